@@ -1,0 +1,80 @@
+# drender — GNU Makefile. `make` builds ./build/drender, `make test` runs every
+# test, `make bench` the benchmarks, `make sanitize` the tests under ASan/UBSan.
+# Missing Debian packages are installed by scripts/install-deps.sh first.
+
+PREFIX  ?= /usr/local
+BUILD   ?= build
+CC      ?= cc
+CXX     ?= c++
+OPT     ?= -O3 -march=native
+SAN     ?=
+PKGS    := OpenImageIO stb
+
+ifeq ($(SAN),1)
+OPT     := -O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined -fno-sanitize-recover=undefined
+endif
+
+WARN     := -Wall -Wextra -Wpedantic
+CPPFLAGS += -Icore -Iestimators -MMD -MP
+CFLAGS   += -std=c11 -D_GNU_SOURCE $(OPT) $(WARN) -pthread
+CXXFLAGS += -std=c++17 $(OPT) $(WARN) -pthread $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
+LDLIBS   += $(shell pkg-config --libs $(PKGS) 2>/dev/null) -ltinygltf -lembree3 -lstdc++ -lm -pthread
+LDFLAGS  += $(OPT)
+
+CORE_C   := $(wildcard core/*.c estimators/*.c)
+CORE_CXX := $(wildcard core/*.cpp)
+CLI_C    := $(wildcard cli/*.c)
+TEST_C   := $(wildcard tests/test_*.c)
+BENCH_C  := $(wildcard bench/*.c)
+
+CORE_OBJ := $(CORE_C:%.c=$(BUILD)/%.o) $(CORE_CXX:%.cpp=$(BUILD)/%.o)
+CLI_OBJ  := $(CLI_C:%.c=$(BUILD)/%.o)
+TEST_BIN := $(TEST_C:tests/%.c=$(BUILD)/tests/%)
+BENCH_BIN:= $(BENCH_C:bench/%.c=$(BUILD)/bench/%)
+LIB      := $(BUILD)/libdrender.a
+
+.PHONY: all deps test bench sanitize install clean
+all: deps $(BUILD)/drender
+
+# Installs missing system packages (fast no-op when all are present).
+deps:
+	@scripts/install-deps.sh
+
+$(BUILD)/%.o: %.c
+	@mkdir -p $(dir $@)
+	$(CC) $(CPPFLAGS) $(CFLAGS) -c $< -o $@
+$(BUILD)/%.o: %.cpp
+	@mkdir -p $(dir $@)
+	$(CXX) $(CPPFLAGS) $(CXXFLAGS) -c $< -o $@
+
+$(LIB): $(CORE_OBJ)
+	@rm -f $@
+	ar rcs $@ $^
+
+$(BUILD)/drender: $(CLI_OBJ) $(LIB)
+	$(CC) $(LDFLAGS) $(CLI_OBJ) $(LIB) $(LDLIBS) -o $@
+
+$(BUILD)/tests/%: $(BUILD)/tests/%.o $(LIB)
+	$(CC) $(LDFLAGS) $< $(LIB) $(LDLIBS) -o $@
+$(BUILD)/bench/%: $(BUILD)/bench/%.o $(LIB)
+	$(CC) $(LDFLAGS) $< $(LIB) $(LDLIBS) -o $@
+
+test: deps $(BUILD)/drender $(TEST_BIN)
+	BUILD=$(BUILD) tests/run.sh
+
+# The whole suite again under AddressSanitizer and UndefinedBehaviorSanitizer.
+sanitize:
+	$(MAKE) test BUILD=build-san SAN=1
+
+bench: deps $(BUILD)/drender $(BENCH_BIN)
+	BUILD=$(BUILD) bench/run.sh
+
+install: all
+	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/share/man/man1
+	install -m 755 $(BUILD)/drender $(DESTDIR)$(PREFIX)/bin/drender
+	install -m 644 man/drender.1 $(DESTDIR)$(PREFIX)/share/man/man1/drender.1
+
+clean:
+	rm -rf build build-san
+
+-include $(shell find $(BUILD) -name '*.d' 2>/dev/null)

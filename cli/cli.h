@@ -1,0 +1,52 @@
+/* Shared pieces of the command-line layer: exit codes, option value parsing,
+ * locating bundled data, and a tiny JSON writer. */
+#ifndef DR_CLI_H
+#define DR_CLI_H
+
+#include <stdbool.h>
+#include <stdint.h>
+#include <stdio.h>
+
+/* Exit codes (documented in man/drender.1). */
+enum {
+    DR_EXIT_OK = 0,
+    DR_EXIT_FAILURE = 1,  /* the work failed (cannot write output, out of memory, ...) */
+    DR_EXIT_USAGE = 2,    /* unknown subcommand or option, impossible option value */
+    DR_EXIT_INPUT = 3     /* a scene or image could not be read or is malformed */
+};
+
+#define DR_VERSION "0.1.0"
+
+struct dr_command {
+    const char *name;
+    const char *summary;
+    int (*run)(int argc, char **argv);   /* argv[0] is the subcommand name */
+    void (*usage)(FILE *out);
+};
+
+extern const struct dr_command dr_commands[];
+const struct dr_command *dr_command_find(const char *name);
+
+/* "drender CMD: message" on stderr. */
+void cli_error(const char *cmd, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+
+/* Parse option values; on failure print a message naming the option and
+ * return false. */
+bool cli_parse_int(const char *cmd, const char *opt, const char *text, long min, long max, long *out);
+bool cli_parse_u64(const char *cmd, const char *opt, const char *text, uint64_t *out);
+bool cli_parse_res(const char *cmd, const char *opt, const char *text, int *w, int *h);
+
+/* Path of a scene shipped with drender (e.g. "cornell-box.gltf"), looked up
+ * in $DRENDER_DATA, next to the binary (../scenes), and in the install
+ * prefix's share/drender/scenes. Returns a malloc'd path or NULL. */
+char *cli_find_bundled_scene(const char *name);
+
+/* Peak resident memory of this process, bytes. */
+uint64_t cli_peak_rss_bytes(void);
+double cli_now(void);
+
+/* Minimal JSON output: the caller prints structure, these escape values. */
+void json_string(FILE *f, const char *s);
+void json_number(FILE *f, double v);   /* NaN/Inf written as null */
+
+#endif

@@ -1,0 +1,150 @@
+#include <errno.h>
+#include <limits.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "cli.h"
+
+#ifndef DR_DATADIR
+#define DR_DATADIR "/usr/local/share/drender"
+#endif
+
+void cli_error(const char *cmd, const char *fmt, ...)
+{
+    va_list ap;
+    fprintf(stderr, "drender%s%s: ", cmd ? " " : "", cmd ? cmd : "");
+    va_start(ap, fmt);
+    vfprintf(stderr, fmt, ap);
+    va_end(ap);
+    fputc('\n', stderr);
+}
+
+bool cli_parse_int(const char *cmd, const char *opt, const char *text, long min, long max, long *out)
+{
+    char *end;
+    errno = 0;
+    long v = strtol(text, &end, 10);
+    if (errno || end == text || *end) {
+        cli_error(cmd, "%s: '%s' is not a whole number", opt, text);
+        return false;
+    }
+    if (v < min || v > max) {
+        cli_error(cmd, "%s: %ld is out of range (%ld..%ld)", opt, v, min, max);
+        return false;
+    }
+    *out = v;
+    return true;
+}
+
+bool cli_parse_u64(const char *cmd, const char *opt, const char *text, uint64_t *out)
+{
+    char *end;
+    errno = 0;
+    if (text[0] == '-') {
+        cli_error(cmd, "%s: '%s' must not be negative", opt, text);
+        return false;
+    }
+    unsigned long long v = strtoull(text, &end, 0);
+    if (errno || end == text || *end) {
+        cli_error(cmd, "%s: '%s' is not a whole number", opt, text);
+        return false;
+    }
+    *out = v;
+    return true;
+}
+
+bool cli_parse_res(const char *cmd, const char *opt, const char *text, int *w, int *h)
+{
+    char *end;
+    errno = 0;
+    long a = strtol(text, &end, 10);
+    if (errno || end == text || (*end != 'x' && *end != 'X')) {
+        cli_error(cmd, "%s: '%s' is not of the form WIDTHxHEIGHT (e.g. 640x480)", opt, text);
+        return false;
+    }
+    const char *p = end + 1;
+    long b = strtol(p, &end, 10);
+    if (errno || end == p || *end) {
+        cli_error(cmd, "%s: '%s' is not of the form WIDTHxHEIGHT (e.g. 640x480)", opt, text);
+        return false;
+    }
+    if (a < 1 || b < 1 || a > 32768 || b > 32768) {
+        cli_error(cmd, "%s: %ldx%ld: width and height must be between 1 and 32768", opt, a, b);
+        return false;
+    }
+    *w = (int)a;
+    *h = (int)b;
+    return true;
+}
+
+static char *try_path(const char *dir, const char *sub, const char *name)
+{
+    char buf[PATH_MAX];
+    int n = snprintf(buf, sizeof buf, "%s%s/%s", dir, sub, name);
+    if (n < 0 || (size_t)n >= sizeof buf)
+        return NULL;   /* too long to be a real path */
+    return access(buf, R_OK) == 0 ? strdup(buf) : NULL;
+}
+
+char *cli_find_bundled_scene(const char *name)
+{
+    char *p;
+    const char *env = getenv("DRENDER_DATA");
+    if (env && (p = try_path(env, "/scenes", name)))
+        return p;
+    char exe[PATH_MAX];
+    ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
+    if (n > 0) {
+        exe[n] = '\0';
+        char *slash = strrchr(exe, '/');
+        if (slash) {
+            *slash = '\0';
+            /* build tree (build/drender -> scenes/) or installed (bin/ -> share/drender) */
+            if ((p = try_path(exe, "/../scenes", name)) || (p = try_path(exe, "/../share/drender/scenes", name)))
+                return p;
+        }
+    }
+    return try_path(DR_DATADIR, "/scenes", name);
+}
+
+uint64_t cli_peak_rss_bytes(void)
+{
+    struct rusage ru;
+    getrusage(RUSAGE_SELF, &ru);
+    return (uint64_t)ru.ru_maxrss * 1024u;
+}
+
+double cli_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+void json_string(FILE *f, const char *s)
+{
+    fputc('"', f);
+    for (; s && *s; s++) {
+        unsigned char c = (unsigned char)*s;
+        if (c == '"' || c == '\\')
+            fprintf(f, "\\%c", c);
+        else if (c < 0x20)
+            fprintf(f, "\\u%04x", c);
+        else
+            fputc(c, f);
+    }
+    fputc('"', f);
+}
+
+void json_number(FILE *f, double v)
+{
+    if (isfinite(v))
+        fprintf(f, "%.17g", v);
+    else
+        fputs("null", f);
+}

@@ -1,0 +1,89 @@
+/* drender: the subcommand table and dispatch. */
+#include <stdlib.h>
+#include <string.h>
+
+#include "cli.h"
+
+int cmd_render(int argc, char **argv);
+void cmd_render_usage(FILE *out);
+static int cmd_help(int argc, char **argv);
+static void cmd_help_usage(FILE *out);
+
+const struct dr_command dr_commands[] = {
+    {"render", "render a glTF scene to an image (path tracing)", cmd_render, cmd_render_usage},
+    {"help", "show help for drender or one subcommand", cmd_help, cmd_help_usage},
+    {NULL, NULL, NULL, NULL},
+};
+
+const struct dr_command *dr_command_find(const char *name)
+{
+    for (const struct dr_command *c = dr_commands; c->name; c++)
+        if (strcmp(c->name, name) == 0)
+            return c;
+    return NULL;
+}
+
+static void main_usage(FILE *out)
+{
+    fprintf(out,
+            "usage: drender [--version] [--help] COMMAND [ARGS]\n"
+            "\n"
+            "drender renders glTF 2.0 scenes with a path tracer and differentiates them.\n"
+            "\n"
+            "commands:\n");
+    for (const struct dr_command *c = dr_commands; c->name; c++)
+        fprintf(out, "  %-10s %s\n", c->name, c->summary);
+    fprintf(out, "\n'drender help COMMAND' or 'drender COMMAND --help' describes one command;\n"
+                 "'man drender' has the whole manual.\n");
+}
+
+static void cmd_help_usage(FILE *out)
+{
+    fprintf(out, "usage: drender help [COMMAND]\n\nShows the list of commands, or the options of COMMAND.\n");
+}
+
+static int cmd_help(int argc, char **argv)
+{
+    if (argc < 2) {
+        main_usage(stdout);
+        return DR_EXIT_OK;
+    }
+    if (strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0) {
+        cmd_help_usage(stdout);
+        return DR_EXIT_OK;
+    }
+    const struct dr_command *c = dr_command_find(argv[1]);
+    if (!c) {
+        cli_error("help", "unknown command '%s' (see 'drender help')", argv[1]);
+        return DR_EXIT_USAGE;
+    }
+    c->usage(stdout);
+    return DR_EXIT_OK;
+}
+
+int main(int argc, char **argv)
+{
+    if (argc < 2) {
+        main_usage(stderr);
+        return DR_EXIT_USAGE;
+    }
+    const char *name = argv[1];
+    if (strcmp(name, "--help") == 0 || strcmp(name, "-h") == 0) {
+        main_usage(stdout);
+        return DR_EXIT_OK;
+    }
+    if (strcmp(name, "--version") == 0 || strcmp(name, "-V") == 0) {
+        printf("drender %s\n", DR_VERSION);
+        return DR_EXIT_OK;
+    }
+    if (name[0] == '-') {
+        cli_error(NULL, "unknown option '%s' (see 'drender --help')", name);
+        return DR_EXIT_USAGE;
+    }
+    const struct dr_command *c = dr_command_find(name);
+    if (!c) {
+        cli_error(NULL, "'%s' is not a drender command (see 'drender help')", name);
+        return DR_EXIT_USAGE;
+    }
+    return c->run(argc - 1, argv + 1);
+}

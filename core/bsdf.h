@@ -1,0 +1,53 @@
+/* The glTF metallic-roughness BSDF (reflection only):
+ *   f = (1-metallic) * [ (1 - max(F_d)) * base/pi + F_d * D G / (4 |wo.n| |wi.n|) ]
+ *     +    metallic  * [ F_m * D G / (4 |wo.n| |wi.n|) ]
+ * D: GGX / Trowbridge-Reitz with alpha = roughness^2 (floored at DR_BSDF_MIN_ALPHA),
+ * G: Smith height-correlated masking-shadowing, F: Schlick.
+ * Dielectric Fresnel follows KHR_materials_specular:
+ *   F_d = f0 + (specular - f0) (1 - |wo.h|)^5, f0 = min(0.04 * specular_color, 1) * specular,
+ * so specular = 0 gives a pure Lambertian surface. Metal: F_m = base + (1 - base)(1 - |wo.h|)^5.
+ *
+ * All directions are unit vectors in the local shading frame (normal = +z),
+ * both pointing away from the surface: wo towards the viewer, wi towards the
+ * light. Below the surface (z <= 0) on either side, f = 0 and pdf = 0. */
+#ifndef DR_BSDF_H
+#define DR_BSDF_H
+
+#include <stdbool.h>
+
+#include "vec.h"
+
+#define DR_BSDF_MIN_ALPHA 1e-6   /* roughness 0.001 */
+
+/* The material evaluated at one shading point (textures already applied). */
+struct dr_bsdf {
+    dr_vec3 base_color;
+    double metallic, roughness;
+    double specular;
+    dr_vec3 specular_color;
+};
+
+struct dr_bsdf_sample {
+    dr_vec3 wi;     /* sampled direction, local frame */
+    dr_vec3 f;      /* BSDF value (without the cosine) */
+    double pdf;     /* solid-angle pdf of wi, the same value dr_bsdf_pdf returns */
+};
+
+/* BSDF value f(wo, wi) (no cosine factor). */
+dr_vec3 dr_bsdf_eval(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi);
+/* Solid-angle density with which dr_bsdf_sample produces wi. */
+double dr_bsdf_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi);
+/* Both at once (shares the microfacet terms); *pdf receives the density. */
+dr_vec3 dr_bsdf_eval_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double *pdf);
+/* Chooses a lobe with u_lobe (probability dr_bsdf_specular_prob), then samples
+ * it: cosine-weighted hemisphere for the diffuse lobe, GGX visible normals
+ * (Heitz 2018) for the specular lobe, from (u1, u2). Returns false when no
+ * valid direction results (wo below the surface, sample below it); the path
+ * then ends. */
+bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u1,
+                    double u2, struct dr_bsdf_sample *out);
+/* Probability of choosing the specular lobe for this wo (0 for a pure
+ * Lambertian, 1 for a lobe with no diffuse part). */
+double dr_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo);
+
+#endif

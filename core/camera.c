@@ -1,0 +1,30 @@
+#include "camera.h"
+
+#include <string.h>
+
+dr_vec3 dr_camera_direction(const struct dr_camera *cam, int width, int height, double fx, double fy)
+{
+    double th = tan(0.5 * cam->yfov);
+    double sx = (2.0 * fx / width - 1.0) * th * ((double)width / height);
+    double sy = (1.0 - 2.0 * fy / height) * th;
+    return dr_normalize(dr_add(cam->forward, dr_add(dr_scale(cam->right, sx), dr_scale(cam->up, sy))));
+}
+
+struct dr_camera dr_camera_default(const struct dr_scene *scene)
+{
+    struct dr_camera c;
+    memset(&c, 0, sizeof c);
+    strcpy(c.name, "default");
+    dr_vec3 center = dr_scale(dr_add(scene->bbox_min, scene->bbox_max), 0.5);
+    double radius = 0.5 * dr_length(dr_sub(scene->bbox_max, scene->bbox_min));
+    if (!(radius > 0.0))
+        radius = 1.0;
+    c.yfov = 45.0 * M_PI / 180.0;
+    /* distance at which the bounding sphere fits the vertical field of view */
+    double dist = radius / sin(0.5 * c.yfov);
+    c.origin = dr_add(center, dr_v3(0, 0, dist));
+    c.forward = dr_v3(0, 0, -1);
+    c.up = dr_v3(0, 1, 0);
+    c.right = dr_v3(1, 0, 0);
+    return c;
+}

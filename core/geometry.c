@@ -1,0 +1,90 @@
+#include "geometry.h"
+
+static void attributes(const struct dr_mesh *m, int64_t tri, double b1, double b2, struct dr_hit *hit)
+{
+    const uint32_t *idx = m->indices + 3 * (size_t)tri;
+    double b0 = 1.0 - b1 - b2;
+    dr_vec3 p0 = dr_mesh_vertex(m, idx[0]), p1 = dr_mesh_vertex(m, idx[1]), p2 = dr_mesh_vertex(m, idx[2]);
+    hit->tri = tri;
+    hit->p = dr_add(dr_add(dr_scale(p0, b0), dr_scale(p1, b1)), dr_scale(p2, b2));
+    dr_vec3 ng = dr_cross(dr_sub(p1, p0), dr_sub(p2, p0));
+    double len = dr_length(ng);
+    hit->ng = len > 0.0 ? dr_scale(ng, 1.0 / len) : dr_v3(0, 0, 1);
+    hit->ns = hit->ng;
+    uint8_t flags = m->flags[tri];
+    if (flags & DR_TRI_HAS_NORMALS) {
+        const float *n0 = m->normals + 3 * (size_t)idx[0], *n1 = m->normals + 3 * (size_t)idx[1],
+                    *n2 = m->normals + 3 * (size_t)idx[2];
+        dr_vec3 ns = dr_v3(b0 * n0[0] + b1 * n1[0] + b2 * n2[0], b0 * n0[1] + b1 * n1[1] + b2 * n2[1],
+                           b0 * n0[2] + b1 * n1[2] + b2 * n2[2]);
+        double l = dr_length(ns);
+        if (l > 0.0) {
+            ns = dr_scale(ns, 1.0 / l);
+            /* Authored normals may face away from the winding; keep them on
+             * the geometric front side so "front" means one thing. */
+            hit->ns = dr_dot(ns, hit->ng) < 0.0 ? dr_neg(ns) : ns;
+        }
+    }
+    if (flags & DR_TRI_HAS_UVS) {
+        const float *t0 = m->uvs + 2 * (size_t)idx[0], *t1 = m->uvs + 2 * (size_t)idx[1],
+                    *t2 = m->uvs + 2 * (size_t)idx[2];
+        hit->uv[0] = b0 * t0[0] + b1 * t1[0] + b2 * t2[0];
+        hit->uv[1] = b0 * t0[1] + b1 * t1[1] + b2 * t2[1];
+    } else {
+        hit->uv[0] = hit->uv[1] = 0.0;
+    }
+    hit->material = m->material[tri];
+}
+
+void dr_hit_compute(const struct dr_mesh *m, int64_t tri, dr_vec3 o, dr_vec3 d, struct dr_hit *hit)
+{
+    const uint32_t *idx = m->indices + 3 * (size_t)tri;
+    dr_vec3 p0 = dr_mesh_vertex(m, idx[0]);
+    dr_vec3 e1 = dr_sub(dr_mesh_vertex(m, idx[1]), p0), e2 = dr_sub(dr_mesh_vertex(m, idx[2]), p0);
+    /* Moller-Trumbore without rejection: Embree already decided it is a hit. */
+    dr_vec3 pv = dr_cross(d, e2);
+    double det = dr_dot(e1, pv);
+    double b1 = 0.0, b2 = 0.0, t = 0.0;
+    if (det != 0.0) {
+        double inv = 1.0 / det;
+        dr_vec3 tv = dr_sub(o, p0);
+        b1 = dr_dot(tv, pv) * inv;
+        dr_vec3 qv = dr_cross(tv, e1);
+        b2 = dr_dot(d, qv) * inv;
+        t = dr_dot(e2, qv) * inv;
+    }
+    /* Clamp into the triangle (float/double disagreement at edges). */
+    b1 = dr_clamp(b1, 0.0, 1.0);
+    b2 = dr_clamp(b2, 0.0, 1.0);
+    if (b1 + b2 > 1.0) {
+        double s = b1 + b2;
+        b1 /= s;
+        b2 /= s;
+    }
+    attributes(m, tri, b1, b2, hit);
+    hit->t = t > 0.0 ? t : dr_length(dr_sub(hit->p, o));
+    hit->front = dr_dot(d, hit->ng) < 0.0;
+}
+
+void dr_hit_at(const struct dr_mesh *m, int64_t tri, double b1, double b2, struct dr_hit *hit)
+{
+    attributes(m, tri, b1, b2, hit);
+    hit->t = 0.0;
+    hit->front = true;
+}
+
+double dr_triangle_area(const struct dr_mesh *m, int64_t tri)
+{
+    const uint32_t *idx = m->indices + 3 * (size_t)tri;
+    dr_vec3 p0 = dr_mesh_vertex(m, idx[0]);
+    return 0.5 * dr_length(dr_cross(dr_sub(dr_mesh_vertex(m, idx[1]), p0), dr_sub(dr_mesh_vertex(m, idx[2]), p0)));
+}
+
+dr_vec3 dr_offset_origin(dr_vec3 p, dr_vec3 ng, dr_vec3 d, double scene_eps)
+{
+    double mag = fmax(fabs(p.x), fmax(fabs(p.y), fabs(p.z)));
+    /* float spacing at |p| is ~6e-8 |p|; 1e-5 |p| clears the float hit
+     * reconstruction error with a wide margin; scene_eps covers p near 0. */
+    double eps = 1e-5 * mag + scene_eps;
+    return dr_madd(p, ng, dr_dot(d, ng) >= 0.0 ? eps : -eps);
+}

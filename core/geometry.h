@@ -1,0 +1,45 @@
+/* Surface points recomputed in double from the triangle Embree reported, so
+ * positions, normals and texture coordinates have well-defined derivatives. */
+#ifndef DR_GEOMETRY_H
+#define DR_GEOMETRY_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "scene.h"
+#include "vec.h"
+
+struct dr_hit {
+    int64_t tri;
+    double t;          /* distance along the (unit) ray direction */
+    dr_vec3 p;         /* position, interpolated from the vertices */
+    dr_vec3 ng;        /* unit geometric normal of the front face (CCW winding) */
+    dr_vec3 ns;        /* unit shading normal, on the same side as ng */
+    double uv[2];      /* TEXCOORD_0 (0,0 without UVs) */
+    bool front;        /* the ray arrived on the front face's side */
+    int material;
+};
+
+static inline dr_vec3 dr_mesh_vertex(const struct dr_mesh *m, uint32_t v)
+{
+    const float *p = m->positions + 3 * (size_t)v;
+    return dr_v3(p[0], p[1], p[2]);
+}
+
+/* Fills hit for triangle tri hit by the ray o + t d (d unit). The barycentrics
+ * are recomputed in double and clamped into the triangle, so a hit that float
+ * traversal reported just outside an edge still yields a point on it. */
+void dr_hit_compute(const struct dr_mesh *m, int64_t tri, dr_vec3 o, dr_vec3 d, struct dr_hit *hit);
+
+/* Surface attributes at barycentrics (b1, b2) of tri, for sampling points on
+ * emitters: fills p, ng, ns, uv, material (t = 0, front = true). */
+void dr_hit_at(const struct dr_mesh *m, int64_t tri, double b1, double b2, struct dr_hit *hit);
+
+double dr_triangle_area(const struct dr_mesh *m, int64_t tri);
+
+/* Origin for a ray leaving p on the side of n that direction d points to:
+ * pushed off the surface by an offset relative to the magnitude of p, so
+ * float traversal does not re-hit the surface it starts on at any scene scale. */
+dr_vec3 dr_offset_origin(dr_vec3 p, dr_vec3 ng, dr_vec3 d, double scene_eps);
+
+#endif

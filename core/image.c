@@ -1,0 +1,174 @@
+/* In-memory images: the sRGB transfer curves and bilinear texture lookup. */
+#include "image.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "error.h"
+
+/* IEC 61966-2-1 piecewise curves. Negative values use the linear segment. */
+double dr_srgb_to_linear(double v)
+{
+    if (v <= 0.04045)
+        return v / 12.92;
+    return pow((v + 0.055) / 1.055, 2.4);
+}
+
+double dr_linear_to_srgb(double v)
+{
+    if (v <= 0.0031308)
+        return v * 12.92;
+    return 1.055 * pow(v, 1.0 / 2.4) - 0.055;
+}
+
+int dr_image_make_linear(struct dr_image *img)
+{
+    if (!img || !img->data || img->width <= 0 || img->height <= 0 || img->channels <= 0)
+        return DR_ERR_ARG;
+    if (img->linear)
+        return DR_OK;
+    size_t n = (size_t)img->width * (size_t)img->height;
+    size_t c = (size_t)img->channels;
+    float *lin = malloc(n * c * sizeof *lin);
+    if (!lin) {
+        dr_set_error("out of memory decoding a %dx%d texture", img->width, img->height);
+        return DR_ERR_NOMEM;
+    }
+    if (!img->file_is_srgb) {
+        /* The stored values are linear already. */
+        memcpy(lin, img->data, n * c * sizeof *lin);
+    } else {
+        /* Colour channels are decoded, alpha (channel 1 of 2, 3 of 4) is not. */
+        size_t ncolour = c == 2 ? 1 : (c >= 4 ? 3 : c);
+        for (size_t i = 0; i < n; ++i) {
+            const float *s = img->data + i * c;
+            float *d = lin + i * c;
+            for (size_t k = 0; k < c; ++k)
+                d[k] = k < ncolour ? (float)dr_srgb_to_linear(s[k]) : s[k];
+        }
+    }
+    img->linear = lin;
+    return DR_OK;
+}
+
+void dr_image_release(struct dr_image *img)
+{
+    if (!img)
+        return;
+    free(img->data);
+    free(img->linear);
+    img->data = NULL;
+    img->linear = NULL;
+    img->width = img->height = img->channels = 0;
+    img->file_is_srgb = false;
+}
+
+/* Reduces a texture coordinate to a range where texel indices fit an int and
+ * the wrap mode gives the same result: [0,1] for REPEAT (period 1), [0,2) for
+ * MIRROR (period 2), [-1,2] for CLAMP. NaN and infinities become 0. Exact for
+ * finite doubles: t - floor(t) has no rounding error. */
+static inline double reduce_coord(double t, enum dr_wrap mode)
+{
+    if (!(t == t) || t - t != 0.0) /* NaN or +-inf */
+        return 0.0;
+    switch (mode) {
+    case DR_WRAP_CLAMP:
+        return t < -1.0 ? -1.0 : (t > 2.0 ? 2.0 : t);
+    case DR_WRAP_MIRROR:
+        return t - 2.0 * floor(0.5 * t);
+    case DR_WRAP_REPEAT:
+    default:
+        return t - floor(t);
+    }
+}
+
+/* Maps a texel index to [0, n) (OpenGL semantics). */
+static inline int wrap_index(int i, int n, enum dr_wrap mode)
+{
+    switch (mode) {
+    case DR_WRAP_CLAMP:
+        return i < 0 ? 0 : (i >= n ? n - 1 : i);
+    case DR_WRAP_MIRROR: {
+        int p = 2 * n;
+        int m = i % p;
+        if (m < 0)
+            m += p;
+        /* mirror(a) = a >= 0 ? a : -1 - a;  result = n - 1 - mirror(m - n) */
+        int a = m - n;
+        if (a < 0)
+            a = -1 - a;
+        return n - 1 - a;
+    }
+    case DR_WRAP_REPEAT:
+    default: {
+        int m = i % n;
+        return m < 0 ? m + n : m;
+    }
+    }
+}
+
+/* Adds weight * texel (expanded to RGBA) to acc. */
+static inline void add_texel(const float *p, int channels, double weight, double acc[4])
+{
+    switch (channels) {
+    case 1:
+        acc[0] += weight * p[0];
+        acc[1] += weight * p[0];
+        acc[2] += weight * p[0];
+        acc[3] += weight;
+        break;
+    case 2:
+        acc[0] += weight * p[0];
+        acc[1] += weight * p[0];
+        acc[2] += weight * p[0];
+        acc[3] += weight * p[1];
+        break;
+    case 3:
+        acc[0] += weight * p[0];
+        acc[1] += weight * p[1];
+        acc[2] += weight * p[2];
+        acc[3] += weight;
+        break;
+    default:
+        acc[0] += weight * p[0];
+        acc[1] += weight * p[1];
+        acc[2] += weight * p[2];
+        acc[3] += weight * p[3];
+        break;
+    }
+}
+
+void dr_texture_eval(const struct dr_texture *tex, const struct dr_image *img,
+                     double u, double v, bool use_linear, double out[4])
+{
+    const float *pix = img ? (use_linear && img->linear ? img->linear : img->data) : NULL;
+    if (!pix || img->width <= 0 || img->height <= 0 || img->channels <= 0) {
+        out[0] = out[1] = out[2] = 0.0;
+        out[3] = 1.0;
+        return;
+    }
+    enum dr_wrap ws = tex ? tex->wrap_s : DR_WRAP_REPEAT;
+    enum dr_wrap wt = tex ? tex->wrap_t : DR_WRAP_REPEAT;
+    int w = img->width, h = img->height, c = img->channels;
+
+    double x = reduce_coord(u, ws) * w - 0.5;
+    double y = reduce_coord(v, wt) * h - 0.5;
+    double fx0 = floor(x), fy0 = floor(y);
+    double fx = x - fx0, fy = y - fy0;
+    int i0 = (int)fx0, j0 = (int)fy0;
+
+    int xa = wrap_index(i0, w, ws), xb = wrap_index(i0 + 1, w, ws);
+    int ya = wrap_index(j0, h, wt), yb = wrap_index(j0 + 1, h, wt);
+
+    size_t row_a = (size_t)ya * (size_t)w, row_b = (size_t)yb * (size_t)w;
+    double acc[4] = {0.0, 0.0, 0.0, 0.0};
+    add_texel(pix + (row_a + (size_t)xa) * (size_t)c, c, (1.0 - fx) * (1.0 - fy), acc);
+    add_texel(pix + (row_a + (size_t)xb) * (size_t)c, c, fx * (1.0 - fy), acc);
+    add_texel(pix + (row_b + (size_t)xa) * (size_t)c, c, (1.0 - fx) * fy, acc);
+    add_texel(pix + (row_b + (size_t)xb) * (size_t)c, c, fx * fy, acc);
+    out[0] = acc[0];
+    out[1] = acc[1];
+    out[2] = acc[2];
+    out[3] = (c == 2 || c >= 4) ? acc[3] : 1.0; /* exactly opaque without alpha */
+}

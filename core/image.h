@@ -1,0 +1,47 @@
+/* In-memory images and texture lookup.
+ * Pixels are float, row-major, top row first, `channels` interleaved values. */
+#ifndef DR_IMAGE_H
+#define DR_IMAGE_H
+
+#include <stdbool.h>
+#include <stddef.h>
+
+#include "vec.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+struct dr_image {
+    int width, height, channels;
+    float *data;     /* values as stored in the file (8-bit colour: sRGB-encoded, 0..1) */
+    float *linear;   /* sRGB-decoded copy of data (RGB decoded, alpha kept); NULL until
+                        dr_image_make_linear(); colour textures are looked up here */
+    bool file_is_srgb; /* the file declares sRGB-encoded values (PNG/JPEG, 8-bit)      */
+};
+
+enum dr_wrap { DR_WRAP_REPEAT, DR_WRAP_CLAMP, DR_WRAP_MIRROR };
+
+/* glTF texture = image + sampler. */
+struct dr_texture {
+    int image;                /* index into scene->images */
+    enum dr_wrap wrap_s, wrap_t;
+};
+
+double dr_srgb_to_linear(double v);
+double dr_linear_to_srgb(double v);
+
+/* Fills img->linear from img->data (idempotent). Returns 0 or DR_ERR_NOMEM. */
+int dr_image_make_linear(struct dr_image *img);
+void dr_image_release(struct dr_image *img);   /* frees data and linear */
+
+/* Bilinear lookup at glTF uv (u right, v down, texel centres at (i+0.5)/w),
+ * honouring the wrap modes. Returns up to 4 channels in out (missing channels:
+ * 0 for colour, 1 for alpha). `use_linear` selects img->linear (must exist). */
+void dr_texture_eval(const struct dr_texture *tex, const struct dr_image *img,
+                     double u, double v, bool use_linear, double out[4]);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,510 @@
+// Image reading and writing: a thin extern "C" shim over OpenImageIO 2.4.
+//
+// Nothing here throws across the C boundary: every exported function catches
+// everything and turns it into a DR_ERR_* code with a message.
+//
+// Verified with OIIO 2.4.7 (Debian):
+//  - ioproxy input is supported by the png, jpeg, hdr, openexr, tiff, bmp,
+//    targa, gif and webp readers (fits is not); readers without it are fed
+//    through a private temporary file instead.
+//  - the built-in colour config knows "linear" and "sRGB", but an $OCIO
+//    environment could rename them, so the 8-bit encoding uses our own exact
+//    IEC 61966-2-1 curve (dr_linear_to_srgb) instead of colorconvert.
+//  - the PNG/TGA plugins (de)associate alpha by default; we ask for
+//    "oiio:UnassociatedAlpha" on both sides so values round-trip as given.
+
+#include "image_io.h"
+
+#include "error.h"
+#include "image.h"
+
+#include <OpenImageIO/filesystem.h>
+#include <OpenImageIO/imageio.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <memory>
+#include <new>
+#include <string>
+#include <vector>
+
+#include <strings.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+using namespace OIIO;
+
+namespace {
+
+// One line, no trailing newline: OIIO messages sometimes end with '\n'.
+std::string clean(std::string s)
+{
+    while (!s.empty() && (s.back() == '\n' || s.back() == '\r' || s.back() == ' '))
+        s.pop_back();
+    for (char &c : s)
+        if (c == '\n')
+            c = ' ';
+    return s.empty() ? std::string("unknown error") : s;
+}
+
+std::string oiio_error(const ImageInput *in)
+{
+    std::string e = in ? in->geterror() : std::string();
+    if (e.empty())
+        e = OIIO::geterror();
+    return clean(e);
+}
+
+std::string oiio_error(const ImageOutput *out)
+{
+    std::string e = out ? out->geterror() : std::string();
+    if (e.empty())
+        e = OIIO::geterror();
+    return clean(e);
+}
+
+void zero_image(dr_image *img)
+{
+    img->width = img->height = img->channels = 0;
+    img->data = nullptr;
+    img->linear = nullptr;
+    img->file_is_srgb = false;
+}
+
+// Extension of the last path component, without the dot; "" when none.
+std::string extension_of(const std::string &path)
+{
+    size_t slash = path.find_last_of('/');
+    size_t start = slash == std::string::npos ? 0 : slash + 1;
+    size_t dot = path.find_last_of('.');
+    if (dot == std::string::npos || dot < start || dot + 1 >= path.size())
+        return std::string();
+    // ".hidden" has no extension
+    if (dot == start)
+        return std::string();
+    return path.substr(dot + 1);
+}
+
+bool starts_with_ci(const std::string &s, const char *prefix)
+{
+    size_t n = std::strlen(prefix);
+    return s.size() >= n && strncasecmp(s.c_str(), prefix, n) == 0;
+}
+
+// Does the file declare sRGB-encoded values?
+bool spec_is_srgb(const ImageSpec &spec, const char *format_name)
+{
+    std::string cs = spec.get_string_attribute("oiio:ColorSpace");
+    if (starts_with_ci(cs, "srgb"))
+        return true;
+    if (starts_with_ci(cs, "linear") || starts_with_ci(cs, "lin_") ||
+        starts_with_ci(cs, "scene_linear") || starts_with_ci(cs, "acescg"))
+        return false;
+    // No (or an unrecognised, e.g. "Gamma2.2") declaration: 8-bit files of
+    // the display-referred formats are sRGB by convention.
+    if (spec.format != TypeDesc::UINT8 || !format_name)
+        return false;
+    static const char *const srgb_formats[] = {"png", "jpeg", "bmp", "gif", "targa"};
+    for (const char *f : srgb_formats)
+        if (std::strcmp(format_name, f) == 0)
+            return true;
+    return false;
+}
+
+// Reads the first subimage of an open ImageInput into img. `label` names the
+// image in messages. On failure img is left zeroed.
+int read_opened(ImageInput *in, const std::string &label, dr_image *img)
+{
+    const ImageSpec &spec = in->spec();
+    if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) {
+        dr_set_error("%s: cannot read image: empty image (%dx%d, %d channels)",
+                     label.c_str(), spec.width, spec.height, spec.nchannels);
+        return DR_ERR_FORMAT;
+    }
+    if (spec.depth > 1) {
+        dr_set_error("%s: cannot read image: volume images are not supported", label.c_str());
+        return DR_ERR_FORMAT;
+    }
+    int nch = spec.nchannels < 4 ? spec.nchannels : 4;
+    size_t w = (size_t)spec.width, h = (size_t)spec.height;
+    if (w > SIZE_MAX / sizeof(float) / 4 / h) {
+        dr_set_error("%s: cannot read image: image too large", label.c_str());
+        return DR_ERR_FORMAT;
+    }
+    float *data = (float *)std::malloc(w * h * (size_t)nch * sizeof(float));
+    if (!data) {
+        dr_set_error("%s: cannot read image: out of memory", label.c_str());
+        return DR_ERR_NOMEM;
+    }
+    if (!in->read_image(0, 0, 0, nch, TypeDesc::FLOAT, data)) {
+        std::free(data);
+        dr_set_error("%s: cannot read image: %s", label.c_str(), oiio_error(in).c_str());
+        return DR_ERR_FORMAT;
+    }
+    img->width = spec.width;
+    img->height = spec.height;
+    img->channels = nch;
+    img->data = data;
+    img->linear = nullptr;
+    img->file_is_srgb = spec_is_srgb(spec, in->format_name());
+    return DR_OK;
+}
+
+ImageSpec read_config()
+{
+    ImageSpec config;
+    // Values as stored: no alpha association by the PNG/TGA readers.
+    config.attribute("oiio:UnassociatedAlpha", 1);
+    return config;
+}
+
+int read_file(const char *path, const std::string &label, dr_image *img)
+{
+    ImageSpec config = read_config();
+    auto in = ImageInput::open(path, &config);
+    if (!in) {
+        struct stat st;
+        bool readable = stat(path, &st) == 0 && S_ISREG(st.st_mode) && access(path, R_OK) == 0;
+        int code = readable ? DR_ERR_FORMAT : DR_ERR_IO;
+        dr_set_error("%s: cannot read image: %s", label.c_str(), oiio_error(in.get()).c_str());
+        return code;
+    }
+    int rc = read_opened(in.get(), label, img);
+    in->close();
+    return rc;
+}
+
+// Picks a file name whose extension selects the decoder for `bytes`.
+std::string memory_name(const unsigned char *b, size_t n, const std::string &hint)
+{
+    if (n >= 8 && std::memcmp(b, "\x89PNG\r\n\x1a\n", 8) == 0)
+        return "embedded.png";
+    if (n >= 3 && b[0] == 0xFF && b[1] == 0xD8 && b[2] == 0xFF)
+        return "embedded.jpg";
+    if (n >= 4 && b[0] == 0x76 && b[1] == 0x2F && b[2] == 0x31 && b[3] == 0x01)
+        return "embedded.exr";
+    if ((n >= 10 && std::memcmp(b, "#?RADIANCE", 10) == 0) ||
+        (n >= 6 && std::memcmp(b, "#?RGBE", 6) == 0))
+        return "embedded.hdr";
+    std::string ext = extension_of(hint);
+    if (!ext.empty())
+        return "embedded." + ext;
+    // Perhaps a MIME type such as "image/png".
+    size_t slash = hint.find_last_of('/');
+    if (slash != std::string::npos && slash + 1 < hint.size())
+        return "embedded." + hint.substr(slash + 1);
+    return std::string();
+}
+
+// Fallback for readers without ioproxy support: a private temporary file.
+int read_memory_via_file(const void *bytes, size_t size, const std::string &ext,
+                         const std::string &label, dr_image *img)
+{
+    const char *tmpdir = std::getenv("TMPDIR");
+    if (!tmpdir || !*tmpdir)
+        tmpdir = "/tmp";
+    std::string suffix = "." + ext;
+    std::string templ = std::string(tmpdir) + "/drender-img-XXXXXX" + suffix;
+    std::vector<char> name(templ.begin(), templ.end());
+    name.push_back('\0');
+    int fd = mkstemps(name.data(), (int)suffix.size());
+    if (fd < 0) {
+        dr_set_error("%s: cannot read image: cannot create a temporary file in %s: %s",
+                     label.c_str(), tmpdir, std::strerror(errno));
+        return DR_ERR_IO;
+    }
+    const unsigned char *p = (const unsigned char *)bytes;
+    size_t left = size;
+    while (left > 0) {
+        ssize_t k = write(fd, p, left);
+        if (k < 0 && errno == EINTR)
+            continue;
+        if (k <= 0) {
+            int e = errno;
+            close(fd);
+            unlink(name.data());
+            dr_set_error("%s: cannot read image: cannot write a temporary file: %s",
+                         label.c_str(), std::strerror(e));
+            return DR_ERR_IO;
+        }
+        p += k;
+        left -= (size_t)k;
+    }
+    close(fd);
+    int rc = read_file(name.data(), label, img);
+    unlink(name.data());
+    if (rc == DR_ERR_IO)   // the temporary exists: the content is at fault
+        rc = DR_ERR_FORMAT;
+    return rc;
+}
+
+int read_memory(const void *bytes, size_t size, const char *name_hint, dr_image *img)
+{
+    std::string label = name_hint && *name_hint ? name_hint : "<memory>";
+    if (!bytes || size == 0) {
+        dr_set_error("%s: cannot read image: no data", label.c_str());
+        return DR_ERR_FORMAT;
+    }
+    std::string name = memory_name((const unsigned char *)bytes, size, label);
+    std::string ext = extension_of(name);
+    std::unique_ptr<ImageInput> probe;
+    if (!ext.empty())
+        probe = ImageInput::create(name);
+    if (!probe) {
+        OIIO::geterror();   // clear
+        dr_set_error("%s: cannot read image: unknown image format", label.c_str());
+        return DR_ERR_FORMAT;
+    }
+    if (!probe->supports("ioproxy")) {
+        probe.reset();
+        return read_memory_via_file(bytes, size, ext, label, img);
+    }
+    probe.reset();
+
+    Filesystem::IOMemReader proxy(bytes, size);
+    ImageSpec config = read_config();
+    int rc;
+    {
+        auto in = ImageInput::open(name, &config, &proxy);
+        if (!in) {
+            dr_set_error("%s: cannot read image: %s", label.c_str(), oiio_error(in.get()).c_str());
+            return DR_ERR_FORMAT;
+        }
+        rc = read_opened(in.get(), label, img);
+        in->close();
+    }   // the input is gone before the proxy
+    return rc;
+}
+
+// Formats that keep linear float values; everything else gets sRGB 8-bit.
+bool is_float_format(const char *format_name)
+{
+    static const char *const float_formats[] = {"openexr", "hdr", "tiff", "fits", "pfm"};
+    for (const char *f : float_formats)
+        if (std::strcmp(format_name, f) == 0)
+            return true;
+    return false;
+}
+
+std::string dir_and_temp_name(const std::string &path, const std::string &ext)
+{
+    size_t slash = path.find_last_of('/');
+    std::string dir = slash == std::string::npos ? std::string() : path.substr(0, slash + 1);
+    std::string base = slash == std::string::npos ? path : path.substr(slash + 1);
+    return dir + "." + base + ".tmp" + std::to_string((long)getpid()) + "." + ext;
+}
+
+// Removes the temporary output file unless told to keep it (also when an
+// exception unwinds through write_image).
+struct temp_guard {
+    std::string path;
+    bool keep = false;
+    ~temp_guard()
+    {
+        if (!keep && !path.empty())
+            unlink(path.c_str());   // unlink, not remove: never delete a directory
+    }
+};
+
+inline uint8_t quantize(double v)
+{
+    if (!(v > 0.0))   // also NaN
+        return 0;
+    if (v >= 1.0)
+        return 255;
+    return (uint8_t)(v * 255.0 + 0.5);
+}
+
+int write_image(const char *path, int width, int height, int channels, const float *pixels)
+{
+    std::string spath = path;
+    auto out = ImageOutput::create(spath);
+    if (!out) {
+        OIIO::geterror();   // clear
+        dr_set_error("%s: OpenImageIO cannot write this format", path);
+        return DR_ERR_ARG;
+    }
+    if (width <= 0 || height <= 0 || channels < 1 || channels > 4 || !pixels) {
+        dr_set_error("%s: cannot write image: invalid image (%dx%d, %d channels)", path, width,
+                     height, channels);
+        return DR_ERR_ARG;
+    }
+    const char *fmt = out->format_name();
+    bool as_float = is_float_format(fmt);
+    bool has_alpha = channels == 2 || channels == 4;
+
+    // Channel layout of the file: src_of[k] = source channel for file channel k.
+    int src_of[4];
+    int out_ch;
+    if (std::strcmp(fmt, "hdr") == 0) {   // RGBE: exactly RGB
+        out_ch = 3;
+        for (int k = 0; k < 3; ++k)
+            src_of[k] = channels >= 3 ? k : 0;
+    } else if (has_alpha && !out->supports("alpha")) {   // JPEG, PNM, ...: drop alpha
+        out_ch = channels - 1;
+        for (int k = 0; k < out_ch; ++k)
+            src_of[k] = k;
+    } else {
+        out_ch = channels;
+        for (int k = 0; k < out_ch; ++k)
+            src_of[k] = k;
+    }
+    int alpha_k = (has_alpha && out_ch == channels) ? out_ch - 1 : -1;
+
+    size_t n = (size_t)width * (size_t)height;
+    ImageSpec spec(width, height, out_ch, as_float ? TypeDesc::FLOAT : TypeDesc::UINT8);
+    if (alpha_k >= 0)
+        spec.alpha_channel = alpha_k;
+    if (out_ch == 2) {
+        spec.channelnames = {"Y", "A"};
+    } else if (out_ch == 1) {
+        spec.channelnames = {"Y"};
+    }
+    spec.attribute("oiio:UnassociatedAlpha", 1);
+    std::vector<float> fbuf;
+    std::vector<uint8_t> bbuf;
+    if (as_float) {
+        fbuf.resize(n * (size_t)out_ch);
+        for (size_t i = 0; i < n; ++i)
+            for (int k = 0; k < out_ch; ++k)
+                fbuf[i * out_ch + k] = pixels[i * channels + src_of[k]];
+    } else {
+        spec.attribute("oiio:ColorSpace", "sRGB");
+        bbuf.resize(n * (size_t)out_ch);
+        for (size_t i = 0; i < n; ++i)
+            for (int k = 0; k < out_ch; ++k) {
+                double v = pixels[i * channels + src_of[k]];
+                if (k != alpha_k)
+                    v = dr_linear_to_srgb(v > 0.0 ? v : 0.0);
+                bbuf[i * out_ch + k] = quantize(v);
+            }
+    }
+
+    std::string ext = extension_of(spath);
+    std::string tmp = dir_and_temp_name(spath, ext);
+    temp_guard guard;
+    guard.path = tmp;
+    std::string why;
+    bool ok = out->open(tmp, spec);
+    if (!ok) {
+        why = oiio_error(out.get());
+    } else {
+        ok = as_float ? out->write_image(TypeDesc::FLOAT, fbuf.data())
+                      : out->write_image(TypeDesc::UINT8, bbuf.data());
+        if (!ok)
+            why = oiio_error(out.get());
+        bool closed = out->close();
+        if (ok && !closed) {
+            ok = false;
+            why = oiio_error(out.get());
+        }
+    }
+    out.reset();
+    if (ok && std::rename(tmp.c_str(), path) != 0) {
+        ok = false;
+        why = std::strerror(errno);
+    }
+    if (!ok) {
+        dr_set_error("%s: cannot write image: %s", path, why.c_str());
+        return DR_ERR_IO;   // the guard removes the temporary
+    }
+    guard.keep = true;   // renamed: nothing left to remove
+    return DR_OK;
+}
+
+}   // namespace
+
+extern "C" int dr_image_read(const char *path, struct dr_image *img)
+{
+    if (!img)
+        return DR_ERR_ARG;
+    zero_image(img);
+    if (!path || !*path) {
+        dr_set_error("cannot read image: empty file name");
+        return DR_ERR_ARG;
+    }
+    try {
+        return read_file(path, path, img);
+    } catch (const std::bad_alloc &) {
+        dr_image_release(img);
+        zero_image(img);
+        dr_set_error("%s: cannot read image: out of memory", path);
+        return DR_ERR_NOMEM;
+    } catch (const std::exception &e) {
+        dr_image_release(img);
+        zero_image(img);
+        dr_set_error("%s: cannot read image: %s", path, e.what());
+        return DR_ERR_INTERNAL;
+    } catch (...) {
+        dr_image_release(img);
+        zero_image(img);
+        dr_set_error("%s: cannot read image: unexpected error", path);
+        return DR_ERR_INTERNAL;
+    }
+}
+
+extern "C" int dr_image_read_memory(const void *bytes, size_t size, const char *name_hint,
+                                    struct dr_image *img)
+{
+    if (!img)
+        return DR_ERR_ARG;
+    zero_image(img);
+    const char *label = name_hint && *name_hint ? name_hint : "<memory>";
+    try {
+        return read_memory(bytes, size, name_hint, img);
+    } catch (const std::bad_alloc &) {
+        dr_image_release(img);
+        zero_image(img);
+        dr_set_error("%s: cannot read image: out of memory", label);
+        return DR_ERR_NOMEM;
+    } catch (const std::exception &e) {
+        dr_image_release(img);
+        zero_image(img);
+        dr_set_error("%s: cannot read image: %s", label, e.what());
+        return DR_ERR_INTERNAL;
+    } catch (...) {
+        dr_image_release(img);
+        zero_image(img);
+        dr_set_error("%s: cannot read image: unexpected error", label);
+        return DR_ERR_INTERNAL;
+    }
+}
+
+extern "C" bool dr_image_can_write(const char *path)
+{
+    if (!path || !*path)
+        return false;
+    try {
+        bool ok = (bool)ImageOutput::create(std::string(path));
+        if (!ok)
+            OIIO::geterror();   // clear
+        return ok;
+    } catch (...) {
+        return false;
+    }
+}
+
+extern "C" int dr_image_write(const char *path, int width, int height, int channels,
+                              const float *pixels)
+{
+    if (!path || !*path) {
+        dr_set_error("cannot write image: empty file name");
+        return DR_ERR_ARG;
+    }
+    try {
+        return write_image(path, width, height, channels, pixels);
+    } catch (const std::bad_alloc &) {
+        dr_set_error("%s: cannot write image: out of memory", path);
+        return DR_ERR_NOMEM;
+    } catch (const std::exception &e) {
+        dr_set_error("%s: cannot write image: %s", path, e.what());
+        return DR_ERR_INTERNAL;
+    } catch (...) {
+        dr_set_error("%s: cannot write image: unexpected error", path);
+        return DR_ERR_INTERNAL;
+    }
+}

@@ -1,0 +1,36 @@
+/* Reading and writing images through OpenImageIO (image_io.cpp). */
+#ifndef DR_IMAGE_IO_H
+#define DR_IMAGE_IO_H
+
+#include <stdbool.h>
+#include <stddef.h>
+
+#include "image.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Reads any format OpenImageIO knows into img->data as float, values as
+ * stored (no colour conversion); sets file_is_srgb from the file's colour
+ * space (8-bit PNG/JPEG are sRGB). 0 or negative DR_ERR_*, message names path. */
+int dr_image_read(const char *path, struct dr_image *img);
+/* Same, decoding an in-memory encoded file (glTF data URIs, .glb buffers);
+ * `name_hint` is used for the format and for messages. */
+int dr_image_read_memory(const void *bytes, size_t size, const char *name_hint,
+                         struct dr_image *img);
+
+/* True when OpenImageIO can write this file name's format. */
+bool dr_image_can_write(const char *path);
+
+/* Writes linear float RGB(A) pixels. The format follows the extension: float
+ * formats (EXR, HDR, TIFF, PFM) stay linear float; 8-bit formats (PNG, JPEG,
+ * ...) are sRGB-encoded. Written to a temporary file beside `path` and renamed,
+ * so a failure never leaves a partial file. 0 or negative DR_ERR_*. */
+int dr_image_write(const char *path, int width, int height, int channels,
+                   const float *pixels);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,397 @@
+#include "lights.h"
+
+#include <float.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "error.h"
+
+/* Discrete distribution over: [0, n_emitters) emissive triangles, then the
+ * punctual lights, then (if present) the environment. */
+struct dr_light_sampler {
+    int64_t n_emitters;
+    int64_t *emitter_tri;      /* triangle of each emitter entry */
+    double *tri_pick;          /* per triangle: probability of picking it (0: not an emitter) */
+    int n_punctual;
+    int env_entry;             /* index of the environment in cdf, -1 if none */
+    int64_t n_entries;
+    double *cdf;               /* n_entries + 1 */
+    double *pick;              /* n_entries: probability of each entry */
+    double scene_radius;
+    dr_vec3 scene_center;
+    /* environment map importance sampling: piecewise constant over texels */
+    int env_w, env_h;
+    double *env_marginal;      /* env_h + 1: cdf over rows */
+    double *env_conditional;   /* env_h * (env_w + 1): cdf over columns per row */
+    double env_integral;       /* sum of texel weights / (w h), for the pdf */
+};
+
+static int64_t cdf_find(const double *cdf, int64_t n, double u)
+{
+    /* largest i with cdf[i] <= u, in [0, n) */
+    int64_t lo = 0, hi = n;
+    while (hi - lo > 1) {
+        int64_t mid = (lo + hi) / 2;
+        if (cdf[mid] <= u)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
+static double mean_texture_value(const struct dr_scene *s, const struct dr_texref *ref, int channel_count)
+{
+    if (ref->texture < 0)
+        return 1.0;
+    const struct dr_image *img = &s->images[s->textures[ref->texture].image];
+    const float *px = img->linear ? img->linear : img->data;
+    if (!px)
+        return 1.0;
+    double sum = 0.0;
+    size_t n = (size_t)img->width * img->height;
+    int c = img->channels < channel_count ? img->channels : channel_count;
+    for (size_t i = 0; i < n; i++)
+        for (int k = 0; k < c; k++)
+            sum += px[i * img->channels + k];
+    return sum / (double)(n * (size_t)c);
+}
+
+static double emitter_power_weight(const struct dr_scene *s, const struct dr_material *m)
+{
+    dr_vec3 e = dr_scale(m->emissive_factor, m->emissive_strength);
+    double w = (e.x + e.y + e.z) / 3.0 * mean_texture_value(s, &m->emissive_tex, 3);
+    return m->double_sided ? 2.0 * w : w;
+}
+
+static int build_env_tables(const struct dr_scene *s, struct dr_light_sampler *ls)
+{
+    const struct dr_image *img = &s->env.map;
+    int w = img->width, h = img->height, c = img->channels;
+    ls->env_w = w;
+    ls->env_h = h;
+    ls->env_marginal = malloc(sizeof(double) * (size_t)(h + 1));
+    ls->env_conditional = malloc(sizeof(double) * (size_t)h * (size_t)(w + 1));
+    if (!ls->env_marginal || !ls->env_conditional)
+        return DR_ERR_NOMEM;
+    double total = 0.0;
+    ls->env_marginal[0] = 0.0;
+    for (int y = 0; y < h; y++) {
+        /* texel weight: mean radiance times the solid angle of its row */
+        double sin_theta = sin(M_PI * (y + 0.5) / h);
+        double *row = ls->env_conditional + (size_t)y * (w + 1);
+        row[0] = 0.0;
+        for (int x = 0; x < w; x++) {
+            const float *p = img->data + ((size_t)y * w + x) * c;
+            double v = c >= 3 ? (fabs(p[0]) + fabs(p[1]) + fabs(p[2])) / 3.0 : fabs(p[0]);
+            if (!isfinite(v))
+                v = 0.0;
+            row[x + 1] = row[x] + v * sin_theta;
+        }
+        double row_sum = row[w];
+        if (row_sum > 0.0)
+            for (int x = 1; x <= w; x++)
+                row[x] /= row_sum;
+        else
+            for (int x = 1; x <= w; x++)
+                row[x] = (double)x / w;
+        total += row_sum;
+        ls->env_marginal[y + 1] = total;
+    }
+    if (total > 0.0) {
+        for (int y = 1; y <= h; y++)
+            ls->env_marginal[y] /= total;
+    } else {
+        for (int y = 1; y <= h; y++)
+            ls->env_marginal[y] = (double)y / h;
+    }
+    ls->env_integral = total / ((double)w * h);
+    return 0;
+}
+
+struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
+{
+    struct dr_light_sampler *ls = calloc(1, sizeof *ls);
+    if (!ls)
+        goto nomem;
+    ls->env_entry = -1;
+    ls->scene_center = dr_scale(dr_add(s->bbox_min, s->bbox_max), 0.5);
+    ls->scene_radius = 0.5 * dr_length(dr_sub(s->bbox_max, s->bbox_min));
+    if (!(ls->scene_radius > 0.0))
+        ls->scene_radius = 1.0;
+
+    const struct dr_mesh *m = &s->mesh;
+    for (uint32_t t = 0; t < m->n_triangles; t++)
+        if (emitter_power_weight(s, &s->materials[m->material[t]]) > 0.0)
+            ls->n_emitters++;
+    ls->n_punctual = s->n_lights;
+    ls->n_entries = ls->n_emitters + ls->n_punctual + (s->env.present ? 1 : 0);
+    ls->emitter_tri = malloc(sizeof(int64_t) * (size_t)(ls->n_emitters + 1));
+    ls->tri_pick = calloc((size_t)m->n_triangles + 1, sizeof(double));
+    ls->cdf = malloc(sizeof(double) * (size_t)(ls->n_entries + 1));
+    ls->pick = malloc(sizeof(double) * (size_t)(ls->n_entries + 1));
+    if (!ls->emitter_tri || !ls->tri_pick || !ls->cdf || !ls->pick)
+        goto nomem;
+
+    /* Power estimates, comparable across light kinds: flux in watts-ish. */
+    double *w = ls->pick;
+    int64_t k = 0;
+    double *mat_w = calloc((size_t)s->n_materials + 1, sizeof(double));
+    if (!mat_w)
+        goto nomem;
+    for (int i = 0; i < s->n_materials; i++)
+        mat_w[i] = emitter_power_weight(s, &s->materials[i]);
+    for (uint32_t t = 0; t < m->n_triangles; t++) {
+        double mw = mat_w[m->material[t]];
+        if (mw > 0.0) {
+            ls->emitter_tri[k] = t;
+            w[k++] = M_PI * mw * dr_triangle_area(m, t);
+        }
+    }
+    free(mat_w);
+    for (int i = 0; i < s->n_lights; i++) {
+        const struct dr_punctual *l = &s->lights[i];
+        double I = l->intensity * (l->color.x + l->color.y + l->color.z) / 3.0;
+        double p;
+        switch (l->type) {
+        case DR_LIGHT_POINT: p = 4.0 * M_PI * I; break;
+        case DR_LIGHT_SPOT: p = 2.0 * M_PI * (1.0 - 0.5 * (l->cos_inner + l->cos_outer)) * I; break;
+        default: p = M_PI * ls->scene_radius * ls->scene_radius * I; break;
+        }
+        w[k++] = fmax(p, 0.0);
+    }
+    if (s->env.present) {
+        if (s->env.map.data && build_env_tables(s, ls) != 0)
+            goto nomem;
+        double mean = (s->env.color.x + s->env.color.y + s->env.color.z) / 3.0 * s->env.strength;
+        if (s->env.map.data)
+            mean *= ls->env_integral * 0.5 * M_PI; /* mean radiance over the sphere */
+        ls->env_entry = (int)k;
+        w[k++] = fmax(M_PI * M_PI * ls->scene_radius * ls->scene_radius * mean, 0.0);
+    }
+    double total = 0.0;
+    ls->cdf[0] = 0.0;
+    for (int64_t i = 0; i < ls->n_entries; i++) {
+        total += w[i];
+        ls->cdf[i + 1] = total;
+    }
+    for (int64_t i = 0; i < ls->n_entries; i++) {
+        ls->pick[i] = total > 0.0 ? w[i] / total : 0.0;
+        ls->cdf[i + 1] = total > 0.0 ? ls->cdf[i + 1] / total : 0.0;
+    }
+    for (int64_t i = 0; i < ls->n_emitters; i++)
+        ls->tri_pick[ls->emitter_tri[i]] = ls->pick[i];
+    if (total <= 0.0)
+        ls->n_entries = 0;   /* nothing emits: NEE is skipped entirely */
+    return ls;
+nomem:
+    dr_set_error("out of memory building the light tables");
+    dr_light_sampler_destroy(ls);
+    return NULL;
+}
+
+void dr_light_sampler_destroy(struct dr_light_sampler *ls)
+{
+    if (!ls)
+        return;
+    free(ls->emitter_tri);
+    free(ls->tri_pick);
+    free(ls->cdf);
+    free(ls->pick);
+    free(ls->env_marginal);
+    free(ls->env_conditional);
+    free(ls);
+}
+
+bool dr_light_sampler_empty(const struct dr_light_sampler *ls) { return ls->n_entries == 0; }
+
+void dr_env_dir_to_uv(dr_vec3 d, double *u, double *v)
+{
+    *u = 0.5 + atan2(d.x, -d.z) * (0.5 / M_PI);
+    *v = acos(dr_clamp(d.y, -1.0, 1.0)) * DR_INV_PI;
+}
+
+dr_vec3 dr_env_uv_to_dir(double u, double v)
+{
+    double phi = (u - 0.5) * 2.0 * M_PI, theta = v * M_PI;
+    double st = sin(theta);
+    return dr_v3(st * sin(phi), cos(theta), -st * cos(phi));
+}
+
+dr_vec3 dr_env_radiance(const struct dr_scene *s, dr_vec3 dir)
+{
+    dr_vec3 L = dr_scale(s->env.color, s->env.strength);
+    if (s->env.map.data) {
+        double u, v, px[4];
+        dr_env_dir_to_uv(dir, &u, &v);
+        struct dr_texture tex = {0, DR_WRAP_REPEAT, DR_WRAP_CLAMP};
+        dr_texture_eval(&tex, &s->env.map, u, v, false, px);
+        L = dr_mul(L, dr_v3(px[0], px[1], px[2]));
+    }
+    return L;
+}
+
+static double env_pdf_dir(const struct dr_light_sampler *ls, dr_vec3 dir)
+{
+    if (!ls->env_marginal)
+        return 1.0 / (4.0 * M_PI);
+    double u, v;
+    dr_env_dir_to_uv(dir, &u, &v);
+    int x = (int)dr_clamp(floor(u * ls->env_w), 0, ls->env_w - 1);
+    int y = (int)dr_clamp(floor(v * ls->env_h), 0, ls->env_h - 1);
+    const double *row = ls->env_conditional + (size_t)y * (ls->env_w + 1);
+    double p_uv = (ls->env_marginal[y + 1] - ls->env_marginal[y]) * (row[x + 1] - row[x]) * ls->env_w * ls->env_h;
+    double st = sin(M_PI * (y + 0.5) / ls->env_h);
+    /* Use the row-centre sine, the same factor the weights were built with,
+     * so the density stays finite at the poles and matches sampling. */
+    return st > 0.0 ? p_uv / (2.0 * M_PI * M_PI * st) : 0.0;
+}
+
+double dr_light_pdf_env(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 dir)
+{
+    (void)s;
+    if (ls->env_entry < 0 || ls->n_entries == 0)
+        return 0.0;
+    return ls->pick[ls->env_entry] * env_pdf_dir(ls, dir);
+}
+
+double dr_light_pdf_area_pick(const struct dr_light_sampler *ls, int64_t tri) { return ls->tri_pick[tri]; }
+
+double dr_light_pdf_area(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 from,
+                         const struct dr_hit *hit)
+{
+    double pick = ls->tri_pick[hit->tri];
+    if (pick <= 0.0)
+        return 0.0;
+    dr_vec3 d = dr_sub(hit->p, from);
+    double d2 = dr_dot(d, d);
+    double cos_l = fabs(dr_dot(hit->ng, d)) / sqrt(d2);
+    double area = dr_triangle_area(&s->mesh, hit->tri);
+    return cos_l > 0.0 && area > 0.0 ? pick * d2 / (cos_l * area) : 0.0;
+}
+
+dr_vec3 dr_emission(const struct dr_scene *s, const struct dr_hit *hit)
+{
+    const struct dr_material *m = &s->materials[hit->material];
+    if (!hit->front && !m->double_sided)
+        return dr_v3s(0.0);
+    dr_vec3 e = dr_scale(m->emissive_factor, m->emissive_strength);
+    if (m->emissive_tex.texture >= 0 && !dr_is_black(e)) {
+        const struct dr_texture *t = &s->textures[m->emissive_tex.texture];
+        double px[4];
+        dr_texture_eval(t, &s->images[t->image], hit->uv[0], hit->uv[1], true, px);
+        e = dr_mul(e, dr_v3(px[0], px[1], px[2]));
+    }
+    return e;
+}
+
+static double spot_falloff(const struct dr_punctual *l, double cos_angle)
+{
+    /* glTF's recommended smooth cone attenuation */
+    double scale = 1.0 / fmax(1e-3, l->cos_inner - l->cos_outer);
+    double t = dr_clamp((cos_angle - l->cos_outer) * scale, 0.0, 1.0);
+    return t * t;
+}
+
+static double range_window(double range, double dist)
+{
+    if (range <= 0.0)
+        return 1.0;
+    double r = dist / range;
+    double w = dr_clamp(1.0 - r * r * r * r, 0.0, 1.0);
+    return w * w;
+}
+
+static bool sample_env(const struct dr_scene *s, const struct dr_light_sampler *ls, double u1, double u2,
+                       struct dr_light_sample *out)
+{
+    dr_vec3 dir;
+    double pdf;
+    if (!ls->env_marginal) {
+        /* constant radiance: uniform sphere */
+        double z = 1.0 - 2.0 * u1, r = sqrt(fmax(0.0, 1.0 - z * z)), phi = 2.0 * M_PI * u2;
+        dir = dr_v3(r * cos(phi), r * sin(phi), z);
+        pdf = 1.0 / (4.0 * M_PI);
+    } else {
+        int y = (int)cdf_find(ls->env_marginal, ls->env_h, u1);
+        double py = ls->env_marginal[y + 1] - ls->env_marginal[y];
+        if (py <= 0.0)
+            return false;
+        double dv = (u1 - ls->env_marginal[y]) / py;
+        const double *row = ls->env_conditional + (size_t)y * (ls->env_w + 1);
+        int x = (int)cdf_find(row, ls->env_w, u2);
+        double px = row[x + 1] - row[x];
+        if (px <= 0.0)
+            return false;
+        double du = (u2 - row[x]) / px;
+        double u = (x + dr_clamp(du, 0.0, 1.0)) / ls->env_w, v = (y + dr_clamp(dv, 0.0, 1.0)) / ls->env_h;
+        dir = dr_env_uv_to_dir(u, v);
+        double st = sin(M_PI * (y + 0.5) / ls->env_h);
+        pdf = st > 0.0 ? py * px * ls->env_w * ls->env_h / (2.0 * M_PI * M_PI * st) : 0.0;
+    }
+    if (!(pdf > 0.0))
+        return false;
+    out->wi = dir;
+    out->dist = INFINITY;
+    out->radiance = dr_env_radiance(s, dir);
+    out->pdf = pdf * ls->pick[ls->env_entry];
+    out->delta = false;
+    return !dr_is_black(out->radiance);
+}
+
+bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 p, double u_pick,
+                     double u1, double u2, struct dr_light_sample *out)
+{
+    if (ls->n_entries == 0)
+        return false;
+    int64_t i = cdf_find(ls->cdf, ls->n_entries, u_pick);
+    if (ls->pick[i] <= 0.0)
+        return false;
+    if (i < ls->n_emitters) {
+        int64_t tri = ls->emitter_tri[i];
+        double su = sqrt(u1);
+        struct dr_hit h;
+        dr_hit_at(&s->mesh, tri, 1.0 - su, u2 * su, &h);
+        dr_vec3 d = dr_sub(h.p, p);
+        double d2 = dr_dot(d, d);
+        if (!(d2 > 0.0))
+            return false;
+        double dist = sqrt(d2);
+        out->wi = dr_scale(d, 1.0 / dist);
+        double cos_l = dr_dot(h.ng, out->wi);
+        h.front = cos_l < 0.0;   /* the shading point sees the front face */
+        double area = dr_triangle_area(&s->mesh, tri);
+        if (cos_l == 0.0 || !(area > 0.0))
+            return false;
+        out->radiance = dr_emission(s, &h);
+        out->dist = dist;
+        out->pdf = ls->pick[i] * d2 / (fabs(cos_l) * area);
+        out->delta = false;
+        return !dr_is_black(out->radiance);
+    }
+    if (i == ls->env_entry)
+        return sample_env(s, ls, u1, u2, out);
+
+    const struct dr_punctual *l = &s->lights[i - ls->n_emitters];
+    dr_vec3 I = dr_scale(l->color, l->intensity);
+    out->delta = true;
+    out->pdf = ls->pick[i];
+    if (l->type == DR_LIGHT_DIRECTIONAL) {
+        out->wi = dr_neg(l->direction);
+        out->dist = INFINITY;
+        out->radiance = I;
+        return true;
+    }
+    dr_vec3 d = dr_sub(l->position, p);
+    double d2 = dr_dot(d, d);
+    if (!(d2 > 0.0))
+        return false;
+    double dist = sqrt(d2);
+    out->wi = dr_scale(d, 1.0 / dist);
+    out->dist = dist;
+    double atten = range_window(l->range, dist) / d2;
+    if (l->type == DR_LIGHT_SPOT)
+        atten *= spot_falloff(l, -dr_dot(out->wi, l->direction));
+    out->radiance = dr_scale(I, atten);
+    return atten > 0.0;
+}

@@ -1,0 +1,56 @@
+/* Light sources and next-event estimation: one discrete distribution over all
+ * of them (emissive triangles, punctual lights, the environment), chosen by
+ * estimated power, plus the densities MIS needs when a BSDF-sampled ray
+ * reaches an emitter or escapes. */
+#ifndef DR_LIGHTS_H
+#define DR_LIGHTS_H
+
+#include <stdbool.h>
+
+#include "geometry.h"
+#include "scene.h"
+#include "vec.h"
+
+struct dr_light_sampler;
+
+struct dr_light_sample {
+    dr_vec3 wi;        /* unit direction from the shading point towards the light */
+    double dist;       /* distance to the light point (INFINITY: environment/directional) */
+    dr_vec3 radiance;  /* radiance (area, environment) or irradiance-like value
+                          (punctual: intensity / dist^2 with falloff) arriving along wi */
+    double pdf;        /* solid-angle density including the choice of light;
+                          for delta lights, the probability of choosing it */
+    bool delta;        /* punctual: no MIS, no BSDF-sampled counterpart */
+};
+
+/* Builds the tables; scene->accel need not exist. NULL + dr_last_error. */
+struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *scene);
+void dr_light_sampler_destroy(struct dr_light_sampler *ls);
+bool dr_light_sampler_empty(const struct dr_light_sampler *ls);
+
+/* Samples a light as seen from point p with three uniforms. False when there
+ * is nothing to sample or the sample carries no light. */
+bool dr_light_sample(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 p,
+                     double u_pick, double u1, double u2, struct dr_light_sample *out);
+
+/* Solid-angle density with which dr_light_sample would produce the point
+ * `hit` on an emissive triangle as seen from `from`. */
+double dr_light_pdf_area(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 from,
+                         const struct dr_hit *hit);
+/* Probability that NEE picks triangle tri (0: it does not emit). */
+double dr_light_pdf_area_pick(const struct dr_light_sampler *ls, int64_t tri);
+/* Density for an escaping direction (environment). */
+double dr_light_pdf_env(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 dir);
+
+/* Radiance emitted by the surface at hit towards the side the ray came from
+ * (zero on the back of single-sided materials). */
+dr_vec3 dr_emission(const struct dr_scene *scene, const struct dr_hit *hit);
+/* Environment radiance arriving from direction -dir... i.e. seen along dir. */
+dr_vec3 dr_env_radiance(const struct dr_scene *scene, dr_vec3 dir);
+
+/* Equirectangular mapping (+Y up; u = 0.5 looks down -Z, u grows towards +X;
+ * v = 0 is straight up). */
+void dr_env_dir_to_uv(dr_vec3 dir, double *u, double *v);
+dr_vec3 dr_env_uv_to_dir(double u, double v);
+
+#endif

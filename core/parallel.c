@@ -1,0 +1,97 @@
+#include "parallel.h"
+
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdlib.h>
+#include <unistd.h>
+
+#include "error.h"
+
+struct job {
+    int width, height, tiles_x, total;
+    atomic_int next;
+    int done;
+    pthread_mutex_t lock;
+    dr_tile_fn fn;
+    dr_progress_fn progress;
+    void *ctx;
+};
+
+struct worker {
+    struct job *job;
+    int index;
+};
+
+static void *worker_main(void *arg)
+{
+    struct worker *w = arg;
+    struct job *j = w->job;
+    for (;;) {
+        int t = atomic_fetch_add(&j->next, 1);
+        if (t >= j->total)
+            break;
+        int x0 = (t % j->tiles_x) * DR_TILE_SIZE, y0 = (t / j->tiles_x) * DR_TILE_SIZE;
+        int x1 = x0 + DR_TILE_SIZE < j->width ? x0 + DR_TILE_SIZE : j->width;
+        int y1 = y0 + DR_TILE_SIZE < j->height ? y0 + DR_TILE_SIZE : j->height;
+        j->fn(j->ctx, w->index, x0, y0, x1, y1);
+        if (j->progress) {
+            pthread_mutex_lock(&j->lock);
+            j->done++;
+            j->progress(j->ctx, j->done, j->total);
+            pthread_mutex_unlock(&j->lock);
+        }
+    }
+    return NULL;
+}
+
+int dr_cpu_count(void)
+{
+    long n = sysconf(_SC_NPROCESSORS_ONLN);
+    return n >= 1 ? (int)n : 1;
+}
+
+int dr_parallel_tiles(int width, int height, int threads, dr_tile_fn fn, dr_progress_fn progress, void *ctx)
+{
+    struct job j;
+    j.width = width;
+    j.height = height;
+    j.tiles_x = (width + DR_TILE_SIZE - 1) / DR_TILE_SIZE;
+    j.total = j.tiles_x * ((height + DR_TILE_SIZE - 1) / DR_TILE_SIZE);
+    atomic_init(&j.next, 0);
+    j.done = 0;
+    j.fn = fn;
+    j.progress = progress;
+    j.ctx = ctx;
+    pthread_mutex_init(&j.lock, NULL);
+    if (threads <= 0)
+        threads = dr_cpu_count();
+    if (threads > j.total)
+        threads = j.total > 0 ? j.total : 1;
+
+    struct worker *ws = calloc((size_t)threads, sizeof *ws);
+    pthread_t *ids = calloc((size_t)threads, sizeof *ids);
+    int started = 0, rc = 0;
+    if (!ws || !ids) {
+        dr_set_error("out of memory");
+        rc = DR_ERR_NOMEM;
+        goto out;
+    }
+    for (int i = 0; i < threads; i++) {
+        ws[i].job = &j;
+        ws[i].index = i;
+    }
+    /* The calling thread is worker 0; the others are spawned. */
+    for (int i = 1; i < threads; i++) {
+        if (pthread_create(&ids[i], NULL, worker_main, &ws[i]) != 0)
+            break;
+        started++;
+    }
+    worker_main(&ws[0]);
+    for (int i = 1; i <= started; i++)
+        pthread_join(ids[i], NULL);
+out:
+    free(ws);
+    free(ids);
+    pthread_mutex_destroy(&j.lock);
+    return rc;
+}

@@ -1,0 +1,124 @@
+#include "render.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "camera.h"
+#include "error.h"
+#include "parallel.h"
+#include "sampler.h"
+
+#define MAX_THREADS 256
+
+struct render_job {
+    const struct dr_scene *scene;
+    const struct dr_camera *camera;
+    const struct dr_render_opts *opts;
+    struct dr_trace_opts trace;
+    float *rgb;
+    /* per-thread counters, padded apart to avoid false sharing */
+    struct {
+        struct dr_ray_counts rays;
+        uint64_t invalid;
+        char pad[64];
+    } counters[MAX_THREADS];
+};
+
+static void render_tile(void *ctx, int thread, int x0, int y0, int x1, int y1)
+{
+    struct render_job *j = ctx;
+    const struct dr_render_opts *o = j->opts;
+    struct dr_ray_counts *rays = &j->counters[thread].rays;
+    for (int y = y0; y < y1; y++) {
+        for (int x = x0; x < x1; x++) {
+            uint64_t pixel = (uint64_t)y * (uint64_t)o->width + (uint64_t)x;
+            dr_vec3 sum = dr_v3s(0.0);
+            for (int s = 0; s < o->spp; s++) {
+                struct dr_sampler smp;
+                dr_sampler_init(&smp, o->seed, pixel, (uint64_t)s);
+                double jx = dr_sampler_next(&smp), jy = dr_sampler_next(&smp);
+                dr_vec3 d = dr_camera_direction(j->camera, o->width, o->height, x + jx, y + jy);
+                dr_vec3 L = dr_path_radiance(j->scene, &j->trace, j->camera->origin, d, &smp, rays);
+                if (isfinite(L.x) && isfinite(L.y) && isfinite(L.z))
+                    sum = dr_add(sum, L);
+                else
+                    j->counters[thread].invalid++;
+            }
+            float *px = j->rgb + 3 * pixel;
+            px[0] = (float)(sum.x / o->spp);
+            px[1] = (float)(sum.y / o->spp);
+            px[2] = (float)(sum.z / o->spp);
+        }
+    }
+}
+
+void dr_progress_bar(const char *label, int done, int total)
+{
+    static int last_pct = -1;
+    int pct = total > 0 ? (int)(100.0 * done / total) : 100;
+    if (pct == last_pct && done != total)
+        return;
+    last_pct = pct;
+    const int width = 40;
+    int fill = pct * width / 100;
+    char bar[64];
+    for (int i = 0; i < width; i++)
+        bar[i] = i < fill ? '=' : ' ';
+    bar[width] = '\0';
+    fprintf(stderr, "\r%s [%s] %3d%%", label, bar, pct);
+    if (done >= total) {
+        fputc('\n', stderr);
+        last_pct = -1;
+    }
+    fflush(stderr);
+}
+
+static void progress(void *ctx, int done, int total)
+{
+    (void)ctx;
+    dr_progress_bar("rendering", done, total);
+}
+
+static double now_seconds(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+int dr_render(const struct dr_scene *scene, const struct dr_camera *camera, const struct dr_render_opts *opts,
+              float *rgb, struct dr_render_stats *stats)
+{
+    struct render_job *j = calloc(1, sizeof *j);
+    if (!j) {
+        dr_set_error("out of memory");
+        return DR_ERR_NOMEM;
+    }
+    j->scene = scene;
+    j->camera = camera;
+    j->opts = opts;
+    j->trace.max_depth = opts->max_depth;
+    j->trace.rr_depth = opts->rr_depth;
+    j->rgb = rgb;
+    int threads = opts->threads > 0 ? opts->threads : dr_cpu_count();
+    if (threads > MAX_THREADS)
+        threads = MAX_THREADS;
+    double t0 = now_seconds();
+    int rc = dr_parallel_tiles(opts->width, opts->height, threads, render_tile, opts->progress ? progress : NULL, j);
+    double t1 = now_seconds();
+    if (stats) {
+        memset(stats, 0, sizeof *stats);
+        stats->seconds = t1 - t0;
+        stats->threads = threads;
+        for (int i = 0; i < threads; i++) {
+            stats->rays.camera += j->counters[i].rays.camera;
+            stats->rays.extension += j->counters[i].rays.extension;
+            stats->rays.shadow += j->counters[i].rays.shadow;
+            stats->invalid_samples += j->counters[i].invalid;
+        }
+    }
+    free(j);
+    return rc;
+}

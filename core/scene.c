@@ -1,0 +1,122 @@
+#include "scene.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "accel.h"
+#include "error.h"
+#include "lights.h"
+
+struct dr_scene *dr_scene_load(const char *path)
+{
+    struct dr_scene *s = calloc(1, sizeof *s);
+    if (!s) {
+        dr_set_error("out of memory");
+        return NULL;
+    }
+    s->path = strdup(path);
+    if (!s->path || dr_gltf_load(path, s) != 0 || dr_scene_prepare(s) != 0) {
+        if (!s->path)
+            dr_set_error("out of memory");
+        dr_scene_destroy(s);
+        return NULL;
+    }
+    return s;
+}
+
+static bool material_has_specular(const struct dr_material *m)
+{
+    return m->metallic > 0.0 || (m->specular > 0.0 && !dr_is_black(m->specular_color)) ||
+           m->metallic_roughness_tex.texture >= 0;
+}
+
+int dr_scene_prepare(struct dr_scene *s)
+{
+    const struct dr_mesh *m = &s->mesh;
+    s->effects = 0;
+    /* Effects follow from what the triangles actually use, not from what the
+     * file happens to declare. */
+    bool *used = calloc((size_t)s->n_materials + 1, sizeof(bool));
+    if (!used) {
+        dr_set_error("out of memory");
+        return DR_ERR_NOMEM;
+    }
+    for (uint32_t t = 0; t < m->n_triangles; t++) {
+        used[m->material[t]] = true;
+        if (m->flags[t] & DR_TRI_HAS_NORMALS)
+            s->effects |= DR_FX_SHADING_NORMALS;
+    }
+    for (int i = 0; i < s->n_materials; i++) {
+        const struct dr_material *mat = &s->materials[i];
+        if (!used[i])
+            continue;
+        if (mat->base_color_tex.texture >= 0 || mat->metallic_roughness_tex.texture >= 0 ||
+            mat->emissive_tex.texture >= 0)
+            s->effects |= DR_FX_TEXTURES;
+        if (material_has_specular(mat))
+            s->effects |= DR_FX_SPECULAR;
+    }
+    free(used);
+
+    s->light_sampler = dr_light_sampler_create(s);
+    if (!s->light_sampler)
+        return DR_ERR_NOMEM;
+    for (uint32_t t = 0; t < m->n_triangles; t++)
+        if (dr_light_pdf_area_pick(s->light_sampler, t) > 0.0) {
+            s->effects |= DR_FX_AREA_LIGHTS;
+            break;
+        }
+    if (s->n_lights > 0)
+        s->effects |= DR_FX_PUNCTUAL_LIGHTS;
+    if (s->env.present)
+        s->effects |= s->env.map.data ? DR_FX_ENV_MAP : DR_FX_ENV_CONSTANT;
+
+    s->accel = dr_accel_create(m);
+    if (!s->accel) {
+        char msg[1024];
+        snprintf(msg, sizeof msg, "%s: cannot build the ray acceleration structure: %s", s->path, dr_last_error());
+        dr_set_error("%s", msg);
+        return DR_ERR_INTERNAL;
+    }
+    return 0;
+}
+
+void dr_scene_destroy(struct dr_scene *s)
+{
+    if (!s)
+        return;
+    dr_accel_destroy(s->accel);
+    dr_light_sampler_destroy(s->light_sampler);
+    free(s->mesh.positions);
+    free(s->mesh.normals);
+    free(s->mesh.uvs);
+    free(s->mesh.indices);
+    free(s->mesh.material);
+    free(s->mesh.flags);
+    free(s->materials);
+    free(s->textures);
+    for (int i = 0; i < s->n_images; i++)
+        dr_image_release(&s->images[i]);
+    free(s->images);
+    free(s->cameras);
+    free(s->lights);
+    dr_image_release(&s->env.map);
+    free(s->path);
+    free(s);
+}
+
+void dr_effects_describe(unsigned fx, char *buf, int size)
+{
+    static const struct { unsigned bit; const char *name; } names[] = {
+        {DR_FX_AREA_LIGHTS, "area_lights"},     {DR_FX_PUNCTUAL_LIGHTS, "punctual_lights"},
+        {DR_FX_ENV_CONSTANT, "environment"},    {DR_FX_ENV_MAP, "environment_map"},
+        {DR_FX_TEXTURES, "textures"},           {DR_FX_SPECULAR, "specular"},
+        {DR_FX_SHADING_NORMALS, "shading_normals"},
+    };
+    int n = 0;
+    buf[0] = '\0';
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
+        if (fx & names[i].bit)
+            n += snprintf(buf + n, n < size ? (size_t)(size - n) : 0, "%s%s", n ? "," : "", names[i].name);
+}

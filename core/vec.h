@@ -1,0 +1,66 @@
+/* Small double-precision vector maths used by the tracer.
+ * Value types, all inline: the inner loop lives on these. */
+#ifndef DR_VEC_H
+#define DR_VEC_H
+
+#include <math.h>
+#include <stdbool.h>
+
+#ifndef M_PI
+#define M_PI 3.14159265358979323846
+#endif
+#define DR_INV_PI (1.0 / M_PI)
+
+typedef struct { double x, y, z; } dr_vec3;
+
+static inline dr_vec3 dr_v3(double x, double y, double z) { dr_vec3 r = {x, y, z}; return r; }
+static inline dr_vec3 dr_v3s(double s) { return dr_v3(s, s, s); }
+static inline dr_vec3 dr_add(dr_vec3 a, dr_vec3 b) { return dr_v3(a.x + b.x, a.y + b.y, a.z + b.z); }
+static inline dr_vec3 dr_sub(dr_vec3 a, dr_vec3 b) { return dr_v3(a.x - b.x, a.y - b.y, a.z - b.z); }
+static inline dr_vec3 dr_mul(dr_vec3 a, dr_vec3 b) { return dr_v3(a.x * b.x, a.y * b.y, a.z * b.z); }
+static inline dr_vec3 dr_scale(dr_vec3 a, double s) { return dr_v3(a.x * s, a.y * s, a.z * s); }
+static inline dr_vec3 dr_neg(dr_vec3 a) { return dr_v3(-a.x, -a.y, -a.z); }
+static inline dr_vec3 dr_madd(dr_vec3 a, dr_vec3 b, double s) { return dr_v3(a.x + b.x * s, a.y + b.y * s, a.z + b.z * s); }
+static inline double dr_dot(dr_vec3 a, dr_vec3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+static inline dr_vec3 dr_cross(dr_vec3 a, dr_vec3 b)
+{
+    return dr_v3(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
+}
+static inline double dr_length(dr_vec3 a) { return sqrt(dr_dot(a, a)); }
+static inline dr_vec3 dr_normalize(dr_vec3 a)
+{
+    double l = dr_length(a);
+    return l > 0.0 ? dr_scale(a, 1.0 / l) : a;
+}
+static inline dr_vec3 dr_lerp3(dr_vec3 a, dr_vec3 b, double t) { return dr_add(dr_scale(a, 1.0 - t), dr_scale(b, t)); }
+static inline double dr_max3(dr_vec3 a) { return fmax(a.x, fmax(a.y, a.z)); }
+/* Rec. 709 luminance of linear RGB. */
+static inline double dr_luminance(dr_vec3 c) { return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z; }
+static inline bool dr_is_black(dr_vec3 c) { return c.x == 0.0 && c.y == 0.0 && c.z == 0.0; }
+static inline double dr_clamp(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
+static inline double dr_sqr(double v) { return v * v; }
+
+/* Orthonormal frame around a unit normal n (Duff et al. 2017, branchless). */
+typedef struct { dr_vec3 s, t, n; } dr_frame;
+
+static inline dr_frame dr_frame_from_normal(dr_vec3 n)
+{
+    double sign = copysign(1.0, n.z);
+    double a = -1.0 / (sign + n.z);
+    double b = n.x * n.y * a;
+    dr_frame f;
+    f.s = dr_v3(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+    f.t = dr_v3(b, sign + n.y * n.y * a, -n.y);
+    f.n = n;
+    return f;
+}
+static inline dr_vec3 dr_frame_to_local(const dr_frame *f, dr_vec3 v)
+{
+    return dr_v3(dr_dot(v, f->s), dr_dot(v, f->t), dr_dot(v, f->n));
+}
+static inline dr_vec3 dr_frame_to_world(const dr_frame *f, dr_vec3 v)
+{
+    return dr_add(dr_add(dr_scale(f->s, v.x), dr_scale(f->t, v.y)), dr_scale(f->n, v.z));
+}
+
+#endif

@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# Installs the Debian packages drender needs to build, test and benchmark.
+# Only what is missing is installed; uses sudo when not root. Idempotent.
+set -euo pipefail
+
+pkgs=(build-essential pkg-config
+      libembree-dev libopenimageio-dev openimageio-tools
+      libtinygltf-dev nlohmann-json3-dev libstb-dev
+      gnuplot-nox)
+
+missing=()
+for p in "${pkgs[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+[ ${#missing[@]} -eq 0 ] && exit 0
+
+echo "install-deps: installing ${missing[*]}" >&2
+SUDO=""
+[ "$(id -u)" -ne 0 ] && SUDO="sudo"
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >&2

@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# Runs every test: the compiled unit tests (build/tests/test_*) and the
+# command-line tests (tests/cli_*.sh), one process each, and closes with
+# "N passed, N failed". Exit status is non-zero if any failed or none ran.
+set -u
+build=${BUILD:-build}
+cd "$(dirname "$0")/.."
+export DRENDER="${DRENDER:-$PWD/$build/drender}"
+export DR_TESTDIR="$PWD/tests" DR_SCENES="$PWD/scenes"
+passed=0 failed=0 failed_names=()
+log_dir="$build/test-logs"; mkdir -p "$log_dir"
+for t in "$build"/tests/test_* tests/cli_*.sh; do
+    [ -e "$t" ] || continue
+    name=$(basename "$t")
+    start=$EPOCHREALTIME
+    if [ "${t%.sh}" != "$t" ]; then bash "$t" >"$log_dir/$name.log" 2>&1; else "$t" >"$log_dir/$name.log" 2>&1; fi
+    rc=$?
+    secs=$(awk -v a="$start" -v b="$EPOCHREALTIME" 'BEGIN{printf "%.1f", b-a}')
+    if [ $rc -eq 0 ]; then
+        passed=$((passed + 1)); printf 'PASS %-34s %6ss\n' "$name" "$secs"
+    else
+        failed=$((failed + 1)); failed_names+=("$name")
+        printf 'FAIL %-34s %6ss (exit %d)\n' "$name" "$secs" "$rc"
+        sed 's/^/    | /' "$log_dir/$name.log" | tail -n 25
+    fi
+done
+echo "$passed passed, $failed failed"
+[ $failed -eq 0 ] && [ $passed -gt 0 ]

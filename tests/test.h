@@ -1,0 +1,32 @@
+/* Minimal test harness: one process per test file. CHECK records a failure
+ * and keeps going; TEST_END() returns non-zero if anything failed. */
+#ifndef DR_TEST_H
+#define DR_TEST_H
+
+#include <math.h>
+#include <stdio.h>
+
+static int test_failures = 0;
+static int test_checks = 0;
+
+#define CHECK(cond, ...)                                                           \
+    do {                                                                           \
+        test_checks++;                                                             \
+        if (!(cond)) {                                                             \
+            test_failures++;                                                       \
+            fprintf(stderr, "%s:%d: CHECK failed: %s: ", __FILE__, __LINE__, #cond); \
+            fprintf(stderr, __VA_ARGS__);                                          \
+            fprintf(stderr, "\n");                                                 \
+        }                                                                          \
+    } while (0)
+
+/* |a - b| <= tol */
+#define CHECK_NEAR(a, b, tol, what)                                                \
+    CHECK(fabs((double)(a) - (double)(b)) <= (tol), "%s: %.10g vs %.10g (tol %.3g)", \
+          what, (double)(a), (double)(b), (double)(tol))
+
+#define TEST_END()                                                                 \
+    (fprintf(stderr, "%s: %d checks, %d failed\n", __FILE__, test_checks, test_failures), \
+     test_failures != 0)
+
+#endif
