@@ -34,6 +34,12 @@ static void attributes(const struct dr_mesh *m, int64_t tri, double b1, double b
         hit->uv[0] = hit->uv[1] = 0.0;
     }
     hit->material = m->material[tri];
+    double mag = 0.0;
+    for (int k = 0; k < 3; k++) {
+        const float *v = m->positions + 3 * (size_t)idx[k];
+        mag = fmax(mag, fmax(fabs(v[0]), fmax(fabs(v[1]), fabs(v[2]))));
+    }
+    hit->eps = 1e-5 * mag + 1e-30;
 }
 
 void dr_hit_compute(const struct dr_mesh *m, int64_t tri, dr_vec3 o, dr_vec3 d, struct dr_hit *hit)
@@ -80,11 +86,7 @@ double dr_triangle_area(const struct dr_mesh *m, int64_t tri)
     return 0.5 * dr_length(dr_cross(dr_sub(dr_mesh_vertex(m, idx[1]), p0), dr_sub(dr_mesh_vertex(m, idx[2]), p0)));
 }
 
-dr_vec3 dr_offset_origin(dr_vec3 p, dr_vec3 ng, dr_vec3 d, double scene_eps)
+dr_vec3 dr_offset_origin(const struct dr_hit *hit, dr_vec3 ng, dr_vec3 d)
 {
-    double mag = fmax(fabs(p.x), fmax(fabs(p.y), fabs(p.z)));
-    /* float spacing at |p| is ~6e-8 |p|; 1e-5 |p| clears the float hit
-     * reconstruction error with a wide margin; scene_eps covers p near 0. */
-    double eps = 1e-5 * mag + scene_eps;
-    return dr_madd(p, ng, dr_dot(d, ng) >= 0.0 ? eps : -eps);
+    return dr_madd(hit->p, ng, dr_dot(d, ng) >= 0.0 ? hit->eps : -hit->eps);
 }

@@ -18,6 +18,8 @@ struct dr_hit {
     double uv[2];      /* TEXCOORD_0 (0,0 without UVs) */
     bool front;        /* the ray arrived on the front face's side */
     int material;
+    double eps;        /* ray-offset distance: bounds the float error of Embree's
+                          intersection test on this triangle (see dr_offset_origin) */
 };
 
 static inline dr_vec3 dr_mesh_vertex(const struct dr_mesh *m, uint32_t v)
@@ -37,9 +39,11 @@ void dr_hit_at(const struct dr_mesh *m, int64_t tri, double b1, double b2, struc
 
 double dr_triangle_area(const struct dr_mesh *m, int64_t tri);
 
-/* Origin for a ray leaving p on the side of n that direction d points to:
- * pushed off the surface by an offset relative to the magnitude of p, so
- * float traversal does not re-hit the surface it starts on at any scene scale. */
-dr_vec3 dr_offset_origin(dr_vec3 p, dr_vec3 ng, dr_vec3 d, double scene_eps);
+/* Origin for a ray leaving hit->p towards d: pushed off the surface along ng
+ * (on d's side) by hit->eps. Embree tests triangles in float, with an error
+ * proportional to the magnitude of the triangle's vertices (not of p: a point
+ * near the origin on a huge triangle is still imprecise), so eps is 1e-5 times
+ * the largest vertex coordinate: ~50x the float error, at every scene scale. */
+dr_vec3 dr_offset_origin(const struct dr_hit *hit, dr_vec3 ng, dr_vec3 d);
 
 #endif

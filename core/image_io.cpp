@@ -251,32 +251,35 @@ int read_memory(const void *bytes, size_t size, const char *name_hint, dr_image 
     }
     std::string name = memory_name((const unsigned char *)bytes, size, label);
     std::string ext = extension_of(name);
-    std::unique_ptr<ImageInput> probe;
+    // Notes on OIIO 2.4: ImageInput::create("x.png") tries to open the file,
+    // so the plugin is looked up by the bare extension; and
+    // ImageInput::open(name, &config, &proxy) ignores the proxy when a config
+    // is given, so the proxy is attached with set_ioproxy() before open().
+    std::unique_ptr<ImageInput> in;
     if (!ext.empty())
-        probe = ImageInput::create(name);
-    if (!probe) {
+        in = ImageInput::create(ext);
+    if (!in) {
         OIIO::geterror();   // clear
         dr_set_error("%s: cannot read image: unknown image format", label.c_str());
         return DR_ERR_FORMAT;
     }
-    if (!probe->supports("ioproxy")) {
-        probe.reset();
+    if (!in->supports("ioproxy")) {
+        in.reset();
         return read_memory_via_file(bytes, size, ext, label, img);
     }
-    probe.reset();
 
     Filesystem::IOMemReader proxy(bytes, size);
     ImageSpec config = read_config();
+    ImageSpec spec;
     int rc;
-    {
-        auto in = ImageInput::open(name, &config, &proxy);
-        if (!in) {
-            dr_set_error("%s: cannot read image: %s", label.c_str(), oiio_error(in.get()).c_str());
-            return DR_ERR_FORMAT;
-        }
+    if (!in->set_ioproxy(&proxy) || !in->open(name, spec, config)) {
+        dr_set_error("%s: cannot read image: %s", label.c_str(), oiio_error(in.get()).c_str());
+        rc = DR_ERR_FORMAT;
+    } else {
         rc = read_opened(in.get(), label, img);
         in->close();
-    }   // the input is gone before the proxy
+    }
+    in.reset();   // the input is gone before the proxy
     return rc;
 }
 

@@ -6,19 +6,12 @@
 #include "lights.h"
 #include "material.h"
 
-double dr_scene_epsilon(const struct dr_scene *s)
-{
-    double r = dr_length(dr_sub(s->bbox_max, s->bbox_min));
-    return r > 0.0 ? 1e-7 * r : 1e-7;
-}
-
 dr_vec3 dr_path_radiance(const struct dr_scene *s, const struct dr_trace_opts *opts, dr_vec3 o, dr_vec3 d,
                          struct dr_sampler *sampler, struct dr_ray_counts *counts)
 {
     const struct dr_light_sampler *ls = s->light_sampler;
     const bool has_lights = !dr_light_sampler_empty(ls);
     const bool has_area = (s->effects & DR_FX_AREA_LIGHTS) != 0;
-    const double scene_eps = dr_scene_epsilon(s);
     dr_vec3 L = dr_v3s(0.0), beta = dr_v3s(1.0);
     double prev_pdf = 0.0;       /* BSDF density of the direction d (0 at the camera) */
     dr_vec3 prev_p = o;
@@ -73,10 +66,18 @@ dr_vec3 dr_path_radiance(const struct dr_scene *s, const struct dr_trace_opts *o
             double bsdf_pdf;
             dr_vec3 f = dr_bsdf_eval_pdf(&bsdf, wo, wi, &bsdf_pdf);
             if (!dr_is_black(f)) {
-                dr_vec3 so = dr_offset_origin(hit.p, ng, lsmp.wi, scene_eps);
-                double tmax = isinf(lsmp.dist) ? INFINITY : lsmp.dist * (1.0 - 1e-4);
+                /* The shadow ray joins the two offset end points: aiming it
+                 * from the lifted origin along the unlifted direction would
+                 * reach a grazing light's plane early and shadow itself. */
+                dr_vec3 so = dr_offset_origin(&hit, ng, lsmp.wi), sd = lsmp.wi;
+                double tmax = INFINITY;
+                if (!isinf(lsmp.dist)) {
+                    sd = dr_sub(lsmp.target, so);
+                    tmax = dr_length(sd);
+                    sd = dr_scale(sd, 1.0 / tmax);
+                }
                 counts->shadow++;
-                if (!dr_accel_occluded(s->accel, so, lsmp.wi, 0.0, tmax)) {
+                if (tmax > 0.0 && !dr_accel_occluded(s->accel, so, sd, 0.0, tmax)) {
                     double w = lsmp.delta ? 1.0 : dr_mis_power(lsmp.pdf, bsdf_pdf);
                     dr_vec3 c = dr_scale(dr_mul(f, lsmp.radiance), fabs(wi.z) * w / lsmp.pdf);
                     L = dr_add(L, dr_mul(beta, c));
@@ -96,7 +97,7 @@ dr_vec3 dr_path_radiance(const struct dr_scene *s, const struct dr_trace_opts *o
             break;
         prev_pdf = bs.pdf;
         prev_p = hit.p;
-        o = dr_offset_origin(hit.p, ng, wi, scene_eps);
+        o = dr_offset_origin(&hit, ng, wi);
         d = wi;
 
         if (depth >= opts->rr_depth) {

@@ -40,7 +40,4 @@ static inline double dr_mis_power(double pdf_a, double pdf_b)
     return 1.0 / (1.0 + r * r);
 }
 
-/* Offset scale for ray origins near the coordinate origin (from scene size). */
-double dr_scene_epsilon(const struct dr_scene *scene);
-
 #endif

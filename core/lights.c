@@ -365,6 +365,7 @@ bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls
             return false;
         out->radiance = dr_emission(s, &h);
         out->dist = dist;
+        out->target = dr_offset_origin(&h, h.ng, dr_neg(out->wi));
         out->pdf = ls->pick[i] * d2 / (fabs(cos_l) * area);
         out->delta = false;
         return !dr_is_black(out->radiance);
@@ -375,6 +376,7 @@ bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls
     const struct dr_punctual *l = &s->lights[i - ls->n_emitters];
     dr_vec3 I = dr_scale(l->color, l->intensity);
     out->delta = true;
+    out->target = l->position;
     out->pdf = ls->pick[i];
     if (l->type == DR_LIGHT_DIRECTIONAL) {
         out->wi = dr_neg(l->direction);

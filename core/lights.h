@@ -21,6 +21,9 @@ struct dr_light_sample {
     double pdf;        /* solid-angle density including the choice of light;
                           for delta lights, the probability of choosing it */
     bool delta;        /* punctual: no MIS, no BSDF-sampled counterpart */
+    dr_vec3 target;    /* finite lights: the light point, pushed off the light's
+                          surface towards the shading point (see dr_offset_origin);
+                          shadow rays end here */
 };
 
 /* Builds the tables; scene->accel need not exist. NULL + dr_last_error. */

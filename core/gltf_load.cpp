@@ -1,0 +1,1108 @@
+/* glTF 2.0 (.gltf / .glb) -> struct dr_scene, through tinygltf.
+ *
+ * The only file that includes tinygltf. tinygltf parses the JSON and reads the
+ * buffers; everything it leaves unchecked (indices, byte ranges, node graph)
+ * is validated here, because the tracer trusts the arrays it gets. Every error
+ * names the scene file and the JSON pointer of the offending value.
+ *
+ * Internally a failure throws `Failure` after dr_set_error(); the extern "C"
+ * entry point catches it (and everything else), so no exception escapes. */
+#include <tiny_gltf.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstdarg>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <set>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <strings.h>
+
+#include "error.h"
+#include "image_io.h"
+#include "scene.h"
+
+namespace {
+
+struct Failure {
+    int code;
+};
+
+#if defined(__GNUC__)
+#define DR_PRINTF(a, b) __attribute__((format(printf, a, b)))
+#else
+#define DR_PRINTF(a, b)
+#endif
+
+std::string vstrf(const char *fmt, va_list ap)
+{
+    char buf[1024];
+    vsnprintf(buf, sizeof buf, fmt, ap);
+    return buf;
+}
+
+DR_PRINTF(1, 2) std::string strf(const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    std::string s = vstrf(fmt, ap);
+    va_end(ap);
+    return s;
+}
+
+void copy_name(char dst[DR_NAME_MAX], const std::string &src)
+{
+    snprintf(dst, DR_NAME_MAX, "%s", src.c_str());
+}
+
+/* Copies a vector into a malloc'd array (the C side frees it); `extra` zeroed
+ * elements are appended. Empty -> NULL. */
+template <class T> T *copy_out(const std::vector<T> &v, size_t extra = 0)
+{
+    size_t n = v.size() + extra;
+    if (n == 0) return nullptr;
+    T *p = static_cast<T *>(calloc(n, sizeof(T)));
+    if (!p) throw std::bad_alloc();
+    if (!v.empty()) memcpy(p, v.data(), v.size() * sizeof(T));
+    return p;
+}
+
+/* ---- 4x4 affine matrices, column-major as glTF stores them: m[col*4+row] ---- */
+
+struct Mat4 {
+    double m[16];
+    double operator()(int row, int col) const { return m[col * 4 + row]; }
+};
+
+Mat4 mat_identity()
+{
+    Mat4 r = {};
+    r.m[0] = r.m[5] = r.m[10] = r.m[15] = 1.0;
+    return r;
+}
+
+Mat4 mat_mul(const Mat4 &a, const Mat4 &b)
+{
+    Mat4 r;
+    for (int c = 0; c < 4; c++)
+        for (int row = 0; row < 4; row++) {
+            double s = 0.0;
+            for (int k = 0; k < 4; k++) s += a(row, k) * b(k, c);
+            r.m[c * 4 + row] = s;
+        }
+    return r;
+}
+
+dr_vec3 mat_point(const Mat4 &a, double x, double y, double z)
+{
+    return dr_v3(a(0, 0) * x + a(0, 1) * y + a(0, 2) * z + a(0, 3),
+                 a(1, 0) * x + a(1, 1) * y + a(1, 2) * z + a(1, 3),
+                 a(2, 0) * x + a(2, 1) * y + a(2, 2) * z + a(2, 3));
+}
+
+dr_vec3 mat_column(const Mat4 &a, int c) { return dr_v3(a(0, c), a(1, c), a(2, c)); }
+
+/* Normals transform with the inverse transpose of the upper 3x3. The cofactor
+ * matrix is det * inverse-transpose; times sign(det) it points the right way
+ * and needs no division, so singular scales do not produce NaNs. */
+struct NormalXform {
+    double n[3][3];
+    bool mirrored;  /* det < 0: the winding flips */
+};
+
+NormalXform normal_xform(const Mat4 &a)
+{
+    auto e = [&](int r, int c) { return a(r, c); };
+    double cof[3][3];
+    for (int r = 0; r < 3; r++)
+        for (int c = 0; c < 3; c++) {
+            int r1 = (r + 1) % 3, r2 = (r + 2) % 3, c1 = (c + 1) % 3, c2 = (c + 2) % 3;
+            cof[r][c] = e(r1, c1) * e(r2, c2) - e(r1, c2) * e(r2, c1);
+        }
+    double det = e(0, 0) * cof[0][0] + e(0, 1) * cof[0][1] + e(0, 2) * cof[0][2];
+    NormalXform x;
+    x.mirrored = det < 0.0;
+    double s = x.mirrored ? -1.0 : 1.0;
+    for (int r = 0; r < 3; r++)
+        for (int c = 0; c < 3; c++) x.n[r][c] = s * cof[r][c];
+    return x;
+}
+
+/* ---- component types ---- */
+
+size_t component_size(int type)
+{
+    switch (type) {
+    case TINYGLTF_COMPONENT_TYPE_BYTE: case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return 1;
+    case TINYGLTF_COMPONENT_TYPE_SHORT: case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: return 2;
+    case TINYGLTF_COMPONENT_TYPE_INT: case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT:
+    case TINYGLTF_COMPONENT_TYPE_FLOAT: return 4;
+    case TINYGLTF_COMPONENT_TYPE_DOUBLE: return 8;
+    default: return 0;
+    }
+}
+
+const char *type_name(int type)
+{
+    switch (type) {
+    case TINYGLTF_TYPE_SCALAR: return "SCALAR";
+    case TINYGLTF_TYPE_VEC2: return "VEC2";
+    case TINYGLTF_TYPE_VEC3: return "VEC3";
+    case TINYGLTF_TYPE_VEC4: return "VEC4";
+    case TINYGLTF_TYPE_MAT2: return "MAT2";
+    case TINYGLTF_TYPE_MAT3: return "MAT3";
+    case TINYGLTF_TYPE_MAT4: return "MAT4";
+    default: return "unknown";
+    }
+}
+
+/* A validated view of an accessor: element i, component c is at
+ * base + i*stride + c*component_size. base == NULL: no bufferView, all zeros
+ * (as the spec says for accessors without one). */
+struct AccessorView {
+    const unsigned char *base = nullptr;
+    size_t stride = 0, count = 0;
+    int comp_type = 0;
+    bool normalized = false;
+
+    template <class T> T raw(size_t i, int c) const
+    {
+        T v;
+        memcpy(&v, base + i * stride + size_t(c) * sizeof(T), sizeof(T));  /* may be unaligned */
+        return v;
+    }
+
+    /* As a float, applying the glTF normalised-integer rules when flagged. */
+    double get(size_t i, int c) const
+    {
+        if (!base) return 0.0;
+        switch (comp_type) {
+        case TINYGLTF_COMPONENT_TYPE_FLOAT: return raw<float>(i, c);
+        case TINYGLTF_COMPONENT_TYPE_DOUBLE: return raw<double>(i, c);
+        case TINYGLTF_COMPONENT_TYPE_BYTE: {
+            double v = raw<int8_t>(i, c);
+            return normalized ? fmax(v / 127.0, -1.0) : v;
+        }
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: {
+            double v = raw<uint8_t>(i, c);
+            return normalized ? v / 255.0 : v;
+        }
+        case TINYGLTF_COMPONENT_TYPE_SHORT: {
+            double v = raw<int16_t>(i, c);
+            return normalized ? fmax(v / 32767.0, -1.0) : v;
+        }
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
+            double v = raw<uint16_t>(i, c);
+            return normalized ? v / 65535.0 : v;
+        }
+        case TINYGLTF_COMPONENT_TYPE_INT: return raw<int32_t>(i, c);
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT: {
+            double v = raw<uint32_t>(i, c);
+            return normalized ? v / 4294967295.0 : v;
+        }
+        default: return 0.0;
+        }
+    }
+
+    uint32_t index(size_t i) const
+    {
+        if (!base) return 0;
+        switch (comp_type) {
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return raw<uint8_t>(i, 0);
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: return raw<uint16_t>(i, 0);
+        default: return raw<uint32_t>(i, 0);
+        }
+    }
+};
+
+const char *const kSupportedExtensions[] = {
+    "KHR_materials_emissive_strength", "KHR_materials_specular", "KHR_lights_punctual",
+    "DR_environment"};
+
+bool is_supported_extension(const std::string &name)
+{
+    for (const char *s : kSupportedExtensions)
+        if (name == s) return true;
+    return false;
+}
+
+class Loader {
+public:
+    Loader(const char *path, dr_scene *scene) : path_(path), scene_(scene) {}
+    ~Loader()
+    {
+        for (dr_image &img : images_) dr_image_release(&img);  /* those not handed over */
+    }
+    void run();
+
+    /* tinygltf callbacks (user data = this) */
+    static bool fs_exists(const std::string &path, void *user);
+    static std::string fs_expand(const std::string &path, void *user);
+    static bool fs_read(std::vector<unsigned char> *out, std::string *err, const std::string &path,
+                        void *user);
+    static bool fs_write(std::string *err, const std::string &path,
+                         const std::vector<unsigned char> &data, void *user);
+    static bool image_cb(tinygltf::Image *image, const int image_idx, std::string *err,
+                         std::string *warn, int req_w, int req_h, const unsigned char *bytes,
+                         int size, void *user);
+
+private:
+    [[noreturn]] DR_PRINTF(3, 4) void fail(int code, const char *fmt, ...);
+    DR_PRINTF(3, 4) void warn_once(const std::string &key, const char *fmt, ...);
+
+    void load_model();
+    void check_features();
+    void take_images();
+    void load_textures();
+    void load_materials();
+    dr_texref texref(const tinygltf::TextureInfo &ti, const std::string &path);
+    void traverse_scene();
+    void visit_node(int idx, const Mat4 &parent, const std::string &ref, std::vector<char> &on_path);
+    Mat4 local_matrix(int idx);
+    void add_primitive(int mesh_idx, int prim_idx, const Mat4 &world, const NormalXform &nx);
+    void add_camera(int cam_idx, int node_idx, const Mat4 &world);
+    void add_light(int light_idx, int node_idx, const Mat4 &world);
+    void load_environment();
+    void finish();
+
+    AccessorView view_accessor(int idx, const std::string &ref, int want_type, const char *what);
+    double ext_number(const tinygltf::Value &obj, const char *key, double def, const std::string &path);
+    dr_vec3 ext_vec3(const tinygltf::Value &obj, const char *key, dr_vec3 def, const std::string &path);
+    dr_vec3 color3(const std::vector<double> &v, dr_vec3 def, const std::string &path);
+
+    const char *path_;
+    dr_scene *scene_;
+    tinygltf::Model model_;
+
+    /* the first file tinygltf could not open since the last successful read */
+    std::string fs_fail_path_;
+    int fs_fail_errno_ = 0;
+    /* error set by the image callback (tinygltf only sees "false") */
+    int image_error_ = 0;
+    std::string image_message_;
+
+    std::vector<dr_image> images_;          /* decoded by image_cb, by glTF image index */
+    std::vector<char> linear_images_;       /* used as colour: needs sRGB decode */
+    std::vector<dr_material> materials_;
+    bool default_material_used_ = false;
+    std::vector<dr_camera> cameras_;
+    std::vector<dr_punctual> lights_;
+
+    std::vector<float> positions_, normals_, uvs_;
+    std::vector<uint32_t> indices_;
+    std::vector<int32_t> tri_material_;
+    std::vector<uint8_t> tri_flags_;
+    dr_vec3 bbox_min_ = dr_v3s(HUGE_VAL), bbox_max_ = dr_v3s(-HUGE_VAL);
+
+    std::set<std::string> warned_;
+    std::vector<std::string> warnings_;     /* emitted only when the load succeeds */
+};
+
+void Loader::fail(int code, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    std::string msg = vstrf(fmt, ap);
+    va_end(ap);
+    dr_set_error("%s: %s", path_, msg.c_str());
+    throw Failure{code};
+}
+
+void Loader::warn_once(const std::string &key, const char *fmt, ...)
+{
+    if (!warned_.insert(key).second) return;
+    va_list ap;
+    va_start(ap, fmt);
+    warnings_.push_back(std::string(path_) + ": " + vstrf(fmt, ap));
+    va_end(ap);
+}
+
+/* ---- file system: our own callbacks so a missing buffer file can be reported
+ * with its errno instead of tinygltf's free-form text ---- */
+
+bool Loader::fs_exists(const std::string &path, void *user)
+{
+    FILE *f = fopen(path.c_str(), "rb");
+    if (f) {
+        fclose(f);
+        return true;
+    }
+    Loader *L = static_cast<Loader *>(user);
+    if (L->fs_fail_path_.empty()) {
+        L->fs_fail_path_ = path;
+        L->fs_fail_errno_ = errno;
+    }
+    return false;
+}
+
+std::string Loader::fs_expand(const std::string &path, void *) { return path; }
+
+bool Loader::fs_read(std::vector<unsigned char> *out, std::string *err, const std::string &path,
+                     void *user)
+{
+    Loader *L = static_cast<Loader *>(user);
+    FILE *f = fopen(path.c_str(), "rb");
+    if (f) {
+        out->clear();
+        unsigned char buf[65536];
+        size_t n;
+        while ((n = fread(buf, 1, sizeof buf, f)) > 0) out->insert(out->end(), buf, buf + n);
+        bool ok = !ferror(f);
+        int e = errno;
+        fclose(f);
+        if (ok) {
+            L->fs_fail_path_.clear();  /* an earlier probe of another directory does not count */
+            return true;
+        }
+        errno = e;
+    }
+    if (L->fs_fail_path_.empty()) {
+        L->fs_fail_path_ = path;
+        L->fs_fail_errno_ = errno;
+    }
+    if (err) *err = strerror(errno);
+    return false;
+}
+
+bool Loader::fs_write(std::string *err, const std::string &, const std::vector<unsigned char> &, void *)
+{
+    if (err) *err = "the loader does not write files";
+    return false;
+}
+
+/* ---- images: decoded by OpenImageIO (image_io.cpp), never by stb ---- */
+
+std::string image_name_hint(const tinygltf::Image &image, int idx, const unsigned char *b, int size)
+{
+    if (!image.uri.empty()) return image.uri;
+    /* OpenImageIO picks the reader by extension, so give the hint one. */
+    const char *ext = "";
+    if (image.mimeType == "image/png") ext = ".png";
+    else if (image.mimeType == "image/jpeg") ext = ".jpg";
+    else if (size >= 4 && b[0] == 0x89 && b[1] == 'P' && b[2] == 'N' && b[3] == 'G') ext = ".png";
+    else if (size >= 3 && b[0] == 0xff && b[1] == 0xd8 && b[2] == 0xff) ext = ".jpg";
+    else if (size >= 4 && b[0] == 0x76 && b[1] == 0x2f && b[2] == 0x31 && b[3] == 0x01) ext = ".exr";
+    else if (size >= 2 && b[0] == '#' && b[1] == '?') ext = ".hdr";
+    return strf("image%d%s", idx, ext);
+}
+
+bool Loader::image_cb(tinygltf::Image *image, const int image_idx, std::string *err, std::string *,
+                      int, int, const unsigned char *bytes, int size, void *user)
+{
+    Loader *L = static_cast<Loader *>(user);
+    try {
+        std::string where = strf("/images/%d", image_idx);
+        if (image->bufferView >= 0) {
+            /* tinygltf hands us &buffer[byteOffset] with byteLength unchecked. */
+            const tinygltf::BufferView &bv = L->model_.bufferViews[size_t(image->bufferView)];
+            size_t blen = L->model_.buffers[size_t(bv.buffer)].data.size();
+            if (bv.byteOffset > blen || bv.byteLength > blen - bv.byteOffset) {
+                L->image_error_ = DR_ERR_FORMAT;
+                L->image_message_ = strf("%s: /bufferViews/%d: byte range %zu..%zu exceeds buffer %d (length %zu)",
+                                         L->path_, image->bufferView, bv.byteOffset,
+                                         bv.byteOffset + bv.byteLength, bv.buffer, blen);
+                if (err) *err += L->image_message_;
+                return false;
+            }
+        }
+        dr_image img = {};
+        std::string hint = image_name_hint(*image, image_idx, bytes, size);
+        int rc = dr_image_read_memory(bytes, size_t(size), hint.c_str(), &img);
+        if (rc != 0) {
+            L->image_error_ = rc;
+            L->image_message_ = strf("%s: %s: %s", L->path_, where.c_str(), dr_last_error());
+            if (err) *err += L->image_message_;
+            return false;
+        }
+        if (L->images_.size() <= size_t(image_idx)) L->images_.resize(size_t(image_idx) + 1, dr_image{});
+        dr_image_release(&L->images_[size_t(image_idx)]);
+        L->images_[size_t(image_idx)] = img;
+        /* tinygltf only needs to believe the image is loaded; the pixels stay with us */
+        image->width = img.width;
+        image->height = img.height;
+        image->component = img.channels;
+        image->bits = 32;
+        image->pixel_type = TINYGLTF_COMPONENT_TYPE_FLOAT;
+        image->image.clear();
+        return true;
+    } catch (...) {
+        L->image_error_ = DR_ERR_NOMEM;
+        L->image_message_ = strf("%s: /images/%d: out of memory", L->path_, image_idx);
+        return false;
+    }
+}
+
+/* ---- parsing ---- */
+
+std::string trim_message(std::string s)
+{
+    while (!s.empty() && (s.back() == '\n' || s.back() == ' ')) s.pop_back();
+    for (char &c : s)
+        if (c == '\n') c = ';';
+    return s;
+}
+
+std::string directory_of(const char *path)
+{
+    const char *slash = strrchr(path, '/');
+    return slash ? std::string(path, size_t(slash - path + 1)) : std::string();
+}
+
+bool has_suffix(const char *s, const char *suffix)
+{
+    size_t n = strlen(s), m = strlen(suffix);
+    return n >= m && strcasecmp(s + n - m, suffix) == 0;
+}
+
+void Loader::load_model()
+{
+    /* Open it ourselves first: a clean "cannot open" message, and the magic. */
+    FILE *f = fopen(path_, "rb");
+    if (!f) fail(DR_ERR_IO, "cannot open: %s", strerror(errno));
+    unsigned char magic[4] = {0, 0, 0, 0};
+    size_t got = fread(magic, 1, 4, f);
+    bool read_error = ferror(f);
+    int e = errno;
+    fclose(f);
+    if (read_error) fail(DR_ERR_IO, "cannot read: %s", strerror(e));
+    bool binary = (got == 4 && memcmp(magic, "glTF", 4) == 0) || has_suffix(path_, ".glb");
+
+    tinygltf::TinyGLTF gltf;
+    tinygltf::FsCallbacks fs = {fs_exists, fs_expand, fs_read, fs_write, this};
+    gltf.SetFsCallbacks(fs);
+    gltf.SetImageLoader(image_cb, this);
+
+    std::string err, warn;
+    bool ok = binary ? gltf.LoadBinaryFromFile(&model_, &err, &warn, path_)
+                     : gltf.LoadASCIIFromFile(&model_, &err, &warn, path_);
+    if (!ok) {
+        if (image_error_) {
+            dr_set_error("%s", image_message_.c_str());
+            throw Failure{image_error_};
+        }
+        if (!fs_fail_path_.empty()) {
+            if (fs_fail_path_ == path_)
+                fail(DR_ERR_IO, "cannot read: %s", strerror(fs_fail_errno_));
+            /* Buffers are the only external files whose absence is fatal to
+             * tinygltf, and it stops at the first: the one being parsed is the
+             * next index. */
+            size_t b = model_.buffers.size();
+            std::string dir = directory_of(path_), file = fs_fail_path_;
+            if (!dir.empty() && file.compare(0, dir.size(), dir) == 0) file.erase(0, dir.size());
+            fail(DR_ERR_IO, "/buffers/%zu/uri: cannot read '%s': %s", b, file.c_str(),
+                 strerror(fs_fail_errno_));
+        }
+        fail(DR_ERR_FORMAT, "%s", trim_message(err.empty() ? "tinygltf failed to load the file" : err).c_str());
+    }
+    size_t start = 0;
+    while (start < warn.size()) {
+        size_t end = warn.find('\n', start);
+        if (end == std::string::npos) end = warn.size();
+        if (end > start) warnings_.push_back(std::string(path_) + ": " + warn.substr(start, end - start));
+        start = end + 1;
+    }
+}
+
+void Loader::check_features()
+{
+    const auto &req = model_.extensionsRequired;
+    std::vector<std::string> names = model_.extensionsUsed;
+    names.insert(names.end(), req.begin(), req.end());
+    for (const std::string &name : names) {
+        if (is_supported_extension(name)) continue;
+        bool required = std::find(req.begin(), req.end(), name) != req.end();
+        if (required)
+            warn_once("ext:" + name,
+                      "extension %s is required by this file but drender does not support it; "
+                      "rendering without it", name.c_str());
+        else
+            warn_once("ext:" + name, "extension %s is not supported; ignored", name.c_str());
+    }
+    if (!model_.animations.empty())
+        warn_once("animations", "/animations: animations are ignored (the scene is rendered at rest)");
+    if (!model_.skins.empty())
+        warn_once("skins", "/skins: skins are ignored (meshes are rendered in their bind pose)");
+}
+
+void Loader::take_images()
+{
+    size_t n = model_.images.size();
+    images_.resize(std::max(images_.size(), n), dr_image{});
+    for (size_t i = 0; i < n; i++)
+        if (!images_[i].data) {
+            const tinygltf::Image &im = model_.images[i];
+            if (!im.uri.empty())
+                fail(DR_ERR_IO, "/images/%zu/uri: cannot read '%s'", i, im.uri.c_str());
+            fail(DR_ERR_FORMAT, "/images/%zu: image data could not be loaded", i);
+        }
+    linear_images_.assign(n, 0);
+    scene_->images = static_cast<dr_image *>(calloc(n ? n : 1, sizeof(dr_image)));
+    if (!scene_->images) throw std::bad_alloc();
+    for (size_t i = 0; i < n; i++) {
+        scene_->images[i] = images_[i];
+        images_[i] = dr_image{};  /* the scene owns it now */
+    }
+    scene_->n_images = int(n);
+}
+
+enum dr_wrap wrap_mode(int gl) { return gl == 33071 ? DR_WRAP_CLAMP : gl == 33648 ? DR_WRAP_MIRROR : DR_WRAP_REPEAT; }
+
+void Loader::load_textures()
+{
+    std::vector<dr_texture> textures;
+    for (size_t i = 0; i < model_.textures.size(); i++) {
+        const tinygltf::Texture &t = model_.textures[i];
+        dr_texture tex = {};
+        if (t.source < 0)
+            fail(DR_ERR_FORMAT, "/textures/%zu: texture has no source image (image extensions such as "
+                 "KHR_texture_basisu are not supported)", i);
+        if (size_t(t.source) >= model_.images.size())
+            fail(DR_ERR_FORMAT, "/textures/%zu/source: image %d does not exist", i, t.source);
+        tex.image = t.source;
+        tex.wrap_s = tex.wrap_t = DR_WRAP_REPEAT;
+        if (t.sampler >= 0) {
+            if (size_t(t.sampler) >= model_.samplers.size())
+                fail(DR_ERR_FORMAT, "/textures/%zu/sampler: sampler %d does not exist", i, t.sampler);
+            const tinygltf::Sampler &s = model_.samplers[size_t(t.sampler)];
+            for (int w : {s.wrapS, s.wrapT})
+                if (w != 10497 && w != 33071 && w != 33648)
+                    fail(DR_ERR_FORMAT, "/samplers/%d: invalid wrap mode %d", t.sampler, w);
+            tex.wrap_s = wrap_mode(s.wrapS);
+            tex.wrap_t = wrap_mode(s.wrapT);
+        }
+        textures.push_back(tex);
+    }
+    scene_->textures = copy_out(textures);
+    scene_->n_textures = int(textures.size());
+}
+
+double Loader::ext_number(const tinygltf::Value &obj, const char *key, double def, const std::string &path)
+{
+    if (!obj.Has(key)) return def;
+    const tinygltf::Value &v = obj.Get(key);
+    if (!v.IsNumber()) fail(DR_ERR_FORMAT, "%s/%s: expected a number", path.c_str(), key);
+    return v.GetNumberAsDouble();
+}
+
+dr_vec3 Loader::ext_vec3(const tinygltf::Value &obj, const char *key, dr_vec3 def, const std::string &path)
+{
+    if (!obj.Has(key)) return def;
+    const tinygltf::Value &v = obj.Get(key);
+    if (!v.IsArray() || v.ArrayLen() != 3 || !v.Get(0).IsNumber() || !v.Get(1).IsNumber() ||
+        !v.Get(2).IsNumber())
+        fail(DR_ERR_FORMAT, "%s/%s: expected an array of 3 numbers", path.c_str(), key);
+    return dr_v3(v.Get(0).GetNumberAsDouble(), v.Get(1).GetNumberAsDouble(), v.Get(2).GetNumberAsDouble());
+}
+
+dr_vec3 Loader::color3(const std::vector<double> &v, dr_vec3 def, const std::string &path)
+{
+    if (v.empty()) return def;
+    if (v.size() < 3) fail(DR_ERR_FORMAT, "%s: expected at least 3 numbers", path.c_str());
+    return dr_v3(v[0], v[1], v[2]);
+}
+
+dr_texref Loader::texref(const tinygltf::TextureInfo &ti, const std::string &path)
+{
+    dr_texref r = {-1, ti.texCoord};
+    if (ti.index < 0) return r;
+    if (size_t(ti.index) >= model_.textures.size())
+        fail(DR_ERR_FORMAT, "%s/index: texture %d does not exist", path.c_str(), ti.index);
+    if (ti.extensions.count("KHR_texture_transform"))
+        warn_once("ext:KHR_texture_transform", "%s/extensions/KHR_texture_transform: texture transforms "
+                  "are not supported; ignored", path.c_str());
+    if (ti.texCoord != 0) {
+        warn_once("texcoord", "%s/texCoord: only TEXCOORD_0 is supported; texture ignored", path.c_str());
+        return r;
+    }
+    r.texture = ti.index;
+    return r;
+}
+
+dr_material default_material(const char *name)
+{
+    dr_material m = {};
+    copy_name(m.name, name);
+    m.base_color = dr_v3s(1.0);
+    m.metallic = m.roughness = 1.0;
+    m.emissive_factor = dr_v3s(0.0);
+    m.emissive_strength = 1.0;
+    m.specular = 1.0;
+    m.specular_color = dr_v3s(1.0);
+    m.double_sided = false;
+    m.base_color_tex = m.metallic_roughness_tex = m.emissive_tex = dr_texref{-1, 0};
+    return m;
+}
+
+void Loader::load_materials()
+{
+    for (size_t i = 0; i < model_.materials.size(); i++) {
+        const tinygltf::Material &g = model_.materials[i];
+        const tinygltf::PbrMetallicRoughness &pbr = g.pbrMetallicRoughness;
+        std::string mp = strf("/materials/%zu", i);
+        std::string pp = mp + "/pbrMetallicRoughness";
+        dr_material m = default_material(g.name.empty() ? strf("material_%zu", i).c_str() : g.name.c_str());
+        m.base_color = color3(pbr.baseColorFactor, dr_v3s(1.0), pp + "/baseColorFactor");
+        m.metallic = pbr.metallicFactor;
+        m.roughness = pbr.roughnessFactor;
+        m.emissive_factor = color3(g.emissiveFactor, dr_v3s(0.0), mp + "/emissiveFactor");
+        m.double_sided = g.doubleSided;
+        m.base_color_tex = texref(pbr.baseColorTexture, pp + "/baseColorTexture");
+        m.metallic_roughness_tex = texref(pbr.metallicRoughnessTexture, pp + "/metallicRoughnessTexture");
+        m.emissive_tex = texref(g.emissiveTexture, mp + "/emissiveTexture");
+        /* colour textures are sRGB-encoded; metallicRoughness is linear data */
+        for (const dr_texref *t : {&m.base_color_tex, &m.emissive_tex})
+            if (t->texture >= 0) linear_images_[size_t(scene_->textures[t->texture].image)] = 1;
+
+        if (g.alphaMode != "OPAQUE" && !g.alphaMode.empty())
+            warn_once("alpha", "%s/alphaMode: %s is not supported; rendered as OPAQUE", mp.c_str(),
+                      g.alphaMode.c_str());
+        if (g.normalTexture.index >= 0)
+            warn_once("normalTexture", "%s/normalTexture: normal maps are not supported; ignored", mp.c_str());
+        if (g.occlusionTexture.index >= 0)
+            warn_once("occlusionTexture", "%s/occlusionTexture: occlusion maps are ignored (the path "
+                      "tracer computes occlusion)", mp.c_str());
+
+        auto it = g.extensions.find("KHR_materials_emissive_strength");
+        if (it != g.extensions.end()) {
+            std::string ep = mp + "/extensions/KHR_materials_emissive_strength";
+            if (!it->second.IsObject()) fail(DR_ERR_FORMAT, "%s: expected an object", ep.c_str());
+            m.emissive_strength = ext_number(it->second, "emissiveStrength", 1.0, ep);
+        }
+        it = g.extensions.find("KHR_materials_specular");
+        if (it != g.extensions.end()) {
+            std::string ep = mp + "/extensions/KHR_materials_specular";
+            if (!it->second.IsObject()) fail(DR_ERR_FORMAT, "%s: expected an object", ep.c_str());
+            m.specular = ext_number(it->second, "specularFactor", 1.0, ep);
+            m.specular_color = ext_vec3(it->second, "specularColorFactor", dr_v3s(1.0), ep);
+            for (const char *key : {"specularTexture", "specularColorTexture"})
+                if (it->second.Has(key))
+                    warn_once(std::string("spec:") + key, "%s/%s: specular textures are not supported; ignored",
+                              ep.c_str(), key);
+        }
+        for (const auto &kv : g.extensions)
+            if (!is_supported_extension(kv.first))
+                warn_once("ext:" + kv.first, "%s/extensions/%s: extension is not supported; ignored",
+                          mp.c_str(), kv.first.c_str());
+        materials_.push_back(m);
+    }
+}
+
+/* ---- accessors ---- */
+
+AccessorView Loader::view_accessor(int idx, const std::string &ref, int want_type, const char *what)
+{
+    if (idx < 0 || size_t(idx) >= model_.accessors.size())
+        fail(DR_ERR_FORMAT, "%s: accessor %d does not exist", ref.c_str(), idx);
+    const tinygltf::Accessor &a = model_.accessors[size_t(idx)];
+    if (a.sparse.isSparse)
+        fail(DR_ERR_FORMAT, "/accessors/%d: sparse accessors are not supported", idx);
+    if (a.type != want_type)
+        fail(DR_ERR_FORMAT, "/accessors/%d: %s must be %s, not %s", idx, what, type_name(want_type),
+             type_name(a.type));
+    size_t csize = component_size(a.componentType);
+    if (csize == 0)
+        fail(DR_ERR_FORMAT, "/accessors/%d/componentType: invalid component type %d", idx, a.componentType);
+    size_t ncomp = size_t(tinygltf::GetNumComponentsInType(uint32_t(a.type)));
+    size_t elem = csize * ncomp;
+
+    AccessorView v;
+    v.count = a.count;
+    v.comp_type = a.componentType;
+    v.normalized = a.normalized;
+    v.stride = elem;
+    if (a.bufferView < 0) return v;  /* all zeros */
+
+    if (size_t(a.bufferView) >= model_.bufferViews.size())
+        fail(DR_ERR_FORMAT, "/accessors/%d/bufferView: bufferView %d does not exist", idx, a.bufferView);
+    const tinygltf::BufferView &bv = model_.bufferViews[size_t(a.bufferView)];
+    if (bv.buffer < 0 || size_t(bv.buffer) >= model_.buffers.size())
+        fail(DR_ERR_FORMAT, "/bufferViews/%d/buffer: buffer %d does not exist", a.bufferView, bv.buffer);
+    const std::vector<unsigned char> &data = model_.buffers[size_t(bv.buffer)].data;
+    if (bv.byteOffset > data.size() || bv.byteLength > data.size() - bv.byteOffset)
+        fail(DR_ERR_FORMAT, "/bufferViews/%d: byte range %zu..%zu exceeds buffer %d (length %zu)",
+             a.bufferView, bv.byteOffset, bv.byteOffset + bv.byteLength, bv.buffer, data.size());
+    if (bv.byteStride != 0) {
+        if (bv.byteStride < elem)
+            fail(DR_ERR_FORMAT, "/bufferViews/%d/byteStride: %zu is less than the %zu-byte elements of "
+                 "accessor %d", a.bufferView, bv.byteStride, elem, idx);
+        v.stride = bv.byteStride;
+    }
+    /* bytes the accessor touches (the last element needs only elem bytes),
+     * checked without overflowing size_t */
+    size_t len = bv.byteLength;
+    bool fits = a.byteOffset <= len &&
+                (a.count == 0 || (elem <= len - a.byteOffset &&
+                                  (a.count - 1) <= (len - a.byteOffset - elem) / v.stride));
+    if (!fits) {
+        double end = double(a.byteOffset) + (a.count ? double(a.count - 1) * double(v.stride) + double(elem) : 0.0);
+        fail(DR_ERR_FORMAT, "/accessors/%d: byte range %zu..%.0f exceeds bufferView %d (length %zu)", idx,
+             a.byteOffset, end, a.bufferView, len);
+    }
+    v.base = data.data() + bv.byteOffset + a.byteOffset;
+    return v;
+}
+
+/* ---- geometry ---- */
+
+void Loader::add_primitive(int mesh_idx, int prim_idx, const Mat4 &world, const NormalXform &nx)
+{
+    const tinygltf::Primitive &p = model_.meshes[size_t(mesh_idx)].primitives[size_t(prim_idx)];
+    std::string pp = strf("/meshes/%d/primitives/%d", mesh_idx, prim_idx);
+    int mode = p.mode < 0 ? TINYGLTF_MODE_TRIANGLES : p.mode;
+    if (mode == TINYGLTF_MODE_POINTS)
+        fail(DR_ERR_FORMAT, "%s/mode: points are not supported (drender renders triangles)", pp.c_str());
+    if (mode == TINYGLTF_MODE_LINE || mode == TINYGLTF_MODE_LINE_LOOP || mode == TINYGLTF_MODE_LINE_STRIP)
+        fail(DR_ERR_FORMAT, "%s/mode: lines are not supported (drender renders triangles)", pp.c_str());
+    if (mode != TINYGLTF_MODE_TRIANGLES && mode != TINYGLTF_MODE_TRIANGLE_STRIP &&
+        mode != TINYGLTF_MODE_TRIANGLE_FAN)
+        fail(DR_ERR_FORMAT, "%s/mode: unknown primitive mode %d", pp.c_str(), mode);
+    if (!p.targets.empty())
+        warn_once("morph", "%s/targets: morph targets are ignored", pp.c_str());
+    for (const auto &kv : p.extensions)
+        if (!is_supported_extension(kv.first))
+            warn_once("ext:" + kv.first, "%s/extensions/%s: extension is not supported; ignored", pp.c_str(),
+                      kv.first.c_str());
+
+    auto attr = [&](const char *name) {
+        auto it = p.attributes.find(name);
+        return it == p.attributes.end() ? -1 : it->second;
+    };
+    int pos_idx = attr("POSITION");
+    if (pos_idx < 0) fail(DR_ERR_FORMAT, "%s/attributes: the primitive has no POSITION", pp.c_str());
+    AccessorView pos = view_accessor(pos_idx, pp + "/attributes/POSITION", TINYGLTF_TYPE_VEC3, "POSITION");
+    size_t nv = pos.count;
+
+    AccessorView nor, uv;
+    int nor_idx = attr("NORMAL"), uv_idx = attr("TEXCOORD_0");
+    if (nor_idx >= 0) {
+        nor = view_accessor(nor_idx, pp + "/attributes/NORMAL", TINYGLTF_TYPE_VEC3, "NORMAL");
+        if (nor.count != nv)
+            fail(DR_ERR_FORMAT, "/accessors/%d: NORMAL has %zu elements but POSITION has %zu", nor_idx,
+                 nor.count, nv);
+    }
+    if (uv_idx >= 0) {
+        uv = view_accessor(uv_idx, pp + "/attributes/TEXCOORD_0", TINYGLTF_TYPE_VEC2, "TEXCOORD_0");
+        if (uv.count != nv)
+            fail(DR_ERR_FORMAT, "/accessors/%d: TEXCOORD_0 has %zu elements but POSITION has %zu", uv_idx,
+                 uv.count, nv);
+    }
+
+    /* the primitive's vertex sequence, as listed or implicit */
+    std::vector<uint32_t> seq;
+    if (p.indices >= 0) {
+        AccessorView ix = view_accessor(p.indices, pp + "/indices", TINYGLTF_TYPE_SCALAR, "indices");
+        if (ix.comp_type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
+            ix.comp_type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+            ix.comp_type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+            fail(DR_ERR_FORMAT, "/accessors/%d/componentType: indices must be unsigned byte, short or int",
+                 p.indices);
+        seq.resize(ix.count);
+        for (size_t i = 0; i < ix.count; i++) {
+            seq[i] = ix.index(i);
+            if (seq[i] >= nv)
+                fail(DR_ERR_FORMAT, "/accessors/%d: index %u (element %zu) is out of range: the "
+                     "primitive has %zu vertices", p.indices, seq[i], i, nv);
+        }
+    } else {
+        if (nv > UINT32_MAX) fail(DR_ERR_FORMAT, "%s: too many vertices", pp.c_str());
+        seq.resize(nv);
+        for (size_t i = 0; i < nv; i++) seq[i] = uint32_t(i);
+    }
+
+    /* strips and fans become lists; an incomplete last triangle is dropped */
+    std::vector<uint32_t> tri;
+    if (mode == TINYGLTF_MODE_TRIANGLES) {
+        tri.assign(seq.begin(), seq.begin() + ptrdiff_t(seq.size() / 3 * 3));
+    } else {
+        for (size_t i = 0; i + 2 < seq.size(); i++) {
+            if (mode == TINYGLTF_MODE_TRIANGLE_FAN)
+                tri.insert(tri.end(), {seq[0], seq[i + 1], seq[i + 2]});
+            else if (i % 2 == 0)
+                tri.insert(tri.end(), {seq[i], seq[i + 1], seq[i + 2]});
+            else  /* odd strip triangles swap to keep the winding */
+                tri.insert(tri.end(), {seq[i + 1], seq[i], seq[i + 2]});
+        }
+    }
+
+    size_t base = positions_.size() / 3;
+    if (base + nv > UINT32_MAX) fail(DR_ERR_FORMAT, "%s: the scene has more than 2^32 vertices", pp.c_str());
+
+    int32_t material;
+    if (p.material < 0) {
+        default_material_used_ = true;
+        material = int32_t(model_.materials.size());
+    } else if (size_t(p.material) >= model_.materials.size()) {
+        fail(DR_ERR_FORMAT, "%s/material: material %d does not exist", pp.c_str(), p.material);
+    } else {
+        material = p.material;
+    }
+    uint8_t flags = uint8_t((nor_idx >= 0 ? DR_TRI_HAS_NORMALS : 0) | (uv_idx >= 0 ? DR_TRI_HAS_UVS : 0));
+
+    for (size_t i = 0; i < nv; i++) {
+        dr_vec3 w = mat_point(world, pos.get(i, 0), pos.get(i, 1), pos.get(i, 2));
+        positions_.insert(positions_.end(), {float(w.x), float(w.y), float(w.z)});
+        bbox_min_ = dr_v3(fmin(bbox_min_.x, w.x), fmin(bbox_min_.y, w.y), fmin(bbox_min_.z, w.z));
+        bbox_max_ = dr_v3(fmax(bbox_max_.x, w.x), fmax(bbox_max_.y, w.y), fmax(bbox_max_.z, w.z));
+        dr_vec3 n = dr_v3s(0.0);
+        if (nor_idx >= 0) {
+            double a = nor.get(i, 0), b = nor.get(i, 1), c = nor.get(i, 2);
+            n = dr_normalize(dr_v3(nx.n[0][0] * a + nx.n[0][1] * b + nx.n[0][2] * c,
+                                   nx.n[1][0] * a + nx.n[1][1] * b + nx.n[1][2] * c,
+                                   nx.n[2][0] * a + nx.n[2][1] * b + nx.n[2][2] * c));
+        }
+        normals_.insert(normals_.end(), {float(n.x), float(n.y), float(n.z)});
+        uvs_.insert(uvs_.end(), {float(uv.get(i, 0)), float(uv.get(i, 1))});
+    }
+    for (size_t t = 0; t + 2 < tri.size(); t += 3) {
+        uint32_t a = uint32_t(base) + tri[t], b = uint32_t(base) + tri[t + 1], c = uint32_t(base) + tri[t + 2];
+        if (nx.mirrored) std::swap(b, c);  /* a mirror turns counter-clockwise into clockwise */
+        indices_.insert(indices_.end(), {a, b, c});
+        tri_material_.push_back(material);
+        tri_flags_.push_back(flags);
+    }
+}
+
+/* ---- cameras and lights ---- */
+
+void Loader::add_camera(int cam_idx, int node_idx, const Mat4 &world)
+{
+    const tinygltf::Camera &c = model_.cameras[size_t(cam_idx)];
+    if (c.type == "orthographic") {
+        warn_once("ortho", "/cameras/%d: orthographic cameras are not supported; camera skipped", cam_idx);
+        return;
+    }
+    if (c.type != "perspective")
+        fail(DR_ERR_FORMAT, "/cameras/%d/type: unknown camera type '%s'", cam_idx, c.type.c_str());
+    dr_camera cam = {};
+    const std::string &name = !c.name.empty() ? c.name : model_.nodes[size_t(node_idx)].name;
+    copy_name(cam.name, name.empty() ? strf("camera_%zu", cameras_.size()) : name);
+    cam.origin = mat_column(world, 3);
+    cam.right = dr_normalize(mat_column(world, 0));
+    cam.up = dr_normalize(mat_column(world, 1));
+    cam.forward = dr_normalize(dr_neg(mat_column(world, 2)));
+    cam.yfov = c.perspective.yfov;
+    cam.aspect = c.perspective.aspectRatio;
+    if (!(cam.yfov > 0.0 && cam.yfov < M_PI))
+        fail(DR_ERR_FORMAT, "/cameras/%d/perspective/yfov: %g is not in (0, pi)", cam_idx, cam.yfov);
+    cameras_.push_back(cam);
+}
+
+void Loader::add_light(int light_idx, int node_idx, const Mat4 &world)
+{
+    const tinygltf::Light &g = model_.lights[size_t(light_idx)];
+    std::string lp = strf("/extensions/KHR_lights_punctual/lights/%d", light_idx);
+    dr_punctual l = {};
+    const std::string &name = !g.name.empty() ? g.name : model_.nodes[size_t(node_idx)].name;
+    copy_name(l.name, name.empty() ? strf("light_%d", light_idx) : name);
+    if (g.type == "point") l.type = DR_LIGHT_POINT;
+    else if (g.type == "spot") l.type = DR_LIGHT_SPOT;
+    else if (g.type == "directional") l.type = DR_LIGHT_DIRECTIONAL;
+    else fail(DR_ERR_FORMAT, "%s/type: unknown light type '%s'", lp.c_str(), g.type.c_str());
+    l.color = color3(g.color, dr_v3s(1.0), lp + "/color");
+    l.intensity = g.intensity;
+    l.range = g.range;
+    l.position = mat_column(world, 3);
+    l.direction = dr_normalize(dr_neg(mat_column(world, 2)));
+    l.cos_inner = cos(g.spot.innerConeAngle);
+    l.cos_outer = cos(g.spot.outerConeAngle);
+    l.gltf_index = light_idx;
+    lights_.push_back(l);
+}
+
+/* ---- the node graph ---- */
+
+Mat4 Loader::local_matrix(int idx)
+{
+    const tinygltf::Node &n = model_.nodes[size_t(idx)];
+    if (!n.matrix.empty()) {
+        if (n.matrix.size() != 16) fail(DR_ERR_FORMAT, "/nodes/%d/matrix: expected 16 numbers", idx);
+        Mat4 m;
+        for (int i = 0; i < 16; i++) m.m[i] = n.matrix[size_t(i)];
+        return m;
+    }
+    if (!n.translation.empty() && n.translation.size() != 3)
+        fail(DR_ERR_FORMAT, "/nodes/%d/translation: expected 3 numbers", idx);
+    if (!n.rotation.empty() && n.rotation.size() != 4)
+        fail(DR_ERR_FORMAT, "/nodes/%d/rotation: expected 4 numbers", idx);
+    if (!n.scale.empty() && n.scale.size() != 3)
+        fail(DR_ERR_FORMAT, "/nodes/%d/scale: expected 3 numbers", idx);
+    double t[3] = {0, 0, 0}, s[3] = {1, 1, 1}, q[4] = {0, 0, 0, 1};
+    for (size_t i = 0; i < n.translation.size(); i++) t[i] = n.translation[i];
+    for (size_t i = 0; i < n.scale.size(); i++) s[i] = n.scale[i];
+    for (size_t i = 0; i < n.rotation.size(); i++) q[i] = n.rotation[i];
+    double ql = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    if (ql > 0.0)
+        for (double &c : q) c /= ql;
+    double x = q[0], y = q[1], z = q[2], w = q[3];
+    double r[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)},
+                      {2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)},
+                      {2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)}};
+    Mat4 m = mat_identity();  /* T * R * S */
+    for (int row = 0; row < 3; row++) {
+        for (int col = 0; col < 3; col++) m.m[col * 4 + row] = r[row][col] * s[col];
+        m.m[12 + row] = t[row];
+    }
+    return m;
+}
+
+void Loader::visit_node(int idx, const Mat4 &parent, const std::string &ref, std::vector<char> &on_path)
+{
+    if (idx < 0 || size_t(idx) >= model_.nodes.size())
+        fail(DR_ERR_FORMAT, "%s: node %d does not exist", ref.c_str(), idx);
+    if (on_path[size_t(idx)]) fail(DR_ERR_FORMAT, "%s: node %d is its own ancestor", ref.c_str(), idx);
+    const tinygltf::Node &n = model_.nodes[size_t(idx)];
+    Mat4 world = mat_mul(parent, local_matrix(idx));
+
+    if (n.skin >= 0) warn_once("skins", "/nodes/%d/skin: skins are ignored (meshes are rendered in their "
+                               "bind pose)", idx);
+    if (n.mesh >= 0) {
+        if (size_t(n.mesh) >= model_.meshes.size())
+            fail(DR_ERR_FORMAT, "/nodes/%d/mesh: mesh %d does not exist", idx, n.mesh);
+        NormalXform nx = normal_xform(world);
+        for (size_t p = 0; p < model_.meshes[size_t(n.mesh)].primitives.size(); p++)
+            add_primitive(n.mesh, int(p), world, nx);
+    }
+    if (n.camera >= 0) {
+        if (size_t(n.camera) >= model_.cameras.size())
+            fail(DR_ERR_FORMAT, "/nodes/%d/camera: camera %d does not exist", idx, n.camera);
+        add_camera(n.camera, idx, world);
+    }
+    auto ext = n.extensions.find("KHR_lights_punctual");
+    if (ext != n.extensions.end()) {
+        std::string ep = strf("/nodes/%d/extensions/KHR_lights_punctual", idx);
+        if (!ext->second.IsObject() || !ext->second.Get("light").IsInt())
+            fail(DR_ERR_FORMAT, "%s/light: expected a light index", ep.c_str());
+        int li = ext->second.Get("light").GetNumberAsInt();
+        if (li < 0 || size_t(li) >= model_.lights.size())
+            fail(DR_ERR_FORMAT, "%s/light: light %d does not exist", ep.c_str(), li);
+        add_light(li, idx, world);
+    }
+
+    on_path[size_t(idx)] = 1;
+    for (size_t c = 0; c < n.children.size(); c++)
+        visit_node(n.children[c], world, strf("/nodes/%d/children/%zu", idx, c), on_path);
+    on_path[size_t(idx)] = 0;
+}
+
+void Loader::traverse_scene()
+{
+    std::vector<char> on_path(model_.nodes.size(), 0);
+    Mat4 id = mat_identity();
+    if (!model_.scenes.empty()) {
+        int s = model_.defaultScene < 0 ? 0 : model_.defaultScene;
+        if (size_t(s) >= model_.scenes.size()) fail(DR_ERR_FORMAT, "/scene: scene %d does not exist", s);
+        const std::vector<int> &roots = model_.scenes[size_t(s)].nodes;
+        for (size_t i = 0; i < roots.size(); i++)
+            visit_node(roots[i], id, strf("/scenes/%d/nodes/%zu", s, i), on_path);
+        return;
+    }
+    /* no scenes: render every node that is nobody's child */
+    std::vector<char> is_child(model_.nodes.size(), 0);
+    for (const tinygltf::Node &n : model_.nodes)
+        for (int c : n.children)
+            if (c >= 0 && size_t(c) < is_child.size()) is_child[size_t(c)] = 1;
+    for (size_t i = 0; i < model_.nodes.size(); i++)
+        if (!is_child[i]) visit_node(int(i), id, strf("/nodes/%zu", i), on_path);
+}
+
+/* ---- DR_environment ---- */
+
+void Loader::load_environment()
+{
+    auto it = model_.extensions.find("DR_environment");
+    if (it == model_.extensions.end()) return;
+    const std::string ep = "/extensions/DR_environment";
+    const tinygltf::Value &v = it->second;
+    if (!v.IsObject()) fail(DR_ERR_FORMAT, "%s: expected an object", ep.c_str());
+    dr_environment &env = scene_->env;
+    env.present = true;
+    env.color = ext_vec3(v, "color", dr_v3s(1.0), ep);
+    env.strength = ext_number(v, "strength", 1.0, ep);
+    if (!v.Has("uri")) return;
+    if (!v.Get("uri").IsString()) fail(DR_ERR_FORMAT, "%s/uri: expected a string", ep.c_str());
+    const std::string &uri = v.Get("uri").Get<std::string>();
+    if (uri.empty() || uri.size() >= sizeof env.uri)
+        fail(DR_ERR_FORMAT, "%s/uri: invalid file name '%s'", ep.c_str(), uri.c_str());
+    std::string file = uri[0] == '/' ? uri : directory_of(path_) + uri;
+    int rc = dr_image_read(file.c_str(), &env.map);
+    if (rc != 0) fail(rc, "%s/uri: %s", ep.c_str(), dr_last_error());
+    snprintf(env.uri, sizeof env.uri, "%s", uri.c_str());
+    /* an 8-bit sky is sRGB-encoded; give the renderer the decoded copy too */
+    if (env.map.file_is_srgb && (rc = dr_image_make_linear(&env.map)) != 0)
+        fail(rc, "%s/uri: %s", ep.c_str(), dr_last_error());
+}
+
+/* ---- hand-over ---- */
+
+void Loader::finish()
+{
+    if (default_material_used_) materials_.push_back(default_material("gltf_default"));
+    scene_->materials = copy_out(materials_);
+    scene_->n_materials = int(materials_.size());
+    scene_->cameras = copy_out(cameras_);
+    scene_->n_cameras = int(cameras_.size());
+    scene_->lights = copy_out(lights_);
+    scene_->n_lights = int(lights_.size());
+
+    dr_mesh &mesh = scene_->mesh;
+    mesh.n_vertices = uint32_t(positions_.size() / 3);
+    mesh.n_triangles = uint32_t(tri_material_.size());
+    mesh.positions = copy_out(positions_, 1);  /* Embree reads 16 bytes per vertex */
+    mesh.normals = copy_out(normals_);
+    mesh.uvs = copy_out(uvs_);
+    mesh.indices = copy_out(indices_);
+    mesh.material = copy_out(tri_material_);
+    mesh.flags = copy_out(tri_flags_);
+    if (mesh.n_vertices == 0) bbox_min_ = bbox_max_ = dr_v3s(0.0);
+    scene_->bbox_min = bbox_min_;
+    scene_->bbox_max = bbox_max_;
+
+    for (size_t i = 0; i < linear_images_.size(); i++) {
+        int rc = linear_images_[i] ? dr_image_make_linear(&scene_->images[i]) : 0;
+        if (rc != 0) fail(rc, "/images/%zu: %s", i, dr_last_error());
+    }
+}
+
+void Loader::run()
+{
+    if (!scene_->path) {
+        scene_->path = strdup(path_);
+        if (!scene_->path) throw std::bad_alloc();
+    }
+    load_model();
+    check_features();
+    take_images();
+    load_textures();
+    load_materials();
+    traverse_scene();
+    load_environment();
+    finish();
+    for (const std::string &w : warnings_) dr_warn("%s", w.c_str());
+}
+
+}  // namespace
+
+extern "C" int dr_gltf_load(const char *path, struct dr_scene *scene)
+{
+    try {
+        Loader loader(path, scene);
+        loader.run();
+        return 0;
+    } catch (const Failure &f) {
+        return f.code;
+    } catch (const std::bad_alloc &) {
+        dr_set_error("%s: out of memory", path);
+        return DR_ERR_NOMEM;
+    } catch (const std::exception &e) {
+        dr_set_error("%s: internal error: %s", path, e.what());
+        return DR_ERR_INTERNAL;
+    } catch (...) {
+        dr_set_error("%s: internal error", path);
+        return DR_ERR_INTERNAL;
+    }
+}

@@ -1,0 +1,143 @@
+/* Builds small scenes in code for tests: quads and boxes with chosen
+ * materials, optional environment and punctual lights. Everything is
+ * malloc'd so dr_scene_destroy releases it. */
+#ifndef DR_TEST_SCENE_BUILDER_H
+#define DR_TEST_SCENE_BUILDER_H
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "error.h"
+#include "scene.h"
+
+struct sb {
+    struct dr_scene *s;
+    uint32_t cap_v, cap_t;
+};
+
+static inline struct dr_material sb_diffuse(dr_vec3 albedo)
+{
+    struct dr_material m;
+    memset(&m, 0, sizeof m);
+    strcpy(m.name, "diffuse");
+    m.base_color = albedo;
+    m.metallic = 0.0;
+    m.roughness = 1.0;
+    m.emissive_strength = 1.0;
+    m.specular = 0.0;   /* pure Lambertian */
+    m.specular_color = dr_v3s(1.0);
+    m.base_color_tex.texture = m.metallic_roughness_tex.texture = m.emissive_tex.texture = -1;
+    return m;
+}
+
+static inline void sb_init(struct sb *b)
+{
+    b->s = calloc(1, sizeof *b->s);
+    b->s->path = strdup("test-scene");
+    b->cap_v = 1024;
+    b->cap_t = 1024;
+    struct dr_mesh *m = &b->s->mesh;
+    m->positions = calloc(3 * b->cap_v + 1, sizeof(float));
+    m->normals = calloc(3 * b->cap_v, sizeof(float));
+    m->uvs = calloc(2 * b->cap_v, sizeof(float));
+    m->indices = calloc(3 * b->cap_t, sizeof(uint32_t));
+    m->material = calloc(b->cap_t, sizeof(int32_t));
+    m->flags = calloc(b->cap_t, sizeof(uint8_t));
+    b->s->bbox_min = dr_v3s(INFINITY);
+    b->s->bbox_max = dr_v3s(-INFINITY);
+}
+
+static inline int sb_material(struct sb *b, struct dr_material mat)
+{
+    struct dr_scene *s = b->s;
+    s->materials = realloc(s->materials, sizeof(struct dr_material) * (size_t)(s->n_materials + 1));
+    s->materials[s->n_materials] = mat;
+    return s->n_materials++;
+}
+
+static inline uint32_t sb_vertex(struct sb *b, dr_vec3 p, double u, double v)
+{
+    struct dr_mesh *m = &b->s->mesh;
+    uint32_t i = m->n_vertices++;
+    m->positions[3 * i] = (float)p.x;
+    m->positions[3 * i + 1] = (float)p.y;
+    m->positions[3 * i + 2] = (float)p.z;
+    m->uvs[2 * i] = (float)u;
+    m->uvs[2 * i + 1] = (float)v;
+    b->s->bbox_min = dr_v3(fmin(b->s->bbox_min.x, p.x), fmin(b->s->bbox_min.y, p.y), fmin(b->s->bbox_min.z, p.z));
+    b->s->bbox_max = dr_v3(fmax(b->s->bbox_max.x, p.x), fmax(b->s->bbox_max.y, p.y), fmax(b->s->bbox_max.z, p.z));
+    return i;
+}
+
+static inline void sb_triangle(struct sb *b, uint32_t a, uint32_t c, uint32_t d, int material)
+{
+    struct dr_mesh *m = &b->s->mesh;
+    uint32_t t = m->n_triangles++;
+    m->indices[3 * t] = a;
+    m->indices[3 * t + 1] = c;
+    m->indices[3 * t + 2] = d;
+    m->material[t] = material;
+    m->flags[t] = DR_TRI_HAS_UVS;
+}
+
+/* Parallelogram p, p+e1, p+e1+e2, p+e2; front side = cross(e1, e2). */
+static inline void sb_quad(struct sb *b, dr_vec3 p, dr_vec3 e1, dr_vec3 e2, int material)
+{
+    uint32_t a = sb_vertex(b, p, 0, 1), c = sb_vertex(b, dr_add(p, e1), 1, 1);
+    uint32_t d = sb_vertex(b, dr_add(dr_add(p, e1), e2), 1, 0), e = sb_vertex(b, dr_add(p, e2), 0, 0);
+    sb_triangle(b, a, c, d, material);
+    sb_triangle(b, a, d, e, material);
+}
+
+/* Axis-aligned box with outward-facing fronts. */
+static inline void sb_box(struct sb *b, dr_vec3 lo, dr_vec3 hi, int material)
+{
+    dr_vec3 dx = dr_v3(hi.x - lo.x, 0, 0), dy = dr_v3(0, hi.y - lo.y, 0), dz = dr_v3(0, 0, hi.z - lo.z);
+    sb_quad(b, lo, dy, dx, material);                    /* z = lo, -z */
+    sb_quad(b, dr_add(lo, dz), dx, dy, material);        /* z = hi, +z */
+    sb_quad(b, lo, dz, dy, material);                    /* x = lo, -x */
+    sb_quad(b, dr_add(lo, dx), dy, dz, material);        /* x = hi, +x */
+    sb_quad(b, lo, dx, dz, material);                    /* y = lo, -y */
+    sb_quad(b, dr_add(lo, dy), dz, dx, material);        /* y = hi, +y */
+}
+
+static inline void sb_environment(struct sb *b, dr_vec3 color)
+{
+    b->s->env.present = true;
+    b->s->env.color = color;
+    b->s->env.strength = 1.0;
+}
+
+static inline void sb_light(struct sb *b, struct dr_punctual l)
+{
+    struct dr_scene *s = b->s;
+    s->lights = realloc(s->lights, sizeof l * (size_t)(s->n_lights + 1));
+    s->lights[s->n_lights++] = l;
+}
+
+static inline struct dr_camera sb_camera(dr_vec3 origin, dr_vec3 target, double yfov_deg)
+{
+    struct dr_camera c;
+    memset(&c, 0, sizeof c);
+    strcpy(c.name, "test");
+    c.origin = origin;
+    c.forward = dr_normalize(dr_sub(target, origin));
+    dr_vec3 up = fabs(c.forward.y) > 0.99 ? dr_v3(0, 0, -1) : dr_v3(0, 1, 0);
+    c.right = dr_normalize(dr_cross(c.forward, up));
+    c.up = dr_cross(c.right, c.forward);
+    c.yfov = yfov_deg * M_PI / 180.0;
+    return c;
+}
+
+/* Builds acceleration structure and light tables. */
+static inline struct dr_scene *sb_finish(struct sb *b)
+{
+    if (dr_scene_prepare(b->s) != 0) {
+        fprintf(stderr, "dr_scene_prepare: %s\n", dr_last_error());
+        exit(2);
+    }
+    return b->s;
+}
+
+#endif

@@ -1,0 +1,724 @@
+/* Tests of core/bsdf.c: sampling against the pdf (chi-square), the pdf's
+ * normalisation, the pdf against the Jacobian of the sampling map,
+ * reciprocity, energy conservation, the Lambertian limit and hard cases.
+ * Deterministic: every random number comes from fixed seeds. */
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "bsdf.h"
+#include "sampler.h"
+#include "test.h"
+
+/* ---------------------------------------------------------------- helpers */
+
+struct rng { uint64_t s; };
+static double rng_next(struct rng *r)
+{
+    r->s += 0x9e3779b97f4a7c15ULL;
+    return (double)(dr_hash64(r->s) >> 11) * (1.0 / 9007199254740992.0);
+}
+
+static struct dr_bsdf make_bsdf(double rough, double metal, double spec, dr_vec3 base)
+{
+    struct dr_bsdf b;
+    b.base_color = base;
+    b.metallic = metal;
+    b.roughness = rough;
+    b.specular = spec;
+    b.specular_color = dr_v3s(1.0);
+    return b;
+}
+
+static double test_alpha(double rough)
+{
+    return fmax(rough * rough, DR_BSDF_MIN_ALPHA);
+}
+
+static dr_vec3 dir_from(double cos_t, double phi)
+{
+    double s = sqrt(fmax(0.0, 1.0 - cos_t * cos_t));
+    return dr_v3(s * cos(phi), s * sin(phi), cos_t);
+}
+
+static dr_vec3 random_hemi(struct rng *r)
+{
+    /* cos theta uniform in (0.02, 1): avoids the grazing limit for generic checks */
+    return dir_from(0.02 + 0.98 * rng_next(r), 2.0 * M_PI * rng_next(r));
+}
+
+static bool finite3(dr_vec3 v) { return isfinite(v.x) && isfinite(v.y) && isfinite(v.z); }
+static bool nonneg3(dr_vec3 v) { return v.x >= 0.0 && v.y >= 0.0 && v.z >= 0.0; }
+
+/* Test-side GGX formulas (textbook forms, independent of core/bsdf.c). */
+static double ref_lambda(double a, dr_vec3 w)
+{
+    double tan2 = (w.x * w.x + w.y * w.y) / (w.z * w.z);
+    return (-1.0 + sqrt(1.0 + a * a * tan2)) / 2.0;
+}
+static double ref_D(double a, dr_vec3 h)
+{
+    double c2 = h.z * h.z, a2 = a * a;
+    double d = c2 * (a2 - 1.0) + 1.0;
+    return a2 / (M_PI * d * d);
+}
+/* pdf of the specular lobe alone (VNDF + reflection). */
+static double ref_pdf_spec(double a, dr_vec3 wo, dr_vec3 wi)
+{
+    dr_vec3 h = dr_normalize(dr_add(wo, wi));
+    double g1 = 1.0 / (1.0 + ref_lambda(a, wo));
+    double dwo = g1 * fmax(0.0, dr_dot(wo, h)) * ref_D(a, h) / wo.z;
+    return dwo / (4.0 * fabs(dr_dot(wo, h)));
+}
+
+/* Regularised upper incomplete gamma Q(a, x) (Numerical Recipes gser/gcf). */
+static double gamma_q(double a, double x)
+{
+    if (x <= 0.0)
+        return 1.0;
+    double gln = lgamma(a);
+    if (x < a + 1.0) {
+        double ap = a, sum = 1.0 / a, del = sum;
+        for (int n = 0; n < 100000; n++) {
+            ap += 1.0;
+            del *= x / ap;
+            sum += del;
+            if (fabs(del) < fabs(sum) * 1e-15)
+                break;
+        }
+        return 1.0 - sum * exp(-x + a * log(x) - gln);
+    }
+    const double fpmin = 1e-300;
+    double bb = x + 1.0 - a, c = 1.0 / fpmin, d = 1.0 / bb, h = d;
+    for (int i = 1; i < 100000; i++) {
+        double an = -i * (i - a);
+        bb += 2.0;
+        d = an * d + bb;
+        if (fabs(d) < fpmin) d = fpmin;
+        c = bb + an / c;
+        if (fabs(c) < fpmin) c = fpmin;
+        d = 1.0 / d;
+        double del = d * c;
+        h *= del;
+        if (fabs(del - 1.0) < 1e-15)
+            break;
+    }
+    return exp(-x + a * log(x) - gln) * h;
+}
+
+static const double *sort_key;
+static int cmp_by_key(const void *a, const void *b)
+{
+    double x = sort_key[*(const int *)a], y = sort_key[*(const int *)b];
+    return x < y ? -1 : (x > y ? 1 : 0);
+}
+
+/* Chi-square test with cells of expectation < 5 pooled (smallest first).
+ * Returns the p-value; *dof_out, *chi2_out receive the statistic. */
+static double chi2_test(const double *obs, const double *expd, int n, int *dof_out, double *chi2_out)
+{
+    int *idx = malloc(sizeof(int) * (size_t)n);
+    for (int i = 0; i < n; i++) idx[i] = i;
+    sort_key = expd;
+    qsort(idx, (size_t)n, sizeof(int), cmp_by_key);
+    double chi2 = 0.0, pool_o = 0.0, pool_e = 0.0;
+    int cells = 0;
+    for (int k = 0; k < n; k++) {
+        int i = idx[k];
+        if (expd[i] < 5.0 || pool_e > 0.0) {
+            pool_o += obs[i];
+            pool_e += expd[i];
+            if (pool_e >= 5.0) {
+                chi2 += dr_sqr(pool_o - pool_e) / pool_e;
+                cells++;
+                pool_o = pool_e = 0.0;
+            }
+            continue;
+        }
+        chi2 += dr_sqr(obs[i] - expd[i]) / expd[i];
+        cells++;
+    }
+    if (pool_e > 0.0) {          /* leftover (< 5): its own cell, a conservative choice */
+        chi2 += dr_sqr(pool_o - pool_e) / pool_e;
+        cells++;
+    } else if (pool_o > 0.0) {   /* observations where nothing is expected */
+        chi2 += 1e30;
+    }
+    free(idx);
+    int dof = cells - 1;
+    *dof_out = dof;
+    *chi2_out = chi2;
+    return dof > 0 ? gamma_q(0.5 * dof, 0.5 * chi2) : 1.0;
+}
+
+/* ------------------------------------------------- adaptive quadrature */
+
+typedef double (*dens_fn)(void *ctx, double x, double y);
+
+static long quad_evals;
+
+static double gl3_rect(dens_fn f, void *ctx, double x0, double x1, double y0, double y1)
+{
+    static const double nd[3] = {-0.7745966692414834, 0.0, 0.7745966692414834};
+    static const double wt[3] = {5.0 / 9.0, 8.0 / 9.0, 5.0 / 9.0};
+    double xm = 0.5 * (x0 + x1), xr = 0.5 * (x1 - x0), ym = 0.5 * (y0 + y1), yr = 0.5 * (y1 - y0);
+    double s = 0.0;
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            s += wt[i] * wt[j] * f(ctx, xm + xr * nd[i], ym + yr * nd[j]);
+    quad_evals += 9;
+    return s * xr * yr;
+}
+
+#define QUAD_MIN_DEPTH 2
+#define QUAD_MAX_DEPTH 10
+
+static double adapt_rec(dens_fn f, void *ctx, double x0, double x1, double y0, double y1, double whole,
+                        double tol, int depth)
+{
+    double xm = 0.5 * (x0 + x1), ym = 0.5 * (y0 + y1);
+    double c[4] = {gl3_rect(f, ctx, x0, xm, y0, ym), gl3_rect(f, ctx, xm, x1, y0, ym),
+                   gl3_rect(f, ctx, x0, xm, ym, y1), gl3_rect(f, ctx, xm, x1, ym, y1)};
+    double sum = c[0] + c[1] + c[2] + c[3];
+    if (depth >= QUAD_MAX_DEPTH || (depth >= QUAD_MIN_DEPTH && fabs(sum - whole) <= tol))
+        return sum;
+    return adapt_rec(f, ctx, x0, xm, y0, ym, c[0], 0.5 * tol, depth + 1) +
+           adapt_rec(f, ctx, xm, x1, y0, ym, c[1], 0.5 * tol, depth + 1) +
+           adapt_rec(f, ctx, x0, xm, ym, y1, c[2], 0.5 * tol, depth + 1) +
+           adapt_rec(f, ctx, xm, x1, ym, y1, c[3], 0.5 * tol, depth + 1);
+}
+
+/* Integral of f over [x0,x1] x [y0,y1]: adaptive 3x3 Gauss-Legendre, absolute tolerance tol. */
+static double integrate2d(dens_fn f, void *ctx, double x0, double x1, double y0, double y1, double tol)
+{
+    return adapt_rec(f, ctx, x0, x1, y0, y1, gl3_rect(f, ctx, x0, x1, y0, y1), tol, 0);
+}
+
+/* ----------------------------------------------------- chi-square cases */
+
+/* Two binnings of the sampled directions, each with expected counts from an
+ * adaptive quadrature of dr_bsdf_pdf in the binning's own coordinates:
+ *  W: wi in (cos theta, phi), 10 x 20 cells over the hemisphere; used for lobes
+ *     with roughness >= 0.3 (an adaptive quadrature started on a fixed grid can
+ *     step over a narrower peak, which would make the expected counts wrong);
+ *  H: the half vector h = normalize(wo + wi) in (u, phi_h), 20 x 20 cells, with
+ *     u = 1 - sqrt(1 - t), t = tan^2 theta_h / (alpha^2 + tan^2 theta_h) the GGX
+ *     slope CDF: the specular lobe spreads over all cells however small alpha is,
+ *     and the density in (u, phi_h) stays bounded. With v = 1 - u:
+ *       tan theta_h = alpha sqrt(1 - v^2) / v,
+ *       d omega_h / du dphi = alpha^2 / (v^2 + alpha^2 (1 - v^2))^(3/2),
+ *     and d omega_wi = 4 (wo.h) d omega_h. */
+#define WU 10
+#define WV 20
+#define HU 20
+#define HV 20
+
+static int bin_w(dr_vec3 wi)
+{
+    double phi = atan2(wi.y, wi.x);
+    if (phi < 0.0) phi += 2.0 * M_PI;
+    int iu = (int)(dr_clamp(wi.z, 0.0, 1.0) * WU), iv = (int)(phi / (2.0 * M_PI) * WV);
+    if (iu >= WU) iu = WU - 1;
+    if (iv >= WV) iv = WV - 1;
+    return iu * WV + iv;
+}
+
+static int bin_h(dr_vec3 h, double a)
+{
+    double sxy = h.x * h.x + h.y * h.y;
+    double v = a * h.z / sqrt(sxy + a * a * h.z * h.z);
+    double phi = atan2(h.y, h.x);
+    if (phi < 0.0) phi += 2.0 * M_PI;
+    int iu = (int)((1.0 - v) * HU), iv = (int)(phi / (2.0 * M_PI) * HV);
+    if (iu >= HU) iu = HU - 1;
+    if (iu < 0) iu = 0;
+    if (iv >= HV) iv = HV - 1;
+    return iu * HV + iv;
+}
+
+/* h at (u, phi) of the H parametrisation; *jac = d omega_h / du dphi. */
+static dr_vec3 h_of_u(double a, double u, double phi, double *jac)
+{
+    double v = 1.0 - u, a2 = a * a;
+    double q = v * v + a2 * (1.0 - v * v);
+    double sq = sqrt(q);
+    *jac = a2 / (q * sq);
+    double st = a * sqrt(fmax(0.0, 1.0 - v * v)) / sq, ct = v / sq;
+    return dr_v3(st * cos(phi), st * sin(phi), ct);
+}
+
+struct qctx {
+    const struct dr_bsdf *b;
+    dr_vec3 wo;
+    double a;
+    int mode;   /* dens_ref_vndf: 0 everywhere, 1 only where the reflection leaves the hemisphere */
+};
+
+static double dens_w(void *vc, double c, double phi)
+{
+    struct qctx *q = vc;
+    return dr_bsdf_pdf(q->b, q->wo, dir_from(c, phi));
+}
+
+static double dens_h(void *vc, double u, double phi)
+{
+    struct qctx *q = vc;
+    double jac;
+    dr_vec3 h = h_of_u(q->a, u, phi, &jac);
+    double oh = dr_dot(q->wo, h);
+    if (oh <= 0.0)
+        return 0.0;
+    dr_vec3 wi = dr_sub(dr_scale(h, 2.0 * oh), q->wo);
+    if (wi.z <= 0.0)
+        return 0.0;
+    return dr_bsdf_pdf(q->b, q->wo, wi) * 4.0 * oh * jac;
+}
+
+/* Test-side visible-normal density D_wo(h) in (u, phi) coordinates. */
+static double dens_ref_vndf(void *vc, double u, double phi)
+{
+    struct qctx *q = vc;
+    double jac;
+    dr_vec3 h = h_of_u(q->a, u, phi, &jac);
+    double oh = dr_dot(q->wo, h);
+    if (oh <= 0.0)
+        return 0.0;
+    if (q->mode == 1 && 2.0 * oh * h.z - q->wo.z > 0.0)
+        return 0.0;
+    double g1 = 1.0 / (1.0 + ref_lambda(q->a, q->wo));
+    return g1 * oh * ref_D(q->a, h) / q->wo.z * jac;
+}
+
+/* Integral over the whole (u, phi) square, cell by cell (H cells). */
+static double integrate_h_space(dens_fn f, struct qctx *q, double *cells, double tol)
+{
+    double total = 0.0;
+    for (int i = 0; i < HU; i++)
+        for (int j = 0; j < HV; j++) {
+            double v = integrate2d(f, q, (double)i / HU, (double)(i + 1) / HU, 2.0 * M_PI * j / HV,
+                                   2.0 * M_PI * (j + 1) / HV, tol);
+            if (cells) cells[i * HV + j] = v;
+            total += v;
+        }
+    return total;
+}
+
+struct combo {
+    const char *name;
+    double rough, metal, spec;
+    dr_vec3 base;
+};
+
+static const struct combo combos[] = {
+    {"rough1 dielectric", 1.0, 0.0, 1.0, {0.5, 0.4, 0.3}},
+    {"rough0.5 dielectric", 0.5, 0.0, 1.0, {0.6, 0.5, 0.2}},
+    {"rough0.2 metal", 0.2, 1.0, 1.0, {0.9, 0.6, 0.3}},
+    {"rough0.05 metal", 0.05, 1.0, 1.0, {0.95, 0.9, 0.8}},
+    {"rough0.3 half-metal", 0.3, 0.5, 1.0, {0.7, 0.3, 0.5}},
+    {"rough0.05 dielectric", 0.05, 0.0, 1.0, {0.2, 0.5, 0.8}},
+    {"lambertian", 0.5, 0.0, 0.0, {0.8, 0.6, 0.4}},
+};
+#define NCOMBOS ((int)(sizeof(combos) / sizeof(combos[0])))
+
+static double min_pvalue = 1.0;
+
+static void chi2_case(const struct combo *c, double cos_o, long nsamples, int seed)
+{
+    struct dr_bsdf b = make_bsdf(c->rough, c->metal, c->spec, c->base);
+    dr_vec3 wo = dir_from(cos_o, 0.7);
+    double a = test_alpha(c->rough);
+    double p = dr_bsdf_specular_prob(&b, wo);
+    bool use_w = c->rough >= 0.3;
+    static double ew[WU * WV], ow[WU * WV], eh[HU * HV], oh[HU * HV];
+    memset(ow, 0, sizeof(ow));
+    memset(oh, 0, sizeof(oh));
+    struct qctx q = {&b, wo, a, 0};
+
+    /* expected counts */
+    double int_w = 0.0;
+    if (use_w)
+        for (int i = 0; i < WU; i++)
+            for (int j = 0; j < WV; j++) {
+                double v = integrate2d(dens_w, &q, (double)i / WU, (double)(i + 1) / WU, 2.0 * M_PI * j / WV,
+                                       2.0 * M_PI * (j + 1) / WV, 1e-8);
+                ew[i * WV + j] = v * (double)nsamples;
+                int_w += v;
+            }
+    double int_h = integrate_h_space(dens_h, &q, eh, 1e-8);
+    for (int i = 0; i < HU * HV; i++) eh[i] *= (double)nsamples;
+    /* test-side: the visible normals integrate to 1; the part reflected below the horizon */
+    double vndf_total = integrate_h_space(dens_ref_vndf, &q, NULL, 1e-8);
+    q.mode = 1;
+    double fail_ref = integrate_h_space(dens_ref_vndf, &q, NULL, 1e-8);
+
+    /* samples */
+    struct rng r = {(uint64_t)seed * 7919u + 17u};
+    long fails = 0;
+    for (long s = 0; s < nsamples; s++) {
+        struct dr_bsdf_sample bs;
+        double ul = rng_next(&r), u1 = rng_next(&r), u2 = rng_next(&r);
+        if (!dr_bsdf_sample(&b, wo, ul, u1, u2, &bs)) {
+            fails++;
+            continue;
+        }
+        ow[bin_w(bs.wi)] += 1.0;
+        oh[bin_h(dr_normalize(dr_add(wo, bs.wi)), a)] += 1.0;
+    }
+
+    int dof_w = 0, dof_h;
+    double chi_w = 0.0, chi_h, pw = 1.0;
+    if (use_w)
+        pw = chi2_test(ow, ew, WU * WV, &dof_w, &chi_w);
+    double ph = chi2_test(oh, eh, HU * HV, &dof_h, &chi_h);
+    double expect_integral = 1.0 - p * fail_ref;
+    double fail_frac = (double)fails / (double)nsamples;
+    if (use_w)
+        printf("  %-21s wo.z=%.1f p_spec=%.4f | W: chi2=%6.1f dof=%3d p=%.4f | H: chi2=%6.1f dof=%3d p=%.4f"
+               " | int pdf: W %.5f H %.5f ref %.5f | fail %.5f\n",
+               c->name, cos_o, p, chi_w, dof_w, pw, chi_h, dof_h, ph, int_w, int_h, expect_integral, fail_frac);
+    else
+        printf("  %-21s wo.z=%.1f p_spec=%.4f | W: (lobe too narrow)        | H: chi2=%6.1f dof=%3d p=%.4f"
+               " | int pdf: W    -    H %.5f ref %.5f | fail %.5f\n",
+               c->name, cos_o, p, chi_h, dof_h, ph, int_h, expect_integral, fail_frac);
+    min_pvalue = fmin(min_pvalue, fmin(pw, ph));
+    CHECK(pw > 0.001, "%s wo.z=%g: chi-square (wi cells) p-value %g", c->name, cos_o, pw);
+    CHECK(ph > 0.001, "%s wo.z=%g: chi-square (half-vector cells) p-value %g", c->name, cos_o, ph);
+    /* normalisation: the pdf integrates to 1 minus the probability that a
+     * specular sample leaves the hemisphere (test-side VNDF quadrature) */
+    CHECK(fabs(int_h - expect_integral) < 2e-3, "%s wo.z=%g: integral of pdf over h %.6f, expected %.6f",
+          c->name, cos_o, int_h, expect_integral);
+    if (use_w)
+        CHECK(fabs(int_w - expect_integral) < 2e-3, "%s wo.z=%g: integral of pdf over wi %.6f, expected %.6f",
+              c->name, cos_o, int_w, expect_integral);
+    CHECK(int_h <= 1.0 + 1e-3, "%s wo.z=%g: integral of pdf %.6f > 1", c->name, cos_o, int_h);
+    CHECK(fabs(vndf_total - 1.0) < 1e-3, "%s wo.z=%g: VNDF integral %.6f", c->name, cos_o, vndf_total);
+    double pf = 1.0 - int_h;
+    double sd = sqrt(fmax(pf * (1.0 - pf), 1e-12) / (double)nsamples);
+    CHECK(fabs(fail_frac - pf) < 5.0 * sd + 1e-4, "%s wo.z=%g: failed samples %.5f, expected %.5f", c->name,
+          cos_o, fail_frac, pf);
+}
+
+static void test_chi2(void)
+{
+    printf("chi-square goodness of fit (dr_bsdf_sample vs dr_bsdf_pdf), 400k samples per case:\n");
+    const double coss[] = {0.9, 0.5, 0.1};
+    int seed = 1;
+    quad_evals = 0;
+    for (int c = 0; c < NCOMBOS; c++)
+        for (int k = 0; k < 3; k++)
+            chi2_case(&combos[c], coss[k], 400000, seed++);
+    printf("  smallest p-value %.4f; quadrature evaluations %ld\n", min_pvalue, quad_evals);
+}
+
+/* --------------------------------------------------------- Jacobian test */
+
+static dr_vec3 sample_map(const struct dr_bsdf *b, dr_vec3 wo, double ul, double u1, double u2, bool *ok)
+{
+    struct dr_bsdf_sample s;
+    *ok = dr_bsdf_sample(b, wo, ul, u1, u2, &s) && *ok;
+    return s.wi;
+}
+
+/* 1 / |d wi/du1 x d wi/du2|: the solid-angle density of the map (u1, u2) -> wi. */
+static double map_density(const struct dr_bsdf *b, dr_vec3 wo, double ul, double u1, double u2, bool *ok)
+{
+    const double e = 1e-6;
+    dr_vec3 a1 = sample_map(b, wo, ul, u1 + e, u2, ok), b1 = sample_map(b, wo, ul, u1 - e, u2, ok);
+    dr_vec3 a2 = sample_map(b, wo, ul, u1, u2 + e, ok), b2 = sample_map(b, wo, ul, u1, u2 - e, ok);
+    dr_vec3 d1 = dr_scale(dr_sub(a1, b1), 0.5 / e), d2 = dr_scale(dr_sub(a2, b2), 0.5 / e);
+    return 1.0 / dr_length(dr_cross(d1, d2));
+}
+
+static void test_jacobian(void)
+{
+    const double us[][2] = {{0.13, 0.37}, {0.5, 0.71}, {0.82, 0.23}, {0.31, 0.9}, {0.66, 0.05}, {0.05, 0.55}};
+    const double coss[] = {0.95, 0.6, 0.2};
+    const double roughs[] = {1.0, 0.5, 0.2, 0.05};
+    int checked = 0;
+    double worst = 0.0;
+    for (int k = 0; k < 3; k++) {
+        dr_vec3 wo = dir_from(coss[k], 2.1);
+        /* specular lobe alone: metallic 1 gives p = 1, so dr_bsdf_pdf is the lobe pdf */
+        for (int r = 0; r < 4; r++) {
+            struct dr_bsdf b = make_bsdf(roughs[r], 1.0, 1.0, dr_v3(0.8, 0.7, 0.6));
+            CHECK(dr_bsdf_specular_prob(&b, wo) == 1.0, "metal: specular prob must be 1");
+            for (int i = 0; i < 6; i++) {
+                bool ok = true;
+                double dens = map_density(&b, wo, 0.5, us[i][0], us[i][1], &ok);
+                if (!ok)
+                    continue;   /* the sample (or a neighbour) left the hemisphere */
+                struct dr_bsdf_sample s;
+                dr_bsdf_sample(&b, wo, 0.5, us[i][0], us[i][1], &s);
+                double pdf = dr_bsdf_pdf(&b, wo, s.wi);
+                double rel = fabs(dens / pdf - 1.0);
+                worst = fmax(worst, rel);
+                checked++;
+                CHECK(rel < 1e-4, "specular Jacobian: rough %g wo.z %g u (%g,%g): map %.9g pdf %.9g",
+                      roughs[r], coss[k], us[i][0], us[i][1], dens, pdf);
+                CHECK(s.pdf == pdf, "sample pdf %.17g != dr_bsdf_pdf %.17g", s.pdf, pdf);
+            }
+        }
+        /* diffuse lobe alone: Lambertian, p = 0 */
+        struct dr_bsdf lam = make_bsdf(0.5, 0.0, 0.0, dr_v3(0.8, 0.7, 0.6));
+        for (int i = 0; i < 6; i++) {
+            bool ok = true;
+            double dens = map_density(&lam, wo, 0.5, us[i][0], us[i][1], &ok);
+            struct dr_bsdf_sample s;
+            dr_bsdf_sample(&lam, wo, 0.5, us[i][0], us[i][1], &s);
+            double pdf = dr_bsdf_pdf(&lam, wo, s.wi);
+            double rel = fabs(dens / pdf - 1.0);
+            worst = fmax(worst, rel);
+            checked++;
+            CHECK(ok && rel < 1e-4, "diffuse Jacobian: wo.z %g u (%g,%g): map %.9g pdf %.9g", coss[k],
+                  us[i][0], us[i][1], dens, pdf);
+        }
+        /* mixture: each lobe's map against the test-side component formula,
+         * and dr_bsdf_pdf against (1-p) cos/pi + p pdf_spec */
+        for (int r = 0; r < 4; r++) {
+            struct dr_bsdf b = make_bsdf(roughs[r], 0.4, 0.8, dr_v3(0.5, 0.6, 0.7));
+            double p = dr_bsdf_specular_prob(&b, wo), a = test_alpha(roughs[r]);
+            CHECK(p > 0.0 && p < 1.0, "mixture: specular prob %g", p);
+            for (int i = 0; i < 6; i++) {
+                bool ok = true;
+                double dens_s = map_density(&b, wo, 0.0, us[i][0], us[i][1], &ok);
+                if (ok) {
+                    struct dr_bsdf_sample s;
+                    dr_bsdf_sample(&b, wo, 0.0, us[i][0], us[i][1], &s);
+                    double ps = ref_pdf_spec(a, wo, s.wi);
+                    double rel = fabs(dens_s / ps - 1.0);
+                    worst = fmax(worst, rel);
+                    checked++;
+                    CHECK(rel < 1e-4, "mixture specular map: rough %g: %.9g vs %.9g", roughs[r], dens_s, ps);
+                    double mix = (1.0 - p) * s.wi.z / M_PI + p * ps;
+                    CHECK(fabs(s.pdf / mix - 1.0) < 1e-9, "mixture pdf %.12g vs %.12g", s.pdf, mix);
+                }
+                ok = true;
+                double dens_d = map_density(&b, wo, 1.0 - 1e-12, us[i][0], us[i][1], &ok);
+                struct dr_bsdf_sample s;
+                dr_bsdf_sample(&b, wo, 1.0 - 1e-12, us[i][0], us[i][1], &s);
+                double rel = fabs(dens_d / (s.wi.z / M_PI) - 1.0);
+                worst = fmax(worst, rel);
+                checked++;
+                CHECK(ok && rel < 1e-4, "mixture diffuse map: %.9g vs %.9g", dens_d, s.wi.z / M_PI);
+                double mix = (1.0 - p) * s.wi.z / M_PI + p * ref_pdf_spec(a, wo, s.wi);
+                CHECK(fabs(s.pdf / mix - 1.0) < 1e-9, "mixture pdf (diffuse sample) %.12g vs %.12g", s.pdf, mix);
+            }
+        }
+    }
+    printf("Jacobian of the sampling map vs pdf: %d points, worst relative error %.2e\n", checked, worst);
+}
+
+/* ------------------------------------------------------------ reciprocity */
+
+static void test_reciprocity(void)
+{
+    struct rng r = {12345};
+    double worst = 0.0;
+    for (int c = 0; c < NCOMBOS; c++) {
+        struct dr_bsdf b = make_bsdf(combos[c].rough, combos[c].metal, combos[c].spec, combos[c].base);
+        for (int i = 0; i < 2000; i++) {
+            dr_vec3 wo = random_hemi(&r), wi = random_hemi(&r);
+            dr_vec3 f1 = dr_bsdf_eval(&b, wo, wi), f2 = dr_bsdf_eval(&b, wi, wo);
+            double scale = fmax(dr_max3(f1), 1e-300);
+            double rel = fmax(fabs(f1.x - f2.x), fmax(fabs(f1.y - f2.y), fabs(f1.z - f2.z))) / scale;
+            worst = fmax(worst, rel);
+            CHECK(rel <= 1e-12, "reciprocity %s: rel %g", combos[c].name, rel);
+        }
+    }
+    printf("reciprocity: worst relative difference %.2e\n", worst);
+}
+
+/* ------------------------------------------------------------ energy */
+
+static void test_energy(void)
+{
+    const double roughs[] = {0.05, 0.2, 0.5, 1.0};
+    const double coss[] = {0.9, 0.5, 0.1};
+    printf("white metal directional albedo (importance sampled, 200k samples):\n");
+    for (int ri = 0; ri < 4; ri++) {
+        struct dr_bsdf b = make_bsdf(roughs[ri], 1.0, 1.0, dr_v3s(1.0));
+        printf("  rough %.2f:", roughs[ri]);
+        for (int k = 0; k < 3; k++) {
+            dr_vec3 wo = dir_from(coss[k], 0.3);
+            struct rng r = {(uint64_t)(1000 + 10 * ri + k)};
+            const long n = 200000;
+            double sum = 0.0, sum2 = 0.0;
+            for (long s = 0; s < n; s++) {
+                struct dr_bsdf_sample bs;
+                double ul = rng_next(&r), u1 = rng_next(&r), u2 = rng_next(&r);
+                double w = 0.0;
+                if (dr_bsdf_sample(&b, wo, ul, u1, u2, &bs))
+                    w = bs.f.x * bs.wi.z / bs.pdf;
+                sum += w;
+                sum2 += w * w;
+            }
+            double mean = sum / n, se = sqrt(fmax(0.0, sum2 / n - mean * mean) / n);
+            printf("  wo.z=%.1f: %.4f +- %.4f", coss[k], mean, se);
+            CHECK(mean <= 1.0 + 3.0 * se, "white metal rough %g wo.z %g: albedo %.5f +- %.5f", roughs[ri],
+                  coss[k], mean, se);
+            CHECK(mean > 0.5, "white metal rough %g wo.z %g: albedo %.5f implausibly low", roughs[ri], coss[k],
+                  mean);
+        }
+        printf("\n");
+    }
+    /* white Lambertian: every sample weight is exactly 1 */
+    struct dr_bsdf lam = make_bsdf(0.5, 0.0, 0.0, dr_v3s(1.0));
+    struct rng r = {99};
+    double worst = 0.0;
+    for (int s = 0; s < 100000; s++) {
+        dr_vec3 wo = random_hemi(&r);
+        struct dr_bsdf_sample bs;
+        double ul = rng_next(&r), u1 = rng_next(&r), u2 = rng_next(&r);
+        if (!dr_bsdf_sample(&lam, wo, ul, u1, u2, &bs))
+            continue;   /* only wi.z <= 1e-12, probability ~1e-24 */
+        worst = fmax(worst, fabs(bs.f.x * bs.wi.z / bs.pdf - 1.0));
+    }
+    printf("white Lambertian: worst |weight - 1| = %.2e\n", worst);
+    CHECK(worst <= 1e-12, "white Lambertian sample weight off by %g", worst);
+}
+
+/* ------------------------------------------------------------ Lambertian */
+
+static void test_lambertian(void)
+{
+    dr_vec3 base = dr_v3(0.8, 0.35, 0.05);
+    const double roughs[] = {0.0, 0.001, 0.5, 1.0};
+    struct rng r = {4242};
+    for (int ri = 0; ri < 4; ri++) {
+        struct dr_bsdf b = make_bsdf(roughs[ri], 0.0, 0.0, base);
+        b.specular_color = dr_v3(3.0, 2.0, 1.0);   /* irrelevant when specular = 0 */
+        for (int i = 0; i < 2000; i++) {
+            dr_vec3 wo = random_hemi(&r), wi = random_hemi(&r);
+            dr_vec3 f = dr_bsdf_eval(&b, wo, wi);
+            CHECK(f.x == base.x * DR_INV_PI && f.y == base.y * DR_INV_PI && f.z == base.z * DR_INV_PI,
+                  "Lambertian eval (%.17g %.17g %.17g) != base/pi", f.x, f.y, f.z);
+            double pdf;
+            dr_vec3 f2 = dr_bsdf_eval_pdf(&b, wo, wi, &pdf);
+            CHECK(f2.x == f.x && f2.y == f.y && f2.z == f.z, "eval_pdf f differs from eval");
+            CHECK(fabs(pdf - wi.z / M_PI) <= 1e-15 * pdf, "Lambertian pdf %.17g vs cos/pi %.17g", pdf, wi.z / M_PI);
+            CHECK(dr_bsdf_specular_prob(&b, wo) == 0.0, "Lambertian specular prob must be exactly 0");
+            struct dr_bsdf_sample s;
+            /* u_lobe close to 1 must still pick the diffuse lobe */
+            double ul = (i & 1) ? 1.0 - 1e-16 : rng_next(&r);
+            bool ok = dr_bsdf_sample(&b, wo, ul, rng_next(&r), rng_next(&r), &s);
+            CHECK(ok, "Lambertian sample failed");
+            if (ok) {
+                CHECK(fabs(s.f.x * s.wi.z / s.pdf - base.x) <= 1e-12 * base.x &&
+                      fabs(s.f.y * s.wi.z / s.pdf - base.y) <= 1e-12 * base.y &&
+                      fabs(s.f.z * s.wi.z / s.pdf - base.z) <= 1e-12 * base.z,
+                      "Lambertian sample weight != base");
+                CHECK(fabs(dr_length(s.wi) - 1.0) < 1e-12, "cosine sample not unit: %.17g", dr_length(s.wi));
+            }
+        }
+    }
+}
+
+/* ------------------------------------------------------------ hard cases */
+
+static void check_pair(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, const char *what)
+{
+    double pdf = -1.0;
+    dr_vec3 f = dr_bsdf_eval_pdf(b, wo, wi, &pdf);
+    dr_vec3 fe = dr_bsdf_eval(b, wo, wi);
+    double pp = dr_bsdf_pdf(b, wo, wi);
+    double ps = dr_bsdf_specular_prob(b, wo);
+    CHECK(finite3(f) && nonneg3(f) && isfinite(pdf) && pdf >= 0.0, "%s: f (%g %g %g) pdf %g", what, f.x, f.y,
+          f.z, pdf);
+    CHECK(fe.x == f.x && fe.y == f.y && fe.z == f.z, "%s: eval differs from eval_pdf", what);
+    CHECK(pp == pdf, "%s: pdf %.17g differs from eval_pdf %.17g", what, pp, pdf);
+    CHECK(isfinite(ps) && ps >= 0.0 && ps <= 1.0, "%s: specular prob %g", what, ps);
+    if (wo.z <= 0.0 || wi.z <= 0.0)
+        CHECK(dr_is_black(f) && pdf == 0.0 && pp == 0.0, "%s: below the surface must give zero", what);
+}
+
+static void test_hard_cases(void)
+{
+    const double roughs[] = {0.0, 0.001, 0.01, 0.5, 1.0};
+    const double metals[] = {0.0, 0.5, 1.0};
+    const double specs[] = {0.0, 0.5, 1.0};
+    const dr_vec3 bases[] = {{0, 0, 0}, {1, 1, 1}, {0.5, 0.2, 0.0}};
+    const double zs[] = {1.0, 0.5, 1e-4, 1e-8, 1e-12, 1e-13, 1e-300, 0.0, -0.0, -1e-8, -0.5};
+    const int nz = (int)(sizeof(zs) / sizeof(zs[0]));
+    struct rng r = {777};
+    for (int ri = 0; ri < 5; ri++)
+        for (int mi = 0; mi < 3; mi++)
+            for (int si = 0; si < 3; si++)
+                for (int bi = 0; bi < 3; bi++) {
+                    struct dr_bsdf b = make_bsdf(roughs[ri], metals[mi], specs[si], bases[bi]);
+                    char what[160];
+                    snprintf(what, sizeof what, "rough %g metal %g spec %g base %d", roughs[ri], metals[mi],
+                             specs[si], bi);
+                    for (int i = 0; i < nz; i++)
+                        for (int j = 0; j < nz; j++) {
+                            double so = sqrt(fmax(0.0, 1.0 - zs[i] * zs[i]));
+                            double si2 = sqrt(fmax(0.0, 1.0 - zs[j] * zs[j]));
+                            dr_vec3 wo = dr_v3(so, 0.0, zs[i]);
+                            check_pair(&b, wo, dr_v3(-si2, 0.0, zs[j]), what);   /* mirror plane */
+                            check_pair(&b, wo, dr_v3(si2, 0.0, zs[j]), what);    /* retro plane */
+                            check_pair(&b, wo, dr_v3(0.0, si2, zs[j]), what);    /* side */
+                            check_pair(&b, wo, dr_neg(wo), what);                /* wo == -wi: h undefined */
+                            check_pair(&b, wo, wo, what);                        /* wo == wi */
+                        }
+                    /* mirror direction exactly: the peak of a near-specular lobe */
+                    dr_vec3 wo = dir_from(0.3, 1.0), wm = dr_v3(-wo.x, -wo.y, wo.z);
+                    check_pair(&b, wo, wm, what);
+                    /* samples: finite, consistent with eval/pdf, zero when rejected */
+                    for (int k = 0; k < nz; k++) {
+                        dr_vec3 w = dr_v3(sqrt(fmax(0.0, 1.0 - zs[k] * zs[k])), 0.0, zs[k]);
+                        const double edge[] = {0.0, 0.5, 1.0 - 1e-16};
+                        for (int e = 0; e < 3 * 3 * 3 + 30; e++) {
+                            double ul, u1, u2;
+                            if (e < 27) {
+                                ul = edge[e % 3]; u1 = edge[(e / 3) % 3]; u2 = edge[e / 9];
+                            } else {
+                                ul = rng_next(&r); u1 = rng_next(&r); u2 = rng_next(&r);
+                            }
+                            struct dr_bsdf_sample s;
+                            bool ok = dr_bsdf_sample(&b, w, ul, u1, u2, &s);
+                            CHECK(finite3(s.f) && isfinite(s.pdf) && finite3(s.wi), "%s: sample not finite", what);
+                            if (!ok) {
+                                CHECK(dr_is_black(s.f) && s.pdf == 0.0, "%s: rejected sample not zero", what);
+                                continue;
+                            }
+                            CHECK(w.z > 0.0 && s.wi.z > 0.0 && s.pdf > 0.0 && nonneg3(s.f),
+                                  "%s: accepted sample invalid (wo.z %g wi.z %g pdf %g)", what, w.z, s.wi.z, s.pdf);
+                            double pdf;
+                            dr_vec3 f = dr_bsdf_eval_pdf(&b, w, s.wi, &pdf);
+                            CHECK(pdf == s.pdf && f.x == s.f.x && f.y == s.f.y && f.z == s.f.z,
+                                  "%s: sample (f, pdf) differ from eval_pdf: pdf %.17g vs %.17g", what, s.pdf, pdf);
+                        }
+                    }
+                }
+    /* specular prob: exact 0 without a specular lobe, exact 1 without a diffuse one */
+    dr_vec3 wo = dir_from(0.7, 0.0);
+    struct dr_bsdf b0 = make_bsdf(0.3, 0.0, 0.0, dr_v3(0.0, 0.0, 0.0));
+    CHECK(dr_bsdf_specular_prob(&b0, wo) == 0.0, "black Lambertian: p must be 0");
+    struct dr_bsdf b1 = make_bsdf(0.3, 1.0, 0.0, dr_v3(0.0, 0.0, 0.0));
+    CHECK(dr_bsdf_specular_prob(&b1, wo) == 1.0, "black metal: p must be 1");
+    struct dr_bsdf b2 = make_bsdf(0.3, 0.0, 1.0, dr_v3(0.0, 0.0, 0.0));
+    CHECK(dr_bsdf_specular_prob(&b2, wo) == 1.0, "black dielectric: p must be 1");
+    /* grazing wo: the specular value stays finite and positive at 1e-8 */
+    struct dr_bsdf g = make_bsdf(0.001, 1.0, 1.0, dr_v3s(1.0));
+    dr_vec3 wg = dr_v3(sqrt(1.0 - 1e-16), 0.0, 1e-8);
+    dr_vec3 fg = dr_bsdf_eval(&g, wg, dr_v3(-wg.x, 0.0, wg.z));
+    CHECK(finite3(fg) && fg.x > 0.0, "grazing mirror value %g", fg.x);
+}
+
+int main(void)
+{
+    clock_t t0 = clock();
+    test_lambertian();
+    test_reciprocity();
+    test_hard_cases();
+    test_jacobian();
+    clock_t t1 = clock();
+    test_energy();
+    clock_t t2 = clock();
+    test_chi2();
+    clock_t t3 = clock();
+    printf("times: basic %.2fs, energy %.2fs, chi-square + pdf integrals %.2fs\n",
+           (double)(t1 - t0) / CLOCKS_PER_SEC, (double)(t2 - t1) / CLOCKS_PER_SEC,
+           (double)(t3 - t2) / CLOCKS_PER_SEC);
+    return TEST_END();
+}

@@ -1,0 +1,749 @@
+/* Tests for core/image.c (sRGB curves, texture lookup) and core/image_io.cpp
+ * (reading and writing through OpenImageIO). */
+#include <dirent.h>
+#include <errno.h>
+#include <ftw.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "error.h"
+#include "image.h"
+#include "image_io.h"
+#include "test.h"
+
+#if defined(__SANITIZE_ADDRESS__)
+/* OpenImageIO 2.4's PNG reader leaks a std::string when libpng longjmps out
+ * of PNGInput::PngReadCallback on a truncated file (the corrupt-file cases
+ * below). Not ours to fix. Matching the frame needs full stacks at malloc
+ * (libstdc++ has no frame pointers). */
+const char *__asan_default_options(void);
+const char *__asan_default_options(void) { return "fast_unwind_on_malloc=0"; }
+const char *__lsan_default_suppressions(void);
+const char *__lsan_default_suppressions(void) { return "leak:PngReadCallback\n"; }
+#endif
+
+static char tmpdir[256];
+
+static void path_in_tmp(char *buf, size_t size, const char *name)
+{
+    snprintf(buf, size, "%s/%s", tmpdir, name);
+}
+
+static int count_entries(const char *dir)
+{
+    DIR *d = opendir(dir);
+    if (!d)
+        return -1;
+    int n = 0;
+    struct dirent *e;
+    while ((e = readdir(d)))
+        if (strcmp(e->d_name, ".") && strcmp(e->d_name, ".."))
+            n++;
+    closedir(d);
+    return n;
+}
+
+/* Number of entries whose name contains `needle`. */
+static int count_matching(const char *dir, const char *needle)
+{
+    DIR *d = opendir(dir);
+    if (!d)
+        return -1;
+    int n = 0;
+    struct dirent *e;
+    while ((e = readdir(d)))
+        if (strstr(e->d_name, needle))
+            n++;
+    closedir(d);
+    return n;
+}
+
+static unsigned char *slurp(const char *path, size_t *size)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return NULL;
+    unsigned char *buf = NULL;
+    size_t cap = 0, n = 0;
+    for (;;) {
+        if (n == cap) {
+            cap = cap ? 2 * cap : 65536;
+            unsigned char *nb = realloc(buf, cap);
+            if (!nb) {
+                free(buf);
+                fclose(f);
+                return NULL;
+            }
+            buf = nb;
+        }
+        size_t k = fread(buf + n, 1, cap - n, f);
+        n += k;
+        if (k == 0)
+            break;
+    }
+    fclose(f);
+    *size = n;
+    return buf;
+}
+
+static bool file_exists(const char *path)
+{
+    struct stat st;
+    return stat(path, &st) == 0;
+}
+
+static int rm_entry(const char *path, const struct stat *st, int flag, struct FTW *ftw)
+{
+    (void)st;
+    (void)flag;
+    (void)ftw;
+    return remove(path);
+}
+
+static bool zeroed(const struct dr_image *img)
+{
+    return img->width == 0 && img->height == 0 && img->channels == 0 && !img->data &&
+           !img->linear && !img->file_is_srgb;
+}
+
+/* ------------------------------------------------------------------------ */
+
+static void test_srgb_curves(void)
+{
+    CHECK_NEAR(dr_linear_to_srgb(0.5), 0.7353569830524495, 1e-12, "linear 0.5 -> sRGB");
+    CHECK_NEAR(dr_linear_to_srgb(0.0), 0.0, 0.0, "linear 0");
+    CHECK_NEAR(dr_linear_to_srgb(1.0), 1.0, 1e-12, "linear 1");
+    CHECK_NEAR(dr_srgb_to_linear(1.0), 1.0, 1e-12, "sRGB 1");
+    CHECK_NEAR(dr_srgb_to_linear(0.5), 0.21404114048223255, 1e-12, "sRGB 0.5 -> linear");
+    CHECK_NEAR(dr_srgb_to_linear(0.02), 0.02 / 12.92, 1e-15, "linear segment");
+    CHECK_NEAR(dr_linear_to_srgb(0.001), 0.01292, 1e-15, "linear segment");
+    /* Continuity at the thresholds (the standard's constants leave ~1e-7). */
+    double t = 0.0031308;
+    CHECK_NEAR(dr_linear_to_srgb(t), dr_linear_to_srgb(nextafter(t, 1.0)), 1e-6,
+               "linear_to_srgb continuity");
+    double s = 0.04045;
+    CHECK_NEAR(dr_srgb_to_linear(s), dr_srgb_to_linear(nextafter(s, 1.0)), 1e-6,
+               "srgb_to_linear continuity");
+    /* Round trips, and monotonicity. */
+    double worst = 0.0, prev = -1.0;
+    bool mono = true;
+    for (int i = 0; i <= 1000; ++i) {
+        double x = i / 1000.0;
+        double y = dr_linear_to_srgb(x);
+        worst = fmax(worst, fabs(dr_srgb_to_linear(y) - x));
+        worst = fmax(worst, fabs(dr_linear_to_srgb(dr_srgb_to_linear(x)) - x));
+        if (y < prev)
+            mono = false;
+        prev = y;
+    }
+    CHECK(worst < 1e-12, "round trip error %g", worst);
+    CHECK(mono, "linear_to_srgb not monotonic");
+}
+
+/* 3x2 single-channel image:  row 0 (top): 0  1  2
+ *                            row 1:       10 20 40 */
+static const float grid[6] = {0, 1, 2, 10, 20, 40};
+
+static double eval1(enum dr_wrap ws, enum dr_wrap wt, double u, double v)
+{
+    struct dr_image img = {3, 2, 1, (float *)grid, NULL, false};
+    struct dr_texture tex = {0, ws, wt};
+    double out[4];
+    dr_texture_eval(&tex, &img, u, v, false, out);
+    CHECK(out[0] == out[1] && out[1] == out[2], "grey not replicated");
+    CHECK(out[3] == 1.0, "alpha of a 1-channel image: %g", out[3]);
+    return out[0];
+}
+
+static void test_bilinear(void)
+{
+    const enum dr_wrap R = DR_WRAP_REPEAT, C = DR_WRAP_CLAMP, M = DR_WRAP_MIRROR;
+    const double tol = 1e-12;
+    enum dr_wrap all[3] = {R, C, M};
+    for (int m = 0; m < 3; ++m) {
+        enum dr_wrap w = all[m];
+        /* Texel centres: exact texel values in every mode. */
+        CHECK_NEAR(eval1(w, w, 1.0 / 6, 0.25), 0, tol, "centre (0,0)");
+        CHECK_NEAR(eval1(w, w, 0.5, 0.25), 1, tol, "centre (1,0)");
+        CHECK_NEAR(eval1(w, w, 5.0 / 6, 0.75), 40, tol, "centre (2,1)");
+        CHECK_NEAR(eval1(w, w, 0.5, 0.75), 20, tol, "centre (1,1): v runs down");
+        /* Interior: between rows. */
+        CHECK_NEAR(eval1(w, w, 0.5, 0.5), 10.5, tol, "interior (1, 0.5)");
+        /* Interior, both axes: x = 0.75, y = 0.25 */
+        CHECK_NEAR(eval1(w, w, 1.25 / 3, 0.375),
+                   0.75 * (0.25 * 0 + 0.75 * 1) + 0.25 * (0.25 * 10 + 0.75 * 20), tol,
+                   "interior both axes");
+    }
+    /* Left edge u = 0 (x = -0.5): REPEAT blends texel 2 and texel 0. */
+    CHECK_NEAR(eval1(R, R, 0.0, 0.25), 1.0, tol, "repeat u=0");
+    CHECK_NEAR(eval1(C, C, 0.0, 0.25), 0.0, tol, "clamp u=0");
+    CHECK_NEAR(eval1(M, M, 0.0, 0.25), 0.0, tol, "mirror u=0");
+    /* Negative u = -0.25: x = -1.25, i0 = -2, frac 0.75. */
+    CHECK_NEAR(eval1(R, R, -0.25, 0.25), 0.25 * 1 + 0.75 * 2, tol, "repeat u=-0.25");
+    CHECK_NEAR(eval1(C, C, -0.25, 0.25), 0.0, tol, "clamp u=-0.25");
+    CHECK_NEAR(eval1(M, M, -0.25, 0.25), 0.25 * 1 + 0.75 * 0, tol, "mirror u=-0.25");
+    /* u = 1.25: x = 3.25, i0 = 3, frac 0.25. */
+    CHECK_NEAR(eval1(R, R, 1.25, 0.25), 0.75 * 0 + 0.25 * 1, tol, "repeat u=1.25");
+    CHECK_NEAR(eval1(C, C, 1.25, 0.25), 2.0, tol, "clamp u=1.25");
+    CHECK_NEAR(eval1(M, M, 1.25, 0.25), 0.75 * 2 + 0.25 * 1, tol, "mirror u=1.25");
+    /* Mirror: the period is 2, and u and -u agree. */
+    CHECK_NEAR(eval1(M, M, 2.3, 0.6), eval1(M, M, 0.3, 0.6), 1e-9, "mirror period 2");
+    CHECK_NEAR(eval1(M, M, -0.3, 0.6), eval1(M, M, 0.3, 0.6), 1e-9, "mirror symmetry");
+    CHECK_NEAR(eval1(M, M, 1.7, 0.6), eval1(M, M, 0.3, 0.6), 1e-9, "mirror about 1");
+    CHECK_NEAR(eval1(R, R, -3.7, 0.6), eval1(R, R, 0.3, 0.6), 1e-9, "repeat period 1");
+    /* v = -0.375 (column 1 holds 1 and 20): y = -1.25, j0 = -2, frac 0.75. */
+    CHECK_NEAR(eval1(R, R, 0.5, -0.375), 0.25 * 1 + 0.75 * 20, tol, "repeat v=-0.375");
+    CHECK_NEAR(eval1(C, C, 0.5, -0.375), 1.0, tol, "clamp v=-0.375");
+    CHECK_NEAR(eval1(M, M, 0.5, -0.375), 0.25 * 20 + 0.75 * 1, tol, "mirror v=-0.375");
+    /* v = 1.125: y = 1.75, j0 = 1, frac 0.75. */
+    CHECK_NEAR(eval1(R, R, 0.5, 1.125), 0.25 * 20 + 0.75 * 1, tol, "repeat v=1.125");
+    CHECK_NEAR(eval1(C, C, 0.5, 1.125), 20.0, tol, "clamp v=1.125");
+    CHECK_NEAR(eval1(M, M, 0.5, 1.125), 20.0, tol, "mirror v=1.125");
+    /* Corner u = v = 1 with REPEAT: the average of the four corners. */
+    CHECK_NEAR(eval1(R, R, 1.0, 1.0), 0.25 * (0 + 2 + 10 + 40), tol, "repeat corner");
+    CHECK_NEAR(eval1(C, C, 1.0, 1.0), 40.0, tol, "clamp corner");
+    CHECK_NEAR(eval1(M, M, 1.0, 1.0), 40.0, tol, "mirror corner");
+    /* Different modes per axis: s repeats, t clamps. */
+    CHECK_NEAR(eval1(R, C, 0.0, 0.0), 0.5 * 2 + 0.5 * 0, tol, "repeat s, clamp t");
+    CHECK_NEAR(eval1(C, R, 0.0, 0.0), 0.5 * 0 + 0.5 * 10, tol, "clamp s, repeat t");
+
+    /* NaN, infinite and huge coordinates: finite results inside the range. */
+    const double bad[] = {NAN, INFINITY, -INFINITY, 1e300, -1e300, 1e18 + 0.3, -4e9};
+    for (int m = 0; m < 3; ++m)
+        for (size_t i = 0; i < sizeof bad / sizeof bad[0]; ++i)
+            for (size_t j = 0; j < sizeof bad / sizeof bad[0]; ++j) {
+                double r = eval1(all[m], all[m], bad[i], bad[j]);
+                CHECK(isfinite(r) && r >= 0.0 && r <= 40.0, "mode %d uv (%g, %g) -> %g", m,
+                      bad[i], bad[j], r);
+            }
+    CHECK_NEAR(eval1(R, R, NAN, 0.25), eval1(R, R, 0.0, 0.25), tol, "NaN u acts as 0");
+}
+
+static void test_channels(void)
+{
+    struct dr_texture tex = {0, DR_WRAP_CLAMP, DR_WRAP_CLAMP};
+    double out[4];
+    /* 2 channels: grey + alpha. 2x1 image. */
+    float ga[4] = {0.2f, 0.5f, 0.6f, 1.0f};
+    struct dr_image img2 = {2, 1, 2, ga, NULL, false};
+    dr_texture_eval(&tex, &img2, 0.5, 0.5, false, out);
+    CHECK_NEAR(out[0], 0.5 * ((double)0.2f + (double)0.6f), 1e-12, "grey r");
+    CHECK_NEAR(out[1], out[0], 0, "grey g");
+    CHECK_NEAR(out[2], out[0], 0, "grey b");
+    CHECK_NEAR(out[3], 0.5 * ((double)0.5f + 1.0), 1e-12, "grey alpha");
+    /* 3 channels: alpha 1. */
+    float rgb[3] = {0.1f, 0.2f, 0.3f};
+    struct dr_image img3 = {1, 1, 3, rgb, NULL, false};
+    dr_texture_eval(&tex, &img3, 0.9, 0.1, false, out);
+    CHECK(out[0] == (double)0.1f && out[1] == (double)0.2f && out[2] == (double)0.3f &&
+              out[3] == 1.0,
+          "rgb: %g %g %g %g", out[0], out[1], out[2], out[3]);
+    /* 4 channels. */
+    float rgba[4] = {0.1f, 0.2f, 0.3f, 0.4f};
+    struct dr_image img4 = {1, 1, 4, rgba, NULL, false};
+    dr_texture_eval(&tex, &img4, 0.3, 0.7, false, out);
+    CHECK_NEAR(out[3], 0.4f, 1e-7, "rgba alpha");
+    /* No image data: black, opaque. */
+    struct dr_image empty = {0, 0, 0, NULL, NULL, false};
+    dr_texture_eval(&tex, &empty, 0.3, 0.7, false, out);
+    CHECK(out[0] == 0 && out[1] == 0 && out[2] == 0 && out[3] == 1, "empty image");
+
+    /* make_linear: decodes colour, keeps alpha, idempotent. */
+    struct dr_image s = {0};
+    s.width = 1;
+    s.height = 1;
+    s.channels = 4;
+    s.file_is_srgb = true;
+    s.data = malloc(4 * sizeof(float));
+    CHECK(s.data != NULL, "malloc");
+    if (!s.data)
+        return;
+    s.data[0] = 0.5f;
+    s.data[1] = 0.02f;
+    s.data[2] = 1.0f;
+    s.data[3] = 0.5f;
+    CHECK(dr_image_make_linear(&s) == 0, "make_linear");
+    float *first = s.linear;
+    CHECK(dr_image_make_linear(&s) == 0 && s.linear == first, "make_linear idempotent");
+    CHECK_NEAR(s.linear[0], dr_srgb_to_linear(0.5), 1e-7, "decoded r");
+    CHECK_NEAR(s.linear[1], 0.02 / 12.92, 1e-9, "decoded g");
+    CHECK_NEAR(s.linear[2], 1.0, 1e-7, "decoded b");
+    CHECK_NEAR(s.linear[3], 0.5, 0, "alpha kept");
+    dr_texture_eval(&tex, &s, 0.5, 0.5, true, out);
+    CHECK_NEAR(out[0], dr_srgb_to_linear(0.5), 1e-7, "lookup in linear");
+    dr_texture_eval(&tex, &s, 0.5, 0.5, false, out);
+    CHECK_NEAR(out[0], 0.5, 0, "lookup in data");
+    dr_image_release(&s);
+    CHECK(zeroed(&s), "release zeroes");
+    dr_image_release(&s); /* twice is harmless */
+
+    /* A linear file's "linear" copy is the data itself. */
+    float lin[1] = {0.5f};
+    struct dr_image l = {1, 1, 1, NULL, NULL, false};
+    l.data = malloc(sizeof lin);
+    if (l.data) {
+        memcpy(l.data, lin, sizeof lin);
+        CHECK(dr_image_make_linear(&l) == 0 && l.linear[0] == 0.5f, "linear file not decoded");
+    }
+    dr_image_release(&l);
+}
+
+/* ------------------------------------------------------------------------ */
+
+#define W 5
+#define H 4
+
+static void fill_pixels(float *p, int channels)
+{
+    for (int y = 0; y < H; ++y)
+        for (int x = 0; x < W; ++x)
+            for (int c = 0; c < channels; ++c) {
+                float v = (float)(x + 1) / W * (float)(y + 1) / H;
+                if (c == 1)
+                    v = 1.0f - v;
+                if (c == 2)
+                    v = 0.37f * v * v;
+                if (c == 3)
+                    v = (float)((x + 2 * y) % 5) / 4.0f;
+                p[(y * W + x) * channels + c] = v;
+            }
+}
+
+static void test_exr(void)
+{
+    char path[512];
+    path_in_tmp(path, sizeof path, "round.exr");
+    float px[W * H * 4];
+    fill_pixels(px, 4);
+    px[0] = 1e-30f;  /* awkward values must survive bit for bit */
+    px[1] = 65504.5f;
+    px[2] = -3.25f;
+    px[3] = 1234567.8f;
+    CHECK(dr_image_write(path, W, H, 4, px) == 0, "write exr: %s", dr_last_error());
+    struct dr_image img;
+    int rc = dr_image_read(path, &img);
+    CHECK(rc == 0, "read exr: %s", dr_last_error());
+    if (rc == 0) {
+        CHECK(img.width == W && img.height == H && img.channels == 4, "exr dims %dx%dx%d",
+              img.width, img.height, img.channels);
+        CHECK(!img.file_is_srgb, "exr is linear");
+        CHECK(img.linear == NULL, "linear not made by read");
+        if (img.channels == 4)
+            CHECK(memcmp(img.data, px, sizeof px) == 0, "exr not bit-exact");
+    }
+    dr_image_release(&img);
+    CHECK(count_matching(tmpdir, ".tmp") == 0, "temporary left behind");
+
+    /* 1-channel float. */
+    path_in_tmp(path, sizeof path, "grey.exr");
+    float g[W * H];
+    fill_pixels(g, 1);
+    CHECK(dr_image_write(path, W, H, 1, g) == 0, "write grey exr: %s", dr_last_error());
+    rc = dr_image_read(path, &img);
+    CHECK(rc == 0 && img.channels == 1 && memcmp(img.data, g, sizeof g) == 0,
+          "grey exr round trip (rc %d, %d channels)", rc, img.channels);
+    dr_image_release(&img);
+}
+
+static void test_png(void)
+{
+    char path[512];
+    path_in_tmp(path, sizeof path, "round.png");
+    float px[W * H * 4];
+    fill_pixels(px, 4);
+    px[4] = 0.8f; /* pixel 1: colour with alpha 0 must not be premultiplied away */
+    px[7] = 0.0f;
+    px[8] = 2.0f;  /* out of range: clamped */
+    px[9] = -1.0f; /* negative: clamped */
+    px[10] = NAN;  /* NaN: 0 */
+    CHECK(dr_image_write(path, W, H, 4, px) == 0, "write png: %s", dr_last_error());
+    struct dr_image img;
+    int rc = dr_image_read(path, &img);
+    CHECK(rc == 0, "read png: %s", dr_last_error());
+    if (rc != 0)
+        return;
+    CHECK(img.width == W && img.height == H && img.channels == 4, "png dims %dx%dx%d",
+          img.width, img.height, img.channels);
+    CHECK(img.file_is_srgb, "png is sRGB");
+    if (img.channels == 4) {
+        double worst_code = 0.0, worst_lin = 0.0, worst_alpha = 0.0;
+        for (int i = 0; i < W * H; ++i)
+            for (int c = 0; c < 4; ++c) {
+                double src = px[i * 4 + c], got = img.data[i * 4 + c];
+                if ((i == 1 || i == 2) && c < 3)
+                    continue; /* the special pixels, checked below */
+                if (c == 3) {
+                    worst_alpha = fmax(worst_alpha, fabs(got - src));
+                    continue;
+                }
+                double want = dr_linear_to_srgb(src);
+                worst_code = fmax(worst_code, fabs(got - want));
+                /* decoded: within half a step times the curve's slope (<= 2.4) */
+                worst_lin = fmax(worst_lin, fabs(dr_srgb_to_linear(got) - src));
+                /* stored values are exact 8-bit codes */
+                double code = got * 255.0;
+                CHECK(fabs(code - floor(code + 0.5)) < 1e-4, "not an 8-bit code: %g", code);
+            }
+        CHECK(worst_code <= 0.5 / 255 + 1e-6, "sRGB code error %g", worst_code);
+        CHECK(worst_lin <= 2.4 * 0.5 / 255, "linear error %g", worst_lin);
+        CHECK(worst_alpha <= 0.5 / 255 + 1e-6, "alpha error %g", worst_alpha);
+        CHECK_NEAR(img.data[4], dr_linear_to_srgb(0.8), 0.5 / 255 + 1e-6,
+                   "colour kept under alpha 0");
+        CHECK_NEAR(img.data[7], 0.0, 0, "alpha 0");
+        CHECK_NEAR(img.data[8], 1.0, 0, "clamped above");
+        CHECK_NEAR(img.data[9], 0.0, 0, "clamped below");
+        CHECK_NEAR(img.data[10], 0.0, 0, "NaN written as 0");
+        CHECK_NEAR(img.data[0], round(dr_linear_to_srgb(px[0]) * 255) / 255, 1e-6,
+                   "rounded to nearest");
+        CHECK(dr_image_make_linear(&img) == 0, "make_linear");
+        CHECK_NEAR(img.linear[0], px[0], 0.5 / 255, "make_linear decodes");
+        CHECK_NEAR(img.linear[3], img.data[3], 0, "make_linear keeps alpha");
+    }
+    dr_image_release(&img);
+
+    /* RGB and grey PNGs. */
+    float rgb[W * H * 3];
+    fill_pixels(rgb, 3);
+    path_in_tmp(path, sizeof path, "rgb.png");
+    CHECK(dr_image_write(path, W, H, 3, rgb) == 0, "write rgb png: %s", dr_last_error());
+    rc = dr_image_read(path, &img);
+    CHECK(rc == 0 && img.channels == 3 && img.file_is_srgb, "rgb png: rc %d, %d channels", rc,
+          img.channels);
+    if (rc == 0 && img.channels == 3)
+        CHECK_NEAR(img.data[5], dr_linear_to_srgb(rgb[5]), 0.5 / 255 + 1e-6, "rgb png value");
+    dr_image_release(&img);
+
+    /* Grey + alpha, and other 8-bit formats with alpha. */
+    float ga[W * H * 2];
+    fill_pixels(ga, 2);
+    const char *names[] = {"ga.png", "ga.tga", "rgba.tga", "rgba.bmp", "ga.jpg"};
+    const int chans[] = {2, 2, 4, 4, 2};
+    const int want[] = {2, 2, 4, 4, 1};
+    for (int k = 0; k < 5; ++k) {
+        path_in_tmp(path, sizeof path, names[k]);
+        const float *src = chans[k] == 2 ? ga : px;
+        rc = dr_image_write(path, W, H, chans[k], src);
+        CHECK(rc == 0, "write %s: %s", names[k], dr_last_error());
+        rc = dr_image_read(path, &img);
+        CHECK(rc == 0 && img.channels == want[k] && img.file_is_srgb,
+              "%s: rc %d, %d channels, srgb %d", names[k], rc, img.channels, img.file_is_srgb);
+        if (rc == 0 && img.channels == want[k] && k < 4) {
+            /* pixel 6: colour and alpha */
+            int c = chans[k];
+            CHECK_NEAR(img.data[6 * c], dr_linear_to_srgb(src[6 * c]), 0.5 / 255 + 1e-6,
+                       names[k]);
+            CHECK_NEAR(img.data[6 * c + c - 1], src[6 * c + c - 1], 0.5 / 255 + 1e-6,
+                       names[k]);
+        }
+        dr_image_release(&img);
+    }
+}
+
+static void test_hdr(void)
+{
+    char path[512];
+    path_in_tmp(path, sizeof path, "round.hdr");
+    float px[W * H * 3];
+    fill_pixels(px, 3);
+    px[0] = 1000.0f;
+    CHECK(dr_image_write(path, W, H, 3, px) == 0, "write hdr: %s", dr_last_error());
+    struct dr_image img;
+    int rc = dr_image_read(path, &img);
+    CHECK(rc == 0, "read hdr: %s", dr_last_error());
+    if (rc == 0) {
+        CHECK(img.width == W && img.height == H && img.channels == 3, "hdr dims %dx%dx%d",
+              img.width, img.height, img.channels);
+        CHECK(!img.file_is_srgb, "hdr is linear");
+        if (img.channels == 3) {
+            /* RGBE: 8-bit mantissas sharing the largest component's exponent. */
+            double worst = 0.0;
+            for (int i = 0; i < W * H; ++i) {
+                double m = fmax(px[3 * i], fmax(px[3 * i + 1], px[3 * i + 2]));
+                for (int c = 0; c < 3; ++c)
+                    worst = fmax(worst, fabs(img.data[3 * i + c] - px[3 * i + c]) / m);
+            }
+            CHECK(worst <= 1.0 / 128, "hdr error %g (relative to the pixel's max)", worst);
+        }
+    }
+    dr_image_release(&img);
+    /* RGBA to HDR: alpha dropped. */
+    float px4[W * H * 4];
+    fill_pixels(px4, 4);
+    path_in_tmp(path, sizeof path, "rgba.hdr");
+    CHECK(dr_image_write(path, W, H, 4, px4) == 0, "write rgba hdr: %s", dr_last_error());
+    rc = dr_image_read(path, &img);
+    CHECK(rc == 0 && img.channels == 3, "rgba hdr read: rc %d, %d channels", rc, img.channels);
+    dr_image_release(&img);
+    /* Grey to HDR: replicated into RGB. */
+    float g[W * H];
+    fill_pixels(g, 1);
+    path_in_tmp(path, sizeof path, "grey.hdr");
+    CHECK(dr_image_write(path, W, H, 1, g) == 0, "write grey hdr: %s", dr_last_error());
+    rc = dr_image_read(path, &img);
+    CHECK(rc == 0 && img.channels == 3, "grey hdr read: rc %d, %d channels", rc, img.channels);
+    if (rc == 0 && img.channels == 3)
+        CHECK(img.data[9] == img.data[10] && img.data[10] == img.data[11] &&
+                  fabs(img.data[9] - g[3]) <= g[3] / 128,
+              "grey hdr pixel: %g %g %g vs %g", img.data[9], img.data[10], img.data[11], g[3]);
+    dr_image_release(&img);
+}
+
+static void test_jpeg(void)
+{
+    char path[512];
+    path_in_tmp(path, sizeof path, "rgba.jpg");
+    float px[W * H * 4];
+    fill_pixels(px, 4);
+    CHECK(dr_image_write(path, W, H, 4, px) == 0, "write rgba jpeg: %s", dr_last_error());
+    struct dr_image img;
+    int rc = dr_image_read(path, &img);
+    CHECK(rc == 0, "read jpeg: %s", dr_last_error());
+    if (rc == 0) {
+        CHECK(img.channels == 3, "jpeg has no alpha: %d channels", img.channels);
+        CHECK(img.file_is_srgb, "jpeg is sRGB");
+    }
+    dr_image_release(&img);
+}
+
+/* Reads `path` from a file and from memory (twice: with the name and with a
+ * name that says nothing), and compares. */
+static void compare_memory_read(const char *path, const char *what)
+{
+    struct dr_image a, b, c;
+    int ra = dr_image_read(path, &a);
+    CHECK(ra == 0, "%s: read: %s", what, dr_last_error());
+    size_t size = 0;
+    unsigned char *bytes = slurp(path, &size);
+    CHECK(bytes != NULL, "%s: slurp", what);
+    if (ra != 0 || !bytes) {
+        dr_image_release(&a);
+        free(bytes);
+        return;
+    }
+    const char *base = strrchr(path, '/');
+    base = base ? base + 1 : path;
+    int rb = dr_image_read_memory(bytes, size, base, &b);
+    CHECK(rb == 0, "%s: read_memory: %s", what, dr_last_error());
+    int rc = dr_image_read_memory(bytes, size, "embedded-image", &c);
+    CHECK(rc == 0, "%s: read_memory (magic bytes): %s", what, dr_last_error());
+    const struct dr_image *m[2] = {&b, &c};
+    int r[2] = {rb, rc};
+    for (int k = 0; k < 2; ++k) {
+        if (r[k] != 0)
+            continue;
+        bool same = m[k]->width == a.width && m[k]->height == a.height &&
+                    m[k]->channels == a.channels && m[k]->file_is_srgb == a.file_is_srgb;
+        CHECK(same, "%s: memory read differs in shape (%d)", what, k);
+        if (same)
+            CHECK(memcmp(m[k]->data, a.data,
+                         (size_t)a.width * a.height * a.channels * sizeof(float)) == 0,
+                  "%s: memory read differs in pixels (%d)", what, k);
+    }
+    dr_image_release(&a);
+    dr_image_release(&b);
+    dr_image_release(&c);
+    free(bytes);
+}
+
+static void test_read_memory(void)
+{
+    char path[512];
+    path_in_tmp(path, sizeof path, "round.png");
+    compare_memory_read(path, "png");
+    path_in_tmp(path, sizeof path, "rgba.jpg");
+    compare_memory_read(path, "jpeg");
+    path_in_tmp(path, sizeof path, "round.exr");
+    compare_memory_read(path, "exr");
+    path_in_tmp(path, sizeof path, "round.hdr");
+    compare_memory_read(path, "hdr");
+
+    /* A MIME type as the name hint. */
+    path_in_tmp(path, sizeof path, "round.png");
+    size_t size = 0;
+    unsigned char *bytes = slurp(path, &size);
+    struct dr_image img;
+    if (bytes) {
+        CHECK(dr_image_read_memory(bytes, size, "image/png", &img) == 0 && img.channels == 4,
+              "mime hint: %s", dr_last_error());
+        dr_image_release(&img);
+        /* Truncated data: an error and a zeroed image. */
+        int rc = dr_image_read_memory(bytes, size / 2, "half.png", &img);
+        CHECK(rc < 0, "truncated png accepted");
+        CHECK(zeroed(&img), "image not zeroed after failure");
+        dr_image_release(&img);
+        free(bytes);
+    }
+    /* Garbage with no useful name. */
+    const char junk[] = "this is not an image at all";
+    int rc = dr_image_read_memory(junk, sizeof junk, "blob", &img);
+    CHECK(rc == DR_ERR_FORMAT, "junk: rc %d", rc);
+    CHECK(zeroed(&img), "junk: image not zeroed");
+    CHECK(strstr(dr_last_error(), "blob") != NULL, "message names the hint: %s", dr_last_error());
+
+    /* FITS has no ioproxy reader in OIIO 2.4: the temporary-file fallback,
+     * which must clean up after itself. */
+    path_in_tmp(path, sizeof path, "round.fits");
+    float px[W * H * 3];
+    fill_pixels(px, 3);
+    CHECK(dr_image_can_write(path), "OpenImageIO without FITS?");
+    if (dr_image_can_write(path)) {
+        CHECK(dr_image_write(path, W, H, 3, px) == 0, "write fits: %s", dr_last_error());
+        char sub[512];
+        path_in_tmp(sub, sizeof sub, "fitstmp");
+        CHECK(mkdir(sub, 0700) == 0, "mkdir");
+        const char *old = getenv("TMPDIR");
+        char *saved = old ? strdup(old) : NULL;
+        setenv("TMPDIR", sub, 1);
+        bytes = slurp(path, &size);
+        if (bytes) {
+            struct dr_image a;
+            int ra = dr_image_read(path, &a);
+            rc = dr_image_read_memory(bytes, size, "embedded.fits", &img);
+            CHECK(ra == 0 && rc == 0, "fits via memory: %s", dr_last_error());
+            if (ra == 0 && rc == 0)
+                CHECK(img.channels == a.channels && img.width == a.width &&
+                          memcmp(img.data, a.data,
+                                 (size_t)a.width * a.height * a.channels * sizeof(float)) == 0,
+                      "fits via memory differs");
+            dr_image_release(&a);
+            dr_image_release(&img);
+            free(bytes);
+        }
+        CHECK(count_entries(sub) == 0, "fallback temporary left behind");
+        if (saved) {
+            setenv("TMPDIR", saved, 1);
+            free(saved);
+        } else {
+            unsetenv("TMPDIR");
+        }
+    }
+}
+
+static void test_errors(void)
+{
+    char path[512], other[512];
+    struct dr_image img;
+
+    CHECK(!dr_image_can_write("out.xyz"), "can_write .xyz");
+    CHECK(!dr_image_can_write("noextension"), "can_write without extension");
+    CHECK(dr_image_can_write("out.png"), "can_write .png");
+    CHECK(dr_image_can_write("out.exr"), "can_write .exr");
+    CHECK(dr_image_can_write("dir/out.JPG"), "can_write .JPG");
+
+    /* Reading a missing file. */
+    path_in_tmp(path, sizeof path, "missing.png");
+    memset(&img, 0x5a, sizeof img);
+    int rc = dr_image_read(path, &img);
+    CHECK(rc == DR_ERR_IO, "missing file: rc %d", rc);
+    CHECK(zeroed(&img), "missing file: image not zeroed");
+    CHECK(strstr(dr_last_error(), path) && strstr(dr_last_error(), "cannot read image"),
+          "message: %s", dr_last_error());
+    /* Reading a corrupt file. */
+    path_in_tmp(path, sizeof path, "corrupt.png");
+    FILE *f = fopen(path, "wb");
+    if (f) {
+        fputs("\x89PNG\r\n\x1a\n garbage garbage", f);
+        fclose(f);
+    }
+    rc = dr_image_read(path, &img);
+    CHECK(rc < 0, "corrupt file accepted");
+    CHECK(zeroed(&img), "corrupt file: image not zeroed");
+    remove(path);
+
+    float px[W * H * 3];
+    fill_pixels(px, 3);
+    int before = count_entries(tmpdir);
+
+    /* Unknown format: DR_ERR_ARG, nothing created. */
+    path_in_tmp(path, sizeof path, "out.xyz");
+    rc = dr_image_write(path, W, H, 3, px);
+    CHECK(rc == DR_ERR_ARG, ".xyz write: rc %d", rc);
+    CHECK(strstr(dr_last_error(), "cannot write this format"), "message: %s", dr_last_error());
+    CHECK(count_entries(tmpdir) == before, ".xyz write created something");
+
+    /* Nonexistent directory: DR_ERR_IO. */
+    path_in_tmp(path, sizeof path, "no/such/dir/out.png");
+    rc = dr_image_write(path, W, H, 3, px);
+    CHECK(rc == DR_ERR_IO, "write into a missing directory: rc %d", rc);
+    CHECK(strstr(dr_last_error(), path) && strstr(dr_last_error(), "cannot write image"),
+          "message: %s", dr_last_error());
+    CHECK(count_entries(tmpdir) == before, "missing directory: something created");
+
+    /* Invalid arguments. */
+    path_in_tmp(path, sizeof path, "bad.png");
+    CHECK(dr_image_write(path, 0, H, 3, px) == DR_ERR_ARG, "zero width");
+    CHECK(dr_image_write(path, W, H, 5, px) == DR_ERR_ARG, "5 channels");
+    CHECK(dr_image_write(path, W, H, 3, NULL) == DR_ERR_ARG, "NULL pixels");
+    CHECK(count_entries(tmpdir) == before, "invalid write created something");
+
+    /* The rename fails (the target is a directory): DR_ERR_IO and the
+     * temporary, fully written by then, is removed. */
+    path_in_tmp(path, sizeof path, "isdir.png");
+    CHECK(mkdir(path, 0700) == 0, "mkdir");
+    rc = dr_image_write(path, W, H, 3, px);
+    CHECK(rc == DR_ERR_IO, "write over a directory: rc %d", rc);
+    CHECK(count_matching(tmpdir, ".tmp") == 0, "temporary left behind after failed rename");
+    CHECK(count_entries(tmpdir) == before + 1, "unexpected files");
+    rmdir(path);
+
+    /* A failed write over an existing file leaves it untouched: block the
+     * temporary's name with a directory so OpenImageIO cannot create it. */
+    path_in_tmp(path, sizeof path, "keep.png");
+    CHECK(dr_image_write(path, W, H, 3, px) == 0, "write keep.png: %s", dr_last_error());
+    size_t size0 = 0, size1 = 0;
+    unsigned char *orig = slurp(path, &size0);
+    char tmpname[128];
+    snprintf(tmpname, sizeof tmpname, ".keep.png.tmp%ld.png", (long)getpid());
+    path_in_tmp(other, sizeof other, tmpname);
+    CHECK(mkdir(other, 0700) == 0, "mkdir %s", other);
+    float px2[W * H * 3];
+    for (int i = 0; i < W * H * 3; ++i)
+        px2[i] = 1.0f - px[i];
+    rc = dr_image_write(path, W, H, 3, px2);
+    CHECK(rc == DR_ERR_IO, "blocked write: rc %d", rc);
+    unsigned char *now = slurp(path, &size1);
+    CHECK(orig && now && size0 == size1 && memcmp(orig, now, size0) == 0,
+          "existing file changed by a failed write");
+    CHECK(file_exists(other), "the blocking directory was removed");
+    rmdir(other);
+    free(orig);
+    free(now);
+    /* The same write works once the way is clear, and replaces the file. */
+    rc = dr_image_write(path, W, H, 3, px2);
+    CHECK(rc == 0, "write after unblocking: %s", dr_last_error());
+    rc = dr_image_read(path, &img);
+    if (rc == 0 && img.channels == 3)
+        CHECK_NEAR(img.data[0], dr_linear_to_srgb(px2[0]), 0.5 / 255 + 1e-6, "file replaced");
+    dr_image_release(&img);
+    CHECK(count_matching(tmpdir, ".tmp") == 0, "temporary left behind");
+    remove(path);
+}
+
+int main(void)
+{
+    const char *base = getenv("TMPDIR");
+    snprintf(tmpdir, sizeof tmpdir, "%s/drender-test-image-XXXXXX",
+             base && *base ? base : "/tmp");
+    if (!mkdtemp(tmpdir)) {
+        fprintf(stderr, "mkdtemp %s: %s\n", tmpdir, strerror(errno));
+        return 1;
+    }
+
+    test_srgb_curves();
+    test_bilinear();
+    test_channels();
+    test_exr();
+    test_png();
+    test_hdr();
+    test_jpeg();
+    test_read_memory();
+    test_errors();
+
+    nftw(tmpdir, rm_entry, 16, FTW_DEPTH | FTW_PHYS);
+    return TEST_END();
+}

@@ -1,0 +1,275 @@
+/* Analytic scenes with known radiance, rendered through dr_render, checked
+ * within statistical tolerances (pixels are independent estimates, so their
+ * spread gives the standard error of the image mean). */
+#include <stdlib.h>
+
+#include "error.h"
+#include "lights.h"
+#include "render.h"
+#include "sampler.h"
+#include "scene_builder.h"
+#include "test.h"
+
+struct stats {
+    dr_vec3 mean, stderr_;
+    double min, max;
+};
+
+static struct stats render_stats(struct dr_scene *s, struct dr_camera cam, int res, int spp, int depth)
+{
+    float *rgb = malloc(sizeof(float) * 3 * res * res);
+    struct dr_render_opts o = {res, res, spp, depth, 5, 7, 2, false};
+    struct dr_render_stats st;
+    int rc = dr_render(s, &cam, &o, rgb, &st);
+    CHECK(rc == 0, "dr_render failed: %s", dr_last_error());
+    CHECK(st.invalid_samples == 0, "%llu non-finite samples", (unsigned long long)st.invalid_samples);
+    double sum[3] = {0}, sq[3] = {0};
+    struct stats r = {dr_v3s(0), dr_v3s(0), INFINITY, -INFINITY};
+    int n = res * res;
+    for (int i = 0; i < n; i++)
+        for (int c = 0; c < 3; c++) {
+            double v = rgb[3 * i + c];
+            sum[c] += v;
+            sq[c] += v * v;
+            r.min = fmin(r.min, v);
+            r.max = fmax(r.max, v);
+        }
+    double m[3], se[3];
+    for (int c = 0; c < 3; c++) {
+        m[c] = sum[c] / n;
+        se[c] = sqrt(fmax(0.0, sq[c] / n - m[c] * m[c]) / (n - 1));
+    }
+    r.mean = dr_v3(m[0], m[1], m[2]);
+    r.stderr_ = dr_v3(se[0], se[1], se[2]);
+    free(rgb);
+    return r;
+}
+
+/* mean within k standard errors (plus a relative slack for tiny errors) */
+static void check_mean(const char *what, struct stats st, dr_vec3 expect, double rel_slack)
+{
+    double m[3] = {st.mean.x, st.mean.y, st.mean.z}, e[3] = {expect.x, expect.y, expect.z},
+           se[3] = {st.stderr_.x, st.stderr_.y, st.stderr_.z};
+    for (int c = 0; c < 3; c++) {
+        double tol = 4.0 * se[c] + rel_slack * fabs(e[c]);
+        CHECK(fabs(m[c] - e[c]) <= tol, "%s channel %d: mean %.6f, expected %.6f (tol %.2g, stderr %.2g)", what, c,
+              m[c], e[c], tol, se[c]);
+    }
+}
+
+static void test_emitter_seen_directly(void)
+{
+    struct sb b;
+    sb_init(&b);
+    struct dr_material m = sb_diffuse(dr_v3s(0.0));
+    m.emissive_factor = dr_v3(2, 3, 4);
+    sb_quad(&b, dr_v3(-50, -50, -1), dr_v3(100, 0, 0), dr_v3(0, 100, 0), sb_material(&b, m));
+    struct dr_scene *s = sb_finish(&b);
+    struct stats st = render_stats(s, sb_camera(dr_v3(0, 0, 0), dr_v3(0, 0, -1), 40), 16, 4, 8);
+    CHECK_NEAR(st.mean.x, 2.0, 1e-6, "emitter red");
+    CHECK_NEAR(st.mean.y, 3.0, 1e-6, "emitter green");
+    CHECK_NEAR(st.mean.z, 4.0, 1e-6, "emitter blue");
+    /* seen from behind, a single-sided emitter is black */
+    st = render_stats(s, sb_camera(dr_v3(0, 0, -2), dr_v3(0, 0, -1), 40), 8, 2, 8);
+    CHECK(st.max == 0.0, "back of single-sided emitter: max %g", st.max);
+    dr_scene_destroy(s);
+}
+
+static void test_diffuse_plane_constant_env(void)
+{
+    for (int depth = 2; depth <= 6; depth += 4) {
+        struct sb b;
+        sb_init(&b);
+        dr_vec3 albedo = dr_v3(0.8, 0.5, 0.2), E = dr_v3(0.5, 1.0, 2.0);
+        sb_quad(&b, dr_v3(-100, 0, 100), dr_v3(200, 0, 0), dr_v3(0, 0, -200), sb_material(&b, sb_diffuse(albedo)));
+        sb_environment(&b, E);
+        struct dr_scene *s = sb_finish(&b);
+        struct stats st = render_stats(s, sb_camera(dr_v3(0, 1, 0), dr_v3(0, 0, 0), 20), 32, 16, depth);
+        check_mean("diffuse plane under constant environment", st, dr_mul(albedo, E), 0.0);
+        dr_scene_destroy(s);
+    }
+}
+
+/* A white open box (fronts inside, open at the top) under uniform radiance 1:
+ * every interreflection bounce matters, and a white Lambertian must render
+ * exactly the environment (the furnace test). */
+static struct dr_scene *furnace_scene(struct dr_material mat)
+{
+    struct sb b;
+    sb_init(&b);
+    int mi = sb_material(&b, mat);
+    dr_vec3 lo = dr_v3(-1, 0, -1);
+    sb_quad(&b, lo, dr_v3(0, 0, 2), dr_v3(2, 0, 0), mi);                       /* floor, +y */
+    sb_quad(&b, lo, dr_v3(2, 0, 0), dr_v3(0, 2, 0), mi);                       /* z=-1, +z */
+    sb_quad(&b, dr_v3(-1, 0, 1), dr_v3(0, 2, 0), dr_v3(2, 0, 0), mi);          /* z=+1, -z */
+    sb_quad(&b, lo, dr_v3(0, 2, 0), dr_v3(0, 0, 2), mi);                       /* x=-1, +x */
+    sb_quad(&b, dr_v3(1, 0, -1), dr_v3(0, 0, 2), dr_v3(0, 2, 0), mi);          /* x=+1, -x */
+    sb_environment(&b, dr_v3s(1.0));
+    return sb_finish(&b);
+}
+
+static void test_furnace(void)
+{
+    struct dr_scene *s = furnace_scene(sb_diffuse(dr_v3s(1.0)));
+    struct dr_camera cam = sb_camera(dr_v3(0.1, 4, 0.2), dr_v3(0, 0, 0), 35);
+    struct stats st = render_stats(s, cam, 32, 32, 1000);
+    check_mean("white Lambertian furnace", st, dr_v3s(1.0), 0.0);
+    CHECK(fabs(st.mean.x - 1.0) < 0.01, "furnace mean %.5f off by more than 1%%", st.mean.x);
+    dr_scene_destroy(s);
+
+    /* A rough white metal loses energy (single-scattering microfacets), never
+     * gains it, and loses more the rougher it is. */
+    double prev = 2.0;
+    for (double rough = 0.2; rough <= 1.0; rough += 0.4) {
+        struct dr_material m = sb_diffuse(dr_v3s(1.0));
+        m.metallic = 1.0;
+        m.roughness = rough;
+        m.specular = 1.0;
+        s = furnace_scene(m);
+        st = render_stats(s, cam, 32, 32, 1000);
+        CHECK(st.mean.x <= 1.0 + 4.0 * st.stderr_.x, "rough metal %.1f furnace %.5f > 1", rough, st.mean.x);
+        CHECK(st.mean.x < prev - 4.0 * st.stderr_.x, "rough metal %.1f furnace %.5f not darker than %.5f", rough,
+              st.mean.x, prev);
+        prev = st.mean.x;
+        dr_scene_destroy(s);
+    }
+}
+
+static struct dr_punctual light(enum dr_light_type type, dr_vec3 pos, dr_vec3 dir, double intensity)
+{
+    struct dr_punctual l;
+    memset(&l, 0, sizeof l);
+    l.type = type;
+    l.color = dr_v3(1.0, 0.5, 0.25);
+    l.intensity = intensity;
+    l.position = pos;
+    l.direction = dir;
+    l.cos_inner = cos(10 * M_PI / 180);
+    l.cos_outer = cos(20 * M_PI / 180);
+    return l;
+}
+
+static void test_punctual(void)
+{
+    dr_vec3 albedo = dr_v3(0.6, 0.6, 0.6);
+    double h = 2.0, I = 5.0;
+    for (int t = 0; t < 4; t++) {
+        struct sb b;
+        sb_init(&b);
+        sb_quad(&b, dr_v3(-100, 0, 100), dr_v3(200, 0, 0), dr_v3(0, 0, -200), sb_material(&b, sb_diffuse(albedo)));
+        struct dr_punctual l;
+        double expect;
+        const char *what;
+        if (t == 0) {
+            l = light(DR_LIGHT_POINT, dr_v3(0, h, 0), dr_v3(0, -1, 0), I);
+            expect = I / (h * h);
+            what = "point light";
+        } else if (t == 1) {
+            l = light(DR_LIGHT_SPOT, dr_v3(0, h, 0), dr_v3(0, -1, 0), I);
+            expect = I / (h * h);
+            what = "spot light, inside the cone";
+        } else if (t == 2) {
+            l = light(DR_LIGHT_SPOT, dr_v3(0, h, 0), dr_normalize(dr_v3(1, -0.3, 0)), I);
+            expect = 0.0;
+            what = "spot light, outside the cone";
+        } else {
+            l = light(DR_LIGHT_DIRECTIONAL, dr_v3(0, 0, 0), dr_v3(0, -1, 0), I);
+            expect = I;
+            what = "directional light";
+        }
+        sb_light(&b, l);
+        struct dr_scene *s = sb_finish(&b);
+        /* camera just beside the light looking straight down, a 1 degree view */
+        struct stats st = render_stats(s, sb_camera(dr_v3(0, h - 1e-3, 0), dr_v3(0, 0, 0), 1.0), 8, 2, 4);
+        dr_vec3 e = dr_scale(dr_mul(albedo, l.color), expect * DR_INV_PI);
+        check_mean(what, st, e, 1e-3);
+        dr_scene_destroy(s);
+    }
+}
+
+/* A ceiling that emits everywhere above a diffuse floor: the floor's direct
+ * lighting is albedo * Le, which needs both MIS strategies summed right. */
+static void test_area_light_mis(void)
+{
+    struct sb b;
+    sb_init(&b);
+    dr_vec3 albedo = dr_v3(0.7, 0.4, 0.9), Le = dr_v3(1.5, 2.0, 0.5);
+    sb_quad(&b, dr_v3(-500, 0, 500), dr_v3(1000, 0, 0), dr_v3(0, 0, -1000), sb_material(&b, sb_diffuse(albedo)));
+    struct dr_material em = sb_diffuse(dr_v3s(0.0));
+    em.emissive_factor = Le;
+    sb_quad(&b, dr_v3(-500, 1, 500), dr_v3(0, 0, -1000), dr_v3(1000, 0, 0), sb_material(&b, em)); /* faces -y */
+    struct dr_scene *s = sb_finish(&b);
+    struct stats st = render_stats(s, sb_camera(dr_v3(0, 0.5, 0), dr_v3(0, 0, 0), 30), 32, 16, 2);
+    check_mean("floor under an emitting ceiling", st, dr_mul(albedo, Le), 1e-4);
+    dr_scene_destroy(s);
+
+    /* a small emitter far away: the inverse-square law with both cosines */
+    sb_init(&b);
+    sb_quad(&b, dr_v3(-100, 0, 100), dr_v3(200, 0, 0), dr_v3(0, 0, -200), sb_material(&b, sb_diffuse(albedo)));
+    double side = 0.02, hgt = 2.0;
+    sb_quad(&b, dr_v3(-side / 2, hgt, side / 2), dr_v3(0, 0, -side), dr_v3(side, 0, 0), sb_material(&b, em));
+    s = sb_finish(&b);
+    st = render_stats(s, sb_camera(dr_v3(0, 0.5, 0), dr_v3(0, 0, 0), 0.5), 16, 16, 2);
+    double E = side * side / (hgt * hgt);   /* irradiance / Le for a small source overhead */
+    check_mean("small area light", st, dr_scale(dr_mul(albedo, Le), E * DR_INV_PI), 2e-3);
+    dr_scene_destroy(s);
+}
+
+/* Environment-map importance sampling: the density dr_light_sample reports is
+ * the one dr_light_pdf_env gives back, and it integrates the map correctly. */
+static void test_env_map_sampling(void)
+{
+    struct sb b;
+    sb_init(&b);
+    sb_quad(&b, dr_v3(-1, 0, 1), dr_v3(2, 0, 0), dr_v3(0, 0, -2), sb_material(&b, sb_diffuse(dr_v3s(0.5))));
+    sb_environment(&b, dr_v3s(1.0));
+    struct dr_image *map = &b.s->env.map;
+    map->width = 16;
+    map->height = 8;
+    map->channels = 3;
+    map->data = malloc(sizeof(float) * 16 * 8 * 3);
+    for (int y = 0; y < 8; y++)
+        for (int x = 0; x < 16; x++)
+            for (int c = 0; c < 3; c++)
+                map->data[(y * 16 + x) * 3 + c] = (float)(0.1 + ((x * 7 + y * 3 + c) % 11) + (x == 5 && y == 2 ? 200 : 0));
+    struct dr_scene *s = sb_finish(&b);
+    struct dr_sampler smp;
+    dr_sampler_init(&smp, 1, 2, 3);
+    int n = 200000, mismatch = 0;
+    double sum_is = 0, sum_is2 = 0, sum_u = 0, sum_u2 = 0;
+    for (int i = 0; i < n; i++) {
+        struct dr_light_sample ls;
+        double a = dr_sampler_next(&smp), u1 = dr_sampler_next(&smp), u2 = dr_sampler_next(&smp);
+        if (dr_light_sample(s, s->light_sampler, dr_v3(0, 1, 0), a, u1, u2, &ls)) {
+            double p = dr_light_pdf_env(s, s->light_sampler, ls.wi);
+            if (fabs(p - ls.pdf) > 1e-6 * ls.pdf)
+                mismatch++;
+            double v = ls.radiance.x / ls.pdf;
+            sum_is += v;
+            sum_is2 += v * v;
+        }
+        /* the same integral by uniform sphere sampling */
+        double z = 1 - 2 * u1, r = sqrt(fmax(0, 1 - z * z)), ph = 2 * M_PI * u2;
+        double v = dr_env_radiance(s, dr_v3(r * cos(ph), r * sin(ph), z)).x * 4 * M_PI;
+        sum_u += v;
+        sum_u2 += v * v;
+    }
+    CHECK(mismatch == 0, "%d samples whose pdf differs from dr_light_pdf_env", mismatch);
+    double m_is = sum_is / n, m_u = sum_u / n;
+    double se = sqrt((sum_is2 / n - m_is * m_is) / n + (sum_u2 / n - m_u * m_u) / n);
+    CHECK(fabs(m_is - m_u) < 4 * se, "env integral: importance %.4f vs uniform %.4f (se %.3g)", m_is, m_u, se);
+    /* importance sampling must have far less variance on a peaked map */
+    CHECK(sum_is2 / n - m_is * m_is < sum_u2 / n - m_u * m_u, "importance sampling is not better than uniform");
+    dr_scene_destroy(s);
+}
+
+int main(void)
+{
+    test_emitter_seen_directly();
+    test_diffuse_plane_constant_env();
+    test_furnace();
+    test_punctual();
+    test_area_light_mis();
+    test_env_map_sampling();
+    return TEST_END();
+}
