@@ -114,8 +114,10 @@ static int cmp_by_key(const void *a, const void *b)
     return x < y ? -1 : (x > y ? 1 : 0);
 }
 
-/* Chi-square test with cells of expectation < 5 pooled (smallest first).
- * Returns the p-value; *dof_out, *chi2_out receive the statistic. */
+/* Chi-square test. Cells expecting fewer than 5 counts are pooled into one
+ * cell, which also takes the next-smallest cells until it expects >= 5; cells
+ * that expect nothing are in that pool too, so an observation where nothing is
+ * expected weighs heavily unless the pool is large. */
 static double chi2_test(const double *obs, const double *expd, int n, int *dof_out, double *chi2_out)
 {
     int *idx = malloc(sizeof(int) * (size_t)n);
@@ -123,32 +125,28 @@ static double chi2_test(const double *obs, const double *expd, int n, int *dof_o
     sort_key = expd;
     qsort(idx, (size_t)n, sizeof(int), cmp_by_key);
     double chi2 = 0.0, pool_o = 0.0, pool_e = 0.0;
-    int cells = 0;
+    int cells = 0, pooled = 0;
     for (int k = 0; k < n; k++) {
         int i = idx[k];
-        if (expd[i] < 5.0 || pool_e > 0.0) {
+        if (expd[i] < 5.0 || (pooled > 0 && pool_e < 5.0)) {
             pool_o += obs[i];
             pool_e += expd[i];
-            if (pool_e >= 5.0) {
-                chi2 += dr_sqr(pool_o - pool_e) / pool_e;
-                cells++;
-                pool_o = pool_e = 0.0;
-            }
+            pooled++;
             continue;
         }
         chi2 += dr_sqr(obs[i] - expd[i]) / expd[i];
         cells++;
     }
-    if (pool_e > 0.0) {          /* leftover (< 5): its own cell, a conservative choice */
-        chi2 += dr_sqr(pool_o - pool_e) / pool_e;
+    if (pooled > 0) {
+        chi2 += pool_e > 0.0 ? dr_sqr(pool_o - pool_e) / pool_e : (pool_o > 0.0 ? INFINITY : 0.0);
         cells++;
-    } else if (pool_o > 0.0) {   /* observations where nothing is expected */
-        chi2 += 1e30;
     }
     free(idx);
     int dof = cells - 1;
     *dof_out = dof;
     *chi2_out = chi2;
+    if (!isfinite(chi2))
+        return 0.0;
     return dof > 0 ? gamma_q(0.5 * dof, 0.5 * chi2) : 1.0;
 }
 
