@@ -16,7 +16,8 @@ endif
 
 WARN     := -Wall -Wextra -Wpedantic
 CPPFLAGS += -Icore -Iestimators -MMD -MP
-CFLAGS   += -std=c11 -D_GNU_SOURCE $(OPT) $(WARN) -pthread
+# -fno-math-errno lets sqrt compile to one instruction; results are unchanged.
+CFLAGS   += -std=c11 -D_GNU_SOURCE $(OPT) $(WARN) -pthread -fno-math-errno
 CXXFLAGS += -std=c++17 $(OPT) $(WARN) -pthread $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 LDLIBS   += $(shell pkg-config --libs $(PKGS) 2>/dev/null) -ltinygltf -lembree3 -lstdc++ -lm -pthread
 LDFLAGS  += $(OPT)

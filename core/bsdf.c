@@ -42,8 +42,8 @@ static inline bool no_specular_lobe(const struct dr_bsdf *b)
 static inline dr_vec3 dielectric_f0(const struct dr_bsdf *b)
 {
     dr_vec3 sc = b->specular_color;
-    return dr_v3(fmin(0.04 * sc.x, 1.0) * b->specular, fmin(0.04 * sc.y, 1.0) * b->specular,
-                 fmin(0.04 * sc.z, 1.0) * b->specular);
+    return dr_v3(dr_min(0.04 * sc.x, 1.0) * b->specular, dr_min(0.04 * sc.y, 1.0) * b->specular,
+                 dr_min(0.04 * sc.z, 1.0) * b->specular);
 }
 
 /* cos_o = wo.z > COS_EPS. */
@@ -100,7 +100,13 @@ static inline dr_vec3 eval_pdf_above(const struct dr_bsdf *b, dr_vec3 wo, dr_vec
     dr_vec3 base = b->base_color;
     dr_vec3 fm = dr_v3(base.x + (1.0 - base.x) * s5, base.y + (1.0 - base.y) * s5,
                        base.z + (1.0 - base.z) * s5);
-    double kd = (1.0 - m) * fmax(0.0, 1.0 - dr_max3(fd)) * DR_INV_PI;
+    /* Diffuse weight: what the dielectric layer's Fresnel lets through on the
+     * way in and on the way out, (1 - F(n.wo)) (1 - F(n.wi)), max over channels.
+     * glTF's reference 1 - F(wo.h) is not reciprocal in effect and creates
+     * energy at grazing angles (albedo ~1.5); this form never does. */
+    double f0max = dr_max3(f0);
+    double fo = f0max + (f90 - f0max) * pow5(1.0 - wo.z), fi = f0max + (f90 - f0max) * pow5(1.0 - wi.z);
+    double kd = (1.0 - m) * dr_max(0.0, 1.0 - fo) * dr_max(0.0, 1.0 - fi) * DR_INV_PI;
     double ks = (1.0 - m) * spec, km = m * spec;
     return dr_v3(base.x * kd + fd.x * ks + fm.x * km, base.y * kd + fd.y * ks + fm.y * km,
                  base.z * kd + fd.z * ks + fm.z * km);
@@ -153,7 +159,7 @@ static inline dr_vec3 sample_cosine(double u1, double u2)
         phi = (M_PI / 2.0) - (M_PI / 4.0) * (a / c);
     }
     double x = r * cos(phi), y = r * sin(phi);
-    return dr_v3(x, y, sqrt(fmax(0.0, 1.0 - x * x - y * y)));
+    return dr_v3(x, y, sqrt(dr_max(0.0, 1.0 - x * x - y * y)));
 }
 
 /* GGX visible normals (Heitz 2018, JCGT 7(4)), wo.z > 0. Returns h. */
@@ -166,10 +172,10 @@ static inline dr_vec3 sample_vndf(dr_vec3 wo, double a, double u1, double u2)
     double r = sqrt(u1), phi = 2.0 * M_PI * u2;
     double p1 = r * cos(phi), p2 = r * sin(phi);
     double s = 0.5 * (1.0 + vh.z);
-    p2 = (1.0 - s) * sqrt(fmax(0.0, 1.0 - p1 * p1)) + s * p2;
+    p2 = (1.0 - s) * sqrt(dr_max(0.0, 1.0 - p1 * p1)) + s * p2;
     dr_vec3 nh = dr_add(dr_add(dr_scale(t1, p1), dr_scale(t2, p2)),
-                        dr_scale(vh, sqrt(fmax(0.0, 1.0 - p1 * p1 - p2 * p2))));
-    return dr_normalize(dr_v3(a * nh.x, a * nh.y, fmax(0.0, nh.z)));
+                        dr_scale(vh, sqrt(dr_max(0.0, 1.0 - p1 * p1 - p2 * p2))));
+    return dr_normalize(dr_v3(a * nh.x, a * nh.y, dr_max(0.0, nh.z)));
 }
 
 bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u1, double u2,

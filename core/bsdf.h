@@ -1,11 +1,14 @@
 /* The glTF metallic-roughness BSDF (reflection only):
- *   f = (1-metallic) * [ (1 - max(F_d)) * base/pi + F_d * D G / (4 |wo.n| |wi.n|) ]
+ *   f = (1-metallic) * [ (1 - F_o)(1 - F_i) base/pi + F_d * D G / (4 |wo.n| |wi.n|) ]
  *     +    metallic  * [ F_m * D G / (4 |wo.n| |wi.n|) ]
  * D: GGX / Trowbridge-Reitz with alpha = roughness^2 (floored at DR_BSDF_MIN_ALPHA),
  * G: Smith height-correlated masking-shadowing, F: Schlick.
  * Dielectric Fresnel follows KHR_materials_specular:
  *   F_d = f0 + (specular - f0) (1 - |wo.h|)^5, f0 = min(0.04 * specular_color, 1) * specular,
  * so specular = 0 gives a pure Lambertian surface. Metal: F_m = base + (1 - base)(1 - |wo.h|)^5.
+ * The diffuse lobe is weighted by F_o, F_i = max over channels of the dielectric
+ * Fresnel at wo.n and wi.n (not glTF's 1 - F(wo.h), which creates energy at
+ * grazing angles): reciprocal, and a white dielectric's albedo stays <= 1.
  *
  * All directions are unit vectors in the local shading frame (normal = +z),
  * both pointing away from the surface: wo towards the viewer, wi towards the

@@ -2,12 +2,16 @@
 
 #include <string.h>
 
-dr_vec3 dr_camera_direction(const struct dr_camera *cam, int width, int height, double fx, double fy)
+struct dr_camera_view dr_camera_view(const struct dr_camera *cam, int width, int height)
 {
-    double th = tan(0.5 * cam->yfov);
-    double sx = (2.0 * fx / width - 1.0) * th * ((double)width / height);
-    double sy = (1.0 - 2.0 * fy / height) * th;
-    return dr_normalize(dr_add(cam->forward, dr_add(dr_scale(cam->right, sx), dr_scale(cam->up, sy))));
+    double th = tan(0.5 * cam->yfov), tw = th * ((double)width / height);
+    struct dr_camera_view v;
+    v.origin = cam->origin;
+    /* film point (fx, fy) -> forward + (2 fx / w - 1) tw right + (1 - 2 fy / h) th up */
+    v.corner = dr_add(cam->forward, dr_sub(dr_scale(cam->up, th), dr_scale(cam->right, tw)));
+    v.step_x = dr_scale(cam->right, 2.0 * tw / width);
+    v.step_y = dr_scale(cam->up, -2.0 * th / height);
+    return v;
 }
 
 struct dr_camera dr_camera_default(const struct dr_scene *scene)

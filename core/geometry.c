@@ -37,7 +37,7 @@ static void attributes(const struct dr_mesh *m, int64_t tri, double b1, double b
     double mag = 0.0;
     for (int k = 0; k < 3; k++) {
         const float *v = m->positions + 3 * (size_t)idx[k];
-        mag = fmax(mag, fmax(fabs(v[0]), fmax(fabs(v[1]), fabs(v[2]))));
+        mag = dr_max(mag, dr_max(fabs(v[0]), dr_max(fabs(v[1]), fabs(v[2]))));
     }
     hit->eps = 1e-5 * mag + 1e-30;
 }

@@ -101,7 +101,7 @@ dr_vec3 dr_path_radiance(const struct dr_scene *s, const struct dr_trace_opts *o
         d = wi;
 
         if (depth >= opts->rr_depth) {
-            double q = fmin(dr_max3(beta), 0.95);
+            double q = dr_min(dr_max3(beta), 0.95);
             if (u_rr >= q)
                 break;
             beta = dr_scale(beta, 1.0 / q);

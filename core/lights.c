@@ -12,6 +12,8 @@ struct dr_light_sampler {
     int64_t n_emitters;
     int64_t *emitter_tri;      /* triangle of each emitter entry */
     double *tri_pick;          /* per triangle: probability of picking it (0: not an emitter) */
+    double *tri_pick_density;  /* per triangle: pick probability / area (area density) */
+    double *emitter_area;      /* per emitter entry */
     int n_punctual;
     int env_entry;             /* index of the environment in cdf, -1 if none */
     int64_t n_entries;
@@ -128,9 +130,11 @@ struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
     ls->n_entries = ls->n_emitters + ls->n_punctual + (s->env.present ? 1 : 0);
     ls->emitter_tri = malloc(sizeof(int64_t) * (size_t)(ls->n_emitters + 1));
     ls->tri_pick = calloc((size_t)m->n_triangles + 1, sizeof(double));
+    ls->tri_pick_density = calloc((size_t)m->n_triangles + 1, sizeof(double));
+    ls->emitter_area = malloc(sizeof(double) * (size_t)(ls->n_emitters + 1));
     ls->cdf = malloc(sizeof(double) * (size_t)(ls->n_entries + 1));
     ls->pick = malloc(sizeof(double) * (size_t)(ls->n_entries + 1));
-    if (!ls->emitter_tri || !ls->tri_pick || !ls->cdf || !ls->pick)
+    if (!ls->emitter_tri || !ls->tri_pick || !ls->tri_pick_density || !ls->emitter_area || !ls->cdf || !ls->pick)
         goto nomem;
 
     /* Power estimates, comparable across light kinds: flux in watts-ish. */
@@ -145,7 +149,9 @@ struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
         double mw = mat_w[m->material[t]];
         if (mw > 0.0) {
             ls->emitter_tri[k] = t;
-            w[k++] = M_PI * mw * dr_triangle_area(m, t);
+            ls->emitter_area[k] = dr_triangle_area(m, t);
+            w[k] = M_PI * mw * ls->emitter_area[k];
+            k++;
         }
     }
     free(mat_w);
@@ -179,8 +185,10 @@ struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
         ls->pick[i] = total > 0.0 ? w[i] / total : 0.0;
         ls->cdf[i + 1] = total > 0.0 ? ls->cdf[i + 1] / total : 0.0;
     }
-    for (int64_t i = 0; i < ls->n_emitters; i++)
+    for (int64_t i = 0; i < ls->n_emitters; i++) {
         ls->tri_pick[ls->emitter_tri[i]] = ls->pick[i];
+        ls->tri_pick_density[ls->emitter_tri[i]] = ls->emitter_area[i] > 0.0 ? ls->pick[i] / ls->emitter_area[i] : 0.0;
+    }
     if (total <= 0.0)
         ls->n_entries = 0;   /* nothing emits: NEE is skipped entirely */
     return ls;
@@ -196,6 +204,8 @@ void dr_light_sampler_destroy(struct dr_light_sampler *ls)
         return;
     free(ls->emitter_tri);
     free(ls->tri_pick);
+    free(ls->tri_pick_density);
+    free(ls->emitter_area);
     free(ls->cdf);
     free(ls->pick);
     free(ls->env_marginal);
@@ -260,14 +270,14 @@ double dr_light_pdf_area_pick(const struct dr_light_sampler *ls, int64_t tri) { 
 double dr_light_pdf_area(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 from,
                          const struct dr_hit *hit)
 {
-    double pick = ls->tri_pick[hit->tri];
-    if (pick <= 0.0)
+    (void)s;
+    double density = ls->tri_pick_density[hit->tri];
+    if (density <= 0.0)
         return 0.0;
     dr_vec3 d = dr_sub(hit->p, from);
     double d2 = dr_dot(d, d);
     double cos_l = fabs(dr_dot(hit->ng, d)) / sqrt(d2);
-    double area = dr_triangle_area(&s->mesh, hit->tri);
-    return cos_l > 0.0 && area > 0.0 ? pick * d2 / (cos_l * area) : 0.0;
+    return cos_l > 0.0 ? density * d2 / cos_l : 0.0;
 }
 
 dr_vec3 dr_emission(const struct dr_scene *s, const struct dr_hit *hit)
@@ -309,7 +319,7 @@ static bool sample_env(const struct dr_scene *s, const struct dr_light_sampler *
     double pdf;
     if (!ls->env_marginal) {
         /* constant radiance: uniform sphere */
-        double z = 1.0 - 2.0 * u1, r = sqrt(fmax(0.0, 1.0 - z * z)), phi = 2.0 * M_PI * u2;
+        double z = 1.0 - 2.0 * u1, r = sqrt(dr_max(0.0, 1.0 - z * z)), phi = 2.0 * M_PI * u2;
         dir = dr_v3(r * cos(phi), r * sin(phi), z);
         pdf = 1.0 / (4.0 * M_PI);
     } else {
@@ -360,7 +370,7 @@ bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls
         out->wi = dr_scale(d, 1.0 / dist);
         double cos_l = dr_dot(h.ng, out->wi);
         h.front = cos_l < 0.0;   /* the shading point sees the front face */
-        double area = dr_triangle_area(&s->mesh, tri);
+        double area = ls->emitter_area[i];
         if (cos_l == 0.0 || !(area > 0.0))
             return false;
         out->radiance = dr_emission(s, &h);

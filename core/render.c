@@ -15,6 +15,7 @@
 struct render_job {
     const struct dr_scene *scene;
     const struct dr_camera *camera;
+    struct dr_camera_view view;
     const struct dr_render_opts *opts;
     struct dr_trace_opts trace;
     float *rgb;
@@ -39,8 +40,8 @@ static void render_tile(void *ctx, int thread, int x0, int y0, int x1, int y1)
                 struct dr_sampler smp;
                 dr_sampler_init(&smp, o->seed, pixel, (uint64_t)s);
                 double jx = dr_sampler_next(&smp), jy = dr_sampler_next(&smp);
-                dr_vec3 d = dr_camera_direction(j->camera, o->width, o->height, x + jx, y + jy);
-                dr_vec3 L = dr_path_radiance(j->scene, &j->trace, j->camera->origin, d, &smp, rays);
+                dr_vec3 d = dr_camera_direction(&j->view, x + jx, y + jy);
+                dr_vec3 L = dr_path_radiance(j->scene, &j->trace, j->view.origin, d, &smp, rays);
                 if (isfinite(L.x) && isfinite(L.y) && isfinite(L.z))
                     sum = dr_add(sum, L);
                 else
@@ -98,6 +99,7 @@ int dr_render(const struct dr_scene *scene, const struct dr_camera *camera, cons
     }
     j->scene = scene;
     j->camera = camera;
+    j->view = dr_camera_view(camera, opts->width, opts->height);
     j->opts = opts;
     j->trace.max_depth = opts->max_depth;
     j->trace.rr_depth = opts->rr_depth;

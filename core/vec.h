@@ -33,7 +33,10 @@ static inline dr_vec3 dr_normalize(dr_vec3 a)
     return l > 0.0 ? dr_scale(a, 1.0 / l) : a;
 }
 static inline dr_vec3 dr_lerp3(dr_vec3 a, dr_vec3 b, double t) { return dr_add(dr_scale(a, 1.0 - t), dr_scale(b, t)); }
-static inline double dr_max3(dr_vec3 a) { return fmax(a.x, fmax(a.y, a.z)); }
+/* Plain comparisons: fmin/fmax are library calls unless -ffast-math. */
+static inline double dr_min(double a, double b) { return a < b ? a : b; }
+static inline double dr_max(double a, double b) { return a > b ? a : b; }
+static inline double dr_max3(dr_vec3 a) { return dr_max(a.x, dr_max(a.y, a.z)); }
 /* Rec. 709 luminance of linear RGB. */
 static inline double dr_luminance(dr_vec3 c) { return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z; }
 static inline bool dr_is_black(dr_vec3 c) { return c.x == 0.0 && c.y == 0.0 && c.z == 0.0; }

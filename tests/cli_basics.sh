@@ -1,0 +1,115 @@
+#!/usr/bin/env bash
+# Command-line basics of drender: --version, --help, help COMMAND, usage
+# errors. Run by tests/run.sh (env: DRENDER = the binary); also runs alone.
+#
+# Expected exit codes (cli/cli.h, man/drender.1):
+#   0 = success (--version, --help, help, help render, render --help)
+#   2 = usage error: no arguments, unknown command, unknown option,
+#       option without its value
+#   3 = input error (scene/image missing or malformed)  -- see cli_errors.sh
+#   1 = other failures (cannot write output, ...)       -- see cli_errors.sh
+set -u
+
+DRENDER=${DRENDER:-$(cd "$(dirname "$0")/.." && pwd)/build/drender}
+tmp=$(mktemp -d "${TMPDIR:-/tmp}/drender-cli-basics.XXXXXX") || exit 1
+trap 'rm -rf "$tmp"' EXIT
+trap 'exit 130' INT TERM
+mkdir "$tmp/work" && cd "$tmp/work" || exit 1
+
+fail() {
+    echo "FAIL: $*" >&2
+    if [ -n "${last_cmd:-}" ]; then
+        echo "  command: $last_cmd (exit $rc)" >&2
+        echo "  --- stdout ---" >&2; head -c 2000 "$tmp/out" >&2
+        echo "  --- stderr ---" >&2; head -c 2000 "$tmp/err" >&2
+    fi
+    exit 1
+}
+# run ARGS...: runs drender, stdout -> $tmp/out, stderr -> $tmp/err, exit code -> $rc
+run() {
+    last_cmd="drender $*"
+    "$DRENDER" "$@" >"$tmp/out" 2>"$tmp/err" </dev/null
+    rc=$?
+}
+expect_rc() { [ "$rc" -eq "$1" ] || fail "$2: expected exit $1, got $rc"; }
+expect_in() {   # expect_in FILE TEXT DESCRIPTION (fixed string)
+    grep -qF -- "$2" "$tmp/$1" || fail "$3: expected '$2' in $1"
+}
+expect_empty() { [ ! -s "$tmp/$1" ] || fail "$2: expected empty $1"; }
+
+[ -x "$DRENDER" ] || fail "drender binary not found or not executable: $DRENDER"
+
+# --version
+run --version
+expect_rc 0 "--version"
+grep -Eqx 'drender [0-9]+\.[0-9]+\.[0-9]+' "$tmp/out" \
+    || fail "--version: expected exactly one line 'drender X.Y.Z' on stdout"
+[ "$(wc -l <"$tmp/out")" -eq 1 ] || fail "--version: expected one line"
+expect_empty err "--version"
+
+# --help and help: list every command on stdout
+for args in "--help" "help"; do
+    run $args
+    expect_rc 0 "drender $args"
+    expect_in out "usage: drender" "drender $args"
+    for cmd in render help; do
+        grep -Eq "^ +$cmd +[^ ]" "$tmp/out" || fail "drender $args: expected command '$cmd' listed with a summary"
+    done
+    expect_empty err "drender $args"
+done
+
+# help render and render --help: usage naming every option
+for args in "help render" "render --help"; do
+    run $args
+    expect_rc 0 "drender $args"
+    expect_in out "usage: drender render" "drender $args"
+    for opt in -o --output --spp --max-depth --res --camera --seed --threads --json --help; do
+        grep -qE -- "(^|[ ,])$opt([ ,=]|\$)" "$tmp/out" || fail "drender $args: expected option $opt in the usage"
+    done
+    expect_empty err "drender $args"
+    cp "$tmp/out" "$tmp/usage.$rc.${args%% *}"
+done
+# both spellings print the same text
+cmp -s "$tmp/usage.0.help" "$tmp/usage.0.render" || fail "'drender help render' and 'drender render --help' differ"
+run help help
+expect_rc 0 "drender help help"
+expect_in out "usage: drender help" "drender help help"
+
+# no arguments: usage on stderr, nothing on stdout, exit 2
+run
+expect_rc 2 "no arguments"
+expect_in err "usage: drender" "no arguments (usage goes to stderr)"
+expect_in err "render" "no arguments (usage lists the commands)"
+expect_empty out "no arguments"
+
+# unknown subcommand
+run frobnicate
+expect_rc 2 "unknown command"
+expect_in err "frobnicate" "unknown command (message names it)"
+expect_empty out "unknown command"
+run help frobnicate
+expect_rc 2 "help for an unknown command"
+expect_in err "frobnicate" "help for an unknown command (message names it)"
+
+# unknown options
+run --bogus
+expect_rc 2 "unknown global option"
+expect_in err "'--bogus'" "unknown global option (message names it)"
+run render --bogus
+expect_rc 2 "unknown render option"
+expect_in err "'--bogus'" "unknown render option (message names it)"
+expect_empty out "unknown render option"
+run render -x
+expect_rc 2 "unknown short render option"
+expect_in err "-x" "unknown short render option (message names it)"
+
+# options missing their value
+for opt in --spp --res -o; do
+    run render "$opt"
+    expect_rc 2 "render $opt without a value"
+    expect_in err "$opt" "render $opt without a value (message names the option)"
+done
+
+# usage errors are found before any work: nothing written
+[ -z "$(ls -A)" ] || fail "usage errors left files behind: $(ls -A)"
+echo "cli_basics: all passed"

@@ -1,0 +1,154 @@
+#!/usr/bin/env bash
+# drender render, the successful paths: the bundled default scene to every
+# output format, --json, --res, determinism across --threads, --seed,
+# --camera, and a quiet stderr when stderr is not a terminal.
+# Run by tests/run.sh (env: DRENDER = the binary, DR_TESTDIR = tests/);
+# also runs alone. Uses oiiotool (openimageio-tools) and python3 if present.
+#
+# Expected exit codes (cli/cli.h, man/drender.1):
+#   0 = success (every render here)
+#   2 = usage error (bad option values, unknown option/command) -- cli_basics.sh, cli_errors.sh
+#   3 = input error (scene/image missing or malformed)          -- cli_errors.sh
+#   1 = other failures (e.g. cannot write the output file)       -- cli_errors.sh
+set -u
+
+here=$(cd "$(dirname "$0")" && pwd)
+DRENDER=${DRENDER:-$here/../build/drender}
+DR_TESTDIR=${DR_TESTDIR:-$here}
+gltf=$DR_TESTDIR/data/gltf
+tmp=$(mktemp -d "${TMPDIR:-/tmp}/drender-cli-render.XXXXXX") || exit 1
+trap 'rm -rf "$tmp"' EXIT
+trap 'exit 130' INT TERM
+mkdir "$tmp/work" && cd "$tmp/work" || exit 1
+
+fail() {
+    echo "FAIL: $*" >&2
+    if [ -n "${last_cmd:-}" ]; then
+        echo "  last command: $last_cmd (exit $rc)" >&2
+        echo "  --- stdout ---" >&2; head -c 2000 "$tmp/out" >&2
+        echo "  --- stderr ---" >&2; head -c 2000 "$tmp/err" >&2
+    fi
+    exit 1
+}
+# run ARGS...: runs drender, stdout -> $tmp/out, stderr -> $tmp/err, exit code -> $rc
+run() {
+    last_cmd="drender $*"
+    "$DRENDER" "$@" >"$tmp/out" 2>"$tmp/err" </dev/null
+    rc=$?
+}
+expect_rc() { [ "$rc" -eq "$1" ] || fail "$2: expected exit $1, got $rc"; }
+expect_empty() { [ ! -s "$tmp/$1" ] || fail "$2: expected empty $1, got: $(head -c 300 "$tmp/$1")"; }
+# A render that must succeed quietly: exit 0, nothing on stdout or stderr
+# (no progress bar: stderr is a file here, not a terminal), output written.
+render_ok() {   # render_ok OUTPUT ARGS...
+    local o=$1; shift
+    run render "$@" -o "$o"
+    expect_rc 0 "render to $o"
+    expect_empty out "render to $o without --json (stdout)"
+    expect_empty err "render to $o (stderr: no progress bar or message when not a terminal)"
+    [ -s "$o" ] || fail "render to $o: expected a non-empty file $o"
+}
+magic() { head -c "$2" "$1" | od -An -tx1 | tr -d ' \n'; }
+have_oiio=false
+command -v oiiotool >/dev/null 2>&1 && have_oiio=true
+have_python=false
+command -v python3 >/dev/null 2>&1 && python3 -c 'import json' 2>/dev/null && have_python=true
+
+# EXR files carry a DateTime header attribute, so two renders a second apart
+# differ in those 19 bytes: blank it before comparing files byte for byte.
+normalize_exr() {   # normalize_exr IN OUT
+    if command -v perl >/dev/null 2>&1; then
+        perl -0777 -pe 's/(DateTime\0string\0\x13\0\0\0).{19}/$1 . ("0" x 19)/se' "$1" >"$2"
+    else
+        cp "$1" "$2"
+    fi
+}
+same_pixels() {   # same_pixels A B: bit-identical files (DateTime aside) and, with oiiotool, pixels
+    normalize_exr "$1" "$tmp/a.norm"; normalize_exr "$2" "$tmp/b.norm"
+    cmp -s "$tmp/a.norm" "$tmp/b.norm" || return 1
+    if $have_oiio; then   # float pixels through a metadata-free format
+        oiiotool "$1" -o "$tmp/a.pfm" && oiiotool "$2" -o "$tmp/b.pfm" || fail "oiiotool cannot convert $1/$2"
+        cmp -s "$tmp/a.pfm" "$tmp/b.pfm" || return 1
+    fi
+    return 0
+}
+
+[ -x "$DRENDER" ] || fail "drender binary not found or not executable: $DRENDER"
+
+# ---- the bundled default scene (no SCENE argument) to every format ----
+res="--res 24x16 --spp 2"
+render_ok img.png $res
+render_ok img.exr $res
+render_ok img.hdr $res
+render_ok img.jpg $res
+[ "$(magic img.png 8)" = 89504e470d0a1a0a ] || fail "img.png: not a PNG (magic $(magic img.png 8))"
+[ "$(magic img.exr 4)" = 762f3101 ] || fail "img.exr: not OpenEXR (magic $(magic img.exr 4))"
+[ "$(head -c 2 img.hdr)" = "#?" ] || fail "img.hdr: not Radiance HDR (starts '$(head -c 10 img.hdr)')"
+[ "$(magic img.jpg 3)" = ffd8ff ] || fail "img.jpg: not JPEG (magic $(magic img.jpg 3))"
+if $have_oiio; then
+    check_info() {   # check_info FILE REGEX: oiiotool --info prints "F : 24 x 16, 3 channel, TYPE FORMAT"
+        local info
+        info=$(oiiotool --info "$1" 2>&1) || fail "oiiotool --info $1 failed: $info"
+        echo "$info" | grep -Eq "$2" || fail "$1: expected oiiotool --info to match '$2', got: $info"
+    }
+    check_info img.png ' 24 x +16, 3 channel, uint8 png'
+    check_info img.exr ' 24 x +16, 3 channel, (float|half) openexr'
+    check_info img.hdr ' 24 x +16, 3 channel, float hdr'
+    check_info img.jpg ' 24 x +16, 3 channel, uint8 jpeg'
+    # the image is not black: the Cornell box light is in view
+    stats=$(oiiotool --stats img.exr 2>&1)
+    max=$(echo "$stats" | sed -n 's/.*Max: *\([0-9.e+-]*\).*/\1/p' | head -n 1)
+    awk -v m="${max:-0}" 'BEGIN { exit !(m > 0) }' || fail "img.exr: expected some light, oiiotool --stats says: $stats"
+else
+    echo "note: oiiotool not found; checked the files by their magic bytes only"
+fi
+# a successful render leaves no temporary files behind
+extra=$(ls -A | grep -v '^img\.\(png\|exr\|hdr\|jpg\)$')
+[ -z "$extra" ] || fail "stray files after rendering: $extra"
+
+# ---- --json: one object on stdout, the image still written ----
+run render --res 16x16 --spp 3 --json -o j.exr
+expect_rc 0 "render --json"
+expect_empty err "render --json (stderr)"
+[ -s j.exr ] || fail "render --json: expected j.exr to be written"
+[ "$(wc -l <"$tmp/out")" -eq 1 ] || fail "render --json: expected exactly one line on stdout"
+if $have_python; then
+    python3 - "$tmp/out" <<'EOF' || fail "render --json: stdout is not the expected JSON object"
+import json, sys
+with open(sys.argv[1]) as f:
+    doc = json.load(f)      # raises on anything besides one JSON value
+assert isinstance(doc, dict), "not an object: %r" % (doc,)
+for k in ("time", "rays", "peak_memory_bytes", "effects", "spp"):
+    assert k in doc, "key %r missing from %s" % (k, sorted(doc))
+assert doc["spp"] == 3, "spp %r, want 3" % doc["spp"]
+assert (doc.get("width"), doc.get("height")) == (16, 16), "size %r" % ((doc.get("width"), doc.get("height")),)
+assert isinstance(doc["time"], dict) and isinstance(doc["time"].get("total"), (int, float)), doc["time"]
+assert isinstance(doc["rays"], dict) and doc["rays"].get("total", 0) > 0, doc["rays"]
+assert isinstance(doc["peak_memory_bytes"], int) and doc["peak_memory_bytes"] > 0, doc["peak_memory_bytes"]
+assert isinstance(doc["effects"], list) and all(isinstance(e, str) for e in doc["effects"]), doc["effects"]
+EOF
+else
+    echo "note: python3 not found; --json checked with grep only"
+    o=$(cat "$tmp/out")
+    case $o in "{"*"}") ;; *) fail "render --json: stdout is not one {...} object" ;; esac
+    for k in time rays peak_memory_bytes effects spp; do
+        grep -q "\"$k\": *[0-9{[]" "$tmp/out" || fail "render --json: key \"$k\" missing"
+    done
+fi
+
+# ---- determinism: the same seed gives the same image for any --threads ----
+render_ok t1.exr --res 16x16 --spp 2 --seed 7 --threads 1
+render_ok t2.exr --res 16x16 --spp 2 --seed 7 --threads 2
+same_pixels t1.exr t2.exr || fail "--seed 7: --threads 1 and --threads 2 gave different images (t1.exr vs t2.exr)"
+render_ok t4.exr --res 16x16 --spp 2 --seed 7 --threads 3
+same_pixels t1.exr t4.exr || fail "--seed 7: --threads 1 and --threads 3 gave different images"
+# ... and a different seed gives a different image
+render_ok s8.exr --res 16x16 --spp 2 --seed 8 --threads 2
+same_pixels t1.exr s8.exr && fail "--seed 7 and --seed 8 gave identical images"
+# PNG has no timestamp: plain cmp must agree too
+render_ok p1.png --res 16x16 --spp 2 --seed 7 --threads 1
+render_ok p2.png --res 16x16 --spp 2 --seed 7 --threads 2
+cmp -s p1.png p2.png || fail "--seed 7: PNG for --threads 1 and 2 differ"
+
+# ---- --camera and --max-depth, scene as an argument ----
+render_ok c0.png "$DR_SCENES_FILE" --res 16x16 --spp 1 --camera 0 2>/dev/null || true
