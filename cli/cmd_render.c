@@ -97,7 +97,14 @@ static int parse_args(int argc, char **argv, struct render_args *a)
             cli_error("render", "option '%s' needs a value", argv[optind - 1]);
             return DR_EXIT_USAGE;
         default:
-            cli_error("render", "unknown option '%s' (see 'drender render --help')", argv[optind - 1]);
+            /* optopt: an unknown short option (argv[optind - 1] is not it inside a group
+             * like -xy), or the option of '--json=1'; 0 for an unknown long option. */
+            if (optopt > 0 && optopt < 256 && optopt != 'h' && optopt != 'o')
+                cli_error("render", "unknown option '-%c' (see 'drender render --help')", optopt);
+            else if (optopt != 0)
+                cli_error("render", "option '%s' does not take a value", argv[optind - 1]);
+            else
+                cli_error("render", "unknown option '%s' (see 'drender render --help')", argv[optind - 1]);
             return DR_EXIT_USAGE;
         }
     }

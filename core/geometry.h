@@ -34,10 +34,14 @@ static inline dr_vec3 dr_mesh_vertex(const struct dr_mesh *m, uint32_t v)
 void dr_hit_compute(const struct dr_mesh *m, int64_t tri, dr_vec3 o, dr_vec3 d, struct dr_hit *hit);
 
 /* Surface attributes at barycentrics (b1, b2) of tri, for sampling points on
- * emitters: fills p, ng, ns, uv, material (t = 0, front = true). */
+ * emitters: fills p, ng, uv, eps, material; ns = ng (t = 0, front = true). */
 void dr_hit_at(const struct dr_mesh *m, int64_t tri, double b1, double b2, struct dr_hit *hit);
 
 double dr_triangle_area(const struct dr_mesh *m, int64_t tri);
+
+/* Fills m->tri_normal_eps from the vertices (called by dr_scene_prepare).
+ * 0, or -1 when out of memory. */
+int dr_mesh_derive(struct dr_mesh *m);
 
 /* Origin for a ray leaving hit->p towards d: pushed off the surface along ng
  * (on d's side) by hit->eps. Embree tests triangles in float, with an error

@@ -6,6 +6,7 @@
 
 #include "accel.h"
 #include "error.h"
+#include "geometry.h"
 #include "lights.h"
 
 struct dr_scene *dr_scene_load(const char *path)
@@ -33,7 +34,7 @@ static bool material_has_specular(const struct dr_material *m)
 
 int dr_scene_prepare(struct dr_scene *s)
 {
-    const struct dr_mesh *m = &s->mesh;
+    struct dr_mesh *m = &s->mesh;
     s->effects = 0;
     /* Effects follow from what the triangles actually use, not from what the
      * file happens to declare. */
@@ -59,6 +60,10 @@ int dr_scene_prepare(struct dr_scene *s)
     }
     free(used);
 
+    if (dr_mesh_derive(&s->mesh) != 0) {
+        dr_set_error("out of memory");
+        return DR_ERR_NOMEM;
+    }
     s->light_sampler = dr_light_sampler_create(s);
     if (!s->light_sampler)
         return DR_ERR_NOMEM;
@@ -94,6 +99,7 @@ void dr_scene_destroy(struct dr_scene *s)
     free(s->mesh.indices);
     free(s->mesh.material);
     free(s->mesh.flags);
+    free(s->mesh.tri_normal_eps);
     free(s->materials);
     free(s->textures);
     for (int i = 0; i < s->n_images; i++)

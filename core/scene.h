@@ -50,6 +50,9 @@ struct dr_mesh {
     uint32_t *indices;  /* 3 per triangle, counter-clockwise = front */
     int32_t *material;  /* per triangle, index into scene->materials */
     uint8_t *flags;     /* per triangle, enum dr_tri_flags */
+    /* derived by dr_scene_prepare: per triangle unit geometric normal (x, y, z)
+     * and ray-offset distance (see dr_offset_origin), so hits need not redo them */
+    double *tri_normal_eps;  /* 4 per triangle */
 };
 
 struct dr_camera {

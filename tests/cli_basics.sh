@@ -99,9 +99,14 @@ run render --bogus
 expect_rc 2 "unknown render option"
 expect_in err "'--bogus'" "unknown render option (message names it)"
 expect_empty out "unknown render option"
-run render -x
+# inside a group of short options the message names the unknown letter
+run render -xy
 expect_rc 2 "unknown short render option"
-expect_in err "-x" "unknown short render option (message names it)"
+expect_in err "'-x'" "unknown short render option in a group (message names it)"
+# a flag given a value
+run render --json=1
+expect_rc 2 "flag with a value"
+expect_in err "--json" "flag with a value (message names it)"
 
 # options missing their value
 for opt in --spp --res -o; do

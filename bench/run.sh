@@ -1,0 +1,247 @@
+#!/usr/bin/env bash
+# drender benchmarks: prints a readable report and writes $BUILD/bench/results.json.
+# Run from the repository root, normally through `make bench` (which builds
+# $BUILD/drender and every bench/*.c into $BUILD/bench/NAME first).
+#
+# Figures (bench/README.md says what each one means):
+#   a. throughput ratio   drender rays/s / raw Embree rays/s, per scene (goal >= 0.5)
+#   b. thread scaling     render time with 1 thread / with 2 threads
+#   c. peer comparison    render time on the peer's Cornell box vs Mitsuba 3 (goal < 1)
+#   d. peak memory        of that render vs the peer's 116 MiB
+#
+# Environment knobs:
+#   BUILD         build directory (default: build)
+#   PEER          the peer scene (default: ../shared/bench/peer-cornell-box.gltf)
+#   BENCH_RUNS    timed runs of the main peer render, after one warm-up (default: 3)
+#   BENCH_BUDGET  seconds; the optional max-depth sweep (4/16/32) skips any run
+#                 predicted to end past this point (default: 170)
+#
+# No dependency beyond bash, coreutils, sed and awk: drender's --json summary
+# is a single-line object whose sub-objects are flat, so sed extracts numbers.
+set -euo pipefail
+
+BUILD=${BUILD:-build}
+PEER=${PEER:-../shared/bench/peer-cornell-box.gltf}
+BENCH_RUNS=${BENCH_RUNS:-3}
+BENCH_BUDGET=${BENCH_BUDGET:-170}
+
+OUT=$BUILD/bench
+CORNELL=scenes/cornell-box.gltf
+BIG=$OUT/big-scene.gltf
+
+# The peer's figures (Mitsuba 3.8.0, 2 threads, 256x256, 64 spp; see
+# ../shared/bench/README.md): primal render seconds per max_depth, peak memory.
+declare -A PEER_TIME=([4]=0.84 [8]=1.16 [16]=1.27 [32]=1.23)
+PEER_MEM_MIB=116
+THROUGHPUT_GOAL=0.5
+
+for f in "$BUILD/drender" "$OUT/raw_embree" "$OUT/make_big_scene"; do
+    [[ -x $f ]] || { echo "bench: $f is missing; run 'make bench'" >&2; exit 1; }
+done
+mkdir -p "$OUT"
+TMP=$(mktemp -d)
+trap 'rm -rf "$TMP"' EXIT
+
+# Work on private copies of the binaries, so a rebuild of $BUILD by someone
+# else during the run cannot swap the program between measurements.
+cp "$BUILD/drender" "$OUT/raw_embree" "$TMP/"
+DRENDER=$TMP/drender
+RAW_EMBREE=$TMP/raw_embree
+
+# ---- helpers ---------------------------------------------------------------
+
+now() { date +%s.%N; }
+START=$(now)
+elapsed() { awk -v a="$START" -v b="$(now)" 'BEGIN { printf "%.1f", b - a }'; }
+
+# calc EXPR [FORMAT]: floating-point arithmetic through awk (default: 3 significant digits)
+calc() { awk "BEGIN { printf \"${2:-%.3g}\", ($1) }"; }
+yesno() { awk "BEGIN { print ($1) ? \"yes\" : \"no\" }"; }
+truefalse() { awk "BEGIN { print ($1) ? \"true\" : \"false\" }"; }
+
+# json_num JSON KEY [OBJECT]: the number stored under KEY (inside the flat
+# sub-object OBJECT when given) of a single-line JSON object; empty if absent.
+json_num() {
+    local re
+    if [[ -n ${3:-} ]]; then re="\"$3\": *{[^}]*\"$2\": *"; else re="\"$2\": *"; fi
+    printf '%s\n' "$1" | sed -n "s/.*$re\([-+0-9.eE]*\).*/\1/p" | head -n 1
+}
+
+# median of the numbers given as arguments
+median() { printf '%s\n' "$@" | sort -g | awk '{ v[NR] = $1 } END { print (NR % 2) ? v[(NR + 1) / 2] : (v[NR / 2] + v[NR / 2 + 1]) / 2 }'; }
+
+# join ITEMS...: the items separated by ", "
+join() {
+    local out=$1 x; shift
+    for x in "$@"; do out+=", $x"; done
+    printf '%s' "$out"
+}
+
+# CPU accounting, to tell a slow program from a busy machine:
+# own_cpu sets OWN_CPU, the CPU seconds (user + sys) of all finished children
+# of this shell (the `times` builtin; it must run here, not in a $(...) subshell);
+# all_cpu prints the CPU seconds all processes of the machine have used (/proc/stat).
+HZ=$(getconf CLK_TCK)
+own_cpu() {
+    times >"$TMP/times"
+    OWN_CPU=$(awk 'NR == 2 { for (i = 1; i <= 2; i++) { split($i, p, /[ms]/); s += p[1] * 60 + p[2] } print s }' "$TMP/times")
+}
+all_cpu() { awk -v hz="$HZ" '$1 == "cpu" { print ($2 + $3 + $4 + $7 + $8 + $9) / hz; exit }' /proc/stat; }
+
+# measure CMD ARGS...: runs the command, stdout captured, stderr shown only if
+# it fails (then the benchmark stops). Sets M_OUT (its stdout), M_WALL (wall
+# seconds of the whole process), M_CPU (its CPU seconds) and M_OTHER (CPU
+# seconds used meanwhile by every other process on the machine); adds to the
+# totals behind the noise note at the end.
+OTHER_TOTAL=0 WALL_TOTAL=0
+measure() {
+    local t0 t1 a0 a1 c0
+    own_cpu; c0=$OWN_CPU; a0=$(all_cpu); t0=$(now)
+    if ! M_OUT=$("$@" 2>"$TMP/stderr"); then
+        echo "bench: '$*' failed:" >&2
+        cat "$TMP/stderr" >&2
+        exit 1
+    fi
+    t1=$(now); a1=$(all_cpu); own_cpu
+    M_WALL=$(calc "$t1 - $t0" %.4f)
+    M_CPU=$(calc "$OWN_CPU - $c0" %.3f)
+    M_OTHER=$(awk -v a="$a1" -v b="$a0" -v c="$M_CPU" 'BEGIN { x = a - b - c; printf "%.3f", x < 0 ? 0 : x }')
+    OTHER_TOTAL=$(calc "$OTHER_TOTAL + $M_OTHER" %.3f)
+    WALL_TOTAL=$(calc "$WALL_TOTAL + $M_WALL" %.3f)
+}
+
+# render SCENE ARGS...: drender render --json, image to a scratch file; sets
+# R_JSON (the summary), R_TIME (its "render" seconds) and the M_* above.
+render() {
+    local scene=$1; shift
+    measure "$DRENDER" render "$scene" -o "$TMP/render.png" --json "$@"
+    R_JSON=$M_OUT
+    R_TIME=$(calc "$(json_num "$R_JSON" render time)" %.4f)
+}
+
+# ---- header ----------------------------------------------------------------
+
+LOAD_START=$(cut -d ' ' -f 1 /proc/loadavg)
+echo "drender benchmarks ($(date '+%Y-%m-%d %H:%M'), $(nproc) CPUs, load average $LOAD_START at start)"
+"$OUT/make_big_scene" "$BIG" >/dev/null
+
+# ---- a. throughput ratio ---------------------------------------------------
+# The same path-tracing workload on each scene (256x256, 16 spp, max depth 8,
+# 2 threads); drender's rays/s counts camera + extension + shadow rays over the
+# render phase. The ceiling: raw_embree, random incoherent rtcIntersect1 rays
+# on the same geometry, 2 threads.
+
+echo
+echo "a. throughput: drender rays/s / raw Embree rays/s  (256x256, 16 spp, depth 8, 2 threads; goal >= $THROUGHPUT_GOAL)"
+printf '   %-24s %9s %13s %12s %7s %5s\n' scene triangles "drender Mr/s" "Embree Mr/s" ratio goal
+SCENES=("$CORNELL")
+if [[ -f $PEER ]]; then SCENES+=("$PEER"); else echo "   (peer scene $PEER not found: skipped)"; fi
+SCENES+=("$BIG")
+TP_JSON=()
+for scene in "${SCENES[@]}"; do
+    render "$scene" --res 256x256 --spp 16 --max-depth 8 --threads 2
+    dr_rps=$(calc "$(json_num "$R_JSON" per_second rays)" %.0f)
+    tris=$(json_num "$R_JSON" triangles)
+    measure "$RAW_EMBREE" "$scene" 8000000 2
+    em_rps=$(calc "$(json_num "$M_OUT" rays_per_second)" %.0f)
+    ratio=$(calc "$dr_rps / $em_rps")
+    printf '   %-24s %9s %13s %12s %7s %5s\n' "$(basename "$scene")" "$tris" \
+        "$(calc "$dr_rps / 1e6")" "$(calc "$em_rps / 1e6")" "$ratio" "$(yesno "$ratio >= $THROUGHPUT_GOAL")"
+    TP_JSON+=("{\"scene\": \"$scene\", \"triangles\": $tris, \"drender_rays_per_second\": $dr_rps, \"embree_rays_per_second\": $em_rps, \"ratio\": $ratio, \"goal\": $THROUGHPUT_GOAL, \"met\": $(truefalse "$ratio >= $THROUGHPUT_GOAL")}")
+done
+
+# ---- b. thread scaling -----------------------------------------------------
+# The Cornell box with 1 thread, then with 2, back to back (so both see the
+# same machine). Ideal speedup on 2 cores: 2.
+
+echo
+echo "b. thread scaling: $(basename "$CORNELL"), 256x256, 16 spp, depth 8"
+render "$CORNELL" --res 256x256 --spp 16 --max-depth 8 --threads 1
+T1=$R_TIME
+render "$CORNELL" --res 256x256 --spp 16 --max-depth 8 --threads 2
+T2=$R_TIME
+SPEEDUP=$(calc "$T1 / $T2")
+printf '   1 thread %.3g s, 2 threads %.3g s: speedup %s (ideal 2)\n' "$T1" "$T2" "$SPEEDUP"
+
+# ---- c + d. peer comparison ------------------------------------------------
+# The peer's protocol: 256x256, 64 spp, 2 threads, median of BENCH_RUNS runs
+# after one warm-up. drender's "render" time (scene loading and image writing
+# excluded, like the peer's figure) and the wall time of the whole process.
+
+PEER_JSON=null
+if [[ -f $PEER ]]; then
+    echo
+    echo "c. peer comparison: $(basename "$PEER"), 256x256, 64 spp, 2 threads vs Mitsuba 3 (goal: ratio < 1)"
+    args=(--res 256x256 --spp 64 --threads 2)
+    render "$PEER" "${args[@]}" --max-depth 8   # warm-up
+    runs=() walls=() mem_max=0 cpu_sum=0 other_sum=0 wall_sum=0
+    for ((i = 0; i < BENCH_RUNS; i++)); do
+        render "$PEER" "${args[@]}" --max-depth 8
+        runs+=("$(calc "$R_TIME" %.3f)")
+        walls+=("$M_WALL")
+        mem=$(json_num "$R_JSON" peak_memory_bytes)
+        mem_max=$(calc "$mem > $mem_max ? $mem : $mem_max" %.0f)
+        cpu_sum=$(calc "$cpu_sum + $M_CPU" %.3f)
+        other_sum=$(calc "$other_sum + $M_OTHER" %.3f)
+        wall_sum=$(calc "$wall_sum + $M_WALL" %.3f)
+    done
+    med8=$(median "${runs[@]}")
+    wall8=$(median "${walls[@]}")
+    ratio8=$(calc "$med8 / ${PEER_TIME[8]}")
+    printf '   %-9s %9s %8s %8s %7s %5s\n' max_depth "render s" "wall s" "peer s" ratio goal
+    printf '   %-9s %9.3g %8.3g %8s %7s %5s   median of %d: %s\n' 8 "$med8" "$wall8" \
+        "${PEER_TIME[8]}" "$ratio8" "$(yesno "$ratio8 < 1")" "$BENCH_RUNS" "$(join "${runs[@]}")"
+    depth_json=("\"8\": {\"render_seconds\": $med8, \"wall_seconds\": $wall8, \"runs\": [$(join "${runs[@]}")], \"peer_seconds\": ${PEER_TIME[8]}, \"ratio\": $ratio8}")
+
+    # The rest of the peer's table, one run each, within the time budget; a
+    # run is predicted to take the depth-8 wall time scaled like the peer's.
+    for d in 4 16 32; do
+        predict=$(calc "$wall8 * ${PEER_TIME[$d]} / ${PEER_TIME[8]}" %.1f)
+        if awk "BEGIN { exit !($(elapsed) + $predict > $BENCH_BUDGET) }"; then
+            printf '   %-9s skipped: its ~%s s would end past the %s s budget (BENCH_BUDGET)\n' "$d" "$predict" "$BENCH_BUDGET"
+            depth_json+=("\"$d\": null")
+            continue
+        fi
+        render "$PEER" "${args[@]}" --max-depth "$d"
+        r=$(calc "$R_TIME / ${PEER_TIME[$d]}")
+        printf '   %-9s %9.3g %8.3g %8s %7s %5s   1 run\n' "$d" "$R_TIME" "$M_WALL" "${PEER_TIME[$d]}" "$r" "$(yesno "$r < 1")"
+        depth_json+=("\"$d\": {\"render_seconds\": $R_TIME, \"wall_seconds\": $M_WALL, \"runs\": [$R_TIME], \"peer_seconds\": ${PEER_TIME[$d]}, \"ratio\": $r}")
+    done
+    busy=$(calc "$cpu_sum / $wall_sum" %.2f)
+    other=$(calc "$other_sum / $wall_sum" %.2f)
+    echo "   during the timed depth-8 runs drender kept $busy cores busy; other processes used $other cores"
+
+    echo
+    mem_mib=$(calc "$mem_max / 1048576" %.1f)
+    mem_ratio=$(calc "$mem_mib / $PEER_MEM_MIB")
+    echo "d. peak memory, depth-8 peer render: $mem_mib MiB vs the peer's $PEER_MEM_MIB MiB: ratio $mem_ratio (goal < 1: $(yesno "$mem_ratio < 1"))"
+
+    PEER_JSON="{\"scene\": \"$PEER\", \"res\": \"256x256\", \"spp\": 64, \"threads\": 2, \"max_depth\": {$(join "${depth_json[@]}")}, \"drender_cores_busy\": $busy, \"other_cores_busy\": $other, \"peak_memory_bytes\": $mem_max, \"peak_memory_mib\": $mem_mib, \"peer_memory_mib\": $PEER_MEM_MIB, \"memory_ratio\": $mem_ratio}"
+else
+    echo
+    echo "c, d. peer comparison skipped: $PEER not found"
+fi
+
+# ---- results.json and the noise note ---------------------------------------
+
+TOTAL=$(elapsed)
+OTHER_CORES=$(calc "$OTHER_TOTAL / $WALL_TOTAL" %.2f)
+{
+    echo "{"
+    echo "  \"date\": \"$(date -Iseconds)\", \"cpus\": $(nproc), \"bench_seconds\": $TOTAL,"
+    echo "  \"load_average_start\": $LOAD_START, \"other_cores_busy\": $OTHER_CORES,"
+    echo "  \"throughput\": ["
+    for ((i = 0; i < ${#TP_JSON[@]}; i++)); do
+        echo "    ${TP_JSON[i]}$( ((i + 1 < ${#TP_JSON[@]})) && echo ,)"
+    done
+    echo "  ],"
+    echo "  \"thread_scaling\": {\"scene\": \"$CORNELL\", \"t1_seconds\": $T1, \"t2_seconds\": $T2, \"speedup\": $SPEEDUP},"
+    echo "  \"peer\": $PEER_JSON"
+    echo "}"
+} >"$OUT/results.json"
+
+echo
+echo "$TOTAL s in all; results in $OUT/results.json"
+if awk "BEGIN { exit !($OTHER_CORES > 0.2) }"; then
+    echo "note: other processes kept $OTHER_CORES of $(nproc) cores busy on average while we measured; timings are noisy"
+fi
