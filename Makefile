@@ -17,7 +17,7 @@ OPT     := -O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined -fno-sani
 endif
 
 WARN     := -Wall -Wextra -Wpedantic
-CPPFLAGS += -Icore -Iestimators -MMD -MP
+CPPFLAGS += -Icore -Iestimators -MMD -MP -DDR_DATADIR='"$(PREFIX)/share/drender"'
 # -fno-math-errno lets sqrt compile to one instruction; results are unchanged.
 CFLAGS   += -std=c11 -D_GNU_SOURCE $(OPT) $(WARN) -pthread -fno-math-errno
 CXXFLAGS += -std=c++17 $(OPT) $(WARN) -pthread $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
@@ -36,7 +36,7 @@ TEST_BIN := $(TEST_C:tests/%.c=$(BUILD)/tests/%)
 BENCH_BIN:= $(BENCH_C:bench/%.c=$(BUILD)/bench/%)
 LIB      := $(BUILD)/libdrender.a
 
-.PHONY: all deps test bench sanitize install clean
+.PHONY: all deps demo test bench sanitize install clean
 all: deps $(BUILD)/drender
 
 # Installs missing system packages (fast no-op when all are present).
@@ -72,10 +72,19 @@ sanitize:
 bench: deps $(BUILD)/drender $(BENCH_BIN)
 	BUILD=$(BUILD) bench/run.sh
 
+# The main job on the bundled scene: render the Cornell box.
+DEMO_OUT ?= out
+demo: all
+	@mkdir -p $(DEMO_OUT)
+	$(BUILD)/drender render -o $(DEMO_OUT)/cornell-box.png --spp 256 --json
+	@echo "wrote $(DEMO_OUT)/cornell-box.png"
+
 install: all
-	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/share/man/man1
+	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/share/man/man1 $(DESTDIR)$(PREFIX)/share/drender/scenes
 	install -m 755 $(BUILD)/drender $(DESTDIR)$(PREFIX)/bin/drender
 	install -m 644 man/drender.1 $(DESTDIR)$(PREFIX)/share/man/man1/drender.1
+	install -m 644 scenes/cornell-box.gltf scenes/cornell-box.bin scenes/cornell-box-checker.png \
+		$(DESTDIR)$(PREFIX)/share/drender/scenes/
 
 clean:
 	rm -rf build build-san
