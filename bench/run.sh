@@ -142,12 +142,14 @@ for scene in "${SCENES[@]}"; do
     render "$scene" --res 256x256 --spp 16 --max-depth 8 --threads 2
     dr_rps=$(calc "$(json_num "$R_JSON" per_second rays)" %.0f)
     tris=$(json_num "$R_JSON" triangles)
+    o=$M_OTHER w=$M_WALL
     measure "$RAW_EMBREE" "$scene" 8000000 2
+    other=$(calc "($o + $M_OTHER) / ($w + $M_WALL)" %.2f)
     em_rps=$(calc "$(json_num "$M_OUT" rays_per_second)" %.0f)
     ratio=$(calc "$dr_rps / $em_rps")
     printf '   %-24s %9s %13s %12s %7s %5s\n' "$(basename "$scene")" "$tris" \
         "$(calc "$dr_rps / 1e6")" "$(calc "$em_rps / 1e6")" "$ratio" "$(yesno "$ratio >= $THROUGHPUT_GOAL")"
-    TP_JSON+=("{\"scene\": \"$scene\", \"triangles\": $tris, \"drender_rays_per_second\": $dr_rps, \"embree_rays_per_second\": $em_rps, \"ratio\": $ratio, \"goal\": $THROUGHPUT_GOAL, \"met\": $(truefalse "$ratio >= $THROUGHPUT_GOAL")}")
+    TP_JSON+=("{\"scene\": \"$scene\", \"triangles\": $tris, \"drender_rays_per_second\": $dr_rps, \"embree_rays_per_second\": $em_rps, \"ratio\": $ratio, \"goal\": $THROUGHPUT_GOAL, \"met\": $(truefalse "$ratio >= $THROUGHPUT_GOAL"), \"other_cores_busy\": $other}")
 done
 
 # ---- b. thread scaling -----------------------------------------------------
@@ -157,10 +159,11 @@ done
 echo
 echo "b. thread scaling: $(basename "$CORNELL"), 256x256, 16 spp, depth 8"
 render "$CORNELL" --res 256x256 --spp 16 --max-depth 8 --threads 1
-T1=$R_TIME
+T1=$R_TIME o=$M_OTHER w=$M_WALL
 render "$CORNELL" --res 256x256 --spp 16 --max-depth 8 --threads 2
 T2=$R_TIME
 SPEEDUP=$(calc "$T1 / $T2")
+SCALING_OTHER=$(calc "($o + $M_OTHER) / ($w + $M_WALL)" %.2f)
 printf '   1 thread %.3g s, 2 threads %.3g s: speedup %s (ideal 2)\n' "$T1" "$T2" "$SPEEDUP"
 
 # ---- c + d. peer comparison ------------------------------------------------
@@ -235,7 +238,7 @@ OTHER_CORES=$(calc "$OTHER_TOTAL / $WALL_TOTAL" %.2f)
         echo "    ${TP_JSON[i]}$( ((i + 1 < ${#TP_JSON[@]})) && echo ,)"
     done
     echo "  ],"
-    echo "  \"thread_scaling\": {\"scene\": \"$CORNELL\", \"t1_seconds\": $T1, \"t2_seconds\": $T2, \"speedup\": $SPEEDUP},"
+    echo "  \"thread_scaling\": {\"scene\": \"$CORNELL\", \"t1_seconds\": $T1, \"t2_seconds\": $T2, \"speedup\": $SPEEDUP, \"other_cores_busy\": $SCALING_OTHER},"
     echo "  \"peer\": $PEER_JSON"
     echo "}"
 } >"$OUT/results.json"
