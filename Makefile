@@ -90,3 +90,6 @@ clean:
 	rm -rf build build-san
 
 -include $(shell find $(BUILD) -name '*.d' 2>/dev/null)
+
+# keep test/bench objects (chained implicit rules would delete them)
+.SECONDARY:

@@ -133,7 +133,7 @@ echo "drender benchmarks ($(date '+%Y-%m-%d %H:%M'), $(nproc) CPUs, load average
 
 echo
 echo "a. throughput: drender rays/s / raw Embree rays/s  (256x256, 16 spp, depth 8, 2 threads; goal >= $THROUGHPUT_GOAL)"
-printf '   %-24s %9s %13s %12s %7s %5s\n' scene triangles "drender Mr/s" "Embree Mr/s" ratio goal
+printf '   %-24s %9s %13s %12s %7s %5s %7s\n' scene triangles "drender Mr/s" "Embree Mr/s" ratio goal others
 SCENES=("$CORNELL")
 if [[ -f $PEER ]]; then SCENES+=("$PEER"); else echo "   (peer scene $PEER not found: skipped)"; fi
 SCENES+=("$BIG")
@@ -147,8 +147,8 @@ for scene in "${SCENES[@]}"; do
     other=$(calc "($o + $M_OTHER) / ($w + $M_WALL)" %.2f)
     em_rps=$(calc "$(json_num "$M_OUT" rays_per_second)" %.0f)
     ratio=$(calc "$dr_rps / $em_rps")
-    printf '   %-24s %9s %13s %12s %7s %5s\n' "$(basename "$scene")" "$tris" \
-        "$(calc "$dr_rps / 1e6")" "$(calc "$em_rps / 1e6")" "$ratio" "$(yesno "$ratio >= $THROUGHPUT_GOAL")"
+    printf '   %-24s %9s %13s %12s %7s %5s %7s\n' "$(basename "$scene")" "$tris" \
+        "$(calc "$dr_rps / 1e6")" "$(calc "$em_rps / 1e6")" "$ratio" "$(yesno "$ratio >= $THROUGHPUT_GOAL")" "$other"
     TP_JSON+=("{\"scene\": \"$scene\", \"triangles\": $tris, \"drender_rays_per_second\": $dr_rps, \"embree_rays_per_second\": $em_rps, \"ratio\": $ratio, \"goal\": $THROUGHPUT_GOAL, \"met\": $(truefalse "$ratio >= $THROUGHPUT_GOAL"), \"other_cores_busy\": $other}")
 done
 
@@ -164,7 +164,7 @@ render "$CORNELL" --res 256x256 --spp 16 --max-depth 8 --threads 2
 T2=$R_TIME
 SPEEDUP=$(calc "$T1 / $T2")
 SCALING_OTHER=$(calc "($o + $M_OTHER) / ($w + $M_WALL)" %.2f)
-printf '   1 thread %.3g s, 2 threads %.3g s: speedup %s (ideal 2)\n' "$T1" "$T2" "$SPEEDUP"
+printf '   1 thread %.3g s, 2 threads %.3g s: speedup %s (ideal 2); others %s\n' "$T1" "$T2" "$SPEEDUP" "$SCALING_OTHER"
 
 # ---- c + d. peer comparison ------------------------------------------------
 # The peer's protocol: 256x256, 64 spp, 2 threads, median of BENCH_RUNS runs
@@ -191,9 +191,10 @@ if [[ -f $PEER ]]; then
     med8=$(median "${runs[@]}")
     wall8=$(median "${walls[@]}")
     ratio8=$(calc "$med8 / ${PEER_TIME[8]}")
-    printf '   %-9s %9s %8s %8s %7s %5s\n' max_depth "render s" "wall s" "peer s" ratio goal
-    printf '   %-9s %9.3g %8.3g %8s %7s %5s   median of %d: %s\n' 8 "$med8" "$wall8" \
-        "${PEER_TIME[8]}" "$ratio8" "$(yesno "$ratio8 < 1")" "$BENCH_RUNS" "$(join "${runs[@]}")"
+    printf '   %-9s %9s %8s %8s %7s %5s %7s\n' max_depth "render s" "wall s" "peer s" ratio goal others
+    other=$(calc "$other_sum / $wall_sum" %.2f)
+    printf '   %-9s %9.3g %8.3g %8s %7s %5s %7s   median of %d: %s\n' 8 "$med8" "$wall8" \
+        "${PEER_TIME[8]}" "$ratio8" "$(yesno "$ratio8 < 1")" "$other" "$BENCH_RUNS" "$(join "${runs[@]}")"
     depth_json=("\"8\": {\"render_seconds\": $med8, \"wall_seconds\": $wall8, \"runs\": [$(join "${runs[@]}")], \"peer_seconds\": ${PEER_TIME[8]}, \"ratio\": $ratio8}")
 
     # The rest of the peer's table, one run each, within the time budget; a
@@ -207,12 +208,13 @@ if [[ -f $PEER ]]; then
         fi
         render "$PEER" "${args[@]}" --max-depth "$d"
         r=$(calc "$R_TIME / ${PEER_TIME[$d]}")
-        printf '   %-9s %9.3g %8.3g %8s %7s %5s   1 run\n' "$d" "$R_TIME" "$M_WALL" "${PEER_TIME[$d]}" "$r" "$(yesno "$r < 1")"
+        printf '   %-9s %9.3g %8.3g %8s %7s %5s %7s   1 run\n' "$d" "$R_TIME" "$M_WALL" "${PEER_TIME[$d]}" "$r" "$(yesno "$r < 1")" \
+            "$(calc "$M_OTHER / $M_WALL" %.2f)"
         depth_json+=("\"$d\": {\"render_seconds\": $R_TIME, \"wall_seconds\": $M_WALL, \"runs\": [$R_TIME], \"peer_seconds\": ${PEER_TIME[$d]}, \"ratio\": $r}")
     done
     busy=$(calc "$cpu_sum / $wall_sum" %.2f)
-    other=$(calc "$other_sum / $wall_sum" %.2f)
     echo "   during the timed depth-8 runs drender kept $busy cores busy; other processes used $other cores"
+    echo "   (others: cores used by other processes on this machine during the run; 0 is a quiet machine)"
 
     echo
     mem_mib=$(calc "$mem_max / 1048576" %.1f)

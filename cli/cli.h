@@ -41,6 +41,11 @@ bool cli_parse_res(const char *cmd, const char *opt, const char *text, int *w, i
  * prefix's share/drender/scenes. Returns a malloc'd path or NULL. */
 char *cli_find_bundled_scene(const char *name);
 
+/* The directory an output file goes to exists and is writable (checked before
+ * any work, so a long render does not end in "cannot write"). Prints the
+ * error naming the file. */
+bool cli_output_dir_writable(const char *cmd, const char *path);
+
 /* Peak resident memory of this process, bytes. */
 uint64_t cli_peak_rss_bytes(void);
 double cli_now(void);

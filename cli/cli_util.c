@@ -49,7 +49,7 @@ bool cli_parse_u64(const char *cmd, const char *opt, const char *text, uint64_t 
         cli_error(cmd, "%s: '%s' must not be negative", opt, text);
         return false;
     }
-    unsigned long long v = strtoull(text, &end, 0);
+    unsigned long long v = strtoull(text, &end, 10);
     if (errno || end == text || *end) {
         cli_error(cmd, "%s: '%s' is not a whole number", opt, text);
         return false;
@@ -110,6 +110,23 @@ char *cli_find_bundled_scene(const char *name)
         }
     }
     return try_path(DR_DATADIR, "/scenes", name);
+}
+
+bool cli_output_dir_writable(const char *cmd, const char *path)
+{
+    char dir[PATH_MAX];
+    const char *slash = strrchr(path, '/');
+    if (!slash)
+        strcpy(dir, ".");
+    else if (slash == path)
+        strcpy(dir, "/");
+    else
+        snprintf(dir, sizeof dir, "%.*s", (int)(slash - path), path);
+    if (access(dir, W_OK) != 0) {
+        cli_error(cmd, "%s: cannot write into '%s': %s", path, dir, strerror(errno));
+        return false;
+    }
+    return true;
 }
 
 uint64_t cli_peak_rss_bytes(void)

@@ -172,6 +172,8 @@ int cmd_render(int argc, char **argv)
                   a.output);
         return DR_EXIT_USAGE;
     }
+    if (!cli_output_dir_writable("render", a.output))
+        return DR_EXIT_FAILURE;
     char *scene_path = a.scene_arg ? strdup(a.scene_arg) : cli_find_bundled_scene(DEFAULT_SCENE);
     if (!scene_path) {
         cli_error("render", "no SCENE given and the bundled %s was not found (set DRENDER_DATA)", DEFAULT_SCENE);

@@ -412,6 +412,9 @@ int write_image(const char *path, int width, int height, int channels, const flo
         why = std::strerror(errno);
     }
     if (!ok) {
+        // OpenImageIO's message names the temporary; the user knows only path.
+        for (size_t at; (at = why.find(tmp)) != std::string::npos;)
+            why.replace(at, tmp.size(), path);
         dr_set_error("%s: cannot write image: %s", path, why.c_str());
         return DR_ERR_IO;   // the guard removes the temporary
     }

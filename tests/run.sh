@@ -10,7 +10,8 @@ export DR_TESTDIR="$PWD/tests" DR_SCENES="$PWD/scenes"
 passed=0 failed=0 failed_names=()
 log_dir="$build/test-logs"; mkdir -p "$log_dir"
 for t in "$build"/tests/test_* tests/cli_*.sh; do
-    [ -e "$t" ] || continue
+    [ -f "$t" ] || continue
+    case "$t" in *.sh) ;; *) [ -x "$t" ] || continue ;; esac   # skip build/tests/*.o, *.d
     name=$(basename "$t")
     start=$EPOCHREALTIME
     if [ "${t%.sh}" != "$t" ]; then bash "$t" >"$log_dir/$name.log" 2>&1; else "$t" >"$log_dir/$name.log" 2>&1; fi
