@@ -53,4 +53,16 @@ bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u
  * Lambertian, 1 for a lobe with no diffuse part). */
 double dr_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo);
 
+/* Adjoint of the differentiable BSDF inputs (same field names as struct dr_bsdf). */
+struct dr_d_bsdf {
+    dr_vec3 base_color;
+    double metallic, roughness;
+};
+
+/* Reverse mode of dr_bsdf_eval: given d_out = d loss / d f (per channel),
+ * accumulates (+=) d loss / d base_color, metallic, roughness into *d.
+ * Zero where f is zero by construction (below the surface). The roughness
+ * floor (DR_BSDF_MIN_ALPHA) has zero derivative below it. */
+void d_bsdf_eval(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out, struct dr_d_bsdf *d);
+
 #endif

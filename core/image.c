@@ -139,6 +139,30 @@ static inline void add_texel(const float *p, int channels, double weight, double
     }
 }
 
+void dr_texture_taps(const struct dr_texture *tex, const struct dr_image *img, double u, double v,
+                     int64_t idx[4], double wt[4])
+{
+    enum dr_wrap ws = tex ? tex->wrap_s : DR_WRAP_REPEAT;
+    enum dr_wrap wtm = tex ? tex->wrap_t : DR_WRAP_REPEAT;
+    int w = img->width, h = img->height;
+    double x = reduce_coord(u, ws) * w - 0.5;
+    double y = reduce_coord(v, wtm) * h - 0.5;
+    double fx0 = floor(x), fy0 = floor(y);
+    double fx = x - fx0, fy = y - fy0;
+    int i0 = (int)fx0, j0 = (int)fy0;
+    int xa = wrap_index(i0, w, ws), xb = wrap_index(i0 + 1, w, ws);
+    int ya = wrap_index(j0, h, wtm), yb = wrap_index(j0 + 1, h, wtm);
+    int64_t row_a = (int64_t)ya * w, row_b = (int64_t)yb * w;
+    idx[0] = row_a + xa;
+    idx[1] = row_a + xb;
+    idx[2] = row_b + xa;
+    idx[3] = row_b + xb;
+    wt[0] = (1.0 - fx) * (1.0 - fy);
+    wt[1] = fx * (1.0 - fy);
+    wt[2] = (1.0 - fx) * fy;
+    wt[3] = fx * fy;
+}
+
 void dr_texture_eval(const struct dr_texture *tex, const struct dr_image *img,
                      double u, double v, bool use_linear, double out[4])
 {
@@ -148,27 +172,41 @@ void dr_texture_eval(const struct dr_texture *tex, const struct dr_image *img,
         out[3] = 1.0;
         return;
     }
-    enum dr_wrap ws = tex ? tex->wrap_s : DR_WRAP_REPEAT;
-    enum dr_wrap wt = tex ? tex->wrap_t : DR_WRAP_REPEAT;
-    int w = img->width, h = img->height, c = img->channels;
-
-    double x = reduce_coord(u, ws) * w - 0.5;
-    double y = reduce_coord(v, wt) * h - 0.5;
-    double fx0 = floor(x), fy0 = floor(y);
-    double fx = x - fx0, fy = y - fy0;
-    int i0 = (int)fx0, j0 = (int)fy0;
-
-    int xa = wrap_index(i0, w, ws), xb = wrap_index(i0 + 1, w, ws);
-    int ya = wrap_index(j0, h, wt), yb = wrap_index(j0 + 1, h, wt);
-
-    size_t row_a = (size_t)ya * (size_t)w, row_b = (size_t)yb * (size_t)w;
+    int c = img->channels;
+    int64_t idx[4];
+    double wt[4];
+    dr_texture_taps(tex, img, u, v, idx, wt);
     double acc[4] = {0.0, 0.0, 0.0, 0.0};
-    add_texel(pix + (row_a + (size_t)xa) * (size_t)c, c, (1.0 - fx) * (1.0 - fy), acc);
-    add_texel(pix + (row_a + (size_t)xb) * (size_t)c, c, fx * (1.0 - fy), acc);
-    add_texel(pix + (row_b + (size_t)xa) * (size_t)c, c, (1.0 - fx) * fy, acc);
-    add_texel(pix + (row_b + (size_t)xb) * (size_t)c, c, fx * fy, acc);
+    for (int i = 0; i < 4; i++)
+        add_texel(pix + (size_t)idx[i] * (size_t)c, c, wt[i], acc);
     out[0] = acc[0];
     out[1] = acc[1];
     out[2] = acc[2];
     out[3] = (c == 2 || c >= 4) ? acc[3] : 1.0; /* exactly opaque without alpha */
+}
+
+void d_texture_eval(const struct dr_texture *tex, const struct dr_image *img, double u, double v,
+                    const double d_out[4], double *d_texels)
+{
+    if (!d_texels || !img || img->width <= 0 || img->height <= 0 || img->channels <= 0)
+        return;
+    int c = img->channels < 4 ? img->channels : 4;
+    int64_t idx[4];
+    double wt[4];
+    dr_texture_taps(tex, img, u, v, idx, wt);
+    for (int i = 0; i < 4; i++) {
+        if (wt[i] == 0.0)
+            continue;
+        double *t = d_texels + (size_t)idx[i] * (size_t)img->channels;
+        if (c == 1) {
+            /* grey replicated into rgb: the adjoint gathers all three */
+            t[0] += wt[i] * (d_out[0] + d_out[1] + d_out[2]);
+        } else if (c == 2) {
+            t[0] += wt[i] * (d_out[0] + d_out[1] + d_out[2]);
+            t[1] += wt[i] * d_out[3];
+        } else {
+            for (int k = 0; k < c; k++)
+                t[k] += wt[i] * d_out[k];
+        }
+    }
 }

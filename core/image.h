@@ -5,6 +5,7 @@
 
 #include <stdbool.h>
 #include <stddef.h>
+#include <stdint.h>
 
 #include "vec.h"
 
@@ -40,6 +41,18 @@ void dr_image_release(struct dr_image *img);   /* frees data and linear */
  * 0 for colour, 1 for alpha). `use_linear` selects img->linear (must exist). */
 void dr_texture_eval(const struct dr_texture *tex, const struct dr_image *img,
                      double u, double v, bool use_linear, double out[4]);
+
+/* The (at most) four texels a bilinear lookup blends: texel index (y * width
+ * + x, 0 when its weight is 0) and weight; dr_texture_eval(...) channel c is
+ * sum_i w[i] * pixels[idx[i] * channels + c]. Derivatives use the same taps. */
+void dr_texture_taps(const struct dr_texture *tex, const struct dr_image *img, double u, double v,
+                     int64_t idx[4], double w[4]);
+
+/* Reverse mode of dr_texture_eval with respect to the texel values: adds
+ * d_out[c] * weight to d_texels[texel * channels + c] for the blended texels
+ * (c < min(channels, 4); d_texels has width * height * channels entries). */
+void d_texture_eval(const struct dr_texture *tex, const struct dr_image *img, double u, double v,
+                    const double d_out[4], double *d_texels);
 
 #ifdef __cplusplus
 }
