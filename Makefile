@@ -67,7 +67,8 @@ test: deps $(BUILD)/drender $(TEST_BIN)
 
 # The whole suite again under AddressSanitizer and UndefinedBehaviorSanitizer.
 sanitize:
-	$(MAKE) test BUILD=build-san SAN=1
+	ASAN_OPTIONS=fast_unwind_on_malloc=0 LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp \
+		$(MAKE) test BUILD=build-san SAN=1
 
 bench: deps $(BUILD)/drender $(BENCH_BIN)
 	BUILD=$(BUILD) bench/run.sh
