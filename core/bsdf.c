@@ -205,3 +205,87 @@ bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u
     out->pdf = pdf;
     return true;
 }
+
+/* ------------------------------------------------------------ derivatives */
+
+/* Reverse mode of dr_bsdf_eval (directions are constants). With
+ *   kd0 = max(0, 1 - F_o) max(0, 1 - F_i) / pi,   spec = D G2 / (4 wo.z wi.z),
+ *   f_c = (1-m) kd0 base_c + (1-m) spec F_d,c + m spec F_m,c,
+ *   F_m,c = base_c + (1 - base_c) s5:
+ *   df_c/dbase_c = (1-m) kd0 + m spec (1 - s5)
+ *   df_c/dm      = -kd0 base_c - spec F_d,c + spec F_m,c
+ *   df_c/dalpha  = ((1-m) F_d,c + m F_m,c) dspec/dalpha
+ * F_o, F_i, F_d and s5 depend only on specular, specular_color and the
+ * directions (so the maxima over channels carry no derivative).
+ *
+ * dspec/dalpha = spec (dlnD/dalpha - (dL_o/dalpha + dL_i/dalpha) / (1 + L_o + L_i)), where
+ *   D = a^2 |H|^4 / (pi q^2), q = Hxy^2 + a^2 Hz^2:
+ *     dlnD/da = 2/a - 4 a Hz^2 / q = (2/a) (Hxy^2 - a^2 Hz^2) / q   (the ratio is in [-1, 1])
+ *   L = x / (2 (1 + sqrt(1 + x))), x = a^2 tan^2:  dL/dx = 1 / (4 sqrt(1 + x)), dx/da = 2 a tan^2:
+ *     dL/da = a tan^2 / (2 sqrt(1 + x))
+ * No cancellation and no division by anything that can vanish (a >= 1e-6,
+ * q >= a^2 Hz^2 > 0, w.z > COS_EPS), so the result is finite wherever f is.
+ * dalpha/droughness = 2 roughness above the floor, 0 at or below it.
+ *
+ * The pure-Lambertian fast path (metallic == 0, specular == 0) evaluates the
+ * general formula exactly (F_d = F_o = F_i = 0, kd0 = 1/pi); its metallic
+ * derivative is the general one, -base/pi + spec F_m, which needs spec. */
+void d_bsdf_eval(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out, struct dr_d_bsdf *d)
+{
+    if (!(wo.z > COS_EPS) || !(wi.z > COS_EPS))
+        return;
+    const bool lambert = no_specular_lobe(b);
+    const double m = b->metallic;
+    const dr_vec3 base = b->base_color;
+
+    /* Microfacet term spec = D G2 / (4 wo.z wi.z), shared by both lobes. */
+    double a = bsdf_alpha(b), a2 = a * a;
+    dr_vec3 H = dr_add(wo, wi);
+    double hxy2 = H.x * H.x + H.y * H.y;
+    double hz2 = H.z * H.z;
+    double H2 = hxy2 + hz2;
+    double q = hxy2 + a2 * hz2;
+    double r = H2 / q;
+    double D = a2 * r * r * DR_INV_PI;
+    double tan2o = (wo.x * wo.x + wo.y * wo.y) / (wo.z * wo.z);
+    double tan2i = (wi.x * wi.x + wi.y * wi.y) / (wi.z * wi.z);
+    double xo = a2 * tan2o, xi = a2 * tan2i;
+    double so = sqrt(1.0 + xo), si = sqrt(1.0 + xi);
+    double lo = 0.5 * xo / (1.0 + so), li = 0.5 * xi / (1.0 + si);
+    double g = 1.0 + lo + li;
+    double spec = D / (4.0 * wo.z * g * wi.z);
+
+    double c = 0.5 * sqrt(H2);
+    double s5 = pow5(1.0 - dr_clamp(c, 0.0, 1.0));
+    dr_vec3 fm = dr_v3(base.x + (1.0 - base.x) * s5, base.y + (1.0 - base.y) * s5,
+                       base.z + (1.0 - base.z) * s5);
+    double d_km = dr_dot(d_out, fm);      /* d loss / d (m spec)       */
+    double d_kd = dr_dot(d_out, base);    /* d loss / d ((1-m) kd0)    */
+
+    if (lambert) {
+        /* m = 0, F_d = 0, kd0 = 1/pi: the roughness derivative is exactly 0. */
+        d->base_color = dr_madd(d->base_color, d_out, DR_INV_PI);
+        d->metallic += spec * d_km - DR_INV_PI * d_kd;
+        return;
+    }
+
+    dr_vec3 f0 = dielectric_f0(b);
+    double f90 = b->specular;
+    dr_vec3 fd = dr_v3(f0.x + (f90 - f0.x) * s5, f0.y + (f90 - f0.y) * s5, f0.z + (f90 - f0.z) * s5);
+    double f0max = dr_max3(f0);
+    double fo = f0max + (f90 - f0max) * pow5(1.0 - wo.z), fi = f0max + (f90 - f0max) * pow5(1.0 - wi.z);
+    double kd0 = dr_max(0.0, 1.0 - fo) * dr_max(0.0, 1.0 - fi) * DR_INV_PI;
+    double d_ks = dr_dot(d_out, fd);      /* d loss / d ((1-m) spec)   */
+
+    d->base_color = dr_madd(d->base_color, d_out, (1.0 - m) * kd0 + m * spec * (1.0 - s5));
+    d->metallic += spec * (d_km - d_ks) - kd0 * d_kd;
+
+    double rough = b->roughness;
+    double d_spec = (1.0 - m) * d_ks + m * d_km;
+    if (d_spec == 0.0 || !(rough * rough > DR_BSDF_MIN_ALPHA))
+        return;
+    double dlnD = (2.0 / a) * ((hxy2 - a2 * hz2) / q);
+    double dlo = 0.5 * a * tan2o / so, dli = 0.5 * a * tan2i / si;
+    double dspec_da = spec * (dlnD - (dlo + dli) / g);
+    d->roughness += d_spec * dspec_da * (2.0 * rough);
+}
