@@ -1041,6 +1041,7 @@ void Loader::load_environment()
 
 void Loader::finish()
 {
+    scene_->n_file_materials = int(materials_.size());
     if (default_material_used_) materials_.push_back(default_material("gltf_default"));
     scene_->materials = copy_out(materials_);
     scene_->n_materials = int(materials_.size());

@@ -78,13 +78,14 @@ static int build_env_tables(const struct dr_scene *s, struct dr_light_sampler *l
         return DR_ERR_NOMEM;
     double total = 0.0;
     ls->env_marginal[0] = 0.0;
+    const float *texels = img->linear ? img->linear : img->data;
     for (int y = 0; y < h; y++) {
         /* texel weight: mean radiance times the solid angle of its row */
         double sin_theta = sin(M_PI * (y + 0.5) / h);
         double *row = ls->env_conditional + (size_t)y * (w + 1);
         row[0] = 0.0;
         for (int x = 0; x < w; x++) {
-            const float *p = img->data + ((size_t)y * w + x) * c;
+            const float *p = texels + ((size_t)y * w + x) * c;
             double v = c >= 3 ? (fabs(p[0]) + fabs(p[1]) + fabs(p[2])) / 3.0 : fabs(p[0]);
             if (!isfinite(v))
                 v = 0.0;
@@ -235,7 +236,7 @@ dr_vec3 dr_env_radiance(const struct dr_scene *s, dr_vec3 dir)
         double u, v, px[4];
         dr_env_dir_to_uv(dir, &u, &v);
         struct dr_texture tex = {0, DR_WRAP_REPEAT, DR_WRAP_CLAMP};
-        dr_texture_eval(&tex, &s->env.map, u, v, false, px);
+        dr_texture_eval(&tex, &s->env.map, u, v, true, px);  /* decoded copy if 8-bit sRGB */
         L = dr_mul(L, dr_v3(px[0], px[1], px[2]));
     }
     return L;

@@ -32,9 +32,9 @@ static bool material_has_specular(const struct dr_material *m)
            m->metallic_roughness_tex.texture >= 0;
 }
 
-int dr_scene_prepare(struct dr_scene *s)
+int dr_scene_refresh(struct dr_scene *s)
 {
-    struct dr_mesh *m = &s->mesh;
+    const struct dr_mesh *m = &s->mesh;
     s->effects = 0;
     /* Effects follow from what the triangles actually use, not from what the
      * file happens to declare. */
@@ -60,10 +60,7 @@ int dr_scene_prepare(struct dr_scene *s)
     }
     free(used);
 
-    if (dr_mesh_derive(&s->mesh) != 0) {
-        dr_set_error("out of memory");
-        return DR_ERR_NOMEM;
-    }
+    dr_light_sampler_destroy(s->light_sampler);
     s->light_sampler = dr_light_sampler_create(s);
     if (!s->light_sampler)
         return DR_ERR_NOMEM;
@@ -76,8 +73,19 @@ int dr_scene_prepare(struct dr_scene *s)
         s->effects |= DR_FX_PUNCTUAL_LIGHTS;
     if (s->env.present)
         s->effects |= s->env.map.data ? DR_FX_ENV_MAP : DR_FX_ENV_CONSTANT;
+    return 0;
+}
 
-    s->accel = dr_accel_create(m);
+int dr_scene_prepare(struct dr_scene *s)
+{
+    if (dr_mesh_derive(&s->mesh) != 0) {
+        dr_set_error("out of memory");
+        return DR_ERR_NOMEM;
+    }
+    int rc = dr_scene_refresh(s);
+    if (rc != 0)
+        return rc;
+    s->accel = dr_accel_create(&s->mesh);
     if (!s->accel) {
         char msg[1024];
         snprintf(msg, sizeof msg, "%s: cannot build the ray acceleration structure: %s", s->path, dr_last_error());

@@ -107,6 +107,7 @@ struct dr_scene {
     char *path;
     struct dr_mesh mesh;
     struct dr_material *materials; int n_materials;  /* last one may be the glTF default */
+    int n_file_materials;         /* those in the file's "materials" (the rest: the default) */
     struct dr_texture *textures; int n_textures;
     struct dr_image *images; int n_images;
     struct dr_camera *cameras; int n_cameras;
@@ -124,6 +125,10 @@ struct dr_scene {
  * failure; the message names the file and, for content errors, the JSON path. */
 struct dr_scene *dr_scene_load(const char *path);
 int dr_scene_prepare(struct dr_scene *scene);
+/* After materials, lights or the environment changed (parameters set):
+ * recomputes the effect flags and the light sampling tables. Geometry must
+ * not have changed. 0 or DR_ERR_NOMEM. */
+int dr_scene_refresh(struct dr_scene *scene);
 void dr_scene_destroy(struct dr_scene *scene);
 /* Comma-separated names of the effect bits, for --json and messages. */
 void dr_effects_describe(unsigned effects, char *buf, int size);

@@ -1,0 +1,544 @@
+#include "params.h"
+
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "error.h"
+
+static const char *const mat_fields[] = {
+    [DR_PARAM_BASE_COLOR] = "/pbrMetallicRoughness/baseColorFactor",
+    [DR_PARAM_METALLIC] = "/pbrMetallicRoughness/metallicFactor",
+    [DR_PARAM_ROUGHNESS] = "/pbrMetallicRoughness/roughnessFactor",
+    [DR_PARAM_EMISSIVE_FACTOR] = "/emissiveFactor",
+    [DR_PARAM_EMISSIVE_STRENGTH] = "/extensions/KHR_materials_emissive_strength/emissiveStrength",
+};
+
+const char *dr_param_type_name(const struct dr_param *p)
+{
+    switch (p->kind) {
+    case DR_PARAM_BASE_COLOR:
+    case DR_PARAM_EMISSIVE_FACTOR:
+    case DR_PARAM_LIGHT_COLOR:
+    case DR_PARAM_ENV_COLOR: return "color";
+    case DR_PARAM_ENV_MAP:
+    case DR_PARAM_IMAGE: return "image";
+    default: return "scalar";
+    }
+}
+
+void dr_param_range(const struct dr_param *p, double *lo, double *hi)
+{
+    switch (p->kind) {
+    case DR_PARAM_BASE_COLOR:
+    case DR_PARAM_METALLIC: *lo = 0.0; *hi = 1.0; break;
+    case DR_PARAM_ROUGHNESS: *lo = 0.001; *hi = 1.0; break;   /* the BSDF's floor */
+    case DR_PARAM_IMAGE: *lo = 0.0; *hi = 1.0; break;        /* colour or data texels */
+    default: *lo = 0.0; *hi = INFINITY; break;               /* emission, light, environment */
+    }
+}
+
+/* ---- which images are looked up as colour (sRGB-decoded) or as data ---- */
+
+static void image_usage(const struct dr_scene *s, int image, bool *as_colour, bool *as_data)
+{
+    *as_colour = *as_data = false;
+    for (int i = 0; i < s->n_materials; i++) {
+        const struct dr_material *m = &s->materials[i];
+        const struct dr_texref *colour[2] = {&m->base_color_tex, &m->emissive_tex};
+        for (int k = 0; k < 2; k++)
+            if (colour[k]->texture >= 0 && s->textures[colour[k]->texture].image == image)
+                *as_colour = true;
+        if (m->metallic_roughness_tex.texture >= 0 && s->textures[m->metallic_roughness_tex.texture].image == image)
+            *as_data = true;
+    }
+}
+
+/* The texel array a parameter reads and writes. */
+static float *param_texels(const struct dr_scene *s, const struct dr_param *p)
+{
+    if (p->kind == DR_PARAM_ENV_MAP)
+        return s->env.map.linear ? s->env.map.linear : s->env.map.data;
+    struct dr_image *img = &s->images[p->target];
+    bool colour, data;
+    image_usage(s, p->target, &colour, &data);
+    return colour && img->linear ? img->linear : img->data;
+}
+
+/* ---- listing ---- */
+
+static bool light_instanced(const struct dr_scene *s, int gltf_index)
+{
+    for (int i = 0; i < s->n_lights; i++)
+        if (s->lights[i].gltf_index == gltf_index)
+            return true;
+    return false;
+}
+
+static int max_light_index(const struct dr_scene *s)
+{
+    int m = -1;
+    for (int i = 0; i < s->n_lights; i++)
+        if (s->lights[i].gltf_index > m)
+            m = s->lights[i].gltf_index;
+    return m;
+}
+
+static struct dr_param make(enum dr_param_kind kind, int target, int64_t size, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+static struct dr_param make(enum dr_param_kind kind, int target, int64_t size, const char *fmt, ...)
+{
+    struct dr_param p;
+    memset(&p, 0, sizeof p);
+    p.kind = kind;
+    p.target = target;
+    p.size = size;
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(p.name, sizeof p.name, fmt, ap);
+    va_end(ap);
+    return p;
+}
+
+int dr_params_list(const struct dr_scene *s, struct dr_param **out, int *count)
+{
+    int cap = 5 * s->n_file_materials + 2 * (max_light_index(s) + 1) + 3 + s->n_images + 1;
+    struct dr_param *list = calloc((size_t)cap, sizeof *list);
+    if (!list) {
+        dr_set_error("out of memory");
+        return DR_ERR_NOMEM;
+    }
+    int n = 0;
+    for (int m = 0; m < s->n_file_materials; m++)
+        for (int k = DR_PARAM_BASE_COLOR; k <= DR_PARAM_EMISSIVE_STRENGTH; k++) {
+            int64_t size = (k == DR_PARAM_BASE_COLOR || k == DR_PARAM_EMISSIVE_FACTOR) ? 3 : 1;
+            list[n++] = make(k, m, size, "/materials/%d%s", m, mat_fields[k]);
+        }
+    for (int l = 0; l <= max_light_index(s); l++) {
+        if (!light_instanced(s, l))
+            continue;   /* a light no node places is not rendered */
+        list[n++] = make(DR_PARAM_LIGHT_COLOR, l, 3, "/extensions/KHR_lights_punctual/lights/%d/color", l);
+        list[n++] = make(DR_PARAM_LIGHT_INTENSITY, l, 1, "/extensions/KHR_lights_punctual/lights/%d/intensity", l);
+    }
+    if (s->env.present) {
+        list[n++] = make(DR_PARAM_ENV_COLOR, -1, 3, "/extensions/DR_environment/color");
+        list[n++] = make(DR_PARAM_ENV_STRENGTH, -1, 1, "/extensions/DR_environment/strength");
+        if (s->env.map.data) {
+            const struct dr_image *im = &s->env.map;
+            struct dr_param p = make(DR_PARAM_ENV_MAP, -1, (int64_t)im->width * im->height * im->channels,
+                                     "/extensions/DR_environment/uri");
+            p.width = im->width;
+            p.height = im->height;
+            p.channels = im->channels;
+            list[n++] = p;
+        }
+    }
+    for (int i = 0; i < s->n_images; i++) {
+        const struct dr_image *im = &s->images[i];
+        struct dr_param p = make(DR_PARAM_IMAGE, i, (int64_t)im->width * im->height * im->channels, "/images/%d", i);
+        p.width = im->width;
+        p.height = im->height;
+        p.channels = im->channels;
+        list[n++] = p;
+    }
+    *out = list;
+    *count = n;
+    return 0;
+}
+
+/* ---- resolving ---- */
+
+/* Splits a JSON pointer into unescaped tokens (~1 -> '/', ~0 -> '~'). */
+static int split_pointer(const char *ptr, char tokens[][DR_PARAM_NAME_MAX], int max)
+{
+    if (ptr[0] != '/')
+        return -1;
+    int n = 0;
+    const char *p = ptr + 1;
+    for (;;) {
+        if (n == max)
+            return -1;
+        int len = 0;
+        while (*p && *p != '/') {
+            char c = *p++;
+            if (c == '~' && (*p == '0' || *p == '1'))
+                c = *p++ == '0' ? '~' : '/';
+            if (len < DR_PARAM_NAME_MAX - 1)
+                tokens[n][len++] = c;
+        }
+        tokens[n++][len] = '\0';
+        if (!*p)
+            return n;
+        p++;
+    }
+}
+
+static bool parse_index(const char *tok, int *out)
+{
+    if (!*tok)
+        return false;
+    long v = 0;
+    for (const char *c = tok; *c; c++) {
+        if (*c < '0' || *c > '9' || v > 100000000)
+            return false;
+        v = v * 10 + (*c - '0');
+    }
+    *out = (int)v;
+    return true;
+}
+
+/* Material by index or by name; -2 when ambiguous. */
+static int find_material(const struct dr_scene *s, const char *tok)
+{
+    int idx;
+    if (parse_index(tok, &idx))
+        return idx < s->n_file_materials ? idx : -1;
+    int found = -1;
+    for (int i = 0; i < s->n_file_materials; i++)
+        if (strcmp(s->materials[i].name, tok) == 0) {
+            if (found >= 0)
+                return -2;
+            found = i;
+        }
+    return found;
+}
+
+static int edit_distance(const char *a, const char *b)
+{
+    int la = (int)strlen(a), lb = (int)strlen(b);
+    int *row = malloc(sizeof(int) * (size_t)(lb + 1));
+    if (!row)
+        return 1 << 20;
+    for (int j = 0; j <= lb; j++)
+        row[j] = j;
+    for (int i = 1; i <= la; i++) {
+        int diag = row[0];
+        row[0] = i;
+        for (int j = 1; j <= lb; j++) {
+            int up = row[j];
+            int sub = diag + (a[i - 1] != b[j - 1]);
+            int best = up + 1 < row[j - 1] + 1 ? up + 1 : row[j - 1] + 1;
+            row[j] = sub < best ? sub : best;
+            diag = up;
+        }
+    }
+    int d = row[lb];
+    free(row);
+    return d;
+}
+
+/* Error message: the pointer, the reason, and up to three nearest names. */
+static int fail_with_suggestions(const struct dr_scene *s, const char *ptr, const char *why)
+{
+    struct dr_param *list = NULL;
+    int n = 0;
+    char msg[1024];
+    int len = snprintf(msg, sizeof msg, "%s: %s", ptr, why);
+    if (dr_params_list(s, &list, &n) == 0 && n > 0) {
+        int best[3] = {-1, -1, -1}, dist[3] = {1 << 30, 1 << 30, 1 << 30};
+        for (int i = 0; i < n; i++) {
+            /* compare against the index form and the material-name form */
+            int d = edit_distance(ptr, list[i].name);
+            if (list[i].kind <= DR_PARAM_EMISSIVE_STRENGTH) {
+                char named[2 * DR_PARAM_NAME_MAX];
+                snprintf(named, sizeof named, "/materials/%s%s", s->materials[list[i].target].name,
+                         mat_fields[list[i].kind]);
+                int dn = edit_distance(ptr, named);
+                d = dn < d ? dn : d;
+            }
+            for (int k = 0; k < 3; k++)
+                if (d < dist[k]) {
+                    for (int j = 2; j > k; j--) {
+                        dist[j] = dist[j - 1];
+                        best[j] = best[j - 1];
+                    }
+                    dist[k] = d;
+                    best[k] = i;
+                    break;
+                }
+        }
+        len += snprintf(msg + len, len < (int)sizeof msg ? sizeof msg - (size_t)len : 0, "; nearest valid names:");
+        for (int k = 0; k < 3 && best[k] >= 0; k++)
+            len += snprintf(msg + len, len < (int)sizeof msg ? sizeof msg - (size_t)len : 0, " %s",
+                            list[best[k]].name);
+        snprintf(msg + len, len < (int)sizeof msg ? sizeof msg - (size_t)len : 0,
+                 " ('drender params' lists them all)");
+    } else {
+        snprintf(msg + len, len < (int)sizeof msg ? sizeof msg - (size_t)len : 0,
+                 "; this scene has no differentiable parameters");
+    }
+    free(list);
+    dr_set_error("%s", msg);
+    return DR_ERR_ARG;
+}
+
+int dr_param_resolve(const struct dr_scene *s, const char *ptr, struct dr_param *out)
+{
+    char tok[8][DR_PARAM_NAME_MAX];
+    int n = split_pointer(ptr, tok, 8);
+    if (n < 0)
+        return fail_with_suggestions(s, ptr, "not a JSON pointer (it must start with '/')");
+    struct dr_param *list = NULL;
+    int count = 0;
+    if (dr_params_list(s, &list, &count) != 0)
+        return DR_ERR_NOMEM;
+    int want = -1;  /* index into list */
+    if (n >= 3 && strcmp(tok[0], "materials") == 0) {
+        int m = find_material(s, tok[1]);
+        if (m == -2) {
+            free(list);
+            return fail_with_suggestions(s, ptr, "several materials have that name: use the index");
+        }
+        if (m < 0) {
+            free(list);
+            return fail_with_suggestions(s, ptr, "no such material");
+        }
+        char field[4 * DR_PARAM_NAME_MAX] = "";
+        for (int i = 2; i < n; i++) {
+            strcat(field, "/");
+            strcat(field, tok[i]);
+        }
+        for (int k = DR_PARAM_BASE_COLOR; k <= DR_PARAM_EMISSIVE_STRENGTH; k++)
+            if (strcmp(field, mat_fields[k]) == 0)
+                for (int i = 0; i < count; i++)
+                    if (list[i].kind == (enum dr_param_kind)k && list[i].target == m)
+                        want = i;
+    } else {
+        /* everything else is named by its canonical pointer */
+        for (int i = 0; i < count; i++)
+            if (strcmp(list[i].name, ptr) == 0)
+                want = i;
+    }
+    if (want < 0) {
+        free(list);
+        return fail_with_suggestions(s, ptr, "names nothing differentiable in this scene");
+    }
+    *out = list[want];
+    free(list);
+    return 0;
+}
+
+/* ---- values ---- */
+
+static double *mat_scalar(struct dr_material *m, enum dr_param_kind k)
+{
+    switch (k) {
+    case DR_PARAM_METALLIC: return &m->metallic;
+    case DR_PARAM_ROUGHNESS: return &m->roughness;
+    case DR_PARAM_EMISSIVE_STRENGTH: return &m->emissive_strength;
+    default: return NULL;
+    }
+}
+
+static dr_vec3 *param_vec3(struct dr_scene *s, const struct dr_param *p, int *light_first)
+{
+    *light_first = -1;
+    switch (p->kind) {
+    case DR_PARAM_BASE_COLOR: return &s->materials[p->target].base_color;
+    case DR_PARAM_EMISSIVE_FACTOR: return &s->materials[p->target].emissive_factor;
+    case DR_PARAM_ENV_COLOR: return &s->env.color;
+    case DR_PARAM_LIGHT_COLOR:
+        for (int i = 0; i < s->n_lights; i++)
+            if (s->lights[i].gltf_index == p->target) {
+                *light_first = i;
+                return &s->lights[i].color;
+            }
+        return NULL;
+    default: return NULL;
+    }
+}
+
+void dr_param_get(const struct dr_scene *cs, const struct dr_param *p, double *v)
+{
+    struct dr_scene *s = (struct dr_scene *)cs;   /* read only */
+    int first;
+    dr_vec3 *c = param_vec3(s, p, &first);
+    if (c) {
+        v[0] = c->x;
+        v[1] = c->y;
+        v[2] = c->z;
+        return;
+    }
+    switch (p->kind) {
+    case DR_PARAM_LIGHT_INTENSITY:
+        for (int i = 0; i < s->n_lights; i++)
+            if (s->lights[i].gltf_index == p->target) {
+                v[0] = s->lights[i].intensity;
+                return;
+            }
+        v[0] = 0.0;
+        return;
+    case DR_PARAM_ENV_STRENGTH: v[0] = s->env.strength; return;
+    case DR_PARAM_ENV_MAP:
+    case DR_PARAM_IMAGE: {
+        const float *t = param_texels(s, p);
+        for (int64_t i = 0; i < p->size; i++)
+            v[i] = t[i];
+        return;
+    }
+    default: v[0] = *mat_scalar(&s->materials[p->target], p->kind); return;
+    }
+}
+
+void dr_param_put(struct dr_scene *s, const struct dr_param *p, const double *v)
+{
+    int first;
+    dr_vec3 *c = param_vec3(s, p, &first);
+    if (c) {
+        *c = dr_v3(v[0], v[1], v[2]);
+        /* a glTF light placed by several nodes: every instance changes */
+        if (first >= 0)
+            for (int i = first + 1; i < s->n_lights; i++)
+                if (s->lights[i].gltf_index == p->target)
+                    s->lights[i].color = *c;
+        return;
+    }
+    switch (p->kind) {
+    case DR_PARAM_LIGHT_INTENSITY:
+        for (int i = 0; i < s->n_lights; i++)
+            if (s->lights[i].gltf_index == p->target)
+                s->lights[i].intensity = v[0];
+        return;
+    case DR_PARAM_ENV_STRENGTH: s->env.strength = v[0]; return;
+    case DR_PARAM_ENV_MAP:
+    case DR_PARAM_IMAGE: {
+        float *t = param_texels(s, p);
+        for (int64_t i = 0; i < p->size; i++)
+            t[i] = (float)v[i];
+        return;
+    }
+    default: *mat_scalar(&s->materials[p->target], p->kind) = v[0]; return;
+    }
+}
+
+/* ---- sets ---- */
+
+void dr_param_set_destroy(struct dr_param_set *set)
+{
+    if (!set)
+        return;
+    free(set->params);
+    free(set->mat_base_color);
+    free(set->mat_metallic);
+    free(set->mat_roughness);
+    free(set->mat_emissive_factor);
+    free(set->mat_emissive_strength);
+    free(set->light_color);
+    free(set->light_intensity);
+    free(set->image);
+    free(set->mat_bsdf_active);
+    free(set->mat_emission_active);
+    free(set);
+}
+
+static int64_t *offsets(int n)
+{
+    int64_t *a = malloc(sizeof(int64_t) * (size_t)(n > 0 ? n : 1));
+    if (a)
+        for (int i = 0; i < n; i++)
+            a[i] = -1;
+    return a;
+}
+
+static bool texref_active(const struct dr_param_set *set, const struct dr_scene *s, const struct dr_texref *t)
+{
+    return t->texture >= 0 && set->image[s->textures[t->texture].image] >= 0;
+}
+
+struct dr_param_set *dr_param_set_create(const struct dr_scene *s, const char *const *pointers, int n)
+{
+    struct dr_param_set *set = calloc(1, sizeof *set);
+    if (!set)
+        goto nomem;
+    set->n_materials = s->n_materials;
+    set->n_lights = s->n_lights;
+    set->n_images = s->n_images;
+    set->params = calloc((size_t)(n > 0 ? n : 1), sizeof *set->params);
+    set->mat_base_color = offsets(s->n_materials);
+    set->mat_metallic = offsets(s->n_materials);
+    set->mat_roughness = offsets(s->n_materials);
+    set->mat_emissive_factor = offsets(s->n_materials);
+    set->mat_emissive_strength = offsets(s->n_materials);
+    set->light_color = offsets(s->n_lights);
+    set->light_intensity = offsets(s->n_lights);
+    set->image = offsets(s->n_images);
+    set->mat_bsdf_active = calloc((size_t)s->n_materials + 1, sizeof(bool));
+    set->mat_emission_active = calloc((size_t)s->n_materials + 1, sizeof(bool));
+    set->env_color = set->env_strength = set->env_map = -1;
+    if (!set->params || !set->mat_base_color || !set->mat_metallic || !set->mat_roughness ||
+        !set->mat_emissive_factor || !set->mat_emissive_strength || !set->light_color || !set->light_intensity ||
+        !set->image || !set->mat_bsdf_active || !set->mat_emission_active)
+        goto nomem;
+
+    int64_t total = 0;
+    for (int i = 0; i < n; i++) {
+        struct dr_param p;
+        if (dr_param_resolve(s, pointers[i], &p) != 0)
+            goto fail;
+        for (int j = 0; j < set->n; j++)
+            if (strcmp(set->params[j].name, p.name) == 0) {
+                dr_set_error("%s: requested twice (as %s)", pointers[i], p.name);
+                goto fail;
+            }
+        if (p.kind == DR_PARAM_IMAGE) {
+            bool colour, data;
+            image_usage(s, p.target, &colour, &data);
+            if (colour && data) {
+                dr_set_error("%s: this image is used both as a colour texture (sRGB) and as metallic-roughness "
+                             "data; drender cannot differentiate it as one parameter",
+                             pointers[i]);
+                goto fail;
+            }
+        }
+        p.offset = total;
+        total += p.size;
+        set->params[set->n++] = p;
+        switch (p.kind) {
+        case DR_PARAM_BASE_COLOR: set->mat_base_color[p.target] = p.offset; break;
+        case DR_PARAM_METALLIC: set->mat_metallic[p.target] = p.offset; break;
+        case DR_PARAM_ROUGHNESS: set->mat_roughness[p.target] = p.offset; break;
+        case DR_PARAM_EMISSIVE_FACTOR: set->mat_emissive_factor[p.target] = p.offset; break;
+        case DR_PARAM_EMISSIVE_STRENGTH: set->mat_emissive_strength[p.target] = p.offset; break;
+        case DR_PARAM_LIGHT_COLOR:
+        case DR_PARAM_LIGHT_INTENSITY:
+            for (int l = 0; l < s->n_lights; l++)
+                if (s->lights[l].gltf_index == p.target)
+                    (p.kind == DR_PARAM_LIGHT_COLOR ? set->light_color : set->light_intensity)[l] = p.offset;
+            set->lights_active = true;
+            break;
+        case DR_PARAM_ENV_COLOR: set->env_color = p.offset; set->env_active = true; break;
+        case DR_PARAM_ENV_STRENGTH: set->env_strength = p.offset; set->env_active = true; break;
+        case DR_PARAM_ENV_MAP: set->env_map = p.offset; set->env_active = true; break;
+        case DR_PARAM_IMAGE: set->image[p.target] = p.offset; break;
+        default: break;
+        }
+    }
+    set->total = total;
+    for (int m = 0; m < s->n_materials; m++) {
+        const struct dr_material *mat = &s->materials[m];
+        set->mat_bsdf_active[m] = set->mat_base_color[m] >= 0 || set->mat_metallic[m] >= 0 ||
+                                  set->mat_roughness[m] >= 0 || texref_active(set, s, &mat->base_color_tex) ||
+                                  texref_active(set, s, &mat->metallic_roughness_tex);
+        set->mat_emission_active[m] = set->mat_emissive_factor[m] >= 0 || set->mat_emissive_strength[m] >= 0 ||
+                                      texref_active(set, s, &mat->emissive_tex);
+    }
+    return set;
+nomem:
+    dr_set_error("out of memory");
+fail:
+    dr_param_set_destroy(set);
+    return NULL;
+}
+
+void dr_param_set_get(const struct dr_scene *s, const struct dr_param_set *set, double *values)
+{
+    for (int i = 0; i < set->n; i++)
+        dr_param_get(s, &set->params[i], values + set->params[i].offset);
+}
+
+void dr_param_set_put(struct dr_scene *s, const struct dr_param_set *set, const double *values)
+{
+    for (int i = 0; i < set->n; i++)
+        dr_param_put(s, &set->params[i], values + set->params[i].offset);
+}

@@ -1,0 +1,98 @@
+/* Differentiable scene parameters, named by JSON pointers into the glTF
+ * document (material names may stand in for indices):
+ *   /materials/M/pbrMetallicRoughness/baseColorFactor                  3 (rgb; alpha is not rendered)
+ *   /materials/M/pbrMetallicRoughness/metallicFactor                   1
+ *   /materials/M/pbrMetallicRoughness/roughnessFactor                  1
+ *   /materials/M/emissiveFactor                                        3
+ *   /materials/M/extensions/KHR_materials_emissive_strength/emissiveStrength  1
+ *   /extensions/KHR_lights_punctual/lights/L/color                     3
+ *   /extensions/KHR_lights_punctual/lights/L/intensity                 1
+ *   /extensions/DR_environment/color                                   3
+ *   /extensions/DR_environment/strength                                1
+ *   /extensions/DR_environment/uri            every texel of the environment map (w*h*3)
+ *   /images/I                                 every texel of image I (w*h*channels, rgb(a))
+ * Image texels are the linear values the renderer looks up: sRGB-decoded for
+ * colour textures, as stored for metallic-roughness data. */
+#ifndef DR_PARAMS_H
+#define DR_PARAMS_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "scene.h"
+
+enum dr_param_kind {
+    DR_PARAM_BASE_COLOR,
+    DR_PARAM_METALLIC,
+    DR_PARAM_ROUGHNESS,
+    DR_PARAM_EMISSIVE_FACTOR,
+    DR_PARAM_EMISSIVE_STRENGTH,
+    DR_PARAM_LIGHT_COLOR,
+    DR_PARAM_LIGHT_INTENSITY,
+    DR_PARAM_ENV_COLOR,
+    DR_PARAM_ENV_STRENGTH,
+    DR_PARAM_ENV_MAP,
+    DR_PARAM_IMAGE,
+    DR_PARAM_KIND_COUNT
+};
+
+#define DR_PARAM_NAME_MAX 160
+
+struct dr_param {
+    char name[DR_PARAM_NAME_MAX]; /* canonical pointer, with indices */
+    enum dr_param_kind kind;
+    int target;                   /* material, glTF light or image index (-1: environment) */
+    int64_t size;                 /* number of scalars */
+    int64_t offset;               /* first scalar in a gradient vector (set by dr_param_set_create) */
+    int width, height, channels;  /* images and the environment map */
+};
+
+/* "color", "scalar", "image": a word for listings. */
+const char *dr_param_type_name(const struct dr_param *p);
+/* Physical range of each scalar (for optimisers and finite differences). */
+void dr_param_range(const struct dr_param *p, double *lo, double *hi);
+
+/* Every differentiable parameter the scene offers, in document order.
+ * *out is malloc'd. 0 or DR_ERR_NOMEM. */
+int dr_params_list(const struct dr_scene *scene, struct dr_param **out, int *count);
+
+/* Resolves a pointer (indices or material names). On failure returns
+ * DR_ERR_ARG with a message that lists the nearest valid names. */
+int dr_param_resolve(const struct dr_scene *scene, const char *pointer, struct dr_param *out);
+
+/* Current values (size scalars) / new values of a parameter. Setting changes
+ * the scene; call dr_scene_refresh() before rendering again. */
+void dr_param_get(const struct dr_scene *scene, const struct dr_param *p, double *values);
+void dr_param_put(struct dr_scene *scene, const struct dr_param *p, const double *values);
+
+/* The requested parameters, laid out in one gradient vector, with per-object
+ * lookups for the tracer: an offset of -1 means "not requested", so a vertex
+ * whose material, emitter or texture has no requested parameter does no
+ * derivative work at all. */
+struct dr_param_set {
+    struct dr_param *params;
+    int n;
+    int64_t total;                       /* scalars in the gradient vector */
+    int n_materials, n_lights, n_images;
+    int64_t *mat_base_color, *mat_metallic, *mat_roughness;      /* per material */
+    int64_t *mat_emissive_factor, *mat_emissive_strength;        /* per material */
+    int64_t *light_color, *light_intensity;                      /* per scene light instance */
+    int64_t *image;                                              /* per image: texel (0,0) */
+    int64_t env_color, env_strength, env_map;
+    bool *mat_bsdf_active;      /* base colour, metallic, roughness or one of their textures */
+    bool *mat_emission_active;  /* emissive factor, strength or texture */
+    bool lights_active;         /* some punctual light parameter */
+    bool env_active;
+};
+
+/* Resolves every pointer; duplicates and images used both as colour and as
+ * data are refused. NULL + dr_last_error on failure. */
+struct dr_param_set *dr_param_set_create(const struct dr_scene *scene, const char *const *pointers, int n);
+void dr_param_set_destroy(struct dr_param_set *set);
+
+/* All values of the set, concatenated (total scalars) / written back. */
+void dr_param_set_get(const struct dr_scene *scene, const struct dr_param_set *set, double *values);
+void dr_param_set_put(struct dr_scene *scene, const struct dr_param_set *set, const double *values);
+
+#endif
