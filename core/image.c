@@ -190,23 +190,16 @@ void d_texture_eval(const struct dr_texture *tex, const struct dr_image *img, do
 {
     if (!d_texels || !img || img->width <= 0 || img->height <= 0 || img->channels <= 0)
         return;
-    int c = img->channels < 4 ? img->channels : 4;
     int64_t idx[4];
     double wt[4];
     dr_texture_taps(tex, img, u, v, idx, wt);
+    double g[4];
+    int k = dr_texture_channel_adjoint(img->channels, d_out, g);
     for (int i = 0; i < 4; i++) {
         if (wt[i] == 0.0)
             continue;
         double *t = d_texels + (size_t)idx[i] * (size_t)img->channels;
-        if (c == 1) {
-            /* grey replicated into rgb: the adjoint gathers all three */
-            t[0] += wt[i] * (d_out[0] + d_out[1] + d_out[2]);
-        } else if (c == 2) {
-            t[0] += wt[i] * (d_out[0] + d_out[1] + d_out[2]);
-            t[1] += wt[i] * d_out[3];
-        } else {
-            for (int k = 0; k < c; k++)
-                t[k] += wt[i] * d_out[k];
-        }
+        for (int ch = 0; ch < k; ch++)
+            t[ch] += wt[i] * g[ch];
     }
 }

@@ -48,6 +48,25 @@ void dr_texture_eval(const struct dr_texture *tex, const struct dr_image *img,
 void dr_texture_taps(const struct dr_texture *tex, const struct dr_image *img, double u, double v,
                      int64_t idx[4], double w[4]);
 
+/* How an rgba adjoint d_out lands on an image's channels (grey images gather
+ * r+g+b into channel 0): fills g[0..k) and returns k = min(channels, 4). */
+static inline int dr_texture_channel_adjoint(int channels, const double d_out[4], double g[4])
+{
+    if (channels == 1) {
+        g[0] = d_out[0] + d_out[1] + d_out[2];
+        return 1;
+    }
+    if (channels == 2) {
+        g[0] = d_out[0] + d_out[1] + d_out[2];
+        g[1] = d_out[3];
+        return 2;
+    }
+    int k = channels < 4 ? channels : 4;
+    for (int i = 0; i < k; i++)
+        g[i] = d_out[i];
+    return k;
+}
+
 /* Reverse mode of dr_texture_eval with respect to the texel values: adds
  * d_out[c] * weight to d_texels[texel * channels + c] for the blended texels
  * (c < min(channels, 4); d_texels has width * height * channels entries). */

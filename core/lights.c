@@ -176,6 +176,14 @@ struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
         ls->env_entry = (int)k;
         w[k++] = fmax(M_PI * M_PI * ls->scene_radius * ls->scene_radius * mean, 0.0);
     }
+    /* Punctual lights and the environment keep a small floor of probability
+     * even when dark: otherwise a light at intensity 0 would never be
+     * sampled and its intensity could get no gradient. */
+    double wmax = 0.0;
+    for (int64_t i = 0; i < ls->n_entries; i++)
+        wmax = dr_max(wmax, w[i]);
+    for (int64_t i = ls->n_emitters; i < ls->n_entries; i++)
+        w[i] = dr_max(w[i], wmax > 0.0 ? 1e-3 * wmax : 1.0);
     double total = 0.0;
     ls->cdf[0] = 0.0;
     for (int64_t i = 0; i < ls->n_entries; i++) {
@@ -344,6 +352,7 @@ static bool sample_env(const struct dr_scene *s, const struct dr_light_sampler *
         return false;
     out->wi = dir;
     out->dist = INFINITY;
+    out->type = DR_LS_ENV;
     out->radiance = dr_env_radiance(s, dir);
     out->pdf = pdf * ls->pick[ls->env_entry];
     out->delta = false;
@@ -376,6 +385,10 @@ bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls
             return false;
         out->radiance = dr_emission(s, &h);
         out->dist = dist;
+        out->type = DR_LS_AREA;
+        out->index = tri;
+        out->b1 = 1.0 - su;
+        out->b2 = u2 * su;
         out->target = dr_offset_origin(&h, h.ng, dr_neg(out->wi));
         out->pdf = ls->pick[i] * d2 / (fabs(cos_l) * area);
         out->delta = false;
@@ -386,12 +399,15 @@ bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls
 
     const struct dr_punctual *l = &s->lights[i - ls->n_emitters];
     dr_vec3 I = dr_scale(l->color, l->intensity);
+    out->type = DR_LS_PUNCTUAL;
+    out->index = i - ls->n_emitters;
     out->delta = true;
     out->target = l->position;
     out->pdf = ls->pick[i];
     if (l->type == DR_LIGHT_DIRECTIONAL) {
         out->wi = dr_neg(l->direction);
         out->dist = INFINITY;
+        out->atten = 1.0;
         out->radiance = I;
         return true;
     }
@@ -405,6 +421,7 @@ bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls
     double atten = range_window(l->range, dist) / d2;
     if (l->type == DR_LIGHT_SPOT)
         atten *= spot_falloff(l, -dr_dot(out->wi, l->direction));
+    out->atten = atten;
     out->radiance = dr_scale(I, atten);
     return atten > 0.0;
 }

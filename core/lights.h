@@ -13,6 +13,8 @@
 
 struct dr_light_sampler;
 
+enum { DR_LS_AREA, DR_LS_PUNCTUAL, DR_LS_ENV };
+
 struct dr_light_sample {
     dr_vec3 wi;        /* unit direction from the shading point towards the light */
     double dist;       /* distance to the light point (INFINITY: environment/directional) */
@@ -21,6 +23,11 @@ struct dr_light_sample {
     double pdf;        /* solid-angle density including the choice of light;
                           for delta lights, the probability of choosing it */
     bool delta;        /* punctual: no MIS, no BSDF-sampled counterpart */
+    /* which light, for derivatives: */
+    int type;          /* DR_LS_AREA, DR_LS_PUNCTUAL, DR_LS_ENV */
+    int64_t index;     /* emissive triangle, or index into scene->lights */
+    double b1, b2;     /* area: barycentrics of the light point */
+    double atten;      /* punctual: radiance = color * intensity * atten */
     dr_vec3 target;    /* finite lights: the light point, pushed off the light's
                           surface towards the shading point (see dr_offset_origin);
                           shadow rays end here */
