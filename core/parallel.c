@@ -95,3 +95,65 @@ out:
     pthread_mutex_destroy(&j.lock);
     return rc;
 }
+
+struct range_job {
+    int64_t n, chunk;
+    _Atomic int64_t next;
+    dr_range_fn fn;
+    void *ctx;
+};
+
+struct range_worker {
+    struct range_job *job;
+    int index;
+};
+
+static void *range_main(void *arg)
+{
+    struct range_worker *w = arg;
+    struct range_job *j = w->job;
+    for (;;) {
+        int64_t b = atomic_fetch_add(&j->next, j->chunk);
+        if (b >= j->n)
+            break;
+        int64_t e = b + j->chunk < j->n ? b + j->chunk : j->n;
+        j->fn(j->ctx, w->index, b, e);
+    }
+    return NULL;
+}
+
+int dr_parallel_for(int64_t n, int64_t chunk, int threads, dr_range_fn fn, void *ctx)
+{
+    struct range_job j;
+    j.n = n;
+    j.chunk = chunk > 0 ? chunk : 1;
+    atomic_init(&j.next, 0);
+    j.fn = fn;
+    j.ctx = ctx;
+    if (threads <= 0)
+        threads = dr_cpu_count();
+    struct range_worker *ws = calloc((size_t)threads, sizeof *ws);
+    pthread_t *ids = calloc((size_t)threads, sizeof *ids);
+    if (!ws || !ids) {
+        free(ws);
+        free(ids);
+        dr_set_error("out of memory");
+        return DR_ERR_NOMEM;
+    }
+    int started = 0;
+    for (int i = 0; i < threads; i++) {
+        ws[i].job = &j;
+        ws[i].index = i;
+    }
+    for (int i = 1; i < threads; i++) {
+        if (pthread_create(&ids[i], NULL, range_main, &ws[i]) != 0)
+            break;
+        started++;
+    }
+    range_main(&ws[0]);
+    for (int i = 1; i <= started; i++)
+        pthread_join(ids[i], NULL);
+    free(ws);
+    free(ids);
+    return 0;
+}

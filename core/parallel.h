@@ -5,6 +5,8 @@
 #ifndef DR_PARALLEL_H
 #define DR_PARALLEL_H
 
+#include <stdint.h>
+
 #define DR_TILE_SIZE 16
 
 /* Called once per tile, from worker `thread` (0..threads-1); [x0,x1) x [y0,y1). */
@@ -16,6 +18,11 @@ typedef void (*dr_progress_fn)(void *ctx, int done, int total);
 /* Runs fn over all tiles of a width x height image on `threads` threads
  * (<= 0: one per online CPU). Returns 0 or DR_ERR_INTERNAL (thread creation). */
 int dr_parallel_tiles(int width, int height, int threads, dr_tile_fn fn, dr_progress_fn progress, void *ctx);
+
+/* Runs fn over [0, n) in chunks of `chunk` items handed out dynamically to
+ * `threads` workers (<= 0: one per CPU); fn gets [begin, end). */
+typedef void (*dr_range_fn)(void *ctx, int thread, int64_t begin, int64_t end);
+int dr_parallel_for(int64_t n, int64_t chunk, int threads, dr_range_fn fn, void *ctx);
 
 /* Number of online CPUs (>= 1). */
 int dr_cpu_count(void);
