@@ -1,0 +1,49 @@
+/* Checking an estimator against finite differences, statistically.
+ *
+ * Objective: J(theta) = mean over pixels and channels of the rendered image.
+ * For each direction (every scalar of a colour or scalar parameter; for an
+ * image, all texels at once and a fixed random +-1 pattern), K independent
+ * batches (seeds seed + b) each give
+ *   - the estimator's dJ/dtheta . dir in reverse mode (uniform adjoint) and in
+ *     forward mode (mean of the derivative image),
+ *   - a central difference (J(theta + eps dir) - J(theta - eps dir)) / 2 eps from
+ *     two renders with the same seed (common random numbers); one-sided,
+ *     second order, where theta - eps dir would leave the parameter's range.
+ * Means and standard errors over the batches give z = (g - fd) / sqrt(se_g^2 + se_fd^2). */
+#ifndef DR_FDCHECK_H
+#define DR_FDCHECK_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "estimator.h"
+#include "params.h"
+#include "scene.h"
+
+struct dr_fd_options {
+    const struct dr_estimator_ops *estimator;
+    int width, height;
+    int spp;            /* per batch */
+    int batches;        /* >= 2 */
+    int max_depth, rr_depth;
+    uint64_t seed;
+    int threads;
+    double eps;         /* step along the direction (absolute) */
+    double z_max;       /* agreement threshold on |z| */
+};
+
+struct dr_fd_entry {
+    char label[DR_PARAM_NAME_MAX + 32];   /* parameter name + component */
+    double reverse, reverse_se;           /* estimator, reverse mode */
+    double forward, forward_se;           /* estimator, forward mode */
+    double fd, fd_se;                     /* finite differences */
+    double z_reverse, z_forward;
+    bool agree;                           /* both |z| <= z_max */
+};
+
+/* Runs the check for every parameter of ps (the scene is modified during the
+ * run and restored). *entries is malloc'd. 0 or a negative DR_ERR_*. */
+int dr_fdcheck(struct dr_scene *scene, const struct dr_camera *camera, const struct dr_param_set *ps,
+               const struct dr_fd_options *o, struct dr_fd_entry **entries, int *count);
+
+#endif
