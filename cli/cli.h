@@ -12,7 +12,8 @@ enum {
     DR_EXIT_OK = 0,
     DR_EXIT_FAILURE = 1,  /* the work failed (cannot write output, out of memory, ...) */
     DR_EXIT_USAGE = 2,    /* unknown subcommand or option, impossible option value */
-    DR_EXIT_INPUT = 3     /* a scene or image could not be read or is malformed */
+    DR_EXIT_INPUT = 3,    /* a scene or image could not be read or is malformed */
+    DR_EXIT_DISAGREE = 4  /* fdcheck: some gradient disagrees with finite differences */
 };
 
 #define DR_VERSION "0.1.0"
@@ -34,6 +35,8 @@ void cli_error(const char *cmd, const char *fmt, ...) __attribute__((format(prin
  * return false. */
 bool cli_parse_int(const char *cmd, const char *opt, const char *text, long min, long max, long *out);
 bool cli_parse_u64(const char *cmd, const char *opt, const char *text, uint64_t *out);
+/* A finite real number greater than min_exclusive. */
+bool cli_parse_double(const char *cmd, const char *opt, const char *text, double min_exclusive, double *out);
 bool cli_parse_res(const char *cmd, const char *opt, const char *text, int *w, int *h);
 
 /* Path of a scene shipped with drender (e.g. "cornell-box.gltf"), looked up

@@ -165,3 +165,20 @@ void json_number(FILE *f, double v)
     else
         fputs("null", f);
 }
+
+bool cli_parse_double(const char *cmd, const char *opt, const char *text, double min_exclusive, double *out)
+{
+    char *end;
+    errno = 0;
+    double v = strtod(text, &end);
+    if (errno == ERANGE || end == text || *end || !isfinite(v)) {
+        cli_error(cmd, "%s: '%s' is not a finite number", opt, text);
+        return false;
+    }
+    if (!(v > min_exclusive)) {
+        cli_error(cmd, "%s: %s must be greater than %g", opt, text, min_exclusive);
+        return false;
+    }
+    *out = v;
+    return true;
+}

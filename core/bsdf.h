@@ -20,7 +20,7 @@
 
 #include "vec.h"
 
-#define DR_BSDF_MIN_ALPHA 1e-6   /* roughness 0.001 */
+#define DR_BSDF_MIN_ALPHA 1e-7   /* roughness ~0.0003: below the smallest roughness parameter (0.001) */
 
 /* The material evaluated at one shading point (textures already applied). */
 struct dr_bsdf {

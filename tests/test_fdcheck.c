@@ -16,6 +16,7 @@ struct fd_case {
     const char *name;
     int spp, batches, max_depth, res;
     double eps;
+    bool may_be_zero;   /* the true derivative may be ~0 (skip the resolvability check) */
 };
 
 static void run_case(const struct fd_case *c, struct dr_scene *s, struct dr_camera cam, const char *const *ptrs,
@@ -43,7 +44,7 @@ static void run_case(const struct fd_case *c, struct dr_scene *s, struct dr_came
                   dr_estimators[e]->name, en[i].label, en[i].reverse, en[i].forward, en[i].fd, en[i].z_reverse,
                   en[i].z_forward);
             /* a check that cannot fail is no check: the derivative must be resolved */
-            CHECK(fabs(en[i].fd) > 3.0 * en[i].fd_se || fabs(en[i].reverse) < 1e-12,
+            CHECK(c->may_be_zero || fabs(en[i].fd) > 3.0 * en[i].fd_se || fabs(en[i].reverse) < 1e-12,
                   "%s: %s: finite differences too noisy to judge (%.3g +- %.3g)", c->name, en[i].label, en[i].fd,
                   en[i].fd_se);
         }
@@ -61,13 +62,279 @@ static void diffuse_plane_env(void)
     struct dr_scene *s = sb_finish(&b);
     const char *p[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor", "/extensions/DR_environment/color",
                        "/extensions/DR_environment/strength"};
-    struct fd_case c = {"plane-env", 4, 8, 4, 16, 1e-2};
+    struct fd_case c = {"plane-env", 4, 8, 4, 16, 1e-2, false};
     run_case(&c, s, sb_camera(dr_v3(0, 1, 0.5), dr_v3(0, 0, 0), 40), p, 3);
     dr_scene_destroy(s);
+}
+
+
+static struct dr_material emitter(dr_vec3 Le)
+{
+    struct dr_material m = sb_diffuse(dr_v3s(0.0));
+    m.emissive_factor = Le;
+    return m;
+}
+
+/* Floor, a wall behind the camera (never seen directly) and a small ceiling
+ * light: with max depth 3 the wall's albedo matters only through
+ * camera -> floor -> wall -> light. Geometry scaled by `scale`. */
+static struct dr_scene *hidden_wall_scene(double scale, dr_vec3 wall_albedo)
+{
+    struct sb b;
+    sb_init(&b);
+    double S = scale;
+    sb_quad(&b, dr_v3(-3 * S, 0, 3 * S), dr_v3(6 * S, 0, 0), dr_v3(0, 0, -6 * S), sb_material(&b, sb_diffuse(dr_v3s(0.7))));
+    /* wall at z = +2, facing -z */
+    sb_quad(&b, dr_v3(3 * S, 0, 2 * S), dr_v3(-6 * S, 0, 0), dr_v3(0, 3 * S, 0), sb_material(&b, sb_diffuse(wall_albedo)));
+    /* light at y = 2.5 facing down, near the wall */
+    sb_quad(&b, dr_v3(-0.5 * S, 2.5 * S, 1.8 * S), dr_v3(0, 0, -1 * S), dr_v3(1 * S, 0, 0), sb_material(&b, emitter(dr_v3(8, 8, 8))));
+    return sb_finish(&b);
+}
+
+static void hidden_wall(void)
+{
+    struct dr_scene *s = hidden_wall_scene(1.0, dr_v3(0.5, 0.6, 0.7));
+    const char *p[] = {"/materials/1/pbrMetallicRoughness/baseColorFactor"};
+    struct fd_case c = {"hidden-wall", 16, 8, 3, 16, 1e-2, false};
+    run_case(&c, s, sb_camera(dr_v3(0, 1, 1), dr_v3(0, 0, -1.5), 40), p, 1);
+    dr_scene_destroy(s);
+}
+
+/* Area light over a floor: emission factor and strength. */
+static void area_emission(void)
+{
+    struct sb b;
+    sb_init(&b);
+    sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, sb_diffuse(dr_v3(0.6, 0.6, 0.6))));
+    sb_quad(&b, dr_v3(-0.5, 1.5, 0.5), dr_v3(0, 0, -1), dr_v3(1, 0, 0), sb_material(&b, emitter(dr_v3(3, 2, 1))));
+    struct dr_scene *s = sb_finish(&b);
+    const char *p[] = {"/materials/1/emissiveFactor", "/materials/1/extensions/KHR_materials_emissive_strength/emissiveStrength"};
+    struct fd_case c = {"area-light", 8, 8, 4, 16, 1e-2, false};
+    run_case(&c, s, sb_camera(dr_v3(0, 1, 2), dr_v3(0, 0, 0), 50), p, 2);
+    dr_scene_destroy(s);
+}
+
+static void point_light(void)
+{
+    struct sb b;
+    sb_init(&b);
+    sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, sb_diffuse(dr_v3(0.6, 0.5, 0.4))));
+    sb_box(&b, dr_v3(-0.3, 0, -0.3), dr_v3(0.3, 0.6, 0.3), sb_material(&b, sb_diffuse(dr_v3(0.8, 0.8, 0.8))));
+    struct dr_punctual l;
+    memset(&l, 0, sizeof l);
+    l.type = DR_LIGHT_POINT;
+    l.color = dr_v3(1, 0.8, 0.6);
+    l.intensity = 4;
+    l.position = dr_v3(0.5, 2, 0.5);
+    sb_light(&b, l);
+    struct dr_scene *s = sb_finish(&b);
+    const char *p[] = {"/extensions/KHR_lights_punctual/lights/0/intensity", "/extensions/KHR_lights_punctual/lights/0/color"};
+    struct fd_case c = {"point-light", 8, 8, 4, 16, 1e-2, false};
+    run_case(&c, s, sb_camera(dr_v3(1.5, 1.5, 1.5), dr_v3(0, 0.2, 0), 50), p, 2);
+    dr_scene_destroy(s);
+}
+
+/* An environment map lighting a diffuse box on a floor: every texel. */
+static void env_map(void)
+{
+    struct sb b;
+    sb_init(&b);
+    sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, sb_diffuse(dr_v3(0.6, 0.6, 0.6))));
+    sb_box(&b, dr_v3(-0.3, 0, -0.3), dr_v3(0.3, 0.6, 0.3), sb_material(&b, sb_diffuse(dr_v3(0.8, 0.5, 0.3))));
+    sb_environment(&b, dr_v3s(1.0));
+    struct dr_image *map = &b.s->env.map;
+    map->width = 8;
+    map->height = 4;
+    map->channels = 3;
+    map->data = malloc(sizeof(float) * 8 * 4 * 3);
+    for (int i = 0; i < 8 * 4 * 3; i++)
+        map->data[i] = (float)(0.2 + 0.1 * (i % 7));
+    struct dr_scene *s = sb_finish(&b);
+    const char *p[] = {"/extensions/DR_environment/uri"};
+    struct fd_case c = {"env-map", 8, 8, 4, 16, 1e-2, false};
+    run_case(&c, s, sb_camera(dr_v3(1.5, 1.5, 1.5), dr_v3(0, 0.2, 0), 50), p, 1);
+    dr_scene_destroy(s);
+}
+
+/* A glossy floor (metallic 0.5, roughness 0.3) reflecting an area light. */
+static void glossy(void)
+{
+    struct sb b;
+    sb_init(&b);
+    struct dr_material g = sb_diffuse(dr_v3(0.7, 0.5, 0.3));
+    g.metallic = 0.5;
+    g.roughness = 0.3;
+    g.specular = 1.0;
+    sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, g));
+    sb_quad(&b, dr_v3(-0.5, 1.5, -0.5), dr_v3(0, 0, -1), dr_v3(1, 0, 0), sb_material(&b, emitter(dr_v3(4, 4, 4))));
+    struct dr_scene *s = sb_finish(&b);
+    const char *p[] = {"/materials/0/pbrMetallicRoughness/roughnessFactor", "/materials/0/pbrMetallicRoughness/metallicFactor"};
+    struct fd_case c = {"glossy", 64, 8, 3, 16, 2e-2, false};
+    run_case(&c, s, sb_camera(dr_v3(0, 1, 1.5), dr_v3(0, 0, -0.6), 40), p, 2);
+    dr_scene_destroy(s);
+}
+
+/* A floor with a 4x4 base-colour texture (already linear) under an environment. */
+static void texture_texels(void)
+{
+    struct sb b;
+    sb_init(&b);
+    struct dr_material m = sb_diffuse(dr_v3s(1.0));
+    m.base_color_tex.texture = 0;
+    sb_quad(&b, dr_v3(-1, 0, 1), dr_v3(2, 0, 0), dr_v3(0, 0, -2), sb_material(&b, m));
+    sb_environment(&b, dr_v3(1.0, 0.9, 0.8));
+    struct dr_scene *s = b.s;
+    s->n_images = 1;
+    s->images = calloc(1, sizeof(struct dr_image));
+    s->images[0].width = s->images[0].height = 4;
+    s->images[0].channels = 3;
+    s->images[0].data = malloc(sizeof(float) * 48);
+    s->images[0].linear = malloc(sizeof(float) * 48);
+    for (int i = 0; i < 48; i++)
+        s->images[0].data[i] = s->images[0].linear[i] = (float)(0.2 + 0.05 * (i % 11));
+    s->n_textures = 1;
+    s->textures = calloc(1, sizeof(struct dr_texture));
+    s->textures[0] = (struct dr_texture){0, DR_WRAP_REPEAT, DR_WRAP_REPEAT};
+    sb_finish(&b);
+    const char *p[] = {"/images/0"};
+    struct fd_case c = {"texture", 8, 8, 3, 16, 1e-2, false};
+    run_case(&c, s, sb_camera(dr_v3(0, 1.2, 0.8), dr_v3(0, 0, 0), 60), p, 1);
+    dr_scene_destroy(s);
+}
+
+/* ---- hard cases ---- */
+
+/* Base colour exactly 0 inside an open box under an environment: the replay
+ * divides by f = 0 nowhere, and the interreflection derivative (through the
+ * substituted continuation) matches one-sided finite differences. */
+static void zero_albedo(void)
+{
+    struct sb b;
+    sb_init(&b);
+    int mi = sb_material(&b, sb_diffuse(dr_v3s(0.0)));
+    dr_vec3 lo = dr_v3(-1, 0, -1);
+    sb_quad(&b, lo, dr_v3(0, 0, 2), dr_v3(2, 0, 0), mi);
+    sb_quad(&b, lo, dr_v3(2, 0, 0), dr_v3(0, 2, 0), mi);
+    sb_quad(&b, dr_v3(-1, 0, 1), dr_v3(0, 2, 0), dr_v3(2, 0, 0), mi);
+    sb_quad(&b, lo, dr_v3(0, 2, 0), dr_v3(0, 0, 2), mi);
+    sb_quad(&b, dr_v3(1, 0, -1), dr_v3(0, 0, 2), dr_v3(0, 2, 0), mi);
+    sb_environment(&b, dr_v3s(1.0));
+    struct dr_scene *s = sb_finish(&b);
+    const char *p[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor"};
+    struct fd_case c = {"zero-albedo", 8, 8, 6, 16, 1e-2, false};
+    run_case(&c, s, sb_camera(dr_v3(0.1, 4, 0.2), dr_v3(0, 0, 0), 30), p, 1);
+    dr_scene_destroy(s);
+}
+
+/* Camera rays skimming a plane at 0.05 degrees. */
+static void grazing(void)
+{
+    struct sb b;
+    sb_init(&b);
+    sb_quad(&b, dr_v3(-1000, 0, 1000), dr_v3(2000, 0, 0), dr_v3(0, 0, -2000), sb_material(&b, sb_diffuse(dr_v3(0.5, 0.5, 0.5))));
+    sb_environment(&b, dr_v3(1, 1, 1));
+    struct dr_scene *s = sb_finish(&b);
+    double a = 0.05 * M_PI / 180;
+    const char *p[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor"};
+    struct fd_case c = {"grazing", 4, 8, 3, 16, 1e-2, false};
+    run_case(&c, s, sb_camera(dr_v3(0, 0.5, 0), dr_v3(0, 0.5 - 10 * tan(a), -10), 0.02), p, 1);
+    dr_scene_destroy(s);
+}
+
+/* Near-specular metal (roughness 0.001) reflecting an environment map. */
+static void near_specular(void)
+{
+    struct sb b;
+    sb_init(&b);
+    struct dr_material m = sb_diffuse(dr_v3(0.9, 0.8, 0.6));
+    m.metallic = 1.0;
+    m.roughness = 0.001;
+    m.specular = 1.0;
+    sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, m));
+    sb_environment(&b, dr_v3s(1.0));
+    struct dr_image *map = &b.s->env.map;
+    map->width = 16;
+    map->height = 8;
+    map->channels = 3;
+    map->data = malloc(sizeof(float) * 16 * 8 * 3);
+    for (int y = 0; y < 8; y++)
+        for (int x = 0; x < 16; x++)
+            for (int k = 0; k < 3; k++)
+                map->data[(y * 16 + x) * 3 + k] = (float)(0.2 + 0.1 * x + 0.05 * y);
+    struct dr_scene *s = sb_finish(&b);
+    const char *p[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor", "/materials/0/pbrMetallicRoughness/roughnessFactor"};
+    struct fd_case c = {"rough-0.001", 16, 8, 3, 16, 2e-4, true};
+    run_case(&c, s, sb_camera(dr_v3(0, 1, 1), dr_v3(0, 0, -1), 40), p, 2);
+    dr_scene_destroy(s);
+}
+
+/* Albedo 0.99 in the open box, max depth 1000: long paths, Russian roulette. */
+static void long_paths(void)
+{
+    struct sb b;
+    sb_init(&b);
+    int mi = sb_material(&b, sb_diffuse(dr_v3s(0.99)));
+    dr_vec3 lo = dr_v3(-1, 0, -1);
+    sb_quad(&b, lo, dr_v3(0, 0, 2), dr_v3(2, 0, 0), mi);
+    sb_quad(&b, lo, dr_v3(2, 0, 0), dr_v3(0, 2, 0), mi);
+    sb_quad(&b, dr_v3(-1, 0, 1), dr_v3(0, 2, 0), dr_v3(2, 0, 0), mi);
+    sb_quad(&b, lo, dr_v3(0, 2, 0), dr_v3(0, 0, 2), mi);
+    sb_quad(&b, dr_v3(1, 0, -1), dr_v3(0, 0, 2), dr_v3(0, 2, 0), mi);
+    /* a deep box (opening 2x2 at height 6) keeps paths bouncing */
+    sb_quad(&b, dr_v3(-1, 2, -1), dr_v3(2, 0, 0), dr_v3(0, 4, 0), mi);
+    sb_quad(&b, dr_v3(-1, 2, 1), dr_v3(0, 4, 0), dr_v3(2, 0, 0), mi);
+    sb_quad(&b, dr_v3(-1, 2, -1), dr_v3(0, 4, 0), dr_v3(0, 0, 2), mi);
+    sb_quad(&b, dr_v3(1, 2, -1), dr_v3(0, 0, 2), dr_v3(0, 4, 0), mi);
+    sb_environment(&b, dr_v3s(1.0));
+    struct dr_scene *s = sb_finish(&b);
+    const char *p[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor"};
+    struct fd_case c = {"depth-1000", 8, 8, 1000, 12, 2e-3, false};
+    run_case(&c, s, sb_camera(dr_v3(0.1, 9, 0.2), dr_v3(0, 0, 0), 10), p, 1);
+    dr_scene_destroy(s);
+}
+
+/* A 1 mm emitter of radiance 1e6 over a floor. */
+static void tiny_emitter(void)
+{
+    struct sb b;
+    sb_init(&b);
+    sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, sb_diffuse(dr_v3(0.6, 0.5, 0.4))));
+    sb_quad(&b, dr_v3(-5e-4, 1, 5e-4), dr_v3(0, 0, -1e-3), dr_v3(1e-3, 0, 0), sb_material(&b, emitter(dr_v3s(1e6))));
+    struct dr_scene *s = sb_finish(&b);
+    const char *p[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor",
+                       "/materials/1/extensions/KHR_materials_emissive_strength/emissiveStrength"};
+    struct fd_case c = {"tiny-1e6", 8, 8, 4, 16, 1e-2, false};
+    run_case(&c, s, sb_camera(dr_v3(0, 1, 1.5), dr_v3(0, 0, 0), 50), p, 2);
+    dr_scene_destroy(s);
+}
+
+/* The hidden-wall scene at 1e-3 and 1e3 times its size. */
+static void scales(void)
+{
+    for (int k = 0; k < 2; k++) {
+        double S = k == 0 ? 1e-3 : 1e3;
+        struct dr_scene *s = hidden_wall_scene(S, dr_v3(0.5, 0.6, 0.7));
+        const char *p[] = {"/materials/1/pbrMetallicRoughness/baseColorFactor", "/materials/0/pbrMetallicRoughness/baseColorFactor"};
+        struct fd_case c = {k == 0 ? "scale-1e-3" : "scale-1e3", 16, 8, 3, 16, 1e-2, false};
+        run_case(&c, s, sb_camera(dr_v3(0, S, S), dr_v3(0, 0, -1.5 * S), 40), p, 2);
+        dr_scene_destroy(s);
+    }
 }
 
 int main(void)
 {
     diffuse_plane_env();
+    hidden_wall();
+    area_emission();
+    point_light();
+    env_map();
+    glossy();
+    texture_texels();
+    zero_albedo();
+    grazing();
+    near_specular();
+    long_paths();
+    tiny_emitter();
+    scales();
     return TEST_END();
 }

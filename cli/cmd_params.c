@@ -1,0 +1,213 @@
+/* drender params: the differentiable parameters a scene offers, with their
+ * current values. */
+#include <getopt.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "cli.h"
+#include "error.h"
+#include "params.h"
+#include "scene.h"
+
+#define DEFAULT_SCENE "cornell-box.gltf"
+
+void cmd_params_usage(FILE *out)
+{
+    fprintf(out,
+            "usage: drender params [SCENE] [--json]\n"
+            "\n"
+            "Lists every differentiable parameter of SCENE (.gltf or .glb; default: the\n"
+            "bundled Cornell box): its name (a JSON pointer into the glTF document, as\n"
+            "--param takes it), type (color, scalar, image), number of scalars, current\n"
+            "value (images: size and mean texel) and, for material parameters, the\n"
+            "material's name (which may stand in for its index in --param).\n"
+            "\n"
+            "options:\n"
+            "      --json          print one JSON object on stdout instead of the table\n"
+            "  -h, --help          show this help\n");
+}
+
+enum { OPT_JSON = 256 };
+
+static bool is_material(const struct dr_param *p)
+{
+    return p->kind <= DR_PARAM_EMISSIVE_STRENGTH;
+}
+
+static bool is_image(const struct dr_param *p)
+{
+    return p->kind == DR_PARAM_IMAGE || p->kind == DR_PARAM_ENV_MAP;
+}
+
+/* Mean of each channel of an image parameter (values: size scalars). */
+static void channel_means(const struct dr_param *p, const double *values, double mean[4])
+{
+    int ch = p->channels > 0 ? p->channels : 1;
+    int64_t texels = p->size / ch;
+    for (int c = 0; c < 4; c++)
+        mean[c] = 0.0;
+    for (int64_t i = 0; i < texels; i++)
+        for (int c = 0; c < ch && c < 4; c++)
+            mean[c] += values[i * ch + c];
+    for (int c = 0; c < ch && c < 4; c++)
+        mean[c] = texels > 0 ? mean[c] / (double)texels : 0.0;
+}
+
+static void print_value(FILE *f, const struct dr_param *p, const double *values)
+{
+    if (is_image(p)) {
+        double mean[4];
+        channel_means(p, values, mean);
+        fprintf(f, "%dx%dx%d image, mean (", p->width, p->height, p->channels);
+        for (int c = 0; c < p->channels && c < 4; c++)
+            fprintf(f, "%s%.6g", c ? ", " : "", mean[c]);
+        fputc(')', f);
+        return;
+    }
+    if (p->size == 1) {
+        fprintf(f, "%.6g", values[0]);
+        return;
+    }
+    fputc('(', f);
+    for (int64_t i = 0; i < p->size; i++)
+        fprintf(f, "%s%.6g", i ? ", " : "", values[i]);
+    fputc(')', f);
+}
+
+static void print_json_param(FILE *f, const struct dr_scene *s, const struct dr_param *p, const double *values)
+{
+    fprintf(f, "{\"name\": ");
+    json_string(f, p->name);
+    fprintf(f, ", \"type\": ");
+    json_string(f, dr_param_type_name(p));
+    fprintf(f, ", \"size\": %lld", (long long)p->size);
+    if (is_image(p)) {
+        double mean[4];
+        channel_means(p, values, mean);
+        fprintf(f, ", \"width\": %d, \"height\": %d, \"channels\": %d, \"mean\": [", p->width, p->height,
+                p->channels);
+        for (int c = 0; c < p->channels && c < 4; c++) {
+            if (c)
+                fputs(", ", f);
+            json_number(f, mean[c]);
+        }
+        fputc(']', f);
+    } else {
+        fprintf(f, ", \"value\": [");
+        for (int64_t i = 0; i < p->size; i++) {
+            if (i)
+                fputs(", ", f);
+            json_number(f, values[i]);
+        }
+        fputc(']', f);
+    }
+    if (is_material(p) && s->materials[p->target].name[0]) {
+        fprintf(f, ", \"material\": ");
+        json_string(f, s->materials[p->target].name);
+    }
+    fputc('}', f);
+}
+
+int cmd_params(int argc, char **argv)
+{
+    static const struct option opts[] = {
+        {"json", no_argument, NULL, OPT_JSON},
+        {"help", no_argument, NULL, 'h'},
+        {NULL, 0, NULL, 0},
+    };
+    bool json = false;
+    opterr = 0;
+    optind = 1;
+    int c;
+    while ((c = getopt_long(argc, argv, ":h", opts, NULL)) != -1) {
+        switch (c) {
+        case 'h': cmd_params_usage(stdout); return DR_EXIT_OK;
+        case OPT_JSON: json = true; break;
+        case ':':
+            cli_error("params", "option '%s' needs a value", argv[optind - 1]);
+            return DR_EXIT_USAGE;
+        default:
+            if (optopt > 0 && optopt < 256 && optopt != 'h')
+                cli_error("params", "unknown option '-%c' (see 'drender params --help')", optopt);
+            else if (optopt != 0)
+                cli_error("params", "option '%s' does not take a value", argv[optind - 1]);
+            else
+                cli_error("params", "unknown option '%s' (see 'drender params --help')", argv[optind - 1]);
+            return DR_EXIT_USAGE;
+        }
+    }
+    const char *scene_arg = NULL;
+    if (optind < argc)
+        scene_arg = argv[optind++];
+    if (optind < argc) {
+        cli_error("params", "unexpected argument '%s' (one scene at a time)", argv[optind]);
+        return DR_EXIT_USAGE;
+    }
+    char *scene_path = scene_arg ? strdup(scene_arg) : cli_find_bundled_scene(DEFAULT_SCENE);
+    if (!scene_path) {
+        cli_error("params", "no SCENE given and the bundled %s was not found (set DRENDER_DATA)", DEFAULT_SCENE);
+        return DR_EXIT_INPUT;
+    }
+    int rc;
+    struct dr_param *list = NULL;
+    int n = 0;
+    double *values = NULL;
+    struct dr_scene *scene = dr_scene_load(scene_path);
+    if (!scene) {
+        cli_error("params", "%s", dr_last_error());
+        rc = DR_EXIT_INPUT;
+        goto out;
+    }
+    if (dr_params_list(scene, &list, &n) != 0) {
+        cli_error("params", "%s", dr_last_error());
+        rc = DR_EXIT_FAILURE;
+        goto out;
+    }
+    int64_t biggest = 1;
+    size_t name_w = 4;
+    for (int i = 0; i < n; i++) {
+        if (list[i].size > biggest)
+            biggest = list[i].size;
+        if (strlen(list[i].name) > name_w)
+            name_w = strlen(list[i].name);
+    }
+    values = malloc(sizeof(double) * (size_t)biggest);
+    if (!values) {
+        cli_error("params", "out of memory");
+        rc = DR_EXIT_FAILURE;
+        goto out;
+    }
+    FILE *f = stdout;
+    if (json) {
+        fprintf(f, "{\"command\": \"params\", \"scene\": ");
+        json_string(f, scene_path);
+        fprintf(f, ", \"parameters\": [");
+        for (int i = 0; i < n; i++) {
+            dr_param_get(scene, &list[i], values);
+            if (i)
+                fputs(", ", f);
+            print_json_param(f, scene, &list[i], values);
+        }
+        fprintf(f, "]}\n");
+    } else {
+        fprintf(f, "%s: %d differentiable parameter%s\n", scene_path, n, n == 1 ? "" : "s");
+        if (n > 0)
+            fprintf(f, "%-*s  %-6s  %7s  %s\n", (int)name_w, "NAME", "TYPE", "SIZE", "VALUE");
+        for (int i = 0; i < n; i++) {
+            const struct dr_param *p = &list[i];
+            dr_param_get(scene, p, values);
+            fprintf(f, "%-*s  %-6s  %7lld  ", (int)name_w, p->name, dr_param_type_name(p), (long long)p->size);
+            print_value(f, p, values);
+            if (is_material(p) && scene->materials[p->target].name[0])
+                fprintf(f, "  [material '%s']", scene->materials[p->target].name);
+            fputc('\n', f);
+        }
+    }
+    rc = DR_EXIT_OK;
+out:
+    free(values);
+    free(list);
+    dr_scene_destroy(scene);
+    free(scene_path);
+    return rc;
+}

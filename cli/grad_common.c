@@ -1,0 +1,221 @@
+/* Options and set-up shared by drender grad and drender fdcheck. */
+#include "grad_common.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+#include "camera.h"
+#include "cli.h"
+#include "error.h"
+
+#define DEFAULT_SCENE "cornell-box.gltf"
+
+void grad_common_init(struct grad_common *g, const char *cmd, int spp)
+{
+    memset(g, 0, sizeof *g);
+    g->cmd = cmd;
+    g->estimator = dr_estimator_find("prb");
+    g->spp = spp;
+    g->max_depth = 8;
+}
+
+void grad_common_free(struct grad_common *g)
+{
+    free(g->params);
+    g->params = NULL;
+    g->n_params = 0;
+}
+
+static void list_estimators(char *buf, size_t size)
+{
+    buf[0] = '\0';
+    for (int i = 0; dr_estimators[i]; i++) {
+        size_t len = strlen(buf);
+        snprintf(buf + len, size - len, "%s%s", i ? ", " : "", dr_estimators[i]->name);
+    }
+}
+
+int grad_common_option(struct grad_common *g, int c, const char *arg)
+{
+    long v;
+    switch (c) {
+    case GOPT_PARAM: {
+        const char **p = realloc(g->params, sizeof *p * (size_t)(g->n_params + 1));
+        if (!p) {
+            cli_error(g->cmd, "out of memory");
+            return DR_EXIT_FAILURE;
+        }
+        g->params = p;
+        g->params[g->n_params++] = arg;
+        return 0;
+    }
+    case GOPT_ESTIMATOR:
+        g->estimator = dr_estimator_find(arg);
+        if (!g->estimator) {
+            char names[256];
+            list_estimators(names, sizeof names);
+            cli_error(g->cmd, "--estimator: unknown estimator '%s' (available: %s)", arg, names);
+            return DR_EXIT_USAGE;
+        }
+        return 0;
+    case GOPT_SAMPLING:
+        if (strcmp(arg, "detached") == 0)
+            return 0;
+        if (strcmp(arg, "attached") == 0)
+            cli_error(g->cmd, "--sampling attached: not available yet: only 'detached' sampling is implemented");
+        else
+            cli_error(g->cmd, "--sampling: unknown sampling strategy '%s': only 'detached' sampling is implemented",
+                      arg);
+        return DR_EXIT_USAGE;
+    case GOPT_SPP:
+        if (!cli_parse_int(g->cmd, "--spp", arg, 1, 1L << 30, &v))
+            return DR_EXIT_USAGE;
+        g->spp = (int)v;
+        return 0;
+    case GOPT_DEPTH:
+        if (!cli_parse_int(g->cmd, "--max-depth", arg, 1, 100000, &v))
+            return DR_EXIT_USAGE;
+        g->max_depth = (int)v;
+        return 0;
+    case GOPT_RES:
+        if (!cli_parse_res(g->cmd, "--res", arg, &g->width, &g->height))
+            return DR_EXIT_USAGE;
+        g->res_given = true;
+        return 0;
+    case GOPT_CAMERA:
+        if (!cli_parse_int(g->cmd, "--camera", arg, 0, 1L << 30, &v))
+            return DR_EXIT_USAGE;
+        g->camera = (int)v;
+        g->camera_given = true;
+        return 0;
+    case GOPT_SEED:
+        if (!cli_parse_u64(g->cmd, "--seed", arg, &g->seed))
+            return DR_EXIT_USAGE;
+        return 0;
+    case GOPT_THREADS:
+        if (!cli_parse_int(g->cmd, "--threads", arg, 0, 256, &v))
+            return DR_EXIT_USAGE;
+        g->threads = (int)v;
+        return 0;
+    case GOPT_JSON: g->json = true; return 0;
+    default: return -1;
+    }
+}
+
+int grad_getopt_error(const char *cmd, int c, char **argv, const char *short_with_arg)
+{
+    if (c == ':') {
+        cli_error(cmd, "option '%s' needs a value", argv[optind - 1]);
+        return DR_EXIT_USAGE;
+    }
+    /* optopt: an unknown short option (argv[optind - 1] is not it inside a group
+     * like -xy), or the option of '--json=1'; 0 for an unknown long option. */
+    if (optopt > 0 && optopt < 256 && optopt != 'h' && !strchr(short_with_arg, optopt))
+        cli_error(cmd, "unknown option '-%c' (see 'drender %s --help')", optopt, cmd);
+    else if (optopt != 0)
+        cli_error(cmd, "option '%s' does not take a value", argv[optind - 1]);
+    else
+        cli_error(cmd, "unknown option '%s' (see 'drender %s --help')", argv[optind - 1], cmd);
+    return DR_EXIT_USAGE;
+}
+
+int grad_common_check(const struct grad_common *g)
+{
+    if (g->n_params == 0) {
+        cli_error(g->cmd, "--param is required (at least one; 'drender params SCENE' lists them)");
+        return DR_EXIT_USAGE;
+    }
+    return -1;
+}
+
+int grad_load_scene(struct grad_common *g, char **scene_path, struct dr_scene **scene, struct dr_camera *cam,
+                    int default_w, int default_h)
+{
+    *scene = NULL;
+    *scene_path = g->scene_arg ? strdup(g->scene_arg) : cli_find_bundled_scene(DEFAULT_SCENE);
+    if (!*scene_path) {
+        cli_error(g->cmd, "no SCENE given and the bundled %s was not found (set DRENDER_DATA)", DEFAULT_SCENE);
+        return DR_EXIT_INPUT;
+    }
+    *scene = dr_scene_load(*scene_path);
+    if (!*scene) {
+        cli_error(g->cmd, "%s", dr_last_error());
+        return DR_EXIT_INPUT;
+    }
+    const struct dr_scene *s = *scene;
+    if (g->camera_given && g->camera >= s->n_cameras) {
+        cli_error(g->cmd, "--camera %d: %s has %d camera%s%s", g->camera, *scene_path, s->n_cameras,
+                  s->n_cameras == 1 ? "" : "s",
+                  s->n_cameras > 0 ? " (numbered from 0)" : "; without --camera a default view is used");
+        return DR_EXIT_USAGE;
+    }
+    *cam = s->n_cameras > 0 ? s->cameras[g->camera] : dr_camera_default(s);
+    if (!g->res_given) {
+        if (default_w > 0 && default_h > 0) {
+            g->width = default_w;
+            g->height = default_h;
+        } else {
+            g->height = 512;
+            g->width = cam->aspect > 0.0 ? (int)(512.0 * cam->aspect + 0.5) : 512;
+            if (g->width < 1)
+                g->width = 1;
+        }
+    }
+    return -1;
+}
+
+int grad_param_set(const struct grad_common *g, const struct dr_scene *scene, struct dr_param_set **set)
+{
+    *set = dr_param_set_create(scene, g->params, g->n_params);
+    if (!*set) {
+        cli_error(g->cmd, "--param %s", dr_last_error());
+        return DR_EXIT_USAGE;
+    }
+    return -1;
+}
+
+static void effect_names(const struct dr_param_set *set, const char *names[8], int *n)
+{
+    bool bsdf = false, emission = false, textures = false, envmap = false;
+    for (int m = 0; m < set->n_materials; m++) {
+        bsdf |= set->mat_bsdf_active[m];
+        emission |= set->mat_emission_active[m];
+    }
+    for (int i = 0; i < set->n; i++) {
+        textures |= set->params[i].kind == DR_PARAM_IMAGE;
+        envmap |= set->params[i].kind == DR_PARAM_ENV_MAP;
+    }
+    *n = 0;
+    if (bsdf) names[(*n)++] = "bsdf";
+    if (emission) names[(*n)++] = "emission";
+    if (set->lights_active) names[(*n)++] = "punctual_lights";
+    if (set->env_active) names[(*n)++] = "environment";
+    if (envmap) names[(*n)++] = "environment_map";
+    if (textures) names[(*n)++] = "textures";
+}
+
+void grad_effects_differentiated(const struct dr_param_set *set, char *buf, size_t size)
+{
+    const char *names[8];
+    int n;
+    effect_names(set, names, &n);
+    buf[0] = '\0';
+    for (int i = 0; i < n; i++) {
+        size_t len = strlen(buf);
+        snprintf(buf + len, size - len, "%s%s", i ? ", " : "", names[i]);
+    }
+}
+
+void grad_json_effects(FILE *f, const struct dr_param_set *set)
+{
+    const char *names[8];
+    int n;
+    effect_names(set, names, &n);
+    fputc('[', f);
+    for (int i = 0; i < n; i++) {
+        if (i)
+            fputs(", ", f);
+        json_string(f, names[i]);
+    }
+    fputc(']', f);
+}
