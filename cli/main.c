@@ -6,11 +6,20 @@
 
 int cmd_render(int argc, char **argv);
 void cmd_render_usage(FILE *out);
+int cmd_params(int argc, char **argv);
+void cmd_params_usage(FILE *out);
+int cmd_grad(int argc, char **argv);
+void cmd_grad_usage(FILE *out);
+int cmd_fdcheck(int argc, char **argv);
+void cmd_fdcheck_usage(FILE *out);
 static int cmd_help(int argc, char **argv);
 static void cmd_help_usage(FILE *out);
 
 const struct dr_command dr_commands[] = {
     {"render", "render a glTF scene to an image (path tracing)", cmd_render, cmd_render_usage},
+    {"params", "list a scene's differentiable parameters and their values", cmd_params, cmd_params_usage},
+    {"grad", "derivatives: d image / d parameter, or d loss / d parameters", cmd_grad, cmd_grad_usage},
+    {"fdcheck", "check a gradient estimator against finite differences", cmd_fdcheck, cmd_fdcheck_usage},
     {"help", "show help for drender or one subcommand", cmd_help, cmd_help_usage},
     {NULL, NULL, NULL, NULL},
 };

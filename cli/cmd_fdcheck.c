@@ -1,0 +1,217 @@
+/* drender fdcheck: a gradient estimator against finite differences, with a
+ * statistical verdict (z-scores from independent batches). */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "cli.h"
+#include "error.h"
+#include "fdcheck.h"
+#include "grad_common.h"
+#include "params.h"
+#include "scene.h"
+
+void cmd_fdcheck_usage(FILE *out)
+{
+    fprintf(out,
+            "usage: drender fdcheck [SCENE] --param P [--param P ...] [options]\n"
+            "\n"
+            "Checks a gradient estimator against finite differences on SCENE (default: the\n"
+            "bundled Cornell box). The objective is the mean of the rendered image over\n"
+            "pixels and channels. For every component of each --param (for an image: all\n"
+            "texels at once, and a fixed random +-1 pattern), K independent batches each\n"
+            "give the estimator's derivative in reverse and in forward mode and a central\n"
+            "difference with common random numbers (one-sided at the parameter's range\n"
+            "ends); z = (gradient - fd) / sqrt(se_gradient^2 + se_fd^2). Exit status 0 when\n"
+            "every |z| <= --z-max, 4 when some entry disagrees.\n"
+            "\n"
+            "options:\n"
+            "      --param P       a parameter to check (repeatable, required)\n"
+            "      --eps E         finite-difference step, absolute (default: 1e-2)\n"
+            "      --spp N         samples per pixel of each batch (default: 16)\n"
+            "      --batches K     independent batches, at least 2 (default: 8)\n"
+            "      --z-max Z       agreement threshold on |z| (default: 4)\n"
+            "      --estimator E   gradient estimator: prb (path replay, default) or tape\n"
+            "      --sampling S    detached (default; the only one implemented so far)\n"
+            "      --res WxH       image size (default: 32x32)\n"
+            "      --max-depth D   path segments (default: 8)\n"
+            "      --camera N      which camera of the file (default: 0)\n"
+            "      --seed S        random seed (default: 0; batch b uses S + b)\n"
+            "      --threads T     worker threads (default: one per CPU)\n"
+            "      --json          print the entries as one JSON object on stdout\n"
+            "  -h, --help          show this help\n");
+}
+
+enum { OPT_EPS = GOPT_END, OPT_BATCHES, OPT_ZMAX, OPT_BATCH };
+
+struct fdcheck_args {
+    struct grad_common g;
+    double eps, z_max;
+    int batches;
+};
+
+static int parse_args(int argc, char **argv, struct fdcheck_args *a)
+{
+    static const struct option opts[] = {
+        GRAD_COMMON_LONG_OPTIONS,
+        {"eps", required_argument, NULL, OPT_EPS},
+        {"batches", required_argument, NULL, OPT_BATCHES},
+        {"z-max", required_argument, NULL, OPT_ZMAX},
+        /* listed so that getopt does not take it for an abbreviation of --batches */
+        {"batch", required_argument, NULL, OPT_BATCH},
+        {NULL, 0, NULL, 0},
+    };
+    long v;
+    opterr = 0;
+    optind = 1;
+    int c;
+    while ((c = getopt_long(argc, argv, ":h", opts, NULL)) != -1) {
+        int rc = grad_common_option(&a->g, c, optarg);
+        if (rc >= 0) {
+            if (rc != 0)
+                return rc;
+            continue;
+        }
+        switch (c) {
+        case 'h': cmd_fdcheck_usage(stdout); return DR_EXIT_OK;
+        case OPT_EPS:
+            if (!cli_parse_double("fdcheck", "--eps", optarg, 0.0, &a->eps)) return DR_EXIT_USAGE;
+            break;
+        case OPT_ZMAX:
+            if (!cli_parse_double("fdcheck", "--z-max", optarg, 0.0, &a->z_max)) return DR_EXIT_USAGE;
+            break;
+        case OPT_BATCHES:
+            if (!cli_parse_int("fdcheck", "--batches", optarg, 2, 1L << 20, &v)) return DR_EXIT_USAGE;
+            a->batches = (int)v;
+            break;
+        case OPT_BATCH:
+            cli_error("fdcheck", "--batch (tape paths per sweep) is a 'grad' option; fdcheck's tape sweeps one "
+                                 "sample of every pixel at a time (did you mean --batches?)");
+            return DR_EXIT_USAGE;
+        default: return grad_getopt_error("fdcheck", c, argv, "");
+        }
+    }
+    if (optind < argc)
+        a->g.scene_arg = argv[optind++];
+    if (optind < argc) {
+        cli_error("fdcheck", "unexpected argument '%s' (one scene at a time)", argv[optind]);
+        return DR_EXIT_USAGE;
+    }
+    return -1;
+}
+
+static void print_json(const struct fdcheck_args *a, const char *scene_path, const struct dr_fd_entry *en, int n,
+                       bool all_agree, double t_load, double t_check, double t_total, const struct dr_param_set *ps)
+{
+    FILE *f = stdout;
+    fprintf(f, "{\"command\": \"fdcheck\", \"scene\": ");
+    json_string(f, scene_path);
+    fprintf(f, ", \"estimator\": ");
+    json_string(f, a->g.estimator->name);
+    fprintf(f, ", \"sampling\": \"detached\", \"width\": %d, \"height\": %d, \"spp\": %d, \"batches\": %d, "
+               "\"max_depth\": %d, \"seed\": %llu, \"eps\": ",
+            a->g.width, a->g.height, a->g.spp, a->batches, a->g.max_depth, (unsigned long long)a->g.seed);
+    json_number(f, a->eps);
+    fprintf(f, ", \"z_max\": ");
+    json_number(f, a->z_max);
+    fprintf(f, ", \"time\": {\"load\": ");
+    json_number(f, t_load);
+    fprintf(f, ", \"check\": ");
+    json_number(f, t_check);
+    fprintf(f, ", \"total\": ");
+    json_number(f, t_total);
+    fprintf(f, "}, \"peak_memory_bytes\": %llu, \"agree\": %s, \"entries\": [",
+            (unsigned long long)cli_peak_rss_bytes(), all_agree ? "true" : "false");
+    for (int i = 0; i < n; i++) {
+        const struct dr_fd_entry *e = &en[i];
+        fprintf(f, "%s{\"label\": ", i ? ", " : "");
+        json_string(f, e->label);
+        const char *keys[] = {"reverse", "reverse_se", "forward", "forward_se", "fd", "fd_se", "z_reverse",
+                              "z_forward"};
+        const double vals[] = {e->reverse, e->reverse_se, e->forward, e->forward_se, e->fd, e->fd_se,
+                               e->z_reverse, e->z_forward};
+        for (int k = 0; k < 8; k++) {
+            fprintf(f, ", \"%s\": ", keys[k]);
+            json_number(f, vals[k]);
+        }
+        fprintf(f, ", \"agree\": %s}", e->agree ? "true" : "false");
+    }
+    fprintf(f, "], \"effects_differentiated\": ");
+    grad_json_effects(f, ps);
+    fprintf(f, "}\n");
+}
+
+int cmd_fdcheck(int argc, char **argv)
+{
+    double t_start = cli_now();
+    struct fdcheck_args a;
+    memset(&a, 0, sizeof a);
+    grad_common_init(&a.g, "fdcheck", 16);
+    a.eps = 1e-2;
+    a.z_max = 4.0;
+    a.batches = 8;
+    char *scene_path = NULL;
+    struct dr_scene *scene = NULL;
+    struct dr_param_set *ps = NULL;
+    struct dr_fd_entry *en = NULL;
+    int n = 0;
+    int rc = parse_args(argc, argv, &a);
+    if (rc >= 0)
+        goto out;
+    if ((rc = grad_common_check(&a.g)) >= 0)
+        goto out;
+    struct dr_camera cam;
+    if ((rc = grad_load_scene(&a.g, &scene_path, &scene, &cam, 32, 32)) >= 0)
+        goto out;
+    if ((rc = grad_param_set(&a.g, scene, &ps)) >= 0)
+        goto out;
+    double t_loaded = cli_now();
+    struct dr_fd_options o = {a.g.estimator, a.g.width, a.g.height, a.g.spp, a.batches, a.g.max_depth, 5,
+                              a.g.seed, a.g.threads, a.eps, a.z_max};
+    if (dr_fdcheck(scene, &cam, ps, &o, &en, &n) != 0) {
+        cli_error("fdcheck", "%s", dr_last_error());
+        rc = DR_EXIT_FAILURE;
+        goto out;
+    }
+    double t_end = cli_now();
+    bool all_agree = true;
+    for (int i = 0; i < n; i++)
+        all_agree &= en[i].agree;
+    if (a.g.json) {
+        print_json(&a, scene_path, en, n, all_agree, t_loaded - t_start, t_end - t_loaded, t_end - t_start, ps);
+    } else {
+        FILE *f = stdout;
+        int lw = 5;
+        for (int i = 0; i < n; i++)
+            if ((int)strlen(en[i].label) > lw)
+                lw = (int)strlen(en[i].label);
+        fprintf(f, "%s: %s estimator vs finite differences (eps %g), %d batches of %d spp at %dx%d, |z| <= %g\n",
+                scene_path, a.g.estimator->name, a.eps, a.batches, a.g.spp, a.g.width, a.g.height, a.z_max);
+        fprintf(f, "%-*s  %24s  %24s  %24s  %7s  %7s  %s\n", lw, "ENTRY", "REVERSE +- SE", "FORWARD +- SE",
+                "FD +- SE", "Z(REV)", "Z(FWD)", "VERDICT");
+        for (int i = 0; i < n; i++) {
+            const struct dr_fd_entry *e = &en[i];
+            char r[64], fw[64], fd[64];
+            snprintf(r, sizeof r, "%.5g +- %.2g", e->reverse, e->reverse_se);
+            snprintf(fw, sizeof fw, "%.5g +- %.2g", e->forward, e->forward_se);
+            snprintf(fd, sizeof fd, "%.5g +- %.2g", e->fd, e->fd_se);
+            fprintf(f, "%-*s  %24s  %24s  %24s  %7.2f  %7.2f  %s\n", lw, e->label, r, fw, fd, e->z_reverse,
+                    e->z_forward, e->agree ? "agree" : "DISAGREE");
+        }
+        int bad = 0;
+        for (int i = 0; i < n; i++)
+            bad += !en[i].agree;
+        if (bad)
+            fprintf(f, "%d of %d entries disagree\n", bad, n);
+        else
+            fprintf(f, "all %d entries agree\n", n);
+    }
+    rc = all_agree ? DR_EXIT_OK : DR_EXIT_DISAGREE;
+out:
+    free(en);
+    dr_param_set_destroy(ps);
+    dr_scene_destroy(scene);
+    free(scene_path);
+    grad_common_free(&a.g);
+    return rc;
+}

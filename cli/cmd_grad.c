@@ -1,0 +1,759 @@
+/* drender grad: derivatives of the rendered image with respect to scene
+ * parameters. Forward mode (no --target) writes d image / d parameter as a
+ * float image per parameter; reverse mode (--target) prints d loss / d
+ * parameter with standard errors from independent batches. */
+#include <ctype.h>
+#include <errno.h>
+#include <limits.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "cli.h"
+#include "error.h"
+#include "estimator.h"
+#include "grad_common.h"
+#include "image.h"
+#include "image_io.h"
+#include "loss.h"
+#include "params.h"
+#include "render.h"
+#include "sampler.h"
+#include "scene.h"
+#include "vis.h"
+
+/* The primal image of reverse mode uses its own random numbers (see the manual). */
+#define PRIMAL_SEED_SALT 0x5052494d414cULL   /* "PRIMAL" */
+
+void cmd_grad_usage(FILE *out)
+{
+    fprintf(out,
+            "usage: drender grad [SCENE] --param P [--param P ...] -o DIMG [options]   (forward mode)\n"
+            "       drender grad [SCENE] --param P [--param P ...] --target IMG [options]  (reverse mode)\n"
+            "\n"
+            "Differentiates the image rendered from SCENE (default: the bundled Cornell box)\n"
+            "with respect to parameters named by JSON pointers ('drender params SCENE' lists\n"
+            "them; material names may stand in for indices).\n"
+            "\n"
+            "Forward mode writes, for each --param, d image / d parameter along all of the\n"
+            "parameter's components at once (the image's change when every component grows\n"
+            "by the same amount) as a linear float RGB image. With several --param, the\n"
+            "parameter's index is inserted before the extension: dimg.0.exr, dimg.1.exr.\n"
+            "\n"
+            "Reverse mode renders the image, compares it with the target (--loss) and prints\n"
+            "d loss / d parameter for every component, with a standard error from --batches\n"
+            "independent batches. Texture gradients are written as float images to\n"
+            "--grad-dir (/images/3 -> DIR/grad-images-3.exr).\n"
+            "\n"
+            "options:\n"
+            "      --param P       a parameter to differentiate (repeatable, required)\n"
+            "  -o, --output FILE   forward mode: derivative image, a float format\n"
+            "                      (.exr, .tif, .pfm; not .png/.jpg, not .hdr: no negatives)\n"
+            "      --vis FILE      forward mode: also a picture of the derivative (e.g. .png),\n"
+            "                      blue < 0 < red, white = 0, scaled to the 99th percentile\n"
+            "                      of |per-pixel mean over r, g, b|\n"
+            "      --target IMG    reverse mode: the image to match (same size as the render;\n"
+            "                      8-bit sRGB files are decoded to linear)\n"
+            "      --loss L        reverse mode: l1 or l2 (mean over pixels and channels;\n"
+            "                      default: l2)\n"
+            "      --batches K     reverse mode: independent gradient batches, each with\n"
+            "                      ceil(spp / K) samples per pixel (default: 4, at least 2)\n"
+            "      --grad-dir DIR  reverse mode: where texture gradients go (default: .)\n"
+            "      --estimator E   gradient estimator: prb (path replay, default) or tape\n"
+            "      --sampling S    detached (default; the only one implemented so far)\n"
+            "      --spp N         samples per pixel (default: 16)\n"
+            "      --max-depth D   path segments (default: 8)\n"
+            "      --res WxH       image size (default: the target's size, else as render)\n"
+            "      --camera N      which camera of the file (default: 0)\n"
+            "      --seed S        random seed (default: 0)\n"
+            "      --threads T     worker threads (default: one per CPU)\n"
+            "      --batch N       tape: paths recorded per backward sweep (default 0: one\n"
+            "                      sample of every pixel); bounds the tape's memory\n"
+            "      --json          print a summary object on stdout\n"
+            "  -h, --help          show this help\n");
+}
+
+enum { OPT_VIS = GOPT_END, OPT_TARGET, OPT_LOSS, OPT_BATCHES, OPT_BATCH, OPT_GRAD_DIR };
+
+struct grad_args {
+    struct grad_common g;
+    const char *output, *vis, *target, *grad_dir;
+    enum dr_loss_kind loss;
+    bool loss_given, batches_given, grad_dir_given;
+    int batches;
+    int64_t batch;
+};
+
+/* Returns -1 to go on, or an exit code. */
+static int parse_args(int argc, char **argv, struct grad_args *a)
+{
+    static const struct option opts[] = {
+        GRAD_COMMON_LONG_OPTIONS,
+        {"output", required_argument, NULL, 'o'},
+        {"vis", required_argument, NULL, OPT_VIS},
+        {"target", required_argument, NULL, OPT_TARGET},
+        {"loss", required_argument, NULL, OPT_LOSS},
+        {"batches", required_argument, NULL, OPT_BATCHES},
+        {"batch", required_argument, NULL, OPT_BATCH},
+        {"grad-dir", required_argument, NULL, OPT_GRAD_DIR},
+        {NULL, 0, NULL, 0},
+    };
+    long v;
+    opterr = 0;
+    optind = 1;
+    int c;
+    while ((c = getopt_long(argc, argv, ":o:h", opts, NULL)) != -1) {
+        int rc = grad_common_option(&a->g, c, optarg);
+        if (rc >= 0) {
+            if (rc != 0)
+                return rc;
+            continue;
+        }
+        switch (c) {
+        case 'o': a->output = optarg; break;
+        case 'h': cmd_grad_usage(stdout); return DR_EXIT_OK;
+        case OPT_VIS: a->vis = optarg; break;
+        case OPT_TARGET: a->target = optarg; break;
+        case OPT_LOSS: {
+            int k = dr_loss_parse(optarg);
+            if (k < 0) {
+                cli_error("grad", "--loss: unknown loss '%s' (available: l1, l2)", optarg);
+                return DR_EXIT_USAGE;
+            }
+            a->loss = (enum dr_loss_kind)k;
+            a->loss_given = true;
+            break;
+        }
+        case OPT_BATCHES:
+            if (!cli_parse_int("grad", "--batches", optarg, 2, 1L << 20, &v)) return DR_EXIT_USAGE;
+            a->batches = (int)v;
+            a->batches_given = true;
+            break;
+        case OPT_BATCH:
+            if (!cli_parse_int("grad", "--batch", optarg, 0, LONG_MAX, &v)) return DR_EXIT_USAGE;
+            a->batch = v;
+            break;
+        case OPT_GRAD_DIR:
+            a->grad_dir = optarg;
+            a->grad_dir_given = true;
+            break;
+        default: return grad_getopt_error("grad", c, argv, "o");
+        }
+    }
+    if (optind < argc)
+        a->g.scene_arg = argv[optind++];
+    if (optind < argc) {
+        cli_error("grad", "unexpected argument '%s' (one scene at a time)", argv[optind]);
+        return DR_EXIT_USAGE;
+    }
+    return -1;
+}
+
+/* ---- file names ---- */
+
+static const char *extension(const char *path)
+{
+    const char *slash = strrchr(path, '/');
+    const char *dot = strrchr(path, '.');
+    return dot && (!slash || dot > slash) && dot != (slash ? slash + 1 : path) ? dot : NULL;
+}
+
+static bool ext_is(const char *ext, const char *want)
+{
+    return ext && strcasecmp(ext, want) == 0;
+}
+
+/* "dimg.exr" -> "dimg.3.exr" (no extension: "dimg.3"). */
+static char *indexed_name(const char *path, int index)
+{
+    const char *ext = extension(path);
+    size_t stem = ext ? (size_t)(ext - path) : strlen(path);
+    size_t len = strlen(path) + 24;
+    char *s = malloc(len);
+    if (s)
+        snprintf(s, len, "%.*s.%d%s", (int)stem, path, index, ext ? ext : "");
+    return s;
+}
+
+/* Gradient image of an image parameter: DIR/grad-<pointer without the leading
+ * '/', '/' -> '-'>.exr, e.g. /images/3 -> DIR/grad-images-3.exr and the
+ * environment map -> DIR/grad-environment.exr. */
+static char *grad_image_name(const char *dir, const struct dr_param *p)
+{
+    char base[DR_PARAM_NAME_MAX + 16];
+    if (p->kind == DR_PARAM_ENV_MAP) {
+        snprintf(base, sizeof base, "grad-environment.exr");
+    } else {
+        size_t k = 0;
+        k += (size_t)snprintf(base, sizeof base, "grad-");
+        for (const char *c = p->name + (p->name[0] == '/'); *c && k + 5 < sizeof base; c++)
+            base[k++] = (*c == '/' || *c == '~' || isspace((unsigned char)*c)) ? '-' : *c;
+        snprintf(base + k, sizeof base - k, ".exr");
+    }
+    size_t len = strlen(dir) + strlen(base) + 2;
+    char *s = malloc(len);
+    if (s)
+        snprintf(s, len, "%s%s%s", dir, dir[strlen(dir) - 1] == '/' ? "" : "/", base);
+    return s;
+}
+
+/* ---- option checks that need no scene ---- */
+
+static int check_args(struct grad_args *a)
+{
+    int rc = grad_common_check(&a->g);
+    if (rc >= 0)
+        return rc;
+    if (!a->target) {
+        if (a->loss_given || a->batches_given || a->grad_dir_given) {
+            cli_error("grad", "%s is for reverse mode: give --target IMG (forward mode writes -o)",
+                      a->loss_given ? "--loss" : a->batches_given ? "--batches" : "--grad-dir");
+            return DR_EXIT_USAGE;
+        }
+        if (!a->output) {
+            cli_error("grad", "forward mode needs -o DIMG.exr (or give --target IMG for reverse mode)");
+            return DR_EXIT_USAGE;
+        }
+        const char *ext = extension(a->output);
+        if (ext_is(ext, ".hdr")) {
+            cli_error("grad", "-o %s: Radiance HDR cannot store negative values; derivatives are signed: "
+                              "use .exr, .tif or .pfm", a->output);
+            return DR_EXIT_USAGE;
+        }
+        if (!(ext_is(ext, ".exr") || ext_is(ext, ".tif") || ext_is(ext, ".tiff") || ext_is(ext, ".pfm"))) {
+            cli_error("grad", "-o %s: derivative images need a float format: use .exr, .tif or .pfm "
+                              "(--vis FILE.png draws a picture of it)", a->output);
+            return DR_EXIT_USAGE;
+        }
+        if (!dr_image_can_write(a->output)) {
+            cli_error("grad", "-o %s: OpenImageIO cannot write this format", a->output);
+            return DR_EXIT_USAGE;
+        }
+        if (a->vis && !dr_image_can_write(a->vis)) {
+            cli_error("grad", "--vis %s: OpenImageIO cannot write this format (use e.g. .png)", a->vis);
+            return DR_EXIT_USAGE;
+        }
+        if (a->vis && strcmp(a->vis, a->output) == 0) {
+            cli_error("grad", "--vis %s: the same file as -o", a->vis);
+            return DR_EXIT_USAGE;
+        }
+        if (!cli_output_dir_writable("grad", a->output) || (a->vis && !cli_output_dir_writable("grad", a->vis)))
+            return DR_EXIT_FAILURE;
+    } else {
+        if (a->output || a->vis) {
+            cli_error("grad", "%s is for forward mode; with --target, texture gradients go to --grad-dir",
+                      a->output ? "-o" : "--vis");
+            return DR_EXIT_USAGE;
+        }
+        struct stat sb;
+        if (stat(a->grad_dir, &sb) != 0 || !S_ISDIR(sb.st_mode)) {
+            cli_error("grad", "--grad-dir %s: not a directory", a->grad_dir);
+            return DR_EXIT_USAGE;
+        }
+        if (access(a->grad_dir, W_OK) != 0) {
+            cli_error("grad", "--grad-dir %s: cannot write into it: %s", a->grad_dir, strerror(errno));
+            return DR_EXIT_FAILURE;
+        }
+    }
+    return -1;
+}
+
+/* ---- summaries ---- */
+
+static void add_rays(struct dr_ray_counts *sum, const struct dr_ray_counts *r)
+{
+    sum->camera += r->camera;
+    sum->extension += r->extension;
+    sum->shadow += r->shadow;
+}
+
+static void json_rays(FILE *f, const struct dr_ray_counts *r)
+{
+    fprintf(f, "\"rays\": {\"camera\": %llu, \"extension\": %llu, \"shadow\": %llu, \"total\": %llu}",
+            (unsigned long long)r->camera, (unsigned long long)r->extension, (unsigned long long)r->shadow,
+            (unsigned long long)(r->camera + r->extension + r->shadow));
+}
+
+static void json_common(FILE *f, const struct grad_args *a, const char *scene_path, const char *mode)
+{
+    fprintf(f, "{\"command\": \"grad\", \"mode\": \"%s\", \"scene\": ", mode);
+    json_string(f, scene_path);
+    fprintf(f, ", \"estimator\": ");
+    json_string(f, a->g.estimator->name);
+    fprintf(f, ", \"sampling\": \"detached\", \"width\": %d, \"height\": %d, \"spp\": %d, \"max_depth\": %d, "
+               "\"seed\": %llu",
+            a->g.width, a->g.height, a->g.spp, a->g.max_depth, (unsigned long long)a->g.seed);
+}
+
+static bool is_image_param(const struct dr_param *p)
+{
+    return p->kind == DR_PARAM_IMAGE || p->kind == DR_PARAM_ENV_MAP;
+}
+
+/* ---- forward mode ---- */
+
+static int cmp_float(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
+/* 99th percentile of |v| (n values); scratch: n floats. */
+static double percentile99(const float *v, size_t n, float *scratch)
+{
+    for (size_t i = 0; i < n; i++)
+        scratch[i] = isfinite(v[i]) ? fabsf(v[i]) : 0.0f;
+    qsort(scratch, n, sizeof(float), cmp_float);
+    return scratch[(size_t)floor(0.99 * (double)(n - 1))];
+}
+
+/* The --vis picture: t = 0.5 + 0.5 * clamp(mean_rgb / m, -1, 1). */
+static int write_vis(const char *path, const float *dimg, int w, int h, double *scale)
+{
+    size_t n = (size_t)w * h;
+    float *mean = malloc(sizeof(float) * n), *t = malloc(sizeof(float) * n);
+    float *rgb = malloc(sizeof(float) * n * 3);
+    int rc = DR_ERR_NOMEM;
+    if (!mean || !t || !rgb) {
+        dr_set_error("out of memory");
+        goto out;
+    }
+    for (size_t i = 0; i < n; i++)
+        mean[i] = (dimg[3 * i] + dimg[3 * i + 1] + dimg[3 * i + 2]) / 3.0f;
+    double m = percentile99(mean, n, t);
+    *scale = m;
+    for (size_t i = 0; i < n; i++) {
+        double x = m > 0.0 ? mean[i] / m : 0.0;
+        x = x < -1.0 ? -1.0 : x > 1.0 ? 1.0 : x;
+        t[i] = (float)(0.5 + 0.5 * x);
+    }
+    if ((rc = dr_colormap_diverging(t, w, h, rgb)) != 0)
+        goto out;
+    rc = dr_image_write(path, w, h, 3, rgb);
+out:
+    free(mean);
+    free(t);
+    free(rgb);
+    return rc;
+}
+
+static int run_forward(struct grad_args *a, const char *scene_path, const struct dr_scene *scene,
+                       const struct dr_camera *cam, const struct dr_param_set *ps, double t_start, double t_loaded)
+{
+    const int n = ps->n;
+    const size_t npix = (size_t)a->g.width * a->g.height;
+    double *dir = calloc((size_t)(ps->total > 0 ? ps->total : 1), sizeof(double));
+    double *dimg = malloc(sizeof(double) * npix * 3);
+    float *fimg = malloc(sizeof(float) * npix * 3);
+    char **outs = calloc((size_t)n, sizeof(char *)), **viss = calloc((size_t)n, sizeof(char *));
+    double *vis_scale = calloc((size_t)n, sizeof(double)), *lo = calloc((size_t)n, sizeof(double)),
+           *hi = calloc((size_t)n, sizeof(double));
+    int rc = DR_EXIT_FAILURE;
+    if (!dir || !dimg || !fimg || !outs || !viss || !vis_scale || !lo || !hi) {
+        cli_error("grad", "out of memory for a %dx%d derivative image", a->g.width, a->g.height);
+        goto out;
+    }
+    for (int i = 0; i < n; i++) {
+        outs[i] = n > 1 ? indexed_name(a->output, i) : strdup(a->output);
+        viss[i] = a->vis ? (n > 1 ? indexed_name(a->vis, i) : strdup(a->vis)) : NULL;
+        if (!outs[i] || (a->vis && !viss[i])) {
+            cli_error("grad", "out of memory");
+            goto out;
+        }
+    }
+    bool progress = isatty(2) != 0;
+    struct dr_ray_counts rays = {0, 0, 0};
+    uint64_t invalid = 0, tape_peak = 0;
+    double t_grad = 0.0, t_write = 0.0;
+    int threads = 0;
+    for (int i = 0; i < n; i++) {
+        const struct dr_param *p = &ps->params[i];
+        if (progress)
+            dr_progress_bar("grad", i, n);
+        memset(dir, 0, sizeof(double) * (size_t)ps->total);
+        for (int64_t k = 0; k < p->size; k++)
+            dir[p->offset + k] = 1.0;
+        struct dr_grad_problem prob = {scene, cam, ps, a->g.width, a->g.height, a->g.spp, a->g.max_depth, 5,
+                                       a->g.seed, a->g.threads, a->batch};
+        struct dr_grad_stats st;
+        memset(&st, 0, sizeof st);
+        if (a->g.estimator->forward(&prob, dir, dimg, &st) != 0) {
+            if (progress)
+                fputc('\n', stderr);
+            cli_error("grad", "%s", dr_last_error());
+            goto out;
+        }
+        t_grad += st.seconds;
+        add_rays(&rays, &st.rays);
+        invalid += st.invalid_samples;
+        if (st.tape_peak_bytes > tape_peak)
+            tape_peak = st.tape_peak_bytes;
+        threads = st.threads;
+        lo[i] = INFINITY;
+        hi[i] = -INFINITY;
+        for (size_t k = 0; k < npix * 3; k++) {
+            fimg[k] = (float)dimg[k];
+            lo[i] = fmin(lo[i], dimg[k]);
+            hi[i] = fmax(hi[i], dimg[k]);
+        }
+        double t_w0 = cli_now();
+        if (dr_image_write(outs[i], a->g.width, a->g.height, 3, fimg) != 0 ||
+            (viss[i] && write_vis(viss[i], fimg, a->g.width, a->g.height, &vis_scale[i]) != 0)) {
+            if (progress)
+                fputc('\n', stderr);
+            cli_error("grad", "%s", dr_last_error());
+            goto out;
+        }
+        t_write += cli_now() - t_w0;
+    }
+    if (progress)
+        dr_progress_bar("grad", n, n);
+    if (invalid > 0)
+        cli_error("grad", "warning: %llu samples were not finite and were dropped", (unsigned long long)invalid);
+    double t_end = cli_now();
+    FILE *f = stdout;
+    if (a->g.json) {
+        json_common(f, a, scene_path, "forward");
+        fprintf(f, ", \"threads\": %d, \"time\": {\"load\": ", threads);
+        json_number(f, t_loaded - t_start);
+        fprintf(f, ", \"gradient\": ");
+        json_number(f, t_grad);
+        fprintf(f, ", \"write\": ");
+        json_number(f, t_write);
+        fprintf(f, ", \"total\": ");
+        json_number(f, t_end - t_start);
+        fprintf(f, "}, \"peak_memory_bytes\": %llu", (unsigned long long)cli_peak_rss_bytes());
+        if (strcmp(a->g.estimator->name, "tape") == 0)
+            fprintf(f, ", \"tape_peak_bytes\": %llu", (unsigned long long)tape_peak);
+        fprintf(f, ", ");
+        json_rays(f, &rays);
+        fprintf(f, ", \"invalid_samples\": %llu, \"parameters\": [", (unsigned long long)invalid);
+        for (int i = 0; i < n; i++) {
+            fprintf(f, "%s{\"name\": ", i ? ", " : "");
+            json_string(f, ps->params[i].name);
+            fprintf(f, ", \"size\": %lld, \"file\": ", (long long)ps->params[i].size);
+            json_string(f, outs[i]);
+            if (viss[i]) {
+                fprintf(f, ", \"vis\": ");
+                json_string(f, viss[i]);
+                fprintf(f, ", \"vis_scale\": ");
+                json_number(f, vis_scale[i]);
+            }
+            fprintf(f, ", \"min\": ");
+            json_number(f, lo[i]);
+            fprintf(f, ", \"max\": ");
+            json_number(f, hi[i]);
+            fputc('}', f);
+        }
+        fprintf(f, "], \"effects_differentiated\": ");
+        grad_json_effects(f, ps);
+        fprintf(f, "}\n");
+    } else {
+        for (int i = 0; i < n; i++) {
+            fprintf(f, "%s: d image / d %s (sum over its %lld component%s), range [%.6g, %.6g]\n", outs[i],
+                    ps->params[i].name, (long long)ps->params[i].size, ps->params[i].size == 1 ? "" : "s", lo[i],
+                    hi[i]);
+            if (viss[i])
+                fprintf(f, "%s: picture, blue -%.3g .. white 0 .. red +%.3g\n", viss[i], vis_scale[i],
+                        vis_scale[i]);
+        }
+    }
+    rc = DR_EXIT_OK;
+out:
+    for (int i = 0; outs && viss && i < n; i++) {
+        free(outs[i]);
+        free(viss[i]);
+    }
+    free(outs);
+    free(viss);
+    free(vis_scale);
+    free(lo);
+    free(hi);
+    free(dir);
+    free(dimg);
+    free(fimg);
+    return rc;
+}
+
+/* ---- reverse mode ---- */
+
+/* The target as linear RGB (width * height * 3). Exit code or -1. */
+static int load_target(const char *path, struct dr_image *img, float **rgb)
+{
+    if (dr_image_read(path, img) != 0) {
+        cli_error("grad", "--target %s", dr_last_error());
+        return DR_EXIT_INPUT;
+    }
+    size_t n = (size_t)img->width * img->height;
+    *rgb = malloc(sizeof(float) * n * 3);
+    if (!*rgb) {
+        cli_error("grad", "--target %s: out of memory", path);
+        return DR_EXIT_FAILURE;
+    }
+    const int ch = img->channels;
+    for (size_t i = 0; i < n; i++)
+        for (int c = 0; c < 3; c++) {
+            float v = img->data[i * ch + (ch >= 3 ? c : 0)];
+            if (!isfinite(v)) {
+                cli_error("grad", "--target %s: pixel (%zu, %zu) channel %d is not a finite number", path,
+                          i % (size_t)img->width, i / (size_t)img->width, ch >= 3 ? c : 0);
+                return DR_EXIT_INPUT;
+            }
+            (*rgb)[i * 3 + c] = img->file_is_srgb ? (float)dr_srgb_to_linear(v) : v;
+        }
+    return -1;
+}
+
+static int run_reverse(struct grad_args *a, const char *scene_path, const struct dr_scene *scene,
+                       const struct dr_camera *cam, const struct dr_param_set *ps, const float *target,
+                       double t_start, double t_loaded)
+{
+    const int K = a->batches;
+    const int64_t T = ps->total;
+    const size_t npix = (size_t)a->g.width * a->g.height;
+    const int spp_b = (int)(((int64_t)a->g.spp + K - 1) / K);
+    float *img = malloc(sizeof(float) * npix * 3), *adj = malloc(sizeof(float) * npix * 3);
+    double *g = malloc(sizeof(double) * (size_t)(T > 0 ? T : 1));
+    double *mean = calloc((size_t)(T > 0 ? T : 1), sizeof(double)), *m2 = calloc((size_t)(T > 0 ? T : 1), sizeof(double));
+    char **files = calloc((size_t)ps->n, sizeof(char *));
+    float *gimg = NULL;
+    int rc = DR_EXIT_FAILURE;
+    if (!img || !adj || !g || !mean || !m2 || !files) {
+        cli_error("grad", "out of memory (%lld gradient entries, %dx%d image)", (long long)T, a->g.width,
+                  a->g.height);
+        goto out;
+    }
+    bool progress = isatty(2) != 0;
+
+    /* primal image, with random numbers independent of every gradient batch */
+    uint64_t primal_seed = dr_hash64(a->g.seed ^ PRIMAL_SEED_SALT);
+    struct dr_render_opts ro = {a->g.width, a->g.height, a->g.spp, a->g.max_depth, 5, primal_seed, a->g.threads,
+                                progress};
+    struct dr_render_stats rs;
+    memset(&rs, 0, sizeof rs);
+    if (dr_render(scene, cam, &ro, img, &rs) != 0) {
+        cli_error("grad", "%s", dr_last_error());
+        goto out;
+    }
+    struct dr_ray_counts rays = rs.rays;
+    uint64_t invalid = rs.invalid_samples, tape_peak = 0;
+    double loss = dr_loss_eval(a->loss, img, target, npix * 3);
+    d_loss_eval(a->loss, img, target, npix * 3, 1.0, adj);
+
+    /* K independent gradient batches: mean and standard error (Welford) */
+    double t_grad = 0.0;
+    int threads = rs.threads;
+    for (int b = 0; b < K; b++) {
+        if (progress)
+            dr_progress_bar("gradient", b, K);
+        struct dr_grad_problem prob = {scene, cam, ps, a->g.width, a->g.height, spp_b, a->g.max_depth, 5,
+                                       a->g.seed + 1 + (uint64_t)b, a->g.threads, a->batch};
+        struct dr_grad_stats st;
+        memset(&st, 0, sizeof st);
+        if (a->g.estimator->backward(&prob, adj, g, &st) != 0) {
+            if (progress)
+                fputc('\n', stderr);
+            cli_error("grad", "%s", dr_last_error());
+            goto out;
+        }
+        t_grad += st.seconds;
+        add_rays(&rays, &st.rays);
+        invalid += st.invalid_samples;
+        if (st.tape_peak_bytes > tape_peak)
+            tape_peak = st.tape_peak_bytes;
+        if (st.threads > 0)
+            threads = st.threads;
+        for (int64_t i = 0; i < T; i++) {
+            double d = g[i] - mean[i];
+            mean[i] += d / (b + 1);
+            m2[i] += d * (g[i] - mean[i]);
+        }
+    }
+    if (progress)
+        dr_progress_bar("gradient", K, K);
+    if (invalid > 0)
+        cli_error("grad", "warning: %llu samples were not finite and were dropped", (unsigned long long)invalid);
+    /* m2 becomes the standard error of the mean */
+    for (int64_t i = 0; i < T; i++)
+        m2[i] = sqrt(m2[i] / (K - 1) / K);
+
+    /* texture gradients as images */
+    double t_w0 = cli_now();
+    for (int k = 0; k < ps->n; k++) {
+        const struct dr_param *p = &ps->params[k];
+        if (!is_image_param(p))
+            continue;
+        files[k] = grad_image_name(a->grad_dir, p);
+        free(gimg);
+        gimg = malloc(sizeof(float) * (size_t)p->size);
+        if (!files[k] || !gimg) {
+            cli_error("grad", "out of memory");
+            goto out;
+        }
+        for (int64_t i = 0; i < p->size; i++)
+            gimg[i] = (float)mean[p->offset + i];
+        if (dr_image_write(files[k], p->width, p->height, p->channels, gimg) != 0) {
+            cli_error("grad", "%s", dr_last_error());
+            goto out;
+        }
+    }
+    double t_end = cli_now();
+    double t_primal = rs.seconds;
+
+    FILE *f = stdout;
+    if (a->g.json) {
+        json_common(f, a, scene_path, "reverse");
+        fprintf(f, ", \"threads\": %d, \"target\": ", threads);
+        json_string(f, a->target);
+        fprintf(f, ", \"loss\": ");
+        json_number(f, loss);
+        fprintf(f, ", \"loss_kind\": ");
+        json_string(f, dr_loss_name(a->loss));
+        fprintf(f, ", \"batches\": %d, \"spp_per_batch\": %d, \"primal_seed\": %llu", K, spp_b,
+                (unsigned long long)primal_seed);
+        fprintf(f, ", \"time\": {\"load\": ");
+        json_number(f, t_loaded - t_start);
+        fprintf(f, ", \"primal\": ");
+        json_number(f, t_primal);
+        fprintf(f, ", \"gradient\": ");
+        json_number(f, t_grad);
+        fprintf(f, ", \"write\": ");
+        json_number(f, t_end - t_w0);
+        fprintf(f, ", \"total\": ");
+        json_number(f, t_end - t_start);
+        fprintf(f, "}, \"peak_memory_bytes\": %llu", (unsigned long long)cli_peak_rss_bytes());
+        if (strcmp(a->g.estimator->name, "tape") == 0)
+            fprintf(f, ", \"tape_peak_bytes\": %llu", (unsigned long long)tape_peak);
+        fprintf(f, ", ");
+        json_rays(f, &rays);
+        fprintf(f, ", \"invalid_samples\": %llu, \"parameters\": [", (unsigned long long)invalid);
+        for (int k = 0; k < ps->n; k++) {
+            const struct dr_param *p = &ps->params[k];
+            fprintf(f, "%s{\"name\": ", k ? ", " : "");
+            json_string(f, p->name);
+            fprintf(f, ", \"size\": %lld", (long long)p->size);
+            if (is_image_param(p)) {
+                double nrm = 0.0, snrm = 0.0;
+                for (int64_t i = 0; i < p->size; i++) {
+                    nrm += mean[p->offset + i] * mean[p->offset + i];
+                    snrm += m2[p->offset + i] * m2[p->offset + i];
+                }
+                fprintf(f, ", \"width\": %d, \"height\": %d, \"channels\": %d, \"norm\": ", p->width, p->height,
+                        p->channels);
+                json_number(f, sqrt(nrm));
+                fprintf(f, ", \"stderr_norm\": ");
+                json_number(f, sqrt(snrm));
+                fprintf(f, ", \"file\": ");
+                json_string(f, files[k]);
+            } else {
+                fprintf(f, ", \"gradient\": [");
+                for (int64_t i = 0; i < p->size; i++) {
+                    if (i)
+                        fputs(", ", f);
+                    json_number(f, mean[p->offset + i]);
+                }
+                fprintf(f, "], \"stderr\": [");
+                for (int64_t i = 0; i < p->size; i++) {
+                    if (i)
+                        fputs(", ", f);
+                    json_number(f, m2[p->offset + i]);
+                }
+                fputc(']', f);
+            }
+            fputc('}', f);
+        }
+        fprintf(f, "], \"effects_differentiated\": ");
+        grad_json_effects(f, ps);
+        fprintf(f, "}\n");
+    } else {
+        fprintf(f, "loss (%s): %.9g\n", dr_loss_name(a->loss), loss);
+        fprintf(f, "d loss / d parameter (mean of %d batches of %d spp, +- standard error; %s, detached):\n", K,
+                spp_b, a->g.estimator->name);
+        for (int k = 0; k < ps->n; k++) {
+            const struct dr_param *p = &ps->params[k];
+            if (is_image_param(p)) {
+                double nrm = 0.0, snrm = 0.0;
+                for (int64_t i = 0; i < p->size; i++) {
+                    nrm += mean[p->offset + i] * mean[p->offset + i];
+                    snrm += m2[p->offset + i] * m2[p->offset + i];
+                }
+                fprintf(f, "%s (%dx%dx%d image): gradient norm %.6g (standard errors' norm %.3g) -> %s\n", p->name,
+                        p->width, p->height, p->channels, sqrt(nrm), sqrt(snrm), files[k]);
+            } else if (p->size == 1) {
+                fprintf(f, "%s: %.6g +- %.2g\n", p->name, mean[p->offset], m2[p->offset]);
+            } else {
+                fprintf(f, "%s:", p->name);
+                for (int64_t i = 0; i < p->size; i++)
+                    fprintf(f, "%s%.6g +- %.2g", i ? ", " : " ", mean[p->offset + i], m2[p->offset + i]);
+                fputc('\n', f);
+            }
+        }
+    }
+    rc = DR_EXIT_OK;
+out:
+    for (int k = 0; files && k < ps->n; k++)
+        free(files[k]);
+    free(files);
+    free(gimg);
+    free(img);
+    free(adj);
+    free(g);
+    free(mean);
+    free(m2);
+    return rc;
+}
+
+int cmd_grad(int argc, char **argv)
+{
+    double t_start = cli_now();
+    struct grad_args a;
+    memset(&a, 0, sizeof a);
+    grad_common_init(&a.g, "grad", 16);
+    a.loss = DR_LOSS_L2;
+    a.batches = 4;
+    a.grad_dir = ".";
+    char *scene_path = NULL;
+    struct dr_scene *scene = NULL;
+    struct dr_param_set *ps = NULL;
+    struct dr_image timg;
+    memset(&timg, 0, sizeof timg);
+    float *target = NULL;
+    int rc = parse_args(argc, argv, &a);
+    if (rc >= 0)
+        goto out;
+    /* Everything the user can get wrong in the options is checked before any work. */
+    if ((rc = check_args(&a)) >= 0)
+        goto out;
+    if (a.target) {
+        if ((rc = load_target(a.target, &timg, &target)) >= 0)
+            goto out;
+        if (a.g.res_given && (a.g.width != timg.width || a.g.height != timg.height)) {
+            cli_error("grad", "--target %s is %dx%d but --res asks for %dx%d (the render and the target must be "
+                              "the same size)", a.target, timg.width, timg.height, a.g.width, a.g.height);
+            rc = DR_EXIT_USAGE;
+            goto out;
+        }
+    }
+    struct dr_camera cam;
+    if ((rc = grad_load_scene(&a.g, &scene_path, &scene, &cam, a.target ? timg.width : 0,
+                              a.target ? timg.height : 0)) >= 0)
+        goto out;
+    if ((rc = grad_param_set(&a.g, scene, &ps)) >= 0)
+        goto out;
+    double t_loaded = cli_now();
+    if (a.target)
+        rc = run_reverse(&a, scene_path, scene, &cam, ps, target, t_start, t_loaded);
+    else
+        rc = run_forward(&a, scene_path, scene, &cam, ps, t_start, t_loaded);
+out:
+    free(target);
+    dr_image_release(&timg);
+    dr_param_set_destroy(ps);
+    dr_scene_destroy(scene);
+    free(scene_path);
+    grad_common_free(&a.g);
+    return rc;
+}

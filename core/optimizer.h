@@ -1,0 +1,40 @@
+/* Adam over a parameter vector, with a learning rate per scalar and each
+ * scalar kept inside its physical range (projected after every step). */
+#ifndef DR_OPTIMIZER_H
+#define DR_OPTIMIZER_H
+
+#include <stdint.h>
+
+#include "params.h"
+
+struct dr_adam {
+    int64_t n;
+    int64_t t;                 /* steps taken */
+    double beta1, beta2, eps;
+    double *m, *v;             /* moment estimates */
+    double *lr, *lo, *hi;      /* per scalar */
+};
+
+/* Learning rates: lr_override > 0 applies to every parameter; otherwise a
+ * default per kind (see dr_param_default_lr). NULL + dr_last_error. */
+struct dr_adam *dr_adam_create(const struct dr_param_set *ps, const double *theta, double lr_override);
+void dr_adam_destroy(struct dr_adam *a);
+/* theta -= lr * mhat / (sqrt(vhat) + eps), then clamped into [lo, hi].
+ * Non-finite gradient entries are treated as 0 (and counted in the return). */
+int64_t dr_adam_step(struct dr_adam *a, double *theta, const double *grad);
+
+/* Default learning rate of a parameter given its current values:
+ * 0.02 for colours, metallic, roughness and texels (they live in [0,1]);
+ * 5% of the current magnitude (at least 0.01) for intensities, emission
+ * strengths and environment radiance, which have no natural scale. */
+double dr_param_default_lr(const struct dr_param *p, const double *values);
+
+/* Checkpoint: parameters and optimizer state, as text with every double in
+ * %.17g (exact round trip), written to PATH.tmp and renamed (atomic).
+ * Reading checks that the names and sizes match the parameter set. */
+int dr_checkpoint_write(const char *path, const char *scene_path, const struct dr_param_set *ps,
+                        const double *theta, const struct dr_adam *adam, int64_t iteration);
+int dr_checkpoint_read(const char *path, const struct dr_param_set *ps, double *theta, struct dr_adam *adam,
+                       int64_t *iteration);
+
+#endif

@@ -1,0 +1,93 @@
+/* Adam and checkpoints: Adam finds the minimum of a separable quadratic and
+ * keeps every scalar inside its range; a checkpoint restores parameters and
+ * optimizer state bit for bit, so a resumed run continues exactly; a
+ * checkpoint for other parameters or a truncated one is refused. */
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "error.h"
+#include "optimizer.h"
+#include "scene_builder.h"
+#include "test.h"
+
+static struct dr_scene *scene(void)
+{
+    struct sb b;
+    sb_init(&b);
+    struct dr_material m = sb_diffuse(dr_v3(0.5, 0.5, 0.5));
+    m.emissive_factor = dr_v3(1, 1, 1);
+    m.emissive_strength = 4.0;
+    sb_quad(&b, dr_v3(0, 0, 0), dr_v3(1, 0, 0), dr_v3(0, 1, 0), sb_material(&b, m));
+    struct dr_scene *s = sb_finish(&b);
+    s->n_file_materials = s->n_materials;
+    return s;
+}
+
+int main(void)
+{
+    struct dr_scene *s = scene();
+    const char *ptrs[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor",
+                          "/materials/0/pbrMetallicRoughness/roughnessFactor",
+                          "/materials/0/extensions/KHR_materials_emissive_strength/emissiveStrength"};
+    struct dr_param_set *ps = dr_param_set_create(s, ptrs, 3);
+    CHECK(ps && ps->total == 5, "param set: %s", dr_last_error());
+    double theta[5], target[5] = {0.2, 0.9, 1.5 /* outside [0,1]: must stop at 1 */, 0.0005 /* below floor */, 9.0};
+    dr_param_set_get(s, ps, theta);
+    struct dr_adam *a = dr_adam_create(ps, theta, 0.0);
+    CHECK(a != NULL, "adam");
+    CHECK_NEAR(a->lr[0], 0.02, 0, "colour learning rate");
+    CHECK_NEAR(a->lr[4], 0.05 * 4.0, 1e-12, "strength learning rate is 5% of its value");
+    double grad[5], saved_theta[5];
+    struct dr_adam *b = dr_adam_create(ps, theta, 0.0);
+    char path[] = "/tmp/drender-ckpt-XXXXXX";
+    int fd = mkstemp(path);
+    close(fd);
+    for (int it = 0; it < 600; it++) {
+        for (int i = 0; i < 5; i++)
+            grad[i] = 2.0 * (theta[i] - target[i]);   /* d/dtheta (theta - target)^2 */
+        dr_adam_step(a, theta, grad);
+        if (it == 299) {
+            CHECK(dr_checkpoint_write(path, "scene.gltf", ps, theta, a, it + 1) == 0, "write: %s", dr_last_error());
+            memcpy(saved_theta, theta, sizeof theta);
+        }
+    }
+    CHECK_NEAR(theta[0], 0.2, 2e-3, "base colour r");
+    CHECK_NEAR(theta[1], 0.9, 2e-3, "base colour g");
+    CHECK(theta[2] == 1.0, "base colour b clamped to 1: %.17g", theta[2]);
+    CHECK(theta[3] == 0.001, "roughness clamped to its floor 0.001: %.17g", theta[3]);
+    CHECK_NEAR(theta[4], 9.0, 0.05, "emission strength");
+
+    /* resume from iteration 300: exactly the same end point */
+    double resumed[5];
+    int64_t it0 = 0;
+    CHECK(dr_checkpoint_read(path, ps, resumed, b, &it0) == 0, "read: %s", dr_last_error());
+    CHECK(it0 == 300 && b->t == 300, "iteration %lld, adam t %lld", (long long)it0, (long long)b->t);
+    CHECK(memcmp(resumed, saved_theta, sizeof resumed) == 0, "parameters not restored bit for bit");
+    for (int64_t it = it0; it < 600; it++) {
+        for (int i = 0; i < 5; i++)
+            grad[i] = 2.0 * (resumed[i] - target[i]);
+        dr_adam_step(b, resumed, grad);
+    }
+    CHECK(memcmp(resumed, theta, sizeof resumed) == 0, "resumed run differs from the uninterrupted one");
+
+    /* a different parameter list is refused */
+    struct dr_param_set *other = dr_param_set_create(s, ptrs, 2);
+    double tmp[5];
+    CHECK(dr_checkpoint_read(path, other, tmp, b, &it0) == DR_ERR_ARG, "mismatched parameters accepted");
+    CHECK(strstr(dr_last_error(), "--param") != NULL, "message: %s", dr_last_error());
+    /* a truncated file is refused */
+    FILE *f = fopen(path, "r+");
+    fseek(f, 0, SEEK_END);
+    long len = ftell(f);
+    fclose(f);
+    CHECK(truncate(path, len / 2) == 0, "truncate");
+    CHECK(dr_checkpoint_read(path, ps, tmp, b, &it0) == DR_ERR_FORMAT, "truncated checkpoint accepted");
+    unlink(path);
+    dr_param_set_destroy(other);
+    dr_adam_destroy(a);
+    dr_adam_destroy(b);
+    dr_param_set_destroy(ps);
+    dr_scene_destroy(s);
+    return TEST_END();
+}
