@@ -126,6 +126,10 @@ void d_env_radiance(const struct dr_scene *s, const struct dr_param_set *ps, dr_
 void d_light_radiance(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_light_sample *ls,
                       dr_vec3 d_L, struct dr_grad_sink *k)
 {
+    /* nothing about this light is requested: no derivative work at all */
+    if ((ls->type == DR_LS_AREA && !ps->mat_emission_active[s->mesh.material[ls->index]]) ||
+        (ls->type == DR_LS_ENV && !ps->env_active) || (ls->type == DR_LS_PUNCTUAL && !ps->lights_active))
+        return;
     switch (ls->type) {
     case DR_LS_AREA: {
         struct dr_hit h;
