@@ -322,7 +322,8 @@ inline uint8_t quantize(double v)
     return (uint8_t)(v * 255.0 + 0.5);
 }
 
-int write_image(const char *path, int width, int height, int channels, const float *pixels)
+int write_image(const char *path, int width, int height, int channels, const float *pixels,
+                bool srgb_encode)
 {
     std::string spath = path;
     auto out = ImageOutput::create(spath);
@@ -376,12 +377,15 @@ int write_image(const char *path, int width, int height, int channels, const flo
             for (int k = 0; k < out_ch; ++k)
                 fbuf[i * out_ch + k] = pixels[i * channels + src_of[k]];
     } else {
-        spec.attribute("oiio:ColorSpace", "sRGB");
+        // Data written as-is gets no colour-space tag (no sRGB/gAMA chunk): glTF
+        // reads such textures (metallic-roughness) as linear regardless.
+        if (srgb_encode)
+            spec.attribute("oiio:ColorSpace", "sRGB");
         bbuf.resize(n * (size_t)out_ch);
         for (size_t i = 0; i < n; ++i)
             for (int k = 0; k < out_ch; ++k) {
                 double v = pixels[i * channels + src_of[k]];
-                if (k != alpha_k)
+                if (k != alpha_k && srgb_encode)
                     v = dr_linear_to_srgb(v > 0.0 ? v : 0.0);
                 bbuf[i * out_ch + k] = quantize(v);
             }
@@ -497,12 +501,18 @@ extern "C" bool dr_image_can_write(const char *path)
 extern "C" int dr_image_write(const char *path, int width, int height, int channels,
                               const float *pixels)
 {
+    return dr_image_write_encoded(path, width, height, channels, pixels, true);
+}
+
+extern "C" int dr_image_write_encoded(const char *path, int width, int height, int channels,
+                                      const float *pixels, bool srgb_encode)
+{
     if (!path || !*path) {
         dr_set_error("cannot write image: empty file name");
         return DR_ERR_ARG;
     }
     try {
-        return write_image(path, width, height, channels, pixels);
+        return write_image(path, width, height, channels, pixels, srgb_encode);
     } catch (const std::bad_alloc &) {
         dr_set_error("%s: cannot write image: out of memory", path);
         return DR_ERR_NOMEM;

@@ -29,6 +29,13 @@ bool dr_image_can_write(const char *path);
  * so a failure never leaves a partial file. 0 or negative DR_ERR_*. */
 int dr_image_write(const char *path, int width, int height, int channels,
                    const float *pixels);
+/* Same, but 8-bit formats get the sRGB curve only when `srgb_encode` (colour
+ * textures, images); without it the values are quantised as they are (data
+ * textures such as glTF metallic-roughness) and the file carries no colour-space
+ * tag. Float formats ignore the flag. dr_image_write(...) is
+ * dr_image_write_encoded(..., true). */
+int dr_image_write_encoded(const char *path, int width, int height, int channels,
+                           const float *pixels, bool srgb_encode);
 
 #ifdef __cplusplus
 }

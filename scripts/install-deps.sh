@@ -7,6 +7,10 @@ pkgs=(build-essential pkg-config
       libembree-dev libopenimageio-dev openimageio-tools
       libtinygltf-dev nlohmann-json3-dev libstb-dev
       gnuplot-nox)
+# Node.js runs the Khronos glTF validator (tests/cli_gltf_validate.sh). Any node
+# on PATH will do (e.g. NodeSource's nodejs, which bundles npm and conflicts with
+# Debian's npm), so Debian's packages are added only when there is none.
+command -v node >/dev/null 2>&1 || pkgs+=(nodejs npm)
 
 missing=()
 for p in "${pkgs[@]}"; do
