@@ -1,0 +1,240 @@
+#!/usr/bin/env bash
+# drender params, grad and fdcheck on the bundled Cornell box: listings,
+# forward mode (float derivative images, --vis pictures), reverse mode
+# (loss, gradients with standard errors, texture gradient images, --json),
+# fdcheck's verdict, and the errors of each.
+# Run by tests/run.sh (env: DRENDER = the binary); also runs alone.
+# Uses oiiotool (openimageio-tools) and python3 if present.
+#
+# Expected exit codes (cli/cli.h, man/drender.1):
+#   0 = success
+#   2 = usage error: unknown --param (message lists the nearest names), the same
+#       parameter twice, --sampling attached, unknown --estimator, a target of
+#       the wrong size, -o in a non-float format, ...
+#   3 = input error: target or scene missing, unreadable or with NaN pixels
+#   4 = fdcheck: some gradient disagrees with finite differences
+set -u
+
+here=$(cd "$(dirname "$0")" && pwd)
+DRENDER=${DRENDER:-$here/../build/drender}
+tmp=$(mktemp -d "${TMPDIR:-/tmp}/drender-cli-grad.XXXXXX") || exit 1
+trap 'rm -rf "$tmp"' EXIT
+trap 'exit 130' INT TERM
+mkdir "$tmp/work" && cd "$tmp/work" || exit 1
+
+fail() {
+    echo "FAIL: $*" >&2
+    if [ -n "${last_cmd:-}" ]; then
+        echo "  last command: $last_cmd (exit $rc)" >&2
+        echo "  --- stdout ---" >&2; head -c 3000 "$tmp/out" >&2
+        echo "  --- stderr ---" >&2; head -c 2000 "$tmp/err" >&2
+    fi
+    exit 1
+}
+run() {   # run ARGS...: stdout -> $tmp/out, stderr -> $tmp/err, exit code -> $rc
+    last_cmd="drender $*"
+    "$DRENDER" "$@" >"$tmp/out" 2>"$tmp/err" </dev/null
+    rc=$?
+}
+expect_rc() { [ "$rc" -eq "$1" ] || fail "$2: expected exit $1, got $rc"; }
+expect_in() { grep -qF -- "$2" "$tmp/$1" || fail "$3: expected '$2' in $1"; }
+expect_empty() { [ ! -s "$tmp/$1" ] || fail "$2: expected empty $1, got: $(head -c 300 "$tmp/$1")"; }
+# expect_fail CODE "NEEDLE1|NEEDLE2" ARGS...: exit CODE, every needle on stderr,
+# nothing on stdout, no file left in the (empty) working directory.
+expect_fail() {
+    local want=$1 needles=$2 n
+    shift 2
+    local before
+    before=$(ls -A)
+    run "$@"
+    expect_rc "$want" "$*"
+    [ -s "$tmp/err" ] || fail "$*: expected an error message on stderr"
+    local IFS='|'
+    for n in $needles; do
+        grep -qF -- "$n" "$tmp/err" || fail "$*: expected the message to mention '$n'"
+    done
+    unset IFS
+    expect_empty out "$*"
+    [ "$(ls -A)" = "$before" ] || fail "$*: left files behind: $(ls -A)"
+}
+have_oiio=false
+command -v oiiotool >/dev/null 2>&1 && have_oiio=true
+have_python=false
+command -v python3 >/dev/null 2>&1 && python3 -c 'import json' 2>/dev/null && have_python=true
+# json_check FILE PYTHON-EXPR-over-d: the file is one JSON object and the expression holds
+json_check() {
+    $have_python || return 0
+    python3 - "$1" "$2" <<'EOF' || fail "JSON check failed: $2"
+import json, math, sys
+d = json.load(open(sys.argv[1]))
+ok = eval("(" + sys.argv[2] + "\n)", {"math": math, "d": d})
+if not ok:
+    print(json.dumps(d, indent=1)[:3000], file=sys.stderr)
+    sys.exit(1)
+EOF
+}
+
+[ -x "$DRENDER" ] || fail "drender binary not found or not executable: $DRENDER"
+red=/materials/red/pbrMetallicRoughness/baseColorFactor
+red_idx=/materials/1/pbrMetallicRoughness/baseColorFactor
+fast="--res 16x16 --spp 4"
+
+# ---- help ----
+run --help
+for cmd in params grad fdcheck; do
+    grep -Eq "^ +$cmd +[^ ]" "$tmp/out" || fail "drender --help: expected command '$cmd' listed"
+done
+for cmd in params grad fdcheck; do
+    run help "$cmd"
+    expect_rc 0 "help $cmd"
+    expect_in out "usage: drender $cmd" "help $cmd"
+    cp "$tmp/out" "$tmp/help.$cmd"
+    run "$cmd" --help
+    expect_rc 0 "$cmd --help"
+    cmp -s "$tmp/out" "$tmp/help.$cmd" || fail "'drender help $cmd' and 'drender $cmd --help' differ"
+done
+run grad --help
+for opt in --param -o --vis --target --loss --batches --grad-dir --estimator --sampling --spp --max-depth \
+    --res --camera --seed --threads --batch --json; do
+    grep -qE -- "(^|[ ,])$opt([ ,=]|\$)" "$tmp/out" || fail "grad --help: expected option $opt"
+done
+run fdcheck --help
+for opt in --param --eps --spp --batches --z-max --estimator --sampling --res --max-depth --seed --threads --json; do
+    grep -qE -- "(^|[ ,])$opt([ ,=]|\$)" "$tmp/out" || fail "fdcheck --help: expected option $opt"
+done
+
+# ---- params ----
+run params
+expect_rc 0 "params"
+expect_empty err "params"
+expect_in out "/materials/0/pbrMetallicRoughness/baseColorFactor" "params"
+expect_in out "/images/0" "params"
+expect_in out "64x64x3 image, mean (" "params (images summarised)"
+expect_in out "'red'" "params (material names)"
+run params --json
+expect_rc 0 "params --json"
+[ "$(wc -l <"$tmp/out")" -eq 1 ] || fail "params --json: expected one line"
+json_check "$tmp/out" '
+any(p["name"] == "/materials/0/pbrMetallicRoughness/baseColorFactor" and p["type"] == "color"
+    and len(p["value"]) == 3 and p["material"] == "white" for p in d["parameters"])
+and any(p["name"] == "/images/0" and p["type"] == "image" and p["width"] == 64 and p["channels"] == 3
+        and len(p["mean"]) == 3 and "value" not in p for p in d["parameters"])
+and d["scene"].endswith("cornell-box.gltf")'
+expect_fail 2 "--bogus" params --bogus
+expect_fail 3 "nope.gltf" params nope.gltf
+
+# ---- grad: option errors (before any work, nothing written) ----
+expect_fail 2 "/materials/red/pbrMetallicRoughnes/baseColorFactor|nearest valid names|$red_idx" \
+    grad --param /materials/red/pbrMetallicRoughnes/baseColorFactor -o d.exr $fast
+expect_fail 2 "requested twice" grad --param "$red" --param "$red_idx" -o d.exr $fast
+expect_fail 2 "--sampling|not available yet|detached" grad --param "$red" --sampling attached -o d.exr $fast
+expect_fail 2 "--estimator|bogus|prb|tape" grad --param "$red" --estimator bogus -o d.exr $fast
+expect_fail 2 "--param" grad -o d.exr $fast
+expect_fail 2 "-o d.png|float" grad --param "$red" -o d.png $fast
+expect_fail 2 "-o d.hdr|negative" grad --param "$red" -o d.hdr $fast
+expect_fail 2 "-o" grad --param "$red" $fast
+expect_fail 2 "--loss" grad --param "$red" -o d.exr --loss l1 $fast
+expect_fail 2 "--batches" grad --param "$red" --target t.exr --batches 1
+expect_fail 2 "--loss|l3" grad --param "$red" --target t.exr --loss l3
+expect_fail 2 "--spp" grad --param "$red" -o d.exr --spp 0
+expect_fail 2 "'--bogus'" grad --bogus
+expect_fail 2 "--json" grad --json=1
+expect_fail 1 "sub/d.exr" grad --param "$red" -o sub/d.exr $fast
+
+# ---- grad, forward mode ----
+run grad --param "$red" -o d.exr --vis d.png $fast
+expect_rc 0 "grad forward"
+expect_empty err "grad forward"
+[ -s d.exr ] && [ -s d.png ] || fail "grad forward: expected d.exr and d.png"
+run grad --param "$red" --param /images/0 -o m.exr --vis m.png $fast --json
+expect_rc 0 "grad forward, two parameters"
+for f in m.0.exr m.1.exr m.0.png m.1.png; do [ -s "$f" ] || fail "grad forward: expected $f (index before the extension)"; done
+[ ! -e m.exr ] || fail "grad forward with two parameters: m.exr should not exist (indexed names)"
+json_check "$tmp/out" 'd["mode"] == "forward" and [p["file"] for p in d["parameters"]] == ["m.0.exr", "m.1.exr"]
+and d["parameters"][0]["max"] > 0 and "textures" in d["effects_differentiated"] and "bsdf" in d["effects_differentiated"]'
+if $have_oiio; then
+    info=$(oiiotool --info d.exr d.png 2>&1) || fail "oiiotool --info: $info"
+    echo "$info" | grep -F "d.exr " | grep -Eq ' 16 x +16, 3 channel, float openexr' || fail "d.exr: not float EXR: $info"
+    echo "$info" | grep -F "d.png " | grep -Eq ' 16 x +16, 3 channel, uint8 png' || fail "d.png: not an 8-bit PNG: $info"
+    # the red wall's colour: derivative is positive somewhere, never meaningfully negative, and finite
+    stats=$(oiiotool --stats d.exr 2>&1)
+    echo "$stats" | grep -q 'NanCount: 0 0 0' || fail "d.exr has NaNs: $stats"
+    max=$(echo "$stats" | sed -n 's/.*Max: *\([0-9.e+-]*\).*/\1/p' | head -n 1)
+    awk -v m="${max:-0}" 'BEGIN { exit !(m > 0) }' || fail "d.exr: expected a positive derivative: $stats"
+fi
+
+# ---- grad, reverse mode ----
+run render --res 16x16 --spp 16 -o t.exr
+expect_rc 0 "render the target"
+run render --res 16x16 --spp 16 -o t.png
+expect_rc 0 "render the target (png)"
+run grad --target t.exr --param "$red" --param /images/0 --spp 8
+expect_rc 0 "grad reverse"
+expect_in out "loss (l2):" "grad reverse"
+expect_in out "$red_idx:" "grad reverse"
+expect_in out " +- " "grad reverse (standard errors)"
+expect_in out "grad-images-0.exr" "grad reverse (texture gradient file)"
+[ -s grad-images-0.exr ] || fail "grad reverse: expected grad-images-0.exr"
+if $have_oiio; then
+    oiiotool --info grad-images-0.exr 2>&1 | grep -Eq ' 64 x +64, 3 channel, float openexr' \
+        || fail "grad-images-0.exr: expected a 64x64 float EXR: $(oiiotool --info grad-images-0.exr 2>&1)"
+fi
+mkdir gdir
+for est in prb tape; do
+    run grad --target t.exr --param "$red" --param /images/0 --estimator "$est" --spp 8 --batches 2 \
+        --grad-dir gdir --json
+    expect_rc 0 "grad reverse --json ($est)"
+    expect_empty err "grad reverse --json ($est)"
+    [ "$(wc -l <"$tmp/out")" -eq 1 ] || fail "grad --json: expected one line"
+    json_check "$tmp/out" '
+all(k in d for k in ["loss", "loss_kind", "estimator", "sampling", "spp", "batches", "time", "peak_memory_bytes",
+                     "rays", "parameters", "effects_differentiated"])
+and all(k in d["time"] for k in ["primal", "gradient", "total"])
+and 0 <= d["loss"] < 0.5 and d["loss_kind"] == "l2" and d["sampling"] == "detached"
+and d["batches"] == 2 and d["spp"] == 8
+and (("tape_peak_bytes" in d and d["tape_peak_bytes"] > 0) if d["estimator"] == "tape" else "tape_peak_bytes" not in d)
+and len(d["parameters"][0]["gradient"]) == 3 and len(d["parameters"][0]["stderr"]) == 3
+and all(math.isfinite(x) for x in d["parameters"][0]["gradient"] + d["parameters"][0]["stderr"])
+and d["parameters"][1]["file"] == "gdir/grad-images-0.exr" and math.isfinite(d["parameters"][1]["norm"])
+and "gradient" not in d["parameters"][1]
+and "bsdf" in d["effects_differentiated"] and "textures" in d["effects_differentiated"]'
+done
+[ -s gdir/grad-images-0.exr ] || fail "grad --grad-dir gdir: expected gdir/grad-images-0.exr"
+run grad --target t.exr --param "$red" --loss l1 --json
+expect_rc 0 "grad --loss l1"
+json_check "$tmp/out" 'd["loss_kind"] == "l1" and d["width"] == 16 and d["height"] == 16'
+# an 8-bit sRGB target is decoded to linear (its clipped light makes the loss larger, not absurd)
+run grad --target t.png --param "$red" --json
+expect_rc 0 "grad --target t.png"
+json_check "$tmp/out" '0 < d["loss"] < 1 and all(math.isfinite(x) for x in d["parameters"][0]["gradient"])'
+
+# reverse-mode errors
+expect_fail 2 "t.exr|16x16|--res" grad --target t.exr --param "$red" --res 8x8
+expect_fail 3 "missing.exr" grad --target missing.exr --param "$red"
+{ printf 'PF\n4 4\n-1.0\n'; for i in $(seq 48); do printf '\x00\x00\xc0\x7f'; done; } >nan.pfm   # all NaN
+expect_fail 3 "nan.pfm|not a finite number" grad --target nan.pfm --param "$red"
+expect_fail 2 "-o" grad --target t.exr --param "$red" -o x.exr
+expect_fail 2 "--grad-dir|nodir" grad --target t.exr --param "$red" --grad-dir nodir
+rm -f nan.pfm
+
+# ---- fdcheck ----
+run fdcheck --param "$red" --res 16x16 --spp 4 --batches 4
+expect_rc 0 "fdcheck on the red wall's colour"
+expect_in out "agree" "fdcheck"
+expect_in out "$red_idx[0]" "fdcheck (entry labels)"
+run fdcheck --param "$red" --res 16x16 --spp 4 --batches 4 --estimator tape --json
+expect_rc 0 "fdcheck --json (tape)"
+json_check "$tmp/out" 'd["agree"] is True and len(d["entries"]) == 3 and d["estimator"] == "tape"
+and all(e["agree"] and math.isfinite(e["fd"]) and math.isfinite(e["reverse"]) for e in d["entries"])'
+# an impossible threshold: every entry disagrees -> exit 4
+run fdcheck --param "$red" --res 8x8 --spp 2 --batches 2 --z-max 1e-9
+expect_rc 4 "fdcheck --z-max 1e-9"
+expect_in out "DISAGREE" "fdcheck --z-max 1e-9"
+expect_fail 2 "--eps" fdcheck --param "$red" --eps 0
+expect_fail 2 "--batches" fdcheck --param "$red" --batches 1
+expect_fail 2 "--batch" fdcheck --param "$red" --batch 3
+expect_fail 2 "--sampling" fdcheck --param "$red" --sampling attached
+expect_fail 2 "nearest valid names" fdcheck --param /images/7
+expect_fail 3 "nope.gltf" fdcheck nope.gltf --param "$red"
+
+echo "cli_grad: all passed"
