@@ -482,32 +482,6 @@ out:
 /* ---- reverse mode ---- */
 
 /* The target as linear RGB (width * height * 3). Exit code or -1. */
-static int load_target(const char *path, struct dr_image *img, float **rgb)
-{
-    if (dr_image_read(path, img) != 0) {
-        cli_error("grad", "--target %s", dr_last_error());
-        return DR_EXIT_INPUT;
-    }
-    size_t n = (size_t)img->width * img->height;
-    *rgb = malloc(sizeof(float) * n * 3);
-    if (!*rgb) {
-        cli_error("grad", "--target %s: out of memory", path);
-        return DR_EXIT_FAILURE;
-    }
-    const int ch = img->channels;
-    for (size_t i = 0; i < n; i++)
-        for (int c = 0; c < 3; c++) {
-            float v = img->data[i * ch + (ch >= 3 ? c : 0)];
-            if (!isfinite(v)) {
-                cli_error("grad", "--target %s: pixel (%zu, %zu) channel %d is not a finite number", path,
-                          i % (size_t)img->width, i / (size_t)img->width, ch >= 3 ? c : 0);
-                return DR_EXIT_INPUT;
-            }
-            (*rgb)[i * 3 + c] = img->file_is_srgb ? (float)dr_srgb_to_linear(v) : v;
-        }
-    return -1;
-}
-
 static int run_reverse(struct grad_args *a, const char *scene_path, const struct dr_scene *scene,
                        const struct dr_camera *cam, const struct dr_param_set *ps, const float *target,
                        double t_start, double t_loaded)
@@ -729,7 +703,7 @@ int cmd_grad(int argc, char **argv)
     if ((rc = check_args(&a)) >= 0)
         goto out;
     if (a.target) {
-        if ((rc = load_target(a.target, &timg, &target)) >= 0)
+        if ((rc = grad_load_target("grad", a.target, &timg, &target)) >= 0)
             goto out;
         if (a.g.res_given && (a.g.width != timg.width || a.g.height != timg.height)) {
             cli_error("grad", "--target %s is %dx%d but --res asks for %dx%d (the render and the target must be "

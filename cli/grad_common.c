@@ -1,12 +1,14 @@
 /* Options and set-up shared by drender grad and drender fdcheck. */
 #include "grad_common.h"
 
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "camera.h"
 #include "cli.h"
 #include "error.h"
+#include "image_io.h"
 
 #define DEFAULT_SCENE "cornell-box.gltf"
 
@@ -218,4 +220,30 @@ void grad_json_effects(FILE *f, const struct dr_param_set *set)
         json_string(f, names[i]);
     }
     fputc(']', f);
+}
+
+int grad_load_target(const char *cmd, const char *path, struct dr_image *img, float **rgb)
+{
+    if (dr_image_read(path, img) != 0) {
+        cli_error(cmd, "--target %s", dr_last_error());
+        return DR_EXIT_INPUT;
+    }
+    size_t n = (size_t)img->width * img->height;
+    *rgb = malloc(sizeof(float) * n * 3);
+    if (!*rgb) {
+        cli_error(cmd, "--target %s: out of memory", path);
+        return DR_EXIT_FAILURE;
+    }
+    const int ch = img->channels;
+    for (size_t i = 0; i < n; i++)
+        for (int c = 0; c < 3; c++) {
+            float v = img->data[i * ch + (ch >= 3 ? c : 0)];
+            if (!isfinite(v)) {
+                cli_error(cmd, "--target %s: pixel (%zu, %zu) channel %d is not a finite number", path,
+                          i % (size_t)img->width, i / (size_t)img->width, ch >= 3 ? c : 0);
+                return DR_EXIT_INPUT;
+            }
+            (*rgb)[i * 3 + c] = img->file_is_srgb ? (float)dr_srgb_to_linear(v) : v;
+        }
+    return -1;
 }

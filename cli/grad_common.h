@@ -74,6 +74,11 @@ int grad_load_scene(struct grad_common *g, char **scene_path, struct dr_scene **
 /* Resolves the --param list (exit 2 with dr_last_error's nearest names). */
 int grad_param_set(const struct grad_common *g, const struct dr_scene *scene, struct dr_param_set **set);
 
+/* Reads a target image (--target): the first 3 channels (grey replicated) as
+ * linear float rgb (8-bit sRGB files decoded); NaN/Inf pixels refused.
+ * img keeps the file's size (release it). Returns -1 to go on or an exit code. */
+int grad_load_target(const char *cmd, const char *path, struct dr_image *img, float **rgb);
+
 /* Names of the effects a parameter set differentiates, comma separated. */
 void grad_effects_differentiated(const struct dr_param_set *set, char *buf, size_t size);
 /* The same as a JSON array. */

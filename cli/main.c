@@ -12,6 +12,8 @@ int cmd_grad(int argc, char **argv);
 void cmd_grad_usage(FILE *out);
 int cmd_fdcheck(int argc, char **argv);
 void cmd_fdcheck_usage(FILE *out);
+int cmd_optimize(int argc, char **argv);
+void cmd_optimize_usage(FILE *out);
 static int cmd_help(int argc, char **argv);
 static void cmd_help_usage(FILE *out);
 
@@ -20,6 +22,8 @@ const struct dr_command dr_commands[] = {
     {"params", "list a scene's differentiable parameters and their values", cmd_params, cmd_params_usage},
     {"grad", "derivatives: d image / d parameter, or d loss / d parameters", cmd_grad, cmd_grad_usage},
     {"fdcheck", "check a gradient estimator against finite differences", cmd_fdcheck, cmd_fdcheck_usage},
+    {"optimize", "fit scene parameters to target images (Adam), write the result as glTF", cmd_optimize,
+     cmd_optimize_usage},
     {"help", "show help for drender or one subcommand", cmd_help, cmd_help_usage},
     {NULL, NULL, NULL, NULL},
 };
