@@ -73,12 +73,11 @@ sanitize:
 bench: deps $(BUILD)/drender $(BENCH_BIN)
 	BUILD=$(BUILD) bench/run.sh
 
-# The main job on the bundled scene: render the Cornell box.
-DEMO_OUT ?= out
+# The main job on the bundled scene: inverse rendering of the Cornell box
+# (render a target, optimise wall colours and roughness from wrong values).
+DEMO_OUT ?= out/demo
 demo: all
-	@mkdir -p $(DEMO_OUT)
-	$(BUILD)/drender render -o $(DEMO_OUT)/cornell-box.png --spp 256 --json
-	@echo "wrote $(DEMO_OUT)/cornell-box.png"
+	BUILD=$(BUILD) scripts/demo.sh $(DEMO_OUT)
 
 install: all
 	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/share/man/man1 $(DESTDIR)$(PREFIX)/share/drender/scenes

@@ -293,10 +293,10 @@ static int apply_set(struct dr_scene *scene, const char *spec)
 
 struct history {
     int n, cap;
-    double *loss, *seconds;
+    double *loss, *seconds, *error;   /* error: max |parameter - reference|, NaN without --reference */
 };
 
-static void history_add(struct history *h, int it, double loss, double sec)
+static void history_add(struct history *h, int it, double loss, double sec, double err)
 {
     if (it >= h->cap) {
         int cap = h->cap ? h->cap * 2 : 256;
@@ -304,10 +304,12 @@ static void history_add(struct history *h, int it, double loss, double sec)
             cap *= 2;
         h->loss = realloc(h->loss, sizeof(double) * (size_t)cap);
         h->seconds = realloc(h->seconds, sizeof(double) * (size_t)cap);
+        h->error = realloc(h->error, sizeof(double) * (size_t)cap);
         h->cap = cap;
     }
     h->loss[it] = loss;
     h->seconds[it] = sec;
+    h->error[it] = err;
     if (it + 1 > h->n)
         h->n = it + 1;
 }
@@ -326,9 +328,13 @@ static void write_loss_csv(const char *dir, const struct history *h)
     FILE *f = fopen(tmp, "w");
     if (!f)
         return;
-    fprintf(f, "iteration,loss,seconds\n");
-    for (int i = 0; i < h->n; i++)
-        fprintf(f, "%d,%.10g,%.4f\n", i, h->loss[i], h->seconds[i]);
+    fprintf(f, "iteration,loss,seconds,parameter_error\n");
+    for (int i = 0; i < h->n; i++) {
+        fprintf(f, "%d,%.10g,%.4f,", i, h->loss[i], h->seconds[i]);
+        if (isfinite(h->error[i]))
+            fprintf(f, "%.6g", h->error[i]);
+        fputc('\n', f);
+    }
     if (fclose(f) == 0)
         rename(tmp, path);
     else
@@ -345,15 +351,16 @@ static void read_loss_csv(const char *dir, struct history *h, int upto)
         return;
     while (fgets(line, sizeof line, f)) {
         int it;
-        double l, s;
-        if (sscanf(line, "%d,%lf,%lf", &it, &l, &s) == 3 && it >= 0 && it < upto)
-            history_add(h, it, l, s);
+        double l, s, e = NAN;
+        int n = sscanf(line, "%d,%lf,%lf,%lf", &it, &l, &s, &e);
+        if (n >= 3 && it >= 0 && it < upto)
+            history_add(h, it, l, s, n == 4 ? e : NAN);
     }
     fclose(f);
 }
 
 /* DIR/loss.png with gnuplot (a warning if gnuplot is missing). */
-static void plot_loss(const char *dir)
+static void plot_loss(const char *dir, bool with_error)
 {
     char csv[4096], png[4096], tmp[4200], cmd[9000];
     path_in(csv, sizeof csv, dir, "loss.csv");
@@ -369,10 +376,16 @@ static void plot_loss(const char *dir)
             "set terminal png size 800,500\n"
             "set output '%s'\n"
             "set datafile separator ','\n"
-            "set title 'drender optimize: loss'\n"
-            "set xlabel 'iteration'\nset ylabel 'loss'\nset logscale y\nset grid\n"
-            "plot '%s' using 1:2 skip 1 with lines lw 2 title 'loss'\n",
-            tmp, csv);
+            "set title 'drender optimize'\n"
+            "set xlabel 'iteration'\nset ylabel 'loss'\nset logscale y\nset grid\nset key top right\n",
+            tmp);
+    if (with_error)
+        fprintf(g, "set y2tics\nset y2label 'max |parameter - reference|'\nset logscale y2\nset ytics nomirror\n"
+                   "plot '%s' using 1:2 skip 1 with lines lw 2 title 'loss (includes Monte Carlo noise)', "
+                   "'%s' using 1:4 skip 1 axes x1y2 with lines lw 2 title 'max |parameter - reference|'\n",
+                csv, csv);
+    else
+        fprintf(g, "plot '%s' using 1:2 skip 1 with lines lw 2 title 'loss'\n", csv);
     int rc = pclose(g);
     if (rc == 0 && access(tmp, R_OK) == 0)
         rename(tmp, png);
@@ -507,7 +520,7 @@ int cmd_optimize(int argc, char **argv)
     struct dr_param_set *ps = NULL;
     struct dr_adam *adam = NULL;
     double *theta = NULL, *grad = NULL, *gt = NULL, *ref = NULL;
-    struct history hist = {0, 0, NULL, NULL};
+    struct history hist = {0, 0, NULL, NULL, NULL};
     struct dr_camera cam0;
     int rc = parse_args(argc, argv, &a);
     if (rc >= 0)
@@ -659,19 +672,20 @@ int cmd_optimize(int argc, char **argv)
             rc = DR_EXIT_FAILURE;
             break;
         }
-        double now = cli_now(), sec = now - t_it;
-        history_add(&hist, it, loss, sec);
+        double now = cli_now(), sec = now - t_it, err = NAN;
+        if (ref) {
+            err = 0.0;
+            for (int k = 0; k < ps->n; k++)
+                err = fmax(err, reference_error(ps, theta, ref, k));
+        }
+        history_add(&hist, it, loss, sec, err);
         write_loss_csv(a.out_dir, &hist);
         double per = (now - t_loop) / (it - it0 + 1);
         char eta[32];
         eta_text(per * (a.iters - it - 1), eta, sizeof eta);
         char refmsg[128] = "";
-        if (ref) {
-            double e = 0.0;
-            for (int k = 0; k < ps->n; k++)
-                e = fmax(e, reference_error(ps, theta, ref, k));
-            snprintf(refmsg, sizeof refmsg, "  max |error| %.4f", e);
-        }
+        if (ref)
+            snprintf(refmsg, sizeof refmsg, "  max |error| %.4f", err);
         fprintf(stderr, "%siter %*d/%d  loss %.6e  %.2f s/iter  eta %s%s%s", tty ? "\r" : "",
                 (int)snprintf(NULL, 0, "%d", a.iters), it + 1, a.iters, loss, sec, eta, refmsg, tty ? "  " : "\n");
         if (a.g.json) {
@@ -707,7 +721,7 @@ int cmd_optimize(int argc, char **argv)
         fputc('\n', stderr);
     if (rc >= 0)
         goto out;
-    plot_loss(a.out_dir);
+    plot_loss(a.out_dir, ref != NULL);
     int vrc = save_view(&a, scene, "after.png");
     if (vrc != DR_EXIT_OK) {
         rc = vrc;
@@ -735,7 +749,9 @@ int cmd_optimize(int argc, char **argv)
                 snprintf(got + gl, sizeof got - gl, "%s%.4f", i ? " " : "", theta[p->offset + i]);
                 snprintf(want + wl, sizeof want - wl, "%s%.4f", i ? " " : "", ref[p->offset + i]);
             }
-            fprintf(so, "%-68s %-26s %-26s %.4f\n", p->name, got, want, reference_error(ps, theta, ref, k));
+            char shown[DR_PARAM_NAME_MAX * 2];
+            dr_param_display_name(scene, p, shown, sizeof shown);
+            fprintf(so, "%-68s %-26s %-26s %.4f\n", shown, got, want, reference_error(ps, theta, ref, k));
         }
     } else {
         fprintf(so, "optimised parameters:\n");
@@ -784,6 +800,7 @@ out:
     }
     free(hist.loss);
     free(hist.seconds);
+    free(hist.error);
     free(theta);
     free(grad);
     free(gt);

@@ -39,6 +39,21 @@ void dr_param_range(const struct dr_param *p, double *lo, double *hi)
     }
 }
 
+void dr_param_display_name(const struct dr_scene *s, const struct dr_param *p, char *buf, size_t size)
+{
+    if (p->kind <= DR_PARAM_EMISSIVE_STRENGTH && s->materials[p->target].name[0] &&
+        !strchr(s->materials[p->target].name, '/')) {
+        int same = 0;
+        for (int i = 0; i < s->n_file_materials; i++)
+            same += strcmp(s->materials[i].name, s->materials[p->target].name) == 0;
+        if (same == 1) {
+            snprintf(buf, size, "/materials/%s%s", s->materials[p->target].name, mat_fields[p->kind]);
+            return;
+        }
+    }
+    snprintf(buf, size, "%s", p->name);
+}
+
 /* ---- which images are looked up as colour (sRGB-decoded) or as data ---- */
 
 static void image_usage(const struct dr_scene *s, int image, bool *as_colour, bool *as_data)

@@ -48,6 +48,10 @@ struct dr_param {
     int width, height, channels;  /* images and the environment map */
 };
 
+/* The name with the material's name in place of its index when that name
+ * is unique (what a user would type), else the canonical name. */
+void dr_param_display_name(const struct dr_scene *scene, const struct dr_param *p, char *buf, size_t size);
+
 /* "color", "scalar", "image": a word for listings. */
 const char *dr_param_type_name(const struct dr_param *p);
 /* Physical range of each scalar (for optimisers and finite differences). */
