@@ -27,6 +27,7 @@ void cmd_fdcheck_usage(FILE *out)
             "\n"
             "options:\n"
             "      --param P       a parameter to check (repeatable, required)\n"
+            "      --set P=V[,V...]  use these values for parameter P instead of the file's\n"
             "      --eps E         finite-difference step, absolute (default: 1e-2)\n"
             "      --spp N         samples per pixel of each batch (default: 16)\n"
             "      --batches K     independent batches, at least 2 (default: 8)\n"
@@ -163,7 +164,7 @@ int cmd_fdcheck(int argc, char **argv)
     struct dr_camera cam;
     if ((rc = grad_load_scene(&a.g, &scene_path, &scene, &cam, 32, 32)) >= 0)
         goto out;
-    if ((rc = grad_param_set(&a.g, scene, &ps)) >= 0)
+    if ((rc = grad_apply_sets(&a.g, scene)) >= 0 || (rc = grad_param_set(&a.g, scene, &ps)) >= 0)
         goto out;
     double t_loaded = cli_now();
     struct dr_fd_options o = {a.g.estimator, a.g.width, a.g.height, a.g.spp, a.batches, a.g.max_depth, 5,

@@ -51,6 +51,7 @@ void cmd_grad_usage(FILE *out)
             "\n"
             "options:\n"
             "      --param P       a parameter to differentiate (repeatable, required)\n"
+            "      --set P=V[,V...]  use these values for parameter P instead of the file's\n"
             "  -o, --output FILE   forward mode: derivative image, a float format\n"
             "                      (.exr, .tif, .pfm; not .png/.jpg, not .hdr: no negatives)\n"
             "      --vis FILE      forward mode: also a picture of the derivative (.png),\n"
@@ -716,7 +717,7 @@ int cmd_grad(int argc, char **argv)
     if ((rc = grad_load_scene(&a.g, &scene_path, &scene, &cam, a.target ? timg.width : 0,
                               a.target ? timg.height : 0)) >= 0)
         goto out;
-    if ((rc = grad_param_set(&a.g, scene, &ps)) >= 0)
+    if ((rc = grad_apply_sets(&a.g, scene)) >= 0 || (rc = grad_param_set(&a.g, scene, &ps)) >= 0)
         goto out;
     double t_loaded = cli_now();
     if (a.target)

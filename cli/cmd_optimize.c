@@ -25,7 +25,6 @@
 #include "sampler.h"
 
 #define MAX_TARGETS 64
-#define MAX_SETS 64
 
 void cmd_optimize_usage(FILE *out)
 {
@@ -69,7 +68,7 @@ void cmd_optimize_usage(FILE *out)
             "  -h, --help             show this help\n");
 }
 
-enum { OOPT_TARGET = GOPT_END, OOPT_SET, OOPT_ITERS, OOPT_LR, OOPT_LOSS, OOPT_OUTDIR, OOPT_RESUME, OOPT_RENDER_EVERY,
+enum { OOPT_TARGET = GOPT_END, OOPT_ITERS, OOPT_LR, OOPT_LOSS, OOPT_OUTDIR, OOPT_RESUME, OOPT_RENDER_EVERY,
        OOPT_CKPT_EVERY, OOPT_REFERENCE };
 
 struct target {
@@ -85,8 +84,6 @@ struct opt_args {
     struct grad_common g;
     struct target targets[MAX_TARGETS];
     int n_targets;
-    const char *sets[MAX_SETS];
-    int n_sets;
     int iters, render_every, ckpt_every;
     double lr;
     int loss;
@@ -108,7 +105,6 @@ static int parse_args(int argc, char **argv, struct opt_args *a)
     static const struct option opts[] = {
         GRAD_COMMON_LONG_OPTIONS,
         {"target", required_argument, NULL, OOPT_TARGET},
-        {"set", required_argument, NULL, OOPT_SET},
         {"iters", required_argument, NULL, OOPT_ITERS},
         {"lr", required_argument, NULL, OOPT_LR},
         {"loss", required_argument, NULL, OOPT_LOSS},
@@ -140,13 +136,6 @@ static int parse_args(int argc, char **argv, struct opt_args *a)
                 return DR_EXIT_USAGE;
             }
             a->targets[a->n_targets++].arg = optarg;
-            break;
-        case OOPT_SET:
-            if (a->n_sets == MAX_SETS) {
-                cli_error("optimize", "--set: at most %d", MAX_SETS);
-                return DR_EXIT_USAGE;
-            }
-            a->sets[a->n_sets++] = optarg;
             break;
         case OOPT_ITERS:
             if (!cli_parse_int("optimize", "--iters", optarg, 1, 100000000, &v)) return DR_EXIT_USAGE;
@@ -236,57 +225,6 @@ static int make_dirs(const char *path)
             *p = '/';
         }
     return mkdir(buf, 0777) != 0 && errno != EEXIST ? -1 : 0;
-}
-
-/* --set P=v1,v2,... */
-static int apply_set(struct dr_scene *scene, const char *spec)
-{
-    const char *eq = strrchr(spec, '=');
-    if (!eq) {
-        cli_error("optimize", "--set %s: expected POINTER=VALUE[,VALUE...]", spec);
-        return DR_EXIT_USAGE;
-    }
-    char ptr[DR_PARAM_NAME_MAX * 2];
-    snprintf(ptr, sizeof ptr, "%.*s", (int)(eq - spec), spec);
-    struct dr_param p;
-    if (dr_param_resolve(scene, ptr, &p) != 0) {
-        cli_error("optimize", "--set %s", dr_last_error());
-        return DR_EXIT_USAGE;
-    }
-    if (p.kind == DR_PARAM_IMAGE || p.kind == DR_PARAM_ENV_MAP) {
-        cli_error("optimize", "--set %s: images cannot be set from the command line", ptr);
-        return DR_EXIT_USAGE;
-    }
-    double v[3];
-    int n = 0;
-    const char *s = eq + 1;
-    while (*s && n < 4) {
-        char *end;
-        errno = 0;
-        double x = strtod(s, &end);
-        if (end == s || errno || !isfinite(x) || (*end && *end != ',')) {
-            cli_error("optimize", "--set %s: '%s' is not a list of numbers", ptr, eq + 1);
-            return DR_EXIT_USAGE;
-        }
-        if (n < 3)
-            v[n] = x;
-        n++;
-        s = *end ? end + 1 : end;
-    }
-    if (n != p.size) {
-        cli_error("optimize", "--set %s: %d value%s given, the parameter has %lld", ptr, n, n == 1 ? "" : "s",
-                  (long long)p.size);
-        return DR_EXIT_USAGE;
-    }
-    double lo, hi;
-    dr_param_range(&p, &lo, &hi);
-    for (int i = 0; i < n; i++)
-        if (v[i] < lo || v[i] > hi) {
-            cli_error("optimize", "--set %s: %g is outside the parameter's range [%g, %g]", ptr, v[i], lo, hi);
-            return DR_EXIT_USAGE;
-        }
-    dr_param_put(scene, &p, v);
-    return -1;
 }
 
 /* ---- progress files ---- */
@@ -560,9 +498,8 @@ int cmd_optimize(int argc, char **argv)
         dr_param_set_get(ref_scene, rps, ref);
         dr_param_set_destroy(rps);
     }
-    for (int i = 0; i < a.n_sets; i++)
-        if ((rc = apply_set(scene, a.sets[i])) >= 0)
-            goto out;
+    if ((rc = grad_apply_sets(&a.g, scene)) >= 0)
+        goto out;
     theta = malloc(sizeof(double) * (size_t)ps->total);
     grad = malloc(sizeof(double) * (size_t)ps->total);
     gt = malloc(sizeof(double) * (size_t)ps->total);

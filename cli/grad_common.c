@@ -1,6 +1,7 @@
 /* Options and set-up shared by drender grad and drender fdcheck. */
 #include "grad_common.h"
 
+#include <errno.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -24,8 +25,9 @@ void grad_common_init(struct grad_common *g, const char *cmd, int spp)
 void grad_common_free(struct grad_common *g)
 {
     free(g->params);
-    g->params = NULL;
-    g->n_params = 0;
+    free(g->sets);
+    g->params = g->sets = NULL;
+    g->n_params = g->n_sets = 0;
 }
 
 static void list_estimators(char *buf, size_t size)
@@ -49,6 +51,16 @@ int grad_common_option(struct grad_common *g, int c, const char *arg)
         }
         g->params = p;
         g->params[g->n_params++] = arg;
+        return 0;
+    }
+    case GOPT_SET: {
+        const char **p = realloc(g->sets, sizeof *p * (size_t)(g->n_sets + 1));
+        if (!p) {
+            cli_error(g->cmd, "out of memory");
+            return DR_EXIT_FAILURE;
+        }
+        g->sets = p;
+        g->sets[g->n_sets++] = arg;
         return 0;
     }
     case GOPT_ESTIMATOR:
@@ -245,5 +257,70 @@ int grad_load_target(const char *cmd, const char *path, struct dr_image *img, fl
             }
             (*rgb)[i * 3 + c] = img->file_is_srgb ? (float)dr_srgb_to_linear(v) : v;
         }
+    return -1;
+}
+
+/* --set P=v1,v2,... */
+static int apply_set(const char *cmd, struct dr_scene *scene, const char *spec)
+{
+    const char *eq = strrchr(spec, '=');
+    if (!eq) {
+        cli_error(cmd, "--set %s: expected POINTER=VALUE[,VALUE...]", spec);
+        return DR_EXIT_USAGE;
+    }
+    char ptr[DR_PARAM_NAME_MAX * 2];
+    snprintf(ptr, sizeof ptr, "%.*s", (int)(eq - spec), spec);
+    struct dr_param p;
+    if (dr_param_resolve(scene, ptr, &p) != 0) {
+        cli_error(cmd, "--set %s", dr_last_error());
+        return DR_EXIT_USAGE;
+    }
+    if (p.kind == DR_PARAM_IMAGE || p.kind == DR_PARAM_ENV_MAP) {
+        cli_error(cmd, "--set %s: images cannot be set from the command line", ptr);
+        return DR_EXIT_USAGE;
+    }
+    double v[3];
+    int n = 0;
+    const char *s = eq + 1;
+    while (*s && n < 4) {
+        char *end;
+        errno = 0;
+        double x = strtod(s, &end);
+        if (end == s || errno || !isfinite(x) || (*end && *end != ',')) {
+            cli_error(cmd, "--set %s: '%s' is not a list of numbers", ptr, eq + 1);
+            return DR_EXIT_USAGE;
+        }
+        if (n < 3)
+            v[n] = x;
+        n++;
+        s = *end ? end + 1 : end;
+    }
+    if (n != p.size) {
+        cli_error(cmd, "--set %s: %d value%s given, the parameter has %lld", ptr, n, n == 1 ? "" : "s",
+                  (long long)p.size);
+        return DR_EXIT_USAGE;
+    }
+    double lo, hi;
+    dr_param_range(&p, &lo, &hi);
+    for (int i = 0; i < n; i++)
+        if (v[i] < lo || v[i] > hi) {
+            cli_error(cmd, "--set %s: %g is outside the parameter's range [%g, %g]", ptr, v[i], lo, hi);
+            return DR_EXIT_USAGE;
+        }
+    dr_param_put(scene, &p, v);
+    return -1;
+}
+
+int grad_apply_sets(const struct grad_common *g, struct dr_scene *scene)
+{
+    for (int i = 0; i < g->n_sets; i++) {
+        int rc = apply_set(g->cmd, scene, g->sets[i]);
+        if (rc >= 0)
+            return rc;
+    }
+    if (g->n_sets > 0 && dr_scene_refresh(scene) != 0) {
+        cli_error(g->cmd, "%s", dr_last_error());
+        return DR_EXIT_FAILURE;
+    }
     return -1;
 }

@@ -27,6 +27,7 @@ enum {
     GOPT_SEED,
     GOPT_THREADS,
     GOPT_JSON,
+    GOPT_SET,
     GOPT_END
 };
 
@@ -37,6 +38,7 @@ enum {
         {"max-depth", required_argument, NULL, GOPT_DEPTH}, {"res", required_argument, NULL, GOPT_RES},     \
         {"camera", required_argument, NULL, GOPT_CAMERA}, {"seed", required_argument, NULL, GOPT_SEED},     \
         {"threads", required_argument, NULL, GOPT_THREADS}, {"json", no_argument, NULL, GOPT_JSON},         \
+        {"set", required_argument, NULL, GOPT_SET},                                                    \
         {"help", no_argument, NULL, 'h'}
 
 struct grad_common {
@@ -44,6 +46,8 @@ struct grad_common {
     const char *scene_arg;
     const char **params;             /* the --param values, in order (argv strings) */
     int n_params;
+    const char **sets;               /* the --set P=V,... values, in order */
+    int n_sets;
     const struct dr_estimator_ops *estimator;
     int spp, max_depth, width, height, camera, threads;
     bool res_given, camera_given, json;
@@ -70,6 +74,11 @@ int grad_common_check(const struct grad_common *g);
  * Returns -1 to go on, or an exit code; *scene must be destroyed by the caller. */
 int grad_load_scene(struct grad_common *g, char **scene_path, struct dr_scene **scene, struct dr_camera *cam,
                     int default_w, int default_h);
+
+/* Applies every --set POINTER=V[,V...] to the scene (before parameters are
+ * read), refreshing it. Returns -1 to go on or DR_EXIT_USAGE after a message
+ * (unknown pointer with nearest names, wrong count, value out of range). */
+int grad_apply_sets(const struct grad_common *g, struct dr_scene *scene);
 
 /* Resolves the --param list (exit 2 with dr_last_error's nearest names). */
 int grad_param_set(const struct grad_common *g, const struct dr_scene *scene, struct dr_param_set **set);
