@@ -72,6 +72,7 @@ sanitize:
 
 bench: deps $(BUILD)/drender $(BENCH_BIN)
 	BUILD=$(BUILD) bench/run.sh
+	BUILD=$(BUILD) bench/grad.sh
 
 # The main job on the bundled scene: inverse rendering of the Cornell box
 # (render a target, optimise wall colours and roughness from wrong values).

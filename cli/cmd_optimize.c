@@ -212,6 +212,46 @@ static int check_args(struct opt_args *a)
     return -1;
 }
 
+/* Length of the shortest prefix of PATH (at a '/' or its end) that does not
+ * exist yet: what make_dirs will create from; 0 when PATH exists. */
+static size_t first_missing_prefix(const char *path)
+{
+    char buf[4096];
+    struct stat st;
+    snprintf(buf, sizeof buf, "%s", path);
+    size_t n = strlen(buf);
+    for (size_t i = 1; i <= n; i++)
+        if (buf[i] == '/' || buf[i] == '\0') {
+            char c = buf[i];
+            buf[i] = '\0';
+            bool exists = stat(buf, &st) == 0;
+            buf[i] = c;
+            if (!exists)
+                return i;
+        }
+    return 0;
+}
+
+/* Removes what make_dirs created (directories at least `from` long), so a run
+ * rejected after creating --out-dir leaves nothing behind. */
+static void unmake_dirs(const char *path, size_t from)
+{
+    char buf[4096];
+    snprintf(buf, sizeof buf, "%s", path);
+    size_t n = strlen(buf);
+    while (n > 1 && buf[n - 1] == '/')
+        buf[--n] = '\0';
+    while (from > 0 && n >= from) {
+        if (rmdir(buf) != 0)
+            return;
+        char *slash = strrchr(buf, '/');
+        if (!slash)
+            return;
+        *slash = '\0';
+        n = strlen(buf);
+    }
+}
+
 /* mkdir -p */
 static int make_dirs(const char *path)
 {
@@ -460,6 +500,7 @@ int cmd_optimize(int argc, char **argv)
     double *theta = NULL, *grad = NULL, *gt = NULL, *ref = NULL;
     struct history hist = {0, 0, NULL, NULL, NULL};
     struct dr_camera cam0;
+    double loss = 0.0;
     int rc = parse_args(argc, argv, &a);
     if (rc >= 0)
         goto out;
@@ -515,20 +556,10 @@ int cmd_optimize(int argc, char **argv)
         rc = DR_EXIT_FAILURE;
         goto out;
     }
-    if (make_dirs(a.out_dir) != 0) {
-        cli_error("optimize", "--out-dir %s: cannot create: %s", a.out_dir, strerror(errno));
-        rc = DR_EXIT_FAILURE;
-        goto out;
-    }
-    /* -o may point into the progress directory just created */
-    if (a.output && !cli_output_dir_writable("optimize", a.output)) {
-        rc = DR_EXIT_FAILURE;
-        goto out;
-    }
     char ckpt[4096];
     path_in(ckpt, sizeof ckpt, a.out_dir, "checkpoint.txt");
     int it0 = 0;
-    if (a.resume) {
+    if (a.resume) {   /* read before --out-dir is created: a missing checkpoint leaves nothing behind */
         int64_t it;
         int crc = dr_checkpoint_read(ckpt, ps, theta, adam, &it);
         if (crc != 0) {
@@ -536,8 +567,31 @@ int cmd_optimize(int argc, char **argv)
             rc = crc == DR_ERR_ARG ? DR_EXIT_USAGE : DR_EXIT_INPUT;
             goto out;
         }
+        if (it > a.iters) {
+            cli_error("optimize", "--resume: %s is at iteration %lld, beyond --iters %d", ckpt, (long long)it,
+                      a.iters);
+            rc = DR_EXIT_USAGE;
+            goto out;
+        }
         it0 = (int)it;
+    }
+    size_t made_from = first_missing_prefix(a.out_dir);
+    if (make_dirs(a.out_dir) != 0) {
+        cli_error("optimize", "--out-dir %s: cannot create: %s", a.out_dir, strerror(errno));
+        unmake_dirs(a.out_dir, made_from);
+        rc = DR_EXIT_FAILURE;
+        goto out;
+    }
+    /* -o may point into the progress directory just created */
+    if (a.output && !cli_output_dir_writable("optimize", a.output)) {
+        unmake_dirs(a.out_dir, made_from);
+        rc = DR_EXIT_FAILURE;
+        goto out;
+    }
+    if (a.resume) {
         read_loss_csv(a.out_dir, &hist, it0);
+        /* a run resumed at its last iteration reports the loss it ended with */
+        loss = it0 > 0 && hist.n >= it0 ? hist.loss[it0 - 1] : NAN;
         dr_param_set_put(scene, ps, theta);
         if (dr_scene_refresh(scene) != 0) {
             cli_error("optimize", "%s", dr_last_error());
@@ -562,7 +616,7 @@ int cmd_optimize(int argc, char **argv)
     sigaction(SIGINT, &sa, NULL);
     sigaction(SIGTERM, &sa, NULL);
     const bool tty = isatty(2);
-    double t_loop = cli_now(), loss = 0.0;
+    double t_loop = cli_now();
     struct dr_grad_stats gs;
     memset(&gs, 0, sizeof gs);
     int it = it0;

@@ -1,0 +1,103 @@
+#!/usr/bin/env bash
+# drender gradient benchmarks (run by `make bench` after bench/run.sh):
+#   e. cost: reverse-mode prb gradient time / primal render time (same spp and
+#      depth; goal <= 2.5), tape time / prb time, on the bundled Cornell box
+#   f. accuracy per cost: gradient standard error x sqrt(gradient seconds), both
+#      estimators (lower is better: the cost of a given accuracy)
+#   g. memory vs depth: prb peak memory at max depth 4, 64, 1000 (goal: flat
+#      within 5%) and tape bytes at those depths
+#   h. peer comparison (../shared/bench): red wall set to (0.2, 0.6, 0.3), L2
+#      against a render at the true value, 256x256, 64 spp, 2 threads: prb
+#      gradient time at max_depth 8 vs the peer's 3.68 s; tape peak memory at
+#      max_depth 32 vs the peer's 15.3 GiB for conventional AD
+# Writes $BUILD/bench/grad-results.json.
+set -euo pipefail
+BUILD=${BUILD:-build}
+PEER=${PEER:-../shared/bench/peer-cornell-box.gltf}
+OUT=$BUILD/bench
+mkdir -p "$OUT"
+TMP=$(mktemp -d)
+trap 'rm -rf "$TMP"' EXIT
+cp "$BUILD/drender" "$TMP/"
+DR=$TMP/drender
+# shellcheck source=bench/lib.sh
+source bench/lib.sh
+
+CORNELL=scenes/cornell-box.gltf
+RED=/materials/red/pbrMetallicRoughness/baseColorFactor
+GOLD=/materials/rough-gold/pbrMetallicRoughness/roughnessFactor
+RES=128x128 SPP=16 DEPTH=8
+
+# first number of the "stderr" array of the first parameter
+first_stderr() { printf '%s\n' "$1" | sed -n 's/.*"stderr": \[\([-+0-9.eE]*\).*/\1/p' | head -n 1; }
+
+echo "drender gradient benchmarks ($(date '+%Y-%m-%d %H:%M'), $(nproc) CPUs, load average $(cut -d' ' -f1 /proc/loadavg))"
+echo
+"$DR" render "$CORNELL" -o "$TMP/target.exr" --res $RES --spp 256 --max-depth $DEPTH --seed 99
+
+echo "e. cost on $CORNELL ($RES, $SPP spp, depth $DEPTH, 2 threads; params: red wall colour, sphere roughness)"
+P=$("$DR" render "$CORNELL" -o "$TMP/p.exr" --res $RES --spp $SPP --max-depth $DEPTH --threads 2 --json)
+T_PRIMAL=$(json_num "$P" render time)
+declare -A T SE MEM TAPE
+for est in prb tape; do
+    J=$("$DR" grad "$CORNELL" --target "$TMP/target.exr" --param $RED --param $GOLD --set $RED=0.3,0.3,0.3 \
+        --estimator $est --spp $SPP --batches 4 --max-depth $DEPTH --threads 2 --json)
+    T[$est]=$(json_num "$J" gradient time)
+    SE[$est]=$(first_stderr "$J")
+    TAPE[$est]=$(json_num "$J" tape_peak_bytes)
+done
+R_PRB=$(calc "${T[prb]} / $T_PRIMAL")
+R_TAPE=$(calc "${T[tape]} / ${T[prb]}")
+printf '   primal %.3f s, prb gradient %.3f s: ratio %s (goal <= 2.5: %s)\n' "$T_PRIMAL" "${T[prb]}" "$R_PRB" \
+    "$(yesno "$R_PRB <= 2.5")"
+printf '   tape gradient %.3f s: tape / prb %s; tape held %s MiB\n' "${T[tape]}" "$R_TAPE" \
+    "$(calc "${TAPE[tape]:-0} / 1048576" %.1f)"
+echo
+echo "f. accuracy per cost: stderr(d loss / d red.r) x sqrt(gradient seconds)"
+for est in prb tape; do
+    printf '   %-5s stderr %s, %.3f s: %s\n' $est "${SE[$est]}" "${T[$est]}" "$(calc "${SE[$est]} * sqrt(${T[$est]})")"
+done
+echo
+echo "g. memory vs max depth ($RES, 4 spp, 1 sample per pixel per tape batch)"
+MEM_JSON=""
+for d in 4 64 1000; do
+    for est in prb tape; do
+        J=$("$DR" grad "$CORNELL" --target "$TMP/target.exr" --param $RED --estimator $est --spp 4 --batches 2 \
+            --max-depth $d --threads 2 --json)
+        MEM[$est$d]=$(json_num "$J" peak_memory_bytes)
+        TAPE[$est$d]=$(json_num "$J" tape_peak_bytes)
+    done
+    printf '   depth %4d: prb peak %.1f MiB; tape peak %.1f MiB, of which tape %.1f MiB\n' $d \
+        "$(calc "${MEM[prb$d]} / 1048576" %.3f)" "$(calc "${MEM[tape$d]} / 1048576" %.3f)" \
+        "$(calc "${TAPE[tape$d]:-0} / 1048576" %.3f)"
+    MEM_JSON+="{\"max_depth\": $d, \"prb_peak_bytes\": ${MEM[prb$d]}, \"tape_peak_rss_bytes\": ${MEM[tape$d]}, \"tape_bytes\": ${TAPE[tape$d]:-0}},"
+done
+SPREAD=$(calc "(${MEM[prb1000]} - ${MEM[prb4]}) / ${MEM[prb4]} * 100" %.2f)
+echo "   prb peak memory change from depth 4 to 1000: $SPREAD % (goal: within 5%: $(yesno "$SPREAD <= 5 && $SPREAD >= -5"))"
+echo
+PEER_JSON=null
+if [[ -f $PEER ]]; then
+    echo "h. peer comparison ($PEER, 256x256, 64 spp, 2 threads, red wall (0.2, 0.6, 0.3), L2)"
+    "$DR" render "$PEER" -o "$TMP/peer-target.exr" --res 256x256 --spp 64 --max-depth 8 --threads 2 --seed 5
+    J=$("$DR" grad "$PEER" --target "$TMP/peer-target.exr" --param $RED --set $RED=0.2,0.6,0.3 --spp 64 \
+        --batches 2 --max-depth 8 --threads 2 --json)
+    T_PEER=$(json_num "$J" gradient time)
+    R=$(calc "$T_PEER / 3.68")
+    echo "   prb gradient (primal + replay), depth 8: $(calc "$T_PEER" %.2f) s vs the peer's 3.68 s: ratio $R (goal < 1: $(yesno "$R < 1"))"
+    J=$("$DR" grad "$PEER" --target "$TMP/peer-target.exr" --param $RED --set $RED=0.2,0.6,0.3 --spp 64 \
+        --batches 2 --max-depth 32 --threads 2 --estimator tape --json)
+    M32=$(json_num "$J" peak_memory_bytes)
+    TB32=$(json_num "$J" tape_peak_bytes)
+    echo "   tape, depth 32: peak memory $(calc "$M32 / 1048576" %.0f) MiB (tape $(calc "$TB32 / 1048576" %.0f) MiB) vs the peer's 15.3 GiB: $(calc "$M32 / (15.3 * 1073741824) * 100" %.2f) %"
+    echo "   tape gradient time at depth 32: $(calc "$(json_num "$J" gradient time)" %.2f) s (the peer's conventional AD: 5.29 s)"
+    PEER_JSON="{\"prb_gradient_seconds_depth8\": $T_PEER, \"ratio_to_peer\": $R, \"tape_peak_bytes_depth32\": $M32, \"tape_bytes_depth32\": $TB32}"
+fi
+cat >"$OUT/grad-results.json" <<JSON
+{"primal_seconds": $T_PRIMAL, "prb_seconds": ${T[prb]}, "tape_seconds": ${T[tape]},
+ "prb_over_primal": $R_PRB, "tape_over_prb": $R_TAPE,
+ "stderr_sqrt_seconds": {"prb": $(calc "${SE[prb]} * sqrt(${T[prb]})" %.6g), "tape": $(calc "${SE[tape]} * sqrt(${T[tape]})" %.6g)},
+ "memory_vs_depth": [${MEM_JSON%,}], "prb_memory_change_percent": $SPREAD,
+ "peer": $PEER_JSON}
+JSON
+echo
+echo "results in $OUT/grad-results.json"
