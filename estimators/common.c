@@ -52,6 +52,21 @@ void dr_est_continuation(const struct dr_scene *s, const struct dr_param_set *ps
     d_material_eval(s, ps, &v->hit, &db, sink);
 }
 
+void dr_est_stats_fill(struct dr_grad_stats *st, const struct dr_est_counters *c, int threads, double seconds)
+{
+    if (!st)
+        return;
+    memset(st, 0, sizeof *st);
+    st->seconds = seconds;
+    st->threads = threads;
+    for (int t = 0; t < threads; t++) {
+        st->rays.camera += c[t].rays.camera;
+        st->rays.extension += c[t].rays.extension;
+        st->rays.shadow += c[t].rays.shadow;
+        st->invalid_samples += c[t].invalid;
+    }
+}
+
 int dr_est_thread_count(const struct dr_grad_problem *p)
 {
     int t = p->threads > 0 ? p->threads : dr_cpu_count();

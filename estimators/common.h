@@ -40,6 +40,15 @@ void dr_est_accum_free(struct dr_est_accum *a);
 double *dr_est_chunk_begin(struct dr_est_accum *a, int thread);
 void dr_est_chunk_end(struct dr_est_accum *a, int thread);
 
+/* Per-thread counters, padded apart against false sharing. */
+struct dr_est_counters {
+    struct dr_ray_counts rays;
+    uint64_t invalid;
+    char pad[64];
+};
+/* Sums the threads' counters into *st (when st is not NULL). */
+void dr_est_stats_fill(struct dr_grad_stats *st, const struct dr_est_counters *c, int threads, double seconds);
+
 int dr_est_thread_count(const struct dr_grad_problem *p);
 double dr_est_now(void);
 bool dr_vec3_finite(dr_vec3 v);

@@ -23,11 +23,7 @@ struct prb_job {
     const float *adjoint;   /* reverse mode */
     const double *dir;      /* forward mode */
     struct dr_est_accum acc;
-    struct {
-        struct dr_ray_counts rays;
-        uint64_t invalid;
-        char pad[64];
-    } thr[DR_EST_MAX_THREADS];
+    struct dr_est_counters thr[DR_EST_MAX_THREADS];
 };
 
 /* Primal pass: L_true (the estimate) and L_sub (with substitutes). */
@@ -152,17 +148,7 @@ static int prb_run(const struct dr_grad_problem *p, const float *adjoint, const 
     rc = dr_parallel_for((int64_t)p->width * p->height, 16, j->acc.threads, prb_pixels, j);
     double t1 = dr_est_now();
     dr_est_accum_finish(&j->acc, p, grad, d_image);
-    if (st) {
-        memset(st, 0, sizeof *st);
-        st->seconds = t1 - t0;
-        st->threads = j->acc.threads;
-        for (int t = 0; t < j->acc.threads; t++) {
-            st->rays.camera += j->thr[t].rays.camera;
-            st->rays.extension += j->thr[t].rays.extension;
-            st->rays.shadow += j->thr[t].rays.shadow;
-            st->invalid_samples += j->thr[t].invalid;
-        }
-    }
+    dr_est_stats_fill(st, j->thr, j->acc.threads, t1 - t0);
     free(j);
     return rc;
 }

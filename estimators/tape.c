@@ -44,11 +44,7 @@ struct tape_job {
     struct tape tapes[DR_EST_MAX_THREADS];
     int64_t batch_begin;     /* path ids of the current batch start here */
     uint64_t peak_bytes;
-    struct {
-        struct dr_ray_counts rays;
-        uint64_t invalid;
-        char pad[64];
-    } thr[DR_EST_MAX_THREADS];
+    struct dr_est_counters thr[DR_EST_MAX_THREADS];
 };
 
 static bool grow(void **p, int64_t *cap, int64_t need, size_t elem)
@@ -220,18 +216,9 @@ static int tape_run(const struct dr_grad_problem *p, const float *adjoint, const
     }
     double t1 = dr_est_now();
     dr_est_accum_finish(&j->acc, p, grad, d_image);
-    if (st) {
-        memset(st, 0, sizeof *st);
-        st->seconds = t1 - t0;
-        st->threads = threads;
+    dr_est_stats_fill(st, j->thr, threads, t1 - t0);
+    if (st)
         st->tape_peak_bytes = j->peak_bytes;
-        for (int t = 0; t < threads; t++) {
-            st->rays.camera += j->thr[t].rays.camera;
-            st->rays.extension += j->thr[t].rays.extension;
-            st->rays.shadow += j->thr[t].rays.shadow;
-            st->invalid_samples += j->thr[t].invalid;
-        }
-    }
     for (int t = 0; t < threads; t++) {
         free(j->tapes[t].verts);
         free(j->tapes[t].paths);
