@@ -128,7 +128,7 @@ expect_fail 2 "--reference|does not have the same parameters" "$scene" --target 
 expect_fail 3 "--resume|checkpoint.txt|cannot read checkpoint" "$scene" --target "$T" --param "$P" "${fast[@]}" --resume
 # a checkpoint for other parameters (in an existing directory: nothing in it changes)
 ck=$tmp/ck
-run optimize "$scene" --target "$T" --param "$R" --spp 1 --max-depth 2 --iters 2 --out-dir "$ck"
+run optimize "$scene" --target "$T" --param "$R" --param "$P" --spp 1 --max-depth 2 --iters 2 --out-dir "$ck"
 [ "$rc" -eq 0 ] && [ -s "$ck/checkpoint.txt" ] || fail "set-up run for the --resume cases"
 snapshot() { (cd "$ck" && ls -l --time-style=+%s.%N && cat checkpoint.txt loss.csv); }
 before=$(snapshot)
@@ -136,7 +136,7 @@ resume_fail() {   # resume_fail CODE "NEEDLES" ARGS...: like expect_fail with --
     local want=$1 needles=$2 n
     shift 2
     ncases=$((ncases + 1))
-    run optimize "$@" --out-dir "$ck" --resume
+    run optimize "$scene" --target "$T" --spp 1 --max-depth 2 "$@" --out-dir "$ck" --resume
     [ "$rc" -eq "$want" ] || fail "expected exit $want, got $rc"
     local IFS='|'
     for n in $needles; do
@@ -146,14 +146,14 @@ resume_fail() {   # resume_fail CODE "NEEDLES" ARGS...: like expect_fail with --
     [ ! -s "$tmp/out" ] || fail "expected nothing on stdout"
     [ "$(snapshot)" = "$before" ] || fail "a rejected --resume changed $ck"
 }
-resume_fail 2 "--resume|checkpoint holds|roughnessFactor|baseColorFactor|same --param list" \
-    "$scene" --target "$T" --param "$P" --spp 1 --max-depth 2 --iters 4
-resume_fail 2 "--resume|more parameters|same --param list" \
-    "$scene" --target "$T" --spp 1 --max-depth 2 --iters 4 --param "$P" --param "$R" --json
-resume_fail 2 "--resume|checkpoint holds" "$scene" --target "$T" --param "$R" --param "$P" --spp 1 --max-depth 2 --iters 4
-resume_fail 2 "--resume|iteration 2|beyond --iters 1" "$scene" --target "$T" --param "$R" --spp 1 --max-depth 2 --iters 1
+resume_fail 2 "--resume|checkpoint holds|roughnessFactor|baseColorFactor|same --param list" --param "$P" --iters 4
+resume_fail 2 "--resume|checkpoint holds" --param "$P" --param "$R" --iters 4
+resume_fail 2 "--resume|more parameters|same --param list" --param "$R" --iters 4 --json
+resume_fail 2 "--resume|iteration 2|beyond --iters 1" --param "$R" --param "$P" --iters 1
+# (a checkpoint with fewer parameters than the run reads as truncated)
+resume_fail 3 "--resume|checkpoint" --param "$R" --param "$P" --param /materials/wall/emissiveFactor --iters 4
 head -c 60 "$ck/checkpoint.txt" >"$tmp/trunc.txt"
 cp "$ck/checkpoint.txt" "$tmp/saved.txt" && cp "$tmp/trunc.txt" "$ck/checkpoint.txt"
 before=$(snapshot)
-resume_fail 3 "--resume|not a valid drender checkpoint" "$scene" --target "$T" --param "$R" --spp 1 --max-depth 2 --iters 4
+resume_fail 3 "--resume|not a valid drender checkpoint" --param "$R" --param "$P" --iters 4
 echo "$ncases rejected inputs: right exit codes and messages, nothing left behind"
