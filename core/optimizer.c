@@ -159,7 +159,15 @@ int dr_checkpoint_read(const char *path, const struct dr_param_set *ps, double *
               fscanf(f, "adam %lld %lf %lf %lf\n", &t, &a->beta1, &a->beta2, &a->eps) == 4;
     for (int k = 0; ok && k < ps->n; k++) {
         const struct dr_param *p = &ps->params[k];
-        if (fscanf(f, " param %160s %lld", name, &size) != 2) {
+        char word[16];
+        if (fscanf(f, " %15s", word) == 1 && strcmp(word, "end") == 0) {
+            dr_set_error("%s: checkpoint holds fewer parameters than the run asks for: resume with the same --param "
+                         "list",
+                         path);
+            fclose(f);
+            return DR_ERR_ARG;
+        }
+        if (strcmp(word, "param") != 0 || fscanf(f, " %160s %lld", name, &size) != 2) {
             ok = false;
             break;
         }

@@ -1,6 +1,7 @@
 #include "parallel.h"
 
 #include <pthread.h>
+#include <stdbool.h>
 #include <stdatomic.h>
 #include <stdlib.h>
 #include <unistd.h>
@@ -98,6 +99,8 @@ out:
 
 struct range_job {
     int64_t n, chunk;
+    int threads;
+    bool fixed;            /* static assignment: chunk c -> worker c mod threads */
     _Atomic int64_t next;
     dr_range_fn fn;
     void *ctx;
@@ -112,6 +115,11 @@ static void *range_main(void *arg)
 {
     struct range_worker *w = arg;
     struct range_job *j = w->job;
+    if (j->fixed) {
+        for (int64_t b = (int64_t)w->index * j->chunk; b < j->n; b += (int64_t)j->threads * j->chunk)
+            j->fn(j->ctx, w->index, b, b + j->chunk < j->n ? b + j->chunk : j->n);
+        return NULL;
+    }
     for (;;) {
         int64_t b = atomic_fetch_add(&j->next, j->chunk);
         if (b >= j->n)
@@ -122,16 +130,18 @@ static void *range_main(void *arg)
     return NULL;
 }
 
-int dr_parallel_for(int64_t n, int64_t chunk, int threads, dr_range_fn fn, void *ctx)
+static int range_run(int64_t n, int64_t chunk, int threads, bool fixed, dr_range_fn fn, void *ctx)
 {
     struct range_job j;
     j.n = n;
     j.chunk = chunk > 0 ? chunk : 1;
+    j.fixed = fixed;
     atomic_init(&j.next, 0);
     j.fn = fn;
     j.ctx = ctx;
     if (threads <= 0)
         threads = dr_cpu_count();
+    j.threads = threads;
     struct range_worker *ws = calloc((size_t)threads, sizeof *ws);
     pthread_t *ids = calloc((size_t)threads, sizeof *ids);
     if (!ws || !ids) {
@@ -156,4 +166,14 @@ int dr_parallel_for(int64_t n, int64_t chunk, int threads, dr_range_fn fn, void 
     free(ws);
     free(ids);
     return 0;
+}
+
+int dr_parallel_for(int64_t n, int64_t chunk, int threads, dr_range_fn fn, void *ctx)
+{
+    return range_run(n, chunk, threads, false, fn, ctx);
+}
+
+int dr_parallel_for_static(int64_t n, int64_t chunk, int threads, dr_range_fn fn, void *ctx)
+{
+    return range_run(n, chunk, threads, true, fn, ctx);
 }

@@ -23,6 +23,11 @@ int dr_parallel_tiles(int width, int height, int threads, dr_tile_fn fn, dr_prog
  * `threads` workers (<= 0: one per CPU); fn gets [begin, end). */
 typedef void (*dr_range_fn)(void *ctx, int thread, int64_t begin, int64_t end);
 int dr_parallel_for(int64_t n, int64_t chunk, int threads, dr_range_fn fn, void *ctx);
+/* The same with a fixed assignment: chunk c goes to worker c mod threads, each
+ * worker taking its chunks in increasing order. Per-thread sums then do not
+ * depend on timing, so results are bit-identical run to run for a given
+ * thread count (what gradient estimators and resumable optimisation need). */
+int dr_parallel_for_static(int64_t n, int64_t chunk, int threads, dr_range_fn fn, void *ctx);
 
 /* Number of online CPUs (>= 1). */
 int dr_cpu_count(void);

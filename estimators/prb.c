@@ -145,7 +145,7 @@ static int prb_run(const struct dr_grad_problem *p, const float *adjoint, const 
         return rc;
     }
     double t0 = dr_est_now();
-    rc = dr_parallel_for((int64_t)p->width * p->height, 16, j->acc.threads, prb_pixels, j);
+    rc = dr_parallel_for_static((int64_t)p->width * p->height, 16, j->acc.threads, prb_pixels, j);
     double t1 = dr_est_now();
     dr_est_accum_finish(&j->acc, p, grad, d_image);
     dr_est_stats_fill(st, j->thr, j->acc.threads, t1 - t0);

@@ -199,7 +199,7 @@ static int tape_run(const struct dr_grad_problem *p, const float *adjoint, const
         int64_t n = total - j->batch_begin < batch ? total - j->batch_begin : batch;
         for (int t = 0; t < threads; t++)
             j->tapes[t].n_verts = j->tapes[t].n_paths = 0;
-        rc = dr_parallel_for(n, 16, threads, record, j);
+        rc = dr_parallel_for_static(n, 16, threads, record, j);
         uint64_t bytes = 0;
         for (int t = 0; t < threads; t++) {
             bytes += tape_bytes(&j->tapes[t]);
@@ -212,7 +212,7 @@ static int tape_run(const struct dr_grad_problem *p, const float *adjoint, const
         if (bytes > j->peak_bytes)
             j->peak_bytes = bytes;
         if (rc == 0)
-            rc = dr_parallel_for(threads, 1, threads, sweep_tape, j);
+            rc = dr_parallel_for_static(threads, 1, threads, sweep_tape, j);
     }
     double t1 = dr_est_now();
     dr_est_accum_finish(&j->acc, p, grad, d_image);
