@@ -10,34 +10,10 @@
 #   1 = other failures (cannot write output, ...)       -- see cli_errors.sh
 set -u
 
-DRENDER=${DRENDER:-$(cd "$(dirname "$0")/.." && pwd)/build/drender}
-tmp=$(mktemp -d "${TMPDIR:-/tmp}/drender-cli-basics.XXXXXX") || exit 1
-trap 'rm -rf "$tmp"' EXIT
-trap 'exit 130' INT TERM
-mkdir "$tmp/work" && cd "$tmp/work" || exit 1
-
-fail() {
-    echo "FAIL: $*" >&2
-    if [ -n "${last_cmd:-}" ]; then
-        echo "  command: $last_cmd (exit $rc)" >&2
-        echo "  --- stdout ---" >&2; head -c 2000 "$tmp/out" >&2
-        echo "  --- stderr ---" >&2; head -c 2000 "$tmp/err" >&2
-    fi
-    exit 1
-}
-# run ARGS...: runs drender, stdout -> $tmp/out, stderr -> $tmp/err, exit code -> $rc
-run() {
-    last_cmd="drender $*"
-    "$DRENDER" "$@" >"$tmp/out" 2>"$tmp/err" </dev/null
-    rc=$?
-}
-expect_rc() { [ "$rc" -eq "$1" ] || fail "$2: expected exit $1, got $rc"; }
-expect_in() {   # expect_in FILE TEXT DESCRIPTION (fixed string)
-    grep -qF -- "$2" "$tmp/$1" || fail "$3: expected '$2' in $1"
-}
-expect_empty() { [ ! -s "$tmp/$1" ] || fail "$2: expected empty $1"; }
-
-[ -x "$DRENDER" ] || fail "drender binary not found or not executable: $DRENDER"
+# shellcheck source=SCRIPTDIR/lib/cli.sh
+. "$(dirname "$0")/lib/cli.sh"
+cli_setup basics
+require_drender
 
 # --version
 run --version

@@ -15,55 +15,28 @@
 #   0 = success (cli_render.sh)
 set -u
 
-here=$(cd "$(dirname "$0")" && pwd)
-DRENDER=${DRENDER:-$here/../build/drender}
-DR_TESTDIR=${DR_TESTDIR:-$here}
+# shellcheck source=SCRIPTDIR/lib/cli.sh
+. "$(dirname "$0")/lib/cli.sh"
 gltf=$DR_TESTDIR/data/gltf
 clidata=$DR_TESTDIR/data/cli
-tmp=$(mktemp -d "${TMPDIR:-/tmp}/drender-cli-errors.XXXXXX") || exit 1
-trap 'rm -rf "$tmp"' EXIT
-trap 'exit 130' INT TERM
-work=$tmp/work
-mkdir "$work" && cd "$work" || exit 1
-
-fail() {
-    echo "FAIL: $*" >&2
-    if [ -n "${last_cmd:-}" ]; then
-        echo "  command: $last_cmd (exit $rc)" >&2
-        echo "  --- stdout ---" >&2; head -c 2000 "$tmp/out" >&2
-        echo "  --- stderr ---" >&2; head -c 2000 "$tmp/err" >&2
-    fi
-    exit 1
-}
-run() {   # run ARGS...: stdout -> $tmp/out, stderr -> $tmp/err, exit code -> $rc
-    last_cmd="drender $*"
-    "$DRENDER" "$@" >"$tmp/out" 2>"$tmp/err" </dev/null
-    rc=$?
-}
+cli_setup errors
 ncases=0
 # expect_fail CODE "NEEDLE1|NEEDLE2|..." ARGS...
 #   runs `drender render ARGS...` in an empty directory and checks the exit
 #   code, that stderr contains every NEEDLE (fixed strings), that stdout is
 #   empty and that the directory is still empty afterwards.
 expect_fail() {
-    local want=$1 needles=$2 n
+    local want=$1 needles=$2
     shift 2
     ncases=$((ncases + 1))
     run render "$@"
-    [ "$rc" -eq "$want" ] || fail "expected exit $want, got $rc"
-    [ -s "$tmp/err" ] || fail "expected an error message on stderr, got none"
-    local IFS='|'
-    for n in $needles; do
-        grep -qF -- "$n" "$tmp/err" || fail "expected the message to mention '$n'"
-    done
-    unset IFS
-    [ ! -s "$tmp/out" ] || fail "expected nothing on stdout"
+    check_failed "$want" "$needles"
     local left
     left=$(ls -A "$work")
     [ -z "$left" ] || fail "expected no files left in the output directory, found: $left"
 }
 
-[ -x "$DRENDER" ] || fail "drender binary not found or not executable: $DRENDER"
+require_drender
 [ -f "$gltf/bad_json.gltf" ] && [ -f "$clidata/missing_texture.gltf" ] || fail "test scenes not found under $DR_TESTDIR/data"
 
 R="--res 16x16 --spp 1"

@@ -15,52 +15,24 @@
 #   4 = fdcheck: some gradient disagrees with finite differences
 set -u
 
-here=$(cd "$(dirname "$0")" && pwd)
-DRENDER=${DRENDER:-$here/../build/drender}
-tmp=$(mktemp -d "${TMPDIR:-/tmp}/drender-cli-grad.XXXXXX") || exit 1
-trap 'rm -rf "$tmp"' EXIT
-trap 'exit 130' INT TERM
-mkdir "$tmp/work" && cd "$tmp/work" || exit 1
-
-fail() {
-    echo "FAIL: $*" >&2
-    if [ -n "${last_cmd:-}" ]; then
-        echo "  last command: $last_cmd (exit $rc)" >&2
-        echo "  --- stdout ---" >&2; head -c 3000 "$tmp/out" >&2
-        echo "  --- stderr ---" >&2; head -c 2000 "$tmp/err" >&2
-    fi
-    exit 1
-}
-run() {   # run ARGS...: stdout -> $tmp/out, stderr -> $tmp/err, exit code -> $rc
-    last_cmd="drender $*"
-    "$DRENDER" "$@" >"$tmp/out" 2>"$tmp/err" </dev/null
-    rc=$?
-}
-expect_rc() { [ "$rc" -eq "$1" ] || fail "$2: expected exit $1, got $rc"; }
-expect_in() { grep -qF -- "$2" "$tmp/$1" || fail "$3: expected '$2' in $1"; }
-expect_empty() { [ ! -s "$tmp/$1" ] || fail "$2: expected empty $1, got: $(head -c 300 "$tmp/$1")"; }
+# shellcheck source=SCRIPTDIR/lib/cli.sh
+. "$(dirname "$0")/lib/cli.sh"
+cli_setup grad
+cli_cmd_label="last command" cli_out_bytes=3000
 # expect_fail CODE "NEEDLE1|NEEDLE2" ARGS...: exit CODE, every needle on stderr,
 # nothing on stdout, no file left in the (empty) working directory.
 expect_fail() {
-    local want=$1 needles=$2 n
+    local want=$1 needles=$2
     shift 2
     local before
     before=$(ls -A)
     run "$@"
     expect_rc "$want" "$*"
     [ -s "$tmp/err" ] || fail "$*: expected an error message on stderr"
-    local IFS='|'
-    for n in $needles; do
-        grep -qF -- "$n" "$tmp/err" || fail "$*: expected the message to mention '$n'"
-    done
-    unset IFS
+    expect_mentions "$needles" "$*"
     expect_empty out "$*"
     [ "$(ls -A)" = "$before" ] || fail "$*: left files behind: $(ls -A)"
 }
-have_oiio=false
-command -v oiiotool >/dev/null 2>&1 && have_oiio=true
-have_python=false
-command -v python3 >/dev/null 2>&1 && python3 -c 'import json' 2>/dev/null && have_python=true
 # json_check FILE PYTHON-EXPR-over-d: the file is one JSON object and the expression holds
 json_check() {
     $have_python || return 0
@@ -74,7 +46,7 @@ if not ok:
 EOF
 }
 
-[ -x "$DRENDER" ] || fail "drender binary not found or not executable: $DRENDER"
+require_drender
 red=/materials/red/pbrMetallicRoughness/baseColorFactor
 red_idx=/materials/1/pbrMetallicRoughness/baseColorFactor
 fast="--res 16x16 --spp 4"

@@ -21,32 +21,16 @@
 # gnuplot if present.
 set -u
 
-here=$(cd "$(dirname "$0")" && pwd)
-DRENDER=${DRENDER:-$here/../build/drender}
-DR_TESTDIR=${DR_TESTDIR:-$here}
+# shellcheck source=SCRIPTDIR/lib/cli.sh
+. "$(dirname "$0")/lib/cli.sh"
 data=$DR_TESTDIR/data/optimize
-tmp=$(mktemp -d "${TMPDIR:-/tmp}/drender-cli-optimize.XXXXXX") || exit 1
-bg_pid=
-trap '[ -n "$bg_pid" ] && kill "$bg_pid" 2>/dev/null; rm -rf "$tmp"' EXIT
-trap 'exit 130' INT TERM
-mkdir "$tmp/work" && cd "$tmp/work" || exit 1
-
-fail() {
-    echo "FAIL: $*" >&2
-    if [ -n "${last_cmd:-}" ]; then
-        echo "  last command: $last_cmd (exit $rc)" >&2
-        echo "  --- stdout (last lines) ---" >&2; tail -n 3 "$tmp/out" | head -c 3000 >&2
-        echo "  --- stderr (last lines) ---" >&2; tail -n 15 "$tmp/err" | head -c 3000 >&2
-    fi
-    exit 1
+cli_setup optimize
+# fail shows the last lines of the command's output (optimize's output is long)
+cli_cmd_label="last command"
+cli_show_output() {
+    echo "  --- stdout (last lines) ---" >&2; tail -n 3 "$tmp/out" | head -c 3000 >&2
+    echo "  --- stderr (last lines) ---" >&2; tail -n 15 "$tmp/err" | head -c 3000 >&2
 }
-run() {   # run ARGS...: stdout -> $tmp/out, stderr -> $tmp/err, exit code -> $rc
-    last_cmd="drender $*"
-    "$DRENDER" "$@" >"$tmp/out" 2>"$tmp/err" </dev/null
-    rc=$?
-}
-expect_rc() { [ "$rc" -eq "$1" ] || fail "$2: expected exit $1, got $rc"; }
-expect_in() { grep -qF -- "$2" "$tmp/$1" || fail "$3: expected '$2' in $1"; }
 # The last line of stdout must be optimize's --json summary.
 summary() { tail -n 1 "$tmp/out" | grep -q '^{"done": true' || fail "$1: no --json summary line on stdout"; tail -n 1 "$tmp/out" >"$tmp/$2"; }
 # ref_error FILE NAME: the summary's reference_error of parameter NAME
@@ -67,14 +51,12 @@ check() {
 }
 csv_rows() { echo $(($(wc -l <"$1") - 1)); }
 
-[ -x "$DRENDER" ] || fail "drender binary not found or not executable: $DRENDER"
+require_drender
 for f in diffuse.gltf texture-true.gltf texture-flat.gltf glossy.gltf texture-true.png texture-flat.png; do
     [ -f "$data/$f" ] || fail "test scene $data/$f not found (python3 tests/data/optimize/make_scenes.py)"
 done
 have_gnuplot=false
 command -v gnuplot >/dev/null 2>&1 && have_gnuplot=true
-have_oiio=false
-command -v oiiotool >/dev/null 2>&1 && have_oiio=true
 
 albedo=/materials/wall/pbrMetallicRoughness/baseColorFactor
 albedo_idx=/materials/0/pbrMetallicRoughness/baseColorFactor
@@ -232,20 +214,8 @@ echo "d. SIGINT after iteration $k: exit 130, checkpoint valid, resumed; SIGTERM
 
 # ---- e. output glTF ----
 last_cmd=
-validator_pkg="gltf-validator@2.0.0-dev.3.10"   # as tests/cli_gltf_validate.sh
-node_dir="$here/../build/node"
-export GLTF_VALIDATOR_DIR="$node_dir"
-command -v node >/dev/null 2>&1 || fail "node is not installed (Debian: apt-get install nodejs npm, or scripts/install-deps.sh)"
-if [ ! -f "$node_dir/node_modules/gltf-validator/package.json" ]; then
-    command -v npm >/dev/null 2>&1 || fail "npm is not installed (Debian: apt-get install npm)"
-    mkdir -p "$node_dir" || fail "cannot create $node_dir"
-    (
-        flock 9
-        [ -f "$node_dir/node_modules/gltf-validator/package.json" ] ||
-            npm install --no-audit --no-fund --prefix "$node_dir" "$validator_pkg" >&2
-    ) 9>"$node_dir/.install-lock" || fail "npm install --prefix $node_dir $validator_pkg failed"
-fi
-node "$here/validate_gltf.mjs" b/result.gltf c/result.glb >"$tmp/validate.log" 2>&1 ||
+ensure_gltf_validator
+validate_gltf b/result.gltf c/result.glb >"$tmp/validate.log" 2>&1 ||
     { cat "$tmp/validate.log" >&2; fail "e: the glTF validator reports errors in b/result.gltf or c/result.glb"; }
 # the written values read back
 run params c/result.glb --json

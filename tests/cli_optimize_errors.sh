@@ -16,30 +16,10 @@
 #   1 = other failures: -o into a directory that does not exist
 set -u
 
-here=$(cd "$(dirname "$0")" && pwd)
-DRENDER=${DRENDER:-$here/../build/drender}
-DR_TESTDIR=${DR_TESTDIR:-$here}
+# shellcheck source=SCRIPTDIR/lib/cli.sh
+. "$(dirname "$0")/lib/cli.sh"
 data=$DR_TESTDIR/data/optimize
-tmp=$(mktemp -d "${TMPDIR:-/tmp}/drender-cli-optimize-errors.XXXXXX") || exit 1
-trap 'rm -rf "$tmp"' EXIT
-trap 'exit 130' INT TERM
-work=$tmp/work
-mkdir "$work" && cd "$work" || exit 1
-
-fail() {
-    echo "FAIL: $*" >&2
-    if [ -n "${last_cmd:-}" ]; then
-        echo "  command: $last_cmd (exit $rc)" >&2
-        echo "  --- stdout ---" >&2; head -c 2000 "$tmp/out" >&2
-        echo "  --- stderr ---" >&2; head -c 2000 "$tmp/err" >&2
-    fi
-    exit 1
-}
-run() {   # run ARGS...: stdout -> $tmp/out, stderr -> $tmp/err, exit code -> $rc
-    last_cmd="drender $*"
-    "$DRENDER" "$@" >"$tmp/out" 2>"$tmp/err" </dev/null
-    rc=$?
-}
+cli_setup optimize-errors
 ncases=0
 # expect_fail CODE "NEEDLE1|NEEDLE2|..." ARGS...
 #   runs `drender optimize ARGS... --out-dir out/progress` in the work
@@ -47,23 +27,16 @@ ncases=0
 #   (fixed strings), that stdout is empty and that the work directory holds
 #   the same files as before (so out/ was not created).
 expect_fail() {
-    local want=$1 needles=$2 n before
+    local want=$1 needles=$2 before
     shift 2
     ncases=$((ncases + 1))
     before=$(ls -AR "$work")
     run optimize "$@" --out-dir out/progress
-    [ "$rc" -eq "$want" ] || fail "expected exit $want, got $rc"
-    [ -s "$tmp/err" ] || fail "expected an error message on stderr, got none"
-    local IFS='|'
-    for n in $needles; do
-        grep -qF -- "$n" "$tmp/err" || fail "expected the message to mention '$n'"
-    done
-    unset IFS
-    [ ! -s "$tmp/out" ] || fail "expected nothing on stdout"
+    check_failed "$want" "$needles"
     [ "$(ls -AR "$work")" = "$before" ] || fail "files left behind in $work: $(ls -AR "$work")"
 }
 
-[ -x "$DRENDER" ] || fail "drender binary not found or not executable: $DRENDER"
+require_drender
 [ -f "$data/diffuse.gltf" ] || fail "test scene $data/diffuse.gltf not found"
 
 # inputs live in $tmp (outside the watched work directory)
@@ -133,17 +106,11 @@ run optimize "$scene" --target "$T" --param "$R" --param "$P" --spp 1 --max-dept
 snapshot() { (cd "$ck" && ls -l --time-style=+%s.%N && cat checkpoint.txt loss.csv); }
 before=$(snapshot)
 resume_fail() {   # resume_fail CODE "NEEDLES" ARGS...: like expect_fail with --out-dir $ck --resume
-    local want=$1 needles=$2 n
+    local want=$1 needles=$2
     shift 2
     ncases=$((ncases + 1))
     run optimize "$scene" --target "$T" --spp 1 --max-depth 2 "$@" --out-dir "$ck" --resume
-    [ "$rc" -eq "$want" ] || fail "expected exit $want, got $rc"
-    local IFS='|'
-    for n in $needles; do
-        grep -qF -- "$n" "$tmp/err" || fail "expected the message to mention '$n'"
-    done
-    unset IFS
-    [ ! -s "$tmp/out" ] || fail "expected nothing on stdout"
+    check_failed "$want" "$needles"
     [ "$(snapshot)" = "$before" ] || fail "a rejected --resume changed $ck"
 }
 resume_fail 2 "--resume|checkpoint holds|roughnessFactor|baseColorFactor|same --param list" --param "$P" --iters 4

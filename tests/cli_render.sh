@@ -12,33 +12,11 @@
 #   1 = other failures (e.g. cannot write the output file)       -- cli_errors.sh
 set -u
 
-here=$(cd "$(dirname "$0")" && pwd)
-DRENDER=${DRENDER:-$here/../build/drender}
-DR_TESTDIR=${DR_TESTDIR:-$here}
-DR_SCENES=${DR_SCENES:-$here/../scenes}
+# shellcheck source=SCRIPTDIR/lib/cli.sh
+. "$(dirname "$0")/lib/cli.sh"
 gltf=$DR_TESTDIR/data/gltf
-tmp=$(mktemp -d "${TMPDIR:-/tmp}/drender-cli-render.XXXXXX") || exit 1
-trap 'rm -rf "$tmp"' EXIT
-trap 'exit 130' INT TERM
-mkdir "$tmp/work" && cd "$tmp/work" || exit 1
-
-fail() {
-    echo "FAIL: $*" >&2
-    if [ -n "${last_cmd:-}" ]; then
-        echo "  last command: $last_cmd (exit $rc)" >&2
-        echo "  --- stdout ---" >&2; head -c 2000 "$tmp/out" >&2
-        echo "  --- stderr ---" >&2; head -c 2000 "$tmp/err" >&2
-    fi
-    exit 1
-}
-# run ARGS...: runs drender, stdout -> $tmp/out, stderr -> $tmp/err, exit code -> $rc
-run() {
-    last_cmd="drender $*"
-    "$DRENDER" "$@" >"$tmp/out" 2>"$tmp/err" </dev/null
-    rc=$?
-}
-expect_rc() { [ "$rc" -eq "$1" ] || fail "$2: expected exit $1, got $rc"; }
-expect_empty() { [ ! -s "$tmp/$1" ] || fail "$2: expected empty $1, got: $(head -c 300 "$tmp/$1")"; }
+cli_setup render
+cli_cmd_label="last command"
 # A render that must succeed quietly: exit 0, nothing on stdout or stderr
 # (no progress bar: stderr is a file here, not a terminal), output written.
 render_ok() {   # render_ok OUTPUT ARGS...
@@ -50,10 +28,6 @@ render_ok() {   # render_ok OUTPUT ARGS...
     [ -s "$o" ] || fail "render to $o: expected a non-empty file $o"
 }
 magic() { head -c "$2" "$1" | od -An -tx1 | tr -d ' \n'; }
-have_oiio=false
-command -v oiiotool >/dev/null 2>&1 && have_oiio=true
-have_python=false
-command -v python3 >/dev/null 2>&1 && python3 -c 'import json' 2>/dev/null && have_python=true
 
 # OpenEXR files carry a capDate header attribute (the time of writing), so two
 # renders a second apart differ in those 19 bytes: blank it before comparing
@@ -76,7 +50,7 @@ same_pixels() {   # same_pixels A.exr B.exr
     return 0
 }
 
-[ -x "$DRENDER" ] || fail "drender binary not found or not executable: $DRENDER"
+require_drender
 
 # ---- the bundled default scene (no SCENE argument) to every format ----
 res="--res 24x16 --spp 2"
