@@ -158,3 +158,29 @@ void dr_est_chunk_end(struct dr_est_accum *a, int thread)
     for (int64_t i = 0; i < a->total; i++)
         g[i] += c[i];
 }
+
+int dr_est_base_init(struct dr_est_base *b, const struct dr_grad_problem *p, const float *adjoint,
+                     const double *dir)
+{
+    b->p = p;
+    b->view = dr_camera_view(p->camera, p->width, p->height);
+    b->popts = (struct dr_path_opts){p->max_depth, p->rr_depth, p->params};
+    b->adjoint = adjoint;
+    b->dir = dir;
+    memset(b->thr, 0, sizeof b->thr);
+    b->t0 = dr_est_now();
+    return dr_est_accum_init(&b->acc, p, dir != NULL);
+}
+
+void dr_est_base_finish(struct dr_est_base *b, double *grad, double *d_image, struct dr_grad_stats *st)
+{
+    double t1 = dr_est_now();
+    dr_est_accum_finish(&b->acc, b->p, grad, d_image);
+    dr_est_stats_fill(st, b->thr, b->acc.threads, t1 - b->t0);
+}
+
+dr_vec3 dr_est_pixel_adjoint(const struct dr_est_base *b, int64_t pixel)
+{
+    const float *a = b->adjoint + 3 * pixel;
+    return dr_scale(dr_v3(a[0], a[1], a[2]), 1.0 / b->p->spp);
+}

@@ -49,6 +49,26 @@ struct dr_est_counters {
 /* Sums the threads' counters into *st (when st is not NULL). */
 void dr_est_stats_fill(struct dr_grad_stats *st, const struct dr_est_counters *c, int threads, double seconds);
 
+/* What every estimator run holds: the problem, the camera set up for it, the
+ * walker's options, the mode (adjoint image for reverse, direction for
+ * forward), the accumulators and per-thread counters. */
+struct dr_est_base {
+    const struct dr_grad_problem *p;
+    struct dr_camera_view view;
+    struct dr_path_opts popts;
+    const float *adjoint;   /* reverse mode */
+    const double *dir;      /* forward mode (NULL in reverse mode) */
+    struct dr_est_accum acc;
+    struct dr_est_counters thr[DR_EST_MAX_THREADS];
+    double t0;
+};
+int dr_est_base_init(struct dr_est_base *b, const struct dr_grad_problem *p, const float *adjoint,
+                     const double *dir);
+/* Sums the threads into grad / d_image and fills *st (may be NULL). */
+void dr_est_base_finish(struct dr_est_base *b, double *grad, double *d_image, struct dr_grad_stats *st);
+/* Adjoint of sample L at a pixel in reverse mode: adjoint / spp. */
+dr_vec3 dr_est_pixel_adjoint(const struct dr_est_base *b, int64_t pixel);
+
 int dr_est_thread_count(const struct dr_grad_problem *p);
 double dr_est_now(void);
 bool dr_vec3_finite(dr_vec3 v);

@@ -17,13 +17,7 @@
 #include "parallel.h"
 
 struct prb_job {
-    const struct dr_grad_problem *p;
-    struct dr_camera_view view;
-    struct dr_path_opts popts;
-    const float *adjoint;   /* reverse mode */
-    const double *dir;      /* forward mode */
-    struct dr_est_accum acc;
-    struct dr_est_counters thr[DR_EST_MAX_THREADS];
+    struct dr_est_base b;   /* first: the shared part */
 };
 
 /* Primal pass: L_true (the estimate) and L_sub (with substitutes). */
@@ -36,7 +30,7 @@ static void primal(const struct prb_job *j, struct dr_sampler smp, dr_vec3 o, dr
     dr_vec3 lt = dr_v3s(0.0), ls = dr_v3s(0.0);
     for (;;) {
         dr_vec3 beta = st.beta, ratio = st.ratio;
-        bool more = dr_path_step(j->p->scene, &j->popts, &st, &smp, &v, rays);
+        bool more = dr_path_step(j->b.p->scene, &j->b.popts, &st, &smp, &v, rays);
         dr_vec3 c = dr_mul(beta, dr_path_vertex_term(&v));
         ls = dr_add(ls, c);
         lt = dr_add(lt, dr_mul(ratio, c));
@@ -51,15 +45,15 @@ static void primal(const struct prb_job *j, struct dr_sampler smp, dr_vec3 o, dr
 static void replay(const struct prb_job *j, struct dr_sampler smp, dr_vec3 o, dr_vec3 d, dr_vec3 L_true,
                    dr_vec3 L_sub, dr_vec3 adj, struct dr_grad_sink *sink, struct dr_ray_counts *rays)
 {
-    const struct dr_scene *s = j->p->scene;
-    const struct dr_param_set *ps = j->p->params;
+    const struct dr_scene *s = j->b.p->scene;
+    const struct dr_param_set *ps = j->b.p->params;
     struct dr_path_state st;
     struct dr_path_vertex v;
     dr_path_start(&st, o, d);
     dr_vec3 R_true = L_true, R_sub = L_sub;
     for (;;) {
         dr_vec3 beta = st.beta, ratio = st.ratio;
-        bool more = dr_path_step(s, &j->popts, &st, &smp, &v, rays);
+        bool more = dr_path_step(s, &j->b.popts, &st, &smp, &v, rays);
         dr_vec3 e = dr_path_vertex_term(&v);
         dr_vec3 bt = dr_mul(ratio, beta);           /* true throughput */
         R_sub = dr_sub(R_sub, dr_mul(beta, e));
@@ -85,35 +79,34 @@ static void replay(const struct prb_job *j, struct dr_sampler smp, dr_vec3 o, dr
 static void prb_pixels(void *ctx, int thread, int64_t begin, int64_t end)
 {
     struct prb_job *j = ctx;
-    const struct dr_grad_problem *p = j->p;
-    struct dr_ray_counts *rays = &j->thr[thread].rays;
+    const struct dr_grad_problem *p = j->b.p;
+    struct dr_ray_counts *rays = &j->b.thr[thread].rays;
     const double inv_spp = 1.0 / p->spp;
-    struct dr_grad_sink sink = {NULL, j->dir, 0.0};
-    if (!j->dir)
-        sink.grad = dr_est_chunk_begin(&j->acc, thread);
+    struct dr_grad_sink sink = {NULL, j->b.dir, 0.0};
+    if (!j->b.dir)
+        sink.grad = dr_est_chunk_begin(&j->b.acc, thread);
     for (int64_t px = begin; px < end; px++) {
         dr_vec3 adj = dr_v3s(0.0);
-        if (!j->dir) {
-            const float *a = j->adjoint + 3 * px;
-            adj = dr_scale(dr_v3(a[0], a[1], a[2]), inv_spp);
+        if (!j->b.dir) {
+            adj = dr_est_pixel_adjoint(&j->b, px);
             if (dr_is_black(adj))
                 continue;   /* this pixel does not matter to the loss */
         }
         for (int sidx = 0; sidx < p->spp; sidx++) {
             struct dr_sampler smp;
             dr_vec3 o, d, L_true, L_sub;
-            dr_est_camera_ray(p, &j->view, px, sidx, &smp, &o, &d);
+            dr_est_camera_ray(p, &j->b.view, px, sidx, &smp, &o, &d);
             primal(j, smp, o, d, &L_true, &L_sub, rays);
             if (!dr_vec3_finite(L_true) || !dr_vec3_finite(L_sub)) {
-                j->thr[thread].invalid++;
+                j->b.thr[thread].invalid++;
                 continue;
             }
-            if (!j->dir) {
+            if (!j->b.dir) {
                 replay(j, smp, o, d, L_true, L_sub, adj, &sink, rays);
                 continue;
             }
             /* forward mode: one replay per output channel */
-            double *out = j->acc.image[thread] + 3 * px;
+            double *out = j->b.acc.image[thread] + 3 * px;
             for (int c = 0; c < 3; c++) {
                 dr_vec3 e = dr_v3(c == 0, c == 1, c == 2);
                 sink.forward = 0.0;
@@ -122,8 +115,8 @@ static void prb_pixels(void *ctx, int thread, int64_t begin, int64_t end)
             }
         }
     }
-    if (!j->dir)
-        dr_est_chunk_end(&j->acc, thread);
+    if (!j->b.dir)
+        dr_est_chunk_end(&j->b.acc, thread);
 }
 
 static int prb_run(const struct dr_grad_problem *p, const float *adjoint, const double *dir, double *grad,
@@ -134,21 +127,13 @@ static int prb_run(const struct dr_grad_problem *p, const float *adjoint, const 
         dr_set_error("out of memory");
         return DR_ERR_NOMEM;
     }
-    j->p = p;
-    j->view = dr_camera_view(p->camera, p->width, p->height);
-    j->popts = (struct dr_path_opts){p->max_depth, p->rr_depth, p->params};
-    j->adjoint = adjoint;
-    j->dir = dir;
-    int rc = dr_est_accum_init(&j->acc, p, dir != NULL);
+    int rc = dr_est_base_init(&j->b, p, adjoint, dir);
     if (rc != 0) {
         free(j);
         return rc;
     }
-    double t0 = dr_est_now();
-    rc = dr_parallel_for_static((int64_t)p->width * p->height, 16, j->acc.threads, prb_pixels, j);
-    double t1 = dr_est_now();
-    dr_est_accum_finish(&j->acc, p, grad, d_image);
-    dr_est_stats_fill(st, j->thr, j->acc.threads, t1 - t0);
+    rc = dr_parallel_for_static((int64_t)p->width * p->height, 16, j->b.acc.threads, prb_pixels, j);
+    dr_est_base_finish(&j->b, grad, d_image, st);
     free(j);
     return rc;
 }

@@ -35,16 +35,10 @@ struct tape {
 };
 
 struct tape_job {
-    const struct dr_grad_problem *p;
-    struct dr_camera_view view;
-    struct dr_path_opts popts;
-    const float *adjoint;
-    const double *dir;
-    struct dr_est_accum acc;
+    struct dr_est_base b;   /* first: the shared part */
     struct tape tapes[DR_EST_MAX_THREADS];
     int64_t batch_begin;     /* path ids of the current batch start here */
     uint64_t peak_bytes;
-    struct dr_est_counters thr[DR_EST_MAX_THREADS];
 };
 
 static bool grow(void **p, int64_t *cap, int64_t need, size_t elem)
@@ -71,23 +65,21 @@ static uint64_t tape_bytes(const struct tape *t)
 static void record(void *ctx, int thread, int64_t begin, int64_t end)
 {
     struct tape_job *j = ctx;
-    const struct dr_grad_problem *p = j->p;
+    const struct dr_grad_problem *p = j->b.p;
     struct tape *tp = &j->tapes[thread];
     const int64_t pixels = (int64_t)p->width * p->height;
-    const double inv_spp = 1.0 / p->spp;
     for (int64_t id = j->batch_begin + begin; id < j->batch_begin + end; id++) {
         int64_t px = id % pixels;
         int sidx = (int)(id / pixels);
         dr_vec3 adj = dr_v3s(0.0);
-        if (!j->dir) {
-            const float *a = j->adjoint + 3 * px;
-            adj = dr_scale(dr_v3(a[0], a[1], a[2]), inv_spp);
+        if (!j->b.dir) {
+            adj = dr_est_pixel_adjoint(&j->b, px);
             if (dr_is_black(adj))
                 continue;
         }
         struct dr_sampler smp;
         dr_vec3 o, d;
-        dr_est_camera_ray(p, &j->view, px, sidx, &smp, &o, &d);
+        dr_est_camera_ray(p, &j->b.view, px, sidx, &smp, &o, &d);
         if (!grow((void **)&tp->paths, &tp->cap_paths, tp->n_paths + 1, sizeof *tp->paths)) {
             tp->failed = true;
             return;
@@ -107,7 +99,7 @@ static void record(void *ctx, int thread, int64_t begin, int64_t end)
             }
             struct tape_vertex *tv = &tp->verts[tp->n_verts];
             tv->bt = dr_mul(st.ratio, st.beta);
-            bool more = dr_path_step(p->scene, &j->popts, &st, &smp, &tv->v, &j->thr[thread].rays);
+            bool more = dr_path_step(p->scene, &j->b.popts, &st, &smp, &tv->v, &j->b.thr[thread].rays);
             L = dr_add(L, dr_mul(tv->bt, dr_path_vertex_term(&tv->v)));
             tp->n_verts++;
             path->count++;
@@ -116,7 +108,7 @@ static void record(void *ctx, int thread, int64_t begin, int64_t end)
         }
         if (!dr_vec3_finite(L)) {   /* drop the path */
             tp->n_verts = path->first;
-            j->thr[thread].invalid++;
+            j->b.thr[thread].invalid++;
             continue;
         }
         tp->n_paths++;
@@ -127,8 +119,8 @@ static void record(void *ctx, int thread, int64_t begin, int64_t end)
 static void sweep(const struct tape_job *j, const struct tape_vertex *verts, int count, dr_vec3 adj,
                   struct dr_grad_sink *sink)
 {
-    const struct dr_scene *s = j->p->scene;
-    const struct dr_param_set *ps = j->p->params;
+    const struct dr_scene *s = j->b.p->scene;
+    const struct dr_param_set *ps = j->b.p->params;
     dr_vec3 abar = dr_v3s(0.0);   /* adjoint of the true throughput after the vertex */
     for (int k = count - 1; k >= 0; k--) {
         const struct dr_path_vertex *v = &verts[k].v;
@@ -148,28 +140,28 @@ static void sweep(const struct tape_job *j, const struct tape_vertex *verts, int
 static void sweep_tape(void *ctx, int thread, int64_t begin, int64_t end)
 {
     struct tape_job *j = ctx;
-    const double inv_spp = 1.0 / j->p->spp;
+    const double inv_spp = 1.0 / j->b.p->spp;
     for (int64_t i = begin; i < end; i++) {
         const struct tape *tp = &j->tapes[i];
-        struct dr_grad_sink sink = {NULL, j->dir, 0.0};
-        if (!j->dir)
-            sink.grad = dr_est_chunk_begin(&j->acc, thread);
+        struct dr_grad_sink sink = {NULL, j->b.dir, 0.0};
+        if (!j->b.dir)
+            sink.grad = dr_est_chunk_begin(&j->b.acc, thread);
         for (int64_t pi = 0; pi < tp->n_paths; pi++) {
             const struct tape_path *path = &tp->paths[pi];
             const struct tape_vertex *verts = tp->verts + path->first;
-            if (!j->dir) {
+            if (!j->b.dir) {
                 sweep(j, verts, path->count, path->adj, &sink);
                 continue;
             }
-            double *out = j->acc.image[thread] + 3 * path->pixel;
+            double *out = j->b.acc.image[thread] + 3 * path->pixel;
             for (int c = 0; c < 3; c++) {
                 sink.forward = 0.0;
                 sweep(j, verts, path->count, dr_v3(c == 0, c == 1, c == 2), &sink);
                 out[c] += sink.forward * inv_spp;
             }
         }
-        if (!j->dir)
-            dr_est_chunk_end(&j->acc, thread);
+        if (!j->b.dir)
+            dr_est_chunk_end(&j->b.acc, thread);
     }
 }
 
@@ -181,20 +173,14 @@ static int tape_run(const struct dr_grad_problem *p, const float *adjoint, const
         dr_set_error("out of memory");
         return DR_ERR_NOMEM;
     }
-    j->p = p;
-    j->view = dr_camera_view(p->camera, p->width, p->height);
-    j->popts = (struct dr_path_opts){p->max_depth, p->rr_depth, p->params};
-    j->adjoint = adjoint;
-    j->dir = dir;
-    int rc = dr_est_accum_init(&j->acc, p, dir != NULL);
+    int rc = dr_est_base_init(&j->b, p, adjoint, dir);
     if (rc != 0) {
         free(j);
         return rc;
     }
-    const int threads = j->acc.threads;
+    const int threads = j->b.acc.threads;
     const int64_t total = (int64_t)p->width * p->height * p->spp;
     const int64_t batch = p->batch > 0 ? p->batch : (int64_t)p->width * p->height;
-    double t0 = dr_est_now();
     for (j->batch_begin = 0; j->batch_begin < total && rc == 0; j->batch_begin += batch) {
         int64_t n = total - j->batch_begin < batch ? total - j->batch_begin : batch;
         for (int t = 0; t < threads; t++)
@@ -214,9 +200,7 @@ static int tape_run(const struct dr_grad_problem *p, const float *adjoint, const
         if (rc == 0)
             rc = dr_parallel_for_static(threads, 1, threads, sweep_tape, j);
     }
-    double t1 = dr_est_now();
-    dr_est_accum_finish(&j->acc, p, grad, d_image);
-    dr_est_stats_fill(st, j->thr, threads, t1 - t0);
+    dr_est_base_finish(&j->b, grad, d_image, st);
     if (st)
         st->tape_peak_bytes = j->peak_bytes;
     for (int t = 0; t < threads; t++) {
