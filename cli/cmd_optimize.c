@@ -677,7 +677,15 @@ int cmd_optimize(int argc, char **argv)
         char refmsg[128] = "";
         if (ref)
             snprintf(refmsg, sizeof refmsg, "  max |error| %.4f", err);
-        fprintf(stderr, "%siter %*d/%d  loss %.6e  %.2f s/iter  eta %s%s%s", tty ? "\r" : "",
+        char bar[32] = "";
+        if (tty) {   /* a live bar on a terminal, plain lines otherwise */
+            int fill = (int)(20.0 * (it + 1) / a.iters);
+            bar[0] = '[';
+            for (int b = 0; b < 20; b++)
+                bar[b + 1] = b < fill ? '=' : ' ';
+            strcpy(bar + 21, "] ");
+        }
+        fprintf(stderr, "%s%siter %*d/%d  loss %.6e  %.2f s/iter  eta %s%s%s", tty ? "\r" : "", bar,
                 (int)snprintf(NULL, 0, "%d", a.iters), it + 1, a.iters, loss, sec, eta, refmsg, tty ? "  " : "\n");
         if (a.g.json) {
             printf("{\"iteration\": %d, \"loss\": ", it + 1);
