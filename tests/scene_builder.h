@@ -102,6 +102,18 @@ static inline void sb_box(struct sb *b, dr_vec3 lo, dr_vec3 hi, int material)
     sb_quad(b, dr_add(lo, dy), dz, dx, material);        /* y = hi, +y */
 }
 
+/* Box [-1,1] x [0,height] x [-1,1] without a top, fronts facing inside: an
+ * enclosure whose only opening is the top (furnace and interreflection tests). */
+static inline void sb_open_box(struct sb *b, double height, int material)
+{
+    dr_vec3 lo = dr_v3(-1, 0, -1);
+    sb_quad(b, lo, dr_v3(0, 0, 2), dr_v3(2, 0, 0), material);                        /* floor, +y */
+    sb_quad(b, lo, dr_v3(2, 0, 0), dr_v3(0, height, 0), material);                   /* z=-1, +z */
+    sb_quad(b, dr_v3(-1, 0, 1), dr_v3(0, height, 0), dr_v3(2, 0, 0), material);      /* z=+1, -z */
+    sb_quad(b, lo, dr_v3(0, height, 0), dr_v3(0, 0, 2), material);                   /* x=-1, +x */
+    sb_quad(b, dr_v3(1, 0, -1), dr_v3(0, 0, 2), dr_v3(0, height, 0), material);      /* x=+1, -x */
+}
+
 static inline void sb_environment(struct sb *b, dr_vec3 color)
 {
     b->s->env.present = true;

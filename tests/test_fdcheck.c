@@ -211,13 +211,7 @@ static void zero_albedo(void)
 {
     struct sb b;
     sb_init(&b);
-    int mi = sb_material(&b, sb_diffuse(dr_v3s(0.0)));
-    dr_vec3 lo = dr_v3(-1, 0, -1);
-    sb_quad(&b, lo, dr_v3(0, 0, 2), dr_v3(2, 0, 0), mi);
-    sb_quad(&b, lo, dr_v3(2, 0, 0), dr_v3(0, 2, 0), mi);
-    sb_quad(&b, dr_v3(-1, 0, 1), dr_v3(0, 2, 0), dr_v3(2, 0, 0), mi);
-    sb_quad(&b, lo, dr_v3(0, 2, 0), dr_v3(0, 0, 2), mi);
-    sb_quad(&b, dr_v3(1, 0, -1), dr_v3(0, 0, 2), dr_v3(0, 2, 0), mi);
+    sb_open_box(&b, 2.0, sb_material(&b, sb_diffuse(dr_v3s(0.0))));
     sb_environment(&b, dr_v3s(1.0));
     struct dr_scene *s = sb_finish(&b);
     const char *p[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor"};
@@ -273,18 +267,8 @@ static void long_paths(void)
 {
     struct sb b;
     sb_init(&b);
-    int mi = sb_material(&b, sb_diffuse(dr_v3s(0.99)));
-    dr_vec3 lo = dr_v3(-1, 0, -1);
-    sb_quad(&b, lo, dr_v3(0, 0, 2), dr_v3(2, 0, 0), mi);
-    sb_quad(&b, lo, dr_v3(2, 0, 0), dr_v3(0, 2, 0), mi);
-    sb_quad(&b, dr_v3(-1, 0, 1), dr_v3(0, 2, 0), dr_v3(2, 0, 0), mi);
-    sb_quad(&b, lo, dr_v3(0, 2, 0), dr_v3(0, 0, 2), mi);
-    sb_quad(&b, dr_v3(1, 0, -1), dr_v3(0, 0, 2), dr_v3(0, 2, 0), mi);
     /* a deep box (opening 2x2 at height 6) keeps paths bouncing */
-    sb_quad(&b, dr_v3(-1, 2, -1), dr_v3(2, 0, 0), dr_v3(0, 4, 0), mi);
-    sb_quad(&b, dr_v3(-1, 2, 1), dr_v3(0, 4, 0), dr_v3(2, 0, 0), mi);
-    sb_quad(&b, dr_v3(-1, 2, -1), dr_v3(0, 4, 0), dr_v3(0, 0, 2), mi);
-    sb_quad(&b, dr_v3(1, 2, -1), dr_v3(0, 0, 2), dr_v3(0, 4, 0), mi);
+    sb_open_box(&b, 6.0, sb_material(&b, sb_diffuse(dr_v3s(0.99))));
     sb_environment(&b, dr_v3s(1.0));
     struct dr_scene *s = sb_finish(&b);
     const char *p[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor"};

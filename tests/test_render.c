@@ -97,13 +97,7 @@ static struct dr_scene *furnace_scene(struct dr_material mat)
 {
     struct sb b;
     sb_init(&b);
-    int mi = sb_material(&b, mat);
-    dr_vec3 lo = dr_v3(-1, 0, -1);
-    sb_quad(&b, lo, dr_v3(0, 0, 2), dr_v3(2, 0, 0), mi);                       /* floor, +y */
-    sb_quad(&b, lo, dr_v3(2, 0, 0), dr_v3(0, 2, 0), mi);                       /* z=-1, +z */
-    sb_quad(&b, dr_v3(-1, 0, 1), dr_v3(0, 2, 0), dr_v3(2, 0, 0), mi);          /* z=+1, -z */
-    sb_quad(&b, lo, dr_v3(0, 2, 0), dr_v3(0, 0, 2), mi);                       /* x=-1, +x */
-    sb_quad(&b, dr_v3(1, 0, -1), dr_v3(0, 0, 2), dr_v3(0, 2, 0), mi);          /* x=+1, -x */
+    sb_open_box(&b, 2.0, sb_material(&b, mat));
     sb_environment(&b, dr_v3s(1.0));
     return sb_finish(&b);
 }
