@@ -17,14 +17,14 @@ OPT     := -O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined -fno-sani
 endif
 
 WARN     := -Wall -Wextra -Wpedantic
-CPPFLAGS += -Icore -Iestimators -MMD -MP -DDR_DATADIR='"$(PREFIX)/share/drender"'
+CPPFLAGS += -Icore -Iestimators -Idrivers -MMD -MP -DDR_DATADIR='"$(PREFIX)/share/drender"'
 # -fno-math-errno lets sqrt compile to one instruction; results are unchanged.
 CFLAGS   += -std=c11 -D_GNU_SOURCE $(OPT) $(WARN) -pthread -fno-math-errno
 CXXFLAGS += -std=c++17 $(OPT) $(WARN) -pthread $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 LDLIBS   += $(shell pkg-config --libs $(PKGS) 2>/dev/null) -ltinygltf -lembree3 -lstdc++ -lm -pthread
 LDFLAGS  += $(OPT)
 
-CORE_C   := $(wildcard core/*.c estimators/*.c)
+CORE_C   := $(wildcard core/*.c estimators/*.c drivers/*.c)
 CORE_CXX := $(wildcard core/*.cpp)
 CLI_C    := $(wildcard cli/*.c)
 TEST_C   := $(wildcard tests/test_*.c)

@@ -44,7 +44,7 @@ for est in prb tape; do
         --estimator $est --spp $SPP --batches 4 --max-depth $DEPTH --threads 2 --json)
     T[$est]=$(json_num "$J" gradient time)
     SE[$est]=$(first_stderr "$J")
-    TAPE[$est]=$(json_num "$J" tape_peak_bytes)
+    TAPE[$est]=$(json_num "$J" record_bytes)
 done
 R_PRB=$(calc "${T[prb]} / $T_PRIMAL")
 R_TAPE=$(calc "${T[tape]} / ${T[prb]}")
@@ -65,7 +65,7 @@ for d in 4 64 1000; do
         J=$("$DR" grad "$CORNELL" --target "$TMP/target.exr" --param $RED --estimator $est --spp 4 --batches 2 \
             --max-depth $d --threads 2 --json)
         MEM[$est$d]=$(json_num "$J" peak_memory_bytes)
-        TAPE[$est$d]=$(json_num "$J" tape_peak_bytes)
+        TAPE[$est$d]=$(json_num "$J" record_bytes)
     done
     printf '   depth %4d: prb peak %.1f MiB; tape peak %.1f MiB, of which tape %.1f MiB\n' $d \
         "$(calc "${MEM[prb$d]} / 1048576" %.3f)" "$(calc "${MEM[tape$d]} / 1048576" %.3f)" \
@@ -87,10 +87,10 @@ if [[ -f $PEER ]]; then
     J=$("$DR" grad "$PEER" --target "$TMP/peer-target.exr" --param $RED --set $RED=0.2,0.6,0.3 --spp 64 \
         --batches 2 --max-depth 32 --threads 2 --estimator tape --json)
     M32=$(json_num "$J" peak_memory_bytes)
-    TB32=$(json_num "$J" tape_peak_bytes)
+    TB32=$(json_num "$J" record_bytes)
     echo "   tape, depth 32: peak memory $(calc "$M32 / 1048576" %.0f) MiB (tape $(calc "$TB32 / 1048576" %.0f) MiB) vs the peer's 15.3 GiB: $(calc "$M32 / (15.3 * 1073741824) * 100" %.2f) %"
     echo "   tape gradient time at depth 32: $(calc "$(json_num "$J" gradient time)" %.2f) s (the peer's conventional AD: 5.29 s)"
-    PEER_JSON="{\"prb_gradient_seconds_depth8\": $T_PEER, \"ratio_to_peer\": $R, \"tape_peak_bytes_depth32\": $M32, \"tape_bytes_depth32\": $TB32}"
+    PEER_JSON="{\"prb_gradient_seconds_depth8\": $T_PEER, \"ratio_to_peer\": $R, \"record_bytes_depth32\": $M32, \"tape_bytes_depth32\": $TB32}"
 fi
 cat >"$OUT/grad-results.json" <<JSON
 {"primal_seconds": $T_PRIMAL, "prb_seconds": ${T[prb]}, "tape_seconds": ${T[tape]},

@@ -7,6 +7,8 @@
 #include <stdint.h>
 #include <stdio.h>
 
+#include "clock.h"
+
 /* Exit codes (documented in man/drender.1). */
 enum {
     DR_EXIT_OK = 0,
@@ -51,10 +53,11 @@ bool cli_output_dir_writable(const char *cmd, const char *path);
 
 /* Peak resident memory of this process, bytes. */
 uint64_t cli_peak_rss_bytes(void);
-double cli_now(void);
 
 /* Minimal JSON output: the caller prints structure, these escape values. */
 void json_string(FILE *f, const char *s);
+/* "a,b,c" as a JSON array of strings (names: no characters that need escaping). */
+void json_name_list(FILE *f, const char *names);
 void json_number(FILE *f, double v);   /* NaN/Inf written as null */
 
 #endif

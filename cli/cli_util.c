@@ -136,13 +136,6 @@ uint64_t cli_peak_rss_bytes(void)
     return (uint64_t)ru.ru_maxrss * 1024u;
 }
 
-double cli_now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec + 1e-9 * ts.tv_nsec;
-}
-
 void json_string(FILE *f, const char *s)
 {
     fputc('"', f);
@@ -181,4 +174,16 @@ bool cli_parse_double(const char *cmd, const char *opt, const char *text, double
     }
     *out = v;
     return true;
+}
+
+void json_name_list(FILE *f, const char *names)
+{
+    fputc('[', f);
+    for (const char *p = names; *p;) {
+        const char *q = strchr(p, ',');
+        size_t n = q ? (size_t)(q - p) : strlen(p);
+        fprintf(f, "%s\"%.*s\"", p == names ? "" : ", ", (int)n, p);
+        p += n + (q != NULL);
+    }
+    fputc(']', f);
 }

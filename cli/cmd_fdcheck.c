@@ -36,6 +36,7 @@ void cmd_fdcheck_usage(FILE *out)
             "      --sampling S    detached (default; the only one implemented so far)\n"
             "      --res WxH       image size (default: 32x32)\n"
             "      --max-depth D   path segments (default: 8)\n"
+            "      --rr-depth D    Russian roulette from this many segments on (default: 5)\n"
             "      --camera N      which camera of the file (default: 0)\n"
             "      --seed S        random seed (default: 0; batch b uses S + b)\n"
             "      --threads T     worker threads (default: one per CPU)\n"
@@ -105,13 +106,9 @@ static void print_json(const struct fdcheck_args *a, const char *scene_path, con
                        bool all_agree, double t_load, double t_check, double t_total, const struct dr_param_set *ps)
 {
     FILE *f = stdout;
-    fprintf(f, "{\"command\": \"fdcheck\", \"scene\": ");
-    json_string(f, scene_path);
-    fprintf(f, ", \"estimator\": ");
-    json_string(f, a->g.estimator->name);
-    fprintf(f, ", \"sampling\": \"detached\", \"width\": %d, \"height\": %d, \"spp\": %d, \"batches\": %d, "
-               "\"max_depth\": %d, \"seed\": %llu, \"eps\": ",
-            a->g.width, a->g.height, a->g.spp, a->batches, a->g.max_depth, (unsigned long long)a->g.seed);
+    fprintf(f, "{");
+    grad_json_head(f, &a->g, scene_path);
+    fprintf(f, ", \"batches\": %d, \"eps\": ", a->batches);
     json_number(f, a->eps);
     fprintf(f, ", \"z_max\": ");
     json_number(f, a->z_max);
@@ -144,7 +141,7 @@ static void print_json(const struct fdcheck_args *a, const char *scene_path, con
 
 int cmd_fdcheck(int argc, char **argv)
 {
-    double t_start = cli_now();
+    double t_start = dr_clock_seconds();
     struct fdcheck_args a;
     memset(&a, 0, sizeof a);
     grad_common_init(&a.g, "fdcheck", 16);
@@ -166,15 +163,17 @@ int cmd_fdcheck(int argc, char **argv)
         goto out;
     if ((rc = grad_apply_sets(&a.g, scene)) >= 0 || (rc = grad_param_set(&a.g, scene, &ps)) >= 0)
         goto out;
-    double t_loaded = cli_now();
-    struct dr_fd_options o = {a.g.estimator, a.g.width, a.g.height, a.g.spp, a.batches, a.g.max_depth, 5,
-                              a.g.seed, a.g.threads, a.eps, a.z_max};
+    double t_loaded = dr_clock_seconds();
+    struct dr_fd_options o = {.estimator = a.g.estimator, .sampling = a.g.sampling, .width = a.g.width,
+                              .height = a.g.height, .spp = a.g.spp, .batches = a.batches,
+                              .max_depth = a.g.max_depth, .rr_depth = a.g.rr_depth, .seed = a.g.seed,
+                              .threads = a.g.threads, .eps = a.eps, .z_max = a.z_max};
     if (dr_fdcheck(scene, &cam, ps, &o, &en, &n) != 0) {
         cli_error("fdcheck", "%s", dr_last_error());
         rc = DR_EXIT_FAILURE;
         goto out;
     }
-    double t_end = cli_now();
+    double t_end = dr_clock_seconds();
     bool all_agree = true;
     for (int i = 0; i < n; i++)
         all_agree &= en[i].agree;
@@ -186,8 +185,8 @@ int cmd_fdcheck(int argc, char **argv)
         for (int i = 0; i < n; i++)
             if ((int)strlen(en[i].label) > lw)
                 lw = (int)strlen(en[i].label);
-        fprintf(f, "%s: %s estimator vs finite differences (eps %g), %d batches of %d spp at %dx%d, |z| <= %g\n",
-                scene_path, a.g.estimator->name, a.eps, a.batches, a.g.spp, a.g.width, a.g.height, a.z_max);
+        fprintf(f, "%s: %s estimator (%s) vs finite differences (eps %g), %d batches of %d spp at %dx%d, |z| <= %g\n",
+                scene_path, a.g.estimator->name, dr_sampling_name(a.g.sampling), a.eps, a.batches, a.g.spp, a.g.width, a.g.height, a.z_max);
         fprintf(f, "%-*s  %24s  %24s  %24s  %7s  %7s  %s\n", lw, "ENTRY", "REVERSE +- SE", "FORWARD +- SE",
                 "FD +- SE", "Z(REV)", "Z(FWD)", "VERDICT");
         for (int i = 0; i < n; i++) {

@@ -68,6 +68,7 @@ void cmd_grad_usage(FILE *out)
             "      --sampling S    detached (default; the only one implemented so far)\n"
             "      --spp N         samples per pixel (default: 16)\n"
             "      --max-depth D   path segments (default: 8)\n"
+            "      --rr-depth D    Russian roulette from this many segments on (default: 5)\n"
             "      --res WxH       image size (default: the target's size, else as render)\n"
             "      --camera N      which camera of the file (default: 0)\n"
             "      --seed S        random seed (default: 0)\n"
@@ -265,29 +266,13 @@ static int check_args(struct grad_args *a)
 
 /* ---- summaries ---- */
 
-static void add_rays(struct dr_ray_counts *sum, const struct dr_ray_counts *r)
+static void json_open(FILE *f, const struct grad_args *a, const char *scene_path, const char *mode,
+                      const struct grad_totals *t)
 {
-    sum->camera += r->camera;
-    sum->extension += r->extension;
-    sum->shadow += r->shadow;
-}
-
-static void json_rays(FILE *f, const struct dr_ray_counts *r)
-{
-    fprintf(f, "\"rays\": {\"camera\": %llu, \"extension\": %llu, \"shadow\": %llu, \"total\": %llu}",
-            (unsigned long long)r->camera, (unsigned long long)r->extension, (unsigned long long)r->shadow,
-            (unsigned long long)(r->camera + r->extension + r->shadow));
-}
-
-static void json_common(FILE *f, const struct grad_args *a, const char *scene_path, const char *mode)
-{
-    fprintf(f, "{\"command\": \"grad\", \"mode\": \"%s\", \"scene\": ", mode);
-    json_string(f, scene_path);
-    fprintf(f, ", \"estimator\": ");
-    json_string(f, a->g.estimator->name);
-    fprintf(f, ", \"sampling\": \"detached\", \"width\": %d, \"height\": %d, \"spp\": %d, \"max_depth\": %d, "
-               "\"seed\": %llu",
-            a->g.width, a->g.height, a->g.spp, a->g.max_depth, (unsigned long long)a->g.seed);
+    fprintf(f, "{");
+    grad_json_head(f, &a->g, scene_path);
+    fprintf(f, ", \"mode\": \"%s\", ", mode);
+    grad_json_run(f, t);
 }
 
 static bool is_image_param(const struct dr_param *p)
@@ -342,97 +327,30 @@ out:
     return rc;
 }
 
-static int run_forward(struct grad_args *a, const char *scene_path, const struct dr_scene *scene,
-                       const struct dr_camera *cam, const struct dr_param_set *ps, double t_start, double t_loaded)
+/* The forward-mode summary: JSON or one line per written image. */
+struct forward_outputs {
+    char **outs, **viss;             /* derivative image and --vis picture per parameter */
+    double *vis_scale, *lo, *hi;     /* the picture's scale; the image's range */
+};
+
+static void forward_print(FILE *f, const struct grad_args *a, const char *scene_path, const struct dr_param_set *ps,
+                          const struct forward_outputs *fo, const struct grad_totals *tot, double t_load,
+                          double t_write, double t_total)
 {
     const int n = ps->n;
-    const size_t npix = (size_t)a->g.width * a->g.height;
-    double *dir = calloc((size_t)(ps->total > 0 ? ps->total : 1), sizeof(double));
-    double *dimg = malloc(sizeof(double) * npix * 3);
-    float *fimg = malloc(sizeof(float) * npix * 3);
-    char **outs = calloc((size_t)n, sizeof(char *)), **viss = calloc((size_t)n, sizeof(char *));
-    double *vis_scale = calloc((size_t)n, sizeof(double)), *lo = calloc((size_t)n, sizeof(double)),
-           *hi = calloc((size_t)n, sizeof(double));
-    int rc = DR_EXIT_FAILURE;
-    if (!dir || !dimg || !fimg || !outs || !viss || !vis_scale || !lo || !hi) {
-        cli_error("grad", "out of memory for a %dx%d derivative image", a->g.width, a->g.height);
-        goto out;
-    }
-    for (int i = 0; i < n; i++) {
-        outs[i] = n > 1 ? indexed_name(a->output, i) : strdup(a->output);
-        viss[i] = a->vis ? (n > 1 ? indexed_name(a->vis, i) : strdup(a->vis)) : NULL;
-        if (!outs[i] || (a->vis && !viss[i])) {
-            cli_error("grad", "out of memory");
-            goto out;
-        }
-    }
-    bool progress = isatty(2) != 0;
-    struct dr_ray_counts rays = {0, 0, 0};
-    uint64_t invalid = 0, tape_peak = 0;
-    double t_grad = 0.0, t_write = 0.0;
-    int threads = 0;
-    for (int i = 0; i < n; i++) {
-        const struct dr_param *p = &ps->params[i];
-        if (progress)
-            dr_progress_bar("grad", i, n);
-        memset(dir, 0, sizeof(double) * (size_t)ps->total);
-        for (int64_t k = 0; k < p->size; k++)
-            dir[p->offset + k] = 1.0;
-        struct dr_grad_problem prob = {scene, cam, ps, a->g.width, a->g.height, a->g.spp, a->g.max_depth, 5,
-                                       a->g.seed, a->g.threads, a->batch};
-        struct dr_grad_stats st;
-        memset(&st, 0, sizeof st);
-        if (a->g.estimator->forward(&prob, dir, dimg, &st) != 0) {
-            if (progress)
-                fputc('\n', stderr);
-            cli_error("grad", "%s", dr_last_error());
-            goto out;
-        }
-        t_grad += st.seconds;
-        add_rays(&rays, &st.rays);
-        invalid += st.invalid_samples;
-        if (st.tape_peak_bytes > tape_peak)
-            tape_peak = st.tape_peak_bytes;
-        threads = st.threads;
-        lo[i] = INFINITY;
-        hi[i] = -INFINITY;
-        for (size_t k = 0; k < npix * 3; k++) {
-            fimg[k] = (float)dimg[k];
-            lo[i] = fmin(lo[i], dimg[k]);
-            hi[i] = fmax(hi[i], dimg[k]);
-        }
-        double t_w0 = cli_now();
-        if (dr_image_write(outs[i], a->g.width, a->g.height, 3, fimg) != 0 ||
-            (viss[i] && write_vis(viss[i], fimg, a->g.width, a->g.height, &vis_scale[i]) != 0)) {
-            if (progress)
-                fputc('\n', stderr);
-            cli_error("grad", "%s", dr_last_error());
-            goto out;
-        }
-        t_write += cli_now() - t_w0;
-    }
-    if (progress)
-        dr_progress_bar("grad", n, n);
-    if (invalid > 0)
-        cli_error("grad", "warning: %llu samples were not finite and were dropped", (unsigned long long)invalid);
-    double t_end = cli_now();
-    FILE *f = stdout;
+    char **outs = fo->outs, **viss = fo->viss;
+    const double *vis_scale = fo->vis_scale, *lo = fo->lo, *hi = fo->hi;
     if (a->g.json) {
-        json_common(f, a, scene_path, "forward");
-        fprintf(f, ", \"threads\": %d, \"time\": {\"load\": ", threads);
-        json_number(f, t_loaded - t_start);
+        json_open(f, a, scene_path, "forward", tot);
+        fprintf(f, ", \"time\": {\"load\": ");
+        json_number(f, t_load);
         fprintf(f, ", \"gradient\": ");
-        json_number(f, t_grad);
+        json_number(f, tot->seconds);
         fprintf(f, ", \"write\": ");
         json_number(f, t_write);
         fprintf(f, ", \"total\": ");
-        json_number(f, t_end - t_start);
-        fprintf(f, "}, \"peak_memory_bytes\": %llu", (unsigned long long)cli_peak_rss_bytes());
-        if (strcmp(a->g.estimator->name, "tape") == 0)
-            fprintf(f, ", \"tape_peak_bytes\": %llu", (unsigned long long)tape_peak);
-        fprintf(f, ", ");
-        json_rays(f, &rays);
-        fprintf(f, ", \"invalid_samples\": %llu, \"parameters\": [", (unsigned long long)invalid);
+        json_number(f, t_total);
+        fprintf(f, "}, \"parameters\": [");
         for (int i = 0; i < n; i++) {
             fprintf(f, "%s{\"name\": ", i ? ", " : "");
             json_string(f, ps->params[i].name);
@@ -463,6 +381,76 @@ static int run_forward(struct grad_args *a, const char *scene_path, const struct
                         vis_scale[i]);
         }
     }
+}
+
+static int run_forward(struct grad_args *a, const char *scene_path, const struct dr_scene *scene,
+                       const struct dr_camera *cam, const struct dr_param_set *ps, double t_start, double t_loaded)
+{
+    const int n = ps->n;
+    const size_t npix = (size_t)a->g.width * a->g.height;
+    double *dir = calloc((size_t)(ps->total > 0 ? ps->total : 1), sizeof(double));
+    double *dimg = malloc(sizeof(double) * npix * 3);
+    float *fimg = malloc(sizeof(float) * npix * 3);
+    char **outs = calloc((size_t)n, sizeof(char *)), **viss = calloc((size_t)n, sizeof(char *));
+    double *vis_scale = calloc((size_t)n, sizeof(double)), *lo = calloc((size_t)n, sizeof(double)),
+           *hi = calloc((size_t)n, sizeof(double));
+    int rc = DR_EXIT_FAILURE;
+    if (!dir || !dimg || !fimg || !outs || !viss || !vis_scale || !lo || !hi) {
+        cli_error("grad", "out of memory for a %dx%d derivative image", a->g.width, a->g.height);
+        goto out;
+    }
+    for (int i = 0; i < n; i++) {
+        outs[i] = n > 1 ? indexed_name(a->output, i) : strdup(a->output);
+        viss[i] = a->vis ? (n > 1 ? indexed_name(a->vis, i) : strdup(a->vis)) : NULL;
+        if (!outs[i] || (a->vis && !viss[i])) {
+            cli_error("grad", "out of memory");
+            goto out;
+        }
+    }
+    bool progress = isatty(2) != 0;
+    struct grad_totals tot = {0};
+    double t_write = 0.0;
+    for (int i = 0; i < n; i++) {
+        const struct dr_param *p = &ps->params[i];
+        if (progress)
+            dr_progress_bar("grad", i, n);
+        memset(dir, 0, sizeof(double) * (size_t)ps->total);
+        for (int64_t k = 0; k < p->size; k++)
+            dir[p->offset + k] = 1.0;
+        struct dr_grad_problem prob =
+            grad_problem(&a->g, scene, cam, ps, a->g.width, a->g.height, a->g.spp, a->g.seed);
+        prob.batch = a->batch;
+        struct dr_grad_stats st = {0};
+        if (dr_estimator_forward(a->g.estimator, &prob, dir, dimg, &st) != 0) {
+            if (progress)
+                fputc('\n', stderr);
+            cli_error("grad", "%s", dr_last_error());
+            goto out;
+        }
+        grad_totals_add(&tot, &st);
+        lo[i] = INFINITY;
+        hi[i] = -INFINITY;
+        for (size_t k = 0; k < npix * 3; k++) {
+            fimg[k] = (float)dimg[k];
+            lo[i] = fmin(lo[i], dimg[k]);
+            hi[i] = fmax(hi[i], dimg[k]);
+        }
+        double t_w0 = dr_clock_seconds();
+        if (dr_image_write(outs[i], a->g.width, a->g.height, 3, fimg) != 0 ||
+            (viss[i] && write_vis(viss[i], fimg, a->g.width, a->g.height, &vis_scale[i]) != 0)) {
+            if (progress)
+                fputc('\n', stderr);
+            cli_error("grad", "%s", dr_last_error());
+            goto out;
+        }
+        t_write += dr_clock_seconds() - t_w0;
+    }
+    if (progress)
+        dr_progress_bar("grad", n, n);
+    grad_totals_warn("grad", &tot);
+    double t_end = dr_clock_seconds();
+    struct forward_outputs fo = {outs, viss, vis_scale, lo, hi};
+    forward_print(stdout, a, scene_path, ps, &fo, &tot, t_loaded - t_start, t_write, t_end - t_start);
     rc = DR_EXIT_OK;
 out:
     for (int i = 0; outs && viss && i < n; i++) {
@@ -482,209 +470,244 @@ out:
 
 /* ---- reverse mode ---- */
 
-/* The target as linear RGB (width * height * 3). Exit code or -1. */
-static int run_reverse(struct grad_args *a, const char *scene_path, const struct dr_scene *scene,
-                       const struct dr_camera *cam, const struct dr_param_set *ps, const float *target,
-                       double t_start, double t_loaded)
+/* One reverse-mode run: the primal image and the adjoint of the loss, then
+ * K independent gradient batches reduced to a mean and a standard error. */
+struct reverse_run {
+    int K, spp_b;
+    int64_t T;
+    float *img, *adj;
+    double *g, *mean, *se;         /* one batch; mean over batches; its standard error */
+    char **files;                  /* gradient images of image parameters */
+    double loss, t_primal, t_write;
+    uint64_t primal_seed;
+    struct grad_totals tot;
+};
+
+static void reverse_free(struct reverse_run *r, int n_params)
 {
-    const int K = a->batches;
-    const int64_t T = ps->total;
-    const size_t npix = (size_t)a->g.width * a->g.height;
-    const int spp_b = (int)(((int64_t)a->g.spp + K - 1) / K);
-    float *img = malloc(sizeof(float) * npix * 3), *adj = malloc(sizeof(float) * npix * 3);
-    double *g = malloc(sizeof(double) * (size_t)(T > 0 ? T : 1));
-    double *mean = calloc((size_t)(T > 0 ? T : 1), sizeof(double)), *m2 = calloc((size_t)(T > 0 ? T : 1), sizeof(double));
-    char **files = calloc((size_t)ps->n, sizeof(char *));
-    float *gimg = NULL;
-    int rc = DR_EXIT_FAILURE;
-    if (!img || !adj || !g || !mean || !m2 || !files) {
-        cli_error("grad", "out of memory (%lld gradient entries, %dx%d image)", (long long)T, a->g.width,
-                  a->g.height);
-        goto out;
-    }
-    bool progress = isatty(2) != 0;
+    for (int k = 0; r->files && k < n_params; k++)
+        free(r->files[k]);
+    free(r->files);
+    free(r->img);
+    free(r->adj);
+    free(r->g);
+    free(r->mean);
+    free(r->se);
+}
 
-    /* primal image, with random numbers independent of every gradient batch */
-    uint64_t primal_seed = dr_hash64(a->g.seed ^ PRIMAL_SEED_SALT);
-    struct dr_render_opts ro = {a->g.width, a->g.height, a->g.spp, a->g.max_depth, 5, primal_seed, a->g.threads,
-                                progress};
-    struct dr_render_stats rs;
-    memset(&rs, 0, sizeof rs);
-    if (dr_render(scene, cam, &ro, img, &rs) != 0) {
+/* The primal image, with random numbers independent of every gradient
+ * batch, its loss against the target and the loss's adjoint. */
+static int reverse_primal(const struct grad_args *a, const struct dr_scene *scene, const struct dr_camera *cam,
+                          const float *target, bool progress, struct reverse_run *r)
+{
+    const size_t n = (size_t)a->g.width * a->g.height * 3;
+    r->primal_seed = dr_hash64(a->g.seed ^ PRIMAL_SEED_SALT);
+    struct dr_render_opts ro = grad_render_opts(&a->g, a->g.width, a->g.height, a->g.spp, r->primal_seed, progress);
+    struct dr_render_stats rs = {0};
+    if (dr_render(scene, cam, &ro, r->img, &rs) != 0) {
         cli_error("grad", "%s", dr_last_error());
-        goto out;
+        return DR_EXIT_FAILURE;
     }
-    struct dr_ray_counts rays = rs.rays;
-    uint64_t invalid = rs.invalid_samples, tape_peak = 0;
-    double loss = dr_loss_eval(a->loss, img, target, npix * 3);
-    d_loss_eval(a->loss, img, target, npix * 3, 1.0, adj);
+    grad_totals_add_render(&r->tot, &rs);
+    r->t_primal = rs.seconds;
+    r->loss = dr_loss_eval(a->loss, r->img, target, n);
+    d_loss_eval(a->loss, r->img, target, n, 1.0, r->adj);
+    return -1;
+}
 
-    /* K independent gradient batches: mean and standard error (Welford) */
-    double t_grad = 0.0;
-    int threads = rs.threads;
-    for (int b = 0; b < K; b++) {
+/* K gradient batches of spp_b samples: mean and standard error (Welford). */
+static int reverse_batches(const struct grad_args *a, const struct dr_scene *scene, const struct dr_camera *cam,
+                           const struct dr_param_set *ps, bool progress, struct reverse_run *r)
+{
+    double *m2 = r->se;
+    for (int b = 0; b < r->K; b++) {
         if (progress)
-            dr_progress_bar("gradient", b, K);
-        struct dr_grad_problem prob = {scene, cam, ps, a->g.width, a->g.height, spp_b, a->g.max_depth, 5,
-                                       a->g.seed + 1 + (uint64_t)b, a->g.threads, a->batch};
-        struct dr_grad_stats st;
-        memset(&st, 0, sizeof st);
-        if (a->g.estimator->backward(&prob, adj, g, &st) != 0) {
+            dr_progress_bar("gradient", b, r->K);
+        struct dr_grad_problem prob = grad_problem(&a->g, scene, cam, ps, a->g.width, a->g.height, r->spp_b,
+                                                   a->g.seed + 1 + (uint64_t)b);
+        prob.batch = a->batch;
+        struct dr_grad_stats st = {0};
+        if (dr_estimator_backward(a->g.estimator, &prob, r->adj, r->g, &st) != 0) {
             if (progress)
                 fputc('\n', stderr);
             cli_error("grad", "%s", dr_last_error());
-            goto out;
+            return DR_EXIT_FAILURE;
         }
-        t_grad += st.seconds;
-        add_rays(&rays, &st.rays);
-        invalid += st.invalid_samples;
-        if (st.tape_peak_bytes > tape_peak)
-            tape_peak = st.tape_peak_bytes;
-        if (st.threads > 0)
-            threads = st.threads;
-        for (int64_t i = 0; i < T; i++) {
-            double d = g[i] - mean[i];
-            mean[i] += d / (b + 1);
-            m2[i] += d * (g[i] - mean[i]);
+        grad_totals_add(&r->tot, &st);
+        for (int64_t i = 0; i < r->T; i++) {
+            double d = r->g[i] - r->mean[i];
+            r->mean[i] += d / (b + 1);
+            m2[i] += d * (r->g[i] - r->mean[i]);
         }
     }
     if (progress)
-        dr_progress_bar("gradient", K, K);
-    if (invalid > 0)
-        cli_error("grad", "warning: %llu samples were not finite and were dropped", (unsigned long long)invalid);
-    /* m2 becomes the standard error of the mean */
-    for (int64_t i = 0; i < T; i++)
-        m2[i] = sqrt(m2[i] / (K - 1) / K);
+        dr_progress_bar("gradient", r->K, r->K);
+    for (int64_t i = 0; i < r->T; i++)
+        r->se[i] = sqrt(m2[i] / (r->K - 1) / r->K);
+    return -1;
+}
 
-    /* texture gradients as images */
-    double t_w0 = cli_now();
+/* Texture and environment-map gradients as float images in --grad-dir. */
+static int reverse_write_images(const struct grad_args *a, const struct dr_param_set *ps, struct reverse_run *r)
+{
+    double t0 = dr_clock_seconds();
     for (int k = 0; k < ps->n; k++) {
         const struct dr_param *p = &ps->params[k];
         if (!is_image_param(p))
             continue;
-        files[k] = grad_image_name(a->grad_dir, p);
-        free(gimg);
-        gimg = malloc(sizeof(float) * (size_t)p->size);
-        if (!files[k] || !gimg) {
+        r->files[k] = grad_image_name(a->grad_dir, p);
+        float *gimg = malloc(sizeof(float) * (size_t)p->size);
+        if (!r->files[k] || !gimg) {
+            free(gimg);
             cli_error("grad", "out of memory");
-            goto out;
+            return DR_EXIT_FAILURE;
         }
         for (int64_t i = 0; i < p->size; i++)
-            gimg[i] = (float)mean[p->offset + i];
-        if (dr_image_write(files[k], p->width, p->height, p->channels, gimg) != 0) {
+            gimg[i] = (float)r->mean[p->offset + i];
+        int rc = dr_image_write(r->files[k], p->width, p->height, p->channels, gimg);
+        free(gimg);
+        if (rc != 0) {
             cli_error("grad", "%s", dr_last_error());
-            goto out;
+            return DR_EXIT_FAILURE;
         }
     }
-    double t_end = cli_now();
-    double t_primal = rs.seconds;
+    r->t_write = dr_clock_seconds() - t0;
+    return -1;
+}
 
-    FILE *f = stdout;
-    if (a->g.json) {
-        json_common(f, a, scene_path, "reverse");
-        fprintf(f, ", \"threads\": %d, \"target\": ", threads);
-        json_string(f, a->target);
-        fprintf(f, ", \"loss\": ");
-        json_number(f, loss);
-        fprintf(f, ", \"loss_kind\": ");
-        json_string(f, dr_loss_name(a->loss));
-        fprintf(f, ", \"batches\": %d, \"spp_per_batch\": %d, \"primal_seed\": %llu", K, spp_b,
-                (unsigned long long)primal_seed);
-        fprintf(f, ", \"time\": {\"load\": ");
-        json_number(f, t_loaded - t_start);
-        fprintf(f, ", \"primal\": ");
-        json_number(f, t_primal);
-        fprintf(f, ", \"gradient\": ");
-        json_number(f, t_grad);
-        fprintf(f, ", \"write\": ");
-        json_number(f, t_end - t_w0);
-        fprintf(f, ", \"total\": ");
-        json_number(f, t_end - t_start);
-        fprintf(f, "}, \"peak_memory_bytes\": %llu", (unsigned long long)cli_peak_rss_bytes());
-        if (strcmp(a->g.estimator->name, "tape") == 0)
-            fprintf(f, ", \"tape_peak_bytes\": %llu", (unsigned long long)tape_peak);
-        fprintf(f, ", ");
-        json_rays(f, &rays);
-        fprintf(f, ", \"invalid_samples\": %llu, \"parameters\": [", (unsigned long long)invalid);
-        for (int k = 0; k < ps->n; k++) {
-            const struct dr_param *p = &ps->params[k];
-            fprintf(f, "%s{\"name\": ", k ? ", " : "");
-            json_string(f, p->name);
-            fprintf(f, ", \"size\": %lld", (long long)p->size);
-            if (is_image_param(p)) {
-                double nrm = 0.0, snrm = 0.0;
-                for (int64_t i = 0; i < p->size; i++) {
-                    nrm += mean[p->offset + i] * mean[p->offset + i];
-                    snrm += m2[p->offset + i] * m2[p->offset + i];
-                }
-                fprintf(f, ", \"width\": %d, \"height\": %d, \"channels\": %d, \"norm\": ", p->width, p->height,
-                        p->channels);
-                json_number(f, sqrt(nrm));
-                fprintf(f, ", \"stderr_norm\": ");
-                json_number(f, sqrt(snrm));
-                fprintf(f, ", \"file\": ");
-                json_string(f, files[k]);
-            } else {
-                fprintf(f, ", \"gradient\": [");
-                for (int64_t i = 0; i < p->size; i++) {
-                    if (i)
-                        fputs(", ", f);
-                    json_number(f, mean[p->offset + i]);
-                }
-                fprintf(f, "], \"stderr\": [");
-                for (int64_t i = 0; i < p->size; i++) {
-                    if (i)
-                        fputs(", ", f);
-                    json_number(f, m2[p->offset + i]);
-                }
-                fputc(']', f);
-            }
-            fputc('}', f);
+/* Norms of an image parameter's gradient and of its standard errors. */
+static void image_norms(const struct dr_param *p, const struct reverse_run *r, double *nrm, double *snrm)
+{
+    double a = 0.0, b = 0.0;
+    for (int64_t i = 0; i < p->size; i++) {
+        a += r->mean[p->offset + i] * r->mean[p->offset + i];
+        b += r->se[p->offset + i] * r->se[p->offset + i];
+    }
+    *nrm = sqrt(a);
+    *snrm = sqrt(b);
+}
+
+static void json_array(FILE *f, const double *v, int64_t n)
+{
+    fputc('[', f);
+    for (int64_t i = 0; i < n; i++) {
+        if (i)
+            fputs(", ", f);
+        json_number(f, v[i]);
+    }
+    fputc(']', f);
+}
+
+static void reverse_print_json(FILE *f, const struct grad_args *a, const char *scene_path,
+                               const struct dr_param_set *ps, const struct reverse_run *r, double t_load, double t_end)
+{
+    json_open(f, a, scene_path, "reverse", &r->tot);
+    fprintf(f, ", \"target\": ");
+    json_string(f, a->target);
+    fprintf(f, ", \"loss\": ");
+    json_number(f, r->loss);
+    fprintf(f, ", \"loss_kind\": ");
+    json_string(f, dr_loss_name(a->loss));
+    fprintf(f, ", \"batches\": %d, \"spp_per_batch\": %d, \"primal_seed\": %llu", r->K, r->spp_b,
+            (unsigned long long)r->primal_seed);
+    fprintf(f, ", \"time\": {\"load\": ");
+    json_number(f, t_load);
+    fprintf(f, ", \"primal\": ");
+    json_number(f, r->t_primal);
+    fprintf(f, ", \"gradient\": ");
+    json_number(f, r->tot.seconds);
+    fprintf(f, ", \"write\": ");
+    json_number(f, r->t_write);
+    fprintf(f, ", \"total\": ");
+    json_number(f, t_end);
+    fprintf(f, "}, \"parameters\": [");
+    for (int k = 0; k < ps->n; k++) {
+        const struct dr_param *p = &ps->params[k];
+        fprintf(f, "%s{\"name\": ", k ? ", " : "");
+        json_string(f, p->name);
+        fprintf(f, ", \"size\": %lld", (long long)p->size);
+        if (is_image_param(p)) {
+            double nrm, snrm;
+            image_norms(p, r, &nrm, &snrm);
+            fprintf(f, ", \"width\": %d, \"height\": %d, \"channels\": %d, \"norm\": ", p->width, p->height,
+                    p->channels);
+            json_number(f, nrm);
+            fprintf(f, ", \"stderr_norm\": ");
+            json_number(f, snrm);
+            fprintf(f, ", \"file\": ");
+            json_string(f, r->files[k]);
+        } else {
+            fprintf(f, ", \"gradient\": ");
+            json_array(f, r->mean + p->offset, p->size);
+            fprintf(f, ", \"stderr\": ");
+            json_array(f, r->se + p->offset, p->size);
         }
-        fprintf(f, "], \"effects_differentiated\": ");
-        grad_json_effects(f, ps);
-        fprintf(f, "}\n");
-    } else {
-        fprintf(f, "loss (%s): %.9g\n", dr_loss_name(a->loss), loss);
-        fprintf(f, "d loss / d parameter (mean of %d batches of %d spp, +- standard error; %s, detached):\n", K,
-                spp_b, a->g.estimator->name);
-        for (int k = 0; k < ps->n; k++) {
-            const struct dr_param *p = &ps->params[k];
-            if (is_image_param(p)) {
-                double nrm = 0.0, snrm = 0.0;
-                for (int64_t i = 0; i < p->size; i++) {
-                    nrm += mean[p->offset + i] * mean[p->offset + i];
-                    snrm += m2[p->offset + i] * m2[p->offset + i];
-                }
-                fprintf(f, "%s (%dx%dx%d image): gradient norm %.6g (standard errors' norm %.3g) -> %s\n", p->name,
-                        p->width, p->height, p->channels, sqrt(nrm), sqrt(snrm), files[k]);
-            } else if (p->size == 1) {
-                fprintf(f, "%s: %.6g +- %.2g\n", p->name, mean[p->offset], m2[p->offset]);
-            } else {
-                fprintf(f, "%s:", p->name);
-                for (int64_t i = 0; i < p->size; i++)
-                    fprintf(f, "%s%.6g +- %.2g", i ? ", " : " ", mean[p->offset + i], m2[p->offset + i]);
-                fputc('\n', f);
-            }
+        fputc('}', f);
+    }
+    fprintf(f, "], \"effects_differentiated\": ");
+    grad_json_effects(f, ps);
+    fprintf(f, "}\n");
+}
+
+static void reverse_print_text(FILE *f, const struct grad_args *a, const struct dr_param_set *ps,
+                               const struct reverse_run *r)
+{
+    fprintf(f, "loss (%s): %.9g\n", dr_loss_name(a->loss), r->loss);
+    fprintf(f, "d loss / d parameter (mean of %d batches of %d spp, +- standard error; %s, %s):\n", r->K, r->spp_b,
+            a->g.estimator->name, dr_sampling_name(a->g.sampling));
+    for (int k = 0; k < ps->n; k++) {
+        const struct dr_param *p = &ps->params[k];
+        if (is_image_param(p)) {
+            double nrm, snrm;
+            image_norms(p, r, &nrm, &snrm);
+            fprintf(f, "%s (%dx%dx%d image): gradient norm %.6g (standard errors' norm %.3g) -> %s\n", p->name,
+                    p->width, p->height, p->channels, nrm, snrm, r->files[k]);
+        } else if (p->size == 1) {
+            fprintf(f, "%s: %.6g +- %.2g\n", p->name, r->mean[p->offset], r->se[p->offset]);
+        } else {
+            fprintf(f, "%s:", p->name);
+            for (int64_t i = 0; i < p->size; i++)
+                fprintf(f, "%s%.6g +- %.2g", i ? ", " : " ", r->mean[p->offset + i], r->se[p->offset + i]);
+            fputc('\n', f);
         }
     }
-    rc = DR_EXIT_OK;
-out:
-    for (int k = 0; files && k < ps->n; k++)
-        free(files[k]);
-    free(files);
-    free(gimg);
-    free(img);
-    free(adj);
-    free(g);
-    free(mean);
-    free(m2);
+}
+
+static int run_reverse(struct grad_args *a, const char *scene_path, const struct dr_scene *scene,
+                       const struct dr_camera *cam, const struct dr_param_set *ps, const float *target,
+                       double t_start, double t_loaded)
+{
+    struct reverse_run r = {.K = a->batches, .T = ps->total};
+    r.spp_b = (int)(((int64_t)a->g.spp + r.K - 1) / r.K);
+    const size_t n = (size_t)a->g.width * a->g.height * 3, T1 = (size_t)(r.T > 0 ? r.T : 1);
+    r.img = malloc(sizeof(float) * n);
+    r.adj = malloc(sizeof(float) * n);
+    r.g = malloc(sizeof(double) * T1);
+    r.mean = calloc(T1, sizeof(double));
+    r.se = calloc(T1, sizeof(double));
+    r.files = calloc((size_t)ps->n, sizeof(char *));
+    int rc = DR_EXIT_FAILURE;
+    bool progress = isatty(2) != 0;
+    if (!r.img || !r.adj || !r.g || !r.mean || !r.se || !r.files)
+        cli_error("grad", "out of memory (%lld gradient entries, %dx%d image)", (long long)r.T, a->g.width,
+                  a->g.height);
+    else if ((rc = reverse_primal(a, scene, cam, target, progress, &r)) < 0 &&
+             (rc = reverse_batches(a, scene, cam, ps, progress, &r)) < 0 &&
+             (rc = reverse_write_images(a, ps, &r)) < 0) {
+        grad_totals_warn("grad", &r.tot);
+        if (a->g.json)
+            reverse_print_json(stdout, a, scene_path, ps, &r, t_loaded - t_start, dr_clock_seconds() - t_start);
+        else
+            reverse_print_text(stdout, a, ps, &r);
+        rc = DR_EXIT_OK;
+    }
+    reverse_free(&r, ps->n);
     return rc;
 }
 
 int cmd_grad(int argc, char **argv)
 {
-    double t_start = cli_now();
+    double t_start = dr_clock_seconds();
     struct grad_args a;
     memset(&a, 0, sizeof a);
     grad_common_init(&a.g, "grad", 16);
@@ -719,7 +742,7 @@ int cmd_grad(int argc, char **argv)
         goto out;
     if ((rc = grad_apply_sets(&a.g, scene)) >= 0 || (rc = grad_param_set(&a.g, scene, &ps)) >= 0)
         goto out;
-    double t_loaded = cli_now();
+    double t_loaded = dr_clock_seconds();
     if (a.target)
         rc = run_reverse(&a, scene_path, scene, &cam, ps, target, t_start, t_loaded);
     else

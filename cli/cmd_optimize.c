@@ -51,6 +51,7 @@ void cmd_optimize_usage(FILE *out)
             "      --spp N            samples per pixel for the loss image and for the gradient\n"
             "                         (default 8)\n"
             "      --max-depth D      path segments (default 6)\n"
+            "      --rr-depth D       Russian roulette from this many segments on (default 5)\n"
             "      --res WxH          render size; every target must have it (default: each\n"
             "                         target's own size)\n"
             "      --seed S           random seed (default 0)\n"
@@ -391,7 +392,7 @@ static int save_view(const struct opt_args *a, const struct dr_scene *scene, con
     float *rgb = malloc(sizeof(float) * 3 * (size_t)t->w * t->h);
     if (!rgb)
         return DR_EXIT_FAILURE;
-    struct dr_render_opts ro = {t->w, t->h, 4 * a->g.spp, a->g.max_depth, 5, a->g.seed ^ 0xbefa, a->g.threads, false};
+    struct dr_render_opts ro = grad_render_opts(&a->g, t->w, t->h, 4 * a->g.spp, a->g.seed ^ 0xbefa, false);
     int rc = dr_render(scene, &scene->cameras[t->camera], &ro, rgb, NULL);
     if (rc == 0)
         rc = dr_image_write(path, t->w, t->h, 3, rgb);
@@ -481,9 +482,377 @@ static uint64_t iteration_seed(uint64_t seed, int it, int target, uint64_t what)
     return dr_hash64(dr_hash64(dr_hash64(seed ^ what) + (uint64_t)it) + (uint64_t)target);
 }
 
+/* What one optimisation run holds, from loading to the summary. */
+struct opt_run {
+    double t_start;
+    char *scene_path;
+    struct dr_scene *scene, *ref_scene;
+    struct dr_param_set *ps;
+    struct dr_adam *adam;
+    double *theta, *grad, *gt, *ref;   /* values, gradient, one target's gradient, reference values */
+    struct history hist;
+    double loss;
+    char ckpt[4096];
+    int it0;                           /* first iteration to run (resumed runs: > 0) */
+};
+
+/* --reference: the true values of the same parameters, for error reports. */
+static int load_reference(const struct opt_args *a, struct opt_run *r)
+{
+    r->ref_scene = dr_scene_load(a->reference);
+    if (!r->ref_scene) {
+        cli_error("optimize", "--reference %s", dr_last_error());
+        return DR_EXIT_INPUT;
+    }
+    struct dr_param_set *rps = dr_param_set_create(r->ref_scene, a->g.params, a->g.n_params);
+    if (!rps || rps->total != r->ps->total) {
+        cli_error("optimize", "--reference %s: does not have the same parameters (%s)", a->reference,
+                  rps ? "different sizes" : dr_last_error());
+        dr_param_set_destroy(rps);
+        return DR_EXIT_USAGE;
+    }
+    r->ref = malloc(sizeof(double) * (size_t)r->ps->total);
+    if (r->ref)
+        dr_param_set_get(r->ref_scene, rps, r->ref);
+    dr_param_set_destroy(rps);
+    if (!r->ref) {
+        cli_error("optimize", "out of memory");
+        return DR_EXIT_FAILURE;
+    }
+    return -1;
+}
+
+/* Targets, scene, cameras, parameters, reference, starting values, Adam:
+ * every input is checked before any work starts. */
+static int opt_load(struct opt_args *a, struct opt_run *r)
+{
+    int rc;
+    struct dr_camera cam0;
+    if ((rc = load_targets(a)) >= 0 ||
+        (rc = grad_load_scene(&a->g, &r->scene_path, &r->scene, &cam0, a->targets[0].w, a->targets[0].h)) >= 0)
+        return rc;
+    for (int i = 0; i < a->n_targets; i++)
+        if (a->targets[i].camera >= r->scene->n_cameras) {
+            cli_error("optimize", "--target %s: camera %d: %s has %d camera%s", a->targets[i].arg,
+                      a->targets[i].camera, r->scene_path, r->scene->n_cameras, r->scene->n_cameras == 1 ? "" : "s");
+            return DR_EXIT_USAGE;
+        }
+    if ((rc = grad_param_set(&a->g, r->scene, &r->ps)) >= 0)
+        return rc;
+    if (a->reference && (rc = load_reference(a, r)) >= 0)
+        return rc;
+    if ((rc = grad_apply_sets(&a->g, r->scene)) >= 0)
+        return rc;
+    const size_t T = (size_t)r->ps->total;
+    r->theta = malloc(sizeof(double) * T);
+    r->grad = malloc(sizeof(double) * T);
+    r->gt = malloc(sizeof(double) * T);
+    if (!r->theta || !r->grad || !r->gt) {
+        cli_error("optimize", "out of memory");
+        return DR_EXIT_FAILURE;
+    }
+    dr_param_set_get(r->scene, r->ps, r->theta);
+    r->adam = dr_adam_create(r->ps, r->theta, a->lr);
+    if (!r->adam) {
+        cli_error("optimize", "%s", dr_last_error());
+        return DR_EXIT_FAILURE;
+    }
+    return -1;
+}
+
+/* --resume: the checkpoint, read before --out-dir is created, so a missing
+ * one leaves nothing behind. */
+static int read_checkpoint(const struct opt_args *a, struct opt_run *r)
+{
+    int64_t it;
+    int crc = dr_checkpoint_read(r->ckpt, r->ps, r->theta, r->adam, &it);
+    if (crc != 0) {
+        cli_error("optimize", "--resume: %s", dr_last_error());
+        return crc == DR_ERR_ARG ? DR_EXIT_USAGE : DR_EXIT_INPUT;
+    }
+    if (it > a->iters) {
+        cli_error("optimize", "--resume: %s is at iteration %lld, beyond --iters %d", r->ckpt, (long long)it,
+                  a->iters);
+        return DR_EXIT_USAGE;
+    }
+    r->it0 = (int)it;
+    return -1;
+}
+
+/* The output directory (created, or the resumed run's history read back)
+ * and, for a new run, the before and target pictures. */
+static int opt_open_outputs(const struct opt_args *a, struct opt_run *r)
+{
+    int rc;
+    path_in(r->ckpt, sizeof r->ckpt, a->out_dir, "checkpoint.txt");
+    if (a->resume && (rc = read_checkpoint(a, r)) >= 0)
+        return rc;
+    size_t made_from = first_missing_prefix(a->out_dir);
+    if (make_dirs(a->out_dir) != 0) {
+        cli_error("optimize", "--out-dir %s: cannot create: %s", a->out_dir, strerror(errno));
+        unmake_dirs(a->out_dir, made_from);
+        return DR_EXIT_FAILURE;
+    }
+    /* -o may point into the progress directory just created */
+    if (a->output && !cli_output_dir_writable("optimize", a->output)) {
+        unmake_dirs(a->out_dir, made_from);
+        return DR_EXIT_FAILURE;
+    }
+    if (!a->resume) {
+        if ((rc = save_view(a, r->scene, "before.png")) != DR_EXIT_OK)
+            return rc;
+        char tp[4096];
+        path_in(tp, sizeof tp, a->out_dir, "target.png");
+        dr_image_write(tp, a->targets[0].w, a->targets[0].h, 3, a->targets[0].rgb);
+        return -1;
+    }
+    read_loss_csv(a->out_dir, &r->hist, r->it0);
+    /* a run resumed at its last iteration reports the loss it ended with */
+    r->loss = r->it0 > 0 && r->hist.n >= r->it0 ? r->hist.loss[r->it0 - 1] : NAN;
+    dr_param_set_put(r->scene, r->ps, r->theta);
+    if (dr_scene_refresh(r->scene) != 0) {
+        cli_error("optimize", "%s", dr_last_error());
+        return DR_EXIT_FAILURE;
+    }
+    fprintf(stderr, "drender optimize: resuming at iteration %d from %s\n", r->it0, r->ckpt);
+    return -1;
+}
+
+/* Loss and gradient of iteration `it` over every target: the loss image and
+ * the gradient from independent random numbers. */
+static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
+{
+    memset(r->grad, 0, sizeof(double) * (size_t)r->ps->total);
+    r->loss = 0.0;
+    for (int ti = 0; ti < a->n_targets; ti++) {
+        const struct target *t = &a->targets[ti];
+        const struct dr_camera *cam = &r->scene->cameras[t->camera];
+        size_t n = (size_t)t->w * t->h * 3;
+        struct dr_render_opts ro =
+            grad_render_opts(&a->g, t->w, t->h, a->g.spp, iteration_seed(a->g.seed, it, ti, 0x5052494d), false);
+        if (dr_render(r->scene, cam, &ro, t->render, NULL) != 0) {
+            cli_error("optimize", "%s", dr_last_error());
+            return DR_EXIT_FAILURE;
+        }
+        r->loss += dr_loss_eval(a->loss, t->render, t->rgb, n) / a->n_targets;
+        d_loss_eval(a->loss, t->render, t->rgb, n, 1.0 / a->n_targets, t->adjoint);
+        struct dr_grad_problem p = grad_problem(&a->g, r->scene, cam, r->ps, t->w, t->h, a->g.spp,
+                                                iteration_seed(a->g.seed, it, ti, 0x47524144));
+        if (dr_estimator_backward(a->g.estimator, &p, t->adjoint, r->gt, NULL) != 0) {
+            cli_error("optimize", "%s", dr_last_error());
+            return DR_EXIT_FAILURE;
+        }
+        for (int64_t i = 0; i < r->ps->total; i++)
+            r->grad[i] += r->gt[i];
+        if (ti == 0 && (it % a->render_every == 0)) {
+            char name[64], path[4096];
+            snprintf(name, sizeof name, "render-%04d.png", it);
+            path_in(path, sizeof path, a->out_dir, name);
+            dr_image_write(path, t->w, t->h, 3, t->render);
+        }
+    }
+    return -1;
+}
+
+/* The largest error against --reference over the parameters (NaN without). */
+static double reference_max_error(const struct opt_run *r)
+{
+    if (!r->ref)
+        return NAN;
+    double err = 0.0;
+    for (int k = 0; k < r->ps->n; k++)
+        err = fmax(err, reference_error(r->ps, r->theta, r->ref, k));
+    return err;
+}
+
+/* One progress line per iteration (a live bar on a terminal), and one JSON
+ * object on stdout with --json. */
+static void opt_report(const struct opt_args *a, const struct opt_run *r, int it, double sec, double per, double err)
+{
+    const bool tty = isatty(2);
+    char eta[32];
+    eta_text(per * (a->iters - it - 1), eta, sizeof eta);
+    char refmsg[128] = "";
+    if (r->ref)
+        snprintf(refmsg, sizeof refmsg, "  max |error| %.4f", err);
+    char bar[32] = "";
+    if (tty) {
+        int fill = (int)(20.0 * (it + 1) / a->iters);
+        bar[0] = '[';
+        for (int b = 0; b < 20; b++)
+            bar[b + 1] = b < fill ? '=' : ' ';
+        strcpy(bar + 21, "] ");
+    }
+    fprintf(stderr, "%s%siter %*d/%d  loss %.6e  %.2f s/iter  eta %s%s%s", tty ? "\r" : "", bar,
+            (int)snprintf(NULL, 0, "%d", a->iters), it + 1, a->iters, r->loss, sec, eta, refmsg, tty ? "  " : "\n");
+    if (!a->g.json)
+        return;
+    printf("{\"iteration\": %d, \"loss\": ", it + 1);
+    json_number(stdout, r->loss);
+    printf(", \"seconds\": ");
+    json_number(stdout, sec);
+    printf(", \"eta_seconds\": ");
+    json_number(stdout, per * (a->iters - it - 1));
+    printf(", \"parameters\": {");
+    print_values(stdout, r->ps, r->theta, true);
+    printf("}}\n");
+    fflush(stdout);
+}
+
+/* The iterations: gradient, Adam step, history, report, checkpoint every K
+ * and on SIGINT/SIGTERM (then exit 128 + signal). */
+static int opt_loop(const struct opt_args *a, struct opt_run *r)
+{
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal;
+    sigaction(SIGINT, &sa, NULL);
+    sigaction(SIGTERM, &sa, NULL);
+    double t_loop = dr_clock_seconds();
+    for (int it = r->it0; it < a->iters; it++) {
+        double t_it = dr_clock_seconds();
+        int rc = opt_gradient(a, r, it);
+        if (rc >= 0)
+            return rc;
+        dr_adam_step(r->adam, r->theta, r->grad);
+        dr_param_set_put(r->scene, r->ps, r->theta);
+        if (dr_scene_refresh(r->scene) != 0) {
+            cli_error("optimize", "%s", dr_last_error());
+            return DR_EXIT_FAILURE;
+        }
+        double now = dr_clock_seconds(), sec = now - t_it, err = reference_max_error(r);
+        history_add(&r->hist, it, r->loss, sec, err);
+        write_loss_csv(a->out_dir, &r->hist);
+        opt_report(a, r, it, sec, (now - t_loop) / (it - r->it0 + 1), err);
+        bool last = it + 1 == a->iters;
+        if (((it + 1) % a->ckpt_every == 0 || last || stop_signal) &&
+            dr_checkpoint_write(r->ckpt, r->scene_path, r->ps, r->theta, r->adam, it + 1) != 0) {
+            cli_error("optimize", "%s", dr_last_error());
+            return DR_EXIT_FAILURE;
+        }
+        if (stop_signal) {
+            if (isatty(2))
+                fputc('\n', stderr);
+            cli_error("optimize", "interrupted after iteration %d: checkpoint written to %s; continue with --resume",
+                      it + 1, r->ckpt);
+            return 128 + stop_signal;
+        }
+    }
+    if (isatty(2))
+        fputc('\n', stderr);
+    return -1;
+}
+
+/* Human summary (stdout, or stderr when stdout carries --json). */
+static void opt_summary_text(FILE *so, const struct opt_args *a, const struct opt_run *r)
+{
+    const struct dr_param_set *ps = r->ps;
+    fprintf(so, "final loss %.6e after %d iterations (%.1f s)\n", r->loss, a->iters, dr_clock_seconds() - r->t_start);
+    if (r->ref) {
+        fprintf(so, "%-68s %-26s %-26s %s\n", "parameter", "recovered", "true", "max |error|");
+        for (int k = 0; k < ps->n; k++) {
+            const struct dr_param *p = &ps->params[k];
+            if (p->kind == DR_PARAM_IMAGE || p->kind == DR_PARAM_ENV_MAP) {
+                fprintf(so, "%-68s relative error %.4f\n", p->name, reference_rel_error(ps, r->theta, r->ref, k));
+                continue;
+            }
+            char got[128] = "", want[128] = "";
+            for (int64_t i = 0; i < p->size; i++) {
+                size_t gl = strlen(got), wl = strlen(want);
+                snprintf(got + gl, sizeof got - gl, "%s%.4f", i ? " " : "", r->theta[p->offset + i]);
+                snprintf(want + wl, sizeof want - wl, "%s%.4f", i ? " " : "", r->ref[p->offset + i]);
+            }
+            char shown[DR_PARAM_NAME_MAX * 2];
+            dr_param_display_name(r->scene, p, shown, sizeof shown);
+            fprintf(so, "%-68s %-26s %-26s %.4f\n", shown, got, want, reference_error(ps, r->theta, r->ref, k));
+        }
+    } else {
+        fprintf(so, "optimised parameters:\n");
+        print_values(so, ps, r->theta, false);
+    }
+    if (a->output)
+        fprintf(so, "wrote %s\n", a->output);
+    fprintf(so, "progress files in %s/ (loss.csv, loss.png, before.png, after.png, target.png, render-*.png)\n",
+            a->out_dir);
+}
+
+static void opt_summary_json(const struct opt_args *a, const struct opt_run *r)
+{
+    const struct dr_param_set *ps = r->ps;
+    printf("{\"done\": true, \"iterations\": %d, \"final_loss\": ", a->iters);
+    json_number(stdout, r->loss);
+    printf(", \"seconds\": ");
+    json_number(stdout, dr_clock_seconds() - r->t_start);
+    printf(", \"estimator\": ");
+    json_string(stdout, a->g.estimator->name);
+    printf(", \"sampling\": ");
+    json_string(stdout, dr_sampling_name(a->g.sampling));
+    printf(", \"peak_memory_bytes\": %llu, \"output\": ", (unsigned long long)cli_peak_rss_bytes());
+    if (a->output)
+        json_string(stdout, a->output);
+    else
+        fputs("null", stdout);
+    if (r->ref) {
+        printf(", \"reference_error\": {");
+        for (int k = 0; k < ps->n; k++) {
+            const struct dr_param *p = &ps->params[k];
+            printf("%s", k ? ", " : "");
+            json_string(stdout, p->name);
+            printf(": ");
+            json_number(stdout, p->kind == DR_PARAM_IMAGE || p->kind == DR_PARAM_ENV_MAP
+                                    ? reference_rel_error(ps, r->theta, r->ref, k)
+                                    : reference_error(ps, r->theta, r->ref, k));
+        }
+        printf("}");
+    }
+    printf(", \"parameters\": {");
+    print_values(stdout, ps, r->theta, true);
+    printf("}}\n");
+}
+
+/* After the last iteration: the loss plot, the after picture, the glTF, the summary. */
+static int opt_finish(const struct opt_args *a, struct opt_run *r)
+{
+    plot_loss(a->out_dir, r->ref != NULL);
+    int rc = save_view(a, r->scene, "after.png");
+    if (rc != DR_EXIT_OK)
+        return rc;
+    if (a->output && dr_gltf_write(r->scene, r->ps, a->output) != 0) {
+        cli_error("optimize", "%s", dr_last_error());
+        return DR_EXIT_FAILURE;
+    }
+    opt_summary_text(a->g.json ? stderr : stdout, a, r);
+    if (a->g.json)
+        opt_summary_json(a, r);
+    return DR_EXIT_OK;
+}
+
+static void opt_free(struct opt_args *a, struct opt_run *r)
+{
+    for (int i = 0; i < a->n_targets; i++) {
+        dr_image_release(&a->targets[i].img);
+        free(a->targets[i].rgb);
+        free(a->targets[i].render);
+        free(a->targets[i].adjoint);
+    }
+    free(r->hist.loss);
+    free(r->hist.seconds);
+    free(r->hist.error);
+    free(r->theta);
+    free(r->grad);
+    free(r->gt);
+    free(r->ref);
+    dr_adam_destroy(r->adam);
+    dr_param_set_destroy(r->ps);
+    dr_scene_destroy(r->scene);
+    dr_scene_destroy(r->ref_scene);
+    free(r->scene_path);
+    grad_common_free(&a->g);
+}
+
 int cmd_optimize(int argc, char **argv)
 {
-    double t_start = cli_now();
+    struct opt_run r = {.t_start = dr_clock_seconds()};
     struct opt_args a;
     memset(&a, 0, sizeof a);
     grad_common_init(&a.g, "optimize", 8);
@@ -493,322 +862,10 @@ int cmd_optimize(int argc, char **argv)
     a.ckpt_every = 10;
     a.loss = DR_LOSS_L2;
     a.out_dir = "optimize-out";
-    char *scene_path = NULL;
-    struct dr_scene *scene = NULL, *ref_scene = NULL;
-    struct dr_param_set *ps = NULL;
-    struct dr_adam *adam = NULL;
-    double *theta = NULL, *grad = NULL, *gt = NULL, *ref = NULL;
-    struct history hist = {0, 0, NULL, NULL, NULL};
-    struct dr_camera cam0;
-    double loss = 0.0;
     int rc = parse_args(argc, argv, &a);
-    if (rc >= 0)
-        goto out;
-    if ((rc = check_args(&a)) >= 0)
-        goto out;
-    /* Every input is checked before any work starts. */
-    if ((rc = load_targets(&a)) >= 0)
-        goto out;
-    if ((rc = grad_load_scene(&a.g, &scene_path, &scene, &cam0, a.targets[0].w, a.targets[0].h)) >= 0)
-        goto out;
-    for (int i = 0; i < a.n_targets; i++)
-        if (a.targets[i].camera >= scene->n_cameras) {
-            cli_error("optimize", "--target %s: camera %d: %s has %d camera%s", a.targets[i].arg,
-                      a.targets[i].camera, scene_path, scene->n_cameras, scene->n_cameras == 1 ? "" : "s");
-            rc = DR_EXIT_USAGE;
-            goto out;
-        }
-    if ((rc = grad_param_set(&a.g, scene, &ps)) >= 0)
-        goto out;
-    if (a.reference) {
-        ref_scene = dr_scene_load(a.reference);
-        if (!ref_scene) {
-            cli_error("optimize", "--reference %s", dr_last_error());
-            rc = DR_EXIT_INPUT;
-            goto out;
-        }
-        struct dr_param_set *rps = dr_param_set_create(ref_scene, a.g.params, a.g.n_params);
-        if (!rps || rps->total != ps->total) {
-            cli_error("optimize", "--reference %s: does not have the same parameters (%s)", a.reference,
-                      rps ? "different sizes" : dr_last_error());
-            dr_param_set_destroy(rps);
-            rc = DR_EXIT_USAGE;
-            goto out;
-        }
-        ref = malloc(sizeof(double) * (size_t)ps->total);
-        dr_param_set_get(ref_scene, rps, ref);
-        dr_param_set_destroy(rps);
-    }
-    if ((rc = grad_apply_sets(&a.g, scene)) >= 0)
-        goto out;
-    theta = malloc(sizeof(double) * (size_t)ps->total);
-    grad = malloc(sizeof(double) * (size_t)ps->total);
-    gt = malloc(sizeof(double) * (size_t)ps->total);
-    if (!theta || !grad || !gt) {
-        cli_error("optimize", "out of memory");
-        rc = DR_EXIT_FAILURE;
-        goto out;
-    }
-    dr_param_set_get(scene, ps, theta);
-    adam = dr_adam_create(ps, theta, a.lr);
-    if (!adam) {
-        cli_error("optimize", "%s", dr_last_error());
-        rc = DR_EXIT_FAILURE;
-        goto out;
-    }
-    char ckpt[4096];
-    path_in(ckpt, sizeof ckpt, a.out_dir, "checkpoint.txt");
-    int it0 = 0;
-    if (a.resume) {   /* read before --out-dir is created: a missing checkpoint leaves nothing behind */
-        int64_t it;
-        int crc = dr_checkpoint_read(ckpt, ps, theta, adam, &it);
-        if (crc != 0) {
-            cli_error("optimize", "--resume: %s", dr_last_error());
-            rc = crc == DR_ERR_ARG ? DR_EXIT_USAGE : DR_EXIT_INPUT;
-            goto out;
-        }
-        if (it > a.iters) {
-            cli_error("optimize", "--resume: %s is at iteration %lld, beyond --iters %d", ckpt, (long long)it,
-                      a.iters);
-            rc = DR_EXIT_USAGE;
-            goto out;
-        }
-        it0 = (int)it;
-    }
-    size_t made_from = first_missing_prefix(a.out_dir);
-    if (make_dirs(a.out_dir) != 0) {
-        cli_error("optimize", "--out-dir %s: cannot create: %s", a.out_dir, strerror(errno));
-        unmake_dirs(a.out_dir, made_from);
-        rc = DR_EXIT_FAILURE;
-        goto out;
-    }
-    /* -o may point into the progress directory just created */
-    if (a.output && !cli_output_dir_writable("optimize", a.output)) {
-        unmake_dirs(a.out_dir, made_from);
-        rc = DR_EXIT_FAILURE;
-        goto out;
-    }
-    if (a.resume) {
-        read_loss_csv(a.out_dir, &hist, it0);
-        /* a run resumed at its last iteration reports the loss it ended with */
-        loss = it0 > 0 && hist.n >= it0 ? hist.loss[it0 - 1] : NAN;
-        dr_param_set_put(scene, ps, theta);
-        if (dr_scene_refresh(scene) != 0) {
-            cli_error("optimize", "%s", dr_last_error());
-            rc = DR_EXIT_FAILURE;
-            goto out;
-        }
-        fprintf(stderr, "drender optimize: resuming at iteration %d from %s\n", it0, ckpt);
-    } else {
-        int vrc = save_view(&a, scene, "before.png");
-        if (vrc != DR_EXIT_OK) {
-            rc = vrc;
-            goto out;
-        }
-        char tp[4096];
-        path_in(tp, sizeof tp, a.out_dir, "target.png");
-        dr_image_write(tp, a.targets[0].w, a.targets[0].h, 3, a.targets[0].rgb);
-    }
-
-    struct sigaction sa;
-    memset(&sa, 0, sizeof sa);
-    sa.sa_handler = on_signal;
-    sigaction(SIGINT, &sa, NULL);
-    sigaction(SIGTERM, &sa, NULL);
-    const bool tty = isatty(2);
-    double t_loop = cli_now();
-    struct dr_grad_stats gs;
-    memset(&gs, 0, sizeof gs);
-    int it = it0;
-    for (; it < a.iters; it++) {
-        double t_it = cli_now();
-        memset(grad, 0, sizeof(double) * (size_t)ps->total);
-        loss = 0.0;
-        for (int ti = 0; ti < a.n_targets && rc < 0; ti++) {
-            struct target *t = &a.targets[ti];
-            const struct dr_camera *cam = &scene->cameras[t->camera];
-            size_t n = (size_t)t->w * t->h * 3;
-            /* loss image and gradient from independent random numbers */
-            struct dr_render_opts ro = {t->w, t->h, a.g.spp, a.g.max_depth, 5,
-                                        iteration_seed(a.g.seed, it, ti, 0x5052494d), a.g.threads, false};
-            if (dr_render(scene, cam, &ro, t->render, NULL) != 0) {
-                cli_error("optimize", "%s", dr_last_error());
-                rc = DR_EXIT_FAILURE;
-                break;
-            }
-            loss += dr_loss_eval(a.loss, t->render, t->rgb, n) / a.n_targets;
-            d_loss_eval(a.loss, t->render, t->rgb, n, 1.0 / a.n_targets, t->adjoint);
-            struct dr_grad_problem p = {scene, cam, ps, t->w, t->h, a.g.spp, a.g.max_depth, 5,
-                                        iteration_seed(a.g.seed, it, ti, 0x47524144), a.g.threads, 0};
-            if (a.g.estimator->backward(&p, t->adjoint, gt, &gs) != 0) {
-                cli_error("optimize", "%s", dr_last_error());
-                rc = DR_EXIT_FAILURE;
-                break;
-            }
-            for (int64_t i = 0; i < ps->total; i++)
-                grad[i] += gt[i];
-            if (ti == 0 && (it % a.render_every == 0)) {
-                char name[64], path[4096];
-                snprintf(name, sizeof name, "render-%04d.png", it);
-                path_in(path, sizeof path, a.out_dir, name);
-                dr_image_write(path, t->w, t->h, 3, t->render);
-            }
-        }
-        if (rc >= 0)
-            break;
-        dr_adam_step(adam, theta, grad);
-        dr_param_set_put(scene, ps, theta);
-        if (dr_scene_refresh(scene) != 0) {
-            cli_error("optimize", "%s", dr_last_error());
-            rc = DR_EXIT_FAILURE;
-            break;
-        }
-        double now = cli_now(), sec = now - t_it, err = NAN;
-        if (ref) {
-            err = 0.0;
-            for (int k = 0; k < ps->n; k++)
-                err = fmax(err, reference_error(ps, theta, ref, k));
-        }
-        history_add(&hist, it, loss, sec, err);
-        write_loss_csv(a.out_dir, &hist);
-        double per = (now - t_loop) / (it - it0 + 1);
-        char eta[32];
-        eta_text(per * (a.iters - it - 1), eta, sizeof eta);
-        char refmsg[128] = "";
-        if (ref)
-            snprintf(refmsg, sizeof refmsg, "  max |error| %.4f", err);
-        char bar[32] = "";
-        if (tty) {   /* a live bar on a terminal, plain lines otherwise */
-            int fill = (int)(20.0 * (it + 1) / a.iters);
-            bar[0] = '[';
-            for (int b = 0; b < 20; b++)
-                bar[b + 1] = b < fill ? '=' : ' ';
-            strcpy(bar + 21, "] ");
-        }
-        fprintf(stderr, "%s%siter %*d/%d  loss %.6e  %.2f s/iter  eta %s%s%s", tty ? "\r" : "", bar,
-                (int)snprintf(NULL, 0, "%d", a.iters), it + 1, a.iters, loss, sec, eta, refmsg, tty ? "  " : "\n");
-        if (a.g.json) {
-            printf("{\"iteration\": %d, \"loss\": ", it + 1);
-            json_number(stdout, loss);
-            printf(", \"seconds\": ");
-            json_number(stdout, sec);
-            printf(", \"eta_seconds\": ");
-            json_number(stdout, per * (a.iters - it - 1));
-            printf(", \"parameters\": {");
-            print_values(stdout, ps, theta, true);
-            printf("}}\n");
-            fflush(stdout);
-        }
-        bool last = it + 1 == a.iters;
-        if ((it + 1) % a.ckpt_every == 0 || last || stop_signal) {
-            if (dr_checkpoint_write(ckpt, scene_path, ps, theta, adam, it + 1) != 0) {
-                cli_error("optimize", "%s", dr_last_error());
-                rc = DR_EXIT_FAILURE;
-                break;
-            }
-        }
-        if (stop_signal) {
-            if (tty)
-                fputc('\n', stderr);
-            cli_error("optimize", "interrupted after iteration %d: checkpoint written to %s; continue with --resume",
-                      it + 1, ckpt);
-            rc = 128 + stop_signal;
-            break;
-        }
-    }
-    if (tty && rc < 0)
-        fputc('\n', stderr);
-    if (rc >= 0)
-        goto out;
-    plot_loss(a.out_dir, ref != NULL);
-    int vrc = save_view(&a, scene, "after.png");
-    if (vrc != DR_EXIT_OK) {
-        rc = vrc;
-        goto out;
-    }
-    if (a.output && dr_gltf_write(scene, ps, a.output) != 0) {
-        cli_error("optimize", "%s", dr_last_error());
-        rc = DR_EXIT_FAILURE;
-        goto out;
-    }
-    /* human summary on stderr (stdout is for --json) */
-    FILE *so = a.g.json ? stderr : stdout;
-    fprintf(so, "final loss %.6e after %d iterations (%.1f s)\n", loss, a.iters, cli_now() - t_start);
-    if (ref) {
-        fprintf(so, "%-68s %-26s %-26s %s\n", "parameter", "recovered", "true", "max |error|");
-        for (int k = 0; k < ps->n; k++) {
-            const struct dr_param *p = &ps->params[k];
-            if (p->kind == DR_PARAM_IMAGE || p->kind == DR_PARAM_ENV_MAP) {
-                fprintf(so, "%-68s relative error %.4f\n", p->name, reference_rel_error(ps, theta, ref, k));
-                continue;
-            }
-            char got[128] = "", want[128] = "";
-            for (int64_t i = 0; i < p->size; i++) {
-                size_t gl = strlen(got), wl = strlen(want);
-                snprintf(got + gl, sizeof got - gl, "%s%.4f", i ? " " : "", theta[p->offset + i]);
-                snprintf(want + wl, sizeof want - wl, "%s%.4f", i ? " " : "", ref[p->offset + i]);
-            }
-            char shown[DR_PARAM_NAME_MAX * 2];
-            dr_param_display_name(scene, p, shown, sizeof shown);
-            fprintf(so, "%-68s %-26s %-26s %.4f\n", shown, got, want, reference_error(ps, theta, ref, k));
-        }
-    } else {
-        fprintf(so, "optimised parameters:\n");
-        print_values(so, ps, theta, false);
-    }
-    if (a.output)
-        fprintf(so, "wrote %s\n", a.output);
-    fprintf(so, "progress files in %s/ (loss.csv, loss.png, before.png, after.png, target.png, render-*.png)\n",
-            a.out_dir);
-    if (a.g.json) {
-        printf("{\"done\": true, \"iterations\": %d, \"final_loss\": ", a.iters);
-        json_number(stdout, loss);
-        printf(", \"seconds\": ");
-        json_number(stdout, cli_now() - t_start);
-        printf(", \"estimator\": ");
-        json_string(stdout, a.g.estimator->name);
-        printf(", \"peak_memory_bytes\": %llu, \"output\": ", (unsigned long long)cli_peak_rss_bytes());
-        if (a.output)
-            json_string(stdout, a.output);
-        else
-            fputs("null", stdout);
-        if (ref) {
-            printf(", \"reference_error\": {");
-            for (int k = 0; k < ps->n; k++) {
-                printf("%s", k ? ", " : "");
-                json_string(stdout, ps->params[k].name);
-                printf(": ");
-                const struct dr_param *p = &ps->params[k];
-                json_number(stdout, p->kind == DR_PARAM_IMAGE || p->kind == DR_PARAM_ENV_MAP
-                                        ? reference_rel_error(ps, theta, ref, k)
-                                        : reference_error(ps, theta, ref, k));
-            }
-            printf("}");
-        }
-        printf(", \"parameters\": {");
-        print_values(stdout, ps, theta, true);
-        printf("}}\n");
-    }
-    rc = DR_EXIT_OK;
-out:
-    for (int i = 0; i < a.n_targets; i++) {
-        dr_image_release(&a.targets[i].img);
-        free(a.targets[i].rgb);
-        free(a.targets[i].render);
-        free(a.targets[i].adjoint);
-    }
-    free(hist.loss);
-    free(hist.seconds);
-    free(hist.error);
-    free(theta);
-    free(grad);
-    free(gt);
-    free(ref);
-    dr_adam_destroy(adam);
-    dr_param_set_destroy(ps);
-    dr_scene_destroy(scene);
-    dr_scene_destroy(ref_scene);
-    free(scene_path);
-    grad_common_free(&a.g);
+    if (rc < 0 && (rc = check_args(&a)) < 0 && (rc = opt_load(&a, &r)) < 0 && (rc = opt_open_outputs(&a, &r)) < 0 &&
+        (rc = opt_loop(&a, &r)) < 0)
+        rc = opt_finish(&a, &r);
+    opt_free(&a, &r);
     return rc;
 }

@@ -20,6 +20,8 @@ void grad_common_init(struct grad_common *g, const char *cmd, int spp)
     g->estimator = dr_estimator_find("prb");
     g->spp = spp;
     g->max_depth = 8;
+    g->rr_depth = DR_RR_DEPTH_DEFAULT;
+    g->sampling = DR_SAMPLING_DETACHED;
 }
 
 void grad_common_free(struct grad_common *g)
@@ -72,15 +74,20 @@ int grad_common_option(struct grad_common *g, int c, const char *arg)
             return DR_EXIT_USAGE;
         }
         return 0;
-    case GOPT_SAMPLING:
-        if (strcmp(arg, "detached") == 0)
-            return 0;
-        if (strcmp(arg, "attached") == 0)
-            cli_error(g->cmd, "--sampling attached: not available yet: only 'detached' sampling is implemented");
-        else
-            cli_error(g->cmd, "--sampling: unknown sampling strategy '%s': only 'detached' sampling is implemented",
-                      arg);
-        return DR_EXIT_USAGE;
+    case GOPT_SAMPLING: {
+        int s = dr_sampling_parse(arg);
+        if (s < 0) {
+            cli_error(g->cmd, "--sampling: unknown sampling strategy '%s' (known: detached, attached)", arg);
+            return DR_EXIT_USAGE;
+        }
+        g->sampling = (enum dr_sampling)s;
+        return 0;
+    }
+    case GOPT_RR_DEPTH:
+        if (!cli_parse_int(g->cmd, "--rr-depth", arg, 1, 1L << 30, &v))
+            return DR_EXIT_USAGE;
+        g->rr_depth = (int)v;
+        return 0;
     case GOPT_SPP:
         if (!cli_parse_int(g->cmd, "--spp", arg, 1, 1L << 30, &v))
             return DR_EXIT_USAGE;
@@ -135,6 +142,11 @@ int grad_getopt_error(const char *cmd, int c, char **argv, const char *short_wit
 
 int grad_common_check(const struct grad_common *g)
 {
+    if (!dr_estimator_supports(g->estimator, g->sampling)) {
+        cli_error(g->cmd, "--sampling %s: not available yet for estimator '%s' (implemented: detached)",
+                  dr_sampling_name(g->sampling), g->estimator->name);
+        return DR_EXIT_USAGE;
+    }
     if (g->n_params == 0) {
         cli_error(g->cmd, "--param is required (at least one; 'drender params SCENE' lists them)");
         return DR_EXIT_USAGE;
@@ -323,4 +335,87 @@ int grad_apply_sets(const struct grad_common *g, struct dr_scene *scene)
         return DR_EXIT_FAILURE;
     }
     return -1;
+}
+
+struct dr_grad_problem grad_problem(const struct grad_common *g, const struct dr_scene *scene,
+                                    const struct dr_camera *cam, const struct dr_param_set *ps, int w, int h, int spp,
+                                    uint64_t seed)
+{
+    return (struct dr_grad_problem){.scene = scene, .camera = cam, .params = ps, .width = w, .height = h,
+                                    .spp = spp, .max_depth = g->max_depth, .rr_depth = g->rr_depth, .seed = seed,
+                                    .threads = g->threads, .sampling = g->sampling};
+}
+
+struct dr_render_opts grad_render_opts(const struct grad_common *g, int w, int h, int spp, uint64_t seed,
+                                       bool progress)
+{
+    return (struct dr_render_opts){.width = w, .height = h, .spp = spp, .max_depth = g->max_depth,
+                                   .rr_depth = g->rr_depth, .seed = seed, .threads = g->threads,
+                                   .progress = progress};
+}
+
+static void add_rays(struct dr_ray_counts *sum, const struct dr_ray_counts *r)
+{
+    sum->camera += r->camera;
+    sum->extension += r->extension;
+    sum->shadow += r->shadow;
+}
+
+void grad_totals_add(struct grad_totals *t, const struct dr_grad_stats *st)
+{
+    t->seconds += st->seconds;
+    add_rays(&t->rays, &st->rays);
+    t->invalid += st->invalid_samples;
+    if (st->memory_bytes > t->memory_bytes)
+        t->memory_bytes = st->memory_bytes;
+    if (st->record_bytes > t->record_bytes)
+        t->record_bytes = st->record_bytes;
+    t->stages |= st->stages;
+    if (st->threads > 0)
+        t->threads = st->threads;
+}
+
+void grad_totals_add_render(struct grad_totals *t, const struct dr_render_stats *rs)
+{
+    add_rays(&t->rays, &rs->rays);
+    t->invalid += rs->invalid_samples;
+    t->stages |= rs->stages;
+    if (rs->threads > 0)
+        t->threads = rs->threads;
+}
+
+void grad_totals_warn(const char *cmd, const struct grad_totals *t)
+{
+    if (t->invalid > 0)
+        cli_error(cmd, "warning: %llu samples were not finite and were dropped", (unsigned long long)t->invalid);
+}
+
+void grad_json_head(FILE *f, const struct grad_common *g, const char *scene_path)
+{
+    fprintf(f, "\"command\": ");
+    json_string(f, g->cmd);
+    fprintf(f, ", \"scene\": ");
+    json_string(f, scene_path);
+    fprintf(f, ", \"estimator\": ");
+    json_string(f, g->estimator->name);
+    fprintf(f, ", \"sampling\": ");
+    json_string(f, dr_sampling_name(g->sampling));
+    fprintf(f, ", \"width\": %d, \"height\": %d, \"spp\": %d, \"max_depth\": %d, \"rr_depth\": %d, \"seed\": %llu",
+            g->width, g->height, g->spp, g->max_depth, g->rr_depth, (unsigned long long)g->seed);
+}
+
+void grad_json_run(FILE *f, const struct grad_totals *t)
+{
+    const struct dr_ray_counts *r = &t->rays;
+    fprintf(f, "\"threads\": %d, \"estimator_memory_bytes\": %llu, \"record_bytes\": %llu, "
+               "\"peak_memory_bytes\": %llu",
+            t->threads, (unsigned long long)t->memory_bytes, (unsigned long long)t->record_bytes,
+            (unsigned long long)cli_peak_rss_bytes());
+    fprintf(f, ", \"rays\": {\"camera\": %llu, \"extension\": %llu, \"shadow\": %llu, \"total\": %llu}",
+            (unsigned long long)r->camera, (unsigned long long)r->extension, (unsigned long long)r->shadow,
+            (unsigned long long)(r->camera + r->extension + r->shadow));
+    char stages[256];
+    dr_path_stages_describe(t->stages, stages, sizeof stages);
+    fprintf(f, ", \"invalid_samples\": %llu, \"stages\": ", (unsigned long long)t->invalid);
+    json_name_list(f, stages);
 }

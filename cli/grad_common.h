@@ -1,7 +1,8 @@
-/* Options and set-up shared by the gradient commands (grad, fdcheck):
- * --param, --estimator, --sampling, --spp, --max-depth, --res, --camera,
- * --seed, --threads, --json; loading the scene, choosing the camera and the
- * image size, resolving the parameters. */
+/* Options and set-up shared by the commands that render (render, grad,
+ * fdcheck, optimize): --spp, --max-depth, --rr-depth, --res, --camera,
+ * --seed, --threads, --json, and for gradients --param, --set, --estimator,
+ * --sampling; loading the scene, choosing the camera and the image size,
+ * resolving the parameters, and the JSON pieces every summary shares. */
 #ifndef DR_GRAD_COMMON_H
 #define DR_GRAD_COMMON_H
 
@@ -12,6 +13,7 @@
 
 #include "estimator.h"
 #include "params.h"
+#include "render.h"
 #include "scene.h"
 
 /* getopt_long codes of the shared options; each command numbers its own
@@ -28,18 +30,22 @@ enum {
     GOPT_THREADS,
     GOPT_JSON,
     GOPT_SET,
+    GOPT_RR_DEPTH,
     GOPT_END
 };
 
-/* The shared entries of a getopt_long table (copied into each command's table). */
-#define GRAD_COMMON_LONG_OPTIONS                                                                       \
-    {"param", required_argument, NULL, GOPT_PARAM}, {"estimator", required_argument, NULL, GOPT_ESTIMATOR}, \
-        {"sampling", required_argument, NULL, GOPT_SAMPLING}, {"spp", required_argument, NULL, GOPT_SPP},   \
-        {"max-depth", required_argument, NULL, GOPT_DEPTH}, {"res", required_argument, NULL, GOPT_RES},     \
+/* The shared entries of a getopt_long table (copied into each command's
+ * table): what every rendering command takes, and what gradient commands add. */
+#define RENDER_COMMON_LONG_OPTIONS                                                                     \
+    {"spp", required_argument, NULL, GOPT_SPP}, {"max-depth", required_argument, NULL, GOPT_DEPTH},        \
+        {"rr-depth", required_argument, NULL, GOPT_RR_DEPTH}, {"res", required_argument, NULL, GOPT_RES},  \
         {"camera", required_argument, NULL, GOPT_CAMERA}, {"seed", required_argument, NULL, GOPT_SEED},     \
         {"threads", required_argument, NULL, GOPT_THREADS}, {"json", no_argument, NULL, GOPT_JSON},         \
-        {"set", required_argument, NULL, GOPT_SET},                                                    \
         {"help", no_argument, NULL, 'h'}
+#define GRAD_COMMON_LONG_OPTIONS                                                                       \
+    {"param", required_argument, NULL, GOPT_PARAM}, {"estimator", required_argument, NULL, GOPT_ESTIMATOR}, \
+        {"sampling", required_argument, NULL, GOPT_SAMPLING}, {"set", required_argument, NULL, GOPT_SET},   \
+        RENDER_COMMON_LONG_OPTIONS
 
 struct grad_common {
     const char *cmd;                 /* "grad", "fdcheck": prefixes messages */
@@ -49,12 +55,14 @@ struct grad_common {
     const char **sets;               /* the --set P=V,... values, in order */
     int n_sets;
     const struct dr_estimator_ops *estimator;
-    int spp, max_depth, width, height, camera, threads;
+    enum dr_sampling sampling;
+    int spp, max_depth, rr_depth, width, height, camera, threads;
     bool res_given, camera_given, json;
     uint64_t seed;
 };
 
-/* Defaults: prb, detached, the given spp, depth 8, no --res. */
+/* Defaults: prb, detached, the given spp, depth 8, Russian roulette from
+ * DR_RR_DEPTH_DEFAULT, no --res. */
 void grad_common_init(struct grad_common *g, const char *cmd, int spp);
 void grad_common_free(struct grad_common *g);
 
@@ -87,6 +95,36 @@ int grad_param_set(const struct grad_common *g, const struct dr_scene *scene, st
  * linear float rgb (8-bit sRGB files decoded); NaN/Inf pixels refused.
  * img keeps the file's size (release it). Returns -1 to go on or an exit code. */
 int grad_load_target(const char *cmd, const char *path, struct dr_image *img, float **rgb);
+
+/* The estimator problem / render options the shared options describe, for an
+ * image of w x h at spp samples per pixel with this seed. */
+struct dr_grad_problem grad_problem(const struct grad_common *g, const struct dr_scene *scene,
+                                    const struct dr_camera *cam, const struct dr_param_set *ps, int w, int h, int spp,
+                                    uint64_t seed);
+struct dr_render_opts grad_render_opts(const struct grad_common *g, int w, int h, int spp, uint64_t seed,
+                                       bool progress);
+
+/* What several estimator runs did, summed (time, rays, dropped samples) or
+ * maximised (memory), for the summaries. */
+struct grad_totals {
+    double seconds;
+    struct dr_ray_counts rays;
+    uint64_t invalid, memory_bytes, record_bytes;
+    unsigned stages;
+    int threads;
+};
+void grad_totals_add(struct grad_totals *t, const struct dr_grad_stats *st);
+void grad_totals_add_render(struct grad_totals *t, const struct dr_render_stats *rs);
+/* Prints the dropped-samples warning when some were dropped. */
+void grad_totals_warn(const char *cmd, const struct grad_totals *t);
+
+/* JSON: `"command": ..., "scene": ..., "estimator": ..., "sampling": ...,
+ * "width": ..., "height": ..., "spp": ..., "max_depth": ..., "rr_depth": ...,
+ * "seed": ...` (no braces), the start of every gradient command's summary. */
+void grad_json_head(FILE *f, const struct grad_common *g, const char *scene_path);
+/* JSON: `"threads", "estimator_memory_bytes", "record_bytes", "peak_memory_bytes",
+ * "rays", "invalid_samples", "stages"` (no braces). */
+void grad_json_run(FILE *f, const struct grad_totals *t);
 
 /* Names of the effects a parameter set differentiates, comma separated. */
 void grad_effects_differentiated(const struct dr_param_set *set, char *buf, size_t size);

@@ -1,6 +1,8 @@
 /* In-memory images: the sRGB transfer curves and bilinear texture lookup. */
 #include "image.h"
 
+#include "grad_sink.h"
+
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -186,9 +188,9 @@ void dr_texture_eval(const struct dr_texture *tex, const struct dr_image *img,
 }
 
 void d_texture_eval(const struct dr_texture *tex, const struct dr_image *img, double u, double v,
-                    const double d_out[4], double *d_texels)
+                    const double d_out[4], int64_t slot, struct dr_grad_sink *sink)
 {
-    if (!d_texels || !img || img->width <= 0 || img->height <= 0 || img->channels <= 0)
+    if (!img || img->width <= 0 || img->height <= 0 || img->channels <= 0)
         return;
     int64_t idx[4];
     double wt[4];
@@ -198,8 +200,8 @@ void d_texture_eval(const struct dr_texture *tex, const struct dr_image *img, do
     for (int i = 0; i < 4; i++) {
         if (wt[i] == 0.0)
             continue;
-        double *t = d_texels + (size_t)idx[i] * (size_t)img->channels;
+        int64_t t = slot + idx[i] * img->channels;
         for (int ch = 0; ch < k; ch++)
-            t[ch] += wt[i] * g[ch];
+            dr_sink_add(sink, t + ch, wt[i] * g[ch]);
     }
 }

@@ -67,11 +67,13 @@ static inline int dr_texture_channel_adjoint(int channels, const double d_out[4]
     return k;
 }
 
-/* Reverse mode of dr_texture_eval with respect to the texel values: adds
- * d_out[c] * weight to d_texels[texel * channels + c] for the blended texels
- * (c < min(channels, 4); d_texels has width * height * channels entries). */
+struct dr_grad_sink;   /* grad_sink.h */
+
+/* Adjoint of dr_texture_eval with respect to the texel values: d_out[c] *
+ * weight lands in the sink at slot + texel * channels + c for the blended
+ * texels (c < min(channels, 4)); slot is the image's first gradient entry. */
 void d_texture_eval(const struct dr_texture *tex, const struct dr_image *img, double u, double v,
-                    const double d_out[4], double *d_texels);
+                    const double d_out[4], int64_t slot, struct dr_grad_sink *sink);
 
 #ifdef __cplusplus
 }

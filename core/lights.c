@@ -112,70 +112,23 @@ static int build_env_tables(const struct dr_scene *s, struct dr_light_sampler *l
     return 0;
 }
 
-struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
+/* Flux-like power of a punctual light, comparable with emitters' pi * L * A. */
+static double punctual_power(const struct dr_punctual *l, double scene_radius)
 {
-    struct dr_light_sampler *ls = calloc(1, sizeof *ls);
-    if (!ls)
-        goto nomem;
-    ls->env_entry = -1;
-    ls->scene_center = dr_scale(dr_add(s->bbox_min, s->bbox_max), 0.5);
-    ls->scene_radius = 0.5 * dr_length(dr_sub(s->bbox_max, s->bbox_min));
-    if (!(ls->scene_radius > 0.0))
-        ls->scene_radius = 1.0;
+    double I = l->intensity * (l->color.x + l->color.y + l->color.z) / 3.0, p;
+    switch (l->type) {
+    case DR_LIGHT_POINT: p = 4.0 * M_PI * I; break;
+    case DR_LIGHT_SPOT: p = 2.0 * M_PI * (1.0 - 0.5 * (l->cos_inner + l->cos_outer)) * I; break;
+    default: p = M_PI * scene_radius * scene_radius * I; break;
+    }
+    return fmax(p, 0.0);
+}
 
-    const struct dr_mesh *m = &s->mesh;
-    for (uint32_t t = 0; t < m->n_triangles; t++)
-        if (emitter_power_weight(s, &s->materials[m->material[t]]) > 0.0)
-            ls->n_emitters++;
-    ls->n_punctual = s->n_lights;
-    ls->n_entries = ls->n_emitters + ls->n_punctual + (s->env.present ? 1 : 0);
-    ls->emitter_tri = malloc(sizeof(int64_t) * (size_t)(ls->n_emitters + 1));
-    ls->tri_pick = calloc((size_t)m->n_triangles + 1, sizeof(double));
-    ls->tri_pick_density = calloc((size_t)m->n_triangles + 1, sizeof(double));
-    ls->emitter_area = malloc(sizeof(double) * (size_t)(ls->n_emitters + 1));
-    ls->cdf = malloc(sizeof(double) * (size_t)(ls->n_entries + 1));
-    ls->pick = malloc(sizeof(double) * (size_t)(ls->n_entries + 1));
-    if (!ls->emitter_tri || !ls->tri_pick || !ls->tri_pick_density || !ls->emitter_area || !ls->cdf || !ls->pick)
-        goto nomem;
-
-    /* Power estimates, comparable across light kinds: flux in watts-ish. */
+/* Turns the power weights in ls->pick into probabilities, the cdf and the
+ * per-triangle tables; returns the total weight (0: nothing emits). */
+static double normalise_picks(struct dr_light_sampler *ls)
+{
     double *w = ls->pick;
-    int64_t k = 0;
-    double *mat_w = calloc((size_t)s->n_materials + 1, sizeof(double));
-    if (!mat_w)
-        goto nomem;
-    for (int i = 0; i < s->n_materials; i++)
-        mat_w[i] = emitter_power_weight(s, &s->materials[i]);
-    for (uint32_t t = 0; t < m->n_triangles; t++) {
-        double mw = mat_w[m->material[t]];
-        if (mw > 0.0) {
-            ls->emitter_tri[k] = t;
-            ls->emitter_area[k] = dr_triangle_area(m, t);
-            w[k] = M_PI * mw * ls->emitter_area[k];
-            k++;
-        }
-    }
-    free(mat_w);
-    for (int i = 0; i < s->n_lights; i++) {
-        const struct dr_punctual *l = &s->lights[i];
-        double I = l->intensity * (l->color.x + l->color.y + l->color.z) / 3.0;
-        double p;
-        switch (l->type) {
-        case DR_LIGHT_POINT: p = 4.0 * M_PI * I; break;
-        case DR_LIGHT_SPOT: p = 2.0 * M_PI * (1.0 - 0.5 * (l->cos_inner + l->cos_outer)) * I; break;
-        default: p = M_PI * ls->scene_radius * ls->scene_radius * I; break;
-        }
-        w[k++] = fmax(p, 0.0);
-    }
-    if (s->env.present) {
-        if (s->env.map.data && build_env_tables(s, ls) != 0)
-            goto nomem;
-        double mean = (s->env.color.x + s->env.color.y + s->env.color.z) / 3.0 * s->env.strength;
-        if (s->env.map.data)
-            mean *= ls->env_integral * 0.5 * M_PI; /* mean radiance over the sphere */
-        ls->env_entry = (int)k;
-        w[k++] = fmax(M_PI * M_PI * ls->scene_radius * ls->scene_radius * mean, 0.0);
-    }
     /* Punctual lights and the environment keep a small floor of probability
      * even when dark: otherwise a light at intensity 0 would never be
      * sampled and its intensity could get no gradient. */
@@ -198,6 +151,69 @@ struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
         ls->tri_pick[ls->emitter_tri[i]] = ls->pick[i];
         ls->tri_pick_density[ls->emitter_tri[i]] = ls->emitter_area[i] > 0.0 ? ls->pick[i] / ls->emitter_area[i] : 0.0;
     }
+    return total;
+}
+
+struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
+{
+    struct dr_light_sampler *ls = calloc(1, sizeof *ls);
+    if (!ls)
+        goto nomem;
+    ls->env_entry = -1;
+    ls->scene_center = dr_scale(dr_add(s->bbox_min, s->bbox_max), 0.5);
+    ls->scene_radius = 0.5 * dr_length(dr_sub(s->bbox_max, s->bbox_min));
+    if (!(ls->scene_radius > 0.0))
+        ls->scene_radius = 1.0;
+
+    /* Power per material first: a textured emitter's weight averages its
+     * whole texture, which must happen once per material, not per triangle. */
+    const struct dr_mesh *m = &s->mesh;
+    double *mat_w = calloc((size_t)s->n_materials + 1, sizeof(double));
+    if (!mat_w)
+        goto nomem;
+    for (int i = 0; i < s->n_materials; i++)
+        mat_w[i] = emitter_power_weight(s, &s->materials[i]);
+    for (uint32_t t = 0; t < m->n_triangles; t++)
+        if (mat_w[m->material[t]] > 0.0)
+            ls->n_emitters++;
+    ls->n_punctual = s->n_lights;
+    ls->n_entries = ls->n_emitters + ls->n_punctual + (s->env.present ? 1 : 0);
+    ls->emitter_tri = malloc(sizeof(int64_t) * (size_t)(ls->n_emitters + 1));
+    ls->tri_pick = calloc((size_t)m->n_triangles + 1, sizeof(double));
+    ls->tri_pick_density = calloc((size_t)m->n_triangles + 1, sizeof(double));
+    ls->emitter_area = malloc(sizeof(double) * (size_t)(ls->n_emitters + 1));
+    ls->cdf = malloc(sizeof(double) * (size_t)(ls->n_entries + 1));
+    ls->pick = malloc(sizeof(double) * (size_t)(ls->n_entries + 1));
+    if (!ls->emitter_tri || !ls->tri_pick || !ls->tri_pick_density || !ls->emitter_area || !ls->cdf || !ls->pick) {
+        free(mat_w);
+        goto nomem;
+    }
+
+    /* Power estimates, comparable across light kinds: flux in watts-ish. */
+    double *w = ls->pick;
+    int64_t k = 0;
+    for (uint32_t t = 0; t < m->n_triangles; t++) {
+        double mw = mat_w[m->material[t]];
+        if (mw > 0.0) {
+            ls->emitter_tri[k] = t;
+            ls->emitter_area[k] = dr_triangle_area(m, t);
+            w[k] = M_PI * mw * ls->emitter_area[k];
+            k++;
+        }
+    }
+    free(mat_w);
+    for (int i = 0; i < s->n_lights; i++)
+        w[k++] = punctual_power(&s->lights[i], ls->scene_radius);
+    if (s->env.present) {
+        if (s->env.map.data && build_env_tables(s, ls) != 0)
+            goto nomem;
+        double mean = (s->env.color.x + s->env.color.y + s->env.color.z) / 3.0 * s->env.strength;
+        if (s->env.map.data)
+            mean *= ls->env_integral * 0.5 * M_PI; /* mean radiance over the sphere */
+        ls->env_entry = (int)k;
+        w[k++] = fmax(M_PI * M_PI * ls->scene_radius * ls->scene_radius * mean, 0.0);
+    }
+    double total = normalise_picks(ls);
     if (total <= 0.0)
         ls->n_entries = 0;   /* nothing emits: NEE is skipped entirely */
     return ls;
@@ -248,6 +264,34 @@ dr_vec3 dr_env_radiance(const struct dr_scene *s, dr_vec3 dir)
         L = dr_mul(L, dr_v3(px[0], px[1], px[2]));
     }
     return L;
+}
+
+void d_env_radiance(const struct dr_scene *s, const struct dr_param_set *ps, dr_vec3 dir, dr_vec3 d_L,
+                    struct dr_grad_sink *k)
+{
+    if (!ps->env_active)
+        return;
+    /* L = color * strength * map(dir) */
+    dr_vec3 map = dr_v3s(1.0);
+    struct dr_texture tex = {0, DR_WRAP_REPEAT, DR_WRAP_CLAMP};   /* as dr_env_radiance */
+    double u = 0.0, v = 0.0;
+    if (s->env.map.data) {
+        double px[4];
+        dr_env_dir_to_uv(dir, &u, &v);
+        dr_texture_eval(&tex, &s->env.map, u, v, true, px);
+        map = dr_v3(px[0], px[1], px[2]);
+    }
+    if (ps->env_color >= 0) {
+        dr_vec3 g = dr_scale(dr_mul(d_L, map), s->env.strength);
+        dr_sink_add3(k, ps->env_color, g);
+    }
+    if (ps->env_strength >= 0)
+        dr_sink_add(k, ps->env_strength, dr_dot(d_L, dr_mul(s->env.color, map)));
+    if (ps->env_map >= 0 && s->env.map.data) {
+        dr_vec3 g = dr_scale(dr_mul(d_L, s->env.color), s->env.strength);
+        double d_out[4] = {g.x, g.y, g.z, 0.0};
+        d_texture_eval(&tex, &s->env.map, u, v, d_out, ps->env_map, k);
+    }
 }
 
 static double env_pdf_dir(const struct dr_light_sampler *ls, dr_vec3 dir)
@@ -302,6 +346,37 @@ dr_vec3 dr_emission(const struct dr_scene *s, const struct dr_hit *hit)
         e = dr_mul(e, dr_v3(px[0], px[1], px[2]));
     }
     return e;
+}
+
+void d_emission(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_hit *hit, dr_vec3 d_Le,
+                struct dr_grad_sink *k)
+{
+    const int mi = hit->material;
+    const struct dr_material *m = &s->materials[mi];
+    if (!ps->mat_emission_active[mi] || (!hit->front && !m->double_sided))
+        return;
+    /* Le = factor * strength * texture rgb */
+    dr_vec3 tex_rgb = dr_v3s(1.0);
+    const struct dr_texture *et = m->emissive_tex.texture >= 0 ? &s->textures[m->emissive_tex.texture] : NULL;
+    if (et) {
+        double px[4];
+        dr_texture_eval(et, &s->images[et->image], hit->uv[0], hit->uv[1], true, px);
+        tex_rgb = dr_v3(px[0], px[1], px[2]);
+    }
+    double st = m->emissive_strength;
+    if (ps->mat_emissive_factor[mi] >= 0) {
+        int64_t o = ps->mat_emissive_factor[mi];
+        dr_sink_add(k, o + 0, d_Le.x * st * tex_rgb.x);
+        dr_sink_add(k, o + 1, d_Le.y * st * tex_rgb.y);
+        dr_sink_add(k, o + 2, d_Le.z * st * tex_rgb.z);
+    }
+    if (ps->mat_emissive_strength[mi] >= 0)
+        dr_sink_add(k, ps->mat_emissive_strength[mi], dr_dot(d_Le, dr_mul(m->emissive_factor, tex_rgb)));
+    if (et && ps->image[et->image] >= 0) {
+        dr_vec3 g = dr_scale(dr_mul(d_Le, m->emissive_factor), st);
+        double d_out[4] = {g.x, g.y, g.z, 0.0};
+        d_texture_eval(et, &s->images[et->image], hit->uv[0], hit->uv[1], d_out, ps->image[et->image], k);
+    }
 }
 
 static double spot_falloff(const struct dr_punctual *l, double cos_angle)
@@ -424,4 +499,35 @@ bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls
     out->atten = atten;
     out->radiance = dr_scale(I, atten);
     return atten > 0.0;
+}
+
+void d_light_radiance(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_light_sample *ls,
+                      dr_vec3 d_L, struct dr_grad_sink *k)
+{
+    /* nothing about this light is requested: no derivative work at all */
+    if ((ls->type == DR_LS_AREA && !ps->mat_emission_active[s->mesh.material[ls->index]]) ||
+        (ls->type == DR_LS_ENV && !ps->env_active) || (ls->type == DR_LS_PUNCTUAL && !ps->lights_active))
+        return;
+    switch (ls->type) {
+    case DR_LS_AREA: {
+        struct dr_hit h;
+        dr_hit_at(&s->mesh, ls->index, ls->b1, ls->b2, &h);
+        h.front = dr_dot(h.ng, ls->wi) < 0.0;
+        d_emission(s, ps, &h, d_L, k);
+        return;
+    }
+    case DR_LS_ENV: d_env_radiance(s, ps, ls->wi, d_L, k); return;
+    default: {
+        /* radiance = color * intensity * atten */
+        const struct dr_punctual *l = &s->lights[ls->index];
+        int64_t oc = ps->light_color[ls->index], oi = ps->light_intensity[ls->index];
+        if (oc >= 0) {
+            dr_vec3 g = dr_scale(d_L, l->intensity * ls->atten);
+            dr_sink_add3(k, oc, g);
+        }
+        if (oi >= 0)
+            dr_sink_add(k, oi, dr_dot(d_L, l->color) * ls->atten);
+        return;
+    }
+    }
 }

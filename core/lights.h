@@ -8,6 +8,8 @@
 #include <stdbool.h>
 
 #include "geometry.h"
+#include "grad_sink.h"
+#include "params.h"
 #include "scene.h"
 #include "vec.h"
 
@@ -42,6 +44,10 @@ bool dr_light_sampler_empty(const struct dr_light_sampler *ls);
  * is nothing to sample or the sample carries no light. */
 bool dr_light_sample(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 p,
                      double u_pick, double u1, double u2, struct dr_light_sample *out);
+/* Adjoint of the radiance a light sample carries (area, punctual or
+ * environment) into that light's requested parameters; none requested: no work. */
+void d_light_radiance(const struct dr_scene *scene, const struct dr_param_set *params,
+                      const struct dr_light_sample *ls, dr_vec3 d_L, struct dr_grad_sink *sink);
 
 /* Solid-angle density with which dr_light_sample would produce the point
  * `hit` on an emissive triangle as seen from `from`. */
@@ -55,8 +61,14 @@ double dr_light_pdf_env(const struct dr_scene *scene, const struct dr_light_samp
 /* Radiance emitted by the surface at hit towards the side the ray came from
  * (zero on the back of single-sided materials). */
 dr_vec3 dr_emission(const struct dr_scene *scene, const struct dr_hit *hit);
+/* Adjoint: d_Le into the hit material's requested emission parameters. */
+void d_emission(const struct dr_scene *scene, const struct dr_param_set *params, const struct dr_hit *hit,
+                dr_vec3 d_Le, struct dr_grad_sink *sink);
 /* Environment radiance arriving from direction -dir... i.e. seen along dir. */
 dr_vec3 dr_env_radiance(const struct dr_scene *scene, dr_vec3 dir);
+/* Adjoint: d_L into the requested environment colour, strength and texels. */
+void d_env_radiance(const struct dr_scene *scene, const struct dr_param_set *params, dr_vec3 dir, dr_vec3 d_L,
+                    struct dr_grad_sink *sink);
 
 /* Equirectangular mapping (+Y up; u = 0.5 looks down -Z, u grows towards +X;
  * v = 0 is straight up). */

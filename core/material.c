@@ -1,5 +1,15 @@
+/* A glTF material at a surface point: factors times textures, and the
+ * adjoint of that evaluation down to the requested parameters. */
 #include "material.h"
 
+/* The texture a texref points at, or NULL. */
+static const struct dr_texture *texref_texture(const struct dr_scene *s, const struct dr_texref *r)
+{
+    return r->texture >= 0 ? &s->textures[r->texture] : NULL;
+}
+
+/* base_color = factor * texture rgb (sRGB-decoded); roughness = factor * G,
+ * metallic = factor * B of the metallic-roughness texture (linear). */
 void dr_material_eval(const struct dr_scene *s, const struct dr_hit *hit, struct dr_bsdf *b)
 {
     const struct dr_material *m = &s->materials[hit->material];
@@ -9,15 +19,55 @@ void dr_material_eval(const struct dr_scene *s, const struct dr_hit *hit, struct
     b->specular = m->specular;
     b->specular_color = m->specular_color;
     double px[4];
-    if (m->base_color_tex.texture >= 0) {
-        const struct dr_texture *t = &s->textures[m->base_color_tex.texture];
+    const struct dr_texture *t = texref_texture(s, &m->base_color_tex);
+    if (t) {
         dr_texture_eval(t, &s->images[t->image], hit->uv[0], hit->uv[1], true, px);
         b->base_color = dr_mul(b->base_color, dr_v3(px[0], px[1], px[2]));
     }
-    if (m->metallic_roughness_tex.texture >= 0) {
-        const struct dr_texture *t = &s->textures[m->metallic_roughness_tex.texture];
+    t = texref_texture(s, &m->metallic_roughness_tex);
+    if (t) {
         dr_texture_eval(t, &s->images[t->image], hit->uv[0], hit->uv[1], false, px);
         b->roughness *= px[1];
         b->metallic *= px[2];
+    }
+}
+
+void d_material_eval(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_hit *hit,
+                     const struct dr_d_bsdf *d_b, struct dr_grad_sink *k)
+{
+    const int mi = hit->material;
+    const struct dr_material *m = &s->materials[mi];
+    const double u = hit->uv[0], v = hit->uv[1];
+    /* base_color = factor * texture rgb */
+    dr_vec3 tex_rgb = dr_v3s(1.0);
+    const struct dr_texture *bt = texref_texture(s, &m->base_color_tex);
+    if (bt) {
+        double px[4];
+        dr_texture_eval(bt, &s->images[bt->image], u, v, true, px);
+        tex_rgb = dr_v3(px[0], px[1], px[2]);
+    }
+    if (ps->mat_base_color[mi] >= 0)
+        dr_sink_add3(k, ps->mat_base_color[mi], dr_mul(d_b->base_color, tex_rgb));
+    if (bt && ps->image[bt->image] >= 0) {
+        dr_vec3 g = dr_mul(d_b->base_color, m->base_color);
+        double d_out[4] = {g.x, g.y, g.z, 0.0};
+        d_texture_eval(bt, &s->images[bt->image], u, v, d_out, ps->image[bt->image], k);
+    }
+    /* roughness = factor * texture G, metallic = factor * texture B */
+    double tex_g = 1.0, tex_b = 1.0;
+    const struct dr_texture *mt = texref_texture(s, &m->metallic_roughness_tex);
+    if (mt) {
+        double px[4];
+        dr_texture_eval(mt, &s->images[mt->image], u, v, false, px);
+        tex_g = px[1];
+        tex_b = px[2];
+    }
+    if (ps->mat_roughness[mi] >= 0)
+        dr_sink_add(k, ps->mat_roughness[mi], d_b->roughness * tex_g);
+    if (ps->mat_metallic[mi] >= 0)
+        dr_sink_add(k, ps->mat_metallic[mi], d_b->metallic * tex_b);
+    if (mt && ps->image[mt->image] >= 0) {
+        double d_out[4] = {0.0, d_b->roughness * m->roughness, d_b->metallic * m->metallic, 0.0};
+        d_texture_eval(mt, &s->images[mt->image], u, v, d_out, ps->image[mt->image], k);
     }
 }

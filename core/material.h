@@ -4,10 +4,16 @@
 
 #include "bsdf.h"
 #include "geometry.h"
+#include "grad_sink.h"
+#include "params.h"
 #include "scene.h"
 
 /* Fills b with the BSDF parameters at hit (baseColorTexture is sRGB-decoded
  * rgb; metallicRoughnessTexture: G = roughness, B = metallic, linear). */
 void dr_material_eval(const struct dr_scene *scene, const struct dr_hit *hit, struct dr_bsdf *b);
+/* Adjoint: d_b (of dr_material_eval's output) into the requested factors and
+ * texels of the hit's material. */
+void d_material_eval(const struct dr_scene *scene, const struct dr_param_set *params, const struct dr_hit *hit,
+                     const struct dr_d_bsdf *d_b, struct dr_grad_sink *sink);
 
 #endif

@@ -177,3 +177,9 @@ int dr_parallel_for_static(int64_t n, int64_t chunk, int threads, dr_range_fn fn
 {
     return range_run(n, chunk, threads, true, fn, ctx);
 }
+
+int dr_thread_count(int requested)
+{
+    int t = requested > 0 ? requested : dr_cpu_count();
+    return t > DR_MAX_THREADS ? DR_MAX_THREADS : t;
+}

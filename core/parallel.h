@@ -8,6 +8,8 @@
 #include <stdint.h>
 
 #define DR_TILE_SIZE 16
+/* The most worker threads any run uses (per-thread buffers are sized by it). */
+#define DR_MAX_THREADS 256
 
 /* Called once per tile, from worker `thread` (0..threads-1); [x0,x1) x [y0,y1). */
 typedef void (*dr_tile_fn)(void *ctx, int thread, int x0, int y0, int x1, int y1);
@@ -31,5 +33,7 @@ int dr_parallel_for_static(int64_t n, int64_t chunk, int threads, dr_range_fn fn
 
 /* Number of online CPUs (>= 1). */
 int dr_cpu_count(void);
+/* The workers a run uses for a request (<= 0: one per CPU), at most DR_MAX_THREADS. */
+int dr_thread_count(int requested);
 
 #endif

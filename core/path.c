@@ -1,20 +1,75 @@
+/* The staged path walker (path.h) and the adjoints of a vertex's terms. */
 #include "path.h"
+
+#include <stdio.h>
+#include <string.h>
 
 #include "accel.h"
 #include "material.h"
 
-void dr_path_start(struct dr_path_state *st, dr_vec3 o, dr_vec3 d)
+/* ------------------------------------------------------------------ plan */
+
+unsigned dr_path_plan(const struct dr_scene *s, const struct dr_param_set *ps)
 {
-    st->o = o;
-    st->d = d;
-    st->prev_pdf = 0.0;
-    st->prev_p = o;
-    st->depth = 0;
-    st->beta = dr_v3s(1.0);
-    st->ratio = dr_v3s(1.0);
+    unsigned st = 0;
+    if (s->env.present)
+        st |= DR_STAGE_ENV;
+    bool emission_differentiated = false;
+    for (int m = 0; ps && m < ps->n_materials; m++)
+        emission_differentiated |= ps->mat_emission_active[m];
+    if ((s->effects & DR_FX_AREA_LIGHTS) || emission_differentiated)
+        st |= DR_STAGE_EMISSION;
+    if (!dr_light_sampler_empty(s->light_sampler))
+        st |= DR_STAGE_NEE;
+    return st;
 }
 
-static bool material_emits(const struct dr_scene *s, const struct dr_path_opts *o, int64_t tri, int mat)
+void dr_path_stages_describe(unsigned stages, char *buf, int size)
+{
+    static const struct { unsigned bit; const char *name; } names[] = {
+        {DR_STAGE_ENV, "environment_lookup"},
+        {DR_STAGE_EMISSION, "surface_emission"},
+        {DR_STAGE_NEE, "next_event_estimation"},
+    };
+    int n = 0;
+    buf[0] = '\0';
+    for (size_t i = 0; i < sizeof names / sizeof names[0] && n < size; i++)
+        if (stages & names[i].bit)
+            n += snprintf(buf + n, (size_t)(size - n), "%s%s", n ? "," : "", names[i].name);
+}
+
+/* ---------------------------------------------------------------- stages */
+
+void dr_path_start(struct dr_path_state *st, dr_vec3 o, dr_vec3 d)
+{
+    *st = (struct dr_path_state){.o = o, .d = d, .prev_pdf = 0.0, .prev_p = o, .depth = 0,
+                                 .beta = dr_v3s(1.0), .ratio = dr_v3s(1.0)};
+}
+
+/* Stage trace: the closest triangle along the current ray (-1: none). */
+static int64_t stage_trace(const struct dr_scene *s, const struct dr_path_state *st, struct dr_ray_counts *counts)
+{
+    if (st->depth == 1)
+        counts->camera++;
+    else
+        counts->extension++;
+    return dr_accel_intersect(s->accel, st->o, st->d, 0.0, INFINITY);
+}
+
+/* Stage escaped: environment radiance seen along the ray, MIS-weighted
+ * against next-event estimation of the environment. */
+static void stage_escaped(const struct dr_scene *s, const struct dr_path_opts *opts,
+                          const struct dr_path_state *st, struct dr_path_vertex *v)
+{
+    v->kind = DR_VERTEX_ESCAPED;
+    if (!(opts->stages & DR_STAGE_ENV))
+        return;
+    v->emits = true;
+    v->Le = dr_env_radiance(s, st->d);
+    v->emit_w = st->depth == 1 ? 1.0 : dr_mis_power(st->prev_pdf, dr_light_pdf_env(s, s->light_sampler, st->d));
+}
+
+static bool surface_emits(const struct dr_scene *s, const struct dr_path_opts *o, int64_t tri, int mat)
 {
     if (dr_light_pdf_area_pick(s->light_sampler, tri) > 0.0)
         return true;
@@ -22,113 +77,121 @@ static bool material_emits(const struct dr_scene *s, const struct dr_path_opts *
     return o->params && o->params->mat_emission_active[mat];
 }
 
-bool dr_path_step(const struct dr_scene *s, const struct dr_path_opts *opts, struct dr_path_state *st,
-                  struct dr_sampler *sampler, struct dr_path_vertex *v, struct dr_ray_counts *counts)
+/* Stage emission: the hit point (recomputed in double: Embree only says
+ * which triangle) and the radiance it emits towards the ray, MIS-weighted
+ * against next-event estimation of that triangle. */
+static void stage_surface_hit(const struct dr_scene *s, const struct dr_path_opts *opts,
+                              const struct dr_path_state *st, int64_t tri, struct dr_path_vertex *v)
 {
-    const struct dr_light_sampler *ls = s->light_sampler;
-    const int depth = ++st->depth;
-    v->depth = depth;
-    v->d = st->d;
-    v->emits = v->shaded = v->nee = v->cont = v->diff_bsdf = false;
-
-    int64_t tri = dr_accel_intersect(s->accel, st->o, st->d, 0.0, INFINITY);
-    if (depth == 1)
-        counts->camera++;
-    else
-        counts->extension++;
-
-    if (tri < 0) {
-        v->kind = DR_VERTEX_ESCAPED;
-        if (s->env.present) {
-            v->emits = true;
-            v->Le = dr_env_radiance(s, st->d);
-            v->emit_w = depth == 1 ? 1.0 : dr_mis_power(st->prev_pdf, dr_light_pdf_env(s, ls, st->d));
-        }
-        return false;
-    }
     v->kind = DR_VERTEX_SURFACE;
     struct dr_hit *hit = &v->hit;
     dr_hit_compute(&s->mesh, tri, st->o, st->d, hit);
+    if (!(opts->stages & DR_STAGE_EMISSION) || !surface_emits(s, opts, tri, hit->material))
+        return;
+    v->emits = true;
+    v->Le = dr_emission(s, hit);
+    v->emit_w = st->depth == 1 ? 1.0 : dr_mis_power(st->prev_pdf, dr_light_pdf_area(s, s->light_sampler, st->prev_p, hit));
+}
 
-    if (material_emits(s, opts, tri, hit->material)) {
-        v->emits = true;
-        v->Le = dr_emission(s, hit);
-        v->emit_w = depth == 1 ? 1.0 : dr_mis_power(st->prev_pdf, dr_light_pdf_area(s, ls, st->prev_p, hit));
-    }
-    if (depth >= opts->max_depth)
+/* Stage material: the shading frame oriented towards the arriving ray, the
+ * BSDF inputs, and the vertex's block of random numbers. False when the
+ * surface reflects nothing (last segment, or the back of a single-sided one). */
+static bool stage_material(const struct dr_scene *s, const struct dr_path_opts *opts,
+                           const struct dr_path_state *st, struct dr_sampler *sampler, struct dr_path_vertex *v)
+{
+    const struct dr_hit *hit = &v->hit;
+    if (st->depth >= opts->max_depth)
         return false;
-
-    const struct dr_material *mat = &s->materials[hit->material];
-    if (!hit->front && !mat->double_sided)
-        return false;   /* the back of a single-sided surface reflects nothing */
-    /* Orient both normals towards the side the ray arrived from. */
-    dr_vec3 ng = hit->front ? hit->ng : dr_neg(hit->ng);
-    dr_vec3 ns = hit->front ? hit->ns : dr_neg(hit->ns);
-    v->frame = dr_frame_from_normal(ns);
+    if (!hit->front && !s->materials[hit->material].double_sided)
+        return false;
+    v->ng = hit->front ? hit->ng : dr_neg(hit->ng);
+    v->frame = dr_frame_from_normal(hit->front ? hit->ns : dr_neg(hit->ns));
     v->wo = dr_frame_to_local(&v->frame, dr_neg(st->d));
     dr_material_eval(s, hit, &v->bsdf);
     v->shaded = true;
     v->diff_bsdf = opts->params && opts->params->mat_bsdf_active[hit->material];
 
-    sampler->dim = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)(depth - 1);
-    double u_pick = dr_sampler_next(sampler), u_l1 = dr_sampler_next(sampler), u_l2 = dr_sampler_next(sampler);
-    double u_lobe = dr_sampler_next(sampler), u_b1 = dr_sampler_next(sampler), u_b2 = dr_sampler_next(sampler);
-    double u_rr = dr_sampler_next(sampler);
+    sampler->dim = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)(st->depth - 1);
+    struct dr_vertex_randoms *u = &v->u;
+    u->light_pick = dr_sampler_next(sampler);
+    u->light_u1 = dr_sampler_next(sampler);
+    u->light_u2 = dr_sampler_next(sampler);
+    u->lobe = dr_sampler_next(sampler);
+    u->bsdf_u1 = dr_sampler_next(sampler);
+    u->bsdf_u2 = dr_sampler_next(sampler);
+    u->rr = dr_sampler_next(sampler);
+    return true;
+}
 
-    /* Next-event estimation. */
-    if (!dr_light_sampler_empty(ls) && dr_light_sample(s, ls, hit->p, u_pick, u_l1, u_l2, &v->ls) &&
-        dr_dot(v->ls.wi, ng) > 0.0) {
-        v->nee_wi = dr_frame_to_local(&v->frame, v->ls.wi);
-        double bsdf_pdf;
-        v->nee_f = dr_bsdf_eval_pdf(&v->bsdf, v->wo, v->nee_wi, &bsdf_pdf);
-        /* A zero BSDF contributes nothing, but its derivative may not be zero. */
-        if (!dr_is_black(v->nee_f) || v->diff_bsdf) {
-            /* The shadow ray joins the two offset end points: aiming it from
-             * the lifted origin along the unlifted direction would reach a
-             * grazing light's plane early and shadow itself. */
-            dr_vec3 so = dr_offset_origin(hit, ng, v->ls.wi), sd = v->ls.wi;
-            double tmax = INFINITY;
-            if (!isinf(v->ls.dist)) {
-                sd = dr_sub(v->ls.target, so);
-                tmax = dr_length(sd);
-                sd = dr_scale(sd, 1.0 / tmax);
-            }
-            counts->shadow++;
-            if (tmax > 0.0 && !dr_accel_occluded(s->accel, so, sd, 0.0, tmax)) {
-                double w = v->ls.delta ? 1.0 : dr_mis_power(v->ls.pdf, bsdf_pdf);
-                v->nee_scale = fabs(v->nee_wi.z) * w / v->ls.pdf;
-                v->nee = true;
-            }
-        }
+void dr_path_nee(const struct dr_scene *s, struct dr_path_vertex *v, struct dr_ray_counts *counts)
+{
+    const struct dr_hit *hit = &v->hit;
+    const struct dr_vertex_randoms *u = &v->u;
+    if (!dr_light_sample(s, s->light_sampler, hit->p, u->light_pick, u->light_u1, u->light_u2, &v->ls) ||
+        dr_dot(v->ls.wi, v->ng) <= 0.0)
+        return;
+    v->nee_wi = dr_frame_to_local(&v->frame, v->ls.wi);
+    double bsdf_pdf;
+    v->nee_f = dr_bsdf_eval_pdf(&v->bsdf, v->wo, v->nee_wi, &bsdf_pdf);
+    /* A zero BSDF contributes nothing, but its derivative may not be zero. */
+    if (dr_is_black(v->nee_f) && !v->diff_bsdf)
+        return;
+    /* The shadow ray joins the two offset end points: aiming it from the
+     * lifted origin along the unlifted direction would reach a grazing
+     * light's plane early and shadow itself. */
+    dr_vec3 so = dr_offset_origin(hit, v->ng, v->ls.wi), sd = v->ls.wi;
+    double tmax = INFINITY;
+    if (!isinf(v->ls.dist)) {
+        sd = dr_sub(v->ls.target, so);
+        tmax = dr_length(sd);
+        sd = dr_scale(sd, 1.0 / tmax);
     }
+    counts->shadow++;
+    if (!(tmax > 0.0) || dr_accel_occluded(s->accel, so, sd, 0.0, tmax))
+        return;
+    double w = v->ls.delta ? 1.0 : dr_mis_power(v->ls.pdf, bsdf_pdf);
+    v->nee_scale = fabs(v->nee_wi.z) * w / v->ls.pdf;
+    v->nee = true;
+}
 
-    /* Continue the path by sampling the BSDF. */
+/* At a differentiated vertex, channels whose BSDF value is exactly 0 are
+ * traced on with the substitute factor (path.h), once per channel. */
+static void substitute_zero_channels(const struct dr_path_state *st, struct dr_path_vertex *v)
+{
+    v->s = v->f;
+    v->sub[0] = v->sub[1] = v->sub[2] = false;
+    if (!v->diff_bsdf)
+        return;
+    for (int c = 0; c < 3; c++)
+        if (dr_v3_get(v->s, c) == 0.0 && dr_v3_get(st->ratio, c) != 0.0) {
+            dr_v3_set(&v->s, c, DR_PATH_SUBSTITUTE);
+            v->sub[c] = true;
+        }
+}
+
+/* Stage continue: BSDF sample, Russian roulette, the next ray. False when
+ * the path ends here. */
+static bool stage_continue(const struct dr_path_opts *opts, struct dr_path_state *st, struct dr_path_vertex *v)
+{
+    const struct dr_vertex_randoms *u = &v->u;
     struct dr_bsdf_sample bs;
-    if (!dr_bsdf_sample(&v->bsdf, v->wo, u_lobe, u_b1, u_b2, &bs) || !(bs.pdf > 0.0))
+    if (!dr_bsdf_sample(&v->bsdf, v->wo, u->lobe, u->bsdf_u1, u->bsdf_u2, &bs) || !(bs.pdf > 0.0))
         return false;
     dr_vec3 wi = dr_frame_to_world(&v->frame, bs.wi);
-    if (dr_dot(wi, ng) <= 0.0)
+    if (dr_dot(wi, v->ng) <= 0.0)
         return false;   /* shading normal points where the geometry does not */
     v->wi = bs.wi;
     v->f = bs.f;
-    v->s = bs.f;
-    v->sub[0] = v->sub[1] = v->sub[2] = false;
-    if (v->diff_bsdf) {
-        double *sc = &v->s.x, *rc = &st->ratio.x;
-        for (int c = 0; c < 3; c++)
-            if (sc[c] == 0.0 && rc[c] != 0.0) {
-                sc[c] = DR_PATH_SUBSTITUTE;
-                v->sub[c] = true;
-            }
-    }
+    v->pdf = bs.pdf;
+    substitute_zero_channels(st, v);
     double cos_pdf = fabs(bs.wi.z) / bs.pdf;
     dr_vec3 beta = dr_mul(st->beta, dr_scale(v->s, cos_pdf));
     if (dr_is_black(beta))
         return false;
     double q = 1.0;
-    if (depth >= opts->rr_depth) {
+    if (st->depth >= opts->rr_depth) {
         q = dr_min(dr_max3(beta), 0.95);
-        if (u_rr >= q)
+        if (u->rr >= q)
             return false;
     }
     v->cos_pdf_q = cos_pdf / q;
@@ -136,10 +199,112 @@ bool dr_path_step(const struct dr_scene *s, const struct dr_path_opts *opts, str
     st->beta = dr_scale(beta, 1.0 / q);
     for (int c = 0; c < 3; c++)
         if (v->sub[c])
-            (&st->ratio.x)[c] = 0.0;
+            dr_v3_set(&st->ratio, c, 0.0);
     st->prev_pdf = bs.pdf;
-    st->prev_p = hit->p;
-    st->o = dr_offset_origin(hit, ng, wi);
+    st->prev_p = v->hit.p;
+    st->o = dr_offset_origin(&v->hit, v->ng, wi);
     st->d = wi;
     return true;
+}
+
+bool dr_path_step(const struct dr_scene *s, const struct dr_path_opts *opts, struct dr_path_state *st,
+                  struct dr_sampler *sampler, struct dr_path_vertex *v, struct dr_ray_counts *counts)
+{
+    v->depth = ++st->depth;
+    v->d = st->d;
+    v->emits = v->shaded = v->nee = v->cont = v->diff_bsdf = false;
+
+    int64_t tri = stage_trace(s, st, counts);
+    if (tri < 0) {
+        stage_escaped(s, opts, st, v);
+        return false;
+    }
+    stage_surface_hit(s, opts, st, tri, v);
+    if (!stage_material(s, opts, st, sampler, v))
+        return false;
+    if (opts->stages & DR_STAGE_NEE)
+        dr_path_nee(s, v, counts);
+    return stage_continue(opts, st, v);
+}
+
+dr_vec3 dr_path_radiance(const struct dr_scene *s, const struct dr_path_opts *opts, dr_vec3 o, dr_vec3 d,
+                         struct dr_sampler *sampler, struct dr_ray_counts *counts)
+{
+    struct dr_path_state st;
+    struct dr_path_vertex v;
+    dr_path_start(&st, o, d);
+    dr_vec3 L = dr_v3s(0.0);
+    for (;;) {
+        dr_vec3 beta = st.beta;
+        bool more = dr_path_step(s, opts, &st, sampler, &v, counts);
+        L = dr_add(L, dr_mul(beta, dr_path_vertex_term(&v)));
+        if (!more)
+            return L;
+    }
+}
+
+/* -------------------------------------------------------------- adjoints */
+
+/* d_e of one image channel (forward mode) or of all (reverse mode). */
+static void vertex_term_part(const struct dr_scene *s, const struct dr_param_set *ps,
+                             const struct dr_path_vertex *v, dr_vec3 d_e, struct dr_grad_sink *sink)
+{
+    if (v->emits) {
+        dr_vec3 d_Le = dr_scale(d_e, v->emit_w);
+        if (v->kind == DR_VERTEX_SURFACE)
+            d_emission(s, ps, &v->hit, d_Le, sink);
+        else
+            d_env_radiance(s, ps, v->d, d_Le, sink);
+    }
+    if (v->nee) {
+        if (v->diff_bsdf) {
+            struct dr_d_bsdf db = {dr_v3s(0.0), 0.0, 0.0};
+            d_bsdf_eval(&v->bsdf, v->wo, v->nee_wi, dr_scale(dr_mul(d_e, v->ls.radiance), v->nee_scale), &db);
+            d_material_eval(s, ps, &v->hit, &db, sink);
+        }
+        d_light_radiance(s, ps, &v->ls, dr_scale(dr_mul(d_e, v->nee_f), v->nee_scale), sink);
+    }
+}
+
+static void continuation_part(const struct dr_scene *s, const struct dr_param_set *ps,
+                              const struct dr_path_vertex *v, dr_vec3 d_f, struct dr_grad_sink *sink)
+{
+    struct dr_d_bsdf db = {dr_v3s(0.0), 0.0, 0.0};
+    d_bsdf_eval(&v->bsdf, v->wo, v->wi, d_f, &db);
+    d_material_eval(s, ps, &v->hit, &db, sink);
+}
+
+typedef void (*adjoint_part_fn)(const struct dr_scene *, const struct dr_param_set *, const struct dr_path_vertex *,
+                                dr_vec3, struct dr_grad_sink *);
+
+/* Every path term is diagonal in the colour channels, so forward mode can
+ * keep the image channels apart by splitting the adjoint: one pass over the
+ * path serves all three (instead of one replay per channel). */
+static void by_channel(adjoint_part_fn fn, const struct dr_scene *s, const struct dr_param_set *ps,
+                       const struct dr_path_vertex *v, dr_vec3 d, struct dr_grad_sink *sink)
+{
+    if (dr_is_black(d))
+        return;
+    if (!sink->dir) {
+        fn(s, ps, v, d, sink);
+        return;
+    }
+    for (int c = 0; c < 3; c++) {
+        if (dr_v3_get(d, c) == 0.0)
+            continue;
+        sink->channel = c;
+        fn(s, ps, v, dr_v3_channel(d, c), sink);
+    }
+}
+
+void d_path_vertex_term(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
+                        dr_vec3 d_e, struct dr_grad_sink *sink)
+{
+    by_channel(vertex_term_part, s, ps, v, d_e, sink);
+}
+
+void d_path_continuation(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
+                         dr_vec3 d_f, struct dr_grad_sink *sink)
+{
+    by_channel(continuation_part, s, ps, v, d_f, sink);
 }

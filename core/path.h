@@ -1,7 +1,22 @@
 /* The path walker: one vertex of a path at a time, with everything the
- * primal pass, the path-replay pass and the tape need. All three call
+ * renderer, the path-replay pass and the tape need. All of them call
  * dr_path_step with the same random numbers and so make bit-identical
  * decisions (Russian roulette included).
+ *
+ * A step is a fixed sequence of stages, each ray query at a stage boundary
+ * (the shape of pbrt-v4's wavefront integrator, so a packet tracer can batch
+ * at the boundaries and media can add a segment stage after the trace):
+ *
+ *   trace      closest hit of the current ray                 (extension ray)
+ *   escaped    environment radiance with its MIS weight        [DR_STAGE_ENV]
+ *   emission   surface emission with its MIS weight            [DR_STAGE_EMISSION]
+ *   material   shading frame, BSDF inputs, the vertex's random numbers
+ *   nee        light sample + shadow ray (dr_path_nee)          [DR_STAGE_NEE]
+ *   continue   BSDF sample, zero-BSDF substitution, Russian roulette, next ray
+ *
+ * Which optional stages exist is decided once per run from the scene's
+ * effects and the requested parameters (dr_path_plan): a scene without lights
+ * never samples one, a scene without an environment never looks one up.
  *
  * A path's estimate is L = sum_k beta_k * e_k, where e_k is what vertex k adds
  * (emission times its MIS weight, plus the next-event estimate) and
@@ -19,14 +34,64 @@
 #define DR_PATH_H
 
 #include <stdbool.h>
+#include <stdint.h>
 
 #include "bsdf.h"
 #include "geometry.h"
-#include "integrator.h"
+#include "grad_sink.h"
 #include "lights.h"
 #include "params.h"
 #include "sampler.h"
 #include "scene.h"
+
+struct dr_ray_counts {
+    uint64_t camera, extension, shadow;
+};
+
+/* Dimensions a path uses: 2 for the pixel position, then a fixed block per
+ * vertex so each decision owns its own random numbers whatever came before. */
+#define DR_DIMS_CAMERA 2
+#define DR_DIMS_PER_VERTEX 8
+
+/* Russian roulette starts at this depth (segments) unless told otherwise. */
+#define DR_RR_DEPTH_DEFAULT 5
+
+/* Power heuristic (beta = 2) weight of strategy a against b. */
+static inline double dr_mis_power(double pdf_a, double pdf_b)
+{
+    if (!(pdf_a > 0.0))
+        return 0.0;
+    if (!(pdf_b > 0.0))
+        return 1.0;
+    double r = pdf_b / pdf_a;   /* ratio form stays finite for huge densities */
+    return 1.0 / (1.0 + r * r);
+}
+
+/* The optional stages (bits of dr_path_opts.stages). */
+enum dr_path_stage {
+    DR_STAGE_ENV = 1 << 0,        /* escaped rays see an environment */
+    DR_STAGE_EMISSION = 1 << 1,   /* some surface emits, or its emission is differentiated */
+    DR_STAGE_NEE = 1 << 2         /* there is a light to sample */
+};
+
+struct dr_path_opts {
+    int max_depth, rr_depth;
+    unsigned stages;                     /* enum dr_path_stage bits (dr_path_plan) */
+    const struct dr_param_set *params;   /* NULL: primal only (no substitution) */
+};
+
+/* The stages a scene and a parameter set (NULL: none) call for. */
+unsigned dr_path_plan(const struct dr_scene *scene, const struct dr_param_set *params);
+/* Comma-separated names of stage bits, for --json and messages. */
+void dr_path_stages_describe(unsigned stages, char *buf, int size);
+
+/* The uniform numbers a vertex drew, in its fixed block of dimensions: kept
+ * so a derivative pass can re-evaluate the sampling maps (attached sampling). */
+struct dr_vertex_randoms {
+    double light_pick, light_u1, light_u2;   /* next-event estimation */
+    double lobe, bsdf_u1, bsdf_u2;           /* BSDF sample: lobe choice, direction */
+    double rr;                               /* Russian roulette */
+};
 
 enum dr_vertex_kind {
     DR_VERTEX_SURFACE,   /* the ray hit a triangle */
@@ -47,8 +112,10 @@ struct dr_path_vertex {
     bool diff_bsdf;            /* its material has a requested parameter */
     struct dr_bsdf bsdf;
     dr_frame frame;
+    dr_vec3 ng;                /* geometric normal, towards the side the ray came from */
     dr_vec3 wo;                /* local */
-    /* next-event estimation */
+    struct dr_vertex_randoms u;
+    /* next-event estimation; the light chosen is ls.type / ls.index */
     bool nee;                  /* a light sample contributes (unoccluded, f != 0 ...) */
     struct dr_light_sample ls;
     dr_vec3 nee_wi;            /* local */
@@ -58,6 +125,7 @@ struct dr_path_vertex {
     bool cont;                 /* the path goes on from here */
     dr_vec3 wi;                /* local, sampled */
     dr_vec3 f;                 /* BSDF value along wi */
+    double pdf;                /* its solid-angle density */
     double cos_pdf_q;          /* |cos| / pdf / (Russian roulette survival q) */
     dr_vec3 s;                 /* tracing factor: f, or the substitute where substituted */
     bool sub[3];               /* channel substituted here */
@@ -72,10 +140,14 @@ static inline dr_vec3 dr_path_vertex_term(const struct dr_path_vertex *v)
     return e;
 }
 
-struct dr_path_opts {
-    int max_depth, rr_depth;
-    const struct dr_param_set *params;   /* NULL: primal only (no substitution) */
-};
+/* Adjoint of e_k with respect to the parameters (emission, environment, the
+ * light sampled and the BSDF towards it), given d_e = d loss / d e_k. In
+ * forward mode the channels of d_e land in the sink's channels. */
+void d_path_vertex_term(const struct dr_scene *scene, const struct dr_param_set *params,
+                        const struct dr_path_vertex *v, dr_vec3 d_e, struct dr_grad_sink *sink);
+/* Adjoint of the continuation's BSDF value f along v->wi, given d_f. */
+void d_path_continuation(const struct dr_scene *scene, const struct dr_param_set *params,
+                         const struct dr_path_vertex *v, dr_vec3 d_f, struct dr_grad_sink *sink);
 
 struct dr_path_state {
     dr_vec3 o, d;            /* the next ray */
@@ -92,6 +164,16 @@ void dr_path_start(struct dr_path_state *st, dr_vec3 o, dr_vec3 d);
  * Returns false when the path ends with this vertex (its terms still count). */
 bool dr_path_step(const struct dr_scene *scene, const struct dr_path_opts *opts, struct dr_path_state *st,
                   struct dr_sampler *sampler, struct dr_path_vertex *v, struct dr_ray_counts *counts);
+
+/* Next-event estimation at a shaded surface vertex: samples a light with the
+ * vertex's random numbers, casts the shadow ray, and fills v->nee, v->ls,
+ * v->nee_wi, v->nee_f, v->nee_scale. */
+void dr_path_nee(const struct dr_scene *scene, struct dr_path_vertex *v, struct dr_ray_counts *counts);
+
+/* Radiance arriving at o from direction d (unit): the walker with nothing to
+ * differentiate, which is what `render` computes. */
+dr_vec3 dr_path_radiance(const struct dr_scene *scene, const struct dr_path_opts *opts, dr_vec3 o, dr_vec3 d,
+                         struct dr_sampler *sampler, struct dr_ray_counts *counts);
 
 /* Substitute factor for zero BSDF channels at differentiated vertices. */
 #define DR_PATH_SUBSTITUTE DR_INV_PI

@@ -3,28 +3,26 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 #include "camera.h"
+#include "clock.h"
 #include "error.h"
 #include "parallel.h"
 #include "sampler.h"
-
-#define MAX_THREADS 256
 
 struct render_job {
     const struct dr_scene *scene;
     const struct dr_camera *camera;
     struct dr_camera_view view;
     const struct dr_render_opts *opts;
-    struct dr_trace_opts trace;
+    struct dr_path_opts path;
     float *rgb;
     /* per-thread counters, padded apart to avoid false sharing */
     struct {
         struct dr_ray_counts rays;
         uint64_t invalid;
         char pad[64];
-    } counters[MAX_THREADS];
+    } counters[DR_MAX_THREADS];
 };
 
 static void render_tile(void *ctx, int thread, int x0, int y0, int x1, int y1)
@@ -41,8 +39,8 @@ static void render_tile(void *ctx, int thread, int x0, int y0, int x1, int y1)
                 dr_sampler_init(&smp, o->seed, pixel, (uint64_t)s);
                 double jx = dr_sampler_next(&smp), jy = dr_sampler_next(&smp);
                 dr_vec3 d = dr_camera_direction(&j->view, x + jx, y + jy);
-                dr_vec3 L = dr_path_radiance(j->scene, &j->trace, j->view.origin, d, &smp, rays);
-                if (isfinite(L.x) && isfinite(L.y) && isfinite(L.z))
+                dr_vec3 L = dr_path_radiance(j->scene, &j->path, j->view.origin, d, &smp, rays);
+                if (dr_v3_finite(L))
                     sum = dr_add(sum, L);
                 else
                     j->counters[thread].invalid++;
@@ -82,13 +80,6 @@ static void progress(void *ctx, int done, int total)
     dr_progress_bar("rendering", done, total);
 }
 
-static double now_seconds(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec + 1e-9 * ts.tv_nsec;
-}
-
 int dr_render(const struct dr_scene *scene, const struct dr_camera *camera, const struct dr_render_opts *opts,
               float *rgb, struct dr_render_stats *stats)
 {
@@ -101,19 +92,18 @@ int dr_render(const struct dr_scene *scene, const struct dr_camera *camera, cons
     j->camera = camera;
     j->view = dr_camera_view(camera, opts->width, opts->height);
     j->opts = opts;
-    j->trace.max_depth = opts->max_depth;
-    j->trace.rr_depth = opts->rr_depth;
+    j->path = (struct dr_path_opts){.max_depth = opts->max_depth, .rr_depth = opts->rr_depth,
+                                    .stages = dr_path_plan(scene, NULL)};
     j->rgb = rgb;
-    int threads = opts->threads > 0 ? opts->threads : dr_cpu_count();
-    if (threads > MAX_THREADS)
-        threads = MAX_THREADS;
-    double t0 = now_seconds();
+    int threads = dr_thread_count(opts->threads);
+    double t0 = dr_clock_seconds();
     int rc = dr_parallel_tiles(opts->width, opts->height, threads, render_tile, opts->progress ? progress : NULL, j);
-    double t1 = now_seconds();
+    double t1 = dr_clock_seconds();
     if (stats) {
         memset(stats, 0, sizeof *stats);
         stats->seconds = t1 - t0;
         stats->threads = threads;
+        stats->stages = j->path.stages;
         for (int i = 0; i < threads; i++) {
             stats->rays.camera += j->counters[i].rays.camera;
             stats->rays.extension += j->counters[i].rays.extension;

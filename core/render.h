@@ -6,7 +6,7 @@
 #include <stdbool.h>
 #include <stdint.h>
 
-#include "integrator.h"
+#include "path.h"
 #include "scene.h"
 
 struct dr_render_opts {
@@ -23,6 +23,7 @@ struct dr_render_stats {
     double seconds;
     struct dr_ray_counts rays;
     uint64_t invalid_samples;   /* NaN/Inf path values dropped (should stay 0) */
+    unsigned stages;            /* the walker's optional stages that ran (path.h) */
     int threads;
 };
 

@@ -42,6 +42,23 @@ static inline double dr_luminance(dr_vec3 c) { return 0.2126 * c.x + 0.7152 * c.
 static inline bool dr_is_black(dr_vec3 c) { return c.x == 0.0 && c.y == 0.0 && c.z == 0.0; }
 static inline double dr_clamp(double v, double lo, double hi) { return v < lo ? lo : (v > hi ? hi : v); }
 static inline double dr_sqr(double v) { return v * v; }
+/* Channel c (0, 1, 2) of a colour, without indexing past a struct member. */
+static inline double dr_v3_get(dr_vec3 v, int c) { return c == 0 ? v.x : (c == 1 ? v.y : v.z); }
+static inline void dr_v3_set(dr_vec3 *v, int c, double s)
+{
+    if (c == 0)
+        v->x = s;
+    else if (c == 1)
+        v->y = s;
+    else
+        v->z = s;
+}
+/* The colour with only channel c kept (the others exactly 0). */
+static inline dr_vec3 dr_v3_channel(dr_vec3 v, int c)
+{
+    return dr_v3(c == 0 ? v.x : 0.0, c == 1 ? v.y : 0.0, c == 2 ? v.z : 0.0);
+}
+static inline bool dr_v3_finite(dr_vec3 v) { return isfinite(v.x) && isfinite(v.y) && isfinite(v.z); }
 
 /* Orthonormal frame around a unit normal n (Duff et al. 2017, branchless). */
 typedef struct { dr_vec3 s, t, n; } dr_frame;

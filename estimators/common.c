@@ -2,127 +2,67 @@
 
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
+#include "clock.h"
 #include "error.h"
-#include "parallel.h"
 
 /* Scalar problems up to this size sum each chunk locally first. */
 #define CHUNK_LOCAL_MAX 4096
 
-void dr_est_camera_ray(const struct dr_grad_problem *p, const struct dr_camera_view *view, int64_t pixel,
-                       int sample, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+void dr_est_camera_ray(const struct dr_est_base *b, int64_t pixel, int sample, struct dr_sampler *smp, dr_vec3 *o,
+                       dr_vec3 *d)
 {
-    dr_sampler_init(smp, p->seed, (uint64_t)pixel, (uint64_t)sample);
+    dr_sampler_init(smp, b->p->seed, (uint64_t)pixel, (uint64_t)sample);
     double jx = dr_sampler_next(smp), jy = dr_sampler_next(smp);
-    int x = (int)(pixel % p->width), y = (int)(pixel / p->width);
-    *o = view->origin;
-    *d = dr_camera_direction(view, x + jx, y + jy);
+    int x = (int)(pixel % b->p->width), y = (int)(pixel / b->p->width);
+    *o = b->view.origin;
+    *d = dr_camera_direction(&b->view, x + jx, y + jy);
 }
 
-void dr_est_vertex_terms(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
-                         dr_vec3 a, struct dr_grad_sink *sink)
+/* ------------------------------------------------------------ accumulators */
+
+static void accum_free(struct dr_est_accum *a)
 {
-    if (dr_is_black(a))
-        return;
-    if (v->emits) {
-        dr_vec3 d_Le = dr_scale(a, v->emit_w);
-        if (v->kind == DR_VERTEX_SURFACE)
-            d_emission(s, ps, &v->hit, d_Le, sink);
-        else
-            d_env_radiance(s, ps, v->d, d_Le, sink);
-    }
-    if (v->nee) {
-        if (v->diff_bsdf) {
-            struct dr_d_bsdf db = {dr_v3s(0.0), 0.0, 0.0};
-            d_bsdf_eval(&v->bsdf, v->wo, v->nee_wi, dr_scale(dr_mul(a, v->ls.radiance), v->nee_scale), &db);
-            d_material_eval(s, ps, &v->hit, &db, sink);
-        }
-        d_light_radiance(s, ps, &v->ls, dr_scale(dr_mul(a, v->nee_f), v->nee_scale), sink);
+    for (int t = 0; t < DR_MAX_THREADS; t++) {
+        free(a->grad[t]);
+        free(a->chunk[t]);
+        free(a->image[t]);
+        a->grad[t] = a->chunk[t] = a->image[t] = NULL;
     }
 }
 
-void dr_est_continuation(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
-                         dr_vec3 d_f, struct dr_grad_sink *sink)
+static double *accum_alloc(struct dr_est_accum *a, size_t n)
 {
-    if (dr_is_black(d_f))
-        return;
-    struct dr_d_bsdf db = {dr_v3s(0.0), 0.0, 0.0};
-    d_bsdf_eval(&v->bsdf, v->wo, v->wi, d_f, &db);
-    d_material_eval(s, ps, &v->hit, &db, sink);
+    a->bytes += n * sizeof(double);
+    return calloc(n, sizeof(double));
 }
 
-void dr_est_stats_fill(struct dr_grad_stats *st, const struct dr_est_counters *c, int threads, double seconds)
-{
-    if (!st)
-        return;
-    memset(st, 0, sizeof *st);
-    st->seconds = seconds;
-    st->threads = threads;
-    for (int t = 0; t < threads; t++) {
-        st->rays.camera += c[t].rays.camera;
-        st->rays.extension += c[t].rays.extension;
-        st->rays.shadow += c[t].rays.shadow;
-        st->invalid_samples += c[t].invalid;
-    }
-}
-
-int dr_est_thread_count(const struct dr_grad_problem *p)
-{
-    int t = p->threads > 0 ? p->threads : dr_cpu_count();
-    return t > DR_EST_MAX_THREADS ? DR_EST_MAX_THREADS : t;
-}
-
-double dr_est_now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec + 1e-9 * ts.tv_nsec;
-}
-
-bool dr_vec3_finite(dr_vec3 v) { return isfinite(v.x) && isfinite(v.y) && isfinite(v.z); }
-
-int dr_est_accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, bool forward)
+static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, bool forward)
 {
     memset(a, 0, sizeof *a);
-    a->threads = dr_est_thread_count(p);
+    a->threads = dr_thread_count(p->threads);
     a->total = p->params->total;
     size_t pixels = (size_t)p->width * (size_t)p->height;
     for (int t = 0; t < a->threads; t++) {
         if (forward) {
-            a->image[t] = calloc(pixels * 3, sizeof(double));
-            if (!a->image[t])
+            if (!(a->image[t] = accum_alloc(a, pixels * 3)))
                 goto nomem;
             continue;
         }
-        a->grad[t] = calloc((size_t)a->total + 1, sizeof(double));
-        if (!a->grad[t])
+        if (!(a->grad[t] = accum_alloc(a, (size_t)a->total + 1)))
             goto nomem;
-        if (a->total <= CHUNK_LOCAL_MAX) {
-            a->chunk[t] = calloc((size_t)a->total + 1, sizeof(double));
-            if (!a->chunk[t])
-                goto nomem;
-        }
+        if (a->total <= CHUNK_LOCAL_MAX && !(a->chunk[t] = accum_alloc(a, (size_t)a->total + 1)))
+            goto nomem;
     }
     return 0;
 nomem:
-    dr_est_accum_free(a);
+    accum_free(a);
     dr_set_error("out of memory for the gradient buffers");
     return DR_ERR_NOMEM;
 }
 
-void dr_est_accum_free(struct dr_est_accum *a)
-{
-    for (int t = 0; t < DR_EST_MAX_THREADS; t++) {
-        free(a->grad[t]);
-        free(a->chunk[t]);
-        free(a->image[t]);
-        a->grad[t] = a->chunk[t] = NULL;
-        a->image[t] = NULL;
-    }
-}
-
-void dr_est_accum_finish(struct dr_est_accum *a, const struct dr_grad_problem *p, double *grad, double *d_image)
+/* Sums the threads (in thread order) into grad / d_image. */
+static void accum_sum(const struct dr_est_accum *a, const struct dr_grad_problem *p, double *grad, double *d_image)
 {
     if (grad) {
         memset(grad, 0, sizeof(double) * (size_t)a->total);
@@ -139,48 +79,106 @@ void dr_est_accum_finish(struct dr_est_accum *a, const struct dr_grad_problem *p
             d_image[i] = v;
         }
     }
-    dr_est_accum_free(a);
 }
 
-double *dr_est_chunk_begin(struct dr_est_accum *a, int thread)
+/* ------------------------------------------------------------ per sample */
+
+struct dr_grad_sink dr_est_sink_begin(struct dr_est_base *b, int thread)
 {
+    if (b->dir)
+        return dr_sink_forward(b->dir);
+    struct dr_est_accum *a = &b->acc;
     if (!a->chunk[thread])
-        return a->grad[thread];
+        return dr_sink_reverse(a->grad[thread]);
     memset(a->chunk[thread], 0, sizeof(double) * (size_t)a->total);
-    return a->chunk[thread];
+    return dr_sink_reverse(a->chunk[thread]);
 }
 
-void dr_est_chunk_end(struct dr_est_accum *a, int thread)
+void dr_est_sink_end(struct dr_est_base *b, int thread)
 {
-    if (!a->chunk[thread])
+    struct dr_est_accum *a = &b->acc;
+    if (b->dir || !a->chunk[thread])
         return;
     double *g = a->grad[thread], *c = a->chunk[thread];
     for (int64_t i = 0; i < a->total; i++)
         g[i] += c[i];
 }
 
-int dr_est_base_init(struct dr_est_base *b, const struct dr_grad_problem *p, const float *adjoint,
-                     const double *dir)
+bool dr_est_sample_adjoint(const struct dr_est_base *b, int64_t pixel, dr_vec3 *adj)
 {
+    if (b->dir) {
+        *adj = dr_v3s(1.0);
+        return true;
+    }
+    const float *a = b->adjoint + 3 * pixel;
+    *adj = dr_scale(dr_v3(a[0], a[1], a[2]), 1.0 / b->p->spp);
+    return !dr_is_black(*adj);
+}
+
+void dr_est_sample_done(struct dr_est_base *b, int thread, int64_t pixel, struct dr_grad_sink *sink)
+{
+    if (!b->dir)
+        return;
+    double *out = b->acc.image[thread] + 3 * pixel;
+    const double inv_spp = 1.0 / b->p->spp;
+    for (int c = 0; c < 3; c++) {
+        out[c] += sink->forward[c] * inv_spp;
+        sink->forward[c] = 0.0;
+    }
+}
+
+/* ------------------------------------------------------------------- run */
+
+static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const float *adjoint,
+               const double *dir, double *grad, double *d_image, struct dr_grad_stats *st)
+{
+    if (!dr_estimator_supports(e, p->sampling)) {
+        dr_set_error("estimator '%s' does not implement %s sampling", e->name, dr_sampling_name(p->sampling));
+        return DR_ERR_ARG;
+    }
+    struct dr_est_base *b = calloc(1, e->job_size);
+    if (!b) {
+        dr_set_error("out of memory");
+        return DR_ERR_NOMEM;
+    }
+    b->t0 = dr_clock_seconds();
     b->p = p;
     b->view = dr_camera_view(p->camera, p->width, p->height);
-    b->popts = (struct dr_path_opts){p->max_depth, p->rr_depth, p->params};
+    b->popts = (struct dr_path_opts){.max_depth = p->max_depth, .rr_depth = p->rr_depth,
+                                     .stages = dr_path_plan(p->scene, p->params), .params = p->params};
     b->adjoint = adjoint;
     b->dir = dir;
-    memset(b->thr, 0, sizeof b->thr);
-    b->t0 = dr_est_now();
-    return dr_est_accum_init(&b->acc, p, dir != NULL);
+    int rc = accum_init(&b->acc, p, dir != NULL);
+    if (rc == 0) {
+        rc = e->run(b);
+        accum_sum(&b->acc, p, grad, d_image);
+    }
+    if (st) {
+        *st = (struct dr_grad_stats){.seconds = dr_clock_seconds() - b->t0, .threads = b->acc.threads,
+                                     .memory_bytes = b->acc.bytes + b->record_bytes,
+                                     .record_bytes = b->record_bytes, .stages = b->popts.stages};
+        for (int t = 0; t < b->acc.threads; t++) {
+            st->rays.camera += b->thr[t].rays.camera;
+            st->rays.extension += b->thr[t].rays.extension;
+            st->rays.shadow += b->thr[t].rays.shadow;
+            st->invalid_samples += b->thr[t].invalid;
+        }
+    }
+    if (e->release)
+        e->release(b);
+    accum_free(&b->acc);
+    free(b);
+    return rc;
 }
 
-void dr_est_base_finish(struct dr_est_base *b, double *grad, double *d_image, struct dr_grad_stats *st)
+int dr_estimator_forward(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const double *dir,
+                         double *d_image, struct dr_grad_stats *st)
 {
-    double t1 = dr_est_now();
-    dr_est_accum_finish(&b->acc, b->p, grad, d_image);
-    dr_est_stats_fill(st, b->thr, b->acc.threads, t1 - b->t0);
+    return run(e, p, NULL, dir, NULL, d_image, st);
 }
 
-dr_vec3 dr_est_pixel_adjoint(const struct dr_est_base *b, int64_t pixel)
+int dr_estimator_backward(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const float *adjoint,
+                          double *grad, struct dr_grad_stats *st)
 {
-    const float *a = b->adjoint + 3 * pixel;
-    return dr_scale(dr_v3(a[0], a[1], a[2]), 1.0 / b->p->spp);
+    return run(e, p, adjoint, NULL, grad, NULL, st);
 }

@@ -1,44 +1,34 @@
-/* What the estimators share: the camera ray of (pixel, sample), the
- * derivative terms of one path vertex, per-thread gradient buffers. */
+/* The run every estimator shares, so an estimator file holds only its
+ * algorithm: set-up (camera, walker options and stages, accumulators),
+ * per-thread counters, the sink a thread writes to, forward-mode image
+ * channels, and the statistics at the end.
+ *
+ * An algorithm (struct dr_estimator_ops.run) walks paths with dr_path_step
+ * and, per sample of a pixel:
+ *     dr_vec3 adj;
+ *     if (!dr_est_sample_adjoint(b, pixel, &adj)) skip;   // pixel does not matter
+ *     ... d_path_* (..., sink) with adjoints scaled by adj ...
+ *     dr_est_sample_done(b, thread, pixel, &sink);         // forward: its image channels
+ * between dr_est_sink_begin / dr_est_sink_end for each piece of work. */
 #ifndef DR_ESTIMATORS_COMMON_H
 #define DR_ESTIMATORS_COMMON_H
 
 #include "camera.h"
-#include "d_scene.h"
 #include "estimator.h"
+#include "parallel.h"
 #include "path.h"
 #include "sampler.h"
-
-#define DR_EST_MAX_THREADS 64
-
-/* Sampler and camera ray of sample `sample` of pixel `pixel`. */
-void dr_est_camera_ray(const struct dr_grad_problem *p, const struct dr_camera_view *view, int64_t pixel,
-                       int sample, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d);
-
-/* The derivative terms a vertex owes regardless of the rest of the path:
- * emission and next-event estimation, with adjoint a = adj * true throughput. */
-void dr_est_vertex_terms(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
-                         dr_vec3 a, struct dr_grad_sink *sink);
-/* The continuation's BSDF term: d_f = adjoint of the BSDF value along v->wi. */
-void dr_est_continuation(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
-                         dr_vec3 d_f, struct dr_grad_sink *sink);
 
 /* Per-thread accumulation. Scalar-sized problems sum each chunk of work in a
  * small local buffer first (pairwise-style), so 1e8 samples lose no precision. */
 struct dr_est_accum {
     int threads;
-    int64_t total;              /* gradient entries */
-    double *grad[DR_EST_MAX_THREADS];
-    double *chunk[DR_EST_MAX_THREADS];   /* NULL when total is large */
-    double *image[DR_EST_MAX_THREADS];   /* forward mode: per-thread d image (w*h*3), else NULL */
+    int64_t total;                        /* gradient entries */
+    double *grad[DR_MAX_THREADS];
+    double *chunk[DR_MAX_THREADS];        /* NULL when total is large */
+    double *image[DR_MAX_THREADS];        /* forward mode: per-thread d image (w*h*3), else NULL */
+    uint64_t bytes;                       /* what the buffers above hold */
 };
-int dr_est_accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, bool forward);
-/* Sums the threads (in thread order) into grad / d_image, then frees. */
-void dr_est_accum_finish(struct dr_est_accum *a, const struct dr_grad_problem *p, double *grad, double *d_image);
-void dr_est_accum_free(struct dr_est_accum *a);
-/* The gradient slots a chunk writes to (chunk buffer or thread buffer). */
-double *dr_est_chunk_begin(struct dr_est_accum *a, int thread);
-void dr_est_chunk_end(struct dr_est_accum *a, int thread);
 
 /* Per-thread counters, padded apart against false sharing. */
 struct dr_est_counters {
@@ -46,12 +36,7 @@ struct dr_est_counters {
     uint64_t invalid;
     char pad[64];
 };
-/* Sums the threads' counters into *st (when st is not NULL). */
-void dr_est_stats_fill(struct dr_grad_stats *st, const struct dr_est_counters *c, int threads, double seconds);
 
-/* What every estimator run holds: the problem, the camera set up for it, the
- * walker's options, the mode (adjoint image for reverse, direction for
- * forward), the accumulators and per-thread counters. */
 struct dr_est_base {
     const struct dr_grad_problem *p;
     struct dr_camera_view view;
@@ -59,18 +44,26 @@ struct dr_est_base {
     const float *adjoint;   /* reverse mode */
     const double *dir;      /* forward mode (NULL in reverse mode) */
     struct dr_est_accum acc;
-    struct dr_est_counters thr[DR_EST_MAX_THREADS];
+    struct dr_est_counters thr[DR_MAX_THREADS];
+    uint64_t record_bytes;  /* the algorithm's peak recorded-path memory, if any */
     double t0;
 };
-int dr_est_base_init(struct dr_est_base *b, const struct dr_grad_problem *p, const float *adjoint,
-                     const double *dir);
-/* Sums the threads into grad / d_image and fills *st (may be NULL). */
-void dr_est_base_finish(struct dr_est_base *b, double *grad, double *d_image, struct dr_grad_stats *st);
-/* Adjoint of sample L at a pixel in reverse mode: adjoint / spp. */
-dr_vec3 dr_est_pixel_adjoint(const struct dr_est_base *b, int64_t pixel);
 
-int dr_est_thread_count(const struct dr_grad_problem *p);
-double dr_est_now(void);
-bool dr_vec3_finite(dr_vec3 v);
+/* Sampler and camera ray of sample `sample` of pixel `pixel`. */
+void dr_est_camera_ray(const struct dr_est_base *b, int64_t pixel, int sample, struct dr_sampler *smp, dr_vec3 *o,
+                       dr_vec3 *d);
+
+/* The sink a thread writes a piece of work into (reverse mode: a chunk
+ * buffer summed into the thread's gradient by dr_est_sink_end). */
+struct dr_grad_sink dr_est_sink_begin(struct dr_est_base *b, int thread);
+void dr_est_sink_end(struct dr_est_base *b, int thread);
+
+/* The adjoint of one sample's radiance at a pixel: adjoint / spp in reverse
+ * mode (false: the pixel does not matter to the loss, skip it), all ones in
+ * forward mode (the sink keeps the channels apart). */
+bool dr_est_sample_adjoint(const struct dr_est_base *b, int64_t pixel, dr_vec3 *adj);
+/* Forward mode: moves the sink's three channels into the pixel of the
+ * thread's d image (divided by spp). Reverse mode: nothing. */
+void dr_est_sample_done(struct dr_est_base *b, int thread, int64_t pixel, struct dr_grad_sink *sink);
 
 #endif

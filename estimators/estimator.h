@@ -2,18 +2,29 @@
  * Adding one = one .c file in estimators/ + one line in registry.c.
  *
  * Both modes differentiate the rendered image I (mean of `spp` samples per
- * pixel) with respect to the parameters of `params`, with detached sampling:
- * directions, pdfs, MIS weights and Russian roulette are constants of the
- * derivative (differentiate-then-reparametrize with the forward sampler). */
+ * pixel) with respect to the parameters of `params`. The sampling mode says
+ * how sampled quantities enter the derivative: `detached` (directions, pdfs,
+ * MIS weights and Russian roulette are constants of the derivative:
+ * differentiate-then-reparametrize with the forward sampler). */
 #ifndef DR_ESTIMATOR_H
 #define DR_ESTIMATOR_H
 
 #include <stdbool.h>
+#include <stddef.h>
 #include <stdint.h>
 
-#include "integrator.h"
 #include "params.h"
+#include "path.h"
 #include "scene.h"
+
+enum dr_sampling {
+    DR_SAMPLING_DETACHED,   /* differentiate-then-reparametrize */
+    DR_SAMPLING_ATTACHED,   /* reparametrize-then-differentiate (not implemented yet) */
+    DR_SAMPLING_COUNT
+};
+/* "detached", "attached"; and back (-1: unknown name). */
+const char *dr_sampling_name(enum dr_sampling s);
+int dr_sampling_parse(const char *name);
 
 struct dr_grad_problem {
     const struct dr_scene *scene;
@@ -21,30 +32,45 @@ struct dr_grad_problem {
     const struct dr_param_set *params;
     int width, height, spp, max_depth, rr_depth;
     uint64_t seed;
-    int threads;            /* <= 0: one per CPU */
-    int64_t batch;          /* tape: paths per record/sweep (0: one sample of every pixel) */
+    int threads;               /* <= 0: one per CPU (at most DR_MAX_THREADS) */
+    int64_t batch;             /* tape: paths per record/sweep (0: one sample of every pixel) */
+    enum dr_sampling sampling;
 };
 
 struct dr_grad_stats {
     double seconds;
     struct dr_ray_counts rays;
     uint64_t invalid_samples;   /* non-finite path values or derivatives dropped */
-    uint64_t tape_peak_bytes;   /* tape: largest tape held at once (all threads) */
+    uint64_t memory_bytes;      /* peak bytes the estimator held: gradient buffers, images, records */
+    uint64_t record_bytes;      /* the part holding recorded path vertices (tape), 0 if none */
+    unsigned stages;            /* the walker's optional stages that ran (path.h) */
     int threads;
 };
 
+struct dr_est_base;   /* common.h: the run every estimator shares */
+
 struct dr_estimator_ops {
     const char *name, *summary;
-    /* Forward mode: d_image (width * height * 3 doubles) = d I / d theta . dir,
-     * dir having params->total entries. */
-    int (*forward)(const struct dr_grad_problem *p, const double *dir, double *d_image, struct dr_grad_stats *st);
-    /* Reverse mode: grad (params->total entries, overwritten) =
-     * sum over pixels and channels of adjoint * d I / d theta, adjoint being
-     * d loss / d I (width * height * 3 floats). */
-    int (*backward)(const struct dr_grad_problem *p, const float *adjoint, double *grad, struct dr_grad_stats *st);
+    unsigned sampling;        /* bit (1 << enum dr_sampling) per supported mode */
+    size_t job_size;          /* the algorithm's job, struct dr_est_base first */
+    /* The algorithm: fills the base's accumulators (see common.h). 0 or DR_ERR_*. */
+    int (*run)(struct dr_est_base *job);
+    /* Frees what run allocated beyond the base (may be NULL). */
+    void (*release)(struct dr_est_base *job);
 };
 
 extern const struct dr_estimator_ops *const dr_estimators[];   /* NULL-terminated */
 const struct dr_estimator_ops *dr_estimator_find(const char *name);
+bool dr_estimator_supports(const struct dr_estimator_ops *e, enum dr_sampling s);
+
+/* Forward mode: d_image (width * height * 3 doubles) = d I / d theta . dir,
+ * dir having params->total entries. */
+int dr_estimator_forward(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const double *dir,
+                         double *d_image, struct dr_grad_stats *st);
+/* Reverse mode: grad (params->total entries, overwritten) = sum over pixels
+ * and channels of adjoint * d I / d theta, adjoint being d loss / d I
+ * (width * height * 3 floats). */
+int dr_estimator_backward(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const float *adjoint,
+                          double *grad, struct dr_grad_stats *st);
 
 #endif

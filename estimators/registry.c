@@ -1,4 +1,4 @@
-/* The table of gradient estimators. */
+/* The table of gradient estimators and the names of the sampling modes. */
 #include <string.h>
 
 #include "estimator.h"
@@ -18,4 +18,24 @@ const struct dr_estimator_ops *dr_estimator_find(const char *name)
         if (strcmp(dr_estimators[i]->name, name) == 0)
             return dr_estimators[i];
     return NULL;
+}
+
+static const char *const sampling_names[DR_SAMPLING_COUNT] = {"detached", "attached"};
+
+const char *dr_sampling_name(enum dr_sampling s)
+{
+    return (unsigned)s < DR_SAMPLING_COUNT ? sampling_names[s] : "?";
+}
+
+int dr_sampling_parse(const char *name)
+{
+    for (int i = 0; i < DR_SAMPLING_COUNT; i++)
+        if (strcmp(sampling_names[i], name) == 0)
+            return i;
+    return -1;
+}
+
+bool dr_estimator_supports(const struct dr_estimator_ops *e, enum dr_sampling s)
+{
+    return (unsigned)s < DR_SAMPLING_COUNT && (e->sampling & (1u << s)) != 0;
 }

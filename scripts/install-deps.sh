@@ -6,7 +6,7 @@ set -euo pipefail
 pkgs=(build-essential pkg-config
       libembree-dev libopenimageio-dev openimageio-tools
       libtinygltf-dev nlohmann-json3-dev libstb-dev
-      gnuplot-nox)
+      gnuplot-nox python3)
 # Node.js runs the Khronos glTF validator (tests/cli_gltf_validate.sh). Any node
 # on PATH will do (e.g. NodeSource's nodejs, which bundles npm and conflicts with
 # Debian's npm), so Debian's packages are added only when there is none.

@@ -164,7 +164,9 @@ all(k in d for k in ["loss", "loss_kind", "estimator", "sampling", "spp", "batch
 and all(k in d["time"] for k in ["primal", "gradient", "total"])
 and 0 <= d["loss"] < 0.5 and d["loss_kind"] == "l2" and d["sampling"] == "detached"
 and d["batches"] == 2 and d["spp"] == 8
-and (("tape_peak_bytes" in d and d["tape_peak_bytes"] > 0) if d["estimator"] == "tape" else "tape_peak_bytes" not in d)
+and d["estimator_memory_bytes"] > 0 and d["rr_depth"] == 5
+and ((d["record_bytes"] > 0) if d["estimator"] == "tape" else d["record_bytes"] == 0)
+and set(d["stages"]) == {"surface_emission", "next_event_estimation"}
 and len(d["parameters"][0]["gradient"]) == 3 and len(d["parameters"][0]["stderr"]) == 3
 and all(math.isfinite(x) for x in d["parameters"][0]["gradient"] + d["parameters"][0]["stderr"])
 and d["parameters"][1]["file"] == "gdir/grad-images-0.exr" and math.isfinite(d["parameters"][1]["norm"])

@@ -25,8 +25,10 @@ static int test_checks = 0;
     CHECK(fabs((double)(a) - (double)(b)) <= (tol), "%s: %.10g vs %.10g (tol %.3g)", \
           what, (double)(a), (double)(b), (double)(tol))
 
+/* A test binary that ran no check fails: it tested nothing. */
 #define TEST_END()                                                                 \
-    (fprintf(stderr, "%s: %d checks, %d failed\n", __FILE__, test_checks, test_failures), \
-     test_failures != 0)
+    (fprintf(stderr, "%s: %d checks, %d failed%s\n", __FILE__, test_checks, test_failures, \
+             test_checks == 0 ? " (no check ran: failing)" : ""),                   \
+     test_failures != 0 || test_checks == 0)
 
 #endif

@@ -31,10 +31,11 @@ int main(int argc, char **argv)
     for (int i = 0; i < 3 * W * H; i++)
         adj[i] = (float)(1.0 / (3.0 * W * H));
     double exact = (double)adj[0] * W * H;   /* the float adjoint's own value, summed */
-    struct dr_grad_problem p = {s, &cam, ps, W, H, spp, 1, 5, 3, 2, 0};
+    struct dr_grad_problem p = {.scene = s, .camera = &cam, .params = ps, .width = W, .height = H, .spp = spp,
+                                .max_depth = 1, .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 3, .threads = 2};
     double g[3];
     struct dr_grad_stats st;
-    CHECK(dr_estimator_find("prb")->backward(&p, adj, g, &st) == 0, "%s", dr_last_error());
+    CHECK(dr_estimator_backward(dr_estimator_find("prb"), &p, adj, g, &st) == 0, "%s", dr_last_error());
     printf("%lld samples: gradient %.17g, exact %.17g, relative error %.3g (%.1f s)\n", (long long)W * H * spp, g[0],
            exact, fabs(g[0] - exact) / exact, st.seconds);
     CHECK(fabs(g[0] - exact) <= 1e-12 * exact, "gradient %.17g vs %.17g", g[0], exact);

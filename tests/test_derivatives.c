@@ -9,6 +9,7 @@
 #include <string.h>
 
 #include "bsdf.h"
+#include "grad_sink.h"
 #include "image.h"
 #include "sampler.h"
 #include "test.h"
@@ -296,7 +297,7 @@ static void check_texture(struct dr_image *img, enum dr_wrap ws, enum dr_wrap wt
     double d_out[4];
     for (int c = 0; c < 4; c++)
         d_out[c] = 2.0 * rng_next(r) - 1.0;
-    d_texture_eval(&tex, img, u, v, d_out, dt);
+    d_texture_eval(&tex, img, u, v, d_out, 0, &(struct dr_grad_sink){.grad = dt});
     /* Texel values are multiples of 2^-8 and h = 2^-6: x +- h is exact in float,
      * and the lookup is linear in the texels, so the difference is exact up
      * to the rounding of the weighted sums. */
@@ -317,9 +318,9 @@ static void check_texture(struct dr_image *img, enum dr_wrap ws, enum dr_wrap wt
               img->height, img->channels, (int)ws, (int)wt, u, v, i, dt[i], fd);
     }
     /* accumulation */
-    d_texture_eval(&tex, img, u, v, d_out, dt);
+    d_texture_eval(&tex, img, u, v, d_out, 0, &(struct dr_grad_sink){.grad = dt});
     double *d1 = calloc(n, sizeof *d1);
-    d_texture_eval(&tex, img, u, v, d_out, d1);
+    d_texture_eval(&tex, img, u, v, d_out, 0, &(struct dr_grad_sink){.grad = d1});
     for (size_t i = 0; i < n; i++)
         CHECK_NEAR(dt[i], 2.0 * d1[i], 1e-14, "texture adjoint accumulates");
     free(d1);

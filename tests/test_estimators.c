@@ -21,6 +21,31 @@ static double rel_err(double a, double b)
     return m > 0 ? fabs(a - b) / m : 0.0;
 }
 
+#define MAX_EST 8
+
+/* max over parameters of (max |a - b| over its scalars / max |gradient|):
+ * for a scalar parameter the plain relative error; for a texture relative to
+ * its largest texel gradient, since PRB's subtraction leaves ~1e-20 where the
+ * tape has exact zeros. Checks no parameter's gradient is identically zero. */
+static double reverse_difference(const char *what, const struct dr_param_set *ps, const double *a, const double *b)
+{
+    double worst = 0;
+    for (int k = 0; k < ps->n; k++) {
+        const struct dr_param *pp = &ps->params[k];
+        double diff = 0, scale = 0;
+        for (int64_t i = pp->offset; i < pp->offset + pp->size; i++) {
+            diff = fmax(diff, fabs(a[i] - b[i]));
+            scale = fmax(scale, fmax(fabs(a[i]), fabs(b[i])));
+        }
+        CHECK(scale > 0, "%s: %s: gradient identically zero", what, pp->name);
+        worst = fmax(worst, scale > 0 ? diff / scale : 0.0);
+    }
+    return worst;
+}
+
+/* Every registered estimator on the same problem and random numbers; every
+ * pair must agree to rounding, in both modes, and each must be bit-identical
+ * when repeated (resumable optimisation relies on it). */
 static void compare(const char *what, struct dr_scene *s, const struct dr_camera *cam, const char *const *ptrs, int n,
                     int depth)
 {
@@ -28,79 +53,71 @@ static void compare(const char *what, struct dr_scene *s, const struct dr_camera
     CHECK(ps != NULL, "%s: param set: %s", what, dr_last_error());
     if (!ps)
         return;
-    struct dr_grad_problem p = {s, cam, ps, W, H, 3, depth, 5, 11, 2, 0};
-    const struct dr_estimator_ops *prb = dr_estimator_find("prb"), *tape = dr_estimator_find("tape");
-    /* reverse mode, with a random adjoint image */
+    struct dr_grad_problem p = {.scene = s, .camera = cam, .params = ps, .width = W, .height = H, .spp = 3,
+                                .max_depth = depth, .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 11, .threads = 2};
+    int ne = 0;
+    while (dr_estimators[ne] && ne < MAX_EST)
+        ne++;
+    CHECK(ne >= 2, "%s: fewer than two estimators registered (%d)", what, ne);
     float *adj = malloc(sizeof(float) * 3 * W * H);
     struct dr_sampler r;
     dr_sampler_init(&r, 5, 6, 7);
     for (int i = 0; i < 3 * W * H; i++)
         adj[i] = (float)(dr_sampler_next(&r) - 0.3);
-    double *g1 = calloc((size_t)ps->total, sizeof(double)), *g2 = calloc((size_t)ps->total, sizeof(double));
-    struct dr_grad_stats st1, st2;
-    CHECK(prb->backward(&p, adj, g1, &st1) == 0, "%s: prb backward: %s", what, dr_last_error());
-    p.batch = 97;   /* several record/sweep batches */
-    CHECK(tape->backward(&p, adj, g2, &st2) == 0, "%s: tape backward: %s", what, dr_last_error());
-    /* per parameter: max |prb - tape| over its scalars / max |gradient| (for a
-     * scalar parameter, plain relative error; for a texture, relative to its
-     * largest texel gradient, since PRB's subtraction leaves ~1e-20 where the
-     * tape has exact zeros) */
-    double worst = 0, norm = 0;
-    for (int k = 0; k < ps->n; k++) {
-        const struct dr_param *pp = &ps->params[k];
-        double diff = 0, scale = 0;
-        for (int64_t i = pp->offset; i < pp->offset + pp->size; i++) {
-            diff = fmax(diff, fabs(g1[i] - g2[i]));
-            scale = fmax(scale, fmax(fabs(g1[i]), fabs(g2[i])));
-        }
-        double rel = scale > 0 ? diff / scale : 0.0;
-        CHECK(scale > 0, "%s: %s: gradient identically zero", what, pp->name);
-        worst = fmax(worst, rel);
-        norm = fmax(norm, scale);
-    }
-    CHECK(norm > 0, "%s: gradient is identically zero", what);
-    CHECK(worst <= 1e-9, "%s: reverse mode prb vs tape differ by %.3g relative", what, worst);
-    CHECK(st2.tape_peak_bytes > 0, "%s: tape reports no memory", what);
-    /* the same run again gives the same bits (fixed work assignment), which
-     * resumable optimisation relies on */
-    double *g3 = calloc((size_t)ps->total, sizeof(double));
-    p.batch = 0;
-    prb->backward(&p, adj, g3, NULL);
-    CHECK(memcmp(g1, g3, sizeof(double) * (size_t)ps->total) == 0, "%s: prb not bit-identical when repeated", what);
-    p.batch = 97;
-    tape->backward(&p, adj, g3, NULL);
-    CHECK(memcmp(g2, g3, sizeof(double) * (size_t)ps->total) == 0, "%s: tape not bit-identical when repeated", what);
-    free(g3);
-    printf("%s: reverse: %lld scalars, worst relative difference %.3g, tape %llu bytes\n", what,
-           (long long)ps->total, worst, (unsigned long long)st2.tape_peak_bytes);
-    /* forward mode along a random direction */
     double *dir = malloc(sizeof(double) * (size_t)ps->total);
     for (int64_t i = 0; i < ps->total; i++)
         dir[i] = dr_sampler_next(&r) - 0.5;
-    double *f1 = calloc(3 * W * H, sizeof(double)), *f2 = calloc(3 * W * H, sizeof(double));
-    p.batch = 0;
-    CHECK(prb->forward(&p, dir, f1, &st1) == 0, "%s: prb forward: %s", what, dr_last_error());
-    CHECK(tape->forward(&p, dir, f2, &st2) == 0, "%s: tape forward: %s", what, dr_last_error());
-    double fworst = 0, fnorm = 0, dot = 0;
-    for (int i = 0; i < 3 * W * H; i++) {
-        fworst = fmax(fworst, rel_err(f1[i], f2[i]) * (fabs(f1[i]) > 1e-12));
-        fnorm = fmax(fnorm, fabs(f1[i]));
-        dot += adj[i] * f1[i];
+    double *g[MAX_EST], *f[MAX_EST];
+    double *again = calloc((size_t)ps->total, sizeof(double));
+    for (int e = 0; e < ne; e++) {
+        const struct dr_estimator_ops *est = dr_estimators[e];
+        g[e] = calloc((size_t)ps->total, sizeof(double));
+        f[e] = calloc(3 * W * H, sizeof(double));
+        struct dr_grad_stats st = {0};
+        p.batch = e % 2 ? 97 : 0;   /* tape: several record/sweep batches */
+        CHECK(dr_estimator_backward(est, &p, adj, g[e], &st) == 0, "%s: %s backward: %s", what, est->name,
+              dr_last_error());
+        CHECK(st.memory_bytes > 0, "%s: %s reports no memory", what, est->name);
+        CHECK(st.memory_bytes >= st.record_bytes, "%s: %s: record bytes exceed its memory", what, est->name);
+        dr_estimator_backward(est, &p, adj, again, NULL);
+        CHECK(memcmp(g[e], again, sizeof(double) * (size_t)ps->total) == 0, "%s: %s not bit-identical when repeated",
+              what, est->name);
+        CHECK(dr_estimator_forward(est, &p, dir, f[e], &st) == 0, "%s: %s forward: %s", what, est->name,
+              dr_last_error());
+        /* forward and reverse are transposes: adj . (J dir) == (adj^T J) . dir */
+        double dot = 0, rdot = 0, fnorm = 0;
+        for (int i = 0; i < 3 * W * H; i++) {
+            dot += adj[i] * f[e][i];
+            fnorm = fmax(fnorm, fabs(f[e][i]));
+        }
+        for (int64_t i = 0; i < ps->total; i++)
+            rdot += g[e][i] * dir[i];
+        CHECK(fnorm > 0, "%s: %s: forward derivative image is zero", what, est->name);
+        CHECK(rel_err(dot, rdot) <= 1e-9, "%s: %s: forward . adjoint %.12g != reverse . dir %.12g", what, est->name,
+              dot, rdot);
+        printf("%s: %s: %lld scalars, adjoint identity %.3g, memory %llu bytes (records %llu)\n", what, est->name,
+               (long long)ps->total, rel_err(dot, rdot), (unsigned long long)st.memory_bytes,
+               (unsigned long long)st.record_bytes);
     }
-    CHECK(fnorm > 0, "%s: forward derivative image is zero", what);
-    CHECK(fworst <= 1e-9, "%s: forward mode prb vs tape differ by %.3g relative", what, fworst);
-    /* forward and reverse are transposes: adj . (J dir) == (adj^T J) . dir */
-    double rdot = 0;
-    for (int64_t i = 0; i < ps->total; i++)
-        rdot += g1[i] * dir[i];
-    CHECK(rel_err(dot, rdot) <= 1e-9, "%s: forward . adjoint %.12g != reverse . dir %.12g", what, dot, rdot);
-    printf("%s: forward: worst relative difference %.3g; adjoint identity %.3g\n", what, fworst, rel_err(dot, rdot));
+    for (int a = 0; a < ne; a++)
+        for (int b = a + 1; b < ne; b++) {
+            double worst = reverse_difference(what, ps, g[a], g[b]), fworst = 0;
+            for (int i = 0; i < 3 * W * H; i++)
+                fworst = fmax(fworst, rel_err(f[a][i], f[b][i]) * (fabs(f[a][i]) > 1e-12));
+            CHECK(worst <= 1e-9, "%s: reverse mode %s vs %s differ by %.3g relative", what, dr_estimators[a]->name,
+                  dr_estimators[b]->name, worst);
+            CHECK(fworst <= 1e-9, "%s: forward mode %s vs %s differ by %.3g relative", what, dr_estimators[a]->name,
+                  dr_estimators[b]->name, fworst);
+            printf("%s: %s vs %s: worst relative difference reverse %.3g, forward %.3g\n", what,
+                   dr_estimators[a]->name, dr_estimators[b]->name, worst, fworst);
+        }
+    for (int e = 0; e < ne; e++) {
+        free(g[e]);
+        free(f[e]);
+    }
+    free(again);
     free(adj);
-    free(g1);
-    free(g2);
     free(dir);
-    free(f1);
-    free(f2);
     dr_param_set_destroy(ps);
 }
 

@@ -41,10 +41,11 @@ rc=0
 bg_pid=
 cli_cmd_label="command"
 cli_out_bytes=2000
-have_oiio=false
-command -v oiiotool >/dev/null 2>&1 && have_oiio=true
-have_python=false
-command -v python3 >/dev/null 2>&1 && python3 -c 'import json' 2>/dev/null && have_python=true
+# oiiotool and python3 are installed by scripts/install-deps.sh: a check that
+# needs them must not pass silently where they are missing, so they are required.
+have_oiio=true have_python=true
+command -v oiiotool >/dev/null 2>&1 || { echo "FAIL: oiiotool is required (scripts/install-deps.sh installs openimageio-tools)"; exit 1; }
+python3 -c 'import json' 2>/dev/null || { echo "FAIL: python3 is required (scripts/install-deps.sh installs it)"; exit 1; }
 
 cli_setup() {   # cli_setup NAME
     tmp=$(mktemp -d "${TMPDIR:-/tmp}/drender-cli-$1.XXXXXX") || exit 1

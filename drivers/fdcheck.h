@@ -22,6 +22,7 @@
 
 struct dr_fd_options {
     const struct dr_estimator_ops *estimator;
+    enum dr_sampling sampling;
     int width, height;
     int spp;            /* per batch */
     int batches;        /* >= 2 */

@@ -1,0 +1,50 @@
+/* Where parameter adjoints land. Every d_ function that reaches a scene
+ * parameter writes through a sink instead of knowing the estimator's mode:
+ *  - reverse mode: a gradient vector, grad[slot] += v  (d loss / d theta);
+ *  - forward mode: a running dot product with a direction per image channel,
+ *    forward[channel] += dir[slot] * v  (d I_channel / d theta . dir).
+ * Forward mode keeps the three image channels apart in one pass over a path:
+ * the caller splits a channel-diagonal adjoint into its channels and sets
+ * `channel` before each part (dr_sink_for_channels). Slots are offsets into
+ * the parameter set's gradient vector (params.h). */
+#ifndef DR_GRAD_SINK_H
+#define DR_GRAD_SINK_H
+
+#include <stdint.h>
+
+#include "vec.h"
+
+struct dr_grad_sink {
+    double *grad;        /* reverse mode: gradient vector (+=) */
+    const double *dir;   /* forward mode (when not NULL): direction */
+    double forward[3];   /* forward mode: accumulated dot product per image channel */
+    int channel;         /* forward mode: the channel the current adjoint belongs to */
+};
+
+static inline struct dr_grad_sink dr_sink_reverse(double *grad)
+{
+    return (struct dr_grad_sink){.grad = grad};
+}
+
+static inline struct dr_grad_sink dr_sink_forward(const double *dir)
+{
+    return (struct dr_grad_sink){.dir = dir};
+}
+
+static inline void dr_sink_add(struct dr_grad_sink *k, int64_t slot, double v)
+{
+    if (k->dir)
+        k->forward[k->channel] += k->dir[slot] * v;
+    else
+        k->grad[slot] += v;
+}
+
+/* Adds v = (v0, v1, v2) to three consecutive slots (a colour parameter). */
+static inline void dr_sink_add3(struct dr_grad_sink *k, int64_t slot, dr_vec3 v)
+{
+    dr_sink_add(k, slot + 0, v.x);
+    dr_sink_add(k, slot + 1, v.y);
+    dr_sink_add(k, slot + 2, v.z);
+}
+
+#endif

@@ -1,0 +1,265 @@
+#include "fdcheck.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "error.h"
+#include "render.h"
+#include "sampler.h"
+
+struct fd_run {
+    struct dr_scene *scene;
+    const struct dr_camera *camera;
+    const struct dr_param_set *ps;
+    const struct dr_fd_options *o;
+    double *theta0, *theta, *lo, *hi;
+    float *rgb;
+};
+
+static struct dr_grad_problem problem(const struct dr_scene *scene, const struct dr_camera *camera,
+                                      const struct dr_param_set *ps, const struct dr_fd_options *o, uint64_t seed)
+{
+    return (struct dr_grad_problem){.scene = scene, .camera = camera, .params = ps, .width = o->width,
+                                    .height = o->height, .spp = o->spp, .max_depth = o->max_depth,
+                                    .rr_depth = o->rr_depth, .seed = seed, .threads = o->threads,
+                                    .sampling = o->sampling};
+}
+
+/* Mean of the image rendered at theta0 + t * dir with seed. */
+static int objective(struct fd_run *r, const double *dir, double t, uint64_t seed, double *J)
+{
+    for (int64_t i = 0; i < r->ps->total; i++)
+        r->theta[i] = r->theta0[i] + t * dir[i];
+    dr_param_set_put(r->scene, r->ps, r->theta);
+    int rc = dr_scene_refresh(r->scene);
+    if (rc != 0)
+        return rc;
+    const struct dr_fd_options *o = r->o;
+    struct dr_render_opts ro = {.width = o->width, .height = o->height, .spp = o->spp, .max_depth = o->max_depth,
+                                .rr_depth = o->rr_depth, .seed = seed, .threads = o->threads};
+    rc = dr_render(r->scene, r->camera, &ro, r->rgb, NULL);
+    if (rc != 0)
+        return rc;
+    double sum = 0.0;
+    size_t n = (size_t)o->width * o->height * 3;
+    for (size_t i = 0; i < n; i++)
+        sum += r->rgb[i];
+    *J = sum / (double)n;
+    return 0;
+}
+
+/* Which difference stays inside every parameter's range: 0 central,
+ * +1 one-sided forward, -1 one-sided backward. */
+static int fd_side(const struct fd_run *r, const double *dir, double eps)
+{
+    bool down_ok = true, up_ok = true, up2_ok = true, down2_ok = true;
+    for (int64_t i = 0; i < r->ps->total; i++) {
+        if (dir[i] == 0.0)
+            continue;
+        double a = r->theta0[i] - eps * dir[i], b = r->theta0[i] + eps * dir[i];
+        double a2 = r->theta0[i] - 2 * eps * dir[i], b2 = r->theta0[i] + 2 * eps * dir[i];
+        if (a < r->lo[i] || a > r->hi[i]) down_ok = false;
+        if (b < r->lo[i] || b > r->hi[i]) up_ok = false;
+        if (a2 < r->lo[i] || a2 > r->hi[i]) down2_ok = false;
+        if (b2 < r->lo[i] || b2 > r->hi[i]) up2_ok = false;
+    }
+    if (down_ok && up_ok)
+        return 0;
+    return up2_ok ? 1 : (down2_ok ? -1 : 0);
+}
+
+static void mean_se(const double *v, int n, double *mean, double *se)
+{
+    double m = 0.0, q = 0.0;
+    for (int i = 0; i < n; i++)
+        m += v[i];
+    m /= n;
+    for (int i = 0; i < n; i++)
+        q += (v[i] - m) * (v[i] - m);
+    *mean = m;
+    *se = n > 1 ? sqrt(q / (n - 1) / n) : 0.0;
+}
+
+static double zscore(double a, double b, double sa, double sb)
+{
+    double s = sqrt(sa * sa + sb * sb);
+    if (s > 0.0)
+        return (a - b) / s;
+    return a == b ? 0.0 : INFINITY;
+}
+
+/* Direction c of parameter k (a unit vector along one scalar; for an image,
+ * all texels at once or a fixed random +-1 pattern) and its entry's label. */
+static void entry_direction(const struct dr_param *pp, int k, int c, int64_t T, double *dir, struct dr_fd_entry *en)
+{
+    memset(dir, 0, sizeof(double) * (size_t)T);
+    if (pp->kind != DR_PARAM_IMAGE && pp->kind != DR_PARAM_ENV_MAP) {
+        dir[pp->offset + c] = 1.0;
+        if (pp->size > 1)
+            snprintf(en->label, sizeof en->label, "%s[%d]", pp->name, c);
+        else
+            snprintf(en->label, sizeof en->label, "%s", pp->name);
+        return;
+    }
+    struct dr_sampler smp;
+    dr_sampler_init(&smp, 0x5eed, (uint64_t)k, 0);
+    for (int64_t i = 0; i < pp->size; i++)
+        dir[pp->offset + i] = c == 0 ? 1.0 : (dr_sampler_next(&smp) < 0.5 ? -1.0 : 1.0);
+    snprintf(en->label, sizeof en->label, "%s (%s)", pp->name, c == 0 ? "all texels" : "random +-1 texels");
+}
+
+/* Batch b along dir: the forward-mode estimate at the nominal parameters and
+ * a finite difference with common random numbers (central, or one-sided and
+ * second order at a range end: side = +-1). */
+static int batch_estimates(struct fd_run *r, const double *dir, int side, uint64_t seed, double *dimg,
+                           double *fwd, double *fd)
+{
+    const struct dr_fd_options *o = r->o;
+    const size_t n = (size_t)o->width * o->height * 3;
+    dr_param_set_put(r->scene, r->ps, r->theta0);
+    int rc = dr_scene_refresh(r->scene);
+    if (rc != 0)
+        return rc;
+    struct dr_grad_problem p = problem(r->scene, r->camera, r->ps, o, seed);
+    if ((rc = dr_estimator_forward(o->estimator, &p, dir, dimg, NULL)) != 0)
+        return rc;
+    double m = 0.0;
+    for (size_t i = 0; i < n; i++)
+        m += dimg[i];
+    *fwd = m / (double)n;
+    double J0, J1, J2;
+    if (side == 0) {
+        if ((rc = objective(r, dir, o->eps, seed, &J1)) || (rc = objective(r, dir, -o->eps, seed, &J2)))
+            return rc;
+        *fd = (J1 - J2) / (2.0 * o->eps);
+        return 0;
+    }
+    double h = side * o->eps;
+    if ((rc = objective(r, dir, 0.0, seed, &J0)) || (rc = objective(r, dir, h, seed, &J1)) ||
+        (rc = objective(r, dir, 2.0 * h, seed, &J2)))
+        return rc;
+    *fd = (-3.0 * J0 + 4.0 * J1 - J2) / (2.0 * h);
+    return 0;
+}
+
+static void entry_verdict(struct dr_fd_entry *en, const double *rev, const double *fwd, const double *fd, int K,
+                          double z_max)
+{
+    mean_se(rev, K, &en->reverse, &en->reverse_se);
+    mean_se(fwd, K, &en->forward, &en->forward_se);
+    mean_se(fd, K, &en->fd, &en->fd_se);
+    en->z_reverse = zscore(en->reverse, en->fd, en->reverse_se, en->fd_se);
+    en->z_forward = zscore(en->forward, en->fd, en->forward_se, en->fd_se);
+    en->agree = fabs(en->z_reverse) <= z_max && fabs(en->z_forward) <= z_max;
+}
+
+/* Scratch buffers of one check. */
+struct fd_buffers {
+    double *grads, *dir, *dimg, *rev, *fwd, *fd;
+    float *adj;
+};
+
+static void fd_buffers_free(struct fd_buffers *b, struct fd_run *r)
+{
+    free(b->grads);
+    free(b->dir);
+    free(b->dimg);
+    free(b->adj);
+    free(b->rev);
+    free(b->fwd);
+    free(b->fd);
+    free(r->theta0);
+    free(r->theta);
+    free(r->lo);
+    free(r->hi);
+    free(r->rgb);
+}
+
+static bool fd_buffers_alloc(struct fd_buffers *b, struct fd_run *r, int K, int64_t T, size_t npix)
+{
+    b->grads = calloc((size_t)K * (size_t)T, sizeof(double));
+    b->dir = calloc((size_t)T, sizeof(double));
+    b->dimg = malloc(sizeof(double) * npix * 3);
+    b->adj = malloc(sizeof(float) * npix * 3);
+    b->rev = malloc(sizeof(double) * K);
+    b->fwd = malloc(sizeof(double) * K);
+    b->fd = malloc(sizeof(double) * K);
+    r->theta0 = malloc(sizeof(double) * (size_t)T);
+    r->theta = malloc(sizeof(double) * (size_t)T);
+    r->lo = malloc(sizeof(double) * (size_t)T);
+    r->hi = malloc(sizeof(double) * (size_t)T);
+    r->rgb = malloc(sizeof(float) * npix * 3);
+    return b->grads && b->dir && b->dimg && b->adj && b->rev && b->fwd && b->fd && r->theta0 && r->theta && r->lo &&
+           r->hi && r->rgb;
+}
+
+int dr_fdcheck(struct dr_scene *scene, const struct dr_camera *camera, const struct dr_param_set *ps,
+               const struct dr_fd_options *o, struct dr_fd_entry **entries, int *count)
+{
+    const int K = o->batches;
+    const int64_t T = ps->total;
+    const size_t npix = (size_t)o->width * o->height;
+    struct fd_run r = {scene, camera, ps, o, NULL, NULL, NULL, NULL, NULL};
+    struct fd_buffers b = {0};
+    int n_dirs = 0;
+    for (int k = 0; k < ps->n; k++)
+        n_dirs += ps->params[k].kind == DR_PARAM_IMAGE || ps->params[k].kind == DR_PARAM_ENV_MAP
+                      ? 2 : (int)ps->params[k].size;
+    struct dr_fd_entry *out = calloc((size_t)n_dirs, sizeof *out);
+    int rc = 0;
+    bool restore = false;   /* theta0 holds the scene's values */
+    if (!fd_buffers_alloc(&b, &r, K, T, npix) || !out) {
+        dr_set_error("out of memory");
+        rc = DR_ERR_NOMEM;
+        goto done;
+    }
+    dr_param_set_get(scene, ps, r.theta0);
+    restore = true;
+    for (int k = 0; k < ps->n; k++) {
+        double lo, hi;
+        dr_param_range(&ps->params[k], &lo, &hi);
+        for (int64_t i = 0; i < ps->params[k].size; i++) {
+            r.lo[ps->params[k].offset + i] = lo;
+            r.hi[ps->params[k].offset + i] = hi;
+        }
+    }
+    /* reverse mode once per batch for all parameters: J's adjoint is uniform */
+    for (size_t i = 0; i < npix * 3; i++)
+        b.adj[i] = (float)(1.0 / (double)(npix * 3));
+    for (int k = 0; k < K && rc == 0; k++) {
+        struct dr_grad_problem p = problem(scene, camera, ps, o, o->seed + (uint64_t)k);
+        rc = dr_estimator_backward(o->estimator, &p, b.adj, b.grads + (size_t)k * T, NULL);
+    }
+    for (int k = 0, e = 0; k < ps->n && rc == 0; k++) {
+        const struct dr_param *pp = &ps->params[k];
+        int ndir = pp->kind == DR_PARAM_IMAGE || pp->kind == DR_PARAM_ENV_MAP ? 2 : (int)pp->size;
+        for (int c = 0; c < ndir && rc == 0; c++, e++) {
+            entry_direction(pp, k, c, T, b.dir, &out[e]);
+            int side = fd_side(&r, b.dir, o->eps);
+            for (int bi = 0; bi < K && rc == 0; bi++) {
+                b.rev[bi] = 0.0;
+                for (int64_t i = 0; i < T; i++)
+                    b.rev[bi] += b.grads[(size_t)bi * T + i] * b.dir[i];
+                rc = batch_estimates(&r, b.dir, side, o->seed + (uint64_t)bi, b.dimg, &b.fwd[bi], &b.fd[bi]);
+            }
+            if (rc == 0)
+                entry_verdict(&out[e], b.rev, b.fwd, b.fd, K, o->z_max);
+        }
+    }
+done:
+    if (restore) {
+        dr_param_set_put(scene, ps, r.theta0);
+        int rc2 = dr_scene_refresh(scene);
+        if (rc == 0)
+            rc = rc2;
+    }
+    fd_buffers_free(&b, &r);
+    if (rc != 0) {
+        free(out);
+        return rc;
+    }
+    *entries = out;
+    *count = n_dirs;
+    return 0;
+}
