@@ -52,6 +52,31 @@ struct fdcheck_args {
     int batches;
 };
 
+/* The options only `fdcheck` takes (grad_own_option_fn). */
+static int own_option(void *ctx, int c, const char *optarg)
+{
+    struct fdcheck_args *a = ctx;
+    long v;
+    switch (c) {
+    case OPT_EPS:
+        if (!cli_parse_double("fdcheck", "--eps", optarg, 0.0, &a->eps)) return DR_EXIT_USAGE;
+        return 0;
+    case OPT_ZMAX:
+        if (!cli_parse_double("fdcheck", "--z-max", optarg, 0.0, &a->z_max)) return DR_EXIT_USAGE;
+        return 0;
+    case OPT_BATCHES:
+        if (!cli_parse_int("fdcheck", "--batches", optarg, 2, 1L << 20, &v)) return DR_EXIT_USAGE;
+        a->batches = (int)v;
+        return 0;
+    case OPT_BATCH:
+        cli_error("fdcheck", "--batch (tape paths per sweep) is a 'grad' option; fdcheck's tape sweeps one "
+                             "sample of every pixel at a time (did you mean --batches?)");
+        return DR_EXIT_USAGE;
+    default: return -1;
+    }
+}
+
+/* Returns -1 to go on, or an exit code. */
 static int parse_args(int argc, char **argv, struct fdcheck_args *a)
 {
     static const struct option opts[] = {
@@ -63,43 +88,7 @@ static int parse_args(int argc, char **argv, struct fdcheck_args *a)
         {"batch", required_argument, NULL, OPT_BATCH},
         {NULL, 0, NULL, 0},
     };
-    long v;
-    opterr = 0;
-    optind = 1;
-    int c;
-    while ((c = getopt_long(argc, argv, ":h", opts, NULL)) != -1) {
-        int rc = grad_common_option(&a->g, c, optarg);
-        if (rc >= 0) {
-            if (rc != 0)
-                return rc;
-            continue;
-        }
-        switch (c) {
-        case 'h': cmd_fdcheck_usage(stdout); return DR_EXIT_OK;
-        case OPT_EPS:
-            if (!cli_parse_double("fdcheck", "--eps", optarg, 0.0, &a->eps)) return DR_EXIT_USAGE;
-            break;
-        case OPT_ZMAX:
-            if (!cli_parse_double("fdcheck", "--z-max", optarg, 0.0, &a->z_max)) return DR_EXIT_USAGE;
-            break;
-        case OPT_BATCHES:
-            if (!cli_parse_int("fdcheck", "--batches", optarg, 2, 1L << 20, &v)) return DR_EXIT_USAGE;
-            a->batches = (int)v;
-            break;
-        case OPT_BATCH:
-            cli_error("fdcheck", "--batch (tape paths per sweep) is a 'grad' option; fdcheck's tape sweeps one "
-                                 "sample of every pixel at a time (did you mean --batches?)");
-            return DR_EXIT_USAGE;
-        default: return grad_getopt_error("fdcheck", c, argv, "");
-        }
-    }
-    if (optind < argc)
-        a->g.scene_arg = argv[optind++];
-    if (optind < argc) {
-        cli_error("fdcheck", "unexpected argument '%s' (one scene at a time)", argv[optind]);
-        return DR_EXIT_USAGE;
-    }
-    return -1;
+    return grad_parse_args(&a->g, argc, argv, opts, "", own_option, a, cmd_fdcheck_usage);
 }
 
 static void print_json(const struct fdcheck_args *a, const char *scene_path, const struct dr_fd_entry *en, int n,

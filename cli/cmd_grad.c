@@ -90,6 +90,42 @@ struct grad_args {
     int64_t batch;
 };
 
+/* The options only `grad` takes (grad_own_option_fn). */
+static int own_option(void *ctx, int c, const char *optarg)
+{
+    struct grad_args *a = ctx;
+    long v;
+    switch (c) {
+    case 'o': a->output = optarg; return 0;
+    case OPT_VIS: a->vis = optarg; return 0;
+    case OPT_TARGET: a->target = optarg; return 0;
+    case OPT_LOSS: {
+        int k = dr_loss_parse(optarg);
+        if (k < 0) {
+            cli_error("grad", "--loss: unknown loss '%s' (available: l1, l2)", optarg);
+            return DR_EXIT_USAGE;
+        }
+        a->loss = (enum dr_loss_kind)k;
+        a->loss_given = true;
+        return 0;
+    }
+    case OPT_BATCHES:
+        if (!cli_parse_int("grad", "--batches", optarg, 2, 1L << 20, &v)) return DR_EXIT_USAGE;
+        a->batches = (int)v;
+        a->batches_given = true;
+        return 0;
+    case OPT_BATCH:
+        if (!cli_parse_int("grad", "--batch", optarg, 0, LONG_MAX, &v)) return DR_EXIT_USAGE;
+        a->batch = v;
+        return 0;
+    case OPT_GRAD_DIR:
+        a->grad_dir = optarg;
+        a->grad_dir_given = true;
+        return 0;
+    default: return -1;
+    }
+}
+
 /* Returns -1 to go on, or an exit code. */
 static int parse_args(int argc, char **argv, struct grad_args *a)
 {
@@ -104,55 +140,7 @@ static int parse_args(int argc, char **argv, struct grad_args *a)
         {"grad-dir", required_argument, NULL, OPT_GRAD_DIR},
         {NULL, 0, NULL, 0},
     };
-    long v;
-    opterr = 0;
-    optind = 1;
-    int c;
-    while ((c = getopt_long(argc, argv, ":o:h", opts, NULL)) != -1) {
-        int rc = grad_common_option(&a->g, c, optarg);
-        if (rc >= 0) {
-            if (rc != 0)
-                return rc;
-            continue;
-        }
-        switch (c) {
-        case 'o': a->output = optarg; break;
-        case 'h': cmd_grad_usage(stdout); return DR_EXIT_OK;
-        case OPT_VIS: a->vis = optarg; break;
-        case OPT_TARGET: a->target = optarg; break;
-        case OPT_LOSS: {
-            int k = dr_loss_parse(optarg);
-            if (k < 0) {
-                cli_error("grad", "--loss: unknown loss '%s' (available: l1, l2)", optarg);
-                return DR_EXIT_USAGE;
-            }
-            a->loss = (enum dr_loss_kind)k;
-            a->loss_given = true;
-            break;
-        }
-        case OPT_BATCHES:
-            if (!cli_parse_int("grad", "--batches", optarg, 2, 1L << 20, &v)) return DR_EXIT_USAGE;
-            a->batches = (int)v;
-            a->batches_given = true;
-            break;
-        case OPT_BATCH:
-            if (!cli_parse_int("grad", "--batch", optarg, 0, LONG_MAX, &v)) return DR_EXIT_USAGE;
-            a->batch = v;
-            break;
-        case OPT_GRAD_DIR:
-            a->grad_dir = optarg;
-            a->grad_dir_given = true;
-            break;
-        default: return grad_getopt_error("grad", c, argv, "o");
-        }
-    }
-    if (optind < argc)
-        a->g.scene_arg = argv[optind++];
-    if (optind < argc) {
-        cli_error("grad", "unexpected argument '%s' (one scene at a time)", argv[optind]);
-        return DR_EXIT_USAGE;
-    }
-    return -1;
+    return grad_parse_args(&a->g, argc, argv, opts, "o", own_option, a, cmd_grad_usage);
 }
 
 /* ---- file names ---- */

@@ -101,6 +101,50 @@ static void on_signal(int sig)
     stop_signal = sig;
 }
 
+/* The options only `optimize` takes (grad_own_option_fn). */
+static int own_option(void *ctx, int c, const char *optarg)
+{
+    struct opt_args *a = ctx;
+    long v;
+    switch (c) {
+    case 'o': a->output = optarg; return 0;
+    case OOPT_TARGET:
+        if (a->n_targets == MAX_TARGETS) {
+            cli_error("optimize", "--target: at most %d targets", MAX_TARGETS);
+            return DR_EXIT_USAGE;
+        }
+        a->targets[a->n_targets++].arg = optarg;
+        return 0;
+    case OOPT_ITERS:
+        if (!cli_parse_int("optimize", "--iters", optarg, 1, 100000000, &v)) return DR_EXIT_USAGE;
+        a->iters = (int)v;
+        return 0;
+    case OOPT_LR:
+        if (!cli_parse_double("optimize", "--lr", optarg, 0.0, &a->lr)) return DR_EXIT_USAGE;
+        return 0;
+    case OOPT_LOSS:
+        a->loss = dr_loss_parse(optarg);
+        if (a->loss < 0) {
+            cli_error("optimize", "--loss: '%s' is not a loss (use l1 or l2)", optarg);
+            return DR_EXIT_USAGE;
+        }
+        return 0;
+    case OOPT_OUTDIR: a->out_dir = optarg; return 0;
+    case OOPT_RESUME: a->resume = true; return 0;
+    case OOPT_RENDER_EVERY:
+        if (!cli_parse_int("optimize", "--render-every", optarg, 1, 100000000, &v)) return DR_EXIT_USAGE;
+        a->render_every = (int)v;
+        return 0;
+    case OOPT_CKPT_EVERY:
+        if (!cli_parse_int("optimize", "--checkpoint-every", optarg, 1, 100000000, &v)) return DR_EXIT_USAGE;
+        a->ckpt_every = (int)v;
+        return 0;
+    case OOPT_REFERENCE: a->reference = optarg; return 0;
+    default: return -1;
+    }
+}
+
+/* Returns -1 to go on, or an exit code. */
 static int parse_args(int argc, char **argv, struct opt_args *a)
 {
     static const struct option opts[] = {
@@ -117,62 +161,7 @@ static int parse_args(int argc, char **argv, struct opt_args *a)
         {"reference", required_argument, NULL, OOPT_REFERENCE},
         {NULL, 0, NULL, 0},
     };
-    long v;
-    opterr = 0;
-    optind = 1;
-    int c;
-    while ((c = getopt_long(argc, argv, ":o:h", opts, NULL)) != -1) {
-        int rc = grad_common_option(&a->g, c, optarg);
-        if (rc >= 0) {
-            if (rc != 0)
-                return rc;
-            continue;
-        }
-        switch (c) {
-        case 'h': cmd_optimize_usage(stdout); return DR_EXIT_OK;
-        case 'o': a->output = optarg; break;
-        case OOPT_TARGET:
-            if (a->n_targets == MAX_TARGETS) {
-                cli_error("optimize", "--target: at most %d targets", MAX_TARGETS);
-                return DR_EXIT_USAGE;
-            }
-            a->targets[a->n_targets++].arg = optarg;
-            break;
-        case OOPT_ITERS:
-            if (!cli_parse_int("optimize", "--iters", optarg, 1, 100000000, &v)) return DR_EXIT_USAGE;
-            a->iters = (int)v;
-            break;
-        case OOPT_LR:
-            if (!cli_parse_double("optimize", "--lr", optarg, 0.0, &a->lr)) return DR_EXIT_USAGE;
-            break;
-        case OOPT_LOSS:
-            a->loss = dr_loss_parse(optarg);
-            if (a->loss < 0) {
-                cli_error("optimize", "--loss: '%s' is not a loss (use l1 or l2)", optarg);
-                return DR_EXIT_USAGE;
-            }
-            break;
-        case OOPT_OUTDIR: a->out_dir = optarg; break;
-        case OOPT_RESUME: a->resume = true; break;
-        case OOPT_RENDER_EVERY:
-            if (!cli_parse_int("optimize", "--render-every", optarg, 1, 100000000, &v)) return DR_EXIT_USAGE;
-            a->render_every = (int)v;
-            break;
-        case OOPT_CKPT_EVERY:
-            if (!cli_parse_int("optimize", "--checkpoint-every", optarg, 1, 100000000, &v)) return DR_EXIT_USAGE;
-            a->ckpt_every = (int)v;
-            break;
-        case OOPT_REFERENCE: a->reference = optarg; break;
-        default: return grad_getopt_error("optimize", c, argv, "o");
-        }
-    }
-    if (optind < argc)
-        a->g.scene_arg = argv[optind++];
-    if (optind < argc) {
-        cli_error("optimize", "unexpected argument '%s' (one scene at a time)", argv[optind]);
-        return DR_EXIT_USAGE;
-    }
-    return -1;
+    return grad_parse_args(&a->g, argc, argv, opts, "o", own_option, a, cmd_optimize_usage);
 }
 
 /* "N=path" -> camera N; "path" -> camera 0. */

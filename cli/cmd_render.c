@@ -47,37 +47,23 @@ struct render_args {
     const char *output;
 };
 
+/* The options only `render` takes (grad_own_option_fn). */
+static int own_option(void *ctx, int c, const char *arg)
+{
+    struct render_args *a = ctx;
+    if (c != 'o')
+        return -1;
+    a->output = arg;
+    return 0;
+}
+
 /* Returns -1 to go on, or an exit code. */
 static int parse_args(int argc, char **argv, struct render_args *a)
 {
     static const struct option opts[] = {
         {"output", required_argument, NULL, 'o'}, RENDER_COMMON_LONG_OPTIONS, {NULL, 0, NULL, 0},
     };
-    opterr = 0;
-    optind = 1;
-    int c;
-    while ((c = getopt_long(argc, argv, ":o:h", opts, NULL)) != -1) {
-        if (c == 'o') {
-            a->output = optarg;
-            continue;
-        }
-        if (c == 'h') {
-            cmd_render_usage(stdout);
-            return DR_EXIT_OK;
-        }
-        int rc = grad_common_option(&a->g, c, optarg);
-        if (rc == -1)
-            return grad_getopt_error("render", c, argv, "o");
-        if (rc != 0)
-            return rc;
-    }
-    if (optind < argc)
-        a->g.scene_arg = argv[optind++];
-    if (optind < argc) {
-        cli_error("render", "unexpected argument '%s' (one scene at a time)", argv[optind]);
-        return DR_EXIT_USAGE;
-    }
-    return -1;
+    return grad_parse_args(&a->g, argc, argv, opts, "o", own_option, a, cmd_render_usage);
 }
 
 static void print_json(const struct render_args *a, const char *scene_path, const struct dr_scene *scene,

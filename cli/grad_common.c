@@ -140,6 +140,36 @@ int grad_getopt_error(const char *cmd, int c, char **argv, const char *short_wit
     return DR_EXIT_USAGE;
 }
 
+int grad_parse_args(struct grad_common *g, int argc, char **argv, const struct option *opts,
+                    const char *short_with_arg, grad_own_option_fn own, void *ctx, void (*usage)(FILE *))
+{
+    char shortopts[16];
+    snprintf(shortopts, sizeof shortopts, ":%sh", short_with_arg[0] ? "o:" : "");
+    opterr = 0;
+    optind = 1;
+    int c;
+    while ((c = getopt_long(argc, argv, shortopts, opts, NULL)) != -1) {
+        if (c == 'h') {
+            usage(stdout);
+            return DR_EXIT_OK;
+        }
+        int rc = grad_common_option(g, c, optarg);
+        if (rc == -1)
+            rc = own(ctx, c, optarg);
+        if (rc == -1)
+            return grad_getopt_error(g->cmd, c, argv, short_with_arg);
+        if (rc != 0)
+            return rc;
+    }
+    if (optind < argc)
+        g->scene_arg = argv[optind++];
+    if (optind < argc) {
+        cli_error(g->cmd, "unexpected argument '%s' (one scene at a time)", argv[optind]);
+        return DR_EXIT_USAGE;
+    }
+    return -1;
+}
+
 int grad_common_check(const struct grad_common *g)
 {
     if (!dr_estimator_supports(g->estimator, g->sampling)) {

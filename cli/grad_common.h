@@ -70,6 +70,18 @@ void grad_common_free(struct grad_common *g);
  * printing a message, or -1 when `c` is not a shared option. */
 int grad_common_option(struct grad_common *g, int c, const char *arg);
 
+/* A command's own options: 0 when handled, an exit code after a message, or
+ * -1 when `c` is not one of them. */
+typedef int (*grad_own_option_fn)(void *ctx, int c, const char *arg);
+
+/* The option loop every rendering command runs: getopt_long over argv with
+ * the command's table; shared options go to g, the rest to `own`; -h prints
+ * `usage`; the single positional argument is the scene. short_with_arg names
+ * the short options that take a value ("o" or ""). Returns -1 to go on, or an
+ * exit code. */
+int grad_parse_args(struct grad_common *g, int argc, char **argv, const struct option *opts,
+                    const char *short_with_arg, grad_own_option_fn own, void *ctx, void (*usage)(FILE *));
+
 /* Reports a getopt_long failure ('?' or ':') the way every command does. */
 int grad_getopt_error(const char *cmd, int c, char **argv, const char *short_with_arg);
 

@@ -15,7 +15,8 @@ static float *render(const struct dr_scene *s, int threads, uint64_t seed)
 {
     const int w = 48, h = 40;
     float *rgb = malloc(sizeof(float) * 3 * w * h);
-    struct dr_render_opts o = {w, h, 4, 12, 5, seed, threads, false};
+    struct dr_render_opts o = {.width = w, .height = h, .spp = 4, .max_depth = 12, .rr_depth = DR_RR_DEPTH_DEFAULT,
+                              .seed = seed, .threads = threads};
     struct dr_render_stats st;
     CHECK(dr_render(s, &s->cameras[0], &o, rgb, &st) == 0, "render: %s", dr_last_error());
     CHECK(st.threads == threads, "ran on %d threads, asked %d", st.threads, threads);

@@ -18,7 +18,8 @@ struct stats {
 static struct stats render_stats(struct dr_scene *s, struct dr_camera cam, int res, int spp, int depth)
 {
     float *rgb = malloc(sizeof(float) * 3 * res * res);
-    struct dr_render_opts o = {res, res, spp, depth, 5, 7, 2, false};
+    struct dr_render_opts o = {.width = res, .height = res, .spp = spp, .max_depth = depth,
+                              .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 7, .threads = 2};
     struct dr_render_stats st;
     int rc = dr_render(s, &cam, &o, rgb, &st);
     CHECK(rc == 0, "dr_render failed: %s", dr_last_error());
