@@ -172,7 +172,9 @@ struct vndf_tape {
     dr_vec3 nh, m, h;     /* hemisphere normal, unstretched, normalised */
 };
 
-/* GGX visible normals (Heitz 2018, JCGT 7(4)), wo.z > 0. Returns h; fills *t. */
+/* GGX visible normals (Heitz 2018, JCGT 7(4)), wo.z > 0. Returns h; fills *t
+ * (the primal's callers let the compiler drop those stores). The arithmetic
+ * is exactly the pre-adjoint map's, so dr_bsdf_sample's samples did not change. */
 static inline dr_vec3 sample_vndf(dr_vec3 wo, double a, double u1, double u2, struct vndf_tape *t)
 {
     t->v = dr_v3(a * wo.x, a * wo.y, wo.z);
@@ -330,8 +332,10 @@ static inline double pow4(double s)
 /* Gradient of ln D with respect to the unnormalised half vector H, for
  * D = a^2 |H|^4 / (pi q^2), q = Hxy^2 + a^2 Hz^2:
  *   d lnD/dH = 4 H / |H|^2 - 4 (Hx, Hy, a^2 Hz) / q.
- * Near the specular configuration the two terms almost cancel, so they are
- * combined over |H|^2 q first (q - |H|^2 = -(1 - a^2) Hz^2, q - a^2 |H|^2 = (1 - a^2) Hxy^2):
+ * The two terms cancel in z where H is near the normal (the peak of a narrow
+ * lobe, where accuracy matters most) and in x, y where roughness is near 1 or
+ * H is far from the normal, so they are combined over |H|^2 q first
+ * (q - |H|^2 = -(1 - a^2) Hz^2, q - a^2 |H|^2 = (1 - a^2) Hxy^2):
  *   d lnD/dHxy = -4 (1 - a^2) Hxy (Hz^2 / |H|^2) / q,   d lnD/dHz = 4 (1 - a^2) Hz (Hxy^2 / |H|^2) / q.
  * Bounded: |Hxy| / q <= 1 / (2 a |Hz|) and Hxy^2 / q <= 1, so the only large
  * values are the genuine ones of a narrow lobe (no overflow for a >= 1e-7,

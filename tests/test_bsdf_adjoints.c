@@ -753,7 +753,7 @@ static void test_hard_cases(void)
                 for (int ib = 0; ib < 2; ib++)
                     for (int ic = 0; ic < nc; ic++)
                         for (int jc = 0; jc < nc; jc++)
-                            for (int kind = 0; kind < 5; kind++) {
+                            for (int kind = 0; kind < 7; kind++) {
                                 struct cfg c;
                                 memset(&c, 0, sizeof c);
                                 c.b = make_bsdf(hr[ir], metals[im], specs[is], ib ? dr_v3(1.0, 0.5, 0.0) : dr_v3s(0.0),
@@ -765,8 +765,12 @@ static void test_hard_cases(void)
                                     c.wi = dir_from(cosines[jc], 0.3 + M_PI);      /* same plane, opposite */
                                 else if (kind == 2)
                                     c.wi = dir_from(cosines[jc], 1.9);
-                                else
+                                else if (kind == 3)
                                     c.wi = dr_v3(1e-9, 0.0, 1.0);                  /* nearly the normal */
+                                else if (kind == 5)                                /* H nearly along z */
+                                    c.wi = reflect(c.wo, dr_normalize(dr_v3(1e-9, -1e-9, 1.0)));
+                                else
+                                    c.wi = c.wo;                                   /* c = |H|/2 = 1 */
                                 c.d3 = dr_v3(1.0, -0.5, 0.25);
                                 c.d1 = 0.7;
                                 c.lobe = (ic + jc) % 2 ? DR_BSDF_LOBE_SPECULAR : DR_BSDF_LOBE_DIFFUSE;
