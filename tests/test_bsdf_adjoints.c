@@ -228,15 +228,15 @@ struct fn {
     double (*feature)(const struct cfg *);
     /* statistics */
     long checks, one_sided, skipped, id_checks, id_skipped;
-    double worst_rel, worst_ratio, id_worst_rel;
+    double worst_rel, worst_ratio, id_worst_rel, id_worst_ratio;
 };
 
-static struct fn fn_eval = {"d_bsdf_eval", loss_eval, mag_eval, adj_eval, regime_eval, feature_eval, 0, 0, 0, 0, 0, 0, 0, 0};
-static struct fn fn_pdf = {"d_bsdf_pdf", loss_pdf, mag_pdf, adj_pdf, regime_pdf, feature_eval, 0, 0, 0, 0, 0, 0, 0, 0};
+static struct fn fn_eval = {"d_bsdf_eval", loss_eval, mag_eval, adj_eval, regime_eval, feature_eval, 0, 0, 0, 0, 0, 0, 0, 0, 0};
+static struct fn fn_pdf = {"d_bsdf_pdf", loss_pdf, mag_pdf, adj_pdf, regime_pdf, feature_eval, 0, 0, 0, 0, 0, 0, 0, 0, 0};
 static struct fn fn_prob = {"d_bsdf_specular_prob", loss_prob, mag_prob, adj_prob, regime_prob, feature_prob,
-                            0, 0, 0, 0, 0, 0, 0, 0};
+                            0, 0, 0, 0, 0, 0, 0, 0, 0};
 static struct fn fn_sample = {"d_bsdf_sample_dir", loss_sample, mag_sample, adj_sample, regime_sample,
-                              feature_sample, 0, 0, 0, 0, 0, 0, 0, 0};
+                              feature_sample, 0, 0, 0, 0, 0, 0, 0, 0, 0};
 
 /* ------------------------------------------------ finite differences */
 
@@ -550,7 +550,14 @@ static void check_identity(struct fn *f, const struct cfg *c, struct rng *r)
     double floor_abs = (1e-13 * f->mag(c) + 1e-14 * cond) / t;
     double tol = RTOL * fmax(cond, fabs(fd)) + floor_abs;
     f->id_checks++;
+    f->id_worst_ratio = fmax(f->id_worst_ratio, fabs(ad - fd) / tol);
     double scale = fmax(fabs(ad), fabs(fd));
+    /* DR_TEST_VERBOSE=1: show the identity checks that agree least (usually
+     * a small <g, v> out of large, cancelling terms) */
+    if (getenv("DR_TEST_VERBOSE") && scale > 1e3 * floor_abs && fabs(ad - fd) / scale > 5e-6) {
+        fprintf(stderr, "  identity %s: rel %.2e, <g,v> %.12g, sum |g_k v_k| %.3g\n", f->name, fabs(ad - fd) / scale, ad, cond);
+        print_cfg(f->name, "identity", c);
+    }
     if (scale > 1e3 * floor_abs)
         f->id_worst_rel = fmax(f->id_worst_rel, fabs(ad - fd) / scale);
     bool ok = isfinite(ad) && fabs(ad - fd) <= tol;
@@ -871,9 +878,10 @@ static void summary(const struct fn *f)
 {
     fprintf(stderr,
             "%-21s: %6ld FD checks (%5ld one-sided, %4ld skipped at kinks), worst rel. error %.2e, "
-            "worst error/tolerance %.2f; identity: %5ld checks (%3ld skipped), worst rel. error %.2e\n",
+            "worst error/tolerance %.2f; identity: %5ld checks (%3ld skipped), worst rel. error %.2e, "
+            "worst error/tolerance %.2f\n",
             f->name, f->checks, f->one_sided, f->skipped, f->worst_rel, f->worst_ratio, f->id_checks,
-            f->id_skipped, f->id_worst_rel);
+            f->id_skipped, f->id_worst_rel, f->id_worst_ratio);
 }
 
 int main(void)
