@@ -162,20 +162,56 @@ static inline dr_vec3 sample_cosine(double u1, double u2)
     return dr_v3(x, y, sqrt(dr_max(0.0, 1.0 - x * x - y * y)));
 }
 
-/* GGX visible normals (Heitz 2018, JCGT 7(4)), wo.z > 0. Returns h. */
-static inline dr_vec3 sample_vndf(dr_vec3 wo, double a, double u1, double u2)
+/* Intermediates of sample_vndf, kept for its adjoint (d_sample_vndf). */
+struct vndf_tape {
+    dr_vec3 v, vh;        /* stretched wo and its normalisation */
+    double lensq;         /* vh.x^2 + vh.y^2 */
+    dr_vec3 t1, t2;       /* frame around vh */
+    double p1, p2, c;     /* disk point (constants of u) and c = sqrt(1 - p1^2) */
+    double s, p2s, n3;    /* warp weight, warped p2, lift onto the hemisphere */
+    dr_vec3 nh, m, h;     /* hemisphere normal, unstretched, normalised */
+};
+
+/* GGX visible normals (Heitz 2018, JCGT 7(4)), wo.z > 0. Returns h; fills *t
+ * (the primal's callers let the compiler drop those stores). The arithmetic
+ * is exactly the pre-adjoint map's, so dr_bsdf_sample's samples did not change. */
+static inline dr_vec3 sample_vndf(dr_vec3 wo, double a, double u1, double u2, struct vndf_tape *t)
 {
-    dr_vec3 vh = dr_normalize(dr_v3(a * wo.x, a * wo.y, wo.z));
+    t->v = dr_v3(a * wo.x, a * wo.y, wo.z);
+    dr_vec3 vh = dr_normalize(t->v);
     double lensq = vh.x * vh.x + vh.y * vh.y;
     dr_vec3 t1 = lensq > 0.0 ? dr_scale(dr_v3(-vh.y, vh.x, 0.0), 1.0 / sqrt(lensq)) : dr_v3(1.0, 0.0, 0.0);
     dr_vec3 t2 = dr_cross(vh, t1);
     double r = sqrt(u1), phi = 2.0 * M_PI * u2;
     double p1 = r * cos(phi), p2 = r * sin(phi);
     double s = 0.5 * (1.0 + vh.z);
-    p2 = (1.0 - s) * sqrt(dr_max(0.0, 1.0 - p1 * p1)) + s * p2;
-    dr_vec3 nh = dr_add(dr_add(dr_scale(t1, p1), dr_scale(t2, p2)),
-                        dr_scale(vh, sqrt(dr_max(0.0, 1.0 - p1 * p1 - p2 * p2))));
-    return dr_normalize(dr_v3(a * nh.x, a * nh.y, dr_max(0.0, nh.z)));
+    double c = sqrt(dr_max(0.0, 1.0 - p1 * p1));
+    double p2s = (1.0 - s) * c + s * p2;
+    double n3 = sqrt(dr_max(0.0, 1.0 - p1 * p1 - p2s * p2s));
+    dr_vec3 nh = dr_add(dr_add(dr_scale(t1, p1), dr_scale(t2, p2s)), dr_scale(vh, n3));
+    t->m = dr_v3(a * nh.x, a * nh.y, dr_max(0.0, nh.z));
+    t->h = dr_normalize(t->m);
+    t->vh = vh;
+    t->lensq = lensq;
+    t->t1 = t1;
+    t->t2 = t2;
+    t->p1 = p1;
+    t->p2 = p2;
+    t->c = c;
+    t->s = s;
+    t->p2s = p2s;
+    t->n3 = n3;
+    t->nh = nh;
+    return t->h;
+}
+
+dr_vec3 dr_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lobe, double u1, double u2)
+{
+    if (lobe != DR_BSDF_LOBE_SPECULAR)
+        return sample_cosine(u1, u2);
+    struct vndf_tape t;
+    dr_vec3 h = sample_vndf(wo, bsdf_alpha(b), u1, u2, &t);
+    return dr_sub(dr_scale(h, 2.0 * dr_dot(wo, h)), wo);
 }
 
 bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u1, double u2,
@@ -184,16 +220,12 @@ bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u
     out->wi = dr_v3(0.0, 0.0, 1.0);
     out->f = dr_v3s(0.0);
     out->pdf = 0.0;
+    out->lobe = DR_BSDF_LOBE_DIFFUSE;
     if (!(wo.z > COS_EPS))
         return false;
     double p = specular_prob(b, wo.z);
-    dr_vec3 wi;
-    if (u_lobe < p) {
-        dr_vec3 h = sample_vndf(wo, bsdf_alpha(b), u1, u2);
-        wi = dr_sub(dr_scale(h, 2.0 * dr_dot(wo, h)), wo);
-    } else {
-        wi = sample_cosine(u1, u2);
-    }
+    out->lobe = u_lobe < p ? DR_BSDF_LOBE_SPECULAR : DR_BSDF_LOBE_DIFFUSE;
+    dr_vec3 wi = dr_bsdf_sample_dir(b, wo, out->lobe, u1, u2);
     out->wi = wi;
     if (!(wi.z > COS_EPS))
         return false;
@@ -208,7 +240,7 @@ bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u
 
 /* ------------------------------------------------------------ derivatives */
 
-/* Reverse mode of dr_bsdf_eval (directions are constants). With
+/* Parameter part of d_bsdf_eval (wo.z, wi.z > COS_EPS). With
  *   kd0 = max(0, 1 - F_o) max(0, 1 - F_i) / pi,   spec = D G2 / (4 wo.z wi.z),
  *   f_c = (1-m) kd0 base_c + (1-m) spec F_d,c + m spec F_m,c,
  *   F_m,c = base_c + (1 - base_c) s5:
@@ -230,10 +262,9 @@ bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u
  * The pure-Lambertian fast path (metallic == 0, specular == 0) evaluates the
  * general formula exactly (F_d = F_o = F_i = 0, kd0 = 1/pi); its metallic
  * derivative is the general one, -base/pi + spec F_m, which needs spec. */
-void d_bsdf_eval(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out, struct dr_d_bsdf *d)
+static void d_eval_params(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out,
+                          struct dr_d_bsdf *d)
 {
-    if (!(wo.z > COS_EPS) || !(wi.z > COS_EPS))
-        return;
     const bool lambert = no_specular_lobe(b);
     const double m = b->metallic;
     const dr_vec3 base = b->base_color;
@@ -288,4 +319,338 @@ void d_bsdf_eval(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out,
     double dlo = 0.5 * a * tan2o / so, dli = 0.5 * a * tan2i / si;
     double dspec_da = spec * (dlnD - (dlo + dli) / g);
     d->roughness += d_spec * dspec_da * (2.0 * rough);
+}
+
+/* ---------------------------------------------- direction adjoints: pieces */
+
+static inline double pow4(double s)
+{
+    double s2 = s * s;
+    return s2 * s2;
+}
+
+/* Gradient of ln D with respect to the unnormalised half vector H, for
+ * D = a^2 |H|^4 / (pi q^2), q = Hxy^2 + a^2 Hz^2:
+ *   d lnD/dH = 4 H / |H|^2 - 4 (Hx, Hy, a^2 Hz) / q.
+ * The two terms cancel in z where H is near the normal (the peak of a narrow
+ * lobe, where accuracy matters most) and in x, y where roughness is near 1 or
+ * H is far from the normal, so they are combined over |H|^2 q first
+ * (q - |H|^2 = -(1 - a^2) Hz^2, q - a^2 |H|^2 = (1 - a^2) Hxy^2):
+ *   d lnD/dHxy = -4 (1 - a^2) Hxy (Hz^2 / |H|^2) / q,   d lnD/dHz = 4 (1 - a^2) Hz (Hxy^2 / |H|^2) / q.
+ * Bounded: |Hxy| / q <= 1 / (2 a |Hz|) and Hxy^2 / q <= 1, so the only large
+ * values are the genuine ones of a narrow lobe (no overflow for a >= 1e-7,
+ * Hz > 2e-12). Exactly zero in x, y for H along the normal. */
+static inline dr_vec3 grad_ln_D(double a2, dr_vec3 H, double hxy2, double hz2, double H2, double q)
+{
+    double k = 4.0 * (1.0 - a2);
+    double kxy = -k * (hz2 / H2) / q, kz = k * (hxy2 / H2) / q;
+    return dr_v3(kxy * H.x, kxy * H.y, kz * H.z);
+}
+
+/* Gradient of smith_lambda(a2, w) with respect to w (w.z > COS_EPS). With
+ * x = a^2 (wx^2 + wy^2) / wz^2: dLambda/dx = 1 / (4 sqrt(1 + x)) (from
+ * Lambda = (-1 + sqrt(1 + x)) / 2), dx/dwxy = 2 a^2 wxy / wz^2, dx/dwz = -2 x / wz.
+ * At wz = 1e-12 the pieces stay below ~1e36: finite. */
+static inline dr_vec3 grad_lambda(double a2, dr_vec3 w)
+{
+    double iz2 = 1.0 / (w.z * w.z);
+    double x = a2 * (w.x * w.x + w.y * w.y) * iz2;
+    double k = 0.25 / sqrt(1.0 + x);
+    double kxy = k * (2.0 * a2 * iz2);
+    return dr_v3(kxy * w.x, kxy * w.y, -k * (2.0 * x / w.z));
+}
+
+/* d s5 / d c for s5 = (1 - clamp(c, 0, 1))^5: the clamp is flat outside (0, 1). */
+static inline double ds5_dc(double c)
+{
+    return c > 0.0 && c < 1.0 ? -5.0 * pow4(1.0 - c) : 0.0;
+}
+
+/* ---------------------------------------------------- d_bsdf_eval: directions */
+
+/* Direction part of d_bsdf_eval on the general path (wo.z, wi.z > COS_EPS).
+ * f_c = base_c kd + F_d,c (1-m) spec + F_m,c m spec, and the directions enter
+ * through four quantities only:
+ *   spec = D(H) / (4 wo.z (1 + L_o + L_i) wi.z), H = wo + wi: differentiated in
+ *     log form, d spec = spec (d lnD - dwo.z/wo.z - dwi.z/wi.z - (dL_o + dL_i) / g),
+ *     because spec spans ~50 orders of magnitude while its log-derivative stays
+ *     moderate (see grad_ln_D, grad_lambda);
+ *   s5 = (1 - c)^5, c = |H| / 2 (the Fresnel cosine; the primal never forms
+ *     wo.h): dc/dH = H / (4 c);
+ *   F_o, F_i = f0max + (f90 - f0max)(1 - z)^5 of wo.z, wi.z, inside
+ *     kd = (1-m) max(0, 1 - F_o) max(0, 1 - F_i) / pi (zero slope where a max clamps).
+ * H feeds both directions equally, which is why d_H is added to both. */
+static void d_eval_dirs(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out, dr_vec3 *d_wo,
+                        dr_vec3 *d_wi)
+{
+    const double m = b->metallic;
+    const dr_vec3 base = b->base_color;
+    double a = bsdf_alpha(b), a2 = a * a;
+    dr_vec3 H = dr_add(wo, wi);
+    double hxy2 = H.x * H.x + H.y * H.y, hz2 = H.z * H.z;
+    double H2 = hxy2 + hz2;
+    double q = hxy2 + a2 * hz2;
+    double r = H2 / q;
+    double D = a2 * r * r * DR_INV_PI;
+    double lo = smith_lambda(a2, wo), li = smith_lambda(a2, wi);
+    double g = 1.0 + lo + li;
+    double spec = D / (4.0 * wo.z * g * wi.z);
+
+    double c = 0.5 * sqrt(H2);
+    double s5 = pow5(1.0 - dr_clamp(c, 0.0, 1.0));
+    dr_vec3 f0 = dielectric_f0(b);
+    double f90 = b->specular;
+    dr_vec3 fd = dr_v3(f0.x + (f90 - f0.x) * s5, f0.y + (f90 - f0.y) * s5, f0.z + (f90 - f0.z) * s5);
+    dr_vec3 fm = dr_v3(base.x + (1.0 - base.x) * s5, base.y + (1.0 - base.y) * s5,
+                       base.z + (1.0 - base.z) * s5);
+    double gs = ((1.0 - m) * dr_dot(d_out, fd) + m * dr_dot(d_out, fm)) * spec;  /* d loss / d ln spec */
+    /* d loss / d s5: F_d,c has slope f90 - f0_c, F_m,c has slope 1 - base_c */
+    double d_s5 = spec * ((1.0 - m) * dr_dot(d_out, dr_sub(dr_v3s(f90), f0)) +
+                          m * dr_dot(d_out, dr_sub(dr_v3s(1.0), base)));
+    double d_c = d_s5 * ds5_dc(c);
+    dr_vec3 d_H = dr_scale(grad_ln_D(a2, H, hxy2, hz2, H2, q), gs);
+    if (d_c != 0.0)
+        d_H = dr_madd(d_H, H, d_c * 0.25 / c);
+
+    dr_vec3 go = dr_madd(d_H, grad_lambda(a2, wo), -gs / g);
+    dr_vec3 gi = dr_madd(d_H, grad_lambda(a2, wi), -gs / g);
+    go.z -= gs / wo.z;
+    gi.z -= gs / wi.z;
+
+    double f0max = dr_max3(f0);
+    double fo = f0max + (f90 - f0max) * pow5(1.0 - wo.z), fi = f0max + (f90 - f0max) * pow5(1.0 - wi.z);
+    double d_kk = dr_dot(d_out, base) * (1.0 - m) * DR_INV_PI;  /* d loss / d [max(0,1-F_o) max(0,1-F_i)] */
+    double dF = -5.0 * (f90 - f0max);                            /* dF/dz = dF (1 - z)^4 */
+    if (1.0 - fo > 0.0)
+        go.z -= d_kk * dr_max(0.0, 1.0 - fi) * dF * pow4(1.0 - wo.z);
+    if (1.0 - fi > 0.0)
+        gi.z -= d_kk * dr_max(0.0, 1.0 - fo) * dF * pow4(1.0 - wi.z);
+    if (d_wo)
+        *d_wo = dr_add(*d_wo, go);
+    if (d_wi)
+        *d_wi = dr_add(*d_wi, gi);
+}
+
+/* Reverse mode of dr_bsdf_eval. The parameter part is d_eval_params, whose
+ * arithmetic is kept exactly as it was when the directions were constants:
+ * the estimators compare their gradients bit for bit. */
+void d_bsdf_eval(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out, struct dr_d_bsdf *d,
+                 dr_vec3 *d_wo, dr_vec3 *d_wi)
+{
+    if (!(wo.z > COS_EPS) || !(wi.z > COS_EPS))
+        return;
+    if (d)
+        d_eval_params(b, wo, wi, d_out, d);
+    /* The Lambertian fast path, f = base / pi, does not depend on the directions. */
+    if ((d_wo || d_wi) && !no_specular_lobe(b))
+        d_eval_dirs(b, wo, wi, d_out, d_wo, d_wi);
+}
+
+/* ------------------------------------------------------ d_bsdf_pdf and p */
+
+/* Adjoint of specular_prob(b, cos_o) for d_p = d loss / d p: adds the
+ * parameter part to *d (if not NULL) and returns d loss / d cos_o.
+ *   p = ws / (ws + wd),  ws = (1-m) F + m lum(F_m),  wd = (1-m) (1 - F) lum(base),
+ *   F = f0max + (specular - f0max) s5,  F_m,c = base_c + (1 - base_c) s5,
+ *   s5 = (1 - clamp(cos_o, 0, 1))^5,
+ * so dp = (wd dws - ws dwd) / (ws + wd)^2. The primal's shortcuts p = 1
+ * (wd = 0) and p = 0 (ws = 0, which includes the Lambertian early return) are
+ * the ratio's own values, so the ratio's derivative applies there as well: at
+ * the domain's edges (metallic 1, base 0) it is the one-sided derivative from
+ * inside, and for a Lambertian it is the general formula's metallic
+ * derivative, as in d_bsdf_eval. Only ws = wd = 0 (black Lambertian; black
+ * metal at exactly normal incidence) is a jump of p: zero there. */
+static double d_specular_prob(const struct dr_bsdf *b, double cos_o, double d_p, struct dr_d_bsdf *d)
+{
+    const double m = b->metallic;
+    const dr_vec3 base = b->base_color;
+    double t = 1.0 - dr_clamp(cos_o, 0.0, 1.0);
+    double s5 = pow5(t);
+    double f0max = dr_max3(dielectric_f0(b));
+    double fd = f0max + (b->specular - f0max) * s5;
+    dr_vec3 fm = dr_v3(base.x + (1.0 - base.x) * s5, base.y + (1.0 - base.y) * s5,
+                       base.z + (1.0 - base.z) * s5);
+    double lb = dr_luminance(base), lfm = dr_luminance(fm);
+    double ws = (1.0 - m) * fd + m * lfm, wd = (1.0 - m) * (1.0 - fd) * lb;
+    double sum = ws + wd;
+    if (!(sum > 0.0) || d_p == 0.0)
+        return 0.0;
+    double k = d_p / sum;
+    double d_ws = k * (wd / sum), d_wd = -k * (ws / sum);
+    if (d) {
+        d->metallic += d_ws * (lfm - fd) - d_wd * (1.0 - fd) * lb;
+        /* lum is linear: d lum(v) / dv_c is the luminance of the c-th unit vector */
+        double kb = d_ws * m * (1.0 - s5) + d_wd * (1.0 - m) * (1.0 - fd);
+        d->base_color = dr_add(d->base_color, dr_v3(dr_luminance(dr_v3(kb, 0.0, 0.0)),
+                                                     dr_luminance(dr_v3(0.0, kb, 0.0)),
+                                                     dr_luminance(dr_v3(0.0, 0.0, kb))));
+    }
+    double dfd = b->specular - f0max;   /* dF/ds5 */
+    double d_s5 = d_ws * ((1.0 - m) * dfd + m * dr_luminance(dr_sub(dr_v3s(1.0), base))) -
+                  d_wd * (1.0 - m) * dfd * lb;
+    return cos_o > 0.0 && cos_o < 1.0 ? -5.0 * pow4(t) * d_s5 : 0.0;
+}
+
+void d_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo, double d_p, struct dr_d_bsdf *d, dr_vec3 *d_wo)
+{
+    /* Below the surface dr_bsdf_specular_prob is p at cos_o = 0, a constant in wo. */
+    bool above = wo.z > COS_EPS;
+    double d_cos = d_specular_prob(b, above ? wo.z : 0.0, d_p, d);
+    if (above && d_wo)
+        d_wo->z += d_cos;
+}
+
+/* Reverse mode of dr_bsdf_pdf: pdf = (1-p) wi.z / pi + p P_s with
+ *   P_s = D / (4 wo.z (1 + L_o)) = G1(wo) D / (4 wo.z), the visible-normal
+ *   density D_wo(h) = G1(wo) max(0, wo.h) D / wo.z times the reflection's
+ *   Jacobian 1 / (4 wo.h) (the wo.h cancel, so the primal never forms it);
+ *   p = specular_prob(wo.z), whose adjoint is d_specular_prob.
+ * d pdf = (P_s - wi.z/pi) dp + (1-p) dwi.z / pi + p P_s d ln P_s,
+ *   d ln P_s = d lnD - dwo.z / wo.z - dL_o / (1 + L_o)   (log form as in d_eval_dirs),
+ *   d lnD/da = (2/a) (Hxy^2 - a^2 Hz^2) / q, dL/da = a tan^2 / (2 sqrt(1 + x)) (see d_eval_params).
+ * The Lambertian fast path returns wi.z / pi, the general formula at p = 0;
+ * its metallic derivative is the general one, (P_s - wi.z/pi) dp/dm, so P_s
+ * is computed there too. */
+void d_bsdf_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double d_pdf, struct dr_d_bsdf *d,
+                dr_vec3 *d_wo, dr_vec3 *d_wi)
+{
+    if (!(wo.z > COS_EPS) || !(wi.z > COS_EPS))
+        return;
+    const double rough = b->roughness;
+    double p = specular_prob(b, wo.z);
+    double cos_pdf = wi.z * DR_INV_PI;
+    double a = bsdf_alpha(b), a2 = a * a;
+    dr_vec3 H = dr_add(wo, wi);
+    double hxy2 = H.x * H.x + H.y * H.y, hz2 = H.z * H.z;
+    double H2 = hxy2 + hz2;
+    double q = hxy2 + a2 * hz2;
+    double r = H2 / q;
+    double D = a2 * r * r * DR_INV_PI;
+    double lo = smith_lambda(a2, wo);
+    double ps = D / (4.0 * wo.z) / (1.0 + lo);
+    double d_cos_o = d_specular_prob(b, wo.z, d_pdf * (ps - cos_pdf), d);
+    double gs = d_pdf * p * ps;   /* d loss / d ln P_s */
+    if (d && gs != 0.0 && rough * rough > DR_BSDF_MIN_ALPHA) {
+        double dlnD = (2.0 / a) * ((hxy2 - a2 * hz2) / q);
+        double tan2o = (wo.x * wo.x + wo.y * wo.y) / (wo.z * wo.z);
+        double dlo = 0.5 * a * tan2o / sqrt(1.0 + a2 * tan2o);
+        d->roughness += gs * (dlnD - dlo / (1.0 + lo)) * (2.0 * rough);
+    }
+    dr_vec3 d_H = dr_scale(grad_ln_D(a2, H, hxy2, hz2, H2, q), gs);
+    if (d_wo) {
+        dr_vec3 go = dr_madd(d_H, grad_lambda(a2, wo), -gs / (1.0 + lo));
+        go.z += d_cos_o - gs / wo.z;
+        *d_wo = dr_add(*d_wo, go);
+    }
+    if (d_wi) {
+        d_H.z += d_pdf * (1.0 - p) * DR_INV_PI;
+        *d_wi = dr_add(*d_wi, d_H);
+    }
+}
+
+/* --------------------------------------------------- sampling map adjoints */
+
+/* Adjoint of sample_vndf: given d_h = d loss / d h, adds d loss / d wo to
+ * *d_wo and d loss / d a to *d_a, walking the forward steps backwards with the
+ * intermediates in *t (p1, p2 and c depend on u only):
+ *   h = m / |m|, m = (a nh.x, a nh.y, max(0, nh.z))   d_m = (d_h - h (h.d_h)) / |m|
+ *   nh = p1 t1 + p2s t2 + n3 vh, n3 = sqrt(1 - p1^2 - p2s^2)
+ *   p2s = (1 - s) c + s p2, s = (1 + vh.z) / 2
+ *   t2 = vh x t1                                     d_vh += t1 x d_t2, d_t1 += d_t2 x vh
+ *   t1 = e / |e|, e = (-vh.y, vh.x, 0)
+ *   vh = v / |v|, v = (a wo.x, a wo.y, wo.z)
+ * Where the map is not differentiable the adjoint is that of the branch taken:
+ *  - t1 is the azimuthal frame around vh; at vh = n (wo along the normal) it
+ *    jumps to (1, 0, 0) and the sampled direction turns with wo's azimuth, so
+ *    the map itself is discontinuous there. Its derivative grows like
+ *    1 / sin(theta_v) towards that point (a property of Heitz's map, not of
+ *    the adjoint); exactly at it, the constant branch's zero.
+ *  - n3 has slope -p2s / n3, unbounded at the disk's rim (u1 -> 1) where
+ *    n3 -> 0; at n3 == 0 (u1 = 1, or rounding) the clamp's zero slope.
+ *  - max(0, nh.z) clamps only when h ends up horizontal, and then the
+ *    reflection lies below the surface and the sample is rejected. */
+static void d_sample_vndf(dr_vec3 wo, double a, const struct vndf_tape *t, dr_vec3 d_h, dr_vec3 *d_wo,
+                          double *d_a)
+{
+    double lm = dr_length(t->m);
+    if (!(lm > 0.0))
+        return;
+    dr_vec3 d_m = dr_scale(dr_sub(d_h, dr_scale(t->h, dr_dot(t->h, d_h))), 1.0 / lm);
+    *d_a += t->nh.x * d_m.x + t->nh.y * d_m.y;
+    dr_vec3 d_nh = dr_v3(a * d_m.x, a * d_m.y, t->nh.z > 0.0 ? d_m.z : 0.0);
+    dr_vec3 d_t1 = dr_scale(d_nh, t->p1), d_t2 = dr_scale(d_nh, t->p2s), d_vh = dr_scale(d_nh, t->n3);
+    double d_p2s = dr_dot(t->t2, d_nh);
+    if (t->n3 > 0.0)
+        d_p2s -= dr_dot(t->vh, d_nh) * (t->p2s / t->n3);
+    d_vh.z += 0.5 * d_p2s * (t->p2 - t->c);
+    d_vh = dr_add(d_vh, dr_cross(t->t1, d_t2));
+    d_t1 = dr_add(d_t1, dr_cross(d_t2, t->vh));
+    if (t->lensq > 0.0) {
+        dr_vec3 d_e = dr_scale(dr_sub(d_t1, dr_scale(t->t1, dr_dot(t->t1, d_t1))), 1.0 / sqrt(t->lensq));
+        d_vh.x += d_e.y;
+        d_vh.y -= d_e.x;
+    }
+    dr_vec3 d_v = dr_scale(dr_sub(d_vh, dr_scale(t->vh, dr_dot(t->vh, d_vh))), 1.0 / dr_length(t->v));
+    *d_a += wo.x * d_v.x + wo.y * d_v.y;
+    *d_wo = dr_add(*d_wo, dr_v3(a * d_v.x, a * d_v.y, d_v.z));
+}
+
+/* Reverse mode of dr_bsdf_sample_dir. The cosine map (u1, u2) -> wi involves
+ * neither the parameters nor wo: it contributes nothing. The specular map is
+ * wi = 2 (wo.h) h - wo with h = sample_vndf(wo, alpha): the reflection gives
+ *   d_h = 2 (wo.h) d_wi + 2 (h.d_wi) wo,   d_wo (direct) = 2 (h.d_wi) h - d_wi,
+ * then d_sample_vndf; d alpha / d roughness = 2 roughness above the floor. */
+void d_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lobe, double u1, double u2,
+                       dr_vec3 d_wi, struct dr_d_bsdf *d, dr_vec3 *d_wo)
+{
+    if (lobe != DR_BSDF_LOBE_SPECULAR || !(wo.z > COS_EPS))
+        return;
+    const double rough = b->roughness;
+    const bool at_floor = !(rough * rough > DR_BSDF_MIN_ALPHA);
+    if (!d_wo && (!d || at_floor))
+        return;
+    double a = bsdf_alpha(b);
+    struct vndf_tape t;
+    dr_vec3 h = sample_vndf(wo, a, u1, u2, &t);
+    double oh = dr_dot(wo, h), hd = dr_dot(h, d_wi);
+    dr_vec3 d_h = dr_add(dr_scale(d_wi, 2.0 * oh), dr_scale(wo, 2.0 * hd));
+    dr_vec3 g_wo = dr_sub(dr_scale(h, 2.0 * hd), d_wi);
+    double d_a = 0.0;
+    d_sample_vndf(wo, a, &t, d_h, &g_wo, &d_a);
+    if (d_wo)
+        *d_wo = dr_add(*d_wo, g_wo);
+    if (d && !at_floor)
+        d->roughness += d_a * (2.0 * rough);
+}
+
+/* ------------------------------------------------------------------ MIS */
+
+/* dr_mis_power computes w = 1 / (1 + r^2), r = pb / pa. With t = r / (1 + r^2)
+ * (so t^2 = w (1 - w)) and w = 1 / (1 + r^2):
+ *   dw/dpa = 2 w (1 - w) / pa = 2 t^2 / pa,   dw/dpb = -2 w (1 - w) / pb = -2 t w / pa,
+ * i.e. 2 pa pb^2 / (pa^2 + pb^2)^2 and its mirror, without forming 1 - w (it
+ * cancels for w near 1) and without squaring a huge ratio (t is formed as
+ * 1 / (r + 1/r) for r > 1). The primal's branches pa <= 0 (w = 0) and
+ * pb <= 0 (w = 1) are w's limits and its derivative vanishes towards them:
+ * zero there. */
+void d_mis_power(double pdf_a, double pdf_b, double d_w, double *d_pa, double *d_pb)
+{
+    if (!(pdf_a > 0.0) || !(pdf_b > 0.0))
+        return;
+    double r = pdf_b / pdf_a;
+    if (!isfinite(r))
+        return;
+    double t, w;
+    if (r > 1.0) {
+        t = 1.0 / (r + 1.0 / r);
+        w = t / r;
+    } else {
+        w = 1.0 / (1.0 + r * r);
+        t = r * w;
+    }
+    double k = 2.0 * d_w * t / pdf_a;
+    if (d_pa)
+        *d_pa += k * t;
+    if (d_pb)
+        *d_pb -= k * w;
 }

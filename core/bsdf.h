@@ -30,10 +30,14 @@ struct dr_bsdf {
     dr_vec3 specular_color;
 };
 
+/* The two lobes dr_bsdf_sample chooses between. */
+enum dr_bsdf_lobe { DR_BSDF_LOBE_DIFFUSE, DR_BSDF_LOBE_SPECULAR };
+
 struct dr_bsdf_sample {
     dr_vec3 wi;     /* sampled direction, local frame */
     dr_vec3 f;      /* BSDF value (without the cosine) */
     double pdf;     /* solid-angle pdf of wi, the same value dr_bsdf_pdf returns */
+    enum dr_bsdf_lobe lobe;  /* the lobe whose map produced wi (dr_bsdf_sample_dir) */
 };
 
 /* BSDF value f(wo, wi) (no cosine factor). */
@@ -52,6 +56,11 @@ bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u
 /* Probability of choosing the specular lobe for this wo (0 for a pure
  * Lambertian, 1 for a lobe with no diffuse part). */
 double dr_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo);
+/* The sampling map of one lobe: the direction dr_bsdf_sample returns for
+ * (u1, u2) once it has chosen `lobe` (bit for bit the same). The diffuse map
+ * ignores b and wo; the specular map needs wo.z > 0. The result may lie below
+ * the surface (dr_bsdf_sample then rejects it). */
+dr_vec3 dr_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lobe, double u1, double u2);
 
 /* Adjoint of the differentiable BSDF inputs (same field names as struct dr_bsdf). */
 struct dr_d_bsdf {
@@ -59,10 +68,35 @@ struct dr_d_bsdf {
     double metallic, roughness;
 };
 
-/* Reverse mode of dr_bsdf_eval: given d_out = d loss / d f (per channel),
- * accumulates (+=) d loss / d base_color, metallic, roughness into *d.
- * Zero where f is zero by construction (below the surface). The roughness
- * floor (DR_BSDF_MIN_ALPHA) has zero derivative below it. */
-void d_bsdf_eval(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out, struct dr_d_bsdf *d);
+/* Reverse-mode adjoints (redner style): each takes the primal's inputs and
+ * d loss / d output, and accumulates (+=) d loss / d input into every output
+ * pointer that is not NULL (NULL = not needed). Directions count as three
+ * independent components each, in the formula as written (the caller handles
+ * normalisation and frames). Where the primal is zero or rejected by
+ * construction (below the surface) the adjoints are zero and nothing is
+ * touched. The roughness floor (DR_BSDF_MIN_ALPHA) has zero derivative below
+ * it. The specular and specular_color inputs are not differentiated. */
+
+/* Reverse mode of dr_bsdf_eval: d_out = d loss / d f (per channel). The
+ * parameter part (*d) does not depend on whether d_wo, d_wi are requested. */
+void d_bsdf_eval(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out, struct dr_d_bsdf *d,
+                 dr_vec3 *d_wo, dr_vec3 *d_wi);
+/* Reverse mode of dr_bsdf_pdf, including the lobe-selection probability's
+ * dependence on the parameters and on wo. */
+void d_bsdf_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double d_pdf, struct dr_d_bsdf *d,
+                dr_vec3 *d_wo, dr_vec3 *d_wi);
+/* Reverse mode of dr_bsdf_specular_prob. */
+void d_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo, double d_p, struct dr_d_bsdf *d, dr_vec3 *d_wo);
+/* Reverse mode of dr_bsdf_sample_dir: d_wi = d loss / d wi. The lobe and
+ * (u1, u2) are constants. The diffuse map depends on nothing differentiable
+ * (zero); the specular map depends on roughness and wo. Zero for
+ * wo.z <= 0 (dr_bsdf_sample rejects the sample before mapping). */
+void d_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lobe, double u1, double u2,
+                       dr_vec3 d_wi, struct dr_d_bsdf *d, dr_vec3 *d_wo);
+
+/* Reverse mode of the MIS power heuristic w = pa^2 / (pa^2 + pb^2), as
+ * dr_mis_power (core/integrator.h) computes it. Lives here until it can move
+ * beside dr_mis_power. */
+void d_mis_power(double pdf_a, double pdf_b, double d_w, double *d_pa, double *d_pb);
 
 #endif

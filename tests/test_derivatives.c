@@ -147,7 +147,7 @@ static void check_bsdf_point(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr
 {
     struct dr_d_bsdf d;
     memset(&d, 0, sizeof d);
-    d_bsdf_eval(b, wo, wi, d_out, &d);
+    d_bsdf_eval(b, wo, wi, d_out, &d, NULL, NULL);
     CHECK(finite_d(&d), "non-finite adjoint: r %g m %g s %g", b->roughness, b->metallic, b->specular);
     dr_vec3 f = dr_bsdf_eval(b, wo, wi);
     double mag = fabs(d_out.x * f.x) + fabs(d_out.y * f.y) + fabs(d_out.z * f.z);
@@ -249,7 +249,7 @@ static void test_bsdf_floor(void)
                 check_bsdf_point(&b, wo, wi, d_out);
                 if (roughs[ir] * roughs[ir] <= DR_BSDF_MIN_ALPHA) {
                     struct dr_d_bsdf d = {dr_v3s(0.0), 0.0, 0.0};
-                    d_bsdf_eval(&b, wo, wi, d_out, &d);
+                    d_bsdf_eval(&b, wo, wi, d_out, &d, NULL, NULL);
                     CHECK(d.roughness == 0.0, "below the floor: d roughness %g at r %g", d.roughness,
                           roughs[ir]);
                 }
@@ -266,9 +266,9 @@ static void test_bsdf_accumulates(void)
         dr_vec3 wo = random_hemi(&r), wi = random_hemi(&r);
         dr_vec3 d_out = dr_v3(rng_next(&r), rng_next(&r), rng_next(&r));
         struct dr_d_bsdf d1 = {dr_v3s(0.0), 0.0, 0.0}, d2 = {dr_v3(1.0, 2.0, 3.0), 4.0, 5.0};
-        d_bsdf_eval(&b, wo, wi, d_out, &d1);
-        d_bsdf_eval(&b, wo, wi, d_out, &d2);
-        d_bsdf_eval(&b, wo, wi, d_out, &d2);
+        d_bsdf_eval(&b, wo, wi, d_out, &d1, NULL, NULL);
+        d_bsdf_eval(&b, wo, wi, d_out, &d2, NULL, NULL);
+        d_bsdf_eval(&b, wo, wi, d_out, &d2, NULL, NULL);
         double want[N_IN] = {1.0, 2.0, 3.0, 4.0, 5.0};
         for (int k = 0; k < N_IN; k++) {
             double one = d_in(&d1, k), two = d_in(&d2, k) - want[k];
@@ -278,9 +278,9 @@ static void test_bsdf_accumulates(void)
     /* Below the surface: f = 0 by construction, *d is untouched. */
     struct dr_bsdf b = make_bsdf(0.5, 0.5, 0.5, dr_v3s(0.5), dr_v3s(1.0));
     struct dr_d_bsdf d = {dr_v3(1.0, 2.0, 3.0), 4.0, 5.0};
-    d_bsdf_eval(&b, dr_v3(0.0, 0.6, -0.8), dr_v3(0.0, 0.0, 1.0), dr_v3s(1.0), &d);
-    d_bsdf_eval(&b, dr_v3(0.0, 0.0, 1.0), dr_v3(0.6, 0.0, -0.8), dr_v3s(1.0), &d);
-    d_bsdf_eval(&b, dr_v3(1.0, 0.0, 0.0), dr_v3(0.0, 0.0, 1.0), dr_v3s(1.0), &d);
+    d_bsdf_eval(&b, dr_v3(0.0, 0.6, -0.8), dr_v3(0.0, 0.0, 1.0), dr_v3s(1.0), &d, NULL, NULL);
+    d_bsdf_eval(&b, dr_v3(0.0, 0.0, 1.0), dr_v3(0.6, 0.0, -0.8), dr_v3s(1.0), &d, NULL, NULL);
+    d_bsdf_eval(&b, dr_v3(1.0, 0.0, 0.0), dr_v3(0.0, 0.0, 1.0), dr_v3s(1.0), &d, NULL, NULL);
     CHECK(d.base_color.x == 1.0 && d.base_color.y == 2.0 && d.base_color.z == 3.0 && d.metallic == 4.0 &&
               d.roughness == 5.0,
           "below the surface the adjoint must not change");
@@ -388,7 +388,7 @@ static void test_bsdf_hard_cases(void)
                                 else
                                     wi = dir_from(cosines[jc], 1.9);
                                 struct dr_d_bsdf d = {dr_v3s(0.0), 0.0, 0.0};
-                                d_bsdf_eval(&b, wo, wi, dr_v3(1.0, -0.5, 0.25), &d);
+                                d_bsdf_eval(&b, wo, wi, dr_v3(1.0, -0.5, 0.25), &d, NULL, NULL);
                                 dr_vec3 f = dr_bsdf_eval(&b, wo, wi);
                                 n++;
                                 CHECK(finite_d(&d) && finite3(f),
