@@ -622,35 +622,3 @@ void d_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lo
     if (d && !at_floor)
         d->roughness += d_a * (2.0 * rough);
 }
-
-/* ------------------------------------------------------------------ MIS */
-
-/* dr_mis_power computes w = 1 / (1 + r^2), r = pb / pa. With t = r / (1 + r^2)
- * (so t^2 = w (1 - w)) and w = 1 / (1 + r^2):
- *   dw/dpa = 2 w (1 - w) / pa = 2 t^2 / pa,   dw/dpb = -2 w (1 - w) / pb = -2 t w / pa,
- * i.e. 2 pa pb^2 / (pa^2 + pb^2)^2 and its mirror, without forming 1 - w (it
- * cancels for w near 1) and without squaring a huge ratio (t is formed as
- * 1 / (r + 1/r) for r > 1). The primal's branches pa <= 0 (w = 0) and
- * pb <= 0 (w = 1) are w's limits and its derivative vanishes towards them:
- * zero there. */
-void d_mis_power(double pdf_a, double pdf_b, double d_w, double *d_pa, double *d_pb)
-{
-    if (!(pdf_a > 0.0) || !(pdf_b > 0.0))
-        return;
-    double r = pdf_b / pdf_a;
-    if (!isfinite(r))
-        return;
-    double t, w;
-    if (r > 1.0) {
-        t = 1.0 / (r + 1.0 / r);
-        w = t / r;
-    } else {
-        w = 1.0 / (1.0 + r * r);
-        t = r * w;
-    }
-    double k = 2.0 * d_w * t / pdf_a;
-    if (d_pa)
-        *d_pa += k * t;
-    if (d_pb)
-        *d_pb -= k * w;
-}

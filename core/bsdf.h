@@ -94,9 +94,4 @@ void d_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo, double d_p, struc
 void d_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lobe, double u1, double u2,
                        dr_vec3 d_wi, struct dr_d_bsdf *d, dr_vec3 *d_wo);
 
-/* Reverse mode of the MIS power heuristic w = pa^2 / (pa^2 + pb^2), as
- * dr_mis_power (core/integrator.h) computes it. Lives here until it can move
- * beside dr_mis_power. */
-void d_mis_power(double pdf_a, double pdf_b, double d_w, double *d_pa, double *d_pb);
-
 #endif

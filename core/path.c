@@ -38,6 +38,38 @@ void dr_path_stages_describe(unsigned stages, char *buf, int size)
             n += snprintf(buf + n, (size_t)(size - n), "%s%s", n ? "," : "", names[i].name);
 }
 
+/* ------------------------------------------------------------------- MIS */
+
+/* dr_mis_power computes w = 1 / (1 + r^2), r = pb / pa. With t = r / (1 + r^2)
+ * (so t^2 = w (1 - w)) and w = 1 / (1 + r^2):
+ *   dw/dpa = 2 w (1 - w) / pa = 2 t^2 / pa,   dw/dpb = -2 w (1 - w) / pb = -2 t w / pa,
+ * i.e. 2 pa pb^2 / (pa^2 + pb^2)^2 and its mirror, without forming 1 - w (it
+ * cancels for w near 1) and without squaring a huge ratio (t is formed as
+ * 1 / (r + 1/r) for r > 1). The primal's branches pa <= 0 (w = 0) and
+ * pb <= 0 (w = 1) are w's limits and its derivative vanishes towards them:
+ * zero there. */
+void d_mis_power(double pdf_a, double pdf_b, double d_w, double *d_pa, double *d_pb)
+{
+    if (!(pdf_a > 0.0) || !(pdf_b > 0.0))
+        return;
+    double r = pdf_b / pdf_a;
+    if (!isfinite(r))
+        return;
+    double t, w;
+    if (r > 1.0) {
+        t = 1.0 / (r + 1.0 / r);
+        w = t / r;
+    } else {
+        w = 1.0 / (1.0 + r * r);
+        t = r * w;
+    }
+    double k = 2.0 * d_w * t / pdf_a;
+    if (d_pa)
+        *d_pa += k * t;
+    if (d_pb)
+        *d_pb -= k * w;
+}
+
 /* ---------------------------------------------------------------- stages */
 
 void dr_path_start(struct dr_path_state *st, dr_vec3 o, dr_vec3 d)
@@ -183,6 +215,7 @@ static bool stage_continue(const struct dr_path_opts *opts, struct dr_path_state
     v->wi = bs.wi;
     v->f = bs.f;
     v->pdf = bs.pdf;
+    v->lobe = bs.lobe;
     substitute_zero_channels(st, v);
     double cos_pdf = fabs(bs.wi.z) / bs.pdf;
     dr_vec3 beta = dr_mul(st->beta, dr_scale(v->s, cos_pdf));
@@ -259,7 +292,8 @@ static void vertex_term_part(const struct dr_scene *s, const struct dr_param_set
     if (v->nee) {
         if (v->diff_bsdf) {
             struct dr_d_bsdf db = {dr_v3s(0.0), 0.0, 0.0};
-            d_bsdf_eval(&v->bsdf, v->wo, v->nee_wi, dr_scale(dr_mul(d_e, v->ls.radiance), v->nee_scale), &db);
+            d_bsdf_eval(&v->bsdf, v->wo, v->nee_wi, dr_scale(dr_mul(d_e, v->ls.radiance), v->nee_scale), &db, NULL,
+                        NULL);
             d_material_eval(s, ps, &v->hit, &db, sink);
         }
         d_light_radiance(s, ps, &v->ls, dr_scale(dr_mul(d_e, v->nee_f), v->nee_scale), sink);
@@ -270,7 +304,7 @@ static void continuation_part(const struct dr_scene *s, const struct dr_param_se
                               const struct dr_path_vertex *v, dr_vec3 d_f, struct dr_grad_sink *sink)
 {
     struct dr_d_bsdf db = {dr_v3s(0.0), 0.0, 0.0};
-    d_bsdf_eval(&v->bsdf, v->wo, v->wi, d_f, &db);
+    d_bsdf_eval(&v->bsdf, v->wo, v->wi, d_f, &db, NULL, NULL);
     d_material_eval(s, ps, &v->hit, &db, sink);
 }
 

@@ -66,6 +66,8 @@ static inline double dr_mis_power(double pdf_a, double pdf_b)
     double r = pdf_b / pdf_a;   /* ratio form stays finite for huge densities */
     return 1.0 / (1.0 + r * r);
 }
+/* Reverse mode of dr_mis_power: d_w = d loss / d w into d_pa, d_pb (+=; NULL: not needed). */
+void d_mis_power(double pdf_a, double pdf_b, double d_w, double *d_pa, double *d_pb);
 
 /* The optional stages (bits of dr_path_opts.stages). */
 enum dr_path_stage {
@@ -126,6 +128,7 @@ struct dr_path_vertex {
     dr_vec3 wi;                /* local, sampled */
     dr_vec3 f;                 /* BSDF value along wi */
     double pdf;                /* its solid-angle density */
+    enum dr_bsdf_lobe lobe;    /* the lobe chosen (a discrete choice: stays detached) */
     double cos_pdf_q;          /* |cos| / pdf / (Russian roulette survival q) */
     dr_vec3 s;                 /* tracing factor: f, or the substitute where substituted */
     bool sub[3];               /* channel substituted here */

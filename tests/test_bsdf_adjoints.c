@@ -3,7 +3,7 @@
  *   a. d_bsdf_eval        (parameters and both directions) vs dr_bsdf_eval,
  *   b. d_bsdf_pdf         vs dr_bsdf_pdf; d_bsdf_specular_prob vs dr_bsdf_specular_prob,
  *   c. d_bsdf_sample_dir  vs dr_bsdf_sample_dir, both lobes,
- *   d. d_mis_power        vs dr_mis_power (core/integrator.h),
+ *   d. d_mis_power        vs dr_mis_power (core/path.h),
  *   e. the forward-mode identity: <d_out, J v> from a difference of the
  *      primal along a random v equals <adjoint, v>,
  *   f. bit-identity: d_bsdf_eval's parameter part equals the frozen version
@@ -20,7 +20,7 @@
 #include <string.h>
 
 #include "bsdf.h"
-#include "integrator.h"
+#include "path.h"
 #include "sampler.h"
 #include "test.h"
 
