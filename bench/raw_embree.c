@@ -3,6 +3,7 @@
  * geometry is identical), builds its own Embree BVH with the same flags,
  * and casts random rays (uniform origins in the bounding box, uniform
  * directions) with rtcIntersect1 on T threads. Prints one JSON object. */
+#include "clock.h"
 #include <embree3/rtcore.h>
 #include <pthread.h>
 #include <stdio.h>
@@ -55,12 +56,7 @@ static void *cast(void *arg)
     return NULL;
 }
 
-static double now(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec + 1e-9 * ts.tv_nsec;
-}
+static double now(void) { return dr_clock_seconds(); }
 
 int main(int argc, char **argv)
 {

@@ -461,6 +461,30 @@ static bool texref_active(const struct dr_param_set *set, const struct dr_scene 
     return t->texture >= 0 && set->image[s->textures[t->texture].image] >= 0;
 }
 
+/* Records parameter p in the per-object lookups the tracer reads. */
+static void index_param(struct dr_param_set *set, const struct dr_scene *s, const struct dr_param *p)
+{
+    switch (p->kind) {
+    case DR_PARAM_BASE_COLOR: set->mat_base_color[p->target] = p->offset; break;
+    case DR_PARAM_METALLIC: set->mat_metallic[p->target] = p->offset; break;
+    case DR_PARAM_ROUGHNESS: set->mat_roughness[p->target] = p->offset; break;
+    case DR_PARAM_EMISSIVE_FACTOR: set->mat_emissive_factor[p->target] = p->offset; break;
+    case DR_PARAM_EMISSIVE_STRENGTH: set->mat_emissive_strength[p->target] = p->offset; break;
+    case DR_PARAM_LIGHT_COLOR:
+    case DR_PARAM_LIGHT_INTENSITY:
+        for (int l = 0; l < s->n_lights; l++)
+            if (s->lights[l].gltf_index == p->target)
+                (p->kind == DR_PARAM_LIGHT_COLOR ? set->light_color : set->light_intensity)[l] = p->offset;
+        set->lights_active = true;
+        break;
+    case DR_PARAM_ENV_COLOR: set->env_color = p->offset; set->env_active = true; break;
+    case DR_PARAM_ENV_STRENGTH: set->env_strength = p->offset; set->env_active = true; break;
+    case DR_PARAM_ENV_MAP: set->env_map = p->offset; set->env_active = true; break;
+    case DR_PARAM_IMAGE: set->image[p->target] = p->offset; break;
+    default: break;
+    }
+}
+
 struct dr_param_set *dr_param_set_create(const struct dr_scene *s, const char *const *pointers, int n)
 {
     struct dr_param_set *set = calloc(1, sizeof *set);
@@ -509,25 +533,7 @@ struct dr_param_set *dr_param_set_create(const struct dr_scene *s, const char *c
         p.offset = total;
         total += p.size;
         set->params[set->n++] = p;
-        switch (p.kind) {
-        case DR_PARAM_BASE_COLOR: set->mat_base_color[p.target] = p.offset; break;
-        case DR_PARAM_METALLIC: set->mat_metallic[p.target] = p.offset; break;
-        case DR_PARAM_ROUGHNESS: set->mat_roughness[p.target] = p.offset; break;
-        case DR_PARAM_EMISSIVE_FACTOR: set->mat_emissive_factor[p.target] = p.offset; break;
-        case DR_PARAM_EMISSIVE_STRENGTH: set->mat_emissive_strength[p.target] = p.offset; break;
-        case DR_PARAM_LIGHT_COLOR:
-        case DR_PARAM_LIGHT_INTENSITY:
-            for (int l = 0; l < s->n_lights; l++)
-                if (s->lights[l].gltf_index == p.target)
-                    (p.kind == DR_PARAM_LIGHT_COLOR ? set->light_color : set->light_intensity)[l] = p.offset;
-            set->lights_active = true;
-            break;
-        case DR_PARAM_ENV_COLOR: set->env_color = p.offset; set->env_active = true; break;
-        case DR_PARAM_ENV_STRENGTH: set->env_strength = p.offset; set->env_active = true; break;
-        case DR_PARAM_ENV_MAP: set->env_map = p.offset; set->env_active = true; break;
-        case DR_PARAM_IMAGE: set->image[p.target] = p.offset; break;
-        default: break;
-        }
+        index_param(set, s, &p);
     }
     set->total = total;
     for (int m = 0; m < s->n_materials; m++) {
