@@ -8,6 +8,7 @@
 #include "error.h"
 #include "fdcheck.h"
 #include "grad_common.h"
+#include "mem_limits.h"
 #include "params.h"
 #include "scene.h"
 
@@ -107,6 +108,7 @@ static void print_json(const struct fdcheck_args *a, const char *scene_path, con
     FILE *f = stdout;
     fprintf(f, "{\"command\": \"fdcheck\", \"scene\": ");
     json_string(f, scene_path);
+    cli_json_memory_estimate(f);
     fprintf(f, ", \"estimator\": ");
     json_string(f, a->g.estimator->name);
     fprintf(f, ", \"sampling\": \"detached\", \"width\": %d, \"height\": %d, \"spp\": %d, \"batches\": %d, "
@@ -165,6 +167,8 @@ int cmd_fdcheck(int argc, char **argv)
     if ((rc = grad_load_scene(&a.g, &scene_path, &scene, &cam, 32, 32)) >= 0)
         goto out;
     if ((rc = grad_apply_sets(&a.g, scene)) >= 0 || (rc = grad_param_set(&a.g, scene, &ps)) >= 0)
+        goto out;
+    if ((rc = cli_limits_fdcheck(&a.g, scene, ps, a.batches)) >= 0)
         goto out;
     double t_loaded = cli_now();
     struct dr_fd_options o = {a.g.estimator, a.g.width, a.g.height, a.g.spp, a.batches, a.g.max_depth, 5,

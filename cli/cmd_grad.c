@@ -18,6 +18,7 @@
 #include "grad_common.h"
 #include "image.h"
 #include "image_io.h"
+#include "mem_limits.h"
 #include "loss.h"
 #include "params.h"
 #include "render.h"
@@ -428,6 +429,7 @@ static int run_forward(struct grad_args *a, const char *scene_path, const struct
         fprintf(f, ", \"total\": ");
         json_number(f, t_end - t_start);
         fprintf(f, "}, \"peak_memory_bytes\": %llu", (unsigned long long)cli_peak_rss_bytes());
+        cli_json_memory_estimate(f);
         if (strcmp(a->g.estimator->name, "tape") == 0)
             fprintf(f, ", \"tape_peak_bytes\": %llu", (unsigned long long)tape_peak);
         fprintf(f, ", ");
@@ -601,6 +603,7 @@ static int run_reverse(struct grad_args *a, const char *scene_path, const struct
         fprintf(f, ", \"total\": ");
         json_number(f, t_end - t_start);
         fprintf(f, "}, \"peak_memory_bytes\": %llu", (unsigned long long)cli_peak_rss_bytes());
+        cli_json_memory_estimate(f);
         if (strcmp(a->g.estimator->name, "tape") == 0)
             fprintf(f, ", \"tape_peak_bytes\": %llu", (unsigned long long)tape_peak);
         fprintf(f, ", ");
@@ -718,6 +721,8 @@ int cmd_grad(int argc, char **argv)
                               a.target ? timg.height : 0)) >= 0)
         goto out;
     if ((rc = grad_apply_sets(&a.g, scene)) >= 0 || (rc = grad_param_set(&a.g, scene, &ps)) >= 0)
+        goto out;
+    if ((rc = cli_limits_grad(&a.g, scene, ps, a.target != NULL, a.batches, a.batches_given, a.batch)) >= 0)
         goto out;
     double t_loaded = cli_now();
     if (a.target)

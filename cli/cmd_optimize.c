@@ -20,6 +20,7 @@
 #include "grad_common.h"
 #include "image_io.h"
 #include "loss.h"
+#include "mem_limits.h"
 #include "optimizer.h"
 #include "render.h"
 #include "sampler.h"
@@ -476,6 +477,18 @@ static int load_targets(struct opt_args *a)
     return -1;
 }
 
+/* Pixels of all targets, or of the largest (memory estimate). */
+static uint64_t target_pixels(const struct opt_args *a, bool largest)
+{
+    uint64_t sum = 0, max = 0;
+    for (int i = 0; i < a->n_targets; i++) {
+        uint64_t n = (uint64_t)a->targets[i].w * (uint64_t)a->targets[i].h;
+        sum += n;
+        max = n > max ? n : max;
+    }
+    return largest ? max : sum;
+}
+
 static uint64_t iteration_seed(uint64_t seed, int it, int target, uint64_t what)
 {
     return dr_hash64(dr_hash64(dr_hash64(seed ^ what) + (uint64_t)it) + (uint64_t)target);
@@ -519,6 +532,8 @@ int cmd_optimize(int argc, char **argv)
             goto out;
         }
     if ((rc = grad_param_set(&a.g, scene, &ps)) >= 0)
+        goto out;
+    if ((rc = cli_limits_optimize(&a.g, scene, ps, target_pixels(&a, false), target_pixels(&a, true))) >= 0)
         goto out;
     if (a.reference) {
         ref_scene = dr_scene_load(a.reference);
@@ -767,7 +782,9 @@ int cmd_optimize(int argc, char **argv)
         json_number(stdout, cli_now() - t_start);
         printf(", \"estimator\": ");
         json_string(stdout, a.g.estimator->name);
-        printf(", \"peak_memory_bytes\": %llu, \"output\": ", (unsigned long long)cli_peak_rss_bytes());
+        printf(", \"peak_memory_bytes\": %llu", (unsigned long long)cli_peak_rss_bytes());
+        cli_json_memory_estimate(stdout);
+        printf(", \"output\": ");
         if (a.output)
             json_string(stdout, a.output);
         else

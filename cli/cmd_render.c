@@ -8,6 +8,7 @@
 #include "cli.h"
 #include "error.h"
 #include "image_io.h"
+#include "mem_limits.h"
 #include "render.h"
 #include "scene.h"
 
@@ -127,6 +128,7 @@ static void print_json(const struct render_args *a, const char *scene_path, cons
     FILE *f = stdout;
     fprintf(f, "{\"command\": \"render\", \"scene\": ");
     json_string(f, scene_path);
+    cli_json_memory_estimate(f);
     fprintf(f, ", \"output\": ");
     json_string(f, a->output);
     fprintf(f, ", \"width\": %d, \"height\": %d, \"spp\": %d, \"max_depth\": %d, \"seed\": %llu, \"threads\": %d",
@@ -205,6 +207,8 @@ int cmd_render(int argc, char **argv)
             a.width = 1;
     }
 
+    if ((rc = cli_limits_render(scene, a.width, a.height, a.threads)) >= 0)
+        goto out;
     rgb = malloc(sizeof(float) * 3 * (size_t)a.width * (size_t)a.height);
     if (!rgb) {
         cli_error("render", "out of memory for a %dx%d image", a.width, a.height);

@@ -3,6 +3,7 @@
 #include <string.h>
 
 #include "cli.h"
+#include "mem_limits.h"
 
 int cmd_render(int argc, char **argv);
 void cmd_render_usage(FILE *out);
@@ -98,5 +99,6 @@ int main(int argc, char **argv)
         cli_error(NULL, "'%s' is not a drender command (see 'drender help')", name);
         return DR_EXIT_USAGE;
     }
+    cli_limits_init();
     return c->run(argc - 1, argv + 1);
 }

@@ -166,11 +166,19 @@ static void fmt_bytes(double b, char *buf, size_t size)
         snprintf(buf, size, "%.1f %s", b, units[u]);
 }
 
-static int check(const char *cmd, const struct need *n, const char *images_opt, const char *tape_opt,
-                 uint64_t *estimate)
+static uint64_t last_estimate;
+
+uint64_t cli_mem_estimate(void) { return last_estimate; }
+
+void cli_json_memory_estimate(FILE *f)
+{
+    fprintf(f, ", \"memory_estimate_bytes\": %llu", (unsigned long long)last_estimate);
+}
+
+static int check(const char *cmd, const struct need *n, const char *images_opt, const char *tape_opt)
 {
     double total = n->images + n->grads + n->tape + n->batches + n->scene;
-    *estimate = total >= 1.8e19 ? UINT64_MAX : (uint64_t)total;
+    last_estimate = total >= 1.8e19 ? UINT64_MAX : (uint64_t)total;
     uint64_t limit = cli_mem_limit();
     if (total <= (double)limit)
         return -1;
@@ -197,20 +205,19 @@ static int check(const char *cmd, const struct need *n, const char *images_opt, 
     fmt_bytes(total, need_s, sizeof need_s);
     fmt_bytes((double)limit, limit_s, sizeof limit_s);
     fmt_bytes(part, part_s, sizeof part_s);
-    cli_error(cmd, "this request needs about %s of memory but drender may use %s (%s): %s of it come%s from %s",
-              need_s, limit_s, getenv("DRENDER_MEM_LIMIT") ? "DRENDER_MEM_LIMIT" : "the machine's memory", part_s,
-              part_s[0] == '1' && part_s[1] == ' ' ? "s" : "", what);
+    cli_error(cmd, "this request needs about %s of memory (%s for %s), more than the %s drender may use (%s)",
+              need_s, part_s, what, limit_s, getenv("DRENDER_MEM_LIMIT") ? "DRENDER_MEM_LIMIT" : "the machine's memory");
     return DR_EXIT_USAGE;
 }
 
-int cli_limits_render(const struct dr_scene *scene, int width, int height, int threads, uint64_t *estimate)
+int cli_limits_render(const struct dr_scene *scene, int width, int height, int threads)
 {
     (void)threads;   /* per-thread tiles are small */
     const double npix = (double)width * height;
     struct need n = {0};
     n.images = 2.0 * npix * 3 * sizeof(float);   /* the image, and its encoded copy while writing */
     n.scene = (double)cli_mem_scene(scene);
-    return check("render", &n, "--res", "--max-depth", estimate);
+    return check("render", &n, "--res", "--max-depth");
 }
 
 /* Tape: every vertex of every path of a batch, at most max_depth per path. */
@@ -222,9 +229,9 @@ static double tape_bytes(const struct grad_common *g, double paths_per_batch)
 }
 
 int cli_limits_grad(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *ps,
-                    bool reverse, int batches, int64_t batch, uint64_t *estimate)
+                    bool reverse, int batches, bool batches_given, int64_t batch)
 {
-    if (reverse && batches > g->spp) {
+    if (reverse && batches_given && batches > g->spp) {
         cli_error("grad", "--batches %d exceeds --spp %d: every batch needs at least one sample per pixel", batches,
                   g->spp);
         return DR_EXIT_USAGE;
@@ -247,12 +254,11 @@ int cli_limits_grad(const struct grad_common *g, const struct dr_scene *scene, c
         double paths = npix * g->spp;
         n.tape = tape_bytes(g, batch > 0 ? fmin((double)batch, paths) : npix);
     }
-    return check("grad", &n, "--res", "--max-depth x --batch (tape records every vertex of a batch: lower them, or --estimator prb)",
-                 estimate);
+    return check("grad", &n, "--res", "--max-depth x --batch (tape records every vertex of a batch: lower them, or --estimator prb)");
 }
 
 int cli_limits_fdcheck(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *ps,
-                       int batches, uint64_t *estimate)
+                       int batches)
 {
     const double npix = (double)g->width * g->height, T = ps ? (double)ps->total : 0.0;
     const int threads = thread_count(g->threads);
@@ -263,14 +269,12 @@ int cli_limits_fdcheck(const struct grad_common *g, const struct dr_scene *scene
     n.grads = T * 5 * sizeof(double) + T * 2 * sizeof(double) * threads;
     n.batches = (double)batches * T * sizeof(double);
     n.tape = tape_bytes(g, npix);
-    return check("fdcheck", &n, "--res", "--max-depth (tape records every vertex of a batch; or --estimator prb)",
-                 estimate);
+    return check("fdcheck", &n, "--res", "--max-depth (tape records every vertex of a batch; or --estimator prb)");
 }
 
 int cli_limits_optimize(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *ps,
-                        int n_targets, uint64_t target_pixels, uint64_t max_pixels, uint64_t *estimate)
+                        uint64_t target_pixels, uint64_t max_pixels)
 {
-    (void)n_targets;
     const double T = ps ? (double)ps->total : 0.0;
     const int threads = thread_count(g->threads);
     struct need n = {0};
@@ -281,5 +285,5 @@ int cli_limits_optimize(const struct grad_common *g, const struct dr_scene *scen
     n.grads = T * 9 * sizeof(double) + T * 2 * sizeof(double) * threads;
     n.tape = tape_bytes(g, (double)max_pixels);
     return check("optimize", &n, "--target (the images' size)",
-                 "--max-depth (tape records every vertex of a batch; or --estimator prb)", estimate);
+                 "--max-depth (tape records every vertex of a batch; or --estimator prb)");
 }

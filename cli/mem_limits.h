@@ -12,6 +12,7 @@
 
 #include <stdbool.h>
 #include <stdint.h>
+#include <stdio.h>
 
 struct dr_scene;
 struct dr_param_set;
@@ -36,15 +37,20 @@ uint64_t cli_mem_scene(const struct dr_scene *scene);
  * the tape estimator's memory: paths x max-depth x this, an upper bound. */
 #define CLI_TAPE_RECORD_BYTES 704u
 
-int cli_limits_render(const struct dr_scene *scene, int width, int height, int threads, uint64_t *estimate);
-/* grad: reverse (with --target) or forward mode; batches K, --batch paths. */
+int cli_limits_render(const struct dr_scene *scene, int width, int height, int threads);
+/* grad: reverse (with --target) or forward mode; K batches (refused when
+ * batches_given and K > --spp), --batch paths (tape). */
 int cli_limits_grad(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *ps,
-                    bool reverse, int batches, int64_t batch, uint64_t *estimate);
+                    bool reverse, int batches, bool batches_given, int64_t batch);
 int cli_limits_fdcheck(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *ps,
-                       int batches, uint64_t *estimate);
-/* optimize: n_targets target images of target_pixels pixels in all, the
- * largest max_pixels (the render size of the --res check is the target's). */
+                       int batches);
+/* optimize: the targets' pixels in all and the largest target's. */
 int cli_limits_optimize(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *ps,
-                        int n_targets, uint64_t target_pixels, uint64_t max_pixels, uint64_t *estimate);
+                        uint64_t target_pixels, uint64_t max_pixels);
+
+/* The estimate of the last cli_limits_* call, in bytes (0 before any). */
+uint64_t cli_mem_estimate(void);
+/* Writes ', "memory_estimate_bytes": N' into a JSON object being printed. */
+void cli_json_memory_estimate(FILE *f);
 
 #endif
