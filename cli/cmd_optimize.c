@@ -24,6 +24,7 @@
 #include "optimizer.h"
 #include "render.h"
 #include "sampler.h"
+#include "stale_temps.h"
 
 #define MAX_TARGETS 64
 
@@ -597,6 +598,7 @@ int cmd_optimize(int argc, char **argv)
         rc = DR_EXIT_FAILURE;
         goto out;
     }
+    cli_remove_stale_temps(a.out_dir, a.output);   /* left by a killed run */
     /* -o may point into the progress directory just created */
     if (a.output && !cli_output_dir_writable("optimize", a.output)) {
         unmake_dirs(a.out_dir, made_from);
