@@ -75,7 +75,7 @@ void cmd_grad_usage(FILE *out)
             "      --threads T     worker threads (default: one per CPU)\n"
             "      --batch N       tape: paths recorded per backward sweep (default 0: one\n"
             "                      sample of every pixel); bounds the tape's memory\n"
-            "      --json          print a summary object on stdout\n"
+            "      --json          print a summary object on stdout (memory estimate included)\n"
             "  -h, --help          show this help\n");
 }
 

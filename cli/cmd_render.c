@@ -37,7 +37,7 @@ void cmd_render_usage(FILE *out)
             "                      image for any --threads\n"
             "      --threads T     worker threads (default: one per CPU)\n"
             "      --json          print a summary object on stdout (timings, rays,\n"
-            "                      peak memory, effects simulated)\n"
+            "                      peak memory, memory estimate, effects simulated)\n"
             "  -h, --help          show this help\n");
 }
 

@@ -48,7 +48,9 @@ static void main_usage(FILE *out)
     for (const struct dr_command *c = dr_commands; c->name; c++)
         fprintf(out, "  %-10s %s\n", c->name, c->summary);
     fprintf(out, "\n'drender help COMMAND' or 'drender COMMAND --help' describes one command;\n"
-                 "'man drender' has the whole manual.\n");
+                 "'man drender' has the whole manual.\n"
+                 "\nA request that would need more memory than the machine has (or than\n"
+                 "$DRENDER_MEM_LIMIT, e.g. 8G) is refused before it starts (exit 2).\n");
 }
 
 static void cmd_help_usage(FILE *out)
