@@ -149,9 +149,13 @@ int read_opened(ImageInput *in, const std::string &label, dr_image *img)
         dr_set_error("%s: cannot read image: image too large", label.c_str());
         return DR_ERR_FORMAT;
     }
-    // Data plus the linear copy a colour texture gets: refused from the header,
+    // Data plus the linear copy a colour texture gets, plus the scratch buffer
+    // OpenImageIO 2.4's read_image converts through: 256 scanlines in the
+    // file's own format, however few the image has (a 55-byte BMP claiming a
+    // width of 3.6 million made it allocate 2.7 GB). Refused from the header,
     // before the decoder or we allocate pixel memory.
-    double need = 2.0 * (double)w * (double)h * nch * sizeof(float);
+    double need = 2.0 * (double)w * (double)h * nch * sizeof(float) +
+                  256.0 * (double)w * (double)spec.pixel_bytes(true);
     unsigned long long limit = max_image_bytes();
     if (limit > 0 && need > (double)limit) {
         dr_set_error("%s: cannot read image: %dx%d with %d channels needs %.1f MiB decoded, more than the "

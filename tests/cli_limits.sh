@@ -81,6 +81,11 @@ mkdir "$tmp/hugetex"
 cp "$data/gltf/basic.gltf" "$data/gltf/basic.bin" "$data/gltf/mr.png" "$tmp/hugetex/"
 cp "$tmp/huge.png" "$tmp/hugetex/checker.png"
 refused 3 "basic.gltf|/images/0|999999x999999|more than the" render "$tmp/hugetex/basic.gltf" -o r.exr
+# found by make fuzz: a 55-byte BMP claiming 3604481x5 pixels made OpenImageIO
+# allocate 256 scanlines (2.7 GB) to convert it; the estimate counts that too
+tail -c +2 "$cli_root/fuzz/corpus/image/regress-bmp-bogus-bpp" >"$tmp/bogus.bmp"
+DRENDER_MEM_LIMIT=1G refused 3 "--target|bogus.bmp|3604481x5|more than the" grad "$scene" --target "$tmp/bogus.bmp" \
+    --param $P
 # a texture that fits the machine but not DRENDER_MEM_LIMIT
 huge_png "$tmp/hugetex/checker.png" 2000
 DRENDER_MEM_LIMIT=32M refused 3 "/images/0|2000x2000|32.0 MiB" params "$tmp/hugetex/basic.gltf"
