@@ -1,5 +1,6 @@
 # drender — GNU Makefile. `make` builds ./build/drender, `make test` runs every
-# test, `make bench` the benchmarks, `make sanitize` the tests under ASan/UBSan.
+# test, `make bench` the benchmarks, `make sanitize` the tests under ASan/UBSan,
+# `make fuzz` the libFuzzer targets of fuzz/ (clang; FUZZ_SECONDS each).
 # Missing Debian packages are installed by scripts/install-deps.sh first.
 
 PREFIX  ?= /usr/local
@@ -36,7 +37,7 @@ TEST_BIN := $(TEST_C:tests/%.c=$(BUILD)/tests/%)
 BENCH_BIN:= $(BENCH_C:bench/%.c=$(BUILD)/bench/%)
 LIB      := $(BUILD)/libdrender.a
 
-.PHONY: all deps demo test bench sanitize install clean
+.PHONY: all deps fuzz-deps demo test bench sanitize fuzz fuzz-build install clean
 all: deps $(BUILD)/drender
 
 # Installs missing system packages (fast no-op when all are present).
@@ -59,6 +60,10 @@ $(BUILD)/drender: $(CLI_OBJ) $(LIB)
 
 $(BUILD)/tests/%: $(BUILD)/tests/%.o $(LIB)
 	$(CC) $(LDFLAGS) $< $(LIB) $(LDLIBS) -o $@
+# the fuzz corpus replay of the option parsers (tests/test_fuzz_cli.c) links cli/'s parsers
+$(BUILD)/tests/test_fuzz_cli: $(BUILD)/tests/test_fuzz_cli.o $(BUILD)/cli/cli_util.o $(BUILD)/cli/grad_common.o \
+		$(BUILD)/cli/mem_limits.o $(LIB)
+	$(CC) $(LDFLAGS) $^ $(LDLIBS) -o $@
 $(BUILD)/bench/%: $(BUILD)/bench/%.o $(LIB)
 	$(CC) $(LDFLAGS) $< $(LIB) $(LDLIBS) -o $@
 
@@ -69,6 +74,41 @@ test: deps $(BUILD)/drender $(TEST_BIN)
 sanitize:
 	ASAN_OPTIONS=fast_unwind_on_malloc=0 LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp \
 		$(MAKE) test BUILD=build-san SAN=1
+
+# ---- fuzzing (clang + libFuzzer; not needed by `make test`) ----
+# Every core file plus the option parsers of cli/ is rebuilt with clang under
+# -fsanitize=fuzzer-no-link,address,undefined into build-fuzz/, and tinygltf is
+# compiled from its header (fuzz/tinygltf_impl.cpp) so that its parser is
+# instrumented too (the shared libtinygltf is not). OpenImageIO, libpng & co.
+# stay the uninstrumented system libraries. `make fuzz` runs each target for
+# FUZZ_SECONDS from fuzz/corpus/TARGET (new inputs go to build-fuzz/corpus/).
+FUZZ_SECONDS ?= 60
+FUZZ_TARGETS ?= gltf checkpoint cli image
+FUZZ_BUILD   := build-fuzz
+FUZZ_CC      ?= clang
+FUZZ_CXX     ?= clang++
+FUZZ_SAN     := -fsanitize=address,undefined -fno-sanitize-recover=undefined
+FUZZ_CFLAGS  := -O1 -g -fno-omit-frame-pointer $(FUZZ_SAN) -fsanitize=fuzzer-no-link $(WARN)
+FUZZ_CLI_C   := cli/cli_util.c cli/grad_common.c cli/mem_limits.c
+FUZZ_OBJ     := $(CORE_C:%.c=$(FUZZ_BUILD)/%.o) $(CORE_CXX:%.cpp=$(FUZZ_BUILD)/%.o) \
+                $(FUZZ_CLI_C:%.c=$(FUZZ_BUILD)/%.o) $(FUZZ_BUILD)/fuzz/tinygltf_impl.o
+FUZZ_BIN     := $(FUZZ_TARGETS:%=$(FUZZ_BUILD)/fuzz_%)
+FUZZ_LIBS    := $(filter-out -ltinygltf,$(LDLIBS)) -lstb
+
+fuzz-deps:
+	@scripts/install-deps.sh --fuzz
+$(FUZZ_BUILD)/%.o: %.c | fuzz-deps
+	@mkdir -p $(dir $@)
+	$(FUZZ_CC) $(CPPFLAGS) -Icli -std=c11 -D_GNU_SOURCE -pthread $(FUZZ_CFLAGS) -DDR_FUZZ_DATA='"$(CURDIR)/tests/data"' -c $< -o $@
+$(FUZZ_BUILD)/%.o: %.cpp | fuzz-deps
+	@mkdir -p $(dir $@)
+	$(FUZZ_CXX) $(CPPFLAGS) -std=c++17 -pthread $(FUZZ_CFLAGS) $(shell pkg-config --cflags $(PKGS) 2>/dev/null) -c $< -o $@
+$(FUZZ_BUILD)/fuzz_%: $(FUZZ_BUILD)/fuzz/fuzz_%.o $(FUZZ_OBJ)
+	$(FUZZ_CXX) -fsanitize=fuzzer $(FUZZ_SAN) $^ $(FUZZ_LIBS) -o $@
+
+fuzz-build: $(FUZZ_BIN)
+fuzz: fuzz-build
+	FUZZ_SECONDS=$(FUZZ_SECONDS) FUZZ_BUILD=$(FUZZ_BUILD) fuzz/run.sh $(FUZZ_TARGETS)
 
 bench: deps $(BUILD)/drender $(BENCH_BIN)
 	BUILD=$(BUILD) bench/run.sh
@@ -88,9 +128,9 @@ install: all
 		$(DESTDIR)$(PREFIX)/share/drender/scenes/
 
 clean:
-	rm -rf build build-san
+	rm -rf build build-san build-fuzz
 
--include $(shell find $(BUILD) -name '*.d' 2>/dev/null)
+-include $(shell find $(BUILD) $(FUZZ_BUILD) -name '*.d' 2>/dev/null)
 
 # keep test/bench objects (chained implicit rules would delete them)
 .SECONDARY:

@@ -8,6 +8,7 @@
 #include "error.h"
 #include "fdcheck.h"
 #include "grad_common.h"
+#include "mem_limits.h"
 #include "params.h"
 #include "scene.h"
 
@@ -97,6 +98,7 @@ static void print_json(const struct fdcheck_args *a, const char *scene_path, con
     FILE *f = stdout;
     fprintf(f, "{");
     grad_json_head(f, &a->g, scene_path);
+    cli_json_memory_estimate(f);
     fprintf(f, ", \"batches\": %d, \"eps\": ", a->batches);
     json_number(f, a->eps);
     fprintf(f, ", \"z_max\": ");
@@ -151,6 +153,8 @@ int cmd_fdcheck(int argc, char **argv)
     if ((rc = grad_load_scene(&a.g, &scene_path, &scene, &cam, 32, 32)) >= 0)
         goto out;
     if ((rc = grad_apply_sets(&a.g, scene)) >= 0 || (rc = grad_param_set(&a.g, scene, &ps)) >= 0)
+        goto out;
+    if ((rc = cli_limits_fdcheck(&a.g, scene, ps, a.batches)) >= 0)
         goto out;
     double t_loaded = dr_clock_seconds();
     struct dr_fd_options o = {.estimator = a.g.estimator, .sampling = a.g.sampling, .width = a.g.width,

@@ -18,6 +18,7 @@
 #include "grad_common.h"
 #include "image.h"
 #include "image_io.h"
+#include "mem_limits.h"
 #include "loss.h"
 #include "params.h"
 #include "render.h"
@@ -75,7 +76,7 @@ void cmd_grad_usage(FILE *out)
             "      --threads T     worker threads (default: one per CPU)\n"
             "      --batch N       tape: paths recorded per backward sweep (default 0: one\n"
             "                      sample of every pixel); bounds the tape's memory\n"
-            "      --json          print a summary object on stdout\n"
+            "      --json          print a summary object on stdout (memory estimate included)\n"
             "  -h, --help          show this help\n");
 }
 
@@ -259,6 +260,7 @@ static void json_open(FILE *f, const struct grad_args *a, const char *scene_path
 {
     fprintf(f, "{");
     grad_json_head(f, &a->g, scene_path);
+    cli_json_memory_estimate(f);
     fprintf(f, ", \"mode\": \"%s\", ", mode);
     grad_json_run(f, t);
 }
@@ -729,6 +731,8 @@ int cmd_grad(int argc, char **argv)
                               a.target ? timg.height : 0)) >= 0)
         goto out;
     if ((rc = grad_apply_sets(&a.g, scene)) >= 0 || (rc = grad_param_set(&a.g, scene, &ps)) >= 0)
+        goto out;
+    if ((rc = cli_limits_grad(&a.g, scene, ps, a.target != NULL, a.batches, a.batches_given, a.batch)) >= 0)
         goto out;
     double t_loaded = dr_clock_seconds();
     if (a.target)

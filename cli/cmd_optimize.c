@@ -20,9 +20,11 @@
 #include "grad_common.h"
 #include "image_io.h"
 #include "loss.h"
+#include "mem_limits.h"
 #include "optimizer.h"
 #include "render.h"
 #include "sampler.h"
+#include "stale_temps.h"
 
 #define MAX_TARGETS 64
 
@@ -466,6 +468,18 @@ static int load_targets(struct opt_args *a)
     return -1;
 }
 
+/* Pixels of all targets, or of the largest (memory estimate). */
+static uint64_t target_pixels(const struct opt_args *a, bool largest)
+{
+    uint64_t sum = 0, max = 0;
+    for (int i = 0; i < a->n_targets; i++) {
+        uint64_t n = (uint64_t)a->targets[i].w * (uint64_t)a->targets[i].h;
+        sum += n;
+        max = n > max ? n : max;
+    }
+    return largest ? max : sum;
+}
+
 static uint64_t iteration_seed(uint64_t seed, int it, int target, uint64_t what)
 {
     return dr_hash64(dr_hash64(dr_hash64(seed ^ what) + (uint64_t)it) + (uint64_t)target);
@@ -526,7 +540,8 @@ static int opt_load(struct opt_args *a, struct opt_run *r)
                       a->targets[i].camera, r->scene_path, r->scene->n_cameras, r->scene->n_cameras == 1 ? "" : "s");
             return DR_EXIT_USAGE;
         }
-    if ((rc = grad_param_set(&a->g, r->scene, &r->ps)) >= 0)
+    if ((rc = grad_param_set(&a->g, r->scene, &r->ps)) >= 0 ||
+        (rc = cli_limits_optimize(&a->g, r->scene, r->ps, target_pixels(a, false), target_pixels(a, true))) >= 0)
         return rc;
     if (a->reference && (rc = load_reference(a, r)) >= 0)
         return rc;
@@ -582,6 +597,7 @@ static int opt_open_outputs(const struct opt_args *a, struct opt_run *r)
         unmake_dirs(a->out_dir, made_from);
         return DR_EXIT_FAILURE;
     }
+    cli_remove_stale_temps(a->out_dir, a->output);   /* left by a killed run */
     /* -o may point into the progress directory just created */
     if (a->output && !cli_output_dir_writable("optimize", a->output)) {
         unmake_dirs(a->out_dir, made_from);
@@ -776,7 +792,9 @@ static void opt_summary_json(const struct opt_args *a, const struct opt_run *r)
     json_string(stdout, a->g.estimator->name);
     printf(", \"sampling\": ");
     json_string(stdout, dr_sampling_name(a->g.sampling));
-    printf(", \"peak_memory_bytes\": %llu, \"output\": ", (unsigned long long)cli_peak_rss_bytes());
+    printf(", \"peak_memory_bytes\": %llu", (unsigned long long)cli_peak_rss_bytes());
+    cli_json_memory_estimate(stdout);
+    printf(", \"output\": ");
     if (a->output)
         json_string(stdout, a->output);
     else

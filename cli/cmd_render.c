@@ -9,6 +9,7 @@
 #include "cli.h"
 #include "error.h"
 #include "image_io.h"
+#include "mem_limits.h"
 #include "render.h"
 #include "scene.h"
 
@@ -38,7 +39,7 @@ void cmd_render_usage(FILE *out)
             "                      image for any --threads\n"
             "      --threads T     worker threads (default: one per CPU)\n"
             "      --json          print a summary object on stdout (timings, rays,\n"
-            "                      peak memory, effects simulated)\n"
+            "                      peak memory, memory estimate, effects simulated)\n"
             "  -h, --help          show this help\n");
 }
 
@@ -76,6 +77,7 @@ static void print_json(const struct render_args *a, const char *scene_path, cons
     FILE *f = stdout;
     fprintf(f, "{\"command\": \"render\", \"scene\": ");
     json_string(f, scene_path);
+    cli_json_memory_estimate(f);
     fprintf(f, ", \"output\": ");
     json_string(f, a->output);
     const struct grad_common *g = &a->g;
@@ -134,6 +136,8 @@ int cmd_render(int argc, char **argv)
         goto out;
     double t_loaded = dr_clock_seconds();
     const int w = a.g.width, h = a.g.height;
+    if ((rc = cli_limits_render(scene, w, h, a.g.threads)) >= 0)
+        goto out;
     rgb = malloc(sizeof(float) * 3 * (size_t)w * (size_t)h);
     if (!rgb) {
         cli_error("render", "out of memory for a %dx%d image", w, h);

@@ -3,6 +3,7 @@
 #include <string.h>
 
 #include "cli.h"
+#include "mem_limits.h"
 
 int cmd_render(int argc, char **argv);
 void cmd_render_usage(FILE *out);
@@ -47,7 +48,9 @@ static void main_usage(FILE *out)
     for (const struct dr_command *c = dr_commands; c->name; c++)
         fprintf(out, "  %-10s %s\n", c->name, c->summary);
     fprintf(out, "\n'drender help COMMAND' or 'drender COMMAND --help' describes one command;\n"
-                 "'man drender' has the whole manual.\n");
+                 "'man drender' has the whole manual.\n"
+                 "\nA request that would need more memory than the machine has (or than\n"
+                 "$DRENDER_MEM_LIMIT, e.g. 8G) is refused before it starts (exit 2).\n");
 }
 
 static void cmd_help_usage(FILE *out)
@@ -98,5 +101,6 @@ int main(int argc, char **argv)
         cli_error(NULL, "'%s' is not a drender command (see 'drender help')", name);
         return DR_EXIT_USAGE;
     }
+    cli_limits_init();
     return c->run(argc - 1, argv + 1);
 }

@@ -21,6 +21,7 @@
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 
+#include <atomic>
 #include <cerrno>
 #include <cmath>
 #include <cstdint>
@@ -39,6 +40,19 @@
 using namespace OIIO;
 
 namespace {
+
+// The limit of dr_image_set_max_bytes; until it is called, the physical memory.
+std::atomic<unsigned long long> g_max_image_bytes{0};
+std::atomic<bool> g_max_image_set{false};
+
+unsigned long long max_image_bytes()
+{
+    if (!g_max_image_set.load()) {
+        long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGESIZE);
+        return pages > 0 && page > 0 ? (unsigned long long)pages * (unsigned long long)page : 0;
+    }
+    return g_max_image_bytes.load();
+}
 
 // One line, no trailing newline: OIIO messages sometimes end with '\n'.
 std::string clean(std::string s)
@@ -134,6 +148,21 @@ int read_opened(ImageInput *in, const std::string &label, dr_image *img)
     if (w > SIZE_MAX / sizeof(float) / 4 / h) {
         dr_set_error("%s: cannot read image: image too large", label.c_str());
         return DR_ERR_FORMAT;
+    }
+    // Data plus the linear copy a colour texture gets, plus the scratch buffer
+    // OpenImageIO 2.4's read_image converts through: 256 scanlines in the
+    // file's own format, however few the image has (a 55-byte BMP claiming a
+    // width of 3.6 million made it allocate 2.7 GB). Refused from the header,
+    // before the decoder or we allocate pixel memory.
+    double need = 2.0 * (double)w * (double)h * nch * sizeof(float) +
+                  256.0 * (double)w * (double)spec.pixel_bytes(true);
+    unsigned long long limit = max_image_bytes();
+    if (limit > 0 && need > (double)limit) {
+        dr_set_error("%s: cannot read image: %dx%d with %d channels needs %.1f MiB decoded, more than the "
+                     "%.1f MiB of memory drender may use",
+                     label.c_str(), spec.width, spec.height, nch, need / 1048576.0,
+                     (double)limit / 1048576.0);
+        return DR_ERR_NOMEM;
     }
     float *data = (float *)std::malloc(w * h * (size_t)nch * sizeof(float));
     if (!data) {
@@ -482,6 +511,12 @@ extern "C" int dr_image_read_memory(const void *bytes, size_t size, const char *
         dr_set_error("%s: cannot read image: unexpected error", label);
         return DR_ERR_INTERNAL;
     }
+}
+
+extern "C" void dr_image_set_max_bytes(unsigned long long bytes)
+{
+    g_max_image_bytes.store(bytes);
+    g_max_image_set.store(true);
 }
 
 extern "C" bool dr_image_can_write(const char *path)

@@ -20,6 +20,13 @@ int dr_image_read(const char *path, struct dr_image *img);
 int dr_image_read_memory(const void *bytes, size_t size, const char *name_hint,
                          struct dr_image *img);
 
+/* Largest decoded image dr_image_read* accept, in bytes of float pixels plus
+ * their linear copy (width x height x channels x 4 x 2); a larger image is
+ * refused from its header, before any pixel memory is allocated, with
+ * DR_ERR_NOMEM and a message naming the image and its size. 0 = no limit.
+ * Default: the machine's physical memory. */
+void dr_image_set_max_bytes(unsigned long long bytes);
+
 /* True when OpenImageIO can write this file name's format. */
 bool dr_image_can_write(const char *path);
 

@@ -1,6 +1,7 @@
 #include "optimizer.h"
 
 #include <errno.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -194,6 +195,26 @@ int dr_checkpoint_read(const char *path, const struct dr_param_set *ps, double *
     if (!ok) {
         dr_set_error("%s: not a valid drender checkpoint (or truncated)", path);
         return DR_ERR_FORMAT;
+    }
+    /* A well-formed file can still hold a state no run reaches: a negative
+     * iteration (optimize indexes its history with it), Adam constants out of
+     * range, non-finite or out-of-range values, a negative second moment. */
+    if (it < 0 || t < 0 || !(a->beta1 >= 0.0 && a->beta1 < 1.0) || !(a->beta2 >= 0.0 && a->beta2 < 1.0) ||
+        !(a->eps > 0.0 && isfinite(a->eps))) {
+        dr_set_error("%s: not a valid drender checkpoint: iteration %lld, adam %lld %g %g %g out of range", path, it,
+                     t, a->beta1, a->beta2, a->eps);
+        return DR_ERR_FORMAT;
+    }
+    for (int k = 0; k < ps->n; k++) {
+        const struct dr_param *p = &ps->params[k];
+        for (int64_t i = p->offset; i < p->offset + p->size; i++)
+            if (!(theta[i] >= a->lo[i] && theta[i] <= a->hi[i]) || !isfinite(a->m[i]) || !isfinite(a->v[i]) ||
+                a->v[i] < 0.0) {
+                dr_set_error("%s: not a valid drender checkpoint: %s value %lld is %g (range [%g, %g]), m %g, v %g",
+                             path, p->name, (long long)(i - p->offset), theta[i], a->lo[i], a->hi[i], a->m[i],
+                             a->v[i]);
+                return DR_ERR_FORMAT;
+            }
     }
     a->t = t;
     *iteration = it;

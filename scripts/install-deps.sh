@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Installs the Debian packages drender needs to build, test and benchmark.
 # Only what is missing is installed; uses sudo when not root. Idempotent.
+# With --fuzz, only the fuzzing toolchain of `make fuzz` (clang, libFuzzer and
+# the sanitizer runtimes) is checked; `make test` never needs it.
 set -euo pipefail
 
 pkgs=(build-essential pkg-config
@@ -11,6 +13,8 @@ pkgs=(build-essential pkg-config
 # on PATH will do (e.g. NodeSource's nodejs, which bundles npm and conflicts with
 # Debian's npm), so Debian's packages are added only when there is none.
 command -v node >/dev/null 2>&1 || pkgs+=(nodejs npm)
+# `make fuzz`: Debian 12's clang 14 ships libFuzzer in libclang-rt-14-dev.
+[ "${1:-}" = "--fuzz" ] && pkgs=(clang libclang-rt-14-dev)
 
 missing=()
 for p in "${pkgs[@]}"; do
