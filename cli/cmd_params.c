@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "cli.h"
+#include "grad_common.h"
 #include "error.h"
 #include "params.h"
 #include "scene.h"
@@ -27,7 +28,6 @@ void cmd_params_usage(FILE *out)
             "  -h, --help          show this help\n");
 }
 
-enum { OPT_JSON = 256 };
 
 static bool is_material(const struct dr_param *p)
 {
@@ -108,41 +108,27 @@ static void print_json_param(FILE *f, const struct dr_scene *s, const struct dr_
     fputc('}', f);
 }
 
+static int no_own_option(void *ctx, int c, const char *arg)
+{
+    (void)ctx, (void)c, (void)arg;
+    return -1;
+}
+
 int cmd_params(int argc, char **argv)
 {
     static const struct option opts[] = {
-        {"json", no_argument, NULL, OPT_JSON},
+        {"json", no_argument, NULL, GOPT_JSON},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
-    bool json = false;
-    opterr = 0;
-    optind = 1;
-    int c;
-    while ((c = getopt_long(argc, argv, ":h", opts, NULL)) != -1) {
-        switch (c) {
-        case 'h': cmd_params_usage(stdout); return DR_EXIT_OK;
-        case OPT_JSON: json = true; break;
-        case ':':
-            cli_error("params", "option '%s' needs a value", argv[optind - 1]);
-            return DR_EXIT_USAGE;
-        default:
-            if (optopt > 0 && optopt < 256 && optopt != 'h')
-                cli_error("params", "unknown option '-%c' (see 'drender params --help')", optopt);
-            else if (optopt != 0)
-                cli_error("params", "option '%s' does not take a value", argv[optind - 1]);
-            else
-                cli_error("params", "unknown option '%s' (see 'drender params --help')", argv[optind - 1]);
-            return DR_EXIT_USAGE;
-        }
-    }
-    const char *scene_arg = NULL;
-    if (optind < argc)
-        scene_arg = argv[optind++];
-    if (optind < argc) {
-        cli_error("params", "unexpected argument '%s' (one scene at a time)", argv[optind]);
-        return DR_EXIT_USAGE;
-    }
+    struct grad_common g;
+    grad_common_init(&g, "params", 1);
+    int prc = grad_parse_args(&g, argc, argv, opts, "", no_own_option, NULL, cmd_params_usage);
+    const bool json = g.json;
+    const char *scene_arg = g.scene_arg;
+    grad_common_free(&g);
+    if (prc >= 0)
+        return prc;
     char *scene_path = scene_arg ? strdup(scene_arg) : cli_find_bundled_scene(DEFAULT_SCENE);
     if (!scene_path) {
         cli_error("params", "no SCENE given and the bundled %s was not found (set DRENDER_DATA)", DEFAULT_SCENE);
