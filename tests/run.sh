@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Runs every test: the compiled unit tests (build/tests/test_*) and the
 # command-line tests (tests/cli_*.sh), one process each, and closes with
-# "N passed, N failed". Exit status is non-zero if any failed or none ran.
+# "N passed, N failed". TESTS="name ..." limits the run to those tests. Exit status is non-zero if any failed or none ran.
 set -u
 build=${BUILD:-build}
 cd "$(dirname "$0")/.."
@@ -13,6 +13,8 @@ for t in "$build"/tests/test_* tests/cli_*.sh; do
     [ -f "$t" ] || continue
     case "$t" in *.sh) ;; *) [ -x "$t" ] || continue ;; esac   # skip build/tests/*.o, *.d
     name=$(basename "$t")
+    # TESTS="test_a cli_b" runs only the named tests (for quick iteration)
+    if [ -n "${TESTS:-}" ]; then case " $TESTS " in *" ${name%.sh} "*|*" $name "*) ;; *) continue ;; esac; fi
     start=$EPOCHREALTIME
     if [ "${t%.sh}" != "$t" ]; then bash "$t" >"$log_dir/$name.log" 2>&1; else "$t" >"$log_dir/$name.log" 2>&1; fi
     rc=$?
