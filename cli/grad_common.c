@@ -321,10 +321,10 @@ static int apply_set(const char *cmd, struct dr_scene *scene, const char *spec)
         cli_error(cmd, "--set %s: images cannot be set from the command line", ptr);
         return DR_EXIT_USAGE;
     }
-    double v[3];
-    int n = 0;
+    double v[4];
+    int n = 0;   /* counts every value given, so the message says how many */
     const char *s = eq + 1;
-    while (*s && n < 4) {
+    while (*s) {
         char *end;
         errno = 0;
         double x = strtod(s, &end);
@@ -332,7 +332,7 @@ static int apply_set(const char *cmd, struct dr_scene *scene, const char *spec)
             cli_error(cmd, "--set %s: '%s' is not a list of numbers", ptr, eq + 1);
             return DR_EXIT_USAGE;
         }
-        if (n < 3)
+        if (n < 4)
             v[n] = x;
         n++;
         s = *end ? end + 1 : end;

@@ -225,7 +225,7 @@ static double tape_bytes(const struct grad_common *g, double paths_per_batch)
 {
     if (!g->estimator || strcmp(g->estimator->name, "tape") != 0)
         return 0.0;
-    return paths_per_batch * ((double)g->max_depth * CLI_TAPE_RECORD_BYTES + 64.0);
+    return paths_per_batch * ((double)g->max_depth * (double)dr_tape_vertex_bytes() + 64.0);
 }
 
 int cli_limits_grad(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *ps,

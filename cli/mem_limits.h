@@ -33,9 +33,6 @@ void cli_limits_init(void);
  * environment map, the acceleration structure (approximate). */
 uint64_t cli_mem_scene(const struct dr_scene *scene);
 
-/* Bytes of one tape record (a path vertex and its throughput), the unit of
- * the tape estimator's memory: paths x max-depth x this, an upper bound. */
-#define CLI_TAPE_RECORD_BYTES 704u
 
 int cli_limits_render(const struct dr_scene *scene, int width, int height, int threads);
 /* grad: reverse (with --target) or forward mode; K batches (refused when

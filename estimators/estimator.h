@@ -61,6 +61,11 @@ struct dr_estimator_ops {
 
 extern const struct dr_estimator_ops *const dr_estimators[];   /* NULL-terminated */
 const struct dr_estimator_ops *dr_estimator_find(const char *name);
+
+/* Bytes the tape estimator records per path vertex (its record plus the path's
+ * share is bounded by this); the CLI's memory estimate uses it so that the
+ * estimate follows the record when the record changes. */
+size_t dr_tape_vertex_bytes(void);
 bool dr_estimator_supports(const struct dr_estimator_ops *e, enum dr_sampling s);
 
 /* Forward mode: d_image (width * height * 3 doubles) = d I / d theta . dir,

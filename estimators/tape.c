@@ -17,6 +17,11 @@ struct tape_vertex {
     dr_vec3 bt;        /* true throughput arriving at the vertex */
 };
 
+size_t dr_tape_vertex_bytes(void)
+{
+    return sizeof(struct tape_vertex);
+}
+
 struct tape_path {
     int64_t pixel;
     int64_t first;     /* index of its first vertex */

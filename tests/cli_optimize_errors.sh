@@ -69,6 +69,7 @@ expect_fail 2 "--param|/materials/wall/doubleSided|nearest valid names" \
 expect_fail 2 "--param is required" "$scene" --target "$T" "${fast[@]}"
 expect_fail 2 "--set|2 values given|has 3" "$scene" --target "$T" --param "$P" --set "$P=0.5,0.5" "${fast[@]}"
 expect_fail 2 "--set|4 values given|has 3" "$scene" --target "$T" --param "$P" --set "$P=0.5,0.5,0.5,0.5" "${fast[@]}"
+expect_fail 2 "--set|6 values given|has 3" "$scene" --target "$T" --param "$P" --set "$P=0.5,0.5,0.5,0.5,0.5,0.5" "${fast[@]}"
 expect_fail 2 "--set|1.5|outside|[0, 1]" "$scene" --target "$T" --param "$P" --set "$P=0.5,0.5,1.5" "${fast[@]}"
 expect_fail 2 "--set|-0.1|outside" "$scene" --target "$T" --param "$R" --set "$R=-0.1" "${fast[@]}"
 expect_fail 2 "--set|not a list of numbers" "$scene" --target "$T" --param "$P" --set "$P=0.5,0.5,nan" "${fast[@]}"
