@@ -18,15 +18,21 @@ OPT     := -O1 -g -fno-omit-frame-pointer -fsanitize=address,undefined -fno-sani
 endif
 
 WARN     := -Wall -Wextra -Wpedantic
-CPPFLAGS += -Icore -Iestimators -Idrivers -MMD -MP -DDR_DATADIR='"$(PREFIX)/share/drender"'
+CPPFLAGS += -Icore -Iestimators -Idrivers -MMD -MP -DDR_DATADIR='"$(PREFIX)/share/drender"' -DDR_LIBDIR='"$(PREFIX)/lib/drender"'
 # -fno-math-errno lets sqrt compile to one instruction; results are unchanged.
 CFLAGS   += -std=c11 -D_GNU_SOURCE $(OPT) $(WARN) -pthread -fno-math-errno
 CXXFLAGS += -std=c++17 $(OPT) $(WARN) -pthread $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
-LDLIBS   += $(shell pkg-config --libs $(PKGS) 2>/dev/null) -ltinygltf -lembree3 -lstdc++ -lm -pthread
+# The drender binary does not link OpenImageIO: it loads $(PLUGIN) on first use
+# (core/image_plugin.h says why). Tests, bench and fuzz programs link the
+# image objects directly.
+HOST_LIBS := -ltinygltf -lembree3 -lstdc++ -lm -pthread -ldl
+IMG_LIBS  := $(shell pkg-config --libs $(PKGS) 2>/dev/null)
+LDLIBS   += $(IMG_LIBS) $(HOST_LIBS)
 LDFLAGS  += $(OPT)
 
 CORE_C   := $(wildcard core/*.c estimators/*.c drivers/*.c)
-CORE_CXX := $(wildcard core/*.cpp)
+IMG_CXX  := core/image_io.cpp core/vis.cpp
+CORE_CXX := $(filter-out $(IMG_CXX),$(wildcard core/*.cpp))
 CLI_C    := $(wildcard cli/*.c)
 TEST_C   := $(wildcard tests/test_*.c)
 BENCH_C  := $(wildcard bench/*.c)
@@ -36,9 +42,11 @@ CLI_OBJ  := $(CLI_C:%.c=$(BUILD)/%.o)
 TEST_BIN := $(TEST_C:tests/%.c=$(BUILD)/tests/%)
 BENCH_BIN:= $(BENCH_C:bench/%.c=$(BUILD)/bench/%)
 LIB      := $(BUILD)/libdrender.a
+IMG_OBJ  := $(IMG_CXX:%.cpp=$(BUILD)/%.o)
+PLUGIN   := $(BUILD)/libdrender-image.so
 
 .PHONY: all deps fuzz-deps demo test bench sanitize fuzz fuzz-build install clean
-all: deps $(BUILD)/drender
+all: deps $(BUILD)/drender $(PLUGIN)
 
 # Installs missing system packages (fast no-op when all are present).
 deps:
@@ -55,17 +63,21 @@ $(LIB): $(CORE_OBJ)
 	@rm -f $@
 	$(AR) rcs $@ $^
 
-$(BUILD)/drender: $(CLI_OBJ) $(LIB)
-	$(CC) $(LDFLAGS) $(CLI_OBJ) $(LIB) $(LDLIBS) -o $@
+# -rdynamic: the plugin calls back into the binary (dr_set_error, dr_image_release).
+$(BUILD)/drender: $(CLI_OBJ) $(LIB) | $(PLUGIN)
+	$(CC) $(LDFLAGS) -rdynamic $(CLI_OBJ) $(LIB) $(HOST_LIBS) -o $@
+$(IMG_OBJ): CXXFLAGS += -fPIC
+$(PLUGIN): $(IMG_OBJ)
+	$(CXX) $(LDFLAGS) -shared $^ $(IMG_LIBS) -o $@
 
-$(BUILD)/tests/%: $(BUILD)/tests/%.o $(LIB)
-	$(CC) $(LDFLAGS) $< $(LIB) $(LDLIBS) -o $@
+$(BUILD)/tests/%: $(BUILD)/tests/%.o $(LIB) $(IMG_OBJ)
+	$(CC) $(LDFLAGS) $< $(IMG_OBJ) $(LIB) $(LDLIBS) -o $@
 # the fuzz corpus replay of the option parsers (tests/test_fuzz_cli.c) links cli/'s parsers
 $(BUILD)/tests/test_fuzz_cli: $(BUILD)/tests/test_fuzz_cli.o $(BUILD)/cli/cli_util.o $(BUILD)/cli/grad_common.o \
-		$(BUILD)/cli/mem_limits.o $(LIB)
+		$(BUILD)/cli/mem_limits.o $(IMG_OBJ) $(LIB)
 	$(CC) $(LDFLAGS) $^ $(LDLIBS) -o $@
-$(BUILD)/bench/%: $(BUILD)/bench/%.o $(LIB)
-	$(CC) $(LDFLAGS) $< $(LIB) $(LDLIBS) -o $@
+$(BUILD)/bench/%: $(BUILD)/bench/%.o $(LIB) $(IMG_OBJ)
+	$(CC) $(LDFLAGS) $< $(IMG_OBJ) $(LIB) $(LDLIBS) -o $@
 
 test: deps $(BUILD)/drender $(TEST_BIN)
 	BUILD=$(BUILD) tests/run.sh
@@ -90,7 +102,7 @@ FUZZ_CXX     ?= clang++
 FUZZ_SAN     := -fsanitize=address,undefined -fno-sanitize-recover=undefined
 FUZZ_CFLAGS  := -O1 -g -fno-omit-frame-pointer $(FUZZ_SAN) -fsanitize=fuzzer-no-link $(WARN)
 FUZZ_CLI_C   := cli/cli_util.c cli/grad_common.c cli/mem_limits.c
-FUZZ_OBJ     := $(CORE_C:%.c=$(FUZZ_BUILD)/%.o) $(CORE_CXX:%.cpp=$(FUZZ_BUILD)/%.o) \
+FUZZ_OBJ     := $(CORE_C:%.c=$(FUZZ_BUILD)/%.o) $(CORE_CXX:%.cpp=$(FUZZ_BUILD)/%.o) $(IMG_CXX:%.cpp=$(FUZZ_BUILD)/%.o) \
                 $(FUZZ_CLI_C:%.c=$(FUZZ_BUILD)/%.o) $(FUZZ_BUILD)/fuzz/tinygltf_impl.o
 FUZZ_BIN     := $(FUZZ_TARGETS:%=$(FUZZ_BUILD)/fuzz_%)
 FUZZ_LIBS    := $(filter-out -ltinygltf,$(LDLIBS)) -lstb
@@ -122,7 +134,9 @@ demo: all
 
 install: all
 	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/share/man/man1 $(DESTDIR)$(PREFIX)/share/drender/scenes
+	install -d $(DESTDIR)$(PREFIX)/lib/drender
 	install -m 755 $(BUILD)/drender $(DESTDIR)$(PREFIX)/bin/drender
+	install -m 644 $(PLUGIN) $(DESTDIR)$(PREFIX)/lib/drender/
 	install -m 644 man/drender.1 $(DESTDIR)$(PREFIX)/share/man/man1/drender.1
 	install -m 644 scenes/cornell-box.gltf scenes/cornell-box.bin scenes/cornell-box-checker.png \
 		$(DESTDIR)$(PREFIX)/share/drender/scenes/

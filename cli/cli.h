@@ -51,6 +51,12 @@ char *cli_find_bundled_scene(const char *name);
  * error naming the file. */
 bool cli_output_dir_writable(const char *cmd, const char *path);
 
+/* Start-up accounting: main() calls cli_mark_start() first thing;
+ * cli_seconds_since_start() is the time since the process was created
+ * (exec, dynamic linking and all; 10 ms resolution for the part before main). */
+void cli_mark_start(void);
+double cli_seconds_since_start(void);
+
 /* Peak resident memory of this process, bytes. */
 uint64_t cli_peak_rss_bytes(void);
 

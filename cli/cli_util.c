@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include "cli.h"
+#include "clock.h"
 
 #ifndef DR_DATADIR
 #define DR_DATADIR "/usr/local/share/drender"
@@ -127,6 +128,43 @@ bool cli_output_dir_writable(const char *cmd, const char *path)
         return false;
     }
     return true;
+}
+
+/* Process age at main(), from the kernel's start time (clock ticks since
+ * boot, so 1/CLK_TCK resolution, 10 ms here), and the monotonic clock then. */
+static double age_at_main, clock_at_main;
+
+static double process_age_seconds(void)
+{
+    char buf[1024];
+    FILE *f = fopen("/proc/self/stat", "r");
+    size_t n = f ? fread(buf, 1, sizeof buf - 1, f) : 0;
+    if (f)
+        fclose(f);
+    buf[n] = '\0';
+    const char *p = strrchr(buf, ')');   /* the command name may hold spaces */
+    if (!p)
+        return 0.0;
+    unsigned long long start = 0;
+    /* after ")" come fields 3, 4, ...; starttime is field 22 */
+    if (sscanf(p + 1, " %*s %*s %*s %*s %*s %*s %*s %*s %*s %*s %*s %*s %*s %*s %*s %*s %*s %*s %*s %llu",
+               &start) != 1)
+        return 0.0;
+    struct timespec now;
+    clock_gettime(CLOCK_BOOTTIME, &now);
+    double age = (double)now.tv_sec + 1e-9 * (double)now.tv_nsec - (double)start / (double)sysconf(_SC_CLK_TCK);
+    return age > 0.0 ? age : 0.0;
+}
+
+void cli_mark_start(void)
+{
+    age_at_main = process_age_seconds();
+    clock_at_main = dr_clock_seconds();
+}
+
+double cli_seconds_since_start(void)
+{
+    return age_at_main + (dr_clock_seconds() - clock_at_main);
 }
 
 uint64_t cli_peak_rss_bytes(void)

@@ -220,6 +220,10 @@ static int check_args(struct grad_args *a)
                               "(--vis FILE.png draws a picture of it)", a->output);
             return DR_EXIT_USAGE;
         }
+        if (!dr_image_library_ok()) {
+            cli_error("grad", "%s", dr_last_error());
+            return DR_EXIT_FAILURE;
+        }
         if (!dr_image_can_write(a->output)) {
             cli_error("grad", "-o %s: OpenImageIO cannot write this format", a->output);
             return DR_EXIT_USAGE;

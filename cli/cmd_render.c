@@ -68,8 +68,8 @@ static int parse_args(int argc, char **argv, struct render_args *a)
 }
 
 static void print_json(const struct render_args *a, const char *scene_path, const struct dr_scene *scene,
-                       const char *camera_name, const struct dr_render_stats *st, double t_load, double t_write,
-                       double t_total)
+                       const char *camera_name, const struct dr_render_stats *st, double t_startup, double t_load,
+                       double t_write, double t_total)
 {
     uint64_t total = st->rays.camera + st->rays.extension + st->rays.shadow;
     char fx[256];
@@ -87,7 +87,9 @@ static void print_json(const struct render_args *a, const char *scene_path, cons
     fprintf(f, ", \"camera\": ");
     json_string(f, camera_name);
     fprintf(f, ", \"triangles\": %u", scene->mesh.n_triangles);
-    fprintf(f, ", \"time\": {\"load\": ");
+    fprintf(f, ", \"time\": {\"startup\": ");
+    json_number(f, t_startup);
+    fprintf(f, ", \"load\": ");
     json_number(f, t_load);
     fprintf(f, ", \"render\": ");
     json_number(f, st->seconds);
@@ -120,13 +122,11 @@ int cmd_render(int argc, char **argv)
     int rc = parse_args(argc, argv, &a);
     if (rc >= 0)
         goto out;
-    /* Everything the user can get wrong in the options is checked before any work. */
-    if (!dr_image_can_write(a.output)) {
-        cli_error("render", "-o %s: OpenImageIO cannot write this format (use e.g. .exr, .hdr, .png, .jpg)",
-                  a.output);
-        rc = DR_EXIT_USAGE;
-        goto out;
-    }
+    /* Everything the user can get wrong is checked before rendering. The
+     * output format is checked after the scene is loaded, so that loading the
+     * image library (started in main) overlaps loading the scene; for the
+     * common formats the check does not wait for it at all, and the first ray
+     * is traced while it loads. */
     if (!cli_output_dir_writable("render", a.output)) {
         rc = DR_EXIT_FAILURE;
         goto out;
@@ -134,6 +134,17 @@ int cmd_render(int argc, char **argv)
     struct dr_camera cam;
     if ((rc = grad_load_scene(&a.g, &scene_path, &scene, &cam, 0, 0)) >= 0)
         goto out;
+    if (!dr_image_can_write(a.output) && !dr_image_library_ok()) {
+        cli_error("render", "%s", dr_last_error());
+        rc = DR_EXIT_FAILURE;
+        goto out;
+    }
+    if (!dr_image_can_write(a.output)) {
+        cli_error("render", "-o %s: OpenImageIO cannot write this format (use e.g. .exr, .hdr, .png, .jpg)",
+                  a.output);
+        rc = DR_EXIT_USAGE;
+        goto out;
+    }
     double t_loaded = dr_clock_seconds();
     const int w = a.g.width, h = a.g.height;
     if ((rc = cli_limits_render(scene, w, h, a.g.threads)) >= 0)
@@ -146,6 +157,7 @@ int cmd_render(int argc, char **argv)
     }
     struct dr_render_opts ro = grad_render_opts(&a.g, w, h, a.g.spp, a.g.seed, isatty(2) != 0);
     struct dr_render_stats st;
+    const double t_startup = cli_seconds_since_start();   /* to the first ray */
     if (dr_render(scene, &cam, &ro, rgb, &st) != 0) {
         cli_error("render", "%s", dr_last_error());
         rc = DR_EXIT_FAILURE;
@@ -162,7 +174,7 @@ int cmd_render(int argc, char **argv)
     }
     double t_end = dr_clock_seconds();
     if (a.g.json)
-        print_json(&a, scene_path, scene, cam.name, &st, t_loaded - t_start, t_end - t_w0, t_end - t_start);
+        print_json(&a, scene_path, scene, cam.name, &st, t_startup, t_loaded - t_start, t_end - t_w0, t_end - t_start);
     rc = DR_EXIT_OK;
 out:
     free(rgb);

@@ -14,6 +14,7 @@
 //    "oiio:UnassociatedAlpha" on both sides so values round-trip as given.
 
 #include "image_io.h"
+#include "image_plugin.h"
 
 #include "error.h"
 #include "image.h"
@@ -457,7 +458,7 @@ int write_image(const char *path, int width, int height, int channels, const flo
 
 }   // namespace
 
-extern "C" int dr_image_read(const char *path, struct dr_image *img)
+static int plugin_read(const char *path, struct dr_image *img)
 {
     if (!img)
         return DR_ERR_ARG;
@@ -486,7 +487,7 @@ extern "C" int dr_image_read(const char *path, struct dr_image *img)
     }
 }
 
-extern "C" int dr_image_read_memory(const void *bytes, size_t size, const char *name_hint,
+static int plugin_read_memory(const void *bytes, size_t size, const char *name_hint,
                                     struct dr_image *img)
 {
     if (!img)
@@ -513,13 +514,13 @@ extern "C" int dr_image_read_memory(const void *bytes, size_t size, const char *
     }
 }
 
-extern "C" void dr_image_set_max_bytes(unsigned long long bytes)
+static void plugin_set_max_bytes(unsigned long long bytes)
 {
     g_max_image_bytes.store(bytes);
     g_max_image_set.store(true);
 }
 
-extern "C" bool dr_image_can_write(const char *path)
+static bool plugin_can_write(const char *path)
 {
     if (!path || !*path)
         return false;
@@ -533,13 +534,7 @@ extern "C" bool dr_image_can_write(const char *path)
     }
 }
 
-extern "C" int dr_image_write(const char *path, int width, int height, int channels,
-                              const float *pixels)
-{
-    return dr_image_write_encoded(path, width, height, channels, pixels, true);
-}
-
-extern "C" int dr_image_write_encoded(const char *path, int width, int height, int channels,
+static int plugin_write_encoded(const char *path, int width, int height, int channels,
                                       const float *pixels, bool srgb_encode)
 {
     if (!path || !*path) {
@@ -558,4 +553,15 @@ extern "C" int dr_image_write_encoded(const char *path, int width, int height, i
         dr_set_error("%s: cannot write image: unexpected error", path);
         return DR_ERR_INTERNAL;
     }
+}
+
+// The plugin's entry point: image_plugin.c finds this with dlsym (or, when
+// this file is linked in directly, through a weak reference).
+extern "C" const struct dr_image_plugin *dr_image_plugin_table(void)
+{
+    static const struct dr_image_plugin table = {
+        DR_IMAGE_PLUGIN_VERSION, plugin_read,          plugin_read_memory,    plugin_set_max_bytes,
+        plugin_can_write,        plugin_write_encoded, drp_colormap_diverging,
+    };
+    return &table;
 }

@@ -27,6 +27,11 @@ int dr_image_read_memory(const void *bytes, size_t size, const char *name_hint,
  * Default: the machine's physical memory. */
 void dr_image_set_max_bytes(unsigned long long bytes);
 
+/* Loads the image library (core/image_plugin.h) if it is not loaded yet;
+ * false, with dr_last_error naming where it looked, when it cannot be loaded
+ * (an installation problem, not a problem of the user's file). */
+bool dr_image_library_ok(void);
+
 /* True when OpenImageIO can write this file name's format. */
 bool dr_image_can_write(const char *path);
 

@@ -6,6 +6,7 @@
 // blue. Nothing here throws across the C boundary.
 
 #include "vis.h"
+#include "image_plugin.h"
 
 #include "error.h"
 #include "image.h"
@@ -31,7 +32,7 @@ const unsigned char rdbu_reversed[11][3] = {
 
 }  // namespace
 
-extern "C" int dr_colormap_diverging(const float *t, int width, int height, float *rgb)
+extern "C" int drp_colormap_diverging(const float *t, int width, int height, float *rgb)
 {
     try {
         float knots[11 * 3];

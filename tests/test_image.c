@@ -14,6 +14,7 @@
 #include "error.h"
 #include "image.h"
 #include "image_io.h"
+#include "image_plugin.h"
 #include "test.h"
 
 #if defined(__SANITIZE_ADDRESS__)
@@ -634,6 +635,15 @@ static void test_errors(void)
     CHECK(dr_image_can_write("out.png"), "can_write .png");
     CHECK(dr_image_can_write("out.exr"), "can_write .exr");
     CHECK(dr_image_can_write("dir/out.JPG"), "can_write .JPG");
+    CHECK(!dr_image_can_write("dir.png/noextension"), "can_write: a dot in the directory is no extension");
+    CHECK(!dr_image_can_write(".png"), "can_write: a hidden file name is no extension");
+    /* The formats answered without loading the library must be ones the
+     * library really writes (core/image_plugin.c). */
+    for (int i = 0; dr_image_common_write_formats[i]; i++) {
+        char name[64];
+        snprintf(name, sizeof name, "out.%s", dr_image_common_write_formats[i]);
+        CHECK(dr_image_plugin_table()->can_write(name), "OpenImageIO cannot write %s", name);
+    }
 
     /* Reading a missing file. */
     path_in_tmp(path, sizeof path, "missing.png");

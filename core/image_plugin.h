@@ -1,0 +1,58 @@
+/* The image library as a plugin.
+ *
+ * OpenImageIO links about 260 shared libraries; resolving them costs a process
+ * about 0.23 s before main() runs, which every `drender --help`, every failed
+ * option check and every batch-script call paid. So image_io.cpp and vis.cpp
+ * (the only code that touches OpenImageIO) are built into
+ * libdrender-image.so, and the functions of image_io.h / vis.h are small
+ * trampolines (image_plugin.c) that load it on first use, or earlier in the
+ * background (dr_image_library_preload) so that loading overlaps scene
+ * parsing and BVH building instead of delaying the first ray.
+ *
+ * Programs that link image_io.o and vis.o directly (tests, fuzz targets) get
+ * the table through the weak symbol below and never dlopen anything. */
+#ifndef DR_IMAGE_PLUGIN_H
+#define DR_IMAGE_PLUGIN_H
+
+#include <stdbool.h>
+#include <stddef.h>
+
+#include "image.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define DR_IMAGE_PLUGIN_VERSION 1
+#define DR_IMAGE_PLUGIN_FILE "libdrender-image.so"
+
+/* The plugin's functions; same contracts as image_io.h and vis.h. */
+struct dr_image_plugin {
+    int version;   /* DR_IMAGE_PLUGIN_VERSION of the plugin's build */
+    int (*read)(const char *path, struct dr_image *img);
+    int (*read_memory)(const void *bytes, size_t size, const char *name_hint, struct dr_image *img);
+    void (*set_max_bytes)(unsigned long long bytes);
+    bool (*can_write)(const char *path);
+    int (*write_encoded)(const char *path, int width, int height, int channels, const float *pixels,
+                         bool srgb_encode);
+    int (*colormap_diverging)(const float *t, int width, int height, float *rgb);
+};
+
+/* Exported by the plugin (image_io.cpp): its table. */
+const struct dr_image_plugin *dr_image_plugin_table(void);
+
+/* vis.cpp's colour map, put in the table by image_io.cpp. */
+int drp_colormap_diverging(const float *t, int width, int height, float *rgb);
+
+/* File-name extensions (lower case, NULL-terminated) for which
+ * dr_image_can_write answers true without loading the library. */
+extern const char *const dr_image_common_write_formats[];
+
+/* Starts loading the plugin on a background thread and returns at once; the
+ * first image call waits for it. Harmless to call more than once. */
+void dr_image_library_preload(void);
+
+#ifdef __cplusplus
+}
+#endif
+#endif
