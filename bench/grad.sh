@@ -18,7 +18,7 @@ OUT=$BUILD/bench
 mkdir -p "$OUT"
 TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
-cp "$BUILD/drender" "$TMP/"
+cp "$BUILD/drender" "$BUILD/libdrender-image.so" "$TMP/"
 DR=$TMP/drender
 # shellcheck source=bench/lib.sh
 source bench/lib.sh

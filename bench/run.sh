@@ -16,7 +16,7 @@
 #   BENCH_BUDGET  seconds; the optional max-depth sweep (4/16/32) skips any run
 #                 predicted to end past this point (default: 170)
 #
-# No dependency beyond bash, coreutils, sed and awk: drender's --json summary
+# No dependency beyond bash, coreutils, sed, awk (and python3 for one scene edit): drender's --json summary
 # is a single-line object whose sub-objects are flat, so sed extracts numbers.
 set -euo pipefail
 
@@ -35,7 +35,7 @@ declare -A PEER_TIME=([4]=0.84 [8]=1.16 [16]=1.27 [32]=1.23)
 PEER_MEM_MIB=116
 THROUGHPUT_GOAL=0.5
 
-for f in "$BUILD/drender" "$OUT/raw_embree" "$OUT/make_big_scene"; do
+for f in "$BUILD/drender" "$BUILD/libdrender-image.so" "$OUT/raw_embree" "$OUT/make_big_scene"; do
     [[ -x $f ]] || { echo "bench: $f is missing; run 'make bench'" >&2; exit 1; }
 done
 mkdir -p "$OUT"
@@ -44,7 +44,7 @@ trap 'rm -rf "$TMP"' EXIT
 
 # Work on private copies of the binaries, so a rebuild of $BUILD by someone
 # else during the run cannot swap the program between measurements.
-cp "$BUILD/drender" "$OUT/raw_embree" "$TMP/"
+cp "$BUILD/drender" "$BUILD/libdrender-image.so" "$OUT/raw_embree" "$TMP/"
 DRENDER=$TMP/drender
 RAW_EMBREE=$TMP/raw_embree
 
@@ -136,7 +136,23 @@ for scene in "${SCENES[@]}"; do
     ratio=$(calc "$dr_rps / $em_rps")
     printf '   %-24s %9s %13s %12s %7s %5s %7s\n' "$(basename "$scene")" "$tris" \
         "$(calc "$dr_rps / 1e6")" "$(calc "$em_rps / 1e6")" "$ratio" "$(yesno "$ratio >= $THROUGHPUT_GOAL")" "$other"
-    TP_JSON+=("{\"scene\": \"$scene\", \"triangles\": $tris, \"drender_rays_per_second\": $dr_rps, \"embree_rays_per_second\": $em_rps, \"ratio\": $ratio, \"goal\": $THROUGHPUT_GOAL, \"met\": $(truefalse "$ratio >= $THROUGHPUT_GOAL"), \"other_cores_busy\": $other}")
+    # the other ceilings: packets and streams, incoherent and coherent rays
+    ceil_json=() ceil_line=()
+    for api in rtcIntersect1 rtcIntersect16 rtcIntersect1M; do
+        for pat in incoherent coherent; do
+            v=$(calc "$(json_num "$M_OUT" "${api}_$pat" ceilings)" %.0f)
+            ceil_json+=("\"${api}_$pat\": $v")
+            ceil_line+=("${api#rtcIntersect} $pat $(calc "$v / 1e6")")
+        done
+    done
+    best_inc=$(calc "$(json_num "$M_OUT" rtcIntersect1M_incoherent ceilings)" %.0f)
+    for api in rtcIntersect1 rtcIntersect16; do
+        v=$(calc "$(json_num "$M_OUT" "${api}_incoherent" ceilings)" %.0f)
+        best_inc=$(calc "$v > $best_inc ? $v : $best_inc" %.0f)
+    done
+    ratio_best=$(calc "$dr_rps / $best_inc")
+    printf '   %-24s Embree Mr/s by interface: %s; drender / best incoherent: %s\n' "" "$(join "${ceil_line[@]}")" "$ratio_best"
+    TP_JSON+=("{\"scene\": \"$scene\", \"triangles\": $tris, \"drender_rays_per_second\": $dr_rps, \"embree_rays_per_second\": $em_rps, \"ratio\": $ratio, \"ratio_best_incoherent\": $ratio_best, \"embree_ceilings\": {$(join "${ceil_json[@]}")}, \"goal\": $THROUGHPUT_GOAL, \"met\": $(truefalse "$ratio >= $THROUGHPUT_GOAL"), \"other_cores_busy\": $other}")
 done
 
 # ---- b. thread scaling -----------------------------------------------------
@@ -214,6 +230,36 @@ else
     echo "c, d. peer comparison skipped: $PEER not found"
 fi
 
+# ---- e. start-up -------------------------------------------------------------
+# Process creation to first ray (render --json time.startup) on a scene that
+# needs no image to load, and the wall time of commands that never load the
+# image library. Median of 5.
+
+echo
+echo "e. start-up (median of 5; goal: first ray <= 0.05 s)"
+# the bundled Cornell box without its texture (python3: installed by install-deps.sh)
+python3 - "$CORNELL" "$TMP/notex.gltf" <<'PY'
+import json, sys
+g = json.load(open(sys.argv[1]))
+for k in ("textures", "images", "samplers"):
+    g.pop(k, None)
+for m in g.get("materials", []):
+    m.get("pbrMetallicRoughness", {}).pop("baseColorTexture", None)
+json.dump(g, open(sys.argv[2], "w"))
+PY
+cp "${CORNELL%.gltf}.bin" "$TMP/"
+st=() vw=() hw=()
+for i in 1 2 3 4 5; do
+    render "$TMP/notex.gltf" --res 64x64 --spp 1 --threads 2
+    st+=("$(json_num "$R_JSON" startup time)")
+    measure "$DRENDER" --version; vw+=("$M_WALL")
+    measure "$DRENDER" render --help; hw+=("$M_WALL")
+done
+STARTUP=$(median "${st[@]}") VERSION_WALL=$(median "${vw[@]}") HELP_WALL=$(median "${hw[@]}")
+printf '   process start to first ray (untextured Cornell box): %.3f s (goal <= 0.05: %s)\n' "$STARTUP" "$(yesno "$STARTUP <= 0.05")"
+printf '   drender --version: %.3f s wall; drender render --help: %.3f s wall\n' "$VERSION_WALL" "$HELP_WALL"
+STARTUP_JSON="{\"first_ray_seconds\": $STARTUP, \"version_wall_seconds\": $VERSION_WALL, \"help_wall_seconds\": $HELP_WALL}"
+
 # ---- results.json and the noise note ---------------------------------------
 
 TOTAL=$(elapsed)
@@ -228,6 +274,7 @@ OTHER_CORES=$(calc "$OTHER_TOTAL / $WALL_TOTAL" %.2f)
     done
     echo "  ],"
     echo "  \"thread_scaling\": {\"scene\": \"$CORNELL\", \"t1_seconds\": $T1, \"t2_seconds\": $T2, \"speedup\": $SPEEDUP, \"other_cores_busy\": $SCALING_OTHER},"
+    echo "  \"startup\": $STARTUP_JSON,"
     echo "  \"peer\": $PEER_JSON"
     echo "}"
 } >"$OUT/results.json"
