@@ -122,11 +122,10 @@ int cmd_render(int argc, char **argv)
     int rc = parse_args(argc, argv, &a);
     if (rc >= 0)
         goto out;
-    /* Everything the user can get wrong is checked before rendering. The
-     * output format is checked after the scene is loaded, so that loading the
-     * image library (started in main) overlaps loading the scene; for the
-     * common formats the check does not wait for it at all, and the first ray
-     * is traced while it loads. */
+    /* Everything the user can get wrong is checked before rendering. For the
+     * common formats the output check needs no image library, so an
+     * untextured scene reaches its first ray without loading it
+     * (core/image_plugin.h). */
     if (!cli_output_dir_writable("render", a.output)) {
         rc = DR_EXIT_FAILURE;
         goto out;

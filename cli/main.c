@@ -1,11 +1,8 @@
 /* drender: the subcommand table and dispatch. */
-#include <stdbool.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "accel.h"
 #include "cli.h"
-#include "image_plugin.h"
 #include "mem_limits.h"
 
 int cmd_render(int argc, char **argv);
@@ -80,14 +77,6 @@ static int cmd_help(int argc, char **argv)
     return DR_EXIT_OK;
 }
 
-static bool asks_for_help(int argc, char **argv)
-{
-    for (int i = 2; i < argc; i++)
-        if (strcmp(argv[i], "--help") == 0 || strcmp(argv[i], "-h") == 0)
-            return true;
-    return false;
-}
-
 int main(int argc, char **argv)
 {
     cli_mark_start();
@@ -112,13 +101,6 @@ int main(int argc, char **argv)
     if (!c) {
         cli_error(NULL, "'%s' is not a drender command (see 'drender help')", name);
         return DR_EXIT_USAGE;
-    }
-    /* Every command but help reads or writes images: start loading the image
-     * library now, so that it overlaps option checks, scene parsing and BVH
-     * building (core/image_plugin.h). */
-    if (c->run != cmd_help && !asks_for_help(argc, argv)) {
-        dr_accel_warm_up();   /* first: it needs the loader lock the preload holds */
-        dr_image_library_preload();
     }
     cli_limits_init();
     return c->run(argc - 1, argv + 1);

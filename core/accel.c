@@ -18,13 +18,6 @@ static void embree_error(void *user, enum RTCError code, const char *msg)
     dr_set_error("Embree error %d: %s", (int)code, msg ? msg : "");
 }
 
-void dr_accel_warm_up(void)
-{
-    RTCDevice d = rtcNewDevice(NULL);
-    if (d)
-        rtcReleaseDevice(d);
-}
-
 struct dr_accel *dr_accel_create(const struct dr_mesh *mesh)
 {
     struct dr_accel *a = calloc(1, sizeof *a);

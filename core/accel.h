@@ -13,13 +13,6 @@
 struct dr_accel;
 
 /* Builds a robust-mode BVH over mesh (which must outlive the accel). */
-/* Creates and releases one Embree device, so that Embree's thread library has
- * loaded its allocator (libtbb dlopens libtbbmalloc on first use) before
- * another thread holds the dynamic loader's lock for a long time (the image
- * plugin's preload, core/image_plugin.h); otherwise the first scene load
- * waits for that whole load. A few milliseconds. */
-void dr_accel_warm_up(void);
-
 struct dr_accel *dr_accel_create(const struct dr_mesh *mesh);
 void dr_accel_destroy(struct dr_accel *accel);
 

@@ -1,7 +1,6 @@
 /* The functions of image_io.h and vis.h as trampolines into the image plugin
- * (why: image_plugin.h). Loading happens once, under pthread_once, either on
- * the preload thread or on the first caller; every later call is one
- * indirect call. */
+ * (why: image_plugin.h). Loading happens once, under pthread_once, on the
+ * first call that needs the library; every later call is one indirect call. */
 #include "image_plugin.h"
 
 #include <dlfcn.h>
@@ -122,25 +121,6 @@ static const struct dr_image_plugin *get_plugin(void)
     return p;
 }
 
-static void *preload_thread(void *arg)
-{
-    (void)arg;
-    pthread_once(&load_once, load);
-    return NULL;
-}
-
-void dr_image_library_preload(void)
-{
-    pthread_attr_t attr;
-    pthread_t t;
-    if (pthread_attr_init(&attr) != 0)
-        return;
-    pthread_attr_setdetachstate(&attr, PTHREAD_CREATE_DETACHED);
-    if (pthread_create(&t, &attr, preload_thread, NULL) != 0)
-        pthread_once(&load_once, load);   /* no thread: load now, still correct */
-    pthread_attr_destroy(&attr);
-}
-
 int dr_image_read(const char *path, struct dr_image *img)
 {
     const struct dr_image_plugin *p = get_plugin();
@@ -182,7 +162,7 @@ bool dr_image_library_ok(void)
 
 /* Formats every OpenImageIO build drender supports writes (tests/test_image.c
  * checks each against the library). Answering for these without the library
- * lets `render` start tracing while the library is still loading. */
+ * lets `render` of an untextured scene trace its first ray without it. */
 const char *const dr_image_common_write_formats[] = {"exr", "png", "jpg", "jpeg", "hdr", "tif", "tiff",
                                                      NULL};
 
