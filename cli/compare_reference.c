@@ -185,8 +185,11 @@ static int check_inputs(struct ref_reader *rd, const struct cmp_run *r)
         return differs(rd, "another", "--target image", r->a->target ? r->a->target : "none");
     if ((rc = read_u64_field(rd, "values_hash", &h)) >= 0)
         return rc;
-    if (h != fp->values_hash)
-        return differs(rd, "other parameter values", "(--set or the scene file)", "different values");
+    if (h != fp->values_hash) {
+        cli_error("compare", "--reference %s was made with other values of the parameters (a different --set, or "
+                             "an edited scene file); compute a new reference: --reference spp:N or fd", rd->file);
+        return DR_EXIT_USAGE;
+    }
     return -1;
 }
 
