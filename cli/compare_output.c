@@ -7,6 +7,7 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "cli.h"
 #include "compare.h"
@@ -475,7 +476,10 @@ static void plot_error_vs_time(FILE *g, const struct cmp_run *r)
                    "with labels offset 0,0.8 font ',8' notitle, ", s, label, s);
         s++;
     }
-    fprintf(g, "%.6g with lines dt 2 lc 'black' title \"reference's own error\"\n", r->ref.rel_se);
+    if (isfinite(r->ref.rel_se) && r->ref.rel_se > 0.0)
+        fprintf(g, "%.6g with lines dt 2 lc 'black' title \"reference's own error\"\n", r->ref.rel_se);
+    else
+        fprintf(g, "NaN notitle\n");
     fprintf(g, "unset logscale\nunset title\n");
 }
 
@@ -532,7 +536,7 @@ static void plot_efficiency(FILE *g, const struct cmp_run *r)
         for (int c = 0; c < r->n_combos; c++)
             if (r->combos[c].spp == r->a->spps[k] && r->combos[c].max_depth == dmax) {
                 double e = cmp_efficiency(r, c);
-                fprintf(g, " %.6g", isfinite(e) ? e : 0.0);
+                fprintf(g, isfinite(e) && e > 0.0 ? " %.6g" : " NaN", e);
             }
         fputc('\n', g);
     }
@@ -554,15 +558,24 @@ static int write_plot_script(const struct cmp_run *r, const char *path)
     }
     fprintf(g, "# drender compare: gnuplot script with its data inline (run: gnuplot plots.gp)\n"
                "set terminal pngcairo size 900,560 noenhanced\n");
-    plot_error_vs_time(g, r);
+    /* a zero reference leaves errors and efficiencies undefined: those plots are left out */
+    bool defined = r->ref.norm2 > 0.0;
+    if (defined)
+        plot_error_vs_time(g, r);
     plot_memory(g, r);
-    plot_efficiency(g, r);
+    if (defined)
+        plot_efficiency(g, r);
     return fclose(g) == 0 ? 0 : -1;
 }
 
 int cmp_write_plots(const struct cmp_run *r, const char *dir)
 {
     char path[4400], cmd[9000], quoted[8800];
+    static const char *const pngs[] = {"error_vs_time.png", "memory_vs_depth.png", "efficiency.png"};
+    for (int i = 0; i < 3; i++) {   /* no stale plot of an earlier run survives a plot left out */
+        snprintf(path, sizeof path, "%s/%s", dir, pngs[i]);
+        unlink(path);
+    }
     snprintf(path, sizeof path, "%s/plots.gp", dir);
     if (write_plot_script(r, path) != 0)
         return -1;
