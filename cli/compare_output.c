@@ -268,6 +268,9 @@ void cmp_write_json(const struct cmp_run *r, FILE *f)
 
 /* ---- report.md ---- */
 
+static bool series_start(const struct cmp_run *r, int c);
+static bool same_series(const struct cmp_combo *a, const struct cmp_combo *b);
+
 static void bytes_text(uint64_t b, char *buf, size_t size)
 {
     if (b >= (1ull << 30))
@@ -305,8 +308,15 @@ static void report_head(FILE *f, const struct cmp_run *r)
                "**%.3g**: errors near it are not resolved.\n\n",
             ref->batches, ref->spp, r->fp.max_depth, ref->seconds, ref->file[0] ? ", read from " : "", ref->file,
             ref->rel_se);
-    if (r->skipped[0])
-        fprintf(f, "Left out (the estimator does not support the sampling mode): %s.\n\n", r->skipped);   /* "a b,c d" */
+    if (r->skipped[0]) {   /* "prb attached,tape attached" */
+        fprintf(f, "Left out (the estimator does not support the sampling mode): ");
+        for (const char *c = r->skipped; *c; c++)
+            if (*c == ',')
+                fputs(", ", f);
+            else
+                fputc(*c, f);
+        fprintf(f, ".\n\n");
+    }
 }
 
 static void report_table(FILE *f, const struct cmp_run *r)
@@ -338,7 +348,8 @@ static void report_params(FILE *f, const struct cmp_run *r)
     fprintf(f, "## Per parameter (largest spp and max depth)\n\n%s\n\n"
                "| estimator | sampling | parameter | estimate ± standard error | reference ± standard error | "
                "rel. error |\n|---|---|---|---|---|---:|\n",
-            r->reverse ? "Colours and scalars component by component; textures by the norm of their gradient."
+            r->reverse ? "Colours and scalars component by component; textures by the norm of their gradient. The "
+                         "table above mixes all components, so its error follows the largest gradients."
                        : "The derivative image's mean over pixels; the error is over every pixel.");
     for (int c = 0; c < r->n_combos; c++) {
         const struct cmp_combo *cb = &r->combos[c];
@@ -377,6 +388,43 @@ static double error_slope(const struct cmp_run *r, int c)
     return n >= 2 && d > 0.0 ? (n * sxy - sx * sy) / d : NAN;
 }
 
+/* Median over spp of the efficiency of the series starting at c (one
+ * estimate of it per spp: steadier than any single cell). */
+static double median_efficiency(const struct cmp_run *r, int c)
+{
+    double e[CMP_MAX_LIST];
+    int n = 0;
+    for (int i = c; i < r->n_combos && same_series(&r->combos[i], &r->combos[c]); i++)
+        if (isfinite(cmp_efficiency(r, i)))
+            e[n++] = cmp_efficiency(r, i);
+    if (n == 0)
+        return NAN;
+    qsort(e, (size_t)n, sizeof(double), cmp_double);
+    return n % 2 ? e[n / 2] : 0.5 * (e[n / 2 - 1] + e[n / 2]);
+}
+
+/* "At max depth D, median efficiency over spp: prb detached X, tape detached
+ * Y (Y/X)": the ranking of estimators, once per depth. */
+static void report_median_efficiency(FILE *f, const struct cmp_run *r)
+{
+    for (int d = 0; d < r->a->n_depths; d++) {
+        double first = NAN;
+        fprintf(f, "- Max depth %d, median efficiency over spp:", r->a->depths[d]);
+        for (int c = 0, k = 0; c < r->n_combos; c++) {
+            if (!series_start(r, c) || r->combos[c].max_depth != r->a->depths[d])
+                continue;
+            double e = median_efficiency(r, c);
+            if (k == 0)
+                first = e;
+            fprintf(f, "%s %s %s %.4g", k++ ? "," : "", r->combos[c].est->name,
+                    dr_sampling_name(r->combos[c].sampling), e);
+            if (k > 1)
+                fprintf(f, " (%.2fx the first)", e / first);
+        }
+        fprintf(f, ".\n");
+    }
+}
+
 /* Sentences the table supports: most efficient, least memory, convergence. */
 static void report_reading(FILE *f, const struct cmp_run *r)
 {
@@ -388,6 +436,7 @@ static void report_reading(FILE *f, const struct cmp_run *r)
                "seconds)); efficiency hardly depends on spp, so compare estimators by it and pick spp for the "
                "error you need.\n",
             label, r->combos[best].spp, cmp_efficiency(r, best));
+    report_median_efficiency(f, r);
     for (int d = 0; d < r->a->n_depths; d++) {
         int lo = -1, hi = -1;
         for (int c = 0; c < r->n_combos; c++) {
