@@ -75,8 +75,9 @@ py out1 "all(abs(a['rel_error'] - b['rel_error']) <= 1e-6 * a['rel_error'] for a
 py out1 "all(c['memory_bytes'] > 0 and c['rays'] > 0 and c['efficiency'] > 0 for c in d['combinations'])"
 py out1 "all(len(c['parameters']) == 1 and c['parameters'][0]['summary'] == 'pixel_mean' for c in d['combinations'])"
 
-# ---- the same seed gives the same table (timings aside); --repeat ----
-run compare $tiny --param "$red" --spp 1,16 --reference spp:256 --repeat 2 --json -o out2
+# ---- the same seed gives the same table (timings aside); --repeat; reference files ----
+# (out1's reference read back from its file: a forward-mode reference reused, and no second reference to compute)
+run compare $tiny --param "$red" --spp 1,16 --reference out1/reference.txt --repeat 2 --json -o out2
 expect_rc 0 "compare --repeat 2"
 python3 -c 'import json,sys; json.load(open(sys.argv[1]))' "$tmp/out" || fail "--json: stdout is not one JSON object"
 py out2 "len(rows) == 4 * $n_pairs and sorted(set(r['repeat'] for r in rows)) == ['0', '1']"
