@@ -497,6 +497,18 @@ static bool same_series(const struct cmp_combo *a, const struct cmp_combo *b)
     return a->est == b->est && a->sampling == b->sampling && a->max_depth == b->max_depth;
 }
 
+/* Which estimator x sampling pair combination c belongs to, counted in the
+ * order the pairs first appear. */
+static int pair_index(const struct cmp_run *r, int c)
+{
+    int n = 0;
+    for (int i = 0; i < c; i++)
+        if (series_start(r, i) && r->combos[i].max_depth == r->a->depths[0] &&
+            (r->combos[i].est != r->combos[c].est || r->combos[i].sampling != r->combos[c].sampling))
+            n++;
+    return n;
+}
+
 static void plot_error_vs_time(FILE *g, const struct cmp_run *r)
 {
     int s = 0;
@@ -521,8 +533,17 @@ static void plot_error_vs_time(FILE *g, const struct cmp_run *r)
             continue;
         char label[128];
         cmp_combo_label(&r->combos[c], label, sizeof label);
-        fprintf(g, "$err%d using 1:2 with linespoints lw 2 pt 7 title '%s', $err%d using 1:2:(sprintf('%%d', $3)) "
-                   "with labels offset 0,0.8 font ',8' notitle, ", s, label, s);
+        /* colour = estimator x sampling, point and dash = depth; spp labels on
+         * the deepest series only, so the plot stays readable */
+        int depth_i = 0;
+        while (r->a->depths[depth_i] != r->combos[c].max_depth)
+            depth_i++;
+        static const int pts[] = {7, 5, 9, 11, 13, 15};
+        fprintf(g, "$err%d using 1:2 with linespoints lw 2 lc %d pt %d dt %d title '%s', ", s,
+                pair_index(r, c) + 1, pts[depth_i % 6], depth_i % 5 + 1, label);
+        if (depth_i == r->a->n_depths - 1)
+            fprintf(g, "$err%d using 1:2:(sprintf('%%d spp', $3)) with labels offset 0,0.9 font ',8' tc lt %d "
+                       "notitle, ", s, pair_index(r, c) + 1);
         s++;
     }
     if (isfinite(r->ref.rel_se) && r->ref.rel_se > 0.0)
