@@ -831,9 +831,10 @@ static int check_scene_args(struct cmp_run *r, const struct dr_scene *scene)
             }
     struct grad_common g = a->g;
     g.max_depth = a->depths[a->n_depths - 1];
-    g.spp = a->spps[a->n_spps - 1];
-    g.estimator = dr_estimator_find("tape") ? dr_estimator_find("tape") : g.estimator;
-    int rc = cli_limits_grad(&g, scene, r->ps, r->reverse, 1, false, 0);
+    bool tape = false;
+    for (int c = 0; c < r->n_combos; c++)
+        tape |= strcmp(r->combos[c].est->name, "tape") == 0;
+    int rc = cli_limits_compare(&g, scene, r->ps, r->reverse, tape);
     if (rc >= 0)
         return rc;
     bool ok;

@@ -151,4 +151,6 @@ printf 'not a reference\n' >junk.txt
 refused 3 "junk.txt|not a drender reference file" compare $tiny --param "$red" --spp 1000000 --reference junk.txt -o bad
 refused 2 "/images/0|--reference spp:N" compare $tiny --param /images/0 --target target.exr --spp 1000000 \
     --reference fd -o bad
+DRENDER_MEM_LIMIT=20M refused 2 "DRENDER_MEM_LIMIT|--max-depth" compare --param "$red" --res 512x512 --max-depth 64 \
+    --spp 1000000 -o bad
 echo "cli_compare: all checks passed"
