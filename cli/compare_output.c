@@ -524,9 +524,9 @@ static void plot_error_vs_time(FILE *g, const struct cmp_run *r)
         }
         fprintf(g, "EOD\n");
     }
-    fprintf(g, "set output 'error_vs_time.png'\nset title 'Error vs time (reference %s)'\n"
-               "set xlabel 'seconds per estimate'\nset ylabel 'relative RMS error'\nset logscale xy\n"
-               "set key outside right top\nset grid\nplot ", r->ref.kind);
+    fprintf(g, "set output 'error_vs_time.png'\nset title 'Error vs time (reference %s, its own relative error "
+               "%.2g)'\nset xlabel 'seconds per estimate'\nset ylabel 'relative RMS error'\nset logscale xy\n"
+               "set key outside right top\nset grid\nplot ", r->ref.kind, r->ref.rel_se);
     s = 0;
     for (int c = 0; c < r->n_combos; c++) {
         if (!series_start(r, c))
@@ -610,12 +610,12 @@ static void plot_efficiency(FILE *g, const struct cmp_run *r)
             }
         fputc('\n', g);
     }
-    fprintf(g, "EOD\nset output 'efficiency.png'\nset title 'Efficiency = 1 / (relative variance x seconds), max "
-               "depth %d (higher is better)'\nset xlabel 'samples per pixel'\nset ylabel 'efficiency (1/s)'\n"
+    fprintf(g, "EOD\nset output 'efficiency.png'\nset title \"Efficiency = 1 / (relative variance x seconds), "
+               "higher is better\\nmax depth %d, reference %s\"\nset xlabel 'samples per pixel'\nset ylabel 'efficiency (1/s)'\n"
                "set style data histograms\nset style histogram cluster gap 1\nset style fill solid 0.8 border -1\n"
                "set boxwidth 0.9\nset key outside right top\nset grid ytics\nset logscale y\n"
                "plot for [i=2:%d] $eff using i:xtic(1) title columnheader(i)\n",
-            dmax, cols + 1);
+            dmax, r->ref.kind, cols + 1);
 }
 
 /* plots.gp: the three plots, data inline. */
