@@ -15,6 +15,8 @@ int cmd_fdcheck(int argc, char **argv);
 void cmd_fdcheck_usage(FILE *out);
 int cmd_optimize(int argc, char **argv);
 void cmd_optimize_usage(FILE *out);
+int cmd_compare(int argc, char **argv);
+void cmd_compare_usage(FILE *out);
 static int cmd_help(int argc, char **argv);
 static void cmd_help_usage(FILE *out);
 
@@ -25,6 +27,8 @@ const struct dr_command dr_commands[] = {
     {"fdcheck", "check a gradient estimator against finite differences", cmd_fdcheck, cmd_fdcheck_usage},
     {"optimize", "fit scene parameters to target images (Adam), write the result as glTF", cmd_optimize,
      cmd_optimize_usage},
+    {"compare", "what accuracy costs in time: every estimator x sampling x spp, tables and plots", cmd_compare,
+     cmd_compare_usage},
     {"help", "show help for drender or one subcommand", cmd_help, cmd_help_usage},
     {NULL, NULL, NULL, NULL},
 };

@@ -287,3 +287,27 @@ int cli_limits_optimize(const struct grad_common *g, const struct dr_scene *scen
     return check("optimize", &n, "--target (the images' size)",
                  "--max-depth (tape records every vertex of a batch; or --estimator prb)");
 }
+
+/* ---- compare (cmd_compare.c) ---- */
+
+int cli_limits_compare(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *ps,
+                       bool reverse, bool tape)
+{
+    const double npix = (double)g->width * g->height, T = ps ? (double)ps->total : 0.0;
+    const double P = ps ? (double)ps->n : 0.0;
+    const int threads = thread_count(g->threads);
+    struct grad_common gt = *g;
+    gt.estimator = tape ? dr_estimator_find("tape") : NULL;
+    struct need n = {0};
+    n.scene = (double)cli_mem_scene(scene);
+    /* the estimated vector: d loss / d theta (T) or one d image per --param;
+     * the reference's mean and error, one estimate, running mean and m2 */
+    const double V = reverse ? T : P * npix * 3;
+    n.batches = V * 5 * sizeof(double);
+    /* target, primal and adjoint; fd and forward-mode images, per-thread copies */
+    n.images = npix * 3 * (3 * sizeof(float) + sizeof(double) * (threads + 2));
+    n.grads = T * 3 * sizeof(double) + T * 2 * sizeof(double) * threads;
+    n.tape = tape_bytes(&gt, npix);
+    return check("compare", &n, "--res", "--max-depth (tape records every vertex of a batch: lower it, or "
+                                         "--estimators prb)");
+}

@@ -45,6 +45,11 @@ int cli_limits_fdcheck(const struct grad_common *g, const struct dr_scene *scene
 int cli_limits_optimize(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *ps,
                         uint64_t target_pixels, uint64_t max_pixels);
 
+/* compare: reverse or forward mode, g's size and largest max depth; tape when
+ * the tape estimator is among those compared. */
+int cli_limits_compare(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *ps,
+                       bool reverse, bool tape);
+
 /* The estimate of the last cli_limits_* call, in bytes (0 before any). */
 uint64_t cli_mem_estimate(void);
 /* Writes ', "memory_estimate_bytes": N' into a JSON object being printed. */

@@ -263,3 +263,64 @@ done:
     *count = n_dirs;
     return 0;
 }
+
+/* The image rendered at theta0 + t * dir with seed, into r->rgb. */
+static int render_at(struct fd_run *r, const double *dir, double t, uint64_t seed)
+{
+    double J;   /* objective() renders into r->rgb; its mean is not needed here */
+    return objective(r, dir, t, seed, &J);
+}
+
+static void axpy_image(double *dimg, double a, const float *rgb, size_t n)
+{
+    for (size_t i = 0; i < n; i++)
+        dimg[i] += a * rgb[i];
+}
+
+int dr_fd_image(struct dr_scene *scene, const struct dr_camera *camera, const struct dr_param_set *ps,
+                const struct dr_fd_options *o, const double *dir, uint64_t seed, double *dimg)
+{
+    const int64_t T = ps->total;
+    const size_t n = (size_t)o->width * o->height * 3;
+    struct fd_run r = {scene, camera, ps, o, NULL, NULL, NULL, NULL, NULL};
+    r.theta0 = malloc(sizeof(double) * (size_t)(T > 0 ? T : 1));
+    r.theta = malloc(sizeof(double) * (size_t)(T > 0 ? T : 1));
+    r.lo = malloc(sizeof(double) * (size_t)(T > 0 ? T : 1));
+    r.hi = malloc(sizeof(double) * (size_t)(T > 0 ? T : 1));
+    r.rgb = malloc(sizeof(float) * n);
+    int rc = 0;
+    if (!r.theta0 || !r.theta || !r.lo || !r.hi || !r.rgb) {
+        dr_set_error("out of memory");
+        rc = DR_ERR_NOMEM;
+        goto out;
+    }
+    dr_param_set_get(scene, ps, r.theta0);
+    for (int k = 0; k < ps->n; k++) {
+        double lo, hi;
+        dr_param_range(&ps->params[k], &lo, &hi);
+        for (int64_t i = 0; i < ps->params[k].size; i++) {
+            r.lo[ps->params[k].offset + i] = lo;
+            r.hi[ps->params[k].offset + i] = hi;
+        }
+    }
+    memset(dimg, 0, sizeof(double) * n);
+    const int side = fd_side(&r, dir, o->eps);
+    const double h = side == 0 ? o->eps : side * o->eps;
+    /* central: (I(+h) - I(-h)) / 2h; one-sided: (-3 I(0) + 4 I(h) - I(2h)) / 2h */
+    const double ts[3] = {side == 0 ? h : 0.0, side == 0 ? -h : h, 2.0 * h};
+    const double ws[3] = {side == 0 ? 1.0 : -3.0, side == 0 ? -1.0 : 4.0, -1.0};
+    for (int k = 0; k < (side == 0 ? 2 : 3) && rc == 0; k++)
+        if ((rc = render_at(&r, dir, ts[k], seed)) == 0)
+            axpy_image(dimg, ws[k] / (2.0 * h), r.rgb, n);
+    dr_param_set_put(scene, ps, r.theta0);
+    int rc2 = dr_scene_refresh(scene);
+    if (rc == 0)
+        rc = rc2;
+out:
+    free(r.theta0);
+    free(r.theta);
+    free(r.lo);
+    free(r.hi);
+    free(r.rgb);
+    return rc;
+}

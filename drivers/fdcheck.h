@@ -47,4 +47,12 @@ struct dr_fd_entry {
 int dr_fdcheck(struct dr_scene *scene, const struct dr_camera *camera, const struct dr_param_set *ps,
                const struct dr_fd_options *o, struct dr_fd_entry **entries, int *count);
 
+/* The finite difference of the rendered image along dir (params->total
+ * entries) with common random numbers (seed): central, or one-sided second
+ * order where theta - eps dir would leave a parameter's range. Uses o's size,
+ * spp, depths, threads and eps (estimator, batches, z_max unused). dimg:
+ * width * height * 3 doubles. The scene is modified and restored. 0 or DR_ERR_*. */
+int dr_fd_image(struct dr_scene *scene, const struct dr_camera *camera, const struct dr_param_set *ps,
+                const struct dr_fd_options *o, const double *dir, uint64_t seed, double *dimg);
+
 #endif

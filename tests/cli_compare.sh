@@ -1,0 +1,156 @@
+#!/usr/bin/env bash
+# drender compare on the bundled Cornell box at a tiny size: the output
+# directory and its schema (results.csv columns, results.json keys, report.md,
+# plots), errors that fall as spp grows (statistical, with a margin; never a
+# timing), the reference's own error reported, the same table from the same
+# seed, --repeat, a reference file reused, and bad inputs refused before any
+# work (exit 2, nothing written).
+# Run by tests/run.sh (env: DRENDER = the binary); also runs alone.
+set -u
+
+# shellcheck source=SCRIPTDIR/lib/cli.sh
+. "$(dirname "$0")/lib/cli.sh"
+cli_setup compare
+require_drender
+red=/materials/red/pbrMetallicRoughness/baseColorFactor
+green=/materials/green/pbrMetallicRoughness/baseColorFactor
+tiny="--res 12x12 --max-depth 4"
+
+# py FILE EXPR: python3 over d = the JSON object in FILE (and rows = the CSV's rows)
+py() {
+    python3 - "$@" <<'EOF' || fail "check failed: $2"
+import csv, json, math, os, sys
+path, expr = sys.argv[1], sys.argv[2]
+d = json.load(open(os.path.join(path, "results.json")))
+rows = list(csv.DictReader(open(os.path.join(path, "results.csv"))))
+if not eval(expr, {"d": d, "rows": rows, "math": math}):
+    print(json.dumps({k: d[k] for k in ("reference", "skipped")}, indent=1), file=sys.stderr)
+    for c in d["combinations"]:
+        print(c["estimator"], c["sampling"], c["max_depth"], c["spp"], c["rel_error"], file=sys.stderr)
+    sys.exit(1)
+EOF
+}
+
+# ---- help, and what the registry offers (never a hard-coded list) ----
+run --help
+expect_rc 0 "drender --help"
+grep -Eq '^ +compare +[^ ]' "$tmp/out" || fail "drender --help: compare not listed"
+run compare --help
+expect_rc 0 "compare --help"
+for o in --estimators --sampling --spp --max-depth --reference --repeat --batches --target --json; do
+    expect_in out "$o" "compare --help lists $o"
+done
+# "available now: prb (detached), tape (detached)" -> estimator:mode pairs
+avail=$(sed -n 's/.*available now: //p' "$tmp/out")
+[ -n "$avail" ] || fail "compare --help: no 'available now:' line"
+n_pairs=$(python3 -c '
+import re, sys
+print(sum(len(m.split(", ")) for m in re.findall(r"\(([^)]*)\)", sys.argv[1]) if m != "none"))' "$avail")
+
+# ---- forward mode: schema, falling errors, the reference's own error ----
+run compare $tiny --param "$red" --spp 1,16 --reference spp:256 -o out1
+expect_rc 0 "compare (forward)"
+for f in results.csv results.json report.md reference.txt plots.gp error_vs_time.png memory_vs_depth.png efficiency.png; do
+    [ -s "out1/$f" ] || fail "compare: out1/$f missing or empty"
+done
+for f in error_vs_time.png memory_vs_depth.png efficiency.png; do
+    [ "$(head -c 4 "out1/$f" | tail -c 3)" = PNG ] || fail "out1/$f is not a PNG"
+done
+want='scene,mode,estimator,sampling,max_depth,spp,repeat,batches,seconds,rays,memory_bytes,record_bytes,invalid_samples,rel_error,rel_variance,efficiency,reference,reference_rel_se'
+[ "$(head -1 out1/results.csv)" = "$want" ] || fail "results.csv header: $(head -1 out1/results.csv)"
+# every pair the registry supports, at each spp; one CSV row per run
+py out1 "len(d['combinations']) == 2 * $n_pairs and len(rows) == 2 * $n_pairs"
+py out1 "all(k in d for k in ('command', 'scene', 'mode', 'reference', 'combinations', 'rows', 'best', 'skipped'))"
+py out1 "d['mode'] == 'forward' and d['reference']['kind'] == 'spp:256' and d['reference']['estimator']"
+# the reference's own error is reported, finite and smaller than any run's
+py out1 "0 < d['reference']['rel_se'] < min(c['rel_error'] for c in d['combinations'])"
+py out1 "all(abs(float(r['reference_rel_se']) - d['reference']['rel_se']) <= 1e-5 * d['reference']['rel_se'] for r in rows)"
+grep -q 'relative standard error' out1/report.md || fail "report.md does not state the reference's own error"
+# errors fall as spp grows: 16x the samples should give ~1/4 the error; 0.7 leaves room for noise
+py out1 "all(b['rel_error'] < 0.7 * a['rel_error'] for a in d['combinations'] for b in d['combinations']
+          if a['estimator'] == b['estimator'] and a['sampling'] == b['sampling'] and a['spp'] == 1 and b['spp'] == 16)"
+# the same random numbers: every estimator of one sampling mode gives the same gradient, to rounding
+py out1 "all(abs(a['rel_error'] - b['rel_error']) <= 1e-6 * a['rel_error'] for a in d['combinations']
+          for b in d['combinations'] if a['spp'] == b['spp'] and a['sampling'] == b['sampling'])"
+py out1 "all(c['memory_bytes'] > 0 and c['rays'] > 0 and c['efficiency'] > 0 for c in d['combinations'])"
+py out1 "all(len(c['parameters']) == 1 and c['parameters'][0]['summary'] == 'pixel_mean' for c in d['combinations'])"
+
+# ---- the same seed gives the same table (timings aside); --repeat; reference files ----
+# (out1's reference read back from its file: a forward-mode reference reused, and no second reference to compute)
+run compare $tiny --param "$red" --spp 1,16 --reference out1/reference.txt --repeat 2 --json -o out2
+expect_rc 0 "compare --repeat 2"
+python3 -c 'import json,sys; json.load(open(sys.argv[1]))' "$tmp/out" || fail "--json: stdout is not one JSON object"
+py out2 "len(rows) == 4 * $n_pairs and sorted(set(r['repeat'] for r in rows)) == ['0', '1']"
+py out2 "all(c['seconds_min'] <= c['seconds_median'] <= c['seconds_max'] for c in d['combinations'])"
+python3 - out1/results.csv out2/results.csv <<'EOF' || fail "the same seed gave a different table (out1 vs out2)"
+import csv, sys
+keys = ("estimator", "sampling", "max_depth", "spp", "rays", "memory_bytes", "rel_error", "rel_variance")
+a = [tuple(r[k] for k in keys) for r in csv.DictReader(open(sys.argv[1]))]
+b = [tuple(r[k] for k in keys) for r in csv.DictReader(open(sys.argv[2]))]
+sys.exit(0 if a + a == b else 1)   # repeat 0 then repeat 1, both the same numbers
+EOF
+
+# ---- reverse mode, finite differences, and a reference file reused ----
+run render $tiny --spp 64 -o target.exr
+expect_rc 0 "render the target"
+run compare $tiny --param "$red" --param "$green" --set "$red=0.4,0.3,0.3" --target target.exr \
+    --estimators prb --sampling detached --spp 2,32 --reference fd:64 -o rev
+expect_rc 0 "compare (reverse, fd reference)"
+py rev "d['mode'] == 'reverse' and d['reference']['kind'] == 'fd:64' and d['reference']['eps'] == 0.01"
+py rev "[len(p['value']) for p in d['combinations'][0]['parameters']] == [3, 3]"
+py rev "d['combinations'][1]['rel_error'] < 0.7 * d['combinations'][0]['rel_error']"
+run compare $tiny --param "$red" --param "$green" --set "$red=0.4,0.3,0.3" --target target.exr \
+    --estimators prb --sampling detached --spp 2,32 --reference rev/reference.txt -o rev2
+expect_rc 0 "compare --reference FILE"
+py rev2 "d['reference']['file'].endswith('rev/reference.txt') and d['reference']['kind'] == 'fd:64'"
+cmp <(cut -d, -f4-8,14,15,17,18 rev/results.csv) <(cut -d, -f4-8,14,15,17,18 rev2/results.csv) ||
+    fail "the reference read back from its file gave other errors"
+
+# ---- refused before any work: exit 2, a message, nothing written ----
+# --spp 1000000 makes any work that did start show up as a timeout (exit 124).
+huge="--spp 1000000 --reference spp:1000000"
+refused() {   # refused CODE "NEEDLES" ARGS...
+    local code=$1 needles=$2
+    shift 2
+    last_cmd="drender $*"
+    timeout 60 "$DRENDER" "$@" >"$tmp/out" 2>"$tmp/err" </dev/null
+    rc=$?
+    check_failed "$code" "$needles"
+    [ ! -e bad ] || fail "$*: left bad/ behind"
+}
+refused 2 "unknown estimator 'nope'|prb" compare $tiny --param "$red" --estimators prb,nope $huge -o bad
+refused 2 "unknown sampling mode 'sideways'" compare $tiny --param "$red" --sampling sideways $huge -o bad
+refused 2 "--param is required" compare $tiny -o bad
+refused 2 "-o DIR is required" compare $tiny --param "$red"
+refused 2 "--spp: 4 is listed twice" compare $tiny --param "$red" --spp 4,4 -o bad
+# a sampling mode an estimator lacks, found from the registry via --help
+lacking=$(python3 -c '
+import re, sys
+for name, modes in re.findall(r"(\w+) \(([^)]*)\)", sys.argv[1]):
+    for m in ("detached", "attached"):
+        if m not in modes.split(", "):
+            print(name, m); sys.exit(0)' "$avail")
+if [ -n "$lacking" ]; then
+    set -- $lacking
+    refused 2 "estimator '$1' does not support $2" compare $tiny --param "$red" --estimators "$1" --sampling "$2" $huge -o bad
+else
+    echo "note: every estimator supports every sampling mode; the refusal of a missing pair is not exercised"
+fi
+refused 2 "made for parameters|/materials/2/pbrMetallicRoughness/baseColorFactor" compare $tiny --param "$red" --set "$red=0.4,0.3,0.3" --target target.exr \
+    --spp 1000000 --reference rev/reference.txt -o bad
+refused 2 "made for mode reverse" compare $tiny --param "$red" --param "$green" --spp 1000000 \
+    --reference rev/reference.txt -o bad
+refused 2 "other values" compare $tiny --param "$red" --param "$green" --target target.exr \
+    --spp 1000000 --reference rev/reference.txt -o bad
+# another scene: the same file with one byte more (its .bin and texture beside it)
+cp "$DR_SCENES"/cornell-box.bin "$DR_SCENES"/cornell-box-checker.png .
+{ cat "$DR_SCENES/cornell-box.gltf"; echo; } >other.gltf
+refused 2 "made for scene|other.gltf" compare other.gltf $tiny --param "$red" --param "$green" --set "$red=0.4,0.3,0.3" \
+    --target target.exr --spp 1000000 --reference rev/reference.txt -o bad
+printf 'not a reference\n' >junk.txt
+refused 3 "junk.txt|not a drender reference file" compare $tiny --param "$red" --spp 1000000 --reference junk.txt -o bad
+refused 2 "/images/0|--reference spp:N" compare $tiny --param /images/0 --target target.exr --spp 1000000 \
+    --reference fd -o bad
+DRENDER_MEM_LIMIT=20M refused 2 "DRENDER_MEM_LIMIT|--max-depth" compare --param "$red" --res 512x512 --max-depth 64 \
+    --spp 1000000 -o bad
+echo "cli_compare: all checks passed"
