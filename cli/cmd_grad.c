@@ -74,6 +74,11 @@ void cmd_grad_usage(FILE *out)
             "      --camera N      which camera of the file (default: 0)\n"
             "      --seed S        random seed (default: 0)\n"
             "      --threads T     worker threads (default: one per CPU)\n"
+            "      --filter F      pixel filter: box (default), tent or gaussian[:STDDEV]\n"
+            "                      (as render)\n"
+            "      --crop X,Y,W,H  only this rectangle of the --res frame is rendered and\n"
+            "                      compared: -o images are W x H; a --target may be W x H\n"
+            "                      (then --res gives the frame) or the full frame\n"
             "      --batch N       tape: paths recorded per backward sweep (default 0: one\n"
             "                      sample of every pixel); bounds the tape's memory\n"
             "      --json          print a summary object on stdout (memory estimate included)\n"
@@ -190,6 +195,18 @@ static char *grad_image_name(const char *dir, const struct dr_param *p)
     if (s)
         snprintf(s, len, "%s%s%s", dir, dir[strlen(dir) - 1] == '/' ? "" : "/", base);
     return s;
+}
+
+/* --crop with a crop-sized target and no --res: the frame's size is unknown
+ * (without --res a target is the full frame). Returns -1 to go on or an exit code. */
+static int crop_target_size(const struct grad_args *a, const struct dr_image *timg)
+{
+    const struct grad_common *g = &a->g;
+    if (!g->crop_given || g->res_given || timg->width != g->crop_w || timg->height != g->crop_h)
+        return -1;
+    cli_error("grad", "--target %s is the crop's size (%dx%d): give the full frame's size with --res WxH",
+              a->target, timg->width, timg->height);
+    return DR_EXIT_USAGE;
 }
 
 /* ---- option checks that need no scene ---- */
@@ -377,7 +394,9 @@ static int run_forward(struct grad_args *a, const char *scene_path, const struct
                        const struct dr_camera *cam, const struct dr_param_set *ps, double t_start, double t_loaded)
 {
     const int n = ps->n;
-    const size_t npix = (size_t)a->g.width * a->g.height;
+    int w, h;   /* the rendered rectangle: the frame or --crop's */
+    grad_film(&a->g, a->g.width, a->g.height, &w, &h);
+    const size_t npix = (size_t)w * h;
     double *dir = calloc((size_t)(ps->total > 0 ? ps->total : 1), sizeof(double));
     double *dimg = malloc(sizeof(double) * npix * 3);
     float *fimg = malloc(sizeof(float) * npix * 3);
@@ -386,7 +405,7 @@ static int run_forward(struct grad_args *a, const char *scene_path, const struct
            *hi = calloc((size_t)n, sizeof(double));
     int rc = DR_EXIT_FAILURE;
     if (!dir || !dimg || !fimg || !outs || !viss || !vis_scale || !lo || !hi) {
-        cli_error("grad", "out of memory for a %dx%d derivative image", a->g.width, a->g.height);
+        cli_error("grad", "out of memory for a %dx%d derivative image", w, h);
         goto out;
     }
     for (int i = 0; i < n; i++) {
@@ -426,8 +445,8 @@ static int run_forward(struct grad_args *a, const char *scene_path, const struct
             hi[i] = fmax(hi[i], dimg[k]);
         }
         double t_w0 = dr_clock_seconds();
-        if (dr_image_write(outs[i], a->g.width, a->g.height, 3, fimg) != 0 ||
-            (viss[i] && write_vis(viss[i], fimg, a->g.width, a->g.height, &vis_scale[i]) != 0)) {
+        if (dr_image_write(outs[i], w, h, 3, fimg) != 0 ||
+            (viss[i] && write_vis(viss[i], fimg, w, h, &vis_scale[i]) != 0)) {
             if (progress)
                 fputc('\n', stderr);
             cli_error("grad", "%s", dr_last_error());
@@ -695,6 +714,7 @@ int cmd_grad(int argc, char **argv)
     struct dr_image timg;
     memset(&timg, 0, sizeof timg);
     float *target = NULL;
+    char target_what[4200];
     int rc = parse_args(argc, argv, &a);
     if (rc >= 0)
         goto out;
@@ -704,16 +724,24 @@ int cmd_grad(int argc, char **argv)
     if (a.target) {
         if ((rc = grad_load_target("grad", a.target, &timg, &target)) >= 0)
             goto out;
-        if (a.g.res_given && (a.g.width != timg.width || a.g.height != timg.height)) {
+        if ((rc = crop_target_size(&a, &timg)) >= 0)
+            goto out;
+        if (a.g.res_given && (a.g.width != timg.width || a.g.height != timg.height) && !a.g.crop_given) {
             cli_error("grad", "--target %s is %dx%d but --res asks for %dx%d (the render and the target must be "
                               "the same size)", a.target, timg.width, timg.height, a.g.width, a.g.height);
             rc = DR_EXIT_USAGE;
             goto out;
         }
     }
+    snprintf(target_what, sizeof target_what, "--target %s", a.target ? a.target : "");
     struct dr_camera cam;
     if ((rc = grad_load_scene(&a.g, &scene_path, &scene, &cam, a.target ? timg.width : 0,
                               a.target ? timg.height : 0)) >= 0)
+        goto out;
+    if ((rc = grad_check_crop(&a.g, a.g.width, a.g.height)) >= 0)
+        goto out;
+    if (a.target && (rc = grad_crop_image(&a.g, target_what, &target, timg.width, timg.height, a.g.width,
+                                          a.g.height)) >= 0)
         goto out;
     if ((rc = grad_apply_sets(&a.g, scene)) >= 0 || (rc = grad_param_set(&a.g, scene, &ps)) >= 0)
         goto out;

@@ -62,6 +62,9 @@ void cmd_optimize_usage(FILE *out)
             "                         target's own size)\n"
             "      --seed S           random seed (default 0)\n"
             "      --threads T        worker threads (default: one per CPU)\n"
+            "      --filter F         pixel filter: box (default), tent or gaussian[:STDDEV]\n"
+            "      --crop X,Y,W,H     fit only this rectangle of every target's frame; a target\n"
+            "                         may be W x H (then --res gives the frame) or the full frame\n"
             "  -o, --output FILE      write the optimised scene (.gltf or .glb)\n"
             "      --out-dir DIR      progress files (default optimize-out): loss.csv, loss.png,\n"
             "                         render-NNNN.png, before.png, after.png, target.png,\n"
@@ -82,9 +85,10 @@ struct target {
     const char *arg, *path;
     int camera;
     struct dr_image img;
-    float *rgb;          /* linear target */
-    int w, h;
-    float *render, *adjoint;
+    float *rgb;          /* linear target (the rendered rectangle: --crop's or the frame) */
+    int w, h;            /* the frame */
+    int rw, rh;          /* the rendered rectangle: --crop's size, else the frame's */
+    float *render;
 };
 
 struct opt_args {
@@ -389,13 +393,13 @@ static int save_view(const struct opt_args *a, const struct dr_scene *scene, con
     const struct target *t = &a->targets[0];
     char path[4096];
     path_in(path, sizeof path, a->out_dir, name);
-    float *rgb = malloc(sizeof(float) * 3 * (size_t)t->w * t->h);
+    float *rgb = malloc(sizeof(float) * 3 * (size_t)t->rw * t->rh);
     if (!rgb)
         return DR_EXIT_FAILURE;
     struct dr_render_opts ro = grad_render_opts(&a->g, t->w, t->h, 4 * a->g.spp, a->g.seed ^ 0xbefa, false);
     int rc = dr_render(scene, &scene->cameras[t->camera], &ro, rgb, NULL);
     if (rc == 0)
-        rc = dr_image_write(path, t->w, t->h, 3, rgb);
+        rc = dr_image_write(path, t->rw, t->rh, 3, rgb);
     if (rc != 0)
         cli_error("optimize", "%s", dr_last_error());
     free(rgb);
@@ -453,6 +457,26 @@ static double reference_rel_error(const struct dr_param_set *ps, const double *t
     return den > 0.0 ? sqrt(num / den) : sqrt(num);
 }
 
+/* --crop: the target's frame (--res, else the target's own size: a
+ * crop-sized target needs --res) and the target cut to the crop. */
+static int target_frame(struct opt_args *a, struct target *t)
+{
+    char what[4200];
+    snprintf(what, sizeof what, "--target %s", t->path);
+    if (!a->g.res_given && t->w == a->g.crop_w && t->h == a->g.crop_h) {
+        cli_error("optimize", "%s is the crop's size (%dx%d): give the full frame's size with --res WxH", what, t->w,
+                  t->h);
+        return DR_EXIT_USAGE;
+    }
+    int fw = a->g.res_given ? a->g.width : t->w, fh = a->g.res_given ? a->g.height : t->h;
+    int rc = grad_check_crop(&a->g, fw, fh);
+    if (rc < 0)
+        rc = grad_crop_image(&a->g, what, &t->rgb, t->w, t->h, fw, fh);
+    t->w = fw;
+    t->h = fh;
+    return rc;
+}
+
 static int load_targets(struct opt_args *a)
 {
     for (int i = 0; i < a->n_targets; i++) {
@@ -462,14 +486,16 @@ static int load_targets(struct opt_args *a)
             return rc;
         t->w = t->img.width;
         t->h = t->img.height;
+        if (a->g.crop_given && (rc = target_frame(a, t)) >= 0)
+            return rc;
         if (a->g.res_given && (t->w != a->g.width || t->h != a->g.height)) {
             cli_error("optimize", "--target %s is %dx%d but --res asks for %dx%d", t->path, t->w, t->h, a->g.width,
                       a->g.height);
             return DR_EXIT_USAGE;
         }
-        t->render = malloc(sizeof(float) * 3 * (size_t)t->w * t->h);
-        t->adjoint = malloc(sizeof(float) * 3 * (size_t)t->w * t->h);
-        if (!t->render || !t->adjoint) {
+        grad_film(&a->g, t->w, t->h, &t->rw, &t->rh);
+        t->render = malloc(sizeof(float) * 3 * (size_t)t->rw * t->rh);
+        if (!t->render) {
             cli_error("optimize", "out of memory");
             return DR_EXIT_FAILURE;
         }
@@ -621,7 +647,7 @@ static int opt_open_outputs(const struct opt_args *a, struct opt_run *r)
             return rc;
         char tp[4096];
         path_in(tp, sizeof tp, a->out_dir, "target.png");
-        dr_image_write(tp, a->targets[0].w, a->targets[0].h, 3, a->targets[0].rgb);
+        dr_image_write(tp, a->targets[0].rw, a->targets[0].rh, 3, a->targets[0].rgb);
         return -1;
     }
     read_loss_csv(a->out_dir, &r->hist, r->it0);
@@ -668,7 +694,7 @@ static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
             char name[64], path[4096];
             snprintf(name, sizeof name, "render-%04d.png", it);
             path_in(path, sizeof path, a->out_dir, name);
-            dr_image_write(path, t->w, t->h, 3, t->render);
+            dr_image_write(path, t->rw, t->rh, 3, t->render);
         }
     }
     for (int64_t i = 0; i < T; i++)
@@ -862,7 +888,6 @@ static void opt_free(struct opt_args *a, struct opt_run *r)
         dr_image_release(&a->targets[i].img);
         free(a->targets[i].rgb);
         free(a->targets[i].render);
-        free(a->targets[i].adjoint);
     }
     free(r->hist.loss);
     free(r->hist.seconds);

@@ -60,7 +60,7 @@ static int primal(struct rev_work *w, uint64_t seed, int spp, struct dr_reverse_
 {
     const struct dr_grad_problem *p = &w->o->problem;
     struct dr_render_opts ro = {.width = p->width, .height = p->height, .spp = spp, .max_depth = p->max_depth,
-                                .rr_depth = p->rr_depth, .seed = seed, .threads = p->threads};
+                                .rr_depth = p->rr_depth, .seed = seed, .threads = p->threads, .film = p->film};
     struct dr_render_stats rs = {0};
     int rc = dr_render(p->scene, p->camera, &ro, w->img, &rs);
     if (rc != 0)
