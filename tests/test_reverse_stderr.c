@@ -11,8 +11,10 @@
  * The old estimator (one primal shared by all batches) reports the spread of
  * the gradient samples only and must fail there; the per-batch estimator
  * must pass, and attribute most of its error to the primal.
- * Case "mixed": a target far from the image (both noises matter); the
- * per-batch estimator must pass too. */
+ * Case "mixed": a target at half the image (both noises matter), and case
+ * "far": a target of -10 times the image, where the gradient samples' noise
+ * dominates; the per-batch estimator must pass both, and attribute the error
+ * of "far" mostly to the gradient samples. */
 #include <stdlib.h>
 #include <string.h>
 
@@ -95,18 +97,20 @@ int main(void)
     if (!ps)
         return TEST_END();
     /* the expected image, to rounding: 8192 spp */
-    float target[RES * RES * 3], dim[RES * RES * 3];
+    float target[RES * RES * 3], dim[RES * RES * 3], neg[RES * RES * 3];
     struct dr_render_opts ro = {.width = RES, .height = RES, .spp = 8192, .max_depth = 2,
                                 .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 777, .threads = 2};
     CHECK(dr_render(s, &cam, &ro, target, NULL) == 0, "%s", dr_last_error());
     for (int i = 0; i < RES * RES * 3; i++)
-        dim[i] = 0.5f * target[i];
+        dim[i] = 0.5f * target[i], neg[i] = -10.0f * target[i];
 
     /* P(|t_7| <= 2) = 0.9144; 200 runs x 3 channels: binomial sd ~ 0.016 (channels are correlated) */
     const double want = 0.9144, lo = want - 0.07, hi = want + 0.06;
     struct coverage old = run_many(s, &cam, ps, target, DR_PRIMAL_SHARED);
     struct coverage now = run_many(s, &cam, ps, target, DR_PRIMAL_PER_BATCH);
     struct coverage mixed = run_many(s, &cam, ps, dim, DR_PRIMAL_PER_BATCH);
+    /* far from the target (I - T ~ 11 I): the gradient samples' noise dominates */
+    struct coverage far = run_many(s, &cam, ps, neg, DR_PRIMAL_PER_BATCH);
     printf("primal-dominated: shared primal covers %.3f (mean se %.3g); per-batch covers %.3f (mean se %.3g = "
            "gradient %.3g + primal %.3g in quadrature)\n",
            old.inside, old.se, now.inside, now.se, now.se_gradient, now.se_primal);
@@ -116,6 +120,11 @@ int main(void)
     CHECK(now.inside >= lo && now.inside <= hi, "per-batch coverage %.3f outside [%.3f, %.3f]", now.inside, lo, hi);
     CHECK(mixed.inside >= lo && mixed.inside <= hi, "mixed coverage %.3f outside [%.3f, %.3f]", mixed.inside, lo,
           hi);
+    printf("far: per-batch covers %.3f (se %.3g: gradient %.3g, primal %.3g)\n", far.inside, far.se,
+           far.se_gradient, far.se_primal);
+    CHECK(far.inside >= lo && far.inside <= hi, "far coverage %.3f outside [%.3f, %.3f]", far.inside, lo, hi);
+    CHECK(far.se_gradient > 2.0 * far.se_primal, "gradient part %.3g should dominate primal part %.3g",
+          far.se_gradient, far.se_primal);
     CHECK(now.se_primal > 2.0 * now.se_gradient, "primal part %.3g should dominate gradient part %.3g",
           now.se_primal, now.se_gradient);
     dr_param_set_destroy(ps);
