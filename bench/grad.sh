@@ -10,6 +10,9 @@
 #      against a render at the true value, 256x256, 64 spp, 2 threads: prb
 #      gradient time at max_depth 8 vs the peer's 3.68 s; tape peak memory at
 #      max_depth 32 vs the peer's 15.3 GiB for conventional AD
+#   i. honest standard error (issue 14): reverse mode with a primal image per
+#      batch vs one shared primal (the old estimator), same samples: time ratio
+#      (goal <= 1.1), primal share of the run, and both reported standard errors
 # Writes $BUILD/bench/grad-results.json.
 set -euo pipefail
 BUILD=${BUILD:-build}
@@ -92,12 +95,17 @@ if [[ -f $PEER ]]; then
     echo "   tape gradient time at depth 32: $(calc "$(json_num "$J" gradient time)" %.2f) s (the peer's conventional AD: 5.29 s)"
     PEER_JSON="{\"prb_gradient_seconds_depth8\": $T_PEER, \"ratio_to_peer\": $R, \"record_bytes_depth32\": $M32, \"tape_bytes_depth32\": $TB32}"
 fi
+echo "i. reverse-mode standard error with a primal per batch vs one shared primal ($RES, 32 spp, 4 batches)"
+cp "$OUT/reverse_stderr" "$TMP/"
+SEJ=$("$TMP/reverse_stderr" $CORNELL $RED $RES 32 4 2)
+echo "   $SEJ"
+echo "   time ratio $(json_num "$SEJ" time_ratio) (goal <= 1.1: $(yesno "$(json_num "$SEJ" time_ratio) <= 1.1"))"
 cat >"$OUT/grad-results.json" <<JSON
 {"primal_seconds": $T_PRIMAL, "prb_seconds": ${T[prb]}, "tape_seconds": ${T[tape]},
  "prb_over_primal": $R_PRB, "tape_over_prb": $R_TAPE,
  "stderr_sqrt_seconds": {"prb": $(calc "${SE[prb]} * sqrt(${T[prb]})" %.6g), "tape": $(calc "${SE[tape]} * sqrt(${T[tape]})" %.6g)},
  "memory_vs_depth": [${MEM_JSON%,}], "prb_memory_change_percent": $SPREAD,
- "peer": $PEER_JSON}
+ "peer": $PEER_JSON, "reverse_stderr": $SEJ}
 JSON
 echo
 echo "results in $OUT/grad-results.json"

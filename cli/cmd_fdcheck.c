@@ -41,6 +41,9 @@ void cmd_fdcheck_usage(FILE *out)
             "      --camera N      which camera of the file (default: 0)\n"
             "      --seed S        random seed (default: 0; batch b uses S + b)\n"
             "      --threads T     worker threads (default: one per CPU)\n"
+            "      --filter F      pixel filter: box (default), tent or gaussian[:STDDEV]\n"
+            "      --crop X,Y,W,H  only this rectangle of the --res frame is rendered (the\n"
+            "                      objective is its mean)\n"
             "      --json          print the entries as one JSON object on stdout\n"
             "  -h, --help          show this help\n");
 }
@@ -156,9 +159,13 @@ int cmd_fdcheck(int argc, char **argv)
         goto out;
     if ((rc = cli_limits_fdcheck(&a.g, scene, ps, a.batches)) >= 0)
         goto out;
+    if ((rc = grad_check_crop(&a.g, a.g.width, a.g.height)) >= 0)
+        goto out;
     double t_loaded = dr_clock_seconds();
-    struct dr_fd_options o = {.estimator = a.g.estimator, .sampling = a.g.sampling, .width = a.g.width,
-                              .height = a.g.height, .spp = a.g.spp, .batches = a.batches,
+    int rw, rh;   /* the rendered rectangle: the frame or --crop's */
+    struct dr_film film = grad_film(&a.g, a.g.width, a.g.height, &rw, &rh);
+    struct dr_fd_options o = {.estimator = a.g.estimator, .sampling = a.g.sampling, .width = rw,
+                              .height = rh, .film = film, .spp = a.g.spp, .batches = a.batches,
                               .max_depth = a.g.max_depth, .rr_depth = a.g.rr_depth, .seed = a.g.seed,
                               .threads = a.g.threads, .eps = a.eps, .z_max = a.z_max};
     if (dr_fdcheck(scene, &cam, ps, &o, &en, &n) != 0) {

@@ -22,12 +22,10 @@
 #include "loss.h"
 #include "params.h"
 #include "render.h"
+#include "reverse.h"
 #include "sampler.h"
 #include "scene.h"
 #include "vis.h"
-
-/* The primal image of reverse mode uses its own random numbers (see the manual). */
-#define PRIMAL_SEED_SALT 0x5052494d414cULL   /* "PRIMAL" */
 
 void cmd_grad_usage(FILE *out)
 {
@@ -62,8 +60,10 @@ void cmd_grad_usage(FILE *out)
             "                      8-bit sRGB files are decoded to linear)\n"
             "      --loss L        reverse mode: l1 or l2 (mean over pixels and channels;\n"
             "                      default: l2)\n"
-            "      --batches K     reverse mode: independent gradient batches, each with\n"
-            "                      ceil(spp / K) samples per pixel (default: 4, at least 2)\n"
+            "      --batches K     reverse mode: independent batches, each with its own primal\n"
+            "                      image and gradient samples of ceil(spp / K) samples per\n"
+            "                      pixel (default: 4, at least 2); the standard error is their\n"
+            "                      spread, primal noise included (--json: its parts)\n"
             "      --grad-dir DIR  reverse mode: where texture gradients go (default: .)\n"
             "      --estimator E   gradient estimator: prb (path replay, default) or tape\n"
             "      --sampling S    detached (default; the only one implemented so far)\n"
@@ -74,6 +74,11 @@ void cmd_grad_usage(FILE *out)
             "      --camera N      which camera of the file (default: 0)\n"
             "      --seed S        random seed (default: 0)\n"
             "      --threads T     worker threads (default: one per CPU)\n"
+            "      --filter F      pixel filter: box (default), tent or gaussian[:STDDEV]\n"
+            "                      (as render)\n"
+            "      --crop X,Y,W,H  only this rectangle of the --res frame is rendered and\n"
+            "                      compared: -o images are W x H; a --target may be W x H\n"
+            "                      (then --res gives the frame) or the full frame\n"
             "      --batch N       tape: paths recorded per backward sweep (default 0: one\n"
             "                      sample of every pixel); bounds the tape's memory\n"
             "      --json          print a summary object on stdout (memory estimate included)\n"
@@ -190,6 +195,18 @@ static char *grad_image_name(const char *dir, const struct dr_param *p)
     if (s)
         snprintf(s, len, "%s%s%s", dir, dir[strlen(dir) - 1] == '/' ? "" : "/", base);
     return s;
+}
+
+/* --crop with a crop-sized target and no --res: the frame's size is unknown
+ * (without --res a target is the full frame). Returns -1 to go on or an exit code. */
+static int crop_target_size(const struct grad_args *a, const struct dr_image *timg)
+{
+    const struct grad_common *g = &a->g;
+    if (!g->crop_given || g->res_given || timg->width != g->crop_w || timg->height != g->crop_h)
+        return -1;
+    cli_error("grad", "--target %s is the crop's size (%dx%d): give the full frame's size with --res WxH",
+              a->target, timg->width, timg->height);
+    return DR_EXIT_USAGE;
 }
 
 /* ---- option checks that need no scene ---- */
@@ -381,7 +398,9 @@ static int run_forward(struct grad_args *a, const char *scene_path, const struct
                        const struct dr_camera *cam, const struct dr_param_set *ps, double t_start, double t_loaded)
 {
     const int n = ps->n;
-    const size_t npix = (size_t)a->g.width * a->g.height;
+    int w, h;   /* the rendered rectangle: the frame or --crop's */
+    grad_film(&a->g, a->g.width, a->g.height, &w, &h);
+    const size_t npix = (size_t)w * h;
     double *dir = calloc((size_t)(ps->total > 0 ? ps->total : 1), sizeof(double));
     double *dimg = malloc(sizeof(double) * npix * 3);
     float *fimg = malloc(sizeof(float) * npix * 3);
@@ -390,7 +409,7 @@ static int run_forward(struct grad_args *a, const char *scene_path, const struct
            *hi = calloc((size_t)n, sizeof(double));
     int rc = DR_EXIT_FAILURE;
     if (!dir || !dimg || !fimg || !outs || !viss || !vis_scale || !lo || !hi) {
-        cli_error("grad", "out of memory for a %dx%d derivative image", a->g.width, a->g.height);
+        cli_error("grad", "out of memory for a %dx%d derivative image", w, h);
         goto out;
     }
     for (int i = 0; i < n; i++) {
@@ -430,8 +449,8 @@ static int run_forward(struct grad_args *a, const char *scene_path, const struct
             hi[i] = fmax(hi[i], dimg[k]);
         }
         double t_w0 = dr_clock_seconds();
-        if (dr_image_write(outs[i], a->g.width, a->g.height, 3, fimg) != 0 ||
-            (viss[i] && write_vis(viss[i], fimg, a->g.width, a->g.height, &vis_scale[i]) != 0)) {
+        if (dr_image_write(outs[i], w, h, 3, fimg) != 0 ||
+            (viss[i] && write_vis(viss[i], fimg, w, h, &vis_scale[i]) != 0)) {
             if (progress)
                 fputc('\n', stderr);
             cli_error("grad", "%s", dr_last_error());
@@ -464,16 +483,14 @@ out:
 
 /* ---- reverse mode ---- */
 
-/* One reverse-mode run: the primal image and the adjoint of the loss, then
- * K independent gradient batches reduced to a mean and a standard error. */
+/* One reverse-mode run (drivers/reverse.h): K batches, each with its own
+ * primal image and gradient samples, reduced to a mean and standard errors. */
 struct reverse_run {
-    int K, spp_b;
     int64_t T;
-    float *img, *adj;
-    double *g, *mean, *se;         /* one batch; mean over batches; its standard error */
+    double *mean, *se, *se_grad, *se_primal;
     char **files;                  /* gradient images of image parameters */
-    double loss, t_primal, t_write;
-    uint64_t primal_seed;
+    double t_write;
+    struct dr_reverse_result res;
     struct grad_totals tot;
 };
 
@@ -482,62 +499,47 @@ static void reverse_free(struct reverse_run *r, int n_params)
     for (int k = 0; r->files && k < n_params; k++)
         free(r->files[k]);
     free(r->files);
-    free(r->img);
-    free(r->adj);
-    free(r->g);
     free(r->mean);
     free(r->se);
+    free(r->se_grad);
+    free(r->se_primal);
 }
 
-/* The primal image, with random numbers independent of every gradient
- * batch, its loss against the target and the loss's adjoint. */
-static int reverse_primal(const struct grad_args *a, const struct dr_scene *scene, const struct dr_camera *cam,
-                          const float *target, bool progress, struct reverse_run *r)
+static void reverse_progress(void *ctx, int done, int total)
 {
-    const size_t n = (size_t)a->g.width * a->g.height * 3;
-    r->primal_seed = dr_hash64(a->g.seed ^ PRIMAL_SEED_SALT);
-    struct dr_render_opts ro = grad_render_opts(&a->g, a->g.width, a->g.height, a->g.spp, r->primal_seed, progress);
-    struct dr_render_stats rs = {0};
-    if (dr_render(scene, cam, &ro, r->img, &rs) != 0) {
+    (void)ctx;
+    dr_progress_bar("grad", done, total);
+}
+
+static void reverse_on_render(void *ctx, const struct dr_render_stats *rs)
+{
+    grad_totals_add_render(&((struct reverse_run *)ctx)->tot, rs);
+}
+
+static void reverse_on_gradient(void *ctx, const struct dr_grad_stats *st)
+{
+    grad_totals_add(&((struct reverse_run *)ctx)->tot, st);
+}
+
+/* The batches: gradient, total standard error and its parts. */
+static int reverse_batches(const struct grad_args *a, const struct dr_scene *scene, const struct dr_camera *cam,
+                           const struct dr_param_set *ps, const float *target, bool progress, struct reverse_run *r)
+{
+    struct dr_reverse_options o = {
+        .estimator = a->g.estimator,
+        .problem = grad_problem(&a->g, scene, cam, ps, a->g.width, a->g.height, a->g.spp, a->g.seed),
+        .loss = a->loss, .loss_scale = 1.0, .batches = a->batches, .primal = DR_PRIMAL_PER_BATCH,
+        .progress = progress ? reverse_progress : NULL, .on_render = reverse_on_render,
+        .on_gradient = reverse_on_gradient, .ctx = r};
+    o.problem.batch = a->batch;
+    r->res = (struct dr_reverse_result){.grad = r->mean, .se = r->se, .se_gradient = r->se_grad,
+                                        .se_primal = r->se_primal};
+    if (dr_reverse_gradient(&o, target, &r->res) != 0) {
+        if (progress)
+            fputc('\n', stderr);
         cli_error("grad", "%s", dr_last_error());
         return DR_EXIT_FAILURE;
     }
-    grad_totals_add_render(&r->tot, &rs);
-    r->t_primal = rs.seconds;
-    r->loss = dr_loss_eval(a->loss, r->img, target, n);
-    d_loss_eval(a->loss, r->img, target, n, 1.0, r->adj);
-    return -1;
-}
-
-/* K gradient batches of spp_b samples: mean and standard error (Welford). */
-static int reverse_batches(const struct grad_args *a, const struct dr_scene *scene, const struct dr_camera *cam,
-                           const struct dr_param_set *ps, bool progress, struct reverse_run *r)
-{
-    double *m2 = r->se;
-    for (int b = 0; b < r->K; b++) {
-        if (progress)
-            dr_progress_bar("gradient", b, r->K);
-        struct dr_grad_problem prob = grad_problem(&a->g, scene, cam, ps, a->g.width, a->g.height, r->spp_b,
-                                                   a->g.seed + 1 + (uint64_t)b);
-        prob.batch = a->batch;
-        struct dr_grad_stats st = {0};
-        if (dr_estimator_backward(a->g.estimator, &prob, r->adj, r->g, &st) != 0) {
-            if (progress)
-                fputc('\n', stderr);
-            cli_error("grad", "%s", dr_last_error());
-            return DR_EXIT_FAILURE;
-        }
-        grad_totals_add(&r->tot, &st);
-        for (int64_t i = 0; i < r->T; i++) {
-            double d = r->g[i] - r->mean[i];
-            r->mean[i] += d / (b + 1);
-            m2[i] += d * (r->g[i] - r->mean[i]);
-        }
-    }
-    if (progress)
-        dr_progress_bar("gradient", r->K, r->K);
-    for (int64_t i = 0; i < r->T; i++)
-        r->se[i] = sqrt(m2[i] / (r->K - 1) / r->K);
     return -1;
 }
 
@@ -569,16 +571,13 @@ static int reverse_write_images(const struct grad_args *a, const struct dr_param
     return -1;
 }
 
-/* Norms of an image parameter's gradient and of its standard errors. */
-static void image_norms(const struct dr_param *p, const struct reverse_run *r, double *nrm, double *snrm)
+/* Root of the sum of squares of v over an image parameter's entries. */
+static double image_norm(const struct dr_param *p, const double *v)
 {
-    double a = 0.0, b = 0.0;
-    for (int64_t i = 0; i < p->size; i++) {
-        a += r->mean[p->offset + i] * r->mean[p->offset + i];
-        b += r->se[p->offset + i] * r->se[p->offset + i];
-    }
-    *nrm = sqrt(a);
-    *snrm = sqrt(b);
+    double a = 0.0;
+    for (int64_t i = 0; i < p->size; i++)
+        a += v[p->offset + i] * v[p->offset + i];
+    return sqrt(a);
 }
 
 static void json_array(FILE *f, const double *v, int64_t n)
@@ -592,6 +591,36 @@ static void json_array(FILE *f, const double *v, int64_t n)
     fputc(']', f);
 }
 
+/* One parameter's gradient and standard errors (total, gradient-sample and
+ * primal-image parts; null parts when a batch has a single sample). */
+static void reverse_json_param(FILE *f, const struct dr_param *p, const struct reverse_run *r, const char *file)
+{
+    fprintf(f, "{\"name\": ");
+    json_string(f, p->name);
+    fprintf(f, ", \"size\": %lld", (long long)p->size);
+    const char *keys[] = {"stderr", "stderr_gradient", "stderr_primal"};
+    const double *vals[] = {r->se, r->se_grad, r->se_primal};
+    if (is_image_param(p)) {
+        fprintf(f, ", \"width\": %d, \"height\": %d, \"channels\": %d, \"norm\": ", p->width, p->height,
+                p->channels);
+        json_number(f, image_norm(p, r->mean));
+        for (int k = 0; k < 3; k++) {
+            fprintf(f, ", \"%s_norm\": ", keys[k]);
+            json_number(f, image_norm(p, vals[k]));
+        }
+        fprintf(f, ", \"file\": ");
+        json_string(f, file);
+    } else {
+        fprintf(f, ", \"gradient\": ");
+        json_array(f, r->mean + p->offset, p->size);
+        for (int k = 0; k < 3; k++) {
+            fprintf(f, ", \"%s\": ", keys[k]);
+            json_array(f, vals[k] + p->offset, p->size);
+        }
+    }
+    fputc('}', f);
+}
+
 static void reverse_print_json(FILE *f, const struct grad_args *a, const char *scene_path,
                                const struct dr_param_set *ps, const struct reverse_run *r, double t_load, double t_end)
 {
@@ -599,44 +628,25 @@ static void reverse_print_json(FILE *f, const struct grad_args *a, const char *s
     fprintf(f, ", \"target\": ");
     json_string(f, a->target);
     fprintf(f, ", \"loss\": ");
-    json_number(f, r->loss);
+    json_number(f, r->res.loss);
     fprintf(f, ", \"loss_kind\": ");
     json_string(f, dr_loss_name(a->loss));
-    fprintf(f, ", \"batches\": %d, \"spp_per_batch\": %d, \"primal_seed\": %llu", r->K, r->spp_b,
-            (unsigned long long)r->primal_seed);
+    fprintf(f, ", \"batches\": %d, \"spp_per_batch\": %d, \"primal_seed\": %llu", a->batches, r->res.spp_batch,
+            (unsigned long long)r->res.primal_seed);
     fprintf(f, ", \"time\": {\"load\": ");
     json_number(f, t_load);
     fprintf(f, ", \"primal\": ");
-    json_number(f, r->t_primal);
+    json_number(f, r->res.t_primal);
     fprintf(f, ", \"gradient\": ");
-    json_number(f, r->tot.seconds);
+    json_number(f, r->res.t_gradient);
     fprintf(f, ", \"write\": ");
     json_number(f, r->t_write);
     fprintf(f, ", \"total\": ");
     json_number(f, t_end);
     fprintf(f, "}, \"parameters\": [");
     for (int k = 0; k < ps->n; k++) {
-        const struct dr_param *p = &ps->params[k];
-        fprintf(f, "%s{\"name\": ", k ? ", " : "");
-        json_string(f, p->name);
-        fprintf(f, ", \"size\": %lld", (long long)p->size);
-        if (is_image_param(p)) {
-            double nrm, snrm;
-            image_norms(p, r, &nrm, &snrm);
-            fprintf(f, ", \"width\": %d, \"height\": %d, \"channels\": %d, \"norm\": ", p->width, p->height,
-                    p->channels);
-            json_number(f, nrm);
-            fprintf(f, ", \"stderr_norm\": ");
-            json_number(f, snrm);
-            fprintf(f, ", \"file\": ");
-            json_string(f, r->files[k]);
-        } else {
-            fprintf(f, ", \"gradient\": ");
-            json_array(f, r->mean + p->offset, p->size);
-            fprintf(f, ", \"stderr\": ");
-            json_array(f, r->se + p->offset, p->size);
-        }
-        fputc('}', f);
+        fputs(k ? ", " : "", f);
+        reverse_json_param(f, &ps->params[k], r, r->files[k]);
     }
     fprintf(f, "], \"effects_differentiated\": ");
     grad_json_effects(f, ps);
@@ -646,16 +656,14 @@ static void reverse_print_json(FILE *f, const struct grad_args *a, const char *s
 static void reverse_print_text(FILE *f, const struct grad_args *a, const struct dr_param_set *ps,
                                const struct reverse_run *r)
 {
-    fprintf(f, "loss (%s): %.9g\n", dr_loss_name(a->loss), r->loss);
-    fprintf(f, "d loss / d parameter (mean of %d batches of %d spp, +- standard error; %s, %s):\n", r->K, r->spp_b,
-            a->g.estimator->name, dr_sampling_name(a->g.sampling));
+    fprintf(f, "loss (%s): %.9g\n", dr_loss_name(a->loss), r->res.loss);
+    fprintf(f, "d loss / d parameter (mean of %d batches of %d spp, +- standard error incl. primal noise; %s, %s):\n",
+            a->batches, r->res.spp_batch, a->g.estimator->name, dr_sampling_name(a->g.sampling));
     for (int k = 0; k < ps->n; k++) {
         const struct dr_param *p = &ps->params[k];
         if (is_image_param(p)) {
-            double nrm, snrm;
-            image_norms(p, r, &nrm, &snrm);
             fprintf(f, "%s (%dx%dx%d image): gradient norm %.6g (standard errors' norm %.3g) -> %s\n", p->name,
-                    p->width, p->height, p->channels, nrm, snrm, r->files[k]);
+                    p->width, p->height, p->channels, image_norm(p, r->mean), image_norm(p, r->se), r->files[k]);
         } else if (p->size == 1) {
             fprintf(f, "%s: %.6g +- %.2g\n", p->name, r->mean[p->offset], r->se[p->offset]);
         } else {
@@ -671,22 +679,18 @@ static int run_reverse(struct grad_args *a, const char *scene_path, const struct
                        const struct dr_camera *cam, const struct dr_param_set *ps, const float *target,
                        double t_start, double t_loaded)
 {
-    struct reverse_run r = {.K = a->batches, .T = ps->total};
-    r.spp_b = (int)(((int64_t)a->g.spp + r.K - 1) / r.K);
-    const size_t n = (size_t)a->g.width * a->g.height * 3, T1 = (size_t)(r.T > 0 ? r.T : 1);
-    r.img = malloc(sizeof(float) * n);
-    r.adj = malloc(sizeof(float) * n);
-    r.g = malloc(sizeof(double) * T1);
+    struct reverse_run r = {.T = ps->total};
+    const size_t T1 = (size_t)(r.T > 0 ? r.T : 1);
     r.mean = calloc(T1, sizeof(double));
     r.se = calloc(T1, sizeof(double));
+    r.se_grad = calloc(T1, sizeof(double));
+    r.se_primal = calloc(T1, sizeof(double));
     r.files = calloc((size_t)ps->n, sizeof(char *));
     int rc = DR_EXIT_FAILURE;
     bool progress = isatty(2) != 0;
-    if (!r.img || !r.adj || !r.g || !r.mean || !r.se || !r.files)
-        cli_error("grad", "out of memory (%lld gradient entries, %dx%d image)", (long long)r.T, a->g.width,
-                  a->g.height);
-    else if ((rc = reverse_primal(a, scene, cam, target, progress, &r)) < 0 &&
-             (rc = reverse_batches(a, scene, cam, ps, progress, &r)) < 0 &&
+    if (!r.mean || !r.se || !r.se_grad || !r.se_primal || !r.files)
+        cli_error("grad", "out of memory (%lld gradient entries)", (long long)r.T);
+    else if ((rc = reverse_batches(a, scene, cam, ps, target, progress, &r)) < 0 &&
              (rc = reverse_write_images(a, ps, &r)) < 0) {
         grad_totals_warn("grad", &r.tot);
         if (a->g.json)
@@ -714,6 +718,7 @@ int cmd_grad(int argc, char **argv)
     struct dr_image timg;
     memset(&timg, 0, sizeof timg);
     float *target = NULL;
+    char target_what[4200];
     int rc = parse_args(argc, argv, &a);
     if (rc >= 0)
         goto out;
@@ -723,16 +728,24 @@ int cmd_grad(int argc, char **argv)
     if (a.target) {
         if ((rc = grad_load_target("grad", a.target, &timg, &target)) >= 0)
             goto out;
-        if (a.g.res_given && (a.g.width != timg.width || a.g.height != timg.height)) {
+        if ((rc = crop_target_size(&a, &timg)) >= 0)
+            goto out;
+        if (a.g.res_given && (a.g.width != timg.width || a.g.height != timg.height) && !a.g.crop_given) {
             cli_error("grad", "--target %s is %dx%d but --res asks for %dx%d (the render and the target must be "
                               "the same size)", a.target, timg.width, timg.height, a.g.width, a.g.height);
             rc = DR_EXIT_USAGE;
             goto out;
         }
     }
+    snprintf(target_what, sizeof target_what, "--target %s", a.target ? a.target : "");
     struct dr_camera cam;
     if ((rc = grad_load_scene(&a.g, &scene_path, &scene, &cam, a.target ? timg.width : 0,
                               a.target ? timg.height : 0)) >= 0)
+        goto out;
+    if ((rc = grad_check_crop(&a.g, a.g.width, a.g.height)) >= 0)
+        goto out;
+    if (a.target && (rc = grad_crop_image(&a.g, target_what, &target, timg.width, timg.height, a.g.width,
+                                          a.g.height)) >= 0)
         goto out;
     if ((rc = grad_apply_sets(&a.g, scene)) >= 0 || (rc = grad_param_set(&a.g, scene, &ps)) >= 0)
         goto out;

@@ -23,6 +23,7 @@
 #include "mem_limits.h"
 #include "optimizer.h"
 #include "render.h"
+#include "reverse.h"
 #include "sampler.h"
 #include "stale_temps.h"
 
@@ -52,12 +53,18 @@ void cmd_optimize_usage(FILE *out)
             "      --sampling S       detached (the only one implemented)\n"
             "      --spp N            samples per pixel for the loss image and for the gradient\n"
             "                         (default 8)\n"
+            "      --batches K        split each iteration's samples into K independent batches\n"
+            "                         (own primal image each) for the gradient's standard error\n"
+            "                         (--json: gradient_stderr; default 2, at least 2)\n"
             "      --max-depth D      path segments (default 6)\n"
             "      --rr-depth D       Russian roulette from this many segments on (default 5)\n"
             "      --res WxH          render size; every target must have it (default: each\n"
             "                         target's own size)\n"
             "      --seed S           random seed (default 0)\n"
             "      --threads T        worker threads (default: one per CPU)\n"
+            "      --filter F         pixel filter: box (default), tent or gaussian[:STDDEV]\n"
+            "      --crop X,Y,W,H     fit only this rectangle of every target's frame; a target\n"
+            "                         may be W x H (then --res gives the frame) or the full frame\n"
             "  -o, --output FILE      write the optimised scene (.gltf or .glb)\n"
             "      --out-dir DIR      progress files (default optimize-out): loss.csv, loss.png,\n"
             "                         render-NNNN.png, before.png, after.png, target.png,\n"
@@ -72,22 +79,23 @@ void cmd_optimize_usage(FILE *out)
 }
 
 enum { OOPT_TARGET = GOPT_END, OOPT_ITERS, OOPT_LR, OOPT_LOSS, OOPT_OUTDIR, OOPT_RESUME, OOPT_RENDER_EVERY,
-       OOPT_CKPT_EVERY, OOPT_REFERENCE };
+       OOPT_CKPT_EVERY, OOPT_REFERENCE, OOPT_BATCHES };
 
 struct target {
     const char *arg, *path;
     int camera;
     struct dr_image img;
-    float *rgb;          /* linear target */
-    int w, h;
-    float *render, *adjoint;
+    float *rgb;          /* linear target (the rendered rectangle: --crop's or the frame) */
+    int w, h;            /* the frame */
+    int rw, rh;          /* the rendered rectangle: --crop's size, else the frame's */
+    float *render;
 };
 
 struct opt_args {
     struct grad_common g;
     struct target targets[MAX_TARGETS];
     int n_targets;
-    int iters, render_every, ckpt_every;
+    int iters, render_every, ckpt_every, batches;
     double lr;
     int loss;
     const char *output, *out_dir, *reference;
@@ -142,6 +150,10 @@ static int own_option(void *ctx, int c, const char *optarg)
         a->ckpt_every = (int)v;
         return 0;
     case OOPT_REFERENCE: a->reference = optarg; return 0;
+    case OOPT_BATCHES:
+        if (!cli_parse_int("optimize", "--batches", optarg, 2, 1L << 20, &v)) return DR_EXIT_USAGE;
+        a->batches = (int)v;
+        return 0;
     default: return -1;
     }
 }
@@ -161,6 +173,7 @@ static int parse_args(int argc, char **argv, struct opt_args *a)
         {"render-every", required_argument, NULL, OOPT_RENDER_EVERY},
         {"checkpoint-every", required_argument, NULL, OOPT_CKPT_EVERY},
         {"reference", required_argument, NULL, OOPT_REFERENCE},
+        {"batches", required_argument, NULL, OOPT_BATCHES},
         {NULL, 0, NULL, 0},
     };
     return grad_parse_args(&a->g, argc, argv, opts, "o", own_option, a, cmd_optimize_usage);
@@ -380,13 +393,13 @@ static int save_view(const struct opt_args *a, const struct dr_scene *scene, con
     const struct target *t = &a->targets[0];
     char path[4096];
     path_in(path, sizeof path, a->out_dir, name);
-    float *rgb = malloc(sizeof(float) * 3 * (size_t)t->w * t->h);
+    float *rgb = malloc(sizeof(float) * 3 * (size_t)t->rw * t->rh);
     if (!rgb)
         return DR_EXIT_FAILURE;
     struct dr_render_opts ro = grad_render_opts(&a->g, t->w, t->h, 4 * a->g.spp, a->g.seed ^ 0xbefa, false);
     int rc = dr_render(scene, &scene->cameras[t->camera], &ro, rgb, NULL);
     if (rc == 0)
-        rc = dr_image_write(path, t->w, t->h, 3, rgb);
+        rc = dr_image_write(path, t->rw, t->rh, 3, rgb);
     if (rc != 0)
         cli_error("optimize", "%s", dr_last_error());
     free(rgb);
@@ -444,6 +457,26 @@ static double reference_rel_error(const struct dr_param_set *ps, const double *t
     return den > 0.0 ? sqrt(num / den) : sqrt(num);
 }
 
+/* --crop: the target's frame (--res, else the target's own size: a
+ * crop-sized target needs --res) and the target cut to the crop. */
+static int target_frame(struct opt_args *a, struct target *t)
+{
+    char what[4200];
+    snprintf(what, sizeof what, "--target %s", t->path);
+    if (!a->g.res_given && t->w == a->g.crop_w && t->h == a->g.crop_h) {
+        cli_error("optimize", "%s is the crop's size (%dx%d): give the full frame's size with --res WxH", what, t->w,
+                  t->h);
+        return DR_EXIT_USAGE;
+    }
+    int fw = a->g.res_given ? a->g.width : t->w, fh = a->g.res_given ? a->g.height : t->h;
+    int rc = grad_check_crop(&a->g, fw, fh);
+    if (rc < 0)
+        rc = grad_crop_image(&a->g, what, &t->rgb, t->w, t->h, fw, fh);
+    t->w = fw;
+    t->h = fh;
+    return rc;
+}
+
 static int load_targets(struct opt_args *a)
 {
     for (int i = 0; i < a->n_targets; i++) {
@@ -453,14 +486,16 @@ static int load_targets(struct opt_args *a)
             return rc;
         t->w = t->img.width;
         t->h = t->img.height;
+        if (a->g.crop_given && (rc = target_frame(a, t)) >= 0)
+            return rc;
         if (a->g.res_given && (t->w != a->g.width || t->h != a->g.height)) {
             cli_error("optimize", "--target %s is %dx%d but --res asks for %dx%d", t->path, t->w, t->h, a->g.width,
                       a->g.height);
             return DR_EXIT_USAGE;
         }
-        t->render = malloc(sizeof(float) * 3 * (size_t)t->w * t->h);
-        t->adjoint = malloc(sizeof(float) * 3 * (size_t)t->w * t->h);
-        if (!t->render || !t->adjoint) {
+        grad_film(&a->g, t->w, t->h, &t->rw, &t->rh);
+        t->render = malloc(sizeof(float) * 3 * (size_t)t->rw * t->rh);
+        if (!t->render) {
             cli_error("optimize", "out of memory");
             return DR_EXIT_FAILURE;
         }
@@ -493,6 +528,7 @@ struct opt_run {
     struct dr_param_set *ps;
     struct dr_adam *adam;
     double *theta, *grad, *gt, *ref;   /* values, gradient, one target's gradient, reference values */
+    double *se, *se_t, *se_parts;      /* gradient's total standard error; one target's; its parts (2 T) */
     struct history hist;
     double loss;
     char ckpt[4096];
@@ -551,7 +587,10 @@ static int opt_load(struct opt_args *a, struct opt_run *r)
     r->theta = malloc(sizeof(double) * T);
     r->grad = malloc(sizeof(double) * T);
     r->gt = malloc(sizeof(double) * T);
-    if (!r->theta || !r->grad || !r->gt) {
+    r->se = malloc(sizeof(double) * T);
+    r->se_t = malloc(sizeof(double) * T);
+    r->se_parts = malloc(sizeof(double) * 2 * (T ? T : 1));
+    if (!r->theta || !r->grad || !r->gt || !r->se || !r->se_t || !r->se_parts) {
         cli_error("optimize", "out of memory");
         return DR_EXIT_FAILURE;
     }
@@ -608,7 +647,7 @@ static int opt_open_outputs(const struct opt_args *a, struct opt_run *r)
             return rc;
         char tp[4096];
         path_in(tp, sizeof tp, a->out_dir, "target.png");
-        dr_image_write(tp, a->targets[0].w, a->targets[0].h, 3, a->targets[0].rgb);
+        dr_image_write(tp, a->targets[0].rw, a->targets[0].rh, 3, a->targets[0].rgb);
         return -1;
     }
     read_loss_csv(a->out_dir, &r->hist, r->it0);
@@ -623,39 +662,43 @@ static int opt_open_outputs(const struct opt_args *a, struct opt_run *r)
     return -1;
 }
 
-/* Loss and gradient of iteration `it` over every target: the loss image and
- * the gradient from independent random numbers. */
+/* Loss and gradient of iteration `it` over every target, from
+ * drivers/reverse.h (batches with their own primal images, independent of
+ * their gradient samples); the targets' standard errors add in quadrature. */
 static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
 {
-    memset(r->grad, 0, sizeof(double) * (size_t)r->ps->total);
+    const int64_t T = r->ps->total;
+    memset(r->grad, 0, sizeof(double) * (size_t)T);
+    memset(r->se, 0, sizeof(double) * (size_t)T);
     r->loss = 0.0;
     for (int ti = 0; ti < a->n_targets; ti++) {
         const struct target *t = &a->targets[ti];
         const struct dr_camera *cam = &r->scene->cameras[t->camera];
-        size_t n = (size_t)t->w * t->h * 3;
-        struct dr_render_opts ro =
-            grad_render_opts(&a->g, t->w, t->h, a->g.spp, iteration_seed(a->g.seed, it, ti, 0x5052494d), false);
-        if (dr_render(r->scene, cam, &ro, t->render, NULL) != 0) {
+        struct dr_reverse_options o = {
+            .estimator = a->g.estimator, .loss = (enum dr_loss_kind)a->loss, .loss_scale = 1.0 / a->n_targets,
+            .batches = a->batches, .primal = DR_PRIMAL_PER_BATCH,
+            .problem = grad_problem(&a->g, r->scene, cam, r->ps, t->w, t->h, a->g.spp,
+                                    iteration_seed(a->g.seed, it, ti, 0x47524144))};
+        struct dr_reverse_result res = {.grad = r->gt, .se = r->se_t, .se_gradient = r->se_parts,
+                                        .se_primal = r->se_parts + T, .image = t->render};
+        if (dr_reverse_gradient(&o, t->rgb, &res) != 0) {
             cli_error("optimize", "%s", dr_last_error());
             return DR_EXIT_FAILURE;
         }
-        r->loss += dr_loss_eval(a->loss, t->render, t->rgb, n) / a->n_targets;
-        d_loss_eval(a->loss, t->render, t->rgb, n, 1.0 / a->n_targets, t->adjoint);
-        struct dr_grad_problem p = grad_problem(&a->g, r->scene, cam, r->ps, t->w, t->h, a->g.spp,
-                                                iteration_seed(a->g.seed, it, ti, 0x47524144));
-        if (dr_estimator_backward(a->g.estimator, &p, t->adjoint, r->gt, NULL) != 0) {
-            cli_error("optimize", "%s", dr_last_error());
-            return DR_EXIT_FAILURE;
-        }
-        for (int64_t i = 0; i < r->ps->total; i++)
+        r->loss += res.loss;
+        for (int64_t i = 0; i < T; i++) {
             r->grad[i] += r->gt[i];
+            r->se[i] += r->se_t[i] * r->se_t[i];
+        }
         if (ti == 0 && (it % a->render_every == 0)) {
             char name[64], path[4096];
             snprintf(name, sizeof name, "render-%04d.png", it);
             path_in(path, sizeof path, a->out_dir, name);
-            dr_image_write(path, t->w, t->h, 3, t->render);
+            dr_image_write(path, t->rw, t->rh, 3, t->render);
         }
     }
+    for (int64_t i = 0; i < T; i++)
+        r->se[i] = sqrt(r->se[i]);
     return -1;
 }
 
@@ -700,6 +743,11 @@ static void opt_report(const struct opt_args *a, const struct opt_run *r, int it
     json_number(stdout, per * (a->iters - it - 1));
     printf(", \"parameters\": {");
     print_values(stdout, r->ps, r->theta, true);
+    /* this iteration's gradient and its total standard error (primal noise included) */
+    printf("}, \"gradient\": {");
+    print_values(stdout, r->ps, r->grad, true);
+    printf("}, \"gradient_stderr\": {");
+    print_values(stdout, r->ps, r->se, true);
     printf("}}\n");
     fflush(stdout);
 }
@@ -840,7 +888,6 @@ static void opt_free(struct opt_args *a, struct opt_run *r)
         dr_image_release(&a->targets[i].img);
         free(a->targets[i].rgb);
         free(a->targets[i].render);
-        free(a->targets[i].adjoint);
     }
     free(r->hist.loss);
     free(r->hist.seconds);
@@ -848,6 +895,9 @@ static void opt_free(struct opt_args *a, struct opt_run *r)
     free(r->theta);
     free(r->grad);
     free(r->gt);
+    free(r->se);
+    free(r->se_t);
+    free(r->se_parts);
     free(r->ref);
     dr_adam_destroy(r->adam);
     dr_param_set_destroy(r->ps);
@@ -867,6 +917,7 @@ int cmd_optimize(int argc, char **argv)
     a.iters = 100;
     a.render_every = 10;
     a.ckpt_every = 10;
+    a.batches = 2;
     a.loss = DR_LOSS_L2;
     a.out_dir = "optimize-out";
     int rc = parse_args(argc, argv, &a);

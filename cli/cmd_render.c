@@ -38,6 +38,12 @@ void cmd_render_usage(FILE *out)
             "      --seed S        random seed (default: 0); the same seed gives the same\n"
             "                      image for any --threads\n"
             "      --threads T     worker threads (default: one per CPU)\n"
+            "      --filter F      pixel filter: box (default: the pixel's square), tent\n"
+            "                      (radius 1 pixel) or gaussian[:STDDEV] (default 0.5 pixel),\n"
+            "                      by filter importance sampling\n"
+            "      --crop X,Y,W,H  render only this rectangle of the --res frame (top-left\n"
+            "                      pixel X,Y; W x H pixels): the same pixels, bit for bit,\n"
+            "                      as the full render's; the image written is W x H\n"
             "      --json          print a summary object on stdout (timings, rays,\n"
             "                      peak memory, memory estimate, effects simulated)\n"
             "  -h, --help          show this help\n");
@@ -84,6 +90,8 @@ static void print_json(const struct render_args *a, const char *scene_path, cons
     fprintf(f, ", \"width\": %d, \"height\": %d, \"spp\": %d, \"max_depth\": %d, \"rr_depth\": %d, \"seed\": %llu, "
                "\"threads\": %d",
             g->width, g->height, g->spp, g->max_depth, g->rr_depth, (unsigned long long)g->seed, st->threads);
+    fputs(", ", f);
+    grad_json_film(f, g);
     fprintf(f, ", \"camera\": ");
     json_string(f, camera_name);
     fprintf(f, ", \"triangles\": %u", scene->mesh.n_triangles);
@@ -145,7 +153,11 @@ int cmd_render(int argc, char **argv)
         goto out;
     }
     double t_loaded = dr_clock_seconds();
-    const int w = a.g.width, h = a.g.height;
+    if ((rc = grad_check_crop(&a.g, a.g.width, a.g.height)) >= 0)
+        goto out;
+    /* the rendered rectangle: the frame, or --crop's part of it */
+    struct dr_render_opts ro = grad_render_opts(&a.g, a.g.width, a.g.height, a.g.spp, a.g.seed, isatty(2) != 0);
+    const int w = ro.width, h = ro.height;
     if ((rc = cli_limits_render(scene, w, h, a.g.threads)) >= 0)
         goto out;
     rgb = malloc(sizeof(float) * 3 * (size_t)w * (size_t)h);
@@ -154,7 +166,6 @@ int cmd_render(int argc, char **argv)
         rc = DR_EXIT_FAILURE;
         goto out;
     }
-    struct dr_render_opts ro = grad_render_opts(&a.g, w, h, a.g.spp, a.g.seed, isatty(2) != 0);
     struct dr_render_stats st;
     const double t_startup = cli_seconds_since_start();   /* to the first ray */
     if (dr_render(scene, &cam, &ro, rgb, &st) != 0) {

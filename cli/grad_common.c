@@ -41,6 +41,8 @@ static void list_estimators(char *buf, size_t size)
     }
 }
 
+static int film_option(struct grad_common *g, int c, const char *arg);
+
 int grad_common_option(struct grad_common *g, int c, const char *arg)
 {
     long v;
@@ -119,6 +121,8 @@ int grad_common_option(struct grad_common *g, int c, const char *arg)
         g->threads = (int)v;
         return 0;
     case GOPT_JSON: g->json = true; return 0;
+    case GOPT_FILTER:
+    case GOPT_CROP: return film_option(g, c, arg);
     default: return -1;
     }
 }
@@ -371,17 +375,21 @@ struct dr_grad_problem grad_problem(const struct grad_common *g, const struct dr
                                     const struct dr_camera *cam, const struct dr_param_set *ps, int w, int h, int spp,
                                     uint64_t seed)
 {
-    return (struct dr_grad_problem){.scene = scene, .camera = cam, .params = ps, .width = w, .height = h,
+    int rw, rh;
+    struct dr_film film = grad_film(g, w, h, &rw, &rh);
+    return (struct dr_grad_problem){.scene = scene, .camera = cam, .params = ps, .width = rw, .height = rh,
                                     .spp = spp, .max_depth = g->max_depth, .rr_depth = g->rr_depth, .seed = seed,
-                                    .threads = g->threads, .sampling = g->sampling};
+                                    .threads = g->threads, .sampling = g->sampling, .film = film};
 }
 
 struct dr_render_opts grad_render_opts(const struct grad_common *g, int w, int h, int spp, uint64_t seed,
                                        bool progress)
 {
-    return (struct dr_render_opts){.width = w, .height = h, .spp = spp, .max_depth = g->max_depth,
+    int rw, rh;
+    struct dr_film film = grad_film(g, w, h, &rw, &rh);
+    return (struct dr_render_opts){.width = rw, .height = rh, .spp = spp, .max_depth = g->max_depth,
                                    .rr_depth = g->rr_depth, .seed = seed, .threads = g->threads,
-                                   .progress = progress};
+                                   .progress = progress, .film = film};
 }
 
 static void add_rays(struct dr_ray_counts *sum, const struct dr_ray_counts *r)
@@ -432,6 +440,8 @@ void grad_json_head(FILE *f, const struct grad_common *g, const char *scene_path
     json_string(f, dr_sampling_name(g->sampling));
     fprintf(f, ", \"width\": %d, \"height\": %d, \"spp\": %d, \"max_depth\": %d, \"rr_depth\": %d, \"seed\": %llu",
             g->width, g->height, g->spp, g->max_depth, g->rr_depth, (unsigned long long)g->seed);
+    fputs(", ", f);
+    grad_json_film(f, g);
 }
 
 void grad_json_run(FILE *f, const struct grad_totals *t)
@@ -448,4 +458,111 @@ void grad_json_run(FILE *f, const struct grad_totals *t)
     dr_path_stages_describe(t->stages, stages, sizeof stages);
     fprintf(f, ", \"invalid_samples\": %llu, \"stages\": ", (unsigned long long)t->invalid);
     json_name_list(f, stages);
+}
+
+/* ---- the film: --filter and --crop (issue 14) ---- */
+
+/* "X,Y,W,H": four integers, X, Y >= 0, W, H >= 1. */
+static bool parse_crop(const char *arg, int v[4])
+{
+    const char *s = arg;
+    for (int i = 0; i < 4; i++) {
+        char *end;
+        errno = 0;
+        long x = strtol(s, &end, 10);
+        if (end == s || errno || x < (i < 2 ? 0 : 1) || x > (1L << 24) || *end != (i < 3 ? ',' : '\0'))
+            return false;
+        v[i] = (int)x;
+        s = end + 1;
+    }
+    return true;
+}
+
+static int film_option(struct grad_common *g, int c, const char *arg)
+{
+    if (c == GOPT_FILTER) {
+        if (dr_filter_parse(arg, &g->filter) != 0) {
+            cli_error(g->cmd, "--filter: %s", dr_last_error());
+            return DR_EXIT_USAGE;
+        }
+        return 0;
+    }
+    int v[4];
+    if (!parse_crop(arg, v)) {
+        cli_error(g->cmd, "--crop %s: expected X,Y,W,H (the rectangle's top-left pixel, X, Y >= 0, and its size, "
+                          "W, H >= 1)", arg);
+        return DR_EXIT_USAGE;
+    }
+    g->crop_given = true;
+    g->crop_x = v[0];
+    g->crop_y = v[1];
+    g->crop_w = v[2];
+    g->crop_h = v[3];
+    return 0;
+}
+
+struct dr_film grad_film(const struct grad_common *g, int w, int h, int *rw, int *rh)
+{
+    struct dr_film film = {.filter = g->filter};
+    *rw = w;
+    *rh = h;
+    if (g->crop_given) {
+        film.frame_w = w;
+        film.frame_h = h;
+        film.x0 = g->crop_x;
+        film.y0 = g->crop_y;
+        *rw = g->crop_w;
+        *rh = g->crop_h;
+    }
+    return film;
+}
+
+int grad_check_crop(const struct grad_common *g, int frame_w, int frame_h)
+{
+    if (!g->crop_given || ((int64_t)g->crop_x + g->crop_w <= frame_w && (int64_t)g->crop_y + g->crop_h <= frame_h))
+        return -1;
+    cli_error(g->cmd, "--crop %d,%d,%d,%d: the rectangle does not lie inside the %dx%d frame (pixels %d..%d x "
+                      "%d..%d)", g->crop_x, g->crop_y, g->crop_w, g->crop_h, frame_w, frame_h, g->crop_x,
+              g->crop_x + g->crop_w - 1, g->crop_y, g->crop_y + g->crop_h - 1);
+    return DR_EXIT_USAGE;
+}
+
+int grad_crop_image(const struct grad_common *g, const char *what, float **rgb, int tw, int th, int frame_w,
+                    int frame_h)
+{
+    if (g->crop_given && tw == g->crop_w && th == g->crop_h)
+        return -1;   /* already the crop's rectangle */
+    if (tw != frame_w || th != frame_h) {
+        if (g->crop_given)
+            cli_error(g->cmd, "%s is %dx%d: with --crop it must be the crop's size (%dx%d) or the frame's (%dx%d)",
+                      what, tw, th, g->crop_w, g->crop_h, frame_w, frame_h);
+        else
+            cli_error(g->cmd, "%s is %dx%d but the render is %dx%d", what, tw, th, frame_w, frame_h);
+        return DR_EXIT_USAGE;
+    }
+    if (!g->crop_given)
+        return -1;
+    float *out = malloc(sizeof(float) * 3 * (size_t)g->crop_w * (size_t)g->crop_h);
+    if (!out) {
+        cli_error(g->cmd, "%s: out of memory", what);
+        return DR_EXIT_FAILURE;
+    }
+    for (int y = 0; y < g->crop_h; y++)
+        memcpy(out + 3 * (size_t)y * g->crop_w, *rgb + 3 * ((size_t)(g->crop_y + y) * frame_w + g->crop_x),
+               sizeof(float) * 3 * (size_t)g->crop_w);
+    free(*rgb);
+    *rgb = out;
+    return -1;
+}
+
+void grad_json_film(FILE *f, const struct grad_common *g)
+{
+    char name[64];
+    dr_filter_format(&g->filter, name, sizeof name);
+    fprintf(f, "\"filter\": ");
+    json_string(f, name);
+    if (g->crop_given)
+        fprintf(f, ", \"crop\": [%d, %d, %d, %d]", g->crop_x, g->crop_y, g->crop_w, g->crop_h);
+    else
+        fprintf(f, ", \"crop\": null");
 }

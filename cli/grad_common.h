@@ -31,6 +31,8 @@ enum {
     GOPT_JSON,
     GOPT_SET,
     GOPT_RR_DEPTH,
+    GOPT_FILTER,   /* film (issue 14) */
+    GOPT_CROP,
     GOPT_END
 };
 
@@ -41,6 +43,7 @@ enum {
         {"rr-depth", required_argument, NULL, GOPT_RR_DEPTH}, {"res", required_argument, NULL, GOPT_RES},  \
         {"camera", required_argument, NULL, GOPT_CAMERA}, {"seed", required_argument, NULL, GOPT_SEED},     \
         {"threads", required_argument, NULL, GOPT_THREADS}, {"json", no_argument, NULL, GOPT_JSON},         \
+        {"filter", required_argument, NULL, GOPT_FILTER}, {"crop", required_argument, NULL, GOPT_CROP},     \
         {"help", no_argument, NULL, 'h'}
 #define GRAD_COMMON_LONG_OPTIONS                                                                       \
     {"param", required_argument, NULL, GOPT_PARAM}, {"estimator", required_argument, NULL, GOPT_ESTIMATOR}, \
@@ -59,6 +62,11 @@ struct grad_common {
     int spp, max_depth, rr_depth, width, height, camera, threads;
     bool res_given, camera_given, json;
     uint64_t seed;
+    /* the film (core/film.h): --filter, and --crop X,Y,W,H of the frame
+     * (width x height above stay the frame's size) */
+    struct dr_filter filter;
+    bool crop_given;
+    int crop_x, crop_y, crop_w, crop_h;
 };
 
 /* Defaults: prb, detached, the given spp, depth 8, Russian roulette from
@@ -108,8 +116,28 @@ int grad_param_set(const struct grad_common *g, const struct dr_scene *scene, st
  * img keeps the file's size (release it). Returns -1 to go on or an exit code. */
 int grad_load_target(const char *cmd, const char *path, struct dr_image *img, float **rgb);
 
-/* The estimator problem / render options the shared options describe, for an
- * image of w x h at spp samples per pixel with this seed. */
+/* ---- the film: --filter and --crop ----
+ * The film of a w x h frame under the options: the filter, and with --crop
+ * the rectangle; *rw x *rh is the size of what is rendered (the crop's, else
+ * the frame's). */
+struct dr_film grad_film(const struct grad_common *g, int w, int h, int *rw, int *rh);
+/* Checks that --crop lies inside a frame_w x frame_h frame (the message names
+ * --crop and the frame). Returns -1 to go on or DR_EXIT_USAGE. */
+int grad_check_crop(const struct grad_common *g, int frame_w, int frame_h);
+/* An image to compare with the rendered rectangle (a --target; `compare`
+ * can use it for its images too): tw x th rgb that is either the crop's size
+ * (kept) or the frame's (the crop's rectangle cut out into a new buffer,
+ * *rgb replaced and the old one freed). Without --crop it must be the
+ * frame's size. Returns -1 to go on or DR_EXIT_USAGE after a message naming
+ * `what` (e.g. "--target t.exr"). */
+int grad_crop_image(const struct grad_common *g, const char *what, float **rgb, int tw, int th, int frame_w,
+                    int frame_h);
+/* JSON: `"filter": "box", "crop": [x, y, w, h] or null` (no braces). */
+void grad_json_film(FILE *f, const struct grad_common *g);
+
+/* The estimator problem / render options the shared options describe, for a
+ * frame of w x h (the rendered rectangle follows --crop, the filter
+ * --filter) at spp samples per pixel with this seed. */
 struct dr_grad_problem grad_problem(const struct grad_common *g, const struct dr_scene *scene,
                                     const struct dr_camera *cam, const struct dr_param_set *ps, int w, int h, int spp,
                                     uint64_t seed);

@@ -32,23 +32,26 @@ static void render_tile(void *ctx, int thread, int x0, int y0, int x1, int y1)
     struct dr_ray_counts *rays = &j->counters[thread].rays;
     for (int y = y0; y < y1; y++) {
         for (int x = x0; x < x1; x++) {
-            uint64_t pixel = (uint64_t)y * (uint64_t)o->width + (uint64_t)x;
+            int fx, fy;   /* the frame pixel: random numbers and rays do not depend on the crop */
+            int64_t local = (int64_t)y * o->width + x;
+            uint64_t pixel = dr_film_pixel(&o->film, o->width, local, &fx, &fy);
             dr_vec3 sum = dr_v3s(0.0);
             for (int s = 0; s < o->spp; s++) {
                 struct dr_sampler smp;
                 dr_sampler_init(&smp, o->seed, pixel, (uint64_t)s);
-                double jx = dr_sampler_next(&smp), jy = dr_sampler_next(&smp);
-                dr_vec3 d = dr_camera_direction(&j->view, x + jx, y + jy);
+                double u = dr_sampler_next(&smp), v = dr_sampler_next(&smp), px, py;
+                dr_film_sample(&o->film.filter, fx, fy, u, v, &px, &py);
+                dr_vec3 d = dr_camera_direction(&j->view, px, py);
                 dr_vec3 L = dr_path_radiance(j->scene, &j->path, j->view.origin, d, &smp, rays);
                 if (dr_v3_finite(L))
                     sum = dr_add(sum, L);
                 else
                     j->counters[thread].invalid++;
             }
-            float *px = j->rgb + 3 * pixel;
-            px[0] = (float)(sum.x / o->spp);
-            px[1] = (float)(sum.y / o->spp);
-            px[2] = (float)(sum.z / o->spp);
+            float *out = j->rgb + 3 * local;
+            out[0] = (float)(sum.x / o->spp);
+            out[1] = (float)(sum.y / o->spp);
+            out[2] = (float)(sum.z / o->spp);
         }
     }
 }
@@ -83,6 +86,8 @@ static void progress(void *ctx, int done, int total)
 int dr_render(const struct dr_scene *scene, const struct dr_camera *camera, const struct dr_render_opts *opts,
               float *rgb, struct dr_render_stats *stats)
 {
+    if (dr_film_check(&opts->film, opts->width, opts->height) != 0)
+        return DR_ERR_ARG;
     struct render_job *j = calloc(1, sizeof *j);
     if (!j) {
         dr_set_error("out of memory");
@@ -90,7 +95,8 @@ int dr_render(const struct dr_scene *scene, const struct dr_camera *camera, cons
     }
     j->scene = scene;
     j->camera = camera;
-    j->view = dr_camera_view(camera, opts->width, opts->height);
+    j->view = dr_camera_view(camera, dr_film_frame_w(&opts->film, opts->width),
+                             dr_film_frame_h(&opts->film, opts->height));
     j->opts = opts;
     j->path = (struct dr_path_opts){.max_depth = opts->max_depth, .rr_depth = opts->rr_depth,
                                     .stages = dr_path_plan(scene, NULL)};

@@ -6,17 +6,19 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "film.h"
 #include "path.h"
 #include "scene.h"
 
 struct dr_render_opts {
-    int width, height;
+    int width, height;    /* the rendered rectangle (the frame, unless film crops it) */
     int spp;
     int max_depth;
     int rr_depth;
     uint64_t seed;
     int threads;          /* <= 0: one per CPU */
     bool progress;        /* draw a progress bar on stderr */
+    struct dr_film film;  /* pixel filter and crop (zeroed: box, whole frame) */
 };
 
 struct dr_render_stats {
@@ -27,7 +29,8 @@ struct dr_render_stats {
     int threads;
 };
 
-/* Renders into rgb (width * height * 3 floats, top row first). */
+/* Renders into rgb (width * height * 3 floats, top row first): the
+ * rectangle opts->film says of the frame (DR_ERR_ARG if it does not fit). */
 int dr_render(const struct dr_scene *scene, const struct dr_camera *camera, const struct dr_render_opts *opts,
               float *rgb, struct dr_render_stats *stats);
 

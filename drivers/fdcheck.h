@@ -31,6 +31,7 @@ struct dr_fd_options {
     int threads;
     double eps;         /* step along the direction (absolute) */
     double z_max;       /* agreement threshold on |z| */
+    struct dr_film film;   /* filter and crop; width x height above is the rendered rectangle */
 };
 
 struct dr_fd_entry {

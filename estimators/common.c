@@ -12,11 +12,14 @@
 void dr_est_camera_ray(const struct dr_est_base *b, int64_t pixel, int sample, struct dr_sampler *smp, dr_vec3 *o,
                        dr_vec3 *d)
 {
-    dr_sampler_init(smp, b->p->seed, (uint64_t)pixel, (uint64_t)sample);
-    double jx = dr_sampler_next(smp), jy = dr_sampler_next(smp);
-    int x = (int)(pixel % b->p->width), y = (int)(pixel / b->p->width);
+    /* film.h: the frame pixel keys the random numbers, the filter draws the offset */
+    int x, y;
+    uint64_t frame_pixel = dr_film_pixel(&b->p->film, b->p->width, pixel, &x, &y);
+    dr_sampler_init(smp, b->p->seed, frame_pixel, (uint64_t)sample);
+    double u = dr_sampler_next(smp), v = dr_sampler_next(smp), fx, fy;
+    dr_film_sample(&b->p->film.filter, x, y, u, v, &fx, &fy);
     *o = b->view.origin;
-    *d = dr_camera_direction(&b->view, x + jx, y + jy);
+    *d = dr_camera_direction(&b->view, fx, fy);
 }
 
 /* ------------------------------------------------------------ accumulators */
@@ -143,7 +146,11 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
     }
     b->t0 = dr_clock_seconds();
     b->p = p;
-    b->view = dr_camera_view(p->camera, p->width, p->height);
+    if (dr_film_check(&p->film, p->width, p->height) != 0) {
+        free(b);
+        return DR_ERR_ARG;
+    }
+    b->view = dr_camera_view(p->camera, dr_film_frame_w(&p->film, p->width), dr_film_frame_h(&p->film, p->height));
     b->popts = (struct dr_path_opts){.max_depth = p->max_depth, .rr_depth = p->rr_depth,
                                      .stages = dr_path_plan(p->scene, p->params), .params = p->params};
     b->adjoint = adjoint;

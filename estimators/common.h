@@ -49,7 +49,9 @@ struct dr_est_base {
     double t0;
 };
 
-/* Sampler and camera ray of sample `sample` of pixel `pixel`. */
+/* Sampler and camera ray of sample `sample` of pixel `pixel` (an index into
+ * the rendered rectangle; film.h maps it to the frame and draws the filter's
+ * offset). */
 void dr_est_camera_ray(const struct dr_est_base *b, int64_t pixel, int sample, struct dr_sampler *smp, dr_vec3 *o,
                        dr_vec3 *d);
 

@@ -13,6 +13,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "film.h"
 #include "params.h"
 #include "path.h"
 #include "scene.h"
@@ -35,6 +36,10 @@ struct dr_grad_problem {
     int threads;               /* <= 0: one per CPU (at most DR_MAX_THREADS) */
     int64_t batch;             /* tape: paths per record/sweep (0: one sample of every pixel) */
     enum dr_sampling sampling;
+    /* The pixel filter and the crop (zeroed: box, whole frame). width and
+     * height above are the rendered rectangle: estimators iterate its pixels
+     * and every image (adjoint, d image) has its size. */
+    struct dr_film film;
 };
 
 struct dr_grad_stats {

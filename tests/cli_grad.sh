@@ -173,6 +173,21 @@ and d["parameters"][1]["file"] == "gdir/grad-images-0.exr" and math.isfinite(d["
 and "gradient" not in d["parameters"][1]
 and "bsdf" in d["effects_differentiated"] and "textures" in d["effects_differentiated"]'
 done
+# the standard error's parts (issue 14): total^2 = gradient part^2 + primal part^2
+run grad --target t.exr --param "$red" --param /images/0 --spp 16 --batches 4 --json
+expect_rc 0 "grad reverse --json (stderr parts)"
+json_check "$tmp/out" '
+all(abs(t * t - g * g - q * q) <= 1e-9 * t * t + 1e-30 or (q == 0 and g >= t)
+    for t, g, q in zip(*(d["parameters"][0][k] for k in ["stderr", "stderr_gradient", "stderr_primal"])))
+and all(x > 0 for x in d["parameters"][0]["stderr_gradient"] + d["parameters"][0]["stderr"])
+and d["spp_per_batch"] == 4
+and all(math.isfinite(d["parameters"][1][k]) for k in ["stderr_norm", "stderr_gradient_norm", "stderr_primal_norm"])'
+# one sample per batch: no halves, so no parts (null), the total is still there
+run grad --target t.exr --param "$red" --spp 2 --batches 2 --json
+expect_rc 0 "grad reverse --json (spp 1 per batch)"
+json_check "$tmp/out" '
+d["parameters"][0]["stderr_gradient"] == [None] * 3 and d["parameters"][0]["stderr_primal"] == [None] * 3
+and all(x > 0 for x in d["parameters"][0]["stderr"])'
 [ -s gdir/grad-images-0.exr ] || fail "grad --grad-dir gdir: expected gdir/grad-images-0.exr"
 run grad --target t.exr --param "$red" --loss l1 --json
 expect_rc 0 "grad --loss l1"

@@ -1,0 +1,170 @@
+#include "reverse.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "error.h"
+#include "sampler.h"
+
+#define PRIMAL_SEED_SALT 0x5052494d414cULL   /* "PRIMAL" */
+#define GRAD_SEED_SALT 0x47524144ULL         /* "GRAD" */
+
+/* Scratch of one run: images, adjoint and per-entry sums. */
+struct rev_work {
+    const struct dr_reverse_options *o;
+    const float *target;
+    size_t n;                  /* pixels * 3 */
+    int64_t T;
+    float *img, *adj;
+    double *img_sum;           /* sum of the batches' primal images */
+    double *half[2], *m2, *dsq;
+    int done, steps;
+};
+
+static void work_free(struct rev_work *w)
+{
+    free(w->img);
+    free(w->adj);
+    free(w->img_sum);
+    free(w->half[0]);
+    free(w->half[1]);
+    free(w->m2);
+    free(w->dsq);
+}
+
+static int work_alloc(struct rev_work *w)
+{
+    size_t T1 = (size_t)(w->T > 0 ? w->T : 1);
+    w->img = malloc(sizeof(float) * w->n);
+    w->adj = malloc(sizeof(float) * w->n);
+    w->img_sum = calloc(w->n, sizeof(double));
+    w->half[0] = calloc(T1, sizeof(double));
+    w->half[1] = calloc(T1, sizeof(double));
+    w->m2 = calloc(T1, sizeof(double));
+    w->dsq = calloc(T1, sizeof(double));
+    if (w->img && w->adj && w->img_sum && w->half[0] && w->half[1] && w->m2 && w->dsq)
+        return 0;
+    dr_set_error("out of memory (%lld gradient entries, %zu image values)", (long long)w->T, w->n);
+    return DR_ERR_NOMEM;
+}
+
+static void step_done(struct rev_work *w)
+{
+    if (w->o->progress)
+        w->o->progress(w->o->ctx, ++w->done, w->steps);
+}
+
+/* A primal image with this seed and the loss's adjoint at it. */
+static int primal(struct rev_work *w, uint64_t seed, int spp, struct dr_reverse_result *r)
+{
+    const struct dr_grad_problem *p = &w->o->problem;
+    struct dr_render_opts ro = {.width = p->width, .height = p->height, .spp = spp, .max_depth = p->max_depth,
+                                .rr_depth = p->rr_depth, .seed = seed, .threads = p->threads, .film = p->film};
+    struct dr_render_stats rs = {0};
+    int rc = dr_render(p->scene, p->camera, &ro, w->img, &rs);
+    if (rc != 0)
+        return rc;
+    r->t_primal += rs.seconds;
+    if (w->o->on_render)
+        w->o->on_render(w->o->ctx, &rs);
+    for (size_t i = 0; i < w->n; i++)
+        w->img_sum[i] += w->img[i];
+    d_loss_eval(w->o->loss, w->img, w->target, w->n, w->o->loss_scale, w->adj);
+    step_done(w);
+    return 0;
+}
+
+/* The estimator with the current adjoint: spp samples, this seed, into g. */
+static int gradient(struct rev_work *w, uint64_t seed, int spp, double *g, struct dr_reverse_result *r)
+{
+    struct dr_grad_problem p = w->o->problem;
+    p.spp = spp;
+    p.seed = seed;
+    struct dr_grad_stats st = {0};
+    int rc = dr_estimator_backward(w->o->estimator, &p, w->adj, g, &st);
+    if (rc != 0)
+        return rc;
+    r->t_gradient += st.seconds;
+    if (w->o->on_gradient)
+        w->o->on_gradient(w->o->ctx, &st);
+    return 0;
+}
+
+/* Batch b's gradient g_b into r->grad's running mean (Welford), and, with
+ * two halves, the gradient-sample variance of g_b into dsq. */
+static int batch(struct rev_work *w, int b, uint64_t grad_base, struct dr_reverse_result *r)
+{
+    const int spp = r->spp_batch, n0 = (spp + 1) / 2, n1 = spp / 2;
+    const bool split = w->o->primal == DR_PRIMAL_PER_BATCH && n1 > 0;
+    int rc;
+    if (w->o->primal == DR_PRIMAL_SHARED)
+        rc = gradient(w, w->o->problem.seed + 1 + (uint64_t)b, spp, w->half[0], r);
+    else
+        rc = gradient(w, dr_hash64(grad_base + 2 * (uint64_t)b), split ? n0 : spp, w->half[0], r);
+    if (rc == 0 && split)
+        rc = gradient(w, dr_hash64(grad_base + 2 * (uint64_t)b + 1), n1, w->half[1], r);
+    if (rc != 0)
+        return rc;
+    for (int64_t i = 0; i < w->T; i++) {
+        double g = split ? (n0 * w->half[0][i] + n1 * w->half[1][i]) / spp : w->half[0][i];
+        double d = g - r->grad[i];
+        r->grad[i] += d / (b + 1);
+        w->m2[i] += d * (g - r->grad[i]);
+        if (split) {
+            double h = w->half[0][i] - w->half[1][i];
+            w->dsq[i] += h * h * n0 * n1 / ((double)spp * spp);
+        }
+    }
+    step_done(w);
+    return 0;
+}
+
+/* Standard errors from the sums, and the loss of the mean primal image. */
+static void finish(struct rev_work *w, struct dr_reverse_result *r, int K, int primals)
+{
+    for (int64_t i = 0; i < w->T; i++) {
+        r->se[i] = sqrt(w->m2[i] / (K - 1) / K);
+        double sg2 = w->dsq[i] / K / K;
+        r->se_gradient[i] = r->parts ? sqrt(sg2) : NAN;
+        r->se_primal[i] = r->parts ? sqrt(fmax(0.0, r->se[i] * r->se[i] - sg2)) : NAN;
+    }
+    for (size_t i = 0; i < w->n; i++)
+        w->img[i] = (float)(w->img_sum[i] / primals);
+    r->loss = w->o->loss_scale * dr_loss_eval(w->o->loss, w->img, w->target, w->n);
+    if (r->image)
+        memcpy(r->image, w->img, sizeof(float) * w->n);
+}
+
+int dr_reverse_gradient(const struct dr_reverse_options *o, const float *target, struct dr_reverse_result *r)
+{
+    const struct dr_grad_problem *p = &o->problem;
+    const int K = o->batches;
+    if (K < 2) {
+        dr_set_error("reverse mode needs at least 2 batches for a standard error");
+        return DR_ERR_ARG;
+    }
+    struct rev_work w = {.o = o, .target = target, .n = (size_t)p->width * (size_t)p->height * 3,
+                         .T = p->params->total, .steps = 2 * K};
+    r->spp_batch = (int)(((int64_t)p->spp + K - 1) / K);
+    r->parts = o->primal == DR_PRIMAL_PER_BATCH && r->spp_batch >= 2;
+    r->primal_seed = dr_hash64(p->seed ^ PRIMAL_SEED_SALT);
+    r->t_primal = r->t_gradient = 0.0;
+    memset(r->grad, 0, sizeof(double) * (size_t)w.T);
+    const uint64_t grad_base = dr_hash64(p->seed ^ GRAD_SEED_SALT);
+    int rc = work_alloc(&w);
+    if (rc == 0 && o->primal == DR_PRIMAL_SHARED) {
+        w.steps = K + 1;
+        rc = primal(&w, r->primal_seed, p->spp, r);
+    }
+    for (int b = 0; b < K && rc == 0; b++) {
+        if (o->primal == DR_PRIMAL_PER_BATCH)
+            rc = primal(&w, dr_hash64(r->primal_seed + (uint64_t)b), r->spp_batch, r);
+        if (rc == 0)
+            rc = batch(&w, b, grad_base, r);
+    }
+    if (rc == 0)
+        finish(&w, r, K, o->primal == DR_PRIMAL_SHARED ? 1 : K);
+    work_free(&w);
+    return rc;
+}

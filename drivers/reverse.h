@@ -1,0 +1,73 @@
+/* Reverse mode with an honest standard error: d loss / d parameters for an
+ * image loss against a target, as the mean of K batches that are independent
+ * in every random input.
+ *
+ * Batch b renders its own primal image I_b (spp_b = ceil(spp / K) samples,
+ * seed hash(hash(seed ^ "PRIMAL") + b)), takes the loss's adjoint
+ * a_b = d loss / d I at I_b, and runs the gradient estimator with that
+ * adjoint on samples of its own (seeds hash(hash(seed ^ "GRAD") + 2b + h)),
+ * so the primal and the gradient samples of a batch are independent (no
+ * correlation bias) and the K batch gradients g_b are i.i.d.:
+ *
+ *   gradient           = mean_b g_b
+ *   stderr (total)     = sqrt(sum_b (g_b - mean)^2 / (K - 1) / K)
+ *
+ * The parts come from the law of total variance. Each batch's gradient
+ * samples are run as two halves h = 0, 1 of n0 = ceil(spp_b / 2) and
+ * n1 = floor(spp_b / 2) samples with the same adjoint, g_b = (n0 g_b0 +
+ * n1 g_b1) / spp_b. Their difference carries gradient-sample noise only
+ * (E[g_b0 - g_b1 | I_b] = 0), and E[(g_b0 - g_b1)^2] n0 n1 / spp_b^2 is the
+ * gradient-sample variance of g_b given its primal. So
+ *
+ *   stderr_gradient    = sqrt(mean_b (g_b0 - g_b1)^2 n0 n1 / spp_b^2 / K)
+ *   stderr_primal      = sqrt(max(0, stderr^2 - stderr_gradient^2))
+ *
+ * (NaN when spp_b = 1: there are no halves). The cost against one full-spp
+ * primal: the same samples, K renders of spp_b instead of one of spp, and
+ * two estimator runs per batch instead of one.
+ *
+ * DR_PRIMAL_SHARED is the estimator drender used before: one primal at the
+ * full spp shared by every batch, whose spread then misses the primal's noise.
+ * It is kept to show (tests/test_reverse_stderr.c) that it undercovers. */
+#ifndef DR_REVERSE_H
+#define DR_REVERSE_H
+
+#include "estimator.h"
+#include "loss.h"
+#include "render.h"
+
+enum dr_primal_mode {
+    DR_PRIMAL_PER_BATCH,   /* each batch its own primal image (the honest estimator) */
+    DR_PRIMAL_SHARED,      /* one primal for all batches (understates the error; tests only) */
+};
+
+struct dr_reverse_options {
+    const struct dr_estimator_ops *estimator;
+    struct dr_grad_problem problem;   /* .spp: samples per pixel in all (split over the batches) */
+    enum dr_loss_kind loss;
+    double loss_scale;                /* d_out of the loss (1; optimize: 1 / targets) */
+    int batches;                      /* K >= 2 */
+    enum dr_primal_mode primal;
+    /* optional callbacks: progress (done of total steps) and every run's statistics */
+    void (*progress)(void *ctx, int done, int total);
+    void (*on_render)(void *ctx, const struct dr_render_stats *st);
+    void (*on_gradient)(void *ctx, const struct dr_grad_stats *st);
+    void *ctx;
+};
+
+struct dr_reverse_result {
+    /* caller-allocated, params->total entries each */
+    double *grad, *se, *se_gradient, *se_primal;
+    /* optional (may be NULL): the mean of the primal images, width * height * 3 */
+    float *image;
+    double loss;                     /* loss of the mean primal image (scaled by loss_scale) */
+    int spp_batch;                   /* samples per pixel of each batch */
+    bool parts;                      /* se_gradient / se_primal were estimated */
+    uint64_t primal_seed;            /* hash(seed ^ "PRIMAL"); batch b uses hash(primal_seed + b) */
+    double t_primal, t_gradient;     /* seconds in renders and in estimator runs */
+};
+
+/* target: width * height * 3 linear floats. 0 or a negative DR_ERR_*. */
+int dr_reverse_gradient(const struct dr_reverse_options *o, const float *target, struct dr_reverse_result *r);
+
+#endif
