@@ -49,7 +49,7 @@ void cmd_optimize_usage(FILE *out)
             "                         5%% of the value for emission, lights and environment)\n"
             "      --loss l1|l2       image loss (default l2)\n"
             "      --estimator E      gradient estimator: prb (default) or tape\n"
-            "      --sampling S       detached (the only one implemented)\n"
+            "      --sampling S       detached (default) or attached (tape only; see SAMPLING in the manual)\n"
             "      --spp N            samples per pixel for the loss image and for the gradient\n"
             "                         (default 8)\n"
             "      --max-depth D      path segments (default 6)\n"

@@ -173,8 +173,18 @@ int grad_parse_args(struct grad_common *g, int argc, char **argv, const struct o
 int grad_common_check(const struct grad_common *g)
 {
     if (!dr_estimator_supports(g->estimator, g->sampling)) {
-        cli_error(g->cmd, "--sampling %s: not available yet for estimator '%s' (implemented: detached)",
-                  dr_sampling_name(g->sampling), g->estimator->name);
+        char have[64] = "", others[128] = "";
+        for (int k = 0; k < DR_SAMPLING_COUNT; k++)
+            if (dr_estimator_supports(g->estimator, (enum dr_sampling)k))
+                snprintf(have + strlen(have), sizeof have - strlen(have), "%s%s", have[0] ? ", " : "",
+                         dr_sampling_name((enum dr_sampling)k));
+        for (int e = 0; dr_estimators[e]; e++)
+            if (dr_estimator_supports(dr_estimators[e], g->sampling))
+                snprintf(others + strlen(others), sizeof others - strlen(others), "%s%s", others[0] ? ", " : "",
+                         dr_estimators[e]->name);
+        cli_error(g->cmd, "--sampling %s: not available for estimator '%s' (it implements: %s; %s sampling: --estimator %s)",
+                  dr_sampling_name(g->sampling), g->estimator->name, have, dr_sampling_name(g->sampling),
+                  others[0] ? others : "none yet");
         return DR_EXIT_USAGE;
     }
     if (g->n_params == 0) {
@@ -403,6 +413,7 @@ void grad_totals_add(struct grad_totals *t, const struct dr_grad_stats *st)
     t->stages |= st->stages;
     if (st->threads > 0)
         t->threads = st->threads;
+    t->attached_run |= st->sampling_run == DR_SAMPLING_ATTACHED;
 }
 
 void grad_totals_add_render(struct grad_totals *t, const struct dr_render_stats *rs)
@@ -448,4 +459,7 @@ void grad_json_run(FILE *f, const struct grad_totals *t)
     dr_path_stages_describe(t->stages, stages, sizeof stages);
     fprintf(f, ", \"invalid_samples\": %llu, \"stages\": ", (unsigned long long)t->invalid);
     json_name_list(f, stages);
+    /* attached sampling with no parameter in a sampling map runs detached */
+    fprintf(f, ", \"sampling_effective\": ");
+    json_string(f, t->attached_run ? "attached" : "detached");
 }

@@ -124,6 +124,7 @@ struct grad_totals {
     uint64_t invalid, memory_bytes, record_bytes;
     unsigned stages;
     int threads;
+    bool attached_run;   /* some run differentiated with attached sampling */
 };
 void grad_totals_add(struct grad_totals *t, const struct dr_grad_stats *st);
 void grad_totals_add_render(struct grad_totals *t, const struct dr_render_stats *rs);
@@ -135,7 +136,7 @@ void grad_totals_warn(const char *cmd, const struct grad_totals *t);
  * "seed": ...` (no braces), the start of every gradient command's summary. */
 void grad_json_head(FILE *f, const struct grad_common *g, const char *scene_path);
 /* JSON: `"threads", "estimator_memory_bytes", "record_bytes", "peak_memory_bytes",
- * "rays", "invalid_samples", "stages"` (no braces). */
+ * "rays", "invalid_samples", "stages", "sampling_effective"` (no braces). */
 void grad_json_run(FILE *f, const struct grad_totals *t);
 
 /* Names of the effects a parameter set differentiates, comma separated. */

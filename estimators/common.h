@@ -49,6 +49,11 @@ struct dr_est_base {
     double t0;
 };
 
+/* The sampling an algorithm runs: attached sampling where no requested
+ * parameter enters a sampling map is detached sampling, bit for bit, and
+ * runs as such (path.h). */
+enum dr_sampling dr_est_sampling_run(const struct dr_grad_problem *p);
+
 /* Sampler and camera ray of sample `sample` of pixel `pixel`. */
 void dr_est_camera_ray(const struct dr_est_base *b, int64_t pixel, int sample, struct dr_sampler *smp, dr_vec3 *o,
                        dr_vec3 *d);

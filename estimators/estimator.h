@@ -5,7 +5,9 @@
  * pixel) with respect to the parameters of `params`. The sampling mode says
  * how sampled quantities enter the derivative: `detached` (directions, pdfs,
  * MIS weights and Russian roulette are constants of the derivative:
- * differentiate-then-reparametrize with the forward sampler). */
+ * differentiate-then-reparametrize with the forward sampler) or `attached`
+ * (directions, hit points, pdfs and MIS weights move with the parameters:
+ * reparametrize-then-differentiate; see path.h). */
 #ifndef DR_ESTIMATOR_H
 #define DR_ESTIMATOR_H
 
@@ -19,7 +21,7 @@
 
 enum dr_sampling {
     DR_SAMPLING_DETACHED,   /* differentiate-then-reparametrize */
-    DR_SAMPLING_ATTACHED,   /* reparametrize-then-differentiate (not implemented yet) */
+    DR_SAMPLING_ATTACHED,   /* reparametrize-then-differentiate (path.h: what moves, what stays) */
     DR_SAMPLING_COUNT
 };
 /* "detached", "attached"; and back (-1: unknown name). */
@@ -45,6 +47,8 @@ struct dr_grad_stats {
     uint64_t record_bytes;      /* the part holding recorded path vertices (tape), 0 if none */
     unsigned stages;            /* the walker's optional stages that ran (path.h) */
     int threads;
+    enum dr_sampling sampling_run;   /* what ran: attached with no parameter entering a
+                                        sampling map is detached (identical, cheaper) */
 };
 
 struct dr_est_base;   /* common.h: the run every estimator shares */

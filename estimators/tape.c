@@ -206,7 +206,7 @@ static int tape_run(struct dr_est_base *b)
     const int64_t total = (int64_t)p->width * p->height * p->spp;
     const int64_t batch = p->batch > 0 ? p->batch : (int64_t)p->width * p->height;
     int rc = 0;
-    j->attached = p->sampling == DR_SAMPLING_ATTACHED && dr_path_params_enter_sampling(p->scene, p->params);
+    j->attached = dr_est_sampling_run(p) == DR_SAMPLING_ATTACHED;
     for (j->batch_begin = 0; j->batch_begin < total && rc == 0; j->batch_begin += batch) {
         int64_t n = total - j->batch_begin < batch ? total - j->batch_begin : batch;
         for (int t = 0; t < threads; t++)

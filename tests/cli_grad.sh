@@ -99,7 +99,7 @@ expect_fail 3 "nope.gltf" params nope.gltf
 expect_fail 2 "/materials/red/pbrMetallicRoughnes/baseColorFactor|nearest valid names|$red_idx" \
     grad --param /materials/red/pbrMetallicRoughnes/baseColorFactor -o d.exr $fast
 expect_fail 2 "requested twice" grad --param "$red" --param "$red_idx" -o d.exr $fast
-expect_fail 2 "--sampling|not available yet|detached" grad --param "$red" --sampling attached -o d.exr $fast
+expect_fail 2 "--sampling|not available|detached" grad --param "$red" --sampling attached -o d.exr $fast
 expect_fail 2 "--estimator|bogus|prb|tape" grad --param "$red" --estimator bogus -o d.exr $fast
 expect_fail 2 "--param" grad -o d.exr $fast
 expect_fail 2 "-o d.png|float" grad --param "$red" -o d.png $fast
@@ -174,6 +174,17 @@ and "gradient" not in d["parameters"][1]
 and "bsdf" in d["effects_differentiated"] and "textures" in d["effects_differentiated"]'
 done
 [ -s gdir/grad-images-0.exr ] || fail "grad --grad-dir gdir: expected gdir/grad-images-0.exr"
+# attached sampling (tape): roughness enters a sampling map, a colour does not
+rough=/materials/4/pbrMetallicRoughness/roughnessFactor
+run grad --target t.exr --param "$rough" --estimator tape --sampling attached --spp 4 --batches 2 --json
+expect_rc 0 "grad --sampling attached (roughness)"
+json_check "$tmp/out" 'd["sampling"] == "attached" and d["sampling_effective"] == "attached"
+and all(math.isfinite(x) for x in d["parameters"][0]["gradient"] + d["parameters"][0]["stderr"])'
+run grad --target t.exr --param "$red" --estimator tape --sampling attached --spp 4 --batches 2 --json
+expect_rc 0 "grad --sampling attached (colour)"
+json_check "$tmp/out" 'd["sampling"] == "attached" and d["sampling_effective"] == "detached"'
+run grad --target t.exr --param "$red" --estimator tape --spp 4 --batches 2 --json
+json_check "$tmp/out" 'd["sampling_effective"] == "detached"'
 run grad --target t.exr --param "$red" --loss l1 --json
 expect_rc 0 "grad --loss l1"
 json_check "$tmp/out" 'd["loss_kind"] == "l1" and d["width"] == 16 and d["height"] == 16'
