@@ -37,7 +37,11 @@ struct dr_grad_problem {
     int threads;               /* <= 0: one per CPU (at most DR_MAX_THREADS) */
     int64_t batch;             /* tape: paths per record/sweep (0: one sample of every pixel) */
     enum dr_sampling sampling;
+    double regularize;         /* prb, attached: Tikhonov weight of the inverse Jacobians (0: exact inverse) */
 };
+
+/* prb --sampling attached: the default --regularize. */
+#define DR_PRB_REGULARIZE_DEFAULT 1e-3
 
 struct dr_grad_stats {
     double seconds;

@@ -12,7 +12,9 @@
  * and a point light, seen directly and via a tilted, smooth-shaded,
  * textured glossy panel (so hit points, shading normals, uv, NEE geometry
  * and emission MIS all move); and a near-specular metal under an
- * environment map. Both modes (reverse, forward) are checked. */
+ * environment map. Both modes (reverse, forward) are checked, and prb with
+ * the exact inverse Jacobian (--regularize 0) must give tape's number to
+ * rounding on every path where the Jacobians are invertible. */
 #include <stdlib.h>
 #include <string.h>
 
@@ -69,7 +71,7 @@ static void check_paths(const char *what, struct dr_scene *s, const struct dr_ca
         return;
     const struct dr_estimator_ops *tape = dr_estimator_find("tape");
     float adj[3] = {1.0f, 1.0f, 1.0f};
-    int agree = 0, nonzero = 0, finite = 1;
+    int agree = 0, nonzero = 0, finite = 1, prb_agree = 0;
     double worst_ok = 0.0;
     for (int i = 0; i < paths; i++) {
         struct dr_grad_problem p = {.scene = s, .camera = cam, .params = ps, .width = 1, .height = 1, .spp = 1,
@@ -80,6 +82,18 @@ static void check_paths(const char *what, struct dr_scene *s, const struct dr_ca
         rc |= dr_estimator_forward(tape, &p, &dir, dimg, NULL);
         CHECK(rc == 0, "%s: %s", what, dr_last_error());
         double fwd = dimg[0] + dimg[1] + dimg[2];
+        /* prb, exact inverse (--regularize 0): the same number to rounding where M is invertible */
+        double gp = 0.0, dimgp[3];
+        p.regularize = 0.0;
+        rc = dr_estimator_backward(dr_estimator_find("prb"), &p, adj, &gp, NULL);
+        rc |= dr_estimator_forward(dr_estimator_find("prb"), &p, &dir, dimgp, NULL);
+        CHECK(rc == 0, "%s: prb: %s", what, dr_last_error());
+        double fwdp = dimgp[0] + dimgp[1] + dimgp[2];
+        finite &= isfinite(gp) && isfinite(fwdp);
+        if (fabs(gp - g) <= 1e-9 * (fabs(g) + 1e-6) && fabs(fwdp - g) <= 1e-9 * (fabs(g) + 1e-6))
+            prb_agree++;
+        else if (getenv("DR_TEST_VERBOSE"))
+            printf("  %s seed %d: tape %.12g prb %.12g prb fwd %.12g\n", what, i, g, gp, fwdp);
         double fd = fd_of_path(s, cam, ps, 0, (uint64_t)i, max_depth, h);
         finite &= isfinite(g) && isfinite(fwd);
         double tol = 1e-4 * (fabs(fd) + fabs(g)) + 1e-9;
@@ -92,11 +106,12 @@ static void check_paths(const char *what, struct dr_scene *s, const struct dr_ca
             printf("  %s seed %d: reverse %.9g forward %.9g fd %.9g\n", what, i, g, fwd, fd);
         }
     }
-    printf("%-28s %d of %d paths agree with their finite difference (%d depend on the parameter)\n", what, agree,
-           paths, nonzero);
+    printf("%-28s %d of %d paths agree with their finite difference (%d depend on the parameter); prb = tape on %d\n",
+           what, agree, paths, nonzero, prb_agree);
     CHECK(finite, "%s: non-finite gradient", what);
     CHECK(nonzero >= paths / 3, "%s: only %d of %d paths depend on the parameter", what, nonzero, paths);
     CHECK(agree >= min_agree * paths, "%s: only %d of %d paths agree", what, agree, paths);
+    CHECK(prb_agree >= min_agree * paths, "%s: prb equals tape on only %d of %d paths", what, prb_agree, paths);
     dr_param_set_destroy(ps);
 }
 
