@@ -22,6 +22,7 @@ void grad_common_init(struct grad_common *g, const char *cmd, int spp)
     g->max_depth = 8;
     g->rr_depth = DR_RR_DEPTH_DEFAULT;
     g->sampling = DR_SAMPLING_DETACHED;
+    g->regularize = DR_PRB_REGULARIZE_DEFAULT;
 }
 
 void grad_common_free(struct grad_common *g)
@@ -81,6 +82,17 @@ int grad_common_option(struct grad_common *g, int c, const char *arg)
             return DR_EXIT_USAGE;
         }
         g->sampling = (enum dr_sampling)s;
+        return 0;
+    }
+    case GOPT_REGULARIZE: {
+        double e;
+        if (!cli_parse_double(g->cmd, "--regularize", arg, -1.0, &e))
+            return DR_EXIT_USAGE;
+        if (e < 0.0 || e > 1.0) {
+            cli_error(g->cmd, "--regularize: %s is outside [0, 1] (0: exact inverse Jacobians)", arg);
+            return DR_EXIT_USAGE;
+        }
+        g->regularize = e;
         return 0;
     }
     case GOPT_RR_DEPTH:
@@ -383,7 +395,7 @@ struct dr_grad_problem grad_problem(const struct grad_common *g, const struct dr
 {
     return (struct dr_grad_problem){.scene = scene, .camera = cam, .params = ps, .width = w, .height = h,
                                     .spp = spp, .max_depth = g->max_depth, .rr_depth = g->rr_depth, .seed = seed,
-                                    .threads = g->threads, .sampling = g->sampling};
+                                    .threads = g->threads, .sampling = g->sampling, .regularize = g->regularize};
 }
 
 struct dr_render_opts grad_render_opts(const struct grad_common *g, int w, int h, int spp, uint64_t seed,
@@ -441,6 +453,7 @@ void grad_json_head(FILE *f, const struct grad_common *g, const char *scene_path
     json_string(f, g->estimator->name);
     fprintf(f, ", \"sampling\": ");
     json_string(f, dr_sampling_name(g->sampling));
+    fprintf(f, ", \"regularize\": %.17g", g->regularize);
     fprintf(f, ", \"width\": %d, \"height\": %d, \"spp\": %d, \"max_depth\": %d, \"rr_depth\": %d, \"seed\": %llu",
             g->width, g->height, g->spp, g->max_depth, g->rr_depth, (unsigned long long)g->seed);
 }

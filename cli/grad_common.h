@@ -31,6 +31,7 @@ enum {
     GOPT_JSON,
     GOPT_SET,
     GOPT_RR_DEPTH,
+    GOPT_REGULARIZE,
     GOPT_END
 };
 
@@ -45,7 +46,7 @@ enum {
 #define GRAD_COMMON_LONG_OPTIONS                                                                       \
     {"param", required_argument, NULL, GOPT_PARAM}, {"estimator", required_argument, NULL, GOPT_ESTIMATOR}, \
         {"sampling", required_argument, NULL, GOPT_SAMPLING}, {"set", required_argument, NULL, GOPT_SET},   \
-        RENDER_COMMON_LONG_OPTIONS
+        {"regularize", required_argument, NULL, GOPT_REGULARIZE}, RENDER_COMMON_LONG_OPTIONS
 
 struct grad_common {
     const char *cmd;                 /* "grad", "fdcheck": prefixes messages */
@@ -59,6 +60,7 @@ struct grad_common {
     int spp, max_depth, rr_depth, width, height, camera, threads;
     bool res_given, camera_given, json;
     uint64_t seed;
+    double regularize;               /* prb --sampling attached: Tikhonov weight */
 };
 
 /* Defaults: prb, detached, the given spp, depth 8, Russian roulette from

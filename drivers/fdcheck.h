@@ -31,6 +31,7 @@ struct dr_fd_options {
     int threads;
     double eps;         /* step along the direction (absolute) */
     double z_max;       /* agreement threshold on |z| */
+    double regularize;  /* prb, attached sampling: Tikhonov weight of the inverse Jacobians */
 };
 
 struct dr_fd_entry {
