@@ -37,7 +37,8 @@ struct dr_grad_problem {
     int threads;               /* <= 0: one per CPU (at most DR_MAX_THREADS) */
     int64_t batch;             /* tape: paths per record/sweep (0: one sample of every pixel) */
     enum dr_sampling sampling;
-    double regularize;         /* prb, attached: Tikhonov weight of the inverse Jacobians (0: exact inverse) */
+    double regularize;         /* prb, attached: Jacobians with sigma_min/sigma_max below this are not
+                                  inverted, forward mode restarts there (0: always invert) */
 };
 
 /* prb --sampling attached: the default --regularize. */

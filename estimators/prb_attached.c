@@ -18,11 +18,17 @@
  *    position-direction block:  c_{k+1} = M_k^-T (c_k - a_k).  The pdf part
  *    of c_{k+1} does not reach s_{k+2}; it is the next vertex's emission MIS
  *    term, read one vertex ahead.
- * The inverse is regularised (Tikhonov, weight eps^2 |M|^2 / 4: --regularize)
- * because M_k is singular wherever a direction forgets where it came from (a
- * diffuse bounce on a flat triangle) and near-singular near it; there the
- * estimate is biased (the manual reports how much). With eps = 0 and a
- * well-conditioned path, prb and tape agree to rounding.
+ * M_k is singular wherever a direction forgets where it came from (a diffuse
+ * bounce on a flat triangle: d_{k+1} does not depend on d_k) and
+ * near-singular near it, where inverting it loses the adjoint (the seed
+ * regularises the inverse and accepts the bias; a regularised inverse of an
+ * exactly singular block still drops the lost components). So where
+ * sigma_min / sigma_max of the block is below eps (--regularize), the
+ * state adjoint is recomputed exactly by forward mode over the rest of the
+ * path instead: unbiased, at the price of another walk of the remainder
+ * (quadratic in the path length on all-diffuse paths, memory still constant).
+ * With eps = 0 the block is always inverted (biased where it is singular).
+ * On well-conditioned paths prb and tape agree to rounding.
  *
  * The Jacobian rows and the local terms are obtained from the same reverse-mode
  * vertex adjoint the tape uses (d_path_vertex_attached), with a sink that
@@ -36,18 +42,21 @@
 #define NS 5   /* tangent coordinates of a state: p (2), d (2), pdf (1) */
 #define ND 4   /* the part that reaches the next state: p, d */
 
+/* Orthonormal bases; position coordinates count in units of the scene's
+ * radius (a motion dp has coordinates p . dp / radius, its adjoint
+ * radius * p . d_p), so position and direction coordinates are
+ * commensurable in the condition test. */
 struct state_basis {
     dr_vec3 p[2], d[2];
+    double radius;
 };
 
 /* Basis of the state vertex v hands on along next_d: the plane of its
- * triangle (scaled by the scene radius: adjoints per radius of motion, so
- * position and direction coordinates are commensurable) and the plane
- * normal to next_d. */
+ * triangle and the plane normal to next_d. */
 static struct state_basis basis_after(const struct dr_path_vertex *v, dr_vec3 next_d, double radius)
 {
     dr_frame fp = dr_frame_from_normal(v->ng), fd = dr_frame_from_normal(next_d);
-    return (struct state_basis){{dr_scale(fp.s, radius), dr_scale(fp.t, radius)}, {fd.s, fd.t}};
+    return (struct state_basis){{fp.s, fp.t}, {fd.s, fd.t}, radius};
 }
 
 static struct dr_d_path_state to_ambient(const struct state_basis *T, const double c[NS])
@@ -56,7 +65,7 @@ static struct dr_d_path_state to_ambient(const struct state_basis *T, const doub
     memset(&r, 0, sizeof r);
     if (!T)
         return r;
-    r.o = dr_add(dr_scale(T->p[0], c[0]), dr_scale(T->p[1], c[1]));
+    r.o = dr_scale(dr_add(dr_scale(T->p[0], c[0]), dr_scale(T->p[1], c[1])), 1.0 / T->radius);
     r.d = dr_add(dr_scale(T->d[0], c[2]), dr_scale(T->d[1], c[3]));
     r.prev_pdf = c[4];
     return r;
@@ -66,8 +75,8 @@ static struct dr_d_path_state to_ambient(const struct state_basis *T, const doub
 static void to_tangent(const struct state_basis *T, const struct dr_d_path_state *r, double c[NS])
 {
     dr_vec3 po = dr_add(r->o, r->prev_p);
-    c[0] = T ? dr_dot(T->p[0], po) : 0.0;
-    c[1] = T ? dr_dot(T->p[1], po) : 0.0;
+    c[0] = T ? T->radius * dr_dot(T->p[0], po) : 0.0;
+    c[1] = T ? T->radius * dr_dot(T->p[1], po) : 0.0;
     c[2] = T ? dr_dot(T->d[0], r->d) : 0.0;
     c[3] = T ? dr_dot(T->d[1], r->d) : 0.0;
     c[4] = r->prev_pdf;
@@ -169,36 +178,61 @@ static void tangent_walk(const struct prb_attached_ctx *c, struct dr_sampler smp
 
 /* --------------------------------------------------------------- replay */
 
-/* Solves A x = y for 4x4 A: Tikhonov-regularised normal equations
- * (A^T A + lambda I) x = A^T y with lambda = eps^2 |A|_F^2 / 4 when eps > 0,
- * plain Gaussian elimination with partial pivoting when eps == 0 (a zero
- * pivot leaves that component 0). */
-static void solve4(double A[ND][ND], const double y[ND], double eps, double x[ND])
+/* sigma_min / sigma_max of a 4x4 matrix: square roots of the extreme
+ * eigenvalues of A^T A (cyclic Jacobi rotations, converged to rounding). */
+static double condition_ratio(double A[ND][ND])
 {
-    double M[ND][ND + 1];
-    if (eps > 0.0) {
-        double f2 = 0.0;
-        for (int i = 0; i < ND; i++)
-            for (int k = 0; k < ND; k++)
-                f2 += A[i][k] * A[i][k];
-        for (int i = 0; i < ND; i++) {
-            for (int k = 0; k < ND; k++) {
-                double s = 0.0;
-                for (int r = 0; r < ND; r++)
-                    s += A[r][i] * A[r][k];
-                M[i][k] = s + (i == k ? 0.25 * eps * eps * f2 : 0.0);
-            }
+    double S[ND][ND];
+    for (int i = 0; i < ND; i++)
+        for (int k = 0; k < ND; k++) {
             double s = 0.0;
             for (int r = 0; r < ND; r++)
-                s += A[r][i] * y[r];
-            M[i][ND] = s;
+                s += A[r][i] * A[r][k];
+            S[i][k] = s;
         }
-    } else {
-        for (int i = 0; i < ND; i++) {
-            for (int k = 0; k < ND; k++)
-                M[i][k] = A[i][k];
-            M[i][ND] = y[i];
-        }
+    for (int sweep = 0; sweep < 30; sweep++) {
+        double off = 0.0;
+        for (int p = 0; p < ND; p++)
+            for (int q = p + 1; q < ND; q++)
+                off += S[p][q] * S[p][q];
+        if (off <= 1e-300)
+            break;
+        for (int p = 0; p < ND; p++)
+            for (int q = p + 1; q < ND; q++) {
+                if (S[p][q] == 0.0)
+                    continue;
+                double th = 0.5 * (S[q][q] - S[p][p]) / S[p][q];
+                double t = (th >= 0.0 ? 1.0 : -1.0) / (fabs(th) + sqrt(th * th + 1.0));
+                double cs = 1.0 / sqrt(t * t + 1.0), sn = t * cs;
+                for (int k = 0; k < ND; k++) {   /* S <- S J */
+                    double a = S[k][p], b = S[k][q];
+                    S[k][p] = cs * a - sn * b;
+                    S[k][q] = sn * a + cs * b;
+                }
+                for (int k = 0; k < ND; k++) {   /* S <- J^T S */
+                    double a = S[p][k], b = S[q][k];
+                    S[p][k] = cs * a - sn * b;
+                    S[q][k] = sn * a + cs * b;
+                }
+            }
+    }
+    double lo = INFINITY, hi = 0.0;
+    for (int i = 0; i < ND; i++) {
+        lo = dr_min(lo, fabs(S[i][i]));
+        hi = dr_max(hi, fabs(S[i][i]));
+    }
+    return hi > 0.0 ? sqrt(lo / hi) : 0.0;
+}
+
+/* Solves A x = y (4x4) by Gaussian elimination with partial pivoting; the
+ * caller has made sure A is well conditioned. */
+static void solve4(double A[ND][ND], const double y[ND], double x[ND])
+{
+    double M[ND][ND + 1];
+    for (int i = 0; i < ND; i++) {
+        for (int k = 0; k < ND; k++)
+            M[i][k] = A[i][k];
+        M[i][ND] = y[i];
     }
     for (int col = 0; col < ND; col++) {
         int piv = col;
@@ -210,10 +244,8 @@ static void solve4(double A[ND][ND], const double y[ND], double eps, double x[ND
             M[col][k] = M[piv][k];
             M[piv][k] = t;
         }
-        if (M[col][col] == 0.0)
-            continue;
         for (int r = col + 1; r < ND; r++) {
-            double f = M[r][col] / M[col][col];
+            double f = M[col][col] != 0.0 ? M[r][col] / M[col][col] : 0.0;
             for (int k = col; k <= ND; k++)
                 M[r][k] -= f * M[col][k];
         }
@@ -235,6 +267,8 @@ struct pending {
     double ck[NS];            /* adjoint of the state it received (when has_Tk) */
     double cn[ND];            /* first moving vertex: the forward-mode result */
     bool first;
+    struct dr_path_state st;  /* the state it handed on, and the sampler: */
+    struct dr_sampler smp;    /* where a forward-mode pass restarts */
 };
 
 /* With the next vertex known: the state adjoint it receives (pdf part read
@@ -242,7 +276,7 @@ struct pending {
  * inverse Jacobian), then the pending vertex's parameter adjoints. Returns
  * the next vertex's c_{k+1} in *c_next. */
 static void finish(const struct prb_attached_ctx *c, const struct pending *P, const struct dr_path_vertex *next,
-                   dr_vec3 next_d_e, double c_next[NS], struct dr_grad_sink *sink)
+                   dr_vec3 next_d_e, dr_vec3 adj, double c_next[NS], struct dr_grad_sink *sink)
 {
     struct dr_d_path_state dt, zero;
     memset(&zero, 0, sizeof zero);
@@ -260,7 +294,13 @@ static void finish(const struct prb_attached_ctx *c, const struct pending *P, co
                 A[r][i] = w[i][r];
             y[r] = P->ck[r] - a[r];
         }
-        solve4(A, y, c->eps, x);
+        if (condition_ratio(A) >= c->eps) {
+            solve4(A, y, x);
+        } else {
+            /* (near-)singular: the direction forgot where it came from;
+             * forward mode over the rest of the path instead, exactly */
+            tangent_walk(c, P->smp, P->st, &P->Tn, adj, x);
+        }
         memcpy(c_next, x, sizeof x);
     }
     vertex_call(c, &P->v, P->has_Tk ? &P->Tk : NULL, &P->Tn, P->d_e, P->d_t, c_next, NULL, sink);
@@ -338,7 +378,7 @@ static void replay(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_v
         } else {
             double c_next[NS];
             if (have)
-                finish(c, &P, &v, d_e, c_next, sink);
+                finish(c, &P, &v, d_e, adj, c_next, sink);
             P.has_Tk = have;
             if (have) {
                 P.Tk = P.Tn;
@@ -354,6 +394,8 @@ static void replay(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_v
                 return;
             }
             P.Tn = basis_after(&v, st.d, c->radius);
+            P.st = st;
+            P.smp = smp;
             if (P.first)
                 tangent_walk(c, smp, st, &P.Tn, adj, P.cn);
         }

@@ -8,7 +8,8 @@
 struct prb_attached_ctx {
     const struct dr_est_base *b;
     const double *zeros;        /* params->total zeros: a sink direction that discards */
-    double eps;                 /* Tikhonov weight of the inverse Jacobians (--regularize) */
+    double eps;                 /* --regularize: below this sigma_min/sigma_max a Jacobian is
+                                   not inverted; forward mode restarts there */
     double radius;              /* the scene's radius: positions in commensurable units */
     struct dr_ray_counts *rays;
 };
