@@ -8,6 +8,7 @@
 #      Where an estimator does not implement a mode, the row says so; where no
 #      parameter enters a sampling map, attached runs as detached (the JSON's
 #      sampling_effective) and the figures only differ by timing noise.
+#   j. prb attached: peak memory at max depth 4, 64, 1000 (goal: flat within 5%).
 # Writes $BUILD/bench/sampling-results.json.
 set -euo pipefail
 BUILD=${BUILD:-build}
@@ -70,8 +71,21 @@ row "roughness 0.1" $GOLD_R --set $GOLD_R=0.1
 row "roughness 0.5" $GOLD_R --set $GOLD_R=0.5
 row "metallic (gold)" $GOLD_M --set $GOLD_M=0.7
 row "texture (floor)" $TEX
-printf '{"scene": "%s", "res": "%s", "spp": %d, "batches": %d, "max_depth": %d, "rows": [%s]}\n' \
-    "$CORNELL" $RES $SPP $BATCHES $DEPTH "${ROWS%,}" >"$OUT/sampling-results.json"
-echo "   (prb attached: not implemented; its memory-vs-depth row is therefore absent)"
+echo
+echo "j. prb --sampling attached: peak memory vs max depth (gold roughness, $RES, 4 spp; goal: flat within 5%)"
+MEM_JSON=""
+declare -A MEM
+for d in 4 64 1000; do
+    J=$("$DR" grad "$CORNELL" --target "$TMP/target.exr" --param $GOLD_R --estimator prb --sampling attached \
+        --spp 4 --batches 2 --max-depth $d --threads 2 --json)
+    MEM[$d]=$(json_num "$J" peak_memory_bytes)
+    printf '   depth %4d: peak %.2f MiB, gradient %.3f s\n' $d "$(calc "${MEM[$d]} / 1048576" %.4f)" \
+        "$(json_num "$J" gradient time)"
+    MEM_JSON+="{\"max_depth\": $d, \"peak_bytes\": ${MEM[$d]}},"
+done
+SPREAD=$(calc "(${MEM[1000]} - ${MEM[4]}) / ${MEM[4]} * 100" %.2f)
+echo "   change from depth 4 to 1000: $SPREAD % (within 5%: $(yesno "$SPREAD <= 5 && $SPREAD >= -5"))"
+printf '{"scene": "%s", "res": "%s", "spp": %d, "batches": %d, "max_depth": %d, "rows": [%s],\n "prb_attached_memory_vs_depth": [%s], "prb_attached_memory_change_percent": %s}\n' \
+    "$CORNELL" $RES $SPP $BATCHES $DEPTH "${ROWS%,}" "${MEM_JSON%,}" "$SPREAD" >"$OUT/sampling-results.json"
 echo
 echo "results in $OUT/sampling-results.json"
