@@ -39,7 +39,7 @@ static void run_case(const struct fd_case *c, struct dr_scene *s, struct dr_came
         struct dr_fd_options o = {.estimator = dr_estimators[e], .sampling = smp, .width = c->res, .height = c->res,
                                   .spp = c->spp, .batches = c->batches, .max_depth = c->max_depth,
                                   .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 1234, .threads = 2, .eps = c->eps,
-                                  .z_max = 4.0};
+                                  .z_max = 4.0, .regularize = DR_PRB_REGULARIZE_DEFAULT};
         struct dr_fd_entry *en = NULL;
         int count = 0;
         int rc = dr_fdcheck(s, &cam, ps, &o, &en, &count);
@@ -196,7 +196,7 @@ static void glossy(void)
 /* The same floor under a smooth environment map instead: nothing to cross,
  * so attached sampling agrees too (the lobe probability, which depends on
  * wo and metallic, is held fixed by the attached estimator: unbiased). */
-static void glossy_env(void)
+static void glossy_env_scaled(double S, const char *name)
 {
     struct sb b;
     sb_init(&b);
@@ -204,7 +204,7 @@ static void glossy_env(void)
     g.metallic = 0.5;
     g.roughness = 0.3;
     g.specular = 1.0;
-    sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, g));
+    sb_quad(&b, dr_v3(-3 * S, 0, 3 * S), dr_v3(6 * S, 0, 0), dr_v3(0, 0, -6 * S), sb_material(&b, g));
     sb_environment(&b, dr_v3s(1.0));
     struct dr_image *map = &b.s->env.map;
     map->width = 16;
@@ -217,8 +217,37 @@ static void glossy_env(void)
                 map->data[(y * 16 + x) * 3 + k] = (float)(0.2 + 0.1 * x + 0.3 * y + 0.1 * k);
     struct dr_scene *s = sb_finish(&b);
     const char *p[] = {"/materials/0/pbrMetallicRoughness/roughnessFactor", "/materials/0/pbrMetallicRoughness/metallicFactor"};
-    struct fd_case c = {"glossy-env", 32, 8, 3, 16, 2e-2, NULL, NULL};
-    run_case(&c, s, sb_camera(dr_v3(0, 1, 1.5), dr_v3(0, 0, -0.6), 40), p, 2);
+    struct fd_case c = {name, 32, 8, 3, 16, 2e-2, NULL, NULL};
+    run_case(&c, s, sb_camera(dr_v3(0, S, 1.5 * S), dr_v3(0, 0, -0.6 * S), 40), p, 2);
+    dr_scene_destroy(s);
+}
+
+static void glossy_env(void)
+{
+    glossy_env_scaled(1.0, "glossy-env");
+    glossy_env_scaled(1e-3, "glossy-1e-3");
+    glossy_env_scaled(1e3, "glossy-1e3");
+}
+
+/* Inside a closed glossy box whose walls all glow: every ray hits a wall and
+ * the radiance is continuous across the corners (nothing for attached
+ * sampling to cross), max depth 1000 with Russian roulette: attached
+ * roughness derivatives over long paths. */
+static void glossy_closed_box(void)
+{
+    struct sb b;
+    sb_init(&b);
+    struct dr_material g = sb_diffuse(dr_v3(0.9, 0.85, 0.8));
+    g.metallic = 0.5;
+    g.roughness = 0.4;
+    g.specular = 1.0;
+    g.emissive_factor = dr_v3(0.3, 0.3, 0.3);
+    g.double_sided = true;
+    sb_box(&b, dr_v3(-1, -1, -1), dr_v3(1, 1, 1), sb_material(&b, g));
+    struct dr_scene *s = sb_finish(&b);
+    const char *p[] = {"/materials/0/pbrMetallicRoughness/roughnessFactor"};
+    struct fd_case c = {"box-1000", 8, 8, 1000, 12, 2e-2, NULL, NULL};
+    run_case(&c, s, sb_camera(dr_v3(0.2, 0.1, 0.8), dr_v3(-0.3, -0.5, -1), 60), p, 1);
     dr_scene_destroy(s);
 }
 
@@ -472,6 +501,7 @@ int main(void)
     near_specular();
     near_specular_attached_vs_detached();
     long_paths();
+    glossy_closed_box();
     tiny_emitter();
     scales();
     return TEST_END();
