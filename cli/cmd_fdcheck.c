@@ -34,7 +34,10 @@ void cmd_fdcheck_usage(FILE *out)
             "      --batches K     independent batches, at least 2 (default: 8)\n"
             "      --z-max Z       agreement threshold on |z| (default: 4)\n"
             "      --estimator E   gradient estimator: prb (path replay, default) or tape\n"
-            "      --sampling S    detached (default; the only one implemented so far)\n"
+            "      --sampling S    detached (default) or attached (differentiates through the\n"
+            "                      sampling: for roughness; see SAMPLING in the manual)\n"
+            "      --regularize E  prb, attached: Tikhonov weight of the inverse Jacobians\n"
+            "                      (default: 1e-3; 0: exact inverse)\n"
             "      --res WxH       image size (default: 32x32)\n"
             "      --max-depth D   path segments (default: 8)\n"
             "      --rr-depth D    Russian roulette from this many segments on (default: 5)\n"
@@ -167,6 +170,7 @@ int cmd_fdcheck(int argc, char **argv)
     struct dr_fd_options o = {.estimator = a.g.estimator, .sampling = a.g.sampling, .width = rw,
                               .height = rh, .film = film, .spp = a.g.spp, .batches = a.batches,
                               .max_depth = a.g.max_depth, .rr_depth = a.g.rr_depth, .seed = a.g.seed,
+                              .regularize = a.g.regularize,
                               .threads = a.g.threads, .eps = a.eps, .z_max = a.z_max};
     if (dr_fdcheck(scene, &cam, ps, &o, &en, &n) != 0) {
         cli_error("fdcheck", "%s", dr_last_error());

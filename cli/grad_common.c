@@ -22,6 +22,7 @@ void grad_common_init(struct grad_common *g, const char *cmd, int spp)
     g->max_depth = 8;
     g->rr_depth = DR_RR_DEPTH_DEFAULT;
     g->sampling = DR_SAMPLING_DETACHED;
+    g->regularize = DR_PRB_REGULARIZE_DEFAULT;
 }
 
 void grad_common_free(struct grad_common *g)
@@ -83,6 +84,17 @@ int grad_common_option(struct grad_common *g, int c, const char *arg)
             return DR_EXIT_USAGE;
         }
         g->sampling = (enum dr_sampling)s;
+        return 0;
+    }
+    case GOPT_REGULARIZE: {
+        double e;
+        if (!cli_parse_double(g->cmd, "--regularize", arg, -1.0, &e))
+            return DR_EXIT_USAGE;
+        if (e < 0.0 || e > 1.0) {
+            cli_error(g->cmd, "--regularize: %s is outside [0, 1] (0: exact inverse Jacobians)", arg);
+            return DR_EXIT_USAGE;
+        }
+        g->regularize = e;
         return 0;
     }
     case GOPT_RR_DEPTH:
@@ -177,8 +189,18 @@ int grad_parse_args(struct grad_common *g, int argc, char **argv, const struct o
 int grad_common_check(const struct grad_common *g)
 {
     if (!dr_estimator_supports(g->estimator, g->sampling)) {
-        cli_error(g->cmd, "--sampling %s: not available yet for estimator '%s' (implemented: detached)",
-                  dr_sampling_name(g->sampling), g->estimator->name);
+        char have[64] = "", others[128] = "";
+        for (int k = 0; k < DR_SAMPLING_COUNT; k++)
+            if (dr_estimator_supports(g->estimator, (enum dr_sampling)k))
+                snprintf(have + strlen(have), sizeof have - strlen(have), "%s%s", have[0] ? ", " : "",
+                         dr_sampling_name((enum dr_sampling)k));
+        for (int e = 0; dr_estimators[e]; e++)
+            if (dr_estimator_supports(dr_estimators[e], g->sampling))
+                snprintf(others + strlen(others), sizeof others - strlen(others), "%s%s", others[0] ? ", " : "",
+                         dr_estimators[e]->name);
+        cli_error(g->cmd, "--sampling %s: not available for estimator '%s' (it implements: %s; %s sampling: --estimator %s)",
+                  dr_sampling_name(g->sampling), g->estimator->name, have, dr_sampling_name(g->sampling),
+                  others[0] ? others : "none yet");
         return DR_EXIT_USAGE;
     }
     if (g->n_params == 0) {
@@ -379,7 +401,8 @@ struct dr_grad_problem grad_problem(const struct grad_common *g, const struct dr
     struct dr_film film = grad_film(g, w, h, &rw, &rh);
     return (struct dr_grad_problem){.scene = scene, .camera = cam, .params = ps, .width = rw, .height = rh,
                                     .spp = spp, .max_depth = g->max_depth, .rr_depth = g->rr_depth, .seed = seed,
-                                    .threads = g->threads, .sampling = g->sampling, .film = film};
+                                    .threads = g->threads, .sampling = g->sampling, .film = film,
+                                    .regularize = g->regularize};
 }
 
 struct dr_render_opts grad_render_opts(const struct grad_common *g, int w, int h, int spp, uint64_t seed,
@@ -411,6 +434,7 @@ void grad_totals_add(struct grad_totals *t, const struct dr_grad_stats *st)
     t->stages |= st->stages;
     if (st->threads > 0)
         t->threads = st->threads;
+    t->attached_run |= st->sampling_run == DR_SAMPLING_ATTACHED;
 }
 
 void grad_totals_add_render(struct grad_totals *t, const struct dr_render_stats *rs)
@@ -438,6 +462,7 @@ void grad_json_head(FILE *f, const struct grad_common *g, const char *scene_path
     json_string(f, g->estimator->name);
     fprintf(f, ", \"sampling\": ");
     json_string(f, dr_sampling_name(g->sampling));
+    fprintf(f, ", \"regularize\": %.17g", g->regularize);
     fprintf(f, ", \"width\": %d, \"height\": %d, \"spp\": %d, \"max_depth\": %d, \"rr_depth\": %d, \"seed\": %llu",
             g->width, g->height, g->spp, g->max_depth, g->rr_depth, (unsigned long long)g->seed);
     fputs(", ", f);
@@ -458,6 +483,9 @@ void grad_json_run(FILE *f, const struct grad_totals *t)
     dr_path_stages_describe(t->stages, stages, sizeof stages);
     fprintf(f, ", \"invalid_samples\": %llu, \"stages\": ", (unsigned long long)t->invalid);
     json_name_list(f, stages);
+    /* attached sampling with no parameter in a sampling map runs detached */
+    fprintf(f, ", \"sampling_effective\": ");
+    json_string(f, t->attached_run ? "attached" : "detached");
 }
 
 /* ---- the film: --filter and --crop (issue 14) ---- */

@@ -33,6 +33,7 @@ enum {
     GOPT_RR_DEPTH,
     GOPT_FILTER,   /* film (issue 14) */
     GOPT_CROP,
+    GOPT_REGULARIZE,
     GOPT_END
 };
 
@@ -48,7 +49,7 @@ enum {
 #define GRAD_COMMON_LONG_OPTIONS                                                                       \
     {"param", required_argument, NULL, GOPT_PARAM}, {"estimator", required_argument, NULL, GOPT_ESTIMATOR}, \
         {"sampling", required_argument, NULL, GOPT_SAMPLING}, {"set", required_argument, NULL, GOPT_SET},   \
-        RENDER_COMMON_LONG_OPTIONS
+        {"regularize", required_argument, NULL, GOPT_REGULARIZE}, RENDER_COMMON_LONG_OPTIONS
 
 struct grad_common {
     const char *cmd;                 /* "grad", "fdcheck": prefixes messages */
@@ -67,6 +68,7 @@ struct grad_common {
     struct dr_filter filter;
     bool crop_given;
     int crop_x, crop_y, crop_w, crop_h;
+    double regularize;               /* prb --sampling attached: Tikhonov weight */
 };
 
 /* Defaults: prb, detached, the given spp, depth 8, Russian roulette from
@@ -152,6 +154,7 @@ struct grad_totals {
     uint64_t invalid, memory_bytes, record_bytes;
     unsigned stages;
     int threads;
+    bool attached_run;   /* some run differentiated with attached sampling */
 };
 void grad_totals_add(struct grad_totals *t, const struct dr_grad_stats *st);
 void grad_totals_add_render(struct grad_totals *t, const struct dr_render_stats *rs);
@@ -163,7 +166,7 @@ void grad_totals_warn(const char *cmd, const struct grad_totals *t);
  * "seed": ...` (no braces), the start of every gradient command's summary. */
 void grad_json_head(FILE *f, const struct grad_common *g, const char *scene_path);
 /* JSON: `"threads", "estimator_memory_bytes", "record_bytes", "peak_memory_bytes",
- * "rays", "invalid_samples", "stages"` (no braces). */
+ * "rays", "invalid_samples", "stages", "sampling_effective"` (no braces). */
 void grad_json_run(FILE *f, const struct grad_totals *t);
 
 /* Names of the effects a parameter set differentiates, comma separated. */

@@ -511,8 +511,8 @@ void d_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo, double d_p, struc
  * The Lambertian fast path returns wi.z / pi, the general formula at p = 0;
  * its metallic derivative is the general one, (P_s - wi.z/pi) dp/dm, so P_s
  * is computed there too. */
-void d_bsdf_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double d_pdf, struct dr_d_bsdf *d,
-                dr_vec3 *d_wo, dr_vec3 *d_wi)
+static void d_pdf_impl(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double d_pdf, bool prob_moves,
+                  struct dr_d_bsdf *d, dr_vec3 *d_wo, dr_vec3 *d_wi)
 {
     if (!(wo.z > COS_EPS) || !(wi.z > COS_EPS))
         return;
@@ -528,7 +528,7 @@ void d_bsdf_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double d_pdf, s
     double D = a2 * r * r * DR_INV_PI;
     double lo = smith_lambda(a2, wo);
     double ps = D / (4.0 * wo.z) / (1.0 + lo);
-    double d_cos_o = d_specular_prob(b, wo.z, d_pdf * (ps - cos_pdf), d);
+    double d_cos_o = prob_moves ? d_specular_prob(b, wo.z, d_pdf * (ps - cos_pdf), d) : 0.0;
     double gs = d_pdf * p * ps;   /* d loss / d ln P_s */
     if (d && gs != 0.0 && rough * rough > DR_BSDF_MIN_ALPHA) {
         double dlnD = (2.0 / a) * ((hxy2 - a2 * hz2) / q);
@@ -546,6 +546,18 @@ void d_bsdf_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double d_pdf, s
         d_H.z += d_pdf * (1.0 - p) * DR_INV_PI;
         *d_wi = dr_add(*d_wi, d_H);
     }
+}
+
+void d_bsdf_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double d_pdf, struct dr_d_bsdf *d,
+                dr_vec3 *d_wo, dr_vec3 *d_wi)
+{
+    d_pdf_impl(b, wo, wi, d_pdf, true, d, d_wo, d_wi);
+}
+
+void d_bsdf_pdf_fixed_prob(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double d_pdf, struct dr_d_bsdf *d,
+                           dr_vec3 *d_wo, dr_vec3 *d_wi)
+{
+    d_pdf_impl(b, wo, wi, d_pdf, false, d, d_wo, d_wi);
 }
 
 /* --------------------------------------------------- sampling map adjoints */

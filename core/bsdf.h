@@ -85,6 +85,13 @@ void d_bsdf_eval(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out,
  * dependence on the parameters and on wo. */
 void d_bsdf_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double d_pdf, struct dr_d_bsdf *d,
                 dr_vec3 *d_wo, dr_vec3 *d_wi);
+/* The same with the lobe-selection probability P held at its value (attached
+ * sampling): a discrete choice made with a probability that moved with the
+ * parameter would need the boundary term of the lobe threshold; with P a
+ * constant the sampling strategy is a fixed mixture whose density,
+ * P p_spec + (1 - P) p_diff, is what this differentiates. */
+void d_bsdf_pdf_fixed_prob(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double d_pdf, struct dr_d_bsdf *d,
+                           dr_vec3 *d_wo, dr_vec3 *d_wi);
 /* Reverse mode of dr_bsdf_specular_prob. */
 void d_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo, double d_p, struct dr_d_bsdf *d, dr_vec3 *d_wo);
 /* Reverse mode of dr_bsdf_sample_dir: d_wi = d loss / d wi. The lobe and

@@ -10,6 +10,8 @@ static void attributes(const struct dr_mesh *m, int64_t tri, double b1, double b
     const float *p0 = m->positions + 3 * (size_t)idx[0], *p1 = m->positions + 3 * (size_t)idx[1],
                 *p2 = m->positions + 3 * (size_t)idx[2];
     hit->tri = tri;
+    hit->b1 = b1;
+    hit->b2 = b2;
     hit->p = dr_v3(b0 * p0[0] + b1 * p1[0] + b2 * p2[0], b0 * p0[1] + b1 * p1[1] + b2 * p2[1],
                    b0 * p0[2] + b1 * p1[2] + b2 * p2[2]);
     hit->ng = dr_v3(ne[0], ne[1], ne[2]);
@@ -96,6 +98,61 @@ void dr_hit_compute(const struct dr_mesh *m, int64_t tri, dr_vec3 o, dr_vec3 d, 
     hit->front = dr_dot(d, hit->ng) < 0.0;
 }
 
+/* d loss / d (b1, b2) of the shading normal: ns = sign * n / |n|,
+ * n = b0 n0 + b1 n1 + b2 n2 (sign: the flip onto ng's side). */
+static void d_shading_normal(const struct dr_mesh *m, const struct dr_hit *hit, const uint32_t *idx, dr_vec3 d_ns,
+                             double *d_b1, double *d_b2)
+{
+    if (!(m->flags[hit->tri] & DR_TRI_HAS_NORMALS) || dr_is_black(d_ns))
+        return;
+    dr_vec3 n0 = dr_v3(m->normals[3 * (size_t)idx[0]], m->normals[3 * (size_t)idx[0] + 1], m->normals[3 * (size_t)idx[0] + 2]);
+    dr_vec3 n1 = dr_v3(m->normals[3 * (size_t)idx[1]], m->normals[3 * (size_t)idx[1] + 1], m->normals[3 * (size_t)idx[1] + 2]);
+    dr_vec3 n2 = dr_v3(m->normals[3 * (size_t)idx[2]], m->normals[3 * (size_t)idx[2] + 1], m->normals[3 * (size_t)idx[2] + 2]);
+    double b1 = hit->b1, b2 = hit->b2, b0 = 1.0 - b1 - b2;
+    dr_vec3 n = dr_add(dr_add(dr_scale(n0, b0), dr_scale(n1, b1)), dr_scale(n2, b2));
+    double len = dr_length(n);
+    if (!(len > 0.0))
+        return;   /* the primal fell back to ng: constant */
+    dr_vec3 u = dr_scale(n, 1.0 / len);
+    double sign = dr_dot(hit->ns, u) < 0.0 ? -1.0 : 1.0;
+    /* d n = sign (d_ns - u (u . d_ns)) / |n| */
+    dr_vec3 dn = dr_scale(dr_sub(d_ns, dr_scale(u, dr_dot(u, d_ns))), sign / len);
+    *d_b1 += dr_dot(dn, dr_sub(n1, n0));
+    *d_b2 += dr_dot(dn, dr_sub(n2, n0));
+}
+
+void d_hit_compute(const struct dr_mesh *m, const struct dr_hit *hit, dr_vec3 o, dr_vec3 d,
+                   const struct dr_d_hit *d_hit, dr_vec3 *d_o, dr_vec3 *d_d)
+{
+    const uint32_t *idx = m->indices + 3 * (size_t)hit->tri;
+    dr_vec3 p0 = dr_mesh_vertex(m, idx[0]);
+    dr_vec3 e1 = dr_sub(dr_mesh_vertex(m, idx[1]), p0), e2 = dr_sub(dr_mesh_vertex(m, idx[2]), p0);
+    dr_vec3 n = dr_cross(e1, e2);
+    double n2 = dr_dot(n, n), dn = dr_dot(n, d);
+    if (!(n2 > 0.0) || dn == 0.0)
+        return;
+    /* Barycentrics of a point in the plane: b1 = (p - p0) . c1, b2 = (p - p0) . c2
+     * with the dual basis c1 = (e2 x n) / |n|^2, c2 = (n x e1) / |n|^2. */
+    double d_b1 = 0.0, d_b2 = 0.0;
+    if (m->flags[hit->tri] & DR_TRI_HAS_UVS) {
+        const float *t0 = m->uvs + 2 * (size_t)idx[0], *t1 = m->uvs + 2 * (size_t)idx[1],
+                    *t2 = m->uvs + 2 * (size_t)idx[2];
+        d_b1 += d_hit->uv[0] * (t1[0] - t0[0]) + d_hit->uv[1] * (t1[1] - t0[1]);
+        d_b2 += d_hit->uv[0] * (t2[0] - t0[0]) + d_hit->uv[1] * (t2[1] - t0[1]);
+    }
+    d_shading_normal(m, hit, idx, d_hit->ns, &d_b1, &d_b2);
+    dr_vec3 c1 = dr_scale(dr_cross(e2, n), 1.0 / n2), c2 = dr_scale(dr_cross(n, e1), 1.0 / n2);
+    dr_vec3 d_p = dr_add(d_hit->p, dr_add(dr_scale(c1, d_b1), dr_scale(c2, d_b2)));
+    /* p = o + t d, t = n . (p0 - o) / (n . d):
+     *   dp = (I - d n^T / (n . d)) (do + t dd) */
+    double t = dr_dot(n, dr_sub(p0, o)) / dn;
+    dr_vec3 g = dr_sub(d_p, dr_scale(n, dr_dot(d, d_p) / dn));
+    if (d_o)
+        *d_o = dr_add(*d_o, g);
+    if (d_d)
+        *d_d = dr_madd(*d_d, g, t);
+}
+
 void dr_hit_at(const struct dr_mesh *m, int64_t tri, double b1, double b2, struct dr_hit *hit)
 {
     /* Points on emitters need no shading normal: only p, ng, eps, uv. */
@@ -105,6 +162,8 @@ void dr_hit_at(const struct dr_mesh *m, int64_t tri, double b1, double b2, struc
     const float *p0 = m->positions + 3 * (size_t)idx[0], *p1 = m->positions + 3 * (size_t)idx[1],
                 *p2 = m->positions + 3 * (size_t)idx[2];
     hit->tri = tri;
+    hit->b1 = b1;
+    hit->b2 = b2;
     hit->p = dr_v3(b0 * p0[0] + b1 * p1[0] + b2 * p2[0], b0 * p0[1] + b1 * p1[1] + b2 * p2[1],
                    b0 * p0[2] + b1 * p1[2] + b2 * p2[2]);
     hit->ng = hit->ns = dr_v3(ne[0], ne[1], ne[2]);

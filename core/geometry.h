@@ -16,6 +16,7 @@ struct dr_hit {
     dr_vec3 ng;        /* unit geometric normal of the front face (CCW winding) */
     dr_vec3 ns;        /* unit shading normal, on the same side as ng */
     double uv[2];      /* TEXCOORD_0 (0,0 without UVs) */
+    double b1, b2;     /* barycentrics of p (weights of vertices 1 and 2) */
     bool front;        /* the ray arrived on the front face's side */
     int material;
     double eps;        /* ray-offset distance: bounds the float error of Embree's
@@ -32,6 +33,22 @@ static inline dr_vec3 dr_mesh_vertex(const struct dr_mesh *m, uint32_t v)
  * are recomputed in double and clamped into the triangle, so a hit that float
  * traversal reported just outside an edge still yields a point on it. */
 void dr_hit_compute(const struct dr_mesh *m, int64_t tri, dr_vec3 o, dr_vec3 d, struct dr_hit *hit);
+
+/* Adjoint of the differentiable outputs of dr_hit_compute (attached sampling:
+ * the hit point moves with the ray). ng is constant on a triangle. */
+struct dr_d_hit {
+    dr_vec3 p, ns;
+    double uv[2];
+};
+
+/* Reverse mode of dr_hit_compute with respect to the ray: given d_hit, adds
+ * d loss / d o and d loss / d d (+=; NULL: not needed). p = o + t d on the
+ * triangle's plane; uv and ns follow the barycentrics of p. Where the primal
+ * clamped the barycentrics (a hit float traversal put just outside an edge)
+ * the adjoint is that of the unclamped plane point. A ray parallel to the
+ * plane (never reported as a hit) gives nothing. */
+void d_hit_compute(const struct dr_mesh *m, const struct dr_hit *hit, dr_vec3 o, dr_vec3 d,
+                   const struct dr_d_hit *d_hit, dr_vec3 *d_o, dr_vec3 *d_d);
 
 /* Surface attributes at barycentrics (b1, b2) of tri, for sampling points on
  * emitters: fills p, ng, uv, eps, material; ns = ng (t = 0, front = true). */

@@ -205,3 +205,42 @@ void d_texture_eval(const struct dr_texture *tex, const struct dr_image *img, do
             dr_sink_add(sink, t + ch, wt[i] * g[ch]);
     }
 }
+
+/* Slope of reduce_coord: 1 except where CLAMP clamps. */
+static inline double reduce_slope(double t, enum dr_wrap mode)
+{
+    if (!(t == t) || t - t != 0.0)
+        return 0.0;
+    return mode == DR_WRAP_CLAMP && (t < -1.0 || t > 2.0) ? 0.0 : 1.0;
+}
+
+void d_texture_eval_uv(const struct dr_texture *tex, const struct dr_image *img, double u, double v,
+                       bool use_linear, const double d_out[4], double *d_u, double *d_v)
+{
+    const float *pix = img ? (use_linear && img->linear ? img->linear : img->data) : NULL;
+    if (!pix || img->width <= 0 || img->height <= 0 || img->channels <= 0)
+        return;
+    enum dr_wrap ws = tex ? tex->wrap_s : DR_WRAP_REPEAT;
+    enum dr_wrap wtm = tex ? tex->wrap_t : DR_WRAP_REPEAT;
+    int64_t idx[4];
+    double wt[4];
+    dr_texture_taps(tex, img, u, v, idx, wt);
+    /* the fractions fx, fy back from the weights: wt1 + wt3 = fx, wt2 + wt3 = fy */
+    double fx = wt[1] + wt[3], fy = wt[2] + wt[3];
+    const int c = img->channels;
+    double g[4];   /* sum_c d_out[c] * texel_i[c] */
+    for (int i = 0; i < 4; i++) {
+        double acc[4] = {0.0, 0.0, 0.0, 0.0};
+        add_texel(pix + (size_t)idx[i] * (size_t)c, c, 1.0, acc);
+        if (c == 1 || c == 3)
+            acc[3] = 0.0;   /* constant alpha: no slope */
+        g[i] = d_out[0] * acc[0] + d_out[1] * acc[1] + d_out[2] * acc[2] + d_out[3] * acc[3];
+    }
+    /* wt0 = (1-fx)(1-fy), wt1 = fx(1-fy), wt2 = (1-fx)fy, wt3 = fx fy; x = u' w - 0.5 */
+    double d_fx = (1.0 - fy) * (g[1] - g[0]) + fy * (g[3] - g[2]);
+    double d_fy = (1.0 - fx) * (g[2] - g[0]) + fx * (g[3] - g[1]);
+    if (d_u)
+        *d_u += d_fx * img->width * reduce_slope(u, ws);
+    if (d_v)
+        *d_v += d_fy * img->height * reduce_slope(v, wtm);
+}

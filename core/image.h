@@ -75,6 +75,14 @@ struct dr_grad_sink;   /* grad_sink.h */
 void d_texture_eval(const struct dr_texture *tex, const struct dr_image *img, double u, double v,
                     const double d_out[4], int64_t slot, struct dr_grad_sink *sink);
 
+/* Adjoint of dr_texture_eval with respect to (u, v) (attached sampling: the
+ * lookup moves with the hit point): adds sum_c d_out[c] * d out[c] / d u to
+ * *d_u and likewise *d_v. Bilinear weights are piecewise linear: at a texel
+ * centre or a wrap seam the adjoint is the one-sided slope of the cell the
+ * primal used; CLAMP beyond [-1, 2] (where reduce_coord clamps) gives zero. */
+void d_texture_eval_uv(const struct dr_texture *tex, const struct dr_image *img, double u, double v,
+                       bool use_linear, const double d_out[4], double *d_u, double *d_v);
+
 #ifdef __cplusplus
 }
 #endif

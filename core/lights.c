@@ -531,3 +531,120 @@ void d_light_radiance(const struct dr_scene *s, const struct dr_param_set *ps, c
     }
     }
 }
+
+/* ---------------------------------------------- adjoints w.r.t. geometry */
+
+/* wi = (y - p) / r, r = |y - p|: reverse mode into d_p given d_wi and d_r. */
+static dr_vec3 d_unit_towards(dr_vec3 wi, double r, dr_vec3 d_wi, double d_r)
+{
+    /* d wi / d y = (I - wi wi^T) / r, d r / d y = wi^T; d/d p = -d/d y */
+    dr_vec3 g = dr_scale(dr_sub(d_wi, dr_scale(wi, dr_dot(wi, d_wi))), 1.0 / r);
+    return dr_neg(dr_madd(g, wi, d_r));
+}
+
+/* d atten / d r and d atten / d (wi) of a point or spot light's attenuation. */
+static void d_punctual_atten(const struct dr_punctual *l, const struct dr_light_sample *ls, double d_atten,
+                             dr_vec3 *d_wi, double *d_r)
+{
+    double r = ls->dist, r2 = r * r;
+    double win = range_window(l->range, r), fall = l->type == DR_LIGHT_SPOT ? spot_falloff(l, -dr_dot(ls->wi, l->direction)) : 1.0;
+    /* atten = win(r) / r^2 * fall(wi) */
+    double d_win = 0.0;
+    if (l->range > 0.0) {
+        double x = r / l->range, w = 1.0 - x * x * x * x;
+        if (w > 0.0 && w < 1.0)
+            d_win = 2.0 * w * (-4.0 * x * x * x / l->range);
+    }
+    *d_r += d_atten * fall * (d_win / r2 - 2.0 * win / (r2 * r));
+    if (l->type == DR_LIGHT_SPOT) {
+        double scale = 1.0 / fmax(1e-3, l->cos_inner - l->cos_outer);
+        double t = (-dr_dot(ls->wi, l->direction) - l->cos_outer) * scale;
+        if (t > 0.0 && t < 1.0)   /* fall = t^2, t = (cos - cos_outer) scale, cos = -wi . dir */
+            *d_wi = dr_madd(*d_wi, l->direction, -d_atten * win / r2 * 2.0 * t * scale);
+    }
+}
+
+void d_light_sample_point(const struct dr_scene *s, dr_vec3 p, const struct dr_light_sample *ls, dr_vec3 d_wi,
+                          double d_pdf, dr_vec3 d_radiance, dr_vec3 *d_p)
+{
+    (void)p;
+    double d_r = 0.0;
+    if (ls->type == DR_LS_AREA) {
+        /* pdf = pick r^2 / (|ng . wi| area) with pick / area = pdf |cos| / r^2 */
+        struct dr_hit h;
+        dr_hit_at(&s->mesh, ls->index, ls->b1, ls->b2, &h);
+        double c = dr_dot(h.ng, ls->wi);
+        d_r += d_pdf * 2.0 * ls->pdf / ls->dist;
+        d_wi = dr_madd(d_wi, h.ng, -d_pdf * ls->pdf / c);
+        *d_p = dr_add(*d_p, d_unit_towards(ls->wi, ls->dist, d_wi, d_r));
+        return;
+    }
+    if (ls->type != DR_LS_PUNCTUAL || isinf(ls->dist))
+        return;
+    const struct dr_punctual *l = &s->lights[ls->index];
+    /* radiance = I atten */
+    double d_atten = dr_dot(d_radiance, dr_scale(l->color, l->intensity));
+    d_punctual_atten(l, ls, d_atten, &d_wi, &d_r);
+    *d_p = dr_add(*d_p, d_unit_towards(ls->wi, ls->dist, d_wi, d_r));
+}
+
+void d_light_pdf_area_points(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 from,
+                             const struct dr_hit *hit, double d_pdf, dr_vec3 *d_from, dr_vec3 *d_hit_p)
+{
+    (void)s;
+    double density = ls->tri_pick_density[hit->tri];
+    if (density <= 0.0 || d_pdf == 0.0)
+        return;
+    /* pdf = density |d|^3 / |ng . d|, d = hit.p - from */
+    dr_vec3 d = dr_sub(hit->p, from);
+    double d2 = dr_dot(d, d), len = sqrt(d2), c = dr_dot(hit->ng, d);
+    if (c == 0.0 || !(d2 > 0.0))
+        return;
+    double pdf = density * d2 * len / fabs(c);
+    dr_vec3 g = dr_scale(dr_sub(dr_scale(d, 3.0 / d2), dr_scale(hit->ng, 1.0 / c)), pdf * d_pdf);
+    if (d_hit_p)
+        *d_hit_p = dr_add(*d_hit_p, g);
+    if (d_from)
+        *d_from = dr_sub(*d_from, g);
+}
+
+void d_emission_uv(const struct dr_scene *s, const struct dr_hit *hit, dr_vec3 d_Le, double d_uv[2])
+{
+    const struct dr_material *m = &s->materials[hit->material];
+    if (!hit->front && !m->double_sided)
+        return;
+    dr_vec3 e = dr_scale(m->emissive_factor, m->emissive_strength);
+    if (m->emissive_tex.texture < 0 || dr_is_black(e))
+        return;
+    const struct dr_texture *t = &s->textures[m->emissive_tex.texture];
+    dr_vec3 g = dr_mul(d_Le, e);
+    double d_out[4] = {g.x, g.y, g.z, 0.0};
+    d_texture_eval_uv(t, &s->images[t->image], hit->uv[0], hit->uv[1], true, d_out, &d_uv[0], &d_uv[1]);
+}
+
+void d_env_dir_to_uv(dr_vec3 d, double d_u, double d_v, dr_vec3 *d_dir)
+{
+    /* u = 1/2 + atan2(x, -z) / (2 pi): du = (-z dx + x dz) / (2 pi (x^2 + z^2));
+     * v = acos(y) / pi: dv = -dy / (pi sqrt(1 - y^2)) */
+    double r2 = d.x * d.x + d.z * d.z;
+    if (!(r2 > 0.0))
+        return;
+    double k = d_u / (2.0 * M_PI * r2);
+    d_dir->x += -d.z * k;
+    d_dir->z += d.x * k;
+    if (fabs(d.y) < 1.0)
+        d_dir->y += -d_v / (M_PI * sqrt(1.0 - d.y * d.y));
+}
+
+void d_env_radiance_dir(const struct dr_scene *s, dr_vec3 dir, dr_vec3 d_L, dr_vec3 *d_dir)
+{
+    if (!s->env.map.data)
+        return;
+    double u, v, d_u = 0.0, d_v = 0.0;
+    dr_env_dir_to_uv(dir, &u, &v);
+    dr_vec3 g = dr_scale(dr_mul(d_L, s->env.color), s->env.strength);
+    double d_out[4] = {g.x, g.y, g.z, 0.0};
+    struct dr_texture tex = {0, DR_WRAP_REPEAT, DR_WRAP_CLAMP};   /* as dr_env_radiance */
+    d_texture_eval_uv(&tex, &s->env.map, u, v, true, d_out, &d_u, &d_v);
+    d_env_dir_to_uv(dir, d_u, d_v, d_dir);
+}

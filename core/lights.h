@@ -70,6 +70,28 @@ dr_vec3 dr_env_radiance(const struct dr_scene *scene, dr_vec3 dir);
 void d_env_radiance(const struct dr_scene *scene, const struct dr_param_set *params, dr_vec3 dir, dr_vec3 d_L,
                     struct dr_grad_sink *sink);
 
+/* ---- adjoints with respect to points and directions (attached sampling) ---- */
+
+/* Reverse mode of dr_light_sample with respect to the shading point p, for
+ * the sample *ls it returned (the light, the point on it and the environment
+ * cell are discrete choices and stay fixed): d_wi, d_pdf and d_radiance of
+ * the sample into *d_p (+=). Environment and directional samples do not
+ * depend on p (zero). */
+void d_light_sample_point(const struct dr_scene *scene, dr_vec3 p, const struct dr_light_sample *ls, dr_vec3 d_wi,
+                          double d_pdf, dr_vec3 d_radiance, dr_vec3 *d_p);
+/* Reverse mode of dr_light_pdf_area with respect to `from` and hit->p (the
+ * emitter's ng is constant). */
+void d_light_pdf_area_points(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 from,
+                             const struct dr_hit *hit, double d_pdf, dr_vec3 *d_from, dr_vec3 *d_hit_p);
+/* Reverse mode of dr_emission with respect to the hit's uv (an emissive texture). */
+void d_emission_uv(const struct dr_scene *scene, const struct dr_hit *hit, dr_vec3 d_Le, double d_uv[2]);
+/* Reverse mode of dr_env_radiance with respect to the direction (bilinear
+ * map lookup through the equirectangular mapping). dr_light_pdf_env is
+ * piecewise constant in the direction (per map cell): no adjoint. */
+void d_env_radiance_dir(const struct dr_scene *scene, dr_vec3 dir, dr_vec3 d_L, dr_vec3 *d_dir);
+/* Reverse mode of dr_env_dir_to_uv (zero at the poles, where u is undefined). */
+void d_env_dir_to_uv(dr_vec3 dir, double d_u, double d_v, dr_vec3 *d_dir);
+
 /* Equirectangular mapping (+Y up; u = 0.5 looks down -Z, u grows towards +X;
  * v = 0 is straight up). */
 void dr_env_dir_to_uv(dr_vec3 dir, double *u, double *v);

@@ -71,3 +71,21 @@ void d_material_eval(const struct dr_scene *s, const struct dr_param_set *ps, co
         d_texture_eval(mt, &s->images[mt->image], u, v, d_out, ps->image[mt->image], k);
     }
 }
+
+void d_material_eval_uv(const struct dr_scene *s, const struct dr_hit *hit, const struct dr_d_bsdf *d_b,
+                        double d_uv[2])
+{
+    const struct dr_material *m = &s->materials[hit->material];
+    const double u = hit->uv[0], v = hit->uv[1];
+    const struct dr_texture *bt = texref_texture(s, &m->base_color_tex);
+    if (bt) {   /* base_color = factor * rgb(uv) */
+        dr_vec3 g = dr_mul(d_b->base_color, m->base_color);
+        double d_out[4] = {g.x, g.y, g.z, 0.0};
+        d_texture_eval_uv(bt, &s->images[bt->image], u, v, true, d_out, &d_uv[0], &d_uv[1]);
+    }
+    const struct dr_texture *mt = texref_texture(s, &m->metallic_roughness_tex);
+    if (mt) {   /* roughness = factor * G(uv), metallic = factor * B(uv) */
+        double d_out[4] = {0.0, d_b->roughness * m->roughness, d_b->metallic * m->metallic, 0.0};
+        d_texture_eval_uv(mt, &s->images[mt->image], u, v, false, d_out, &d_uv[0], &d_uv[1]);
+    }
+}

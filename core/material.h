@@ -16,4 +16,9 @@ void dr_material_eval(const struct dr_scene *scene, const struct dr_hit *hit, st
 void d_material_eval(const struct dr_scene *scene, const struct dr_param_set *params, const struct dr_hit *hit,
                      const struct dr_d_bsdf *d_b, struct dr_grad_sink *sink);
 
+/* Adjoint of dr_material_eval with respect to the hit's uv (attached
+ * sampling): d_b into d_uv[0], d_uv[1] (+=) through the textures' slopes. */
+void d_material_eval_uv(const struct dr_scene *scene, const struct dr_hit *hit, const struct dr_d_bsdf *d_b,
+                        double d_uv[2]);
+
 #endif

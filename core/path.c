@@ -245,6 +245,9 @@ bool dr_path_step(const struct dr_scene *s, const struct dr_path_opts *opts, str
 {
     v->depth = ++st->depth;
     v->d = st->d;
+    v->o = st->o;
+    v->prev_pdf = st->prev_pdf;
+    v->prev_p = st->prev_p;
     v->emits = v->shaded = v->nee = v->cont = v->diff_bsdf = false;
 
     int64_t tri = stage_trace(s, st, counts);

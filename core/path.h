@@ -104,6 +104,9 @@ struct dr_path_vertex {
     enum dr_vertex_kind kind;
     int depth;                 /* segments so far (1: the camera ray's hit) */
     dr_vec3 d;                 /* direction of the ray that arrived here */
+    dr_vec3 o;                 /* and its origin */
+    double prev_pdf;           /* the walker's state on arrival (dr_path_state) */
+    dr_vec3 prev_p;
     struct dr_hit hit;
     /* emission seen here (surface) or environment radiance (escaped) */
     bool emits;                /* Le is evaluated (and differentiable) here */
@@ -151,6 +154,56 @@ void d_path_vertex_term(const struct dr_scene *scene, const struct dr_param_set 
 /* Adjoint of the continuation's BSDF value f along v->wi, given d_f. */
 void d_path_continuation(const struct dr_scene *scene, const struct dr_param_set *params,
                          const struct dr_path_vertex *v, dr_vec3 d_f, struct dr_grad_sink *sink);
+
+/* ---- attached sampling (reparametrize-then-differentiate) ----
+ *
+ * The sampled directions, the hit points, the pdfs and the MIS weights move
+ * with the parameters. The discrete choices stay as the primal made them
+ * (which light, which environment cell, Russian roulette, zero-channel
+ * substitution) and their probabilities are constants of the derivative; so
+ * is the lobe-selection probability P (a lobe chosen with a P that moved
+ * with the parameter would need the boundary term of the lobe threshold; a
+ * fixed P makes the strategy a fixed mixture, whose density the pdf is).
+ * With P fixed, the only parameter that enters the sampling (the GGX
+ * visible-normal map and its density) is roughness: a path differs from its
+ * detached derivative only from the first vertex whose material has a
+ * requested roughness, and for every other parameter attached equals
+ * detached exactly. Visibility is
+ * not differentiated: a sample that crosses an occluder's edge drops a
+ * boundary term, so the estimate is biased there (see the manual). */
+
+/* Adjoint of the walker's state as a vertex receives it. */
+struct dr_d_path_state {
+    dr_vec3 o, d;        /* of the arriving ray */
+    double prev_pdf;     /* of the BSDF density that sampled d */
+    dr_vec3 prev_p;      /* of the point that ray left */
+};
+
+/* Does a requested parameter move material m's sampling map (its roughness
+ * factor, or the image of its metallic-roughness texture)? */
+bool dr_path_material_sampling_moves(const struct dr_scene *scene, const struct dr_param_set *params, int m);
+/* Does any requested parameter enter a sampling map? False: attached
+ * sampling is detached sampling, and runs as such. */
+bool dr_path_params_enter_sampling(const struct dr_scene *scene, const struct dr_param_set *params);
+/* Does vertex v's BSDF sampling depend on a requested parameter? Then its
+ * BSDF density (hence its continuation's 1/pdf and the MIS weights that use
+ * it) does, whichever lobe it chose, and a specular sample's direction too:
+ * from this vertex on the path is attached. */
+bool dr_path_vertex_sampling_moves(const struct dr_scene *scene, const struct dr_param_set *params,
+                                   const struct dr_path_vertex *v);
+
+/* Reverse mode of one vertex under attached sampling. Given d_e (adjoint of
+ * the vertex term e_k, as d_path_vertex_term), d_t (adjoint of the
+ * continuation factor t_k = f |cos| / pdf / q, per channel) and d_next (the
+ * adjoint of the state the vertex hands on: next ray, its pdf, this point),
+ * sends every parameter adjoint of the vertex to the sink (emission, lights,
+ * BSDF values, pdfs, the sampling map, textures through the moving uv) and
+ * sets *d_this to the adjoint of the state it received. Forward mode: d_e
+ * and d_t carry one image channel, the caller sets sink->channel. */
+void d_path_vertex_attached(const struct dr_scene *scene, const struct dr_param_set *params,
+                            const struct dr_path_vertex *v, dr_vec3 d_e, dr_vec3 d_t,
+                            const struct dr_d_path_state *d_next, struct dr_d_path_state *d_this,
+                            struct dr_grad_sink *sink);
 
 struct dr_path_state {
     dr_vec3 o, d;            /* the next ray */

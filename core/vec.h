@@ -8,6 +8,44 @@
 
 #ifndef M_PI
 #define M_PI 3.14159265358979323846
+/* Adjoints of the frame maps (attached sampling: frames move with the shading
+ * normal). d_f collects d loss / d (s, t, n) of the frame. */
+static inline void d_frame_to_local(const dr_frame *f, dr_vec3 v, dr_vec3 d_out, dr_vec3 *d_v, dr_frame *d_f)
+{
+    if (d_v)
+        *d_v = dr_add(*d_v, dr_add(dr_add(dr_scale(f->s, d_out.x), dr_scale(f->t, d_out.y)), dr_scale(f->n, d_out.z)));
+    if (d_f) {
+        d_f->s = dr_madd(d_f->s, v, d_out.x);
+        d_f->t = dr_madd(d_f->t, v, d_out.y);
+        d_f->n = dr_madd(d_f->n, v, d_out.z);
+    }
+}
+static inline void d_frame_to_world(const dr_frame *f, dr_vec3 v, dr_vec3 d_out, dr_vec3 *d_v, dr_frame *d_f)
+{
+    if (d_v)
+        *d_v = dr_add(*d_v, dr_v3(dr_dot(f->s, d_out), dr_dot(f->t, d_out), dr_dot(f->n, d_out)));
+    if (d_f) {
+        d_f->s = dr_madd(d_f->s, d_out, v.x);
+        d_f->t = dr_madd(d_f->t, d_out, v.y);
+        d_f->n = dr_madd(d_f->n, d_out, v.z);
+    }
+}
+/* Reverse mode of dr_frame_from_normal: d_f (of s, t, n) into *d_n. The
+ * sign branch is constant (the frame jumps where n.z changes sign, a set of
+ * measure zero); with a = -1 / (sign + n.z), da/dn.z = a^2, b = n.x n.y a. */
+static inline void d_frame_from_normal(dr_vec3 n, const dr_frame *d_f, dr_vec3 *d_n)
+{
+    double sign = copysign(1.0, n.z);
+    double a = -1.0 / (sign + n.z);
+    /* s = (1 + sign nx^2 a, sign b, -sign nx), t = (b, sign + ny^2 a, -ny) */
+    double g_b = sign * d_f->s.y + d_f->t.x;
+    double g_a = sign * n.x * n.x * d_f->s.x + n.y * n.y * d_f->t.y + n.x * n.y * g_b;
+    double gx = 2.0 * sign * n.x * a * d_f->s.x - sign * d_f->s.z + n.y * a * g_b;
+    double gy = 2.0 * n.y * a * d_f->t.y - d_f->t.z + n.x * a * g_b;
+    double gz = g_a * a * a;
+    *d_n = dr_add(*d_n, dr_add(d_f->n, dr_v3(gx, gy, gz)));
+}
+
 #endif
 #define DR_INV_PI (1.0 / M_PI)
 
@@ -81,6 +119,44 @@ static inline dr_vec3 dr_frame_to_local(const dr_frame *f, dr_vec3 v)
 static inline dr_vec3 dr_frame_to_world(const dr_frame *f, dr_vec3 v)
 {
     return dr_add(dr_add(dr_scale(f->s, v.x), dr_scale(f->t, v.y)), dr_scale(f->n, v.z));
+}
+
+/* Adjoints of the frame maps (attached sampling: frames move with the shading
+ * normal). d_f collects d loss / d (s, t, n) of the frame. */
+static inline void d_frame_to_local(const dr_frame *f, dr_vec3 v, dr_vec3 d_out, dr_vec3 *d_v, dr_frame *d_f)
+{
+    if (d_v)
+        *d_v = dr_add(*d_v, dr_add(dr_add(dr_scale(f->s, d_out.x), dr_scale(f->t, d_out.y)), dr_scale(f->n, d_out.z)));
+    if (d_f) {
+        d_f->s = dr_madd(d_f->s, v, d_out.x);
+        d_f->t = dr_madd(d_f->t, v, d_out.y);
+        d_f->n = dr_madd(d_f->n, v, d_out.z);
+    }
+}
+static inline void d_frame_to_world(const dr_frame *f, dr_vec3 v, dr_vec3 d_out, dr_vec3 *d_v, dr_frame *d_f)
+{
+    if (d_v)
+        *d_v = dr_add(*d_v, dr_v3(dr_dot(f->s, d_out), dr_dot(f->t, d_out), dr_dot(f->n, d_out)));
+    if (d_f) {
+        d_f->s = dr_madd(d_f->s, d_out, v.x);
+        d_f->t = dr_madd(d_f->t, d_out, v.y);
+        d_f->n = dr_madd(d_f->n, d_out, v.z);
+    }
+}
+/* Reverse mode of dr_frame_from_normal: d_f (of s, t, n) into *d_n. The
+ * sign branch is constant (the frame jumps where n.z changes sign, a set of
+ * measure zero); with a = -1 / (sign + n.z), da/dn.z = a^2, b = n.x n.y a. */
+static inline void d_frame_from_normal(dr_vec3 n, const dr_frame *d_f, dr_vec3 *d_n)
+{
+    double sign = copysign(1.0, n.z);
+    double a = -1.0 / (sign + n.z);
+    /* s = (1 + sign nx^2 a, sign b, -sign nx), t = (b, sign + ny^2 a, -ny) */
+    double g_b = sign * d_f->s.y + d_f->t.x;
+    double g_a = sign * n.x * n.x * d_f->s.x + n.y * n.y * d_f->t.y + n.x * n.y * g_b;
+    double gx = 2.0 * sign * n.x * a * d_f->s.x - sign * d_f->s.z + n.y * a * g_b;
+    double gy = 2.0 * n.y * a * d_f->t.y - d_f->t.z + n.x * a * g_b;
+    double gz = g_a * a * a;
+    *d_n = dr_add(*d_n, dr_add(d_f->n, dr_v3(gx, gy, gz)));
 }
 
 #endif

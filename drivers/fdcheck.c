@@ -23,7 +23,7 @@ static struct dr_grad_problem problem(const struct dr_scene *scene, const struct
     return (struct dr_grad_problem){.scene = scene, .camera = camera, .params = ps, .width = o->width,
                                     .height = o->height, .spp = o->spp, .max_depth = o->max_depth,
                                     .rr_depth = o->rr_depth, .seed = seed, .threads = o->threads,
-                                    .sampling = o->sampling, .film = o->film};
+                                    .sampling = o->sampling, .film = o->film, .regularize = o->regularize};
 }
 
 /* Mean of the image rendered at theta0 + t * dir with seed. */

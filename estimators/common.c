@@ -132,6 +132,13 @@ void dr_est_sample_done(struct dr_est_base *b, int thread, int64_t pixel, struct
 
 /* ------------------------------------------------------------------- run */
 
+enum dr_sampling dr_est_sampling_run(const struct dr_grad_problem *p)
+{
+    if (p->sampling == DR_SAMPLING_ATTACHED && !dr_path_params_enter_sampling(p->scene, p->params))
+        return DR_SAMPLING_DETACHED;
+    return p->sampling;
+}
+
 static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const float *adjoint,
                const double *dir, double *grad, double *d_image, struct dr_grad_stats *st)
 {
@@ -163,7 +170,8 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
     if (st) {
         *st = (struct dr_grad_stats){.seconds = dr_clock_seconds() - b->t0, .threads = b->acc.threads,
                                      .memory_bytes = b->acc.bytes + b->record_bytes,
-                                     .record_bytes = b->record_bytes, .stages = b->popts.stages};
+                                     .record_bytes = b->record_bytes, .stages = b->popts.stages,
+                                     .sampling_run = dr_est_sampling_run(p)};
         for (int t = 0; t < b->acc.threads; t++) {
             st->rays.camera += b->thr[t].rays.camera;
             st->rays.extension += b->thr[t].rays.extension;

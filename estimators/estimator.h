@@ -5,7 +5,9 @@
  * pixel) with respect to the parameters of `params`. The sampling mode says
  * how sampled quantities enter the derivative: `detached` (directions, pdfs,
  * MIS weights and Russian roulette are constants of the derivative:
- * differentiate-then-reparametrize with the forward sampler). */
+ * differentiate-then-reparametrize with the forward sampler) or `attached`
+ * (directions, hit points, pdfs and MIS weights move with the parameters:
+ * reparametrize-then-differentiate; see path.h). */
 #ifndef DR_ESTIMATOR_H
 #define DR_ESTIMATOR_H
 
@@ -20,7 +22,7 @@
 
 enum dr_sampling {
     DR_SAMPLING_DETACHED,   /* differentiate-then-reparametrize */
-    DR_SAMPLING_ATTACHED,   /* reparametrize-then-differentiate (not implemented yet) */
+    DR_SAMPLING_ATTACHED,   /* reparametrize-then-differentiate (path.h: what moves, what stays) */
     DR_SAMPLING_COUNT
 };
 /* "detached", "attached"; and back (-1: unknown name). */
@@ -40,7 +42,12 @@ struct dr_grad_problem {
      * height above are the rendered rectangle: estimators iterate its pixels
      * and every image (adjoint, d image) has its size. */
     struct dr_film film;
+    double regularize;         /* prb, attached: Jacobians with sigma_min/sigma_max below this are not
+                                  inverted, forward mode restarts there (0: always invert) */
 };
+
+/* prb --sampling attached: the default --regularize. */
+#define DR_PRB_REGULARIZE_DEFAULT 1e-3
 
 struct dr_grad_stats {
     double seconds;
@@ -50,6 +57,8 @@ struct dr_grad_stats {
     uint64_t record_bytes;      /* the part holding recorded path vertices (tape), 0 if none */
     unsigned stages;            /* the walker's optional stages that ran (path.h) */
     int threads;
+    enum dr_sampling sampling_run;   /* what ran: attached with no parameter entering a
+                                        sampling map is detached (identical, cheaper) */
 };
 
 struct dr_est_base;   /* common.h: the run every estimator shares */

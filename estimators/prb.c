@@ -11,7 +11,17 @@
  * Primal and replay are one loop (as in Mitsuba's prb.py): with an adjoint,
  * the walk subtracts each vertex's contribution and sends derivatives to the
  * sink. All sums are in double. */
+#include <stdlib.h>
+
 #include "common.h"
+#include "error.h"
+#include "prb_attached.h"
+
+struct prb_job {
+    struct dr_est_base b;   /* first: the shared part */
+    double *zeros;          /* attached sampling: a sink direction that discards (params->total zeros) */
+    double radius;          /* attached sampling: the scene's radius */
+};
 
 struct prb_radiance {
     dr_vec3 true_, sub;   /* L with the true throughput, and with substitutes */
@@ -55,15 +65,38 @@ static void walk(const struct dr_est_base *b, struct dr_sampler smp, dr_vec3 o, 
     }
 }
 
+/* One pixel's samples with attached sampling (prb_attached.c). */
+static void attached_pixel(struct prb_job *j, int thread, int64_t px, dr_vec3 adj, struct dr_grad_sink *sink)
+{
+    struct dr_est_base *b = &j->b;
+    struct prb_attached_ctx c = {.b = b, .zeros = j->zeros, .eps = b->p->regularize, .radius = j->radius,
+                                 .rays = &b->thr[thread].rays};
+    for (int sidx = 0; sidx < b->p->spp; sidx++) {
+        struct dr_sampler smp;
+        dr_vec3 o, d;
+        dr_est_camera_ray(b, px, sidx, &smp, &o, &d);
+        if (!prb_attached_sample(&c, smp, o, d, adj, sink)) {
+            b->thr[thread].invalid++;
+            continue;
+        }
+        dr_est_sample_done(b, thread, px, sink);
+    }
+}
+
 static void prb_pixels(void *ctx, int thread, int64_t begin, int64_t end)
 {
-    struct dr_est_base *b = ctx;
+    struct prb_job *j = ctx;
+    struct dr_est_base *b = &j->b;
     struct dr_ray_counts *rays = &b->thr[thread].rays;
     struct dr_grad_sink sink = dr_est_sink_begin(b, thread);
     for (int64_t px = begin; px < end; px++) {
         dr_vec3 adj;
         if (!dr_est_sample_adjoint(b, px, &adj))
             continue;   /* this pixel does not matter to the loss */
+        if (j->zeros) {
+            attached_pixel(j, thread, px, adj, &sink);
+            continue;
+        }
         for (int sidx = 0; sidx < b->p->spp; sidx++) {
             struct dr_sampler smp;
             dr_vec3 o, d;
@@ -83,13 +116,30 @@ static void prb_pixels(void *ctx, int thread, int64_t begin, int64_t end)
 
 static int prb_run(struct dr_est_base *b)
 {
-    return dr_parallel_for_static((int64_t)b->p->width * b->p->height, 16, b->acc.threads, prb_pixels, b);
+    struct prb_job *j = (struct prb_job *)b;
+    if (dr_est_sampling_run(b->p) == DR_SAMPLING_ATTACHED) {
+        if (!(j->zeros = calloc((size_t)b->p->params->total + 1, sizeof(double)))) {
+            dr_set_error("out of memory");
+            return DR_ERR_NOMEM;
+        }
+        const struct dr_scene *s = b->p->scene;
+        j->radius = 0.5 * dr_length(dr_sub(s->bbox_max, s->bbox_min));
+        if (!(j->radius > 0.0) || !isfinite(j->radius))
+            j->radius = 1.0;
+    }
+    return dr_parallel_for_static((int64_t)b->p->width * b->p->height, 16, b->acc.threads, prb_pixels, j);
+}
+
+static void prb_release(struct dr_est_base *b)
+{
+    free(((struct prb_job *)b)->zeros);
 }
 
 const struct dr_estimator_ops dr_estimator_prb = {
     .name = "prb",
     .summary = "path replay backpropagation: primal pass + replay, constant memory per path, time linear in depth",
-    .sampling = 1u << DR_SAMPLING_DETACHED,
-    .job_size = sizeof(struct dr_est_base),
+    .sampling = (1u << DR_SAMPLING_DETACHED) | (1u << DR_SAMPLING_ATTACHED),
+    .job_size = sizeof(struct prb_job),
     .run = prb_run,
+    .release = prb_release,
 };

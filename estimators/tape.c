@@ -8,6 +8,7 @@
  * so with the same random numbers the two estimators agree to rounding.
  * Memory: (vertices per path) x (paths per batch), reported as record_bytes. */
 #include <stdlib.h>
+#include <string.h>
 
 #include "common.h"
 #include "error.h"
@@ -26,6 +27,7 @@ struct tape_path {
     int64_t pixel;
     int64_t first;     /* index of its first vertex */
     int count;
+    int moving;        /* attached sampling: first vertex whose sampling moves with a parameter (count: none) */
     dr_vec3 adj;       /* d loss / d L of this sample (forward mode: ones) */
 };
 
@@ -41,6 +43,7 @@ struct tape_job {
     struct dr_est_base b;   /* first: the shared part */
     struct tape tapes[DR_MAX_THREADS];
     int64_t batch_begin;     /* path ids of the current batch start here */
+    bool attached;           /* attached sampling, and some parameter enters a sampling map */
 };
 
 static bool grow(void **p, int64_t *cap, int64_t need, size_t elem)
@@ -72,7 +75,7 @@ static bool record_path(struct tape_job *j, struct tape *tp, int thread, int64_t
     if (!grow((void **)&tp->paths, &tp->cap_paths, tp->n_paths + 1, sizeof *tp->paths))
         return false;
     struct tape_path *path = &tp->paths[tp->n_paths];
-    *path = (struct tape_path){.pixel = px, .first = tp->n_verts, .count = 0, .adj = adj};
+    *path = (struct tape_path){.pixel = px, .first = tp->n_verts, .count = 0, .moving = -1, .adj = adj};
     struct dr_path_state st;
     dr_path_start(&st, o, d);
     dr_vec3 L = dr_v3s(0.0);
@@ -83,11 +86,15 @@ static bool record_path(struct tape_job *j, struct tape *tp, int thread, int64_t
         tv->bt = dr_mul(st.ratio, st.beta);
         bool more = dr_path_step(j->b.p->scene, &j->b.popts, &st, &smp, &tv->v, &j->b.thr[thread].rays);
         L = dr_add(L, dr_mul(tv->bt, dr_path_vertex_term(&tv->v)));
+        if (path->moving < 0 && j->attached && dr_path_vertex_sampling_moves(j->b.p->scene, j->b.p->params, &tv->v))
+            path->moving = path->count;
         tp->n_verts++;
         path->count++;
         if (!more)
             break;
     }
+    if (path->moving < 0)
+        path->moving = path->count;
     if (!dr_v3_finite(L)) {   /* drop the path */
         tp->n_verts = path->first;
         j->b.thr[thread].invalid++;
@@ -132,6 +139,54 @@ static void sweep(const struct tape_job *j, const struct tape_vertex *verts, int
     }
 }
 
+/* Backward sweep under attached sampling. Vertices from path->moving on see
+ * a ray that moves with the parameters: their reverse mode also carries the
+ * adjoint of the walker's state (d_path_vertex_attached), from the last
+ * vertex back to the first moving one, whose own arriving ray is fixed.
+ * Before it, the detached adjoints are the whole story. */
+static void sweep_attached(const struct tape_job *j, const struct tape_vertex *verts, int count, int moving,
+                           dr_vec3 adj, struct dr_grad_sink *sink)
+{
+    const struct dr_scene *s = j->b.p->scene;
+    const struct dr_param_set *ps = j->b.p->params;
+    dr_vec3 abar = dr_v3s(0.0);
+    struct dr_d_path_state d_next, d_this;
+    memset(&d_next, 0, sizeof d_next);
+    for (int k = count - 1; k >= 0; k--) {
+        const struct dr_path_vertex *v = &verts[k].v;
+        dr_vec3 bt = verts[k].bt;
+        dr_vec3 t = v->cont ? dr_scale(v->f, v->cos_pdf_q) : dr_v3s(0.0);
+        if (k >= moving) {
+            d_path_vertex_attached(s, ps, v, dr_mul(adj, bt), dr_mul(abar, bt), &d_next, &d_this, sink);
+            d_next = d_this;
+        } else {
+            if (v->cont && v->diff_bsdf)
+                d_path_continuation(s, ps, v, dr_scale(dr_mul(abar, bt), v->cos_pdf_q), sink);
+            d_path_vertex_term(s, ps, v, dr_mul(adj, bt), sink);
+        }
+        abar = dr_add(dr_mul(adj, dr_path_vertex_term(v)), dr_mul(abar, t));
+    }
+}
+
+/* One recorded path's sweep. The attached state adjoint mixes the colour
+ * channels, so in forward mode each image channel gets its own sweep. */
+static void sweep_path(const struct tape_job *j, const struct tape_vertex *verts, const struct tape_path *path,
+                       struct dr_grad_sink *sink)
+{
+    if (path->moving >= path->count) {
+        sweep(j, verts, path->count, path->adj, sink);
+        return;
+    }
+    if (!sink->dir) {
+        sweep_attached(j, verts, path->count, path->moving, path->adj, sink);
+        return;
+    }
+    for (int c = 0; c < 3; c++) {
+        sink->channel = c;
+        sweep_attached(j, verts, path->count, path->moving, dr_v3_channel(path->adj, c), sink);
+    }
+}
+
 /* Sweep phase: item i sweeps tape i (recorded by worker i). */
 static void sweep_tape(void *ctx, int thread, int64_t begin, int64_t end)
 {
@@ -141,7 +196,7 @@ static void sweep_tape(void *ctx, int thread, int64_t begin, int64_t end)
         struct dr_grad_sink sink = dr_est_sink_begin(&j->b, thread);
         for (int64_t pi = 0; pi < tp->n_paths; pi++) {
             const struct tape_path *path = &tp->paths[pi];
-            sweep(j, tp->verts + path->first, path->count, path->adj, &sink);
+            sweep_path(j, tp->verts + path->first, path, &sink);
             dr_est_sample_done(&j->b, thread, path->pixel, &sink);
         }
         dr_est_sink_end(&j->b, thread);
@@ -156,6 +211,7 @@ static int tape_run(struct dr_est_base *b)
     const int64_t total = (int64_t)p->width * p->height * p->spp;
     const int64_t batch = p->batch > 0 ? p->batch : (int64_t)p->width * p->height;
     int rc = 0;
+    j->attached = dr_est_sampling_run(p) == DR_SAMPLING_ATTACHED;
     for (j->batch_begin = 0; j->batch_begin < total && rc == 0; j->batch_begin += batch) {
         int64_t n = total - j->batch_begin < batch ? total - j->batch_begin : batch;
         for (int t = 0; t < threads; t++)
@@ -191,7 +247,7 @@ const struct dr_estimator_ops dr_estimator_tape = {
     .name = "tape",
     .summary = "conventional reverse mode: records every vertex of a batch of paths, then sweeps backward; memory "
                "grows with depth x paths per batch",
-    .sampling = 1u << DR_SAMPLING_DETACHED,
+    .sampling = (1u << DR_SAMPLING_DETACHED) | (1u << DR_SAMPLING_ATTACHED),
     .job_size = sizeof(struct tape_job),
     .run = tape_run,
     .release = tape_release,

@@ -9,7 +9,8 @@
 # Expected exit codes (cli/cli.h, man/drender.1):
 #   0 = success
 #   2 = usage error: unknown --param (message lists the nearest names), the same
-#       parameter twice, --sampling attached, unknown --estimator, a target of
+#       parameter twice, unknown --sampling, --regularize outside [0, 1],
+#       unknown --estimator, a target of
 #       the wrong size, -o in a non-float format, ...
 #   3 = input error: target or scene missing, unreadable or with NaN pixels
 #   4 = fdcheck: some gradient disagrees with finite differences
@@ -99,7 +100,9 @@ expect_fail 3 "nope.gltf" params nope.gltf
 expect_fail 2 "/materials/red/pbrMetallicRoughnes/baseColorFactor|nearest valid names|$red_idx" \
     grad --param /materials/red/pbrMetallicRoughnes/baseColorFactor -o d.exr $fast
 expect_fail 2 "requested twice" grad --param "$red" --param "$red_idx" -o d.exr $fast
-expect_fail 2 "--sampling|not available yet|detached" grad --param "$red" --sampling attached -o d.exr $fast
+expect_fail 2 "--sampling|bogus|detached|attached" grad --param "$red" --sampling bogus -o d.exr $fast
+expect_fail 2 "--regularize|2" grad --param "$red" --sampling attached --regularize 2 -o d.exr $fast
+expect_fail 2 "--regularize|x" grad --param "$red" --sampling attached --regularize x -o d.exr $fast
 expect_fail 2 "--estimator|bogus|prb|tape" grad --param "$red" --estimator bogus -o d.exr $fast
 expect_fail 2 "--param" grad -o d.exr $fast
 expect_fail 2 "-o d.png|float" grad --param "$red" -o d.png $fast
@@ -189,6 +192,21 @@ json_check "$tmp/out" '
 d["parameters"][0]["stderr_gradient"] == [None] * 3 and d["parameters"][0]["stderr_primal"] == [None] * 3
 and all(x > 0 for x in d["parameters"][0]["stderr"])'
 [ -s gdir/grad-images-0.exr ] || fail "grad --grad-dir gdir: expected gdir/grad-images-0.exr"
+# attached sampling (tape): roughness enters a sampling map, a colour does not
+rough=/materials/4/pbrMetallicRoughness/roughnessFactor
+run grad --target t.exr --param "$rough" --estimator tape --sampling attached --spp 4 --batches 2 --json
+expect_rc 0 "grad --sampling attached (roughness)"
+json_check "$tmp/out" 'd["sampling"] == "attached" and d["sampling_effective"] == "attached"
+and all(math.isfinite(x) for x in d["parameters"][0]["gradient"] + d["parameters"][0]["stderr"])'
+run grad --target t.exr --param "$rough" --estimator prb --sampling attached --regularize 0 --spp 4 --batches 2 --json
+expect_rc 0 "grad --sampling attached (prb)"
+json_check "$tmp/out" 'd["sampling_effective"] == "attached" and d["regularize"] == 0
+and all(math.isfinite(x) for x in d["parameters"][0]["gradient"] + d["parameters"][0]["stderr"])'
+run grad --target t.exr --param "$red" --estimator tape --sampling attached --spp 4 --batches 2 --json
+expect_rc 0 "grad --sampling attached (colour)"
+json_check "$tmp/out" 'd["sampling"] == "attached" and d["sampling_effective"] == "detached"'
+run grad --target t.exr --param "$red" --estimator tape --spp 4 --batches 2 --json
+json_check "$tmp/out" 'd["sampling_effective"] == "detached"'
 run grad --target t.exr --param "$red" --loss l1 --json
 expect_rc 0 "grad --loss l1"
 json_check "$tmp/out" 'd["loss_kind"] == "l1" and d["width"] == 16 and d["height"] == 16'
@@ -222,7 +240,7 @@ expect_in out "DISAGREE" "fdcheck --z-max 1e-9"
 expect_fail 2 "--eps" fdcheck --param "$red" --eps 0
 expect_fail 2 "--batches" fdcheck --param "$red" --batches 1
 expect_fail 2 "--batch" fdcheck --param "$red" --batch 3
-expect_fail 2 "--sampling" fdcheck --param "$red" --sampling attached
+expect_fail 2 "--sampling|bogus" fdcheck --param "$red" --sampling bogus
 expect_fail 2 "nearest valid names" fdcheck --param /images/7
 expect_fail 3 "nope.gltf" fdcheck nope.gltf --param "$red"
 

@@ -9,7 +9,7 @@
 # Expected exit codes (cli/cli.h, man/drender.1):
 #   2 = usage error: target of the wrong size for --res, camera index out of
 #       range, a parameter that is not differentiable (nearest names listed),
-#       bad --set, -o not .gltf/.glb, --iters 0, --sampling attached,
+#       bad --set, -o not .gltf/.glb, --iters 0, --sampling bogus, --regularize -1,
 #       --resume with a checkpoint for other parameters or beyond --iters
 #   3 = input error: target missing, unreadable or with NaN pixels, scene or
 #       --reference missing, --resume without a checkpoint
@@ -88,7 +88,8 @@ expect_fail 2 "--iters|0" "$scene" --target "$T" --param "$P" --spp 1 --iters 0
 expect_fail 2 "--iters|-5" "$scene" --target "$T" --param "$P" --spp 1 --iters -5
 expect_fail 2 "--lr|0" "$scene" --target "$T" --param "$P" "${fast[@]}" --lr 0
 expect_fail 2 "--loss|l3" "$scene" --target "$T" --param "$P" "${fast[@]}" --loss l3
-expect_fail 2 "--sampling attached|detached" "$scene" --target "$T" --param "$P" "${fast[@]}" --sampling attached
+expect_fail 2 "--sampling|bogus|detached" "$scene" --target "$T" --param "$P" "${fast[@]}" --sampling bogus
+expect_fail 2 "--regularize|-1" "$scene" --target "$T" --param "$P" "${fast[@]}" --regularize -1
 expect_fail 2 "--estimator|magic" "$scene" --target "$T" --param "$P" "${fast[@]}" --estimator magic
 expect_fail 2 "--checkpoint-every|0" "$scene" --target "$T" --param "$P" "${fast[@]}" --checkpoint-every 0
 expect_fail 2 "--render-every|0" "$scene" --target "$T" --param "$P" "${fast[@]}" --render-every 0

@@ -1,0 +1,156 @@
+/* Attached sampling: the reverse mode of one vertex of the staged walker
+ * (path.h), stage by stage in reverse order, carrying the adjoint of the
+ * walker's state (arriving ray, previous pdf, previous point) as redner's
+ * backward pass carries d_next_rays / d_next_points.
+ *
+ * Forward order at a surface vertex, and what each stage's adjoint gets:
+ *   hit      p, ns, uv = hit(o, d)                  d_hit_compute -> d_o, d_d
+ *   emission Le(uv) * mis(prev_pdf, pdf_A(prev_p, p)) -> d_prev_pdf, d_prev_p, d_p, d_uv
+ *   material frame(ns), wo = frame^T (-d), bsdf(uv)  -> d_ns, d_d, d_uv
+ *   nee      light sample at p; f(wo, wi_l), |cos| mis / pdf  -> d_p, d_wo, d_frame
+ *   continue wi = T(u, bsdf, wo); t = f |cos| / pdf / q; next ray (p, frame wi)
+ * An escaped vertex has only Le(d) * mis(prev_pdf, pdf_env(d)); pdf_env is
+ * piecewise constant in d. */
+#include "path.h"
+
+#include <string.h>
+
+#include "material.h"
+
+bool dr_path_material_sampling_moves(const struct dr_scene *s, const struct dr_param_set *ps, int m)
+{
+    if (!ps || m < 0 || m >= ps->n_materials)
+        return false;
+    if (ps->mat_roughness[m] >= 0)
+        return true;
+    int t = s->materials[m].metallic_roughness_tex.texture;
+    return t >= 0 && ps->image[s->textures[t].image] >= 0;
+}
+
+bool dr_path_params_enter_sampling(const struct dr_scene *s, const struct dr_param_set *ps)
+{
+    for (int m = 0; ps && m < ps->n_materials; m++)
+        if (dr_path_material_sampling_moves(s, ps, m))
+            return true;
+    return false;
+}
+
+bool dr_path_vertex_sampling_moves(const struct dr_scene *s, const struct dr_param_set *ps,
+                                   const struct dr_path_vertex *v)
+{
+    return v->shaded && dr_path_material_sampling_moves(s, ps, v->hit.material);
+}
+
+/* Adjoints gathered at one vertex before they flow into the hit and the material. */
+struct vertex_adjoint {
+    dr_vec3 p, ns, wo;
+    double uv[2];
+    dr_frame frame;
+    struct dr_d_bsdf bsdf;
+};
+
+/* Emission (surface) or environment radiance (escaped), times its MIS weight. */
+static void emission_adjoint(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
+                             dr_vec3 d_e, struct vertex_adjoint *a, struct dr_d_path_state *d_this,
+                             struct dr_grad_sink *sink)
+{
+    if (!v->emits || dr_is_black(d_e))
+        return;
+    dr_vec3 d_Le = dr_scale(d_e, v->emit_w);
+    double d_w = dr_dot(d_e, v->Le);
+    if (v->kind == DR_VERTEX_ESCAPED) {
+        d_env_radiance(s, ps, v->d, d_Le, sink);
+        d_env_radiance_dir(s, v->d, d_Le, &d_this->d);
+        if (v->depth > 1)   /* pdf_env is constant within a map cell */
+            d_mis_power(v->prev_pdf, dr_light_pdf_env(s, s->light_sampler, v->d), d_w, &d_this->prev_pdf, NULL);
+        return;
+    }
+    d_emission(s, ps, &v->hit, d_Le, sink);
+    d_emission_uv(s, &v->hit, d_Le, a->uv);
+    if (v->depth > 1) {
+        double pdf_a = dr_light_pdf_area(s, s->light_sampler, v->prev_p, &v->hit), d_pdf_a = 0.0;
+        d_mis_power(v->prev_pdf, pdf_a, d_w, &d_this->prev_pdf, &d_pdf_a);
+        d_light_pdf_area_points(s, s->light_sampler, v->prev_p, &v->hit, d_pdf_a, &d_this->prev_p, &a->p);
+    }
+}
+
+/* Next-event estimation: e_nee = f(wo, wi_l) L_l |wi_l.z| w / pdf_l, with
+ * wi_l = frame^T ls.wi(p), w = mis(pdf_l(p), pdf_bsdf(wo, wi_l)). */
+static void nee_adjoint(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
+                        dr_vec3 d_e, struct vertex_adjoint *a, struct dr_grad_sink *sink)
+{
+    if (!v->nee || dr_is_black(d_e))
+        return;
+    const struct dr_light_sample *ls = &v->ls;
+    dr_vec3 d_f = dr_scale(dr_mul(d_e, ls->radiance), v->nee_scale);
+    dr_vec3 d_rad = dr_scale(dr_mul(d_e, v->nee_f), v->nee_scale);
+    double d_scale = dr_dot(d_e, dr_mul(v->nee_f, ls->radiance));
+    double c = fabs(v->nee_wi.z), pdf_b = dr_bsdf_pdf(&v->bsdf, v->wo, v->nee_wi);
+    double w = ls->delta ? 1.0 : dr_mis_power(ls->pdf, pdf_b);
+    double d_pdf_l = -d_scale * v->nee_scale / ls->pdf, d_pdf_b = 0.0;
+    if (!ls->delta)
+        d_mis_power(ls->pdf, pdf_b, d_scale * c / ls->pdf, &d_pdf_l, &d_pdf_b);
+    dr_vec3 d_wi = dr_v3(0.0, 0.0, copysign(d_scale * w / ls->pdf, v->nee_wi.z));
+    d_bsdf_eval(&v->bsdf, v->wo, v->nee_wi, d_f, &a->bsdf, &a->wo, &d_wi);
+    if (d_pdf_b != 0.0)
+        d_bsdf_pdf_fixed_prob(&v->bsdf, v->wo, v->nee_wi, d_pdf_b, &a->bsdf, &a->wo, &d_wi);
+    dr_vec3 d_ls_wi = dr_v3s(0.0);
+    d_frame_to_local(&v->frame, ls->wi, d_wi, &d_ls_wi, &a->frame);
+    d_light_radiance(s, ps, ls, d_rad, sink);
+    d_light_sample_point(s, v->hit.p, ls, d_ls_wi, d_pdf_l, d_rad, &a->p);
+}
+
+/* Continuation: t = f(wo, wi) |wi.z| / pdf(wo, wi) / q (q constant), the next
+ * ray leaves p (offset along the constant ng) along frame wi, wi = T(u, bsdf, wo). */
+static void continuation_adjoint(const struct dr_path_vertex *v, dr_vec3 d_t, const struct dr_d_path_state *d_next,
+                                 struct vertex_adjoint *a)
+{
+    if (!v->cont)
+        return;
+    dr_vec3 d_f = dr_scale(d_t, v->cos_pdf_q);
+    double d_tt = dr_dot(d_f, v->f);   /* sum_c d_t,c t_c */
+    double d_pdf = -d_tt / v->pdf + d_next->prev_pdf;
+    dr_vec3 d_wi = dr_v3(0.0, 0.0, d_tt / v->wi.z);
+    d_bsdf_eval(&v->bsdf, v->wo, v->wi, d_f, &a->bsdf, &a->wo, &d_wi);
+    if (d_pdf != 0.0)
+        d_bsdf_pdf_fixed_prob(&v->bsdf, v->wo, v->wi, d_pdf, &a->bsdf, &a->wo, &d_wi);
+    d_frame_to_world(&v->frame, v->wi, d_next->d, &d_wi, &a->frame);
+    a->p = dr_add(a->p, dr_add(d_next->o, d_next->prev_p));
+    d_bsdf_sample_dir(&v->bsdf, v->wo, v->lobe, v->u.bsdf_u1, v->u.bsdf_u2, d_wi, &a->bsdf, &a->wo);
+}
+
+/* Material inputs (the BSDF at uv, the frame of the oriented shading normal,
+ * wo) and then the hit point itself, back to the arriving ray. */
+static void surface_adjoint(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
+                            struct vertex_adjoint *a, struct dr_d_path_state *d_this, struct dr_grad_sink *sink)
+{
+    const struct dr_hit *hit = &v->hit;
+    if (v->shaded) {
+        if (v->diff_bsdf)
+            d_material_eval(s, ps, hit, &a->bsdf, sink);
+        d_material_eval_uv(s, hit, &a->bsdf, a->uv);
+        dr_vec3 d_wo_world = dr_v3s(0.0);
+        d_frame_to_local(&v->frame, dr_neg(v->d), a->wo, &d_wo_world, &a->frame);
+        d_this->d = dr_sub(d_this->d, d_wo_world);
+        dr_vec3 n = hit->front ? hit->ns : dr_neg(hit->ns), d_n = dr_v3s(0.0);
+        d_frame_from_normal(n, &a->frame, &d_n);
+        a->ns = hit->front ? dr_add(a->ns, d_n) : dr_sub(a->ns, d_n);
+    }
+    struct dr_d_hit dh = {a->p, a->ns, {a->uv[0], a->uv[1]}};
+    d_hit_compute(&s->mesh, hit, v->o, v->d, &dh, &d_this->o, &d_this->d);
+}
+
+void d_path_vertex_attached(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
+                            dr_vec3 d_e, dr_vec3 d_t, const struct dr_d_path_state *d_next,
+                            struct dr_d_path_state *d_this, struct dr_grad_sink *sink)
+{
+    struct vertex_adjoint a;
+    memset(&a, 0, sizeof a);
+    memset(d_this, 0, sizeof *d_this);
+    emission_adjoint(s, ps, v, d_e, &a, d_this, sink);
+    if (v->kind != DR_VERTEX_SURFACE)
+        return;
+    nee_adjoint(s, ps, v, d_e, &a, sink);
+    continuation_adjoint(v, d_t, d_next, &a);
+    surface_adjoint(s, ps, v, &a, d_this, sink);
+}

@@ -1,0 +1,425 @@
+/* Path replay backpropagation with attached sampling (the seed's version,
+ * after Vicini et al. 2021): constant memory in path length.
+ *
+ * Under attached sampling each vertex k hands a moving state to the next:
+ * s_{k+1} = (the point p_k, the direction d_{k+1}, the density pdf_k that
+ * sampled it). The tape carries the adjoint of that state backward
+ * (d_path_vertex_attached); PRB walks forward and must know it at each vertex
+ * without a tape. In tangent coordinates (p: 2 in the plane of p_k's
+ * triangle, d: 2 normal to d_{k+1}, pdf: 1) the reverse recurrence is
+ *     c_k = a_k + M_k^T c_{k+1},
+ * with M_k = d s_{k+1} / d s_k (the differentiated sampling map, hit point,
+ * frame, ...) and a_k vertex k's own terms. So:
+ *  - at the first vertex j whose sampling moves with a parameter, c_{j+1} is
+ *    computed by forward mode over the rest of the path (four tangent
+ *    directions of p_j and d_{j+1}, their throughput derivatives carried
+ *    along: the seed's "dL/domega_0"), and
+ *  - at each later vertex c_{k+1} comes from c_k through the inverse of M_k's
+ *    position-direction block:  c_{k+1} = M_k^-T (c_k - a_k).  The pdf part
+ *    of c_{k+1} does not reach s_{k+2}; it is the next vertex's emission MIS
+ *    term, read one vertex ahead.
+ * M_k is singular wherever a direction forgets where it came from (a diffuse
+ * bounce on a flat triangle: d_{k+1} does not depend on d_k) and
+ * near-singular near it, where inverting it loses the adjoint (the seed
+ * regularises the inverse and accepts the bias; a regularised inverse of an
+ * exactly singular block still drops the lost components). So where
+ * sigma_min / sigma_max of the block is below eps (--regularize), the
+ * state adjoint is recomputed exactly by forward mode over the rest of the
+ * path instead: unbiased, at the price of another walk of the remainder
+ * (quadratic in the path length on all-diffuse paths, memory still constant).
+ * With eps = 0 the block is always inverted (biased where it is singular).
+ * On well-conditioned paths prb and tape agree to rounding.
+ *
+ * The Jacobian rows and the local terms are obtained from the same reverse-mode
+ * vertex adjoint the tape uses (d_path_vertex_attached), with a sink that
+ * discards parameter adjoints; so nothing is differentiated twice by hand.
+ * Cost per vertex after j: about 9 vertex adjoints in the forward-mode pass
+ * and 6 in the replay (the tape: 1), and three walks of the path. */
+#include "prb_attached.h"
+
+#include <string.h>
+
+#define NS 5   /* tangent coordinates of a state: p (2), d (2), pdf (1) */
+#define ND 4   /* the part that reaches the next state: p, d */
+
+/* Orthonormal bases; position coordinates count in units of the scene's
+ * radius (a motion dp has coordinates p . dp / radius, its adjoint
+ * radius * p . d_p), so position and direction coordinates are
+ * commensurable in the condition test. */
+struct state_basis {
+    dr_vec3 p[2], d[2];
+    double radius;
+};
+
+/* Basis of the state vertex v hands on along next_d: the plane of its
+ * triangle and the plane normal to next_d. */
+static struct state_basis basis_after(const struct dr_path_vertex *v, dr_vec3 next_d, double radius)
+{
+    dr_frame fp = dr_frame_from_normal(v->ng), fd = dr_frame_from_normal(next_d);
+    return (struct state_basis){{fp.s, fp.t}, {fd.s, fd.t}, radius};
+}
+
+static struct dr_d_path_state to_ambient(const struct state_basis *T, const double c[NS])
+{
+    struct dr_d_path_state r;
+    memset(&r, 0, sizeof r);
+    if (!T)
+        return r;
+    r.o = dr_scale(dr_add(dr_scale(T->p[0], c[0]), dr_scale(T->p[1], c[1])), 1.0 / T->radius);
+    r.d = dr_add(dr_scale(T->d[0], c[2]), dr_scale(T->d[1], c[3]));
+    r.prev_pdf = c[4];
+    return r;
+}
+
+/* The origin and the previous point are the same point p_{k-1}. */
+static void to_tangent(const struct state_basis *T, const struct dr_d_path_state *r, double c[NS])
+{
+    dr_vec3 po = dr_add(r->o, r->prev_p);
+    c[0] = T ? T->radius * dr_dot(T->p[0], po) : 0.0;
+    c[1] = T ? T->radius * dr_dot(T->p[1], po) : 0.0;
+    c[2] = T ? dr_dot(T->d[0], r->d) : 0.0;
+    c[3] = T ? dr_dot(T->d[1], r->d) : 0.0;
+    c[4] = r->prev_pdf;
+}
+
+/* c_out = T_k^T V_k(d_e, d_t, T_{k+1} c_next): vertex v's adjoint in tangent
+ * coordinates (Tk may be NULL when s_k does not move; Tn NULL when nothing follows). */
+static void vertex_call(const struct prb_attached_ctx *c, const struct dr_path_vertex *v, const struct state_basis *Tk,
+                        const struct state_basis *Tn, dr_vec3 d_e, dr_vec3 d_t, const double c_next[NS],
+                        double c_out[NS], struct dr_grad_sink *sink)
+{
+    struct dr_grad_sink discard = dr_sink_forward(c->zeros);
+    struct dr_d_path_state dn = to_ambient(Tn, c_next), dt;
+    d_path_vertex_attached(c->b->p->scene, c->b->p->params, v, d_e, d_t, &dn, &dt, sink ? sink : &discard);
+    if (c_out)
+        to_tangent(Tk, &dt, c_out);
+}
+
+/* Rows of M_k (how s_{k+1}'s coordinate i depends on s_k's): w[i] = M_k^T e_i. */
+static void jacobian_rows(const struct prb_attached_ctx *c, const struct dr_path_vertex *v,
+                          const struct state_basis *Tk, const struct state_basis *Tn, int rows, double w[NS][NS])
+{
+    for (int i = 0; i < rows; i++) {
+        double e[NS] = {0.0, 0.0, 0.0, 0.0, 0.0};
+        e[i] = 1.0;
+        vertex_call(c, v, Tk, Tn, dr_v3s(0.0), dr_v3s(0.0), e, w[i], NULL);
+    }
+}
+
+/* ------------------------------------------------- forward mode (dL/ds_{j+1}) */
+
+struct tangents {
+    double U[NS][ND];   /* motion of s_k per unit motion of s_{j+1}'s p, d coordinates */
+    double dB[3][ND];   /* motion of the true throughput, per channel */
+};
+
+/* Advances the tangents over vertex v (continuing along Tn): U <- M U,
+ * dB <- t dB + bt (dt/ds) U. */
+static void tangents_advance(const struct prb_attached_ctx *c, const struct dr_path_vertex *v,
+                             const struct state_basis *Tk, const struct state_basis *Tn, dr_vec3 bt,
+                             struct tangents *g)
+{
+    double w[NS][NS], DT[3][NS], U[NS][ND];
+    jacobian_rows(c, v, Tk, Tn, NS, w);
+    for (int ch = 0; ch < 3; ch++) {
+        dr_vec3 unit = dr_v3_channel(dr_v3s(1.0), ch);
+        vertex_call(c, v, Tk, NULL, dr_v3s(0.0), unit, NULL, DT[ch], NULL);
+    }
+    dr_vec3 t = dr_scale(v->f, v->cos_pdf_q);
+    for (int col = 0; col < ND; col++) {
+        for (int ch = 0; ch < 3; ch++) {
+            double s = 0.0;
+            for (int r = 0; r < NS; r++)
+                s += DT[ch][r] * g->U[r][col];
+            g->dB[ch][col] = dr_v3_get(t, ch) * g->dB[ch][col] + dr_v3_get(bt, ch) * s;
+        }
+        for (int i = 0; i < NS; i++) {
+            double s = 0.0;
+            for (int r = 0; r < NS; r++)
+                s += w[i][r] * g->U[r][col];
+            U[i][col] = s;
+        }
+    }
+    memcpy(g->U, U, sizeof U);
+}
+
+/* dL_{>j} / d s_{j+1} in s_{j+1}'s p and d coordinates (T1), by forward mode
+ * over the rest of the path, walked again from state st with sampler smp. */
+static void tangent_walk(const struct prb_attached_ctx *c, struct dr_sampler smp, struct dr_path_state st,
+                         const struct state_basis *T1, dr_vec3 adj, double out[ND])
+{
+    const struct dr_est_base *b = c->b;
+    struct tangents g;
+    memset(&g, 0, sizeof g);
+    for (int i = 0; i < ND; i++)
+        g.U[i][i] = 1.0;
+    memset(out, 0, sizeof(double) * ND);
+    struct state_basis Tk = *T1;
+    struct dr_path_vertex v;
+    for (;;) {
+        dr_vec3 bt = dr_mul(st.ratio, st.beta);
+        bool more = dr_path_step(b->p->scene, &b->popts, &st, &smp, &v, c->rays);
+        double ge[NS];
+        vertex_call(c, &v, &Tk, NULL, dr_mul(adj, bt), dr_v3s(0.0), NULL, ge, NULL);
+        dr_vec3 e = dr_mul(adj, dr_path_vertex_term(&v));
+        for (int col = 0; col < ND; col++) {
+            double s = e.x * g.dB[0][col] + e.y * g.dB[1][col] + e.z * g.dB[2][col];
+            for (int r = 0; r < NS; r++)
+                s += ge[r] * g.U[r][col];
+            out[col] += s;
+        }
+        if (!more)
+            return;
+        struct state_basis Tn = basis_after(&v, st.d, c->radius);
+        tangents_advance(c, &v, &Tk, &Tn, bt, &g);
+        Tk = Tn;
+    }
+}
+
+/* --------------------------------------------------------------- replay */
+
+/* sigma_min / sigma_max of a 4x4 matrix: square roots of the extreme
+ * eigenvalues of A^T A (cyclic Jacobi rotations, converged to rounding). */
+static double condition_ratio(double A[ND][ND])
+{
+    double S[ND][ND];
+    for (int i = 0; i < ND; i++)
+        for (int k = 0; k < ND; k++) {
+            double s = 0.0;
+            for (int r = 0; r < ND; r++)
+                s += A[r][i] * A[r][k];
+            S[i][k] = s;
+        }
+    for (int sweep = 0; sweep < 30; sweep++) {
+        double off = 0.0;
+        for (int p = 0; p < ND; p++)
+            for (int q = p + 1; q < ND; q++)
+                off += S[p][q] * S[p][q];
+        if (off <= 1e-300)
+            break;
+        for (int p = 0; p < ND; p++)
+            for (int q = p + 1; q < ND; q++) {
+                if (S[p][q] == 0.0)
+                    continue;
+                double th = 0.5 * (S[q][q] - S[p][p]) / S[p][q];
+                double t = (th >= 0.0 ? 1.0 : -1.0) / (fabs(th) + sqrt(th * th + 1.0));
+                double cs = 1.0 / sqrt(t * t + 1.0), sn = t * cs;
+                for (int k = 0; k < ND; k++) {   /* S <- S J */
+                    double a = S[k][p], b = S[k][q];
+                    S[k][p] = cs * a - sn * b;
+                    S[k][q] = sn * a + cs * b;
+                }
+                for (int k = 0; k < ND; k++) {   /* S <- J^T S */
+                    double a = S[p][k], b = S[q][k];
+                    S[p][k] = cs * a - sn * b;
+                    S[q][k] = sn * a + cs * b;
+                }
+            }
+    }
+    double lo = INFINITY, hi = 0.0;
+    for (int i = 0; i < ND; i++) {
+        lo = dr_min(lo, fabs(S[i][i]));
+        hi = dr_max(hi, fabs(S[i][i]));
+    }
+    return hi > 0.0 ? sqrt(lo / hi) : 0.0;
+}
+
+/* Solves A x = y (4x4) by Gaussian elimination with partial pivoting; the
+ * caller has made sure A is well conditioned. */
+static void solve4(double A[ND][ND], const double y[ND], double x[ND])
+{
+    double M[ND][ND + 1];
+    for (int i = 0; i < ND; i++) {
+        for (int k = 0; k < ND; k++)
+            M[i][k] = A[i][k];
+        M[i][ND] = y[i];
+    }
+    for (int col = 0; col < ND; col++) {
+        int piv = col;
+        for (int r = col + 1; r < ND; r++)
+            if (fabs(M[r][col]) > fabs(M[piv][col]))
+                piv = r;
+        for (int k = 0; k <= ND; k++) {
+            double t = M[col][k];
+            M[col][k] = M[piv][k];
+            M[piv][k] = t;
+        }
+        for (int r = col + 1; r < ND; r++) {
+            double f = M[col][col] != 0.0 ? M[r][col] / M[col][col] : 0.0;
+            for (int k = col; k <= ND; k++)
+                M[r][k] -= f * M[col][k];
+        }
+    }
+    for (int i = ND - 1; i >= 0; i--) {
+        double s = M[i][ND];
+        for (int k = i + 1; k < ND; k++)
+            s -= M[i][k] * x[k];
+        x[i] = M[i][i] != 0.0 ? s / M[i][i] : 0.0;
+    }
+}
+
+/* A moving vertex whose derivative waits for the next one (the lookahead). */
+struct pending {
+    struct dr_path_vertex v;
+    dr_vec3 d_e, d_t;
+    struct state_basis Tk, Tn;
+    bool has_Tk;
+    double ck[NS];            /* adjoint of the state it received (when has_Tk) */
+    double cn[ND];            /* first moving vertex: the forward-mode result */
+    bool first;
+    struct dr_path_state st;  /* the state it handed on, and the sampler: */
+    struct dr_sampler smp;    /* where a forward-mode pass restarts */
+};
+
+/* With the next vertex known: the state adjoint it receives (pdf part read
+ * from its emission, p and d parts from the forward-mode pass or through the
+ * inverse Jacobian), then the pending vertex's parameter adjoints. Returns
+ * the next vertex's c_{k+1} in *c_next. */
+static void finish(const struct prb_attached_ctx *c, const struct pending *P, const struct dr_path_vertex *next,
+                   dr_vec3 next_d_e, dr_vec3 adj, double c_next[NS], struct dr_grad_sink *sink)
+{
+    struct dr_d_path_state dt, zero;
+    memset(&zero, 0, sizeof zero);
+    d_path_vertex_attached(c->b->p->scene, c->b->p->params, next, next_d_e, dr_v3s(0.0), &zero, &dt,
+                           &(struct dr_grad_sink){.dir = c->zeros});
+    c_next[4] = dt.prev_pdf;
+    if (P->first) {
+        memcpy(c_next, P->cn, sizeof P->cn);
+    } else {
+        double pdf_only[NS] = {0.0, 0.0, 0.0, 0.0, c_next[4]}, a[NS], w[NS][NS], A[ND][ND], y[ND], x[ND];
+        vertex_call(c, &P->v, &P->Tk, &P->Tn, P->d_e, P->d_t, pdf_only, a, NULL);
+        jacobian_rows(c, &P->v, &P->Tk, &P->Tn, ND, w);
+        for (int r = 0; r < ND; r++) {
+            for (int i = 0; i < ND; i++)
+                A[r][i] = w[i][r];
+            y[r] = P->ck[r] - a[r];
+        }
+        if (condition_ratio(A) >= c->eps) {
+            solve4(A, y, x);
+        } else {
+            /* (near-)singular: the direction forgot where it came from;
+             * forward mode over the rest of the path instead, exactly */
+            tangent_walk(c, P->smp, P->st, &P->Tn, adj, x);
+        }
+        memcpy(c_next, x, sizeof x);
+    }
+    vertex_call(c, &P->v, P->has_Tk ? &P->Tk : NULL, &P->Tn, P->d_e, P->d_t, c_next, NULL, sink);
+}
+
+/* d_t of vertex v from the radiance still to come (as the detached replay's
+ * d_f, divided by |cos| / pdf / q: the adjoint of t = f |cos| / pdf / q). */
+static dr_vec3 continuation_adjoint(const struct dr_path_vertex *v, dr_vec3 ratio, dr_vec3 L_true, dr_vec3 L_sub,
+                                    dr_vec3 adj)
+{
+    dr_vec3 d_t = dr_v3s(0.0);
+    if (!v->cont)
+        return d_t;
+    for (int ch = 0; ch < 3; ch++) {
+        double f = dr_v3_get(v->f, ch), r;
+        if (v->sub[ch])
+            r = dr_v3_get(ratio, ch) * dr_v3_get(L_sub, ch) / dr_v3_get(v->s, ch);
+        else
+            r = f != 0.0 ? dr_v3_get(L_true, ch) / f : 0.0;
+        dr_v3_set(&d_t, ch, r * dr_v3_get(adj, ch) / v->cos_pdf_q);
+    }
+    return d_t;
+}
+
+struct walk_sums {
+    dr_vec3 L_true, L_sub;
+    int first_moving;   /* index of the first vertex whose sampling moves (-1: none) */
+};
+
+/* The primal: the path's radiance and its first moving vertex. */
+static void primal(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_vec3 o, dr_vec3 d, struct walk_sums *w)
+{
+    const struct dr_est_base *b = c->b;
+    struct dr_path_state st;
+    struct dr_path_vertex v;
+    dr_path_start(&st, o, d);
+    *w = (struct walk_sums){dr_v3s(0.0), dr_v3s(0.0), -1};
+    for (int k = 0;; k++) {
+        dr_vec3 beta = st.beta, ratio = st.ratio;
+        bool more = dr_path_step(b->p->scene, &b->popts, &st, &smp, &v, c->rays);
+        dr_vec3 e = dr_mul(beta, dr_path_vertex_term(&v));
+        w->L_sub = dr_add(w->L_sub, e);
+        w->L_true = dr_add(w->L_true, dr_mul(ratio, e));
+        if (w->first_moving < 0 && dr_path_vertex_sampling_moves(b->p->scene, b->p->params, &v))
+            w->first_moving = k;
+        if (!more)
+            return;
+    }
+}
+
+/* The replay: vertices before the first moving one as the detached replay;
+ * from it on, each vertex's derivative once the next one is known. */
+static void replay(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_vec3 o, dr_vec3 d, dr_vec3 adj,
+                   struct walk_sums *w, struct dr_grad_sink *sink)
+{
+    const struct dr_est_base *b = c->b;
+    const struct dr_scene *s = b->p->scene;
+    const struct dr_param_set *ps = b->p->params;
+    struct dr_path_state st;
+    struct pending P;
+    bool have = false;
+    dr_path_start(&st, o, d);
+    for (int k = 0;; k++) {
+        dr_vec3 beta = st.beta, ratio = st.ratio, bt = dr_mul(ratio, beta);
+        struct dr_path_vertex v;
+        bool more = dr_path_step(s, &b->popts, &st, &smp, &v, c->rays);
+        dr_vec3 e = dr_mul(beta, dr_path_vertex_term(&v));
+        w->L_sub = dr_sub(w->L_sub, e);
+        w->L_true = dr_sub(w->L_true, dr_mul(ratio, e));
+        dr_vec3 d_e = dr_mul(adj, bt), d_t = continuation_adjoint(&v, ratio, w->L_true, w->L_sub, adj);
+        if (w->first_moving < 0 || k < w->first_moving) {
+            d_path_vertex_term(s, ps, &v, d_e, sink);
+            if (v.cont && v.diff_bsdf)
+                d_path_continuation(s, ps, &v, dr_scale(d_t, v.cos_pdf_q), sink);
+        } else {
+            double c_next[NS];
+            if (have)
+                finish(c, &P, &v, d_e, adj, c_next, sink);
+            P.has_Tk = have;
+            if (have) {
+                P.Tk = P.Tn;
+                memcpy(P.ck, c_next, sizeof P.ck);
+            }
+            P.v = v;
+            P.d_e = d_e;
+            P.d_t = d_t;
+            P.first = k == w->first_moving;
+            have = true;
+            if (!more) {
+                vertex_call(c, &P.v, P.has_Tk ? &P.Tk : NULL, NULL, d_e, d_t, NULL, NULL, sink);
+                return;
+            }
+            P.Tn = basis_after(&v, st.d, c->radius);
+            P.st = st;
+            P.smp = smp;
+            if (P.first)
+                tangent_walk(c, smp, st, &P.Tn, adj, P.cn);
+        }
+        if (!more)
+            return;
+    }
+}
+
+bool prb_attached_sample(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_vec3 o, dr_vec3 d, dr_vec3 adj,
+                         struct dr_grad_sink *sink)
+{
+    struct walk_sums w;
+    primal(c, smp, o, d, &w);
+    if (!dr_v3_finite(w.L_true) || !dr_v3_finite(w.L_sub))
+        return false;
+    if (!sink->dir) {
+        replay(c, smp, o, d, adj, &w, sink);
+        return true;
+    }
+    /* forward mode: the state adjoint mixes the channels, one replay each */
+    for (int ch = 0; ch < 3; ch++) {
+        struct walk_sums wc = w;
+        sink->channel = ch;
+        replay(c, smp, o, d, dr_v3_channel(adj, ch), &wc, sink);
+    }
+    return true;
+}

@@ -1,0 +1,23 @@
+/* Path replay backpropagation with attached sampling (prb_attached.c). */
+#ifndef DR_PRB_ATTACHED_H
+#define DR_PRB_ATTACHED_H
+
+#include "common.h"
+
+/* What one sample's attached replay needs besides the shared run. */
+struct prb_attached_ctx {
+    const struct dr_est_base *b;
+    const double *zeros;        /* params->total zeros: a sink direction that discards */
+    double eps;                 /* --regularize: below this sigma_min/sigma_max a Jacobian is
+                                   not inverted; forward mode restarts there */
+    double radius;              /* the scene's radius: positions in commensurable units */
+    struct dr_ray_counts *rays;
+};
+
+/* The whole derivative of one sample (primal, forward-mode pass, replay),
+ * given its sampler and camera ray; adj as in the detached replay; false
+ * when the path's value is not finite (nothing was added). */
+bool prb_attached_sample(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_vec3 o, dr_vec3 d, dr_vec3 adj,
+                         struct dr_grad_sink *sink);
+
+#endif

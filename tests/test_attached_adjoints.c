@@ -1,0 +1,399 @@
+/* The adjoints attached sampling adds, against central finite differences of
+ * their primals: the hit point recomputed from a ray (point, shading normal,
+ * uv w.r.t. origin and direction), the shading frame, texture lookups w.r.t.
+ * uv (every wrap mode), materials and emission w.r.t. uv, environment
+ * radiance w.r.t. the direction, light samples w.r.t. the shading point
+ * (area, point with a range, spot), the area-light pdf w.r.t. both end
+ * points, and the BSDF pdf with the lobe probability held fixed.
+ *
+ * Each check writes the scalar J = adjoint . primal(x) for random adjoint
+ * weights and compares dJ/dx from the adjoint with (J(x+h) - J(x-h)) / 2h. */
+#include <stdlib.h>
+#include <string.h>
+
+#include "bsdf.h"
+#include "error.h"
+#include "geometry.h"
+#include "lights.h"
+#include "material.h"
+#include "sampler.h"
+#include "scene_builder.h"
+#include "test.h"
+
+typedef double (*objective_fn)(void *ctx, const double *x);
+
+/* Compares grad (n entries, from an adjoint) with central differences of fn at x. */
+static void check_fd(const char *what, objective_fn fn, void *ctx, double *x, int n, const double *grad, double h,
+                     double rtol)
+{
+    double worst = 0.0, scale = 0.0;
+    for (int i = 0; i < n; i++) {
+        double x0 = x[i];
+        x[i] = x0 + h;
+        double jp = fn(ctx, x);
+        x[i] = x0 - h;
+        double jm = fn(ctx, x);
+        x[i] = x0;
+        double fd = (jp - jm) / (2.0 * h);
+        worst = fmax(worst, fabs(fd - grad[i]));
+        scale = fmax(scale, fmax(fabs(fd), fabs(grad[i])));
+    }
+    CHECK(scale > 0.0, "%s: the objective does not depend on x", what);
+    CHECK(worst <= rtol * (1e-12 + scale), "%s: adjoint vs central differences differ by %.3g (scale %.3g)", what,
+          worst, scale);
+    printf("%-34s worst |adjoint - fd| %.2g (scale %.3g)\n", what, worst, scale);
+}
+
+static struct dr_sampler rng;
+static double rnd(void) { return 2.0 * dr_sampler_next(&rng) - 1.0; }
+static dr_vec3 rnd3(void) { return dr_v3(rnd(), rnd(), rnd()); }
+static dr_vec3 v3(const double *x) { return dr_v3(x[0], x[1], x[2]); }
+
+/* texel values are multiples of 2^-8 */
+static struct dr_image make_image(int w, int h, int c, int salt)
+{
+    struct dr_image im;
+    memset(&im, 0, sizeof im);
+    im.width = w;
+    im.height = h;
+    im.channels = c;
+    im.data = malloc(sizeof(float) * (size_t)(w * h * c));
+    im.linear = malloc(sizeof(float) * (size_t)(w * h * c));
+    for (int i = 0; i < w * h * c; i++)
+        im.data[i] = im.linear[i] = (float)((32 + (i * 37 + salt * 11) % 160) / 256.0);
+    return im;
+}
+
+/* A textured, smooth-normal quad, an emitter above it, a spot and a point light. */
+static struct dr_scene *make_scene(void)
+{
+    struct sb b;
+    sb_init(&b);
+    struct dr_material m = sb_diffuse(dr_v3(0.6, 0.5, 0.4));
+    m.metallic = 0.3;
+    m.roughness = 0.45;
+    m.specular = 1.0;
+    m.emissive_factor = dr_v3(0.5, 0.75, 0.25);
+    m.emissive_strength = 3.0;
+    m.base_color_tex.texture = 0;
+    m.metallic_roughness_tex.texture = 1;
+    m.emissive_tex.texture = 2;
+    m.double_sided = true;
+    int mat = sb_material(&b, m);
+    sb_quad(&b, dr_v3(-1, 0, 1), dr_v3(2, 0.3, 0), dr_v3(0, 0.2, -2), mat);   /* tris 0, 1 */
+    struct dr_material e = sb_diffuse(dr_v3s(0.0));
+    e.emissive_factor = dr_v3(4, 4, 4);
+    sb_quad(&b, dr_v3(-0.3, 2, -0.3), dr_v3(0, 0, 0.6), dr_v3(0.6, 0.1, 0), sb_material(&b, e));   /* tris 2, 3 */
+    struct dr_punctual l;
+    memset(&l, 0, sizeof l);
+    l.type = DR_LIGHT_SPOT;
+    l.color = dr_v3(1.0, 0.8, 0.6);
+    l.intensity = 5.0;
+    l.position = dr_v3(0.1, 2, 0.2);
+    l.direction = dr_normalize(dr_v3(0.1, -1, 0.05));
+    l.cos_inner = cos(0.1);
+    l.cos_outer = cos(0.9);
+    sb_light(&b, l);
+    l.type = DR_LIGHT_POINT;
+    l.range = 4.0;
+    l.position = dr_v3(-0.5, 1.5, 0.4);
+    sb_light(&b, l);
+    sb_environment(&b, dr_v3(0.8, 0.9, 1.1));
+    b.s->env.map = make_image(8, 4, 3, 7);
+    struct dr_scene *s = b.s;
+    /* smooth normals on the quad's vertices, tilted differently */
+    struct dr_mesh *mesh = &s->mesh;
+    for (uint32_t v = 0; v < 4; v++) {
+        dr_vec3 n = dr_normalize(dr_v3(0.2 * rnd(), 1.0, 0.2 * rnd()));
+        mesh->normals[3 * v] = (float)n.x;
+        mesh->normals[3 * v + 1] = (float)n.y;
+        mesh->normals[3 * v + 2] = (float)n.z;
+    }
+    mesh->flags[0] |= DR_TRI_HAS_NORMALS;
+    mesh->flags[1] |= DR_TRI_HAS_NORMALS;
+    s->n_images = 3;
+    s->images = calloc(3, sizeof(struct dr_image));
+    s->images[0] = make_image(4, 3, 3, 1);
+    s->images[1] = make_image(3, 3, 3, 2);
+    s->images[2] = make_image(2, 4, 4, 3);
+    s->n_textures = 3;
+    s->textures = calloc(3, sizeof(struct dr_texture));
+    s->textures[0] = (struct dr_texture){0, DR_WRAP_REPEAT, DR_WRAP_MIRROR};
+    s->textures[1] = (struct dr_texture){1, DR_WRAP_CLAMP, DR_WRAP_REPEAT};
+    s->textures[2] = (struct dr_texture){2, DR_WRAP_MIRROR, DR_WRAP_CLAMP};
+    return sb_finish(&b);
+}
+
+/* ------------------------------------------------------------- hit point */
+
+struct hit_ctx {
+    const struct dr_scene *s;
+    int64_t tri;
+    struct dr_d_hit w;
+};
+
+static double hit_objective(void *c, const double *x)
+{
+    struct hit_ctx *k = c;
+    struct dr_hit h;
+    dr_hit_compute(&k->s->mesh, k->tri, v3(x), v3(x + 3), &h);
+    return dr_dot(k->w.p, h.p) + dr_dot(k->w.ns, h.ns) + k->w.uv[0] * h.uv[0] + k->w.uv[1] * h.uv[1];
+}
+
+static void test_hit(const struct dr_scene *s)
+{
+    struct hit_ctx k = {s, 0, {rnd3(), rnd3(), {rnd(), rnd()}}};
+    dr_vec3 o = dr_v3(0.2, 1.5, 0.3);
+    struct dr_hit target;
+    dr_hit_at(&s->mesh, 0, 0.3, 0.4, &target);
+    dr_vec3 d = dr_normalize(dr_sub(target.p, o));
+    double x[6] = {o.x, o.y, o.z, d.x, d.y, d.z};
+    struct dr_hit h;
+    dr_hit_compute(&s->mesh, 0, o, d, &h);
+    dr_vec3 d_o = dr_v3s(0), d_d = dr_v3s(0);
+    d_hit_compute(&s->mesh, &h, o, d, &k.w, &d_o, &d_d);
+    double g[6] = {d_o.x, d_o.y, d_o.z, d_d.x, d_d.y, d_d.z};
+    check_fd("d_hit_compute (p, ns, uv)", hit_objective, &k, x, 6, g, 1e-6, 1e-6);
+}
+
+/* ----------------------------------------------------------------- frame */
+
+struct frame_ctx {
+    dr_frame w;
+    dr_vec3 v, w_local, w_world;
+};
+
+static double frame_objective(void *c, const double *x)
+{
+    struct frame_ctx *k = c;
+    dr_frame f = dr_frame_from_normal(v3(x));
+    return dr_dot(k->w.s, f.s) + dr_dot(k->w.t, f.t) + dr_dot(k->w.n, f.n) +
+           dr_dot(k->w_local, dr_frame_to_local(&f, k->v)) + dr_dot(k->w_world, dr_frame_to_world(&f, k->v));
+}
+
+static void test_frame(void)
+{
+    for (int sgn = -1; sgn <= 1; sgn += 2) {
+        struct frame_ctx k = {{rnd3(), rnd3(), rnd3()}, rnd3(), rnd3(), rnd3()};
+        dr_vec3 n = dr_normalize(dr_v3(0.3, -0.4, 0.8 * sgn));
+        double x[3] = {n.x, n.y, n.z};
+        dr_frame f = dr_frame_from_normal(n), df = k.w;
+        d_frame_to_local(&f, k.v, k.w_local, NULL, &df);
+        d_frame_to_world(&f, k.v, k.w_world, NULL, &df);
+        dr_vec3 dn = dr_v3s(0);
+        d_frame_from_normal(n, &df, &dn);
+        double g[3] = {dn.x, dn.y, dn.z};
+        check_fd(sgn > 0 ? "d_frame_from_normal (n.z > 0)" : "d_frame_from_normal (n.z < 0)", frame_objective, &k, x,
+                 3, g, 1e-6, 1e-7);
+        /* and the vector part of the frame maps */
+        dr_vec3 dv = dr_v3s(0);
+        d_frame_to_local(&f, k.v, k.w_local, &dv, NULL);
+        d_frame_to_world(&f, k.v, k.w_world, &dv, NULL);
+        dr_vec3 expect = dr_add(dr_frame_to_world(&f, k.w_local), dr_frame_to_local(&f, k.w_world));
+        CHECK(dr_length(dr_sub(dv, expect)) < 1e-14, "frame maps: the vector adjoint is the transpose");
+    }
+}
+
+/* ------------------------------------------------------- textures and uv */
+
+struct uv_ctx {
+    const struct dr_scene *s;
+    int texture;          /* >= 0: a texture lookup; -1: material; -2: emission */
+    struct dr_hit hit;
+    double w[4];
+    struct dr_d_bsdf wb;
+};
+
+static double uv_objective(void *c, const double *x)
+{
+    struct uv_ctx *k = c;
+    struct dr_hit h = k->hit;
+    h.uv[0] = x[0];
+    h.uv[1] = x[1];
+    if (k->texture >= 0) {
+        const struct dr_texture *t = &k->s->textures[k->texture];
+        double px[4];
+        dr_texture_eval(t, &k->s->images[t->image], x[0], x[1], true, px);
+        return k->w[0] * px[0] + k->w[1] * px[1] + k->w[2] * px[2] + k->w[3] * px[3];
+    }
+    if (k->texture == -1) {
+        struct dr_bsdf b;
+        dr_material_eval(k->s, &h, &b);
+        return dr_dot(k->wb.base_color, b.base_color) + k->wb.metallic * b.metallic + k->wb.roughness * b.roughness;
+    }
+    return dr_dot(v3(k->w), dr_emission(k->s, &h));
+}
+
+static void test_uv(const struct dr_scene *s)
+{
+    static const char *names[] = {"d_texture_eval_uv repeat/mirror", "d_texture_eval_uv clamp/repeat",
+                                  "d_texture_eval_uv mirror/clamp (rgba)"};
+    /* points away from texel centres, some outside [0, 1] to exercise the wraps */
+    const double pts[][2] = {{0.37, 0.29}, {1.61, -0.43}, {-0.62, 0.71}};
+    for (int t = 0; t < 3; t++)
+        for (int p = 0; p < 3; p++) {
+            struct uv_ctx k = {s, t, {0}, {rnd(), rnd(), rnd(), rnd()}, {dr_v3s(0), 0, 0}};
+            double x[2] = {pts[p][0], pts[p][1]}, g[2] = {0, 0};
+            const struct dr_texture *tx = &s->textures[t];
+            d_texture_eval_uv(tx, &s->images[tx->image], x[0], x[1], true, k.w, &g[0], &g[1]);
+            check_fd(names[t], uv_objective, &k, x, 2, g, 1e-7, 1e-6);
+        }
+    struct uv_ctx k = {s, -1, {0}, {rnd(), rnd(), rnd(), 0}, {rnd3(), rnd(), rnd()}};
+    dr_hit_at(&s->mesh, 0, 0.3, 0.25, &k.hit);
+    double x[2] = {k.hit.uv[0], k.hit.uv[1]}, g[2] = {0, 0};
+    d_material_eval_uv(s, &k.hit, &k.wb, g);
+    check_fd("d_material_eval_uv", uv_objective, &k, x, 2, g, 1e-7, 1e-6);
+    k.texture = -2;
+    g[0] = g[1] = 0.0;
+    d_emission_uv(s, &k.hit, v3(k.w), g);
+    check_fd("d_emission_uv", uv_objective, &k, x, 2, g, 1e-7, 1e-6);
+}
+
+/* ----------------------------------------------------------- environment */
+
+struct env_ctx {
+    const struct dr_scene *s;
+    dr_vec3 w;
+};
+
+static double env_objective(void *c, const double *x)
+{
+    struct env_ctx *k = c;
+    return dr_dot(k->w, dr_env_radiance(k->s, v3(x)));
+}
+
+static void test_env(const struct dr_scene *s)
+{
+    struct env_ctx k = {s, rnd3()};
+    dr_vec3 dir = dr_normalize(dr_v3(0.3, 0.45, -0.7));
+    double x[3] = {dir.x, dir.y, dir.z};
+    dr_vec3 dd = dr_v3s(0);
+    d_env_radiance_dir(s, dir, k.w, &dd);
+    double g[3] = {dd.x, dd.y, dd.z};
+    check_fd("d_env_radiance_dir", env_objective, &k, x, 3, g, 1e-7, 1e-6);
+}
+
+/* ---------------------------------------------------------------- lights */
+
+struct light_ctx {
+    const struct dr_scene *s;
+    double pick, u1, u2;
+    dr_vec3 w_wi, w_rad;
+    double w_pdf;
+};
+
+static double light_objective(void *c, const double *x)
+{
+    struct light_ctx *k = c;
+    struct dr_light_sample ls;
+    if (!dr_light_sample(k->s, k->s->light_sampler, v3(x), k->pick, k->u1, k->u2, &ls))
+        return NAN;
+    return dr_dot(k->w_wi, ls.wi) + k->w_pdf * ls.pdf + dr_dot(k->w_rad, ls.radiance);
+}
+
+static void test_light_sample(const struct dr_scene *s)
+{
+    dr_vec3 p = dr_v3(0.1, 0.15, -0.2);
+    int kinds[4] = {0, 0, 0, 0};   /* area, spot, environment, point */
+    for (int i = 0; i < 40; i++) {
+        struct light_ctx k = {s, (i + 0.5) / 40.0, 0.3, 0.6, rnd3(), rnd3(), rnd()};
+        struct dr_light_sample ls;
+        if (!dr_light_sample(s, s->light_sampler, p, k.pick, k.u1, k.u2, &ls))
+            continue;
+        int kind = ls.type == DR_LS_AREA ? 0 : (ls.type == DR_LS_PUNCTUAL ? 1 : 2);
+        kinds[kind == 1 && ls.index == 1 ? 3 : kind]++;
+        double x[3] = {p.x, p.y, p.z};
+        dr_vec3 dp = dr_v3s(0);
+        d_light_sample_point(s, p, &ls, k.w_wi, k.w_pdf, k.w_rad, &dp);
+        double g[3] = {dp.x, dp.y, dp.z};
+        if (kind == 2) {
+            CHECK(dr_is_black(dp), "environment samples do not depend on the shading point");
+            continue;
+        }
+        char what[64];
+        snprintf(what, sizeof what, "d_light_sample_point %s", kind == 0 ? "area" : (ls.index == 0 ? "spot" : "point"));
+        check_fd(what, light_objective, &k, x, 3, g, 1e-6, 1e-6);
+    }
+    CHECK(kinds[0] >= 1 && kinds[1] >= 1 && kinds[2] >= 1 && kinds[3] >= 1,
+          "light kinds sampled: area %d, spot %d, environment %d, point %d", kinds[0], kinds[1], kinds[2], kinds[3]);
+}
+
+struct pdf_area_ctx {
+    const struct dr_scene *s;
+    struct dr_hit hit;
+};
+
+static double pdf_area_objective(void *c, const double *x)
+{
+    struct pdf_area_ctx *k = c;
+    struct dr_hit h = k->hit;
+    h.p = v3(x + 3);
+    return dr_light_pdf_area(k->s, k->s->light_sampler, v3(x), &h);
+}
+
+static void test_pdf_area(const struct dr_scene *s)
+{
+    struct pdf_area_ctx k = {s, {0}};
+    dr_hit_at(&s->mesh, 2, 0.3, 0.4, &k.hit);
+    dr_vec3 from = dr_v3(0.1, 0.2, 0.05);
+    double x[6] = {from.x, from.y, from.z, k.hit.p.x, k.hit.p.y, k.hit.p.z};
+    dr_vec3 df = dr_v3s(0), dh = dr_v3s(0);
+    d_light_pdf_area_points(s, s->light_sampler, from, &k.hit, 1.0, &df, &dh);
+    double g[6] = {df.x, df.y, df.z, dh.x, dh.y, dh.z};
+    check_fd("d_light_pdf_area_points", pdf_area_objective, &k, x, 6, g, 1e-6, 1e-6);
+}
+
+/* ------------------------------------------------ pdf with a fixed lobe P */
+
+struct pdf_ctx {
+    struct dr_bsdf b;
+    double P0;
+};
+
+/* (1 - P0) cos/pi + P0 p_spec, p_spec recovered from the full pdf and P. */
+static double pdf_fixed_objective(void *c, const double *x)
+{
+    struct pdf_ctx *k = c;
+    struct dr_bsdf b = k->b;
+    b.roughness = x[0];
+    dr_vec3 wo = v3(x + 1), wi = v3(x + 4);
+    double P = dr_bsdf_specular_prob(&b, wo), pd = wi.z * DR_INV_PI;
+    double ps = (dr_bsdf_pdf(&b, wo, wi) - (1.0 - P) * pd) / P;
+    return (1.0 - k->P0) * pd + k->P0 * ps;
+}
+
+static void test_pdf_fixed(void)
+{
+    const double roughs[] = {0.05, 0.3, 0.8};
+    for (int r = 0; r < 3; r++) {
+        struct pdf_ctx k;
+        memset(&k, 0, sizeof k);
+        k.b = (struct dr_bsdf){dr_v3(0.5, 0.4, 0.3), 0.4, roughs[r], 1.0, dr_v3s(1.0)};
+        dr_vec3 wo = dr_normalize(dr_v3(0.3, -0.2, 0.8));
+        dr_vec3 wi = dr_normalize(dr_v3(-0.25, 0.15 + 0.05 * r, 0.9));
+        k.P0 = dr_bsdf_specular_prob(&k.b, wo);
+        double x[7] = {roughs[r], wo.x, wo.y, wo.z, wi.x, wi.y, wi.z};
+        struct dr_d_bsdf db = {dr_v3s(0), 0, 0};
+        dr_vec3 dwo = dr_v3s(0), dwi = dr_v3s(0);
+        d_bsdf_pdf_fixed_prob(&k.b, wo, wi, 1.0, &db, &dwo, &dwi);
+        double g[7] = {db.roughness, dwo.x, dwo.y, dwo.z, dwi.x, dwi.y, dwi.z};
+        check_fd("d_bsdf_pdf_fixed_prob", pdf_fixed_objective, &k, x, 7, g, 1e-7, 1e-5);
+        CHECK(db.metallic == 0.0 && dr_is_black(db.base_color),
+              "with P fixed the pdf does not depend on metallic or base colour");
+    }
+}
+
+int main(void)
+{
+    dr_sampler_init(&rng, 11, 0, 0);
+    struct dr_scene *s = make_scene();
+    test_hit(s);
+    test_frame();
+    test_uv(s);
+    test_env(s);
+    test_light_sample(s);
+    test_pdf_area(s);
+    test_pdf_fixed();
+    dr_scene_destroy(s);
+    return TEST_END();
+}
