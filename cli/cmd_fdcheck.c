@@ -44,6 +44,8 @@ void cmd_fdcheck_usage(FILE *out)
             "      --camera N      which camera of the file (default: 0)\n"
             "      --seed S        random seed (default: 0; batch b uses S + b)\n"
             "      --threads T     worker threads (default: one per CPU)\n"
+            "      --sampler S     random numbers: independent (default) or sobol (Owen-\n"
+            "                      scrambled Sobol: stratified, faster convergence)\n"
             "      --filter F      pixel filter: box (default), tent or gaussian[:STDDEV]\n"
             "      --crop X,Y,W,H  only this rectangle of the --res frame is rendered (the\n"
             "                      objective is its mean)\n"
@@ -170,7 +172,7 @@ int cmd_fdcheck(int argc, char **argv)
     struct dr_fd_options o = {.estimator = a.g.estimator, .sampling = a.g.sampling, .width = rw,
                               .height = rh, .film = film, .spp = a.g.spp, .batches = a.batches,
                               .max_depth = a.g.max_depth, .rr_depth = a.g.rr_depth, .seed = a.g.seed,
-                              .regularize = a.g.regularize,
+                              .regularize = a.g.regularize, .sampler = a.g.sampler,
                               .threads = a.g.threads, .eps = a.eps, .z_max = a.z_max};
     if (dr_fdcheck(scene, &cam, ps, &o, &en, &n) != 0) {
         cli_error("fdcheck", "%s", dr_last_error());

@@ -77,6 +77,8 @@ void cmd_grad_usage(FILE *out)
             "      --camera N      which camera of the file (default: 0)\n"
             "      --seed S        random seed (default: 0)\n"
             "      --threads T     worker threads (default: one per CPU)\n"
+            "      --sampler S     random numbers: independent (default) or sobol (Owen-\n"
+            "                      scrambled Sobol: stratified, faster convergence)\n"
             "      --filter F      pixel filter: box (default), tent or gaussian[:STDDEV]\n"
             "                      (as render)\n"
             "      --crop X,Y,W,H  only this rectangle of the --res frame is rendered and\n"

@@ -63,6 +63,8 @@ void cmd_optimize_usage(FILE *out)
             "                         target's own size)\n"
             "      --seed S           random seed (default 0)\n"
             "      --threads T        worker threads (default: one per CPU)\n"
+            "      --sampler S        random numbers: independent (default) or sobol (Owen-\n"
+            "                         scrambled Sobol: stratified, faster convergence)\n"
             "      --filter F         pixel filter: box (default), tent or gaussian[:STDDEV]\n"
             "      --crop X,Y,W,H     fit only this rectangle of every target's frame; a target\n"
             "                         may be W x H (then --res gives the frame) or the full frame\n"

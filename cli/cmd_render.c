@@ -38,6 +38,8 @@ void cmd_render_usage(FILE *out)
             "      --seed S        random seed (default: 0); the same seed gives the same\n"
             "                      image for any --threads\n"
             "      --threads T     worker threads (default: one per CPU)\n"
+            "      --sampler S     random numbers: independent (default) or sobol (Owen-\n"
+            "                      scrambled Sobol: stratified, faster convergence)\n"
             "      --filter F      pixel filter: box (default: the pixel's square), tent\n"
             "                      (radius 1 pixel) or gaussian[:STDDEV] (default 0.5 pixel),\n"
             "                      by filter importance sampling\n"

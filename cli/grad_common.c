@@ -135,6 +135,15 @@ int grad_common_option(struct grad_common *g, int c, const char *arg)
     case GOPT_JSON: g->json = true; return 0;
     case GOPT_FILTER:
     case GOPT_CROP: return film_option(g, c, arg);
+    case GOPT_SAMPLER: {
+        int k = dr_sampler_kind_parse(arg);
+        if (k < 0) {
+            cli_error(g->cmd, "--sampler: unknown sampler '%s' (known: independent, sobol)", arg);
+            return DR_EXIT_USAGE;
+        }
+        g->sampler = (enum dr_sampler_kind)k;
+        return 0;
+    }
     default: return -1;
     }
 }
@@ -402,7 +411,7 @@ struct dr_grad_problem grad_problem(const struct grad_common *g, const struct dr
     return (struct dr_grad_problem){.scene = scene, .camera = cam, .params = ps, .width = rw, .height = rh,
                                     .spp = spp, .max_depth = g->max_depth, .rr_depth = g->rr_depth, .seed = seed,
                                     .threads = g->threads, .sampling = g->sampling, .film = film,
-                                    .regularize = g->regularize};
+                                    .regularize = g->regularize, .sampler = g->sampler};
 }
 
 struct dr_render_opts grad_render_opts(const struct grad_common *g, int w, int h, int spp, uint64_t seed,
@@ -412,7 +421,7 @@ struct dr_render_opts grad_render_opts(const struct grad_common *g, int w, int h
     struct dr_film film = grad_film(g, w, h, &rw, &rh);
     return (struct dr_render_opts){.width = rw, .height = rh, .spp = spp, .max_depth = g->max_depth,
                                    .rr_depth = g->rr_depth, .seed = seed, .threads = g->threads,
-                                   .progress = progress, .film = film};
+                                   .progress = progress, .film = film, .sampler = g->sampler};
 }
 
 static void add_rays(struct dr_ray_counts *sum, const struct dr_ray_counts *r)
@@ -593,4 +602,6 @@ void grad_json_film(FILE *f, const struct grad_common *g)
         fprintf(f, ", \"crop\": [%d, %d, %d, %d]", g->crop_x, g->crop_y, g->crop_w, g->crop_h);
     else
         fprintf(f, ", \"crop\": null");
+    fprintf(f, ", \"sampler\": ");
+    json_string(f, dr_sampler_kind_name(g->sampler));
 }

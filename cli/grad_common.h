@@ -34,6 +34,7 @@ enum {
     GOPT_FILTER,   /* film (issue 14) */
     GOPT_CROP,
     GOPT_REGULARIZE,
+    GOPT_SAMPLER,   /* random numbers: independent | sobol */
     GOPT_END
 };
 
@@ -45,7 +46,7 @@ enum {
         {"camera", required_argument, NULL, GOPT_CAMERA}, {"seed", required_argument, NULL, GOPT_SEED},     \
         {"threads", required_argument, NULL, GOPT_THREADS}, {"json", no_argument, NULL, GOPT_JSON},         \
         {"filter", required_argument, NULL, GOPT_FILTER}, {"crop", required_argument, NULL, GOPT_CROP},     \
-        {"help", no_argument, NULL, 'h'}
+        {"sampler", required_argument, NULL, GOPT_SAMPLER}, {"help", no_argument, NULL, 'h'}
 #define GRAD_COMMON_LONG_OPTIONS                                                                       \
     {"param", required_argument, NULL, GOPT_PARAM}, {"estimator", required_argument, NULL, GOPT_ESTIMATOR}, \
         {"sampling", required_argument, NULL, GOPT_SAMPLING}, {"set", required_argument, NULL, GOPT_SET},   \
@@ -66,6 +67,7 @@ struct grad_common {
     /* the film (core/film.h): --filter, and --crop X,Y,W,H of the frame
      * (width x height above stay the frame's size) */
     struct dr_filter filter;
+    enum dr_sampler_kind sampler;    /* --sampler */
     bool crop_given;
     int crop_x, crop_y, crop_w, crop_h;
     double regularize;               /* prb --sampling attached: Tikhonov weight */

@@ -146,11 +146,9 @@ static bool stage_material(const struct dr_scene *s, const struct dr_path_opts *
     sampler->dim = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)(st->depth - 1);
     struct dr_vertex_randoms *u = &v->u;
     u->light_pick = dr_sampler_next(sampler);
-    u->light_u1 = dr_sampler_next(sampler);
-    u->light_u2 = dr_sampler_next(sampler);
+    dr_sampler_next2(sampler, &u->light_u1, &u->light_u2);   /* a 2D point on the light */
     u->lobe = dr_sampler_next(sampler);
-    u->bsdf_u1 = dr_sampler_next(sampler);
-    u->bsdf_u2 = dr_sampler_next(sampler);
+    dr_sampler_next2(sampler, &u->bsdf_u1, &u->bsdf_u2);     /* a 2D direction sample */
     u->rr = dr_sampler_next(sampler);
     return true;
 }

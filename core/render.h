@@ -7,6 +7,7 @@
 #include <stdint.h>
 
 #include "film.h"
+#include "sampler.h"
 #include "path.h"
 #include "scene.h"
 
@@ -19,6 +20,7 @@ struct dr_render_opts {
     int threads;          /* <= 0: one per CPU */
     bool progress;        /* draw a progress bar on stderr */
     struct dr_film film;  /* pixel filter and crop (zeroed: box, whole frame) */
+    enum dr_sampler_kind sampler;   /* zero: independent */
 };
 
 struct dr_render_stats {

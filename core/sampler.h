@@ -4,6 +4,7 @@
 #ifndef DR_SAMPLER_H
 #define DR_SAMPLER_H
 
+#include <stddef.h>
 #include <stdint.h>
 
 /* SplitMix64's finaliser: a strong 64-bit mix. */
@@ -17,22 +18,130 @@ static inline uint64_t dr_hash64(uint64_t x)
     return x;
 }
 
+/* Which numbers a sampler draws. Both are pure functions of
+ * (seed, pixel, sample, dimension).
+ *  independent  every number is an independent hash;
+ *  sobol        Owen-scrambled Sobol points (hash-based nested uniform
+ *               scrambling and index shuffling, Burley 2020 "Practical
+ *               Hash-based Owen Scrambling"): over a pixel's samples each
+ *               1D draw is stratified, and each 2D draw (dr_sampler_next2:
+ *               camera offset, light point, BSDF direction) is a (0,2)
+ *               sequence, stratified in every elementary interval at powers of
+ *               two; different dimensions are decorrelated by their own
+ *               scrambling seeds. Independent seeds (batches) give
+ *               independent randomised point sets, so batch statistics stay
+ *               valid standard errors. */
+enum dr_sampler_kind { DR_SAMPLER_INDEPENDENT = 0, DR_SAMPLER_SOBOL = 1 };
+
 struct dr_sampler {
-    uint64_t key;   /* hash of (seed, pixel, sample) */
-    uint32_t dim;   /* next dimension */
+    uint64_t key;     /* hash of (seed, pixel, sample) */
+    uint32_t dim;     /* next dimension */
+    uint32_t kind;    /* enum dr_sampler_kind */
+    uint64_t pkey;    /* sobol: hash of (seed, pixel), the scrambling seed */
+    uint32_t index;   /* sobol: the sample's index in the pixel */
 };
 
 static inline void dr_sampler_init(struct dr_sampler *s, uint64_t seed, uint64_t pixel, uint64_t sample)
 {
     s->key = dr_hash64(dr_hash64(dr_hash64(seed + 0x9e3779b97f4a7c15ULL) ^ pixel) ^ (sample * 0x9e3779b97f4a7c15ULL));
     s->dim = 0;
+    s->kind = DR_SAMPLER_INDEPENDENT;
+    s->pkey = 0;
+    s->index = 0;
+}
+
+static inline void dr_sampler_init_kind(struct dr_sampler *s, enum dr_sampler_kind kind, uint64_t seed,
+                                        uint64_t pixel, uint64_t sample)
+{
+    dr_sampler_init(s, seed, pixel, sample);
+    if (kind == DR_SAMPLER_SOBOL) {
+        s->kind = DR_SAMPLER_SOBOL;
+        s->pkey = dr_hash64(dr_hash64(seed ^ 0x5b0b5b0b5b0b5b0bULL) ^ (pixel * 0xd6e8feb86659fd93ULL));
+        s->index = (uint32_t)sample;
+    }
+}
+
+/* ---- Owen-scrambled Sobol (the two dimensions of a (0,2) sequence) ---- */
+
+static inline uint32_t dr_reverse_bits32(uint32_t x)
+{
+    x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
+    x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
+    x = ((x >> 4) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4);
+    x = ((x >> 8) & 0x00ff00ffu) | ((x & 0x00ff00ffu) << 8);
+    return (x >> 16) | (x << 16);
+}
+
+/* Nested uniform (Owen) scrambling of a 32-bit fixed-point number: a hash
+ * that lets higher bits affect only lower ones, applied to the reversed bits
+ * (Laine-Karras permutation with Burley's constants). */
+static inline uint32_t dr_owen_scramble(uint32_t x, uint32_t seed)
+{
+    x = dr_reverse_bits32(x);
+    x += seed;
+    x ^= x * 0x6c50b47cu;
+    x ^= x * 0xb82f1e52u;
+    x ^= x * 0xc7afe638u;
+    x ^= x * 0x8d22f6e6u;
+    return dr_reverse_bits32(x);
+}
+
+/* Sobol dimension 1's generator matrix (Pascal's triangle mod 2), as the
+ * direction numbers of Joe and Kuo's table; dimension 0 is bit reversal. */
+static inline uint32_t dr_sobol_dim1(uint32_t i)
+{
+    uint32_t x = 0, v = 0x80000000u;
+    for (; i; i >>= 1, v ^= v >> 1)
+        if (i & 1)
+            x ^= v;
+    return x;
+}
+
+/* 53-bit double from a 32-bit point; the low 21 bits are random within the
+ * point's cell, so no two samples coincide and 0 is never returned exactly. */
+static inline double dr_sobol_to_double(uint32_t x, uint64_t h)
+{
+    return (double)(((uint64_t)x << 21) | (h >> 43)) * (1.0 / 9007199254740992.0);
+}
+
+/* The Sobol pair of dimension `dim` (its seed) for this sampler's sample. */
+static inline void dr_sampler_sobol2(const struct dr_sampler *s, uint32_t dim, double *u1, double *u2)
+{
+    uint64_t h = dr_hash64(s->pkey + (uint64_t)dim * 0xd1b54a32d192ed03ULL);
+    uint32_t i = dr_owen_scramble(s->index, (uint32_t)h);   /* Burley's shuffled index */
+    uint64_t h1 = dr_hash64(h ^ 0x1111111111111111ULL), h2 = dr_hash64(h ^ 0x2222222222222222ULL);
+    *u1 = dr_sobol_to_double(dr_owen_scramble(dr_reverse_bits32(i), (uint32_t)(h1 >> 32)), h1);
+    if (u2)
+        *u2 = dr_sobol_to_double(dr_owen_scramble(dr_sobol_dim1(i), (uint32_t)(h2 >> 32)), h2);
 }
 
 /* Uniform double in [0, 1) with 53 random bits. */
 static inline double dr_sampler_next(struct dr_sampler *s)
 {
+    if (s->kind == DR_SAMPLER_SOBOL) {
+        double u;
+        dr_sampler_sobol2(s, ++s->dim, &u, NULL);
+        return u;
+    }
     uint64_t h = dr_hash64(s->key + (uint64_t)(++s->dim) * 0xd1b54a32d192ed03ULL);
     return (double)(h >> 11) * (1.0 / 9007199254740992.0);
 }
+
+/* Two numbers that belong together (a 2D sample): two independent draws, or
+ * one Sobol pair. Uses two dimensions either way, so the layout of a path's
+ * dimensions does not depend on the sampler. */
+static inline void dr_sampler_next2(struct dr_sampler *s, double *u1, double *u2)
+{
+    if (s->kind == DR_SAMPLER_SOBOL) {
+        dr_sampler_sobol2(s, ++s->dim, u1, u2);
+        ++s->dim;
+        return;
+    }
+    *u1 = dr_sampler_next(s);
+    *u2 = dr_sampler_next(s);
+}
+
+const char *dr_sampler_kind_name(enum dr_sampler_kind k);
+int dr_sampler_kind_parse(const char *name);   /* -1 if unknown */
 
 #endif

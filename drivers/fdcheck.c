@@ -23,7 +23,8 @@ static struct dr_grad_problem problem(const struct dr_scene *scene, const struct
     return (struct dr_grad_problem){.scene = scene, .camera = camera, .params = ps, .width = o->width,
                                     .height = o->height, .spp = o->spp, .max_depth = o->max_depth,
                                     .rr_depth = o->rr_depth, .seed = seed, .threads = o->threads,
-                                    .sampling = o->sampling, .film = o->film, .regularize = o->regularize};
+                                    .sampling = o->sampling, .film = o->film, .regularize = o->regularize,
+                                    .sampler = o->sampler};
 }
 
 /* Mean of the image rendered at theta0 + t * dir with seed. */
@@ -37,7 +38,8 @@ static int objective(struct fd_run *r, const double *dir, double t, uint64_t see
         return rc;
     const struct dr_fd_options *o = r->o;
     struct dr_render_opts ro = {.width = o->width, .height = o->height, .spp = o->spp, .max_depth = o->max_depth,
-                                .rr_depth = o->rr_depth, .seed = seed, .threads = o->threads, .film = o->film};
+                                .rr_depth = o->rr_depth, .seed = seed, .threads = o->threads, .film = o->film,
+                                .sampler = o->sampler};
     rc = dr_render(r->scene, r->camera, &ro, r->rgb, NULL);
     if (rc != 0)
         return rc;

@@ -32,6 +32,7 @@ struct dr_fd_options {
     double eps;         /* step along the direction (absolute) */
     double z_max;       /* agreement threshold on |z| */
     struct dr_film film;   /* filter and crop; width x height above is the rendered rectangle */
+    enum dr_sampler_kind sampler;   /* the random numbers, shared by estimator and differences */
     double regularize;  /* prb, attached sampling: Tikhonov weight of the inverse Jacobians */
 };
 

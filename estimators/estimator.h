@@ -16,6 +16,8 @@
 #include <stdint.h>
 
 #include "film.h"
+#include "sampler.h"
+#include "sampler.h"
 #include "params.h"
 #include "path.h"
 #include "scene.h"
@@ -42,6 +44,7 @@ struct dr_grad_problem {
      * height above are the rendered rectangle: estimators iterate its pixels
      * and every image (adjoint, d image) has its size. */
     struct dr_film film;
+    enum dr_sampler_kind sampler;   /* the random numbers (zero: independent) */
     double regularize;         /* prb, attached: Jacobians with sigma_min/sigma_max below this are not
                                   inverted, forward mode restarts there (0: always invert) */
 };
