@@ -70,7 +70,7 @@ struct grad_common {
     enum dr_sampler_kind sampler;    /* --sampler */
     bool crop_given;
     int crop_x, crop_y, crop_w, crop_h;
-    double regularize;               /* prb --sampling attached: Tikhonov weight */
+    double regularize;               /* prb attached: conditioning threshold (estimator.h) */
 };
 
 /* Defaults: prb, detached, the given spp, depth 8, Russian roulette from

@@ -33,7 +33,7 @@ struct dr_fd_options {
     double z_max;       /* agreement threshold on |z| */
     struct dr_film film;   /* filter and crop; width x height above is the rendered rectangle */
     enum dr_sampler_kind sampler;   /* the random numbers, shared by estimator and differences */
-    double regularize;  /* prb, attached sampling: Tikhonov weight of the inverse Jacobians */
+    double regularize;  /* prb, attached: conditioning threshold (estimator.h) */
 };
 
 struct dr_fd_entry {
