@@ -98,6 +98,11 @@ void cmd_compare_usage(FILE *out)
             "      --camera N      which camera of the file (default: 0)\n"
             "      --seed S        random seed (default: 0); the same seed gives the same table\n"
             "      --threads T     worker threads (default: one per CPU)\n"
+            "      --filter F      pixel filter: box (default), tent or gaussian[:STDDEV]\n"
+            "      --crop X,Y,W,H  only this rectangle of the --res frame is rendered and\n"
+            "                      compared (a full-frame target is cut to it; a crop-sized\n"
+            "                      one needs --res)\n"
+            "      --sampler S     random numbers: independent (default) or sobol\n"
             "      --json          print results.json on stdout too\n"
             "  -h, --help          show this help\n",
             PRIMAL_SPP, pairs, DEFAULT_RES, DEFAULT_RES);
@@ -294,6 +299,9 @@ static int parse_args(int argc, char **argv, struct cmp_args *a)
         {"camera", required_argument, NULL, GOPT_CAMERA},
         {"seed", required_argument, NULL, GOPT_SEED},
         {"threads", required_argument, NULL, GOPT_THREADS},
+        {"filter", required_argument, NULL, GOPT_FILTER},
+        {"crop", required_argument, NULL, GOPT_CROP},
+        {"sampler", required_argument, NULL, GOPT_SAMPLER},
         {"json", no_argument, NULL, GOPT_JSON},
         {"help", no_argument, NULL, 'h'},
         {"output-dir", required_argument, NULL, 'o'},
@@ -653,9 +661,11 @@ static int compute_reference(struct cmp_ctx *x)
     ref->spp = a->ref_spp;
     ref->batches = B;
     ref->max_depth = a->depths[a->n_depths - 1];
-    struct dr_fd_options o = {.width = a->g.width, .height = a->g.height, .spp = ref->spp, .batches = B,
-                              .max_depth = ref->max_depth, .rr_depth = a->g.rr_depth, .threads = a->g.threads,
-                              .eps = a->eps};
+    int rw, rh;   /* the rendered rectangle: the frame or --crop's */
+    struct dr_film film = grad_film(&a->g, a->g.width, a->g.height, &rw, &rh);
+    struct dr_fd_options o = {.width = rw, .height = rh, .film = film, .sampler = a->g.sampler, .spp = ref->spp,
+                              .batches = B, .max_depth = ref->max_depth, .rr_depth = a->g.rr_depth,
+                              .threads = a->g.threads, .eps = a->eps};
     if (a->ref_kind == CMP_REF_FD) {
         snprintf(ref->kind, sizeof ref->kind, "fd:%d", ref->spp);
         ref->eps = a->eps;
@@ -726,11 +736,19 @@ static void ctx_free(struct cmp_ctx *x)
     free(x->seg_err2);
 }
 
+/* Values of one rendered image: the frame, or --crop's rectangle of it. */
+static int64_t rendered_values(const struct cmp_args *a)
+{
+    int rw, rh;
+    grad_film(&a->g, a->g.width, a->g.height, &rw, &rh);
+    return (int64_t)rw * rh * 3;
+}
+
 /* Segments of v, result slots, the reference's arrays and the scratch. */
 static int run_alloc(struct cmp_run *r, struct cmp_ctx *x)
 {
     const struct dr_param_set *ps = r->ps;
-    const int64_t npix3 = (int64_t)r->a->g.width * r->a->g.height * 3;
+    const int64_t npix3 = rendered_values(r->a);
     r->seg_off = calloc((size_t)ps->n, sizeof(int64_t));
     r->seg_len = calloc((size_t)ps->n, sizeof(int64_t));
     if (!r->seg_off || !r->seg_len)
@@ -782,6 +800,12 @@ static void fingerprint(struct cmp_run *r, const struct dr_scene *scene, bool *o
     }
     fp->width = a->g.width;
     fp->height = a->g.height;
+    char filter[64], crop[64] = "none";
+    dr_filter_format(&a->g.filter, filter, sizeof filter);
+    if (a->g.crop_given)
+        snprintf(crop, sizeof crop, "%d,%d,%d,%d", a->g.crop_x, a->g.crop_y, a->g.crop_w, a->g.crop_h);
+    snprintf(fp->film, sizeof fp->film, "filter=%s crop=%s sampler=%s", filter, crop,
+             dr_sampler_kind_name(a->g.sampler));
     fp->camera = a->g.camera;
     fp->max_depth = a->depths[a->n_depths - 1];
     fp->rr_depth = a->g.rr_depth;
@@ -795,7 +819,7 @@ static void fingerprint(struct cmp_run *r, const struct dr_scene *scene, bool *o
 static int shared_adjoint(struct cmp_ctx *x, const float *target)
 {
     const struct cmp_args *a = x->r->a;
-    const size_t n = (size_t)a->g.width * a->g.height * 3;
+    const size_t n = (size_t)rendered_values(a);   /* target: cut to the crop by load_target */
     float *img = malloc(sizeof(float) * n);
     x->adj = malloc(sizeof(float) * n);
     if (!img || !x->adj) {
@@ -946,7 +970,13 @@ static int load_target(struct cmp_args *a, struct dr_image *timg, float **target
     int rc = grad_load_target("compare", a->target, timg, target);
     if (rc >= 0)
         return rc;
-    if (a->g.res_given && (a->g.width != timg->width || a->g.height != timg->height)) {
+    const struct grad_common *g = &a->g;
+    if (g->crop_given && !g->res_given && timg->width == g->crop_w && timg->height == g->crop_h) {
+        cli_error("compare", "--target %s is the crop's size (%dx%d): give the full frame's size with --res WxH",
+                  a->target, timg->width, timg->height);
+        return DR_EXIT_USAGE;
+    }
+    if (a->g.res_given && !g->crop_given && (a->g.width != timg->width || a->g.height != timg->height)) {
         cli_error("compare", "--target %s is %dx%d but --res asks for %dx%d (the render and the target must be "
                              "the same size)", a->target, timg->width, timg->height, a->g.width, a->g.height);
         return DR_EXIT_USAGE;
@@ -1003,6 +1033,9 @@ int cmd_compare(int argc, char **argv)
         goto out;
     int dw = a.target ? timg.width : DEFAULT_RES, dh = a.target ? timg.height : DEFAULT_RES;
     if ((rc = grad_load_scene(&a.g, &scene_path, &scene, &cam, dw, dh)) >= 0 ||
+        (rc = grad_check_crop(&a.g, a.g.width, a.g.height)) >= 0 ||
+        (target && (rc = grad_crop_image(&a.g, "--target", &target, timg.width, timg.height, a.g.width,
+                                         a.g.height)) >= 0) ||
         (rc = grad_apply_sets(&a.g, scene)) >= 0 || (rc = grad_param_set(&a.g, scene, &ps)) >= 0)
         goto out;
     r.scene_path = scene_path;

@@ -67,6 +67,7 @@ struct cmp_fingerprint {
     uint64_t scene_hash, values_hash, target_hash;
     int width, height, camera, max_depth, rr_depth, primal_spp;
     char mode[16], loss[16];
+    char film[128];   /* "filter=F crop=X,Y,W,H|none sampler=S": the film and random numbers */
 };
 
 struct cmp_args {

@@ -237,6 +237,8 @@ void cmp_write_json(const struct cmp_run *r, FILE *f)
         fputs("null", f);
     fprintf(f, ", \"width\": %d, \"height\": %d, \"rr_depth\": %d, \"seed\": %llu, \"batches\": %d, \"repeat\": %d",
             a->g.width, a->g.height, a->g.rr_depth, (unsigned long long)a->g.seed, a->batches, a->repeat);
+    fputs(", ", f);
+    grad_json_film(f, &a->g);
     fputs(", \"output_dir\": ", f);
     json_string(f, a->out_dir);
     fputs(", \"parameters\": [", f);
@@ -295,8 +297,10 @@ static void report_head(FILE *f, const struct cmp_run *r)
         fprintf(f, "Forward mode: d image / d parameter (all of a parameter's components at once); errors are "
                    "over image pixels. ");
     fprintf(f, "Image %dx%d, Russian roulette from depth %d, seed %llu. Each run is %d independent estimates of "
-               "SPP samples per pixel; its time, rays and error are those of one estimate.\n\nParameters:",
+               "SPP samples per pixel; its time, rays and error are those of one estimate.",
             a->g.width, a->g.height, a->g.rr_depth, (unsigned long long)a->g.seed, a->batches);
+    fprintf(f, " Film: %s.", r->fp.film);
+    fprintf(f, "\n\nParameters:");
     for (int k = 0; k < r->ps->n; k++)
         fprintf(f, "%s `%s` (%lld)", k ? "," : "", r->ps->params[k].name, (long long)r->ps->params[k].size);
     fprintf(f, ".\n\n**Reference:** %s", ref->kind);

@@ -54,6 +54,7 @@ static void write_header(FILE *f, const struct cmp_run *r)
     fprintf(f, "target_hash %016" PRIx64 "\nvalues_hash %016" PRIx64 "\n", fp->target_hash, fp->values_hash);
     fprintf(f, "size %d %d\ncamera %d\nmax_depth %d\nrr_depth %d\nprimal_spp %d\n", fp->width, fp->height,
             fp->camera, fp->max_depth, fp->rr_depth, fp->primal_spp);
+    fprintf(f, "film %s\n", fp->film);
 }
 
 int cmp_reference_write(const struct cmp_run *r, const char *path)
@@ -219,6 +220,12 @@ static int check_settings(struct ref_reader *rd, const struct cmp_run *r)
             return differs(rd, what[i], t, o);
         }
     }
+    /* the filter, crop and sampler change the estimated quantity's pixels */
+    const char *film = field(rd, "film");
+    if (!film)
+        return DR_EXIT_INPUT;
+    if (strcmp(film, fp->film) != 0)
+        return differs(rd, "the film", film, fp->film);
     return -1;
 }
 

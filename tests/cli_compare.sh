@@ -153,4 +153,20 @@ refused 2 "/images/0|--reference spp:N" compare $tiny --param /images/0 --target
     --reference fd -o bad
 DRENDER_MEM_LIMIT=20M refused 2 "DRENDER_MEM_LIMIT|--max-depth" compare --param "$red" --res 512x512 --max-depth 64 \
     --spp 1000000 -o bad
+# --filter, --crop and --sampler: a cropped run (full-frame target cut to the
+# crop) writes its film into results.json; its reference errors are finite;
+# a reference made for another film is refused; a crop outside the frame too
+run compare $tiny --param "$red" --set "$red=0.4,0.3,0.3" --target target.exr --crop 2,3,8,6 \
+    --filter gaussian:0.5 --sampler sobol --estimators prb --sampling detached --spp 2,8 -o film
+[ "$rc" -eq 0 ] || fail "cropped compare: exit $rc"
+python3 - film/results.json <<'PY' || fail "cropped compare: results.json"
+import json, math, sys
+d = json.load(open(sys.argv[1]))
+assert d["crop"] == [2, 3, 8, 6] and d["filter"] == "gaussian:0.5" and d["sampler"] == "sobol", d
+assert d["rows"] and all(math.isfinite(r["rel_error"]) for r in d["rows"]), d["rows"]
+PY
+grep -q "^film filter=gaussian:0.5 crop=2,3,8,6 sampler=sobol$" film/reference.txt || fail "reference.txt lacks the film"
+refused 2 "made for the film|crop=2,3,8,6" compare $tiny --param "$red" --set "$red=0.4,0.3,0.3" --target target.exr \
+    --spp 1000000 --reference film/reference.txt -o bad
+refused 2 "--crop|12x12" compare $tiny --param "$red" --crop 8,8,8,8 --spp 1000000 -o bad
 echo "cli_compare: all checks passed"
