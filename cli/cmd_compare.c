@@ -302,6 +302,8 @@ static int parse_args(int argc, char **argv, struct cmp_args *a)
         {"filter", required_argument, NULL, GOPT_FILTER},
         {"crop", required_argument, NULL, GOPT_CROP},
         {"sampler", required_argument, NULL, GOPT_SAMPLER},
+        {"env", required_argument, NULL, GOPT_ENV},
+        {"no-default-light", no_argument, NULL, GOPT_NO_DEFAULT_LIGHT},
         {"json", no_argument, NULL, GOPT_JSON},
         {"help", no_argument, NULL, 'h'},
         {"output-dir", required_argument, NULL, 'o'},

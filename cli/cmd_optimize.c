@@ -392,6 +392,13 @@ static void eta_text(double secs, char *buf, size_t size)
         snprintf(buf, size, "%ld:%02ld", s / 60, s % 60);
 }
 
+/* Camera `index` of the file, or, for a file without cameras, the default
+ * view render uses (index 0 only: opt_load checks). */
+static struct dr_camera view_camera(const struct dr_scene *scene, int index)
+{
+    return scene->n_cameras > 0 ? scene->cameras[index] : dr_camera_default(scene);
+}
+
 /* Renders target 0's view at higher quality into DIR/NAME. */
 static int save_view(const struct opt_args *a, const struct dr_scene *scene, const char *name)
 {
@@ -402,7 +409,8 @@ static int save_view(const struct opt_args *a, const struct dr_scene *scene, con
     if (!rgb)
         return DR_EXIT_FAILURE;
     struct dr_render_opts ro = grad_render_opts(&a->g, t->w, t->h, 4 * a->g.spp, a->g.seed ^ 0xbefa, false);
-    int rc = dr_render(scene, &scene->cameras[t->camera], &ro, rgb, NULL);
+    struct dr_camera cam = view_camera(scene, t->camera);
+    int rc = dr_render(scene, &cam, &ro, rgb, NULL);
     if (rc == 0)
         rc = dr_image_write(path, t->rw, t->rh, 3, rgb);
     if (rc != 0)
@@ -575,10 +583,13 @@ static int opt_load(struct opt_args *a, struct opt_run *r)
     if ((rc = load_targets(a)) >= 0 ||
         (rc = grad_load_scene(&a->g, &r->scene_path, &r->scene, &cam0, a->targets[0].w, a->targets[0].h)) >= 0)
         return rc;
+    /* a file without cameras has one view: the default framing render uses */
+    const int n_views = r->scene->n_cameras > 0 ? r->scene->n_cameras : 1;
     for (int i = 0; i < a->n_targets; i++)
-        if (a->targets[i].camera >= r->scene->n_cameras) {
-            cli_error("optimize", "--target %s: camera %d: %s has %d camera%s", a->targets[i].arg,
-                      a->targets[i].camera, r->scene_path, r->scene->n_cameras, r->scene->n_cameras == 1 ? "" : "s");
+        if (a->targets[i].camera >= n_views) {
+            cli_error("optimize", "--target %s: camera %d: %s has %d camera%s%s", a->targets[i].arg,
+                      a->targets[i].camera, r->scene_path, r->scene->n_cameras, r->scene->n_cameras == 1 ? "" : "s",
+                      r->scene->n_cameras ? " (numbered from 0)" : "; its one view is the default framing, target 0");
             return DR_EXIT_USAGE;
         }
     if ((rc = grad_param_set(&a->g, r->scene, &r->ps)) >= 0 ||
@@ -678,7 +689,7 @@ static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
     r->loss = 0.0;
     for (int ti = 0; ti < a->n_targets; ti++) {
         const struct target *t = &a->targets[ti];
-        const struct dr_camera *cam = &r->scene->cameras[t->camera];
+        const struct dr_camera view = view_camera(r->scene, t->camera), *cam = &view;
         struct dr_reverse_options o = {
             .estimator = a->g.estimator, .loss = (enum dr_loss_kind)a->loss, .loss_scale = 1.0 / a->n_targets,
             .batches = a->batches, .primal = DR_PRIMAL_PER_BATCH,

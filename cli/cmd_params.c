@@ -144,6 +144,10 @@ int cmd_params(int argc, char **argv)
         rc = DR_EXIT_INPUT;
         goto out;
     }
+    /* the default environment a rendering command would add is a parameter too */
+    struct grad_common lighting = {.cmd = "params"};
+    if ((rc = grad_apply_lighting(&lighting, scene_path, scene)) >= 0)
+        goto out;
     if (dr_params_list(scene, &list, &n) != 0) {
         cli_error("params", "%s", dr_last_error());
         rc = DR_EXIT_FAILURE;

@@ -5,6 +5,7 @@
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "camera.h"
 #include "cli.h"
@@ -40,6 +41,58 @@ static void list_estimators(char *buf, size_t size)
         size_t len = strlen(buf);
         snprintf(buf + len, size - len, "%s%s", i ? ", " : "", dr_estimators[i]->name);
     }
+}
+
+/* --env FILE[,STRENGTH] or --env R,G,B[,STRENGTH] / GREY[,STRENGTH]. Numbers
+ * first: "1,1,1" is a colour even if a file of that name existed. */
+static int env_option(struct grad_common *g, const char *arg)
+{
+    double v[5];
+    int n = 0;
+    const char *p = arg;
+    while (*p && n < 5) {
+        char *end;
+        errno = 0;
+        double x = strtod(p, &end);
+        if (end == p || errno || (*end && *end != ','))
+            break;
+        v[n++] = x;
+        p = *end ? end + 1 : end;
+    }
+    g->env_given = true;
+    if (!*p && n >= 1 && n <= 4) {
+        g->env_file = NULL;
+        g->env_color = n >= 3 ? dr_v3(v[0], v[1], v[2]) : dr_v3s(v[0]);
+        g->env_strength = n == 2 ? v[1] : n == 4 ? v[3] : 1.0;
+        for (int i = 0; i < n; i++)
+            if (!isfinite(v[i]) || v[i] < 0.0) {
+                cli_error(g->cmd, "--env %s: colour and strength must be finite and >= 0", arg);
+                return DR_EXIT_USAGE;
+            }
+        return 0;
+    }
+    /* a file, perhaps with ",STRENGTH" */
+    g->env_color = dr_v3s(1.0);
+    g->env_strength = 1.0;
+    g->env_file = arg;
+    if (access(arg, R_OK) == 0)
+        return 0;
+    const char *comma = strrchr(arg, ',');
+    if (comma) {
+        char *end;
+        double st = strtod(comma + 1, &end);
+        size_t len = (size_t)(comma - arg);
+        char *file = len ? strndup(arg, len) : NULL;
+        if (file && !*end && isfinite(st) && st >= 0.0 && access(file, R_OK) == 0) {
+            g->env_strength = st;
+            g->env_file = file;   /* kept for the process's life (one option) */
+            return 0;
+        }
+        free(file);
+    }
+    cli_error(g->cmd, "--env %s: neither a readable image file nor a colour (R,G,B[,STRENGTH] or GREY[,STRENGTH])",
+              arg);
+    return DR_EXIT_USAGE;
 }
 
 static int film_option(struct grad_common *g, int c, const char *arg);
@@ -135,6 +188,8 @@ int grad_common_option(struct grad_common *g, int c, const char *arg)
     case GOPT_JSON: g->json = true; return 0;
     case GOPT_FILTER:
     case GOPT_CROP: return film_option(g, c, arg);
+    case GOPT_ENV: return env_option(g, arg);
+    case GOPT_NO_DEFAULT_LIGHT: g->no_default_light = true; return 0;
     case GOPT_SAMPLER: {
         int k = dr_sampler_kind_parse(arg);
         if (k < 0) {
@@ -219,6 +274,27 @@ int grad_common_check(const struct grad_common *g)
     return -1;
 }
 
+int grad_apply_lighting(const struct grad_common *g, const char *scene_path, struct dr_scene *scene)
+{
+    if (g->env_given) {
+        if (dr_scene_set_environment(scene, g->env_color, g->env_strength, g->env_file, false) != 0) {
+            cli_error(g->cmd, "--env %s", dr_last_error());
+            return g->env_file ? DR_EXIT_INPUT : DR_EXIT_FAILURE;
+        }
+        return -1;
+    }
+    if (dr_scene_has_light(scene) || g->no_default_light)
+        return -1;
+    if (dr_scene_set_environment(scene, dr_v3s(1.0), 1.0, NULL, true) != 0) {
+        cli_error(g->cmd, "%s", dr_last_error());
+        return DR_EXIT_FAILURE;
+    }
+    cli_error(g->cmd, "note: %s has no light (no emissive surface, punctual light or environment): lit by a "
+                      "default white environment of radiance 1 (--env to choose one, --no-default-light for none)",
+              scene_path);
+    return -1;
+}
+
 int grad_load_scene(struct grad_common *g, char **scene_path, struct dr_scene **scene, struct dr_camera *cam,
                     int default_w, int default_h)
 {
@@ -233,6 +309,9 @@ int grad_load_scene(struct grad_common *g, char **scene_path, struct dr_scene **
         cli_error(g->cmd, "%s", dr_last_error());
         return DR_EXIT_INPUT;
     }
+    int lrc = grad_apply_lighting(g, *scene_path, *scene);
+    if (lrc >= 0)
+        return lrc;
     const struct dr_scene *s = *scene;
     if (g->camera_given && g->camera >= s->n_cameras) {
         cli_error(g->cmd, "--camera %d: %s has %d camera%s%s", g->camera, *scene_path, s->n_cameras,

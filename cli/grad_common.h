@@ -35,6 +35,8 @@ enum {
     GOPT_CROP,
     GOPT_REGULARIZE,
     GOPT_SAMPLER,   /* random numbers: independent | sobol */
+    GOPT_ENV,       /* lighting: --env FILE|COLOR[,STRENGTH] */
+    GOPT_NO_DEFAULT_LIGHT,
     GOPT_END
 };
 
@@ -46,7 +48,8 @@ enum {
         {"camera", required_argument, NULL, GOPT_CAMERA}, {"seed", required_argument, NULL, GOPT_SEED},     \
         {"threads", required_argument, NULL, GOPT_THREADS}, {"json", no_argument, NULL, GOPT_JSON},         \
         {"filter", required_argument, NULL, GOPT_FILTER}, {"crop", required_argument, NULL, GOPT_CROP},     \
-        {"sampler", required_argument, NULL, GOPT_SAMPLER}, {"help", no_argument, NULL, 'h'}
+        {"sampler", required_argument, NULL, GOPT_SAMPLER}, {"env", required_argument, NULL, GOPT_ENV},      \
+        {"no-default-light", no_argument, NULL, GOPT_NO_DEFAULT_LIGHT}, {"help", no_argument, NULL, 'h'}
 #define GRAD_COMMON_LONG_OPTIONS                                                                       \
     {"param", required_argument, NULL, GOPT_PARAM}, {"estimator", required_argument, NULL, GOPT_ESTIMATOR}, \
         {"sampling", required_argument, NULL, GOPT_SAMPLING}, {"set", required_argument, NULL, GOPT_SET},   \
@@ -71,6 +74,11 @@ struct grad_common {
     bool crop_given;
     int crop_x, crop_y, crop_w, crop_h;
     double regularize;               /* prb attached: conditioning threshold (estimator.h) */
+    /* lighting: --env (a file, or a colour) and --no-default-light */
+    const char *env_file;            /* NULL: env_color * env_strength, if env_given */
+    bool env_given, no_default_light;
+    dr_vec3 env_color;
+    double env_strength;
 };
 
 /* Defaults: prb, detached, the given spp, depth 8, Russian roulette from
@@ -104,6 +112,12 @@ int grad_common_check(const struct grad_common *g);
  * camera. When !g->res_given, the size is taken from default_w/default_h if
  * positive, else as `render` does (512 high, width from the aspect ratio).
  * Returns -1 to go on, or an exit code; *scene must be destroyed by the caller. */
+/* The lighting after loading: --env replaces the environment; a scene with
+ * no light at all gets the default white environment (one note on stderr)
+ * unless --no-default-light. -1 to go on, or an exit code. Called by
+ * grad_load_scene; params calls it with a grad_common of its own. */
+int grad_apply_lighting(const struct grad_common *g, const char *scene_path, struct dr_scene *scene);
+
 int grad_load_scene(struct grad_common *g, char **scene_path, struct dr_scene **scene, struct dr_camera *cam,
                     int default_w, int default_h);
 

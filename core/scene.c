@@ -7,6 +7,7 @@
 #include "accel.h"
 #include "error.h"
 #include "geometry.h"
+#include "image_io.h"
 #include "lights.h"
 
 struct dr_scene *dr_scene_load(const char *path)
@@ -74,6 +75,35 @@ int dr_scene_refresh(struct dr_scene *s)
     if (s->env.present)
         s->effects |= s->env.map.data ? DR_FX_ENV_MAP : DR_FX_ENV_CONSTANT;
     return 0;
+}
+
+bool dr_scene_has_light(const struct dr_scene *s)
+{
+    return s->env.present || (s->effects & (DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS)) != 0;
+}
+
+int dr_scene_set_environment(struct dr_scene *s, dr_vec3 color, double strength, const char *map_path,
+                             bool is_default)
+{
+    struct dr_image map;
+    memset(&map, 0, sizeof map);
+    if (map_path) {
+        int rc = dr_image_read(map_path, &map);
+        if (rc == 0 && map.file_is_srgb)   /* an 8-bit sky is sRGB-encoded, as in the loader */
+            rc = dr_image_make_linear(&map);
+        if (rc != 0) {
+            dr_image_release(&map);
+            return rc;
+        }
+    }
+    dr_image_release(&s->env.map);
+    s->env.map = map;
+    s->env.present = true;
+    s->env.color = color;
+    s->env.strength = strength;
+    s->env.is_default = is_default;
+    snprintf(s->env.uri, sizeof s->env.uri, "%s", map_path ? map_path : "");
+    return dr_scene_refresh(s);
 }
 
 int dr_scene_prepare(struct dr_scene *s)

@@ -87,6 +87,7 @@ struct dr_environment {
     double strength;        /* "strength" (default 1) */
     struct dr_image map;    /* map.data == NULL: constant radiance */
     char uri[512];
+    bool is_default;        /* set by drender (no light in the file), not by the file */
 };
 
 struct dr_accel;
@@ -130,6 +131,18 @@ int dr_scene_prepare(struct dr_scene *scene);
  * not have changed. 0 or DR_ERR_NOMEM. */
 int dr_scene_refresh(struct dr_scene *scene);
 void dr_scene_destroy(struct dr_scene *scene);
+
+/* True when something in the scene emits: an emissive triangle with power,
+ * a punctual light, or an environment (even one of strength 0: the file
+ * asked for it). A scene without is black whatever the materials. */
+bool dr_scene_has_light(const struct dr_scene *scene);
+/* Replaces the environment with color * strength, times the equirectangular
+ * image map_path when it is not NULL (read like DR_environment/uri), and
+ * refreshes the scene. is_default marks drender's own default lighting (the
+ * glTF writer does not write it back unless its parameters were fitted).
+ * 0 or a negative DR_ERR_* with dr_last_error naming the file. */
+int dr_scene_set_environment(struct dr_scene *scene, dr_vec3 color, double strength, const char *map_path,
+                             bool is_default);
 /* Comma-separated names of the effect bits, for --json and messages. */
 void dr_effects_describe(unsigned effects, char *buf, int size);
 
