@@ -21,6 +21,8 @@ unsigned dr_path_plan(const struct dr_scene *s, const struct dr_param_set *ps)
         st |= DR_STAGE_EMISSION;
     if (!dr_light_sampler_empty(s->light_sampler))
         st |= DR_STAGE_NEE;
+    if (s->n_media > 0)
+        st |= DR_STAGE_MEDIA;
     return st;
 }
 
@@ -30,6 +32,7 @@ void dr_path_stages_describe(unsigned stages, char *buf, int size)
         {DR_STAGE_ENV, "environment_lookup"},
         {DR_STAGE_EMISSION, "surface_emission"},
         {DR_STAGE_NEE, "next_event_estimation"},
+        {DR_STAGE_MEDIA, "participating_media"},
     };
     int n = 0;
     buf[0] = '\0';
@@ -243,8 +246,11 @@ static bool stage_continue(const struct dr_path_opts *opts, struct dr_path_state
 bool dr_path_step(const struct dr_scene *s, const struct dr_path_opts *opts, struct dr_path_state *st,
                   struct dr_sampler *sampler, struct dr_path_vertex *v, struct dr_ray_counts *counts)
 {
+    if (opts->stages & DR_STAGE_MEDIA)
+        return dr_medium_path_step(s, opts, st, sampler, v, counts);
     v->depth = ++st->depth;
     v->d = st->d;
+    v->seg = dr_v3s(1.0);
     v->emits = v->shaded = v->nee = v->cont = v->diff_bsdf = false;
 
     int64_t tri = stage_trace(s, st, counts);
@@ -334,11 +340,36 @@ static void by_channel(adjoint_part_fn fn, const struct dr_scene *s, const struc
 void d_path_vertex_term(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
                         dr_vec3 d_e, struct dr_grad_sink *sink)
 {
-    by_channel(vertex_term_part, s, ps, v, d_e, sink);
+    by_channel(vertex_term_part, s, ps, v, dr_mul(d_e, v->seg), sink);
 }
 
 void d_path_continuation(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
                          dr_vec3 d_f, struct dr_grad_sink *sink)
 {
     by_channel(continuation_part, s, ps, v, d_f, sink);
+}
+
+/* ------------------------------------------- stages for the medium walker */
+
+void dr_path_stage_escaped(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_state *st,
+                           struct dr_path_vertex *v)
+{
+    stage_escaped(s, opts, st, v);
+}
+
+void dr_path_stage_surface_hit(const struct dr_scene *s, const struct dr_path_opts *opts,
+                               const struct dr_path_state *st, int64_t tri, struct dr_path_vertex *v)
+{
+    stage_surface_hit(s, opts, st, tri, v);
+}
+
+bool dr_path_stage_material(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_state *st,
+                            struct dr_sampler *sampler, struct dr_path_vertex *v)
+{
+    return stage_material(s, opts, st, sampler, v);
+}
+
+bool dr_path_stage_continue(const struct dr_path_opts *opts, struct dr_path_state *st, struct dr_path_vertex *v)
+{
+    return stage_continue(opts, st, v);
 }

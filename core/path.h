@@ -73,7 +73,8 @@ void d_mis_power(double pdf_a, double pdf_b, double d_w, double *d_pa, double *d
 enum dr_path_stage {
     DR_STAGE_ENV = 1 << 0,        /* escaped rays see an environment */
     DR_STAGE_EMISSION = 1 << 1,   /* some surface emits, or its emission is differentiated */
-    DR_STAGE_NEE = 1 << 2         /* there is a light to sample */
+    DR_STAGE_NEE = 1 << 2,        /* there is a light to sample */
+    DR_STAGE_MEDIA = 1 << 3       /* participating media: the medium walker (medium_path.c) */
 };
 
 struct dr_path_opts {
@@ -97,13 +98,17 @@ struct dr_vertex_randoms {
 
 enum dr_vertex_kind {
     DR_VERTEX_SURFACE,   /* the ray hit a triangle */
-    DR_VERTEX_ESCAPED    /* the ray left the scene (environment radiance, if any) */
+    DR_VERTEX_ESCAPED,   /* the ray left the scene (environment radiance, if any) */
+    DR_VERTEX_MEDIUM     /* a collision in a participating medium (hit.p; hit.tri = -1) */
 };
 
 struct dr_path_vertex {
     enum dr_vertex_kind kind;
     int depth;                 /* segments so far (1: the camera ray's hit) */
     dr_vec3 d;                 /* direction of the ray that arrived here */
+    dr_vec3 seg;               /* free-flight weight of the segment that arrived here
+                                  (tracking weights in media; 1 without media) */
+    int medium;                /* medium vertex: its medium; else the medium the ray came through (-1) */
     struct dr_hit hit;
     /* emission seen here (surface) or environment radiance (escaped) */
     bool emits;                /* Le is evaluated (and differentiable) here */
@@ -140,7 +145,7 @@ static inline dr_vec3 dr_path_vertex_term(const struct dr_path_vertex *v)
     dr_vec3 e = v->emits ? dr_scale(v->Le, v->emit_w) : dr_v3s(0.0);
     if (v->nee)
         e = dr_add(e, dr_scale(dr_mul(v->nee_f, v->ls.radiance), v->nee_scale));
-    return e;
+    return dr_mul(e, v->seg);
 }
 
 /* Adjoint of e_k with respect to the parameters (emission, environment, the
@@ -159,6 +164,10 @@ struct dr_path_state {
     int depth;               /* segments traced so far */
     dr_vec3 beta;            /* tracing throughput (with substitutes) */
     dr_vec3 ratio;           /* true / tracing throughput, per channel: 1 or 0 */
+    /* media scenes only (medium_path.c): */
+    int medium;              /* the medium the ray travels in */
+    int hero;                /* spectral MIS: the channel deciding collisions */
+    double mis_r[3];         /* ... and each channel's event probability so far (relative) */
 };
 
 void dr_path_start(struct dr_path_state *st, dr_vec3 o, dr_vec3 d);
@@ -177,6 +186,19 @@ void dr_path_nee(const struct dr_scene *scene, struct dr_path_vertex *v, struct 
  * differentiate, which is what `render` computes. */
 dr_vec3 dr_path_radiance(const struct dr_scene *scene, const struct dr_path_opts *opts, dr_vec3 o, dr_vec3 d,
                          struct dr_sampler *sampler, struct dr_ray_counts *counts);
+
+/* The stages, for the medium walker (medium_path.c), which strings them
+ * together with free-flight sampling and boundary crossings. */
+void dr_path_stage_escaped(const struct dr_scene *scene, const struct dr_path_opts *opts,
+                           const struct dr_path_state *st, struct dr_path_vertex *v);
+void dr_path_stage_surface_hit(const struct dr_scene *scene, const struct dr_path_opts *opts,
+                               const struct dr_path_state *st, int64_t tri, struct dr_path_vertex *v);
+bool dr_path_stage_material(const struct dr_scene *scene, const struct dr_path_opts *opts,
+                            const struct dr_path_state *st, struct dr_sampler *sampler, struct dr_path_vertex *v);
+bool dr_path_stage_continue(const struct dr_path_opts *opts, struct dr_path_state *st, struct dr_path_vertex *v);
+/* dr_path_step for scenes with media (medium_path.c). */
+bool dr_medium_path_step(const struct dr_scene *scene, const struct dr_path_opts *opts, struct dr_path_state *st,
+                         struct dr_sampler *sampler, struct dr_path_vertex *v, struct dr_ray_counts *counts);
 
 /* Substitute factor for zero BSDF channels at differentiated vertices. */
 #define DR_PATH_SUBSTITUTE DR_INV_PI
