@@ -12,8 +12,9 @@
  *
  * Spectral MIS (medium.h) weights what the path gathers at a vertex by
  * r / mean(r) of the events so far; the change of that weight over the
- * segment arriving at a vertex is the vertex's `seg` (its terms are
- * multiplied by it, path.h), and goes into the throughput. Tracking draws its uniforms from streams of their own (keyed by
+ * segment arriving at a vertex is the vertex's `seg`: folded into what the
+ * vertex adds (Le, ls.radiance; path.h keeps seg for the derivatives) and
+ * into the throughput. Tracking draws its uniforms from streams of their own (keyed by
  * the path's sampler and the depth), so the vertex's block of dimensions is
  * the same as without media and a replay draws the same numbers. */
 #include <math.h>
@@ -47,7 +48,7 @@ static void draw_vertex_randoms(struct dr_sampler *sampler, int depth, struct dr
 
 /* Next-event estimation from a surface or medium vertex: the light sample,
  * the BSDF or phase value towards it, and the transmittance to it through
- * media (folded into ls.radiance). */
+ * media; that and the segment's weight are folded into ls.radiance. */
 static void media_nee(const struct dr_scene *s, struct dr_path_vertex *v, const struct dr_sampler *smp,
                       struct dr_ray_counts *counts)
 {
@@ -86,7 +87,8 @@ static void media_nee(const struct dr_scene *s, struct dr_path_vertex *v, const 
         return;
     double w = v->ls.delta ? 1.0 : dr_mis_power(v->ls.pdf, pdf);
     v->nee_scale = cosine * w / v->ls.pdf;
-    v->ls.radiance = dr_mul(v->ls.radiance, tr);
+    v->nee_tr = dr_mul(tr, v->seg);
+    v->ls.radiance = dr_mul(v->ls.radiance, v->nee_tr);
     v->nee = true;
 }
 
@@ -142,6 +144,8 @@ static bool surface_vertex(const struct dr_scene *s, const struct dr_path_opts *
                            struct dr_ray_counts *counts)
 {
     dr_path_stage_surface_hit(s, opts, st, tri, v);
+    if (v->emits)
+        v->Le = dr_mul(v->Le, v->seg);
     if (!dr_path_stage_material(s, opts, st, sampler, v))
         return false;
     if (opts->stages & DR_STAGE_NEE)
@@ -180,6 +184,7 @@ bool dr_medium_path_step(const struct dr_scene *s, const struct dr_path_opts *op
     v->d = st->d;
     v->seg = dr_v3s(1.0);
     v->emits = v->shaded = v->nee = v->cont = v->diff_bsdf = false;
+    v->media = true;
     if (st->depth == 1)
         start_path(s, st, sampler);
     struct dr_sampler rng = tracking_stream(sampler, st->depth, STREAM_FREE_FLIGHT);
@@ -218,6 +223,7 @@ bool dr_medium_path_step(const struct dr_scene *s, const struct dr_path_opts *op
             end_segment(st, v, &mis, w_before);
             if (tri < 0) {
                 dr_path_stage_escaped(s, opts, st, v);
+                v->Le = dr_mul(v->Le, v->seg);
                 return false;
             }
             return surface_vertex(s, opts, st, sampler, v, tri, counts);

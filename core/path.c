@@ -7,6 +7,21 @@
 #include "accel.h"
 #include "material.h"
 
+struct dr_path_state;
+/* The stages are exported to the medium walker too (end of file), yet kept inlined into
+ * dr_path_step: a scene without media must not pay a call for that. */
+static inline bool stage_material(const struct dr_scene *s, const struct dr_path_opts *opts,
+                                  const struct dr_path_state *st, struct dr_sampler *sampler,
+                                  struct dr_path_vertex *v) __attribute__((always_inline));
+static inline void stage_escaped(const struct dr_scene *s, const struct dr_path_opts *opts,
+                                 const struct dr_path_state *st, struct dr_path_vertex *v)
+    __attribute__((always_inline));
+static inline void stage_surface_hit(const struct dr_scene *s, const struct dr_path_opts *opts,
+                                     const struct dr_path_state *st, int64_t tri, struct dr_path_vertex *v)
+    __attribute__((always_inline));
+static inline bool stage_continue(const struct dr_path_opts *opts, struct dr_path_state *st,
+                                  struct dr_path_vertex *v) __attribute__((always_inline));
+
 /* ------------------------------------------------------------------ plan */
 
 unsigned dr_path_plan(const struct dr_scene *s, const struct dr_param_set *ps)
@@ -250,8 +265,7 @@ bool dr_path_step(const struct dr_scene *s, const struct dr_path_opts *opts, str
         return dr_medium_path_step(s, opts, st, sampler, v, counts);
     v->depth = ++st->depth;
     v->d = st->d;
-    v->seg = dr_v3s(1.0);
-    v->emits = v->shaded = v->nee = v->cont = v->diff_bsdf = false;
+    v->emits = v->shaded = v->nee = v->cont = v->diff_bsdf = v->media = false;
 
     int64_t tri = stage_trace(s, st, counts);
     if (tri < 0) {
@@ -290,6 +304,8 @@ static void vertex_term_part(const struct dr_scene *s, const struct dr_param_set
 {
     if (v->emits) {
         dr_vec3 d_Le = dr_scale(d_e, v->emit_w);
+        if (v->media)
+            d_Le = dr_mul(d_Le, v->seg);   /* folded into Le by the medium walker */
         if (v->kind == DR_VERTEX_SURFACE)
             d_emission(s, ps, &v->hit, d_Le, sink);
         else
@@ -302,7 +318,8 @@ static void vertex_term_part(const struct dr_scene *s, const struct dr_param_set
                         NULL);
             d_material_eval(s, ps, &v->hit, &db, sink);
         }
-        d_light_radiance(s, ps, &v->ls, dr_scale(dr_mul(d_e, v->nee_f), v->nee_scale), sink);
+        dr_vec3 d_L = dr_scale(dr_mul(d_e, v->nee_f), v->nee_scale);
+        d_light_radiance(s, ps, &v->ls, v->media ? dr_mul(d_L, v->nee_tr) : d_L, sink);
     }
 }
 
@@ -340,7 +357,7 @@ static void by_channel(adjoint_part_fn fn, const struct dr_scene *s, const struc
 void d_path_vertex_term(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
                         dr_vec3 d_e, struct dr_grad_sink *sink)
 {
-    by_channel(vertex_term_part, s, ps, v, dr_mul(d_e, v->seg), sink);
+    by_channel(vertex_term_part, s, ps, v, d_e, sink);
 }
 
 void d_path_continuation(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,

@@ -106,8 +106,9 @@ struct dr_path_vertex {
     enum dr_vertex_kind kind;
     int depth;                 /* segments so far (1: the camera ray's hit) */
     dr_vec3 d;                 /* direction of the ray that arrived here */
-    dr_vec3 seg;               /* free-flight weight of the segment that arrived here
-                                  (tracking weights in media; 1 without media) */
+    bool media;                /* from the medium walker (medium_path.c): seg and nee_tr hold */
+    dr_vec3 seg;               /* spectral MIS weight change over the segment that arrived
+                                  here; already folded into Le and ls.radiance */
     int medium;                /* medium vertex: its medium; else the medium the ray came through (-1) */
     struct dr_hit hit;
     /* emission seen here (surface) or environment radiance (escaped) */
@@ -128,6 +129,7 @@ struct dr_path_vertex {
     dr_vec3 nee_wi;            /* local */
     dr_vec3 nee_f;             /* BSDF value towards the light */
     double nee_scale;          /* |cos| * MIS weight / pdf */
+    dr_vec3 nee_tr;            /* media: transmittance to the light times seg, folded into ls.radiance */
     /* continuation */
     bool cont;                 /* the path goes on from here */
     dr_vec3 wi;                /* local, sampled */
@@ -145,7 +147,7 @@ static inline dr_vec3 dr_path_vertex_term(const struct dr_path_vertex *v)
     dr_vec3 e = v->emits ? dr_scale(v->Le, v->emit_w) : dr_v3s(0.0);
     if (v->nee)
         e = dr_add(e, dr_scale(dr_mul(v->nee_f, v->ls.radiance), v->nee_scale));
-    return dr_mul(e, v->seg);
+    return e;
 }
 
 /* Adjoint of e_k with respect to the parameters (emission, environment, the
