@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <cmath>
 #include <cstring>
 #include <set>
 #include <string>
@@ -25,6 +26,7 @@
 
 #include "error.h"
 #include "image_io.h"
+#include "medium.h"
 #include "scene.h"
 
 namespace {
@@ -222,7 +224,10 @@ struct AccessorView {
 
 const char *const kSupportedExtensions[] = {
     "KHR_materials_emissive_strength", "KHR_materials_specular", "KHR_lights_punctual",
-    "DR_environment"};
+    "DR_environment",
+    /* participating media (load_material_medium) */
+    "KHR_materials_volume", "KHR_materials_transmission", "KHR_materials_ior", "KHR_materials_volume_scatter",
+    "DR_medium"};
 
 bool is_supported_extension(const std::string &name)
 {
@@ -237,6 +242,7 @@ public:
     ~Loader()
     {
         for (dr_image &img : images_) dr_image_release(&img);  /* those not handed over */
+        for (dr_medium &m : media_) dr_grid_release(&m.grid);
     }
     void run();
 
@@ -269,6 +275,12 @@ private:
     void add_light(int light_idx, int node_idx, const Mat4 &world);
     void load_environment();
     void finish();
+    /* participating media (the "media" section at the end of this file) */
+    void load_material_medium(const tinygltf::Material &g, const std::string &mp, size_t index);
+    void read_medium_ext(const tinygltf::Value &v, const std::string &ep, dr_medium &med);
+    void read_medium_grid(const tinygltf::Value &v, const std::string &ep, dr_medium &med);
+    void load_global_medium();
+    void finish_media();
 
     AccessorView view_accessor(int idx, const std::string &ref, int want_type, const char *what);
     double ext_number(const tinygltf::Value &obj, const char *key, double def, const std::string &path);
@@ -292,6 +304,8 @@ private:
     bool default_material_used_ = false;
     std::vector<dr_camera> cameras_;
     std::vector<dr_punctual> lights_;
+    std::vector<dr_medium> media_;          /* owned here until finish_media() */
+    std::vector<int> material_medium_;      /* per file material: index into media_, -1 */
 
     std::vector<float> positions_, normals_, uvs_;
     std::vector<uint32_t> indices_;
@@ -684,6 +698,7 @@ void Loader::load_materials()
                     warn_once(std::string("spec:") + key, "%s/%s: specular textures are not supported; ignored",
                               ep.c_str(), key);
         }
+        load_material_medium(g, mp, i);
         for (const auto &kv : g.extensions)
             if (!is_supported_extension(kv.first))
                 warn_once("ext:" + kv.first, "%s/extensions/%s: extension is not supported; ignored",
@@ -1082,8 +1097,176 @@ void Loader::run()
     load_materials();
     traverse_scene();
     load_environment();
+    load_global_medium();
     finish();
+    finish_media();
     for (const std::string &w : warnings_) dr_warn("%s", w.c_str());
+}
+
+/* ---- participating media ----
+ * A material with KHR_materials_volume or DR_medium bounds a medium (its mesh
+ * must be closed; checked in dr_media_prepare). The boundary is index-matched:
+ * KHR_materials_volume needs transmissionFactor 1 and ior 1 (dielectric
+ * boundaries are refused, not silently rendered wrong). DR_medium at the top
+ * level is the global medium: the space outside every medium mesh. */
+
+void Loader::read_medium_grid(const tinygltf::Value &v, const std::string &ep, dr_medium &med)
+{
+    const std::string gp = ep + "/density";
+    if (!v.IsObject()) fail(DR_ERR_FORMAT, "%s: expected an object with uri and resolution", gp.c_str());
+    if (!v.Has("uri") || !v.Get("uri").IsString() || v.Get("uri").Get<std::string>().empty())
+        fail(DR_ERR_FORMAT, "%s/uri: expected a file name", gp.c_str());
+    const std::string &uri = v.Get("uri").Get<std::string>();
+    if (uri.size() >= sizeof med.grid_uri) fail(DR_ERR_FORMAT, "%s/uri: file name too long", gp.c_str());
+    const tinygltf::Value &r = v.Get("resolution");
+    int n[3] = {0, 0, 0};
+    if (!r.IsArray() || r.ArrayLen() != 3)
+        fail(DR_ERR_FORMAT, "%s/resolution: expected [nx, ny, nz]", gp.c_str());
+    double voxels = 1.0;
+    for (int a = 0; a < 3; a++) {
+        double x = r.Get(a).IsNumber() ? r.Get(a).GetNumberAsDouble() : -1.0;
+        if (!(x >= 1.0 && x <= 65536.0) || x != double(int(x)))
+            fail(DR_ERR_FORMAT, "%s/resolution/%d: expected a positive integer", gp.c_str(), a);
+        n[a] = int(x);
+        voxels *= x;
+    }
+    if (voxels > double(1 << 28))
+        fail(DR_ERR_FORMAT, "%s/resolution: %.0f voxels is more than the 2^28 supported", gp.c_str(), voxels);
+    std::string file = uri[0] == '/' ? uri : directory_of(path_) + uri;
+    int rc = dr_grid_read(file.c_str(), n[0], n[1], n[2], &med.grid);
+    if (rc != 0) fail(rc, "%s/uri: %s", gp.c_str(), dr_last_error());
+    med.has_grid = true;
+    snprintf(med.grid_uri, sizeof med.grid_uri, "%s", uri.c_str());
+}
+
+/* The DR_medium fields (material or top level) over what med already holds. */
+void Loader::read_medium_ext(const tinygltf::Value &v, const std::string &ep, dr_medium &med)
+{
+    if (!v.IsObject()) fail(DR_ERR_FORMAT, "%s: expected an object", ep.c_str());
+    if (v.Has("extinction") && v.Get("extinction").IsNumber())
+        med.extinction = dr_v3s(v.Get("extinction").GetNumberAsDouble());
+    else
+        med.extinction = ext_vec3(v, "extinction", med.extinction, ep);
+    med.albedo = ext_vec3(v, "albedo", med.albedo, ep);
+    med.g = ext_number(v, "g", med.g, ep);
+    med.density_scale = ext_number(v, "density_scale", 1.0, ep);
+    for (int c = 0; c < 3; c++) {
+        double e = dr_v3_get(med.extinction, c), a = dr_v3_get(med.albedo, c);
+        if (!(e >= 0.0) || !std::isfinite(e))
+            fail(DR_ERR_FORMAT, "%s/extinction: must be finite and >= 0 (got %g)", ep.c_str(), e);
+        if (!(a >= 0.0 && a <= 1.0)) fail(DR_ERR_FORMAT, "%s/albedo: must be in [0, 1] (got %g)", ep.c_str(), a);
+    }
+    if (!(med.g > -1.0 && med.g < 1.0)) fail(DR_ERR_FORMAT, "%s/g: must be in (-1, 1) (got %g)", ep.c_str(), med.g);
+    if (!(med.density_scale >= 0.0) || !std::isfinite(med.density_scale))
+        fail(DR_ERR_FORMAT, "%s/density_scale: must be finite and >= 0", ep.c_str());
+    if (v.Has("density")) read_medium_grid(v.Get("density"), ep, med);
+    if (v.Has("bounds")) {
+        const tinygltf::Value &b = v.Get("bounds");
+        if (!b.IsObject()) fail(DR_ERR_FORMAT, "%s/bounds: expected {\"min\": [..], \"max\": [..]}", ep.c_str());
+        med.grid.bmin = ext_vec3(b, "min", dr_v3s(0.0), ep + "/bounds");
+        med.grid.bmax = ext_vec3(b, "max", dr_v3s(0.0), ep + "/bounds");
+        if (!(med.grid.bmin.x < med.grid.bmax.x && med.grid.bmin.y < med.grid.bmax.y &&
+              med.grid.bmin.z < med.grid.bmax.z))
+            fail(DR_ERR_FORMAT, "%s/bounds: min must be below max on every axis", ep.c_str());
+    }
+}
+
+static dr_medium empty_medium(const char *name, int material)
+{
+    dr_medium m = {};
+    snprintf(m.name, sizeof m.name, "%s", name);
+    m.extinction = dr_v3s(0.0);
+    m.albedo = dr_v3s(0.0);
+    m.density_scale = 1.0;
+    m.material = material;
+    return m;
+}
+
+/* KHR_materials_volume: attenuation (sigma_t = -ln(colour) / distance);
+ * KHR_materials_volume_scatter: albedo and g; the boundary's transmission. */
+static void khr_volume(const tinygltf::Material &g, dr_medium &med, bool *index_matched)
+{
+    auto vol = g.extensions.find("KHR_materials_volume");
+    const tinygltf::Value &v = vol->second;
+    double dist = v.Has("attenuationDistance") && v.Get("attenuationDistance").IsNumber()
+                      ? v.Get("attenuationDistance").GetNumberAsDouble() : HUGE_VAL;
+    dr_vec3 col = dr_v3s(1.0);
+    const tinygltf::Value &c = v.Get("attenuationColor");
+    if (c.IsArray() && c.ArrayLen() == 3)
+        col = dr_v3(c.Get(0).GetNumberAsDouble(), c.Get(1).GetNumberAsDouble(), c.Get(2).GetNumberAsDouble());
+    for (int k = 0; k < 3; k++) {
+        double a = dr_clamp(dr_v3_get(col, k), 0.0, 1.0);
+        dr_v3_set(&med.extinction, k, a >= 1.0 || std::isinf(dist) ? 0.0 : (a <= 0.0 ? 1e4 : -std::log(a) / dist));
+    }
+    auto sc = g.extensions.find("KHR_materials_volume_scatter");
+    if (sc != g.extensions.end()) {
+        const tinygltf::Value &ms = sc->second.Get("multiscatterColor");
+        if (ms.IsArray() && ms.ArrayLen() == 3)
+            for (int k = 0; k < 3; k++)
+                dr_v3_set(&med.albedo, k, dr_albedo_from_multiscatter(ms.Get(k).GetNumberAsDouble()));
+        const tinygltf::Value &an = sc->second.Get("scatterAnisotropy");
+        if (an.IsNumber()) med.g = an.GetNumberAsDouble();
+    }
+    double transmission = 0.0, ior = 1.5;
+    auto tr = g.extensions.find("KHR_materials_transmission");
+    if (tr != g.extensions.end() && tr->second.Get("transmissionFactor").IsNumber())
+        transmission = tr->second.Get("transmissionFactor").GetNumberAsDouble();
+    auto io = g.extensions.find("KHR_materials_ior");
+    if (io != g.extensions.end() && io->second.Get("ior").IsNumber()) ior = io->second.Get("ior").GetNumberAsDouble();
+    *index_matched = transmission == 1.0 && ior == 1.0;
+}
+
+void Loader::load_material_medium(const tinygltf::Material &g, const std::string &mp, size_t index)
+{
+    material_medium_.resize(index + 1, -1);
+    bool has_vol = g.extensions.count("KHR_materials_volume") > 0;
+    auto dr = g.extensions.find("DR_medium");
+    if (!has_vol && dr == g.extensions.end()) {
+        if (g.extensions.count("KHR_materials_transmission"))
+            warn_once("transmission", "%s/extensions/KHR_materials_transmission: transmission without a medium "
+                      "(KHR_materials_volume or DR_medium) is not supported; rendered opaque", mp.c_str());
+        return;
+    }
+    dr_medium med = empty_medium(g.name.empty() ? strf("material_%zu", index).c_str() : g.name.c_str(), int(index));
+    if (has_vol) {
+        bool matched = false;
+        khr_volume(g, med, &matched);
+        if (!matched && dr == g.extensions.end())
+            fail(DR_ERR_FORMAT, "%s/extensions/KHR_materials_volume: only index-matched medium boundaries are "
+                 "supported: set KHR_materials_transmission.transmissionFactor to 1 and KHR_materials_ior.ior "
+                 "to 1 (or describe the medium with DR_medium)", mp.c_str());
+    }
+    media_.push_back(med);   /* owned (and released) by the loader from here */
+    if (dr != g.extensions.end()) read_medium_ext(dr->second, mp + "/extensions/DR_medium", media_.back());
+    material_medium_[index] = int(media_.size() - 1);
+}
+
+void Loader::load_global_medium()
+{
+    auto it = model_.extensions.find("DR_medium");
+    if (it == model_.extensions.end()) return;
+    const std::string ep = "/extensions/DR_medium";
+    media_.push_back(empty_medium("global", -1));
+    read_medium_ext(it->second, ep, media_.back());
+    const dr_medium &m = media_.back();
+    if (m.has_grid && !(m.grid.bmin.x < m.grid.bmax.x))
+        fail(DR_ERR_FORMAT, "%s/bounds: a global medium with a density grid needs bounds {min, max}", ep.c_str());
+}
+
+void Loader::finish_media()
+{
+    if (media_.empty()) return;
+    scene_->material_medium = static_cast<int *>(malloc(sizeof(int) * size_t(scene_->n_materials)));
+    if (!scene_->material_medium) throw std::bad_alloc();
+    scene_->global_medium = -1;
+    for (int i = 0; i < scene_->n_materials; i++)
+        scene_->material_medium[i] = size_t(i) < material_medium_.size() ? material_medium_[size_t(i)] : -1;
+    for (size_t i = 0; i < media_.size(); i++)
+        if (media_[i].material < 0) scene_->global_medium = int(i);
+    scene_->media = copy_out(media_);
+    if (!scene_->media) throw std::bad_alloc();
+    scene_->n_media = int(media_.size());
+    media_.clear();   /* the scene owns the grids now */
 }
 
 }  // namespace

@@ -7,6 +7,21 @@
 #include "accel.h"
 #include "material.h"
 
+struct dr_path_state;
+/* The stages are exported to the medium walker too (end of file), yet kept inlined into
+ * dr_path_step: a scene without media must not pay a call for that. */
+static inline bool stage_material(const struct dr_scene *s, const struct dr_path_opts *opts,
+                                  const struct dr_path_state *st, struct dr_sampler *sampler,
+                                  struct dr_path_vertex *v) __attribute__((always_inline));
+static inline void stage_escaped(const struct dr_scene *s, const struct dr_path_opts *opts,
+                                 const struct dr_path_state *st, struct dr_path_vertex *v)
+    __attribute__((always_inline));
+static inline void stage_surface_hit(const struct dr_scene *s, const struct dr_path_opts *opts,
+                                     const struct dr_path_state *st, int64_t tri, struct dr_path_vertex *v)
+    __attribute__((always_inline));
+static inline bool stage_continue(const struct dr_path_opts *opts, struct dr_path_state *st,
+                                  struct dr_path_vertex *v) __attribute__((always_inline));
+
 /* ------------------------------------------------------------------ plan */
 
 unsigned dr_path_plan(const struct dr_scene *s, const struct dr_param_set *ps)
@@ -21,6 +36,8 @@ unsigned dr_path_plan(const struct dr_scene *s, const struct dr_param_set *ps)
         st |= DR_STAGE_EMISSION;
     if (!dr_light_sampler_empty(s->light_sampler))
         st |= DR_STAGE_NEE;
+    if (s->n_media > 0)
+        st |= DR_STAGE_MEDIA;
     return st;
 }
 
@@ -30,6 +47,7 @@ void dr_path_stages_describe(unsigned stages, char *buf, int size)
         {DR_STAGE_ENV, "environment_lookup"},
         {DR_STAGE_EMISSION, "surface_emission"},
         {DR_STAGE_NEE, "next_event_estimation"},
+        {DR_STAGE_MEDIA, "participating_media"},
     };
     int n = 0;
     buf[0] = '\0';
@@ -241,12 +259,14 @@ static bool stage_continue(const struct dr_path_opts *opts, struct dr_path_state
 bool dr_path_step(const struct dr_scene *s, const struct dr_path_opts *opts, struct dr_path_state *st,
                   struct dr_sampler *sampler, struct dr_path_vertex *v, struct dr_ray_counts *counts)
 {
+    if (opts->stages & DR_STAGE_MEDIA)
+        return dr_medium_path_step(s, opts, st, sampler, v, counts);
     v->depth = ++st->depth;
     v->d = st->d;
     v->o = st->o;
     v->prev_pdf = st->prev_pdf;
     v->prev_p = st->prev_p;
-    v->emits = v->shaded = v->nee = v->cont = v->diff_bsdf = false;
+    v->emits = v->shaded = v->nee = v->cont = v->diff_bsdf = v->media = false;
 
     int64_t tri = stage_trace(s, st, counts);
     if (tri < 0) {
@@ -285,6 +305,8 @@ static void vertex_term_part(const struct dr_scene *s, const struct dr_param_set
 {
     if (v->emits) {
         dr_vec3 d_Le = dr_scale(d_e, v->emit_w);
+        if (v->media)
+            d_Le = dr_mul(d_Le, v->seg);   /* folded into Le by the medium walker */
         if (v->kind == DR_VERTEX_SURFACE)
             d_emission(s, ps, &v->hit, d_Le, sink);
         else
@@ -297,7 +319,8 @@ static void vertex_term_part(const struct dr_scene *s, const struct dr_param_set
                         NULL);
             d_material_eval(s, ps, &v->hit, &db, sink);
         }
-        d_light_radiance(s, ps, &v->ls, dr_scale(dr_mul(d_e, v->nee_f), v->nee_scale), sink);
+        dr_vec3 d_L = dr_scale(dr_mul(d_e, v->nee_f), v->nee_scale);
+        d_light_radiance(s, ps, &v->ls, v->media ? dr_mul(d_L, v->nee_tr) : d_L, sink);
     }
 }
 
@@ -342,4 +365,29 @@ void d_path_continuation(const struct dr_scene *s, const struct dr_param_set *ps
                          dr_vec3 d_f, struct dr_grad_sink *sink)
 {
     by_channel(continuation_part, s, ps, v, d_f, sink);
+}
+
+/* ------------------------------------------- stages for the medium walker */
+
+void dr_path_stage_escaped(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_state *st,
+                           struct dr_path_vertex *v)
+{
+    stage_escaped(s, opts, st, v);
+}
+
+void dr_path_stage_surface_hit(const struct dr_scene *s, const struct dr_path_opts *opts,
+                               const struct dr_path_state *st, int64_t tri, struct dr_path_vertex *v)
+{
+    stage_surface_hit(s, opts, st, tri, v);
+}
+
+bool dr_path_stage_material(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_state *st,
+                            struct dr_sampler *sampler, struct dr_path_vertex *v)
+{
+    return stage_material(s, opts, st, sampler, v);
+}
+
+bool dr_path_stage_continue(const struct dr_path_opts *opts, struct dr_path_state *st, struct dr_path_vertex *v)
+{
+    return stage_continue(opts, st, v);
 }

@@ -73,7 +73,8 @@ void d_mis_power(double pdf_a, double pdf_b, double d_w, double *d_pa, double *d
 enum dr_path_stage {
     DR_STAGE_ENV = 1 << 0,        /* escaped rays see an environment */
     DR_STAGE_EMISSION = 1 << 1,   /* some surface emits, or its emission is differentiated */
-    DR_STAGE_NEE = 1 << 2         /* there is a light to sample */
+    DR_STAGE_NEE = 1 << 2,        /* there is a light to sample */
+    DR_STAGE_MEDIA = 1 << 3       /* participating media: the medium walker (medium_path.c) */
 };
 
 struct dr_path_opts {
@@ -97,7 +98,8 @@ struct dr_vertex_randoms {
 
 enum dr_vertex_kind {
     DR_VERTEX_SURFACE,   /* the ray hit a triangle */
-    DR_VERTEX_ESCAPED    /* the ray left the scene (environment radiance, if any) */
+    DR_VERTEX_ESCAPED,   /* the ray left the scene (environment radiance, if any) */
+    DR_VERTEX_MEDIUM     /* a collision in a participating medium (hit.p; hit.tri = -1) */
 };
 
 struct dr_path_vertex {
@@ -107,6 +109,10 @@ struct dr_path_vertex {
     dr_vec3 o;                 /* and its origin */
     double prev_pdf;           /* the walker's state on arrival (dr_path_state) */
     dr_vec3 prev_p;
+    bool media;                /* from the medium walker (medium_path.c): seg and nee_tr hold */
+    dr_vec3 seg;               /* spectral MIS weight change over the segment that arrived
+                                  here; already folded into Le and ls.radiance */
+    int medium;                /* medium vertex: its medium; else the medium the ray came through (-1) */
     struct dr_hit hit;
     /* emission seen here (surface) or environment radiance (escaped) */
     bool emits;                /* Le is evaluated (and differentiable) here */
@@ -126,6 +132,7 @@ struct dr_path_vertex {
     dr_vec3 nee_wi;            /* local */
     dr_vec3 nee_f;             /* BSDF value towards the light */
     double nee_scale;          /* |cos| * MIS weight / pdf */
+    dr_vec3 nee_tr;            /* media: transmittance to the light times seg, folded into ls.radiance */
     /* continuation */
     bool cont;                 /* the path goes on from here */
     dr_vec3 wi;                /* local, sampled */
@@ -212,6 +219,10 @@ struct dr_path_state {
     int depth;               /* segments traced so far */
     dr_vec3 beta;            /* tracing throughput (with substitutes) */
     dr_vec3 ratio;           /* true / tracing throughput, per channel: 1 or 0 */
+    /* media scenes only (medium_path.c): */
+    int medium;              /* the medium the ray travels in */
+    int hero;                /* spectral MIS: the channel deciding collisions */
+    double mis_r[3];         /* ... and each channel's event probability so far (relative) */
 };
 
 void dr_path_start(struct dr_path_state *st, dr_vec3 o, dr_vec3 d);
@@ -230,6 +241,19 @@ void dr_path_nee(const struct dr_scene *scene, struct dr_path_vertex *v, struct 
  * differentiate, which is what `render` computes. */
 dr_vec3 dr_path_radiance(const struct dr_scene *scene, const struct dr_path_opts *opts, dr_vec3 o, dr_vec3 d,
                          struct dr_sampler *sampler, struct dr_ray_counts *counts);
+
+/* The stages, for the medium walker (medium_path.c), which strings them
+ * together with free-flight sampling and boundary crossings. */
+void dr_path_stage_escaped(const struct dr_scene *scene, const struct dr_path_opts *opts,
+                           const struct dr_path_state *st, struct dr_path_vertex *v);
+void dr_path_stage_surface_hit(const struct dr_scene *scene, const struct dr_path_opts *opts,
+                               const struct dr_path_state *st, int64_t tri, struct dr_path_vertex *v);
+bool dr_path_stage_material(const struct dr_scene *scene, const struct dr_path_opts *opts,
+                            const struct dr_path_state *st, struct dr_sampler *sampler, struct dr_path_vertex *v);
+bool dr_path_stage_continue(const struct dr_path_opts *opts, struct dr_path_state *st, struct dr_path_vertex *v);
+/* dr_path_step for scenes with media (medium_path.c). */
+bool dr_medium_path_step(const struct dr_scene *scene, const struct dr_path_opts *opts, struct dr_path_state *st,
+                         struct dr_sampler *sampler, struct dr_path_vertex *v, struct dr_ray_counts *counts);
 
 /* Substitute factor for zero BSDF channels at differentiated vertices. */
 #define DR_PATH_SUBSTITUTE DR_INV_PI

@@ -9,6 +9,7 @@
 #include "geometry.h"
 #include "image_io.h"
 #include "lights.h"
+#include "medium_scene.h"
 
 struct dr_scene *dr_scene_load(const char *path)
 {
@@ -74,6 +75,8 @@ int dr_scene_refresh(struct dr_scene *s)
         s->effects |= DR_FX_PUNCTUAL_LIGHTS;
     if (s->env.present)
         s->effects |= s->env.map.data ? DR_FX_ENV_MAP : DR_FX_ENV_CONSTANT;
+    if (s->n_media > 0)
+        return dr_media_refresh(s);
     return 0;
 }
 
@@ -112,7 +115,10 @@ int dr_scene_prepare(struct dr_scene *s)
         dr_set_error("out of memory");
         return DR_ERR_NOMEM;
     }
-    int rc = dr_scene_refresh(s);
+    int rc = s->n_media > 0 ? dr_media_prepare(s) : 0;
+    if (rc != 0)
+        return rc;
+    rc = dr_scene_refresh(s);
     if (rc != 0)
         return rc;
     s->accel = dr_accel_create(&s->mesh);
@@ -145,6 +151,7 @@ void dr_scene_destroy(struct dr_scene *s)
     free(s->images);
     free(s->cameras);
     free(s->lights);
+    dr_media_release(s);
     dr_image_release(&s->env.map);
     free(s->path);
     free(s);
@@ -156,7 +163,8 @@ void dr_effects_describe(unsigned fx, char *buf, int size)
         {DR_FX_AREA_LIGHTS, "area_lights"},     {DR_FX_PUNCTUAL_LIGHTS, "punctual_lights"},
         {DR_FX_ENV_CONSTANT, "environment"},    {DR_FX_ENV_MAP, "environment_map"},
         {DR_FX_TEXTURES, "textures"},           {DR_FX_SPECULAR, "specular"},
-        {DR_FX_SHADING_NORMALS, "shading_normals"},
+        {DR_FX_SHADING_NORMALS, "shading_normals"}, {DR_FX_MEDIA, "media"},
+        {DR_FX_HETEROGENEOUS_MEDIA, "heterogeneous_media"},
     };
     int n = 0;
     buf[0] = '\0';

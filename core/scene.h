@@ -92,6 +92,7 @@ struct dr_environment {
 
 struct dr_accel;
 struct dr_light_sampler;
+struct dr_medium;   /* medium.h */
 
 /* Effects a render of this scene needs, decided once in dr_scene_prepare. */
 enum dr_effect {
@@ -101,7 +102,9 @@ enum dr_effect {
     DR_FX_ENV_MAP = 1 << 3,
     DR_FX_TEXTURES = 1 << 4,
     DR_FX_SPECULAR = 1 << 5,     /* some material has a non-zero specular lobe */
-    DR_FX_SHADING_NORMALS = 1 << 6
+    DR_FX_SHADING_NORMALS = 1 << 6,
+    DR_FX_MEDIA = 1 << 7,              /* some participating medium (medium.h) */
+    DR_FX_HETEROGENEOUS_MEDIA = 1 << 8 /* ... with a density grid */
 };
 
 struct dr_scene {
@@ -115,6 +118,10 @@ struct dr_scene {
     struct dr_punctual *lights; int n_lights;
     struct dr_environment env;
     dr_vec3 bbox_min, bbox_max;
+    /* participating media (all NULL / 0 without any): */
+    struct dr_medium *media; int n_media;
+    int *material_medium;         /* per material: the medium it bounds, -1; NULL without media */
+    int global_medium;            /* the medium outside every medium mesh, -1: vacuum */
 
     /* built by dr_scene_prepare() */
     struct dr_accel *accel;

@@ -147,6 +147,14 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
         dr_set_error("estimator '%s' does not implement %s sampling", e->name, dr_sampling_name(p->sampling));
         return DR_ERR_ARG;
     }
+    /* The attached adjoints (path_attached.c) know surfaces only: a path
+     * through a medium would silently lose its moving terms. */
+    if (dr_est_sampling_run(p) == DR_SAMPLING_ATTACHED && (p->scene->effects & DR_FX_MEDIA)) {
+        dr_set_error("attached sampling does not handle participating media yet (the scene has %d medi%s); use "
+                     "--sampling detached",
+                     p->scene->n_media, p->scene->n_media == 1 ? "um" : "a");
+        return DR_ERR_ARG;
+    }
     struct dr_est_base *b = calloc(1, e->job_size);
     if (!b) {
         dr_set_error("out of memory");

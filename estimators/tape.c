@@ -130,9 +130,13 @@ static void sweep(const struct tape_job *j, const struct tape_vertex *verts, int
         dr_vec3 bt = verts[k].bt;
         dr_vec3 t = dr_v3s(0.0);
         if (v->cont) {
+            /* in media the throughput also took the segment's weight (path.h) */
+            dr_vec3 bts = v->media ? dr_mul(bt, v->seg) : bt;
             if (v->diff_bsdf)
-                d_path_continuation(s, ps, v, dr_scale(dr_mul(abar, bt), v->cos_pdf_q), sink);
+                d_path_continuation(s, ps, v, dr_scale(dr_mul(abar, bts), v->cos_pdf_q), sink);
             t = dr_scale(v->f, v->cos_pdf_q);
+            if (v->media)
+                t = dr_mul(t, v->seg);
         }
         d_path_vertex_term(s, ps, v, dr_mul(adj, bt), sink);
         abar = dr_add(dr_mul(adj, dr_path_vertex_term(v)), dr_mul(abar, t));

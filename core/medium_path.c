@@ -1,0 +1,235 @@
+/* The path walker's step for scenes with participating media (path.h:
+ * dr_path_step hands over here when DR_STAGE_MEDIA is planned; a scene
+ * without media never comes here).
+ *
+ * A step traces the current ray, samples a free flight in the current medium
+ * up to the hit (delta tracking with spectral MIS, medium.h), and then either scatters in
+ * the medium (a medium vertex: HG phase next-event estimation and phase
+ * sampling), crosses an index-matched boundary (the medium changes, the ray
+ * goes on within the same step: boundaries are not vertices), escapes, or
+ * reaches an ordinary surface (the stages of path.c, with shadow rays that
+ * estimate transmittance through media and boundaries).
+ *
+ * Spectral MIS (medium.h) weights what the path gathers at a vertex by
+ * r / mean(r) of the events so far; the change of that weight over the
+ * segment arriving at a vertex is the vertex's `seg`: folded into what the
+ * vertex adds (Le, ls.radiance; path.h keeps seg for the derivatives) and
+ * into the throughput. Tracking draws its uniforms from streams of their own (keyed by
+ * the path's sampler and the depth), so the vertex's block of dimensions is
+ * the same as without media and a replay draws the same numbers. */
+#include <math.h>
+
+#include "accel.h"
+#include "medium_scene.h"
+#include "path.h"
+
+/* Boundaries one segment may cross before the path gives up. */
+#define MAX_CROSSINGS 256
+
+enum { STREAM_FREE_FLIGHT = 1, STREAM_SHADOW = 2, STREAM_HERO = 3 };
+
+static struct dr_sampler tracking_stream(const struct dr_sampler *smp, int depth, uint64_t which)
+{
+    /* free-flight and tracking numbers: independent hashes, whatever the sampler */
+    struct dr_sampler r = {.key = dr_hash64(smp->key ^ (which * 0x632be59bd9b4e019ULL)),
+                           .dim = (uint32_t)depth << 20, .kind = DR_SAMPLER_INDEPENDENT};
+    return r;
+}
+
+static void draw_vertex_randoms(struct dr_sampler *sampler, int depth, struct dr_vertex_randoms *u)
+{
+    sampler->dim = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)(depth - 1);
+    u->light_pick = dr_sampler_next(sampler);
+    dr_sampler_next2(sampler, &u->light_u1, &u->light_u2);   /* as stage_material in path.c */
+    u->lobe = dr_sampler_next(sampler);
+    dr_sampler_next2(sampler, &u->bsdf_u1, &u->bsdf_u2);
+    u->rr = dr_sampler_next(sampler);
+}
+
+/* Next-event estimation from a surface or medium vertex: the light sample,
+ * the BSDF or phase value towards it, and the transmittance to it through
+ * media; that and the segment's weight are folded into ls.radiance. */
+static void media_nee(const struct dr_scene *s, struct dr_path_vertex *v, const struct dr_sampler *smp,
+                      struct dr_ray_counts *counts)
+{
+    const struct dr_vertex_randoms *u = &v->u;
+    const bool in_medium = v->kind == DR_VERTEX_MEDIUM;
+    if (!dr_light_sample(s, s->light_sampler, v->hit.p, u->light_pick, u->light_u1, u->light_u2, &v->ls))
+        return;
+    double pdf, cosine = 1.0;
+    dr_vec3 so = v->hit.p;
+    if (in_medium) {
+        v->nee_wi = v->ls.wi;
+        pdf = dr_hg_eval(s->media[v->medium].g, dr_dot(v->d, v->ls.wi));
+        v->nee_f = dr_v3s(pdf);
+    } else {
+        if (dr_dot(v->ls.wi, v->ng) <= 0.0)
+            return;
+        v->nee_wi = dr_frame_to_local(&v->frame, v->ls.wi);
+        v->nee_f = dr_bsdf_eval_pdf(&v->bsdf, v->wo, v->nee_wi, &pdf);
+        if (dr_is_black(v->nee_f) && !v->diff_bsdf)
+            return;
+        so = dr_offset_origin(&v->hit, v->ng, v->ls.wi);
+        cosine = fabs(v->nee_wi.z);
+    }
+    dr_vec3 sd = v->ls.wi;
+    double tmax = INFINITY;
+    if (!isinf(v->ls.dist)) {
+        sd = dr_sub(v->ls.target, so);
+        tmax = dr_length(sd);
+        sd = dr_scale(sd, 1.0 / tmax);
+    }
+    if (!(tmax > 0.0))
+        return;
+    struct dr_sampler rng = tracking_stream(smp, v->depth, STREAM_SHADOW);
+    dr_vec3 tr = dr_media_transmittance(s, so, sd, tmax, v->medium, &rng, &counts->shadow);
+    if (dr_is_black(tr))
+        return;
+    double w = v->ls.delta ? 1.0 : dr_mis_power(v->ls.pdf, pdf);
+    v->nee_scale = cosine * w / v->ls.pdf;
+    v->nee_tr = dr_mul(tr, v->seg);
+    v->ls.radiance = dr_mul(v->ls.radiance, v->nee_tr);
+    v->nee = true;
+}
+
+/* A scattering collision at p: NEE, then a phase-sampled continuation with
+ * Russian roulette as at surfaces. The phase function is its own sampling
+ * density, so the throughput changes only by the roulette. */
+static bool medium_vertex(const struct dr_scene *s, const struct dr_path_opts *opts, struct dr_path_state *st,
+                          struct dr_sampler *sampler, struct dr_path_vertex *v, dr_vec3 p,
+                          struct dr_ray_counts *counts)
+{
+    v->kind = DR_VERTEX_MEDIUM;
+    v->hit = (struct dr_hit){.tri = -1, .p = p, .material = -1};
+    if (st->depth >= opts->max_depth)
+        return false;
+    v->shaded = true;
+    v->frame = (dr_frame){dr_v3(1, 0, 0), dr_v3(0, 1, 0), dr_v3(0, 0, 1)};   /* local = world */
+    v->wo = dr_neg(st->d);
+    draw_vertex_randoms(sampler, st->depth, &v->u);
+    if (opts->stages & DR_STAGE_NEE)
+        media_nee(s, v, sampler, counts);
+
+    dr_vec3 wi;
+    double pdf = dr_hg_sample(s->media[v->medium].g, st->d, v->u.bsdf_u1, v->u.bsdf_u2, &wi);
+    if (!(pdf > 0.0))
+        return false;
+    v->wi = wi;
+    v->f = v->s = dr_v3s(pdf);
+    v->pdf = pdf;
+    v->sub[0] = v->sub[1] = v->sub[2] = false;
+    /* Russian roulette only once the throughput has dropped below 1 (as in
+     * pbrt-v4's volumetric path tracer): a survival cap below 1 would make
+     * the long walks of a bright, dense medium a heavy-tailed lottery (a white
+     * medium of optical depth 2e4 averaged 0.8 instead of 1 with the 0.95 cap). */
+    double q = 1.0;
+    if (st->depth >= opts->rr_depth) {
+        q = dr_min(dr_max3(st->beta), 1.0);
+        if (v->u.rr >= q)
+            return false;
+    }
+    v->cos_pdf_q = 1.0 / (pdf * q);
+    v->cont = true;
+    st->beta = dr_scale(st->beta, 1.0 / q);
+    st->prev_pdf = pdf;
+    st->prev_p = p;
+    st->o = p;
+    st->d = wi;
+    return true;
+}
+
+/* An ordinary surface: the stages of path.c with media-aware shadow rays. */
+static bool surface_vertex(const struct dr_scene *s, const struct dr_path_opts *opts, struct dr_path_state *st,
+                           struct dr_sampler *sampler, struct dr_path_vertex *v, int64_t tri,
+                           struct dr_ray_counts *counts)
+{
+    dr_path_stage_surface_hit(s, opts, st, tri, v);
+    if (v->emits)
+        v->Le = dr_mul(v->Le, v->seg);
+    if (!dr_path_stage_material(s, opts, st, sampler, v))
+        return false;
+    if (opts->stages & DR_STAGE_NEE)
+        media_nee(s, v, sampler, counts);
+    return dr_path_stage_continue(opts, st, v);
+}
+
+/* Ends the segment arriving at v: its spectral MIS weight change is v->seg
+ * (the vertex's terms carry the path's weight r / mean(r), path.h), and the
+ * throughput takes it on. */
+static void end_segment(struct dr_path_state *st, struct dr_path_vertex *v, const struct dr_spectral_mis *mis,
+                        dr_vec3 w_before)
+{
+    dr_vec3 w = dr_spectral_mis_weight(mis);
+    for (int c = 0; c < 3; c++) {
+        double b = dr_v3_get(w_before, c);
+        dr_v3_set(&v->seg, c, b > 0.0 ? dr_v3_get(w, c) / b : 0.0);
+        st->mis_r[c] = mis->r[c];
+    }
+    st->beta = dr_mul(st->beta, v->seg);
+}
+
+static void start_path(const struct dr_scene *s, struct dr_path_state *st, const struct dr_sampler *sampler)
+{
+    st->medium = dr_medium_at(s, st->o, st->d);
+    struct dr_sampler rng = tracking_stream(sampler, 0, STREAM_HERO);
+    int hero = (int)(dr_sampler_next(&rng) * 3.0);
+    st->hero = hero > 2 ? 2 : hero;
+    st->mis_r[0] = st->mis_r[1] = st->mis_r[2] = 1.0;
+}
+
+bool dr_medium_path_step(const struct dr_scene *s, const struct dr_path_opts *opts, struct dr_path_state *st,
+                         struct dr_sampler *sampler, struct dr_path_vertex *v, struct dr_ray_counts *counts)
+{
+    v->depth = ++st->depth;
+    v->d = st->d;
+    v->seg = dr_v3s(1.0);
+    v->emits = v->shaded = v->nee = v->cont = v->diff_bsdf = false;
+    v->media = true;
+    if (st->depth == 1)
+        start_path(s, st, sampler);
+    struct dr_sampler rng = tracking_stream(sampler, st->depth, STREAM_FREE_FLIGHT);
+    struct dr_spectral_mis mis = {st->hero, {st->mis_r[0], st->mis_r[1], st->mis_r[2]}};
+    const dr_vec3 w_before = dr_spectral_mis_weight(&mis);
+    for (int crossing = 0; crossing < MAX_CROSSINGS; crossing++) {
+        if (st->depth == 1 && crossing == 0)
+            counts->camera++;
+        else
+            counts->extension++;
+        v->medium = st->medium;
+        int64_t tri = dr_accel_intersect(s->accel, st->o, st->d, 0.0, INFINITY);
+        struct dr_hit h;
+        double thit = INFINITY;
+        if (tri >= 0) {
+            dr_hit_compute(&s->mesh, tri, st->o, st->d, &h);
+            thit = dr_dot(dr_sub(h.p, st->o), st->d);
+        }
+        if (st->medium >= 0) {
+            double t;
+            enum dr_medium_event ev = dr_medium_sample(&s->media[st->medium], st->o, st->d, thit, &rng, &mis, &t);
+            if (ev == DR_MEDIUM_ABSORB) {
+                v->kind = DR_VERTEX_MEDIUM;
+                v->hit = (struct dr_hit){.tri = -1, .p = dr_madd(st->o, st->d, t), .material = -1};
+                v->seg = dr_v3s(0.0);
+                st->beta = dr_v3s(0.0);
+                return false;
+            }
+            if (ev == DR_MEDIUM_SCATTER) {
+                end_segment(st, v, &mis, w_before);
+                return medium_vertex(s, opts, st, sampler, v, dr_madd(st->o, st->d, t), counts);
+            }
+        }
+        int med = tri >= 0 ? dr_boundary_medium(s, tri) : -1;
+        if (tri < 0 || med < 0) {
+            end_segment(st, v, &mis, w_before);
+            if (tri < 0) {
+                dr_path_stage_escaped(s, opts, st, v);
+                v->Le = dr_mul(v->Le, v->seg);
+                return false;
+            }
+            return surface_vertex(s, opts, st, sampler, v, tri, counts);
+        }
+        st->medium = h.front ? med : s->global_medium;
+        st->o = dr_offset_origin(&h, h.ng, st->d);
+    }
+    return false;
+}

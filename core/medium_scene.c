@@ -1,0 +1,217 @@
+/* Participating media in a scene (medium_scene.h). */
+#include "medium_scene.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "accel.h"
+#include "error.h"
+#include "geometry.h"
+
+/* --------------------------------------------------------- closed meshes */
+
+struct edge {
+    uint32_t a, b;   /* welded vertex ids, a < b */
+    int dir;         /* +1: a -> b in the triangle's winding, -1: b -> a */
+};
+
+static const float *weld_pos;
+
+static int cmp_vertex(const void *x, const void *y)
+{
+    const float *p = weld_pos + 3 * (size_t)*(const uint32_t *)x, *q = weld_pos + 3 * (size_t)*(const uint32_t *)y;
+    return memcmp(p, q, 3 * sizeof(float));
+}
+
+static int cmp_edge(const void *x, const void *y)
+{
+    const struct edge *e = x, *f = y;
+    if (e->a != f->a)
+        return e->a < f->a ? -1 : 1;
+    return e->b < f->b ? -1 : (e->b > f->b ? 1 : 0);
+}
+
+/* Vertex ids with equal positions merged (primitives split vertices for
+ * normals and uvs; a closed surface is closed in positions). */
+static uint32_t *weld(const struct dr_mesh *m)
+{
+    uint32_t *order = malloc(sizeof(uint32_t) * m->n_vertices), *id = malloc(sizeof(uint32_t) * m->n_vertices);
+    if (!order || !id) {
+        free(order);
+        free(id);
+        return NULL;
+    }
+    for (uint32_t i = 0; i < m->n_vertices; i++)
+        order[i] = i;
+    weld_pos = m->positions;
+    qsort(order, m->n_vertices, sizeof *order, cmp_vertex);
+    for (uint32_t i = 0; i < m->n_vertices; i++)
+        id[order[i]] = i > 0 && cmp_vertex(&order[i - 1], &order[i]) == 0 ? id[order[i - 1]] : order[i];
+    free(order);
+    return id;
+}
+
+/* Every edge of the material's triangles is shared by exactly two of them,
+ * wound oppositely (so inside and outside are well defined). */
+static int check_closed(const struct dr_scene *s, int material, const uint32_t *id)
+{
+    const struct dr_mesh *m = &s->mesh;
+    size_t n = 0;
+    for (uint32_t t = 0; t < m->n_triangles; t++)
+        n += m->material[t] == material ? 3 : 0;
+    struct edge *e = malloc(sizeof *e * (n ? n : 1));
+    if (!e) {
+        dr_set_error("out of memory");
+        return DR_ERR_NOMEM;
+    }
+    size_t k = 0;
+    for (uint32_t t = 0; t < m->n_triangles; t++)
+        for (int j = 0; m->material[t] == material && j < 3; j++) {
+            uint32_t a = id[m->indices[3 * t + j]], b = id[m->indices[3 * t + (j + 1) % 3]];
+            e[k++] = a < b ? (struct edge){a, b, 1} : (struct edge){b, a, -1};
+        }
+    qsort(e, n, sizeof *e, cmp_edge);
+    const char *problem = NULL;
+    for (size_t i = 0; i < n && !problem;) {
+        size_t j = i;
+        int sum = 0;
+        while (j < n && e[j].a == e[i].a && e[j].b == e[i].b)
+            sum += e[j++].dir;
+        if (j - i != 2)
+            problem = j - i == 1 ? "an edge belongs to only one triangle (the mesh is open)"
+                                 : "an edge is shared by more than two triangles";
+        else if (sum != 0)
+            problem = "two triangles sharing an edge are wound the same way (inconsistent orientation)";
+        i = j;
+    }
+    free(e);
+    if (n == 0)
+        problem = "no triangle uses this material";
+    if (problem) {
+        dr_set_error("%s: /materials/%d (%s): a medium boundary must be a closed mesh: %s", s->path, material,
+                     s->materials[material].name, problem);
+        return DR_ERR_FORMAT;
+    }
+    return 0;
+}
+
+/* The world bounds of the material's triangles: the default grid box. */
+static void material_bounds(const struct dr_mesh *m, int material, dr_vec3 *lo, dr_vec3 *hi)
+{
+    *lo = dr_v3s(INFINITY);
+    *hi = dr_v3s(-INFINITY);
+    for (uint32_t t = 0; t < m->n_triangles; t++)
+        for (int j = 0; m->material[t] == material && j < 3; j++) {
+            dr_vec3 p = dr_mesh_vertex(m, m->indices[3 * t + j]);
+            *lo = dr_v3(fmin(lo->x, p.x), fmin(lo->y, p.y), fmin(lo->z, p.z));
+            *hi = dr_v3(fmax(hi->x, p.x), fmax(hi->y, p.y), fmax(hi->z, p.z));
+        }
+}
+
+int dr_media_prepare(struct dr_scene *s)
+{
+    uint32_t *id = weld(&s->mesh);
+    if (!id && s->mesh.n_vertices) {
+        dr_set_error("out of memory");
+        return DR_ERR_NOMEM;
+    }
+    int rc = 0;
+    for (int i = 0; i < s->n_media && rc == 0; i++) {
+        struct dr_medium *med = &s->media[i];
+        if (med->material < 0)
+            continue;
+        rc = check_closed(s, med->material, id);
+        if (rc != 0)
+            break;
+        material_bounds(&s->mesh, med->material, &med->bmin, &med->bmax);
+        /* a little slack: the boundary's own rounding */
+        dr_vec3 slack = dr_v3s(1e-4 * dr_max3(dr_sub(med->bmax, med->bmin)));
+        med->bmin = dr_sub(med->bmin, slack);
+        med->bmax = dr_add(med->bmax, slack);
+        med->bounded = true;
+        struct dr_grid *g = &med->grid;
+        if (med->has_grid && !(g->bmin.x < g->bmax.x)) {
+            material_bounds(&s->mesh, med->material, &g->bmin, &g->bmax);
+        }
+    }
+    free(id);
+    return rc;
+}
+
+int dr_media_refresh(struct dr_scene *s)
+{
+    s->effects |= DR_FX_MEDIA;
+    for (int i = 0; i < s->n_media; i++)
+        if (s->media[i].has_grid) {
+            s->effects |= DR_FX_HETEROGENEOUS_MEDIA;
+            int rc = dr_grid_build_majorants(&s->media[i].grid);
+            if (rc != 0)
+                return rc;
+        }
+    return 0;
+}
+
+void dr_media_release(struct dr_scene *s)
+{
+    for (int i = 0; i < s->n_media; i++)
+        dr_grid_release(&s->media[i].grid);
+    free(s->media);
+    free(s->material_medium);
+    s->media = NULL;
+    s->material_medium = NULL;
+    s->n_media = 0;
+}
+
+/* ------------------------------------------------------------- queries */
+
+/* Boundaries crossed before giving up (a ray grazing many thin shells). */
+#define MAX_CROSSINGS 256
+
+int dr_medium_at(const struct dr_scene *s, dr_vec3 o, dr_vec3 d)
+{
+    for (int i = 0; i < MAX_CROSSINGS; i++) {
+        int64_t tri = dr_accel_intersect(s->accel, o, d, 0.0, INFINITY);
+        if (tri < 0)
+            return s->global_medium;
+        struct dr_hit h;
+        dr_hit_compute(&s->mesh, tri, o, d, &h);
+        int med = dr_boundary_medium(s, tri);
+        if (med >= 0)
+            return h.front ? s->global_medium : med;
+        o = dr_offset_origin(&h, h.front ? dr_neg(h.ng) : h.ng, d);   /* an ordinary surface: look past it */
+    }
+    return s->global_medium;
+}
+
+dr_vec3 dr_media_transmittance(const struct dr_scene *s, dr_vec3 o, dr_vec3 d, double tmax, int medium,
+                               struct dr_sampler *rng, uint64_t *rays)
+{
+    dr_vec3 T = dr_v3s(1.0);
+    for (int i = 0; i < MAX_CROSSINGS; i++) {
+        ++*rays;
+        int64_t tri = dr_accel_intersect(s->accel, o, d, 0.0, tmax);
+        struct dr_hit h;
+        double seg = tmax;
+        if (tri >= 0) {
+            dr_hit_compute(&s->mesh, tri, o, d, &h);
+            seg = dr_dot(dr_sub(h.p, o), d);
+        }
+        if (medium >= 0)
+            T = dr_mul(T, dr_medium_transmittance(&s->media[medium], o, d, seg, rng));
+        if (tri < 0 || dr_is_black(T))
+            return T;
+        int med = dr_boundary_medium(s, tri);
+        if (med < 0)
+            return dr_v3s(0.0);   /* an ordinary surface blocks the light */
+        medium = h.front ? med : s->global_medium;
+        dr_vec3 next = dr_offset_origin(&h, h.front ? dr_neg(h.ng) : h.ng, d);
+        if (!isinf(tmax))
+            tmax -= dr_dot(dr_sub(next, o), d);
+        o = next;
+        if (!(tmax > 0.0))
+            return T;
+    }
+    return T;
+}

@@ -1,0 +1,35 @@
+/* Participating media in a scene: preparation, checks, and the queries the
+ * path walker makes where media exist (medium_path.c). Nothing here runs for
+ * a scene without media (dr_path_plan leaves DR_STAGE_MEDIA unset). */
+#ifndef DR_MEDIUM_SCENE_H
+#define DR_MEDIUM_SCENE_H
+
+#include "medium.h"
+#include "sampler.h"
+#include "scene.h"
+
+/* After loading: grid boxes of mesh media (the mesh's bounds unless given),
+ * closedness of every medium boundary. 0 or DR_ERR_* naming file and JSON path. */
+int dr_media_prepare(struct dr_scene *scene);
+/* After parameters changed: majorants, effect flags. 0 or DR_ERR_NOMEM. */
+int dr_media_refresh(struct dr_scene *scene);
+void dr_media_release(struct dr_scene *scene);
+
+/* The medium bounded by triangle tri's material, -1: an ordinary surface. */
+static inline int dr_boundary_medium(const struct dr_scene *s, int64_t tri)
+{
+    return s->material_medium[s->mesh.material[tri]];
+}
+
+/* The medium containing point o (-1: vacuum): the first medium boundary along
+ * direction d says (its back seen: inside it). */
+int dr_medium_at(const struct dr_scene *scene, dr_vec3 o, dr_vec3 d);
+
+/* Transmittance from o along d (unit) over distance tmax (INFINITY: to the
+ * environment) starting in medium `medium`, through index-matched
+ * boundaries; 0 when an ordinary surface is in the way. *rays counts the
+ * ray queries. */
+dr_vec3 dr_media_transmittance(const struct dr_scene *scene, dr_vec3 o, dr_vec3 d, double tmax, int medium,
+                               struct dr_sampler *rng, uint64_t *rays);
+
+#endif
