@@ -35,6 +35,7 @@ struct dr_grad_problem {
     int threads;               /* <= 0: one per CPU (at most DR_MAX_THREADS) */
     int64_t batch;             /* tape: paths per record/sweep (0: one sample of every pixel) */
     enum dr_sampling sampling;
+    enum dr_medium_grad medium_grad;   /* media: DRT (default, 0) or the biased baseline (path.h) */
 };
 
 struct dr_grad_stats {
