@@ -185,8 +185,11 @@ enum dr_medium_event dr_medium_sample(const struct dr_medium *m, dr_vec3 o, dr_v
 }
 
 /* Ratio tracking with Russian roulette once the estimate is small, so a
- * dense grid does not walk thousands of null collisions for nothing. */
-static dr_vec3 ratio_tracking(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double tmax, struct dr_sampler *rng)
+ * dense grid does not walk thousands of null collisions for nothing.
+ * visit (may be NULL) sees every collision: the baseline derivative replays
+ * the same collisions with the same random numbers. */
+static dr_vec3 ratio_tracking(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double tmax, struct dr_sampler *rng,
+                              dr_medium_visit_fn visit, void *ctx)
 {
     struct majorant_walk w;
     double t0, t1, maj;
@@ -199,7 +202,10 @@ static dr_vec3 ratio_tracking(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, d
             t -= log1p(-dr_sampler_next(rng)) / maj;
             if (!(t < t1))
                 break;
-            dr_vec3 st = dr_medium_sigma_t(m, dr_madd(o, d, t));
+            dr_vec3 x = dr_madd(o, d, t);
+            dr_vec3 st = dr_medium_sigma_t(m, x);
+            if (visit)
+                visit(ctx, x, maj);
             T = dr_mul(T, dr_v3(dr_max(1.0 - st.x / maj, 0.0), dr_max(1.0 - st.y / maj, 0.0),
                                 dr_max(1.0 - st.z / maj, 0.0)));
             double tm = dr_max3(T);
@@ -215,10 +221,45 @@ static dr_vec3 ratio_tracking(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, d
     return T;
 }
 
+void dr_medium_replay_ratio_tracking(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double tmax,
+                                     struct dr_sampler *rng, dr_medium_visit_fn visit, void *ctx)
+{
+    if (m->has_grid)
+        ratio_tracking(m, o, d, tmax, rng, visit, ctx);
+}
+
+void dr_medium_replay_nulls(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double len, struct dr_sampler *rng,
+                            dr_medium_visit_fn visit, void *ctx)
+{
+    struct majorant_walk walk;
+    double t0, t1, maj;
+    walk_start(&walk, m, o, d, len);
+    while (walk_next(&walk, &t0, &t1, &maj)) {
+        if (!(maj > 0.0))
+            continue;
+        for (double t = t0;;) {
+            t -= log1p(-dr_sampler_next(rng)) / maj;
+            if (!(t < t1))
+                break;
+            dr_sampler_next(rng);   /* the event's number: it was a null collision */
+            visit(ctx, dr_madd(o, d, t), maj);
+        }
+    }
+}
+
+bool dr_medium_clip(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double *t0, double *t1)
+{
+    if (m->bounded && !clip_to_box(m->bmin, m->bmax, o, d, t0, t1))
+        return false;
+    if (m->has_grid && !clip_to_box(m->grid.bmin, m->grid.bmax, o, d, t0, t1))
+        return false;
+    return *t0 < *t1;
+}
+
 dr_vec3 dr_medium_transmittance(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double tmax, struct dr_sampler *rng)
 {
     if (m->has_grid)
-        return ratio_tracking(m, o, d, tmax, rng);
+        return ratio_tracking(m, o, d, tmax, rng, NULL, NULL);
     dr_vec3 s = dr_scale(m->extinction, m->density_scale);
     if (isinf(tmax))
         return dr_v3(s.x > 0.0 ? 0.0 : 1.0, s.y > 0.0 ? 0.0 : 1.0, s.z > 0.0 ? 0.0 : 1.0);
@@ -231,6 +272,14 @@ double dr_hg_eval(double g, double cos_theta)
 {
     double denom = 1.0 + g * g - 2.0 * g * cos_theta;
     return (1.0 - g * g) / (4.0 * M_PI * denom * sqrt(denom));
+}
+
+/* p = (1 - g^2) / (4 pi D^1.5), D = 1 + g^2 - 2 g mu:
+ * d ln p / dg = -2 g / (1 - g^2) - 1.5 (2 g - 2 mu) / D. */
+double dr_hg_dlog_dg(double g, double mu)
+{
+    double D = 1.0 + g * g - 2.0 * g * mu;
+    return -2.0 * g / (1.0 - g * g) - 3.0 * (g - mu) / D;
 }
 
 double dr_hg_sample(double g, dr_vec3 d, double u1, double u2, dr_vec3 *wi)

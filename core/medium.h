@@ -101,6 +101,20 @@ enum dr_medium_event dr_medium_sample(const struct dr_medium *m, dr_vec3 o, dr_v
 dr_vec3 dr_medium_transmittance(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double tmax,
                                 struct dr_sampler *rng);
 
+/* Replays for the baseline derivative (medium_grad.c): the same tentative
+ * collisions as dr_medium_sample over [0, len) of a stretch that ended there
+ * (so all of them were null collisions) / as the transmittance estimate,
+ * from the same random numbers; visit sees each point and its majorant. */
+typedef void (*dr_medium_visit_fn)(void *ctx, dr_vec3 x, double majorant);
+void dr_medium_replay_nulls(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double len, struct dr_sampler *rng,
+                            dr_medium_visit_fn visit, void *ctx);
+void dr_medium_replay_ratio_tracking(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double tmax,
+                                     struct dr_sampler *rng, dr_medium_visit_fn visit, void *ctx);
+/* Clips [*t0, *t1) to where the medium can be non-zero; false: nowhere. */
+bool dr_medium_clip(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double *t0, double *t1);
+/* d/dg of dr_hg_eval, over its value. */
+double dr_hg_dlog_dg(double g, double cos_theta);
+
 /* Henyey-Greenstein: density of scattering from a ray travelling along d
  * into direction wi (both unit; cos = d . wi); it is its own sampling pdf. */
 double dr_hg_eval(double g, double cos_theta);

@@ -20,8 +20,8 @@
 #include <math.h>
 
 #include "accel.h"
+#include "medium_grad.h"
 #include "medium_scene.h"
-#include "path.h"
 
 /* Boundaries one segment may cross before the path gives up. */
 #define MAX_CROSSINGS 256
@@ -34,6 +34,12 @@ static struct dr_sampler tracking_stream(const struct dr_sampler *smp, int depth
     struct dr_sampler r = {.key = dr_hash64(smp->key ^ (which * 0x632be59bd9b4e019ULL)),
                            .dim = (uint32_t)depth << 20, .kind = DR_SAMPLER_INDEPENDENT};
     return r;
+}
+
+/* Derivatives of media parameters are requested: record what to re-trace. */
+static bool recording(const struct dr_path_opts *opts)
+{
+    return opts->params && opts->params->media_active;
 }
 
 static void draw_vertex_randoms(struct dr_sampler *sampler, int depth, struct dr_vertex_randoms *u)
@@ -50,7 +56,7 @@ static void draw_vertex_randoms(struct dr_sampler *sampler, int depth, struct dr
  * the BSDF or phase value towards it, and the transmittance to it through
  * media; that and the segment's weight are folded into ls.radiance. */
 static void media_nee(const struct dr_scene *s, struct dr_path_vertex *v, const struct dr_sampler *smp,
-                      struct dr_ray_counts *counts)
+                      bool rec, struct dr_ray_counts *counts)
 {
     const struct dr_vertex_randoms *u = &v->u;
     const bool in_medium = v->kind == DR_VERTEX_MEDIUM;
@@ -82,7 +88,7 @@ static void media_nee(const struct dr_scene *s, struct dr_path_vertex *v, const 
     if (!(tmax > 0.0))
         return;
     struct dr_sampler rng = tracking_stream(smp, v->depth, STREAM_SHADOW);
-    dr_vec3 tr = dr_media_transmittance(s, so, sd, tmax, v->medium, &rng, &counts->shadow);
+    dr_vec3 tr = dr_media_transmittance(s, so, sd, tmax, v->medium, &rng, &counts->shadow, rec ? &v->shadow_trace : NULL);
     if (dr_is_black(tr))
         return;
     double w = v->ls.delta ? 1.0 : dr_mis_power(v->ls.pdf, pdf);
@@ -108,7 +114,7 @@ static bool medium_vertex(const struct dr_scene *s, const struct dr_path_opts *o
     v->wo = dr_neg(st->d);
     draw_vertex_randoms(sampler, st->depth, &v->u);
     if (opts->stages & DR_STAGE_NEE)
-        media_nee(s, v, sampler, counts);
+        media_nee(s, v, sampler, recording(opts), counts);
 
     dr_vec3 wi;
     double pdf = dr_hg_sample(s->media[v->medium].g, st->d, v->u.bsdf_u1, v->u.bsdf_u2, &wi);
@@ -149,7 +155,7 @@ static bool surface_vertex(const struct dr_scene *s, const struct dr_path_opts *
     if (!dr_path_stage_material(s, opts, st, sampler, v))
         return false;
     if (opts->stages & DR_STAGE_NEE)
-        media_nee(s, v, sampler, counts);
+        media_nee(s, v, sampler, recording(opts), counts);
     return dr_path_stage_continue(opts, st, v);
 }
 
@@ -188,6 +194,13 @@ bool dr_medium_path_step(const struct dr_scene *s, const struct dr_path_opts *op
     if (st->depth == 1)
         start_path(s, st, sampler);
     struct dr_sampler rng = tracking_stream(sampler, st->depth, STREAM_FREE_FLIGHT);
+    const bool rec = recording(opts);
+    if (rec) {
+        v->hero = st->hero;
+        v->seg_trace = (struct dr_medium_trace){.rng_key = rng.key, .n = 0, .o0 = st->o, .d = st->d,
+                                                .medium0 = st->medium};
+        v->shadow_trace.n = 0;
+    }
     struct dr_spectral_mis mis = {st->hero, {st->mis_r[0], st->mis_r[1], st->mis_r[2]}};
     const dr_vec3 w_before = dr_spectral_mis_weight(&mis);
     for (int crossing = 0; crossing < MAX_CROSSINGS; crossing++) {
@@ -204,8 +217,11 @@ bool dr_medium_path_step(const struct dr_scene *s, const struct dr_path_opts *op
             thit = dr_dot(dr_sub(h.p, st->o), st->d);
         }
         if (st->medium >= 0) {
-            double t;
+            double t = thit;
+            uint32_t dim0 = rng.dim;
             enum dr_medium_event ev = dr_medium_sample(&s->media[st->medium], st->o, st->d, thit, &rng, &mis, &t);
+            if (rec)
+                dr_medium_trace_add(&v->seg_trace, st->medium, dim0, st->o, t);
             if (ev == DR_MEDIUM_ABSORB) {
                 v->kind = DR_VERTEX_MEDIUM;
                 v->hit = (struct dr_hit){.tri = -1, .p = dr_madd(st->o, st->d, t), .material = -1};
@@ -232,4 +248,35 @@ bool dr_medium_path_step(const struct dr_scene *s, const struct dr_path_opts *op
         st->o = dr_offset_origin(&h, h.ng, st->d);
     }
     return false;
+}
+
+dr_vec3 dr_medium_inscattered(const struct dr_scene *s, const struct dr_path_opts *opts, dr_vec3 x, dr_vec3 d,
+                              int medium, int depth, uint64_t key, struct dr_ray_counts *counts)
+{
+    struct dr_path_opts o = *opts;
+    o.params = NULL;   /* a primal estimate: nothing recorded */
+    struct dr_sampler sampler = {.key = key, .dim = 0};
+    struct dr_path_state st;
+    struct dr_path_vertex v;
+    dr_path_start(&st, x, d);
+    st.depth = depth;
+    st.medium = medium;
+    struct dr_sampler rng = tracking_stream(&sampler, 0, STREAM_HERO);
+    int hero = (int)(dr_sampler_next(&rng) * 3.0);
+    st.hero = hero > 2 ? 2 : hero;
+    st.mis_r[0] = st.mis_r[1] = st.mis_r[2] = 1.0;
+    v.depth = depth;
+    v.d = d;
+    v.seg = dr_v3s(1.0);
+    v.emits = v.shaded = v.nee = v.cont = v.diff_bsdf = false;
+    v.media = true;
+    v.medium = medium;
+    bool more = medium_vertex(s, &o, &st, &sampler, &v, x, counts);
+    dr_vec3 L = dr_path_vertex_term(&v);
+    while (more) {
+        dr_vec3 beta = st.beta;
+        more = dr_medium_path_step(s, &o, &st, &sampler, &v, counts);
+        L = dr_add(L, dr_mul(beta, dr_path_vertex_term(&v)));
+    }
+    return L;
 }

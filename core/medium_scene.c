@@ -9,6 +9,7 @@
 #include "accel.h"
 #include "error.h"
 #include "geometry.h"
+#include "path.h"
 
 /* --------------------------------------------------------- closed meshes */
 
@@ -185,9 +186,20 @@ int dr_medium_at(const struct dr_scene *s, dr_vec3 o, dr_vec3 d)
     return s->global_medium;
 }
 
-dr_vec3 dr_media_transmittance(const struct dr_scene *s, dr_vec3 o, dr_vec3 d, double tmax, int medium,
-                               struct dr_sampler *rng, uint64_t *rays)
+void dr_medium_trace_add(struct dr_medium_trace *rec, int medium, uint32_t rng_dim, dr_vec3 o, double len)
 {
+    if (rec->n < DR_MEDIUM_PIECES)
+        rec->p[rec->n++] = (struct dr_medium_piece){medium, rng_dim, o, len};
+}
+
+dr_vec3 dr_media_transmittance(const struct dr_scene *s, dr_vec3 o, dr_vec3 d, double tmax, int medium,
+                               struct dr_sampler *rng, uint64_t *rays, struct dr_medium_trace *rec)
+{
+    if (rec) {
+        rec->rng_key = rng->key;
+        rec->n = 0;
+        rec->d = d;
+    }
     dr_vec3 T = dr_v3s(1.0);
     for (int i = 0; i < MAX_CROSSINGS; i++) {
         ++*rays;
@@ -198,8 +210,11 @@ dr_vec3 dr_media_transmittance(const struct dr_scene *s, dr_vec3 o, dr_vec3 d, d
             dr_hit_compute(&s->mesh, tri, o, d, &h);
             seg = dr_dot(dr_sub(h.p, o), d);
         }
-        if (medium >= 0)
+        if (medium >= 0) {
+            if (rec)
+                dr_medium_trace_add(rec, medium, rng->dim, o, seg);
             T = dr_mul(T, dr_medium_transmittance(&s->media[medium], o, d, seg, rng));
+        }
         if (tri < 0 || dr_is_black(T))
             return T;
         int med = dr_boundary_medium(s, tri);

@@ -29,7 +29,11 @@ int dr_medium_at(const struct dr_scene *scene, dr_vec3 o, dr_vec3 d);
  * environment) starting in medium `medium`, through index-matched
  * boundaries; 0 when an ordinary surface is in the way. *rays counts the
  * ray queries. */
+struct dr_medium_trace;
+/* rec (may be NULL): records the medium pieces crossed, for derivatives. */
 dr_vec3 dr_media_transmittance(const struct dr_scene *scene, dr_vec3 o, dr_vec3 d, double tmax, int medium,
-                               struct dr_sampler *rng, uint64_t *rays);
+                               struct dr_sampler *rng, uint64_t *rays, struct dr_medium_trace *rec);
+/* Appends a piece to rec (if there is room). */
+void dr_medium_trace_add(struct dr_medium_trace *rec, int medium, uint32_t rng_dim, dr_vec3 o, double len);
 
 #endif

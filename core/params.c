@@ -6,6 +6,89 @@
 #include <string.h>
 
 #include "error.h"
+#include "medium.h"
+
+/* ---- participating media (the DR_medium parameters, params.h) ---- */
+
+static const char *const medium_fields[] = {
+    [DR_PARAM_MEDIUM_EXTINCTION - DR_PARAM_MEDIUM_EXTINCTION] = "/extinction",
+    [DR_PARAM_MEDIUM_ALBEDO - DR_PARAM_MEDIUM_EXTINCTION] = "/albedo",
+    [DR_PARAM_MEDIUM_G - DR_PARAM_MEDIUM_EXTINCTION] = "/g",
+    [DR_PARAM_MEDIUM_DENSITY_SCALE - DR_PARAM_MEDIUM_EXTINCTION] = "/density_scale",
+    [DR_PARAM_MEDIUM_DENSITY - DR_PARAM_MEDIUM_EXTINCTION] = "/density",
+};
+
+static bool is_medium_kind(enum dr_param_kind k)
+{
+    return k >= DR_PARAM_MEDIUM_EXTINCTION && k <= DR_PARAM_MEDIUM_DENSITY;
+}
+
+/* The parameters of every medium: appended to list, returns how many. */
+static int list_medium_params(const struct dr_scene *s, struct dr_param *list)
+{
+    int n = 0;
+    for (int i = 0; i < s->n_media; i++) {
+        const struct dr_medium *m = &s->media[i];
+        char base[64];
+        if (m->material >= 0)
+            snprintf(base, sizeof base, "/materials/%d/extensions/DR_medium", m->material);
+        else
+            snprintf(base, sizeof base, "/extensions/DR_medium");
+        for (int k = DR_PARAM_MEDIUM_EXTINCTION; k <= DR_PARAM_MEDIUM_DENSITY; k++) {
+            if (k == DR_PARAM_MEDIUM_DENSITY && !m->has_grid)
+                continue;
+            struct dr_param *p = &list[n++];
+            memset(p, 0, sizeof *p);
+            p->kind = (enum dr_param_kind)k;
+            p->target = i;
+            p->size = k == DR_PARAM_MEDIUM_EXTINCTION || k == DR_PARAM_MEDIUM_ALBEDO ? 3 : 1;
+            if (k == DR_PARAM_MEDIUM_DENSITY) {
+                p->size = (int64_t)m->grid.nx * m->grid.ny * m->grid.nz;
+                p->width = m->grid.nx;
+                p->height = m->grid.ny * m->grid.nz;
+                p->channels = 1;
+            }
+            snprintf(p->name, sizeof p->name, "%s%s", base, medium_fields[k - DR_PARAM_MEDIUM_EXTINCTION]);
+        }
+    }
+    return n;
+}
+
+static void medium_param_get(const struct dr_scene *s, const struct dr_param *p, double *v)
+{
+    const struct dr_medium *m = &s->media[p->target];
+    switch (p->kind) {
+    case DR_PARAM_MEDIUM_EXTINCTION: v[0] = m->extinction.x; v[1] = m->extinction.y; v[2] = m->extinction.z; return;
+    case DR_PARAM_MEDIUM_ALBEDO: v[0] = m->albedo.x; v[1] = m->albedo.y; v[2] = m->albedo.z; return;
+    case DR_PARAM_MEDIUM_G: v[0] = m->g; return;
+    case DR_PARAM_MEDIUM_DENSITY_SCALE: v[0] = m->density_scale; return;
+    default:
+        for (int64_t i = 0; i < p->size; i++)
+            v[i] = m->grid.density[i];
+        return;
+    }
+}
+
+/* Values are clamped into what the tracker can take (a negative density or
+ * |g| >= 1 has no meaning); the caller refreshes the scene (majorants). */
+static void medium_param_put(struct dr_scene *s, const struct dr_param *p, const double *v)
+{
+    struct dr_medium *m = &s->media[p->target];
+    switch (p->kind) {
+    case DR_PARAM_MEDIUM_EXTINCTION:
+        m->extinction = dr_v3(dr_max(v[0], 0.0), dr_max(v[1], 0.0), dr_max(v[2], 0.0));
+        return;
+    case DR_PARAM_MEDIUM_ALBEDO:
+        m->albedo = dr_v3(dr_clamp(v[0], 0.0, 1.0), dr_clamp(v[1], 0.0, 1.0), dr_clamp(v[2], 0.0, 1.0));
+        return;
+    case DR_PARAM_MEDIUM_G: m->g = dr_clamp(v[0], -0.999, 0.999); return;
+    case DR_PARAM_MEDIUM_DENSITY_SCALE: m->density_scale = dr_max(v[0], 0.0); return;
+    default:
+        for (int64_t i = 0; i < p->size; i++)
+            m->grid.density[i] = (float)dr_max(v[i], 0.0);
+        return;
+    }
+}
 
 static const char *const mat_fields[] = {
     [DR_PARAM_BASE_COLOR] = "/pbrMetallicRoughness/baseColorFactor",
@@ -21,9 +104,12 @@ const char *dr_param_type_name(const struct dr_param *p)
     case DR_PARAM_BASE_COLOR:
     case DR_PARAM_EMISSIVE_FACTOR:
     case DR_PARAM_LIGHT_COLOR:
+    case DR_PARAM_MEDIUM_EXTINCTION:
+    case DR_PARAM_MEDIUM_ALBEDO:
     case DR_PARAM_ENV_COLOR: return "color";
     case DR_PARAM_ENV_MAP:
     case DR_PARAM_IMAGE: return "image";
+    case DR_PARAM_MEDIUM_DENSITY: return "grid";
     default: return "scalar";
     }
 }
@@ -35,6 +121,8 @@ void dr_param_range(const struct dr_param *p, double *lo, double *hi)
     case DR_PARAM_METALLIC: *lo = 0.0; *hi = 1.0; break;
     case DR_PARAM_ROUGHNESS: *lo = 0.001; *hi = 1.0; break;   /* the BSDF's floor */
     case DR_PARAM_IMAGE: *lo = 0.0; *hi = 1.0; break;        /* colour or data texels */
+    case DR_PARAM_MEDIUM_ALBEDO: *lo = 0.0; *hi = 1.0; break;
+    case DR_PARAM_MEDIUM_G: *lo = -0.99; *hi = 0.99; break;
     default: *lo = 0.0; *hi = INFINITY; break;               /* emission, light, environment */
     }
 }
@@ -118,7 +206,7 @@ static struct dr_param make(enum dr_param_kind kind, int target, int64_t size, c
 
 int dr_params_list(const struct dr_scene *s, struct dr_param **out, int *count)
 {
-    int cap = 5 * s->n_file_materials + 2 * (max_light_index(s) + 1) + 3 + s->n_images + 1;
+    int cap = 5 * s->n_file_materials + 2 * (max_light_index(s) + 1) + 3 + s->n_images + 5 * s->n_media + 1;
     struct dr_param *list = calloc((size_t)cap, sizeof *list);
     if (!list) {
         dr_set_error("out of memory");
@@ -157,6 +245,7 @@ int dr_params_list(const struct dr_scene *s, struct dr_param **out, int *count)
         p.channels = im->channels;
         list[n++] = p;
     }
+    n += list_medium_params(s, list + n);
     *out = list;
     *count = n;
     return 0;
@@ -319,6 +408,12 @@ int dr_param_resolve(const struct dr_scene *s, const char *ptr, struct dr_param 
                 for (int i = 0; i < count; i++)
                     if (list[i].kind == (enum dr_param_kind)k && list[i].target == m)
                         want = i;
+        /* a medium's parameters, by the material's index or name */
+        char canonical[5 * DR_PARAM_NAME_MAX];
+        snprintf(canonical, sizeof canonical, "/materials/%d%s", m, field);
+        for (int i = 0; want < 0 && i < count; i++)
+            if (is_medium_kind(list[i].kind) && strcmp(list[i].name, canonical) == 0)
+                want = i;
     } else {
         /* everything else is named by its canonical pointer */
         for (int i = 0; i < count; i++)
@@ -367,6 +462,10 @@ static dr_vec3 *param_vec3(struct dr_scene *s, const struct dr_param *p, int *li
 void dr_param_get(const struct dr_scene *cs, const struct dr_param *p, double *v)
 {
     struct dr_scene *s = (struct dr_scene *)cs;   /* read only */
+    if (is_medium_kind(p->kind)) {
+        medium_param_get(s, p, v);
+        return;
+    }
     int first;
     dr_vec3 *c = param_vec3(s, p, &first);
     if (c) {
@@ -398,6 +497,10 @@ void dr_param_get(const struct dr_scene *cs, const struct dr_param *p, double *v
 
 void dr_param_put(struct dr_scene *s, const struct dr_param *p, const double *v)
 {
+    if (is_medium_kind(p->kind)) {
+        medium_param_put(s, p, v);
+        return;
+    }
     int first;
     dr_vec3 *c = param_vec3(s, p, &first);
     if (c) {
@@ -444,6 +547,12 @@ void dr_param_set_destroy(struct dr_param_set *set)
     free(set->image);
     free(set->mat_bsdf_active);
     free(set->mat_emission_active);
+    free(set->med_extinction);
+    free(set->med_albedo);
+    free(set->med_g);
+    free(set->med_density_scale);
+    free(set->med_density);
+    free(set->med_active);
     free(set);
 }
 
@@ -481,6 +590,11 @@ static void index_param(struct dr_param_set *set, const struct dr_scene *s, cons
     case DR_PARAM_ENV_STRENGTH: set->env_strength = p->offset; set->env_active = true; break;
     case DR_PARAM_ENV_MAP: set->env_map = p->offset; set->env_active = true; break;
     case DR_PARAM_IMAGE: set->image[p->target] = p->offset; break;
+    case DR_PARAM_MEDIUM_EXTINCTION: set->med_extinction[p->target] = p->offset; break;
+    case DR_PARAM_MEDIUM_ALBEDO: set->med_albedo[p->target] = p->offset; break;
+    case DR_PARAM_MEDIUM_G: set->med_g[p->target] = p->offset; break;
+    case DR_PARAM_MEDIUM_DENSITY_SCALE: set->med_density_scale[p->target] = p->offset; break;
+    case DR_PARAM_MEDIUM_DENSITY: set->med_density[p->target] = p->offset; break;
     default: break;
     }
 }
@@ -505,6 +619,16 @@ struct dr_param_set *dr_param_set_create(const struct dr_scene *s, const char *c
     set->mat_bsdf_active = calloc((size_t)s->n_materials + 1, sizeof(bool));
     set->mat_emission_active = calloc((size_t)s->n_materials + 1, sizeof(bool));
     set->env_color = set->env_strength = set->env_map = -1;
+    set->n_media = s->n_media;
+    set->med_extinction = offsets(s->n_media);
+    set->med_albedo = offsets(s->n_media);
+    set->med_g = offsets(s->n_media);
+    set->med_density_scale = offsets(s->n_media);
+    set->med_density = offsets(s->n_media);
+    set->med_active = calloc((size_t)s->n_media + 1, sizeof(bool));
+    if (!set->med_extinction || !set->med_albedo || !set->med_g || !set->med_density_scale || !set->med_density ||
+        !set->med_active)
+        goto nomem;
     if (!set->params || !set->mat_base_color || !set->mat_metallic || !set->mat_roughness ||
         !set->mat_emissive_factor || !set->mat_emissive_strength || !set->light_color || !set->light_intensity ||
         !set->image || !set->mat_bsdf_active || !set->mat_emission_active)
@@ -543,6 +667,11 @@ struct dr_param_set *dr_param_set_create(const struct dr_scene *s, const char *c
                                   texref_active(set, s, &mat->metallic_roughness_tex);
         set->mat_emission_active[m] = set->mat_emissive_factor[m] >= 0 || set->mat_emissive_strength[m] >= 0 ||
                                       texref_active(set, s, &mat->emissive_tex);
+    }
+    for (int i = 0; i < s->n_media; i++) {
+        set->med_active[i] = set->med_extinction[i] >= 0 || set->med_albedo[i] >= 0 || set->med_g[i] >= 0 ||
+                             set->med_density_scale[i] >= 0 || set->med_density[i] >= 0;
+        set->media_active |= set->med_active[i];
     }
     return set;
 nomem:

@@ -11,6 +11,14 @@
  *   /extensions/DR_environment/strength                                1
  *   /extensions/DR_environment/uri            every texel of the environment map (w*h*3)
  *   /images/I                                 every texel of image I (w*h*channels, rgb(a))
+ * Participating media (medium.h), MEDIUM = /materials/M/extensions/DR_medium
+ * for the medium a material bounds (also when KHR_materials_volume declares
+ * it), /extensions/DR_medium for the global medium:
+ *   MEDIUM/extinction                                                  3 (1/m at density 1)
+ *   MEDIUM/albedo                                                      3
+ *   MEDIUM/g                                                           1
+ *   MEDIUM/density_scale                                               1
+ *   MEDIUM/density                            every voxel of the grid (nx*ny*nz)
  * Image texels are the linear values the renderer looks up: sRGB-decoded for
  * colour textures, as stored for metallic-roughness data. */
 #ifndef DR_PARAMS_H
@@ -34,6 +42,11 @@ enum dr_param_kind {
     DR_PARAM_ENV_STRENGTH,
     DR_PARAM_ENV_MAP,
     DR_PARAM_IMAGE,
+    DR_PARAM_MEDIUM_EXTINCTION,   /* media: target = medium index */
+    DR_PARAM_MEDIUM_ALBEDO,
+    DR_PARAM_MEDIUM_G,
+    DR_PARAM_MEDIUM_DENSITY_SCALE,
+    DR_PARAM_MEDIUM_DENSITY,
     DR_PARAM_KIND_COUNT
 };
 
@@ -47,6 +60,13 @@ struct dr_param {
     int64_t offset;               /* first scalar in a gradient vector (set by dr_param_set_create) */
     int width, height, channels;  /* images and the environment map */
 };
+
+/* A parameter with one scalar per texel or voxel (images, the environment
+ * map, density grids): listed, checked and written as an array. */
+static inline bool dr_param_is_array(const struct dr_param *p)
+{
+    return p->kind == DR_PARAM_IMAGE || p->kind == DR_PARAM_ENV_MAP || p->kind == DR_PARAM_MEDIUM_DENSITY;
+}
 
 /* The name with the material's name in place of its index when that name
  * is unique (what a user would type), else the canonical name. */
@@ -88,6 +108,11 @@ struct dr_param_set {
     bool *mat_emission_active;  /* emissive factor, strength or texture */
     bool lights_active;         /* some punctual light parameter */
     bool env_active;
+    /* participating media, per medium (scene->media): */
+    int n_media;
+    int64_t *med_extinction, *med_albedo, *med_g, *med_density_scale, *med_density;
+    bool *med_active;           /* some parameter of that medium */
+    bool media_active;
 };
 
 /* Resolves every pointer; duplicates and images used both as colour and as

@@ -77,8 +77,16 @@ enum dr_path_stage {
     DR_STAGE_MEDIA = 1 << 3       /* participating media: the medium walker (medium_path.c) */
 };
 
+/* How derivatives of media parameters treat free-flight sampling (medium_grad.c). */
+enum dr_medium_grad {
+    DR_MEDIUM_GRAD_DRT,        /* differential ratio tracking: unbiased (the default) */
+    DR_MEDIUM_GRAD_BASELINE    /* differentiate the sampled null collisions as they are: biased
+                                  where the majorant is 0 or tight */
+};
+
 struct dr_path_opts {
     int max_depth, rr_depth;
+    enum dr_medium_grad medium_grad;
     unsigned stages;                     /* enum dr_path_stage bits (dr_path_plan) */
     const struct dr_param_set *params;   /* NULL: primal only (no substitution) */
 };
@@ -94,6 +102,23 @@ struct dr_vertex_randoms {
     double light_pick, light_u1, light_u2;   /* next-event estimation */
     double lobe, bsdf_u1, bsdf_u2;           /* BSDF sample: lobe choice, direction */
     double rr;                               /* Russian roulette */
+};
+
+/* The stretch of one medium a ray crossed (for the derivatives of media
+ * parameters: medium_grad.c replays or re-samples it). */
+struct dr_medium_piece {
+    int medium;
+    uint32_t rng_dim;          /* the tracking stream's dimension when the piece began */
+    dr_vec3 o;                 /* its start; the direction is the trace's */
+    double len;                /* to the boundary, the collision, or the light */
+};
+#define DR_MEDIUM_PIECES 4
+struct dr_medium_trace {
+    uint64_t rng_key;          /* the tracking stream (sampler.h key) */
+    int n;                     /* pieces recorded (a longer crossing keeps the first DR_MEDIUM_PIECES) */
+    dr_vec3 o0, d;             /* the ray (free flight: from the previous vertex) */
+    int medium0;               /* ... and the medium it starts in */
+    struct dr_medium_piece p[DR_MEDIUM_PIECES];
 };
 
 enum dr_vertex_kind {
@@ -133,6 +158,9 @@ struct dr_path_vertex {
     dr_vec3 nee_f;             /* BSDF value towards the light */
     double nee_scale;          /* |cos| * MIS weight / pdf */
     dr_vec3 nee_tr;            /* media: transmittance to the light times seg, folded into ls.radiance */
+    /* media, when media parameters are differentiated: what to re-trace */
+    int hero;                  /* the path's spectral MIS hero channel */
+    struct dr_medium_trace seg_trace, shadow_trace;
     /* continuation */
     bool cont;                 /* the path goes on from here */
     dr_vec3 wi;                /* local, sampled */

@@ -168,7 +168,8 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
     }
     b->view = dr_camera_view(p->camera, dr_film_frame_w(&p->film, p->width), dr_film_frame_h(&p->film, p->height));
     b->popts = (struct dr_path_opts){.max_depth = p->max_depth, .rr_depth = p->rr_depth,
-                                     .stages = dr_path_plan(p->scene, p->params), .params = p->params};
+                                     .stages = dr_path_plan(p->scene, p->params), .params = p->params,
+                                     .medium_grad = p->medium_grad};
     b->adjoint = adjoint;
     b->dir = dir;
     int rc = accum_init(&b->acc, p, dir != NULL);

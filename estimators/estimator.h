@@ -47,6 +47,7 @@ struct dr_grad_problem {
     enum dr_sampler_kind sampler;   /* the random numbers (zero: independent) */
     double regularize;         /* prb, attached: Jacobians with sigma_min/sigma_max below this are not
                                   inverted, forward mode restarts there (0: always invert) */
+    enum dr_medium_grad medium_grad;   /* media: DRT (default, 0) or the biased baseline (path.h) */
 };
 
 /* prb --sampling attached: the default --regularize. */

@@ -22,6 +22,7 @@ struct prb_job {
     double *zeros;          /* attached sampling: a sink direction that discards (params->total zeros) */
     double radius;          /* attached sampling: the scene's radius */
 };
+#include "medium_grad.h"
 
 struct prb_radiance {
     dr_vec3 true_, sub;   /* L with the true throughput, and with substitutes */
@@ -43,8 +44,13 @@ static void walk(const struct dr_est_base *b, struct dr_sampler smp, dr_vec3 o, 
         dr_vec3 beta = st.beta, ratio = st.ratio;
         bool more = dr_path_step(s, &b->popts, &st, &smp, &v, rays);
         dr_vec3 c = dr_mul(beta, dr_path_vertex_term(&v));   /* with substitutes */
+        dr_vec3 remaining = L->true_;   /* replay: from this vertex on */
         L->sub = dr_madd(L->sub, c, sign);
         L->true_ = dr_madd(L->true_, dr_mul(ratio, c), sign);
+        if (sink && v.media)
+            d_medium_vertex(s, &b->popts, &v, dr_mul(adj, dr_mul(ratio, beta)), dr_mul(adj, remaining),
+                            dr_mul(adj, L->true_),
+                            dr_mul(adj, dr_mul(dr_mul(ratio, beta), dr_path_vertex_nee(&v))), sink);
         if (sink) {
             d_path_vertex_term(s, ps, &v, dr_mul(adj, dr_mul(ratio, beta)), sink);
             if (v.cont && v.diff_bsdf) {

@@ -11,6 +11,7 @@
 #include <string.h>
 
 #include "common.h"
+#include "medium_grad.h"
 #include "error.h"
 
 struct tape_vertex {
@@ -125,9 +126,16 @@ static void sweep(const struct tape_job *j, const struct tape_vertex *verts, int
     const struct dr_scene *s = j->b.p->scene;
     const struct dr_param_set *ps = j->b.p->params;
     dr_vec3 abar = dr_v3s(0.0);   /* adjoint of the true throughput after the vertex */
+    dr_vec3 after = dr_v3s(0.0);  /* media: radiance gathered after the vertex */
     for (int k = count - 1; k >= 0; k--) {
         const struct dr_path_vertex *v = &verts[k].v;
         dr_vec3 bt = verts[k].bt;
+        if (v->media) {
+            dr_vec3 from = dr_add(after, dr_mul(bt, dr_path_vertex_term(v)));
+            d_medium_vertex(s, &j->b.popts, v, dr_mul(adj, bt), dr_mul(adj, from), dr_mul(adj, after),
+                            dr_mul(adj, dr_mul(bt, dr_path_vertex_nee(v))), sink);
+            after = from;
+        }
         dr_vec3 t = dr_v3s(0.0);
         if (v->cont) {
             /* in media the throughput also took the segment's weight (path.h) */

@@ -1,0 +1,29 @@
+/* Derivatives with respect to media parameters (medium_grad.c). */
+#ifndef DR_MEDIUM_GRAD_H
+#define DR_MEDIUM_GRAD_H
+
+#include "path.h"
+
+/* Every media-parameter derivative vertex v contributes (nothing unless the
+ * vertex came from the medium walker with media parameters requested):
+ *   d_beta = adjoint (x) the true throughput arriving at the segment into v;
+ *   d_R   = adjoint (x) the true radiance the path gathers from v on, v's own terms included;
+ *   d_Rn  = the same from the next vertex on;
+ *   d_nee = adjoint (x) v's next-event contribution (true throughput).
+ * Forward mode: the channels of these land in the sink's channels. */
+void d_medium_vertex(const struct dr_scene *scene, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
+                     dr_vec3 d_beta, dr_vec3 d_R, dr_vec3 d_Rn, dr_vec3 d_nee, struct dr_grad_sink *sink);
+
+/* Radiance scattered at x (in medium `medium`, the ray arriving along d)
+ * towards -d, per unit scattering coefficient: NEE and a phase-sampled path
+ * from x as if the path's vertex `depth` were there (medium_path.c). */
+dr_vec3 dr_medium_inscattered(const struct dr_scene *scene, const struct dr_path_opts *opts, dr_vec3 x, dr_vec3 d,
+                              int medium, int depth, uint64_t key, struct dr_ray_counts *counts);
+
+/* v's next-event term (what dr_path_vertex_term adds for NEE). */
+static inline dr_vec3 dr_path_vertex_nee(const struct dr_path_vertex *v)
+{
+    return v->nee ? dr_scale(dr_mul(v->nee_f, v->ls.radiance), v->nee_scale) : dr_v3s(0.0);
+}
+
+#endif
