@@ -97,9 +97,9 @@ static int env_option(struct grad_common *g, const char *arg)
 
 static int film_option(struct grad_common *g, int c, const char *arg);
 
-int grad_common_option(struct grad_common *g, int c, const char *arg)
+/* --param and --set: appended to their lists. */
+static int list_option(struct grad_common *g, int c, const char *arg)
 {
-    long v;
     switch (c) {
     case GOPT_PARAM: {
         const char **p = realloc(g->params, sizeof *p * (size_t)(g->n_params + 1));
@@ -121,6 +121,14 @@ int grad_common_option(struct grad_common *g, int c, const char *arg)
         g->sets[g->n_sets++] = arg;
         return 0;
     }
+    default: return -1;
+    }
+}
+
+/* How derivatives are estimated: --estimator, --sampling, --regularize, --sampler. */
+static int method_option(struct grad_common *g, int c, const char *arg)
+{
+    switch (c) {
     case GOPT_ESTIMATOR:
         g->estimator = dr_estimator_find(arg);
         if (!g->estimator) {
@@ -150,6 +158,23 @@ int grad_common_option(struct grad_common *g, int c, const char *arg)
         g->regularize = e;
         return 0;
     }
+    case GOPT_SAMPLER: {
+        int k = dr_sampler_kind_parse(arg);
+        if (k < 0) {
+            cli_error(g->cmd, "--sampler: unknown sampler '%s' (known: independent, sobol)", arg);
+            return DR_EXIT_USAGE;
+        }
+        g->sampler = (enum dr_sampler_kind)k;
+        return 0;
+    }
+    default: return -1;
+    }
+}
+
+int grad_common_option(struct grad_common *g, int c, const char *arg)
+{
+    long v;
+    switch (c) {
     case GOPT_RR_DEPTH:
         if (!cli_parse_int(g->cmd, "--rr-depth", arg, 1, 1L << 30, &v))
             return DR_EXIT_USAGE;
@@ -186,19 +211,16 @@ int grad_common_option(struct grad_common *g, int c, const char *arg)
         g->threads = (int)v;
         return 0;
     case GOPT_JSON: g->json = true; return 0;
+    case GOPT_PARAM:
+    case GOPT_SET: return list_option(g, c, arg);
+    case GOPT_ESTIMATOR:
+    case GOPT_SAMPLING:
+    case GOPT_REGULARIZE:
+    case GOPT_SAMPLER: return method_option(g, c, arg);
     case GOPT_FILTER:
     case GOPT_CROP: return film_option(g, c, arg);
     case GOPT_ENV: return env_option(g, arg);
     case GOPT_NO_DEFAULT_LIGHT: g->no_default_light = true; return 0;
-    case GOPT_SAMPLER: {
-        int k = dr_sampler_kind_parse(arg);
-        if (k < 0) {
-            cli_error(g->cmd, "--sampler: unknown sampler '%s' (known: independent, sobol)", arg);
-            return DR_EXIT_USAGE;
-        }
-        g->sampler = (enum dr_sampler_kind)k;
-        return 0;
-    }
     default: return -1;
     }
 }
