@@ -28,6 +28,8 @@ void grad_common_init(struct grad_common *g, const char *cmd, int spp)
 
 void grad_common_free(struct grad_common *g)
 {
+    free(g->env_file_buf);
+    g->env_file_buf = NULL;
     free(g->params);
     free(g->sets);
     g->params = g->sets = NULL;
@@ -85,7 +87,8 @@ static int env_option(struct grad_common *g, const char *arg)
         char *file = len ? strndup(arg, len) : NULL;
         if (file && !*end && isfinite(st) && st >= 0.0 && access(file, R_OK) == 0) {
             g->env_strength = st;
-            g->env_file = file;   /* kept for the process's life (one option) */
+            free(g->env_file_buf);   /* a repeated --env: the last one wins */
+            g->env_file = g->env_file_buf = file;
             return 0;
         }
         free(file);

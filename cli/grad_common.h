@@ -76,6 +76,7 @@ struct grad_common {
     double regularize;               /* prb attached: conditioning threshold (estimator.h) */
     /* lighting: --env (a file, or a colour) and --no-default-light */
     const char *env_file;            /* NULL: env_color * env_strength, if env_given */
+    char *env_file_buf;              /* owned copy when --env FILE,STRENGTH was split */
     bool env_given, no_default_light;
     dr_vec3 env_color;
     double env_strength;
