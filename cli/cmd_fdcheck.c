@@ -35,6 +35,7 @@ void cmd_fdcheck_usage(FILE *out)
             "      --z-max Z       agreement threshold on |z| (default: 4)\n"
             "      --estimator E   gradient estimator: prb (path replay, default) or tape\n"
             "      --sampling S    detached (default; the only one implemented so far)\n"
+            "      --medium-grad M drt (default) or baseline, for media parameters\n"
             "      --res WxH       image size (default: 32x32)\n"
             "      --max-depth D   path segments (default: 8)\n"
             "      --rr-depth D    Russian roulette from this many segments on (default: 5)\n"
@@ -157,7 +158,7 @@ int cmd_fdcheck(int argc, char **argv)
     if ((rc = cli_limits_fdcheck(&a.g, scene, ps, a.batches)) >= 0)
         goto out;
     double t_loaded = dr_clock_seconds();
-    struct dr_fd_options o = {.estimator = a.g.estimator, .sampling = a.g.sampling, .width = a.g.width,
+    struct dr_fd_options o = {.estimator = a.g.estimator, .sampling = a.g.sampling, .medium_grad = a.g.medium_grad, .width = a.g.width,
                               .height = a.g.height, .spp = a.g.spp, .batches = a.batches,
                               .max_depth = a.g.max_depth, .rr_depth = a.g.rr_depth, .seed = a.g.seed,
                               .threads = a.g.threads, .eps = a.eps, .z_max = a.z_max};

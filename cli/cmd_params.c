@@ -36,7 +36,7 @@ static bool is_material(const struct dr_param *p)
 
 static bool is_image(const struct dr_param *p)
 {
-    return p->kind == DR_PARAM_IMAGE || p->kind == DR_PARAM_ENV_MAP;
+    return dr_param_is_array(p);
 }
 
 /* Mean of each channel of an image parameter (values: size scalars). */
