@@ -125,6 +125,7 @@ fuzz: fuzz-build
 bench: deps $(BUILD)/drender $(BENCH_BIN)
 	BUILD=$(BUILD) bench/run.sh
 	BUILD=$(BUILD) bench/grad.sh
+	BUILD=$(BUILD) bench/media.sh
 
 # The main job on the bundled scene: inverse rendering of the Cornell box
 # (render a target, optimise wall colours and roughness from wrong values).
