@@ -58,7 +58,10 @@ static void print_value(FILE *f, const struct dr_param *p, const double *values)
     if (is_image(p)) {
         double mean[4];
         channel_means(p, values, mean);
-        fprintf(f, "%dx%dx%d image, mean (", p->width, p->height, p->channels);
+        if (p->kind == DR_PARAM_MEDIUM_DENSITY)
+            fprintf(f, "grid of %lld voxels, mean (", (long long)p->size);
+        else
+            fprintf(f, "%dx%dx%d image, mean (", p->width, p->height, p->channels);
         for (int c = 0; c < p->channels && c < 4; c++)
             fprintf(f, "%s%.6g", c ? ", " : "", mean[c]);
         fputc(')', f);
