@@ -113,9 +113,8 @@ static bool sigma_t_requested(const struct dr_param_set *ps, int medium)
  * with T by ratio tracking (exact when homogeneous) and L_s, the light
  * scattered at x per unit sigma_s, from a fresh path (dr_medium_inscattered). */
 static void drt_gain(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
-                     dr_vec3 d_beta, struct dr_grad_sink *sink)
+                     const struct dr_medium_trace *tr, dr_vec3 d_beta, struct dr_grad_sink *sink)
 {
-    const struct dr_medium_trace *tr = &v->seg_trace;
     struct dr_sampler rng = {dr_hash64(tr->rng_key ^ 0x7f4a7c159e3779b9ULL), 0};
     dr_vec3 o = tr->o0, d = tr->d, T = d_beta;
     int medium = tr->medium0;
@@ -211,17 +210,18 @@ static void d_scatter(const struct dr_scene *s, const struct dr_path_opts *opts,
 }
 
 void d_medium_vertex(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
-                     dr_vec3 d_beta, dr_vec3 d_R, dr_vec3 d_Rn, dr_vec3 d_nee, struct dr_grad_sink *sink)
+                     const struct dr_medium_record *rec, dr_vec3 d_beta, dr_vec3 d_R, dr_vec3 d_Rn, dr_vec3 d_nee,
+                     struct dr_grad_sink *sink)
 {
     const struct dr_param_set *ps = opts->params;
-    if (!v->media || !ps || !ps->media_active)
+    if (!v->media || !rec || !ps || !ps->media_active)
         return;
     if (!dr_is_black(d_R))
-        d_trace(s, opts, &v->seg_trace, false, d_R, sink);
+        d_trace(s, opts, &rec->seg, false, d_R, sink);
     if (opts->medium_grad == DR_MEDIUM_GRAD_DRT && !dr_is_black(d_beta))
-        drt_gain(s, opts, v, d_beta, sink);
+        drt_gain(s, opts, v, &rec->seg, d_beta, sink);
     if (v->kind == DR_VERTEX_MEDIUM && v->shaded && ps->med_active[v->medium])
         d_scatter(s, opts, v, d_R, d_Rn, d_nee, sink);
     if (v->nee && !dr_is_black(d_nee))
-        d_trace(s, opts, &v->shadow_trace, true, d_nee, sink);
+        d_trace(s, opts, &rec->shadow, true, d_nee, sink);
 }

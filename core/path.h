@@ -121,6 +121,15 @@ struct dr_medium_trace {
     struct dr_medium_piece p[DR_MEDIUM_PIECES];
 };
 
+/* What the medium walker records at a vertex for the derivatives of media
+ * parameters (medium_grad.c): in the caller's storage, so a vertex stays small
+ * where nothing is recorded (the tape keeps these only when media parameters
+ * are requested). */
+struct dr_medium_record {
+    struct dr_medium_trace seg;      /* the free flight into the vertex */
+    struct dr_medium_trace shadow;   /* the shadow ray of its next-event estimate */
+};
+
 enum dr_vertex_kind {
     DR_VERTEX_SURFACE,   /* the ray hit a triangle */
     DR_VERTEX_ESCAPED,   /* the ray left the scene (environment radiance, if any) */
@@ -155,9 +164,8 @@ struct dr_path_vertex {
     dr_vec3 nee_f;             /* BSDF value towards the light */
     double nee_scale;          /* |cos| * MIS weight / pdf */
     dr_vec3 nee_tr;            /* media: transmittance to the light times seg, folded into ls.radiance */
-    /* media, when media parameters are differentiated: what to re-trace */
-    int hero;                  /* the path's spectral MIS hero channel */
-    struct dr_medium_trace seg_trace, shadow_trace;
+    struct dr_medium_record *mrec;   /* set by the caller: where the medium walker records
+                                        (used only when media parameters are requested) */
     /* continuation */
     bool cont;                 /* the path goes on from here */
     dr_vec3 wi;                /* local, sampled */

@@ -29,6 +29,8 @@ static void walk(const struct dr_est_base *b, struct dr_sampler smp, dr_vec3 o, 
     const double sign = sink ? -1.0 : 1.0;
     struct dr_path_state st;
     struct dr_path_vertex v;
+    struct dr_medium_record mrec;   /* media: what the replay re-traces, one vertex at a time */
+    v.mrec = &mrec;
     dr_path_start(&st, o, d);
     for (;;) {
         dr_vec3 beta = st.beta, ratio = st.ratio;
@@ -38,7 +40,7 @@ static void walk(const struct dr_est_base *b, struct dr_sampler smp, dr_vec3 o, 
         L->sub = dr_madd(L->sub, c, sign);
         L->true_ = dr_madd(L->true_, dr_mul(ratio, c), sign);
         if (sink && v.media)
-            d_medium_vertex(s, &b->popts, &v, dr_mul(adj, dr_mul(ratio, beta)), dr_mul(adj, remaining),
+            d_medium_vertex(s, &b->popts, &v, &mrec, dr_mul(adj, dr_mul(ratio, beta)), dr_mul(adj, remaining),
                             dr_mul(adj, L->true_),
                             dr_mul(adj, dr_mul(dr_mul(ratio, beta), dr_path_vertex_nee(&v))), sink);
         if (sink) {
