@@ -104,6 +104,30 @@ static bool sigma_t_requested(const struct dr_param_set *ps, int medium)
     return ps->med_density[medium] >= 0 || ps->med_density_scale[medium] >= 0 || ps->med_extinction[medium] >= 0;
 }
 
+/* A position in the stretch [t0, t1) of medium m for the gain term, and
+ * 1 / its density: uniform when the stretch is finite; exponential at the
+ * medium's smallest non-zero extinction when it is not (an unbounded
+ * homogeneous medium: every channel's transmittance decays at least that
+ * fast, so the weights T / pdf stay bounded). False: nothing to sample. */
+static bool stretch_sample(const struct dr_medium *m, double t0, double t1, double u, double *t, double *inv_pdf)
+{
+    if (!isinf(t1)) {
+        *t = t0 + (t1 - t0) * u;
+        *inv_pdf = t1 - t0;
+        return true;
+    }
+    double rate = INFINITY;
+    for (int c = 0; c < 3; c++)
+        if (dr_v3_get(m->extinction, c) > 0.0)
+            rate = dr_min(rate, m->density_scale * dr_v3_get(m->extinction, c));
+    if (!(rate > 0.0) || isinf(rate))
+        return false;   /* a clear unbounded medium: infinitely long, transmittance 1: not differentiable */
+    double s = -log1p(-u) / rate;
+    *t = t0 + s;
+    *inv_pdf = exp(rate * s) / rate;
+    return isfinite(*inv_pdf);
+}
+
 /* DRT's gain term of the segment into v: scattering that a change of
  * sigma_t would add anywhere along the ray the segment started on (up to the
  * first opaque surface, through every medium on the way, beyond where this
@@ -128,9 +152,9 @@ static void drt_gain(const struct dr_scene *s, const struct dr_path_opts *opts, 
         }
         if (medium >= 0) {
             const struct dr_medium *m = &s->media[medium];
-            double t0 = 0.0, t1 = seg;
-            if (sigma_t_requested(opts->params, medium) && dr_medium_clip(m, o, d, &t0, &t1) && !isinf(t1)) {
-                double t = t0 + (t1 - t0) * dr_sampler_next(&rng);
+            double t0 = 0.0, t1 = seg, t, inv_pdf;
+            if (sigma_t_requested(opts->params, medium) && dr_medium_clip(m, o, d, &t0, &t1) &&
+                stretch_sample(m, t0, t1, dr_sampler_next(&rng), &t, &inv_pdf)) {
                 dr_vec3 x = dr_madd(o, d, t);
                 dr_vec3 w = dr_mul(dr_mul(T, dr_medium_transmittance(m, o, d, t, &rng)), m->albedo);
                 if (!dr_is_black(w)) {
@@ -138,7 +162,7 @@ static void drt_gain(const struct dr_scene *s, const struct dr_path_opts *opts, 
                     uint64_t key = dr_hash64(tr->rng_key ^ (0x9e3779b97f4a7c15ULL * (uint64_t)(crossing + 1)));
                     dr_vec3 Ls = dr_medium_inscattered(s, opts, x, d, medium, v->depth, key, &counts);
                     for (int c = 0; c < 3; c++) {
-                        double wc = dr_v3_get(w, c) * dr_v3_get(Ls, c) * (t1 - t0);
+                        double wc = dr_v3_get(w, c) * dr_v3_get(Ls, c) * inv_pdf;
                         if (wc != 0.0)
                             add_dsigma_t(s, opts->params, sink, medium, x, c, wc);
                     }

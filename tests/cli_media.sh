@@ -4,7 +4,8 @@
 #   a. render --json lists the effects media / heterogeneous_media and the
 #      stage participating_media; the Cornell box lists none of them
 #   b. params lists the DR_medium parameters (KHR_materials_volume media too)
-#   c. grad / fdcheck on media parameters with --medium-grad drt and baseline;
+#   c. grad / fdcheck on media parameters (a homogeneous KHR medium; a global
+#      fog around a grid medium) with --medium-grad drt and baseline;
 #      a bad --medium-grad value is a usage error (exit 2)
 #   d. bad media input (missing grid) is an input error naming file and JSON path
 #   e. optimize grows density in an all-empty grid (4^3, one majorant cell):
@@ -53,6 +54,10 @@ check_failed 2 "--medium-grad|exact|drt|baseline"
 run fdcheck "$data/fog-khr.gltf" --param /materials/0/extensions/DR_medium/albedo \
     --param /materials/0/extensions/DR_medium/extinction --spp 16 --res 12x12 --batches 8 --json
 expect_rc 0 "fdcheck on homogeneous medium coefficients"
+# an unbounded global fog around the grid cube: rays never leave it
+run fdcheck "$data/fog-global.gltf" --param /extensions/DR_medium/extinction --param /extensions/DR_medium/g \
+    --param /materials/smoke/extensions/DR_medium/density_scale --spp 16 --res 16x16 --batches 16 --eps 0.03 --json
+expect_rc 0 "fdcheck on a global medium and a grid medium inside it"
 
 # d. bad input
 sed 's/"smoke.raw"/"missing.raw"/' "$data/smoke.gltf" >bad.gltf

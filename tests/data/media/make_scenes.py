@@ -12,6 +12,8 @@
   coarse.gltf, coarse-empty.gltf
                     the same with a 4^3 grid (one majorant cell): the
                     blob, and all zeros
+  fog-global.gltf   coarse.gltf inside an unbounded global fog (DR_medium at
+                    the document root): the camera and the light are in it
   fog-khr.gltf      the cube as a homogeneous KHR_materials_volume medium
                     (transmission 1, ior 1, volume_scatter albedo)
 """
@@ -40,7 +42,7 @@ def write_grid(name, f, n=N):
                     out.write(struct.pack("<f", f(x, y, z)))
 
 
-def scene(material_ext, name):
+def scene(material_ext, name, global_medium=None):
     cube = [(-1, -1, -1), (1, -1, -1), (1, 1, -1), (-1, 1, -1), (-1, -1, 1), (1, -1, 1), (1, 1, 1), (-1, 1, 1)]
     cube_idx = [0, 2, 1, 0, 3, 2, 4, 5, 6, 4, 6, 7, 0, 1, 5, 0, 5, 4, 3, 7, 6, 3, 6, 2, 0, 4, 7, 0, 7, 3, 1, 2, 6,
                 1, 6, 5]
@@ -80,6 +82,9 @@ def scene(material_ext, name):
                        "KHR_lights_punctual": {"lights": [{"type": "point", "color": [1, 0.9, 0.8],
                                                            "intensity": 40}]}},
     }
+    if global_medium:
+        doc["extensions"]["DR_medium"] = global_medium
+        doc["extensionsUsed"] = sorted(doc["extensionsUsed"] + ["DR_medium"])
     with open(os.path.join(HERE, name), "w") as f:
         json.dump(doc, f, indent=1)
         f.write("\n")
@@ -98,6 +103,8 @@ write_grid("coarse.raw", lambda x, y, z: 0.6 * blob(x, y, z, 4), 4)
 write_grid("coarse-empty.raw", lambda x, y, z: 0.0, 4)
 scene(dr_medium("coarse.raw", 4), "coarse.gltf")
 scene(dr_medium("coarse-empty.raw", 4), "coarse-empty.gltf")
+scene(dr_medium("coarse.raw", 4), "fog-global.gltf",
+      {"extinction": [0.15, 0.2, 0.3], "albedo": [0.9, 0.9, 0.9], "g": 0.4})
 scene({"KHR_materials_volume": {"thicknessFactor": 1, "attenuationDistance": 1.5,
                                 "attenuationColor": [0.6, 0.7, 0.8]},
        "KHR_materials_transmission": {"transmissionFactor": 1}, "KHR_materials_ior": {"ior": 1},
