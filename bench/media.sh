@@ -7,6 +7,8 @@
 #      (lower is better: the cost of a given accuracy), peak memory, tape bytes
 #  ii. prb peak memory at max depth 4, 64, 1000 (goal: flat within 5%)
 # iii. render time of the smoke cube (rays per second)
+#  iv. a dense, almost white medium at depth 1000: gradient / primal time
+#      (DRT's gain paths are spread so that the cost stays linear in depth)
 # Writes $BUILD/bench/media-results.json.
 set -euo pipefail
 BUILD=${BUILD:-build}
@@ -60,9 +62,17 @@ J=$("$DR" render "$SMOKE" -o "$TMP/r.exr" --res 256x256 --spp 16 --threads 2 --j
 RT=$(json_num "$J" render time)
 RPS=$(json_num "$J" per_second rays)
 echo "iii. render $SMOKE 256x256 16 spp: $(calc "$RT" %.3f) s, $(calc "$RPS / 1e6" %.2f) M rays/s"
+DENSE=tests/data/media/fog-dense.gltf
+J=$("$DR" render "$DENSE" -o "$TMP/d.exr" --res 32x32 --spp 4 --max-depth 1000 --threads 2 --json)
+TP=$(json_num "$J" render time)
+J=$("$DR" grad "$DENSE" --param /materials/0/extensions/DR_medium/extinction -o "$TMP/dd.exr" --res 32x32 --spp 4 \
+    --max-depth 1000 --threads 2 --json)
+TG=$(json_num "$J" gradient time)
+echo " iv. dense medium (extinction 1e4/1e3/1e2, albedo 0.999, depth 1000, 32x32, 4 spp): primal $(calc "$TP" %.3f) s," \
+    "prb DRT gradient $(calc "$TG" %.3f) s: ratio $(calc "$TG / $TP")"
 cat >"$OUT/media-results.json" <<JSON
 {"volume_gradient": [${ROWS%,}], "prb_memory_vs_depth": [${MEM_JSON%,}], "prb_memory_change_percent": $SPREAD,
- "render_seconds": $RT}
+ "render_seconds": $RT, "dense_primal_seconds": $TP, "dense_gradient_seconds": $TG}
 JSON
 echo
 echo "results in $OUT/media-results.json"

@@ -132,7 +132,7 @@ static void sweep(const struct tape_job *j, const struct tape_vertex *verts,
         dr_vec3 bt = verts[k].bt;
         if (v->media) {
             dr_vec3 from = dr_add(after, dr_mul(bt, dr_path_vertex_term(v)));
-            d_medium_vertex(s, &j->b.popts, v, mrecs ? &mrecs[k] : NULL, dr_mul(adj, bt), dr_mul(adj, from),
+            d_medium_vertex(s, &j->b.popts, v, mrecs ? &mrecs[k] : NULL, count, dr_mul(adj, bt), dr_mul(adj, from),
                             dr_mul(adj, after),
                             dr_mul(adj, dr_mul(bt, dr_path_vertex_nee(v))), sink);
             after = from;

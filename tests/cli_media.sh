@@ -7,6 +7,7 @@
 #   c. grad / fdcheck on media parameters (a homogeneous KHR medium; a global
 #      fog around a grid medium) with --medium-grad drt and baseline;
 #      a bad --medium-grad value is a usage error (exit 2)
+#      and extinction 1e4 with albedo 0.999 at depth 1000 stays finite
 #   d. bad media input (missing grid) is an input error naming file and JSON path
 #   e. optimize grows density in an all-empty grid (4^3, one majorant cell):
 #      DRT lowers the loss and moves towards the true grid, the baseline's
@@ -58,6 +59,12 @@ expect_rc 0 "fdcheck on homogeneous medium coefficients"
 run fdcheck "$data/fog-global.gltf" --param /extensions/DR_medium/extinction --param /extensions/DR_medium/g \
     --param /materials/smoke/extensions/DR_medium/density_scale --spp 16 --res 16x16 --batches 16 --eps 0.03 --json
 expect_rc 0 "fdcheck on a global medium and a grid medium inside it"
+
+# hard case: extinction up to 1e4 with albedo 0.999 at depth 1000: finite gradients, nothing dropped
+run grad "$data/fog-dense.gltf" --param /materials/0/extensions/DR_medium/extinction \
+    --param /materials/0/extensions/DR_medium/albedo --max-depth 1000 --spp 2 --res 12x12 -o dense.exr --json
+expect_rc 0 "grad on a dense, almost white medium at depth 1000"
+expect_in out '"invalid_samples": 0' "no non-finite samples in the dense medium"
 
 # d. bad input
 sed 's/"smoke.raw"/"missing.raw"/' "$data/smoke.gltf" >bad.gltf

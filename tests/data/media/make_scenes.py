@@ -14,6 +14,7 @@
                     blob, and all zeros
   fog-global.gltf   coarse.gltf inside an unbounded global fog (DR_medium at
                     the document root): the camera and the light are in it
+  fog-dense.gltf    a hard case: extinction 1e4, 1e3, 1e2 (1/m), albedo 0.999
   fog-khr.gltf      the cube as a homogeneous KHR_materials_volume medium
                     (transmission 1, ior 1, volume_scatter albedo)
 """
@@ -103,6 +104,7 @@ write_grid("coarse.raw", lambda x, y, z: 0.6 * blob(x, y, z, 4), 4)
 write_grid("coarse-empty.raw", lambda x, y, z: 0.0, 4)
 scene(dr_medium("coarse.raw", 4), "coarse.gltf")
 scene(dr_medium("coarse-empty.raw", 4), "coarse-empty.gltf")
+scene({"DR_medium": {"extinction": [1e4, 1e3, 1e2], "albedo": [0.999, 0.999, 0.999], "g": 0.5}}, "fog-dense.gltf")
 scene(dr_medium("coarse.raw", 4), "fog-global.gltf",
       {"extinction": [0.15, 0.2, 0.3], "albedo": [0.9, 0.9, 0.9], "g": 0.4})
 scene({"KHR_materials_volume": {"thicknessFactor": 1, "attenuationDistance": 1.5,
