@@ -112,7 +112,7 @@ struct dr_medium_piece {
     dr_vec3 o;                 /* its start; the direction is the trace's */
     double len;                /* to the boundary, the collision, or the light */
 };
-#define DR_MEDIUM_PIECES 4
+#define DR_MEDIUM_PIECES 8
 struct dr_medium_trace {
     uint64_t rng_key;          /* the tracking stream (sampler.h key) */
     int n;                     /* pieces recorded (a longer crossing keeps the first DR_MEDIUM_PIECES) */
