@@ -39,6 +39,7 @@ void cmd_fdcheck_usage(FILE *out)
             "      --regularize E  prb, attached: a vertex Jacobian whose smallest/largest\n"
             "                      singular value is below E is not inverted; forward mode\n"
             "                      restarts there instead (default: 1e-3; 0: always invert)\n"
+            "      --medium-grad M drt (default) or baseline, for media parameters\n"
             "      --res WxH       image size (default: 32x32)\n"
             "      --max-depth D   path segments (default: 8)\n"
             "      --rr-depth D    Russian roulette from this many segments on (default: 5)\n"
@@ -170,7 +171,7 @@ int cmd_fdcheck(int argc, char **argv)
     double t_loaded = dr_clock_seconds();
     int rw, rh;   /* the rendered rectangle: the frame or --crop's */
     struct dr_film film = grad_film(&a.g, a.g.width, a.g.height, &rw, &rh);
-    struct dr_fd_options o = {.estimator = a.g.estimator, .sampling = a.g.sampling, .width = rw,
+    struct dr_fd_options o = {.estimator = a.g.estimator, .sampling = a.g.sampling, .medium_grad = a.g.medium_grad, .width = rw,
                               .height = rh, .film = film, .spp = a.g.spp, .batches = a.batches,
                               .max_depth = a.g.max_depth, .rr_depth = a.g.rr_depth, .seed = a.g.seed,
                               .regularize = a.g.regularize, .sampler = a.g.sampler,

@@ -71,6 +71,9 @@ void cmd_grad_usage(FILE *out)
             "      --regularize E  prb, attached: a vertex Jacobian whose smallest/largest\n"
             "                      singular value is below E is not inverted; forward mode\n"
             "                      restarts there instead (default: 1e-3; 0: always invert)\n"
+            "      --medium-grad M drt (default: differential ratio tracking, unbiased) or\n"
+            "                      baseline (differentiates the sampled collisions; biased\n"
+            "                      where the density is 0), for media parameters\n"
             "      --spp N         samples per pixel (default: 16)\n"
             "      --max-depth D   path segments (default: 8)\n"
             "      --rr-depth D    Russian roulette from this many segments on (default: 5)\n"
@@ -294,7 +297,7 @@ static void json_open(FILE *f, const struct grad_args *a, const char *scene_path
 
 static bool is_image_param(const struct dr_param *p)
 {
-    return p->kind == DR_PARAM_IMAGE || p->kind == DR_PARAM_ENV_MAP;
+    return dr_param_is_array(p);
 }
 
 /* ---- forward mode ---- */

@@ -54,6 +54,7 @@ void cmd_optimize_usage(FILE *out)
             "      --regularize E     prb, attached: a vertex Jacobian whose smallest/largest\n"
             "                         singular value is below E is not inverted; forward mode\n"
             "                         restarts there instead (default 1e-3; 0: always invert)\n"
+            "      --medium-grad M    drt (default) or baseline, for media parameters\n"
             "      --spp N            samples per pixel for the loss image and for the gradient\n"
             "                         (default 8)\n"
             "      --batches K        split each iteration's samples into K independent batches\n"
@@ -425,7 +426,7 @@ static void print_values(FILE *f, const struct dr_param_set *ps, const double *t
     bool first = true;
     for (int k = 0; k < ps->n; k++) {
         const struct dr_param *p = &ps->params[k];
-        if (p->kind == DR_PARAM_IMAGE || p->kind == DR_PARAM_ENV_MAP)
+        if (dr_param_is_array(p))
             continue;
         if (json) {
             fprintf(f, "%s", first ? "" : ", ");
@@ -821,7 +822,7 @@ static void opt_summary_text(FILE *so, const struct opt_args *a, const struct op
         fprintf(so, "%-68s %-26s %-26s %s\n", "parameter", "recovered", "true", "max |error|");
         for (int k = 0; k < ps->n; k++) {
             const struct dr_param *p = &ps->params[k];
-            if (p->kind == DR_PARAM_IMAGE || p->kind == DR_PARAM_ENV_MAP) {
+            if (dr_param_is_array(p)) {
                 fprintf(so, "%-68s relative error %.4f\n", p->name, reference_rel_error(ps, r->theta, r->ref, k));
                 continue;
             }
@@ -870,7 +871,7 @@ static void opt_summary_json(const struct opt_args *a, const struct opt_run *r)
             printf("%s", k ? ", " : "");
             json_string(stdout, p->name);
             printf(": ");
-            json_number(stdout, p->kind == DR_PARAM_IMAGE || p->kind == DR_PARAM_ENV_MAP
+            json_number(stdout, dr_param_is_array(p)
                                     ? reference_rel_error(ps, r->theta, r->ref, k)
                                     : reference_error(ps, r->theta, r->ref, k));
         }

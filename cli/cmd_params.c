@@ -36,7 +36,7 @@ static bool is_material(const struct dr_param *p)
 
 static bool is_image(const struct dr_param *p)
 {
-    return p->kind == DR_PARAM_IMAGE || p->kind == DR_PARAM_ENV_MAP;
+    return dr_param_is_array(p);
 }
 
 /* Mean of each channel of an image parameter (values: size scalars). */
@@ -58,7 +58,10 @@ static void print_value(FILE *f, const struct dr_param *p, const double *values)
     if (is_image(p)) {
         double mean[4];
         channel_means(p, values, mean);
-        fprintf(f, "%dx%dx%d image, mean (", p->width, p->height, p->channels);
+        if (p->kind == DR_PARAM_MEDIUM_DENSITY)
+            fprintf(f, "grid of %lld voxels, mean (", (long long)p->size);
+        else
+            fprintf(f, "%dx%dx%d image, mean (", p->width, p->height, p->channels);
         for (int c = 0; c < p->channels && c < 4; c++)
             fprintf(f, "%s%.6g", c ? ", " : "", mean[c]);
         fputc(')', f);

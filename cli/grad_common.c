@@ -170,6 +170,16 @@ static int method_option(struct grad_common *g, int c, const char *arg)
         g->sampler = (enum dr_sampler_kind)k;
         return 0;
     }
+    case GOPT_MEDIUM_GRAD:
+        if (strcmp(arg, "drt") == 0)
+            g->medium_grad = DR_MEDIUM_GRAD_DRT;
+        else if (strcmp(arg, "baseline") == 0)
+            g->medium_grad = DR_MEDIUM_GRAD_BASELINE;
+        else {
+            cli_error(g->cmd, "--medium-grad: unknown method '%s' (known: drt, baseline)", arg);
+            return DR_EXIT_USAGE;
+        }
+        return 0;
     default: return -1;
     }
 }
@@ -219,7 +229,8 @@ int grad_common_option(struct grad_common *g, int c, const char *arg)
     case GOPT_ESTIMATOR:
     case GOPT_SAMPLING:
     case GOPT_REGULARIZE:
-    case GOPT_SAMPLER: return method_option(g, c, arg);
+    case GOPT_SAMPLER:
+    case GOPT_MEDIUM_GRAD: return method_option(g, c, arg);
     case GOPT_FILTER:
     case GOPT_CROP: return film_option(g, c, arg);
     case GOPT_ENV: return env_option(g, arg);
@@ -456,8 +467,8 @@ static int apply_set(const char *cmd, struct dr_scene *scene, const char *spec)
         cli_error(cmd, "--set %s", dr_last_error());
         return DR_EXIT_USAGE;
     }
-    if (p.kind == DR_PARAM_IMAGE || p.kind == DR_PARAM_ENV_MAP) {
-        cli_error(cmd, "--set %s: images cannot be set from the command line", ptr);
+    if (dr_param_is_array(&p)) {
+        cli_error(cmd, "--set %s: images cannot be set from the command line (nor density grids)", ptr);
         return DR_EXIT_USAGE;
     }
     double v[4];
@@ -515,7 +526,8 @@ struct dr_grad_problem grad_problem(const struct grad_common *g, const struct dr
     return (struct dr_grad_problem){.scene = scene, .camera = cam, .params = ps, .width = rw, .height = rh,
                                     .spp = spp, .max_depth = g->max_depth, .rr_depth = g->rr_depth, .seed = seed,
                                     .threads = g->threads, .sampling = g->sampling, .film = film,
-                                    .regularize = g->regularize, .sampler = g->sampler};
+                                    .regularize = g->regularize, .sampler = g->sampler,
+                                    .medium_grad = g->medium_grad};
 }
 
 struct dr_render_opts grad_render_opts(const struct grad_common *g, int w, int h, int spp, uint64_t seed,
@@ -576,6 +588,7 @@ void grad_json_head(FILE *f, const struct grad_common *g, const char *scene_path
     fprintf(f, ", \"sampling\": ");
     json_string(f, dr_sampling_name(g->sampling));
     fprintf(f, ", \"regularize\": %.17g", g->regularize);
+    fprintf(f, ", \"medium_grad\": \"%s\"", g->medium_grad == DR_MEDIUM_GRAD_BASELINE ? "baseline" : "drt");
     fprintf(f, ", \"width\": %d, \"height\": %d, \"spp\": %d, \"max_depth\": %d, \"rr_depth\": %d, \"seed\": %llu",
             g->width, g->height, g->spp, g->max_depth, g->rr_depth, (unsigned long long)g->seed);
     fputs(", ", f);

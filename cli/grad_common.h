@@ -37,6 +37,7 @@ enum {
     GOPT_SAMPLER,   /* random numbers: independent | sobol */
     GOPT_ENV,       /* lighting: --env FILE|COLOR[,STRENGTH] */
     GOPT_NO_DEFAULT_LIGHT,
+    GOPT_MEDIUM_GRAD,
     GOPT_END
 };
 
@@ -53,7 +54,8 @@ enum {
 #define GRAD_COMMON_LONG_OPTIONS                                                                       \
     {"param", required_argument, NULL, GOPT_PARAM}, {"estimator", required_argument, NULL, GOPT_ESTIMATOR}, \
         {"sampling", required_argument, NULL, GOPT_SAMPLING}, {"set", required_argument, NULL, GOPT_SET},   \
-        {"regularize", required_argument, NULL, GOPT_REGULARIZE}, RENDER_COMMON_LONG_OPTIONS
+        {"regularize", required_argument, NULL, GOPT_REGULARIZE},                           \
+        {"medium-grad", required_argument, NULL, GOPT_MEDIUM_GRAD}, RENDER_COMMON_LONG_OPTIONS
 
 struct grad_common {
     const char *cmd;                 /* "grad", "fdcheck": prefixes messages */
@@ -64,6 +66,7 @@ struct grad_common {
     int n_sets;
     const struct dr_estimator_ops *estimator;
     enum dr_sampling sampling;
+    enum dr_medium_grad medium_grad;   /* --medium-grad: drt (default) or baseline */
     int spp, max_depth, rr_depth, width, height, camera, threads;
     bool res_given, camera_given, json;
     uint64_t seed;

@@ -50,6 +50,7 @@
 #include "error.h"
 #include "gltf_write.h"
 #include "image_io.h"
+#include "medium.h"
 
 namespace {
 
@@ -236,6 +237,10 @@ private:
     void apply_environment(const std::vector<const dr_param *> &ps);
     void write_image_param(const dr_param *p);
     void write_env_map(const dr_param *p, tinygltf::Value::Object &env);
+    /* participating media (the "media" section) */
+    tinygltf::Value *medium_extension(int medium, std::string *where);
+    void apply_medium(const dr_param *p);
+    void copy_medium_grids();
     void copy_resources();
     std::string copy_one(const std::string &rel, const std::string &what, const std::string &flat_name);
     void set_buffer_uris();
@@ -350,7 +355,7 @@ std::vector<double> Writer::values(const dr_param *p)
 {
     std::vector<double> v(size_t(p->size > 0 ? p->size : 0));
     if (!v.empty()) dr_param_get(scene_, p, v.data());
-    if (p->kind != DR_PARAM_IMAGE && p->kind != DR_PARAM_ENV_MAP)
+    if (!dr_param_is_array(p))
         for (double x : v)
             if (!std::isfinite(x)) fail(DR_ERR_ARG, "%s: the value is not finite (%g)", p->name, x);
     return v;
@@ -523,6 +528,94 @@ void Writer::apply_environment(const std::vector<const dr_param *> &ps)
     model_.extensions["DR_environment"] = tinygltf::Value(std::move(env));
 }
 
+/* ---- participating media ---- */
+
+bool copyable(const std::string &uri);
+
+/* The DR_medium object of a medium (created if the source has none: a
+ * KHR_materials_volume medium gets DR_medium values that override it). */
+tinygltf::Value *Writer::medium_extension(int medium, std::string *where)
+{
+    int mat = scene_->media[medium].material;
+    tinygltf::ExtensionMap *ext = &model_.extensions;
+    *where = "/extensions/DR_medium";
+    if (mat >= 0) {
+        if (size_t(mat) >= model_.materials.size())
+            fail(DR_ERR_ARG, "/materials/%d: the source file has no such material", mat);
+        ext = &model_.materials[size_t(mat)].extensions;
+        *where = strf("/materials/%d/extensions/DR_medium", mat);
+    }
+    tinygltf::Value &v = (*ext)["DR_medium"];
+    if (!v.IsObject()) v = tinygltf::Value(tinygltf::Value::Object());
+    return &v;
+}
+
+void Writer::apply_medium(const dr_param *p)
+{
+    std::string where;
+    tinygltf::Value *v = medium_extension(p->target, &where);
+    tinygltf::Value::Object obj = v->Get<tinygltf::Value::Object>();
+    std::vector<double> x = values(p);
+    switch (p->kind) {
+    case DR_PARAM_MEDIUM_EXTINCTION:
+    case DR_PARAM_MEDIUM_ALBEDO:
+    {
+        tinygltf::Value::Array c;
+        for (int k = 0; k < 3; k++) c.push_back(tinygltf::Value(x[size_t(k)]));
+        obj[p->kind == DR_PARAM_MEDIUM_ALBEDO ? "albedo" : "extinction"] = tinygltf::Value(std::move(c));
+    }
+        break;
+    case DR_PARAM_MEDIUM_G: obj["g"] = tinygltf::Value(x[0]); break;
+    case DR_PARAM_MEDIUM_DENSITY_SCALE: obj["density_scale"] = tinygltf::Value(x[0]); break;
+    default: {
+        /* the grid as raw float32 next to the output, with its resolution */
+        const dr_grid &g = scene_->media[p->target].grid;
+        std::string name = stem_ + strf(".medium%d.raw", p->target);
+        claim(name, where + "/density/uri");
+        std::string tmp = tmpdir_ + name;
+        FILE *f = fopen(tmp.c_str(), "wb");
+        bool ok = f && fwrite(g.density, sizeof(float), size_t(p->size), f) == size_t(p->size);
+        if (f && fclose(f) != 0) ok = false;
+        if (!ok) fail(DR_ERR_IO, "%s/density/uri: cannot write %s", where.c_str(), tmp.c_str());
+        files_.push_back({tmp, join(out_dir_, name)});
+        tinygltf::Value::Array res;
+        for (int n : {g.nx, g.ny, g.nz}) res.push_back(tinygltf::Value(n));
+        tinygltf::Value::Object dens;
+        dens["uri"] = tinygltf::Value(name);
+        dens["resolution"] = tinygltf::Value(std::move(res));
+        obj["density"] = tinygltf::Value(std::move(dens));
+        break;
+    }
+    }
+    *v = tinygltf::Value(std::move(obj));
+}
+
+/* Density grids the output still references from the source: copied. */
+void Writer::copy_medium_grids()
+{
+    for (int i = 0; i < scene_->n_media; i++) {
+        std::string where;
+        int mat = scene_->media[i].material;
+        const tinygltf::ExtensionMap &ext = mat >= 0 && size_t(mat) < model_.materials.size()
+                                                ? model_.materials[size_t(mat)].extensions : model_.extensions;
+        auto it = ext.find("DR_medium");
+        if (it == ext.end() || !it->second.IsObject() || !it->second.Has("density")) continue;
+        const tinygltf::Value &d = it->second.Get("density");
+        if (!d.IsObject() || !d.Has("uri") || !d.Get("uri").IsString()) continue;
+        std::string rel = d.Get("uri").Get<std::string>();
+        if (rel.rfind(stem_ + ".medium", 0) == 0 || !copyable(rel)) continue;   /* written by apply_medium */
+        tinygltf::Value *v = medium_extension(i, &where);
+        std::string final_rel = copy_one(rel, where + "/density/uri", stem_ + strf(".medium%d", i));
+        if (final_rel != rel) {
+            tinygltf::Value::Object obj = v->Get<tinygltf::Value::Object>();
+            tinygltf::Value::Object dens = obj["density"].Get<tinygltf::Value::Object>();
+            dens["uri"] = tinygltf::Value(final_rel);
+            obj["density"] = tinygltf::Value(std::move(dens));
+            *v = tinygltf::Value(std::move(obj));
+        }
+    }
+}
+
 void Writer::apply_params()
 {
     if (!params_) return;
@@ -542,6 +635,11 @@ void Writer::apply_params()
         case DR_PARAM_ENV_STRENGTH:
         case DR_PARAM_ENV_MAP: env.push_back(p); break;
         case DR_PARAM_IMAGE: write_image_param(p); break;
+        case DR_PARAM_MEDIUM_EXTINCTION:
+        case DR_PARAM_MEDIUM_ALBEDO:
+        case DR_PARAM_MEDIUM_G:
+        case DR_PARAM_MEDIUM_DENSITY_SCALE:
+        case DR_PARAM_MEDIUM_DENSITY: apply_medium(p); break;
         default: fail(DR_ERR_ARG, "%s: this kind of parameter cannot be written", p->name);
         }
     }
@@ -609,6 +707,7 @@ bool copyable(const std::string &uri) { return !uri.empty() && uri[0] != '/' && 
 void Writer::copy_resources()
 {
     if (same_dir_) return;
+    copy_medium_grids();
     for (size_t i = 0; i < model_.images.size(); i++) {
         tinygltf::Image &im = model_.images[i];
         if (replaced_images_.count(int(i)) || im.bufferView >= 0 || !copyable(im.uri)) continue;

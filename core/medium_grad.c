@@ -137,9 +137,8 @@ static bool stretch_sample(const struct dr_medium *m, double t0, double t1, doub
  * with T by ratio tracking (exact when homogeneous) and L_s, the light
  * scattered at x per unit sigma_s, from a fresh path (dr_medium_inscattered). */
 static void drt_gain(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
-                     dr_vec3 d_beta, struct dr_grad_sink *sink)
+                     const struct dr_medium_trace *tr, dr_vec3 d_beta, struct dr_grad_sink *sink)
 {
-    const struct dr_medium_trace *tr = &v->seg_trace;
     struct dr_sampler rng = {.key = dr_hash64(tr->rng_key ^ 0x7f4a7c159e3779b9ULL), .dim = 0};
     dr_vec3 o = tr->o0, d = tr->d, T = d_beta;
     int medium = tr->medium0;
@@ -234,18 +233,30 @@ static void d_scatter(const struct dr_scene *s, const struct dr_path_opts *opts,
     }
 }
 
+/* DRT's gain term traces a path from a point of the segment: done at every
+ * vertex, a path of n vertices would cost n^2. So a vertex does it with
+ * probability min(1, GAIN_PATHS / n), weighted by the inverse: about
+ * GAIN_PATHS gain paths per path, linear time, unbiased; every vertex of
+ * paths of up to GAIN_PATHS vertices. */
+#define GAIN_PATHS 8
+
 void d_medium_vertex(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
-                     dr_vec3 d_beta, dr_vec3 d_R, dr_vec3 d_Rn, dr_vec3 d_nee, struct dr_grad_sink *sink)
+                     const struct dr_medium_record *rec, int path_vertices, dr_vec3 d_beta, dr_vec3 d_R,
+                     dr_vec3 d_Rn, dr_vec3 d_nee, struct dr_grad_sink *sink)
 {
     const struct dr_param_set *ps = opts->params;
-    if (!v->media || !ps || !ps->media_active)
+    if (!v->media || !rec || !ps || !ps->media_active)
         return;
     if (!dr_is_black(d_R))
-        d_trace(s, opts, &v->seg_trace, false, d_R, sink);
-    if (opts->medium_grad == DR_MEDIUM_GRAD_DRT && !dr_is_black(d_beta))
-        drt_gain(s, opts, v, d_beta, sink);
+        d_trace(s, opts, &rec->seg, false, d_R, sink);
+    if (opts->medium_grad == DR_MEDIUM_GRAD_DRT && !dr_is_black(d_beta)) {
+        double p = path_vertices > GAIN_PATHS ? (double)GAIN_PATHS / path_vertices : 1.0;
+        double u = (double)(dr_hash64(rec->seg.rng_key ^ 0x2545f4914f6cdd1dULL) >> 11) * (1.0 / 9007199254740992.0);
+        if (u < p)
+            drt_gain(s, opts, v, &rec->seg, dr_scale(d_beta, 1.0 / p), sink);
+    }
     if (v->kind == DR_VERTEX_MEDIUM && v->shaded && ps->med_active[v->medium])
         d_scatter(s, opts, v, d_R, d_Rn, d_nee, sink);
     if (v->nee && !dr_is_black(d_nee))
-        d_trace(s, opts, &v->shadow_trace, true, d_nee, sink);
+        d_trace(s, opts, &rec->shadow, true, d_nee, sink);
 }

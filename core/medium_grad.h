@@ -4,15 +4,18 @@
 
 #include "path.h"
 
-/* Every media-parameter derivative vertex v contributes (nothing unless the
- * vertex came from the medium walker with media parameters requested):
+/* Every media-parameter derivative vertex v contributes, from what the walker
+ * recorded in rec (nothing unless the vertex came from the medium walker with
+ * media parameters requested); path_vertices: how many the path has (DRT's
+ * gain paths are spread over them so the cost stays linear in its length):
  *   d_beta = adjoint (x) the true throughput arriving at the segment into v;
  *   d_R   = adjoint (x) the true radiance the path gathers from v on, v's own terms included;
  *   d_Rn  = the same from the next vertex on;
  *   d_nee = adjoint (x) v's next-event contribution (true throughput).
  * Forward mode: the channels of these land in the sink's channels. */
 void d_medium_vertex(const struct dr_scene *scene, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
-                     dr_vec3 d_beta, dr_vec3 d_R, dr_vec3 d_Rn, dr_vec3 d_nee, struct dr_grad_sink *sink);
+                     const struct dr_medium_record *rec, int path_vertices, dr_vec3 d_beta, dr_vec3 d_R,
+                     dr_vec3 d_Rn, dr_vec3 d_nee, struct dr_grad_sink *sink);
 
 /* Radiance scattered at x (in medium `medium`, the ray arriving along d)
  * towards -d, per unit scattering coefficient: NEE and a phase-sampled path

@@ -37,9 +37,9 @@ static struct dr_sampler tracking_stream(const struct dr_sampler *smp, int depth
 }
 
 /* Derivatives of media parameters are requested: record what to re-trace. */
-static bool recording(const struct dr_path_opts *opts)
+static bool recording(const struct dr_path_opts *opts, const struct dr_path_vertex *v)
 {
-    return opts->params && opts->params->media_active;
+    return opts->params && opts->params->media_active && v->mrec;
 }
 
 static void draw_vertex_randoms(struct dr_sampler *sampler, int depth, struct dr_vertex_randoms *u)
@@ -88,7 +88,7 @@ static void media_nee(const struct dr_scene *s, struct dr_path_vertex *v, const 
     if (!(tmax > 0.0))
         return;
     struct dr_sampler rng = tracking_stream(smp, v->depth, STREAM_SHADOW);
-    dr_vec3 tr = dr_media_transmittance(s, so, sd, tmax, v->medium, &rng, &counts->shadow, rec ? &v->shadow_trace : NULL);
+    dr_vec3 tr = dr_media_transmittance(s, so, sd, tmax, v->medium, &rng, &counts->shadow, rec ? &v->mrec->shadow : NULL);
     if (dr_is_black(tr))
         return;
     double w = v->ls.delta ? 1.0 : dr_mis_power(v->ls.pdf, pdf);
@@ -114,7 +114,7 @@ static bool medium_vertex(const struct dr_scene *s, const struct dr_path_opts *o
     v->wo = dr_neg(st->d);
     draw_vertex_randoms(sampler, st->depth, &v->u);
     if (opts->stages & DR_STAGE_NEE)
-        media_nee(s, v, sampler, recording(opts), counts);
+        media_nee(s, v, sampler, recording(opts, v), counts);
 
     dr_vec3 wi;
     double pdf = dr_hg_sample(s->media[v->medium].g, st->d, v->u.bsdf_u1, v->u.bsdf_u2, &wi);
@@ -155,7 +155,7 @@ static bool surface_vertex(const struct dr_scene *s, const struct dr_path_opts *
     if (!dr_path_stage_material(s, opts, st, sampler, v))
         return false;
     if (opts->stages & DR_STAGE_NEE)
-        media_nee(s, v, sampler, recording(opts), counts);
+        media_nee(s, v, sampler, recording(opts, v), counts);
     return dr_path_stage_continue(opts, st, v);
 }
 
@@ -194,12 +194,11 @@ bool dr_medium_path_step(const struct dr_scene *s, const struct dr_path_opts *op
     if (st->depth == 1)
         start_path(s, st, sampler);
     struct dr_sampler rng = tracking_stream(sampler, st->depth, STREAM_FREE_FLIGHT);
-    const bool rec = recording(opts);
+    const bool rec = recording(opts, v);
     if (rec) {
-        v->hero = st->hero;
-        v->seg_trace = (struct dr_medium_trace){.rng_key = rng.key, .n = 0, .o0 = st->o, .d = st->d,
+        v->mrec->seg = (struct dr_medium_trace){.rng_key = rng.key, .n = 0, .o0 = st->o, .d = st->d,
                                                 .medium0 = st->medium};
-        v->shadow_trace.n = 0;
+        v->mrec->shadow.n = 0;
     }
     struct dr_spectral_mis mis = {st->hero, {st->mis_r[0], st->mis_r[1], st->mis_r[2]}};
     const dr_vec3 w_before = dr_spectral_mis_weight(&mis);
@@ -221,7 +220,7 @@ bool dr_medium_path_step(const struct dr_scene *s, const struct dr_path_opts *op
             uint32_t dim0 = rng.dim;
             enum dr_medium_event ev = dr_medium_sample(&s->media[st->medium], st->o, st->d, thit, &rng, &mis, &t);
             if (rec)
-                dr_medium_trace_add(&v->seg_trace, st->medium, dim0, st->o, t);
+                dr_medium_trace_add(&v->mrec->seg, st->medium, dim0, st->o, t);
             if (ev == DR_MEDIUM_ABSORB) {
                 v->kind = DR_VERTEX_MEDIUM;
                 v->hit = (struct dr_hit){.tri = -1, .p = dr_madd(st->o, st->d, t), .material = -1};

@@ -15,7 +15,10 @@ double dr_param_default_lr(const struct dr_param *p, const double *values)
     case DR_PARAM_BASE_COLOR:
     case DR_PARAM_METALLIC:
     case DR_PARAM_ROUGHNESS:
-    case DR_PARAM_IMAGE: return 0.02;
+    case DR_PARAM_IMAGE:
+    case DR_PARAM_MEDIUM_ALBEDO:
+    case DR_PARAM_MEDIUM_G: return 0.02;
+    case DR_PARAM_MEDIUM_DENSITY: return 0.05;   /* voxels: densities of order 1, often starting at 0 */
     default: {
         double mean = 0.0;
         for (int64_t i = 0; i < p->size; i++)

@@ -112,13 +112,22 @@ struct dr_medium_piece {
     dr_vec3 o;                 /* its start; the direction is the trace's */
     double len;                /* to the boundary, the collision, or the light */
 };
-#define DR_MEDIUM_PIECES 4
+#define DR_MEDIUM_PIECES 8
 struct dr_medium_trace {
     uint64_t rng_key;          /* the tracking stream (sampler.h key) */
     int n;                     /* pieces recorded (a longer crossing keeps the first DR_MEDIUM_PIECES) */
     dr_vec3 o0, d;             /* the ray (free flight: from the previous vertex) */
     int medium0;               /* ... and the medium it starts in */
     struct dr_medium_piece p[DR_MEDIUM_PIECES];
+};
+
+/* What the medium walker records at a vertex for the derivatives of media
+ * parameters (medium_grad.c): in the caller's storage, so a vertex stays small
+ * where nothing is recorded (the tape keeps these only when media parameters
+ * are requested). */
+struct dr_medium_record {
+    struct dr_medium_trace seg;      /* the free flight into the vertex */
+    struct dr_medium_trace shadow;   /* the shadow ray of its next-event estimate */
 };
 
 enum dr_vertex_kind {
@@ -158,9 +167,8 @@ struct dr_path_vertex {
     dr_vec3 nee_f;             /* BSDF value towards the light */
     double nee_scale;          /* |cos| * MIS weight / pdf */
     dr_vec3 nee_tr;            /* media: transmittance to the light times seg, folded into ls.radiance */
-    /* media, when media parameters are differentiated: what to re-trace */
-    int hero;                  /* the path's spectral MIS hero channel */
-    struct dr_medium_trace seg_trace, shadow_trace;
+    struct dr_medium_record *mrec;   /* set by the caller: where the medium walker records
+                                        (used only when media parameters are requested) */
     /* continuation */
     bool cont;                 /* the path goes on from here */
     dr_vec3 wi;                /* local, sampled */

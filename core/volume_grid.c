@@ -71,8 +71,8 @@ int dr_grid_read(const char *file, int nx, int ny, int nz, struct dr_grid *g)
 {
     memset(g, 0, sizeof *g);
     if (has_suffix(file, ".vdb")) {
-        dr_set_error("%s: OpenVDB grids are not supported by this build (the OpenImageIO it uses has no openvdb "
-                     "reader); write the density as raw float32 (.raw) or a single-channel EXR", file);
+        dr_set_error("%s: OpenVDB grids are not read yet (drender reads 2D images through OpenImageIO, not its "
+                     "openvdb volume reader); write the density as raw float32 (.raw) or a single-channel EXR", file);
         return DR_ERR_FORMAT;
     }
     bool raw = has_suffix(file, ".raw") || has_suffix(file, ".f32") || has_suffix(file, ".bin");

@@ -24,7 +24,7 @@ static struct dr_grad_problem problem(const struct dr_scene *scene, const struct
                                     .height = o->height, .spp = o->spp, .max_depth = o->max_depth,
                                     .rr_depth = o->rr_depth, .seed = seed, .threads = o->threads,
                                     .sampling = o->sampling, .film = o->film, .regularize = o->regularize,
-                                    .sampler = o->sampler};
+                                    .sampler = o->sampler, .medium_grad = o->medium_grad};
 }
 
 /* Mean of the image rendered at theta0 + t * dir with seed. */
@@ -96,7 +96,7 @@ static double zscore(double a, double b, double sa, double sb)
 static void entry_direction(const struct dr_param *pp, int k, int c, int64_t T, double *dir, struct dr_fd_entry *en)
 {
     memset(dir, 0, sizeof(double) * (size_t)T);
-    if (pp->kind != DR_PARAM_IMAGE && pp->kind != DR_PARAM_ENV_MAP) {
+    if (!dr_param_is_array(pp)) {
         dir[pp->offset + c] = 1.0;
         if (pp->size > 1)
             snprintf(en->label, sizeof en->label, "%s[%d]", pp->name, c);
@@ -206,7 +206,7 @@ int dr_fdcheck(struct dr_scene *scene, const struct dr_camera *camera, const str
     struct fd_buffers b = {0};
     int n_dirs = 0;
     for (int k = 0; k < ps->n; k++)
-        n_dirs += ps->params[k].kind == DR_PARAM_IMAGE || ps->params[k].kind == DR_PARAM_ENV_MAP
+        n_dirs += dr_param_is_array(&ps->params[k])
                       ? 2 : (int)ps->params[k].size;
     struct dr_fd_entry *out = calloc((size_t)n_dirs, sizeof *out);
     int rc = 0;
@@ -235,7 +235,7 @@ int dr_fdcheck(struct dr_scene *scene, const struct dr_camera *camera, const str
     }
     for (int k = 0, e = 0; k < ps->n && rc == 0; k++) {
         const struct dr_param *pp = &ps->params[k];
-        int ndir = pp->kind == DR_PARAM_IMAGE || pp->kind == DR_PARAM_ENV_MAP ? 2 : (int)pp->size;
+        int ndir = dr_param_is_array(pp) ? 2 : (int)pp->size;
         for (int c = 0; c < ndir && rc == 0; c++, e++) {
             entry_direction(pp, k, c, T, b.dir, &out[e]);
             int side = fd_side(&r, b.dir, o->eps);

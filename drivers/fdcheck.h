@@ -23,6 +23,7 @@
 struct dr_fd_options {
     const struct dr_estimator_ops *estimator;
     enum dr_sampling sampling;
+    enum dr_medium_grad medium_grad;   /* media: drt (default) or baseline */
     int width, height;
     int spp;            /* per batch */
     int batches;        /* >= 2 */

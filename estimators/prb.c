@@ -32,23 +32,27 @@ struct prb_radiance {
  * radiance goes to *L. With it: the replay, which turns *L (the primal's
  * result) into the remaining radiance vertex by vertex. */
 static void walk(const struct dr_est_base *b, struct dr_sampler smp, dr_vec3 o, dr_vec3 d, struct prb_radiance *L,
-                 dr_vec3 adj, struct dr_grad_sink *sink, struct dr_ray_counts *rays)
+                 dr_vec3 adj, struct dr_grad_sink *sink, struct dr_ray_counts *rays, int *vertices)
 {
     const struct dr_scene *s = b->p->scene;
     const struct dr_param_set *ps = b->p->params;
     const double sign = sink ? -1.0 : 1.0;
     struct dr_path_state st;
     struct dr_path_vertex v;
+    struct dr_medium_record mrec;   /* media: what the replay re-traces, one vertex at a time */
+    v.mrec = &mrec;
     dr_path_start(&st, o, d);
     for (;;) {
         dr_vec3 beta = st.beta, ratio = st.ratio;
         bool more = dr_path_step(s, &b->popts, &st, &smp, &v, rays);
+        if (!sink)
+            ++*vertices;
         dr_vec3 c = dr_mul(beta, dr_path_vertex_term(&v));   /* with substitutes */
         dr_vec3 remaining = L->true_;   /* replay: from this vertex on */
         L->sub = dr_madd(L->sub, c, sign);
         L->true_ = dr_madd(L->true_, dr_mul(ratio, c), sign);
         if (sink && v.media)
-            d_medium_vertex(s, &b->popts, &v, dr_mul(adj, dr_mul(ratio, beta)), dr_mul(adj, remaining),
+            d_medium_vertex(s, &b->popts, &v, &mrec, *vertices, dr_mul(adj, dr_mul(ratio, beta)), dr_mul(adj, remaining),
                             dr_mul(adj, L->true_),
                             dr_mul(adj, dr_mul(dr_mul(ratio, beta), dr_path_vertex_nee(&v))), sink);
         if (sink) {
@@ -108,12 +112,13 @@ static void prb_pixels(void *ctx, int thread, int64_t begin, int64_t end)
             dr_vec3 o, d;
             struct prb_radiance L = {dr_v3s(0.0), dr_v3s(0.0)};
             dr_est_camera_ray(b, px, sidx, &smp, &o, &d);
-            walk(b, smp, o, d, &L, adj, NULL, rays);
+            int vertices = 0;   /* the primal counts them, the replay's media derivatives use the count */
+            walk(b, smp, o, d, &L, adj, NULL, rays, &vertices);
             if (!dr_v3_finite(L.true_) || !dr_v3_finite(L.sub)) {
                 b->thr[thread].invalid++;
                 continue;
             }
-            walk(b, smp, o, d, &L, adj, &sink, rays);
+            walk(b, smp, o, d, &L, adj, &sink, rays, &vertices);
             dr_est_sample_done(b, thread, px, &sink);
         }
     }

@@ -35,6 +35,8 @@ struct tape_path {
 struct tape {
     struct tape_vertex *verts;
     int64_t n_verts, cap_verts;
+    struct dr_medium_record *mrecs;   /* one per vertex, only when media parameters are requested */
+    int64_t cap_mrecs;
     struct tape_path *paths;
     int64_t n_paths, cap_paths;
     bool failed;       /* out of memory while recording */
@@ -64,7 +66,8 @@ static bool grow(void **p, int64_t *cap, int64_t need, size_t elem)
 
 static uint64_t tape_bytes(const struct tape *t)
 {
-    return (uint64_t)t->cap_verts * sizeof(struct tape_vertex) + (uint64_t)t->cap_paths * sizeof(struct tape_path);
+    return (uint64_t)t->cap_verts * sizeof(struct tape_vertex) + (uint64_t)t->cap_paths * sizeof(struct tape_path) +
+           (uint64_t)t->cap_mrecs * sizeof(struct dr_medium_record);
 }
 
 /* Records the path of sample sidx of pixel px; false when out of memory. */
@@ -83,7 +86,11 @@ static bool record_path(struct tape_job *j, struct tape *tp, int thread, int64_t
     for (;;) {
         if (!grow((void **)&tp->verts, &tp->cap_verts, tp->n_verts + 1, sizeof *tp->verts))
             return false;
+        bool media = j->b.popts.params->media_active;
+        if (media && !grow((void **)&tp->mrecs, &tp->cap_mrecs, tp->n_verts + 1, sizeof *tp->mrecs))
+            return false;
         struct tape_vertex *tv = &tp->verts[tp->n_verts];
+        tv->v.mrec = media ? &tp->mrecs[tp->n_verts] : NULL;
         tv->bt = dr_mul(st.ratio, st.beta);
         bool more = dr_path_step(j->b.p->scene, &j->b.popts, &st, &smp, &tv->v, &j->b.thr[thread].rays);
         L = dr_add(L, dr_mul(tv->bt, dr_path_vertex_term(&tv->v)));
@@ -120,8 +127,8 @@ static void record(void *ctx, int thread, int64_t begin, int64_t end)
 }
 
 /* Backward sweep over one path with adjoint adj. */
-static void sweep(const struct tape_job *j, const struct tape_vertex *verts, int count, dr_vec3 adj,
-                  struct dr_grad_sink *sink)
+static void sweep(const struct tape_job *j, const struct tape_vertex *verts,
+                  const struct dr_medium_record *mrecs, int count, dr_vec3 adj, struct dr_grad_sink *sink)
 {
     const struct dr_scene *s = j->b.p->scene;
     const struct dr_param_set *ps = j->b.p->params;
@@ -132,7 +139,8 @@ static void sweep(const struct tape_job *j, const struct tape_vertex *verts, int
         dr_vec3 bt = verts[k].bt;
         if (v->media) {
             dr_vec3 from = dr_add(after, dr_mul(bt, dr_path_vertex_term(v)));
-            d_medium_vertex(s, &j->b.popts, v, dr_mul(adj, bt), dr_mul(adj, from), dr_mul(adj, after),
+            d_medium_vertex(s, &j->b.popts, v, mrecs ? &mrecs[k] : NULL, count, dr_mul(adj, bt), dr_mul(adj, from),
+                            dr_mul(adj, after),
                             dr_mul(adj, dr_mul(bt, dr_path_vertex_nee(v))), sink);
             after = from;
         }
@@ -182,11 +190,11 @@ static void sweep_attached(const struct tape_job *j, const struct tape_vertex *v
 
 /* One recorded path's sweep. The attached state adjoint mixes the colour
  * channels, so in forward mode each image channel gets its own sweep. */
-static void sweep_path(const struct tape_job *j, const struct tape_vertex *verts, const struct tape_path *path,
-                       struct dr_grad_sink *sink)
+static void sweep_path(const struct tape_job *j, const struct tape_vertex *verts,
+                       const struct dr_medium_record *mrecs, const struct tape_path *path, struct dr_grad_sink *sink)
 {
     if (path->moving >= path->count) {
-        sweep(j, verts, path->count, path->adj, sink);
+        sweep(j, verts, mrecs, path->count, path->adj, sink);
         return;
     }
     if (!sink->dir) {
@@ -208,7 +216,7 @@ static void sweep_tape(void *ctx, int thread, int64_t begin, int64_t end)
         struct dr_grad_sink sink = dr_est_sink_begin(&j->b, thread);
         for (int64_t pi = 0; pi < tp->n_paths; pi++) {
             const struct tape_path *path = &tp->paths[pi];
-            sweep_path(j, tp->verts + path->first, path, &sink);
+            sweep_path(j, tp->verts + path->first, tp->mrecs ? tp->mrecs + path->first : NULL, path, &sink);
             dr_est_sample_done(&j->b, thread, path->pixel, &sink);
         }
         dr_est_sink_end(&j->b, thread);
@@ -251,6 +259,7 @@ static void tape_release(struct dr_est_base *b)
     struct tape_job *j = (struct tape_job *)b;
     for (int t = 0; t < DR_MAX_THREADS; t++) {
         free(j->tapes[t].verts);
+        free(j->tapes[t].mrecs);
         free(j->tapes[t].paths);
     }
 }

@@ -8,7 +8,8 @@ set -euo pipefail
 pkgs=(build-essential pkg-config
       libembree-dev libopenimageio-dev openimageio-tools
       libtinygltf-dev nlohmann-json3-dev libstb-dev
-      gnuplot-nox python3)
+      gnuplot-nox python3
+      valgrind)   # scripts/no-media-overhead.sh counts instructions with callgrind
 # Node.js runs the Khronos glTF validator (tests/cli_gltf_validate.sh). Any node
 # on PATH will do (e.g. NodeSource's nodejs, which bundles npm and conflicts with
 # Debian's npm), so Debian's packages are added only when there is none.

@@ -151,8 +151,11 @@ int main(void)
     struct dr_camera cam = sb_camera(dr_v3(0.4, 0.8, 4.0), dr_v3(0, 0, 0), 40);
     const char *ptrs[] = {"/materials/0/extensions/DR_medium/density", "/materials/0/extensions/DR_medium/albedo",
                           "/materials/0/extensions/DR_medium/g", "/materials/0/extensions/DR_medium/extinction",
-                          "/materials/0/extensions/DR_medium/density_scale"};
-    struct dr_param_set *ps = dr_param_set_create(s, ptrs, 5);
+                          "/materials/0/extensions/DR_medium/density_scale",
+                          /* surfaces and lights seen and lit through the medium */
+                          "/materials/1/pbrMetallicRoughness/baseColorFactor",
+                          "/extensions/KHR_lights_punctual/lights/0/intensity"};
+    struct dr_param_set *ps = dr_param_set_create(s, ptrs, 7);
     CHECK(ps != NULL, "param set: %s", dr_last_error());
     if (!ps)
         return TEST_END();
@@ -166,8 +169,10 @@ int main(void)
         {ps->params[2].offset, "g", false},
         {ps->params[3].offset + 0, "extinction r", false},
         {ps->params[4].offset, "density_scale", false},
+        {ps->params[5].offset, "floor base colour r", false},
+        {ps->params[6].offset, "light intensity", false},
     };
-    const double eps[] = {0.1, 0.2, 0.02, 0.05, 0.1, 0.05};
+    const double eps[] = {0.1, 0.2, 0.02, 0.05, 0.1, 0.05, 0.05, 0.5};
     int64_t *slots = malloc(sizeof(int64_t) * 12 * 8 * 8);
     enum { N = sizeof checks / sizeof checks[0] };
     struct moments fd[N] = {{0}}, drt_prb[N] = {{0}}, drt_tape[N] = {{0}}, base[N] = {{0}};

@@ -1,0 +1,78 @@
+#!/usr/bin/env bash
+# drender participating-media benchmarks (run by `make bench` after grad.sh),
+# on the smoke cube tests/data/media/smoke.gltf (16^3 density grid):
+#   i. a volume gradient (density_scale and every voxel; L2 against a render at
+#      the true values, starting from density_scale 0.5), prb vs tape and DRT
+#      vs baseline: time, stderr of d loss / d density_scale, stderr^2 x seconds
+#      (lower is better: the cost of a given accuracy), peak memory, tape bytes
+#  ii. prb peak memory at max depth 4, 64, 1000 (goal: flat within 5%)
+# iii. render time of the smoke cube (rays per second)
+#  iv. a dense, almost white medium at depth 1000: gradient / primal time
+#      (DRT's gain paths are spread so that the cost stays linear in depth)
+# Writes $BUILD/bench/media-results.json.
+set -euo pipefail
+BUILD=${BUILD:-build}
+OUT=$BUILD/bench
+mkdir -p "$OUT"
+TMP=$(mktemp -d)
+trap 'rm -rf "$TMP"' EXIT
+DR=$BUILD/drender
+# shellcheck source=bench/lib.sh
+source bench/lib.sh
+
+SMOKE=tests/data/media/smoke.gltf
+SCALE=/materials/smoke/extensions/DR_medium/density_scale
+GRID=/materials/smoke/extensions/DR_medium/density
+RES=64x64 SPP=8 DEPTH=8
+first_stderr() { printf '%s\n' "$1" | sed -n 's/.*"stderr": \[\([-+0-9.eE]*\).*/\1/p' | head -n 1; }
+
+echo "drender media benchmarks ($(date '+%Y-%m-%d %H:%M'), $(nproc) CPUs, load average $(cut -d' ' -f1 /proc/loadavg))"
+echo
+"$DR" render "$SMOKE" -o "$TMP/target.exr" --res $RES --spp 256 --max-depth $DEPTH --seed 99
+echo "i. volume gradient on $SMOKE ($RES, $SPP spp x 4 batches, depth $DEPTH, 2 threads; density_scale + 4096 voxels)"
+ROWS=""
+for est in prb tape; do
+    for mg in drt baseline; do
+        J=$("$DR" grad "$SMOKE" --target "$TMP/target.exr" --param $SCALE --param $GRID --set $SCALE=0.5 \
+            --estimator $est --medium-grad $mg --spp $SPP --batches 4 --max-depth $DEPTH --threads 2 --json)
+        T=$(json_num "$J" gradient time)
+        SE=$(first_stderr "$J")
+        M=$(json_num "$J" peak_memory_bytes)
+        TB=$(json_num "$J" record_bytes)
+        printf '   %-4s %-8s %.3f s  stderr %s  stderr^2 x s %s  peak %.1f MiB  tape %.1f MiB\n' $est $mg "$T" "$SE" \
+            "$(calc "$SE * $SE * $T")" "$(calc "$M / 1048576" %.3f)" "$(calc "${TB:-0} / 1048576" %.3f)"
+        ROWS+="{\"estimator\": \"$est\", \"medium_grad\": \"$mg\", \"seconds\": $T, \"stderr\": $SE, \"peak_memory_bytes\": $M, \"record_bytes\": ${TB:-0}},"
+    done
+done
+echo
+echo "ii. prb memory vs max depth (smoke cube, $RES, 4 spp)"
+declare -A MEM
+MEM_JSON=""
+for d in 4 64 1000; do
+    J=$("$DR" grad "$SMOKE" --target "$TMP/target.exr" --param $SCALE --param $GRID --spp 4 --batches 2 \
+        --max-depth $d --threads 2 --json)
+    MEM[$d]=$(json_num "$J" peak_memory_bytes)
+    printf '   depth %4d: prb peak %.3f MiB\n' $d "$(calc "${MEM[$d]} / 1048576" %.3f)"
+    MEM_JSON+="{\"max_depth\": $d, \"prb_peak_bytes\": ${MEM[$d]}},"
+done
+SPREAD=$(calc "(${MEM[1000]} - ${MEM[4]}) / ${MEM[4]} * 100" %.2f)
+echo "   change from depth 4 to 1000: $SPREAD % (goal: within 5%: $(yesno "$SPREAD <= 5 && $SPREAD >= -5"))"
+echo
+J=$("$DR" render "$SMOKE" -o "$TMP/r.exr" --res 256x256 --spp 16 --threads 2 --json)
+RT=$(json_num "$J" render time)
+RPS=$(json_num "$J" per_second rays)
+echo "iii. render $SMOKE 256x256 16 spp: $(calc "$RT" %.3f) s, $(calc "$RPS / 1e6" %.2f) M rays/s"
+DENSE=tests/data/media/fog-dense.gltf
+J=$("$DR" render "$DENSE" -o "$TMP/d.exr" --res 32x32 --spp 4 --max-depth 1000 --threads 2 --json)
+TP=$(json_num "$J" render time)
+J=$("$DR" grad "$DENSE" --param /materials/0/extensions/DR_medium/extinction -o "$TMP/dd.exr" --res 32x32 --spp 4 \
+    --max-depth 1000 --threads 2 --json)
+TG=$(json_num "$J" gradient time)
+echo " iv. dense medium (extinction 1e4/1e3/1e2, albedo 0.999, depth 1000, 32x32, 4 spp): primal $(calc "$TP" %.3f) s," \
+    "prb DRT gradient $(calc "$TG" %.3f) s: ratio $(calc "$TG / $TP")"
+cat >"$OUT/media-results.json" <<JSON
+{"volume_gradient": [${ROWS%,}], "prb_memory_vs_depth": [${MEM_JSON%,}], "prb_memory_change_percent": $SPREAD,
+ "render_seconds": $RT, "dense_primal_seconds": $TP, "dense_gradient_seconds": $TG}
+JSON
+echo
+echo "results in $OUT/media-results.json"

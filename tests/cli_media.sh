@@ -1,0 +1,100 @@
+#!/usr/bin/env bash
+# Participating media from the command line (scenes in tests/data/media/,
+# written by make_scenes.py there):
+#   a. render --json lists the effects media / heterogeneous_media and the
+#      stage participating_media; the Cornell box lists none of them
+#   b. params lists the DR_medium parameters (KHR_materials_volume media too)
+#   c. grad / fdcheck on media parameters (a homogeneous KHR medium; a global
+#      fog around a grid medium) with --medium-grad drt and baseline;
+#      a bad --medium-grad value is a usage error (exit 2)
+#      and extinction 1e4 with albedo 0.999 at depth 1000 stays finite
+#   d. bad media input (missing grid) is an input error naming file and JSON path
+#   e. optimize grows density in an all-empty grid (4^3, one majorant cell):
+#      DRT lowers the loss and moves towards the true grid, the baseline's
+#      gradient is 0 there and the grid stays empty; -o writes the grid back
+# Run by tests/run.sh (env: DRENDER, DR_TESTDIR); also runs alone.
+set -u
+
+# shellcheck source=SCRIPTDIR/lib/cli.sh
+. "$(dirname "$0")/lib/cli.sh"
+data=$DR_TESTDIR/data/media
+cli_setup media
+cli_cmd_label="last command"
+require_drender
+
+# a. effects
+run render "$data/smoke.gltf" --spp 4 --res 24x24 -o smoke.png --json
+expect_rc 0 "render smoke"
+expect_in out '"media", "heterogeneous_media"' "render --json effects of a grid medium"
+expect_in out '"participating_media"' "render --json stages of a grid medium"
+run render "$data/fog-khr.gltf" --spp 4 --res 24x24 -o fog.png --json
+expect_rc 0 "render KHR_materials_volume fog"
+expect_in out '"media"]' "render --json effects of a homogeneous medium"
+run render --spp 1 --res 16x16 -o box.png --json
+expect_rc 0 "render the Cornell box"
+grep -q '"media"\|heterogeneous_media\|participating_media' "$tmp/out" && fail "the Cornell box must not list media effects or stages"
+
+# b. params
+run params "$data/smoke.gltf"
+expect_rc 0 "params smoke"
+for p in extinction albedo g density_scale density; do
+    expect_in out "/materials/0/extensions/DR_medium/$p" "params lists $p"
+done
+run params "$data/fog-khr.gltf"
+expect_in out "/materials/0/extensions/DR_medium/extinction" "params of a KHR_materials_volume medium"
+
+# c. grad and fdcheck
+for mg in drt baseline; do
+    run grad "$data/smoke.gltf" --param /materials/smoke/extensions/DR_medium/density_scale \
+        --param /materials/smoke/extensions/DR_medium/g --spp 4 --res 16x16 --medium-grad $mg -o "dimg-$mg.exr" --json
+    expect_rc 0 "grad --medium-grad $mg"
+    expect_in out "\"medium_grad\": \"$mg\"" "grad --json names the method"
+done
+run grad "$data/smoke.gltf" --param /materials/smoke/extensions/DR_medium/g --medium-grad exact
+check_failed 2 "--medium-grad|exact|drt|baseline"
+run fdcheck "$data/fog-khr.gltf" --param /materials/0/extensions/DR_medium/albedo \
+    --param /materials/0/extensions/DR_medium/extinction --spp 16 --res 12x12 --batches 8 --json
+expect_rc 0 "fdcheck on homogeneous medium coefficients"
+# an unbounded global fog around the grid cube: rays never leave it
+run fdcheck "$data/fog-global.gltf" --param /extensions/DR_medium/extinction --param /extensions/DR_medium/g \
+    --param /materials/smoke/extensions/DR_medium/density_scale --spp 16 --res 16x16 --batches 16 --eps 0.03 --json
+expect_rc 0 "fdcheck on a global medium and a grid medium inside it"
+
+# hard case: extinction up to 1e4 with albedo 0.999 at depth 1000: finite gradients, nothing dropped
+run grad "$data/fog-dense.gltf" --param /materials/0/extensions/DR_medium/extinction \
+    --param /materials/0/extensions/DR_medium/albedo --max-depth 1000 --spp 2 --res 12x12 -o dense.exr --json
+expect_rc 0 "grad on a dense, almost white medium at depth 1000"
+expect_in out '"invalid_samples": 0' "no non-finite samples in the dense medium"
+
+# d. bad input
+sed 's/"smoke.raw"/"missing.raw"/' "$data/smoke.gltf" >bad.gltf
+run render bad.gltf -o bad.png
+check_failed 3 "bad.gltf|/materials/0/extensions/DR_medium/density/uri|missing.raw"
+[ ! -e bad.png ] || fail "nothing may be written for a bad scene"
+
+# e. optimize from an empty grid
+run render "$data/coarse.gltf" --spp 256 --res 32x32 -o target.exr
+expect_rc 0 "target render"
+for mg in drt baseline; do
+    run optimize "$data/coarse-empty.gltf" --target target.exr \
+        --param /materials/smoke/extensions/DR_medium/density --iters 40 --spp 16 --medium-grad $mg \
+        --reference "$data/coarse.gltf" --out-dir "opt-$mg" -o "opt-$mg.gltf" --json
+    expect_rc 0 "optimize --medium-grad $mg"
+    tail -n 1 "$tmp/out" | grep -o '"reference_error": {[^}]*}' | grep -o '[-+0-9.eE]*}$' | tr -d '}' >"err-$mg"
+    awk -F, 'NR == 2 { print $2, $4 }' "opt-$mg/loss.csv" >"first-$mg"
+    awk -F, 'END { print $2, $4 }' "opt-$mg/loss.csv" >"last-$mg"
+done
+read -r loss0 perr0 <first-drt
+read -r loss1 perr1 <last-drt
+read -r bloss0 bperr0 <first-baseline
+read -r bloss1 bperr1 <last-baseline
+echo "optimize from an empty grid: DRT loss $loss0 -> $loss1, grid error $perr0 -> $perr1 (relative $(cat err-drt));" \
+    "baseline grid error $bperr0 -> $bperr1"
+awk -v a="$loss0" -v b="$loss1" 'BEGIN { exit !(b < 0.7 * a) }' || fail "DRT: loss $loss0 -> $loss1, expected a 30% drop"
+awk -v a="$perr0" -v b="$perr1" 'BEGIN { exit !(b < 0.85 * a) }' || fail "DRT: grid error $perr0 -> $perr1"
+[ "$bperr0" = "$bperr1" ] || fail "baseline: the grid must stay empty (error $bperr0 -> $bperr1)"
+[ -s opt-drt.medium0.raw ] || fail "optimize -o must write the grid (opt-drt.medium0.raw)"
+grep -q '"opt-drt.medium0.raw"' opt-drt.gltf || fail "the written scene must reference its grid"
+run params opt-drt.gltf
+expect_rc 0 "the optimised scene loads"
+echo "cli_media: all passed"
