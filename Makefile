@@ -26,7 +26,10 @@ CXXFLAGS += -std=c++17 $(OPT) $(WARN) -pthread $(shell pkg-config --cflags $(PKG
 # (core/image_plugin.h says why). Tests, bench and fuzz programs link the
 # image objects directly.
 HOST_LIBS := -ltinygltf -lembree3 -lstdc++ -lm -pthread -ldl
-IMG_LIBS  := $(shell pkg-config --libs $(PKGS) 2>/dev/null)
+# Deferred (=, not :=): on a fresh machine the packages are installed by the
+# `deps` step, after make has read this file, so pkg-config must be asked when a
+# link runs, not when the Makefile is parsed.
+IMG_LIBS   = $(shell pkg-config --libs $(PKGS) 2>/dev/null)
 LDLIBS   += $(IMG_LIBS) $(HOST_LIBS)
 LDFLAGS  += $(OPT)
 
@@ -113,7 +116,7 @@ FUZZ_CLI_C   := cli/cli_util.c cli/grad_common.c cli/mem_limits.c
 FUZZ_OBJ     := $(CORE_C:%.c=$(FUZZ_BUILD)/%.o) $(CORE_CXX:%.cpp=$(FUZZ_BUILD)/%.o) $(IMG_CXX:%.cpp=$(FUZZ_BUILD)/%.o) \
                 $(FUZZ_CLI_C:%.c=$(FUZZ_BUILD)/%.o) $(FUZZ_BUILD)/fuzz/tinygltf_impl.o
 FUZZ_BIN     := $(FUZZ_TARGETS:%=$(FUZZ_BUILD)/fuzz_%)
-FUZZ_LIBS    := $(filter-out -ltinygltf,$(LDLIBS)) -lstb
+FUZZ_LIBS     = $(filter-out -ltinygltf,$(LDLIBS)) -lstb
 
 fuzz-deps:
 	@scripts/install-deps.sh --fuzz
