@@ -106,6 +106,7 @@ void cmd_compare_usage(FILE *out)
             "      --json          print results.json on stdout too\n"
             "  -h, --help          show this help\n",
             PRIMAL_SPP, pairs, DEFAULT_RES, DEFAULT_RES);
+    grad_lighting_usage(out);
 }
 
 enum {
@@ -304,6 +305,7 @@ static int parse_args(int argc, char **argv, struct cmp_args *a)
         {"sampler", required_argument, NULL, GOPT_SAMPLER},
         {"env", required_argument, NULL, GOPT_ENV},
         {"no-default-light", no_argument, NULL, GOPT_NO_DEFAULT_LIGHT},
+        {"light-units", required_argument, NULL, GOPT_LIGHT_UNITS},
         {"json", no_argument, NULL, GOPT_JSON},
         {"help", no_argument, NULL, 'h'},
         {"output-dir", required_argument, NULL, 'o'},

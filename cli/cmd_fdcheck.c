@@ -53,6 +53,7 @@ void cmd_fdcheck_usage(FILE *out)
             "                      objective is its mean)\n"
             "      --json          print the entries as one JSON object on stdout\n"
             "  -h, --help          show this help\n");
+    grad_lighting_usage(out);
 }
 
 enum { OPT_EPS = GOPT_END, OPT_BATCHES, OPT_ZMAX, OPT_BATCH };

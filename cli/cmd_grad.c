@@ -92,6 +92,7 @@ void cmd_grad_usage(FILE *out)
             "                      sample of every pixel); bounds the tape's memory\n"
             "      --json          print a summary object on stdout (memory estimate included)\n"
             "  -h, --help          show this help\n");
+    grad_lighting_usage(out);
 }
 
 enum { OPT_VIS = GOPT_END, OPT_TARGET, OPT_LOSS, OPT_BATCHES, OPT_BATCH, OPT_GRAD_DIR };

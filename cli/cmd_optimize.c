@@ -82,6 +82,7 @@ void cmd_optimize_usage(FILE *out)
             "                         the parameter error each iteration and at the end\n"
             "      --json             one JSON object per iteration on stdout, then a summary\n"
             "  -h, --help             show this help\n");
+    grad_lighting_usage(out);
 }
 
 enum { OOPT_TARGET = GOPT_END, OOPT_ITERS, OOPT_LR, OOPT_LOSS, OOPT_OUTDIR, OOPT_RESUME, OOPT_RENDER_EVERY,

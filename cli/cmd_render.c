@@ -49,6 +49,7 @@ void cmd_render_usage(FILE *out)
             "      --json          print a summary object on stdout (timings, rays,\n"
             "                      peak memory, memory estimate, effects simulated)\n"
             "  -h, --help          show this help\n");
+    grad_lighting_usage(out);
 }
 
 struct render_args {

@@ -235,6 +235,15 @@ int grad_common_option(struct grad_common *g, int c, const char *arg)
     case GOPT_CROP: return film_option(g, c, arg);
     case GOPT_ENV: return env_option(g, arg);
     case GOPT_NO_DEFAULT_LIGHT: g->no_default_light = true; return 0;
+    case GOPT_LIGHT_UNITS:
+        if (strcmp(arg, "photometric") != 0 && strcmp(arg, "radiometric") != 0) {
+            cli_error(g->cmd, "--light-units %s: expected photometric (glTF: candela, lux) or radiometric (W/sr, W/m^2)",
+                      arg);
+            return DR_EXIT_USAGE;
+        }
+        g->light_units_given = true;
+        g->light_units = arg[0] == 'p' ? DR_LIGHT_UNITS_PHOTOMETRIC : DR_LIGHT_UNITS_RADIOMETRIC;
+        return 0;
     default: return -1;
     }
 }
@@ -310,8 +319,28 @@ int grad_common_check(const struct grad_common *g)
     return -1;
 }
 
+void grad_lighting_usage(FILE *out)
+{
+    fprintf(out,
+            "\nlighting:\n"
+            "      --env FILE|COLOR[,STRENGTH]\n"
+            "                      set the environment: an equirectangular image (.exr, .hdr,\n"
+            "                      ...) or a colour R,G,B or GREY, times STRENGTH (default 1);\n"
+            "                      replaces the file's DR_environment\n"
+            "      --no-default-light\n"
+            "                      render a scene without any light black (by default it gets\n"
+            "                      a white environment of radiance 1, with a note on stderr)\n"
+            "      --light-units U photometric (glTF's definition: candela, lux; divided by\n"
+            "                      683 lm/W) or radiometric (W/sr, W/m^2) punctual light\n"
+            "                      intensities (default: the file's DR_units, else photometric)\n");
+}
+
 int grad_apply_lighting(const struct grad_common *g, const char *scene_path, struct dr_scene *scene)
 {
+    if (g->light_units_given && dr_scene_set_light_units(scene, g->light_units) != 0) {
+        cli_error(g->cmd, "%s", dr_last_error());
+        return DR_EXIT_FAILURE;
+    }
     if (g->env_given) {
         if (dr_scene_set_environment(scene, g->env_color, g->env_strength, g->env_file, false) != 0) {
             cli_error(g->cmd, "--env %s", dr_last_error());

@@ -37,6 +37,7 @@ enum {
     GOPT_SAMPLER,   /* random numbers: independent | sobol */
     GOPT_ENV,       /* lighting: --env FILE|COLOR[,STRENGTH] */
     GOPT_NO_DEFAULT_LIGHT,
+    GOPT_LIGHT_UNITS,   /* --light-units photometric|radiometric */
     GOPT_MEDIUM_GRAD,
     GOPT_END
 };
@@ -50,7 +51,8 @@ enum {
         {"threads", required_argument, NULL, GOPT_THREADS}, {"json", no_argument, NULL, GOPT_JSON},         \
         {"filter", required_argument, NULL, GOPT_FILTER}, {"crop", required_argument, NULL, GOPT_CROP},     \
         {"sampler", required_argument, NULL, GOPT_SAMPLER}, {"env", required_argument, NULL, GOPT_ENV},      \
-        {"no-default-light", no_argument, NULL, GOPT_NO_DEFAULT_LIGHT}, {"help", no_argument, NULL, 'h'}
+        {"no-default-light", no_argument, NULL, GOPT_NO_DEFAULT_LIGHT},                                   \
+        {"light-units", required_argument, NULL, GOPT_LIGHT_UNITS}, {"help", no_argument, NULL, 'h'}
 #define GRAD_COMMON_LONG_OPTIONS                                                                       \
     {"param", required_argument, NULL, GOPT_PARAM}, {"estimator", required_argument, NULL, GOPT_ESTIMATOR}, \
         {"sampling", required_argument, NULL, GOPT_SAMPLING}, {"set", required_argument, NULL, GOPT_SET},   \
@@ -81,6 +83,8 @@ struct grad_common {
     const char *env_file;            /* NULL: env_color * env_strength, if env_given */
     char *env_file_buf;              /* owned copy when --env FILE,STRENGTH was split */
     bool env_given, no_default_light;
+    bool light_units_given;          /* --light-units: overrides the file's DR_units */
+    enum dr_light_units light_units;
     dr_vec3 env_color;
     double env_strength;
 };
@@ -121,6 +125,10 @@ int grad_common_check(const struct grad_common *g);
  * unless --no-default-light. -1 to go on, or an exit code. Called by
  * grad_load_scene; params calls it with a grad_common of its own. */
 int grad_apply_lighting(const struct grad_common *g, const char *scene_path, struct dr_scene *scene);
+
+/* The lighting options' help lines (--env, --no-default-light, --light-units),
+ * printed by every command that renders, after its own options. */
+void grad_lighting_usage(FILE *out);
 
 int grad_load_scene(struct grad_common *g, char **scene_path, struct dr_scene **scene, struct dr_camera *cam,
                     int default_w, int default_h);

@@ -224,7 +224,7 @@ struct AccessorView {
 
 const char *const kSupportedExtensions[] = {
     "KHR_materials_emissive_strength", "KHR_materials_specular", "KHR_lights_punctual",
-    "DR_environment",
+    "DR_environment", "DR_units",
     /* participating media (load_material_medium) */
     "KHR_materials_volume", "KHR_materials_transmission", "KHR_materials_ior", "KHR_materials_volume_scatter",
     "DR_medium"};
@@ -274,6 +274,7 @@ private:
     void add_camera(int cam_idx, int node_idx, const Mat4 &world);
     void add_light(int light_idx, int node_idx, const Mat4 &world);
     void load_environment();
+    void load_light_units();
     void finish();
     /* participating media (the "media" section at the end of this file) */
     void load_material_medium(const tinygltf::Material &g, const std::string &mp, size_t index);
@@ -1052,6 +1053,24 @@ void Loader::load_environment()
         fail(rc, "%s/uri: %s", ep.c_str(), dr_last_error());
 }
 
+/* ---- DR_units: how punctual light intensities are read ---- */
+
+void Loader::load_light_units()
+{
+    scene_->light_units = DR_LIGHT_UNITS_PHOTOMETRIC;   /* glTF's own definition */
+    auto it = model_.extensions.find("DR_units");
+    if (it == model_.extensions.end()) return;
+    const std::string ep = "/extensions/DR_units";
+    const tinygltf::Value &v = it->second;
+    if (!v.IsObject()) fail(DR_ERR_FORMAT, "%s: expected an object", ep.c_str());
+    if (!v.Has("lights")) return;
+    const tinygltf::Value &l = v.Get("lights");
+    std::string s = l.IsString() ? l.Get<std::string>() : "";
+    if (s == "radiometric") scene_->light_units = DR_LIGHT_UNITS_RADIOMETRIC;
+    else if (s != "photometric")
+        fail(DR_ERR_FORMAT, "%s/lights: expected \"photometric\" or \"radiometric\"", ep.c_str());
+}
+
 /* ---- hand-over ---- */
 
 void Loader::finish()
@@ -1062,6 +1081,8 @@ void Loader::finish()
     scene_->n_materials = int(materials_.size());
     scene_->cameras = copy_out(cameras_);
     scene_->n_cameras = int(cameras_.size());
+    for (dr_punctual &l : lights_)
+        l.watts_per_unit = scene_->light_units == DR_LIGHT_UNITS_PHOTOMETRIC ? 1.0 / DR_LUMENS_PER_WATT : 1.0;
     scene_->lights = copy_out(lights_);
     scene_->n_lights = int(lights_.size());
 
@@ -1097,6 +1118,7 @@ void Loader::run()
     load_materials();
     traverse_scene();
     load_environment();
+    load_light_units();
     load_global_medium();
     finish();
     finish_media();

@@ -232,6 +232,7 @@ private:
     void load_source();
     void make_temp_dir();
     void apply_params();
+    void record_light_units();
     void apply_material(int m, const std::vector<const dr_param *> &ps);
     void apply_light(int l, const std::vector<const dr_param *> &ps);
     void apply_environment(const std::vector<const dr_param *> &ps);
@@ -648,6 +649,20 @@ void Writer::apply_params()
     if (!env.empty()) apply_environment(env);
 }
 
+/* The intensities are written back as they were read (in the scene's units);
+ * when those are not glTF's photometric ones, DR_units says so, so that the
+ * output reads back the same, also after --light-units changed them. */
+void Writer::record_light_units()
+{
+    bool radiometric = scene_->light_units == DR_LIGHT_UNITS_RADIOMETRIC;
+    auto it = model_.extensions.find("DR_units");
+    if (model_.lights.empty() || (!radiometric && it == model_.extensions.end())) return;
+    tinygltf::Value::Object units;
+    if (it != model_.extensions.end() && it->second.IsObject()) units = it->second.Get<tinygltf::Value::Object>();
+    units["lights"] = tinygltf::Value(std::string(radiometric ? "radiometric" : "photometric"));
+    model_.extensions["DR_units"] = tinygltf::Value(std::move(units));
+}
+
 /* One external file the output references (rel: a path relative to the source
  * directory, not percent-encoded), copied next to the output. Returns the path
  * it gets relative to the output directory: rel itself, or flat_name + its
@@ -987,6 +1002,7 @@ void Writer::run()
     load_source();
     make_temp_dir();
     apply_params();
+    record_light_units();
     copy_resources();
     set_buffer_uris();
     declare_extensions();

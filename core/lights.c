@@ -115,7 +115,7 @@ static int build_env_tables(const struct dr_scene *s, struct dr_light_sampler *l
 /* Flux-like power of a punctual light, comparable with emitters' pi * L * A. */
 static double punctual_power(const struct dr_punctual *l, double scene_radius)
 {
-    double I = l->intensity * (l->color.x + l->color.y + l->color.z) / 3.0, p;
+    double I = dr_punctual_radiant(l) * (l->color.x + l->color.y + l->color.z) / 3.0, p;
     switch (l->type) {
     case DR_LIGHT_POINT: p = 4.0 * M_PI * I; break;
     case DR_LIGHT_SPOT: p = 2.0 * M_PI * (1.0 - 0.5 * (l->cos_inner + l->cos_outer)) * I; break;
@@ -473,7 +473,7 @@ bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls
         return sample_env(s, ls, u1, u2, out);
 
     const struct dr_punctual *l = &s->lights[i - ls->n_emitters];
-    dr_vec3 I = dr_scale(l->color, l->intensity);
+    dr_vec3 I = dr_scale(l->color, dr_punctual_radiant(l));
     out->type = DR_LS_PUNCTUAL;
     out->index = i - ls->n_emitters;
     out->delta = true;
@@ -518,15 +518,15 @@ void d_light_radiance(const struct dr_scene *s, const struct dr_param_set *ps, c
     }
     case DR_LS_ENV: d_env_radiance(s, ps, ls->wi, d_L, k); return;
     default: {
-        /* radiance = color * intensity * atten */
+        /* radiance = color * intensity * watts_per_unit * atten (intensity in the file's units) */
         const struct dr_punctual *l = &s->lights[ls->index];
         int64_t oc = ps->light_color[ls->index], oi = ps->light_intensity[ls->index];
         if (oc >= 0) {
-            dr_vec3 g = dr_scale(d_L, l->intensity * ls->atten);
+            dr_vec3 g = dr_scale(d_L, dr_punctual_radiant(l) * ls->atten);
             dr_sink_add3(k, oc, g);
         }
         if (oi >= 0)
-            dr_sink_add(k, oi, dr_dot(d_L, l->color) * ls->atten);
+            dr_sink_add(k, oi, dr_dot(d_L, l->color) * l->watts_per_unit * ls->atten);
         return;
     }
     }
@@ -583,7 +583,7 @@ void d_light_sample_point(const struct dr_scene *s, dr_vec3 p, const struct dr_l
         return;
     const struct dr_punctual *l = &s->lights[ls->index];
     /* radiance = I atten */
-    double d_atten = dr_dot(d_radiance, dr_scale(l->color, l->intensity));
+    double d_atten = dr_dot(d_radiance, dr_scale(l->color, dr_punctual_radiant(l)));
     d_punctual_atten(l, ls, d_atten, &d_wi, &d_r);
     *d_p = dr_add(*d_p, d_unit_towards(ls->wi, ls->dist, d_wi, d_r));
 }

@@ -109,6 +109,15 @@ int dr_scene_set_environment(struct dr_scene *s, dr_vec3 color, double strength,
     return dr_scene_refresh(s);
 }
 
+int dr_scene_set_light_units(struct dr_scene *s, enum dr_light_units units)
+{
+    s->light_units = units;
+    double w = units == DR_LIGHT_UNITS_PHOTOMETRIC ? 1.0 / DR_LUMENS_PER_WATT : 1.0;
+    for (int i = 0; i < s->n_lights; i++)
+        s->lights[i].watts_per_unit = w;
+    return dr_scene_refresh(s);
+}
+
 int dr_scene_prepare(struct dr_scene *s)
 {
     if (dr_mesh_derive(&s->mesh) != 0) {

@@ -65,13 +65,23 @@ struct dr_camera {
 
 enum dr_light_type { DR_LIGHT_POINT, DR_LIGHT_SPOT, DR_LIGHT_DIRECTIONAL };
 
-/* KHR_lights_punctual, radiometric (see manual: intensity W/sr for point and
+/* How KHR_lights_punctual intensities are read. glTF defines them as
+ * photometric (candela for point and spot, lux for directional), and Blender's
+ * exporter writes them so (683 lm/W); drender renders radiometrically, so a
+ * photometric intensity is divided by 683 lm/W. Files drender's own tests and
+ * users write in watts say so with the DR_units extension
+ * ({"lights": "radiometric"}) or the --light-units option. */
+enum dr_light_units { DR_LIGHT_UNITS_PHOTOMETRIC, DR_LIGHT_UNITS_RADIOMETRIC };
+#define DR_LUMENS_PER_WATT 683.0
+
+/* KHR_lights_punctual (see manual: rendered as intensity W/sr for point and
  * spot, irradiance W/m^2 for directional, colour multiplies). */
 struct dr_punctual {
     char name[DR_NAME_MAX];
     enum dr_light_type type;
     dr_vec3 color;
-    double intensity;
+    double intensity;       /* the file's value (a parameter), in the scene's light units */
+    double watts_per_unit;  /* 1 (radiometric) or 1/683 (photometric): radiant = intensity * this */
     dr_vec3 position;
     dr_vec3 direction;      /* unit, the direction light travels (node's -Z) */
     double range;           /* 0 = infinite */
@@ -117,6 +127,7 @@ struct dr_scene {
     struct dr_camera *cameras; int n_cameras;
     struct dr_punctual *lights; int n_lights;
     struct dr_environment env;
+    enum dr_light_units light_units;   /* of every lights[i].intensity */
     dr_vec3 bbox_min, bbox_max;
     /* participating media (all NULL / 0 without any): */
     struct dr_medium *media; int n_media;
@@ -150,6 +161,13 @@ bool dr_scene_has_light(const struct dr_scene *scene);
  * 0 or a negative DR_ERR_* with dr_last_error naming the file. */
 int dr_scene_set_environment(struct dr_scene *scene, dr_vec3 color, double strength, const char *map_path,
                              bool is_default);
+/* Reads every punctual light's intensity in `units` from now on (the values
+ * stay as the file gives them; only their meaning changes) and refreshes the
+ * light sampler. 0 or DR_ERR_NOMEM. */
+int dr_scene_set_light_units(struct dr_scene *scene, enum dr_light_units units);
+/* The radiant intensity (W/sr) or irradiance (W/m^2) of a punctual light. */
+static inline double dr_punctual_radiant(const struct dr_punctual *l) { return l->intensity * l->watts_per_unit; }
+
 /* Comma-separated names of the effect bits, for --json and messages. */
 void dr_effects_describe(unsigned effects, char *buf, int size);
 

@@ -124,6 +124,10 @@ static inline void sb_environment(struct sb *b, dr_vec3 color)
 static inline void sb_light(struct sb *b, struct dr_punctual l)
 {
     struct dr_scene *s = b->s;
+    /* builder scenes are written in watts (W/sr, W/m^2) */
+    s->light_units = DR_LIGHT_UNITS_RADIOMETRIC;
+    if (l.watts_per_unit == 0.0)
+        l.watts_per_unit = 1.0;
     s->lights = realloc(s->lights, sizeof l * (size_t)(s->n_lights + 1));
     s->lights[s->n_lights++] = l;
 }

@@ -237,6 +237,9 @@ static void check_basic(const char *name)
         CHECK(p->type == DR_LIGHT_POINT && strcmp(p->name, "bulb") == 0 && p->gltf_index == 0, "point light");
         check_vec(p->color, 1, 0.5, 0.25, 1e-12, "point colour");
         CHECK_NEAR(p->intensity, 10, 1e-12, "point intensity");
+        /* no DR_units: glTF's photometric candela, rendered as W/sr after / 683 lm/W */
+        CHECK(s->light_units == DR_LIGHT_UNITS_PHOTOMETRIC, "photometric by default");
+        CHECK_NEAR(dr_punctual_radiant(p), 10.0 / 683.0, 1e-15, "point radiant intensity");
         CHECK_NEAR(p->range, 5, 1e-12, "point range");
         check_vec(p->position, 1, 2, 3, 1e-12, "point position");
         CHECK(sp->type == DR_LIGHT_SPOT && strcmp(sp->name, "spot_node") == 0 && sp->gltf_index == 1,

@@ -54,7 +54,7 @@ def scene(material_ext, name, global_medium=None):
     buf = pos + idx
     doc = {
         "asset": {"version": "2.0", "generator": "tests/data/media/make_scenes.py"},
-        "extensionsUsed": sorted(set(["DR_environment", "KHR_lights_punctual"] + list(material_ext.keys()))),
+        "extensionsUsed": sorted(set(["DR_environment", "DR_units", "KHR_lights_punctual"] + list(material_ext.keys()))),
         "scene": 0,
         "scenes": [{"nodes": [0, 1, 2, 3]}],
         "nodes": [{"mesh": 0, "name": "smoke"}, {"mesh": 1, "name": "floor"},
@@ -80,6 +80,7 @@ def scene(material_ext, name, global_medium=None):
                        "min": [-4, -1.2, -4], "max": [4, -1.2, 4]},
                       {"bufferView": 3, "componentType": 5123, "count": 6, "type": "SCALAR"}],
         "extensions": {"DR_environment": {"color": [0.5, 0.6, 0.8]},
+                       "DR_units": {"lights": "radiometric"},   # the point light's 40 is W/sr
                        "KHR_lights_punctual": {"lights": [{"type": "point", "color": [1, 0.9, 0.8],
                                                            "intensity": 40}]}},
     }
