@@ -36,6 +36,8 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
+#include <iterator>
 #include <map>
 #include <set>
 #include <string>
@@ -243,6 +245,7 @@ private:
     void apply_medium(const dr_param *p);
     void copy_medium_grids();
     void copy_resources();
+    void embed_images();
     std::string copy_one(const std::string &rel, const std::string &what, const std::string &flat_name);
     void set_buffer_uris();
     void declare_extensions();
@@ -745,6 +748,46 @@ void Writer::copy_resources()
     }
 }
 
+/* A .glb is one file: every image it references by a relative path (the
+ * source's files, or a texture parameter just written) moves into the binary
+ * chunk as a bufferView, so the output is self-contained. Only PNG and JPEG
+ * may be embedded (glTF's mimeTypes); anything else stays beside the file. */
+void Writer::embed_images()
+{
+    if (model_.buffers.empty()) model_.buffers.emplace_back();
+    std::vector<unsigned char> &bin = model_.buffers[0].data;
+    for (size_t i = 0; i < model_.images.size(); i++) {
+        tinygltf::Image &im = model_.images[i];
+        if (im.bufferView >= 0 || !copyable(im.uri)) continue;
+        std::string rel = percent_decode(im.uri);
+        std::string mime = has_suffix_ci(rel, ".png") ? "image/png"
+                           : has_suffix_ci(rel, ".jpg") || has_suffix_ci(rel, ".jpeg") ? "image/jpeg" : "";
+        if (mime.empty()) continue;
+        std::string src = join(src_dir_, rel);
+        bool written_now = replaced_images_.count(int(i)) > 0;
+        if (written_now) {   /* the parameter's PNG in the private directory: embed it instead of placing it */
+            src = tmpdir_ + rel;
+            files_.erase(std::remove_if(files_.begin(), files_.end(), [&](const PendingFile &f) { return f.tmp == src; }),
+                         files_.end());
+        }
+        std::ifstream in(src, std::ios::binary);
+        std::vector<unsigned char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        if (!in.good() && !in.eof()) fail(DR_ERR_IO, "/images/%zu/uri: cannot read %s to embed it", i, src.c_str());
+        if (bytes.empty()) fail(DR_ERR_IO, "/images/%zu/uri: %s is empty or unreadable", i, src.c_str());
+        if (written_now) remove(src.c_str());
+        while (bin.size() % 4) bin.push_back(0);
+        tinygltf::BufferView view;
+        view.buffer = 0;
+        view.byteOffset = bin.size();
+        view.byteLength = bytes.size();
+        bin.insert(bin.end(), bytes.begin(), bytes.end());
+        model_.bufferViews.push_back(view);
+        im.bufferView = int(model_.bufferViews.size() - 1);
+        im.mimeType = mime;
+        im.uri.clear();
+    }
+}
+
 void Writer::set_buffer_uris()
 {
     for (size_t i = 0; i < model_.buffers.size(); i++) {
@@ -1003,6 +1046,7 @@ void Writer::run()
     make_temp_dir();
     apply_params();
     record_light_units();
+    if (glb_) embed_images();
     copy_resources();
     set_buffer_uris();
     declare_extensions();

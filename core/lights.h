@@ -38,6 +38,9 @@ struct dr_light_sample {
 /* Builds the tables; scene->accel need not exist. NULL + dr_last_error. */
 struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *scene);
 void dr_light_sampler_destroy(struct dr_light_sampler *ls);
+/* How many whole-image averages (emissive textures' mean values) building ls
+ * took: at most one per image, whatever the number of emitting triangles. */
+int dr_light_sampler_texture_averages(const struct dr_light_sampler *ls);
 bool dr_light_sampler_empty(const struct dr_light_sampler *ls);
 
 /* Samples a light as seen from point p with three uniforms. False when there

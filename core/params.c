@@ -239,6 +239,10 @@ int dr_params_list(const struct dr_scene *s, struct dr_param **out, int *count)
     }
     for (int i = 0; i < s->n_images; i++) {
         const struct dr_image *im = &s->images[i];
+        bool colour, data;
+        image_usage(s, i, &colour, &data);
+        if (!colour && !data)
+            continue;   /* only a normal/occlusion map, or unused: its texels cannot change the image */
         struct dr_param p = make(DR_PARAM_IMAGE, i, (int64_t)im->width * im->height * im->channels, "/images/%d", i);
         p.width = im->width;
         p.height = im->height;
@@ -422,6 +426,12 @@ int dr_param_resolve(const struct dr_scene *s, const char *ptr, struct dr_param 
     }
     if (want < 0) {
         free(list);
+        int img = -1;
+        char end = 0;
+        if (sscanf(ptr, "/images/%d%c", &img, &end) == 1 && img >= 0 && img < s->n_images)
+            return fail_with_suggestions(s, ptr, "this image's texels cannot change the rendered image (it is "
+                                                 "used by no base colour, metallic-roughness or emissive texture "
+                                                 "drender renders, e.g. only as a normal or occlusion map)");
         return fail_with_suggestions(s, ptr, "names nothing differentiable in this scene");
     }
     *out = list[want];

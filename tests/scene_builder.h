@@ -56,9 +56,28 @@ static inline int sb_material(struct sb *b, struct dr_material mat)
     return s->n_materials++;
 }
 
+/* Grows a zero-filled array from old_n to new_n elements of `size` bytes. */
+static inline void *sb_grow(void *p, size_t old_n, size_t new_n, size_t size)
+{
+    char *q = realloc(p, new_n * size);
+    if (!q) {
+        fprintf(stderr, "scene_builder: out of memory\n");
+        exit(2);
+    }
+    memset(q + old_n * size, 0, (new_n - old_n) * size);
+    return q;
+}
+
 static inline uint32_t sb_vertex(struct sb *b, dr_vec3 p, double u, double v)
 {
     struct dr_mesh *m = &b->s->mesh;
+    if (m->n_vertices == b->cap_v) {   /* double the capacity (big test meshes) */
+        uint32_t c = b->cap_v;
+        m->positions = sb_grow(m->positions, 3 * (size_t)c + 1, 6 * (size_t)c + 1, sizeof(float));
+        m->normals = sb_grow(m->normals, 3 * (size_t)c, 6 * (size_t)c, sizeof(float));
+        m->uvs = sb_grow(m->uvs, 2 * (size_t)c, 4 * (size_t)c, sizeof(float));
+        b->cap_v = 2 * c;
+    }
     uint32_t i = m->n_vertices++;
     m->positions[3 * i] = (float)p.x;
     m->positions[3 * i + 1] = (float)p.y;
@@ -73,6 +92,13 @@ static inline uint32_t sb_vertex(struct sb *b, dr_vec3 p, double u, double v)
 static inline void sb_triangle(struct sb *b, uint32_t a, uint32_t c, uint32_t d, int material)
 {
     struct dr_mesh *m = &b->s->mesh;
+    if (m->n_triangles == b->cap_t) {
+        uint32_t c = b->cap_t;
+        m->indices = sb_grow(m->indices, 3 * (size_t)c, 6 * (size_t)c, sizeof(uint32_t));
+        m->material = sb_grow(m->material, c, 2 * (size_t)c, sizeof(int32_t));
+        m->flags = sb_grow(m->flags, c, 2 * (size_t)c, sizeof(uint8_t));
+        b->cap_t = 2 * c;
+    }
     uint32_t t = m->n_triangles++;
     m->indices[3 * t] = a;
     m->indices[3 * t + 1] = c;

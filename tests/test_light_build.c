@@ -1,0 +1,96 @@
+/* Building the light sampler of a scene with textured emitters (issue 13's
+ * load-time bug: a 2048^2 emissive texture on 15k triangles took ~145 s
+ * because the texture was averaged once per triangle). Timing-free: the
+ * number of whole-image averages is counted, and must be one per emissive
+ * image, whatever the number of triangles or materials sharing it; the pick
+ * probabilities still weight each emitter by its texture's mean. */
+#include <math.h>
+#include <stdlib.h>
+
+#include "geometry.h"
+#include "lights.h"
+#include "scene_builder.h"
+#include "test.h"
+
+static struct dr_image constant_image(int w, int h, float value)
+{
+    struct dr_image im;
+    memset(&im, 0, sizeof im);
+    im.width = w;
+    im.height = h;
+    im.channels = 3;
+    im.data = malloc(sizeof(float) * (size_t)w * h * 3);
+    im.linear = malloc(sizeof(float) * (size_t)w * h * 3);
+    for (int i = 0; i < w * h * 3; i++)
+        im.data[i] = im.linear[i] = value;
+    return im;
+}
+
+static struct dr_material emitter(int texture, double strength)
+{
+    struct dr_material m = sb_diffuse(dr_v3s(0.5));
+    m.emissive_factor = dr_v3s(1.0);
+    m.emissive_strength = strength;
+    m.emissive_tex.texture = texture;
+    return m;
+}
+
+/* A grid of n x n quads (2 n^2 triangles) in the y = 0 plane, quads cycling
+ * over materials mats[0..k). */
+static void grid(struct sb *b, int n, const int *mats, int k)
+{
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++)
+            sb_quad(b, dr_v3(i, 0, j), dr_v3(0, 0, 1), dr_v3(1, 0, 0), mats[(i * n + j) % k]);
+}
+
+int main(void)
+{
+    struct sb b;
+    sb_init(&b);
+    /* two emitting materials share a 512^2 texture of mean 0.25, a third
+     * uses a 256^2 texture of mean 0.5, a fourth has no texture, a fifth has a
+     * texture but emits nothing (its factor is 0: nothing to average) */
+    int mats[5] = {
+        sb_material(&b, emitter(0, 1.0)), sb_material(&b, emitter(0, 2.0)), sb_material(&b, emitter(1, 1.0)),
+        sb_material(&b, emitter(-1, 1.0)), sb_material(&b, emitter(2, 0.0)),
+    };
+    grid(&b, 60, mats, 5);   /* 7200 triangles, 1440 per material */
+    struct dr_scene *s = b.s;
+    s->n_images = 3;
+    s->images = calloc(3, sizeof(struct dr_image));
+    s->images[0] = constant_image(512, 512, 0.25f);
+    s->images[1] = constant_image(256, 256, 0.5f);
+    s->images[2] = constant_image(64, 64, 1.0f);
+    s->n_textures = 3;
+    s->textures = calloc(3, sizeof(struct dr_texture));
+    for (int i = 0; i < 3; i++)
+        s->textures[i] = (struct dr_texture){i, DR_WRAP_REPEAT, DR_WRAP_REPEAT};
+    sb_finish(&b);
+
+    CHECK(s->mesh.n_triangles == 7200, "%u triangles", s->mesh.n_triangles);
+    int averages = dr_light_sampler_texture_averages(s->light_sampler);
+    CHECK(averages == 2, "%d whole-texture averages for 5760 emitting textured triangles (want 2: one per emissive image)",
+          averages);
+
+    /* pick probability per area: proportional to emission x texture mean */
+    double density[5] = {0};
+    for (uint32_t t = 0; t < s->mesh.n_triangles; t++) {
+        int m = s->mesh.material[t];
+        double p = dr_light_pdf_area_pick(s->light_sampler, t) / dr_triangle_area(&s->mesh, t);
+        if (density[m] == 0.0)
+            density[m] = p;
+        CHECK_NEAR(p, density[m], 1e-12 * density[m] + 1e-300, "same density over one material");
+    }
+    CHECK_NEAR(density[0] / density[3], 0.25, 1e-6, "texture of mean 0.25 vs untextured");
+    CHECK_NEAR(density[1] / density[3], 0.5, 1e-6, "strength 2 x mean 0.25 vs untextured");
+    CHECK_NEAR(density[2] / density[3], 0.5, 1e-6, "texture of mean 0.5 vs untextured");
+    CHECK(density[4] == 0.0, "a material that emits nothing is not an emitter (%g)", density[4]);
+
+    /* a refresh (after parameters changed) averages again, once per image */
+    CHECK(dr_scene_refresh(s) == 0, "refresh");
+    CHECK(dr_light_sampler_texture_averages(s->light_sampler) == 2, "after refresh: %d",
+          dr_light_sampler_texture_averages(s->light_sampler));
+    dr_scene_destroy(s);
+    return TEST_END();
+}
