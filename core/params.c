@@ -239,6 +239,8 @@ int dr_params_list(const struct dr_scene *s, struct dr_param **out, int *count)
     }
     for (int i = 0; i < s->n_images; i++) {
         const struct dr_image *im = &s->images[i];
+        if (!im->data)
+            continue;   /* a KTX2 image skipped by --ignore-unsupported: nothing to differentiate */
         struct dr_param p = make(DR_PARAM_IMAGE, i, (int64_t)im->width * im->height * im->channels, "/images/%d", i);
         p.width = im->width;
         p.height = im->height;

@@ -142,7 +142,7 @@ static double hit_objective(void *c, const double *x)
 
 static void test_hit(const struct dr_scene *s)
 {
-    struct hit_ctx k = {s, 0, {rnd3(), rnd3(), {rnd(), rnd()}}};
+    struct hit_ctx k = {s, 0, {rnd3(), rnd3(), {rnd(), rnd()}, {0, 0}, {0, 0, 0}}};
     dr_vec3 o = dr_v3(0.2, 1.5, 0.3);
     struct dr_hit target;
     dr_hit_at(&s->mesh, 0, 0.3, 0.4, &target);
@@ -240,13 +240,14 @@ static void test_uv(const struct dr_scene *s)
         }
     struct uv_ctx k = {s, -1, {0}, {rnd(), rnd(), rnd(), 0}, {rnd3(), rnd(), rnd()}};
     dr_hit_at(&s->mesh, 0, 0.3, 0.25, &k.hit);
-    double x[2] = {k.hit.uv[0], k.hit.uv[1]}, g[2] = {0, 0};
-    d_material_eval_uv(s, &k.hit, &k.wb, g);
-    check_fd("d_material_eval_uv", uv_objective, &k, x, 2, g, 1e-7, 1e-6);
+    double x[2] = {k.hit.uv[0], k.hit.uv[1]};
+    struct dr_d_hit dh = {0};
+    d_material_eval_uv(s, &k.hit, &k.wb, &dh);
+    check_fd("d_material_eval_uv", uv_objective, &k, x, 2, dh.uv, 1e-7, 1e-6);
     k.texture = -2;
-    g[0] = g[1] = 0.0;
-    d_emission_uv(s, &k.hit, v3(k.w), g);
-    check_fd("d_emission_uv", uv_objective, &k, x, 2, g, 1e-7, 1e-6);
+    memset(&dh, 0, sizeof dh);
+    d_emission_uv(s, &k.hit, v3(k.w), &dh);
+    check_fd("d_emission_uv", uv_objective, &k, x, 2, dh.uv, 1e-7, 1e-6);
 }
 
 /* ----------------------------------------------------------- environment */
