@@ -38,6 +38,7 @@ enum {
     GOPT_ENV,       /* lighting: --env FILE|COLOR[,STRENGTH] */
     GOPT_NO_DEFAULT_LIGHT,
     GOPT_MEDIUM_GRAD,
+    GOPT_IGNORE_UNSUPPORTED,   /* loading: dr_load_opts.ignore_unsupported */
     GOPT_END
 };
 
@@ -50,7 +51,8 @@ enum {
         {"threads", required_argument, NULL, GOPT_THREADS}, {"json", no_argument, NULL, GOPT_JSON},         \
         {"filter", required_argument, NULL, GOPT_FILTER}, {"crop", required_argument, NULL, GOPT_CROP},     \
         {"sampler", required_argument, NULL, GOPT_SAMPLER}, {"env", required_argument, NULL, GOPT_ENV},      \
-        {"no-default-light", no_argument, NULL, GOPT_NO_DEFAULT_LIGHT}, {"help", no_argument, NULL, 'h'}
+        {"no-default-light", no_argument, NULL, GOPT_NO_DEFAULT_LIGHT},                                   \
+        {"ignore-unsupported", no_argument, NULL, GOPT_IGNORE_UNSUPPORTED}, {"help", no_argument, NULL, 'h'}
 #define GRAD_COMMON_LONG_OPTIONS                                                                       \
     {"param", required_argument, NULL, GOPT_PARAM}, {"estimator", required_argument, NULL, GOPT_ESTIMATOR}, \
         {"sampling", required_argument, NULL, GOPT_SAMPLING}, {"set", required_argument, NULL, GOPT_SET},   \
@@ -81,9 +83,16 @@ struct grad_common {
     const char *env_file;            /* NULL: env_color * env_strength, if env_given */
     char *env_file_buf;              /* owned copy when --env FILE,STRENGTH was split */
     bool env_given, no_default_light;
+    struct dr_load_opts load;        /* --ignore-unsupported */
     dr_vec3 env_color;
     double env_strength;
 };
+
+/* The help line of --ignore-unsupported, shared by every command that loads a scene. */
+#define GRAD_IGNORE_UNSUPPORTED_HELP                                                   \
+    "      --ignore-unsupported  skip, with one warning, what drender cannot read but\n" \
+    "                      would not change its image (KTX2 normal/occlusion maps)\n" \
+    "                      instead of failing\n"
 
 /* Defaults: prb, detached, the given spp, depth 8, Russian roulette from
  * DR_RR_DEPTH_DEFAULT, no --res. */
@@ -121,6 +130,11 @@ int grad_common_check(const struct grad_common *g);
  * unless --no-default-light. -1 to go on, or an exit code. Called by
  * grad_load_scene; params calls it with a grad_common of its own. */
 int grad_apply_lighting(const struct grad_common *g, const char *scene_path, struct dr_scene *scene);
+
+/* "--camera N: SCENE has K cameras (...)": the cameras counted as --camera
+ * counts them (node order), plus the file's cameras no node places. */
+void grad_camera_error(const char *cmd, const char *what, int index, const char *scene_path,
+                       const struct dr_scene *s);
 
 int grad_load_scene(struct grad_common *g, char **scene_path, struct dr_scene **scene, struct dr_camera *cam,
                     int default_w, int default_h);

@@ -1088,7 +1088,12 @@ AccessorView Loader::attribute_view(const tinygltf::Primitive &p, const std::str
                     ? model_.accessors[size_t(it->second)].type : TINYGLTF_TYPE_VEC3;
         want_type = t == TINYGLTF_TYPE_VEC4 ? TINYGLTF_TYPE_VEC4 : TINYGLTF_TYPE_VEC3;
     }
-    return view_accessor(it->second, ap, want_type, name);
+    AccessorView v = view_accessor(it->second, ap, want_type, name);
+    if (name == std::string("COLOR_0") && v.comp_type != TINYGLTF_COMPONENT_TYPE_FLOAT &&
+        !((v.comp_type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE || v.comp_type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT) &&
+          v.normalized))
+        fail(DR_ERR_FORMAT, "/accessors/%d: COLOR_0 must be float or normalized unsigned byte or short", it->second);
+    return v;
 }
 
 /* The primitive's vertex sequence, as listed (indices, or the Draco faces) or implicit. */
