@@ -103,6 +103,7 @@ void cmd_compare_usage(FILE *out)
             "                      compared (a full-frame target is cut to it; a crop-sized\n"
             "                      one needs --res)\n"
             "      --sampler S     random numbers: independent (default) or sobol\n"
+            GRAD_IGNORE_UNSUPPORTED_HELP
             "      --json          print results.json on stdout too\n"
             "  -h, --help          show this help\n",
             PRIMAL_SPP, pairs, DEFAULT_RES, DEFAULT_RES);
@@ -306,6 +307,7 @@ static int parse_args(int argc, char **argv, struct cmp_args *a)
         {"env", required_argument, NULL, GOPT_ENV},
         {"no-default-light", no_argument, NULL, GOPT_NO_DEFAULT_LIGHT},
         {"light-units", required_argument, NULL, GOPT_LIGHT_UNITS},
+        {"ignore-unsupported", no_argument, NULL, GOPT_IGNORE_UNSUPPORTED},
         {"json", no_argument, NULL, GOPT_JSON},
         {"help", no_argument, NULL, 'h'},
         {"output-dir", required_argument, NULL, 'o'},

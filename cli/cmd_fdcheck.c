@@ -51,6 +51,7 @@ void cmd_fdcheck_usage(FILE *out)
             "      --filter F      pixel filter: box (default), tent or gaussian[:STDDEV]\n"
             "      --crop X,Y,W,H  only this rectangle of the --res frame is rendered (the\n"
             "                      objective is its mean)\n"
+            GRAD_IGNORE_UNSUPPORTED_HELP
             "      --json          print the entries as one JSON object on stdout\n"
             "  -h, --help          show this help\n");
     grad_lighting_usage(out);

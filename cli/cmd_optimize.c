@@ -80,6 +80,7 @@ void cmd_optimize_usage(FILE *out)
             "      --resume           continue from DIR/checkpoint.txt\n"
             "      --reference SCENE  a scene holding the true values (synthetic tests): report\n"
             "                         the parameter error each iteration and at the end\n"
+            GRAD_IGNORE_UNSUPPORTED_HELP
             "      --json             one JSON object per iteration on stdout, then a summary\n"
             "  -h, --help             show this help\n");
     grad_lighting_usage(out);
@@ -553,7 +554,7 @@ struct opt_run {
 /* --reference: the true values of the same parameters, for error reports. */
 static int load_reference(const struct opt_args *a, struct opt_run *r)
 {
-    r->ref_scene = dr_scene_load(a->reference);
+    r->ref_scene = dr_scene_load_opts(a->reference, &a->g.load);
     if (!r->ref_scene) {
         cli_error("optimize", "--reference %s", dr_last_error());
         return DR_EXIT_INPUT;
@@ -589,9 +590,13 @@ static int opt_load(struct opt_args *a, struct opt_run *r)
     const int n_views = r->scene->n_cameras > 0 ? r->scene->n_cameras : 1;
     for (int i = 0; i < a->n_targets; i++)
         if (a->targets[i].camera >= n_views) {
-            cli_error("optimize", "--target %s: camera %d: %s has %d camera%s%s", a->targets[i].arg,
-                      a->targets[i].camera, r->scene_path, r->scene->n_cameras, r->scene->n_cameras == 1 ? "" : "s",
-                      r->scene->n_cameras ? " (numbered from 0)" : "; its one view is the default framing, target 0");
+            char what[4200];
+            snprintf(what, sizeof what, "--target %s: camera", a->targets[i].arg);
+            if (r->scene->n_cameras > 0)
+                grad_camera_error("optimize", what, a->targets[i].camera, r->scene_path, r->scene);
+            else
+                cli_error("optimize", "%s %d: %s has 0 cameras; its one view is the default framing, target 0", what,
+                          a->targets[i].camera, r->scene_path);
             return DR_EXIT_USAGE;
         }
     if ((rc = grad_param_set(&a->g, r->scene, &r->ps)) >= 0 ||

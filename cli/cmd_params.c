@@ -15,7 +15,7 @@
 void cmd_params_usage(FILE *out)
 {
     fprintf(out,
-            "usage: drender params [SCENE] [--json]\n"
+            "usage: drender params [SCENE] [--json] [--ignore-unsupported]\n"
             "\n"
             "Lists every differentiable parameter of SCENE (.gltf or .glb; default: the\n"
             "bundled Cornell box): its name (a JSON pointer into the glTF document, as\n"
@@ -25,6 +25,7 @@ void cmd_params_usage(FILE *out)
             "\n"
             "options:\n"
             "      --json          print one JSON object on stdout instead of the table\n"
+            GRAD_IGNORE_UNSUPPORTED_HELP
             "  -h, --help          show this help\n");
 }
 
@@ -121,6 +122,7 @@ int cmd_params(int argc, char **argv)
 {
     static const struct option opts[] = {
         {"json", no_argument, NULL, GOPT_JSON},
+        {"ignore-unsupported", no_argument, NULL, GOPT_IGNORE_UNSUPPORTED},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
@@ -129,6 +131,7 @@ int cmd_params(int argc, char **argv)
     int prc = grad_parse_args(&g, argc, argv, opts, "", no_own_option, NULL, cmd_params_usage);
     const bool json = g.json;
     const char *scene_arg = g.scene_arg;
+    const struct dr_load_opts load = g.load;
     grad_common_free(&g);
     if (prc >= 0)
         return prc;
@@ -141,7 +144,7 @@ int cmd_params(int argc, char **argv)
     struct dr_param *list = NULL;
     int n = 0;
     double *values = NULL;
-    struct dr_scene *scene = dr_scene_load(scene_path);
+    struct dr_scene *scene = dr_scene_load_opts(scene_path, &load);
     if (!scene) {
         cli_error("params", "%s", dr_last_error());
         rc = DR_EXIT_INPUT;

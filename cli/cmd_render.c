@@ -46,6 +46,7 @@ void cmd_render_usage(FILE *out)
             "      --crop X,Y,W,H  render only this rectangle of the --res frame (top-left\n"
             "                      pixel X,Y; W x H pixels): the same pixels, bit for bit,\n"
             "                      as the full render's; the image written is W x H\n"
+            GRAD_IGNORE_UNSUPPORTED_HELP
             "      --json          print a summary object on stdout (timings, rays,\n"
             "                      peak memory, memory estimate, effects simulated)\n"
             "  -h, --help          show this help\n");

@@ -244,6 +244,7 @@ int grad_common_option(struct grad_common *g, int c, const char *arg)
         g->light_units_given = true;
         g->light_units = arg[0] == 'p' ? DR_LIGHT_UNITS_PHOTOMETRIC : DR_LIGHT_UNITS_RADIOMETRIC;
         return 0;
+    case GOPT_IGNORE_UNSUPPORTED: g->load.ignore_unsupported = true; return 0;
     default: return -1;
     }
 }
@@ -360,6 +361,20 @@ int grad_apply_lighting(const struct grad_common *g, const char *scene_path, str
     return -1;
 }
 
+void grad_camera_error(const char *cmd, const char *what, int index, const char *scene_path,
+                       const struct dr_scene *s)
+{
+    char unplaced[160] = "";
+    if (s->n_unplaced_cameras > 0)
+        snprintf(unplaced, sizeof unplaced, "; %d more in its \"cameras\" %s placed by no node, so not renderable",
+                 s->n_unplaced_cameras, s->n_unplaced_cameras == 1 ? "is" : "are");
+    cli_error(cmd, "%s %d: %s has %d camera%s%s%s", what, index, scene_path, s->n_cameras,
+              s->n_cameras == 1 ? "" : "s",
+              s->n_cameras > 0 ? " (numbered from 0 in node order, orthographic ones included)"
+                               : "; without --camera a default view is used",
+              unplaced);
+}
+
 int grad_load_scene(struct grad_common *g, char **scene_path, struct dr_scene **scene, struct dr_camera *cam,
                     int default_w, int default_h)
 {
@@ -369,7 +384,7 @@ int grad_load_scene(struct grad_common *g, char **scene_path, struct dr_scene **
         cli_error(g->cmd, "no SCENE given and the bundled %s was not found (set DRENDER_DATA)", DEFAULT_SCENE);
         return DR_EXIT_INPUT;
     }
-    *scene = dr_scene_load(*scene_path);
+    *scene = dr_scene_load_opts(*scene_path, &g->load);
     if (!*scene) {
         cli_error(g->cmd, "%s", dr_last_error());
         return DR_EXIT_INPUT;
@@ -379,9 +394,7 @@ int grad_load_scene(struct grad_common *g, char **scene_path, struct dr_scene **
         return lrc;
     const struct dr_scene *s = *scene;
     if (g->camera_given && g->camera >= s->n_cameras) {
-        cli_error(g->cmd, "--camera %d: %s has %d camera%s%s", g->camera, *scene_path, s->n_cameras,
-                  s->n_cameras == 1 ? "" : "s",
-                  s->n_cameras > 0 ? " (numbered from 0)" : "; without --camera a default view is used");
+        grad_camera_error(g->cmd, "--camera", g->camera, *scene_path, s);
         return DR_EXIT_USAGE;
     }
     *cam = s->n_cameras > 0 ? s->cameras[g->camera] : dr_camera_default(s);

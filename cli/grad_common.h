@@ -39,6 +39,7 @@ enum {
     GOPT_NO_DEFAULT_LIGHT,
     GOPT_LIGHT_UNITS,   /* --light-units photometric|radiometric */
     GOPT_MEDIUM_GRAD,
+    GOPT_IGNORE_UNSUPPORTED,   /* loading: dr_load_opts.ignore_unsupported */
     GOPT_END
 };
 
@@ -52,7 +53,8 @@ enum {
         {"filter", required_argument, NULL, GOPT_FILTER}, {"crop", required_argument, NULL, GOPT_CROP},     \
         {"sampler", required_argument, NULL, GOPT_SAMPLER}, {"env", required_argument, NULL, GOPT_ENV},      \
         {"no-default-light", no_argument, NULL, GOPT_NO_DEFAULT_LIGHT},                                   \
-        {"light-units", required_argument, NULL, GOPT_LIGHT_UNITS}, {"help", no_argument, NULL, 'h'}
+        {"light-units", required_argument, NULL, GOPT_LIGHT_UNITS},                                       \
+        {"ignore-unsupported", no_argument, NULL, GOPT_IGNORE_UNSUPPORTED}, {"help", no_argument, NULL, 'h'}
 #define GRAD_COMMON_LONG_OPTIONS                                                                       \
     {"param", required_argument, NULL, GOPT_PARAM}, {"estimator", required_argument, NULL, GOPT_ESTIMATOR}, \
         {"sampling", required_argument, NULL, GOPT_SAMPLING}, {"set", required_argument, NULL, GOPT_SET},   \
@@ -85,9 +87,16 @@ struct grad_common {
     bool env_given, no_default_light;
     bool light_units_given;          /* --light-units: overrides the file's DR_units */
     enum dr_light_units light_units;
+    struct dr_load_opts load;        /* --ignore-unsupported */
     dr_vec3 env_color;
     double env_strength;
 };
+
+/* The help line of --ignore-unsupported, shared by every command that loads a scene. */
+#define GRAD_IGNORE_UNSUPPORTED_HELP                                                   \
+    "      --ignore-unsupported  skip, with one warning, what drender cannot read but\n" \
+    "                      would not change its image (KTX2 normal/occlusion maps)\n" \
+    "                      instead of failing\n"
 
 /* Defaults: prb, detached, the given spp, depth 8, Russian roulette from
  * DR_RR_DEPTH_DEFAULT, no --res. */
@@ -129,6 +138,10 @@ int grad_apply_lighting(const struct grad_common *g, const char *scene_path, str
 /* The lighting options' help lines (--env, --no-default-light, --light-units),
  * printed by every command that renders, after its own options. */
 void grad_lighting_usage(FILE *out);
+/* "--camera N: SCENE has K cameras (...)": the cameras counted as --camera
+ * counts them (node order), plus the file's cameras no node places. */
+void grad_camera_error(const char *cmd, const char *what, int index, const char *scene_path,
+                       const struct dr_scene *s);
 
 int grad_load_scene(struct grad_common *g, char **scene_path, struct dr_scene **scene, struct dr_camera *cam,
                     int default_w, int default_h);

@@ -140,6 +140,19 @@ void d_hit_compute(const struct dr_mesh *m, const struct dr_hit *hit, dr_vec3 o,
         d_b1 += d_hit->uv[0] * (t1[0] - t0[0]) + d_hit->uv[1] * (t1[1] - t0[1]);
         d_b2 += d_hit->uv[0] * (t2[0] - t0[0]) + d_hit->uv[1] * (t2[1] - t0[1]);
     }
+    if (m->uvs1) {
+        const float *t0 = m->uvs1 + 2 * (size_t)idx[0], *t1 = m->uvs1 + 2 * (size_t)idx[1],
+                    *t2 = m->uvs1 + 2 * (size_t)idx[2];
+        d_b1 += d_hit->uv1[0] * (t1[0] - t0[0]) + d_hit->uv1[1] * (t1[1] - t0[1]);
+        d_b2 += d_hit->uv1[0] * (t2[0] - t0[0]) + d_hit->uv1[1] * (t2[1] - t0[1]);
+    }
+    if (m->colors) {
+        const float *c0 = m->colors + 3 * (size_t)idx[0], *c1 = m->colors + 3 * (size_t)idx[1],
+                    *c2 = m->colors + 3 * (size_t)idx[2];
+        const dr_vec3 dc = d_hit->color;
+        d_b1 += dc.x * (c1[0] - c0[0]) + dc.y * (c1[1] - c0[1]) + dc.z * (c1[2] - c0[2]);
+        d_b2 += dc.x * (c2[0] - c0[0]) + dc.y * (c2[1] - c0[1]) + dc.z * (c2[2] - c0[2]);
+    }
     d_shading_normal(m, hit, idx, d_hit->ns, &d_b1, &d_b2);
     dr_vec3 c1 = dr_scale(dr_cross(e2, n), 1.0 / n2), c2 = dr_scale(dr_cross(n, e1), 1.0 / n2);
     dr_vec3 d_p = dr_add(d_hit->p, dr_add(dr_scale(c1, d_b1), dr_scale(c2, d_b2)));

@@ -15,7 +15,10 @@ struct dr_hit {
     dr_vec3 p;         /* position, interpolated from the vertices */
     dr_vec3 ng;        /* unit geometric normal of the front face (CCW winding) */
     dr_vec3 ns;        /* unit shading normal, on the same side as ng */
-    double uv[2];      /* TEXCOORD_0 (0,0 without UVs) */
+    double uv[2];      /* TEXCOORD_0 (0,0 without UVs); TEXCOORD_1 and COLOR_0 are
+                          interpolated on demand from (tri, b1, b2): dr_hit_uv1,
+                          dr_hit_color (hits are recorded per path vertex, and
+                          scenes without them must not pay for them) */
     double b1, b2;     /* barycentrics of p (weights of vertices 1 and 2) */
     bool front;        /* the ray arrived on the front face's side */
     int material;
@@ -39,6 +42,8 @@ void dr_hit_compute(const struct dr_mesh *m, int64_t tri, dr_vec3 o, dr_vec3 d, 
 struct dr_d_hit {
     dr_vec3 p, ns;
     double uv[2];
+    double uv1[2];     /* TEXCOORD_1 (mesh.uvs1) */
+    dr_vec3 color;     /* COLOR_0 (mesh.colors) */
 };
 
 /* Reverse mode of dr_hit_compute with respect to the ray: given d_hit, adds
@@ -53,6 +58,66 @@ void d_hit_compute(const struct dr_mesh *m, const struct dr_hit *hit, dr_vec3 o,
 /* Surface attributes at barycentrics (b1, b2) of tri, for sampling points on
  * emitters: fills p, ng, uv, eps, material; ns = ng (t = 0, front = true). */
 void dr_hit_at(const struct dr_mesh *m, int64_t tri, double b1, double b2, struct dr_hit *hit);
+
+/* TEXCOORD_1 at the hit (0,0 when the mesh has no second set). */
+static inline void dr_hit_uv1(const struct dr_mesh *m, const struct dr_hit *hit, double uv[2])
+{
+    uv[0] = uv[1] = 0.0;
+    if (!m->uvs1)
+        return;
+    const uint32_t *idx = m->indices + 3 * (size_t)hit->tri;
+    const float *t0 = m->uvs1 + 2 * (size_t)idx[0], *t1 = m->uvs1 + 2 * (size_t)idx[1],
+                *t2 = m->uvs1 + 2 * (size_t)idx[2];
+    double b0 = 1.0 - hit->b1 - hit->b2;
+    uv[0] = b0 * t0[0] + hit->b1 * t1[0] + hit->b2 * t2[0];
+    uv[1] = b0 * t0[1] + hit->b1 * t1[1] + hit->b2 * t2[1];
+}
+
+/* COLOR_0 rgb at the hit; (1,1,1) when the mesh has no vertex colours. */
+static inline dr_vec3 dr_hit_color(const struct dr_mesh *m, const struct dr_hit *hit)
+{
+    if (!m->colors)
+        return dr_v3s(1.0);
+    const uint32_t *idx = m->indices + 3 * (size_t)hit->tri;
+    const float *c0 = m->colors + 3 * (size_t)idx[0], *c1 = m->colors + 3 * (size_t)idx[1],
+                *c2 = m->colors + 3 * (size_t)idx[2];
+    double b1 = hit->b1, b2 = hit->b2, b0 = 1.0 - b1 - b2;
+    return dr_v3(b0 * c0[0] + b1 * c1[0] + b2 * c2[0], b0 * c0[1] + b1 * c1[1] + b2 * c2[1],
+                 b0 * c0[2] + b1 * c1[2] + b2 * c2[2]);
+}
+
+/* The uv a texture reference looks up at hit: its TEXCOORD set, through its
+ * KHR_texture_transform (uv' = xf * (u, v, 1)). */
+static inline void dr_texref_uv(const struct dr_mesh *m, const struct dr_texref *r, const struct dr_hit *hit,
+                                double uv[2])
+{
+    double s[2] = {hit->uv[0], hit->uv[1]};
+    if (r->texcoord == 1)
+        dr_hit_uv1(m, hit, s);
+    if (!r->transformed) {
+        uv[0] = s[0];
+        uv[1] = s[1];
+        return;
+    }
+    const double *x = r->xf;
+    uv[0] = x[0] * s[0] + x[1] * s[1] + x[2];
+    uv[1] = x[3] * s[0] + x[4] * s[1] + x[5];
+}
+
+/* Adjoint of dr_texref_uv: d loss / d (looked-up uv) onto the hit's set
+ * (d_hit->uv or uv1, +=) through the transposed transform. */
+static inline void d_texref_uv(const struct dr_texref *r, const double d_uv[2], struct dr_d_hit *d_hit)
+{
+    double g0 = d_uv[0], g1 = d_uv[1];
+    if (r->transformed) {
+        const double *x = r->xf;
+        g0 = x[0] * d_uv[0] + x[3] * d_uv[1];
+        g1 = x[1] * d_uv[0] + x[4] * d_uv[1];
+    }
+    double *dst = r->texcoord == 1 ? d_hit->uv1 : d_hit->uv;
+    dst[0] += g0;
+    dst[1] += g1;
+}
 
 double dr_triangle_area(const struct dr_mesh *m, int64_t tri);
 

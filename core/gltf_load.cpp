@@ -8,6 +8,7 @@
  * Internally a failure throws `Failure` after dr_set_error(); the extern "C"
  * entry point catches it (and everything else), so no exception escapes. */
 #include <tiny_gltf.h>
+#include <nlohmann/json.hpp>   /* the JSON library tinygltf itself is built with */
 
 #include <algorithm>
 #include <cerrno>
@@ -17,6 +18,8 @@
 #include <cstdlib>
 #include <cmath>
 #include <cstring>
+#include <map>
+#include <memory>
 #include <set>
 #include <string>
 #include <utility>
@@ -24,6 +27,7 @@
 
 #include <strings.h>
 
+#include "draco_decode.h"
 #include "error.h"
 #include "image_io.h"
 #include "medium.h"
@@ -165,12 +169,14 @@ const char *type_name(int type)
 
 /* A validated view of an accessor: element i, component c is at
  * base + i*stride + c*component_size. base == NULL: no bufferView, all zeros
- * (as the spec says for accessors without one). */
+ * (as the spec says for accessors without one). Sparse accessors and Draco
+ * attributes are materialised into `owned`, which base then points into. */
 struct AccessorView {
     const unsigned char *base = nullptr;
     size_t stride = 0, count = 0;
     int comp_type = 0;
     bool normalized = false;
+    std::shared_ptr<std::vector<unsigned char>> owned;
 
     template <class T> T raw(size_t i, int c) const
     {
@@ -224,7 +230,9 @@ struct AccessorView {
 
 const char *const kSupportedExtensions[] = {
     "KHR_materials_emissive_strength", "KHR_materials_specular", "KHR_lights_punctual",
-    "DR_environment", "DR_units",
+    "DR_environment", "DR_units", "KHR_texture_transform", "KHR_draco_mesh_compression",
+    /* KTX2 images are refused, or skipped under --ignore-unsupported (check_ktx2): handled, not ignored */
+    "KHR_texture_basisu",
     /* participating media (load_material_medium) */
     "KHR_materials_volume", "KHR_materials_transmission", "KHR_materials_ior", "KHR_materials_volume_scatter",
     "DR_medium"};
@@ -238,7 +246,7 @@ bool is_supported_extension(const std::string &name)
 
 class Loader {
 public:
-    Loader(const char *path, dr_scene *scene) : path_(path), scene_(scene) {}
+    Loader(const char *path, const dr_load_opts &opts, dr_scene *scene) : path_(path), opts_(opts), scene_(scene) {}
     ~Loader()
     {
         for (dr_image &img : images_) dr_image_release(&img);  /* those not handed over */
@@ -262,15 +270,24 @@ private:
     DR_PRINTF(3, 4) void warn_once(const std::string &key, const char *fmt, ...);
 
     void load_model();
+    bool parse_file(tinygltf::TinyGLTF &gltf, bool binary, std::string *err, std::string *warn);
     void check_features();
     void take_images();
     void load_textures();
     void load_materials();
     dr_texref texref(const tinygltf::TextureInfo &ti, const std::string &path);
+    void texture_transform(const tinygltf::Value &v, const std::string &ep, dr_texref &r);
+    void check_ktx2();
     void traverse_scene();
     void visit_node(int idx, const Mat4 &parent, const std::string &ref, std::vector<char> &on_path);
     Mat4 local_matrix(int idx);
     void add_primitive(int mesh_idx, int prim_idx, const Mat4 &world, const NormalXform &nx);
+    std::vector<uint32_t> primitive_sequence(const tinygltf::Primitive &p, const std::string &pp, size_t nv,
+                                             const dr_draco_mesh *draco);
+    bool decode_draco(const tinygltf::Primitive &p, const std::string &pp, dr_draco_mesh &out,
+                      std::map<std::string, int> &ids);
+    AccessorView attribute_view(const tinygltf::Primitive &p, const std::string &pp, const char *name, int want_type,
+                                const dr_draco_mesh *draco, const std::map<std::string, int> &draco_ids);
     void add_camera(int cam_idx, int node_idx, const Mat4 &world);
     void add_light(int light_idx, int node_idx, const Mat4 &world);
     void load_environment();
@@ -284,11 +301,15 @@ private:
     void finish_media();
 
     AccessorView view_accessor(int idx, const std::string &ref, int want_type, const char *what);
+    AccessorView dense_view(int idx, const tinygltf::Accessor &a, size_t elem);
+    void apply_sparse(int idx, const tinygltf::Accessor &a, size_t elem, AccessorView &v);
+    const unsigned char *view_bytes(int bv, int offset, size_t need, const std::string &where);
     double ext_number(const tinygltf::Value &obj, const char *key, double def, const std::string &path);
     dr_vec3 ext_vec3(const tinygltf::Value &obj, const char *key, dr_vec3 def, const std::string &path);
     dr_vec3 color3(const std::vector<double> &v, dr_vec3 def, const std::string &path);
 
     const char *path_;
+    dr_load_opts opts_;
     dr_scene *scene_;
     tinygltf::Model model_;
 
@@ -300,6 +321,8 @@ private:
     std::string image_message_;
 
     std::vector<dr_image> images_;          /* decoded by image_cb, by glTF image index */
+    std::vector<char> ktx2_images_;         /* by image index: a KTX2 image, left undecoded */
+    std::vector<int> texture_ktx2_;         /* by texture: its KTX2 image, -1 */
     std::vector<char> linear_images_;       /* used as colour: needs sRGB decode */
     std::vector<dr_material> materials_;
     bool default_material_used_ = false;
@@ -309,6 +332,11 @@ private:
     std::vector<int> material_medium_;      /* per file material: index into media_, -1 */
 
     std::vector<float> positions_, normals_, uvs_;
+    /* only when the scene calls for them (empty otherwise): */
+    bool want_uv1_ = false;                 /* some texref reads TEXCOORD_1 */
+    std::vector<float> uvs1_, colors_;
+    bool have_colors_ = false;              /* some primitive so far had COLOR_0 */
+    std::set<int> placed_cameras_;          /* indices into the file's "cameras" that a node places */
     std::vector<uint32_t> indices_;
     std::vector<int32_t> tri_material_;
     std::vector<uint8_t> tri_flags_;
@@ -406,6 +434,17 @@ std::string image_name_hint(const tinygltf::Image &image, int idx, const unsigne
     return strf("image%d%s", idx, ext);
 }
 
+bool has_suffix(const char *s, const char *suffix);
+
+/* KTX2 container (KHR_texture_basisu's images): by MIME type, file name or
+ * the 12-byte identifier. */
+bool is_ktx2(const tinygltf::Image &image, const unsigned char *b, int size)
+{
+    static const unsigned char magic[12] = {0xAB, 'K', 'T', 'X', ' ', '2', '0', 0xBB, '\r', '\n', 0x1A, '\n'};
+    return image.mimeType == "image/ktx2" || (!image.uri.empty() && has_suffix(image.uri.c_str(), ".ktx2")) ||
+           (size >= 12 && memcmp(b, magic, 12) == 0);
+}
+
 bool Loader::image_cb(tinygltf::Image *image, const int image_idx, std::string *err, std::string *,
                       int, int, const unsigned char *bytes, int size, void *user)
 {
@@ -424,6 +463,14 @@ bool Loader::image_cb(tinygltf::Image *image, const int image_idx, std::string *
                 if (err) *err += L->image_message_;
                 return false;
             }
+        }
+        if (is_ktx2(*image, bytes, size)) {
+            /* OpenImageIO cannot decode KTX2 (Basis Universal): kept undecoded;
+             * check_ktx2 decides whether the scene can do without it */
+            if (L->ktx2_images_.size() <= size_t(image_idx)) L->ktx2_images_.resize(size_t(image_idx) + 1, 0);
+            L->ktx2_images_[size_t(image_idx)] = 1;
+            image->image.clear();
+            return true;
         }
         dr_image img = {};
         std::string hint = image_name_hint(*image, image_idx, bytes, size);
@@ -474,6 +521,77 @@ bool has_suffix(const char *s, const char *suffix)
     return n >= m && strcasecmp(s + n - m, suffix) == 0;
 }
 
+/* tinygltf (Debian's is built without Draco) refuses a primitive whose
+ * "indices" accessor has no bufferView, as KHR_draco_mesh_compression's are:
+ * those indices live in the compressed stream (decode_draco). Such primitives
+ * lose "indices" in the copy of the JSON that tinygltf parses. False when
+ * nothing needed rewriting (then tinygltf reads the file itself, as ever). */
+bool draco_strip_indices(std::string &json_text)
+{
+    if (json_text.find("KHR_draco_mesh_compression") == std::string::npos) return false;
+    nlohmann::json j = nlohmann::json::parse(json_text, nullptr, /*allow_exceptions=*/false);
+    if (j.is_discarded() || !j.is_object()) return false;   /* tinygltf reports the syntax error */
+    auto meshes = j.find("meshes");
+    if (meshes == j.end() || !meshes->is_array()) return false;
+    bool changed = false;
+    for (auto &m : *meshes) {
+        if (!m.is_object() || !m.contains("primitives") || !m["primitives"].is_array()) continue;
+        for (auto &p : m["primitives"]) {
+            if (!p.is_object() || !p.contains("extensions") || !p["extensions"].is_object() ||
+                !p["extensions"].contains("KHR_draco_mesh_compression"))
+                continue;
+            changed |= p.erase("indices") > 0;
+        }
+    }
+    if (changed) json_text = j.dump();
+    return changed;
+}
+
+/* A .glb with its JSON chunk rewritten by draco_strip_indices; empty when
+ * nothing changed (or the container is malformed: tinygltf says how). */
+std::vector<unsigned char> glb_strip_draco_indices(const std::vector<unsigned char> &glb)
+{
+    auto u32 = [&](size_t at) {
+        uint32_t v;
+        memcpy(&v, glb.data() + at, 4);
+        return v;
+    };
+    if (glb.size() < 20 || memcmp(glb.data(), "glTF", 4) != 0 || memcmp(glb.data() + 16, "JSON", 4) != 0) return {};
+    size_t len = u32(12);
+    if (len > glb.size() - 20) return {};
+    std::string text(reinterpret_cast<const char *>(glb.data()) + 20, len);
+    if (!draco_strip_indices(text)) return {};
+    while (text.size() % 4) text.push_back(' ');   /* chunks are 4-byte aligned */
+    std::vector<unsigned char> out(glb.begin(), glb.begin() + 12);
+    uint32_t n = uint32_t(text.size());
+    out.insert(out.end(), reinterpret_cast<unsigned char *>(&n), reinterpret_cast<unsigned char *>(&n) + 4);
+    out.insert(out.end(), {'J', 'S', 'O', 'N'});
+    out.insert(out.end(), text.begin(), text.end());
+    out.insert(out.end(), glb.begin() + ptrdiff_t(20 + len), glb.end());
+    uint32_t total = uint32_t(out.size());
+    memcpy(out.data() + 8, &total, 4);
+    return out;
+}
+
+/* Parses the file with tinygltf, through draco_strip_indices when it has Draco primitives. */
+bool Loader::parse_file(tinygltf::TinyGLTF &gltf, bool binary, std::string *err, std::string *warn)
+{
+    std::vector<unsigned char> bytes;
+    std::string ignored;
+    if (!fs_read(&bytes, &ignored, path_, this)) return false;
+    if (binary) {
+        std::vector<unsigned char> glb = glb_strip_draco_indices(bytes);
+        const std::vector<unsigned char> &use = glb.empty() ? bytes : glb;
+        if (use.size() > UINT32_MAX) fail(DR_ERR_FORMAT, "the file is larger than 4 GiB");
+        return gltf.LoadBinaryFromMemory(&model_, err, warn, use.data(), unsigned(use.size()), directory_of(path_));
+    }
+    std::string text(bytes.begin(), bytes.end());
+    if (!draco_strip_indices(text))
+        return gltf.LoadASCIIFromFile(&model_, err, warn, path_);
+    if (text.size() > UINT32_MAX) fail(DR_ERR_FORMAT, "the file is larger than 4 GiB");
+    return gltf.LoadASCIIFromString(&model_, err, warn, text.data(), unsigned(text.size()), directory_of(path_));
+}
+
 void Loader::load_model()
 {
     /* Open it ourselves first: a clean "cannot open" message, and the magic. */
@@ -493,8 +611,7 @@ void Loader::load_model()
     gltf.SetImageLoader(image_cb, this);
 
     std::string err, warn;
-    bool ok = binary ? gltf.LoadBinaryFromFile(&model_, &err, &warn, path_)
-                     : gltf.LoadASCIIFromFile(&model_, &err, &warn, path_);
+    bool ok = parse_file(gltf, binary, &err, &warn);
     if (!ok) {
         if (image_error_) {
             dr_set_error("%s", image_message_.c_str());
@@ -548,8 +665,9 @@ void Loader::take_images()
 {
     size_t n = model_.images.size();
     images_.resize(std::max(images_.size(), n), dr_image{});
+    ktx2_images_.resize(n, 0);
     for (size_t i = 0; i < n; i++)
-        if (!images_[i].data) {
+        if (!images_[i].data && !ktx2_images_[i]) {
             const tinygltf::Image &im = model_.images[i];
             if (!im.uri.empty())
                 fail(DR_ERR_IO, "/images/%zu/uri: cannot read '%s'", i, im.uri.c_str());
@@ -573,12 +691,26 @@ void Loader::load_textures()
     for (size_t i = 0; i < model_.textures.size(); i++) {
         const tinygltf::Texture &t = model_.textures[i];
         dr_texture tex = {};
-        if (t.source < 0)
-            fail(DR_ERR_FORMAT, "/textures/%zu: texture has no source image (image extensions such as "
-                 "KHR_texture_basisu are not supported)", i);
-        if (size_t(t.source) >= model_.images.size())
-            fail(DR_ERR_FORMAT, "/textures/%zu/source: image %d does not exist", i, t.source);
-        tex.image = t.source;
+        int source = t.source;
+        std::string sp = strf("/textures/%zu/source", i);
+        auto bu = t.extensions.find("KHR_texture_basisu");
+        if (bu != t.extensions.end()) {
+            /* A "source" beside the extension is the fallback for viewers that
+             * cannot decode KTX2, such as drender: used when present. */
+            std::string ep = strf("/textures/%zu/extensions/KHR_texture_basisu/source", i);
+            if (!bu->second.IsObject() || !bu->second.Get("source").IsInt())
+                fail(DR_ERR_FORMAT, "%s: expected an image index", ep.c_str());
+            if (t.source < 0) {
+                source = bu->second.Get("source").GetNumberAsInt();
+                sp = ep;
+            }
+        }
+        if (source < 0)
+            fail(DR_ERR_FORMAT, "/textures/%zu: texture has no source image", i);
+        if (size_t(source) >= model_.images.size())
+            fail(DR_ERR_FORMAT, "%s: image %d does not exist", sp.c_str(), source);
+        texture_ktx2_.push_back(ktx2_images_[size_t(source)] ? source : -1);
+        tex.image = source;
         tex.wrap_s = tex.wrap_t = DR_WRAP_REPEAT;
         if (t.sampler >= 0) {
             if (size_t(t.sampler) >= model_.samplers.size())
@@ -621,21 +753,76 @@ dr_vec3 Loader::color3(const std::vector<double> &v, dr_vec3 def, const std::str
     return dr_v3(v[0], v[1], v[2]);
 }
 
+/* KHR_texture_transform on a textureInfo: uv' = T(offset) R(rotation) S(scale) uv,
+ * with the spec's rotation [cos sin; -sin cos]; texCoord overrides the set. */
+void Loader::texture_transform(const tinygltf::Value &v, const std::string &ep, dr_texref &r)
+{
+    if (!v.IsObject()) fail(DR_ERR_FORMAT, "%s: expected an object", ep.c_str());
+    double off[2] = {0.0, 0.0}, sc[2] = {1.0, 1.0};
+    double rot = ext_number(v, "rotation", 0.0, ep);
+    for (auto kv : {std::make_pair("offset", off), std::make_pair("scale", sc)}) {
+        if (!v.Has(kv.first)) continue;
+        const tinygltf::Value &a = v.Get(kv.first);
+        if (!a.IsArray() || a.ArrayLen() != 2 || !a.Get(0).IsNumber() || !a.Get(1).IsNumber())
+            fail(DR_ERR_FORMAT, "%s/%s: expected an array of 2 numbers", ep.c_str(), kv.first);
+        kv.second[0] = a.Get(0).GetNumberAsDouble();
+        kv.second[1] = a.Get(1).GetNumberAsDouble();
+    }
+    if (!std::isfinite(rot) || !std::isfinite(off[0]) || !std::isfinite(off[1]) || !std::isfinite(sc[0]) ||
+        !std::isfinite(sc[1]))
+        fail(DR_ERR_FORMAT, "%s: offset, rotation and scale must be finite", ep.c_str());
+    if (v.Has("texCoord")) {
+        const tinygltf::Value &t = v.Get("texCoord");
+        if (!t.IsInt() || t.GetNumberAsInt() < 0)
+            fail(DR_ERR_FORMAT, "%s/texCoord: expected a non-negative integer", ep.c_str());
+        r.texcoord = t.GetNumberAsInt();
+    }
+    double c = cos(rot), s = sin(rot);
+    double xf[6] = {c * sc[0], s * sc[1], off[0], -s * sc[0], c * sc[1], off[1]};
+    memcpy(r.xf, xf, sizeof xf);
+    r.transformed = true;
+}
+
 dr_texref Loader::texref(const tinygltf::TextureInfo &ti, const std::string &path)
 {
-    dr_texref r = {-1, ti.texCoord};
+    dr_texref r = {-1, ti.texCoord, false, {1.0, 0.0, 0.0, 0.0, 1.0, 0.0}};
     if (ti.index < 0) return r;
     if (size_t(ti.index) >= model_.textures.size())
         fail(DR_ERR_FORMAT, "%s/index: texture %d does not exist", path.c_str(), ti.index);
-    if (ti.extensions.count("KHR_texture_transform"))
-        warn_once("ext:KHR_texture_transform", "%s/extensions/KHR_texture_transform: texture transforms "
-                  "are not supported; ignored", path.c_str());
-    if (ti.texCoord != 0) {
-        warn_once("texcoord", "%s/texCoord: only TEXCOORD_0 is supported; texture ignored", path.c_str());
+    if (ti.texCoord < 0) fail(DR_ERR_FORMAT, "%s/texCoord: must be >= 0", path.c_str());
+    auto tt = ti.extensions.find("KHR_texture_transform");
+    if (tt != ti.extensions.end()) texture_transform(tt->second, path + "/extensions/KHR_texture_transform", r);
+    if (r.texcoord > 1) {
+        warn_once("texcoord", "%s/texCoord: TEXCOORD_%d is not supported (sets 0 and 1 are); texture ignored",
+                  path.c_str(), r.texcoord);
         return r;
     }
+    int k = texture_ktx2_[size_t(ti.index)];
+    if (k >= 0)
+        fail(DR_ERR_FORMAT, "%s/index: texture %d uses the KTX2 image /images/%d ('%s'): KTX2 / "
+             "KHR_texture_basisu images cannot be decoded by drender, and this one changes the rendered image, "
+             "so --ignore-unsupported does not skip it (convert it to PNG or JPEG)", path.c_str(), ti.index, k,
+             model_.images[size_t(k)].uri.c_str());
+    want_uv1_ |= r.texcoord == 1;
     r.texture = ti.index;
     return r;
+}
+
+/* KTX2 images that no texture drender renders with reads (texref refused
+ * those): normal and occlusion maps, or unused. Refused unless
+ * --ignore-unsupported, then skipped with one warning. */
+void Loader::check_ktx2()
+{
+    std::string list;
+    for (size_t i = 0; i < ktx2_images_.size(); i++)
+        if (ktx2_images_[i]) list += (list.empty() ? "" : ", ") + strf("/images/%zu", i);
+    if (list.empty()) return;
+    if (!opts_.ignore_unsupported)
+        fail(DR_ERR_FORMAT, "%s: KTX2 / KHR_texture_basisu images cannot be decoded by drender; they are used only "
+             "as normal or occlusion maps (or not at all), which do not change drender's image: "
+             "--ignore-unsupported skips them", list.c_str());
+    warn_once("ktx2", "%s: KTX2 / KHR_texture_basisu images skipped (--ignore-unsupported): used only as normal "
+              "or occlusion maps (or not at all), which drender does not render", list.c_str());
 }
 
 dr_material default_material(const char *name)
@@ -649,7 +836,7 @@ dr_material default_material(const char *name)
     m.specular = 1.0;
     m.specular_color = dr_v3s(1.0);
     m.double_sided = false;
-    m.base_color_tex = m.metallic_roughness_tex = m.emissive_tex = dr_texref{-1, 0};
+    m.base_color_tex = m.metallic_roughness_tex = m.emissive_tex = dr_texref{-1, 0, false, {1, 0, 0, 0, 1, 0}};
     return m;
 }
 
@@ -715,17 +902,21 @@ AccessorView Loader::view_accessor(int idx, const std::string &ref, int want_typ
     if (idx < 0 || size_t(idx) >= model_.accessors.size())
         fail(DR_ERR_FORMAT, "%s: accessor %d does not exist", ref.c_str(), idx);
     const tinygltf::Accessor &a = model_.accessors[size_t(idx)];
-    if (a.sparse.isSparse)
-        fail(DR_ERR_FORMAT, "/accessors/%d: sparse accessors are not supported", idx);
     if (a.type != want_type)
         fail(DR_ERR_FORMAT, "/accessors/%d: %s must be %s, not %s", idx, what, type_name(want_type),
              type_name(a.type));
     size_t csize = component_size(a.componentType);
     if (csize == 0)
         fail(DR_ERR_FORMAT, "/accessors/%d/componentType: invalid component type %d", idx, a.componentType);
-    size_t ncomp = size_t(tinygltf::GetNumComponentsInType(uint32_t(a.type)));
-    size_t elem = csize * ncomp;
+    size_t elem = csize * size_t(tinygltf::GetNumComponentsInType(uint32_t(a.type)));
+    AccessorView v = dense_view(idx, a, elem);
+    if (a.sparse.isSparse) apply_sparse(idx, a, elem, v);
+    return v;
+}
 
+/* The accessor's bufferView part (all zeros without one), range-checked. */
+AccessorView Loader::dense_view(int idx, const tinygltf::Accessor &a, size_t elem)
+{
     AccessorView v;
     v.count = a.count;
     v.comp_type = a.componentType;
@@ -763,7 +954,195 @@ AccessorView Loader::view_accessor(int idx, const std::string &ref, int want_typ
     return v;
 }
 
+/* need bytes at offset into bufferView bv (tightly packed, as the sparse
+ * indices and values are), range-checked; `where` is the JSON path that names bv. */
+const unsigned char *Loader::view_bytes(int bv, int offset, size_t need, const std::string &where)
+{
+    if (bv < 0 || size_t(bv) >= model_.bufferViews.size())
+        fail(DR_ERR_FORMAT, "%s/bufferView: bufferView %d does not exist", where.c_str(), bv);
+    if (offset < 0) fail(DR_ERR_FORMAT, "%s/byteOffset: %d is negative", where.c_str(), offset);
+    const tinygltf::BufferView &v = model_.bufferViews[size_t(bv)];
+    if (v.buffer < 0 || size_t(v.buffer) >= model_.buffers.size())
+        fail(DR_ERR_FORMAT, "/bufferViews/%d/buffer: buffer %d does not exist", bv, v.buffer);
+    const std::vector<unsigned char> &data = model_.buffers[size_t(v.buffer)].data;
+    if (v.byteOffset > data.size() || v.byteLength > data.size() - v.byteOffset)
+        fail(DR_ERR_FORMAT, "/bufferViews/%d: byte range %zu..%zu exceeds buffer %d (length %zu)", bv,
+             v.byteOffset, v.byteOffset + v.byteLength, v.buffer, data.size());
+    size_t off = size_t(offset);
+    if (off > v.byteLength || need > v.byteLength - off)
+        fail(DR_ERR_FORMAT, "%s: byte range %zu..%.0f exceeds bufferView %d (length %zu)", where.c_str(), off,
+             double(off) + double(need), bv, v.byteLength);
+    return data.data() + v.byteOffset + off;
+}
+
+/* glTF sparse accessors: the base (bufferView or zeros) copied into a dense
+ * array, then sparse.count elements replaced at sparse.indices (strictly
+ * increasing, each below the accessor's count) by sparse.values. */
+void Loader::apply_sparse(int idx, const tinygltf::Accessor &a, size_t elem, AccessorView &v)
+{
+    const std::string sp = strf("/accessors/%d/sparse", idx);
+    const int ict = a.sparse.indices.componentType;
+    if (ict != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE && ict != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+        ict != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+        fail(DR_ERR_FORMAT, "%s/indices/componentType: must be unsigned byte, short or int (got %d)", sp.c_str(),
+             ict);
+    if (a.sparse.count < 1 || size_t(a.sparse.count) > a.count)
+        fail(DR_ERR_FORMAT, "%s/count: %d is not in 1..%zu (the accessor's count)", sp.c_str(), a.sparse.count,
+             a.count);
+    /* without a bufferView nothing bounds count by the file's size */
+    const size_t max_bytes = size_t(1) << 30;
+    if (a.count > max_bytes / elem)
+        fail(DR_ERR_FORMAT, "/accessors/%d/count: %zu elements of a sparse accessor is more than drender "
+             "accepts (%zu bytes)", idx, a.count, max_bytes);
+    const size_t n = size_t(a.sparse.count), isize = component_size(ict);
+    const unsigned char *ib = view_bytes(a.sparse.indices.bufferView, a.sparse.indices.byteOffset, n * isize,
+                                         sp + "/indices");
+    const unsigned char *vb = view_bytes(a.sparse.values.bufferView, a.sparse.values.byteOffset, n * elem,
+                                         sp + "/values");
+    auto dense = std::make_shared<std::vector<unsigned char>>(a.count * elem, 0);
+    if (v.base)
+        for (size_t i = 0; i < a.count; i++) memcpy(dense->data() + i * elem, v.base + i * v.stride, elem);
+    AccessorView ix;
+    ix.base = ib;
+    ix.stride = isize;
+    ix.count = n;
+    ix.comp_type = ict;
+    for (size_t j = 0; j < n; j++) {
+        uint32_t i = ix.index(j);
+        if (i >= a.count)
+            fail(DR_ERR_FORMAT, "%s/indices: index %u (element %zu) is out of range: the accessor has %zu "
+                 "elements", sp.c_str(), i, j, a.count);
+        if (j > 0 && i <= ix.index(j - 1))
+            fail(DR_ERR_FORMAT, "%s/indices: index %u (element %zu) does not increase strictly", sp.c_str(), i, j);
+        memcpy(dense->data() + size_t(i) * elem, vb + j * elem, elem);
+    }
+    v.owned = dense;
+    v.base = dense->data();
+    v.stride = elem;
+}
+
 /* ---- geometry ---- */
+
+/* KHR_draco_mesh_compression: decodes the primitive's compressed bufferView;
+ * ids maps glTF attribute names to the decoded attributes' unique ids. */
+bool Loader::decode_draco(const tinygltf::Primitive &p, const std::string &pp, dr_draco_mesh &out,
+                          std::map<std::string, int> &ids)
+{
+    auto it = p.extensions.find("KHR_draco_mesh_compression");
+    if (it == p.extensions.end()) return false;
+    const std::string ep = pp + "/extensions/KHR_draco_mesh_compression";
+    const tinygltf::Value &v = it->second;
+    if (!v.IsObject() || !v.Get("bufferView").IsInt())
+        fail(DR_ERR_FORMAT, "%s/bufferView: expected a bufferView index", ep.c_str());
+    const tinygltf::Value &attrs = v.Get("attributes");
+    if (!attrs.IsObject()) fail(DR_ERR_FORMAT, "%s/attributes: expected an object", ep.c_str());
+    for (const std::string &key : attrs.Keys()) {
+        const tinygltf::Value &id = attrs.Get(key);
+        if (!id.IsInt() || id.GetNumberAsInt() < 0)
+            fail(DR_ERR_FORMAT, "%s/attributes/%s: expected a non-negative attribute id", ep.c_str(), key.c_str());
+        ids[key] = id.GetNumberAsInt();
+    }
+    int bv = v.Get("bufferView").GetNumberAsInt();
+    if (bv < 0 || size_t(bv) >= model_.bufferViews.size())
+        fail(DR_ERR_FORMAT, "%s/bufferView: bufferView %d does not exist", ep.c_str(), bv);
+    size_t len = model_.bufferViews[size_t(bv)].byteLength;
+    const unsigned char *bytes = view_bytes(bv, 0, len, ep);
+    std::string err;
+    if (!dr_draco_decode(bytes, len, &out, &err))
+        fail(DR_ERR_FORMAT, "%s: cannot decode the Draco mesh: %s", ep.c_str(), err.c_str());
+    if (out.n_points > UINT32_MAX) fail(DR_ERR_FORMAT, "%s: too many points", ep.c_str());
+    return true;
+}
+
+/* Attribute `name` of the primitive: from the Draco mesh when it compressed
+ * it, else its accessor. base == NULL and count 0 when the primitive has none. */
+AccessorView Loader::attribute_view(const tinygltf::Primitive &p, const std::string &pp, const char *name,
+                                    int want_type, const dr_draco_mesh *draco,
+                                    const std::map<std::string, int> &draco_ids)
+{
+    auto it = p.attributes.find(name);
+    auto di = draco_ids.find(name);
+    if (draco && di != draco_ids.end()) {
+        const std::string ep = pp + "/extensions/KHR_draco_mesh_compression/attributes/" + name;
+        const int ncomp = tinygltf::GetNumComponentsInType(uint32_t(want_type));
+        const bool colour = name == std::string("COLOR_0");   /* rgb or rgba: rgb is read from either */
+        for (const dr_draco_attribute &a : draco->attributes) {
+            if (a.unique_id != di->second) continue;
+            if (a.components != ncomp && !(colour && a.components == 4))
+                fail(DR_ERR_FORMAT, "%s: the decoded attribute has %d components, %s needs %d", ep.c_str(),
+                     a.components, name, ncomp);
+            AccessorView v;
+            v.owned = std::make_shared<std::vector<unsigned char>>(a.values.size() * sizeof(float));
+            if (!a.values.empty()) memcpy(v.owned->data(), a.values.data(), v.owned->size());
+            v.base = v.owned->data();
+            v.stride = size_t(a.components) * sizeof(float);
+            v.count = draco->n_points;
+            v.comp_type = TINYGLTF_COMPONENT_TYPE_FLOAT;
+            return v;
+        }
+        fail(DR_ERR_FORMAT, "%s: the Draco mesh has no attribute %d", ep.c_str(), di->second);
+    }
+    if (it == p.attributes.end()) return AccessorView{};
+    const std::string ap = pp + "/attributes/" + name;
+    if (name == std::string("COLOR_0")) {   /* vec3 or vec4 */
+        int t = it->second >= 0 && size_t(it->second) < model_.accessors.size()
+                    ? model_.accessors[size_t(it->second)].type : TINYGLTF_TYPE_VEC3;
+        want_type = t == TINYGLTF_TYPE_VEC4 ? TINYGLTF_TYPE_VEC4 : TINYGLTF_TYPE_VEC3;
+    }
+    AccessorView v = view_accessor(it->second, ap, want_type, name);
+    if (name == std::string("COLOR_0") && v.comp_type != TINYGLTF_COMPONENT_TYPE_FLOAT &&
+        !((v.comp_type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE || v.comp_type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT) &&
+          v.normalized))
+        fail(DR_ERR_FORMAT, "/accessors/%d: COLOR_0 must be float or normalized unsigned byte or short", it->second);
+    return v;
+}
+
+/* The primitive's vertex sequence, as listed (indices, or the Draco faces) or implicit. */
+std::vector<uint32_t> Loader::primitive_sequence(const tinygltf::Primitive &p, const std::string &pp, size_t nv,
+                                                 const dr_draco_mesh *draco)
+{
+    std::vector<uint32_t> seq;
+    if (draco) return draco->indices;   /* each checked < n_points by the shim */
+    if (p.indices >= 0) {
+        AccessorView ix = view_accessor(p.indices, pp + "/indices", TINYGLTF_TYPE_SCALAR, "indices");
+        if (ix.comp_type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
+            ix.comp_type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
+            ix.comp_type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
+            fail(DR_ERR_FORMAT, "/accessors/%d/componentType: indices must be unsigned byte, short or int",
+                 p.indices);
+        seq.resize(ix.count);
+        for (size_t i = 0; i < ix.count; i++) {
+            seq[i] = ix.index(i);
+            if (seq[i] >= nv)
+                fail(DR_ERR_FORMAT, "/accessors/%d: index %u (element %zu) is out of range: the "
+                     "primitive has %zu vertices", p.indices, seq[i], i, nv);
+        }
+    } else {
+        if (nv > UINT32_MAX) fail(DR_ERR_FORMAT, "%s: too many vertices", pp.c_str());
+        seq.resize(nv);
+        for (size_t i = 0; i < nv; i++) seq[i] = uint32_t(i);
+    }
+    return seq;
+}
+
+/* Strips and fans become lists; an incomplete last triangle is dropped. */
+std::vector<uint32_t> triangle_list(int mode, const std::vector<uint32_t> &seq)
+{
+    std::vector<uint32_t> tri;
+    if (mode == TINYGLTF_MODE_TRIANGLES) {
+        tri.assign(seq.begin(), seq.begin() + ptrdiff_t(seq.size() / 3 * 3));
+        return tri;
+    }
+    for (size_t i = 0; i + 2 < seq.size(); i++) {
+        if (mode == TINYGLTF_MODE_TRIANGLE_FAN)
+            tri.insert(tri.end(), {seq[0], seq[i + 1], seq[i + 2]});
+        else if (i % 2 == 0)
+            tri.insert(tri.end(), {seq[i], seq[i + 1], seq[i + 2]});
+        else  /* odd strip triangles swap to keep the winding */
+            tri.insert(tri.end(), {seq[i + 1], seq[i], seq[i + 2]});
+    }
+    return tri;
+}
 
 void Loader::add_primitive(int mesh_idx, int prim_idx, const Mat4 &world, const NormalXform &nx)
 {
@@ -784,66 +1163,32 @@ void Loader::add_primitive(int mesh_idx, int prim_idx, const Mat4 &world, const 
             warn_once("ext:" + kv.first, "%s/extensions/%s: extension is not supported; ignored", pp.c_str(),
                       kv.first.c_str());
 
-    auto attr = [&](const char *name) {
-        auto it = p.attributes.find(name);
-        return it == p.attributes.end() ? -1 : it->second;
+    dr_draco_mesh draco_mesh;
+    std::map<std::string, int> draco_ids;
+    const dr_draco_mesh *draco = decode_draco(p, pp, draco_mesh, draco_ids) ? &draco_mesh : nullptr;
+    auto present = [&](const char *name) { return p.attributes.count(name) > 0 || draco_ids.count(name) > 0; };
+    auto attribute = [&](const char *name, int type) { return attribute_view(p, pp, name, type, draco, draco_ids); };
+    if (!present("POSITION")) fail(DR_ERR_FORMAT, "%s/attributes: the primitive has no POSITION", pp.c_str());
+    AccessorView pos = attribute("POSITION", TINYGLTF_TYPE_VEC3);
+    const size_t nv = pos.count;
+    const bool has_nor = present("NORMAL"), has_uv = present("TEXCOORD_0"), has_col = present("COLOR_0");
+    const bool has_uv1 = want_uv1_ && present("TEXCOORD_1");   /* read only when a texture uses it */
+    AccessorView nor, uv, uv1, col;
+    if (has_nor) nor = attribute("NORMAL", TINYGLTF_TYPE_VEC3);
+    if (has_uv) uv = attribute("TEXCOORD_0", TINYGLTF_TYPE_VEC2);
+    if (has_uv1) uv1 = attribute("TEXCOORD_1", TINYGLTF_TYPE_VEC2);
+    if (has_col) col = attribute("COLOR_0", TINYGLTF_TYPE_VEC3);
+    auto check_count = [&](const char *name, bool has, const AccessorView &v) {
+        if (has && v.count != nv)
+            fail(DR_ERR_FORMAT, "%s/attributes/%s: %s has %zu elements but POSITION has %zu", pp.c_str(), name,
+                 name, v.count, nv);
     };
-    int pos_idx = attr("POSITION");
-    if (pos_idx < 0) fail(DR_ERR_FORMAT, "%s/attributes: the primitive has no POSITION", pp.c_str());
-    AccessorView pos = view_accessor(pos_idx, pp + "/attributes/POSITION", TINYGLTF_TYPE_VEC3, "POSITION");
-    size_t nv = pos.count;
+    check_count("NORMAL", has_nor, nor);
+    check_count("TEXCOORD_0", has_uv, uv);
+    check_count("TEXCOORD_1", has_uv1, uv1);
+    check_count("COLOR_0", has_col, col);
 
-    AccessorView nor, uv;
-    int nor_idx = attr("NORMAL"), uv_idx = attr("TEXCOORD_0");
-    if (nor_idx >= 0) {
-        nor = view_accessor(nor_idx, pp + "/attributes/NORMAL", TINYGLTF_TYPE_VEC3, "NORMAL");
-        if (nor.count != nv)
-            fail(DR_ERR_FORMAT, "/accessors/%d: NORMAL has %zu elements but POSITION has %zu", nor_idx,
-                 nor.count, nv);
-    }
-    if (uv_idx >= 0) {
-        uv = view_accessor(uv_idx, pp + "/attributes/TEXCOORD_0", TINYGLTF_TYPE_VEC2, "TEXCOORD_0");
-        if (uv.count != nv)
-            fail(DR_ERR_FORMAT, "/accessors/%d: TEXCOORD_0 has %zu elements but POSITION has %zu", uv_idx,
-                 uv.count, nv);
-    }
-
-    /* the primitive's vertex sequence, as listed or implicit */
-    std::vector<uint32_t> seq;
-    if (p.indices >= 0) {
-        AccessorView ix = view_accessor(p.indices, pp + "/indices", TINYGLTF_TYPE_SCALAR, "indices");
-        if (ix.comp_type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE &&
-            ix.comp_type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT &&
-            ix.comp_type != TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT)
-            fail(DR_ERR_FORMAT, "/accessors/%d/componentType: indices must be unsigned byte, short or int",
-                 p.indices);
-        seq.resize(ix.count);
-        for (size_t i = 0; i < ix.count; i++) {
-            seq[i] = ix.index(i);
-            if (seq[i] >= nv)
-                fail(DR_ERR_FORMAT, "/accessors/%d: index %u (element %zu) is out of range: the "
-                     "primitive has %zu vertices", p.indices, seq[i], i, nv);
-        }
-    } else {
-        if (nv > UINT32_MAX) fail(DR_ERR_FORMAT, "%s: too many vertices", pp.c_str());
-        seq.resize(nv);
-        for (size_t i = 0; i < nv; i++) seq[i] = uint32_t(i);
-    }
-
-    /* strips and fans become lists; an incomplete last triangle is dropped */
-    std::vector<uint32_t> tri;
-    if (mode == TINYGLTF_MODE_TRIANGLES) {
-        tri.assign(seq.begin(), seq.begin() + ptrdiff_t(seq.size() / 3 * 3));
-    } else {
-        for (size_t i = 0; i + 2 < seq.size(); i++) {
-            if (mode == TINYGLTF_MODE_TRIANGLE_FAN)
-                tri.insert(tri.end(), {seq[0], seq[i + 1], seq[i + 2]});
-            else if (i % 2 == 0)
-                tri.insert(tri.end(), {seq[i], seq[i + 1], seq[i + 2]});
-            else  /* odd strip triangles swap to keep the winding */
-                tri.insert(tri.end(), {seq[i + 1], seq[i], seq[i + 2]});
-        }
-    }
+    std::vector<uint32_t> tri = triangle_list(mode, primitive_sequence(p, pp, nv, draco));
 
     size_t base = positions_.size() / 3;
     if (base + nv > UINT32_MAX) fail(DR_ERR_FORMAT, "%s: the scene has more than 2^32 vertices", pp.c_str());
@@ -857,15 +1202,20 @@ void Loader::add_primitive(int mesh_idx, int prim_idx, const Mat4 &world, const 
     } else {
         material = p.material;
     }
-    uint8_t flags = uint8_t((nor_idx >= 0 ? DR_TRI_HAS_NORMALS : 0) | (uv_idx >= 0 ? DR_TRI_HAS_UVS : 0));
+    uint8_t flags = uint8_t((has_nor ? DR_TRI_HAS_NORMALS : 0) | (has_uv ? DR_TRI_HAS_UVS : 0));
 
+    /* vertex colours and the second uv set exist only once some primitive
+     * needs them; earlier vertices then get the neutral value */
+    if (has_col && !have_colors_) colors_.assign(base * 3, 1.0f);
+    have_colors_ |= has_col;
+    if (want_uv1_ && uvs1_.empty()) uvs1_.assign(base * 2, 0.0f);
     for (size_t i = 0; i < nv; i++) {
         dr_vec3 w = mat_point(world, pos.get(i, 0), pos.get(i, 1), pos.get(i, 2));
         positions_.insert(positions_.end(), {float(w.x), float(w.y), float(w.z)});
         bbox_min_ = dr_v3(fmin(bbox_min_.x, w.x), fmin(bbox_min_.y, w.y), fmin(bbox_min_.z, w.z));
         bbox_max_ = dr_v3(fmax(bbox_max_.x, w.x), fmax(bbox_max_.y, w.y), fmax(bbox_max_.z, w.z));
         dr_vec3 n = dr_v3s(0.0);
-        if (nor_idx >= 0) {
+        if (has_nor) {
             double a = nor.get(i, 0), b = nor.get(i, 1), c = nor.get(i, 2);
             n = dr_normalize(dr_v3(nx.n[0][0] * a + nx.n[0][1] * b + nx.n[0][2] * c,
                                    nx.n[1][0] * a + nx.n[1][1] * b + nx.n[1][2] * c,
@@ -873,6 +1223,13 @@ void Loader::add_primitive(int mesh_idx, int prim_idx, const Mat4 &world, const 
         }
         normals_.insert(normals_.end(), {float(n.x), float(n.y), float(n.z)});
         uvs_.insert(uvs_.end(), {float(uv.get(i, 0)), float(uv.get(i, 1))});
+        if (want_uv1_) uvs1_.insert(uvs1_.end(), {float(uv1.get(i, 0)), float(uv1.get(i, 1))});
+        if (have_colors_) {
+            if (has_col)
+                colors_.insert(colors_.end(), {float(col.get(i, 0)), float(col.get(i, 1)), float(col.get(i, 2))});
+            else
+                colors_.insert(colors_.end(), {1.0f, 1.0f, 1.0f});
+        }
     }
     for (size_t t = 0; t + 2 < tri.size(); t += 3) {
         uint32_t a = uint32_t(base) + tri[t], b = uint32_t(base) + tri[t + 1], c = uint32_t(base) + tri[t + 2];
@@ -888,23 +1245,36 @@ void Loader::add_primitive(int mesh_idx, int prim_idx, const Mat4 &world, const 
 void Loader::add_camera(int cam_idx, int node_idx, const Mat4 &world)
 {
     const tinygltf::Camera &c = model_.cameras[size_t(cam_idx)];
-    if (c.type == "orthographic") {
-        warn_once("ortho", "/cameras/%d: orthographic cameras are not supported; camera skipped", cam_idx);
-        return;
-    }
-    if (c.type != "perspective")
+    if (c.type != "perspective" && c.type != "orthographic")
         fail(DR_ERR_FORMAT, "/cameras/%d/type: unknown camera type '%s'", cam_idx, c.type.c_str());
     dr_camera cam = {};
+    cam.gltf_index = cam_idx;
     const std::string &name = !c.name.empty() ? c.name : model_.nodes[size_t(node_idx)].name;
     copy_name(cam.name, name.empty() ? strf("camera_%zu", cameras_.size()) : name);
     cam.origin = mat_column(world, 3);
     cam.right = dr_normalize(mat_column(world, 0));
     cam.up = dr_normalize(mat_column(world, 1));
     cam.forward = dr_normalize(dr_neg(mat_column(world, 2)));
-    cam.yfov = c.perspective.yfov;
-    cam.aspect = c.perspective.aspectRatio;
-    if (!(cam.yfov > 0.0 && cam.yfov < M_PI))
-        fail(DR_ERR_FORMAT, "/cameras/%d/perspective/yfov: %g is not in (0, pi)", cam_idx, cam.yfov);
+    if (c.type == "orthographic") {
+        /* xmag, ymag: half the view's width and height; the image's W/H
+         * decides the width as yfov does for perspective, xmag/ymag the default W/H */
+        double xmag = fabs(c.orthographic.xmag), ymag = fabs(c.orthographic.ymag);
+        if (!(xmag > 0.0 && std::isfinite(xmag)))
+            fail(DR_ERR_FORMAT, "/cameras/%d/orthographic/xmag: %g must be finite and non-zero", cam_idx,
+                 c.orthographic.xmag);
+        if (!(ymag > 0.0 && std::isfinite(ymag)))
+            fail(DR_ERR_FORMAT, "/cameras/%d/orthographic/ymag: %g must be finite and non-zero", cam_idx,
+                 c.orthographic.ymag);
+        cam.orthographic = true;
+        cam.ymag = ymag;
+        cam.aspect = xmag / ymag;
+    } else {
+        cam.yfov = c.perspective.yfov;
+        cam.aspect = c.perspective.aspectRatio;
+        if (!(cam.yfov > 0.0 && cam.yfov < M_PI))
+            fail(DR_ERR_FORMAT, "/cameras/%d/perspective/yfov: %g is not in (0, pi)", cam_idx, cam.yfov);
+    }
+    placed_cameras_.insert(cam_idx);
     cameras_.push_back(cam);
 }
 
@@ -1083,6 +1453,7 @@ void Loader::finish()
     scene_->n_cameras = int(cameras_.size());
     for (dr_punctual &l : lights_)
         l.watts_per_unit = scene_->light_units == DR_LIGHT_UNITS_PHOTOMETRIC ? 1.0 / DR_LUMENS_PER_WATT : 1.0;
+    scene_->n_unplaced_cameras = int(model_.cameras.size() - placed_cameras_.size());
     scene_->lights = copy_out(lights_);
     scene_->n_lights = int(lights_.size());
 
@@ -1092,6 +1463,8 @@ void Loader::finish()
     mesh.positions = copy_out(positions_, 1);  /* Embree reads 16 bytes per vertex */
     mesh.normals = copy_out(normals_);
     mesh.uvs = copy_out(uvs_);
+    mesh.uvs1 = copy_out(uvs1_);      /* NULL unless a texture reads TEXCOORD_1 */
+    mesh.colors = copy_out(colors_);  /* NULL unless some primitive has COLOR_0 */
     mesh.indices = copy_out(indices_);
     mesh.material = copy_out(tri_material_);
     mesh.flags = copy_out(tri_flags_);
@@ -1116,6 +1489,7 @@ void Loader::run()
     take_images();
     load_textures();
     load_materials();
+    check_ktx2();
     traverse_scene();
     load_environment();
     load_light_units();
@@ -1295,8 +1669,15 @@ void Loader::finish_media()
 
 extern "C" int dr_gltf_load(const char *path, struct dr_scene *scene)
 {
+    return dr_gltf_load_opts(path, nullptr, scene);
+}
+
+extern "C" int dr_gltf_load_opts(const char *path, const struct dr_load_opts *opts, struct dr_scene *scene)
+{
+    dr_load_opts o = {};
+    if (opts) o = *opts;
     try {
-        Loader loader(path, scene);
+        Loader loader(path, o, scene);
         loader.run();
         return 0;
     } catch (const Failure &f) {

@@ -364,8 +364,9 @@ dr_vec3 dr_emission(const struct dr_scene *s, const struct dr_hit *hit)
     dr_vec3 e = dr_scale(m->emissive_factor, m->emissive_strength);
     if (m->emissive_tex.texture >= 0 && !dr_is_black(e)) {
         const struct dr_texture *t = &s->textures[m->emissive_tex.texture];
-        double px[4];
-        dr_texture_eval(t, &s->images[t->image], hit->uv[0], hit->uv[1], true, px);
+        double px[4], uv[2];
+        dr_texref_uv(&s->mesh, &m->emissive_tex, hit, uv);
+        dr_texture_eval(t, &s->images[t->image], uv[0], uv[1], true, px);
         e = dr_mul(e, dr_v3(px[0], px[1], px[2]));
     }
     return e;
@@ -381,9 +382,11 @@ void d_emission(const struct dr_scene *s, const struct dr_param_set *ps, const s
     /* Le = factor * strength * texture rgb */
     dr_vec3 tex_rgb = dr_v3s(1.0);
     const struct dr_texture *et = m->emissive_tex.texture >= 0 ? &s->textures[m->emissive_tex.texture] : NULL;
+    double uv[2] = {0.0, 0.0};
     if (et) {
         double px[4];
-        dr_texture_eval(et, &s->images[et->image], hit->uv[0], hit->uv[1], true, px);
+        dr_texref_uv(&s->mesh, &m->emissive_tex, hit, uv);
+        dr_texture_eval(et, &s->images[et->image], uv[0], uv[1], true, px);
         tex_rgb = dr_v3(px[0], px[1], px[2]);
     }
     double st = m->emissive_strength;
@@ -398,7 +401,7 @@ void d_emission(const struct dr_scene *s, const struct dr_param_set *ps, const s
     if (et && ps->image[et->image] >= 0) {
         dr_vec3 g = dr_scale(dr_mul(d_Le, m->emissive_factor), st);
         double d_out[4] = {g.x, g.y, g.z, 0.0};
-        d_texture_eval(et, &s->images[et->image], hit->uv[0], hit->uv[1], d_out, ps->image[et->image], k);
+        d_texture_eval(et, &s->images[et->image], uv[0], uv[1], d_out, ps->image[et->image], k);
     }
 }
 
@@ -631,7 +634,7 @@ void d_light_pdf_area_points(const struct dr_scene *s, const struct dr_light_sam
         *d_from = dr_sub(*d_from, g);
 }
 
-void d_emission_uv(const struct dr_scene *s, const struct dr_hit *hit, dr_vec3 d_Le, double d_uv[2])
+void d_emission_uv(const struct dr_scene *s, const struct dr_hit *hit, dr_vec3 d_Le, struct dr_d_hit *d_hit)
 {
     const struct dr_material *m = &s->materials[hit->material];
     if (!hit->front && !m->double_sided)
@@ -641,8 +644,10 @@ void d_emission_uv(const struct dr_scene *s, const struct dr_hit *hit, dr_vec3 d
         return;
     const struct dr_texture *t = &s->textures[m->emissive_tex.texture];
     dr_vec3 g = dr_mul(d_Le, e);
-    double d_out[4] = {g.x, g.y, g.z, 0.0};
-    d_texture_eval_uv(t, &s->images[t->image], hit->uv[0], hit->uv[1], true, d_out, &d_uv[0], &d_uv[1]);
+    double d_out[4] = {g.x, g.y, g.z, 0.0}, uv[2], d_uv[2] = {0.0, 0.0};
+    dr_texref_uv(&s->mesh, &m->emissive_tex, hit, uv);
+    d_texture_eval_uv(t, &s->images[t->image], uv[0], uv[1], true, d_out, &d_uv[0], &d_uv[1]);
+    d_texref_uv(&m->emissive_tex, d_uv, d_hit);
 }
 
 void d_env_dir_to_uv(dr_vec3 d, double d_u, double d_v, dr_vec3 *d_dir)

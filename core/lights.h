@@ -86,8 +86,9 @@ void d_light_sample_point(const struct dr_scene *scene, dr_vec3 p, const struct 
  * emitter's ng is constant). */
 void d_light_pdf_area_points(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 from,
                              const struct dr_hit *hit, double d_pdf, dr_vec3 *d_from, dr_vec3 *d_hit_p);
-/* Reverse mode of dr_emission with respect to the hit's uv (an emissive texture). */
-void d_emission_uv(const struct dr_scene *scene, const struct dr_hit *hit, dr_vec3 d_Le, double d_uv[2]);
+/* Reverse mode of dr_emission with respect to the hit's uv sets (an emissive
+ * texture, through its transform): into d_hit->uv or uv1 (+=). */
+void d_emission_uv(const struct dr_scene *scene, const struct dr_hit *hit, dr_vec3 d_Le, struct dr_d_hit *d_hit);
 /* Reverse mode of dr_env_radiance with respect to the direction (bilinear
  * map lookup through the equirectangular mapping). dr_light_pdf_env is
  * piecewise constant in the direction (per map cell): no adjoint. */

@@ -1,5 +1,6 @@
-/* A glTF material at a surface point: factors times textures, and the
- * adjoint of that evaluation down to the requested parameters. */
+/* A glTF material at a surface point: factors times textures (times the
+ * vertex colour for the base colour), and the adjoint of that evaluation down
+ * to the requested parameters. */
 #include "material.h"
 
 /* The texture a texref points at, or NULL. */
@@ -8,8 +9,17 @@ static const struct dr_texture *texref_texture(const struct dr_scene *s, const s
     return r->texture >= 0 ? &s->textures[r->texture] : NULL;
 }
 
-/* base_color = factor * texture rgb (sRGB-decoded); roughness = factor * G,
- * metallic = factor * B of the metallic-roughness texture (linear). */
+/* Texture t of texref r at hit (through r's uv set and transform); the uv
+ * looked up goes to uv. */
+static void texref_eval(const struct dr_scene *s, const struct dr_texture *t, const struct dr_texref *r,
+                        const struct dr_hit *hit, bool use_linear, double uv[2], double px[4])
+{
+    dr_texref_uv(&s->mesh, r, hit, uv);
+    dr_texture_eval(t, &s->images[t->image], uv[0], uv[1], use_linear, px);
+}
+
+/* base_color = factor * texture rgb (sRGB-decoded) * COLOR_0; roughness =
+ * factor * G, metallic = factor * B of the metallic-roughness texture (linear). */
 void dr_material_eval(const struct dr_scene *s, const struct dr_hit *hit, struct dr_bsdf *b)
 {
     const struct dr_material *m = &s->materials[hit->material];
@@ -18,15 +28,17 @@ void dr_material_eval(const struct dr_scene *s, const struct dr_hit *hit, struct
     b->roughness = m->roughness;
     b->specular = m->specular;
     b->specular_color = m->specular_color;
-    double px[4];
+    double px[4], uv[2];
     const struct dr_texture *t = texref_texture(s, &m->base_color_tex);
     if (t) {
-        dr_texture_eval(t, &s->images[t->image], hit->uv[0], hit->uv[1], true, px);
+        texref_eval(s, t, &m->base_color_tex, hit, true, uv, px);
         b->base_color = dr_mul(b->base_color, dr_v3(px[0], px[1], px[2]));
     }
+    if (s->mesh.colors)
+        b->base_color = dr_mul(b->base_color, dr_hit_color(&s->mesh, hit));
     t = texref_texture(s, &m->metallic_roughness_tex);
     if (t) {
-        dr_texture_eval(t, &s->images[t->image], hit->uv[0], hit->uv[1], false, px);
+        texref_eval(s, t, &m->metallic_roughness_tex, hit, false, uv, px);
         b->roughness *= px[1];
         b->metallic *= px[2];
     }
@@ -37,28 +49,27 @@ void d_material_eval(const struct dr_scene *s, const struct dr_param_set *ps, co
 {
     const int mi = hit->material;
     const struct dr_material *m = &s->materials[mi];
-    const double u = hit->uv[0], v = hit->uv[1];
-    /* base_color = factor * texture rgb */
+    /* base_color = factor * texture rgb * vertex colour */
     dr_vec3 tex_rgb = dr_v3s(1.0);
+    const dr_vec3 vcol = dr_hit_color(&s->mesh, hit);
+    double buv[2] = {0.0, 0.0}, px[4];
     const struct dr_texture *bt = texref_texture(s, &m->base_color_tex);
     if (bt) {
-        double px[4];
-        dr_texture_eval(bt, &s->images[bt->image], u, v, true, px);
+        texref_eval(s, bt, &m->base_color_tex, hit, true, buv, px);
         tex_rgb = dr_v3(px[0], px[1], px[2]);
     }
     if (ps->mat_base_color[mi] >= 0)
-        dr_sink_add3(k, ps->mat_base_color[mi], dr_mul(d_b->base_color, tex_rgb));
+        dr_sink_add3(k, ps->mat_base_color[mi], dr_mul(d_b->base_color, dr_mul(tex_rgb, vcol)));
     if (bt && ps->image[bt->image] >= 0) {
-        dr_vec3 g = dr_mul(d_b->base_color, m->base_color);
+        dr_vec3 g = dr_mul(d_b->base_color, dr_mul(m->base_color, vcol));
         double d_out[4] = {g.x, g.y, g.z, 0.0};
-        d_texture_eval(bt, &s->images[bt->image], u, v, d_out, ps->image[bt->image], k);
+        d_texture_eval(bt, &s->images[bt->image], buv[0], buv[1], d_out, ps->image[bt->image], k);
     }
     /* roughness = factor * texture G, metallic = factor * texture B */
-    double tex_g = 1.0, tex_b = 1.0;
+    double tex_g = 1.0, tex_b = 1.0, muv[2] = {0.0, 0.0};
     const struct dr_texture *mt = texref_texture(s, &m->metallic_roughness_tex);
     if (mt) {
-        double px[4];
-        dr_texture_eval(mt, &s->images[mt->image], u, v, false, px);
+        texref_eval(s, mt, &m->metallic_roughness_tex, hit, false, muv, px);
         tex_g = px[1];
         tex_b = px[2];
     }
@@ -68,24 +79,37 @@ void d_material_eval(const struct dr_scene *s, const struct dr_param_set *ps, co
         dr_sink_add(k, ps->mat_metallic[mi], d_b->metallic * tex_b);
     if (mt && ps->image[mt->image] >= 0) {
         double d_out[4] = {0.0, d_b->roughness * m->roughness, d_b->metallic * m->metallic, 0.0};
-        d_texture_eval(mt, &s->images[mt->image], u, v, d_out, ps->image[mt->image], k);
+        d_texture_eval(mt, &s->images[mt->image], muv[0], muv[1], d_out, ps->image[mt->image], k);
     }
 }
 
 void d_material_eval_uv(const struct dr_scene *s, const struct dr_hit *hit, const struct dr_d_bsdf *d_b,
-                        double d_uv[2])
+                        struct dr_d_hit *d_hit)
 {
     const struct dr_material *m = &s->materials[hit->material];
-    const double u = hit->uv[0], v = hit->uv[1];
+    const dr_vec3 vcol = dr_hit_color(&s->mesh, hit);
+    dr_vec3 tex_rgb = dr_v3s(1.0);
+    double uv[2], px[4];
     const struct dr_texture *bt = texref_texture(s, &m->base_color_tex);
-    if (bt) {   /* base_color = factor * rgb(uv) */
-        dr_vec3 g = dr_mul(d_b->base_color, m->base_color);
-        double d_out[4] = {g.x, g.y, g.z, 0.0};
-        d_texture_eval_uv(bt, &s->images[bt->image], u, v, true, d_out, &d_uv[0], &d_uv[1]);
+    if (bt) {   /* base_color = factor * rgb(uv) * colour */
+        dr_texref_uv(&s->mesh, &m->base_color_tex, hit, uv);
+        dr_vec3 g = dr_mul(d_b->base_color, dr_mul(m->base_color, vcol));
+        double d_out[4] = {g.x, g.y, g.z, 0.0}, d_uv[2] = {0.0, 0.0};
+        d_texture_eval_uv(bt, &s->images[bt->image], uv[0], uv[1], true, d_out, &d_uv[0], &d_uv[1]);
+        d_texref_uv(&m->base_color_tex, d_uv, d_hit);
+        if (s->mesh.colors) {
+            dr_texture_eval(bt, &s->images[bt->image], uv[0], uv[1], true, px);
+            tex_rgb = dr_v3(px[0], px[1], px[2]);
+        }
     }
+    if (s->mesh.colors)   /* ... and the colour moves with the hit too */
+        d_hit->color = dr_add(d_hit->color, dr_mul(d_b->base_color, dr_mul(m->base_color, tex_rgb)));
     const struct dr_texture *mt = texref_texture(s, &m->metallic_roughness_tex);
     if (mt) {   /* roughness = factor * G(uv), metallic = factor * B(uv) */
+        dr_texref_uv(&s->mesh, &m->metallic_roughness_tex, hit, uv);
         double d_out[4] = {0.0, d_b->roughness * m->roughness, d_b->metallic * m->metallic, 0.0};
-        d_texture_eval_uv(mt, &s->images[mt->image], u, v, false, d_out, &d_uv[0], &d_uv[1]);
+        double d_uv[2] = {0.0, 0.0};
+        d_texture_eval_uv(mt, &s->images[mt->image], uv[0], uv[1], false, d_out, &d_uv[0], &d_uv[1]);
+        d_texref_uv(&m->metallic_roughness_tex, d_uv, d_hit);
     }
 }

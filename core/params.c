@@ -241,8 +241,9 @@ int dr_params_list(const struct dr_scene *s, struct dr_param **out, int *count)
         const struct dr_image *im = &s->images[i];
         bool colour, data;
         image_usage(s, i, &colour, &data);
-        if (!colour && !data)
-            continue;   /* only a normal/occlusion map, or unused: its texels cannot change the image */
+        if ((!colour && !data) || !im->data)
+            continue;   /* only a normal/occlusion map, or unused: its texels cannot change the image;
+                           no data: a KTX2 image skipped by --ignore-unsupported */
         struct dr_param p = make(DR_PARAM_IMAGE, i, (int64_t)im->width * im->height * im->channels, "/images/%d", i);
         p.width = im->width;
         p.height = im->height;

@@ -44,7 +44,7 @@ bool dr_path_vertex_sampling_moves(const struct dr_scene *s, const struct dr_par
 /* Adjoints gathered at one vertex before they flow into the hit and the material. */
 struct vertex_adjoint {
     dr_vec3 p, ns, wo;
-    double uv[2];
+    struct dr_d_hit attr;   /* uv sets and vertex colour (p and ns are the fields above) */
     dr_frame frame;
     struct dr_d_bsdf bsdf;
 };
@@ -66,7 +66,7 @@ static void emission_adjoint(const struct dr_scene *s, const struct dr_param_set
         return;
     }
     d_emission(s, ps, &v->hit, d_Le, sink);
-    d_emission_uv(s, &v->hit, d_Le, a->uv);
+    d_emission_uv(s, &v->hit, d_Le, &a->attr);
     if (v->depth > 1) {
         double pdf_a = dr_light_pdf_area(s, s->light_sampler, v->prev_p, &v->hit), d_pdf_a = 0.0;
         d_mis_power(v->prev_pdf, pdf_a, d_w, &d_this->prev_pdf, &d_pdf_a);
@@ -128,7 +128,7 @@ static void surface_adjoint(const struct dr_scene *s, const struct dr_param_set 
     if (v->shaded) {
         if (v->diff_bsdf)
             d_material_eval(s, ps, hit, &a->bsdf, sink);
-        d_material_eval_uv(s, hit, &a->bsdf, a->uv);
+        d_material_eval_uv(s, hit, &a->bsdf, &a->attr);
         dr_vec3 d_wo_world = dr_v3s(0.0);
         d_frame_to_local(&v->frame, dr_neg(v->d), a->wo, &d_wo_world, &a->frame);
         d_this->d = dr_sub(d_this->d, d_wo_world);
@@ -136,7 +136,9 @@ static void surface_adjoint(const struct dr_scene *s, const struct dr_param_set 
         d_frame_from_normal(n, &a->frame, &d_n);
         a->ns = hit->front ? dr_add(a->ns, d_n) : dr_sub(a->ns, d_n);
     }
-    struct dr_d_hit dh = {a->p, a->ns, {a->uv[0], a->uv[1]}};
+    struct dr_d_hit dh = a->attr;
+    dh.p = a->p;
+    dh.ns = a->ns;
     d_hit_compute(&s->mesh, hit, v->o, v->d, &dh, &d_this->o, &d_this->d);
 }
 

@@ -42,8 +42,9 @@ static void render_tile(void *ctx, int thread, int x0, int y0, int x1, int y1)
                 double u, v, px, py;
                 dr_sampler_next2(&smp, &u, &v);
                 dr_film_sample(&o->film.filter, fx, fy, u, v, &px, &py);
-                dr_vec3 d = dr_camera_direction(&j->view, px, py);
-                dr_vec3 L = dr_path_radiance(j->scene, &j->path, j->view.origin, d, &smp, rays);
+                dr_vec3 o, d;
+                dr_camera_ray(&j->view, px, py, &o, &d);
+                dr_vec3 L = dr_path_radiance(j->scene, &j->path, o, d, &smp, rays);
                 if (dr_v3_finite(L))
                     sum = dr_add(sum, L);
                 else

@@ -13,13 +13,18 @@
 
 struct dr_scene *dr_scene_load(const char *path)
 {
+    return dr_scene_load_opts(path, NULL);
+}
+
+struct dr_scene *dr_scene_load_opts(const char *path, const struct dr_load_opts *opts)
+{
     struct dr_scene *s = calloc(1, sizeof *s);
     if (!s) {
         dr_set_error("out of memory");
         return NULL;
     }
     s->path = strdup(path);
-    if (!s->path || dr_gltf_load(path, s) != 0 || dr_scene_prepare(s) != 0) {
+    if (!s->path || dr_gltf_load_opts(path, opts, s) != 0 || dr_scene_prepare(s) != 0) {
         if (!s->path)
             dr_set_error("out of memory");
         dr_scene_destroy(s);
@@ -149,6 +154,8 @@ void dr_scene_destroy(struct dr_scene *s)
     free(s->mesh.positions);
     free(s->mesh.normals);
     free(s->mesh.uvs);
+    free(s->mesh.uvs1);
+    free(s->mesh.colors);
     free(s->mesh.indices);
     free(s->mesh.material);
     free(s->mesh.flags);

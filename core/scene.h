@@ -18,8 +18,10 @@ extern "C" {
 #define DR_NAME_MAX 64
 
 struct dr_texref {
-    int texture;   /* index into scene->textures, -1 when absent */
-    int texcoord;  /* TEXCOORD_n set; only 0 is loaded */
+    int texture;       /* index into scene->textures, -1 when absent */
+    int texcoord;      /* TEXCOORD_n set: 0 or 1 (mesh.uvs1 is loaded when some texref reads 1) */
+    bool transformed;  /* KHR_texture_transform: the lookup uses xf * (u, v, 1) */
+    double xf[6];      /* row-major 2x3 affine map of the uv (identity when !transformed) */
 };
 
 /* glTF metallic-roughness material (+ KHR_materials_specular,
@@ -47,6 +49,10 @@ struct dr_mesh {
     float *positions;   /* 3 per vertex, plus 1 padding float (Embree reads 16 bytes) */
     float *normals;     /* 3 per vertex (zero where the primitive had none) */
     float *uvs;         /* 2 per vertex (zero where the primitive had none) */
+    /* Only for the scenes that call for them (NULL otherwise: no memory, no
+     * per-hit work): */
+    float *uvs1;        /* TEXCOORD_1, 2 per vertex, when some texture reads set 1 (zero where absent) */
+    float *colors;      /* COLOR_0 rgb, 3 per vertex, when some primitive has it ((1,1,1) where absent) */
     uint32_t *indices;  /* 3 per triangle, counter-clockwise = front */
     int32_t *material;  /* per triangle, index into scene->materials */
     uint8_t *flags;     /* per triangle, enum dr_tri_flags */
@@ -59,8 +65,11 @@ struct dr_camera {
     char name[DR_NAME_MAX];
     dr_vec3 origin;
     dr_vec3 right, up, forward;   /* unit, world space; looks along forward */
-    double yfov;                  /* radians, vertical field of view */
-    double aspect;                /* glTF aspectRatio, 0 when absent */
+    double yfov;                  /* radians, vertical field of view (perspective) */
+    double aspect;                /* glTF aspectRatio (orthographic: xmag / ymag), 0 when absent */
+    bool orthographic;            /* parallel rays along forward from the film plane */
+    double ymag;                  /* orthographic: half the view's height (its width follows W/H) */
+    int gltf_index;               /* index in the file's "cameras" (-1: drender's default view) */
 };
 
 enum dr_light_type { DR_LIGHT_POINT, DR_LIGHT_SPOT, DR_LIGHT_DIRECTIONAL };
@@ -124,7 +133,8 @@ struct dr_scene {
     int n_file_materials;         /* those in the file's "materials" (the rest: the default) */
     struct dr_texture *textures; int n_textures;
     struct dr_image *images; int n_images;
-    struct dr_camera *cameras; int n_cameras;
+    struct dr_camera *cameras; int n_cameras;   /* camera nodes, in depth-first node order */
+    int n_unplaced_cameras;       /* entries of the file's "cameras" that no node places (not renderable) */
     struct dr_punctual *lights; int n_lights;
     struct dr_environment env;
     enum dr_light_units light_units;   /* of every lights[i].intensity */
@@ -140,9 +150,19 @@ struct dr_scene {
     unsigned effects;             /* enum dr_effect bits */
 };
 
+/* How the loader treats what drender cannot render. */
+struct dr_load_opts {
+    /* Content that does not change the rendered image in drender (a KTX2
+     * image used only as a normal or occlusion map) is skipped with one
+     * warning instead of failing the load (--ignore-unsupported). */
+    bool ignore_unsupported;
+};
+
 /* Loads a .gltf/.glb and prepares it for rendering. NULL + dr_last_error() on
- * failure; the message names the file and, for content errors, the JSON path. */
+ * failure; the message names the file and, for content errors, the JSON path.
+ * dr_scene_load uses the default options (all false). */
 struct dr_scene *dr_scene_load(const char *path);
+struct dr_scene *dr_scene_load_opts(const char *path, const struct dr_load_opts *opts);
 int dr_scene_prepare(struct dr_scene *scene);
 /* After materials, lights or the environment changed (parameters set):
  * recomputes the effect flags and the light sampling tables. Geometry must
@@ -175,6 +195,8 @@ void dr_effects_describe(unsigned effects, char *buf, int size);
  * dr_scene_prepare". Returns 0 or a negative DR_ERR_* with dr_last_error set;
  * on failure the scene may hold partial allocations: call dr_scene_destroy. */
 int dr_gltf_load(const char *path, struct dr_scene *scene);
+/* The same with options (NULL: the defaults). */
+int dr_gltf_load_opts(const char *path, const struct dr_load_opts *opts, struct dr_scene *scene);
 
 #ifdef __cplusplus
 }

@@ -19,8 +19,7 @@ void dr_est_camera_ray(const struct dr_est_base *b, int64_t pixel, int sample, s
     double u, v, fx, fy;
     dr_sampler_next2(smp, &u, &v);
     dr_film_sample(&b->p->film.filter, x, y, u, v, &fx, &fy);
-    *o = b->view.origin;
-    *d = dr_camera_direction(&b->view, fx, fy);
+    dr_camera_ray(&b->view, fx, fy, o, d);
 }
 
 /* ------------------------------------------------------------ accumulators */

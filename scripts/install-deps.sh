@@ -8,6 +8,7 @@ set -euo pipefail
 pkgs=(build-essential pkg-config
       libembree-dev libopenimageio-dev openimageio-tools
       libtinygltf-dev nlohmann-json3-dev libstb-dev
+      libdraco-dev   # KHR_draco_mesh_compression (core/draco_decode.cpp)
       gnuplot-nox python3
       valgrind)   # scripts/no-media-overhead.sh counts instructions with callgrind
 # Node.js runs the Khronos glTF validator (tests/cli_gltf_validate.sh). Any node

@@ -142,7 +142,7 @@ static double hit_objective(void *c, const double *x)
 
 static void test_hit(const struct dr_scene *s)
 {
-    struct hit_ctx k = {s, 0, {rnd3(), rnd3(), {rnd(), rnd()}}};
+    struct hit_ctx k = {s, 0, {rnd3(), rnd3(), {rnd(), rnd()}, {0, 0}, {0, 0, 0}}};
     dr_vec3 o = dr_v3(0.2, 1.5, 0.3);
     struct dr_hit target;
     dr_hit_at(&s->mesh, 0, 0.3, 0.4, &target);
@@ -240,13 +240,71 @@ static void test_uv(const struct dr_scene *s)
         }
     struct uv_ctx k = {s, -1, {0}, {rnd(), rnd(), rnd(), 0}, {rnd3(), rnd(), rnd()}};
     dr_hit_at(&s->mesh, 0, 0.3, 0.25, &k.hit);
-    double x[2] = {k.hit.uv[0], k.hit.uv[1]}, g[2] = {0, 0};
-    d_material_eval_uv(s, &k.hit, &k.wb, g);
-    check_fd("d_material_eval_uv", uv_objective, &k, x, 2, g, 1e-7, 1e-6);
+    double x[2] = {k.hit.uv[0], k.hit.uv[1]};
+    struct dr_d_hit dh = {0};
+    d_material_eval_uv(s, &k.hit, &k.wb, &dh);
+    check_fd("d_material_eval_uv", uv_objective, &k, x, 2, dh.uv, 1e-7, 1e-6);
     k.texture = -2;
-    g[0] = g[1] = 0.0;
-    d_emission_uv(s, &k.hit, v3(k.w), g);
-    check_fd("d_emission_uv", uv_objective, &k, x, 2, g, 1e-7, 1e-6);
+    memset(&dh, 0, sizeof dh);
+    d_emission_uv(s, &k.hit, v3(k.w), &dh);
+    check_fd("d_emission_uv", uv_objective, &k, x, 2, dh.uv, 1e-7, 1e-6);
+}
+
+/* The hit's attributes the glTF features add, moved by the ray: COLOR_0
+ * (base colour), TEXCOORD_1 and KHR_texture_transform (base-colour and
+ * emissive lookups). J(o, d) = w . base_color + w' . emission at the hit. */
+struct attr_ctx {
+    const struct dr_scene *s;
+    struct dr_d_bsdf wb;
+    dr_vec3 we;
+};
+
+static double attr_objective(void *c, const double *x)
+{
+    struct attr_ctx *k = c;
+    struct dr_hit h;
+    dr_hit_compute(&k->s->mesh, 0, v3(x), v3(x + 3), &h);
+    struct dr_bsdf b;
+    dr_material_eval(k->s, &h, &b);
+    return dr_dot(k->wb.base_color, b.base_color) + k->wb.metallic * b.metallic + k->wb.roughness * b.roughness +
+           dr_dot(k->we, dr_emission(k->s, &h));
+}
+
+static void test_hit_attributes(struct dr_scene *s)
+{
+    struct dr_mesh *m = &s->mesh;
+    m->colors = malloc(sizeof(float) * 3 * m->n_vertices);
+    m->uvs1 = malloc(sizeof(float) * 2 * m->n_vertices);
+    for (uint32_t i = 0; i < 3 * m->n_vertices; i++)
+        m->colors[i] = (float)(0.5 + 0.4 * rnd());
+    for (uint32_t i = 0; i < 2 * m->n_vertices; i++)
+        m->uvs1[i] = (float)(0.5 + 0.8 * rnd());
+    struct dr_material *mat = &s->materials[0];
+    const double xf[6] = {0.9, 0.4, 0.1, -0.3, 1.2, 0.25};
+    mat->base_color_tex.texcoord = 1;
+    mat->base_color_tex.transformed = true;
+    memcpy(mat->base_color_tex.xf, xf, sizeof xf);
+    mat->emissive_tex.transformed = true;
+    memcpy(mat->emissive_tex.xf, xf, sizeof xf);
+    mat->metallic_roughness_tex.texcoord = 1;
+    struct attr_ctx k = {s, {rnd3(), rnd(), rnd()}, rnd3()};
+    dr_vec3 o = dr_v3(0.2, 1.5, 0.3);
+    struct dr_hit target;
+    dr_hit_at(m, 0, 0.3, 0.4, &target);
+    dr_vec3 d = dr_normalize(dr_sub(target.p, o));
+    double x[6] = {o.x, o.y, o.z, d.x, d.y, d.z};
+    struct dr_hit h;
+    dr_hit_compute(m, 0, o, d, &h);
+    struct dr_d_hit dh;
+    memset(&dh, 0, sizeof dh);
+    d_material_eval_uv(s, &h, &k.wb, &dh);
+    d_emission_uv(s, &h, k.we, &dh);
+    CHECK(dh.color.x != 0.0 && dh.uv1[0] != 0.0 && dh.uv[0] != 0.0,
+          "adjoints reach the colour (%g), TEXCOORD_1 (%g) and TEXCOORD_0 (%g)", dh.color.x, dh.uv1[0], dh.uv[0]);
+    dr_vec3 d_o = dr_v3s(0), d_d = dr_v3s(0);
+    d_hit_compute(m, &h, o, d, &dh, &d_o, &d_d);
+    double g[6] = {d_o.x, d_o.y, d_o.z, d_d.x, d_d.y, d_d.z};
+    check_fd("COLOR_0, TEXCOORD_1, transform", attr_objective, &k, x, 6, g, 1e-6, 1e-6);
 }
 
 /* ----------------------------------------------------------- environment */
@@ -394,6 +452,7 @@ int main(void)
     test_light_sample(s);
     test_pdf_area(s);
     test_pdf_fixed();
+    test_hit_attributes(s);   /* last: it adds vertex colours and uv transforms to s */
     dr_scene_destroy(s);
     return TEST_END();
 }

@@ -35,7 +35,9 @@ static double path_value(const struct dr_scene *s, const struct dr_camera *cam, 
     struct dr_path_opts po = {.max_depth = max_depth, .rr_depth = DR_RR_DEPTH_DEFAULT,
                               .stages = dr_path_plan(s, NULL), .params = NULL};
     struct dr_ray_counts rc = {0};
-    dr_vec3 L = dr_path_radiance(s, &po, view.origin, dr_camera_direction(&view, jx, jy), &smp, &rc);
+    dr_vec3 o, d;
+    dr_camera_ray(&view, jx, jy, &o, &d);
+    dr_vec3 L = dr_path_radiance(s, &po, o, d, &smp, &rc);
     return L.x + L.y + L.z;
 }
 

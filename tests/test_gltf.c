@@ -43,6 +43,8 @@ static void free_scene(struct dr_scene *s)
     free(s->mesh.positions);
     free(s->mesh.normals);
     free(s->mesh.uvs);
+    free(s->mesh.uvs1);
+    free(s->mesh.colors);
     free(s->mesh.indices);
     free(s->mesh.material);
     free(s->mesh.flags);
@@ -216,9 +218,21 @@ static void check_basic(const char *name)
         }
     }
 
-    /* cameras: the orthographic one is skipped */
-    CHECK(s->n_cameras == 1, "n_cameras %d", s->n_cameras);
-    if (s->n_cameras == 1) {
+    /* no vertex colours, no texture reading TEXCOORD_1: neither array exists */
+    CHECK(s->mesh.colors == NULL && s->mesh.uvs1 == NULL, "no colour / uv1 arrays without COLOR_0 / texCoord 1");
+    /* cameras: the perspective one, then the orthographic one (node order) */
+    CHECK(s->n_cameras == 2 && s->n_unplaced_cameras == 0, "n_cameras %d, unplaced %d", s->n_cameras,
+          s->n_unplaced_cameras);
+    if (s->n_cameras == 2) {
+        const struct dr_camera *o = &s->cameras[1];
+        CHECK(o->orthographic && o->gltf_index == 1, "camera 1 orthographic (%d), /cameras/%d", o->orthographic,
+              o->gltf_index);
+        CHECK_NEAR(o->ymag, 1.0, 0, "ortho ymag");
+        CHECK_NEAR(o->aspect, 1.0, 0, "ortho aspect = xmag / ymag");
+        check_vec(o->forward, 0, 0, -1, 1e-12, "ortho forward");
+        CHECK(!s->cameras[0].orthographic && s->cameras[0].gltf_index == 0, "camera 0 perspective");
+    }
+    if (s->n_cameras >= 1) {
         const struct dr_camera *c = &s->cameras[0];
         CHECK(strcmp(c->name, "main_cam") == 0, "camera name %s", c->name);
         check_vec(c->origin, 0, 1, 5, 1e-12, "camera origin");
@@ -263,9 +277,9 @@ static void check_basic(const char *name)
     CHECK_NEAR(s->env.strength, 2, 0, "environment strength");
     CHECK(s->env.map.data == NULL && s->env.uri[0] == '\0', "constant environment has no map");
 
-    /* warnings: the unsupported extension and the orthographic camera, once each */
+    /* warnings: the unsupported extension once; orthographic cameras are supported now */
     CHECK(count_substr(warnings, "KHR_materials_clearcoat") == 1, "clearcoat warned once:\n%s", warnings);
-    CHECK(count_substr(warnings, "orthographic") == 1, "orthographic camera warned once:\n%s", warnings);
+    CHECK(count_substr(warnings, "orthographic") == 0, "no orthographic camera warning:\n%s", warnings);
     CHECK(strncmp(warnings, data_path(name), strlen(data_path(name))) == 0, "warnings name the file:\n%s",
           warnings);
     fprintf(stderr, "%s", warnings);
@@ -305,13 +319,23 @@ static void test_layout(void)
     CHECK(s->n_materials == 1, "no default material appended when unused: %d", s->n_materials);
     if (s->n_materials == 1) {
         CHECK(strcmp(s->materials[0].name, "material_0") == 0, "unnamed material: %s", s->materials[0].name);
-        CHECK(s->materials[0].emissive_tex.texture == -1 && s->materials[0].emissive_tex.texcoord == 1,
-              "texCoord 1 texture ignored");
+        CHECK(s->materials[0].emissive_tex.texture == 0 && s->materials[0].emissive_tex.texcoord == 1,
+              "texCoord 1 texture used");
     }
-    CHECK(s->n_images == 1 && s->images[0].linear == NULL, "an ignored texture gets no sRGB decode");
+    /* TEXCOORD_1 is loaded because a texture reads it: zero where a primitive has none */
+    CHECK(m->uvs1 != NULL, "TEXCOORD_1 loaded");
+    if (m->uvs1 && m->n_vertices == 11) {
+        static const float want[6] = {0, 0, 1, 0, 0, 1};
+        int bad = 0;
+        for (int i = 0; i < 6; i++) bad += m->uvs1[16 + i] != want[i];
+        for (int i = 0; i < 16; i++) bad += m->uvs1[i] != 0.0f;
+        CHECK(bad == 0, "%d TEXCOORD_1 values differ", bad);
+    }
+    CHECK(m->colors == NULL, "no COLOR_0: no colour array");
+    CHECK(s->n_images == 1 && s->images[0].linear != NULL, "the emissive texture is sRGB-decoded");
     CHECK(s->n_cameras == 0 && s->n_lights == 0 && !s->env.present, "no cameras, lights, environment");
     CHECK(strstr(warnings, "EXT_made_up") && strstr(warnings, "required"), "required extension:\n%s", warnings);
-    CHECK(strstr(warnings, "texCoord"), "TEXCOORD_1 warning:\n%s", warnings);
+    CHECK(!strstr(warnings, "texCoord"), "no TEXCOORD_1 warning:\n%s", warnings);
     CHECK(strstr(warnings, "BLEND"), "alphaMode warning:\n%s", warnings);
     fprintf(stderr, "-- layout.gltf\n%s", warnings);
     free_scene(s);

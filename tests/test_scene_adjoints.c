@@ -205,6 +205,45 @@ static void test_chains(void)
     check_objective(&f, OBJ_ENV, "d_env_radiance");
     check_objective(&f, OBJ_PUNCTUAL, "d_light_radiance/spot");
     check_objective(&f, OBJ_AREA, "d_light_radiance/area");
+    /* COLOR_0 multiplies the base colour, so d/d baseColorFactor and d/d
+     * base-colour texels carry its factor; the lookups go through TEXCOORD_1
+     * and a KHR_texture_transform */
+    double g0[3] = {0, 0, 0}, *gfull = calloc((size_t)f.ps->total, sizeof(double));
+    struct dr_grad_sink k0 = dr_sink_reverse(gfull);
+    d_material_eval(s, f.ps, &f.hit, &f.d_b, &k0);
+    memcpy(g0, gfull + f.ps->mat_base_color[0], sizeof g0);
+    struct dr_mesh *mesh = &s->mesh;
+    mesh->colors = malloc(sizeof(float) * 3 * mesh->n_vertices);
+    mesh->uvs1 = malloc(sizeof(float) * 2 * mesh->n_vertices);
+    for (uint32_t i = 0; i < 3 * mesh->n_vertices; i++)
+        mesh->colors[i] = (float)((i * 7 % 11 + 2) / 16.0);
+    for (uint32_t i = 0; i < 2 * mesh->n_vertices; i++)
+        mesh->uvs1[i] = (float)((i * 5 % 9) / 8.0);
+    const double xf[6] = {0.9, 0.4, 0.1, -0.3, 1.2, 0.25};
+    s->materials[0].base_color_tex.texcoord = 1;
+    s->materials[0].base_color_tex.transformed = true;
+    memcpy(s->materials[0].base_color_tex.xf, xf, sizeof xf);
+    s->materials[0].emissive_tex.transformed = true;
+    memcpy(s->materials[0].emissive_tex.xf, xf, sizeof xf);
+    check_objective(&f, OBJ_MATERIAL, "d_material_eval COLOR_0");
+    check_objective(&f, OBJ_EMISSION, "d_emission transform");
+    /* with the texture lookup unchanged (uv set 0, no transform) the factor's
+     * gradient is the one without colours times the interpolated colour */
+    s->materials[0].base_color_tex.texcoord = 0;
+    s->materials[0].base_color_tex.transformed = false;
+    memset(gfull, 0, sizeof(double) * (size_t)f.ps->total);
+    d_material_eval(s, f.ps, &f.hit, &f.d_b, &k0);
+    dr_vec3 vc = dr_hit_color(mesh, &f.hit);
+    const double *g1 = gfull + f.ps->mat_base_color[0];
+    CHECK(fabs(g1[0] - g0[0] * vc.x) < 1e-12 && fabs(g1[1] - g0[1] * vc.y) < 1e-12 && fabs(g1[2] - g0[2] * vc.z) < 1e-12,
+          "d/d baseColorFactor with COLOR_0 (%g %g %g) = without (%g %g %g) * colour (%g %g %g)", g1[0], g1[1], g1[2],
+          g0[0], g0[1], g0[2], vc.x, vc.y, vc.z);
+    CHECK(fabs(vc.x - 1.0) > 0.05, "the test colour differs from 1 (%g)", vc.x);
+    free(gfull);
+    free(mesh->colors);
+    free(mesh->uvs1);
+    mesh->colors = NULL;
+    mesh->uvs1 = NULL;
     /* the back of a single-sided emitter emits nothing, so no derivative either */
     s->materials[0].double_sided = false;
     f.hit.front = false;

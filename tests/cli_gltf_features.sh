@@ -1,0 +1,236 @@
+#!/usr/bin/env bash
+# glTF features of real users' files (issue 13), on the Khronos samples in
+# ../shared/gltf-samples: each render is checked for the effect the feature
+# has on the image, and where it helps against a copy of the file with the
+# feature taken out (so the check is known to tell them apart).
+#   a. COLOR_0: BoxVertexColors is not grey; VertexColorTest shows no
+#      complementary-colour "X" marks (it does with COLOR_0 removed); fdcheck
+#      of baseColorFactor agrees on the vertex-coloured box
+#   b. TEXCOORD_1: MultiUVTest's emissive texture reads set 1 (differs from
+#      the same file reading set 0), no texCoord warning
+#   c. KHR_texture_transform: TextureTransformTest's top row is green, blue,
+#      cyan from left to right, not the yellow "not supported" image
+#   d. sparse accessors: SimpleSparseAccessor's peaks (height/width of the
+#      shape ~ 4/6, ~ 1/6 without the substitution)
+#   e. cameras: both of Cameras render; the orthographic one draws the tilted
+#      square with parallel edges, the perspective one as a trapezoid;
+#      --camera 2 names the count
+#   f. Draco: Box/glTF-Draco renders the same image as Box/glTF
+#   g. KTX2: AnisotropyBarnLamp-KTX2 is refused naming KHR_texture_basisu and
+#      the image (with and without --ignore-unsupported: its metallic-roughness
+#      map is KTX2); a copy whose KTX2 images are only normal/occlusion maps
+#      is refused without the option and renders with it (one warning)
+#   h. every command that loads a scene takes --ignore-unsupported
+# Run by tests/run.sh (env: DRENDER, DR_TESTDIR); also runs alone.
+set -u
+
+# shellcheck source=SCRIPTDIR/lib/cli.sh
+. "$(dirname "$0")/lib/cli.sh"
+cli_setup gltf-features
+require_drender
+samples=$DR_TESTDIR/../../shared/gltf-samples
+[ -d "$samples/Box" ] || samples=$DR_TESTDIR/../../../shared/gltf-samples
+[ -d "$samples/Box" ] || fail "the shared glTF samples were not found beside the checkout"
+R="--res 48x48 --spp 8"
+
+# pixels IMG: python3 reads "x y r g b" lines of oiiotool --dumpdata (small images)
+pixels() { oiiotool --dumpdata "$1" | sed -n 's/^ *Pixel (\([0-9]*\), \([0-9]*\)): \([^ ]*\) \([^ ]*\) \([^ ]*\).*/\1 \2 \3 \4 \5/p'; }
+# copy_model DIR NAME.gltf OUT.gltf PYTHON: links DIR's files into a new
+# directory and writes OUT.gltf, the model after PYTHON edited its JSON `d`
+copy_model() {
+    local d=$tmp/copy-$3; mkdir -p "$d"
+    for f in "$1"/*; do ln -sf "$f" "$d/"; done
+    rm -f "$d/$2"
+    python3 -c "import json, sys; d = json.load(open(sys.argv[1])); $4; json.dump(d, open(sys.argv[2], 'w'))" \
+        "$1/$2" "$d/$3" || fail "could not edit a copy of $2"
+    echo "$d/$3"
+}
+
+# ---- a. COLOR_0 ----
+run render "$samples/BoxVertexColors/glTF/BoxVertexColors.gltf" $R -o vc.exr
+expect_rc 0 "render BoxVertexColors"
+pixels vc.exr > vc.txt
+python3 - vc.txt <<'PY' || fail "BoxVertexColors is grey: COLOR_0 was not applied"
+import sys
+px = [list(map(float, l.split()))[2:] for l in open(sys.argv[1])]
+obj = [p for p in px if min(p) < 0.95]                      # not the white background
+colourful = [p for p in obj if max(p) - min(p) > 0.2]
+print("BoxVertexColors: %d object pixels, %d with max-min channel > 0.2" % (len(obj), len(colourful)))
+sys.exit(0 if obj and len(colourful) > 0.5 * len(obj) else 1)
+PY
+vct=$samples/VertexColorTest/glTF
+nocol=$(copy_model "$vct" VertexColorTest.gltf nocol.gltf \
+    '[p["attributes"].pop("COLOR_0", None) for m in d["meshes"] for p in m["primitives"]]')
+run render "$vct/VertexColorTest.gltf" --res 96x96 --spp 8 -o vct.exr
+expect_rc 0 "render VertexColorTest"
+run render "$nocol" --res 96x96 --spp 8 -o vct_nocol.exr
+expect_rc 0 "render VertexColorTest without COLOR_0"
+pixels vct.exr > vct.txt
+pixels vct_nocol.exr > vct_nocol.txt
+python3 - vct.txt vct_nocol.txt <<'PY' || fail "VertexColorTest: the complementary X marks are not gone"
+import sys
+def xmarks(f):   # cyan, magenta or yellow pixels: two channels lit, the third dark
+    n = 0
+    for l in open(f):
+        r, g, b = sorted(map(float, l.split()[2:]))
+        n += r < 0.1 and g > 0.3
+    return n
+a, b = xmarks(sys.argv[1]), xmarks(sys.argv[2])
+print("VertexColorTest: %d two-channel (X mark) pixels with COLOR_0, %d without" % (a, b))
+sys.exit(0 if b >= 40 and a * 4 <= b else 1)
+PY
+run fdcheck "$samples/BoxVertexColors/glTF/BoxVertexColors.gltf" \
+    --param /materials/0/pbrMetallicRoughness/baseColorFactor --res 16x16 --spp 4 --batches 6
+expect_rc 0 "fdcheck of baseColorFactor on the vertex-coloured box"
+expect_in out "entries agree" "fdcheck verdict"
+
+# ---- b. TEXCOORD_1 ----
+muv=$samples/MultiUVTest/glTF
+uv0=$(copy_model "$muv" MultiUVTest.gltf uv0.gltf 'd["materials"][0]["emissiveTexture"]["texCoord"] = 0')
+run render "$muv/MultiUVTest.gltf" $R -o muv1.exr
+expect_rc 0 "render MultiUVTest"
+grep -q "texCoord" "$tmp/err" && fail "MultiUVTest: a texCoord warning although TEXCOORD_1 is supported"
+notex=$(copy_model "$muv" MultiUVTest.gltf notex.gltf 'del d["materials"][0]["emissiveTexture"]')
+run render "$uv0" $R -o muv0.exr
+expect_rc 0 "render MultiUVTest reading set 0"
+run render "$notex" $R -o muvn.exr
+expect_rc 0 "render MultiUVTest without the emissive texture"
+for f in muv1 muv0 muvn; do pixels $f.exr > $f.txt; done
+# the same seed gives the same samples: only the emissive lookup differs
+python3 - muv1.txt muv0.txt muvn.txt <<'PY' || fail "MultiUVTest: the emissive texture does not follow TEXCOORD_1"
+import sys
+img = [[list(map(float, l.split()[2:])) for l in open(f)] for f in sys.argv[1:]]
+def diff(a, b): return sum(abs(x - y) for p, q in zip(a, b) for x, y in zip(p, q)) / (3 * len(a))
+d0, dn = diff(img[0], img[1]), diff(img[0], img[2])
+print("MultiUVTest: mean |set 1 - set 0| = %.4f, |set 1 - no texture| = %.4f" % (d0, dn))
+sys.exit(0 if d0 > 0.004 and dn > 0.004 else 1)
+PY
+
+# ---- c. KHR_texture_transform ----
+ttt=$samples/TextureTransformTest/glTF
+nott=$(copy_model "$ttt" TextureTransformTest.gltf nott.gltf \
+    '[m.get("pbrMetallicRoughness", {}).get("baseColorTexture", {}).pop("extensions", None) for m in d["materials"]]')
+for f in "$ttt/TextureTransformTest.gltf" "$nott"; do
+    run render "$f" --res 96x64 --spp 8 -o "tt$(basename "$f" .gltf).exr"
+    expect_rc 0 "render $(basename "$f")"
+done
+pixels ttTextureTransformTest.exr > tt.txt
+pixels ttnott.exr > tt_none.txt
+python3 - tt.txt tt_none.txt <<'PY' || fail "TextureTransformTest: the top row is not green, blue, cyan (transform not applied?)"
+import sys
+def classes(f):   # mean x and count of green, blue, cyan, yellow pixels in the top half
+    out = {k: [] for k in ("green", "blue", "cyan", "yellow")}
+    for l in open(f):
+        x, y, r, g, b = map(float, l.split())
+        if y >= 32: continue
+        if g > 0.3 and g > 2 * r and g > 2 * b: out["green"].append(x)
+        elif b > 0.3 and b > 2 * r and b > 2 * g: out["blue"].append(x)
+        elif g > 0.3 and b > 0.3 and min(g, b) > 2 * r: out["cyan"].append(x)
+        elif r > 0.3 and g > 0.3 and min(r, g) > 2 * b: out["yellow"].append(x)
+    return {k: (len(v), sum(v) / len(v) if v else -1) for k, v in out.items()}
+a, b = classes(sys.argv[1]), classes(sys.argv[2])
+print("with transform:", a)
+print("without       :", b)
+ok = all(a[k][0] >= 40 for k in ("green", "blue", "cyan")) and a["yellow"][0] * 10 < a["green"][0]
+ok = ok and a["green"][1] < a["blue"][1] < a["cyan"][1]          # U, V, UV from left to right
+ok = ok and b["yellow"][0] >= 100 and b["green"][0] < 10           # the check tells them apart
+sys.exit(0 if ok else 1)
+PY
+
+# ---- d. sparse accessors ----
+ssa=$samples/SimpleSparseAccessor/glTF
+nosparse=$(copy_model "$ssa" SimpleSparseAccessor.gltf nosparse.gltf '[a.pop("sparse", None) for a in d["accessors"]]')
+run render "$ssa/SimpleSparseAccessor.gltf" $R -o sparse.exr
+expect_rc 0 "render SimpleSparseAccessor"
+run render "$nosparse" $R -o nosparse.exr
+expect_rc 0 "render SimpleSparseAccessor without the substitution"
+pixels sparse.exr > sparse.txt
+pixels nosparse.exr > nosparse.txt
+python3 - sparse.txt nosparse.txt <<'PY' || fail "SimpleSparseAccessor: the sparse substitution did not raise the peaks"
+import sys
+def aspect(f):   # height / width of the pixels the shape covers
+    pts = [(int(l.split()[0]), int(l.split()[1])) for l in open(f) if min(map(float, l.split()[2:])) < 0.95]
+    xs, ys = [p[0] for p in pts], [p[1] for p in pts]
+    return (max(ys) - min(ys) + 1) / (max(xs) - min(xs) + 1)
+a, b = aspect(sys.argv[1]), aspect(sys.argv[2])
+print("SimpleSparseAccessor: height/width %.3f with sparse (model 4/6), %.3f without (1/6)" % (a, b))
+sys.exit(0 if 0.5 < a < 0.85 and b < 0.3 else 1)
+PY
+
+# ---- e. cameras ----
+cams=$samples/Cameras/glTF/Cameras.gltf
+for c in 0 1; do
+    run render "$cams" --camera $c --res 96x96 --spp 4 -o cam$c.exr
+    expect_rc 0 "render Cameras --camera $c"
+    pixels cam$c.exr > cam$c.txt
+done
+python3 - cam0.txt cam1.txt <<'PY' || fail "Cameras: the orthographic camera is not a parallel projection"
+import sys
+def rows(f):   # covered span width per row, top to bottom
+    w = {}
+    for l in open(f):
+        x, y, r, g, b = l.split()
+        if min(float(r), float(g), float(b)) < 0.95: w[int(y)] = w.get(int(y), 0) + 1
+    ys = sorted(w)
+    return [w[y] for y in ys[1:-1]]   # the edge rows are partly covered
+p, o = rows(sys.argv[1]), rows(sys.argv[2])
+print("perspective: top %d px, bottom %d px wide, %d rows; orthographic: top %d, bottom %d, %d rows"
+      % (p[0], p[-1], len(p), o[0], o[-1], len(o)))
+# orthographic, ymag 1 over 96 px: the unit square is 48 px wide, 48 cos(45) = 34 rows high
+ok = abs(o[0] - o[-1]) <= 2 and abs(o[0] - 48) <= 2 and abs(len(o) + 2 - 34) <= 3
+ok = ok and p[-1] - p[0] >= 4     # perspective: the far (top) edge is shorter
+sys.exit(0 if ok else 1)
+PY
+run render "$cams" --camera 2 $R -o nope.exr
+check_failed 2 "--camera 2|has 2 cameras|Cameras.gltf"
+
+# ---- f. Draco ----
+run render "$samples/Box/glTF/Box.gltf" $R -o box.exr
+expect_rc 0 "render Box"
+run render "$samples/Box/glTF-Draco/Box.gltf" $R -o box_draco.exr
+expect_rc 0 "render Box/glTF-Draco"
+grep -q "KHR_draco_mesh_compression" "$tmp/err" && fail "a warning about the Draco extension"
+pixels box.exr > box.txt
+pixels box_draco.exr > box_draco.txt
+python3 - box.txt box_draco.txt <<'PY' || fail "Box/glTF-Draco renders differently from Box/glTF"
+import sys
+a = [list(map(float, l.split()[2:])) for l in open(sys.argv[1])]
+b = [list(map(float, l.split()[2:])) for l in open(sys.argv[2])]
+m = max(abs(x - y) for p, q in zip(a, b) for x, y in zip(p, q))
+lit = sum(1 for p in a if min(p) < 0.95)
+print("Box vs Box Draco: max |difference| %g over %d pixels (%d show the box)" % (m, len(a), lit))
+sys.exit(0 if len(a) == len(b) == 48 * 48 and lit > 100 and m <= 1e-4 else 1)
+PY
+
+# ---- g. KTX2 ----
+lamp=$samples/AnisotropyBarnLamp-KTX2/glTF
+for opt in "" --ignore-unsupported; do
+    run render "$lamp/AnisotropyBarnLamp.gltf" $R -o lamp.exr $opt
+    check_failed 3 "AnisotropyBarnLamp.gltf|KHR_texture_basisu|/images/1|/materials/0/pbrMetallicRoughness/metallicRoughnessTexture"
+    [ ! -e lamp.exr ] || fail "an image was written for the refused KTX2 model"
+done
+# only normal / occlusion / unsupported-extension maps left in KTX2 (and the
+# glass's dielectric volume, which drender refuses, taken out)
+lamp2=$(copy_model "$lamp" AnisotropyBarnLamp.gltf lamp2.gltf \
+    'del d["materials"][0]["pbrMetallicRoughness"]["metallicRoughnessTexture"]; del d["materials"][2]["extensions"]["KHR_materials_volume"]')
+run render "$lamp2" $R -o lamp2.exr --env 1
+check_failed 3 "lamp2.gltf|KHR_texture_basisu|/images/0|--ignore-unsupported"
+run render "$lamp2" $R -o lamp2.exr --env 1 --ignore-unsupported
+expect_rc 0 "render of the KTX2 normal-map model with --ignore-unsupported"
+[ "$(grep -c "KTX2" "$tmp/err")" -eq 1 ] || fail "expected exactly one KTX2 warning"
+expect_in err "/images/0, /images/1, /images/3" "the warning names the skipped images"
+set -- $(oiiotool --stats lamp2.exr | awk '/Stats Avg/ { print $3, $4, $5; exit }')
+awk -v r="$1" 'BEGIN { exit !(r > 0.01) }' || fail "the lamp rendered black ($*)"
+
+# ---- h. every command that loads a scene takes the option ----
+for c in render params grad fdcheck optimize compare; do
+    "$DRENDER" help $c 2>&1 | grep -q -- "--ignore-unsupported" || fail "drender help $c does not list --ignore-unsupported"
+done
+run params "$lamp2" --ignore-unsupported
+expect_rc 0 "params --ignore-unsupported"
+grep -q "^/images/0 " "$tmp/out" && fail "params lists the skipped KTX2 image /images/0"
+expect_in out "/images/2" "params lists the JPEG base colour"
+run fdcheck "$lamp2" --ignore-unsupported --env 1 --param /extensions/DR_environment/strength --res 8x8 --spp 2 --batches 4
+expect_rc 0 "fdcheck --ignore-unsupported"
+
+echo "cli_gltf_features: all passed"

@@ -1,0 +1,540 @@
+/* glTF features of real users' files (issue 13) in the loader and the
+ * lookups built on it: COLOR_0 (float, normalized byte and short; absent ->
+ * no array), TEXCOORD_1 (loaded only when a texture reads it),
+ * KHR_texture_transform, sparse accessors (and every way their indices and
+ * byte ranges can be wrong), orthographic cameras and their rays, KTX2
+ * images (refused, or skipped under ignore_unsupported), and Draco (the
+ * shared Box sample decodes to the plain Box's triangles).
+ *
+ * Scenes are written into a temporary directory as .gltf with base64
+ * buffers; the expected numbers follow from the bytes written here. */
+#include <math.h>
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "camera.h"
+#include "error.h"
+#include "geometry.h"
+#include "scene.h"
+#include "test.h"
+
+static char dir[256];
+static char warnings[16384];
+
+static void record_warning(const char *msg)
+{
+    size_t n = strlen(warnings);
+    snprintf(warnings + n, sizeof warnings - n, "%s\n", msg);
+}
+
+static const char *tmp_path(const char *name)
+{
+    static char buf[2][512];
+    static int k;
+    k ^= 1;
+    snprintf(buf[k], sizeof buf[k], "%s/%s", dir, name);
+    return buf[k];
+}
+
+static void write_file(const char *name, const void *data, size_t n)
+{
+    FILE *f = fopen(tmp_path(name), "wb");
+    CHECK(f != NULL, "cannot write %s", name);
+    if (!f) return;
+    fwrite(data, 1, n, f);
+    fclose(f);
+}
+
+/* name's contents, or NULL (size in *n) */
+static unsigned char *read_file(const char *path, size_t *n)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f) return NULL;
+    fseek(f, 0, SEEK_END);
+    long len = ftell(f);
+    fseek(f, 0, SEEK_SET);
+    unsigned char *b = malloc((size_t)len + 1);
+    *n = fread(b, 1, (size_t)len, f);
+    fclose(f);
+    return b;
+}
+
+/* "data:application/octet-stream;base64,..." of bytes (static buffer) */
+static const char *data_uri(const void *bytes, size_t n)
+{
+    static char out[8192];
+    static const char tbl[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    const unsigned char *b = bytes;
+    size_t o = (size_t)snprintf(out, sizeof out, "data:application/octet-stream;base64,");
+    for (size_t i = 0; i < n; i += 3) {
+        uint32_t v = (uint32_t)b[i] << 16 | (i + 1 < n ? (uint32_t)b[i + 1] << 8 : 0) | (i + 2 < n ? b[i + 2] : 0);
+        out[o++] = tbl[v >> 18 & 63];
+        out[o++] = tbl[v >> 12 & 63];
+        out[o++] = i + 1 < n ? tbl[v >> 6 & 63] : '=';
+        out[o++] = i + 2 < n ? tbl[v & 63] : '=';
+    }
+    out[o] = '\0';
+    return out;
+}
+
+/* Writes name with the printf-formatted JSON, loads it (opts may be NULL):
+ * the scene (release with dr_scene_destroy) and the return code. */
+static struct dr_scene *load_json(const char *name, const struct dr_load_opts *opts, int *rc, const char *fmt, ...)
+{
+    static char json[65536];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(json, sizeof json, fmt, ap);
+    va_end(ap);
+    write_file(name, json, strlen(json));
+    warnings[0] = '\0';
+    struct dr_scene *s = calloc(1, sizeof *s);
+    s->path = strdup(tmp_path(name));
+    *rc = dr_gltf_load_opts(tmp_path(name), opts, s);
+    return s;
+}
+
+/* The load failed with an error naming the file and every needle. */
+static void check_error(int rc, const char *what, const char *file, const char *n1, const char *n2)
+{
+    const char *e = dr_last_error();
+    CHECK(rc == DR_ERR_FORMAT, "%s: rc %d (%s)", what, rc, e);
+    CHECK(strstr(e, file) != NULL, "%s: the message names the file: %s", what, e);
+    CHECK(strstr(e, n1) != NULL, "%s: the message names '%s': %s", what, n1, e);
+    CHECK(!n2 || strstr(e, n2) != NULL, "%s: the message names '%s': %s", what, n2 ? n2 : "", e);
+    printf("  %-28s -> %s\n", what, e);
+}
+
+static void put_f32(unsigned char *b, size_t *o, int n, ...)
+{
+    va_list ap;
+    va_start(ap, n);
+    for (int i = 0; i < n; i++) {
+        float f = (float)va_arg(ap, double);
+        memcpy(b + *o, &f, 4);
+        *o += 4;
+    }
+    va_end(ap);
+}
+
+/* ---- COLOR_0 ---- */
+
+static void test_colors(void)
+{
+    /* 0..35: 3 positions; 36..47: rgba ubyte (3 x 4); 48..65: rgb ushort (3 x 6) */
+    unsigned char b[72] = {0};
+    size_t o = 0;
+    put_f32(b, &o, 9, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0);
+    const unsigned char rgba[12] = {255, 0, 0, 255, 0, 128, 0, 255, 0, 0, 255, 0};
+    memcpy(b + 36, rgba, 12);
+    const uint16_t rgb16[9] = {65535, 0, 32768, 0, 65535, 0, 13107, 13107, 13107};
+    memcpy(b + 48, rgb16, 18);
+    int rc;
+    struct dr_scene *s = load_json("colors.gltf", NULL, &rc,
+        "{\"asset\":{\"version\":\"2.0\"},\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}],"
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0}},"
+        "{\"attributes\":{\"POSITION\":0,\"COLOR_0\":1}},{\"attributes\":{\"POSITION\":0,\"COLOR_0\":2}}]}],"
+        "\"buffers\":[{\"byteLength\":66,\"uri\":\"%s\"}],"
+        "\"bufferViews\":[{\"buffer\":0,\"byteLength\":36},{\"buffer\":0,\"byteOffset\":36,\"byteLength\":12},"
+        "{\"buffer\":0,\"byteOffset\":48,\"byteLength\":18}],"
+        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\"},"
+        "{\"bufferView\":1,\"componentType\":5121,\"normalized\":true,\"count\":3,\"type\":\"VEC4\"},"
+        "{\"bufferView\":2,\"componentType\":5123,\"normalized\":true,\"count\":3,\"type\":\"VEC3\"}]}",
+        data_uri(b, 66));
+    CHECK(rc == 0, "colors.gltf: %s", dr_last_error());
+    const struct dr_mesh *m = &s->mesh;
+    CHECK(m->colors != NULL && m->n_vertices == 9, "colours loaded (%p), %u vertices", (void *)m->colors,
+          m->n_vertices);
+    if (rc == 0 && m->colors && m->n_vertices == 9) {
+        /* primitive 0 has none: white; 1: ubyte/255 (alpha dropped); 2: ushort/65535 */
+        const double want[27] = {1, 1, 1, 1, 1, 1, 1, 1, 1,
+                                 1, 0, 0, 0, 128 / 255.0, 0, 0, 0, 1,
+                                 1, 0, 32768 / 65535.0, 0, 1, 0, 0.2, 0.2, 0.2};
+        double worst = 0;
+        for (int i = 0; i < 27; i++) worst = fmax(worst, fabs(m->colors[i] - want[i]));
+        CHECK(worst < 1e-6, "COLOR_0 values differ by %g", worst);
+        /* dr_hit_color interpolates them at the barycentrics */
+        struct dr_hit h = {0};
+        h.tri = 1;
+        h.b1 = 0.25;
+        h.b2 = 0.5;
+        dr_vec3 c = dr_hit_color(m, &h);
+        CHECK(fabs(c.x - 0.25) < 1e-6 && fabs(c.y - 0.25 * 128 / 255.0) < 1e-6 && fabs(c.z - 0.5) < 1e-6,
+              "interpolated colour (%g, %g, %g)", c.x, c.y, c.z);
+    }
+    dr_scene_destroy(s);
+
+    /* integer colours must be normalized */
+    s = load_json("colors_raw.gltf", NULL, &rc,
+        "{\"asset\":{\"version\":\"2.0\"},\"nodes\":[{\"mesh\":0}],"
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0,\"COLOR_0\":1}}]}],"
+        "\"buffers\":[{\"byteLength\":66,\"uri\":\"%s\"}],"
+        "\"bufferViews\":[{\"buffer\":0,\"byteLength\":36},{\"buffer\":0,\"byteOffset\":36,\"byteLength\":12}],"
+        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\"},"
+        "{\"bufferView\":1,\"componentType\":5121,\"count\":3,\"type\":\"VEC4\"}]}",
+        data_uri(b, 66));
+    check_error(rc, "COLOR_0 not normalized", "colors_raw.gltf", "/accessors/1", "COLOR_0");
+    dr_scene_destroy(s);
+}
+
+/* ---- sparse accessors ---- */
+
+/* A triangle mesh whose POSITION is accessor 0 = "accessor", with a buffer of
+ * 4 base positions (0..47), sparse indices u16 {1, 3} (48..51) and values
+ * (52..75); extra_views appended to the three views. */
+static struct dr_scene *sparse_scene(const char *name, int *rc, const char *accessor)
+{
+    unsigned char b[76] = {0};
+    size_t o = 0;
+    put_f32(b, &o, 12, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 0.0);
+    const uint16_t ix[2] = {1, 3};
+    memcpy(b + 48, ix, 4);
+    o = 52;
+    put_f32(b, &o, 6, 5.0, 0.0, 0.0, 5.0, 6.0, 7.0);
+    return load_json(name, NULL, rc,
+        "{\"asset\":{\"version\":\"2.0\"},\"nodes\":[{\"mesh\":0}],"
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0},\"mode\":5}]}],"
+        "\"buffers\":[{\"byteLength\":76,\"uri\":\"%s\"}],"
+        "\"bufferViews\":[{\"buffer\":0,\"byteLength\":48},{\"buffer\":0,\"byteOffset\":48,\"byteLength\":4},"
+        "{\"buffer\":0,\"byteOffset\":52,\"byteLength\":24}],"
+        "\"accessors\":[%s]}",
+        data_uri(b, 76), accessor);
+}
+
+#define SPARSE(count, ixview, ixoff, ixtype, valview, valoff)                                               \
+    "{\"bufferView\":0,\"componentType\":5126,\"count\":4,\"type\":\"VEC3\",\"sparse\":{\"count\":" #count \
+    ",\"indices\":{\"bufferView\":" #ixview ",\"byteOffset\":" #ixoff ",\"componentType\":" #ixtype "},"   \
+    "\"values\":{\"bufferView\":" #valview ",\"byteOffset\":" #valoff "}}}"
+
+static void test_sparse(void)
+{
+    int rc;
+    struct dr_scene *s = sparse_scene("sparse.gltf", &rc, SPARSE(2, 1, 0, 5123, 2, 0));
+    CHECK(rc == 0, "sparse.gltf: %s", dr_last_error());
+    if (rc == 0 && s->mesh.n_vertices == 4) {
+        const float want[12] = {0, 0, 0, 5, 0, 0, 0, 1, 0, 5, 6, 7};   /* elements 1 and 3 replaced */
+        int bad = 0;
+        for (int i = 0; i < 12; i++) bad += s->mesh.positions[i] != want[i];
+        CHECK(bad == 0, "%d sparse-substituted coordinates differ", bad);
+    } else {
+        CHECK(0, "sparse.gltf has %u vertices", s->mesh.n_vertices);
+    }
+    dr_scene_destroy(s);
+
+    /* no bufferView: zeros, then the substitution */
+    s = sparse_scene("sparse_zero.gltf", &rc,
+                     "{\"componentType\":5126,\"count\":4,\"type\":\"VEC3\",\"sparse\":{\"count\":2,"
+                     "\"indices\":{\"bufferView\":1,\"componentType\":5123},\"values\":{\"bufferView\":2}}}");
+    CHECK(rc == 0, "sparse_zero.gltf: %s", dr_last_error());
+    if (rc == 0 && s->mesh.n_vertices == 4) {
+        const float want[12] = {0, 0, 0, 5, 0, 0, 0, 0, 0, 5, 6, 7};
+        int bad = 0;
+        for (int i = 0; i < 12; i++) bad += s->mesh.positions[i] != want[i];
+        CHECK(bad == 0, "%d coordinates of a sparse accessor without bufferView differ", bad);
+    }
+    dr_scene_destroy(s);
+
+    /* every way the substitution can point outside what the file holds */
+    struct { const char *name, *acc, *n1, *n2; } bad[] = {
+        {"sp_range.gltf", SPARSE(2, 2, 0, 5123, 2, 0), "/accessors/0/sparse/indices", "out of range"},   /* 5.0f bits */
+        {"sp_count.gltf", SPARSE(5, 1, 0, 5123, 2, 0), "/accessors/0/sparse/count", "5"},
+        {"sp_zero.gltf", SPARSE(0, 1, 0, 5123, 2, 0), "/accessors/0/sparse/count", "0"},
+        {"sp_ixview.gltf", SPARSE(2, 9, 0, 5123, 2, 0), "/accessors/0/sparse/indices/bufferView", "9"},
+        {"sp_ixlen.gltf", SPARSE(2, 1, 2, 5123, 2, 0), "/accessors/0/sparse/indices", "exceeds bufferView 1"},
+        {"sp_ixtype.gltf", SPARSE(2, 1, 0, 5126, 2, 0), "/accessors/0/sparse/indices/componentType", "5126"},
+        {"sp_neg.gltf", SPARSE(2, 1, -4, 5123, 2, 0), "/accessors/0/sparse/indices/byteOffset", "-4"},
+        {"sp_vallen.gltf", SPARSE(2, 1, 0, 5123, 2, 4), "/accessors/0/sparse/values", "exceeds bufferView 2"},
+        {"sp_valview.gltf", SPARSE(2, 1, 0, 5123, -1, 0), "/accessors/0/sparse/values/bufferView", "-1"},
+        {"sp_order.gltf", SPARSE(2, 1, 0, 5121, 2, 0), "/accessors/0/sparse/indices", "strictly"},   /* u8 1, 0 */
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        s = sparse_scene(bad[i].name, &rc, bad[i].acc);
+        check_error(rc, bad[i].name, bad[i].name, bad[i].n1, bad[i].n2);
+        dr_scene_destroy(s);
+    }
+}
+
+/* ---- TEXCOORD_1 and KHR_texture_transform ---- */
+
+static void test_texcoords(void)
+{
+    size_t n = 0;
+    const char *td = getenv("DR_TESTDIR");
+    char src[512];
+    snprintf(src, sizeof src, "%s/data/gltf/checker.png", td && *td ? td : "tests");
+    unsigned char *png = read_file(src, &n);
+    CHECK(png != NULL, "cannot read %s", src);
+    if (!png) return;
+    write_file("checker.png", png, n);
+    free(png);
+    /* positions (0..35), TEXCOORD_0 (36..59), TEXCOORD_1 (60..83) */
+    unsigned char b[84];
+    size_t o = 0;
+    put_f32(b, &o, 9, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0);
+    put_f32(b, &o, 6, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0);
+    put_f32(b, &o, 6, 0.25, 0.5, 0.75, 0.5, 0.25, 1.0);
+    const char *fmt =
+        "{\"asset\":{\"version\":\"2.0\"},\"extensionsUsed\":[\"KHR_texture_transform\"],\"nodes\":[{\"mesh\":0}],"
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0,\"TEXCOORD_0\":1,\"TEXCOORD_1\":2},"
+        "\"material\":0}]}],"
+        "\"materials\":[{\"pbrMetallicRoughness\":{\"baseColorTexture\":{\"index\":0,\"extensions\":"
+        "{\"KHR_texture_transform\":{\"offset\":[0.5,0.25],\"rotation\":1.5707963267948966,\"scale\":[2,3],"
+        "\"texCoord\":1}}},\"metallicRoughnessTexture\":{\"index\":0%s}},"
+        "\"emissiveTexture\":{\"index\":0,\"texCoord\":2}}],"
+        "\"textures\":[{\"source\":0}],\"images\":[{\"uri\":\"checker.png\"}],"
+        "\"buffers\":[{\"byteLength\":84,\"uri\":\"%s\"}],"
+        "\"bufferViews\":[{\"buffer\":0,\"byteLength\":36},{\"buffer\":0,\"byteOffset\":36,\"byteLength\":48}],"
+        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\"},"
+        "{\"bufferView\":1,\"componentType\":5126,\"count\":3,\"type\":\"VEC2\"},"
+        "{\"bufferView\":1,\"byteOffset\":24,\"componentType\":5126,\"count\":3,\"type\":\"VEC2\"}]}";
+    int rc;
+    struct dr_scene *s = load_json("uv.gltf", NULL, &rc, fmt, "", data_uri(b, 84));
+    CHECK(rc == 0, "uv.gltf: %s", dr_last_error());
+    if (rc == 0) {
+        const struct dr_texref *t = &s->materials[0].base_color_tex;
+        /* T(0.5, 0.25) R(90 deg) S(2, 3): [c sx, s sy, ox; -s sx, c sy, oy] */
+        const double want[6] = {0, 3, 0.5, -2, 0, 0.25};
+        double worst = 0;
+        for (int i = 0; i < 6; i++) worst = fmax(worst, fabs(t->xf[i] - want[i]));
+        CHECK(t->texture == 0 && t->texcoord == 1 && t->transformed && worst < 1e-12,
+              "base colour texref: texture %d, texCoord %d (override), transformed %d, matrix off by %g", t->texture,
+              t->texcoord, t->transformed, worst);
+        CHECK(!s->materials[0].metallic_roughness_tex.transformed, "no transform on metallicRoughness");
+        CHECK(s->materials[0].emissive_tex.texture == -1, "TEXCOORD_2 texture ignored");
+        CHECK(strstr(warnings, "TEXCOORD_2") && !strstr(warnings, "KHR_texture_transform"),
+              "a TEXCOORD_2 warning and none about the transform:\n%s", warnings);
+        CHECK(s->mesh.uvs1 != NULL, "TEXCOORD_1 loaded: a texture reads it");
+        if (s->mesh.uvs1) {
+            /* at barycentrics (0.5, 0.25): uv1 = 0.25 (0.25, 0.5) + 0.5 (0.75, 0.5) + 0.25 (0.25, 1) */
+            struct dr_hit h = {0};
+            h.tri = 0;
+            h.b1 = 0.5;
+            h.b2 = 0.25;
+            h.uv[0] = 0.5;   /* TEXCOORD_0 there, which the lookup must not use */
+            h.uv[1] = 0.25;
+            double uv[2];
+            dr_texref_uv(&s->mesh, t, &h, uv);
+            double u1 = 0.5, v1 = 0.625;
+            CHECK(fabs(uv[0] - (3 * v1 + 0.5)) < 1e-7 && fabs(uv[1] - (-2 * u1 + 0.25)) < 1e-7,
+                  "looked-up uv (%g, %g), want (%g, %g)", uv[0], uv[1], 3 * v1 + 0.5, -2 * u1 + 0.25);
+        }
+    }
+    dr_scene_destroy(s);
+    /* without a texture on set 1 the second set is not loaded */
+    s = load_json("uv0.gltf", NULL, &rc,
+                  "{\"asset\":{\"version\":\"2.0\"},\"nodes\":[{\"mesh\":0}],"
+                  "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0,\"TEXCOORD_0\":1,\"TEXCOORD_1\":2}}]}],"
+                  "\"buffers\":[{\"byteLength\":84,\"uri\":\"%s\"}],"
+                  "\"bufferViews\":[{\"buffer\":0,\"byteLength\":36},{\"buffer\":0,\"byteOffset\":36,\"byteLength\":48}],"
+                  "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\"},"
+                  "{\"bufferView\":1,\"componentType\":5126,\"count\":3,\"type\":\"VEC2\"},"
+                  "{\"bufferView\":1,\"byteOffset\":24,\"componentType\":5126,\"count\":3,\"type\":\"VEC2\"}]}",
+                  data_uri(b, 84));
+    CHECK(rc == 0 && s->mesh.uvs1 == NULL && s->mesh.colors == NULL, "uv0.gltf: rc %d, uvs1 %p, colors %p", rc,
+          (void *)s->mesh.uvs1, (void *)s->mesh.colors);
+    dr_scene_destroy(s);
+    /* a malformed transform names its JSON path */
+    s = load_json("uv_bad.gltf", NULL, &rc, fmt,
+                  ",\"extensions\":{\"KHR_texture_transform\":{\"scale\":[1]}}", data_uri(b, 84));
+    check_error(rc, "bad KHR_texture_transform", "uv_bad.gltf",
+                "/materials/0/pbrMetallicRoughness/metallicRoughnessTexture/extensions/KHR_texture_transform/scale",
+                NULL);
+    dr_scene_destroy(s);
+}
+
+/* ---- orthographic cameras ---- */
+
+static void test_ortho(void)
+{
+    unsigned char b[36];
+    size_t o = 0;
+    put_f32(b, &o, 9, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0);
+    const char *fmt =
+        "{\"asset\":{\"version\":\"2.0\"},\"nodes\":[{\"mesh\":0},{\"camera\":1,\"translation\":[0,0,5]},"
+        "{\"camera\":0,\"translation\":[0,0,9]}],\"scenes\":[{\"nodes\":[0,1,2]}],"
+        "\"cameras\":[{\"type\":\"perspective\",\"perspective\":{\"yfov\":0.5,\"znear\":0.1}},"
+        "{\"type\":\"orthographic\",\"orthographic\":{\"xmag\":%s,\"ymag\":1,\"znear\":0.1,\"zfar\":10}},"
+        "{\"type\":\"perspective\",\"perspective\":{\"yfov\":0.7,\"znear\":0.1}}],"
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0}}]}],"
+        "\"buffers\":[{\"byteLength\":36,\"uri\":\"%s\"}],\"bufferViews\":[{\"buffer\":0,\"byteLength\":36}],"
+        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\"}]}";
+    int rc;
+    struct dr_scene *s = load_json("ortho.gltf", NULL, &rc, fmt, "2", data_uri(b, 36));
+    CHECK(rc == 0, "ortho.gltf: %s", dr_last_error());
+    CHECK(s->n_cameras == 2 && s->n_unplaced_cameras == 1, "2 cameras placed (%d), 1 unplaced (%d)", s->n_cameras,
+          s->n_unplaced_cameras);
+    if (rc == 0 && s->n_cameras == 2) {
+        const struct dr_camera *c = &s->cameras[0];
+        CHECK(c->orthographic && c->gltf_index == 1 && c->ymag == 1.0 && c->aspect == 2.0,
+              "camera 0 (node order) is /cameras/1, orthographic %d, ymag %g, aspect %g", c->orthographic, c->ymag,
+              c->aspect);
+        /* a 200 x 100 film: 4 x 2 units, rays parallel along -z from z = 5 */
+        struct dr_camera_view v = dr_camera_view(c, 200, 100);
+        dr_vec3 o0, d0, o1, d1;
+        dr_camera_ray(&v, 0, 0, &o0, &d0);
+        dr_camera_ray(&v, 200, 100, &o1, &d1);
+        CHECK(fabs(o0.x + 2) < 1e-12 && fabs(o0.y - 1) < 1e-12 && fabs(o0.z - 5) < 1e-12, "top-left origin (%g %g %g)",
+              o0.x, o0.y, o0.z);
+        CHECK(fabs(o1.x - 2) < 1e-12 && fabs(o1.y + 1) < 1e-12 && fabs(o1.z - 5) < 1e-12,
+              "bottom-right origin (%g %g %g)", o1.x, o1.y, o1.z);
+        CHECK(d0.x == 0 && d0.y == 0 && d0.z == -1 && d1.x == 0 && d1.y == 0 && d1.z == -1, "parallel rays along -z");
+        /* the perspective camera still has one origin and diverging rays */
+        v = dr_camera_view(&s->cameras[1], 200, 100);
+        dr_camera_ray(&v, 0, 0, &o0, &d0);
+        dr_camera_ray(&v, 200, 100, &o1, &d1);
+        CHECK(o0.z == 9 && o1.z == 9 && o0.x == o1.x && d0.x < 0 && d1.x > 0, "perspective rays");
+    }
+    dr_scene_destroy(s);
+    s = load_json("ortho_bad.gltf", NULL, &rc, fmt, "0", data_uri(b, 36));
+    check_error(rc, "xmag 0", "ortho_bad.gltf", "/cameras/1/orthographic/xmag", NULL);
+    dr_scene_destroy(s);
+}
+
+/* ---- KTX2 ---- */
+
+/* exactly one warning line about KTX2, naming /images/0 */
+static int count_ktx2_warnings(void)
+{
+    int n = 0;
+    for (const char *p = strstr(warnings, "KTX2"); p; p = strstr(p + 1, "KTX2")) n++;
+    return n == 1 && strstr(warnings, "/images/0") != NULL;
+}
+
+static void test_ktx2(void)
+{
+    static const unsigned char ktx2[32] = {0xAB, 'K', 'T', 'X', ' ', '2', '0', 0xBB, '\r', '\n', 0x1A, '\n'};
+    write_file("tex.ktx2", ktx2, sizeof ktx2);
+    unsigned char b[36];
+    size_t o = 0;
+    put_f32(b, &o, 9, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0);
+    const char *fmt =
+        "{\"asset\":{\"version\":\"2.0\"},\"extensionsUsed\":[\"KHR_texture_basisu\"],\"nodes\":[{\"mesh\":0}],"
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0},\"material\":0}]}],"
+        "\"materials\":[{%s}],"
+        "\"textures\":[{\"extensions\":{\"KHR_texture_basisu\":{\"source\":0}}}],"
+        "\"images\":[{\"uri\":\"tex.ktx2\",\"mimeType\":\"image/ktx2\"}],"
+        "\"buffers\":[{\"byteLength\":36,\"uri\":\"%s\"}],\"bufferViews\":[{\"buffer\":0,\"byteLength\":36}],"
+        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\"}]}";
+    const char *normal = "\"normalTexture\":{\"index\":0},\"occlusionTexture\":{\"index\":0}";
+    int rc;
+    struct dr_scene *s = load_json("ktx_normal.gltf", NULL, &rc, fmt, normal, data_uri(b, 36));
+    check_error(rc, "KTX2 normal map", "ktx_normal.gltf", "KHR_texture_basisu", "--ignore-unsupported");
+    CHECK(strstr(dr_last_error(), "/images/0") != NULL, "names the image: %s", dr_last_error());
+    dr_scene_destroy(s);
+    struct dr_load_opts skip = {.ignore_unsupported = true};
+    s = load_json("ktx_normal.gltf", &skip, &rc, fmt, normal, data_uri(b, 36));
+    CHECK(rc == 0, "KTX2 normal map under ignore_unsupported: %s", dr_last_error());
+    CHECK(count_ktx2_warnings(), "one KTX2 warning naming /images/0:\n%s", warnings);
+    CHECK(s->n_images == 1 && s->images[0].data == NULL, "the KTX2 image stays undecoded");
+    dr_scene_destroy(s);
+    /* a base colour changes the image: refused even under ignore_unsupported */
+    s = load_json("ktx_color.gltf", &skip, &rc, fmt, "\"pbrMetallicRoughness\":{\"baseColorTexture\":{\"index\":0}}",
+                  data_uri(b, 36));
+    check_error(rc, "KTX2 base colour", "ktx_color.gltf", "/materials/0/pbrMetallicRoughness/baseColorTexture",
+                "KHR_texture_basisu");
+    dr_scene_destroy(s);
+}
+
+/* ---- Draco: the shared sample against the plain Box ---- */
+
+static int cmp_tri(const void *a, const void *b)
+{
+    const float *x = a, *y = b;
+    for (int i = 0; i < 9; i++)
+        if (x[i] != y[i]) return x[i] < y[i] ? -1 : 1;
+    return 0;
+}
+
+/* The triangles as sorted 9-float records, each starting at its smallest
+ * vertex (so an index permutation that keeps the winding compares equal),
+ * positions rounded to 1e-4 (Draco quantises them). */
+static float *triangles(const struct dr_scene *s)
+{
+    uint32_t n = s->mesh.n_triangles;
+    float *t = malloc(sizeof(float) * 9 * (n ? n : 1));
+    for (uint32_t i = 0; i < n; i++) {
+        float v[3][3];
+        for (int k = 0; k < 3; k++)
+            for (int c = 0; c < 3; c++)
+                v[k][c] = roundf(s->mesh.positions[3 * s->mesh.indices[3 * i + (uint32_t)k] + (uint32_t)c] * 1e4f) / 1e4f;
+        int first = 0;
+        for (int k = 1; k < 3; k++)
+            if (memcmp(v[k], v[first], sizeof v[0]) != 0 &&
+                (v[k][0] < v[first][0] || (v[k][0] == v[first][0] && (v[k][1] < v[first][1] ||
+                                           (v[k][1] == v[first][1] && v[k][2] < v[first][2])))))
+                first = k;
+        for (int k = 0; k < 3; k++) memcpy(t + 9 * i + 3 * k, v[(first + k) % 3], sizeof v[0]);
+    }
+    qsort(t, n, sizeof(float) * 9, cmp_tri);
+    return t;
+}
+
+static void test_draco(void)
+{
+    const char *td = getenv("DR_TESTDIR");
+    char plain[512], draco[512];
+    snprintf(plain, sizeof plain, "%s/../../shared/gltf-samples/Box/glTF/Box.gltf", td && *td ? td : "tests");
+    if (access(plain, R_OK) != 0)
+        snprintf(plain, sizeof plain, "%s/../../../shared/gltf-samples/Box/glTF/Box.gltf", td && *td ? td : "tests");
+    CHECK(access(plain, R_OK) == 0, "the shared sample Box.gltf was not found beside the checkout (%s)", plain);
+    if (access(plain, R_OK) != 0) return;
+    snprintf(draco, sizeof draco, "%.*s/glTF-Draco/Box.gltf", (int)(strstr(plain, "/glTF/Box.gltf") - plain), plain);
+    struct dr_scene *a = calloc(1, sizeof *a), *d = calloc(1, sizeof *d);
+    int ra = dr_gltf_load(plain, a), rd = dr_gltf_load(draco, d);
+    CHECK(ra == 0 && rd == 0, "Box %d, Box Draco %d: %s", ra, rd, dr_last_error());
+    CHECK(!strstr(warnings, "KHR_draco_mesh_compression"), "no warning about the Draco extension:\n%s", warnings);
+    if (ra == 0 && rd == 0) {
+        CHECK(a->mesh.n_triangles == 12 && d->mesh.n_triangles == 12, "12 triangles each (%u, %u)",
+              a->mesh.n_triangles, d->mesh.n_triangles);
+        CHECK(d->mesh.flags[0] & DR_TRI_HAS_NORMALS, "the decoded NORMAL attribute is used");
+        if (a->mesh.n_triangles == d->mesh.n_triangles) {
+            float *ta = triangles(a), *tb = triangles(d);
+            int same = memcmp(ta, tb, sizeof(float) * 9 * a->mesh.n_triangles) == 0;
+            CHECK(same, "the Draco Box's triangles are the plain Box's");
+            free(ta);
+            free(tb);
+        }
+    }
+    dr_scene_destroy(a);
+    dr_scene_destroy(d);
+
+    /* corrupt bytes and an attribute id the stream does not have: errors with the JSON path */
+    const unsigned char junk[24] = "DRACO\x02\x02\x01\x01\x00\x00\x00junkjunkjunk";
+    const char *fmt =
+        "{\"asset\":{\"version\":\"2.0\"},\"extensionsRequired\":[\"KHR_draco_mesh_compression\"],"
+        "\"extensionsUsed\":[\"KHR_draco_mesh_compression\"],\"nodes\":[{\"mesh\":0}],"
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0},\"indices\":1,\"extensions\":"
+        "{\"KHR_draco_mesh_compression\":{\"bufferView\":0,\"attributes\":{\"POSITION\":0}}}}]}],"
+        "\"buffers\":[{\"byteLength\":24,\"uri\":\"%s\"}],\"bufferViews\":[{\"buffer\":0,\"byteLength\":24}],"
+        "\"accessors\":[{\"componentType\":5126,\"count\":3,\"type\":\"VEC3\"},"
+        "{\"componentType\":5123,\"count\":3,\"type\":\"SCALAR\"}]}";
+    int rc;
+    struct dr_scene *s = load_json("draco_bad.gltf", NULL, &rc, fmt, data_uri(junk, 24));
+    check_error(rc, "corrupt Draco stream", "draco_bad.gltf", "/meshes/0/primitives/0/extensions/KHR_draco_mesh_compression",
+                "Draco");
+    dr_scene_destroy(s);
+}
+
+int main(void)
+{
+    snprintf(dir, sizeof dir, "%s/drender-gltf-features.XXXXXX", getenv("TMPDIR") ? getenv("TMPDIR") : "/tmp");
+    if (!mkdtemp(dir)) {
+        perror("mkdtemp");
+        return 1;
+    }
+    dr_set_warn_handler(record_warning);
+    test_colors();
+    test_sparse();
+    test_texcoords();
+    test_ortho();
+    test_ktx2();
+    test_draco();
+    char cmd[400];
+    snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
+    if (system(cmd) != 0) fprintf(stderr, "could not remove %s\n", dir);
+    return TEST_END();
+}
