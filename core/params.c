@@ -158,6 +158,17 @@ static void image_usage(const struct dr_scene *s, int image, bool *as_colour, bo
     }
 }
 
+/* Is image read by some material's normalTexture? */
+static bool image_is_normal_map(const struct dr_scene *s, int image)
+{
+    for (int i = 0; i < s->n_materials; i++) {
+        int t = s->materials[i].normal_tex.texture;
+        if (t >= 0 && s->textures[t].image == image)
+            return true;
+    }
+    return false;
+}
+
 /* The texel array a parameter reads and writes. */
 static float *param_texels(const struct dr_scene *s, const struct dr_param *p)
 {
@@ -239,6 +250,8 @@ int dr_params_list(const struct dr_scene *s, struct dr_param **out, int *count)
     }
     for (int i = 0; i < s->n_images; i++) {
         const struct dr_image *im = &s->images[i];
+        if (image_is_normal_map(s, i))
+            continue;   /* not differentiable (normal_map.h) */
         struct dr_param p = make(DR_PARAM_IMAGE, i, (int64_t)im->width * im->height * im->channels, "/images/%d", i);
         p.width = im->width;
         p.height = im->height;

@@ -5,11 +5,13 @@
 #include <string.h>
 
 #include "accel.h"
+#include "coverage.h"
 #include "error.h"
 #include "geometry.h"
 #include "image_io.h"
 #include "lights.h"
 #include "medium_scene.h"
+#include "normal_map.h"
 
 struct dr_scene *dr_scene_load(const char *path)
 {
@@ -32,6 +34,21 @@ static bool material_has_specular(const struct dr_material *m)
 {
     return m->metallic > 0.0 || (m->specular > 0.0 && !dr_is_black(m->specular_color)) ||
            m->metallic_roughness_tex.texture >= 0;
+}
+
+/* Normal maps, alpha modes and sidedness of material m (normal_map.h, coverage.h). */
+static unsigned surface_effects(const struct dr_scene *s, int m)
+{
+    const struct dr_material *mat = &s->materials[m];
+    unsigned fx = mat->normal_tex.texture >= 0 ? (unsigned)DR_FX_NORMAL_MAPS : 0u;
+    unsigned cover = dr_material_coverage(s, m);
+    if (cover & DR_COVER_MASK)
+        fx |= DR_FX_ALPHA_MASK;
+    if (cover & DR_COVER_BLEND)
+        fx |= DR_FX_ALPHA_BLEND;
+    if (cover & DR_COVER_CULL)
+        fx |= DR_FX_SINGLE_SIDED;
+    return fx;
 }
 
 int dr_scene_refresh(struct dr_scene *s)
@@ -59,6 +76,7 @@ int dr_scene_refresh(struct dr_scene *s)
             s->effects |= DR_FX_TEXTURES;
         if (material_has_specular(mat))
             s->effects |= DR_FX_SPECULAR;
+        s->effects |= surface_effects(s, i);
     }
     free(used);
 
@@ -116,12 +134,14 @@ int dr_scene_prepare(struct dr_scene *s)
         return DR_ERR_NOMEM;
     }
     int rc = s->n_media > 0 ? dr_media_prepare(s) : 0;
+    if (rc == 0)
+        rc = dr_mesh_prepare_tangents(s);
     if (rc != 0)
         return rc;
     rc = dr_scene_refresh(s);
     if (rc != 0)
         return rc;
-    s->accel = dr_accel_create(&s->mesh);
+    s->accel = dr_accel_create_scene(s);
     if (!s->accel) {
         char msg[1024];
         snprintf(msg, sizeof msg, "%s: cannot build the ray acceleration structure: %s", s->path, dr_last_error());
@@ -143,6 +163,7 @@ void dr_scene_destroy(struct dr_scene *s)
     free(s->mesh.indices);
     free(s->mesh.material);
     free(s->mesh.flags);
+    free(s->mesh.tangents);
     free(s->mesh.tri_normal_eps);
     free(s->materials);
     free(s->textures);
@@ -164,7 +185,9 @@ void dr_effects_describe(unsigned fx, char *buf, int size)
         {DR_FX_ENV_CONSTANT, "environment"},    {DR_FX_ENV_MAP, "environment_map"},
         {DR_FX_TEXTURES, "textures"},           {DR_FX_SPECULAR, "specular"},
         {DR_FX_SHADING_NORMALS, "shading_normals"}, {DR_FX_MEDIA, "media"},
-        {DR_FX_HETEROGENEOUS_MEDIA, "heterogeneous_media"},
+        {DR_FX_HETEROGENEOUS_MEDIA, "heterogeneous_media"}, {DR_FX_NORMAL_MAPS, "normal_maps"},
+        {DR_FX_ALPHA_MASK, "alpha_mask"},       {DR_FX_ALPHA_BLEND, "alpha_blend"},
+        {DR_FX_SINGLE_SIDED, "single_sided"},
     };
     int n = 0;
     buf[0] = '\0';
