@@ -214,5 +214,11 @@ dr_vec3 dr_shading_normal_valid(dr_vec3 ng, dr_vec3 wo, dr_vec3 n)
     }
     dr_vec3 out = dr_add(dr_scale(x, sqrt(dr_max(0.0, 1.0 - nz2))), dr_scale(ng, sqrt(nz2)));
     double ol = dr_length(out);
-    return ol > 0.0 && isfinite(ol) ? dr_scale(out, 1.0 / ol) : ng;
+    if (!(ol > 0.0) || !isfinite(ol))
+        return ng;
+    out = dr_scale(out, 1.0 / ol);
+    /* at grazing wo (wo.ng ~ 1e-9) the roots lose the last bits: a result a
+     * rounding error below wo, or reflecting below ng, falls back to ng */
+    double ow = dr_dot(out, wo);
+    return ow > 0.0 && 2.0 * ow * dr_dot(out, ng) - iz >= 0.0 ? out : ng;
 }
