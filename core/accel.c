@@ -5,11 +5,36 @@
 #include <stdio.h>
 #include <stdlib.h>
 
+#include "coverage.h"
 #include "error.h"
 
+/* What a filter callback needs about its geometry. */
+struct dr_accel_geom {
+    const struct dr_accel *accel;
+    uint32_t *tri;               /* primID -> scene triangle; NULL: the same */
+};
+
+/* Coverage (coverage.h) is tested in Embree's per-geometry intersection and
+ * occlusion filters rather than by re-tracing from past a rejected hit: the
+ * filter sees every candidate inside one traversal, so nothing is skipped or
+ * hit twice near the surface a re-traced ray would start from, and shadow
+ * rays stay one rtcOccluded1. Triangles whose material needs no test go into
+ * a geometry without a filter; when no triangle needs one the structure is
+ * exactly the unfiltered one (same buffers, same build), so such scenes pay
+ * nothing and render bit for bit as before. */
 struct dr_accel {
     RTCDevice device;
     RTCScene scene;
+    const struct dr_scene *cover;   /* NULL: nothing is filtered */
+    uint8_t *mat_bits;              /* per material: enum dr_cover_bits */
+    struct dr_accel_geom geom[2];   /* by geomID */
+    uint32_t *indices[2];           /* owned index buffers when the mesh is split */
+};
+
+/* The query context a filter receives: Embree's, then the query's key. */
+struct query_ctx {
+    struct RTCIntersectContext rtc;
+    uint64_t key;
 };
 
 static void embree_error(void *user, enum RTCError code, const char *msg)
@@ -18,7 +43,91 @@ static void embree_error(void *user, enum RTCError code, const char *msg)
     dr_set_error("Embree error %d: %s", (int)code, msg ? msg : "");
 }
 
-struct dr_accel *dr_accel_create(const struct dr_mesh *mesh)
+/* Embree's RTCRayN / RTCHitN accessors are C++ only; the SOA layout they
+ * index (rtcore_ray.h): ray dir_x, dir_y, dir_z at 4N, 5N, 6N floats; hit u, v
+ * at 3N, 4N floats and primID at 5N. */
+static void cover_filter(const struct RTCFilterFunctionNArguments *args)
+{
+    const struct dr_accel_geom *g = args->geometryUserPtr;
+    const struct dr_accel *a = g->accel;
+    const struct query_ctx *q = (const struct query_ctx *)args->context;
+    const unsigned N = args->N;
+    const float *ray = (const float *)args->ray, *hit = (const float *)args->hit;
+    const unsigned *hit_u32 = (const unsigned *)args->hit;
+    for (unsigned i = 0; i < N; i++) {
+        if (args->valid[i] != -1)
+            continue;
+        unsigned prim = hit_u32[5 * N + i];
+        int64_t tri = g->tri ? (int64_t)g->tri[prim] : (int64_t)prim;
+        dr_vec3 d = dr_v3(ray[4 * N + i], ray[5 * N + i], ray[6 * N + i]);
+        unsigned bits = a->mat_bits[a->cover->mesh.material[tri]];
+        if (!dr_coverage_blocks(a->cover, bits, tri, hit[3 * N + i], hit[4 * N + i], d, q->key))
+            args->valid[i] = 0;
+    }
+}
+
+/* Attaches geometry id over indices (n triangles); filtered: with cover_filter. */
+static void add_geometry(struct dr_accel *a, const struct dr_mesh *mesh, unsigned id, const uint32_t *indices,
+                         uint32_t n, bool filtered)
+{
+    RTCGeometry g = rtcNewGeometry(a->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    /* Shared buffers: the mesh arrays are used in place (positions carry
+     * the one float of padding Embree's 16-byte loads need). */
+    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, mesh->positions, 0,
+                               3 * sizeof(float), mesh->n_vertices);
+    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, indices, 0, 3 * sizeof(uint32_t), n);
+    a->geom[id].accel = a;
+    if (filtered) {
+        rtcSetGeometryUserData(g, &a->geom[id]);
+        rtcSetGeometryIntersectFilterFunction(g, cover_filter);
+        rtcSetGeometryOccludedFilterFunction(g, cover_filter);
+    }
+    rtcCommitGeometry(g);
+    rtcAttachGeometryByID(a->scene, g, id);
+    rtcReleaseGeometry(g);
+}
+
+/* Splits the triangles into an unfiltered geometry 0 and a filtered geometry 1. */
+static int add_split(struct dr_accel *a, const struct dr_mesh *mesh, uint32_t n_filtered)
+{
+    uint32_t n[2] = {mesh->n_triangles - n_filtered, n_filtered};
+    for (int k = 0; k < 2; k++) {
+        a->indices[k] = malloc(3 * sizeof(uint32_t) * n[k]);
+        a->geom[k].tri = malloc(sizeof(uint32_t) * n[k]);
+        if (!a->indices[k] || !a->geom[k].tri) {
+            dr_set_error("out of memory");
+            return -1;
+        }
+    }
+    uint32_t fill[2] = {0, 0};
+    for (uint32_t t = 0; t < mesh->n_triangles; t++) {
+        int k = a->mat_bits[mesh->material[t]] ? 1 : 0;
+        for (int c = 0; c < 3; c++)
+            a->indices[k][3 * fill[k] + c] = mesh->indices[3 * (size_t)t + c];
+        a->geom[k].tri[fill[k]++] = t;
+    }
+    add_geometry(a, mesh, 0, a->indices[0], n[0], false);
+    add_geometry(a, mesh, 1, a->indices[1], n[1], true);
+    return 0;
+}
+
+/* Per-material coverage bits; returns how many triangles need the filter. */
+static int64_t classify(struct dr_accel *a, const struct dr_scene *s)
+{
+    a->mat_bits = calloc((size_t)s->n_materials + 1, 1);
+    if (!a->mat_bits) {
+        dr_set_error("out of memory");
+        return -1;
+    }
+    for (int m = 0; m < s->n_materials; m++)
+        a->mat_bits[m] = (uint8_t)dr_material_coverage(s, m);
+    int64_t n = 0;
+    for (uint32_t t = 0; t < s->mesh.n_triangles; t++)
+        n += a->mat_bits[s->mesh.material[t]] != 0;
+    return n;
+}
+
+static struct dr_accel *build(const struct dr_mesh *mesh, const struct dr_scene *cover)
 {
     struct dr_accel *a = calloc(1, sizeof *a);
     if (!a) {
@@ -36,17 +145,20 @@ struct dr_accel *dr_accel_create(const struct dr_mesh *mesh)
     /* Robust mode: no missed hits on shared edges, which would leak light. */
     rtcSetSceneFlags(a->scene, RTC_SCENE_FLAG_ROBUST);
     rtcSetSceneBuildQuality(a->scene, RTC_BUILD_QUALITY_HIGH);
+    int64_t n_filtered = 0;
+    if (cover && (n_filtered = classify(a, cover)) < 0) {
+        dr_accel_destroy(a);
+        return NULL;
+    }
+    if (n_filtered > 0)
+        a->cover = cover;
     if (mesh->n_triangles > 0) {
-        RTCGeometry g = rtcNewGeometry(a->device, RTC_GEOMETRY_TYPE_TRIANGLE);
-        /* Shared buffers: the mesh arrays are used in place (positions carry
-         * the one float of padding Embree's 16-byte loads need). */
-        rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, mesh->positions, 0,
-                                   3 * sizeof(float), mesh->n_vertices);
-        rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, mesh->indices, 0,
-                                   3 * sizeof(uint32_t), mesh->n_triangles);
-        rtcCommitGeometry(g);
-        rtcAttachGeometry(a->scene, g);
-        rtcReleaseGeometry(g);
+        if (n_filtered == 0 || n_filtered == (int64_t)mesh->n_triangles) {
+            add_geometry(a, mesh, 0, mesh->indices, mesh->n_triangles, n_filtered > 0);
+        } else if (add_split(a, mesh, (uint32_t)n_filtered) != 0) {
+            dr_accel_destroy(a);
+            return NULL;
+        }
     }
     rtcCommitScene(a->scene);
     if (rtcGetDeviceError(a->device) != RTC_ERROR_NONE) {
@@ -54,6 +166,16 @@ struct dr_accel *dr_accel_create(const struct dr_mesh *mesh)
         return NULL;
     }
     return a;
+}
+
+struct dr_accel *dr_accel_create(const struct dr_mesh *mesh)
+{
+    return build(mesh, NULL);
+}
+
+struct dr_accel *dr_accel_create_scene(const struct dr_scene *scene)
+{
+    return build(&scene->mesh, scene);
 }
 
 void dr_accel_destroy(struct dr_accel *a)
@@ -64,6 +186,11 @@ void dr_accel_destroy(struct dr_accel *a)
         rtcReleaseScene(a->scene);
     if (a->device)
         rtcReleaseDevice(a->device);
+    for (int k = 0; k < 2; k++) {
+        free(a->indices[k]);
+        free(a->geom[k].tri);
+    }
+    free(a->mat_bits);
     free(a);
 }
 
@@ -83,26 +210,42 @@ static void fill_ray(struct RTCRay *r, dr_vec3 o, dr_vec3 d, double tmin, double
     r->flags = 0;
 }
 
-int64_t dr_accel_intersect(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tmin, double tmax)
+int64_t dr_accel_intersect_key(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tmin, double tmax,
+                               uint64_t key)
 {
-    struct RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+    struct query_ctx q;
+    rtcInitIntersectContext(&q.rtc);
+    q.rtc.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+    q.key = key;
     struct RTCRayHit rh;
     fill_ray(&rh.ray, o, d, tmin, tmax);
     rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
     rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(a->scene, &ctx, &rh);
-    return rh.hit.geomID == RTC_INVALID_GEOMETRY_ID ? -1 : (int64_t)rh.hit.primID;
+    rtcIntersect1(a->scene, &q.rtc, &rh);
+    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID)
+        return -1;
+    const uint32_t *map = a->geom[rh.hit.geomID & 1].tri;
+    return map ? (int64_t)map[rh.hit.primID] : (int64_t)rh.hit.primID;
+}
+
+bool dr_accel_occluded_key(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tmin, double tmax, uint64_t key)
+{
+    struct query_ctx q;
+    rtcInitIntersectContext(&q.rtc);
+    q.rtc.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+    q.key = key;
+    struct RTCRay r;
+    fill_ray(&r, o, d, tmin, tmax);
+    rtcOccluded1(a->scene, &q.rtc, &r);
+    return r.tfar < 0.0f;  /* Embree sets tfar = -inf on a hit */
+}
+
+int64_t dr_accel_intersect(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tmin, double tmax)
+{
+    return dr_accel_intersect_key(a, o, d, tmin, tmax, 0);
 }
 
 bool dr_accel_occluded(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tmin, double tmax)
 {
-    struct RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
-    struct RTCRay r;
-    fill_ray(&r, o, d, tmin, tmax);
-    rtcOccluded1(a->scene, &ctx, &r);
-    return r.tfar < 0.0f;  /* Embree sets tfar = -inf on a hit */
+    return dr_accel_occluded_key(a, o, d, tmin, tmax, 0);
 }

@@ -12,8 +12,15 @@
 
 struct dr_accel;
 
-/* Builds a robust-mode BVH over mesh (which must outlive the accel). */
+/* Builds a robust-mode BVH over mesh (which must outlive the accel); every
+ * triangle is opaque from both sides. */
 struct dr_accel *dr_accel_create(const struct dr_mesh *mesh);
+/* The same over scene->mesh, honouring alphaMode and doubleSided
+ * (coverage.h) for every query. The scene must outlive the accel; its
+ * materials' alpha modes and sidedness must not change afterwards. A scene
+ * without MASK/BLEND/single-sided materials gets exactly dr_accel_create's
+ * structure: no filter is installed. */
+struct dr_accel *dr_accel_create_scene(const struct dr_scene *scene);
 void dr_accel_destroy(struct dr_accel *accel);
 
 /* Closest hit along o + t d, t in (tmin, tmax). Returns the triangle index or
@@ -21,5 +28,13 @@ void dr_accel_destroy(struct dr_accel *accel);
 int64_t dr_accel_intersect(const struct dr_accel *accel, dr_vec3 o, dr_vec3 d, double tmin, double tmax);
 /* True when anything blocks o + t d for t in (tmin, tmax). */
 bool dr_accel_occluded(const struct dr_accel *accel, dr_vec3 o, dr_vec3 d, double tmin, double tmax);
+/* The same with the query's key for stochastic transparency (alphaMode BLEND,
+ * coverage.h: dr_coverage_key). The plain forms use key 0: right for queries
+ * that only look past surfaces, wrong (every path would see the same BLEND
+ * decisions) for a path's rays. */
+int64_t dr_accel_intersect_key(const struct dr_accel *accel, dr_vec3 o, dr_vec3 d, double tmin, double tmax,
+                               uint64_t key);
+bool dr_accel_occluded_key(const struct dr_accel *accel, dr_vec3 o, dr_vec3 d, double tmin, double tmax,
+                           uint64_t key);
 
 #endif

@@ -275,6 +275,9 @@ private:
     void take_images();
     void load_textures();
     void load_materials();
+    void load_surface(const tinygltf::Material &g, const std::string &mp, dr_material &m);
+    void add_tangents(const tinygltf::Primitive &p, const std::string &pp, size_t nv, const Mat4 &world,
+                      bool mirrored, int32_t material);
     dr_texref texref(const tinygltf::TextureInfo &ti, const std::string &path);
     void texture_transform(const tinygltf::Value &v, const std::string &ep, dr_texref &r);
     void check_ktx2();
@@ -337,6 +340,7 @@ private:
     std::vector<float> uvs1_, colors_;
     bool have_colors_ = false;              /* some primitive so far had COLOR_0 */
     std::set<int> placed_cameras_;          /* indices into the file's "cameras" that a node places */
+    std::vector<float> tangents_;           /* 4 per vertex once a primitive has a normal map */
     std::vector<uint32_t> indices_;
     std::vector<int32_t> tri_material_;
     std::vector<uint8_t> tri_flags_;
@@ -837,7 +841,40 @@ dr_material default_material(const char *name)
     m.specular_color = dr_v3s(1.0);
     m.double_sided = false;
     m.base_color_tex = m.metallic_roughness_tex = m.emissive_tex = dr_texref{-1, 0, false, {1, 0, 0, 0, 1, 0}};
+    m.normal_tex = dr_texref{-1, 0, false, {1, 0, 0, 0, 1, 0}};
+    m.normal_scale = 1.0;
+    m.alpha_mode = DR_ALPHA_OPAQUE;
+    m.alpha = 1.0;
+    m.alpha_cutoff = 0.5;
     return m;
+}
+
+/* normalTexture (+ scale), alphaMode, alphaCutoff and baseColorFactor's alpha. */
+void Loader::load_surface(const tinygltf::Material &g, const std::string &mp, dr_material &m)
+{
+    const tinygltf::NormalTextureInfo &nt = g.normalTexture;
+    if (nt.index >= 0) {
+        tinygltf::TextureInfo ti;
+        ti.index = nt.index;
+        ti.texCoord = nt.texCoord;
+        ti.extensions = nt.extensions;
+        m.normal_tex = texref(ti, mp + "/normalTexture");   /* linear data: never sRGB-decoded */
+        m.normal_scale = nt.scale;
+        if (!std::isfinite(m.normal_scale))
+            fail(DR_ERR_FORMAT, "%s/normalTexture/scale: must be finite", mp.c_str());
+    }
+    const std::vector<double> &bc = g.pbrMetallicRoughness.baseColorFactor;
+    if (bc.size() >= 4) m.alpha = bc[3];
+    if (!(m.alpha >= 0.0 && m.alpha <= 1.0))
+        fail(DR_ERR_FORMAT, "%s/pbrMetallicRoughness/baseColorFactor/3: alpha must be in [0, 1] (got %g)",
+             mp.c_str(), m.alpha);
+    m.alpha_cutoff = g.alphaCutoff;
+    if (!std::isfinite(m.alpha_cutoff))
+        fail(DR_ERR_FORMAT, "%s/alphaCutoff: must be finite", mp.c_str());
+    if (g.alphaMode == "MASK") m.alpha_mode = DR_ALPHA_MASK;
+    else if (g.alphaMode == "BLEND") m.alpha_mode = DR_ALPHA_BLEND;
+    else if (g.alphaMode != "OPAQUE" && !g.alphaMode.empty())
+        warn_once("alpha", "%s/alphaMode: unknown mode '%s'; rendered as OPAQUE", mp.c_str(), g.alphaMode.c_str());
 }
 
 void Loader::load_materials()
@@ -860,11 +897,7 @@ void Loader::load_materials()
         for (const dr_texref *t : {&m.base_color_tex, &m.emissive_tex})
             if (t->texture >= 0) linear_images_[size_t(scene_->textures[t->texture].image)] = 1;
 
-        if (g.alphaMode != "OPAQUE" && !g.alphaMode.empty())
-            warn_once("alpha", "%s/alphaMode: %s is not supported; rendered as OPAQUE", mp.c_str(),
-                      g.alphaMode.c_str());
-        if (g.normalTexture.index >= 0)
-            warn_once("normalTexture", "%s/normalTexture: normal maps are not supported; ignored", mp.c_str());
+        load_surface(g, mp, m);
         if (g.occlusionTexture.index >= 0)
             warn_once("occlusionTexture", "%s/occlusionTexture: occlusion maps are ignored (the path "
                       "tracer computes occlusion)", mp.c_str());
@@ -1231,12 +1264,47 @@ void Loader::add_primitive(int mesh_idx, int prim_idx, const Mat4 &world, const 
                 colors_.insert(colors_.end(), {1.0f, 1.0f, 1.0f});
         }
     }
+    add_tangents(p, pp, nv, world, nx.mirrored, material);
     for (size_t t = 0; t + 2 < tri.size(); t += 3) {
         uint32_t a = uint32_t(base) + tri[t], b = uint32_t(base) + tri[t + 1], c = uint32_t(base) + tri[t + 2];
         if (nx.mirrored) std::swap(b, c);  /* a mirror turns counter-clockwise into clockwise */
         indices_.insert(indices_.end(), {a, b, c});
         tri_material_.push_back(material);
         tri_flags_.push_back(flags);
+    }
+}
+
+/* TANGENT (xyz direction, w bitangent sign) of a primitive whose material has
+ * a normal map. tangents_ stays empty until the first such primitive and is
+ * then kept aligned with positions_; zeros mean "generate"
+ * (dr_mesh_prepare_tangents), also for a tangent that is degenerate. */
+void Loader::add_tangents(const tinygltf::Primitive &p, const std::string &pp, size_t nv, const Mat4 &world,
+                          bool mirrored, int32_t material)
+{
+    size_t total = positions_.size() / 3;   /* this primitive's vertices included */
+    bool mapped = size_t(material) < materials_.size() && materials_[size_t(material)].normal_tex.texture >= 0;
+    if (!mapped && tangents_.empty()) return;
+    tangents_.resize(4 * (total - nv), 0.0f);
+    auto it = p.attributes.find("TANGENT");
+    if (!mapped || it == p.attributes.end()) {
+        tangents_.resize(4 * total, 0.0f);
+        return;
+    }
+    AccessorView tv = view_accessor(it->second, pp + "/attributes/TANGENT", TINYGLTF_TYPE_VEC4, "TANGENT");
+    if (tv.count != nv)
+        fail(DR_ERR_FORMAT, "/accessors/%d: TANGENT has %zu elements but POSITION has %zu", it->second, tv.count,
+             nv);
+    dr_vec3 o = mat_point(world, 0, 0, 0);
+    for (size_t i = 0; i < nv; i++) {
+        /* a tangent is a direction along the surface: it moves with the linear part of world */
+        dr_vec3 t = dr_sub(mat_point(world, tv.get(i, 0), tv.get(i, 1), tv.get(i, 2)), o);
+        double len = dr_length(t);
+        /* a mirror flips the handedness of the tangent frame */
+        double w = (tv.get(i, 3) < 0.0) != mirrored ? -1.0 : 1.0;
+        if (!(len > 0.0) || !std::isfinite(len))
+            tangents_.insert(tangents_.end(), {0.0f, 0.0f, 0.0f, 0.0f});
+        else
+            tangents_.insert(tangents_.end(), {float(t.x / len), float(t.y / len), float(t.z / len), float(w)});
     }
 }
 
@@ -1468,6 +1536,10 @@ void Loader::finish()
     mesh.indices = copy_out(indices_);
     mesh.material = copy_out(tri_material_);
     mesh.flags = copy_out(tri_flags_);
+    if (!tangents_.empty()) {
+        tangents_.resize(4 * size_t(mesh.n_vertices), 0.0f);
+        mesh.tangents = copy_out(tangents_);
+    }
     if (mesh.n_vertices == 0) bbox_min_ = bbox_max_ = dr_v3s(0.0);
     scene_->bbox_min = bbox_min_;
     scene_->bbox_max = bbox_max_;

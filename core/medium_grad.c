@@ -143,7 +143,7 @@ static void drt_gain(const struct dr_scene *s, const struct dr_path_opts *opts, 
     dr_vec3 o = tr->o0, d = tr->d, T = d_beta;
     int medium = tr->medium0;
     for (int crossing = 0; crossing < 64 && !dr_is_black(T); crossing++) {
-        int64_t tri = dr_accel_intersect(s->accel, o, d, 0.0, INFINITY);
+        int64_t tri = dr_accel_intersect_key(s->accel, o, d, 0.0, INFINITY, dr_hash64(tr->rng_key ^ 0x2545f4914f6cdd1dULL));
         struct dr_hit h;
         double seg = INFINITY;
         if (tri >= 0) {

@@ -20,6 +20,7 @@
 #include <math.h>
 
 #include "accel.h"
+#include "coverage.h"
 #include "medium_grad.h"
 #include "medium_scene.h"
 
@@ -88,6 +89,9 @@ static void media_nee(const struct dr_scene *s, struct dr_path_vertex *v, const 
     if (!(tmax > 0.0))
         return;
     struct dr_sampler rng = tracking_stream(smp, v->depth, STREAM_SHADOW);
+    if ((s->effects & (DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND)) && v->ls.type == DR_LS_AREA &&
+        !dr_coverage_point_present(s, v->ls.index, v->ls.b1, v->ls.b2, dr_hash64(rng.key ^ 0x5851f42d4c957f2dULL)))
+        return;   /* the light point is a hole in a cut-out emitter */
     dr_vec3 tr = dr_media_transmittance(s, so, sd, tmax, v->medium, &rng, &counts->shadow, rec ? &v->mrec->shadow : NULL);
     if (dr_is_black(tr))
         return;
@@ -208,7 +212,8 @@ bool dr_medium_path_step(const struct dr_scene *s, const struct dr_path_opts *op
         else
             counts->extension++;
         v->medium = st->medium;
-        int64_t tri = dr_accel_intersect(s->accel, st->o, st->d, 0.0, INFINITY);
+        uint64_t key = (s->effects & DR_FX_ALPHA_BLEND) ? dr_coverage_key(sampler->key, st->depth, DR_RAY_TRACE) : 0;
+        int64_t tri = dr_accel_intersect_key(s->accel, st->o, st->d, 0.0, INFINITY, key);
         struct dr_hit h;
         double thit = INFINITY;
         if (tri >= 0) {

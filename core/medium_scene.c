@@ -7,6 +7,7 @@
 #include <string.h>
 
 #include "accel.h"
+#include "coverage.h"
 #include "error.h"
 #include "geometry.h"
 #include "path.h"
@@ -201,9 +202,11 @@ dr_vec3 dr_media_transmittance(const struct dr_scene *s, dr_vec3 o, dr_vec3 d, d
         rec->d = d;
     }
     dr_vec3 T = dr_v3s(1.0);
+    /* BLEND surfaces on a shadow ray: decided by the ray's own stream (coverage.h) */
+    const uint64_t key = (s->effects & DR_FX_ALPHA_BLEND) ? dr_hash64(rng->key ^ 0x5851f42d4c957f2dULL) : 0;
     for (int i = 0; i < MAX_CROSSINGS; i++) {
         ++*rays;
-        int64_t tri = dr_accel_intersect(s->accel, o, d, 0.0, tmax);
+        int64_t tri = dr_accel_intersect_key(s->accel, o, d, 0.0, tmax, key);
         struct dr_hit h;
         double seg = tmax;
         if (tri >= 0) {

@@ -5,7 +5,9 @@
 #include <string.h>
 
 #include "accel.h"
+#include "coverage.h"
 #include "material.h"
+#include "normal_map.h"
 
 struct dr_path_state;
 /* The stages are exported to the medium walker too (end of file), yet kept inlined into
@@ -96,14 +98,17 @@ void dr_path_start(struct dr_path_state *st, dr_vec3 o, dr_vec3 d)
                                  .beta = dr_v3s(1.0), .ratio = dr_v3s(1.0)};
 }
 
-/* Stage trace: the closest triangle along the current ray (-1: none). */
-static int64_t stage_trace(const struct dr_scene *s, const struct dr_path_state *st, struct dr_ray_counts *counts)
+/* Stage trace: the closest triangle along the current ray (-1: none). BLEND
+ * surfaces decide by the path's key at this depth (coverage.h). */
+static int64_t stage_trace(const struct dr_scene *s, const struct dr_path_state *st, const struct dr_sampler *sampler,
+                           struct dr_ray_counts *counts)
 {
     if (st->depth == 1)
         counts->camera++;
     else
         counts->extension++;
-    return dr_accel_intersect(s->accel, st->o, st->d, 0.0, INFINITY);
+    uint64_t key = (s->effects & DR_FX_ALPHA_BLEND) ? dr_coverage_key(sampler->key, st->depth, DR_RAY_TRACE) : 0;
+    return dr_accel_intersect_key(s->accel, st->o, st->d, 0.0, INFINITY, key);
 }
 
 /* Stage escaped: environment radiance seen along the ray, MIS-weighted
@@ -136,6 +141,8 @@ static void stage_surface_hit(const struct dr_scene *s, const struct dr_path_opt
     v->kind = DR_VERTEX_SURFACE;
     struct dr_hit *hit = &v->hit;
     dr_hit_compute(&s->mesh, tri, st->o, st->d, hit);
+    if (s->effects & DR_FX_NORMAL_MAPS)
+        dr_normal_map_apply(s, hit);
     if (!(opts->stages & DR_STAGE_EMISSION) || !surface_emits(s, opts, tri, hit->material))
         return;
     v->emits = true;
@@ -155,7 +162,10 @@ static bool stage_material(const struct dr_scene *s, const struct dr_path_opts *
     if (!hit->front && !s->materials[hit->material].double_sided)
         return false;
     v->ng = hit->front ? hit->ng : dr_neg(hit->ng);
-    v->frame = dr_frame_from_normal(hit->front ? hit->ns : dr_neg(hit->ns));
+    dr_vec3 n = hit->front ? hit->ns : dr_neg(hit->ns);
+    if (s->materials[hit->material].normal_tex.texture >= 0)   /* a mapped normal may face away from wo */
+        n = dr_shading_normal_valid(v->ng, dr_neg(st->d), n);
+    v->frame = dr_frame_from_normal(n);
     v->wo = dr_frame_to_local(&v->frame, dr_neg(st->d));
     dr_material_eval(s, hit, &v->bsdf);
     v->shaded = true;
@@ -168,6 +178,8 @@ static bool stage_material(const struct dr_scene *s, const struct dr_path_opts *
     u->lobe = dr_sampler_next(sampler);
     dr_sampler_next2(sampler, &u->bsdf_u1, &u->bsdf_u2);     /* a 2D direction sample */
     u->rr = dr_sampler_next(sampler);
+    u->cover_key = (s->effects & (DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND))
+                       ? dr_coverage_key(sampler->key, st->depth, DR_RAY_SHADOW) : 0;
     return true;
 }
 
@@ -195,8 +207,11 @@ void dr_path_nee(const struct dr_scene *s, struct dr_path_vertex *v, struct dr_r
         sd = dr_scale(sd, 1.0 / tmax);
     }
     counts->shadow++;
-    if (!(tmax > 0.0) || dr_accel_occluded(s->accel, so, sd, 0.0, tmax))
+    if (!(tmax > 0.0) || dr_accel_occluded_key(s->accel, so, sd, 0.0, tmax, u->cover_key))
         return;
+    if ((s->effects & (DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND)) && v->ls.type == DR_LS_AREA &&
+        !dr_coverage_point_present(s, v->ls.index, v->ls.b1, v->ls.b2, u->cover_key))
+        return;   /* the light point is a hole in a cut-out emitter */
     double w = v->ls.delta ? 1.0 : dr_mis_power(v->ls.pdf, bsdf_pdf);
     v->nee_scale = fabs(v->nee_wi.z) * w / v->ls.pdf;
     v->nee = true;
@@ -268,7 +283,7 @@ bool dr_path_step(const struct dr_scene *s, const struct dr_path_opts *opts, str
     v->prev_p = st->prev_p;
     v->emits = v->shaded = v->nee = v->cont = v->diff_bsdf = v->media = false;
 
-    int64_t tri = stage_trace(s, st, counts);
+    int64_t tri = stage_trace(s, st, sampler, counts);
     if (tri < 0) {
         stage_escaped(s, opts, st, v);
         return false;

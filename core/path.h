@@ -102,6 +102,7 @@ struct dr_vertex_randoms {
     double light_pick, light_u1, light_u2;   /* next-event estimation */
     double lobe, bsdf_u1, bsdf_u2;           /* BSDF sample: lobe choice, direction */
     double rr;                               /* Russian roulette */
+    uint64_t cover_key;                      /* shadow rays' key for BLEND surfaces (coverage.h) */
 };
 
 /* The stretch of one medium a ray crossed (for the derivatives of media

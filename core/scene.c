@@ -5,11 +5,13 @@
 #include <string.h>
 
 #include "accel.h"
+#include "coverage.h"
 #include "error.h"
 #include "geometry.h"
 #include "image_io.h"
 #include "lights.h"
 #include "medium_scene.h"
+#include "normal_map.h"
 
 struct dr_scene *dr_scene_load(const char *path)
 {
@@ -39,6 +41,21 @@ static bool material_has_specular(const struct dr_material *m)
            m->metallic_roughness_tex.texture >= 0;
 }
 
+/* Normal maps, alpha modes and sidedness of material m (normal_map.h, coverage.h). */
+static unsigned surface_effects(const struct dr_scene *s, int m)
+{
+    const struct dr_material *mat = &s->materials[m];
+    unsigned fx = mat->normal_tex.texture >= 0 ? (unsigned)DR_FX_NORMAL_MAPS : 0u;
+    unsigned cover = dr_material_coverage(s, m);
+    if (cover & DR_COVER_MASK)
+        fx |= DR_FX_ALPHA_MASK;
+    if (cover & DR_COVER_BLEND)
+        fx |= DR_FX_ALPHA_BLEND;
+    if (cover & DR_COVER_CULL)
+        fx |= DR_FX_SINGLE_SIDED;
+    return fx;
+}
+
 int dr_scene_refresh(struct dr_scene *s)
 {
     const struct dr_mesh *m = &s->mesh;
@@ -64,6 +81,7 @@ int dr_scene_refresh(struct dr_scene *s)
             s->effects |= DR_FX_TEXTURES;
         if (material_has_specular(mat))
             s->effects |= DR_FX_SPECULAR;
+        s->effects |= surface_effects(s, i);
     }
     free(used);
 
@@ -130,12 +148,14 @@ int dr_scene_prepare(struct dr_scene *s)
         return DR_ERR_NOMEM;
     }
     int rc = s->n_media > 0 ? dr_media_prepare(s) : 0;
+    if (rc == 0)
+        rc = dr_mesh_prepare_tangents(s);
     if (rc != 0)
         return rc;
     rc = dr_scene_refresh(s);
     if (rc != 0)
         return rc;
-    s->accel = dr_accel_create(&s->mesh);
+    s->accel = dr_accel_create_scene(s);
     if (!s->accel) {
         char msg[1024];
         snprintf(msg, sizeof msg, "%s: cannot build the ray acceleration structure: %s", s->path, dr_last_error());
@@ -159,6 +179,7 @@ void dr_scene_destroy(struct dr_scene *s)
     free(s->mesh.indices);
     free(s->mesh.material);
     free(s->mesh.flags);
+    free(s->mesh.tangents);
     free(s->mesh.tri_normal_eps);
     free(s->materials);
     free(s->textures);
@@ -180,7 +201,9 @@ void dr_effects_describe(unsigned fx, char *buf, int size)
         {DR_FX_ENV_CONSTANT, "environment"},    {DR_FX_ENV_MAP, "environment_map"},
         {DR_FX_TEXTURES, "textures"},           {DR_FX_SPECULAR, "specular"},
         {DR_FX_SHADING_NORMALS, "shading_normals"}, {DR_FX_MEDIA, "media"},
-        {DR_FX_HETEROGENEOUS_MEDIA, "heterogeneous_media"},
+        {DR_FX_HETEROGENEOUS_MEDIA, "heterogeneous_media"}, {DR_FX_NORMAL_MAPS, "normal_maps"},
+        {DR_FX_ALPHA_MASK, "alpha_mask"},       {DR_FX_ALPHA_BLEND, "alpha_blend"},
+        {DR_FX_SINGLE_SIDED, "single_sided"},
     };
     int n = 0;
     buf[0] = '\0';

@@ -154,6 +154,17 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
                      p->scene->n_media, p->scene->n_media == 1 ? "um" : "a");
         return DR_ERR_ARG;
     }
+    /* Nor the normal map's dependence on the moving hit point (normal_map.h). */
+    if (dr_est_sampling_run(p) == DR_SAMPLING_ATTACHED && (p->scene->effects & DR_FX_NORMAL_MAPS)) {
+        const char *name = "";
+        for (int m = 0; m < p->scene->n_materials && !name[0]; m++)
+            if (p->scene->materials[m].normal_tex.texture >= 0)
+                name = p->scene->materials[m].name;
+        dr_set_error("attached sampling does not differentiate normal maps (material '%s' has a normalTexture); "
+                     "use --sampling detached",
+                     name);
+        return DR_ERR_ARG;
+    }
     struct dr_est_base *b = calloc(1, e->job_size);
     if (!b) {
         dr_set_error("out of memory");

@@ -29,7 +29,8 @@ expect_in out '"media", "heterogeneous_media"' "render --json effects of a grid 
 expect_in out '"participating_media"' "render --json stages of a grid medium"
 run render "$data/fog-khr.gltf" --spp 4 --res 24x24 -o fog.png --json
 expect_rc 0 "render KHR_materials_volume fog"
-expect_in out '"media"]' "render --json effects of a homogeneous medium"
+expect_in out '"media"' "render --json effects of a homogeneous medium"
+grep -q heterogeneous_media "$tmp/out" && fail "a homogeneous medium listed as heterogeneous_media"
 run render --spp 1 --res 16x16 -o box.png --json
 expect_rc 0 "render the Cornell box"
 grep -q '"media"\|heterogeneous_media\|participating_media' "$tmp/out" && fail "the Cornell box must not list media effects or stages"

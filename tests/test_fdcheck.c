@@ -266,8 +266,12 @@ static void occluder_edge(void)
     g.roughness = 0.2;
     g.specular = 1.0;
     sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, g));
-    /* plate at y = 0.6 over x < 0 (its edge along z at x = 0), facing down */
-    sb_quad(&b, dr_v3(-2, 0.6, -2), dr_v3(0, 0, 4), dr_v3(2, 0, 0), sb_material(&b, sb_diffuse(dr_v3s(0.05))));
+    /* plate at y = 0.6 over x < 0 (its edge along z at x = 0), facing up;
+     * double-sided, so it occludes from below too (a single-sided back is
+     * culled, as glTF says) */
+    struct dr_material plate = sb_diffuse(dr_v3s(0.05));
+    plate.double_sided = true;
+    sb_quad(&b, dr_v3(-2, 0.6, -2), dr_v3(0, 0, 4), dr_v3(2, 0, 0), sb_material(&b, plate));
     sb_environment(&b, dr_v3s(1.0));
     struct dr_scene *s = sb_finish(&b);
     s->n_file_materials = s->n_materials;

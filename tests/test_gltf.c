@@ -336,7 +336,9 @@ static void test_layout(void)
     CHECK(s->n_cameras == 0 && s->n_lights == 0 && !s->env.present, "no cameras, lights, environment");
     CHECK(strstr(warnings, "EXT_made_up") && strstr(warnings, "required"), "required extension:\n%s", warnings);
     CHECK(!strstr(warnings, "texCoord"), "no TEXCOORD_1 warning:\n%s", warnings);
-    CHECK(strstr(warnings, "BLEND"), "alphaMode warning:\n%s", warnings);
+    CHECK(!strstr(warnings, "BLEND"), "alphaMode BLEND is supported, no warning:\n%s", warnings);
+    CHECK(s->n_materials >= 1 && s->materials[0].alpha_mode == DR_ALPHA_BLEND && s->materials[0].alpha == 1.0,
+          "alphaMode BLEND loaded (alpha 1 without baseColorFactor)");
     fprintf(stderr, "-- layout.gltf\n%s", warnings);
     free_scene(s);
 }
