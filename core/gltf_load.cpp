@@ -823,10 +823,10 @@ void Loader::check_ktx2()
     if (list.empty()) return;
     if (!opts_.ignore_unsupported)
         fail(DR_ERR_FORMAT, "%s: KTX2 / KHR_texture_basisu images cannot be decoded by drender; they are used only "
-             "as normal or occlusion maps (or not at all), which do not change drender's image: "
-             "--ignore-unsupported skips them", list.c_str());
+             "as normal or occlusion maps (or not at all): --ignore-unsupported skips them (a normal map is then "
+             "left out: the interpolated normals shade)", list.c_str());
     warn_once("ktx2", "%s: KTX2 / KHR_texture_basisu images skipped (--ignore-unsupported): used only as normal "
-              "or occlusion maps (or not at all), which drender does not render", list.c_str());
+              "or occlusion maps (or not at all); their materials shade without the normal map", list.c_str());
 }
 
 dr_material default_material(const char *name)
@@ -853,7 +853,10 @@ dr_material default_material(const char *name)
 void Loader::load_surface(const tinygltf::Material &g, const std::string &mp, dr_material &m)
 {
     const tinygltf::NormalTextureInfo &nt = g.normalTexture;
-    if (nt.index >= 0) {
+    /* a KTX2 normal map cannot be decoded: left out here, so that check_ktx2
+     * refuses it, or skips it (flat shading normals) under --ignore-unsupported */
+    bool ktx2 = nt.index >= 0 && size_t(nt.index) < texture_ktx2_.size() && texture_ktx2_[size_t(nt.index)] >= 0;
+    if (nt.index >= 0 && !ktx2) {
         tinygltf::TextureInfo ti;
         ti.index = nt.index;
         ti.texCoord = nt.texCoord;

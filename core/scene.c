@@ -67,6 +67,8 @@ int dr_scene_refresh(struct dr_scene *s)
         dr_set_error("out of memory");
         return DR_ERR_NOMEM;
     }
+    if (m->colors)
+        s->effects |= DR_FX_VERTEX_COLORS;
     for (uint32_t t = 0; t < m->n_triangles; t++) {
         used[m->material[t]] = true;
         if (m->flags[t] & DR_TRI_HAS_NORMALS)
@@ -203,7 +205,7 @@ void dr_effects_describe(unsigned fx, char *buf, int size)
         {DR_FX_SHADING_NORMALS, "shading_normals"}, {DR_FX_MEDIA, "media"},
         {DR_FX_HETEROGENEOUS_MEDIA, "heterogeneous_media"}, {DR_FX_NORMAL_MAPS, "normal_maps"},
         {DR_FX_ALPHA_MASK, "alpha_mask"},       {DR_FX_ALPHA_BLEND, "alpha_blend"},
-        {DR_FX_SINGLE_SIDED, "single_sided"},
+        {DR_FX_SINGLE_SIDED, "single_sided"},   {DR_FX_VERTEX_COLORS, "vertex_colors"},
     };
     int n = 0;
     buf[0] = '\0';

@@ -142,7 +142,8 @@ enum dr_effect {
     DR_FX_NORMAL_MAPS = 1 << 9,        /* some material has a normalTexture */
     DR_FX_ALPHA_MASK = 1 << 10,        /* alphaMode MASK: cut-outs (coverage.h) */
     DR_FX_ALPHA_BLEND = 1 << 11,       /* alphaMode BLEND: stochastic transparency */
-    DR_FX_SINGLE_SIDED = 1 << 12       /* doubleSided false: back faces culled */
+    DR_FX_SINGLE_SIDED = 1 << 12,      /* doubleSided false: back faces culled */
+    DR_FX_VERTEX_COLORS = 1 << 13      /* COLOR_0 multiplies base colours (mesh.colors) */
 };
 
 struct dr_scene {
