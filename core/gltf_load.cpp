@@ -285,6 +285,11 @@ private:
     void visit_node(int idx, const Mat4 &parent, const std::string &ref, std::vector<char> &on_path);
     Mat4 local_matrix(int idx);
     void add_primitive(int mesh_idx, int prim_idx, const Mat4 &world, const NormalXform &nx);
+    struct VertexAttrs {
+        const AccessorView &pos, &nor, &uv, &uv1, &col;
+        bool has_nor, has_col;
+    };
+    void append_vertices(const VertexAttrs &va, size_t base, const Mat4 &world, const NormalXform &nx);
     std::vector<uint32_t> primitive_sequence(const tinygltf::Primitive &p, const std::string &pp, size_t nv,
                                              const dr_draco_mesh *draco);
     bool decode_draco(const tinygltf::Primitive &p, const std::string &pp, dr_draco_mesh &out,
@@ -1180,6 +1185,39 @@ std::vector<uint32_t> triangle_list(int mode, const std::vector<uint32_t> &seq)
     return tri;
 }
 
+/* Appends a primitive's vertices in world space; colours and the second uv
+ * set only when the scene has them. */
+void Loader::append_vertices(const VertexAttrs &va, size_t base, const Mat4 &world, const NormalXform &nx)
+{
+    /* vertex colours and the second uv set exist only once some primitive
+     * needs them; earlier vertices then get the neutral value */
+    if (va.has_col && !have_colors_) colors_.assign(base * 3, 1.0f);
+    have_colors_ |= va.has_col;
+    if (want_uv1_ && uvs1_.empty()) uvs1_.assign(base * 2, 0.0f);
+    for (size_t i = 0; i < va.pos.count; i++) {
+        dr_vec3 w = mat_point(world, va.pos.get(i, 0), va.pos.get(i, 1), va.pos.get(i, 2));
+        positions_.insert(positions_.end(), {float(w.x), float(w.y), float(w.z)});
+        bbox_min_ = dr_v3(fmin(bbox_min_.x, w.x), fmin(bbox_min_.y, w.y), fmin(bbox_min_.z, w.z));
+        bbox_max_ = dr_v3(fmax(bbox_max_.x, w.x), fmax(bbox_max_.y, w.y), fmax(bbox_max_.z, w.z));
+        dr_vec3 n = dr_v3s(0.0);
+        if (va.has_nor) {
+            double a = va.nor.get(i, 0), b = va.nor.get(i, 1), c = va.nor.get(i, 2);
+            n = dr_normalize(dr_v3(nx.n[0][0] * a + nx.n[0][1] * b + nx.n[0][2] * c,
+                                   nx.n[1][0] * a + nx.n[1][1] * b + nx.n[1][2] * c,
+                                   nx.n[2][0] * a + nx.n[2][1] * b + nx.n[2][2] * c));
+        }
+        normals_.insert(normals_.end(), {float(n.x), float(n.y), float(n.z)});
+        uvs_.insert(uvs_.end(), {float(va.uv.get(i, 0)), float(va.uv.get(i, 1))});
+        if (want_uv1_) uvs1_.insert(uvs1_.end(), {float(va.uv1.get(i, 0)), float(va.uv1.get(i, 1))});
+        if (have_colors_) {
+            if (va.has_col)
+                colors_.insert(colors_.end(), {float(va.col.get(i, 0)), float(va.col.get(i, 1)), float(va.col.get(i, 2))});
+            else
+                colors_.insert(colors_.end(), {1.0f, 1.0f, 1.0f});
+        }
+    }
+}
+
 void Loader::add_primitive(int mesh_idx, int prim_idx, const Mat4 &world, const NormalXform &nx)
 {
     const tinygltf::Primitive &p = model_.meshes[size_t(mesh_idx)].primitives[size_t(prim_idx)];
@@ -1240,33 +1278,7 @@ void Loader::add_primitive(int mesh_idx, int prim_idx, const Mat4 &world, const 
     }
     uint8_t flags = uint8_t((has_nor ? DR_TRI_HAS_NORMALS : 0) | (has_uv ? DR_TRI_HAS_UVS : 0));
 
-    /* vertex colours and the second uv set exist only once some primitive
-     * needs them; earlier vertices then get the neutral value */
-    if (has_col && !have_colors_) colors_.assign(base * 3, 1.0f);
-    have_colors_ |= has_col;
-    if (want_uv1_ && uvs1_.empty()) uvs1_.assign(base * 2, 0.0f);
-    for (size_t i = 0; i < nv; i++) {
-        dr_vec3 w = mat_point(world, pos.get(i, 0), pos.get(i, 1), pos.get(i, 2));
-        positions_.insert(positions_.end(), {float(w.x), float(w.y), float(w.z)});
-        bbox_min_ = dr_v3(fmin(bbox_min_.x, w.x), fmin(bbox_min_.y, w.y), fmin(bbox_min_.z, w.z));
-        bbox_max_ = dr_v3(fmax(bbox_max_.x, w.x), fmax(bbox_max_.y, w.y), fmax(bbox_max_.z, w.z));
-        dr_vec3 n = dr_v3s(0.0);
-        if (has_nor) {
-            double a = nor.get(i, 0), b = nor.get(i, 1), c = nor.get(i, 2);
-            n = dr_normalize(dr_v3(nx.n[0][0] * a + nx.n[0][1] * b + nx.n[0][2] * c,
-                                   nx.n[1][0] * a + nx.n[1][1] * b + nx.n[1][2] * c,
-                                   nx.n[2][0] * a + nx.n[2][1] * b + nx.n[2][2] * c));
-        }
-        normals_.insert(normals_.end(), {float(n.x), float(n.y), float(n.z)});
-        uvs_.insert(uvs_.end(), {float(uv.get(i, 0)), float(uv.get(i, 1))});
-        if (want_uv1_) uvs1_.insert(uvs1_.end(), {float(uv1.get(i, 0)), float(uv1.get(i, 1))});
-        if (have_colors_) {
-            if (has_col)
-                colors_.insert(colors_.end(), {float(col.get(i, 0)), float(col.get(i, 1)), float(col.get(i, 2))});
-            else
-                colors_.insert(colors_.end(), {1.0f, 1.0f, 1.0f});
-        }
-    }
+    append_vertices(VertexAttrs{pos, nor, uv, uv1, col, has_nor, has_col}, base, world, nx);
     add_tangents(p, pp, nv, world, nx.mirrored, material);
     for (size_t t = 0; t + 2 < tri.size(); t += 3) {
         uint32_t a = uint32_t(base) + tri[t], b = uint32_t(base) + tri[t + 1], c = uint32_t(base) + tri[t + 2];
