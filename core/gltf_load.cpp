@@ -1110,6 +1110,8 @@ void Loader::run()
  * boundaries are refused, not silently rendered wrong). DR_medium at the top
  * level is the global medium: the space outside every medium mesh. */
 
+/* density: {uri, resolution} for raw/EXR grids; {uri, grid?, resolution?}
+ * for OpenVDB files, whose size comes from the file. */
 void Loader::read_medium_grid(const tinygltf::Value &v, const std::string &ep, dr_medium &med)
 {
     const std::string gp = ep + "/density";
@@ -1118,22 +1120,32 @@ void Loader::read_medium_grid(const tinygltf::Value &v, const std::string &ep, d
         fail(DR_ERR_FORMAT, "%s/uri: expected a file name", gp.c_str());
     const std::string &uri = v.Get("uri").Get<std::string>();
     if (uri.size() >= sizeof med.grid_uri) fail(DR_ERR_FORMAT, "%s/uri: file name too long", gp.c_str());
-    const tinygltf::Value &r = v.Get("resolution");
-    int n[3] = {0, 0, 0};
-    if (!r.IsArray() || r.ArrayLen() != 3)
-        fail(DR_ERR_FORMAT, "%s/resolution: expected [nx, ny, nz]", gp.c_str());
-    double voxels = 1.0;
-    for (int a = 0; a < 3; a++) {
-        double x = r.Get(a).IsNumber() ? r.Get(a).GetNumberAsDouble() : -1.0;
-        if (!(x >= 1.0 && x <= 65536.0) || x != double(int(x)))
-            fail(DR_ERR_FORMAT, "%s/resolution/%d: expected a positive integer", gp.c_str(), a);
-        n[a] = int(x);
-        voxels *= x;
+    const bool vdb = dr_grid_file_is_vdb(uri.c_str());
+    std::string grid;
+    if (v.Has("grid")) {
+        if (!vdb) fail(DR_ERR_FORMAT, "%s/grid: only OpenVDB (.vdb) files have named grids", gp.c_str());
+        if (!v.Get("grid").IsString() || v.Get("grid").Get<std::string>().empty())
+            fail(DR_ERR_FORMAT, "%s/grid: expected the name of a float grid", gp.c_str());
+        grid = v.Get("grid").Get<std::string>();
     }
-    if (voxels > double(1 << 28))
-        fail(DR_ERR_FORMAT, "%s/resolution: %.0f voxels is more than the 2^28 supported", gp.c_str(), voxels);
+    int n[3] = {0, 0, 0};
+    if (v.Has("resolution") || !vdb) {
+        const tinygltf::Value &r = v.Get("resolution");
+        if (!r.IsArray() || r.ArrayLen() != 3)
+            fail(DR_ERR_FORMAT, "%s/resolution: expected [nx, ny, nz]", gp.c_str());
+        double voxels = 1.0;
+        for (int a = 0; a < 3; a++) {
+            double x = r.Get(a).IsNumber() ? r.Get(a).GetNumberAsDouble() : -1.0;
+            if (!(x >= 1.0 && x <= 65536.0) || x != double(int(x)))
+                fail(DR_ERR_FORMAT, "%s/resolution/%d: expected a positive integer", gp.c_str(), a);
+            n[a] = int(x);
+            voxels *= x;
+        }
+        if (voxels > double(DR_VOLUME_MAX_VOXELS))
+            fail(DR_ERR_FORMAT, "%s/resolution: %.0f voxels is more than the 2^28 supported", gp.c_str(), voxels);
+    }
     std::string file = uri[0] == '/' ? uri : directory_of(path_) + uri;
-    int rc = dr_grid_read(file.c_str(), n[0], n[1], n[2], &med.grid);
+    int rc = dr_grid_read(file.c_str(), grid.empty() ? nullptr : grid.c_str(), n[0], n[1], n[2], &med.grid);
     if (rc != 0) fail(rc, "%s/uri: %s", gp.c_str(), dr_last_error());
     med.has_grid = true;
     snprintf(med.grid_uri, sizeof med.grid_uri, "%s", uri.c_str());

@@ -61,11 +61,18 @@ struct dr_medium {
 };
 
 /* Reads a density grid of nx x ny x nz voxels from file: raw little-endian
- * float32 (.raw, .f32, .bin: exactly nx*ny*nz*4 bytes) or a single-channel
+ * float32 (.raw, .f32, .bin: exactly nx*ny*nz*4 bytes), a single-channel
  * (or first-channel) EXR of width nx and height ny*nz (z slices stacked
- * top to bottom, each with y rows top to bottom). 0 or DR_ERR_* with a message
- * naming the file (negative or non-finite density, wrong size, other formats). */
-int dr_grid_read(const char *file, int nx, int ny, int nz, struct dr_grid *grid);
+ * top to bottom, each with y rows top to bottom), or an OpenVDB file (.vdb,
+ * through the image library, image_io.h): the float grid `grid_name` (NULL:
+ * "density", else the first float grid), whose active voxel bounding box
+ * becomes the grid's voxels, index coordinate (x0 + i, y0 + j, z0 + k) voxel
+ * (i, j, k); nx = 0 takes its size from the file, otherwise it must match.
+ * 0 or DR_ERR_* with a message naming the file (negative or non-finite
+ * density, wrong size, other formats, no float grid, an empty grid). */
+int dr_grid_read(const char *file, const char *grid_name, int nx, int ny, int nz, struct dr_grid *grid);
+/* Does the file name say OpenVDB (.vdb)? */
+bool dr_grid_file_is_vdb(const char *file);
 /* (Re)builds the majorant cells from the voxels. 0 or DR_ERR_NOMEM. */
 int dr_grid_build_majorants(struct dr_grid *grid);
 void dr_grid_release(struct dr_grid *grid);

@@ -1,5 +1,6 @@
 /* Media in glTF files: KHR_materials_volume (+ transmission, ior,
- * volume_scatter), the DR_medium extension with density grids (raw and EXR),
+ * volume_scatter), the DR_medium extension with density grids (raw, EXR and
+ * OpenVDB: tests/data/media/smoke.vdb holds smoke.raw's voxels),
  * and bad input that must be refused before any work, with a message naming
  * the file and the JSON path. Scenes are written to a temporary directory. */
 #include <stdlib.h>
@@ -178,9 +179,16 @@ static void test_bad_input(void)
                  write_scene("neg", "\"DR_medium\":{\"density\":{\"uri\":\"neg.raw\",\"resolution\":[2,2,2]}}", "",
                              0),
                  "voxel (1, 0, 1)", ">= 0");
-    expect_error("vdb", write_scene("vdb", "\"DR_medium\":{\"density\":{\"uri\":\"smoke.vdb\",\"resolution\":[2,2,2]}}",
-                                    "", 0),
-                 "OpenVDB", "smoke.vdb");
+    expect_error("grid key on a raw file",
+                 write_scene("gridkey", "\"DR_medium\":{\"density\":{\"uri\":\"grid.raw\",\"grid\":\"density\","
+                             "\"resolution\":[4,3,2]}}", "", 0),
+                 "/materials/0/extensions/DR_medium/density/grid", "OpenVDB");
+    expect_error("raw without resolution",
+                 write_scene("nores", "\"DR_medium\":{\"density\":{\"uri\":\"grid.raw\"}}", "", 0),
+                 "/materials/0/extensions/DR_medium/density/resolution", NULL);
+    expect_error("missing vdb",
+                 write_scene("novdb", "\"DR_medium\":{\"density\":{\"uri\":\"smoke.vdb\"}}", "", 0),
+                 "/materials/0/extensions/DR_medium/density/uri", "smoke.vdb");
     expect_error("bad resolution",
                  write_scene("res", "\"DR_medium\":{\"density\":{\"uri\":\"x.raw\",\"resolution\":[2,0,2]}}", "", 0),
                  "/materials/0/extensions/DR_medium/density/resolution/1", NULL);
@@ -202,6 +210,38 @@ static void test_bad_input(void)
                  "/extensions/DR_medium/bounds", NULL);
 }
 
+/* smoke.vdb's grid "density" is smoke.raw's 16^3 voxels at index
+ * (-8, 3, 100); it loads to the same floats, found by name although the file
+ * has other grids; another float grid is picked with "grid". */
+static void test_vdb(void)
+{
+    const char *t = getenv("DR_TESTDIR") ? getenv("DR_TESTDIR") : "tests";
+    char raw[512], vdb[512], file[512];
+    snprintf(raw, sizeof raw, "%s/data/media/smoke.gltf", t);
+    snprintf(vdb, sizeof vdb, "%s/data/media/smoke-vdb.gltf", t);
+    snprintf(file, sizeof file, "%s/data/media/smoke.vdb", t);
+    struct dr_volume vol;
+    CHECK(dr_volume_read(file, NULL, &vol) == 0, "read %s: %s", file, dr_last_error());
+    CHECK(vol.nx == 16 && vol.ny == 16 && vol.nz == 16 && vol.x0 == -8 && vol.y0 == 3 && vol.z0 == 100 &&
+          strcmp(vol.grid, "density") == 0, "the density grid's active box: %dx%dx%d at (%d, %d, %d), '%s'",
+          vol.nx, vol.ny, vol.nz, vol.x0, vol.y0, vol.z0, vol.grid);
+    free(vol.data);
+    CHECK(dr_volume_read(file, "temperature", &vol) == 0 && vol.nx * vol.ny * vol.nz == 1 && vol.data[0] == 5.0f,
+          "the grid named temperature: one voxel of 5");
+    free(vol.data);
+    struct dr_scene *a = dr_scene_load(raw), *b = dr_scene_load(vdb);
+    CHECK(a && b, "load: %s", dr_last_error());
+    if (a && b) {
+        const struct dr_grid *ga = &a->media[0].grid, *gb = &b->media[0].grid;
+        CHECK(gb->nx == 16 && gb->ny == 16 && gb->nz == 16, "resolution from the file");
+        CHECK(memcmp(ga->density, gb->density, 16 * 16 * 16 * sizeof(float)) == 0, "the same voxels as the raw grid");
+        CHECK(memcmp(&ga->bmin, &gb->bmin, sizeof ga->bmin) == 0 && memcmp(&ga->bmax, &gb->bmax, sizeof ga->bmax) == 0,
+              "stretched over the same box");
+    }
+    dr_scene_destroy(a);
+    dr_scene_destroy(b);
+}
+
 int main(void)
 {
     snprintf(dir, sizeof dir, "/tmp/drender-media-XXXXXX");
@@ -211,6 +251,7 @@ int main(void)
     }
     test_khr_volume();
     test_dr_medium_grid();
+    test_vdb();
     test_bad_input();
     char cmd[300];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
