@@ -58,6 +58,10 @@ struct dr_medium {
     dr_vec3 bmin, bmax;
     char grid_uri[512];
     int material;          /* the boundary material, -1: the global medium */
+    /* the boundary: 0 index-matched (crossed without bending); else a smooth
+     * dielectric interface, the index of refraction inside relative to
+     * outside (KHR_materials_ior; the global medium's is 1) */
+    double ior;
 };
 
 /* Reads a density grid of nx x ny x nz voxels from file: raw little-endian
@@ -127,6 +131,16 @@ double dr_hg_dlog_dg(double g, double cos_theta);
 double dr_hg_eval(double g, double cos_theta);
 /* Samples wi for a ray travelling along d; returns its density. */
 double dr_hg_sample(double g, dr_vec3 d, double u1, double u2, dr_vec3 *wi);
+
+/* Smooth dielectric boundaries (medium_path.c). Fresnel reflectance of
+ * unpolarised light arriving at cos_i (> 0, on the incident side) on an
+ * interface of relative index eta = n_transmitted / n_incident (exact: the
+ * mean of the s and p reflectances); *cos_t: the refracted cosine, 0 at total
+ * internal reflection (where the reflectance is 1). */
+double dr_fresnel_dielectric(double cos_i, double eta, double *cos_t);
+/* Direction refracted from d (unit, arriving) through an interface with
+ * unit normal n on the incident side (dot(d, n) = -cos_i), given cos_t. */
+dr_vec3 dr_refract(dr_vec3 d, dr_vec3 n, double cos_i, double cos_t, double eta);
 
 /* KHR_materials_volume_scatter's multiscatterColor (the albedo a thick
  * slab shows) to single-scattering albedo, per channel (the inversion of

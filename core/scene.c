@@ -164,7 +164,7 @@ void dr_effects_describe(unsigned fx, char *buf, int size)
         {DR_FX_ENV_CONSTANT, "environment"},    {DR_FX_ENV_MAP, "environment_map"},
         {DR_FX_TEXTURES, "textures"},           {DR_FX_SPECULAR, "specular"},
         {DR_FX_SHADING_NORMALS, "shading_normals"}, {DR_FX_MEDIA, "media"},
-        {DR_FX_HETEROGENEOUS_MEDIA, "heterogeneous_media"},
+        {DR_FX_HETEROGENEOUS_MEDIA, "heterogeneous_media"}, {DR_FX_DIELECTRIC_BOUNDARIES, "dielectric_boundaries"},
     };
     int n = 0;
     buf[0] = '\0';

@@ -104,7 +104,8 @@ enum dr_effect {
     DR_FX_SPECULAR = 1 << 5,     /* some material has a non-zero specular lobe */
     DR_FX_SHADING_NORMALS = 1 << 6,
     DR_FX_MEDIA = 1 << 7,              /* some participating medium (medium.h) */
-    DR_FX_HETEROGENEOUS_MEDIA = 1 << 8 /* ... with a density grid */
+    DR_FX_HETEROGENEOUS_MEDIA = 1 << 8, /* ... with a density grid */
+    DR_FX_DIELECTRIC_BOUNDARIES = 1 << 9 /* ... bounded by a smooth dielectric (medium.h: ior) */
 };
 
 struct dr_scene {

@@ -19,6 +19,13 @@
 #      grid back as raw float32 with its resolution; bad VDB input (not a VDB,
 #      no float grid, only a vec3 grid, an empty grid, an unknown grid name, a
 #      resolution that disagrees) is an input error naming file and JSON path
+#   g. dielectric boundaries (glass-fog.gltf: fog-khr.gltf with ior 1.5):
+#      --json lists the effect and the stage dielectric_boundaries (the
+#      index-matched scenes do not); fdcheck of the medium's albedo and
+#      extinction and of the floor's base colour seen through the glass, prb
+#      and tape (DRT); prb and tape give the same gradient to 1e-12; an ior
+#      out of [1, 10] and a non-transmissive KHR_materials_volume boundary
+#      are input errors naming file and JSON path
 # Run by tests/run.sh (env: DRENDER, DR_TESTDIR); also runs alone.
 set -u
 
@@ -146,5 +153,36 @@ bad_vdb emptyvdb 's/"smoke.vdb"/"empty.vdb"/' "empty.vdb: cannot read volume: gr
 cp "$data/smoke.vdb" .
 bad_vdb gridname 's/"uri": "smoke.vdb"/"uri": "smoke.vdb", "grid": "velocity"/' "no float grid named 'velocity'"
 bad_vdb vdbres 's/"uri": "smoke.vdb"/"uri": "smoke.vdb", "resolution": [16, 16, 8]/' "16x16x16 voxels"
+
+# g. dielectric boundaries
+run render "$data/glass-fog.gltf" --spp 4 --res 24x24 -o glass.png --json
+expect_rc 0 "render a glass cube of fog"
+expect_in out '"media", "dielectric_boundaries"]' "render --json effects of a dielectric boundary"
+expect_in out '"participating_media", "dielectric_boundaries"]' "render --json stages of a dielectric boundary"
+run render "$data/fog-khr.gltf" --spp 1 --res 8x8 -o fog.png --json
+grep -q dielectric "$tmp/out" && fail "an index-matched boundary must not plan the dielectric stage"
+glass_params=(--param /materials/0/extensions/DR_medium/albedo --param /materials/0/extensions/DR_medium/extinction
+              --param /materials/1/pbrMetallicRoughness/baseColorFactor)
+for est in prb tape; do
+    run fdcheck "$data/glass-fog.gltf" "${glass_params[@]}" --spp 32 --res 12x12 --batches 16 --eps 0.05 \
+        --estimator $est
+    expect_rc 0 "fdcheck through a dielectric boundary ($est)"
+    run grad "$data/glass-fog.gltf" --target fog.png "${glass_params[@]}" --res 8x8 --spp 8 --estimator $est --json
+    expect_rc 0 "grad through a dielectric boundary ($est)"
+    cp "$tmp/out" "glass-$est.json"
+done
+python3 - glass-prb.json glass-tape.json <<'PY' || fail "prb and tape must agree through a dielectric boundary"
+import json, sys
+a, b = (json.load(open(f))["parameters"] for f in sys.argv[1:3])
+worst = max(abs(x - y) / max(abs(x), abs(y), 1e-300) for p, q in zip(a, b) for x, y in zip(p["gradient"], q["gradient"]))
+print("glass-fog: prb vs tape, largest relative difference %.3g" % worst)
+sys.exit(worst > 1e-12)
+PY
+sed 's/"ior": 1.5/"ior": 0.5/' "$data/glass-fog.gltf" >badior.gltf
+run render badior.gltf -o badior.png
+check_failed 3 "badior.gltf|/materials/0/extensions/KHR_materials_ior/ior|[1, 10]"
+sed 's/"transmissionFactor": 1/"transmissionFactor": 0.5/' "$data/glass-fog.gltf" >opaque.gltf
+run render opaque.gltf -o opaque.png
+check_failed 3 "opaque.gltf|/materials/0/extensions/KHR_materials_volume|transmissionFactor"
 
 echo "cli_media: all passed"

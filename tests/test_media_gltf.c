@@ -77,8 +77,8 @@ static void write_raw(const char *name, int n, float value, int negative_at)
     fclose(f);
 }
 
-#define KHR_INDEX_MATCHED                                                                              \
-    "\"KHR_materials_transmission\":{\"transmissionFactor\":1},\"KHR_materials_ior\":{\"ior\":1}"
+#define KHR_TRANSMISSIVE "\"KHR_materials_transmission\":{\"transmissionFactor\":1}"
+#define KHR_INDEX_MATCHED KHR_TRANSMISSIVE ",\"KHR_materials_ior\":{\"ior\":1}"
 
 static void test_khr_volume(void)
 {
@@ -104,6 +104,23 @@ static void test_khr_volume(void)
     char fx[256];
     dr_effects_describe(s->effects, fx, sizeof fx);
     CHECK(strstr(fx, "media") != NULL, "effects name media: %s", fx);
+    CHECK(m->ior == 0.0 && !(s->effects & DR_FX_DIELECTRIC_BOUNDARIES), "ior 1: index-matched");
+    dr_scene_destroy(s);
+
+    /* transmissive without KHR_materials_ior: glTF's default 1.5, a dielectric */
+    p = write_scene("glass", "\"KHR_materials_volume\":{\"attenuationDistance\":2}," KHR_TRANSMISSIVE, "", 0);
+    s = dr_scene_load(p);
+    CHECK(s != NULL, "load: %s", dr_last_error());
+    if (!s)
+        return;
+    CHECK(s->media[0].ior == 1.5 && (s->effects & DR_FX_DIELECTRIC_BOUNDARIES), "default ior 1.5: dielectric");
+    CHECK(dr_path_plan(s, NULL) & DR_STAGE_DIELECTRIC, "plan has the dielectric stage");
+    dr_scene_destroy(s);
+    /* DR_medium with KHR_materials_ior 1.33 and transmission: water (alone: index-matched, below) */
+    p = write_scene("water", "\"DR_medium\":{\"extinction\":1}," KHR_TRANSMISSIVE
+                    ",\"KHR_materials_ior\":{\"ior\":1.33}", "", 0);
+    s = dr_scene_load(p);
+    CHECK(s && s->media[0].ior == 1.33, "DR_medium with KHR_materials_ior 1.33: %s", s ? "wrong ior" : dr_last_error());
     dr_scene_destroy(s);
 }
 
@@ -122,6 +139,7 @@ static void test_dr_medium_grid(void)
     const struct dr_medium *m = &s->media[0];
     CHECK(m->has_grid && m->grid.nx == 4 && m->grid.ny == 3 && m->grid.nz == 2, "grid resolution");
     CHECK(m->grid.bmin.x == -1.0 && m->grid.bmax.z == 1.0, "grid box = the mesh's bounds");
+    CHECK(m->ior == 0.0, "DR_medium alone: an index-matched boundary");
     CHECK(m->grid.majorant && m->grid.majorant[0] == 1.0f, "majorant = largest voxel (%g)",
           m->grid.majorant ? m->grid.majorant[0] : -1.0);
     CHECK(s->effects & DR_FX_HETEROGENEOUS_MEDIA, "heterogeneous_media effect");
@@ -198,12 +216,17 @@ static void test_bad_input(void)
                  "/materials/0/extensions/DR_medium/albedo", NULL);
     expect_error("g", write_scene("g", "\"DR_medium\":{\"g\":1}", "", 0), "/materials/0/extensions/DR_medium/g",
                  NULL);
-    expect_error("dielectric",
-                 write_scene("dielectric",
-                             "\"KHR_materials_volume\":{\"attenuationDistance\":1},"
-                             "\"KHR_materials_transmission\":{\"transmissionFactor\":1}",
-                             "", 0),
-                 "/materials/0/extensions/KHR_materials_volume", "index-matched");
+    expect_error("not transmissive",
+                 write_scene("opaque", "\"KHR_materials_volume\":{\"attenuationDistance\":1}", "", 0),
+                 "/materials/0/extensions/KHR_materials_volume", "transmissionFactor");
+    expect_error("ior below 1",
+                 write_scene("ior", "\"KHR_materials_volume\":{\"attenuationDistance\":1}," KHR_TRANSMISSIVE
+                             ",\"KHR_materials_ior\":{\"ior\":0.9}", "", 0),
+                 "/materials/0/extensions/KHR_materials_ior/ior", "[1, 10]");
+    expect_error("ior not a number",
+                 write_scene("iorstr", "\"KHR_materials_volume\":{\"attenuationDistance\":1}," KHR_TRANSMISSIVE
+                             ",\"KHR_materials_ior\":{\"ior\":\"glass\"}", "", 0),
+                 "/materials/0/extensions/KHR_materials_ior/ior", NULL);
     expect_error("global grid without bounds",
                  write_scene("global", "\"DR_medium\":{\"extinction\":1}",
                              "\"DR_medium\":{\"density\":{\"uri\":\"grid.raw\",\"resolution\":[4,3,2]}}", 0),

@@ -17,6 +17,8 @@
   fog-dense.gltf    a hard case: extinction 1e4, 1e3, 1e2 (1/m), albedo 0.999
   fog-khr.gltf      the cube as a homogeneous KHR_materials_volume medium
                     (transmission 1, ior 1, volume_scatter albedo)
+  glass-fog.gltf    fog-khr.gltf behind a smooth dielectric boundary
+                    (KHR_materials_ior 1.5): a glass cube of fog
   smoke-vdb.gltf    smoke.gltf with the grid read from smoke.vdb (written by
                     make_vdb.py: the same voxels as an OpenVDB float grid)
 """
@@ -120,3 +122,8 @@ scene({"KHR_materials_volume": {"thicknessFactor": 1, "attenuationDistance": 1.5
        "KHR_materials_transmission": {"transmissionFactor": 1}, "KHR_materials_ior": {"ior": 1},
        "KHR_materials_volume_scatter": {"multiscatterColor": [0.9, 0.9, 0.9], "scatterAnisotropy": 0.3}},
       "fog-khr.gltf")
+scene({"KHR_materials_volume": {"thicknessFactor": 1, "attenuationDistance": 1.5,
+                                "attenuationColor": [0.6, 0.7, 0.8]},
+       "KHR_materials_transmission": {"transmissionFactor": 1}, "KHR_materials_ior": {"ior": 1.5},
+       "KHR_materials_volume_scatter": {"multiscatterColor": [0.9, 0.9, 0.9], "scatterAnisotropy": 0.3}},
+      "glass-fog.gltf")
