@@ -537,7 +537,10 @@ int check_volume_size(const ImageSpec &s, const char *path, const std::string &n
     // The reader's tile-aligned buffer, our copy of the box, and the grids
     // OpenVDB holds in memory while the file is open.
     double tiles = (double)s.width * s.height * (s.depth > 0 ? s.depth : 1) * s.nchannels * sizeof(float);
-    double need = tiles + box * sizeof(float) + (double)s.get_int_attribute("openvdb:file_mem_bytes", 0);
+    int64_t held = 0;   // an int64 attribute: get_int_attribute would truncate past 2 GiB
+    if (!s.getattribute("openvdb:file_mem_bytes", TypeDesc::INT64, &held))
+        held = 0;
+    double need = tiles + box * sizeof(float) + (double)held;
     unsigned long long limit = max_image_bytes();
     if (limit > 0 && need > (double)limit) {
         dr_set_error("%s: cannot read volume: grid '%s' (%dx%dx%d active box, %dx%dx%d in tiles) needs %.1f MiB "
