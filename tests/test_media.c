@@ -48,6 +48,8 @@ static struct stats render_stats(struct dr_scene *s, struct dr_camera cam, int r
 
 static void check_mean(const char *what, struct stats st, dr_vec3 expect, double rel_slack)
 {
+    printf("%s: mean %.5f %.5f %.5f (stderr %.2g %.2g %.2g)\n", what, st.mean.x, st.mean.y, st.mean.z, st.se.x,
+           st.se.y, st.se.z);
     for (int c = 0; c < 3; c++) {
         double m = dr_v3_get(st.mean, c), e = dr_v3_get(expect, c), se = dr_v3_get(st.se, c);
         double tol = 4.0 * se + rel_slack * fabs(e);

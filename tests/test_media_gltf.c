@@ -263,6 +263,19 @@ static void test_vdb(void)
     }
     dr_scene_destroy(a);
     dr_scene_destroy(b);
+    /* bad files: the message names the file and says what is wrong */
+    static const char *const bad[][2] = {{"not-a-vdb.vdb", "not an OpenVDB file"},
+                                         {"nofloat.vdb", "no float grid"},
+                                         {"vec3.vdb", "velocity (vec3)"},
+                                         {"empty.vdb", "no active voxels"}};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        char ext[700];
+        snprintf(file, sizeof file, "%s/data/media/%s", t, bad[i][0]);
+        snprintf(ext, sizeof ext, "\"DR_medium\":{\"density\":{\"uri\":\"%s\"}}", file);
+        expect_error(bad[i][0], write_scene("badvdb", ext, "", 0), bad[i][1], file);
+        CHECK(dr_volume_read(file, NULL, &vol) != 0 && vol.data == NULL, "%s: refused, nothing allocated",
+              bad[i][0]);
+    }
 }
 
 int main(void)
