@@ -12,6 +12,7 @@
 #include "cli.h"
 #include "grad_common.h"
 #include "image_io.h"
+#include "medium.h"
 #include "parallel.h"
 #include "params.h"
 #include "scene.h"
@@ -134,6 +135,8 @@ uint64_t cli_mem_scene(const struct dr_scene *s)
         b += image_bytes(&s->images[i]);
     b += image_bytes(&s->env.map);
     b += (double)s->n_materials * sizeof(struct dr_material) + (double)s->n_textures * sizeof(struct dr_texture);
+    for (int i = 0; i < s->n_media; i++)   /* density voxels (and their majorants, at most as many) */
+        b += 2.0 * (double)s->media[i].grid.nx * s->media[i].grid.ny * s->media[i].grid.nz * sizeof(float);
     return b >= 1.8e19 ? UINT64_MAX : (uint64_t)b;
 }
 

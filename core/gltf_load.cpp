@@ -305,6 +305,7 @@ private:
     void load_material_medium(const tinygltf::Material &g, const std::string &mp, size_t index);
     void read_medium_ext(const tinygltf::Value &v, const std::string &ep, dr_medium &med);
     void read_medium_grid(const tinygltf::Value &v, const std::string &ep, dr_medium &med);
+    double boundary_ior(const tinygltf::Material &g, const std::string &mp, bool has_dr);
     void load_global_medium();
     void finish_media();
 
@@ -1588,11 +1589,14 @@ void Loader::run()
 
 /* ---- participating media ----
  * A material with KHR_materials_volume or DR_medium bounds a medium (its mesh
- * must be closed; checked in dr_media_prepare). The boundary is index-matched:
- * KHR_materials_volume needs transmissionFactor 1 and ior 1 (dielectric
- * boundaries are refused, not silently rendered wrong). DR_medium at the top
- * level is the global medium: the space outside every medium mesh. */
+ * must be closed; checked in dr_media_prepare). The boundary is index-matched
+ * (ior 1) or a smooth dielectric (ior != 1, KHR_materials_ior, default 1.5
+ * with KHR_materials_volume): both need KHR_materials_transmission's
+ * transmissionFactor 1 (boundary_ior). DR_medium at the top level is the
+ * global medium: the space outside every medium mesh. */
 
+/* density: {uri, resolution} for raw/EXR grids; {uri, grid?, resolution?}
+ * for OpenVDB files, whose size comes from the file. */
 void Loader::read_medium_grid(const tinygltf::Value &v, const std::string &ep, dr_medium &med)
 {
     const std::string gp = ep + "/density";
@@ -1601,22 +1605,32 @@ void Loader::read_medium_grid(const tinygltf::Value &v, const std::string &ep, d
         fail(DR_ERR_FORMAT, "%s/uri: expected a file name", gp.c_str());
     const std::string &uri = v.Get("uri").Get<std::string>();
     if (uri.size() >= sizeof med.grid_uri) fail(DR_ERR_FORMAT, "%s/uri: file name too long", gp.c_str());
-    const tinygltf::Value &r = v.Get("resolution");
-    int n[3] = {0, 0, 0};
-    if (!r.IsArray() || r.ArrayLen() != 3)
-        fail(DR_ERR_FORMAT, "%s/resolution: expected [nx, ny, nz]", gp.c_str());
-    double voxels = 1.0;
-    for (int a = 0; a < 3; a++) {
-        double x = r.Get(a).IsNumber() ? r.Get(a).GetNumberAsDouble() : -1.0;
-        if (!(x >= 1.0 && x <= 65536.0) || x != double(int(x)))
-            fail(DR_ERR_FORMAT, "%s/resolution/%d: expected a positive integer", gp.c_str(), a);
-        n[a] = int(x);
-        voxels *= x;
+    const bool vdb = dr_grid_file_is_vdb(uri.c_str());
+    std::string grid;
+    if (v.Has("grid")) {
+        if (!vdb) fail(DR_ERR_FORMAT, "%s/grid: only OpenVDB (.vdb) files have named grids", gp.c_str());
+        if (!v.Get("grid").IsString() || v.Get("grid").Get<std::string>().empty())
+            fail(DR_ERR_FORMAT, "%s/grid: expected the name of a float grid", gp.c_str());
+        grid = v.Get("grid").Get<std::string>();
     }
-    if (voxels > double(1 << 28))
-        fail(DR_ERR_FORMAT, "%s/resolution: %.0f voxels is more than the 2^28 supported", gp.c_str(), voxels);
+    int n[3] = {0, 0, 0};
+    if (v.Has("resolution") || !vdb) {
+        const tinygltf::Value &r = v.Get("resolution");
+        if (!r.IsArray() || r.ArrayLen() != 3)
+            fail(DR_ERR_FORMAT, "%s/resolution: expected [nx, ny, nz]", gp.c_str());
+        double voxels = 1.0;
+        for (int a = 0; a < 3; a++) {
+            double x = r.Get(a).IsNumber() ? r.Get(a).GetNumberAsDouble() : -1.0;
+            if (!(x >= 1.0 && x <= 65536.0) || x != double(int(x)))
+                fail(DR_ERR_FORMAT, "%s/resolution/%d: expected a positive integer", gp.c_str(), a);
+            n[a] = int(x);
+            voxels *= x;
+        }
+        if (voxels > double(DR_VOLUME_MAX_VOXELS))
+            fail(DR_ERR_FORMAT, "%s/resolution: %.0f voxels is more than the 2^28 supported", gp.c_str(), voxels);
+    }
     std::string file = uri[0] == '/' ? uri : directory_of(path_) + uri;
-    int rc = dr_grid_read(file.c_str(), n[0], n[1], n[2], &med.grid);
+    int rc = dr_grid_read(file.c_str(), grid.empty() ? nullptr : grid.c_str(), n[0], n[1], n[2], &med.grid);
     if (rc != 0) fail(rc, "%s/uri: %s", gp.c_str(), dr_last_error());
     med.has_grid = true;
     snprintf(med.grid_uri, sizeof med.grid_uri, "%s", uri.c_str());
@@ -1666,8 +1680,8 @@ static dr_medium empty_medium(const char *name, int material)
 }
 
 /* KHR_materials_volume: attenuation (sigma_t = -ln(colour) / distance);
- * KHR_materials_volume_scatter: albedo and g; the boundary's transmission. */
-static void khr_volume(const tinygltf::Material &g, dr_medium &med, bool *index_matched)
+ * KHR_materials_volume_scatter: albedo and g. */
+static void khr_volume(const tinygltf::Material &g, dr_medium &med)
 {
     auto vol = g.extensions.find("KHR_materials_volume");
     const tinygltf::Value &v = vol->second;
@@ -1690,13 +1704,34 @@ static void khr_volume(const tinygltf::Material &g, dr_medium &med, bool *index_
         const tinygltf::Value &an = sc->second.Get("scatterAnisotropy");
         if (an.IsNumber()) med.g = an.GetNumberAsDouble();
     }
-    double transmission = 0.0, ior = 1.5;
+}
+
+/* The boundary's index of refraction, 1: index-matched. KHR_materials_ior
+ * (default 1.5 under KHR_materials_volume, as glTF says; DR_medium alone: 1)
+ * needs a transmissive boundary (transmissionFactor 1); a DR_medium material
+ * whose KHR_materials_volume boundary is not transmissive stays index-matched
+ * (DR_medium describes the medium, as before dielectrics existed). */
+double Loader::boundary_ior(const tinygltf::Material &g, const std::string &mp, bool has_dr)
+{
+    const bool has_vol = g.extensions.count("KHR_materials_volume") > 0;
+    auto io = g.extensions.find("KHR_materials_ior");
+    if (!has_vol && io == g.extensions.end()) return 1.0;
+    double ior = 1.5, transmission = 0.0;
+    if (io != g.extensions.end() && io->second.Has("ior")) {
+        const tinygltf::Value &x = io->second.Get("ior");
+        ior = x.IsNumber() ? x.GetNumberAsDouble() : -1.0;
+        if (!(ior >= 1.0 && ior <= 10.0))
+            fail(DR_ERR_FORMAT, "%s/extensions/KHR_materials_ior/ior: a medium boundary's index of refraction must "
+                 "be a number in [1, 10] (got %s)", mp.c_str(), x.IsNumber() ? strf("%g", ior).c_str() : "no number");
+    }
     auto tr = g.extensions.find("KHR_materials_transmission");
     if (tr != g.extensions.end() && tr->second.Get("transmissionFactor").IsNumber())
         transmission = tr->second.Get("transmissionFactor").GetNumberAsDouble();
-    auto io = g.extensions.find("KHR_materials_ior");
-    if (io != g.extensions.end() && io->second.Get("ior").IsNumber()) ior = io->second.Get("ior").GetNumberAsDouble();
-    *index_matched = transmission == 1.0 && ior == 1.0;
+    if (transmission == 1.0) return ior;
+    if (has_dr) return 1.0;
+    fail(DR_ERR_FORMAT, "%s/extensions/KHR_materials_volume: a medium boundary must be transmissive: set "
+         "KHR_materials_transmission.transmissionFactor to 1 (with KHR_materials_ior.ior 1 the boundary is "
+         "index-matched, otherwise a smooth dielectric), or describe the medium with DR_medium", mp.c_str());
 }
 
 void Loader::load_material_medium(const tinygltf::Material &g, const std::string &mp, size_t index)
@@ -1711,14 +1746,9 @@ void Loader::load_material_medium(const tinygltf::Material &g, const std::string
         return;
     }
     dr_medium med = empty_medium(g.name.empty() ? strf("material_%zu", index).c_str() : g.name.c_str(), int(index));
-    if (has_vol) {
-        bool matched = false;
-        khr_volume(g, med, &matched);
-        if (!matched && dr == g.extensions.end())
-            fail(DR_ERR_FORMAT, "%s/extensions/KHR_materials_volume: only index-matched medium boundaries are "
-                 "supported: set KHR_materials_transmission.transmissionFactor to 1 and KHR_materials_ior.ior "
-                 "to 1 (or describe the medium with DR_medium)", mp.c_str());
-    }
+    if (has_vol) khr_volume(g, med);
+    double ior = boundary_ior(g, mp, dr != g.extensions.end());
+    med.ior = ior == 1.0 ? 0.0 : ior;   /* medium.h: 0 is index-matched */
     media_.push_back(med);   /* owned (and released) by the loader from here */
     if (dr != g.extensions.end()) read_medium_ext(dr->second, mp + "/extensions/DR_medium", media_.back());
     material_medium_[index] = int(media_.size() - 1);

@@ -49,6 +49,32 @@ int dr_image_write(const char *path, int width, int height, int channels,
 int dr_image_write_encoded(const char *path, int width, int height, int channels,
                            const float *pixels, bool srgb_encode);
 
+/* One float grid of a volume file: an OpenVDB file through OpenImageIO's
+ * openvdb reader, which presents each float (1 channel) or vec3 (3 channels)
+ * grid as a tiled volume subimage named after the grid, whose display window
+ * is the grid's active voxel bounding box in index space. */
+struct dr_volume {
+    int nx, ny, nz;     /* the active voxel bounding box, in voxels */
+    int x0, y0, z0;     /* index coordinates of its first voxel */
+    float *data;        /* nx*ny*nz voxels, x fastest, then y, then z; release with free() */
+    char grid[64];      /* the name of the grid read */
+};
+
+/* Most voxels a volume may have (the density grids' limit). */
+#define DR_VOLUME_MAX_VOXELS (1 << 28)
+
+/* Reads the float grid named `grid` (NULL or "": the grid named "density",
+ * else the first float grid) of a volume file: the voxels of its active
+ * bounding box (inactive ones inside it as the reader fills them: the
+ * background). Refused from the header, before any voxel memory is taken,
+ * when the decoded volume (the reader's tile-aligned buffer, the copy and the
+ * file's grid as OpenVDB holds it) would need more than dr_image_set_max_bytes
+ * allows (DR_ERR_NOMEM) or the box has more than DR_VOLUME_MAX_VOXELS.
+ * 0 or negative DR_ERR_*: DR_ERR_IO when the file cannot be read,
+ * DR_ERR_FORMAT when it is not an OpenVDB file, has no float grid (or none of
+ * that name) or the grid has no active voxel; the message names the path. */
+int dr_volume_read(const char *path, const char *grid, struct dr_volume *vol);
+
 #ifdef __cplusplus
 }
 #endif

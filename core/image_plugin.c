@@ -199,6 +199,17 @@ int dr_image_write_encoded(const char *path, int width, int height, int channels
     return p ? p->write_encoded(path, width, height, channels, pixels, srgb_encode) : DR_ERR_IO;
 }
 
+int dr_volume_read(const char *path, const char *grid, struct dr_volume *vol)
+{
+    const struct dr_image_plugin *p = get_plugin();
+    if (!p) {
+        if (vol)
+            memset(vol, 0, sizeof *vol);
+        return DR_ERR_IO;
+    }
+    return p->read_volume(path, grid, vol);
+}
+
 int dr_colormap_diverging(const float *t, int width, int height, float *rgb)
 {
     const struct dr_image_plugin *p = get_plugin();

@@ -22,12 +22,13 @@
 #include <stddef.h>
 
 #include "image.h"
+#include "image_io.h"
 
 #ifdef __cplusplus
 extern "C" {
 #endif
 
-#define DR_IMAGE_PLUGIN_VERSION 1
+#define DR_IMAGE_PLUGIN_VERSION 2
 #define DR_IMAGE_PLUGIN_FILE "libdrender-image.so"
 
 /* The plugin's functions; same contracts as image_io.h and vis.h. */
@@ -40,6 +41,7 @@ struct dr_image_plugin {
     int (*write_encoded)(const char *path, int width, int height, int channels, const float *pixels,
                          bool srgb_encode);
     int (*colormap_diverging)(const float *t, int width, int height, float *rgb);
+    int (*read_volume)(const char *path, const char *grid, struct dr_volume *vol);
 };
 
 /* Exported by the plugin (image_io.cpp): its table. */

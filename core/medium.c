@@ -305,3 +305,23 @@ double dr_albedo_from_multiscatter(double a)
     double k = 4.09712 + 4.20863 * a - sqrt(9.59217 + 41.6808 * a + 17.7126 * a * a);
     return dr_clamp(1.0 - k * k, 0.0, 1.0);
 }
+
+double dr_fresnel_dielectric(double cos_i, double eta, double *cos_t)
+{
+    cos_i = dr_clamp(cos_i, 0.0, 1.0);
+    double sin2_t = (1.0 - cos_i * cos_i) / (eta * eta);
+    if (sin2_t >= 1.0) {
+        *cos_t = 0.0;
+        return 1.0;
+    }
+    double ct = sqrt(1.0 - sin2_t);
+    double rs = (cos_i - eta * ct) / (cos_i + eta * ct), rp = (eta * cos_i - ct) / (eta * cos_i + ct);
+    *cos_t = ct;
+    return 0.5 * (rs * rs + rp * rp);
+}
+
+dr_vec3 dr_refract(dr_vec3 d, dr_vec3 n, double cos_i, double cos_t, double eta)
+{
+    /* Snell: the tangential part scales by 1/eta, the normal part is cos_t */
+    return dr_normalize(dr_madd(dr_scale(d, 1.0 / eta), n, cos_i / eta - cos_t));
+}

@@ -58,14 +58,25 @@ struct dr_medium {
     dr_vec3 bmin, bmax;
     char grid_uri[512];
     int material;          /* the boundary material, -1: the global medium */
+    /* the boundary: 0 index-matched (crossed without bending); else a smooth
+     * dielectric interface, the index of refraction inside relative to
+     * outside (KHR_materials_ior; the global medium's is 1) */
+    double ior;
 };
 
 /* Reads a density grid of nx x ny x nz voxels from file: raw little-endian
- * float32 (.raw, .f32, .bin: exactly nx*ny*nz*4 bytes) or a single-channel
+ * float32 (.raw, .f32, .bin: exactly nx*ny*nz*4 bytes), a single-channel
  * (or first-channel) EXR of width nx and height ny*nz (z slices stacked
- * top to bottom, each with y rows top to bottom). 0 or DR_ERR_* with a message
- * naming the file (negative or non-finite density, wrong size, other formats). */
-int dr_grid_read(const char *file, int nx, int ny, int nz, struct dr_grid *grid);
+ * top to bottom, each with y rows top to bottom), or an OpenVDB file (.vdb,
+ * through the image library, image_io.h): the float grid `grid_name` (NULL:
+ * "density", else the first float grid), whose active voxel bounding box
+ * becomes the grid's voxels, index coordinate (x0 + i, y0 + j, z0 + k) voxel
+ * (i, j, k); nx = 0 takes its size from the file, otherwise it must match.
+ * 0 or DR_ERR_* with a message naming the file (negative or non-finite
+ * density, wrong size, other formats, no float grid, an empty grid). */
+int dr_grid_read(const char *file, const char *grid_name, int nx, int ny, int nz, struct dr_grid *grid);
+/* Does the file name say OpenVDB (.vdb)? */
+bool dr_grid_file_is_vdb(const char *file);
 /* (Re)builds the majorant cells from the voxels. 0 or DR_ERR_NOMEM. */
 int dr_grid_build_majorants(struct dr_grid *grid);
 void dr_grid_release(struct dr_grid *grid);
@@ -120,6 +131,16 @@ double dr_hg_dlog_dg(double g, double cos_theta);
 double dr_hg_eval(double g, double cos_theta);
 /* Samples wi for a ray travelling along d; returns its density. */
 double dr_hg_sample(double g, dr_vec3 d, double u1, double u2, dr_vec3 *wi);
+
+/* Smooth dielectric boundaries (medium_path.c). Fresnel reflectance of
+ * unpolarised light arriving at cos_i (> 0, on the incident side) on an
+ * interface of relative index eta = n_transmitted / n_incident (exact: the
+ * mean of the s and p reflectances); *cos_t: the refracted cosine, 0 at total
+ * internal reflection (where the reflectance is 1). */
+double dr_fresnel_dielectric(double cos_i, double eta, double *cos_t);
+/* Direction refracted from d (unit, arriving) through an interface with
+ * unit normal n on the incident side (dot(d, n) = -cos_i), given cos_t. */
+dr_vec3 dr_refract(dr_vec3 d, dr_vec3 n, double cos_i, double cos_t, double eta);
 
 /* KHR_materials_volume_scatter's multiscatterColor (the albedo a thick
  * slab shows) to single-scattering albedo, per channel (the inversion of

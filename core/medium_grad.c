@@ -171,8 +171,8 @@ static void drt_gain(const struct dr_scene *s, const struct dr_path_opts *opts, 
             T = dr_mul(T, dr_medium_transmittance(m, o, d, seg, &rng));
         }
         int med = tri >= 0 ? dr_boundary_medium(s, tri) : -1;
-        if (tri < 0 || med < 0)
-            return;
+        if (tri < 0 || med < 0 || dr_boundary_dielectric(s, med))
+            return;   /* the ray ends there (a dielectric: the segment's vertex; the next segment has its own) */
         medium = h.front ? med : s->global_medium;
         o = dr_offset_origin(&h, h.ng, d);
     }

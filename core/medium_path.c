@@ -8,7 +8,9 @@
  * sampling), crosses an index-matched boundary (the medium changes, the ray
  * goes on within the same step: boundaries are not vertices), escapes, or
  * reaches an ordinary surface (the stages of path.c, with shadow rays that
- * estimate transmittance through media and boundaries).
+ * estimate transmittance through media and boundaries). A dielectric boundary
+ * (only in scenes planned with DR_STAGE_DIELECTRIC) is a vertex of its own: a
+ * specular reflection or refraction (dielectric_vertex).
  *
  * Spectral MIS (medium.h) weights what the path gathers at a vertex by
  * r / mean(r) of the events so far; the change of that weight over the
@@ -163,6 +165,56 @@ static bool surface_vertex(const struct dr_scene *s, const struct dr_path_opts *
     return dr_path_stage_continue(opts, st, v);
 }
 
+/* A smooth dielectric boundary of medium med, hit at h: reflection with the
+ * Fresnel probability F, else refraction (Snell), chosen by the vertex's lobe
+ * number. A delta event: no next-event estimation here (shadow rays are
+ * blocked by the interface, dr_media_transmittance), and light found after
+ * it counts with MIS weight 1 (prev_pdf = infinity: dr_mis_power(inf, p) = 1).
+ * Weights: F / F = 1 for reflection; (1 - F) / (1 - F) / eta^2 for
+ * refraction, eta = n_t / n_i along the path: radiance transport, in which
+ * radiance inside a medium of index n is n^2 times larger (Mitsuba's and
+ * pbrt's TransportMode::Radiance), so a path that enters and leaves carries
+ * 1. No parameter enters the event: its adjoint is the weight (path.h). The
+ * boundary's roughness is ignored (smooth only). No Russian roulette here:
+ * the weight does not lower the throughput of a path that leaves again. */
+static bool dielectric_vertex(const struct dr_scene *s, const struct dr_path_opts *opts, struct dr_path_state *st,
+                              struct dr_sampler *sampler, struct dr_path_vertex *v, const struct dr_hit *h, int med)
+{
+    v->kind = DR_VERTEX_DIELECTRIC;
+    v->hit = *h;
+    if (st->depth >= opts->max_depth)
+        return false;
+    draw_vertex_randoms(sampler, st->depth, &v->u);
+    v->ng = h->front ? h->ng : dr_neg(h->ng);   /* towards the arriving ray */
+    const double eta = h->front ? s->media[med].ior : 1.0 / s->media[med].ior;
+    const double cos_i = -dr_dot(st->d, v->ng);
+    double cos_t, w = 1.0;
+    const double F = dr_fresnel_dielectric(cos_i, eta, &cos_t);
+    dr_vec3 wi;
+    if (v->u.lobe < F) {
+        wi = dr_normalize(dr_madd(st->d, v->ng, 2.0 * cos_i));
+    } else {
+        wi = dr_refract(st->d, v->ng, cos_i, cos_t, eta);
+        w = 1.0 / (eta * eta);
+        st->medium = h->front ? med : s->global_medium;
+    }
+    v->frame = (dr_frame){dr_v3(1, 0, 0), dr_v3(0, 1, 0), dr_v3(0, 0, 1)};   /* local = world */
+    v->wo = dr_neg(st->d);
+    v->wi = wi;
+    v->f = v->s = dr_v3s(w);
+    v->pdf = INFINITY;
+    v->lobe = DR_BSDF_LOBE_SPECULAR;
+    v->sub[0] = v->sub[1] = v->sub[2] = false;
+    v->cos_pdf_q = 1.0;
+    v->cont = true;
+    st->beta = dr_scale(st->beta, w);
+    st->prev_pdf = INFINITY;
+    st->prev_p = h->p;
+    st->o = dr_offset_origin(h, h->ng, wi);
+    st->d = wi;
+    return true;
+}
+
 /* Ends the segment arriving at v: its spectral MIS weight change is v->seg
  * (the vertex's terms carry the path's weight r / mean(r), path.h), and the
  * throughput takes it on. */
@@ -239,6 +291,10 @@ bool dr_medium_path_step(const struct dr_scene *s, const struct dr_path_opts *op
             }
         }
         int med = tri >= 0 ? dr_boundary_medium(s, tri) : -1;
+        if (med >= 0 && (opts->stages & DR_STAGE_DIELECTRIC) && s->media[med].ior > 0.0) {
+            end_segment(st, v, &mis, w_before);
+            return dielectric_vertex(s, opts, st, sampler, v, &h, med);
+        }
         if (tri < 0 || med < 0) {
             end_segment(st, v, &mis, w_before);
             if (tri < 0) {

@@ -146,6 +146,9 @@ int dr_media_refresh(struct dr_scene *s)
 {
     s->effects |= DR_FX_MEDIA;
     for (int i = 0; i < s->n_media; i++)
+        if (s->media[i].ior > 0.0 && s->media[i].material >= 0)
+            s->effects |= DR_FX_DIELECTRIC_BOUNDARIES;
+    for (int i = 0; i < s->n_media; i++)
         if (s->media[i].has_grid) {
             s->effects |= DR_FX_HETEROGENEOUS_MEDIA;
             int rc = dr_grid_build_majorants(&s->media[i].grid);
@@ -221,8 +224,8 @@ dr_vec3 dr_media_transmittance(const struct dr_scene *s, dr_vec3 o, dr_vec3 d, d
         if (tri < 0 || dr_is_black(T))
             return T;
         int med = dr_boundary_medium(s, tri);
-        if (med < 0)
-            return dr_v3s(0.0);   /* an ordinary surface blocks the light */
+        if (med < 0 || dr_boundary_dielectric(s, med))
+            return dr_v3s(0.0);   /* an ordinary surface or a dielectric interface blocks the light */
         medium = h.front ? med : s->global_medium;
         dr_vec3 next = dr_offset_origin(&h, h.front ? dr_neg(h.ng) : h.ng, d);
         if (!isinf(tmax))

@@ -21,13 +21,21 @@ static inline int dr_boundary_medium(const struct dr_scene *s, int64_t tri)
     return s->material_medium[s->mesh.material[tri]];
 }
 
+/* Is medium med (>= 0) bounded by a dielectric? Only scenes with the effect
+ * look at the medium: the others run as before. */
+static inline bool dr_boundary_dielectric(const struct dr_scene *s, int med)
+{
+    return (s->effects & DR_FX_DIELECTRIC_BOUNDARIES) && s->media[med].ior > 0.0;
+}
+
 /* The medium containing point o (-1: vacuum): the first medium boundary along
  * direction d says (its back seen: inside it). */
 int dr_medium_at(const struct dr_scene *scene, dr_vec3 o, dr_vec3 d);
 
 /* Transmittance from o along d (unit) over distance tmax (INFINITY: to the
  * environment) starting in medium `medium`, through index-matched
- * boundaries; 0 when an ordinary surface is in the way. *rays counts the
+ * boundaries; 0 when an ordinary surface or a dielectric boundary (a
+ * specular interface, which no straight shadow ray crosses) is in the way. *rays counts the
  * ray queries. */
 struct dr_medium_trace;
 /* rec (may be NULL): records the medium pieces crossed, for derivatives. */

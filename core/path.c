@@ -40,6 +40,8 @@ unsigned dr_path_plan(const struct dr_scene *s, const struct dr_param_set *ps)
         st |= DR_STAGE_NEE;
     if (s->n_media > 0)
         st |= DR_STAGE_MEDIA;
+    if (s->effects & DR_FX_DIELECTRIC_BOUNDARIES)
+        st |= DR_STAGE_DIELECTRIC;
     return st;
 }
 
@@ -50,6 +52,7 @@ void dr_path_stages_describe(unsigned stages, char *buf, int size)
         {DR_STAGE_EMISSION, "surface_emission"},
         {DR_STAGE_NEE, "next_event_estimation"},
         {DR_STAGE_MEDIA, "participating_media"},
+        {DR_STAGE_DIELECTRIC, "dielectric_boundaries"},
     };
     int n = 0;
     buf[0] = '\0';

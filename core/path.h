@@ -74,7 +74,8 @@ enum dr_path_stage {
     DR_STAGE_ENV = 1 << 0,        /* escaped rays see an environment */
     DR_STAGE_EMISSION = 1 << 1,   /* some surface emits, or its emission is differentiated */
     DR_STAGE_NEE = 1 << 2,        /* there is a light to sample */
-    DR_STAGE_MEDIA = 1 << 3       /* participating media: the medium walker (medium_path.c) */
+    DR_STAGE_MEDIA = 1 << 3,      /* participating media: the medium walker (medium_path.c) */
+    DR_STAGE_DIELECTRIC = 1 << 4  /* ... with dielectric medium boundaries: specular events there */
 };
 
 /* How derivatives of media parameters treat free-flight sampling (medium_grad.c). */
@@ -134,7 +135,10 @@ struct dr_medium_record {
 enum dr_vertex_kind {
     DR_VERTEX_SURFACE,   /* the ray hit a triangle */
     DR_VERTEX_ESCAPED,   /* the ray left the scene (environment radiance, if any) */
-    DR_VERTEX_MEDIUM     /* a collision in a participating medium (hit.p; hit.tri = -1) */
+    DR_VERTEX_MEDIUM,    /* a collision in a participating medium (hit.p; hit.tri = -1) */
+    DR_VERTEX_DIELECTRIC /* a smooth dielectric medium boundary (medium_path.c): a specular
+                            event, no emission, no next-event estimation, weight f = 1 or
+                            1 / eta^2, continuation pdf infinite (delta) */
 };
 
 struct dr_path_vertex {

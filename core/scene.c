@@ -206,6 +206,7 @@ void dr_effects_describe(unsigned fx, char *buf, int size)
         {DR_FX_HETEROGENEOUS_MEDIA, "heterogeneous_media"}, {DR_FX_NORMAL_MAPS, "normal_maps"},
         {DR_FX_ALPHA_MASK, "alpha_mask"},       {DR_FX_ALPHA_BLEND, "alpha_blend"},
         {DR_FX_SINGLE_SIDED, "single_sided"},   {DR_FX_VERTEX_COLORS, "vertex_colors"},
+        {DR_FX_DIELECTRIC_BOUNDARIES, "dielectric_boundaries"},
     };
     int n = 0;
     buf[0] = '\0';

@@ -143,7 +143,8 @@ enum dr_effect {
     DR_FX_ALPHA_MASK = 1 << 10,        /* alphaMode MASK: cut-outs (coverage.h) */
     DR_FX_ALPHA_BLEND = 1 << 11,       /* alphaMode BLEND: stochastic transparency */
     DR_FX_SINGLE_SIDED = 1 << 12,      /* doubleSided false: back faces culled */
-    DR_FX_VERTEX_COLORS = 1 << 13      /* COLOR_0 multiplies base colours (mesh.colors) */
+    DR_FX_VERTEX_COLORS = 1 << 13,     /* COLOR_0 multiplies base colours (mesh.colors) */
+    DR_FX_DIELECTRIC_BOUNDARIES = 1 << 14 /* a medium bounded by a smooth dielectric (medium.h: ior) */
 };
 
 struct dr_scene {

@@ -67,39 +67,77 @@ static int read_exr(const char *file, int nx, int ny, int nz, float *out)
     return 0;
 }
 
-int dr_grid_read(const char *file, int nx, int ny, int nz, struct dr_grid *g)
+/* OpenVDB through the image library: the active voxel bounding box of the
+ * chosen float grid becomes the nx x ny x nz voxels (medium.h). */
+static int read_vdb(const char *file, const char *grid_name, int *n, float **out)
 {
-    memset(g, 0, sizeof *g);
-    if (has_suffix(file, ".vdb")) {
-        dr_set_error("%s: OpenVDB grids are not read yet (drender reads 2D images through OpenImageIO, not its "
-                     "openvdb volume reader); write the density as raw float32 (.raw) or a single-channel EXR", file);
+    struct dr_volume vol;
+    int rc = dr_volume_read(file, grid_name, &vol);
+    if (rc != 0)
+        return rc;
+    if (n[0] > 0 && (vol.nx != n[0] || vol.ny != n[1] || vol.nz != n[2])) {
+        dr_set_error("%s: grid '%s' has an active bounding box of %dx%dx%d voxels, but the resolution says "
+                     "[%d, %d, %d] (leave resolution out for OpenVDB files)", file, vol.grid, vol.nx, vol.ny, vol.nz,
+                     n[0], n[1], n[2]);
+        free(vol.data);
         return DR_ERR_FORMAT;
     }
+    n[0] = vol.nx;
+    n[1] = vol.ny;
+    n[2] = vol.nz;
+    *out = vol.data;
+    return 0;
+}
+
+static int read_raw_or_exr(const char *file, const int *n, float **out)
+{
     bool raw = has_suffix(file, ".raw") || has_suffix(file, ".f32") || has_suffix(file, ".bin");
     if (!raw && !has_suffix(file, ".exr")) {
-        dr_set_error("%s: unknown density grid format (expected .raw/.f32/.bin float32, or .exr)", file);
+        dr_set_error("%s: unknown density grid format (expected .raw/.f32/.bin float32, .exr or .vdb)", file);
         return DR_ERR_FORMAT;
     }
-    size_t n = (size_t)nx * ny * nz;
-    g->density = malloc(n * sizeof(float));
-    if (!g->density) {
-        dr_set_error("%s: out of memory for a %dx%dx%d grid", file, nx, ny, nz);
+    size_t count = (size_t)n[0] * n[1] * n[2];
+    *out = malloc(count * sizeof(float));
+    if (!*out) {
+        dr_set_error("%s: out of memory for a %dx%dx%d grid", file, n[0], n[1], n[2]);
         return DR_ERR_NOMEM;
     }
-    int rc = raw ? read_raw(file, n, g->density) : read_exr(file, nx, ny, nz, g->density);
-    for (size_t i = 0; rc == 0 && i < n; i++)
+    int rc = raw ? read_raw(file, count, *out) : read_exr(file, n[0], n[1], n[2], *out);
+    if (rc != 0) {
+        free(*out);
+        *out = NULL;
+    }
+    return rc;
+}
+
+bool dr_grid_file_is_vdb(const char *file)
+{
+    return has_suffix(file, ".vdb");
+}
+
+int dr_grid_read(const char *file, const char *grid_name, int nx, int ny, int nz, struct dr_grid *g)
+{
+    memset(g, 0, sizeof *g);
+    int n[3] = {nx, ny, nz};
+    int rc = dr_grid_file_is_vdb(file) ? read_vdb(file, grid_name, n, &g->density)
+                                       : read_raw_or_exr(file, n, &g->density);
+    if (rc != 0)
+        return rc;
+    size_t count = (size_t)n[0] * n[1] * n[2];
+    for (size_t i = 0; rc == 0 && i < count; i++)
         if (!(g->density[i] >= 0.0f) || !isfinite(g->density[i])) {
             dr_set_error("%s: voxel (%zu, %zu, %zu) has density %g; densities must be finite and >= 0", file,
-                         i % (size_t)nx, i / (size_t)nx % (size_t)ny, i / ((size_t)nx * ny), (double)g->density[i]);
+                         i % (size_t)n[0], i / (size_t)n[0] % (size_t)n[1], i / ((size_t)n[0] * n[1]),
+                         (double)g->density[i]);
             rc = DR_ERR_FORMAT;
         }
     if (rc != 0) {
         dr_grid_release(g);
         return rc;
     }
-    g->nx = nx;
-    g->ny = ny;
-    g->nz = nz;
+    g->nx = n[0];
+    g->ny = n[1];
+    g->nz = n[2];
     return 0;
 }
 

@@ -10,7 +10,8 @@ pkgs=(build-essential pkg-config
       libtinygltf-dev nlohmann-json3-dev libstb-dev
       libdraco-dev   # KHR_draco_mesh_compression (core/draco_decode.cpp)
       gnuplot-nox python3
-      valgrind)   # scripts/no-media-overhead.sh counts instructions with callgrind
+      valgrind    # scripts/no-media-overhead.sh counts instructions with callgrind
+      python3-openvdb)   # tests/data/media/make_vdb.py writes the test .vdb files
 # Node.js runs the Khronos glTF validator (tests/cli_gltf_validate.sh). Any node
 # on PATH will do (e.g. NodeSource's nodejs, which bundles npm and conflicts with
 # Debian's npm), so Debian's packages are added only when there is none.

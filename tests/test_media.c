@@ -2,7 +2,10 @@
  * flight through the camera ray and ratio tracking for shadow rays), the
  * furnace (albedo 1 in a white environment: radiance 1 everywhere, whatever
  * the extinction per channel, density grid or phase function), hard cases
- * (extinction 1e4, albedo 0.999 at depth 1000, sharp-edged grids). */
+ * (extinction 1e4, albedo 0.999 at depth 1000, sharp-edged grids);
+ * dielectric boundaries: Fresnel values, the fraction of paths a flat
+ * interface reflects (= Fresnel), Snell's law and the 1/eta^2 weight, total
+ * internal reflection, and the furnace inside glass (still 1). */
 #include <stdlib.h>
 
 #include "error.h"
@@ -45,6 +48,8 @@ static struct stats render_stats(struct dr_scene *s, struct dr_camera cam, int r
 
 static void check_mean(const char *what, struct stats st, dr_vec3 expect, double rel_slack)
 {
+    printf("%s: mean %.5f %.5f %.5f (stderr %.2g %.2g %.2g)\n", what, st.mean.x, st.mean.y, st.mean.z, st.se.x,
+           st.se.y, st.se.z);
     for (int c = 0; c < 3; c++) {
         double m = dr_v3_get(st.mean, c), e = dr_v3_get(expect, c), se = dr_v3_get(st.se, c);
         double tol = 4.0 * se + rel_slack * fabs(e);
@@ -186,6 +191,130 @@ static void test_furnace(void)
     dr_scene_destroy(s);
 }
 
+/* ------------------------------------------------------ dielectric boundaries */
+
+static void test_fresnel(void)
+{
+    double ct;
+    /* values of the s/p formulas for n = 1.5 (computed independently) */
+    CHECK_NEAR(dr_fresnel_dielectric(1.0, 1.5, &ct), 0.04, 1e-12, "normal incidence ((n-1)/(n+1))^2");
+    CHECK_NEAR(ct, 1.0, 1e-12, "normal incidence cos_t");
+    CHECK_NEAR(dr_fresnel_dielectric(cos(M_PI / 4), 1.5, &ct), 0.05023991101223594, 1e-12, "45 degrees");
+    CHECK_NEAR(dr_fresnel_dielectric(0.5, 1.5, &ct), 0.08918671280221274, 1e-12, "60 degrees");
+    CHECK_NEAR(dr_fresnel_dielectric(cos(atan(1.5)), 1.5, &ct), 0.07396449704142012, 1e-12,
+               "Brewster's angle: p reflects nothing");
+    /* from inside: total internal reflection beyond asin(1/1.5) = 41.8 degrees */
+    CHECK(dr_fresnel_dielectric(cos(0.75), 1.0 / 1.5, &ct) == 1.0 && ct == 0.0, "total internal reflection");
+    /* reciprocity: the same interface seen from the other side */
+    for (double ci = 0.05; ci < 1.0; ci += 0.1) {
+        double f = dr_fresnel_dielectric(ci, 1.5, &ct), ct2;
+        double back = dr_fresnel_dielectric(ct, 1.0 / 1.5, &ct2);
+        CHECK(fabs(back - f) <= 1e-12 && fabs(ct2 - ci) <= 1e-12, "reciprocity at cos %.2f: %.15f vs %.15f", ci,
+              back, f);
+    }
+}
+
+/* A box [-4,4]x[-4,4]x[-1,1] bounding a clear medium behind a dielectric of
+ * index 1.5 (nothing else: the vertex alone is looked at). */
+static struct dr_scene *glass_slab(void)
+{
+    struct sb b;
+    sb_init(&b);
+    int mat = sb_material(&b, sb_diffuse(dr_v3s(0.5)));
+    sb_box(&b, dr_v3(-4, -4, -1), dr_v3(4, 4, 1), mat);
+    struct dr_medium m = medium(dr_v3s(0.0), dr_v3s(1.0), 0.0);
+    m.ior = 1.5;
+    sb_medium(&b, mat, m);
+    return sb_finish(&b);
+}
+
+/* One step from o along d, many times: the fraction reflected and what
+ * reflection and refraction do to the ray and the throughput. */
+static void interface_trials(struct dr_scene *s, dr_vec3 o, dr_vec3 d, double eta, int n, const char *what)
+{
+    struct dr_path_opts opts = {.max_depth = 8, .rr_depth = 5, .stages = dr_path_plan(s, NULL)};
+    CHECK(opts.stages & DR_STAGE_DIELECTRIC, "%s: the plan has the dielectric stage", what);
+    dr_vec3 nrm = dr_v3(0, 0, d.z < 0 ? 1 : -1);   /* the hit face's normal on the incident side */
+    double cos_i = -dr_dot(d, nrm), ct;
+    double F = dr_fresnel_dielectric(cos_i, eta, &ct);
+    int reflected = 0, bad = 0;
+    for (int i = 0; i < n; i++) {
+        struct dr_sampler smp;
+        dr_sampler_init(&smp, 6, (uint64_t)i, 0);
+        struct dr_path_state st;
+        struct dr_path_vertex v;
+        struct dr_ray_counts rays = {0, 0, 0};
+        v.mrec = NULL;
+        dr_path_start(&st, o, d);
+        bool more = dr_path_step(s, &opts, &st, &smp, &v, &rays);
+        if (!more || v.kind != DR_VERTEX_DIELECTRIC || v.nee || v.emits) {
+            bad++;
+            continue;
+        }
+        dr_vec3 mirror = dr_v3(d.x, d.y, -d.z);
+        if (dr_dot(st.d, nrm) > 0.0) {
+            reflected++;
+            bad += dr_length(dr_sub(st.d, mirror)) > 1e-12 || fabs(st.beta.x - 1.0) > 1e-15;
+        } else {
+            double sin_t = sqrt(st.d.x * st.d.x + st.d.y * st.d.y), sin_i = sqrt(d.x * d.x + d.y * d.y);
+            bad += fabs(sin_t - sin_i / eta) > 1e-12 || fabs(st.beta.x - 1.0 / (eta * eta)) > 1e-12 ||
+                   st.d.x * d.x < 0.0;
+        }
+    }
+    double frac = (double)reflected / n, se = sqrt(F * (1.0 - F) / n);
+    CHECK(bad == 0, "%s: %d steps with a wrong event, direction or weight", what, bad);
+    CHECK(fabs(frac - F) <= 4.0 * se + 1e-12, "%s: reflected %.5f of the paths, Fresnel %.5f (se %.2g)", what, frac,
+          F, se);
+    printf("%s: reflected fraction %.5f, Fresnel %.5f\n", what, frac, F);
+}
+
+static void test_dielectric_interface(void)
+{
+    struct dr_scene *s = glass_slab();
+    for (double deg = 0.0; deg < 80.0; deg += 25.0) {
+        double th = deg * M_PI / 180.0;
+        dr_vec3 d = dr_v3(sin(th), 0.0, -cos(th));
+        char what[64];
+        snprintf(what, sizeof what, "outside, %.0f degrees", deg);
+        interface_trials(s, dr_sub(dr_v3(0, 0, 1), dr_scale(d, 2.0)), d, 1.5, 20000, what);
+    }
+    /* from inside at 35 degrees (refracts) and 50 (beyond the critical 41.8: always reflects) */
+    interface_trials(s, dr_v3(0, 0, 0), dr_v3(sin(0.61), 0.0, -cos(0.61)), 1.0 / 1.5, 20000, "inside, 35 degrees");
+    interface_trials(s, dr_v3(0, 0, 0), dr_v3(sin(0.87), 0.0, -cos(0.87)), 1.0 / 1.5, 2000, "inside, 50 degrees");
+    /* shadow rays do not cross the interface */
+    struct dr_sampler rng;
+    dr_sampler_init(&rng, 1, 2, 3);
+    uint64_t rays = 0;
+    dr_vec3 tr = dr_media_transmittance(s, dr_v3(0, 0, 0), dr_v3(0, 0, 1), INFINITY, 0, &rng, &rays, NULL);
+    CHECK(dr_is_black(tr), "a shadow ray through a dielectric boundary is blocked");
+    dr_scene_destroy(s);
+}
+
+/* The furnace inside glass: albedo 1, a white sky, a box of index 1.5. A
+ * path that enters and leaves carries (1/1.5^2)(1.5^2) = 1 and every path
+ * leaves: the image is 1 (next-event estimation inside is blocked by the
+ * interface; light comes through the specular chain with MIS weight 1). */
+static void test_glass_furnace(void)
+{
+    struct dr_camera cam = sb_camera(dr_v3(0.3, 0.5, 4), dr_v3(0, 0, 0), 30);
+    struct dr_medium m = medium(dr_v3s(0.0), dr_v3s(1.0), 0.0);
+    m.ior = 1.5;
+    struct dr_scene *s = furnace_scene(m);
+    check_mean("clear glass furnace", render_stats(s, cam, 16, 16, 10000), dr_v3s(1.0), 1e-3);
+    dr_scene_destroy(s);
+    m = medium(dr_v3(0.5, 2.0, 8.0), dr_v3s(1.0), 0.6);
+    m.ior = 1.5;
+    s = furnace_scene(m);
+    check_mean("RGB fog in glass furnace", render_stats(s, cam, 16, 32, 10000), dr_v3s(1.0), 1e-3);
+    dr_scene_destroy(s);
+    m = medium(dr_v3(1.0, 4.0, 2.0), dr_v3s(1.0), -0.3);
+    m.ior = 1.33;
+    set_grid(&m, 12, 10, 9, dr_v3(-1, -1, -1), dr_v3(1, 1, 1), noise);
+    s = furnace_scene(m);
+    check_mean("grid in water furnace", render_stats(s, cam, 16, 32, 10000), dr_v3s(1.0), 1e-3);
+    dr_scene_destroy(s);
+}
+
 /* ------------------------------------------------------------- the phase */
 
 static void test_hg(void)
@@ -219,5 +348,8 @@ int main(void)
     test_hg();
     test_slab_transmittance();
     test_furnace();
+    test_fresnel();
+    test_dielectric_interface();
+    test_glass_furnace();
     return TEST_END();
 }

@@ -1,5 +1,6 @@
 /* Media in glTF files: KHR_materials_volume (+ transmission, ior,
- * volume_scatter), the DR_medium extension with density grids (raw and EXR),
+ * volume_scatter), the DR_medium extension with density grids (raw, EXR and
+ * OpenVDB: tests/data/media/smoke.vdb holds smoke.raw's voxels),
  * and bad input that must be refused before any work, with a message naming
  * the file and the JSON path. Scenes are written to a temporary directory. */
 #include <stdlib.h>
@@ -76,8 +77,8 @@ static void write_raw(const char *name, int n, float value, int negative_at)
     fclose(f);
 }
 
-#define KHR_INDEX_MATCHED                                                                              \
-    "\"KHR_materials_transmission\":{\"transmissionFactor\":1},\"KHR_materials_ior\":{\"ior\":1}"
+#define KHR_TRANSMISSIVE "\"KHR_materials_transmission\":{\"transmissionFactor\":1}"
+#define KHR_INDEX_MATCHED KHR_TRANSMISSIVE ",\"KHR_materials_ior\":{\"ior\":1}"
 
 static void test_khr_volume(void)
 {
@@ -103,6 +104,23 @@ static void test_khr_volume(void)
     char fx[256];
     dr_effects_describe(s->effects, fx, sizeof fx);
     CHECK(strstr(fx, "media") != NULL, "effects name media: %s", fx);
+    CHECK(m->ior == 0.0 && !(s->effects & DR_FX_DIELECTRIC_BOUNDARIES), "ior 1: index-matched");
+    dr_scene_destroy(s);
+
+    /* transmissive without KHR_materials_ior: glTF's default 1.5, a dielectric */
+    p = write_scene("glass", "\"KHR_materials_volume\":{\"attenuationDistance\":2}," KHR_TRANSMISSIVE, "", 0);
+    s = dr_scene_load(p);
+    CHECK(s != NULL, "load: %s", dr_last_error());
+    if (!s)
+        return;
+    CHECK(s->media[0].ior == 1.5 && (s->effects & DR_FX_DIELECTRIC_BOUNDARIES), "default ior 1.5: dielectric");
+    CHECK(dr_path_plan(s, NULL) & DR_STAGE_DIELECTRIC, "plan has the dielectric stage");
+    dr_scene_destroy(s);
+    /* DR_medium with KHR_materials_ior 1.33 and transmission: water (alone: index-matched, below) */
+    p = write_scene("water", "\"DR_medium\":{\"extinction\":1}," KHR_TRANSMISSIVE
+                    ",\"KHR_materials_ior\":{\"ior\":1.33}", "", 0);
+    s = dr_scene_load(p);
+    CHECK(s && s->media[0].ior == 1.33, "DR_medium with KHR_materials_ior 1.33: %s", s ? "wrong ior" : dr_last_error());
     dr_scene_destroy(s);
 }
 
@@ -121,6 +139,7 @@ static void test_dr_medium_grid(void)
     const struct dr_medium *m = &s->media[0];
     CHECK(m->has_grid && m->grid.nx == 4 && m->grid.ny == 3 && m->grid.nz == 2, "grid resolution");
     CHECK(m->grid.bmin.x == -1.0 && m->grid.bmax.z == 1.0, "grid box = the mesh's bounds");
+    CHECK(m->ior == 0.0, "DR_medium alone: an index-matched boundary");
     CHECK(m->grid.majorant && m->grid.majorant[0] == 1.0f, "majorant = largest voxel (%g)",
           m->grid.majorant ? m->grid.majorant[0] : -1.0);
     CHECK(s->effects & DR_FX_HETEROGENEOUS_MEDIA, "heterogeneous_media effect");
@@ -178,9 +197,16 @@ static void test_bad_input(void)
                  write_scene("neg", "\"DR_medium\":{\"density\":{\"uri\":\"neg.raw\",\"resolution\":[2,2,2]}}", "",
                              0),
                  "voxel (1, 0, 1)", ">= 0");
-    expect_error("vdb", write_scene("vdb", "\"DR_medium\":{\"density\":{\"uri\":\"smoke.vdb\",\"resolution\":[2,2,2]}}",
-                                    "", 0),
-                 "OpenVDB", "smoke.vdb");
+    expect_error("grid key on a raw file",
+                 write_scene("gridkey", "\"DR_medium\":{\"density\":{\"uri\":\"grid.raw\",\"grid\":\"density\","
+                             "\"resolution\":[4,3,2]}}", "", 0),
+                 "/materials/0/extensions/DR_medium/density/grid", "OpenVDB");
+    expect_error("raw without resolution",
+                 write_scene("nores", "\"DR_medium\":{\"density\":{\"uri\":\"grid.raw\"}}", "", 0),
+                 "/materials/0/extensions/DR_medium/density/resolution", NULL);
+    expect_error("missing vdb",
+                 write_scene("novdb", "\"DR_medium\":{\"density\":{\"uri\":\"smoke.vdb\"}}", "", 0),
+                 "/materials/0/extensions/DR_medium/density/uri", "smoke.vdb");
     expect_error("bad resolution",
                  write_scene("res", "\"DR_medium\":{\"density\":{\"uri\":\"x.raw\",\"resolution\":[2,0,2]}}", "", 0),
                  "/materials/0/extensions/DR_medium/density/resolution/1", NULL);
@@ -190,16 +216,66 @@ static void test_bad_input(void)
                  "/materials/0/extensions/DR_medium/albedo", NULL);
     expect_error("g", write_scene("g", "\"DR_medium\":{\"g\":1}", "", 0), "/materials/0/extensions/DR_medium/g",
                  NULL);
-    expect_error("dielectric",
-                 write_scene("dielectric",
-                             "\"KHR_materials_volume\":{\"attenuationDistance\":1},"
-                             "\"KHR_materials_transmission\":{\"transmissionFactor\":1}",
-                             "", 0),
-                 "/materials/0/extensions/KHR_materials_volume", "index-matched");
+    expect_error("not transmissive",
+                 write_scene("opaque", "\"KHR_materials_volume\":{\"attenuationDistance\":1}", "", 0),
+                 "/materials/0/extensions/KHR_materials_volume", "transmissionFactor");
+    expect_error("ior below 1",
+                 write_scene("ior", "\"KHR_materials_volume\":{\"attenuationDistance\":1}," KHR_TRANSMISSIVE
+                             ",\"KHR_materials_ior\":{\"ior\":0.9}", "", 0),
+                 "/materials/0/extensions/KHR_materials_ior/ior", "[1, 10]");
+    expect_error("ior not a number",
+                 write_scene("iorstr", "\"KHR_materials_volume\":{\"attenuationDistance\":1}," KHR_TRANSMISSIVE
+                             ",\"KHR_materials_ior\":{\"ior\":\"glass\"}", "", 0),
+                 "/materials/0/extensions/KHR_materials_ior/ior", NULL);
     expect_error("global grid without bounds",
                  write_scene("global", "\"DR_medium\":{\"extinction\":1}",
                              "\"DR_medium\":{\"density\":{\"uri\":\"grid.raw\",\"resolution\":[4,3,2]}}", 0),
                  "/extensions/DR_medium/bounds", NULL);
+}
+
+/* smoke.vdb's grid "density" is smoke.raw's 16^3 voxels at index
+ * (-8, 3, 100); it loads to the same floats, found by name although the file
+ * has other grids; another float grid is picked with "grid". */
+static void test_vdb(void)
+{
+    const char *t = getenv("DR_TESTDIR") ? getenv("DR_TESTDIR") : "tests";
+    char raw[512], vdb[512], file[512];
+    snprintf(raw, sizeof raw, "%s/data/media/smoke.gltf", t);
+    snprintf(vdb, sizeof vdb, "%s/data/media/smoke-vdb.gltf", t);
+    snprintf(file, sizeof file, "%s/data/media/smoke.vdb", t);
+    struct dr_volume vol;
+    CHECK(dr_volume_read(file, NULL, &vol) == 0, "read %s: %s", file, dr_last_error());
+    CHECK(vol.nx == 16 && vol.ny == 16 && vol.nz == 16 && vol.x0 == -8 && vol.y0 == 3 && vol.z0 == 100 &&
+          strcmp(vol.grid, "density") == 0, "the density grid's active box: %dx%dx%d at (%d, %d, %d), '%s'",
+          vol.nx, vol.ny, vol.nz, vol.x0, vol.y0, vol.z0, vol.grid);
+    free(vol.data);
+    CHECK(dr_volume_read(file, "temperature", &vol) == 0 && vol.nx * vol.ny * vol.nz == 1 && vol.data[0] == 5.0f,
+          "the grid named temperature: one voxel of 5");
+    free(vol.data);
+    struct dr_scene *a = dr_scene_load(raw), *b = dr_scene_load(vdb);
+    CHECK(a && b, "load: %s", dr_last_error());
+    if (a && b) {
+        const struct dr_grid *ga = &a->media[0].grid, *gb = &b->media[0].grid;
+        CHECK(gb->nx == 16 && gb->ny == 16 && gb->nz == 16, "resolution from the file");
+        CHECK(memcmp(ga->density, gb->density, 16 * 16 * 16 * sizeof(float)) == 0, "the same voxels as the raw grid");
+        CHECK(memcmp(&ga->bmin, &gb->bmin, sizeof ga->bmin) == 0 && memcmp(&ga->bmax, &gb->bmax, sizeof ga->bmax) == 0,
+              "stretched over the same box");
+    }
+    dr_scene_destroy(a);
+    dr_scene_destroy(b);
+    /* bad files: the message names the file and says what is wrong */
+    static const char *const bad[][2] = {{"not-a-vdb.vdb", "not an OpenVDB file"},
+                                         {"nofloat.vdb", "no float grid"},
+                                         {"vec3.vdb", "velocity (vec3)"},
+                                         {"empty.vdb", "no active voxels"}};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        char ext[700];
+        snprintf(file, sizeof file, "%s/data/media/%s", t, bad[i][0]);
+        snprintf(ext, sizeof ext, "\"DR_medium\":{\"density\":{\"uri\":\"%s\"}}", file);
+        expect_error(bad[i][0], write_scene("badvdb", ext, "", 0), bad[i][1], file);
+        CHECK(dr_volume_read(file, NULL, &vol) != 0 && vol.data == NULL, "%s: refused, nothing allocated",
+              bad[i][0]);
+    }
 }
 
 int main(void)
@@ -211,6 +287,7 @@ int main(void)
     }
     test_khr_volume();
     test_dr_medium_grid();
+    test_vdb();
     test_bad_input();
     char cmd[300];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);

@@ -17,6 +17,10 @@
   fog-dense.gltf    a hard case: extinction 1e4, 1e3, 1e2 (1/m), albedo 0.999
   fog-khr.gltf      the cube as a homogeneous KHR_materials_volume medium
                     (transmission 1, ior 1, volume_scatter albedo)
+  glass-fog.gltf    fog-khr.gltf behind a smooth dielectric boundary
+                    (KHR_materials_ior 1.5): a glass cube of fog
+  smoke-vdb.gltf    smoke.gltf with the grid read from smoke.vdb (written by
+                    make_vdb.py: the same voxels as an OpenVDB float grid)
 """
 import base64
 import json
@@ -97,10 +101,16 @@ def dr_medium(uri, n=N):
                           "density": {"uri": uri, "resolution": [n, n, n]}}}
 
 
+def dr_medium_vdb(uri):
+    return {"DR_medium": {"extinction": [4, 4, 4], "albedo": [0.85, 0.8, 0.75], "g": 0.2,
+                          "density": {"uri": uri}}}
+
+
 write_grid("smoke.raw", blob)
 write_grid("empty.raw", lambda x, y, z: 0.0)
 scene(dr_medium("smoke.raw"), "smoke.gltf")
 scene(dr_medium("empty.raw"), "smoke-empty.gltf")
+scene(dr_medium_vdb("smoke.vdb"), "smoke-vdb.gltf")
 write_grid("coarse.raw", lambda x, y, z: 0.6 * blob(x, y, z, 4), 4)
 write_grid("coarse-empty.raw", lambda x, y, z: 0.0, 4)
 scene(dr_medium("coarse.raw", 4), "coarse.gltf")
@@ -113,3 +123,8 @@ scene({"KHR_materials_volume": {"thicknessFactor": 1, "attenuationDistance": 1.5
        "KHR_materials_transmission": {"transmissionFactor": 1}, "KHR_materials_ior": {"ior": 1},
        "KHR_materials_volume_scatter": {"multiscatterColor": [0.9, 0.9, 0.9], "scatterAnisotropy": 0.3}},
       "fog-khr.gltf")
+scene({"KHR_materials_volume": {"thicknessFactor": 1, "attenuationDistance": 1.5,
+                                "attenuationColor": [0.6, 0.7, 0.8]},
+       "KHR_materials_transmission": {"transmissionFactor": 1}, "KHR_materials_ior": {"ior": 1.5},
+       "KHR_materials_volume_scatter": {"multiscatterColor": [0.9, 0.9, 0.9], "scatterAnisotropy": 0.3}},
+      "glass-fog.gltf")
