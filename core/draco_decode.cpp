@@ -1,6 +1,10 @@
 /* KHR_draco_mesh_compression through libdraco (see draco_decode.h). */
 #include "draco_decode.h"
 
+#include <cstring>
+
+#include <nlohmann/json.hpp>
+
 #include <draco/compression/decode.h>
 #include <draco/mesh/mesh.h>
 
@@ -48,3 +52,58 @@ bool dr_draco_decode(const unsigned char *data, size_t size, dr_draco_mesh *out,
         return false;
     }
 }
+
+/* ---- the glTF side of KHR_draco_mesh_compression (loader and writer) ---- */
+
+/* tinygltf (Debian's is built without Draco) refuses a primitive whose
+ * "indices" accessor has no bufferView, as KHR_draco_mesh_compression's are:
+ * those indices live in the compressed stream (gltf_load.cpp's decode_draco). Such primitives
+ * lose "indices" in the copy of the JSON that tinygltf parses. False when
+ * nothing needed rewriting (then tinygltf reads the file itself, as ever). */
+bool dr_draco_strip_indices(std::string &json_text)
+{
+    if (json_text.find("KHR_draco_mesh_compression") == std::string::npos) return false;
+    nlohmann::json j = nlohmann::json::parse(json_text, nullptr, /*allow_exceptions=*/false);
+    if (j.is_discarded() || !j.is_object()) return false;   /* tinygltf reports the syntax error */
+    auto meshes = j.find("meshes");
+    if (meshes == j.end() || !meshes->is_array()) return false;
+    bool changed = false;
+    for (auto &m : *meshes) {
+        if (!m.is_object() || !m.contains("primitives") || !m["primitives"].is_array()) continue;
+        for (auto &p : m["primitives"]) {
+            if (!p.is_object() || !p.contains("extensions") || !p["extensions"].is_object() ||
+                !p["extensions"].contains("KHR_draco_mesh_compression"))
+                continue;
+            changed |= p.erase("indices") > 0;
+        }
+    }
+    if (changed) json_text = j.dump();
+    return changed;
+}
+
+/* A .glb with its JSON chunk rewritten by dr_draco_strip_indices; empty when
+ * nothing changed (or the container is malformed: tinygltf says how). */
+std::vector<unsigned char> dr_glb_strip_draco_indices(const std::vector<unsigned char> &glb)
+{
+    auto u32 = [&](size_t at) {
+        uint32_t v;
+        memcpy(&v, glb.data() + at, 4);
+        return v;
+    };
+    if (glb.size() < 20 || memcmp(glb.data(), "glTF", 4) != 0 || memcmp(glb.data() + 16, "JSON", 4) != 0) return {};
+    size_t len = u32(12);
+    if (len > glb.size() - 20) return {};
+    std::string text(reinterpret_cast<const char *>(glb.data()) + 20, len);
+    if (!dr_draco_strip_indices(text)) return {};
+    while (text.size() % 4) text.push_back(' ');   /* chunks are 4-byte aligned */
+    std::vector<unsigned char> out(glb.begin(), glb.begin() + 12);
+    uint32_t n = uint32_t(text.size());
+    out.insert(out.end(), reinterpret_cast<unsigned char *>(&n), reinterpret_cast<unsigned char *>(&n) + 4);
+    out.insert(out.end(), {'J', 'S', 'O', 'N'});
+    out.insert(out.end(), text.begin(), text.end());
+    out.insert(out.end(), glb.begin() + ptrdiff_t(20 + len), glb.end());
+    uint32_t total = uint32_t(out.size());
+    memcpy(out.data() + 8, &total, 4);
+    return out;
+}
+

@@ -1,5 +1,5 @@
 /* KHR_draco_mesh_compression: a thin C++ shim over Debian's libdraco, used
- * only by gltf_load.cpp (the only file that includes draco's headers is
+ * by gltf_load.cpp and gltf_write.cpp (the only file that includes draco's headers is
  * draco_decode.cpp, so its templates stay out of the loader). */
 #ifndef DR_DRACO_DECODE_H
 #define DR_DRACO_DECODE_H
@@ -30,5 +30,15 @@ struct dr_draco_mesh {
 /* Decodes a Draco-compressed triangle mesh from data[0..size). Returns false
  * with *err set (draco's message) when the bytes are not a valid Draco mesh. */
 bool dr_draco_decode(const unsigned char *data, size_t size, dr_draco_mesh *out, std::string *err);
+
+/* tinygltf (Debian's is built without Draco) refuses a primitive whose
+ * "indices" accessor has no bufferView, as KHR_draco_mesh_compression's are.
+ * These rewrite the JSON tinygltf is given so that such primitives have no
+ * "indices" (the loader decodes them from the stream; the writer puts them
+ * back). dr_draco_strip_indices: false when nothing needed rewriting.
+ * dr_glb_strip_draco_indices: the .glb with its JSON chunk rewritten, empty
+ * when nothing changed or the container is malformed. */
+bool dr_draco_strip_indices(std::string &json_text);
+std::vector<unsigned char> dr_glb_strip_draco_indices(const std::vector<unsigned char> &glb);
 
 #endif

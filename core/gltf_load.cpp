@@ -531,72 +531,20 @@ bool has_suffix(const char *s, const char *suffix)
     return n >= m && strcasecmp(s + n - m, suffix) == 0;
 }
 
-/* tinygltf (Debian's is built without Draco) refuses a primitive whose
- * "indices" accessor has no bufferView, as KHR_draco_mesh_compression's are:
- * those indices live in the compressed stream (decode_draco). Such primitives
- * lose "indices" in the copy of the JSON that tinygltf parses. False when
- * nothing needed rewriting (then tinygltf reads the file itself, as ever). */
-bool draco_strip_indices(std::string &json_text)
-{
-    if (json_text.find("KHR_draco_mesh_compression") == std::string::npos) return false;
-    nlohmann::json j = nlohmann::json::parse(json_text, nullptr, /*allow_exceptions=*/false);
-    if (j.is_discarded() || !j.is_object()) return false;   /* tinygltf reports the syntax error */
-    auto meshes = j.find("meshes");
-    if (meshes == j.end() || !meshes->is_array()) return false;
-    bool changed = false;
-    for (auto &m : *meshes) {
-        if (!m.is_object() || !m.contains("primitives") || !m["primitives"].is_array()) continue;
-        for (auto &p : m["primitives"]) {
-            if (!p.is_object() || !p.contains("extensions") || !p["extensions"].is_object() ||
-                !p["extensions"].contains("KHR_draco_mesh_compression"))
-                continue;
-            changed |= p.erase("indices") > 0;
-        }
-    }
-    if (changed) json_text = j.dump();
-    return changed;
-}
-
-/* A .glb with its JSON chunk rewritten by draco_strip_indices; empty when
- * nothing changed (or the container is malformed: tinygltf says how). */
-std::vector<unsigned char> glb_strip_draco_indices(const std::vector<unsigned char> &glb)
-{
-    auto u32 = [&](size_t at) {
-        uint32_t v;
-        memcpy(&v, glb.data() + at, 4);
-        return v;
-    };
-    if (glb.size() < 20 || memcmp(glb.data(), "glTF", 4) != 0 || memcmp(glb.data() + 16, "JSON", 4) != 0) return {};
-    size_t len = u32(12);
-    if (len > glb.size() - 20) return {};
-    std::string text(reinterpret_cast<const char *>(glb.data()) + 20, len);
-    if (!draco_strip_indices(text)) return {};
-    while (text.size() % 4) text.push_back(' ');   /* chunks are 4-byte aligned */
-    std::vector<unsigned char> out(glb.begin(), glb.begin() + 12);
-    uint32_t n = uint32_t(text.size());
-    out.insert(out.end(), reinterpret_cast<unsigned char *>(&n), reinterpret_cast<unsigned char *>(&n) + 4);
-    out.insert(out.end(), {'J', 'S', 'O', 'N'});
-    out.insert(out.end(), text.begin(), text.end());
-    out.insert(out.end(), glb.begin() + ptrdiff_t(20 + len), glb.end());
-    uint32_t total = uint32_t(out.size());
-    memcpy(out.data() + 8, &total, 4);
-    return out;
-}
-
-/* Parses the file with tinygltf, through draco_strip_indices when it has Draco primitives. */
+/* Parses the file with tinygltf, through dr_draco_strip_indices when it has Draco primitives. */
 bool Loader::parse_file(tinygltf::TinyGLTF &gltf, bool binary, std::string *err, std::string *warn)
 {
     std::vector<unsigned char> bytes;
     std::string ignored;
     if (!fs_read(&bytes, &ignored, path_, this)) return false;
     if (binary) {
-        std::vector<unsigned char> glb = glb_strip_draco_indices(bytes);
+        std::vector<unsigned char> glb = dr_glb_strip_draco_indices(bytes);
         const std::vector<unsigned char> &use = glb.empty() ? bytes : glb;
         if (use.size() > UINT32_MAX) fail(DR_ERR_FORMAT, "the file is larger than 4 GiB");
         return gltf.LoadBinaryFromMemory(&model_, err, warn, use.data(), unsigned(use.size()), directory_of(path_));
     }
     std::string text(bytes.begin(), bytes.end());
-    if (!draco_strip_indices(text))
+    if (!dr_draco_strip_indices(text))
         return gltf.LoadASCIIFromFile(&model_, err, warn, path_);
     if (text.size() > UINT32_MAX) fail(DR_ERR_FORMAT, "the file is larger than 4 GiB");
     return gltf.LoadASCIIFromString(&model_, err, warn, text.data(), unsigned(text.size()), directory_of(path_));

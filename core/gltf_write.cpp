@@ -53,6 +53,7 @@
 #include "gltf_write.h"
 #include "image_io.h"
 #include "medium.h"
+#include "draco_decode.h"
 
 namespace {
 
@@ -233,6 +234,7 @@ private:
     void plan_names();
     void load_source();
     void make_temp_dir();
+    void remember_draco_indices(const std::string &json_text);
     void apply_params();
     void record_light_units();
     void apply_material(int m, const std::vector<const dr_param *> &ps);
@@ -265,6 +267,8 @@ private:
     std::string out_;
 
     bool glb_ = false;
+    struct DracoIndices { size_t mesh, primitive; long long accessor; };
+    std::vector<DracoIndices> draco_indices_;   /* put back by fix_json */
     std::string src_dir_, out_dir_, out_base_, stem_;
     bool same_dir_ = false;
     tinygltf::Model model_;
@@ -316,6 +320,9 @@ void Writer::plan_names()
     claim(out_base_, "the output");
 }
 
+std::vector<unsigned char> read_all(const std::string &path, int *err);
+std::string glb_json(const std::vector<unsigned char> &glb);
+
 void Writer::load_source()
 {
     const char *path = scene_->path;
@@ -331,14 +338,58 @@ void Writer::load_source()
     tinygltf::TinyGLTF gltf;
     gltf.SetImageLoader(keep_image, nullptr);
     std::string err, warn;
-    bool ok = binary ? gltf.LoadBinaryFromFile(&model_, &err, &warn, path)
-                     : gltf.LoadASCIIFromFile(&model_, &err, &warn, path);
+    bool ok;
+    int e = 0;
+    std::vector<unsigned char> bytes = read_all(path, &e);
+    std::string text = binary ? glb_json(bytes) : std::string(bytes.begin(), bytes.end());
+    remember_draco_indices(text);
+    if (!draco_indices_.empty()) {   /* tinygltf needs them stripped (draco_decode.h); fix_json puts them back */
+        std::vector<unsigned char> glb = binary ? dr_glb_strip_draco_indices(bytes) : std::vector<unsigned char>();
+        if (!binary) dr_draco_strip_indices(text);
+        ok = binary ? !glb.empty() && gltf.LoadBinaryFromMemory(&model_, &err, &warn, glb.data(), unsigned(glb.size()),
+                                                                src_dir_)
+                    : gltf.LoadASCIIFromString(&model_, &err, &warn, text.data(), unsigned(text.size()), src_dir_);
+    } else {
+        ok = binary ? gltf.LoadBinaryFromFile(&model_, &err, &warn, path)
+                    : gltf.LoadASCIIFromFile(&model_, &err, &warn, path);
+    }
     if (!ok) {
         while (!err.empty() && (err.back() == '\n' || err.back() == ' ')) err.pop_back();
         for (char &c : err)
             if (c == '\n') c = ';';
         dr_set_error("%s: cannot re-read the source scene: %s", path, err.empty() ? "tinygltf failed" : err.c_str());
         throw Failure{DR_ERR_FORMAT};
+    }
+}
+
+/* The JSON chunk of a .glb ("" when malformed: tinygltf then says how). */
+std::string glb_json(const std::vector<unsigned char> &glb)
+{
+    if (glb.size() < 20 || memcmp(glb.data(), "glTF", 4) != 0) return "";
+    uint32_t len;
+    memcpy(&len, glb.data() + 12, 4);
+    if (len > glb.size() - 20) return "";
+    return std::string(reinterpret_cast<const char *>(glb.data()) + 20, len);
+}
+
+/* Which primitives carry KHR_draco_mesh_compression and which "indices"
+ * accessor they name, so the output keeps them (tinygltf reads the source
+ * without them). */
+void Writer::remember_draco_indices(const std::string &json_text)
+{
+    draco_indices_.clear();
+    if (json_text.find("KHR_draco_mesh_compression") == std::string::npos) return;
+    nlohmann::json j = nlohmann::json::parse(json_text, nullptr, /*allow_exceptions=*/false);
+    if (j.is_discarded() || !j.is_object() || !j.contains("meshes") || !j["meshes"].is_array()) return;
+    for (size_t m = 0; m < j["meshes"].size(); m++) {
+        const nlohmann::json &mesh = j["meshes"][m];
+        if (!mesh.is_object() || !mesh.contains("primitives") || !mesh["primitives"].is_array()) continue;
+        for (size_t k = 0; k < mesh["primitives"].size(); k++) {
+            const nlohmann::json &p = mesh["primitives"][k];
+            if (p.is_object() && p.contains("indices") && p["indices"].is_number_integer() && p.contains("extensions") &&
+                p["extensions"].is_object() && p["extensions"].contains("KHR_draco_mesh_compression"))
+                draco_indices_.push_back({m, k, p["indices"].get<long long>()});
+        }
     }
 }
 
@@ -941,6 +992,9 @@ void Writer::fix_json()
     if (j.is_discarded() || !j.is_object())
         fail(DR_ERR_IO, "cannot write: the written file is incomplete (disk full?)");
     repair(j);
+    for (const DracoIndices &d : draco_indices_)
+        if (j.contains("meshes") && d.mesh < j["meshes"].size() && d.primitive < j["meshes"][d.mesh]["primitives"].size())
+            j["meshes"][d.mesh]["primitives"][d.primitive]["indices"] = d.accessor;
     std::string out;
     if (glb_) {
         std::string text = j.dump();

@@ -8,6 +8,9 @@
 #   b. params lists only images that can change the image: NormalTangentTest's
 #      normal map is not a parameter, and asking for it says why (exit 2)
 #   c. load warnings are printed once per run, also by optimize
+#   d. optimize writes a Draco-compressed model back (.gltf and .glb): the
+#      Draco primitives keep their extension and indices, the output renders
+#      like the fitted scene and the validator finds no error
 # Run by tests/run.sh (env: DRENDER, DR_TESTDIR); also runs alone.
 set -u
 
@@ -79,4 +82,24 @@ run optimize "$dof" --target dof.exr --param /materials/0/pbrMetallicRoughness/b
 expect_rc 0 "optimize DepthOfFieldExample"
 dups=$(grep "warning" "$tmp/err" | sort | uniq -d)
 [ -z "$dups" ] || fail "optimize printed a load warning more than once: $dups"
+# ---- d. Draco written back ----
+draco=$samples/Box/glTF-Draco/Box.gltf
+[ -f "$draco" ] || fail "Box/glTF-Draco/Box.gltf not found"
+run render "$draco" $R -o dtarget.exr --env 0.5
+expect_rc 0 "render the Draco box"
+for o in dbox.gltf dbox.glb; do
+    run optimize "$draco" --target dtarget.exr --param /materials/0/pbrMetallicRoughness/baseColorFactor --iters 2 \
+        --spp 2 --res 24x24 --env 0.5 --out-dir o4 -o "o4/$o"
+    expect_rc 0 "optimize the Draco box into $o"
+    run render "o4/$o" $R -o "back-$o.exr" --env 0.5
+    expect_rc 0 "render the written $o"
+    set -- $(avg "back-$o.exr")
+    awk -v r="$1" 'BEGIN { exit !(r > 0.01) }' || fail "the written $o renders black ($*)"
+done
+python3 - o4/dbox.gltf <<'PY' || fail "the written Draco primitive lost its extension or indices"
+import json, sys
+p = json.load(open(sys.argv[1]))["meshes"][0]["primitives"][0]
+sys.exit(0 if "KHR_draco_mesh_compression" in p.get("extensions", {}) and "indices" in p else 1)
+PY
+validate_gltf o4/dbox.gltf o4/dbox.glb > validate-draco.txt 2>&1 || { cat validate-draco.txt >&2; fail "the validator found errors in the written Draco model"; }
 echo "cli_gltf_output: all passed"
