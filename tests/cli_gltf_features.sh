@@ -28,9 +28,7 @@ set -u
 . "$(dirname "$0")/lib/cli.sh"
 cli_setup gltf-features
 require_drender
-samples=$DR_TESTDIR/../../shared/gltf-samples
-[ -d "$samples/Box" ] || samples=$DR_TESTDIR/../../../shared/gltf-samples
-[ -d "$samples/Box" ] || fail "the shared glTF samples were not found beside the checkout"
+find_samples
 R="--res 48x48 --spp 8"
 
 # pixels IMG: python3 reads "x y r g b" lines of oiiotool --dumpdata (small images)

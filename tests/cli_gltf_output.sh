@@ -18,9 +18,7 @@ set -u
 . "$(dirname "$0")/lib/cli.sh"
 cli_setup gltf-output
 require_drender
-samples=$DR_TESTDIR/../../shared/gltf-samples
-[ -d "$samples" ] || samples=$DR_TESTDIR/../../../shared/gltf-samples
-[ -d "$samples" ] || fail "the shared sample models (shared/gltf-samples) were not found beside the checkout"
+find_samples
 avg() { oiiotool --stats "$1" 2>/dev/null | awk '/Stats Avg/ { print $3, $4, $5; exit }'; }
 # glb_images FILE: one line per image: "bufferView=N uri=U"
 glb_images() {

@@ -13,9 +13,7 @@ set -u
 . "$(dirname "$0")/lib/cli.sh"
 cli_setup gltf-samples
 require_drender
-samples=$DR_TESTDIR/../../shared/gltf-samples
-[ -d "$samples/Box" ] || samples=$DR_TESTDIR/../../../shared/gltf-samples
-[ -d "$samples/Box" ] || fail "the shared glTF samples were not found beside the checkout"
+find_samples
 
 # model | exit | default-light note (yes/no) | effects that must be listed (comma-separated)
 table="

@@ -22,8 +22,7 @@ set -u
 . "$(dirname "$0")/lib/cli.sh"
 cli_setup surfaces
 require_drender
-samples=$DR_TESTDIR/../../shared/gltf-samples
-[ -d "$samples" ] || samples=$DR_TESTDIR/../../../shared/gltf-samples
+find_samples
 [ -d "$samples/NormalTangentTest" ] || fail "the shared sample models were not found beside the checkout"
 data=$DR_TESTDIR/data/surfaces
 

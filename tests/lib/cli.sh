@@ -24,6 +24,9 @@
 #   expect_mentions "N1|N2|..." [WHAT]: stderr contains every needle (fixed strings)
 #   check_failed CODE "N1|N2|...": after run, exit CODE, an error message
 #                        naming every needle, nothing on stdout
+#   find_samples         sets $samples to ../shared/gltf-samples beside the
+#                        checkout (DR_TESTDIR/../../ or, in a work tree one level
+#                        deeper, ../../../), or fails naming it
 #   ensure_gltf_validator  installs the Khronos glTF validator into build/node
 #   validate_gltf FILE...  runs it (tests/validate_gltf.mjs): status 0 = no errors
 #
@@ -101,6 +104,11 @@ check_failed() {
 # first use into build/node (outside git; needs node, npm and the npm registry).
 gltf_validator_pkg="gltf-validator@2.0.0-dev.3.10"
 gltf_validator_dir=$cli_root/build/node
+find_samples() {
+    samples=$DR_TESTDIR/../../shared/gltf-samples
+    [ -d "$samples/Box" ] || samples=$DR_TESTDIR/../../../shared/gltf-samples
+    [ -d "$samples/Box" ] || fail "the shared glTF sample models (shared/gltf-samples) were not found beside the checkout"
+}
 ensure_gltf_validator() {
     local node_dir=$gltf_validator_dir
     command -v node >/dev/null 2>&1 || fail "node is not installed (Debian: apt-get install nodejs npm, or scripts/install-deps.sh)"
