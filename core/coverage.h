@@ -25,6 +25,7 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "sampler.h"   /* dr_hash64 */
 #include "scene.h"
 #include "vec.h"
 
@@ -38,18 +39,13 @@ enum dr_cover_bits {
 unsigned dr_material_coverage(const struct dr_scene *scene, int m);
 
 /* alpha at barycentrics (b1, b2) of triangle tri: baseColorFactor.a times the
- * base colour texture's alpha at the interpolated TEXCOORD_0. */
+ * base colour texture's alpha at its TEXCOORD set, through its KHR_texture_transform. */
 double dr_surface_alpha(const struct dr_scene *scene, int64_t tri, double b1, double b2);
 
 /* The uniform number in [0, 1) a BLEND surface draws for a query. */
 static inline double dr_blend_uniform(uint64_t key, int64_t tri)
 {
-    uint64_t x = key ^ ((uint64_t)tri * 0x9e3779b97f4a7c15ULL + 0x632be59bd9b4e019ULL);
-    x ^= x >> 30;
-    x *= 0xbf58476d1ce4e5b9ULL;
-    x ^= x >> 27;
-    x *= 0x94d049bb133111ebULL;
-    x ^= x >> 31;
+    uint64_t x = dr_hash64(key ^ ((uint64_t)tri * 0x9e3779b97f4a7c15ULL + 0x632be59bd9b4e019ULL));
     return (double)(x >> 11) * 0x1.0p-53;
 }
 
@@ -68,13 +64,7 @@ bool dr_coverage_point_present(const struct dr_scene *scene, int64_t tri, double
 enum dr_ray_purpose { DR_RAY_TRACE = 1, DR_RAY_SHADOW = 2 };
 static inline uint64_t dr_coverage_key(uint64_t path_key, int depth, enum dr_ray_purpose purpose)
 {
-    uint64_t x = path_key ^ ((uint64_t)depth * 0xd6e8feb86659fd93ULL) ^ ((uint64_t)purpose << 56);
-    x ^= x >> 33;
-    x *= 0xff51afd7ed558ccdULL;
-    x ^= x >> 33;
-    x *= 0xc4ceb9fe1a85ec53ULL;
-    x ^= x >> 33;
-    return x;
+    return dr_hash64(path_key ^ ((uint64_t)depth * 0xd6e8feb86659fd93ULL) ^ ((uint64_t)purpose << 56));
 }
 
 #endif

@@ -144,6 +144,30 @@ static inline void sb_open_box(struct sb *b, double height, int material)
     sb_quad(b, dr_v3(1, 0, -1), dr_v3(0, 0, 2), dr_v3(0, height, 0), material);      /* x=+1, -x */
 }
 
+/* A w x h x c image holding px (or filled with `fill` when px is NULL),
+ * with an identical linear copy when `linear` (a colour texture as the
+ * loader gives it). Released by dr_scene_destroy once in scene->images. */
+static inline struct dr_image sb_image(int w, int h, int c, const float *px, float fill, bool linear)
+{
+    struct dr_image im;
+    memset(&im, 0, sizeof im);
+    im.width = w;
+    im.height = h;
+    im.channels = c;
+    size_t n = (size_t)w * h * c;
+    im.data = malloc(sizeof(float) * n);
+    im.linear = linear ? malloc(sizeof(float) * n) : NULL;
+    if (!im.data || (linear && !im.linear)) {
+        fprintf(stderr, "scene_builder: out of memory\n");
+        exit(2);
+    }
+    for (size_t i = 0; i < n; i++)
+        im.data[i] = px ? px[i] : fill;
+    if (linear)
+        memcpy(im.linear, im.data, sizeof(float) * n);
+    return im;
+}
+
 static inline void sb_environment(struct sb *b, dr_vec3 color)
 {
     b->s->env.present = true;

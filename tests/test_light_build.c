@@ -12,20 +12,6 @@
 #include "scene_builder.h"
 #include "test.h"
 
-static struct dr_image constant_image(int w, int h, float value)
-{
-    struct dr_image im;
-    memset(&im, 0, sizeof im);
-    im.width = w;
-    im.height = h;
-    im.channels = 3;
-    im.data = malloc(sizeof(float) * (size_t)w * h * 3);
-    im.linear = malloc(sizeof(float) * (size_t)w * h * 3);
-    for (int i = 0; i < w * h * 3; i++)
-        im.data[i] = im.linear[i] = value;
-    return im;
-}
-
 static struct dr_material emitter(int texture, double strength)
 {
     struct dr_material m = sb_diffuse(dr_v3s(0.5));
@@ -59,9 +45,9 @@ int main(void)
     struct dr_scene *s = b.s;
     s->n_images = 3;
     s->images = calloc(3, sizeof(struct dr_image));
-    s->images[0] = constant_image(512, 512, 0.25f);
-    s->images[1] = constant_image(256, 256, 0.5f);
-    s->images[2] = constant_image(64, 64, 1.0f);
+    s->images[0] = sb_image(512, 512, 3, NULL, 0.25f, true);
+    s->images[1] = sb_image(256, 256, 3, NULL, 0.5f, true);
+    s->images[2] = sb_image(64, 64, 3, NULL, 1.0f, true);
     s->n_textures = 3;
     s->textures = calloc(3, sizeof(struct dr_texture));
     for (int i = 0; i < 3; i++)

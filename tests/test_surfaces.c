@@ -25,18 +25,6 @@
 #include "scene_builder.h"
 #include "test.h"
 
-static struct dr_image make_image(int w, int h, int c, const float *px)
-{
-    struct dr_image im;
-    memset(&im, 0, sizeof im);
-    im.width = w;
-    im.height = h;
-    im.channels = c;
-    im.data = malloc(sizeof(float) * (size_t)(w * h * c));
-    memcpy(im.data, px, sizeof(float) * (size_t)(w * h * c));
-    return im;
-}
-
 /* One image and one texture (clamped) appended to the builder's scene. */
 static int add_texture(struct sb *b, struct dr_image im)
 {
@@ -232,7 +220,7 @@ static struct dr_scene *normal_quad(const dr_vec3 *enc, double scale, bool degen
     for (int i = 0; i < 4; i++)
         px[3 * i] = (float)enc->x, px[3 * i + 1] = (float)enc->y, px[3 * i + 2] = (float)enc->z;
     struct dr_material mat = sb_diffuse(dr_v3s(0.5));
-    mat.normal_tex.texture = add_texture(&b, make_image(2, 2, 3, px));
+    mat.normal_tex.texture = add_texture(&b, sb_image(2, 2, 3, px, 0.0f, false));
     mat.normal_scale = scale;
     sb_quad(&b, dr_v3(-1, -1, 0), dr_v3(2, 0, 0), dr_v3(0, 2, 0), sb_material(&b, mat));
     if (degenerate_uv)
@@ -327,7 +315,7 @@ static struct dr_scene *mask_scene(enum dr_alpha_mode mode, double alpha_factor)
     sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, sb_diffuse(dr_v3s(0.8))));
     const float px[8] = {0.2f, 0.9f, 0.2f, 0.0f, 0.2f, 0.9f, 0.2f, 1.0f};
     struct dr_material m = sb_diffuse(dr_v3s(0.5));
-    m.base_color_tex.texture = add_texture(&b, make_image(2, 1, 4, px));
+    m.base_color_tex.texture = add_texture(&b, sb_image(2, 1, 4, px, 0.0f, false));
     m.alpha_mode = mode;
     m.alpha = alpha_factor;
     m.double_sided = true;
