@@ -36,8 +36,6 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
-#include <fstream>
-#include <iterator>
 #include <map>
 #include <set>
 #include <string>
@@ -821,10 +819,10 @@ void Writer::embed_images()
             files_.erase(std::remove_if(files_.begin(), files_.end(), [&](const PendingFile &f) { return f.tmp == src; }),
                          files_.end());
         }
-        std::ifstream in(src, std::ios::binary);
-        std::vector<unsigned char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-        if (!in.good() && !in.eof()) fail(DR_ERR_IO, "/images/%zu/uri: cannot read %s to embed it", i, src.c_str());
-        if (bytes.empty()) fail(DR_ERR_IO, "/images/%zu/uri: %s is empty or unreadable", i, src.c_str());
+        int e = 0;
+        std::vector<unsigned char> bytes = read_all(src, &e);
+        if (e) fail(DR_ERR_IO, "/images/%zu/uri: cannot read %s to embed it: %s", i, src.c_str(), strerror(e));
+        if (bytes.empty()) fail(DR_ERR_IO, "/images/%zu/uri: %s is empty", i, src.c_str());
         if (written_now) remove(src.c_str());
         while (bin.size() % 4) bin.push_back(0);
         tinygltf::BufferView view;
