@@ -793,3 +793,34 @@ bool dr_bsdf_deriv_sample(const struct dr_bsdf *b, dr_vec3 wo, unsigned params, 
     *pdf = dr_bsdf_deriv_pdf(b, wo, *wi, params);
     return *pdf > 0.0 && isfinite(*pdf);
 }
+
+/* The NDF part of the roughness derivative (see bsdf.h): with
+ * f_spec,c = [(1-m) F_d,c + m F_m,c] D G2 / (4 wo.z wi.z) = K_c spec,
+ *   d f_c / d rough |_D = K_c spec d lnD/d alpha * 2 rough,
+ *   d lnD / d alpha = (2/alpha) (Hxy^2 - alpha^2 Hz^2) / q   (as d_eval_params).
+ * Zero for a Lambertian (no specular lobe) and below the alpha floor, as
+ * d_eval_params' roughness adjoint. */
+void d_bsdf_eval_rough_ndf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out, struct dr_d_bsdf *d)
+{
+    const double rough = b->roughness, m = b->metallic;
+    if (!(wo.z > COS_EPS) || !(wi.z > COS_EPS) || no_specular_lobe(b) || !(rough * rough > DR_BSDF_MIN_ALPHA))
+        return;
+    const dr_vec3 base = b->base_color;
+    double a = bsdf_alpha(b), a2 = a * a;
+    dr_vec3 H = dr_add(wo, wi);
+    double hxy2 = H.x * H.x + H.y * H.y, hz2 = H.z * H.z;
+    double H2 = hxy2 + hz2;
+    double q = hxy2 + a2 * hz2;
+    double r = H2 / q;
+    double D = a2 * r * r * DR_INV_PI;
+    double spec = D / (4.0 * wo.z * (1.0 + smith_lambda(a2, wo) + smith_lambda(a2, wi)) * wi.z);
+    double s5 = pow5(1.0 - dr_clamp(0.5 * sqrt(H2), 0.0, 1.0));
+    dr_vec3 f0 = dielectric_f0(b);
+    double f90 = b->specular;
+    dr_vec3 fd = dr_v3(f0.x + (f90 - f0.x) * s5, f0.y + (f90 - f0.y) * s5, f0.z + (f90 - f0.z) * s5);
+    dr_vec3 fm = dr_v3(base.x + (1.0 - base.x) * s5, base.y + (1.0 - base.y) * s5,
+                       base.z + (1.0 - base.z) * s5);
+    double d_spec = (1.0 - m) * dr_dot(d_out, fd) + m * dr_dot(d_out, fm);
+    double dlnD = (2.0 / a) * ((hxy2 - a2 * hz2) / q);
+    d->roughness += d_spec * spec * dlnD * (2.0 * rough);
+}

@@ -131,6 +131,13 @@ double dr_bsdf_deriv_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, unsign
 /* The sampling map of one lobe (u1, u2) -> wi; may lie below the surface
  * (rejected by dr_bsdf_deriv_sample). wo.z > 0. */
 dr_vec3 dr_bsdf_deriv_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_dlobe lobe, double u1, double u2);
+/* The part of d_bsdf_eval's roughness adjoint that comes through the NDF D
+ * alone (G2 and Fresnel held): d f / d rough |_D = f_spec d lnD/d rough.
+ * Its integrand, d D / d alpha times smooth factors, is what the roughness
+ * lobes are made for (the antithetic pair of path_deriv.c estimates it;
+ * the rest of d f / d rough is left to the forward sampler). Adds to
+ * d->roughness only. */
+void d_bsdf_eval_rough_ndf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out, struct dr_d_bsdf *d);
 /* Chooses a lobe with u_lobe by the weights, maps (u1, u2), and returns the
  * mixture density in *pdf. False: no valid direction (the estimate is 0). */
 bool dr_bsdf_deriv_sample(const struct dr_bsdf *b, dr_vec3 wo, unsigned params, double u_lobe, double u1, double u2,

@@ -25,9 +25,10 @@
 enum dr_sampling {
     DR_SAMPLING_DETACHED,   /* differentiate-then-reparametrize */
     DR_SAMPLING_ATTACHED,   /* reparametrize-then-differentiate (path.h: what moves, what stays) */
+    DR_SAMPLING_DERIVATIVE, /* detached + a direction sampled for d f / d theta, by MIS (path_deriv.h) */
     DR_SAMPLING_COUNT
 };
-/* "detached", "attached"; and back (-1: unknown name). */
+/* "detached", "attached", "derivative"; and back (-1: unknown name). */
 const char *dr_sampling_name(enum dr_sampling s);
 int dr_sampling_parse(const char *name);
 
