@@ -7,7 +7,10 @@
  * MIS weights and Russian roulette are constants of the derivative:
  * differentiate-then-reparametrize with the forward sampler) or `attached`
  * (directions, hit points, pdfs and MIS weights move with the parameters:
- * reparametrize-then-differentiate; see path.h). */
+ * reparametrize-then-differentiate; see path.h), or `derivative` (detached,
+ * plus directions drawn from densities made for the BSDF's derivative and
+ * combined by MIS: reparametrize-then-differentiate-then-reparametrize; see
+ * path_deriv.h; prb only). */
 #ifndef DR_ESTIMATOR_H
 #define DR_ESTIMATOR_H
 
