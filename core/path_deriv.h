@@ -40,7 +40,7 @@
  *    keeps detached sampling's estimate (light + forward, the primal's
  *    weights).
  *
- * In the estimator (prb) the forward strategies are detached sampling's
+ * In the estimators (prb, tape) the forward strategies are detached sampling's
  * terms with corrections: the continuation's derivative becomes B only,
  * times V_f (d_path_deriv_continuation); next-event estimation's derivative
  * becomes B times W_l (d_path_deriv_nee, adding the difference); the

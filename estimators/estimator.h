@@ -10,7 +10,7 @@
  * reparametrize-then-differentiate; see path.h), or `derivative` (detached,
  * plus directions drawn from densities made for the BSDF's derivative and
  * combined by MIS: reparametrize-then-differentiate-then-reparametrize; see
- * path_deriv.h; prb only). */
+ * path_deriv.h). */
 #ifndef DR_ESTIMATOR_H
 #define DR_ESTIMATOR_H
 
