@@ -144,7 +144,7 @@ static int method_option(struct grad_common *g, int c, const char *arg)
     case GOPT_SAMPLING: {
         int s = dr_sampling_parse(arg);
         if (s < 0) {
-            cli_error(g->cmd, "--sampling: unknown sampling strategy '%s' (known: detached, attached)", arg);
+            cli_error(g->cmd, "--sampling: unknown sampling strategy '%s' (known: detached, attached, derivative)", arg);
             return DR_EXIT_USAGE;
         }
         g->sampling = (enum dr_sampling)s;
@@ -602,6 +602,7 @@ void grad_totals_add(struct grad_totals *t, const struct dr_grad_stats *st)
     if (st->threads > 0)
         t->threads = st->threads;
     t->attached_run |= st->sampling_run == DR_SAMPLING_ATTACHED;
+    t->derivative_run |= st->sampling_run == DR_SAMPLING_DERIVATIVE;
 }
 
 void grad_totals_add_render(struct grad_totals *t, const struct dr_render_stats *rs)
@@ -651,9 +652,10 @@ void grad_json_run(FILE *f, const struct grad_totals *t)
     dr_path_stages_describe(t->stages, stages, sizeof stages);
     fprintf(f, ", \"invalid_samples\": %llu, \"stages\": ", (unsigned long long)t->invalid);
     json_name_list(f, stages);
-    /* attached sampling with no parameter in a sampling map runs detached */
+    /* attached sampling with no parameter in a sampling map runs detached; so does
+     * derivative sampling with no BSDF parameter */
     fprintf(f, ", \"sampling_effective\": ");
-    json_string(f, t->attached_run ? "attached" : "detached");
+    json_string(f, t->attached_run ? "attached" : t->derivative_run ? "derivative" : "detached");
 }
 
 /* ---- the film: --filter and --crop (issue 14) ---- */

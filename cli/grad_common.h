@@ -196,6 +196,7 @@ struct grad_totals {
     unsigned stages;
     int threads;
     bool attached_run;   /* some run differentiated with attached sampling */
+    bool derivative_run; /* ... with derivative sampling (some BSDF parameter requested) */
 };
 void grad_totals_add(struct grad_totals *t, const struct dr_grad_stats *st);
 void grad_totals_add_render(struct grad_totals *t, const struct dr_render_stats *rs);

@@ -634,3 +634,193 @@ void d_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lo
     if (d && !at_floor)
         d->roughness += d_a * (2.0 * rough);
 }
+
+/* ------------------------------------------- derivative sampling densities */
+
+/* --sampling derivative (path_deriv.c) samples the derivative integrand
+ * d f / d theta (wo, wi) L_in(wi) cos with a density made for d f / d theta,
+ * a mixture of four lobes (bsdf.h: enum dr_bsdf_dlobe):
+ *
+ *   cosine    wi.z / pi: the derivative of f in base colour, for the diffuse
+ *             lobe, is the diffuse lobe itself (1-m)(1-F_o)(1-F_i) / pi
+ *             (times no colour: the colour is the parameter);
+ *   vndf      the forward specular map's density (Heitz 2018): the base
+ *             colour derivative of a metal, m (1 - s5) D G / (4 cos cos),
+ *             and the positive part of the metallic derivative
+ *             spec (F_m - F_d) are the specular lobe with a different
+ *             Fresnel factor;
+ *   rough+/-  the positivized roughness derivative of GGX D (Zeltner et al.
+ *             2021; Belhe et al. 2024 sample the positive and negative
+ *             parts of d D / d alpha separately). In slope space,
+ *             u = tan^2(theta_h) / alpha^2, GGX is D cos(theta_h) dw_h =
+ *             du / (1+u)^2 dphi / (2 pi), and
+ *               d lnD / d alpha = 2 (u - 1) / (alpha (1 + u)),
+ *             so d/dalpha [D cos dw_h] = (2/alpha) (u-1) / (1+u)^3 du dphi/2pi,
+ *             positive for u > 1 (wide half vectors), negative for u < 1,
+ *             each part of mass 1 / (2 alpha) (they cancel: D stays
+ *             normalised). Normalised, in u:
+ *               p+(u) = 4 (u-1) / (1+u)^3 (u > 1),  CDF ((u-1)/(u+1))^2,
+ *                       inverse u = (1+s)/(1-s), s = sqrt(xi);
+ *               p-(u) = 4 (1-u) / (1+u)^3 (u < 1),  CDF 4u / (1+u)^2,
+ *                       inverse u = (1-t)/(1+t), t = sqrt(1-xi);
+ *             as densities of h: p+-(h) = 2 alpha |d D / d alpha| cos(theta_h)
+ *             on its side (= 4 |u-1| / (1+u) D cos(theta_h)), and of wi by
+ *             the reflection's Jacobian 1 / (4 wo.h).
+ *
+ * The metallic derivative is a signed mixture: spec (F_m - F_d) (positive
+ * where the metal reflects more than the dielectric, i.e. almost always)
+ * minus the diffuse lobe (negative): positivized, each sign with its own
+ * lobe, vndf and cosine. The G and Fresnel parts of the roughness derivative
+ * (D dG/dalpha) are left to the forward sampler, with which the estimator
+ * combines these densities by the balance heuristic (path_deriv.c); that is
+ * also why a lobe need not cover the whole integrand, only its bulk.
+ *
+ * Every lobe density is of wi, zero below the surface; samples a lobe maps
+ * below the surface (or, for the microfacet lobes, with wo.h <= 0) are
+ * rejected, so a lobe's density of valid directions integrates to at most 1
+ * (the rest is the rejection probability). */
+
+void dr_bsdf_deriv_weights(const struct dr_bsdf *b, unsigned params, double w[DR_BSDF_DLOBE_COUNT])
+{
+    for (int l = 0; l < DR_BSDF_DLOBE_COUNT; l++)
+        w[l] = 0.0;
+    int kinds = ((params & DR_BSDF_D_BASE) != 0) + ((params & DR_BSDF_D_METALLIC) != 0) +
+                ((params & DR_BSDF_D_ROUGHNESS) != 0);
+    if (kinds == 0)
+        return;
+    double k = 1.0 / kinds;   /* each requested parameter gets an equal share */
+    if (params & DR_BSDF_D_BASE) {
+        double m = dr_clamp(b->metallic, 0.0, 1.0);
+        w[DR_BSDF_DLOBE_COSINE] += k * (1.0 - m);
+        w[DR_BSDF_DLOBE_VNDF] += k * m;
+    }
+    if (params & DR_BSDF_D_METALLIC) {
+        w[DR_BSDF_DLOBE_COSINE] += 0.5 * k;
+        w[DR_BSDF_DLOBE_VNDF] += 0.5 * k;
+    }
+    if (params & DR_BSDF_D_ROUGHNESS) {
+        w[DR_BSDF_DLOBE_ROUGH_POS] += 0.5 * k;
+        w[DR_BSDF_DLOBE_ROUGH_NEG] += 0.5 * k;
+    }
+}
+
+double dr_bsdf_deriv_lobe_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, enum dr_bsdf_dlobe lobe)
+{
+    if (!(wo.z > COS_EPS) || !(wi.z > COS_EPS))
+        return 0.0;
+    if (lobe == DR_BSDF_DLOBE_COSINE)
+        return wi.z * DR_INV_PI;
+    double a = bsdf_alpha(b), a2 = a * a;
+    dr_vec3 H = dr_add(wo, wi);
+    double hxy2 = H.x * H.x + H.y * H.y, hz2 = H.z * H.z;
+    double H2 = hxy2 + hz2;
+    double q = hxy2 + a2 * hz2;
+    double r = H2 / q;
+    double D = a2 * r * r * DR_INV_PI;
+    if (lobe == DR_BSDF_DLOBE_VNDF)
+        return D / (4.0 * wo.z) / (1.0 + smith_lambda(a2, wo));   /* as eval_pdf_above's pdf_spec */
+    /* u - 1 = (hxy2 - a2 hz2) / (a2 hz2), u + 1 = q / (a2 hz2): their ratio
+     * without forming u (which overflows for tiny alpha). */
+    double num = hxy2 - a2 * hz2;
+    if (lobe == DR_BSDF_DLOBE_ROUGH_POS ? !(num > 0.0) : !(num < 0.0))
+        return 0.0;
+    /* p(h) / (4 wo.h), with p(h) = 4 |u-1|/(u+1) D cos(theta_h), cos(theta_h) = Hz/|H|, wo.h = |H|/2 */
+    return 2.0 * (fabs(num) / q) * D * H.z / H2;
+}
+
+double dr_bsdf_deriv_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, unsigned params)
+{
+    double w[DR_BSDF_DLOBE_COUNT], pdf = 0.0;
+    dr_bsdf_deriv_weights(b, params, w);
+    for (int l = 0; l < DR_BSDF_DLOBE_COUNT; l++)
+        if (w[l] > 0.0)
+            pdf += w[l] * dr_bsdf_deriv_lobe_pdf(b, wo, wi, (enum dr_bsdf_dlobe)l);
+    return pdf;
+}
+
+/* The half vector of a roughness lobe for (u1, u2): tan(theta_h) = alpha sqrt(u),
+ * written as h ~ (alpha sqrt(1 +- s) (cos phi, sin phi), sqrt(1 -+ s)) so
+ * that u = (1 +- s) / (1 -+ s) is never formed (it is infinite at xi = 1). */
+static dr_vec3 sample_rough_h(double a, bool positive, double u1, double u2)
+{
+    double s = positive ? sqrt(u1) : sqrt(dr_max(0.0, 1.0 - u1));
+    double xy = positive ? a * sqrt(1.0 + s) : a * sqrt(dr_max(0.0, 1.0 - s));
+    double z = positive ? sqrt(dr_max(0.0, 1.0 - s)) : sqrt(1.0 + s);
+    double phi = 2.0 * M_PI * u2;
+    return dr_normalize(dr_v3(xy * cos(phi), xy * sin(phi), z));
+}
+
+dr_vec3 dr_bsdf_deriv_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_dlobe lobe, double u1, double u2)
+{
+    switch (lobe) {
+    case DR_BSDF_DLOBE_COSINE:
+        return sample_cosine(u1, u2);
+    case DR_BSDF_DLOBE_VNDF:
+        return dr_bsdf_sample_dir(b, wo, DR_BSDF_LOBE_SPECULAR, u1, u2);
+    default: {
+        dr_vec3 h = sample_rough_h(bsdf_alpha(b), lobe == DR_BSDF_DLOBE_ROUGH_POS, u1, u2);
+        double oh = dr_dot(wo, h);
+        if (!(oh > 0.0))
+            return dr_v3(0.0, 0.0, -1.0);   /* the back of the microfacet: rejected */
+        return dr_sub(dr_scale(h, 2.0 * oh), wo);
+    }
+    }
+}
+
+bool dr_bsdf_deriv_sample(const struct dr_bsdf *b, dr_vec3 wo, unsigned params, double u_lobe, double u1, double u2,
+                          dr_vec3 *wi, double *pdf)
+{
+    double w[DR_BSDF_DLOBE_COUNT], acc = 0.0;
+    *pdf = 0.0;
+    *wi = dr_v3(0.0, 0.0, 1.0);
+    dr_bsdf_deriv_weights(b, params, w);
+    if (!(wo.z > COS_EPS))
+        return false;
+    int lobe = -1;
+    for (int l = 0; l < DR_BSDF_DLOBE_COUNT; l++) {
+        if (!(w[l] > 0.0))
+            continue;
+        acc += w[l];
+        lobe = l;   /* the last lobe with weight also catches rounding (acc may end below 1) */
+        if (u_lobe < acc)
+            break;
+    }
+    if (lobe < 0)
+        return false;
+    *wi = dr_bsdf_deriv_sample_dir(b, wo, (enum dr_bsdf_dlobe)lobe, u1, u2);
+    if (!(wi->z > COS_EPS))
+        return false;
+    *pdf = dr_bsdf_deriv_pdf(b, wo, *wi, params);
+    return *pdf > 0.0 && isfinite(*pdf);
+}
+
+/* The NDF part of the roughness derivative (see bsdf.h): with
+ * f_spec,c = [(1-m) F_d,c + m F_m,c] D G2 / (4 wo.z wi.z) = K_c spec,
+ *   d f_c / d rough |_D = K_c spec d lnD/d alpha * 2 rough,
+ *   d lnD / d alpha = (2/alpha) (Hxy^2 - alpha^2 Hz^2) / q   (as d_eval_params).
+ * Zero for a Lambertian (no specular lobe) and below the alpha floor, as
+ * d_eval_params' roughness adjoint. */
+void d_bsdf_eval_rough_ndf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out, struct dr_d_bsdf *d)
+{
+    const double rough = b->roughness, m = b->metallic;
+    if (!(wo.z > COS_EPS) || !(wi.z > COS_EPS) || no_specular_lobe(b) || !(rough * rough > DR_BSDF_MIN_ALPHA))
+        return;
+    const dr_vec3 base = b->base_color;
+    double a = bsdf_alpha(b), a2 = a * a;
+    dr_vec3 H = dr_add(wo, wi);
+    double hxy2 = H.x * H.x + H.y * H.y, hz2 = H.z * H.z;
+    double H2 = hxy2 + hz2;
+    double q = hxy2 + a2 * hz2;
+    double r = H2 / q;
+    double D = a2 * r * r * DR_INV_PI;
+    double spec = D / (4.0 * wo.z * (1.0 + smith_lambda(a2, wo) + smith_lambda(a2, wi)) * wi.z);
+    double s5 = pow5(1.0 - dr_clamp(0.5 * sqrt(H2), 0.0, 1.0));
+    dr_vec3 f0 = dielectric_f0(b);
+    double f90 = b->specular;
+    dr_vec3 fd = dr_v3(f0.x + (f90 - f0.x) * s5, f0.y + (f90 - f0.y) * s5, f0.z + (f90 - f0.z) * s5);
+    dr_vec3 fm = dr_v3(base.x + (1.0 - base.x) * s5, base.y + (1.0 - base.y) * s5,
+                       base.z + (1.0 - base.z) * s5);
+    double d_spec = (1.0 - m) * dr_dot(d_out, fd) + m * dr_dot(d_out, fm);
+    double dlnD = (2.0 / a) * ((hxy2 - a2 * hz2) / q);
+    d->roughness += d_spec * spec * dlnD * (2.0 * rough);
+}

@@ -101,4 +101,46 @@ void d_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo, double d_p, struc
 void d_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lobe, double u1, double u2,
                        dr_vec3 d_wi, struct dr_d_bsdf *d, dr_vec3 *d_wo);
 
+/* ---- derivative sampling (--sampling derivative; the maths beside the code in bsdf.c) ----
+ *
+ * Densities made for d f / d theta rather than for f: a mixture of lobes
+ * whose weights follow the requested parameters. */
+
+/* The BSDF inputs a derivative is taken with respect to (bits). */
+enum dr_bsdf_dparam { DR_BSDF_D_BASE = 1u, DR_BSDF_D_METALLIC = 2u, DR_BSDF_D_ROUGHNESS = 4u };
+
+/* The lobes of the derivative mixture: cosine (base colour of the diffuse
+ * lobe, the negative part of metallic), the forward GGX visible-normal map
+ * (base colour of a metal, the positive part of metallic), and the positive
+ * and negative parts of d D / d alpha (roughness). */
+enum dr_bsdf_dlobe {
+    DR_BSDF_DLOBE_COSINE,
+    DR_BSDF_DLOBE_VNDF,
+    DR_BSDF_DLOBE_ROUGH_POS,
+    DR_BSDF_DLOBE_ROUGH_NEG,
+    DR_BSDF_DLOBE_COUNT
+};
+
+/* Mixture weights of the lobes for the parameters `params` (dr_bsdf_dparam
+ * bits; each requested kind gets an equal share): sum 1, or all 0 if none. */
+void dr_bsdf_deriv_weights(const struct dr_bsdf *b, unsigned params, double w[DR_BSDF_DLOBE_COUNT]);
+/* Solid-angle density of wi under one lobe (0 below the surface). */
+double dr_bsdf_deriv_lobe_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, enum dr_bsdf_dlobe lobe);
+/* ... and under the mixture for `params`. */
+double dr_bsdf_deriv_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, unsigned params);
+/* The sampling map of one lobe (u1, u2) -> wi; may lie below the surface
+ * (rejected by dr_bsdf_deriv_sample). wo.z > 0. */
+dr_vec3 dr_bsdf_deriv_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_dlobe lobe, double u1, double u2);
+/* The part of d_bsdf_eval's roughness adjoint that comes through the NDF D
+ * alone (G2 and Fresnel held): d f / d rough |_D = f_spec d lnD/d rough.
+ * Its integrand, d D / d alpha times smooth factors, is what the roughness
+ * lobes are made for (the antithetic pair of path_deriv.c estimates it;
+ * the rest of d f / d rough is left to the forward sampler). Adds to
+ * d->roughness only. */
+void d_bsdf_eval_rough_ndf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out, struct dr_d_bsdf *d);
+/* Chooses a lobe with u_lobe by the weights, maps (u1, u2), and returns the
+ * mixture density in *pdf. False: no valid direction (the estimate is 0). */
+bool dr_bsdf_deriv_sample(const struct dr_bsdf *b, dr_vec3 wo, unsigned params, double u_lobe, double u1, double u2,
+                          dr_vec3 *wi, double *pdf);
+
 #endif

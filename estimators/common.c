@@ -136,6 +136,14 @@ enum dr_sampling dr_est_sampling_run(const struct dr_grad_problem *p)
 {
     if (p->sampling == DR_SAMPLING_ATTACHED && !dr_path_params_enter_sampling(p->scene, p->params))
         return DR_SAMPLING_DETACHED;
+    /* derivative sampling adds work only at vertices with a BSDF parameter */
+    if (p->sampling == DR_SAMPLING_DERIVATIVE) {
+        bool any = false;
+        for (int m = 0; p->params && m < p->params->n_materials; m++)
+            any |= p->params->mat_bsdf_active[m];
+        if (!any)
+            return DR_SAMPLING_DETACHED;
+    }
     return p->sampling;
 }
 
@@ -150,6 +158,13 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
      * through a medium would silently lose its moving terms. */
     if (dr_est_sampling_run(p) == DR_SAMPLING_ATTACHED && (p->scene->effects & DR_FX_MEDIA)) {
         dr_set_error("attached sampling does not handle participating media yet (the scene has %d medi%s); use "
+                     "--sampling detached",
+                     p->scene->n_media, p->scene->n_media == 1 ? "um" : "a");
+        return DR_ERR_ARG;
+    }
+    /* Derivative sampling's extra radiance paths use the surface walker's state. */
+    if (dr_est_sampling_run(p) == DR_SAMPLING_DERIVATIVE && (p->scene->effects & DR_FX_MEDIA)) {
+        dr_set_error("derivative sampling does not handle participating media yet (the scene has %d medi%s); use "
                      "--sampling detached",
                      p->scene->n_media, p->scene->n_media == 1 ? "um" : "a");
         return DR_ERR_ARG;

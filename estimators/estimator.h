@@ -7,7 +7,10 @@
  * MIS weights and Russian roulette are constants of the derivative:
  * differentiate-then-reparametrize with the forward sampler) or `attached`
  * (directions, hit points, pdfs and MIS weights move with the parameters:
- * reparametrize-then-differentiate; see path.h). */
+ * reparametrize-then-differentiate; see path.h), or `derivative` (detached,
+ * plus directions drawn from densities made for the BSDF's derivative and
+ * combined by MIS: reparametrize-then-differentiate-then-reparametrize; see
+ * path_deriv.h). */
 #ifndef DR_ESTIMATOR_H
 #define DR_ESTIMATOR_H
 
@@ -25,9 +28,10 @@
 enum dr_sampling {
     DR_SAMPLING_DETACHED,   /* differentiate-then-reparametrize */
     DR_SAMPLING_ATTACHED,   /* reparametrize-then-differentiate (path.h: what moves, what stays) */
+    DR_SAMPLING_DERIVATIVE, /* detached + a direction sampled for d f / d theta, by MIS (path_deriv.h) */
     DR_SAMPLING_COUNT
 };
-/* "detached", "attached"; and back (-1: unknown name). */
+/* "detached", "attached", "derivative"; and back (-1: unknown name). */
 const char *dr_sampling_name(enum dr_sampling s);
 int dr_sampling_parse(const char *name);
 

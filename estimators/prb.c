@@ -15,6 +15,7 @@
 
 #include "common.h"
 #include "error.h"
+#include "path_deriv.h"
 #include "prb_attached.h"
 
 struct prb_job {
@@ -37,6 +38,10 @@ static void walk(const struct dr_est_base *b, struct dr_sampler smp, dr_vec3 o, 
     const struct dr_scene *s = b->p->scene;
     const struct dr_param_set *ps = b->p->params;
     const double sign = sink ? -1.0 : 1.0;
+    const bool dsamp = b->p->sampling == DR_SAMPLING_DERIVATIVE;   /* path_deriv.h */
+    struct dr_path_vertex prev;   /* derivative sampling: the last vertex, if differentiated and continued */
+    bool have_prev = false;
+    dr_vec3 prev_dt = dr_v3s(0.0);
     struct dr_path_state st;
     struct dr_path_vertex v;
     struct dr_medium_record mrec;   /* media: what the replay re-traces, one vertex at a time */
@@ -57,6 +62,11 @@ static void walk(const struct dr_est_base *b, struct dr_sampler smp, dr_vec3 o, 
                             dr_mul(adj, dr_mul(dr_mul(ratio, beta), dr_path_vertex_nee(&v))), sink);
         if (sink) {
             d_path_vertex_term(s, ps, &v, dr_mul(adj, dr_mul(ratio, beta)), sink);
+            if (dsamp) {   /* the three-strategy weights of the BSDF derivative terms (path_deriv.h) */
+                if (have_prev)
+                    d_path_deriv_emission(s, &b->popts, &prev, prev_dt, &v, sink);
+                d_path_deriv_nee(s, &b->popts, &v, dr_mul(adj, dr_mul(ratio, beta)), sink);
+            }
             if (v.cont && v.diff_bsdf) {
                 dr_vec3 d_f;
                 for (int ch = 0; ch < 3; ch++) {
@@ -67,7 +77,18 @@ static void walk(const struct dr_est_base *b, struct dr_sampler smp, dr_vec3 o, 
                         r = f != 0.0 ? dr_v3_get(L->true_, ch) / f : 0.0;
                     dr_v3_set(&d_f, ch, r * dr_v3_get(adj, ch));
                 }
-                d_path_continuation(s, ps, &v, d_f, sink);
+                if (dsamp)
+                    d_path_deriv_continuation(s, ps, &v, d_f, sink);
+                else
+                    d_path_continuation(s, ps, &v, d_f, sink);
+            }
+            /* the new directions: also where the forward sample failed or
+             * Russian roulette ended the path (that strategy then gave 0) */
+            if (dsamp && v.shaded && v.diff_bsdf)
+                d_path_deriv_sample(s, &b->popts, &v, &smp, dr_mul(adj, dr_mul(ratio, beta)), sink, rays);
+            if ((have_prev = dsamp && v.cont && v.diff_bsdf)) {
+                prev = v;
+                prev_dt = dr_scale(dr_mul(adj, dr_mul(ratio, beta)), v.cos_pdf_q);
             }
         }
         if (!more)
@@ -149,7 +170,7 @@ static void prb_release(struct dr_est_base *b)
 const struct dr_estimator_ops dr_estimator_prb = {
     .name = "prb",
     .summary = "path replay backpropagation: primal pass + replay, constant memory per path, time linear in depth",
-    .sampling = (1u << DR_SAMPLING_DETACHED) | (1u << DR_SAMPLING_ATTACHED),
+    .sampling = (1u << DR_SAMPLING_DETACHED) | (1u << DR_SAMPLING_ATTACHED) | (1u << DR_SAMPLING_DERIVATIVE),
     .job_size = sizeof(struct prb_job),
     .run = prb_run,
     .release = prb_release,

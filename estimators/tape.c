@@ -13,6 +13,7 @@
 #include "common.h"
 #include "medium_grad.h"
 #include "error.h"
+#include "path_deriv.h"
 
 struct tape_vertex {
     struct dr_path_vertex v;
@@ -30,6 +31,7 @@ struct tape_path {
     int count;
     int moving;        /* attached sampling: first vertex whose sampling moves with a parameter (count: none) */
     dr_vec3 adj;       /* d loss / d L of this sample (forward mode: ones) */
+    uint64_t key;      /* its sampler's key: derivative sampling's sub-streams hang off it */
 };
 
 struct tape {
@@ -47,6 +49,7 @@ struct tape_job {
     struct tape tapes[DR_MAX_THREADS];
     int64_t batch_begin;     /* path ids of the current batch start here */
     bool attached;           /* attached sampling, and some parameter enters a sampling map */
+    bool derivative;         /* derivative sampling (path_deriv.h) */
 };
 
 static bool grow(void **p, int64_t *cap, int64_t need, size_t elem)
@@ -79,7 +82,8 @@ static bool record_path(struct tape_job *j, struct tape *tp, int thread, int64_t
     if (!grow((void **)&tp->paths, &tp->cap_paths, tp->n_paths + 1, sizeof *tp->paths))
         return false;
     struct tape_path *path = &tp->paths[tp->n_paths];
-    *path = (struct tape_path){.pixel = px, .first = tp->n_verts, .count = 0, .moving = -1, .adj = adj};
+    *path = (struct tape_path){.pixel = px, .first = tp->n_verts, .count = 0, .moving = -1, .adj = adj,
+                               .key = smp.key};
     struct dr_path_state st;
     dr_path_start(&st, o, d);
     dr_vec3 L = dr_v3s(0.0);
@@ -126,10 +130,33 @@ static void record(void *ctx, int thread, int64_t begin, int64_t end)
     }
 }
 
-/* Backward sweep over one path with adjoint adj. */
-static void sweep(const struct tape_job *j, const struct tape_vertex *verts,
-                  const struct dr_medium_record *mrecs, int count, dr_vec3 adj, struct dr_grad_sink *sink)
+/* Derivative sampling's terms of vertex k (path_deriv.h), beside detached
+ * sampling's: the changed weights of next-event estimation and of the
+ * emission the continuation sees at vertex k+1, and the new directions with
+ * their radiance paths (from the path's sub-streams, as prb draws them). */
+static void sweep_derivative(const struct tape_job *j, const struct tape_vertex *verts, int k, int count,
+                             const struct tape_path *path, struct dr_grad_sink *sink, struct dr_ray_counts *rays)
 {
+    const struct dr_path_vertex *v = &verts[k].v;
+    if (!v->diff_bsdf)
+        return;
+    dr_vec3 d_beta = dr_mul(path->adj, verts[k].bt);
+    d_path_deriv_nee(j->b.p->scene, &j->b.popts, v, d_beta, sink);
+    if (v->cont && k + 1 < count)
+        d_path_deriv_emission(j->b.p->scene, &j->b.popts, v, dr_scale(d_beta, v->cos_pdf_q), &verts[k + 1].v, sink);
+    if (v->shaded) {
+        struct dr_sampler smp = {.key = path->key};
+        d_path_deriv_sample(j->b.p->scene, &j->b.popts, v, &smp, d_beta, sink, rays);
+    }
+}
+
+/* Backward sweep over one path (its adjoint path->adj). rays: where
+ * derivative sampling counts its extra rays. */
+static void sweep(const struct tape_job *j, const struct tape_vertex *verts, const struct dr_medium_record *mrecs,
+                  const struct tape_path *path, struct dr_grad_sink *sink, struct dr_ray_counts *rays)
+{
+    const int count = path->count;
+    const dr_vec3 adj = path->adj;
     const struct dr_scene *s = j->b.p->scene;
     const struct dr_param_set *ps = j->b.p->params;
     dr_vec3 abar = dr_v3s(0.0);   /* adjoint of the true throughput after the vertex */
@@ -148,13 +175,17 @@ static void sweep(const struct tape_job *j, const struct tape_vertex *verts,
         if (v->cont) {
             /* in media the throughput also took the segment's weight (path.h) */
             dr_vec3 bts = v->media ? dr_mul(bt, v->seg) : bt;
-            if (v->diff_bsdf)
+            if (v->diff_bsdf && j->derivative)
+                d_path_deriv_continuation(s, ps, v, dr_scale(dr_mul(abar, bts), v->cos_pdf_q), sink);
+            else if (v->diff_bsdf)
                 d_path_continuation(s, ps, v, dr_scale(dr_mul(abar, bts), v->cos_pdf_q), sink);
             t = dr_scale(v->f, v->cos_pdf_q);
             if (v->media)
                 t = dr_mul(t, v->seg);
         }
         d_path_vertex_term(s, ps, v, dr_mul(adj, bt), sink);
+        if (j->derivative)
+            sweep_derivative(j, verts, k, count, path, sink, rays);
         abar = dr_add(dr_mul(adj, dr_path_vertex_term(v)), dr_mul(abar, t));
     }
 }
@@ -191,10 +222,11 @@ static void sweep_attached(const struct tape_job *j, const struct tape_vertex *v
 /* One recorded path's sweep. The attached state adjoint mixes the colour
  * channels, so in forward mode each image channel gets its own sweep. */
 static void sweep_path(const struct tape_job *j, const struct tape_vertex *verts,
-                       const struct dr_medium_record *mrecs, const struct tape_path *path, struct dr_grad_sink *sink)
+                       const struct dr_medium_record *mrecs, const struct tape_path *path, struct dr_grad_sink *sink,
+                       struct dr_ray_counts *rays)
 {
     if (path->moving >= path->count) {
-        sweep(j, verts, mrecs, path->count, path->adj, sink);
+        sweep(j, verts, mrecs, path, sink, rays);
         return;
     }
     if (!sink->dir) {
@@ -216,7 +248,8 @@ static void sweep_tape(void *ctx, int thread, int64_t begin, int64_t end)
         struct dr_grad_sink sink = dr_est_sink_begin(&j->b, thread);
         for (int64_t pi = 0; pi < tp->n_paths; pi++) {
             const struct tape_path *path = &tp->paths[pi];
-            sweep_path(j, tp->verts + path->first, tp->mrecs ? tp->mrecs + path->first : NULL, path, &sink);
+            sweep_path(j, tp->verts + path->first, tp->mrecs ? tp->mrecs + path->first : NULL, path, &sink,
+                       &j->b.thr[thread].rays);
             dr_est_sample_done(&j->b, thread, path->pixel, &sink);
         }
         dr_est_sink_end(&j->b, thread);
@@ -232,6 +265,7 @@ static int tape_run(struct dr_est_base *b)
     const int64_t batch = p->batch > 0 ? p->batch : (int64_t)p->width * p->height;
     int rc = 0;
     j->attached = dr_est_sampling_run(p) == DR_SAMPLING_ATTACHED;
+    j->derivative = dr_est_sampling_run(p) == DR_SAMPLING_DERIVATIVE;
     for (j->batch_begin = 0; j->batch_begin < total && rc == 0; j->batch_begin += batch) {
         int64_t n = total - j->batch_begin < batch ? total - j->batch_begin : batch;
         for (int t = 0; t < threads; t++)
@@ -268,7 +302,7 @@ const struct dr_estimator_ops dr_estimator_tape = {
     .name = "tape",
     .summary = "conventional reverse mode: records every vertex of a batch of paths, then sweeps backward; memory "
                "grows with depth x paths per batch",
-    .sampling = (1u << DR_SAMPLING_DETACHED) | (1u << DR_SAMPLING_ATTACHED),
+    .sampling = (1u << DR_SAMPLING_DETACHED) | (1u << DR_SAMPLING_ATTACHED) | (1u << DR_SAMPLING_DERIVATIVE),
     .job_size = sizeof(struct tape_job),
     .run = tape_run,
     .release = tape_release,

@@ -47,14 +47,15 @@ static double reverse_difference(const char *what, const struct dr_param_set *ps
  * pair must agree to rounding, in both modes, and each must be bit-identical
  * when repeated (resumable optimisation relies on it). */
 static void compare(const char *what, struct dr_scene *s, const struct dr_camera *cam, const char *const *ptrs, int n,
-                    int depth)
+                    int depth, enum dr_sampling sampling)
 {
     struct dr_param_set *ps = dr_param_set_create(s, ptrs, n);
     CHECK(ps != NULL, "%s: param set: %s", what, dr_last_error());
     if (!ps)
         return;
     struct dr_grad_problem p = {.scene = s, .camera = cam, .params = ps, .width = W, .height = H, .spp = 3,
-                                .max_depth = depth, .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 11, .threads = 2};
+                                .max_depth = depth, .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 11, .threads = 2,
+                                .sampling = sampling};
     int ne = 0;
     while (dr_estimators[ne] && ne < MAX_EST)
         ne++;
@@ -139,7 +140,9 @@ int main(void)
         "/materials/light/extensions/KHR_materials_emissive_strength/emissiveStrength",
         "/images/0",
     };
-    compare("cornell box", s, &s->cameras[0], ptrs, 7, 8);
+    compare("cornell box", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DETACHED);
+    /* derivative sampling: the same sub-streams, the same terms in another order */
+    compare("cornell box, derivative sampling", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DERIVATIVE);
     dr_scene_destroy(s);
 
     /* a glossy scene: rough metal and a dielectric floor under a point light and an environment */
@@ -175,7 +178,8 @@ int main(void)
         "/extensions/DR_environment/color",
         "/extensions/DR_environment/strength",
     };
-    compare("glossy scene", s, &cam, gptrs, 8, 6);
+    compare("glossy scene", s, &cam, gptrs, 8, 6, DR_SAMPLING_DETACHED);
+    compare("glossy scene, derivative sampling", s, &cam, gptrs, 8, 6, DR_SAMPLING_DERIVATIVE);
     dr_scene_destroy(s);
     return TEST_END();
 }

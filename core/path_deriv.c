@@ -1,0 +1,248 @@
+/* --sampling derivative at one vertex: see path_deriv.h for the estimator. */
+#include "path_deriv.h"
+
+#include "material.h"
+#include "medium_grad.h"   /* dr_path_vertex_nee */
+
+#define BM_PARAMS (DR_BSDF_D_BASE | DR_BSDF_D_METALLIC)
+
+unsigned dr_path_material_dparams(const struct dr_scene *s, const struct dr_param_set *ps, int m)
+{
+    if (!ps || m < 0 || m >= ps->n_materials || !ps->mat_bsdf_active[m])
+        return 0;
+    const struct dr_material *mat = &s->materials[m];
+    unsigned mask = 0;
+    int bt = mat->base_color_tex.texture, mt = mat->metallic_roughness_tex.texture;
+    if (ps->mat_base_color[m] >= 0 || (bt >= 0 && ps->image[s->textures[bt].image] >= 0))
+        mask |= DR_BSDF_D_BASE;
+    if (ps->mat_metallic[m] >= 0)
+        mask |= DR_BSDF_D_METALLIC;
+    if (ps->mat_roughness[m] >= 0)
+        mask |= DR_BSDF_D_ROUGHNESS;
+    /* one image holds both metallic (B) and roughness (G): its texels move both */
+    if (mt >= 0 && ps->image[s->textures[mt].image] >= 0)
+        mask |= DR_BSDF_D_METALLIC | DR_BSDF_D_ROUGHNESS;
+    return mask;
+}
+
+static unsigned vertex_dparams(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v)
+{
+    return dr_path_material_dparams(s, ps, v->hit.material);
+}
+
+/* p_bm at local wi: the base colour / metallic mixture (0: neither requested). */
+static double bm_pdf(const struct dr_path_vertex *v, unsigned mask, dr_vec3 wi)
+{
+    return (mask & BM_PARAMS) ? dr_bsdf_deriv_pdf(&v->bsdf, v->wo, wi, mask & BM_PARAMS) : 0.0;
+}
+
+/* The light sampler's solid-angle density of the emission seen at w, from
+ * w->prev_p (0 where next-event estimation does not run or cannot reach it):
+ * the density the primal's emission MIS weight used (path.c). */
+static double emitter_light_pdf(const struct dr_scene *s, const struct dr_path_opts *opts,
+                                const struct dr_path_vertex *w)
+{
+    if (!(opts->stages & DR_STAGE_NEE) || !w->emits)
+        return 0.0;
+    if (w->kind == DR_VERTEX_ESCAPED)
+        return dr_light_pdf_env(s, s->light_sampler, w->d);
+    return dr_light_pdf_area(s, s->light_sampler, w->prev_p, &w->hit);
+}
+
+/* ------------------------------------------------ the two derivative parts */
+
+/* A + B along local wi, for d_f = d loss / d f. d_path_continuation
+ * differentiates f along v->wi: a copy of the vertex pointing at wi reuses it
+ * (and its per-channel split in forward mode) rather than duplicating the
+ * material adjoint's plumbing. */
+static void d_full_along(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
+                         dr_vec3 wi, dr_vec3 d_f, struct dr_grad_sink *sink)
+{
+    struct dr_path_vertex at = *v;
+    at.wi = wi;
+    d_path_continuation(s, ps, &at, d_f, sink);
+}
+
+/* A alone along wi; forward mode keeps the image channels apart as
+ * path.c's by_channel does. */
+static void d_ndf_along(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
+                        dr_vec3 wi, dr_vec3 d_f, struct dr_grad_sink *sink)
+{
+    for (int c = 0; c < 3; c++) {
+        dr_vec3 part = sink->dir ? dr_v3_channel(d_f, c) : d_f;
+        if (dr_is_black(part))
+            continue;
+        sink->channel = c;
+        struct dr_d_bsdf db = {dr_v3s(0.0), 0.0, 0.0};
+        d_bsdf_eval_rough_ndf(&v->bsdf, v->wo, wi, part, &db);
+        d_material_eval(s, ps, &v->hit, &db, sink);
+        if (!sink->dir)
+            return;   /* reverse mode: all channels at once */
+    }
+}
+
+/* B = (A + B) - A along wi (A is 0 unless roughness is requested). */
+static void d_rest_along(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
+                         unsigned mask, dr_vec3 wi, dr_vec3 d_f, struct dr_grad_sink *sink)
+{
+    d_full_along(s, ps, v, wi, d_f, sink);
+    if (mask & DR_BSDF_D_ROUGHNESS)
+        d_ndf_along(s, ps, v, wi, dr_neg(d_f), sink);
+}
+
+/* ------------------------------------------- the forward path's strategies */
+
+void d_path_deriv_continuation(const struct dr_scene *s, const struct dr_param_set *ps,
+                               const struct dr_path_vertex *v, dr_vec3 d_f, struct dr_grad_sink *sink)
+{
+    unsigned mask = vertex_dparams(s, ps, v);
+    double vf = v->pdf / (v->pdf + bm_pdf(v, mask, v->wi));
+    d_rest_along(s, ps, v, mask, v->wi, dr_scale(d_f, vf), sink);
+}
+
+void d_path_deriv_nee(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
+                      dr_vec3 d_e, struct dr_grad_sink *sink)
+{
+    if (!v->nee || !v->diff_bsdf)
+        return;
+    unsigned mask = vertex_dparams(s, opts->params, v);
+    double pl = v->ls.pdf, pf = dr_bsdf_pdf(&v->bsdf, v->wo, v->nee_wi);
+    double wp = v->ls.delta ? 1.0 : dr_mis_power(pl, pf);   /* the primal's weight (path.c) */
+    /* a delta light: only next-event estimation reaches it, weight 1 */
+    double wl = v->ls.delta || !(mask & BM_PARAMS) ? wp : pl / (pl + pf + bm_pdf(v, mask, v->nee_wi));
+    dr_vec3 d_f = dr_scale(dr_mul(d_e, v->ls.radiance), fabs(v->nee_wi.z) / pl);
+    if (wl != wp && isfinite(wl - wp))
+        d_rest_along(s, opts->params, v, mask, v->nee_wi, dr_scale(d_f, wl - wp), sink);
+    if (mask & DR_BSDF_D_ROUGHNESS) {   /* A: weight W_l against the antithetic pair's lobes */
+        double pa = dr_bsdf_deriv_lobe_pdf(&v->bsdf, v->wo, v->nee_wi, DR_BSDF_DLOBE_ROUGH_POS) +
+                    dr_bsdf_deriv_lobe_pdf(&v->bsdf, v->wo, v->nee_wi, DR_BSDF_DLOBE_ROUGH_NEG);
+        double wa = v->ls.delta ? 1.0 : pl / (pl + pa);
+        if (wa != wp && isfinite(wa - wp))
+            d_ndf_along(s, opts->params, v, v->nee_wi, dr_scale(d_f, wa - wp), sink);
+    }
+}
+
+void d_path_deriv_emission(const struct dr_scene *s, const struct dr_path_opts *opts,
+                           const struct dr_path_vertex *prev, dr_vec3 d_t, const struct dr_path_vertex *next,
+                           struct dr_grad_sink *sink)
+{
+    unsigned mask = vertex_dparams(s, opts->params, prev);
+    if (!(mask & BM_PARAMS) || !next->emits || dr_is_black(next->Le))
+        return;
+    double pf = prev->pdf, pd = bm_pdf(prev, mask, prev->wi), pl = emitter_light_pdf(s, opts, next);
+    double dw = pf / (pl + pf + pd) - pf / (pf + pd) * next->emit_w;   /* W_f - V_f * primal weight */
+    if (dw == 0.0 || !isfinite(dw))
+        return;
+    d_rest_along(s, opts->params, prev, mask, prev->wi, dr_scale(dr_mul(d_t, next->Le), dw), sink);
+}
+
+/* ------------------------------------------------------ the new directions */
+
+/* Sub-streams of the new directions at depth `depth` (the media walker's
+ * tracking streams use the same construction with other constants). */
+enum { STREAM_DIRS = 1, STREAM_BM_PATH = 2, STREAM_PAIR_PATH = 3 };
+static struct dr_sampler deriv_stream(const struct dr_sampler *smp, int depth, uint64_t which)
+{
+    uint64_t k = smp->key ^ 0x8f1bbcdcca62c1d6ULL ^ ((uint64_t)depth * 0x9e3779b97f4a7c15ULL);
+    struct dr_sampler r = {.key = dr_hash64(k ^ (which * 0x632be59bd9b4e019ULL)), .dim = 0,
+                           .kind = DR_SAMPLER_INDEPENDENT};
+    return r;
+}
+
+/* The radiance along world direction wi from v, split into the emission E at
+ * the first vertex (unweighted; *pl its light density) and the rest L_ind:
+ * the walker from the state the forward continuation would have handed on
+ * had it sampled wi (same depth, prev_pdf = the forward density pf, so the
+ * MIS weights beyond are the primal's), with unit throughput. */
+static void rest_radiance(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
+                          dr_vec3 wi, double pf, struct dr_sampler rng, struct dr_ray_counts *counts, dr_vec3 *E,
+                          double *pl, dr_vec3 *L_ind)
+{
+    struct dr_path_opts o = *opts;
+    o.params = NULL;   /* nothing to differentiate along it: no zero-channel substitution */
+    struct dr_path_state st;
+    struct dr_path_vertex w;
+    dr_path_start(&st, dr_offset_origin(&v->hit, v->ng, wi), wi);
+    st.prev_pdf = pf;
+    st.prev_p = v->hit.p;
+    st.depth = v->depth;
+    *E = *L_ind = dr_v3s(0.0);
+    *pl = 0.0;
+    for (bool first = true;; first = false) {
+        dr_vec3 beta = st.beta;
+        bool more = dr_path_step(s, &o, &st, &rng, &w, counts);
+        if (first) {
+            if (w.emits) {
+                *E = w.Le;
+                *pl = emitter_light_pdf(s, opts, &w);
+            }
+            *L_ind = dr_path_vertex_nee(&w);
+        } else {
+            *L_ind = dr_add(*L_ind, dr_mul(beta, dr_path_vertex_term(&w)));
+        }
+        if (!more)
+            return;
+    }
+}
+
+/* World direction of local wi, or false where the forward sampler would
+ * reject it too (below the geometric surface: the integrand is 0 there). */
+static bool usable(const struct dr_path_vertex *v, dr_vec3 wi, dr_vec3 *wiw)
+{
+    *wiw = dr_frame_to_world(&v->frame, wi);
+    return wi.z > 0.0 && dr_dot(*wiw, v->ng) > 0.0;
+}
+
+/* B's direction from p_bm, MIS-weighted (path_deriv.h). */
+static void sample_bm(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
+                      unsigned mask, struct dr_sampler *dirs, const struct dr_sampler *smp, dr_vec3 d_beta,
+                      struct dr_grad_sink *sink, struct dr_ray_counts *counts)
+{
+    double ul = dr_sampler_next(dirs), u1, u2, pd, pl;
+    dr_sampler_next2(dirs, &u1, &u2);
+    dr_vec3 wi, wiw, E, L_ind;
+    if (!dr_bsdf_deriv_sample(&v->bsdf, v->wo, mask & BM_PARAMS, ul, u1, u2, &wi, &pd) || !usable(v, wi, &wiw))
+        return;
+    double pf = dr_bsdf_pdf(&v->bsdf, v->wo, wi);
+    rest_radiance(s, opts, v, wiw, pf, deriv_stream(smp, v->depth, STREAM_BM_PATH), counts, &E, &pl, &L_ind);
+    dr_vec3 L = dr_add(dr_scale(E, 1.0 / (pl + pf + pd)), dr_scale(L_ind, 1.0 / (pf + pd)));
+    if (dr_v3_finite(L) && !dr_is_black(L))
+        d_rest_along(s, opts->params, v, mask, wi, dr_scale(dr_mul(d_beta, L), fabs(wi.z)), sink);
+}
+
+/* A's antithetic pair: the same (u1, u2), mirrored for the negative lobe so
+ * both start at the sign change, and the same random numbers for both paths. */
+static void sample_pair(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
+                        struct dr_sampler *dirs, const struct dr_sampler *smp, dr_vec3 d_beta,
+                        struct dr_grad_sink *sink, struct dr_ray_counts *counts)
+{
+    double u1, u2;
+    dr_sampler_next2(dirs, &u1, &u2);
+    for (int side = 0; side < 2; side++) {
+        enum dr_bsdf_dlobe lobe = side == 0 ? DR_BSDF_DLOBE_ROUGH_POS : DR_BSDF_DLOBE_ROUGH_NEG;
+        dr_vec3 wi = dr_bsdf_deriv_sample_dir(&v->bsdf, v->wo, lobe, side == 0 ? u1 : 1.0 - u1, u2), wiw, E, L_ind;
+        double p = dr_bsdf_deriv_lobe_pdf(&v->bsdf, v->wo, wi, lobe), pl;
+        if (!(p > 0.0) || !usable(v, wi, &wiw))
+            continue;
+        double pf = dr_bsdf_pdf(&v->bsdf, v->wo, wi);
+        rest_radiance(s, opts, v, wiw, pf, deriv_stream(smp, v->depth, STREAM_PAIR_PATH), counts, &E, &pl, &L_ind);
+        /* E: MIS against next-event estimation (only one lobe is non-zero at wi) */
+        dr_vec3 L = dr_scale(dr_add(dr_scale(E, p / (pl + p)), L_ind), fabs(wi.z) / p);
+        if (dr_v3_finite(L) && !dr_is_black(L))
+            d_ndf_along(s, opts->params, v, wi, dr_mul(d_beta, L), sink);
+    }
+}
+
+void d_path_deriv_sample(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
+                         const struct dr_sampler *smp, dr_vec3 d_beta, struct dr_grad_sink *sink,
+                         struct dr_ray_counts *counts)
+{
+    unsigned mask = vertex_dparams(s, opts->params, v);
+    if (!mask || dr_is_black(d_beta) || !(v->wo.z > 0.0))
+        return;
+    struct dr_sampler dirs = deriv_stream(smp, v->depth, STREAM_DIRS);
+    if (mask & BM_PARAMS)
+        sample_bm(s, opts, v, mask, &dirs, smp, d_beta, sink, counts);
+    if (mask & DR_BSDF_D_ROUGHNESS)
+        sample_pair(s, opts, v, &dirs, smp, d_beta, sink, counts);
+}

@@ -1,0 +1,96 @@
+/* --sampling derivative: reparametrize-then-differentiate-then-reparametrize
+ * for the BSDF derivative term of a path vertex (the seed's open question).
+ *
+ * At a vertex whose BSDF has a requested parameter, the derivative term is
+ *     T = integral of d f/d theta (wo, wi) [E(wi) + L_ind(wi)] |cos wi| dwi,
+ * E the emission first seen along wi (an emitter or the environment), L_ind
+ * the radiance that arrives along wi after further bounces. Detached
+ * sampling estimates it with the forward path only, with densities made for
+ * f: E by next-event estimation (light density p_l, power-heuristic weight
+ * against the BSDF density p_f) and by the forward BSDF direction (the
+ * complementary weight), L_ind by the forward direction alone. Derivative
+ * sampling splits the BSDF derivative in two,
+ *     d f/d theta = A + B,   A = the roughness derivative through the GGX
+ *                                NDF alone (d_bsdf_eval_rough_ndf),
+ *                            B = everything else (base colour, metallic, the
+ *                                roughness derivative through G2),
+ * and estimates each with strategies made for it (bsdf.h: dr_bsdf_deriv_*):
+ *
+ *  A (roughness requested): a signed integrand, d D/d alpha times smooth
+ *    factors, whose positive and negative parts are each ~1 / alpha while
+ *    their difference is ~1. Positivized and antithetic (Zeltner et al.
+ *    2021, Belhe et al. 2024): one direction from the positive lobe p+ and
+ *    one from the negative lobe p-, from the same random numbers (mirrored
+ *    so both start at the sign change tan(theta_h) = alpha), each followed
+ *    by a radiance path with the *same* random numbers, so the two radiance
+ *    estimates nearly cancel where the light varies slowly:
+ *        A(w+) L(w+) |cos| / p+(w+) + A(w-) L(w-) |cos| / p-(w-),
+ *    L = E + L_ind unweighted: A is estimated by this pair alone (A / p+-
+ *    is bounded), and removed from the forward strategies' terms.
+ *
+ *  B (base colour or metallic requested): a third strategy besides light
+ *    and forward sampling, a direction from the mixture p_bm of the cosine
+ *    lobe (base colour of the diffuse lobe; the negative part of metallic)
+ *    and the GGX visible-normal lobe (base colour of a metal; the positive
+ *    part of metallic), combined by one-sample-each MIS with the balance
+ *    heuristic:
+ *        E:     W_s = p_s / (p_l + p_f + p_bm)   s = light, forward, derivative
+ *        L_ind: V_s = p_s / (p_f + p_bm)         s = forward, derivative
+ *    (a delta light keeps weight 1). Without base colour or metallic, B
+ *    keeps detached sampling's estimate (light + forward, the primal's
+ *    weights).
+ *
+ * In the estimators (prb, tape) the forward strategies are detached sampling's
+ * terms with corrections: the continuation's derivative becomes B only,
+ * times V_f (d_path_deriv_continuation); next-event estimation's derivative
+ * becomes B times W_l (d_path_deriv_nee, adding the difference); the
+ * emission the forward direction sees at the next vertex moves from V_f
+ * times the primal's MIS weight to W_f (d_path_deriv_emission); and
+ * d_path_deriv_sample adds the new directions and their radiance paths, the
+ * extra cost (one path for B, two for A, per differentiated vertex).
+ *
+ * Nothing in the primal changes: the image, the path's continuation and
+ * every other derivative term are detached sampling's. The new directions
+ * and their paths draw from sub-streams of the path's key per vertex depth
+ * (independent hashes), so replay and finite differences see the same
+ * numbers. */
+#ifndef DR_PATH_DERIV_H
+#define DR_PATH_DERIV_H
+
+#include "path.h"
+
+/* The BSDF inputs of material m that requested parameters differentiate
+ * (enum dr_bsdf_dparam bits; textures count for the inputs they feed). */
+unsigned dr_path_material_dparams(const struct dr_scene *scene, const struct dr_param_set *params, int m);
+
+/* In place of d_path_continuation at a differentiated vertex v (v->cont):
+ * the derivative of B along v->wi times V_f, given d_f (detached sampling's
+ * d loss / d f along v->wi). */
+void d_path_deriv_continuation(const struct dr_scene *scene, const struct dr_param_set *params,
+                               const struct dr_path_vertex *v, dr_vec3 d_f, struct dr_grad_sink *sink);
+
+/* Next-event estimation at v (v->nee, v->diff_bsdf), after d_path_vertex_term:
+ * turns its BSDF derivative (A + B with the primal's weight) into B with
+ * weight W_l, given d_e = d loss / d e_v (as d_path_vertex_term). */
+void d_path_deriv_nee(const struct dr_scene *scene, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
+                      dr_vec3 d_e, struct dr_grad_sink *sink);
+
+/* The emission seen at `next`, reached from the differentiated vertex prev
+ * along prev->wi: adds the derivative of B along prev->wi times
+ * d_t * Le * (W_f - V_f * next->emit_w), d_t = d loss / d [true throughput
+ * into prev] * prev->cos_pdf_q. Nothing without base colour or metallic. */
+void d_path_deriv_emission(const struct dr_scene *scene, const struct dr_path_opts *opts,
+                           const struct dr_path_vertex *prev, dr_vec3 d_t, const struct dr_path_vertex *next,
+                           struct dr_grad_sink *sink);
+
+/* The new directions at a shaded, differentiated vertex v (also where the
+ * forward sample failed or Russian roulette ended the path): B's direction
+ * from p_bm and A's antithetic pair, each with a radiance path, as above.
+ * d_beta: d loss / d [true throughput into v], per channel (forward mode
+ * splits channels as d_path_continuation does). smp: the path's sampler
+ * (only its key is used). Counts the extra rays. */
+void d_path_deriv_sample(const struct dr_scene *scene, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
+                         const struct dr_sampler *smp, dr_vec3 d_beta, struct dr_grad_sink *sink,
+                         struct dr_ray_counts *counts);
+
+#endif

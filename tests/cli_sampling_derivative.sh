@@ -1,0 +1,91 @@
+#!/usr/bin/env bash
+# --sampling derivative (issue 12) on the command line: the help of grad,
+# fdcheck and optimize names it; grad runs it in reverse and forward mode
+# and --json reports what ran; fdcheck agrees with finite differences;
+# optimize takes it; tape gives prb's gradient; a scene with participating
+# media is refused naming the option; unknown names list it.
+# Run by tests/run.sh (env: DRENDER, DR_TESTDIR); also runs alone.
+#
+# Expected exit codes: 0 success; 2 usage error (unknown name); 1 a scene with media (refused when the run starts, as
+# attached sampling is).
+set -u
+
+# shellcheck source=SCRIPTDIR/lib/cli.sh
+. "$(dirname "$0")/lib/cli.sh"
+cli_setup deriv
+cli_cmd_label="last command" cli_out_bytes=3000
+require_drender
+have_python=false
+command -v python3 >/dev/null 2>&1 && have_python=true
+json_check() {   # json_check FILE PYTHON-EXPR-over-d
+    $have_python || return 0
+    python3 - "$1" "$2" <<'PY' || fail "JSON check failed: $2"
+import json, math, sys
+d = json.load(open(sys.argv[1]))
+if not eval("(" + sys.argv[2] + "\n)", {"math": math, "json": json, "d": d}):
+    print(json.dumps(d, indent=1)[:3000], file=sys.stderr)
+    sys.exit(1)
+PY
+}
+red=/materials/red/pbrMetallicRoughness/baseColorFactor
+rough=/materials/rough-gold/pbrMetallicRoughness/roughnessFactor
+metal=/materials/rough-gold/pbrMetallicRoughness/metallicFactor
+light=/materials/light/emissiveFactor
+fast="--res 16x16 --spp 4 --threads 2"
+
+# ---- help: every command that differentiates names the mode ----
+for cmd in grad fdcheck optimize; do
+    run help "$cmd"
+    expect_rc 0 "help $cmd"
+    grep -A3 -e "--sampling" "$tmp/out" | grep -q "derivative" || fail "help $cmd: --sampling does not name derivative"
+done
+
+# ---- grad, reverse mode: what ran ----
+run render -o t.exr $fast
+expect_rc 0 "render target"
+run grad --target t.exr --param "$rough" --param "$metal" --sampling derivative --batches 2 $fast --json
+expect_rc 0 "grad --sampling derivative"
+json_check "$tmp/out" 'd["sampling"] == "derivative" and d["sampling_effective"] == "derivative"
+and all(math.isfinite(g) for p in d["parameters"] for g in p["gradient"])'
+# no BSDF parameter: nothing to sample for, runs (and reports) detached
+run grad --target t.exr --param "$light" --sampling derivative --batches 2 $fast --json
+expect_rc 0 "grad --sampling derivative (emission only)"
+json_check "$tmp/out" 'd["sampling"] == "derivative" and d["sampling_effective"] == "detached"'
+# the derivative directions' extra radiance paths cost rays
+run grad --target t.exr --param "$rough" --sampling detached --batches 2 $fast --json
+cp "$tmp/out" det.json
+run grad --target t.exr --param "$rough" --sampling derivative --batches 2 $fast --json
+json_check "$tmp/out" 'd["rays"]["extension"] > json.load(open("det.json"))["rays"]["extension"]'
+
+# ---- forward mode writes a finite derivative image ----
+run grad --param "$rough" --sampling derivative -o d.exr $fast
+expect_rc 0 "grad forward --sampling derivative"
+[ -s d.exr ] || fail "grad forward --sampling derivative: no d.exr"
+
+# ---- fdcheck: agrees ----
+run fdcheck --param "$red" --param "$metal" --sampling derivative --res 12x12 --spp 8 --batches 4 --threads 2 --json
+expect_rc 0 "fdcheck --sampling derivative"
+json_check "$tmp/out" 'd["agree"] is True and d["sampling"] == "derivative" and len(d["entries"]) == 4'
+
+# ---- optimize takes it ----
+run optimize --target t.exr --param "$red" --set "$red=0.4,0.4,0.4" --sampling derivative --iters 2 \
+    $fast -o o.gltf --json
+expect_rc 0 "optimize --sampling derivative"
+tail -n 1 "$tmp/out" > summary.json
+json_check summary.json 'd["sampling"] == "derivative"'
+
+# ---- refusals ----
+# ---- tape: the same gradient as prb, to rounding ----
+run grad --target t.exr --param "$rough" --param "$red" --estimator prb --sampling derivative --batches 2 $fast --json
+cp "$tmp/out" prb.json
+run grad --target t.exr --param "$rough" --param "$red" --estimator tape --sampling derivative --batches 2 $fast --json
+expect_rc 0 "grad --estimator tape --sampling derivative"
+json_check "$tmp/out" 'all(abs(a - b) <= 1e-9 * (abs(a) + 1e-12) for p, q in zip(d["parameters"], json.load(open("prb.json"))["parameters"]) for a, b in zip(p["gradient"], q["gradient"]))'
+run grad "$DR_TESTDIR/data/media/fog-khr.gltf" --param /materials/floor/pbrMetallicRoughness/baseColorFactor \
+    --sampling derivative -o d.exr $fast
+expect_rc 1 "derivative sampling on a scene with media (refused at run time, as attached sampling is)"
+expect_mentions "derivative sampling|participating media|--sampling detached"
+run grad --target t.exr --param "$red" --sampling derivativ $fast
+check_failed 2 "--sampling|derivativ|derivative"
+
+echo "cli_sampling_derivative: all passed"

@@ -1,0 +1,306 @@
+/* Tests of the derivative-sampling densities (core/bsdf.c, --sampling
+ * derivative): each lobe and each parameter mixture's samples against its
+ * pdf (chi-square over half-vector cells whose expected counts integrate the
+ * pdf), the pdf's normalisation, and the roughness lobes against a central
+ * difference of GGX D in alpha (p+-(h) = 2 alpha |dD/dalpha| cos(theta_h)).
+ * Deterministic: every random number comes from fixed seeds. */
+#include <stdint.h>
+#include <stdlib.h>
+
+#include "bsdf.h"
+#include "sampler.h"
+#include "test.h"
+
+struct rng { uint64_t s; };
+static double rng_next(struct rng *r)
+{
+    r->s += 0x9e3779b97f4a7c15ULL;
+    return (double)(dr_hash64(r->s) >> 11) * (1.0 / 9007199254740992.0);
+}
+
+static struct dr_bsdf make_bsdf(double rough, double metal, dr_vec3 base)
+{
+    struct dr_bsdf b = {.base_color = base, .metallic = metal, .roughness = rough, .specular = 1.0,
+                        .specular_color = dr_v3s(1.0)};
+    return b;
+}
+
+/* Chi-square p-value by the Wilson-Hilferty approximation (dof >= 10 here). */
+static double chi2_pvalue(double chi2, int dof)
+{
+    double k = dof, z = (cbrt(chi2 / k) - (1.0 - 2.0 / (9.0 * k))) / sqrt(2.0 / (9.0 * k));
+    return 0.5 * erfc(z / sqrt(2.0));
+}
+
+/* Half-vector cells: v = (2/pi) atan(tan(theta_h) / alpha) in [0, 1) (so GGX's
+ * bulk, tan(theta_h) ~ alpha, sits mid-range whatever alpha) times phi_h. */
+#define NV 32
+#define NP 12
+#define SUBV 96
+#define SUBP 24
+
+static dr_vec3 h_of(double a, double v, double phi, double *domega_dvdphi)
+{
+    double tv = tan(0.5 * M_PI * v);           /* tan(theta_h) / alpha = sqrt(u) */
+    double t = a * tv, c = 1.0 / sqrt(1.0 + t * t);
+    double du_dv = 2.0 * tv * (1.0 + tv * tv) * 0.5 * M_PI;
+    *domega_dvdphi = a * a * c * c * c * 0.5 * du_dv;   /* dw_h = a^2 cos^3 / 2 du dphi */
+    return dr_v3(t * c * cos(phi), t * c * sin(phi), c);
+}
+
+static int cell_of(double a, dr_vec3 h)
+{
+    double t = sqrt(h.x * h.x + h.y * h.y) / h.z;
+    double v = atan(t / a) / (0.5 * M_PI);
+    double phi = atan2(h.y, h.x);
+    if (phi < 0.0)
+        phi += 2.0 * M_PI;
+    int iv = (int)(v * NV), ip = (int)(phi / (2.0 * M_PI) * NP);
+    iv = iv < 0 ? 0 : (iv >= NV ? NV - 1 : iv);
+    ip = ip < 0 ? 0 : (ip >= NP ? NP - 1 : ip);
+    return iv * NP + ip;
+}
+
+/* Density of the mixture (params != 0) or of one lobe (params == 0) */
+static double pdf_of(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, unsigned params, int lobe)
+{
+    return params ? dr_bsdf_deriv_pdf(b, wo, wi, params) : dr_bsdf_deriv_lobe_pdf(b, wo, wi, (enum dr_bsdf_dlobe)lobe);
+}
+
+/* Expected fraction of samples per cell: the wi density carried to h space
+ * (times 4 wo.h), integrated by the midpoint rule on a fine sub-grid. */
+static double expected_cells(const struct dr_bsdf *b, double a, dr_vec3 wo, unsigned params, int lobe, double *e)
+{
+    double total = 0.0;
+    for (int iv = 0; iv < NV; iv++)
+        for (int ip = 0; ip < NP; ip++) {
+            double s = 0.0;
+            for (int sv = 0; sv < SUBV; sv++)
+                for (int sp = 0; sp < SUBP; sp++) {
+                    double v = (iv + (sv + 0.5) / SUBV) / NV, phi = 2.0 * M_PI * (ip + (sp + 0.5) / SUBP) / NP, jac;
+                    dr_vec3 h = h_of(a, v, phi, &jac);
+                    double oh = dr_dot(wo, h);
+                    if (!(oh > 0.0))
+                        continue;
+                    dr_vec3 wi = dr_sub(dr_scale(h, 2.0 * oh), wo);
+                    s += pdf_of(b, wo, wi, params, lobe) * 4.0 * oh * jac;
+                }
+            e[iv * NP + ip] = s / (SUBV * SUBP) / NV * (2.0 * M_PI / NP);
+            total += e[iv * NP + ip];
+        }
+    return total;
+}
+
+static double worst_p = 1.0;
+
+/* Samples n directions (mixture: dr_bsdf_deriv_sample; one lobe: its map)
+ * and compares the cell counts with the integrated pdf; the pdf's total must
+ * equal the fraction of valid samples (normalisation). */
+static void chi2_case(const char *what, const struct dr_bsdf *b, double cos_o, unsigned params, int lobe, long n,
+                      uint64_t seed)
+{
+    double a = fmax(b->roughness * b->roughness, DR_BSDF_MIN_ALPHA);
+    dr_vec3 wo = dr_v3(sqrt(1.0 - cos_o * cos_o), 0.0, cos_o);
+    static double obs[NV * NP], expd[NV * NP];
+    for (int i = 0; i < NV * NP; i++)
+        obs[i] = 0.0;
+    double total = expected_cells(b, a, wo, params, lobe, expd);
+    struct rng r = {seed};
+    long valid = 0;
+    for (long k = 0; k < n; k++) {
+        double ul = rng_next(&r), u1 = rng_next(&r), u2 = rng_next(&r), pdf = 0.0;
+        dr_vec3 wi;
+        bool ok;
+        if (params) {
+            ok = dr_bsdf_deriv_sample(b, wo, params, ul, u1, u2, &wi, &pdf);
+        } else {
+            wi = dr_bsdf_deriv_sample_dir(b, wo, (enum dr_bsdf_dlobe)lobe, u1, u2);
+            pdf = dr_bsdf_deriv_lobe_pdf(b, wo, wi, (enum dr_bsdf_dlobe)lobe);
+            ok = wi.z > 1e-12 && pdf > 0.0;
+        }
+        if (!ok)
+            continue;
+        CHECK(isfinite(pdf) && pdf > 0.0, "%s: sampled pdf %g", what, pdf);
+        valid++;
+        obs[cell_of(a, dr_normalize(dr_add(wo, wi)))] += 1.0;
+    }
+    /* pool cells expecting < 5 counts */
+    double chi2 = 0.0, po = 0.0, pe = 0.0;
+    int cells = 0;
+    for (int i = 0; i < NV * NP; i++) {
+        double ei = expd[i] * n;
+        if (ei < 5.0) {
+            po += obs[i];
+            pe += ei;
+            continue;
+        }
+        chi2 += dr_sqr(obs[i] - ei) / ei;
+        cells++;
+    }
+    if (pe > 0.0 || po > 0.0) {
+        chi2 += pe > 1.0 ? dr_sqr(po - pe) / pe : dr_sqr(po - pe);
+        cells++;
+    }
+    double p = chi2_pvalue(chi2, cells - 1);
+    double frac = (double)valid / n, se = sqrt(frac * (1.0 - frac) / n) + 1e-4;
+    printf("  %-34s wo.z=%.2f valid=%.4f integral=%.4f chi2=%7.1f dof=%3d p=%.4f\n", what, cos_o, frac, total, chi2,
+           cells - 1, p);
+    if (p < worst_p)
+        worst_p = p;
+    CHECK(p > 1e-4, "%s wo.z=%g: chi-square p-value %g", what, cos_o, p);
+    CHECK(fabs(total - frac) < 4.0 * se + 2e-3, "%s wo.z=%g: pdf integrates to %g, valid fraction %g", what, cos_o,
+          total, frac);
+}
+
+static void test_lobes(void)
+{
+    static const char *names[] = {"cosine", "vndf", "rough+", "rough-"};
+    const double roughs[] = {0.1, 0.5, 0.9}, coss[] = {0.95, 0.4};
+    uint64_t seed = 1;
+    printf("single lobes (map vs pdf):\n");
+    for (int l = 0; l < DR_BSDF_DLOBE_COUNT; l++)
+        for (int i = 0; i < 3; i++)
+            for (int k = 0; k < 2; k++) {
+                struct dr_bsdf b = make_bsdf(roughs[i], 1.0, dr_v3(1.0, 0.8, 0.3));
+                char what[64];
+                snprintf(what, sizeof what, "%s rough=%.1f", names[l], roughs[i]);
+                chi2_case(what, &b, coss[k], 0, l, 200000, seed++);
+            }
+}
+
+static void test_mixtures(void)
+{
+    static const struct { const char *name; unsigned params; } masks[] = {
+        {"base", DR_BSDF_D_BASE}, {"metallic", DR_BSDF_D_METALLIC}, {"roughness", DR_BSDF_D_ROUGHNESS},
+        {"all", DR_BSDF_D_BASE | DR_BSDF_D_METALLIC | DR_BSDF_D_ROUGHNESS}};
+    const double metals[] = {0.0, 0.5, 1.0};
+    uint64_t seed = 1000;
+    printf("mixtures (dr_bsdf_deriv_sample vs dr_bsdf_deriv_pdf):\n");
+    for (int m = 0; m < 4; m++)
+        for (int i = 0; i < 3; i++) {
+            struct dr_bsdf b = make_bsdf(i == 0 ? 0.1 : 0.5, metals[i], dr_v3(0.9, 0.1, 0.1));
+            char what[64];
+            snprintf(what, sizeof what, "%s metallic=%.1f rough=%.1f", masks[m].name, metals[i], b.roughness);
+            chi2_case(what, &b, 0.7, masks[m].params, 0, 200000, seed++);
+        }
+    /* weights sum to 1 for any request, and to 0 for none */
+    struct dr_bsdf b = make_bsdf(0.3, 0.25, dr_v3s(0.5));
+    for (unsigned mask = 0; mask < 8; mask++) {
+        double w[DR_BSDF_DLOBE_COUNT], s = 0.0;
+        dr_bsdf_deriv_weights(&b, mask, w);
+        for (int l = 0; l < DR_BSDF_DLOBE_COUNT; l++) {
+            CHECK(w[l] >= 0.0, "mask %u: weight %d is %g", mask, l, w[l]);
+            s += w[l];
+        }
+        CHECK_NEAR(s, mask ? 1.0 : 0.0, 1e-15, "sum of the mixture weights");
+    }
+}
+
+/* Test-side GGX D (textbook form). */
+static double ref_D(double a, dr_vec3 h)
+{
+    double c2 = h.z * h.z, a2 = a * a;
+    double d = c2 * (a2 - 1.0) + 1.0;
+    return a2 / (M_PI * d * d);
+}
+
+/* The roughness lobes are |d D / d alpha| made a density: their h-space
+ * density 4 wo.h p(wi), summed over both signs, must equal
+ * 2 alpha |dD/dalpha| cos(theta_h), dD/dalpha by central differences; and
+ * each sign's lobe lives on its own side of tan(theta_h) = alpha. */
+static void test_rough_vs_fd(void)
+{
+    struct rng r = {77};
+    double worst = 0.0;
+    for (int k = 0; k < 2000; k++) {
+        double rough = 0.05 + 0.9 * rng_next(&r), a = rough * rough;
+        struct dr_bsdf b = make_bsdf(rough, 1.0, dr_v3s(1.0));
+        double ct = 0.2 + 0.8 * rng_next(&r), po = 2.0 * M_PI * rng_next(&r);
+        dr_vec3 wo = dr_v3(sqrt(1 - ct * ct) * cos(po), sqrt(1 - ct * ct) * sin(po), ct);
+        double th = atan(a * tan(0.5 * M_PI * 0.98 * rng_next(&r))), ph = 2.0 * M_PI * rng_next(&r);
+        dr_vec3 h = dr_v3(sin(th) * cos(ph), sin(th) * sin(ph), cos(th));
+        double oh = dr_dot(wo, h);
+        dr_vec3 wi = dr_sub(dr_scale(h, 2.0 * oh), wo);
+        if (!(oh > 0.0) || !(wi.z > 1e-3))
+            continue;
+        double eps = 1e-4 * a;
+        double dD = (ref_D(a + eps, h) - ref_D(a - eps, h)) / (2.0 * eps);
+        double want = 2.0 * a * fabs(dD) * h.z;
+        double pp = dr_bsdf_deriv_lobe_pdf(&b, wo, wi, DR_BSDF_DLOBE_ROUGH_POS) * 4.0 * oh;
+        double pn = dr_bsdf_deriv_lobe_pdf(&b, wo, wi, DR_BSDF_DLOBE_ROUGH_NEG) * 4.0 * oh;
+        double rel = fabs(pp + pn - want) / fmax(want, 1e-300);
+        if (want > 1e-3 * ref_D(a, dr_v3(0, 0, 1)) && rel > worst)
+            worst = rel;
+        bool wide = tan(th) > a;
+        CHECK(wide ? pn == 0.0 : pp == 0.0, "roughness lobe on the wrong side: tan %g alpha %g (+ %g, - %g)",
+              tan(th), a, pp, pn);
+    }
+    printf("roughness lobes vs 2 alpha |dD/dalpha| cos (central differences): worst relative error %.3g\n", worst);
+    CHECK(worst < 1e-4, "roughness lobe density vs finite differences of D: relative error %g", worst);
+}
+
+/* Test-side Smith G2 (height-correlated) and the specular lobe with D
+ * evaluated at its own alpha, so D alone can be varied. */
+static double ref_lambda(double a, dr_vec3 w)
+{
+    double tan2 = (w.x * w.x + w.y * w.y) / (w.z * w.z);
+    return (-1.0 + sqrt(1.0 + a * a * tan2)) / 2.0;
+}
+
+/* d_bsdf_eval_rough_ndf against central differences in roughness of the
+ * specular lobe with only D moving (G2 and Fresnel at the fixed roughness),
+ * channel by channel: the part of d f / d rough that the antithetic pair
+ * estimates. Also: zero for a Lambertian and below the alpha floor. */
+static void test_rough_ndf_vs_fd(void)
+{
+    struct rng r = {91};
+    double worst = 0.0;
+    for (int k = 0; k < 500; k++) {
+        double rough = 0.1 + 0.85 * rng_next(&r), m = rng_next(&r);
+        dr_vec3 base = dr_v3(rng_next(&r), rng_next(&r), rng_next(&r));
+        struct dr_bsdf b = make_bsdf(rough, m, base);
+        b.specular = 0.5 + 0.5 * rng_next(&r);
+        double co = 0.2 + 0.8 * rng_next(&r), ci = 0.2 + 0.8 * rng_next(&r), pi_ = 2.0 * M_PI * rng_next(&r);
+        dr_vec3 wo = dr_v3(sqrt(1 - co * co), 0.0, co), wi = dr_v3(sqrt(1 - ci * ci) * cos(pi_), sqrt(1 - ci * ci) * sin(pi_), ci);
+        /* the lobe with D at roughness t: f(t) = f_rest + f_spec(rough) * D(t) / D(rough) */
+        double a = rough * rough, h = 1e-5;
+        dr_vec3 hv = dr_normalize(dr_add(wo, wi));
+        double g2 = 1.0 / (1.0 + ref_lambda(a, wo) + ref_lambda(a, wi));
+        double dD = (ref_D((rough + h) * (rough + h), hv) - ref_D((rough - h) * (rough - h), hv)) / (2.0 * h);
+        double s5 = pow(1.0 - 0.5 * dr_length(dr_add(wo, wi)), 5.0);
+        double f0 = fmin(0.04, 1.0) * b.specular;
+        for (int c = 0; c < 3; c++) {
+            double bc = dr_v3_get(base, c);
+            double fd = f0 + (b.specular - f0) * s5, fm = bc + (1.0 - bc) * s5;
+            double want = ((1.0 - m) * fd + m * fm) * g2 * dD / (4.0 * wo.z * wi.z);
+            struct dr_d_bsdf d = {dr_v3s(0.0), 0.0, 0.0};
+            dr_vec3 d_out = dr_v3s(0.0);
+            dr_v3_set(&d_out, c, 1.0);
+            d_bsdf_eval_rough_ndf(&b, wo, wi, d_out, &d);
+            double err = fabs(d.roughness - want) / (fabs(want) + 1e-3);
+            if (err > worst)
+                worst = err;
+            CHECK(d.metallic == 0.0 && dr_is_black(d.base_color), "rough_ndf touched other adjoints");
+        }
+    }
+    printf("NDF part of d f / d roughness vs central differences: worst relative error %.3g\n", worst);
+    CHECK(worst < 1e-5, "d_bsdf_eval_rough_ndf vs finite differences: relative error %g", worst);
+    struct dr_bsdf lam = make_bsdf(0.5, 0.0, dr_v3s(0.5));
+    lam.specular = 0.0;
+    struct dr_bsdf flo = make_bsdf(1e-4, 1.0, dr_v3s(0.5));
+    struct dr_d_bsdf d = {dr_v3s(0.0), 0.0, 0.0};
+    dr_vec3 w = dr_normalize(dr_v3(0.1, 0.2, 1.0));
+    d_bsdf_eval_rough_ndf(&lam, w, w, dr_v3s(1.0), &d);
+    d_bsdf_eval_rough_ndf(&flo, w, w, dr_v3s(1.0), &d);
+    CHECK(d.roughness == 0.0, "NDF part not 0 for a Lambertian or below the alpha floor: %g", d.roughness);
+}
+
+int main(void)
+{
+    test_rough_ndf_vs_fd();
+    test_rough_vs_fd();
+    test_lobes();
+    test_mixtures();
+    printf("worst chi-square p-value: %.4g\n", worst_p);
+    return TEST_END();
+}
