@@ -29,6 +29,7 @@ struct tape_path {
     int64_t first;     /* index of its first vertex */
     int count;
     int moving;        /* attached sampling: first vertex whose sampling moves with a parameter (count: none) */
+    int sample;        /* its sample index (mis: the pixel and sample pick the group) */
     dr_vec3 adj;       /* d loss / d L of this sample (forward mode: ones) */
 };
 
@@ -46,7 +47,7 @@ struct tape_job {
     struct dr_est_base b;   /* first: the shared part */
     struct tape tapes[DR_MAX_THREADS];
     int64_t batch_begin;     /* path ids of the current batch start here */
-    bool attached;           /* attached sampling, and some parameter enters a sampling map */
+    bool attached;           /* attached sampling (or mis), and some parameter enters a sampling map */
 };
 
 static bool grow(void **p, int64_t *cap, int64_t need, size_t elem)
@@ -79,7 +80,8 @@ static bool record_path(struct tape_job *j, struct tape *tp, int thread, int64_t
     if (!grow((void **)&tp->paths, &tp->cap_paths, tp->n_paths + 1, sizeof *tp->paths))
         return false;
     struct tape_path *path = &tp->paths[tp->n_paths];
-    *path = (struct tape_path){.pixel = px, .first = tp->n_verts, .count = 0, .moving = -1, .adj = adj};
+    *path = (struct tape_path){.pixel = px, .first = tp->n_verts, .count = 0, .moving = -1, .sample = sidx,
+                               .adj = adj};
     struct dr_path_state st;
     dr_path_start(&st, o, d);
     dr_vec3 L = dr_v3s(0.0);
@@ -207,6 +209,18 @@ static void sweep_path(const struct tape_job *j, const struct tape_vertex *verts
     }
 }
 
+/* mis: one recorded path swept twice, detached and attached, into its
+ * group's two estimates (mis.h): the record (every ray) is shared. */
+static void sweep_path_mis(struct tape_job *j, int thread, const struct tape_vertex *verts,
+                           const struct dr_medium_record *mrecs, const struct tape_path *path)
+{
+    struct dr_grad_sink det, att;
+    dr_est_mis_sinks(&j->b, thread, path->pixel, path->sample, &det, &att);
+    sweep(j, verts, mrecs, path->count, path->adj, &det);
+    sweep_path(j, verts, mrecs, path, &att);
+    dr_est_mis_sample_done(&j->b, thread, path->pixel, path->sample, &det, &att);
+}
+
 /* Sweep phase: item i sweeps tape i (recorded by worker i). */
 static void sweep_tape(void *ctx, int thread, int64_t begin, int64_t end)
 {
@@ -216,7 +230,12 @@ static void sweep_tape(void *ctx, int thread, int64_t begin, int64_t end)
         struct dr_grad_sink sink = dr_est_sink_begin(&j->b, thread);
         for (int64_t pi = 0; pi < tp->n_paths; pi++) {
             const struct tape_path *path = &tp->paths[pi];
-            sweep_path(j, tp->verts + path->first, tp->mrecs ? tp->mrecs + path->first : NULL, path, &sink);
+            const struct dr_medium_record *mrecs = tp->mrecs ? tp->mrecs + path->first : NULL;
+            if (j->b.mis) {
+                sweep_path_mis(j, thread, tp->verts + path->first, mrecs, path);
+                continue;
+            }
+            sweep_path(j, tp->verts + path->first, mrecs, path, &sink);
             dr_est_sample_done(&j->b, thread, path->pixel, &sink);
         }
         dr_est_sink_end(&j->b, thread);
@@ -231,7 +250,7 @@ static int tape_run(struct dr_est_base *b)
     const int64_t total = (int64_t)p->width * p->height * p->spp;
     const int64_t batch = p->batch > 0 ? p->batch : (int64_t)p->width * p->height;
     int rc = 0;
-    j->attached = dr_est_sampling_run(p) == DR_SAMPLING_ATTACHED;
+    j->attached = dr_est_sampling_run(p) != DR_SAMPLING_DETACHED;   /* attached, or mis */
     for (j->batch_begin = 0; j->batch_begin < total && rc == 0; j->batch_begin += batch) {
         int64_t n = total - j->batch_begin < batch ? total - j->batch_begin : batch;
         for (int t = 0; t < threads; t++)
@@ -268,7 +287,7 @@ const struct dr_estimator_ops dr_estimator_tape = {
     .name = "tape",
     .summary = "conventional reverse mode: records every vertex of a batch of paths, then sweeps backward; memory "
                "grows with depth x paths per batch",
-    .sampling = (1u << DR_SAMPLING_DETACHED) | (1u << DR_SAMPLING_ATTACHED),
+    .sampling = (1u << DR_SAMPLING_DETACHED) | (1u << DR_SAMPLING_ATTACHED) | (1u << DR_SAMPLING_MIS),
     .job_size = sizeof(struct tape_job),
     .run = tape_run,
     .release = tape_release,
