@@ -172,15 +172,15 @@ static int check_sampling(const struct dr_estimator_ops *e, const struct dr_grad
 }
 
 /* mis: one weight per parameter in reverse mode, one for the direction in
- * forward mode (mis.h); per-sample statistics where each sample's vector is
- * small. */
+ * forward mode (mis.h). */
 static int mis_init(struct dr_est_base *b)
 {
     const struct dr_grad_problem *p = b->p;
     const struct dr_param_set *ps = p->params;
+    const int64_t pixels = (int64_t)p->width * p->height;
     if (b->dir) {
-        int64_t off = 0, n = (int64_t)p->width * p->height * 3;
-        return dr_mis_init(&b->mis_acc, b->acc.threads, n, 1, &off, &n, true, false);
+        int64_t off = 0, n = pixels * 3;
+        return dr_mis_init(&b->mis_acc, b->acc.threads, n, 1, &off, &n, pixels, true);
     }
     int64_t *seg = malloc(sizeof(int64_t) * 2 * (size_t)(ps->n > 0 ? ps->n : 1));
     if (!seg) {
@@ -191,8 +191,7 @@ static int mis_init(struct dr_est_base *b)
         seg[k] = ps->params[k].offset;
         seg[ps->n + k] = ps->params[k].size;
     }
-    bool per_sample = ps->total <= DR_MIS_SAMPLE_STATS_MAX;
-    int rc = dr_mis_init(&b->mis_acc, b->acc.threads, ps->total, ps->n, seg, seg + ps->n, per_sample, per_sample);
+    int rc = dr_mis_init(&b->mis_acc, b->acc.threads, ps->total, ps->n, seg, seg + ps->n, pixels, false);
     free(seg);
     return rc;
 }
@@ -208,7 +207,7 @@ static void mis_finish(struct dr_est_base *b, double *grad, double *d_image)
         p->mis_weights[k] = wd;
 }
 
-void dr_est_mis_sinks(struct dr_est_base *b, int thread, int64_t pixel, int sample, struct dr_grad_sink *det,
+void dr_est_mis_sinks(struct dr_est_base *b, int thread, int64_t pixel, struct dr_grad_sink *det,
                       struct dr_grad_sink *att)
 {
     struct dr_mis_accum *m = &b->mis_acc;
@@ -219,20 +218,19 @@ void dr_est_mis_sinks(struct dr_est_base *b, int thread, int64_t pixel, int samp
         *det = dr_sink_reverse(m->scratch[thread]);
         *att = dr_sink_reverse(m->scratch[thread] + m->stride);
     } else {
-        int g = dr_mis_group(pixel, sample);
+        int g = dr_mis_group(pixel);
         *det = dr_sink_reverse(dr_mis_slot(m, thread, g, DR_MIS_DETACHED));
         *att = dr_sink_reverse(dr_mis_slot(m, thread, g, DR_MIS_ATTACHED));
     }
 }
 
-void dr_est_mis_sample_done(struct dr_est_base *b, int thread, int64_t pixel, int sample, struct dr_grad_sink *det,
+void dr_est_mis_sample_done(struct dr_est_base *b, int thread, int64_t pixel, struct dr_grad_sink *det,
                             struct dr_grad_sink *att)
 {
     struct dr_mis_accum *m = &b->mis_acc;
-    int g = dr_mis_group(pixel, sample);
     if (!b->dir) {
         if (m->scratch[thread])
-            dr_mis_add_scratch(m, thread, g);
+            dr_mis_add_scratch(m, thread, pixel);
         return;
     }
     const double inv_spp = 1.0 / b->p->spp;
@@ -242,7 +240,7 @@ void dr_est_mis_sample_done(struct dr_est_base *b, int thread, int64_t pixel, in
         a[c] = att->forward[c] * inv_spp;
         det->forward[c] = att->forward[c] = 0.0;
     }
-    dr_mis_add(m, thread, g, 0, 3 * pixel, 3, d, a);
+    dr_mis_add(m, thread, pixel, 3 * pixel, 3, d, a);
 }
 
 static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const float *adjoint,

@@ -76,14 +76,15 @@ bool dr_est_sample_adjoint(const struct dr_est_base *b, int64_t pixel, dr_vec3 *
  * thread's d image (divided by spp). Reverse mode: nothing. */
 void dr_est_sample_done(struct dr_est_base *b, int thread, int64_t pixel, struct dr_grad_sink *sink);
 
-/* mis (mis.h): the sinks of one sample, its group's detached and attached
- * estimates (reverse mode: the group's gradient vectors; forward mode: the
- * direction, moved into the group's images by dr_est_mis_sample_done). */
-void dr_est_mis_sinks(struct dr_est_base *b, int thread, int64_t pixel, int sample, struct dr_grad_sink *det,
+/* mis (mis.h): the sinks of one sample of a pixel, for its detached and
+ * attached derivatives (reverse mode: the scratch vectors, or the pixel's
+ * group's gradient vectors; forward mode: the direction). */
+void dr_est_mis_sinks(struct dr_est_base *b, int thread, int64_t pixel, struct dr_grad_sink *det,
                       struct dr_grad_sink *att);
-/* Forward mode: moves both sinks' channels into the pixel of the group's
- * images (divided by spp). Reverse mode: nothing. */
-void dr_est_mis_sample_done(struct dr_est_base *b, int thread, int64_t pixel, int sample, struct dr_grad_sink *det,
+/* After the sample: forward mode moves both sinks' channels into the pixel
+ * of the group's images (divided by spp); reverse mode with per-sample
+ * statistics moves the scratch vectors into the group (mis.h). */
+void dr_est_mis_sample_done(struct dr_est_base *b, int thread, int64_t pixel, struct dr_grad_sink *det,
                             struct dr_grad_sink *att);
 
 #endif

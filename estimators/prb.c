@@ -88,14 +88,14 @@ static void attached_pixel(struct prb_job *j, int thread, int64_t px, dr_vec3 ad
         dr_vec3 o, d;
         struct dr_grad_sink det, att;
         if (b->mis)
-            dr_est_mis_sinks(b, thread, px, sidx, &det, &att);
+            dr_est_mis_sinks(b, thread, px, &det, &att);
         dr_est_camera_ray(b, px, sidx, &smp, &o, &d);
         if (!prb_attached_sample(&c, smp, o, d, adj, b->mis ? &att : sink, b->mis ? &det : NULL)) {
             b->thr[thread].invalid++;
             continue;
         }
         if (b->mis)
-            dr_est_mis_sample_done(b, thread, px, sidx, &det, &att);
+            dr_est_mis_sample_done(b, thread, px, &det, &att);
         else
             dr_est_sample_done(b, thread, px, sink);
     }

@@ -29,7 +29,6 @@ struct tape_path {
     int64_t first;     /* index of its first vertex */
     int count;
     int moving;        /* attached sampling: first vertex whose sampling moves with a parameter (count: none) */
-    int sample;        /* its sample index (mis: the pixel and sample pick the group) */
     dr_vec3 adj;       /* d loss / d L of this sample (forward mode: ones) */
 };
 
@@ -80,8 +79,7 @@ static bool record_path(struct tape_job *j, struct tape *tp, int thread, int64_t
     if (!grow((void **)&tp->paths, &tp->cap_paths, tp->n_paths + 1, sizeof *tp->paths))
         return false;
     struct tape_path *path = &tp->paths[tp->n_paths];
-    *path = (struct tape_path){.pixel = px, .first = tp->n_verts, .count = 0, .moving = -1, .sample = sidx,
-                               .adj = adj};
+    *path = (struct tape_path){.pixel = px, .first = tp->n_verts, .count = 0, .moving = -1, .adj = adj};
     struct dr_path_state st;
     dr_path_start(&st, o, d);
     dr_vec3 L = dr_v3s(0.0);
@@ -215,10 +213,10 @@ static void sweep_path_mis(struct tape_job *j, int thread, const struct tape_ver
                            const struct dr_medium_record *mrecs, const struct tape_path *path)
 {
     struct dr_grad_sink det, att;
-    dr_est_mis_sinks(&j->b, thread, path->pixel, path->sample, &det, &att);
+    dr_est_mis_sinks(&j->b, thread, path->pixel, &det, &att);
     sweep(j, verts, mrecs, path->count, path->adj, &det);
     sweep_path(j, verts, mrecs, path, &att);
-    dr_est_mis_sample_done(&j->b, thread, path->pixel, path->sample, &det, &att);
+    dr_est_mis_sample_done(&j->b, thread, path->pixel, &det, &att);
 }
 
 /* Sweep phase: item i sweeps tape i (recorded by worker i). */
