@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # --sampling mis (detached and attached combined, estimators/mis.h) from the
 # command line, on the bundled Cornell box:
-#   a. help texts of grad, fdcheck and optimize name it; an unknown mode is
-#      refused listing every mode (exit 2);
+#   a. help texts of grad, fdcheck and optimize and the manual name it; an
+#      unknown mode is refused listing every mode (exit 2);
 #   b. grad --json reports the weights per parameter (reverse and forward
 #      mode): roughness gets a real mix, a colour all detached; with no
 #      parameter in a sampling map mis runs detached, the same gradient bit
@@ -41,6 +41,11 @@ for cmd in grad fdcheck optimize; do
     expect_rc 0 "$cmd --help"
     grep -A3 -- '--sampling S' "$tmp/out" | grep -q 'mis' || fail "$cmd --help: --sampling does not mention mis"
 done
+# the manual documents the mode, its option value and the JSON key
+man_page="$cli_root/man/drender.1"
+grep -q 'detached\\fR|\\fPattached\\fR|\\fPmis' "$man_page" || fail "man/drender.1: --sampling does not list mis"
+grep -q '^\.B mis$' "$man_page" || fail "man/drender.1: SAMPLING has no mis entry"
+grep -q 'mis_weight' "$man_page" || fail "man/drender.1: mis_weight undocumented"
 run grad --param "$red" --sampling sideways -o d.exr $fast
 expect_rc 2 "grad --sampling sideways"
 expect_mentions "--sampling|sideways|detached, attached, mis"
