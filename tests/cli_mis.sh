@@ -10,7 +10,8 @@
 #   c. fdcheck --sampling mis agrees for roughness;
 #   d. compare takes the mode from the registry: listed in --help, run by
 #      default, and by name;
-#   e. what attached cannot do (media), mis refuses the same way.
+#   e. what attached cannot do (media), mis refuses the same way;
+#   f. the memory estimate counts mis's copies and refuses what exceeds the limit.
 # Run by tests/run.sh (env: DRENDER = the binary); also runs alone.
 set -u
 
@@ -123,4 +124,20 @@ run grad "$fog" --param /materials/0/pbrMetallicRoughness/roughnessFactor --samp
 expect_rc "$attached_rc" "grad --sampling mis on a scene with media (as attached)"
 expect_mentions "mis sampling|participating media|--sampling detached"
 [ -e m.exr ] && fail "a refused run wrote m.exr"
+# ---- f. the memory estimate counts mis's group copies (16 per thread) ----
+est() { python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["memory_estimate_bytes"])' "$1"; }
+if $have_python; then
+    run grad --param "$rough" --res 16x16 --spp 1 --threads 2 --sampling detached -o e.exr --json
+    cp "$tmp/out" est_det.json
+    run grad --param "$rough" --res 16x16 --spp 1 --threads 2 --sampling mis -o e.exr --json
+    cp "$tmp/out" est_mis.json
+    # forward mode: 2 x 8 derivative images (16 x 16 x 3 doubles) and the pixel counts, per thread
+    want=$(( (16 * 16 * 3 * 16 + 16 * 16) * 8 * 2 ))
+    [ $(( $(est est_mis.json) - $(est est_det.json) )) -eq "$want" ] ||
+        fail "memory estimate: mis adds $(( $(est est_mis.json) - $(est est_det.json) )) bytes, want $want"
+fi
+DRENDER_MEM_LIMIT=2G run grad --param "$rough" --res 2048x2048 --spp 1 --threads 2 --sampling mis -o big.exr
+expect_rc 2 "grad --sampling mis over the memory limit"
+expect_mentions "--res|DRENDER_MEM_LIMIT"
+[ -e big.exr ] && fail "a refused run wrote big.exr"
 echo "cli_mis: all checks passed"
