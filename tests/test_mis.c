@@ -4,6 +4,8 @@
  *  - on the bundled Cornell box: agreement with finite differences (|z| <= 3)
  *    for the red wall's albedo, the gold sphere's roughness at 0.1 and 0.5,
  *    its metallic, and the floor's texture;
+ *  - a metallic-roughness texture (a texture that moves the sampling), 4x4
+ *    (per-sample statistics) and 12x12 (the groups' statistics), both estimators;
  *  - prb and tape give the same mis gradient to rounding (reverse and forward);
  *  - where no parameter moves a sampling map, mis is detached bit for bit;
  *  - the variance over independent seeds of mis is at most that of the
@@ -17,6 +19,7 @@
 #include "fdcheck.h"
 #include "mis.h"
 #include "render.h"
+#include "scene_builder.h"
 #include "test.h"
 
 static const char *const RED = "/materials/red/pbrMetallicRoughness/baseColorFactor";
@@ -270,6 +273,88 @@ static void weighted_fd_case(double rough)
     dr_scene_destroy(s);
 }
 
+/* A texture that moves the sampling: a metal floor whose metallic-roughness
+ * texture (G = roughness 0.15..0.55, B = metallic 1) is the parameter, under
+ * an environment map with a gradient (so roughness shows). n x n texels:
+ * 4 x 4 (48 entries: per-sample statistics) and 12 x 12 (432 > 256: the
+ * groups' statistics, mis.h). mis against finite differences, both
+ * estimators, |z| <= 3; the weights are a real mix, reported. */
+static void roughness_texture(int n)
+{
+    struct sb b;
+    sb_init(&b);
+    struct dr_material m = sb_diffuse(dr_v3(0.9, 0.8, 0.6));
+    m.metallic = 1.0;
+    m.roughness = 1.0;   /* factors multiply the texture */
+    m.specular = 1.0;
+    m.metallic_roughness_tex.texture = 0;
+    sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, m));
+    sb_environment(&b, dr_v3s(1.0));
+    struct dr_image *map = &b.s->env.map;
+    *map = sb_image(16, 8, 3, NULL, 0.0f, false);
+    for (int y = 0; y < 8; y++)
+        for (int x = 0; x < 16; x++)
+            for (int k = 0; k < 3; k++)
+                map->data[(y * 16 + x) * 3 + k] = (float)(0.2 + 0.1 * x + 0.05 * y);
+    float *px = malloc(sizeof(float) * n * n * 3);
+    for (int i = 0; i < n * n; i++) {
+        px[3 * i] = 0.0f;
+        px[3 * i + 1] = (float)(0.15 + 0.4 * ((i * 7) % 11) / 10.0);
+        px[3 * i + 2] = 1.0f;
+    }
+    struct dr_scene *s = b.s;
+    s->n_images = 1;
+    s->images = calloc(1, sizeof(struct dr_image));
+    s->images[0] = sb_image(n, n, 3, px, 0.0f, false);
+    free(px);
+    s->n_textures = 1;
+    s->textures = calloc(1, sizeof(struct dr_texture));
+    s->textures[0] = (struct dr_texture){0, DR_WRAP_REPEAT, DR_WRAP_REPEAT};
+    sb_finish(&b);
+    s->n_file_materials = s->n_materials;
+    const char *ptr = "/images/0";
+    struct dr_param_set *ps = dr_param_set_create(s, &ptr, 1);
+    CHECK(ps != NULL, "roughness texture: %s", dr_last_error());
+    struct dr_camera cam = sb_camera(dr_v3(0, 1, 1), dr_v3(0, 0, -1), 40);
+    for (int e = 0; ps && dr_estimators[e]; e++) {
+        struct dr_fd_options o = {.estimator = dr_estimators[e], .sampling = DR_SAMPLING_MIS, .width = 16,
+                                  .height = 16, .spp = 16, .batches = 8, .max_depth = 3,
+                                  .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 21, .threads = 2, .eps = 1e-2,
+                                  .z_max = 3.0, .regularize = DR_PRB_REGULARIZE_DEFAULT};
+        struct dr_fd_entry *en = NULL;
+        int count = 0;
+        CHECK(dr_fdcheck(s, &cam, ps, &o, &en, &count) == 0 && count == 2, "roughness texture: %s", dr_last_error());
+        for (int i = 0; i < count; i++) {
+            printf("mis %s, %dx%d roughness texture, %-32s rev %.5g +- %.2g  fwd %.5g +- %.2g  fd %.5g +- %.2g  "
+                   "z %.2f %.2f\n",
+                   dr_estimators[e]->name, n, n, en[i].label, en[i].reverse, en[i].reverse_se, en[i].forward,
+                   en[i].forward_se, en[i].fd, en[i].fd_se, en[i].z_reverse, en[i].z_forward);
+            CHECK(en[i].agree, "%dx%d roughness texture (%s): %s: mis %.6g / %.6g vs fd %.6g (z %.2f, %.2f)", n, n,
+                  dr_estimators[e]->name, en[i].label, en[i].reverse, en[i].forward, en[i].fd, en[i].z_reverse,
+                  en[i].z_forward);
+            CHECK(fabs(en[i].fd) > 3.0 * en[i].fd_se, "%dx%d roughness texture: %s unresolved (%.3g +- %.3g)", n, n,
+                  en[i].label, en[i].fd, en[i].fd_se);
+        }
+        free(en);
+    }
+    /* the weight chosen for the texture (reverse mode, uniform adjoint) */
+    float *adj = malloc(sizeof(float) * 16 * 16 * 3);
+    for (int i = 0; i < 16 * 16 * 3; i++)
+        adj[i] = 1.0f;
+    double *g = calloc((size_t)(ps ? ps->total : 1), sizeof(double)), w = NAN;
+    struct dr_grad_problem p = {.scene = s, .camera = &cam, .params = ps, .width = 16, .height = 16, .spp = 16,
+                                .max_depth = 3, .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 3, .threads = 2,
+                                .sampling = DR_SAMPLING_MIS, .regularize = DR_PRB_REGULARIZE_DEFAULT,
+                                .mis_weights = &w};
+    CHECK(ps && dr_estimator_backward(dr_estimator_find("prb"), &p, adj, g, NULL) == 0, "%s", dr_last_error());
+    printf("%dx%d roughness texture: weight of detached %.3f\n", n, n, w);
+    CHECK(w >= 0.0 && w <= 1.0, "%dx%d roughness texture: weight %.3f", n, n, w);
+    free(adj);
+    free(g);
+    dr_param_set_destroy(ps);
+    dr_scene_destroy(s);
+}
+
 /* prb and tape, reverse and forward mode, same seed: equal to rounding; and
  * the weights they report equal. With roughness and albedo requested
  * together, the albedo's weight is all detached (the two estimates coincide). */
@@ -410,5 +495,7 @@ int main(void)
     fd_case("roughness 0.5", 0.5, ROUGH, NULL);
     fd_case("metallic", 0.35, METAL, NULL);
     fd_case("texture", 0.35, TEX, "/images/0 (random");
+    roughness_texture(4);
+    roughness_texture(12);
     return TEST_END();
 }
