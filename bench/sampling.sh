@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # drender sampling benchmark (run by `make bench` after bench/grad.sh):
-#   i. detached vs attached sampling: standard error^2 x gradient seconds of
+#   i. detached vs attached vs mis sampling: standard error^2 x gradient seconds of
 #      d loss / d theta (lower is better: the cost of a given accuracy) for
 #      both estimators on the bundled Cornell box, L2 against a 256-spp render:
 #      red wall colour (albedo), the gold sphere's roughness at 0.001, 0.1 and
@@ -36,7 +36,7 @@ first_stderr() {
     printf '%s' "$v"
 }
 
-echo "i. detached vs attached sampling on $CORNELL ($RES, $SPP spp in $BATCHES batches, depth $DEPTH, 2 threads)"
+echo "i. detached vs attached vs mis sampling on $CORNELL ($RES, $SPP spp in $BATCHES batches, depth $DEPTH, 2 threads)"
 "$DR" render "$CORNELL" -o "$TMP/target.exr" --res $RES --spp 256 --max-depth $DEPTH --seed 99 --threads 2
 printf '   %-22s %-5s %-9s %-9s %12s %9s %12s\n' parameter est sampling ran stderr seconds "stderr^2*s"
 ROWS=""
@@ -44,7 +44,7 @@ row() {   # label param set-args...
     local label=$1 param=$2
     shift 2
     for est in prb tape; do
-        for smp in detached attached; do
+        for smp in detached attached mis; do
             local J rc=0
             J=$("$DR" grad "$CORNELL" --target "$TMP/target.exr" --param "$param" "$@" --estimator $est \
                 --sampling $smp --spp $SPP --batches $BATCHES --max-depth $DEPTH --threads 2 --seed 3 --json \

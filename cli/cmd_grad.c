@@ -67,9 +67,10 @@ void cmd_grad_usage(FILE *out)
             "      --grad-dir DIR  reverse mode: where texture gradients go (default: .)\n"
             "      --estimator E   gradient estimator: prb (path replay, default) or tape\n"
             "      --sampling S    detached (default), attached (differentiates through the\n"
-            "                      sampling: for roughness) or derivative (adds directions\n"
-            "                      sampled for the BSDF derivative, combined by MIS; see\n"
-            "                      SAMPLING in the manual)\n"
+            "                      sampling: for roughness), mis (both from the same paths,\n"
+            "                      weighted per parameter) or derivative (adds directions\n"
+            "                      sampled for the BSDF derivative, combined by MIS); see\n"
+            "                      SAMPLING in the manual\n"
             "      --regularize E  prb, attached: a vertex Jacobian whose smallest/largest\n"
             "                      singular value is below E is not inverted; forward mode\n"
             "                      restarts there instead (default: 1e-3; 0: always invert)\n"
@@ -356,6 +357,7 @@ out:
 struct forward_outputs {
     char **outs, **viss;             /* derivative image and --vis picture per parameter */
     double *vis_scale, *lo, *hi;     /* the picture's scale; the image's range */
+    double *mis_w;                   /* --sampling mis: each parameter's weight of the detached estimate */
 };
 
 static void forward_print(FILE *f, const struct grad_args *a, const char *scene_path, const struct dr_param_set *ps,
@@ -391,6 +393,7 @@ static void forward_print(FILE *f, const struct grad_args *a, const char *scene_
             json_number(f, lo[i]);
             fprintf(f, ", \"max\": ");
             json_number(f, hi[i]);
+            grad_json_mis_weight(f, &a->g, fo->mis_w[i]);
             fputc('}', f);
         }
         fprintf(f, "], \"effects_differentiated\": ");
@@ -404,6 +407,9 @@ static void forward_print(FILE *f, const struct grad_args *a, const char *scene_
             if (viss[i])
                 fprintf(f, "%s: picture, blue -%.3g .. white 0 .. red +%.3g\n", viss[i], vis_scale[i],
                         vis_scale[i]);
+            if (a->g.sampling == DR_SAMPLING_MIS)
+                fprintf(f, "%s: mis weight %.3f detached, %.3f attached\n", outs[i], fo->mis_w[i],
+                        1.0 - fo->mis_w[i]);
         }
     }
 }
@@ -421,8 +427,9 @@ static int run_forward(struct grad_args *a, const char *scene_path, const struct
     char **outs = calloc((size_t)n, sizeof(char *)), **viss = calloc((size_t)n, sizeof(char *));
     double *vis_scale = calloc((size_t)n, sizeof(double)), *lo = calloc((size_t)n, sizeof(double)),
            *hi = calloc((size_t)n, sizeof(double));
+    double *mis_w = calloc((size_t)n, sizeof(double)), *mis_one = calloc((size_t)n, sizeof(double));
     int rc = DR_EXIT_FAILURE;
-    if (!dir || !dimg || !fimg || !outs || !viss || !vis_scale || !lo || !hi) {
+    if (!dir || !dimg || !fimg || !outs || !viss || !vis_scale || !lo || !hi || !mis_w || !mis_one) {
         cli_error("grad", "out of memory for a %dx%d derivative image", w, h);
         goto out;
     }
@@ -447,6 +454,7 @@ static int run_forward(struct grad_args *a, const char *scene_path, const struct
         struct dr_grad_problem prob =
             grad_problem(&a->g, scene, cam, ps, a->g.width, a->g.height, a->g.spp, a->g.seed);
         prob.batch = a->batch;
+        prob.mis_weights = mis_one;   /* mis: the direction's weight (every entry the same) */
         struct dr_grad_stats st = {0};
         if (dr_estimator_forward(a->g.estimator, &prob, dir, dimg, &st) != 0) {
             if (progress)
@@ -455,6 +463,7 @@ static int run_forward(struct grad_args *a, const char *scene_path, const struct
             goto out;
         }
         grad_totals_add(&tot, &st);
+        mis_w[i] = mis_one[i];
         lo[i] = INFINITY;
         hi[i] = -INFINITY;
         for (size_t k = 0; k < npix * 3; k++) {
@@ -476,7 +485,7 @@ static int run_forward(struct grad_args *a, const char *scene_path, const struct
         dr_progress_bar("grad", n, n);
     grad_totals_warn("grad", &tot);
     double t_end = dr_clock_seconds();
-    struct forward_outputs fo = {outs, viss, vis_scale, lo, hi};
+    struct forward_outputs fo = {outs, viss, vis_scale, lo, hi, mis_w};
     forward_print(stdout, a, scene_path, ps, &fo, &tot, t_loaded - t_start, t_write, t_end - t_start);
     rc = DR_EXIT_OK;
 out:
@@ -489,6 +498,8 @@ out:
     free(vis_scale);
     free(lo);
     free(hi);
+    free(mis_w);
+    free(mis_one);
     free(dir);
     free(dimg);
     free(fimg);
@@ -501,11 +512,16 @@ out:
  * primal image and gradient samples, reduced to a mean and standard errors. */
 struct reverse_run {
     int64_t T;
+    int n_params;
     double *mean, *se, *se_grad, *se_primal;
     char **files;                  /* gradient images of image parameters */
     double t_write;
     struct dr_reverse_result res;
     struct grad_totals tot;
+    /* --sampling mis: every estimator run's weights (mis_last, per parameter)
+     * summed into mis_sum; reported as their mean */
+    double *mis_last, *mis_sum;
+    int mis_runs;
 };
 
 static void reverse_free(struct reverse_run *r, int n_params)
@@ -517,6 +533,8 @@ static void reverse_free(struct reverse_run *r, int n_params)
     free(r->se);
     free(r->se_grad);
     free(r->se_primal);
+    free(r->mis_last);
+    free(r->mis_sum);
 }
 
 static void reverse_progress(void *ctx, int done, int total)
@@ -532,7 +550,19 @@ static void reverse_on_render(void *ctx, const struct dr_render_stats *rs)
 
 static void reverse_on_gradient(void *ctx, const struct dr_grad_stats *st)
 {
-    grad_totals_add(&((struct reverse_run *)ctx)->tot, st);
+    struct reverse_run *r = ctx;
+    grad_totals_add(&r->tot, st);
+    if (!r->mis_last)
+        return;
+    for (int64_t k = 0; k < r->n_params; k++)
+        r->mis_sum[k] += r->mis_last[k];
+    r->mis_runs++;
+}
+
+/* The mean weight of the detached estimate for parameter k (mis). */
+static double reverse_mis_weight(const struct reverse_run *r, int k)
+{
+    return r->mis_runs > 0 ? r->mis_sum[k] / r->mis_runs : NAN;
 }
 
 /* The batches: gradient, total standard error and its parts. */
@@ -546,6 +576,7 @@ static int reverse_batches(const struct grad_args *a, const struct dr_scene *sce
         .progress = progress ? reverse_progress : NULL, .on_render = reverse_on_render,
         .on_gradient = reverse_on_gradient, .ctx = r};
     o.problem.batch = a->batch;
+    o.problem.mis_weights = r->mis_last;
     r->res = (struct dr_reverse_result){.grad = r->mean, .se = r->se, .se_gradient = r->se_grad,
                                         .se_primal = r->se_primal};
     if (dr_reverse_gradient(&o, target, &r->res) != 0) {
@@ -607,8 +638,11 @@ static void json_array(FILE *f, const double *v, int64_t n)
 
 /* One parameter's gradient and standard errors (total, gradient-sample and
  * primal-image parts; null parts when a batch has a single sample). */
-static void reverse_json_param(FILE *f, const struct dr_param *p, const struct reverse_run *r, const char *file)
+static void reverse_json_param(FILE *f, const struct grad_args *a, const struct dr_param_set *ps, int k,
+                               const struct reverse_run *r)
 {
+    const struct dr_param *p = &ps->params[k];
+    const char *file = r->files[k];
     fprintf(f, "{\"name\": ");
     json_string(f, p->name);
     fprintf(f, ", \"size\": %lld", (long long)p->size);
@@ -632,6 +666,7 @@ static void reverse_json_param(FILE *f, const struct dr_param *p, const struct r
             json_array(f, vals[k] + p->offset, p->size);
         }
     }
+    grad_json_mis_weight(f, &a->g, reverse_mis_weight(r, k));
     fputc('}', f);
 }
 
@@ -660,7 +695,7 @@ static void reverse_print_json(FILE *f, const struct grad_args *a, const char *s
     fprintf(f, "}, \"parameters\": [");
     for (int k = 0; k < ps->n; k++) {
         fputs(k ? ", " : "", f);
-        reverse_json_param(f, &ps->params[k], r, r->files[k]);
+        reverse_json_param(f, a, ps, k, r);
     }
     fprintf(f, "], \"effects_differentiated\": ");
     grad_json_effects(f, ps);
@@ -687,22 +722,31 @@ static void reverse_print_text(FILE *f, const struct grad_args *a, const struct 
             fputc('\n', f);
         }
     }
+    for (int k = 0; a->g.sampling == DR_SAMPLING_MIS && k < ps->n; k++)
+        fprintf(f, "%s: mis weight %.3f detached, %.3f attached (mean over runs)\n", ps->params[k].name,
+                reverse_mis_weight(r, k), 1.0 - reverse_mis_weight(r, k));
 }
 
 static int run_reverse(struct grad_args *a, const char *scene_path, const struct dr_scene *scene,
                        const struct dr_camera *cam, const struct dr_param_set *ps, const float *target,
                        double t_start, double t_loaded)
 {
-    struct reverse_run r = {.T = ps->total};
+    struct reverse_run r = {.T = ps->total, .n_params = ps->n};
     const size_t T1 = (size_t)(r.T > 0 ? r.T : 1);
     r.mean = calloc(T1, sizeof(double));
     r.se = calloc(T1, sizeof(double));
     r.se_grad = calloc(T1, sizeof(double));
     r.se_primal = calloc(T1, sizeof(double));
     r.files = calloc((size_t)ps->n, sizeof(char *));
+    bool mis_ok = true;
+    if (a->g.sampling == DR_SAMPLING_MIS) {
+        r.mis_last = calloc((size_t)ps->n, sizeof(double));
+        r.mis_sum = calloc((size_t)ps->n, sizeof(double));
+        mis_ok = r.mis_last && r.mis_sum;
+    }
     int rc = DR_EXIT_FAILURE;
     bool progress = isatty(2) != 0;
-    if (!r.mean || !r.se || !r.se_grad || !r.se_primal || !r.files)
+    if (!r.mean || !r.se || !r.se_grad || !r.se_primal || !r.files || !mis_ok)
         cli_error("grad", "out of memory (%lld gradient entries)", (long long)r.T);
     else if ((rc = reverse_batches(a, scene, cam, ps, target, progress, &r)) < 0 &&
              (rc = reverse_write_images(a, ps, &r)) < 0) {

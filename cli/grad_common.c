@@ -144,7 +144,11 @@ static int method_option(struct grad_common *g, int c, const char *arg)
     case GOPT_SAMPLING: {
         int s = dr_sampling_parse(arg);
         if (s < 0) {
-            cli_error(g->cmd, "--sampling: unknown sampling strategy '%s' (known: detached, attached, derivative)", arg);
+            char known[128] = "";   /* from the registry: a new mode is listed as soon as it exists */
+            for (int k = 0, len = 0; k < DR_SAMPLING_COUNT; k++)
+                len += snprintf(known + len, sizeof known - (size_t)len, "%s%s", k ? ", " : "",
+                                dr_sampling_name((enum dr_sampling)k));
+            cli_error(g->cmd, "--sampling: unknown sampling strategy '%s' (known: %s)", arg, known);
             return DR_EXIT_USAGE;
         }
         g->sampling = (enum dr_sampling)s;
@@ -602,6 +606,7 @@ void grad_totals_add(struct grad_totals *t, const struct dr_grad_stats *st)
     if (st->threads > 0)
         t->threads = st->threads;
     t->attached_run |= st->sampling_run == DR_SAMPLING_ATTACHED;
+    t->mis_run |= st->sampling_run == DR_SAMPLING_MIS;
     t->derivative_run |= st->sampling_run == DR_SAMPLING_DERIVATIVE;
 }
 
@@ -652,10 +657,24 @@ void grad_json_run(FILE *f, const struct grad_totals *t)
     dr_path_stages_describe(t->stages, stages, sizeof stages);
     fprintf(f, ", \"invalid_samples\": %llu, \"stages\": ", (unsigned long long)t->invalid);
     json_name_list(f, stages);
-    /* attached sampling with no parameter in a sampling map runs detached; so does
-     * derivative sampling with no BSDF parameter */
+    /* attached or mis sampling with no parameter in a sampling map runs detached; so
+     * does derivative sampling with no BSDF parameter */
     fprintf(f, ", \"sampling_effective\": ");
-    json_string(f, t->attached_run ? "attached" : t->derivative_run ? "derivative" : "detached");
+    json_string(f, t->mis_run          ? "mis"
+                   : t->attached_run   ? "attached"
+                   : t->derivative_run ? "derivative"
+                                       : "detached");
+}
+
+void grad_json_mis_weight(FILE *f, const struct grad_common *g, double w_detached)
+{
+    if (g->sampling != DR_SAMPLING_MIS)
+        return;
+    fprintf(f, ", \"mis_weight\": {\"detached\": ");
+    json_number(f, w_detached);
+    fprintf(f, ", \"attached\": ");
+    json_number(f, 1.0 - w_detached);
+    fputc('}', f);
 }
 
 /* ---- the film: --filter and --crop (issue 14) ---- */

@@ -196,6 +196,7 @@ struct grad_totals {
     unsigned stages;
     int threads;
     bool attached_run;   /* some run differentiated with attached sampling */
+    bool mis_run;        /* some run combined detached and attached (mis) */
     bool derivative_run; /* ... with derivative sampling (some BSDF parameter requested) */
 };
 void grad_totals_add(struct grad_totals *t, const struct dr_grad_stats *st);
@@ -210,6 +211,10 @@ void grad_json_head(FILE *f, const struct grad_common *g, const char *scene_path
 /* JSON: `"threads", "estimator_memory_bytes", "record_bytes", "peak_memory_bytes",
  * "rays", "invalid_samples", "stages", "sampling_effective"` (no braces). */
 void grad_json_run(FILE *f, const struct grad_totals *t);
+
+/* JSON, with --sampling mis only: `, "mis_weight": {"detached": w, "attached": 1 - w}`
+ * (w: the weight of the detached estimate, estimators/mis.h). */
+void grad_json_mis_weight(FILE *f, const struct grad_common *g, double w_detached);
 
 /* Names of the effects a parameter set differentiates, comma separated. */
 void grad_effects_differentiated(const struct dr_param_set *set, char *buf, size_t size);

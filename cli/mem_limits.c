@@ -11,6 +11,7 @@
 
 #include "cli.h"
 #include "grad_common.h"
+#include "mis.h"
 #include "image_io.h"
 #include "medium.h"
 #include "parallel.h"
@@ -231,6 +232,19 @@ static double tape_bytes(const struct grad_common *g, double paths_per_batch)
     return paths_per_batch * ((double)g->max_depth * (double)dr_tape_vertex_bytes() + 64.0);
 }
 
+/* --sampling mis (estimators/mis.h): per thread, 2 x DR_MIS_GROUPS copies of
+ * the estimate (T gradient entries, or the 3 npix derivative image in
+ * forward mode), plus per-pixel sums where per-sample statistics are kept. */
+static double mis_bytes(const struct grad_common *g, double T, double npix, int threads, bool forward)
+{
+    if (g->sampling != DR_SAMPLING_MIS)
+        return 0.0;
+    double n = forward ? 3.0 * npix : T, per_thread = n * 2 * DR_MIS_GROUPS + npix;
+    if (!forward && T <= DR_MIS_SAMPLE_STATS_MAX && npix * 2 * T <= (double)DR_MIS_PIXEL_SUMS_MAX)
+        per_thread += npix * 2 * T + 2 * T;
+    return per_thread * sizeof(double) * threads;
+}
+
 int cli_limits_grad(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *ps,
                     bool reverse, int batches, bool batches_given, int64_t batch)
 {
@@ -246,13 +260,14 @@ int cli_limits_grad(const struct grad_common *g, const struct dr_scene *scene, c
     if (reverse) {
         /* primal image, adjoint, target (read + rgb), texture gradient images */
         n.images = npix * 3 * (3 * sizeof(float)) + npix * 4 * sizeof(float);
-        n.grads = T * (3 * sizeof(double) + sizeof(float)) + T * 2 * sizeof(double) * threads;
+        n.grads = T * (3 * sizeof(double) + sizeof(float)) + T * 2 * sizeof(double) * threads +
+                  mis_bytes(g, T, npix, threads, false);
         double spp_b = ceil((double)g->spp / (batches > 0 ? batches : 1));
         double paths = npix * spp_b;
         n.tape = tape_bytes(g, batch > 0 ? fmin((double)batch, paths) : npix);
     } else {
         /* d image in double per thread and summed, plus its float copy */
-        n.images = npix * 3 * (sizeof(double) * (threads + 1) + sizeof(float));
+        n.images = npix * 3 * (sizeof(double) * (threads + 1) + sizeof(float)) + mis_bytes(g, T, npix, threads, true);
         n.grads = T * sizeof(double);
         double paths = npix * g->spp;
         n.tape = tape_bytes(g, batch > 0 ? fmin((double)batch, paths) : npix);
@@ -269,7 +284,9 @@ int cli_limits_fdcheck(const struct grad_common *g, const struct dr_scene *scene
     n.scene = (double)cli_mem_scene(scene);
     /* d image (double), adjoint and renders (float), per-thread forward images */
     n.images = npix * 3 * (sizeof(double) * (threads + 1) + 3 * sizeof(float));
-    n.grads = T * 5 * sizeof(double) + T * 2 * sizeof(double) * threads;
+    /* one estimator run at a time, forward or reverse: the larger of the two */
+    n.grads = T * 5 * sizeof(double) + T * 2 * sizeof(double) * threads +
+              fmax(mis_bytes(g, T, npix, threads, true), mis_bytes(g, T, npix, threads, false));
     n.batches = (double)batches * T * sizeof(double);
     n.tape = tape_bytes(g, npix);
     return check("fdcheck", &n, "--res", "--max-depth (tape records every vertex of a batch; or --estimator prb)");
@@ -285,7 +302,8 @@ int cli_limits_optimize(const struct grad_common *g, const struct dr_scene *scen
     /* per target: the file (up to 4 channels), rgb, render, adjoint; one view render */
     n.images = (double)target_pixels * (4 + 9) * sizeof(float) + (double)max_pixels * 3 * sizeof(float);
     /* theta, grad, per-target grad, reference, Adam's m, v, lr, lo, hi; per-thread copies */
-    n.grads = T * 9 * sizeof(double) + T * 2 * sizeof(double) * threads;
+    n.grads = T * 9 * sizeof(double) + T * 2 * sizeof(double) * threads +
+              mis_bytes(g, T, (double)max_pixels, threads, false);
     n.tape = tape_bytes(g, (double)max_pixels);
     return check("optimize", &n, "--target (the images' size)",
                  "--max-depth (tape records every vertex of a batch; or --estimator prb)");

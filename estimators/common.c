@@ -134,7 +134,9 @@ void dr_est_sample_done(struct dr_est_base *b, int thread, int64_t pixel, struct
 
 enum dr_sampling dr_est_sampling_run(const struct dr_grad_problem *p)
 {
-    if (p->sampling == DR_SAMPLING_ATTACHED && !dr_path_params_enter_sampling(p->scene, p->params))
+    /* attached and mis differ from detached only through a moving sampling map */
+    if ((p->sampling == DR_SAMPLING_ATTACHED || p->sampling == DR_SAMPLING_MIS) &&
+        !dr_path_params_enter_sampling(p->scene, p->params))
         return DR_SAMPLING_DETACHED;
     /* derivative sampling adds work only at vertices with a BSDF parameter */
     if (p->sampling == DR_SAMPLING_DERIVATIVE) {
@@ -147,39 +149,120 @@ enum dr_sampling dr_est_sampling_run(const struct dr_grad_problem *p)
     return p->sampling;
 }
 
-static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const float *adjoint,
-               const double *dir, double *grad, double *d_image, struct dr_grad_stats *st)
+/* What the sampling mode cannot run on this problem: 0, or DR_ERR_ARG with
+ * the message set. */
+static int check_sampling(const struct dr_estimator_ops *e, const struct dr_grad_problem *p)
 {
     if (!dr_estimator_supports(e, p->sampling)) {
         dr_set_error("estimator '%s' does not implement %s sampling", e->name, dr_sampling_name(p->sampling));
         return DR_ERR_ARG;
     }
-    /* The attached adjoints (path_attached.c) know surfaces only: a path
-     * through a medium would silently lose its moving terms. */
-    if (dr_est_sampling_run(p) == DR_SAMPLING_ATTACHED && (p->scene->effects & DR_FX_MEDIA)) {
-        dr_set_error("attached sampling does not handle participating media yet (the scene has %d medi%s); use "
+    const enum dr_sampling run = dr_est_sampling_run(p);
+    if (run == DR_SAMPLING_DETACHED)
+        return 0;
+    /* The attached adjoints (path_attached.c; mis uses them too) know
+     * surfaces only: a path through a medium would silently lose its moving
+     * terms; derivative sampling's extra radiance paths use the surface
+     * walker's state. */
+    if (p->scene->effects & DR_FX_MEDIA) {
+        dr_set_error("%s sampling does not handle participating media yet (the scene has %d medi%s); use "
                      "--sampling detached",
-                     p->scene->n_media, p->scene->n_media == 1 ? "um" : "a");
+                     dr_sampling_name(p->sampling), p->scene->n_media, p->scene->n_media == 1 ? "um" : "a");
         return DR_ERR_ARG;
     }
-    /* Derivative sampling's extra radiance paths use the surface walker's state. */
-    if (dr_est_sampling_run(p) == DR_SAMPLING_DERIVATIVE && (p->scene->effects & DR_FX_MEDIA)) {
-        dr_set_error("derivative sampling does not handle participating media yet (the scene has %d medi%s); use "
-                     "--sampling detached",
-                     p->scene->n_media, p->scene->n_media == 1 ? "um" : "a");
-        return DR_ERR_ARG;
-    }
-    /* Nor the normal map's dependence on the moving hit point (normal_map.h). */
-    if (dr_est_sampling_run(p) == DR_SAMPLING_ATTACHED && (p->scene->effects & DR_FX_NORMAL_MAPS)) {
+    /* Nor the normal map's dependence on the moving hit point (normal_map.h);
+     * derivative sampling keeps the hit points fixed, like detached. */
+    if (run != DR_SAMPLING_DERIVATIVE && (p->scene->effects & DR_FX_NORMAL_MAPS)) {
         const char *name = "";
         for (int m = 0; m < p->scene->n_materials && !name[0]; m++)
             if (p->scene->materials[m].normal_tex.texture >= 0)
                 name = p->scene->materials[m].name;
-        dr_set_error("attached sampling does not differentiate normal maps (material '%s' has a normalTexture); "
+        dr_set_error("%s sampling does not differentiate normal maps (material '%s' has a normalTexture); "
                      "use --sampling detached",
-                     name);
+                     dr_sampling_name(p->sampling), name);
         return DR_ERR_ARG;
     }
+    return 0;
+}
+
+/* mis: one weight per parameter in reverse mode, one for the direction in
+ * forward mode (mis.h). */
+static int mis_init(struct dr_est_base *b)
+{
+    const struct dr_grad_problem *p = b->p;
+    const struct dr_param_set *ps = p->params;
+    const int64_t pixels = (int64_t)p->width * p->height;
+    if (b->dir) {
+        int64_t off = 0, n = pixels * 3;
+        return dr_mis_init(&b->mis_acc, b->acc.threads, n, 1, &off, &n, pixels, true);
+    }
+    int64_t *seg = malloc(sizeof(int64_t) * 2 * (size_t)(ps->n > 0 ? ps->n : 1));
+    if (!seg) {
+        dr_set_error("out of memory");
+        return DR_ERR_NOMEM;
+    }
+    for (int k = 0; k < ps->n; k++) {
+        seg[k] = ps->params[k].offset;
+        seg[ps->n + k] = ps->params[k].size;
+    }
+    int rc = dr_mis_init(&b->mis_acc, b->acc.threads, ps->total, ps->n, seg, seg + ps->n, pixels, false);
+    free(seg);
+    return rc;
+}
+
+/* mis: the groups' estimates combined into grad or d_image, the weights to
+ * p->mis_weights (forward mode: the direction's weight for every parameter). */
+static void mis_finish(struct dr_est_base *b, double *grad, double *d_image)
+{
+    const struct dr_grad_problem *p = b->p;
+    double wd = 1.0;
+    dr_mis_combine(&b->mis_acc, d_image ? d_image : grad, d_image ? &wd : p->mis_weights);
+    for (int k = 0; d_image && p->mis_weights && k < p->params->n; k++)
+        p->mis_weights[k] = wd;
+}
+
+void dr_est_mis_sinks(struct dr_est_base *b, int thread, int64_t pixel, struct dr_grad_sink *det,
+                      struct dr_grad_sink *att)
+{
+    struct dr_mis_accum *m = &b->mis_acc;
+    if (b->dir) {
+        *det = dr_sink_forward(b->dir);
+        *att = dr_sink_forward(b->dir);
+    } else if (m->scratch[thread]) {   /* per-sample statistics: the sample apart first */
+        *det = dr_sink_reverse(m->scratch[thread]);
+        *att = dr_sink_reverse(m->scratch[thread] + m->stride);
+    } else {
+        int g = dr_mis_group(pixel);
+        *det = dr_sink_reverse(dr_mis_slot(m, thread, g, DR_MIS_DETACHED));
+        *att = dr_sink_reverse(dr_mis_slot(m, thread, g, DR_MIS_ATTACHED));
+    }
+}
+
+void dr_est_mis_sample_done(struct dr_est_base *b, int thread, int64_t pixel, struct dr_grad_sink *det,
+                            struct dr_grad_sink *att)
+{
+    struct dr_mis_accum *m = &b->mis_acc;
+    if (!b->dir) {
+        if (m->scratch[thread])
+            dr_mis_add_scratch(m, thread, pixel);
+        return;
+    }
+    const double inv_spp = 1.0 / b->p->spp;
+    double d[3], a[3];
+    for (int c = 0; c < 3; c++) {
+        d[c] = det->forward[c] * inv_spp;
+        a[c] = att->forward[c] * inv_spp;
+        det->forward[c] = att->forward[c] = 0.0;
+    }
+    dr_mis_add(m, thread, pixel, 3 * pixel, 3, d, a);
+}
+
+static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const float *adjoint,
+               const double *dir, double *grad, double *d_image, struct dr_grad_stats *st)
+{
+    int rc = check_sampling(e, p);
+    if (rc != 0)
+        return rc;
     struct dr_est_base *b = calloc(1, e->job_size);
     if (!b) {
         dr_set_error("out of memory");
@@ -197,14 +280,23 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
                                      .medium_grad = p->medium_grad};
     b->adjoint = adjoint;
     b->dir = dir;
-    int rc = accum_init(&b->acc, p, dir != NULL);
+    rc = accum_init(&b->acc, p, dir != NULL);
+    b->mis = dr_est_sampling_run(p) == DR_SAMPLING_MIS;
+    if (rc == 0 && b->mis)
+        rc = mis_init(b);
     if (rc == 0) {
         rc = e->run(b);
-        accum_sum(&b->acc, p, grad, d_image);
+        if (b->mis)
+            mis_finish(b, grad, d_image);
+        else
+            accum_sum(&b->acc, p, grad, d_image);
     }
+    if (p->mis_weights && p->sampling == DR_SAMPLING_MIS && !b->mis)   /* ran detached */
+        for (int k = 0; k < p->params->n; k++)
+            p->mis_weights[k] = 1.0;
     if (st) {
         *st = (struct dr_grad_stats){.seconds = dr_clock_seconds() - b->t0, .threads = b->acc.threads,
-                                     .memory_bytes = b->acc.bytes + b->record_bytes,
+                                     .memory_bytes = b->acc.bytes + b->mis_acc.bytes + b->record_bytes,
                                      .record_bytes = b->record_bytes, .stages = b->popts.stages,
                                      .sampling_run = dr_est_sampling_run(p)};
         for (int t = 0; t < b->acc.threads; t++) {
@@ -217,6 +309,7 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
     if (e->release)
         e->release(b);
     accum_free(&b->acc);
+    dr_mis_free(&b->mis_acc);
     free(b);
     return rc;
 }

@@ -15,6 +15,7 @@
 
 #include "camera.h"
 #include "estimator.h"
+#include "mis.h"
 #include "parallel.h"
 #include "path.h"
 #include "sampler.h"
@@ -47,11 +48,13 @@ struct dr_est_base {
     struct dr_est_counters thr[DR_MAX_THREADS];
     uint64_t record_bytes;  /* the algorithm's peak recorded-path memory, if any */
     double t0;
+    bool mis;               /* --sampling mis that runs as such: samples go to b->mis_acc, not acc */
+    struct dr_mis_accum mis_acc;
 };
 
-/* The sampling an algorithm runs: attached sampling where no requested
- * parameter enters a sampling map is detached sampling, bit for bit, and
- * runs as such (path.h). */
+/* The sampling an algorithm runs: attached (or mis) sampling where no
+ * requested parameter enters a sampling map is detached sampling, bit for
+ * bit, and runs as such (path.h). */
 enum dr_sampling dr_est_sampling_run(const struct dr_grad_problem *p);
 
 /* Sampler and camera ray of sample `sample` of pixel `pixel` (an index into
@@ -72,5 +75,16 @@ bool dr_est_sample_adjoint(const struct dr_est_base *b, int64_t pixel, dr_vec3 *
 /* Forward mode: moves the sink's three channels into the pixel of the
  * thread's d image (divided by spp). Reverse mode: nothing. */
 void dr_est_sample_done(struct dr_est_base *b, int thread, int64_t pixel, struct dr_grad_sink *sink);
+
+/* mis (mis.h): the sinks of one sample of a pixel, for its detached and
+ * attached derivatives (reverse mode: the scratch vectors, or the pixel's
+ * group's gradient vectors; forward mode: the direction). */
+void dr_est_mis_sinks(struct dr_est_base *b, int thread, int64_t pixel, struct dr_grad_sink *det,
+                      struct dr_grad_sink *att);
+/* After the sample: forward mode moves both sinks' channels into the pixel
+ * of the group's images (divided by spp); reverse mode with per-sample
+ * statistics moves the scratch vectors into the group (mis.h). */
+void dr_est_mis_sample_done(struct dr_est_base *b, int thread, int64_t pixel, struct dr_grad_sink *det,
+                            struct dr_grad_sink *att);
 
 #endif

@@ -7,11 +7,11 @@
  * MIS weights and Russian roulette are constants of the derivative:
  * differentiate-then-reparametrize with the forward sampler) or `attached`
  * (directions, hit points, pdfs and MIS weights move with the parameters:
- * reparametrize-then-differentiate; see path.h), or `derivative` (detached,
- * plus directions drawn from densities made for the BSDF's derivative and
- * combined by MIS: reparametrize-then-differentiate-then-reparametrize; see
- * path_deriv.h). */
-#ifndef DR_ESTIMATOR_H
+ * reparametrize-then-differentiate; see path.h), `mis` (both from the
+ * same paths, combined with per-parameter weights: mis.h), or `derivative`
+ * (detached, plus directions drawn from densities made for the BSDF's
+ * derivative and combined by MIS: reparametrize-then-differentiate-then-
+ * reparametrize; see path_deriv.h). */#ifndef DR_ESTIMATOR_H
 #define DR_ESTIMATOR_H
 
 #include <stdbool.h>
@@ -28,10 +28,12 @@
 enum dr_sampling {
     DR_SAMPLING_DETACHED,   /* differentiate-then-reparametrize */
     DR_SAMPLING_ATTACHED,   /* reparametrize-then-differentiate (path.h: what moves, what stays) */
+    DR_SAMPLING_MIS,        /* both from the same paths, combined per parameter with weights
+                               estimated by cross-fitting (mis.h) */
     DR_SAMPLING_DERIVATIVE, /* detached + a direction sampled for d f / d theta, by MIS (path_deriv.h) */
     DR_SAMPLING_COUNT
 };
-/* "detached", "attached", "derivative"; and back (-1: unknown name). */
+/* "detached", "attached", "mis", "derivative"; and back (-1: unknown name). */
 const char *dr_sampling_name(enum dr_sampling s);
 int dr_sampling_parse(const char *name);
 
@@ -52,6 +54,9 @@ struct dr_grad_problem {
     double regularize;         /* prb, attached: Jacobians with sigma_min/sigma_max below this are not
                                   inverted, forward mode restarts there (0: always invert) */
     enum dr_medium_grad medium_grad;   /* media: DRT (default, 0) or the biased baseline (path.h) */
+    double *mis_weights;       /* mis (optional output): params->n entries, each parameter's weight of
+                                  the detached estimate (mean over the groups, mis.h); 1 where the
+                                  run was detached. Left alone by the other modes */
 };
 
 /* prb --sampling attached: the default --regularize. */
@@ -65,7 +70,7 @@ struct dr_grad_stats {
     uint64_t record_bytes;      /* the part holding recorded path vertices (tape), 0 if none */
     unsigned stages;            /* the walker's optional stages that ran (path.h) */
     int threads;
-    enum dr_sampling sampling_run;   /* what ran: attached with no parameter entering a
+    enum dr_sampling sampling_run;   /* what ran: attached or mis with no parameter entering a
                                         sampling map is detached (identical, cheaper) */
 };
 

@@ -38,7 +38,7 @@ static void walk(const struct dr_est_base *b, struct dr_sampler smp, dr_vec3 o, 
     const struct dr_scene *s = b->p->scene;
     const struct dr_param_set *ps = b->p->params;
     const double sign = sink ? -1.0 : 1.0;
-    const bool dsamp = b->p->sampling == DR_SAMPLING_DERIVATIVE;   /* path_deriv.h */
+    const bool dsamp = b->p->sampling == DR_SAMPLING_DERIVATIVE;   /* path_deriv.h (only vertices with a BSDF parameter) */
     struct dr_path_vertex prev;   /* derivative sampling: the last vertex, if differentiated and continued */
     bool have_prev = false;
     dr_vec3 prev_dt = dr_v3s(0.0);
@@ -96,7 +96,9 @@ static void walk(const struct dr_est_base *b, struct dr_sampler smp, dr_vec3 o, 
     }
 }
 
-/* One pixel's samples with attached sampling (prb_attached.c). */
+/* One pixel's samples with attached sampling (prb_attached.c); under mis
+ * each sample's attached and detached derivatives, from one replay, go to
+ * its group's two estimates (mis.h). */
 static void attached_pixel(struct prb_job *j, int thread, int64_t px, dr_vec3 adj, struct dr_grad_sink *sink)
 {
     struct dr_est_base *b = &j->b;
@@ -105,12 +107,18 @@ static void attached_pixel(struct prb_job *j, int thread, int64_t px, dr_vec3 ad
     for (int sidx = 0; sidx < b->p->spp; sidx++) {
         struct dr_sampler smp;
         dr_vec3 o, d;
+        struct dr_grad_sink det, att;
+        if (b->mis)
+            dr_est_mis_sinks(b, thread, px, &det, &att);
         dr_est_camera_ray(b, px, sidx, &smp, &o, &d);
-        if (!prb_attached_sample(&c, smp, o, d, adj, sink)) {
+        if (!prb_attached_sample(&c, smp, o, d, adj, b->mis ? &att : sink, b->mis ? &det : NULL)) {
             b->thr[thread].invalid++;
             continue;
         }
-        dr_est_sample_done(b, thread, px, sink);
+        if (b->mis)
+            dr_est_mis_sample_done(b, thread, px, &det, &att);
+        else
+            dr_est_sample_done(b, thread, px, sink);
     }
 }
 
@@ -149,7 +157,8 @@ static void prb_pixels(void *ctx, int thread, int64_t begin, int64_t end)
 static int prb_run(struct dr_est_base *b)
 {
     struct prb_job *j = (struct prb_job *)b;
-    if (dr_est_sampling_run(b->p) == DR_SAMPLING_ATTACHED) {
+    const enum dr_sampling run = dr_est_sampling_run(b->p);
+    if (run == DR_SAMPLING_ATTACHED || run == DR_SAMPLING_MIS) {   /* mis: both from one replay */
         if (!(j->zeros = calloc((size_t)b->p->params->total + 1, sizeof(double)))) {
             dr_set_error("out of memory");
             return DR_ERR_NOMEM;
@@ -170,7 +179,8 @@ static void prb_release(struct dr_est_base *b)
 const struct dr_estimator_ops dr_estimator_prb = {
     .name = "prb",
     .summary = "path replay backpropagation: primal pass + replay, constant memory per path, time linear in depth",
-    .sampling = (1u << DR_SAMPLING_DETACHED) | (1u << DR_SAMPLING_ATTACHED) | (1u << DR_SAMPLING_DERIVATIVE),
+    .sampling = (1u << DR_SAMPLING_DETACHED) | (1u << DR_SAMPLING_ATTACHED) | (1u << DR_SAMPLING_MIS) |
+                (1u << DR_SAMPLING_DERIVATIVE),
     .job_size = sizeof(struct prb_job),
     .run = prb_run,
     .release = prb_release,

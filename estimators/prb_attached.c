@@ -306,22 +306,34 @@ static void finish(const struct prb_attached_ctx *c, const struct pending *P, co
     vertex_call(c, &P->v, P->has_Tk ? &P->Tk : NULL, &P->Tn, P->d_e, P->d_t, c_next, NULL, sink);
 }
 
-/* d_t of vertex v from the radiance still to come (as the detached replay's
- * d_f, divided by |cos| / pdf / q: the adjoint of t = f |cos| / pdf / q). */
-static dr_vec3 continuation_adjoint(const struct dr_path_vertex *v, dr_vec3 ratio, dr_vec3 L_true, dr_vec3 L_sub,
-                                    dr_vec3 adj)
+/* d L / d f of vertex v's continuation from the radiance still to come, times
+ * adj (as the detached replay's d_f, prb.c). */
+static dr_vec3 continuation_df(const struct dr_path_vertex *v, dr_vec3 ratio, dr_vec3 L_true, dr_vec3 L_sub,
+                               dr_vec3 adj)
 {
-    dr_vec3 d_t = dr_v3s(0.0);
+    dr_vec3 d_f = dr_v3s(0.0);
     if (!v->cont)
-        return d_t;
+        return d_f;
     for (int ch = 0; ch < 3; ch++) {
         double f = dr_v3_get(v->f, ch), r;
         if (v->sub[ch])
             r = dr_v3_get(ratio, ch) * dr_v3_get(L_sub, ch) / dr_v3_get(v->s, ch);
         else
             r = f != 0.0 ? dr_v3_get(L_true, ch) / f : 0.0;
-        dr_v3_set(&d_t, ch, r * dr_v3_get(adj, ch) / v->cos_pdf_q);
+        dr_v3_set(&d_f, ch, r * dr_v3_get(adj, ch));
     }
+    return d_f;
+}
+
+/* d_t of vertex v: d_f divided by |cos| / pdf / q (the adjoint of
+ * t = f |cos| / pdf / q). */
+static dr_vec3 continuation_adjoint(const struct dr_path_vertex *v, dr_vec3 d_f)
+{
+    dr_vec3 d_t = dr_v3s(0.0);
+    if (!v->cont)
+        return d_t;
+    for (int ch = 0; ch < 3; ch++)
+        dr_v3_set(&d_t, ch, dr_v3_get(d_f, ch) / v->cos_pdf_q);
     return d_t;
 }
 
@@ -352,9 +364,11 @@ static void primal(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_v
 }
 
 /* The replay: vertices before the first moving one as the detached replay;
- * from it on, each vertex's derivative once the next one is known. */
+ * from it on, each vertex's derivative once the next one is known. With
+ * `det` (mis), every vertex's detached adjoints also go there: the detached
+ * estimate of the same path, for no extra ray. */
 static void replay(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_vec3 o, dr_vec3 d, dr_vec3 adj,
-                   struct walk_sums *w, struct dr_grad_sink *sink)
+                   struct walk_sums *w, struct dr_grad_sink *sink, struct dr_grad_sink *det)
 {
     const struct dr_est_base *b = c->b;
     const struct dr_scene *s = b->p->scene;
@@ -370,7 +384,13 @@ static void replay(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_v
         dr_vec3 e = dr_mul(beta, dr_path_vertex_term(&v));
         w->L_sub = dr_sub(w->L_sub, e);
         w->L_true = dr_sub(w->L_true, dr_mul(ratio, e));
-        dr_vec3 d_e = dr_mul(adj, bt), d_t = continuation_adjoint(&v, ratio, w->L_true, w->L_sub, adj);
+        dr_vec3 d_e = dr_mul(adj, bt), d_f = continuation_df(&v, ratio, w->L_true, w->L_sub, adj);
+        dr_vec3 d_t = continuation_adjoint(&v, d_f);
+        if (det) {
+            d_path_vertex_term(s, ps, &v, d_e, det);
+            if (v.cont && v.diff_bsdf)
+                d_path_continuation(s, ps, &v, d_f, det);
+        }
         if (w->first_moving < 0 || k < w->first_moving) {
             d_path_vertex_term(s, ps, &v, d_e, sink);
             if (v.cont && v.diff_bsdf)
@@ -405,21 +425,21 @@ static void replay(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_v
 }
 
 bool prb_attached_sample(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_vec3 o, dr_vec3 d, dr_vec3 adj,
-                         struct dr_grad_sink *sink)
+                         struct dr_grad_sink *sink, struct dr_grad_sink *det)
 {
     struct walk_sums w;
     primal(c, smp, o, d, &w);
     if (!dr_v3_finite(w.L_true) || !dr_v3_finite(w.L_sub))
         return false;
     if (!sink->dir) {
-        replay(c, smp, o, d, adj, &w, sink);
+        replay(c, smp, o, d, adj, &w, sink, det);
         return true;
     }
     /* forward mode: the state adjoint mixes the channels, one replay each */
     for (int ch = 0; ch < 3; ch++) {
         struct walk_sums wc = w;
         sink->channel = ch;
-        replay(c, smp, o, d, dr_v3_channel(adj, ch), &wc, sink);
+        replay(c, smp, o, d, dr_v3_channel(adj, ch), &wc, sink, det);
     }
     return true;
 }

@@ -16,8 +16,9 @@ struct prb_attached_ctx {
 
 /* The whole derivative of one sample (primal, forward-mode pass, replay),
  * given its sampler and camera ray; adj as in the detached replay; false
- * when the path's value is not finite (nothing was added). */
+ * when the path's value is not finite (nothing was added). det (mis; NULL:
+ * none) receives the same path's detached derivative, from the same replay. */
 bool prb_attached_sample(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_vec3 o, dr_vec3 d, dr_vec3 adj,
-                         struct dr_grad_sink *sink);
+                         struct dr_grad_sink *sink, struct dr_grad_sink *det);
 
 #endif

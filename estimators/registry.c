@@ -20,7 +20,7 @@ const struct dr_estimator_ops *dr_estimator_find(const char *name)
     return NULL;
 }
 
-static const char *const sampling_names[DR_SAMPLING_COUNT] = {"detached", "attached", "derivative"};
+static const char *const sampling_names[DR_SAMPLING_COUNT] = {"detached", "attached", "mis", "derivative"};
 
 const char *dr_sampling_name(enum dr_sampling s)
 {

@@ -48,7 +48,7 @@ struct tape_job {
     struct dr_est_base b;   /* first: the shared part */
     struct tape tapes[DR_MAX_THREADS];
     int64_t batch_begin;     /* path ids of the current batch start here */
-    bool attached;           /* attached sampling, and some parameter enters a sampling map */
+    bool attached;           /* attached sampling (or mis), and some parameter enters a sampling map */
     bool derivative;         /* derivative sampling (path_deriv.h) */
 };
 
@@ -239,6 +239,19 @@ static void sweep_path(const struct tape_job *j, const struct tape_vertex *verts
     }
 }
 
+/* mis: one recorded path swept twice, detached and attached, into its
+ * group's two estimates (mis.h): the record (every ray) is shared. */
+static void sweep_path_mis(struct tape_job *j, int thread, const struct tape_vertex *verts,
+                           const struct dr_medium_record *mrecs, const struct tape_path *path)
+{
+    struct dr_grad_sink det, att;
+    dr_est_mis_sinks(&j->b, thread, path->pixel, &det, &att);
+    struct dr_ray_counts *rays = &j->b.thr[thread].rays;   /* unused: mis is not derivative sampling */
+    sweep(j, verts, mrecs, path, &det, rays);
+    sweep_path(j, verts, mrecs, path, &att, rays);
+    dr_est_mis_sample_done(&j->b, thread, path->pixel, &det, &att);
+}
+
 /* Sweep phase: item i sweeps tape i (recorded by worker i). */
 static void sweep_tape(void *ctx, int thread, int64_t begin, int64_t end)
 {
@@ -248,8 +261,12 @@ static void sweep_tape(void *ctx, int thread, int64_t begin, int64_t end)
         struct dr_grad_sink sink = dr_est_sink_begin(&j->b, thread);
         for (int64_t pi = 0; pi < tp->n_paths; pi++) {
             const struct tape_path *path = &tp->paths[pi];
-            sweep_path(j, tp->verts + path->first, tp->mrecs ? tp->mrecs + path->first : NULL, path, &sink,
-                       &j->b.thr[thread].rays);
+            const struct dr_medium_record *mrecs = tp->mrecs ? tp->mrecs + path->first : NULL;
+            if (j->b.mis) {
+                sweep_path_mis(j, thread, tp->verts + path->first, mrecs, path);
+                continue;
+            }
+            sweep_path(j, tp->verts + path->first, mrecs, path, &sink, &j->b.thr[thread].rays);
             dr_est_sample_done(&j->b, thread, path->pixel, &sink);
         }
         dr_est_sink_end(&j->b, thread);
@@ -264,8 +281,9 @@ static int tape_run(struct dr_est_base *b)
     const int64_t total = (int64_t)p->width * p->height * p->spp;
     const int64_t batch = p->batch > 0 ? p->batch : (int64_t)p->width * p->height;
     int rc = 0;
-    j->attached = dr_est_sampling_run(p) == DR_SAMPLING_ATTACHED;
-    j->derivative = dr_est_sampling_run(p) == DR_SAMPLING_DERIVATIVE;
+    const enum dr_sampling run = dr_est_sampling_run(p);
+    j->attached = run == DR_SAMPLING_ATTACHED || run == DR_SAMPLING_MIS;
+    j->derivative = run == DR_SAMPLING_DERIVATIVE;
     for (j->batch_begin = 0; j->batch_begin < total && rc == 0; j->batch_begin += batch) {
         int64_t n = total - j->batch_begin < batch ? total - j->batch_begin : batch;
         for (int t = 0; t < threads; t++)
@@ -302,7 +320,8 @@ const struct dr_estimator_ops dr_estimator_tape = {
     .name = "tape",
     .summary = "conventional reverse mode: records every vertex of a batch of paths, then sweeps backward; memory "
                "grows with depth x paths per batch",
-    .sampling = (1u << DR_SAMPLING_DETACHED) | (1u << DR_SAMPLING_ATTACHED) | (1u << DR_SAMPLING_DERIVATIVE),
+    .sampling = (1u << DR_SAMPLING_DETACHED) | (1u << DR_SAMPLING_ATTACHED) | (1u << DR_SAMPLING_MIS) |
+                (1u << DR_SAMPLING_DERIVATIVE),
     .job_size = sizeof(struct tape_job),
     .run = tape_run,
     .release = tape_release,

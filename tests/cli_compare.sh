@@ -126,8 +126,10 @@ refused 2 "--spp: 4 is listed twice" compare $tiny --param "$red" --spp 4,4 -o b
 # a sampling mode an estimator lacks, found from the registry via --help
 lacking=$(python3 -c '
 import re, sys
-for name, modes in re.findall(r"(\w+) \(([^)]*)\)", sys.argv[1]):
-    for m in ("detached", "attached"):
+pairs = re.findall(r"(\w+) \(([^)]*)\)", sys.argv[1])
+every = sorted({m for _, modes in pairs for m in modes.split(", ") if m != "none"})
+for name, modes in pairs:
+    for m in every:
         if m not in modes.split(", "):
             print(name, m); sys.exit(0)' "$avail")
 if [ -n "$lacking" ]; then

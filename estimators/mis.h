@@ -1,0 +1,128 @@
+/* --sampling mis: detached and attached sampling combined.
+ *
+ * Both estimators see the SAME path (same random numbers): D (detached: the
+ * sample is a constant of the derivative) and A (attached: it moves with the
+ * parameters through the sampling map, path.h). Where the sampling maps are
+ * continuous both are unbiased for the same interior derivative, so their
+ * difference Delta = A - D has mean 0: A is D plus a zero-mean control
+ * variate, and every combination
+ *     G(w) = w D + (1 - w) A = D + a Delta,      a = 1 - w,
+ * with a weight that does not depend on the samples it multiplies is unbiased.
+ * Its variance, Var D + 2 a Cov(D, Delta) + a^2 Var Delta, is smallest at
+ *     a* = -Cov(D, Delta) / Var Delta
+ *        = (Var_D - Cov(D, A)) / (Var_D + Var_A - 2 Cov(D, A)),
+ *     w* = 1 - a* = (Var_A - Cov(D, A)) / (Var_D + Var_A - 2 Cov(D, A)),
+ * where it equals Var D - Cov(D, Delta)^2 / Var Delta: never more than
+ * Var D (a = 0) nor Var A (a = 1). Clamped to [0, 1] (a convex
+ * combination, as a MIS weight), the optimum over [0, 1] still beats both
+ * ends; the clamp keeps a noisy estimate of a* from extrapolating.
+ *
+ * Var and Cov are estimated from the run itself, per parameter (w is one
+ * number for all components of a parameter: the sums below run over its
+ * components, which minimises the summed variance), from single samples:
+ * the samples are independent across (pixel, sample) (sampler.h), so
+ *     Cov(D, Delta) = sum_px n_px Cov_px(d, Delta),
+ * each pixel's covariance estimated from its own n_px samples, centred on
+ * their mean:
+ *     P = sum_px [ sum_s d_s . Delta_s - (sum_s d_s) . (sum_s Delta_s) / n_px ],
+ *     Q = sum_px [ sum_s |Delta_s|^2  - |sum_s Delta_s|^2 / n_px ],
+ *     a* ~ -P / Q
+ * (the common factor n / (n - 1) cancels in the ratio). The centring
+ * matters: attached sampling drops the boundary term where a moving sample
+ * crosses an edge of the integrand (a light's outline seen in a glossy
+ * reflection), so per pixel E[Delta] is not 0, and the uncentred products
+ * would mistake that bias for covariance (measured on the Cornell box:
+ * weight 0.4 on detached where the variance-optimal one is 0.9 to 1).
+ * Cross-fitting keeps the result unbiased: pixels are split into
+ * DR_MIS_GROUPS groups (by a hash of the pixel; all samples of a pixel in
+ * one group), each with its own sums D_g, A_g, P_g, Q_g, and group g's
+ * weight comes from the OTHER groups only (leave-one-out),
+ *     a_g = clamp(-sum_{h != g} P_h / sum_{h != g} Q_h, 0, 1),
+ * so a_g is independent of D_g and Delta_g: E[D_g + a_g Delta_g] is
+ * E[D_g] + a_g E[Delta_g], exactly what a fixed weight gives (unbiased
+ * where attached is). The estimate is sum_g (D_g + a_g Delta_g). Where
+ * Delta vanishes (no parameter of the segment moves a sampling map:
+ * attached == detached up to rounding) the weight is 1 on detached.
+ *
+ * Per-sample sums need each sample's vector apart and each pixel's sums:
+ * free in forward mode (a sample is a pixel's three channels, the group's
+ * image holds the pixel's sums), and in reverse mode kept for small
+ * gradient vectors (DR_MIS_SAMPLE_STATS_MAX entries; a per-sample scratch
+ * vector and per-pixel sums, at most DR_MIS_PIXEL_SUMS_MAX doubles per
+ * thread). Otherwise, and when every pixel has a single sample (nothing to
+ * centre on), the statistics come from the groups' sums, centred on the
+ * other groups' mean: P_{-g} = sum_{h != g} (D_h - mean) . (Delta_h - mean)
+ * (still unbiased; a noisier weight, from 7 numbers whose pixel sets differ).
+ *
+ * Memory: per thread, 2 G copies of the estimate (the gradient vector in
+ * reverse mode, the derivative image in forward mode), plus the per-pixel
+ * sums above. */
+#ifndef DR_ESTIMATORS_MIS_H
+#define DR_ESTIMATORS_MIS_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "parallel.h"
+#include "sampler.h"
+
+#define DR_MIS_GROUPS 8
+/* Reverse mode: per-sample statistics for gradient vectors up to this size,
+ * and per-pixel sums up to this many doubles per thread. */
+#define DR_MIS_SAMPLE_STATS_MAX 256
+#define DR_MIS_PIXEL_SUMS_MAX ((int64_t)8 << 20)
+
+enum dr_mis_estimate { DR_MIS_DETACHED, DR_MIS_ATTACHED };
+
+struct dr_mis_accum {
+    int threads;
+    int64_t n;                        /* entries of one estimate */
+    int64_t stride;                   /* n + 1: a spare entry, as the gradient buffers have (common.c) */
+    int64_t pixels;
+    int segments;                     /* parameters (reverse mode) or 1 (forward mode) */
+    int64_t *seg_off, *seg_size;
+    bool forward;                     /* entries are the derivative image (pixel p at 3p) */
+    bool per_sample;                  /* per-sample statistics, centred per pixel (else the groups') */
+    double *buf[DR_MAX_THREADS];      /* per thread: [group][estimate][stride] */
+    double *stats[DR_MAX_THREADS];    /* per_sample: [group][segment][P, Q, R], uncentred */
+    double *count[DR_MAX_THREADS];    /* per_sample: samples per pixel */
+    double *pix[DR_MAX_THREADS];      /* reverse, per_sample: [pixel][estimate][n], the pixel's sums */
+    double *scratch[DR_MAX_THREADS];  /* reverse, per_sample: the current sample's [estimate][stride] */
+    uint64_t bytes;
+};
+
+/* Segments [off[k], off[k] + size[k]) of n entries get one weight each.
+ * forward: n = 3 pixels, one segment. Reverse mode keeps per-sample
+ * statistics when n and pixels allow (above). 0, or DR_ERR_NOMEM (message set). */
+int dr_mis_init(struct dr_mis_accum *m, int threads, int64_t n, int segments, const int64_t *off,
+                const int64_t *size, int64_t pixels, bool forward);
+void dr_mis_free(struct dr_mis_accum *m);
+
+/* The group of a pixel (every sample of it). */
+static inline int dr_mis_group(int64_t pixel)
+{
+    return (int)(dr_hash64((uint64_t)pixel ^ 0x4d49534d49534d49ULL) % DR_MIS_GROUPS);
+}
+
+/* Where thread `thread` accumulates group g's estimate e. */
+static inline double *dr_mis_slot(const struct dr_mis_accum *m, int thread, int g, enum dr_mis_estimate e)
+{
+    return m->buf[thread] + ((int64_t)g * 2 + (int)e) * m->stride;
+}
+
+/* One sample of pixel px: d and a (its detached and attached values for
+ * entries [at, at + len)) added to its group's sums and, with per_sample,
+ * to the statistics and the pixel's sums. */
+void dr_mis_add(struct dr_mis_accum *m, int thread, int64_t px, int64_t at, int64_t len, const double *d,
+                const double *a);
+/* Reverse mode, per_sample: the sample in thread's scratch vectors added
+ * (dr_mis_add over the whole vector), and the scratch cleared. */
+void dr_mis_add_scratch(struct dr_mis_accum *m, int thread, int64_t px);
+
+/* The combined estimate into out (n entries): the threads summed, then each
+ * segment weighted as above; w_detached (may be NULL) gets each segment's
+ * weight of the detached estimate, the mean of 1 - a_g over the groups that
+ * have samples in it. */
+void dr_mis_combine(struct dr_mis_accum *m, double *out, double *w_detached);
+
+#endif
