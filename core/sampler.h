@@ -49,6 +49,7 @@ struct dr_sampler {
     uint64_t pkey;    /* sobol, stratified: hash of (seed, pixel), the scrambling/permutation seed */
     uint32_t index;   /* sobol, stratified: the sample's index in the pixel */
     uint32_t count;   /* stratified: the pixel's sample count (the strata) */
+    uint32_t grid_m, grid_n;   /* stratified: the 2D draws' grid (stratified.h) */
 };
 
 static inline void dr_sampler_init(struct dr_sampler *s, uint64_t seed, uint64_t pixel, uint64_t sample)
@@ -59,6 +60,7 @@ static inline void dr_sampler_init(struct dr_sampler *s, uint64_t seed, uint64_t
     s->pkey = 0;
     s->index = 0;
     s->count = 0;
+    s->grid_m = s->grid_n = 0;
 }
 
 /* Sample `sample` of the `spp` samples of `pixel`. spp only matters to the
@@ -77,6 +79,7 @@ static inline void dr_sampler_init_kind(struct dr_sampler *s, enum dr_sampler_ki
         s->pkey = dr_hash64(dr_hash64(seed ^ 0x57a7157a7157a715ULL) ^ (pixel * 0xd6e8feb86659fd93ULL));
         s->index = (uint32_t)sample;
         s->count = spp > 0 ? (uint32_t)spp : 1u;
+        dr_strat_grid(s->count, &s->grid_m, &s->grid_n);
     }
 }
 
@@ -178,7 +181,7 @@ static inline void dr_sampler_next2(struct dr_sampler *s, double *u1, double *u2
     if (s->kind == DR_SAMPLER_STRATIFIED) {
         uint32_t d = ++s->dim;
         ++s->dim;
-        dr_strat_2d(s->index, s->count, dr_sampler_strat_seed(s, d), dr_sampler_strat_jitter(s, d, 0x1ULL),
+        dr_strat_2d(s->index, s->grid_m, s->grid_n, dr_sampler_strat_seed(s, d), dr_sampler_strat_jitter(s, d, 0x1ULL),
                     dr_sampler_strat_jitter(s, d, 0x2ULL), u1, u2);
         return;
     }

@@ -82,6 +82,19 @@ static void check_strata(int n)
     free(u);
 }
 
+/* The 2D grid is exact (m x n = spp, m <= 2n) for squares, powers of two
+ * and other near-square products, and padded only where none exists. */
+static void test_grid(void)
+{
+    const uint32_t c[] = {1, 2, 8, 12, 32, 48, 128, 200, 7, 14, 1021};
+    const uint32_t want_m[] = {1, 2, 4, 4, 8, 8, 16, 20, 3, 4, 32}, want_n[] = {1, 1, 2, 3, 4, 6, 8, 10, 3, 4, 32};
+    for (int k = 0; k < 11; k++) {
+        uint32_t m, n;
+        dr_strat_grid(c[k], &m, &n);
+        CHECK(m == want_m[k] && n == want_n[k], "grid for %u: %ux%u, want %ux%u", c[k], m, n, want_m[k], want_n[k]);
+    }
+}
+
 /* Unbiased: one fixed sample index, over many seeds (pixels), is uniform in
  * every dimension (chi-square over 16 bins, 4x4 cells for the 2D draws), for
  * a square, a padded and a prime sample count. */
@@ -226,6 +239,15 @@ static void test_convergence(void)
     CHECK(s2 < -0.75, "stratified 2D slope %.2f is not about -1", s2);
     CHECK(s1 < -1.3, "stratified 1D slope %.2f is not about -1.5", s1);
     CHECK(exp(l2[1]) < 0.3 * exp(li[1]), "stratified RMSE at 64 samples not well below independent");
+    /* more samples, less error, also between the squares (a padded grid
+     * with empty cells once made 32 samples worse than 16) */
+    const int steps[] = {16, 24, 32, 48, 64};
+    double prev = INFINITY;
+    for (int k = 0; k < 5; k++) {
+        double e = rmse(DR_SAMPLER_STRATIFIED, steps[k], true, NULL);
+        CHECK(e < 0.9 * prev, "stratified RMSE at %d samples %.3g is not below %.3g at fewer", steps[k], e, prev);
+        prev = e;
+    }
     const int odd[] = {7, 12, 48, 200};
     for (int k = 0; k < 4; k++) {
         double b2, b1;
@@ -239,9 +261,10 @@ static void test_convergence(void)
 
 int main(void)
 {
-    const int ns[] = {1, 2, 7, 12, 16, 48, 64, 100};
-    for (int k = 0; k < 8; k++)
+    const int ns[] = {1, 2, 7, 8, 12, 14, 16, 32, 48, 64, 100};
+    for (int k = 0; k < 11; k++)
         check_strata(ns[k]);
+    test_grid();
     test_uniform();
     test_pure();
     test_decorrelated();
