@@ -26,7 +26,8 @@ static inline uint64_t dr_hash64(uint64_t x)
  *  independent  every number is an independent hash;
  *  stratified   jittered stratification of every draw over the pixel's spp
  *               samples (stratified.h): 1D draws in spp strata, 2D draws
- *               correlated multi-jittered on a padded m x n grid, with the
+ *               correlated multi-jittered on an m x n grid (spp = m x n
+ *               where spp factors so, padded otherwise), with the
  *               sample-to-stratum map permuted per dimension by a hash, so
  *               dimensions are decorrelated. Any spp works (not only squares
  *               or powers of two); independent seeds give independent sets;

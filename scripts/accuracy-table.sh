@@ -7,15 +7,22 @@
 #
 #   scripts/accuracy-table.sh [OUT]          (default OUT: out/accuracy)
 #
-# Cases: the red wall's albedo; the gold sphere's roughness set to 0.001, 0.1
-# and 0.5; its metallic (set to 0.7, inside [0, 1], as bench/sampling.sh).
-# Forward mode (d image / d parameter, all components at once): the error and
-# variance are over the derivative image's pixels, against a high-spp
-# reference of the first estimator, sampling mode and sampler.
+# Reverse mode, as an optimisation sees it: d loss / d parameter, L2 against a
+# render of the box at its true values (OUT/target.exr), from wrong values:
+# the red wall's albedo set to 0.4,0.3,0.3; the gold sphere's roughness set to
+# 0.001, 0.1 and 0.5 (true: 0.35); its metallic set to 0.7 (true: 1, inside
+# [0, 1] as bench/sampling.sh). The reference is finite differences with
+# common random numbers (--reference fd: no estimator's own weakness, such as
+# detached sampling's variance at roughness 0.001, leaks into it), with a step
+# of a tenth of the value or less.
+# Within a case every efficiency is over the same |reference|^2, so their
+# ratios do not depend on the reference; "rel. error" does, and is not
+# resolved where the reference's own relative error (printed) is near 1
+# (roughness 0.001: the mirror's gradient is nearly 0).
 # Efficiency = 1 / (relative variance x seconds per estimate); "x independent"
 # is it divided by the same estimator and mode's with the first sampler.
 # Seconds are wall time on whatever machine runs it (shared machines: noisy).
-# Settings (environment): RES (64x64), SPP (16), BATCHES (4), REF_SPP (512),
+# Settings (environment): RES (64x64), SPP (16), BATCHES (4), REF_SPP (128),
 # DEPTH (6), THREADS (2), SAMPLERS (independent,stratified,sobol).
 # OUT/<case>/ holds each comparison; OUT/tables.md the tables (also printed).
 set -euo pipefail
@@ -23,28 +30,30 @@ cd "$(dirname "$0")/.."
 BUILD=${BUILD:-build}
 DR=${DRENDER:-$BUILD/drender}
 OUT=${1:-out/accuracy}
-RES=${RES:-64x64} SPP=${SPP:-16} BATCHES=${BATCHES:-4} REF_SPP=${REF_SPP:-512} DEPTH=${DEPTH:-6}
+RES=${RES:-64x64} SPP=${SPP:-16} BATCHES=${BATCHES:-4} REF_SPP=${REF_SPP:-128} DEPTH=${DEPTH:-6}
 THREADS=${THREADS:-2} SAMPLERS=${SAMPLERS:-independent,stratified,sobol}
 mkdir -p "$OUT"
 
 red=/materials/red/pbrMetallicRoughness/baseColorFactor
 rough=/materials/rough-gold/pbrMetallicRoughness/roughnessFactor
 metal=/materials/rough-gold/pbrMetallicRoughness/metallicFactor
-CASES=(
-    "albedo|red wall albedo|--param $red"
-    "roughness-0.001|gold roughness 0.001|--param $rough --set $rough=0.001"
-    "roughness-0.1|gold roughness 0.1|--param $rough --set $rough=0.1"
-    "roughness-0.5|gold roughness 0.5|--param $rough --set $rough=0.5"
-    "metallic|gold metallic (at 0.7)|--param $metal --set $metal=0.7"
+CASES=(   # name|title|finite-difference step|arguments
+    "albedo|red wall albedo (at 0.4,0.3,0.3)|1e-2|--param $red --set $red=0.4,0.3,0.3"
+    "roughness-0.001|gold roughness 0.001|1e-4|--param $rough --set $rough=0.001"
+    "roughness-0.1|gold roughness 0.1|1e-2|--param $rough --set $rough=0.1"
+    "roughness-0.5|gold roughness 0.5|2e-2|--param $rough --set $rough=0.5"
+    "metallic|gold metallic (at 0.7)|2e-2|--param $metal --set $metal=0.7"
 )
 
+"$DR" render scenes/cornell-box.gltf --res "$RES" --spp 256 --max-depth "$DEPTH" --threads "$THREADS" --seed 99 \
+    -o "$OUT/target.exr"
 : >"$OUT/tables.md"
 for entry in "${CASES[@]}"; do
-    IFS='|' read -r name title args <<<"$entry"
+    IFS='|' read -r name title eps args <<<"$entry"
     echo "== $title" >&2
     # shellcheck disable=SC2086  # args is a word list
-    "$DR" compare scenes/cornell-box.gltf $args --res "$RES" --spp "$SPP" --batches "$BATCHES" \
-        --reference "spp:$REF_SPP" --max-depth "$DEPTH" --threads "$THREADS" --sampler "$SAMPLERS" \
+    "$DR" compare scenes/cornell-box.gltf $args --target "$OUT/target.exr" --res "$RES" --spp "$SPP" --batches "$BATCHES" \
+        --reference "fd:$REF_SPP" --eps "$eps" --max-depth "$DEPTH" --threads "$THREADS" --sampler "$SAMPLERS" \
         -o "$OUT/$name" >/dev/null
     python3 - "$OUT/$name/results.json" "$title" >>"$OUT/tables.md" <<'PY'
 import json, math, sys
@@ -52,9 +61,10 @@ d = json.load(open(sys.argv[1]))
 ref, first = d["reference"], d["samplers"][0]
 num = lambda v, f: "n/a" if v is None or not math.isfinite(v) else format(v, f)
 print(f"### {sys.argv[2]}\n")
+what = f"{ref['estimator']} {ref['sampling']}" if ref["estimator"] else f"finite differences, step {ref['eps']:g}"
 print(f"{d['width']}x{d['height']}, {d['combinations'][0]['spp']} spp x {d['batches']} batches, max depth "
-      f"{ref['max_depth']}; reference {ref['kind']} ({ref['estimator']} {ref['sampling']} {first}, its own "
-      f"relative error {num(ref['rel_se'], '.3g')})\n")
+      f"{ref['max_depth']}; reference {ref['kind']} ({what}, {first} numbers; its own relative error "
+      f"{num(ref['rel_se'], '.3g')})\n")
 print(f"| estimator | sampling | sampler | efficiency | x {first} | rel. error | seconds |")
 print("|---|---|---|---:|---:|---:|---:|")
 combos = d["combinations"]

@@ -3,8 +3,9 @@
 # directory and its schema (results.csv columns, results.json keys, report.md,
 # plots), errors that fall as spp grows (statistical, with a margin; never a
 # timing), the reference's own error reported, the same table from the same
-# seed, --repeat, a reference file reused, and bad inputs refused before any
-# work (exit 2, nothing written).
+# seed, --repeat, a reference file reused, --sampler as a list (the sampler a
+# column of every output, per-parameter efficiency), and bad inputs refused
+# before any work (exit 2, nothing written).
 # Run by tests/run.sh (env: DRENDER = the binary); also runs alone.
 set -u
 
