@@ -22,15 +22,20 @@
 # Efficiency = 1 / (relative variance x seconds per estimate); "x independent"
 # is it divided by the same estimator and mode's with the first sampler.
 # Seconds are wall time on whatever machine runs it (shared machines: noisy).
-# Settings (environment): RES (64x64), SPP (16), BATCHES (4), REF_SPP (128),
+# Settings (environment): RES (32x32), SPP (16), BATCHES (64), REF_SPP (16 per batch),
 # DEPTH (6), THREADS (2), SAMPLERS (independent,stratified,sobol).
+# Many small batches rather than a few large images: a gradient is one number
+# per batch, and its variance (hence the efficiency) is estimated from the
+# batches; these estimators are heavy-tailed, and with 16 batches of 64x64 the
+# sampler ratios swung by 2x and more between runs. 64 batches of 32x32 cost
+# the same (about 7 minutes on 2 shared cores).
 # OUT/<case>/ holds each comparison; OUT/tables.md the tables (also printed).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BUILD=${BUILD:-build}
 DR=${DRENDER:-$BUILD/drender}
 OUT=${1:-out/accuracy}
-RES=${RES:-64x64} SPP=${SPP:-16} BATCHES=${BATCHES:-4} REF_SPP=${REF_SPP:-128} DEPTH=${DEPTH:-6}
+RES=${RES:-32x32} SPP=${SPP:-16} BATCHES=${BATCHES:-64} REF_SPP=${REF_SPP:-16} DEPTH=${DEPTH:-6}
 THREADS=${THREADS:-2} SAMPLERS=${SAMPLERS:-independent,stratified,sobol}
 mkdir -p "$OUT"
 
