@@ -26,6 +26,14 @@
 #include <math.h>
 #include <stdint.h>
 
+/* (i + p) mod l for i < l without a 64-bit division: t < r means the 32-bit
+ * sum wrapped (l > 2^31), and t - l then wraps back. */
+static inline uint32_t dr_strat_rotate(uint32_t i, uint32_t p, uint32_t l)
+{
+    uint32_t r = p % l, t = i + r;
+    return t >= l || t < r ? t - l : t;
+}
+
 /* A pseudo-random permutation of [0, l) evaluated at i, seeded by p:
  * Kensler's hash (every step is a bijection on the bits under mask w) with
  * cycle-walking until the result falls inside [0, l). l must be >= 1. */
@@ -59,7 +67,7 @@ static inline uint32_t dr_strat_permute(uint32_t i, uint32_t l, uint32_t p)
         i &= w;
         i ^= i >> 5;
     } while (i >= l);
-    return (uint32_t)(((uint64_t)i + p) % l);
+    return dr_strat_rotate(i, p, l);
 }
 
 /* (k + jitter) / n as a number in [0, 1): rounding can reach 1.0 for the last

@@ -82,6 +82,35 @@ static void check_strata(int n)
     free(u);
 }
 
+/* dr_strat_permute is a bijection of [0, l) for any l, and its final
+ * rotation (i + p) mod l is exact also where the 32-bit sum wraps. */
+static void test_permute(void)
+{
+    const uint32_t ls[] = {1, 2, 3, 7, 16, 100, 1000};
+    static unsigned char seen[1000];
+    for (int k = 0; k < 7; k++)
+        for (uint32_t p = 0; p < 40; p++) {
+            uint32_t l = ls[k], seed = (uint32_t)dr_hash64(p), bad = 0;
+            memset(seen, 0, l);
+            for (uint32_t i = 0; i < l; i++) {
+                uint32_t j = dr_strat_permute(i, l, seed);
+                bad += j >= l || seen[j]++;
+            }
+            CHECK(bad == 0, "permute over %u (seed %u): not a bijection (%u off)", l, p, bad);
+        }
+    /* the final rotation against 64-bit arithmetic, l up to 2^32 - 1 (sums that wrap) */
+    int wrong = 0;
+    for (uint64_t k = 0; k < 20000; k++) {
+        uint64_t h = dr_hash64(k);
+        uint32_t l = (uint32_t)(h >> 32) | (k % 2 ? 0x80000000u : 0u), p = (uint32_t)h;
+        if (l == 0)
+            continue;
+        uint32_t i = (uint32_t)(dr_hash64(h) % l);
+        wrong += dr_strat_rotate(i, p, l) != (uint32_t)(((uint64_t)i + p) % l);
+    }
+    CHECK(wrong == 0, "(i + p) mod l wrong in %d of 20000 cases", wrong);
+}
+
 /* The 2D grid is exact (m x n = spp, m <= 2n) for squares, powers of two
  * and other near-square products, and padded only where none exists. */
 static void test_grid(void)
@@ -265,6 +294,7 @@ int main(void)
     for (int k = 0; k < 11; k++)
         check_strata(ns[k]);
     test_grid();
+    test_permute();
     test_uniform();
     test_pure();
     test_decorrelated();
