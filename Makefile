@@ -138,6 +138,7 @@ bench: deps $(BUILD)/drender $(BENCH_BIN)
 	BUILD=$(BUILD) bench/run.sh
 	BUILD=$(BUILD) bench/grad.sh
 	BUILD=$(BUILD) bench/sampling.sh
+	BUILD=$(BUILD) bench/convergence.sh
 	BUILD=$(BUILD) bench/media.sh
 
 # The main job on the bundled scene: inverse rendering of the Cornell box

@@ -1,5 +1,5 @@
 /* drender compare: what accuracy costs in time. Runs every estimator x
- * sampling x max depth x spp combination on one scene and parameter set,
+ * sampling x sampler x max depth x spp combination on one scene and parameter set,
  * measures time, rays and memory, and the error of each against a reference
  * (a high-sample estimate, finite differences, or a file of an earlier run);
  * writes a table, a report and plots (compare_output.c). */
@@ -57,10 +57,11 @@ void cmd_compare_usage(FILE *out)
     fprintf(out,
             "usage: drender compare [SCENE] --param P [--param P ...] -o DIR [options]\n"
             "\n"
-            "What accuracy costs in time: runs every estimator x sampling x max depth x spp\n"
-            "combination on SCENE (default: the bundled Cornell box) and measures, per run,\n"
-            "wall time, rays, memory, the gradient +- standard error per parameter, its\n"
-            "error against a reference and the efficiency 1 / (relative variance x seconds).\n"
+            "What accuracy costs in time: runs every estimator x sampling x sampler x max\n"
+            "depth x spp combination on SCENE (default: the bundled Cornell box) and\n"
+            "measures, per run, wall time, rays, memory, the gradient +- standard error per\n"
+            "parameter, its error against a reference and the efficiency 1 / (relative\n"
+            "variance x seconds), in all and per parameter.\n"
             "With --target, runs differentiate the loss (reverse mode; one primal image of\n"
             "%d spp gives every run the same adjoint); without, they compute d image / d\n"
             "parameter (forward mode) and errors are over image pixels. Each run is\n"
@@ -102,7 +103,9 @@ void cmd_compare_usage(FILE *out)
             "      --crop X,Y,W,H  only this rectangle of the --res frame is rendered and\n"
             "                      compared (a full-frame target is cut to it; a crop-sized\n"
             "                      one needs --res)\n"
-            "      --sampler S     random numbers: independent (default) or sobol\n"
+            "      --sampler L     comma-separated random numbers: independent (default),\n"
+            "                      stratified, sobol (as render); every combination runs\n"
+            "                      with each, the reference with the first\n"
             GRAD_IGNORE_UNSUPPORTED_HELP
             "      --json          print results.json on stdout too\n"
             "  -h, --help          show this help\n",
@@ -121,6 +124,7 @@ enum {
     OPT_BATCHES,
     OPT_REPEAT,
     OPT_EPS,
+    OPT_SAMPLERS,
 };
 
 /* ---- options ---- */
@@ -183,6 +187,23 @@ static int one_sampling(struct cmp_args *a, const char *name)
             return DR_EXIT_USAGE;
         }
     a->samplings[a->n_samplings++] = (enum dr_sampling)s;
+    return -1;
+}
+
+static int one_sampler(struct cmp_args *a, const char *name)
+{
+    int k = dr_sampler_kind_parse(name);
+    if (k < 0) {
+        cli_error("compare", "--sampler: unknown sampler '%s' (known: independent, stratified, sobol)", name);
+        return DR_EXIT_USAGE;
+    }
+    for (int i = 0; i < a->n_samplers; i++)
+        if ((int)a->samplers[i] == k) {
+            cli_error("compare", "--sampler: '%s' is listed twice", name);
+            return DR_EXIT_USAGE;
+        }
+    a->samplers[a->n_samplers++] = (enum dr_sampler_kind)k;
+    a->g.sampler = a->samplers[0];   /* the reference's, and the one --json's "sampler" names */
     return -1;
 }
 
@@ -262,6 +283,9 @@ static int own_option(void *ctx, int c, const char *arg)
         a->n_samplings = 0;
         a->sampling_given = true;
         return split_list("--sampling", arg, DR_SAMPLING_COUNT, one_sampling, a) >= 0 ? DR_EXIT_USAGE : 0;
+    case OPT_SAMPLERS:
+        a->n_samplers = 0;
+        return split_list("--sampler", arg, CMP_MAX_SAMPLERS, one_sampler, a) >= 0 ? DR_EXIT_USAGE : 0;
     case OPT_SPPS: return int_list("--spp", arg, 1, 1L << 24, a->spps, &a->n_spps) >= 0 ? DR_EXIT_USAGE : 0;
     case OPT_DEPTHS: return int_list("--max-depth", arg, 1, 100000, a->depths, &a->n_depths) >= 0 ? DR_EXIT_USAGE : 0;
     case OPT_REFERENCE: return parse_reference(a, arg);
@@ -303,7 +327,7 @@ static int parse_args(int argc, char **argv, struct cmp_args *a)
         {"threads", required_argument, NULL, GOPT_THREADS},
         {"filter", required_argument, NULL, GOPT_FILTER},
         {"crop", required_argument, NULL, GOPT_CROP},
-        {"sampler", required_argument, NULL, GOPT_SAMPLER},
+        {"sampler", required_argument, NULL, OPT_SAMPLERS},   /* a list here: compare's own */
         {"env", required_argument, NULL, GOPT_ENV},
         {"no-default-light", no_argument, NULL, GOPT_NO_DEFAULT_LIGHT},
         {"light-units", required_argument, NULL, GOPT_LIGHT_UNITS},
@@ -343,6 +367,7 @@ static void args_defaults(struct cmp_args *a)
     for (int i = 0; i < 4; i++)
         a->spps[a->n_spps++] = spps[i];
     a->depths[a->n_depths++] = 8;
+    a->samplers[a->n_samplers++] = DR_SAMPLER_INDEPENDENT;
     a->ref_kind = CMP_REF_SPP;
 }
 
@@ -375,7 +400,8 @@ static int check_out_dir(const char *dir)
  * does not apply; left out (and listed in the report) otherwise. */
 static int build_combos(const struct cmp_args *a, struct cmp_run *r)
 {
-    r->combos = calloc((size_t)(a->n_ests * a->n_samplings * a->n_depths * a->n_spps), sizeof *r->combos);
+    r->combos = calloc((size_t)(a->n_ests * a->n_samplings * a->n_samplers * a->n_depths * a->n_spps),
+                       sizeof *r->combos);
     if (!r->combos) {
         cli_error("compare", "out of memory");
         return DR_EXIT_FAILURE;
@@ -397,9 +423,11 @@ static int build_combos(const struct cmp_args *a, struct cmp_run *r)
                          dr_sampling_name(a->samplings[s]));
                 continue;
             }
-            for (int d = 0; d < a->n_depths; d++)
-                for (int k = 0; k < a->n_spps; k++)
-                    r->combos[r->n_combos++] = (struct cmp_combo){est, a->samplings[s], a->depths[d], a->spps[k]};
+            for (int q = 0; q < a->n_samplers; q++)
+                for (int d = 0; d < a->n_depths; d++)
+                    for (int k = 0; k < a->n_spps; k++)
+                        r->combos[r->n_combos++] =
+                            (struct cmp_combo){est, a->samplings[s], a->depths[d], a->spps[k], a->samplers[q]};
         }
     if (r->n_combos == 0) {
         char pairs[512];
@@ -471,14 +499,15 @@ static void stats_add(struct dr_grad_stats *sum, const struct dr_grad_stats *st)
         sum->record_bytes = st->record_bytes;
 }
 
-/* One estimate of v by estimator e (stats summed into *sum). */
-static int estimate(struct cmp_ctx *x, const struct dr_estimator_ops *e, enum dr_sampling s, int depth, int spp,
-                    uint64_t seed, double *v, struct dr_grad_stats *sum)
+/* One estimate of v by estimator e with sampler q (stats summed into *sum). */
+static int estimate(struct cmp_ctx *x, const struct dr_estimator_ops *e, enum dr_sampling s,
+                    enum dr_sampler_kind q, int depth, int spp, uint64_t seed, double *v, struct dr_grad_stats *sum)
 {
     const struct cmp_run *r = x->r;
     struct grad_common g = r->a->g;
     g.max_depth = depth;
     g.sampling = s;
+    g.sampler = q;
     struct dr_grad_problem p = grad_problem(&g, x->scene, x->cam, r->ps, g.width, g.height, spp, seed);
     struct dr_grad_stats st = {0};
     if (r->reverse) {
@@ -552,6 +581,10 @@ static void summarise_param(const struct cmp_ctx *x, int k, int B, struct cmp_pa
     const int64_t off = r->seg_off[k], len = r->seg_len[k];
     double rn2 = seg_norm2(r, k, ref->mean);
     pr->rel_error = rn2 > 0.0 ? sqrt(x->seg_err2[k] / B / rn2) : NAN;
+    double var = 0.0;   /* as cmp_result's rel_variance, over this parameter's entries */
+    for (int64_t i = off; i < off + len; i++)
+        var += x->m2[i] / (B - 1);
+    pr->rel_variance = rn2 > 0.0 ? var / rn2 : NAN;
     if (!r->reverse) {   /* the derivative image's mean over pixels */
         pr->n = 1;
         pr->value[0] = x->seg_mean[k];
@@ -615,7 +648,8 @@ static int run_combo(struct cmp_ctx *x, int c, int rep)
     struct dr_grad_stats sum = {0};
     welford_reset(x);
     for (int b = 0; b < B; b++) {
-        if (estimate(x, cb->est, cb->sampling, cb->max_depth, cb->spp, r->a->g.seed + 1 + (uint64_t)b, x->v, &sum))
+        if (estimate(x, cb->est, cb->sampling, cb->sampler, cb->max_depth, cb->spp, r->a->g.seed + 1 + (uint64_t)b,
+                     x->v, &sum))
             return -1;
         welford_add(x, b, r->ref.mean);
         tick(x);
@@ -687,7 +721,8 @@ static int compute_reference(struct cmp_ctx *x)
         uint64_t seed = dr_hash64(a->g.seed ^ REF_SEED_SALT) + (uint64_t)b;
         int rc = a->ref_kind == CMP_REF_FD
                      ? fd_estimate(x, &o, seed)
-                     : estimate(x, first->est, first->sampling, ref->max_depth, ref->spp, seed, x->v, &sum);
+                     : estimate(x, first->est, first->sampling, a->g.sampler, ref->max_depth, ref->spp, seed, x->v,
+                                &sum);
         if (rc != 0)
             return -1;
         welford_add(x, b, NULL);
@@ -810,8 +845,12 @@ static void fingerprint(struct cmp_run *r, const struct dr_scene *scene, bool *o
     dr_filter_format(&a->g.filter, filter, sizeof filter);
     if (a->g.crop_given)
         snprintf(crop, sizeof crop, "%d,%d,%d,%d", a->g.crop_x, a->g.crop_y, a->g.crop_w, a->g.crop_h);
-    snprintf(fp->film, sizeof fp->film, "filter=%s crop=%s sampler=%s", filter, crop,
-             dr_sampler_kind_name(a->g.sampler));
+    char samplers[64] = "";   /* the list as given: one name for a single sampler, as before lists */
+    for (int q = 0; q < a->n_samplers; q++) {
+        size_t len = strlen(samplers);
+        snprintf(samplers + len, sizeof samplers - len, "%s%s", q ? "," : "", dr_sampler_kind_name(a->samplers[q]));
+    }
+    snprintf(fp->film, sizeof fp->film, "filter=%s crop=%s sampler=%s", filter, crop, samplers);
     fp->camera = a->g.camera;
     fp->max_depth = a->depths[a->n_depths - 1];
     fp->rr_depth = a->g.rr_depth;
@@ -960,7 +999,7 @@ static void print_summary(const struct cmp_run *r)
         if (cmp_efficiency(r, c) > cmp_efficiency(r, best))
             best = c;
     char label[128];
-    cmp_combo_label(&r->combos[best], label, sizeof label);
+    cmp_combo_label(r, &r->combos[best], label, sizeof label);
     printf("most efficient: %s at %d spp (efficiency %.4g, relative error %.3g)\n", label, r->combos[best].spp,
            cmp_efficiency(r, best), r->results[best].rel_error);
     printf("written to %s: report.md, results.csv, results.json, reference.txt, plots.gp and the plots\n", dir);

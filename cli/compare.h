@@ -20,14 +20,17 @@
 #include "estimator.h"
 #include "grad_common.h"
 #include "loss.h"
+#include "sampler.h"
 
 #define CMP_MAX_LIST 16
+#define CMP_MAX_SAMPLERS 3   /* independent, stratified, sobol: each at most once */
 
 /* One combination of the sweep. */
 struct cmp_combo {
     const struct dr_estimator_ops *est;
     enum dr_sampling sampling;
     int max_depth, spp;
+    enum dr_sampler_kind sampler;   /* the random numbers (--sampler, a list) */
 };
 
 /* What one parameter's estimate was, summarised: up to 3 components for a
@@ -38,6 +41,7 @@ struct cmp_param_result {
     double value[3], se[3];   /* mean over batches and its standard error */
     double ref[3], ref_se[3]; /* the reference, summarised the same way */
     double rel_error;         /* of a single estimate, this parameter's segment */
+    double rel_variance;      /* sum of the segment's per-entry variances / |its reference|^2 */
 };
 
 /* One combination's outcome (the same for every repeat: same random numbers). */
@@ -80,6 +84,8 @@ struct cmp_args {
     enum dr_sampling samplings[DR_SAMPLING_COUNT];
     int n_samplings;
     int spps[CMP_MAX_LIST], n_spps;
+    enum dr_sampler_kind samplers[CMP_MAX_SAMPLERS];   /* --sampler's list; g.sampler is the first */
+    int n_samplers;
     int depths[CMP_MAX_LIST], n_depths;
     int batches, repeat;
     double eps;
@@ -112,8 +118,13 @@ int cmp_write_report(const struct cmp_run *r, const char *path);
 /* Writes DIR/plots.gp and runs gnuplot on it (a warning when gnuplot is
  * missing or fails: the PNGs are then not drawn). */
 int cmp_write_plots(const struct cmp_run *r, const char *dir);
-/* The combination's label, "prb detached d8". */
-void cmp_combo_label(const struct cmp_combo *c, char *buf, size_t size);
+/* The combination's label, "prb detached d8"; with more than one --sampler
+ * listed, the sampler too: "prb detached sobol d8". */
+void cmp_combo_label(const struct cmp_run *r, const struct cmp_combo *c, char *buf, size_t size);
+/* "prb detached" or, with several samplers, "prb detached sobol". */
+void cmp_pair_label(const struct cmp_run *r, const struct cmp_combo *c, char *buf, size_t size);
+/* The efficiency 1 / (relative variance x seconds) of parameter k in combination c. */
+double cmp_param_efficiency(const struct cmp_run *r, int c, int k);
 /* Median / min / max of a combination's repeat timings. */
 void cmp_seconds_spread(const struct cmp_run *r, int c, double *median, double *lo, double *hi);
 double cmp_efficiency(const struct cmp_run *r, int c);

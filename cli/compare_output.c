@@ -12,9 +12,20 @@
 #include "cli.h"
 #include "compare.h"
 
-void cmp_combo_label(const struct cmp_combo *c, char *buf, size_t size)
+void cmp_pair_label(const struct cmp_run *r, const struct cmp_combo *c, char *buf, size_t size)
 {
-    snprintf(buf, size, "%s %s d%d", c->est->name, dr_sampling_name(c->sampling), c->max_depth);
+    /* a single sampler is the run's setting (in the film line), not a dimension */
+    if (r->a->n_samplers > 1)
+        snprintf(buf, size, "%s %s %s", c->est->name, dr_sampling_name(c->sampling), dr_sampler_kind_name(c->sampler));
+    else
+        snprintf(buf, size, "%s %s", c->est->name, dr_sampling_name(c->sampling));
+}
+
+void cmp_combo_label(const struct cmp_run *r, const struct cmp_combo *c, char *buf, size_t size)
+{
+    char pair[96];
+    cmp_pair_label(r, c, pair, sizeof pair);
+    snprintf(buf, size, "%s d%d", pair, c->max_depth);
 }
 
 static int cmp_double(const void *a, const void *b)
@@ -47,6 +58,14 @@ double cmp_efficiency(const struct cmp_run *r, int c)
     return efficiency_at(&r->results[c], med);
 }
 
+double cmp_param_efficiency(const struct cmp_run *r, int c, int k)
+{
+    double med, lo, hi;
+    cmp_seconds_spread(r, c, &med, &lo, &hi);
+    double d = r->results[c].params[k].rel_variance * med;
+    return d > 0.0 && isfinite(d) ? 1.0 / d : NAN;
+}
+
 /* ---- results.csv ---- */
 
 static void csv_string(FILE *f, const char *s)
@@ -74,7 +93,7 @@ static void csv_number(FILE *f, double v)
 
 #define CSV_COLUMNS                                                                                           \
     "scene,mode,estimator,sampling,max_depth,spp,repeat,batches,seconds,rays,memory_bytes,record_bytes,"       \
-    "invalid_samples,rel_error,rel_variance,efficiency,reference,reference_rel_se"
+    "invalid_samples,rel_error,rel_variance,efficiency,reference,reference_rel_se,sampler"
 
 int cmp_write_csv(const struct cmp_run *r, const char *path)
 {
@@ -99,7 +118,7 @@ int cmp_write_csv(const struct cmp_run *r, const char *path)
             csv_number(f, efficiency_at(res, res->seconds[rep]));
             fprintf(f, ",%s", r->ref.kind);
             csv_number(f, r->ref.rel_se);
-            fputc('\n', f);
+            fprintf(f, ",%s\n", dr_sampler_kind_name(cb->sampler));   /* last: older columns keep their place */
         }
     if (fclose(f) != 0) {
         cli_error("compare", "%s: %s", path, strerror(errno));
@@ -135,8 +154,9 @@ static const char *summary_kind(const struct cmp_run *r, int k)
     return p->kind == DR_PARAM_IMAGE || p->kind == DR_PARAM_ENV_MAP ? "norm" : "components";
 }
 
-static void json_params(FILE *f, const struct cmp_run *r, const struct cmp_result *res)
+static void json_params(FILE *f, const struct cmp_run *r, int c)
 {
+    const struct cmp_result *res = &r->results[c];
     fputs(", \"parameters\": [", f);
     for (int k = 0; k < r->ps->n; k++) {
         const struct cmp_param_result *pr = &res->params[k];
@@ -151,6 +171,8 @@ static void json_params(FILE *f, const struct cmp_run *r, const struct cmp_resul
         fputs(", \"reference_stderr\": ", f);
         json_array(f, pr->ref_se, pr->n);
         json_key_number(f, "rel_error", pr->rel_error);
+        json_key_number(f, "rel_variance", pr->rel_variance);
+        json_key_number(f, "efficiency", cmp_param_efficiency(r, c, k));
         fputc('}', f);
     }
     fputc(']', f);
@@ -162,8 +184,8 @@ static void json_combination(FILE *f, const struct cmp_run *r, int c)
     const struct cmp_result *res = &r->results[c];
     double med, lo, hi;
     cmp_seconds_spread(r, c, &med, &lo, &hi);
-    fprintf(f, "{\"estimator\": \"%s\", \"sampling\": \"%s\", \"max_depth\": %d, \"spp\": %d", cb->est->name,
-            dr_sampling_name(cb->sampling), cb->max_depth, cb->spp);
+    fprintf(f, "{\"estimator\": \"%s\", \"sampling\": \"%s\", \"sampler\": \"%s\", \"max_depth\": %d, \"spp\": %d",
+            cb->est->name, dr_sampling_name(cb->sampling), dr_sampler_kind_name(cb->sampler), cb->max_depth, cb->spp);
     json_key_number(f, "seconds_median", med);
     json_key_number(f, "seconds_min", lo);
     json_key_number(f, "seconds_max", hi);
@@ -174,7 +196,7 @@ static void json_combination(FILE *f, const struct cmp_run *r, int c)
     json_key_number(f, "rel_error", res->rel_error);
     json_key_number(f, "rel_variance", res->rel_variance);
     json_key_number(f, "efficiency", efficiency_at(res, med));
-    json_params(f, r, res);
+    json_params(f, r, c);
     fputc('}', f);
 }
 
@@ -214,9 +236,9 @@ static void json_rows(FILE *f, const struct cmp_run *r)
     for (int rep = 0, i = 0; rep < r->a->repeat; rep++)
         for (int c = 0; c < r->n_combos; c++, i++) {
             const struct cmp_combo *cb = &r->combos[c];
-            fprintf(f, "%s{\"estimator\": \"%s\", \"sampling\": \"%s\", \"max_depth\": %d, \"spp\": %d, "
-                       "\"repeat\": %d", i ? ", " : "", cb->est->name, dr_sampling_name(cb->sampling),
-                    cb->max_depth, cb->spp, rep);
+            fprintf(f, "%s{\"estimator\": \"%s\", \"sampling\": \"%s\", \"sampler\": \"%s\", \"max_depth\": %d, "
+                       "\"spp\": %d, \"repeat\": %d", i ? ", " : "", cb->est->name, dr_sampling_name(cb->sampling),
+                    dr_sampler_kind_name(cb->sampler), cb->max_depth, cb->spp, rep);
             json_key_number(f, "seconds", r->results[c].seconds[rep]);
             json_key_number(f, "rel_error", r->results[c].rel_error);
             json_key_number(f, "efficiency", efficiency_at(&r->results[c], r->results[c].seconds[rep]));
@@ -239,7 +261,10 @@ void cmp_write_json(const struct cmp_run *r, FILE *f)
             a->g.width, a->g.height, a->g.rr_depth, (unsigned long long)a->g.seed, a->batches, a->repeat);
     fputs(", ", f);
     grad_json_film(f, &a->g);
-    fputs(", \"output_dir\": ", f);
+    fputs(", \"samplers\": [", f);   /* "sampler" (the film's) is the first: the reference's */
+    for (int q = 0; q < a->n_samplers; q++)
+        fprintf(f, "%s\"%s\"", q ? ", " : "", dr_sampler_kind_name(a->samplers[q]));
+    fputs("], \"output_dir\": ", f);
     json_string(f, a->out_dir);
     fputs(", \"parameters\": [", f);
     for (int k = 0; k < r->ps->n; k++) {
@@ -259,9 +284,9 @@ void cmp_write_json(const struct cmp_run *r, FILE *f)
     fputc(']', f);
     json_rows(f, r);
     int b = best_combo(r);
-    fprintf(f, ", \"best\": {\"estimator\": \"%s\", \"sampling\": \"%s\", \"max_depth\": %d, \"spp\": %d",
-            r->combos[b].est->name, dr_sampling_name(r->combos[b].sampling), r->combos[b].max_depth,
-            r->combos[b].spp);
+    fprintf(f, ", \"best\": {\"estimator\": \"%s\", \"sampling\": \"%s\", \"sampler\": \"%s\", \"max_depth\": %d, "
+               "\"spp\": %d", r->combos[b].est->name, dr_sampling_name(r->combos[b].sampling),
+            dr_sampler_kind_name(r->combos[b].sampler), r->combos[b].max_depth, r->combos[b].spp);
     json_key_number(f, "efficiency", cmp_efficiency(r, b));
     fputc('}', f);
     json_key_number(f, "seconds_total", r->t_total);
@@ -325,8 +350,9 @@ static void report_head(FILE *f, const struct cmp_run *r)
 
 static void report_table(FILE *f, const struct cmp_run *r)
 {
-    fprintf(f, "| estimator | sampling | max depth | spp | time / estimate (s)%s | rays | memory | tape records "
-               "| rel. error | rel. variance | efficiency |\n|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+    fprintf(f, "| estimator | sampling | sampler | max depth | spp | time / estimate (s)%s | rays | memory | tape "
+               "records | rel. error | rel. variance | efficiency |\n"
+               "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
             r->a->repeat > 1 ? ", median (min–max)" : "");
     for (int c = 0; c < r->n_combos; c++) {
         const struct cmp_combo *cb = &r->combos[c];
@@ -340,9 +366,9 @@ static void report_table(FILE *f, const struct cmp_run *r)
             snprintf(t, sizeof t, "%.4g (%.4g–%.4g)", med, lo, hi);
         else
             snprintf(t, sizeof t, "%.4g", med);
-        fprintf(f, "| %s | %s | %d | %d | %s | %.3g | %s | %s | %.3g | %.3g | %.4g |\n", cb->est->name,
-                dr_sampling_name(cb->sampling), cb->max_depth, cb->spp, t, res->rays, mem, rec, res->rel_error,
-                res->rel_variance, efficiency_at(res, med));
+        fprintf(f, "| %s | %s | %s | %d | %d | %s | %.3g | %s | %s | %.3g | %.3g | %.4g |\n", cb->est->name,
+                dr_sampling_name(cb->sampling), dr_sampler_kind_name(cb->sampler), cb->max_depth, cb->spp, t,
+                res->rays, mem, rec, res->rel_error, res->rel_variance, efficiency_at(res, med));
     }
     fputc('\n', f);
 }
@@ -350,8 +376,8 @@ static void report_table(FILE *f, const struct cmp_run *r)
 static void report_params(FILE *f, const struct cmp_run *r)
 {
     fprintf(f, "## Per parameter (largest spp and max depth)\n\n%s\n\n"
-               "| estimator | sampling | parameter | estimate ± standard error | reference ± standard error | "
-               "rel. error |\n|---|---|---|---|---|---:|\n",
+               "| estimator | sampling | sampler | parameter | estimate ± standard error | reference ± standard "
+               "error | rel. error | rel. variance | efficiency |\n|---|---|---|---|---|---|---:|---:|---:|\n",
             r->reverse ? "Colours and scalars component by component; textures by the norm of their gradient. The "
                          "table above mixes all components, so its error follows the largest gradients."
                        : "The derivative image's mean over pixels; the error is over every pixel.");
@@ -361,21 +387,23 @@ static void report_params(FILE *f, const struct cmp_run *r)
             continue;
         for (int k = 0; k < r->ps->n; k++) {
             const struct cmp_param_result *pr = &r->results[c].params[k];
-            fprintf(f, "| %s | %s | `%s`%s | ", cb->est->name, dr_sampling_name(cb->sampling),
-                    r->ps->params[k].name, strcmp(summary_kind(r, k), "norm") == 0 ? " (norm)" : "");
+            fprintf(f, "| %s | %s | %s | `%s`%s | ", cb->est->name, dr_sampling_name(cb->sampling),
+                    dr_sampler_kind_name(cb->sampler), r->ps->params[k].name,
+                    strcmp(summary_kind(r, k), "norm") == 0 ? " (norm)" : "");
             for (int i = 0; i < pr->n; i++)
                 fprintf(f, "%s%.4g ± %.2g", i ? ", " : "", pr->value[i], pr->se[i]);
             fputs(" | ", f);
             for (int i = 0; i < pr->n; i++)
                 fprintf(f, "%s%.4g ± %.2g", i ? ", " : "", pr->ref[i], pr->ref_se[i]);
-            fprintf(f, " | %.3g |\n", pr->rel_error);
+            fprintf(f, " | %.3g | %.3g | %.4g |\n", pr->rel_error, pr->rel_variance, cmp_param_efficiency(r, c, k));
         }
     }
     fputc('\n', f);
 }
 
 /* Least-squares slope of log(error) against log(spp) of the combinations
- * sharing c's estimator, sampling and depth (-0.5: Monte Carlo as usual). */
+ * sharing c's estimator, sampling, sampler and depth (-0.5: Monte Carlo as
+ * usual; steeper for stratified and Sobol numbers on smooth integrands). */
 static double error_slope(const struct cmp_run *r, int c)
 {
     double sx = 0, sy = 0, sxx = 0, sxy = 0;
@@ -383,7 +411,7 @@ static double error_slope(const struct cmp_run *r, int c)
     for (int i = 0; i < r->n_combos; i++) {
         const struct cmp_combo *a = &r->combos[i], *b = &r->combos[c];
         double e = r->results[i].rel_error;
-        if (a->est != b->est || a->sampling != b->sampling || a->max_depth != b->max_depth || !(e > 0.0))
+        if (!same_series(a, b) || !(e > 0.0))
             continue;
         double x = log((double)a->spp), y = log(e);
         sx += x, sy += y, sxx += x * x, sxy += x * y, n++;
@@ -420,8 +448,9 @@ static void report_median_efficiency(FILE *f, const struct cmp_run *r)
             double e = median_efficiency(r, c);
             if (k == 0)
                 first = e;
-            fprintf(f, "%s %s %s %.4g", k++ ? "," : "", r->combos[c].est->name,
-                    dr_sampling_name(r->combos[c].sampling), e);
+            char pair[96];
+            cmp_pair_label(r, &r->combos[c], pair, sizeof pair);
+            fprintf(f, "%s %s %.4g", k++ ? "," : "", pair, e);
             if (k > 1)
                 fprintf(f, " (%.2fx the first)", e / first);
         }
@@ -435,7 +464,7 @@ static void report_reading(FILE *f, const struct cmp_run *r)
     fprintf(f, "## Reading it\n\n");
     int best = best_combo(r);
     char label[128];
-    cmp_combo_label(&r->combos[best], label, sizeof label);
+    cmp_combo_label(r, &r->combos[best], label, sizeof label);
     fprintf(f, "- Most accuracy per second: **%s at %d spp** (efficiency %.4g = 1 / (relative variance x "
                "seconds)); efficiency hardly depends on spp, so compare estimators by it and pick spp for the "
                "error you need.\n",
@@ -451,17 +480,17 @@ static void report_reading(FILE *f, const struct cmp_run *r)
             if (hi < 0 || r->results[c].memory_bytes > r->results[hi].memory_bytes)
                 hi = c;
         }
-        char m1[32], m2[32];
+        char m1[32], m2[32], p1[96], p2[96];
         bytes_text(r->results[lo].memory_bytes, m1, sizeof m1);
         bytes_text(r->results[hi].memory_bytes, m2, sizeof m2);
-        fprintf(f, "- Max depth %d: least memory %s %s (%s), most %s %s (%s).\n", r->a->depths[d],
-                r->combos[lo].est->name, dr_sampling_name(r->combos[lo].sampling), m1, r->combos[hi].est->name,
-                dr_sampling_name(r->combos[hi].sampling), m2);
+        cmp_pair_label(r, &r->combos[lo], p1, sizeof p1);
+        cmp_pair_label(r, &r->combos[hi], p2, sizeof p2);
+        fprintf(f, "- Max depth %d: least memory %s (%s), most %s (%s).\n", r->a->depths[d], p1, m1, p2, m2);
     }
     for (int c = 0; c < r->n_combos; c++) {
         if (r->combos[c].spp != r->a->spps[0])
             continue;
-        cmp_combo_label(&r->combos[c], label, sizeof label);
+        cmp_combo_label(r, &r->combos[c], label, sizeof label);
         fprintf(f, "- %s: error ~ spp^%.2f (Monte Carlo: -0.5; flatter once the error meets the reference's or "
                    "a depth bias).\n", label, error_slope(r, c));
     }
@@ -489,8 +518,8 @@ int cmp_write_report(const struct cmp_run *r, const char *path)
 
 /* ---- plots ---- */
 
-/* Combinations c of one estimator x sampling x depth "series" (the first of
- * each series is where combos[c].spp is the smallest). */
+/* Combinations c of one estimator x sampling x sampler x depth "series" (the
+ * first of each series is where combos[c].spp is the smallest). */
 static bool series_start(const struct cmp_run *r, int c)
 {
     return r->combos[c].spp == r->a->spps[0];
@@ -498,17 +527,18 @@ static bool series_start(const struct cmp_run *r, int c)
 
 static bool same_series(const struct cmp_combo *a, const struct cmp_combo *b)
 {
-    return a->est == b->est && a->sampling == b->sampling && a->max_depth == b->max_depth;
+    return a->est == b->est && a->sampling == b->sampling && a->sampler == b->sampler && a->max_depth == b->max_depth;
 }
 
-/* Which estimator x sampling pair combination c belongs to, counted in the
- * order the pairs first appear. */
+/* Which estimator x sampling (x sampler) pair combination c belongs to,
+ * counted in the order the pairs first appear. */
 static int pair_index(const struct cmp_run *r, int c)
 {
     int n = 0;
     for (int i = 0; i < c; i++)
         if (series_start(r, i) && r->combos[i].max_depth == r->a->depths[0] &&
-            (r->combos[i].est != r->combos[c].est || r->combos[i].sampling != r->combos[c].sampling))
+            (r->combos[i].est != r->combos[c].est || r->combos[i].sampling != r->combos[c].sampling ||
+             r->combos[i].sampler != r->combos[c].sampler))
             n++;
     return n;
 }
@@ -536,7 +566,7 @@ static void plot_error_vs_time(FILE *g, const struct cmp_run *r)
         if (!series_start(r, c))
             continue;
         char label[128];
-        cmp_combo_label(&r->combos[c], label, sizeof label);
+        cmp_combo_label(r, &r->combos[c], label, sizeof label);
         /* colour = estimator x sampling, point and dash = depth; spp labels on
          * the deepest series only, so the plot stays readable */
         int depth_i = 0;
@@ -557,8 +587,8 @@ static void plot_error_vs_time(FILE *g, const struct cmp_run *r)
     fprintf(g, "unset logscale\nunset title\n");
 }
 
-/* Memory against max depth, one line per estimator x sampling (the largest
- * over spp: the tape's records do not grow with spp). */
+/* Memory against max depth, one line per estimator x sampling (x sampler;
+ * the largest over spp: the tape's records do not grow with spp). */
 static void plot_memory(FILE *g, const struct cmp_run *r)
 {
     int s = 0;
@@ -571,8 +601,9 @@ static void plot_memory(FILE *g, const struct cmp_run *r)
     for (int c = 0; c < r->n_combos; c++) {
         if (!series_start(r, c) || r->combos[c].max_depth != r->a->depths[0])
             continue;
-        fprintf(g, "%s'-' using 1:2 with linespoints lw 2 pt 7 title '%s %s'", s++ ? ", " : "",
-                r->combos[c].est->name, dr_sampling_name(r->combos[c].sampling));
+        char pair[96];
+        cmp_pair_label(r, &r->combos[c], pair, sizeof pair);
+        fprintf(g, "%s'-' using 1:2 with linespoints lw 2 pt 7 title '%s'", s++ ? ", " : "", pair);
     }
     fputc('\n', g);
     for (int c = 0; c < r->n_combos; c++) {
@@ -580,7 +611,8 @@ static void plot_memory(FILE *g, const struct cmp_run *r)
             continue;
         for (int i = 0; i < r->n_combos; i++) {
             const struct cmp_combo *x = &r->combos[i];
-            if (x->est != r->combos[c].est || x->sampling != r->combos[c].sampling || !series_start(r, i))
+            if (x->est != r->combos[c].est || x->sampling != r->combos[c].sampling ||
+                x->sampler != r->combos[c].sampler || !series_start(r, i))
                 continue;
             uint64_t m = 0;
             for (int j = i; j < r->n_combos && same_series(&r->combos[j], x); j++)
@@ -601,7 +633,9 @@ static void plot_efficiency(FILE *g, const struct cmp_run *r)
     fprintf(g, "$eff << EOD\nspp");
     for (int c = 0; c < r->n_combos; c++)
         if (series_start(r, c) && r->combos[c].max_depth == dmax) {
-            fprintf(g, " \"%s %s\"", r->combos[c].est->name, dr_sampling_name(r->combos[c].sampling));
+            char pair[96];
+            cmp_pair_label(r, &r->combos[c], pair, sizeof pair);
+            fprintf(g, " \"%s\"", pair);
             cols++;
         }
     fputc('\n', g);

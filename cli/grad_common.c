@@ -168,7 +168,7 @@ static int method_option(struct grad_common *g, int c, const char *arg)
     case GOPT_SAMPLER: {
         int k = dr_sampler_kind_parse(arg);
         if (k < 0) {
-            cli_error(g->cmd, "--sampler: unknown sampler '%s' (known: independent, sobol)", arg);
+            cli_error(g->cmd, "--sampler: unknown sampler '%s' (known: independent, stratified, sobol)", arg);
             return DR_EXIT_USAGE;
         }
         g->sampler = (enum dr_sampler_kind)k;

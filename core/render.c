@@ -38,7 +38,7 @@ static void render_tile(void *ctx, int thread, int x0, int y0, int x1, int y1)
             dr_vec3 sum = dr_v3s(0.0);
             for (int s = 0; s < o->spp; s++) {
                 struct dr_sampler smp;
-                dr_sampler_init_kind(&smp, o->sampler, o->seed, pixel, (uint64_t)s);
+                dr_sampler_init_kind(&smp, o->sampler, o->seed, pixel, (uint64_t)s, o->spp);
                 double u, v, px, py;
                 dr_sampler_next2(&smp, &u, &v);
                 dr_film_sample(&o->film.filter, fx, fy, u, v, &px, &py);

@@ -7,6 +7,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "stratified.h"
+
 /* SplitMix64's finaliser: a strong 64-bit mix. */
 static inline uint64_t dr_hash64(uint64_t x)
 {
@@ -18,9 +20,17 @@ static inline uint64_t dr_hash64(uint64_t x)
     return x;
 }
 
-/* Which numbers a sampler draws. Both are pure functions of
- * (seed, pixel, sample, dimension).
+/* Which numbers a sampler draws. All are pure functions of
+ * (seed, pixel, sample, dimension) and, for stratified, the pixel's sample
+ * count (spp of the run, or of the batch half that draws them).
  *  independent  every number is an independent hash;
+ *  stratified   jittered stratification of every draw over the pixel's spp
+ *               samples (stratified.h): 1D draws in spp strata, 2D draws
+ *               correlated multi-jittered on an m x n grid (spp = m x n
+ *               where spp factors so, padded otherwise), with the
+ *               sample-to-stratum map permuted per dimension by a hash, so
+ *               dimensions are decorrelated. Any spp works (not only squares
+ *               or powers of two); independent seeds give independent sets;
  *  sobol        Owen-scrambled Sobol points (hash-based nested uniform
  *               scrambling and index shuffling, Burley 2020 "Practical
  *               Hash-based Owen Scrambling"): over a pixel's samples each
@@ -31,14 +41,16 @@ static inline uint64_t dr_hash64(uint64_t x)
  *               scrambling seeds. Independent seeds (batches) give
  *               independent randomised point sets, so batch statistics stay
  *               valid standard errors. */
-enum dr_sampler_kind { DR_SAMPLER_INDEPENDENT = 0, DR_SAMPLER_SOBOL = 1 };
+enum dr_sampler_kind { DR_SAMPLER_INDEPENDENT = 0, DR_SAMPLER_SOBOL = 1, DR_SAMPLER_STRATIFIED = 2 };
 
 struct dr_sampler {
     uint64_t key;     /* hash of (seed, pixel, sample) */
     uint32_t dim;     /* next dimension */
     uint32_t kind;    /* enum dr_sampler_kind */
-    uint64_t pkey;    /* sobol: hash of (seed, pixel), the scrambling seed */
-    uint32_t index;   /* sobol: the sample's index in the pixel */
+    uint64_t pkey;    /* sobol, stratified: hash of (seed, pixel), the scrambling/permutation seed */
+    uint32_t index;   /* sobol, stratified: the sample's index in the pixel */
+    uint32_t count;   /* stratified: the pixel's sample count (the strata) */
+    uint32_t grid_m, grid_n;   /* stratified: the 2D draws' grid (stratified.h) */
 };
 
 static inline void dr_sampler_init(struct dr_sampler *s, uint64_t seed, uint64_t pixel, uint64_t sample)
@@ -48,16 +60,27 @@ static inline void dr_sampler_init(struct dr_sampler *s, uint64_t seed, uint64_t
     s->kind = DR_SAMPLER_INDEPENDENT;
     s->pkey = 0;
     s->index = 0;
+    s->count = 0;
+    s->grid_m = s->grid_n = 0;
 }
 
+/* Sample `sample` of the `spp` samples of `pixel`. spp only matters to the
+ * stratified kind (its strata); it must be the number of samples drawn with
+ * this seed for this pixel, sample < spp. */
 static inline void dr_sampler_init_kind(struct dr_sampler *s, enum dr_sampler_kind kind, uint64_t seed,
-                                        uint64_t pixel, uint64_t sample)
+                                        uint64_t pixel, uint64_t sample, int spp)
 {
     dr_sampler_init(s, seed, pixel, sample);
     if (kind == DR_SAMPLER_SOBOL) {
         s->kind = DR_SAMPLER_SOBOL;
         s->pkey = dr_hash64(dr_hash64(seed ^ 0x5b0b5b0b5b0b5b0bULL) ^ (pixel * 0xd6e8feb86659fd93ULL));
         s->index = (uint32_t)sample;
+    } else if (kind == DR_SAMPLER_STRATIFIED) {
+        s->kind = DR_SAMPLER_STRATIFIED;
+        s->pkey = dr_hash64(dr_hash64(seed ^ 0x57a7157a7157a715ULL) ^ (pixel * 0xd6e8feb86659fd93ULL));
+        s->index = (uint32_t)sample;
+        s->count = spp > 0 ? (uint32_t)spp : 1u;
+        dr_strat_grid(s->count, &s->grid_m, &s->grid_n);
     }
 }
 
@@ -115,6 +138,20 @@ static inline void dr_sampler_sobol2(const struct dr_sampler *s, uint32_t dim, d
         *u2 = dr_sobol_to_double(dr_owen_scramble(dr_sobol_dim1(i), (uint32_t)(h2 >> 32)), h2);
 }
 
+/* ---- stratified (stratified.h) ---- */
+
+/* Dimension `dim`'s permutation seed (shared by the pixel's samples) and the
+ * sample's own jitter hash for it. */
+static inline uint64_t dr_sampler_strat_seed(const struct dr_sampler *s, uint32_t dim)
+{
+    return dr_hash64(s->pkey + (uint64_t)dim * 0xd1b54a32d192ed03ULL);
+}
+
+static inline uint64_t dr_sampler_strat_jitter(const struct dr_sampler *s, uint32_t dim, uint64_t salt)
+{
+    return dr_hash64((s->key ^ salt) + (uint64_t)dim * 0xd1b54a32d192ed03ULL);
+}
+
 /* Uniform double in [0, 1) with 53 random bits. */
 static inline double dr_sampler_next(struct dr_sampler *s)
 {
@@ -123,18 +160,30 @@ static inline double dr_sampler_next(struct dr_sampler *s)
         dr_sampler_sobol2(s, ++s->dim, &u, NULL);
         return u;
     }
+    if (s->kind == DR_SAMPLER_STRATIFIED) {
+        ++s->dim;
+        return dr_strat_1d(s->index, s->count, (uint32_t)dr_sampler_strat_seed(s, s->dim),
+                           dr_sampler_strat_jitter(s, s->dim, 0x3c6ef372fe94f82bULL));
+    }
     uint64_t h = dr_hash64(s->key + (uint64_t)(++s->dim) * 0xd1b54a32d192ed03ULL);
     return (double)(h >> 11) * (1.0 / 9007199254740992.0);
 }
 
-/* Two numbers that belong together (a 2D sample): two independent draws, or
- * one Sobol pair. Uses two dimensions either way, so the layout of a path's
- * dimensions does not depend on the sampler. */
+/* Two numbers that belong together (a 2D sample): two independent draws, one
+ * Sobol pair, or one multi-jittered point. Uses two dimensions either way, so
+ * the layout of a path's dimensions does not depend on the sampler. */
 static inline void dr_sampler_next2(struct dr_sampler *s, double *u1, double *u2)
 {
     if (s->kind == DR_SAMPLER_SOBOL) {
         dr_sampler_sobol2(s, ++s->dim, u1, u2);
         ++s->dim;
+        return;
+    }
+    if (s->kind == DR_SAMPLER_STRATIFIED) {
+        uint32_t d = ++s->dim;
+        ++s->dim;
+        dr_strat_2d(s->index, s->grid_m, s->grid_n, dr_sampler_strat_seed(s, d), dr_sampler_strat_jitter(s, d, 0x1ULL),
+                    dr_sampler_strat_jitter(s, d, 0x2ULL), u1, u2);
         return;
     }
     *u1 = dr_sampler_next(s);

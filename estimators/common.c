@@ -15,7 +15,7 @@ void dr_est_camera_ray(const struct dr_est_base *b, int64_t pixel, int sample, s
     /* film.h: the frame pixel keys the random numbers, the filter draws the offset */
     int x, y;
     uint64_t frame_pixel = dr_film_pixel(&b->p->film, b->p->width, pixel, &x, &y);
-    dr_sampler_init_kind(smp, b->p->sampler, b->p->seed, frame_pixel, (uint64_t)sample);
+    dr_sampler_init_kind(smp, b->p->sampler, b->p->seed, frame_pixel, (uint64_t)sample, b->p->spp);
     double u, v, fx, fy;
     dr_sampler_next2(smp, &u, &v);
     dr_film_sample(&b->p->film.filter, x, y, u, v, &fx, &fy);

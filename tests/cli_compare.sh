@@ -3,8 +3,9 @@
 # directory and its schema (results.csv columns, results.json keys, report.md,
 # plots), errors that fall as spp grows (statistical, with a margin; never a
 # timing), the reference's own error reported, the same table from the same
-# seed, --repeat, a reference file reused, and bad inputs refused before any
-# work (exit 2, nothing written).
+# seed, --repeat, a reference file reused, --sampler as a list (the sampler a
+# column of every output, per-parameter efficiency), and bad inputs refused
+# before any work (exit 2, nothing written).
 # Run by tests/run.sh (env: DRENDER = the binary); also runs alone.
 set -u
 
@@ -56,7 +57,7 @@ done
 for f in error_vs_time.png memory_vs_depth.png efficiency.png; do
     [ "$(head -c 4 "out1/$f" | tail -c 3)" = PNG ] || fail "out1/$f is not a PNG"
 done
-want='scene,mode,estimator,sampling,max_depth,spp,repeat,batches,seconds,rays,memory_bytes,record_bytes,invalid_samples,rel_error,rel_variance,efficiency,reference,reference_rel_se'
+want='scene,mode,estimator,sampling,max_depth,spp,repeat,batches,seconds,rays,memory_bytes,record_bytes,invalid_samples,rel_error,rel_variance,efficiency,reference,reference_rel_se,sampler'
 [ "$(head -1 out1/results.csv)" = "$want" ] || fail "results.csv header: $(head -1 out1/results.csv)"
 # every pair the registry supports, at each spp; one CSV row per run
 py out1 "len(d['combinations']) == 2 * $n_pairs and len(rows) == 2 * $n_pairs"
@@ -74,6 +75,32 @@ py out1 "all(abs(a['rel_error'] - b['rel_error']) <= 1e-6 * a['rel_error'] for a
           for b in d['combinations'] if a['spp'] == b['spp'] and a['sampling'] == b['sampling'])"
 py out1 "all(c['memory_bytes'] > 0 and c['rays'] > 0 and c['efficiency'] > 0 for c in d['combinations'])"
 py out1 "all(len(c['parameters']) == 1 and c['parameters'][0]['summary'] == 'pixel_mean' for c in d['combinations'])"
+# one sampler (the default): every row says so; one parameter: its efficiency is the run's
+py out1 "d['samplers'] == ['independent'] and all(r['sampler'] == 'independent' for r in rows)"
+py out1 "all(abs(c['parameters'][0]['efficiency'] - c['efficiency']) <= 1e-9 * c['efficiency'] for c in d['combinations'])"
+
+# ---- --sampler as a list: the sampler is a dimension of every output ----
+run compare $tiny --param "$red" --param "$green" --spp 4,16 --sampler independent,stratified,sobol --estimators prb \
+    --reference spp:256 -o smp
+expect_rc 0 "compare --sampler independent,stratified,sobol"
+py smp "d['samplers'] == ['independent', 'stratified', 'sobol'] and d['sampler'] == 'independent'"
+# every sampling mode of prb x 3 samplers x 2 spp, in results.json and results.csv alike
+npb=$(python3 -c 'import re,sys; print(len(re.search(r"prb \(([^)]*)\)", sys.argv[1]).group(1).split(", ")))' "$avail")
+py smp "len(d['combinations']) == 6 * $npb and len(rows) == 6 * $npb"
+py smp "sorted(set(r['sampler'] for r in rows)) == ['independent', 'sobol', 'stratified']"
+py smp "[r['sampler'] for r in rows] == [c['sampler'] for c in d['combinations']] == [r['sampler'] for r in d['rows']]"
+# per parameter: an efficiency and a relative variance each, which add up to the run's variance
+py smp "all(len(c['parameters']) == 2 and all(p['efficiency'] > 0 for p in c['parameters']) for c in d['combinations'])"
+py smp "all(min(p['rel_variance'] for p in c['parameters']) < c['rel_variance'] for c in d['combinations'])"
+# the samplers draw other numbers: at the same spp, their errors differ
+py smp "len(set(c['rel_error'] for c in d['combinations'] if c['spp'] == 16 and c['sampling'] == 'detached')) == 3"
+# stratified and Sobol numbers: below the independent error at 16 spp on this smooth derivative
+py smp "all(c['rel_error'] < next(i['rel_error'] for i in d['combinations'] if i['sampler'] == 'independent' and
+        i['spp'] == 16 and i['sampling'] == c['sampling']) for c in d['combinations'] if c['spp'] == 16 and c['sampler'] != 'independent')"
+grep -q '^| estimator | sampling | sampler |' smp/report.md || fail "report.md: no sampler column"
+grep -q 'prb detached sobol' smp/report.md || fail "report.md: the ranking does not name the sampler"
+grep -q '^film filter=box crop=none sampler=independent,stratified,sobol$' smp/reference.txt ||
+    fail "reference.txt does not record the sampler list"
 
 # ---- the same seed gives the same table (timings aside); --repeat; reference files ----
 # (out1's reference read back from its file: a forward-mode reference reused, and no second reference to compute)
@@ -123,6 +150,8 @@ refused 2 "unknown sampling mode 'sideways'" compare $tiny --param "$red" --samp
 refused 2 "--param is required" compare $tiny -o bad
 refused 2 "-o DIR is required" compare $tiny --param "$red"
 refused 2 "--spp: 4 is listed twice" compare $tiny --param "$red" --spp 4,4 -o bad
+refused 2 "--sampler: unknown sampler 'halton'" compare $tiny --param "$red" --sampler sobol,halton $huge -o bad
+refused 2 "--sampler: 'sobol' is listed twice" compare $tiny --param "$red" --sampler sobol,sobol $huge -o bad
 # a sampling mode an estimator lacks, found from the registry via --help
 lacking=$(python3 -c '
 import re, sys

@@ -14,7 +14,7 @@ static void test_independent_unchanged(void)
 {
     struct dr_sampler a, b;
     dr_sampler_init(&a, 7, 1234, 5);
-    dr_sampler_init_kind(&b, DR_SAMPLER_INDEPENDENT, 7, 1234, 5);
+    dr_sampler_init_kind(&b, DR_SAMPLER_INDEPENDENT, 7, 1234, 5, 8);
     uint64_t key = dr_hash64(dr_hash64(dr_hash64(7 + 0x9e3779b97f4a7c15ULL) ^ 1234) ^ (5 * 0x9e3779b97f4a7c15ULL));
     for (uint32_t d = 1; d <= 40; d++) {
         double want = (double)(dr_hash64(key + (uint64_t)d * 0xd1b54a32d192ed03ULL) >> 11) * (1.0 / 9007199254740992.0);
@@ -43,7 +43,7 @@ static void test_sobol_stratified(void)
         double u1[N][8];
         for (int i = 0; i < N; i++) {
             struct dr_sampler s;
-            dr_sampler_init_kind(&s, DR_SAMPLER_SOBOL, 3, pixel, (uint64_t)i);
+            dr_sampler_init_kind(&s, DR_SAMPLER_SOBOL, 3, pixel, (uint64_t)i, N);
             u1[i][0] = dr_sampler_next(&s);
             dr_sampler_next2(&s, &u1[i][1], &u1[i][2]);
             u1[i][3] = dr_sampler_next(&s);
@@ -84,14 +84,14 @@ static void test_sobol_stratified(void)
 static void test_sobol_pure(void)
 {
     struct dr_sampler a, b, c;
-    dr_sampler_init_kind(&a, DR_SAMPLER_SOBOL, 11, 99, 13);
+    dr_sampler_init_kind(&a, DR_SAMPLER_SOBOL, 11, 99, 13, 16);
     double first[10];
     for (int d = 0; d < 10; d++)
         first[d] = dr_sampler_next(&a);
-    dr_sampler_init_kind(&b, DR_SAMPLER_SOBOL, 11, 99, 13);
+    dr_sampler_init_kind(&b, DR_SAMPLER_SOBOL, 11, 99, 13, 16);
     b.dim = 6;   /* jump ahead, as the path walker does per vertex */
     CHECK(dr_sampler_next(&b) == first[6], "jumping to dimension 7 gives the same number");
-    dr_sampler_init_kind(&c, DR_SAMPLER_SOBOL, 12, 99, 13);
+    dr_sampler_init_kind(&c, DR_SAMPLER_SOBOL, 12, 99, 13, 16);
     int same = 0;
     for (int d = 0; d < 10; d++)
         same += dr_sampler_next(&c) == first[d];
@@ -109,7 +109,7 @@ static double rmse(enum dr_sampler_kind kind, int n)
         double sum = 0.0;
         for (int i = 0; i < n; i++) {
             struct dr_sampler s;
-            dr_sampler_init_kind(&s, kind, 5, (uint64_t)r, (uint64_t)i);
+            dr_sampler_init_kind(&s, kind, 5, (uint64_t)r, (uint64_t)i, n);
             double x, y;
             dr_sampler_next2(&s, &x, &y);
             sum += sin(3.0 * x) * exp(y);
