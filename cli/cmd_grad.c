@@ -77,6 +77,9 @@ void cmd_grad_usage(FILE *out)
             "      --medium-grad M drt (default: differential ratio tracking, unbiased) or\n"
             "                      baseline (differentiates the sampled collisions; biased\n"
             "                      where the density is 0), for media parameters\n"
+            );
+    /* split again: together these would pass the 4095 characters ISO C guarantees */
+    fprintf(out,
             "      --spp N         samples per pixel (default: 16)\n"
             "      --max-depth D   path segments (default: 8)\n"
             "      --rr-depth D    Russian roulette from this many segments on (default: 5)\n"
