@@ -418,6 +418,49 @@ static void forward_print(FILE *f, const struct grad_args *a, const char *scene_
     }
 }
 
+/* The buffers of one forward run, reused for every parameter. */
+struct forward_images {
+    int w, h;          /* the rendered rectangle */
+    double *dir;       /* the tangent direction (params->total entries) */
+    double *dimg;      /* d image / d parameter */
+    float *fimg;       /* ... as written */
+    double *mis_one;   /* mis: the direction's weight */
+};
+
+/* Parameter i: its derivative image along all its components, its range
+ * and its files. 0, or non-zero with dr_last_error set. */
+static int forward_param(struct grad_args *a, const struct dr_scene *scene, const struct dr_camera *cam,
+                         const struct dr_param_set *ps, int i, const struct forward_images *img,
+                         const struct forward_outputs *fo, struct grad_totals *tot, double *t_write)
+{
+    const struct dr_param *p = &ps->params[i];
+    const size_t npix = (size_t)img->w * img->h;
+    memset(img->dir, 0, sizeof(double) * (size_t)ps->total);
+    for (int64_t k = 0; k < p->size; k++)
+        img->dir[p->offset + k] = 1.0;
+    struct dr_grad_problem prob = grad_problem(&a->g, scene, cam, ps, a->g.width, a->g.height, a->g.spp, a->g.seed);
+    prob.batch = a->batch;
+    prob.mis_weights = img->mis_one;   /* mis: the direction's weight (every entry the same) */
+    struct dr_grad_stats st = {0};
+    if (dr_estimator_forward(a->g.estimator, &prob, img->dir, img->dimg, &st) != 0)
+        return -1;
+    grad_totals_add(tot, &st);
+    fo->mis_w[i] = img->mis_one[i];
+    fo->lo[i] = INFINITY;
+    fo->hi[i] = -INFINITY;
+    for (size_t k = 0; k < npix * 3; k++) {
+        img->fimg[k] = (float)img->dimg[k];
+        fo->lo[i] = fmin(fo->lo[i], img->dimg[k]);
+        fo->hi[i] = fmax(fo->hi[i], img->dimg[k]);
+    }
+    double t_w0 = dr_clock_seconds();
+    if (dr_image_write(fo->outs[i], img->w, img->h, 3, img->fimg) != 0 ||
+        (fo->viss[i] && write_vis(fo->viss[i], img->fimg, img->w, img->h, &fo->vis_scale[i]) != 0))
+        return -1;
+    *t_write += dr_clock_seconds() - t_w0;
+    return 0;
+}
+
 static int run_forward(struct grad_args *a, const char *scene_path, const struct dr_scene *scene,
                        const struct dr_camera *cam, const struct dr_param_set *ps, double t_start, double t_loaded)
 {
@@ -448,48 +491,22 @@ static int run_forward(struct grad_args *a, const char *scene_path, const struct
     bool progress = isatty(2) != 0;
     struct grad_totals tot = {0};
     double t_write = 0.0;
+    struct forward_outputs fo = {outs, viss, vis_scale, lo, hi, mis_w};
+    struct forward_images img = {w, h, dir, dimg, fimg, mis_one};
     for (int i = 0; i < n; i++) {
-        const struct dr_param *p = &ps->params[i];
         if (progress)
             dr_progress_bar("grad", i, n);
-        memset(dir, 0, sizeof(double) * (size_t)ps->total);
-        for (int64_t k = 0; k < p->size; k++)
-            dir[p->offset + k] = 1.0;
-        struct dr_grad_problem prob =
-            grad_problem(&a->g, scene, cam, ps, a->g.width, a->g.height, a->g.spp, a->g.seed);
-        prob.batch = a->batch;
-        prob.mis_weights = mis_one;   /* mis: the direction's weight (every entry the same) */
-        struct dr_grad_stats st = {0};
-        if (dr_estimator_forward(a->g.estimator, &prob, dir, dimg, &st) != 0) {
+        if (forward_param(a, scene, cam, ps, i, &img, &fo, &tot, &t_write) != 0) {
             if (progress)
                 fputc('\n', stderr);
             cli_error("grad", "%s", dr_last_error());
             goto out;
         }
-        grad_totals_add(&tot, &st);
-        mis_w[i] = mis_one[i];
-        lo[i] = INFINITY;
-        hi[i] = -INFINITY;
-        for (size_t k = 0; k < npix * 3; k++) {
-            fimg[k] = (float)dimg[k];
-            lo[i] = fmin(lo[i], dimg[k]);
-            hi[i] = fmax(hi[i], dimg[k]);
-        }
-        double t_w0 = dr_clock_seconds();
-        if (dr_image_write(outs[i], w, h, 3, fimg) != 0 ||
-            (viss[i] && write_vis(viss[i], fimg, w, h, &vis_scale[i]) != 0)) {
-            if (progress)
-                fputc('\n', stderr);
-            cli_error("grad", "%s", dr_last_error());
-            goto out;
-        }
-        t_write += dr_clock_seconds() - t_w0;
     }
     if (progress)
         dr_progress_bar("grad", n, n);
     grad_totals_warn("grad", &tot);
     double t_end = dr_clock_seconds();
-    struct forward_outputs fo = {outs, viss, vis_scale, lo, hi, mis_w};
     forward_print(stdout, a, scene_path, ps, &fo, &tot, t_loaded - t_start, t_write, t_end - t_start);
     rc = DR_EXIT_OK;
 out:
