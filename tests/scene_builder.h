@@ -210,4 +210,34 @@ static inline struct dr_scene *sb_finish(struct sb *b)
     return b->s;
 }
 
+/* The occluder-edge case (test_fdcheck.c, test_deriv_sampling.c): a glossy
+ * metal floor (roughness 0.2, material 0) reflecting the edge of a dark
+ * plate held above it, under a constant sky (so nothing else jumps: a
+ * uniform light-sampling density keeps the MIS weights smooth). As the
+ * roughness changes, reflected samples cross the plate's silhouette: attached
+ * sampling drops that boundary term. The camera looks at the floor below the
+ * edge. */
+static inline struct dr_scene *sb_occluder_edge(struct dr_camera *cam)
+{
+    struct sb b;
+    sb_init(&b);
+    struct dr_material g = sb_diffuse(dr_v3(0.9, 0.9, 0.9));
+    g.metallic = 1.0;
+    g.roughness = 0.2;
+    g.specular = 1.0;
+    sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, g));
+    /* plate at y = 0.6 over x < 0 (its edge along z at x = 0), facing up;
+     * double-sided, so it occludes from below too (a single-sided back is
+     * culled, as glTF says) */
+    struct dr_material plate = sb_diffuse(dr_v3s(0.05));
+    plate.double_sided = true;
+    sb_quad(&b, dr_v3(-2, 0.6, -2), dr_v3(0, 0, 4), dr_v3(2, 0, 0), sb_material(&b, plate));
+    sb_environment(&b, dr_v3s(1.0));
+    struct dr_scene *s = sb_finish(&b);
+    if (s)
+        s->n_file_materials = s->n_materials;
+    *cam = sb_camera(dr_v3(0, 1.2, 1.5), dr_v3(0, 0, 0), 30);
+    return s;
+}
+
 #endif

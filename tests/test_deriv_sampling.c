@@ -97,22 +97,10 @@ static double fd_case(struct dr_scene *s, const char *name, const char *ptr, enu
  * sample: it must agree. */
 static void occluder_edge(void)
 {
-    struct sb b;
-    sb_init(&b);
-    struct dr_material g = sb_diffuse(dr_v3(0.9, 0.9, 0.9));
-    g.metallic = 1.0;
-    g.roughness = 0.2;
-    g.specular = 1.0;
-    sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, g));
-    struct dr_material plate = sb_diffuse(dr_v3s(0.05));
-    plate.double_sided = true;
-    sb_quad(&b, dr_v3(-2, 0.6, -2), dr_v3(0, 0, 4), dr_v3(2, 0, 0), sb_material(&b, plate));
-    sb_environment(&b, dr_v3s(1.0));
-    struct dr_scene *s = sb_finish(&b);
-    s->n_file_materials = s->n_materials;
+    struct dr_camera cam;
+    struct dr_scene *s = sb_occluder_edge(&cam);
     const char *p = "/materials/0/pbrMetallicRoughness/roughnessFactor";
     struct dr_param_set *ps = dr_param_set_create(s, &p, 1);
-    struct dr_camera cam = sb_camera(dr_v3(0, 1.2, 1.5), dr_v3(0, 0, 0), 30);
     struct dr_fd_options o = {.estimator = dr_estimator_find("prb"), .sampling = DR_SAMPLING_DERIVATIVE,
                               .width = 16, .height = 16, .spp = 32, .batches = 8, .max_depth = 2,
                               .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 7, .threads = 2, .eps = 1e-2, .z_max = 3.0};
