@@ -240,6 +240,44 @@ bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u
 
 /* ------------------------------------------------------------ derivatives */
 
+/* The GGX half-vector terms every microfacet evaluation shares: H = wo + wi
+ * (not normalised), its squared components and length, q = Hxy^2 + a2 Hz^2
+ * and D = a2 (H^2 / q)^2 / pi, the normal distribution at H/|H|. */
+struct ggx_half {
+    dr_vec3 H;
+    double hxy2, hz2, H2, q, D;
+};
+
+static inline struct ggx_half ggx_half(double a2, dr_vec3 wo, dr_vec3 wi)
+{
+    struct ggx_half g;
+    g.H = dr_add(wo, wi);
+    g.hxy2 = g.H.x * g.H.x + g.H.y * g.H.y;
+    g.hz2 = g.H.z * g.H.z;
+    g.H2 = g.hxy2 + g.hz2;
+    g.q = g.hxy2 + a2 * g.hz2;
+    double r = g.H2 / g.q;
+    g.D = a2 * r * r * DR_INV_PI;
+    return g;
+}
+
+/* d ln D / d alpha = (2/alpha) (Hxy^2 - alpha^2 Hz^2) / q. */
+static inline double ggx_dlnD_dalpha(double a, double a2, const struct ggx_half *g)
+{
+    return (2.0 / a) * ((g->hxy2 - a2 * g->hz2) / g->q);
+}
+
+/* The Schlick-weighted Fresnel of the two specular lobes at weight s5 =
+ * (1 - |H|/2)^5: dielectric F_d = f0 + (f90 - f0) s5 and metal F_m = base +
+ * (1 - base) s5, per channel. */
+static inline void fresnel_lobes(const struct dr_bsdf *b, double s5, dr_vec3 *fd, dr_vec3 *fm)
+{
+    const dr_vec3 f0 = dielectric_f0(b), base = b->base_color;
+    const double f90 = b->specular;
+    *fd = dr_v3(f0.x + (f90 - f0.x) * s5, f0.y + (f90 - f0.y) * s5, f0.z + (f90 - f0.z) * s5);
+    *fm = dr_v3(base.x + (1.0 - base.x) * s5, base.y + (1.0 - base.y) * s5, base.z + (1.0 - base.z) * s5);
+}
+
 /* Parameter part of d_bsdf_eval (wo.z, wi.z > COS_EPS). With
  *   kd0 = max(0, 1 - F_o) max(0, 1 - F_i) / pi,   spec = D G2 / (4 wo.z wi.z),
  *   f_c = (1-m) kd0 base_c + (1-m) spec F_d,c + m spec F_m,c,
@@ -271,22 +309,16 @@ static void d_eval_params(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_ve
 
     /* Microfacet term spec = D G2 / (4 wo.z wi.z), shared by both lobes. */
     double a = bsdf_alpha(b), a2 = a * a;
-    dr_vec3 H = dr_add(wo, wi);
-    double hxy2 = H.x * H.x + H.y * H.y;
-    double hz2 = H.z * H.z;
-    double H2 = hxy2 + hz2;
-    double q = hxy2 + a2 * hz2;
-    double r = H2 / q;
-    double D = a2 * r * r * DR_INV_PI;
+    const struct ggx_half g_h = ggx_half(a2, wo, wi);
     double tan2o = (wo.x * wo.x + wo.y * wo.y) / (wo.z * wo.z);
     double tan2i = (wi.x * wi.x + wi.y * wi.y) / (wi.z * wi.z);
     double xo = a2 * tan2o, xi = a2 * tan2i;
     double so = sqrt(1.0 + xo), si = sqrt(1.0 + xi);
     double lo = 0.5 * xo / (1.0 + so), li = 0.5 * xi / (1.0 + si);
     double g = 1.0 + lo + li;
-    double spec = D / (4.0 * wo.z * g * wi.z);
+    double spec = g_h.D / (4.0 * wo.z * g * wi.z);
 
-    double c = 0.5 * sqrt(H2);
+    double c = 0.5 * sqrt(g_h.H2);
     double s5 = pow5(1.0 - dr_clamp(c, 0.0, 1.0));
     dr_vec3 fm = dr_v3(base.x + (1.0 - base.x) * s5, base.y + (1.0 - base.y) * s5,
                        base.z + (1.0 - base.z) * s5);
@@ -315,7 +347,7 @@ static void d_eval_params(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_ve
     double d_spec = (1.0 - m) * d_ks + m * d_km;
     if (d_spec == 0.0 || !(rough * rough > DR_BSDF_MIN_ALPHA))
         return;
-    double dlnD = (2.0 / a) * ((hxy2 - a2 * hz2) / q);
+    double dlnD = ggx_dlnD_dalpha(a, a2, &g_h);
     double dlo = 0.5 * a * tan2o / so, dli = 0.5 * a * tan2i / si;
     double dspec_da = spec * (dlnD - (dlo + dli) / g);
     d->roughness += d_spec * dspec_da * (2.0 * rough);
@@ -386,31 +418,25 @@ static void d_eval_dirs(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3
     const double m = b->metallic;
     const dr_vec3 base = b->base_color;
     double a = bsdf_alpha(b), a2 = a * a;
-    dr_vec3 H = dr_add(wo, wi);
-    double hxy2 = H.x * H.x + H.y * H.y, hz2 = H.z * H.z;
-    double H2 = hxy2 + hz2;
-    double q = hxy2 + a2 * hz2;
-    double r = H2 / q;
-    double D = a2 * r * r * DR_INV_PI;
+    const struct ggx_half g_h = ggx_half(a2, wo, wi);
     double lo = smith_lambda(a2, wo), li = smith_lambda(a2, wi);
     double g = 1.0 + lo + li;
-    double spec = D / (4.0 * wo.z * g * wi.z);
+    double spec = g_h.D / (4.0 * wo.z * g * wi.z);
 
-    double c = 0.5 * sqrt(H2);
+    double c = 0.5 * sqrt(g_h.H2);
     double s5 = pow5(1.0 - dr_clamp(c, 0.0, 1.0));
     dr_vec3 f0 = dielectric_f0(b);
     double f90 = b->specular;
-    dr_vec3 fd = dr_v3(f0.x + (f90 - f0.x) * s5, f0.y + (f90 - f0.y) * s5, f0.z + (f90 - f0.z) * s5);
-    dr_vec3 fm = dr_v3(base.x + (1.0 - base.x) * s5, base.y + (1.0 - base.y) * s5,
-                       base.z + (1.0 - base.z) * s5);
+    dr_vec3 fd, fm;
+    fresnel_lobes(b, s5, &fd, &fm);
     double gs = ((1.0 - m) * dr_dot(d_out, fd) + m * dr_dot(d_out, fm)) * spec;  /* d loss / d ln spec */
     /* d loss / d s5: F_d,c has slope f90 - f0_c, F_m,c has slope 1 - base_c */
     double d_s5 = spec * ((1.0 - m) * dr_dot(d_out, dr_sub(dr_v3s(f90), f0)) +
                           m * dr_dot(d_out, dr_sub(dr_v3s(1.0), base)));
     double d_c = d_s5 * ds5_dc(c);
-    dr_vec3 d_H = dr_scale(grad_ln_D(a2, H, hxy2, hz2, H2, q), gs);
+    dr_vec3 d_H = dr_scale(grad_ln_D(a2, g_h.H, g_h.hxy2, g_h.hz2, g_h.H2, g_h.q), gs);
     if (d_c != 0.0)
-        d_H = dr_madd(d_H, H, d_c * 0.25 / c);
+        d_H = dr_madd(d_H, g_h.H, d_c * 0.25 / c);
 
     dr_vec3 go = dr_madd(d_H, grad_lambda(a2, wo), -gs / g);
     dr_vec3 gi = dr_madd(d_H, grad_lambda(a2, wi), -gs / g);
@@ -520,23 +546,18 @@ static void d_pdf_impl(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double d
     double p = specular_prob(b, wo.z);
     double cos_pdf = wi.z * DR_INV_PI;
     double a = bsdf_alpha(b), a2 = a * a;
-    dr_vec3 H = dr_add(wo, wi);
-    double hxy2 = H.x * H.x + H.y * H.y, hz2 = H.z * H.z;
-    double H2 = hxy2 + hz2;
-    double q = hxy2 + a2 * hz2;
-    double r = H2 / q;
-    double D = a2 * r * r * DR_INV_PI;
+    const struct ggx_half g_h = ggx_half(a2, wo, wi);
     double lo = smith_lambda(a2, wo);
-    double ps = D / (4.0 * wo.z) / (1.0 + lo);
+    double ps = g_h.D / (4.0 * wo.z) / (1.0 + lo);
     double d_cos_o = prob_moves ? d_specular_prob(b, wo.z, d_pdf * (ps - cos_pdf), d) : 0.0;
     double gs = d_pdf * p * ps;   /* d loss / d ln P_s */
     if (d && gs != 0.0 && rough * rough > DR_BSDF_MIN_ALPHA) {
-        double dlnD = (2.0 / a) * ((hxy2 - a2 * hz2) / q);
+        double dlnD = ggx_dlnD_dalpha(a, a2, &g_h);
         double tan2o = (wo.x * wo.x + wo.y * wo.y) / (wo.z * wo.z);
         double dlo = 0.5 * a * tan2o / sqrt(1.0 + a2 * tan2o);
         d->roughness += gs * (dlnD - dlo / (1.0 + lo)) * (2.0 * rough);
     }
-    dr_vec3 d_H = dr_scale(grad_ln_D(a2, H, hxy2, hz2, H2, q), gs);
+    dr_vec3 d_H = dr_scale(grad_ln_D(a2, g_h.H, g_h.hxy2, g_h.hz2, g_h.H2, g_h.q), gs);
     if (d_wo) {
         dr_vec3 go = dr_madd(d_H, grad_lambda(a2, wo), -gs / (1.0 + lo));
         go.z += d_cos_o - gs / wo.z;
@@ -711,21 +732,16 @@ double dr_bsdf_deriv_lobe_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, e
     if (lobe == DR_BSDF_DLOBE_COSINE)
         return wi.z * DR_INV_PI;
     double a = bsdf_alpha(b), a2 = a * a;
-    dr_vec3 H = dr_add(wo, wi);
-    double hxy2 = H.x * H.x + H.y * H.y, hz2 = H.z * H.z;
-    double H2 = hxy2 + hz2;
-    double q = hxy2 + a2 * hz2;
-    double r = H2 / q;
-    double D = a2 * r * r * DR_INV_PI;
+    const struct ggx_half g_h = ggx_half(a2, wo, wi);
     if (lobe == DR_BSDF_DLOBE_VNDF)
-        return D / (4.0 * wo.z) / (1.0 + smith_lambda(a2, wo));   /* as eval_pdf_above's pdf_spec */
+        return g_h.D / (4.0 * wo.z) / (1.0 + smith_lambda(a2, wo));   /* as eval_pdf_above's pdf_spec */
     /* u - 1 = (hxy2 - a2 hz2) / (a2 hz2), u + 1 = q / (a2 hz2): their ratio
      * without forming u (which overflows for tiny alpha). */
-    double num = hxy2 - a2 * hz2;
+    double num = g_h.hxy2 - a2 * g_h.hz2;
     if (lobe == DR_BSDF_DLOBE_ROUGH_POS ? !(num > 0.0) : !(num < 0.0))
         return 0.0;
     /* p(h) / (4 wo.h), with p(h) = 4 |u-1|/(u+1) D cos(theta_h), cos(theta_h) = Hz/|H|, wo.h = |H|/2 */
-    return 2.0 * (fabs(num) / q) * D * H.z / H2;
+    return 2.0 * (fabs(num) / g_h.q) * g_h.D * g_h.H.z / g_h.H2;
 }
 
 double dr_bsdf_deriv_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, unsigned params)
@@ -805,22 +821,13 @@ void d_bsdf_eval_rough_ndf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_v
     const double rough = b->roughness, m = b->metallic;
     if (!(wo.z > COS_EPS) || !(wi.z > COS_EPS) || no_specular_lobe(b) || !(rough * rough > DR_BSDF_MIN_ALPHA))
         return;
-    const dr_vec3 base = b->base_color;
     double a = bsdf_alpha(b), a2 = a * a;
-    dr_vec3 H = dr_add(wo, wi);
-    double hxy2 = H.x * H.x + H.y * H.y, hz2 = H.z * H.z;
-    double H2 = hxy2 + hz2;
-    double q = hxy2 + a2 * hz2;
-    double r = H2 / q;
-    double D = a2 * r * r * DR_INV_PI;
-    double spec = D / (4.0 * wo.z * (1.0 + smith_lambda(a2, wo) + smith_lambda(a2, wi)) * wi.z);
-    double s5 = pow5(1.0 - dr_clamp(0.5 * sqrt(H2), 0.0, 1.0));
-    dr_vec3 f0 = dielectric_f0(b);
-    double f90 = b->specular;
-    dr_vec3 fd = dr_v3(f0.x + (f90 - f0.x) * s5, f0.y + (f90 - f0.y) * s5, f0.z + (f90 - f0.z) * s5);
-    dr_vec3 fm = dr_v3(base.x + (1.0 - base.x) * s5, base.y + (1.0 - base.y) * s5,
-                       base.z + (1.0 - base.z) * s5);
+    const struct ggx_half g_h = ggx_half(a2, wo, wi);
+    double spec = g_h.D / (4.0 * wo.z * (1.0 + smith_lambda(a2, wo) + smith_lambda(a2, wi)) * wi.z);
+    double s5 = pow5(1.0 - dr_clamp(0.5 * sqrt(g_h.H2), 0.0, 1.0));
+    dr_vec3 fd, fm;
+    fresnel_lobes(b, s5, &fd, &fm);
     double d_spec = (1.0 - m) * dr_dot(d_out, fd) + m * dr_dot(d_out, fm);
-    double dlnD = (2.0 / a) * ((hxy2 - a2 * hz2) / q);
+    double dlnD = ggx_dlnD_dalpha(a, a2, &g_h);
     d->roughness += d_spec * spec * dlnD * (2.0 * rough);
 }
