@@ -5,6 +5,7 @@
 
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 
 static int test_failures = 0;
 static int test_checks = 0;
@@ -30,5 +31,20 @@ static int test_checks = 0;
     (fprintf(stderr, "%s: %d checks, %d failed%s\n", __FILE__, test_checks, test_failures, \
              test_checks == 0 ? " (no check ran: failing)" : ""),                   \
      test_failures != 0 || test_checks == 0)
+
+/* NAME in directory $ENV (default DEF); four buffers in turn, so a few
+ * results can be held at once. */
+static inline const char *path_in(const char *env, const char *def, const char *name)
+{
+    static char buf[4][4096];
+    static int k;
+    const char *dir = getenv(env);
+    char *b = buf[k++ & 3];
+    snprintf(b, sizeof buf[0], "%s/%s", dir && *dir ? dir : def, name);
+    return b;
+}
+
+/* A bundled scene: $DR_SCENES/NAME, default scenes/NAME. */
+static inline const char *scene_path(const char *name) { return path_in("DR_SCENES", "scenes", name); }
 
 #endif

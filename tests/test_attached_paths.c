@@ -212,9 +212,7 @@ static void near_specular(void)
  * loses those components: the regularisation bias, printed. */
 static void cornell_singular(void)
 {
-    const char *dir = getenv("DR_SCENES") ? getenv("DR_SCENES") : "scenes";
-    char path[4096];
-    snprintf(path, sizeof path, "%s/cornell-box.gltf", dir);
+    const char *path = scene_path("cornell-box.gltf");
     struct dr_scene *s = dr_scene_load(path);
     CHECK(s != NULL, "load: %s", dr_last_error());
     if (!s)

@@ -25,9 +25,7 @@ static float *render(const struct dr_scene *s, int threads, uint64_t seed)
 
 int main(void)
 {
-    const char *dir = getenv("DR_SCENES") ? getenv("DR_SCENES") : "scenes";
-    char path[4096];
-    snprintf(path, sizeof path, "%s/cornell-box.gltf", dir);
+    const char *path = scene_path("cornell-box.gltf");
     struct dr_scene *s = dr_scene_load(path);
     CHECK(s != NULL, "load %s: %s", path, dr_last_error());
     if (!s)

@@ -32,17 +32,6 @@ static void record_warning(const char *msg)
     snprintf(warnings + n, sizeof warnings - n, "%s\n", msg);
 }
 
-static const char *path_in(const char *env, const char *def, const char *name)
-{
-    static char buf[4][4096];
-    static int k;
-    const char *dir = getenv(env);
-    char *b = buf[k++ & 3];
-    snprintf(b, sizeof buf[0], "%s/%s", dir && *dir ? dir : def, name);
-    return b;
-}
-
-static const char *scene_path(const char *name) { return path_in("DR_SCENES", "scenes", name); }
 static const char *data_path(const char *name) { return path_in("DR_TESTDIR", "tests", name); }
 
 static const char *out_path(const char *name)

@@ -135,9 +135,7 @@ static void combine_rule(int samples)
 
 static struct dr_scene *cornell(double roughness)
 {
-    const char *dir = getenv("DR_SCENES") ? getenv("DR_SCENES") : "scenes";
-    char path[4096];
-    snprintf(path, sizeof path, "%s/cornell-box.gltf", dir);
+    const char *path = scene_path("cornell-box.gltf");
     struct dr_scene *s = dr_scene_load(path);
     CHECK(s != NULL, "load: %s", dr_last_error());
     if (!s)
