@@ -34,18 +34,6 @@ expect_fail() {
     expect_empty out "$*"
     [ "$(ls -A)" = "$before" ] || fail "$*: left files behind: $(ls -A)"
 }
-# json_check FILE PYTHON-EXPR-over-d: the file is one JSON object and the expression holds
-json_check() {
-    $have_python || return 0
-    python3 - "$1" "$2" <<'EOF' || fail "JSON check failed: $2"
-import json, math, sys
-d = json.load(open(sys.argv[1]))
-ok = eval("(" + sys.argv[2] + "\n)", {"math": math, "d": d})
-if not ok:
-    print(json.dumps(d, indent=1)[:3000], file=sys.stderr)
-    sys.exit(1)
-EOF
-}
 
 require_drender
 red=/materials/red/pbrMetallicRoughness/baseColorFactor

@@ -23,18 +23,6 @@ red=/materials/red/pbrMetallicRoughness/baseColorFactor
 rough=/materials/rough-gold/pbrMetallicRoughness/roughnessFactor
 fast="--res 16x16 --max-depth 6"
 
-# json_check FILE PYTHON-EXPR-over-d
-json_check() {
-    $have_python || return 0
-    python3 - "$1" "$2" <<'EOF' || fail "JSON check failed: $2"
-import json, math, sys
-d = json.load(open(sys.argv[1]))
-ok = eval("(" + sys.argv[2] + "\n)", {"math": math, "d": d})
-if not ok:
-    print(json.dumps(d, indent=1)[:3000], file=sys.stderr)
-    sys.exit(1)
-EOF
-}
 
 # ---- a. help and the unknown mode ----
 for cmd in grad fdcheck optimize; do

@@ -15,18 +15,6 @@ set -u
 cli_setup deriv
 cli_cmd_label="last command" cli_out_bytes=3000
 require_drender
-have_python=false
-command -v python3 >/dev/null 2>&1 && have_python=true
-json_check() {   # json_check FILE PYTHON-EXPR-over-d
-    $have_python || return 0
-    python3 - "$1" "$2" <<'PY' || fail "JSON check failed: $2"
-import json, math, sys
-d = json.load(open(sys.argv[1]))
-if not eval("(" + sys.argv[2] + "\n)", {"math": math, "json": json, "d": d}):
-    print(json.dumps(d, indent=1)[:3000], file=sys.stderr)
-    sys.exit(1)
-PY
-}
 red=/materials/red/pbrMetallicRoughness/baseColorFactor
 rough=/materials/rough-gold/pbrMetallicRoughness/roughnessFactor
 metal=/materials/rough-gold/pbrMetallicRoughness/metallicFactor

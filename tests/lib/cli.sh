@@ -24,6 +24,9 @@
 #   expect_mentions "N1|N2|..." [WHAT]: stderr contains every needle (fixed strings)
 #   check_failed CODE "N1|N2|...": after run, exit CODE, an error message
 #                        naming every needle, nothing on stdout
+#   json_check FILE EXPR   the file is one JSON object d and the Python
+#                        expression EXPR over d (math, json available) holds;
+#                        otherwise fail, with the object on stderr
 #   find_samples         sets $samples to ../shared/gltf-samples beside the
 #                        checkout (DR_TESTDIR/../../ or, in a work tree one level
 #                        deeper, ../../../), or fails naming it
@@ -124,4 +127,14 @@ ensure_gltf_validator() {
 }
 validate_gltf() {   # validate_gltf FILE...: prints every issue; status 0 when no file has errors
     GLTF_VALIDATOR_DIR=$gltf_validator_dir node "$here/validate_gltf.mjs" "$@"
+}
+
+json_check() {   # json_check FILE PYTHON-EXPR-over-d
+    python3 - "$1" "$2" <<'PY' || fail "JSON check failed: $2"
+import json, math, sys
+d = json.load(open(sys.argv[1]))
+if not eval("(" + sys.argv[2] + "\n)", {"math": math, "json": json, "d": d}):
+    print(json.dumps(d, indent=1)[:3000], file=sys.stderr)
+    sys.exit(1)
+PY
 }
