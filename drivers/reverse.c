@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "error.h"
+#include "mis.h"
 #include "sampler.h"
 
 #define PRIMAL_SEED_SALT 0x5052494d414cULL   /* "PRIMAL" */
@@ -20,6 +21,7 @@ struct rev_work {
     double *img_sum;           /* sum of the batches' primal images */
     double *half[2], *m2, *dsq;
     int done, steps;
+    struct dr_mis_history mis;   /* mis without the caller's history: this run's batches' */
 };
 
 static void work_free(struct rev_work *w)
@@ -31,6 +33,7 @@ static void work_free(struct rev_work *w)
     free(w->half[1]);
     free(w->m2);
     free(w->dsq);
+    dr_mis_history_free(&w->mis);
 }
 
 static int work_alloc(struct rev_work *w)
@@ -81,6 +84,8 @@ static int gradient(struct rev_work *w, uint64_t seed, int spp, double *g, struc
     struct dr_grad_problem p = w->o->problem;
     p.spp = spp;
     p.seed = seed;
+    if (!p.mis_history && w->mis.stats)
+        p.mis_history = &w->mis;
     struct dr_grad_stats st = {0};
     int rc = dr_estimator_backward(w->o->estimator, &p, w->adj, g, &st);
     if (rc != 0)
@@ -96,7 +101,7 @@ static int gradient(struct rev_work *w, uint64_t seed, int spp, double *g, struc
 static int batch(struct rev_work *w, int b, uint64_t grad_base, struct dr_reverse_result *r)
 {
     const int spp = r->spp_batch, n0 = (spp + 1) / 2, n1 = spp / 2;
-    const bool split = w->o->primal == DR_PRIMAL_PER_BATCH && n1 > 0;
+    const bool split = r->parts && n1 > 0;
     int rc;
     if (w->o->primal == DR_PRIMAL_SHARED)
         rc = gradient(w, w->o->problem.seed + 1 + (uint64_t)b, spp, w->half[0], r);
@@ -147,12 +152,17 @@ int dr_reverse_gradient(const struct dr_reverse_options *o, const float *target,
     struct rev_work w = {.o = o, .target = target, .n = (size_t)p->width * (size_t)p->height * 3,
                          .T = p->params->total, .steps = 2 * K};
     r->spp_batch = (int)(((int64_t)p->spp + K - 1) / K);
-    r->parts = o->primal == DR_PRIMAL_PER_BATCH && r->spp_batch >= 2;
+    /* mis: a batch in one piece (no halves, so no se_gradient/se_primal
+     * split): weights from halves of 2 spp were poor (mis.h) */
+    r->parts = o->primal == DR_PRIMAL_PER_BATCH && r->spp_batch >= 2 && p->sampling != DR_SAMPLING_MIS;
     r->primal_seed = dr_hash64(p->seed ^ PRIMAL_SEED_SALT);
     r->t_primal = r->t_gradient = 0.0;
     memset(r->grad, 0, sizeof(double) * (size_t)w.T);
     const uint64_t grad_base = dr_hash64(p->seed ^ GRAD_SEED_SALT);
     int rc = work_alloc(&w);
+    /* mis: the weights of each batch (and half) from the earlier ones too (mis.h) */
+    if (rc == 0 && p->sampling == DR_SAMPLING_MIS && !p->mis_history)
+        rc = dr_mis_history_init(&w.mis, p->params->n, 1.0);
     if (rc == 0 && o->primal == DR_PRIMAL_SHARED) {
         w.steps = K + 1;
         rc = primal(&w, r->primal_seed, p->spp, r);

@@ -216,7 +216,7 @@ static void mis_finish(struct dr_est_base *b, double *grad, double *d_image)
 {
     const struct dr_grad_problem *p = b->p;
     double wd = 1.0;
-    dr_mis_combine(&b->mis_acc, d_image ? d_image : grad, d_image ? &wd : p->mis_weights);
+    dr_mis_combine(&b->mis_acc, d_image ? d_image : grad, d_image ? &wd : p->mis_weights, p->mis_history);
     for (int k = 0; d_image && p->mis_weights && k < p->params->n; k++)
         p->mis_weights[k] = wd;
 }

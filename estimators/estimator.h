@@ -37,6 +37,8 @@ enum dr_sampling {
 const char *dr_sampling_name(enum dr_sampling s);
 int dr_sampling_parse(const char *name);
 
+struct dr_mis_history;
+
 struct dr_grad_problem {
     const struct dr_scene *scene;
     const struct dr_camera *camera;
@@ -57,6 +59,8 @@ struct dr_grad_problem {
     double *mis_weights;       /* mis (optional output): params->n entries, each parameter's weight of
                                   the detached estimate (mean over the groups, mis.h); 1 where the
                                   run was detached. Left alone by the other modes */
+    struct dr_mis_history *mis_history;   /* mis (optional, in/out): statistics of earlier runs of
+                                             this problem for the weights (mis.h); NULL: this run's only */
 };
 
 /* prb --sampling attached: the default --regularize. */

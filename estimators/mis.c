@@ -180,38 +180,110 @@ static void stats_loo_groups(const struct dr_mis_accum *m, int k, double s[DR_MI
     }
 }
 
-/* One segment: each group's attached weight a_g from the other groups, the
- * combination into out, and the mean detached weight. */
-static double combine_segment(const struct dr_mis_accum *m, int k, double *out)
+/* Group h's own variance-optimal weight from its statistics st: -P / Q
+ * clamped to [0, 1]; 0 (detached) where Delta is rounding. False when the
+ * group has no samples in the segment (it casts no vote). */
+static bool group_weight(const double st[NSTAT], double *a)
+{
+    *a = 0.0;
+    if (st[Q_] <= 0.0 && st[R_] <= 0.0)
+        return false;
+    if (st[Q_] > ROUNDING_RATIO * st[R_] && st[Q_] > 0.0)
+        *a = dr_clamp(-st[P_] / st[Q_], 0.0, 1.0);
+    return true;
+}
+
+static int cmp_double(const void *x, const void *y)
+{
+    double a = *(const double *)x, b = *(const double *)y;
+    return (a > b) - (a < b);
+}
+
+/* Each group's weight as the median of the OTHER groups' own weights (mis.h:
+ * why a median and not the pooled ratio). 0 where no other group votes. */
+static void weights_median(double s[DR_MIS_GROUPS][NSTAT], double a[DR_MIS_GROUPS])
+{
+    double own[DR_MIS_GROUPS];
+    bool votes[DR_MIS_GROUPS];
+    for (int h = 0; h < DR_MIS_GROUPS; h++)
+        votes[h] = group_weight(s[h], &own[h]);
+    for (int g = 0; g < DR_MIS_GROUPS; g++) {
+        double v[DR_MIS_GROUPS];
+        int n = 0;
+        for (int h = 0; h < DR_MIS_GROUPS; h++)
+            if (h != g && votes[h])
+                v[n++] = own[h];
+        qsort(v, (size_t)n, sizeof v[0], cmp_double);
+        a[g] = n == 0 ? 0.0 : n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+    }
+}
+
+/* Each group's weight from the leave-one-out statistics of the groups' sums
+ * (no per-sample statistics: one number per group, too few for a median). */
+static void weights_pooled(const struct dr_mis_accum *m, int k, double a[DR_MIS_GROUPS])
+{
+    double loo[DR_MIS_GROUPS][NSTAT];
+    stats_loo_groups(m, k, loo);
+    for (int g = 0; g < DR_MIS_GROUPS; g++)
+        group_weight(loo[g], &a[g]);
+}
+
+int dr_mis_history_init(struct dr_mis_history *h, int segments, double decay)
+{
+    h->segments = segments;
+    h->decay = decay;
+    h->stats = calloc((size_t)(segments > 0 ? segments : 1) * DR_MIS_GROUPS * NSTAT, sizeof(double));
+    if (h->stats)
+        return 0;
+    dr_set_error("out of memory for the mis statistics of %d parameters", segments);
+    return DR_ERR_NOMEM;
+}
+
+void dr_mis_history_free(struct dr_mis_history *h)
+{
+    free(h->stats);
+    h->stats = NULL;
+}
+
+/* Segment k's groups' statistics s with the history's added (for the
+ * weights), and the history updated with this run's own. */
+static void join_history(struct dr_mis_history *h, int k, double s[DR_MIS_GROUPS][NSTAT])
+{
+    double *hs = h->stats + (size_t)k * DR_MIS_GROUPS * NSTAT;
+    for (int g = 0; g < DR_MIS_GROUPS; g++)
+        for (int j = 0; j < NSTAT; j++) {
+            double own = s[g][j], old = h->decay * hs[g * NSTAT + j];
+            s[g][j] = own + old;
+            hs[g * NSTAT + j] = own + old;
+        }
+}
+
+/* One segment: each group's attached weight a_g from the other groups (and
+ * the history), the combination into out, and the mean detached weight. */
+static double combine_segment(const struct dr_mis_accum *m, int k, double *out, struct dr_mis_history *h)
 {
     const int64_t off = m->seg_off[k], size = m->seg_size[k];
-    double s[DR_MIS_GROUPS][NSTAT], loo[DR_MIS_GROUPS][NSTAT], all[NSTAT] = {0.0, 0.0, 0.0};
+    double s[DR_MIS_GROUPS][NSTAT], a[DR_MIS_GROUPS];
     if (m->per_sample && stats_per_sample(m, k, s)) {
-        for (int g = 0; g < DR_MIS_GROUPS; g++)
-            for (int j = 0; j < NSTAT; j++)
-                all[j] += s[g][j];
-        for (int g = 0; g < DR_MIS_GROUPS; g++)
-            for (int j = 0; j < NSTAT; j++)
-                loo[g][j] = all[j] - s[g][j];
+        if (h && h->stats && h->segments == m->segments)
+            join_history(h, k, s);
+        weights_median(s, a);
     } else {
-        stats_loo_groups(m, k, loo);
+        weights_pooled(m, k, a);
     }
     memset(out + off, 0, sizeof(double) * (size_t)size);
     double w_sum = 0.0;
     int used = 0;
     for (int g = 0; g < DR_MIS_GROUPS; g++) {
-        double a = 0.0;
-        if (loo[g][Q_] > ROUNDING_RATIO * loo[g][R_] && loo[g][Q_] > 0.0)
-            a = dr_clamp(-loo[g][P_] / loo[g][Q_], 0.0, 1.0);
         const double *D = dr_mis_slot(m, 0, g, DR_MIS_DETACHED) + off;
         const double *A = dr_mis_slot(m, 0, g, DR_MIS_ATTACHED) + off;
         bool has = false;
         for (int64_t i = 0; i < size; i++) {
-            out[off + i] += D[i] + a * (A[i] - D[i]);
+            out[off + i] += D[i] + a[g] * (A[i] - D[i]);
             has |= D[i] != 0.0 || A[i] != 0.0;
         }
         if (has) {   /* a group with samples in this segment */
-            w_sum += 1.0 - a;
+            w_sum += 1.0 - a[g];
             used++;
         }
     }
@@ -225,7 +297,7 @@ static void sum_threads(double *const *parts, int threads, int64_t count)
             parts[0][i] += parts[t][i];
 }
 
-void dr_mis_combine(struct dr_mis_accum *m, double *out, double *w_detached)
+void dr_mis_combine(struct dr_mis_accum *m, double *out, double *w_detached, struct dr_mis_history *history)
 {
     /* the threads into thread 0's buffers, in thread order */
     sum_threads(m->buf, m->threads, m->stride * 2 * DR_MIS_GROUPS);
@@ -233,7 +305,7 @@ void dr_mis_combine(struct dr_mis_accum *m, double *out, double *w_detached)
     sum_threads(m->count, m->threads, m->pixels);
     sum_threads(m->pix, m->threads, m->pixels * 2 * m->n);
     for (int k = 0; k < m->segments; k++) {
-        double w = combine_segment(m, k, out);
+        double w = combine_segment(m, k, out, history);
         if (w_detached)
             w_detached[k] = w;
     }

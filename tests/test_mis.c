@@ -30,10 +30,11 @@ static const char *const TEX = "/images/0";
 /* ------------------------------------------------ the combination rule */
 
 /* Two segments (entries 0-1 and 2), one pixel per group, hand-made samples:
- * the output must be sum_g (D_g + a_g (A_g - D_g)) with a_g the clamped
- * leave-one-out ratio of the statistics of mis.h: per sample, centred per
- * pixel (two samples a pixel), or (one sample a pixel: nothing to centre
- * on) from the groups' sums centred on the other groups' mean. */
+ * the output must be sum_g (D_g + a_g (A_g - D_g)) with a_g from the
+ * statistics of mis.h: per sample, centred per pixel (two samples a pixel),
+ * the median of the other groups' own clamped ratios; or (one sample a
+ * pixel: nothing to centre on) the clamped leave-one-out ratio of the
+ * groups' sums centred on the other groups' mean. */
 static double sample_value(int g, int k, int i, bool attached)
 {
     /* segment 0: attached much less noisy, its delta anti-correlated with
@@ -42,6 +43,27 @@ static double sample_value(int g, int k, int i, bool attached)
     if (!attached || i == 2)
         return 1.0 + noise;
     return 1.0 + 0.1 * noise - 0.05 * ((g + k) % 3 - 1);
+}
+
+static double clamp01(double x)
+{
+    return x < 0.0 ? 0.0 : x > 1.0 ? 1.0 : x;
+}
+
+/* The median of the clamped -P[h] / Q[h] over h != g (7 values: the 4th). */
+static double median_of_others(const double *P, const double *Q, int g)
+{
+    double v[DR_MIS_GROUPS];
+    int n = 0;
+    for (int h = 0; h < DR_MIS_GROUPS; h++)
+        if (h != g) {
+            double x = clamp01(-P[h] / Q[h]);
+            int j = n++;
+            for (; j > 0 && v[j - 1] > x; j--)   /* insertion sort */
+                v[j] = v[j - 1];
+            v[j] = x;
+        }
+    return v[n / 2];
 }
 
 static void combine_rule(int samples)
@@ -62,9 +84,10 @@ static void combine_rule(int samples)
             dr_mis_add(&m, k, px[g], 0, 3, d, a);   /* the samples on different threads: sums are what count */
         }
     double out[3], w[2];
-    dr_mis_combine(&m, out, w);
+    dr_mis_combine(&m, out, w, NULL);
     /* the statistics by hand: P[g], Q[g] as group g's weight uses them */
-    double D[DR_MIS_GROUPS][3], A[DR_MIS_GROUPS][3], P[DR_MIS_GROUPS] = {0}, Q[DR_MIS_GROUPS] = {0};
+    double D[DR_MIS_GROUPS][3], A[DR_MIS_GROUPS][3], P[DR_MIS_GROUPS] = {0}, Q[DR_MIS_GROUPS] = {0},
+           ag[DR_MIS_GROUPS];
     for (int g = 0; g < DR_MIS_GROUPS; g++)
         for (int i = 0; i < 3; i++) {
             D[g][i] = A[g][i] = 0.0;
@@ -74,7 +97,7 @@ static void combine_rule(int samples)
             }
         }
     if (samples == 2) {
-        double own_P[DR_MIS_GROUPS] = {0}, own_Q[DR_MIS_GROUPS] = {0}, Ps = 0.0, Qs = 0.0;
+        double own_P[DR_MIS_GROUPS] = {0}, own_Q[DR_MIS_GROUPS] = {0};
         for (int g = 0; g < DR_MIS_GROUPS; g++) {
             for (int i = 0; i < 2; i++) {
                 for (int k = 0; k < 2; k++) {
@@ -86,13 +109,9 @@ static void combine_rule(int samples)
                 own_P[g] -= D[g][i] * De / 2.0;
                 own_Q[g] -= De * De / 2.0;
             }
-            Ps += own_P[g];
-            Qs += own_Q[g];
         }
-        for (int g = 0; g < DR_MIS_GROUPS; g++) {
-            P[g] = Ps - own_P[g];
-            Q[g] = Qs - own_Q[g];
-        }
+        for (int g = 0; g < DR_MIS_GROUPS; g++)
+            ag[g] = median_of_others(own_P, own_Q, g);
     } else {
         for (int g = 0; g < DR_MIS_GROUPS; g++)
             for (int i = 0; i < 2; i++) {
@@ -109,14 +128,14 @@ static void combine_rule(int samples)
                         Q[g] += e * e;
                     }
             }
+        for (int g = 0; g < DR_MIS_GROUPS; g++)
+            ag[g] = clamp01(-P[g] / Q[g]);
     }
     double want[2] = {0.0, 0.0}, wsum = 0.0;
     for (int g = 0; g < DR_MIS_GROUPS; g++) {
-        double ag = -P[g] / Q[g];
-        ag = ag < 0.0 ? 0.0 : ag > 1.0 ? 1.0 : ag;
         for (int i = 0; i < 2; i++)
-            want[i] += D[g][i] + ag * (A[g][i] - D[g][i]);
-        wsum += 1.0 - ag;
+            want[i] += D[g][i] + ag[g] * (A[g][i] - D[g][i]);
+        wsum += 1.0 - ag[g];
     }
     CHECK_NEAR(out[0], want[0], 1e-12, "combined entry 0");
     CHECK_NEAR(out[1], want[1], 1e-12, "combined entry 1");
@@ -129,6 +148,90 @@ static void combine_rule(int samples)
     CHECK_NEAR(out[2], d2, 1e-12, "identical estimates: their common value");
     CHECK(w[1] == 1.0, "identical estimates: all weight on detached (got %.3f)", w[1]);
     dr_mis_free(&m);
+}
+
+/* Run B's samples: attached noisier than run A's, so its own weights differ. */
+static double sample_value_b(int g, int k, int i, bool attached)
+{
+    double v = sample_value(g, k, i, attached);
+    return attached && i < 2 ? v + 1.5 * ((g + 3 * k) % 2 ? 1.0 : -1.0) * (1.0 + 0.2 * g) : v;
+}
+
+/* Group g's own centred statistics over segment 0 (entries 0-1), two samples. */
+static void own_stats(double (*f)(int, int, int, bool), int g, double *P, double *Q)
+{
+    *P = *Q = 0.0;
+    for (int i = 0; i < 2; i++) {
+        double Ds = 0.0, Es = 0.0;
+        for (int k = 0; k < 2; k++) {
+            double dk = f(g, k, i, false), ek = f(g, k, i, true) - dk;
+            *P += dk * ek;
+            *Q += ek * ek;
+            Ds += dk;
+            Es += ek;
+        }
+        *P -= Ds * Es / 2.0;
+        *Q -= Es * Es / 2.0;
+    }
+}
+
+static void run_with_history(double (*f)(int, int, int, bool), struct dr_mis_history *h, double *out, double *w)
+{
+    struct dr_mis_accum m;
+    int64_t off[2] = {0, 2}, size[2] = {2, 1}, px[DR_MIS_GROUPS];
+    for (int g = 0; g < DR_MIS_GROUPS; g++)
+        for (px[g] = 0; dr_mis_group(px[g]) != g; px[g]++)
+            ;
+    CHECK(dr_mis_init(&m, 1, 3, 2, off, size, 64, false) == 0, "init: %s", dr_last_error());
+    for (int g = 0; g < DR_MIS_GROUPS; g++)
+        for (int k = 0; k < 2; k++) {
+            double d[3], a[3];
+            for (int i = 0; i < 3; i++) {
+                d[i] = f(g, k, i, false);
+                a[i] = f(g, k, i, true);
+            }
+            dr_mis_add(&m, 0, px[g], 0, 3, d, a);
+        }
+    dr_mis_combine(&m, out, w, h);
+    dr_mis_free(&m);
+}
+
+/* Run B after run A with a history (decay 0.5): group h's statistics for
+ * B's weights are 0.5 A_h + B_h, the weight of g their median over h != g. */
+static void history_rule(void)
+{
+    struct dr_mis_history h;
+    CHECK(dr_mis_history_init(&h, 2, 0.5) == 0, "history init");
+    double out_a[3], out_a0[3], w_a[2], w_a0[2], out[3], w[2];
+    run_with_history(sample_value, &h, out_a, w_a);
+    run_with_history(sample_value, NULL, out_a0, w_a0);
+    CHECK(memcmp(out_a, out_a0, sizeof out_a) == 0 && w_a[0] == w_a0[0],
+          "an empty history changes nothing");
+    double out_b0[3], w_b0[2];
+    run_with_history(sample_value_b, NULL, out_b0, w_b0);
+    run_with_history(sample_value_b, &h, out, w);
+    double P[DR_MIS_GROUPS], Q[DR_MIS_GROUPS], want = 0.0, wsum = 0.0;
+    for (int g = 0; g < DR_MIS_GROUPS; g++) {
+        double pa, qa, pb, qb;
+        own_stats(sample_value, g, &pa, &qa);
+        own_stats(sample_value_b, g, &pb, &qb);
+        P[g] = 0.5 * pa + pb;
+        Q[g] = 0.5 * qa + qb;
+    }
+    for (int g = 0; g < DR_MIS_GROUPS; g++) {
+        double ag = median_of_others(P, Q, g), Dg = 0.0, Ag = 0.0;
+        for (int k = 0; k < 2; k++) {
+            Dg += sample_value_b(g, k, 0, false);
+            Ag += sample_value_b(g, k, 0, true);
+        }
+        want += Dg + ag * (Ag - Dg);
+        wsum += 1.0 - ag;
+    }
+    CHECK_NEAR(out[0], want, 1e-12, "run B with the history: entry 0");
+    CHECK_NEAR(w[0], wsum / DR_MIS_GROUPS, 1e-12, "run B with the history: the weight");
+    CHECK(fabs(w[0] - w_b0[0]) > 0.05, "the history should move run B's weight (%.3f alone, %.3f with it)",
+          w_b0[0], w[0]);
+    dr_mis_history_free(&h);
 }
 
 /* ------------------------------------------------------ the Cornell box */
@@ -431,7 +534,11 @@ static void detached_when_nothing_moves(void)
 }
 
 /* Variance over independent seeds, d (mean image) / d roughness. The three
- * estimates share each seed's paths, so the comparison is paired. */
+ * estimates share each seed's paths, so the comparison is paired. The seeds
+ * are mis's runs as grad's batches are (drivers/reverse.c): each run's
+ * weights also use the earlier runs' statistics (a dr_mis_history); its own
+ * 2k samples alone miss attached's tail at roughness 0.5 (without the
+ * history: mis 2.1x detached's variance here). */
 static void variance_case(double roughness)
 {
     struct dr_scene *s = cornell(roughness);
@@ -444,12 +551,15 @@ static void variance_case(double roughness)
     for (int i = 0; i < n; i++)
         adj[i] = 1.0f / n;
     double sum[3] = {0, 0, 0}, sq[3] = {0, 0, 0}, wsum = 0.0, secs[3] = {0, 0, 0};
+    struct dr_mis_history hist;
+    dr_mis_history_init(&hist, 1, 1.0);
     for (int k = 0; k < seeds; k++)
         for (int m = 0; m < 3; m++) {
             double g = 0.0, w = NAN;
             struct dr_grad_stats st;
             struct dr_grad_problem p = problem(s, ps, res, 8, 1000 + (uint64_t)k, (enum dr_sampling)m);
             p.mis_weights = &w;
+            p.mis_history = &hist;
             CHECK(dr_estimator_backward(dr_estimator_find("prb"), &p, adj, &g, &st) == 0, "%s",
                   dr_last_error());
             sum[m] += g;
@@ -459,6 +569,7 @@ static void variance_case(double roughness)
                 wsum += w;
         }
     double var[3];
+    dr_mis_history_free(&hist);
     for (int m = 0; m < 3; m++)
         var[m] = (sq[m] - sum[m] * sum[m] / seeds) / (seeds - 1);
     double best = fmin(var[0], var[1]), worst = fmax(var[0], var[1]);
@@ -482,6 +593,7 @@ int main(void)
 {
     combine_rule(2);
     combine_rule(1);
+    history_rule();
     prb_equals_tape();
     detached_when_nothing_moves();
     variance_case(0.1);
