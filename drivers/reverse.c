@@ -154,14 +154,15 @@ int dr_reverse_gradient(const struct dr_reverse_options *o, const float *target,
     r->spp_batch = (int)(((int64_t)p->spp + K - 1) / K);
     /* mis: a batch in one piece (no halves, so no se_gradient/se_primal
      * split): weights from halves of 2 spp were poor (mis.h) */
-    r->parts = o->primal == DR_PRIMAL_PER_BATCH && r->spp_batch >= 2 && p->sampling != DR_SAMPLING_MIS;
+    const bool mis = dr_est_sampling_run(p) == DR_SAMPLING_MIS;
+    r->parts = o->primal == DR_PRIMAL_PER_BATCH && r->spp_batch >= 2 && !mis;
     r->primal_seed = dr_hash64(p->seed ^ PRIMAL_SEED_SALT);
     r->t_primal = r->t_gradient = 0.0;
     memset(r->grad, 0, sizeof(double) * (size_t)w.T);
     const uint64_t grad_base = dr_hash64(p->seed ^ GRAD_SEED_SALT);
     int rc = work_alloc(&w);
     /* mis: the weights of each batch (and half) from the earlier ones too (mis.h) */
-    if (rc == 0 && p->sampling == DR_SAMPLING_MIS && !p->mis_history)
+    if (rc == 0 && mis && !p->mis_history)
         rc = dr_mis_history_init(&w.mis, p->params->n, 1.0);
     if (rc == 0 && o->primal == DR_PRIMAL_SHARED) {
         w.steps = K + 1;

@@ -52,11 +52,6 @@ struct dr_est_base {
     struct dr_mis_accum mis_acc;
 };
 
-/* The sampling an algorithm runs: attached (or mis) sampling where no
- * requested parameter enters a sampling map is detached sampling, bit for
- * bit, and runs as such (path.h). */
-enum dr_sampling dr_est_sampling_run(const struct dr_grad_problem *p);
-
 /* Sampler and camera ray of sample `sample` of pixel `pixel` (an index into
  * the rendered rectangle; film.h maps it to the frame and draws the filter's
  * offset). */

@@ -63,6 +63,12 @@ struct dr_grad_problem {
                                              this problem for the weights (mis.h); NULL: this run's only */
 };
 
+/* The sampling an algorithm runs: attached (or mis) sampling where no
+ * requested parameter enters a sampling map, and derivative sampling with no
+ * BSDF parameter, is detached sampling, bit for bit, and runs as such
+ * (path.h). */
+enum dr_sampling dr_est_sampling_run(const struct dr_grad_problem *p);
+
 /* prb --sampling attached: the default --regularize. */
 #define DR_PRB_REGULARIZE_DEFAULT 1e-3
 

@@ -50,7 +50,9 @@ and all(0 <= p["mis_weight"]["detached"] <= 1 and abs(p["mis_weight"]["detached"
         for p in d["parameters"])
 and d["parameters"][0]["mis_weight"]["detached"] < 0.9
 and d["parameters"][1]["mis_weight"]["detached"] == 1
-and all(math.isfinite(x) for p in d["parameters"] for x in p["gradient"] + p["stderr"])'
+and all(math.isfinite(x) for p in d["parameters"] for x in p["gradient"] + p["stderr"])
+and all(p["stderr_gradient"] == [None] * p["size"] and p["stderr_primal"] == [None] * p["size"]
+        for p in d["parameters"])'
 run grad --target t.exr --param "$rough" --param "$red" --set "$rough=0.1" --sampling mis --spp 8 --batches 4 $fast --json \
     --estimator tape
 expect_rc 0 "grad --sampling mis --estimator tape"
