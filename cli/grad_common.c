@@ -423,6 +423,14 @@ int grad_param_set(const struct grad_common *g, const struct dr_scene *scene, st
         cli_error(g->cmd, "--param %s", dr_last_error());
         return DR_EXIT_USAGE;
     }
+    /* a sampling mode this scene cannot take is bad usage: refused before any work */
+    struct dr_grad_problem p = {.scene = scene, .params = *set, .sampling = g->sampling};
+    if (g->estimator && dr_estimator_check(g->estimator, &p) != 0) {
+        cli_error(g->cmd, "%s", dr_last_error());
+        dr_param_set_destroy(*set);
+        *set = NULL;
+        return DR_EXIT_USAGE;
+    }
     return -1;
 }
 

@@ -149,9 +149,7 @@ enum dr_sampling dr_est_sampling_run(const struct dr_grad_problem *p)
     return p->sampling;
 }
 
-/* What the sampling mode cannot run on this problem: 0, or DR_ERR_ARG with
- * the message set. */
-static int check_sampling(const struct dr_estimator_ops *e, const struct dr_grad_problem *p)
+int dr_estimator_check(const struct dr_estimator_ops *e, const struct dr_grad_problem *p)
 {
     if (!dr_estimator_supports(e, p->sampling)) {
         dr_set_error("estimator '%s' does not implement %s sampling", e->name, dr_sampling_name(p->sampling));
@@ -260,7 +258,7 @@ void dr_est_mis_sample_done(struct dr_est_base *b, int thread, int64_t pixel, st
 static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const float *adjoint,
                const double *dir, double *grad, double *d_image, struct dr_grad_stats *st)
 {
-    int rc = check_sampling(e, p);
+    int rc = dr_estimator_check(e, p);
     if (rc != 0)
         return rc;
     struct dr_est_base *b = calloc(1, e->job_size);

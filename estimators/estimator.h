@@ -38,6 +38,7 @@ const char *dr_sampling_name(enum dr_sampling s);
 int dr_sampling_parse(const char *name);
 
 struct dr_mis_history;
+struct dr_estimator_ops;
 
 struct dr_grad_problem {
     const struct dr_scene *scene;
@@ -68,6 +69,12 @@ struct dr_grad_problem {
  * BSDF parameter, is detached sampling, bit for bit, and runs as such
  * (path.h). */
 enum dr_sampling dr_est_sampling_run(const struct dr_grad_problem *p);
+
+/* What estimator e with p->sampling cannot run on p's scene and parameters
+ * (media, normal maps, a mode it does not implement): 0, or DR_ERR_ARG with
+ * the message set. Every run checks it first; front ends call it before any
+ * work to report bad usage. */
+int dr_estimator_check(const struct dr_estimator_ops *e, const struct dr_grad_problem *p);
 
 /* prb --sampling attached: the default --regularize. */
 #define DR_PRB_REGULARIZE_DEFAULT 1e-3

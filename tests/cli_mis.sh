@@ -110,7 +110,7 @@ and all(math.isfinite(c["rel_error"]) for c in d["combinations"])'
 fog="$DR_TESTDIR/data/media/fog-khr.gltf"
 run grad "$fog" --param /materials/0/pbrMetallicRoughness/roughnessFactor --sampling attached --res 8x8 --spp 1 -o m.exr
 attached_rc=$rc
-[ "$attached_rc" -ne 0 ] || fail "attached sampling on a scene with media should be refused"
+[ "$attached_rc" -eq 2 ] || fail "attached sampling on a scene with media: exit $attached_rc, want 2 (bad usage)"
 run grad "$fog" --param /materials/0/pbrMetallicRoughness/roughnessFactor --sampling mis --res 8x8 --spp 1 -o m.exr
 expect_rc "$attached_rc" "grad --sampling mis on a scene with media (as attached)"
 expect_mentions "mis sampling|participating media|--sampling detached"

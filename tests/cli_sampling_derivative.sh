@@ -6,7 +6,7 @@
 # media is refused naming the option; unknown names list it.
 # Run by tests/run.sh (env: DRENDER, DR_TESTDIR); also runs alone.
 #
-# Expected exit codes: 0 success; 2 usage error (unknown name); 1 a scene with media (refused when the run starts, as
+# Expected exit codes: 0 success; 2 usage error (unknown name, and a scene with media: refused before any work, as
 # attached sampling is).
 set -u
 
@@ -71,7 +71,7 @@ expect_rc 0 "grad --estimator tape --sampling derivative"
 json_check "$tmp/out" 'all(abs(a - b) <= 1e-9 * (abs(a) + 1e-12) for p, q in zip(d["parameters"], json.load(open("prb.json"))["parameters"]) for a, b in zip(p["gradient"], q["gradient"]))'
 run grad "$DR_TESTDIR/data/media/fog-khr.gltf" --param /materials/floor/pbrMetallicRoughness/baseColorFactor \
     --sampling derivative -o d.exr $fast
-expect_rc 1 "derivative sampling on a scene with media (refused at run time, as attached sampling is)"
+expect_rc 2 "derivative sampling on a scene with media (bad usage, refused before any work, as attached sampling is)"
 expect_mentions "derivative sampling|participating media|--sampling detached"
 run grad --target t.exr --param "$red" --sampling derivativ $fast
 check_failed 2 "--sampling|derivativ|derivative"
