@@ -35,7 +35,7 @@ declare -A PEER_TIME=([4]=0.84 [8]=1.16 [16]=1.27 [32]=1.23)
 PEER_MEM_MIB=116
 THROUGHPUT_GOAL=0.5
 
-for f in "$BUILD/drender" "$BUILD/libdrender-image.so" "$OUT/raw_embree" "$OUT/make_big_scene"; do
+for f in "$BUILD/drender" "$BUILD/libdrender-image.so" "$OUT/raw_embree" "$OUT/path_rays" "$OUT/make_big_scene"; do
     [[ -x $f ]] || { echo "bench: $f is missing; run 'make bench'" >&2; exit 1; }
 done
 mkdir -p "$OUT"
@@ -152,7 +152,19 @@ for scene in "${SCENES[@]}"; do
     done
     ratio_best=$(calc "$dr_rps / $best_inc")
     printf '   %-24s Embree Mr/s by interface: %s; drender / best incoherent: %s\n' "" "$(join "${ceil_line[@]}")" "$ratio_best"
-    TP_JSON+=("{\"scene\": \"$scene\", \"triangles\": $tris, \"drender_rays_per_second\": $dr_rps, \"embree_rays_per_second\": $em_rps, \"ratio\": $ratio, \"ratio_best_incoherent\": $ratio_best, \"embree_ceilings\": {$(join "${ceil_json[@]}")}, \"goal\": $THROUGHPUT_GOAL, \"met\": $(truefalse "$ratio >= $THROUGHPUT_GOAL"), \"other_cores_busy\": $other}")
+    # the ceilings on drender's own kind of rays: path_rays records diffuse
+    # paths' extension and shadow rays and replays them (bench/path_rays.c)
+    measure "$OUT/path_rays" "$scene" 256 256 8 2 8
+    path_json=() path_line=() best_path=0
+    for v in drender_accel_path rtc1_path rtc1_wavefront rtc16_wavefront rtc1M_wavefront; do
+        x=$(json_num "$M_OUT" "$v" mrays_per_second)
+        path_json+=("\"$v\": $x")
+        path_line+=("$v $x")
+        [[ $v == drender_accel_path ]] || best_path=$(calc "$x > $best_path ? $x : $best_path" %.2f)
+    done
+    ratio_path=$(calc "$dr_rps / 1e6 / $best_path")
+    printf '   %-24s path-ray Mr/s: %s; drender / best: %s\n' "" "$(join "${path_line[@]}")" "$ratio_path"
+    TP_JSON+=("{\"scene\": \"$scene\", \"triangles\": $tris, \"drender_rays_per_second\": $dr_rps, \"embree_rays_per_second\": $em_rps, \"ratio\": $ratio, \"ratio_best_incoherent\": $ratio_best, \"embree_ceilings\": {$(join "${ceil_json[@]}")}, \"path_ray_ceilings_mrays\": {$(join "${path_json[@]}")}, \"ratio_best_path_rays\": $ratio_path, \"goal\": $THROUGHPUT_GOAL, \"met\": $(truefalse "$ratio >= $THROUGHPUT_GOAL"), \"other_cores_busy\": $other}")
 done
 
 # ---- b. thread scaling -----------------------------------------------------
