@@ -900,10 +900,12 @@ static int check_scene_args(struct cmp_run *r, const struct dr_scene *scene)
             }
     struct grad_common g = a->g;
     g.max_depth = a->depths[a->n_depths - 1];
-    bool tape = false;
-    for (int c = 0; c < r->n_combos; c++)
+    bool tape = false, mis = false;
+    for (int c = 0; c < r->n_combos; c++) {
         tape |= strcmp(r->combos[c].est->name, "tape") == 0;
-    int rc = cli_limits_compare(&g, scene, r->ps, r->reverse, tape);
+        mis |= r->combos[c].sampling == DR_SAMPLING_MIS;
+    }
+    int rc = cli_limits_compare(&g, scene, r->ps, r->reverse, tape, mis);
     if (rc >= 0)
         return rc;
     bool ok;

@@ -153,6 +153,7 @@ struct need {
     double grads;      /* gradient vectors and per-thread copies: --param (textures), --threads */
     double tape;       /* tape estimator: --max-depth x paths per batch */
     double batches;    /* per-batch gradient storage: --batches x --param */
+    double mis;        /* --sampling mis: its group copies of the estimate, per thread */
     double scene;      /* already loaded */
 };
 
@@ -181,7 +182,7 @@ void cli_json_memory_estimate(FILE *f)
 
 static int check(const char *cmd, const struct need *n, const char *images_opt, const char *tape_opt)
 {
-    double total = n->images + n->grads + n->tape + n->batches + n->scene;
+    double total = n->images + n->grads + n->tape + n->batches + n->mis + n->scene;
     last_estimate = total >= 1.8e19 ? UINT64_MAX : (uint64_t)total;
     uint64_t limit = cli_mem_limit();
     if (total <= (double)limit)
@@ -200,6 +201,11 @@ static int check(const char *cmd, const struct need *n, const char *images_opt, 
     if (n->batches > part) {
         part = n->batches;
         what = "--batches (every batch keeps its gradient of every --param scalar)";
+    }
+    if (n->mis > part) {
+        part = n->mis;
+        what = "--sampling mis (16 copies of the estimate per thread: fewer --threads, a smaller --res, or "
+               "--sampling detached)";
     }
     if (n->scene > part) {
         part = n->scene;
@@ -260,14 +266,15 @@ int cli_limits_grad(const struct grad_common *g, const struct dr_scene *scene, c
     if (reverse) {
         /* primal image, adjoint, target (read + rgb), texture gradient images */
         n.images = npix * 3 * (3 * sizeof(float)) + npix * 4 * sizeof(float);
-        n.grads = T * (3 * sizeof(double) + sizeof(float)) + T * 2 * sizeof(double) * threads +
-                  mis_bytes(g, T, npix, threads, false);
+        n.grads = T * (3 * sizeof(double) + sizeof(float)) + T * 2 * sizeof(double) * threads;
+        n.mis = mis_bytes(g, T, npix, threads, false);
         double spp_b = ceil((double)g->spp / (batches > 0 ? batches : 1));
         double paths = npix * spp_b;
         n.tape = tape_bytes(g, batch > 0 ? fmin((double)batch, paths) : npix);
     } else {
         /* d image in double per thread and summed, plus its float copy */
-        n.images = npix * 3 * (sizeof(double) * (threads + 1) + sizeof(float)) + mis_bytes(g, T, npix, threads, true);
+        n.images = npix * 3 * (sizeof(double) * (threads + 1) + sizeof(float));
+        n.mis = mis_bytes(g, T, npix, threads, true);
         n.grads = T * sizeof(double);
         double paths = npix * g->spp;
         n.tape = tape_bytes(g, batch > 0 ? fmin((double)batch, paths) : npix);
@@ -285,8 +292,8 @@ int cli_limits_fdcheck(const struct grad_common *g, const struct dr_scene *scene
     /* d image (double), adjoint and renders (float), per-thread forward images */
     n.images = npix * 3 * (sizeof(double) * (threads + 1) + 3 * sizeof(float));
     /* one estimator run at a time, forward or reverse: the larger of the two */
-    n.grads = T * 5 * sizeof(double) + T * 2 * sizeof(double) * threads +
-              fmax(mis_bytes(g, T, npix, threads, true), mis_bytes(g, T, npix, threads, false));
+    n.grads = T * 5 * sizeof(double) + T * 2 * sizeof(double) * threads;
+    n.mis = fmax(mis_bytes(g, T, npix, threads, true), mis_bytes(g, T, npix, threads, false));
     n.batches = (double)batches * T * sizeof(double);
     n.tape = tape_bytes(g, npix);
     return check("fdcheck", &n, "--res", "--max-depth (tape records every vertex of a batch; or --estimator prb)");
@@ -302,8 +309,8 @@ int cli_limits_optimize(const struct grad_common *g, const struct dr_scene *scen
     /* per target: the file (up to 4 channels), rgb, render, adjoint; one view render */
     n.images = (double)target_pixels * (4 + 9) * sizeof(float) + (double)max_pixels * 3 * sizeof(float);
     /* theta, grad, per-target grad, reference, Adam's m, v, lr, lo, hi; per-thread copies */
-    n.grads = T * 9 * sizeof(double) + T * 2 * sizeof(double) * threads +
-              mis_bytes(g, T, (double)max_pixels, threads, false);
+    n.grads = T * 9 * sizeof(double) + T * 2 * sizeof(double) * threads;
+    n.mis = mis_bytes(g, T, (double)max_pixels, threads, false);
     n.tape = tape_bytes(g, (double)max_pixels);
     return check("optimize", &n, "--target (the images' size)",
                  "--max-depth (tape records every vertex of a batch; or --estimator prb)");
@@ -312,7 +319,7 @@ int cli_limits_optimize(const struct grad_common *g, const struct dr_scene *scen
 /* ---- compare (cmd_compare.c) ---- */
 
 int cli_limits_compare(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *ps,
-                       bool reverse, bool tape)
+                       bool reverse, bool tape, bool mis)
 {
     const double npix = (double)g->width * g->height, T = ps ? (double)ps->total : 0.0;
     const double P = ps ? (double)ps->n : 0.0;
@@ -328,6 +335,10 @@ int cli_limits_compare(const struct grad_common *g, const struct dr_scene *scene
     /* target, primal and adjoint; fd and forward-mode images, per-thread copies */
     n.images = npix * 3 * (3 * sizeof(float) + sizeof(double) * (threads + 2));
     n.grads = T * 3 * sizeof(double) + T * 2 * sizeof(double) * threads;
+    if (mis) {   /* one estimator run at a time: a mis one holds its group copies */
+        gt.sampling = DR_SAMPLING_MIS;
+        n.mis = mis_bytes(&gt, T, npix, threads, !reverse);
+    }
     n.tape = tape_bytes(&gt, npix);
     return check("compare", &n, "--res", "--max-depth (tape records every vertex of a batch: lower it, or "
                                          "--estimators prb)");

@@ -46,9 +46,9 @@ int cli_limits_optimize(const struct grad_common *g, const struct dr_scene *scen
                         uint64_t target_pixels, uint64_t max_pixels);
 
 /* compare: reverse or forward mode, g's size and largest max depth; tape when
- * the tape estimator is among those compared. */
+ * the tape estimator is among those compared, mis when mis sampling is. */
 int cli_limits_compare(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *ps,
-                       bool reverse, bool tape);
+                       bool reverse, bool tape, bool mis);
 
 /* The estimate of the last cli_limits_* call, in bytes (0 before any). */
 uint64_t cli_mem_estimate(void);

@@ -131,4 +131,11 @@ DRENDER_MEM_LIMIT=2G run grad --param "$rough" --res 2048x2048 --spp 1 --threads
 expect_rc 2 "grad --sampling mis over the memory limit"
 expect_mentions "--res|DRENDER_MEM_LIMIT"
 [ -e big.exr ] && fail "a refused run wrote big.exr"
+# compare counts them too: forward mode at 1536x1536 needs about 0.6 GB with
+# detached sampling alone, 2.5 GB once a mis run's 16 derivative images per thread count
+DRENDER_MEM_LIMIT=1500M run compare --param "$rough" --res 1536x1536 --spp 1 --batches 2 --threads 2 \
+    --sampling detached,mis --estimators prb -o cmp_big
+expect_rc 2 "compare --sampling mis over the memory limit"
+expect_mentions "compare|--sampling mis|DRENDER_MEM_LIMIT"
+[ -e cmp_big/results.json ] && fail "a refused compare wrote results.json"
 echo "cli_mis: all checks passed"
