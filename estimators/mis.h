@@ -57,8 +57,8 @@
  * Why the weights need care: the attached roughness derivative is
  * heavy-tailed. On the Cornell box at roughness 0.5 (32x32), one pixel,
  * (20, 20), holds 82% of sum |Delta|^2 over 200 runs, in a few rare
- * samples (a likely cause, not verified: hit points seen at grazing angles
- * move as 1/cos when the direction moves). A run that has not seen them takes Var Delta for small and
+ * samples: the sphere's highlight, where it reflects the small ceiling
+ * light (why those samples carry large attached values is not analysed). A run that has not seen them takes Var Delta for small and
  * leans to attached where detached is better. Three choices keep that in
  * check (measured with grad's default 4 batches of 4 spp at 32x32, 200
  * seeds):
