@@ -14,12 +14,24 @@
  *
  * The dense objects are built in local coordinates (unit sphere, torus of
  * major radius 1) and placed by node matrices as well, with smooth vertex
- * normals. Standard library only, so it links with anything. */
+ * normals.
+ *
+ *   make_big_scene --textured OUT.gltf
+ *
+ * writes the textured variant instead (issue 11's "heavy textured asset"):
+ * the same geometry with TEXCOORD_0, the white sphere's base colour from a
+ * 2048x2048 PNG and the blue torus emissive through a 2048x2048 emissive
+ * texture (16 384 emissive triangles for the light sampler), the PNGs next
+ * to the .gltf (OUT-base.png, OUT-emissive.png; written with stb, which
+ * drender links anyway). */
 #include <math.h>
+#include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+
+#include <stb/stb_image_write.h>
 
 #define PI 3.14159265358979323846
 
@@ -52,27 +64,29 @@ static size_t bin_append(const void *data, size_t n)
 
 /* One indexed triangle mesh in local coordinates. */
 struct mesh {
-    float *pos, *nor;
+    float *pos, *nor, *uv;
     uint32_t *idx;
     size_t nv, nt;
 };
 
 static struct mesh mesh_alloc(size_t nv, size_t nt)
 {
-    struct mesh m = {malloc(nv * 3 * sizeof(float)), malloc(nv * 3 * sizeof(float)),
+    struct mesh m = {malloc(nv * 3 * sizeof(float)), malloc(nv * 3 * sizeof(float)), malloc(nv * 2 * sizeof(float)),
                      malloc(nt * 3 * sizeof(uint32_t)), 0, 0};
-    if (!m.pos || !m.nor || !m.idx) {
+    if (!m.pos || !m.nor || !m.uv || !m.idx) {
         fprintf(stderr, "make_big_scene: out of memory\n");
         exit(1);
     }
     return m;
 }
 
-static void put_vertex(struct mesh *m, double px, double py, double pz, double nx, double ny, double nz)
+static void put_vertex(struct mesh *m, double px, double py, double pz, double nx, double ny, double nz, double u,
+                       double v)
 {
-    float *p = m->pos + 3 * m->nv, *n = m->nor + 3 * m->nv;
+    float *p = m->pos + 3 * m->nv, *n = m->nor + 3 * m->nv, *t = m->uv + 2 * m->nv;
     p[0] = (float)px, p[1] = (float)py, p[2] = (float)pz;
     n[0] = (float)nx, n[1] = (float)ny, n[2] = (float)nz;
+    t[0] = (float)u, t[1] = (float)v;
     m->nv++;
 }
 
@@ -87,10 +101,10 @@ static void put_tri(struct mesh *m, uint32_t a, uint32_t b, uint32_t c)
 static struct mesh make_quad(void)
 {
     struct mesh m = mesh_alloc(4, 2);
-    put_vertex(&m, -1, -1, 0, 0, 0, 1);
-    put_vertex(&m, 1, -1, 0, 0, 0, 1);
-    put_vertex(&m, 1, 1, 0, 0, 0, 1);
-    put_vertex(&m, -1, 1, 0, 0, 0, 1);
+    put_vertex(&m, -1, -1, 0, 0, 0, 1, 0, 1);
+    put_vertex(&m, 1, -1, 0, 0, 0, 1, 1, 1);
+    put_vertex(&m, 1, 1, 0, 0, 0, 1, 1, 0);
+    put_vertex(&m, -1, 1, 0, 0, 0, 1, 0, 0);
     put_tri(&m, 0, 1, 2);
     put_tri(&m, 0, 2, 3);
     return m;
@@ -105,7 +119,7 @@ static struct mesh make_sphere(int nu, int nv)
         double th = PI * j / nv, y = cos(th), r = sin(th);
         for (int i = 0; i <= nu; i++) {
             double ph = 2 * PI * i / nu, x = r * sin(ph), z = r * cos(ph);
-            put_vertex(&m, x, y, z, x, y, z);
+            put_vertex(&m, x, y, z, x, y, z, (double)i / nu, (double)j / nv);
         }
     }
     for (int j = 0; j < nv; j++)
@@ -132,7 +146,7 @@ static struct mesh make_torus(double r, int nu, int nv)
             double th = 2 * PI * j / nv, ct = cos(th), st = sin(th);
             /* normal: (cos th cos ph, sin th, cos th sin ph) */
             double nx = ct * cp, ny = st, nz = ct * sp;
-            put_vertex(&m, cp + r * nx, r * ny, sp + r * nz, nx, ny, nz);
+            put_vertex(&m, cp + r * nx, r * ny, sp + r * nz, nx, ny, nz, (double)i / nu, (double)j / nv);
         }
     }
     for (int i = 0; i < nu; i++)
@@ -191,13 +205,66 @@ static const char *base_name(const char *path)
     return s ? s + 1 : path;
 }
 
+/* The file name of path without its directory and ".gltf" (the PNGs' prefix). */
+static const char *stem(const char *path)
+{
+    static char buf[1024];
+    snprintf(buf, sizeof buf, "%s", base_name(path));
+    size_t n = strlen(buf);
+    if (n > 5 && strcmp(buf + n - 5, ".gltf") == 0)
+        buf[n - 5] = '\0';
+    return buf;
+}
+
+/* OUT-base.png (a two-tone checker with a gradient) and OUT-emissive.png
+ * (bright stripes on black), 2048x2048 RGB, next to OUT.gltf. */
+static int write_textures(const char *gltf_path)
+{
+    enum { S = 2048 };
+    unsigned char *px = malloc((size_t)S * S * 3);
+    char path[2048], dir[1024];
+    snprintf(dir, sizeof dir, "%s", gltf_path);
+    char *slash = strrchr(dir, '/');
+    if (slash)
+        slash[1] = '\0';
+    else
+        dir[0] = '\0';
+    if (!px)
+        return 1;
+    for (int pass = 0; pass < 2; pass++) {
+        for (int y = 0; y < S; y++)
+            for (int x = 0; x < S; x++) {
+                unsigned char *c = px + 3 * ((size_t)y * S + x);
+                if (pass == 0) {
+                    int on = ((x / 64) + (y / 64)) % 2;
+                    c[0] = (unsigned char)(on ? 230 : 60 + x / 16);
+                    c[1] = (unsigned char)(on ? 220 : 80 + y / 16);
+                    c[2] = (unsigned char)(on ? 200 : 120);
+                } else {
+                    int lit = (x % 256) < 48;
+                    c[0] = c[1] = (unsigned char)(lit ? 255 : 0);
+                    c[2] = (unsigned char)(lit ? 180 : 0);
+                }
+            }
+        snprintf(path, sizeof path, "%s%s-%s.png", dir, stem(gltf_path), pass ? "emissive" : "base");
+        if (!stbi_write_png(path, S, S, 3, px, S * 3)) {
+            fprintf(stderr, "make_big_scene: cannot write %s\n", path);
+            free(px);
+            return 1;
+        }
+    }
+    free(px);
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
-    if (argc != 2 || argv[1][0] == '-') {
-        fprintf(stderr, "usage: make_big_scene OUT.gltf   (also writes OUT.bin next to it)\n");
+    const bool textured = argc == 3 && strcmp(argv[1], "--textured") == 0;
+    if (!(argc == 2 || textured) || argv[argc - 1][0] == '-') {
+        fprintf(stderr, "usage: make_big_scene [--textured] OUT.gltf   (also writes OUT.bin next to it)\n");
         return 2;
     }
-    const char *gltf_path = argv[1];
+    const char *gltf_path = argv[argc - 1];
     size_t plen = strlen(gltf_path);
     char *bin_path = malloc(plen + 5);
     if (!bin_path)
@@ -254,14 +321,19 @@ int main(int argc, char **argv)
     /* blue torus (0.2 + 0.07) lying flat on the floor, front right */
     trs(nodes[9].m, 0.2, 0, 1, 0, 0, 0.45, -1.0 + 0.2 * 0.35, 0.42);
 
-    /* binary: per mesh positions, normals, indices (all 4-byte aligned) */
-    size_t off_pos[N_MESHES], off_nor[N_MESHES], off_idx[N_MESHES];
+    /* binary: per mesh positions, normals, indices (all 4-byte aligned), and
+     * in the textured variant the UVs; A accessors (and buffer views) per mesh */
+    const int A = textured ? 4 : 3;
+    size_t off_pos[N_MESHES], off_nor[N_MESHES], off_idx[N_MESHES], off_uv[N_MESHES];
     size_t total_tris = 0;
     for (int i = 0; i < N_MESHES; i++) {
         off_pos[i] = bin_append(meshes[i].pos, meshes[i].nv * 3 * sizeof(float));
         off_nor[i] = bin_append(meshes[i].nor, meshes[i].nv * 3 * sizeof(float));
         off_idx[i] = bin_append(meshes[i].idx, meshes[i].nt * 3 * sizeof(uint32_t));
+        off_uv[i] = textured ? bin_append(meshes[i].uv, meshes[i].nv * 2 * sizeof(float)) : 0;
     }
+    if (textured && write_textures(gltf_path) != 0)
+        return 1;
     for (int i = 0; i < N_NODES; i++)
         total_tris += meshes[nodes[i].mesh].nt;
 
@@ -278,6 +350,10 @@ int main(int argc, char **argv)
     }
     fprintf(f, "{\n  \"asset\": {\"version\": \"2.0\", \"generator\": \"drender bench/make_big_scene.c\"},\n");
     fprintf(f, "  \"extensionsUsed\": [\"KHR_materials_specular\", \"KHR_materials_emissive_strength\"],\n");
+    if (textured)
+        fprintf(f, "  \"images\": [{\"uri\": \"%s-base.png\"}, {\"uri\": \"%s-emissive.png\"}],\n"
+                   "  \"samplers\": [{}],\n  \"textures\": [{\"source\": 0, \"sampler\": 0}, {\"source\": 1, \"sampler\": 0}],\n",
+                stem(gltf_path), stem(gltf_path));
     fprintf(f, "  \"scene\": 0,\n  \"scenes\": [{\"name\": \"big-cornell-box\", \"nodes\": [");
     for (int i = 0; i <= N_NODES; i++)
         fprintf(f, "%s%d", i ? ", " : "", i);
@@ -299,19 +375,33 @@ int main(int argc, char **argv)
     fprintf(f, "  \"meshes\": [\n");
     for (int i = 0; i < N_NODES; i++) {
         int g = nodes[i].mesh;
-        fprintf(f, "    {\"name\": \"%s\", \"primitives\": [{\"attributes\": {\"POSITION\": %d, \"NORMAL\": %d}, "
+        char uv[48] = "";
+        if (textured)
+            snprintf(uv, sizeof uv, ", \"TEXCOORD_0\": %d", A * g + 3);
+        fprintf(f, "    {\"name\": \"%s\", \"primitives\": [{\"attributes\": {\"POSITION\": %d, \"NORMAL\": %d%s}, "
                    "\"indices\": %d, \"material\": %d}]}%s\n",
-                nodes[i].name, 3 * g, 3 * g + 1, 3 * g + 2, nodes[i].material, i + 1 < N_NODES ? "," : "");
+                nodes[i].name, A * g, A * g + 1, uv, A * g + 2, nodes[i].material, i + 1 < N_NODES ? "," : "");
     }
     fprintf(f, "  ],\n  \"materials\": [\n");
-    write_material(f, "white", 0.885809, 0.698859, 0.666422, 0, 1, 0);
+    if (textured)   /* the base colour texture on the white sphere's material (walls read it too) */
+        fprintf(f, "    {\"name\": \"white\", \"pbrMetallicRoughness\": {\"baseColorFactor\": [0.885809, 0.698859, "
+                   "0.666422, 1.0], \"baseColorTexture\": {\"index\": 0}, \"metallicFactor\": 0.0, "
+                   "\"roughnessFactor\": 1.0}, \"extensions\": {\"KHR_materials_specular\": {\"specularFactor\": 0.0}}},\n");
+    else
+        write_material(f, "white", 0.885809, 0.698859, 0.666422, 0, 1, 0);
     write_material(f, "green", 0.105421, 0.37798, 0.076425, 0, 1, 0);
     write_material(f, "red", 0.570068, 0.0430135, 0.0443706, 0, 1, 0);
     fprintf(f, "    {\"name\": \"light\", \"pbrMetallicRoughness\": {\"baseColorFactor\": [0.885809, 0.698859, "
                "0.666422, 1.0], \"metallicFactor\": 0.0, \"roughnessFactor\": 1.0}, \"emissiveFactor\": "
                "[1.0, 0.7607168107902321, 0.36730135421765375], \"extensions\": {\"KHR_materials_specular\": "
                "{\"specularFactor\": 0.0}, \"KHR_materials_emissive_strength\": {\"emissiveStrength\": 18.387}}},\n");
-    write_material(f, "blue", 0.08, 0.18, 0.6, 0, 1, 0);
+    if (textured)   /* the blue torus glows through its emissive texture */
+        fprintf(f, "    {\"name\": \"blue\", \"pbrMetallicRoughness\": {\"baseColorFactor\": [0.08, 0.18, 0.6, 1.0], "
+                   "\"metallicFactor\": 0.0, \"roughnessFactor\": 1.0}, \"emissiveFactor\": [1.0, 1.0, 1.0], "
+                   "\"emissiveTexture\": {\"index\": 1}, \"extensions\": {\"KHR_materials_specular\": "
+                   "{\"specularFactor\": 0.0}, \"KHR_materials_emissive_strength\": {\"emissiveStrength\": 4.0}}},\n");
+    else
+        write_material(f, "blue", 0.08, 0.18, 0.6, 0, 1, 0);
     write_material(f, "rough-gold", 1.0, 0.78, 0.34, 1, 0.35, 0);
     write_material(f, "rough-silver", 0.95, 0.93, 0.88, 1, 0.2, 1);
 
@@ -326,11 +416,14 @@ int main(int argc, char **argv)
             }
         fprintf(f, "    {\"bufferView\": %d, \"componentType\": 5126, \"count\": %zu, \"type\": \"VEC3\", "
                    "\"min\": [%.9g, %.9g, %.9g], \"max\": [%.9g, %.9g, %.9g]},\n",
-                3 * g, m->nv, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
+                A * g, m->nv, lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
         fprintf(f, "    {\"bufferView\": %d, \"componentType\": 5126, \"count\": %zu, \"type\": \"VEC3\"},\n",
-                3 * g + 1, m->nv);
+                A * g + 1, m->nv);
         fprintf(f, "    {\"bufferView\": %d, \"componentType\": 5125, \"count\": %zu, \"type\": \"SCALAR\"}%s\n",
-                3 * g + 2, 3 * m->nt, g + 1 < N_MESHES ? "," : "");
+                A * g + 2, 3 * m->nt, g + 1 < N_MESHES || textured ? "," : "");
+        if (textured)
+            fprintf(f, "    {\"bufferView\": %d, \"componentType\": 5126, \"count\": %zu, \"type\": \"VEC2\"}%s\n",
+                    A * g + 3, m->nv, g + 1 < N_MESHES ? "," : "");
     }
     fprintf(f, "  ],\n  \"bufferViews\": [\n");
     for (int g = 0; g < N_MESHES; g++) {
@@ -340,7 +433,10 @@ int main(int argc, char **argv)
         fprintf(f, "    {\"buffer\": 0, \"byteOffset\": %zu, \"byteLength\": %zu, \"target\": 34962},\n",
                 off_nor[g], m->nv * 3 * sizeof(float));
         fprintf(f, "    {\"buffer\": 0, \"byteOffset\": %zu, \"byteLength\": %zu, \"target\": 34963}%s\n",
-                off_idx[g], m->nt * 3 * sizeof(uint32_t), g + 1 < N_MESHES ? "," : "");
+                off_idx[g], m->nt * 3 * sizeof(uint32_t), g + 1 < N_MESHES || textured ? "," : "");
+        if (textured)
+            fprintf(f, "    {\"buffer\": 0, \"byteOffset\": %zu, \"byteLength\": %zu, \"target\": 34962}%s\n",
+                    off_uv[g], m->nv * 2 * sizeof(float), g + 1 < N_MESHES ? "," : "");
     }
     fprintf(f, "  ],\n  \"buffers\": [{\"uri\": \"%s\", \"byteLength\": %zu}]\n}\n", base_name(bin_path), bin_len);
     if (fclose(f) != 0) {
@@ -352,6 +448,7 @@ int main(int argc, char **argv)
     for (int i = 0; i < N_MESHES; i++) {
         free(meshes[i].pos);
         free(meshes[i].nor);
+        free(meshes[i].uv);
         free(meshes[i].idx);
     }
     free(bin);

@@ -28,6 +28,7 @@ BENCH_BUDGET=${BENCH_BUDGET:-170}
 OUT=$BUILD/bench
 CORNELL=scenes/cornell-box.gltf
 BIG=$OUT/big-scene.gltf
+BIG_TEX=$OUT/big-textured.gltf   # the same with two 2048x2048 textures, 16k emissive-textured triangles
 
 # The peer's figures (Mitsuba 3.8.0, 2 threads, 256x256, 64 spp; see
 # ../shared/bench/README.md): primal render seconds per max_depth, peak memory.
@@ -111,6 +112,7 @@ render() {
 LOAD_START=$(cut -d ' ' -f 1 /proc/loadavg)
 echo "drender benchmarks ($(date '+%Y-%m-%d %H:%M'), $(nproc) CPUs, load average $LOAD_START at start)"
 "$OUT/make_big_scene" "$BIG" >/dev/null
+"$OUT/make_big_scene" --textured "$BIG_TEX" >/dev/null
 
 # ---- a. throughput ratio ---------------------------------------------------
 # The same path-tracing workload on each scene (256x256, 16 spp, max depth 8,
@@ -123,7 +125,7 @@ echo "a. throughput: drender rays/s / raw Embree rays/s  (256x256, 16 spp, depth
 printf '   %-24s %9s %13s %12s %7s %5s %7s\n' scene triangles "drender Mr/s" "Embree Mr/s" ratio goal others
 SCENES=("$CORNELL")
 if [[ -f $PEER ]]; then SCENES+=("$PEER"); else echo "   (peer scene $PEER not found: skipped)"; fi
-SCENES+=("$BIG")
+SCENES+=("$BIG" "$BIG_TEX")
 TP_JSON=()
 for scene in "${SCENES[@]}"; do
     render "$scene" --res 256x256 --spp 16 --max-depth 8 --threads 2
@@ -269,8 +271,18 @@ for i in 1 2 3 4 5; do
 done
 STARTUP=$(median "${st[@]}") VERSION_WALL=$(median "${vw[@]}") HELP_WALL=$(median "${hw[@]}")
 printf '   process start to first ray (untextured Cornell box): %.3f s (goal <= 0.05: %s)\n' "$STARTUP" "$(yesno "$STARTUP <= 0.05")"
+# a textured scene: the image library's plugins, two 2048x2048 PNG decodes and the emissive light sampler
+st=() ld=()
+for i in 1 2 3 4 5; do
+    render "$BIG_TEX" --res 64x64 --spp 1 --threads 2
+    st+=("$(json_num "$R_JSON" startup time)")
+    ld+=("$(json_num "$R_JSON" load time)")
+done
+STARTUP_TEX=$(median "${st[@]}") LOAD_TEX=$(median "${ld[@]}")
+printf '   process start to first ray (%s): %.3f s, of which loading the scene %.3f s\n' "$(basename "$BIG_TEX")" \
+    "$STARTUP_TEX" "$LOAD_TEX"
 printf '   drender --version: %.3f s wall; drender render --help: %.3f s wall\n' "$VERSION_WALL" "$HELP_WALL"
-STARTUP_JSON="{\"first_ray_seconds\": $STARTUP, \"version_wall_seconds\": $VERSION_WALL, \"help_wall_seconds\": $HELP_WALL}"
+STARTUP_JSON="{\"first_ray_seconds\": $STARTUP, \"textured_first_ray_seconds\": $STARTUP_TEX, \"textured_load_seconds\": $LOAD_TEX, \"version_wall_seconds\": $VERSION_WALL, \"help_wall_seconds\": $HELP_WALL}"
 
 # ---- results.json and the noise note ---------------------------------------
 

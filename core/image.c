@@ -24,6 +24,27 @@ double dr_linear_to_srgb(double v)
     return 1.055 * pow(v, 1.0 / 2.4) - 0.055;
 }
 
+/* The last input seen at each 8-bit level and its decoded value. */
+struct srgb_memo {
+    float in[256], out[256];
+    bool known[256];
+};
+
+static float srgb_to_linear_memo(struct srgb_memo *m, float v)
+{
+    float level = v * 255.0f;
+    if (!(level >= 0.0f && level <= 255.0f))
+        return (float)dr_srgb_to_linear(v);
+    int k = (int)(level + 0.5f);
+    if (m->known[k] && m->in[k] == v)
+        return m->out[k];
+    float out = (float)dr_srgb_to_linear(v);
+    m->known[k] = true;
+    m->in[k] = v;
+    m->out[k] = out;
+    return out;
+}
+
 int dr_image_make_linear(struct dr_image *img)
 {
     if (!img || !img->data || img->width <= 0 || img->height <= 0 || img->channels <= 0)
@@ -41,13 +62,20 @@ int dr_image_make_linear(struct dr_image *img)
         /* The stored values are linear already. */
         memcpy(lin, img->data, n * c * sizeof *lin);
     } else {
-        /* Colour channels are decoded, alpha (channel 1 of 2, 3 of 4) is not. */
+        /* Colour channels are decoded, alpha (channel 1 of 2, 3 of 4) is not.
+         * 8-bit files hold at most 256 distinct values, and pow() per texel
+         * was a quarter of loading a scene with two 2k textures: each value
+         * is decoded once and remembered (by its nearest 8-bit level, with
+         * the exact input, so any other input still goes through pow and the
+         * result is bit for bit what it was). */
+        struct srgb_memo memo;
+        memset(&memo, 0, sizeof memo);
         size_t ncolour = c == 2 ? 1 : (c >= 4 ? 3 : c);
         for (size_t i = 0; i < n; ++i) {
             const float *s = img->data + i * c;
             float *d = lin + i * c;
             for (size_t k = 0; k < c; ++k)
-                d[k] = k < ncolour ? (float)dr_srgb_to_linear(s[k]) : s[k];
+                d[k] = k < ncolour ? srgb_to_linear_memo(&memo, s[k]) : s[k];
         }
     }
     img->linear = lin;

@@ -161,6 +161,35 @@ static double eval1(enum dr_wrap ws, enum dr_wrap wt, double u, double v)
     return out[0];
 }
 
+/* dr_image_make_linear remembers each 8-bit level's decoded value: the
+ * result must still be dr_srgb_to_linear of every stored value, bit for
+ * bit, for 8-bit levels, for values between levels (same nearest level,
+ * different input), out of range and NaN; alpha kept. */
+static void test_make_linear_exact(void)
+{
+    enum { N = 600 };
+    float *data = malloc(sizeof(float) * N * 4);
+    for (int i = 0; i < N; i++) {
+        float v = i < 256 ? (float)i / 255.0f                       /* the levels */
+                  : i < 512 ? (float)(i - 256) / 255.0f + 1e-4f      /* near them */
+                  : i == 512 ? -0.25f : i == 513 ? 1.5f : i == 514 ? NAN : (float)(i % 7) * (1.0f / 255.0f);
+        data[4 * i] = v;
+        data[4 * i + 1] = 1.0f - v;
+        data[4 * i + 2] = (float)((i * 37) % 256) * (1.0f / 255.0f);   /* another rounding of k/255 */
+        data[4 * i + 3] = 0.5f;
+    }
+    struct dr_image img = {N, 1, 4, data, NULL, true};
+    CHECK(dr_image_make_linear(&img) == DR_OK, "make_linear");
+    int bad = 0;
+    for (int i = 0; i < N * 4 && img.linear; i++) {
+        float want = i % 4 == 3 ? data[i] : (float)dr_srgb_to_linear(data[i]);
+        if (memcmp(&want, &img.linear[i], sizeof want) != 0)
+            bad++;
+    }
+    CHECK(img.linear && bad == 0, "%d decoded values differ from dr_srgb_to_linear", bad);
+    dr_image_release(&img);
+}
+
 static void test_bilinear(void)
 {
     const enum dr_wrap R = DR_WRAP_REPEAT, C = DR_WRAP_CLAMP, M = DR_WRAP_MIRROR;
@@ -745,6 +774,7 @@ int main(void)
     }
 
     test_srgb_curves();
+    test_make_linear_exact();
     test_bilinear();
     test_channels();
     test_exr();
