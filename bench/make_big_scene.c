@@ -205,7 +205,8 @@ static const char *base_name(const char *path)
     return s ? s + 1 : path;
 }
 
-/* The file name of path without its directory and ".gltf" (the PNGs' prefix). */
+/* The file name of path without its directory and ".gltf" (the PNGs'
+ * prefix), in a static buffer: the next call overwrites it. */
 static const char *stem(const char *path)
 {
     static char buf[1024];
@@ -350,10 +351,12 @@ int main(int argc, char **argv)
     }
     fprintf(f, "{\n  \"asset\": {\"version\": \"2.0\", \"generator\": \"drender bench/make_big_scene.c\"},\n");
     fprintf(f, "  \"extensionsUsed\": [\"KHR_materials_specular\", \"KHR_materials_emissive_strength\"],\n");
-    if (textured)
+    if (textured) {
+        const char *st = stem(gltf_path);
         fprintf(f, "  \"images\": [{\"uri\": \"%s-base.png\"}, {\"uri\": \"%s-emissive.png\"}],\n"
                    "  \"samplers\": [{}],\n  \"textures\": [{\"source\": 0, \"sampler\": 0}, {\"source\": 1, \"sampler\": 0}],\n",
-                stem(gltf_path), stem(gltf_path));
+                st, st);
+    }
     fprintf(f, "  \"scene\": 0,\n  \"scenes\": [{\"name\": \"big-cornell-box\", \"nodes\": [");
     for (int i = 0; i <= N_NODES; i++)
         fprintf(f, "%s%d", i ? ", " : "", i);

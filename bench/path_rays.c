@@ -37,6 +37,7 @@
 #include "accel.h"
 #include "camera.h"
 #include "clock.h"
+#include "raw_scene.h"
 #include "error.h"
 #include "geometry.h"
 #include "sampler.h"
@@ -46,6 +47,7 @@
 
 struct ray {
     float o[3], d[3], tfar;
+    uint32_t seq;   /* recording order: the order within a depth in wavefront order */
     uint8_t shadow, depth;
 };
 
@@ -64,8 +66,9 @@ static void push(struct rays *rs, dr_vec3 o, dr_vec3 d, double tfar, bool shadow
             exit(1);
         }
     }
+    const uint32_t seq = (uint32_t)rs->n;
     rs->r[rs->n++] = (struct ray){{(float)o.x, (float)o.y, (float)o.z}, {(float)d.x, (float)d.y, (float)d.z},
-                                  tfar >= FLT_MAX ? INFINITY : (float)tfar, shadow, (uint8_t)depth};
+                                  tfar >= FLT_MAX ? INFINITY : (float)tfar, seq, shadow, (uint8_t)depth};
 }
 
 /* ---- recording ---------------------------------------------------------- */
@@ -86,24 +89,17 @@ static struct emitters find_emitters(const struct dr_scene *s)
     return e;
 }
 
-static dr_vec3 tri_point(const struct dr_mesh *m, int64_t t, double u1, double u2)
-{
-    const uint32_t *i = m->indices + 3 * t;
-    double su = sqrt(u1), b1 = 1.0 - su, b2 = u2 * su;
-    dr_vec3 p0 = dr_mesh_vertex(m, i[0]), p1 = dr_mesh_vertex(m, i[1]), p2 = dr_mesh_vertex(m, i[2]);
-    return dr_add(dr_add(dr_scale(p0, 1.0 - b1 - b2), dr_scale(p1, b1)), dr_scale(p2, b2));
-}
-
-/* An orthonormal frame around n, then the cosine-distributed direction. */
+/* A cosine-distributed direction around n (the Lambertian walls' sampling;
+ * the map differs from core/bsdf.c's concentric one, the distribution not). */
 static dr_vec3 cosine_dir(dr_vec3 n, double u1, double u2)
 {
-    dr_vec3 a = fabs(n.x) > 0.9 ? dr_v3(0, 1, 0) : dr_v3(1, 0, 0);
-    dr_vec3 t = dr_normalize(dr_cross(a, n)), b = dr_cross(n, t);
+    const dr_frame f = dr_frame_from_normal(n);
     double r = sqrt(u1), ph = 2.0 * M_PI * u2;
-    return dr_add(dr_add(dr_scale(t, r * cos(ph)), dr_scale(b, r * sin(ph))), dr_scale(n, sqrt(fmax(0.0, 1.0 - u1))));
+    return dr_frame_to_world(&f, dr_v3(r * cos(ph), r * sin(ph), sqrt(fmax(0.0, 1.0 - u1))));
 }
 
-/* One path from pixel (x, y), sample s: its rays appended to rs. */
+/* One path from pixel (x, y), sample s: its rays appended to rs. Hits,
+ * light points and ray offsets are drender's (core/geometry.h). */
 static void record_path(const struct dr_scene *sc, const struct dr_accel *acc, const struct dr_camera_view *view,
                         const struct emitters *em, int x, int y, int s, int max_depth, struct rays *rs)
 {
@@ -117,32 +113,23 @@ static void record_path(const struct dr_scene *sc, const struct dr_accel *acc, c
         int64_t tri = dr_accel_intersect(acc, o, d, 0.0, INFINITY);
         if (tri < 0)
             return;
-        const double *ne = sc->mesh.tri_normal_eps + 4 * tri;
-        dr_vec3 n = dr_v3(ne[0], ne[1], ne[2]);
-        if (dr_dot(n, d) > 0.0)
-            n = dr_scale(n, -1.0);
-        /* the hit point, from Embree's distance (drender recomputes it in double) */
-        double t = 0.0;
-        {
-            const uint32_t *i = sc->mesh.indices + 3 * tri;
-            dr_vec3 p0 = dr_mesh_vertex(&sc->mesh, i[0]);
-            double dn = dr_dot(n, d);
-            t = dn != 0.0 ? dr_dot(n, dr_sub(p0, o)) / dn : 0.0;
-        }
-        dr_vec3 p = dr_add(dr_add(o, dr_scale(d, t)), dr_scale(n, ne[3]));
-        const dr_vec3 c = sc->materials[sc->mesh.material[tri]].base_color;
+        struct dr_hit h;
+        dr_hit_compute(&sc->mesh, tri, o, d, &h);
+        const dr_vec3 n = h.front ? h.ng : dr_neg(h.ng);   /* the side the ray arrived on */
+        const dr_vec3 c = sc->materials[h.material].base_color;
         beta *= fmax(c.x, fmax(c.y, c.z));
         if (!(beta > 0.0))
-            return;   /* a black surface (the light's): no shadow ray, no bounce, as drender */
-        if (em->n > 0) {   /* next-event estimation: one shadow ray */
+            return;   /* a black surface: no shadow ray, no bounce, as drender */
+        if (em->n > 0) {   /* next-event estimation: one shadow ray, to a uniform point of an emitter */
             int64_t lt = em->tri[(int64_t)(dr_sampler_next(&smp) * em->n) % em->n];
-            dr_vec3 q = tri_point(&sc->mesh, lt, dr_sampler_next(&smp), dr_sampler_next(&smp));
-            dr_vec3 to = dr_sub(q, p);
+            double su = sqrt(dr_sampler_next(&smp)), u2 = dr_sampler_next(&smp);
+            struct dr_hit l;
+            dr_hit_at(&sc->mesh, lt, 1.0 - su, u2 * su, &l);
+            dr_vec3 to = dr_sub(l.p, h.p);
             double dist = dr_length(to);
-            const double *ln = sc->mesh.tri_normal_eps + 4 * lt;   /* emitters shine from their front */
-            if (dist > 0.0 && dr_dot(to, n) > 0.0 && dr_dot(to, dr_v3(ln[0], ln[1], ln[2])) < 0.0) {
-                dr_vec3 w = dr_scale(to, 1.0 / dist);
-                push(rs, p, w, dist * (1.0 - 1e-4), true, depth);
+            if (dist > 0.0 && dr_dot(to, n) > 0.0 && dr_dot(to, l.ng) < 0.0) {   /* emitters shine from their front */
+                dr_vec3 w = dr_scale(to, 1.0 / dist), po = dr_offset_origin(&h, n, w);
+                push(rs, po, w, dr_length(dr_sub(l.p, po)) * (1.0 - 1e-4), true, depth);
             }
         }
         if (depth + 1 >= 5) {   /* roulette from depth 5 (segments so far) */
@@ -151,8 +138,8 @@ static void record_path(const struct dr_scene *sc, const struct dr_accel *acc, c
                 return;
             beta /= q;
         }
-        o = p;
         d = cosine_dir(n, dr_sampler_next(&smp), dr_sampler_next(&smp));
+        o = dr_offset_origin(&h, n, d);
     }
 }
 
@@ -282,12 +269,13 @@ static int by_depth_kind(const void *a, const void *b)
 {
     const struct ray *x = a, *y = b;
     int kx = x->depth * 2 + x->shadow, ky = y->depth * 2 + y->shadow;
-    return (kx > ky) - (kx < ky);
+    if (kx != ky)
+        return (kx > ky) - (kx < ky);
+    return (x->seq > y->seq) - (x->seq < y->seq);
 }
 
-/* Each thread replays its contiguous share (whole paths in path order; in
- * wavefront order its share is sorted by depth and kind, stable enough:
- * qsort keeps no order, but within a depth the rays stay spread the same). */
+/* Each thread replays its share: whole paths in path order, or the same rays
+ * sorted by depth and kind, recording order within (wavefront order). */
 static double timed(struct rays *per_thread, int threads, enum variant v, RTCScene raw, const struct dr_accel *acc,
                     long *hits)
 {
@@ -306,23 +294,6 @@ static double timed(struct rays *per_thread, int threads, enum variant v, RTCSce
     for (int t = 0; t < threads; t++)
         *hits += j[t].hits;
     return sec;
-}
-
-static RTCScene build_raw(RTCDevice dev, const struct dr_scene *scene)
-{
-    RTCScene es = rtcNewScene(dev);
-    rtcSetSceneFlags(es, RTC_SCENE_FLAG_ROBUST);
-    rtcSetSceneBuildQuality(es, RTC_BUILD_QUALITY_HIGH);
-    RTCGeometry g = rtcNewGeometry(dev, RTC_GEOMETRY_TYPE_TRIANGLE);
-    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, scene->mesh.positions, 0,
-                               3 * sizeof(float), scene->mesh.n_vertices);
-    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, scene->mesh.indices, 0,
-                               3 * sizeof(uint32_t), scene->mesh.n_triangles);
-    rtcCommitGeometry(g);
-    rtcAttachGeometry(es, g);
-    rtcReleaseGeometry(g);
-    rtcCommitScene(es);
-    return es;
 }
 
 int main(int argc, char **argv)
@@ -363,7 +334,7 @@ int main(int argc, char **argv)
             counts[path[t].r[i].shadow]++;
     }
     RTCDevice dev = rtcNewDevice(NULL);
-    RTCScene raw = build_raw(dev, sc);
+    RTCScene raw = bench_raw_scene(dev, sc);
     const double samples = (double)W * H * S, total = (double)(counts[0] + counts[1]);
     printf("{\"scene\": \"%s\", \"width\": %d, \"height\": %d, \"spp\": %d, \"threads\": %d, \"max_depth\": %d, "
            "\"rays_per_sample\": {\"extension\": %.3f, \"shadow\": %.3f}, \"mrays_per_second\": {",

@@ -21,6 +21,7 @@
 #include <string.h>
 
 #include "clock.h"
+#include "raw_scene.h"
 #include "error.h"
 #include "sampler.h"
 #include "scene.h"
@@ -158,23 +159,6 @@ static double run(RTCScene es, const struct dr_scene *scene, long rays, int thre
     return (double)total / t;
 }
 
-static RTCScene build(RTCDevice dev, const struct dr_scene *scene)
-{
-    RTCScene es = rtcNewScene(dev);
-    rtcSetSceneFlags(es, RTC_SCENE_FLAG_ROBUST);
-    rtcSetSceneBuildQuality(es, RTC_BUILD_QUALITY_HIGH);
-    RTCGeometry g = rtcNewGeometry(dev, RTC_GEOMETRY_TYPE_TRIANGLE);
-    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, scene->mesh.positions, 0,
-                               3 * sizeof(float), scene->mesh.n_vertices);
-    rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, scene->mesh.indices, 0,
-                               3 * sizeof(uint32_t), scene->mesh.n_triangles);
-    rtcCommitGeometry(g);
-    rtcAttachGeometry(es, g);
-    rtcReleaseGeometry(g);
-    rtcCommitScene(es);
-    return es;
-}
-
 int main(int argc, char **argv)
 {
     if (argc < 2) {
@@ -191,7 +175,7 @@ int main(int argc, char **argv)
         return 1;
     }
     RTCDevice dev = rtcNewDevice(NULL);
-    RTCScene es = build(dev, scene);
+    RTCScene es = bench_raw_scene(dev, scene);
     double rps[API_COUNT][PATTERN_COUNT], hitf[API_COUNT][PATTERN_COUNT];
     for (int a = 0; a < API_COUNT; a++)
         for (int p = 0; p < PATTERN_COUNT; p++)

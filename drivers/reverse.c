@@ -163,7 +163,7 @@ int dr_reverse_gradient(const struct dr_reverse_options *o, const float *target,
     int rc = work_alloc(&w);
     /* mis: the weights of each batch (and half) from the earlier ones too (mis.h) */
     if (rc == 0 && mis && !p->mis_history)
-        rc = dr_mis_history_init(&w.mis, p->params->n, 1.0);
+        rc = dr_mis_history_init(&w.mis, p->params->n);
     if (rc == 0 && o->primal == DR_PRIMAL_SHARED) {
         w.steps = K + 1;
         rc = primal(&w, r->primal_seed, p->spp, r);

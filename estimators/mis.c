@@ -228,10 +228,9 @@ static void weights_pooled(const struct dr_mis_accum *m, int k, double a[DR_MIS_
         group_weight(loo[g], &a[g]);
 }
 
-int dr_mis_history_init(struct dr_mis_history *h, int segments, double decay)
+int dr_mis_history_init(struct dr_mis_history *h, int segments)
 {
     h->segments = segments;
-    h->decay = decay;
     h->stats = calloc((size_t)(segments > 0 ? segments : 1) * DR_MIS_GROUPS * NSTAT, sizeof(double));
     if (h->stats)
         return 0;
@@ -252,9 +251,8 @@ static void join_history(struct dr_mis_history *h, int k, double s[DR_MIS_GROUPS
     double *hs = h->stats + (size_t)k * DR_MIS_GROUPS * NSTAT;
     for (int g = 0; g < DR_MIS_GROUPS; g++)
         for (int j = 0; j < NSTAT; j++) {
-            double own = s[g][j], old = h->decay * hs[g * NSTAT + j];
-            s[g][j] = own + old;
-            hs[g * NSTAT + j] = own + old;
+            s[g][j] += hs[g * NSTAT + j];
+            hs[g * NSTAT + j] = s[g][j];
         }
 }
 

@@ -148,15 +148,14 @@ void dr_mis_add(struct dr_mis_accum *m, int thread, int64_t px, int64_t at, int6
 void dr_mis_add_scratch(struct dr_mis_accum *m, int thread, int64_t px);
 
 /* Statistics of earlier runs of one problem (same parameters): per segment
- * and group, P, Q, R (per-sample, centred per pixel). A run adds its own to
- * them after multiplying the old ones by decay (1: all runs count alike). */
+ * and group, the sums of P, Q, R (per-sample, centred per pixel); a run
+ * adds its own after its combination. */
 struct dr_mis_history {
     int segments;
-    double decay;
     double *stats;   /* [segment][group][P, Q, R] */
 };
 /* 0, or DR_ERR_NOMEM (message set). */
-int dr_mis_history_init(struct dr_mis_history *h, int segments, double decay);
+int dr_mis_history_init(struct dr_mis_history *h, int segments);
 void dr_mis_history_free(struct dr_mis_history *h);
 
 /* The combined estimate into out (n entries): the threads summed, then each
