@@ -31,10 +31,12 @@ struct dr_accel {
     uint32_t *indices[2];           /* owned index buffers when the mesh is split */
 };
 
-/* The query context a filter receives: Embree's, then the query's key. */
+/* The query context a filter receives: Embree's, then the query's key, or
+ * for a packet every ray's key by the ray's id (its lane). */
 struct query_ctx {
     struct RTCIntersectContext rtc;
     uint64_t key;
+    const uint64_t *keys;   /* NULL: key for every ray */
 };
 
 static void embree_error(void *user, enum RTCError code, const char *msg)
@@ -54,14 +56,16 @@ static void cover_filter(const struct RTCFilterFunctionNArguments *args)
     const unsigned N = args->N;
     const float *ray = (const float *)args->ray, *hit = (const float *)args->hit;
     const unsigned *hit_u32 = (const unsigned *)args->hit;
+    const unsigned *ray_u32 = (const unsigned *)args->ray;
     for (unsigned i = 0; i < N; i++) {
         if (args->valid[i] != -1)
             continue;
+        uint64_t key = q->keys ? q->keys[ray_u32[10 * N + i] % DR_ACCEL_PACKET] : q->key;   /* id at 10N */
         unsigned prim = hit_u32[5 * N + i];
         int64_t tri = g->tri ? (int64_t)g->tri[prim] : (int64_t)prim;
         dr_vec3 d = dr_v3(ray[4 * N + i], ray[5 * N + i], ray[6 * N + i]);
         unsigned bits = a->mat_bits[a->cover->mesh.material[tri]];
-        if (!dr_coverage_blocks(a->cover, bits, tri, hit[3 * N + i], hit[4 * N + i], d, q->key))
+        if (!dr_coverage_blocks(a->cover, bits, tri, hit[3 * N + i], hit[4 * N + i], d, key))
             args->valid[i] = 0;
     }
 }
@@ -217,6 +221,7 @@ int64_t dr_accel_intersect_key(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, d
     rtcInitIntersectContext(&q.rtc);
     q.rtc.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
     q.key = key;
+    q.keys = NULL;
     struct RTCRayHit rh;
     fill_ray(&rh.ray, o, d, tmin, tmax);
     rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
@@ -234,6 +239,7 @@ bool dr_accel_occluded_key(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, doubl
     rtcInitIntersectContext(&q.rtc);
     q.rtc.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
     q.key = key;
+    q.keys = NULL;
     struct RTCRay r;
     fill_ray(&r, o, d, tmin, tmax);
     rtcOccluded1(a->scene, &q.rtc, &r);
@@ -248,4 +254,76 @@ int64_t dr_accel_intersect(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, doubl
 bool dr_accel_occluded(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tmin, double tmax)
 {
     return dr_accel_occluded_key(a, o, d, tmin, tmax, 0);
+}
+
+/* ---------------------------------------------------------------- packets */
+
+/* Lane j of packet r from ray i, as fill_ray converts it (the same floats). */
+static void fill_lane(struct RTCRay16 *r, int j, const struct dr_accel_rays *rays, int i)
+{
+    dr_vec3 o = rays->o[i], d = rays->d[i];
+    double tmax = rays->tmax[i];
+    r->org_x[j] = (float)o.x;
+    r->org_y[j] = (float)o.y;
+    r->org_z[j] = (float)o.z;
+    r->dir_x[j] = (float)d.x;
+    r->dir_y[j] = (float)d.y;
+    r->dir_z[j] = (float)d.z;
+    r->tnear[j] = 0.0f;
+    r->tfar[j] = tmax >= FLT_MAX ? INFINITY : (float)tmax;
+    r->time[j] = 0.0f;
+    r->mask[j] = 0xFFFFFFFFu;
+    r->id[j] = (unsigned)j;
+    r->flags[j] = 0;
+}
+
+/* Packet k's lanes: rays [16k, min(16k + 16, n)); valid marks them. */
+static int packet_lanes(const struct dr_accel_rays *rays, int k, int valid[DR_ACCEL_PACKET], struct query_ctx *q)
+{
+    int first = k * DR_ACCEL_PACKET, m = rays->n - first < DR_ACCEL_PACKET ? rays->n - first : DR_ACCEL_PACKET;
+    for (int j = 0; j < DR_ACCEL_PACKET; j++)
+        valid[j] = j < m ? -1 : 0;
+    rtcInitIntersectContext(&q->rtc);
+    q->rtc.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+    q->key = 0;
+    q->keys = rays->key ? rays->key + first : NULL;
+    return m;
+}
+
+void dr_accel_intersect_many(const struct dr_accel *a, const struct dr_accel_rays *rays, int64_t *tri)
+{
+    for (int k = 0; k * DR_ACCEL_PACKET < rays->n; k++) {
+        int valid[DR_ACCEL_PACKET];
+        struct query_ctx q;
+        int first = k * DR_ACCEL_PACKET, m = packet_lanes(rays, k, valid, &q);
+        struct RTCRayHit16 rh __attribute__((aligned(64)));
+        for (int j = 0; j < m; j++) {
+            fill_lane(&rh.ray, j, rays, first + j);
+            rh.hit.geomID[j] = RTC_INVALID_GEOMETRY_ID;
+            rh.hit.instID[0][j] = RTC_INVALID_GEOMETRY_ID;
+        }
+        rtcIntersect16(valid, a->scene, &q.rtc, &rh);
+        for (int j = 0; j < m; j++) {
+            unsigned g = rh.hit.geomID[j];
+            const uint32_t *map = g == RTC_INVALID_GEOMETRY_ID ? NULL : a->geom[g & 1].tri;
+            tri[first + j] = g == RTC_INVALID_GEOMETRY_ID ? -1
+                             : map                        ? (int64_t)map[rh.hit.primID[j]]
+                                                          : (int64_t)rh.hit.primID[j];
+        }
+    }
+}
+
+void dr_accel_occluded_many(const struct dr_accel *a, const struct dr_accel_rays *rays, bool *occluded)
+{
+    for (int k = 0; k * DR_ACCEL_PACKET < rays->n; k++) {
+        int valid[DR_ACCEL_PACKET];
+        struct query_ctx q;
+        int first = k * DR_ACCEL_PACKET, m = packet_lanes(rays, k, valid, &q);
+        struct RTCRay16 r __attribute__((aligned(64)));
+        for (int j = 0; j < m; j++)
+            fill_lane(&r, j, rays, first + j);
+        rtcOccluded16(valid, a->scene, &q.rtc, &r);
+        for (int j = 0; j < m; j++)
+            occluded[first + j] = r.tfar[j] < 0.0f;
+    }
 }

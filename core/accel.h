@@ -37,4 +37,21 @@ int64_t dr_accel_intersect_key(const struct dr_accel *accel, dr_vec3 o, dr_vec3 
 bool dr_accel_occluded_key(const struct dr_accel *accel, dr_vec3 o, dr_vec3 d, double tmin, double tmax,
                            uint64_t key);
 
+/* Many rays at once, as Embree packets of DR_ACCEL_PACKET (the wavefront
+ * renderer's stage boundaries): ray i from o[i] along d[i] over (0, tmax[i]),
+ * with coverage key key[i] (NULL: all 0). Each ray gets the answer a single
+ * query would give, except which of two triangles wins an exact tie in t
+ * (Embree's packet and single-ray traversals visit nodes in different orders). */
+#define DR_ACCEL_PACKET 16
+struct dr_accel_rays {
+    int n;
+    const dr_vec3 *o, *d;
+    const double *tmax;
+    const uint64_t *key;
+};
+/* tri[i]: the closest triangle or -1. */
+void dr_accel_intersect_many(const struct dr_accel *accel, const struct dr_accel_rays *rays, int64_t *tri);
+/* occluded[i]: anything blocks ray i. */
+void dr_accel_occluded_many(const struct dr_accel *accel, const struct dr_accel_rays *rays, bool *occluded);
+
 #endif

@@ -101,17 +101,26 @@ void dr_path_start(struct dr_path_state *st, dr_vec3 o, dr_vec3 d)
                                  .beta = dr_v3s(1.0), .ratio = dr_v3s(1.0)};
 }
 
-/* Stage trace: the closest triangle along the current ray (-1: none). BLEND
- * surfaces decide by the path's key at this depth (coverage.h). */
-static int64_t stage_trace(const struct dr_scene *s, const struct dr_path_state *st, const struct dr_sampler *sampler,
-                           struct dr_ray_counts *counts)
+uint64_t dr_path_trace_key(const struct dr_scene *s, const struct dr_path_state *st, const struct dr_sampler *sampler)
+{
+    return (s->effects & DR_FX_ALPHA_BLEND) ? dr_coverage_key(sampler->key, st->depth, DR_RAY_TRACE) : 0;
+}
+
+void dr_path_count_trace(const struct dr_path_state *st, struct dr_ray_counts *counts)
 {
     if (st->depth == 1)
         counts->camera++;
     else
         counts->extension++;
-    uint64_t key = (s->effects & DR_FX_ALPHA_BLEND) ? dr_coverage_key(sampler->key, st->depth, DR_RAY_TRACE) : 0;
-    return dr_accel_intersect_key(s->accel, st->o, st->d, 0.0, INFINITY, key);
+}
+
+/* Stage trace: the closest triangle along the current ray (-1: none). BLEND
+ * surfaces decide by the path's key at this depth (coverage.h). */
+static int64_t stage_trace(const struct dr_scene *s, const struct dr_path_state *st, const struct dr_sampler *sampler,
+                           struct dr_ray_counts *counts)
+{
+    dr_path_count_trace(st, counts);
+    return dr_accel_intersect_key(s->accel, st->o, st->d, 0.0, INFINITY, dr_path_trace_key(s, st, sampler));
 }
 
 /* Stage escaped: environment radiance seen along the ray, MIS-weighted
@@ -186,19 +195,18 @@ static bool stage_material(const struct dr_scene *s, const struct dr_path_opts *
     return true;
 }
 
-void dr_path_nee(const struct dr_scene *s, struct dr_path_vertex *v, struct dr_ray_counts *counts)
+bool dr_path_nee_begin(const struct dr_scene *s, struct dr_path_vertex *v, struct dr_shadow_ray *ray)
 {
     const struct dr_hit *hit = &v->hit;
     const struct dr_vertex_randoms *u = &v->u;
     if (!dr_light_sample(s, s->light_sampler, hit->p, u->light_pick, u->light_u1, u->light_u2, &v->ls) ||
         dr_dot(v->ls.wi, v->ng) <= 0.0)
-        return;
+        return false;
     v->nee_wi = dr_frame_to_local(&v->frame, v->ls.wi);
-    double bsdf_pdf;
-    v->nee_f = dr_bsdf_eval_pdf(&v->bsdf, v->wo, v->nee_wi, &bsdf_pdf);
+    v->nee_f = dr_bsdf_eval_pdf(&v->bsdf, v->wo, v->nee_wi, &v->nee_bsdf_pdf);
     /* A zero BSDF contributes nothing, but its derivative may not be zero. */
     if (dr_is_black(v->nee_f) && !v->diff_bsdf)
-        return;
+        return false;
     /* The shadow ray joins the two offset end points: aiming it from the
      * lifted origin along the unlifted direction would reach a grazing
      * light's plane early and shadow itself. */
@@ -209,15 +217,31 @@ void dr_path_nee(const struct dr_scene *s, struct dr_path_vertex *v, struct dr_r
         tmax = dr_length(sd);
         sd = dr_scale(sd, 1.0 / tmax);
     }
-    counts->shadow++;
-    if (!(tmax > 0.0) || dr_accel_occluded_key(s->accel, so, sd, 0.0, tmax, u->cover_key))
+    *ray = (struct dr_shadow_ray){.o = so, .d = sd, .tmax = tmax, .key = u->cover_key};
+    return true;
+}
+
+void dr_path_nee_end(const struct dr_scene *s, struct dr_path_vertex *v, const struct dr_shadow_ray *ray,
+                     bool occluded)
+{
+    if (!(ray->tmax > 0.0) || occluded)
         return;
     if ((s->effects & (DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND)) && v->ls.type == DR_LS_AREA &&
-        !dr_coverage_point_present(s, v->ls.index, v->ls.b1, v->ls.b2, u->cover_key))
+        !dr_coverage_point_present(s, v->ls.index, v->ls.b1, v->ls.b2, ray->key))
         return;   /* the light point is a hole in a cut-out emitter */
-    double w = v->ls.delta ? 1.0 : dr_mis_power(v->ls.pdf, bsdf_pdf);
+    double w = v->ls.delta ? 1.0 : dr_mis_power(v->ls.pdf, v->nee_bsdf_pdf);
     v->nee_scale = fabs(v->nee_wi.z) * w / v->ls.pdf;
     v->nee = true;
+}
+
+void dr_path_nee(const struct dr_scene *s, struct dr_path_vertex *v, struct dr_ray_counts *counts)
+{
+    struct dr_shadow_ray ray;
+    if (!dr_path_nee_begin(s, v, &ray))
+        return;
+    counts->shadow++;
+    bool occluded = ray.tmax > 0.0 && dr_accel_occluded_key(s->accel, ray.o, ray.d, 0.0, ray.tmax, ray.key);
+    dr_path_nee_end(s, v, &ray, occluded);
 }
 
 /* At a differentiated vertex, channels whose BSDF value is exactly 0 are
@@ -274,28 +298,52 @@ static bool stage_continue(const struct dr_path_opts *opts, struct dr_path_state
     return true;
 }
 
-bool dr_path_step(const struct dr_scene *s, const struct dr_path_opts *opts, struct dr_path_state *st,
-                  struct dr_sampler *sampler, struct dr_path_vertex *v, struct dr_ray_counts *counts)
+void dr_path_step_begin(struct dr_path_state *st, struct dr_path_vertex *v)
 {
-    if (opts->stages & DR_STAGE_MEDIA)
-        return dr_medium_path_step(s, opts, st, sampler, v, counts);
     v->depth = ++st->depth;
     v->d = st->d;
     v->o = st->o;
     v->prev_pdf = st->prev_pdf;
     v->prev_p = st->prev_p;
     v->emits = v->shaded = v->nee = v->cont = v->diff_bsdf = v->media = false;
+}
 
-    int64_t tri = stage_trace(s, st, sampler, counts);
+enum dr_step_next dr_path_step_hit(const struct dr_scene *s, const struct dr_path_opts *opts,
+                                   const struct dr_path_state *st, struct dr_sampler *sampler,
+                                   struct dr_path_vertex *v, int64_t tri, struct dr_shadow_ray *shadow)
+{
     if (tri < 0) {
         stage_escaped(s, opts, st, v);
-        return false;
+        return DR_STEP_END;
     }
     stage_surface_hit(s, opts, st, tri, v);
     if (!stage_material(s, opts, st, sampler, v))
+        return DR_STEP_END;
+    if ((opts->stages & DR_STAGE_NEE) && dr_path_nee_begin(s, v, shadow))
+        return DR_STEP_SHADOW;
+    return DR_STEP_CONTINUE;
+}
+
+bool dr_path_step(const struct dr_scene *s, const struct dr_path_opts *opts, struct dr_path_state *st,
+                  struct dr_sampler *sampler, struct dr_path_vertex *v, struct dr_ray_counts *counts)
+{
+    if (opts->stages & DR_STAGE_MEDIA)
+        return dr_medium_path_step(s, opts, st, sampler, v, counts);
+    dr_path_step_begin(st, v);
+    int64_t tri = stage_trace(s, st, sampler, counts);
+    struct dr_shadow_ray shadow;
+    switch (dr_path_step_hit(s, opts, st, sampler, v, tri, &shadow)) {
+    case DR_STEP_END:
         return false;
-    if (opts->stages & DR_STAGE_NEE)
-        dr_path_nee(s, v, counts);
+    case DR_STEP_SHADOW:
+        counts->shadow++;
+        dr_path_nee_end(s, v, &shadow,
+                        shadow.tmax > 0.0 &&
+                            dr_accel_occluded_key(s->accel, shadow.o, shadow.d, 0.0, shadow.tmax, shadow.key));
+        break;
+    case DR_STEP_CONTINUE:
+        break;
+    }
     return stage_continue(opts, st, v);
 }
 

@@ -171,6 +171,7 @@ struct dr_path_vertex {
     dr_vec3 nee_wi;            /* local */
     dr_vec3 nee_f;             /* BSDF value towards the light */
     double nee_scale;          /* |cos| * MIS weight / pdf */
+    double nee_bsdf_pdf;       /* the BSDF's density towards the light (its MIS weight's other side) */
     dr_vec3 nee_tr;            /* media: transmittance to the light times seg, folded into ls.radiance */
     struct dr_medium_record *mrec;   /* set by the caller: where the medium walker records
                                         (used only when media parameters are requested) */
@@ -277,6 +278,41 @@ bool dr_path_step(const struct dr_scene *scene, const struct dr_path_opts *opts,
  * vertex's random numbers, casts the shadow ray, and fills v->nee, v->ls,
  * v->nee_wi, v->nee_f, v->nee_scale. */
 void dr_path_nee(const struct dr_scene *scene, struct dr_path_vertex *v, struct dr_ray_counts *counts);
+
+/* ---- the step cut at its ray queries (for a packet tracer: render.c) ----
+ *
+ * dr_path_step is exactly
+ *   dr_path_step_begin; trace (st->o, st->d) with dr_path_trace_key;
+ *   dr_path_step_hit;  [DR_STEP_SHADOW: test the shadow ray, dr_path_nee_end];
+ *   [unless DR_STEP_END: dr_path_stage_continue (below)]
+ * so a caller that batches the two queries of many paths makes the same
+ * decisions with the same numbers as the one-path walker. */
+struct dr_shadow_ray {
+    dr_vec3 o, d;
+    double tmax;      /* not > 0: nothing to trace, and no contribution */
+    uint64_t key;     /* coverage key (coverage.h) */
+};
+enum dr_step_next {
+    DR_STEP_END,        /* the path ends with this vertex (its terms still count) */
+    DR_STEP_SHADOW,     /* test *shadow, then dr_path_nee_end, then continue */
+    DR_STEP_CONTINUE    /* go on to dr_path_step_continue */
+};
+/* The vertex's bookkeeping before its trace (depth, arriving ray). */
+void dr_path_step_begin(struct dr_path_state *st, struct dr_path_vertex *v);
+/* The coverage key of the trace at st->depth (0 without BLEND surfaces). */
+uint64_t dr_path_trace_key(const struct dr_scene *scene, const struct dr_path_state *st,
+                           const struct dr_sampler *sampler);
+/* Counts the trace as a camera or extension ray. */
+void dr_path_count_trace(const struct dr_path_state *st, struct dr_ray_counts *counts);
+/* Everything between the trace (tri: its result, -1 none) and the shadow ray. */
+enum dr_step_next dr_path_step_hit(const struct dr_scene *scene, const struct dr_path_opts *opts,
+                                   const struct dr_path_state *st, struct dr_sampler *sampler,
+                                   struct dr_path_vertex *v, int64_t tri, struct dr_shadow_ray *shadow);
+/* Next-event estimation in two halves around the shadow ray's query. begin:
+ * false when no ray is needed (and nothing contributes). */
+bool dr_path_nee_begin(const struct dr_scene *scene, struct dr_path_vertex *v, struct dr_shadow_ray *shadow);
+void dr_path_nee_end(const struct dr_scene *scene, struct dr_path_vertex *v, const struct dr_shadow_ray *shadow,
+                     bool occluded);
 
 /* Radiance arriving at o from direction d (unit): the walker with nothing to
  * differentiate, which is what `render` computes. */

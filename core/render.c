@@ -9,6 +9,7 @@
 #include "error.h"
 #include "parallel.h"
 #include "sampler.h"
+#include "wavefront.h"
 
 struct render_job {
     const struct dr_scene *scene;
@@ -17,45 +18,117 @@ struct render_job {
     const struct dr_render_opts *opts;
     struct dr_path_opts path;
     float *rgb;
-    /* per-thread counters, padded apart to avoid false sharing */
+    bool wave;               /* the packet renderer (wavefront.h); false: one path at a time (media) */
+    int chunk_pixels;        /* pixels whose samples one wavefront run takes */
+    /* per-thread counters and wavefront storage, padded apart to avoid false sharing */
     struct {
         struct dr_ray_counts rays;
         uint64_t invalid;
+        struct dr_wave *wave;
+        dr_vec3 *L;          /* chunk_pixels * spp path values */
         char pad[64];
     } counters[DR_MAX_THREADS];
 };
 
+/* Sample s of frame pixel (fx, fy): its random numbers and camera ray. The
+ * frame pixel (not the crop's) keys them, so a crop renders the same pixels. */
+static void start_sample(const struct render_job *j, int fx, int fy, uint64_t pixel, int s, struct dr_sampler *smp,
+                         dr_vec3 *o, dr_vec3 *d)
+{
+    const struct dr_render_opts *ro = j->opts;
+    dr_sampler_init_kind(smp, ro->sampler, ro->seed, pixel, (uint64_t)s, ro->spp);
+    double u, v, px, py;
+    dr_sampler_next2(smp, &u, &v);
+    dr_film_sample(&ro->film.filter, fx, fy, u, v, &px, &py);
+    dr_camera_ray(&j->view, px, py, o, d);
+}
+
+/* The pixel's mean over its samples, summed in sample order (so the value
+ * does not depend on the order in which the paths were worked on). */
+static void store_pixel(struct render_job *j, int thread, int64_t local, const dr_vec3 *L)
+{
+    const int spp = j->opts->spp;
+    dr_vec3 sum = dr_v3s(0.0);
+    for (int s = 0; s < spp; s++) {
+        if (dr_v3_finite(L[s]))
+            sum = dr_add(sum, L[s]);
+        else
+            j->counters[thread].invalid++;
+    }
+    float *out = j->rgb + 3 * local;
+    out[0] = (float)(sum.x / spp);
+    out[1] = (float)(sum.y / spp);
+    out[2] = (float)(sum.z / spp);
+}
+
+/* One path at a time (scenes with media). */
+static void render_tile_scalar(struct render_job *j, int thread, int x0, int y0, int x1, int y1)
+{
+    const struct dr_render_opts *o = j->opts;
+    struct dr_ray_counts *rays = &j->counters[thread].rays;
+    dr_vec3 *L = j->counters[thread].L;
+    for (int y = y0; y < y1; y++) {
+        for (int x = x0; x < x1; x++) {
+            int fx, fy;
+            int64_t local = (int64_t)y * o->width + x;
+            uint64_t pixel = dr_film_pixel(&o->film, o->width, local, &fx, &fy);
+            for (int s = 0; s < o->spp; s++) {
+                struct dr_sampler smp;
+                dr_vec3 ro, rd;
+                start_sample(j, fx, fy, pixel, s, &smp, &ro, &rd);
+                L[s] = dr_path_radiance(j->scene, &j->path, ro, rd, &smp, rays);
+            }
+            store_pixel(j, thread, local, L);
+        }
+    }
+}
+
+/* A run of a tile's pixels (row-major in the tile) for the wavefront. */
+struct pixel_run {
+    const struct render_job *j;
+    int x0, x1;              /* the tile's columns */
+    int first;               /* index of the run's first pixel in the tile */
+    int64_t local[DR_TILE_SIZE * DR_TILE_SIZE];
+    int fx[DR_TILE_SIZE * DR_TILE_SIZE], fy[DR_TILE_SIZE * DR_TILE_SIZE];
+    uint64_t pixel[DR_TILE_SIZE * DR_TILE_SIZE];
+};
+
+static void start_run_sample(void *ctx, int64_t i, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    const struct pixel_run *r = ctx;
+    const int spp = r->j->opts->spp;
+    int p = r->first + (int)(i / spp);
+    start_sample(r->j, r->fx[p], r->fy[p], r->pixel[p], (int)(i % spp), smp, o, d);
+}
+
+/* Many paths at a time (wavefront.h), chunk_pixels pixels' samples per run. */
+static void render_tile_wave(struct render_job *j, int thread, int x0, int y0, int x1, int y1)
+{
+    const struct dr_render_opts *o = j->opts;
+    struct pixel_run run = {.j = j, .x0 = x0, .x1 = x1};
+    int n = 0;
+    for (int y = y0; y < y1; y++)
+        for (int x = x0; x < x1; x++, n++) {
+            run.local[n] = (int64_t)y * o->width + x;
+            run.pixel[n] = dr_film_pixel(&o->film, o->width, run.local[n], &run.fx[n], &run.fy[n]);
+        }
+    dr_vec3 *L = j->counters[thread].L;
+    for (run.first = 0; run.first < n; run.first += j->chunk_pixels) {
+        int m = n - run.first < j->chunk_pixels ? n - run.first : j->chunk_pixels;
+        dr_wave_radiance(j->counters[thread].wave, j->scene, &j->path, (int64_t)m * o->spp, start_run_sample, &run,
+                         L, &j->counters[thread].rays);
+        for (int p = 0; p < m; p++)
+            store_pixel(j, thread, run.local[run.first + p], L + (int64_t)p * o->spp);
+    }
+}
+
 static void render_tile(void *ctx, int thread, int x0, int y0, int x1, int y1)
 {
     struct render_job *j = ctx;
-    const struct dr_render_opts *o = j->opts;
-    struct dr_ray_counts *rays = &j->counters[thread].rays;
-    for (int y = y0; y < y1; y++) {
-        for (int x = x0; x < x1; x++) {
-            int fx, fy;   /* the frame pixel: random numbers and rays do not depend on the crop */
-            int64_t local = (int64_t)y * o->width + x;
-            uint64_t pixel = dr_film_pixel(&o->film, o->width, local, &fx, &fy);
-            dr_vec3 sum = dr_v3s(0.0);
-            for (int s = 0; s < o->spp; s++) {
-                struct dr_sampler smp;
-                dr_sampler_init_kind(&smp, o->sampler, o->seed, pixel, (uint64_t)s, o->spp);
-                double u, v, px, py;
-                dr_sampler_next2(&smp, &u, &v);
-                dr_film_sample(&o->film.filter, fx, fy, u, v, &px, &py);
-                dr_vec3 o, d;
-                dr_camera_ray(&j->view, px, py, &o, &d);
-                dr_vec3 L = dr_path_radiance(j->scene, &j->path, o, d, &smp, rays);
-                if (dr_v3_finite(L))
-                    sum = dr_add(sum, L);
-                else
-                    j->counters[thread].invalid++;
-            }
-            float *out = j->rgb + 3 * local;
-            out[0] = (float)(sum.x / o->spp);
-            out[1] = (float)(sum.y / o->spp);
-            out[2] = (float)(sum.z / o->spp);
-        }
-    }
+    if (j->wave)
+        render_tile_wave(j, thread, x0, y0, x1, y1);
+    else
+        render_tile_scalar(j, thread, x0, y0, x1, y1);
 }
 
 void dr_progress_bar(const char *label, int done, int total)
@@ -103,9 +176,25 @@ int dr_render(const struct dr_scene *scene, const struct dr_camera *camera, cons
     j->path = (struct dr_path_opts){.max_depth = opts->max_depth, .rr_depth = opts->rr_depth,
                                     .stages = dr_path_plan(scene, NULL)};
     j->rgb = rgb;
+    j->wave = !(j->path.stages & DR_STAGE_MEDIA);
+    /* Enough pixels that a run keeps the lanes busy, but never more path
+     * values than a tile's worth of 4096 (or one pixel's spp). */
+    j->chunk_pixels = opts->spp >= 4096 ? 1 : 4096 / opts->spp;
+    if (j->chunk_pixels > DR_TILE_SIZE * DR_TILE_SIZE)
+        j->chunk_pixels = DR_TILE_SIZE * DR_TILE_SIZE;
     int threads = dr_thread_count(opts->threads);
+    int rc = 0;
+    for (int i = 0; i < threads && rc == 0; i++) {
+        j->counters[i].L = malloc(sizeof(dr_vec3) * (size_t)j->chunk_pixels * (size_t)opts->spp);
+        j->counters[i].wave = j->wave ? dr_wave_create() : NULL;
+        if (!j->counters[i].L || (j->wave && !j->counters[i].wave)) {
+            dr_set_error("out of memory");
+            rc = DR_ERR_NOMEM;
+        }
+    }
     double t0 = dr_clock_seconds();
-    int rc = dr_parallel_tiles(opts->width, opts->height, threads, render_tile, opts->progress ? progress : NULL, j);
+    if (rc == 0)
+        rc = dr_parallel_tiles(opts->width, opts->height, threads, render_tile, opts->progress ? progress : NULL, j);
     double t1 = dr_clock_seconds();
     if (stats) {
         memset(stats, 0, sizeof *stats);
@@ -118,6 +207,10 @@ int dr_render(const struct dr_scene *scene, const struct dr_camera *camera, cons
             stats->rays.shadow += j->counters[i].rays.shadow;
             stats->invalid_samples += j->counters[i].invalid;
         }
+    }
+    for (int i = 0; i < threads; i++) {
+        free(j->counters[i].L);
+        dr_wave_destroy(j->counters[i].wave);
     }
     free(j);
     return rc;
