@@ -163,7 +163,7 @@ int cmd_render(int argc, char **argv)
     /* the rendered rectangle: the frame, or --crop's part of it */
     struct dr_render_opts ro = grad_render_opts(&a.g, a.g.width, a.g.height, a.g.spp, a.g.seed, isatty(2) != 0);
     const int w = ro.width, h = ro.height;
-    if ((rc = cli_limits_render(scene, w, h, a.g.threads)) >= 0)
+    if ((rc = cli_limits_render(scene, w, h, a.g.spp, a.g.threads)) >= 0)
         goto out;
     rgb = malloc(sizeof(float) * 3 * (size_t)w * (size_t)h);
     if (!rgb) {

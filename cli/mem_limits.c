@@ -11,6 +11,7 @@
 
 #include "cli.h"
 #include "grad_common.h"
+#include "render.h"
 #include "mis.h"
 #include "image_io.h"
 #include "medium.h"
@@ -220,12 +221,13 @@ static int check(const char *cmd, const struct need *n, const char *images_opt, 
     return DR_EXIT_USAGE;
 }
 
-int cli_limits_render(const struct dr_scene *scene, int width, int height, int threads)
+int cli_limits_render(const struct dr_scene *scene, int width, int height, int spp, int threads)
 {
-    (void)threads;   /* per-thread tiles are small */
     const double npix = (double)width * height;
     struct need n = {0};
     n.images = 2.0 * npix * 3 * sizeof(float);   /* the image, and its encoded copy while writing */
+    /* per thread: the wavefront's lanes and a run of pixels' path values (render.h) */
+    n.images += (double)dr_thread_count(threads) * (double)dr_render_thread_bytes(spp);
     n.scene = (double)cli_mem_scene(scene);
     return check("render", &n, "--res", "--max-depth");
 }

@@ -34,7 +34,7 @@ void cli_limits_init(void);
 uint64_t cli_mem_scene(const struct dr_scene *scene);
 
 
-int cli_limits_render(const struct dr_scene *scene, int width, int height, int threads);
+int cli_limits_render(const struct dr_scene *scene, int width, int height, int spp, int threads);
 /* grad: reverse (with --target) or forward mode; K batches (refused when
  * batches_given and K > --spp), --batch paths (tape). */
 int cli_limits_grad(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *ps,

@@ -21,10 +21,22 @@ struct dr_accel_geom {
  * rays stay one rtcOccluded1. Triangles whose material needs no test go into
  * a geometry without a filter; when no triangle needs one the structure is
  * exactly the unfiltered one (same buffers, same build), so such scenes pay
- * nothing and render bit for bit as before. */
+ * nothing and render bit for bit as before.
+ *
+ * Filters cost: Embree calls back for every candidate, and glTF's default
+ * (single-sided) puts nearly every real asset's triangles behind one. So a
+ * filtered scene also gets `plain`, the same triangles without filters, and
+ * a query asks it first. Its closest hit, if the filter would accept it, is
+ * the filtered query's answer too (every candidate the filtered traversal
+ * accepts is one of plain's, and nothing is nearer); no hit there is no hit
+ * at all. Only a nearest hit the filter would reject (a back face, a hole)
+ * asks the filtered scene. Shadow rays ask plain for the closest hit rather
+ * than any hit, to see whether the blocker counts. Exact up to which of two
+ * triangles wins a tie in t. */
 struct dr_accel {
     RTCDevice device;
     RTCScene scene;
+    RTCScene plain;                 /* with a filter in scene: every triangle, no filter (see below) */
     const struct dr_scene *cover;   /* NULL: nothing is filtered */
     uint8_t *mat_bits;              /* per material: enum dr_cover_bits */
     struct dr_accel_geom geom[2];   /* by geomID */
@@ -131,7 +143,7 @@ static int64_t classify(struct dr_accel *a, const struct dr_scene *s)
     return n;
 }
 
-static struct dr_accel *build(const struct dr_mesh *mesh, const struct dr_scene *cover)
+static struct dr_accel *build(const struct dr_mesh *mesh, const struct dr_scene *cover, bool with_plain)
 {
     struct dr_accel *a = calloc(1, sizeof *a);
     if (!a) {
@@ -165,6 +177,20 @@ static struct dr_accel *build(const struct dr_mesh *mesh, const struct dr_scene 
         }
     }
     rtcCommitScene(a->scene);
+    if (with_plain && a->cover && mesh->n_triangles > 0) {
+        a->plain = rtcNewScene(a->device);
+        rtcSetSceneFlags(a->plain, RTC_SCENE_FLAG_ROBUST);
+        rtcSetSceneBuildQuality(a->plain, RTC_BUILD_QUALITY_HIGH);
+        RTCGeometry g = rtcNewGeometry(a->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+        rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, mesh->positions, 0,
+                                   3 * sizeof(float), mesh->n_vertices);
+        rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, mesh->indices, 0,
+                                   3 * sizeof(uint32_t), mesh->n_triangles);
+        rtcCommitGeometry(g);
+        rtcAttachGeometryByID(a->plain, g, 0);
+        rtcReleaseGeometry(g);
+        rtcCommitScene(a->plain);
+    }
     if (rtcGetDeviceError(a->device) != RTC_ERROR_NONE) {
         dr_accel_destroy(a);
         return NULL;
@@ -174,12 +200,17 @@ static struct dr_accel *build(const struct dr_mesh *mesh, const struct dr_scene 
 
 struct dr_accel *dr_accel_create(const struct dr_mesh *mesh)
 {
-    return build(mesh, NULL);
+    return build(mesh, NULL, false);
 }
 
 struct dr_accel *dr_accel_create_scene(const struct dr_scene *scene)
 {
-    return build(&scene->mesh, scene);
+    return build(&scene->mesh, scene, true);
+}
+
+struct dr_accel *dr_accel_create_scene_filtered(const struct dr_scene *scene)
+{
+    return build(&scene->mesh, scene, false);
 }
 
 void dr_accel_destroy(struct dr_accel *a)
@@ -188,6 +219,8 @@ void dr_accel_destroy(struct dr_accel *a)
         return;
     if (a->scene)
         rtcReleaseScene(a->scene);
+    if (a->plain)
+        rtcReleaseScene(a->plain);
     if (a->device)
         rtcReleaseDevice(a->device);
     for (int k = 0; k < 2; k++) {
@@ -214,8 +247,9 @@ static void fill_ray(struct RTCRay *r, dr_vec3 o, dr_vec3 d, double tmin, double
     r->flags = 0;
 }
 
-int64_t dr_accel_intersect_key(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tmin, double tmax,
-                               uint64_t key)
+/* The filtered scene's answers (the filter sees every candidate). */
+static int64_t filtered_intersect(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tmin, double tmax,
+                                  uint64_t key)
 {
     struct query_ctx q;
     rtcInitIntersectContext(&q.rtc);
@@ -233,7 +267,7 @@ int64_t dr_accel_intersect_key(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, d
     return map ? (int64_t)map[rh.hit.primID] : (int64_t)rh.hit.primID;
 }
 
-bool dr_accel_occluded_key(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tmin, double tmax, uint64_t key)
+static bool filtered_occluded(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tmin, double tmax, uint64_t key)
 {
     struct query_ctx q;
     rtcInitIntersectContext(&q.rtc);
@@ -244,6 +278,57 @@ bool dr_accel_occluded_key(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, doubl
     fill_ray(&r, o, d, tmin, tmax);
     rtcOccluded1(a->scene, &q.rtc, &r);
     return r.tfar < 0.0f;  /* Embree sets tfar = -inf on a hit */
+}
+
+/* Would the filter accept plain's hit on tri at (u, v)? Asked with what the
+ * filter sees: the ray's float direction, Embree's float barycentrics. */
+static bool filter_accepts(const struct dr_accel *a, int64_t tri, float u, float v, dr_vec3 d, uint64_t key)
+{
+    unsigned bits = a->mat_bits[a->cover->mesh.material[tri]];
+    dr_vec3 df = dr_v3((float)d.x, (float)d.y, (float)d.z);
+    return !bits || dr_coverage_blocks(a->cover, bits, tri, u, v, df, key);
+}
+
+/* plain's closest hit: the triangle (-1: none) and its barycentrics. */
+static int64_t plain_intersect(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tmin, double tmax, float *u,
+                               float *v)
+{
+    struct RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+    struct RTCRayHit rh;
+    fill_ray(&rh.ray, o, d, tmin, tmax);
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(a->plain, &ctx, &rh);
+    *u = rh.hit.u;
+    *v = rh.hit.v;
+    return rh.hit.geomID == RTC_INVALID_GEOMETRY_ID ? -1 : (int64_t)rh.hit.primID;
+}
+
+int64_t dr_accel_intersect_key(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tmin, double tmax,
+                               uint64_t key)
+{
+    if (a->plain) {
+        float u, v;
+        int64_t tri = plain_intersect(a, o, d, tmin, tmax, &u, &v);
+        if (tri < 0 || filter_accepts(a, tri, u, v, d, key))
+            return tri;
+    }
+    return filtered_intersect(a, o, d, tmin, tmax, key);
+}
+
+bool dr_accel_occluded_key(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tmin, double tmax, uint64_t key)
+{
+    if (a->plain) {
+        float u, v;
+        int64_t tri = plain_intersect(a, o, d, tmin, tmax, &u, &v);
+        if (tri < 0)
+            return false;
+        if (filter_accepts(a, tri, u, v, d, key))
+            return true;
+    }
+    return filtered_occluded(a, o, d, tmin, tmax, key);
 }
 
 int64_t dr_accel_intersect(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tmin, double tmax)
@@ -290,35 +375,73 @@ static int packet_lanes(const struct dr_accel_rays *rays, int k, int valid[DR_AC
     return m;
 }
 
+/* Packet k's closest hits in scene sc: tri[j] for ray 16k + j (-1: none)
+ * and, where asked, Embree's barycentrics. Returns its number of rays. */
+static int packet_intersect(RTCScene sc, const struct dr_accel *a, const struct dr_accel_rays *rays, int k,
+                            int64_t *tri, float *u, float *v)
+{
+    int valid[DR_ACCEL_PACKET];
+    struct query_ctx q;
+    int first = k * DR_ACCEL_PACKET, m = packet_lanes(rays, k, valid, &q);
+    struct RTCRayHit16 rh __attribute__((aligned(64)));
+    for (int j = 0; j < m; j++) {
+        fill_lane(&rh.ray, j, rays, first + j);
+        rh.hit.geomID[j] = RTC_INVALID_GEOMETRY_ID;
+        rh.hit.instID[0][j] = RTC_INVALID_GEOMETRY_ID;
+    }
+    rtcIntersect16(valid, sc, &q.rtc, &rh);
+    for (int j = 0; j < m; j++) {
+        unsigned g = rh.hit.geomID[j];
+        const uint32_t *map = g == RTC_INVALID_GEOMETRY_ID || sc == a->plain ? NULL : a->geom[g & 1].tri;
+        tri[j] = g == RTC_INVALID_GEOMETRY_ID ? -1
+                 : map                        ? (int64_t)map[rh.hit.primID[j]]
+                                              : (int64_t)rh.hit.primID[j];
+        if (u) {
+            u[j] = rh.hit.u[j];
+            v[j] = rh.hit.v[j];
+        }
+    }
+    return m;
+}
+
+static uint64_t ray_key(const struct dr_accel_rays *rays, int i)
+{
+    return rays->key ? rays->key[i] : 0;
+}
+
 void dr_accel_intersect_many(const struct dr_accel *a, const struct dr_accel_rays *rays, int64_t *tri)
 {
     for (int k = 0; k * DR_ACCEL_PACKET < rays->n; k++) {
-        int valid[DR_ACCEL_PACKET];
-        struct query_ctx q;
-        int first = k * DR_ACCEL_PACKET, m = packet_lanes(rays, k, valid, &q);
-        struct RTCRayHit16 rh __attribute__((aligned(64)));
-        for (int j = 0; j < m; j++) {
-            fill_lane(&rh.ray, j, rays, first + j);
-            rh.hit.geomID[j] = RTC_INVALID_GEOMETRY_ID;
-            rh.hit.instID[0][j] = RTC_INVALID_GEOMETRY_ID;
+        int64_t *t = tri + k * DR_ACCEL_PACKET;
+        if (!a->plain) {
+            packet_intersect(a->scene, a, rays, k, t, NULL, NULL);
+            continue;
         }
-        rtcIntersect16(valid, a->scene, &q.rtc, &rh);
-        for (int j = 0; j < m; j++) {
-            unsigned g = rh.hit.geomID[j];
-            const uint32_t *map = g == RTC_INVALID_GEOMETRY_ID ? NULL : a->geom[g & 1].tri;
-            tri[first + j] = g == RTC_INVALID_GEOMETRY_ID ? -1
-                             : map                        ? (int64_t)map[rh.hit.primID[j]]
-                                                          : (int64_t)rh.hit.primID[j];
-        }
+        float u[DR_ACCEL_PACKET], v[DR_ACCEL_PACKET];
+        int m = packet_intersect(a->plain, a, rays, k, t, u, v);
+        for (int j = 0, i = k * DR_ACCEL_PACKET; j < m; j++, i++)
+            if (t[j] >= 0 && !filter_accepts(a, t[j], u[j], v[j], rays->d[i], ray_key(rays, i)))
+                t[j] = filtered_intersect(a, rays->o[i], rays->d[i], 0.0, rays->tmax[i], ray_key(rays, i));
     }
 }
 
 void dr_accel_occluded_many(const struct dr_accel *a, const struct dr_accel_rays *rays, bool *occluded)
 {
     for (int k = 0; k * DR_ACCEL_PACKET < rays->n; k++) {
+        int first = k * DR_ACCEL_PACKET;
+        if (a->plain) {   /* the closest blocker, and whether it counts */
+            int64_t tri[DR_ACCEL_PACKET];
+            float u[DR_ACCEL_PACKET], v[DR_ACCEL_PACKET];
+            int m = packet_intersect(a->plain, a, rays, k, tri, u, v);
+            for (int j = 0, i = first; j < m; j++, i++)
+                occluded[i] = tri[j] >= 0 &&
+                              (filter_accepts(a, tri[j], u[j], v[j], rays->d[i], ray_key(rays, i)) ||
+                               filtered_occluded(a, rays->o[i], rays->d[i], 0.0, rays->tmax[i], ray_key(rays, i)));
+            continue;
+        }
         int valid[DR_ACCEL_PACKET];
         struct query_ctx q;
-        int first = k * DR_ACCEL_PACKET, m = packet_lanes(rays, k, valid, &q);
+        int m = packet_lanes(rays, k, valid, &q);
         struct RTCRay16 r __attribute__((aligned(64)));
         for (int j = 0; j < m; j++)
             fill_lane(&r, j, rays, first + j);

@@ -21,6 +21,9 @@ struct dr_accel *dr_accel_create(const struct dr_mesh *mesh);
  * without MASK/BLEND/single-sided materials gets exactly dr_accel_create's
  * structure: no filter is installed. */
 struct dr_accel *dr_accel_create_scene(const struct dr_scene *scene);
+/* The same without the unfiltered copy (accel.c): every query runs the
+ * filters. The reference the tests hold the fast path to. */
+struct dr_accel *dr_accel_create_scene_filtered(const struct dr_scene *scene);
 void dr_accel_destroy(struct dr_accel *accel);
 
 /* Closest hit along o + t d, t in (tmin, tmax). Returns the triangle index or

@@ -158,6 +158,19 @@ static void progress(void *ctx, int done, int total)
     dr_progress_bar("rendering", done, total);
 }
 
+/* Pixels per wavefront run: enough that a run keeps the lanes busy, but
+ * never more path values than 4096 (or one pixel's spp), nor a whole tile. */
+static int chunk_pixels(int spp)
+{
+    int n = spp >= 4096 ? 1 : 4096 / spp;
+    return n < DR_TILE_SIZE * DR_TILE_SIZE ? n : DR_TILE_SIZE * DR_TILE_SIZE;
+}
+
+size_t dr_render_thread_bytes(int spp)
+{
+    return dr_wave_bytes() + sizeof(dr_vec3) * (size_t)chunk_pixels(spp) * (size_t)(spp > 0 ? spp : 1);
+}
+
 int dr_render(const struct dr_scene *scene, const struct dr_camera *camera, const struct dr_render_opts *opts,
               float *rgb, struct dr_render_stats *stats)
 {
@@ -177,11 +190,7 @@ int dr_render(const struct dr_scene *scene, const struct dr_camera *camera, cons
                                     .stages = dr_path_plan(scene, NULL)};
     j->rgb = rgb;
     j->wave = !(j->path.stages & DR_STAGE_MEDIA);
-    /* Enough pixels that a run keeps the lanes busy, but never more path
-     * values than a tile's worth of 4096 (or one pixel's spp). */
-    j->chunk_pixels = opts->spp >= 4096 ? 1 : 4096 / opts->spp;
-    if (j->chunk_pixels > DR_TILE_SIZE * DR_TILE_SIZE)
-        j->chunk_pixels = DR_TILE_SIZE * DR_TILE_SIZE;
+    j->chunk_pixels = chunk_pixels(opts->spp);
     int threads = dr_thread_count(opts->threads);
     int rc = 0;
     for (int i = 0; i < threads && rc == 0; i++) {

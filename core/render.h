@@ -36,6 +36,9 @@ struct dr_render_stats {
 int dr_render(const struct dr_scene *scene, const struct dr_camera *camera, const struct dr_render_opts *opts,
               float *rgb, struct dr_render_stats *stats);
 
+/* Working storage dr_render allocates per thread for spp samples per pixel. */
+size_t dr_render_thread_bytes(int spp);
+
 /* Draws "label [=====     ] 42%" on stderr (call with done == total to end the line). */
 void dr_progress_bar(const char *label, int done, int total);
 
