@@ -1,7 +1,8 @@
-/* The packet renderer's lanes (wavefront.h). */
+/* The packet tracer's lanes (wavefront.h). */
 #include "wavefront.h"
 
 #include <stdlib.h>
+#include <string.h>
 
 #include "accel.h"
 
@@ -9,11 +10,10 @@ struct lane {
     struct dr_path_state st;
     struct dr_sampler smp;
     struct dr_path_vertex v;
-    dr_vec3 L;               /* the path's sum so far */
-    dr_vec3 beta;            /* its throughput on arrival at v */
-    int64_t path;            /* which path (index into L of dr_wave_radiance) */
-    enum dr_step_next next;  /* what the hit stage asked for */
+    struct dr_wave_arrival arrival;   /* the throughput v was reached with */
+    enum dr_step_next next;           /* what the hit stage asked for */
     struct dr_shadow_ray shadow;
+    _Alignas(16) unsigned char user[DR_WAVE_USER_BYTES];
 };
 
 /* The rays of one batch, in the layout dr_accel_*_many reads. */
@@ -63,20 +63,13 @@ static struct dr_accel_rays accel_rays(const struct batch *b)
     return (struct dr_accel_rays){.n = b->n, .o = b->o, .d = b->d, .tmax = b->tmax, .key = b->key};
 }
 
-/* Ends lane k's path: its sum to L, the lane to the free list. */
-static void retire(struct dr_wave *w, int *n_free, int k, dr_vec3 *L)
-{
-    L[w->lane[k].path] = w->lane[k].L;
-    w->free_[(*n_free)++] = k;
-}
-
 /* The trace stage of every live lane: one batch of extension (or camera) rays. */
 static void trace_live(struct dr_wave *w, int n_live, const struct dr_scene *s, struct dr_ray_counts *counts)
 {
     w->rays.n = 0;
     for (int i = 0; i < n_live; i++) {
         struct lane *l = &w->lane[w->live[i]];
-        l->beta = l->st.beta;
+        l->arrival = (struct dr_wave_arrival){l->st.beta, l->st.ratio};
         dr_path_step_begin(&l->st, &l->v);
         dr_path_count_trace(&l->st, counts);
         add_ray(&w->rays, w->live[i], l->st.o, l->st.d, INFINITY, dr_path_trace_key(s, &l->st, &l->smp));
@@ -103,10 +96,17 @@ static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
     dr_accel_occluded_many(s->accel, &r, w->occluded);
 }
 
-/* The end of the step: next-event results, the vertex's terms, the
- * continuation. Returns how many lanes live on (compacted in order). */
+/* Starts the lane's next walk (or its item's first) from sampler, o, d. */
+static void begin_walk(struct lane *l, dr_vec3 o, dr_vec3 d)
+{
+    dr_path_start(&l->st, o, d);
+}
+
+/* The end of the step: next-event results, the continuation, the vertex to
+ * the caller; lanes whose item ended go to the free list. Returns how many
+ * lanes live on (compacted, in order). */
 static int finish_live(struct dr_wave *w, int n_live, int *n_free, const struct dr_scene *s,
-                       const struct dr_path_opts *opts, dr_vec3 *L)
+                       const struct dr_path_opts *opts, const struct dr_wave_ops *ops, void *ctx)
 {
     for (int r = 0; r < w->rays.n; r++) {
         struct lane *l = &w->lane[w->rays.owner[r]];
@@ -119,35 +119,85 @@ static int finish_live(struct dr_wave *w, int n_live, int *n_free, const struct 
         if (l->next == DR_STEP_SHADOW && !(l->shadow.tmax > 0.0))
             dr_path_nee_end(s, &l->v, &l->shadow, false);   /* no ray: nothing contributes */
         bool more = l->next != DR_STEP_END && dr_path_stage_continue(opts, &l->st, &l->v);
-        l->L = dr_add(l->L, dr_mul(l->beta, dr_path_vertex_term(&l->v)));
-        if (more)
+        ops->vertex(ctx, l->user, &l->arrival, &l->v, &l->smp, more);
+        dr_vec3 o, d;
+        if (more || ops->walk_end(ctx, l->user, &l->smp, &o, &d)) {
+            if (!more)
+                begin_walk(l, o, d);
             w->live[kept++] = k;
-        else
-            retire(w, n_free, k, L);
+        } else {
+            w->free_[(*n_free)++] = k;
+        }
     }
     return kept;
 }
 
-void dr_wave_radiance(struct dr_wave *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
-                      dr_wave_start_fn start, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts)
+void dr_wave_run(struct dr_wave *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
+                 const struct dr_wave_ops *ops, void *ctx, struct dr_ray_counts *counts)
 {
     int n_live = 0, n_free = DR_WAVE_LANES;
     for (int k = 0; k < DR_WAVE_LANES; k++)
         w->free_[k] = DR_WAVE_LANES - 1 - k;   /* lane 0 is handed out first */
     int64_t next = 0;
     while (next < n || n_live > 0) {
-        while (n_free > 0 && next < n) {   /* refill: new paths in start order */
+        while (n_free > 0 && next < n) {   /* refill: new items in order */
             int k = w->free_[--n_free];
             struct lane *l = &w->lane[k];
             dr_vec3 o, d;
-            start(ctx, next, &l->smp, &o, &d);
-            dr_path_start(&l->st, o, d);
-            l->L = dr_v3s(0.0);
-            l->path = next++;
+            memset(l->user, 0, sizeof l->user);
+            ops->start(ctx, next++, l->user, &l->smp, &o, &d);
+            begin_walk(l, o, d);
             w->live[n_live++] = k;
         }
         trace_live(w, n_live, s, counts);
         shade_live(w, n_live, s, opts, counts);
-        n_live = finish_live(w, n_live, &n_free, s, opts, L);
+        n_live = finish_live(w, n_live, &n_free, s, opts, ops, ctx);
     }
+}
+
+/* ------------------------------------------------------------- radiance */
+
+struct radiance_ctx {
+    dr_wave_start_fn start;
+    void *ctx;
+    dr_vec3 *L;
+};
+struct radiance_lane {
+    int64_t path;
+    dr_vec3 L;
+};
+_Static_assert(sizeof(struct radiance_lane) <= DR_WAVE_USER_BYTES, "lane state fits");
+
+static void radiance_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    struct radiance_ctx *c = ctx;
+    struct radiance_lane *r = user;
+    r->path = i;
+    r->L = dr_v3s(0.0);
+    c->start(c->ctx, i, smp, o, d);
+}
+
+static void radiance_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
+                            struct dr_sampler *smp, bool more)
+{
+    (void)ctx, (void)smp, (void)more;
+    struct radiance_lane *r = user;
+    r->L = dr_add(r->L, dr_mul(a->beta, dr_path_vertex_term(v)));
+}
+
+static bool radiance_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    (void)smp, (void)o, (void)d;
+    struct radiance_ctx *c = ctx;
+    const struct radiance_lane *r = user;
+    c->L[r->path] = r->L;
+    return false;
+}
+
+void dr_wave_radiance(struct dr_wave *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
+                      dr_wave_start_fn start, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts)
+{
+    static const struct dr_wave_ops ops = {radiance_start, radiance_vertex, radiance_end};
+    struct radiance_ctx c = {start, ctx, L};
+    dr_wave_run(w, s, opts, n, &ops, &c, counts);
 }

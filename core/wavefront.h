@@ -1,13 +1,18 @@
-/* Many paths advanced together, one stage at a time (the packet renderer):
+/* Many paths advanced together, one stage at a time (the packet tracer):
  * every live path is traced in one batch of Embree packets, shaded, its
- * shadow rays tested in a second batch, and continued; a path that ends
- * frees its lane for the next one. Each path runs exactly the one-path
- * walker's stages (path.h: dr_path_step cut at its ray queries), so it
- * makes the same decisions with the same numbers; only the order in which
- * paths are worked on changes. Scenes with media use the one-path walker. */
+ * shadow rays tested in a second batch, and continued; a lane whose work
+ * ends takes the next item. Each path runs exactly the one-path walker's
+ * stages (path.h: dr_path_step cut at its ray queries), so it makes the same
+ * decisions with the same numbers; only the order in which paths are worked
+ * on changes. Scenes with media use the one-path walker.
+ *
+ * A lane works on one item (a pixel sample) at a time, as one or more walks
+ * (render: one; path replay: the primal walk, then the replay). What a walk
+ * does with its vertices is the caller's (struct dr_wave_ops). */
 #ifndef DR_WAVEFRONT_H
 #define DR_WAVEFRONT_H
 
+#include <stddef.h>
 #include <stdint.h>
 
 #include "path.h"
@@ -16,14 +21,38 @@
 
 /* Paths in flight per wavefront: four 16-wide packets. */
 #define DR_WAVE_LANES 64
+/* Bytes of the caller's per-lane state (dr_wave_ops.user). */
+#define DR_WAVE_USER_BYTES 320
+
+/* The walker's state a vertex was reached with (what the throughput was). */
+struct dr_wave_arrival {
+    dr_vec3 beta, ratio;
+};
+
+struct dr_wave_ops {
+    /* Begins item i in a lane: its state in user (DR_WAVE_USER_BYTES,
+     * zeroed), the first walk's sampler and ray. */
+    void (*start)(void *ctx, int64_t i, void *user, struct dr_sampler *sampler, dr_vec3 *o, dr_vec3 *d);
+    /* Vertex v of the walk, reached with throughput a; more: the walk goes on. */
+    void (*vertex)(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
+                   struct dr_sampler *sampler, bool more);
+    /* The walk ended: true starts another walk of the same item from
+     * (*sampler, *o, *d) (set them), false ends the item. */
+    bool (*walk_end)(void *ctx, void *user, struct dr_sampler *sampler, dr_vec3 *o, dr_vec3 *d);
+};
 
 struct dr_wave;
 
-/* Per-thread working storage (about DR_WAVE_LANES path vertices). NULL: out of memory. */
+/* Working storage of one thread (about DR_WAVE_LANES path vertices). NULL: out of memory. */
 struct dr_wave *dr_wave_create(void);
 void dr_wave_destroy(struct dr_wave *wave);
 /* Bytes dr_wave_create allocates (for memory estimates). */
 size_t dr_wave_bytes(void);
+
+/* Works items [0, n) to their end, at most DR_WAVE_LANES at a time, started
+ * in order. */
+void dr_wave_run(struct dr_wave *wave, const struct dr_scene *scene, const struct dr_path_opts *opts, int64_t n,
+                 const struct dr_wave_ops *ops, void *ctx, struct dr_ray_counts *counts);
 
 /* Starts path i: its sampler, and its camera ray o + t d. */
 typedef void (*dr_wave_start_fn)(void *ctx, int64_t i, struct dr_sampler *sampler, dr_vec3 *o, dr_vec3 *d);

@@ -18,79 +18,103 @@
 #include "path_deriv.h"
 #include "prb_attached.h"
 
+#include "medium_grad.h"
+#include "wavefront.h"
+
 struct prb_job {
     struct dr_est_base b;   /* first: the shared part */
     double *zeros;          /* attached sampling: a sink direction that discards (params->total zeros) */
     double radius;          /* attached sampling: the scene's radius */
+    bool wave;              /* detached, no media, no derivative sampling: samples as a wavefront */
+    struct dr_wave *waves[DR_MAX_THREADS];   /* ... per thread, made on first use */
 };
-#include "medium_grad.h"
 
 struct prb_radiance {
     dr_vec3 true_, sub;   /* L with the true throughput, and with substitutes */
 };
 
-/* One walk over the path of (smp, o, d). Without `sink`: the primal, whose
- * radiance goes to *L. With it: the replay, which turns *L (the primal's
- * result) into the remaining radiance vertex by vertex. */
-static void walk(const struct dr_est_base *b, struct dr_sampler smp, dr_vec3 o, dr_vec3 d, struct prb_radiance *L,
-                 dr_vec3 adj, struct dr_grad_sink *sink, struct dr_ray_counts *rays, int *vertices)
+/* One walk over a path. Without `sink`: the primal, whose radiance goes to
+ * L. With it: the replay, which turns L (the primal's result) into the
+ * remaining radiance vertex by vertex. */
+struct walk {
+    struct prb_radiance L;
+    dr_vec3 adj;
+    struct dr_grad_sink *sink;
+    int vertices;                      /* the primal counts them, the replay's media derivatives use the count */
+    struct dr_medium_record *mrec;     /* media: what the replay re-traces, one vertex at a time */
+    /* derivative sampling: the last vertex, if differentiated and continued */
+    struct dr_path_vertex *prev;
+    bool have_prev;
+    dr_vec3 prev_dt;
+};
+
+/* What vertex v (reached with throughput beta, ratio) does to the walk:
+ * the body of the walk's loop, shared by the one-path walk and the wavefront. */
+static void walk_vertex(const struct dr_est_base *b, struct walk *w, const struct dr_path_vertex *v, dr_vec3 beta,
+                        dr_vec3 ratio, struct dr_sampler *smp, struct dr_ray_counts *rays)
 {
     const struct dr_scene *s = b->p->scene;
     const struct dr_param_set *ps = b->p->params;
+    struct dr_grad_sink *sink = w->sink;
+    struct prb_radiance *L = &w->L;
+    const dr_vec3 adj = w->adj;
     const double sign = sink ? -1.0 : 1.0;
     const bool dsamp = b->p->sampling == DR_SAMPLING_DERIVATIVE;   /* path_deriv.h (only vertices with a BSDF parameter) */
-    struct dr_path_vertex prev;   /* derivative sampling: the last vertex, if differentiated and continued */
-    bool have_prev = false;
-    dr_vec3 prev_dt = dr_v3s(0.0);
+    if (!sink)
+        ++w->vertices;
+    dr_vec3 c = dr_mul(beta, dr_path_vertex_term(v));   /* with substitutes */
+    dr_vec3 remaining = L->true_;   /* replay: from this vertex on */
+    L->sub = dr_madd(L->sub, c, sign);
+    L->true_ = dr_madd(L->true_, dr_mul(ratio, c), sign);
+    if (!sink)
+        return;
+    if (v->media)
+        d_medium_vertex(s, &b->popts, v, w->mrec, w->vertices, dr_mul(adj, dr_mul(ratio, beta)), dr_mul(adj, remaining),
+                        dr_mul(adj, L->true_), dr_mul(adj, dr_mul(dr_mul(ratio, beta), dr_path_vertex_nee(v))), sink);
+    d_path_vertex_term(s, ps, v, dr_mul(adj, dr_mul(ratio, beta)), sink);
+    if (dsamp) {   /* the three-strategy weights of the BSDF derivative terms (path_deriv.h) */
+        if (w->have_prev)
+            d_path_deriv_emission(s, &b->popts, w->prev, w->prev_dt, v, sink);
+        d_path_deriv_nee(s, &b->popts, v, dr_mul(adj, dr_mul(ratio, beta)), sink);
+    }
+    if (v->cont && v->diff_bsdf) {
+        dr_vec3 d_f;
+        for (int ch = 0; ch < 3; ch++) {
+            double f = dr_v3_get(v->f, ch), r;
+            if (v->sub[ch])
+                r = dr_v3_get(ratio, ch) * dr_v3_get(L->sub, ch) / dr_v3_get(v->s, ch);
+            else
+                r = f != 0.0 ? dr_v3_get(L->true_, ch) / f : 0.0;
+            dr_v3_set(&d_f, ch, r * dr_v3_get(adj, ch));
+        }
+        if (dsamp)
+            d_path_deriv_continuation(s, ps, v, d_f, sink);
+        else
+            d_path_continuation(s, ps, v, d_f, sink);
+    }
+    /* the new directions: also where the forward sample failed or
+     * Russian roulette ended the path (that strategy then gave 0) */
+    if (dsamp && v->shaded && v->diff_bsdf)
+        d_path_deriv_sample(s, &b->popts, v, smp, dr_mul(adj, dr_mul(ratio, beta)), sink, rays);
+    if ((w->have_prev = dsamp && v->cont && v->diff_bsdf)) {
+        *w->prev = *v;
+        w->prev_dt = dr_scale(dr_mul(adj, dr_mul(ratio, beta)), v->cos_pdf_q);
+    }
+}
+
+/* The walk of (smp, o, d), one path at a time. */
+static void walk(const struct dr_est_base *b, struct dr_sampler smp, dr_vec3 o, dr_vec3 d, struct walk *w,
+                 struct dr_ray_counts *rays)
+{
     struct dr_path_state st;
     struct dr_path_vertex v;
-    struct dr_medium_record mrec;   /* media: what the replay re-traces, one vertex at a time */
-    v.mrec = &mrec;
+    v.mrec = w->mrec;
+    w->have_prev = false;
     dr_path_start(&st, o, d);
     for (;;) {
         dr_vec3 beta = st.beta, ratio = st.ratio;
-        bool more = dr_path_step(s, &b->popts, &st, &smp, &v, rays);
-        if (!sink)
-            ++*vertices;
-        dr_vec3 c = dr_mul(beta, dr_path_vertex_term(&v));   /* with substitutes */
-        dr_vec3 remaining = L->true_;   /* replay: from this vertex on */
-        L->sub = dr_madd(L->sub, c, sign);
-        L->true_ = dr_madd(L->true_, dr_mul(ratio, c), sign);
-        if (sink && v.media)
-            d_medium_vertex(s, &b->popts, &v, &mrec, *vertices, dr_mul(adj, dr_mul(ratio, beta)), dr_mul(adj, remaining),
-                            dr_mul(adj, L->true_),
-                            dr_mul(adj, dr_mul(dr_mul(ratio, beta), dr_path_vertex_nee(&v))), sink);
-        if (sink) {
-            d_path_vertex_term(s, ps, &v, dr_mul(adj, dr_mul(ratio, beta)), sink);
-            if (dsamp) {   /* the three-strategy weights of the BSDF derivative terms (path_deriv.h) */
-                if (have_prev)
-                    d_path_deriv_emission(s, &b->popts, &prev, prev_dt, &v, sink);
-                d_path_deriv_nee(s, &b->popts, &v, dr_mul(adj, dr_mul(ratio, beta)), sink);
-            }
-            if (v.cont && v.diff_bsdf) {
-                dr_vec3 d_f;
-                for (int ch = 0; ch < 3; ch++) {
-                    double f = dr_v3_get(v.f, ch), r;
-                    if (v.sub[ch])
-                        r = dr_v3_get(ratio, ch) * dr_v3_get(L->sub, ch) / dr_v3_get(v.s, ch);
-                    else
-                        r = f != 0.0 ? dr_v3_get(L->true_, ch) / f : 0.0;
-                    dr_v3_set(&d_f, ch, r * dr_v3_get(adj, ch));
-                }
-                if (dsamp)
-                    d_path_deriv_continuation(s, ps, &v, d_f, sink);
-                else
-                    d_path_continuation(s, ps, &v, d_f, sink);
-            }
-            /* the new directions: also where the forward sample failed or
-             * Russian roulette ended the path (that strategy then gave 0) */
-            if (dsamp && v.shaded && v.diff_bsdf)
-                d_path_deriv_sample(s, &b->popts, &v, &smp, dr_mul(adj, dr_mul(ratio, beta)), sink, rays);
-            if ((have_prev = dsamp && v.cont && v.diff_bsdf)) {
-                prev = v;
-                prev_dt = dr_scale(dr_mul(adj, dr_mul(ratio, beta)), v.cos_pdf_q);
-            }
-        }
+        bool more = dr_path_step(b->p->scene, &b->popts, &st, &smp, &v, rays);
+        walk_vertex(b, w, &v, beta, ratio, &smp, rays);
         if (!more)
             break;
     }
@@ -122,12 +146,100 @@ static void attached_pixel(struct prb_job *j, int thread, int64_t px, dr_vec3 ad
     }
 }
 
+/* ---- the wavefront (wavefront.h): a lane's item is one sample, its primal
+ * walk then its replay; each lane has its own sink (forward mode keeps a
+ * sample's three channel sums in it; reverse mode's all add to the thread's
+ * gradient). Detached sampling without media or derivative sampling only. */
+
+/* Pixels per parallel chunk (and at most per wavefront run). */
+#define PIXEL_CHUNK 16
+
+struct wave_ctx {
+    struct prb_job *j;
+    int thread;
+    struct dr_grad_sink sink;   /* the thread's, copied into each lane */
+    int64_t px[PIXEL_CHUNK];
+    dr_vec3 adj[PIXEL_CHUNK];
+};
+
+struct prb_lane {
+    struct walk w;
+    struct dr_grad_sink sink;
+    struct dr_sampler smp0;   /* the sample's first numbers: the replay starts from them again */
+    dr_vec3 o, d;
+    int64_t px;
+};
+_Static_assert(sizeof(struct prb_lane) <= DR_WAVE_USER_BYTES, "a prb lane's state fits");
+
+static void lane_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    struct wave_ctx *c = ctx;
+    struct prb_lane *l = user;
+    const int spp = c->j->b.p->spp;
+    l->px = c->px[i / spp];
+    l->w.adj = c->adj[i / spp];
+    dr_est_camera_ray(&c->j->b, l->px, (int)(i % spp), smp, o, d);
+    l->smp0 = *smp;
+    l->o = *o;
+    l->d = *d;
+}
+
+static void lane_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
+                        struct dr_sampler *smp, bool more)
+{
+    (void)more;
+    struct wave_ctx *c = ctx;
+    struct prb_lane *l = user;
+    walk_vertex(&c->j->b, &l->w, v, a->beta, a->ratio, smp, &c->j->b.thr[c->thread].rays);
+}
+
+static bool lane_walk_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    struct wave_ctx *c = ctx;
+    struct prb_lane *l = user;
+    struct dr_est_base *b = &c->j->b;
+    if (l->w.sink) {   /* the replay ended: the sample is done */
+        dr_est_sample_done(b, c->thread, l->px, l->w.sink);
+        return false;
+    }
+    if (!dr_v3_finite(l->w.L.true_) || !dr_v3_finite(l->w.L.sub)) {
+        b->thr[c->thread].invalid++;
+        return false;
+    }
+    l->sink = c->sink;
+    l->w.sink = &l->sink;
+    *smp = l->smp0;
+    *o = l->o;
+    *d = l->d;
+    return true;
+}
+
+/* The chunk's pixels that matter to the loss, every sample as a lane's item. */
+static bool wave_pixels(struct prb_job *j, int thread, int64_t begin, int64_t end, struct dr_grad_sink sink)
+{
+    struct dr_est_base *b = &j->b;
+    if (!j->waves[thread] && !(j->waves[thread] = dr_wave_create()))
+        return false;   /* no memory for the lanes: one path at a time */
+    struct wave_ctx c = {.j = j, .thread = thread, .sink = sink};
+    int n = 0;
+    for (int64_t px = begin; px < end; px++)
+        if (dr_est_sample_adjoint(b, px, &c.adj[n]))
+            c.px[n++] = px;
+    static const struct dr_wave_ops ops = {lane_start, lane_vertex, lane_walk_end};
+    dr_wave_run(j->waves[thread], b->p->scene, &b->popts, (int64_t)n * b->p->spp, &ops, &c, &b->thr[thread].rays);
+    return true;
+}
+
 static void prb_pixels(void *ctx, int thread, int64_t begin, int64_t end)
 {
     struct prb_job *j = ctx;
     struct dr_est_base *b = &j->b;
     struct dr_ray_counts *rays = &b->thr[thread].rays;
     struct dr_grad_sink sink = dr_est_sink_begin(b, thread);
+    if (j->wave && end - begin <= PIXEL_CHUNK && wave_pixels(j, thread, begin, end, sink)) {
+        dr_est_sink_end(b, thread);
+        return;
+    }
     for (int64_t px = begin; px < end; px++) {
         dr_vec3 adj;
         if (!dr_est_sample_adjoint(b, px, &adj))
@@ -136,18 +248,20 @@ static void prb_pixels(void *ctx, int thread, int64_t begin, int64_t end)
             attached_pixel(j, thread, px, adj, &sink);
             continue;
         }
+        struct dr_medium_record mrec;
+        struct dr_path_vertex prev;
         for (int sidx = 0; sidx < b->p->spp; sidx++) {
             struct dr_sampler smp;
             dr_vec3 o, d;
-            struct prb_radiance L = {dr_v3s(0.0), dr_v3s(0.0)};
+            struct walk w = {.adj = adj, .mrec = &mrec, .prev = &prev};
             dr_est_camera_ray(b, px, sidx, &smp, &o, &d);
-            int vertices = 0;   /* the primal counts them, the replay's media derivatives use the count */
-            walk(b, smp, o, d, &L, adj, NULL, rays, &vertices);
-            if (!dr_v3_finite(L.true_) || !dr_v3_finite(L.sub)) {
+            walk(b, smp, o, d, &w, rays);
+            if (!dr_v3_finite(w.L.true_) || !dr_v3_finite(w.L.sub)) {
                 b->thr[thread].invalid++;
                 continue;
             }
-            walk(b, smp, o, d, &L, adj, &sink, rays, &vertices);
+            w.sink = &sink;
+            walk(b, smp, o, d, &w, rays);
             dr_est_sample_done(b, thread, px, &sink);
         }
     }
@@ -168,12 +282,17 @@ static int prb_run(struct dr_est_base *b)
         if (!(j->radius > 0.0) || !isfinite(j->radius))
             j->radius = 1.0;
     }
-    return dr_parallel_for_static((int64_t)b->p->width * b->p->height, 16, b->acc.threads, prb_pixels, j);
+    j->wave = run == DR_SAMPLING_DETACHED && b->p->sampling != DR_SAMPLING_DERIVATIVE &&
+              !(b->popts.stages & DR_STAGE_MEDIA);
+    return dr_parallel_for_static((int64_t)b->p->width * b->p->height, PIXEL_CHUNK, b->acc.threads, prb_pixels, j);
 }
 
 static void prb_release(struct dr_est_base *b)
 {
-    free(((struct prb_job *)b)->zeros);
+    struct prb_job *j = (struct prb_job *)b;
+    free(j->zeros);
+    for (int t = 0; t < DR_MAX_THREADS; t++)
+        dr_wave_destroy(j->waves[t]);
 }
 
 const struct dr_estimator_ops dr_estimator_prb = {
