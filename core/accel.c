@@ -150,7 +150,10 @@ static struct dr_accel *build(const struct dr_mesh *mesh, const struct dr_scene 
         dr_set_error("out of memory");
         return NULL;
     }
-    a->device = rtcNewDevice(NULL);
+    /* DRENDER_EMBREE_CONFIG: Embree's device configuration (e.g. "isa=avx2":
+     * how a machine without AVX-512 traces; the tests use it) */
+    const char *config = getenv("DRENDER_EMBREE_CONFIG");
+    a->device = rtcNewDevice(config && *config ? config : NULL);
     if (!a->device) {
         dr_set_error("cannot create the Embree device");
         free(a);
@@ -362,6 +365,22 @@ static void fill_lane(struct RTCRay16 *r, int j, const struct dr_accel_rays *ray
     r->flags[j] = 0;
 }
 
+/* An unused lane: masked off by valid, and also a well-formed, inactive ray
+ * (tfar < tnear), as Embree's 8-wide split of a 16-wide packet checks every
+ * lane of a half it traces (an assertion on machines without AVX-512). */
+static void empty_lane(struct RTCRay16 *r, int j)
+{
+    r->org_x[j] = r->org_y[j] = r->org_z[j] = 0.0f;
+    r->dir_x[j] = r->dir_y[j] = 0.0f;
+    r->dir_z[j] = 1.0f;
+    r->tnear[j] = 0.0f;
+    r->tfar[j] = -INFINITY;
+    r->time[j] = 0.0f;
+    r->mask[j] = 0;
+    r->id[j] = (unsigned)j;
+    r->flags[j] = 0;
+}
+
 /* Packet k's lanes: rays [16k, min(16k + 16, n)); valid marks them. */
 static int packet_lanes(const struct dr_accel_rays *rays, int k, int valid[DR_ACCEL_PACKET], struct query_ctx *q)
 {
@@ -384,8 +403,11 @@ static int packet_intersect(RTCScene sc, const struct dr_accel *a, const struct 
     struct query_ctx q;
     int first = k * DR_ACCEL_PACKET, m = packet_lanes(rays, k, valid, &q);
     struct RTCRayHit16 rh __attribute__((aligned(64)));
-    for (int j = 0; j < m; j++) {
-        fill_lane(&rh.ray, j, rays, first + j);
+    for (int j = 0; j < DR_ACCEL_PACKET; j++) {
+        if (j < m)
+            fill_lane(&rh.ray, j, rays, first + j);
+        else
+            empty_lane(&rh.ray, j);
         rh.hit.geomID[j] = RTC_INVALID_GEOMETRY_ID;
         rh.hit.instID[0][j] = RTC_INVALID_GEOMETRY_ID;
     }
@@ -443,8 +465,12 @@ void dr_accel_occluded_many(const struct dr_accel *a, const struct dr_accel_rays
         struct query_ctx q;
         int m = packet_lanes(rays, k, valid, &q);
         struct RTCRay16 r __attribute__((aligned(64)));
-        for (int j = 0; j < m; j++)
-            fill_lane(&r, j, rays, first + j);
+        for (int j = 0; j < DR_ACCEL_PACKET; j++) {
+            if (j < m)
+                fill_lane(&r, j, rays, first + j);
+            else
+                empty_lane(&r, j);
+        }
         rtcOccluded16(valid, a->scene, &q.rtc, &r);
         for (int j = 0; j < m; j++)
             occluded[first + j] = r.tfar[j] < 0.0f;
