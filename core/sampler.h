@@ -152,21 +152,26 @@ static inline uint64_t dr_sampler_strat_jitter(const struct dr_sampler *s, uint3
     return dr_hash64((s->key ^ salt) + (uint64_t)dim * 0xd1b54a32d192ed03ULL);
 }
 
+/* The independent sampler's draw of dimension dim: 53 random bits. */
+static inline double dr_sampler_independent(const struct dr_sampler *s, uint32_t dim)
+{
+    uint64_t h = dr_hash64(s->key + (uint64_t)dim * 0xd1b54a32d192ed03ULL);
+    return (double)(h >> 11) * (1.0 / 9007199254740992.0);
+}
+
+/* The Sobol and stratified draws (sampler.c): out of line, so the
+ * independent sampler's few instructions inline into every caller (a path
+ * vertex draws seven numbers; through the general function they cost a
+ * quarter of its shading). */
+double dr_sampler_next_structured(struct dr_sampler *s);
+void dr_sampler_next2_structured(struct dr_sampler *s, double *u1, double *u2);
+
 /* Uniform double in [0, 1) with 53 random bits. */
 static inline double dr_sampler_next(struct dr_sampler *s)
 {
-    if (s->kind == DR_SAMPLER_SOBOL) {
-        double u;
-        dr_sampler_sobol2(s, ++s->dim, &u, NULL);
-        return u;
-    }
-    if (s->kind == DR_SAMPLER_STRATIFIED) {
-        ++s->dim;
-        return dr_strat_1d(s->index, s->count, (uint32_t)dr_sampler_strat_seed(s, s->dim),
-                           dr_sampler_strat_jitter(s, s->dim, 0x3c6ef372fe94f82bULL));
-    }
-    uint64_t h = dr_hash64(s->key + (uint64_t)(++s->dim) * 0xd1b54a32d192ed03ULL);
-    return (double)(h >> 11) * (1.0 / 9007199254740992.0);
+    if (__builtin_expect(s->kind == DR_SAMPLER_INDEPENDENT, 1))
+        return dr_sampler_independent(s, ++s->dim);
+    return dr_sampler_next_structured(s);
 }
 
 /* Two numbers that belong together (a 2D sample): two independent draws, one
@@ -174,20 +179,12 @@ static inline double dr_sampler_next(struct dr_sampler *s)
  * the layout of a path's dimensions does not depend on the sampler. */
 static inline void dr_sampler_next2(struct dr_sampler *s, double *u1, double *u2)
 {
-    if (s->kind == DR_SAMPLER_SOBOL) {
-        dr_sampler_sobol2(s, ++s->dim, u1, u2);
-        ++s->dim;
+    if (__builtin_expect(s->kind == DR_SAMPLER_INDEPENDENT, 1)) {
+        *u1 = dr_sampler_independent(s, ++s->dim);
+        *u2 = dr_sampler_independent(s, ++s->dim);
         return;
     }
-    if (s->kind == DR_SAMPLER_STRATIFIED) {
-        uint32_t d = ++s->dim;
-        ++s->dim;
-        dr_strat_2d(s->index, s->grid_m, s->grid_n, dr_sampler_strat_seed(s, d), dr_sampler_strat_jitter(s, d, 0x1ULL),
-                    dr_sampler_strat_jitter(s, d, 0x2ULL), u1, u2);
-        return;
-    }
-    *u1 = dr_sampler_next(s);
-    *u2 = dr_sampler_next(s);
+    dr_sampler_next2_structured(s, u1, u2);
 }
 
 const char *dr_sampler_kind_name(enum dr_sampler_kind k);
