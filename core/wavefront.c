@@ -13,6 +13,13 @@ struct lane {
     struct dr_wave_arrival arrival;   /* the throughput v was reached with */
     enum dr_step_next next;           /* what the hit stage asked for */
     struct dr_shadow_ray shadow;
+    int64_t tri;                      /* the trace's answer */
+    bool occluded;                    /* the shadow ray's */
+    /* the walk's ray answers by vertex (depth - 1), for a replay */
+    bool replaying;                   /* this walk replays the last one: answers from the log */
+    int logged;                       /* vertices logged */
+    int64_t tri_log[DR_WAVE_REPLAY_DEPTH];
+    bool occ_log[DR_WAVE_REPLAY_DEPTH];
     _Alignas(16) unsigned char user[DR_WAVE_USER_BYTES];
 };
 
@@ -30,9 +37,15 @@ struct dr_wave {
     int live[DR_WAVE_LANES];    /* indices of the lanes with a path, in start order */
     int free_[DR_WAVE_LANES];   /* and of those without */
     struct batch rays;
-    int64_t tri[DR_WAVE_LANES];
+    int64_t tri[DR_WAVE_LANES];       /* by ray of the batch */
     bool occluded[DR_WAVE_LANES];
 };
+
+/* Is the answer for the lane's current vertex in its log (a replay)? */
+static bool from_log(const struct lane *l)
+{
+    return l->replaying && l->st.depth <= l->logged;
+}
 
 struct dr_wave *dr_wave_create(void)
 {
@@ -63,7 +76,8 @@ static struct dr_accel_rays accel_rays(const struct batch *b)
     return (struct dr_accel_rays){.n = b->n, .o = b->o, .d = b->d, .tmax = b->tmax, .key = b->key};
 }
 
-/* The trace stage of every live lane: one batch of extension (or camera) rays. */
+/* The trace stage of every live lane: one batch of extension (or camera)
+ * rays, but for replaying lanes whose answer is logged. */
 static void trace_live(struct dr_wave *w, int n_live, const struct dr_scene *s, struct dr_ray_counts *counts)
 {
     w->rays.n = 0;
@@ -71,35 +85,59 @@ static void trace_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
         struct lane *l = &w->lane[w->live[i]];
         l->arrival = (struct dr_wave_arrival){l->st.beta, l->st.ratio};
         dr_path_step_begin(&l->st, &l->v);
+        if (from_log(l)) {
+            l->tri = l->tri_log[l->st.depth - 1];
+            continue;
+        }
         dr_path_count_trace(&l->st, counts);
         add_ray(&w->rays, w->live[i], l->st.o, l->st.d, INFINITY, dr_path_trace_key(s, &l->st, &l->smp));
     }
     struct dr_accel_rays r = accel_rays(&w->rays);
     dr_accel_intersect_many(s->accel, &r, w->tri);
+    for (int k = 0; k < w->rays.n; k++) {
+        struct lane *l = &w->lane[w->rays.owner[k]];
+        l->tri = w->tri[k];
+        if (!l->replaying && l->st.depth <= DR_WAVE_REPLAY_DEPTH)
+            l->tri_log[(l->logged = l->st.depth) - 1] = l->tri;
+    }
 }
 
-/* The hit stage: shading up to the shadow ray; collects the shadow rays. */
+/* The hit stage: shading up to the shadow ray; collects the shadow rays
+ * (a replaying lane's logged answer stands in for its ray). */
 static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, const struct dr_path_opts *opts,
                        struct dr_ray_counts *counts)
 {
     w->rays.n = 0;
     for (int i = 0; i < n_live; i++) {
         struct lane *l = &w->lane[w->live[i]];
-        l->next = dr_path_step_hit(s, opts, &l->st, &l->smp, &l->v, w->tri[i], &l->shadow);
-        if (l->next != DR_STEP_SHADOW)
+        l->next = dr_path_step_hit(s, opts, &l->st, &l->smp, &l->v, l->tri, &l->shadow);
+        l->occluded = false;
+        if (l->next != DR_STEP_SHADOW || !(l->shadow.tmax > 0.0))
+            continue;   /* no ray (nee_end knows there was none) */
+        if (from_log(l)) {
+            l->occluded = l->occ_log[l->st.depth - 1];
             continue;
+        }
         counts->shadow++;
-        if (l->shadow.tmax > 0.0)
-            add_ray(&w->rays, w->live[i], l->shadow.o, l->shadow.d, l->shadow.tmax, l->shadow.key);
+        add_ray(&w->rays, w->live[i], l->shadow.o, l->shadow.d, l->shadow.tmax, l->shadow.key);
     }
     struct dr_accel_rays r = accel_rays(&w->rays);
     dr_accel_occluded_many(s->accel, &r, w->occluded);
+    for (int k = 0; k < w->rays.n; k++) {
+        struct lane *l = &w->lane[w->rays.owner[k]];
+        l->occluded = w->occluded[k];
+        if (!l->replaying && l->st.depth <= DR_WAVE_REPLAY_DEPTH)
+            l->occ_log[l->st.depth - 1] = l->occluded;
+    }
 }
 
-/* Starts the lane's next walk (or its item's first) from sampler, o, d. */
-static void begin_walk(struct lane *l, dr_vec3 o, dr_vec3 d)
+/* Starts the lane's next walk (or its item's first) from o, d. */
+static void begin_walk(struct lane *l, dr_vec3 o, dr_vec3 d, enum dr_wave_next how)
 {
     dr_path_start(&l->st, o, d);
+    l->replaying = how == DR_WAVE_REPLAY;
+    if (!l->replaying)
+        l->logged = 0;
 }
 
 /* The end of the step: next-event results, the continuation, the vertex to
@@ -108,26 +146,23 @@ static void begin_walk(struct lane *l, dr_vec3 o, dr_vec3 d)
 static int finish_live(struct dr_wave *w, int n_live, int *n_free, const struct dr_scene *s,
                        const struct dr_path_opts *opts, const struct dr_wave_ops *ops, void *ctx)
 {
-    for (int r = 0; r < w->rays.n; r++) {
-        struct lane *l = &w->lane[w->rays.owner[r]];
-        dr_path_nee_end(s, &l->v, &l->shadow, w->occluded[r]);
-    }
     int kept = 0;
     for (int i = 0; i < n_live; i++) {
         int k = w->live[i];
         struct lane *l = &w->lane[k];
-        if (l->next == DR_STEP_SHADOW && !(l->shadow.tmax > 0.0))
-            dr_path_nee_end(s, &l->v, &l->shadow, false);   /* no ray: nothing contributes */
+        if (l->next == DR_STEP_SHADOW)
+            dr_path_nee_end(s, &l->v, &l->shadow, l->occluded);
         bool more = l->next != DR_STEP_END && dr_path_stage_continue(opts, &l->st, &l->v);
         ops->vertex(ctx, l->user, &l->arrival, &l->v, &l->smp, more);
         dr_vec3 o, d;
-        if (more || ops->walk_end(ctx, l->user, &l->smp, &o, &d)) {
-            if (!more)
-                begin_walk(l, o, d);
-            w->live[kept++] = k;
-        } else {
+        enum dr_wave_next how = more ? DR_WAVE_WALK : ops->walk_end(ctx, l->user, &l->smp, &o, &d);
+        if (how == DR_WAVE_DONE) {
             w->free_[(*n_free)++] = k;
+            continue;
         }
+        if (!more)
+            begin_walk(l, o, d, how);
+        w->live[kept++] = k;
     }
     return kept;
 }
@@ -146,7 +181,7 @@ void dr_wave_run(struct dr_wave *w, const struct dr_scene *s, const struct dr_pa
             dr_vec3 o, d;
             memset(l->user, 0, sizeof l->user);
             ops->start(ctx, next++, l->user, &l->smp, &o, &d);
-            begin_walk(l, o, d);
+            begin_walk(l, o, d, DR_WAVE_WALK);
             w->live[n_live++] = k;
         }
         trace_live(w, n_live, s, counts);
@@ -185,13 +220,13 @@ static void radiance_vertex(void *ctx, void *user, const struct dr_wave_arrival 
     r->L = dr_add(r->L, dr_mul(a->beta, dr_path_vertex_term(v)));
 }
 
-static bool radiance_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+static enum dr_wave_next radiance_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
 {
     (void)smp, (void)o, (void)d;
     struct radiance_ctx *c = ctx;
     const struct radiance_lane *r = user;
     c->L[r->path] = r->L;
-    return false;
+    return DR_WAVE_DONE;
 }
 
 void dr_wave_radiance(struct dr_wave *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,

@@ -29,6 +29,20 @@ struct dr_wave_arrival {
     dr_vec3 beta, ratio;
 };
 
+/* What a lane does when its walk ends (dr_wave_ops.walk_end). */
+enum dr_wave_next {
+    DR_WAVE_DONE,     /* the item is finished: the lane takes the next */
+    DR_WAVE_WALK,     /* another walk of the item, from the sampler and ray set */
+    DR_WAVE_REPLAY    /* the same walk again (same sampler, ray, and decisions,
+                         as path replay's second pass): its first
+                         DR_WAVE_REPLAY_DEPTH vertices' ray queries are answered
+                         from what the walk before found instead of traced */
+};
+/* Vertices per lane whose trace and shadow-ray answers are kept for a
+ * replay: a constant, so memory does not grow with the path's length
+ * (longer paths trace the rest again). */
+#define DR_WAVE_REPLAY_DEPTH 32
+
 struct dr_wave_ops {
     /* Begins item i in a lane: its state in user (DR_WAVE_USER_BYTES,
      * zeroed), the first walk's sampler and ray. */
@@ -36,9 +50,9 @@ struct dr_wave_ops {
     /* Vertex v of the walk, reached with throughput a; more: the walk goes on. */
     void (*vertex)(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
                    struct dr_sampler *sampler, bool more);
-    /* The walk ended: true starts another walk of the same item from
-     * (*sampler, *o, *d) (set them), false ends the item. */
-    bool (*walk_end)(void *ctx, void *user, struct dr_sampler *sampler, dr_vec3 *o, dr_vec3 *d);
+    /* The walk ended: what next (DR_WAVE_WALK and DR_WAVE_REPLAY: set
+     * *sampler, *o, *d to the next walk's start). */
+    enum dr_wave_next (*walk_end)(void *ctx, void *user, struct dr_sampler *sampler, dr_vec3 *o, dr_vec3 *d);
 };
 
 struct dr_wave;

@@ -193,25 +193,27 @@ static void lane_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, 
     walk_vertex(&c->j->b, &l->w, v, a->beta, a->ratio, smp, &c->j->b.thr[c->thread].rays);
 }
 
-static bool lane_walk_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+/* The primal walk ended: the replay of the same path follows (the wavefront
+ * answers its first ray queries from the primal's: no tracing twice). */
+static enum dr_wave_next lane_walk_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
 {
     struct wave_ctx *c = ctx;
     struct prb_lane *l = user;
     struct dr_est_base *b = &c->j->b;
     if (l->w.sink) {   /* the replay ended: the sample is done */
         dr_est_sample_done(b, c->thread, l->px, l->w.sink);
-        return false;
+        return DR_WAVE_DONE;
     }
     if (!dr_v3_finite(l->w.L.true_) || !dr_v3_finite(l->w.L.sub)) {
         b->thr[c->thread].invalid++;
-        return false;
+        return DR_WAVE_DONE;
     }
     l->sink = c->sink;
     l->w.sink = &l->sink;
     *smp = l->smp0;
     *o = l->o;
     *d = l->d;
-    return true;
+    return DR_WAVE_REPLAY;
 }
 
 /* The chunk's pixels that matter to the loss, every sample as a lane's item. */
