@@ -399,7 +399,7 @@ static int packet_lanes(const struct dr_accel_rays *rays, int k, int valid[DR_AC
 static int packet_intersect(RTCScene sc, const struct dr_accel *a, const struct dr_accel_rays *rays, int k,
                             int64_t *tri, float *u, float *v)
 {
-    int valid[DR_ACCEL_PACKET];
+    int valid[DR_ACCEL_PACKET] __attribute__((aligned(64)));   /* Embree: 64-byte aligned */
     struct query_ctx q;
     int first = k * DR_ACCEL_PACKET, m = packet_lanes(rays, k, valid, &q);
     struct RTCRayHit16 rh __attribute__((aligned(64)));
@@ -461,7 +461,7 @@ void dr_accel_occluded_many(const struct dr_accel *a, const struct dr_accel_rays
                                filtered_occluded(a, rays->o[i], rays->d[i], 0.0, rays->tmax[i], ray_key(rays, i)));
             continue;
         }
-        int valid[DR_ACCEL_PACKET];
+        int valid[DR_ACCEL_PACKET] __attribute__((aligned(64)));   /* Embree: 64-byte aligned */
         struct query_ctx q;
         int m = packet_lanes(rays, k, valid, &q);
         struct RTCRay16 r __attribute__((aligned(64)));
