@@ -168,6 +168,19 @@ static inline struct dr_image sb_image(int w, int h, int c, const float *px, flo
     return im;
 }
 
+/* Adds im to the scene's images and a texture on it (clamped both ways);
+ * returns the texture's index. */
+static inline int sb_texture(struct sb *b, struct dr_image im)
+{
+    struct dr_scene *s = b->s;
+    s->images = realloc(s->images, sizeof(struct dr_image) * (size_t)(s->n_images + 1));
+    s->images[s->n_images] = im;
+    s->textures = realloc(s->textures, sizeof(struct dr_texture) * (size_t)(s->n_textures + 1));
+    s->textures[s->n_textures] = (struct dr_texture){s->n_images, DR_WRAP_CLAMP, DR_WRAP_CLAMP};
+    s->n_images++;
+    return s->n_textures++;
+}
+
 static inline void sb_environment(struct sb *b, dr_vec3 color)
 {
     b->s->env.present = true;

@@ -20,13 +20,7 @@ static int striped_texture(struct sb *b, int w)
     }
     struct dr_image im = sb_image(w, 1, 4, px, 0.0f, false);
     free(px);
-    struct dr_scene *s = b->s;
-    s->images = realloc(s->images, sizeof(struct dr_image) * (size_t)(s->n_images + 1));
-    s->images[s->n_images] = im;
-    s->textures = realloc(s->textures, sizeof(struct dr_texture) * (size_t)(s->n_textures + 1));
-    s->textures[s->n_textures] = (struct dr_texture){s->n_images, DR_WRAP_CLAMP, DR_WRAP_CLAMP};
-    s->n_images++;
-    return s->n_textures++;
+    return sb_texture(b, im);
 }
 
 /* Boxes and quads of every coverage kind inside [-2, 2]^3. */

@@ -26,17 +26,6 @@
 #include "test.h"
 
 /* One image and one texture (clamped) appended to the builder's scene. */
-static int add_texture(struct sb *b, struct dr_image im)
-{
-    struct dr_scene *s = b->s;
-    s->images = realloc(s->images, sizeof(struct dr_image) * (size_t)(s->n_images + 1));
-    s->images[s->n_images] = im;
-    s->textures = realloc(s->textures, sizeof(struct dr_texture) * (size_t)(s->n_textures + 1));
-    s->textures[s->n_textures] = (struct dr_texture){s->n_images, DR_WRAP_CLAMP, DR_WRAP_CLAMP};
-    s->n_images++;
-    return s->n_textures++;
-}
-
 /* ------------------------------------------------------------ tangents */
 
 static const char *shared_sample(const char *rel)
@@ -220,7 +209,7 @@ static struct dr_scene *normal_quad(const dr_vec3 *enc, double scale, bool degen
     for (int i = 0; i < 4; i++)
         px[3 * i] = (float)enc->x, px[3 * i + 1] = (float)enc->y, px[3 * i + 2] = (float)enc->z;
     struct dr_material mat = sb_diffuse(dr_v3s(0.5));
-    mat.normal_tex.texture = add_texture(&b, sb_image(2, 2, 3, px, 0.0f, false));
+    mat.normal_tex.texture = sb_texture(&b, sb_image(2, 2, 3, px, 0.0f, false));
     mat.normal_scale = scale;
     sb_quad(&b, dr_v3(-1, -1, 0), dr_v3(2, 0, 0), dr_v3(0, 2, 0), sb_material(&b, mat));
     if (degenerate_uv)
@@ -315,7 +304,7 @@ static struct dr_scene *mask_scene(enum dr_alpha_mode mode, double alpha_factor)
     sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, sb_diffuse(dr_v3s(0.8))));
     const float px[8] = {0.2f, 0.9f, 0.2f, 0.0f, 0.2f, 0.9f, 0.2f, 1.0f};
     struct dr_material m = sb_diffuse(dr_v3s(0.5));
-    m.base_color_tex.texture = add_texture(&b, sb_image(2, 1, 4, px, 0.0f, false));
+    m.base_color_tex.texture = sb_texture(&b, sb_image(2, 1, 4, px, 0.0f, false));
     m.alpha_mode = mode;
     m.alpha = alpha_factor;
     m.double_sided = true;
