@@ -25,7 +25,6 @@
 #include "scene_builder.h"
 #include "test.h"
 
-/* One image and one texture (clamped) appended to the builder's scene. */
 /* ------------------------------------------------------------ tangents */
 
 static const char *shared_sample(const char *rel)
