@@ -15,6 +15,7 @@
 #include "cli.h"
 #include "error.h"
 #include "estimator.h"
+#include "bigalloc.h"
 #include "grad_common.h"
 #include "image.h"
 #include "image_io.h"
@@ -754,10 +755,10 @@ static int run_reverse(struct grad_args *a, const char *scene_path, const struct
 {
     struct reverse_run r = {.T = ps->total, .n_params = ps->n};
     const size_t T1 = (size_t)(r.T > 0 ? r.T : 1);
-    r.mean = calloc(T1, sizeof(double));
-    r.se = calloc(T1, sizeof(double));
-    r.se_grad = calloc(T1, sizeof(double));
-    r.se_primal = calloc(T1, sizeof(double));
+    r.mean = dr_calloc_big(T1, sizeof(double));   /* bigalloc.h: texture parameters */
+    r.se = dr_calloc_big(T1, sizeof(double));
+    r.se_grad = dr_calloc_big(T1, sizeof(double));
+    r.se_primal = dr_calloc_big(T1, sizeof(double));
     r.files = calloc((size_t)ps->n, sizeof(char *));
     bool mis_ok = true;
     if (a->g.sampling == DR_SAMPLING_MIS) {

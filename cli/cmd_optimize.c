@@ -13,6 +13,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "bigalloc.h"
 #include "camera.h"
 #include "cli.h"
 #include "error.h"
@@ -609,12 +610,12 @@ static int opt_load(struct opt_args *a, struct opt_run *r)
     if ((rc = grad_apply_sets(&a->g, r->scene)) >= 0)
         return rc;
     const size_t T = (size_t)r->ps->total;
-    r->theta = malloc(sizeof(double) * T);
-    r->grad = malloc(sizeof(double) * T);
-    r->gt = malloc(sizeof(double) * T);
-    r->se = malloc(sizeof(double) * T);
-    r->se_t = malloc(sizeof(double) * T);
-    r->se_parts = malloc(sizeof(double) * 2 * (T ? T : 1));
+    r->theta = dr_alloc_big(sizeof(double) * T);
+    r->grad = dr_alloc_big(sizeof(double) * T);
+    r->gt = dr_alloc_big(sizeof(double) * T);
+    r->se = dr_alloc_big(sizeof(double) * T);
+    r->se_t = dr_alloc_big(sizeof(double) * T);
+    r->se_parts = dr_alloc_big(sizeof(double) * 2 * (T ? T : 1));   /* bigalloc.h: texture parameters */
     if (!r->theta || !r->grad || !r->gt || !r->se || !r->se_t || !r->se_parts) {
         cli_error("optimize", "out of memory");
         return DR_EXIT_FAILURE;

@@ -53,7 +53,7 @@ int dr_image_make_linear(struct dr_image *img)
         return DR_OK;
     size_t n = (size_t)img->width * (size_t)img->height;
     size_t c = (size_t)img->channels;
-    float *lin = dr_image_alloc(n * c * sizeof *lin);
+    float *lin = dr_alloc_big(n * c * sizeof *lin);
     if (!lin) {
         dr_set_error("out of memory decoding a %dx%d texture", img->width, img->height);
         return DR_ERR_NOMEM;

@@ -6,9 +6,8 @@
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
-#include <stdlib.h>
-#include <sys/mman.h>
 
+#include "bigalloc.h"   /* pixel buffers: dr_alloc_big */
 #include "vec.h"
 
 #ifdef __cplusplus
@@ -30,22 +29,6 @@ struct dr_texture {
     int image;                /* index into scene->images */
     enum dr_wrap wrap_s, wrap_t;
 };
-
-/* Pixel memory (release with free()): a buffer of 2 MiB or more starts on a
- * 2 MiB boundary and asks for transparent huge pages, so filling a 2k RGBA
- * texture takes a few dozen page faults instead of 16 thousand (a quarter of
- * loading a scene with two 2k textures went to faults on this kind of VM). */
-static inline void *dr_image_alloc(size_t bytes)
-{
-    const size_t huge = (size_t)2 << 20;
-    if (bytes < huge)
-        return malloc(bytes);
-    size_t rounded = (bytes + huge - 1) / huge * huge;
-    void *p = aligned_alloc(huge, rounded);
-    if (p)
-        madvise(p, rounded, MADV_HUGEPAGE);   /* advice only: failure changes nothing */
-    return p;
-}
 
 double dr_srgb_to_linear(double v);
 double dr_linear_to_srgb(double v);

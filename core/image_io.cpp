@@ -165,7 +165,7 @@ int read_opened(ImageInput *in, const std::string &label, dr_image *img)
                      (double)limit / 1048576.0);
         return DR_ERR_NOMEM;
     }
-    float *data = (float *)dr_image_alloc(w * h * (size_t)nch * sizeof(float));
+    float *data = (float *)dr_alloc_big(w * h * (size_t)nch * sizeof(float));
     if (!data) {
         dr_set_error("%s: cannot read image: out of memory", label.c_str());
         return DR_ERR_NOMEM;

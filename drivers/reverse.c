@@ -4,6 +4,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "bigalloc.h"
 #include "error.h"
 #include "mis.h"
 #include "sampler.h"
@@ -42,10 +43,10 @@ static int work_alloc(struct rev_work *w)
     w->img = malloc(sizeof(float) * w->n);
     w->adj = malloc(sizeof(float) * w->n);
     w->img_sum = calloc(w->n, sizeof(double));
-    w->half[0] = calloc(T1, sizeof(double));
-    w->half[1] = calloc(T1, sizeof(double));
-    w->m2 = calloc(T1, sizeof(double));
-    w->dsq = calloc(T1, sizeof(double));
+    w->half[0] = dr_calloc_big(T1, sizeof(double));
+    w->half[1] = dr_calloc_big(T1, sizeof(double));
+    w->m2 = dr_calloc_big(T1, sizeof(double));
+    w->dsq = dr_calloc_big(T1, sizeof(double));
     if (w->img && w->adj && w->img_sum && w->half[0] && w->half[1] && w->m2 && w->dsq)
         return 0;
     dr_set_error("out of memory (%lld gradient entries, %zu image values)", (long long)w->T, w->n);

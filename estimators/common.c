@@ -3,6 +3,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "bigalloc.h"
+
 #include "clock.h"
 #include "error.h"
 
@@ -37,7 +39,7 @@ static void accum_free(struct dr_est_accum *a)
 static double *accum_alloc(struct dr_est_accum *a, size_t n)
 {
     a->bytes += n * sizeof(double);
-    return calloc(n, sizeof(double));
+    return dr_calloc_big(n, sizeof(double));   /* texture gradients: 100 MB a 2k texture */
 }
 
 static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, bool forward)
