@@ -234,14 +234,20 @@ void dr_path_nee_end(const struct dr_scene *s, struct dr_path_vertex *v, const s
     v->nee = true;
 }
 
+/* The shadow ray of dr_path_nee_begin, one at a time, and the estimate's end. */
+static void nee_trace_one(const struct dr_scene *s, struct dr_path_vertex *v, const struct dr_shadow_ray *ray,
+                          struct dr_ray_counts *counts)
+{
+    counts->shadow++;
+    bool occluded = ray->tmax > 0.0 && dr_accel_occluded_key(s->accel, ray->o, ray->d, 0.0, ray->tmax, ray->key);
+    dr_path_nee_end(s, v, ray, occluded);
+}
+
 void dr_path_nee(const struct dr_scene *s, struct dr_path_vertex *v, struct dr_ray_counts *counts)
 {
     struct dr_shadow_ray ray;
-    if (!dr_path_nee_begin(s, v, &ray))
-        return;
-    counts->shadow++;
-    bool occluded = ray.tmax > 0.0 && dr_accel_occluded_key(s->accel, ray.o, ray.d, 0.0, ray.tmax, ray.key);
-    dr_path_nee_end(s, v, &ray, occluded);
+    if (dr_path_nee_begin(s, v, &ray))
+        nee_trace_one(s, v, &ray, counts);
 }
 
 /* At a differentiated vertex, channels whose BSDF value is exactly 0 are
@@ -336,10 +342,7 @@ bool dr_path_step(const struct dr_scene *s, const struct dr_path_opts *opts, str
     case DR_STEP_END:
         return false;
     case DR_STEP_SHADOW:
-        counts->shadow++;
-        dr_path_nee_end(s, v, &shadow,
-                        shadow.tmax > 0.0 &&
-                            dr_accel_occluded_key(s->accel, shadow.o, shadow.d, 0.0, shadow.tmax, shadow.key));
+        nee_trace_one(s, v, &shadow, counts);
         break;
     case DR_STEP_CONTINUE:
         break;

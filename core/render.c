@@ -86,7 +86,6 @@ static void render_tile_scalar(struct render_job *j, int thread, int x0, int y0,
 /* A run of a tile's pixels (row-major in the tile) for the wavefront. */
 struct pixel_run {
     const struct render_job *j;
-    int x0, x1;              /* the tile's columns */
     int first;               /* index of the run's first pixel in the tile */
     int64_t local[DR_TILE_SIZE * DR_TILE_SIZE];
     int fx[DR_TILE_SIZE * DR_TILE_SIZE], fy[DR_TILE_SIZE * DR_TILE_SIZE];
@@ -105,7 +104,7 @@ static void start_run_sample(void *ctx, int64_t i, struct dr_sampler *smp, dr_ve
 static void render_tile_wave(struct render_job *j, int thread, int x0, int y0, int x1, int y1)
 {
     const struct dr_render_opts *o = j->opts;
-    struct pixel_run run = {.j = j, .x0 = x0, .x1 = x1};
+    struct pixel_run run = {.j = j};
     int n = 0;
     for (int y = y0; y < y1; y++)
         for (int x = x0; x < x1; x++, n++) {

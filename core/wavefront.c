@@ -112,13 +112,15 @@ static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
         struct lane *l = &w->lane[w->live[i]];
         l->next = dr_path_step_hit(s, opts, &l->st, &l->smp, &l->v, l->tri, &l->shadow);
         l->occluded = false;
-        if (l->next != DR_STEP_SHADOW || !(l->shadow.tmax > 0.0))
-            continue;   /* no ray (nee_end knows there was none) */
-        if (from_log(l)) {
-            l->occluded = l->occ_log[l->st.depth - 1];
+        if (l->next != DR_STEP_SHADOW)
+            continue;
+        if (from_log(l)) {   /* (no ray when tmax is not > 0: nee_end knows) */
+            l->occluded = l->shadow.tmax > 0.0 && l->occ_log[l->st.depth - 1];
             continue;
         }
-        counts->shadow++;
+        counts->shadow++;   /* counted as dr_path_step counts it */
+        if (!(l->shadow.tmax > 0.0))
+            continue;
         add_ray(&w->rays, w->live[i], l->shadow.o, l->shadow.d, l->shadow.tmax, l->shadow.key);
     }
     struct dr_accel_rays r = accel_rays(&w->rays);

@@ -12,6 +12,7 @@
 #include "sampler.h"
 #include "scene_builder.h"
 #include "test.h"
+#include "wavefront.h"
 
 static const int W = 24, H = 20;
 
@@ -53,8 +54,11 @@ static void compare(const char *what, struct dr_scene *s, const struct dr_camera
     CHECK(ps != NULL, "%s: param set: %s", what, dr_last_error());
     if (!ps)
         return;
+    /* past the wavefront's replay log (DR_WAVE_REPLAY_DEPTH vertices), no
+     * roulette: every path is that long, so prb's replay traces its tail again */
+    const int rr_depth = depth > DR_WAVE_REPLAY_DEPTH ? depth : DR_RR_DEPTH_DEFAULT;
     struct dr_grad_problem p = {.scene = s, .camera = cam, .params = ps, .width = W, .height = H, .spp = 3,
-                                .max_depth = depth, .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 11, .threads = 2,
+                                .max_depth = depth, .rr_depth = rr_depth, .seed = 11, .threads = 2,
                                 .sampling = sampling};
     int ne = 0;
     while (dr_estimators[ne] && ne < MAX_EST)
@@ -141,6 +145,8 @@ int main(void)
     compare("cornell box", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DETACHED);
     /* derivative sampling: the same sub-streams, the same terms in another order */
     compare("cornell box, derivative sampling", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DERIVATIVE);
+    compare("cornell box, paths longer than the replay log", s, &s->cameras[0], ptrs, 7, DR_WAVE_REPLAY_DEPTH + 12,
+            DR_SAMPLING_DETACHED);
     dr_scene_destroy(s);
 
     /* a glossy scene: rough metal and a dielectric floor under a point light and an environment */
