@@ -3,7 +3,9 @@
  * spread gives the standard error of the image mean). */
 #include <stdlib.h>
 
+#include "camera.h"
 #include "error.h"
+#include "film.h"
 #include "lights.h"
 #include "render.h"
 #include "sampler.h"
@@ -258,8 +260,55 @@ static void test_env_map_sampling(void)
     dr_scene_destroy(s);
 }
 
+/* The packet renderer (wavefront.c, which render uses) against the one-path
+ * walker, pixel by pixel: the same sampler, film, camera ray and
+ * dr_path_radiance per sample, summed in sample order. Bit for bit equal on
+ * the bundled Cornell box (textures, glossy and single-sided surfaces). */
+static void test_wavefront_matches_one_path(void)
+{
+    struct dr_scene *s = dr_scene_load(scene_path("cornell-box.gltf"));
+    CHECK(s != NULL, "load the bundled scene: %s", dr_last_error());
+    if (!s)
+        return;
+    const int w = 12, h = 10, spp = 5, depth = 8;
+    struct dr_camera cam = s->cameras[0];
+    float *rgb = malloc(sizeof(float) * 3 * w * h);
+    struct dr_render_opts o = {.width = w, .height = h, .spp = spp, .max_depth = depth,
+                              .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 3, .threads = 2};
+    struct dr_render_stats st;
+    CHECK(dr_render(s, &cam, &o, rgb, &st) == 0, "dr_render: %s", dr_last_error());
+    struct dr_camera_view view = dr_camera_view(&cam, w, h);
+    struct dr_path_opts po = {.max_depth = depth, .rr_depth = DR_RR_DEPTH_DEFAULT, .stages = dr_path_plan(s, NULL)};
+    struct dr_ray_counts rays = {0, 0, 0};
+    int differ = 0;
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            dr_vec3 sum = dr_v3s(0.0);
+            for (int k = 0; k < spp; k++) {
+                struct dr_sampler smp;
+                dr_sampler_init_kind(&smp, DR_SAMPLER_INDEPENDENT, o.seed, (uint64_t)(y * w + x), (uint64_t)k, spp);
+                double u, v, px, py;
+                dr_vec3 ro, rd;
+                dr_sampler_next2(&smp, &u, &v);
+                dr_film_sample(&o.film.filter, x, y, u, v, &px, &py);
+                dr_camera_ray(&view, px, py, &ro, &rd);
+                sum = dr_add(sum, dr_path_radiance(s, &po, ro, rd, &smp, &rays));
+            }
+            const float *got = rgb + 3 * (y * w + x);
+            differ += got[0] != (float)(sum.x / spp) || got[1] != (float)(sum.y / spp) || got[2] != (float)(sum.z / spp);
+        }
+    CHECK(differ == 0, "%d of %d pixels differ between the packet renderer and the one-path walker", differ, w * h);
+    CHECK(rays.camera == st.rays.camera && rays.extension == st.rays.extension && rays.shadow == st.rays.shadow,
+          "ray counts: packets %llu/%llu/%llu, one path %llu/%llu/%llu", (unsigned long long)st.rays.camera,
+          (unsigned long long)st.rays.extension, (unsigned long long)st.rays.shadow, (unsigned long long)rays.camera,
+          (unsigned long long)rays.extension, (unsigned long long)rays.shadow);
+    free(rgb);
+    dr_scene_destroy(s);
+}
+
 int main(void)
 {
+    test_wavefront_matches_one_path();
     test_emitter_seen_directly();
     test_diffuse_plane_constant_env();
     test_furnace();
