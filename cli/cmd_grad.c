@@ -28,6 +28,11 @@
 #include "scene.h"
 #include "vis.h"
 
+/* DR_TAPE_PATHS_PER_WORKER as text, for the help */
+#define TEXT_(x) #x
+#define TEXT(x) TEXT_(x)
+#define TAPE_PER_THREAD TEXT(DR_TAPE_PATHS_PER_WORKER)
+
 void cmd_grad_usage(FILE *out)
 {
     fprintf(out,
@@ -96,8 +101,9 @@ void cmd_grad_usage(FILE *out)
             "      --crop X,Y,W,H  only this rectangle of the --res frame is rendered and\n"
             "                      compared: -o images are W x H; a --target may be W x H\n"
             "                      (then --res gives the frame) or the full frame\n"
-            "      --batch N       tape: paths recorded per backward sweep (default 0: one\n"
-            "                      sample of every pixel); bounds the tape's memory\n");
+            "      --batch N       tape: paths recorded per backward sweep, over all threads\n"
+            "                      (default 0: " TAPE_PER_THREAD " per thread, a tape the sweep reads\n"
+            "                      back from the cache); bounds the tape's memory\n");
     /* a second literal: one would pass the 4095 characters ISO C guarantees */
     fprintf(out, GRAD_IGNORE_UNSUPPORTED_HELP
             "      --json          print a summary object on stdout (memory estimate included)\n"

@@ -20,7 +20,6 @@
 
 #include "film.h"
 #include "sampler.h"
-#include "sampler.h"
 #include "params.h"
 #include "path.h"
 #include "scene.h"
@@ -110,6 +109,12 @@ const struct dr_estimator_ops *dr_estimator_find(const char *name);
  * share is bounded by this); the CLI's memory estimate uses it so that the
  * estimate follows the record when the record changes. */
 size_t dr_tape_vertex_bytes(void);
+/* The tape's default batch: paths each worker records before it sweeps them.
+ * About 2 MB of tape per worker on a Cornell box, so the sweep reads it
+ * back from the cache (see tape.c). */
+#define DR_TAPE_PATHS_PER_WORKER 512
+/* Paths recorded per sweep over all workers, for --batch `batch` (0: the default). */
+int64_t dr_tape_batch_paths(int64_t batch, int threads);
 bool dr_estimator_supports(const struct dr_estimator_ops *e, enum dr_sampling s);
 
 /* Forward mode: d_image (width * height * 3 doubles) = d I / d theta . dir,

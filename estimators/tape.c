@@ -1,12 +1,21 @@
 /* Conventional reverse mode with a tape: the baseline PRB is measured against.
  *
- * The forward pass records every vertex of every path of a batch (default: one
- * sample of every pixel, --batch N paths otherwise); then one backward sweep
- * per path, from the last vertex to the first, carries the adjoint of the
- * throughput:  abar_k = adj * e_k + abar_{k+1} * t_k,  and the BSDF term of
- * vertex k gets d t_k = abar_{k+1} * beta_k. No division by f (unlike PRB),
- * so with the same random numbers the two estimators agree to rounding.
- * Memory: (vertices per path) x (paths per batch), reported as record_bytes. */
+ * Each worker records every vertex of a batch of paths (DR_TAPE_PATHS_PER_WORKER
+ * by default, --batch N paths over all workers otherwise), then sweeps that
+ * tape backward, path by path, from the last vertex to the first, carrying
+ * the adjoint of the throughput:  abar_k = adj * e_k + abar_{k+1} * t_k,  and
+ * the BSDF term of vertex k gets d t_k = abar_{k+1} * beta_k. No division by f
+ * (unlike PRB), so with the same random numbers the two estimators agree to
+ * rounding. Memory: (vertices per path) x (paths per batch), reported as
+ * record_bytes.
+ *
+ * A worker records and sweeps its own batch with no barrier between them
+ * (the loss's adjoint is known before the record), and the default batch is
+ * small enough that the tape is swept while it is still in the cache: the
+ * sweep reads back every byte the record wrote (about 1 KB per vertex).
+ * Without media the record runs on the packet tracer (wavefront.h), whose
+ * paths advance together, so a path's vertices are not adjacent in the
+ * tape: each vertex links to the one before it on its path. */
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
@@ -15,10 +24,12 @@
 #include "medium_grad.h"
 #include "error.h"
 #include "path_deriv.h"
+#include "wavefront.h"
 
 struct tape_vertex {
     struct dr_path_vertex v;
     dr_vec3 bt;        /* true throughput arriving at the vertex */
+    int64_t prev;      /* the path's vertex before this one (-1: the first) */
 };
 
 size_t dr_tape_vertex_bytes(void)
@@ -28,8 +39,9 @@ size_t dr_tape_vertex_bytes(void)
 
 struct tape_path {
     int64_t pixel;
-    int64_t first;     /* index of its first vertex */
+    int64_t last;      /* index of its last vertex (-1: none yet); the links lead back */
     int count;
+    bool dropped;      /* not finite: left out of the sweep */
     int moving;        /* attached sampling: first vertex whose sampling moves with a parameter (count: none) */
     dr_vec3 adj;       /* d loss / d L of this sample (forward mode: ones) */
     uint64_t key;      /* its sampler's key: derivative sampling's sub-streams hang off it */
@@ -48,7 +60,10 @@ struct tape {
 struct tape_job {
     struct dr_est_base b;   /* first: the shared part */
     struct tape tapes[DR_MAX_THREADS];
-    int64_t batch_begin;     /* path ids of the current batch start here */
+    struct dr_wave *waves[DR_MAX_THREADS];   /* the packet tracer's lanes, per worker, made on first use */
+    int64_t *ids[DR_MAX_THREADS];            /* ... and the batch's path ids that matter to the loss */
+    int64_t batch;           /* paths a worker records before it sweeps */
+    bool wave;               /* no media: the record runs on the packet tracer */
     bool attached;           /* attached sampling (or mis), and some parameter enters a sampling map */
     bool derivative;         /* derivative sampling (path_deriv.h) */
 };
@@ -96,56 +111,88 @@ static uint64_t tape_bytes(const struct tape *t)
            (uint64_t)t->cap_mrecs * sizeof(struct dr_medium_record);
 }
 
-/* Records the path of sample sidx of pixel px; false when out of memory. */
+int64_t dr_tape_batch_paths(int64_t batch, int threads)
+{
+    return batch > 0 ? batch : (int64_t)DR_TAPE_PATHS_PER_WORKER * (threads > 0 ? threads : 1);
+}
+
+/* A new path of the tape (NULL: out of memory). */
+static struct tape_path *new_path(struct tape *tp, int64_t px, dr_vec3 adj, uint64_t key)
+{
+    if (!grow((void **)&tp->paths, &tp->cap_paths, tp->n_paths + 1, sizeof *tp->paths))
+        return NULL;
+    struct tape_path *path = &tp->paths[tp->n_paths++];
+    *path = (struct tape_path){.pixel = px, .last = -1, .count = 0, .moving = -1, .adj = adj, .key = key};
+    return path;
+}
+
+/* The path's next vertex slot, linked after its last (NULL: out of memory). */
+static struct tape_vertex *new_vertex(struct tape *tp, struct tape_path *path, bool media)
+{
+    if (!grow((void **)&tp->verts, &tp->cap_verts, tp->n_verts + 1, sizeof *tp->verts))
+        return NULL;
+    if (media && !grow((void **)&tp->mrecs, &tp->cap_mrecs, tp->n_verts + 1, sizeof *tp->mrecs))
+        return NULL;
+    struct tape_vertex *tv = &tp->verts[tp->n_verts];
+    tv->prev = path->last;
+    path->last = tp->n_verts++;
+    path->count++;
+    return tv;
+}
+
+/* What the record notes of vertex v (already on the tape): its part of L,
+ * and whether attached sampling moves it. */
+static void note_vertex(const struct tape_job *j, struct tape_path *path, const struct tape_vertex *tv, dr_vec3 *L)
+{
+    *L = dr_add(*L, dr_mul(tv->bt, dr_path_vertex_term(&tv->v)));
+    if (path->moving < 0 && j->attached && dr_path_vertex_sampling_moves(j->b.p->scene, j->b.p->params, &tv->v))
+        path->moving = path->count - 1;
+}
+
+/* The path's record is complete (L: its radiance). */
+static void end_path(struct tape_job *j, int thread, struct tape_path *path, dr_vec3 L)
+{
+    if (path->moving < 0)
+        path->moving = path->count;
+    if (!dr_v3_finite(L)) {
+        path->dropped = true;
+        j->b.thr[thread].invalid++;
+    }
+}
+
+/* Records the path of sample sidx of pixel px, one vertex after the other
+ * (the one-path walker: scenes with media); false when out of memory. */
 static bool record_path(struct tape_job *j, struct tape *tp, int thread, int64_t px, int sidx, dr_vec3 adj)
 {
     struct dr_sampler smp;
     dr_vec3 o, d;
     dr_est_camera_ray(&j->b, px, sidx, &smp, &o, &d);
-    if (!grow((void **)&tp->paths, &tp->cap_paths, tp->n_paths + 1, sizeof *tp->paths))
+    struct tape_path *path = new_path(tp, px, adj, smp.key);
+    if (!path)
         return false;
-    struct tape_path *path = &tp->paths[tp->n_paths];
-    *path = (struct tape_path){.pixel = px, .first = tp->n_verts, .count = 0, .moving = -1, .adj = adj,
-                               .key = smp.key};
+    const bool media = j->b.popts.params->media_active;
     struct dr_path_state st;
     dr_path_start(&st, o, d);
     dr_vec3 L = dr_v3s(0.0);
     for (;;) {
-        if (!grow((void **)&tp->verts, &tp->cap_verts, tp->n_verts + 1, sizeof *tp->verts))
+        struct tape_vertex *tv = new_vertex(tp, path, media);
+        if (!tv)
             return false;
-        bool media = j->b.popts.params->media_active;
-        if (media && !grow((void **)&tp->mrecs, &tp->cap_mrecs, tp->n_verts + 1, sizeof *tp->mrecs))
-            return false;
-        struct tape_vertex *tv = &tp->verts[tp->n_verts];
-        tv->v.mrec = media ? &tp->mrecs[tp->n_verts] : NULL;
+        tv->v.mrec = media ? &tp->mrecs[path->last] : NULL;
         tv->bt = dr_mul(st.ratio, st.beta);
         bool more = dr_path_step(j->b.p->scene, &j->b.popts, &st, &smp, &tv->v, &j->b.thr[thread].rays);
-        L = dr_add(L, dr_mul(tv->bt, dr_path_vertex_term(&tv->v)));
-        if (path->moving < 0 && j->attached && dr_path_vertex_sampling_moves(j->b.p->scene, j->b.p->params, &tv->v))
-            path->moving = path->count;
-        tp->n_verts++;
-        path->count++;
+        note_vertex(j, path, tv, &L);
         if (!more)
             break;
     }
-    if (path->moving < 0)
-        path->moving = path->count;
-    if (!dr_v3_finite(L)) {   /* drop the path */
-        tp->n_verts = path->first;
-        j->b.thr[thread].invalid++;
-        return true;
-    }
-    tp->n_paths++;
+    end_path(j, thread, path, L);
     return true;
 }
 
-/* Record phase: path ids [begin, end) of the batch; id = sample * pixels + pixel. */
-static void record(void *ctx, int thread, int64_t begin, int64_t end)
+static void record_one_by_one(struct tape_job *j, struct tape *tp, int thread, int64_t begin, int64_t end)
 {
-    struct tape_job *j = ctx;
-    struct tape *tp = &j->tapes[thread];
     const int64_t pixels = (int64_t)j->b.p->width * j->b.p->height;
-    for (int64_t id = j->batch_begin + begin; id < j->batch_begin + end && !tp->failed; id++) {
+    for (int64_t id = begin; id < end && !tp->failed; id++) {
         dr_vec3 adj;
         if (dr_est_sample_adjoint(&j->b, id % pixels, &adj) &&
             !record_path(j, tp, thread, id % pixels, (int)(id / pixels), adj))
@@ -153,20 +200,101 @@ static void record(void *ctx, int thread, int64_t begin, int64_t end)
     }
 }
 
-/* Derivative sampling's terms of vertex k (path_deriv.h), beside detached
+/* ---- the record on the packet tracer: a lane's item is one path */
+
+struct wave_record {
+    struct tape_job *j;
+    struct tape *tp;
+    int thread;
+    const int64_t *ids;
+};
+
+struct record_lane {
+    int64_t path;   /* its index in tp->paths (-1: out of memory) */
+    dr_vec3 L;
+};
+_Static_assert(sizeof(struct record_lane) <= DR_WAVE_USER_BYTES, "a record lane's state fits");
+
+static void lane_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    struct wave_record *c = ctx;
+    struct record_lane *l = user;
+    const int64_t pixels = (int64_t)c->j->b.p->width * c->j->b.p->height, px = c->ids[i] % pixels;
+    dr_vec3 adj;
+    dr_est_sample_adjoint(&c->j->b, px, &adj);
+    dr_est_camera_ray(&c->j->b, px, (int)(c->ids[i] / pixels), smp, o, d);
+    struct tape_path *path = c->tp->failed ? NULL : new_path(c->tp, px, adj, smp->key);
+    if (!path)
+        c->tp->failed = true;
+    l->path = path ? c->tp->n_paths - 1 : -1;
+}
+
+static void lane_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
+                        struct dr_sampler *smp, bool more)
+{
+    (void)smp, (void)more;
+    struct wave_record *c = ctx;
+    struct record_lane *l = user;
+    if (l->path < 0 || c->tp->failed)
+        return;
+    struct tape_path *path = &c->tp->paths[l->path];
+    struct tape_vertex *tv = new_vertex(c->tp, path, false);
+    if (!tv) {
+        c->tp->failed = true;
+        return;
+    }
+    tv->v = *v;
+    tv->v.mrec = NULL;
+    tv->bt = dr_mul(a->ratio, a->beta);
+    note_vertex(c->j, path, tv, &l->L);
+}
+
+static enum dr_wave_next lane_walk_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    (void)smp, (void)o, (void)d;
+    struct wave_record *c = ctx;
+    struct record_lane *l = user;
+    if (l->path >= 0 && !c->tp->failed)
+        end_path(c->j, c->thread, &c->tp->paths[l->path], l->L);
+    return DR_WAVE_DONE;
+}
+
+/* False when the lanes cannot be had (then one path at a time). */
+static bool record_wave(struct tape_job *j, struct tape *tp, int thread, int64_t begin, int64_t end)
+{
+    if (!j->waves[thread] && !(j->waves[thread] = dr_wave_create()))
+        return false;
+    if (!j->ids[thread] && !(j->ids[thread] = malloc(sizeof(int64_t) * (size_t)j->batch)))
+        return false;
+    const int64_t pixels = (int64_t)j->b.p->width * j->b.p->height;
+    int64_t n = 0;
+    dr_vec3 adj;
+    for (int64_t id = begin; id < end; id++)
+        if (dr_est_sample_adjoint(&j->b, id % pixels, &adj))
+            j->ids[thread][n++] = id;
+    struct wave_record c = {.j = j, .tp = tp, .thread = thread, .ids = j->ids[thread]};
+    static const struct dr_wave_ops ops = {lane_start, lane_vertex, lane_walk_end};
+    dr_wave_run(j->waves[thread], j->b.p->scene, &j->b.popts, n, &ops, &c, &j->b.thr[thread].rays);
+    return true;
+}
+
+/* ---- the backward sweep */
+
+/* Derivative sampling's terms of vertex tv (path_deriv.h), beside detached
  * sampling's: the changed weights of next-event estimation and of the
- * emission the continuation sees at vertex k+1, and the new directions with
- * their radiance paths (from the path's sub-streams, as prb draws them). */
-static void sweep_derivative(const struct tape_job *j, const struct tape_vertex *verts, int k, int count,
+ * emission the continuation sees at the next vertex (NULL: none), and the new
+ * directions with their radiance paths (from the path's sub-streams, as prb
+ * draws them). */
+static void sweep_derivative(const struct tape_job *j, const struct tape_vertex *tv, const struct tape_vertex *next,
                              const struct tape_path *path, struct dr_grad_sink *sink, struct dr_ray_counts *rays)
 {
-    const struct dr_path_vertex *v = &verts[k].v;
+    const struct dr_path_vertex *v = &tv->v;
     if (!v->diff_bsdf)
         return;
-    dr_vec3 d_beta = dr_mul(path->adj, verts[k].bt);
+    dr_vec3 d_beta = dr_mul(path->adj, tv->bt);
     d_path_deriv_nee(j->b.p->scene, &j->b.popts, v, d_beta, sink);
-    if (v->cont && k + 1 < count)
-        d_path_deriv_emission(j->b.p->scene, &j->b.popts, v, dr_scale(d_beta, v->cos_pdf_q), &verts[k + 1].v, sink);
+    if (v->cont && next)
+        d_path_deriv_emission(j->b.p->scene, &j->b.popts, v, dr_scale(d_beta, v->cos_pdf_q), &next->v, sink);
     if (v->shaded) {
         struct dr_sampler smp = {.key = path->key};
         d_path_deriv_sample(j->b.p->scene, &j->b.popts, v, &smp, d_beta, sink, rays);
@@ -184,12 +312,13 @@ static void sweep(const struct tape_job *j, const struct tape_vertex *verts, con
     const struct dr_param_set *ps = j->b.p->params;
     dr_vec3 abar = dr_v3s(0.0);   /* adjoint of the true throughput after the vertex */
     dr_vec3 after = dr_v3s(0.0);  /* media: radiance gathered after the vertex */
-    for (int k = count - 1; k >= 0; k--) {
-        const struct dr_path_vertex *v = &verts[k].v;
-        dr_vec3 bt = verts[k].bt;
+    const struct tape_vertex *next = NULL;
+    for (int64_t i = path->last; i >= 0; i = verts[i].prev) {
+        const struct dr_path_vertex *v = &verts[i].v;
+        dr_vec3 bt = verts[i].bt;
         if (v->media) {
             dr_vec3 from = dr_add(after, dr_mul(bt, dr_path_vertex_term(v)));
-            d_medium_vertex(s, &j->b.popts, v, mrecs ? &mrecs[k] : NULL, count, dr_mul(adj, bt), dr_mul(adj, from),
+            d_medium_vertex(s, &j->b.popts, v, mrecs ? &mrecs[i] : NULL, count, dr_mul(adj, bt), dr_mul(adj, from),
                             dr_mul(adj, after),
                             dr_mul(adj, dr_mul(bt, dr_path_vertex_nee(v))), sink);
             after = from;
@@ -208,8 +337,9 @@ static void sweep(const struct tape_job *j, const struct tape_vertex *verts, con
         }
         d_path_vertex_term(s, ps, v, dr_mul(adj, bt), sink);
         if (j->derivative)
-            sweep_derivative(j, verts, k, count, path, sink, rays);
+            sweep_derivative(j, &verts[i], next, path, sink, rays);
         abar = dr_add(dr_mul(adj, dr_path_vertex_term(v)), dr_mul(abar, t));
+        next = &verts[i];
     }
 }
 
@@ -218,7 +348,7 @@ static void sweep(const struct tape_job *j, const struct tape_vertex *verts, con
  * adjoint of the walker's state (d_path_vertex_attached), from the last
  * vertex back to the first moving one, whose own arriving ray is fixed.
  * Before it, the detached adjoints are the whole story. */
-static void sweep_attached(const struct tape_job *j, const struct tape_vertex *verts, int count, int moving,
+static void sweep_attached(const struct tape_job *j, const struct tape_vertex *verts, const struct tape_path *path,
                            dr_vec3 adj, struct dr_grad_sink *sink)
 {
     const struct dr_scene *s = j->b.p->scene;
@@ -226,11 +356,12 @@ static void sweep_attached(const struct tape_job *j, const struct tape_vertex *v
     dr_vec3 abar = dr_v3s(0.0);
     struct dr_d_path_state d_next, d_this;
     memset(&d_next, 0, sizeof d_next);
-    for (int k = count - 1; k >= 0; k--) {
-        const struct dr_path_vertex *v = &verts[k].v;
-        dr_vec3 bt = verts[k].bt;
+    int k = path->count - 1;   /* the vertex's place on its path */
+    for (int64_t i = path->last; i >= 0; i = verts[i].prev, k--) {
+        const struct dr_path_vertex *v = &verts[i].v;
+        dr_vec3 bt = verts[i].bt;
         dr_vec3 t = v->cont ? dr_scale(v->f, v->cos_pdf_q) : dr_v3s(0.0);
-        if (k >= moving) {
+        if (k >= path->moving) {
             d_path_vertex_attached(s, ps, v, dr_mul(adj, bt), dr_mul(abar, bt), &d_next, &d_this, sink);
             d_next = d_this;
         } else {
@@ -253,12 +384,12 @@ static void sweep_path(const struct tape_job *j, const struct tape_vertex *verts
         return;
     }
     if (!sink->dir) {
-        sweep_attached(j, verts, path->count, path->moving, path->adj, sink);
+        sweep_attached(j, verts, path, path->adj, sink);
         return;
     }
     for (int c = 0; c < 3; c++) {
         sink->channel = c;
-        sweep_attached(j, verts, path->count, path->moving, dr_v3_channel(path->adj, c), sink);
+        sweep_attached(j, verts, path, dr_v3_channel(path->adj, c), sink);
     }
 }
 
@@ -275,25 +406,37 @@ static void sweep_path_mis(struct tape_job *j, int thread, const struct tape_ver
     dr_est_mis_sample_done(&j->b, thread, path->pixel, &det, &att);
 }
 
-/* Sweep phase: item i sweeps tape i (recorded by worker i). */
-static void sweep_tape(void *ctx, int thread, int64_t begin, int64_t end)
+/* The sweep of the worker's tape, path by path. */
+static void sweep_tape(struct tape_job *j, int thread, const struct tape *tp)
+{
+    struct dr_grad_sink sink = dr_est_sink_begin(&j->b, thread);
+    for (int64_t pi = 0; pi < tp->n_paths; pi++) {
+        const struct tape_path *path = &tp->paths[pi];
+        if (path->dropped)
+            continue;
+        if (j->b.mis) {
+            sweep_path_mis(j, thread, tp->verts, tp->mrecs, path);
+            continue;
+        }
+        sweep_path(j, tp->verts, tp->mrecs, path, &sink, &j->b.thr[thread].rays);
+        dr_est_sample_done(&j->b, thread, path->pixel, &sink);
+    }
+    dr_est_sink_end(&j->b, thread);
+}
+
+/* One worker's batch: path ids [begin, end) (id = sample * pixels + pixel)
+ * recorded, then swept. */
+static void record_and_sweep(void *ctx, int thread, int64_t begin, int64_t end)
 {
     struct tape_job *j = ctx;
-    for (int64_t i = begin; i < end; i++) {
-        const struct tape *tp = &j->tapes[i];
-        struct dr_grad_sink sink = dr_est_sink_begin(&j->b, thread);
-        for (int64_t pi = 0; pi < tp->n_paths; pi++) {
-            const struct tape_path *path = &tp->paths[pi];
-            const struct dr_medium_record *mrecs = tp->mrecs ? tp->mrecs + path->first : NULL;
-            if (j->b.mis) {
-                sweep_path_mis(j, thread, tp->verts + path->first, mrecs, path);
-                continue;
-            }
-            sweep_path(j, tp->verts + path->first, mrecs, path, &sink, &j->b.thr[thread].rays);
-            dr_est_sample_done(&j->b, thread, path->pixel, &sink);
-        }
-        dr_est_sink_end(&j->b, thread);
-    }
+    struct tape *tp = &j->tapes[thread];
+    if (tp->failed)
+        return;
+    tp->n_verts = tp->n_paths = 0;
+    if (!(j->wave && record_wave(j, tp, thread, begin, end)))
+        record_one_by_one(j, tp, thread, begin, end);
+    if (!tp->failed)
+        sweep_tape(j, thread, tp);
 }
 
 static int tape_run(struct dr_est_base *b)
@@ -302,30 +445,23 @@ static int tape_run(struct dr_est_base *b)
     const struct dr_grad_problem *p = b->p;
     const int threads = b->acc.threads;
     const int64_t total = (int64_t)p->width * p->height * p->spp;
-    const int64_t batch = p->batch > 0 ? p->batch : (int64_t)p->width * p->height;
-    int rc = 0;
     const enum dr_sampling run = dr_est_sampling_run(p);
     j->attached = run == DR_SAMPLING_ATTACHED || run == DR_SAMPLING_MIS;
     j->derivative = run == DR_SAMPLING_DERIVATIVE;
-    for (j->batch_begin = 0; j->batch_begin < total && rc == 0; j->batch_begin += batch) {
-        int64_t n = total - j->batch_begin < batch ? total - j->batch_begin : batch;
-        for (int t = 0; t < threads; t++)
-            j->tapes[t].n_verts = j->tapes[t].n_paths = 0;
-        rc = dr_parallel_for_static(n, 16, threads, record, j);
-        uint64_t bytes = 0;
-        for (int t = 0; t < threads; t++) {
-            bytes += tape_bytes(&j->tapes[t]);
-            if (j->tapes[t].failed) {
-                dr_set_error("out of memory recording the tape (%llu bytes so far); use --batch to bound it",
-                             (unsigned long long)bytes);
-                rc = DR_ERR_NOMEM;
-            }
+    j->wave = !(b->popts.stages & DR_STAGE_MEDIA);
+    const int64_t batch = dr_tape_batch_paths(p->batch, threads);
+    j->batch = (batch + threads - 1) / threads;
+    int rc = dr_parallel_for_static(total, j->batch, threads, record_and_sweep, j);
+    uint64_t bytes = 0;
+    for (int t = 0; t < threads; t++)
+        bytes += tape_bytes(&j->tapes[t]);   /* capacities only grow: the most held at once */
+    b->record_bytes = bytes;
+    for (int t = 0; t < threads && rc == 0; t++)
+        if (j->tapes[t].failed) {
+            dr_set_error("out of memory recording the tape (%llu bytes so far); use --batch to bound it",
+                         (unsigned long long)bytes);
+            rc = DR_ERR_NOMEM;
         }
-        if (bytes > b->record_bytes)
-            b->record_bytes = bytes;
-        if (rc == 0)
-            rc = dr_parallel_for_static(threads, 1, threads, sweep_tape, j);
-    }
     return rc;
 }
 
@@ -336,6 +472,8 @@ static void tape_release(struct dr_est_base *b)
         map_free(j->tapes[t].verts, j->tapes[t].cap_verts, sizeof *j->tapes[t].verts);
         map_free(j->tapes[t].mrecs, j->tapes[t].cap_mrecs, sizeof *j->tapes[t].mrecs);
         map_free(j->tapes[t].paths, j->tapes[t].cap_paths, sizeof *j->tapes[t].paths);
+        dr_wave_destroy(j->waves[t]);
+        free(j->ids[t]);
     }
 }
 

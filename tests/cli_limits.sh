@@ -120,10 +120,18 @@ check_estimate "grad (forward)" $((64 * 64 * 24))
 run grad "$scene" --target t64.exr --param $P --spp 2 --batches 2 --json
 expect_rc 0 "grad reverse --json"
 check_estimate "grad (reverse)" $((64 * 64 * 12 * 2))
-run grad "$scene" --target t64.exr --param $P --spp 2 --batches 2 --json --estimator tape --max-depth 50
+# the tape's default batch: 512 paths per thread, recorded then swept
+run grad "$scene" --target t64.exr --param $P --spp 2 --batches 2 --json --estimator tape --max-depth 50 --threads 2
 expect_rc 0 "grad reverse tape --json"
 e=$(json_estimate)
-[ "$e" -ge $((64 * 64 * 50 * 704)) ] || fail "the tape estimate ($e) is below paths x depth x record size"
+[ "$e" -ge $((2 * 512 * 50 * 704)) ] || fail "the tape estimate ($e) is below paths x depth x record size"
+# --batch: every pixel's sample of a batch at once (4096 paths)
+run grad "$scene" --target t64.exr --param $P --spp 2 --batches 2 --json --estimator tape --max-depth 50 --threads 2 \
+    --batch 4096
+expect_rc 0 "grad reverse tape --batch 4096 --json"
+eb=$(json_estimate)
+[ "$eb" -ge $((64 * 64 * 50 * 704)) ] && [ "$eb" -gt "$e" ] ||
+    fail "the tape estimate does not follow --batch (default: $e, 4096 paths: $eb)"
 run fdcheck "$scene" --param $P --res 16x16 --spp 1 --batches 2 --json
 [ "$rc" -eq 0 ] || [ "$rc" -eq 4 ] || fail "fdcheck --json: exit $rc"
 check_estimate "fdcheck" $((16 * 16 * 12))
