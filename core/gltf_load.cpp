@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>   /* the JSON library tinygltf itself is built with */
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <cstdarg>
 #include <cstdint>
@@ -22,6 +23,7 @@
 #include <memory>
 #include <set>
 #include <string>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -31,6 +33,9 @@
 #include "error.h"
 #include "image_io.h"
 #include "medium.h"
+extern "C" {
+#include "parallel.h"   /* dr_cpu_count */
+}
 #include "scene.h"
 
 namespace {
@@ -292,6 +297,7 @@ private:
     void append_vertices(const VertexAttrs &va, size_t base, const Mat4 &world, const NormalXform &nx);
     std::vector<uint32_t> primitive_sequence(const tinygltf::Primitive &p, const std::string &pp, size_t nv,
                                              const dr_draco_mesh *draco);
+    void decode_images();
     bool decode_draco(const tinygltf::Primitive &p, const std::string &pp, dr_draco_mesh &out,
                       std::map<std::string, int> &ids);
     AccessorView attribute_view(const tinygltf::Primitive &p, const std::string &pp, const char *name, int want_type,
@@ -329,7 +335,13 @@ private:
     int image_error_ = 0;
     std::string image_message_;
 
-    std::vector<dr_image> images_;          /* decoded by image_cb, by glTF image index */
+    std::vector<dr_image> images_;          /* decoded by decode_images, by glTF image index */
+    struct EncodedImage {                   /* kept by image_cb for decode_images */
+        int index;
+        std::string hint;                   /* name for the format and messages */
+        std::vector<unsigned char> bytes;
+    };
+    std::vector<EncodedImage> encoded_images_;
     std::vector<char> ktx2_images_;         /* by image index: a KTX2 image, left undecoded */
     std::vector<int> texture_ktx2_;         /* by texture: its KTX2 image, -1 */
     std::vector<char> linear_images_;       /* used as colour: needs sRGB decode */
@@ -430,6 +442,35 @@ bool Loader::fs_write(std::string *err, const std::string &, const std::vector<u
 
 /* ---- images: decoded by OpenImageIO (image_io.cpp), never by stb ---- */
 
+/* Runs fn(i) for every i in [0, n), on up to one thread per CPU (the caller's
+ * among them). fn must not throw. Without threads (none can be made) the
+ * caller does it all. */
+template <class Fn> void parallel_each(size_t n, Fn fn)
+{
+    const size_t workers = std::min(n, size_t(dr_cpu_count()));
+    std::atomic<size_t> next{0};
+    auto work = [&] {
+        for (size_t i; (i = next++) < n;) fn(i);
+    };
+    std::vector<std::thread> pool;
+    try {
+        for (size_t t = 1; t < workers; t++) pool.emplace_back(work);
+    } catch (...) {
+        /* fewer helpers: the work is shared among those there are */
+    }
+    work();
+    for (std::thread &t : pool) t.join();
+}
+
+/* Error messages of work done on other threads (dr_last_error is per thread). */
+struct ThreadMessages {
+    explicit ThreadMessages(size_t n) : text(n * kSize, '\0') {}
+    void keep(size_t i) { snprintf(&text[i * kSize], kSize, "%s", dr_last_error()); }
+    const char *at(size_t i) const { return &text[i * kSize]; }
+    static constexpr size_t kSize = 1024;
+    std::vector<char> text;
+};
+
 std::string image_name_hint(const tinygltf::Image &image, int idx, const unsigned char *b, int size)
 {
     if (!image.uri.empty()) return image.uri;
@@ -460,7 +501,6 @@ bool Loader::image_cb(tinygltf::Image *image, const int image_idx, std::string *
 {
     Loader *L = static_cast<Loader *>(user);
     try {
-        std::string where = strf("/images/%d", image_idx);
         if (image->bufferView >= 0) {
             /* tinygltf hands us &buffer[byteOffset] with byteLength unchecked. */
             const tinygltf::BufferView &bv = L->model_.bufferViews[size_t(image->bufferView)];
@@ -482,24 +522,11 @@ bool Loader::image_cb(tinygltf::Image *image, const int image_idx, std::string *
             image->image.clear();
             return true;
         }
-        dr_image img = {};
-        std::string hint = image_name_hint(*image, image_idx, bytes, size);
-        int rc = dr_image_read_memory(bytes, size_t(size), hint.c_str(), &img);
-        if (rc != 0) {
-            L->image_error_ = rc;
-            L->image_message_ = strf("%s: %s: %s", L->path_, where.c_str(), dr_last_error());
-            if (err) *err += L->image_message_;
-            return false;
-        }
-        if (L->images_.size() <= size_t(image_idx)) L->images_.resize(size_t(image_idx) + 1, dr_image{});
-        dr_image_release(&L->images_[size_t(image_idx)]);
-        L->images_[size_t(image_idx)] = img;
-        /* tinygltf only needs to believe the image is loaded; the pixels stay with us */
-        image->width = img.width;
-        image->height = img.height;
-        image->component = img.channels;
-        image->bits = 32;
-        image->pixel_type = TINYGLTF_COMPONENT_TYPE_FLOAT;
+        /* decoded after the parse, all images at once (decode_images);
+         * tinygltf only needs to believe the image is loaded */
+        L->encoded_images_.push_back(
+            EncodedImage{image_idx, image_name_hint(*image, image_idx, bytes, size),
+                         std::vector<unsigned char>(bytes, bytes + size)});
         image->image.clear();
         return true;
     } catch (...) {
@@ -507,6 +534,44 @@ bool Loader::image_cb(tinygltf::Image *image, const int image_idx, std::string *
         L->image_message_ = strf("%s: /images/%d: out of memory", L->path_, image_idx);
         return false;
     }
+}
+
+/* The images image_cb kept, decoded all at once, one per CPU at a time (a
+ * scene's 2k textures were decoded one after the other). A failure is
+ * reported for the first failing image in file order, as before. */
+void Loader::decode_images()
+{
+    const size_t n = encoded_images_.size();
+    std::vector<dr_image> out(n, dr_image{});
+    std::vector<int> rc(n, 0);
+    ThreadMessages why(n);
+    parallel_each(n, [&](size_t k) {
+        const EncodedImage &e = encoded_images_[k];
+        if ((rc[k] = dr_image_read_memory(e.bytes.data(), e.bytes.size(), e.hint.c_str(), &out[k])) != 0)
+            why.keep(k);
+    });
+    size_t failed = n;
+    for (size_t k = 0; k < n; k++) {
+        const int idx = encoded_images_[k].index;
+        if (rc[k] != 0) {
+            if (failed == n || idx < encoded_images_[failed].index) failed = k;
+            continue;
+        }
+        if (images_.size() <= size_t(idx)) images_.resize(size_t(idx) + 1, dr_image{});
+        dr_image_release(&images_[size_t(idx)]);
+        images_[size_t(idx)] = out[k];   /* ours now: released by the destructor if loading fails */
+        tinygltf::Image &im = model_.images[size_t(idx)];
+        im.width = out[k].width;
+        im.height = out[k].height;
+        im.component = out[k].channels;
+        im.bits = 32;
+        im.pixel_type = TINYGLTF_COMPONENT_TYPE_FLOAT;
+    }
+    if (failed < n) {
+        dr_set_error("%s: /images/%d: %s", path_, encoded_images_[failed].index, why.at(failed));
+        throw Failure{rc[failed]};
+    }
+    encoded_images_.clear();
 }
 
 /* ---- parsing ---- */
@@ -595,7 +660,7 @@ void Loader::load_model()
         if (end == std::string::npos) end = warn.size();
         if (end > start) warnings_.push_back(std::string(path_) + ": " + warn.substr(start, end - start));
         start = end + 1;
-    }
+    }    decode_images();
 }
 
 void Loader::check_features()
@@ -1508,10 +1573,15 @@ void Loader::finish()
     scene_->bbox_min = bbox_min_;
     scene_->bbox_max = bbox_max_;
 
-    for (size_t i = 0; i < linear_images_.size(); i++) {
-        int rc = linear_images_[i] ? dr_image_make_linear(&scene_->images[i]) : 0;
-        if (rc != 0) fail(rc, "/images/%zu: %s", i, dr_last_error());
-    }
+    /* the colour textures' sRGB decode, also one image per CPU */
+    const size_t n = linear_images_.size();
+    std::vector<int> rc(n, 0);
+    ThreadMessages why(n);
+    parallel_each(n, [&](size_t i) {
+        if (linear_images_[i] && (rc[i] = dr_image_make_linear(&scene_->images[i])) != 0) why.keep(i);
+    });
+    for (size_t i = 0; i < n; i++)
+        if (rc[i] != 0) fail(rc[i], "/images/%zu: %s", i, why.at(i));
 }
 
 void Loader::run()
