@@ -101,9 +101,9 @@ void cmd_grad_usage(FILE *out)
             "      --crop X,Y,W,H  only this rectangle of the --res frame is rendered and\n"
             "                      compared: -o images are W x H; a --target may be W x H\n"
             "                      (then --res gives the frame) or the full frame\n"
-            "      --batch N       tape: paths recorded per backward sweep, over all threads\n"
-            "                      (default 0: " TAPE_PER_THREAD " per thread, a tape the sweep reads\n"
-            "                      back from the cache); bounds the tape's memory\n");
+            "      --batch N       tape: paths recorded per backward sweep, over all threads,\n"
+            "                      in whole pixels (default 0: " TAPE_PER_THREAD " per thread, a tape the\n"
+            "                      sweep reads back from the cache); bounds the tape's memory\n");
     /* a second literal: one would pass the 4095 characters ISO C guarantees */
     fprintf(out, GRAD_IGNORE_UNSUPPORTED_HELP
             "      --json          print a summary object on stdout (memory estimate included)\n"

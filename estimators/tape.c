@@ -1,7 +1,8 @@
 /* Conventional reverse mode with a tape: the baseline PRB is measured against.
  *
  * Each worker records every vertex of a batch of paths (DR_TAPE_PATHS_PER_WORKER
- * by default, --batch N paths over all workers otherwise), then sweeps that
+ * by default, --batch N paths over all workers otherwise; whole pixels, every
+ * sample of each, so at least one pixel's spp paths), then sweeps that
  * tape backward, path by path, from the last vertex to the first, carrying
  * the adjoint of the throughput:  abar_k = adj * e_k + abar_{k+1} * t_k,  and
  * the BSDF term of vertex k gets d t_k = abar_{k+1} * beta_k. No division by f
@@ -62,7 +63,7 @@ struct tape_job {
     struct tape tapes[DR_MAX_THREADS];
     struct dr_wave *waves[DR_MAX_THREADS];   /* the packet tracer's lanes, per worker, made on first use */
     int64_t *ids[DR_MAX_THREADS];            /* ... and the batch's path ids that matter to the loss */
-    int64_t batch;           /* paths a worker records before it sweeps */
+    int64_t batch;           /* pixels (all their samples) a worker records before it sweeps */
     bool wave;               /* no media: the record runs on the packet tracer */
     bool attached;           /* attached sampling (or mis), and some parameter enters a sampling map */
     bool derivative;         /* derivative sampling (path_deriv.h) */
@@ -189,14 +190,16 @@ static bool record_path(struct tape_job *j, struct tape *tp, int thread, int64_t
     return true;
 }
 
+/* Pixels [begin, end), every sample, one path after the other. */
 static void record_one_by_one(struct tape_job *j, struct tape *tp, int thread, int64_t begin, int64_t end)
 {
-    const int64_t pixels = (int64_t)j->b.p->width * j->b.p->height;
-    for (int64_t id = begin; id < end && !tp->failed; id++) {
+    for (int64_t px = begin; px < end && !tp->failed; px++) {
         dr_vec3 adj;
-        if (dr_est_sample_adjoint(&j->b, id % pixels, &adj) &&
-            !record_path(j, tp, thread, id % pixels, (int)(id / pixels), adj))
-            tp->failed = true;
+        if (!dr_est_sample_adjoint(&j->b, px, &adj))
+            continue;   /* this pixel does not matter to the loss */
+        for (int sidx = 0; sidx < j->b.p->spp && !tp->failed; sidx++)
+            if (!record_path(j, tp, thread, px, sidx, adj))
+                tp->failed = true;
     }
 }
 
@@ -206,7 +209,7 @@ struct wave_record {
     struct tape_job *j;
     struct tape *tp;
     int thread;
-    const int64_t *ids;
+    const int64_t *ids;   /* by item: pixel * spp + sample */
 };
 
 struct record_lane {
@@ -219,10 +222,11 @@ static void lane_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp,
 {
     struct wave_record *c = ctx;
     struct record_lane *l = user;
-    const int64_t pixels = (int64_t)c->j->b.p->width * c->j->b.p->height, px = c->ids[i] % pixels;
+    const int spp = c->j->b.p->spp;
+    const int64_t px = c->ids[i] / spp;
     dr_vec3 adj;
     dr_est_sample_adjoint(&c->j->b, px, &adj);
-    dr_est_camera_ray(&c->j->b, px, (int)(c->ids[i] / pixels), smp, o, d);
+    dr_est_camera_ray(&c->j->b, px, (int)(c->ids[i] % spp), smp, o, d);
     struct tape_path *path = c->tp->failed ? NULL : new_path(c->tp, px, adj, smp->key);
     if (!path)
         c->tp->failed = true;
@@ -264,14 +268,15 @@ static bool record_wave(struct tape_job *j, struct tape *tp, int thread, int64_t
 {
     if (!j->waves[thread] && !(j->waves[thread] = dr_wave_create()))
         return false;
-    if (!j->ids[thread] && !(j->ids[thread] = malloc(sizeof(int64_t) * (size_t)j->batch)))
+    const int spp = j->b.p->spp;
+    if (!j->ids[thread] && !(j->ids[thread] = malloc(sizeof(int64_t) * (size_t)(j->batch * spp))))
         return false;
-    const int64_t pixels = (int64_t)j->b.p->width * j->b.p->height;
     int64_t n = 0;
     dr_vec3 adj;
-    for (int64_t id = begin; id < end; id++)
-        if (dr_est_sample_adjoint(&j->b, id % pixels, &adj))
-            j->ids[thread][n++] = id;
+    for (int64_t px = begin; px < end; px++)
+        if (dr_est_sample_adjoint(&j->b, px, &adj))
+            for (int sidx = 0; sidx < spp; sidx++)
+                j->ids[thread][n++] = px * spp + sidx;
     struct wave_record c = {.j = j, .tp = tp, .thread = thread, .ids = j->ids[thread]};
     static const struct dr_wave_ops ops = {lane_start, lane_vertex, lane_walk_end};
     dr_wave_run(j->waves[thread], j->b.p->scene, &j->b.popts, n, &ops, &c, &j->b.thr[thread].rays);
@@ -424,8 +429,10 @@ static void sweep_tape(struct tape_job *j, int thread, const struct tape *tp)
     dr_est_sink_end(&j->b, thread);
 }
 
-/* One worker's batch: path ids [begin, end) (id = sample * pixels + pixel)
- * recorded, then swept. */
+/* One worker's batch: every sample of pixels [begin, end) recorded, then
+ * swept. A pixel's samples stay in one batch, in sample order, so its sums
+ * do not depend on where the batches are cut (a crop's pixels are bit for bit
+ * the full frame's). */
 static void record_and_sweep(void *ctx, int thread, int64_t begin, int64_t end)
 {
     struct tape_job *j = ctx;
@@ -444,14 +451,14 @@ static int tape_run(struct dr_est_base *b)
     struct tape_job *j = (struct tape_job *)b;
     const struct dr_grad_problem *p = b->p;
     const int threads = b->acc.threads;
-    const int64_t total = (int64_t)p->width * p->height * p->spp;
     const enum dr_sampling run = dr_est_sampling_run(p);
     j->attached = run == DR_SAMPLING_ATTACHED || run == DR_SAMPLING_MIS;
     j->derivative = run == DR_SAMPLING_DERIVATIVE;
     j->wave = !(b->popts.stages & DR_STAGE_MEDIA);
-    const int64_t batch = dr_tape_batch_paths(p->batch, threads);
-    j->batch = (batch + threads - 1) / threads;
-    int rc = dr_parallel_for_static(total, j->batch, threads, record_and_sweep, j);
+    /* pixels per worker batch: its share of the paths, in whole pixels */
+    const int64_t share = (dr_tape_batch_paths(p->batch, threads) + threads - 1) / threads;
+    j->batch = share / p->spp > 1 ? share / p->spp : 1;
+    int rc = dr_parallel_for_static((int64_t)p->width * p->height, j->batch, threads, record_and_sweep, j);
     uint64_t bytes = 0;
     for (int t = 0; t < threads; t++)
         bytes += tape_bytes(&j->tapes[t]);   /* capacities only grow: the most held at once */
