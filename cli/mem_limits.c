@@ -272,14 +272,14 @@ int cli_limits_grad(const struct grad_common *g, const struct dr_scene *scene, c
         n.mis = mis_bytes(g, T, npix, threads, false);
         double spp_b = ceil((double)g->spp / (batches > 0 ? batches : 1));
         double paths = npix * spp_b;
-        n.tape = tape_bytes(g, fmin((double)dr_tape_batch_paths(batch, threads), paths));
+        n.tape = tape_bytes(g, fmin(dr_tape_batch_paths(batch, threads, (int)spp_b), paths));
     } else {
         /* d image in double per thread and summed, plus its float copy */
         n.images = npix * 3 * (sizeof(double) * (threads + 1) + sizeof(float));
         n.mis = mis_bytes(g, T, npix, threads, true);
         n.grads = T * sizeof(double);
         double paths = npix * g->spp;
-        n.tape = tape_bytes(g, fmin((double)dr_tape_batch_paths(batch, threads), paths));
+        n.tape = tape_bytes(g, fmin(dr_tape_batch_paths(batch, threads, g->spp), paths));
     }
     return check("grad", &n, "--res", "--max-depth x --batch (tape records every vertex of a batch: lower them, or --estimator prb)");
 }
@@ -297,7 +297,7 @@ int cli_limits_fdcheck(const struct grad_common *g, const struct dr_scene *scene
     n.grads = T * 5 * sizeof(double) + T * 2 * sizeof(double) * threads;
     n.mis = fmax(mis_bytes(g, T, npix, threads, true), mis_bytes(g, T, npix, threads, false));
     n.batches = (double)batches * T * sizeof(double);
-    n.tape = tape_bytes(g, fmin((double)dr_tape_batch_paths(0, threads), npix * g->spp));
+    n.tape = tape_bytes(g, fmin(dr_tape_batch_paths(0, threads, g->spp), npix * g->spp));
     return check("fdcheck", &n, "--res", "--max-depth (tape records every vertex of a batch; or --estimator prb)");
 }
 
@@ -313,7 +313,7 @@ int cli_limits_optimize(const struct grad_common *g, const struct dr_scene *scen
     /* theta, grad, per-target grad, reference, Adam's m, v, lr, lo, hi; per-thread copies */
     n.grads = T * 9 * sizeof(double) + T * 2 * sizeof(double) * threads;
     n.mis = mis_bytes(g, T, (double)max_pixels, threads, false);
-    n.tape = tape_bytes(g, fmin((double)dr_tape_batch_paths(0, threads), (double)max_pixels * g->spp));
+    n.tape = tape_bytes(g, fmin(dr_tape_batch_paths(0, threads, g->spp), (double)max_pixels * g->spp));
     return check("optimize", &n, "--target (the images' size)",
                  "--max-depth (tape records every vertex of a batch; or --estimator prb)");
 }

@@ -113,8 +113,9 @@ size_t dr_tape_vertex_bytes(void);
  * About 2 MB of tape per worker on a Cornell box, so the sweep reads it
  * back from the cache (see tape.c). */
 #define DR_TAPE_PATHS_PER_WORKER 512
-/* Paths recorded per sweep over all workers, for --batch `batch` (0: the default). */
-int64_t dr_tape_batch_paths(int64_t batch, int threads);
+/* Paths the tape holds at once over all workers, for --batch `batch` (0: the
+ * default): each worker's share in whole pixels of spp paths, at least one. */
+double dr_tape_batch_paths(int64_t batch, int threads, int spp);
 bool dr_estimator_supports(const struct dr_estimator_ops *e, enum dr_sampling s);
 
 /* Forward mode: d_image (width * height * 3 doubles) = d I / d theta . dir,

@@ -112,9 +112,20 @@ static uint64_t tape_bytes(const struct tape *t)
            (uint64_t)t->cap_mrecs * sizeof(struct dr_medium_record);
 }
 
-int64_t dr_tape_batch_paths(int64_t batch, int threads)
+/* Pixels in a worker's batch: its share of the paths, in whole pixels (at least one). */
+static int64_t batch_pixels(int64_t batch, int threads, int spp)
 {
-    return batch > 0 ? batch : (int64_t)DR_TAPE_PATHS_PER_WORKER * (threads > 0 ? threads : 1);
+    threads = threads > 0 ? threads : 1;
+    spp = spp > 0 ? spp : 1;
+    const int64_t paths = batch > 0 ? batch : (int64_t)DR_TAPE_PATHS_PER_WORKER * threads;
+    const int64_t share = paths / threads + (paths % threads != 0);   /* (no overflow at INT64_MAX) */
+    return share / spp > 1 ? share / spp : 1;
+}
+
+double dr_tape_batch_paths(int64_t batch, int threads, int spp)
+{
+    /* (in double: a --batch near INT64_MAX must not wrap) */
+    return (double)batch_pixels(batch, threads, spp) * (spp > 0 ? spp : 1) * (threads > 0 ? threads : 1);
 }
 
 /* A new path of the tape (NULL: out of memory). */
@@ -455,10 +466,11 @@ static int tape_run(struct dr_est_base *b)
     j->attached = run == DR_SAMPLING_ATTACHED || run == DR_SAMPLING_MIS;
     j->derivative = run == DR_SAMPLING_DERIVATIVE;
     j->wave = !(b->popts.stages & DR_STAGE_MEDIA);
-    /* pixels per worker batch: its share of the paths, in whole pixels */
-    const int64_t share = (dr_tape_batch_paths(p->batch, threads) + threads - 1) / threads;
-    j->batch = share / p->spp > 1 ? share / p->spp : 1;
-    int rc = dr_parallel_for_static((int64_t)p->width * p->height, j->batch, threads, record_and_sweep, j);
+    const int64_t pixels = (int64_t)p->width * p->height;
+    j->batch = batch_pixels(p->batch, threads, p->spp);
+    if (j->batch > pixels)
+        j->batch = pixels > 0 ? pixels : 1;   /* (the index buffer holds a batch) */
+    int rc = dr_parallel_for_static(pixels, j->batch, threads, record_and_sweep, j);
     uint64_t bytes = 0;
     for (int t = 0; t < threads; t++)
         bytes += tape_bytes(&j->tapes[t]);   /* capacities only grow: the most held at once */
