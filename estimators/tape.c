@@ -56,6 +56,8 @@ struct tape {
     int64_t cap_mrecs;
     struct tape_path *paths;
     int64_t n_paths, cap_paths;
+    uint64_t peak;     /* this run's largest record, in bytes (the mappings may be larger:
+                          they grow by doubling and are kept from earlier runs) */
     bool failed;       /* out of memory while recording */
 };
 
@@ -107,12 +109,12 @@ static bool grow(void **p, int64_t *cap, int64_t need, size_t elem)
     return true;
 }
 
-static uint64_t tape_bytes(const struct tape *t)
+/* Bytes the record in tp holds now. */
+static uint64_t tape_bytes(const struct tape *t, bool media)
 {
-    return (uint64_t)t->cap_verts * sizeof(struct tape_vertex) + (uint64_t)t->cap_paths * sizeof(struct tape_path) +
-           (uint64_t)t->cap_mrecs * sizeof(struct dr_medium_record);
+    return (uint64_t)t->n_verts * (sizeof(struct tape_vertex) + (media ? sizeof(struct dr_medium_record) : 0)) +
+           (uint64_t)t->n_paths * sizeof(struct tape_path);
 }
-
 /* Pixels in a worker's batch: its share of the paths, in whole pixels (at least one). */
 static int64_t batch_pixels(int64_t batch, int threads, int spp)
 {
@@ -469,6 +471,7 @@ static void tape_take(struct tape *tp, int t)
     tape_pool.kept[t] = (struct tape){0};
     pthread_mutex_unlock(&tape_pool.lock);
     tp->n_verts = tp->n_paths = 0;
+    tp->peak = 0;
     tp->failed = false;
 }
 
@@ -496,6 +499,8 @@ static void record_and_sweep(void *ctx, int thread, int64_t begin, int64_t end)
     tp->n_verts = tp->n_paths = 0;
     if (!(j->wave && record_wave(j, tp, thread, begin, end)))
         record_one_by_one(j, tp, thread, begin, end);
+    uint64_t bytes = tape_bytes(tp, j->b.popts.params->media_active);
+    tp->peak = bytes > tp->peak ? bytes : tp->peak;
     if (!tp->failed)
         sweep_tape(j, thread, tp);
 }
@@ -518,7 +523,7 @@ static int tape_run(struct dr_est_base *b)
     int rc = dr_parallel_for_static(pixels, j->batch, threads, record_and_sweep, j);
     uint64_t bytes = 0;
     for (int t = 0; t < threads; t++)
-        bytes += tape_bytes(&j->tapes[t]);   /* capacities only grow: the most held at once */
+        bytes += j->tapes[t].peak;   /* (workers may peak at different times: an upper bound) */
     b->record_bytes = bytes;
     for (int t = 0; t < threads && rc == 0; t++)
         if (j->tapes[t].failed) {

@@ -126,6 +126,43 @@ static void compare(const char *what, struct dr_scene *s, const struct dr_camera
     dr_param_set_destroy(ps);
 }
 
+/* tape keeps each worker's tape mappings from one run to the next (tape.c):
+ * a run after runs of other depths, batch sizes and thread counts gives bit
+ * for bit what it gave before them. */
+static void tape_reuse(struct dr_scene *s, const struct dr_camera *cam, const char *const *ptrs, int n)
+{
+    const struct dr_estimator_ops *tape = dr_estimator_find("tape");
+    struct dr_param_set *ps = dr_param_set_create(s, ptrs, n);
+    CHECK(tape && ps, "tape reuse: set-up: %s", dr_last_error());
+    if (!tape || !ps)
+        return;
+    float *adj = malloc(sizeof(float) * 3 * W * H);
+    for (int i = 0; i < 3 * W * H; i++)
+        adj[i] = (float)(0.01 * ((i * 7) % 13 - 6));
+    double *first = calloc((size_t)ps->total, sizeof(double)), *other = calloc((size_t)ps->total, sizeof(double)),
+           *again = calloc((size_t)ps->total, sizeof(double));
+    struct dr_grad_problem p = {.scene = s, .camera = cam, .params = ps, .width = W, .height = H, .spp = 2,
+                                .max_depth = 6, .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 3, .threads = 1};
+    CHECK(dr_estimator_backward(tape, &p, adj, first, NULL) == 0, "tape reuse: %s", dr_last_error());
+    struct dr_grad_problem deep = p, small = p;
+    deep.threads = 2;
+    deep.max_depth = deep.rr_depth = 40;   /* longer tapes than the first run's */
+    deep.spp = 3;
+    small.threads = 3;
+    small.batch = 7;                       /* shorter ones, on more workers */
+    CHECK(dr_estimator_backward(tape, &deep, adj, other, NULL) == 0, "tape reuse (deep): %s", dr_last_error());
+    CHECK(dr_estimator_backward(tape, &small, adj, other, NULL) == 0, "tape reuse (small): %s", dr_last_error());
+    CHECK(dr_estimator_backward(tape, &p, adj, again, NULL) == 0, "tape reuse (again): %s", dr_last_error());
+    CHECK(memcmp(first, again, sizeof(double) * (size_t)ps->total) == 0,
+          "tape: a run after runs of other sizes differs from the same run before them");
+    printf("tape reuse: %lld scalars bit-identical after deeper and smaller runs\n", (long long)ps->total);
+    free(first);
+    free(other);
+    free(again);
+    free(adj);
+    dr_param_set_destroy(ps);
+}
+
 int main(void)
 {
     const char *path = scene_path("cornell-box.gltf");
@@ -184,6 +221,7 @@ int main(void)
     };
     compare("glossy scene", s, &cam, gptrs, 8, 6, DR_SAMPLING_DETACHED);
     compare("glossy scene, derivative sampling", s, &cam, gptrs, 8, 6, DR_SAMPLING_DERIVATIVE);
+    tape_reuse(s, &cam, gptrs, 8);
     dr_scene_destroy(s);
     return TEST_END();
 }
