@@ -11,7 +11,6 @@
 #include <nlohmann/json.hpp>   /* the JSON library tinygltf itself is built with */
 
 #include <algorithm>
-#include <atomic>
 #include <cerrno>
 #include <cstdarg>
 #include <cstdint>
@@ -23,7 +22,6 @@
 #include <memory>
 #include <set>
 #include <string>
-#include <thread>
 #include <utility>
 #include <vector>
 
@@ -34,7 +32,7 @@
 #include "image_io.h"
 #include "medium.h"
 extern "C" {
-#include "parallel.h"   /* dr_cpu_count */
+#include "parallel.h"   /* dr_parallel_for, dr_cpu_count */
 }
 #include "scene.h"
 
@@ -442,24 +440,17 @@ bool Loader::fs_write(std::string *err, const std::string &, const std::vector<u
 
 /* ---- images: decoded by OpenImageIO (image_io.cpp), never by stb ---- */
 
-/* Runs fn(i) for every i in [0, n), on up to one thread per CPU (the caller's
- * among them). fn must not throw. Without threads (none can be made) the
- * caller does it all. */
+/* fn(i) for every i in [0, n), one item per CPU at a time: the renderer's
+ * dr_parallel_for (the caller's thread among the workers; fewer helpers if
+ * threads cannot be made). fn must not throw. */
 template <class Fn> void parallel_each(size_t n, Fn fn)
 {
-    const size_t workers = std::min(n, size_t(dr_cpu_count()));
-    std::atomic<size_t> next{0};
-    auto work = [&] {
-        for (size_t i; (i = next++) < n;) fn(i);
+    if (n == 0) return;
+    const int threads = int(std::min(n, size_t(dr_cpu_count())));
+    dr_range_fn range = [](void *ctx, int, int64_t begin, int64_t end) {
+        for (int64_t i = begin; i < end; i++) (*static_cast<Fn *>(ctx))(size_t(i));
     };
-    std::vector<std::thread> pool;
-    try {
-        for (size_t t = 1; t < workers; t++) pool.emplace_back(work);
-    } catch (...) {
-        /* fewer helpers: the work is shared among those there are */
-    }
-    work();
-    for (std::thread &t : pool) t.join();
+    if (dr_parallel_for(int64_t(n), 1, threads, range, &fn) != 0) throw std::bad_alloc();
 }
 
 /* Error messages of work done on other threads (dr_last_error is per thread). */
@@ -660,7 +651,8 @@ void Loader::load_model()
         if (end == std::string::npos) end = warn.size();
         if (end > start) warnings_.push_back(std::string(path_) + ": " + warn.substr(start, end - start));
         start = end + 1;
-    }    decode_images();
+    }
+    decode_images();
 }
 
 void Loader::check_features()

@@ -65,7 +65,7 @@ struct tape_job {
     struct dr_est_base b;   /* first: the shared part */
     struct tape tapes[DR_MAX_THREADS];
     struct dr_wave *waves[DR_MAX_THREADS];   /* the packet tracer's lanes, per worker, made on first use */
-    int64_t *ids[DR_MAX_THREADS];            /* ... and the batch's path ids that matter to the loss */
+    int64_t *pixels[DR_MAX_THREADS];         /* ... and the batch's pixels that matter to the loss */
     int64_t batch;           /* pixels (all their samples) a worker records before it sweeps */
     bool wave;               /* no media: the record runs on the packet tracer */
     bool attached;           /* attached sampling (or mis), and some parameter enters a sampling map */
@@ -115,6 +115,7 @@ static uint64_t tape_bytes(const struct tape *t, bool media)
     return (uint64_t)t->n_verts * (sizeof(struct tape_vertex) + (media ? sizeof(struct dr_medium_record) : 0)) +
            (uint64_t)t->n_paths * sizeof(struct tape_path);
 }
+
 /* Pixels in a worker's batch: its share of the paths, in whole pixels (at least one). */
 static int64_t batch_pixels(int64_t batch, int threads, int spp)
 {
@@ -223,7 +224,7 @@ struct wave_record {
     struct tape_job *j;
     struct tape *tp;
     int thread;
-    const int64_t *ids;   /* by item: pixel * spp + sample */
+    const int64_t *px;    /* the batch's pixels that matter; item i is sample i % spp of px[i / spp] */
 };
 
 struct record_lane {
@@ -237,10 +238,10 @@ static void lane_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp,
     struct wave_record *c = ctx;
     struct record_lane *l = user;
     const int spp = c->j->b.p->spp;
-    const int64_t px = c->ids[i] / spp;
+    const int64_t px = c->px[i / spp];
     dr_vec3 adj;
     dr_est_sample_adjoint(&c->j->b, px, &adj);
-    dr_est_camera_ray(&c->j->b, px, (int)(c->ids[i] % spp), smp, o, d);
+    dr_est_camera_ray(&c->j->b, px, (int)(i % spp), smp, o, d);
     struct tape_path *path = c->tp->failed ? NULL : new_path(c->tp, px, adj, smp->key);
     if (!path)
         c->tp->failed = true;
@@ -261,7 +262,7 @@ static void lane_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, 
         c->tp->failed = true;
         return;
     }
-    tv->v = *v;
+    tv->v = *v;   /* (the lane's vertex is overwritten at its next step) */
     tv->v.mrec = NULL;
     tv->bt = dr_mul(a->ratio, a->beta);
     note_vertex(c->j, path, tv, &l->L);
@@ -282,18 +283,16 @@ static bool record_wave(struct tape_job *j, struct tape *tp, int thread, int64_t
 {
     if (!j->waves[thread] && !(j->waves[thread] = dr_wave_create()))
         return false;
-    const int spp = j->b.p->spp;
-    if (!j->ids[thread] && !(j->ids[thread] = malloc(sizeof(int64_t) * (size_t)(j->batch * spp))))
+    if (!j->pixels[thread] && !(j->pixels[thread] = malloc(sizeof(int64_t) * (size_t)j->batch)))
         return false;
     int64_t n = 0;
     dr_vec3 adj;
     for (int64_t px = begin; px < end; px++)
         if (dr_est_sample_adjoint(&j->b, px, &adj))
-            for (int sidx = 0; sidx < spp; sidx++)
-                j->ids[thread][n++] = px * spp + sidx;
-    struct wave_record c = {.j = j, .tp = tp, .thread = thread, .ids = j->ids[thread]};
+            j->pixels[thread][n++] = px;
+    struct wave_record c = {.j = j, .tp = tp, .thread = thread, .px = j->pixels[thread]};
     static const struct dr_wave_ops ops = {lane_start, lane_vertex, lane_walk_end};
-    dr_wave_run(j->waves[thread], j->b.p->scene, &j->b.popts, n, &ops, &c, &j->b.thr[thread].rays);
+    dr_wave_run(j->waves[thread], j->b.p->scene, &j->b.popts, n * j->b.p->spp, &ops, &c, &j->b.thr[thread].rays);
     return true;
 }
 
@@ -455,9 +454,10 @@ static void tape_unmap(struct tape *tp)
 
 /* Each worker's tape mappings, kept from one estimator run to the next: the
  * reverse driver runs the estimator twice per batch, and a tape faulted in
- * afresh every run (4 KiB at a time, about 10 us each on a VM) cost more
- * than recording it on small images (64x64, 2 spp a run: tape 0.5 s against
- * prb's 0.29 s). Held until the process ends; the OS takes them back. */
+ * afresh every run (4 KiB at a time, about 10 us each on a VM) doubled the
+ * tape's time on small images (Cornell box 64x64, 32 spp in 8 batches:
+ * 0.27 s, now 0.13 s; prb 0.145 s). Held until the process ends; the OS
+ * takes them back. */
 static struct {
     pthread_mutex_t lock;
     struct tape kept[DR_MAX_THREADS];
@@ -519,7 +519,7 @@ static int tape_run(struct dr_est_base *b)
     const int64_t pixels = (int64_t)p->width * p->height;
     j->batch = batch_pixels(p->batch, threads, p->spp);
     if (j->batch > pixels)
-        j->batch = pixels > 0 ? pixels : 1;   /* (the index buffer holds a batch) */
+        j->batch = pixels > 0 ? pixels : 1;   /* (the pixel list holds a batch) */
     int rc = dr_parallel_for_static(pixels, j->batch, threads, record_and_sweep, j);
     uint64_t bytes = 0;
     for (int t = 0; t < threads; t++)
@@ -543,7 +543,7 @@ static void tape_release(struct dr_est_base *b)
         else if (j->tapes[t].cap_verts || j->tapes[t].cap_paths || j->tapes[t].cap_mrecs)
             tape_leave(&j->tapes[t], t);
         dr_wave_destroy(j->waves[t]);
-        free(j->ids[t]);
+        free(j->pixels[t]);
     }
 }
 

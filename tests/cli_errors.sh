@@ -73,6 +73,24 @@ expect_fail 3 "points.gltf|/meshes/1/primitives/0/mode|points" "$gltf/points.glt
 expect_fail 3 "tex_nosource.gltf|/textures/0|source" "$tri" $R -o out.png
 expect_fail 3 "missing_texture.gltf|/images/0|nothere.png" "$clidata/missing_texture.gltf" $R -o out.png
 expect_fail 3 "truncated_texture.gltf|/images/0|truncated.png" "$clidata/truncated_texture.gltf" $R -o out.png
+# images are decoded in parallel: with two broken ones the first in file
+# order is named (/images/1), whichever thread finishes first
+multi=$tmp/multi-image
+mkdir -p "$multi"
+cp "$gltf/checker.png" "$multi/good.png"
+cp "$clidata/truncated.png" "$multi/bad1.png"
+cp "$clidata/truncated.png" "$multi/bad2.png"
+python3 - "$clidata/truncated_texture.gltf" "$multi/multi_image.gltf" <<'PY'
+import json, sys
+g = json.load(open(sys.argv[1]))
+g["images"] = [{"uri": "good.png"}, {"uri": "bad1.png"}, {"uri": "bad2.png"}]
+g["textures"] = [{"source": 0}, {"source": 1}, {"source": 2}]
+json.dump(g, open(sys.argv[2], "w"))
+PY
+for i in 1 2 3; do
+    expect_fail 3 "multi_image.gltf|/images/1|bad1.png" "$multi/multi_image.gltf" $R -o out.png
+    grep -q "/images/2" "$tmp/err" && fail "the second broken image was named instead of the first"
+done
 expect_fail 3 "bad_env.gltf|/extensions/DR_environment/uri|nosky.hdr" "$gltf/bad_env.gltf" $R -o out.png
 expect_fail 3 "truncated.glb" "$clidata/truncated.glb" $R -o out.png   # binary glTF cut short
 expect_fail 3 "empty.gltf" "$clidata/empty.gltf" $R -o out.png         # zero bytes
