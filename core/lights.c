@@ -4,6 +4,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "cdf.h"
 #include "error.h"
 
 /* Discrete distribution over: [0, n_emitters) emissive triangles, then the
@@ -18,6 +19,7 @@ struct dr_light_sampler {
     int env_entry;             /* index of the environment in cdf, -1 if none */
     int64_t n_entries;
     double *cdf;               /* n_entries + 1 */
+    uint32_t *cdf_guide;       /* n_entries + 1: its guide table (cdf.h) */
     double *pick;              /* n_entries: probability of each entry */
     double scene_radius;
     dr_vec3 scene_center;
@@ -25,23 +27,11 @@ struct dr_light_sampler {
     int env_w, env_h;
     double *env_marginal;      /* env_h + 1: cdf over rows */
     double *env_conditional;   /* env_h * (env_w + 1): cdf over columns per row */
+    uint32_t *env_marginal_guide;      /* env_h + 1: their guide tables (cdf.h) */
+    uint32_t *env_conditional_guide;   /* env_h * (env_w + 1) */
     double env_integral;       /* sum of texel weights / (w h), for the pdf */
     int texture_averages;      /* whole-image averages the build made (one per emissive image) */
 };
-
-static int64_t cdf_find(const double *cdf, int64_t n, double u)
-{
-    /* largest i with cdf[i] <= u, in [0, n) */
-    int64_t lo = 0, hi = n;
-    while (hi - lo > 1) {
-        int64_t mid = (lo + hi) / 2;
-        if (cdf[mid] <= u)
-            lo = mid;
-        else
-            hi = mid;
-    }
-    return lo;
-}
 
 static double mean_texture_value(const struct dr_scene *s, const struct dr_texref *ref, int channel_count)
 {
@@ -125,6 +115,14 @@ static int build_env_tables(const struct dr_scene *s, struct dr_light_sampler *l
             ls->env_marginal[y] = (double)y / h;
     }
     ls->env_integral = total / ((double)w * h);
+    ls->env_marginal_guide = malloc(sizeof(uint32_t) * (size_t)(h + 1));
+    ls->env_conditional_guide = malloc(sizeof(uint32_t) * (size_t)h * (size_t)(w + 1));
+    if (!ls->env_marginal_guide || !ls->env_conditional_guide)
+        return DR_ERR_NOMEM;
+    dr_cdf_guide_build(ls->env_marginal, h, ls->env_marginal_guide, h);
+    for (int y = 0; y < h; y++)
+        dr_cdf_guide_build(ls->env_conditional + (size_t)y * (w + 1), w,
+                           ls->env_conditional_guide + (size_t)y * (w + 1), w);
     return 0;
 }
 
@@ -207,7 +205,9 @@ struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
     ls->emitter_area = malloc(sizeof(double) * (size_t)(ls->n_emitters + 1));
     ls->cdf = malloc(sizeof(double) * (size_t)(ls->n_entries + 1));
     ls->pick = malloc(sizeof(double) * (size_t)(ls->n_entries + 1));
-    if (!ls->emitter_tri || !ls->tri_pick || !ls->tri_pick_density || !ls->emitter_area || !ls->cdf || !ls->pick) {
+    ls->cdf_guide = malloc(sizeof(uint32_t) * (size_t)(ls->n_entries + 1));
+    if (!ls->emitter_tri || !ls->tri_pick || !ls->tri_pick_density || !ls->emitter_area || !ls->cdf || !ls->pick ||
+        !ls->cdf_guide) {
         free(mat_w);
         goto nomem;
     }
@@ -237,6 +237,8 @@ struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
         w[k++] = fmax(M_PI * M_PI * ls->scene_radius * ls->scene_radius * mean, 0.0);
     }
     double total = normalise_picks(ls);
+    if (ls->n_entries > 0)
+        dr_cdf_guide_build(ls->cdf, ls->n_entries, ls->cdf_guide, ls->n_entries);
     if (total <= 0.0)
         ls->n_entries = 0;   /* nothing emits: NEE is skipped entirely */
     return ls;
@@ -255,9 +257,12 @@ void dr_light_sampler_destroy(struct dr_light_sampler *ls)
     free(ls->tri_pick_density);
     free(ls->emitter_area);
     free(ls->cdf);
+    free(ls->cdf_guide);
     free(ls->pick);
     free(ls->env_marginal);
     free(ls->env_conditional);
+    free(ls->env_marginal_guide);
+    free(ls->env_conditional_guide);
     free(ls);
 }
 
@@ -433,13 +438,14 @@ static bool sample_env(const struct dr_scene *s, const struct dr_light_sampler *
         dir = dr_v3(r * cos(phi), r * sin(phi), z);
         pdf = 1.0 / (4.0 * M_PI);
     } else {
-        int y = (int)cdf_find(ls->env_marginal, ls->env_h, u1);
+        int y = (int)dr_cdf_find_guided(ls->env_marginal, ls->env_h, ls->env_marginal_guide, ls->env_h, u1);
         double py = ls->env_marginal[y + 1] - ls->env_marginal[y];
         if (py <= 0.0)
             return false;
         double dv = (u1 - ls->env_marginal[y]) / py;
         const double *row = ls->env_conditional + (size_t)y * (ls->env_w + 1);
-        int x = (int)cdf_find(row, ls->env_w, u2);
+        const uint32_t *row_guide = ls->env_conditional_guide + (size_t)y * (ls->env_w + 1);
+        int x = (int)dr_cdf_find_guided(row, ls->env_w, row_guide, ls->env_w, u2);
         double px = row[x + 1] - row[x];
         if (px <= 0.0)
             return false;
@@ -465,7 +471,7 @@ bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls
 {
     if (ls->n_entries == 0)
         return false;
-    int64_t i = cdf_find(ls->cdf, ls->n_entries, u_pick);
+    int64_t i = dr_cdf_find_guided(ls->cdf, ls->n_entries, ls->cdf_guide, ls->n_entries, u_pick);
     if (ls->pick[i] <= 0.0)
         return false;
     if (i < ls->n_emitters) {
