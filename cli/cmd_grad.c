@@ -66,10 +66,16 @@ void cmd_grad_usage(FILE *out)
             "                      8-bit sRGB files are decoded to linear)\n"
             "      --loss L        reverse mode: l1 or l2 (mean over pixels and channels;\n"
             "                      default: l2)\n"
-            "      --batches K     reverse mode: independent batches, each with its own primal\n"
-            "                      image and gradient samples of ceil(spp / K) samples per\n"
-            "                      pixel (default: 4, at least 2); the standard error is their\n"
-            "                      spread, primal noise included (--json: its parts)\n"
+            "      --batches K     reverse mode: independent batches of ceil(spp / K) samples\n"
+            "                      per pixel, each with its own primal (default: 4, at least\n"
+            "                      2); the standard error is their spread, primal noise\n"
+            "                      included\n"
+            "      --primal M      reverse mode: where a batch's primal (the image the loss is\n"
+            "                      taken at) comes from: cross (default: from the gradient's own\n"
+            "                      samples, each half of a pixel's samples weighted at the\n"
+            "                      other half's mean: unbiased, no extra render) or separate\n"
+            "                      (a render of its own; --json then also splits the standard\n"
+            "                      error into gradient-sample and primal parts)\n"
             "      --grad-dir DIR  reverse mode: where texture gradients go (default: .)\n"
             "      --estimator E   gradient estimator: prb (path replay, default) or tape\n"
             "      --sampling S    detached (default), attached (differentiates through the\n"
@@ -111,13 +117,14 @@ void cmd_grad_usage(FILE *out)
     grad_lighting_usage(out);
 }
 
-enum { OPT_VIS = GOPT_END, OPT_TARGET, OPT_LOSS, OPT_BATCHES, OPT_BATCH, OPT_GRAD_DIR };
+enum { OPT_VIS = GOPT_END, OPT_TARGET, OPT_LOSS, OPT_BATCHES, OPT_BATCH, OPT_GRAD_DIR, OPT_PRIMAL };
 
 struct grad_args {
     struct grad_common g;
     const char *output, *vis, *target, *grad_dir;
     enum dr_loss_kind loss;
-    bool loss_given, batches_given, grad_dir_given;
+    bool loss_given, batches_given, grad_dir_given, primal_given;
+    enum dr_primal_mode primal;
     int batches;
     int64_t batch;
 };
@@ -154,6 +161,9 @@ static int own_option(void *ctx, int c, const char *optarg)
         a->grad_dir = optarg;
         a->grad_dir_given = true;
         return 0;
+    case OPT_PRIMAL:
+        a->primal_given = true;
+        return grad_parse_primal("grad", optarg, &a->primal);
     default: return -1;
     }
 }
@@ -170,6 +180,7 @@ static int parse_args(int argc, char **argv, struct grad_args *a)
         {"batches", required_argument, NULL, OPT_BATCHES},
         {"batch", required_argument, NULL, OPT_BATCH},
         {"grad-dir", required_argument, NULL, OPT_GRAD_DIR},
+        {"primal", required_argument, NULL, OPT_PRIMAL},
         {NULL, 0, NULL, 0},
     };
     return grad_parse_args(&a->g, argc, argv, opts, "o", own_option, a, cmd_grad_usage);
@@ -243,9 +254,12 @@ static int check_args(struct grad_args *a)
     if (rc >= 0)
         return rc;
     if (!a->target) {
-        if (a->loss_given || a->batches_given || a->grad_dir_given) {
+        if (a->loss_given || a->batches_given || a->grad_dir_given || a->primal_given) {
             cli_error("grad", "%s is for reverse mode: give --target IMG (forward mode writes -o)",
-                      a->loss_given ? "--loss" : a->batches_given ? "--batches" : "--grad-dir");
+                      a->loss_given      ? "--loss"
+                      : a->batches_given ? "--batches"
+                      : a->primal_given  ? "--primal"
+                                         : "--grad-dir");
             return DR_EXIT_USAGE;
         }
         if (!a->output) {
@@ -600,7 +614,7 @@ static int reverse_batches(const struct grad_args *a, const struct dr_scene *sce
     struct dr_reverse_options o = {
         .estimator = a->g.estimator,
         .problem = grad_problem(&a->g, scene, cam, ps, a->g.width, a->g.height, a->g.spp, a->g.seed),
-        .loss = a->loss, .loss_scale = 1.0, .batches = a->batches, .primal = DR_PRIMAL_PER_BATCH,
+        .loss = a->loss, .loss_scale = 1.0, .batches = a->batches, .primal = a->primal,
         .progress = progress ? reverse_progress : NULL, .on_render = reverse_on_render,
         .on_gradient = reverse_on_gradient, .ctx = r};
     o.problem.batch = a->batch;
@@ -708,8 +722,8 @@ static void reverse_print_json(FILE *f, const struct grad_args *a, const char *s
     json_number(f, r->res.loss);
     fprintf(f, ", \"loss_kind\": ");
     json_string(f, dr_loss_name(a->loss));
-    fprintf(f, ", \"batches\": %d, \"spp_per_batch\": %d, \"primal_seed\": %llu", a->batches, r->res.spp_batch,
-            (unsigned long long)r->res.primal_seed);
+    fprintf(f, ", \"batches\": %d, \"spp_per_batch\": %d, \"primal\": \"%s\", \"primal_seed\": %llu", a->batches,
+            r->res.spp_batch, grad_primal_name(r->res.primal_run), (unsigned long long)r->res.primal_seed);
     fprintf(f, ", \"time\": {\"load\": ");
     json_number(f, t_load);
     fprintf(f, ", \"primal\": ");
@@ -797,6 +811,7 @@ int cmd_grad(int argc, char **argv)
     grad_common_init(&a.g, "grad", 16);
     a.loss = DR_LOSS_L2;
     a.batches = 4;
+    a.primal = DR_PRIMAL_CROSS;
     a.grad_dir = ".";
     char *scene_path = NULL;
     struct dr_scene *scene = NULL;

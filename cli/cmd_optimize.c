@@ -60,8 +60,12 @@ void cmd_optimize_usage(FILE *out)
             "      --spp N            samples per pixel for the loss image and for the gradient\n"
             "                         (default 8)\n"
             "      --batches K        split each iteration's samples into K independent batches\n"
-            "                         (own primal image each) for the gradient's standard error\n"
+            "                         (own primal each) for the gradient's standard error\n"
             "                         (--json: gradient_stderr; default 2, at least 2)\n"
+            "      --primal M         where a batch's primal (the image the loss is taken at)\n"
+            "                         comes from: cross (default: the gradient's own samples,\n"
+            "                         each weighted at the mean of its pixel's others; unbiased,\n"
+            "                         no extra render) or separate (a render of its own)\n"
             "      --max-depth D      path segments (default 6)\n"
             "      --rr-depth D       Russian roulette from this many segments on (default 5)\n"
             "      --res WxH          render size; every target must have it (default: each\n"
@@ -90,7 +94,7 @@ void cmd_optimize_usage(FILE *out)
 }
 
 enum { OOPT_TARGET = GOPT_END, OOPT_ITERS, OOPT_LR, OOPT_LOSS, OOPT_OUTDIR, OOPT_RESUME, OOPT_RENDER_EVERY,
-       OOPT_CKPT_EVERY, OOPT_REFERENCE, OOPT_BATCHES };
+       OOPT_CKPT_EVERY, OOPT_REFERENCE, OOPT_BATCHES, OOPT_PRIMAL };
 
 struct target {
     const char *arg, *path;
@@ -107,6 +111,7 @@ struct opt_args {
     struct target targets[MAX_TARGETS];
     int n_targets;
     int iters, render_every, ckpt_every, batches;
+    enum dr_primal_mode primal;
     double lr;
     int loss;
     const char *output, *out_dir, *reference;
@@ -165,6 +170,7 @@ static int own_option(void *ctx, int c, const char *optarg)
         if (!cli_parse_int("optimize", "--batches", optarg, 2, 1L << 20, &v)) return DR_EXIT_USAGE;
         a->batches = (int)v;
         return 0;
+    case OOPT_PRIMAL: return grad_parse_primal("optimize", optarg, &a->primal);
     default: return -1;
     }
 }
@@ -185,6 +191,7 @@ static int parse_args(int argc, char **argv, struct opt_args *a)
         {"checkpoint-every", required_argument, NULL, OOPT_CKPT_EVERY},
         {"reference", required_argument, NULL, OOPT_REFERENCE},
         {"batches", required_argument, NULL, OOPT_BATCHES},
+        {"primal", required_argument, NULL, OOPT_PRIMAL},
         {NULL, 0, NULL, 0},
     };
     return grad_parse_args(&a->g, argc, argv, opts, "o", own_option, a, cmd_optimize_usage);
@@ -689,7 +696,7 @@ static int opt_open_outputs(const struct opt_args *a, struct opt_run *r)
 }
 
 /* Loss and gradient of iteration `it` over every target, from
- * drivers/reverse.h (batches with their own primal images, independent of
+ * drivers/reverse.h (batches with primals of their own, independent of
  * their gradient samples); the targets' standard errors add in quadrature. */
 static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
 {
@@ -702,7 +709,7 @@ static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
         const struct dr_camera view = view_camera(r->scene, t->camera), *cam = &view;
         struct dr_reverse_options o = {
             .estimator = a->g.estimator, .loss = (enum dr_loss_kind)a->loss, .loss_scale = 1.0 / a->n_targets,
-            .batches = a->batches, .primal = DR_PRIMAL_PER_BATCH,
+            .batches = a->batches, .primal = a->primal,
             .problem = grad_problem(&a->g, r->scene, cam, r->ps, t->w, t->h, a->g.spp,
                                     iteration_seed(a->g.seed, it, ti, 0x47524144))};
         struct dr_reverse_result res = {.grad = r->gt, .se = r->se_t, .se_gradient = r->se_parts,
@@ -944,6 +951,7 @@ int cmd_optimize(int argc, char **argv)
     a.render_every = 10;
     a.ckpt_every = 10;
     a.batches = 2;
+    a.primal = DR_PRIMAL_CROSS;
     a.loss = DR_LOSS_L2;
     a.out_dir = "optimize-out";
     int rc = parse_args(argc, argv, &a);

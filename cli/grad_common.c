@@ -793,3 +793,21 @@ void grad_json_film(FILE *f, const struct grad_common *g)
     fprintf(f, ", \"sampler\": ");
     json_string(f, dr_sampler_kind_name(g->sampler));
 }
+
+int grad_parse_primal(const char *cmd, const char *arg, enum dr_primal_mode *mode)
+{
+    if (strcmp(arg, "cross") == 0)
+        *mode = DR_PRIMAL_CROSS;
+    else if (strcmp(arg, "separate") == 0)
+        *mode = DR_PRIMAL_PER_BATCH;
+    else {
+        cli_error(cmd, "--primal: unknown mode '%s' (available: cross, separate)", arg);
+        return DR_EXIT_USAGE;
+    }
+    return 0;
+}
+
+const char *grad_primal_name(enum dr_primal_mode mode)
+{
+    return mode == DR_PRIMAL_CROSS ? "cross" : mode == DR_PRIMAL_PER_BATCH ? "separate" : "shared";
+}

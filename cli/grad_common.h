@@ -14,6 +14,7 @@
 #include "estimator.h"
 #include "params.h"
 #include "render.h"
+#include "reverse.h"
 #include "scene.h"
 
 /* getopt_long codes of the shared options; each command numbers its own
@@ -158,6 +159,12 @@ int grad_param_set(const struct grad_common *g, const struct dr_scene *scene, st
  * linear float rgb (8-bit sRGB files decoded); NaN/Inf pixels refused.
  * img keeps the file's size (release it). Returns -1 to go on or an exit code. */
 int grad_load_target(const char *cmd, const char *path, struct dr_image *img, float **rgb);
+
+/* --primal cross|separate (reverse.h's DR_PRIMAL_CROSS / DR_PRIMAL_PER_BATCH):
+ * 0, or DR_EXIT_USAGE with the message printed. */
+int grad_parse_primal(const char *cmd, const char *arg, enum dr_primal_mode *mode);
+/* Its name, for --json and messages. */
+const char *grad_primal_name(enum dr_primal_mode mode);
 
 /* ---- the film: --filter and --crop ----
  * The film of a w x h frame under the options: the filter, and with --crop

@@ -16,5 +16,9 @@ double dr_loss_eval(enum dr_loss_kind k, const float *image, const float *target
 /* d_image[i] = d_out * d loss / d image[i] (l1 at I == T: 0). */
 void d_loss_eval(enum dr_loss_kind k, const float *image, const float *target, size_t n, double d_out,
                  float *d_image);
+/* One value's part of d_loss_eval: d_out * d loss / d image[i] at image[i] =
+ * image, target[i] = target, for a loss over n values. Both losses are means
+ * of per-value terms, so a pixel's adjoint needs only that pixel. */
+double d_loss_value(enum dr_loss_kind k, double image, double target, size_t n, double d_out);
 
 #endif

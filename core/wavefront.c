@@ -15,11 +15,8 @@ struct lane {
     struct dr_shadow_ray shadow;
     int64_t tri;                      /* the trace's answer */
     bool occluded;                    /* the shadow ray's */
-    /* the walk's ray answers by vertex (depth - 1), for a replay */
     bool replaying;                   /* this walk replays the last one: answers from the log */
-    int logged;                       /* vertices logged */
-    int64_t tri_log[DR_WAVE_REPLAY_DEPTH];
-    bool occ_log[DR_WAVE_REPLAY_DEPTH];
+    struct dr_wave_log log;           /* the walk's ray answers, for a replay */
     _Alignas(16) unsigned char user[DR_WAVE_USER_BYTES];
 };
 
@@ -44,7 +41,7 @@ struct dr_wave {
 /* Is the answer for the lane's current vertex in its log (a replay)? */
 static bool from_log(const struct lane *l)
 {
-    return l->replaying && l->st.depth <= l->logged;
+    return l->replaying && l->st.depth <= l->log.n;
 }
 
 struct dr_wave *dr_wave_create(void)
@@ -86,7 +83,7 @@ static void trace_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
         l->arrival = (struct dr_wave_arrival){l->st.beta, l->st.ratio};
         dr_path_step_begin(&l->st, &l->v);
         if (from_log(l)) {
-            l->tri = l->tri_log[l->st.depth - 1];
+            l->tri = l->log.tri[l->st.depth - 1];
             continue;
         }
         dr_path_count_trace(&l->st, counts);
@@ -98,7 +95,7 @@ static void trace_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
         struct lane *l = &w->lane[w->rays.owner[k]];
         l->tri = w->tri[k];
         if (!l->replaying && l->st.depth <= DR_WAVE_REPLAY_DEPTH)
-            l->tri_log[(l->logged = l->st.depth) - 1] = l->tri;
+            l->log.tri[(l->log.n = l->st.depth) - 1] = l->tri;
     }
 }
 
@@ -115,7 +112,7 @@ static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
         if (l->next != DR_STEP_SHADOW)
             continue;
         if (from_log(l)) {   /* (no ray when tmax is not > 0: nee_end knows) */
-            l->occluded = l->shadow.tmax > 0.0 && l->occ_log[l->st.depth - 1];
+            l->occluded = l->shadow.tmax > 0.0 && l->log.occ[l->st.depth - 1];
             continue;
         }
         counts->shadow++;   /* counted as dr_path_step counts it */
@@ -129,7 +126,7 @@ static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
         struct lane *l = &w->lane[w->rays.owner[k]];
         l->occluded = w->occluded[k];
         if (!l->replaying && l->st.depth <= DR_WAVE_REPLAY_DEPTH)
-            l->occ_log[l->st.depth - 1] = l->occluded;
+            l->log.occ[l->st.depth - 1] = l->occluded;
     }
 }
 
@@ -139,7 +136,7 @@ static void begin_walk(struct lane *l, dr_vec3 o, dr_vec3 d, enum dr_wave_next h
     dr_path_start(&l->st, o, d);
     l->replaying = how == DR_WAVE_REPLAY;
     if (!l->replaying)
-        l->logged = 0;
+        l->log.n = 0;
 }
 
 /* The end of the step: next-event results, the continuation, the vertex to
@@ -156,6 +153,8 @@ static int finish_live(struct dr_wave *w, int n_live, int *n_free, const struct 
             dr_path_nee_end(s, &l->v, &l->shadow, l->occluded);
         bool more = l->next != DR_STEP_END && dr_path_stage_continue(opts, &l->st, &l->v);
         ops->vertex(ctx, l->user, &l->arrival, &l->v, &l->smp, more);
+        if (!more && ops->keep_log && !l->replaying)
+            ops->keep_log(ctx, l->user, &l->log);
         dr_vec3 o, d;
         enum dr_wave_next how = more ? DR_WAVE_WALK : ops->walk_end(ctx, l->user, &l->smp, &o, &d);
         if (how == DR_WAVE_DONE) {
@@ -183,7 +182,10 @@ void dr_wave_run(struct dr_wave *w, const struct dr_scene *s, const struct dr_pa
             dr_vec3 o, d;
             memset(l->user, 0, sizeof l->user);
             ops->start(ctx, next++, l->user, &l->smp, &o, &d);
-            begin_walk(l, o, d, DR_WAVE_WALK);
+            const struct dr_wave_log *log = ops->replay_log ? ops->replay_log(ctx, l->user) : NULL;
+            if (log)
+                l->log = *log;
+            begin_walk(l, o, d, log ? DR_WAVE_REPLAY : DR_WAVE_WALK);
             w->live[n_live++] = k;
         }
         trace_live(w, n_live, s, counts);
@@ -234,7 +236,7 @@ static enum dr_wave_next radiance_end(void *ctx, void *user, struct dr_sampler *
 void dr_wave_radiance(struct dr_wave *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
                       dr_wave_start_fn start, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts)
 {
-    static const struct dr_wave_ops ops = {radiance_start, radiance_vertex, radiance_end};
+    static const struct dr_wave_ops ops = {radiance_start, radiance_vertex, radiance_end, NULL, NULL};
     struct radiance_ctx c = {start, ctx, L};
     dr_wave_run(w, s, opts, n, &ops, &c, counts);
 }

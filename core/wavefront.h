@@ -43,6 +43,13 @@ enum dr_wave_next {
  * (longer paths trace the rest again). */
 #define DR_WAVE_REPLAY_DEPTH 32
 
+/* A walk's ray answers by vertex (depth - 1), for a replay of it. */
+struct dr_wave_log {
+    int n;                                  /* vertices logged */
+    int64_t tri[DR_WAVE_REPLAY_DEPTH];      /* the trace's answer */
+    bool occ[DR_WAVE_REPLAY_DEPTH];         /* the shadow ray's */
+};
+
 struct dr_wave_ops {
     /* Begins item i in a lane: its state in user (DR_WAVE_USER_BYTES,
      * zeroed), the first walk's sampler and ray. */
@@ -53,6 +60,13 @@ struct dr_wave_ops {
     /* The walk ended: what next (DR_WAVE_WALK and DR_WAVE_REPLAY: set
      * *sampler, *o, *d to the next walk's start). */
     enum dr_wave_next (*walk_end)(void *ctx, void *user, struct dr_sampler *sampler, dr_vec3 *o, dr_vec3 *d);
+    /* Optional (NULL: none), for a replay that comes later, in another run:
+     * keep_log gets a traced walk's answers just before its walk_end;
+     * replay_log, called after start, returns the answers of an earlier walk
+     * with the same sampler and ray (NULL: none), and then the item's first
+     * walk is a replay of it (as DR_WAVE_REPLAY). */
+    void (*keep_log)(void *ctx, void *user, const struct dr_wave_log *log);
+    const struct dr_wave_log *(*replay_log)(void *ctx, void *user);
 };
 
 struct dr_wave;

@@ -20,6 +20,7 @@ struct rev_work {
     int64_t T;
     float *img, *adj;
     double *img_sum;           /* sum of the batches' primal images */
+    double *cross_img;         /* cross mode: a batch's primal image, from its estimator run */
     double *half[2], *m2, *dsq;
     int done, steps;
     struct dr_mis_history mis;   /* mis without the caller's history: this run's batches' */
@@ -30,6 +31,7 @@ static void work_free(struct rev_work *w)
     free(w->img);
     free(w->adj);
     free(w->img_sum);
+    free(w->cross_img);
     free(w->half[0]);
     free(w->half[1]);
     free(w->m2);
@@ -43,11 +45,12 @@ static int work_alloc(struct rev_work *w)
     w->img = malloc(sizeof(float) * w->n);
     w->adj = malloc(sizeof(float) * w->n);
     w->img_sum = calloc(w->n, sizeof(double));
+    w->cross_img = calloc(w->n, sizeof(double));
     w->half[0] = dr_calloc_big(T1, sizeof(double));
     w->half[1] = dr_calloc_big(T1, sizeof(double));
     w->m2 = dr_calloc_big(T1, sizeof(double));
     w->dsq = dr_calloc_big(T1, sizeof(double));
-    if (w->img && w->adj && w->img_sum && w->half[0] && w->half[1] && w->m2 && w->dsq)
+    if (w->img && w->adj && w->img_sum && w->cross_img && w->half[0] && w->half[1] && w->m2 && w->dsq)
         return 0;
     dr_set_error("out of memory (%lld gradient entries, %zu image values)", (long long)w->T, w->n);
     return DR_ERR_NOMEM;
@@ -97,6 +100,30 @@ static int gradient(struct rev_work *w, uint64_t seed, int spp, double *g, struc
     return 0;
 }
 
+/* Cross mode: batch b's gradient into half[0], from one estimator run
+ * whose paths are their own primal; its image goes into the sum. */
+static int cross_gradient(struct rev_work *w, uint64_t seed, struct dr_reverse_result *r)
+{
+    const struct dr_cross_loss cross = {.loss = w->o->loss, .target = w->target, .scale = w->o->loss_scale,
+                                        .image = w->cross_img};
+    struct dr_grad_problem p = w->o->problem;
+    p.spp = r->spp_batch;
+    p.seed = seed;
+    p.cross = &cross;
+    if (!p.mis_history && w->mis.stats)
+        p.mis_history = &w->mis;
+    struct dr_grad_stats st = {0};
+    int rc = dr_estimator_backward(w->o->estimator, &p, NULL, w->half[0], &st);
+    if (rc != 0)
+        return rc;
+    r->t_gradient += st.seconds;
+    if (w->o->on_gradient)
+        w->o->on_gradient(w->o->ctx, &st);
+    for (size_t i = 0; i < w->n; i++)
+        w->img_sum[i] += w->cross_img[i];
+    return 0;
+}
+
 /* Batch b's gradient g_b into r->grad's running mean (Welford), and, with
  * two halves, the gradient-sample variance of g_b into dsq. */
 static int batch(struct rev_work *w, int b, uint64_t grad_base, struct dr_reverse_result *r)
@@ -104,7 +131,9 @@ static int batch(struct rev_work *w, int b, uint64_t grad_base, struct dr_revers
     const int spp = r->spp_batch, n0 = (spp + 1) / 2, n1 = spp / 2;
     const bool split = r->parts && n1 > 0;
     int rc;
-    if (w->o->primal == DR_PRIMAL_SHARED)
+    if (r->primal_run == DR_PRIMAL_CROSS)
+        rc = cross_gradient(w, dr_hash64(grad_base + 2 * (uint64_t)b), r);
+    else if (w->o->primal == DR_PRIMAL_SHARED)
         rc = gradient(w, w->o->problem.seed + 1 + (uint64_t)b, spp, w->half[0], r);
     else
         rc = gradient(w, dr_hash64(grad_base + 2 * (uint64_t)b), split ? n0 : spp, w->half[0], r);
@@ -152,11 +181,14 @@ int dr_reverse_gradient(const struct dr_reverse_options *o, const float *target,
     }
     struct rev_work w = {.o = o, .target = target, .n = (size_t)p->width * (size_t)p->height * 3,
                          .T = p->params->total, .steps = 2 * K};
+    if (o->primal == DR_PRIMAL_CROSS && r->spp_batch >= 2)
+        w.steps = K;
     r->spp_batch = (int)(((int64_t)p->spp + K - 1) / K);
+    r->primal_run = o->primal == DR_PRIMAL_CROSS && r->spp_batch < 2 ? DR_PRIMAL_PER_BATCH : o->primal;
     /* mis: a batch in one piece (no halves, so no se_gradient/se_primal
      * split): weights from halves of 2 spp were poor (mis.h) */
     const bool mis = dr_est_sampling_run(p) == DR_SAMPLING_MIS;
-    r->parts = o->primal == DR_PRIMAL_PER_BATCH && r->spp_batch >= 2 && !mis;
+    r->parts = r->primal_run == DR_PRIMAL_PER_BATCH && r->spp_batch >= 2 && !mis;
     r->primal_seed = dr_hash64(p->seed ^ PRIMAL_SEED_SALT);
     r->t_primal = r->t_gradient = 0.0;
     memset(r->grad, 0, sizeof(double) * (size_t)w.T);
@@ -170,7 +202,7 @@ int dr_reverse_gradient(const struct dr_reverse_options *o, const float *target,
         rc = primal(&w, r->primal_seed, p->spp, r);
     }
     for (int b = 0; b < K && rc == 0; b++) {
-        if (o->primal == DR_PRIMAL_PER_BATCH)
+        if (r->primal_run == DR_PRIMAL_PER_BATCH)
             rc = primal(&w, dr_hash64(r->primal_seed + (uint64_t)b), r->spp_batch, r);
         if (rc == 0)
             rc = batch(&w, b, grad_base, r);

@@ -26,6 +26,16 @@
  * primal: the same samples, K renders of spp_b instead of one of spp, and
  * two estimator runs per batch instead of one.
  *
+ * DR_PRIMAL_CROSS (the default of grad and optimize) renders no primal
+ * image: batch b's estimator run takes each pixel's adjoint from its own
+ * paths, the even samples' derivatives weighted at the odd samples' mean and
+ * the other way round (estimator.h, struct dr_cross_loss). Independent halves
+ * keep it unbiased and the K batches stay i.i.d., so the standard error is
+ * their spread as above; the parts are not estimated (the halves mix both
+ * noises). It needs spp_b >= 2; with fewer, the run is DR_PRIMAL_PER_BATCH.
+ * The cost against DR_PRIMAL_PER_BATCH: one estimator run per batch and no
+ * render, i.e. the estimator's own primal walks serve as the loss's primal.
+ *
  * DR_PRIMAL_SHARED is the estimator drender used before: one primal at the
  * full spp shared by every batch, whose spread then misses the primal's noise.
  * It is kept to show (tests/test_reverse_stderr.c) that it undercovers. */
@@ -38,6 +48,7 @@
 
 enum dr_primal_mode {
     DR_PRIMAL_PER_BATCH,   /* each batch its own primal image (the honest estimator) */
+    DR_PRIMAL_CROSS,       /* each batch's paths are their own primal, half for half (as honest, no render) */
     DR_PRIMAL_SHARED,      /* one primal for all batches (understates the error; tests only) */
 };
 
@@ -65,6 +76,7 @@ struct dr_reverse_result {
     bool parts;                      /* se_gradient / se_primal were estimated */
     uint64_t primal_seed;            /* hash(seed ^ "PRIMAL"); batch b uses hash(primal_seed + b) */
     double t_primal, t_gradient;     /* seconds in renders and in estimator runs */
+    enum dr_primal_mode primal_run;  /* what ran: DR_PRIMAL_CROSS with spp_batch < 2 runs per batch */
 };
 
 /* target: width * height * 3 linear floats. 0 or a negative DR_ERR_*. */

@@ -120,6 +120,27 @@ bool dr_est_sample_adjoint(const struct dr_est_base *b, int64_t pixel, dr_vec3 *
     return !dr_is_black(*adj);
 }
 
+void dr_est_cross_pixel(const struct dr_est_base *b, int64_t pixel, dr_vec3 sum)
+{
+    double *img = b->p->cross->image + 3 * pixel;
+    for (int c = 0; c < 3; c++)
+        img[c] = dr_v3_get(sum, c) / b->p->spp;
+}
+
+dr_vec3 dr_est_cross_adjoint(const struct dr_est_base *b, int64_t pixel, dr_vec3 sum, dr_vec3 L)
+{
+    const struct dr_cross_loss *x = b->p->cross;
+    const int spp = b->p->spp;
+    const size_t values = (size_t)b->p->width * (size_t)b->p->height * 3;
+    const float *target = x->target + 3 * pixel;
+    dr_vec3 adj;
+    for (int c = 0; c < 3; c++) {
+        double others = (dr_v3_get(sum, c) - dr_v3_get(L, c)) / (spp - 1);
+        dr_v3_set(&adj, c, d_loss_value(x->loss, others, target[c], values, x->scale) / spp);
+    }
+    return adj;
+}
+
 void dr_est_sample_done(struct dr_est_base *b, int thread, int64_t pixel, struct dr_grad_sink *sink)
 {
     if (!b->dir)
@@ -270,6 +291,11 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
     }
     b->t0 = dr_clock_seconds();
     b->p = p;
+    if (p->cross && (dir || p->spp < 2 || !p->cross->target || !p->cross->image)) {
+        dr_set_error("the cross primal is for reverse mode with at least 2 samples per pixel (spp %d)", p->spp);
+        free(b);
+        return DR_ERR_ARG;
+    }
     if (dr_film_check(&p->film, p->width, p->height) != 0) {
         free(b);
         return DR_ERR_ARG;

@@ -67,6 +67,13 @@ void dr_est_sink_end(struct dr_est_base *b, int thread);
  * mode (false: the pixel does not matter to the loss, skip it), all ones in
  * forward mode (the sink keeps the channels apart). */
 bool dr_est_sample_adjoint(const struct dr_est_base *b, int64_t pixel, dr_vec3 *adj);
+/* Cross mode (dr_grad_problem.cross), given sum, the sum of a pixel's
+ * sample radiances (a non-finite sample counted as 0, as the renderer
+ * does): dr_est_cross_pixel stores the pixel's mean in the cross image;
+ * dr_est_cross_adjoint is the adjoint of the pixel's sample of radiance L:
+ * the loss's adjoint at the mean of the other samples, / spp. */
+void dr_est_cross_pixel(const struct dr_est_base *b, int64_t pixel, dr_vec3 sum);
+dr_vec3 dr_est_cross_adjoint(const struct dr_est_base *b, int64_t pixel, dr_vec3 sum, dr_vec3 L);
 /* Forward mode: moves the sink's three channels into the pixel of the
  * thread's d image (divided by spp). Reverse mode: nothing. */
 void dr_est_sample_done(struct dr_est_base *b, int thread, int64_t pixel, struct dr_grad_sink *sink);

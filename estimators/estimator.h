@@ -19,6 +19,7 @@
 #include <stdint.h>
 
 #include "film.h"
+#include "loss.h"
 #include "sampler.h"
 #include "params.h"
 #include "path.h"
@@ -38,6 +39,22 @@ int dr_sampling_parse(const char *name);
 
 struct dr_mis_history;
 struct dr_estimator_ops;
+
+/* Reverse mode with the loss's adjoint taken from the estimator's own paths
+ * (the reverse driver's cross primal, reverse.h), instead of an adjoint
+ * image from a separate primal render. Each sample's derivative is weighted
+ * with the loss's adjoint at the mean of its pixel's other samples (leave
+ * one out): that mean is independent of the sample, so the estimate is
+ * unbiased, as with a separate primal (for l2 it is the U-statistic of the
+ * product of the two means, the least-variance unbiased use of the same
+ * paths), and the primal costs nothing beyond the walks the gradient makes
+ * anyway. Needs spp >= 2. */
+struct dr_cross_loss {
+    enum dr_loss_kind loss;
+    const float *target;   /* the rendered rectangle's width * height * 3 values */
+    double scale;          /* d_out of the loss */
+    double *image;         /* out: each pixel's mean radiance over all its samples (width * height * 3) */
+};
 
 struct dr_grad_problem {
     const struct dr_scene *scene;
@@ -61,6 +78,8 @@ struct dr_grad_problem {
                                   run was detached. Left alone by the other modes */
     struct dr_mis_history *mis_history;   /* mis (optional, in/out): statistics of earlier runs of
                                              this problem for the weights (mis.h); NULL: this run's only */
+    const struct dr_cross_loss *cross;    /* reverse mode: the adjoint from the paths themselves (NULL: from
+                                             the adjoint image dr_estimator_backward is given) */
 };
 
 /* The sampling an algorithm runs: attached (or mis) sampling where no
@@ -124,7 +143,8 @@ int dr_estimator_forward(const struct dr_estimator_ops *e, const struct dr_grad_
                          double *d_image, struct dr_grad_stats *st);
 /* Reverse mode: grad (params->total entries, overwritten) = sum over pixels
  * and channels of adjoint * d I / d theta, adjoint being d loss / d I
- * (width * height * 3 floats). */
+ * (width * height * 3 floats; NULL with p->cross, which says how to take it
+ * from the paths). */
 int dr_estimator_backward(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const float *adjoint,
                           double *grad, struct dr_grad_stats *st);
 

@@ -27,11 +27,26 @@ struct prb_job {
     double radius;          /* attached sampling: the scene's radius */
     bool wave;              /* detached, no media, no derivative sampling: samples as a wavefront */
     struct dr_wave *waves[DR_MAX_THREADS];   /* ... per thread, made on first use */
+    struct prb_item *items[DR_MAX_THREADS];  /* cross mode: a group's parked samples, per thread */
+    int32_t *order[DR_MAX_THREADS];          /* ... and those to replay */
+    dr_vec3 *adj[DR_MAX_THREADS];            /* one path at a time: a pixel's samples' adjoints, per thread */
 };
 
 struct prb_radiance {
     dr_vec3 true_, sub;   /* L with the true throughput, and with substitutes */
 };
+
+/* Cross mode (estimator.h) on the wavefront: a sample parked between its
+ * primal walk and its replay, which must wait for the pixel's other half. */
+struct prb_item {
+    struct prb_radiance L;
+    bool valid;               /* L is finite */
+    dr_vec3 adj;              /* its adjoint, once the pixel's halves are known */
+    struct dr_wave_log log;   /* the primal walk's ray answers: the replay traces nothing again */
+};
+/* Samples whose ray answers are parked at most (per thread: about 1.4 MB);
+ * with more samples per pixel than this, a replay traces its rays again. */
+#define CROSS_LOGGED_ITEMS 4096
 
 /* One walk over a path. Without `sink`: the primal, whose radiance goes to
  * L. With it: the replay, which turns L (the primal's result) into the
@@ -123,7 +138,7 @@ static void walk(const struct dr_est_base *b, struct dr_sampler smp, dr_vec3 o, 
 /* One pixel's samples with attached sampling (prb_attached.c); under mis
  * each sample's attached and detached derivatives, from one replay, go to
  * its group's two estimates (mis.h). */
-static void attached_pixel(struct prb_job *j, int thread, int64_t px, dr_vec3 adj, struct dr_grad_sink *sink)
+static void attached_pixel(struct prb_job *j, int thread, int64_t px, const dr_vec3 *adj, struct dr_grad_sink *sink)
 {
     struct dr_est_base *b = &j->b;
     struct prb_attached_ctx c = {.b = b, .zeros = j->zeros, .eps = b->p->regularize, .radius = j->radius,
@@ -132,10 +147,12 @@ static void attached_pixel(struct prb_job *j, int thread, int64_t px, dr_vec3 ad
         struct dr_sampler smp;
         dr_vec3 o, d;
         struct dr_grad_sink det, att;
+        if (dr_is_black(adj[sidx]))
+            continue;   /* (cross mode: this sample does not matter to the loss) */
         if (b->mis)
             dr_est_mis_sinks(b, thread, px, &det, &att);
         dr_est_camera_ray(b, px, sidx, &smp, &o, &d);
-        if (!prb_attached_sample(&c, smp, o, d, adj, b->mis ? &att : sink, b->mis ? &det : NULL)) {
+        if (!prb_attached_sample(&c, smp, o, d, adj[sidx], b->mis ? &att : sink, b->mis ? &det : NULL)) {
             b->thr[thread].invalid++;
             continue;
         }
@@ -227,9 +244,189 @@ static bool wave_pixels(struct prb_job *j, int thread, int64_t begin, int64_t en
     for (int64_t px = begin; px < end; px++)
         if (dr_est_sample_adjoint(b, px, &c.adj[n]))
             c.px[n++] = px;
-    static const struct dr_wave_ops ops = {lane_start, lane_vertex, lane_walk_end};
+    static const struct dr_wave_ops ops = {lane_start, lane_vertex, lane_walk_end, NULL, NULL};
     dr_wave_run(j->waves[thread], b->p->scene, &b->popts, (int64_t)n * b->p->spp, &ops, &c, &b->thr[thread].rays);
     return true;
+}
+
+/* ---- cross mode on the wavefront (estimator.h): the primal walks of a group
+ * of pixels' samples, then each pixel's adjoints from its two halves, then
+ * the replays, which answer their ray queries from the primal walks' logs */
+
+struct cross_ctx {
+    struct prb_job *j;
+    int thread;
+    struct dr_grad_sink sink;
+    int64_t first_px;            /* item i: sample i % spp of pixel first_px + i / spp */
+    struct prb_item *items;
+    bool logs;                   /* the items keep their walks' ray answers */
+    const int32_t *order;        /* the replays: their items */
+};
+
+struct cross_lane {
+    struct walk w;
+    struct dr_grad_sink sink;
+    int64_t item, px;
+};
+_Static_assert(sizeof(struct cross_lane) <= DR_WAVE_USER_BYTES, "a cross lane's state fits");
+
+/* Item i's sampler and camera ray. */
+static void cross_ray(struct cross_ctx *c, struct cross_lane *l, int64_t i, struct dr_sampler *smp, dr_vec3 *o,
+                      dr_vec3 *d)
+{
+    const int spp = c->j->b.p->spp;
+    l->item = i;
+    l->px = c->first_px + i / spp;
+    dr_est_camera_ray(&c->j->b, l->px, (int)(i % spp), smp, o, d);
+}
+
+static void cross_primal_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    cross_ray(ctx, user, i, smp, o, d);
+}
+
+static void cross_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
+                         struct dr_sampler *smp, bool more)
+{
+    (void)more;
+    struct cross_ctx *c = ctx;
+    struct cross_lane *l = user;
+    walk_vertex(&c->j->b, &l->w, v, a->beta, a->ratio, smp, &c->j->b.thr[c->thread].rays);
+}
+
+static void cross_keep_log(void *ctx, void *user, const struct dr_wave_log *log)
+{
+    struct cross_ctx *c = ctx;
+    const struct cross_lane *l = user;
+    if (c->logs)
+        c->items[l->item].log = *log;
+}
+
+static enum dr_wave_next cross_primal_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    (void)smp, (void)o, (void)d;
+    struct cross_ctx *c = ctx;
+    const struct cross_lane *l = user;
+    struct prb_item *it = &c->items[l->item];
+    it->L = l->w.L;
+    it->valid = dr_v3_finite(l->w.L.true_) && dr_v3_finite(l->w.L.sub);
+    if (!it->valid)
+        c->j->b.thr[c->thread].invalid++;
+    return DR_WAVE_DONE;
+}
+
+static void cross_replay_start(void *ctx, int64_t k, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    struct cross_ctx *c = ctx;
+    struct cross_lane *l = user;
+    cross_ray(c, l, c->order[k], smp, o, d);
+    const struct prb_item *it = &c->items[l->item];
+    l->w.L = it->L;
+    l->w.adj = it->adj;
+    l->sink = c->sink;
+    l->w.sink = &l->sink;
+}
+
+static const struct dr_wave_log *cross_replay_log(void *ctx, void *user)
+{
+    struct cross_ctx *c = ctx;
+    const struct cross_lane *l = user;
+    return c->logs ? &c->items[l->item].log : NULL;
+}
+
+static enum dr_wave_next cross_replay_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    (void)smp, (void)o, (void)d;
+    struct cross_ctx *c = ctx;
+    struct cross_lane *l = user;
+    dr_est_sample_done(&c->j->b, c->thread, l->px, &l->sink);
+    return DR_WAVE_DONE;
+}
+
+/* Pixels a cross group holds: its samples' logs fit CROSS_LOGGED_ITEMS. */
+static int64_t cross_group(int spp)
+{
+    return spp < CROSS_LOGGED_ITEMS ? CROSS_LOGGED_ITEMS / spp : 1;
+}
+
+/* Pixels [begin, end) in cross mode on the wavefront. False: no memory for
+ * the lanes or the parked samples (then one path at a time). */
+static bool cross_wave(struct prb_job *j, int thread, int64_t begin, int64_t end, struct dr_grad_sink sink)
+{
+    struct dr_est_base *b = &j->b;
+    const int spp = b->p->spp;
+    const int64_t group = cross_group(spp), cap = group * spp;
+    if (!j->waves[thread] && !(j->waves[thread] = dr_wave_create()))
+        return false;
+    if (!j->items[thread] && !(j->items[thread] = malloc(sizeof(struct prb_item) * (size_t)cap)))
+        return false;
+    if (!j->order[thread] && !(j->order[thread] = malloc(sizeof(int32_t) * (size_t)cap)))
+        return false;
+    struct prb_item *items = j->items[thread];
+    int32_t *order = j->order[thread];
+    static const struct dr_wave_ops primal = {cross_primal_start, cross_vertex, cross_primal_end, cross_keep_log,
+                                              NULL};
+    static const struct dr_wave_ops replay = {cross_replay_start, cross_vertex, cross_replay_end, NULL,
+                                              cross_replay_log};
+    for (int64_t first = begin; first < end; first += group) {
+        const int64_t n_px = end - first < group ? end - first : group;
+        struct cross_ctx c = {.j = j, .thread = thread, .sink = sink, .first_px = first, .items = items,
+                              .logs = n_px * spp <= CROSS_LOGGED_ITEMS, .order = order};
+        dr_wave_run(j->waves[thread], b->p->scene, &b->popts, n_px * spp, &primal, &c, &b->thr[thread].rays);
+        int32_t n = 0;
+        for (int64_t k = 0; k < n_px; k++) {
+            struct prb_item *px_items = items + k * spp;
+            dr_vec3 sum = dr_v3s(0.0);
+            for (int s = 0; s < spp; s++)
+                if (px_items[s].valid)
+                    sum = dr_add(sum, px_items[s].L.true_);
+            dr_est_cross_pixel(b, first + k, sum);
+            for (int s = 0; s < spp; s++) {
+                if (!px_items[s].valid)
+                    continue;
+                px_items[s].adj = dr_est_cross_adjoint(b, first + k, sum, px_items[s].L.true_);
+                if (!dr_is_black(px_items[s].adj))   /* (else the sample does not matter to the loss) */
+                    order[n++] = (int32_t)(k * spp + s);
+            }
+        }
+        dr_wave_run(j->waves[thread], b->p->scene, &b->popts, n, &replay, &c, &b->thr[thread].rays);
+    }
+    return true;
+}
+
+/* The adjoint of each of pixel px's samples into adj[0, spp) (false: none
+ * matters to the loss). Cross mode (estimator.h): from primal walks of all
+ * its samples (their replays walk them again). */
+static bool pixel_adjoints(struct prb_job *j, int thread, int64_t px, dr_vec3 *adj)
+{
+    struct dr_est_base *b = &j->b;
+    const int spp = b->p->spp;
+    if (!b->p->cross) {
+        if (!dr_est_sample_adjoint(b, px, &adj[0]))
+            return false;
+        for (int sidx = 1; sidx < spp; sidx++)
+            adj[sidx] = adj[0];
+        return true;
+    }
+    struct dr_medium_record mrec;
+    struct dr_path_vertex prev;
+    dr_vec3 sum = dr_v3s(0.0);
+    for (int sidx = 0; sidx < spp; sidx++) {   /* adj holds the samples' radiance meanwhile */
+        struct dr_sampler smp;
+        dr_vec3 o, d;
+        struct walk w = {.mrec = &mrec, .prev = &prev};
+        dr_est_camera_ray(b, px, sidx, &smp, &o, &d);
+        walk(b, smp, o, d, &w, &b->thr[thread].rays);
+        adj[sidx] = dr_v3_finite(w.L.true_) && dr_v3_finite(w.L.sub) ? w.L.true_ : dr_v3s(0.0);
+        sum = dr_add(sum, adj[sidx]);
+    }
+    dr_est_cross_pixel(b, px, sum);
+    bool any = false;
+    for (int sidx = 0; sidx < spp; sidx++) {
+        adj[sidx] = dr_est_cross_adjoint(b, px, sum, adj[sidx]);
+        any = any || !dr_is_black(adj[sidx]);
+    }
+    return any;
 }
 
 static void prb_pixels(void *ctx, int thread, int64_t begin, int64_t end)
@@ -238,13 +435,14 @@ static void prb_pixels(void *ctx, int thread, int64_t begin, int64_t end)
     struct dr_est_base *b = &j->b;
     struct dr_ray_counts *rays = &b->thr[thread].rays;
     struct dr_grad_sink sink = dr_est_sink_begin(b, thread);
-    if (j->wave && end - begin <= PIXEL_CHUNK && wave_pixels(j, thread, begin, end, sink)) {
+    if (j->wave && end - begin <= PIXEL_CHUNK &&
+        (b->p->cross ? cross_wave(j, thread, begin, end, sink) : wave_pixels(j, thread, begin, end, sink))) {
         dr_est_sink_end(b, thread);
         return;
     }
+    dr_vec3 *adj = j->adj[thread];   /* by sample (all the same but in cross mode) */
     for (int64_t px = begin; px < end; px++) {
-        dr_vec3 adj;
-        if (!dr_est_sample_adjoint(b, px, &adj))
+        if (!pixel_adjoints(j, thread, px, adj))
             continue;   /* this pixel does not matter to the loss */
         if (j->zeros) {
             attached_pixel(j, thread, px, adj, &sink);
@@ -255,7 +453,9 @@ static void prb_pixels(void *ctx, int thread, int64_t begin, int64_t end)
         for (int sidx = 0; sidx < b->p->spp; sidx++) {
             struct dr_sampler smp;
             dr_vec3 o, d;
-            struct walk w = {.adj = adj, .mrec = &mrec, .prev = &prev};
+            if (dr_is_black(adj[sidx]))
+                continue;   /* (cross mode: this sample does not matter to the loss) */
+            struct walk w = {.adj = adj[sidx], .mrec = &mrec, .prev = &prev};
             dr_est_camera_ray(b, px, sidx, &smp, &o, &d);
             walk(b, smp, o, d, &w, rays);
             if (!dr_v3_finite(w.L.true_) || !dr_v3_finite(w.L.sub)) {
@@ -286,6 +486,11 @@ static int prb_run(struct dr_est_base *b)
     }
     j->wave = run == DR_SAMPLING_DETACHED && b->p->sampling != DR_SAMPLING_DERIVATIVE &&
               !(b->popts.stages & DR_STAGE_MEDIA);
+    for (int t = 0; t < b->acc.threads; t++)
+        if (!(j->adj[t] = malloc(sizeof(dr_vec3) * (size_t)b->p->spp))) {
+            dr_set_error("out of memory (%d samples per pixel)", b->p->spp);
+            return DR_ERR_NOMEM;
+        }
     return dr_parallel_for_static((int64_t)b->p->width * b->p->height, PIXEL_CHUNK, b->acc.threads, prb_pixels, j);
 }
 
@@ -293,8 +498,12 @@ static void prb_release(struct dr_est_base *b)
 {
     struct prb_job *j = (struct prb_job *)b;
     free(j->zeros);
-    for (int t = 0; t < DR_MAX_THREADS; t++)
+    for (int t = 0; t < DR_MAX_THREADS; t++) {
         dr_wave_destroy(j->waves[t]);
+        free(j->items[t]);
+        free(j->order[t]);
+        free(j->adj[t]);
+    }
 }
 
 const struct dr_estimator_ops dr_estimator_prb = {

@@ -45,8 +45,9 @@ struct tape_path {
     int count;
     bool dropped;      /* not finite: left out of the sweep */
     int moving;        /* attached sampling: first vertex whose sampling moves with a parameter (count: none) */
-    dr_vec3 adj;       /* d loss / d L of this sample (forward mode: ones) */
+    dr_vec3 adj;       /* d loss / d L of this sample (forward mode: ones; cross mode: set after the record) */
     uint64_t key;      /* its sampler's key: derivative sampling's sub-streams hang off it */
+    dr_vec3 L;         /* its radiance (cross mode: the others' adjoints are taken without it) */
 };
 
 struct tape {
@@ -142,6 +143,18 @@ static struct tape_path *new_path(struct tape *tp, int64_t px, dr_vec3 adj, uint
     return path;
 }
 
+/* The adjoint of one sample of pixel px, when it is known before the record
+ * (false: the pixel does not matter); cross mode: every pixel is recorded,
+ * its adjoint comes after (cross_adjoints). */
+static bool adjoint_before(const struct tape_job *j, int64_t px, dr_vec3 *adj)
+{
+    if (j->b.p->cross) {
+        *adj = dr_v3s(0.0);
+        return true;
+    }
+    return dr_est_sample_adjoint(&j->b, px, adj);
+}
+
 /* The path's next vertex slot, linked after its last (NULL: out of memory). */
 static struct tape_vertex *new_vertex(struct tape *tp, struct tape_path *path, bool media)
 {
@@ -170,9 +183,27 @@ static void end_path(struct tape_job *j, int thread, struct tape_path *path, dr_
 {
     if (path->moving < 0)
         path->moving = path->count;
+    path->L = L;
     if (!dr_v3_finite(L)) {
         path->dropped = true;
         j->b.thr[thread].invalid++;
+    }
+}
+
+/* Cross mode: each path's adjoint from its pixel's other samples
+ * (estimator.h). The tape holds whole pixels, their paths one after the other. */
+static void cross_adjoints(const struct tape_job *j, struct tape *tp)
+{
+    for (int64_t first = 0, end; first < tp->n_paths; first = end) {
+        const int64_t px = tp->paths[first].pixel;
+        dr_vec3 sum = dr_v3s(0.0);
+        for (end = first; end < tp->n_paths && tp->paths[end].pixel == px; end++)
+            if (!tp->paths[end].dropped)
+                sum = dr_add(sum, tp->paths[end].L);
+        dr_est_cross_pixel(&j->b, px, sum);
+        for (int64_t k = first; k < end; k++)
+            if (!tp->paths[k].dropped)
+                tp->paths[k].adj = dr_est_cross_adjoint(&j->b, px, sum, tp->paths[k].L);
     }
 }
 
@@ -210,7 +241,7 @@ static void record_one_by_one(struct tape_job *j, struct tape *tp, int thread, i
 {
     for (int64_t px = begin; px < end && !tp->failed; px++) {
         dr_vec3 adj;
-        if (!dr_est_sample_adjoint(&j->b, px, &adj))
+        if (!adjoint_before(j, px, &adj))
             continue;   /* this pixel does not matter to the loss */
         for (int sidx = 0; sidx < j->b.p->spp && !tp->failed; sidx++)
             if (!record_path(j, tp, thread, px, sidx, adj))
@@ -240,7 +271,7 @@ static void lane_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp,
     const int spp = c->j->b.p->spp;
     const int64_t px = c->px[i / spp];
     dr_vec3 adj;
-    dr_est_sample_adjoint(&c->j->b, px, &adj);
+    adjoint_before(c->j, px, &adj);
     dr_est_camera_ray(&c->j->b, px, (int)(i % spp), smp, o, d);
     struct tape_path *path = c->tp->failed ? NULL : new_path(c->tp, px, adj, smp->key);
     if (!path)
@@ -288,10 +319,10 @@ static bool record_wave(struct tape_job *j, struct tape *tp, int thread, int64_t
     int64_t n = 0;
     dr_vec3 adj;
     for (int64_t px = begin; px < end; px++)
-        if (dr_est_sample_adjoint(&j->b, px, &adj))
+        if (adjoint_before(j, px, &adj))
             j->pixels[thread][n++] = px;
     struct wave_record c = {.j = j, .tp = tp, .thread = thread, .px = j->pixels[thread]};
-    static const struct dr_wave_ops ops = {lane_start, lane_vertex, lane_walk_end};
+    static const struct dr_wave_ops ops = {lane_start, lane_vertex, lane_walk_end, NULL, NULL};
     dr_wave_run(j->waves[thread], j->b.p->scene, &j->b.popts, n * j->b.p->spp, &ops, &c, &j->b.thr[thread].rays);
     return true;
 }
@@ -432,8 +463,8 @@ static void sweep_tape(struct tape_job *j, int thread, const struct tape *tp)
     const struct dr_medium_record *mrecs = j->b.popts.params->media_active ? tp->mrecs : NULL;
     for (int64_t pi = 0; pi < tp->n_paths; pi++) {
         const struct tape_path *path = &tp->paths[pi];
-        if (path->dropped)
-            continue;
+        if (path->dropped || (j->b.p->cross && dr_is_black(path->adj)))
+            continue;   /* (cross mode: a pixel that does not matter to the loss) */
         if (j->b.mis) {
             sweep_path_mis(j, thread, tp->verts, mrecs, path);
             continue;
@@ -501,6 +532,8 @@ static void record_and_sweep(void *ctx, int thread, int64_t begin, int64_t end)
         record_one_by_one(j, tp, thread, begin, end);
     uint64_t bytes = tape_bytes(tp, j->b.popts.params->media_active);
     tp->peak = bytes > tp->peak ? bytes : tp->peak;
+    if (!tp->failed && j->b.p->cross)
+        cross_adjoints(j, tp);
     if (!tp->failed)
         sweep_tape(j, thread, tp);
 }

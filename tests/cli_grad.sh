@@ -164,21 +164,47 @@ and d["parameters"][1]["file"] == "gdir/grad-images-0.exr" and math.isfinite(d["
 and "gradient" not in d["parameters"][1]
 and "bsdf" in d["effects_differentiated"] and "textures" in d["effects_differentiated"]'
 done
-# the standard error's parts (issue 14): total^2 = gradient part^2 + primal part^2
-run grad --target t.exr --param "$red" --param /images/0 --spp 16 --batches 4 --json
+# the standard error's parts (issue 14), with a primal render per batch:
+# total^2 = gradient part^2 + primal part^2
+run grad --target t.exr --param "$red" --param /images/0 --spp 16 --batches 4 --primal separate --json
 expect_rc 0 "grad reverse --json (stderr parts)"
+json_check "$tmp/out" 'd["primal"] == "separate" and d["time"]["primal"] > 0'
 json_check "$tmp/out" '
 all(abs(t * t - g * g - q * q) <= 1e-9 * t * t + 1e-30 or (q == 0 and g >= t)
     for t, g, q in zip(*(d["parameters"][0][k] for k in ["stderr", "stderr_gradient", "stderr_primal"])))
 and all(x > 0 for x in d["parameters"][0]["stderr_gradient"] + d["parameters"][0]["stderr"])
 and d["spp_per_batch"] == 4
 and all(math.isfinite(d["parameters"][1][k]) for k in ["stderr_norm", "stderr_gradient_norm", "stderr_primal_norm"])'
-# one sample per batch: no halves, so no parts (null), the total is still there
+# one sample per batch: no halves, so no parts (null), the total is still there;
+# and no other sample of the pixel to be its primal: the cross primal (the
+# default) renders one, and says so
 run grad --target t.exr --param "$red" --spp 2 --batches 2 --json
 expect_rc 0 "grad reverse --json (spp 1 per batch)"
 json_check "$tmp/out" '
 d["parameters"][0]["stderr_gradient"] == [None] * 3 and d["parameters"][0]["stderr_primal"] == [None] * 3
-and all(x > 0 for x in d["parameters"][0]["stderr"])'
+and all(x > 0 for x in d["parameters"][0]["stderr"]) and d["primal"] == "separate" and d["time"]["primal"] > 0'
+# the cross primal (default): the gradient's own samples are the loss's
+# primal, no render, no parts; both estimators give the same numbers
+for est in prb tape; do
+    run grad --target t.exr --param "$red" --spp 16 --batches 4 --estimator $est --json
+    expect_rc 0 "grad reverse --json (cross primal, $est)"
+    cp "$tmp/out" "$tmp/cross-$est.json"
+    json_check "$tmp/out" 'd["primal"] == "cross" and d["time"]["primal"] == 0 and 0 < d["loss"] < 0.5
+and d["parameters"][0]["stderr_primal"] == [None] * 3
+and all(math.isfinite(x) and x != 0 for x in d["parameters"][0]["gradient"] + d["parameters"][0]["stderr"])'
+done
+python3 - "$tmp/cross-prb.json" "$tmp/cross-tape.json" <<'PY' || fail "grad --primal cross: prb and tape differ"
+import json, sys
+a, b = (json.load(open(f)) for f in sys.argv[1:])
+ga, gb = a["parameters"][0]["gradient"], b["parameters"][0]["gradient"]
+sys.exit(not (all(abs(x - y) <= 1e-9 * max(abs(x), abs(y)) for x, y in zip(ga, gb)) and a["loss"] == b["loss"]))
+PY
+run grad --target t.exr --param "$red" --primal sideways
+expect_rc 2 "grad --primal sideways"
+expect_in err "unknown mode 'sideways' (available: cross, separate)" "grad --primal sideways"
+run grad -o d.exr --param "$red" --primal separate
+expect_rc 2 "grad --primal in forward mode"
+expect_in err "--primal is for reverse mode" "grad --primal in forward mode"
 [ -s gdir/grad-images-0.exr ] || fail "grad --grad-dir gdir: expected gdir/grad-images-0.exr"
 # attached sampling (tape): roughness enters a sampling map, a colour does not
 rough=/materials/4/pbrMetallicRoughness/roughnessFactor

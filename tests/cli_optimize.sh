@@ -99,6 +99,18 @@ check "a: loss.csv's last parameter_error should be the summary's" 'last - e < 1
 head -n 1 a/checkpoint.txt | grep -qx 'drender-checkpoint 1' || fail "a: checkpoint header"
 grep -qx 'iteration 120' a/checkpoint.txt || fail "a: checkpoint should be at iteration 120"
 echo "a. albedo recovered: max |error| $e"
+# ... also with a primal render per batch (--primal separate; a used the
+# default, the cross primal: the gradient's own samples)
+run optimize "$data/diffuse.gltf" --target diffuse0.exr --param "$albedo" --set "$albedo=0.3,0.3,0.3" \
+    --iters 120 --spp 16 $depth --reference "$data/diffuse.gltf" --out-dir a-separate --primal separate --json
+expect_rc 0 "a: optimise the albedo (--primal separate)"
+summary "a-separate" a-separate.json
+e2=$(ref_error a-separate.json "$albedo_idx")
+check "a (--primal separate): albedo not recovered to 0.01 in 120 iterations" 'e < 0.01' e="$e2"
+run optimize "$data/diffuse.gltf" --target diffuse0.exr --param "$albedo" --iters 1 --primal nope --out-dir a-bad
+expect_rc 2 "optimize --primal nope"
+expect_in err "unknown mode 'nope' (available: cross, separate)" "optimize --primal nope"
+[ -e a-bad ] && fail "optimize --primal nope: created its output directory"
 
 # a, two views: camera 0 straight on, camera 1 from the side
 run optimize "$data/diffuse.gltf" --target 0=diffuse0.exr --target 1=diffuse1.exr --param "$albedo" \

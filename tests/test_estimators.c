@@ -1,5 +1,6 @@
 /* tape and prb: with the same random numbers they compute the same gradient
- * (to rounding: 1e-9 relative), in reverse and forward mode, on the bundled
+ * (to rounding: 1e-9 relative), in reverse and forward mode and with the
+ * cross primal (the adjoint from the paths themselves), on the bundled
  * Cornell box (area light, textures, rough metal, shading normals) and on a
  * glossy scene; and both agree with the plain renderer's primal. */
 #include <stdlib.h>
@@ -104,6 +105,46 @@ static void compare(const char *what, struct dr_scene *s, const struct dr_camera
                (long long)ps->total, rel_err(dot, rdot), (unsigned long long)st.memory_bytes,
                (unsigned long long)st.record_bytes);
     }
+    /* the cross primal (estimator.h): the adjoint from the paths themselves */
+    double *cg[MAX_EST], *cimg[MAX_EST];
+    float *target = malloc(sizeof(float) * 3 * W * H);
+    for (int i = 0; i < 3 * W * H; i++)
+        target[i] = (float)(0.5 * dr_sampler_next(&r));
+    for (int e = 0; e < ne; e++) {
+        const struct dr_estimator_ops *est = dr_estimators[e];
+        cg[e] = calloc((size_t)ps->total, sizeof(double));
+        cimg[e] = calloc(3 * W * H, sizeof(double));
+        struct dr_cross_loss cross = {.loss = DR_LOSS_L2, .target = target, .scale = 1.0, .image = cimg[e]};
+        struct dr_grad_problem cp = p;
+        cp.cross = &cross;
+        cp.batch = e % 2 ? 97 : 0;
+        CHECK(dr_estimator_backward(est, &cp, NULL, cg[e], NULL) == 0, "%s: %s cross: %s", what, est->name,
+              dr_last_error());
+        dr_estimator_backward(est, &cp, NULL, again, NULL);
+        CHECK(memcmp(cg[e], again, sizeof(double) * (size_t)ps->total) == 0,
+              "%s: %s cross not bit-identical when repeated", what, est->name);
+        double inorm = 0;
+        for (int i = 0; i < 3 * W * H; i++)
+            inorm = fmax(inorm, fabs(cimg[e][i]));
+        CHECK(inorm > 0 && isfinite(inorm), "%s: %s cross: primal image empty (%g)", what, est->name, inorm);
+    }
+    for (int a = 0; a < ne; a++)
+        for (int b = a + 1; b < ne; b++) {
+            double worst = reverse_difference(what, ps, cg[a], cg[b]), iworst = 0;
+            for (int i = 0; i < 3 * W * H; i++)
+                iworst = fmax(iworst, rel_err(cimg[a][i], cimg[b][i]));
+            CHECK(worst <= 1e-9, "%s: cross %s vs %s differ by %.3g relative", what, dr_estimators[a]->name,
+                  dr_estimators[b]->name, worst);
+            CHECK(iworst <= 1e-9, "%s: cross primal images %s vs %s differ by %.3g relative", what,
+                  dr_estimators[a]->name, dr_estimators[b]->name, iworst);
+            printf("%s: cross %s vs %s: worst relative difference %.3g, images %.3g\n", what, dr_estimators[a]->name,
+                   dr_estimators[b]->name, worst, iworst);
+        }
+    for (int e = 0; e < ne; e++) {
+        free(cg[e]);
+        free(cimg[e]);
+    }
+    free(target);
     for (int a = 0; a < ne; a++)
         for (int b = a + 1; b < ne; b++) {
             double worst = reverse_difference(what, ps, g[a], g[b]), fworst = 0;

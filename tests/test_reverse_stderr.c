@@ -14,7 +14,11 @@
  * Case "mixed": a target at half the image (both noises matter), and case
  * "far": a target of -10 times the image, where the gradient samples' noise
  * dominates; the per-batch estimator must pass both, and attribute the error
- * of "far" mostly to the gradient samples. */
+ * of "far" mostly to the gradient samples.
+ *
+ * The cross primal (each pixel's samples are their own primal, half for half;
+ * reverse.h) must pass all three cases too, and be unbiased: its mean over
+ * the runs must agree with the per-batch estimator's within their spreads. */
 #include <stdlib.h>
 #include <string.h>
 
@@ -35,6 +39,7 @@ static struct dr_material emitter(dr_vec3 Le)
 }
 
 struct coverage {
+    double mean[3], sd[3];   /* of the runs' gradients */
     double inside;        /* fraction of (run, channel) within +-2 se of the mean */
     double se_gradient;   /* mean reported parts */
     double se_primal;
@@ -62,6 +67,9 @@ static struct coverage run_many(const struct dr_scene *s, const struct dr_camera
             return c;
         for (int ch = 0; ch < 3; ch++) {
             c.se += se[r][ch] / (3.0 * RUNS);
+            if (mode == DR_PRIMAL_CROSS)
+                CHECK(!res.parts && res.primal_run == DR_PRIMAL_CROSS && res.t_primal == 0.0,
+                      "cross: no parts, no render");
             if (mode == DR_PRIMAL_PER_BATCH) {
                 CHECK(res.parts && isfinite(sg[ch]) && isfinite(sp[ch]), "parts missing");
                 /* the parts add up to the total (in variance) */
@@ -76,8 +84,13 @@ static struct coverage run_many(const struct dr_scene *s, const struct dr_camera
         double mean = 0.0;
         for (int r = 0; r < RUNS; r++)
             mean += g[r][ch] / RUNS;
-        for (int r = 0; r < RUNS; r++)
+        double var = 0.0;
+        for (int r = 0; r < RUNS; r++) {
             c.inside += fabs(g[r][ch] - mean) <= 2.0 * se[r][ch] ? 1.0 / (3.0 * RUNS) : 0.0;
+            var += (g[r][ch] - mean) * (g[r][ch] - mean) / (RUNS - 1);
+        }
+        c.mean[ch] = mean;
+        c.sd[ch] = sqrt(var);
     }
     return c;
 }
@@ -127,6 +140,23 @@ int main(void)
           far.se_gradient, far.se_primal);
     CHECK(now.se_primal > 2.0 * now.se_gradient, "primal part %.3g should dominate gradient part %.3g",
           now.se_primal, now.se_gradient);
+
+    /* the cross primal: honest errors in all three cases, and unbiased */
+    const float *targets[3] = {target, dim, neg};
+    const struct coverage *separate[3] = {&now, &mixed, &far};
+    const char *names[3] = {"primal-dominated", "mixed", "far"};
+    for (int k = 0; k < 3; k++) {
+        struct coverage x = run_many(s, &cam, ps, targets[k], DR_PRIMAL_CROSS);
+        printf("%s: cross covers %.3f (mean se %.3g; runs' sd %.3g %.3g %.3g, separate's %.3g %.3g %.3g)\n", names[k],
+               x.inside, x.se, x.sd[0], x.sd[1], x.sd[2], separate[k]->sd[0], separate[k]->sd[1], separate[k]->sd[2]);
+        CHECK(x.inside >= lo && x.inside <= hi, "%s: cross coverage %.3f outside [%.3f, %.3f]", names[k], x.inside, lo,
+              hi);
+        for (int ch = 0; ch < 3; ch++) {
+            double tol = 4.0 * sqrt((x.sd[ch] * x.sd[ch] + separate[k]->sd[ch] * separate[k]->sd[ch]) / RUNS);
+            CHECK(fabs(x.mean[ch] - separate[k]->mean[ch]) <= tol, "%s: cross mean %.6g vs separate %.6g (tol %.3g)",
+                  names[k], x.mean[ch], separate[k]->mean[ch], tol);
+        }
+    }
     dr_param_set_destroy(ps);
     dr_scene_destroy(s);
     return TEST_END();
