@@ -8,12 +8,15 @@
 #      within 5%) and tape bytes at those depths
 #   h. peer comparison (../shared/bench): red wall set to (0.2, 0.6, 0.3), L2
 #      against a render at the true value, 256x256, 64 spp, 2 threads: prb
-#      gradient time at max_depth 8 vs the peer's 3.68 s; tape (with the loss's
-#      primal images) at max_depth 4, 8, 16, 32 vs the peer's conventional AD,
+#      gradient time at max_depth 8 vs the peer's 3.68 s (with the default cross
+#      primal and with --primal separate); tape at max_depth 4, 8, 16, 32 vs the
+#      peer's conventional AD,
 #      and its peak memory at max_depth 32 vs the peer's 15.3 GiB
 #   i. honest standard error (issue 14): reverse mode with a primal image per
 #      batch vs one shared primal (the old estimator), same samples: time ratio
-#      (goal <= 1.1), primal share of the run, and both reported standard errors
+#      (goal <= 1.1), primal share of the run, and both reported standard errors;
+#      then the cross primal (default) vs a primal per batch over 8 seeds each:
+#      time ratio and efficiency (variance x time)
 # Writes $BUILD/bench/grad-results.json.
 set -euo pipefail
 BUILD=${BUILD:-build}
@@ -93,7 +96,12 @@ if [[ -f $PEER ]]; then
     T_PEER_BOTH=$(calc "$T_PEER + $T_PEER_PRIMAL")
     R_BOTH=$(calc "$T_PEER_BOTH / 3.68")
     echo "   prb gradient (primal + replay), depth 8: $(calc "$T_PEER" %.2f) s vs the peer's 3.68 s: ratio $R (goal < 1: $(yesno "$R < 1"))"
-    echo "   ... with the loss's primal images (like for like): $(calc "$T_PEER_BOTH" %.2f) s: ratio $R_BOTH (goal < 1: $(yesno "$R_BOTH < 1"))"
+    echo "   ... with the loss's primal (like for like; the cross primal: the gradient's own samples, time.primal $(calc "$T_PEER_PRIMAL" %.2f) s): $(calc "$T_PEER_BOTH" %.2f) s: ratio $R_BOTH (goal < 1: $(yesno "$R_BOTH < 1"))"
+    J=$("$DR" grad "$PEER" --target "$TMP/peer-target.exr" --param $RED --set $RED=0.2,0.6,0.3 --spp 64 \
+        --batches 2 --max-depth 8 --threads 2 --primal separate --json)
+    T_SEP=$(calc "$(json_num "$J" gradient time) + $(json_num "$J" primal time)")
+    R_SEP=$(calc "$T_SEP / 3.68")
+    echo "   ... with --primal separate (a render per batch): $(calc "$T_SEP" %.2f) s: ratio $R_SEP"
     # tape against the peer's conventional AD at every depth of its table,
     # like for like (its time includes its primal render, ours the loss's primal images)
     declare -A PEER_AD=([4]=2.28 [8]=3.66 [16]=4.26 [32]=5.29)
@@ -103,20 +111,21 @@ if [[ -f $PEER ]]; then
             --batches 2 --max-depth $d --threads 2 --estimator tape --json)
         TG=$(json_num "$J" gradient time) TP=$(json_num "$J" primal time)
         RT=$(calc "($TG + $TP) / ${PEER_AD[$d]}")
-        printf '   tape, depth %2d: gradient %.2f s + primal images %.2f s vs the peer'"'"'s conventional AD %.2f s: ratio %s (goal <= 1: %s); peak memory %.0f MiB\n' \
+        printf '   tape, depth %2d: gradient %.2f s + separate primal %.2f s vs the peer'"'"'s conventional AD %.2f s: ratio %s (goal <= 1: %s); peak memory %.0f MiB\n' \
             $d "$TG" "$TP" "${PEER_AD[$d]}" "$RT" "$(yesno "$RT <= 1")" "$(calc "$(json_num "$J" peak_memory_bytes) / 1048576" %.0f)"
         TAPE_JSON+="{\"max_depth\": $d, \"gradient_seconds\": $TG, \"primal_seconds\": $TP, \"ratio_to_peer_ad\": $RT},"
     done
     M32=$(json_num "$J" peak_memory_bytes)
     TB32=$(json_num "$J" record_bytes)
     echo "   tape, depth 32: peak memory $(calc "$M32 / 1048576" %.0f) MiB (tape $(calc "$TB32 / 1048576" %.1f) MiB) vs the peer's 15.3 GiB: $(calc "$M32 / (15.3 * 1073741824) * 100" %.2f) %"
-    PEER_JSON="{\"prb_gradient_seconds_depth8\": $T_PEER, \"ratio_to_peer\": $R, \"primal_seconds_depth8\": $T_PEER_PRIMAL, \"ratio_to_peer_like_for_like\": $R_BOTH, \"record_bytes_depth32\": $M32, \"tape_bytes_depth32\": $TB32, \"tape_vs_peer_ad\": [${TAPE_JSON%,}]}"
+    PEER_JSON="{\"prb_gradient_seconds_depth8\": $T_PEER, \"ratio_to_peer\": $R, \"primal_seconds_depth8\": $T_PEER_PRIMAL, \"ratio_to_peer_like_for_like\": $R_BOTH, \"separate_primal_seconds_depth8\": $T_SEP, \"separate_ratio_to_peer\": $R_SEP, \"record_bytes_depth32\": $M32, \"tape_bytes_depth32\": $TB32, \"tape_vs_peer_ad\": [${TAPE_JSON%,}]}"
 fi
 echo "i. reverse-mode standard error with a primal per batch vs one shared primal ($RES, 32 spp, 4 batches)"
 cp "$OUT/reverse_stderr" "$TMP/"
 SEJ=$("$TMP/reverse_stderr" $CORNELL $RED $RES 32 4 2)
 echo "   $SEJ"
 echo "   time ratio $(json_num "$SEJ" time_ratio) (goal <= 1.1: $(yesno "$(json_num "$SEJ" time_ratio) <= 1.1"))"
+echo "   cross primal (the default: no render) vs a primal per batch, over $(json_num "$SEJ" runs) seeds each: time ratio $(json_num "$SEJ" cross_time_ratio), efficiency (variance x time, per-batch / cross) $(json_num "$SEJ" cross_efficiency)"
 cat >"$OUT/grad-results.json" <<JSON
 {"primal_seconds": $T_PRIMAL, "prb_seconds": ${T[prb]}, "tape_seconds": ${T[tape]},
  "prb_over_primal": $R_PRB, "tape_over_prb": $R_TAPE,

@@ -3,9 +3,15 @@
  * used before (one primal at the full spp shared by all batches) and with
  * per-batch primals (K renders of spp/K, two estimator runs per batch), and
  * prints their seconds, primal shares and reported standard errors as JSON.
+ * Then the cross primal (no render: the gradient's samples are their own
+ * primal) against per-batch primals over RUNS seeds each: mean seconds, the
+ * runs' spread of the first gradient entry, and the efficiency ratio
+ * (variance x time of per-batch / of cross; > 1: cross is cheaper for the
+ * same accuracy).
  *
  * usage: reverse_stderr SCENE PARAM [WxH] [SPP] [K] [THREADS]
  * The target is the scene rendered at 4 x SPP with PARAM's values scaled by 0.8. */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -16,7 +22,7 @@
 #include "reverse.h"
 
 struct timing {
-    double seconds, primal, gradient, se;
+    double seconds, primal, gradient, se, g0;
 };
 
 static int time_mode(const struct dr_reverse_options *base, enum dr_primal_mode mode, const float *target,
@@ -30,9 +36,35 @@ static int time_mode(const struct dr_reverse_options *base, enum dr_primal_mode 
     struct dr_reverse_result r = {.grad = buf, .se = buf + T, .se_gradient = buf + 2 * T, .se_primal = buf + 3 * T};
     double t0 = dr_clock_seconds();
     int rc = dr_reverse_gradient(&o, target, &r);
-    *out = (struct timing){dr_clock_seconds() - t0, r.t_primal, r.t_gradient, buf[T]};
+    *out = (struct timing){dr_clock_seconds() - t0, r.t_primal, r.t_gradient, buf[T], buf[0]};
     free(buf);
     return rc;
+}
+
+#define RUNS 8
+
+/* RUNS runs of mode with seeds 100..: mean seconds and the spread (sample
+ * standard deviation) of the first gradient entry. */
+static int spread(const struct dr_reverse_options *base, enum dr_primal_mode mode, const float *target, int64_t T,
+                  double *seconds, double *sd)
+{
+    double g[RUNS], mean = 0.0, var = 0.0;
+    *seconds = 0.0;
+    for (int r = 0; r < RUNS; r++) {
+        struct dr_reverse_options o = *base;
+        o.problem.seed = 100 + (uint64_t)r;
+        struct timing t;
+        int rc = time_mode(&o, mode, target, T, &t);
+        if (rc != 0)
+            return rc;
+        *seconds += t.seconds / RUNS;
+        g[r] = t.g0;
+        mean += g[r] / RUNS;
+    }
+    for (int r = 0; r < RUNS; r++)
+        var += (g[r] - mean) * (g[r] - mean) / (RUNS - 1);
+    *sd = sqrt(var);
+    return 0;
 }
 
 int main(int argc, char **argv)
@@ -82,11 +114,20 @@ int main(int argc, char **argv)
         fprintf(stderr, "%s\n", dr_last_error());
         return 1;
     }
+    double t_sep, sd_sep, t_cross, sd_cross;
+    if (spread(&o, DR_PRIMAL_PER_BATCH, target, ps->total, &t_sep, &sd_sep) != 0 ||
+        spread(&o, DR_PRIMAL_CROSS, target, ps->total, &t_cross, &sd_cross) != 0) {
+        fprintf(stderr, "%s\n", dr_last_error());
+        return 1;
+    }
     printf("{\"shared_primal\": {\"seconds\": %.4f, \"primal_share\": %.3f, \"stderr0\": %.4g}, "
            "\"per_batch_primal\": {\"seconds\": %.4f, \"primal_share\": %.3f, \"stderr0\": %.4g}, "
-           "\"time_ratio\": %.3f}\n",
+           "\"time_ratio\": %.3f, \"runs\": %d, \"per_batch_runs\": {\"seconds\": %.4f, \"sd0\": %.4g}, "
+           "\"cross_runs\": {\"seconds\": %.4f, \"sd0\": %.4g}, \"cross_time_ratio\": %.3f, "
+           "\"cross_efficiency\": %.3f}\n",
            old.seconds, old.primal / old.seconds, old.se, now.seconds, now.primal / now.seconds, now.se,
-           now.seconds / old.seconds);
+           now.seconds / old.seconds, RUNS, t_sep, sd_sep, t_cross, sd_cross, t_cross / t_sep,
+           sd_sep * sd_sep * t_sep / (sd_cross * sd_cross * t_cross));
     free(theta);
     free(target);
     dr_param_set_destroy(ps);
