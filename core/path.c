@@ -368,6 +368,23 @@ dr_vec3 dr_path_radiance(const struct dr_scene *s, const struct dr_path_opts *op
 
 /* -------------------------------------------------------------- adjoints */
 
+bool dr_path_vertex_has_derivative(const struct dr_scene *s, const struct dr_param_set *ps,
+                                   const struct dr_path_vertex *v)
+{
+    if (v->diff_bsdf || v->media)
+        return true;
+    /* the conditions under which d_emission, d_env_radiance and d_light_radiance work */
+    if (v->emits && (v->kind == DR_VERTEX_SURFACE ? ps->mat_emission_active[v->hit.material] : ps->env_active))
+        return true;
+    if (!v->nee)
+        return false;
+    switch (v->ls.type) {
+    case DR_LS_AREA: return ps->mat_emission_active[s->mesh.material[v->ls.index]];
+    case DR_LS_ENV: return ps->env_active;
+    default: return ps->lights_active;
+    }
+}
+
 /* d_e of one image channel (forward mode) or of all (reverse mode). */
 static void vertex_term_part(const struct dr_scene *s, const struct dr_param_set *ps,
                              const struct dr_path_vertex *v, dr_vec3 d_e, struct dr_grad_sink *sink)

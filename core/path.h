@@ -200,6 +200,13 @@ static inline dr_vec3 dr_path_vertex_term(const struct dr_path_vertex *v)
  * forward mode the channels of d_e land in the sink's channels. */
 void d_path_vertex_term(const struct dr_scene *scene, const struct dr_param_set *params,
                         const struct dr_path_vertex *v, dr_vec3 d_e, struct dr_grad_sink *sink);
+/* Does vertex v have a derivative term under detached sampling (its BSDF,
+ * the emission or environment it sees, or the light its next-event estimate
+ * sampled has a requested parameter; or it is a medium vertex)? False: the
+ * vertex's d_path_vertex_term and d_path_continuation add nothing, so a
+ * path's derivative work can end at its last vertex with a term. */
+bool dr_path_vertex_has_derivative(const struct dr_scene *scene, const struct dr_param_set *params,
+                                   const struct dr_path_vertex *v);
 /* Adjoint of the continuation's BSDF value f along v->wi, given d_f. */
 void d_path_continuation(const struct dr_scene *scene, const struct dr_param_set *params,
                          const struct dr_path_vertex *v, dr_vec3 d_f, struct dr_grad_sink *sink);

@@ -152,7 +152,8 @@ static int finish_live(struct dr_wave *w, int n_live, int *n_free, const struct 
         if (l->next == DR_STEP_SHADOW)
             dr_path_nee_end(s, &l->v, &l->shadow, l->occluded);
         bool more = l->next != DR_STEP_END && dr_path_stage_continue(opts, &l->st, &l->v);
-        ops->vertex(ctx, l->user, &l->arrival, &l->v, &l->smp, more);
+        if (!ops->vertex(ctx, l->user, &l->arrival, &l->v, &l->smp, more))
+            more = false;
         if (!more && ops->keep_log && !l->replaying)
             ops->keep_log(ctx, l->user, &l->log);
         dr_vec3 o, d;
@@ -216,12 +217,13 @@ static void radiance_start(void *ctx, int64_t i, void *user, struct dr_sampler *
     c->start(c->ctx, i, smp, o, d);
 }
 
-static void radiance_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
+static bool radiance_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
                             struct dr_sampler *smp, bool more)
 {
     (void)ctx, (void)smp, (void)more;
     struct radiance_lane *r = user;
     r->L = dr_add(r->L, dr_mul(a->beta, dr_path_vertex_term(v)));
+    return true;
 }
 
 static enum dr_wave_next radiance_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)

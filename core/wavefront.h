@@ -54,8 +54,9 @@ struct dr_wave_ops {
     /* Begins item i in a lane: its state in user (DR_WAVE_USER_BYTES,
      * zeroed), the first walk's sampler and ray. */
     void (*start)(void *ctx, int64_t i, void *user, struct dr_sampler *sampler, dr_vec3 *o, dr_vec3 *d);
-    /* Vertex v of the walk, reached with throughput a; more: the walk goes on. */
-    void (*vertex)(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
+    /* Vertex v of the walk, reached with throughput a; more: the walk goes
+     * on. Returns false to end the walk here (then walk_end follows). */
+    bool (*vertex)(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
                    struct dr_sampler *sampler, bool more);
     /* The walk ended: what next (DR_WAVE_WALK and DR_WAVE_REPLAY: set
      * *sampler, *o, *d to the next walk's start). */

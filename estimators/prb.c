@@ -40,6 +40,7 @@ struct prb_radiance {
  * primal walk and its replay, which must wait for the pixel's other half. */
 struct prb_item {
     struct prb_radiance L;
+    int last_diff;            /* the primal walk's (struct walk) */
     bool valid;               /* L is finite */
     dr_vec3 adj;              /* its adjoint, once the pixel's halves are known */
     struct dr_wave_log log;   /* the primal walk's ray answers: the replay traces nothing again */
@@ -56,6 +57,8 @@ struct walk {
     dr_vec3 adj;
     struct dr_grad_sink *sink;
     int vertices;                      /* the primal counts them, the replay's media derivatives use the count */
+    int last_diff;                     /* the primal: depth of the last vertex with a derivative term (0: none);
+                                          the wavefront's replay ends there (detached sampling) */
     struct dr_medium_record *mrec;     /* media: what the replay re-traces, one vertex at a time */
     /* derivative sampling: the last vertex, if differentiated and continued */
     struct dr_path_vertex *prev;
@@ -81,8 +84,11 @@ static void walk_vertex(const struct dr_est_base *b, struct walk *w, const struc
     dr_vec3 remaining = L->true_;   /* replay: from this vertex on */
     L->sub = dr_madd(L->sub, c, sign);
     L->true_ = dr_madd(L->true_, dr_mul(ratio, c), sign);
-    if (!sink)
+    if (!sink) {
+        if (dr_path_vertex_has_derivative(s, ps, v))
+            w->last_diff = v->depth;
         return;
+    }
     if (v->media)
         d_medium_vertex(s, &b->popts, v, w->mrec, w->vertices, dr_mul(adj, dr_mul(ratio, beta)), dr_mul(adj, remaining),
                         dr_mul(adj, L->true_), dr_mul(adj, dr_mul(dr_mul(ratio, beta), dr_path_vertex_nee(v))), sink);
@@ -201,13 +207,22 @@ static void lane_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp,
     l->d = *d;
 }
 
-static void lane_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
+/* The replay ends at the primal's last vertex with a derivative term: the
+ * vertices after it add nothing to the gradient (their share of L is never
+ * needed), so it neither shades nor traces them. */
+static bool replay_goes_on(const struct walk *w, const struct dr_path_vertex *v)
+{
+    return !w->sink || v->depth < w->last_diff;
+}
+
+static bool lane_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
                         struct dr_sampler *smp, bool more)
 {
     (void)more;
     struct wave_ctx *c = ctx;
     struct prb_lane *l = user;
     walk_vertex(&c->j->b, &l->w, v, a->beta, a->ratio, smp, &c->j->b.thr[c->thread].rays);
+    return replay_goes_on(&l->w, v);
 }
 
 /* The primal walk ended: the replay of the same path follows (the wavefront
@@ -225,6 +240,8 @@ static enum dr_wave_next lane_walk_end(void *ctx, void *user, struct dr_sampler 
         b->thr[c->thread].invalid++;
         return DR_WAVE_DONE;
     }
+    if (l->w.last_diff == 0)
+        return DR_WAVE_DONE;   /* no vertex of the path has a derivative term: no replay */
     l->sink = c->sink;
     l->w.sink = &l->sink;
     *smp = l->smp0;
@@ -285,13 +302,14 @@ static void cross_primal_start(void *ctx, int64_t i, void *user, struct dr_sampl
     cross_ray(ctx, user, i, smp, o, d);
 }
 
-static void cross_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
+static bool cross_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
                          struct dr_sampler *smp, bool more)
 {
     (void)more;
     struct cross_ctx *c = ctx;
     struct cross_lane *l = user;
     walk_vertex(&c->j->b, &l->w, v, a->beta, a->ratio, smp, &c->j->b.thr[c->thread].rays);
+    return replay_goes_on(&l->w, v);
 }
 
 static void cross_keep_log(void *ctx, void *user, const struct dr_wave_log *log)
@@ -309,6 +327,7 @@ static enum dr_wave_next cross_primal_end(void *ctx, void *user, struct dr_sampl
     const struct cross_lane *l = user;
     struct prb_item *it = &c->items[l->item];
     it->L = l->w.L;
+    it->last_diff = l->w.last_diff;
     it->valid = dr_v3_finite(l->w.L.true_) && dr_v3_finite(l->w.L.sub);
     if (!it->valid)
         c->j->b.thr[c->thread].invalid++;
@@ -322,6 +341,7 @@ static void cross_replay_start(void *ctx, int64_t k, void *user, struct dr_sampl
     cross_ray(c, l, c->order[k], smp, o, d);
     const struct prb_item *it = &c->items[l->item];
     l->w.L = it->L;
+    l->w.last_diff = it->last_diff;
     l->w.adj = it->adj;
     l->sink = c->sink;
     l->w.sink = &l->sink;
@@ -385,7 +405,8 @@ static bool cross_wave(struct prb_job *j, int thread, int64_t begin, int64_t end
                 if (!px_items[s].valid)
                     continue;
                 px_items[s].adj = dr_est_cross_adjoint(b, first + k, sum, px_items[s].L.true_);
-                if (!dr_is_black(px_items[s].adj))   /* (else the sample does not matter to the loss) */
+                /* (else the sample does not matter to the loss, or its path has no derivative term) */
+                if (!dr_is_black(px_items[s].adj) && px_items[s].last_diff > 0)
                     order[n++] = (int32_t)(k * spp + s);
             }
         }

@@ -279,24 +279,25 @@ static void lane_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp,
     l->path = path ? c->tp->n_paths - 1 : -1;
 }
 
-static void lane_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
+static bool lane_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
                         struct dr_sampler *smp, bool more)
 {
     (void)smp, (void)more;
     struct wave_record *c = ctx;
     struct record_lane *l = user;
     if (l->path < 0 || c->tp->failed)
-        return;
+        return true;
     struct tape_path *path = &c->tp->paths[l->path];
     struct tape_vertex *tv = new_vertex(c->tp, path, false);
     if (!tv) {
         c->tp->failed = true;
-        return;
+        return true;
     }
     tv->v = *v;   /* (the lane's vertex is overwritten at its next step) */
     tv->v.mrec = NULL;
     tv->bt = dr_mul(a->ratio, a->beta);
     note_vertex(c->j, path, tv, &l->L);
+    return true;
 }
 
 static enum dr_wave_next lane_walk_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
