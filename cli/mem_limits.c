@@ -122,7 +122,7 @@ static double image_bytes(const struct dr_image *im)
     if (!im->data)
         return 0.0;
     double px = (double)im->width * im->height * im->channels * sizeof(float);
-    return im->linear ? 2.0 * px : px;
+    return im->linear && !im->linear_in_data ? 2.0 * px : px;
 }
 
 uint64_t cli_mem_scene(const struct dr_scene *s)

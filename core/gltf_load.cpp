@@ -343,6 +343,7 @@ private:
     std::vector<char> ktx2_images_;         /* by image index: a KTX2 image, left undecoded */
     std::vector<int> texture_ktx2_;         /* by texture: its KTX2 image, -1 */
     std::vector<char> linear_images_;       /* used as colour: needs sRGB decode */
+    std::vector<char> data_images_;         /* used as data (metallic-roughness, normals): keeps its values */
     std::vector<dr_material> materials_;
     bool default_material_used_ = false;
     std::vector<dr_camera> cameras_;
@@ -689,6 +690,7 @@ void Loader::take_images()
             fail(DR_ERR_FORMAT, "/images/%zu: image data could not be loaded", i);
         }
     linear_images_.assign(n, 0);
+    data_images_.assign(n, 0);
     scene_->images = static_cast<dr_image *>(calloc(n ? n : 1, sizeof(dr_image)));
     if (!scene_->images) throw std::bad_alloc();
     for (size_t i = 0; i < n; i++) {
@@ -912,6 +914,8 @@ void Loader::load_materials()
             if (t->texture >= 0) linear_images_[size_t(scene_->textures[t->texture].image)] = 1;
 
         load_surface(g, mp, m);
+        for (const dr_texref *t : {&m.metallic_roughness_tex, &m.normal_tex})
+            if (t->texture >= 0) data_images_[size_t(scene_->textures[t->texture].image)] = 1;
         if (g.occlusionTexture.index >= 0)
             warn_once("occlusionTexture", "%s/occlusionTexture: occlusion maps are ignored (the path "
                       "tracer computes occlusion)", mp.c_str());
@@ -1565,12 +1569,16 @@ void Loader::finish()
     scene_->bbox_min = bbox_min_;
     scene_->bbox_max = bbox_max_;
 
-    /* the colour textures' sRGB decode, also one image per CPU */
+    /* the colour textures' sRGB decode, also one image per CPU; in place
+     * where nothing reads the encoded values (an image only used as colour) */
     const size_t n = linear_images_.size();
     std::vector<int> rc(n, 0);
     ThreadMessages why(n);
     parallel_each(n, [&](size_t i) {
-        if (linear_images_[i] && (rc[i] = dr_image_make_linear(&scene_->images[i])) != 0) why.keep(i);
+        if (!linear_images_[i]) return;
+        dr_image *img = &scene_->images[i];
+        rc[i] = data_images_[i] ? dr_image_make_linear(img) : dr_image_make_linear_in_place(img);
+        if (rc[i] != 0) why.keep(i);
     });
     for (size_t i = 0; i < n; i++)
         if (rc[i] != 0) fail(rc[i], "/images/%zu: %s", i, why.at(i));

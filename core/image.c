@@ -45,9 +45,39 @@ static float srgb_to_linear_memo(struct srgb_memo *m, float v)
     return out;
 }
 
+/* Colour channels (sRGB-decoded) of a c-channel image; the rest is alpha. */
+static int colour_channels(int c)
+{
+    return c == 2 ? 1 : (c >= 4 ? 3 : c);
+}
+
+/* dst = src with the colour channels sRGB-decoded (alpha, channel 1 of 2 or
+ * 3 of 4, kept); dst may be src. 8-bit files hold at most 256 distinct
+ * values, and pow() per texel was a quarter of loading a scene with two 2k
+ * textures: each value is decoded once and remembered (by its nearest 8-bit
+ * level, with the exact input, so any other input still goes through pow and
+ * the result is bit for bit what it was). */
+static void decode_srgb(const float *src, float *dst, size_t n, size_t c)
+{
+    struct srgb_memo memo;
+    memset(&memo, 0, sizeof memo);
+    size_t ncolour = (size_t)colour_channels((int)c);
+    for (size_t i = 0; i < n; ++i) {
+        const float *s = src + i * c;
+        float *d = dst + i * c;
+        for (size_t k = 0; k < c; ++k)
+            d[k] = k < ncolour ? srgb_to_linear_memo(&memo, s[k]) : s[k];
+    }
+}
+
+static bool image_usable(const struct dr_image *img)
+{
+    return img && img->data && img->width > 0 && img->height > 0 && img->channels > 0;
+}
+
 int dr_image_make_linear(struct dr_image *img)
 {
-    if (!img || !img->data || img->width <= 0 || img->height <= 0 || img->channels <= 0)
+    if (!image_usable(img))
         return DR_ERR_ARG;
     if (img->linear)
         return DR_OK;
@@ -58,27 +88,24 @@ int dr_image_make_linear(struct dr_image *img)
         dr_set_error("out of memory decoding a %dx%d texture", img->width, img->height);
         return DR_ERR_NOMEM;
     }
-    if (!img->file_is_srgb) {
-        /* The stored values are linear already. */
-        memcpy(lin, img->data, n * c * sizeof *lin);
-    } else {
-        /* Colour channels are decoded, alpha (channel 1 of 2, 3 of 4) is not.
-         * 8-bit files hold at most 256 distinct values, and pow() per texel
-         * was a quarter of loading a scene with two 2k textures: each value
-         * is decoded once and remembered (by its nearest 8-bit level, with
-         * the exact input, so any other input still goes through pow and the
-         * result is bit for bit what it was). */
-        struct srgb_memo memo;
-        memset(&memo, 0, sizeof memo);
-        size_t ncolour = c == 2 ? 1 : (c >= 4 ? 3 : c);
-        for (size_t i = 0; i < n; ++i) {
-            const float *s = img->data + i * c;
-            float *d = lin + i * c;
-            for (size_t k = 0; k < c; ++k)
-                d[k] = k < ncolour ? srgb_to_linear_memo(&memo, s[k]) : s[k];
-        }
-    }
+    if (img->file_is_srgb)
+        decode_srgb(img->data, lin, n, c);
+    else
+        memcpy(lin, img->data, n * c * sizeof *lin);   /* the stored values are linear already */
     img->linear = lin;
+    return DR_OK;
+}
+
+int dr_image_make_linear_in_place(struct dr_image *img)
+{
+    if (!image_usable(img))
+        return DR_ERR_ARG;
+    if (img->linear)
+        return DR_OK;
+    if (img->file_is_srgb)
+        decode_srgb(img->data, img->data, (size_t)img->width * (size_t)img->height, (size_t)img->channels);
+    img->linear = img->data;
+    img->linear_in_data = true;
     return DR_OK;
 }
 
@@ -86,10 +113,12 @@ void dr_image_release(struct dr_image *img)
 {
     if (!img)
         return;
+    if (img->linear != img->data)
+        free(img->linear);
     free(img->data);
-    free(img->linear);
     img->data = NULL;
     img->linear = NULL;
+    img->linear_in_data = false;
     img->width = img->height = img->channels = 0;
     img->file_is_srgb = false;
 }

@@ -20,6 +20,7 @@ struct dr_image {
     float *linear;   /* sRGB-decoded copy of data (RGB decoded, alpha kept); NULL until
                         dr_image_make_linear(); colour textures are looked up here */
     bool file_is_srgb; /* the file declares sRGB-encoded values (PNG/JPEG, 8-bit)      */
+    bool linear_in_data; /* linear is data itself, decoded in place (dr_image_make_linear_in_place) */
 };
 
 enum dr_wrap { DR_WRAP_REPEAT, DR_WRAP_CLAMP, DR_WRAP_MIRROR };
@@ -35,6 +36,10 @@ double dr_linear_to_srgb(double v);
 
 /* Fills img->linear from img->data (idempotent). Returns 0 or DR_ERR_NOMEM. */
 int dr_image_make_linear(struct dr_image *img);
+/* The same for an image only ever looked up as colour: decodes data in
+ * place and makes linear the same array (no second copy to allocate, fault
+ * in and keep; the file's encoded values are gone). Returns 0 or DR_ERR_ARG. */
+int dr_image_make_linear_in_place(struct dr_image *img);
 void dr_image_release(struct dr_image *img);   /* frees data and linear */
 
 /* Bilinear lookup at glTF uv (u right, v down, texel centres at (i+0.5)/w),

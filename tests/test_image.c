@@ -152,7 +152,7 @@ static const float grid[6] = {0, 1, 2, 10, 20, 40};
 
 static double eval1(enum dr_wrap ws, enum dr_wrap wt, double u, double v)
 {
-    struct dr_image img = {3, 2, 1, (float *)grid, NULL, false};
+    struct dr_image img = {3, 2, 1, (float *)grid, NULL, false, false};
     struct dr_texture tex = {0, ws, wt};
     double out[4];
     dr_texture_eval(&tex, &img, u, v, false, out);
@@ -178,7 +178,7 @@ static void test_make_linear_exact(void)
         data[4 * i + 2] = (float)((i * 37) % 256) * (1.0f / 255.0f);   /* another rounding of k/255 */
         data[4 * i + 3] = 0.5f;
     }
-    struct dr_image img = {N, 1, 4, data, NULL, true};
+    struct dr_image img = {N, 1, 4, data, NULL, true, false};
     CHECK(dr_image_make_linear(&img) == DR_OK, "make_linear");
     int bad = 0;
     for (int i = 0; i < N * 4 && img.linear; i++) {
@@ -187,6 +187,17 @@ static void test_make_linear_exact(void)
             bad++;
     }
     CHECK(img.linear && bad == 0, "%d decoded values differ from dr_srgb_to_linear", bad);
+    /* in place (an image only used as colour): the same values in data itself */
+    float *copy = malloc(sizeof(float) * N * 4);
+    memcpy(copy, data, sizeof(float) * N * 4);
+    struct dr_image in = {N, 1, 4, copy, NULL, true, false};
+    CHECK(dr_image_make_linear_in_place(&in) == DR_OK && in.linear == in.data && in.linear_in_data,
+          "make_linear_in_place: linear is data");
+    CHECK(img.linear && memcmp(in.linear, img.linear, sizeof(float) * N * 4) == 0,
+          "in place: values differ from make_linear's");
+    CHECK(dr_image_make_linear_in_place(&in) == DR_OK && in.linear == copy, "in place: idempotent");
+    dr_image_release(&in);   /* (one buffer: freed once; ASan checks) */
+    CHECK(!in.data && !in.linear && !in.linear_in_data, "in place: release zeroes");
     dr_image_release(&img);
 }
 
@@ -260,7 +271,7 @@ static void test_channels(void)
     double out[4];
     /* 2 channels: grey + alpha. 2x1 image. */
     float ga[4] = {0.2f, 0.5f, 0.6f, 1.0f};
-    struct dr_image img2 = {2, 1, 2, ga, NULL, false};
+    struct dr_image img2 = {2, 1, 2, ga, NULL, false, false};
     dr_texture_eval(&tex, &img2, 0.5, 0.5, false, out);
     CHECK_NEAR(out[0], 0.5 * ((double)0.2f + (double)0.6f), 1e-12, "grey r");
     CHECK_NEAR(out[1], out[0], 0, "grey g");
@@ -268,18 +279,18 @@ static void test_channels(void)
     CHECK_NEAR(out[3], 0.5 * ((double)0.5f + 1.0), 1e-12, "grey alpha");
     /* 3 channels: alpha 1. */
     float rgb[3] = {0.1f, 0.2f, 0.3f};
-    struct dr_image img3 = {1, 1, 3, rgb, NULL, false};
+    struct dr_image img3 = {1, 1, 3, rgb, NULL, false, false};
     dr_texture_eval(&tex, &img3, 0.9, 0.1, false, out);
     CHECK(out[0] == (double)0.1f && out[1] == (double)0.2f && out[2] == (double)0.3f &&
               out[3] == 1.0,
           "rgb: %g %g %g %g", out[0], out[1], out[2], out[3]);
     /* 4 channels. */
     float rgba[4] = {0.1f, 0.2f, 0.3f, 0.4f};
-    struct dr_image img4 = {1, 1, 4, rgba, NULL, false};
+    struct dr_image img4 = {1, 1, 4, rgba, NULL, false, false};
     dr_texture_eval(&tex, &img4, 0.3, 0.7, false, out);
     CHECK_NEAR(out[3], 0.4f, 1e-7, "rgba alpha");
     /* No image data: black, opaque. */
-    struct dr_image empty = {0, 0, 0, NULL, NULL, false};
+    struct dr_image empty = {0, 0, 0, NULL, NULL, false, false};
     dr_texture_eval(&tex, &empty, 0.3, 0.7, false, out);
     CHECK(out[0] == 0 && out[1] == 0 && out[2] == 0 && out[3] == 1, "empty image");
 
@@ -314,7 +325,7 @@ static void test_channels(void)
 
     /* A linear file's "linear" copy is the data itself. */
     float lin[1] = {0.5f};
-    struct dr_image l = {1, 1, 1, NULL, NULL, false};
+    struct dr_image l = {1, 1, 1, NULL, NULL, false, false};
     l.data = malloc(sizeof lin);
     if (l.data) {
         memcpy(l.data, lin, sizeof lin);
