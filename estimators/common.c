@@ -322,7 +322,7 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
             p->mis_weights[k] = 1.0;
     if (st) {
         *st = (struct dr_grad_stats){.seconds = dr_clock_seconds() - b->t0, .threads = b->acc.threads,
-                                     .memory_bytes = b->acc.bytes + b->mis_acc.bytes + b->record_bytes,
+                                     .memory_bytes = b->acc.bytes + b->mis_acc.bytes + b->record_bytes + b->scratch_bytes,
                                      .record_bytes = b->record_bytes, .stages = b->popts.stages,
                                      .sampling_run = dr_est_sampling_run(p)};
         for (int t = 0; t < b->acc.threads; t++) {

@@ -47,6 +47,7 @@ struct dr_est_base {
     struct dr_est_accum acc;
     struct dr_est_counters thr[DR_MAX_THREADS];
     uint64_t record_bytes;  /* the algorithm's peak recorded-path memory, if any */
+    uint64_t scratch_bytes; /* ... and its other working buffers (prb's parked samples) */
     double t0;
     bool mis;               /* --sampling mis that runs as such: samples go to b->mis_acc, not acc */
     struct dr_mis_accum mis_acc;

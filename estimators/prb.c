@@ -37,12 +37,12 @@ struct prb_radiance {
 };
 
 /* Cross mode (estimator.h) on the wavefront: a sample parked between its
- * primal walk and its replay, which must wait for the pixel's other half. */
+ * primal walk and its replay, whose adjoint waits for its pixel's other samples. */
 struct prb_item {
     struct prb_radiance L;
     int last_diff;            /* the primal walk's (struct walk) */
     bool valid;               /* L is finite */
-    dr_vec3 adj;              /* its adjoint, once the pixel's halves are known */
+    dr_vec3 adj;              /* its adjoint, once its pixel's samples are all walked */
     struct dr_wave_log log;   /* the primal walk's ray answers: the replay traces nothing again */
 };
 /* Samples whose ray answers are parked at most (per thread: about 1.4 MB);
@@ -267,8 +267,9 @@ static bool wave_pixels(struct prb_job *j, int thread, int64_t begin, int64_t en
 }
 
 /* ---- cross mode on the wavefront (estimator.h): the primal walks of a group
- * of pixels' samples, then each pixel's adjoints from its two halves, then
- * the replays, which answer their ray queries from the primal walks' logs */
+ * of pixels' samples, then each sample's adjoint from its pixel's other
+ * samples, then the replays, which answer their ray queries from the primal
+ * walks' logs */
 
 struct cross_ctx {
     struct prb_job *j;
@@ -512,6 +513,12 @@ static int prb_run(struct dr_est_base *b)
             dr_set_error("out of memory (%d samples per pixel)", b->p->spp);
             return DR_ERR_NOMEM;
         }
+    /* what the workers hold besides the gradient: the samples' adjoints, and
+     * in cross mode on the wavefront the parked samples (cross_wave) */
+    uint64_t per_thread = sizeof(dr_vec3) * (uint64_t)b->p->spp;
+    if (j->wave && b->p->cross)
+        per_thread += (uint64_t)cross_group(b->p->spp) * (uint64_t)b->p->spp * (sizeof(struct prb_item) + sizeof(int32_t));
+    b->scratch_bytes = per_thread * (uint64_t)b->acc.threads;
     return dr_parallel_for_static((int64_t)b->p->width * b->p->height, PIXEL_CHUNK, b->acc.threads, prb_pixels, j);
 }
 

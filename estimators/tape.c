@@ -31,8 +31,20 @@
 struct tape_vertex {
     struct dr_path_vertex v;
     dr_vec3 bt;        /* true throughput arriving at the vertex */
-    int64_t prev;      /* the path's vertex before this one (-1: the first) */
+    int64_t prev;      /* the path's vertex before this one (-1: the first; a link, see TAPE_STEP) */
 };
+
+/* A vertex without a derivative term of its own (dr_path_vertex_has_derivative)
+ * under plain detached sampling: the sweep needs only what it adds and how it
+ * passes the throughput on, 56 bytes instead of a whole vertex's 900, so the
+ * record copies and the sweep reads far less. */
+struct tape_step {
+    dr_vec3 e;         /* dr_path_vertex_term */
+    dr_vec3 t;         /* the continuation factor f |cos| / pdf / q (0: the path ends) */
+    int64_t prev;
+};
+/* Links (tape_vertex.prev, tape_path.last) with this bit name a tape_step. */
+#define TAPE_STEP ((int64_t)1 << 62)
 
 size_t dr_tape_vertex_bytes(void)
 {
@@ -45,6 +57,7 @@ struct tape_path {
     int count;
     bool dropped;      /* not finite: left out of the sweep */
     int moving;        /* attached sampling: first vertex whose sampling moves with a parameter (count: none) */
+    bool derivative;   /* some vertex has a derivative term (else the sweep would add nothing) */
     dr_vec3 adj;       /* d loss / d L of this sample (forward mode: ones; cross mode: set after the record) */
     uint64_t key;      /* its sampler's key: derivative sampling's sub-streams hang off it */
     dr_vec3 L;         /* its radiance (cross mode: the others' adjoints are taken without it) */
@@ -53,6 +66,8 @@ struct tape_path {
 struct tape {
     struct tape_vertex *verts;
     int64_t n_verts, cap_verts;
+    struct tape_step *steps;
+    int64_t n_steps, cap_steps;
     struct dr_medium_record *mrecs;   /* one per vertex, only when media parameters are requested */
     int64_t cap_mrecs;
     struct tape_path *paths;
@@ -71,6 +86,7 @@ struct tape_job {
     bool wave;               /* no media: the record runs on the packet tracer */
     bool attached;           /* attached sampling (or mis), and some parameter enters a sampling map */
     bool derivative;         /* derivative sampling (path_deriv.h) */
+    bool steps;              /* vertices without a derivative term are recorded as steps (tape_step) */
 };
 
 /* The tape's arrays live in mappings of their own. Grown with realloc, a
@@ -114,6 +130,7 @@ static bool grow(void **p, int64_t *cap, int64_t need, size_t elem)
 static uint64_t tape_bytes(const struct tape *t, bool media)
 {
     return (uint64_t)t->n_verts * (sizeof(struct tape_vertex) + (media ? sizeof(struct dr_medium_record) : 0)) +
+           (uint64_t)t->n_steps * sizeof(struct tape_step) +
            (uint64_t)t->n_paths * sizeof(struct tape_path);
 }
 
@@ -167,6 +184,22 @@ static struct tape_vertex *new_vertex(struct tape *tp, struct tape_path *path, b
     path->last = tp->n_verts++;
     path->count++;
     return tv;
+}
+
+/* Records vertex v (reached with true throughput bt) as a step of the path
+ * and adds its part to L; false when out of memory. */
+static bool new_step(struct tape *tp, struct tape_path *path, const struct dr_path_vertex *v, dr_vec3 *L, dr_vec3 bt)
+{
+    if (!grow((void **)&tp->steps, &tp->cap_steps, tp->n_steps + 1, sizeof *tp->steps))
+        return false;
+    struct tape_step *st = &tp->steps[tp->n_steps];
+    st->e = dr_path_vertex_term(v);
+    st->t = v->cont ? dr_scale(v->f, v->cos_pdf_q) : dr_v3s(0.0);
+    st->prev = path->last;
+    path->last = TAPE_STEP | tp->n_steps++;
+    path->count++;
+    *L = dr_add(*L, dr_mul(bt, st->e));
+    return true;
 }
 
 /* What the record notes of vertex v (already on the tape): its part of L,
@@ -288,6 +321,11 @@ static bool lane_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, 
     if (l->path < 0 || c->tp->failed)
         return true;
     struct tape_path *path = &c->tp->paths[l->path];
+    if (c->j->steps && !dr_path_vertex_has_derivative(c->j->b.p->scene, c->j->b.p->params, v)) {
+        if (!new_step(c->tp, path, v, &l->L, dr_mul(a->ratio, a->beta)))
+            c->tp->failed = true;
+        return true;
+    }
     struct tape_vertex *tv = new_vertex(c->tp, path, false);
     if (!tv) {
         c->tp->failed = true;
@@ -297,6 +335,7 @@ static bool lane_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, 
     tv->v.mrec = NULL;
     tv->bt = dr_mul(a->ratio, a->beta);
     note_vertex(c->j, path, tv, &l->L);
+    path->derivative = true;
     return true;
 }
 
@@ -353,9 +392,10 @@ static void sweep_derivative(const struct tape_job *j, const struct tape_vertex 
 
 /* Backward sweep over one path (its adjoint path->adj). rays: where
  * derivative sampling counts its extra rays. */
-static void sweep(const struct tape_job *j, const struct tape_vertex *verts, const struct dr_medium_record *mrecs,
+static void sweep(const struct tape_job *j, const struct tape *tp, const struct dr_medium_record *mrecs,
                   const struct tape_path *path, struct dr_grad_sink *sink, struct dr_ray_counts *rays)
 {
+    const struct tape_vertex *verts = tp->verts;
     const int count = path->count;
     const dr_vec3 adj = path->adj;
     const struct dr_scene *s = j->b.p->scene;
@@ -364,6 +404,13 @@ static void sweep(const struct tape_job *j, const struct tape_vertex *verts, con
     dr_vec3 after = dr_v3s(0.0);  /* media: radiance gathered after the vertex */
     const struct tape_vertex *next = NULL;
     for (int64_t i = path->last; i >= 0; i = verts[i].prev) {
+        while (i >= 0 && (i & TAPE_STEP)) {   /* steps: no derivative term, only what they pass on */
+            const struct tape_step *st = &tp->steps[i & ~TAPE_STEP];
+            abar = dr_add(dr_mul(adj, st->e), dr_mul(abar, st->t));
+            i = st->prev;
+        }
+        if (i < 0)
+            break;
         const struct dr_path_vertex *v = &verts[i].v;
         dr_vec3 bt = verts[i].bt;
         if (v->media) {
@@ -425,12 +472,12 @@ static void sweep_attached(const struct tape_job *j, const struct tape_vertex *v
 
 /* One recorded path's sweep. The attached state adjoint mixes the colour
  * channels, so in forward mode each image channel gets its own sweep. */
-static void sweep_path(const struct tape_job *j, const struct tape_vertex *verts,
-                       const struct dr_medium_record *mrecs, const struct tape_path *path, struct dr_grad_sink *sink,
-                       struct dr_ray_counts *rays)
+static void sweep_path(const struct tape_job *j, const struct tape *tp, const struct dr_medium_record *mrecs,
+                       const struct tape_path *path, struct dr_grad_sink *sink, struct dr_ray_counts *rays)
 {
+    const struct tape_vertex *verts = tp->verts;
     if (path->moving >= path->count) {
-        sweep(j, verts, mrecs, path, sink, rays);
+        sweep(j, tp, mrecs, path, sink, rays);
         return;
     }
     if (!sink->dir) {
@@ -445,14 +492,14 @@ static void sweep_path(const struct tape_job *j, const struct tape_vertex *verts
 
 /* mis: one recorded path swept twice, detached and attached, into its
  * group's two estimates (mis.h): the record (every ray) is shared. */
-static void sweep_path_mis(struct tape_job *j, int thread, const struct tape_vertex *verts,
-                           const struct dr_medium_record *mrecs, const struct tape_path *path)
+static void sweep_path_mis(struct tape_job *j, int thread, const struct tape *tp, const struct dr_medium_record *mrecs,
+                           const struct tape_path *path)
 {
     struct dr_grad_sink det, att;
     dr_est_mis_sinks(&j->b, thread, path->pixel, &det, &att);
     struct dr_ray_counts *rays = &j->b.thr[thread].rays;   /* unused: mis is not derivative sampling */
-    sweep(j, verts, mrecs, path, &det, rays);
-    sweep_path(j, verts, mrecs, path, &att, rays);
+    sweep(j, tp, mrecs, path, &det, rays);
+    sweep_path(j, tp, mrecs, path, &att, rays);
     dr_est_mis_sample_done(&j->b, thread, path->pixel, &det, &att);
 }
 
@@ -464,13 +511,13 @@ static void sweep_tape(struct tape_job *j, int thread, const struct tape *tp)
     const struct dr_medium_record *mrecs = j->b.popts.params->media_active ? tp->mrecs : NULL;
     for (int64_t pi = 0; pi < tp->n_paths; pi++) {
         const struct tape_path *path = &tp->paths[pi];
-        if (path->dropped || (j->b.p->cross && dr_is_black(path->adj)))
-            continue;   /* (cross mode: a pixel that does not matter to the loss) */
+        if (path->dropped || (j->b.p->cross && dr_is_black(path->adj)) || (j->steps && !path->derivative))
+            continue;   /* (cross mode: a pixel that does not matter to the loss; steps only: nothing to add) */
         if (j->b.mis) {
-            sweep_path_mis(j, thread, tp->verts, mrecs, path);
+            sweep_path_mis(j, thread, tp, mrecs, path);
             continue;
         }
-        sweep_path(j, tp->verts, mrecs, path, &sink, &j->b.thr[thread].rays);
+        sweep_path(j, tp, mrecs, path, &sink, &j->b.thr[thread].rays);
         dr_est_sample_done(&j->b, thread, path->pixel, &sink);
     }
     dr_est_sink_end(&j->b, thread);
@@ -479,6 +526,7 @@ static void sweep_tape(struct tape_job *j, int thread, const struct tape *tp)
 static void tape_unmap(struct tape *tp)
 {
     map_free(tp->verts, tp->cap_verts, sizeof *tp->verts);
+    map_free(tp->steps, tp->cap_steps, sizeof *tp->steps);
     map_free(tp->mrecs, tp->cap_mrecs, sizeof *tp->mrecs);
     map_free(tp->paths, tp->cap_paths, sizeof *tp->paths);
     *tp = (struct tape){0};
@@ -502,7 +550,7 @@ static void tape_take(struct tape *tp, int t)
     *tp = tape_pool.kept[t];
     tape_pool.kept[t] = (struct tape){0};
     pthread_mutex_unlock(&tape_pool.lock);
-    tp->n_verts = tp->n_paths = 0;
+    tp->n_verts = tp->n_steps = tp->n_paths = 0;
     tp->peak = 0;
     tp->failed = false;
 }
@@ -528,7 +576,7 @@ static void record_and_sweep(void *ctx, int thread, int64_t begin, int64_t end)
     struct tape *tp = &j->tapes[thread];
     if (tp->failed)
         return;
-    tp->n_verts = tp->n_paths = 0;
+    tp->n_verts = tp->n_steps = tp->n_paths = 0;
     if (!(j->wave && record_wave(j, tp, thread, begin, end)))
         record_one_by_one(j, tp, thread, begin, end);
     uint64_t bytes = tape_bytes(tp, j->b.popts.params->media_active);
@@ -548,6 +596,9 @@ static int tape_run(struct dr_est_base *b)
     j->attached = run == DR_SAMPLING_ATTACHED || run == DR_SAMPLING_MIS;
     j->derivative = run == DR_SAMPLING_DERIVATIVE;
     j->wave = !(b->popts.stages & DR_STAGE_MEDIA);
+    /* steps: plain detached sampling on the packet tracer (attached, mis and
+     * derivative sampling read whole vertices where detached has no term) */
+    j->steps = j->wave && run == DR_SAMPLING_DETACHED && !b->mis;
     for (int t = 0; t < threads; t++)
         tape_take(&j->tapes[t], t);
     const int64_t pixels = (int64_t)p->width * p->height;
@@ -574,7 +625,7 @@ static void tape_release(struct dr_est_base *b)
     for (int t = 0; t < DR_MAX_THREADS; t++) {
         if (j->tapes[t].failed)
             tape_unmap(&j->tapes[t]);   /* (an out-of-memory tape is not worth keeping) */
-        else if (j->tapes[t].cap_verts || j->tapes[t].cap_paths || j->tapes[t].cap_mrecs)
+        else if (j->tapes[t].cap_verts || j->tapes[t].cap_steps || j->tapes[t].cap_paths || j->tapes[t].cap_mrecs)
             tape_leave(&j->tapes[t], t);
         dr_wave_destroy(j->waves[t]);
         free(j->pixels[t]);
