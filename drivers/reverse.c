@@ -82,16 +82,19 @@ static int primal(struct rev_work *w, uint64_t seed, int spp, struct dr_reverse_
     return 0;
 }
 
-/* The estimator with the current adjoint: spp samples, this seed, into g. */
-static int gradient(struct rev_work *w, uint64_t seed, int spp, double *g, struct dr_reverse_result *r)
+/* The estimator: spp samples, this seed, into g; with the current adjoint
+ * image, or with cross non-NULL from the paths themselves. */
+static int run_estimator(struct rev_work *w, uint64_t seed, int spp, const struct dr_cross_loss *cross, double *g,
+                         struct dr_reverse_result *r)
 {
     struct dr_grad_problem p = w->o->problem;
     p.spp = spp;
     p.seed = seed;
+    p.cross = cross;
     if (!p.mis_history && w->mis.stats)
         p.mis_history = &w->mis;
     struct dr_grad_stats st = {0};
-    int rc = dr_estimator_backward(w->o->estimator, &p, w->adj, g, &st);
+    int rc = dr_estimator_backward(w->o->estimator, &p, cross ? NULL : w->adj, g, &st);
     if (rc != 0)
         return rc;
     r->t_gradient += st.seconds;
@@ -100,28 +103,21 @@ static int gradient(struct rev_work *w, uint64_t seed, int spp, double *g, struc
     return 0;
 }
 
+static int gradient(struct rev_work *w, uint64_t seed, int spp, double *g, struct dr_reverse_result *r)
+{
+    return run_estimator(w, seed, spp, NULL, g, r);
+}
+
 /* Cross mode: batch b's gradient into half[0], from one estimator run
  * whose paths are their own primal; its image goes into the sum. */
 static int cross_gradient(struct rev_work *w, uint64_t seed, struct dr_reverse_result *r)
 {
     const struct dr_cross_loss cross = {.loss = w->o->loss, .target = w->target, .scale = w->o->loss_scale,
                                         .image = w->cross_img};
-    struct dr_grad_problem p = w->o->problem;
-    p.spp = r->spp_batch;
-    p.seed = seed;
-    p.cross = &cross;
-    if (!p.mis_history && w->mis.stats)
-        p.mis_history = &w->mis;
-    struct dr_grad_stats st = {0};
-    int rc = dr_estimator_backward(w->o->estimator, &p, NULL, w->half[0], &st);
-    if (rc != 0)
-        return rc;
-    r->t_gradient += st.seconds;
-    if (w->o->on_gradient)
-        w->o->on_gradient(w->o->ctx, &st);
-    for (size_t i = 0; i < w->n; i++)
+    int rc = run_estimator(w, seed, r->spp_batch, &cross, w->half[0], r);
+    for (size_t i = 0; rc == 0 && i < w->n; i++)
         w->img_sum[i] += w->cross_img[i];
-    return 0;
+    return rc;
 }
 
 /* Batch b's gradient g_b into r->grad's running mean (Welford), and, with
