@@ -53,6 +53,16 @@ have_oiio=true have_python=true
 command -v oiiotool >/dev/null 2>&1 || { echo "FAIL: oiiotool is required (scripts/install-deps.sh installs openimageio-tools)"; exit 1; }
 python3 -c 'import json' 2>/dev/null || { echo "FAIL: python3 is required (scripts/install-deps.sh installs it)"; exit 1; }
 
+# A misspelt or missing helper or tool must fail the test, not print
+# "command not found" and carry on (the scripts do not run with set -e).
+# bash runs this handler in a subshell, so it stops the script by signal: the
+# TERM trap below exits non-zero.
+command_not_found_handle() {
+    echo "FAIL: command not found: $1 (a missing helper or tool)" >&2
+    kill -TERM $$
+    return 127
+}
+
 cli_setup() {   # cli_setup NAME
     tmp=$(mktemp -d "${TMPDIR:-/tmp}/drender-cli-$1.XXXXXX") || exit 1
     trap '[ -n "$bg_pid" ] && kill "$bg_pid" 2>/dev/null; rm -rf "$tmp"' EXIT
