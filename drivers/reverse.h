@@ -27,12 +27,13 @@
  * two estimator runs per batch instead of one.
  *
  * DR_PRIMAL_CROSS (the default of grad and optimize) renders no primal
- * image: batch b's estimator run takes each pixel's adjoint from its own
- * paths, the even samples' derivatives weighted at the odd samples' mean and
- * the other way round (estimator.h, struct dr_cross_loss). Independent halves
- * keep it unbiased and the K batches stay i.i.d., so the standard error is
- * their spread as above; the parts are not estimated (the halves mix both
- * noises). It needs spp_b >= 2; with fewer, the run is DR_PRIMAL_PER_BATCH.
+ * image: batch b's estimator run weights each sample's derivative with the
+ * loss's adjoint at the mean of its pixel's other samples (estimator.h,
+ * struct dr_cross_loss). That mean is independent of the sample, which keeps
+ * the estimate unbiased, and the K batches stay i.i.d., so the standard error
+ * is their spread as above; the parts are not estimated (a sample's primal
+ * and derivative noise are no longer apart). It needs spp_b >= 2; with
+ * fewer, the run is DR_PRIMAL_PER_BATCH.
  * The cost against DR_PRIMAL_PER_BATCH: one estimator run per batch and no
  * render, i.e. the estimator's own primal walks serve as the loss's primal.
  *
@@ -48,7 +49,7 @@
 
 enum dr_primal_mode {
     DR_PRIMAL_PER_BATCH,   /* each batch its own primal image (the honest estimator) */
-    DR_PRIMAL_CROSS,       /* each batch's paths are their own primal, half for half (as honest, no render) */
+    DR_PRIMAL_CROSS,       /* each batch's paths are their own primal, leave one out (as honest, no render) */
     DR_PRIMAL_SHARED,      /* one primal for all batches (understates the error; tests only) */
 };
 
