@@ -175,12 +175,15 @@ int dr_reverse_gradient(const struct dr_reverse_options *o, const float *target,
         dr_set_error("reverse mode needs at least 2 batches for a standard error");
         return DR_ERR_ARG;
     }
-    struct rev_work w = {.o = o, .target = target, .n = (size_t)p->width * (size_t)p->height * 3,
-                         .T = p->params->total, .steps = 2 * K};
-    if (o->primal == DR_PRIMAL_CROSS && r->spp_batch >= 2)
-        w.steps = K;
     r->spp_batch = (int)(((int64_t)p->spp + K - 1) / K);
-    r->primal_run = o->primal == DR_PRIMAL_CROSS && r->spp_batch < 2 ? DR_PRIMAL_PER_BATCH : o->primal;
+    /* the cross primal needs a pixel's samples independent of each other: not
+     * so with one sample, nor under the stratified and sobol samplers, whose
+     * samples of a pixel share their strata (estimator.h) */
+    const bool cross_ok = r->spp_batch >= 2 && p->sampler == DR_SAMPLER_INDEPENDENT;
+    r->primal_run = o->primal == DR_PRIMAL_CROSS && !cross_ok ? DR_PRIMAL_PER_BATCH : o->primal;
+    /* progress steps: a render and an estimator run per batch, or (cross) the run alone */
+    struct rev_work w = {.o = o, .target = target, .n = (size_t)p->width * (size_t)p->height * 3,
+                         .T = p->params->total, .steps = r->primal_run == DR_PRIMAL_CROSS ? K : 2 * K};
     /* mis: a batch in one piece (no halves, so no se_gradient/se_primal
      * split): weights from halves of 2 spp were poor (mis.h) */
     const bool mis = dr_est_sampling_run(p) == DR_SAMPLING_MIS;

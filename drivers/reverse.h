@@ -32,8 +32,8 @@
  * struct dr_cross_loss). That mean is independent of the sample, which keeps
  * the estimate unbiased, and the K batches stay i.i.d., so the standard error
  * is their spread as above; the parts are not estimated (a sample's primal
- * and derivative noise are no longer apart). It needs spp_b >= 2; with
- * fewer, the run is DR_PRIMAL_PER_BATCH.
+ * and derivative noise are no longer apart). It needs spp_b >= 2 and the
+ * independent sampler (estimator.h); otherwise the run is DR_PRIMAL_PER_BATCH.
  * The cost against DR_PRIMAL_PER_BATCH: one estimator run per batch and no
  * render, i.e. the estimator's own primal walks serve as the loss's primal.
  *
@@ -77,7 +77,8 @@ struct dr_reverse_result {
     bool parts;                      /* se_gradient / se_primal were estimated */
     uint64_t primal_seed;            /* hash(seed ^ "PRIMAL"); batch b uses hash(primal_seed + b) */
     double t_primal, t_gradient;     /* seconds in renders and in estimator runs */
-    enum dr_primal_mode primal_run;  /* what ran: DR_PRIMAL_CROSS with spp_batch < 2 runs per batch */
+    enum dr_primal_mode primal_run;  /* what ran: DR_PRIMAL_CROSS with spp_batch < 2 or a stratified
+                                        or sobol sampler runs per batch */
 };
 
 /* target: width * height * 3 linear floats. 0 or a negative DR_ERR_*. */

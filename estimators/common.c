@@ -291,8 +291,10 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
     }
     b->t0 = dr_clock_seconds();
     b->p = p;
-    if (p->cross && (dir || p->spp < 2 || !p->cross->target || !p->cross->image)) {
-        dr_set_error("the cross primal is for reverse mode with at least 2 samples per pixel (spp %d)", p->spp);
+    if (p->cross && (dir || p->spp < 2 || p->sampler != DR_SAMPLER_INDEPENDENT || !p->cross->target ||
+                     !p->cross->image)) {
+        dr_set_error("the cross primal is for reverse mode with at least 2 independent samples per pixel "
+                     "(spp %d, sampler %d)", p->spp, (int)p->sampler);
         free(b);
         return DR_ERR_ARG;
     }

@@ -48,7 +48,10 @@ struct dr_estimator_ops;
  * unbiased, as with a separate primal (for l2 it is the U-statistic of the
  * product of the two means, the least-variance unbiased use of the same
  * paths), and the primal costs nothing beyond the walks the gradient makes
- * anyway. Needs spp >= 2. */
+ * anyway. Needs spp >= 2 and the independent sampler: the stratified and
+ * sobol samplers make a pixel's samples depend on each other (they share
+ * the strata), and the mean of the others would then be correlated with the
+ * sample, a bias of order 1/spp. */
 struct dr_cross_loss {
     enum dr_loss_kind loss;
     const float *target;   /* the rendered rectangle's width * height * 3 values */

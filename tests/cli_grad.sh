@@ -199,6 +199,11 @@ a, b = (json.load(open(f)) for f in sys.argv[1:])
 ga, gb = a["parameters"][0]["gradient"], b["parameters"][0]["gradient"]
 sys.exit(not (all(abs(x - y) <= 1e-9 * max(abs(x), abs(y)) for x, y in zip(ga, gb)) and a["loss"] == b["loss"]))
 PY
+# stratified samples of a pixel depend on each other (shared strata): their
+# leave-one-out means would be correlated with the sample, so separate runs
+run grad --target t.exr --param "$red" --spp 16 --batches 4 --sampler stratified --json
+expect_rc 0 "grad --sampler stratified (cross requested)"
+json_check "$tmp/out" 'd["primal"] == "separate" and d["time"]["primal"] > 0'
 run grad --target t.exr --param "$red" --primal sideways
 expect_rc 2 "grad --primal sideways"
 expect_in err "unknown mode 'sideways' (available: cross, separate)" "grad --primal sideways"
