@@ -196,6 +196,59 @@ static void cross_many_samples(struct dr_scene *s, const struct dr_camera *cam, 
     dr_param_set_destroy(ps);
 }
 
+/* dr_path_vertex_has_derivative's contract, checked against the adjoints
+ * themselves: a vertex it calls derivative-free gets nothing from
+ * d_path_vertex_term (nor d_path_continuation, which only differentiated
+ * materials reach). prb's shortened replays and tape's steps both rest on
+ * it, so their agreement above could not catch a predicate that forgot a
+ * kind of term: this can. */
+static void derivative_predicate(struct dr_scene *s, const struct dr_camera *cam, const char *const *ptrs, int n)
+{
+    struct dr_param_set *ps = dr_param_set_create(s, ptrs, n);
+    CHECK(ps != NULL, "predicate: %s", dr_last_error());
+    if (!ps)
+        return;
+    const struct dr_path_opts opts = {.max_depth = 8, .rr_depth = DR_RR_DEPTH_DEFAULT,
+                                      .stages = dr_path_plan(s, ps), .params = ps};
+    struct dr_camera_view view = dr_camera_view(cam, W, H);
+    double *g = calloc((size_t)ps->total, sizeof(double));
+    struct dr_ray_counts rays = {0};
+    int with = 0, without = 0, leaks = 0;
+    for (int i = 0; i < 4000; i++) {
+        struct dr_sampler smp;
+        dr_sampler_init(&smp, 21, (uint64_t)i, 0);
+        double u, v;
+        dr_sampler_next2(&smp, &u, &v);
+        dr_vec3 o, d;
+        dr_camera_ray(&view, (i % W) + u, ((i / W) % H) + v, &o, &d);
+        struct dr_path_state st;
+        struct dr_path_vertex vx;
+        dr_path_start(&st, o, d);
+        for (bool more = true; more;) {
+            more = dr_path_step(s, &opts, &st, &smp, &vx, &rays);
+            if (dr_path_vertex_has_derivative(s, ps, &vx)) {
+                with++;
+                continue;
+            }
+            without++;
+            struct dr_grad_sink sink = dr_sink_reverse(g);
+            d_path_vertex_term(s, ps, &vx, dr_v3s(1.0), &sink);
+            if (vx.cont && vx.diff_bsdf)
+                d_path_continuation(s, ps, &vx, dr_v3s(1.0), &sink);
+            for (int64_t k = 0; k < ps->total; k++)
+                if (g[k] != 0.0) {
+                    leaks++;
+                    g[k] = 0.0;
+                }
+        }
+    }
+    CHECK(with > 0 && without > 0, "predicate: vertices with %d, without %d (both kinds needed)", with, without);
+    CHECK(leaks == 0, "predicate: %d derivative terms at vertices it calls derivative-free", leaks);
+    printf("derivative predicate: %d vertices with a term, %d without, %d leaks\n", with, without, leaks);
+    free(g);
+    dr_param_set_destroy(ps);
+}
+
 /* tape keeps each worker's tape mappings from one run to the next (tape.c):
  * a run after runs of other depths, batch sizes and thread counts gives bit
  * for bit what it gave before them. */
@@ -250,6 +303,9 @@ int main(void)
         "/images/0",
     };
     compare("cornell box", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DETACHED);
+    /* one parameter at a time: most vertices then have no term */
+    for (int k = 0; k < 7; k++)
+        derivative_predicate(s, &s->cameras[0], &ptrs[k], 1);
     /* derivative sampling: the same sub-streams, the same terms in another order */
     compare("cornell box, derivative sampling", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DERIVATIVE);
     compare("cornell box, paths longer than the replay log", s, &s->cameras[0], ptrs, 7, DR_WAVE_REPLAY_DEPTH + 12,
@@ -293,6 +349,8 @@ int main(void)
     compare("glossy scene, derivative sampling", s, &cam, gptrs, 8, 6, DR_SAMPLING_DERIVATIVE);
     tape_reuse(s, &cam, gptrs, 8);
     cross_many_samples(s, &cam, gptrs, 8);
+    for (int k = 0; k < 8; k++)
+        derivative_predicate(s, &cam, &gptrs[k], 1);
     dr_scene_destroy(s);
     return TEST_END();
 }
