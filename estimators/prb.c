@@ -177,9 +177,15 @@ static void attached_pixel(struct prb_job *j, int thread, int64_t px, const dr_v
 /* Pixels per parallel chunk (and at most per wavefront run). */
 #define PIXEL_CHUNK 16
 
-struct wave_ctx {
+/* What every wavefront callback needs of its run: the first member of
+ * struct wave_ctx and struct cross_ctx, so one vertex callback serves both. */
+struct lane_ctx {
     struct prb_job *j;
     int thread;
+};
+
+struct wave_ctx {
+    struct lane_ctx run;
     struct dr_grad_sink sink;   /* the thread's, copied into each lane */
     int64_t px[PIXEL_CHUNK];
     dr_vec3 adj[PIXEL_CHUNK];
@@ -198,10 +204,10 @@ static void lane_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp,
 {
     struct wave_ctx *c = ctx;
     struct prb_lane *l = user;
-    const int spp = c->j->b.p->spp;
+    const int spp = c->run.j->b.p->spp;
     l->px = c->px[i / spp];
     l->w.adj = c->adj[i / spp];
-    dr_est_camera_ray(&c->j->b, l->px, (int)(i % spp), smp, o, d);
+    dr_est_camera_ray(&c->run.j->b, l->px, (int)(i % spp), smp, o, d);
     l->smp0 = *smp;
     l->o = *o;
     l->d = *d;
@@ -215,14 +221,16 @@ static bool replay_goes_on(const struct walk *w, const struct dr_path_vertex *v)
     return !w->sink || v->depth < w->last_diff;
 }
 
+/* A lane's vertex, in both kinds of run: its lane state begins with its
+ * walk (struct prb_lane, struct cross_lane). */
 static bool lane_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
                         struct dr_sampler *smp, bool more)
 {
     (void)more;
-    struct wave_ctx *c = ctx;
-    struct prb_lane *l = user;
-    walk_vertex(&c->j->b, &l->w, v, a->beta, a->ratio, smp, &c->j->b.thr[c->thread].rays);
-    return replay_goes_on(&l->w, v);
+    const struct lane_ctx *c = ctx;
+    struct walk *w = user;
+    walk_vertex(&c->j->b, w, v, a->beta, a->ratio, smp, &c->j->b.thr[c->thread].rays);
+    return replay_goes_on(w, v);
 }
 
 /* The primal walk ended: the replay of the same path follows (the wavefront
@@ -231,13 +239,13 @@ static enum dr_wave_next lane_walk_end(void *ctx, void *user, struct dr_sampler 
 {
     struct wave_ctx *c = ctx;
     struct prb_lane *l = user;
-    struct dr_est_base *b = &c->j->b;
+    struct dr_est_base *b = &c->run.j->b;
     if (l->w.sink) {   /* the replay ended: the sample is done */
-        dr_est_sample_done(b, c->thread, l->px, l->w.sink);
+        dr_est_sample_done(b, c->run.thread, l->px, l->w.sink);
         return DR_WAVE_DONE;
     }
     if (!dr_v3_finite(l->w.L.true_) || !dr_v3_finite(l->w.L.sub)) {
-        b->thr[c->thread].invalid++;
+        b->thr[c->run.thread].invalid++;
         return DR_WAVE_DONE;
     }
     if (l->w.last_diff == 0)
@@ -256,7 +264,7 @@ static bool wave_pixels(struct prb_job *j, int thread, int64_t begin, int64_t en
     struct dr_est_base *b = &j->b;
     if (!j->waves[thread] && !(j->waves[thread] = dr_wave_create()))
         return false;   /* no memory for the lanes: one path at a time */
-    struct wave_ctx c = {.j = j, .thread = thread, .sink = sink};
+    struct wave_ctx c = {.run = {j, thread}, .sink = sink};
     int n = 0;
     for (int64_t px = begin; px < end; px++)
         if (dr_est_sample_adjoint(b, px, &c.adj[n]))
@@ -272,8 +280,7 @@ static bool wave_pixels(struct prb_job *j, int thread, int64_t begin, int64_t en
  * walks' logs */
 
 struct cross_ctx {
-    struct prb_job *j;
-    int thread;
+    struct lane_ctx run;
     struct dr_grad_sink sink;
     int64_t first_px;            /* item i: sample i % spp of pixel first_px + i / spp */
     struct prb_item *items;
@@ -292,25 +299,15 @@ _Static_assert(sizeof(struct cross_lane) <= DR_WAVE_USER_BYTES, "a cross lane's 
 static void cross_ray(struct cross_ctx *c, struct cross_lane *l, int64_t i, struct dr_sampler *smp, dr_vec3 *o,
                       dr_vec3 *d)
 {
-    const int spp = c->j->b.p->spp;
+    const int spp = c->run.j->b.p->spp;
     l->item = i;
     l->px = c->first_px + i / spp;
-    dr_est_camera_ray(&c->j->b, l->px, (int)(i % spp), smp, o, d);
+    dr_est_camera_ray(&c->run.j->b, l->px, (int)(i % spp), smp, o, d);
 }
 
 static void cross_primal_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
 {
     cross_ray(ctx, user, i, smp, o, d);
-}
-
-static bool cross_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
-                         struct dr_sampler *smp, bool more)
-{
-    (void)more;
-    struct cross_ctx *c = ctx;
-    struct cross_lane *l = user;
-    walk_vertex(&c->j->b, &l->w, v, a->beta, a->ratio, smp, &c->j->b.thr[c->thread].rays);
-    return replay_goes_on(&l->w, v);
 }
 
 static void cross_keep_log(void *ctx, void *user, const struct dr_wave_log *log)
@@ -331,7 +328,7 @@ static enum dr_wave_next cross_primal_end(void *ctx, void *user, struct dr_sampl
     it->last_diff = l->w.last_diff;
     it->valid = dr_v3_finite(l->w.L.true_) && dr_v3_finite(l->w.L.sub);
     if (!it->valid)
-        c->j->b.thr[c->thread].invalid++;
+        c->run.j->b.thr[c->run.thread].invalid++;
     return DR_WAVE_DONE;
 }
 
@@ -360,7 +357,7 @@ static enum dr_wave_next cross_replay_end(void *ctx, void *user, struct dr_sampl
     (void)smp, (void)o, (void)d;
     struct cross_ctx *c = ctx;
     struct cross_lane *l = user;
-    dr_est_sample_done(&c->j->b, c->thread, l->px, &l->sink);
+    dr_est_sample_done(&c->run.j->b, c->run.thread, l->px, &l->sink);
     return DR_WAVE_DONE;
 }
 
@@ -385,13 +382,13 @@ static bool cross_wave(struct prb_job *j, int thread, int64_t begin, int64_t end
         return false;
     struct prb_item *items = j->items[thread];
     int32_t *order = j->order[thread];
-    static const struct dr_wave_ops primal = {cross_primal_start, cross_vertex, cross_primal_end, cross_keep_log,
+    static const struct dr_wave_ops primal = {cross_primal_start, lane_vertex, cross_primal_end, cross_keep_log,
                                               NULL};
-    static const struct dr_wave_ops replay = {cross_replay_start, cross_vertex, cross_replay_end, NULL,
+    static const struct dr_wave_ops replay = {cross_replay_start, lane_vertex, cross_replay_end, NULL,
                                               cross_replay_log};
     for (int64_t first = begin; first < end; first += group) {
         const int64_t n_px = end - first < group ? end - first : group;
-        struct cross_ctx c = {.j = j, .thread = thread, .sink = sink, .first_px = first, .items = items,
+        struct cross_ctx c = {.run = {j, thread}, .sink = sink, .first_px = first, .items = items,
                               .logs = n_px * spp <= CROSS_LOGGED_ITEMS, .order = order};
         dr_wave_run(j->waves[thread], b->p->scene, &b->popts, n_px * spp, &primal, &c, &b->thr[thread].rays);
         int32_t n = 0;
