@@ -244,6 +244,19 @@ void dr_texture_eval(const struct dr_texture *tex, const struct dr_image *img,
     out[3] = (c == 2 || c >= 4) ? acc[3] : 1.0; /* exactly opaque without alpha */
 }
 
+void dr_texture_prefetch(const struct dr_texture *tex, const struct dr_image *img, double u, double v,
+                         bool use_linear)
+{
+    const float *pix = img ? (use_linear && img->linear ? img->linear : img->data) : NULL;
+    if (!pix || img->width <= 0 || img->height <= 0 || img->channels <= 0)
+        return;
+    int64_t idx[4];
+    double wt[4];
+    dr_texture_taps(tex, img, u, v, idx, wt);
+    for (int i = 0; i < 4; i++)
+        __builtin_prefetch(pix + (size_t)idx[i] * (size_t)img->channels);
+}
+
 void d_texture_eval(const struct dr_texture *tex, const struct dr_image *img, double u, double v,
                     const double d_out[4], int64_t slot, struct dr_grad_sink *sink)
 {

@@ -53,6 +53,12 @@ void dr_texture_eval(const struct dr_texture *tex, const struct dr_image *img,
  * sum_i w[i] * pixels[idx[i] * channels + c]. Derivatives use the same taps. */
 void dr_texture_taps(const struct dr_texture *tex, const struct dr_image *img, double u, double v,
                      int64_t idx[4], double w[4]);
+/* Asks the cache for the texels dr_texture_eval(tex, img, u, v, use_linear)
+ * will read, without waiting for them: a packet tracer calls it for all its
+ * hits before shading any, so the misses of a large texture overlap instead
+ * of stalling one lane after another. Changes no result. */
+void dr_texture_prefetch(const struct dr_texture *tex, const struct dr_image *img, double u, double v,
+                         bool use_linear);
 
 /* How an rgba adjoint d_out lands on an image's channels (grey images gather
  * r+g+b into channel 0): fills g[0..k) and returns k = min(channels, 4). */

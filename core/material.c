@@ -44,6 +44,28 @@ void dr_material_eval(const struct dr_scene *s, const struct dr_hit *hit, struct
     }
 }
 
+static void texref_prefetch(const struct dr_scene *s, const struct dr_texref *r, const struct dr_hit *hit,
+                            bool use_linear)
+{
+    const struct dr_texture *t = texref_texture(s, r);
+    if (!t)
+        return;
+    double uv[2];
+    dr_texref_uv(&s->mesh, r, hit, uv);
+    dr_texture_prefetch(t, &s->images[t->image], uv[0], uv[1], use_linear);
+}
+
+/* The same lookups as dr_material_eval, dr_emission and dr_normal_map_apply. */
+void dr_material_prefetch(const struct dr_scene *s, const struct dr_hit *hit)
+{
+    const struct dr_material *m = &s->materials[hit->material];
+    texref_prefetch(s, &m->base_color_tex, hit, true);
+    texref_prefetch(s, &m->metallic_roughness_tex, hit, false);
+    if (!dr_is_black(m->emissive_factor) && m->emissive_strength != 0.0)   /* else dr_emission reads nothing */
+        texref_prefetch(s, &m->emissive_tex, hit, true);
+    texref_prefetch(s, &m->normal_tex, hit, false);
+}
+
 void d_material_eval(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_hit *hit,
                      const struct dr_d_bsdf *d_b, struct dr_grad_sink *k)
 {

@@ -13,6 +13,12 @@
  * G = roughness, B = metallic, linear). Textures are looked up at their texref's
  * uv set through its KHR_texture_transform (dr_texref_uv). */
 void dr_material_eval(const struct dr_scene *scene, const struct dr_hit *hit, struct dr_bsdf *b);
+/* Prefetches the texels that shading hit will read from its material's
+ * textures (base colour, metallic-roughness, emission, normal map), for a
+ * packet tracer that locates all its hits before shading them
+ * (dr_texture_prefetch). Changes no result; a material without textures
+ * costs a few loads. */
+void dr_material_prefetch(const struct dr_scene *scene, const struct dr_hit *hit);
 /* Adjoint: d_b (of dr_material_eval's output) into the requested factors and
  * texels of the hit's material. */
 void d_material_eval(const struct dr_scene *scene, const struct dr_param_set *params, const struct dr_hit *hit,

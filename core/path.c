@@ -144,15 +144,21 @@ static bool surface_emits(const struct dr_scene *s, const struct dr_path_opts *o
     return o->params && o->params->mat_emission_active[mat];
 }
 
-/* Stage emission: the hit point (recomputed in double: Embree only says
- * which triangle) and the radiance it emits towards the ray, MIS-weighted
- * against next-event estimation of that triangle. */
-static void stage_surface_hit(const struct dr_scene *s, const struct dr_path_opts *opts,
-                              const struct dr_path_state *st, int64_t tri, struct dr_path_vertex *v)
+/* The hit point (recomputed in double: Embree only says which triangle). */
+static inline void stage_locate(const struct dr_scene *s, const struct dr_path_state *st, int64_t tri,
+                                struct dr_path_vertex *v)
 {
     v->kind = DR_VERTEX_SURFACE;
+    dr_hit_compute(&s->mesh, tri, st->o, st->d, &v->hit);
+}
+
+/* Stage emission, after stage_locate: the shading normal and the radiance the
+ * hit emits towards the ray, MIS-weighted against next-event estimation of
+ * that triangle. */
+static inline void stage_emission(const struct dr_scene *s, const struct dr_path_opts *opts,
+                                  const struct dr_path_state *st, int64_t tri, struct dr_path_vertex *v)
+{
     struct dr_hit *hit = &v->hit;
-    dr_hit_compute(&s->mesh, tri, st->o, st->d, hit);
     if (s->effects & DR_FX_NORMAL_MAPS)
         dr_normal_map_apply(s, hit);
     if (!(opts->stages & DR_STAGE_EMISSION) || !surface_emits(s, opts, tri, hit->material))
@@ -160,6 +166,13 @@ static void stage_surface_hit(const struct dr_scene *s, const struct dr_path_opt
     v->emits = true;
     v->Le = dr_emission(s, hit);
     v->emit_w = st->depth == 1 ? 1.0 : dr_mis_power(st->prev_pdf, dr_light_pdf_area(s, s->light_sampler, st->prev_p, hit));
+}
+
+static void stage_surface_hit(const struct dr_scene *s, const struct dr_path_opts *opts,
+                              const struct dr_path_state *st, int64_t tri, struct dr_path_vertex *v)
+{
+    stage_locate(s, st, tri, v);
+    stage_emission(s, opts, st, tri, v);
 }
 
 /* Stage material: the shading frame oriented towards the arriving ray, the
@@ -314,20 +327,44 @@ void dr_path_step_begin(struct dr_path_state *st, struct dr_path_vertex *v)
     v->emits = v->shaded = v->nee = v->cont = v->diff_bsdf = v->media = false;
 }
 
-enum dr_step_next dr_path_step_hit(const struct dr_scene *s, const struct dr_path_opts *opts,
-                                   const struct dr_path_state *st, struct dr_sampler *sampler,
-                                   struct dr_path_vertex *v, int64_t tri, struct dr_shadow_ray *shadow)
+void dr_path_step_locate(const struct dr_scene *s, const struct dr_path_state *st, struct dr_path_vertex *v,
+                         int64_t tri)
+{
+    if (tri >= 0)
+        stage_locate(s, st, tri, v);
+}
+
+/* dr_path_step_shade's body, inlined into dr_path_step_hit as well. */
+static inline __attribute__((always_inline)) enum dr_step_next
+step_shade(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_state *st,
+           struct dr_sampler *sampler, struct dr_path_vertex *v, int64_t tri, struct dr_shadow_ray *shadow)
 {
     if (tri < 0) {
         stage_escaped(s, opts, st, v);
         return DR_STEP_END;
     }
-    stage_surface_hit(s, opts, st, tri, v);
+    stage_emission(s, opts, st, tri, v);
     if (!stage_material(s, opts, st, sampler, v))
         return DR_STEP_END;
     if ((opts->stages & DR_STAGE_NEE) && dr_path_nee_begin(s, v, shadow))
         return DR_STEP_SHADOW;
     return DR_STEP_CONTINUE;
+}
+
+enum dr_step_next dr_path_step_hit(const struct dr_scene *s, const struct dr_path_opts *opts,
+                                   const struct dr_path_state *st, struct dr_sampler *sampler,
+                                   struct dr_path_vertex *v, int64_t tri, struct dr_shadow_ray *shadow)
+{
+    if (tri >= 0)
+        stage_locate(s, st, tri, v);
+    return step_shade(s, opts, st, sampler, v, tri, shadow);
+}
+
+enum dr_step_next dr_path_step_shade(const struct dr_scene *s, const struct dr_path_opts *opts,
+                                     const struct dr_path_state *st, struct dr_sampler *sampler,
+                                     struct dr_path_vertex *v, int64_t tri, struct dr_shadow_ray *shadow)
+{
+    return step_shade(s, opts, st, sampler, v, tri, shadow);
 }
 
 bool dr_path_step(const struct dr_scene *s, const struct dr_path_opts *opts, struct dr_path_state *st,

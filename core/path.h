@@ -315,6 +315,15 @@ void dr_path_count_trace(const struct dr_path_state *st, struct dr_ray_counts *c
 enum dr_step_next dr_path_step_hit(const struct dr_scene *scene, const struct dr_path_opts *opts,
                                    const struct dr_path_state *st, struct dr_sampler *sampler,
                                    struct dr_path_vertex *v, int64_t tri, struct dr_shadow_ray *shadow);
+/* dr_path_step_hit in two halves, for a packet tracer that prefetches what
+ * shading its hits will read (dr_material_prefetch) once it knows where
+ * they are: locate computes v->hit of a surface hit (nothing when tri < 0),
+ * shade is the rest. */
+void dr_path_step_locate(const struct dr_scene *scene, const struct dr_path_state *st, struct dr_path_vertex *v,
+                         int64_t tri);
+enum dr_step_next dr_path_step_shade(const struct dr_scene *scene, const struct dr_path_opts *opts,
+                                     const struct dr_path_state *st, struct dr_sampler *sampler,
+                                     struct dr_path_vertex *v, int64_t tri, struct dr_shadow_ray *shadow);
 /* Next-event estimation in two halves around the shadow ray's query. begin:
  * false when no ray is needed (and nothing contributes). */
 bool dr_path_nee_begin(const struct dr_scene *scene, struct dr_path_vertex *v, struct dr_shadow_ray *shadow);

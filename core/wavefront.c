@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "accel.h"
+#include "material.h"
 
 struct lane {
     struct dr_path_state st;
@@ -36,6 +37,7 @@ struct dr_wave {
     struct batch rays;
     int64_t tri[DR_WAVE_LANES];       /* by ray of the batch */
     bool occluded[DR_WAVE_LANES];
+    bool prefetch;                    /* locate all hits before shading any (dr_wave_prefetches) */
 };
 
 /* Is the answer for the lane's current vertex in its log (a replay)? */
@@ -96,6 +98,27 @@ static void trace_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
         l->tri = w->tri[k];
         if (!l->replaying && l->st.depth <= DR_WAVE_REPLAY_DEPTH)
             l->log.tri[(l->log.n = l->st.depth) - 1] = l->tri;
+        if (w->prefetch && l->tri >= 0)
+            dr_mesh_prefetch_triangle(&s->mesh, l->tri);
+    }
+}
+
+/* Before shading (w->prefetch): every lane's hit point, and the texels its
+ * shading will read asked for, so that the cache misses of a big scene or
+ * texture overlap (geometry.h); the triangles' records were asked for as the
+ * trace's answers came in, the vertices one pass before the hit points. */
+static void locate_live(struct dr_wave *w, int n_live, const struct dr_scene *s)
+{
+    for (int i = 0; i < n_live; i++) {
+        const struct lane *l = &w->lane[w->live[i]];
+        if (l->tri >= 0)
+            dr_mesh_prefetch_vertices(&s->mesh, l->tri);
+    }
+    for (int i = 0; i < n_live; i++) {
+        struct lane *l = &w->lane[w->live[i]];
+        dr_path_step_locate(s, &l->st, &l->v, l->tri);
+        if (l->tri >= 0 && s->n_textures > 0)
+            dr_material_prefetch(s, &l->v.hit);
     }
 }
 
@@ -107,7 +130,8 @@ static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
     w->rays.n = 0;
     for (int i = 0; i < n_live; i++) {
         struct lane *l = &w->lane[w->live[i]];
-        l->next = dr_path_step_hit(s, opts, &l->st, &l->smp, &l->v, l->tri, &l->shadow);
+        l->next = w->prefetch ? dr_path_step_shade(s, opts, &l->st, &l->smp, &l->v, l->tri, &l->shadow)
+                              : dr_path_step_hit(s, opts, &l->st, &l->smp, &l->v, l->tri, &l->shadow);
         l->occluded = false;
         if (l->next != DR_STEP_SHADOW)
             continue;
@@ -169,9 +193,19 @@ static int finish_live(struct dr_wave *w, int n_live, int *n_free, const struct 
     return kept;
 }
 
+/* (wavefront.h) The threshold is a core's L2 cache here. */
+bool dr_wave_prefetches(const struct dr_scene *s)
+{
+    const struct dr_mesh *m = &s->mesh;
+    size_t bytes = (size_t)m->n_vertices * (3 + 3 + 2) * sizeof(float) +
+                   (size_t)m->n_triangles * (3 * sizeof(uint32_t) + 4 * sizeof(double) + sizeof(int32_t) + 1);
+    return s->n_textures > 0 || bytes > ((size_t)1 << 20);
+}
+
 void dr_wave_run(struct dr_wave *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
                  const struct dr_wave_ops *ops, void *ctx, struct dr_ray_counts *counts)
 {
+    w->prefetch = dr_wave_prefetches(s);
     int n_live = 0, n_free = DR_WAVE_LANES;
     for (int k = 0; k < DR_WAVE_LANES; k++)
         w->free_[k] = DR_WAVE_LANES - 1 - k;   /* lane 0 is handed out first */
@@ -190,6 +224,8 @@ void dr_wave_run(struct dr_wave *w, const struct dr_scene *s, const struct dr_pa
             w->live[n_live++] = k;
         }
         trace_live(w, n_live, s, counts);
+        if (w->prefetch)
+            locate_live(w, n_live, s);
         shade_live(w, n_live, s, opts, counts);
         n_live = finish_live(w, n_live, &n_free, s, opts, ops, ctx);
     }

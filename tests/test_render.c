@@ -10,6 +10,7 @@
 #include "render.h"
 #include "sampler.h"
 #include "scene_builder.h"
+#include "wavefront.h"
 #include "test.h"
 
 struct stats {
@@ -262,16 +263,10 @@ static void test_env_map_sampling(void)
 
 /* The packet renderer (wavefront.c, which render uses) against the one-path
  * walker, pixel by pixel: the same sampler, film, camera ray and
- * dr_path_radiance per sample, summed in sample order. Bit for bit equal on
- * the bundled Cornell box (textures, glossy and single-sided surfaces). */
-static void test_wavefront_matches_one_path(void)
+ * dr_path_radiance per sample, summed in sample order. Bit for bit equal. */
+static void wavefront_matches_one_path(struct dr_scene *s, struct dr_camera cam, const char *name)
 {
-    struct dr_scene *s = dr_scene_load(scene_path("cornell-box.gltf"));
-    CHECK(s != NULL, "load the bundled scene: %s", dr_last_error());
-    if (!s)
-        return;
     const int w = 12, h = 10, spp = 5, depth = 8;
-    struct dr_camera cam = s->cameras[0];
     float *rgb = malloc(sizeof(float) * 3 * w * h);
     struct dr_render_opts o = {.width = w, .height = h, .spp = spp, .max_depth = depth,
                               .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 3, .threads = 2};
@@ -281,6 +276,7 @@ static void test_wavefront_matches_one_path(void)
     struct dr_path_opts po = {.max_depth = depth, .rr_depth = DR_RR_DEPTH_DEFAULT, .stages = dr_path_plan(s, NULL)};
     struct dr_ray_counts rays = {0, 0, 0};
     int differ = 0;
+    double total = 0.0;
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {
             dr_vec3 sum = dr_v3s(0.0);
@@ -295,14 +291,40 @@ static void test_wavefront_matches_one_path(void)
                 sum = dr_add(sum, dr_path_radiance(s, &po, ro, rd, &smp, &rays));
             }
             const float *got = rgb + 3 * (y * w + x);
+            total += got[0] + got[1] + got[2];
             differ += got[0] != (float)(sum.x / spp) || got[1] != (float)(sum.y / spp) || got[2] != (float)(sum.z / spp);
         }
-    CHECK(differ == 0, "%d of %d pixels differ between the packet renderer and the one-path walker", differ, w * h);
+    CHECK(total > 0.0, "%s: the image is black", name);
+    CHECK(differ == 0, "%s: %d of %d pixels differ between the packet renderer and the one-path walker", name, differ,
+          w * h);
     CHECK(rays.camera == st.rays.camera && rays.extension == st.rays.extension && rays.shadow == st.rays.shadow,
-          "ray counts: packets %llu/%llu/%llu, one path %llu/%llu/%llu", (unsigned long long)st.rays.camera,
+          "%s: ray counts: packets %llu/%llu/%llu, one path %llu/%llu/%llu", name, (unsigned long long)st.rays.camera,
           (unsigned long long)st.rays.extension, (unsigned long long)st.rays.shadow, (unsigned long long)rays.camera,
           (unsigned long long)rays.extension, (unsigned long long)rays.shadow);
     free(rgb);
+}
+
+/* Both ways the packet renderer shades: the bundled Cornell box (textures,
+ * glossy and single-sided surfaces) has its hits located and their texels
+ * prefetched before shading; a small untextured box is shaded in one pass. */
+static void test_wavefront_matches_one_path(void)
+{
+    struct dr_scene *s = dr_scene_load(scene_path("cornell-box.gltf"));
+    CHECK(s != NULL, "load the bundled scene: %s", dr_last_error());
+    if (s) {
+        CHECK(dr_wave_prefetches(s), "the textured box is shaded with prefetching");
+        wavefront_matches_one_path(s, s->cameras[0], "bundled Cornell box");
+        dr_scene_destroy(s);
+    }
+    struct sb b;
+    sb_init(&b);
+    sb_open_box(&b, 2.0, sb_material(&b, sb_diffuse(dr_v3(0.7, 0.5, 0.3))));
+    struct dr_material lamp = sb_diffuse(dr_v3s(0.0));
+    lamp.emissive_factor = dr_v3(4.0, 3.0, 2.0);
+    sb_quad(&b, dr_v3(-0.3, 1.9, -0.3), dr_v3(0.6, 0, 0), dr_v3(0, 0, 0.6), sb_material(&b, lamp));   /* faces down */
+    s = sb_finish(&b);
+    CHECK(!dr_wave_prefetches(s), "a small untextured box is shaded in one pass");
+    wavefront_matches_one_path(s, sb_camera(dr_v3(0, 1, 3.5), dr_v3(0, 1, 0), 45.0), "untextured box");
     dr_scene_destroy(s);
 }
 
