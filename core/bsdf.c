@@ -46,11 +46,9 @@ static inline dr_vec3 dielectric_f0(const struct dr_bsdf *b)
                  dr_min(0.04 * sc.z, 1.0) * b->specular);
 }
 
-/* cos_o = wo.z > COS_EPS. */
-static double specular_prob(const struct dr_bsdf *b, double cos_o)
+/* specular_prob of a BSDF with a specular lobe. */
+static double __attribute__((noinline)) specular_prob_glossy(const struct dr_bsdf *b, double cos_o)
 {
-    if (no_specular_lobe(b))
-        return 0.0;
     double m = b->metallic;
     double s5 = pow5(1.0 - dr_clamp(cos_o, 0.0, 1.0));
     double f0max = dr_max3(dielectric_f0(b));
@@ -67,17 +65,21 @@ static double specular_prob(const struct dr_bsdf *b, double cos_o)
     return w_spec / (w_spec + w_diff);
 }
 
+/* The probability of sampling the specular lobe; cos_o = wo.z > COS_EPS.
+ * The Lambertian case inline (it is on every bounce of a diffuse scene; a
+ * call passes and returns its vectors through memory), the rest out of line. */
+static inline __attribute__((always_inline)) double specular_prob(const struct dr_bsdf *b, double cos_o)
+{
+    return no_specular_lobe(b) ? 0.0 : specular_prob_glossy(b, cos_o);
+}
+
 /* f and pdf for wo.z, wi.z > COS_EPS, given p = specular_prob(b, wo.z).
  * The single place where the pdf is computed, so dr_bsdf_pdf, dr_bsdf_eval_pdf
  * and dr_bsdf_sample agree bit for bit. */
-static inline dr_vec3 eval_pdf_above(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double p,
-                                     double *pdf)
+static dr_vec3 __attribute__((noinline)) eval_pdf_glossy(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double p,
+                                                          double *pdf)
 {
     double cos_pdf = wi.z * DR_INV_PI;
-    if (no_specular_lobe(b)) {
-        *pdf = cos_pdf;
-        return dr_scale(b->base_color, DR_INV_PI);
-    }
     double a = bsdf_alpha(b), a2 = a * a;
     dr_vec3 H = dr_add(wo, wi);
     double hxy2 = H.x * H.x + H.y * H.y;
@@ -112,6 +114,17 @@ static inline dr_vec3 eval_pdf_above(const struct dr_bsdf *b, dr_vec3 wo, dr_vec
                  base.z * kd + fd.z * ks + fm.z * km);
 }
 
+/* (The Lambertian case inline, as in specular_prob.) */
+static inline __attribute__((always_inline)) dr_vec3 eval_pdf_above(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi,
+                                                                    double p, double *pdf)
+{
+    if (no_specular_lobe(b)) {
+        *pdf = wi.z * DR_INV_PI;
+        return dr_scale(b->base_color, DR_INV_PI);
+    }
+    return eval_pdf_glossy(b, wo, wi, p, pdf);
+}
+
 dr_vec3 dr_bsdf_eval_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double *pdf)
 {
     if (!(wo.z > COS_EPS) || !(wi.z > COS_EPS)) {
@@ -144,21 +157,52 @@ double dr_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo)
     return specular_prob(b, wo.z);
 }
 
-/* Cosine-weighted hemisphere: Shirley-Chiu concentric disk, lifted (Malley). */
+/* sin t and cos t for |t| <= pi/4, by their Taylor series to t^17 and t^18:
+ * the first omitted terms are below 1e-19 there, so both are as accurate as
+ * libm's (within an ulp), without its range reduction. The cosine sampler
+ * needs no more, and it is on every diffuse bounce. */
+static inline void sincos_quarter(double t, double *s, double *c)
+{
+    double t2 = t * t;
+    double ps = 1.0 / 355687428096000.0;                     /* 1/17! */
+    ps = ps * t2 - 1.0 / 1307674368000.0;                    /* 1/15! */
+    ps = ps * t2 + 1.0 / 6227020800.0;
+    ps = ps * t2 - 1.0 / 39916800.0;
+    ps = ps * t2 + 1.0 / 362880.0;
+    ps = ps * t2 - 1.0 / 5040.0;
+    ps = ps * t2 + 1.0 / 120.0;
+    ps = ps * t2 - 1.0 / 6.0;
+    *s = t + t * t2 * ps;
+    double pc = 1.0 / 6402373705728000.0;                    /* 1/18! */
+    pc = pc * t2 - 1.0 / 20922789888000.0;                   /* 1/16! */
+    pc = pc * t2 + 1.0 / 87178291200.0;
+    pc = pc * t2 - 1.0 / 479001600.0;
+    pc = pc * t2 + 1.0 / 3628800.0;
+    pc = pc * t2 - 1.0 / 40320.0;
+    pc = pc * t2 + 1.0 / 720.0;
+    pc = pc * t2 - 1.0 / 24.0;
+    pc = pc * t2 + 0.5;
+    *c = 1.0 - t2 * pc;
+}
+
+/* Cosine-weighted hemisphere: Shirley-Chiu concentric disk, lifted (Malley).
+ * The disk angle is pi/4 (c/a), or pi/2 - pi/4 (a/c), whose cosine and sine
+ * are the sine and cosine of pi/4 (a/c): one small angle either way. */
 static inline dr_vec3 sample_cosine(double u1, double u2)
 {
     double a = 2.0 * u1 - 1.0, c = 2.0 * u2 - 1.0;
-    double r, phi;
     if (a == 0.0 && c == 0.0)
         return dr_v3(0.0, 0.0, 1.0);
+    double r, x, y;
     if (fabs(a) > fabs(c)) {
         r = a;
-        phi = (M_PI / 4.0) * (c / a);
+        sincos_quarter((M_PI / 4.0) * (c / a), &y, &x);
     } else {
         r = c;
-        phi = (M_PI / 2.0) - (M_PI / 4.0) * (a / c);
+        sincos_quarter((M_PI / 4.0) * (a / c), &x, &y);
     }
-    double x = r * cos(phi), y = r * sin(phi);
+    x *= r;
+    y *= r;
     return dr_v3(x, y, sqrt(dr_max(0.0, 1.0 - x * x - y * y)));
 }
 
@@ -205,13 +249,23 @@ static inline dr_vec3 sample_vndf(dr_vec3 wo, double a, double u1, double u2, st
     return t->h;
 }
 
-dr_vec3 dr_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lobe, double u1, double u2)
+static dr_vec3 __attribute__((noinline)) sample_specular_dir(const struct dr_bsdf *b, dr_vec3 wo, double u1, double u2)
 {
-    if (lobe != DR_BSDF_LOBE_SPECULAR)
-        return sample_cosine(u1, u2);
     struct vndf_tape t;
     dr_vec3 h = sample_vndf(wo, bsdf_alpha(b), u1, u2, &t);
     return dr_sub(dr_scale(h, 2.0 * dr_dot(wo, h)), wo);
+}
+
+/* dr_bsdf_sample_dir, with the diffuse lobe inline for dr_bsdf_sample. */
+static inline __attribute__((always_inline)) dr_vec3 sample_dir(const struct dr_bsdf *b, dr_vec3 wo,
+                                                                enum dr_bsdf_lobe lobe, double u1, double u2)
+{
+    return lobe != DR_BSDF_LOBE_SPECULAR ? sample_cosine(u1, u2) : sample_specular_dir(b, wo, u1, u2);
+}
+
+dr_vec3 dr_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lobe, double u1, double u2)
+{
+    return sample_dir(b, wo, lobe, u1, u2);
 }
 
 bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u1, double u2,
@@ -225,7 +279,7 @@ bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u
         return false;
     double p = specular_prob(b, wo.z);
     out->lobe = u_lobe < p ? DR_BSDF_LOBE_SPECULAR : DR_BSDF_LOBE_DIFFUSE;
-    dr_vec3 wi = dr_bsdf_sample_dir(b, wo, out->lobe, u1, u2);
+    dr_vec3 wi = sample_dir(b, wo, out->lobe, u1, u2);
     out->wi = wi;
     if (!(wi.z > COS_EPS))
         return false;

@@ -199,8 +199,3 @@ double dr_triangle_area(const struct dr_mesh *m, int64_t tri)
     dr_vec3 p0 = dr_mesh_vertex(m, idx[0]);
     return 0.5 * dr_length(dr_cross(dr_sub(dr_mesh_vertex(m, idx[1]), p0), dr_sub(dr_mesh_vertex(m, idx[2]), p0)));
 }
-
-dr_vec3 dr_offset_origin(const struct dr_hit *hit, dr_vec3 ng, dr_vec3 d)
-{
-    return dr_madd(hit->p, ng, dr_dot(d, ng) >= 0.0 ? hit->eps : -hit->eps);
-}

@@ -155,6 +155,9 @@ int dr_mesh_derive(struct dr_mesh *m);
  * proportional to the magnitude of the triangle's vertices (not of p: a point
  * near the origin on a huge triangle is still imprecise), so eps is 1e-5 times
  * the largest vertex coordinate: ~50x the float error, at every scene scale. */
-dr_vec3 dr_offset_origin(const struct dr_hit *hit, dr_vec3 ng, dr_vec3 d);
+static inline dr_vec3 dr_offset_origin(const struct dr_hit *hit, dr_vec3 ng, dr_vec3 d)
+{
+    return dr_madd(hit->p, ng, dr_dot(d, ng) >= 0.0 ? hit->eps : -hit->eps);
+}
 
 #endif
