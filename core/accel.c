@@ -388,7 +388,8 @@ static int packet_lanes(const struct dr_accel_rays *rays, int k, int valid[DR_AC
     for (int j = 0; j < DR_ACCEL_PACKET; j++)
         valid[j] = j < m ? -1 : 0;
     rtcInitIntersectContext(&q->rtc);
-    q->rtc.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+    q->rtc.flags = first + m <= rays->coherent ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT
+                                               : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
     q->key = 0;
     q->keys = rays->key ? rays->key + first : NULL;
     return m;

@@ -51,6 +51,8 @@ struct dr_accel_rays {
     const dr_vec3 *o, *d;
     const double *tmax;
     const uint64_t *key;
+    int coherent;   /* the first `coherent` rays are alike (camera rays of one pixel's samples):
+                       their full packets are traced with Embree's coherent flag */
 };
 /* tri[i]: the closest triangle or -1. */
 void dr_accel_intersect_many(const struct dr_accel *accel, const struct dr_accel_rays *rays, int64_t *tri);

@@ -80,6 +80,7 @@ static struct dr_accel_rays accel_rays(const struct batch *b)
 static void trace_live(struct dr_wave *w, int n_live, const struct dr_scene *s, struct dr_ray_counts *counts)
 {
     w->rays.n = 0;
+    bool later = false;   /* extension rays wait for the camera rays */
     for (int i = 0; i < n_live; i++) {
         struct lane *l = &w->lane[w->live[i]];
         l->arrival = (struct dr_wave_arrival){l->st.beta, l->st.ratio};
@@ -89,9 +90,22 @@ static void trace_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
             continue;
         }
         dr_path_count_trace(&l->st, counts);
-        add_ray(&w->rays, w->live[i], l->st.o, l->st.d, INFINITY, dr_path_trace_key(s, &l->st, &l->smp));
+        if (l->st.depth == 1)
+            add_ray(&w->rays, w->live[i], l->st.o, l->st.d, INFINITY, dr_path_trace_key(s, &l->st, &l->smp));
+        else
+            later = true;
+    }
+    /* Camera rays first, in start order: the lanes started together are
+     * consecutive samples of a pixel, whose rays Embree traces fastest as
+     * coherent packets. Then the rest. */
+    int coherent = w->rays.n;
+    for (int i = 0; later && i < n_live; i++) {
+        struct lane *l = &w->lane[w->live[i]];
+        if (l->st.depth > 1 && !from_log(l))
+            add_ray(&w->rays, w->live[i], l->st.o, l->st.d, INFINITY, dr_path_trace_key(s, &l->st, &l->smp));
     }
     struct dr_accel_rays r = accel_rays(&w->rays);
+    r.coherent = coherent;
     dr_accel_intersect_many(s->accel, &r, w->tri);
     for (int k = 0; k < w->rays.n; k++) {
         struct lane *l = &w->lane[w->rays.owner[k]];
