@@ -561,25 +561,35 @@ static void plot_error_vs_time(FILE *g, const struct cmp_run *r)
     fprintf(g, "set output 'error_vs_time.png'\nset title 'Error vs time (reference %s, its own relative error "
                "%.2g)'\nset xlabel 'seconds per estimate'\nset ylabel 'relative RMS error'\nset logscale xy\n"
                "set key outside right top\nset grid\nplot ", r->ref.kind, r->ref.rel_se);
+    /* colour = estimator x sampling, point and dash = depth, each keyed once
+     * (one key entry per series made the legend as large as the plot); spp
+     * labels on the deepest series only, so the plot stays readable */
+    static const int pts[] = {7, 5, 9, 11, 13, 15};
     s = 0;
+    int pairs = 0;
     for (int c = 0; c < r->n_combos; c++) {
         if (!series_start(r, c))
             continue;
-        char label[128];
-        cmp_combo_label(r, &r->combos[c], label, sizeof label);
-        /* colour = estimator x sampling, point and dash = depth; spp labels on
-         * the deepest series only, so the plot stays readable */
         int depth_i = 0;
         while (r->a->depths[depth_i] != r->combos[c].max_depth)
             depth_i++;
-        static const int pts[] = {7, 5, 9, 11, 13, 15};
-        fprintf(g, "$err%d using 1:2 with linespoints lw 2 lc %d pt %d dt %d title '%s', ", s,
-                pair_index(r, c) + 1, pts[depth_i % 6], depth_i % 5 + 1, label);
+        int pair = pair_index(r, c);
+        if (pair == pairs) {   /* the first series of a new pair: its colour's key entry */
+            char label[128];
+            cmp_pair_label(r, &r->combos[c], label, sizeof label);
+            fprintf(g, "NaN with lines lw 2 lc %d title '%s', ", pair + 1, label);
+            pairs++;
+        }
+        fprintf(g, "$err%d using 1:2 with linespoints lw 2 lc %d pt %d dt %d notitle, ", s, pair + 1,
+                pts[depth_i % 6], depth_i % 5 + 1);
         if (depth_i == r->a->n_depths - 1)
             fprintf(g, "$err%d using 1:2:(sprintf('%%d spp', $3)) with labels offset 0,0.9 font ',8' tc lt %d "
-                       "notitle, ", s, pair_index(r, c) + 1);
+                       "notitle, ", s, pair + 1);
         s++;
     }
+    for (int d = 0; d < r->a->n_depths; d++)   /* the depths' key entries */
+        fprintf(g, "NaN with linespoints lw 2 lc 'gray40' pt %d dt %d title 'max depth %d', ", pts[d % 6], d % 5 + 1,
+                r->a->depths[d]);
     if (isfinite(r->ref.rel_se) && r->ref.rel_se > 0.0)
         fprintf(g, "%.6g with lines dt 2 lc 'black' title \"reference's own error\"\n", r->ref.rel_se);
     else
