@@ -160,29 +160,29 @@ double dr_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo)
 /* sin t and cos t for |t| <= pi/4, by their Taylor series to t^17 and t^18:
  * the first omitted terms are below 1e-19 there, so both are as accurate as
  * libm's (within an ulp), without its range reduction. The cosine sampler
- * needs no more, and it is on every diffuse bounce. */
+ * needs no more, and it is on every diffuse bounce. The series run in t^2 by
+ * Horner's rule from the highest term: sin t = t + t^3 P(t^2), cos t = 1 -
+ * t^2 Q(t^2). */
+static const double SIN_SERIES[] = {1.0 / 355687428096000.0, -1.0 / 1307674368000.0, 1.0 / 6227020800.0,
+                                    -1.0 / 39916800.0,       1.0 / 362880.0,         -1.0 / 5040.0,
+                                    1.0 / 120.0,             -1.0 / 6.0};   /* 1/17!, -1/15!, ..., -1/3! */
+static const double COS_SERIES[] = {1.0 / 6402373705728000.0, -1.0 / 20922789888000.0, 1.0 / 87178291200.0,
+                                    -1.0 / 479001600.0,       1.0 / 3628800.0,         -1.0 / 40320.0,
+                                    1.0 / 720.0,              -1.0 / 24.0,             0.5};   /* 1/18!, ..., 1/2! */
+
+static inline double horner(double x, const double *c, int n)
+{
+    double p = c[0];
+    for (int i = 1; i < n; i++)
+        p = p * x + c[i];
+    return p;
+}
+
 static inline void sincos_quarter(double t, double *s, double *c)
 {
     double t2 = t * t;
-    double ps = 1.0 / 355687428096000.0;                     /* 1/17! */
-    ps = ps * t2 - 1.0 / 1307674368000.0;                    /* 1/15! */
-    ps = ps * t2 + 1.0 / 6227020800.0;
-    ps = ps * t2 - 1.0 / 39916800.0;
-    ps = ps * t2 + 1.0 / 362880.0;
-    ps = ps * t2 - 1.0 / 5040.0;
-    ps = ps * t2 + 1.0 / 120.0;
-    ps = ps * t2 - 1.0 / 6.0;
-    *s = t + t * t2 * ps;
-    double pc = 1.0 / 6402373705728000.0;                    /* 1/18! */
-    pc = pc * t2 - 1.0 / 20922789888000.0;                   /* 1/16! */
-    pc = pc * t2 + 1.0 / 87178291200.0;
-    pc = pc * t2 - 1.0 / 479001600.0;
-    pc = pc * t2 + 1.0 / 3628800.0;
-    pc = pc * t2 - 1.0 / 40320.0;
-    pc = pc * t2 + 1.0 / 720.0;
-    pc = pc * t2 - 1.0 / 24.0;
-    pc = pc * t2 + 0.5;
-    *c = 1.0 - t2 * pc;
+    *s = t + t * t2 * horner(t2, SIN_SERIES, (int)(sizeof SIN_SERIES / sizeof SIN_SERIES[0]));
+    *c = 1.0 - t2 * horner(t2, COS_SERIES, (int)(sizeof COS_SERIES / sizeof COS_SERIES[0]));
 }
 
 /* Cosine-weighted hemisphere: Shirley-Chiu concentric disk, lifted (Malley).
