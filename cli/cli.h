@@ -56,6 +56,9 @@ bool cli_output_dir_writable(const char *cmd, const char *path);
  * (exec, dynamic linking and all; 10 ms resolution for the part before main). */
 void cli_mark_start(void);
 double cli_seconds_since_start(void);
+/* The start of one job of a batch (cmd_batch.c): from here on the time since
+ * start counts from now. */
+void cli_mark_job_start(void);
 
 /* Peak resident memory of this process, bytes. */
 uint64_t cli_peak_rss_bytes(void);

@@ -162,6 +162,12 @@ void cli_mark_start(void)
     clock_at_main = dr_clock_seconds();
 }
 
+void cli_mark_job_start(void)
+{
+    age_at_main = 0.0;
+    clock_at_main = dr_clock_seconds();
+}
+
 double cli_seconds_since_start(void)
 {
     return age_at_main + (dr_clock_seconds() - clock_at_main);

@@ -787,13 +787,8 @@ static void opt_report(const struct opt_args *a, const struct opt_run *r, int it
 
 /* The iterations: gradient, Adam step, history, report, checkpoint every K
  * and on SIGINT/SIGTERM (then exit 128 + signal). */
-static int opt_loop(const struct opt_args *a, struct opt_run *r)
+static int opt_iterations(const struct opt_args *a, struct opt_run *r)
 {
-    struct sigaction sa;
-    memset(&sa, 0, sizeof sa);
-    sa.sa_handler = on_signal;
-    sigaction(SIGINT, &sa, NULL);
-    sigaction(SIGTERM, &sa, NULL);
     double t_loop = dr_clock_seconds();
     for (int it = r->it0; it < a->iters; it++) {
         double t_it = dr_clock_seconds();
@@ -827,6 +822,23 @@ static int opt_loop(const struct opt_args *a, struct opt_run *r)
     if (isatty(2))
         fputc('\n', stderr);
     return -1;
+}
+
+/* opt_iterations with SIGINT/SIGTERM caught, and the previous handlers put
+ * back afterwards: in a batch (cmd_batch.c) the jobs after this one must be
+ * stoppable as usual. */
+static int opt_loop(const struct opt_args *a, struct opt_run *r)
+{
+    struct sigaction sa, old_int, old_term;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal;
+    stop_signal = 0;
+    sigaction(SIGINT, &sa, &old_int);
+    sigaction(SIGTERM, &sa, &old_term);
+    int rc = opt_iterations(a, r);
+    sigaction(SIGINT, &old_int, NULL);
+    sigaction(SIGTERM, &old_term, NULL);
+    return rc;
 }
 
 /* Human summary (stdout, or stderr when stdout carries --json). */

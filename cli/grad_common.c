@@ -276,7 +276,7 @@ int grad_parse_args(struct grad_common *g, int argc, char **argv, const struct o
     char shortopts[16];
     snprintf(shortopts, sizeof shortopts, ":%sh", short_with_arg[0] ? "o:" : "");
     opterr = 0;
-    optind = 1;
+    optind = 0;   /* glibc: re-initialise getopt fully (a batch parses many command lines) */
     int c;
     while ((c = getopt_long(argc, argv, shortopts, opts, NULL)) != -1) {
         if (c == 'h') {

@@ -17,6 +17,8 @@ int cmd_optimize(int argc, char **argv);
 void cmd_optimize_usage(FILE *out);
 int cmd_compare(int argc, char **argv);
 void cmd_compare_usage(FILE *out);
+int cmd_batch(int argc, char **argv);
+void cmd_batch_usage(FILE *out);
 static int cmd_help(int argc, char **argv);
 static void cmd_help_usage(FILE *out);
 
@@ -29,6 +31,8 @@ const struct dr_command dr_commands[] = {
      cmd_optimize_usage},
     {"compare", "what accuracy costs in time: every estimator x sampling x spp, tables and plots", cmd_compare,
      cmd_compare_usage},
+    {"batch", "run many drender command lines in one process (the image library loads once)", cmd_batch,
+     cmd_batch_usage},
     {"help", "show help for drender or one subcommand", cmd_help, cmd_help_usage},
     {NULL, NULL, NULL, NULL},
 };
