@@ -163,10 +163,10 @@ double dr_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo)
  * needs no more, and it is on every diffuse bounce. The series run in t^2 by
  * Horner's rule from the highest term: sin t = t + t^3 P(t^2), cos t = 1 -
  * t^2 Q(t^2). */
-static const double SIN_SERIES[] = {1.0 / 355687428096000.0, -1.0 / 1307674368000.0, 1.0 / 6227020800.0,
+const double DR_SIN_SERIES[8] = {1.0 / 355687428096000.0, -1.0 / 1307674368000.0, 1.0 / 6227020800.0,
                                     -1.0 / 39916800.0,       1.0 / 362880.0,         -1.0 / 5040.0,
                                     1.0 / 120.0,             -1.0 / 6.0};   /* 1/17!, -1/15!, ..., -1/3! */
-static const double COS_SERIES[] = {1.0 / 6402373705728000.0, -1.0 / 20922789888000.0, 1.0 / 87178291200.0,
+const double DR_COS_SERIES[9] = {1.0 / 6402373705728000.0, -1.0 / 20922789888000.0, 1.0 / 87178291200.0,
                                     -1.0 / 479001600.0,       1.0 / 3628800.0,         -1.0 / 40320.0,
                                     1.0 / 720.0,              -1.0 / 24.0,             0.5};   /* 1/18!, ..., 1/2! */
 
@@ -181,8 +181,8 @@ static inline double horner(double x, const double *c, int n)
 static inline void sincos_quarter(double t, double *s, double *c)
 {
     double t2 = t * t;
-    *s = t + t * t2 * horner(t2, SIN_SERIES, (int)(sizeof SIN_SERIES / sizeof SIN_SERIES[0]));
-    *c = 1.0 - t2 * horner(t2, COS_SERIES, (int)(sizeof COS_SERIES / sizeof COS_SERIES[0]));
+    *s = t + t * t2 * horner(t2, DR_SIN_SERIES, 8);
+    *c = 1.0 - t2 * horner(t2, DR_COS_SERIES, 9);
 }
 
 /* Cosine-weighted hemisphere: Shirley-Chiu concentric disk, lifted (Malley).

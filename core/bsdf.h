@@ -62,6 +62,11 @@ double dr_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo);
  * the surface (dr_bsdf_sample then rejects it). */
 dr_vec3 dr_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lobe, double u1, double u2);
 
+/* The cosine sampler's sine and cosine series (bsdf.c: sin t = t + t^3 P(t^2),
+ * cos t = 1 - t^2 Q(t^2), coefficients from the highest power), shared with
+ * the eight-lane sampler of path_simd.c so both give the same bits. */
+extern const double DR_SIN_SERIES[8], DR_COS_SERIES[9];
+
 /* Adjoint of the differentiable BSDF inputs (same field names as struct dr_bsdf). */
 struct dr_d_bsdf {
     dr_vec3 base_color;

@@ -58,6 +58,21 @@ double dr_light_pdf_area(const struct dr_scene *scene, const struct dr_light_sam
                          const struct dr_hit *hit);
 /* Probability that NEE picks triangle tri (0: it does not emit). */
 double dr_light_pdf_area_pick(const struct dr_light_sampler *ls, int64_t tri);
+/* The sampler's tables when every light it picks is an emitting triangle
+ * (no punctual light, no environment), for a packet tracer that samples many
+ * lanes' lights at once (path_simd.c does what dr_light_sample and
+ * dr_light_pdf_area do, with these). False otherwise. */
+struct dr_light_area_tables {
+    int64_t n_entries;
+    const double *cdf;              /* n_entries + 1, and its guide table (cdf.h) */
+    const uint32_t *cdf_guide;
+    const double *pick;             /* per entry: its probability */
+    const int64_t *emitter_tri;     /* per entry: its triangle */
+    const double *emitter_area;     /* per entry */
+    const double *tri_pick;         /* per triangle, as dr_light_pdf_area_pick */
+    const double *tri_pick_density; /* per triangle: pick probability / area */
+};
+bool dr_light_area_tables(const struct dr_light_sampler *ls, struct dr_light_area_tables *t);
 /* Density for an escaping direction (environment). */
 double dr_light_pdf_env(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 dir);
 

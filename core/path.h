@@ -46,6 +46,7 @@
 
 struct dr_ray_counts {
     uint64_t camera, extension, shadow;
+    uint64_t simd_vertices;   /* path vertices shaded eight lanes at a time (path_simd.h) */
 };
 
 /* Dimensions a path uses: 2 for the pixel position, then a fixed block per

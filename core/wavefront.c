@@ -6,6 +6,7 @@
 
 #include "accel.h"
 #include "material.h"
+#include "path_simd.h"
 
 struct lane {
     struct dr_path_state st;
@@ -17,6 +18,8 @@ struct lane {
     int64_t tri;                      /* the trace's answer */
     bool occluded;                    /* the shadow ray's */
     bool replaying;                   /* this walk replays the last one: answers from the log */
+    bool simd;                        /* this vertex is shaded eight lanes at a time (path_simd.h) */
+    bool simd_more;                   /* ... and its path goes on (dr_path8_continue) */
     struct dr_wave_log log;           /* the walk's ray answers, for a replay */
     _Alignas(16) unsigned char user[DR_WAVE_USER_BYTES];
 };
@@ -38,6 +41,10 @@ struct dr_wave {
     int64_t tri[DR_WAVE_LANES];       /* by ray of the batch */
     bool occluded[DR_WAVE_LANES];
     bool prefetch;                    /* locate all hits before shading any (dr_wave_prefetches) */
+    bool simd;                        /* shade the lanes path_simd.h accepts eight at a time */
+    int n_groups;                     /* ... in these groups this step */
+    int group_lane[DR_WAVE_LANES / DR_SIMD_W][DR_SIMD_W];
+    struct dr_path8 group[DR_WAVE_LANES / DR_SIMD_W];
 };
 
 /* Is the answer for the lane's current vertex in its log (a replay)? */
@@ -128,7 +135,7 @@ static void locate_live(struct dr_wave *w, int n_live, const struct dr_scene *s)
         if (l->tri >= 0)
             dr_mesh_prefetch_vertices(&s->mesh, l->tri);
     }
-    for (int i = 0; i < n_live; i++) {
+    for (int i = 0; !w->simd && i < n_live; i++) {   /* (the eight-lane stages locate their own) */
         struct lane *l = &w->lane[w->live[i]];
         dr_path_step_locate(s, &l->st, &l->v, l->tri);
         if (l->tri >= 0 && s->n_textures > 0)
@@ -136,16 +143,56 @@ static void locate_live(struct dr_wave *w, int n_live, const struct dr_scene *s)
     }
 }
 
-/* The hit stage: shading up to the shadow ray; collects the shadow rays
+/* dr_path8_shade of the lanes k[0..n-1], as the wave's next group. */
+static void shade_group(struct dr_wave *w, const int *k, int n, const struct dr_scene *s,
+                        const struct dr_path_opts *opts)
+{
+    struct dr_path_state *st[DR_SIMD_W];
+    struct dr_sampler *smp[DR_SIMD_W];
+    struct dr_path_vertex *v[DR_SIMD_W];
+    struct dr_shadow_ray *shadow[DR_SIMD_W];
+    int64_t tri[DR_SIMD_W];
+    enum dr_step_next next[DR_SIMD_W];
+    int g = w->n_groups++;
+    for (int i = 0; i < n; i++) {
+        struct lane *l = &w->lane[k[i]];
+        st[i] = &l->st, smp[i] = &l->smp, v[i] = &l->v, shadow[i] = &l->shadow, tri[i] = l->tri;
+        w->group_lane[g][i] = k[i];
+    }
+    dr_path8_shade(s, opts, n, st, smp, v, tri, shadow, next, &w->group[g]);
+    for (int i = 0; i < n; i++)
+        w->lane[k[i]].next = next[i];
+}
+
+/* The hit stage: shading up to the shadow ray (the lanes path_simd.h
+ * accepts eight at a time, the others one by one); collects the shadow rays
  * (a replaying lane's logged answer stands in for its ray). */
 static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, const struct dr_path_opts *opts,
                        struct dr_ray_counts *counts)
 {
     w->rays.n = 0;
+    w->n_groups = 0;
+    int pending[DR_SIMD_W], n_pending = 0, n_simd = 0;
     for (int i = 0; i < n_live; i++) {
         struct lane *l = &w->lane[w->live[i]];
-        l->next = w->prefetch ? dr_path_step_shade(s, opts, &l->st, &l->smp, &l->v, l->tri, &l->shadow)
-                              : dr_path_step_hit(s, opts, &l->st, &l->smp, &l->v, l->tri, &l->shadow);
+        l->simd = w->simd && !from_log(l) && dr_path8_lane(s, &l->smp, l->tri);
+        if (l->simd) {
+            n_simd++;
+            pending[n_pending++] = w->live[i];
+            if (n_pending == DR_SIMD_W) {
+                shade_group(w, pending, n_pending, s, opts);
+                n_pending = 0;
+            }
+            continue;
+        }
+        l->next = w->prefetch && !w->simd ? dr_path_step_shade(s, opts, &l->st, &l->smp, &l->v, l->tri, &l->shadow)
+                                          : dr_path_step_hit(s, opts, &l->st, &l->smp, &l->v, l->tri, &l->shadow);
+    }
+    if (n_pending > 0)
+        shade_group(w, pending, n_pending, s, opts);
+    counts->simd_vertices += (uint64_t)n_simd;
+    for (int i = 0; i < n_live; i++) {
+        struct lane *l = &w->lane[w->live[i]];
         l->occluded = false;
         if (l->next != DR_STEP_SHADOW)
             continue;
@@ -183,13 +230,31 @@ static void begin_walk(struct lane *l, dr_vec3 o, dr_vec3 d, enum dr_wave_next h
 static int finish_live(struct dr_wave *w, int n_live, int *n_free, const struct dr_scene *s,
                        const struct dr_path_opts *opts, const struct dr_wave_ops *ops, void *ctx)
 {
+    for (int g = 0; g < w->n_groups; g++) {   /* the eight-lane groups' ends first */
+        struct dr_path_state *st[DR_SIMD_W];
+        struct dr_path_vertex *v[DR_SIMD_W];
+        bool occluded[DR_SIMD_W], more[DR_SIMD_W];
+        int n = w->group[g].n;
+        for (int i = 0; i < n; i++) {
+            struct lane *l = &w->lane[w->group_lane[g][i]];
+            st[i] = &l->st, v[i] = &l->v, occluded[i] = l->occluded;
+        }
+        dr_path8_continue(opts, &w->group[g], st, v, occluded, more);
+        for (int i = 0; i < n; i++)
+            w->lane[w->group_lane[g][i]].simd_more = more[i];
+    }
     int kept = 0;
     for (int i = 0; i < n_live; i++) {
         int k = w->live[i];
         struct lane *l = &w->lane[k];
-        if (l->next == DR_STEP_SHADOW)
-            dr_path_nee_end(s, &l->v, &l->shadow, l->occluded);
-        bool more = l->next != DR_STEP_END && dr_path_stage_continue(opts, &l->st, &l->v);
+        bool more;
+        if (l->simd) {
+            more = l->simd_more;
+        } else {
+            if (l->next == DR_STEP_SHADOW)
+                dr_path_nee_end(s, &l->v, &l->shadow, l->occluded);
+            more = l->next != DR_STEP_END && dr_path_stage_continue(opts, &l->st, &l->v);
+        }
         if (!ops->vertex(ctx, l->user, &l->arrival, &l->v, &l->smp, more))
             more = false;
         if (!more && ops->keep_log && !l->replaying)
@@ -220,6 +285,7 @@ void dr_wave_run(struct dr_wave *w, const struct dr_scene *s, const struct dr_pa
                  const struct dr_wave_ops *ops, void *ctx, struct dr_ray_counts *counts)
 {
     w->prefetch = dr_wave_prefetches(s);
+    w->simd = ops->term_only && dr_path8_applies(s, opts);
     int n_live = 0, n_free = DR_WAVE_LANES;
     for (int k = 0; k < DR_WAVE_LANES; k++)
         w->free_[k] = DR_WAVE_LANES - 1 - k;   /* lane 0 is handed out first */
@@ -288,7 +354,7 @@ static enum dr_wave_next radiance_end(void *ctx, void *user, struct dr_sampler *
 void dr_wave_radiance(struct dr_wave *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
                       dr_wave_start_fn start, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts)
 {
-    static const struct dr_wave_ops ops = {radiance_start, radiance_vertex, radiance_end, NULL, NULL};
+    static const struct dr_wave_ops ops = {radiance_start, radiance_vertex, radiance_end, NULL, NULL, true};
     struct radiance_ctx c = {start, ctx, L};
     dr_wave_run(w, s, opts, n, &ops, &c, counts);
 }

@@ -2,6 +2,7 @@
  * within statistical tolerances (pixels are independent estimates, so their
  * spread gives the standard error of the image mean). */
 #include <stdlib.h>
+#include <string.h>
 
 #include "camera.h"
 #include "error.h"
@@ -9,6 +10,7 @@
 #include "lights.h"
 #include "render.h"
 #include "sampler.h"
+#include "path_simd.h"
 #include "scene_builder.h"
 #include "wavefront.h"
 #include "test.h"
@@ -264,7 +266,7 @@ static void test_env_map_sampling(void)
 /* The packet renderer (wavefront.c, which render uses) against the one-path
  * walker, pixel by pixel: the same sampler, film, camera ray and
  * dr_path_radiance per sample, summed in sample order. Bit for bit equal. */
-static void wavefront_matches_one_path(struct dr_scene *s, struct dr_camera cam, const char *name)
+static uint64_t wavefront_matches_one_path(struct dr_scene *s, struct dr_camera cam, const char *name)
 {
     const int w = 12, h = 10, spp = 5, depth = 8;
     float *rgb = malloc(sizeof(float) * 3 * w * h);
@@ -274,7 +276,7 @@ static void wavefront_matches_one_path(struct dr_scene *s, struct dr_camera cam,
     CHECK(dr_render(s, &cam, &o, rgb, &st) == 0, "dr_render: %s", dr_last_error());
     struct dr_camera_view view = dr_camera_view(&cam, w, h);
     struct dr_path_opts po = {.max_depth = depth, .rr_depth = DR_RR_DEPTH_DEFAULT, .stages = dr_path_plan(s, NULL)};
-    struct dr_ray_counts rays = {0, 0, 0};
+    struct dr_ray_counts rays = {0, 0, 0, 0};
     int differ = 0;
     double total = 0.0;
     for (int y = 0; y < h; y++)
@@ -302,6 +304,90 @@ static void wavefront_matches_one_path(struct dr_scene *s, struct dr_camera cam,
           (unsigned long long)st.rays.extension, (unsigned long long)st.rays.shadow, (unsigned long long)rays.camera,
           (unsigned long long)rays.extension, (unsigned long long)rays.shadow);
     free(rgb);
+    return st.rays.simd_vertices;
+}
+
+/* A box whose surfaces take both of the packet renderer's ways: Lambertian
+ * walls with interpolated normals and a single-sided Lambertian panel
+ * (shaded eight lanes at a time, path_simd.h) next to a glossy block (one
+ * lane at a time), lit by two lamps of different size and colour, one
+ * double-sided. */
+static struct dr_scene *mixed_box(void)
+{
+    struct sb b;
+    sb_init(&b);
+    sb_open_box(&b, 2.0, sb_material(&b, sb_diffuse(dr_v3(0.7, 0.5, 0.3))));
+    struct dr_mesh *m = &b.s->mesh;
+    for (uint32_t v = 0; v < m->n_vertices; v++) {   /* normals leaning inwards, towards the box's axis */
+        dr_vec3 p = dr_v3(m->positions[3 * v], m->positions[3 * v + 1], m->positions[3 * v + 2]);
+        dr_vec3 n = dr_normalize(dr_sub(dr_v3(0.0, 1.0, 0.0), dr_scale(p, 0.6)));
+        m->normals[3 * v] = (float)n.x, m->normals[3 * v + 1] = (float)n.y, m->normals[3 * v + 2] = (float)n.z;
+    }
+    for (uint32_t t = 0; t < m->n_triangles; t++)
+        m->flags[t] |= DR_TRI_HAS_NORMALS;
+    struct dr_material glossy = sb_diffuse(dr_v3(0.2, 0.4, 0.8));
+    glossy.specular = 1.0;
+    glossy.roughness = 0.3;
+    sb_box(&b, dr_v3(-0.6, 0.0, -0.5), dr_v3(-0.1, 0.9, 0.0), sb_material(&b, glossy));
+    struct dr_material panel = sb_diffuse(dr_v3(0.3, 0.8, 0.3));
+    panel.double_sided = false;
+    sb_quad(&b, dr_v3(0.2, 0.2, -0.6), dr_v3(0.6, 0, 0), dr_v3(0, 0.8, 0.3), sb_material(&b, panel));
+    struct dr_material lamp = sb_diffuse(dr_v3s(0.0));
+    lamp.emissive_factor = dr_v3(4.0, 3.0, 2.0);
+    sb_quad(&b, dr_v3(-0.3, 1.9, -0.3), dr_v3(0.6, 0, 0), dr_v3(0, 0, 0.6), sb_material(&b, lamp));   /* faces down */
+    struct dr_material lamp2 = sb_diffuse(dr_v3s(0.0));
+    lamp2.emissive_factor = dr_v3(0.5, 2.0, 6.0);
+    lamp2.emissive_strength = 3.0;
+    lamp2.double_sided = true;
+    sb_quad(&b, dr_v3(0.5, 0.6, 0.4), dr_v3(0.2, 0, 0), dr_v3(0, 0.2, 0.1), sb_material(&b, lamp2));
+    return sb_finish(&b);
+}
+
+/* Paths from random points of a camera's view, for the exact comparison below. */
+struct random_paths {
+    struct dr_camera_view view;
+};
+static void random_path_start(void *ctx, int64_t i, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    const struct random_paths *r = ctx;
+    dr_sampler_init(smp, 11, (uint64_t)i, 0);
+    double u, v;
+    dr_sampler_next2(smp, &u, &v);
+    dr_camera_ray(&r->view, u * 64.0, v * 48.0, o, d);
+}
+
+/* The packet tracer's radiance (dr_wave_radiance) against dr_path_radiance,
+ * path by path in double precision: equal to the last bit. Deep paths with
+ * Russian roulette from the second segment, so every stage is crossed many
+ * times (an image's float pixels would hide a last-bit difference). Returns
+ * how many vertices were shaded eight lanes at a time. */
+static uint64_t radiance_matches_exactly(const struct dr_scene *s, struct dr_camera cam, const char *name)
+{
+    enum { N = 6000 };
+    struct random_paths r = {dr_camera_view(&cam, 64, 48)};
+    struct dr_path_opts po = {.max_depth = 16, .rr_depth = 2, .stages = dr_path_plan(s, NULL)};
+    dr_vec3 *L = malloc(sizeof(dr_vec3) * N);
+    struct dr_wave *w = dr_wave_create();
+    struct dr_ray_counts packets = {0, 0, 0, 0}, one = {0, 0, 0, 0};
+    dr_wave_radiance(w, s, &po, N, random_path_start, &r, L, &packets);
+    int differ = 0, lit = 0;
+    for (int i = 0; i < N; i++) {
+        struct dr_sampler smp;
+        dr_vec3 o, d;
+        random_path_start(&r, i, &smp, &o, &d);
+        dr_vec3 ref = dr_path_radiance(s, &po, o, d, &smp, &one);
+        differ += memcmp(&ref, &L[i], sizeof ref) != 0;
+        lit += !dr_is_black(ref);
+    }
+    CHECK(lit > N / 4, "%s: only %d of %d paths carry light", name, lit, N);
+    CHECK(differ == 0, "%s: %d of %d paths' radiance differs (in double) between the packet tracer and the one-path "
+          "walker", name, differ, N);
+    CHECK(packets.extension == one.extension && packets.shadow == one.shadow, "%s: rays %llu/%llu vs %llu/%llu",
+          name, (unsigned long long)packets.extension, (unsigned long long)packets.shadow,
+          (unsigned long long)one.extension, (unsigned long long)one.shadow);
+    dr_wave_destroy(w);
+    free(L);
+    return packets.simd_vertices;
 }
 
 /* Both ways the packet renderer shades: the bundled Cornell box (textures,
@@ -313,7 +399,8 @@ static void test_wavefront_matches_one_path(void)
     CHECK(s != NULL, "load the bundled scene: %s", dr_last_error());
     if (s) {
         CHECK(dr_wave_prefetches(s), "the textured box is shaded with prefetching");
-        wavefront_matches_one_path(s, s->cameras[0], "bundled Cornell box");
+        CHECK(wavefront_matches_one_path(s, s->cameras[0], "bundled Cornell box") == 0,
+              "the textured box is shaded one lane at a time");
         dr_scene_destroy(s);
     }
     struct sb b;
@@ -324,7 +411,18 @@ static void test_wavefront_matches_one_path(void)
     sb_quad(&b, dr_v3(-0.3, 1.9, -0.3), dr_v3(0.6, 0, 0), dr_v3(0, 0, 0.6), sb_material(&b, lamp));   /* faces down */
     s = sb_finish(&b);
     CHECK(!dr_wave_prefetches(s), "a small untextured box is shaded in one pass");
-    wavefront_matches_one_path(s, sb_camera(dr_v3(0, 1, 3.5), dr_v3(0, 1, 0), 45.0), "untextured box");
+    uint64_t simd = wavefront_matches_one_path(s, sb_camera(dr_v3(0, 1, 3.5), dr_v3(0, 1, 0), 45.0), "untextured box");
+    CHECK(simd > 0, "the Lambertian box is shaded eight lanes at a time");
+    dr_scene_destroy(s);
+    s = mixed_box();
+    struct dr_path_opts po = {.max_depth = 8, .rr_depth = DR_RR_DEPTH_DEFAULT, .stages = dr_path_plan(s, NULL)};
+    CHECK(dr_path8_applies(s, &po), "the mixed box qualifies for the eight-lane stages");
+    CHECK((s->effects & DR_FX_SHADING_NORMALS) && (s->effects & DR_FX_SPECULAR) && (s->effects & DR_FX_SINGLE_SIDED),
+          "the mixed box has shading normals, a glossy and a single-sided surface (effects %#x)", s->effects);
+    simd = wavefront_matches_one_path(s, sb_camera(dr_v3(0, 1, 3.5), dr_v3(0, 0.8, 0), 50.0), "mixed box");
+    CHECK(simd > 0, "the mixed box's Lambertian hits are shaded eight lanes at a time");
+    simd = radiance_matches_exactly(s, sb_camera(dr_v3(0, 1, 2.5), dr_v3(0, 0.8, 0), 60.0), "mixed box");
+    CHECK(simd > 1000, "the mixed box: only %llu vertices shaded eight lanes at a time", (unsigned long long)simd);
     dr_scene_destroy(s);
 }
 

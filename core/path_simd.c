@@ -1,0 +1,426 @@
+/* The walker's stages for eight lanes at once (path_simd.h). Each step names
+ * the scalar function it mirrors; keep them in step when either changes
+ * (test_render's bit-for-bit comparison fails otherwise). */
+#include "path_simd.h"
+
+#include <stddef.h>
+
+#include "bsdf.h"
+#include "cdf.h"
+#include "lights.h"
+
+#define COS_EPS 1e-12   /* bsdf.c's */
+
+/* ------------------------------------------------------- loads and stores */
+
+/* The double at byte offset off of each lane's structure b[i]. */
+static inline dr_f8 gather(const void *const *b, size_t off)
+{
+#define G(i) (*(const double *)((const char *)b[i] + off))
+    return (dr_f8){G(0), G(1), G(2), G(3), G(4), G(5), G(6), G(7)};
+#undef G
+}
+static inline dr_v3x8 gather3(const void *const *b, size_t off)
+{
+    return (dr_v3x8){gather(b, off), gather(b, off + sizeof(double)), gather(b, off + 2 * sizeof(double))};
+}
+/* Element k * stride + c of array a for each lane's index k[i]. */
+static inline dr_f8 gather_at(const double *a, const int64_t *k, int stride, int c)
+{
+#define G(i) a[(size_t)k[i] * (size_t)stride + (size_t)c]
+    return (dr_f8){G(0), G(1), G(2), G(3), G(4), G(5), G(6), G(7)};
+#undef G
+}
+/* Vertex vi[i]'s three floats (positions, normals) for each lane. */
+static inline dr_v3x8 gather_vertex(const float *a, const uint32_t *vi)
+{
+#define G(i, c) (double)a[3 * (size_t)vi[i] + c]
+#define V(c) (dr_f8){G(0, c), G(1, c), G(2, c), G(3, c), G(4, c), G(5, c), G(6, c), G(7, c)}
+    return (dr_v3x8){V(0), V(1), V(2)};
+#undef V
+#undef G
+}
+static inline void scatter(void *const *b, size_t off, dr_f8 v, int n, dr_m8 where)
+{
+    for (int i = 0; i < n; i++)
+        if (where[i])
+            *(double *)((char *)b[i] + off) = v[i];
+}
+static inline void scatter3(void *const *b, size_t off, dr_v3x8 v, int n, dr_m8 where)
+{
+    scatter(b, off, v.x, n, where);
+    scatter(b, off + sizeof(double), v.y, n, where);
+    scatter(b, off + 2 * sizeof(double), v.z, n, where);
+}
+static inline dr_m8 mask_of(const bool *b)
+{
+    dr_m8 m;
+    for (int i = 0; i < DR_SIMD_W; i++)
+        m[i] = b[i] ? -1 : 0;
+    return m;
+}
+
+/* ------------------------------------------------------------ the maths */
+
+/* b0 a0 + b1 a1 + b2 a2 per coordinate, as attributes() and dr_hit_at. */
+static inline dr_v3x8 interp(dr_f8 b0, dr_f8 b1, dr_f8 b2, dr_v3x8 a0, dr_v3x8 a1, dr_v3x8 a2)
+{
+    return (dr_v3x8){b0 * a0.x + b1 * a1.x + b2 * a2.x, b0 * a0.y + b1 * a1.y + b2 * a2.y,
+                     b0 * a0.z + b1 * a1.z + b2 * a2.z};
+}
+
+/* dr_mis_power */
+static inline dr_f8 mis_power(dr_f8 a, dr_f8 b)
+{
+    dr_f8 r = b / dr_f8_sel(a > 0.0, a, dr_f8s(1.0));
+    dr_f8 w = dr_f8_sel(b > 0.0, 1.0 / (1.0 + r * r), dr_f8s(1.0));
+    return dr_f8_sel(a > 0.0, w, dr_f8s(0.0));
+}
+
+/* dr_offset_origin: p + ng (d . ng >= 0 ? eps : -eps) */
+static inline dr_v3x8 offset_origin(dr_v3x8 p, dr_v3x8 ng, dr_f8 eps, dr_v3x8 d)
+{
+    return dr_v3x8_madd(p, ng, dr_f8_sel(dr_v3x8_dot(d, ng) >= 0.0, eps, -eps));
+}
+
+/* dr_frame_from_normal and dr_frame_to_local / _to_world */
+static inline void frame_from_normal(dr_v3x8 n, dr_v3x8 *s, dr_v3x8 *t)
+{
+    dr_f8 sign = dr_f8_sign1(n.z);
+    dr_f8 a = -1.0 / (sign + n.z);
+    dr_f8 b = n.x * n.y * a;
+    *s = (dr_v3x8){1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x};
+    *t = (dr_v3x8){b, sign + n.y * n.y * a, -n.y};
+}
+static inline dr_v3x8 to_local(dr_v3x8 s, dr_v3x8 t, dr_v3x8 n, dr_v3x8 v)
+{
+    return (dr_v3x8){dr_v3x8_dot(v, s), dr_v3x8_dot(v, t), dr_v3x8_dot(v, n)};
+}
+static inline dr_v3x8 to_world(dr_v3x8 s, dr_v3x8 t, dr_v3x8 n, dr_v3x8 v)
+{
+    return dr_v3x8_add(dr_v3x8_add(dr_v3x8_scale(s, v.x), dr_v3x8_scale(t, v.y)), dr_v3x8_scale(n, v.z));
+}
+
+/* bsdf.c's horner and sincos_quarter */
+static inline dr_f8 horner(dr_f8 x, const double *c, int n)
+{
+    dr_f8 p = dr_f8s(c[0]);
+    for (int i = 1; i < n; i++)
+        p = p * x + c[i];
+    return p;
+}
+/* bsdf.c's sample_cosine: the concentric disk, lifted. */
+static dr_v3x8 sample_cosine(dr_f8 u1, dr_f8 u2)
+{
+    dr_f8 a = 2.0 * u1 - 1.0, c = 2.0 * u2 - 1.0;
+    dr_m8 centre = (a == 0.0) & (c == 0.0);
+    dr_m8 wide = dr_f8_abs(a) > dr_f8_abs(c);
+    dr_f8 r = dr_f8_sel(wide, a, c);
+    dr_f8 t = (M_PI / 4.0) * (dr_f8_sel(wide, c, a) / dr_f8_sel(centre, dr_f8s(1.0), r));
+    dr_f8 t2 = t * t;
+    dr_f8 sn = t + t * t2 * horner(t2, DR_SIN_SERIES, 8);
+    dr_f8 cs = 1.0 - t2 * horner(t2, DR_COS_SERIES, 9);
+    dr_f8 x = dr_f8_sel(wide, cs, sn) * r, y = dr_f8_sel(wide, sn, cs) * r;
+    dr_f8 z = dr_f8_sqrt(dr_f8_max(dr_f8s(0.0), 1.0 - x * x - y * y));
+    return dr_v3x8_sel(centre, (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(1.0)}, (dr_v3x8){x, y, z});
+}
+
+/* dr_hash64 and dr_sampler_independent */
+static inline dr_f8 independent(dr_u8 key, dr_u8 dim)
+{
+    dr_u8 x = key + dim * 0xd1b54a32d192ed03ULL;
+    x ^= x >> 30;
+    x *= 0xbf58476d1ce4e5b9ULL;
+    x ^= x >> 27;
+    x *= 0x94d049bb133111ebULL;
+    x ^= x >> 31;
+    return __builtin_convertvector((dr_m8)(x >> 11), dr_f8) * (1.0 / 9007199254740992.0);
+}
+
+/* ----------------------------------------------------------- eligibility */
+
+bool dr_path8_applies(const struct dr_scene *s, const struct dr_path_opts *opts)
+{
+    const unsigned allowed = DR_FX_AREA_LIGHTS | DR_FX_SHADING_NORMALS | DR_FX_SINGLE_SIDED | DR_FX_SPECULAR;
+    struct dr_light_area_tables t;
+    return !opts->params && (s->effects & ~allowed) == 0 && (opts->stages & DR_STAGE_NEE) &&
+           (opts->stages & DR_STAGE_EMISSION) &&
+           !(opts->stages & (DR_STAGE_ENV | DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC)) &&
+           dr_light_area_tables(s->light_sampler, &t);
+}
+
+bool dr_path8_lane(const struct dr_scene *s, const struct dr_sampler *smp, int64_t tri)
+{
+    if (tri < 0 || smp->kind != DR_SAMPLER_INDEPENDENT)
+        return false;
+    const struct dr_material *m = &s->materials[s->mesh.material[tri]];
+    return m->metallic == 0.0 && m->specular == 0.0;   /* bsdf.c's no_specular_lobe */
+}
+
+/* ------------------------------------------------------------ the stages */
+
+/* Each lane's hit and material, and the light sample's triangle and entry. */
+struct lanes {
+    const void *st[DR_SIMD_W], *mat[DR_SIMD_W], *lmat[DR_SIMD_W];
+    int64_t tri[DR_SIMD_W], ltri[DR_SIMD_W];
+    uint32_t v0[DR_SIMD_W], v1[DR_SIMD_W], v2[DR_SIMD_W];
+    bool double_sided[DR_SIMD_W], ldouble_sided[DR_SIMD_W], has_normals[DR_SIMD_W];
+    uint32_t dim[DR_SIMD_W];   /* the vertex's first sampler dimension */
+};
+
+static void triangle_vertices(const struct dr_mesh *m, int64_t tri, uint32_t *v0, uint32_t *v1, uint32_t *v2)
+{
+    const uint32_t *ix = m->indices + 3 * (size_t)tri;
+    *v0 = ix[0], *v1 = ix[1], *v2 = ix[2];
+}
+
+/* stage_locate (dr_hit_compute and attributes(), without t and uv, which
+ * the eight-lane stages do not use): the hit point p, the geometric normal
+ * ng, the shading normal ns; returns the front mask. */
+static dr_m8 locate(const struct dr_mesh *m, const struct lanes *L, dr_v3x8 o, dr_v3x8 d, dr_v3x8 *p, dr_v3x8 *ng,
+                    dr_v3x8 *ns, dr_f8 *eps)
+{
+    dr_v3x8 p0 = gather_vertex(m->positions, L->v0), p1 = gather_vertex(m->positions, L->v1),
+            p2 = gather_vertex(m->positions, L->v2);
+    dr_v3x8 e1 = dr_v3x8_sub(p1, p0), e2 = dr_v3x8_sub(p2, p0);
+    dr_v3x8 pv = dr_v3x8_cross(d, e2);
+    dr_f8 det = dr_v3x8_dot(e1, pv);
+    dr_m8 solvable = det != 0.0;
+    dr_f8 inv = 1.0 / dr_f8_sel(solvable, det, dr_f8s(1.0));
+    dr_v3x8 tv = dr_v3x8_sub(o, p0);
+    dr_f8 b1 = dr_f8_sel(solvable, dr_v3x8_dot(tv, pv) * inv, dr_f8s(0.0));
+    dr_v3x8 qv = dr_v3x8_cross(tv, e1);
+    dr_f8 b2 = dr_f8_sel(solvable, dr_v3x8_dot(d, qv) * inv, dr_f8s(0.0));
+    b1 = dr_f8_clamp(b1, 0.0, 1.0);
+    b2 = dr_f8_clamp(b2, 0.0, 1.0);
+    dr_f8 sum = b1 + b2;
+    dr_m8 over = sum > 1.0;
+    b1 = dr_f8_sel(over, b1 / sum, b1);
+    b2 = dr_f8_sel(over, b2 / sum, b2);
+
+    dr_f8 b0 = 1.0 - b1 - b2;
+    *p = interp(b0, b1, b2, p0, p1, p2);
+    *ng = (dr_v3x8){gather_at(m->tri_normal_eps, L->tri, 4, 0), gather_at(m->tri_normal_eps, L->tri, 4, 1),
+                    gather_at(m->tri_normal_eps, L->tri, 4, 2)};
+    *eps = gather_at(m->tri_normal_eps, L->tri, 4, 3);
+    *ns = *ng;
+    dr_m8 has_n = mask_of(L->has_normals);
+    if (m->normals && (has_n[0] | has_n[1] | has_n[2] | has_n[3] | has_n[4] | has_n[5] | has_n[6] | has_n[7])) {
+        dr_v3x8 n = interp(b0, b1, b2, gather_vertex(m->normals, L->v0), gather_vertex(m->normals, L->v1),
+                           gather_vertex(m->normals, L->v2));
+        dr_f8 l2 = dr_v3x8_dot(n, n);
+        dr_m8 use = has_n & (l2 > 0.0);
+        n = dr_v3x8_scale(n, 1.0 / dr_f8_sqrt(dr_f8_sel(use, l2, dr_f8s(1.0))));
+        n = dr_v3x8_sel(dr_v3x8_dot(n, *ng) < 0.0, dr_v3x8_neg(n), n);
+        *ns = dr_v3x8_sel(use, n, *ng);
+    }
+    return dr_v3x8_dot(d, *ng) < 0.0;
+}
+
+/* dr_emission of a material without an emissive texture: factor x strength,
+ * on the front (or both sides). */
+static dr_v3x8 emission(const void *const *mat, dr_m8 seen)
+{
+    dr_v3x8 e = dr_v3x8_scale(gather3(mat, offsetof(struct dr_material, emissive_factor)),
+                              gather(mat, offsetof(struct dr_material, emissive_strength)));
+    return dr_v3x8_sel(seen, e, (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)});
+}
+
+/* stage_emission: what the hit emits towards the ray and its MIS weight
+ * against next-event estimation (dr_light_pdf_area, dr_mis_power), into the
+ * vertices of the lanes whose triangle emits. */
+static void emission_seen(const struct dr_light_area_tables *lt, const struct lanes *L, int n, dr_v3x8 p,
+                          dr_v3x8 ng, dr_m8 front, dr_f8 depth, struct dr_path_vertex *const *v)
+{
+    dr_m8 emits = gather_at(lt->tri_pick, L->tri, 1, 0) > 0.0;
+    if (!(emits[0] | emits[1] | emits[2] | emits[3] | emits[4] | emits[5] | emits[6] | emits[7]))
+        return;
+    dr_v3x8 Le = emission(L->mat, front | mask_of(L->double_sided));
+    dr_f8 density = gather_at(lt->tri_pick_density, L->tri, 1, 0);
+    dr_v3x8 dd = dr_v3x8_sub(p, gather3(L->st, offsetof(struct dr_path_state, prev_p)));
+    dr_f8 d2 = dr_v3x8_dot(dd, dd);
+    dr_f8 cos_l = dr_f8_abs(dr_v3x8_dot(ng, dd)) / dr_f8_sqrt(d2);
+    dr_f8 pdf = dr_f8_sel(cos_l > 0.0, density * d2 / cos_l, dr_f8s(0.0));
+    pdf = dr_f8_sel(density <= 0.0, dr_f8s(0.0), pdf);
+    dr_f8 w = mis_power(gather(L->st, offsetof(struct dr_path_state, prev_pdf)), pdf);
+    w = dr_f8_sel(depth == 1.0, dr_f8s(1.0), w);
+    for (int i = 0; i < n; i++) {
+        if (!emits[i])
+            continue;
+        v[i]->emits = true;
+        v[i]->Le = dr_v3x8_get(Le, i);
+        v[i]->emit_w = w[i];
+    }
+}
+
+/* dr_light_sample's area-light branch (dr_cdf_find_guided, dr_hit_at,
+ * dr_emission, dr_offset_origin) from the points p: direction wi, the
+ * shadow ray's target, radiance and solid-angle pdf; returns where a light
+ * sample carries light. The entry search stays scalar (one table walk per
+ * lane). */
+static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_area_tables *lt, struct lanes *L,
+                          dr_v3x8 p, dr_f8 u_pick, dr_f8 u1, dr_f8 u2, dr_v3x8 *wi, dr_v3x8 *target,
+                          dr_v3x8 *radiance, dr_f8 *pdf)
+{
+    const struct dr_mesh *m = &s->mesh;
+    dr_f8 pick, area;
+    uint32_t v0[DR_SIMD_W], v1[DR_SIMD_W], v2[DR_SIMD_W];
+    for (int i = 0; i < DR_SIMD_W; i++) {
+        int64_t e = dr_cdf_find_guided(lt->cdf, lt->n_entries, lt->cdf_guide, lt->n_entries, u_pick[i]);
+        pick[i] = lt->pick[e];
+        area[i] = lt->emitter_area[e];
+        L->ltri[i] = lt->emitter_tri[e];
+        triangle_vertices(m, L->ltri[i], &v0[i], &v1[i], &v2[i]);
+        const struct dr_material *lm = &s->materials[m->material[L->ltri[i]]];
+        L->lmat[i] = lm;
+        L->ldouble_sided[i] = lm->double_sided;
+    }
+    dr_m8 ok = ~(pick <= 0.0);
+    dr_f8 su = dr_f8_sqrt(u1);
+    dr_f8 b1 = 1.0 - su, b2 = u2 * su, b0 = 1.0 - b1 - b2;
+    dr_v3x8 lp = interp(b0, b1, b2, gather_vertex(m->positions, v0), gather_vertex(m->positions, v1),
+                        gather_vertex(m->positions, v2));
+    dr_v3x8 lng = {gather_at(m->tri_normal_eps, L->ltri, 4, 0), gather_at(m->tri_normal_eps, L->ltri, 4, 1),
+                   gather_at(m->tri_normal_eps, L->ltri, 4, 2)};
+    dr_f8 leps = gather_at(m->tri_normal_eps, L->ltri, 4, 3);
+    dr_v3x8 d = dr_v3x8_sub(lp, p);
+    dr_f8 d2 = dr_v3x8_dot(d, d);
+    ok &= d2 > 0.0;
+    dr_f8 dist = dr_f8_sqrt(d2);
+    *wi = dr_v3x8_scale(d, 1.0 / dist);
+    dr_f8 cos_l = dr_v3x8_dot(lng, *wi);
+    ok &= ~(cos_l == 0.0) & (area > 0.0);
+    *radiance = emission(L->lmat, (cos_l < 0.0) | mask_of(L->ldouble_sided));
+    *target = offset_origin(lp, lng, leps, dr_v3x8_neg(*wi));
+    *pdf = pick * d2 / (dr_f8_abs(cos_l) * area);
+    return ok & ~dr_v3x8_is_black(*radiance);
+}
+
+void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, int n,
+                    struct dr_path_state *const *st, struct dr_sampler *const *smp, struct dr_path_vertex *const *v,
+                    const int64_t *tri, struct dr_shadow_ray *const *shadow, enum dr_step_next *next,
+                    struct dr_path8 *g)
+{
+    const struct dr_mesh *m = &s->mesh;
+    struct dr_light_area_tables lt;
+    dr_light_area_tables(s->light_sampler, &lt);
+    struct lanes L;
+    dr_u8 key, dim;
+    dr_f8 depth;
+    for (int i = 0; i < DR_SIMD_W; i++) {
+        int k = i < n ? i : 0;   /* the padding repeats lane 0 */
+        L.st[i] = st[k];
+        L.tri[i] = tri[k];
+        triangle_vertices(m, tri[k], &L.v0[i], &L.v1[i], &L.v2[i]);
+        const struct dr_material *mat = &s->materials[m->material[tri[k]]];
+        L.mat[i] = mat;
+        L.double_sided[i] = mat->double_sided;
+        L.has_normals[i] = m->flags[tri[k]] & DR_TRI_HAS_NORMALS;
+        L.dim[i] = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)(st[k]->depth - 1);
+        depth[i] = st[k]->depth;
+        key[i] = smp[k]->key;
+        dim[i] = L.dim[i];
+    }
+    g->n = n;
+    dr_v3x8 o = gather3(L.st, offsetof(struct dr_path_state, o)), d = gather3(L.st, offsetof(struct dr_path_state, d));
+
+    /* stage_locate, stage_emission */
+    dr_v3x8 p, ng, ns;
+    dr_f8 eps;
+    dr_m8 front = locate(m, &L, o, d, &p, &ng, &ns, &eps);
+    for (int i = 0; i < n; i++)
+        v[i]->kind = DR_VERTEX_SURFACE;
+    emission_seen(&lt, &L, n, p, ng, front, depth, v);
+
+    /* stage_material: the frame towards the ray, the BSDF, the random numbers */
+    dr_m8 end = (depth >= (double)opts->max_depth) | (~front & ~mask_of(L.double_sided));
+    g->ng = dr_v3x8_sel(front, ng, dr_v3x8_neg(ng));
+    g->fn = dr_v3x8_sel(front, ns, dr_v3x8_neg(ns));
+    frame_from_normal(g->fn, &g->fs, &g->ft);
+    g->wo_z = to_local(g->fs, g->ft, g->fn, dr_v3x8_neg(d)).z;
+    g->base = gather3(L.mat, offsetof(struct dr_material, base_color));
+    dr_f8 u_pick = independent(key, dim + 1), u1 = independent(key, dim + 2), u2 = independent(key, dim + 3);
+    g->bsdf_u1 = independent(key, dim + 5);   /* dim + 4: the lobe choice, unused without a specular lobe */
+    g->bsdf_u2 = independent(key, dim + 6);
+    g->rr = independent(key, dim + 7);
+    for (int i = 0; i < n; i++)
+        if (!end[i])
+            smp[i]->dim = L.dim[i] + 7;
+
+    /* dr_path_nee_begin */
+    dr_v3x8 wi, target;
+    dr_m8 ok = light_sample(s, &lt, &L, p, u_pick, u1, u2, &wi, &target, &g->ls_radiance, &g->ls_pdf);
+    ok &= ~(dr_v3x8_dot(wi, g->ng) <= 0.0);
+    dr_v3x8 nee_wi = to_local(g->fs, g->ft, g->fn, wi);
+    dr_m8 above = (g->wo_z > COS_EPS) & (nee_wi.z > COS_EPS);   /* dr_bsdf_eval_pdf, Lambertian */
+    g->bsdf_pdf = dr_f8_sel(above, nee_wi.z * DR_INV_PI, dr_f8s(0.0));
+    g->nee_f = dr_v3x8_sel(above, dr_v3x8_scale(g->base, dr_f8s(DR_INV_PI)),
+                           (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)});
+    ok &= ~dr_v3x8_is_black(g->nee_f);
+    dr_v3x8 so = offset_origin(p, g->ng, eps, wi);
+    dr_v3x8 sd = dr_v3x8_sub(target, so);
+    g->tmax = dr_f8_sqrt(dr_v3x8_dot(sd, sd));
+    sd = dr_v3x8_scale(sd, 1.0 / g->tmax);
+    g->nee_cos = nee_wi.z;
+    g->shadow = ok & ~end;
+    g->go_on = ~end;
+    g->p = p;
+    g->eps = eps;
+    g->depth = depth;
+    for (int i = 0; i < n; i++) {
+        next[i] = end[i] ? DR_STEP_END : g->shadow[i] ? DR_STEP_SHADOW : DR_STEP_CONTINUE;
+        if (next[i] == DR_STEP_SHADOW)
+            *shadow[i] = (struct dr_shadow_ray){.o = dr_v3x8_get(so, i), .d = dr_v3x8_get(sd, i), .tmax = g->tmax[i],
+                                                .key = 0};
+    }
+}
+
+void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g, struct dr_path_state *const *st,
+                       struct dr_path_vertex *const *v, const bool *occluded, bool *more)
+{
+    const int n = g->n;
+    const void *S[DR_SIMD_W];
+    bool occ[DR_SIMD_W];
+    for (int i = 0; i < DR_SIMD_W; i++) {
+        S[i] = st[i < n ? i : 0];
+        occ[i] = occluded[i < n ? i : 0];
+    }
+    /* dr_path_nee_end */
+    dr_m8 nee = g->shadow & (g->tmax > 0.0) & ~mask_of(occ);
+    dr_f8 nee_scale = dr_f8_abs(g->nee_cos) * mis_power(g->ls_pdf, g->bsdf_pdf) / g->ls_pdf;
+    for (int i = 0; i < n; i++) {
+        if (!nee[i])
+            continue;
+        v[i]->nee = true;
+        v[i]->nee_f = dr_v3x8_get(g->nee_f, i);
+        v[i]->ls.radiance = dr_v3x8_get(g->ls_radiance, i);
+        v[i]->nee_scale = nee_scale[i];
+    }
+
+    /* stage_continue: dr_bsdf_sample (Lambertian), Russian roulette, the next ray */
+    dr_m8 ok = g->go_on & (g->wo_z > COS_EPS);
+    dr_v3x8 wi = sample_cosine(g->bsdf_u1, g->bsdf_u2);
+    ok &= wi.z > COS_EPS;
+    dr_f8 pdf = wi.z * DR_INV_PI;
+    ok &= (pdf > 0.0) & (pdf < INFINITY);
+    dr_v3x8 wiw = to_world(g->fs, g->ft, g->fn, wi);
+    ok &= ~(dr_v3x8_dot(wiw, g->ng) <= 0.0);
+    dr_f8 cos_pdf = dr_f8_abs(wi.z) / pdf;
+    dr_v3x8 beta = dr_v3x8_mul(gather3(S, offsetof(struct dr_path_state, beta)),
+                               dr_v3x8_scale(dr_v3x8_scale(g->base, dr_f8s(DR_INV_PI)), cos_pdf));
+    ok &= ~dr_v3x8_is_black(beta);
+    dr_m8 roulette = g->depth >= (double)opts->rr_depth;
+    dr_f8 q = dr_f8_sel(roulette, dr_f8_min(dr_f8_max(beta.x, dr_f8_max(beta.y, beta.z)), dr_f8s(0.95)),
+                        dr_f8s(1.0));
+    ok &= ~(roulette & (g->rr >= q));
+    beta = dr_v3x8_scale(beta, 1.0 / q);
+    dr_v3x8 o = offset_origin(g->p, g->ng, g->eps, wiw);
+    void *const *W = (void *const *)st;
+    scatter3(W, offsetof(struct dr_path_state, beta), beta, n, ok);
+    scatter(W, offsetof(struct dr_path_state, prev_pdf), pdf, n, ok);
+    scatter3(W, offsetof(struct dr_path_state, prev_p), g->p, n, ok);
+    scatter3(W, offsetof(struct dr_path_state, o), o, n, ok);
+    scatter3(W, offsetof(struct dr_path_state, d), wiw, n, ok);
+    for (int i = 0; i < n; i++)
+        more[i] = ok[i] != 0;
+}

@@ -1,0 +1,62 @@
+/* The walker's stages for eight lanes at once (simd.h), at vertices on
+ * Lambertian surfaces lit by area lights: the bulk of a diffuse scene's work.
+ *
+ * dr_path8_shade is dr_path_step_hit and dr_path8_continue is dr_path_nee_end
+ * + dr_path_stage_continue, for lanes where those reduce to: the hit point,
+ * the emission seen there, a shading frame, a Lambertian BSDF, one light
+ * sample on an emitting triangle, a cosine-weighted continuation and Russian
+ * roulette. Every operation is the scalar code's, in its order, so each lane
+ * gets the scalar walker's bits (test_render compares the images); what the
+ * kernels mirror is named beside each step. Everything else (glossy or
+ * textured materials, media, environment and punctual lights, parameters to
+ * differentiate, the structured samplers) stays with the scalar stages: the
+ * packet tracer (wavefront.c) sends each lane one way or the other.
+ *
+ * The vertex the caller receives holds what dr_path_vertex_term reads
+ * (emission, next-event estimate): the eight-lane stages serve callers that
+ * want the radiance only (dr_wave_ops.term_only). */
+#ifndef DR_PATH_SIMD_H
+#define DR_PATH_SIMD_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "path.h"
+#include "simd.h"
+
+/* What the two halves of a group's vertex share, lane by lane. */
+struct dr_path8 {
+    int n;                        /* lanes in the group (the rest repeat lane 0) */
+    dr_m8 shadow;                 /* a shadow ray was cast (DR_STEP_SHADOW) */
+    dr_m8 go_on;                  /* the continuation runs (not DR_STEP_END) */
+    dr_v3x8 p, ng;                /* hit point; geometric normal on the ray's side */
+    dr_v3x8 fs, ft, fn;           /* shading frame */
+    dr_f8 eps, wo_z, depth;
+    dr_v3x8 base;                 /* base colour */
+    dr_f8 bsdf_u1, bsdf_u2, rr;   /* the vertex's random numbers still to use */
+    dr_f8 tmax, nee_cos, ls_pdf, bsdf_pdf;   /* next-event estimate, for its end */
+    dr_v3x8 nee_f, ls_radiance;
+};
+
+/* Can this run use the eight-lane stages at all (nothing to differentiate,
+ * no textures, vertex colours, normal maps, alpha, media, environment or
+ * punctual light; some area light)? */
+bool dr_path8_applies(const struct dr_scene *scene, const struct dr_path_opts *opts);
+/* Can this lane's vertex use them (a hit, on a material without a specular
+ * lobe, with the independent sampler)? */
+bool dr_path8_lane(const struct dr_scene *scene, const struct dr_sampler *sampler, int64_t tri);
+
+/* dr_path_step_hit of n <= DR_SIMD_W lanes that dr_path8_lane accepts:
+ * fills next[i], *shadow[i] when next[i] is DR_STEP_SHADOW, the vertex term's
+ * emission in *v[i], the sampler's position, and g for dr_path8_continue. */
+void dr_path8_shade(const struct dr_scene *scene, const struct dr_path_opts *opts, int n,
+                    struct dr_path_state *const *st, struct dr_sampler *const *sampler,
+                    struct dr_path_vertex *const *v, const int64_t *tri, struct dr_shadow_ray *const *shadow,
+                    enum dr_step_next *next, struct dr_path8 *g);
+/* dr_path_nee_end (occluded[i]: the shadow ray's answer) and
+ * dr_path_stage_continue of the same lanes: the next-event estimate in
+ * *v[i], the next ray and throughput in *st[i]; more[i]: the path goes on. */
+void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g, struct dr_path_state *const *st,
+                       struct dr_path_vertex *const *v, const bool *occluded, bool *more);
+
+#endif
