@@ -164,9 +164,26 @@ static void shade_group(struct dr_wave *w, const int *k, int n, const struct dr_
         w->lane[k[i]].next = next[i];
 }
 
+/* Lane k's shadow ray into the batch, once its shading asked for one (a
+ * replaying lane's logged answer stands in for the ray). */
+static inline void collect_shadow(struct dr_wave *w, int k, struct dr_ray_counts *counts)
+{
+    struct lane *l = &w->lane[k];
+    l->occluded = false;
+    if (l->next != DR_STEP_SHADOW)
+        return;
+    if (from_log(l)) {   /* (no ray when tmax is not > 0: nee_end knows) */
+        l->occluded = l->shadow.tmax > 0.0 && l->log.occ[l->st.depth - 1];
+        return;
+    }
+    counts->shadow++;   /* counted as dr_path_step counts it */
+    if (l->shadow.tmax > 0.0)
+        add_ray(&w->rays, k, l->shadow.o, l->shadow.d, l->shadow.tmax, l->shadow.key);
+}
+
 /* The hit stage: shading up to the shadow ray (the lanes path_simd.h
- * accepts eight at a time, the others one by one); collects the shadow rays
- * (a replaying lane's logged answer stands in for its ray). */
+ * accepts eight at a time, the others one by one); then the shadow rays.
+ * Without eight-lane groups each lane's ray is collected as it is shaded. */
 static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, const struct dr_path_opts *opts,
                        struct dr_ray_counts *counts)
 {
@@ -187,24 +204,14 @@ static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
         }
         l->next = w->prefetch && !w->simd ? dr_path_step_shade(s, opts, &l->st, &l->smp, &l->v, l->tri, &l->shadow)
                                           : dr_path_step_hit(s, opts, &l->st, &l->smp, &l->v, l->tri, &l->shadow);
+        if (!w->simd)
+            collect_shadow(w, w->live[i], counts);
     }
     if (n_pending > 0)
         shade_group(w, pending, n_pending, s, opts);
     counts->simd_vertices += (uint64_t)n_simd;
-    for (int i = 0; i < n_live; i++) {
-        struct lane *l = &w->lane[w->live[i]];
-        l->occluded = false;
-        if (l->next != DR_STEP_SHADOW)
-            continue;
-        if (from_log(l)) {   /* (no ray when tmax is not > 0: nee_end knows) */
-            l->occluded = l->shadow.tmax > 0.0 && l->log.occ[l->st.depth - 1];
-            continue;
-        }
-        counts->shadow++;   /* counted as dr_path_step counts it */
-        if (!(l->shadow.tmax > 0.0))
-            continue;
-        add_ray(&w->rays, w->live[i], l->shadow.o, l->shadow.d, l->shadow.tmax, l->shadow.key);
-    }
+    for (int i = 0; w->simd && i < n_live; i++)
+        collect_shadow(w, w->live[i], counts);
     struct dr_accel_rays r = accel_rays(&w->rays);
     dr_accel_occluded_many(s->accel, &r, w->occluded);
     for (int k = 0; k < w->rays.n; k++) {
