@@ -9,21 +9,21 @@
 #include "path_simd.h"
 
 struct lane {
-    struct dr_path_state st;
-    struct dr_sampler smp;
-    struct dr_path_vertex v;
-    struct dr_wave_arrival arrival;   /* the throughput v was reached with */
-    enum dr_step_next next;           /* what the hit stage asked for */
-    struct dr_shadow_ray shadow;
-    int64_t tri;                      /* the trace's answer */
-    bool occluded;                    /* the shadow ray's */
+    /* what every pass over the lanes reads first, together */
     bool replaying;                   /* this walk replays the last one: answers from the log */
+    bool occluded;                    /* the shadow ray's */
     bool simd;                        /* this vertex is shaded eight lanes at a time (path_simd.h) */
     bool simd_more;                   /* ... and its path goes on (dr_path8_continue) */
-    struct dr_wave_log log;           /* the walk's ray answers, for a replay */
+    enum dr_step_next next;           /* what the hit stage asked for */
+    int64_t tri;                      /* the trace's answer */
+    struct dr_path_state st;
+    struct dr_sampler smp;
+    struct dr_wave_arrival arrival;   /* the throughput v was reached with */
+    struct dr_shadow_ray shadow;
     _Alignas(16) unsigned char user[DR_WAVE_USER_BYTES];
+    struct dr_path_vertex v;
+    struct dr_wave_log log;           /* the walk's ray answers, for a replay */
 };
-
 /* The rays of one batch, in the layout dr_accel_*_many reads. */
 struct batch {
     dr_vec3 o[DR_WAVE_LANES], d[DR_WAVE_LANES];
