@@ -137,16 +137,156 @@ static inline dr_f8 independent(dr_u8 key, dr_u8 dim)
     return __builtin_convertvector((dr_m8)(x >> 11), dr_f8) * (1.0 / 9007199254740992.0);
 }
 
+/* -------------------------------------------------------------- the BSDF */
+
+/* bsdf.c's helpers */
+static inline dr_f8 pow5(dr_f8 s)
+{
+    dr_f8 s2 = s * s;
+    return s2 * s2 * s;
+}
+static inline dr_f8 max3(dr_v3x8 a) { return dr_f8_max(a.x, dr_f8_max(a.y, a.z)); }
+static inline dr_f8 luminance(dr_v3x8 c) { return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z; }
+static inline dr_f8 smith_lambda(dr_f8 a2, dr_v3x8 w)
+{
+    dr_f8 x = a2 * (w.x * w.x + w.y * w.y) / (w.z * w.z);
+    return 0.5 * x / (1.0 + dr_f8_sqrt(1.0 + x));
+}
+static inline dr_v3x8 normalize(dr_v3x8 a)   /* dr_normalize */
+{
+    dr_f8 l = dr_f8_sqrt(dr_v3x8_dot(a, a));
+    return dr_v3x8_sel(l > 0.0, dr_v3x8_scale(a, 1.0 / dr_f8_sel(l > 0.0, l, dr_f8s(1.0))), a);
+}
+
+/* dr_material_eval of untextured materials, and what bsdf.c derives from
+ * the material alone (bsdf_alpha, dielectric_f0, no_specular_lobe). */
+static void material_eval(struct dr_path8 *g, const void *const *mat)
+{
+    g->base = gather3(mat, offsetof(struct dr_material, base_color));
+    g->metallic = gather(mat, offsetof(struct dr_material, metallic));
+    g->specular = gather(mat, offsetof(struct dr_material, specular));
+    g->lambert = (g->metallic == 0.0) & (g->specular == 0.0);
+    g->glossy = !(g->lambert[0] & g->lambert[1] & g->lambert[2] & g->lambert[3] & g->lambert[4] & g->lambert[5] &
+                  g->lambert[6] & g->lambert[7]);
+    if (!g->glossy)
+        return;
+    dr_f8 r = gather(mat, offsetof(struct dr_material, roughness));
+    dr_f8 a = r * r;
+    g->alpha = dr_f8_sel(a > DR_BSDF_MIN_ALPHA, a, dr_f8s(DR_BSDF_MIN_ALPHA));
+    dr_v3x8 sc = gather3(mat, offsetof(struct dr_material, specular_color));
+    g->f0 = (dr_v3x8){dr_f8_min(0.04 * sc.x, dr_f8s(1.0)) * g->specular,
+                      dr_f8_min(0.04 * sc.y, dr_f8s(1.0)) * g->specular,
+                      dr_f8_min(0.04 * sc.z, dr_f8s(1.0)) * g->specular};
+}
+
+/* specular_prob (0 without a specular lobe) */
+static dr_f8 specular_prob(const struct dr_path8 *g, dr_f8 cos_o)
+{
+    if (!g->glossy)
+        return dr_f8s(0.0);
+    dr_f8 m = g->metallic;
+    dr_f8 s5 = pow5(1.0 - dr_f8_clamp(cos_o, 0.0, 1.0));
+    dr_f8 f0max = max3(g->f0);
+    dr_f8 fd = f0max + (g->specular - f0max) * s5;
+    dr_v3x8 b = g->base;
+    dr_v3x8 fm = {b.x + (1.0 - b.x) * s5, b.y + (1.0 - b.y) * s5, b.z + (1.0 - b.z) * s5};
+    dr_f8 w_spec = (1.0 - m) * fd + m * luminance(fm);
+    dr_f8 w_diff = (1.0 - m) * (1.0 - fd) * luminance(b);
+    dr_f8 p = w_spec / (w_spec + w_diff);
+    p = dr_f8_sel(w_spec > 0.0, p, dr_f8s(0.0));
+    p = dr_f8_sel(w_diff > 0.0, p, dr_f8s(1.0));
+    return dr_f8_sel(g->lambert, dr_f8s(0.0), p);
+}
+
+/* eval_pdf_glossy */
+static dr_v3x8 eval_pdf_glossy(const struct dr_path8 *g, dr_v3x8 wo, dr_v3x8 wi, dr_f8 p, dr_f8 *pdf)
+{
+    dr_f8 cos_pdf = wi.z * DR_INV_PI;
+    dr_f8 a = g->alpha, a2 = a * a;
+    dr_v3x8 H = dr_v3x8_add(wo, wi);
+    dr_f8 hxy2 = H.x * H.x + H.y * H.y;
+    dr_f8 H2 = hxy2 + H.z * H.z;
+    dr_f8 q = hxy2 + a2 * H.z * H.z;
+    dr_f8 r = H2 / q;
+    dr_f8 D = a2 * r * r * DR_INV_PI;
+    dr_f8 lo = smith_lambda(a2, wo), li = smith_lambda(a2, wi);
+    dr_f8 dq = D / (4.0 * wo.z);
+    dr_f8 pdf_spec = dq / (1.0 + lo);
+    dr_f8 spec = dq / ((1.0 + lo + li) * wi.z);
+    *pdf = (1.0 - p) * cos_pdf + p * pdf_spec;
+
+    dr_f8 c = 0.5 * dr_f8_sqrt(H2);
+    dr_f8 s5 = pow5(1.0 - dr_f8_clamp(c, 0.0, 1.0));
+    dr_f8 m = g->metallic;
+    dr_v3x8 f0 = g->f0, base = g->base;
+    dr_f8 f90 = g->specular;
+    dr_v3x8 fd = {f0.x + (f90 - f0.x) * s5, f0.y + (f90 - f0.y) * s5, f0.z + (f90 - f0.z) * s5};
+    dr_v3x8 fm = {base.x + (1.0 - base.x) * s5, base.y + (1.0 - base.y) * s5, base.z + (1.0 - base.z) * s5};
+    dr_f8 f0max = max3(f0);
+    dr_f8 fo = f0max + (f90 - f0max) * pow5(1.0 - wo.z), fi = f0max + (f90 - f0max) * pow5(1.0 - wi.z);
+    dr_f8 kd = (1.0 - m) * dr_f8_max(dr_f8s(0.0), 1.0 - fo) * dr_f8_max(dr_f8s(0.0), 1.0 - fi) * DR_INV_PI;
+    dr_f8 ks = (1.0 - m) * spec, km = m * spec;
+    return (dr_v3x8){base.x * kd + fd.x * ks + fm.x * km, base.y * kd + fd.y * ks + fm.y * km,
+                     base.z * kd + fd.z * ks + fm.z * km};
+}
+
+/* eval_pdf_above: wo.z, wi.z > COS_EPS, p = specular_prob(wo.z) */
+static dr_v3x8 eval_pdf_above(const struct dr_path8 *g, dr_v3x8 wo, dr_v3x8 wi, dr_f8 p, dr_f8 *pdf)
+{
+    dr_f8 pdf_l = wi.z * DR_INV_PI;
+    dr_v3x8 f_l = dr_v3x8_scale(g->base, dr_f8s(DR_INV_PI));
+    if (!g->glossy) {
+        *pdf = pdf_l;
+        return f_l;
+    }
+    dr_f8 pdf_g;
+    dr_v3x8 f_g = eval_pdf_glossy(g, wo, wi, p, &pdf_g);
+    *pdf = dr_f8_sel(g->lambert, pdf_l, pdf_g);
+    return dr_v3x8_sel(g->lambert, f_l, f_g);
+}
+
+/* sample_specular_dir: GGX visible normals (sample_vndf), reflected. The
+ * angle's cosine and sine are libm's, lane by lane, as in the scalar map. */
+static dr_v3x8 sample_specular_dir(const struct dr_path8 *g, dr_v3x8 wo, dr_f8 u1, dr_f8 u2, dr_m8 lanes)
+{
+    dr_f8 a = g->alpha;
+    dr_v3x8 vh = normalize((dr_v3x8){a * wo.x, a * wo.y, wo.z});
+    dr_f8 lensq = vh.x * vh.x + vh.y * vh.y;
+    dr_f8 k = 1.0 / dr_f8_sqrt(dr_f8_sel(lensq > 0.0, lensq, dr_f8s(1.0)));
+    dr_v3x8 t1 = dr_v3x8_sel(lensq > 0.0, (dr_v3x8){-vh.y * k, vh.x * k, 0.0 * k},
+                             (dr_v3x8){dr_f8s(1.0), dr_f8s(0.0), dr_f8s(0.0)});
+    dr_v3x8 t2 = dr_v3x8_cross(vh, t1);
+    dr_f8 r = dr_f8_sqrt(u1), phi = 2.0 * M_PI * u2, cos_phi = dr_f8s(1.0), sin_phi = dr_f8s(0.0);
+    for (int i = 0; i < DR_SIMD_W; i++)
+        if (lanes[i]) {
+            cos_phi[i] = cos(phi[i]);
+            sin_phi[i] = sin(phi[i]);
+        }
+    dr_f8 p1 = r * cos_phi, p2 = r * sin_phi;
+    dr_f8 s = 0.5 * (1.0 + vh.z);
+    dr_f8 c = dr_f8_sqrt(dr_f8_max(dr_f8s(0.0), 1.0 - p1 * p1));
+    dr_f8 p2s = (1.0 - s) * c + s * p2;
+    dr_f8 n3 = dr_f8_sqrt(dr_f8_max(dr_f8s(0.0), 1.0 - p1 * p1 - p2s * p2s));
+    dr_v3x8 nh = dr_v3x8_add(dr_v3x8_add(dr_v3x8_scale(t1, p1), dr_v3x8_scale(t2, p2s)), dr_v3x8_scale(vh, n3));
+    dr_v3x8 h = normalize((dr_v3x8){a * nh.x, a * nh.y, dr_f8_max(dr_f8s(0.0), nh.z)});
+    return dr_v3x8_sub(dr_v3x8_scale(h, 2.0 * dr_v3x8_dot(wo, h)), wo);
+}
+
 /* ----------------------------------------------------------- eligibility */
 
 bool dr_path8_applies(const struct dr_scene *s, const struct dr_path_opts *opts)
 {
-    const unsigned allowed = DR_FX_AREA_LIGHTS | DR_FX_SHADING_NORMALS | DR_FX_SINGLE_SIDED | DR_FX_SPECULAR;
+    const unsigned allowed =
+        DR_FX_AREA_LIGHTS | DR_FX_SHADING_NORMALS | DR_FX_SINGLE_SIDED | DR_FX_SPECULAR | DR_FX_TEXTURES;
     struct dr_light_area_tables t;
-    return !opts->params && (s->effects & ~allowed) == 0 && (opts->stages & DR_STAGE_NEE) &&
-           (opts->stages & DR_STAGE_EMISSION) &&
-           !(opts->stages & (DR_STAGE_ENV | DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC)) &&
-           dr_light_area_tables(s->light_sampler, &t);
+    if (opts->params || (s->effects & ~allowed) || !(opts->stages & DR_STAGE_NEE) ||
+        !(opts->stages & DR_STAGE_EMISSION) || (opts->stages & (DR_STAGE_ENV | DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC)) ||
+        !dr_light_area_tables(s->light_sampler, &t))
+        return false;
+    for (int i = 0; i < s->n_materials; i++)   /* a light sample may land on any emitter */
+        if (s->materials[i].emissive_tex.texture >= 0)
+            return false;
+    return true;
 }
 
 bool dr_path8_lane(const struct dr_scene *s, const struct dr_sampler *smp, int64_t tri)
@@ -154,7 +294,7 @@ bool dr_path8_lane(const struct dr_scene *s, const struct dr_sampler *smp, int64
     if (tri < 0 || smp->kind != DR_SAMPLER_INDEPENDENT)
         return false;
     const struct dr_material *m = &s->materials[s->mesh.material[tri]];
-    return m->metallic == 0.0 && m->specular == 0.0;   /* bsdf.c's no_specular_lobe */
+    return m->base_color_tex.texture < 0 && m->metallic_roughness_tex.texture < 0;   /* dr_material_eval: factors */
 }
 
 /* ------------------------------------------------------------ the stages */
@@ -337,10 +477,13 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
     g->ng = dr_v3x8_sel(front, ng, dr_v3x8_neg(ng));
     g->fn = dr_v3x8_sel(front, ns, dr_v3x8_neg(ns));
     frame_from_normal(g->fn, &g->fs, &g->ft);
-    g->wo_z = to_local(g->fs, g->ft, g->fn, dr_v3x8_neg(d)).z;
-    g->base = gather3(L.mat, offsetof(struct dr_material, base_color));
+    g->wo = to_local(g->fs, g->ft, g->fn, dr_v3x8_neg(d));
+    g->wo_z = g->wo.z;
+    material_eval(g, L.mat);
+    g->spec_p = specular_prob(g, g->wo_z);   /* (wo.z <= COS_EPS: unused) */
     dr_f8 u_pick = independent(key, dim + 1), u1 = independent(key, dim + 2), u2 = independent(key, dim + 3);
-    g->bsdf_u1 = independent(key, dim + 5);   /* dim + 4: the lobe choice, unused without a specular lobe */
+    g->lobe_u = independent(key, dim + 4);
+    g->bsdf_u1 = independent(key, dim + 5);
     g->bsdf_u2 = independent(key, dim + 6);
     g->rr = independent(key, dim + 7);
     for (int i = 0; i < n; i++)
@@ -352,10 +495,11 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
     dr_m8 ok = light_sample(s, &lt, &L, p, u_pick, u1, u2, &wi, &target, &g->ls_radiance, &g->ls_pdf);
     ok &= ~(dr_v3x8_dot(wi, g->ng) <= 0.0);
     dr_v3x8 nee_wi = to_local(g->fs, g->ft, g->fn, wi);
-    dr_m8 above = (g->wo_z > COS_EPS) & (nee_wi.z > COS_EPS);   /* dr_bsdf_eval_pdf, Lambertian */
-    g->bsdf_pdf = dr_f8_sel(above, nee_wi.z * DR_INV_PI, dr_f8s(0.0));
-    g->nee_f = dr_v3x8_sel(above, dr_v3x8_scale(g->base, dr_f8s(DR_INV_PI)),
-                           (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)});
+    dr_m8 above = (g->wo_z > COS_EPS) & (nee_wi.z > COS_EPS);   /* dr_bsdf_eval_pdf */
+    dr_f8 pdf;
+    dr_v3x8 f = eval_pdf_above(g, g->wo, nee_wi, g->spec_p, &pdf);
+    g->bsdf_pdf = dr_f8_sel(above, pdf, dr_f8s(0.0));
+    g->nee_f = dr_v3x8_sel(above, f, (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)});
     ok &= ~dr_v3x8_is_black(g->nee_f);
     dr_v3x8 so = offset_origin(p, g->ng, eps, wi);
     dr_v3x8 sd = dr_v3x8_sub(target, so);
@@ -397,17 +541,20 @@ void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g
         v[i]->nee_scale = nee_scale[i];
     }
 
-    /* stage_continue: dr_bsdf_sample (Lambertian), Russian roulette, the next ray */
+    /* stage_continue: dr_bsdf_sample, Russian roulette, the next ray */
     dr_m8 ok = g->go_on & (g->wo_z > COS_EPS);
     dr_v3x8 wi = sample_cosine(g->bsdf_u1, g->bsdf_u2);
+    dr_m8 specular = ok & (g->lobe_u < g->spec_p);
+    if (specular[0] | specular[1] | specular[2] | specular[3] | specular[4] | specular[5] | specular[6] | specular[7])
+        wi = dr_v3x8_sel(specular, sample_specular_dir(g, g->wo, g->bsdf_u1, g->bsdf_u2, specular), wi);
     ok &= wi.z > COS_EPS;
-    dr_f8 pdf = wi.z * DR_INV_PI;
+    dr_f8 pdf;
+    dr_v3x8 f = eval_pdf_above(g, g->wo, wi, g->spec_p, &pdf);
     ok &= (pdf > 0.0) & (pdf < INFINITY);
     dr_v3x8 wiw = to_world(g->fs, g->ft, g->fn, wi);
     ok &= ~(dr_v3x8_dot(wiw, g->ng) <= 0.0);
     dr_f8 cos_pdf = dr_f8_abs(wi.z) / pdf;
-    dr_v3x8 beta = dr_v3x8_mul(gather3(S, offsetof(struct dr_path_state, beta)),
-                               dr_v3x8_scale(dr_v3x8_scale(g->base, dr_f8s(DR_INV_PI)), cos_pdf));
+    dr_v3x8 beta = dr_v3x8_mul(gather3(S, offsetof(struct dr_path_state, beta)), dr_v3x8_scale(f, cos_pdf));
     ok &= ~dr_v3x8_is_black(beta);
     dr_m8 roulette = g->depth >= (double)opts->rr_depth;
     dr_f8 q = dr_f8_sel(roulette, dr_f8_min(dr_f8_max(beta.x, dr_f8_max(beta.y, beta.z)), dr_f8s(0.95)),

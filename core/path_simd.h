@@ -1,16 +1,17 @@
 /* The walker's stages for eight lanes at once (simd.h), at vertices on
- * Lambertian surfaces lit by area lights: the bulk of a diffuse scene's work.
+ * untextured surfaces lit by area lights: the bulk of such a scene's work.
  *
  * dr_path8_shade is dr_path_step_hit and dr_path8_continue is dr_path_nee_end
  * + dr_path_stage_continue, for lanes where those reduce to: the hit point,
- * the emission seen there, a shading frame, a Lambertian BSDF, one light
- * sample on an emitting triangle, a cosine-weighted continuation and Russian
- * roulette. Every operation is the scalar code's, in its order, so each lane
+ * the emission seen there, a shading frame, the glTF BSDF of an untextured
+ * material (Lambertian, or with its GGX lobe), one light sample on an
+ * emitting triangle, the BSDF's continuation and Russian roulette. Every operation is the scalar code's, in its order, so each lane
  * gets the scalar walker's bits (test_render compares the images); what the
- * kernels mirror is named beside each step. Everything else (glossy or
- * textured materials, media, environment and punctual lights, parameters to
- * differentiate, the structured samplers) stays with the scalar stages: the
- * packet tracer (wavefront.c) sends each lane one way or the other.
+ * kernels mirror is named beside each step. Everything else (textured
+ * materials, media, environment and punctual lights, vertex colours, normal
+ * maps, alpha, parameters to differentiate, the structured samplers) stays
+ * with the scalar stages: the packet tracer (wavefront.c) sends each lane one
+ * way or the other.
  *
  * The vertex the caller receives holds what dr_path_vertex_term reads
  * (emission, next-event estimate): the eight-lane stages serve callers that
@@ -36,14 +37,19 @@ struct dr_path8 {
     dr_f8 bsdf_u1, bsdf_u2, rr;   /* the vertex's random numbers still to use */
     dr_f8 tmax, nee_cos, ls_pdf, bsdf_pdf;   /* next-event estimate, for its end */
     dr_v3x8 nee_f, ls_radiance;
+    /* the BSDF (bsdf.h) where some lane has a specular lobe (glossy) */
+    bool glossy;
+    dr_m8 lambert;                /* lanes without one */
+    dr_v3x8 wo, f0;               /* wo local; the dielectric f0 */
+    dr_f8 metallic, alpha, specular, spec_p, lobe_u;
 };
 
 /* Can this run use the eight-lane stages at all (nothing to differentiate,
- * no textures, vertex colours, normal maps, alpha, media, environment or
- * punctual light; some area light)? */
+ * no vertex colours, normal maps, alpha, media, environment, punctual light
+ * or emissive texture; some area light)? */
 bool dr_path8_applies(const struct dr_scene *scene, const struct dr_path_opts *opts);
-/* Can this lane's vertex use them (a hit, on a material without a specular
- * lobe, with the independent sampler)? */
+/* Can this lane's vertex use them (a hit, on an untextured material, with
+ * the independent sampler)? */
 bool dr_path8_lane(const struct dr_scene *scene, const struct dr_sampler *sampler, int64_t tri);
 
 /* dr_path_step_hit of n <= DR_SIMD_W lanes that dr_path8_lane accepts:

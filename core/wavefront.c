@@ -135,11 +135,22 @@ static void locate_live(struct dr_wave *w, int n_live, const struct dr_scene *s)
         if (l->tri >= 0)
             dr_mesh_prefetch_vertices(&s->mesh, l->tri);
     }
-    for (int i = 0; !w->simd && i < n_live; i++) {   /* (the eight-lane stages locate their own) */
+    for (int i = 0; i < n_live; i++) {
         struct lane *l = &w->lane[w->live[i]];
+        if (l->simd)
+            continue;   /* the eight-lane stages locate their own */
         dr_path_step_locate(s, &l->st, &l->v, l->tri);
         if (l->tri >= 0 && s->n_textures > 0)
             dr_material_prefetch(s, &l->v.hit);
+    }
+}
+
+/* Which lanes' vertices the eight-lane stages shade (path_simd.h). */
+static void classify_live(struct dr_wave *w, int n_live, const struct dr_scene *s)
+{
+    for (int i = 0; i < n_live; i++) {
+        struct lane *l = &w->lane[w->live[i]];
+        l->simd = w->simd && !from_log(l) && dr_path8_lane(s, &l->smp, l->tri);
     }
 }
 
@@ -192,7 +203,6 @@ static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
     int pending[DR_SIMD_W], n_pending = 0, n_simd = 0;
     for (int i = 0; i < n_live; i++) {
         struct lane *l = &w->lane[w->live[i]];
-        l->simd = w->simd && !from_log(l) && dr_path8_lane(s, &l->smp, l->tri);
         if (l->simd) {
             n_simd++;
             pending[n_pending++] = w->live[i];
@@ -202,8 +212,8 @@ static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
             }
             continue;
         }
-        l->next = w->prefetch && !w->simd ? dr_path_step_shade(s, opts, &l->st, &l->smp, &l->v, l->tri, &l->shadow)
-                                          : dr_path_step_hit(s, opts, &l->st, &l->smp, &l->v, l->tri, &l->shadow);
+        l->next = w->prefetch ? dr_path_step_shade(s, opts, &l->st, &l->smp, &l->v, l->tri, &l->shadow)
+                              : dr_path_step_hit(s, opts, &l->st, &l->smp, &l->v, l->tri, &l->shadow);
         if (!w->simd)
             collect_shadow(w, w->live[i], counts);
     }
@@ -311,6 +321,7 @@ void dr_wave_run(struct dr_wave *w, const struct dr_scene *s, const struct dr_pa
             w->live[n_live++] = k;
         }
         trace_live(w, n_live, s, counts);
+        classify_live(w, n_live, s);
         if (w->prefetch)
             locate_live(w, n_live, s);
         shade_live(w, n_live, s, opts, counts);

@@ -308,10 +308,10 @@ static uint64_t wavefront_matches_one_path(struct dr_scene *s, struct dr_camera 
 }
 
 /* A box whose surfaces take both of the packet renderer's ways: Lambertian
- * walls with interpolated normals and a single-sided Lambertian panel
- * (shaded eight lanes at a time, path_simd.h) next to a glossy block (one
- * lane at a time), lit by two lamps of different size and colour, one
- * double-sided. */
+ * walls with interpolated normals, a single-sided Lambertian panel, a glossy
+ * dielectric block and a near-specular metal block (shaded eight lanes at a
+ * time, path_simd.h) next to a textured floor tile (one lane at a time), lit
+ * by two lamps of different size and colour, one double-sided. */
 static struct dr_scene *mixed_box(void)
 {
     struct sb b;
@@ -329,6 +329,15 @@ static struct dr_scene *mixed_box(void)
     glossy.specular = 1.0;
     glossy.roughness = 0.3;
     sb_box(&b, dr_v3(-0.6, 0.0, -0.5), dr_v3(-0.1, 0.9, 0.0), sb_material(&b, glossy));
+    struct dr_material metal = sb_diffuse(dr_v3(0.9, 0.6, 0.3));
+    metal.metallic = 1.0;
+    metal.roughness = 0.05;   /* near-specular */
+    sb_box(&b, dr_v3(0.3, 0.0, 0.1), dr_v3(0.7, 0.3, 0.5), sb_material(&b, metal));
+    struct dr_image checker = sb_image(2, 2, 3, (const float[]){1, 1, 1, 0.1f, 0.1f, 0.1f, 0.1f, 0.1f, 0.1f, 1, 1, 1},
+                                       0.0f, true);
+    struct dr_material textured = sb_diffuse(dr_v3s(0.8));
+    textured.base_color_tex.texture = sb_texture(&b, checker);
+    sb_quad(&b, dr_v3(-0.9, 0.01, 0.2), dr_v3(0.8, 0, 0), dr_v3(0, 0, -0.8), sb_material(&b, textured));
     struct dr_material panel = sb_diffuse(dr_v3(0.3, 0.8, 0.3));
     panel.double_sided = false;
     sb_quad(&b, dr_v3(0.2, 0.2, -0.6), dr_v3(0.6, 0, 0), dr_v3(0, 0.8, 0.3), sb_material(&b, panel));
@@ -390,17 +399,21 @@ static uint64_t radiance_matches_exactly(const struct dr_scene *s, struct dr_cam
     return packets.simd_vertices;
 }
 
-/* Both ways the packet renderer shades: the bundled Cornell box (textures,
- * glossy and single-sided surfaces) has its hits located and their texels
- * prefetched before shading; a small untextured box is shaded in one pass. */
+/* The packet renderer against the one-path walker: the bundled Cornell box
+ * (a textured floor, shaded one lane at a time with its hits located and
+ * texels prefetched first; glossy dielectric walls and a rough metal, eight
+ * lanes at a time), a small Lambertian box (no prefetching), and a box that
+ * mixes them with shading normals and a second, double-sided lamp. */
 static void test_wavefront_matches_one_path(void)
 {
     struct dr_scene *s = dr_scene_load(scene_path("cornell-box.gltf"));
     CHECK(s != NULL, "load the bundled scene: %s", dr_last_error());
     if (s) {
         CHECK(dr_wave_prefetches(s), "the textured box is shaded with prefetching");
-        CHECK(wavefront_matches_one_path(s, s->cameras[0], "bundled Cornell box") == 0,
-              "the textured box is shaded one lane at a time");
+        CHECK(wavefront_matches_one_path(s, s->cameras[0], "bundled Cornell box") > 0,
+              "the bundled box's untextured hits are shaded eight lanes at a time");
+        CHECK(radiance_matches_exactly(s, s->cameras[0], "bundled Cornell box") > 1000,
+              "the bundled box's untextured hits are shaded eight lanes at a time");
         dr_scene_destroy(s);
     }
     struct sb b;
@@ -417,8 +430,9 @@ static void test_wavefront_matches_one_path(void)
     s = mixed_box();
     struct dr_path_opts po = {.max_depth = 8, .rr_depth = DR_RR_DEPTH_DEFAULT, .stages = dr_path_plan(s, NULL)};
     CHECK(dr_path8_applies(s, &po), "the mixed box qualifies for the eight-lane stages");
-    CHECK((s->effects & DR_FX_SHADING_NORMALS) && (s->effects & DR_FX_SPECULAR) && (s->effects & DR_FX_SINGLE_SIDED),
-          "the mixed box has shading normals, a glossy and a single-sided surface (effects %#x)", s->effects);
+    CHECK((s->effects & DR_FX_SHADING_NORMALS) && (s->effects & DR_FX_SPECULAR) && (s->effects & DR_FX_SINGLE_SIDED) &&
+              (s->effects & DR_FX_TEXTURES),
+          "the mixed box has shading normals, glossy, textured and single-sided surfaces (effects %#x)", s->effects);
     simd = wavefront_matches_one_path(s, sb_camera(dr_v3(0, 1, 3.5), dr_v3(0, 0.8, 0), 50.0), "mixed box");
     CHECK(simd > 0, "the mixed box's Lambertian hits are shaded eight lanes at a time");
     simd = radiance_matches_exactly(s, sb_camera(dr_v3(0, 1, 2.5), dr_v3(0, 0.8, 0), 60.0), "mixed box");
