@@ -8,6 +8,7 @@
 #include "bsdf.h"
 #include "cdf.h"
 #include "lights.h"
+#include "material.h"
 
 #define COS_EPS 1e-12   /* bsdf.c's */
 
@@ -58,6 +59,23 @@ static inline dr_m8 mask_of(const bool *b)
     for (int i = 0; i < DR_SIMD_W; i++)
         m[i] = b[i] ? -1 : 0;
     return m;
+}
+
+/* Each lane's hit and material, and the light sample's triangle and entry. */
+struct lanes {
+    const void *st[DR_SIMD_W], *mat[DR_SIMD_W], *lmat[DR_SIMD_W];
+    int64_t tri[DR_SIMD_W], ltri[DR_SIMD_W];
+    uint32_t v0[DR_SIMD_W], v1[DR_SIMD_W], v2[DR_SIMD_W];
+    bool double_sided[DR_SIMD_W], ldouble_sided[DR_SIMD_W], has_normals[DR_SIMD_W];
+    bool textured[DR_SIMD_W], ltextured[DR_SIMD_W];   /* reads_textures of the hit's, the light's material */
+    bool any_textured, any_ltextured;
+    struct dr_hit hit[DR_SIMD_W];   /* the hits of textured lanes, as dr_hit_compute fills them */
+    uint32_t dim[DR_SIMD_W];   /* the vertex's first sampler dimension */
+};
+
+static inline void set_lane(dr_v3x8 *a, int i, dr_vec3 v)
+{
+    a->x[i] = v.x, a->y[i] = v.y, a->z[i] = v.z;
 }
 
 /* ------------------------------------------------------------ the maths */
@@ -158,19 +176,29 @@ static inline dr_v3x8 normalize(dr_v3x8 a)   /* dr_normalize */
     return dr_v3x8_sel(l > 0.0, dr_v3x8_scale(a, 1.0 / dr_f8_sel(l > 0.0, l, dr_f8s(1.0))), a);
 }
 
-/* dr_material_eval of untextured materials, and what bsdf.c derives from
- * the material alone (bsdf_alpha, dielectric_f0, no_specular_lobe). */
-static void material_eval(struct dr_path8 *g, const void *const *mat)
+/* dr_material_eval (the factors; textured lanes call it), and what bsdf.c
+ * derives from the material alone (bsdf_alpha, dielectric_f0,
+ * no_specular_lobe). */
+static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const struct lanes *L, dr_m8 end)
 {
+    const void *const *mat = L->mat;
     g->base = gather3(mat, offsetof(struct dr_material, base_color));
     g->metallic = gather(mat, offsetof(struct dr_material, metallic));
     g->specular = gather(mat, offsetof(struct dr_material, specular));
+    dr_f8 r = gather(mat, offsetof(struct dr_material, roughness));
+    for (int i = 0; L->any_textured && i < g->n; i++)
+        if (L->textured[i] && !end[i]) {   /* textures, vertex colours: dr_material_eval itself */
+            struct dr_bsdf b;
+            dr_material_eval(s, &L->hit[i], &b);
+            set_lane(&g->base, i, b.base_color);
+            g->metallic[i] = b.metallic;
+            r[i] = b.roughness;
+        }
     g->lambert = (g->metallic == 0.0) & (g->specular == 0.0);
     g->glossy = !(g->lambert[0] & g->lambert[1] & g->lambert[2] & g->lambert[3] & g->lambert[4] & g->lambert[5] &
                   g->lambert[6] & g->lambert[7]);
     if (!g->glossy)
         return;
-    dr_f8 r = gather(mat, offsetof(struct dr_material, roughness));
     dr_f8 a = r * r;
     g->alpha = dr_f8_sel(a > DR_BSDF_MIN_ALPHA, a, dr_f8s(DR_BSDF_MIN_ALPHA));
     dr_v3x8 sc = gather3(mat, offsetof(struct dr_material, specular_color));
@@ -276,37 +304,36 @@ static dr_v3x8 sample_specular_dir(const struct dr_path8 *g, dr_v3x8 wo, dr_f8 u
 
 bool dr_path8_applies(const struct dr_scene *s, const struct dr_path_opts *opts)
 {
-    const unsigned allowed =
-        DR_FX_AREA_LIGHTS | DR_FX_SHADING_NORMALS | DR_FX_SINGLE_SIDED | DR_FX_SPECULAR | DR_FX_TEXTURES;
+    const unsigned allowed = DR_FX_AREA_LIGHTS | DR_FX_SHADING_NORMALS | DR_FX_SINGLE_SIDED | DR_FX_SPECULAR |
+                             DR_FX_TEXTURES | DR_FX_VERTEX_COLORS;
     struct dr_light_area_tables t;
-    if (opts->params || (s->effects & ~allowed) || !(opts->stages & DR_STAGE_NEE) ||
-        !(opts->stages & DR_STAGE_EMISSION) || (opts->stages & (DR_STAGE_ENV | DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC)) ||
-        !dr_light_area_tables(s->light_sampler, &t))
-        return false;
-    for (int i = 0; i < s->n_materials; i++)   /* a light sample may land on any emitter */
-        if (s->materials[i].emissive_tex.texture >= 0)
-            return false;
-    return true;
+    return !opts->params && !(s->effects & ~allowed) && (opts->stages & DR_STAGE_NEE) &&
+           (opts->stages & DR_STAGE_EMISSION) &&
+           !(opts->stages & (DR_STAGE_ENV | DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC)) &&
+           dr_light_area_tables(s->light_sampler, &t);
 }
 
 bool dr_path8_lane(const struct dr_scene *s, const struct dr_sampler *smp, int64_t tri)
 {
-    if (tri < 0 || smp->kind != DR_SAMPLER_INDEPENDENT)
-        return false;
-    const struct dr_material *m = &s->materials[s->mesh.material[tri]];
-    return m->base_color_tex.texture < 0 && m->metallic_roughness_tex.texture < 0;   /* dr_material_eval: factors */
+    (void)s;
+    return tri >= 0 && smp->kind == DR_SAMPLER_INDEPENDENT;
+}
+
+/* Does shading a hit on material m read a texture (or the vertex colours):
+ * then its BSDF inputs and emission are the scalar functions', lane by lane. */
+static bool reads_textures(const struct dr_scene *s, const struct dr_material *m)
+{
+    return m->base_color_tex.texture >= 0 || m->metallic_roughness_tex.texture >= 0 || m->emissive_tex.texture >= 0 ||
+           s->mesh.colors;
+}
+
+bool dr_path8_reads_textures(const struct dr_scene *s, int64_t tri)
+{
+    return reads_textures(s, &s->materials[s->mesh.material[tri]]);
 }
 
 /* ------------------------------------------------------------ the stages */
 
-/* Each lane's hit and material, and the light sample's triangle and entry. */
-struct lanes {
-    const void *st[DR_SIMD_W], *mat[DR_SIMD_W], *lmat[DR_SIMD_W];
-    int64_t tri[DR_SIMD_W], ltri[DR_SIMD_W];
-    uint32_t v0[DR_SIMD_W], v1[DR_SIMD_W], v2[DR_SIMD_W];
-    bool double_sided[DR_SIMD_W], ldouble_sided[DR_SIMD_W], has_normals[DR_SIMD_W];
-    uint32_t dim[DR_SIMD_W];   /* the vertex's first sampler dimension */
-};
 
 static void triangle_vertices(const struct dr_mesh *m, int64_t tri, uint32_t *v0, uint32_t *v1, uint32_t *v2)
 {
@@ -318,7 +345,7 @@ static void triangle_vertices(const struct dr_mesh *m, int64_t tri, uint32_t *v0
  * the eight-lane stages do not use): the hit point p, the geometric normal
  * ng, the shading normal ns; returns the front mask. */
 static dr_m8 locate(const struct dr_mesh *m, const struct lanes *L, dr_v3x8 o, dr_v3x8 d, dr_v3x8 *p, dr_v3x8 *ng,
-                    dr_v3x8 *ns, dr_f8 *eps)
+                    dr_v3x8 *ns, dr_f8 *eps, dr_f8 *b1_out, dr_f8 *b2_out)
 {
     dr_v3x8 p0 = gather_vertex(m->positions, L->v0), p1 = gather_vertex(m->positions, L->v1),
             p2 = gather_vertex(m->positions, L->v2);
@@ -338,6 +365,8 @@ static dr_m8 locate(const struct dr_mesh *m, const struct lanes *L, dr_v3x8 o, d
     b1 = dr_f8_sel(over, b1 / sum, b1);
     b2 = dr_f8_sel(over, b2 / sum, b2);
 
+    *b1_out = b1;
+    *b2_out = b2;
     dr_f8 b0 = 1.0 - b1 - b2;
     *p = interp(b0, b1, b2, p0, p1, p2);
     *ng = (dr_v3x8){gather_at(m->tri_normal_eps, L->tri, 4, 0), gather_at(m->tri_normal_eps, L->tri, 4, 1),
@@ -357,6 +386,23 @@ static dr_m8 locate(const struct dr_mesh *m, const struct lanes *L, dr_v3x8 o, d
     return dr_v3x8_dot(d, *ng) < 0.0;
 }
 
+/* A hit as dr_hit_compute (dr_hit_at) fills it, for the scalar material and
+ * emission functions: uv as attributes() interpolates it (t is not read). */
+static void lane_hit(const struct dr_mesh *m, int64_t tri, double b1, double b2, dr_vec3 p, dr_vec3 ng, dr_vec3 ns,
+                     double eps, bool front, struct dr_hit *h)
+{
+    *h = (struct dr_hit){.tri = tri, .t = 0.0, .p = p, .ng = ng, .ns = ns, .b1 = b1, .b2 = b2, .front = front,
+                         .material = m->material[tri], .eps = eps};
+    if (m->flags[tri] & DR_TRI_HAS_UVS) {
+        const uint32_t *idx = m->indices + 3 * (size_t)tri;
+        const float *t0 = m->uvs + 2 * (size_t)idx[0], *t1 = m->uvs + 2 * (size_t)idx[1],
+                    *t2 = m->uvs + 2 * (size_t)idx[2];
+        double b0 = 1.0 - b1 - b2;
+        h->uv[0] = b0 * t0[0] + b1 * t1[0] + b2 * t2[0];
+        h->uv[1] = b0 * t0[1] + b1 * t1[1] + b2 * t2[1];
+    }
+}
+
 /* dr_emission of a material without an emissive texture: factor x strength,
  * on the front (or both sides). */
 static dr_v3x8 emission(const void *const *mat, dr_m8 seen)
@@ -369,13 +415,16 @@ static dr_v3x8 emission(const void *const *mat, dr_m8 seen)
 /* stage_emission: what the hit emits towards the ray and its MIS weight
  * against next-event estimation (dr_light_pdf_area, dr_mis_power), into the
  * vertices of the lanes whose triangle emits. */
-static void emission_seen(const struct dr_light_area_tables *lt, const struct lanes *L, int n, dr_v3x8 p,
-                          dr_v3x8 ng, dr_m8 front, dr_f8 depth, struct dr_path_vertex *const *v)
+static void emission_seen(const struct dr_scene *s, const struct dr_light_area_tables *lt, const struct lanes *L,
+                          int n, dr_v3x8 p, dr_v3x8 ng, dr_m8 front, dr_f8 depth, struct dr_path_vertex *const *v)
 {
     dr_m8 emits = gather_at(lt->tri_pick, L->tri, 1, 0) > 0.0;
     if (!(emits[0] | emits[1] | emits[2] | emits[3] | emits[4] | emits[5] | emits[6] | emits[7]))
         return;
     dr_v3x8 Le = emission(L->mat, front | mask_of(L->double_sided));
+    for (int i = 0; L->any_textured && i < n; i++)
+        if (emits[i] && L->textured[i])
+            set_lane(&Le, i, dr_emission(s, &L->hit[i]));
     dr_f8 density = gather_at(lt->tri_pick_density, L->tri, 1, 0);
     dr_v3x8 dd = dr_v3x8_sub(p, gather3(L->st, offsetof(struct dr_path_state, prev_p)));
     dr_f8 d2 = dr_v3x8_dot(dd, dd);
@@ -414,6 +463,8 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_area_t
         const struct dr_material *lm = &s->materials[m->material[L->ltri[i]]];
         L->lmat[i] = lm;
         L->ldouble_sided[i] = lm->double_sided;
+        L->ltextured[i] = lm->emissive_tex.texture >= 0;
+        L->any_ltextured |= L->ltextured[i];
     }
     dr_m8 ok = ~(pick <= 0.0);
     dr_f8 su = dr_f8_sqrt(u1);
@@ -431,6 +482,13 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_area_t
     dr_f8 cos_l = dr_v3x8_dot(lng, *wi);
     ok &= ~(cos_l == 0.0) & (area > 0.0);
     *radiance = emission(L->lmat, (cos_l < 0.0) | mask_of(L->ldouble_sided));
+    for (int i = 0; L->any_ltextured && i < DR_SIMD_W; i++)
+        if (ok[i] && L->ltextured[i]) {   /* (no texel read for a sample that failed) */
+            struct dr_hit h;
+            lane_hit(m, L->ltri[i], b1[i], b2[i], dr_v3x8_get(lp, i), dr_v3x8_get(lng, i), dr_v3x8_get(lng, i),
+                     leps[i], cos_l[i] < 0.0, &h);
+            set_lane(radiance, i, dr_emission(s, &h));
+        }
     *target = offset_origin(lp, lng, leps, dr_v3x8_neg(*wi));
     *pdf = pick * d2 / (dr_f8_abs(cos_l) * area);
     return ok & ~dr_v3x8_is_black(*radiance);
@@ -439,12 +497,13 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_area_t
 void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, int n,
                     struct dr_path_state *const *st, struct dr_sampler *const *smp, struct dr_path_vertex *const *v,
                     const int64_t *tri, struct dr_shadow_ray *const *shadow, enum dr_step_next *next,
-                    struct dr_path8 *g)
+                    bool located, struct dr_path8 *g)
 {
     const struct dr_mesh *m = &s->mesh;
     struct dr_light_area_tables lt;
     dr_light_area_tables(s->light_sampler, &lt);
     struct lanes L;
+    L.any_textured = L.any_ltextured = false;
     dr_u8 key, dim;
     dr_f8 depth;
     for (int i = 0; i < DR_SIMD_W; i++) {
@@ -454,6 +513,7 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
         triangle_vertices(m, tri[k], &L.v0[i], &L.v1[i], &L.v2[i]);
         const struct dr_material *mat = &s->materials[m->material[tri[k]]];
         L.mat[i] = mat;
+        L.textured[i] = reads_textures(s, mat);
         L.double_sided[i] = mat->double_sided;
         L.has_normals[i] = m->flags[tri[k]] & DR_TRI_HAS_NORMALS;
         L.dim[i] = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)(st[k]->depth - 1);
@@ -466,11 +526,20 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
 
     /* stage_locate, stage_emission */
     dr_v3x8 p, ng, ns;
-    dr_f8 eps;
-    dr_m8 front = locate(m, &L, o, d, &p, &ng, &ns, &eps);
+    dr_f8 eps, b1, b2;
+    dr_m8 front = locate(m, &L, o, d, &p, &ng, &ns, &eps, &b1, &b2);
+    for (int i = 0; i < n; i++)
+        if (L.textured[i]) {
+            L.any_textured = true;
+            if (located)
+                L.hit[i] = v[i]->hit;
+            else
+                lane_hit(m, L.tri[i], b1[i], b2[i], dr_v3x8_get(p, i), dr_v3x8_get(ng, i), dr_v3x8_get(ns, i),
+                         eps[i], front[i] != 0, &L.hit[i]);
+        }
     for (int i = 0; i < n; i++)
         v[i]->kind = DR_VERTEX_SURFACE;
-    emission_seen(&lt, &L, n, p, ng, front, depth, v);
+    emission_seen(s, &lt, &L, n, p, ng, front, depth, v);
 
     /* stage_material: the frame towards the ray, the BSDF, the random numbers */
     dr_m8 end = (depth >= (double)opts->max_depth) | (~front & ~mask_of(L.double_sided));
@@ -479,7 +548,7 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
     frame_from_normal(g->fn, &g->fs, &g->ft);
     g->wo = to_local(g->fs, g->ft, g->fn, dr_v3x8_neg(d));
     g->wo_z = g->wo.z;
-    material_eval(g, L.mat);
+    material_eval(s, g, &L, end);
     g->spec_p = specular_prob(g, g->wo_z);   /* (wo.z <= COS_EPS: unused) */
     dr_f8 u_pick = independent(key, dim + 1), u1 = independent(key, dim + 2), u2 = independent(key, dim + 3);
     g->lobe_u = independent(key, dim + 4);

@@ -52,13 +52,18 @@ bool dr_path8_applies(const struct dr_scene *scene, const struct dr_path_opts *o
  * the independent sampler)? */
 bool dr_path8_lane(const struct dr_scene *scene, const struct dr_sampler *sampler, int64_t tri);
 
+/* Does shading a hit on triangle tri read textures (or vertex colours)? Such
+ * lanes call the scalar material and emission functions with the hit. */
+bool dr_path8_reads_textures(const struct dr_scene *scene, int64_t tri);
 /* dr_path_step_hit of n <= DR_SIMD_W lanes that dr_path8_lane accepts:
  * fills next[i], *shadow[i] when next[i] is DR_STEP_SHADOW, the vertex term's
- * emission in *v[i], the sampler's position, and g for dr_path8_continue. */
+ * emission in *v[i], the sampler's position, and g for dr_path8_continue.
+ * located: v[i]->hit already holds the hit of each lane that reads textures
+ * (dr_path_step_locate, so that its texels could be prefetched). */
 void dr_path8_shade(const struct dr_scene *scene, const struct dr_path_opts *opts, int n,
                     struct dr_path_state *const *st, struct dr_sampler *const *sampler,
                     struct dr_path_vertex *const *v, const int64_t *tri, struct dr_shadow_ray *const *shadow,
-                    enum dr_step_next *next, struct dr_path8 *g);
+                    enum dr_step_next *next, bool located, struct dr_path8 *g);
 /* dr_path_nee_end (occluded[i]: the shadow ray's answer) and
  * dr_path_stage_continue of the same lanes: the next-event estimate in
  * *v[i], the next ray and throughput in *st[i]; more[i]: the path goes on. */

@@ -137,7 +137,7 @@ static void locate_live(struct dr_wave *w, int n_live, const struct dr_scene *s)
     }
     for (int i = 0; i < n_live; i++) {
         struct lane *l = &w->lane[w->live[i]];
-        if (l->simd)
+        if (l->simd && !dr_path8_reads_textures(s, l->tri))
             continue;   /* the eight-lane stages locate their own */
         dr_path_step_locate(s, &l->st, &l->v, l->tri);
         if (l->tri >= 0 && s->n_textures > 0)
@@ -170,7 +170,7 @@ static void shade_group(struct dr_wave *w, const int *k, int n, const struct dr_
         st[i] = &l->st, smp[i] = &l->smp, v[i] = &l->v, shadow[i] = &l->shadow, tri[i] = l->tri;
         w->group_lane[g][i] = k[i];
     }
-    dr_path8_shade(s, opts, n, st, smp, v, tri, shadow, next, &w->group[g]);
+    dr_path8_shade(s, opts, n, st, smp, v, tri, shadow, next, w->prefetch, &w->group[g]);
     for (int i = 0; i < n; i++)
         w->lane[k[i]].next = next[i];
 }

@@ -438,6 +438,19 @@ static void test_wavefront_matches_one_path(void)
     simd = radiance_matches_exactly(s, sb_camera(dr_v3(0, 1, 2.5), dr_v3(0, 0.8, 0), 60.0), "mixed box");
     CHECK(simd > 1000, "the mixed box: only %llu vertices shaded eight lanes at a time", (unsigned long long)simd);
     dr_scene_destroy(s);
+    /* vertex colours without textures: no prefetching, the hits built in the kernel for dr_material_eval */
+    sb_init(&b);
+    sb_open_box(&b, 2.0, sb_material(&b, sb_diffuse(dr_v3(0.9, 0.9, 0.9))));
+    sb_quad(&b, dr_v3(-0.3, 1.9, -0.3), dr_v3(0.6, 0, 0), dr_v3(0, 0, 0.6), sb_material(&b, lamp));
+    struct dr_mesh *m = &b.s->mesh;
+    m->colors = malloc(sizeof(float) * 3 * m->n_vertices);
+    for (uint32_t k = 0; k < 3 * m->n_vertices; k++)
+        m->colors[k] = (float)(0.2 + 0.7 * ((k * 7919u) % 13u) / 12.0);
+    s = sb_finish(&b);
+    CHECK((s->effects & DR_FX_VERTEX_COLORS) && !dr_wave_prefetches(s), "the coloured box: vertex colours, no prefetching");
+    simd = radiance_matches_exactly(s, sb_camera(dr_v3(0, 1, 2.5), dr_v3(0, 0.8, 0), 60.0), "coloured box");
+    CHECK(simd > 1000, "the coloured box: only %llu vertices shaded eight lanes at a time", (unsigned long long)simd);
+    dr_scene_destroy(s);
 }
 
 int main(void)
