@@ -363,10 +363,10 @@ double dr_light_pdf_area(const struct dr_scene *s, const struct dr_light_sampler
 
 bool dr_light_area_tables(const struct dr_light_sampler *ls, struct dr_light_area_tables *t)
 {
-    if (ls->n_entries == 0 || ls->n_emitters != ls->n_entries)
+    if (ls->n_entries == 0)
         return false;
-    *t = (struct dr_light_area_tables){ls->n_entries, ls->cdf, ls->cdf_guide, ls->pick, ls->emitter_tri,
-                                       ls->emitter_area, ls->tri_pick, ls->tri_pick_density};
+    *t = (struct dr_light_area_tables){ls->n_entries, ls->n_emitters, ls->cdf, ls->cdf_guide, ls->pick,
+                                       ls->emitter_tri, ls->emitter_area, ls->tri_pick, ls->tri_pick_density};
     return true;
 }
 

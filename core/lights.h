@@ -58,12 +58,13 @@ double dr_light_pdf_area(const struct dr_scene *scene, const struct dr_light_sam
                          const struct dr_hit *hit);
 /* Probability that NEE picks triangle tri (0: it does not emit). */
 double dr_light_pdf_area_pick(const struct dr_light_sampler *ls, int64_t tri);
-/* The sampler's tables when every light it picks is an emitting triangle
- * (no punctual light, no environment), for a packet tracer that samples many
- * lanes' lights at once (path_simd.c does what dr_light_sample and
- * dr_light_pdf_area do, with these). False otherwise. */
+/* The sampler's tables, for a packet tracer that samples many lanes' lights
+ * at once (path_simd.c does what dr_light_sample and dr_light_pdf_area do for
+ * emitting triangles with these; other entries go through dr_light_sample).
+ * False when there is nothing to sample. */
 struct dr_light_area_tables {
     int64_t n_entries;
+    int64_t n_emitters;             /* entries below this are emitting triangles */
     const double *cdf;              /* n_entries + 1, and its guide table (cdf.h) */
     const uint32_t *cdf_guide;
     const double *pick;             /* per entry: its probability */

@@ -304,13 +304,12 @@ static dr_v3x8 sample_specular_dir(const struct dr_path8 *g, dr_v3x8 wo, dr_f8 u
 
 bool dr_path8_applies(const struct dr_scene *s, const struct dr_path_opts *opts)
 {
-    const unsigned allowed = DR_FX_AREA_LIGHTS | DR_FX_SHADING_NORMALS | DR_FX_SINGLE_SIDED | DR_FX_SPECULAR |
-                             DR_FX_TEXTURES | DR_FX_VERTEX_COLORS;
+    const unsigned allowed = DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_ENV_CONSTANT | DR_FX_ENV_MAP |
+                             DR_FX_SHADING_NORMALS | DR_FX_SINGLE_SIDED | DR_FX_SPECULAR | DR_FX_TEXTURES |
+                             DR_FX_VERTEX_COLORS;
     struct dr_light_area_tables t;
     return !opts->params && !(s->effects & ~allowed) && (opts->stages & DR_STAGE_NEE) &&
-           (opts->stages & DR_STAGE_EMISSION) &&
-           !(opts->stages & (DR_STAGE_ENV | DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC)) &&
-           dr_light_area_tables(s->light_sampler, &t);
+           !(opts->stages & (DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC)) && dr_light_area_tables(s->light_sampler, &t);
 }
 
 bool dr_path8_lane(const struct dr_scene *s, const struct dr_sampler *smp, int64_t tri)
@@ -446,16 +445,30 @@ static void emission_seen(const struct dr_scene *s, const struct dr_light_area_t
  * dr_emission, dr_offset_origin) from the points p: direction wi, the
  * shadow ray's target, radiance and solid-angle pdf; returns where a light
  * sample carries light. The entry search stays scalar (one table walk per
- * lane). */
+ * lane), and so do lanes that pick a punctual light or the environment
+ * (dr_light_sample itself; infinite: at no finite distance, delta: no MIS). */
 static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_area_tables *lt, struct lanes *L,
                           dr_v3x8 p, dr_f8 u_pick, dr_f8 u1, dr_f8 u2, dr_v3x8 *wi, dr_v3x8 *target,
-                          dr_v3x8 *radiance, dr_f8 *pdf)
+                          dr_v3x8 *radiance, dr_f8 *pdf, dr_m8 *infinite, dr_m8 *delta)
 {
     const struct dr_mesh *m = &s->mesh;
     dr_f8 pick, area;
     uint32_t v0[DR_SIMD_W], v1[DR_SIMD_W], v2[DR_SIMD_W];
+    bool other[DR_SIMD_W], any_other = false;   /* a punctual light or the environment: dr_light_sample */
     for (int i = 0; i < DR_SIMD_W; i++) {
         int64_t e = dr_cdf_find_guided(lt->cdf, lt->n_entries, lt->cdf_guide, lt->n_entries, u_pick[i]);
+        other[i] = e >= lt->n_emitters;
+        any_other |= other[i];
+        if (other[i])
+            e = 0 < lt->n_emitters ? 0 : -1;   /* (the area arithmetic runs on a stand-in) */
+        if (e < 0) {   /* no emitter at all: a harmless stand-in triangle */
+            pick[i] = 0.0, area[i] = 1.0, L->ltri[i] = 0;
+            triangle_vertices(m, 0, &v0[i], &v1[i], &v2[i]);
+            L->lmat[i] = &s->materials[m->material[0]];
+            L->ldouble_sided[i] = true;
+            L->ltextured[i] = false;
+            continue;
+        }
         pick[i] = lt->pick[e];
         area[i] = lt->emitter_area[e];
         L->ltri[i] = lt->emitter_tri[e];
@@ -491,7 +504,21 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_area_t
         }
     *target = offset_origin(lp, lng, leps, dr_v3x8_neg(*wi));
     *pdf = pick * d2 / (dr_f8_abs(cos_l) * area);
-    return ok & ~dr_v3x8_is_black(*radiance);
+    ok &= ~dr_v3x8_is_black(*radiance);
+    *infinite = *delta = (dr_m8){0};
+    for (int i = 0; any_other && i < DR_SIMD_W; i++) {
+        if (!other[i])
+            continue;
+        struct dr_light_sample ls = {.dist = 0.0};   /* (its fields stay masked when it fails) */
+        ok[i] = dr_light_sample(s, s->light_sampler, dr_v3x8_get(p, i), u_pick[i], u1[i], u2[i], &ls) ? -1 : 0;
+        set_lane(wi, i, ls.wi);
+        set_lane(target, i, ls.target);
+        set_lane(radiance, i, ls.radiance);
+        (*pdf)[i] = ls.pdf;
+        (*infinite)[i] = isinf(ls.dist) ? -1 : 0;
+        (*delta)[i] = ls.delta ? -1 : 0;
+    }
+    return ok;
 }
 
 void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, int n,
@@ -539,7 +566,8 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
         }
     for (int i = 0; i < n; i++)
         v[i]->kind = DR_VERTEX_SURFACE;
-    emission_seen(s, &lt, &L, n, p, ng, front, depth, v);
+    if (opts->stages & DR_STAGE_EMISSION)
+        emission_seen(s, &lt, &L, n, p, ng, front, depth, v);
 
     /* stage_material: the frame towards the ray, the BSDF, the random numbers */
     dr_m8 end = (depth >= (double)opts->max_depth) | (~front & ~mask_of(L.double_sided));
@@ -561,7 +589,9 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
 
     /* dr_path_nee_begin */
     dr_v3x8 wi, target;
-    dr_m8 ok = light_sample(s, &lt, &L, p, u_pick, u1, u2, &wi, &target, &g->ls_radiance, &g->ls_pdf);
+    dr_m8 infinite;
+    dr_m8 ok = light_sample(s, &lt, &L, p, u_pick, u1, u2, &wi, &target, &g->ls_radiance, &g->ls_pdf, &infinite,
+                            &g->delta);
     ok &= ~(dr_v3x8_dot(wi, g->ng) <= 0.0);
     dr_v3x8 nee_wi = to_local(g->fs, g->ft, g->fn, wi);
     dr_m8 above = (g->wo_z > COS_EPS) & (nee_wi.z > COS_EPS);   /* dr_bsdf_eval_pdf */
@@ -573,7 +603,8 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
     dr_v3x8 so = offset_origin(p, g->ng, eps, wi);
     dr_v3x8 sd = dr_v3x8_sub(target, so);
     g->tmax = dr_f8_sqrt(dr_v3x8_dot(sd, sd));
-    sd = dr_v3x8_scale(sd, 1.0 / g->tmax);
+    sd = dr_v3x8_sel(infinite, wi, dr_v3x8_scale(sd, 1.0 / g->tmax));   /* environment, directional: along wi */
+    g->tmax = dr_f8_sel(infinite, dr_f8s(INFINITY), g->tmax);
     g->nee_cos = nee_wi.z;
     g->shadow = ok & ~end;
     g->go_on = ~end;
@@ -600,7 +631,8 @@ void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g
     }
     /* dr_path_nee_end */
     dr_m8 nee = g->shadow & (g->tmax > 0.0) & ~mask_of(occ);
-    dr_f8 nee_scale = dr_f8_abs(g->nee_cos) * mis_power(g->ls_pdf, g->bsdf_pdf) / g->ls_pdf;
+    dr_f8 w = dr_f8_sel(g->delta, dr_f8s(1.0), mis_power(g->ls_pdf, g->bsdf_pdf));
+    dr_f8 nee_scale = dr_f8_abs(g->nee_cos) * w / g->ls_pdf;
     for (int i = 0; i < n; i++) {
         if (!nee[i])
             continue;

@@ -3,9 +3,9 @@
  *
  * dr_path8_shade is dr_path_step_hit and dr_path8_continue is dr_path_nee_end
  * + dr_path_stage_continue, for lanes where those reduce to: the hit point,
- * the emission seen there, a shading frame, the glTF BSDF of an untextured
- * material (Lambertian, or with its GGX lobe), one light sample on an
- * emitting triangle, the BSDF's continuation and Russian roulette. Every operation is the scalar code's, in its order, so each lane
+ * the emission seen there, a shading frame, the glTF BSDF (Lambertian or
+ * with its GGX lobe), one light sample, the BSDF's continuation and Russian
+ * roulette. Every operation is the scalar code's, in its order, so each lane
  * gets the scalar walker's bits (test_render compares the images); what the
  * kernels mirror is named beside each step. Everything else (textured
  * materials, media, environment and punctual lights, vertex colours, normal
@@ -36,6 +36,7 @@ struct dr_path8 {
     dr_v3x8 base;                 /* base colour */
     dr_f8 bsdf_u1, bsdf_u2, rr;   /* the vertex's random numbers still to use */
     dr_f8 tmax, nee_cos, ls_pdf, bsdf_pdf;   /* next-event estimate, for its end */
+    dr_m8 delta;                  /* ... from a punctual light (no MIS) */
     dr_v3x8 nee_f, ls_radiance;
     /* the BSDF (bsdf.h) where some lane has a specular lobe (glossy) */
     bool glossy;

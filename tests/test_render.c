@@ -438,6 +438,40 @@ static void test_wavefront_matches_one_path(void)
     simd = radiance_matches_exactly(s, sb_camera(dr_v3(0, 1, 2.5), dr_v3(0, 0.8, 0), 60.0), "mixed box");
     CHECK(simd > 1000, "the mixed box: only %llu vertices shaded eight lanes at a time", (unsigned long long)simd);
     dr_scene_destroy(s);
+    struct dr_material glossy = sb_diffuse(dr_v3(0.2, 0.4, 0.8));
+    glossy.specular = 1.0;
+    glossy.roughness = 0.25;
+    /* every kind of light at once: an area lamp, point, spot and directional
+     * lights, and an environment map seen through the open top */
+    sb_init(&b);
+    sb_open_box(&b, 2.0, sb_material(&b, sb_diffuse(dr_v3(0.8, 0.7, 0.6))));
+    sb_box(&b, dr_v3(-0.5, 0.0, -0.5), dr_v3(0.0, 0.7, 0.0), sb_material(&b, glossy));
+    sb_quad(&b, dr_v3(0.4, 1.5, 0.4), dr_v3(0.3, 0, 0), dr_v3(0, 0, -0.3), sb_material(&b, lamp));
+    sb_light(&b, light(DR_LIGHT_POINT, dr_v3(0.5, 1.2, 0.5), dr_v3(0, -1, 0), 2.0));
+    sb_light(&b, light(DR_LIGHT_SPOT, dr_v3(-0.5, 1.6, 0.3), dr_normalize(dr_v3(0.2, -1, -0.1)), 4.0));
+    sb_light(&b, light(DR_LIGHT_DIRECTIONAL, dr_v3(0, 0, 0), dr_normalize(dr_v3(0.3, -1, 0.2)), 1.5));
+    sb_environment(&b, dr_v3s(1.0));
+    struct dr_image *map = &b.s->env.map;
+    map->width = 16, map->height = 8, map->channels = 3;
+    map->data = malloc(sizeof(float) * 16 * 8 * 3);
+    for (int k = 0; k < 16 * 8 * 3; k++)
+        map->data[k] = (float)(0.2 + (k * 37 % 17) / 4.0);
+    s = sb_finish(&b);
+    po = (struct dr_path_opts){.max_depth = 8, .rr_depth = DR_RR_DEPTH_DEFAULT, .stages = dr_path_plan(s, NULL)};
+    CHECK(dr_path8_applies(s, &po) && (s->effects & DR_FX_PUNCTUAL_LIGHTS) && (s->effects & DR_FX_ENV_MAP),
+          "the lit box qualifies, with punctual lights and an environment map (effects %#x)", s->effects);
+    simd = radiance_matches_exactly(s, sb_camera(dr_v3(0, 1, 2.5), dr_v3(0, 0.8, 0), 60.0), "lit box");
+    CHECK(simd > 1000, "the lit box: only %llu vertices shaded eight lanes at a time", (unsigned long long)simd);
+    dr_scene_destroy(s);
+    /* a constant environment alone (what a glTF file without lights gets) */
+    sb_init(&b);
+    sb_open_box(&b, 1.0, sb_material(&b, sb_diffuse(dr_v3(0.8, 0.7, 0.6))));
+    sb_box(&b, dr_v3(-0.5, 0.0, -0.5), dr_v3(0.0, 0.7, 0.0), sb_material(&b, glossy));
+    sb_environment(&b, dr_v3(0.9, 1.0, 1.1));
+    s = sb_finish(&b);
+    simd = radiance_matches_exactly(s, sb_camera(dr_v3(0, 2.5, 2.0), dr_v3(0, 0.3, 0), 60.0), "sky-lit box");
+    CHECK(simd > 1000, "the sky-lit box: only %llu vertices shaded eight lanes at a time", (unsigned long long)simd);
+    dr_scene_destroy(s);
     /* vertex colours without textures: no prefetching, the hits built in the kernel for dr_material_eval */
     sb_init(&b);
     sb_open_box(&b, 2.0, sb_material(&b, sb_diffuse(dr_v3(0.9, 0.9, 0.9))));
