@@ -195,8 +195,7 @@ static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const st
             r[i] = b.roughness;
         }
     g->lambert = (g->metallic == 0.0) & (g->specular == 0.0);
-    g->glossy = !(g->lambert[0] & g->lambert[1] & g->lambert[2] & g->lambert[3] & g->lambert[4] & g->lambert[5] &
-                  g->lambert[6] & g->lambert[7]);
+    g->glossy = dr_m8_any(~g->lambert);
     if (!g->glossy)
         return;
     dr_f8 a = r * r;
@@ -373,7 +372,7 @@ static dr_m8 locate(const struct dr_mesh *m, const struct lanes *L, dr_v3x8 o, d
     *eps = gather_at(m->tri_normal_eps, L->tri, 4, 3);
     *ns = *ng;
     dr_m8 has_n = mask_of(L->has_normals);
-    if (m->normals && (has_n[0] | has_n[1] | has_n[2] | has_n[3] | has_n[4] | has_n[5] | has_n[6] | has_n[7])) {
+    if (m->normals && dr_m8_any(has_n)) {
         dr_v3x8 n = interp(b0, b1, b2, gather_vertex(m->normals, L->v0), gather_vertex(m->normals, L->v1),
                            gather_vertex(m->normals, L->v2));
         dr_f8 l2 = dr_v3x8_dot(n, n);
@@ -418,7 +417,7 @@ static void emission_seen(const struct dr_scene *s, const struct dr_light_area_t
                           int n, dr_v3x8 p, dr_v3x8 ng, dr_m8 front, dr_f8 depth, struct dr_path_vertex *const *v)
 {
     dr_m8 emits = gather_at(lt->tri_pick, L->tri, 1, 0) > 0.0;
-    if (!(emits[0] | emits[1] | emits[2] | emits[3] | emits[4] | emits[5] | emits[6] | emits[7]))
+    if (!dr_m8_any(emits))
         return;
     dr_v3x8 Le = emission(L->mat, front | mask_of(L->double_sided));
     for (int i = 0; L->any_textured && i < n; i++)
@@ -441,49 +440,79 @@ static void emission_seen(const struct dr_scene *s, const struct dr_light_area_t
     }
 }
 
-/* dr_light_sample's area-light branch (dr_cdf_find_guided, dr_hit_at,
- * dr_emission, dr_offset_origin) from the points p: direction wi, the
- * shadow ray's target, radiance and solid-angle pdf; returns where a light
- * sample carries light. The entry search stays scalar (one table walk per
- * lane), and so do lanes that pick a punctual light or the environment
- * (dr_light_sample itself; infinite: at no finite distance, delta: no MIS). */
-static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_area_tables *lt, struct lanes *L,
-                          dr_v3x8 p, dr_f8 u_pick, dr_f8 u1, dr_f8 u2, dr_v3x8 *wi, dr_v3x8 *target,
-                          dr_v3x8 *radiance, dr_f8 *pdf, dr_m8 *infinite, dr_m8 *delta)
+/* A light sample for each lane of a group (dr_light_sample's out). */
+struct light8 {
+    dr_v3x8 wi, target, radiance;
+    dr_f8 pdf;
+    dr_m8 infinite, delta;   /* at no finite distance (environment, directional); no MIS (punctual) */
+};
+
+/* Each lane's light-table entry (dr_cdf_find_guided: a scalar table walk);
+ * other[i]: it is a punctual light or the environment, which light_sample
+ * leaves to dr_light_sample (the area arithmetic runs on a stand-in). */
+static void pick_lights(const struct dr_scene *s, const struct dr_light_area_tables *lt, struct lanes *L,
+                        dr_f8 u_pick, dr_f8 *pick, dr_f8 *area, uint32_t v[3][DR_SIMD_W], bool *other)
 {
     const struct dr_mesh *m = &s->mesh;
-    dr_f8 pick, area;
-    uint32_t v0[DR_SIMD_W], v1[DR_SIMD_W], v2[DR_SIMD_W];
-    bool other[DR_SIMD_W], any_other = false;   /* a punctual light or the environment: dr_light_sample */
     for (int i = 0; i < DR_SIMD_W; i++) {
         int64_t e = dr_cdf_find_guided(lt->cdf, lt->n_entries, lt->cdf_guide, lt->n_entries, u_pick[i]);
         other[i] = e >= lt->n_emitters;
-        any_other |= other[i];
         if (other[i])
-            e = 0 < lt->n_emitters ? 0 : -1;   /* (the area arithmetic runs on a stand-in) */
-        if (e < 0) {   /* no emitter at all: a harmless stand-in triangle */
-            pick[i] = 0.0, area[i] = 1.0, L->ltri[i] = 0;
-            triangle_vertices(m, 0, &v0[i], &v1[i], &v2[i]);
+            e = lt->n_emitters > 0 ? 0 : -1;
+        if (e < 0) {   /* no emitting triangle at all: triangle 0 stands in */
+            (*pick)[i] = 0.0, (*area)[i] = 1.0, L->ltri[i] = 0;
             L->lmat[i] = &s->materials[m->material[0]];
             L->ldouble_sided[i] = true;
             L->ltextured[i] = false;
-            continue;
+        } else {
+            (*pick)[i] = lt->pick[e];
+            (*area)[i] = lt->emitter_area[e];
+            L->ltri[i] = lt->emitter_tri[e];
+            const struct dr_material *lm = &s->materials[m->material[L->ltri[i]]];
+            L->lmat[i] = lm;
+            L->ldouble_sided[i] = lm->double_sided;
+            L->ltextured[i] = lm->emissive_tex.texture >= 0;
+            L->any_ltextured |= L->ltextured[i];
         }
-        pick[i] = lt->pick[e];
-        area[i] = lt->emitter_area[e];
-        L->ltri[i] = lt->emitter_tri[e];
-        triangle_vertices(m, L->ltri[i], &v0[i], &v1[i], &v2[i]);
-        const struct dr_material *lm = &s->materials[m->material[L->ltri[i]]];
-        L->lmat[i] = lm;
-        L->ldouble_sided[i] = lm->double_sided;
-        L->ltextured[i] = lm->emissive_tex.texture >= 0;
-        L->any_ltextured |= L->ltextured[i];
+        triangle_vertices(m, L->ltri[i], &v[0][i], &v[1][i], &v[2][i]);
     }
+}
+
+/* The lanes that picked a punctual light or the environment: dr_light_sample. */
+static void other_light_samples(const struct dr_scene *s, const bool *other, dr_v3x8 p, dr_f8 u_pick, dr_f8 u1,
+                                dr_f8 u2, dr_m8 *ok, struct light8 *out)
+{
+    for (int i = 0; i < DR_SIMD_W; i++) {
+        if (!other[i])
+            continue;
+        struct dr_light_sample ls = {.dist = 0.0};   /* (its fields stay masked when it fails) */
+        (*ok)[i] = dr_light_sample(s, s->light_sampler, dr_v3x8_get(p, i), u_pick[i], u1[i], u2[i], &ls) ? -1 : 0;
+        set_lane(&out->wi, i, ls.wi);
+        set_lane(&out->target, i, ls.target);
+        set_lane(&out->radiance, i, ls.radiance);
+        out->pdf[i] = ls.pdf;
+        out->infinite[i] = isinf(ls.dist) ? -1 : 0;
+        out->delta[i] = ls.delta ? -1 : 0;
+    }
+}
+
+/* dr_light_sample from the points p: its area-light branch (dr_hit_at,
+ * dr_emission, dr_offset_origin) eight-wide, texel reads of textured
+ * emitters and the other kinds of light lane by lane. Returns where a light
+ * sample carries light. */
+static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_area_tables *lt, struct lanes *L,
+                          dr_v3x8 p, dr_f8 u_pick, dr_f8 u1, dr_f8 u2, struct light8 *out)
+{
+    const struct dr_mesh *m = &s->mesh;
+    dr_f8 pick, area;
+    uint32_t v[3][DR_SIMD_W];
+    bool other[DR_SIMD_W];
+    pick_lights(s, lt, L, u_pick, &pick, &area, v, other);
     dr_m8 ok = ~(pick <= 0.0);
     dr_f8 su = dr_f8_sqrt(u1);
     dr_f8 b1 = 1.0 - su, b2 = u2 * su, b0 = 1.0 - b1 - b2;
-    dr_v3x8 lp = interp(b0, b1, b2, gather_vertex(m->positions, v0), gather_vertex(m->positions, v1),
-                        gather_vertex(m->positions, v2));
+    dr_v3x8 lp = interp(b0, b1, b2, gather_vertex(m->positions, v[0]), gather_vertex(m->positions, v[1]),
+                        gather_vertex(m->positions, v[2]));
     dr_v3x8 lng = {gather_at(m->tri_normal_eps, L->ltri, 4, 0), gather_at(m->tri_normal_eps, L->ltri, 4, 1),
                    gather_at(m->tri_normal_eps, L->ltri, 4, 2)};
     dr_f8 leps = gather_at(m->tri_normal_eps, L->ltri, 4, 3);
@@ -491,33 +520,69 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_area_t
     dr_f8 d2 = dr_v3x8_dot(d, d);
     ok &= d2 > 0.0;
     dr_f8 dist = dr_f8_sqrt(d2);
-    *wi = dr_v3x8_scale(d, 1.0 / dist);
-    dr_f8 cos_l = dr_v3x8_dot(lng, *wi);
+    out->wi = dr_v3x8_scale(d, 1.0 / dist);
+    dr_f8 cos_l = dr_v3x8_dot(lng, out->wi);
     ok &= ~(cos_l == 0.0) & (area > 0.0);
-    *radiance = emission(L->lmat, (cos_l < 0.0) | mask_of(L->ldouble_sided));
+    out->radiance = emission(L->lmat, (cos_l < 0.0) | mask_of(L->ldouble_sided));
     for (int i = 0; L->any_ltextured && i < DR_SIMD_W; i++)
-        if (ok[i] && L->ltextured[i]) {   /* (no texel read for a sample that failed) */
+        if (ok[i] && L->ltextured[i] && !other[i]) {   /* (no texel read for a sample that failed) */
             struct dr_hit h;
             lane_hit(m, L->ltri[i], b1[i], b2[i], dr_v3x8_get(lp, i), dr_v3x8_get(lng, i), dr_v3x8_get(lng, i),
                      leps[i], cos_l[i] < 0.0, &h);
-            set_lane(radiance, i, dr_emission(s, &h));
+            set_lane(&out->radiance, i, dr_emission(s, &h));
         }
-    *target = offset_origin(lp, lng, leps, dr_v3x8_neg(*wi));
-    *pdf = pick * d2 / (dr_f8_abs(cos_l) * area);
-    ok &= ~dr_v3x8_is_black(*radiance);
-    *infinite = *delta = (dr_m8){0};
-    for (int i = 0; any_other && i < DR_SIMD_W; i++) {
-        if (!other[i])
-            continue;
-        struct dr_light_sample ls = {.dist = 0.0};   /* (its fields stay masked when it fails) */
-        ok[i] = dr_light_sample(s, s->light_sampler, dr_v3x8_get(p, i), u_pick[i], u1[i], u2[i], &ls) ? -1 : 0;
-        set_lane(wi, i, ls.wi);
-        set_lane(target, i, ls.target);
-        set_lane(radiance, i, ls.radiance);
-        (*pdf)[i] = ls.pdf;
-        (*infinite)[i] = isinf(ls.dist) ? -1 : 0;
-        (*delta)[i] = ls.delta ? -1 : 0;
+    out->target = offset_origin(lp, lng, leps, dr_v3x8_neg(out->wi));
+    out->pdf = pick * d2 / (dr_f8_abs(cos_l) * area);
+    ok &= ~dr_v3x8_is_black(out->radiance);
+    out->infinite = out->delta = (dr_m8){0};
+    other_light_samples(s, other, p, u_pick, u1, u2, &ok, out);
+    return ok;
+}
+
+/* Each lane's state, triangle, material and sampler key (lanes past n
+ * repeat lane 0). */
+static void gather_lanes(const struct dr_scene *s, int n, struct dr_path_state *const *st,
+                         struct dr_sampler *const *smp, const int64_t *tri, struct lanes *L, dr_u8 *key, dr_f8 *depth)
+{
+    const struct dr_mesh *m = &s->mesh;
+    L->any_textured = L->any_ltextured = false;
+    for (int i = 0; i < DR_SIMD_W; i++) {
+        int k = i < n ? i : 0;
+        L->st[i] = st[k];
+        L->tri[i] = tri[k];
+        triangle_vertices(m, tri[k], &L->v0[i], &L->v1[i], &L->v2[i]);
+        const struct dr_material *mat = &s->materials[m->material[tri[k]]];
+        L->mat[i] = mat;
+        L->textured[i] = reads_textures(s, mat);
+        L->double_sided[i] = mat->double_sided;
+        L->has_normals[i] = m->flags[tri[k]] & DR_TRI_HAS_NORMALS;
+        L->dim[i] = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)(st[k]->depth - 1);
+        (*depth)[i] = st[k]->depth;
+        (*key)[i] = smp[k]->key;
     }
+}
+
+/* dr_path_nee_begin after the light sample: the BSDF towards the light
+ * (dr_bsdf_eval_pdf) and the shadow ray; returns where one is cast. */
+static dr_m8 nee_begin(struct dr_path8 *g, dr_m8 ok, const struct light8 *ls, dr_v3x8 *so, dr_v3x8 *sd)
+{
+    ok &= ~(dr_v3x8_dot(ls->wi, g->ng) <= 0.0);
+    dr_v3x8 nee_wi = to_local(g->fs, g->ft, g->fn, ls->wi);
+    dr_m8 above = (g->wo_z > COS_EPS) & (nee_wi.z > COS_EPS);
+    dr_f8 pdf;
+    dr_v3x8 f = eval_pdf_above(g, g->wo, nee_wi, g->spec_p, &pdf);
+    g->bsdf_pdf = dr_f8_sel(above, pdf, dr_f8s(0.0));
+    g->nee_f = dr_v3x8_sel(above, f, (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)});
+    g->nee_cos = nee_wi.z;
+    g->ls_radiance = ls->radiance;
+    g->ls_pdf = ls->pdf;
+    g->delta = ls->delta;
+    ok &= ~dr_v3x8_is_black(g->nee_f);
+    *so = offset_origin(g->p, g->ng, g->eps, ls->wi);
+    *sd = dr_v3x8_sub(ls->target, *so);
+    g->tmax = dr_f8_sqrt(dr_v3x8_dot(*sd, *sd));
+    *sd = dr_v3x8_sel(ls->infinite, ls->wi, dr_v3x8_scale(*sd, 1.0 / g->tmax));   /* environment, directional: along wi */
+    g->tmax = dr_f8_sel(ls->infinite, dr_f8s(INFINITY), g->tmax);
     return ok;
 }
 
@@ -530,44 +595,29 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
     struct dr_light_area_tables lt;
     dr_light_area_tables(s->light_sampler, &lt);
     struct lanes L;
-    L.any_textured = L.any_ltextured = false;
-    dr_u8 key, dim;
+    dr_u8 key;
     dr_f8 depth;
-    for (int i = 0; i < DR_SIMD_W; i++) {
-        int k = i < n ? i : 0;   /* the padding repeats lane 0 */
-        L.st[i] = st[k];
-        L.tri[i] = tri[k];
-        triangle_vertices(m, tri[k], &L.v0[i], &L.v1[i], &L.v2[i]);
-        const struct dr_material *mat = &s->materials[m->material[tri[k]]];
-        L.mat[i] = mat;
-        L.textured[i] = reads_textures(s, mat);
-        L.double_sided[i] = mat->double_sided;
-        L.has_normals[i] = m->flags[tri[k]] & DR_TRI_HAS_NORMALS;
-        L.dim[i] = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)(st[k]->depth - 1);
-        depth[i] = st[k]->depth;
-        key[i] = smp[k]->key;
-        dim[i] = L.dim[i];
-    }
+    gather_lanes(s, n, st, smp, tri, &L, &key, &depth);
     g->n = n;
     dr_v3x8 o = gather3(L.st, offsetof(struct dr_path_state, o)), d = gather3(L.st, offsetof(struct dr_path_state, d));
 
     /* stage_locate, stage_emission */
-    dr_v3x8 p, ng, ns;
-    dr_f8 eps, b1, b2;
-    dr_m8 front = locate(m, &L, o, d, &p, &ng, &ns, &eps, &b1, &b2);
-    for (int i = 0; i < n; i++)
-        if (L.textured[i]) {
-            L.any_textured = true;
-            if (located)
-                L.hit[i] = v[i]->hit;
-            else
-                lane_hit(m, L.tri[i], b1[i], b2[i], dr_v3x8_get(p, i), dr_v3x8_get(ng, i), dr_v3x8_get(ns, i),
-                         eps[i], front[i] != 0, &L.hit[i]);
-        }
-    for (int i = 0; i < n; i++)
+    dr_v3x8 ng, ns;
+    dr_f8 b1, b2;
+    dr_m8 front = locate(m, &L, o, d, &g->p, &ng, &ns, &g->eps, &b1, &b2);
+    for (int i = 0; i < n; i++) {
         v[i]->kind = DR_VERTEX_SURFACE;
+        if (!L.textured[i])
+            continue;
+        L.any_textured = true;
+        if (located)
+            L.hit[i] = v[i]->hit;
+        else
+            lane_hit(m, L.tri[i], b1[i], b2[i], dr_v3x8_get(g->p, i), dr_v3x8_get(ng, i), dr_v3x8_get(ns, i),
+                     g->eps[i], front[i] != 0, &L.hit[i]);
+    }
     if (opts->stages & DR_STAGE_EMISSION)
-        emission_seen(s, &lt, &L, n, p, ng, front, depth, v);
+        emission_seen(s, &lt, &L, n, g->p, ng, front, depth, v);
 
     /* stage_material: the frame towards the ray, the BSDF, the random numbers */
     dr_m8 end = (depth >= (double)opts->max_depth) | (~front & ~mask_of(L.double_sided));
@@ -578,6 +628,8 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
     g->wo_z = g->wo.z;
     material_eval(s, g, &L, end);
     g->spec_p = specular_prob(g, g->wo_z);   /* (wo.z <= COS_EPS: unused) */
+    const uint32_t *dm = L.dim;
+    dr_u8 dim = {dm[0], dm[1], dm[2], dm[3], dm[4], dm[5], dm[6], dm[7]};
     dr_f8 u_pick = independent(key, dim + 1), u1 = independent(key, dim + 2), u2 = independent(key, dim + 3);
     g->lobe_u = independent(key, dim + 4);
     g->bsdf_u1 = independent(key, dim + 5);
@@ -588,28 +640,11 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
             smp[i]->dim = L.dim[i] + 7;
 
     /* dr_path_nee_begin */
-    dr_v3x8 wi, target;
-    dr_m8 infinite;
-    dr_m8 ok = light_sample(s, &lt, &L, p, u_pick, u1, u2, &wi, &target, &g->ls_radiance, &g->ls_pdf, &infinite,
-                            &g->delta);
-    ok &= ~(dr_v3x8_dot(wi, g->ng) <= 0.0);
-    dr_v3x8 nee_wi = to_local(g->fs, g->ft, g->fn, wi);
-    dr_m8 above = (g->wo_z > COS_EPS) & (nee_wi.z > COS_EPS);   /* dr_bsdf_eval_pdf */
-    dr_f8 pdf;
-    dr_v3x8 f = eval_pdf_above(g, g->wo, nee_wi, g->spec_p, &pdf);
-    g->bsdf_pdf = dr_f8_sel(above, pdf, dr_f8s(0.0));
-    g->nee_f = dr_v3x8_sel(above, f, (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)});
-    ok &= ~dr_v3x8_is_black(g->nee_f);
-    dr_v3x8 so = offset_origin(p, g->ng, eps, wi);
-    dr_v3x8 sd = dr_v3x8_sub(target, so);
-    g->tmax = dr_f8_sqrt(dr_v3x8_dot(sd, sd));
-    sd = dr_v3x8_sel(infinite, wi, dr_v3x8_scale(sd, 1.0 / g->tmax));   /* environment, directional: along wi */
-    g->tmax = dr_f8_sel(infinite, dr_f8s(INFINITY), g->tmax);
-    g->nee_cos = nee_wi.z;
-    g->shadow = ok & ~end;
+    struct light8 ls;
+    dr_v3x8 so, sd;
+    dr_m8 ok = light_sample(s, &lt, &L, g->p, u_pick, u1, u2, &ls);
+    g->shadow = nee_begin(g, ok, &ls, &so, &sd) & ~end;
     g->go_on = ~end;
-    g->p = p;
-    g->eps = eps;
     g->depth = depth;
     for (int i = 0; i < n; i++) {
         next[i] = end[i] ? DR_STEP_END : g->shadow[i] ? DR_STEP_SHADOW : DR_STEP_CONTINUE;
@@ -646,7 +681,7 @@ void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g
     dr_m8 ok = g->go_on & (g->wo_z > COS_EPS);
     dr_v3x8 wi = sample_cosine(g->bsdf_u1, g->bsdf_u2);
     dr_m8 specular = ok & (g->lobe_u < g->spec_p);
-    if (specular[0] | specular[1] | specular[2] | specular[3] | specular[4] | specular[5] | specular[6] | specular[7])
+    if (dr_m8_any(specular))
         wi = dr_v3x8_sel(specular, sample_specular_dir(g, g->wo, g->bsdf_u1, g->bsdf_u2, specular), wi);
     ok &= wi.z > COS_EPS;
     dr_f8 pdf;

@@ -11,9 +11,9 @@
  * (test_render).
  *
  * Comparisons give masks (all bits set where true); dr_f8_sel picks by mask.
- * Per-lane loads are built with DR_F8_EACH, whose initialiser list compiles
- * to inserts (a vector load right after eight scalar stores would stall on
- * store forwarding). */
+ * Per-lane loads are best built as an initialiser list of the eight values
+ * (path_simd.c's gathers), which compiles to inserts: a vector load right
+ * after eight scalar stores would stall on store forwarding. */
 #ifndef DR_SIMD_H
 #define DR_SIMD_H
 
@@ -27,10 +27,6 @@
 typedef double dr_f8 __attribute__((vector_size(8 * sizeof(double))));
 typedef int64_t dr_m8 __attribute__((vector_size(8 * sizeof(int64_t))));
 typedef uint64_t dr_u8 __attribute__((vector_size(8 * sizeof(uint64_t))));
-
-/* The vector of E(0), ..., E(7): E is a macro of the lane index. */
-#define DR_F8_EACH(E) ((dr_f8){E(0), E(1), E(2), E(3), E(4), E(5), E(6), E(7)})
-#define DR_U8_EACH(E) ((dr_u8){E(0), E(1), E(2), E(3), E(4), E(5), E(6), E(7)})
 
 static inline dr_f8 dr_f8s(double s) { return (dr_f8){s, s, s, s, s, s, s, s}; }
 /* a where m is set, else b */

@@ -104,7 +104,13 @@ assert isinstance(doc["time"], dict) and isinstance(doc["time"].get("total"), (i
 assert isinstance(doc["rays"], dict) and doc["rays"].get("total", 0) > 0, doc["rays"]
 assert isinstance(doc["peak_memory_bytes"], int) and doc["peak_memory_bytes"] > 0, doc["peak_memory_bytes"]
 assert isinstance(doc["effects"], list) and all(isinstance(e, str) for e in doc["effects"]), doc["effects"]
+# the bundled box's untextured hits are shaded eight lanes at a time (path_simd.h)
+hits = doc["rays"]["camera"] + doc["rays"]["extension"]
+assert 0 < doc["vertices_shaded_8_wide"] <= hits, (doc["vertices_shaded_8_wide"], hits)
 EOF
+    # ... and none with the Sobol sampler, whose draws the eight-lane stages leave to the scalar ones
+    run render --res 16x16 --spp 3 --json --sampler sobol -o j2.exr
+    json_check "$tmp/out" 'd["vertices_shaded_8_wide"] == 0'
 else
     echo "note: python3 not found; --json checked with grep only"
     o=$(cat "$tmp/out")
