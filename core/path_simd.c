@@ -9,6 +9,7 @@
 #include "cdf.h"
 #include "lights.h"
 #include "material.h"
+#include "normal_map.h"
 
 #define COS_EPS 1e-12   /* bsdf.c's */
 
@@ -68,6 +69,7 @@ struct lanes {
     uint32_t v0[DR_SIMD_W], v1[DR_SIMD_W], v2[DR_SIMD_W];
     bool double_sided[DR_SIMD_W], ldouble_sided[DR_SIMD_W], has_normals[DR_SIMD_W];
     bool textured[DR_SIMD_W], ltextured[DR_SIMD_W];   /* reads_textures of the hit's, the light's material */
+    bool normal_mapped[DR_SIMD_W];
     bool any_textured, any_ltextured;
     struct dr_hit hit[DR_SIMD_W];   /* the hits of textured lanes, as dr_hit_compute fills them */
     uint32_t dim[DR_SIMD_W];   /* the vertex's first sampler dimension */
@@ -305,7 +307,7 @@ bool dr_path8_applies(const struct dr_scene *s, const struct dr_path_opts *opts)
 {
     const unsigned allowed = DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_ENV_CONSTANT | DR_FX_ENV_MAP |
                              DR_FX_SHADING_NORMALS | DR_FX_SINGLE_SIDED | DR_FX_SPECULAR | DR_FX_TEXTURES |
-                             DR_FX_VERTEX_COLORS;
+                             DR_FX_VERTEX_COLORS | DR_FX_NORMAL_MAPS;
     struct dr_light_area_tables t;
     return !opts->params && !(s->effects & ~allowed) && (opts->stages & DR_STAGE_NEE) &&
            !(opts->stages & (DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC)) && dr_light_area_tables(s->light_sampler, &t);
@@ -318,11 +320,12 @@ bool dr_path8_lane(const struct dr_scene *s, const struct dr_sampler *smp, int64
 }
 
 /* Does shading a hit on material m read a texture (or the vertex colours):
- * then its BSDF inputs and emission are the scalar functions', lane by lane. */
+ * then its normal map, BSDF inputs and emission are the scalar functions',
+ * lane by lane. */
 static bool reads_textures(const struct dr_scene *s, const struct dr_material *m)
 {
     return m->base_color_tex.texture >= 0 || m->metallic_roughness_tex.texture >= 0 || m->emissive_tex.texture >= 0 ||
-           s->mesh.colors;
+           m->normal_tex.texture >= 0 || s->mesh.colors;
 }
 
 bool dr_path8_reads_textures(const struct dr_scene *s, int64_t tri)
@@ -554,6 +557,7 @@ static void gather_lanes(const struct dr_scene *s, int n, struct dr_path_state *
         const struct dr_material *mat = &s->materials[m->material[tri[k]]];
         L->mat[i] = mat;
         L->textured[i] = reads_textures(s, mat);
+        L->normal_mapped[i] = mat->normal_tex.texture >= 0;
         L->double_sided[i] = mat->double_sided;
         L->has_normals[i] = m->flags[tri[k]] & DR_TRI_HAS_NORMALS;
         L->dim[i] = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)(st[k]->depth - 1);
@@ -615,6 +619,10 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
         else
             lane_hit(m, L.tri[i], b1[i], b2[i], dr_v3x8_get(g->p, i), dr_v3x8_get(ng, i), dr_v3x8_get(ns, i),
                      g->eps[i], front[i] != 0, &L.hit[i]);
+        if (L.normal_mapped[i]) {   /* stage_emission's dr_normal_map_apply */
+            dr_normal_map_apply(s, &L.hit[i]);
+            set_lane(&ns, i, L.hit[i].ns);
+        }
     }
     if (opts->stages & DR_STAGE_EMISSION)
         emission_seen(s, &lt, &L, n, g->p, ng, front, depth, v);
@@ -623,6 +631,10 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
     dr_m8 end = (depth >= (double)opts->max_depth) | (~front & ~mask_of(L.double_sided));
     g->ng = dr_v3x8_sel(front, ng, dr_v3x8_neg(ng));
     g->fn = dr_v3x8_sel(front, ns, dr_v3x8_neg(ns));
+    for (int i = 0; L.any_textured && i < n; i++)   /* a mapped normal may face away from wo */
+        if (L.normal_mapped[i])
+            set_lane(&g->fn, i,
+                     dr_shading_normal_valid(dr_v3x8_get(g->ng, i), dr_neg(dr_v3x8_get(d, i)), dr_v3x8_get(g->fn, i)));
     frame_from_normal(g->fn, &g->fs, &g->ft);
     g->wo = to_local(g->fs, g->ft, g->fn, dr_v3x8_neg(d));
     g->wo_z = g->wo.z;

@@ -1,17 +1,21 @@
-/* The walker's stages for eight lanes at once (simd.h), at vertices on
- * untextured surfaces lit by area lights: the bulk of such a scene's work.
+/* The walker's stages for eight lanes at once (simd.h): the surface hits of
+ * `render`, the bulk of its work.
  *
  * dr_path8_shade is dr_path_step_hit and dr_path8_continue is dr_path_nee_end
- * + dr_path_stage_continue, for lanes where those reduce to: the hit point,
- * the emission seen there, a shading frame, the glTF BSDF (Lambertian or
- * with its GGX lobe), one light sample, the BSDF's continuation and Russian
- * roulette. Every operation is the scalar code's, in its order, so each lane
- * gets the scalar walker's bits (test_render compares the images); what the
- * kernels mirror is named beside each step. Everything else (textured
- * materials, media, environment and punctual lights, vertex colours, normal
- * maps, alpha, parameters to differentiate, the structured samplers) stays
- * with the scalar stages: the packet tracer (wavefront.c) sends each lane one
- * way or the other.
+ * + dr_path_stage_continue for a group of eight lanes: the hit point, the
+ * emission seen there and its MIS weight, the shading frame, the glTF BSDF
+ * (Lambertian or with its GGX lobe), the light sample, the shadow ray, the
+ * BSDF's continuation and Russian roulette, in vector registers. Per lane
+ * inside a group: the light table search, texture, vertex-colour and
+ * normal-map lookups (the scalar material, emission and normal-map functions
+ * with the lane's hit), light samples that pick a punctual light or the
+ * environment (dr_light_sample), libm's cosine and sine of the GGX map.
+ * Every operation is the scalar code's, in its order, so each lane gets the
+ * scalar walker's bits (test_render compares radiance in double); what the
+ * kernels mirror is named beside each step. Escaped rays, alpha, media,
+ * parameters to differentiate and the structured samplers stay with the
+ * scalar stages: the packet tracer (wavefront.c) sends each lane one way or
+ * the other.
  *
  * The vertex the caller receives holds what dr_path_vertex_term reads
  * (emission, next-event estimate): the eight-lane stages serve callers that
@@ -46,15 +50,14 @@ struct dr_path8 {
 };
 
 /* Can this run use the eight-lane stages at all (nothing to differentiate,
- * no vertex colours, normal maps, alpha, media, environment, punctual light
- * or emissive texture; some area light)? */
+ * no alpha, media or dielectric boundaries; some light)? */
 bool dr_path8_applies(const struct dr_scene *scene, const struct dr_path_opts *opts);
-/* Can this lane's vertex use them (a hit, on an untextured material, with
- * the independent sampler)? */
+/* Can this lane's vertex use them (a hit, with the independent sampler)? */
 bool dr_path8_lane(const struct dr_scene *scene, const struct dr_sampler *sampler, int64_t tri);
 
 /* Does shading a hit on triangle tri read textures (or vertex colours)? Such
- * lanes call the scalar material and emission functions with the hit. */
+ * lanes call the scalar material, emission and normal-map functions with
+ * the hit. */
 bool dr_path8_reads_textures(const struct dr_scene *scene, int64_t tri);
 /* dr_path_step_hit of n <= DR_SIMD_W lanes that dr_path8_lane accepts:
  * fills next[i], *shadow[i] when next[i] is DR_STEP_SHADOW, the vertex term's

@@ -24,6 +24,7 @@ struct lane {
     struct dr_path_vertex v;
     struct dr_wave_log log;           /* the walk's ray answers, for a replay */
 };
+
 /* The rays of one batch, in the layout dr_accel_*_many reads. */
 struct batch {
     dr_vec3 o[DR_WAVE_LANES], d[DR_WAVE_LANES];
@@ -158,11 +159,11 @@ static void classify_live(struct dr_wave *w, int n_live, const struct dr_scene *
 static void shade_group(struct dr_wave *w, const int *k, int n, const struct dr_scene *s,
                         const struct dr_path_opts *opts)
 {
-    struct dr_path_state *st[DR_SIMD_W];
-    struct dr_sampler *smp[DR_SIMD_W];
-    struct dr_path_vertex *v[DR_SIMD_W];
-    struct dr_shadow_ray *shadow[DR_SIMD_W];
-    int64_t tri[DR_SIMD_W];
+    struct dr_path_state *st[DR_SIMD_W] = {0};   /* (n >= 1: the kernels read [0..n-1]) */
+    struct dr_sampler *smp[DR_SIMD_W] = {0};
+    struct dr_path_vertex *v[DR_SIMD_W] = {0};
+    struct dr_shadow_ray *shadow[DR_SIMD_W] = {0};
+    int64_t tri[DR_SIMD_W] = {0};
     enum dr_step_next next[DR_SIMD_W];
     int g = w->n_groups++;
     for (int i = 0; i < n; i++) {
@@ -217,8 +218,16 @@ static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
         if (!w->simd)
             collect_shadow(w, w->live[i], counts);
     }
-    if (n_pending > 0)
+    if (n_pending >= DR_SIMD_W / 2) {
         shade_group(w, pending, n_pending, s, opts);
+    } else {   /* a few left over: cheaper one by one than as a group of mostly padding */
+        for (int i = 0; i < n_pending; i++) {
+            struct lane *l = &w->lane[pending[i]];
+            l->simd = false;
+            l->next = dr_path_step_hit(s, opts, &l->st, &l->smp, &l->v, l->tri, &l->shadow);
+        }
+        n_simd -= n_pending;
+    }
     counts->simd_vertices += (uint64_t)n_simd;
     for (int i = 0; w->simd && i < n_live; i++)
         collect_shadow(w, w->live[i], counts);

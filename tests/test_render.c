@@ -472,6 +472,26 @@ static void test_wavefront_matches_one_path(void)
     simd = radiance_matches_exactly(s, sb_camera(dr_v3(0, 2.5, 2.0), dr_v3(0, 0.3, 0), 60.0), "sky-lit box");
     CHECK(simd > 1000, "the sky-lit box: only %llu vertices shaded eight lanes at a time", (unsigned long long)simd);
     dr_scene_destroy(s);
+    /* normal-mapped walls (tangents generated), with a lamp and a glossy block */
+    sb_init(&b);
+    struct dr_image bumps = sb_image(4, 4, 3,
+                                     (const float[]){0.5f, 0.5f, 1, 0.9f, 0.5f, 0.8f, 0.2f, 0.6f, 0.9f, 0.5f, 0.1f, 0.9f,
+                                                     0.7f, 0.7f, 0.7f, 0.3f, 0.3f, 0.9f, 0.5f, 0.5f, 1, 0.8f, 0.2f, 0.7f,
+                                                     0.1f, 0.5f, 0.8f, 0.5f, 0.9f, 0.8f, 0.6f, 0.4f, 0.9f, 0.5f, 0.5f, 1,
+                                                     0.4f, 0.8f, 0.8f, 0.9f, 0.9f, 0.6f, 0.5f, 0.5f, 1, 0.2f, 0.3f, 0.9f},
+                                     0.0f, false);
+    struct dr_material bumpy = sb_diffuse(dr_v3(0.7, 0.6, 0.5));
+    bumpy.normal_tex.texture = sb_texture(&b, bumps);
+    sb_open_box(&b, 2.0, sb_material(&b, bumpy));
+    sb_box(&b, dr_v3(-0.5, 0.0, -0.5), dr_v3(0.0, 0.7, 0.0), sb_material(&b, glossy));
+    sb_quad(&b, dr_v3(-0.3, 1.9, -0.3), dr_v3(0.6, 0, 0), dr_v3(0, 0, 0.6), sb_material(&b, lamp));
+    s = sb_finish(&b);
+    po = (struct dr_path_opts){.max_depth = 8, .rr_depth = DR_RR_DEPTH_DEFAULT, .stages = dr_path_plan(s, NULL)};
+    CHECK(dr_path8_applies(s, &po) && (s->effects & DR_FX_NORMAL_MAPS) && s->mesh.tangents,
+          "the bumpy box qualifies, with a normal map and tangents (effects %#x)", s->effects);
+    simd = radiance_matches_exactly(s, sb_camera(dr_v3(0, 1, 2.5), dr_v3(0, 0.8, 0), 60.0), "bumpy box");
+    CHECK(simd > 1000, "the bumpy box: only %llu vertices shaded eight lanes at a time", (unsigned long long)simd);
+    dr_scene_destroy(s);
     /* vertex colours without textures: no prefetching, the hits built in the kernel for dr_material_eval */
     sb_init(&b);
     sb_open_box(&b, 2.0, sb_material(&b, sb_diffuse(dr_v3(0.9, 0.9, 0.9))));
