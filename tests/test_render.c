@@ -404,49 +404,30 @@ static uint64_t radiance_matches_exactly(const struct dr_scene *s, struct dr_cam
  * texels prefetched first; glossy dielectric walls and a rough metal, eight
  * lanes at a time), a small Lambertian box (no prefetching), and a box that
  * mixes them with shading normals and a second, double-sided lamp. */
-static void test_wavefront_matches_one_path(void)
+/* Materials and a lamp the test scenes share. */
+static struct dr_material glossy_blue(void)
 {
-    struct dr_scene *s = dr_scene_load(scene_path("cornell-box.gltf"));
-    CHECK(s != NULL, "load the bundled scene: %s", dr_last_error());
-    if (s) {
-        CHECK(dr_wave_prefetches(s), "the textured box is shaded with prefetching");
-        CHECK(wavefront_matches_one_path(s, s->cameras[0], "bundled Cornell box") > 0,
-              "the bundled box's untextured hits are shaded eight lanes at a time");
-        CHECK(radiance_matches_exactly(s, s->cameras[0], "bundled Cornell box") > 1000,
-              "the bundled box's untextured hits are shaded eight lanes at a time");
-        dr_scene_destroy(s);
-    }
+    struct dr_material m = sb_diffuse(dr_v3(0.2, 0.4, 0.8));
+    m.specular = 1.0;
+    m.roughness = 0.25;
+    return m;
+}
+static struct dr_material warm_lamp(void)
+{
+    struct dr_material m = sb_diffuse(dr_v3s(0.0));
+    m.emissive_factor = dr_v3(4.0, 3.0, 2.0);
+    return m;
+}
+
+/* Every kind of light at once: an area lamp, point, spot and directional
+ * lights, and an environment map seen through the open top. */
+static struct dr_scene *lit_box(void)
+{
     struct sb b;
     sb_init(&b);
-    sb_open_box(&b, 2.0, sb_material(&b, sb_diffuse(dr_v3(0.7, 0.5, 0.3))));
-    struct dr_material lamp = sb_diffuse(dr_v3s(0.0));
-    lamp.emissive_factor = dr_v3(4.0, 3.0, 2.0);
-    sb_quad(&b, dr_v3(-0.3, 1.9, -0.3), dr_v3(0.6, 0, 0), dr_v3(0, 0, 0.6), sb_material(&b, lamp));   /* faces down */
-    s = sb_finish(&b);
-    CHECK(!dr_wave_prefetches(s), "a small untextured box is shaded in one pass");
-    uint64_t simd = wavefront_matches_one_path(s, sb_camera(dr_v3(0, 1, 3.5), dr_v3(0, 1, 0), 45.0), "untextured box");
-    CHECK(simd > 0, "the Lambertian box is shaded eight lanes at a time");
-    dr_scene_destroy(s);
-    s = mixed_box();
-    struct dr_path_opts po = {.max_depth = 8, .rr_depth = DR_RR_DEPTH_DEFAULT, .stages = dr_path_plan(s, NULL)};
-    CHECK(dr_path8_applies(s, &po), "the mixed box qualifies for the eight-lane stages");
-    CHECK((s->effects & DR_FX_SHADING_NORMALS) && (s->effects & DR_FX_SPECULAR) && (s->effects & DR_FX_SINGLE_SIDED) &&
-              (s->effects & DR_FX_TEXTURES),
-          "the mixed box has shading normals, glossy, textured and single-sided surfaces (effects %#x)", s->effects);
-    simd = wavefront_matches_one_path(s, sb_camera(dr_v3(0, 1, 3.5), dr_v3(0, 0.8, 0), 50.0), "mixed box");
-    CHECK(simd > 0, "the mixed box's Lambertian hits are shaded eight lanes at a time");
-    simd = radiance_matches_exactly(s, sb_camera(dr_v3(0, 1, 2.5), dr_v3(0, 0.8, 0), 60.0), "mixed box");
-    CHECK(simd > 1000, "the mixed box: only %llu vertices shaded eight lanes at a time", (unsigned long long)simd);
-    dr_scene_destroy(s);
-    struct dr_material glossy = sb_diffuse(dr_v3(0.2, 0.4, 0.8));
-    glossy.specular = 1.0;
-    glossy.roughness = 0.25;
-    /* every kind of light at once: an area lamp, point, spot and directional
-     * lights, and an environment map seen through the open top */
-    sb_init(&b);
     sb_open_box(&b, 2.0, sb_material(&b, sb_diffuse(dr_v3(0.8, 0.7, 0.6))));
-    sb_box(&b, dr_v3(-0.5, 0.0, -0.5), dr_v3(0.0, 0.7, 0.0), sb_material(&b, glossy));
-    sb_quad(&b, dr_v3(0.4, 1.5, 0.4), dr_v3(0.3, 0, 0), dr_v3(0, 0, -0.3), sb_material(&b, lamp));
+    sb_box(&b, dr_v3(-0.5, 0.0, -0.5), dr_v3(0.0, 0.7, 0.0), sb_material(&b, glossy_blue()));
+    sb_quad(&b, dr_v3(0.4, 1.5, 0.4), dr_v3(0.3, 0, 0), dr_v3(0, 0, -0.3), sb_material(&b, warm_lamp()));
     sb_light(&b, light(DR_LIGHT_POINT, dr_v3(0.5, 1.2, 0.5), dr_v3(0, -1, 0), 2.0));
     sb_light(&b, light(DR_LIGHT_SPOT, dr_v3(-0.5, 1.6, 0.3), dr_normalize(dr_v3(0.2, -1, -0.1)), 4.0));
     sb_light(&b, light(DR_LIGHT_DIRECTIONAL, dr_v3(0, 0, 0), dr_normalize(dr_v3(0.3, -1, 0.2)), 1.5));
@@ -456,55 +437,97 @@ static void test_wavefront_matches_one_path(void)
     map->data = malloc(sizeof(float) * 16 * 8 * 3);
     for (int k = 0; k < 16 * 8 * 3; k++)
         map->data[k] = (float)(0.2 + (k * 37 % 17) / 4.0);
-    s = sb_finish(&b);
-    po = (struct dr_path_opts){.max_depth = 8, .rr_depth = DR_RR_DEPTH_DEFAULT, .stages = dr_path_plan(s, NULL)};
-    CHECK(dr_path8_applies(s, &po) && (s->effects & DR_FX_PUNCTUAL_LIGHTS) && (s->effects & DR_FX_ENV_MAP),
-          "the lit box qualifies, with punctual lights and an environment map (effects %#x)", s->effects);
-    simd = radiance_matches_exactly(s, sb_camera(dr_v3(0, 1, 2.5), dr_v3(0, 0.8, 0), 60.0), "lit box");
-    CHECK(simd > 1000, "the lit box: only %llu vertices shaded eight lanes at a time", (unsigned long long)simd);
-    dr_scene_destroy(s);
-    /* a constant environment alone (what a glTF file without lights gets) */
+    return sb_finish(&b);
+}
+
+/* A constant environment alone (what a glTF file without lights gets). */
+static struct dr_scene *sky_box(void)
+{
+    struct sb b;
     sb_init(&b);
     sb_open_box(&b, 1.0, sb_material(&b, sb_diffuse(dr_v3(0.8, 0.7, 0.6))));
-    sb_box(&b, dr_v3(-0.5, 0.0, -0.5), dr_v3(0.0, 0.7, 0.0), sb_material(&b, glossy));
+    sb_box(&b, dr_v3(-0.5, 0.0, -0.5), dr_v3(0.0, 0.7, 0.0), sb_material(&b, glossy_blue()));
     sb_environment(&b, dr_v3(0.9, 1.0, 1.1));
-    s = sb_finish(&b);
-    simd = radiance_matches_exactly(s, sb_camera(dr_v3(0, 2.5, 2.0), dr_v3(0, 0.3, 0), 60.0), "sky-lit box");
-    CHECK(simd > 1000, "the sky-lit box: only %llu vertices shaded eight lanes at a time", (unsigned long long)simd);
-    dr_scene_destroy(s);
-    /* normal-mapped walls (tangents generated), with a lamp and a glossy block */
+    return sb_finish(&b);
+}
+
+/* Normal-mapped walls (tangents generated), a lamp and a glossy block. */
+static struct dr_scene *bumpy_box(void)
+{
+    struct sb b;
     sb_init(&b);
-    struct dr_image bumps = sb_image(4, 4, 3,
-                                     (const float[]){0.5f, 0.5f, 1, 0.9f, 0.5f, 0.8f, 0.2f, 0.6f, 0.9f, 0.5f, 0.1f, 0.9f,
-                                                     0.7f, 0.7f, 0.7f, 0.3f, 0.3f, 0.9f, 0.5f, 0.5f, 1, 0.8f, 0.2f, 0.7f,
-                                                     0.1f, 0.5f, 0.8f, 0.5f, 0.9f, 0.8f, 0.6f, 0.4f, 0.9f, 0.5f, 0.5f, 1,
-                                                     0.4f, 0.8f, 0.8f, 0.9f, 0.9f, 0.6f, 0.5f, 0.5f, 1, 0.2f, 0.3f, 0.9f},
-                                     0.0f, false);
+    static const float bump_px[4 * 4 * 3] = {
+        0.5f, 0.5f, 1,    0.9f, 0.5f, 0.8f, 0.2f, 0.6f, 0.9f, 0.5f, 0.1f, 0.9f, 0.7f, 0.7f, 0.7f, 0.3f,
+        0.3f, 0.9f, 0.5f, 0.5f, 1,    0.8f, 0.2f, 0.7f, 0.1f, 0.5f, 0.8f, 0.5f, 0.9f, 0.8f, 0.6f, 0.4f,
+        0.9f, 0.5f, 0.5f, 1,    0.4f, 0.8f, 0.8f, 0.9f, 0.9f, 0.6f, 0.5f, 0.5f, 1,    0.2f, 0.3f, 0.9f};
     struct dr_material bumpy = sb_diffuse(dr_v3(0.7, 0.6, 0.5));
-    bumpy.normal_tex.texture = sb_texture(&b, bumps);
+    bumpy.normal_tex.texture = sb_texture(&b, sb_image(4, 4, 3, bump_px, 0.0f, false));
     sb_open_box(&b, 2.0, sb_material(&b, bumpy));
-    sb_box(&b, dr_v3(-0.5, 0.0, -0.5), dr_v3(0.0, 0.7, 0.0), sb_material(&b, glossy));
-    sb_quad(&b, dr_v3(-0.3, 1.9, -0.3), dr_v3(0.6, 0, 0), dr_v3(0, 0, 0.6), sb_material(&b, lamp));
-    s = sb_finish(&b);
-    po = (struct dr_path_opts){.max_depth = 8, .rr_depth = DR_RR_DEPTH_DEFAULT, .stages = dr_path_plan(s, NULL)};
-    CHECK(dr_path8_applies(s, &po) && (s->effects & DR_FX_NORMAL_MAPS) && s->mesh.tangents,
-          "the bumpy box qualifies, with a normal map and tangents (effects %#x)", s->effects);
-    simd = radiance_matches_exactly(s, sb_camera(dr_v3(0, 1, 2.5), dr_v3(0, 0.8, 0), 60.0), "bumpy box");
-    CHECK(simd > 1000, "the bumpy box: only %llu vertices shaded eight lanes at a time", (unsigned long long)simd);
-    dr_scene_destroy(s);
-    /* vertex colours without textures: no prefetching, the hits built in the kernel for dr_material_eval */
+    sb_box(&b, dr_v3(-0.5, 0.0, -0.5), dr_v3(0.0, 0.7, 0.0), sb_material(&b, glossy_blue()));
+    sb_quad(&b, dr_v3(-0.3, 1.9, -0.3), dr_v3(0.6, 0, 0), dr_v3(0, 0, 0.6), sb_material(&b, warm_lamp()));
+    return sb_finish(&b);
+}
+
+/* Vertex colours without textures: no prefetching, so the eight-lane
+ * stages build the hits dr_material_eval reads themselves. */
+static struct dr_scene *coloured_box(void)
+{
+    struct sb b;
     sb_init(&b);
     sb_open_box(&b, 2.0, sb_material(&b, sb_diffuse(dr_v3(0.9, 0.9, 0.9))));
-    sb_quad(&b, dr_v3(-0.3, 1.9, -0.3), dr_v3(0.6, 0, 0), dr_v3(0, 0, 0.6), sb_material(&b, lamp));
+    sb_quad(&b, dr_v3(-0.3, 1.9, -0.3), dr_v3(0.6, 0, 0), dr_v3(0, 0, 0.6), sb_material(&b, warm_lamp()));
     struct dr_mesh *m = &b.s->mesh;
     m->colors = malloc(sizeof(float) * 3 * m->n_vertices);
     for (uint32_t k = 0; k < 3 * m->n_vertices; k++)
         m->colors[k] = (float)(0.2 + 0.7 * ((k * 7919u) % 13u) / 12.0);
-    s = sb_finish(&b);
-    CHECK((s->effects & DR_FX_VERTEX_COLORS) && !dr_wave_prefetches(s), "the coloured box: vertex colours, no prefetching");
-    simd = radiance_matches_exactly(s, sb_camera(dr_v3(0, 1, 2.5), dr_v3(0, 0.8, 0), 60.0), "coloured box");
-    CHECK(simd > 1000, "the coloured box: only %llu vertices shaded eight lanes at a time", (unsigned long long)simd);
+    return sb_finish(&b);
+}
+
+/* radiance_matches_exactly on scene s (destroyed after), which must have
+ * the effects named and qualify for the eight-lane stages, most of whose
+ * hits they must take. */
+static void exact_with_groups(struct dr_scene *s, unsigned effects, struct dr_camera cam, const char *name)
+{
+    struct dr_path_opts po = {.max_depth = 8, .rr_depth = DR_RR_DEPTH_DEFAULT, .stages = dr_path_plan(s, NULL)};
+    CHECK(dr_path8_applies(s, &po), "%s qualifies for the eight-lane stages", name);
+    CHECK((s->effects & effects) == effects, "%s: effects %#x, expected %#x among them", name, s->effects, effects);
+    uint64_t simd = radiance_matches_exactly(s, cam, name);
+    CHECK(simd > 1000, "%s: only %llu vertices shaded eight lanes at a time", name, (unsigned long long)simd);
     dr_scene_destroy(s);
+}
+
+static void test_wavefront_matches_one_path(void)
+{
+    struct dr_scene *s = dr_scene_load(scene_path("cornell-box.gltf"));
+    CHECK(s != NULL, "load the bundled scene: %s", dr_last_error());
+    if (s) {
+        CHECK(dr_wave_prefetches(s), "the textured box is shaded with prefetching");
+        CHECK(wavefront_matches_one_path(s, s->cameras[0], "bundled Cornell box") > 0,
+              "the bundled box's hits are shaded eight lanes at a time");
+        exact_with_groups(s, DR_FX_TEXTURES | DR_FX_SPECULAR, s->cameras[0], "bundled Cornell box");
+    }
+    struct sb b;
+    sb_init(&b);
+    sb_open_box(&b, 2.0, sb_material(&b, sb_diffuse(dr_v3(0.7, 0.5, 0.3))));
+    sb_quad(&b, dr_v3(-0.3, 1.9, -0.3), dr_v3(0.6, 0, 0), dr_v3(0, 0, 0.6), sb_material(&b, warm_lamp()));   /* faces down */
+    s = sb_finish(&b);
+    CHECK(!dr_wave_prefetches(s), "a small untextured box is shaded in one pass");
+    uint64_t simd = wavefront_matches_one_path(s, sb_camera(dr_v3(0, 1, 3.5), dr_v3(0, 1, 0), 45.0), "untextured box");
+    CHECK(simd > 0, "the Lambertian box is shaded eight lanes at a time");
+    dr_scene_destroy(s);
+    s = mixed_box();
+    CHECK(wavefront_matches_one_path(s, sb_camera(dr_v3(0, 1, 3.5), dr_v3(0, 0.8, 0), 50.0), "mixed box") > 0,
+          "the mixed box's hits are shaded eight lanes at a time");
+    struct dr_camera inside = sb_camera(dr_v3(0, 1, 2.5), dr_v3(0, 0.8, 0), 60.0);
+    exact_with_groups(s, DR_FX_SHADING_NORMALS | DR_FX_SPECULAR | DR_FX_SINGLE_SIDED | DR_FX_TEXTURES, inside,
+                      "mixed box");
+    exact_with_groups(lit_box(), DR_FX_PUNCTUAL_LIGHTS | DR_FX_ENV_MAP | DR_FX_AREA_LIGHTS, inside, "lit box");
+    exact_with_groups(sky_box(), DR_FX_ENV_CONSTANT, sb_camera(dr_v3(0, 2.5, 2.0), dr_v3(0, 0.3, 0), 60.0),
+                      "sky-lit box");
+    exact_with_groups(bumpy_box(), DR_FX_NORMAL_MAPS, inside, "bumpy box");
+    s = coloured_box();
+    CHECK(!dr_wave_prefetches(s), "the coloured box is shaded without prefetching");
+    exact_with_groups(s, DR_FX_VERTEX_COLORS, inside, "coloured box");
 }
 
 int main(void)
