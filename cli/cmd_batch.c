@@ -22,9 +22,9 @@ void cmd_batch_usage(FILE *out)
     fprintf(out,
             "usage: drender batch [--keep-going] [FILE]\n"
             "\n"
-            "Runs the drender command lines of FILE (default, or '-': standard input)\n"
-            "one after another in this one process, so that the image library is loaded\n"
-            "once rather than once per command (about half a second each time here).\n"
+            "Runs the drender command lines of FILE (standard input when FILE is absent\n"
+            "or '-') one after another in this one process, so that the image library is\n"
+            "loaded once rather than once per command (about half a second each time here).\n"
             "\n"
             "One command per line, without or with the leading 'drender', e.g.\n"
             "  render scene.gltf --spp 64 -o 'out/a b.exr'\n"
@@ -138,7 +138,10 @@ static int read_jobs(FILE *in, const char *name, struct job **jobs, int *n_jobs)
         j.argc = split_words(j.text, j.argv, &why, &bad);
         if (j.argc > 0 && strcmp(j.argv[0], "drender") == 0) {
             memmove(j.argv, j.argv + 1, (size_t)j.argc * sizeof j.argv[0]);
-            j.argc--;
+            if (--j.argc == 0) {
+                j.argc = -1;
+                why = "'drender' without a command";
+            }
         }
         const struct dr_command *c = j.argc > 0 ? dr_command_find(j.argv[0]) : NULL;
         if (j.argc < 0) {

@@ -85,6 +85,7 @@ bad_line "render scenes/*.gltf" "'*'" "a glob"
 bad_line "rendr $scene" "rendr|not a drender command" "an unknown command"
 bad_line "batch other.txt" "cannot run 'batch'" "batch in a batch"
 bad_line "render a\\" "continuation" "a trailing backslash"
+bad_line "drender   # nothing else" "without a command" "'drender' alone"
 
 # --- a failing job: named, stops the batch; --keep-going goes on --------
 printf 'render %s %s -o f1.exr\nrender missing.gltf -o f2.exr\nrender %s %s -o f3.exr\n' \
