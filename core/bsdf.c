@@ -12,7 +12,7 @@
  *    which keeps every intermediate finite (z^2 never underflows). */
 #include "bsdf.h"
 
-#define COS_EPS 1e-12
+#define COS_EPS DR_BSDF_COS_EPS
 
 static inline double pow5(double s)
 {

@@ -20,6 +20,8 @@
 
 #include "vec.h"
 
+/* Cosines at or below this count as below the surface (f = pdf = 0). */
+#define DR_BSDF_COS_EPS 1e-12
 #define DR_BSDF_MIN_ALPHA 1e-7   /* roughness ~0.0003: below the smallest roughness parameter (0.001) */
 
 /* The material evaluated at one shading point (textures already applied). */

@@ -361,11 +361,11 @@ double dr_light_pdf_area(const struct dr_scene *s, const struct dr_light_sampler
     return cos_l > 0.0 ? density * d2 / cos_l : 0.0;
 }
 
-bool dr_light_area_tables(const struct dr_light_sampler *ls, struct dr_light_area_tables *t)
+bool dr_light_tables(const struct dr_light_sampler *ls, struct dr_light_tables *t)
 {
     if (ls->n_entries == 0)
         return false;
-    *t = (struct dr_light_area_tables){ls->n_entries, ls->n_emitters, ls->cdf, ls->cdf_guide, ls->pick,
+    *t = (struct dr_light_tables){ls->n_entries, ls->n_emitters, ls->cdf, ls->cdf_guide, ls->pick,
                                        ls->emitter_tri, ls->emitter_area, ls->tri_pick, ls->tri_pick_density};
     return true;
 }

@@ -62,7 +62,7 @@ double dr_light_pdf_area_pick(const struct dr_light_sampler *ls, int64_t tri);
  * at once (path_simd.c does what dr_light_sample and dr_light_pdf_area do for
  * emitting triangles with these; other entries go through dr_light_sample).
  * False when there is nothing to sample. */
-struct dr_light_area_tables {
+struct dr_light_tables {
     int64_t n_entries;
     int64_t n_emitters;             /* entries below this are emitting triangles */
     const double *cdf;              /* n_entries + 1, and its guide table (cdf.h) */
@@ -73,7 +73,7 @@ struct dr_light_area_tables {
     const double *tri_pick;         /* per triangle, as dr_light_pdf_area_pick */
     const double *tri_pick_density; /* per triangle: pick probability / area */
 };
-bool dr_light_area_tables(const struct dr_light_sampler *ls, struct dr_light_area_tables *t);
+bool dr_light_tables(const struct dr_light_sampler *ls, struct dr_light_tables *t);
 /* Density for an escaping direction (environment). */
 double dr_light_pdf_env(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 dir);
 

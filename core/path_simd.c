@@ -11,7 +11,7 @@
 #include "material.h"
 #include "normal_map.h"
 
-#define COS_EPS 1e-12   /* bsdf.c's */
+#define COS_EPS DR_BSDF_COS_EPS
 
 /* ------------------------------------------------------- loads and stores */
 
@@ -308,9 +308,9 @@ bool dr_path8_applies(const struct dr_scene *s, const struct dr_path_opts *opts)
     const unsigned allowed = DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_ENV_CONSTANT | DR_FX_ENV_MAP |
                              DR_FX_SHADING_NORMALS | DR_FX_SINGLE_SIDED | DR_FX_SPECULAR | DR_FX_TEXTURES |
                              DR_FX_VERTEX_COLORS | DR_FX_NORMAL_MAPS;
-    struct dr_light_area_tables t;
+    struct dr_light_tables t;
     return !opts->params && !(s->effects & ~allowed) && (opts->stages & DR_STAGE_NEE) &&
-           !(opts->stages & (DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC)) && dr_light_area_tables(s->light_sampler, &t);
+           !(opts->stages & (DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC)) && dr_light_tables(s->light_sampler, &t);
 }
 
 bool dr_path8_lane(const struct dr_scene *s, const struct dr_sampler *smp, int64_t tri)
@@ -387,23 +387,6 @@ static dr_m8 locate(const struct dr_mesh *m, const struct lanes *L, dr_v3x8 o, d
     return dr_v3x8_dot(d, *ng) < 0.0;
 }
 
-/* A hit as dr_hit_compute (dr_hit_at) fills it, for the scalar material and
- * emission functions: uv as attributes() interpolates it (t is not read). */
-static void lane_hit(const struct dr_mesh *m, int64_t tri, double b1, double b2, dr_vec3 p, dr_vec3 ng, dr_vec3 ns,
-                     double eps, bool front, struct dr_hit *h)
-{
-    *h = (struct dr_hit){.tri = tri, .t = 0.0, .p = p, .ng = ng, .ns = ns, .b1 = b1, .b2 = b2, .front = front,
-                         .material = m->material[tri], .eps = eps};
-    if (m->flags[tri] & DR_TRI_HAS_UVS) {
-        const uint32_t *idx = m->indices + 3 * (size_t)tri;
-        const float *t0 = m->uvs + 2 * (size_t)idx[0], *t1 = m->uvs + 2 * (size_t)idx[1],
-                    *t2 = m->uvs + 2 * (size_t)idx[2];
-        double b0 = 1.0 - b1 - b2;
-        h->uv[0] = b0 * t0[0] + b1 * t1[0] + b2 * t2[0];
-        h->uv[1] = b0 * t0[1] + b1 * t1[1] + b2 * t2[1];
-    }
-}
-
 /* dr_emission of a material without an emissive texture: factor x strength,
  * on the front (or both sides). */
 static dr_v3x8 emission(const void *const *mat, dr_m8 seen)
@@ -416,7 +399,7 @@ static dr_v3x8 emission(const void *const *mat, dr_m8 seen)
 /* stage_emission: what the hit emits towards the ray and its MIS weight
  * against next-event estimation (dr_light_pdf_area, dr_mis_power), into the
  * vertices of the lanes whose triangle emits. */
-static void emission_seen(const struct dr_scene *s, const struct dr_light_area_tables *lt, const struct lanes *L,
+static void emission_seen(const struct dr_scene *s, const struct dr_light_tables *lt, const struct lanes *L,
                           int n, dr_v3x8 p, dr_v3x8 ng, dr_m8 front, dr_f8 depth, struct dr_path_vertex *const *v)
 {
     dr_m8 emits = gather_at(lt->tri_pick, L->tri, 1, 0) > 0.0;
@@ -453,7 +436,7 @@ struct light8 {
 /* Each lane's light-table entry (dr_cdf_find_guided: a scalar table walk);
  * other[i]: it is a punctual light or the environment, which light_sample
  * leaves to dr_light_sample (the area arithmetic runs on a stand-in). */
-static void pick_lights(const struct dr_scene *s, const struct dr_light_area_tables *lt, struct lanes *L,
+static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *lt, struct lanes *L,
                         dr_f8 u_pick, dr_f8 *pick, dr_f8 *area, uint32_t v[3][DR_SIMD_W], bool *other)
 {
     const struct dr_mesh *m = &s->mesh;
@@ -503,7 +486,7 @@ static void other_light_samples(const struct dr_scene *s, const bool *other, dr_
  * dr_emission, dr_offset_origin) eight-wide, texel reads of textured
  * emitters and the other kinds of light lane by lane. Returns where a light
  * sample carries light. */
-static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_area_tables *lt, struct lanes *L,
+static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables *lt, struct lanes *L,
                           dr_v3x8 p, dr_f8 u_pick, dr_f8 u1, dr_f8 u2, struct light8 *out)
 {
     const struct dr_mesh *m = &s->mesh;
@@ -529,9 +512,9 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_area_t
     out->radiance = emission(L->lmat, (cos_l < 0.0) | mask_of(L->ldouble_sided));
     for (int i = 0; L->any_ltextured && i < DR_SIMD_W; i++)
         if (ok[i] && L->ltextured[i] && !other[i]) {   /* (no texel read for a sample that failed) */
-            struct dr_hit h;
-            lane_hit(m, L->ltri[i], b1[i], b2[i], dr_v3x8_get(lp, i), dr_v3x8_get(lng, i), dr_v3x8_get(lng, i),
-                     leps[i], cos_l[i] < 0.0, &h);
+            struct dr_hit h;   /* the light point as dr_light_sample makes it */
+            dr_hit_at(m, L->ltri[i], b1[i], b2[i], &h);
+            h.front = cos_l[i] < 0.0;
             set_lane(&out->radiance, i, dr_emission(s, &h));
         }
     out->target = offset_origin(lp, lng, leps, dr_v3x8_neg(out->wi));
@@ -596,8 +579,8 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
                     bool located, struct dr_path8 *g)
 {
     const struct dr_mesh *m = &s->mesh;
-    struct dr_light_area_tables lt;
-    dr_light_area_tables(s->light_sampler, &lt);
+    struct dr_light_tables lt;
+    dr_light_tables(s->light_sampler, &lt);
     struct lanes L;
     dr_u8 key;
     dr_f8 depth;
@@ -616,9 +599,8 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
         L.any_textured = true;
         if (located)
             L.hit[i] = v[i]->hit;
-        else
-            lane_hit(m, L.tri[i], b1[i], b2[i], dr_v3x8_get(g->p, i), dr_v3x8_get(ng, i), dr_v3x8_get(ns, i),
-                     g->eps[i], front[i] != 0, &L.hit[i]);
+        else   /* the scalar hit the lookups read (the vector one has no uv) */
+            dr_hit_compute(m, L.tri[i], st[i]->o, st[i]->d, &L.hit[i]);
         if (L.normal_mapped[i]) {   /* stage_emission's dr_normal_map_apply */
             dr_normal_map_apply(s, &L.hit[i]);
             set_lane(&ns, i, L.hit[i].ns);
