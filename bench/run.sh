@@ -165,6 +165,7 @@ for scene in "${SCENES[@]}"; do
         [[ $v == drender_accel_path ]] || best_path=$(calc "$x > $best_path ? $x : $best_path" %.2f)
     done
     ratio_path=$(calc "$dr_rps / 1e6 / $best_path")
+    [[ $scene == "$PEER" ]] && PEER_BEST_PATH=$best_path   # part c's Embree floor
     printf '   %-24s path-ray Mr/s: %s; drender / best: %s\n' "" "$(join "${path_line[@]}")" "$ratio_path"
     TP_JSON+=("{\"scene\": \"$scene\", \"triangles\": $tris, \"drender_rays_per_second\": $dr_rps, \"embree_rays_per_second\": $em_rps, \"ratio\": $ratio, \"ratio_best_incoherent\": $ratio_best, \"embree_ceilings\": {$(join "${ceil_json[@]}")}, \"path_ray_ceilings_mrays\": {$(join "${path_json[@]}")}, \"ratio_best_path_rays\": $ratio_path, \"goal\": $THROUGHPUT_GOAL, \"met\": $(truefalse "$ratio >= $THROUGHPUT_GOAL"), \"other_cores_busy\": $other}")
 done
@@ -217,7 +218,18 @@ if [[ -f $PEER ]]; then
     other=$(calc "$other_sum / $wall_sum" %.2f)
     printf '   %-9s %9.3g %8.3g %8s %7s %5s %7s   median of %d: %s\n' 8 "$med8" "$wall8" \
         "${PEER_TIME[8]}" "$ratio8" "$(yesno "$ratio8 < 1")" "$other" "$BENCH_RUNS" "$(join "${runs[@]}")"
-    depth_json=("\"8\": {\"render_seconds\": $med8, \"wall_seconds\": $wall8, \"runs\": [$(join "${runs[@]}")], \"peer_seconds\": ${PEER_TIME[8]}, \"ratio\": $ratio8}")
+    # The Embree floor: drender's own rays of a depth-8 run (camera, extension
+    # and shadow) at the best rate part a measured for path rays on this scene
+    # (raw Embree, no shading at all). What is left of the peer's time after
+    # it is all the shading, sampling and bookkeeping could take at ratio 1.
+    rays8=$(json_num "$R_JSON" total rays)
+    floor8=$(calc "$rays8 / ($PEER_BEST_PATH * 1e6)" %.3f)
+    floor_ratio=$(calc "$floor8 / ${PEER_TIME[8]}")
+    printf '   Embree floor at depth 8: %.1f M rays at the best path-ray rate of part a (%s Mr/s) take %s s = %s of the peer'"'"'s time;\n' \
+        "$(calc "$rays8 / 1e6")" "$PEER_BEST_PATH" "$floor8" "$floor_ratio"
+    printf '   drender spends %s s beyond it (ratio 1 leaves %s s)\n' "$(calc "$med8 - $floor8" %.3f)" \
+        "$(calc "${PEER_TIME[8]} - $floor8" %.3f)"
+    depth_json=("\"8\": {\"render_seconds\": $med8, \"wall_seconds\": $wall8, \"runs\": [$(join "${runs[@]}")], \"peer_seconds\": ${PEER_TIME[8]}, \"ratio\": $ratio8, \"rays\": $rays8, \"embree_floor_seconds\": $floor8, \"embree_floor_ratio\": $floor_ratio}")
 
     # The rest of the peer's table, one run each, within the time budget; a
     # run is predicted to take the depth-8 wall time scaled like the peer's.

@@ -678,7 +678,9 @@ struct dr_param_set *dr_param_set_create(const struct dr_scene *s, const char *c
                                   texref_active(set, s, &mat->metallic_roughness_tex);
         set->mat_emission_active[m] = set->mat_emissive_factor[m] >= 0 || set->mat_emissive_strength[m] >= 0 ||
                                       texref_active(set, s, &mat->emissive_tex);
+        set->radiance_active |= set->mat_emission_active[m];
     }
+    set->radiance_active |= set->lights_active || set->env_active;
     for (int i = 0; i < s->n_media; i++) {
         set->med_active[i] = set->med_extinction[i] >= 0 || set->med_albedo[i] >= 0 || set->med_g[i] >= 0 ||
                              set->med_density_scale[i] >= 0 || set->med_density[i] >= 0;

@@ -108,6 +108,7 @@ struct dr_param_set {
     bool *mat_emission_active;  /* emissive factor, strength or texture */
     bool lights_active;         /* some punctual light parameter */
     bool env_active;
+    bool radiance_active;       /* some light's radiance: an emission, the environment or a punctual light */
     /* participating media, per medium (scene->media): */
     int n_media;
     int64_t *med_extinction, *med_albedo, *med_g, *med_density_scale, *med_density;

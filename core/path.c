@@ -410,6 +410,8 @@ bool dr_path_vertex_has_derivative(const struct dr_scene *s, const struct dr_par
 {
     if (v->diff_bsdf || v->media)
         return true;
+    if (!ps->radiance_active)   /* (then nothing else of v is read: the eight-lane stages rely on it) */
+        return false;
     /* the conditions under which d_emission, d_env_radiance and d_light_radiance work */
     if (v->emits && (v->kind == DR_VERTEX_SURFACE ? ps->mat_emission_active[v->hit.material] : ps->env_active))
         return true;

@@ -205,7 +205,9 @@ void d_path_vertex_term(const struct dr_scene *scene, const struct dr_param_set 
  * the emission or environment it sees, or the light its next-event estimate
  * sampled has a requested parameter; or it is a medium vertex)? False: the
  * vertex's d_path_vertex_term and d_path_continuation add nothing, so a
- * path's derivative work can end at its last vertex with a term. */
+ * path's derivative work can end at its last vertex with a term. Reads
+ * v->diff_bsdf and v->media, and the rest of v only where some light's
+ * radiance has a parameter (params->radiance_active). */
 bool dr_path_vertex_has_derivative(const struct dr_scene *scene, const struct dr_param_set *params,
                                    const struct dr_path_vertex *v);
 /* Adjoint of the continuation's BSDF value f along v->wi, given d_f. */

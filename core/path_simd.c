@@ -309,14 +309,22 @@ bool dr_path8_applies(const struct dr_scene *s, const struct dr_path_opts *opts)
                              DR_FX_SHADING_NORMALS | DR_FX_SINGLE_SIDED | DR_FX_SPECULAR | DR_FX_TEXTURES |
                              DR_FX_VERTEX_COLORS | DR_FX_NORMAL_MAPS;
     struct dr_light_tables t;
-    return !opts->params && !(s->effects & ~allowed) && (opts->stages & DR_STAGE_NEE) &&
-           !(opts->stages & (DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC)) && dr_light_tables(s->light_sampler, &t);
+    /* A light whose radiance has a parameter gives any vertex's emission or
+     * next-event estimate a derivative term (and the scalar walker's
+     * surface_emits counts dark emitters then). */
+    const struct dr_param_set *ps = opts->params;
+    return !(ps && (ps->radiance_active || ps->media_active)) && !(s->effects & ~allowed) &&
+           (opts->stages & DR_STAGE_NEE) && !(opts->stages & (DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC)) &&
+           dr_light_tables(s->light_sampler, &t);
 }
 
-bool dr_path8_lane(const struct dr_scene *s, const struct dr_sampler *smp, int64_t tri)
+/* A material with a BSDF parameter stays scalar: its vertex substitutes zero
+ * channels (path.h) and has a derivative term (dr_path_vertex_has_derivative). */
+bool dr_path8_lane(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_sampler *smp,
+                   int64_t tri)
 {
-    (void)s;
-    return tri >= 0 && smp->kind == DR_SAMPLER_INDEPENDENT;
+    return tri >= 0 && smp->kind == DR_SAMPLER_INDEPENDENT &&
+           !(opts->params && opts->params->mat_bsdf_active[s->mesh.material[tri]]);
 }
 
 /* Does shading a hit on material m read a texture (or the vertex colours):

@@ -13,13 +13,14 @@
  * Every operation is the scalar code's, in its order, so each lane gets the
  * scalar walker's bits (test_render compares radiance in double); what the
  * kernels mirror is named beside each step. Escaped rays, alpha, media,
- * parameters to differentiate and the structured samplers stay with the
+ * vertices with a derivative term and the structured samplers stay with the
  * scalar stages: the packet tracer (wavefront.c) sends each lane one way or
  * the other.
  *
  * The vertex the caller receives holds what dr_path_vertex_term reads
- * (emission, next-event estimate): the eight-lane stages serve callers that
- * want the radiance only (dr_wave_ops.term_only). */
+ * (emission, next-event estimate) and what dr_path_vertex_has_derivative
+ * reads (false): the eight-lane stages serve `render` and the primal walks
+ * of the gradients (dr_wave_ops.term_only). */
 #ifndef DR_PATH_SIMD_H
 #define DR_PATH_SIMD_H
 
@@ -49,11 +50,14 @@ struct dr_path8 {
     dr_f8 metallic, alpha, specular, spec_p, lobe_u;
 };
 
-/* Can this run use the eight-lane stages at all (nothing to differentiate,
- * no alpha, media or dielectric boundaries; some light)? */
+/* Can this run use the eight-lane stages at all (no light whose radiance has
+ * a parameter, no alpha, media or dielectric boundaries; some light)? */
 bool dr_path8_applies(const struct dr_scene *scene, const struct dr_path_opts *opts);
-/* Can this lane's vertex use them (a hit, with the independent sampler)? */
-bool dr_path8_lane(const struct dr_scene *scene, const struct dr_sampler *sampler, int64_t tri);
+/* Can this lane's vertex use them (a hit, with the independent sampler, on a
+ * material without a BSDF parameter)? Such a vertex has no derivative term
+ * in a run dr_path8_applies to. */
+bool dr_path8_lane(const struct dr_scene *scene, const struct dr_path_opts *opts, const struct dr_sampler *sampler,
+                   int64_t tri);
 
 /* Does shading a hit on triangle tri read textures (or vertex colours)? Such
  * lanes call the scalar material, emission and normal-map functions with

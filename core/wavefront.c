@@ -54,9 +54,15 @@ static bool from_log(const struct lane *l)
     return l->replaying && l->st.depth <= l->log.n;
 }
 
+/* Zeroed: a field no stage wrote reads the same on every run (the eight-lane
+ * stages fill only part of a vertex, path_simd.h). */
 struct dr_wave *dr_wave_create(void)
 {
-    return aligned_alloc(64, (sizeof(struct dr_wave) + 63) / 64 * 64);
+    size_t bytes = (sizeof(struct dr_wave) + 63) / 64 * 64;
+    struct dr_wave *w = aligned_alloc(64, bytes);
+    if (w)
+        memset(w, 0, bytes);
+    return w;
 }
 
 void dr_wave_destroy(struct dr_wave *wave)
@@ -147,11 +153,11 @@ static void locate_live(struct dr_wave *w, int n_live, const struct dr_scene *s)
 }
 
 /* Which lanes' vertices the eight-lane stages shade (path_simd.h). */
-static void classify_live(struct dr_wave *w, int n_live, const struct dr_scene *s)
+static void classify_live(struct dr_wave *w, int n_live, const struct dr_scene *s, const struct dr_path_opts *opts)
 {
     for (int i = 0; i < n_live; i++) {
         struct lane *l = &w->lane[w->live[i]];
-        l->simd = w->simd && !from_log(l) && dr_path8_lane(s, &l->smp, l->tri);
+        l->simd = w->simd && !l->replaying && dr_path8_lane(s, opts, &l->smp, l->tri);
     }
 }
 
@@ -330,7 +336,7 @@ void dr_wave_run(struct dr_wave *w, const struct dr_scene *s, const struct dr_pa
             w->live[n_live++] = k;
         }
         trace_live(w, n_live, s, counts);
-        classify_live(w, n_live, s);
+        classify_live(w, n_live, s, opts);
         if (w->prefetch)
             locate_live(w, n_live, s);
         shade_live(w, n_live, s, opts, counts);

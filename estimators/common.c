@@ -331,6 +331,7 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
             st->rays.camera += b->thr[t].rays.camera;
             st->rays.extension += b->thr[t].rays.extension;
             st->rays.shadow += b->thr[t].rays.shadow;
+            st->rays.simd_vertices += b->thr[t].rays.simd_vertices;
             st->invalid_samples += b->thr[t].invalid;
         }
     }

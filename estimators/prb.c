@@ -269,7 +269,8 @@ static bool wave_pixels(struct prb_job *j, int thread, int64_t begin, int64_t en
     for (int64_t px = begin; px < end; px++)
         if (dr_est_sample_adjoint(b, px, &c.adj[n]))
             c.px[n++] = px;
-    static const struct dr_wave_ops ops = {lane_start, lane_vertex, lane_walk_end, NULL, NULL, false};
+    /* (the primal walks read the vertex term only: eight lanes at a time where they can) */
+    static const struct dr_wave_ops ops = {lane_start, lane_vertex, lane_walk_end, NULL, NULL, true};
     dr_wave_run(j->waves[thread], b->p->scene, &b->popts, (int64_t)n * b->p->spp, &ops, &c, &b->thr[thread].rays);
     return true;
 }
@@ -383,7 +384,7 @@ static bool cross_wave(struct prb_job *j, int thread, int64_t begin, int64_t end
     struct prb_item *items = j->items[thread];
     int32_t *order = j->order[thread];
     static const struct dr_wave_ops primal = {cross_primal_start, lane_vertex, cross_primal_end, cross_keep_log,
-                                              NULL, false};
+                                              NULL, true};
     static const struct dr_wave_ops replay = {cross_replay_start, lane_vertex, cross_replay_end, NULL,
                                               cross_replay_log, false};
     for (int64_t first = begin; first < end; first += group) {
