@@ -157,7 +157,7 @@ static void classify_live(struct dr_wave *w, int n_live, const struct dr_scene *
 {
     for (int i = 0; i < n_live; i++) {
         struct lane *l = &w->lane[w->live[i]];
-        l->simd = w->simd && !l->replaying && dr_path8_lane(s, opts, &l->smp, l->tri);
+        l->simd = w->simd && dr_path8_lane(s, opts, &l->smp, l->tri);
     }
 }
 

@@ -68,10 +68,11 @@ struct dr_wave_ops {
      * walk is a replay of it (as DR_WAVE_REPLAY). */
     void (*keep_log)(void *ctx, void *user, const struct dr_wave_log *log);
     const struct dr_wave_log *(*replay_log)(void *ctx, void *user);
-    /* In walks that are not replays, vertex reads only what
-     * dr_path_vertex_term (the radiance), dr_path_vertex_has_derivative and
-     * v->depth read: then the lanes the eight-lane stages accept
-     * (path_simd.h) are shaded by them. Replays read the whole vertex. */
+    /* At a vertex dr_path_vertex_has_derivative calls derivative-free,
+     * vertex reads only what dr_path_vertex_term (the radiance),
+     * dr_path_vertex_has_derivative and v->depth read: then the lanes the
+     * eight-lane stages accept (path_simd.h; only such vertices) are shaded
+     * by them, in first walks and replays alike. */
     bool term_only;
 };
 

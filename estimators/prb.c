@@ -84,11 +84,19 @@ static void walk_vertex(const struct dr_est_base *b, struct walk *w, const struc
     dr_vec3 remaining = L->true_;   /* replay: from this vertex on */
     L->sub = dr_madd(L->sub, c, sign);
     L->true_ = dr_madd(L->true_, dr_mul(ratio, c), sign);
+    const bool has_derivative = dr_path_vertex_has_derivative(s, ps, v);
     if (!sink) {
-        if (dr_path_vertex_has_derivative(s, ps, v))
+        if (has_derivative)
             w->last_diff = v->depth;
         return;
     }
+    /* A vertex without a term adds nothing below (test_estimators checks the
+     * predicate against the adjoints); skipping it also means a replay reads
+     * no more of such a vertex than the primal did, so both walks can shade
+     * it eight lanes at a time (path_simd.h). Derivative sampling still
+     * needs its emission for the previous vertex's sampled direction. */
+    if (!has_derivative && !dsamp)
+        return;
     if (v->media)
         d_medium_vertex(s, &b->popts, v, w->mrec, w->vertices, dr_mul(adj, dr_mul(ratio, beta)), dr_mul(adj, remaining),
                         dr_mul(adj, L->true_), dr_mul(adj, dr_mul(dr_mul(ratio, beta), dr_path_vertex_nee(v))), sink);
@@ -269,7 +277,7 @@ static bool wave_pixels(struct prb_job *j, int thread, int64_t begin, int64_t en
     for (int64_t px = begin; px < end; px++)
         if (dr_est_sample_adjoint(b, px, &c.adj[n]))
             c.px[n++] = px;
-    /* (the primal walks read the vertex term only: eight lanes at a time where they can) */
+    /* (walks read only the term of a vertex without a derivative term: eight lanes at a time where they can) */
     static const struct dr_wave_ops ops = {lane_start, lane_vertex, lane_walk_end, NULL, NULL, true};
     dr_wave_run(j->waves[thread], b->p->scene, &b->popts, (int64_t)n * b->p->spp, &ops, &c, &b->thr[thread].rays);
     return true;
@@ -386,7 +394,7 @@ static bool cross_wave(struct prb_job *j, int thread, int64_t begin, int64_t end
     static const struct dr_wave_ops primal = {cross_primal_start, lane_vertex, cross_primal_end, cross_keep_log,
                                               NULL, true};
     static const struct dr_wave_ops replay = {cross_replay_start, lane_vertex, cross_replay_end, NULL,
-                                              cross_replay_log, false};
+                                              cross_replay_log, true};
     for (int64_t first = begin; first < end; first += group) {
         const int64_t n_px = end - first < group ? end - first : group;
         struct cross_ctx c = {.run = {j, thread}, .sink = sink, .first_px = first, .items = items,
