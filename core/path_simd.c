@@ -699,6 +699,13 @@ void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g
                         dr_f8s(1.0));
     ok &= ~(roulette & (g->rr >= q));
     beta = dr_v3x8_scale(beta, 1.0 / q);
+    dr_f8 cos_pdf_q = cos_pdf / q;
+    for (int i = 0; i < n; i++)   /* the continuation's factor, for a tape's step (tape.c) */
+        if (ok[i]) {
+            v[i]->cont = true;
+            v[i]->f = dr_v3x8_get(f, i);
+            v[i]->cos_pdf_q = cos_pdf_q[i];
+        }
     dr_v3x8 o = offset_origin(g->p, g->ng, g->eps, wiw);
     void *const *W = (void *const *)st;
     scatter3(W, offsetof(struct dr_path_state, beta), beta, n, ok);

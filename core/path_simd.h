@@ -18,9 +18,10 @@
  * the other.
  *
  * The vertex the caller receives holds what dr_path_vertex_term reads
- * (emission, next-event estimate) and what dr_path_vertex_has_derivative
- * reads (false): the eight-lane stages serve `render` and the primal walks
- * of the gradients (dr_wave_ops.term_only). */
+ * (emission, next-event estimate), what dr_path_vertex_has_derivative reads
+ * (false) and the continuation's factor (cont, f, cos_pdf_q): the eight-lane
+ * stages serve `render`, prb's walks and the tape's compact steps
+ * (dr_wave_ops.term_only). */
 #ifndef DR_PATH_SIMD_H
 #define DR_PATH_SIMD_H
 

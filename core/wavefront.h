@@ -70,7 +70,8 @@ struct dr_wave_ops {
     const struct dr_wave_log *(*replay_log)(void *ctx, void *user);
     /* At a vertex dr_path_vertex_has_derivative calls derivative-free,
      * vertex reads only what dr_path_vertex_term (the radiance),
-     * dr_path_vertex_has_derivative and v->depth read: then the lanes the
+     * dr_path_vertex_has_derivative and v->depth read, and the
+     * continuation's factor (v->cont, v->f, v->cos_pdf_q): then the lanes the
      * eight-lane stages accept (path_simd.h; only such vertices) are shaded
      * by them, in first walks and replays alike. */
     bool term_only;

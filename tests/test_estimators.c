@@ -85,9 +85,10 @@ static void compare(const char *what, struct dr_scene *s, const struct dr_camera
               dr_last_error());
         CHECK(st.memory_bytes > 0, "%s: %s reports no memory", what, est->name);
         CHECK(st.memory_bytes >= st.record_bytes, "%s: %s: record bytes exceed its memory", what, est->name);
-        /* prb's primal walks shade eight lanes at a time where no light has a
-         * parameter (path_simd.h); the tape reads every vertex whole */
-        const bool grouped = eight_wide && strcmp(est->name, "prb") == 0;
+        /* prb's walks and the tape's compact steps (detached sampling) shade
+         * the vertices without a derivative term eight lanes at a time where
+         * no light has a parameter (path_simd.h) */
+        const bool grouped = eight_wide;
         CHECK(grouped ? st.rays.simd_vertices > 0 : st.rays.simd_vertices == 0,
               "%s: %s shaded %llu vertices eight lanes at a time (expected %s)", what, est->name,
               (unsigned long long)st.rays.simd_vertices, grouped ? "some" : "none");
@@ -309,8 +310,10 @@ int main(void)
         "/images/0",
     };
     compare("cornell box", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DETACHED, false);
-    /* BSDF parameters only: prb's primal walks shade the vertices on other
-     * materials eight lanes at a time, and must still agree with the tape */
+    /* BSDF parameters only: prb's walks and the tape's steps shade the
+     * vertices on other materials eight lanes at a time; the estimators must
+     * still agree (a wrong continuation factor in the tape's steps, or a
+     * wrong radiance in prb's, would show) */
     const char *bsdf_ptrs[] = {ptrs[0], ptrs[2], ptrs[3], ptrs[6]};
     compare("cornell box, BSDF parameters only", s, &s->cameras[0], bsdf_ptrs, 4, 8, DR_SAMPLING_DETACHED, true);
     /* one parameter at a time: most vertices then have no term */
