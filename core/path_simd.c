@@ -441,15 +441,38 @@ struct light8 {
     dr_m8 infinite, delta;   /* at no finite distance (environment, directional); no MIS (punctual) */
 };
 
-/* Each lane's light-table entry (dr_cdf_find_guided: a scalar table walk);
- * other[i]: it is a punctual light or the environment, which light_sample
- * leaves to dr_light_sample (the area arithmetic runs on a stand-in). */
+/* Tables at most this long are searched all eight lanes at once. */
+#define SHORT_TABLE 16
+
+/* Each lane's entry of the light table: dr_cdf_find_guided's answer, the
+ * largest i with cdf[i] <= u. In a short table that is the number of
+ * entries j >= 1 with cdf[j] <= u (the cdf rises; a NaN u counts none,
+ * as the search answers 0), counted for the eight lanes together. */
+static void find_entries(const struct dr_light_tables *lt, dr_f8 u, int64_t e[DR_SIMD_W])
+{
+    if (lt->n_entries > SHORT_TABLE) {
+        for (int i = 0; i < DR_SIMD_W; i++)
+            e[i] = dr_cdf_find_guided(lt->cdf, lt->n_entries, lt->cdf_guide, lt->n_entries, u[i]);
+        return;
+    }
+    dr_m8 count = {0};
+    for (int64_t j = 1; j < lt->n_entries; j++)
+        count -= dr_f8s(lt->cdf[j]) <= u;   /* (a mask is -1 where true) */
+    for (int i = 0; i < DR_SIMD_W; i++)
+        e[i] = count[i];
+}
+
+/* Each lane's light-table entry; other[i]: it is a punctual light or the
+ * environment, which light_sample leaves to dr_light_sample (the area
+ * arithmetic runs on a stand-in). */
 static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *lt, struct lanes *L,
                         dr_f8 u_pick, dr_f8 *pick, dr_f8 *area, uint32_t v[3][DR_SIMD_W], bool *other)
 {
     const struct dr_mesh *m = &s->mesh;
+    int64_t entry[DR_SIMD_W];
+    find_entries(lt, u_pick, entry);
     for (int i = 0; i < DR_SIMD_W; i++) {
-        int64_t e = dr_cdf_find_guided(lt->cdf, lt->n_entries, lt->cdf_guide, lt->n_entries, u_pick[i]);
+        int64_t e = entry[i];
         other[i] = e >= lt->n_emitters;
         if (other[i])
             e = lt->n_emitters > 0 ? 0 : -1;
