@@ -346,39 +346,35 @@ bool dr_accel_occluded(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tm
 
 /* ---------------------------------------------------------------- packets */
 
-/* Lane j of packet r from ray i, as fill_ray converts it (the same floats). */
-static void fill_lane(struct RTCRay16 *r, int j, const struct dr_accel_rays *rays, int i)
+/* Packet r from rays [first, first + m): lane j from ray first + j, as
+ * fill_ray converts it (the same floats); lanes from m on unused, masked off
+ * by valid and also well-formed, inactive rays (tfar < tnear), as Embree's
+ * 8-wide split of a 16-wide packet checks every lane of a half it traces (an
+ * assertion on machines without AVX-512). One field at a time, so that the
+ * compiler stores each field's sixteen lanes as vectors. */
+static void fill_packet(struct RTCRay16 *r, const struct dr_accel_rays *rays, int first, int m)
 {
-    dr_vec3 o = rays->o[i], d = rays->d[i];
-    double tmax = rays->tmax[i];
-    r->org_x[j] = (float)o.x;
-    r->org_y[j] = (float)o.y;
-    r->org_z[j] = (float)o.z;
-    r->dir_x[j] = (float)d.x;
-    r->dir_y[j] = (float)d.y;
-    r->dir_z[j] = (float)d.z;
-    r->tnear[j] = 0.0f;
-    r->tfar[j] = tmax >= FLT_MAX ? INFINITY : (float)tmax;
-    r->time[j] = 0.0f;
-    r->mask[j] = 0xFFFFFFFFu;
-    r->id[j] = (unsigned)j;
-    r->flags[j] = 0;
-}
-
-/* An unused lane: masked off by valid, and also a well-formed, inactive ray
- * (tfar < tnear), as Embree's 8-wide split of a 16-wide packet checks every
- * lane of a half it traces (an assertion on machines without AVX-512). */
-static void empty_lane(struct RTCRay16 *r, int j)
-{
-    r->org_x[j] = r->org_y[j] = r->org_z[j] = 0.0f;
-    r->dir_x[j] = r->dir_y[j] = 0.0f;
-    r->dir_z[j] = 1.0f;
-    r->tnear[j] = 0.0f;
-    r->tfar[j] = -INFINITY;
-    r->time[j] = 0.0f;
-    r->mask[j] = 0;
-    r->id[j] = (unsigned)j;
-    r->flags[j] = 0;
+    const dr_vec3 *o = rays->o + first, *d = rays->d + first;
+    const double *tmax = rays->tmax + first;
+    for (int j = 0; j < DR_ACCEL_PACKET; j++) {
+        r->org_x[j] = j < m ? (float)o[j].x : 0.0f;
+        r->org_y[j] = j < m ? (float)o[j].y : 0.0f;
+        r->org_z[j] = j < m ? (float)o[j].z : 0.0f;
+    }
+    for (int j = 0; j < DR_ACCEL_PACKET; j++) {
+        r->dir_x[j] = j < m ? (float)d[j].x : 0.0f;
+        r->dir_y[j] = j < m ? (float)d[j].y : 0.0f;
+        r->dir_z[j] = j < m ? (float)d[j].z : 1.0f;
+    }
+    for (int j = 0; j < DR_ACCEL_PACKET; j++)
+        r->tfar[j] = j >= m ? -INFINITY : tmax[j] >= FLT_MAX ? INFINITY : (float)tmax[j];
+    for (int j = 0; j < DR_ACCEL_PACKET; j++) {
+        r->tnear[j] = 0.0f;
+        r->time[j] = 0.0f;
+        r->mask[j] = j < m ? 0xFFFFFFFFu : 0u;
+        r->id[j] = (unsigned)j;
+        r->flags[j] = 0;
+    }
 }
 
 /* Packet k's lanes: rays [16k, min(16k + 16, n)); valid marks them. */
@@ -404,11 +400,8 @@ static int packet_intersect(RTCScene sc, const struct dr_accel *a, const struct 
     struct query_ctx q;
     int first = k * DR_ACCEL_PACKET, m = packet_lanes(rays, k, valid, &q);
     struct RTCRayHit16 rh __attribute__((aligned(64)));
+    fill_packet(&rh.ray, rays, first, m);
     for (int j = 0; j < DR_ACCEL_PACKET; j++) {
-        if (j < m)
-            fill_lane(&rh.ray, j, rays, first + j);
-        else
-            empty_lane(&rh.ray, j);
         rh.hit.geomID[j] = RTC_INVALID_GEOMETRY_ID;
         rh.hit.instID[0][j] = RTC_INVALID_GEOMETRY_ID;
     }
@@ -466,12 +459,7 @@ void dr_accel_occluded_many(const struct dr_accel *a, const struct dr_accel_rays
         struct query_ctx q;
         int m = packet_lanes(rays, k, valid, &q);
         struct RTCRay16 r __attribute__((aligned(64)));
-        for (int j = 0; j < DR_ACCEL_PACKET; j++) {
-            if (j < m)
-                fill_lane(&r, j, rays, first + j);
-            else
-                empty_lane(&r, j);
-        }
+        fill_packet(&r, rays, first, m);
         rtcOccluded16(valid, a->scene, &q.rtc, &r);
         for (int j = 0; j < m; j++)
             occluded[first + j] = r.tfar[j] < 0.0f;

@@ -328,7 +328,7 @@ static double floor_radiance(const struct dr_scene *s, double x)
     struct dr_path_opts o = {.max_depth = 2, .rr_depth = 100, .stages = dr_path_plan(s, NULL)};
     struct dr_sampler smp;
     dr_sampler_init(&smp, 1, 0, 0);
-    struct dr_ray_counts c = {0, 0, 0};
+    struct dr_ray_counts c = {0};
     dr_vec3 org = dr_v3(x, 0.5, -3), d = dr_normalize(dr_sub(dr_v3(x, 0, 0), org));
     return dr_path_radiance(s, &o, org, d, &smp, &c).x;
 }
