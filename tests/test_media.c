@@ -243,7 +243,7 @@ static void interface_trials(struct dr_scene *s, dr_vec3 o, dr_vec3 d, double et
         dr_sampler_init(&smp, 6, (uint64_t)i, 0);
         struct dr_path_state st;
         struct dr_path_vertex v;
-        struct dr_ray_counts rays = {0, 0, 0};
+        struct dr_ray_counts rays = {0};
         v.mrec = NULL;
         dr_path_start(&st, o, d);
         bool more = dr_path_step(s, &opts, &st, &smp, &v, &rays);
