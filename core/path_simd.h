@@ -21,7 +21,7 @@
  * (emission, next-event estimate), what dr_path_vertex_has_derivative reads
  * (false) and the continuation's factor (cont, f, cos_pdf_q): the eight-lane
  * stages serve `render`, prb's walks and the tape's compact steps
- * (dr_wave_ops.term_only). */
+ * (dr_wave_ops.partial_vertices). */
 #ifndef DR_PATH_SIMD_H
 #define DR_PATH_SIMD_H
 

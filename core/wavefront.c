@@ -230,7 +230,10 @@ static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
         for (int i = 0; i < n_pending; i++) {
             struct lane *l = &w->lane[pending[i]];
             l->simd = false;
-            l->next = dr_path_step_hit(s, opts, &l->st, &l->smp, &l->v, l->tri, &l->shadow);
+            /* (locate_live located it if it reads textures: not twice) */
+            l->next = w->prefetch && dr_path8_reads_textures(s, l->tri)
+                          ? dr_path_step_shade(s, opts, &l->st, &l->smp, &l->v, l->tri, &l->shadow)
+                          : dr_path_step_hit(s, opts, &l->st, &l->smp, &l->v, l->tri, &l->shadow);
         }
         n_simd -= n_pending;
     }
@@ -317,7 +320,7 @@ void dr_wave_run(struct dr_wave *w, const struct dr_scene *s, const struct dr_pa
                  const struct dr_wave_ops *ops, void *ctx, struct dr_ray_counts *counts)
 {
     w->prefetch = dr_wave_prefetches(s);
-    w->simd = ops->term_only && dr_path8_applies(s, opts);
+    w->simd = ops->partial_vertices && dr_path8_applies(s, opts);
     int n_live = 0, n_free = DR_WAVE_LANES;
     for (int k = 0; k < DR_WAVE_LANES; k++)
         w->free_[k] = DR_WAVE_LANES - 1 - k;   /* lane 0 is handed out first */

@@ -74,7 +74,7 @@ struct dr_wave_ops {
      * continuation's factor (v->cont, v->f, v->cos_pdf_q): then the lanes the
      * eight-lane stages accept (path_simd.h; only such vertices) are shaded
      * by them, in first walks and replays alike. */
-    bool term_only;
+    bool partial_vertices;
 };
 
 struct dr_wave;
