@@ -188,6 +188,15 @@ T1=$(median "${t1s[@]}") T2=$(median "${t2s[@]}")
 SPEEDUP=$(calc "$T1 / $T2")
 SCALING_OTHER=$(calc "$o / $w" %.2f)
 printf '   1 thread %.3g s, 2 threads %.3g s: speedup %s (ideal 2); others %s\n' "$T1" "$T2" "$SPEEDUP" "$SCALING_OTHER"
+# What the machine itself gives: the SoA floor (bench/soa_floor.c, no
+# shared state between its threads but the scene) on the same scene and
+# workload, 1 thread then 2, each its own best of 3 after a warm-up.
+measure "$OUT/soa_floor" "$CORNELL" 256 256 16 1 8
+F1=$(json_num "$M_OUT" seconds)
+measure "$OUT/soa_floor" "$CORNELL" 256 256 16 2 8
+F2=$(json_num "$M_OUT" seconds)
+FLOOR_SPEEDUP=$(calc "$F1 / $F2")
+printf '   the SoA floor on the same work: 1 thread %.3g s, 2 threads %.3g s: speedup %s (the machine'"'"'s own)\n' "$F1" "$F2" "$FLOOR_SPEEDUP"
 
 # ---- c + d. peer comparison ------------------------------------------------
 # The peer's protocol: 256x256, 64 spp, 2 threads, median of BENCH_RUNS runs
@@ -328,7 +337,7 @@ OTHER_CORES=$(calc "$OTHER_TOTAL / $WALL_TOTAL" %.2f)
         echo "    ${TP_JSON[i]}$( ((i + 1 < ${#TP_JSON[@]})) && echo ,)"
     done
     echo "  ],"
-    echo "  \"thread_scaling\": {\"scene\": \"$CORNELL\", \"t1_seconds\": $T1, \"t2_seconds\": $T2, \"speedup\": $SPEEDUP, \"other_cores_busy\": $SCALING_OTHER},"
+    echo "  \"thread_scaling\": {\"scene\": \"$CORNELL\", \"t1_seconds\": $T1, \"t2_seconds\": $T2, \"speedup\": $SPEEDUP, \"soa_floor_speedup\": $FLOOR_SPEEDUP, \"other_cores_busy\": $SCALING_OTHER},"
     echo "  \"startup\": $STARTUP_JSON,"
     echo "  \"peer\": $PEER_JSON"
     echo "}"
