@@ -36,7 +36,7 @@ declare -A PEER_TIME=([4]=0.84 [8]=1.16 [16]=1.27 [32]=1.23)
 PEER_MEM_MIB=116
 THROUGHPUT_GOAL=0.6   # issue 11: rays/s >= 0.6 x the best raw Embree rate
 
-for f in "$BUILD/drender" "$BUILD/libdrender-image.so" "$OUT/raw_embree" "$OUT/path_rays" "$OUT/soa_floor" "$OUT/soa_floor_double" "$OUT/make_big_scene"; do
+for f in "$BUILD/drender" "$BUILD/libdrender-image.so" "$OUT/raw_embree" "$OUT/path_rays" "$OUT/soa_floor" "$OUT/soa_floor_double" "$OUT/soa_floor_accel" "$OUT/make_big_scene"; do
     [[ -x $f ]] || { echo "bench: $f is missing; run 'make bench'" >&2; exit 1; }
 done
 mkdir -p "$OUT"
@@ -249,10 +249,13 @@ if [[ -f $PEER ]]; then
     soa_rays=$(json_num "$M_OUT" total rays)
     measure "$OUT/soa_floor_double" "$PEER" 256 256 64 2 8
     soa_d=$(json_num "$M_OUT" seconds)
-    printf '   SoA floor at depth 8 (bench/soa_floor.c: %.1f M rays, no features): float %s s = %s of the peer'"'"'s time, double %s s = %s;\n' \
+    measure "$OUT/soa_floor_accel" "$PEER" 256 256 64 2 8   # the rays through drender's query layer
+    soa_a=$(json_num "$M_OUT" seconds)
+    printf '   SoA floor at depth 8 (bench/soa_floor.c: %.1f M rays, no features): float %s s = %s of the peer'"'"'s time, double %s s = %s,\n' \
         "$(calc "$soa_rays / 1e6")" "$soa_f" "$(calc "$soa_f / ${PEER_TIME[8]}")" "$soa_d" "$(calc "$soa_d / ${PEER_TIME[8]}")"
+    printf '   float with the rays through drender'"'"'s query layer (core/accel.h) %s s = %s;\n' "$soa_a" "$(calc "$soa_a / ${PEER_TIME[8]}")"
     printf '   drender takes %s x the float floor\n' "$(calc "$med8 / $soa_f")"
-    depth_json=("\"8\": {\"render_seconds\": $med8, \"wall_seconds\": $wall8, \"runs\": [$(join "${runs[@]}")], \"peer_seconds\": ${PEER_TIME[8]}, \"ratio\": $ratio8, \"rays\": $rays8, \"embree_floor_seconds\": $floor8, \"embree_floor_ratio\": $floor_ratio, \"soa_floor_seconds\": $soa_f, \"soa_floor_ratio\": $(calc "$soa_f / ${PEER_TIME[8]}"), \"soa_floor_double_seconds\": $soa_d, \"soa_floor_rays\": $soa_rays}")
+    depth_json=("\"8\": {\"render_seconds\": $med8, \"wall_seconds\": $wall8, \"runs\": [$(join "${runs[@]}")], \"peer_seconds\": ${PEER_TIME[8]}, \"ratio\": $ratio8, \"rays\": $rays8, \"embree_floor_seconds\": $floor8, \"embree_floor_ratio\": $floor_ratio, \"soa_floor_seconds\": $soa_f, \"soa_floor_ratio\": $(calc "$soa_f / ${PEER_TIME[8]}"), \"soa_floor_double_seconds\": $soa_d, \"soa_floor_accel_seconds\": $soa_a, \"soa_floor_rays\": $soa_rays}")
 
     # The rest of the peer's table, one run each, within the time budget; a
     # run is predicted to take the depth-8 wall time scaled like the peer's.

@@ -33,6 +33,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "accel.h"
 #include "camera.h"
 #include "clock.h"
 #include "error.h"
@@ -87,6 +88,8 @@ struct lights {
 struct ctx {
     const struct dr_scene *sc;
     RTCScene rtc;
+    struct dr_accel *acc;   /* FLOOR_DR_ACCEL: drender's query layer instead */
+    const float *v0;        /* FLOOR_DR_ACCEL: each triangle's first vertex and unit normal (t from the plane) */
     struct dr_camera_view view;
     struct tri_data td;
     struct lights L;
@@ -110,6 +113,12 @@ struct wave {
     real sox[LANES], soy[LANES], soz[LANES], sdx[LANES], sdy[LANES], sdz[LANES], stf[LANES];
     int32_t slane[LANES];                       /* lanes with a shadow ray */
     int32_t has_shadow[LANES];
+#if FLOOR_DR_ACCEL
+    dr_vec3 qo[LANES], qd[LANES];   /* the rays as drender's query layer takes them */
+    double qtmax[LANES];
+    int64_t qtri[LANES];
+    bool qocc[LANES];
+#endif
     int n;
 };
 
@@ -169,9 +178,34 @@ static void start_paths(struct ctx *c, struct wave *w, uint64_t first)
     }
 }
 
-/* Closest hits of lanes [0, n): t and primitive (or ~0u) per lane. */
-static void intersect(struct ctx *c, struct wave *w, struct RTCIntersectContext *ic, long *rays)
+#if FLOOR_DR_ACCEL
+/* FLOOR_DR_ACCEL: the queries through drender's own layer (core/accel.h:
+ * double rays, its unfiltered copy first and its coverage filter for the
+ * single-sided surfaces, camera rays as coherent packets), which answers
+ * the triangle only: t comes from the triangle's plane. */
+static void intersect(struct ctx *c, struct wave *w, struct RTCIntersectContext *ic, long *rays, int depth)
 {
+    (void)ic;
+    for (int i = 0; i < w->n; i++) {
+        w->qo[i] = dr_v3(w->ox[i], w->oy[i], w->oz[i]), w->qd[i] = dr_v3(w->dx[i], w->dy[i], w->dz[i]);
+        w->qtmax[i] = INFINITY;
+    }
+    const struct dr_accel_rays r = {.n = w->n, .o = w->qo, .d = w->qd, .tmax = w->qtmax, .coherent = depth == 0 ? w->n : 0};
+    dr_accel_intersect_many(c->acc, &r, w->qtri);
+    for (int i = 0; i < w->n; i++) {
+        const int64_t tri = w->qtri[i];
+        const float *q = c->v0 + 6 * (tri < 0 ? 0 : tri);
+        const real dn = w->dx[i] * q[3] + w->dy[i] * q[4] + w->dz[i] * q[5];
+        w->t[i] = ((q[0] - w->ox[i]) * q[3] + (q[1] - w->oy[i]) * q[4] + (q[2] - w->oz[i]) * q[5]) / dn;
+        w->prim[i] = tri < 0 ? ~0u : (uint32_t)tri;
+    }
+    *rays += w->n;
+}
+#else
+/* Closest hits of lanes [0, n): t and primitive (or ~0u) per lane. */
+static void intersect(struct ctx *c, struct wave *w, struct RTCIntersectContext *ic, long *rays, int depth)
+{
+    (void)depth;
     for (int b = 0; b < w->n; b += PACKET) {
         _Alignas(64) struct RTCRayHit16 p;
         _Alignas(64) int valid[PACKET];
@@ -193,6 +227,7 @@ static void intersect(struct ctx *c, struct wave *w, struct RTCIntersectContext 
     }
     *rays += w->n;
 }
+#endif
 
 static inline real power_heuristic(real a, real b)
 {
@@ -292,6 +327,25 @@ static int shade(struct ctx *c, struct wave *w, int depth)
     return ns;
 }
 
+#if FLOOR_DR_ACCEL
+static void shadow_rays(struct ctx *c, struct wave *w, int ns, struct RTCIntersectContext *ic, long *rays)
+{
+    (void)ic;
+    for (int k = 0; k < ns; k++) {
+        const int j = w->slane[k];
+        w->qo[k] = dr_v3(w->sox[j], w->soy[j], w->soz[j]), w->qd[k] = dr_v3(w->sdx[j], w->sdy[j], w->sdz[j]);
+        w->qtmax[k] = w->stf[j];
+    }
+    const struct dr_accel_rays r = {.n = ns, .o = w->qo, .d = w->qd, .tmax = w->qtmax};
+    dr_accel_occluded_many(c->acc, &r, w->qocc);
+    for (int k = 0; k < ns; k++) {
+        const int i = w->slane[k];
+        if (!w->qocc[k])
+            w->lr[i] += w->sr[i], w->lg[i] += w->sg[i], w->lb[i] += w->sb[i];
+    }
+    *rays += ns;
+}
+#else
 static void shadow_rays(struct ctx *c, struct wave *w, int ns, struct RTCIntersectContext *ic, long *rays)
 {
     for (int b = 0; b < ns; b += PACKET) {
@@ -316,6 +370,7 @@ static void shadow_rays(struct ctx *c, struct wave *w, int ns, struct RTCInterse
     }
     *rays += ns;
 }
+#endif
 
 /* Finished lanes' radiance to the film; the live ones moved to the front. */
 static void compact(struct ctx *c, struct wave *w)
@@ -357,7 +412,7 @@ static void *work(void *arg)
             break;
         start_paths(&c, w, (uint64_t)wv * WAVE);
         for (int depth = 0; w->n > 0; depth++) {
-            intersect(&c, w, &ic, &wk->rays[0]);
+            intersect(&c, w, &ic, &wk->rays[0], depth);
             const int ns = shade(&c, w, depth);
             shadow_rays(&c, w, ns, &ic, &wk->rays[1]);
             compact(&c, w);
@@ -432,6 +487,20 @@ int main(int argc, char **argv)
     c.td = triangle_data(sc, &c.L);
     RTCDevice dev = rtcNewDevice(NULL);
     c.rtc = bench_raw_scene(dev, sc);
+#if FLOOR_DR_ACCEL
+    c.acc = dr_accel_create_scene(sc);
+    float *v0 = malloc(sizeof(float) * 6 * (sc->mesh.n_triangles + 1u));
+    for (uint32_t t = 0; t < sc->mesh.n_triangles; t++) {
+        const float *p = sc->mesh.positions + 3 * (size_t)sc->mesh.indices[3 * t];
+        v0[6 * t] = p[0], v0[6 * t + 1] = p[1], v0[6 * t + 2] = p[2];
+        v0[6 * t + 3] = (float)c.td.nx[t], v0[6 * t + 4] = (float)c.td.ny[t], v0[6 * t + 5] = (float)c.td.nz[t];
+    }
+    c.v0 = v0;
+    if (!c.acc) {
+        fprintf(stderr, "soa_floor: %s: %s\n", argv[1], dr_last_error());
+        return 1;
+    }
+#endif
     const uint64_t total = (uint64_t)W * H * S;
     c.n_waves = (int)((total + WAVE - 1) / WAVE);
     struct worker wk[64];
@@ -467,6 +536,10 @@ int main(int argc, char **argv)
            argv[1], W, H, S, T, D, best, rays[0], rays[1], rays[0] + rays[1], rays[0] / (double)total - 1.0,
            rays[1] / (double)total, mean);
     rtcReleaseScene(c.rtc);
+#if FLOOR_DR_ACCEL
+    dr_accel_destroy(c.acc);
+    free((void *)c.v0);
+#endif
     rtcReleaseDevice(dev);
     real *fields[9] = {c.td.nx, c.td.ny, c.td.nz, c.td.ar, c.td.ag, c.td.ab, c.td.er, c.td.eg, c.td.eb};
     for (int k = 0; k < 9; k++)
