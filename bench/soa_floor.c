@@ -65,7 +65,7 @@ typedef float real;
 #define LANES (WAVE + 48)
 #define PACKET 16
 
-/* Per-triangle data the shading reads, real, structure of arrays (one
+/* Per-triangle data the shading reads, structure of arrays (one
  * gather per field and lane). */
 struct tri_data {
     real *nx, *ny, *nz;   /* unit geometric normal */
@@ -128,7 +128,7 @@ static inline uint32_t hash32(uint32_t x)
     return x;
 }
 
-/* Uniform real in [0, 1) for dimension dim of the path keyed key. */
+/* Uniform number in [0, 1) for dimension dim of the path keyed key. */
 static inline real rnd(uint32_t key, uint32_t dim)
 {
     return (real)(hash32(key ^ hash32(dim * 0x9e3779b9U)) >> 8) * 0x1p-24f;
@@ -205,7 +205,11 @@ static void intersect(struct ctx *c, struct wave *w, struct RTCIntersectContext 
 /* Closest hits of lanes [0, n): t and primitive (or ~0u) per lane. */
 static void intersect(struct ctx *c, struct wave *w, struct RTCIntersectContext *ic, long *rays, int depth)
 {
-    (void)depth;
+    struct RTCIntersectContext camera;   /* a pixel's samples are consecutive: coherent packets, as drender */
+    rtcInitIntersectContext(&camera);
+    camera.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+    if (depth == 0)
+        ic = &camera;
     for (int b = 0; b < w->n; b += PACKET) {
         _Alignas(64) struct RTCRayHit16 p;
         _Alignas(64) int valid[PACKET];
