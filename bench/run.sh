@@ -165,7 +165,7 @@ for scene in "${SCENES[@]}"; do
         [[ $v == drender_accel_path ]] || best_path=$(calc "$x > $best_path ? $x : $best_path" %.2f)
     done
     ratio_path=$(calc "$dr_rps / 1e6 / $best_path")
-    [[ $scene == "$PEER" ]] && PEER_BEST_PATH=$best_path   # part c's Embree floor
+    [[ $scene == "$PEER" ]] && PEER_BEST_PATH=$best_path   # part c's Embree estimate
     printf '   %-24s path-ray Mr/s: %s; drender / best: %s\n' "" "$(join "${path_line[@]}")" "$ratio_path"
     TP_JSON+=("{\"scene\": \"$scene\", \"triangles\": $tris, \"drender_rays_per_second\": $dr_rps, \"embree_rays_per_second\": $em_rps, \"ratio\": $ratio, \"ratio_best_incoherent\": $ratio_best, \"embree_ceilings\": {$(join "${ceil_json[@]}")}, \"path_ray_ceilings_mrays\": {$(join "${path_json[@]}")}, \"ratio_best_path_rays\": $ratio_path, \"goal\": $THROUGHPUT_GOAL, \"met\": $(truefalse "$ratio >= $THROUGHPUT_GOAL"), \"other_cores_busy\": $other}")
 done
