@@ -189,8 +189,9 @@ SPEEDUP=$(calc "$T1 / $T2")
 SCALING_OTHER=$(calc "$o / $w" %.2f)
 printf '   1 thread %.3g s, 2 threads %.3g s: speedup %s (ideal 2); others %s\n' "$T1" "$T2" "$SPEEDUP" "$SCALING_OTHER"
 # What the machine itself gives: the SoA floor (bench/soa_floor.c, no
-# shared state between its threads but the scene) on the same scene and
-# workload, 1 thread then 2, each its own best of 3 after a warm-up.
+# shared state between its threads but the scene) on the same scene, size
+# and depth (every surface Lambertian to it: a stand-in workload, not the
+# same image), 1 thread then 2, each its own best of 3 after a warm-up.
 measure "$OUT/soa_floor" "$CORNELL" 256 256 16 1 8
 F1=$(json_num "$M_OUT" seconds)
 measure "$OUT/soa_floor" "$CORNELL" 256 256 16 2 8
