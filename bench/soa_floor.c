@@ -406,7 +406,7 @@ static void *work(void *arg)
     struct worker *wk = arg;
     struct ctx c = *wk->c;
     c.film = wk->film;
-    struct wave *w = aligned_alloc(64, sizeof *w);
+    struct wave *w = aligned_alloc(64, (sizeof *w + 63) / 64 * 64);   /* C11: a multiple of the alignment */
     struct RTCIntersectContext ic;
     rtcInitIntersectContext(&ic);
     ic.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
