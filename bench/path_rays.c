@@ -37,6 +37,7 @@
 #include "accel.h"
 #include "camera.h"
 #include "clock.h"
+#include "path_args.h"
 #include "raw_scene.h"
 #include "error.h"
 #include "geometry.h"
@@ -298,17 +299,10 @@ static double timed(struct rays *per_thread, int threads, enum variant v, RTCSce
 
 int main(int argc, char **argv)
 {
-    if (argc < 2) {
-        fprintf(stderr, "usage: path_rays SCENE [WIDTH HEIGHT SPP [THREADS [MAX_DEPTH]]]\n");
+    struct path_args args;
+    if (!path_args_parse(argc, argv, "path_rays", 8, &args))
         return 2;
-    }
-    const int W = argc > 4 ? atoi(argv[2]) : 256, H = argc > 4 ? atoi(argv[3]) : 256,
-              S = argc > 4 ? atoi(argv[4]) : 8, T = argc > 5 ? atoi(argv[5]) : 2,
-              D = argc > 6 ? atoi(argv[6]) : 8;
-    if (W < 1 || H < 1 || S < 1 || T < 1 || T > 64 || D < 1 || D > 255) {
-        fprintf(stderr, "path_rays: bad size, spp, threads or depth\n");
-        return 2;
-    }
+    const int W = args.width, H = args.height, S = args.spp, T = args.threads, D = args.max_depth;
     struct dr_scene *sc = dr_scene_load(argv[1]);
     struct dr_accel *acc = sc ? dr_accel_create_scene(sc) : NULL;
     if (!acc) {

@@ -38,6 +38,7 @@
 #include "clock.h"
 #include "error.h"
 #include "geometry.h"
+#include "path_args.h"
 #include "raw_scene.h"
 #include "scene.h"
 
@@ -470,16 +471,10 @@ static struct tri_data triangle_data(const struct dr_scene *sc, struct lights *L
 
 int main(int argc, char **argv)
 {
-    if (argc < 2) {
-        fprintf(stderr, "usage: soa_floor SCENE [WIDTH HEIGHT SPP [THREADS [MAX_DEPTH]]]\n");
+    struct path_args args;
+    if (!path_args_parse(argc, argv, "soa_floor", 64, &args))
         return 2;
-    }
-    const int W = argc > 4 ? atoi(argv[2]) : 256, H = argc > 4 ? atoi(argv[3]) : 256,
-              S = argc > 4 ? atoi(argv[4]) : 64, T = argc > 5 ? atoi(argv[5]) : 2, D = argc > 6 ? atoi(argv[6]) : 8;
-    if (W < 1 || H < 1 || S < 1 || T < 1 || T > 64 || D < 1 || D > 255) {
-        fprintf(stderr, "soa_floor: bad size, spp, threads or depth\n");
-        return 2;
-    }
+    const int W = args.width, H = args.height, S = args.spp, T = args.threads, D = args.max_depth;
     struct dr_scene *sc = dr_scene_load(argv[1]);
     if (!sc) {
         fprintf(stderr, "soa_floor: %s: %s\n", argv[1], dr_last_error());
