@@ -197,7 +197,7 @@ F1=$(json_num "$M_OUT" seconds)
 measure "$OUT/soa_floor" "$CORNELL" 256 256 16 2 8
 F2=$(json_num "$M_OUT" seconds)
 FLOOR_SPEEDUP=$(calc "$F1 / $F2")
-printf '   the SoA floor on the same work: 1 thread %.3g s, 2 threads %.3g s: speedup %s (the machine'"'"'s own)\n' "$F1" "$F2" "$FLOOR_SPEEDUP"
+printf '   the SoA floor (a stand-in workload of the same size): 1 thread %.3g s, 2 threads %.3g s: speedup %s (the machine'"'"'s own)\n' "$F1" "$F2" "$FLOOR_SPEEDUP"
 
 # ---- c + d. peer comparison ------------------------------------------------
 # The peer's protocol: 256x256, 64 spp, 2 threads, median of BENCH_RUNS runs
