@@ -191,7 +191,8 @@ static void intersect(struct ctx *c, struct wave *w, struct RTCIntersectContext 
         w->qo[i] = dr_v3(w->ox[i], w->oy[i], w->oz[i]), w->qd[i] = dr_v3(w->dx[i], w->dy[i], w->dz[i]);
         w->qtmax[i] = INFINITY;
     }
-    const struct dr_accel_rays r = {.n = w->n, .o = w->qo, .d = w->qd, .tmax = w->qtmax, .coherent = depth == 0 ? w->n : 0};
+    const struct dr_accel_rays r = {
+        .n = w->n, .o = w->qo, .d = w->qd, .tmax = w->qtmax, .coherent = depth == 0 ? w->n : 0};
     dr_accel_intersect_many(c->acc, &r, w->qtri);
     for (int i = 0; i < w->n; i++) {
         const int64_t tri = w->qtri[i];
@@ -240,7 +241,8 @@ static inline real power_heuristic(real a, real b)
 }
 
 /* Emission seen, next-event sample and bounce of every live lane, as one
- * loop without branches that GCC vectorises (16 lanes per AVX-512 register):
+ * loop without branches that GCC vectorises (16 floats or 8 doubles per
+ * AVX-512 register; it needs the build's -fno-math-errno for sqrt):
  * every lane computes everything and masks pick what is kept. Returns the
  * number of shadow rays set up (their lanes in w->slane). A lane whose path
  * ends gets t < 0. */
@@ -253,7 +255,14 @@ static int shade(struct ctx *c, struct wave *w, int depth)
      * a selection on a scalar condition): the camera ray's emission counts
      * fully; before depth 5 the survival probability is 1 */
     const real first = depth == 0 ? 1.0f : 0.0f, q_floor = depth + 1 >= 5 ? 0.0f : 1.0f;
-    real *restrict ox_ = w->ox, *restrict oy_ = w->oy, *restrict oz_ = w->oz, *restrict dx_ = w->dx, *restrict dy_ = w->dy, *restrict dz_ = w->dz, *restrict tr_ = w->tr, *restrict tg_ = w->tg, *restrict tb_ = w->tb, *restrict lr_ = w->lr, *restrict lg_ = w->lg, *restrict lb_ = w->lb, *restrict prev_pdf_ = w->prev_pdf, *restrict t_ = w->t, *restrict sr_ = w->sr, *restrict sg_ = w->sg, *restrict sb_ = w->sb, *restrict sox_ = w->sox, *restrict soy_ = w->soy, *restrict soz_ = w->soz, *restrict sdx_ = w->sdx, *restrict sdy_ = w->sdy, *restrict sdz_ = w->sdz, *restrict stf_ = w->stf;
+    real *restrict ox_ = w->ox, *restrict oy_ = w->oy, *restrict oz_ = w->oz;
+    real *restrict dx_ = w->dx, *restrict dy_ = w->dy, *restrict dz_ = w->dz;
+    real *restrict tr_ = w->tr, *restrict tg_ = w->tg, *restrict tb_ = w->tb;
+    real *restrict lr_ = w->lr, *restrict lg_ = w->lg, *restrict lb_ = w->lb;
+    real *restrict prev_pdf_ = w->prev_pdf, *restrict t_ = w->t;
+    real *restrict sr_ = w->sr, *restrict sg_ = w->sg, *restrict sb_ = w->sb;
+    real *restrict sox_ = w->sox, *restrict soy_ = w->soy, *restrict soz_ = w->soz;
+    real *restrict sdx_ = w->sdx, *restrict sdy_ = w->sdy, *restrict sdz_ = w->sdz, *restrict stf_ = w->stf;
     uint32_t *restrict prim_ = w->prim, *restrict key_ = w->key, *restrict dim_ = w->dim;
     int32_t *restrict has_shadow_ = w->has_shadow;
 #pragma GCC ivdep
