@@ -245,7 +245,8 @@ static inline real power_heuristic(real a, real b)
  * AVX-512 register; it needs the build's -fno-math-errno for sqrt):
  * every lane computes everything and masks pick what is kept. Returns the
  * number of shadow rays set up (their lanes in w->slane). A lane whose path
- * ends gets t < 0. */
+ * ends gets t < 0. Longer than a screen on purpose: the vectoriser sees one
+ * loop body, which is what the floor measures. */
 static int shade(struct ctx *c, struct wave *w, int depth)
 {
     const struct tri_data td = c->td;
