@@ -64,7 +64,7 @@ static inline dr_m8 mask_of(const bool *b)
 
 /* Each lane's hit and material, and the light sample's triangle and entry. */
 struct lanes {
-    const void *st[DR_SIMD_W], *mat[DR_SIMD_W], *lmat[DR_SIMD_W];
+    const void *mat[DR_SIMD_W], *lmat[DR_SIMD_W];
     int64_t tri[DR_SIMD_W], ltri[DR_SIMD_W];
     uint32_t v0[DR_SIMD_W], v1[DR_SIMD_W], v2[DR_SIMD_W];
     bool double_sided[DR_SIMD_W], ldouble_sided[DR_SIMD_W], has_normals[DR_SIMD_W];
@@ -405,33 +405,27 @@ static dr_v3x8 emission(const void *const *mat, dr_m8 seen)
 }
 
 /* stage_emission: what the hit emits towards the ray and its MIS weight
- * against next-event estimation (dr_light_pdf_area, dr_mis_power), into the
- * vertices of the lanes whose triangle emits. */
+ * against next-event estimation (dr_light_pdf_area, dr_mis_power), where
+ * the lane's triangle emits (g->emits, g->Le, g->emit_w). */
 static void emission_seen(const struct dr_scene *s, const struct dr_light_tables *lt, const struct lanes *L,
-                          int n, dr_v3x8 p, dr_v3x8 ng, dr_m8 front, dr_f8 depth, struct dr_path_vertex *const *v)
+                          const struct dr_path8_in *in, dr_v3x8 ng, dr_m8 front, struct dr_path8 *g)
 {
-    dr_m8 emits = gather_at(lt->tri_pick, L->tri, 1, 0) > 0.0;
-    if (!dr_m8_any(emits))
+    g->emits = gather_at(lt->tri_pick, L->tri, 1, 0) > 0.0;
+    if (!dr_m8_any(g->emits))
         return;
     dr_v3x8 Le = emission(L->mat, front | mask_of(L->double_sided));
-    for (int i = 0; L->any_textured && i < n; i++)
-        if (emits[i] && L->textured[i])
+    for (int i = 0; L->any_textured && i < in->n; i++)
+        if (g->emits[i] && L->textured[i])
             set_lane(&Le, i, dr_emission(s, &L->hit[i]));
     dr_f8 density = gather_at(lt->tri_pick_density, L->tri, 1, 0);
-    dr_v3x8 dd = dr_v3x8_sub(p, gather3(L->st, offsetof(struct dr_path_state, prev_p)));
+    dr_v3x8 dd = dr_v3x8_sub(g->p, in->prev_p);
     dr_f8 d2 = dr_v3x8_dot(dd, dd);
     dr_f8 cos_l = dr_f8_abs(dr_v3x8_dot(ng, dd)) / dr_f8_sqrt(d2);
     dr_f8 pdf = dr_f8_sel(cos_l > 0.0, density * d2 / cos_l, dr_f8s(0.0));
     pdf = dr_f8_sel(density <= 0.0, dr_f8s(0.0), pdf);
-    dr_f8 w = mis_power(gather(L->st, offsetof(struct dr_path_state, prev_pdf)), pdf);
-    w = dr_f8_sel(depth == 1.0, dr_f8s(1.0), w);
-    for (int i = 0; i < n; i++) {
-        if (!emits[i])
-            continue;
-        v[i]->emits = true;
-        v[i]->Le = dr_v3x8_get(Le, i);
-        v[i]->emit_w = w[i];
-    }
+    dr_f8 w = mis_power(in->prev_pdf, pdf);
+    g->emit_w = dr_f8_sel(in->depth == 1.0, dr_f8s(1.0), w);
+    g->Le = Le;
 }
 
 /* A light sample for each lane of a group (dr_light_sample's out). */
@@ -556,27 +550,23 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     return ok;
 }
 
-/* Each lane's state, triangle, material and sampler key (lanes past n
- * repeat lane 0). */
-static void gather_lanes(const struct dr_scene *s, int n, struct dr_path_state *const *st,
-                         struct dr_sampler *const *smp, const int64_t *tri, struct lanes *L, dr_u8 *key, dr_f8 *depth)
+/* Each lane's triangle, its vertices and material, and the vertex's first
+ * sampler dimension. */
+static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, struct lanes *L)
 {
     const struct dr_mesh *m = &s->mesh;
     L->any_textured = L->any_ltextured = false;
     for (int i = 0; i < DR_SIMD_W; i++) {
-        int k = i < n ? i : 0;
-        L->st[i] = st[k];
-        L->tri[i] = tri[k];
-        triangle_vertices(m, tri[k], &L->v0[i], &L->v1[i], &L->v2[i]);
-        const struct dr_material *mat = &s->materials[m->material[tri[k]]];
+        int64_t tri = in->tri[i];
+        L->tri[i] = tri;
+        triangle_vertices(m, tri, &L->v0[i], &L->v1[i], &L->v2[i]);
+        const struct dr_material *mat = &s->materials[m->material[tri]];
         L->mat[i] = mat;
         L->textured[i] = reads_textures(s, mat);
         L->normal_mapped[i] = mat->normal_tex.texture >= 0;
         L->double_sided[i] = mat->double_sided;
-        L->has_normals[i] = m->flags[tri[k]] & DR_TRI_HAS_NORMALS;
-        L->dim[i] = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)(st[k]->depth - 1);
-        (*depth)[i] = st[k]->depth;
-        (*key)[i] = smp[k]->key;
+        L->has_normals[i] = m->flags[tri] & DR_TRI_HAS_NORMALS;
+        L->dim[i] = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)(in->depth[i] - 1.0);
     }
 }
 
@@ -604,41 +594,39 @@ static dr_m8 nee_begin(struct dr_path8 *g, dr_m8 ok, const struct light8 *ls, dr
     return ok;
 }
 
-void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, int n,
-                    struct dr_path_state *const *st, struct dr_sampler *const *smp, struct dr_path_vertex *const *v,
-                    const int64_t *tri, struct dr_shadow_ray *const *shadow, enum dr_step_next *next,
-                    bool located, struct dr_path8 *g)
+void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path8_in *in,
+                          struct dr_path8 *g)
 {
     const struct dr_mesh *m = &s->mesh;
     struct dr_light_tables lt;
     dr_light_tables(s->light_sampler, &lt);
     struct lanes L;
-    dr_u8 key;
-    dr_f8 depth;
-    gather_lanes(s, n, st, smp, tri, &L, &key, &depth);
+    lanes_of(s, in, &L);
+    const int n = in->n;
     g->n = n;
-    dr_v3x8 o = gather3(L.st, offsetof(struct dr_path_state, o)), d = gather3(L.st, offsetof(struct dr_path_state, d));
+    dr_v3x8 o = in->o, d = in->d;
+    dr_f8 depth = in->depth;
 
     /* stage_locate, stage_emission */
     dr_v3x8 ng, ns;
     dr_f8 b1, b2;
     dr_m8 front = locate(m, &L, o, d, &g->p, &ng, &ns, &g->eps, &b1, &b2);
     for (int i = 0; i < n; i++) {
-        v[i]->kind = DR_VERTEX_SURFACE;
         if (!L.textured[i])
             continue;
         L.any_textured = true;
-        if (located)
-            L.hit[i] = v[i]->hit;
+        if (in->hit[i])
+            L.hit[i] = *in->hit[i];
         else   /* the scalar hit the lookups read (the vector one has no uv) */
-            dr_hit_compute(m, L.tri[i], st[i]->o, st[i]->d, &L.hit[i]);
+            dr_hit_compute(m, L.tri[i], dr_v3x8_get(o, i), dr_v3x8_get(d, i), &L.hit[i]);
         if (L.normal_mapped[i]) {   /* stage_emission's dr_normal_map_apply */
             dr_normal_map_apply(s, &L.hit[i]);
             set_lane(&ns, i, L.hit[i].ns);
         }
     }
+    g->emits = (dr_m8){0};
     if (opts->stages & DR_STAGE_EMISSION)
-        emission_seen(s, &lt, &L, n, g->p, ng, front, depth, v);
+        emission_seen(s, &lt, &L, in, ng, front, g);
 
     /* stage_material: the frame towards the ray, the BSDF, the random numbers */
     dr_m8 end = (depth >= (double)opts->max_depth) | (~front & ~mask_of(L.double_sided));
@@ -655,52 +643,64 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
     g->spec_p = specular_prob(g, g->wo_z);   /* (wo.z <= COS_EPS: unused) */
     const uint32_t *dm = L.dim;
     dr_u8 dim = {dm[0], dm[1], dm[2], dm[3], dm[4], dm[5], dm[6], dm[7]};
+    dr_u8 key = in->key;
     dr_f8 u_pick = independent(key, dim + 1), u1 = independent(key, dim + 2), u2 = independent(key, dim + 3);
     g->lobe_u = independent(key, dim + 4);
     g->bsdf_u1 = independent(key, dim + 5);
     g->bsdf_u2 = independent(key, dim + 6);
     g->rr = independent(key, dim + 7);
-    for (int i = 0; i < n; i++)
-        if (!end[i])
-            smp[i]->dim = L.dim[i] + 7;
 
     /* dr_path_nee_begin */
     struct light8 ls;
-    dr_v3x8 so, sd;
     dr_m8 ok = light_sample(s, &lt, &L, g->p, u_pick, u1, u2, &ls);
-    g->shadow = nee_begin(g, ok, &ls, &so, &sd) & ~end;
+    g->shadow = nee_begin(g, ok, &ls, &g->so, &g->sd) & ~end;
     g->go_on = ~end;
     g->depth = depth;
+}
+
+void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, int n,
+                    struct dr_path_state *const *st, struct dr_sampler *const *smp, struct dr_path_vertex *const *v,
+                    const int64_t *tri, struct dr_shadow_ray *const *shadow, enum dr_step_next *next,
+                    bool located, struct dr_path8 *g)
+{
+    struct dr_path8_in in = {.n = n};
+    const void *S[DR_SIMD_W];
+    for (int i = 0; i < DR_SIMD_W; i++) {
+        int k = i < n ? i : 0;
+        S[i] = st[k];
+        in.tri[i] = tri[k];
+        in.depth[i] = st[k]->depth;
+        in.key[i] = smp[k]->key;
+        in.hit[i] = located && i < n ? &v[i]->hit : NULL;
+    }
+    in.o = gather3(S, offsetof(struct dr_path_state, o));
+    in.d = gather3(S, offsetof(struct dr_path_state, d));
+    in.prev_p = gather3(S, offsetof(struct dr_path_state, prev_p));
+    in.prev_pdf = gather(S, offsetof(struct dr_path_state, prev_pdf));
+    dr_path8_shade_lanes(s, opts, &in, g);
     for (int i = 0; i < n; i++) {
-        next[i] = end[i] ? DR_STEP_END : g->shadow[i] ? DR_STEP_SHADOW : DR_STEP_CONTINUE;
+        v[i]->kind = DR_VERTEX_SURFACE;
+        if (g->emits[i]) {
+            v[i]->emits = true;
+            v[i]->Le = dr_v3x8_get(g->Le, i);
+            v[i]->emit_w = g->emit_w[i];
+        }
+        if (g->go_on[i])
+            smp[i]->dim = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)(st[i]->depth - 1) + 7;
+        next[i] = !g->go_on[i] ? DR_STEP_END : g->shadow[i] ? DR_STEP_SHADOW : DR_STEP_CONTINUE;
         if (next[i] == DR_STEP_SHADOW)
-            *shadow[i] = (struct dr_shadow_ray){.o = dr_v3x8_get(so, i), .d = dr_v3x8_get(sd, i), .tmax = g->tmax[i],
-                                                .key = 0};
+            *shadow[i] = (struct dr_shadow_ray){.o = dr_v3x8_get(g->so, i), .d = dr_v3x8_get(g->sd, i),
+                                                .tmax = g->tmax[i], .key = 0};
     }
 }
 
-void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g, struct dr_path_state *const *st,
-                       struct dr_path_vertex *const *v, const bool *occluded, bool *more)
+void dr_path8_continue_lanes(const struct dr_path_opts *opts, const struct dr_path8 *g, dr_v3x8 beta_in,
+                             dr_m8 occluded, struct dr_path8_out *out)
 {
-    const int n = g->n;
-    const void *S[DR_SIMD_W];
-    bool occ[DR_SIMD_W];
-    for (int i = 0; i < DR_SIMD_W; i++) {
-        S[i] = st[i < n ? i : 0];
-        occ[i] = occluded[i < n ? i : 0];
-    }
     /* dr_path_nee_end */
-    dr_m8 nee = g->shadow & (g->tmax > 0.0) & ~mask_of(occ);
+    out->nee = g->shadow & (g->tmax > 0.0) & ~occluded;
     dr_f8 w = dr_f8_sel(g->delta, dr_f8s(1.0), mis_power(g->ls_pdf, g->bsdf_pdf));
-    dr_f8 nee_scale = dr_f8_abs(g->nee_cos) * w / g->ls_pdf;
-    for (int i = 0; i < n; i++) {
-        if (!nee[i])
-            continue;
-        v[i]->nee = true;
-        v[i]->nee_f = dr_v3x8_get(g->nee_f, i);
-        v[i]->ls.radiance = dr_v3x8_get(g->ls_radiance, i);
-        v[i]->nee_scale = nee_scale[i];
-    }
+    out->nee_scale = dr_f8_abs(g->nee_cos) * w / g->ls_pdf;
 
     /* stage_continue: dr_bsdf_sample, Russian roulette, the next ray */
     dr_m8 ok = g->go_on & (g->wo_z > COS_EPS);
@@ -715,27 +715,60 @@ void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g
     dr_v3x8 wiw = to_world(g->fs, g->ft, g->fn, wi);
     ok &= ~(dr_v3x8_dot(wiw, g->ng) <= 0.0);
     dr_f8 cos_pdf = dr_f8_abs(wi.z) / pdf;
-    dr_v3x8 beta = dr_v3x8_mul(gather3(S, offsetof(struct dr_path_state, beta)), dr_v3x8_scale(f, cos_pdf));
+    dr_v3x8 beta = dr_v3x8_mul(beta_in, dr_v3x8_scale(f, cos_pdf));
     ok &= ~dr_v3x8_is_black(beta);
     dr_m8 roulette = g->depth >= (double)opts->rr_depth;
     dr_f8 q = dr_f8_sel(roulette, dr_f8_min(dr_f8_max(beta.x, dr_f8_max(beta.y, beta.z)), dr_f8s(0.95)),
                         dr_f8s(1.0));
     ok &= ~(roulette & (g->rr >= q));
-    beta = dr_v3x8_scale(beta, 1.0 / q);
-    dr_f8 cos_pdf_q = cos_pdf / q;
-    for (int i = 0; i < n; i++)   /* the continuation's factor, for a tape's step (tape.c) */
-        if (ok[i]) {
-            v[i]->cont = true;
-            v[i]->f = dr_v3x8_get(f, i);
-            v[i]->cos_pdf_q = cos_pdf_q[i];
+    out->more = ok;
+    out->beta = dr_v3x8_scale(beta, 1.0 / q);
+    out->f = f;
+    out->cos_pdf_q = cos_pdf / q;
+    out->o = offset_origin(g->p, g->ng, g->eps, wiw);
+    out->d = wiw;
+    out->prev_pdf = pdf;
+}
+
+dr_v3x8 dr_path8_term(const struct dr_path8 *g, const struct dr_path8_out *out)
+{
+    const dr_v3x8 zero = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
+    dr_v3x8 e = dr_v3x8_sel(g->emits, dr_v3x8_scale(g->Le, g->emit_w), zero);
+    dr_v3x8 nee = dr_v3x8_scale(dr_v3x8_mul(g->nee_f, g->ls_radiance), out->nee_scale);
+    return dr_v3x8_sel(out->nee, dr_v3x8_add(e, nee), e);
+}
+
+void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g, struct dr_path_state *const *st,
+                       struct dr_path_vertex *const *v, const bool *occluded, bool *more)
+{
+    const int n = g->n;
+    const void *S[DR_SIMD_W];
+    bool occ[DR_SIMD_W];
+    for (int i = 0; i < DR_SIMD_W; i++) {
+        S[i] = st[i < n ? i : 0];
+        occ[i] = occluded[i < n ? i : 0];
+    }
+    struct dr_path8_out out;
+    dr_path8_continue_lanes(opts, g, gather3(S, offsetof(struct dr_path_state, beta)), mask_of(occ), &out);
+    for (int i = 0; i < n; i++) {
+        if (out.nee[i]) {
+            v[i]->nee = true;
+            v[i]->nee_f = dr_v3x8_get(g->nee_f, i);
+            v[i]->ls.radiance = dr_v3x8_get(g->ls_radiance, i);
+            v[i]->nee_scale = out.nee_scale[i];
         }
-    dr_v3x8 o = offset_origin(g->p, g->ng, g->eps, wiw);
+        if (out.more[i]) {   /* the continuation's factor, for a tape's step (tape.c) */
+            v[i]->cont = true;
+            v[i]->f = dr_v3x8_get(out.f, i);
+            v[i]->cos_pdf_q = out.cos_pdf_q[i];
+        }
+    }
     void *const *W = (void *const *)st;
-    scatter3(W, offsetof(struct dr_path_state, beta), beta, n, ok);
-    scatter(W, offsetof(struct dr_path_state, prev_pdf), pdf, n, ok);
-    scatter3(W, offsetof(struct dr_path_state, prev_p), g->p, n, ok);
-    scatter3(W, offsetof(struct dr_path_state, o), o, n, ok);
-    scatter3(W, offsetof(struct dr_path_state, d), wiw, n, ok);
+    scatter3(W, offsetof(struct dr_path_state, beta), out.beta, n, out.more);
+    scatter(W, offsetof(struct dr_path_state, prev_pdf), out.prev_pdf, n, out.more);
+    scatter3(W, offsetof(struct dr_path_state, prev_p), g->p, n, out.more);
+    scatter3(W, offsetof(struct dr_path_state, o), out.o, n, out.more);
+    scatter3(W, offsetof(struct dr_path_state, d), out.d, n, out.more);
     for (int i = 0; i < n; i++)
-        more[i] = ok[i] != 0;
+        more[i] = out.more[i] != 0;
 }

@@ -31,10 +31,27 @@
 #include "path.h"
 #include "simd.h"
 
+/* A group's inputs: each lane's path state as the hit stage reads it
+ * (dr_path_state's fields in vector form; lanes past n repeat lane 0). */
+struct dr_path8_in {
+    int n;                        /* lanes in the group */
+    int64_t tri[DR_SIMD_W];       /* the triangle hit */
+    dr_v3x8 o, d;                 /* the ray that hit it */
+    dr_v3x8 prev_p;               /* the point that ray left */
+    dr_f8 prev_pdf;               /* the BSDF density that sampled it (0: camera ray) */
+    dr_f8 depth;                  /* segments so far, this one included */
+    dr_u8 key;                    /* the sampler's key (independent sampler) */
+    const struct dr_hit *hit[DR_SIMD_W];   /* a lane that reads textures: its hit if located (NULL: computed) */
+};
+
 /* What the two halves of a group's vertex share, lane by lane. */
 struct dr_path8 {
     int n;                        /* lanes in the group (the rest repeat lane 0) */
-    dr_m8 shadow;                 /* a shadow ray was cast (DR_STEP_SHADOW) */
+    dr_m8 emits;                  /* the hit emits towards the ray: Le, with MIS weight emit_w */
+    dr_v3x8 Le;
+    dr_f8 emit_w;
+    dr_m8 shadow;                 /* a shadow ray was cast (DR_STEP_SHADOW): so + t sd, t < tmax */
+    dr_v3x8 so, sd;
     dr_m8 go_on;                  /* the continuation runs (not DR_STEP_END) */
     dr_v3x8 p, ng;                /* hit point; geometric normal on the ray's side */
     dr_v3x8 fs, ft, fn;           /* shading frame */
@@ -73,6 +90,29 @@ void dr_path8_shade(const struct dr_scene *scene, const struct dr_path_opts *opt
                     struct dr_path_state *const *st, struct dr_sampler *const *sampler,
                     struct dr_path_vertex *const *v, const int64_t *tri, struct dr_shadow_ray *const *shadow,
                     enum dr_step_next *next, bool located, struct dr_path8 *g);
+/* The hit stage of a group from its inputs, into g (the same as
+ * dr_path8_shade, for a caller that keeps its paths' state in arrays). */
+void dr_path8_shade_lanes(const struct dr_scene *scene, const struct dr_path_opts *opts,
+                          const struct dr_path8_in *in, struct dr_path8 *g);
+
+/* What dr_path8_continue_lanes gives each lane. */
+struct dr_path8_out {
+    dr_m8 nee;                    /* the next-event estimate counts (dr_path_vertex's nee) */
+    dr_f8 nee_scale;
+    dr_m8 more;                   /* the path goes on; then: */
+    dr_v3x8 f;                    /* the continuation's BSDF value */
+    dr_f8 cos_pdf_q;              /* ... and |cos| / pdf / q */
+    dr_v3x8 beta;                 /* the next throughput */
+    dr_v3x8 o, d;                 /* the next ray */
+    dr_f8 prev_pdf;               /* its density (the next prev_p is g->p) */
+};
+/* dr_path8_continue from the arriving throughput beta and the shadow rays'
+ * answers, into out. */
+void dr_path8_continue_lanes(const struct dr_path_opts *opts, const struct dr_path8 *g, dr_v3x8 beta,
+                             dr_m8 occluded, struct dr_path8_out *out);
+/* Each lane's vertex term e_k (dr_path_vertex_term) after the continuation. */
+dr_v3x8 dr_path8_term(const struct dr_path8 *g, const struct dr_path8_out *out);
+
 /* dr_path_nee_end (occluded[i]: the shadow ray's answer) and
  * dr_path_stage_continue of the same lanes: the next-event estimate in
  * *v[i], the next ray and throughput in *st[i]; more[i]: the path goes on. */

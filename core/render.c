@@ -9,6 +9,7 @@
 #include "error.h"
 #include "parallel.h"
 #include "sampler.h"
+#include "wave_soa.h"
 #include "wavefront.h"
 
 struct render_job {
@@ -167,7 +168,7 @@ static int chunk_pixels(int spp)
 
 size_t dr_render_thread_bytes(int spp)
 {
-    return dr_wave_bytes() + sizeof(dr_vec3) * (size_t)chunk_pixels(spp) * (size_t)(spp > 0 ? spp : 1);
+    return dr_wave_bytes() + dr_wave_soa_bytes() + sizeof(dr_vec3) * (size_t)chunk_pixels(spp) * (size_t)(spp > 0 ? spp : 1);
 }
 
 int dr_render(const struct dr_scene *scene, const struct dr_camera *camera, const struct dr_render_opts *opts,

@@ -7,6 +7,7 @@
 #include "accel.h"
 #include "material.h"
 #include "path_simd.h"
+#include "wave_soa.h"
 
 struct lane {
     /* what every pass over the lanes reads first, together */
@@ -46,6 +47,7 @@ struct dr_wave {
     int n_groups;                     /* ... in these groups this step */
     int group_lane[DR_WAVE_LANES / DR_SIMD_W][DR_SIMD_W];
     struct dr_path8 group[DR_WAVE_LANES / DR_SIMD_W];
+    struct dr_wave_soa *soa;          /* dr_wave_radiance's arrays, made on first use (wave_soa.h) */
 };
 
 /* Is the answer for the lane's current vertex in its log (a replay)? */
@@ -67,6 +69,8 @@ struct dr_wave *dr_wave_create(void)
 
 void dr_wave_destroy(struct dr_wave *wave)
 {
+    if (wave)
+        dr_wave_soa_destroy(wave->soa);
     free(wave);
 }
 
@@ -390,6 +394,15 @@ static enum dr_wave_next radiance_end(void *ctx, void *user, struct dr_sampler *
 void dr_wave_radiance(struct dr_wave *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
                       dr_wave_start_fn start, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts)
 {
+    if (n > 0) {   /* the paths' sampler kind: the first's (wavefront.h) */
+        struct dr_sampler smp;
+        dr_vec3 o, d;
+        start(ctx, 0, &smp, &o, &d);
+        if (dr_wave_soa_applies(s, opts, smp.kind) && (w->soa || (w->soa = dr_wave_soa_create()))) {
+            dr_wave_soa_radiance(w->soa, s, opts, n, start, ctx, L, counts);
+            return;
+        }   /* (out of memory for the arrays: the lanes below, which need none) */
+    }
     static const struct dr_wave_ops ops = {radiance_start, radiance_vertex, radiance_end, NULL, NULL, true};
     struct radiance_ctx c = {start, ctx, L};
     dr_wave_run(w, s, opts, n, &ops, &c, counts);

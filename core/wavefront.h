@@ -104,7 +104,9 @@ bool dr_wave_prefetches(const struct dr_scene *scene);
 typedef void (*dr_wave_start_fn)(void *ctx, int64_t i, struct dr_sampler *sampler, dr_vec3 *o, dr_vec3 *d);
 
 /* L[i] = the radiance of path i for i in [0, n), what dr_path_radiance gives
- * for the same start (up to exact ties between triangles, accel.h). */
+ * for the same start (up to exact ties between triangles, accel.h). Every
+ * path's sampler must be of one kind. Where the eight-lane stages shade
+ * every hit (wave_soa.h), the paths are kept in arrays instead of lanes. */
 void dr_wave_radiance(struct dr_wave *wave, const struct dr_scene *scene, const struct dr_path_opts *opts, int64_t n,
                       dr_wave_start_fn start, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts);
 

@@ -1,0 +1,310 @@
+/* The packet tracer's radiance as arrays (wave_soa.h). */
+#include "wave_soa.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+#include "accel.h"
+#include "material.h"
+#include "path_simd.h"
+#include "wavefront.h"
+
+/* Paths in flight per thread: enough for long runs of full Embree packets
+ * and eight-lane groups, few enough that the arrays stay in a core's L2
+ * cache (the group states are about 3 KB per eight paths). */
+#define LANES 512
+/* Each array's length: LANES plus one cache line. Arrays of a power-of-two
+ * size would all start at the same offset modulo 4 KiB, and a loop reading
+ * ten of them at slot i would map them all to one cache set (measured in
+ * bench/soa_floor.c). The spare slots also hold the last group's padding. */
+#define SLOTS (LANES + 8)
+
+struct dr_wave_soa {
+    /* each path's state by slot; live paths are slots [0, n_live) */
+    dr_vec3 o[SLOTS], d[SLOTS];                 /* the next ray (the layout dr_accel_*_many reads) */
+    double px[SLOTS], py[SLOTS], pz[SLOTS];     /* the point it leaves (dr_path_state's prev_p) */
+    double prev_pdf[SLOTS];                     /* its BSDF density (0: camera ray) */
+    double bx[SLOTS], by[SLOTS], bz[SLOTS];     /* throughput */
+    double Lx[SLOTS], Ly[SLOTS], Lz[SLOTS];     /* radiance so far */
+    double depth[SLOTS];                        /* segments traced */
+    uint64_t key[SLOTS];                        /* the sampler's key */
+    int64_t item[SLOTS];                        /* the path's index in the run */
+    int64_t tri[SLOTS];                         /* the trace's answer */
+    bool occluded[SLOTS];                       /* the shadow ray's */
+    /* one step's shadow rays, and whose they are */
+    dr_vec3 so[SLOTS], sd[SLOTS];
+    double stmax[SLOTS];
+    int sowner[SLOTS];
+    bool socc[SLOTS];
+    double inf[SLOTS];                          /* the traces' tmax */
+    struct dr_hit hit[SLOTS];                   /* textured lanes' hits, located to prefetch their texels */
+    struct dr_path8 group[LANES / DR_SIMD_W];   /* the hit stage's results, for the continuation */
+};
+
+struct dr_wave_soa *dr_wave_soa_create(void)
+{
+    size_t bytes = (sizeof(struct dr_wave_soa) + 63) / 64 * 64;
+    struct dr_wave_soa *w = aligned_alloc(64, bytes);
+    if (!w)
+        return NULL;
+    memset(w, 0, bytes);   /* (padding lanes read slots no path has written) */
+    for (int k = 0; k < SLOTS; k++)
+        w->inf[k] = INFINITY;
+    return w;
+}
+
+void dr_wave_soa_destroy(struct dr_wave_soa *w)
+{
+    free(w);
+}
+
+size_t dr_wave_soa_bytes(void)
+{
+    return sizeof(struct dr_wave_soa);
+}
+
+bool dr_wave_soa_applies(const struct dr_scene *s, const struct dr_path_opts *opts, uint32_t sampler_kind)
+{
+    return !opts->params && sampler_kind == DR_SAMPLER_INDEPENDENT && dr_path8_applies(s, opts);
+}
+
+/* ----------------------------------------------------------- the slots */
+
+static void start_path(struct dr_wave_soa *w, int k, int64_t item, dr_wave_soa_start_fn start, void *ctx)
+{
+    struct dr_sampler smp;
+    dr_vec3 o, d;
+    start(ctx, item, &smp, &o, &d);
+    /* dr_path_start */
+    w->o[k] = o, w->d[k] = d;
+    w->px[k] = o.x, w->py[k] = o.y, w->pz[k] = o.z;
+    w->prev_pdf[k] = 0.0;
+    w->bx[k] = w->by[k] = w->bz[k] = 1.0;
+    w->Lx[k] = w->Ly[k] = w->Lz[k] = 0.0;
+    w->depth[k] = 0.0;
+    w->key[k] = smp.key;
+    w->item[k] = item;
+}
+
+static void move_path(struct dr_wave_soa *w, int to, int from)
+{
+    w->o[to] = w->o[from], w->d[to] = w->d[from];
+    w->px[to] = w->px[from], w->py[to] = w->py[from], w->pz[to] = w->pz[from];
+    w->prev_pdf[to] = w->prev_pdf[from];
+    w->bx[to] = w->bx[from], w->by[to] = w->by[from], w->bz[to] = w->bz[from];
+    w->Lx[to] = w->Lx[from], w->Ly[to] = w->Ly[from], w->Lz[to] = w->Lz[from];
+    w->depth[to] = w->depth[from];
+    w->key[to] = w->key[from];
+    w->item[to] = w->item[from];
+    w->tri[to] = w->tri[from];
+}
+
+static inline dr_f8 load8(const double *a)
+{
+    dr_f8 v;
+    memcpy(&v, a, sizeof v);
+    return v;
+}
+static inline dr_v3x8 load_vec3s(const dr_vec3 *a)
+{
+#define C(c) (dr_f8){a[0].c, a[1].c, a[2].c, a[3].c, a[4].c, a[5].c, a[6].c, a[7].c}
+    return (dr_v3x8){C(x), C(y), C(z)};
+#undef C
+}
+
+/* ------------------------------------------------------------ the stages */
+
+/* The trace of every live path: the extension rays of slots [0, first_new),
+ * then the camera rays of the paths just started (consecutive samples of a
+ * pixel: Embree traces them fastest as coherent packets). */
+static void trace(struct dr_wave_soa *w, const struct dr_scene *s, int n_live, int first_new, bool prefetch,
+                  struct dr_ray_counts *counts)
+{
+    for (int k = 0; k < n_live; k++)
+        w->depth[k] += 1.0;   /* dr_path_step_begin */
+    counts->extension += (uint64_t)first_new;
+    counts->camera += (uint64_t)(n_live - first_new);
+    struct dr_accel_rays old = {.n = first_new, .o = w->o, .d = w->d, .tmax = w->inf};
+    struct dr_accel_rays cam = {.n = n_live - first_new, .o = w->o + first_new, .d = w->d + first_new,
+                                .tmax = w->inf, .coherent = n_live - first_new};
+    if (old.n > 0)
+        dr_accel_intersect_many(s->accel, &old, w->tri);
+    if (cam.n > 0)
+        dr_accel_intersect_many(s->accel, &cam, w->tri + first_new);
+    for (int k = 0; prefetch && k < n_live; k++)
+        if (w->tri[k] >= 0)
+            dr_mesh_prefetch_triangle(&s->mesh, w->tri[k]);
+}
+
+/* A ray that left the scene: the scalar walker's stage (the environment's
+ * radiance, if any), and the path's end. */
+static void escaped(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int k,
+                    dr_vec3 *out)
+{
+    struct dr_path_state st;
+    dr_path_start(&st, w->o[k], w->d[k]);
+    st.prev_pdf = w->prev_pdf[k];
+    st.prev_p = dr_v3(w->px[k], w->py[k], w->pz[k]);
+    st.depth = (int)w->depth[k] - 1;   /* (dr_path_step_begin counts it again) */
+    st.beta = dr_v3(w->bx[k], w->by[k], w->bz[k]);
+    struct dr_sampler smp;
+    dr_sampler_init(&smp, 0, 0, 0);
+    smp.key = w->key[k];
+    smp.dim = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)st.depth;
+    struct dr_path_vertex v;
+    struct dr_shadow_ray shadow;
+    dr_path_step_begin(&st, &v);
+    dr_path_step_hit(s, opts, &st, &smp, &v, -1, &shadow);   /* (DR_STEP_END) */
+    out[w->item[k]] = dr_add(dr_v3(w->Lx[k], w->Ly[k], w->Lz[k]), dr_mul(st.beta, dr_path_vertex_term(&v)));
+}
+
+/* The paths whose ray left the scene end; the others close up. Returns how
+ * many remain. */
+static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int n_live,
+                       bool prefetch, dr_vec3 *out)
+{
+    int kept = 0;
+    for (int k = 0; k < n_live; k++) {
+        if (w->tri[k] < 0) {
+            escaped(w, s, opts, k, out);
+            continue;
+        }
+        if (prefetch)
+            dr_mesh_prefetch_vertices(&s->mesh, w->tri[k]);
+        if (kept != k)
+            move_path(w, kept, k);
+        kept++;
+    }
+    return kept;
+}
+
+/* Before shading (prefetching): the hits of the lanes that read textures,
+ * and their texels asked for, so that the cache misses overlap. */
+static void locate_textured(struct dr_wave_soa *w, const struct dr_scene *s, int n_live)
+{
+    for (int k = 0; k < n_live; k++)
+        if (dr_path8_reads_textures(s, w->tri[k])) {
+            dr_hit_compute(&s->mesh, w->tri[k], w->o[k], w->d[k], &w->hit[k]);
+            dr_material_prefetch(s, &w->hit[k]);
+        }
+}
+
+/* Group g's inputs: slots 8g .. 8g+7 (the last group's padding slots repeat
+ * its first path: pad_last_group). */
+static void group_inputs(const struct dr_wave_soa *w, int g, int n_live, bool located, struct dr_path8_in *in)
+{
+    int i0 = g * DR_SIMD_W;
+    in->n = n_live - i0 < DR_SIMD_W ? n_live - i0 : DR_SIMD_W;
+    memcpy(in->tri, w->tri + i0, sizeof in->tri);
+    memcpy(&in->key, w->key + i0, sizeof in->key);
+    in->o = load_vec3s(w->o + i0);
+    in->d = load_vec3s(w->d + i0);
+    in->prev_p = (dr_v3x8){load8(w->px + i0), load8(w->py + i0), load8(w->pz + i0)};
+    in->prev_pdf = load8(w->prev_pdf + i0);
+    in->depth = load8(w->depth + i0);
+    for (int i = 0; i < DR_SIMD_W; i++)
+        in->hit[i] = located ? &w->hit[i0 + (i < in->n ? i : 0)] : NULL;
+}
+
+/* The kernels work on whole groups: the slots after the last path, up to the
+ * group's end, repeat the group's first path. */
+static void pad_last_group(struct dr_wave_soa *w, int n_live)
+{
+    int i0 = (n_live - 1) / DR_SIMD_W * DR_SIMD_W;
+    for (int k = n_live; k < i0 + DR_SIMD_W; k++)
+        move_path(w, k, i0);
+}
+
+/* The hit stage of every live path, then their shadow rays as one batch. */
+static void shade(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int n_live,
+                  bool located, struct dr_ray_counts *counts)
+{
+    int n_shadow = 0;
+    for (int g = 0; g * DR_SIMD_W < n_live; g++) {
+        struct dr_path8_in in;
+        group_inputs(w, g, n_live, located, &in);
+        struct dr_path8 *G = &w->group[g];
+        dr_path8_shade_lanes(s, opts, &in, G);
+        for (int i = 0; i < in.n; i++) {
+            int k = g * DR_SIMD_W + i;
+            w->occluded[k] = false;
+            if (!G->shadow[i])
+                continue;
+            counts->shadow++;   /* (counted as dr_path_step counts it: no ray when tmax is not > 0) */
+            if (G->tmax[i] > 0.0) {
+                w->so[n_shadow] = dr_v3x8_get(G->so, i);
+                w->sd[n_shadow] = dr_v3x8_get(G->sd, i);
+                w->stmax[n_shadow] = G->tmax[i];
+                w->sowner[n_shadow++] = k;
+            }
+        }
+    }
+    counts->simd_vertices += (uint64_t)n_live;
+    struct dr_accel_rays r = {.n = n_shadow, .o = w->so, .d = w->sd, .tmax = w->stmax};
+    if (n_shadow > 0)
+        dr_accel_occluded_many(s->accel, &r, w->socc);
+    for (int j = 0; j < n_shadow; j++)
+        w->occluded[w->sowner[j]] = w->socc[j];
+}
+
+/* The next-event estimates and continuations: each path's vertex term added
+ * to its radiance, the paths that end written out, the others closed up.
+ * Returns how many go on. (A path only ever moves to a lower slot, one that
+ * has been read already.) */
+static int advance(struct dr_wave_soa *w, const struct dr_path_opts *opts, int n_live, dr_vec3 *out)
+{
+    int kept = 0;
+    for (int g = 0; g * DR_SIMD_W < n_live; g++) {
+        const int i0 = g * DR_SIMD_W;
+        const struct dr_path8 *G = &w->group[g];
+        dr_v3x8 beta = {load8(w->bx + i0), load8(w->by + i0), load8(w->bz + i0)};
+        dr_m8 occluded;
+        for (int i = 0; i < DR_SIMD_W; i++)
+            occluded[i] = w->occluded[i0 + i] ? -1 : 0;
+        struct dr_path8_out c;
+        dr_path8_continue_lanes(opts, G, beta, occluded, &c);
+        dr_v3x8 e = dr_path8_term(G, &c);   /* L += beta e, as dr_path_radiance sums */
+        dr_v3x8 L = {load8(w->Lx + i0) + beta.x * e.x, load8(w->Ly + i0) + beta.y * e.y,
+                     load8(w->Lz + i0) + beta.z * e.z};
+        for (int i = 0; i < G->n; i++) {
+            int k = i0 + i;
+            if (!c.more[i]) {
+                out[w->item[k]] = dr_v3x8_get(L, i);
+                continue;
+            }
+            w->o[kept] = dr_v3x8_get(c.o, i), w->d[kept] = dr_v3x8_get(c.d, i);
+            w->px[kept] = G->p.x[i], w->py[kept] = G->p.y[i], w->pz[kept] = G->p.z[i];
+            w->prev_pdf[kept] = c.prev_pdf[i];
+            w->bx[kept] = c.beta.x[i], w->by[kept] = c.beta.y[i], w->bz[kept] = c.beta.z[i];
+            w->Lx[kept] = L.x[i], w->Ly[kept] = L.y[i], w->Lz[kept] = L.z[i];
+            w->depth[kept] = w->depth[k];
+            w->key[kept] = w->key[k];
+            w->item[kept] = w->item[k];
+            kept++;
+        }
+    }
+    return kept;
+}
+
+void dr_wave_soa_radiance(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
+                          int64_t n, dr_wave_soa_start_fn start, void *ctx, dr_vec3 *L,
+                          struct dr_ray_counts *counts)
+{
+    const bool prefetch = dr_wave_prefetches(s);
+    int n_live = 0;
+    int64_t next = 0;
+    while (next < n || n_live > 0) {
+        int first_new = n_live;
+        while (n_live < LANES && next < n)
+            start_path(w, n_live++, next++, start, ctx);
+        trace(w, s, n_live, first_new, prefetch, counts);
+        n_live = end_escaped(w, s, opts, n_live, prefetch, L);
+        if (n_live == 0)
+            continue;
+        pad_last_group(w, n_live);
+        if (prefetch)
+            locate_textured(w, s, n_live);
+        shade(w, s, opts, n_live, prefetch, counts);
+        n_live = advance(w, opts, n_live, L);
+    }
+}
