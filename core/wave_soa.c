@@ -12,7 +12,10 @@
 /* Paths in flight per thread: enough for long runs of full Embree packets
  * and eight-lane groups, few enough that the arrays stay in a core's L2
  * cache (the group states are about 3 KB per eight paths). */
-#define LANES 512
+#ifndef DR_SOA_LANES
+#define DR_SOA_LANES 512
+#endif
+#define LANES DR_SOA_LANES
 /* Each array's length: LANES plus one cache line. Arrays of a power-of-two
  * size would all start at the same offset modulo 4 KiB, and a loop reading
  * ten of them at slot i would map them all to one cache set (measured in

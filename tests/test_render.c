@@ -365,38 +365,85 @@ static void random_path_start(void *ctx, int64_t i, struct dr_sampler *smp, dr_v
     dr_camera_ray(&r->view, u * 64.0, v * 48.0, o, d);
 }
 
-/* The packet tracer's radiance (dr_wave_radiance) against dr_path_radiance,
- * path by path in double precision: equal to the last bit. Deep paths with
- * Russian roulette from the second segment, so every stage is crossed many
- * times (an image's float pixels would hide a last-bit difference). Returns
- * how many vertices were shaded eight lanes at a time. */
+/* The radiance through the packet tracer's lanes (dr_wave_run with the
+ * caller's vertex callback, as prb's walks use it), for the comparison
+ * below: dr_wave_radiance itself takes the arrays of wave_soa.c where it
+ * can, and the lanes must give the same bits too. */
+struct lane_radiance {
+    int64_t path;
+    dr_vec3 L;
+};
+struct lane_run {
+    struct random_paths *r;
+    dr_vec3 *L;
+};
+static void lane_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    struct lane_run *c = ctx;
+    struct lane_radiance *u = user;
+    u->path = i;
+    random_path_start(c->r, i, smp, o, d);
+}
+static bool lane_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
+                        struct dr_sampler *smp, bool more)
+{
+    (void)ctx, (void)smp, (void)more;
+    struct lane_radiance *u = user;
+    u->L = dr_add(u->L, dr_mul(a->beta, dr_path_vertex_term(v)));
+    return true;
+}
+static enum dr_wave_next lane_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    (void)smp, (void)o, (void)d;
+    struct lane_run *c = ctx;
+    const struct lane_radiance *u = user;
+    c->L[u->path] = u->L;
+    return DR_WAVE_DONE;
+}
+
+/* The packet tracer's radiance against dr_path_radiance, path by path in
+ * double precision: equal to the last bit, both as dr_wave_radiance gives it
+ * and through the lanes (above). Deep paths with Russian roulette from the
+ * second segment, so every stage is crossed many times (an image's float
+ * pixels would hide a last-bit difference). Returns how many vertices were
+ * shaded eight lanes at a time, the fewer of the two ways' counts. */
 static uint64_t radiance_matches_exactly(const struct dr_scene *s, struct dr_camera cam, const char *name)
 {
     enum { N = 6000 };
     struct random_paths r = {dr_camera_view(&cam, 64, 48)};
     struct dr_path_opts po = {.max_depth = 16, .rr_depth = 2, .stages = dr_path_plan(s, NULL)};
-    dr_vec3 *L = malloc(sizeof(dr_vec3) * N);
+    dr_vec3 *L = malloc(sizeof(dr_vec3) * N), *Llanes = malloc(sizeof(dr_vec3) * N);
     struct dr_wave *w = dr_wave_create();
-    struct dr_ray_counts packets = {0, 0, 0, 0}, one = {0, 0, 0, 0};
+    struct dr_ray_counts packets = {0, 0, 0, 0}, lanes = {0, 0, 0, 0}, one = {0, 0, 0, 0};
     dr_wave_radiance(w, s, &po, N, random_path_start, &r, L, &packets);
-    int differ = 0, lit = 0;
+    static const struct dr_wave_ops ops = {lane_start, lane_vertex, lane_end, NULL, NULL, true};
+    struct lane_run run = {&r, Llanes};
+    dr_wave_run(w, s, &po, N, &ops, &run, &lanes);
+    int differ = 0, differ_lanes = 0, lit = 0;
     for (int i = 0; i < N; i++) {
         struct dr_sampler smp;
         dr_vec3 o, d;
         random_path_start(&r, i, &smp, &o, &d);
         dr_vec3 ref = dr_path_radiance(s, &po, o, d, &smp, &one);
         differ += memcmp(&ref, &L[i], sizeof ref) != 0;
+        differ_lanes += memcmp(&ref, &Llanes[i], sizeof ref) != 0;
         lit += !dr_is_black(ref);
     }
     CHECK(lit > N / 4, "%s: only %d of %d paths carry light", name, lit, N);
     CHECK(differ == 0, "%s: %d of %d paths' radiance differs (in double) between the packet tracer and the one-path "
           "walker", name, differ, N);
+    CHECK(differ_lanes == 0, "%s: %d of %d paths' radiance differs (in double) between the packet tracer's lanes and "
+          "the one-path walker", name, differ_lanes, N);
     CHECK(packets.extension == one.extension && packets.shadow == one.shadow, "%s: rays %llu/%llu vs %llu/%llu",
           name, (unsigned long long)packets.extension, (unsigned long long)packets.shadow,
           (unsigned long long)one.extension, (unsigned long long)one.shadow);
+    CHECK(lanes.extension == one.extension && lanes.shadow == one.shadow, "%s: lanes' rays %llu/%llu vs %llu/%llu",
+          name, (unsigned long long)lanes.extension, (unsigned long long)lanes.shadow,
+          (unsigned long long)one.extension, (unsigned long long)one.shadow);
     dr_wave_destroy(w);
     free(L);
-    return packets.simd_vertices;
+    free(Llanes);
+    return packets.simd_vertices < lanes.simd_vertices ? packets.simd_vertices : lanes.simd_vertices;
 }
 
 /* The packet renderer against the one-path walker: the bundled Cornell box
