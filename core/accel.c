@@ -354,18 +354,27 @@ bool dr_accel_occluded(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tm
  * compiler stores each field's sixteen lanes as vectors. */
 static void fill_packet(struct RTCRay16 *r, const struct dr_accel_rays *rays, int first, int m)
 {
-    const dr_vec3 *o = rays->o + first, *d = rays->d + first;
+    if (rays->o) {
+        const dr_vec3 *o = rays->o + first, *d = rays->d + first;
+        for (int j = 0; j < DR_ACCEL_PACKET; j++) {
+            r->org_x[j] = j < m ? (float)o[j].x : 0.0f;
+            r->org_y[j] = j < m ? (float)o[j].y : 0.0f;
+            r->org_z[j] = j < m ? (float)o[j].z : 0.0f;
+        }
+        for (int j = 0; j < DR_ACCEL_PACKET; j++) {
+            r->dir_x[j] = j < m ? (float)d[j].x : 0.0f;
+            r->dir_y[j] = j < m ? (float)d[j].y : 0.0f;
+            r->dir_z[j] = j < m ? (float)d[j].z : 1.0f;
+        }
+    } else {
+#define COORD(field, a, unused) \
+    for (int j = 0; j < DR_ACCEL_PACKET; j++) \
+        r->field[j] = j < m ? (float)rays->a[first + j] : unused;
+        COORD(org_x, ox, 0.0f) COORD(org_y, oy, 0.0f) COORD(org_z, oz, 0.0f)
+        COORD(dir_x, dx, 0.0f) COORD(dir_y, dy, 0.0f) COORD(dir_z, dz, 1.0f)
+#undef COORD
+    }
     const double *tmax = rays->tmax + first;
-    for (int j = 0; j < DR_ACCEL_PACKET; j++) {
-        r->org_x[j] = j < m ? (float)o[j].x : 0.0f;
-        r->org_y[j] = j < m ? (float)o[j].y : 0.0f;
-        r->org_z[j] = j < m ? (float)o[j].z : 0.0f;
-    }
-    for (int j = 0; j < DR_ACCEL_PACKET; j++) {
-        r->dir_x[j] = j < m ? (float)d[j].x : 0.0f;
-        r->dir_y[j] = j < m ? (float)d[j].y : 0.0f;
-        r->dir_z[j] = j < m ? (float)d[j].z : 1.0f;
-    }
     for (int j = 0; j < DR_ACCEL_PACKET; j++)
         r->tfar[j] = j >= m ? -INFINITY : tmax[j] >= FLT_MAX ? INFINITY : (float)tmax[j];
     for (int j = 0; j < DR_ACCEL_PACKET; j++) {
@@ -375,6 +384,16 @@ static void fill_packet(struct RTCRay16 *r, const struct dr_accel_rays *rays, in
         r->id[j] = (unsigned)j;
         r->flags[j] = 0;
     }
+}
+
+/* Ray i's origin and direction, in either layout. */
+static dr_vec3 ray_o(const struct dr_accel_rays *rays, int i)
+{
+    return rays->o ? rays->o[i] : dr_v3(rays->ox[i], rays->oy[i], rays->oz[i]);
+}
+static dr_vec3 ray_d(const struct dr_accel_rays *rays, int i)
+{
+    return rays->d ? rays->d[i] : dr_v3(rays->dx[i], rays->dy[i], rays->dz[i]);
 }
 
 /* Packet k's lanes: rays [16k, min(16k + 16, n)); valid marks them. */
@@ -436,8 +455,8 @@ void dr_accel_intersect_many(const struct dr_accel *a, const struct dr_accel_ray
         float u[DR_ACCEL_PACKET], v[DR_ACCEL_PACKET];
         int m = packet_intersect(a->plain, a, rays, k, t, u, v);
         for (int j = 0, i = k * DR_ACCEL_PACKET; j < m; j++, i++)
-            if (t[j] >= 0 && !filter_accepts(a, t[j], u[j], v[j], rays->d[i], ray_key(rays, i)))
-                t[j] = filtered_intersect(a, rays->o[i], rays->d[i], 0.0, rays->tmax[i], ray_key(rays, i));
+            if (t[j] >= 0 && !filter_accepts(a, t[j], u[j], v[j], ray_d(rays, i), ray_key(rays, i)))
+                t[j] = filtered_intersect(a, ray_o(rays, i), ray_d(rays, i), 0.0, rays->tmax[i], ray_key(rays, i));
     }
 }
 
@@ -451,8 +470,9 @@ void dr_accel_occluded_many(const struct dr_accel *a, const struct dr_accel_rays
             int m = packet_intersect(a->plain, a, rays, k, tri, u, v);
             for (int j = 0, i = first; j < m; j++, i++)
                 occluded[i] = tri[j] >= 0 &&
-                              (filter_accepts(a, tri[j], u[j], v[j], rays->d[i], ray_key(rays, i)) ||
-                               filtered_occluded(a, rays->o[i], rays->d[i], 0.0, rays->tmax[i], ray_key(rays, i)));
+                              (filter_accepts(a, tri[j], u[j], v[j], ray_d(rays, i), ray_key(rays, i)) ||
+                               filtered_occluded(a, ray_o(rays, i), ray_d(rays, i), 0.0, rays->tmax[i],
+                                                 ray_key(rays, i)));
             continue;
         }
         int valid[DR_ACCEL_PACKET] __attribute__((aligned(64)));   /* Embree: 64-byte aligned */

@@ -49,6 +49,8 @@ bool dr_accel_occluded_key(const struct dr_accel *accel, dr_vec3 o, dr_vec3 d, d
 struct dr_accel_rays {
     int n;
     const dr_vec3 *o, *d;
+    const double *ox, *oy, *oz, *dx, *dy, *dz;   /* with o and d NULL: the same by coordinate
+                                                    (for callers that keep rays as arrays) */
     const double *tmax;
     const uint64_t *key;
     int coherent;   /* the first `coherent` rays are alike (camera rays of one pixel's samples):

@@ -24,7 +24,8 @@
 
 struct dr_wave_soa {
     /* each path's state by slot; live paths are slots [0, n_live) */
-    dr_vec3 o[SLOTS], d[SLOTS];                 /* the next ray (the layout dr_accel_*_many reads) */
+    double ox[SLOTS], oy[SLOTS], oz[SLOTS];     /* the next ray */
+    double dx[SLOTS], dy[SLOTS], dz[SLOTS];
     double px[SLOTS], py[SLOTS], pz[SLOTS];     /* the point it leaves (dr_path_state's prev_p) */
     double prev_pdf[SLOTS];                     /* its BSDF density (0: camera ray) */
     double bx[SLOTS], by[SLOTS], bz[SLOTS];     /* throughput */
@@ -35,7 +36,7 @@ struct dr_wave_soa {
     int64_t tri[SLOTS];                         /* the trace's answer */
     bool occluded[SLOTS];                       /* the shadow ray's */
     /* one step's shadow rays, and whose they are */
-    dr_vec3 so[SLOTS], sd[SLOTS];
+    double sox[SLOTS], soy[SLOTS], soz[SLOTS], sdx[SLOTS], sdy[SLOTS], sdz[SLOTS];
     double stmax[SLOTS];
     int sowner[SLOTS];
     bool socc[SLOTS];
@@ -79,7 +80,8 @@ static void start_path(struct dr_wave_soa *w, int k, int64_t item, dr_wave_soa_s
     dr_vec3 o, d;
     start(ctx, item, &smp, &o, &d);
     /* dr_path_start */
-    w->o[k] = o, w->d[k] = d;
+    w->ox[k] = o.x, w->oy[k] = o.y, w->oz[k] = o.z;
+    w->dx[k] = d.x, w->dy[k] = d.y, w->dz[k] = d.z;
     w->px[k] = o.x, w->py[k] = o.y, w->pz[k] = o.z;
     w->prev_pdf[k] = 0.0;
     w->bx[k] = w->by[k] = w->bz[k] = 1.0;
@@ -91,7 +93,8 @@ static void start_path(struct dr_wave_soa *w, int k, int64_t item, dr_wave_soa_s
 
 static void move_path(struct dr_wave_soa *w, int to, int from)
 {
-    w->o[to] = w->o[from], w->d[to] = w->d[from];
+    w->ox[to] = w->ox[from], w->oy[to] = w->oy[from], w->oz[to] = w->oz[from];
+    w->dx[to] = w->dx[from], w->dy[to] = w->dy[from], w->dz[to] = w->dz[from];
     w->px[to] = w->px[from], w->py[to] = w->py[from], w->pz[to] = w->pz[from];
     w->prev_pdf[to] = w->prev_pdf[from];
     w->bx[to] = w->bx[from], w->by[to] = w->by[from], w->bz[to] = w->bz[from];
@@ -108,11 +111,9 @@ static inline dr_f8 load8(const double *a)
     memcpy(&v, a, sizeof v);
     return v;
 }
-static inline dr_v3x8 load_vec3s(const dr_vec3 *a)
+static inline dr_v3x8 load3(const double *x, const double *y, const double *z)
 {
-#define C(c) (dr_f8){a[0].c, a[1].c, a[2].c, a[3].c, a[4].c, a[5].c, a[6].c, a[7].c}
-    return (dr_v3x8){C(x), C(y), C(z)};
-#undef C
+    return (dr_v3x8){load8(x), load8(y), load8(z)};
 }
 
 /* ------------------------------------------------------------ the stages */
@@ -127,9 +128,12 @@ static void trace(struct dr_wave_soa *w, const struct dr_scene *s, int n_live, i
         w->depth[k] += 1.0;   /* dr_path_step_begin */
     counts->extension += (uint64_t)first_new;
     counts->camera += (uint64_t)(n_live - first_new);
-    struct dr_accel_rays old = {.n = first_new, .o = w->o, .d = w->d, .tmax = w->inf};
-    struct dr_accel_rays cam = {.n = n_live - first_new, .o = w->o + first_new, .d = w->d + first_new,
-                                .tmax = w->inf, .coherent = n_live - first_new};
+    struct dr_accel_rays old = {.n = first_new, .ox = w->ox, .oy = w->oy, .oz = w->oz,
+                                .dx = w->dx, .dy = w->dy, .dz = w->dz, .tmax = w->inf};
+    const int f = first_new;
+    struct dr_accel_rays cam = {.n = n_live - f, .ox = w->ox + f, .oy = w->oy + f, .oz = w->oz + f,
+                                .dx = w->dx + f, .dy = w->dy + f, .dz = w->dz + f, .tmax = w->inf,
+                                .coherent = n_live - f};
     if (old.n > 0)
         dr_accel_intersect_many(s->accel, &old, w->tri);
     if (cam.n > 0)
@@ -144,8 +148,13 @@ static void trace(struct dr_wave_soa *w, const struct dr_scene *s, int n_live, i
 static void escaped(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int k,
                     dr_vec3 *out)
 {
+    if (!(opts->stages & DR_STAGE_ENV)) {   /* nothing out there: a term of 0, summed as the walker sums it */
+        dr_vec3 beta = dr_v3(w->bx[k], w->by[k], w->bz[k]);
+        out[w->item[k]] = dr_add(dr_v3(w->Lx[k], w->Ly[k], w->Lz[k]), dr_mul(beta, dr_v3s(0.0)));
+        return;
+    }
     struct dr_path_state st;
-    dr_path_start(&st, w->o[k], w->d[k]);
+    dr_path_start(&st, dr_v3(w->ox[k], w->oy[k], w->oz[k]), dr_v3(w->dx[k], w->dy[k], w->dz[k]));
     st.prev_pdf = w->prev_pdf[k];
     st.prev_p = dr_v3(w->px[k], w->py[k], w->pz[k]);
     st.depth = (int)w->depth[k] - 1;   /* (dr_path_step_begin counts it again) */
@@ -187,7 +196,8 @@ static void locate_textured(struct dr_wave_soa *w, const struct dr_scene *s, int
 {
     for (int k = 0; k < n_live; k++)
         if (dr_path8_reads_textures(s, w->tri[k])) {
-            dr_hit_compute(&s->mesh, w->tri[k], w->o[k], w->d[k], &w->hit[k]);
+            dr_hit_compute(&s->mesh, w->tri[k], dr_v3(w->ox[k], w->oy[k], w->oz[k]),
+                           dr_v3(w->dx[k], w->dy[k], w->dz[k]), &w->hit[k]);
             dr_material_prefetch(s, &w->hit[k]);
         }
 }
@@ -200,9 +210,9 @@ static void group_inputs(const struct dr_wave_soa *w, int g, int n_live, bool lo
     in->n = n_live - i0 < DR_SIMD_W ? n_live - i0 : DR_SIMD_W;
     memcpy(in->tri, w->tri + i0, sizeof in->tri);
     memcpy(&in->key, w->key + i0, sizeof in->key);
-    in->o = load_vec3s(w->o + i0);
-    in->d = load_vec3s(w->d + i0);
-    in->prev_p = (dr_v3x8){load8(w->px + i0), load8(w->py + i0), load8(w->pz + i0)};
+    in->o = load3(w->ox + i0, w->oy + i0, w->oz + i0);
+    in->d = load3(w->dx + i0, w->dy + i0, w->dz + i0);
+    in->prev_p = load3(w->px + i0, w->py + i0, w->pz + i0);
     in->prev_pdf = load8(w->prev_pdf + i0);
     in->depth = load8(w->depth + i0);
     for (int i = 0; i < DR_SIMD_W; i++)
@@ -235,15 +245,16 @@ static void shade(struct dr_wave_soa *w, const struct dr_scene *s, const struct 
                 continue;
             counts->shadow++;   /* (counted as dr_path_step counts it: no ray when tmax is not > 0) */
             if (G->tmax[i] > 0.0) {
-                w->so[n_shadow] = dr_v3x8_get(G->so, i);
-                w->sd[n_shadow] = dr_v3x8_get(G->sd, i);
+                w->sox[n_shadow] = G->so.x[i], w->soy[n_shadow] = G->so.y[i], w->soz[n_shadow] = G->so.z[i];
+                w->sdx[n_shadow] = G->sd.x[i], w->sdy[n_shadow] = G->sd.y[i], w->sdz[n_shadow] = G->sd.z[i];
                 w->stmax[n_shadow] = G->tmax[i];
                 w->sowner[n_shadow++] = k;
             }
         }
     }
     counts->simd_vertices += (uint64_t)n_live;
-    struct dr_accel_rays r = {.n = n_shadow, .o = w->so, .d = w->sd, .tmax = w->stmax};
+    struct dr_accel_rays r = {.n = n_shadow, .ox = w->sox, .oy = w->soy, .oz = w->soz,
+                              .dx = w->sdx, .dy = w->sdy, .dz = w->sdz, .tmax = w->stmax};
     if (n_shadow > 0)
         dr_accel_occluded_many(s->accel, &r, w->socc);
     for (int j = 0; j < n_shadow; j++)
@@ -260,7 +271,7 @@ static int advance(struct dr_wave_soa *w, const struct dr_path_opts *opts, int n
     for (int g = 0; g * DR_SIMD_W < n_live; g++) {
         const int i0 = g * DR_SIMD_W;
         const struct dr_path8 *G = &w->group[g];
-        dr_v3x8 beta = {load8(w->bx + i0), load8(w->by + i0), load8(w->bz + i0)};
+        dr_v3x8 beta = load3(w->bx + i0, w->by + i0, w->bz + i0);
         dr_m8 occluded;
         for (int i = 0; i < DR_SIMD_W; i++)
             occluded[i] = w->occluded[i0 + i] ? -1 : 0;
@@ -275,7 +286,8 @@ static int advance(struct dr_wave_soa *w, const struct dr_path_opts *opts, int n
                 out[w->item[k]] = dr_v3x8_get(L, i);
                 continue;
             }
-            w->o[kept] = dr_v3x8_get(c.o, i), w->d[kept] = dr_v3x8_get(c.d, i);
+            w->ox[kept] = c.o.x[i], w->oy[kept] = c.o.y[i], w->oz[kept] = c.o.z[i];
+            w->dx[kept] = c.d.x[i], w->dy[kept] = c.d.y[i], w->dz[kept] = c.d.z[i];
             w->px[kept] = G->p.x[i], w->py[kept] = G->p.y[i], w->pz[kept] = G->p.z[i];
             w->prev_pdf[kept] = c.prev_pdf[i];
             w->bx[kept] = c.beta.x[i], w->by[kept] = c.beta.y[i], w->bz[kept] = c.beta.z[i];

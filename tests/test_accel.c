@@ -94,7 +94,8 @@ static void test_fast_path_matches_filters(const char *embree_config)
     if (!ref || !bare)
         return;
     uint64_t k = 12345;
-    long hits = 0, passed_over = 0, occl = 0, bad_hit = 0, bad_occl = 0, bad_many = 0, bad_many_occl = 0, bad_coherent = 0, total = 0;
+    long hits = 0, passed_over = 0, occl = 0, bad_hit = 0, bad_occl = 0, bad_many = 0, bad_many_occl = 0, bad_coherent = 0, bad_arrays = 0,
+         total = 0;
     for (int round = 0; round < 1500; round++) {
         dr_vec3 o[RAYS], d[RAYS];
         double tmax[RAYS];
@@ -136,6 +137,20 @@ static void test_fast_path_matches_filters(const char *embree_config)
         dr_accel_intersect_many(s->accel, &r, tri_many);
         for (int i = 0; i < n; i++)
             bad_coherent += tri_many[i] != tri_one[i];
+        /* the same rays given by coordinate (wave_soa.c's layout): the same answers */
+        double c[6][RAYS];
+        for (int i = 0; i < n; i++) {
+            c[0][i] = o[i].x, c[1][i] = o[i].y, c[2][i] = o[i].z;
+            c[3][i] = d[i].x, c[4][i] = d[i].y, c[5][i] = d[i].z;
+        }
+        struct dr_accel_rays a = {.n = n, .ox = c[0], .oy = c[1], .oz = c[2], .dx = c[3], .dy = c[4], .dz = c[5],
+                                  .tmax = tmax, .key = key};
+        poison_stack();
+        dr_accel_intersect_many(s->accel, &a, tri_many);
+        poison_stack();
+        dr_accel_occluded_many(s->accel, &a, occ_many);
+        for (int i = 0; i < n; i++)
+            bad_arrays += tri_many[i] != tri_one[i] || occ_many[i] != occ_one[i];
     }
     fprintf(stderr, "%ld rays: %ld hits, %ld occluded, %ld nearest triangles passed over\n", total, hits, occl,
             passed_over);
@@ -148,6 +163,7 @@ static void test_fast_path_matches_filters(const char *embree_config)
     CHECK(bad_many_occl == 0, "packets: %ld of %ld occlusions differ from one-ray queries", bad_many_occl, total);
     CHECK(bad_coherent == 0, "coherent packets: %ld of %ld closest hits differ from one-ray queries", bad_coherent,
           total);
+    CHECK(bad_arrays == 0, "rays by coordinate: %ld of %ld answers differ from one-ray queries", bad_arrays, total);
     dr_accel_destroy(ref);
     dr_accel_destroy(bare);
     dr_scene_destroy(s);
