@@ -30,9 +30,13 @@ struct dr_accel_geom {
  * the filtered query's answer too (every candidate the filtered traversal
  * accepts is one of plain's, and nothing is nearer); no hit there is no hit
  * at all. Only a nearest hit the filter would reject (a back face, a hole)
- * asks the filtered scene. Shadow rays ask plain for the closest hit rather
- * than any hit, to see whether the blocker counts. Exact up to which of two
- * triangles wins a tie in t. */
+ * asks the filtered scene. Shadow rays in packets ask plain for any hit,
+ * and its filter notes whether the first blocker found counts
+ * (first_blocker_filter): no blocker, or one that counts, is the answer;
+ * only a blocker that would not count asks again, one ray at a time as
+ * above. (Rejecting such blockers inside the traversal instead, as the
+ * filtered scene does, calls back for every candidate: slower on big
+ * scenes, measured.) Exact up to which of two triangles wins a tie in t. */
 struct dr_accel {
     RTCDevice device;
     RTCScene scene;
@@ -40,6 +44,7 @@ struct dr_accel {
     const struct dr_scene *cover;   /* NULL: nothing is filtered */
     uint8_t *mat_bits;              /* per material: enum dr_cover_bits */
     struct dr_accel_geom geom[2];   /* by geomID */
+    struct dr_accel_geom plain_geom;
     uint32_t *indices[2];           /* owned index buffers when the mesh is split */
 };
 
@@ -49,6 +54,8 @@ struct query_ctx {
     struct RTCIntersectContext rtc;
     uint64_t key;
     const uint64_t *keys;   /* NULL: key for every ray */
+    bool *passed;           /* plain's occlusion queries: the blocker found for ray j would not count
+                               (first_blocker_filter) */
 };
 
 static void embree_error(void *user, enum RTCError code, const char *msg)
@@ -79,6 +86,31 @@ static void cover_filter(const struct RTCFilterFunctionNArguments *args)
         unsigned bits = a->mat_bits[a->cover->mesh.material[tri]];
         if (!dr_coverage_blocks(a->cover, bits, tri, hit[3 * N + i], hit[4 * N + i], d, key))
             args->valid[i] = 0;
+    }
+}
+
+static bool filter_accepts(const struct dr_accel *a, int64_t tri, float u, float v, dr_vec3 d, uint64_t key);
+
+/* plain's occlusion filter: takes the first candidate Embree finds, which
+ * ends the query, and notes whether the filtered scene would have taken it
+ * too (passed[j] false: the ray is blocked for certain). So a shadow ray
+ * costs one any-hit traversal and one callback where it is blocked; only
+ * a ray whose first-found blocker would not count (a back face, a hole)
+ * asks again (dr_accel_occluded_many). */
+static void first_blocker_filter(const struct RTCFilterFunctionNArguments *args)
+{
+    const struct dr_accel *a = ((const struct dr_accel_geom *)args->geometryUserPtr)->accel;
+    const struct query_ctx *q = (const struct query_ctx *)args->context;
+    const unsigned N = args->N;
+    const float *ray = (const float *)args->ray, *hit = (const float *)args->hit;
+    const unsigned *hit_u32 = (const unsigned *)args->hit, *ray_u32 = (const unsigned *)args->ray;
+    for (unsigned i = 0; q->passed && i < N; i++) {
+        if (args->valid[i] != -1)
+            continue;
+        unsigned id = ray_u32[10 * N + i] % DR_ACCEL_PACKET;   /* the ray's lane */
+        uint64_t key = q->keys ? q->keys[id] : q->key;
+        dr_vec3 d = dr_v3(ray[4 * N + i], ray[5 * N + i], ray[6 * N + i]);
+        q->passed[id] = !filter_accepts(a, hit_u32[5 * N + i], hit[3 * N + i], hit[4 * N + i], d, key);
     }
 }
 
@@ -189,6 +221,9 @@ static struct dr_accel *build(const struct dr_mesh *mesh, const struct dr_scene 
                                    3 * sizeof(float), mesh->n_vertices);
         rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, mesh->indices, 0,
                                    3 * sizeof(uint32_t), mesh->n_triangles);
+        a->plain_geom.accel = a;
+        rtcSetGeometryUserData(g, &a->plain_geom);
+        rtcSetGeometryOccludedFilterFunction(g, first_blocker_filter);
         rtcCommitGeometry(g);
         rtcAttachGeometryByID(a->plain, g, 0);
         rtcReleaseGeometry(g);
@@ -407,6 +442,7 @@ static int packet_lanes(const struct dr_accel_rays *rays, int k, int valid[DR_AC
                                                : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
     q->key = 0;
     q->keys = rays->key ? rays->key + first : NULL;
+    q->passed = NULL;
     return m;
 }
 
@@ -464,24 +500,23 @@ void dr_accel_occluded_many(const struct dr_accel *a, const struct dr_accel_rays
 {
     for (int k = 0; k * DR_ACCEL_PACKET < rays->n; k++) {
         int first = k * DR_ACCEL_PACKET;
-        if (a->plain) {   /* the closest blocker, and whether it counts */
-            int64_t tri[DR_ACCEL_PACKET];
-            float u[DR_ACCEL_PACKET], v[DR_ACCEL_PACKET];
-            int m = packet_intersect(a->plain, a, rays, k, tri, u, v);
-            for (int j = 0, i = first; j < m; j++, i++)
-                occluded[i] = tri[j] >= 0 &&
-                              (filter_accepts(a, tri[j], u[j], v[j], ray_d(rays, i), ray_key(rays, i)) ||
-                               filtered_occluded(a, ray_o(rays, i), ray_d(rays, i), 0.0, rays->tmax[i],
-                                                 ray_key(rays, i)));
-            continue;
-        }
         int valid[DR_ACCEL_PACKET] __attribute__((aligned(64)));   /* Embree: 64-byte aligned */
         struct query_ctx q;
+        bool passed[DR_ACCEL_PACKET] = {false};
         int m = packet_lanes(rays, k, valid, &q);
         struct RTCRay16 r __attribute__((aligned(64)));
         fill_packet(&r, rays, first, m);
-        rtcOccluded16(valid, a->scene, &q.rtc, &r);
-        for (int j = 0; j < m; j++)
-            occluded[first + j] = r.tfar[j] < 0.0f;
+        if (!a->plain) {
+            rtcOccluded16(valid, a->scene, &q.rtc, &r);
+            for (int j = 0; j < m; j++)
+                occluded[first + j] = r.tfar[j] < 0.0f;
+            continue;
+        }
+        q.passed = passed;   /* plain: any blocker, and whether it counts (first_blocker_filter) */
+        rtcOccluded16(valid, a->plain, &q.rtc, &r);
+        for (int j = 0, i = first; j < m; j++, i++)
+            occluded[i] = r.tfar[j] < 0.0f &&
+                          (!passed[j] || dr_accel_occluded_key(a, ray_o(rays, i), ray_d(rays, i), 0.0,
+                                                               rays->tmax[i], ray_key(rays, i)));
     }
 }
