@@ -170,8 +170,10 @@ static void escaped(const struct dr_wave_soa *w, const struct dr_scene *s, const
     out[w->item[k]] = dr_add(dr_v3(w->Lx[k], w->Ly[k], w->Lz[k]), dr_mul(st.beta, dr_path_vertex_term(&v)));
 }
 
-/* The paths whose ray left the scene end; the others close up. Returns how
- * many remain. */
+/* The paths whose ray left the scene end; the others close up, in order
+ * (moving the last paths into the gaps instead was slower: a pixel's
+ * samples, started together, stay neighbours and their first bounces make
+ * the more coherent packets). Returns how many remain. */
 static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int n_live,
                        bool prefetch, dr_vec3 *out)
 {
