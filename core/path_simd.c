@@ -371,8 +371,10 @@ static dr_m8 locate(const struct dr_mesh *m, const struct lanes *L, dr_v3x8 o, d
     b2 = dr_f8_clamp(b2, 0.0, 1.0);
     dr_f8 sum = b1 + b2;
     dr_m8 over = sum > 1.0;
-    b1 = dr_f8_sel(over, b1 / sum, b1);
-    b2 = dr_f8_sel(over, b2 / sum, b2);
+    if (dr_m8_any(over)) {   /* (rare: two vector divisions saved) */
+        b1 = dr_f8_sel(over, b1 / sum, b1);
+        b2 = dr_f8_sel(over, b2 / sum, b2);
+    }
 
     *b1_out = b1;
     *b2_out = b2;
