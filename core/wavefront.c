@@ -401,8 +401,14 @@ void dr_wave_radiance(struct dr_wave *w, const struct dr_scene *s, const struct 
         if (dr_wave_soa_applies(s, opts, smp.kind) && (w->soa || (w->soa = dr_wave_soa_create()))) {
             dr_wave_soa_radiance(w->soa, s, opts, n, start, ctx, L, counts);
             return;
-        }   /* (out of memory for the arrays: the lanes below, which need none) */
+        }   /* (out of memory for the arrays: the lanes, which need none) */
     }
+    dr_wave_radiance_lanes(w, s, opts, n, start, ctx, L, counts);
+}
+
+void dr_wave_radiance_lanes(struct dr_wave *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
+                            dr_wave_start_fn start, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts)
+{
     static const struct dr_wave_ops ops = {radiance_start, radiance_vertex, radiance_end, NULL, NULL, true};
     struct radiance_ctx c = {start, ctx, L};
     dr_wave_run(w, s, opts, n, &ops, &c, counts);

@@ -109,5 +109,10 @@ typedef void (*dr_wave_start_fn)(void *ctx, int64_t i, struct dr_sampler *sample
  * every hit (wave_soa.h), the paths are kept in arrays instead of lanes. */
 void dr_wave_radiance(struct dr_wave *wave, const struct dr_scene *scene, const struct dr_path_opts *opts, int64_t n,
                       dr_wave_start_fn start, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts);
+/* The same always through the lanes (dr_wave_run), as the gradients' walks
+ * use them: what dr_wave_radiance does where the arrays do not apply (and
+ * test_render holds to the one-path walker's bits too). */
+void dr_wave_radiance_lanes(struct dr_wave *wave, const struct dr_scene *scene, const struct dr_path_opts *opts,
+                            int64_t n, dr_wave_start_fn start, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts);
 
 #endif

@@ -365,45 +365,10 @@ static void random_path_start(void *ctx, int64_t i, struct dr_sampler *smp, dr_v
     dr_camera_ray(&r->view, u * 64.0, v * 48.0, o, d);
 }
 
-/* The radiance through the packet tracer's lanes (dr_wave_run with the
- * caller's vertex callback, as prb's walks use it), for the comparison
- * below: dr_wave_radiance itself takes the arrays of wave_soa.c where it
- * can, and the lanes must give the same bits too. */
-struct lane_radiance {
-    int64_t path;
-    dr_vec3 L;
-};
-struct lane_run {
-    struct random_paths *r;
-    dr_vec3 *L;
-};
-static void lane_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
-{
-    struct lane_run *c = ctx;
-    struct lane_radiance *u = user;
-    u->path = i;
-    random_path_start(c->r, i, smp, o, d);
-}
-static bool lane_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
-                        struct dr_sampler *smp, bool more)
-{
-    (void)ctx, (void)smp, (void)more;
-    struct lane_radiance *u = user;
-    u->L = dr_add(u->L, dr_mul(a->beta, dr_path_vertex_term(v)));
-    return true;
-}
-static enum dr_wave_next lane_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
-{
-    (void)smp, (void)o, (void)d;
-    struct lane_run *c = ctx;
-    const struct lane_radiance *u = user;
-    c->L[u->path] = u->L;
-    return DR_WAVE_DONE;
-}
-
 /* The packet tracer's radiance against dr_path_radiance, path by path in
  * double precision: equal to the last bit, both as dr_wave_radiance gives it
- * and through the lanes (above). Deep paths with Russian roulette from the
+ * (in arrays, wave_soa.c, where it can) and through the lanes
+ * (dr_wave_radiance_lanes, as the gradients' walks use them). Deep paths with Russian roulette from the
  * second segment, so every stage is crossed many times (an image's float
  * pixels would hide a last-bit difference). Returns how many vertices were
  * shaded eight lanes at a time, the fewer of the two ways' counts. */
@@ -416,9 +381,7 @@ static uint64_t radiance_matches_exactly(const struct dr_scene *s, struct dr_cam
     struct dr_wave *w = dr_wave_create();
     struct dr_ray_counts packets = {0, 0, 0, 0}, lanes = {0, 0, 0, 0}, one = {0, 0, 0, 0};
     dr_wave_radiance(w, s, &po, N, random_path_start, &r, L, &packets);
-    static const struct dr_wave_ops ops = {lane_start, lane_vertex, lane_end, NULL, NULL, true};
-    struct lane_run run = {&r, Llanes};
-    dr_wave_run(w, s, &po, N, &ops, &run, &lanes);
+    dr_wave_radiance_lanes(w, s, &po, N, random_path_start, &r, Llanes, &lanes);
     int differ = 0, differ_lanes = 0, lit = 0;
     for (int i = 0; i < N; i++) {
         struct dr_sampler smp;
