@@ -17,6 +17,11 @@
  * scalar stages: the packet tracer (wavefront.c) sends each lane one way or
  * the other.
  *
+ * The kernels themselves (dr_path8_shade_lanes, dr_path8_continue_lanes)
+ * take and give vectors; dr_path8_shade and dr_path8_continue gather them
+ * from the lanes' structures and scatter the results back (wavefront.c),
+ * wave_soa.c loads them from its arrays.
+ *
  * The vertex the caller receives holds what dr_path_vertex_term reads
  * (emission, next-event estimate), what dr_path_vertex_has_derivative reads
  * (false) and the continuation's factor (cont, f, cos_pdf_q): the eight-lane

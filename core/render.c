@@ -168,7 +168,8 @@ static int chunk_pixels(int spp)
 
 size_t dr_render_thread_bytes(int spp)
 {
-    return dr_wave_bytes() + dr_wave_soa_bytes() + sizeof(dr_vec3) * (size_t)chunk_pixels(spp) * (size_t)(spp > 0 ? spp : 1);
+    return dr_wave_bytes() + dr_wave_soa_bytes() +
+           sizeof(dr_vec3) * (size_t)chunk_pixels(spp) * (size_t)(spp > 0 ? spp : 1);
 }
 
 int dr_render(const struct dr_scene *scene, const struct dr_camera *camera, const struct dr_render_opts *opts,

@@ -74,7 +74,7 @@ bool dr_wave_soa_applies(const struct dr_scene *s, const struct dr_path_opts *op
 
 /* ----------------------------------------------------------- the slots */
 
-static void start_path(struct dr_wave_soa *w, int k, int64_t item, dr_wave_soa_start_fn start, void *ctx)
+static void start_path(struct dr_wave_soa *w, int k, int64_t item, dr_wave_start_fn start, void *ctx)
 {
     struct dr_sampler smp;
     dr_vec3 o, d;
@@ -304,7 +304,7 @@ static int advance(struct dr_wave_soa *w, const struct dr_path_opts *opts, int n
 }
 
 void dr_wave_soa_radiance(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
-                          int64_t n, dr_wave_soa_start_fn start, void *ctx, dr_vec3 *L,
+                          int64_t n, dr_wave_start_fn start, void *ctx, dr_vec3 *L,
                           struct dr_ray_counts *counts)
 {
     const bool prefetch = dr_wave_prefetches(s);

@@ -24,6 +24,7 @@
 
 #include "path.h"
 #include "scene.h"
+#include "wavefront.h"
 
 struct dr_wave_soa;
 
@@ -37,12 +38,9 @@ size_t dr_wave_soa_bytes(void);
  * are of kind `sampler_kind`)? */
 bool dr_wave_soa_applies(const struct dr_scene *scene, const struct dr_path_opts *opts, uint32_t sampler_kind);
 
-/* Starts path i: its sampler, and its camera ray o + t d (wavefront.h's dr_wave_start_fn). */
-typedef void (*dr_wave_soa_start_fn)(void *ctx, int64_t i, struct dr_sampler *sampler, dr_vec3 *o, dr_vec3 *d);
-
 /* L[i] = the radiance of path i for i in [0, n), as dr_wave_radiance. */
 void dr_wave_soa_radiance(struct dr_wave_soa *w, const struct dr_scene *scene, const struct dr_path_opts *opts,
-                          int64_t n, dr_wave_soa_start_fn start, void *ctx, dr_vec3 *L,
+                          int64_t n, dr_wave_start_fn start, void *ctx, dr_vec3 *L,
                           struct dr_ray_counts *counts);
 
 #endif
