@@ -94,8 +94,8 @@ static void test_fast_path_matches_filters(const char *embree_config)
     if (!ref || !bare)
         return;
     uint64_t k = 12345;
-    long hits = 0, passed_over = 0, occl = 0, bad_hit = 0, bad_occl = 0, bad_many = 0, bad_many_occl = 0, bad_coherent = 0, bad_arrays = 0,
-         total = 0;
+    long hits = 0, passed_over = 0, occl = 0, bad_hit = 0, bad_occl = 0, bad_many = 0, bad_many_occl = 0;
+    long bad_coherent = 0, bad_arrays = 0, total = 0;
     for (int round = 0; round < 1500; round++) {
         dr_vec3 o[RAYS], d[RAYS];
         double tmax[RAYS];
