@@ -1,0 +1,68 @@
+#!/usr/bin/env bash
+# Two drender binaries compared on one scene, their runs interleaved.
+#
+# On the shared 2-core machines a program's speed drifts by up to 30 % within
+# minutes, so two `make bench` runs, or two renders minutes apart, cannot tell
+# a 5 % change from the machine. Alternating the two binaries run by run puts
+# both in the same minutes; the medians' ratio is then the figure to quote.
+#
+#   bench/ab.sh OLD NEW [SCENE [ROUNDS [RENDER OPTIONS...]]]
+#
+# OLD, NEW: drender binaries (each with its libdrender-image.so beside it, as
+# `make` leaves them). An older commit's binary, for example:
+#   git worktree add /tmp/old REV && make -C /tmp/old build/drender
+#   bench/ab.sh /tmp/old/build/drender build/drender
+# SCENE defaults to the peer's box, ROUNDS to 5, the options to the bench's
+# peer configuration (256x256, 64 spp, depth 8, 2 threads). Prints each run's
+# render seconds (`render --json`, time.render), the medians, NEW / OLD, and
+# whether the two binaries' last images are identical (idiff).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+# shellcheck source=bench/lib.sh
+source bench/lib.sh
+
+if [[ $# -lt 2 || $1 == -h || $1 == --help ]]; then
+    sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'
+    exit 2
+fi
+OLD=$1 NEW=$2
+SCENE=${3:-../shared/bench/peer-cornell-box.gltf}
+ROUNDS=${4:-5}
+shift $(($# < 4 ? $# : 4))
+OPTS=("$@")
+[[ ${#OPTS[@]} -gt 0 ]] || OPTS=(--res 256x256 --spp 64 --max-depth 8 --threads 2)
+for b in "$OLD" "$NEW"; do
+    [[ -x $b ]] || { echo "ab.sh: $b is not an executable" >&2; exit 1; }
+done
+[[ -f $SCENE ]] || { echo "ab.sh: no scene $SCENE" >&2; exit 1; }
+[[ $ROUNDS =~ ^[1-9][0-9]*$ ]] || { echo "ab.sh: ROUNDS must be a positive integer, not '$ROUNDS'" >&2; exit 1; }
+TMP=$(mktemp -d)
+trap 'rm -rf "$TMP"' EXIT
+
+# run BIN TAG: one render; prints its render seconds
+run() {
+    local json
+    if ! json=$("$1" render "$SCENE" -o "$TMP/$2.exr" --json "${OPTS[@]}" 2>"$TMP/stderr"); then
+        echo "ab.sh: '$1 render $SCENE ${OPTS[*]}' failed:" >&2
+        cat "$TMP/stderr" >&2
+        exit 1
+    fi
+    calc "$(json_num "$json" render time)" %.4f
+}
+
+A=() B=()
+echo "$SCENE ${OPTS[*]}: $ROUNDS round(s), alternating"
+for ((r = 1; r <= ROUNDS; r++)); do
+    A+=("$(run "$OLD" old)")
+    B+=("$(run "$NEW" new)")
+    echo "  round $r: old ${A[-1]} s, new ${B[-1]} s"
+done
+MA=$(median "${A[@]}") MB=$(median "${B[@]}")
+echo "median: old $MA s, new $MB s; new / old $(calc "$MB / $MA" %.3f)"
+if command -v idiff >/dev/null; then
+    if idiff -fail 0 -warn 0 "$TMP/old.exr" "$TMP/new.exr" >/dev/null 2>&1; then
+        echo "images: identical"
+    else
+        echo "images: differ (idiff -fail 0)"
+    fi
+fi
