@@ -7,6 +7,9 @@
 #include <stdio.h>
 #include <stdlib.h>
 
+#include "error.h"
+#include "scene.h"
+
 struct path_args {
     const char *scene;
     int width, height, spp, threads, max_depth;
@@ -35,6 +38,16 @@ static inline bool path_args_parse(int argc, char **argv, const char *program, i
         return false;
     }
     return true;
+}
+
+/* The command line's scene (NULL, the error printed under the program's
+ * name, if it does not load). */
+static inline struct dr_scene *path_args_scene(const struct path_args *a, const char *program)
+{
+    struct dr_scene *s = dr_scene_load(a->scene);
+    if (!s)
+        fprintf(stderr, "%s: %s\n", program, dr_last_error());   /* (the error names the file) */
+    return s;
 }
 
 #endif

@@ -303,10 +303,12 @@ int main(int argc, char **argv)
     if (!path_args_parse(argc, argv, "path_rays", 8, &args))
         return 2;
     const int W = args.width, H = args.height, S = args.spp, T = args.threads, D = args.max_depth;
-    struct dr_scene *sc = dr_scene_load(argv[1]);
-    struct dr_accel *acc = sc ? dr_accel_create_scene(sc) : NULL;
+    struct dr_scene *sc = path_args_scene(&args, "path_rays");
+    if (!sc)
+        return 1;
+    struct dr_accel *acc = dr_accel_create_scene(sc);
     if (!acc) {
-        fprintf(stderr, "path_rays: %s: %s\n", argv[1], dr_last_error());
+        fprintf(stderr, "path_rays: %s: %s\n", args.scene, dr_last_error());
         return 1;
     }
     const struct dr_camera cam = sc->n_cameras > 0 ? sc->cameras[0] : dr_camera_default(sc);

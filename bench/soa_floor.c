@@ -485,11 +485,9 @@ int main(int argc, char **argv)
     if (!path_args_parse(argc, argv, "soa_floor", 64, &args))
         return 2;
     const int W = args.width, H = args.height, S = args.spp, T = args.threads, D = args.max_depth;
-    struct dr_scene *sc = dr_scene_load(argv[1]);
-    if (!sc) {
-        fprintf(stderr, "soa_floor: %s: %s\n", argv[1], dr_last_error());
+    struct dr_scene *sc = path_args_scene(&args, "soa_floor");
+    if (!sc)
         return 1;
-    }
     struct ctx c = {.sc = sc, .W = W, .H = H, .S = S, .D = D};
     const struct dr_camera cam = sc->n_cameras > 0 ? sc->cameras[0] : dr_camera_default(sc);
     c.view = dr_camera_view(&cam, W, H);
