@@ -40,14 +40,20 @@ static inline bool path_args_parse(int argc, char **argv, const char *program, i
     return true;
 }
 
-/* The command line's scene (NULL, the error printed under the program's
- * name, if it does not load). */
-static inline struct dr_scene *path_args_scene(const struct path_args *a, const char *program)
+/* Parses the command line and loads its scene into *scene. Returns the
+ * exit status for a failure (2: a wrong command line, 1: a scene that does
+ * not load; the message printed under the program's name), 0 otherwise. */
+static inline int path_args_open(int argc, char **argv, const char *program, int spp_default, struct path_args *a,
+                                 struct dr_scene **scene)
 {
-    struct dr_scene *s = dr_scene_load(a->scene);
-    if (!s)
+    if (!path_args_parse(argc, argv, program, spp_default, a))
+        return 2;
+    *scene = dr_scene_load(a->scene);
+    if (!*scene) {
         fprintf(stderr, "%s: %s\n", program, dr_last_error());   /* (the error names the file) */
-    return s;
+        return 1;
+    }
+    return 0;
 }
 
 #endif

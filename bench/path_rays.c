@@ -300,12 +300,11 @@ static double timed(struct rays *per_thread, int threads, enum variant v, RTCSce
 int main(int argc, char **argv)
 {
     struct path_args args;
-    if (!path_args_parse(argc, argv, "path_rays", 8, &args))
-        return 2;
+    struct dr_scene *sc;
+    int rc = path_args_open(argc, argv, "path_rays", 8, &args, &sc);
+    if (rc)
+        return rc;
     const int W = args.width, H = args.height, S = args.spp, T = args.threads, D = args.max_depth;
-    struct dr_scene *sc = path_args_scene(&args, "path_rays");
-    if (!sc)
-        return 1;
     struct dr_accel *acc = dr_accel_create_scene(sc);
     if (!acc) {
         fprintf(stderr, "path_rays: %s: %s\n", args.scene, dr_last_error());

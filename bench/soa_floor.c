@@ -482,12 +482,11 @@ static struct tri_data triangle_data(const struct dr_scene *sc, struct lights *L
 int main(int argc, char **argv)
 {
     struct path_args args;
-    if (!path_args_parse(argc, argv, "soa_floor", 64, &args))
-        return 2;
+    struct dr_scene *sc;
+    int rc = path_args_open(argc, argv, "soa_floor", 64, &args, &sc);
+    if (rc)
+        return rc;
     const int W = args.width, H = args.height, S = args.spp, T = args.threads, D = args.max_depth;
-    struct dr_scene *sc = path_args_scene(&args, "soa_floor");
-    if (!sc)
-        return 1;
     struct ctx c = {.sc = sc, .W = W, .H = H, .S = S, .D = D};
     const struct dr_camera cam = sc->n_cameras > 0 ? sc->cameras[0] : dr_camera_default(sc);
     c.view = dr_camera_view(&cam, W, H);
