@@ -16,25 +16,25 @@
 /* ------------------------------------------------------- loads and stores */
 
 /* The double at byte offset off of each lane's structure b[i]. */
-static inline dr_f8 gather(const void *const *b, size_t off)
+DR_SIMD_INLINE dr_f8 gather(const void *const *b, size_t off)
 {
 #define G(i) (*(const double *)((const char *)b[i] + off))
     return (dr_f8){G(0), G(1), G(2), G(3), G(4), G(5), G(6), G(7)};
 #undef G
 }
-static inline dr_v3x8 gather3(const void *const *b, size_t off)
+DR_SIMD_INLINE dr_v3x8 gather3(const void *const *b, size_t off)
 {
     return (dr_v3x8){gather(b, off), gather(b, off + sizeof(double)), gather(b, off + 2 * sizeof(double))};
 }
 /* Element k * stride + c of array a for each lane's index k[i]. */
-static inline dr_f8 gather_at(const double *a, const int64_t *k, int stride, int c)
+DR_SIMD_INLINE dr_f8 gather_at(const double *a, const int64_t *k, int stride, int c)
 {
 #define G(i) a[(size_t)k[i] * (size_t)stride + (size_t)c]
     return (dr_f8){G(0), G(1), G(2), G(3), G(4), G(5), G(6), G(7)};
 #undef G
 }
 /* Vertex vi[i]'s three floats (positions, normals) for each lane. */
-static inline dr_v3x8 gather_vertex(const float *a, const uint32_t *vi)
+DR_SIMD_INLINE dr_v3x8 gather_vertex(const float *a, const uint32_t *vi)
 {
 #define G(i, c) (double)a[3 * (size_t)vi[i] + c]
 #define V(c) (dr_f8){G(0, c), G(1, c), G(2, c), G(3, c), G(4, c), G(5, c), G(6, c), G(7, c)}
@@ -42,19 +42,19 @@ static inline dr_v3x8 gather_vertex(const float *a, const uint32_t *vi)
 #undef V
 #undef G
 }
-static inline void scatter(void *const *b, size_t off, dr_f8 v, int n, dr_m8 where)
+DR_SIMD_INLINE void scatter(void *const *b, size_t off, dr_f8 v, int n, dr_m8 where)
 {
     for (int i = 0; i < n; i++)
         if (where[i])
             *(double *)((char *)b[i] + off) = v[i];
 }
-static inline void scatter3(void *const *b, size_t off, dr_v3x8 v, int n, dr_m8 where)
+DR_SIMD_INLINE void scatter3(void *const *b, size_t off, dr_v3x8 v, int n, dr_m8 where)
 {
     scatter(b, off, v.x, n, where);
     scatter(b, off + sizeof(double), v.y, n, where);
     scatter(b, off + 2 * sizeof(double), v.z, n, where);
 }
-static inline dr_m8 mask_of(const bool *b)
+DR_SIMD_INLINE dr_m8 mask_of(const bool *b)
 {
     dr_m8 m;
     for (int i = 0; i < DR_SIMD_W; i++)
@@ -75,7 +75,7 @@ struct lanes {
     uint32_t dim[DR_SIMD_W];   /* the vertex's first sampler dimension */
 };
 
-static inline void set_lane(dr_v3x8 *a, int i, dr_vec3 v)
+DR_SIMD_INLINE void set_lane(dr_v3x8 *a, int i, dr_vec3 v)
 {
     a->x[i] = v.x, a->y[i] = v.y, a->z[i] = v.z;
 }
@@ -83,28 +83,29 @@ static inline void set_lane(dr_v3x8 *a, int i, dr_vec3 v)
 /* ------------------------------------------------------------ the maths */
 
 /* b0 a0 + b1 a1 + b2 a2 per coordinate, as attributes() and dr_hit_at. */
-static inline dr_v3x8 interp(dr_f8 b0, dr_f8 b1, dr_f8 b2, dr_v3x8 a0, dr_v3x8 a1, dr_v3x8 a2)
+DR_SIMD_INLINE dr_v3x8 interp(dr_f8 b0, dr_f8 b1, dr_f8 b2, dr_v3x8 a0, dr_v3x8 a1, dr_v3x8 a2)
 {
     return (dr_v3x8){b0 * a0.x + b1 * a1.x + b2 * a2.x, b0 * a0.y + b1 * a1.y + b2 * a2.y,
                      b0 * a0.z + b1 * a1.z + b2 * a2.z};
 }
 
 /* dr_mis_power */
-static inline dr_f8 mis_power(dr_f8 a, dr_f8 b)
+DR_SIMD_INLINE dr_f8 mis_power(dr_f8 a, dr_f8 b)
 {
-    dr_f8 r = b / dr_f8_sel(a > 0.0, a, dr_f8s(1.0));
-    dr_f8 w = dr_f8_sel(b > 0.0, 1.0 / (1.0 + r * r), dr_f8s(1.0));
-    return dr_f8_sel(a > 0.0, w, dr_f8s(0.0));
+    dr_m8 a_pos = dr_f8_gt(a, dr_f8s(0.0));
+    dr_f8 r = b / dr_f8_sel(a_pos, a, dr_f8s(1.0));
+    dr_f8 w = dr_f8_sel(dr_f8_gt(b, dr_f8s(0.0)), 1.0 / (1.0 + r * r), dr_f8s(1.0));
+    return dr_f8_sel(a_pos, w, dr_f8s(0.0));
 }
 
 /* dr_offset_origin: p + ng (d . ng >= 0 ? eps : -eps) */
-static inline dr_v3x8 offset_origin(dr_v3x8 p, dr_v3x8 ng, dr_f8 eps, dr_v3x8 d)
+DR_SIMD_INLINE dr_v3x8 offset_origin(dr_v3x8 p, dr_v3x8 ng, dr_f8 eps, dr_v3x8 d)
 {
-    return dr_v3x8_madd(p, ng, dr_f8_sel(dr_v3x8_dot(d, ng) >= 0.0, eps, -eps));
+    return dr_v3x8_madd(p, ng, dr_f8_sel(dr_f8_ge(dr_v3x8_dot(d, ng), dr_f8s(0.0)), eps, -eps));
 }
 
 /* dr_frame_from_normal and dr_frame_to_local / _to_world */
-static inline void frame_from_normal(dr_v3x8 n, dr_v3x8 *s, dr_v3x8 *t)
+DR_SIMD_INLINE void frame_from_normal(dr_v3x8 n, dr_v3x8 *s, dr_v3x8 *t)
 {
     dr_f8 sign = dr_f8_sign1(n.z);
     dr_f8 a = -1.0 / (sign + n.z);
@@ -112,17 +113,17 @@ static inline void frame_from_normal(dr_v3x8 n, dr_v3x8 *s, dr_v3x8 *t)
     *s = (dr_v3x8){1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x};
     *t = (dr_v3x8){b, sign + n.y * n.y * a, -n.y};
 }
-static inline dr_v3x8 to_local(dr_v3x8 s, dr_v3x8 t, dr_v3x8 n, dr_v3x8 v)
+DR_SIMD_INLINE dr_v3x8 to_local(dr_v3x8 s, dr_v3x8 t, dr_v3x8 n, dr_v3x8 v)
 {
     return (dr_v3x8){dr_v3x8_dot(v, s), dr_v3x8_dot(v, t), dr_v3x8_dot(v, n)};
 }
-static inline dr_v3x8 to_world(dr_v3x8 s, dr_v3x8 t, dr_v3x8 n, dr_v3x8 v)
+DR_SIMD_INLINE dr_v3x8 to_world(dr_v3x8 s, dr_v3x8 t, dr_v3x8 n, dr_v3x8 v)
 {
     return dr_v3x8_add(dr_v3x8_add(dr_v3x8_scale(s, v.x), dr_v3x8_scale(t, v.y)), dr_v3x8_scale(n, v.z));
 }
 
 /* bsdf.c's horner and sincos_quarter */
-static inline dr_f8 horner(dr_f8 x, const double *c, int n)
+DR_SIMD_INLINE dr_f8 horner(dr_f8 x, const double *c, int n)
 {
     dr_f8 p = dr_f8s(c[0]);
     for (int i = 1; i < n; i++)
@@ -130,11 +131,11 @@ static inline dr_f8 horner(dr_f8 x, const double *c, int n)
     return p;
 }
 /* bsdf.c's sample_cosine: the concentric disk, lifted. */
-static dr_v3x8 sample_cosine(dr_f8 u1, dr_f8 u2)
+DR_SIMD_INLINE dr_v3x8 sample_cosine(dr_f8 u1, dr_f8 u2)
 {
     dr_f8 a = 2.0 * u1 - 1.0, c = 2.0 * u2 - 1.0;
-    dr_m8 centre = (a == 0.0) & (c == 0.0);
-    dr_m8 wide = dr_f8_abs(a) > dr_f8_abs(c);
+    dr_m8 centre = dr_f8_eq(a, dr_f8s(0.0)) & dr_f8_eq(c, dr_f8s(0.0));
+    dr_m8 wide = dr_f8_gt(dr_f8_abs(a), dr_f8_abs(c));
     dr_f8 r = dr_f8_sel(wide, a, c);
     dr_f8 t = (M_PI / 4.0) * (dr_f8_sel(wide, c, a) / dr_f8_sel(centre, dr_f8s(1.0), r));
     dr_f8 t2 = t * t;
@@ -145,8 +146,20 @@ static dr_v3x8 sample_cosine(dr_f8 u1, dr_f8 u2)
     return dr_v3x8_sel(centre, (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(1.0)}, (dr_v3x8){x, y, z});
 }
 
+/* (double)k for k < 2^53, exactly, with integer operations only: x86 has
+ * no vector conversion from 64-bit integers before AVX-512 (GCC converts
+ * lane by lane). Each 32-bit half becomes a double by placing it in the
+ * mantissa of 2^52 (2^84 for the high half) and subtracting that; both
+ * halves and their sum are exact below 2^53. */
+DR_SIMD_INLINE dr_f8 u53_to_f8(dr_u8 k)
+{
+    dr_f8 lo = (dr_f8)((k & 0xffffffffULL) | 0x4330000000000000ULL) - 0x1p52;
+    dr_f8 hi = (dr_f8)((k >> 32) | 0x4530000000000000ULL) - 0x1p84;
+    return hi + lo;
+}
+
 /* dr_hash64 and dr_sampler_independent */
-static inline dr_f8 independent(dr_u8 key, dr_u8 dim)
+DR_SIMD_INLINE dr_f8 independent(dr_u8 key, dr_u8 dim)
 {
     dr_u8 x = key + dim * 0xd1b54a32d192ed03ULL;
     x ^= x >> 30;
@@ -154,28 +167,29 @@ static inline dr_f8 independent(dr_u8 key, dr_u8 dim)
     x ^= x >> 27;
     x *= 0x94d049bb133111ebULL;
     x ^= x >> 31;
-    return __builtin_convertvector((dr_m8)(x >> 11), dr_f8) * (1.0 / 9007199254740992.0);
+    return u53_to_f8(x >> 11) * (1.0 / 9007199254740992.0);
 }
 
 /* -------------------------------------------------------------- the BSDF */
 
 /* bsdf.c's helpers */
-static inline dr_f8 pow5(dr_f8 s)
+DR_SIMD_INLINE dr_f8 pow5(dr_f8 s)
 {
     dr_f8 s2 = s * s;
     return s2 * s2 * s;
 }
-static inline dr_f8 max3(dr_v3x8 a) { return dr_f8_max(a.x, dr_f8_max(a.y, a.z)); }
-static inline dr_f8 luminance(dr_v3x8 c) { return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z; }
-static inline dr_f8 smith_lambda(dr_f8 a2, dr_v3x8 w)
+DR_SIMD_INLINE dr_f8 max3(dr_v3x8 a) { return dr_f8_max(a.x, dr_f8_max(a.y, a.z)); }
+DR_SIMD_INLINE dr_f8 luminance(dr_v3x8 c) { return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z; }
+DR_SIMD_INLINE dr_f8 smith_lambda(dr_f8 a2, dr_v3x8 w)
 {
     dr_f8 x = a2 * (w.x * w.x + w.y * w.y) / (w.z * w.z);
     return 0.5 * x / (1.0 + dr_f8_sqrt(1.0 + x));
 }
-static inline dr_v3x8 normalize(dr_v3x8 a)   /* dr_normalize */
+DR_SIMD_INLINE dr_v3x8 normalize(dr_v3x8 a)   /* dr_normalize */
 {
     dr_f8 l = dr_f8_sqrt(dr_v3x8_dot(a, a));
-    return dr_v3x8_sel(l > 0.0, dr_v3x8_scale(a, 1.0 / dr_f8_sel(l > 0.0, l, dr_f8s(1.0))), a);
+    dr_m8 pos = dr_f8_gt(l, dr_f8s(0.0));
+    return dr_v3x8_sel(pos, dr_v3x8_scale(a, 1.0 / dr_f8_sel(pos, l, dr_f8s(1.0))), a);
 }
 
 /* dr_material_eval (the factors; textured lanes call it), and what bsdf.c
@@ -196,12 +210,12 @@ static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const st
             g->metallic[i] = b.metallic;
             r[i] = b.roughness;
         }
-    g->lambert = (g->metallic == 0.0) & (g->specular == 0.0);
+    g->lambert = dr_f8_eq(g->metallic, dr_f8s(0.0)) & dr_f8_eq(g->specular, dr_f8s(0.0));
     g->glossy = dr_m8_any(~g->lambert);
     if (!g->glossy)
         return;
     dr_f8 a = r * r;
-    g->alpha = dr_f8_sel(a > DR_BSDF_MIN_ALPHA, a, dr_f8s(DR_BSDF_MIN_ALPHA));
+    g->alpha = dr_f8_sel(dr_f8_gt(a, dr_f8s(DR_BSDF_MIN_ALPHA)), a, dr_f8s(DR_BSDF_MIN_ALPHA));
     dr_v3x8 sc = gather3(mat, offsetof(struct dr_material, specular_color));
     g->f0 = (dr_v3x8){dr_f8_min(0.04 * sc.x, dr_f8s(1.0)) * g->specular,
                       dr_f8_min(0.04 * sc.y, dr_f8s(1.0)) * g->specular,
@@ -209,7 +223,7 @@ static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const st
 }
 
 /* specular_prob (0 without a specular lobe) */
-static dr_f8 specular_prob(const struct dr_path8 *g, dr_f8 cos_o)
+DR_SIMD_INLINE dr_f8 specular_prob(const struct dr_path8 *g, dr_f8 cos_o)
 {
     if (!g->glossy)
         return dr_f8s(0.0);
@@ -222,13 +236,13 @@ static dr_f8 specular_prob(const struct dr_path8 *g, dr_f8 cos_o)
     dr_f8 w_spec = (1.0 - m) * fd + m * luminance(fm);
     dr_f8 w_diff = (1.0 - m) * (1.0 - fd) * luminance(b);
     dr_f8 p = w_spec / (w_spec + w_diff);
-    p = dr_f8_sel(w_spec > 0.0, p, dr_f8s(0.0));
-    p = dr_f8_sel(w_diff > 0.0, p, dr_f8s(1.0));
+    p = dr_f8_sel(dr_f8_gt(w_spec, dr_f8s(0.0)), p, dr_f8s(0.0));
+    p = dr_f8_sel(dr_f8_gt(w_diff, dr_f8s(0.0)), p, dr_f8s(1.0));
     return dr_f8_sel(g->lambert, dr_f8s(0.0), p);
 }
 
 /* eval_pdf_glossy */
-static dr_v3x8 eval_pdf_glossy(const struct dr_path8 *g, dr_v3x8 wo, dr_v3x8 wi, dr_f8 p, dr_f8 *pdf)
+DR_SIMD_INLINE dr_v3x8 eval_pdf_glossy(const struct dr_path8 *g, dr_v3x8 wo, dr_v3x8 wi, dr_f8 p, dr_f8 *pdf)
 {
     dr_f8 cos_pdf = wi.z * DR_INV_PI;
     dr_f8 a = g->alpha, a2 = a * a;
@@ -260,7 +274,7 @@ static dr_v3x8 eval_pdf_glossy(const struct dr_path8 *g, dr_v3x8 wo, dr_v3x8 wi,
 }
 
 /* eval_pdf_above: wo.z, wi.z > COS_EPS, p = specular_prob(wo.z) */
-static dr_v3x8 eval_pdf_above(const struct dr_path8 *g, dr_v3x8 wo, dr_v3x8 wi, dr_f8 p, dr_f8 *pdf)
+DR_SIMD_INLINE dr_v3x8 eval_pdf_above(const struct dr_path8 *g, dr_v3x8 wo, dr_v3x8 wi, dr_f8 p, dr_f8 *pdf)
 {
     dr_f8 pdf_l = wi.z * DR_INV_PI;
     dr_v3x8 f_l = dr_v3x8_scale(g->base, dr_f8s(DR_INV_PI));
@@ -276,13 +290,14 @@ static dr_v3x8 eval_pdf_above(const struct dr_path8 *g, dr_v3x8 wo, dr_v3x8 wi, 
 
 /* sample_specular_dir: GGX visible normals (sample_vndf), reflected. The
  * angle's cosine and sine are libm's, lane by lane, as in the scalar map. */
-static dr_v3x8 sample_specular_dir(const struct dr_path8 *g, dr_v3x8 wo, dr_f8 u1, dr_f8 u2, dr_m8 lanes)
+DR_SIMD_INLINE dr_v3x8 sample_specular_dir(const struct dr_path8 *g, dr_v3x8 wo, dr_f8 u1, dr_f8 u2, dr_m8 lanes)
 {
     dr_f8 a = g->alpha;
     dr_v3x8 vh = normalize((dr_v3x8){a * wo.x, a * wo.y, wo.z});
     dr_f8 lensq = vh.x * vh.x + vh.y * vh.y;
-    dr_f8 k = 1.0 / dr_f8_sqrt(dr_f8_sel(lensq > 0.0, lensq, dr_f8s(1.0)));
-    dr_v3x8 t1 = dr_v3x8_sel(lensq > 0.0, (dr_v3x8){-vh.y * k, vh.x * k, 0.0 * k},
+    dr_m8 tilted = dr_f8_gt(lensq, dr_f8s(0.0));
+    dr_f8 k = 1.0 / dr_f8_sqrt(dr_f8_sel(tilted, lensq, dr_f8s(1.0)));
+    dr_v3x8 t1 = dr_v3x8_sel(tilted, (dr_v3x8){-vh.y * k, vh.x * k, 0.0 * k},
                              (dr_v3x8){dr_f8s(1.0), dr_f8s(0.0), dr_f8s(0.0)});
     dr_v3x8 t2 = dr_v3x8_cross(vh, t1);
     dr_f8 r = dr_f8_sqrt(u1), phi = 2.0 * M_PI * u2, cos_phi = dr_f8s(1.0), sin_phi = dr_f8s(0.0);
@@ -353,7 +368,7 @@ static void triangle_vertices(const struct dr_mesh *m, int64_t tri, uint32_t *v0
 /* stage_locate (dr_hit_compute and attributes(), without t and uv, which
  * the eight-lane stages do not use): the hit point p, the geometric normal
  * ng, the shading normal ns; returns the front mask. */
-static dr_m8 locate(const struct dr_mesh *m, const struct lanes *L, dr_v3x8 o, dr_v3x8 d, dr_v3x8 *p, dr_v3x8 *ng,
+DR_SIMD_INLINE dr_m8 locate(const struct dr_mesh *m, const struct lanes *L, dr_v3x8 o, dr_v3x8 d, dr_v3x8 *p, dr_v3x8 *ng,
                     dr_v3x8 *ns, dr_f8 *eps, dr_f8 *b1_out, dr_f8 *b2_out)
 {
     dr_v3x8 p0 = gather_vertex(m->positions, L->v0), p1 = gather_vertex(m->positions, L->v1),
@@ -361,7 +376,7 @@ static dr_m8 locate(const struct dr_mesh *m, const struct lanes *L, dr_v3x8 o, d
     dr_v3x8 e1 = dr_v3x8_sub(p1, p0), e2 = dr_v3x8_sub(p2, p0);
     dr_v3x8 pv = dr_v3x8_cross(d, e2);
     dr_f8 det = dr_v3x8_dot(e1, pv);
-    dr_m8 solvable = det != 0.0;
+    dr_m8 solvable = dr_f8_ne(det, dr_f8s(0.0));
     dr_f8 inv = 1.0 / dr_f8_sel(solvable, det, dr_f8s(1.0));
     dr_v3x8 tv = dr_v3x8_sub(o, p0);
     dr_f8 b1 = dr_f8_sel(solvable, dr_v3x8_dot(tv, pv) * inv, dr_f8s(0.0));
@@ -370,7 +385,7 @@ static dr_m8 locate(const struct dr_mesh *m, const struct lanes *L, dr_v3x8 o, d
     b1 = dr_f8_clamp(b1, 0.0, 1.0);
     b2 = dr_f8_clamp(b2, 0.0, 1.0);
     dr_f8 sum = b1 + b2;
-    dr_m8 over = sum > 1.0;
+    dr_m8 over = dr_f8_gt(sum, dr_f8s(1.0));
     if (dr_m8_any(over)) {   /* (rare: two vector divisions saved) */
         b1 = dr_f8_sel(over, b1 / sum, b1);
         b2 = dr_f8_sel(over, b2 / sum, b2);
@@ -389,17 +404,17 @@ static dr_m8 locate(const struct dr_mesh *m, const struct lanes *L, dr_v3x8 o, d
         dr_v3x8 n = interp(b0, b1, b2, gather_vertex(m->normals, L->v0), gather_vertex(m->normals, L->v1),
                            gather_vertex(m->normals, L->v2));
         dr_f8 l2 = dr_v3x8_dot(n, n);
-        dr_m8 use = has_n & (l2 > 0.0);
+        dr_m8 use = has_n & dr_f8_gt(l2, dr_f8s(0.0));
         n = dr_v3x8_scale(n, 1.0 / dr_f8_sqrt(dr_f8_sel(use, l2, dr_f8s(1.0))));
-        n = dr_v3x8_sel(dr_v3x8_dot(n, *ng) < 0.0, dr_v3x8_neg(n), n);
+        n = dr_v3x8_sel(dr_f8_lt(dr_v3x8_dot(n, *ng), dr_f8s(0.0)), dr_v3x8_neg(n), n);
         *ns = dr_v3x8_sel(use, n, *ng);
     }
-    return dr_v3x8_dot(d, *ng) < 0.0;
+    return dr_f8_lt(dr_v3x8_dot(d, *ng), dr_f8s(0.0));
 }
 
 /* dr_emission of a material without an emissive texture: factor x strength,
  * on the front (or both sides). */
-static dr_v3x8 emission(const void *const *mat, dr_m8 seen)
+DR_SIMD_INLINE dr_v3x8 emission(const void *const *mat, dr_m8 seen)
 {
     dr_v3x8 e = dr_v3x8_scale(gather3(mat, offsetof(struct dr_material, emissive_factor)),
                               gather(mat, offsetof(struct dr_material, emissive_strength)));
@@ -412,7 +427,7 @@ static dr_v3x8 emission(const void *const *mat, dr_m8 seen)
 static void emission_seen(const struct dr_scene *s, const struct dr_light_tables *lt, const struct lanes *L,
                           const struct dr_path8_in *in, dr_v3x8 ng, dr_m8 front, struct dr_path8 *g)
 {
-    g->emits = gather_at(lt->tri_pick, L->tri, 1, 0) > 0.0;
+    g->emits = dr_f8_gt(gather_at(lt->tri_pick, L->tri, 1, 0), dr_f8s(0.0));
     if (!dr_m8_any(g->emits))
         return;
     dr_v3x8 Le = emission(L->mat, front | mask_of(L->double_sided));
@@ -423,10 +438,10 @@ static void emission_seen(const struct dr_scene *s, const struct dr_light_tables
     dr_v3x8 dd = dr_v3x8_sub(g->p, in->prev_p);
     dr_f8 d2 = dr_v3x8_dot(dd, dd);
     dr_f8 cos_l = dr_f8_abs(dr_v3x8_dot(ng, dd)) / dr_f8_sqrt(d2);
-    dr_f8 pdf = dr_f8_sel(cos_l > 0.0, density * d2 / cos_l, dr_f8s(0.0));
-    pdf = dr_f8_sel(density <= 0.0, dr_f8s(0.0), pdf);
+    dr_f8 pdf = dr_f8_sel(dr_f8_gt(cos_l, dr_f8s(0.0)), density * d2 / cos_l, dr_f8s(0.0));
+    pdf = dr_f8_sel(dr_f8_le(density, dr_f8s(0.0)), dr_f8s(0.0), pdf);
     dr_f8 w = mis_power(in->prev_pdf, pdf);
-    g->emit_w = dr_f8_sel(in->depth == 1.0, dr_f8s(1.0), w);
+    g->emit_w = dr_f8_sel(dr_f8_eq(in->depth, dr_f8s(1.0)), dr_f8s(1.0), w);
     g->Le = Le;
 }
 
@@ -453,7 +468,7 @@ static void find_entries(const struct dr_light_tables *lt, dr_f8 u, int64_t e[DR
     }
     dr_m8 count = {0};
     for (int64_t j = 1; j < lt->n_entries; j++)
-        count -= dr_f8s(lt->cdf[j]) <= u;   /* (a mask is -1 where true) */
+        count -= dr_f8_le(dr_f8s(lt->cdf[j]), u);   /* (a mask is -1 where true) */
     for (int i = 0; i < DR_SIMD_W; i++)
         e[i] = count[i];
 }
@@ -521,7 +536,7 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     uint32_t v[3][DR_SIMD_W];
     bool other[DR_SIMD_W];
     pick_lights(s, lt, L, u_pick, &pick, &area, v, other);
-    dr_m8 ok = ~(pick <= 0.0);
+    dr_m8 ok = ~dr_f8_le(pick, dr_f8s(0.0));
     dr_f8 su = dr_f8_sqrt(u1);
     dr_f8 b1 = 1.0 - su, b2 = u2 * su, b0 = 1.0 - b1 - b2;
     dr_v3x8 lp = interp(b0, b1, b2, gather_vertex(m->positions, v[0]), gather_vertex(m->positions, v[1]),
@@ -531,12 +546,12 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     dr_f8 leps = gather_at(m->tri_normal_eps, L->ltri, 4, 3);
     dr_v3x8 d = dr_v3x8_sub(lp, p);
     dr_f8 d2 = dr_v3x8_dot(d, d);
-    ok &= d2 > 0.0;
+    ok &= dr_f8_gt(d2, dr_f8s(0.0));
     dr_f8 dist = dr_f8_sqrt(d2);
     out->wi = dr_v3x8_scale(d, 1.0 / dist);
     dr_f8 cos_l = dr_v3x8_dot(lng, out->wi);
-    ok &= ~(cos_l == 0.0) & (area > 0.0);
-    out->radiance = emission(L->lmat, (cos_l < 0.0) | mask_of(L->ldouble_sided));
+    ok &= ~dr_f8_eq(cos_l, dr_f8s(0.0)) & dr_f8_gt(area, dr_f8s(0.0));
+    out->radiance = emission(L->lmat, dr_f8_lt(cos_l, dr_f8s(0.0)) | mask_of(L->ldouble_sided));
     for (int i = 0; L->any_ltextured && i < DR_SIMD_W; i++)
         if (ok[i] && L->ltextured[i] && !other[i]) {   /* (no texel read for a sample that failed) */
             struct dr_hit h;   /* the light point as dr_light_sample makes it */
@@ -574,11 +589,11 @@ static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, str
 
 /* dr_path_nee_begin after the light sample: the BSDF towards the light
  * (dr_bsdf_eval_pdf) and the shadow ray; returns where one is cast. */
-static dr_m8 nee_begin(struct dr_path8 *g, dr_m8 ok, const struct light8 *ls, dr_v3x8 *so, dr_v3x8 *sd)
+DR_SIMD_INLINE dr_m8 nee_begin(struct dr_path8 *g, dr_m8 ok, const struct light8 *ls, dr_v3x8 *so, dr_v3x8 *sd)
 {
-    ok &= ~(dr_v3x8_dot(ls->wi, g->ng) <= 0.0);
+    ok &= ~dr_f8_le(dr_v3x8_dot(ls->wi, g->ng), dr_f8s(0.0));
     dr_v3x8 nee_wi = to_local(g->fs, g->ft, g->fn, ls->wi);
-    dr_m8 above = (g->wo_z > COS_EPS) & (nee_wi.z > COS_EPS);
+    dr_m8 above = dr_f8_gt(g->wo_z, dr_f8s(COS_EPS)) & dr_f8_gt(nee_wi.z, dr_f8s(COS_EPS));
     dr_f8 pdf;
     dr_v3x8 f = eval_pdf_above(g, g->wo, nee_wi, g->spec_p, &pdf);
     g->bsdf_pdf = dr_f8_sel(above, pdf, dr_f8s(0.0));
@@ -631,7 +646,7 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
         emission_seen(s, &lt, &L, in, ng, front, g);
 
     /* stage_material: the frame towards the ray, the BSDF, the random numbers */
-    dr_m8 end = (depth >= (double)opts->max_depth) | (~front & ~mask_of(L.double_sided));
+    dr_m8 end = dr_f8_ge(depth, dr_f8s(opts->max_depth)) | (~front & ~mask_of(L.double_sided));
     g->ng = dr_v3x8_sel(front, ng, dr_v3x8_neg(ng));
     g->fn = dr_v3x8_sel(front, ns, dr_v3x8_neg(ns));
     for (int i = 0; L.any_textured && i < n; i++)   /* a mapped normal may face away from wo */
@@ -700,29 +715,29 @@ void dr_path8_continue_lanes(const struct dr_path_opts *opts, const struct dr_pa
                              dr_m8 occluded, struct dr_path8_out *out)
 {
     /* dr_path_nee_end */
-    out->nee = g->shadow & (g->tmax > 0.0) & ~occluded;
+    out->nee = g->shadow & dr_f8_gt(g->tmax, dr_f8s(0.0)) & ~occluded;
     dr_f8 w = dr_f8_sel(g->delta, dr_f8s(1.0), mis_power(g->ls_pdf, g->bsdf_pdf));
     out->nee_scale = dr_f8_abs(g->nee_cos) * w / g->ls_pdf;
 
     /* stage_continue: dr_bsdf_sample, Russian roulette, the next ray */
-    dr_m8 ok = g->go_on & (g->wo_z > COS_EPS);
+    dr_m8 ok = g->go_on & dr_f8_gt(g->wo_z, dr_f8s(COS_EPS));
     dr_v3x8 wi = sample_cosine(g->bsdf_u1, g->bsdf_u2);
-    dr_m8 specular = ok & (g->lobe_u < g->spec_p);
+    dr_m8 specular = ok & dr_f8_lt(g->lobe_u, g->spec_p);
     if (dr_m8_any(specular))
         wi = dr_v3x8_sel(specular, sample_specular_dir(g, g->wo, g->bsdf_u1, g->bsdf_u2, specular), wi);
-    ok &= wi.z > COS_EPS;
+    ok &= dr_f8_gt(wi.z, dr_f8s(COS_EPS));
     dr_f8 pdf;
     dr_v3x8 f = eval_pdf_above(g, g->wo, wi, g->spec_p, &pdf);
-    ok &= (pdf > 0.0) & (pdf < INFINITY);
+    ok &= dr_f8_gt(pdf, dr_f8s(0.0)) & dr_f8_lt(pdf, dr_f8s(INFINITY));
     dr_v3x8 wiw = to_world(g->fs, g->ft, g->fn, wi);
-    ok &= ~(dr_v3x8_dot(wiw, g->ng) <= 0.0);
+    ok &= ~dr_f8_le(dr_v3x8_dot(wiw, g->ng), dr_f8s(0.0));
     dr_f8 cos_pdf = dr_f8_abs(wi.z) / pdf;
     dr_v3x8 beta = dr_v3x8_mul(beta_in, dr_v3x8_scale(f, cos_pdf));
     ok &= ~dr_v3x8_is_black(beta);
-    dr_m8 roulette = g->depth >= (double)opts->rr_depth;
+    dr_m8 roulette = dr_f8_ge(g->depth, dr_f8s(opts->rr_depth));
     dr_f8 q = dr_f8_sel(roulette, dr_f8_min(dr_f8_max(beta.x, dr_f8_max(beta.y, beta.z)), dr_f8s(0.95)),
                         dr_f8s(1.0));
-    ok &= ~(roulette & (g->rr >= q));
+    ok &= ~(roulette & dr_f8_ge(g->rr, q));
     out->more = ok;
     out->beta = dr_v3x8_scale(beta, 1.0 / q);
     out->f = f;

@@ -24,34 +24,85 @@
 
 #define DR_SIMD_W 8
 
+/* Every function on these types is inlined: where the target has no 8-double
+ * registers, a call passes each vector through memory (GCC's inliner judged
+ * dr_v3x8_sel, locate and eval_pdf_above too big on AVX2, and the copies
+ * cost more than their work). */
+#define DR_SIMD_INLINE static inline __attribute__((always_inline))
+
 typedef double dr_f8 __attribute__((vector_size(8 * sizeof(double))));
 typedef int64_t dr_m8 __attribute__((vector_size(8 * sizeof(int64_t))));
 typedef uint64_t dr_u8 __attribute__((vector_size(8 * sizeof(uint64_t))));
 
-static inline dr_f8 dr_f8s(double s) { return (dr_f8){s, s, s, s, s, s, s, s}; }
+DR_SIMD_INLINE dr_f8 dr_f8s(double s) { return (dr_f8){s, s, s, s, s, s, s, s}; }
+
+/* Comparisons and selection. Write dr_f8_lt(a, b), never a < b, on these
+ * types: where the target has no 8-double registers (AVX2, AVX), GCC turns
+ * a comparison of 8-wide vectors, and a selection by its mask, into eight
+ * scalar compares and branches (-Wvector-operation-performance says
+ * "vector condition will be expanded piecewise"), which made the shading
+ * kernel three times slower on an AVX2 machine. There the functions below
+ * compare and select the two 4-wide halves, which AVX has instructions for;
+ * with AVX-512 they are the plain operators. Exact either way. */
+#if defined(__AVX512F__) || !defined(__AVX__)
+#define DR_F8_CMP(name, op) \
+    DR_SIMD_INLINE dr_m8 name(dr_f8 a, dr_f8 b) { return a op b; }
 /* a where m is set, else b */
-static inline dr_f8 dr_f8_sel(dr_m8 m, dr_f8 a, dr_f8 b) { return (dr_f8)((m & (dr_m8)a) | (~m & (dr_m8)b)); }
-static inline dr_f8 dr_f8_sqrt(dr_f8 a)
+DR_SIMD_INLINE dr_f8 dr_f8_sel(dr_m8 m, dr_f8 a, dr_f8 b) { return (dr_f8)((m & (dr_m8)a) | (~m & (dr_m8)b)); }
+#else
+typedef double dr_f4 __attribute__((vector_size(4 * sizeof(double))));
+typedef int64_t dr_m4 __attribute__((vector_size(4 * sizeof(int64_t))));
+/* The halves through a union: GCC keeps these in registers, where joining
+ * halves with __builtin_shufflevector went through the stack lane by lane. */
+union dr_f8_halves { dr_f8 v; dr_f4 h[2]; };
+union dr_m8_halves { dr_m8 v; dr_m4 h[2]; };
+#define DR_F8_CMP(name, op) \
+    DR_SIMD_INLINE dr_m8 name(dr_f8 a, dr_f8 b) \
+    { \
+        union dr_f8_halves ua = {a}, ub = {b}; \
+        union dr_m8_halves r; \
+        r.h[0] = ua.h[0] op ub.h[0]; \
+        r.h[1] = ua.h[1] op ub.h[1]; \
+        return r.v; \
+    }
+/* a where m is set, else b */
+DR_SIMD_INLINE dr_f8 dr_f8_sel(dr_m8 m, dr_f8 a, dr_f8 b)
+{
+    union dr_m8_halves um = {m};
+    union dr_f8_halves ua = {a}, ub = {b}, r;
+    for (int k = 0; k < 2; k++)
+        r.h[k] = (dr_f4)((um.h[k] & (dr_m4)ua.h[k]) | (~um.h[k] & (dr_m4)ub.h[k]));
+    return r.v;
+}
+#endif
+DR_F8_CMP(dr_f8_lt, <)
+DR_F8_CMP(dr_f8_le, <=)
+DR_F8_CMP(dr_f8_gt, >)
+DR_F8_CMP(dr_f8_ge, >=)
+DR_F8_CMP(dr_f8_eq, ==)
+DR_F8_CMP(dr_f8_ne, !=)
+#undef DR_F8_CMP
+DR_SIMD_INLINE dr_f8 dr_f8_sqrt(dr_f8 a)
 {
     dr_f8 r;
     for (int i = 0; i < DR_SIMD_W; i++)   /* one vector square root: GCC merges the lanes */
         r[i] = sqrt(a[i]);
     return r;
 }
-static inline dr_f8 dr_f8_abs(dr_f8 a) { return (dr_f8)((dr_m8)a & ~(dr_m8)dr_f8s(-0.0)); }
+DR_SIMD_INLINE dr_f8 dr_f8_abs(dr_f8 a) { return (dr_f8)((dr_m8)a & ~(dr_m8)dr_f8s(-0.0)); }
 /* copysign(1.0, a) */
-static inline dr_f8 dr_f8_sign1(dr_f8 a)
+DR_SIMD_INLINE dr_f8 dr_f8_sign1(dr_f8 a)
 {
     return (dr_f8)(((dr_m8)a & (dr_m8)dr_f8s(-0.0)) | (dr_m8)dr_f8s(1.0));
 }
 /* vec.h's branches, as selects: dr_min, dr_max (a > b ? a : b), dr_clamp */
-static inline dr_f8 dr_f8_min(dr_f8 a, dr_f8 b) { return dr_f8_sel(a < b, a, b); }
-static inline dr_f8 dr_f8_max(dr_f8 a, dr_f8 b) { return dr_f8_sel(a > b, a, b); }
-static inline dr_f8 dr_f8_clamp(dr_f8 v, double lo, double hi)
+DR_SIMD_INLINE dr_f8 dr_f8_min(dr_f8 a, dr_f8 b) { return dr_f8_sel(dr_f8_lt(a, b), a, b); }
+DR_SIMD_INLINE dr_f8 dr_f8_max(dr_f8 a, dr_f8 b) { return dr_f8_sel(dr_f8_gt(a, b), a, b); }
+DR_SIMD_INLINE dr_f8 dr_f8_clamp(dr_f8 v, double lo, double hi)
 {
-    return dr_f8_sel(v < lo, dr_f8s(lo), dr_f8_sel(v > hi, dr_f8s(hi), v));
+    return dr_f8_sel(dr_f8_lt(v, dr_f8s(lo)), dr_f8s(lo), dr_f8_sel(dr_f8_gt(v, dr_f8s(hi)), dr_f8s(hi), v));
 }
-static inline int dr_m8_any(dr_m8 m)
+DR_SIMD_INLINE int dr_m8_any(dr_m8 m)
 {
     int64_t a = 0;
     for (int i = 0; i < DR_SIMD_W; i++)
@@ -62,25 +113,29 @@ static inline int dr_m8_any(dr_m8 m)
 /* Three coordinates of eight vectors; the operations mirror vec.h's. */
 typedef struct { dr_f8 x, y, z; } dr_v3x8;
 
-static inline dr_v3x8 dr_v3x8_add(dr_v3x8 a, dr_v3x8 b) { return (dr_v3x8){a.x + b.x, a.y + b.y, a.z + b.z}; }
-static inline dr_v3x8 dr_v3x8_sub(dr_v3x8 a, dr_v3x8 b) { return (dr_v3x8){a.x - b.x, a.y - b.y, a.z - b.z}; }
-static inline dr_v3x8 dr_v3x8_mul(dr_v3x8 a, dr_v3x8 b) { return (dr_v3x8){a.x * b.x, a.y * b.y, a.z * b.z}; }
-static inline dr_v3x8 dr_v3x8_scale(dr_v3x8 a, dr_f8 s) { return (dr_v3x8){a.x * s, a.y * s, a.z * s}; }
-static inline dr_v3x8 dr_v3x8_neg(dr_v3x8 a) { return (dr_v3x8){-a.x, -a.y, -a.z}; }
-static inline dr_v3x8 dr_v3x8_madd(dr_v3x8 a, dr_v3x8 b, dr_f8 s)
+DR_SIMD_INLINE dr_v3x8 dr_v3x8_add(dr_v3x8 a, dr_v3x8 b) { return (dr_v3x8){a.x + b.x, a.y + b.y, a.z + b.z}; }
+DR_SIMD_INLINE dr_v3x8 dr_v3x8_sub(dr_v3x8 a, dr_v3x8 b) { return (dr_v3x8){a.x - b.x, a.y - b.y, a.z - b.z}; }
+DR_SIMD_INLINE dr_v3x8 dr_v3x8_mul(dr_v3x8 a, dr_v3x8 b) { return (dr_v3x8){a.x * b.x, a.y * b.y, a.z * b.z}; }
+DR_SIMD_INLINE dr_v3x8 dr_v3x8_scale(dr_v3x8 a, dr_f8 s) { return (dr_v3x8){a.x * s, a.y * s, a.z * s}; }
+DR_SIMD_INLINE dr_v3x8 dr_v3x8_neg(dr_v3x8 a) { return (dr_v3x8){-a.x, -a.y, -a.z}; }
+DR_SIMD_INLINE dr_v3x8 dr_v3x8_madd(dr_v3x8 a, dr_v3x8 b, dr_f8 s)
 {
     return (dr_v3x8){a.x + b.x * s, a.y + b.y * s, a.z + b.z * s};
 }
-static inline dr_f8 dr_v3x8_dot(dr_v3x8 a, dr_v3x8 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-static inline dr_v3x8 dr_v3x8_cross(dr_v3x8 a, dr_v3x8 b)
+DR_SIMD_INLINE dr_f8 dr_v3x8_dot(dr_v3x8 a, dr_v3x8 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+DR_SIMD_INLINE dr_v3x8 dr_v3x8_cross(dr_v3x8 a, dr_v3x8 b)
 {
     return (dr_v3x8){a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
-static inline dr_v3x8 dr_v3x8_sel(dr_m8 m, dr_v3x8 a, dr_v3x8 b)
+DR_SIMD_INLINE dr_v3x8 dr_v3x8_sel(dr_m8 m, dr_v3x8 a, dr_v3x8 b)
 {
     return (dr_v3x8){dr_f8_sel(m, a.x, b.x), dr_f8_sel(m, a.y, b.y), dr_f8_sel(m, a.z, b.z)};
 }
-static inline dr_m8 dr_v3x8_is_black(dr_v3x8 c) { return (c.x == 0.0) & (c.y == 0.0) & (c.z == 0.0); }
-static inline dr_vec3 dr_v3x8_get(dr_v3x8 a, int i) { return dr_v3(a.x[i], a.y[i], a.z[i]); }
+DR_SIMD_INLINE dr_m8 dr_v3x8_is_black(dr_v3x8 c)
+{
+    const dr_f8 zero = dr_f8s(0.0);
+    return dr_f8_eq(c.x, zero) & dr_f8_eq(c.y, zero) & dr_f8_eq(c.z, zero);
+}
+DR_SIMD_INLINE dr_vec3 dr_v3x8_get(dr_v3x8 a, int i) { return dr_v3(a.x[i], a.y[i], a.z[i]); }
 
 #endif
