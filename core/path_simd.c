@@ -147,15 +147,19 @@ DR_SIMD_INLINE dr_v3x8 sample_cosine(dr_f8 u1, dr_f8 u2)
 }
 
 /* (double)k for k < 2^53, exactly, with integer operations only: x86 has
- * no vector conversion from 64-bit integers before AVX-512 (GCC converts
+ * no vector conversion from 64-bit integers before AVX-512DQ (GCC converts
  * lane by lane). Each 32-bit half becomes a double by placing it in the
  * mantissa of 2^52 (2^84 for the high half) and subtracting that; both
  * halves and their sum are exact below 2^53. */
 DR_SIMD_INLINE dr_f8 u53_to_f8(dr_u8 k)
 {
+#ifdef __AVX512DQ__
+    return __builtin_convertvector((dr_m8)k, dr_f8);   /* one instruction there */
+#else
     dr_f8 lo = (dr_f8)((k & 0xffffffffULL) | 0x4330000000000000ULL) - 0x1p52;
     dr_f8 hi = (dr_f8)((k >> 32) | 0x4530000000000000ULL) - 0x1p84;
     return hi + lo;
+#endif
 }
 
 /* dr_hash64 and dr_sampler_independent */
