@@ -111,6 +111,15 @@ render() {
 
 LOAD_START=$(cut -d ' ' -f 1 /proc/loadavg)
 echo "drender benchmarks ($(date '+%Y-%m-%d %H:%M'), $(nproc) CPUs, load average $LOAD_START at start)"
+# The machine's processor and widest vector unit. The peer's figures were
+# measured on machines with AVX-512; on one without it, ratios to them
+# compare different hardware (drender's eight-lane shading runs as two
+# 4-wide halves there), and the same-run ratio to the SoA floor is the
+# figure to read.
+CPU_MODEL=$(awk -F': ' '/^model name/ { print $2; exit }' /proc/cpuinfo)
+if grep -qw avx512f /proc/cpuinfo; then VECTOR_ISA=avx512; elif grep -qw avx2 /proc/cpuinfo; then VECTOR_ISA=avx2; else VECTOR_ISA=other; fi
+echo "processor: ${CPU_MODEL:-unknown}, widest vectors: $VECTOR_ISA"
+[[ $VECTOR_ISA == avx512 ]] || echo "   (no AVX-512: the peer's figures come from AVX-512 machines; read its ratios with that in mind, and the SoA-floor ratio first)"
 "$OUT/make_big_scene" "$BIG" >/dev/null
 "$OUT/make_big_scene" --textured "$BIG_TEX" >/dev/null
 
@@ -335,6 +344,7 @@ OTHER_CORES=$(calc "$OTHER_TOTAL / $WALL_TOTAL" %.2f)
 {
     echo "{"
     echo "  \"date\": \"$(date -Iseconds)\", \"cpus\": $(nproc), \"bench_seconds\": $TOTAL,"
+    echo "  \"cpu_model\": \"${CPU_MODEL//\"/}\", \"vector_isa\": \"$VECTOR_ISA\","
     echo "  \"load_average_start\": $LOAD_START, \"other_cores_busy\": $OTHER_CORES,"
     echo "  \"throughput\": ["
     for ((i = 0; i < ${#TP_JSON[@]}; i++)); do
