@@ -42,18 +42,6 @@ DR_SIMD_INLINE dr_v3x8 gather_vertex(const float *a, const uint32_t *vi)
 #undef V
 #undef G
 }
-DR_SIMD_INLINE void scatter(void *const *b, size_t off, dr_f8 v, int n, dr_m8 where)
-{
-    for (int i = 0; i < n; i++)
-        if (where[i])
-            *(double *)((char *)b[i] + off) = v[i];
-}
-DR_SIMD_INLINE void scatter3(void *const *b, size_t off, dr_v3x8 v, int n, dr_m8 where)
-{
-    scatter(b, off, v.x, n, where);
-    scatter(b, off + sizeof(double), v.y, n, where);
-    scatter(b, off + 2 * sizeof(double), v.z, n, where);
-}
 DR_SIMD_INLINE dr_m8 mask_of(const bool *b)
 {
     dr_m8 m;
@@ -778,18 +766,17 @@ void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g
             v[i]->ls.radiance = dr_v3x8_get(g->ls_radiance, i);
             v[i]->nee_scale = out.nee_scale[i];
         }
-        if (out.more[i]) {   /* the continuation's factor, for a tape's step (tape.c) */
-            v[i]->cont = true;
-            v[i]->f = dr_v3x8_get(out.f, i);
-            v[i]->cos_pdf_q = out.cos_pdf_q[i];
-        }
-    }
-    void *const *W = (void *const *)st;
-    scatter3(W, offsetof(struct dr_path_state, beta), out.beta, n, out.more);
-    scatter(W, offsetof(struct dr_path_state, prev_pdf), out.prev_pdf, n, out.more);
-    scatter3(W, offsetof(struct dr_path_state, prev_p), g->p, n, out.more);
-    scatter3(W, offsetof(struct dr_path_state, o), out.o, n, out.more);
-    scatter3(W, offsetof(struct dr_path_state, d), out.d, n, out.more);
-    for (int i = 0; i < n; i++)
         more[i] = out.more[i] != 0;
+        if (!more[i])
+            continue;
+        v[i]->cont = true;   /* the continuation's factor, for a tape's step (tape.c) */
+        v[i]->f = dr_v3x8_get(out.f, i);
+        v[i]->cos_pdf_q = out.cos_pdf_q[i];
+        /* the path's next state: one test per lane, not one per field */
+        st[i]->beta = dr_v3x8_get(out.beta, i);
+        st[i]->prev_pdf = out.prev_pdf[i];
+        st[i]->prev_p = dr_v3x8_get(g->p, i);
+        st[i]->o = dr_v3x8_get(out.o, i);
+        st[i]->d = dr_v3x8_get(out.d, i);
+    }
 }
