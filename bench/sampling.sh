@@ -16,7 +16,7 @@ OUT=$BUILD/bench
 mkdir -p "$OUT"
 TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
-cp "$BUILD/drender" "$TMP/"
+cp "$BUILD/drender" "$BUILD/libdrender-image.so" "$TMP/"   # (drender loads its image library from beside itself)
 DR=$TMP/drender
 # shellcheck source=bench/lib.sh
 source bench/lib.sh
