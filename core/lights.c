@@ -15,7 +15,6 @@ struct dr_light_sampler {
     double *tri_pick;          /* per triangle: probability of picking it (0: not an emitter) */
     double *tri_pick_density;  /* per triangle: pick probability / area (area density) */
     double *emitter_area;      /* per emitter entry */
-    struct dr_emitter_rec *emitter_rec;   /* n_emitters + 1 (dr_light_tables) */
     int n_punctual;
     int env_entry;             /* index of the environment in cdf, -1 if none */
     int64_t n_entries;
@@ -169,33 +168,6 @@ static double normalise_picks(struct dr_light_sampler *ls)
     return total;
 }
 
-_Static_assert(sizeof(struct dr_emitter_rec) == 64, "an emitter record is one cache line");
-
-/* The emitter records (lights.h), after the picks are final; the last one
- * stands on triangle 0 for lanes without an emitter (path_simd.c). */
-static int build_emitter_records(const struct dr_mesh *m, struct dr_light_sampler *ls)
-{
-    ls->emitter_rec = aligned_alloc(64, sizeof(struct dr_emitter_rec) * (size_t)(ls->n_emitters + 1));
-    if (!ls->emitter_rec)
-        return -1;
-    for (int64_t e = 0; e <= ls->n_emitters; e++) {
-        struct dr_emitter_rec *r = &ls->emitter_rec[e];
-        const bool stand_in = e == ls->n_emitters;
-        memset(r, 0, sizeof *r);
-        r->pick = stand_in ? 0.0 : ls->pick[e];
-        r->area = stand_in ? 1.0 : ls->emitter_area[e];
-        if (m->n_triangles == 0)
-            continue;   /* (then there is no emitter either) */
-        const int64_t t = stand_in ? 0 : ls->emitter_tri[e];
-        for (int k = 0; k < 3; k++)
-            for (int c = 0; c < 3; c++)
-                r->p[3 * k + c] = m->positions[3 * (size_t)m->indices[3 * (size_t)t + k] + c];
-        r->material = (uint32_t)m->material[t];
-        r->tri = (uint32_t)t;
-    }
-    return 0;
-}
-
 struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
 {
     struct dr_light_sampler *ls = calloc(1, sizeof *ls);
@@ -265,8 +237,6 @@ struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
         w[k++] = fmax(M_PI * M_PI * ls->scene_radius * ls->scene_radius * mean, 0.0);
     }
     double total = normalise_picks(ls);
-    if (build_emitter_records(m, ls) != 0)
-        goto nomem;
     if (ls->n_entries > 0)
         dr_cdf_guide_build(ls->cdf, ls->n_entries, ls->cdf_guide, ls->n_entries);
     if (total <= 0.0)
@@ -286,7 +256,6 @@ void dr_light_sampler_destroy(struct dr_light_sampler *ls)
     free(ls->tri_pick);
     free(ls->tri_pick_density);
     free(ls->emitter_area);
-    free(ls->emitter_rec);
     free(ls->cdf);
     free(ls->cdf_guide);
     free(ls->pick);
@@ -397,8 +366,7 @@ bool dr_light_tables(const struct dr_light_sampler *ls, struct dr_light_tables *
     if (ls->n_entries == 0)
         return false;
     *t = (struct dr_light_tables){ls->n_entries, ls->n_emitters, ls->cdf, ls->cdf_guide, ls->pick,
-                                       ls->emitter_tri, ls->emitter_area, ls->tri_pick, ls->tri_pick_density,
-                                       ls->emitter_rec};
+                                       ls->emitter_tri, ls->emitter_area, ls->tri_pick, ls->tri_pick_density};
     return true;
 }
 

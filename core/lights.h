@@ -62,17 +62,6 @@ double dr_light_pdf_area_pick(const struct dr_light_sampler *ls, int64_t tri);
  * at once (path_simd.c does what dr_light_sample and dr_light_pdf_area do for
  * emitting triangles with these; other entries go through dr_light_sample).
  * False when there is nothing to sample. */
-/* One emitting triangle as the eight-lane light sample reads it: its
- * vertices' positions, triangle, material, pick probability and area, copied
- * from the mesh and the tables (the same values, so the same bits), in one
- * cache line. Picking among thousands of emitters otherwise costs a chain
- * of scattered reads per sample (entry, triangle, indices, positions). */
-struct dr_emitter_rec {
-    float p[9];          /* the three vertices, as the mesh holds them */
-    uint32_t material;
-    uint32_t tri;
-    double pick, area;
-};
 struct dr_light_tables {
     int64_t n_entries;
     int64_t n_emitters;             /* entries below this are emitting triangles */
@@ -83,8 +72,6 @@ struct dr_light_tables {
     const double *emitter_area;     /* per entry */
     const double *tri_pick;         /* per triangle, as dr_light_pdf_area_pick */
     const double *tri_pick_density; /* per triangle: pick probability / area */
-    const struct dr_emitter_rec *emitter;   /* per emitter entry, and at n_emitters a stand-in for
-                                               "no emitter": triangle 0, pick 0, area 1 */
 };
 bool dr_light_tables(const struct dr_light_sampler *ls, struct dr_light_tables *t);
 /* Density for an escaping direction (environment). */

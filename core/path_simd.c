@@ -26,15 +26,6 @@ DR_SIMD_INLINE dr_v3x8 gather3(const void *const *b, size_t off)
 {
     return (dr_v3x8){gather(b, off), gather(b, off + sizeof(double)), gather(b, off + 2 * sizeof(double))};
 }
-/* The three floats at byte offset off of each lane's structure b[i], as doubles. */
-DR_SIMD_INLINE dr_v3x8 gather_float3(const void *const *b, size_t off)
-{
-#define G(i, c) (double)((const float *)((const char *)b[i] + off))[c]
-#define V(c) (dr_f8){G(0, c), G(1, c), G(2, c), G(3, c), G(4, c), G(5, c), G(6, c), G(7, c)}
-    return (dr_v3x8){V(0), V(1), V(2)};
-#undef V
-#undef G
-}
 /* Element k * stride + c of array a for each lane's index k[i]. */
 DR_SIMD_INLINE dr_f8 gather_at(const double *a, const int64_t *k, int stride, int c)
 {
@@ -474,12 +465,13 @@ static void find_entries(const struct dr_light_tables *lt, dr_f8 u, int64_t e[DR
         e[i] = count[i];
 }
 
-/* Each lane's light-table entry and its emitter record (rec); other[i]: it
- * is a punctual light or the environment, which light_sample leaves to
- * dr_light_sample (the area arithmetic runs on a stand-in). */
+/* Each lane's light-table entry; other[i]: it is a punctual light or the
+ * environment, which light_sample leaves to dr_light_sample (the area
+ * arithmetic runs on a stand-in). */
 static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *lt, struct lanes *L,
-                        dr_f8 u_pick, dr_f8 *pick, dr_f8 *area, const void *rec[DR_SIMD_W], bool *other)
+                        dr_f8 u_pick, dr_f8 *pick, dr_f8 *area, uint32_t v[3][DR_SIMD_W], bool *other)
 {
+    const struct dr_mesh *m = &s->mesh;
     int64_t entry[DR_SIMD_W];
     find_entries(lt, u_pick, entry);
     for (int i = 0; i < DR_SIMD_W; i++) {
@@ -487,15 +479,22 @@ static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *
         other[i] = e >= lt->n_emitters;
         if (other[i])
             e = lt->n_emitters > 0 ? 0 : -1;
-        /* e < 0: no emitting triangle at all; the stand-in record, triangle 0 */
-        const struct dr_emitter_rec *r = &lt->emitter[e < 0 ? lt->n_emitters : e];
-        rec[i] = r;
-        (*pick)[i] = r->pick, (*area)[i] = r->area, L->ltri[i] = r->tri;
-        const struct dr_material *lm = &s->materials[r->material];
-        L->lmat[i] = lm;
-        L->ldouble_sided[i] = e < 0 || lm->double_sided;
-        L->ltextured[i] = e >= 0 && lm->emissive_tex.texture >= 0;
-        L->any_ltextured |= L->ltextured[i];
+        if (e < 0) {   /* no emitting triangle at all: triangle 0 stands in */
+            (*pick)[i] = 0.0, (*area)[i] = 1.0, L->ltri[i] = 0;
+            L->lmat[i] = &s->materials[m->material[0]];
+            L->ldouble_sided[i] = true;
+            L->ltextured[i] = false;
+        } else {
+            (*pick)[i] = lt->pick[e];
+            (*area)[i] = lt->emitter_area[e];
+            L->ltri[i] = lt->emitter_tri[e];
+            const struct dr_material *lm = &s->materials[m->material[L->ltri[i]]];
+            L->lmat[i] = lm;
+            L->ldouble_sided[i] = lm->double_sided;
+            L->ltextured[i] = lm->emissive_tex.texture >= 0;
+            L->any_ltextured |= L->ltextured[i];
+        }
+        triangle_vertices(m, L->ltri[i], &v[0][i], &v[1][i], &v[2][i]);
     }
 }
 
@@ -526,15 +525,14 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
 {
     const struct dr_mesh *m = &s->mesh;
     dr_f8 pick, area;
-    const void *rec[DR_SIMD_W];
+    uint32_t v[3][DR_SIMD_W];
     bool other[DR_SIMD_W];
-    pick_lights(s, lt, L, u_pick, &pick, &area, rec, other);
+    pick_lights(s, lt, L, u_pick, &pick, &area, v, other);
     dr_m8 ok = ~dr_f8_le(pick, dr_f8s(0.0));
     dr_f8 su = dr_f8_sqrt(u1);
     dr_f8 b1 = 1.0 - su, b2 = u2 * su, b0 = 1.0 - b1 - b2;
-    dr_v3x8 lp = interp(b0, b1, b2, gather_float3(rec, offsetof(struct dr_emitter_rec, p[0])),
-                        gather_float3(rec, offsetof(struct dr_emitter_rec, p[3])),
-                        gather_float3(rec, offsetof(struct dr_emitter_rec, p[6])));
+    dr_v3x8 lp = interp(b0, b1, b2, gather_vertex(m->positions, v[0]), gather_vertex(m->positions, v[1]),
+                        gather_vertex(m->positions, v[2]));
     dr_v3x8 lng = {gather_at(m->tri_normal_eps, L->ltri, 4, 0), gather_at(m->tri_normal_eps, L->ltri, 4, 1),
                    gather_at(m->tri_normal_eps, L->ltri, 4, 2)};
     dr_f8 leps = gather_at(m->tri_normal_eps, L->ltri, 4, 3);
