@@ -506,7 +506,7 @@ static void other_light_samples(const struct dr_scene *s, const bool *other, dr_
         if (!other[i])
             continue;
         struct dr_light_sample ls = {.dist = 0.0};   /* (its fields stay masked when it fails) */
-        (*ok)[i] = dr_light_sample(s, s->light_sampler, dr_v3x8_get(p, i), u_pick[i], u1[i], u2[i], &ls) ? -1 : 0;
+        (*ok)[i] = dr_light_sample(s, s->light_sampler, dr_v3x8_get(&p, i), u_pick[i], u1[i], u2[i], &ls) ? -1 : 0;
         set_lane(&out->wi, i, ls.wi);
         set_lane(&out->target, i, ls.target);
         set_lane(&out->radiance, i, ls.radiance);
@@ -627,7 +627,7 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
         if (in->hit[i])
             L.hit[i] = *in->hit[i];
         else   /* the scalar hit the lookups read (the vector one has no uv) */
-            dr_hit_compute(m, L.tri[i], dr_v3x8_get(o, i), dr_v3x8_get(d, i), &L.hit[i]);
+            dr_hit_compute(m, L.tri[i], dr_v3x8_get(&o, i), dr_v3x8_get(&d, i), &L.hit[i]);
         if (L.normal_mapped[i]) {   /* stage_emission's dr_normal_map_apply */
             dr_normal_map_apply(s, &L.hit[i]);
             set_lane(&ns, i, L.hit[i].ns);
@@ -644,7 +644,7 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     for (int i = 0; L.any_textured && i < n; i++)   /* a mapped normal may face away from wo */
         if (L.normal_mapped[i])
             set_lane(&g->fn, i,
-                     dr_shading_normal_valid(dr_v3x8_get(g->ng, i), dr_neg(dr_v3x8_get(d, i)), dr_v3x8_get(g->fn, i)));
+                     dr_shading_normal_valid(dr_v3x8_get(&g->ng, i), dr_neg(dr_v3x8_get(&d, i)), dr_v3x8_get(&g->fn, i)));
     frame_from_normal(g->fn, &g->fs, &g->ft);
     g->wo = to_local(g->fs, g->ft, g->fn, dr_v3x8_neg(d));
     g->wo_z = g->wo.z;
@@ -691,14 +691,14 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
         v[i]->kind = DR_VERTEX_SURFACE;
         if (g->emits[i]) {
             v[i]->emits = true;
-            v[i]->Le = dr_v3x8_get(g->Le, i);
+            v[i]->Le = dr_v3x8_get(&g->Le, i);
             v[i]->emit_w = g->emit_w[i];
         }
         if (g->go_on[i])
             smp[i]->dim = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)(st[i]->depth - 1) + 7;
         next[i] = !g->go_on[i] ? DR_STEP_END : g->shadow[i] ? DR_STEP_SHADOW : DR_STEP_CONTINUE;
         if (next[i] == DR_STEP_SHADOW)
-            *shadow[i] = (struct dr_shadow_ray){.o = dr_v3x8_get(g->so, i), .d = dr_v3x8_get(g->sd, i),
+            *shadow[i] = (struct dr_shadow_ray){.o = dr_v3x8_get(&g->so, i), .d = dr_v3x8_get(&g->sd, i),
                                                 .tmax = g->tmax[i], .key = 0};
     }
 }
@@ -762,21 +762,21 @@ void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g
     for (int i = 0; i < n; i++) {
         if (out.nee[i]) {
             v[i]->nee = true;
-            v[i]->nee_f = dr_v3x8_get(g->nee_f, i);
-            v[i]->ls.radiance = dr_v3x8_get(g->ls_radiance, i);
+            v[i]->nee_f = dr_v3x8_get(&g->nee_f, i);
+            v[i]->ls.radiance = dr_v3x8_get(&g->ls_radiance, i);
             v[i]->nee_scale = out.nee_scale[i];
         }
         more[i] = out.more[i] != 0;
         if (!more[i])
             continue;
         v[i]->cont = true;   /* the continuation's factor, for a tape's step (tape.c) */
-        v[i]->f = dr_v3x8_get(out.f, i);
+        v[i]->f = dr_v3x8_get(&out.f, i);
         v[i]->cos_pdf_q = out.cos_pdf_q[i];
         /* the path's next state: one test per lane, not one per field */
-        st[i]->beta = dr_v3x8_get(out.beta, i);
+        st[i]->beta = dr_v3x8_get(&out.beta, i);
         st[i]->prev_pdf = out.prev_pdf[i];
-        st[i]->prev_p = dr_v3x8_get(g->p, i);
-        st[i]->o = dr_v3x8_get(out.o, i);
-        st[i]->d = dr_v3x8_get(out.d, i);
+        st[i]->prev_p = dr_v3x8_get(&g->p, i);
+        st[i]->o = dr_v3x8_get(&out.o, i);
+        st[i]->d = dr_v3x8_get(&out.d, i);
     }
 }

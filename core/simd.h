@@ -136,6 +136,8 @@ DR_SIMD_INLINE dr_m8 dr_v3x8_is_black(dr_v3x8 c)
     const dr_f8 zero = dr_f8s(0.0);
     return dr_f8_eq(c.x, zero) & dr_f8_eq(c.y, zero) & dr_f8_eq(c.z, zero);
 }
-DR_SIMD_INLINE dr_vec3 dr_v3x8_get(dr_v3x8 a, int i) { return dr_v3(a.x[i], a.y[i], a.z[i]); }
+/* Lane i of a (by pointer: passed by value, GCC copies all 192 bytes of a
+ * vector kept in memory with a memcpy call before reading one lane). */
+DR_SIMD_INLINE dr_vec3 dr_v3x8_get(const dr_v3x8 *a, int i) { return dr_v3(a->x[i], a->y[i], a->z[i]); }
 
 #endif

@@ -286,7 +286,7 @@ static int advance(struct dr_wave_soa *w, const struct dr_path_opts *opts, int n
         for (int i = 0; i < G->n; i++) {
             int k = i0 + i;
             if (!c.more[i]) {
-                out[w->item[k]] = dr_v3x8_get(L, i);
+                out[w->item[k]] = dr_v3x8_get(&L, i);
                 continue;
             }
             w->ox[kept] = c.o.x[i], w->oy[kept] = c.o.y[i], w->oz[kept] = c.o.z[i];

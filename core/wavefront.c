@@ -338,7 +338,7 @@ void dr_wave_run(struct dr_wave *w, const struct dr_scene *s, const struct dr_pa
             ops->start(ctx, next++, l->user, &l->smp, &o, &d);
             const struct dr_wave_log *log = ops->replay_log ? ops->replay_log(ctx, l->user) : NULL;
             if (log)
-                l->log = *log;
+                dr_wave_log_copy(&l->log, log);
             begin_walk(l, o, d, log ? DR_WAVE_REPLAY : DR_WAVE_WALK);
             w->live[n_live++] = k;
         }

@@ -50,6 +50,17 @@ struct dr_wave_log {
     bool occ[DR_WAVE_REPLAY_DEPTH];         /* the shadow ray's */
 };
 
+/* *to = *from as far as a replay reads it: the first n answers (a whole
+ * struct is 300 bytes, most paths log a few vertices). */
+static inline void dr_wave_log_copy(struct dr_wave_log *to, const struct dr_wave_log *from)
+{
+    to->n = from->n;
+    for (int i = 0; i < from->n; i++) {
+        to->tri[i] = from->tri[i];
+        to->occ[i] = from->occ[i];
+    }
+}
+
 struct dr_wave_ops {
     /* Begins item i in a lane: its state in user (DR_WAVE_USER_BYTES,
      * zeroed), the first walk's sampler and ray. */

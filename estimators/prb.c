@@ -324,7 +324,7 @@ static void cross_keep_log(void *ctx, void *user, const struct dr_wave_log *log)
     struct cross_ctx *c = ctx;
     const struct cross_lane *l = user;
     if (c->logs)
-        c->items[l->item].log = *log;
+        dr_wave_log_copy(&c->items[l->item].log, log);
 }
 
 static enum dr_wave_next cross_primal_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
