@@ -3,7 +3,8 @@
  * identical), builds its own Embree BVH with the same flags, and casts rays
  * on T threads through three of Embree's interfaces:
  *   rtcIntersect1    one ray per call (what drender does today),
- *   rtcIntersect16   16-wide SoA packets,
+ *   rtcIntersect8    8-wide SoA packets (native on AVX2 machines),
+ *   rtcIntersect16   16-wide SoA packets (native with AVX-512),
  *   rtcIntersect1M   streams of 256 AoS rays per call,
  * for two ray sets:
  *   incoherent  uniform origins in the bounding box, uniform directions
@@ -28,9 +29,10 @@
 
 #define BATCH 256
 
-enum api { API_1, API_16, API_1M, API_COUNT };
+enum api { API_1, API_8, API_16, API_1M, API_COUNT };
 enum pattern { INCOHERENT, COHERENT, PATTERN_COUNT };
-static const char *const api_names[API_COUNT] = {"rtcIntersect1", "rtcIntersect16", "rtcIntersect1M"};
+static const char *const api_names[API_COUNT] = {"rtcIntersect1", "rtcIntersect8", "rtcIntersect16",
+                                                        "rtcIntersect1M"};
 static const char *const pattern_names[PATTERN_COUNT] = {"incoherent", "coherent"};
 
 struct worker {
@@ -82,6 +84,18 @@ static void generate(const struct worker *w, struct dr_sampler *s, long first, i
     }
 }
 
+/* Rays [b, b + W) of batch into packet p (lanes past n repeat the last ray, masked off by valid). */
+#define PACK(W) \
+    for (int l = 0; l < (W); l++) { \
+        const struct RTCRayHit *r = &batch[b + l < n ? b + l : n - 1]; \
+        valid[l] = b + l < n ? -1 : 0; \
+        p.ray.org_x[l] = r->ray.org_x, p.ray.org_y[l] = r->ray.org_y, p.ray.org_z[l] = r->ray.org_z; \
+        p.ray.dir_x[l] = r->ray.dir_x, p.ray.dir_y[l] = r->ray.dir_y, p.ray.dir_z[l] = r->ray.dir_z; \
+        p.ray.tnear[l] = 0.0f, p.ray.tfar[l] = INFINITY, p.ray.time[l] = 0.0f; \
+        p.ray.mask[l] = 0xFFFFFFFFu, p.ray.id[l] = 0, p.ray.flags[l] = 0; \
+        p.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID; \
+    }
+
 static long cast_batch(const struct worker *w, struct RTCIntersectContext *ctx, struct RTCRayHit *batch, int n)
 {
     long hits = 0;
@@ -90,19 +104,20 @@ static long cast_batch(const struct worker *w, struct RTCIntersectContext *ctx, 
             rtcIntersect1(w->scene, ctx, &batch[i]);
     } else if (w->api == API_1M) {
         rtcIntersect1M(w->scene, ctx, batch, (unsigned)n, sizeof *batch);
+    } else if (w->api == API_8) {
+        for (int b = 0; b < n; b += 8) {
+            _Alignas(32) struct RTCRayHit8 p;
+            _Alignas(32) int valid[8];
+            PACK(8)
+            rtcIntersect8(valid, w->scene, ctx, &p);
+            for (int l = 0; l < 8 && b + l < n; l++)
+                batch[b + l].hit.geomID = p.hit.geomID[l];
+        }
     } else {
         for (int b = 0; b < n; b += 16) {
             _Alignas(64) struct RTCRayHit16 p;
             _Alignas(64) int valid[16];
-            for (int l = 0; l < 16; l++) {
-                const struct RTCRayHit *r = &batch[b + l < n ? b + l : n - 1];
-                valid[l] = b + l < n ? -1 : 0;
-                p.ray.org_x[l] = r->ray.org_x, p.ray.org_y[l] = r->ray.org_y, p.ray.org_z[l] = r->ray.org_z;
-                p.ray.dir_x[l] = r->ray.dir_x, p.ray.dir_y[l] = r->ray.dir_y, p.ray.dir_z[l] = r->ray.dir_z;
-                p.ray.tnear[l] = 0.0f, p.ray.tfar[l] = INFINITY, p.ray.time[l] = 0.0f;
-                p.ray.mask[l] = 0xFFFFFFFFu, p.ray.id[l] = 0, p.ray.flags[l] = 0;
-                p.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
-            }
+            PACK(16)
             rtcIntersect16(valid, w->scene, ctx, &p);
             for (int l = 0; l < 16 && b + l < n; l++)
                 batch[b + l].hit.geomID = p.hit.geomID[l];

@@ -149,7 +149,7 @@ for scene in "${SCENES[@]}"; do
         "$(calc "$dr_rps / 1e6")" "$(calc "$em_rps / 1e6")" "$ratio" "$(yesno "$ratio >= $THROUGHPUT_GOAL")" "$other"
     # the other ceilings: packets and streams, incoherent and coherent rays
     ceil_json=() ceil_line=()
-    for api in rtcIntersect1 rtcIntersect16 rtcIntersect1M; do
+    for api in rtcIntersect1 rtcIntersect8 rtcIntersect16 rtcIntersect1M; do
         for pat in incoherent coherent; do
             v=$(calc "$(json_num "$M_OUT" "${api}_$pat" ceilings)" %.0f)
             ceil_json+=("\"${api}_$pat\": $v")
@@ -157,7 +157,7 @@ for scene in "${SCENES[@]}"; do
         done
     done
     best_inc=$(calc "$(json_num "$M_OUT" rtcIntersect1M_incoherent ceilings)" %.0f)
-    for api in rtcIntersect1 rtcIntersect16; do
+    for api in rtcIntersect1 rtcIntersect8 rtcIntersect16; do
         v=$(calc "$(json_num "$M_OUT" "${api}_incoherent" ceilings)" %.0f)
         best_inc=$(calc "$v > $best_inc ? $v : $best_inc" %.0f)
     done
