@@ -33,11 +33,10 @@ void dr_cdf_guide_build(const double *cdf, int64_t n, uint32_t *at, int64_t k)
 
 int64_t dr_cdf_find_guided(const double *cdf, int64_t n, const uint32_t *at, int64_t k, double u)
 {
-    double x = u * (double)k;
     /* u outside [0, 1) or NaN: the plain search answers as it always did */
-    if (!(x >= 0.0 && x < (double)k))
+    int64_t j = dr_cdf_guide_bucket(k, u);
+    if (j < 0)
         return dr_cdf_find(cdf, n, u);
-    int64_t j = (int64_t)x;
     /* The answer lies in [at[j], at[j+1]] when j / k <= u < (j+1) / k. The
      * product u * k may round across a bucket edge, so both ends are checked
      * against the search's own condition; when a check fails the search

@@ -45,6 +45,13 @@ static inline void dr_mesh_prefetch_triangle(const struct dr_mesh *m, int64_t tr
     __builtin_prefetch(m->material + tri);
     __builtin_prefetch(m->flags + tri);
 }
+/* Only the positions: a point sampled on the triangle (light sampling). */
+static inline void dr_mesh_prefetch_positions(const struct dr_mesh *m, int64_t tri)
+{
+    const uint32_t *idx = m->indices + 3 * (size_t)tri;
+    for (int k = 0; k < 3; k++)
+        __builtin_prefetch(m->positions + 3 * (size_t)idx[k]);
+}
 static inline void dr_mesh_prefetch_vertices(const struct dr_mesh *m, int64_t tri)
 {
     const uint32_t *idx = m->indices + 3 * (size_t)tri;

@@ -453,7 +453,10 @@ struct light8 {
  * as the search answers 0), counted for the eight lanes together. */
 static void find_entries(const struct dr_light_tables *lt, dr_f8 u, int64_t e[DR_SIMD_W])
 {
-    if (lt->n_entries > SHORT_TABLE) {
+    if (lt->n_entries > SHORT_TABLE) {   /* (the lanes' cache misses overlapped: cdf.h) */
+        for (int stage = 0; stage < 2; stage++)
+            for (int i = 0; i < DR_SIMD_W; i++)
+                dr_cdf_prefetch_guided(lt->cdf, lt->cdf_guide, lt->n_entries, u[i], stage);
         for (int i = 0; i < DR_SIMD_W; i++)
             e[i] = dr_cdf_find_guided(lt->cdf, lt->n_entries, lt->cdf_guide, lt->n_entries, u[i]);
         return;
@@ -475,10 +478,30 @@ static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *
     int64_t entry[DR_SIMD_W];
     find_entries(lt, u_pick, entry);
     for (int i = 0; i < DR_SIMD_W; i++) {
-        int64_t e = entry[i];
-        other[i] = e >= lt->n_emitters;
+        other[i] = entry[i] >= lt->n_emitters;
         if (other[i])
-            e = lt->n_emitters > 0 ? 0 : -1;
+            entry[i] = lt->n_emitters > 0 ? 0 : -1;
+    }
+    /* Each lane's reads depend on the one before (entry, its triangle, the
+     * triangle's vertices); on a scene with thousands of emitters each is a
+     * cache miss. Asked for stage by stage for all lanes first, the lanes'
+     * misses overlap instead of following one another. */
+    if (lt->n_emitters > SHORT_TABLE) {
+        for (int i = 0; i < DR_SIMD_W; i++)
+            if (entry[i] >= 0) {
+                __builtin_prefetch(lt->emitter_tri + entry[i]);
+                __builtin_prefetch(lt->pick + entry[i]);
+                __builtin_prefetch(lt->emitter_area + entry[i]);
+            }
+        for (int i = 0; i < DR_SIMD_W; i++)
+            if (entry[i] >= 0)
+                dr_mesh_prefetch_triangle(m, lt->emitter_tri[entry[i]]);
+        for (int i = 0; i < DR_SIMD_W; i++)
+            if (entry[i] >= 0)
+                dr_mesh_prefetch_positions(m, lt->emitter_tri[entry[i]]);
+    }
+    for (int i = 0; i < DR_SIMD_W; i++) {
+        int64_t e = entry[i];
         if (e < 0) {   /* no emitting triangle at all: triangle 0 stands in */
             (*pick)[i] = 0.0, (*area)[i] = 1.0, L->ltri[i] = 0;
             L->lmat[i] = &s->materials[m->material[0]];

@@ -493,6 +493,27 @@ static struct dr_scene *coloured_box(void)
     return sb_finish(&b);
 }
 
+/* A ceiling lamp of 6 x 6 tiles (72 emitting triangles: the light table is
+ * searched through its guide and the lanes' reads of it are prefetched,
+ * path_simd.c) and a point light, so that some lanes pick a light that is
+ * not a triangle of that table. */
+static struct dr_scene *tiled_lamp_box(void)
+{
+    struct sb b;
+    sb_init(&b);
+    sb_open_box(&b, 2.0, sb_material(&b, sb_diffuse(dr_v3(0.8, 0.7, 0.6))));
+    sb_box(&b, dr_v3(-0.5, 0.0, -0.5), dr_v3(0.0, 0.7, 0.0), sb_material(&b, glossy_blue()));
+    int lamp = sb_material(&b, warm_lamp());
+    for (int i = 0; i < 6; i++)
+        for (int j = 0; j < 6; j++)   /* faces down */
+            sb_quad(&b, dr_v3(-0.3 + 0.1 * i, 1.9, -0.3 + 0.1 * j), dr_v3(0.1, 0, 0), dr_v3(0, 0, 0.1), lamp);
+    sb_light(&b, light(DR_LIGHT_POINT, dr_v3(0.5, 1.2, 0.5), dr_v3(0, -1, 0), 2.0));
+    struct dr_scene *s = sb_finish(&b);
+    struct dr_light_tables lt;
+    CHECK(dr_light_tables(s->light_sampler, &lt) && lt.n_emitters == 72, "the tiled lamp is 72 emitters");
+    return s;
+}
+
 /* radiance_matches_exactly on scene s (destroyed after), which must have
  * the effects named and qualify for the eight-lane stages, most of whose
  * hits they must take. */
@@ -535,6 +556,7 @@ static void test_wavefront_matches_one_path(void)
     exact_with_groups(sky_box(), DR_FX_ENV_CONSTANT, sb_camera(dr_v3(0, 2.5, 2.0), dr_v3(0, 0.3, 0), 60.0),
                       "sky-lit box");
     exact_with_groups(bumpy_box(), DR_FX_NORMAL_MAPS, inside, "bumpy box");
+    exact_with_groups(tiled_lamp_box(), DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS, inside, "tiled lamp box");
     s = coloured_box();
     CHECK(!dr_wave_prefetches(s), "the coloured box is shaded without prefetching");
     exact_with_groups(s, DR_FX_VERTEX_COLORS, inside, "coloured box");
