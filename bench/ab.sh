@@ -16,13 +16,20 @@
 # peer configuration (256x256, 64 spp, depth 8, 2 threads). Prints each run's
 # render seconds (`render --json`, time.render), the medians, NEW / OLD, and
 # whether the two binaries' last images are identical (idiff).
+#
+#   bench/ab.sh OLD NEW SCENE ROUNDS grad GRAD OPTIONS...
+#
+# compares gradients instead: `drender grad SCENE GRAD OPTIONS --json`
+# (reverse mode: --target, --param ...), each run's time.primal +
+# time.gradient, and whether the two binaries' last gradients and standard
+# errors are identical to the last digit.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # shellcheck source=bench/lib.sh
 source bench/lib.sh
 
 if [[ $# -lt 2 || $1 == -h || $1 == --help ]]; then
-    sed -n '2,18p' "$0" | sed 's/^# \{0,1\}//'
+    sed -n '2,25p' "$0" | sed 's/^# \{0,1\}//'
     exit 2
 fi
 OLD=$1 NEW=$2
@@ -30,6 +37,11 @@ SCENE=${3:-../shared/bench/peer-cornell-box.gltf}
 ROUNDS=${4:-5}
 shift $(($# < 4 ? $# : 4))
 OPTS=("$@")
+CMD=render
+if [[ ${#OPTS[@]} -gt 0 && ${OPTS[0]} == grad ]]; then
+    CMD=grad
+    OPTS=("${OPTS[@]:1}")
+fi
 [[ ${#OPTS[@]} -gt 0 ]] || OPTS=(--res 256x256 --spp 64 --max-depth 8 --threads 2)
 for b in "$OLD" "$NEW"; do
     [[ -x $b ]] || { echo "ab.sh: $b is not an executable" >&2; exit 1; }
@@ -39,15 +51,21 @@ done
 TMP=$(mktemp -d)
 trap 'rm -rf "$TMP"' EXIT
 
-# run BIN TAG: one render; prints its render seconds
+# run BIN TAG: one render (or gradient); prints its seconds
 run() {
-    local json
-    if ! json=$("$1" render "$SCENE" -o "$TMP/$2.exr" --json "${OPTS[@]}" 2>"$TMP/stderr"); then
-        echo "ab.sh: '$1 render $SCENE ${OPTS[*]}' failed:" >&2
+    local json out=(-o "$TMP/$2.exr")
+    [[ $CMD == render ]] || out=()
+    if ! json=$("$1" "$CMD" "$SCENE" "${out[@]}" --json "${OPTS[@]}" 2>"$TMP/stderr"); then
+        echo "ab.sh: '$1 $CMD $SCENE ${OPTS[*]}' failed:" >&2
         cat "$TMP/stderr" >&2
         exit 1
     fi
-    calc "$(json_num "$json" render time)" %.4f
+    if [[ $CMD == render ]]; then
+        calc "$(json_num "$json" render time)" %.4f
+    else   # the gradients and their standard errors, for the comparison at the end
+        printf '%s\n' "$json" | sed -n 's/.*"parameters": *//p' >"$TMP/$2.grad"
+        calc "$(json_num "$json" primal time) + $(json_num "$json" gradient time)" %.4f
+    fi
 }
 
 A=() B=()
@@ -59,7 +77,15 @@ for ((r = 1; r <= ROUNDS; r++)); do
 done
 MA=$(median "${A[@]}") MB=$(median "${B[@]}")
 echo "median: old $MA s, new $MB s; new / old $(calc "$MB / $MA" %.3f)"
-if command -v idiff >/dev/null; then
+if [[ $CMD == grad ]]; then
+    if cmp -s "$TMP/old.grad" "$TMP/new.grad"; then
+        echo "gradients: identical"
+    else
+        echo "gradients: differ"
+        echo "  old: $(cat "$TMP/old.grad")"
+        echo "  new: $(cat "$TMP/new.grad")"
+    fi
+elif command -v idiff >/dev/null; then
     if idiff -fail 0 -warn 0 "$TMP/old.exr" "$TMP/new.exr" >/dev/null 2>&1; then
         echo "images: identical"
     else

@@ -84,16 +84,24 @@ static void generate(const struct worker *w, struct dr_sampler *s, long first, i
     }
 }
 
-/* Rays [b, b + W) of batch into packet p (lanes past n repeat the last ray, masked off by valid). */
-#define PACK(W) \
-    for (int l = 0; l < (W); l++) { \
-        const struct RTCRayHit *r = &batch[b + l < n ? b + l : n - 1]; \
-        valid[l] = b + l < n ? -1 : 0; \
-        p.ray.org_x[l] = r->ray.org_x, p.ray.org_y[l] = r->ray.org_y, p.ray.org_z[l] = r->ray.org_z; \
-        p.ray.dir_x[l] = r->ray.dir_x, p.ray.dir_y[l] = r->ray.dir_y, p.ray.dir_z[l] = r->ray.dir_z; \
-        p.ray.tnear[l] = 0.0f, p.ray.tfar[l] = INFINITY, p.ray.time[l] = 0.0f; \
-        p.ray.mask[l] = 0xFFFFFFFFu, p.ray.id[l] = 0, p.ray.flags[l] = 0; \
-        p.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID; \
+/* Casts batch[0..n) as W-wide packets of type RAYHIT through INTERSECT
+ * (lanes past n repeat the last ray, masked off by valid). */
+#define CAST_PACKETS(W, RAYHIT, INTERSECT) \
+    for (int b = 0; b < n; b += (W)) { \
+        _Alignas(64) struct RAYHIT p; \
+        _Alignas(64) int valid[W]; \
+        for (int l = 0; l < (W); l++) { \
+            const struct RTCRayHit *r = &batch[b + l < n ? b + l : n - 1]; \
+            valid[l] = b + l < n ? -1 : 0; \
+            p.ray.org_x[l] = r->ray.org_x, p.ray.org_y[l] = r->ray.org_y, p.ray.org_z[l] = r->ray.org_z; \
+            p.ray.dir_x[l] = r->ray.dir_x, p.ray.dir_y[l] = r->ray.dir_y, p.ray.dir_z[l] = r->ray.dir_z; \
+            p.ray.tnear[l] = 0.0f, p.ray.tfar[l] = INFINITY, p.ray.time[l] = 0.0f; \
+            p.ray.mask[l] = 0xFFFFFFFFu, p.ray.id[l] = 0, p.ray.flags[l] = 0; \
+            p.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID; \
+        } \
+        INTERSECT(valid, w->scene, ctx, &p); \
+        for (int l = 0; l < (W) && b + l < n; l++) \
+            batch[b + l].hit.geomID = p.hit.geomID[l]; \
     }
 
 static long cast_batch(const struct worker *w, struct RTCIntersectContext *ctx, struct RTCRayHit *batch, int n)
@@ -105,23 +113,9 @@ static long cast_batch(const struct worker *w, struct RTCIntersectContext *ctx, 
     } else if (w->api == API_1M) {
         rtcIntersect1M(w->scene, ctx, batch, (unsigned)n, sizeof *batch);
     } else if (w->api == API_8) {
-        for (int b = 0; b < n; b += 8) {
-            _Alignas(32) struct RTCRayHit8 p;
-            _Alignas(32) int valid[8];
-            PACK(8)
-            rtcIntersect8(valid, w->scene, ctx, &p);
-            for (int l = 0; l < 8 && b + l < n; l++)
-                batch[b + l].hit.geomID = p.hit.geomID[l];
-        }
+        CAST_PACKETS(8, RTCRayHit8, rtcIntersect8)
     } else {
-        for (int b = 0; b < n; b += 16) {
-            _Alignas(64) struct RTCRayHit16 p;
-            _Alignas(64) int valid[16];
-            PACK(16)
-            rtcIntersect16(valid, w->scene, ctx, &p);
-            for (int l = 0; l < 16 && b + l < n; l++)
-                batch[b + l].hit.geomID = p.hit.geomID[l];
-        }
+        CAST_PACKETS(16, RTCRayHit16, rtcIntersect16)
     }
     for (int i = 0; i < n; i++)
         hits += batch[i].hit.geomID != RTC_INVALID_GEOMETRY_ID;
