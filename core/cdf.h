@@ -24,27 +24,14 @@ void dr_cdf_guide_build(const double *cdf, int64_t n, uint32_t *at, int64_t k);
 /* dr_cdf_find(cdf, n, u) through the guide at[0..k] of the same cdf. */
 int64_t dr_cdf_find_guided(const double *cdf, int64_t n, const uint32_t *at, int64_t k, double u);
 
-/* For many lookups at once: the guide's bucket of u (what
- * dr_cdf_find_guided reads first), -1 where it searches without the guide.
- * A caller with several u asks the cache for all their buckets, then for
- * all their cdf entries, then looks up: a big table's misses overlap
- * instead of stalling one lookup after another (dr_cdf_prefetch_guided). */
+/* The guide's bucket j of u: dr_cdf_find_guided reads at[j], at[j + 1],
+ * then cdf[at[j]]; -1 where it searches without the guide. A caller with
+ * several u can ask the cache for all their at[j], then all their
+ * cdf[at[j]], before looking any up, so that a big table's misses overlap. */
 static inline int64_t dr_cdf_guide_bucket(int64_t k, double u)
 {
     double x = u * (double)k;
     return x >= 0.0 && x < (double)k ? (int64_t)x : -1;
-}
-/* stage 0: the bucket's guide entries; stage 1 (after stage 0 for every u):
- * the cdf values the lookup compares first. Changes no result. */
-static inline void dr_cdf_prefetch_guided(const double *cdf, const uint32_t *at, int64_t k, double u, int stage)
-{
-    int64_t j = dr_cdf_guide_bucket(k, u);
-    if (j < 0)
-        return;
-    if (stage == 0)
-        __builtin_prefetch(at + j);
-    else
-        __builtin_prefetch(cdf + at[j]);
 }
 
 #endif

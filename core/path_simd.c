@@ -453,10 +453,14 @@ struct light8 {
  * as the search answers 0), counted for the eight lanes together. */
 static void find_entries(const struct dr_light_tables *lt, dr_f8 u, int64_t e[DR_SIMD_W])
 {
-    if (lt->n_entries > SHORT_TABLE) {   /* (the lanes' cache misses overlapped: cdf.h) */
-        for (int stage = 0; stage < 2; stage++)
-            for (int i = 0; i < DR_SIMD_W; i++)
-                dr_cdf_prefetch_guided(lt->cdf, lt->cdf_guide, lt->n_entries, u[i], stage);
+    if (lt->n_entries > SHORT_TABLE) {   /* the lanes' cache misses overlapped (cdf.h) */
+        int64_t j[DR_SIMD_W];
+        for (int i = 0; i < DR_SIMD_W; i++)
+            if ((j[i] = dr_cdf_guide_bucket(lt->n_entries, u[i])) >= 0)
+                __builtin_prefetch(lt->cdf_guide + j[i]);
+        for (int i = 0; i < DR_SIMD_W; i++)
+            if (j[i] >= 0)
+                __builtin_prefetch(lt->cdf + lt->cdf_guide[j[i]]);
         for (int i = 0; i < DR_SIMD_W; i++)
             e[i] = dr_cdf_find_guided(lt->cdf, lt->n_entries, lt->cdf_guide, lt->n_entries, u[i]);
         return;
