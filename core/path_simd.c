@@ -330,8 +330,12 @@ bool dr_path8_applies(const struct dr_scene *s, const struct dr_path_opts *opts)
 bool dr_path8_lane(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_sampler *smp,
                    int64_t tri)
 {
-    return tri >= 0 && smp->kind == DR_SAMPLER_INDEPENDENT &&
-           !(opts->params && opts->params->mat_bsdf_active[s->mesh.material[tri]]);
+    return smp->kind == DR_SAMPLER_INDEPENDENT && dr_path8_hit(s, opts, tri);
+}
+
+bool dr_path8_hit(const struct dr_scene *s, const struct dr_path_opts *opts, int64_t tri)
+{
+    return tri >= 0 && !(opts->params && opts->params->mat_bsdf_active[s->mesh.material[tri]]);
 }
 
 /* Does shading a hit on material m read a texture (or the vertex colours):

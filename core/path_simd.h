@@ -81,6 +81,9 @@ bool dr_path8_applies(const struct dr_scene *scene, const struct dr_path_opts *o
  * in a run dr_path8_applies to. */
 bool dr_path8_lane(const struct dr_scene *scene, const struct dr_path_opts *opts, const struct dr_sampler *sampler,
                    int64_t tri);
+/* The same for a lane whose sampler is the independent one (arrays of paths
+ * that share the kind). */
+bool dr_path8_hit(const struct dr_scene *scene, const struct dr_path_opts *opts, int64_t tri);
 
 /* Does shading a hit on triangle tri read textures (or vertex colours)? Such
  * lanes call the scalar material, emission and normal-map functions with

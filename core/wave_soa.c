@@ -44,6 +44,29 @@ struct dr_wave_soa {
     double inf[SLOTS];                          /* the traces' tmax */
     struct dr_hit hit[SLOTS];                   /* textured lanes' hits, located to prefetch their texels */
     struct dr_path8 group[LANES / DR_SIMD_W];   /* the hit stage's results, for the continuation */
+    /* path replay's primal walks only (dr_wave_soa_walk; out is NULL in a radiance run) */
+    const struct dr_wave_soa_walks *out;
+    double rx[SLOTS], ry[SLOTS], rz[SLOTS];     /* true / tracing throughput (dr_path_state's ratio) */
+    double Tx[SLOTS], Ty[SLOTS], Tz[SLOTS];     /* radiance with the true throughput (L: the tracing one's) */
+    int last_diff[SLOTS];
+    struct scalar_path *scalar;                 /* this step's paths at vertices for the scalar stages */
+    int n_scalar;
+};
+
+/* A path whose vertex this step takes the scalar stages (a material with a
+ * BSDF parameter: its vertex substitutes zero channels and has a derivative
+ * term, path.h), out of the arrays from its trace to its continuation. */
+struct scalar_path {
+    int64_t item, tri;            /* the run's index; the trace's answer */
+    int last_diff;
+    struct dr_path_state st;
+    struct dr_sampler smp;
+    dr_vec3 L, T;                 /* as the arrays' */
+    dr_vec3 beta, ratio;          /* the throughput the vertex was reached with */
+    enum dr_step_next next;
+    bool occluded;
+    struct dr_shadow_ray shadow;
+    struct dr_path_vertex v;
 };
 
 struct dr_wave_soa *dr_wave_soa_create(void)
@@ -60,12 +83,24 @@ struct dr_wave_soa *dr_wave_soa_create(void)
 
 void dr_wave_soa_destroy(struct dr_wave_soa *w)
 {
+    if (w)
+        free(w->scalar);
     free(w);
 }
 
 size_t dr_wave_soa_bytes(void)
 {
     return sizeof(struct dr_wave_soa);
+}
+
+size_t dr_wave_soa_walk_bytes(void)
+{
+    return sizeof(struct dr_wave_soa) + sizeof(struct scalar_path) * LANES;
+}
+
+bool dr_wave_soa_walks_apply(const struct dr_scene *s, const struct dr_path_opts *opts, uint32_t sampler_kind)
+{
+    return sampler_kind == DR_SAMPLER_INDEPENDENT && dr_path8_applies(s, opts);
 }
 
 bool dr_wave_soa_applies(const struct dr_scene *s, const struct dr_path_opts *opts, uint32_t sampler_kind)
@@ -90,6 +125,13 @@ static void start_path(struct dr_wave_soa *w, int k, int64_t item, dr_wave_start
     w->depth[k] = 0.0;
     w->key[k] = smp.key;
     w->item[k] = item;
+    if (w->out) {
+        w->rx[k] = w->ry[k] = w->rz[k] = 1.0;
+        w->Tx[k] = w->Ty[k] = w->Tz[k] = 0.0;
+        w->last_diff[k] = 0;
+        if (w->out->log)
+            w->out->log[item].n = 0;
+    }
 }
 
 static void move_path(struct dr_wave_soa *w, int to, int from)
@@ -104,6 +146,32 @@ static void move_path(struct dr_wave_soa *w, int to, int from)
     w->key[to] = w->key[from];
     w->item[to] = w->item[from];
     w->tri[to] = w->tri[from];
+    if (w->out) {
+        w->rx[to] = w->rx[from], w->ry[to] = w->ry[from], w->rz[to] = w->rz[from];
+        w->Tx[to] = w->Tx[from], w->Ty[to] = w->Ty[from], w->Tz[to] = w->Tz[from];
+        w->last_diff[to] = w->last_diff[from];
+    }
+}
+
+/* A walk's end (dr_wave_soa_walk): its sums to the caller. */
+static void walk_done(const struct dr_wave_soa *w, int64_t item, dr_vec3 L, dr_vec3 T, int last_diff)
+{
+    w->out->L[item] = T;
+    w->out->L_sub[item] = L;
+    w->out->last_diff[item] = last_diff;
+}
+
+/* The trace's answer (`tri`) and the shadow ray's (`occ`, with occluded) of
+ * the path at `depth`, for its replay (wavefront.h). */
+static inline void log_trace(const struct dr_wave_soa *w, int64_t item, int depth, int64_t tri)
+{
+    if (w->out && w->out->log && depth <= DR_WAVE_REPLAY_DEPTH)
+        w->out->log[item].tri[(w->out->log[item].n = depth) - 1] = tri;
+}
+static inline void log_shadow(const struct dr_wave_soa *w, int64_t item, int depth, bool occluded)
+{
+    if (w->out && w->out->log && depth <= DR_WAVE_REPLAY_DEPTH)
+        w->out->log[item].occ[depth - 1] = occluded;
 }
 
 static inline dr_f8 load8(const double *a)
@@ -142,6 +210,28 @@ static void trace(struct dr_wave_soa *w, const struct dr_scene *s, int n_live, i
     for (int k = 0; prefetch && k < n_live; k++)
         if (w->tri[k] >= 0)
             dr_mesh_prefetch_triangle(&s->mesh, w->tri[k]);
+    for (int k = 0; w->out && k < n_live; k++)
+        log_trace(w, w->item[k], (int)w->depth[k], w->tri[k]);
+}
+
+/* Slot k's path as the scalar walker holds it, just begun on its vertex
+ * (dr_path_step_begin: the trace counted its segment already) in *v, with
+ * its sampler at the vertex's numbers. */
+static void scalar_state(const struct dr_wave_soa *w, int k, struct dr_path_state *st, struct dr_sampler *smp,
+                         struct dr_path_vertex *v)
+{
+    dr_path_start(st, dr_v3(w->ox[k], w->oy[k], w->oz[k]), dr_v3(w->dx[k], w->dy[k], w->dz[k]));
+    st->prev_pdf = w->prev_pdf[k];
+    st->prev_p = dr_v3(w->px[k], w->py[k], w->pz[k]);
+    st->depth = (int)w->depth[k] - 1;
+    st->beta = dr_v3(w->bx[k], w->by[k], w->bz[k]);
+    if (w->out)
+        st->ratio = dr_v3(w->rx[k], w->ry[k], w->rz[k]);
+    dr_sampler_init(smp, 0, 0, 0);
+    smp->key = w->key[k];
+    smp->dim = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)st->depth;
+    v->mrec = NULL;   /* (no media here) */
+    dr_path_step_begin(st, v);
 }
 
 /* A ray that left the scene: the scalar walker's stage (the environment's
@@ -149,36 +239,53 @@ static void trace(struct dr_wave_soa *w, const struct dr_scene *s, int n_live, i
 static void escaped(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int k,
                     dr_vec3 *out)
 {
-    if (!(opts->stages & DR_STAGE_ENV)) {   /* nothing out there: a term of 0, summed as the walker sums it */
-        dr_vec3 beta = dr_v3(w->bx[k], w->by[k], w->bz[k]);
-        out[w->item[k]] = dr_add(dr_v3(w->Lx[k], w->Ly[k], w->Lz[k]), dr_mul(beta, dr_v3s(0.0)));
+    dr_vec3 e = dr_v3s(0.0);   /* nothing out there: a term of 0, summed as the walker sums it */
+    int last_diff = w->out ? w->last_diff[k] : 0;
+    if (opts->stages & DR_STAGE_ENV) {
+        struct dr_path_state st;
+        struct dr_sampler smp;
+        struct dr_path_vertex v;
+        struct dr_shadow_ray shadow;
+        scalar_state(w, k, &st, &smp, &v);
+        dr_path_step_hit(s, opts, &st, &smp, &v, -1, &shadow);   /* (DR_STEP_END) */
+        e = dr_path_vertex_term(&v);
+        if (opts->params && dr_path_vertex_has_derivative(s, opts->params, &v))
+            last_diff = v.depth;
+    }
+    dr_vec3 c = dr_mul(dr_v3(w->bx[k], w->by[k], w->bz[k]), e), L = dr_add(dr_v3(w->Lx[k], w->Ly[k], w->Lz[k]), c);
+    if (!w->out) {
+        out[w->item[k]] = L;
         return;
     }
-    struct dr_path_state st;
-    dr_path_start(&st, dr_v3(w->ox[k], w->oy[k], w->oz[k]), dr_v3(w->dx[k], w->dy[k], w->dz[k]));
-    st.prev_pdf = w->prev_pdf[k];
-    st.prev_p = dr_v3(w->px[k], w->py[k], w->pz[k]);
-    st.depth = (int)w->depth[k] - 1;   /* (dr_path_step_begin counts it again) */
-    st.beta = dr_v3(w->bx[k], w->by[k], w->bz[k]);
-    struct dr_sampler smp;
-    dr_sampler_init(&smp, 0, 0, 0);
-    smp.key = w->key[k];
-    smp.dim = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)st.depth;
-    struct dr_path_vertex v;
-    struct dr_shadow_ray shadow;
-    dr_path_step_begin(&st, &v);
-    dr_path_step_hit(s, opts, &st, &smp, &v, -1, &shadow);   /* (DR_STEP_END) */
-    out[w->item[k]] = dr_add(dr_v3(w->Lx[k], w->Ly[k], w->Lz[k]), dr_mul(st.beta, dr_path_vertex_term(&v)));
+    dr_vec3 T = dr_add(dr_v3(w->Tx[k], w->Ty[k], w->Tz[k]), dr_mul(dr_v3(w->rx[k], w->ry[k], w->rz[k]), c));
+    walk_done(w, w->item[k], L, T, last_diff);
 }
 
-/* The paths whose ray left the scene end; the others close up, in order
- * (moving the last paths into the gaps instead was slower: a pixel's
- * samples, started together, stay neighbours and their first bounces make
- * the more coherent packets). Returns how many remain. */
+/* Slot k's path out of the arrays, to the scalar stages this step. */
+static void take_scalar(struct dr_wave_soa *w, int k)
+{
+    struct scalar_path *p = &w->scalar[w->n_scalar++];
+    p->item = w->item[k];
+    p->tri = w->tri[k];
+    p->last_diff = w->last_diff[k];
+    scalar_state(w, k, &p->st, &p->smp, &p->v);
+    p->L = dr_v3(w->Lx[k], w->Ly[k], w->Lz[k]);
+    p->T = dr_v3(w->Tx[k], w->Ty[k], w->Tz[k]);
+    p->beta = p->st.beta;
+    p->ratio = p->st.ratio;
+}
+
+/* The paths whose ray left the scene end; in a walk, those whose vertex
+ * takes the scalar stages leave the arrays for this step (take_scalar); the
+ * others close up, in order (moving the last paths into the gaps instead
+ * was slower: a pixel's samples, started together, stay neighbours and
+ * their first bounces make the more coherent packets). Returns how many
+ * remain. */
 static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int n_live,
                        bool prefetch, dr_vec3 *out)
 {
     int kept = 0;
+    w->n_scalar = 0;
     for (int k = 0; k < n_live; k++) {
         if (w->tri[k] < 0) {
             escaped(w, s, opts, k, out);
@@ -186,6 +293,10 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
         }
         if (prefetch)
             dr_mesh_prefetch_vertices(&s->mesh, w->tri[k]);
+        if (w->out && !dr_path8_hit(s, opts, w->tri[k])) {
+            take_scalar(w, k);
+            continue;
+        }
         if (kept != k)
             move_path(w, kept, k);
         kept++;
@@ -231,6 +342,29 @@ static void pad_last_group(struct dr_wave_soa *w, int n_live)
         move_path(w, k, i0);
 }
 
+/* The scalar paths' hit stages (dr_path_step_hit), their shadow rays added
+ * to the step's batch from index n_shadow on (owner SLOTS + the path's
+ * index). Returns the batch's size. */
+static int shade_scalar(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
+                        int n_shadow, struct dr_ray_counts *counts)
+{
+    for (int j = 0; j < w->n_scalar; j++) {
+        struct scalar_path *p = &w->scalar[j];
+        p->next = dr_path_step_hit(s, opts, &p->st, &p->smp, &p->v, p->tri, &p->shadow);
+        p->occluded = false;
+        if (p->next != DR_STEP_SHADOW)
+            continue;
+        counts->shadow++;
+        if (p->shadow.tmax > 0.0) {
+            w->sox[n_shadow] = p->shadow.o.x, w->soy[n_shadow] = p->shadow.o.y, w->soz[n_shadow] = p->shadow.o.z;
+            w->sdx[n_shadow] = p->shadow.d.x, w->sdy[n_shadow] = p->shadow.d.y, w->sdz[n_shadow] = p->shadow.d.z;
+            w->stmax[n_shadow] = p->shadow.tmax;
+            w->sowner[n_shadow++] = SLOTS + j;
+        }
+    }
+    return n_shadow;
+}
+
 /* The hit stage of every live path, then their shadow rays as one batch. */
 static void shade(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int n_live,
                   bool located, struct dr_ray_counts *counts)
@@ -256,19 +390,64 @@ static void shade(struct dr_wave_soa *w, const struct dr_scene *s, const struct 
         }
     }
     counts->simd_vertices += (uint64_t)n_live;
+    n_shadow = shade_scalar(w, s, opts, n_shadow, counts);
     struct dr_accel_rays r = {.n = n_shadow, .ox = w->sox, .oy = w->soy, .oz = w->soz,
                               .dx = w->sdx, .dy = w->sdy, .dz = w->sdz, .tmax = w->stmax};
     if (n_shadow > 0)
         dr_accel_occluded_many(s->accel, &r, w->socc);
-    for (int j = 0; j < n_shadow; j++)
-        w->occluded[w->sowner[j]] = w->socc[j];
+    for (int j = 0; j < n_shadow; j++) {
+        int k = w->sowner[j];
+        if (k >= SLOTS) {
+            struct scalar_path *p = &w->scalar[k - SLOTS];
+            p->occluded = w->socc[j];
+            log_shadow(w, p->item, p->st.depth, p->occluded);
+        } else {
+            w->occluded[k] = w->socc[j];
+            log_shadow(w, w->item[k], (int)w->depth[k], w->occluded[k]);
+        }
+    }
+}
+
+/* A scalar path's next-event estimate and continuation (dr_path_nee_end,
+ * dr_path_stage_continue), its term summed as in advance; back into the
+ * arrays at slot `kept` if it goes on. Returns the next free slot. */
+static int finish_scalar(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
+                         struct scalar_path *p, int kept)
+{
+    if (p->next == DR_STEP_SHADOW)
+        dr_path_nee_end(s, &p->v, &p->shadow, p->occluded);
+    bool more = p->next != DR_STEP_END && dr_path_stage_continue(opts, &p->st, &p->v);
+    dr_vec3 c = dr_mul(p->beta, dr_path_vertex_term(&p->v));
+    dr_vec3 L = dr_add(p->L, c), T = dr_add(p->T, dr_mul(p->ratio, c));
+    int last_diff = opts->params && dr_path_vertex_has_derivative(s, opts->params, &p->v) ? p->v.depth : p->last_diff;
+    if (!more) {
+        walk_done(w, p->item, L, T, last_diff);
+        return kept;
+    }
+    const struct dr_path_state *st = &p->st;
+    const int k = kept;
+    w->ox[k] = st->o.x, w->oy[k] = st->o.y, w->oz[k] = st->o.z;
+    w->dx[k] = st->d.x, w->dy[k] = st->d.y, w->dz[k] = st->d.z;
+    w->px[k] = st->prev_p.x, w->py[k] = st->prev_p.y, w->pz[k] = st->prev_p.z;
+    w->prev_pdf[k] = st->prev_pdf;
+    w->bx[k] = st->beta.x, w->by[k] = st->beta.y, w->bz[k] = st->beta.z;
+    w->rx[k] = st->ratio.x, w->ry[k] = st->ratio.y, w->rz[k] = st->ratio.z;
+    w->Lx[k] = L.x, w->Ly[k] = L.y, w->Lz[k] = L.z;
+    w->Tx[k] = T.x, w->Ty[k] = T.y, w->Tz[k] = T.z;
+    w->depth[k] = (double)st->depth;
+    w->key[k] = p->smp.key;
+    w->item[k] = p->item;
+    w->last_diff[k] = last_diff;
+    return kept + 1;
 }
 
 /* The next-event estimates and continuations: each path's vertex term added
- * to its radiance, the paths that end written out, the others closed up.
- * Returns how many go on. (A path only ever moves to a lower slot, one that
- * has been read already.) */
-static int advance(struct dr_wave_soa *w, const struct dr_path_opts *opts, int n_live, dr_vec3 *out)
+ * to its radiance, the paths that end written out, the others closed up
+ * (then the scalar paths' ends, which go on after them). Returns how many
+ * go on. (A path only ever moves to a lower slot, one that has been read
+ * already.) */
+static int advance(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int n_live,
+                   dr_vec3 *out)
 {
     int kept = 0;
     for (int g = 0; g * DR_SIMD_W < n_live; g++) {
@@ -281,12 +460,19 @@ static int advance(struct dr_wave_soa *w, const struct dr_path_opts *opts, int n
         struct dr_path8_out c;
         dr_path8_continue_lanes(opts, G, beta, occluded, &c);
         dr_v3x8 e = dr_path8_term(G, &c);   /* L += beta e, as dr_path_radiance sums */
-        dr_v3x8 L = {load8(w->Lx + i0) + beta.x * e.x, load8(w->Ly + i0) + beta.y * e.y,
-                     load8(w->Lz + i0) + beta.z * e.z};
+        dr_v3x8 be = dr_v3x8_mul(beta, e);
+        dr_v3x8 L = {load8(w->Lx + i0) + be.x, load8(w->Ly + i0) + be.y, load8(w->Lz + i0) + be.z};
+        dr_v3x8 T = L;   /* a walk: T += ratio beta e, as prb.c's walk_vertex sums */
+        if (w->out)
+            T = dr_v3x8_add(load3(w->Tx + i0, w->Ty + i0, w->Tz + i0),
+                            dr_v3x8_mul(load3(w->rx + i0, w->ry + i0, w->rz + i0), be));
         for (int i = 0; i < G->n; i++) {
             int k = i0 + i;
             if (!c.more[i]) {
-                out[w->item[k]] = dr_v3x8_get(&L, i);
+                if (w->out)
+                    walk_done(w, w->item[k], dr_v3x8_get(&L, i), dr_v3x8_get(&T, i), w->last_diff[k]);
+                else
+                    out[w->item[k]] = dr_v3x8_get(&L, i);
                 continue;
             }
             w->ox[kept] = c.o.x[i], w->oy[kept] = c.o.y[i], w->oz[kept] = c.o.z[i];
@@ -298,15 +484,22 @@ static int advance(struct dr_wave_soa *w, const struct dr_path_opts *opts, int n
             w->depth[kept] = w->depth[k];
             w->key[kept] = w->key[k];
             w->item[kept] = w->item[k];
+            if (w->out) {
+                w->rx[kept] = w->rx[k], w->ry[kept] = w->ry[k], w->rz[kept] = w->rz[k];
+                w->Tx[kept] = T.x[i], w->Ty[kept] = T.y[i], w->Tz[kept] = T.z[i];
+                w->last_diff[kept] = w->last_diff[k];
+            }
             kept++;
         }
     }
+    for (int j = 0; j < w->n_scalar; j++)
+        kept = finish_scalar(w, s, opts, &w->scalar[j], kept);
     return kept;
 }
 
-void dr_wave_soa_radiance(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
-                          int64_t n, dr_wave_start_fn start, void *ctx, dr_vec3 *L,
-                          struct dr_ray_counts *counts)
+/* Paths [0, n) to their ends: radiance into L, or (w->out) a walk's sums. */
+static void run(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
+                dr_wave_start_fn start, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts)
 {
     const bool prefetch = dr_wave_prefetches(s);
     int n_live = 0;
@@ -317,12 +510,33 @@ void dr_wave_soa_radiance(struct dr_wave_soa *w, const struct dr_scene *s, const
             start_path(w, n_live++, next++, start, ctx);
         trace(w, s, n_live, first_new, prefetch, counts);
         n_live = end_escaped(w, s, opts, n_live, prefetch, L);
-        if (n_live == 0)
+        if (n_live == 0 && w->n_scalar == 0)
             continue;
-        pad_last_group(w, n_live);
+        if (n_live > 0)
+            pad_last_group(w, n_live);
         if (prefetch)
             locate_textured(w, s, n_live);
         shade(w, s, opts, n_live, prefetch, counts);
-        n_live = advance(w, opts, n_live, L);
+        n_live = advance(w, s, opts, n_live, L);
     }
+}
+
+void dr_wave_soa_radiance(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
+                          int64_t n, dr_wave_start_fn start, void *ctx, dr_vec3 *L,
+                          struct dr_ray_counts *counts)
+{
+    w->out = NULL;
+    run(w, s, opts, n, start, ctx, L, counts);
+}
+
+bool dr_wave_soa_walk(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
+                      dr_wave_start_fn start, void *ctx, const struct dr_wave_soa_walks *out,
+                      struct dr_ray_counts *counts)
+{
+    if (!w->scalar && !(w->scalar = malloc(sizeof(struct scalar_path) * LANES)))
+        return false;
+    w->out = out;
+    run(w, s, opts, n, start, ctx, NULL, counts);
+    w->out = NULL;
+    return true;
 }

@@ -38,6 +38,30 @@ size_t dr_wave_soa_bytes(void);
  * are of kind `sampler_kind`)? */
 bool dr_wave_soa_applies(const struct dr_scene *scene, const struct dr_path_opts *opts, uint32_t sampler_kind);
 
+/* What path replay's primal walks keep of each path, by item (prb's cross
+ * mode, estimators/prb.c: its lanes' walks give the same). */
+struct dr_wave_soa_walks {
+    dr_vec3 *L;                 /* the radiance (with the true throughput) */
+    dr_vec3 *L_sub;             /* ... and with the substitutes' (path.h) */
+    int *last_diff;             /* the depth of the last vertex with a derivative term (0: none) */
+    struct dr_wave_log *log;    /* the walk's ray answers for its replay (NULL: none kept) */
+};
+
+/* Can path replay's primal walks use the arrays (paths whose samplers are of
+ * kind `sampler_kind`; parameters allowed)? The vertices on materials with a
+ * BSDF parameter take the scalar stages (as in wavefront.c), the others the
+ * eight-lane ones. */
+bool dr_wave_soa_walks_apply(const struct dr_scene *scene, const struct dr_path_opts *opts, uint32_t sampler_kind);
+/* Bytes dr_wave_soa_create and dr_wave_soa_walk allocate (for memory estimates). */
+size_t dr_wave_soa_walk_bytes(void);
+
+/* The primal walks of paths [0, n) into out, with the decisions and sums of
+ * dr_wave_run's walks of the same paths (prb.c's lane_vertex without a
+ * sink). False: no memory for its working storage (nothing walked). */
+bool dr_wave_soa_walk(struct dr_wave_soa *w, const struct dr_scene *scene, const struct dr_path_opts *opts, int64_t n,
+                      dr_wave_start_fn start, void *ctx, const struct dr_wave_soa_walks *out,
+                      struct dr_ray_counts *counts);
+
 /* L[i] = the radiance of path i for i in [0, n), as dr_wave_radiance. */
 void dr_wave_soa_radiance(struct dr_wave_soa *w, const struct dr_scene *scene, const struct dr_path_opts *opts,
                           int64_t n, dr_wave_start_fn start, void *ctx, dr_vec3 *L,

@@ -19,7 +19,18 @@
 #include "prb_attached.h"
 
 #include "medium_grad.h"
+#include "wave_soa.h"
 #include "wavefront.h"
+
+/* Cross mode (estimator.h) on the wavefront: the samples parked between
+ * their primal walks and their replays, whose adjoints wait for their
+ * pixels' other samples; by sample (item), as dr_wave_soa_walk writes them. */
+struct cross_items {
+    struct dr_wave_soa_walks walk;   /* the primal walks' radiance, last_diff (struct walk) and ray
+                                        answers (log: the replay traces nothing again) */
+    dr_vec3 *adj;                    /* the adjoint, once the pixel's samples are all walked */
+    int32_t *order;                  /* the samples to replay */
+};
 
 struct prb_job {
     struct dr_est_base b;   /* first: the shared part */
@@ -27,8 +38,8 @@ struct prb_job {
     double radius;          /* attached sampling: the scene's radius */
     bool wave;              /* detached, no media, no derivative sampling: samples as a wavefront */
     struct dr_wave *waves[DR_MAX_THREADS];   /* ... per thread, made on first use */
-    struct prb_item *items[DR_MAX_THREADS];  /* cross mode: a group's parked samples, per thread */
-    int32_t *order[DR_MAX_THREADS];          /* ... and those to replay */
+    struct dr_wave_soa *soas[DR_MAX_THREADS];   /* cross mode's primal walks where the arrays apply (wave_soa.h) */
+    struct cross_items items[DR_MAX_THREADS];   /* cross mode: a group's parked samples, per thread */
     dr_vec3 *adj[DR_MAX_THREADS];            /* one path at a time: a pixel's samples' adjoints, per thread */
 };
 
@@ -36,15 +47,6 @@ struct prb_radiance {
     dr_vec3 true_, sub;   /* L with the true throughput, and with substitutes */
 };
 
-/* Cross mode (estimator.h) on the wavefront: a sample parked between its
- * primal walk and its replay, whose adjoint waits for its pixel's other samples. */
-struct prb_item {
-    struct prb_radiance L;
-    int last_diff;            /* the primal walk's (struct walk) */
-    bool valid;               /* L is finite */
-    dr_vec3 adj;              /* its adjoint, once its pixel's samples are all walked */
-    struct dr_wave_log log;   /* the primal walk's ray answers: the replay traces nothing again */
-};
 /* Samples whose ray answers are parked at most (per thread: about 1.4 MB);
  * with more samples per pixel than this, a replay traces its rays again. */
 #define CROSS_LOGGED_ITEMS 4096
@@ -292,9 +294,7 @@ struct cross_ctx {
     struct lane_ctx run;
     struct dr_grad_sink sink;
     int64_t first_px;            /* item i: sample i % spp of pixel first_px + i / spp */
-    struct prb_item *items;
-    bool logs;                   /* the items keep their walks' ray answers */
-    const int32_t *order;        /* the replays: their items */
+    const struct cross_items *items;
 };
 
 struct cross_lane {
@@ -319,12 +319,19 @@ static void cross_primal_start(void *ctx, int64_t i, void *user, struct dr_sampl
     cross_ray(ctx, user, i, smp, o, d);
 }
 
+/* The same for the arrays' primal walks (dr_wave_soa_walk). */
+static void cross_soa_start(void *ctx, int64_t i, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    struct cross_lane l;
+    cross_ray(ctx, &l, i, smp, o, d);
+}
+
 static void cross_keep_log(void *ctx, void *user, const struct dr_wave_log *log)
 {
     struct cross_ctx *c = ctx;
     const struct cross_lane *l = user;
-    if (c->logs)
-        dr_wave_log_copy(&c->items[l->item].log, log);
+    if (c->items->walk.log)
+        dr_wave_log_copy(&c->items->walk.log[l->item], log);
 }
 
 static enum dr_wave_next cross_primal_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
@@ -332,12 +339,10 @@ static enum dr_wave_next cross_primal_end(void *ctx, void *user, struct dr_sampl
     (void)smp, (void)o, (void)d;
     struct cross_ctx *c = ctx;
     const struct cross_lane *l = user;
-    struct prb_item *it = &c->items[l->item];
-    it->L = l->w.L;
-    it->last_diff = l->w.last_diff;
-    it->valid = dr_v3_finite(l->w.L.true_) && dr_v3_finite(l->w.L.sub);
-    if (!it->valid)
-        c->run.j->b.thr[c->run.thread].invalid++;
+    const struct dr_wave_soa_walks *out = &c->items->walk;
+    out->L[l->item] = l->w.L.true_;
+    out->L_sub[l->item] = l->w.L.sub;
+    out->last_diff[l->item] = l->w.last_diff;
     return DR_WAVE_DONE;
 }
 
@@ -345,11 +350,11 @@ static void cross_replay_start(void *ctx, int64_t k, void *user, struct dr_sampl
 {
     struct cross_ctx *c = ctx;
     struct cross_lane *l = user;
-    cross_ray(c, l, c->order[k], smp, o, d);
-    const struct prb_item *it = &c->items[l->item];
-    l->w.L = it->L;
-    l->w.last_diff = it->last_diff;
-    l->w.adj = it->adj;
+    const struct cross_items *it = c->items;
+    cross_ray(c, l, it->order[k], smp, o, d);
+    l->w.L = (struct prb_radiance){it->walk.L[l->item], it->walk.L_sub[l->item]};
+    l->w.last_diff = it->walk.last_diff[l->item];
+    l->w.adj = it->adj[l->item];
     l->sink = c->sink;
     l->w.sink = &l->sink;
 }
@@ -358,7 +363,7 @@ static const struct dr_wave_log *cross_replay_log(void *ctx, void *user)
 {
     struct cross_ctx *c = ctx;
     const struct cross_lane *l = user;
-    return c->logs ? &c->items[l->item].log : NULL;
+    return c->items->walk.log ? &c->items->walk.log[l->item] : NULL;
 }
 
 static enum dr_wave_next cross_replay_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
@@ -376,6 +381,54 @@ static int64_t cross_group(int spp)
     return spp < CROSS_LOGGED_ITEMS ? CROSS_LOGGED_ITEMS / spp : 1;
 }
 
+/* Bytes of one thread's parked samples (cap of them). */
+static uint64_t cross_items_bytes(int64_t cap)
+{
+    uint64_t log = cap <= CROSS_LOGGED_ITEMS ? sizeof(struct dr_wave_log) : 0;
+    return (uint64_t)cap * (3 * sizeof(dr_vec3) + sizeof(int) + sizeof(int32_t) + log);
+}
+
+/* A thread's parked samples, made on first use (cap of them; ray answers
+ * only if they fit CROSS_LOGGED_ITEMS). False: out of memory. */
+static bool cross_items_make(struct cross_items *it, int64_t cap)
+{
+    if (it->order)
+        return true;
+    it->walk.L = malloc(sizeof(dr_vec3) * (size_t)cap);
+    it->walk.L_sub = malloc(sizeof(dr_vec3) * (size_t)cap);
+    it->walk.last_diff = malloc(sizeof(int) * (size_t)cap);
+    it->walk.log = cap <= CROSS_LOGGED_ITEMS ? malloc(sizeof(struct dr_wave_log) * (size_t)cap) : NULL;
+    it->adj = malloc(sizeof(dr_vec3) * (size_t)cap);
+    it->order = malloc(sizeof(int32_t) * (size_t)cap);
+    return it->walk.L && it->walk.L_sub && it->walk.last_diff && (it->walk.log || cap > CROSS_LOGGED_ITEMS) &&
+           it->adj && it->order;   /* (a partial set is freed by prb_release; order is made last) */
+}
+
+static void cross_items_free(struct cross_items *it)
+{
+    free(it->walk.L);
+    free(it->walk.L_sub);
+    free(it->walk.last_diff);
+    free(it->walk.log);
+    free(it->adj);
+    free(it->order);
+}
+
+/* The primal walks of a cross group's n samples: in arrays where they apply
+ * (wave_soa.h: the same sums and ray answers, faster), else in the lanes. */
+static void cross_primal(struct prb_job *j, int thread, struct cross_ctx *c, int64_t n)
+{
+    struct dr_est_base *b = &j->b;
+    static const struct dr_wave_ops primal = {cross_primal_start, lane_vertex, cross_primal_end, cross_keep_log,
+                                              NULL, true};
+    if (dr_wave_soa_walks_apply(b->p->scene, &b->popts, b->p->sampler) &&
+        (j->soas[thread] || (j->soas[thread] = dr_wave_soa_create())) &&
+        dr_wave_soa_walk(j->soas[thread], b->p->scene, &b->popts, n, cross_soa_start, c, &c->items->walk,
+                         &b->thr[thread].rays))
+        return;   /* (out of memory for the arrays: the lanes, which need none) */
+    dr_wave_run(j->waves[thread], b->p->scene, &b->popts, n, &primal, c, &b->thr[thread].rays);
+}
+
 /* Pixels [begin, end) in cross mode on the wavefront. False: no memory for
  * the lanes or the parked samples (then one path at a time). */
 static bool cross_wave(struct prb_job *j, int thread, int64_t begin, int64_t end, struct dr_grad_sink sink)
@@ -385,36 +438,34 @@ static bool cross_wave(struct prb_job *j, int thread, int64_t begin, int64_t end
     const int64_t group = cross_group(spp), cap = group * spp;
     if (!j->waves[thread] && !(j->waves[thread] = dr_wave_create()))
         return false;
-    if (!j->items[thread] && !(j->items[thread] = malloc(sizeof(struct prb_item) * (size_t)cap)))
+    struct cross_items *it = &j->items[thread];
+    if (!cross_items_make(it, cap))
         return false;
-    if (!j->order[thread] && !(j->order[thread] = malloc(sizeof(int32_t) * (size_t)cap)))
-        return false;
-    struct prb_item *items = j->items[thread];
-    int32_t *order = j->order[thread];
-    static const struct dr_wave_ops primal = {cross_primal_start, lane_vertex, cross_primal_end, cross_keep_log,
-                                              NULL, true};
+    const struct dr_wave_soa_walks *walk = &it->walk;
     static const struct dr_wave_ops replay = {cross_replay_start, lane_vertex, cross_replay_end, NULL,
                                               cross_replay_log, true};
     for (int64_t first = begin; first < end; first += group) {
         const int64_t n_px = end - first < group ? end - first : group;
-        struct cross_ctx c = {.run = {j, thread}, .sink = sink, .first_px = first, .items = items,
-                              .logs = n_px * spp <= CROSS_LOGGED_ITEMS, .order = order};
-        dr_wave_run(j->waves[thread], b->p->scene, &b->popts, n_px * spp, &primal, &c, &b->thr[thread].rays);
+        struct cross_ctx c = {.run = {j, thread}, .sink = sink, .first_px = first, .items = it};
+        cross_primal(j, thread, &c, n_px * spp);
         int32_t n = 0;
         for (int64_t k = 0; k < n_px; k++) {
-            struct prb_item *px_items = items + k * spp;
+            const int64_t i0 = k * spp;
             dr_vec3 sum = dr_v3s(0.0);
-            for (int s = 0; s < spp; s++)
-                if (px_items[s].valid)
-                    sum = dr_add(sum, px_items[s].L.true_);
+            for (int64_t i = i0; i < i0 + spp; i++) {
+                if (dr_v3_finite(walk->L[i]) && dr_v3_finite(walk->L_sub[i]))
+                    sum = dr_add(sum, walk->L[i]);
+                else
+                    b->thr[thread].invalid++;
+            }
             dr_est_cross_pixel(b, first + k, sum);
-            for (int s = 0; s < spp; s++) {
-                if (!px_items[s].valid)
+            for (int64_t i = i0; i < i0 + spp; i++) {
+                if (!dr_v3_finite(walk->L[i]) || !dr_v3_finite(walk->L_sub[i]))
                     continue;
-                px_items[s].adj = dr_est_cross_adjoint(b, first + k, sum, px_items[s].L.true_);
+                it->adj[i] = dr_est_cross_adjoint(b, first + k, sum, walk->L[i]);
                 /* (else the sample does not matter to the loss, or its path has no derivative term) */
-                if (!dr_is_black(px_items[s].adj) && px_items[s].last_diff > 0)
-                    order[n++] = (int32_t)(k * spp + s);
+                if (!dr_is_black(it->adj[i]) && walk->last_diff[i] > 0)
+                    it->order[n++] = (int32_t)i;
             }
         }
         dr_wave_run(j->waves[thread], b->p->scene, &b->popts, n, &replay, &c, &b->thr[thread].rays);
@@ -522,8 +573,13 @@ static int prb_run(struct dr_est_base *b)
     /* what the workers hold besides the gradient: the samples' adjoints, and
      * in cross mode on the wavefront the parked samples (cross_wave) */
     uint64_t per_thread = sizeof(dr_vec3) * (uint64_t)b->p->spp;
-    if (j->wave && b->p->cross)
-        per_thread += (uint64_t)cross_group(b->p->spp) * (uint64_t)b->p->spp * (sizeof(struct prb_item) + sizeof(int32_t));
+    if (j->wave)
+        per_thread += dr_wave_bytes();
+    if (j->wave && b->p->cross) {
+        per_thread += cross_items_bytes(cross_group(b->p->spp) * b->p->spp);
+        if (dr_wave_soa_walks_apply(b->p->scene, &b->popts, b->p->sampler))
+            per_thread += dr_wave_soa_walk_bytes();
+    }
     b->scratch_bytes = per_thread * (uint64_t)b->acc.threads;
     return dr_parallel_for_static((int64_t)b->p->width * b->p->height, PIXEL_CHUNK, b->acc.threads, prb_pixels, j);
 }
@@ -534,8 +590,8 @@ static void prb_release(struct dr_est_base *b)
     free(j->zeros);
     for (int t = 0; t < DR_MAX_THREADS; t++) {
         dr_wave_destroy(j->waves[t]);
-        free(j->items[t]);
-        free(j->order[t]);
+        dr_wave_soa_destroy(j->soas[t]);
+        cross_items_free(&j->items[t]);
         free(j->adj[t]);
     }
 }
