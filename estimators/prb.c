@@ -22,10 +22,10 @@
 #include "wave_soa.h"
 #include "wavefront.h"
 
-/* Cross mode (estimator.h) on the wavefront: the samples parked between
- * their primal walks and their replays, whose adjoints wait for their
- * pixels' other samples; by sample (item), as dr_wave_soa_walk writes them. */
-struct cross_items {
+/* The wavefront's samples parked between their primal walks and their
+ * replays (in cross mode, estimator.h, their adjoints wait for their pixels'
+ * other samples); by sample (item), as dr_wave_soa_walk writes them. */
+struct parked_samples {
     struct dr_wave_soa_walks walk;   /* the primal walks' radiance, last_diff (struct walk) and ray
                                         answers (log: the replay traces nothing again) */
     dr_vec3 *adj;                    /* the adjoint, once the pixel's samples are all walked */
@@ -38,8 +38,8 @@ struct prb_job {
     double radius;          /* attached sampling: the scene's radius */
     bool wave;              /* detached, no media, no derivative sampling: samples as a wavefront */
     struct dr_wave *waves[DR_MAX_THREADS];   /* ... per thread, made on first use */
-    struct dr_wave_soa *soas[DR_MAX_THREADS];   /* cross mode's primal walks where the arrays apply (wave_soa.h) */
-    struct cross_items items[DR_MAX_THREADS];   /* cross mode: a group's parked samples, per thread */
+    struct dr_wave_soa *soas[DR_MAX_THREADS];   /* the wavefront's primal walks where the arrays apply (wave_soa.h) */
+    struct parked_samples items[DR_MAX_THREADS];   /* the wavefront: a group's parked samples, per thread */
     dr_vec3 *adj[DR_MAX_THREADS];            /* one path at a time: a pixel's samples' adjoints, per thread */
 };
 
@@ -49,7 +49,7 @@ struct prb_radiance {
 
 /* Samples whose ray answers are parked at most (per thread: about 1.4 MB);
  * with more samples per pixel than this, a replay traces its rays again. */
-#define CROSS_LOGGED_ITEMS 4096
+#define LOGGED_ITEMS 4096
 
 /* One walk over a path. Without `sink`: the primal, whose radiance goes to
  * L. With it: the replay, which turns L (the primal's result) into the
@@ -179,49 +179,24 @@ static void attached_pixel(struct prb_job *j, int thread, int64_t px, const dr_v
     }
 }
 
-/* ---- the wavefront (wavefront.h): a lane's item is one sample, its primal
- * walk then its replay; each lane has its own sink (forward mode keeps a
- * sample's three channel sums in it; reverse mode's all add to the thread's
- * gradient). Detached sampling without media or derivative sampling only. */
+/* ---- the wavefront (wavefront.h, wave_soa.h): a chunk's pixels that
+ * matter to the loss, in groups whose samples are parked between their
+ * primal walks and their replays: the primal walks of all the group's
+ * samples (in arrays where they apply), then each sample's adjoint (in cross
+ * mode, estimator.h, from its pixel's other samples), then the replays in
+ * the lanes, which answer their ray queries from the primal walks' logs.
+ * Each replay has its own sink (forward mode keeps a sample's three channel
+ * sums in it; reverse mode's all add to the thread's gradient). Detached
+ * sampling without media or derivative sampling only. */
 
 /* Pixels per parallel chunk (and at most per wavefront run). */
 #define PIXEL_CHUNK 16
 
-/* What every wavefront callback needs of its run: the first member of
- * struct wave_ctx and struct cross_ctx, so one vertex callback serves both. */
+/* What every wavefront callback needs of its run. */
 struct lane_ctx {
     struct prb_job *j;
     int thread;
 };
-
-struct wave_ctx {
-    struct lane_ctx run;
-    struct dr_grad_sink sink;   /* the thread's, copied into each lane */
-    int64_t px[PIXEL_CHUNK];
-    dr_vec3 adj[PIXEL_CHUNK];
-};
-
-struct prb_lane {
-    struct walk w;
-    struct dr_grad_sink sink;
-    struct dr_sampler smp0;   /* the sample's first numbers: the replay starts from them again */
-    dr_vec3 o, d;
-    int64_t px;
-};
-_Static_assert(sizeof(struct prb_lane) <= DR_WAVE_USER_BYTES, "a prb lane's state fits");
-
-static void lane_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
-{
-    struct wave_ctx *c = ctx;
-    struct prb_lane *l = user;
-    const int spp = c->run.j->b.p->spp;
-    l->px = c->px[i / spp];
-    l->w.adj = c->adj[i / spp];
-    dr_est_camera_ray(&c->run.j->b, l->px, (int)(i % spp), smp, o, d);
-    l->smp0 = *smp;
-    l->o = *o;
-    l->d = *d;
-}
 
 /* The replay ends at the primal's last vertex with a derivative term: the
  * vertices after it add nothing to the gradient (their share of L is never
@@ -231,8 +206,8 @@ static bool replay_goes_on(const struct walk *w, const struct dr_path_vertex *v)
     return !w->sink || v->depth < w->last_diff;
 }
 
-/* A lane's vertex, in both kinds of run: its lane state begins with its
- * walk (struct prb_lane, struct cross_lane). */
+/* A lane's vertex, primal or replay: its lane state begins with its walk
+ * (struct park_lane). */
 static bool lane_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
                         struct dr_sampler *smp, bool more)
 {
@@ -243,102 +218,55 @@ static bool lane_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, 
     return replay_goes_on(w, v);
 }
 
-/* The primal walk ended: the replay of the same path follows (the wavefront
- * answers its first ray queries from the primal's: no tracing twice). */
-static enum dr_wave_next lane_walk_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
-{
-    struct wave_ctx *c = ctx;
-    struct prb_lane *l = user;
-    struct dr_est_base *b = &c->run.j->b;
-    if (l->w.sink) {   /* the replay ended: the sample is done */
-        dr_est_sample_done(b, c->run.thread, l->px, l->w.sink);
-        return DR_WAVE_DONE;
-    }
-    if (!dr_v3_finite(l->w.L.true_) || !dr_v3_finite(l->w.L.sub)) {
-        b->thr[c->run.thread].invalid++;
-        return DR_WAVE_DONE;
-    }
-    if (l->w.last_diff == 0)
-        return DR_WAVE_DONE;   /* no vertex of the path has a derivative term: no replay */
-    l->sink = c->sink;
-    l->w.sink = &l->sink;
-    *smp = l->smp0;
-    *o = l->o;
-    *d = l->d;
-    return DR_WAVE_REPLAY;
-}
-
-/* The chunk's pixels that matter to the loss, every sample as a lane's item. */
-static bool wave_pixels(struct prb_job *j, int thread, int64_t begin, int64_t end, struct dr_grad_sink sink)
-{
-    struct dr_est_base *b = &j->b;
-    if (!j->waves[thread] && !(j->waves[thread] = dr_wave_create()))
-        return false;   /* no memory for the lanes: one path at a time */
-    struct wave_ctx c = {.run = {j, thread}, .sink = sink};
-    int n = 0;
-    for (int64_t px = begin; px < end; px++)
-        if (dr_est_sample_adjoint(b, px, &c.adj[n]))
-            c.px[n++] = px;
-    /* (walks read only the term of a vertex without a derivative term: eight lanes at a time where they can) */
-    static const struct dr_wave_ops ops = {lane_start, lane_vertex, lane_walk_end, NULL, NULL, true};
-    dr_wave_run(j->waves[thread], b->p->scene, &b->popts, (int64_t)n * b->p->spp, &ops, &c, &b->thr[thread].rays);
-    return true;
-}
-
-/* ---- cross mode on the wavefront (estimator.h): the primal walks of a group
- * of pixels' samples, then each sample's adjoint from its pixel's other
- * samples, then the replays, which answer their ray queries from the primal
- * walks' logs */
-
-struct cross_ctx {
+struct park_ctx {
     struct lane_ctx run;
     struct dr_grad_sink sink;
-    int64_t first_px;            /* item i: sample i % spp of pixel first_px + i / spp */
-    const struct cross_items *items;
+    const int64_t *px;           /* item i: sample i % spp of pixel px[i / spp] */
+    const struct parked_samples *items;
 };
 
-struct cross_lane {
+struct park_lane {
     struct walk w;
     struct dr_grad_sink sink;
     int64_t item, px;
 };
-_Static_assert(sizeof(struct cross_lane) <= DR_WAVE_USER_BYTES, "a cross lane's state fits");
+_Static_assert(sizeof(struct park_lane) <= DR_WAVE_USER_BYTES, "a park lane's state fits");
 
 /* Item i's sampler and camera ray. */
-static void cross_ray(struct cross_ctx *c, struct cross_lane *l, int64_t i, struct dr_sampler *smp, dr_vec3 *o,
+static void sample_ray(struct park_ctx *c, struct park_lane *l, int64_t i, struct dr_sampler *smp, dr_vec3 *o,
                       dr_vec3 *d)
 {
     const int spp = c->run.j->b.p->spp;
     l->item = i;
-    l->px = c->first_px + i / spp;
+    l->px = c->px[i / spp];
     dr_est_camera_ray(&c->run.j->b, l->px, (int)(i % spp), smp, o, d);
 }
 
-static void cross_primal_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+static void primal_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
 {
-    cross_ray(ctx, user, i, smp, o, d);
+    sample_ray(ctx, user, i, smp, o, d);
 }
 
 /* The same for the arrays' primal walks (dr_wave_soa_walk). */
-static void cross_soa_start(void *ctx, int64_t i, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+static void soa_start(void *ctx, int64_t i, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
 {
-    struct cross_lane l;
-    cross_ray(ctx, &l, i, smp, o, d);
+    struct park_lane l;
+    sample_ray(ctx, &l, i, smp, o, d);
 }
 
-static void cross_keep_log(void *ctx, void *user, const struct dr_wave_log *log)
+static void primal_keep_log(void *ctx, void *user, const struct dr_wave_log *log)
 {
-    struct cross_ctx *c = ctx;
-    const struct cross_lane *l = user;
+    struct park_ctx *c = ctx;
+    const struct park_lane *l = user;
     if (c->items->walk.log)
         dr_wave_log_copy(&c->items->walk.log[l->item], log);
 }
 
-static enum dr_wave_next cross_primal_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+static enum dr_wave_next primal_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
 {
     (void)smp, (void)o, (void)d;
-    struct cross_ctx *c = ctx;
-    const struct cross_lane *l = user;
+    struct park_ctx *c = ctx;
+    const struct park_lane *l = user;
     const struct dr_wave_soa_walks *out = &c->items->walk;
     out->L[l->item] = l->w.L.true_;
     out->L_sub[l->item] = l->w.L.sub;
@@ -346,12 +274,12 @@ static enum dr_wave_next cross_primal_end(void *ctx, void *user, struct dr_sampl
     return DR_WAVE_DONE;
 }
 
-static void cross_replay_start(void *ctx, int64_t k, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+static void replay_start(void *ctx, int64_t k, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
 {
-    struct cross_ctx *c = ctx;
-    struct cross_lane *l = user;
-    const struct cross_items *it = c->items;
-    cross_ray(c, l, it->order[k], smp, o, d);
+    struct park_ctx *c = ctx;
+    struct park_lane *l = user;
+    const struct parked_samples *it = c->items;
+    sample_ray(c, l, it->order[k], smp, o, d);
     l->w.L = (struct prb_radiance){it->walk.L[l->item], it->walk.L_sub[l->item]};
     l->w.last_diff = it->walk.last_diff[l->item];
     l->w.adj = it->adj[l->item];
@@ -359,52 +287,52 @@ static void cross_replay_start(void *ctx, int64_t k, void *user, struct dr_sampl
     l->w.sink = &l->sink;
 }
 
-static const struct dr_wave_log *cross_replay_log(void *ctx, void *user)
+static const struct dr_wave_log *replay_log(void *ctx, void *user)
 {
-    struct cross_ctx *c = ctx;
-    const struct cross_lane *l = user;
+    struct park_ctx *c = ctx;
+    const struct park_lane *l = user;
     return c->items->walk.log ? &c->items->walk.log[l->item] : NULL;
 }
 
-static enum dr_wave_next cross_replay_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+static enum dr_wave_next replay_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
 {
     (void)smp, (void)o, (void)d;
-    struct cross_ctx *c = ctx;
-    struct cross_lane *l = user;
+    struct park_ctx *c = ctx;
+    struct park_lane *l = user;
     dr_est_sample_done(&c->run.j->b, c->run.thread, l->px, &l->sink);
     return DR_WAVE_DONE;
 }
 
-/* Pixels a cross group holds: its samples' logs fit CROSS_LOGGED_ITEMS. */
-static int64_t cross_group(int spp)
+/* Pixels a group holds: its samples' logs fit LOGGED_ITEMS. */
+static int64_t park_group(int spp)
 {
-    return spp < CROSS_LOGGED_ITEMS ? CROSS_LOGGED_ITEMS / spp : 1;
+    return spp < LOGGED_ITEMS ? LOGGED_ITEMS / spp : 1;
 }
 
 /* Bytes of one thread's parked samples (cap of them). */
-static uint64_t cross_items_bytes(int64_t cap)
+static uint64_t parked_bytes(int64_t cap)
 {
-    uint64_t log = cap <= CROSS_LOGGED_ITEMS ? sizeof(struct dr_wave_log) : 0;
+    uint64_t log = cap <= LOGGED_ITEMS ? sizeof(struct dr_wave_log) : 0;
     return (uint64_t)cap * (3 * sizeof(dr_vec3) + sizeof(int) + sizeof(int32_t) + log);
 }
 
 /* A thread's parked samples, made on first use (cap of them; ray answers
- * only if they fit CROSS_LOGGED_ITEMS). False: out of memory. */
-static bool cross_items_make(struct cross_items *it, int64_t cap)
+ * only if they fit LOGGED_ITEMS). False: out of memory. */
+static bool parked_make(struct parked_samples *it, int64_t cap)
 {
     if (it->order)
         return true;
     it->walk.L = malloc(sizeof(dr_vec3) * (size_t)cap);
     it->walk.L_sub = malloc(sizeof(dr_vec3) * (size_t)cap);
     it->walk.last_diff = malloc(sizeof(int) * (size_t)cap);
-    it->walk.log = cap <= CROSS_LOGGED_ITEMS ? malloc(sizeof(struct dr_wave_log) * (size_t)cap) : NULL;
+    it->walk.log = cap <= LOGGED_ITEMS ? malloc(sizeof(struct dr_wave_log) * (size_t)cap) : NULL;
     it->adj = malloc(sizeof(dr_vec3) * (size_t)cap);
     it->order = malloc(sizeof(int32_t) * (size_t)cap);
-    return it->walk.L && it->walk.L_sub && it->walk.last_diff && (it->walk.log || cap > CROSS_LOGGED_ITEMS) &&
+    return it->walk.L && it->walk.L_sub && it->walk.last_diff && (it->walk.log || cap > LOGGED_ITEMS) &&
            it->adj && it->order;   /* (a partial set is freed by prb_release; order is made last) */
 }
 
-static void cross_items_free(struct cross_items *it)
+static void parked_free(struct parked_samples *it)
 {
     free(it->walk.L);
     free(it->walk.L_sub);
@@ -414,60 +342,79 @@ static void cross_items_free(struct cross_items *it)
     free(it->order);
 }
 
-/* The primal walks of a cross group's n samples: in arrays where they apply
+/* The primal walks of a group's n samples: in arrays where they apply
  * (wave_soa.h: the same sums and ray answers, faster), else in the lanes. */
-static void cross_primal(struct prb_job *j, int thread, struct cross_ctx *c, int64_t n)
+static void primal_walks(struct prb_job *j, int thread, struct park_ctx *c, int64_t n)
 {
     struct dr_est_base *b = &j->b;
-    static const struct dr_wave_ops primal = {cross_primal_start, lane_vertex, cross_primal_end, cross_keep_log,
+    static const struct dr_wave_ops primal = {primal_start, lane_vertex, primal_end, primal_keep_log,
                                               NULL, true};
     if (dr_wave_soa_walks_apply(b->p->scene, &b->popts, b->p->sampler) &&
         (j->soas[thread] || (j->soas[thread] = dr_wave_soa_create())) &&
-        dr_wave_soa_walk(j->soas[thread], b->p->scene, &b->popts, n, cross_soa_start, c, &c->items->walk,
+        dr_wave_soa_walk(j->soas[thread], b->p->scene, &b->popts, n, soa_start, c, &c->items->walk,
                          &b->thr[thread].rays))
         return;   /* (out of memory for the arrays: the lanes, which need none) */
     dr_wave_run(j->waves[thread], b->p->scene, &b->popts, n, &primal, c, &b->thr[thread].rays);
 }
 
-/* Pixels [begin, end) in cross mode on the wavefront. False: no memory for
- * the lanes or the parked samples (then one path at a time). */
-static bool cross_wave(struct prb_job *j, int thread, int64_t begin, int64_t end, struct dr_grad_sink sink)
+/* The group's valid samples (finite primal sums) that matter to the loss
+ * and have a derivative term, with their adjoints, into items->order; n_px
+ * pixels from px (adj: their adjoint, but in cross mode). Returns how many. */
+static int32_t replays(struct prb_job *j, int thread, const int64_t *px, const dr_vec3 *adj, int64_t n_px,
+                       const struct parked_samples *it)
 {
     struct dr_est_base *b = &j->b;
     const int spp = b->p->spp;
-    const int64_t group = cross_group(spp), cap = group * spp;
+    const struct dr_wave_soa_walks *walk = &it->walk;
+    int32_t n = 0;
+    for (int64_t k = 0; k < n_px; k++) {
+        const int64_t i0 = k * spp;
+        dr_vec3 sum = dr_v3s(0.0);
+        for (int64_t i = i0; i < i0 + spp; i++) {
+            if (dr_v3_finite(walk->L[i]) && dr_v3_finite(walk->L_sub[i]))
+                sum = dr_add(sum, walk->L[i]);
+            else
+                b->thr[thread].invalid++;
+        }
+        if (b->p->cross)
+            dr_est_cross_pixel(b, px[k], sum);
+        for (int64_t i = i0; i < i0 + spp; i++) {
+            if (!dr_v3_finite(walk->L[i]) || !dr_v3_finite(walk->L_sub[i]))
+                continue;
+            it->adj[i] = b->p->cross ? dr_est_cross_adjoint(b, px[k], sum, walk->L[i]) : adj[k];
+            /* (else the sample does not matter to the loss, or its path has no derivative term) */
+            if (!dr_is_black(it->adj[i]) && walk->last_diff[i] > 0)
+                it->order[n++] = (int32_t)i;
+        }
+    }
+    return n;
+}
+
+/* Pixels [begin, end) (at most PIXEL_CHUNK) on the wavefront. False: no
+ * memory for the lanes or the parked samples (then one path at a time). */
+static bool wave_pixels(struct prb_job *j, int thread, int64_t begin, int64_t end, struct dr_grad_sink sink)
+{
+    struct dr_est_base *b = &j->b;
+    const int spp = b->p->spp;
+    const int64_t group = park_group(spp), cap = group * spp;
     if (!j->waves[thread] && !(j->waves[thread] = dr_wave_create()))
         return false;
-    struct cross_items *it = &j->items[thread];
-    if (!cross_items_make(it, cap))
+    struct parked_samples *it = &j->items[thread];
+    if (!parked_make(it, cap))
         return false;
-    const struct dr_wave_soa_walks *walk = &it->walk;
-    static const struct dr_wave_ops replay = {cross_replay_start, lane_vertex, cross_replay_end, NULL,
-                                              cross_replay_log, true};
-    for (int64_t first = begin; first < end; first += group) {
-        const int64_t n_px = end - first < group ? end - first : group;
-        struct cross_ctx c = {.run = {j, thread}, .sink = sink, .first_px = first, .items = it};
-        cross_primal(j, thread, &c, n_px * spp);
-        int32_t n = 0;
-        for (int64_t k = 0; k < n_px; k++) {
-            const int64_t i0 = k * spp;
-            dr_vec3 sum = dr_v3s(0.0);
-            for (int64_t i = i0; i < i0 + spp; i++) {
-                if (dr_v3_finite(walk->L[i]) && dr_v3_finite(walk->L_sub[i]))
-                    sum = dr_add(sum, walk->L[i]);
-                else
-                    b->thr[thread].invalid++;
-            }
-            dr_est_cross_pixel(b, first + k, sum);
-            for (int64_t i = i0; i < i0 + spp; i++) {
-                if (!dr_v3_finite(walk->L[i]) || !dr_v3_finite(walk->L_sub[i]))
-                    continue;
-                it->adj[i] = dr_est_cross_adjoint(b, first + k, sum, walk->L[i]);
-                /* (else the sample does not matter to the loss, or its path has no derivative term) */
-                if (!dr_is_black(it->adj[i]) && walk->last_diff[i] > 0)
-                    it->order[n++] = (int32_t)i;
-            }
-        }
+    int64_t px[PIXEL_CHUNK];
+    dr_vec3 adj[PIXEL_CHUNK];   /* (but in cross mode) */
+    int64_t n_all = 0;
+    for (int64_t p = begin; p < end; p++)
+        if (b->p->cross || dr_est_sample_adjoint(b, p, &adj[n_all]))
+            px[n_all++] = p;
+    static const struct dr_wave_ops replay = {replay_start, lane_vertex, replay_end, NULL,
+                                              replay_log, true};
+    for (int64_t first = 0; first < n_all; first += group) {
+        const int64_t n_px = n_all - first < group ? n_all - first : group;
+        struct park_ctx c = {.run = {j, thread}, .sink = sink, .px = px + first, .items = it};
+        primal_walks(j, thread, &c, n_px * spp);
+        int32_t n = replays(j, thread, px + first, adj + first, n_px, it);
         dr_wave_run(j->waves[thread], b->p->scene, &b->popts, n, &replay, &c, &b->thr[thread].rays);
     }
     return true;
@@ -515,7 +462,7 @@ static void prb_pixels(void *ctx, int thread, int64_t begin, int64_t end)
     struct dr_ray_counts *rays = &b->thr[thread].rays;
     struct dr_grad_sink sink = dr_est_sink_begin(b, thread);
     if (j->wave && end - begin <= PIXEL_CHUNK &&
-        (b->p->cross ? cross_wave(j, thread, begin, end, sink) : wave_pixels(j, thread, begin, end, sink))) {
+        wave_pixels(j, thread, begin, end, sink)) {
         dr_est_sink_end(b, thread);
         return;
     }
@@ -571,12 +518,10 @@ static int prb_run(struct dr_est_base *b)
             return DR_ERR_NOMEM;
         }
     /* what the workers hold besides the gradient: the samples' adjoints, and
-     * in cross mode on the wavefront the parked samples (cross_wave) */
+     * on the wavefront the lanes, the parked samples and the arrays (wave_pixels) */
     uint64_t per_thread = sizeof(dr_vec3) * (uint64_t)b->p->spp;
-    if (j->wave)
-        per_thread += dr_wave_bytes();
-    if (j->wave && b->p->cross) {
-        per_thread += cross_items_bytes(cross_group(b->p->spp) * b->p->spp);
+    if (j->wave) {
+        per_thread += dr_wave_bytes() + parked_bytes(park_group(b->p->spp) * b->p->spp);
         if (dr_wave_soa_walks_apply(b->p->scene, &b->popts, b->p->sampler))
             per_thread += dr_wave_soa_walk_bytes();
     }
@@ -591,7 +536,7 @@ static void prb_release(struct dr_est_base *b)
     for (int t = 0; t < DR_MAX_THREADS; t++) {
         dr_wave_destroy(j->waves[t]);
         dr_wave_soa_destroy(j->soas[t]);
-        cross_items_free(&j->items[t]);
+        parked_free(&j->items[t]);
         free(j->adj[t]);
     }
 }
