@@ -156,9 +156,12 @@ static void move_path(struct dr_wave_soa *w, int to, int from)
 /* A walk's end (dr_wave_soa_walk): its sums to the caller. */
 static void walk_done(const struct dr_wave_soa *w, int64_t item, dr_vec3 L, dr_vec3 T, int last_diff)
 {
-    w->out->L[item] = T;
-    w->out->L_sub[item] = L;
-    w->out->last_diff[item] = last_diff;
+    if (w->out->L)
+        w->out->L[item] = T;
+    if (w->out->L_sub)
+        w->out->L_sub[item] = L;
+    if (w->out->last_diff)
+        w->out->last_diff[item] = last_diff;
 }
 
 /* The trace's answer (`tri`) and the shadow ray's (`occ`, with occluded) of
@@ -257,7 +260,9 @@ static void escaped(const struct dr_wave_soa *w, const struct dr_scene *s, const
         out[w->item[k]] = L;
         return;
     }
-    dr_vec3 T = dr_add(dr_v3(w->Tx[k], w->Ty[k], w->Tz[k]), dr_mul(dr_v3(w->rx[k], w->ry[k], w->rz[k]), c));
+    dr_vec3 ratio = dr_v3(w->rx[k], w->ry[k], w->rz[k]), T = dr_add(dr_v3(w->Tx[k], w->Ty[k], w->Tz[k]), dr_mul(ratio, c));
+    if (w->out->step)   /* (no derivative term: the environment's radiance has no parameter, dr_path8_applies) */
+        w->out->step(w->out->ctx, w->item[k], e, dr_v3s(0.0), dr_mul(ratio, dr_v3(w->bx[k], w->by[k], w->bz[k])));
     walk_done(w, w->item[k], L, T, last_diff);
 }
 
@@ -420,6 +425,8 @@ static int finish_scalar(struct dr_wave_soa *w, const struct dr_scene *s, const 
     dr_vec3 c = dr_mul(p->beta, dr_path_vertex_term(&p->v));
     dr_vec3 L = dr_add(p->L, c), T = dr_add(p->T, dr_mul(p->ratio, c));
     int last_diff = opts->params && dr_path_vertex_has_derivative(s, opts->params, &p->v) ? p->v.depth : p->last_diff;
+    if (w->out->vertex)
+        w->out->vertex(w->out->ctx, p->item, &(struct dr_wave_arrival){p->beta, p->ratio}, &p->v);
     if (!more) {
         walk_done(w, p->item, L, T, last_diff);
         return kept;
@@ -439,6 +446,18 @@ static int finish_scalar(struct dr_wave_soa *w, const struct dr_scene *s, const 
     w->item[k] = p->item;
     w->last_diff[k] = last_diff;
     return kept + 1;
+}
+
+/* A group's vertices to the walk's step hook (dr_wave_soa_walks). */
+static void steps(const struct dr_wave_soa *w, const struct dr_path8 *G, const struct dr_path8_out *c, dr_v3x8 beta,
+                  dr_v3x8 e)
+{
+    const int i0 = (int)(G - w->group) * DR_SIMD_W;
+    const dr_v3x8 zero = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
+    dr_v3x8 t = dr_v3x8_sel(c->more, dr_v3x8_scale(c->f, c->cos_pdf_q), zero);   /* (tape.c's new_step) */
+    dr_v3x8 bt = dr_v3x8_mul(load3(w->rx + i0, w->ry + i0, w->rz + i0), beta);
+    for (int i = 0; i < G->n; i++)
+        w->out->step(w->out->ctx, w->item[i0 + i], dr_v3x8_get(&e, i), dr_v3x8_get(&t, i), dr_v3x8_get(&bt, i));
 }
 
 /* The next-event estimates and continuations: each path's vertex term added
@@ -466,6 +485,8 @@ static int advance(struct dr_wave_soa *w, const struct dr_scene *s, const struct
         if (w->out)
             T = dr_v3x8_add(load3(w->Tx + i0, w->Ty + i0, w->Tz + i0),
                             dr_v3x8_mul(load3(w->rx + i0, w->ry + i0, w->rz + i0), be));
+        if (w->out && w->out->step)
+            steps(w, G, &c, beta, e);
         for (int i = 0; i < G->n; i++) {
             int k = i0 + i;
             if (!c.more[i]) {

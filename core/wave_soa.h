@@ -38,13 +38,24 @@ size_t dr_wave_soa_bytes(void);
  * are of kind `sampler_kind`)? */
 bool dr_wave_soa_applies(const struct dr_scene *scene, const struct dr_path_opts *opts, uint32_t sampler_kind);
 
-/* What path replay's primal walks keep of each path, by item (prb's cross
- * mode, estimators/prb.c: its lanes' walks give the same). */
+/* What a gradient's primal walks give of each path, by item (the lanes'
+ * walks of the same paths give the same: estimators/prb.c, tape.c). Every
+ * member may be NULL (not wanted). */
 struct dr_wave_soa_walks {
-    dr_vec3 *L;                 /* the radiance (with the true throughput) */
+    /* path replay's (prb.c) */
+    dr_vec3 *L;                 /* the radiance (with the true throughput, summed as prb's walk sums) */
     dr_vec3 *L_sub;             /* ... and with the substitutes' (path.h) */
     int *last_diff;             /* the depth of the last vertex with a derivative term (0: none) */
-    struct dr_wave_log *log;    /* the walk's ray answers for its replay (NULL: none kept) */
+    struct dr_wave_log *log;    /* the walk's ray answers for its replay */
+    /* a tape's (tape.c), each path's vertices in order: */
+    void *ctx;
+    /* a vertex without a derivative term: its term e (dr_path_vertex_term),
+     * its continuation's factor t (f |cos| / pdf / q; 0 where the path ends)
+     * and the true throughput bt (ratio beta) it was reached with */
+    void (*step)(void *ctx, int64_t item, dr_vec3 e, dr_vec3 t, dr_vec3 bt);
+    /* a vertex the scalar stages took (on a material with a BSDF parameter),
+     * whole, reached with a */
+    void (*vertex)(void *ctx, int64_t item, const struct dr_wave_arrival *a, const struct dr_path_vertex *v);
 };
 
 /* Can path replay's primal walks use the arrays (paths whose samplers are of

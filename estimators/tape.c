@@ -27,6 +27,7 @@
 #include "medium_grad.h"
 #include "error.h"
 #include "path_deriv.h"
+#include "wave_soa.h"
 #include "wavefront.h"
 
 struct tape_vertex {
@@ -82,6 +83,7 @@ struct tape_job {
     struct dr_est_base b;   /* first: the shared part */
     struct tape tapes[DR_MAX_THREADS];
     struct dr_wave *waves[DR_MAX_THREADS];   /* the packet tracer's lanes, per worker, made on first use */
+    struct dr_wave_soa *soas[DR_MAX_THREADS];   /* ... or its arrays, where they apply (wave_soa.h) */
     int64_t *pixels[DR_MAX_THREADS];         /* ... and the batch's pixels that matter to the loss */
     int64_t batch;           /* pixels (all their samples) a worker records before it sweeps */
     bool wave;               /* no media: the record runs on the packet tracer */
@@ -187,15 +189,16 @@ static struct tape_vertex *new_vertex(struct tape *tp, struct tape_path *path, b
     return tv;
 }
 
-/* Records vertex v (reached with true throughput bt) as a step of the path
- * and adds its part to L; false when out of memory. */
-static bool new_step(struct tape *tp, struct tape_path *path, const struct dr_path_vertex *v, dr_vec3 *L, dr_vec3 bt)
+/* Records a vertex with term e and continuation factor t (reached with true
+ * throughput bt) as a step of the path and adds its part to L; false when
+ * out of memory. */
+static bool new_step(struct tape *tp, struct tape_path *path, dr_vec3 e, dr_vec3 t, dr_vec3 *L, dr_vec3 bt)
 {
     if (!grow((void **)&tp->steps, &tp->cap_steps, tp->n_steps + 1, sizeof *tp->steps))
         return false;
     struct tape_step *st = &tp->steps[tp->n_steps];
-    st->e = dr_path_vertex_term(v);
-    st->t = v->cont ? dr_scale(v->f, v->cos_pdf_q) : dr_v3s(0.0);
+    st->e = e;
+    st->t = t;
     st->prev = path->last;
     path->last = TAPE_STEP | tp->n_steps++;
     path->count++;
@@ -290,6 +293,7 @@ struct wave_record {
     struct tape *tp;
     int thread;
     const int64_t *px;    /* the batch's pixels that matter; item i is sample i % spp of px[i / spp] */
+    int64_t first_path;   /* the record in arrays: item i's path */
 };
 
 struct record_lane {
@@ -313,30 +317,37 @@ static void lane_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp,
     l->path = path ? c->tp->n_paths - 1 : -1;
 }
 
+/* Vertex v of the path (reached with a): a step (tape_step) where it has no
+ * derivative term and steps are kept, else whole; its part added to L. */
+static void record_vertex(struct wave_record *c, struct tape_path *path, const struct dr_wave_arrival *a,
+                          const struct dr_path_vertex *v, dr_vec3 *L)
+{
+    if (c->j->steps && !dr_path_vertex_has_derivative(c->j->b.p->scene, c->j->b.p->params, v)) {
+        dr_vec3 t = v->cont ? dr_scale(v->f, v->cos_pdf_q) : dr_v3s(0.0);
+        if (!new_step(c->tp, path, dr_path_vertex_term(v), t, L, dr_mul(a->ratio, a->beta)))
+            c->tp->failed = true;
+        return;
+    }
+    struct tape_vertex *tv = new_vertex(c->tp, path, false);
+    if (!tv) {
+        c->tp->failed = true;
+        return;
+    }
+    tv->v = *v;   /* (the lane's vertex is overwritten at its next step) */
+    tv->v.mrec = NULL;
+    tv->bt = dr_mul(a->ratio, a->beta);
+    note_vertex(c->j, path, tv, L);
+    path->derivative = true;
+}
+
 static bool lane_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
                         struct dr_sampler *smp, bool more)
 {
     (void)smp, (void)more;
     struct wave_record *c = ctx;
     struct record_lane *l = user;
-    if (l->path < 0 || c->tp->failed)
-        return true;
-    struct tape_path *path = &c->tp->paths[l->path];
-    if (c->j->steps && !dr_path_vertex_has_derivative(c->j->b.p->scene, c->j->b.p->params, v)) {
-        if (!new_step(c->tp, path, v, &l->L, dr_mul(a->ratio, a->beta)))
-            c->tp->failed = true;
-        return true;
-    }
-    struct tape_vertex *tv = new_vertex(c->tp, path, false);
-    if (!tv) {
-        c->tp->failed = true;
-        return true;
-    }
-    tv->v = *v;   /* (the lane's vertex is overwritten at its next step) */
-    tv->v.mrec = NULL;
-    tv->bt = dr_mul(a->ratio, a->beta);
-    note_vertex(c->j, path, tv, &l->L);
-    path->derivative = true;
+    if (l->path >= 0 && !c->tp->failed)
+        record_vertex(c, &c->tp->paths[l->path], a, v, &l->L);
     return true;
 }
 
@@ -350,11 +361,52 @@ static enum dr_wave_next lane_walk_end(void *ctx, void *user, struct dr_sampler 
     return DR_WAVE_DONE;
 }
 
+/* ---- the record in arrays (wave_soa.h): item i is path first_path + i,
+ * whose radiance is summed in its L as the record goes */
+
+static void soa_start(void *ctx, int64_t i, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    struct record_lane l;
+    lane_start(ctx, i, &l, smp, o, d);
+}
+
+static void soa_step(void *ctx, int64_t i, dr_vec3 e, dr_vec3 t, dr_vec3 bt)
+{
+    struct wave_record *c = ctx;
+    if (c->tp->failed)
+        return;
+    struct tape_path *path = &c->tp->paths[c->first_path + i];
+    if (!new_step(c->tp, path, e, t, &path->L, bt))
+        c->tp->failed = true;
+}
+
+static void soa_vertex(void *ctx, int64_t i, const struct dr_wave_arrival *a, const struct dr_path_vertex *v)
+{
+    struct wave_record *c = ctx;
+    if (!c->tp->failed)
+        record_vertex(c, &c->tp->paths[c->first_path + i], a, v, &c->tp->paths[c->first_path + i].L);
+}
+
+/* The record of n paths in arrays; false when they cannot be had (nothing recorded). */
+static bool record_soa(struct tape_job *j, int thread, struct wave_record *c, int64_t n)
+{
+    const struct dr_scene *s = j->b.p->scene;
+    if (!j->steps || !dr_wave_soa_walks_apply(s, &j->b.popts, j->b.p->sampler))
+        return false;
+    if (!j->soas[thread] && !(j->soas[thread] = dr_wave_soa_create()))
+        return false;
+    const struct dr_wave_soa_walks out = {.ctx = c, .step = soa_step, .vertex = soa_vertex};
+    c->first_path = c->tp->n_paths;
+    if (!dr_wave_soa_walk(j->soas[thread], s, &j->b.popts, n, soa_start, c, &out, &j->b.thr[thread].rays))
+        return false;
+    for (int64_t i = 0; i < n && !c->tp->failed; i++)
+        end_path(j, thread, &c->tp->paths[c->first_path + i], c->tp->paths[c->first_path + i].L);
+    return true;
+}
+
 /* False when the lanes cannot be had (then one path at a time). */
 static bool record_wave(struct tape_job *j, struct tape *tp, int thread, int64_t begin, int64_t end)
 {
-    if (!j->waves[thread] && !(j->waves[thread] = dr_wave_create()))
-        return false;
     if (!j->pixels[thread] && !(j->pixels[thread] = malloc(sizeof(int64_t) * (size_t)j->batch)))
         return false;
     int64_t n = 0;
@@ -363,6 +415,10 @@ static bool record_wave(struct tape_job *j, struct tape *tp, int thread, int64_t
         if (adjoint_before(j, px, &adj))
             j->pixels[thread][n++] = px;
     struct wave_record c = {.j = j, .tp = tp, .thread = thread, .px = j->pixels[thread]};
+    if (record_soa(j, thread, &c, n * j->b.p->spp))
+        return true;
+    if (!j->waves[thread] && !(j->waves[thread] = dr_wave_create()))
+        return false;
     /* With compact steps a vertex without a derivative term is read for its
      * step only (new_step): eight lanes at a time where they can */
     static const struct dr_wave_ops whole = {lane_start, lane_vertex, lane_walk_end, NULL, NULL, false};
@@ -610,6 +666,10 @@ static int tape_run(struct dr_est_base *b)
     j->batch = batch_pixels(p->batch, threads, p->spp);
     if (j->batch > pixels)
         j->batch = pixels > 0 ? pixels : 1;   /* (the pixel list holds a batch) */
+    if (j->wave)   /* what the workers hold besides the tape: the packet tracer's arrays or lanes */
+        b->scratch_bytes = (uint64_t)threads * (j->steps && dr_wave_soa_walks_apply(p->scene, &b->popts, p->sampler)
+                                                    ? dr_wave_soa_walk_bytes()
+                                                    : dr_wave_bytes());
     int rc = dr_parallel_for_static(pixels, j->batch, threads, record_and_sweep, j);
     uint64_t bytes = 0;
     for (int t = 0; t < threads; t++)
@@ -633,6 +693,7 @@ static void tape_release(struct dr_est_base *b)
         else if (j->tapes[t].cap_verts || j->tapes[t].cap_steps || j->tapes[t].cap_paths || j->tapes[t].cap_mrecs)
             tape_leave(&j->tapes[t], t);
         dr_wave_destroy(j->waves[t]);
+        dr_wave_soa_destroy(j->soas[t]);
         free(j->pixels[t]);
     }
 }
