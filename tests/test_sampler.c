@@ -33,6 +33,32 @@ static void test_independent_unchanged(void)
     }
 }
 
+/* dr_sobol_dim1's table against the generator matrix's columns
+ * (v_0 = 2^31, v_(b+1) = v_b ^ (v_b >> 1)), on every one-bit index and on
+ * hashed ones. */
+static uint32_t sobol_dim1_columns(uint32_t i)
+{
+    uint32_t x = 0, v = 0x80000000u;
+    for (int b = 0; b < 32; b++, v ^= v >> 1)
+        if (i >> b & 1u)
+            x ^= v;
+    return x;
+}
+
+static void test_sobol_dim1(void)
+{
+    int bad = 0;
+    for (int b = 0; b < 32; b++)
+        bad += dr_sobol_dim1(1u << b) != sobol_dim1_columns(1u << b);
+    for (uint64_t k = 0; k < 100000; k++) {
+        uint32_t i = (uint32_t)dr_hash64(k);
+        bad += dr_sobol_dim1(i) != sobol_dim1_columns(i);
+    }
+    CHECK(bad == 0, "dr_sobol_dim1 differs from its columns on %d indices", bad);
+    CHECK(dr_sobol_dim1(0) == 0 && dr_sobol_dim1(1) == 0x80000000u && dr_sobol_dim1(3) == 0x40000000u,
+          "dr_sobol_dim1 of 0, 1, 3: %#x %#x %#x", dr_sobol_dim1(0), dr_sobol_dim1(1), dr_sobol_dim1(3));
+}
+
 /* Over N = 2^k samples of a pixel, every 1D Sobol draw puts one sample in
  * each interval [i/N, (i+1)/N), and every 2D draw one in each elementary box
  * of area 1/N (2^a x 2^b cells, a + b = k). */
@@ -141,6 +167,7 @@ static void test_convergence(void)
 int main(void)
 {
     test_independent_unchanged();
+    test_sobol_dim1();
     test_sobol_stratified();
     test_sobol_pure();
     test_convergence();
