@@ -327,12 +327,6 @@ bool dr_path8_applies(const struct dr_scene *s, const struct dr_path_opts *opts)
 
 /* A material with a BSDF parameter stays scalar: its vertex substitutes zero
  * channels (path.h) and has a derivative term (dr_path_vertex_has_derivative). */
-bool dr_path8_lane(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_sampler *smp,
-                   int64_t tri)
-{
-    return smp->kind == DR_SAMPLER_INDEPENDENT && dr_path8_hit(s, opts, tri);
-}
-
 bool dr_path8_hit(const struct dr_scene *s, const struct dr_path_opts *opts, int64_t tri)
 {
     return tri >= 0 && !(opts->params && opts->params->mat_bsdf_active[s->mesh.material[tri]]);
@@ -634,6 +628,32 @@ DR_SIMD_INLINE dr_m8 nee_begin(struct dr_path8 *g, dr_m8 ok, const struct light8
     return ok;
 }
 
+/* The vertex's seven numbers in dr_path_step_hit's order (light pick, light
+ * point, lobe, direction, roulette) from its first dimension dim: the
+ * independent sampler's in vector form, then a structured sampler's lane by
+ * lane with the scalar draws (their 2D pairs belong together). */
+static void vertex_randoms(const struct dr_path8_in *in, const uint32_t *dim, dr_f8 u[7])
+{
+    dr_u8 d = {dim[0], dim[1], dim[2], dim[3], dim[4], dim[5], dim[6], dim[7]};
+    for (int k = 0; k < 7; k++)
+        u[k] = independent(in->key, d + (uint64_t)(k + 1));
+    for (int i = 0; i < DR_SIMD_W; i++) {
+        const struct dr_sampler *p = in->sampler[i];
+        if (!p || p->kind == DR_SAMPLER_INDEPENDENT)
+            continue;
+        struct dr_sampler smp = *p;
+        smp.dim = dim[i];
+        double r[7];
+        r[0] = dr_sampler_next(&smp);
+        dr_sampler_next2(&smp, &r[1], &r[2]);
+        r[3] = dr_sampler_next(&smp);
+        dr_sampler_next2(&smp, &r[4], &r[5]);
+        r[6] = dr_sampler_next(&smp);
+        for (int k = 0; k < 7; k++)
+            u[k][i] = r[k];
+    }
+}
+
 void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path8_in *in,
                           struct dr_path8 *g)
 {
@@ -681,14 +701,13 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     g->wo_z = g->wo.z;
     material_eval(s, g, &L, end);
     g->spec_p = specular_prob(g, g->wo_z);   /* (wo.z <= COS_EPS: unused) */
-    const uint32_t *dm = L.dim;
-    dr_u8 dim = {dm[0], dm[1], dm[2], dm[3], dm[4], dm[5], dm[6], dm[7]};
-    dr_u8 key = in->key;
-    dr_f8 u_pick = independent(key, dim + 1), u1 = independent(key, dim + 2), u2 = independent(key, dim + 3);
-    g->lobe_u = independent(key, dim + 4);
-    g->bsdf_u1 = independent(key, dim + 5);
-    g->bsdf_u2 = independent(key, dim + 6);
-    g->rr = independent(key, dim + 7);
+    dr_f8 u[7];
+    vertex_randoms(in, L.dim, u);
+    dr_f8 u_pick = u[0], u1 = u[1], u2 = u[2];
+    g->lobe_u = u[3];
+    g->bsdf_u1 = u[4];
+    g->bsdf_u2 = u[5];
+    g->rr = u[6];
 
     /* dr_path_nee_begin */
     struct light8 ls;
@@ -711,6 +730,7 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
         in.tri[i] = tri[k];
         in.depth[i] = st[k]->depth;
         in.key[i] = smp[k]->key;
+        in.sampler[i] = smp[k];
         in.hit[i] = located && i < n ? &v[i]->hit : NULL;
     }
     in.o = gather3(S, offsetof(struct dr_path_state, o));

@@ -9,12 +9,12 @@
  * inside a group: the light table search, texture, vertex-colour and
  * normal-map lookups (the scalar material, emission and normal-map functions
  * with the lane's hit), light samples that pick a punctual light or the
- * environment (dr_light_sample), libm's cosine and sine of the GGX map.
- * Every operation is the scalar code's, in its order, so each lane gets the
+ * environment (dr_light_sample), libm's cosine and sine of the GGX map, and the
+ * vertex's random numbers from a Sobol or stratified sampler (sampler.h:
+ * the independent sampler's hashes are vector code). Every operation is the scalar code's, in its order, so each lane gets the
  * scalar walker's bits (test_render compares radiance in double); what the
- * kernels mirror is named beside each step. Escaped rays, alpha, media,
- * vertices with a derivative term and the structured samplers stay with the
- * scalar stages: the packet tracer (wavefront.c) sends each lane one way or
+ * kernels mirror is named beside each step. Escaped rays, alpha, media
+ * and vertices with a derivative term stay with the scalar stages: the packet tracer (wavefront.c) sends each lane one way or
  * the other.
  *
  * The kernels themselves (dr_path8_shade_lanes, dr_path8_continue_lanes)
@@ -46,6 +46,8 @@ struct dr_path8_in {
     dr_f8 prev_pdf;               /* the BSDF density that sampled it (0: camera ray) */
     dr_f8 depth;                  /* segments so far, this one included */
     dr_u8 key;                    /* the sampler's key (independent sampler) */
+    const struct dr_sampler *sampler[DR_SIMD_W];   /* each lane's sampler where it is a structured one (sobol,
+                                                      stratified: its draws are taken lane by lane); NULL: key's */
     const struct dr_hit *hit[DR_SIMD_W];   /* a lane that reads textures: its hit if located (NULL: computed) */
 };
 
@@ -76,20 +78,16 @@ struct dr_path8 {
 /* Can this run use the eight-lane stages at all (no light whose radiance has
  * a parameter, no alpha, media or dielectric boundaries; some light)? */
 bool dr_path8_applies(const struct dr_scene *scene, const struct dr_path_opts *opts);
-/* Can this lane's vertex use them (a hit, with the independent sampler, on a
- * material without a BSDF parameter)? Such a vertex has no derivative term
- * in a run dr_path8_applies to. */
-bool dr_path8_lane(const struct dr_scene *scene, const struct dr_path_opts *opts, const struct dr_sampler *sampler,
-                   int64_t tri);
-/* The same for a lane whose sampler is the independent one (arrays of paths
- * that share the kind). */
+/* Can a vertex on triangle tri use them (a hit, on a material without a
+ * BSDF parameter)? Such a vertex has no derivative term in a run
+ * dr_path8_applies to. */
 bool dr_path8_hit(const struct dr_scene *scene, const struct dr_path_opts *opts, int64_t tri);
 
 /* Does shading a hit on triangle tri read textures (or vertex colours)? Such
  * lanes call the scalar material, emission and normal-map functions with
  * the hit. */
 bool dr_path8_reads_textures(const struct dr_scene *scene, int64_t tri);
-/* dr_path_step_hit of n <= DR_SIMD_W lanes that dr_path8_lane accepts:
+/* dr_path_step_hit of n <= DR_SIMD_W lanes that dr_path8_hit accepts:
  * fills next[i], *shadow[i] when next[i] is DR_STEP_SHADOW, the vertex term's
  * emission in *v[i], the sampler's position, and g for dr_path8_continue.
  * located: v[i]->hit already holds the hit of each lane that reads textures

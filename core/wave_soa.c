@@ -33,6 +33,8 @@ struct dr_wave_soa {
     double Lx[SLOTS], Ly[SLOTS], Lz[SLOTS];     /* radiance so far */
     double depth[SLOTS];                        /* segments traced */
     uint64_t key[SLOTS];                        /* the sampler's key */
+    struct dr_sampler smp[SLOTS];               /* the whole sampler, where it is a structured one */
+    bool structured;                            /* ... (this run's paths' samplers are) */
     int64_t item[SLOTS];                        /* the path's index in the run */
     int64_t tri[SLOTS];                         /* the trace's answer */
     bool occluded[SLOTS];                       /* the shadow ray's */
@@ -98,14 +100,14 @@ size_t dr_wave_soa_walk_bytes(void)
     return sizeof(struct dr_wave_soa) + sizeof(struct scalar_path) * LANES;
 }
 
-bool dr_wave_soa_walks_apply(const struct dr_scene *s, const struct dr_path_opts *opts, uint32_t sampler_kind)
+bool dr_wave_soa_walks_apply(const struct dr_scene *s, const struct dr_path_opts *opts)
 {
-    return sampler_kind == DR_SAMPLER_INDEPENDENT && dr_path8_applies(s, opts);
+    return dr_path8_applies(s, opts);
 }
 
-bool dr_wave_soa_applies(const struct dr_scene *s, const struct dr_path_opts *opts, uint32_t sampler_kind)
+bool dr_wave_soa_applies(const struct dr_scene *s, const struct dr_path_opts *opts)
 {
-    return !opts->params && sampler_kind == DR_SAMPLER_INDEPENDENT && dr_path8_applies(s, opts);
+    return !opts->params && dr_path8_applies(s, opts);
 }
 
 /* ----------------------------------------------------------- the slots */
@@ -125,6 +127,10 @@ static void start_path(struct dr_wave_soa *w, int k, int64_t item, dr_wave_start
     w->depth[k] = 0.0;
     w->key[k] = smp.key;
     w->item[k] = item;
+    if (smp.kind != DR_SAMPLER_INDEPENDENT) {   /* (one kind for all: set before any path moves) */
+        w->structured = true;
+        w->smp[k] = smp;
+    }
     if (w->out) {
         w->rx[k] = w->ry[k] = w->rz[k] = 1.0;
         w->Tx[k] = w->Ty[k] = w->Tz[k] = 0.0;
@@ -146,6 +152,8 @@ static void move_path(struct dr_wave_soa *w, int to, int from)
     w->key[to] = w->key[from];
     w->item[to] = w->item[from];
     w->tri[to] = w->tri[from];
+    if (w->structured)
+        w->smp[to] = w->smp[from];
     if (w->out) {
         w->rx[to] = w->rx[from], w->ry[to] = w->ry[from], w->rz[to] = w->rz[from];
         w->Tx[to] = w->Tx[from], w->Ty[to] = w->Ty[from], w->Tz[to] = w->Tz[from];
@@ -230,8 +238,12 @@ static void scalar_state(const struct dr_wave_soa *w, int k, struct dr_path_stat
     st->beta = dr_v3(w->bx[k], w->by[k], w->bz[k]);
     if (w->out)
         st->ratio = dr_v3(w->rx[k], w->ry[k], w->rz[k]);
-    dr_sampler_init(smp, 0, 0, 0);
-    smp->key = w->key[k];
+    if (w->structured) {
+        *smp = w->smp[k];
+    } else {
+        dr_sampler_init(smp, 0, 0, 0);
+        smp->key = w->key[k];
+    }
     smp->dim = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)st->depth;
     v->mrec = NULL;   /* (no media here) */
     dr_path_step_begin(st, v);
@@ -334,8 +346,10 @@ static void group_inputs(const struct dr_wave_soa *w, int g, int n_live, bool lo
     in->prev_p = load3(w->px + i0, w->py + i0, w->pz + i0);
     in->prev_pdf = load8(w->prev_pdf + i0);
     in->depth = load8(w->depth + i0);
-    for (int i = 0; i < DR_SIMD_W; i++)
+    for (int i = 0; i < DR_SIMD_W; i++) {
         in->hit[i] = located ? &w->hit[i0 + (i < in->n ? i : 0)] : NULL;
+        in->sampler[i] = w->structured ? &w->smp[i0 + (i < in->n ? i : 0)] : NULL;
+    }
 }
 
 /* The kernels work on whole groups: the slots after the last path, up to the
@@ -444,6 +458,8 @@ static int finish_scalar(struct dr_wave_soa *w, const struct dr_scene *s, const 
     w->depth[k] = (double)st->depth;
     w->key[k] = p->smp.key;
     w->item[k] = p->item;
+    if (w->structured)
+        w->smp[k] = p->smp;
     w->last_diff[k] = last_diff;
     return kept + 1;
 }
@@ -505,6 +521,8 @@ static int advance(struct dr_wave_soa *w, const struct dr_scene *s, const struct
             w->depth[kept] = w->depth[k];
             w->key[kept] = w->key[k];
             w->item[kept] = w->item[k];
+            if (w->structured)
+                w->smp[kept] = w->smp[k];
             if (w->out) {
                 w->rx[kept] = w->rx[k], w->ry[kept] = w->ry[k], w->rz[kept] = w->rz[k];
                 w->Tx[kept] = T.x[i], w->Ty[kept] = T.y[i], w->Tz[kept] = T.z[i];
@@ -525,6 +543,7 @@ static void run(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr
     const bool prefetch = dr_wave_prefetches(s);
     int n_live = 0;
     int64_t next = 0;
+    w->structured = false;
     while (next < n || n_live > 0) {
         int first_new = n_live;
         while (n_live < LANES && next < n)

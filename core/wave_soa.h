@@ -6,14 +6,16 @@
  * eight of them into vectors at every stage; most of its own time went to
  * cache misses on those structures, visited five times per step. Here a
  * path is a slot in a set of arrays that hold only what the radiance needs
- * (ray, throughput, previous point and density, depth, sampler key, sum),
+ * (ray, throughput, previous point and density, depth, sampler key or a
+ * structured sampler, sum),
  * live paths are kept contiguous (compacted after every bounce), and a
  * group of eight is eight consecutive slots. The shading is path_simd.c's
  * kernels, so every path gets the same bits as the one-path walker
  * (test_render compares them in double).
  *
  * It applies where every hit can take the eight-lane stages: a run that
- * dr_path8_applies to, without parameters, with the independent sampler.
+ * dr_path8_applies to, without parameters (dr_wave_soa_walk: with them).
+ * Every path of a run must have a sampler of one kind.
  * Rays that leave the scene take the scalar stage (the environment's
  * radiance) and end there. */
 #ifndef DR_WAVE_SOA_H
@@ -34,9 +36,8 @@ void dr_wave_soa_destroy(struct dr_wave_soa *w);
 /* Bytes dr_wave_soa_create allocates (for memory estimates). */
 size_t dr_wave_soa_bytes(void);
 
-/* Can a radiance run use it (opts without parameters, paths whose samplers
- * are of kind `sampler_kind`)? */
-bool dr_wave_soa_applies(const struct dr_scene *scene, const struct dr_path_opts *opts, uint32_t sampler_kind);
+/* Can a radiance run use it (opts without parameters)? */
+bool dr_wave_soa_applies(const struct dr_scene *scene, const struct dr_path_opts *opts);
 
 /* What a gradient's primal walks give of each path, by item (the lanes'
  * walks of the same paths give the same: estimators/prb.c, tape.c). Every
@@ -58,11 +59,10 @@ struct dr_wave_soa_walks {
     void (*vertex)(void *ctx, int64_t item, const struct dr_wave_arrival *a, const struct dr_path_vertex *v);
 };
 
-/* Can path replay's primal walks use the arrays (paths whose samplers are of
- * kind `sampler_kind`; parameters allowed)? The vertices on materials with a
+/* Can a gradient's primal walks use the arrays (parameters allowed)? The vertices on materials with a
  * BSDF parameter take the scalar stages (as in wavefront.c), the others the
  * eight-lane ones. */
-bool dr_wave_soa_walks_apply(const struct dr_scene *scene, const struct dr_path_opts *opts, uint32_t sampler_kind);
+bool dr_wave_soa_walks_apply(const struct dr_scene *scene, const struct dr_path_opts *opts);
 /* Bytes dr_wave_soa_create and dr_wave_soa_walk allocate (for memory estimates). */
 size_t dr_wave_soa_walk_bytes(void);
 

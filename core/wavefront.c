@@ -161,7 +161,7 @@ static void classify_live(struct dr_wave *w, int n_live, const struct dr_scene *
 {
     for (int i = 0; i < n_live; i++) {
         struct lane *l = &w->lane[w->live[i]];
-        l->simd = w->simd && dr_path8_lane(s, opts, &l->smp, l->tri);
+        l->simd = w->simd && dr_path8_hit(s, opts, l->tri);
     }
 }
 
@@ -394,15 +394,10 @@ static enum dr_wave_next radiance_end(void *ctx, void *user, struct dr_sampler *
 void dr_wave_radiance(struct dr_wave *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
                       dr_wave_start_fn start, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts)
 {
-    if (n > 0) {   /* the paths' sampler kind: the first's (wavefront.h) */
-        struct dr_sampler smp;
-        dr_vec3 o, d;
-        start(ctx, 0, &smp, &o, &d);
-        if (dr_wave_soa_applies(s, opts, smp.kind) && (w->soa || (w->soa = dr_wave_soa_create()))) {
-            dr_wave_soa_radiance(w->soa, s, opts, n, start, ctx, L, counts);
-            return;
-        }   /* (out of memory for the arrays: the lanes, which need none) */
-    }
+    if (dr_wave_soa_applies(s, opts) && (w->soa || (w->soa = dr_wave_soa_create()))) {
+        dr_wave_soa_radiance(w->soa, s, opts, n, start, ctx, L, counts);
+        return;
+    }   /* (out of memory for the arrays: the lanes, which need none) */
     dr_wave_radiance_lanes(w, s, opts, n, start, ctx, L, counts);
 }
 

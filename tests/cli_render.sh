@@ -108,9 +108,9 @@ assert isinstance(doc["effects"], list) and all(isinstance(e, str) for e in doc[
 hits = doc["rays"]["camera"] + doc["rays"]["extension"]
 assert 0 < doc["vertices_shaded_8_wide"] <= hits, (doc["vertices_shaded_8_wide"], hits)
 EOF
-    # ... and none with the Sobol sampler, whose draws the eight-lane stages leave to the scalar ones
+    # ... with the Sobol sampler too (its draws taken lane by lane inside the eight-lane stages)
     run render --res 16x16 --spp 3 --json --sampler sobol -o j2.exr
-    json_check "$tmp/out" 'd["vertices_shaded_8_wide"] == 0'
+    json_check "$tmp/out" '0 < d["vertices_shaded_8_wide"] <= d["rays"]["camera"] + d["rays"]["extension"]'
 else
     echo "note: python3 not found; --json checked with grep only"
     o=$(cat "$tmp/out")

@@ -355,11 +355,15 @@ static struct dr_scene *mixed_box(void)
 /* Paths from random points of a camera's view, for the exact comparison below. */
 struct random_paths {
     struct dr_camera_view view;
+    enum dr_sampler_kind kind;   /* structured: 16 samples of a pixel */
 };
 static void random_path_start(void *ctx, int64_t i, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
 {
     const struct random_paths *r = ctx;
-    dr_sampler_init(smp, 11, (uint64_t)i, 0);
+    if (r->kind == DR_SAMPLER_INDEPENDENT)
+        dr_sampler_init(smp, 11, (uint64_t)i, 0);
+    else
+        dr_sampler_init_kind(smp, r->kind, 11, (uint64_t)i / 16, (uint64_t)i % 16, 16);
     double u, v;
     dr_sampler_next2(smp, &u, &v);
     dr_camera_ray(&r->view, u * 64.0, v * 48.0, o, d);
@@ -372,10 +376,13 @@ static void random_path_start(void *ctx, int64_t i, struct dr_sampler *smp, dr_v
  * second segment, so every stage is crossed many times (an image's float
  * pixels would hide a last-bit difference). Returns how many vertices were
  * shaded eight lanes at a time, the fewer of the two ways' counts. */
-static uint64_t radiance_matches_exactly(const struct dr_scene *s, struct dr_camera cam, const char *name)
+static uint64_t radiance_matches_exactly(const struct dr_scene *s, struct dr_camera cam, const char *scene,
+                                         enum dr_sampler_kind kind)
 {
     enum { N = 6000 };
-    struct random_paths r = {dr_camera_view(&cam, 64, 48)};
+    struct random_paths r = {dr_camera_view(&cam, 64, 48), kind};
+    char name[160];
+    snprintf(name, sizeof name, "%s, %s sampler", scene, dr_sampler_kind_name(kind));
     struct dr_path_opts po = {.max_depth = 16, .rr_depth = 2, .stages = dr_path_plan(s, NULL)};
     dr_vec3 *L = malloc(sizeof(dr_vec3) * N), *Llanes = malloc(sizeof(dr_vec3) * N);
     struct dr_wave *w = dr_wave_create();
@@ -522,8 +529,13 @@ static void exact_with_groups(struct dr_scene *s, unsigned effects, struct dr_ca
     struct dr_path_opts po = {.max_depth = 8, .rr_depth = DR_RR_DEPTH_DEFAULT, .stages = dr_path_plan(s, NULL)};
     CHECK(dr_path8_applies(s, &po), "%s qualifies for the eight-lane stages", name);
     CHECK((s->effects & effects) == effects, "%s: effects %#x, expected %#x among them", name, s->effects, effects);
-    uint64_t simd = radiance_matches_exactly(s, cam, name);
-    CHECK(simd > 1000, "%s: only %llu vertices shaded eight lanes at a time", name, (unsigned long long)simd);
+    /* (the structured samplers' numbers are drawn lane by lane inside the kernels) */
+    const enum dr_sampler_kind kinds[] = {DR_SAMPLER_INDEPENDENT, DR_SAMPLER_SOBOL, DR_SAMPLER_STRATIFIED};
+    for (int k = 0; k < 3; k++) {
+        uint64_t simd = radiance_matches_exactly(s, cam, name, kinds[k]);
+        CHECK(simd > 1000, "%s, %s sampler: only %llu vertices shaded eight lanes at a time", name,
+              dr_sampler_kind_name(kinds[k]), (unsigned long long)simd);
+    }
     dr_scene_destroy(s);
 }
 
