@@ -150,16 +150,79 @@ DR_SIMD_INLINE dr_f8 u53_to_f8(dr_u8 k)
 #endif
 }
 
-/* dr_hash64 and dr_sampler_independent */
-DR_SIMD_INLINE dr_f8 independent(dr_u8 key, dr_u8 dim)
+/* dr_hash64 */
+DR_SIMD_INLINE dr_u8 hash64(dr_u8 x)
 {
-    dr_u8 x = key + dim * 0xd1b54a32d192ed03ULL;
     x ^= x >> 30;
     x *= 0xbf58476d1ce4e5b9ULL;
     x ^= x >> 27;
     x *= 0x94d049bb133111ebULL;
     x ^= x >> 31;
-    return u53_to_f8(x >> 11) * (1.0 / 9007199254740992.0);
+    return x;
+}
+
+/* dr_sampler_independent */
+DR_SIMD_INLINE dr_f8 independent(dr_u8 key, dr_u8 dim)
+{
+    return u53_to_f8(hash64(key + dim * 0xd1b54a32d192ed03ULL) >> 11) * (1.0 / 9007199254740992.0);
+}
+
+/* ---- dr_sampler_sobol2 (sampler.h) on eight lanes' 32-bit numbers */
+
+typedef uint32_t u32x8 __attribute__((vector_size(8 * sizeof(uint32_t))));
+
+/* dr_reverse_bits32 */
+DR_SIMD_INLINE u32x8 reverse_bits(u32x8 x)
+{
+    x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
+    x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
+    x = ((x >> 4) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4);
+    x = ((x >> 8) & 0x00ff00ffu) | ((x & 0x00ff00ffu) << 8);
+    return (x >> 16) | (x << 16);
+}
+
+/* dr_owen_scramble */
+DR_SIMD_INLINE u32x8 owen_scramble(u32x8 x, u32x8 seed)
+{
+    x = reverse_bits(x);
+    x += seed;
+    x ^= x * 0x6c50b47cu;
+    x ^= x * 0xb82f1e52u;
+    x ^= x * 0xc7afe638u;
+    x ^= x * 0x8d22f6e6u;
+    return reverse_bits(x);
+}
+
+/* dr_sobol_dim1: the generator matrix's columns v_b for the set bits (in
+ * vector registers a table lookup per lane costs more than the 32 steps) */
+DR_SIMD_INLINE u32x8 sobol_dim1(u32x8 i)
+{
+    u32x8 x = {0};
+    uint32_t v = 0x80000000u;
+    for (int b = 0; b < 32; b++, i >>= 1, v ^= v >> 1)
+        x ^= (0u - (i & 1u)) & v;
+    return x;
+}
+
+/* dr_sobol_to_double */
+DR_SIMD_INLINE dr_f8 sobol_to_f8(u32x8 x, dr_u8 h)
+{
+    dr_u8 k = (__builtin_convertvector(x, dr_u8) << 21) | (h >> 43);
+    return u53_to_f8(k) * (1.0 / 9007199254740992.0);
+}
+
+/* dr_sampler_sobol2 of dimension dim for lanes with scrambling seed pkey
+ * and sample index; u2 NULL: the first number only. */
+DR_SIMD_INLINE void sobol2(dr_u8 pkey, u32x8 index, dr_u8 dim, dr_f8 *u1, dr_f8 *u2)
+{
+    dr_u8 h = hash64(pkey + dim * 0xd1b54a32d192ed03ULL);
+    u32x8 i = owen_scramble(index, __builtin_convertvector(h, u32x8));
+    dr_u8 h1 = hash64(h ^ 0x1111111111111111ULL);
+    *u1 = sobol_to_f8(owen_scramble(reverse_bits(i), __builtin_convertvector(h1 >> 32, u32x8)), h1);
+    if (u2) {
+        dr_u8 h2 = hash64(h ^ 0x2222222222222222ULL);
+        *u2 = sobol_to_f8(owen_scramble(sobol_dim1(i), __builtin_convertvector(h2 >> 32, u32x8)), h2);
+    }
 }
 
 /* -------------------------------------------------------------- the BSDF */
@@ -630,11 +693,26 @@ DR_SIMD_INLINE dr_m8 nee_begin(struct dr_path8 *g, dr_m8 ok, const struct light8
 
 /* The vertex's seven numbers in dr_path_step_hit's order (light pick, light
  * point, lobe, direction, roulette) from its first dimension dim: the
- * independent sampler's in vector form, then a structured sampler's lane by
- * lane with the scalar draws (their 2D pairs belong together). */
+ * independent and Sobol samplers' in vector form, the stratified sampler's
+ * lane by lane with the scalar draws (their 2D pairs belong together). */
 static void vertex_randoms(const struct dr_path8_in *in, const uint32_t *dim, dr_f8 u[7])
 {
     dr_u8 d = {dim[0], dim[1], dim[2], dim[3], dim[4], dim[5], dim[6], dim[7]};
+    bool sobol = true;   /* every lane's (padding lanes repeat lane 0) */
+    for (int i = 0; i < DR_SIMD_W; i++)
+        sobol = sobol && in->sampler[i] && in->sampler[i]->kind == DR_SAMPLER_SOBOL;
+    if (sobol) {   /* the draws of dr_sampler_next and next2 (sampler.c) in vector form */
+        dr_u8 pkey;
+        u32x8 index;
+        for (int i = 0; i < DR_SIMD_W; i++)
+            pkey[i] = in->sampler[i]->pkey, index[i] = in->sampler[i]->index;
+        sobol2(pkey, index, d + 1, &u[0], NULL);
+        sobol2(pkey, index, d + 2, &u[1], &u[2]);
+        sobol2(pkey, index, d + 4, &u[3], NULL);
+        sobol2(pkey, index, d + 5, &u[4], &u[5]);
+        sobol2(pkey, index, d + 7, &u[6], NULL);
+        return;
+    }
     for (int k = 0; k < 7; k++)
         u[k] = independent(in->key, d + (uint64_t)(k + 1));
     for (int i = 0; i < DR_SIMD_W; i++) {
