@@ -176,8 +176,11 @@ static void walk_done(const struct dr_wave_soa *w, int64_t item, dr_vec3 L, dr_v
  * the path at `depth`, for its replay (wavefront.h). */
 static inline void log_trace(const struct dr_wave_soa *w, int64_t item, int depth, int64_t tri)
 {
-    if (w->out && w->out->log && depth <= DR_WAVE_REPLAY_DEPTH)
-        w->out->log[item].tri[(w->out->log[item].n = depth) - 1] = tri;
+    if (w->out && w->out->log && depth <= DR_WAVE_REPLAY_DEPTH) {
+        struct dr_wave_log *log = &w->out->log[item];
+        log->tri[(log->n = depth) - 1] = tri;
+        log->occ[depth - 1] = false;   /* (until a shadow ray answers: a vertex without one has a defined entry) */
+    }
 }
 static inline void log_shadow(const struct dr_wave_soa *w, int64_t item, int depth, bool occluded)
 {
