@@ -576,7 +576,8 @@ bool dr_wave_soa_walk(struct dr_wave_soa *w, const struct dr_scene *s, const str
                       dr_wave_start_fn start, void *ctx, const struct dr_wave_soa_walks *out,
                       struct dr_ray_counts *counts)
 {
-    if (!w->scalar && !(w->scalar = malloc(sizeof(struct scalar_path) * LANES)))
+    /* zeroed, as the lanes (wavefront.c): a field no stage wrote reads the same on every run */
+    if (!w->scalar && !(w->scalar = calloc(LANES, sizeof(struct scalar_path))))
         return false;
     w->out = out;
     run(w, s, opts, n, start, ctx, NULL, counts);
