@@ -161,13 +161,14 @@ static void move_path(struct dr_wave_soa *w, int to, int from)
     }
 }
 
-/* A walk's end (dr_wave_soa_walk): its sums to the caller. */
-static void walk_done(const struct dr_wave_soa *w, int64_t item, dr_vec3 L, dr_vec3 T, int last_diff)
+/* A walk's end (dr_wave_soa_walk): its sums to the caller (L_sub: the
+ * arrays' L, with the tracing throughput; L_true: their T). */
+static void walk_done(const struct dr_wave_soa *w, int64_t item, dr_vec3 L_sub, dr_vec3 L_true, int last_diff)
 {
     if (w->out->L)
-        w->out->L[item] = T;
+        w->out->L[item] = L_true;
     if (w->out->L_sub)
-        w->out->L_sub[item] = L;
+        w->out->L_sub[item] = L_sub;
     if (w->out->last_diff)
         w->out->last_diff[item] = last_diff;
 }

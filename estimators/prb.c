@@ -232,26 +232,33 @@ struct park_lane {
 };
 _Static_assert(sizeof(struct park_lane) <= DR_WAVE_USER_BYTES, "a park lane's state fits");
 
-/* Item i's sampler and camera ray. */
-static void sample_ray(struct park_ctx *c, struct park_lane *l, int64_t i, struct dr_sampler *smp, dr_vec3 *o,
-                      dr_vec3 *d)
+/* Item i's sampler and camera ray (the arrays' primal walks start so:
+ * dr_wave_soa_walk); returns its pixel. */
+static int64_t sample_ray(void *ctx, int64_t i, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
 {
+    const struct park_ctx *c = ctx;
     const int spp = c->run.j->b.p->spp;
+    const int64_t px = c->px[i / spp];
+    dr_est_camera_ray(&c->run.j->b, px, (int)(i % spp), smp, o, d);
+    return px;
+}
+
+/* The same for a lane's walk. */
+static void lane_ray(struct park_ctx *c, struct park_lane *l, int64_t i, struct dr_sampler *smp, dr_vec3 *o,
+                     dr_vec3 *d)
+{
     l->item = i;
-    l->px = c->px[i / spp];
-    dr_est_camera_ray(&c->run.j->b, l->px, (int)(i % spp), smp, o, d);
+    l->px = sample_ray(c, i, smp, o, d);
 }
 
 static void primal_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
 {
-    sample_ray(ctx, user, i, smp, o, d);
+    lane_ray(ctx, user, i, smp, o, d);
 }
 
-/* The same for the arrays' primal walks (dr_wave_soa_walk). */
 static void soa_start(void *ctx, int64_t i, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
 {
-    struct park_lane l;
-    sample_ray(ctx, &l, i, smp, o, d);
+    (void)sample_ray(ctx, i, smp, o, d);
 }
 
 static void primal_keep_log(void *ctx, void *user, const struct dr_wave_log *log)
@@ -279,7 +286,7 @@ static void replay_start(void *ctx, int64_t k, void *user, struct dr_sampler *sm
     struct park_ctx *c = ctx;
     struct park_lane *l = user;
     const struct parked_samples *it = c->items;
-    sample_ray(c, l, it->order[k], smp, o, d);
+    lane_ray(c, l, it->order[k], smp, o, d);
     l->w.L = (struct prb_radiance){it->walk.L[l->item], it->walk.L_sub[l->item]};
     l->w.last_diff = it->walk.last_diff[l->item];
     l->w.adj = it->adj[l->item];
@@ -318,6 +325,17 @@ static uint64_t parked_bytes(int64_t cap)
 
 /* A thread's parked samples, made on first use (cap of them; ray answers
  * only if they fit LOGGED_ITEMS). False: out of memory. */
+static void parked_free(struct parked_samples *it)
+{
+    free(it->walk.L);
+    free(it->walk.L_sub);
+    free(it->walk.last_diff);
+    free(it->walk.log);
+    free(it->adj);
+    free(it->order);
+    *it = (struct parked_samples){0};
+}
+
 static bool parked_make(struct parked_samples *it, int64_t cap)
 {
     if (it->order)
@@ -328,18 +346,11 @@ static bool parked_make(struct parked_samples *it, int64_t cap)
     it->walk.log = cap <= LOGGED_ITEMS ? malloc(sizeof(struct dr_wave_log) * (size_t)cap) : NULL;
     it->adj = malloc(sizeof(dr_vec3) * (size_t)cap);
     it->order = malloc(sizeof(int32_t) * (size_t)cap);
-    return it->walk.L && it->walk.L_sub && it->walk.last_diff && (it->walk.log || cap > LOGGED_ITEMS) &&
-           it->adj && it->order;   /* (a partial set is freed by prb_release; order is made last) */
-}
-
-static void parked_free(struct parked_samples *it)
-{
-    free(it->walk.L);
-    free(it->walk.L_sub);
-    free(it->walk.last_diff);
-    free(it->walk.log);
-    free(it->adj);
-    free(it->order);
+    if (it->walk.L && it->walk.L_sub && it->walk.last_diff && (it->walk.log || cap > LOGGED_ITEMS) && it->adj &&
+        it->order)
+        return true;
+    parked_free(it);   /* all or none: `order` marks a whole set */
+    return false;
 }
 
 /* The primal walks of a group's n samples: in arrays where they apply

@@ -366,7 +366,7 @@ static enum dr_wave_next lane_walk_end(void *ctx, void *user, struct dr_sampler 
 
 static void soa_start(void *ctx, int64_t i, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
 {
-    struct record_lane l;
+    struct record_lane l;   /* (its path index is first_path + i: items start in order) */
     lane_start(ctx, i, &l, smp, o, d);
 }
 
