@@ -132,8 +132,13 @@ static void stage_escaped(const struct dr_scene *s, const struct dr_path_opts *o
     if (!(opts->stages & DR_STAGE_ENV))
         return;
     v->emits = true;
-    v->Le = dr_env_radiance(s, st->d);
-    v->emit_w = st->depth == 1 ? 1.0 : dr_mis_power(st->prev_pdf, dr_light_pdf_env(s, s->light_sampler, st->d));
+    v->Le = dr_path_escaped_radiance(s, st->depth, st->prev_pdf, st->d, &v->emit_w);
+}
+
+dr_vec3 dr_path_escaped_radiance(const struct dr_scene *s, int depth, double prev_pdf, dr_vec3 d, double *emit_w)
+{
+    *emit_w = depth == 1 ? 1.0 : dr_mis_power(prev_pdf, dr_light_pdf_env(s, s->light_sampler, d));
+    return dr_env_radiance(s, d);
 }
 
 static bool surface_emits(const struct dr_scene *s, const struct dr_path_opts *o, int64_t tri, int mat)

@@ -338,6 +338,14 @@ void dr_path_nee_end(const struct dr_scene *scene, struct dr_path_vertex *v, con
 dr_vec3 dr_path_radiance(const struct dr_scene *scene, const struct dr_path_opts *opts, dr_vec3 o, dr_vec3 d,
                          struct dr_sampler *sampler, struct dr_ray_counts *counts);
 
+/* What a ray leaving the scene at vertex `depth` sees along d: the
+ * environment's radiance, and in emit_w its MIS weight against next-event
+ * estimation of the environment (prev_pdf: the BSDF's pdf of d). The
+ * escaped stage's maths; the arrays' escaped paths call it directly
+ * (wave_soa.c). */
+dr_vec3 dr_path_escaped_radiance(const struct dr_scene *scene, int depth, double prev_pdf, dr_vec3 d,
+                                 double *emit_w);
+
 /* The stages, for the medium walker (medium_path.c), which strings them
  * together with free-flight sampling and boundary crossings. */
 void dr_path_stage_escaped(const struct dr_scene *scene, const struct dr_path_opts *opts,
