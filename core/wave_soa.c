@@ -254,7 +254,8 @@ static void scalar_state(const struct dr_wave_soa *w, int k, struct dr_path_stat
 }
 
 /* A ray that left the scene: the scalar walker's stage (the environment's
- * radiance, if any), and the path's end. Without parameters that is the
+ * radiance, if any), and the path's end. Unless the environment has a
+ * parameter (then the vertex has a derivative term: last_diff) that is the
  * stage's maths alone (dr_path_escaped_radiance); building the scalar
  * state and vertex for it took a tenth of a render where most rays leave
  * (a real asset under the default sky). */
@@ -263,7 +264,8 @@ static void escaped(const struct dr_wave_soa *w, const struct dr_scene *s, const
 {
     dr_vec3 e = dr_v3s(0.0);   /* nothing out there: a term of 0, summed as the walker sums it */
     int last_diff = w->out ? w->last_diff[k] : 0;
-    if ((opts->stages & DR_STAGE_ENV) && !opts->params) {
+    const bool env_diff = opts->params && opts->params->radiance_active && opts->params->env_active;
+    if ((opts->stages & DR_STAGE_ENV) && !env_diff) {   /* (dr_path_vertex_has_derivative: false) */
         double emit_w;
         dr_vec3 Le = dr_path_escaped_radiance(s, (int)w->depth[k], w->prev_pdf[k], dr_v3(w->dx[k], w->dy[k], w->dz[k]),
                                               &emit_w);
