@@ -465,6 +465,46 @@ DR_SIMD_INLINE dr_m8 locate(const struct dr_mesh *m, const struct lanes *L, dr_v
     return dr_f8_lt(dr_v3x8_dot(d, *ng), dr_f8s(0.0));
 }
 
+/* Lane i's hit as dr_hit_compute fills it, from locate's results: only the
+ * texture coordinates are new (attributes()'s sums, the same operations),
+ * so a textured lane no longer solves its triangle a second time in scalar
+ * code. t is the distance to p (dr_hit_compute's fallback; nothing reads a
+ * hit's t). */
+static void hit_of_lane(const struct dr_mesh *m, const struct lanes *L, int i, dr_vec3 o, dr_vec3 p, dr_vec3 ng,
+                        dr_vec3 ns, double eps, double b1, double b2, bool front, struct dr_hit *hit)
+{
+    const int64_t tri = L->tri[i];
+    *hit = (struct dr_hit){.tri = tri, .p = p, .ng = ng, .ns = ns, .b1 = b1, .b2 = b2, .front = front,
+                           .material = m->material[tri], .eps = eps};
+    hit->t = dr_length(dr_sub(p, o));
+    if (m->flags[tri] & DR_TRI_HAS_UVS) {
+        const double b0 = 1.0 - b1 - b2;
+        const float *t0 = m->uvs + 2 * (size_t)L->v0[i], *t1 = m->uvs + 2 * (size_t)L->v1[i],
+                    *t2 = m->uvs + 2 * (size_t)L->v2[i];
+        hit->uv[0] = b0 * t0[0] + b1 * t1[0] + b2 * t2[0];
+        hit->uv[1] = b0 * t0[1] + b1 * t1[1] + b2 * t2[1];
+    }
+}
+
+void dr_path8_locate_hits(const struct dr_scene *s, const int64_t *tri, dr_v3x8 o, dr_v3x8 d, const bool *want,
+                          struct dr_hit *hit)
+{
+    const struct dr_mesh *m = &s->mesh;
+    struct lanes L;
+    for (int i = 0; i < DR_SIMD_W; i++) {
+        L.tri[i] = tri[i];
+        triangle_vertices(m, tri[i], &L.v0[i], &L.v1[i], &L.v2[i]);
+        L.has_normals[i] = m->flags[tri[i]] & DR_TRI_HAS_NORMALS;
+    }
+    dr_v3x8 p, ng, ns;
+    dr_f8 eps, b1, b2;
+    dr_m8 front = locate(m, &L, o, d, &p, &ng, &ns, &eps, &b1, &b2);
+    for (int i = 0; i < DR_SIMD_W; i++)
+        if (want[i])
+            hit_of_lane(m, &L, i, dr_v3x8_get(&o, i), dr_v3x8_get(&p, i), dr_v3x8_get(&ng, i), dr_v3x8_get(&ns, i),
+                        eps[i], b1[i], b2[i], front[i] != 0, &hit[i]);
+}
+
 /* dr_emission of a material without an emissive texture: factor x strength,
  * on the front (or both sides). */
 DR_SIMD_INLINE dr_v3x8 emission(const void *const *mat, dr_m8 seen)
@@ -755,8 +795,9 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
         L.any_textured = true;
         if (in->hit[i])
             L.hit[i] = *in->hit[i];
-        else   /* the scalar hit the lookups read (the vector one has no uv) */
-            dr_hit_compute(m, L.tri[i], dr_v3x8_get(&o, i), dr_v3x8_get(&d, i), &L.hit[i]);
+        else   /* the scalar hit the lookups read */
+            hit_of_lane(m, &L, i, dr_v3x8_get(&o, i), dr_v3x8_get(&g->p, i), dr_v3x8_get(&ng, i), dr_v3x8_get(&ns, i),
+                        g->eps[i], b1[i], b2[i], front[i] != 0, &L.hit[i]);
         if (L.normal_mapped[i]) {   /* stage_emission's dr_normal_map_apply */
             dr_normal_map_apply(s, &L.hit[i]);
             set_lane(&ns, i, L.hit[i].ns);

@@ -87,6 +87,13 @@ bool dr_path8_hit(const struct dr_scene *scene, const struct dr_path_opts *opts,
  * lanes call the scalar material, emission and normal-map functions with
  * the hit. */
 bool dr_path8_reads_textures(const struct dr_scene *scene, int64_t tri);
+/* dr_hit_compute of the lanes i with want[i], eight-wide (the hit point
+ * and normals as the hit stage's own locate computes them; the same values
+ * as the scalar function's): into hit[i]. Every lane's tri must be a
+ * triangle. For a tracer that locates textured hits before shading, to
+ * prefetch their texels. */
+void dr_path8_locate_hits(const struct dr_scene *scene, const int64_t *tri, dr_v3x8 o, dr_v3x8 d,
+                          const bool *want, struct dr_hit *hit);
 /* dr_path_step_hit of n <= DR_SIMD_W lanes that dr_path8_hit accepts:
  * fills next[i], *shadow[i] when next[i] is DR_STEP_SHADOW, the vertex term's
  * emission in *v[i], the sampler's position, and g for dr_path8_continue.

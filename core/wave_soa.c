@@ -339,12 +339,18 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
  * and their texels asked for, so that the cache misses overlap. */
 static void locate_textured(struct dr_wave_soa *w, const struct dr_scene *s, int n_live)
 {
-    for (int k = 0; k < n_live; k++)
-        if (dr_path8_reads_textures(s, w->tri[k])) {
-            dr_hit_compute(&s->mesh, w->tri[k], dr_v3(w->ox[k], w->oy[k], w->oz[k]),
-                           dr_v3(w->dx[k], w->dy[k], w->dz[k]), &w->hit[k]);
-            dr_material_prefetch(s, &w->hit[k]);
-        }
+    for (int i0 = 0; i0 < n_live; i0 += DR_SIMD_W) {   /* (the last group padded: pad_last_group) */
+        bool want[DR_SIMD_W], any = false;
+        for (int i = 0; i < DR_SIMD_W; i++)
+            any |= want[i] = i0 + i < n_live && dr_path8_reads_textures(s, w->tri[i0 + i]);
+        if (!any)
+            continue;
+        dr_path8_locate_hits(s, w->tri + i0, load3(w->ox + i0, w->oy + i0, w->oz + i0),
+                             load3(w->dx + i0, w->dy + i0, w->dz + i0), want, w->hit + i0);
+        for (int i = 0; i < DR_SIMD_W; i++)
+            if (want[i])
+                dr_material_prefetch(s, &w->hit[i0 + i]);
+    }
 }
 
 /* Group g's inputs: slots 8g .. 8g+7 (the last group's padding slots repeat
