@@ -1554,7 +1554,7 @@ void Loader::finish()
     mesh.n_vertices = uint32_t(positions_.size() / 3);
     mesh.n_triangles = uint32_t(tri_material_.size());
     mesh.positions = copy_out(positions_, 1);  /* Embree reads 16 bytes per vertex */
-    mesh.normals = copy_out(normals_);
+    mesh.normals = copy_out(normals_, 1);      /* the eight-lane gathers read 16 bytes per vertex */
     mesh.uvs = copy_out(uvs_);
     mesh.uvs1 = copy_out(uvs1_);      /* NULL unless a texture reads TEXCOORD_1 */
     mesh.colors = copy_out(colors_);  /* NULL unless some primitive has COLOR_0 */

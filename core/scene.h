@@ -58,7 +58,8 @@ enum dr_tri_flags {
 struct dr_mesh {
     uint32_t n_vertices, n_triangles;
     float *positions;   /* 3 per vertex, plus 1 padding float (Embree reads 16 bytes) */
-    float *normals;     /* 3 per vertex (zero where the primitive had none) */
+    float *normals;     /* 3 per vertex (zero where the primitive had none), plus 1 padding
+                           float (path_simd.c's gather_vertex reads 16 bytes) */
     float *uvs;         /* 2 per vertex (zero where the primitive had none) */
     /* Only for the scenes that call for them (NULL otherwise: no memory, no
      * per-hit work): */
