@@ -385,11 +385,12 @@ static void pad_last_group(struct dr_wave_soa *w, int n_live)
  * to the step's batch from index n_shadow on (owner SLOTS + the path's
  * index). Returns the batch's size. */
 static int shade_scalar(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
-                        int n_shadow, struct dr_ray_counts *counts)
+                        int n_shadow, bool located, struct dr_ray_counts *counts)
 {
     for (int j = 0; j < w->n_scalar; j++) {
         struct scalar_path *p = &w->scalar[j];
-        p->next = dr_path_step_hit(s, opts, &p->st, &p->smp, &p->v, p->tri, &p->shadow);
+        p->next = located ? dr_path_step_shade(s, opts, &p->st, &p->smp, &p->v, p->tri, &p->shadow)
+                          : dr_path_step_hit(s, opts, &p->st, &p->smp, &p->v, p->tri, &p->shadow);
         p->occluded = false;
         if (p->next != DR_STEP_SHADOW)
             continue;
@@ -409,6 +410,15 @@ static void shade(struct dr_wave_soa *w, const struct dr_scene *s, const struct 
                   bool located, struct dr_ray_counts *counts)
 {
     int n_shadow = 0;
+    /* (located: the scalar paths' hits too, and their texels asked for
+     * before the groups are shaded, as locate_textured does for the groups'
+     * own: where a differentiated material covers a textured asset these
+     * are most vertices, and their texel reads missed one after another) */
+    for (int j = 0; located && j < w->n_scalar; j++) {
+        struct scalar_path *p = &w->scalar[j];
+        dr_path_step_locate(s, &p->st, &p->v, p->tri);
+        dr_material_prefetch(s, &p->v.hit);
+    }
     for (int g = 0; g * DR_SIMD_W < n_live; g++) {
         struct dr_path8_in in;
         group_inputs(w, g, n_live, located, &in);
@@ -429,7 +439,7 @@ static void shade(struct dr_wave_soa *w, const struct dr_scene *s, const struct 
         }
     }
     counts->simd_vertices += (uint64_t)n_live;
-    n_shadow = shade_scalar(w, s, opts, n_shadow, counts);
+    n_shadow = shade_scalar(w, s, opts, n_shadow, located, counts);
     struct dr_accel_rays r = {.n = n_shadow, .ox = w->sox, .oy = w->soy, .oz = w->soz,
                               .dx = w->sdx, .dy = w->sdy, .dz = w->sdz, .tmax = w->stmax};
     if (n_shadow > 0)
