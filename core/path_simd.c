@@ -754,7 +754,7 @@ DR_SIMD_INLINE dr_m8 nee_begin(struct dr_path8 *g, dr_m8 ok, const struct light8
     g->ls_radiance = ls->radiance;
     g->ls_pdf = ls->pdf;
     g->delta = ls->delta;
-    ok &= ~dr_v3x8_is_black(g->nee_f);
+    ok &= ~(dr_v3x8_is_black(g->nee_f) & ~g->diff);   /* (a zero BSDF's derivative may not be zero) */
     *so = offset_origin(g->p, g->ng, g->eps, ls->wi);
     *sd = dr_v3x8_sub(ls->target, *so);
     g->tmax = dr_f8_sqrt(dr_v3x8_dot(*sd, *sd));
@@ -841,6 +841,9 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
 
     /* stage_material: the frame towards the ray, the BSDF, the random numbers */
     dr_m8 end = dr_f8_ge(depth, dr_f8s(opts->max_depth)) | (~front & ~mask_of(L.double_sided));
+    g->diff = (dr_m8){0};
+    for (int i = 0; opts->params && i < DR_SIMD_W; i++)   /* (stage_material's diff_bsdf, where it runs) */
+        g->diff[i] = !end[i] && opts->params->mat_bsdf_active[m->material[L.tri[i]]] ? -1 : 0;
     g->ng = dr_v3x8_sel(front, ng, dr_v3x8_neg(ng));
     g->fn = dr_v3x8_sel(front, ns, dr_v3x8_neg(ns));
     for (int i = 0; L.any_textured && i < n; i++)   /* a mapped normal may face away from wo */
@@ -905,8 +908,23 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
     }
 }
 
+struct mask3 { dr_m8 x, y, z; };   /* a mask per colour channel */
+
+/* substitute_zero_channels (path.c): at a differentiated vertex, a channel
+ * whose BSDF value is exactly 0 and not yet substituted on this path is
+ * traced on with the substitute factor; *sub marks those channels. */
+DR_SIMD_INLINE dr_v3x8 substitute_zero_channels(const struct dr_path8 *g, dr_v3x8 f, dr_v3x8 ratio, struct mask3 *sub)
+{
+    const dr_f8 zero = dr_f8s(0.0), substitute = dr_f8s(DR_PATH_SUBSTITUTE);
+    sub->x = g->diff & dr_f8_eq(f.x, zero) & ~dr_f8_eq(ratio.x, zero);
+    sub->y = g->diff & dr_f8_eq(f.y, zero) & ~dr_f8_eq(ratio.y, zero);
+    sub->z = g->diff & dr_f8_eq(f.z, zero) & ~dr_f8_eq(ratio.z, zero);
+    return (dr_v3x8){dr_f8_sel(sub->x, substitute, f.x), dr_f8_sel(sub->y, substitute, f.y),
+                     dr_f8_sel(sub->z, substitute, f.z)};
+}
+
 void dr_path8_continue_lanes(const struct dr_path_opts *opts, const struct dr_path8 *g, dr_v3x8 beta_in,
-                             dr_m8 occluded, struct dr_path8_out *out)
+                             const dr_v3x8 *ratio_in, dr_m8 occluded, struct dr_path8_out *out)
 {
     /* dr_path_nee_end */
     out->nee = g->shadow & dr_f8_gt(g->tmax, dr_f8s(0.0)) & ~occluded;
@@ -926,7 +944,12 @@ void dr_path8_continue_lanes(const struct dr_path_opts *opts, const struct dr_pa
     dr_v3x8 wiw = to_world(g->fs, g->ft, g->fn, wi);
     ok &= ~dr_f8_le(dr_v3x8_dot(wiw, g->ng), dr_f8s(0.0));
     dr_f8 cos_pdf = dr_f8_abs(wi.z) / pdf;
-    dr_v3x8 beta = dr_v3x8_mul(beta_in, dr_v3x8_scale(f, cos_pdf));
+    const dr_v3x8 one = {dr_f8s(1.0), dr_f8s(1.0), dr_f8s(1.0)};
+    dr_v3x8 ratio = ratio_in ? *ratio_in : one, fs = f;
+    struct mask3 sub = {{0}, {0}, {0}};
+    if (dr_m8_any(g->diff))
+        fs = substitute_zero_channels(g, f, ratio, &sub);
+    dr_v3x8 beta = dr_v3x8_mul(beta_in, dr_v3x8_scale(fs, cos_pdf));
     ok &= ~dr_v3x8_is_black(beta);
     dr_m8 roulette = dr_f8_ge(g->depth, dr_f8s(opts->rr_depth));
     dr_f8 q = dr_f8_sel(roulette, dr_f8_min(dr_f8_max(beta.x, dr_f8_max(beta.y, beta.z)), dr_f8s(0.95)),
@@ -934,6 +957,9 @@ void dr_path8_continue_lanes(const struct dr_path_opts *opts, const struct dr_pa
     ok &= ~(roulette & dr_f8_ge(g->rr, q));
     out->more = ok;
     out->beta = dr_v3x8_scale(beta, 1.0 / q);
+    const dr_f8 zero = dr_f8s(0.0);
+    out->ratio = (dr_v3x8){dr_f8_sel(sub.x, zero, ratio.x), dr_f8_sel(sub.y, zero, ratio.y),
+                           dr_f8_sel(sub.z, zero, ratio.z)};
     out->f = f;
     out->cos_pdf_q = cos_pdf / q;
     out->o = offset_origin(g->p, g->ng, g->eps, wiw);
@@ -960,7 +986,7 @@ void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g
         occ[i] = occluded[i < n ? i : 0];
     }
     struct dr_path8_out out;
-    dr_path8_continue_lanes(opts, g, gather3(S, offsetof(struct dr_path_state, beta)), mask_of(occ), &out);
+    dr_path8_continue_lanes(opts, g, gather3(S, offsetof(struct dr_path_state, beta)), NULL, mask_of(occ), &out);
     for (int i = 0; i < n; i++) {
         if (out.nee[i]) {
             v[i]->nee = true;

@@ -60,6 +60,9 @@ struct dr_path8 {
     dr_m8 shadow;                 /* a shadow ray was cast (DR_STEP_SHADOW): so + t sd, t < tmax */
     dr_v3x8 so, sd;
     dr_m8 go_on;                  /* the continuation runs (not DR_STEP_END) */
+    dr_m8 diff;                   /* a differentiated vertex (dr_path_vertex's diff_bsdf): its
+                                     shadow ray is cast even where the BSDF towards the light is
+                                     0, its zero channels are substituted (path.h) */
     dr_v3x8 p, ng;                /* hit point; geometric normal on the ray's side */
     dr_v3x8 fs, ft, fn;           /* shading frame */
     dr_f8 eps, wo_z, depth;
@@ -78,9 +81,11 @@ struct dr_path8 {
 /* Can this run use the eight-lane stages at all (no light whose radiance has
  * a parameter, no alpha, media or dielectric boundaries; some light)? */
 bool dr_path8_applies(const struct dr_scene *scene, const struct dr_path_opts *opts);
-/* Can a vertex on triangle tri use them (a hit, on a material without a
- * BSDF parameter)? Such a vertex has no derivative term in a run
- * dr_path8_applies to. */
+/* Can a vertex on triangle tri use them without its derivative term's
+ * bookkeeping (a hit, on a material without a BSDF parameter)? Such a
+ * vertex has no derivative term in a run dr_path8_applies to. The arrays'
+ * primal walks for path replay (wave_soa.c) take the others too: the
+ * stages mark them (dr_path8's diff), and a walk's sums follow. */
 bool dr_path8_hit(const struct dr_scene *scene, const struct dr_path_opts *opts, int64_t tri);
 
 /* Does shading a hit on triangle tri read textures (or vertex colours)? Such
@@ -115,14 +120,16 @@ struct dr_path8_out {
     dr_m8 more;                   /* the path goes on; then: */
     dr_v3x8 f;                    /* the continuation's BSDF value */
     dr_f8 cos_pdf_q;              /* ... and |cos| / pdf / q */
-    dr_v3x8 beta;                 /* the next throughput */
+    dr_v3x8 beta;                 /* the next throughput (with substitutes) */
+    dr_v3x8 ratio;                /* the next true / tracing throughput ratio (0 where substituted) */
     dr_v3x8 o, d;                 /* the next ray */
     dr_f8 prev_pdf;               /* its density (the next prev_p is g->p) */
 };
-/* dr_path8_continue from the arriving throughput beta and the shadow rays'
- * answers, into out. */
+/* dr_path8_continue from the arriving throughput beta, ratio (NULL: 1, no
+ * channel substituted yet; a walk with parameters passes its paths') and
+ * the shadow rays' answers, into out. */
 void dr_path8_continue_lanes(const struct dr_path_opts *opts, const struct dr_path8 *g, dr_v3x8 beta,
-                             dr_m8 occluded, struct dr_path8_out *out);
+                             const dr_v3x8 *ratio, dr_m8 occluded, struct dr_path8_out *out);
 /* Each lane's vertex term e_k (dr_path_vertex_term) after the continuation. */
 dr_v3x8 dr_path8_term(const struct dr_path8 *g, const struct dr_path8_out *out);
 

@@ -324,7 +324,7 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
         }
         if (prefetch)
             dr_mesh_prefetch_vertices(&s->mesh, w->tri[k]);
-        if (w->out && !dr_path8_hit(s, opts, w->tri[k])) {
+        if (w->out && w->out->vertex && !dr_path8_hit(s, opts, w->tri[k])) {   /* (a tape keeps such vertices whole) */
             take_scalar(w, k);
             continue;
         }
@@ -523,18 +523,22 @@ static int advance(struct dr_wave_soa *w, const struct dr_scene *s, const struct
         for (int i = 0; i < DR_SIMD_W; i++)
             occluded[i] = w->occluded[i0 + i] ? -1 : 0;
         struct dr_path8_out c;
-        dr_path8_continue_lanes(opts, G, beta, occluded, &c);
+        dr_v3x8 ratio;
+        if (w->out)
+            ratio = load3(w->rx + i0, w->ry + i0, w->rz + i0);
+        dr_path8_continue_lanes(opts, G, beta, w->out ? &ratio : NULL, occluded, &c);
         dr_v3x8 e = dr_path8_term(G, &c);   /* L += beta e, as dr_path_radiance sums */
         dr_v3x8 be = dr_v3x8_mul(beta, e);
         dr_v3x8 L = {load8(w->Lx + i0) + be.x, load8(w->Ly + i0) + be.y, load8(w->Lz + i0) + be.z};
         dr_v3x8 T = L;   /* a walk: T += ratio beta e, as prb.c's walk_vertex sums */
         if (w->out)
-            T = dr_v3x8_add(load3(w->Tx + i0, w->Ty + i0, w->Tz + i0),
-                            dr_v3x8_mul(load3(w->rx + i0, w->ry + i0, w->rz + i0), be));
+            T = dr_v3x8_add(load3(w->Tx + i0, w->Ty + i0, w->Tz + i0), dr_v3x8_mul(ratio, be));
         if (w->out && w->out->step)
             steps(w, G, &c, beta, e);
         for (int i = 0; i < G->n; i++) {
             int k = i0 + i;
+            if (w->out && G->diff[i])   /* (dr_path_vertex_has_derivative: diff_bsdf) */
+                w->last_diff[k] = (int)G->depth[i];
             if (!c.more[i]) {
                 if (w->out)
                     walk_done(w, w->item[k], dr_v3x8_get(&L, i), dr_v3x8_get(&T, i), w->last_diff[k]);
@@ -554,7 +558,7 @@ static int advance(struct dr_wave_soa *w, const struct dr_scene *s, const struct
             if (w->structured)
                 w->smp[kept] = w->smp[k];
             if (w->out) {
-                w->rx[kept] = w->rx[k], w->ry[kept] = w->ry[k], w->rz[kept] = w->rz[k];
+                w->rx[kept] = c.ratio.x[i], w->ry[kept] = c.ratio.y[i], w->rz[kept] = c.ratio.z[i];
                 w->Tx[kept] = T.x[i], w->Ty[kept] = T.y[i], w->Tz[kept] = T.z[i];
                 w->last_diff[kept] = w->last_diff[k];
             }

@@ -325,6 +325,24 @@ int main(void)
             DR_SAMPLING_DETACHED, false);
     compare("cornell box, BSDF parameters only, paths longer than the replay log", s, &s->cameras[0], bsdf_ptrs, 4,
             DR_WAVE_REPLAY_DEPTH + 12, DR_SAMPLING_DETACHED, true);
+    /* zero BSDF channels at differentiated vertices (path.h's substitutes):
+     * the red wall reflects no green or blue, the white walls nothing (no
+     * specular lobe either: its 4 % would make no channel 0). prb's
+     * walks shade these vertices eight lanes at a time (a shadow ray cast
+     * where the BSDF towards the light is 0, the zero channels substituted),
+     * the tape's steps keep them whole and take the scalar stages: the two
+     * must still agree */
+    int zeroed = 0;
+    for (int m = 0; m < s->n_materials; m++) {
+        struct dr_material *mat = &s->materials[m];
+        if (strcmp(mat->name, "red") == 0)
+            mat->base_color = dr_v3(0.8, 0.0, 0.0), mat->specular = 0.0, zeroed++;
+        if (strcmp(mat->name, "white") == 0)
+            mat->base_color = dr_v3(0.0, 0.0, 0.0), mat->specular = 0.0, zeroed++;
+    }
+    CHECK(zeroed == 2, "cornell box: the red and white materials (found %d)", zeroed);
+    const char *zero_ptrs[] = {ptrs[0], ptrs[1], ptrs[2]};
+    compare("cornell box, zero BSDF channels", s, &s->cameras[0], zero_ptrs, 3, 8, DR_SAMPLING_DETACHED, true);
     dr_scene_destroy(s);
 
     /* a glossy scene: rough metal and a dielectric floor under a point light and an environment */
