@@ -55,9 +55,11 @@ struct dr_wave_soa {
     int n_scalar;
 };
 
-/* A path whose vertex this step takes the scalar stages (a material with a
- * BSDF parameter: its vertex substitutes zero channels and has a derivative
- * term, path.h), out of the arrays from its trace to its continuation. */
+/* A path whose vertex this step takes the scalar stages (in a walk with a
+ * vertex hook, a tape's, a material with a BSDF parameter: the hook keeps
+ * such vertices whole), out of the arrays from its trace to its
+ * continuation. Without the hook (prb's walks) the eight-lane stages take
+ * them too (dr_path8's diff). */
 struct scalar_path {
     int64_t item, tri;            /* the run's index; the trace's answer */
     int last_diff;

@@ -54,14 +54,16 @@ struct dr_wave_soa_walks {
      * its continuation's factor t (f |cos| / pdf / q; 0 where the path ends)
      * and the true throughput bt (ratio beta) it was reached with */
     void (*step)(void *ctx, int64_t item, dr_vec3 e, dr_vec3 t, dr_vec3 bt);
-    /* a vertex the scalar stages took (on a material with a BSDF parameter),
-     * whole, reached with a */
+    /* a vertex on a material with a BSDF parameter, whole, reached with a
+     * (set: the scalar stages take such vertices; NULL: the eight-lane
+     * stages, which prb's walks use) */
     void (*vertex)(void *ctx, int64_t item, const struct dr_wave_arrival *a, const struct dr_path_vertex *v);
 };
 
-/* Can a gradient's primal walks use the arrays (parameters allowed)? The vertices on materials with a
- * BSDF parameter take the scalar stages (as in wavefront.c), the others the
- * eight-lane ones. */
+/* Can a gradient's primal walks use the arrays (parameters allowed)? The
+ * vertices on materials with a BSDF parameter take the scalar stages where
+ * the walk has a vertex hook (as in wavefront.c), the eight-lane ones
+ * otherwise, as all other vertices do. */
 bool dr_wave_soa_walks_apply(const struct dr_scene *scene, const struct dr_path_opts *opts);
 /* Bytes dr_wave_soa_create and dr_wave_soa_walk allocate (for memory estimates). */
 size_t dr_wave_soa_walk_bytes(void);
