@@ -155,6 +155,7 @@ struct need {
     double tape;       /* tape estimator: --max-depth x paths per batch */
     double batches;    /* per-batch gradient storage: --batches x --param */
     double mis;        /* --sampling mis: its group copies of the estimate, per thread */
+    double work;       /* the estimator's workers' own storage (paths in flight): --threads */
     double scene;      /* already loaded */
 };
 
@@ -183,7 +184,7 @@ void cli_json_memory_estimate(FILE *f)
 
 static int check(const char *cmd, const struct need *n, const char *images_opt, const char *tape_opt)
 {
-    double total = n->images + n->grads + n->tape + n->batches + n->mis + n->scene;
+    double total = n->images + n->grads + n->tape + n->batches + n->mis + n->work + n->scene;
     last_estimate = total >= 1.8e19 ? UINT64_MAX : (uint64_t)total;
     uint64_t limit = cli_mem_limit();
     if (total <= (double)limit)
@@ -207,6 +208,10 @@ static int check(const char *cmd, const struct need *n, const char *images_opt, 
         part = n->mis;
         what = "--sampling mis (16 copies of the estimate per thread: fewer --threads, a smaller --res, or "
                "--sampling detached)";
+    }
+    if (n->work > part) {
+        part = n->work;
+        what = "--threads (every worker holds its own paths in flight)";
     }
     if (n->scene > part) {
         part = n->scene;
@@ -233,6 +238,14 @@ int cli_limits_render(const struct dr_scene *scene, int width, int height, int s
 }
 
 /* Tape: every vertex of every path of a batch, at most max_depth per path. */
+/* The workers' own storage: threads x the estimator's bound (prb by default). */
+static double work_bytes(const struct dr_estimator_ops *e, int spp, int threads)
+{
+    if (!e)
+        e = dr_estimator_find("prb");
+    return e && e->thread_bytes ? (double)e->thread_bytes(spp) * threads : 0.0;
+}
+
 static double tape_bytes(const struct grad_common *g, double paths_per_batch)
 {
     if (!g->estimator || strcmp(g->estimator->name, "tape") != 0)
@@ -273,6 +286,7 @@ int cli_limits_grad(const struct grad_common *g, const struct dr_scene *scene, c
         double spp_b = ceil((double)g->spp / (batches > 0 ? batches : 1));
         double paths = npix * spp_b;
         n.tape = tape_bytes(g, fmin(dr_tape_batch_paths(batch, threads, (int)spp_b), paths));
+        n.work = work_bytes(g->estimator, (int)spp_b, threads);
     } else {
         /* d image in double per thread and summed, plus its float copy */
         n.images = npix * 3 * (sizeof(double) * (threads + 1) + sizeof(float));
@@ -280,6 +294,7 @@ int cli_limits_grad(const struct grad_common *g, const struct dr_scene *scene, c
         n.grads = T * sizeof(double);
         double paths = npix * g->spp;
         n.tape = tape_bytes(g, fmin(dr_tape_batch_paths(batch, threads, g->spp), paths));
+        n.work = work_bytes(g->estimator, g->spp, threads);
     }
     return check("grad", &n, "--res", "--max-depth x --batch (tape records every vertex of a batch: lower them, or --estimator prb)");
 }
@@ -298,6 +313,7 @@ int cli_limits_fdcheck(const struct grad_common *g, const struct dr_scene *scene
     n.mis = fmax(mis_bytes(g, T, npix, threads, true), mis_bytes(g, T, npix, threads, false));
     n.batches = (double)batches * T * sizeof(double);
     n.tape = tape_bytes(g, fmin(dr_tape_batch_paths(0, threads, g->spp), npix * g->spp));
+    n.work = work_bytes(g->estimator, g->spp, threads);
     return check("fdcheck", &n, "--res", "--max-depth (tape records every vertex of a batch; or --estimator prb)");
 }
 
@@ -314,6 +330,7 @@ int cli_limits_optimize(const struct grad_common *g, const struct dr_scene *scen
     n.grads = T * 9 * sizeof(double) + T * 2 * sizeof(double) * threads;
     n.mis = mis_bytes(g, T, (double)max_pixels, threads, false);
     n.tape = tape_bytes(g, fmin(dr_tape_batch_paths(0, threads, g->spp), (double)max_pixels * g->spp));
+    n.work = work_bytes(g->estimator, g->spp, threads);
     return check("optimize", &n, "--target (the images' size)",
                  "--max-depth (tape records every vertex of a batch; or --estimator prb)");
 }
@@ -342,6 +359,8 @@ int cli_limits_compare(const struct grad_common *g, const struct dr_scene *scene
         n.mis = mis_bytes(&gt, T, npix, threads, !reverse);
     }
     n.tape = tape_bytes(&gt, npix);
+    for (int e = 0; dr_estimators[e]; e++)   /* one estimator run at a time */
+        n.work = fmax(n.work, work_bytes(dr_estimators[e], g->spp, threads));
     return check("compare", &n, "--res", "--max-depth (tape records every vertex of a batch: lower it, or "
                                          "--estimators prb)");
 }

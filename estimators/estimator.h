@@ -122,6 +122,10 @@ struct dr_estimator_ops {
     int (*run)(struct dr_est_base *job);
     /* Frees what run allocated beyond the base (may be NULL). */
     void (*release)(struct dr_est_base *job);
+    /* At most the bytes one worker holds besides the gradient buffers at spp
+     * samples per pixel (its packet tracer's paths, prb's parked samples):
+     * the CLI's memory estimate counts one per thread (NULL: none). */
+    uint64_t (*thread_bytes)(int spp);
 };
 
 extern const struct dr_estimator_ops *const dr_estimators[];   /* NULL-terminated */

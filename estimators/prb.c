@@ -536,7 +536,7 @@ static int prb_run(struct dr_est_base *b)
         if (dr_wave_soa_walks_apply(b->p->scene, &b->popts))
             per_thread += dr_wave_soa_walk_bytes();
     }
-    b->scratch_bytes = per_thread * (uint64_t)b->acc.threads;
+    b->scratch_bytes = per_thread * (uint64_t)b->acc.threads;   /* (at most prb_thread_bytes each) */
     return dr_parallel_for_static((int64_t)b->p->width * b->p->height, PIXEL_CHUNK, b->acc.threads, prb_pixels, j);
 }
 
@@ -552,6 +552,13 @@ static void prb_release(struct dr_est_base *b)
     }
 }
 
+/* prb_run's per_thread where the wavefront and the arrays both serve. */
+static uint64_t prb_thread_bytes(int spp)
+{
+    return sizeof(dr_vec3) * (uint64_t)spp + dr_wave_bytes() + parked_bytes(park_group(spp) * spp) +
+           dr_wave_soa_walk_bytes();
+}
+
 const struct dr_estimator_ops dr_estimator_prb = {
     .name = "prb",
     .summary = "path replay backpropagation: primal pass + replay, constant memory per path, time linear in depth",
@@ -560,4 +567,5 @@ const struct dr_estimator_ops dr_estimator_prb = {
     .job_size = sizeof(struct prb_job),
     .run = prb_run,
     .release = prb_release,
+    .thread_bytes = prb_thread_bytes,
 };

@@ -698,6 +698,14 @@ static void tape_release(struct dr_est_base *b)
     }
 }
 
+/* tape_run's scratch_bytes per thread: the arrays or the lanes, the larger. */
+static uint64_t tape_thread_bytes(int spp)
+{
+    (void)spp;
+    const uint64_t soa = dr_wave_soa_walk_bytes(), lanes = dr_wave_bytes();
+    return soa > lanes ? soa : lanes;
+}
+
 const struct dr_estimator_ops dr_estimator_tape = {
     .name = "tape",
     .summary = "conventional reverse mode: records every vertex of a batch of paths, then sweeps backward; memory "
@@ -707,4 +715,5 @@ const struct dr_estimator_ops dr_estimator_tape = {
     .job_size = sizeof(struct tape_job),
     .run = tape_run,
     .release = tape_release,
+    .thread_bytes = tape_thread_bytes,
 };

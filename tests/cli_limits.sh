@@ -132,6 +132,18 @@ expect_rc 0 "grad reverse tape --batch 4096 --json"
 eb=$(json_estimate)
 [ "$eb" -ge $((64 * 64 * 50 * 704)) ] && [ "$eb" -gt "$e" ] ||
     fail "the tape estimate does not follow --batch (default: $e, 4096 paths: $eb)"
+# the estimate covers what each estimator's workers held (their paths in
+# flight, prb's parked samples: estimator_memory_bytes), on 1 and 2 threads
+for est in prb tape; do
+    for t in 1 2; do
+        run grad "$scene" --target t64.exr --param $P --spp 16 --json --estimator $est --threads $t
+        expect_rc 0 "grad reverse $est --threads $t --json"
+        e=$(json_estimate)
+        held=$(tail -n 1 "$tmp/out" | sed -n 's/.*"estimator_memory_bytes": \([0-9]*\).*/\1/p')
+        [ -n "$held" ] && [ "$e" -ge "$held" ] ||
+            fail "$est, $t threads: the estimate ($e) is below what the estimator held (${held:-none})"
+    done
+done
 run fdcheck "$scene" --param $P --res 16x16 --spp 1 --batches 2 --json
 [ "$rc" -eq 0 ] || [ "$rc" -eq 4 ] || fail "fdcheck --json: exit $rc"
 check_estimate "fdcheck" $((16 * 16 * 12))
