@@ -874,6 +874,9 @@ static int shared_adjoint(struct cmp_ctx *x, const float *target)
     }
     struct grad_common g = a->g;
     g.max_depth = a->depths[a->n_depths - 1];
+    g.spp = a->ref_spp;   /* the most samples per pixel a run takes (the workers' storage follows it) */
+    for (int k = 0; k < a->n_spps; k++)
+        g.spp = a->spps[k] > g.spp ? a->spps[k] : g.spp;
     struct dr_render_opts ro = grad_render_opts(&g, g.width, g.height, PRIMAL_SPP, PRIMAL_SEED, false);
     if (dr_render(x->scene, x->cam, &ro, img, NULL) != 0) {
         free(img);

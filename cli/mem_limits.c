@@ -243,7 +243,7 @@ static double work_bytes(const struct dr_estimator_ops *e, int spp, int threads)
 {
     if (!e)
         e = dr_estimator_find("prb");
-    return e && e->thread_bytes ? (double)e->thread_bytes(spp) * threads : 0.0;
+    return e && e->thread_bytes ? (double)e->thread_bytes(spp > 1 ? spp : 1) * threads : 0.0;
 }
 
 static double tape_bytes(const struct grad_common *g, double paths_per_batch)
