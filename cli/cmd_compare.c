@@ -874,9 +874,6 @@ static int shared_adjoint(struct cmp_ctx *x, const float *target)
     }
     struct grad_common g = a->g;
     g.max_depth = a->depths[a->n_depths - 1];
-    g.spp = a->ref_spp;   /* the most samples per pixel a run takes (the workers' storage follows it) */
-    for (int k = 0; k < a->n_spps; k++)
-        g.spp = a->spps[k] > g.spp ? a->spps[k] : g.spp;
     struct dr_render_opts ro = grad_render_opts(&g, g.width, g.height, PRIMAL_SPP, PRIMAL_SEED, false);
     if (dr_render(x->scene, x->cam, &ro, img, NULL) != 0) {
         free(img);
@@ -903,6 +900,9 @@ static int check_scene_args(struct cmp_run *r, const struct dr_scene *scene)
             }
     struct grad_common g = a->g;
     g.max_depth = a->depths[a->n_depths - 1];
+    g.spp = a->ref_spp;   /* the most samples per pixel a run takes (the workers' storage follows it) */
+    for (int k = 0; k < a->n_spps; k++)
+        g.spp = a->spps[k] > g.spp ? a->spps[k] : g.spp;
     bool tape = false, mis = false;
     for (int c = 0; c < r->n_combos; c++) {
         tape |= strcmp(r->combos[c].est->name, "tape") == 0;

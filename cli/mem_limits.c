@@ -237,7 +237,6 @@ int cli_limits_render(const struct dr_scene *scene, int width, int height, int s
     return check("render", &n, "--res", "--max-depth");
 }
 
-/* Tape: every vertex of every path of a batch, at most max_depth per path. */
 /* The workers' own storage: threads x the estimator's bound (prb by default). */
 static double work_bytes(const struct dr_estimator_ops *e, int spp, int threads)
 {
@@ -246,6 +245,7 @@ static double work_bytes(const struct dr_estimator_ops *e, int spp, int threads)
     return e && e->thread_bytes ? (double)e->thread_bytes(spp > 1 ? spp : 1) * threads : 0.0;
 }
 
+/* Tape: every vertex of every path of a batch, at most max_depth per path. */
 static double tape_bytes(const struct grad_common *g, double paths_per_batch)
 {
     if (!g->estimator || strcmp(g->estimator->name, "tape") != 0)

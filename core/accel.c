@@ -462,9 +462,10 @@ static int packet_lanes(const struct dr_accel_rays *rays, int k, int valid[DR_AC
  * Traced as one 16-wide packet where the device's kernels are 16 wide, else
  * as two 8-wide ones (a->packet8): Embree splits a 16-wide packet into
  * such halves anyway, but through a copy; its coherent rays traced at 28
- * Mrays/s as 16-wide packets against 45 as 8-wide ones on an AVX2 machine
- * (bench part a), and the peer's box renders in 0.93 x the time at depth 1,
- * 0.96 x at depth 8. The same hits either way (test_render's images). */
+ * Mrays/s as 16-wide packets against 33-45 as 8-wide ones on an AVX2
+ * machine (bench part a, runs 12 and 13), and the peer's box renders in
+ * 0.93 x the time at depth 1, 0.96 x at depth 8. The same hits either way
+ * (test_render's images). */
 static int packet_intersect(RTCScene sc, const struct dr_accel *a, const struct dr_accel_rays *rays, int k,
                             int64_t *tri, float *u, float *v)
 {

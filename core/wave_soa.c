@@ -255,33 +255,22 @@ static void scalar_state(const struct dr_wave_soa *w, int k, struct dr_path_stat
     dr_path_step_begin(st, v);
 }
 
-/* A ray that left the scene: the scalar walker's stage (the environment's
- * radiance, if any), and the path's end. Unless the environment has a
- * parameter (then the vertex has a derivative term: last_diff) that is the
- * stage's maths alone (dr_path_escaped_radiance); building the scalar
- * state and vertex for it took a tenth of a render where most rays leave
- * (a real asset under the default sky). */
+/* A ray that left the scene: the escaped stage's maths (the environment's
+ * radiance, if any, with its MIS weight: dr_path_escaped_radiance, which the
+ * scalar stage calls too), and the path's end. The vertex has no derivative
+ * term: the arrays serve no run in which a light's radiance has a parameter
+ * (dr_path8_applies). Building a scalar state and vertex for it, as before,
+ * took a tenth of a render where most rays leave (a real asset under the
+ * default sky). */
 static void escaped(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int k,
                     dr_vec3 *out)
 {
     dr_vec3 e = dr_v3s(0.0);   /* nothing out there: a term of 0, summed as the walker sums it */
-    int last_diff = w->out ? w->last_diff[k] : 0;
-    const bool env_diff = opts->params && opts->params->radiance_active && opts->params->env_active;
-    if ((opts->stages & DR_STAGE_ENV) && !env_diff) {   /* (dr_path_vertex_has_derivative: false) */
+    if (opts->stages & DR_STAGE_ENV) {
         double emit_w;
         dr_vec3 Le = dr_path_escaped_radiance(s, (int)w->depth[k], w->prev_pdf[k], dr_v3(w->dx[k], w->dy[k], w->dz[k]),
                                               &emit_w);
         e = dr_scale(Le, emit_w);   /* dr_path_vertex_term of the escaped vertex */
-    } else if (opts->stages & DR_STAGE_ENV) {
-        struct dr_path_state st;
-        struct dr_sampler smp;
-        struct dr_path_vertex v;
-        struct dr_shadow_ray shadow;
-        scalar_state(w, k, &st, &smp, &v);
-        dr_path_step_hit(s, opts, &st, &smp, &v, -1, &shadow);   /* (DR_STEP_END) */
-        e = dr_path_vertex_term(&v);
-        if (opts->params && dr_path_vertex_has_derivative(s, opts->params, &v))
-            last_diff = v.depth;
     }
     dr_vec3 c = dr_mul(dr_v3(w->bx[k], w->by[k], w->bz[k]), e), L = dr_add(dr_v3(w->Lx[k], w->Ly[k], w->Lz[k]), c);
     if (!w->out) {
@@ -289,9 +278,9 @@ static void escaped(const struct dr_wave_soa *w, const struct dr_scene *s, const
         return;
     }
     dr_vec3 ratio = dr_v3(w->rx[k], w->ry[k], w->rz[k]), T = dr_add(dr_v3(w->Tx[k], w->Ty[k], w->Tz[k]), dr_mul(ratio, c));
-    if (w->out->step)   /* (no derivative term: the environment's radiance has no parameter, dr_path8_applies) */
+    if (w->out->step)
         w->out->step(w->out->ctx, w->item[k], e, dr_v3s(0.0), dr_mul(ratio, dr_v3(w->bx[k], w->by[k], w->bz[k])));
-    walk_done(w, w->item[k], L, T, last_diff);
+    walk_done(w, w->item[k], L, T, w->last_diff[k]);
 }
 
 /* Slot k's path out of the arrays, to the scalar stages this step. */
