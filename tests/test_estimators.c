@@ -386,5 +386,25 @@ int main(void)
     for (int k = 0; k < 8; k++)
         derivative_predicate(s, &cam, &gptrs[k], 1);
     dr_scene_destroy(s);
+
+    /* a closed box lit from inside: no path escapes, and without roulette
+     * every one is as long as the limit, most vertices differentiated (the
+     * walls; the lid's material has no parameter): most replays (in prb's
+     * arrays or lanes) trace their vertices past the log again. (In the
+     * open Cornell box above, few replays got that far.) */
+    sb_init(&b);
+    int wall = sb_material(&b, sb_diffuse(dr_v3(0.7, 0.6, 0.5)));
+    sb_open_box(&b, 2.0, wall);
+    sb_quad(&b, dr_v3(-1, 2, -1), dr_v3(2, 0, 0), dr_v3(0, 0, 2), sb_material(&b, sb_diffuse(dr_v3(0.6, 0.6, 0.6))));
+    l.position = dr_v3(0.2, 1.6, 0.1);
+    l.intensity = 3;
+    sb_light(&b, l);
+    s = sb_finish(&b);
+    s->n_file_materials = s->n_materials;
+    cam = sb_camera(dr_v3(0.5, 1.0, 0.9), dr_v3(-0.3, 0.8, -1), 60);
+    const char *box_ptrs[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor"};
+    compare("closed box, paths longer than the replay log", s, &cam, box_ptrs, 1, DR_WAVE_REPLAY_DEPTH + 12,
+            DR_SAMPLING_DETACHED, true);
+    dr_scene_destroy(s);
     return TEST_END();
 }
