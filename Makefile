@@ -34,7 +34,9 @@ HOST_LIBS := -ltinygltf -ldraco -lembree3 -lstdc++ -lm -pthread -ldl
 # link runs, not when the Makefile is parsed.
 IMG_LIBS   = $(shell pkg-config --libs $(PKGS) 2>/dev/null)
 LDLIBS   += $(IMG_LIBS) $(HOST_LIBS)
-LDFLAGS  += $(OPT)
+# (-Wno-psabi again: with -flto the code is generated at link time, which
+# printed the same notes)
+LDFLAGS  += $(OPT) -Wno-psabi
 
 CORE_C   := $(wildcard core/*.c estimators/*.c drivers/*.c)
 IMG_CXX  := core/image_io.cpp core/vis.cpp
@@ -92,6 +94,9 @@ $(BUILD)/tests/test_fuzz_cli: $(BUILD)/tests/test_fuzz_cli.o $(BUILD)/cli/cli_ut
 	$(CC) $(LDFLAGS) $^ $(LDLIBS) -o $@
 $(BUILD)/bench/%: $(BUILD)/bench/%.o $(LIB) $(IMG_OBJ)
 	$(CC) $(LDFLAGS) $< $(IMG_OBJ) $(LIB) $(LDLIBS) -o $@
+# it measures loading the image library, so it must not link it (as drender does not)
+$(BUILD)/bench/image_lib_rss: $(BUILD)/bench/image_lib_rss.o $(LIB)
+	$(CC) $(LDFLAGS) -rdynamic $< $(LIB) $(HOST_LIBS) -o $@
 
 test: deps $(BUILD)/drender $(TEST_BIN)
 	BUILD=$(BUILD) tests/run.sh

@@ -7,7 +7,7 @@
 #   a. throughput ratio   drender rays/s / raw Embree rays/s, per scene (goal >= 0.6)
 #   b. thread scaling     render time with 1 thread / with 2 threads
 #   c. peer comparison    render time on the peer's Cornell box vs Mitsuba 3 (goal < 1)
-#   d. peak memory        of that render vs the peer's 116 MiB
+#   d. peak memory        of that render vs the peer's 116 MiB, and the image library's share of it
 #
 # Environment knobs:
 #   BUILD         build directory (default: build)
@@ -311,8 +311,17 @@ if [[ -f $PEER ]]; then
     mem_mib=$(calc "$mem_max / 1048576" %.1f)
     mem_ratio=$(calc "$mem_mib / $PEER_MEM_MIB")
     echo "d. peak memory, depth-8 peer render: $mem_mib MiB vs the peer's $PEER_MEM_MIB MiB: ratio $mem_ratio (goal < 1: $(yesno "$mem_ratio < 1"))"
+    # The image library's share: drender loads it to write the image (and to
+    # read textures); bench/image_lib_rss.c loads it alone and reports what
+    # became resident, and its largest parts.
+    lib_json=$("$OUT/image_lib_rss" "$BUILD/libdrender-image.so")
+    lib_mib=$(calc "($(json_num "$lib_json" rss_after_kib) - $(json_num "$lib_json" rss_before_kib)) / 1024" %.1f)
+    own_mib=$(calc "$mem_mib - $lib_mib" %.1f)
+    parts=$(python3 -c 'import json,sys; d=json.loads(sys.argv[1]); print(", ".join("%s %.1f" % (k, v / 1024) for k, v in list(d["largest_kib"].items())[:4]))' "$lib_json")
+    echo "   of which loading the image library alone (OpenImageIO and what it loads: $(json_num "$lib_json" mappings) mapped files and areas) makes $lib_mib MiB resident (largest, MiB: $parts);"
+    echo "   the rest, $own_mib MiB, is $(calc "$own_mib / $PEER_MEM_MIB") of the peer's figure"
 
-    PEER_JSON="{\"scene\": \"$PEER\", \"res\": \"256x256\", \"spp\": 64, \"threads\": 2, \"max_depth\": {$(join "${depth_json[@]}")}, \"drender_cores_busy\": $busy, \"other_cores_busy\": $other, \"peak_memory_bytes\": $mem_max, \"peak_memory_mib\": $mem_mib, \"peer_memory_mib\": $PEER_MEM_MIB, \"memory_ratio\": $mem_ratio}"
+    PEER_JSON="{\"scene\": \"$PEER\", \"res\": \"256x256\", \"spp\": 64, \"threads\": 2, \"max_depth\": {$(join "${depth_json[@]}")}, \"drender_cores_busy\": $busy, \"other_cores_busy\": $other, \"peak_memory_bytes\": $mem_max, \"peak_memory_mib\": $mem_mib, \"peer_memory_mib\": $PEER_MEM_MIB, \"memory_ratio\": $mem_ratio, \"image_library_mib\": $lib_mib, \"without_image_library_mib\": $own_mib}"
 else
     echo
     echo "c, d. peer comparison skipped: $PEER not found"
