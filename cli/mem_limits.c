@@ -119,10 +119,7 @@ void cli_limits_init(void)
 
 static double image_bytes(const struct dr_image *im)
 {
-    if (!im->data)
-        return 0.0;
-    double px = (double)im->width * im->height * im->channels * sizeof(float);
-    return im->linear && !im->linear_in_data ? 2.0 * px : px;
+    return (double)dr_image_pixel_bytes(im);
 }
 
 uint64_t cli_mem_scene(const struct dr_scene *s)

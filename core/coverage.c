@@ -44,7 +44,7 @@ double dr_surface_alpha(const struct dr_scene *s, int64_t tri, double b1, double
     const struct dr_image *img = &s->images[t->image];
     double px[4];
     /* the linear copy keeps alpha as stored (only colour is sRGB-decoded) */
-    dr_texture_eval(t, img, u, v, img->linear != NULL, px);
+    dr_texture_eval(t, img, u, v, dr_image_has_linear(img), px);
     return alpha * px[3];
 }
 

@@ -532,7 +532,7 @@ void Writer::write_image_param(const dr_param *p)
     std::vector<double> v = values(p);
     std::vector<float> px(v.begin(), v.end());
     std::string tmp = tmpdir_ + name;
-    bool srgb = image_as_colour(n) && scene_->images[n].linear;
+    bool srgb = image_as_colour(n) && dr_image_has_linear(&scene_->images[n]);
     if (dr_image_write_encoded(tmp.c_str(), p->width, p->height, p->channels, px.data(), srgb) != 0) {
         std::string msg = dr_last_error();
         fail(DR_ERR_IO, "/images/%d: cannot write %s: %s", n, name.c_str(), msg.c_str());

@@ -72,15 +72,123 @@ static void decode_srgb(const float *src, float *dst, size_t n, size_t c)
 
 static bool image_usable(const struct dr_image *img)
 {
-    return img && img->data && img->width > 0 && img->height > 0 && img->channels > 0;
+    return img && dr_image_has_pixels(img) && img->width > 0 && img->height > 0 && img->channels > 0;
 }
+
+static size_t value_count(const struct dr_image *img)
+{
+    return (size_t)img->width * (size_t)img->height * (size_t)img->channels;
+}
+
+/* ------------------------------------------------------ eight-bit storage */
+
+bool dr_image_compact8(struct dr_image *img)
+{
+    if (!img || !img->data || img->linear || img->bytes || !image_usable(img))
+        return false;
+    const size_t n = value_count(img);
+    float *lut = malloc(512 * sizeof *lut);
+    uint8_t *bytes = dr_alloc_big(n);
+    if (!lut || !bytes) {
+        free(lut);
+        free(bytes);
+        return false;
+    }
+    bool seen[256] = {false};
+    uint32_t bits[256];
+    for (size_t i = 0; i < n; i++) {
+        const float v = img->data[i];
+        if (!(v >= 0.0f && v <= 1.0f)) {   /* (NaN too) */
+            free(lut);
+            free(bytes);
+            return false;
+        }
+        const int level = (int)(v * 255.0f + 0.5f);
+        uint32_t b;
+        memcpy(&b, &v, sizeof b);
+        if (!seen[level]) {
+            seen[level] = true;
+            bits[level] = b;
+            lut[level] = v;
+        } else if (bits[level] != b) {   /* two values at one level: not an 8-bit image */
+            free(lut);
+            free(bytes);
+            return false;
+        }
+        bytes[i] = (uint8_t)level;
+    }
+    for (int k = 0; k < 256; k++)
+        if (!seen[k])
+            lut[k] = 0.0f;   /* (no byte refers to it) */
+    free(img->data);
+    img->data = NULL;
+    img->bytes = bytes;
+    img->lut = lut;
+    img->lut_linear = NULL;
+    return true;
+}
+
+/* The decoded table of an eight-bit image (its colour channels' values:
+ * dr_image_value keeps alpha's from lut), as decode_srgb would decode each
+ * value (the memo gives pow's bits). */
+static void make_lut_linear(struct dr_image *img)
+{
+    float *lin = img->lut + 256;
+    for (int k = 0; k < 256; k++)
+        lin[k] = img->file_is_srgb ? (float)dr_srgb_to_linear(img->lut[k]) : img->lut[k];
+    img->lut_linear = lin;
+}
+
+int dr_image_expand(struct dr_image *img)
+{
+    if (!img || !img->bytes)
+        return DR_OK;
+    const size_t n = value_count(img);
+    const bool decoded = img->lut_linear != NULL, in_place = img->linear_in_data;
+    float *data = dr_alloc_big(n * sizeof *data);
+    float *lin = decoded && !in_place ? dr_alloc_big(n * sizeof *lin) : NULL;
+    if (!data || (decoded && !in_place && !lin)) {
+        free(data);
+        free(lin);
+        dr_set_error("out of memory expanding a %dx%d texture", img->width, img->height);
+        return DR_ERR_NOMEM;
+    }
+    for (size_t i = 0; i < n; i++) {
+        data[i] = dr_image_value(img, i, in_place);   /* decoded in place: data held the decoded values */
+        if (lin)
+            lin[i] = dr_image_value(img, i, true);
+    }
+    free(img->bytes);
+    free(img->lut);
+    img->bytes = NULL;
+    img->lut = img->lut_linear = NULL;
+    img->data = data;
+    img->linear = in_place ? data : lin;
+    return DR_OK;
+}
+
+size_t dr_image_pixel_bytes(const struct dr_image *img)
+{
+    if (img->bytes)
+        return value_count(img) + 512 * sizeof(float);
+    if (!img->data)
+        return 0;
+    const size_t floats = value_count(img) * sizeof(float);
+    return img->linear && !img->linear_in_data ? 2 * floats : floats;
+}
+
+/* ------------------------------------------------------------ decoding */
 
 int dr_image_make_linear(struct dr_image *img)
 {
     if (!image_usable(img))
         return DR_ERR_ARG;
-    if (img->linear)
+    if (dr_image_has_linear(img))
         return DR_OK;
+    if (img->bytes) {
+        make_lut_linear(img);
+        return DR_OK;
+    }
     size_t n = (size_t)img->width * (size_t)img->height;
     size_t c = (size_t)img->channels;
     float *lin = dr_alloc_big(n * c * sizeof *lin);
@@ -100,8 +208,13 @@ int dr_image_make_linear_in_place(struct dr_image *img)
 {
     if (!image_usable(img))
         return DR_ERR_ARG;
-    if (img->linear)
+    if (dr_image_has_linear(img))
         return DR_OK;
+    if (img->bytes) {   /* (both views stay: in place only says what data held, for dr_image_expand) */
+        make_lut_linear(img);
+        img->linear_in_data = true;
+        return DR_OK;
+    }
     if (img->file_is_srgb)
         decode_srgb(img->data, img->data, (size_t)img->width * (size_t)img->height, (size_t)img->channels);
     img->linear = img->data;
@@ -116,8 +229,12 @@ void dr_image_release(struct dr_image *img)
     if (img->linear != img->data)
         free(img->linear);
     free(img->data);
+    free(img->bytes);
+    free(img->lut);
     img->data = NULL;
     img->linear = NULL;
+    img->bytes = NULL;
+    img->lut = img->lut_linear = NULL;
     img->linear_in_data = false;
     img->width = img->height = img->channels = 0;
     img->file_is_srgb = false;
@@ -226,22 +343,46 @@ void dr_texture_taps(const struct dr_texture *tex, const struct dr_image *img, d
     wt[3] = fx * fy;
 }
 
+/* Texel idx of an image in eight-bit storage as the floats its float
+ * storage would hold (dr_image_value), into t[0, channels) (at most 4 are
+ * read). */
+static inline const float *texel8(const struct dr_image *img, int64_t idx, bool use_linear, float t[4])
+{
+    const int c = img->channels < 4 ? img->channels : 4;
+    const uint8_t *b = img->bytes + (size_t)idx * (size_t)img->channels;
+    /* (decoded in place: float storage's data held the decoded values too) */
+    const bool decoded = (use_linear || img->linear_in_data) && img->lut_linear;
+    const float *colour = decoded ? img->lut_linear : img->lut;
+    const int ncolour = colour_channels(c);   /* (the rest: alpha, not decoded) */
+    for (int k = 0; k < c; k++)
+        t[k] = (k < ncolour ? colour : img->lut)[b[k]];
+    return t;
+}
+
+/* The stored texel array a lookup reads (NULL: eight-bit storage, texel8, or
+ * no pixels). */
+static inline const float *texels(const struct dr_image *img, bool use_linear)
+{
+    return use_linear && img->linear ? img->linear : img->data;
+}
+
 void dr_texture_eval(const struct dr_texture *tex, const struct dr_image *img,
                      double u, double v, bool use_linear, double out[4])
 {
-    const float *pix = img ? (use_linear && img->linear ? img->linear : img->data) : NULL;
-    if (!pix || img->width <= 0 || img->height <= 0 || img->channels <= 0) {
+    if (!img || !dr_image_has_pixels(img) || img->width <= 0 || img->height <= 0 || img->channels <= 0) {
         out[0] = out[1] = out[2] = 0.0;
         out[3] = 1.0;
         return;
     }
+    const float *pix = texels(img, use_linear);
     int c = img->channels;
     int64_t idx[4];
     double wt[4];
     dr_texture_taps(tex, img, u, v, idx, wt);
     double acc[4] = {0.0, 0.0, 0.0, 0.0};
+    float t[4];
     for (int i = 0; i < 4; i++)
-        add_texel(pix + (size_t)idx[i] * (size_t)c, c, wt[i], acc);
+        add_texel(pix ? pix + (size_t)idx[i] * (size_t)c : texel8(img, idx[i], use_linear, t), c, wt[i], acc);
     out[0] = acc[0];
     out[1] = acc[1];
     out[2] = acc[2];
@@ -251,14 +392,15 @@ void dr_texture_eval(const struct dr_texture *tex, const struct dr_image *img,
 void dr_texture_prefetch(const struct dr_texture *tex, const struct dr_image *img, double u, double v,
                          bool use_linear)
 {
-    const float *pix = img ? (use_linear && img->linear ? img->linear : img->data) : NULL;
-    if (!pix || img->width <= 0 || img->height <= 0 || img->channels <= 0)
+    if (!img || !dr_image_has_pixels(img) || img->width <= 0 || img->height <= 0 || img->channels <= 0)
         return;
+    const float *pix = texels(img, use_linear);
     int64_t idx[4];
     double wt[4];
     dr_texture_taps(tex, img, u, v, idx, wt);
     for (int i = 0; i < 4; i++)
-        __builtin_prefetch(pix + (size_t)idx[i] * (size_t)img->channels);
+        __builtin_prefetch(pix ? (const void *)(pix + (size_t)idx[i] * (size_t)img->channels)
+                               : (const void *)(img->bytes + (size_t)idx[i] * (size_t)img->channels));
 }
 
 void d_texture_eval(const struct dr_texture *tex, const struct dr_image *img, double u, double v,
@@ -291,9 +433,9 @@ static inline double reduce_slope(double t, enum dr_wrap mode)
 void d_texture_eval_uv(const struct dr_texture *tex, const struct dr_image *img, double u, double v,
                        bool use_linear, const double d_out[4], double *d_u, double *d_v)
 {
-    const float *pix = img ? (use_linear && img->linear ? img->linear : img->data) : NULL;
-    if (!pix || img->width <= 0 || img->height <= 0 || img->channels <= 0)
+    if (!img || !dr_image_has_pixels(img) || img->width <= 0 || img->height <= 0 || img->channels <= 0)
         return;
+    const float *pix = texels(img, use_linear);
     enum dr_wrap ws = tex ? tex->wrap_s : DR_WRAP_REPEAT;
     enum dr_wrap wtm = tex ? tex->wrap_t : DR_WRAP_REPEAT;
     int64_t idx[4];
@@ -305,7 +447,8 @@ void d_texture_eval_uv(const struct dr_texture *tex, const struct dr_image *img,
     double g[4];   /* sum_c d_out[c] * texel_i[c] */
     for (int i = 0; i < 4; i++) {
         double acc[4] = {0.0, 0.0, 0.0, 0.0};
-        add_texel(pix + (size_t)idx[i] * (size_t)c, c, 1.0, acc);
+        float t[4];
+        add_texel(pix ? pix + (size_t)idx[i] * (size_t)c : texel8(img, idx[i], use_linear, t), c, 1.0, acc);
         if (c == 1 || c == 3)
             acc[3] = 0.0;   /* constant alpha: no slope */
         g[i] = d_out[0] * acc[0] + d_out[1] * acc[1] + d_out[2] * acc[2] + d_out[3] * acc[3];

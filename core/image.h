@@ -21,7 +21,57 @@ struct dr_image {
                         dr_image_make_linear(); colour textures are looked up here */
     bool file_is_srgb; /* the file declares sRGB-encoded values (PNG/JPEG, 8-bit)      */
     bool linear_in_data; /* linear is data itself, decoded in place (dr_image_make_linear_in_place) */
+    /* Eight-bit storage (dr_image_compact8), instead of data and linear: a
+     * texture from an 8-bit file holds at most 256 values, so value i is
+     * lut[bytes[i]] and its decoded one lut_linear[bytes[i]] (alpha: lut's),
+     * the same floats as data and linear would hold, in a quarter of the
+     * memory. Read them through dr_image_value, dr_texture_eval and the
+     * other lookups; dr_image_expand goes back to floats (parameters). */
+    uint8_t *bytes;
+    float *lut;          /* 256 values as stored; NULL without bytes */
+    float *lut_linear;   /* 256 decoded (lut + 256), NULL until dr_image_make_linear */
 };
+
+/* Has pixels, in float or eight-bit storage. */
+static inline bool dr_image_has_pixels(const struct dr_image *img)
+{
+    return img->data || img->bytes;
+}
+
+/* Has its sRGB-decoded values (dr_image_make_linear or _in_place ran). */
+static inline bool dr_image_has_linear(const struct dr_image *img)
+{
+    return img->linear || img->lut_linear;
+}
+
+/* Value i (texel * channels + channel): the decoded one where use_linear and
+ * the image has them (dr_image_has_linear), else data's (the stored one, or
+ * the decoded one where it was decoded in place); 0 without pixels. */
+static inline float dr_image_value(const struct dr_image *img, size_t i, bool use_linear)
+{
+    if (img->bytes) {
+        const int c = img->channels, ch = (int)(i % (size_t)c);
+        const bool alpha = (c == 2 && ch == 1) || (c >= 4 && ch >= 3);   /* (not decoded) */
+        const bool decoded = (use_linear || img->linear_in_data) && img->lut_linear;   /* (as data and linear) */
+        return (decoded && !alpha ? img->lut_linear : img->lut)[img->bytes[i]];
+    }
+    const float *px = use_linear && img->linear ? img->linear : img->data;
+    return px ? px[i] : 0.0f;
+}
+
+/* Keeps an image whose every value is one of at most 256 floats in [0, 1],
+ * each the value of one 8-bit level (what an 8-bit file decodes to), in
+ * eight-bit storage: bytes and lut, data freed. Exact by construction: each
+ * byte's float is the first value seen at its level, and an image with two
+ * different values at one level (a 16-bit or float file, or any value the
+ * levels do not give) stays as it is. Only before dr_image_make_linear.
+ * Returns true if compacted (false also when out of memory: still whole). */
+bool dr_image_compact8(struct dr_image *img);
+/* Back to float storage (data, and linear if decoded), the same values.
+ * No-op for float images. Returns 0 or DR_ERR_NOMEM (then unchanged). */
+int dr_image_expand(struct dr_image *img);
+/* Bytes its pixels take (both float arrays, or the bytes and tables). */
+size_t dr_image_pixel_bytes(const struct dr_image *img);
 
 enum dr_wrap { DR_WRAP_REPEAT, DR_WRAP_CLAMP, DR_WRAP_MIRROR };
 

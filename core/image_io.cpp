@@ -84,10 +84,7 @@ std::string oiio_error(const ImageOutput *out)
 
 void zero_image(dr_image *img)
 {
-    img->width = img->height = img->channels = 0;
-    img->data = nullptr;
-    img->linear = nullptr;
-    img->file_is_srgb = false;
+    *img = dr_image{};   // (every field: no pixels, no eight-bit storage)
 }
 
 // Extension of the last path component, without the dot; "" when none.
@@ -130,9 +127,46 @@ bool spec_is_srgb(const ImageSpec &spec, const char *format_name)
     return false;
 }
 
+// An 8-bit file's pixels as bytes, in dr_image's eight-bit storage
+// (image.h): each level's float is what OpenImageIO gives when it reads the
+// file as float (the same conversion, asked for the 256 levels), so no float
+// copy of the image is ever made. test_image compares the two reads.
+int read_opened_bytes(ImageInput *in, const std::string &label, int nch, dr_image *img)
+{
+    const ImageSpec &spec = in->spec();
+    const size_t n = (size_t)spec.width * (size_t)spec.height * (size_t)nch;
+    uint8_t *bytes = (uint8_t *)dr_alloc_big(n);
+    float *lut = (float *)std::malloc(512 * sizeof(float));   // (the second half: decoded, image.c)
+    if (!bytes || !lut) {
+        std::free(bytes);
+        std::free(lut);
+        dr_set_error("%s: cannot read image: out of memory", label.c_str());
+        return DR_ERR_NOMEM;
+    }
+    unsigned char levels[256];
+    for (int k = 0; k < 256; k++)
+        levels[k] = (unsigned char)k;
+    if (!in->read_image(0, 0, 0, nch, TypeDesc::UINT8, bytes) ||
+        !convert_pixel_values(TypeDesc::UINT8, levels, TypeDesc::FLOAT, lut, 256)) {
+        std::free(bytes);
+        std::free(lut);
+        dr_set_error("%s: cannot read image: %s", label.c_str(), oiio_error(in).c_str());
+        return DR_ERR_FORMAT;
+    }
+    *img = dr_image{};
+    img->width = spec.width;
+    img->height = spec.height;
+    img->channels = nch;
+    img->bytes = bytes;
+    img->lut = lut;
+    img->file_is_srgb = spec_is_srgb(spec, in->format_name());
+    return DR_OK;
+}
+
 // Reads the first subimage of an open ImageInput into img. `label` names the
-// image in messages. On failure img is left zeroed.
-int read_opened(ImageInput *in, const std::string &label, dr_image *img)
+// image in messages. On failure img is left zeroed. eight_bit: an 8-bit
+// file's pixels in eight-bit storage (read_opened_bytes), others as float.
+int read_opened(ImageInput *in, const std::string &label, dr_image *img, bool eight_bit)
 {
     const ImageSpec &spec = in->spec();
     if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) {
@@ -154,8 +188,10 @@ int read_opened(ImageInput *in, const std::string &label, dr_image *img)
     // OpenImageIO 2.4's read_image converts through: 256 scanlines in the
     // file's own format, however few the image has (a 55-byte BMP claiming a
     // width of 3.6 million made it allocate 2.7 GB). Refused from the header,
-    // before the decoder or we allocate pixel memory.
-    double need = 2.0 * (double)w * (double)h * nch * sizeof(float) +
+    // before the decoder or we allocate pixel memory. (Eight-bit storage: a
+    // byte per value, and its decoded values in a table.)
+    const bool as_bytes = eight_bit && spec.format == TypeDesc::UINT8;
+    double need = (as_bytes ? 1.0 : 2.0 * sizeof(float)) * (double)w * (double)h * nch +
                   256.0 * (double)w * (double)spec.pixel_bytes(true);
     unsigned long long limit = max_image_bytes();
     if (limit > 0 && need > (double)limit) {
@@ -165,6 +201,8 @@ int read_opened(ImageInput *in, const std::string &label, dr_image *img)
                      (double)limit / 1048576.0);
         return DR_ERR_NOMEM;
     }
+    if (as_bytes)
+        return read_opened_bytes(in, label, nch, img);
     float *data = (float *)dr_alloc_big(w * h * (size_t)nch * sizeof(float));
     if (!data) {
         dr_set_error("%s: cannot read image: out of memory", label.c_str());
@@ -175,11 +213,11 @@ int read_opened(ImageInput *in, const std::string &label, dr_image *img)
         dr_set_error("%s: cannot read image: %s", label.c_str(), oiio_error(in).c_str());
         return DR_ERR_FORMAT;
     }
+    *img = dr_image{};
     img->width = spec.width;
     img->height = spec.height;
     img->channels = nch;
     img->data = data;
-    img->linear = nullptr;
     img->file_is_srgb = spec_is_srgb(spec, in->format_name());
     return DR_OK;
 }
@@ -192,7 +230,7 @@ ImageSpec read_config()
     return config;
 }
 
-int read_file(const char *path, const std::string &label, dr_image *img)
+int read_file(const char *path, const std::string &label, dr_image *img, bool eight_bit)
 {
     ImageSpec config = read_config();
     auto in = ImageInput::open(path, &config);
@@ -203,7 +241,7 @@ int read_file(const char *path, const std::string &label, dr_image *img)
         dr_set_error("%s: cannot read image: %s", label.c_str(), oiio_error(in.get()).c_str());
         return code;
     }
-    int rc = read_opened(in.get(), label, img);
+    int rc = read_opened(in.get(), label, img, eight_bit);
     in->close();
     return rc;
 }
@@ -232,7 +270,7 @@ std::string memory_name(const unsigned char *b, size_t n, const std::string &hin
 
 // Fallback for readers without ioproxy support: a private temporary file.
 int read_memory_via_file(const void *bytes, size_t size, const std::string &ext,
-                         const std::string &label, dr_image *img)
+                         const std::string &label, dr_image *img, bool eight_bit)
 {
     const char *tmpdir = std::getenv("TMPDIR");
     if (!tmpdir || !*tmpdir)
@@ -265,14 +303,14 @@ int read_memory_via_file(const void *bytes, size_t size, const std::string &ext,
         left -= (size_t)k;
     }
     close(fd);
-    int rc = read_file(name.data(), label, img);
+    int rc = read_file(name.data(), label, img, eight_bit);
     unlink(name.data());
     if (rc == DR_ERR_IO)   // the temporary exists: the content is at fault
         rc = DR_ERR_FORMAT;
     return rc;
 }
 
-int read_memory(const void *bytes, size_t size, const char *name_hint, dr_image *img)
+int read_memory(const void *bytes, size_t size, const char *name_hint, dr_image *img, bool eight_bit)
 {
     std::string label = name_hint && *name_hint ? name_hint : "<memory>";
     if (!bytes || size == 0) {
@@ -295,7 +333,7 @@ int read_memory(const void *bytes, size_t size, const char *name_hint, dr_image 
     }
     if (!in->supports("ioproxy")) {
         in.reset();
-        return read_memory_via_file(bytes, size, ext, label, img);
+        return read_memory_via_file(bytes, size, ext, label, img, eight_bit);
     }
 
     Filesystem::IOMemReader proxy(bytes, size);
@@ -306,7 +344,7 @@ int read_memory(const void *bytes, size_t size, const char *name_hint, dr_image 
         dr_set_error("%s: cannot read image: %s", label.c_str(), oiio_error(in.get()).c_str());
         rc = DR_ERR_FORMAT;
     } else {
-        rc = read_opened(in.get(), label, img);
+        rc = read_opened(in.get(), label, img, eight_bit);
         in->close();
     }
     in.reset();   // the input is gone before the proxy
@@ -642,7 +680,7 @@ static int plugin_read(const char *path, struct dr_image *img)
         return DR_ERR_ARG;
     }
     try {
-        return read_file(path, path, img);
+        return read_file(path, path, img, false);
     } catch (const std::bad_alloc &) {
         dr_image_release(img);
         zero_image(img);
@@ -661,15 +699,16 @@ static int plugin_read(const char *path, struct dr_image *img)
     }
 }
 
-static int plugin_read_memory(const void *bytes, size_t size, const char *name_hint,
-                                    struct dr_image *img)
+// dr_image_read_memory and dr_image_read_memory8 (eight_bit).
+static int read_memory_caught(const void *bytes, size_t size, const char *name_hint, struct dr_image *img,
+                              bool eight_bit)
 {
     if (!img)
         return DR_ERR_ARG;
     zero_image(img);
     const char *label = name_hint && *name_hint ? name_hint : "<memory>";
     try {
-        return read_memory(bytes, size, name_hint, img);
+        return read_memory(bytes, size, name_hint, img, eight_bit);
     } catch (const std::bad_alloc &) {
         dr_image_release(img);
         zero_image(img);
@@ -686,6 +725,16 @@ static int plugin_read_memory(const void *bytes, size_t size, const char *name_h
         dr_set_error("%s: cannot read image: unexpected error", label);
         return DR_ERR_INTERNAL;
     }
+}
+
+static int plugin_read_memory(const void *bytes, size_t size, const char *name_hint, struct dr_image *img)
+{
+    return read_memory_caught(bytes, size, name_hint, img, false);
+}
+
+static int plugin_read_memory8(const void *bytes, size_t size, const char *name_hint, struct dr_image *img)
+{
+    return read_memory_caught(bytes, size, name_hint, img, true);
 }
 
 static void plugin_set_max_bytes(unsigned long long bytes)
@@ -759,6 +808,7 @@ extern "C" const struct dr_image_plugin *dr_image_plugin_table(void)
     static const struct dr_image_plugin table = {
         DR_IMAGE_PLUGIN_VERSION, plugin_read,          plugin_read_memory,    plugin_set_max_bytes,
         plugin_can_write,        plugin_write_encoded, drp_colormap_diverging, plugin_read_volume,
+        plugin_read_memory8,
     };
     return &table;
 }

@@ -19,9 +19,14 @@ int dr_image_read(const char *path, struct dr_image *img);
  * `name_hint` is used for the format and for messages. */
 int dr_image_read_memory(const void *bytes, size_t size, const char *name_hint,
                          struct dr_image *img);
+/* Same, but an 8-bit file's pixels come in eight-bit storage (image.h:
+ * bytes and a table of the floats dr_image_read_memory would give, no float
+ * copy made on the way); other files as float. For scene textures. */
+int dr_image_read_memory8(const void *bytes, size_t size, const char *name_hint, struct dr_image *img);
 
 /* Largest decoded image dr_image_read* accept, in bytes of float pixels plus
- * their linear copy (width x height x channels x 4 x 2); a larger image is
+ * their linear copy (width x height x channels x 4 x 2; dr_image_read_memory8
+ * of an 8-bit file: one byte per value); a larger image is
  * refused from its header, before any pixel memory is allocated, with
  * DR_ERR_NOMEM and a message naming the image and its size. 0 = no limit.
  * Default: the machine's physical memory. */

@@ -143,6 +143,17 @@ int dr_image_read_memory(const void *bytes, size_t size, const char *name_hint, 
     return p->read_memory(bytes, size, name_hint, img);
 }
 
+int dr_image_read_memory8(const void *bytes, size_t size, const char *name_hint, struct dr_image *img)
+{
+    const struct dr_image_plugin *p = get_plugin();
+    if (!p) {
+        if (img)
+            memset(img, 0, sizeof *img);
+        return DR_ERR_IO;
+    }
+    return p->read_memory8(bytes, size, name_hint, img);
+}
+
 /* Does not load the plugin: the limit is set at start-up by every command. */
 void dr_image_set_max_bytes(unsigned long long bytes)
 {

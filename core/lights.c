@@ -38,15 +38,14 @@ static double mean_texture_value(const struct dr_scene *s, const struct dr_texre
     if (ref->texture < 0)
         return 1.0;
     const struct dr_image *img = &s->images[s->textures[ref->texture].image];
-    const float *px = img->linear ? img->linear : img->data;
-    if (!px)
+    if (!dr_image_has_pixels(img))
         return 1.0;
     double sum = 0.0;
     size_t n = (size_t)img->width * img->height;
     int c = img->channels < channel_count ? img->channels : channel_count;
-    for (size_t i = 0; i < n; i++)
+    for (size_t i = 0; i < n; i++)   /* (the decoded values where the image has them) */
         for (int k = 0; k < c; k++)
-            sum += px[i * img->channels + k];
+            sum += dr_image_value(img, i * (size_t)img->channels + (size_t)k, true);
     return sum / (double)(n * (size_t)c);
 }
 

@@ -158,12 +158,17 @@ static void image_usage(const struct dr_scene *s, int image, bool *as_colour, bo
     }
 }
 
-/* The texel array a parameter reads and writes. */
+/* The texel array a parameter reads and writes (NULL: out of memory). An
+ * image in eight-bit storage (image.h) goes back to floats first: a
+ * parameter's texels change (dr_param_set_create does it, and says when
+ * there is no memory for it). */
 static float *param_texels(const struct dr_scene *s, const struct dr_param *p)
 {
     if (p->kind == DR_PARAM_ENV_MAP)
         return s->env.map.linear ? s->env.map.linear : s->env.map.data;
     struct dr_image *img = &s->images[p->target];
+    if (img->bytes && dr_image_expand(img) != 0)
+        return NULL;
     bool colour, data;
     image_usage(s, p->target, &colour, &data);
     return colour && img->linear ? img->linear : img->data;
@@ -241,7 +246,7 @@ int dr_params_list(const struct dr_scene *s, struct dr_param **out, int *count)
         const struct dr_image *im = &s->images[i];
         bool colour, data;
         image_usage(s, i, &colour, &data);
-        if ((!colour && !data) || !im->data)
+        if ((!colour && !data) || !dr_image_has_pixels(im))
             continue;   /* only a normal/occlusion map, or unused: its texels cannot change the image;
                            no data: a KTX2 image skipped by --ignore-unsupported */
         struct dr_param p = make(DR_PARAM_IMAGE, i, (int64_t)im->width * im->height * im->channels, "/images/%d", i);
@@ -499,7 +504,7 @@ void dr_param_get(const struct dr_scene *cs, const struct dr_param *p, double *v
     case DR_PARAM_IMAGE: {
         const float *t = param_texels(s, p);
         for (int64_t i = 0; i < p->size; i++)
-            v[i] = t[i];
+            v[i] = t ? t[i] : NAN;   /* (no memory for its floats: dr_param_set_create reported it) */
         return;
     }
     default: v[0] = *mat_scalar(&s->materials[p->target], p->kind); return;
@@ -533,7 +538,7 @@ void dr_param_put(struct dr_scene *s, const struct dr_param *p, const double *v)
     case DR_PARAM_ENV_MAP:
     case DR_PARAM_IMAGE: {
         float *t = param_texels(s, p);
-        for (int64_t i = 0; i < p->size; i++)
+        for (int64_t i = 0; t && i < p->size; i++)
             t[i] = (float)v[i];
         return;
     }
@@ -662,6 +667,12 @@ struct dr_param_set *dr_param_set_create(const struct dr_scene *s, const char *c
                 dr_set_error("%s: this image is used both as a colour texture (sRGB) and as metallic-roughness "
                              "data; drender cannot differentiate it as one parameter",
                              pointers[i]);
+                goto fail;
+            }
+            /* its texels will change: floats again if it was kept in eight
+             * bits (a change of storage, not of the scene: the same values) */
+            if (dr_image_expand(&s->images[p.target]) != 0) {
+                dr_set_error("%s: out of memory for its texels as floats", pointers[i]);
                 goto fail;
             }
         }

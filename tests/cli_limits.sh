@@ -86,9 +86,10 @@ refused 3 "basic.gltf|/images/0|999999x999999|more than the" render "$tmp/hugete
 tail -c +2 "$cli_root/fuzz/corpus/image/regress-bmp-bogus-bpp" >"$tmp/bogus.bmp"
 DRENDER_MEM_LIMIT=1G refused 3 "--target|bogus.bmp|3604481x5|more than the" grad "$scene" --target "$tmp/bogus.bmp" \
     --param $P
-# a texture that fits the machine but not DRENDER_MEM_LIMIT
+# a texture that fits the machine but not DRENDER_MEM_LIMIT (an 8-bit texture
+# takes a byte per value: 11.4 MiB here, and 1.5 MiB of decoder scratch)
 huge_png "$tmp/hugetex/checker.png" 2000
-DRENDER_MEM_LIMIT=32M refused 3 "/images/0|2000x2000|32.0 MiB" params "$tmp/hugetex/basic.gltf"
+DRENDER_MEM_LIMIT=8M refused 3 "/images/0|2000x2000|8.0 MiB" params "$tmp/hugetex/basic.gltf"
 DRENDER_MEM_LIMIT=nonsense run render "$scene" --res 4x4 --spp 1 -o ok.exr
 expect_rc 0 "an unreadable DRENDER_MEM_LIMIT is ignored"
 expect_mentions "DRENDER_MEM_LIMIT='nonsense'|ignored"

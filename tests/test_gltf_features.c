@@ -19,6 +19,7 @@
 #include "camera.h"
 #include "error.h"
 #include "geometry.h"
+#include "render.h"
 #include "scene.h"
 #include "test.h"
 
@@ -473,15 +474,22 @@ static float *triangles(const struct dr_scene *s)
     return t;
 }
 
-static void test_draco(void)
+/* The path of a shared sample (../shared/gltf-samples beside the checkout)
+ * into buf; false (and a failed check) if it is not there. */
+static bool shared_sample(const char *rel, char *buf, size_t size)
 {
     const char *td = getenv("DR_TESTDIR");
+    snprintf(buf, size, "%s/../../shared/gltf-samples/%s", td && *td ? td : "tests", rel);
+    if (access(buf, R_OK) != 0)
+        snprintf(buf, size, "%s/../../../shared/gltf-samples/%s", td && *td ? td : "tests", rel);
+    CHECK(access(buf, R_OK) == 0, "the shared sample %s was not found beside the checkout (%s)", rel, buf);
+    return access(buf, R_OK) == 0;
+}
+
+static void test_draco(void)
+{
     char plain[512], draco[512];
-    snprintf(plain, sizeof plain, "%s/../../shared/gltf-samples/Box/glTF/Box.gltf", td && *td ? td : "tests");
-    if (access(plain, R_OK) != 0)
-        snprintf(plain, sizeof plain, "%s/../../../shared/gltf-samples/Box/glTF/Box.gltf", td && *td ? td : "tests");
-    CHECK(access(plain, R_OK) == 0, "the shared sample Box.gltf was not found beside the checkout (%s)", plain);
-    if (access(plain, R_OK) != 0) return;
+    if (!shared_sample("Box/glTF/Box.gltf", plain, sizeof plain)) return;
     snprintf(draco, sizeof draco, "%.*s/glTF-Draco/Box.gltf", (int)(strstr(plain, "/glTF/Box.gltf") - plain), plain);
     struct dr_scene *a = calloc(1, sizeof *a), *d = calloc(1, sizeof *d);
     int ra = dr_gltf_load(plain, a), rd = dr_gltf_load(draco, d);
@@ -519,6 +527,57 @@ static void test_draco(void)
     dr_scene_destroy(s);
 }
 
+/* ---- eight-bit textures: the shared NormalTangentTest's three 2k PNGs ---- */
+
+/* Its render under a sky (it has no light), 48x48, 8 spp, into rgb. */
+static void render_sample(struct dr_scene *s, float *rgb)
+{
+    struct dr_camera cam = dr_camera_default(s);
+    struct dr_render_opts o = {.width = 48, .height = 48, .spp = 8, .max_depth = 4, .rr_depth = DR_RR_DEPTH_DEFAULT,
+                               .seed = 5, .threads = 2};
+    struct dr_render_stats st;
+    CHECK(dr_render(s, &cam, &o, rgb, &st) == 0, "render: %s", dr_last_error());
+}
+
+/* Textures from 8-bit files are kept in eight bits once decoded (image.h:
+ * the same values from a table); a render of them is bit for bit the render
+ * of the same scene with its textures back in float. */
+static void test_eight_bit(void)
+{
+    char path[512];
+    if (!shared_sample("NormalTangentTest/glTF/NormalTangentTest.gltf", path, sizeof path)) return;
+    struct dr_scene *s = dr_scene_load(path);
+    CHECK(s != NULL, "%s: %s", path, dr_last_error());
+    if (!s) return;
+    CHECK(dr_scene_set_environment(s, dr_v3(1.0, 0.95, 0.9), 1.0, NULL, true) == 0, "sky: %s", dr_last_error());
+    CHECK(s->n_images == 3, "three images (%d)", s->n_images);
+    int eight = 0;
+    size_t bytes = 0;
+    for (int i = 0; i < s->n_images; i++) {
+        eight += s->images[i].bytes != NULL && s->images[i].data == NULL;
+        bytes += dr_image_pixel_bytes(&s->images[i]);
+    }
+    CHECK(eight == s->n_images, "%d of %d images in eight bits", eight, s->n_images);
+    float *a = malloc(sizeof(float) * 3 * 48 * 48), *b = malloc(sizeof(float) * 3 * 48 * 48);
+    render_sample(s, a);
+    size_t floats = 0;
+    for (int i = 0; i < s->n_images; i++) {
+        CHECK(dr_image_expand(&s->images[i]) == 0, "expand image %d: %s", i, dr_last_error());
+        CHECK(s->images[i].data && !s->images[i].bytes, "image %d in float after expanding", i);
+        floats += dr_image_pixel_bytes(&s->images[i]);
+    }
+    CHECK(bytes * 3 < floats, "eight bits take %zu bytes, floats %zu", bytes, floats);
+    render_sample(s, b);
+    double sum = 0.0;
+    for (int i = 0; i < 3 * 48 * 48; i++) sum += a[i];
+    CHECK(sum > 0.0, "the render is not black (%g)", sum);
+    CHECK(memcmp(a, b, sizeof(float) * 3 * 48 * 48) == 0, "eight-bit and float textures render differently");
+    printf("eight-bit textures: %zu bytes against %zu as floats; renders identical\n", bytes, floats);
+    free(a);
+    free(b);
+    dr_scene_destroy(s);
+}
+
 int main(void)
 {
     snprintf(dir, sizeof dir, "%s/drender-gltf-features.XXXXXX", getenv("TMPDIR") ? getenv("TMPDIR") : "/tmp");
@@ -533,6 +592,7 @@ int main(void)
     test_ortho();
     test_ktx2();
     test_draco();
+    test_eight_bit();
     char cmd[400];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
     if (system(cmd) != 0) fprintf(stderr, "could not remove %s\n", dir);

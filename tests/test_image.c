@@ -109,7 +109,7 @@ static int rm_entry(const char *path, const struct stat *st, int flag, struct FT
 static bool zeroed(const struct dr_image *img)
 {
     return img->width == 0 && img->height == 0 && img->channels == 0 && !img->data &&
-           !img->linear && !img->file_is_srgb;
+           !img->linear && !img->file_is_srgb && !img->bytes && !img->lut && !img->lut_linear && !img->linear_in_data;
 }
 
 /* ------------------------------------------------------------------------ */
@@ -152,7 +152,7 @@ static const float grid[6] = {0, 1, 2, 10, 20, 40};
 
 static double eval1(enum dr_wrap ws, enum dr_wrap wt, double u, double v)
 {
-    struct dr_image img = {3, 2, 1, (float *)grid, NULL, false, false};
+    struct dr_image img = {.width = 3, .height = 2, .channels = 1, .data = (float *)grid, .file_is_srgb = false};
     struct dr_texture tex = {0, ws, wt};
     double out[4];
     dr_texture_eval(&tex, &img, u, v, false, out);
@@ -178,7 +178,7 @@ static void test_make_linear_exact(void)
         data[4 * i + 2] = (float)((i * 37) % 256) * (1.0f / 255.0f);   /* another rounding of k/255 */
         data[4 * i + 3] = 0.5f;
     }
-    struct dr_image img = {N, 1, 4, data, NULL, true, false};
+    struct dr_image img = {.width = N, .height = 1, .channels = 4, .data = data, .file_is_srgb = true};
     CHECK(dr_image_make_linear(&img) == DR_OK, "make_linear");
     int bad = 0;
     for (int i = 0; i < N * 4 && img.linear; i++) {
@@ -190,7 +190,7 @@ static void test_make_linear_exact(void)
     /* in place (an image only used as colour): the same values in data itself */
     float *copy = malloc(sizeof(float) * N * 4);
     memcpy(copy, data, sizeof(float) * N * 4);
-    struct dr_image in = {N, 1, 4, copy, NULL, true, false};
+    struct dr_image in = {.width = N, .height = 1, .channels = 4, .data = copy, .file_is_srgb = true};
     CHECK(dr_image_make_linear_in_place(&in) == DR_OK && in.linear == in.data && in.linear_in_data,
           "make_linear_in_place: linear is data");
     CHECK(img.linear && memcmp(in.linear, img.linear, sizeof(float) * N * 4) == 0,
@@ -271,7 +271,7 @@ static void test_channels(void)
     double out[4];
     /* 2 channels: grey + alpha. 2x1 image. */
     float ga[4] = {0.2f, 0.5f, 0.6f, 1.0f};
-    struct dr_image img2 = {2, 1, 2, ga, NULL, false, false};
+    struct dr_image img2 = {.width = 2, .height = 1, .channels = 2, .data = ga, .file_is_srgb = false};
     dr_texture_eval(&tex, &img2, 0.5, 0.5, false, out);
     CHECK_NEAR(out[0], 0.5 * ((double)0.2f + (double)0.6f), 1e-12, "grey r");
     CHECK_NEAR(out[1], out[0], 0, "grey g");
@@ -279,18 +279,18 @@ static void test_channels(void)
     CHECK_NEAR(out[3], 0.5 * ((double)0.5f + 1.0), 1e-12, "grey alpha");
     /* 3 channels: alpha 1. */
     float rgb[3] = {0.1f, 0.2f, 0.3f};
-    struct dr_image img3 = {1, 1, 3, rgb, NULL, false, false};
+    struct dr_image img3 = {.width = 1, .height = 1, .channels = 3, .data = rgb, .file_is_srgb = false};
     dr_texture_eval(&tex, &img3, 0.9, 0.1, false, out);
     CHECK(out[0] == (double)0.1f && out[1] == (double)0.2f && out[2] == (double)0.3f &&
               out[3] == 1.0,
           "rgb: %g %g %g %g", out[0], out[1], out[2], out[3]);
     /* 4 channels. */
     float rgba[4] = {0.1f, 0.2f, 0.3f, 0.4f};
-    struct dr_image img4 = {1, 1, 4, rgba, NULL, false, false};
+    struct dr_image img4 = {.width = 1, .height = 1, .channels = 4, .data = rgba, .file_is_srgb = false};
     dr_texture_eval(&tex, &img4, 0.3, 0.7, false, out);
     CHECK_NEAR(out[3], 0.4f, 1e-7, "rgba alpha");
     /* No image data: black, opaque. */
-    struct dr_image empty = {0, 0, 0, NULL, NULL, false, false};
+    struct dr_image empty = {.width = 0, .height = 0, .channels = 0, .data = NULL, .file_is_srgb = false};
     dr_texture_eval(&tex, &empty, 0.3, 0.7, false, out);
     CHECK(out[0] == 0 && out[1] == 0 && out[2] == 0 && out[3] == 1, "empty image");
 
@@ -325,7 +325,7 @@ static void test_channels(void)
 
     /* A linear file's "linear" copy is the data itself. */
     float lin[1] = {0.5f};
-    struct dr_image l = {1, 1, 1, NULL, NULL, false, false};
+    struct dr_image l = {.width = 1, .height = 1, .channels = 1, .data = NULL, .file_is_srgb = false};
     l.data = malloc(sizeof lin);
     if (l.data) {
         memcpy(l.data, lin, sizeof lin);
@@ -665,6 +665,49 @@ static void test_read_memory(void)
     }
 }
 
+/* dr_image_read_memory8 (scene textures): 8-bit files in eight-bit storage
+ * with the values, stored and decoded, of the float read to the bit; other
+ * files as float, the same as dr_image_read_memory. */
+static void test_read_eight_bit(void)
+{
+    const struct {
+        const char *name;
+        int channels;
+        bool eight;
+    } cases[] = {{"e8.png", 4, true}, {"e8g.png", 1, true}, {"e8.jpg", 3, true}, {"e8.exr", 3, false}};
+    for (size_t k = 0; k < sizeof cases / sizeof *cases; k++) {
+        char path[512];
+        path_in_tmp(path, sizeof path, cases[k].name);
+        float px[W * H * 4];
+        fill_pixels(px, cases[k].channels);
+        CHECK(dr_image_write(path, W, H, cases[k].channels, px) == 0, "%s: write: %s", path, dr_last_error());
+        size_t size = 0;
+        unsigned char *bytes = slurp(path, &size);
+        struct dr_image f, e;
+        int rf = bytes ? dr_image_read_memory(bytes, size, cases[k].name, &f) : -1;
+        int re = bytes ? dr_image_read_memory8(bytes, size, cases[k].name, &e) : -1;
+        CHECK(rf == 0 && re == 0, "%s: read: %s", cases[k].name, dr_last_error());
+        free(bytes);
+        if (rf != 0 || re != 0)
+            continue;
+        CHECK((e.bytes != NULL) == cases[k].eight && (e.data != NULL) == !cases[k].eight,
+              "%s: eight-bit storage %d (want %d)", cases[k].name, e.bytes != NULL, cases[k].eight);
+        CHECK(e.width == f.width && e.height == f.height && e.channels == f.channels &&
+                  e.file_is_srgb == f.file_is_srgb,
+              "%s: the same image", cases[k].name);
+        CHECK(dr_image_make_linear(&f) == 0 && dr_image_make_linear(&e) == 0, "%s: decode", cases[k].name);
+        int bad = 0;
+        for (size_t i = 0; i < (size_t)f.width * f.height * f.channels; i++)
+            for (int lin = 0; lin < 2; lin++) {
+                float a = dr_image_value(&f, i, lin), b = dr_image_value(&e, i, lin);
+                bad += memcmp(&a, &b, sizeof a) != 0;
+            }
+        CHECK(bad == 0, "%s: %d values differ from the float read", cases[k].name, bad);
+        dr_image_release(&f);
+        dr_image_release(&e);
+    }
+}
+
 static void test_errors(void)
 {
     char path[512], other[512];
@@ -774,6 +817,84 @@ static void test_errors(void)
     remove(path);
 }
 
+/* An image of `channels` values that an 8-bit file gives (level / 255 as
+ * float), pseudo-random levels, as float storage. */
+static struct dr_image levels_image(int w, int h, int channels, bool srgb, unsigned seed)
+{
+    struct dr_image img = {.width = w, .height = h, .channels = channels, .file_is_srgb = srgb};
+    size_t n = (size_t)w * h * channels;
+    img.data = malloc(sizeof(float) * n);
+    for (size_t i = 0; i < n; i++) {
+        seed = seed * 1103515245u + 12345u;
+        img.data[i] = (float)((seed >> 16) % 256) / 255.0f;
+    }
+    return img;
+}
+
+static struct dr_image copy_image(const struct dr_image *a)
+{
+    struct dr_image b = *a;
+    size_t n = (size_t)a->width * a->height * a->channels;
+    b.data = malloc(sizeof(float) * n);
+    memcpy(b.data, a->data, sizeof(float) * n);
+    return b;
+}
+
+/* dr_image_compact8: eight-bit storage gives every lookup the float
+ * storage's bits, for 1 to 4 channels, colour and data images, decoded
+ * apart or in place (image.h), and dr_image_expand gives back the float
+ * arrays to the bit; images that are not 8-bit stay as they are. */
+static void test_eight_bit(void)
+{
+    const struct dr_texture tex = {0, DR_WRAP_REPEAT, DR_WRAP_MIRROR};
+    int bad = 0, checked = 0;
+    for (int c = 1; c <= 4; c++)
+        for (int mode = 0; mode < 3; mode++) {   /* 0: data only, 1: decoded apart, 2: decoded in place */
+            struct dr_image f = levels_image(7, 5, c, mode > 0, 40u + (unsigned)c), e = copy_image(&f);
+            CHECK(dr_image_compact8(&e) && e.bytes && !e.data, "%d channels: compacted", c);
+            int rf = mode == 1 ? dr_image_make_linear(&f) : mode == 2 ? dr_image_make_linear_in_place(&f) : 0;
+            int re = mode == 1 ? dr_image_make_linear(&e) : mode == 2 ? dr_image_make_linear_in_place(&e) : 0;
+            CHECK(rf == 0 && re == 0, "%d channels, mode %d: decode", c, mode);
+            CHECK(dr_image_has_linear(&e) == (mode > 0), "%d channels, mode %d: has linear", c, mode);
+            for (size_t i = 0; i < (size_t)7 * 5 * c; i++)
+                for (int lin = 0; lin < 2; lin++) {
+                    float a = dr_image_value(&f, i, lin), b = dr_image_value(&e, i, lin);
+                    bad += memcmp(&a, &b, sizeof a) != 0;
+                }
+            for (int k = 0; k < 40; k++) {
+                double u = -1.3 + 0.097 * k, v = 2.2 - 0.061 * k, of[4], oe[4], du[2] = {0, 0}, dv[2] = {0, 0};
+                const double d_out[4] = {0.3, -0.7, 1.1, 0.5};
+                for (int lin = 0; lin < 2; lin++) {
+                    dr_texture_eval(&tex, &f, u, v, lin, of);
+                    dr_texture_eval(&tex, &e, u, v, lin, oe);
+                    bad += memcmp(of, oe, sizeof of) != 0;
+                    d_texture_eval_uv(&tex, &f, u, v, lin, d_out, &du[0], &dv[0]);
+                    d_texture_eval_uv(&tex, &e, u, v, lin, d_out, &du[1], &dv[1]);
+                    bad += du[0] != du[1] || dv[0] != dv[1];
+                    checked++;
+                }
+            }
+            CHECK(dr_image_expand(&e) == 0 && e.data && !e.bytes, "%d channels, mode %d: expand", c, mode);
+            size_t bytes = sizeof(float) * 7 * 5 * (size_t)c;
+            bad += memcmp(f.data, e.data, bytes) != 0;
+            bad += (f.linear == NULL) != (e.linear == NULL) || (f.linear && memcmp(f.linear, e.linear, bytes) != 0);
+            bad += (f.linear == f.data) != (e.linear == e.data) || f.linear_in_data != e.linear_in_data;
+            dr_image_release(&f);
+            dr_image_release(&e);
+        }
+    CHECK(bad == 0, "eight-bit storage: %d of %d lookups, values or arrays differ from float storage", bad, checked);
+    /* not an 8-bit image: a value between levels, one out of range, NaN */
+    const float odd[3][2] = {{0.5f, 0.5f + 1e-6f}, {0.2f, 1.5f}, {0.2f, NAN}};
+    for (int k = 0; k < 3; k++) {
+        float *px = malloc(sizeof odd[k]);
+        memcpy(px, odd[k], sizeof odd[k]);
+        struct dr_image img = {.width = 2, .height = 1, .channels = 1, .data = px};
+        CHECK(!dr_image_compact8(&img) && img.data == px && !img.bytes && !img.lut, "case %d: left as it is", k);
+        dr_image_release(&img);
+    }
+    printf("eight-bit storage: %d lookups identical to float storage\n", checked);
+}
+
 int main(void)
 {
     const char *base = getenv("TMPDIR");
@@ -788,11 +909,13 @@ int main(void)
     test_make_linear_exact();
     test_bilinear();
     test_channels();
+    test_eight_bit();
     test_exr();
     test_png();
     test_hdr();
     test_jpeg();
     test_read_memory();
+    test_read_eight_bit();
     test_errors();
 
     nftw(tmpdir, rm_entry, 16, FTW_DEPTH | FTW_PHYS);
