@@ -82,52 +82,6 @@ static size_t value_count(const struct dr_image *img)
 
 /* ------------------------------------------------------ eight-bit storage */
 
-bool dr_image_compact8(struct dr_image *img)
-{
-    if (!img || !img->data || img->linear || img->bytes || !image_usable(img))
-        return false;
-    const size_t n = value_count(img);
-    float *lut = malloc(512 * sizeof *lut);
-    uint8_t *bytes = dr_alloc_big(n);
-    if (!lut || !bytes) {
-        free(lut);
-        free(bytes);
-        return false;
-    }
-    bool seen[256] = {false};
-    uint32_t bits[256];
-    for (size_t i = 0; i < n; i++) {
-        const float v = img->data[i];
-        if (!(v >= 0.0f && v <= 1.0f)) {   /* (NaN too) */
-            free(lut);
-            free(bytes);
-            return false;
-        }
-        const int level = (int)(v * 255.0f + 0.5f);
-        uint32_t b;
-        memcpy(&b, &v, sizeof b);
-        if (!seen[level]) {
-            seen[level] = true;
-            bits[level] = b;
-            lut[level] = v;
-        } else if (bits[level] != b) {   /* two values at one level: not an 8-bit image */
-            free(lut);
-            free(bytes);
-            return false;
-        }
-        bytes[i] = (uint8_t)level;
-    }
-    for (int k = 0; k < 256; k++)
-        if (!seen[k])
-            lut[k] = 0.0f;   /* (no byte refers to it) */
-    free(img->data);
-    img->data = NULL;
-    img->bytes = bytes;
-    img->lut = lut;
-    img->lut_linear = NULL;
-    return true;
-}
-
 /* The decoded table of an eight-bit image (its colour channels' values:
  * dr_image_value keeps alpha's from lut), as decode_srgb would decode each
  * value (the memo gives pow's bits). */

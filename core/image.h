@@ -21,7 +21,7 @@ struct dr_image {
                         dr_image_make_linear(); colour textures are looked up here */
     bool file_is_srgb; /* the file declares sRGB-encoded values (PNG/JPEG, 8-bit)      */
     bool linear_in_data; /* linear is data itself, decoded in place (dr_image_make_linear_in_place) */
-    /* Eight-bit storage (dr_image_compact8), instead of data and linear: a
+    /* Eight-bit storage (dr_image_read_memory8), instead of data and linear: a
      * texture from an 8-bit file holds at most 256 values, so value i is
      * lut[bytes[i]] and its decoded one lut_linear[bytes[i]] (alpha: lut's),
      * the same floats as data and linear would hold, in a quarter of the
@@ -59,14 +59,6 @@ static inline float dr_image_value(const struct dr_image *img, size_t i, bool us
     return px ? px[i] : 0.0f;
 }
 
-/* Keeps an image whose every value is one of at most 256 floats in [0, 1],
- * each the value of one 8-bit level (what an 8-bit file decodes to), in
- * eight-bit storage: bytes and lut, data freed. Exact by construction: each
- * byte's float is the first value seen at its level, and an image with two
- * different values at one level (a 16-bit or float file, or any value the
- * levels do not give) stays as it is. Only before dr_image_make_linear.
- * Returns true if compacted (false also when out of memory: still whole). */
-bool dr_image_compact8(struct dr_image *img);
 /* Back to float storage (data, and linear if decoded), the same values.
  * No-op for float images. Returns 0 or DR_ERR_NOMEM (then unchanged). */
 int dr_image_expand(struct dr_image *img);
