@@ -14,8 +14,9 @@
 #   bench/ab.sh /tmp/old/build/drender build/drender
 # SCENE defaults to the peer's box, ROUNDS to 5, the options to the bench's
 # peer configuration (256x256, 64 spp, depth 8, 2 threads). Prints each run's
-# render seconds (`render --json`, time.render), the medians, NEW / OLD, and
-# whether the two binaries' last images are identical (idiff).
+# render seconds (`render --json`, time.render), the medians and the minima
+# with NEW / OLD for each, and whether the two binaries' last images are
+# identical (idiff).
 #
 #   bench/ab.sh OLD NEW SCENE ROUNDS grad GRAD OPTIONS...
 #
@@ -77,6 +78,10 @@ for ((r = 1; r <= ROUNDS; r++)); do
 done
 MA=$(median "${A[@]}") MB=$(median "${B[@]}")
 echo "median: old $MA s, new $MB s; new / old $(calc "$MB / $MA" %.3f)"
+# the least disturbed run of each: with many rounds on a noisy machine the
+# minima's ratio is steadier than the medians' (session 13's note)
+LA=$(printf '%s\n' "${A[@]}" | sort -g | head -n 1) LB=$(printf '%s\n' "${B[@]}" | sort -g | head -n 1)
+echo "minimum: old $LA s, new $LB s; new / old $(calc "$LB / $LA" %.3f)"
 if [[ $CMD == grad ]]; then
     if cmp -s "$TMP/old.grad" "$TMP/new.grad"; then
         echo "gradients: identical"
