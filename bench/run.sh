@@ -355,17 +355,19 @@ done
 STARTUP=$(median "${st[@]}") VERSION_WALL=$(median "${vw[@]}") HELP_WALL=$(median "${hw[@]}")
 printf '   process start to first ray (untextured Cornell box): %.3f s (goal <= 0.05: %s)\n' "$STARTUP" "$(yesno "$STARTUP <= 0.05")"
 # a textured scene: the image library's plugins, two 2048x2048 PNG decodes and the emissive light sampler
-st=() ld=()
+# (and the peak memory of that small render: mostly the image library and the textures)
+st=() ld=() pk=()
 for i in 1 2 3 4 5; do
     render "$BIG_TEX" --res 64x64 --spp 1 --threads 2
     st+=("$(json_num "$R_JSON" startup time)")
     ld+=("$(json_num "$R_JSON" load time)")
+    pk+=("$(json_num "$R_JSON" peak_memory_bytes)")
 done
-STARTUP_TEX=$(median "${st[@]}") LOAD_TEX=$(median "${ld[@]}")
-printf '   process start to first ray (%s): %.3f s, of which loading the scene %.3f s\n' "$(basename "$BIG_TEX")" \
-    "$STARTUP_TEX" "$LOAD_TEX"
+STARTUP_TEX=$(median "${st[@]}") LOAD_TEX=$(median "${ld[@]}") PEAK_TEX=$(median "${pk[@]}")
+printf '   process start to first ray (%s): %.3f s, of which loading the scene %.3f s; peak memory %.1f MiB\n' \
+    "$(basename "$BIG_TEX")" "$STARTUP_TEX" "$LOAD_TEX" "$(calc "$PEAK_TEX / 1048576")"
 printf '   drender --version: %.3f s wall; drender render --help: %.3f s wall\n' "$VERSION_WALL" "$HELP_WALL"
-STARTUP_JSON="{\"first_ray_seconds\": $STARTUP, \"textured_first_ray_seconds\": $STARTUP_TEX, \"textured_load_seconds\": $LOAD_TEX, \"version_wall_seconds\": $VERSION_WALL, \"help_wall_seconds\": $HELP_WALL}"
+STARTUP_JSON="{\"first_ray_seconds\": $STARTUP, \"textured_first_ray_seconds\": $STARTUP_TEX, \"textured_load_seconds\": $LOAD_TEX, \"textured_peak_memory_bytes\": $PEAK_TEX, \"version_wall_seconds\": $VERSION_WALL, \"help_wall_seconds\": $HELP_WALL}"
 
 # ---- results.json and the noise note ---------------------------------------
 
