@@ -299,8 +299,7 @@ void dr_texture_taps(const struct dr_texture *tex, const struct dr_image *img, d
 
 /* Texel idx of an image in eight-bit storage as the floats its float
  * storage would hold (dr_image_value), into t[0, channels) (at most 4 are
- * read). One case per channel count, as add_texel: a loop choosing each
- * channel's table made the lookups of a textured render twice as dear. */
+ * read), one case per channel count as add_texel. */
 static inline const float *texel8(const struct dr_image *img, int64_t idx, bool use_linear, float t[4])
 {
     const uint8_t *b = img->bytes + (size_t)idx * (size_t)img->channels;

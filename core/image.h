@@ -1,5 +1,6 @@
 /* In-memory images and texture lookup.
- * Pixels are float, row-major, top row first, `channels` interleaved values. */
+ * Pixels are row-major, top row first, `channels` interleaved values: floats,
+ * or (a scene texture from an 8-bit file) bytes standing for floats. */
 #ifndef DR_IMAGE_H
 #define DR_IMAGE_H
 
