@@ -45,12 +45,6 @@ static float srgb_to_linear_memo(struct srgb_memo *m, float v)
     return out;
 }
 
-/* Colour channels (sRGB-decoded) of a c-channel image; the rest is alpha. */
-static int colour_channels(int c)
-{
-    return c == 2 ? 1 : (c >= 4 ? 3 : c);
-}
-
 /* dst = src with the colour channels sRGB-decoded (alpha, channel 1 of 2 or
  * 3 of 4, kept); dst may be src. 8-bit files hold at most 256 distinct
  * values, and pow() per texel was a quarter of loading a scene with two 2k
@@ -61,7 +55,7 @@ static void decode_srgb(const float *src, float *dst, size_t n, size_t c)
 {
     struct srgb_memo memo;
     memset(&memo, 0, sizeof memo);
-    size_t ncolour = (size_t)colour_channels((int)c);
+    size_t ncolour = (size_t)dr_image_colour_channels((int)c);
     for (size_t i = 0; i < n; ++i) {
         const float *s = src + i * c;
         float *d = dst + i * c;
@@ -299,7 +293,8 @@ void dr_texture_taps(const struct dr_texture *tex, const struct dr_image *img, d
 
 /* Texel idx of an image in eight-bit storage as the floats its float
  * storage would hold (dr_image_value), into t[0, channels) (at most 4 are
- * read), one case per channel count as add_texel. */
+ * read), one case per channel count as add_texel (the colour channels of
+ * each: dr_image_colour_channels). */
 static inline const float *texel8(const struct dr_image *img, int64_t idx, bool use_linear, float t[4])
 {
     const uint8_t *b = img->bytes + (size_t)idx * (size_t)img->channels;

@@ -33,6 +33,13 @@ struct dr_image {
     float *lut_linear;   /* 256 decoded (lut + 256), NULL until dr_image_make_linear */
 };
 
+/* Colour channels (sRGB-decoded) of a c-channel image; the rest is alpha
+ * (channel 1 of 2, 3 of 4), kept as stored. */
+static inline int dr_image_colour_channels(int c)
+{
+    return c == 2 ? 1 : (c >= 4 ? 3 : c);
+}
+
 /* Has pixels, in float or eight-bit storage. */
 static inline bool dr_image_has_pixels(const struct dr_image *img)
 {
@@ -51,10 +58,9 @@ static inline bool dr_image_has_linear(const struct dr_image *img)
 static inline float dr_image_value(const struct dr_image *img, size_t i, bool use_linear)
 {
     if (img->bytes) {
-        const int c = img->channels, ch = (int)(i % (size_t)c);
-        const bool alpha = (c == 2 && ch == 1) || (c >= 4 && ch >= 3);   /* (not decoded) */
+        const int ch = (int)(i % (size_t)img->channels);
         const bool decoded = (use_linear || img->linear_in_data) && img->lut_linear;   /* (as data and linear) */
-        return (decoded && !alpha ? img->lut_linear : img->lut)[img->bytes[i]];
+        return (decoded && ch < dr_image_colour_channels(img->channels) ? img->lut_linear : img->lut)[img->bytes[i]];
     }
     const float *px = use_linear && img->linear ? img->linear : img->data;
     return px ? px[i] : 0.0f;

@@ -158,10 +158,9 @@ static void image_usage(const struct dr_scene *s, int image, bool *as_colour, bo
     }
 }
 
-/* The texel array a parameter reads and writes (NULL: out of memory). An
- * image in eight-bit storage (image.h) goes back to floats first: a
- * parameter's texels change (dr_param_set_create does it, and says when
- * there is no memory for it). */
+/* The texel array a parameter writes (NULL: out of memory). An image in
+ * eight-bit storage (image.h) goes back to floats first (dr_param_set_create
+ * does it for every image parameter, and says when there is no memory). */
 static float *param_texels(const struct dr_scene *s, const struct dr_param *p)
 {
     if (p->kind == DR_PARAM_ENV_MAP)
@@ -500,11 +499,17 @@ void dr_param_get(const struct dr_scene *cs, const struct dr_param *p, double *v
         v[0] = 0.0;
         return;
     case DR_PARAM_ENV_STRENGTH: v[0] = s->env.strength; return;
-    case DR_PARAM_ENV_MAP:
-    case DR_PARAM_IMAGE: {
+    case DR_PARAM_ENV_MAP: {
         const float *t = param_texels(s, p);
         for (int64_t i = 0; i < p->size; i++)
-            v[i] = t ? t[i] : NAN;   /* (no memory for its floats: dr_param_set_create reported it) */
+            v[i] = t[i];
+        return;
+    }
+    case DR_PARAM_IMAGE: {   /* read in either storage: `drender params` expands nothing */
+        bool colour, data;
+        image_usage(s, p->target, &colour, &data);
+        for (int64_t i = 0; i < p->size; i++)
+            v[i] = dr_image_value(&s->images[p->target], (size_t)i, colour);
         return;
     }
     default: v[0] = *mat_scalar(&s->materials[p->target], p->kind); return;
@@ -538,7 +543,7 @@ void dr_param_put(struct dr_scene *s, const struct dr_param *p, const double *v)
     case DR_PARAM_ENV_MAP:
     case DR_PARAM_IMAGE: {
         float *t = param_texels(s, p);
-        for (int64_t i = 0; t && i < p->size; i++)
+        for (int64_t i = 0; t && i < p->size; i++)   /* (no memory for its floats: nothing changes) */
             t[i] = (float)v[i];
         return;
     }
