@@ -609,18 +609,38 @@ static double reverse_mis_weight(const struct reverse_run *r, int k)
     return r->mis_runs > 0 ? r->mis_sum[k] / r->mis_runs : NAN;
 }
 
-/* The batches: gradient, total standard error and its parts. */
-static int reverse_batches(const struct grad_args *a, const struct dr_scene *scene, const struct dr_camera *cam,
-                           const struct dr_param_set *ps, const float *target, bool progress, struct reverse_run *r)
+/* The reverse run's options, without its callbacks. */
+static struct dr_reverse_options reverse_options(const struct grad_args *a, const struct dr_scene *scene,
+                                                 const struct dr_camera *cam, const struct dr_param_set *ps)
 {
     struct dr_reverse_options o = {
         .estimator = a->g.estimator,
         .problem = grad_problem(&a->g, scene, cam, ps, a->g.width, a->g.height, a->g.spp, a->g.seed),
-        .loss = a->loss, .loss_scale = 1.0, .batches = a->batches, .primal = a->primal,
-        .progress = progress ? reverse_progress : NULL, .on_render = reverse_on_render,
-        .on_gradient = reverse_on_gradient, .ctx = r};
+        .loss = a->loss, .loss_scale = 1.0, .batches = a->batches, .primal = a->primal};
     o.problem.batch = a->batch;
+    return o;
+}
+
+/* The batches: gradient, total standard error and its parts. */
+static int reverse_batches(const struct grad_args *a, const struct dr_scene *scene, const struct dr_camera *cam,
+                           const struct dr_param_set *ps, const float *target, bool progress, struct reverse_run *r)
+{
+    struct dr_reverse_options o = reverse_options(a, scene, cam, ps);
+    o.progress = progress ? reverse_progress : NULL;
+    o.on_render = reverse_on_render;
+    o.on_gradient = reverse_on_gradient;
+    o.ctx = r;
     o.problem.mis_weights = r->mis_last;
+    /* the parts' vectors only when the run estimates them (null in the output otherwise) */
+    if (dr_reverse_parts(&o)) {
+        const size_t T1 = (size_t)(r->T > 0 ? r->T : 1);
+        r->se_grad = dr_calloc_big(T1, sizeof(double));
+        r->se_primal = dr_calloc_big(T1, sizeof(double));
+        if (!r->se_grad || !r->se_primal) {
+            cli_error("grad", "out of memory (%lld gradient entries)", (long long)r->T);
+            return DR_EXIT_FAILURE;
+        }
+    }
     r->res = (struct dr_reverse_result){.grad = r->mean, .se = r->se, .se_gradient = r->se_grad,
                                         .se_primal = r->se_primal};
     if (dr_reverse_gradient(&o, target, &r->res) != 0) {
@@ -669,13 +689,14 @@ static double image_norm(const struct dr_param *p, const double *v)
     return sqrt(a);
 }
 
+/* v NULL: n nulls (standard-error parts the run did not estimate) */
 static void json_array(FILE *f, const double *v, int64_t n)
 {
     fputc('[', f);
     for (int64_t i = 0; i < n; i++) {
         if (i)
             fputs(", ", f);
-        json_number(f, v[i]);
+        json_number(f, v ? v[i] : NAN);
     }
     fputc(']', f);
 }
@@ -698,7 +719,7 @@ static void reverse_json_param(FILE *f, const struct grad_args *a, const struct 
         json_number(f, image_norm(p, r->mean));
         for (int k = 0; k < 3; k++) {
             fprintf(f, ", \"%s_norm\": ", keys[k]);
-            json_number(f, image_norm(p, vals[k]));
+            json_number(f, vals[k] ? image_norm(p, vals[k]) : NAN);
         }
         fprintf(f, ", \"file\": ");
         json_string(f, file);
@@ -707,7 +728,7 @@ static void reverse_json_param(FILE *f, const struct grad_args *a, const struct 
         json_array(f, r->mean + p->offset, p->size);
         for (int k = 0; k < 3; k++) {
             fprintf(f, ", \"%s\": ", keys[k]);
-            json_array(f, vals[k] + p->offset, p->size);
+            json_array(f, vals[k] ? vals[k] + p->offset : NULL, p->size);
         }
     }
     grad_json_mis_weight(f, &a->g, reverse_mis_weight(r, k));
@@ -779,8 +800,6 @@ static int run_reverse(struct grad_args *a, const char *scene_path, const struct
     const size_t T1 = (size_t)(r.T > 0 ? r.T : 1);
     r.mean = dr_calloc_big(T1, sizeof(double));   /* bigalloc.h: texture parameters */
     r.se = dr_calloc_big(T1, sizeof(double));
-    r.se_grad = dr_calloc_big(T1, sizeof(double));
-    r.se_primal = dr_calloc_big(T1, sizeof(double));
     r.files = calloc((size_t)ps->n, sizeof(char *));
     bool mis_ok = true;
     if (a->g.sampling == DR_SAMPLING_MIS) {
@@ -790,7 +809,7 @@ static int run_reverse(struct grad_args *a, const char *scene_path, const struct
     }
     int rc = DR_EXIT_FAILURE;
     bool progress = isatty(2) != 0;
-    if (!r.mean || !r.se || !r.se_grad || !r.se_primal || !r.files || !mis_ok)
+    if (!r.mean || !r.se || !r.files || !mis_ok)
         cli_error("grad", "out of memory (%lld gradient entries)", (long long)r.T);
     else if ((rc = reverse_batches(a, scene, cam, ps, target, progress, &r)) < 0 &&
              (rc = reverse_write_images(a, ps, &r)) < 0) {
@@ -852,7 +871,9 @@ int cmd_grad(int argc, char **argv)
         goto out;
     if ((rc = grad_apply_sets(&a.g, scene)) >= 0 || (rc = grad_param_set(&a.g, scene, &ps)) >= 0)
         goto out;
-    if ((rc = cli_limits_grad(&a.g, scene, ps, a.target != NULL, a.batches, a.batches_given, a.batch)) >= 0)
+    const struct dr_reverse_options planned = reverse_options(&a, scene, &cam, ps);
+    if ((rc = cli_limits_grad(&a.g, scene, ps, a.target != NULL, a.batches, a.batches_given, a.batch,
+                              a.target && dr_reverse_parts(&planned))) >= 0)
         goto out;
     double t_loaded = dr_clock_seconds();
     if (a.target)

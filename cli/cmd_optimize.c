@@ -553,8 +553,9 @@ struct opt_run {
     struct dr_scene *scene, *ref_scene;
     struct dr_param_set *ps;
     struct dr_adam *adam;
-    double *theta, *grad, *gt, *ref;   /* values, gradient, one target's gradient, reference values */
-    double *se, *se_t, *se_parts;      /* gradient's total standard error; one target's; its parts (2 T) */
+    double *theta, *grad, *ref;        /* values, gradient, reference values */
+    double *se;                        /* the gradient's standard error */
+    double *gt, *se_t;                 /* several targets: one target's gradient and standard error */
     struct history hist;
     double loss;
     char ckpt[4096];
@@ -610,7 +611,8 @@ static int opt_load(struct opt_args *a, struct opt_run *r)
             return DR_EXIT_USAGE;
         }
     if ((rc = grad_param_set(&a->g, r->scene, &r->ps)) >= 0 ||
-        (rc = cli_limits_optimize(&a->g, r->scene, r->ps, target_pixels(a, false), target_pixels(a, true))) >= 0)
+        (rc = cli_limits_optimize(&a->g, r->scene, r->ps, target_pixels(a, false), target_pixels(a, true),
+                                   a->n_targets)) >= 0)
         return rc;
     if (a->reference && (rc = load_reference(a, r)) >= 0)
         return rc;
@@ -619,11 +621,13 @@ static int opt_load(struct opt_args *a, struct opt_run *r)
     const size_t T = (size_t)r->ps->total;
     r->theta = dr_alloc_big(sizeof(double) * T);
     r->grad = dr_alloc_big(sizeof(double) * T);
-    r->gt = dr_alloc_big(sizeof(double) * T);
     r->se = dr_alloc_big(sizeof(double) * T);
-    r->se_t = dr_alloc_big(sizeof(double) * T);
-    r->se_parts = dr_alloc_big(sizeof(double) * 2 * (T ? T : 1));   /* bigalloc.h: texture parameters */
-    if (!r->theta || !r->grad || !r->gt || !r->se || !r->se_t || !r->se_parts) {
+    /* one target's result goes straight into grad and se (no parts: optimize
+     * does not report them); several add up through gt and se_t */
+    const bool several = a->n_targets > 1;
+    r->gt = several ? dr_alloc_big(sizeof(double) * T) : NULL;
+    r->se_t = several ? dr_alloc_big(sizeof(double) * T) : NULL;
+    if (!r->theta || !r->grad || !r->se || (several && (!r->gt || !r->se_t))) {
         cli_error("optimize", "out of memory");
         return DR_EXIT_FAILURE;
     }
@@ -701,6 +705,7 @@ static int opt_open_outputs(const struct opt_args *a, struct opt_run *r)
 static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
 {
     const int64_t T = r->ps->total;
+    const bool several = a->n_targets > 1;
     memset(r->grad, 0, sizeof(double) * (size_t)T);
     memset(r->se, 0, sizeof(double) * (size_t)T);
     r->loss = 0.0;
@@ -712,14 +717,14 @@ static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
             .batches = a->batches, .primal = a->primal,
             .problem = grad_problem(&a->g, r->scene, cam, r->ps, t->w, t->h, a->g.spp,
                                     iteration_seed(a->g.seed, it, ti, 0x47524144))};
-        struct dr_reverse_result res = {.grad = r->gt, .se = r->se_t, .se_gradient = r->se_parts,
-                                        .se_primal = r->se_parts + T, .image = t->render};
+        struct dr_reverse_result res = {.grad = several ? r->gt : r->grad, .se = several ? r->se_t : r->se,
+                                        .image = t->render};
         if (dr_reverse_gradient(&o, t->rgb, &res) != 0) {
             cli_error("optimize", "%s", dr_last_error());
             return DR_EXIT_FAILURE;
         }
         r->loss += res.loss;
-        for (int64_t i = 0; i < T; i++) {
+        for (int64_t i = 0; several && i < T; i++) {
             r->grad[i] += r->gt[i];
             r->se[i] += r->se_t[i] * r->se_t[i];
         }
@@ -730,7 +735,7 @@ static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
             dr_image_write(path, t->rw, t->rh, 3, t->render);
         }
     }
-    for (int64_t i = 0; i < T; i++)
+    for (int64_t i = 0; several && i < T; i++)
         r->se[i] = sqrt(r->se[i]);
     return -1;
 }
@@ -942,7 +947,6 @@ static void opt_free(struct opt_args *a, struct opt_run *r)
     free(r->gt);
     free(r->se);
     free(r->se_t);
-    free(r->se_parts);
     free(r->ref);
     dr_adam_destroy(r->adam);
     dr_param_set_destroy(r->ps);

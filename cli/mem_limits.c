@@ -264,7 +264,7 @@ static double mis_bytes(const struct grad_common *g, double T, double npix, int 
 }
 
 int cli_limits_grad(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *ps,
-                    bool reverse, int batches, bool batches_given, int64_t batch)
+                    bool reverse, int batches, bool batches_given, int64_t batch, bool parts)
 {
     if (reverse && batches_given && batches > g->spp) {
         cli_error("grad", "--batches %d exceeds --spp %d: every batch needs at least one sample per pixel", batches,
@@ -278,7 +278,12 @@ int cli_limits_grad(const struct grad_common *g, const struct dr_scene *scene, c
     if (reverse) {
         /* primal image, adjoint, target (read + rgb), texture gradient images */
         n.images = npix * 3 * (3 * sizeof(float)) + npix * 4 * sizeof(float);
-        n.grads = T * (3 * sizeof(double) + sizeof(float)) + T * 2 * sizeof(double) * threads;
+        /* mean, standard error, a batch's gradient (the estimator's thread 0
+         * sums into it, the others into their own: drivers/reverse.c,
+         * estimators/common.c), a float copy for gradient images; with the
+         * standard error's parts a batch's second half and the two parts */
+        n.grads = T * (3 * sizeof(double) + sizeof(float)) + T * sizeof(double) * (threads - 1) +
+                  (parts ? T * 3 * sizeof(double) : 0.0);
         n.mis = mis_bytes(g, T, npix, threads, false);
         double spp_b = ceil((double)g->spp / (batches > 0 ? batches : 1));
         double paths = npix * spp_b;
@@ -315,7 +320,7 @@ int cli_limits_fdcheck(const struct grad_common *g, const struct dr_scene *scene
 }
 
 int cli_limits_optimize(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *ps,
-                        uint64_t target_pixels, uint64_t max_pixels)
+                        uint64_t target_pixels, uint64_t max_pixels, int n_targets)
 {
     const double T = ps ? (double)ps->total : 0.0;
     const int threads = thread_count(g->threads);
@@ -323,8 +328,10 @@ int cli_limits_optimize(const struct grad_common *g, const struct dr_scene *scen
     n.scene = 2.0 * (double)cli_mem_scene(scene);   /* with --reference, a second scene */
     /* per target: the file (up to 4 channels), rgb, render, adjoint; one view render */
     n.images = (double)target_pixels * (4 + 9) * sizeof(float) + (double)max_pixels * 3 * sizeof(float);
-    /* theta, grad, per-target grad, reference, Adam's m, v, lr, lo, hi; per-thread copies */
-    n.grads = T * 9 * sizeof(double) + T * 2 * sizeof(double) * threads;
+    /* theta, grad, its standard error, reference, Adam's m, v, lr, lo, hi; with
+     * several targets one target's gradient and error; a batch's gradient or
+     * two halves (drivers/reverse.c); the estimator's threads but the first */
+    n.grads = T * (9 + (n_targets > 1 ? 2 : 0) + 2) * sizeof(double) + T * sizeof(double) * (threads - 1);
     n.mis = mis_bytes(g, T, (double)max_pixels, threads, false);
     n.tape = tape_bytes(g, fmin(dr_tape_batch_paths(0, threads, g->spp), (double)max_pixels * g->spp));
     n.work = work_bytes(g->estimator, g->spp, threads);

@@ -36,14 +36,15 @@ uint64_t cli_mem_scene(const struct dr_scene *scene);
 
 int cli_limits_render(const struct dr_scene *scene, int width, int height, int spp, int threads);
 /* grad: reverse (with --target) or forward mode; K batches (refused when
- * batches_given and K > --spp), --batch paths (tape). */
+ * batches_given and K > --spp), --batch paths (tape); parts: the run
+ * estimates the standard error's parts (dr_reverse_parts). */
 int cli_limits_grad(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *ps,
-                    bool reverse, int batches, bool batches_given, int64_t batch);
+                    bool reverse, int batches, bool batches_given, int64_t batch, bool parts);
 int cli_limits_fdcheck(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *ps,
                        int batches);
-/* optimize: the targets' pixels in all and the largest target's. */
+/* optimize: the targets' pixels in all and the largest target's, and how many targets. */
 int cli_limits_optimize(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *ps,
-                        uint64_t target_pixels, uint64_t max_pixels);
+                        uint64_t target_pixels, uint64_t max_pixels, int n_targets);
 
 /* compare: reverse or forward mode, g's size and largest max depth; tape when
  * the tape estimator is among those compared, mis when mis sampling is. */

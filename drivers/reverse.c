@@ -21,6 +21,8 @@ struct rev_work {
     float *img, *adj;
     double *img_sum;           /* sum of the batches' primal images */
     double *cross_img;         /* cross mode: a batch's primal image, from its estimator run */
+    /* a batch's gradient (its two halves); Welford's sum of squares and the
+     * halves' (the caller's se and se_gradient, finished in place) */
     double *half[2], *m2, *dsq;
     int done, steps;
     struct dr_mis_history mis;   /* mis without the caller's history: this run's batches' */
@@ -34,23 +36,31 @@ static void work_free(struct rev_work *w)
     free(w->cross_img);
     free(w->half[0]);
     free(w->half[1]);
-    free(w->m2);
-    free(w->dsq);
     dr_mis_history_free(&w->mis);
 }
 
-static int work_alloc(struct rev_work *w)
+/* Scratch for a run: the sums live in the caller's se and se_gradient
+ * (finish() turns them into standard errors in place), the second half only
+ * when batches are split. So a texture parameter costs its result vectors
+ * and one or two batch vectors, not eight (and the estimator sums thread 0
+ * straight into half[0]: common.c). */
+static int work_alloc(struct rev_work *w, const struct dr_reverse_result *r)
 {
     size_t T1 = (size_t)(w->T > 0 ? w->T : 1);
+    const bool split = r->parts && r->spp_batch / 2 > 0;
     w->img = malloc(sizeof(float) * w->n);
     w->adj = malloc(sizeof(float) * w->n);
     w->img_sum = calloc(w->n, sizeof(double));
     w->cross_img = calloc(w->n, sizeof(double));
     w->half[0] = dr_calloc_big(T1, sizeof(double));
-    w->half[1] = dr_calloc_big(T1, sizeof(double));
-    w->m2 = dr_calloc_big(T1, sizeof(double));
-    w->dsq = dr_calloc_big(T1, sizeof(double));
-    if (w->img && w->adj && w->img_sum && w->cross_img && w->half[0] && w->half[1] && w->m2 && w->dsq)
+    w->half[1] = split ? dr_calloc_big(T1, sizeof(double)) : NULL;
+    w->m2 = r->se;
+    memset(w->m2, 0, sizeof(double) * (size_t)w->T);
+    /* the halves' squared differences feed se_gradient and se_primal only */
+    w->dsq = r->parts && r->se_gradient ? r->se_gradient : NULL;
+    if (w->dsq)
+        memset(w->dsq, 0, sizeof(double) * (size_t)w->T);
+    if (w->img && w->adj && w->img_sum && w->cross_img && w->half[0] && (w->half[1] || !split))
         return 0;
     dr_set_error("out of memory (%lld gradient entries, %zu image values)", (long long)w->T, w->n);
     return DR_ERR_NOMEM;
@@ -142,7 +152,7 @@ static int batch(struct rev_work *w, int b, uint64_t grad_base, struct dr_revers
         double d = g - r->grad[i];
         r->grad[i] += d / (b + 1);
         w->m2[i] += d * (g - r->grad[i]);
-        if (split) {
+        if (split && w->dsq) {
             double h = w->half[0][i] - w->half[1][i];
             w->dsq[i] += h * h * n0 * n1 / ((double)spp * spp);
         }
@@ -154,17 +164,48 @@ static int batch(struct rev_work *w, int b, uint64_t grad_base, struct dr_revers
 /* Standard errors from the sums, and the loss of the mean primal image. */
 static void finish(struct rev_work *w, struct dr_reverse_result *r, int K, int primals)
 {
+    /* in place: se held m2, se_gradient (with parts) dsq */
     for (int64_t i = 0; i < w->T; i++) {
         r->se[i] = sqrt(w->m2[i] / (K - 1) / K);
-        double sg2 = w->dsq[i] / K / K;
+        if (!r->se_gradient)
+            continue;
+        double sg2 = w->dsq ? w->dsq[i] / K / K : NAN;
         r->se_gradient[i] = r->parts ? sqrt(sg2) : NAN;
-        r->se_primal[i] = r->parts ? sqrt(fmax(0.0, r->se[i] * r->se[i] - sg2)) : NAN;
+        if (r->se_primal)
+            r->se_primal[i] = r->parts ? sqrt(fmax(0.0, r->se[i] * r->se[i] - sg2)) : NAN;
     }
     for (size_t i = 0; i < w->n; i++)
         w->img[i] = (float)(w->img_sum[i] / primals);
     r->loss = w->o->loss_scale * dr_loss_eval(w->o->loss, w->img, w->target, w->n);
     if (r->image)
         memcpy(r->image, w->img, sizeof(float) * w->n);
+}
+
+/* What will run: samples per batch, the primal mode, whether the standard
+ * error's parts are estimated. */
+static void plan(const struct dr_reverse_options *o, struct dr_reverse_result *r)
+{
+    const struct dr_grad_problem *p = &o->problem;
+    const int K = o->batches;
+    r->spp_batch = (int)(((int64_t)p->spp + K - 1) / K);
+    /* the cross primal needs a pixel's samples independent of each other: not
+     * so with one sample, nor under the stratified and sobol samplers, whose
+     * samples of a pixel share their strata (estimator.h) */
+    const bool cross_ok = r->spp_batch >= 2 && p->sampler == DR_SAMPLER_INDEPENDENT;
+    r->primal_run = o->primal == DR_PRIMAL_CROSS && !cross_ok ? DR_PRIMAL_PER_BATCH : o->primal;
+    /* mis: a batch in one piece (no halves, so no se_gradient/se_primal
+     * split): weights from halves of 2 spp were poor (mis.h) */
+    const bool mis = dr_est_sampling_run(p) == DR_SAMPLING_MIS;
+    r->parts = r->primal_run == DR_PRIMAL_PER_BATCH && r->spp_batch >= 2 && !mis;
+}
+
+bool dr_reverse_parts(const struct dr_reverse_options *o)
+{
+    struct dr_reverse_result r = {0};
+    if (o->batches < 1)
+        return false;
+    plan(o, &r);
+    return r.parts;
 }
 
 int dr_reverse_gradient(const struct dr_reverse_options *o, const float *target, struct dr_reverse_result *r)
@@ -175,24 +216,16 @@ int dr_reverse_gradient(const struct dr_reverse_options *o, const float *target,
         dr_set_error("reverse mode needs at least 2 batches for a standard error");
         return DR_ERR_ARG;
     }
-    r->spp_batch = (int)(((int64_t)p->spp + K - 1) / K);
-    /* the cross primal needs a pixel's samples independent of each other: not
-     * so with one sample, nor under the stratified and sobol samplers, whose
-     * samples of a pixel share their strata (estimator.h) */
-    const bool cross_ok = r->spp_batch >= 2 && p->sampler == DR_SAMPLER_INDEPENDENT;
-    r->primal_run = o->primal == DR_PRIMAL_CROSS && !cross_ok ? DR_PRIMAL_PER_BATCH : o->primal;
+    plan(o, r);
     /* progress steps: a render and an estimator run per batch, or (cross) the run alone */
     struct rev_work w = {.o = o, .target = target, .n = (size_t)p->width * (size_t)p->height * 3,
                          .T = p->params->total, .steps = r->primal_run == DR_PRIMAL_CROSS ? K : 2 * K};
-    /* mis: a batch in one piece (no halves, so no se_gradient/se_primal
-     * split): weights from halves of 2 spp were poor (mis.h) */
     const bool mis = dr_est_sampling_run(p) == DR_SAMPLING_MIS;
-    r->parts = r->primal_run == DR_PRIMAL_PER_BATCH && r->spp_batch >= 2 && !mis;
     r->primal_seed = dr_hash64(p->seed ^ PRIMAL_SEED_SALT);
     r->t_primal = r->t_gradient = 0.0;
     memset(r->grad, 0, sizeof(double) * (size_t)w.T);
     const uint64_t grad_base = dr_hash64(p->seed ^ GRAD_SEED_SALT);
-    int rc = work_alloc(&w);
+    int rc = work_alloc(&w, r);
     /* mis: the weights of each batch (and half) from the earlier ones too (mis.h) */
     if (rc == 0 && mis && !p->mis_history)
         rc = dr_mis_history_init(&w.mis, p->params->n);

@@ -68,7 +68,10 @@ struct dr_reverse_options {
 };
 
 struct dr_reverse_result {
-    /* caller-allocated, params->total entries each */
+    /* caller-allocated, params->total entries each; se_gradient and
+     * se_primal may both be NULL (then only `parts` says whether they could
+     * have been estimated: dr_reverse_parts tells before the run, so a caller
+     * can allocate them only then) */
     double *grad, *se, *se_gradient, *se_primal;
     /* optional (may be NULL): the mean of the primal images, width * height * 3 */
     float *image;
@@ -80,6 +83,10 @@ struct dr_reverse_result {
     enum dr_primal_mode primal_run;  /* what ran: DR_PRIMAL_CROSS with spp_batch < 2 or a stratified
                                         or sobol sampler runs per batch */
 };
+
+/* Whether a run with these options estimates se_gradient and se_primal
+ * (dr_reverse_result.parts). */
+bool dr_reverse_parts(const struct dr_reverse_options *o);
 
 /* target: width * height * 3 linear floats. 0 or a negative DR_ERR_*. */
 int dr_reverse_gradient(const struct dr_reverse_options *o, const float *target, struct dr_reverse_result *r);

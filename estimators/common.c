@@ -29,11 +29,13 @@ void dr_est_camera_ray(const struct dr_est_base *b, int64_t pixel, int sample, s
 static void accum_free(struct dr_est_accum *a)
 {
     for (int t = 0; t < DR_MAX_THREADS; t++) {
-        free(a->grad[t]);
+        if (a->grad[t] != a->borrowed)
+            free(a->grad[t]);
         free(a->chunk[t]);
         free(a->image[t]);
         a->grad[t] = a->chunk[t] = a->image[t] = NULL;
     }
+    a->borrowed = NULL;
 }
 
 static double *accum_alloc(struct dr_est_accum *a, size_t n)
@@ -42,20 +44,29 @@ static double *accum_alloc(struct dr_est_accum *a, size_t n)
     return dr_calloc_big(n, sizeof(double));   /* texture gradients: 100 MB a 2k texture */
 }
 
-static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, bool forward)
+/* The per-thread buffers. Reverse mode: thread 0 sums straight into the
+ * caller's gradient `out` (zeroed here), the others into their own, added to
+ * it in thread order by accum_sum: a texture parameter's gradient costs
+ * (threads - 1) vectors of its size here instead of threads. mis: none (its
+ * samples go to the mis accumulator). */
+static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, bool forward, bool mis, double *out)
 {
     memset(a, 0, sizeof *a);
     a->threads = dr_thread_count(p->threads);
     a->total = p->params->total;
     size_t pixels = (size_t)p->width * (size_t)p->height;
-    for (int t = 0; t < a->threads; t++) {
+    for (int t = 0; t < a->threads && !mis; t++) {
         if (forward) {
             if (!(a->image[t] = accum_alloc(a, pixels * 3)))
                 goto nomem;
             continue;
         }
-        if (!(a->grad[t] = accum_alloc(a, (size_t)a->total + 1)))
+        if (t == 0 && out) {
+            memset(out, 0, sizeof(double) * (size_t)a->total);
+            a->grad[0] = a->borrowed = out;
+        } else if (!(a->grad[t] = accum_alloc(a, (size_t)a->total + 1))) {
             goto nomem;
+        }
         if (a->total <= CHUNK_LOCAL_MAX && !(a->chunk[t] = accum_alloc(a, (size_t)a->total + 1)))
             goto nomem;
     }
@@ -66,14 +77,20 @@ nomem:
     return DR_ERR_NOMEM;
 }
 
-/* Sums the threads (in thread order) into grad / d_image. */
+/* Sums the threads (in thread order) into grad / d_image. grad is thread
+ * 0's own buffer (accum_init); adding +0.0 at the end gives every entry the
+ * bits of the former 0 + g0 + g1 + ... (a -0 sum became +0). */
 static void accum_sum(const struct dr_est_accum *a, const struct dr_grad_problem *p, double *grad, double *d_image)
 {
     if (grad) {
-        memset(grad, 0, sizeof(double) * (size_t)a->total);
+        if (a->grad[0] != grad)
+            memset(grad, 0, sizeof(double) * (size_t)a->total);
         for (int t = 0; t < a->threads; t++)
-            for (int64_t i = 0; i < a->total; i++)
-                grad[i] += a->grad[t][i];
+            if (a->grad[t] != grad)
+                for (int64_t i = 0; i < a->total; i++)
+                    grad[i] += a->grad[t][i];
+        for (int64_t i = 0; i < a->total; i++)
+            grad[i] += 0.0;
     }
     if (d_image) {
         size_t n = (size_t)p->width * (size_t)p->height * 3;
@@ -308,8 +325,8 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
                                      .medium_grad = p->medium_grad};
     b->adjoint = adjoint;
     b->dir = dir;
-    rc = accum_init(&b->acc, p, dir != NULL);
     b->mis = dr_est_sampling_run(p) == DR_SAMPLING_MIS;
+    rc = accum_init(&b->acc, p, dir != NULL, b->mis, grad);
     if (rc == 0 && b->mis)
         rc = mis_init(b);
     if (rc == 0) {

@@ -250,6 +250,37 @@ expect_fail 2 "-o" grad --target t.exr --param "$red" -o x.exr
 expect_fail 2 "--grad-dir|nodir" grad --target t.exr --param "$red" --grad-dir nodir
 rm -f nan.pfm
 
+# ---- grad: a texture parameter's memory ----
+# NormalTangentTest's base colour, 2048x2048x3 = 12.6 M scalars, 96 MiB per
+# vector of doubles. A reverse run holds the mean, the standard error and one
+# batch's gradient (drivers/reverse.c), the estimator's thread 0 sums
+# straight into the last and every other thread has one of its own
+# (estimators/common.c): with the float texture and the gradient image's
+# float copy, about 3.3 vectors over a run with a scalar parameter at one
+# thread, one more per thread. (Before: 9.3 and 10.3 — scratch for the
+# standard error's parts no run asked for, a copy per thread for thread 0.)
+find_samples
+ntt=$samples/NormalTangentTest/glTF/NormalTangentTest.gltf
+[ -f "$ntt" ] || fail "NormalTangentTest.gltf not found beside the checkout"
+run render "$ntt" --res 8x8 --spp 2 -o ntt.exr
+expect_rc 0 "render NormalTangentTest (target)"
+peak() {   # peak PARAM THREADS: sets PEAK, the grad run's peak memory in MiB (here, not in a subshell: fail exits)
+    run grad "$ntt" --target ntt.exr --param "$1" --spp 4 --threads "$2" --grad-dir gdir --json
+    expect_rc 0 "grad NormalTangentTest $1 --threads $2"
+    PEAK=$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["peak_memory_bytes"] / 2**20)' "$tmp/out")
+    [ -n "$PEAK" ] || fail "grad NormalTangentTest $1: no peak_memory_bytes"
+}
+peak /materials/0/pbrMetallicRoughness/roughnessFactor 1
+base=$PEAK
+for threads in 1 2; do
+    peak /images/0 "$threads"
+    tex=$PEAK
+    awk -v b="$base" -v t="$tex" -v n="$threads" 'BEGIN { exit !(t - b < (3.5 + n) * 96) }' ||
+        fail "grad of a 2048x2048x3 texture with $threads thread(s): $tex MiB peak against $base MiB for a scalar (over $((3 + threads)).5 vectors of 96 MiB)"
+    echo "texture gradient, $threads thread(s): peak $tex MiB, a scalar's run $base MiB"
+done
+rm -f ntt.exr gdir/grad-images-0.exr
+
 # ---- fdcheck ----
 run fdcheck --param "$red" --res 16x16 --spp 4 --batches 4
 expect_rc 0 "fdcheck on the red wall's colour"
