@@ -1,7 +1,12 @@
 /* Adam and checkpoints: Adam finds the minimum of a separable quadratic and
  * keeps every scalar inside its range; a checkpoint restores parameters and
- * optimizer state bit for bit, so a resumed run continues exactly; a
+ * optimizer state bit for bit, so a resumed run continues exactly (also for
+ * zeros of either sign, subnormals and the extremes of the double range,
+ * and from a checkpoint written in decimal, as drender did before); a
  * checkpoint for other parameters or a truncated one is refused. */
+#include <float.h>
+#include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
@@ -22,6 +27,52 @@ static struct dr_scene *scene(void)
     struct dr_scene *s = sb_finish(&b);
     s->n_file_materials = s->n_materials;
     return s;
+}
+
+/* The checkpoint's numbers (hexadecimal, optimizer.c's put_double) read back
+ * bit for bit at the edges of the double range; a decimal checkpoint (the
+ * format before) reads as it did. */
+static void edge_values(const struct dr_param_set *ps, const double *theta0, const char *path)
+{
+    struct dr_adam *a = dr_adam_create(ps, theta0, 0.0), *b = dr_adam_create(ps, theta0, 0.0);
+    double theta[5] = {0.0, 4.9406564584124654e-324, 1.0 / 3.0, 0.5, fmin(1e300, a->hi[4])};
+    const double m[5] = {-0.0, -4.9406564584124654e-324, DBL_MAX, -DBL_MIN / 3.0, -1.0 / 3.0};
+    const double v[5] = {0.0, DBL_MIN, DBL_MAX, 0.1, 2.2250738585072009e-308 /* largest subnormal */};
+    memcpy(a->m, m, sizeof m);
+    memcpy(a->v, v, sizeof v);
+    a->t = 7;
+    double back[5];
+    int64_t it = 0;
+    CHECK(dr_checkpoint_write(path, "scene.gltf", ps, theta, a, 7) == 0, "edge write: %s", dr_last_error());
+    CHECK(dr_checkpoint_read(path, ps, back, b, &it) == 0, "edge read: %s", dr_last_error());
+    CHECK(memcmp(back, theta, sizeof back) == 0 && memcmp(b->m, m, sizeof m) == 0 && memcmp(b->v, v, sizeof v) == 0,
+          "edge values not restored bit for bit");
+    for (int i = 0; i < 5; i++)   /* say which, if any */
+        CHECK(memcmp(&b->m[i], &m[i], sizeof(double)) == 0, "m[%d]: %a read back as %a", i, m[i], b->m[i]);
+    /* the same state in decimal, as written before */
+    FILE *f = fopen(path, "w");
+    fprintf(f, "drender-checkpoint 1\nscene scene.gltf\niteration 7\nadam 7 %.17g %.17g %.17g\n", a->beta1, a->beta2,
+            a->eps);
+    for (int k = 0; k < ps->n; k++) {
+        const struct dr_param *p = &ps->params[k];
+        fprintf(f, "param %s %lld\n", p->name, (long long)p->size);
+        const double *vec[3] = {theta, m, v};
+        const char *key[3] = {"value", "m", "v"};
+        for (int j = 0; j < 3; j++) {
+            fputs(key[j], f);
+            for (int64_t i = p->offset; i < p->offset + p->size; i++)
+                fprintf(f, " %.17g", vec[j][i]);
+            fputc('\n', f);
+        }
+    }
+    fputs("end\n", f);
+    fclose(f);
+    memset(back, 0, sizeof back);
+    CHECK(dr_checkpoint_read(path, ps, back, b, &it) == 0, "decimal read: %s", dr_last_error());
+    CHECK(memcmp(back, theta, sizeof back) == 0 && memcmp(b->m, m, sizeof m) == 0 && memcmp(b->v, v, sizeof v) == 0,
+          "a decimal checkpoint not read bit for bit");
+    dr_adam_destroy(a);
+    dr_adam_destroy(b);
 }
 
 int main(void)
@@ -70,6 +121,7 @@ int main(void)
         dr_adam_step(b, resumed, grad);
     }
     CHECK(memcmp(resumed, theta, sizeof resumed) == 0, "resumed run differs from the uninterrupted one");
+    edge_values(ps, saved_theta, path);
 
     /* a different parameter list is refused */
     struct dr_param_set *other = dr_param_set_create(s, ptrs, 2);
