@@ -328,10 +328,11 @@ int cli_limits_optimize(const struct grad_common *g, const struct dr_scene *scen
     n.scene = 2.0 * (double)cli_mem_scene(scene);   /* with --reference, a second scene */
     /* per target: the file (up to 4 channels), rgb, render, adjoint; one view render */
     n.images = (double)target_pixels * (4 + 9) * sizeof(float) + (double)max_pixels * 3 * sizeof(float);
-    /* theta, grad, its standard error, reference, Adam's m, v, lr, lo, hi; with
-     * several targets one target's gradient and error; a batch's gradient or
-     * two halves (drivers/reverse.c); the estimator's threads but the first */
-    n.grads = T * (9 + (n_targets > 1 ? 2 : 0) + 2) * sizeof(double) + T * sizeof(double) * (threads - 1);
+    /* theta, grad, its standard error, reference, Adam's m and v (its
+     * learning rates and ranges are per parameter); with several targets one
+     * target's gradient and error; a batch's gradient or two halves
+     * (drivers/reverse.c); the estimator's threads but the first */
+    n.grads = T * (6 + (n_targets > 1 ? 2 : 0) + 2) * sizeof(double) + T * sizeof(double) * (threads - 1);
     n.mis = mis_bytes(g, T, (double)max_pixels, threads, false);
     n.tape = tape_bytes(g, fmin(dr_tape_batch_paths(0, threads, g->spp), (double)max_pixels * g->spp));
     n.work = work_bytes(g->estimator, g->spp, threads);

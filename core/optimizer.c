@@ -2,6 +2,7 @@
 
 #include <errno.h>
 #include <math.h>
+#include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -36,6 +37,8 @@ void dr_adam_destroy(struct dr_adam *a)
         return;
     free(a->m);
     free(a->v);
+    free(a->offset);
+    free(a->size);
     free(a->lr);
     free(a->lo);
     free(a->hi);
@@ -51,24 +54,23 @@ struct dr_adam *dr_adam_create(const struct dr_param_set *ps, const double *thet
     a->beta1 = 0.9;
     a->beta2 = 0.999;
     a->eps = 1e-8;
-    size_t n = (size_t)(a->n > 0 ? a->n : 1);
+    size_t n = (size_t)(a->n > 0 ? a->n : 1), np = (size_t)(ps->n > 0 ? ps->n : 1);
+    a->n_params = ps->n;
     a->m = calloc(n, sizeof(double));
     a->v = calloc(n, sizeof(double));
-    a->lr = malloc(n * sizeof(double));
-    a->lo = malloc(n * sizeof(double));
-    a->hi = malloc(n * sizeof(double));
-    if (!a->m || !a->v || !a->lr || !a->lo || !a->hi)
+    a->offset = malloc(np * sizeof(int64_t));
+    a->size = malloc(np * sizeof(int64_t));
+    a->lr = malloc(np * sizeof(double));
+    a->lo = malloc(np * sizeof(double));
+    a->hi = malloc(np * sizeof(double));
+    if (!a->m || !a->v || !a->offset || !a->size || !a->lr || !a->lo || !a->hi)
         goto nomem;
     for (int k = 0; k < ps->n; k++) {
         const struct dr_param *p = &ps->params[k];
-        double lo, hi;
-        dr_param_range(p, &lo, &hi);
-        double lr = lr_override > 0.0 ? lr_override : dr_param_default_lr(p, theta + p->offset);
-        for (int64_t i = p->offset; i < p->offset + p->size; i++) {
-            a->lr[i] = lr;
-            a->lo[i] = lo;
-            a->hi[i] = hi;
-        }
+        a->offset[k] = p->offset;
+        a->size[k] = p->size;
+        dr_param_range(p, &a->lo[k], &a->hi[k]);
+        a->lr[k] = lr_override > 0.0 ? lr_override : dr_param_default_lr(p, theta + p->offset);
     }
     return a;
 nomem:
@@ -77,22 +79,44 @@ nomem:
     return NULL;
 }
 
+int dr_adam_param_of(const struct dr_adam *a, int64_t i)
+{
+    for (int k = 0; k < a->n_params; k++)
+        if (i >= a->offset[k] && i < a->offset[k] + a->size[k])
+            return k;
+    return -1;
+}
+
+/* One parameter's scalars. restrict: m, v, theta and grad never overlap, so
+ * GCC may vectorise (the same operations in the same order: the same bits). */
+static int64_t adam_span(const struct dr_adam *a, int64_t n, double *restrict m, double *restrict v,
+                         double *restrict theta, const double *restrict grad, double lr, double lo, double hi,
+                         double c1, double c2)
+{
+    int64_t bad = 0;
+    const double b1 = a->beta1, b2 = a->beta2, eps = a->eps;
+    for (int64_t i = 0; i < n; i++) {
+        double g = grad[i];
+        bool finite = isfinite(g);
+        bad += !finite;
+        g = finite ? g : 0.0;
+        m[i] = b1 * m[i] + (1.0 - b1) * g;
+        v[i] = b2 * v[i] + (1.0 - b2) * g * g;
+        double step = lr * (m[i] / c1) / (sqrt(v[i] / c2) + eps);
+        double x = theta[i] - step;
+        theta[i] = x < lo ? lo : (x > hi ? hi : x);
+    }
+    return bad;
+}
+
 int64_t dr_adam_step(struct dr_adam *a, double *theta, const double *grad)
 {
     int64_t bad = 0;
     a->t++;
     double c1 = 1.0 - pow(a->beta1, (double)a->t), c2 = 1.0 - pow(a->beta2, (double)a->t);
-    for (int64_t i = 0; i < a->n; i++) {
-        double g = grad[i];
-        if (!isfinite(g)) {
-            g = 0.0;
-            bad++;
-        }
-        a->m[i] = a->beta1 * a->m[i] + (1.0 - a->beta1) * g;
-        a->v[i] = a->beta2 * a->v[i] + (1.0 - a->beta2) * g * g;
-        double step = a->lr[i] * (a->m[i] / c1) / (sqrt(a->v[i] / c2) + a->eps);
-        double x = theta[i] - step;
-        theta[i] = x < a->lo[i] ? a->lo[i] : (x > a->hi[i] ? a->hi[i] : x);
+    for (int k = 0; k < a->n_params; k++) {
+        const int64_t o = a->offset[k];
+        bad += adam_span(a, a->size[k], a->m + o, a->v + o, theta + o, grad + o, a->lr[k], a->lo[k], a->hi[k], c1, c2);
     }
     return bad;
 }
@@ -289,10 +313,10 @@ int dr_checkpoint_read(const char *path, const struct dr_param_set *ps, double *
     for (int k = 0; k < ps->n; k++) {
         const struct dr_param *p = &ps->params[k];
         for (int64_t i = p->offset; i < p->offset + p->size; i++)
-            if (!(theta[i] >= a->lo[i] && theta[i] <= a->hi[i]) || !isfinite(a->m[i]) || !isfinite(a->v[i]) ||
+            if (!(theta[i] >= a->lo[k] && theta[i] <= a->hi[k]) || !isfinite(a->m[i]) || !isfinite(a->v[i]) ||
                 a->v[i] < 0.0) {
                 dr_set_error("%s: not a valid drender checkpoint: %s value %lld is %g (range [%g, %g]), m %g, v %g",
-                             path, p->name, (long long)(i - p->offset), theta[i], a->lo[i], a->hi[i], a->m[i],
+                             path, p->name, (long long)(i - p->offset), theta[i], a->lo[k], a->hi[k], a->m[i],
                              a->v[i]);
                 return DR_ERR_FORMAT;
             }

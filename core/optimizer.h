@@ -11,9 +11,17 @@ struct dr_adam {
     int64_t n;
     int64_t t;                 /* steps taken */
     double beta1, beta2, eps;
-    double *m, *v;             /* moment estimates */
-    double *lr, *lo, *hi;      /* per scalar */
+    double *m, *v;             /* moment estimates, per scalar */
+    /* per parameter (scalars [offset[k], offset[k] + size[k])): a texture's
+     * texels share one learning rate and range, so three vectors of its size
+     * would hold one number each */
+    int n_params;
+    int64_t *offset, *size;
+    double *lr, *lo, *hi;
 };
+
+/* The parameter scalar i belongs to (-1: none). */
+int dr_adam_param_of(const struct dr_adam *a, int64_t i);
 
 /* Learning rates: lr_override > 0 applies to every parameter; otherwise a
  * default per kind (see dr_param_default_lr). NULL + dr_last_error. */

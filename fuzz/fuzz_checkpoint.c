@@ -67,9 +67,11 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
      * (optimize indexes its history by iteration and takes sqrt of v). */
     bool ok = it >= 0 && adam->t >= 0 && adam->beta1 >= 0.0 && adam->beta1 < 1.0 && adam->beta2 >= 0.0 &&
               adam->beta2 < 1.0 && adam->eps > 0.0 && isfinite(adam->eps);
-    for (int64_t i = 0; ok && i < ps->total; i++)
-        ok = isfinite(theta[i]) && theta[i] >= adam->lo[i] && theta[i] <= adam->hi[i] && isfinite(adam->m[i]) &&
-             isfinite(adam->v[i]) && adam->v[i] >= 0.0;
+    for (int64_t i = 0; ok && i < ps->total; i++) {
+        const int k = dr_adam_param_of(adam, i);
+        ok = k >= 0 && isfinite(theta[i]) && theta[i] >= adam->lo[k] && theta[i] <= adam->hi[k] &&
+             isfinite(adam->m[i]) && isfinite(adam->v[i]) && adam->v[i] >= 0.0;
+    }
     if (!ok) {
         fprintf(stderr, "fuzz_checkpoint: accepted an impossible state (iteration %lld)\n", (long long)it);
         abort();

@@ -35,7 +35,7 @@ static struct dr_scene *scene(void)
 static void edge_values(const struct dr_param_set *ps, const double *theta0, const char *path)
 {
     struct dr_adam *a = dr_adam_create(ps, theta0, 0.0), *b = dr_adam_create(ps, theta0, 0.0);
-    double theta[5] = {0.0, 4.9406564584124654e-324, 1.0 / 3.0, 0.5, fmin(1e300, a->hi[4])};
+    double theta[5] = {0.0, 4.9406564584124654e-324, 1.0 / 3.0, 0.5, fmin(1e300, a->hi[dr_adam_param_of(a, 4)])};
     const double m[5] = {-0.0, -4.9406564584124654e-324, DBL_MAX, -DBL_MIN / 3.0, -1.0 / 3.0};
     const double v[5] = {0.0, DBL_MIN, DBL_MAX, 0.1, 2.2250738585072009e-308 /* largest subnormal */};
     memcpy(a->m, m, sizeof m);
@@ -87,8 +87,11 @@ int main(void)
     dr_param_set_get(s, ps, theta);
     struct dr_adam *a = dr_adam_create(ps, theta, 0.0);
     CHECK(a != NULL, "adam");
-    CHECK_NEAR(a->lr[0], 0.02, 0, "colour learning rate");
-    CHECK_NEAR(a->lr[4], 0.05 * 4.0, 1e-12, "strength learning rate is 5% of its value");
+    CHECK(dr_adam_param_of(a, 0) == 0 && dr_adam_param_of(a, 2) == 0 && dr_adam_param_of(a, 3) == 1 &&
+              dr_adam_param_of(a, 4) == 2 && dr_adam_param_of(a, 5) == -1,
+          "scalars' parameters");
+    CHECK_NEAR(a->lr[dr_adam_param_of(a, 0)], 0.02, 0, "colour learning rate");
+    CHECK_NEAR(a->lr[dr_adam_param_of(a, 4)], 0.05 * 4.0, 1e-12, "strength learning rate is 5% of its value");
     double grad[5], saved_theta[5];
     struct dr_adam *b = dr_adam_create(ps, theta, 0.0);
     char path[] = "/tmp/drender-ckpt-XXXXXX";
