@@ -18,10 +18,14 @@
 #      (goal <= 1.1), primal share of the run, and both reported standard errors;
 #      then the cross primal (default) vs a primal per batch over 8 seeds each:
 #      time ratio and efficiency (variance x time)
+#   m. a texture parameter (NormalTangentTest's 2048x2048x3 base colour, 12.6 M
+#      scalars): grad's peak memory and gradient time, and optimize's per
+#      iteration time and peak memory (5 iterations, a checkpoint at the end)
 # Writes $BUILD/bench/grad-results.json.
 set -euo pipefail
 BUILD=${BUILD:-build}
 PEER=${PEER:-../shared/bench/peer-cornell-box.gltf}
+NTT=${NTT:-../shared/gltf-samples/NormalTangentTest/glTF/NormalTangentTest.gltf}
 OUT=$BUILD/bench
 mkdir -p "$OUT"
 TMP=$(mktemp -d)
@@ -149,12 +153,26 @@ SEJ=$("$TMP/reverse_stderr" $CORNELL $RED $RES 32 4 2)
 echo "   $SEJ"
 echo "   time ratio $(json_num "$SEJ" time_ratio) (goal <= 1.1: $(yesno "$(json_num "$SEJ" time_ratio) <= 1.1"))"
 echo "   cross primal (the default: no render) vs a primal per batch, over $(json_num "$SEJ" runs) seeds each: time ratio $(json_num "$SEJ" cross_time_ratio), efficiency (variance x time, per-batch / cross) $(json_num "$SEJ" cross_efficiency)"
+TEX_JSON=null
+if [[ -f $NTT ]]; then
+    echo
+    echo "m. a texture parameter: $NTT /images/0 (2048x2048x3), 64x64, 16 spp, 2 threads"
+    "$DR" render "$NTT" -o "$TMP/ntt.exr" --res 64x64 --spp 64 --threads 2 2>/dev/null
+    J=$("$DR" grad "$NTT" --target "$TMP/ntt.exr" --param /images/0 --spp 16 --threads 2 --grad-dir "$TMP" --json 2>/dev/null)
+    G_PEAK=$(json_num "$J" peak_memory_bytes) G_T=$(json_num "$J" gradient time)
+    O=$("$DR" optimize "$NTT" --target "$TMP/ntt.exr" --param /images/0 --spp 16 --threads 2 --iters 5 \
+        --out-dir "$TMP/ntt-opt" --json 2>/dev/null | tail -n 1)
+    O_T=$(json_num "$O" seconds) O_PEAK=$(json_num "$O" peak_memory_bytes)
+    printf '   grad: peak %.0f MiB, gradient %.2f s; optimize: %.2f s per iteration (checkpoint included), peak %.0f MiB\n' \
+        "$(calc "$G_PEAK / 1048576")" "$G_T" "$(calc "$O_T / 5")" "$(calc "$O_PEAK / 1048576")"
+    TEX_JSON="{\"grad_peak_bytes\": $G_PEAK, \"grad_seconds\": $G_T, \"optimize_seconds_per_iteration\": $(calc "$O_T / 5" %.4f), \"optimize_peak_bytes\": $O_PEAK}"
+fi
 cat >"$OUT/grad-results.json" <<JSON
 {"primal_seconds": $T_PRIMAL, "prb_seconds": ${T[prb]}, "tape_seconds": ${T[tape]},
  "prb_over_primal": $R_PRB, "tape_over_prb": $R_TAPE,
  "stderr_sqrt_seconds": {"prb": $(calc "${SE[prb]} * sqrt(${T[prb]})" %.6g), "tape": $(calc "${SE[tape]} * sqrt(${T[tape]})" %.6g)},
  "memory_vs_depth": [${MEM_JSON%,}], "prb_memory_change_percent": $SPREAD,
- "peer": $PEER_JSON, "reverse_stderr": $SEJ}
+ "peer": $PEER_JSON, "reverse_stderr": $SEJ, "texture_parameter": $TEX_JSON}
 JSON
 echo
 echo "results in $OUT/grad-results.json"
