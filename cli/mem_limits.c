@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include "cli.h"
+#include "exact_sum.h"
 #include "grad_common.h"
 #include "render.h"
 #include "mis.h"
@@ -263,6 +264,16 @@ static double mis_bytes(const struct grad_common *g, double T, double npix, int 
     return per_thread * sizeof(double) * threads;
 }
 
+/* A reverse-mode estimator run's own gradient sums beside the caller's
+ * vector: one per thread but the first, or the shared exact sums
+ * (estimator.h). */
+static double est_sums_bytes(double T, int threads)
+{
+    if (dr_estimator_shared_sums(threads, (int64_t)T))
+        return (double)dr_exact_sum_bytes((int64_t)T);
+    return T * sizeof(double) * (threads - 1);
+}
+
 int cli_limits_grad(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *ps,
                     bool reverse, int batches, bool batches_given, int64_t batch, bool parts)
 {
@@ -282,7 +293,7 @@ int cli_limits_grad(const struct grad_common *g, const struct dr_scene *scene, c
          * sums into it, the others into their own: drivers/reverse.c,
          * estimators/common.c), a float copy for gradient images; with the
          * standard error's parts a batch's second half and the two parts */
-        n.grads = T * (3 * sizeof(double) + sizeof(float)) + T * sizeof(double) * (threads - 1) +
+        n.grads = T * (3 * sizeof(double) + sizeof(float)) + est_sums_bytes(T, threads) +
                   (parts ? T * 3 * sizeof(double) : 0.0);
         n.mis = mis_bytes(g, T, npix, threads, false);
         double spp_b = ceil((double)g->spp / (batches > 0 ? batches : 1));
@@ -332,7 +343,7 @@ int cli_limits_optimize(const struct grad_common *g, const struct dr_scene *scen
      * learning rates and ranges are per parameter); with several targets one
      * target's gradient and error; a batch's gradient or two halves
      * (drivers/reverse.c); the estimator's threads but the first */
-    n.grads = T * (6 + (n_targets > 1 ? 2 : 0) + 2) * sizeof(double) + T * sizeof(double) * (threads - 1);
+    n.grads = T * (6 + (n_targets > 1 ? 2 : 0) + 2) * sizeof(double) + est_sums_bytes(T, threads);
     n.mis = mis_bytes(g, T, (double)max_pixels, threads, false);
     n.tape = tape_bytes(g, fmin(dr_tape_batch_paths(0, threads, g->spp), (double)max_pixels * g->spp));
     n.work = work_bytes(g->estimator, g->spp, threads);

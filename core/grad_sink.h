@@ -1,6 +1,8 @@
 /* Where parameter adjoints land. Every d_ function that reaches a scene
  * parameter writes through a sink instead of knowing the estimator's mode:
- *  - reverse mode: a gradient vector, grad[slot] += v  (d loss / d theta);
+ *  - reverse mode: a gradient vector, grad[slot] += v  (d loss / d theta),
+ *    the thread's own, or one all threads share, added to exactly
+ *    (exact_sum.h: a texture parameter on many threads);
  *  - forward mode: a running dot product with a direction per image channel,
  *    forward[channel] += dir[slot] * v  (d I_channel / d theta . dir).
  * Forward mode keeps the three image channels apart in one pass over a path:
@@ -12,10 +14,12 @@
 
 #include <stdint.h>
 
+#include "exact_sum.h"
 #include "vec.h"
 
 struct dr_grad_sink {
     double *grad;        /* reverse mode: gradient vector (+=) */
+    struct dr_exact_sum *exact;   /* reverse mode, when not NULL: the shared exact sums instead */
     const double *dir;   /* forward mode (when not NULL): direction */
     double forward[3];   /* forward mode: accumulated dot product per image channel */
     int channel;         /* forward mode: the channel the current adjoint belongs to */
@@ -24,6 +28,11 @@ struct dr_grad_sink {
 static inline struct dr_grad_sink dr_sink_reverse(double *grad)
 {
     return (struct dr_grad_sink){.grad = grad};
+}
+
+static inline struct dr_grad_sink dr_sink_exact(struct dr_exact_sum *e)
+{
+    return (struct dr_grad_sink){.exact = e};
 }
 
 static inline struct dr_grad_sink dr_sink_forward(const double *dir)
@@ -35,6 +44,8 @@ static inline void dr_sink_add(struct dr_grad_sink *k, int64_t slot, double v)
 {
     if (k->dir)
         k->forward[k->channel] += k->dir[slot] * v;
+    else if (k->exact)
+        dr_exact_add(k->exact, slot, v);
     else
         k->grad[slot] += v;
 }

@@ -28,6 +28,8 @@ void dr_est_camera_ray(const struct dr_est_base *b, int64_t pixel, int sample, s
 
 static void accum_free(struct dr_est_accum *a)
 {
+    dr_exact_sum_destroy(a->exact);
+    a->exact = NULL;
     for (int t = 0; t < DR_MAX_THREADS; t++) {
         if (a->grad[t] != a->borrowed)
             free(a->grad[t]);
@@ -44,17 +46,28 @@ static double *accum_alloc(struct dr_est_accum *a, size_t n)
     return dr_calloc_big(n, sizeof(double));   /* texture gradients: 100 MB a 2k texture */
 }
 
+bool dr_estimator_shared_sums(int threads, int64_t total)
+{
+    return threads >= 4 && total >= DR_SHARED_SUMS_MIN;
+}
+
 /* The per-thread buffers. Reverse mode: thread 0 sums straight into the
  * caller's gradient `out` (zeroed here), the others into their own, added to
  * it in thread order by accum_sum: a texture parameter's gradient costs
- * (threads - 1) vectors of its size here instead of threads. mis: none (its
- * samples go to the mis accumulator). */
+ * (threads - 1) vectors of its size here instead of threads. From four
+ * threads on a large vector is one shared exact sum instead (exact_sum.h:
+ * 17 bytes an entry, not 8 a thread). mis: none (its samples go to the mis
+ * accumulator). */
 static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, bool forward, bool mis, double *out)
 {
     memset(a, 0, sizeof *a);
     a->threads = dr_thread_count(p->threads);
     a->total = p->params->total;
     size_t pixels = (size_t)p->width * (size_t)p->height;
+    if (!forward && !mis && dr_estimator_shared_sums(a->threads, a->total)) {
+        a->bytes += dr_exact_sum_bytes(a->total);
+        return (a->exact = dr_exact_sum_create(a->total)) ? 0 : DR_ERR_NOMEM;
+    }
     for (int t = 0; t < a->threads && !mis; t++) {
         if (forward) {
             if (!(a->image[t] = accum_alloc(a, pixels * 3)))
@@ -82,7 +95,9 @@ nomem:
  * bits of the former 0 + g0 + g1 + ... (a -0 sum became +0). */
 static void accum_sum(const struct dr_est_accum *a, const struct dr_grad_problem *p, double *grad, double *d_image)
 {
-    if (grad) {
+    if (grad && a->exact) {
+        dr_exact_sum_read(a->exact, grad);   /* NaN where a contribution was out of its range (exact_sum.h) */
+    } else if (grad) {
         if (a->grad[0] != grad)
             memset(grad, 0, sizeof(double) * (size_t)a->total);
         for (int t = 0; t < a->threads; t++)
@@ -110,6 +125,8 @@ struct dr_grad_sink dr_est_sink_begin(struct dr_est_base *b, int thread)
     if (b->dir)
         return dr_sink_forward(b->dir);
     struct dr_est_accum *a = &b->acc;
+    if (a->exact)
+        return dr_sink_exact(a->exact);
     if (!a->chunk[thread])
         return dr_sink_reverse(a->grad[thread]);
     memset(a->chunk[thread], 0, sizeof(double) * (size_t)a->total);

@@ -27,6 +27,7 @@ struct dr_est_accum {
     int64_t total;                        /* gradient entries */
     double *grad[DR_MAX_THREADS];         /* reverse mode: thread t's sum (none with mis) */
     double *borrowed;                     /* grad[0] when it is the caller's output (accum_init) */
+    struct dr_exact_sum *exact;           /* instead of grad[]: one shared exact sum (many threads) */
     double *chunk[DR_MAX_THREADS];        /* NULL when total is large */
     double *image[DR_MAX_THREADS];        /* forward mode: per-thread d image (w*h*3), else NULL */
     uint64_t bytes;                       /* what the buffers above hold */

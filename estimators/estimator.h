@@ -144,6 +144,15 @@ size_t dr_tape_vertex_bytes(void);
 double dr_tape_batch_paths(int64_t batch, int threads, int spp);
 bool dr_estimator_supports(const struct dr_estimator_ops *e, enum dr_sampling s);
 
+/* Reverse mode sums a thread's adjoints into a gradient vector of its own
+ * (the first thread into the caller's), except from 4 threads on for
+ * vectors of at least DR_SHARED_SUMS_MIN entries (texture parameters): one
+ * vector all threads add to exactly (core/exact_sum.h), 17 bytes an entry
+ * against 8 for each thread but the first, whose result is the same for any
+ * thread count from 4 on. */
+#define DR_SHARED_SUMS_MIN 65536
+bool dr_estimator_shared_sums(int threads, int64_t total);
+
 /* Forward mode: d_image (width * height * 3 doubles) = d I / d theta . dir,
  * dir having params->total entries. */
 int dr_estimator_forward(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const double *dir,
