@@ -301,8 +301,8 @@ int cli_limits_grad(const struct grad_common *g, const struct dr_scene *scene, c
         n.tape = tape_bytes(g, fmin(dr_tape_batch_paths(batch, threads, (int)spp_b), paths));
         n.work = work_bytes(g->estimator, (int)spp_b, threads);
     } else {
-        /* d image in double per thread and summed, plus its float copy */
-        n.images = npix * 3 * (sizeof(double) * (threads + 1) + sizeof(float));
+        /* d image in double (every thread writes it: estimators/common.c), plus its float copy */
+        n.images = npix * 3 * (sizeof(double) + sizeof(float));
         n.mis = mis_bytes(g, T, npix, threads, true);
         n.grads = T * sizeof(double);
         double paths = npix * g->spp;
@@ -319,8 +319,8 @@ int cli_limits_fdcheck(const struct grad_common *g, const struct dr_scene *scene
     const int threads = thread_count(g->threads);
     struct need n = {0};
     n.scene = (double)cli_mem_scene(scene);
-    /* d image (double), adjoint and renders (float), per-thread forward images */
-    n.images = npix * 3 * (sizeof(double) * (threads + 1) + 3 * sizeof(float));
+    /* d image (double; the forward runs' threads all write it), adjoint and renders (float) */
+    n.images = npix * 3 * (sizeof(double) + 3 * sizeof(float));
     /* one estimator run at a time, forward or reverse: the larger of the two */
     n.grads = T * 5 * sizeof(double) + T * 2 * sizeof(double) * threads;
     n.mis = fmax(mis_bytes(g, T, npix, threads, true), mis_bytes(g, T, npix, threads, false));

@@ -34,7 +34,8 @@ static void accum_free(struct dr_est_accum *a)
         if (a->grad[t] != a->borrowed)
             free(a->grad[t]);
         free(a->chunk[t]);
-        free(a->image[t]);
+        if (a->image[t] != a->borrowed)
+            free(a->image[t]);
         a->grad[t] = a->chunk[t] = a->image[t] = NULL;
     }
     a->borrowed = NULL;
@@ -58,7 +59,8 @@ bool dr_estimator_shared_sums(int threads, int64_t total)
  * threads on a large vector is one shared exact sum instead (exact_sum.h:
  * 17 bytes an entry, not 8 a thread). mis: none (its samples go to the mis
  * accumulator). */
-static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, bool forward, bool mis, double *out)
+static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, bool forward, bool mis, double *out,
+                      double *d_image)
 {
     memset(a, 0, sizeof *a);
     a->threads = dr_thread_count(p->threads);
@@ -67,6 +69,19 @@ static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, b
     if (!forward && !mis && dr_estimator_shared_sums(a->threads, a->total)) {
         a->bytes += dr_exact_sum_bytes(a->total);
         return (a->exact = dr_exact_sum_create(a->total)) ? 0 : DR_ERR_NOMEM;
+    }
+    /* Forward mode: every thread writes the caller's d image itself. A
+     * pixel's samples are all taken by one thread (prb hands out pixel
+     * ranges, the tape whole pixels per worker), so no two threads add to
+     * the same value, and each value is its pixel's samples summed in order:
+     * the same bits as per-thread images summed, for any thread count, in
+     * one image instead of one per thread. */
+    if (forward && !mis && d_image) {
+        memset(d_image, 0, sizeof(double) * pixels * 3);
+        for (int t = 0; t < a->threads; t++)
+            a->image[t] = d_image;
+        a->borrowed = d_image;
+        return 0;
     }
     for (int t = 0; t < a->threads && !mis; t++) {
         if (forward) {
@@ -107,7 +122,10 @@ static void accum_sum(const struct dr_est_accum *a, const struct dr_grad_problem
         for (int64_t i = 0; i < a->total; i++)
             grad[i] += 0.0;
     }
-    if (d_image) {
+    if (d_image && a->image[0] == d_image) {   /* written in place (accum_init); -0 to +0 as before */
+        for (size_t i = 0, n = (size_t)p->width * (size_t)p->height * 3; i < n; i++)
+            d_image[i] += 0.0;
+    } else if (d_image) {
         size_t n = (size_t)p->width * (size_t)p->height * 3;
         for (size_t i = 0; i < n; i++) {
             double v = 0.0;
@@ -179,8 +197,8 @@ void dr_est_sample_done(struct dr_est_base *b, int thread, int64_t pixel, struct
 {
     if (!b->dir)
         return;
-    double *out = b->acc.image[thread] + 3 * pixel;
     const double inv_spp = 1.0 / b->p->spp;
+    double *out = b->acc.image[thread] + 3 * pixel;
     for (int c = 0; c < 3; c++) {
         out[c] += sink->forward[c] * inv_spp;
         sink->forward[c] = 0.0;
@@ -343,7 +361,7 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
     b->adjoint = adjoint;
     b->dir = dir;
     b->mis = dr_est_sampling_run(p) == DR_SAMPLING_MIS;
-    rc = accum_init(&b->acc, p, dir != NULL, b->mis, grad);
+    rc = accum_init(&b->acc, p, dir != NULL, b->mis, grad, d_image);
     if (rc == 0 && b->mis)
         rc = mis_init(b);
     if (rc == 0) {

@@ -125,6 +125,25 @@ if $have_oiio; then
     max=$(echo "$stats" | sed -n 's/.*Max: *\([0-9.e+-]*\).*/\1/p' | head -n 1)
     awk -v m="${max:-0}" 'BEGIN { exit !(m > 0) }' || fail "d.exr: expected a positive derivative: $stats"
 fi
+# Forward mode: every thread writes one shared derivative image (a pixel's
+# samples are one thread's, estimators/common.c): the same values, to the
+# bit, for any thread count, with both estimators
+if command -v idiff >/dev/null; then
+    for est in prb tape; do
+        for threads in 1 3 7; do
+            run grad --param "$red" --param /images/0 -o "f$threads.exr" --res 40x24 --spp 3 --max-depth 5 \
+                --estimator $est --threads $threads
+            expect_rc 0 "grad forward --estimator $est --threads $threads"
+        done
+        for threads in 3 7; do
+            for k in 0 1; do
+                idiff -fail 0 -warn 0 "f1.$k.exr" "f$threads.$k.exr" >/dev/null ||
+                    fail "grad forward ($est): parameter $k's derivative image on $threads threads differs from 1 thread"
+            done
+        done
+    done
+    rm -f f1.*.exr f3.*.exr f7.*.exr
+fi
 
 # ---- grad, reverse mode ----
 run render --res 16x16 --spp 16 -o t.exr
