@@ -8,9 +8,10 @@
  * Here every entry is a 128-bit fixed-point integer in units of 2^-88, added
  * to with atomic integer additions. Integer addition is exact and
  * associative, so the sum does not depend on the order the threads' adds
- * arrive in: one shared vector of 16 bytes an entry, whatever the thread
- * count, and the same bits for any thread count (better than the per-thread
- * vectors, whose result changes with it).
+ * arrive in: one shared vector of 17 bytes an entry (16 and a flag) whatever
+ * the thread count, with the same bits for any thread count (per-thread
+ * vectors' results change in the last digits with it). The estimators use
+ * it from 4 threads on (estimator.h), where it is the smaller.
  *
  * Range: each contribution is rounded to the nearest multiple of 2^-88
  * (3.2e-27: a relative error below 1e-15 for anything above 3e-12) and must

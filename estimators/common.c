@@ -26,19 +26,18 @@ void dr_est_camera_ray(const struct dr_est_base *b, int64_t pixel, int sample, s
 
 /* ------------------------------------------------------------ accumulators */
 
+/* What accum_init allocated (never the caller's vectors: grad[0], image). */
 static void accum_free(struct dr_est_accum *a)
 {
     dr_exact_sum_destroy(a->exact);
     a->exact = NULL;
     for (int t = 0; t < DR_MAX_THREADS; t++) {
-        if (a->grad[t] != a->borrowed)
+        if (t > 0)
             free(a->grad[t]);
         free(a->chunk[t]);
-        if (a->image[t] != a->borrowed)
-            free(a->image[t]);
-        a->grad[t] = a->chunk[t] = a->image[t] = NULL;
+        a->grad[t] = a->chunk[t] = NULL;
     }
-    a->borrowed = NULL;
+    a->image = NULL;
 }
 
 static double *accum_alloc(struct dr_est_accum *a, size_t n)
@@ -52,49 +51,41 @@ bool dr_estimator_shared_sums(int threads, int64_t total)
     return threads >= 4 && total >= DR_SHARED_SUMS_MIN;
 }
 
-/* The per-thread buffers. Reverse mode: thread 0 sums straight into the
- * caller's gradient `out` (zeroed here), the others into their own, added to
- * it in thread order by accum_sum: a texture parameter's gradient costs
- * (threads - 1) vectors of its size here instead of threads. From four
- * threads on a large vector is one shared exact sum instead (exact_sum.h:
- * 17 bytes an entry, not 8 a thread). mis: none (its samples go to the mis
- * accumulator). */
+/* Where the threads' sums go; out and d_image are the caller's outputs
+ * (zeroed here).
+ *  - Reverse mode: thread 0 sums straight into `out`, the others into
+ *    their own vectors, added to it in thread order by accum_sum: a texture
+ *    parameter costs (threads - 1) vectors of its size here, not threads.
+ *    From four threads on a large vector is one shared exact sum instead
+ *    (exact_sum.h: 17 bytes an entry, not 8 a thread).
+ *  - Forward mode: every thread writes d_image itself. A pixel's samples are
+ *    all taken by one thread (prb hands out pixel ranges, the tape whole
+ *    pixels per worker), so no two threads add to the same value, and each
+ *    value is its pixel's samples summed in order: the bits per-thread
+ *    images summed gave, for any thread count, in one image.
+ *  - mis: nothing (its samples go to the mis accumulator). */
 static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, bool forward, bool mis, double *out,
                       double *d_image)
 {
     memset(a, 0, sizeof *a);
     a->threads = dr_thread_count(p->threads);
     a->total = p->params->total;
-    size_t pixels = (size_t)p->width * (size_t)p->height;
-    if (!forward && !mis && dr_estimator_shared_sums(a->threads, a->total)) {
+    if (mis)
+        return 0;
+    if (forward) {
+        memset(d_image, 0, sizeof(double) * (size_t)p->width * (size_t)p->height * 3);
+        a->image = d_image;
+        return 0;
+    }
+    if (dr_estimator_shared_sums(a->threads, a->total)) {
         a->bytes += dr_exact_sum_bytes(a->total);
         return (a->exact = dr_exact_sum_create(a->total)) ? 0 : DR_ERR_NOMEM;
     }
-    /* Forward mode: every thread writes the caller's d image itself. A
-     * pixel's samples are all taken by one thread (prb hands out pixel
-     * ranges, the tape whole pixels per worker), so no two threads add to
-     * the same value, and each value is its pixel's samples summed in order:
-     * the same bits as per-thread images summed, for any thread count, in
-     * one image instead of one per thread. */
-    if (forward && !mis && d_image) {
-        memset(d_image, 0, sizeof(double) * pixels * 3);
-        for (int t = 0; t < a->threads; t++)
-            a->image[t] = d_image;
-        a->borrowed = d_image;
-        return 0;
-    }
-    for (int t = 0; t < a->threads && !mis; t++) {
-        if (forward) {
-            if (!(a->image[t] = accum_alloc(a, pixels * 3)))
-                goto nomem;
-            continue;
-        }
-        if (t == 0 && out) {
-            memset(out, 0, sizeof(double) * (size_t)a->total);
-            a->grad[0] = a->borrowed = out;
-        } else if (!(a->grad[t] = accum_alloc(a, (size_t)a->total + 1))) {
+    memset(out, 0, sizeof(double) * (size_t)a->total);
+    a->grad[0] = out;
+    for (int t = 0; t < a->threads; t++) {
+        if (t > 0 && !(a->grad[t] = accum_alloc(a, (size_t)a->total + 1)))
             goto nomem;
-        }
         if (a->total <= CHUNK_LOCAL_MAX && !(a->chunk[t] = accum_alloc(a, (size_t)a->total + 1)))
             goto nomem;
     }
@@ -105,35 +96,23 @@ nomem:
     return DR_ERR_NOMEM;
 }
 
-/* Sums the threads (in thread order) into grad / d_image. grad is thread
- * 0's own buffer (accum_init); adding +0.0 at the end gives every entry the
- * bits of the former 0 + g0 + g1 + ... (a -0 sum became +0). */
+/* The threads' sums into grad (thread 0 summed there already: the others
+ * added in thread order) or d_image (written in place). Adding +0.0 at the
+ * end gives every entry the bits the former 0 + g0 + g1 + ... gave (a -0
+ * sum became +0). */
 static void accum_sum(const struct dr_est_accum *a, const struct dr_grad_problem *p, double *grad, double *d_image)
 {
     if (grad && a->exact) {
         dr_exact_sum_read(a->exact, grad);   /* NaN where a contribution was out of its range (exact_sum.h) */
     } else if (grad) {
-        if (a->grad[0] != grad)
-            memset(grad, 0, sizeof(double) * (size_t)a->total);
-        for (int t = 0; t < a->threads; t++)
-            if (a->grad[t] != grad)
-                for (int64_t i = 0; i < a->total; i++)
-                    grad[i] += a->grad[t][i];
+        for (int t = 1; t < a->threads; t++)
+            for (int64_t i = 0; i < a->total; i++)
+                grad[i] += a->grad[t][i];
         for (int64_t i = 0; i < a->total; i++)
             grad[i] += 0.0;
     }
-    if (d_image && a->image[0] == d_image) {   /* written in place (accum_init); -0 to +0 as before */
-        for (size_t i = 0, n = (size_t)p->width * (size_t)p->height * 3; i < n; i++)
-            d_image[i] += 0.0;
-    } else if (d_image) {
-        size_t n = (size_t)p->width * (size_t)p->height * 3;
-        for (size_t i = 0; i < n; i++) {
-            double v = 0.0;
-            for (int t = 0; t < a->threads; t++)
-                v += a->image[t][i];
-            d_image[i] = v;
-        }
-    }
+    for (size_t i = 0, n = (size_t)p->width * (size_t)p->height * 3; d_image && i < n; i++)
+        d_image[i] += 0.0;
 }
 
 /* ------------------------------------------------------------ per sample */
@@ -193,12 +172,12 @@ dr_vec3 dr_est_cross_adjoint(const struct dr_est_base *b, int64_t pixel, dr_vec3
     return adj;
 }
 
-void dr_est_sample_done(struct dr_est_base *b, int thread, int64_t pixel, struct dr_grad_sink *sink)
+void dr_est_sample_done(struct dr_est_base *b, int64_t pixel, struct dr_grad_sink *sink)
 {
     if (!b->dir)
         return;
     const double inv_spp = 1.0 / b->p->spp;
-    double *out = b->acc.image[thread] + 3 * pixel;
+    double *out = b->acc.image + 3 * pixel;   /* this thread's pixel (accum_init) */
     for (int c = 0; c < 3; c++) {
         out[c] += sink->forward[c] * inv_spp;
         sink->forward[c] = 0.0;

@@ -8,7 +8,7 @@
  *     dr_vec3 adj;
  *     if (!dr_est_sample_adjoint(b, pixel, &adj)) skip;   // pixel does not matter
  *     ... d_path_* (..., sink) with adjoints scaled by adj ...
- *     dr_est_sample_done(b, thread, pixel, &sink);         // forward: its image channels
+ *     dr_est_sample_done(b, pixel, &sink);                 // forward: its image channels
  * between dr_est_sink_begin / dr_est_sink_end for each piece of work. */
 #ifndef DR_ESTIMATORS_COMMON_H
 #define DR_ESTIMATORS_COMMON_H
@@ -25,11 +25,12 @@
 struct dr_est_accum {
     int threads;
     int64_t total;                        /* gradient entries */
-    double *grad[DR_MAX_THREADS];         /* reverse mode: thread t's sum (none with mis) */
-    double *borrowed;                     /* grad[0] when it is the caller's output (accum_init) */
+    double *grad[DR_MAX_THREADS];         /* reverse mode: thread t's sum; grad[0] is the caller's
+                                             output (none with mis or exact) */
     struct dr_exact_sum *exact;           /* instead of grad[]: one shared exact sum (many threads) */
     double *chunk[DR_MAX_THREADS];        /* NULL when total is large */
-    double *image[DR_MAX_THREADS];        /* forward mode: per-thread d image (w*h*3), else NULL */
+    double *image;                        /* forward mode: the caller's d image (w*h*3), every thread
+                                             writes its own pixels */
     uint64_t bytes;                       /* what the buffers above hold */
 };
 
@@ -77,9 +78,10 @@ bool dr_est_sample_adjoint(const struct dr_est_base *b, int64_t pixel, dr_vec3 *
  * the loss's adjoint at the mean of the other samples, / spp. */
 void dr_est_cross_pixel(const struct dr_est_base *b, int64_t pixel, dr_vec3 sum);
 dr_vec3 dr_est_cross_adjoint(const struct dr_est_base *b, int64_t pixel, dr_vec3 sum, dr_vec3 L);
-/* Forward mode: moves the sink's three channels into the pixel of the
- * thread's d image (divided by spp). Reverse mode: nothing. */
-void dr_est_sample_done(struct dr_est_base *b, int thread, int64_t pixel, struct dr_grad_sink *sink);
+/* Forward mode: moves the sink's three channels into the pixel of the d
+ * image (divided by spp; the pixel is the calling thread's alone). Reverse
+ * mode: nothing. */
+void dr_est_sample_done(struct dr_est_base *b, int64_t pixel, struct dr_grad_sink *sink);
 
 /* mis (mis.h): the sinks of one sample of a pixel, for its detached and
  * attached derivatives (reverse mode: the scratch vectors, or the pixel's

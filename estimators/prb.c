@@ -175,7 +175,7 @@ static void attached_pixel(struct prb_job *j, int thread, int64_t px, const dr_v
         if (b->mis)
             dr_est_mis_sample_done(b, thread, px, &det, &att);
         else
-            dr_est_sample_done(b, thread, px, sink);
+            dr_est_sample_done(b, px, sink);
     }
 }
 
@@ -306,7 +306,7 @@ static enum dr_wave_next replay_end(void *ctx, void *user, struct dr_sampler *sm
     (void)smp, (void)o, (void)d;
     struct park_ctx *c = ctx;
     struct park_lane *l = user;
-    dr_est_sample_done(&c->run.j->b, c->run.thread, l->px, &l->sink);
+    dr_est_sample_done(&c->run.j->b, l->px, &l->sink);
     return DR_WAVE_DONE;
 }
 
@@ -501,7 +501,7 @@ static void prb_pixels(void *ctx, int thread, int64_t begin, int64_t end)
             }
             w.sink = &sink;
             walk(b, smp, o, d, &w, rays);
-            dr_est_sample_done(b, thread, px, &sink);
+            dr_est_sample_done(b, px, &sink);
         }
     }
     dr_est_sink_end(b, thread);

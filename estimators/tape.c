@@ -579,7 +579,7 @@ static void sweep_tape(struct tape_job *j, int thread, const struct tape *tp)
             continue;
         }
         sweep_path(j, tp, mrecs, path, &sink, &j->b.thr[thread].rays);
-        dr_est_sample_done(&j->b, thread, path->pixel, &sink);
+        dr_est_sample_done(&j->b, path->pixel, &sink);
     }
     dr_est_sink_end(&j->b, thread);
 }
