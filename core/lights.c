@@ -385,6 +385,17 @@ dr_vec3 dr_emission(const struct dr_scene *s, const struct dr_hit *hit)
     return e;
 }
 
+void dr_emission_prefetch(const struct dr_scene *s, const struct dr_hit *hit)
+{
+    const struct dr_material *m = &s->materials[hit->material];
+    if (m->emissive_tex.texture < 0 || dr_is_black(m->emissive_factor) || m->emissive_strength == 0.0)
+        return;   /* (dr_emission reads no texel) */
+    const struct dr_texture *t = &s->textures[m->emissive_tex.texture];
+    double uv[2];
+    dr_texref_uv(&s->mesh, &m->emissive_tex, hit, uv);
+    dr_texture_prefetch(t, &s->images[t->image], uv[0], uv[1], true);
+}
+
 void d_emission(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_hit *hit, dr_vec3 d_Le,
                 struct dr_grad_sink *k)
 {

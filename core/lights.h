@@ -80,6 +80,9 @@ double dr_light_pdf_env(const struct dr_scene *scene, const struct dr_light_samp
 /* Radiance emitted by the surface at hit towards the side the ray came from
  * (zero on the back of single-sided materials). */
 dr_vec3 dr_emission(const struct dr_scene *scene, const struct dr_hit *hit);
+/* Asks the cache for the texels dr_emission(scene, hit) will read (none
+ * without an emissive texture). Changes no result. */
+void dr_emission_prefetch(const struct dr_scene *scene, const struct dr_hit *hit);
 /* Adjoint: d_Le into the hit material's requested emission parameters. */
 void d_emission(const struct dr_scene *scene, const struct dr_param_set *params, const struct dr_hit *hit,
                 dr_vec3 d_Le, struct dr_grad_sink *sink);

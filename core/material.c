@@ -3,6 +3,8 @@
  * to the requested parameters. */
 #include "material.h"
 
+#include "lights.h"
+
 /* The texture a texref points at, or NULL. */
 static const struct dr_texture *texref_texture(const struct dr_scene *s, const struct dr_texref *r)
 {
@@ -61,8 +63,7 @@ void dr_material_prefetch(const struct dr_scene *s, const struct dr_hit *hit)
     const struct dr_material *m = &s->materials[hit->material];
     texref_prefetch(s, &m->base_color_tex, hit, true);
     texref_prefetch(s, &m->metallic_roughness_tex, hit, false);
-    if (!dr_is_black(m->emissive_factor) && m->emissive_strength != 0.0)   /* else dr_emission reads nothing */
-        texref_prefetch(s, &m->emissive_tex, hit, true);
+    dr_emission_prefetch(s, hit);
     texref_prefetch(s, &m->normal_tex, hit, false);
 }
 

@@ -521,6 +521,37 @@ static struct dr_scene *tiled_lamp_box(void)
     return s;
 }
 
+/* The tiled lamp with an emissive texture (each tile's light point reads
+ * its texels) and textured walls: the packet tracer locates the textured
+ * hits before shading and keeps the groups' hit points for the shading
+ * (dr_path8_located), and takes the random numbers and light picks ahead,
+ * stage by stage over the wave (dr_path8_ahead), as on a textured asset
+ * with thousands of emitting triangles. */
+static struct dr_scene *textured_lamp_box(void)
+{
+    struct sb b;
+    sb_init(&b);
+    static const float wall_px[3 * 3 * 3] = {0.9f, 0.8f, 0.7f, 0.3f, 0.6f, 0.9f, 0.8f, 0.8f, 0.2f,
+                                             0.5f, 0.9f, 0.4f, 0.7f, 0.2f, 0.3f, 0.6f, 0.6f, 0.6f,
+                                             0.2f, 0.4f, 0.8f, 0.9f, 0.9f, 0.9f, 0.4f, 0.7f, 0.5f};
+    static const float glow_px[2 * 2 * 3] = {1.0f, 0.9f, 0.6f, 0.2f, 0.5f, 1.0f, 0.8f, 0.1f, 0.3f, 0.0f, 0.0f, 0.0f};
+    struct dr_material wall = sb_diffuse(dr_v3s(0.8));
+    wall.base_color_tex.texture = sb_texture(&b, sb_image(3, 3, 3, wall_px, 0.0f, true));
+    sb_open_box(&b, 2.0, sb_material(&b, wall));
+    sb_box(&b, dr_v3(-0.5, 0.0, -0.5), dr_v3(0.0, 0.7, 0.0), sb_material(&b, glossy_blue()));
+    struct dr_material glow = warm_lamp();
+    glow.emissive_tex.texture = sb_texture(&b, sb_image(2, 2, 3, glow_px, 0.0f, true));
+    int lamp = sb_material(&b, glow);
+    for (int i = 0; i < 6; i++)
+        for (int j = 0; j < 6; j++)   /* faces down */
+            sb_quad(&b, dr_v3(-0.3 + 0.1 * i, 1.9, -0.3 + 0.1 * j), dr_v3(0.1, 0, 0), dr_v3(0, 0, 0.1), lamp);
+    sb_light(&b, light(DR_LIGHT_POINT, dr_v3(0.5, 1.2, 0.5), dr_v3(0, -1, 0), 2.0));
+    struct dr_scene *s = sb_finish(&b);
+    CHECK(dr_wave_prefetches(s) && dr_path8_picks_ahead(s),
+          "the textured lamp box is located before shading, its light picks taken ahead");
+    return s;
+}
+
 /* radiance_matches_exactly on scene s (destroyed after), which must have
  * the effects named and qualify for the eight-lane stages, most of whose
  * hits they must take. */
@@ -569,6 +600,8 @@ static void test_wavefront_matches_one_path(void)
                       "sky-lit box");
     exact_with_groups(bumpy_box(), DR_FX_NORMAL_MAPS, inside, "bumpy box");
     exact_with_groups(tiled_lamp_box(), DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS, inside, "tiled lamp box");
+    exact_with_groups(textured_lamp_box(), DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_TEXTURES, inside,
+                      "textured lamp box");
     s = coloured_box();
     CHECK(!dr_wave_prefetches(s), "the coloured box is shaded without prefetching");
     exact_with_groups(s, DR_FX_VERTEX_COLORS, inside, "coloured box");
