@@ -859,10 +859,12 @@ void dr_path8_ahead_stage(const struct dr_scene *s, const struct dr_path8_in *in
                 __builtin_prefetch(lt.cdf_guide + a->bucket[i]);
         break;
     }
-    case 1:   /* the CDF where each lane's search starts */
+    case 1:   /* the CDF at both ends of each lane's search (dr_cdf_find_guided checks both) */
         for (int i = 0; i < DR_SIMD_W; i++)
-            if (a->bucket[i] >= 0)
+            if (a->bucket[i] >= 0) {
                 __builtin_prefetch(lt.cdf + lt.cdf_guide[a->bucket[i]]);
+                __builtin_prefetch(lt.cdf + lt.cdf_guide[a->bucket[i] + 1] + 1);
+            }
         break;
     case 2:   /* the entries; their records */
         for (int i = 0; i < DR_SIMD_W; i++) {
