@@ -43,7 +43,7 @@ IMG_LIBS   = $(shell pkg-config --libs $(PKGS) 2>/dev/null)
 LDLIBS   += $(IMG_LIBS) $(HOST_LIBS)
 # (-Wno-psabi again: with -flto the code is generated at link time, which
 # printed the same notes)
-LDFLAGS  += $(OPT) -Wno-psabi
+LDFLAGS  += $(OPT) $(MOVE_MAX) -Wno-psabi
 
 CORE_C   := $(wildcard core/*.c estimators/*.c drivers/*.c)
 IMG_CXX  := core/image_io.cpp core/vis.cpp

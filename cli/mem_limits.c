@@ -321,8 +321,10 @@ int cli_limits_fdcheck(const struct grad_common *g, const struct dr_scene *scene
     n.scene = (double)cli_mem_scene(scene);
     /* d image (double; the forward runs' threads all write it), adjoint and renders (float) */
     n.images = npix * 3 * (sizeof(double) + 3 * sizeof(float));
-    /* one estimator run at a time, forward or reverse: the larger of the two */
-    n.grads = T * 5 * sizeof(double) + T * 2 * sizeof(double) * threads;
+    /* direction, theta, its copy and range; one estimator run at a time:
+     * forward mode writes the d image alone, reverse mode's thread 0 sums
+     * into the batch's gradient (n.batches) and the others beside it */
+    n.grads = T * 5 * sizeof(double) + est_sums_bytes(T, threads);
     n.mis = fmax(mis_bytes(g, T, npix, threads, true), mis_bytes(g, T, npix, threads, false));
     n.batches = (double)batches * T * sizeof(double);
     n.tape = tape_bytes(g, fmin(dr_tape_batch_paths(0, threads, g->spp), npix * g->spp));
@@ -367,9 +369,13 @@ int cli_limits_compare(const struct grad_common *g, const struct dr_scene *scene
      * the reference's mean and error, one estimate, running mean and m2 */
     const double V = reverse ? T : P * npix * 3;
     n.batches = V * 5 * sizeof(double);
-    /* target, primal and adjoint; fd and forward-mode images, per-thread copies */
-    n.images = npix * 3 * (3 * sizeof(float) + sizeof(double) * (threads + 2));
-    n.grads = T * 3 * sizeof(double) + T * 2 * sizeof(double) * threads;
+    /* target, primal and adjoint; the d image in double (forward mode's
+     * threads all write the one image: estimators/common.c) and a second
+     * double image of margin */
+    n.images = npix * 3 * (3 * sizeof(float) + sizeof(double) * 2);
+    /* the direction and two vectors of margin; a reverse run's sums beside
+     * the estimate's vector (thread 0 sums into it) */
+    n.grads = T * 3 * sizeof(double) + est_sums_bytes(T, threads);
     if (mis) {   /* one estimator run at a time: a mis one holds its group copies */
         gt.sampling = DR_SAMPLING_MIS;
         n.mis = mis_bytes(&gt, T, npix, threads, !reverse);

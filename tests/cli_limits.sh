@@ -152,4 +152,21 @@ run optimize "$scene" --target t64.exr --param $P --iters 1 --spp 1 --out-dir pr
 expect_rc 0 "optimize --json"
 check_estimate "optimize" $((64 * 64 * 12 * 3))
 
+# fdcheck counts the estimator's sums as grad does: its thread 0 sums into
+# the batch's vector and, from 4 threads on, the others share one vector of
+# exact sums (estimator.h), so the estimate stops growing a vector per thread
+find_samples
+ntt=$samples/NormalTangentTest/glTF/NormalTangentTest.gltf
+[ -f "$ntt" ] || fail "NormalTangentTest.gltf not found"
+T=$((2048 * 2048 * 3))
+for t in 2 4 8; do
+    run fdcheck "$ntt" --param /images/0 --res 4x4 --spp 1 --batches 2 --threads $t --json
+    [ "$rc" -eq 0 ] || [ "$rc" -eq 4 ] || fail "fdcheck NormalTangentTest --threads $t: exit $rc"
+    eval "fd$t=\$(json_estimate)"
+done
+# direction, theta, its copy and range, two batches' gradients: 7 vectors
+[ "$fd2" -ge $((T * 7 * 8)) ] || fail "fdcheck's estimate ($fd2) is below its 7 vectors of $T doubles"
+[ $((fd8 - fd4)) -lt $((T * 8)) ] ||
+    fail "fdcheck's estimate grows a vector per thread from 4 threads on (4: $fd4, 8: $fd8)"
+
 echo "cli_limits: $ncases absurd requests refused; estimates in --json checked"
