@@ -732,6 +732,12 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     return ok;
 }
 
+/* The first sampler dimension of a vertex at depth (segments so far). */
+static inline uint32_t vertex_dim(double depth)
+{
+    return DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)(depth - 1.0);
+}
+
 /* Each lane's triangle, its vertices and material, and the vertex's first
  * sampler dimension. */
 static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, struct lanes *L)
@@ -748,7 +754,7 @@ static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, str
         L->normal_mapped[i] = mat->normal_tex.texture >= 0;
         L->double_sided[i] = mat->double_sided;
         L->has_normals[i] = m->flags[tri] & DR_TRI_HAS_NORMALS;
-        L->dim[i] = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)(in->depth[i] - 1.0);
+        L->dim[i] = vertex_dim(in->depth[i]);
     }
 }
 
@@ -849,10 +855,10 @@ void dr_path8_ahead_stage(const struct dr_scene *s, const struct dr_path8_in *in
         return;
     const struct dr_mesh *m = &s->mesh;
     switch (stage) {
-    case 0: {   /* the random numbers (lanes_of's dimensions); the guide entries */
+    case 0: {   /* the random numbers; the guide entries */
         uint32_t dim[DR_SIMD_W];
         for (int i = 0; i < DR_SIMD_W; i++)
-            dim[i] = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)(in->depth[i] - 1.0);
+            dim[i] = vertex_dim(in->depth[i]);
         vertex_randoms(in, dim, a->u);
         for (int i = 0; i < DR_SIMD_W; i++)
             if ((a->bucket[i] = dr_cdf_guide_bucket(lt.n_entries, a->u[0][i])) >= 0)
