@@ -52,6 +52,13 @@ static inline void dr_mesh_prefetch_positions(const struct dr_mesh *m, int64_t t
     for (int k = 0; k < 3; k++)
         __builtin_prefetch(m->positions + 3 * (size_t)idx[k]);
 }
+/* Only the texture coordinates (a textured emitter's light point). */
+static inline void dr_mesh_prefetch_uvs(const struct dr_mesh *m, int64_t tri)
+{
+    const uint32_t *idx = m->indices + 3 * (size_t)tri;
+    for (int k = 0; m->uvs && k < 3; k++)
+        __builtin_prefetch(m->uvs + 2 * (size_t)idx[k]);
+}
 static inline void dr_mesh_prefetch_vertices(const struct dr_mesh *m, int64_t tri)
 {
     const uint32_t *idx = m->indices + 3 * (size_t)tri;

@@ -519,8 +519,8 @@ static void hit_of_lane(const struct dr_mesh *m, const struct lanes *L, int i, d
     }
 }
 
-void dr_path8_locate_group(const struct dr_scene *s, const int64_t *tri, dr_v3x8 o, dr_v3x8 d, const bool *want,
-                           struct dr_hit *hit, struct dr_path8_located *loc)
+void dr_path8_locate_hits(const struct dr_scene *s, const int64_t *tri, dr_v3x8 o, dr_v3x8 d, const bool *want,
+                          struct dr_hit *hit, struct dr_path8_located *loc)
 {
     const struct dr_mesh *m = &s->mesh;
     struct lanes L;
@@ -529,20 +529,12 @@ void dr_path8_locate_group(const struct dr_scene *s, const int64_t *tri, dr_v3x8
         triangle_vertices(m, tri[i], &L.v0[i], &L.v1[i], &L.v2[i]);
         L.has_normals[i] = m->flags[tri[i]] & DR_TRI_HAS_NORMALS;
     }
-    struct dr_path8_located l;
-    l.front = locate(m, &L, o, d, &l.p, &l.ng, &l.ns, &l.eps, &l.b1, &l.b2);
+    struct dr_path8_located *l = loc;
+    l->front = locate(m, &L, o, d, &l->p, &l->ng, &l->ns, &l->eps, &l->b1, &l->b2);
     for (int i = 0; i < DR_SIMD_W; i++)
         if (want[i])
-            hit_of_lane(m, &L, i, dr_v3x8_get(&o, i), dr_v3x8_get(&l.p, i), dr_v3x8_get(&l.ng, i),
-                        dr_v3x8_get(&l.ns, i), l.eps[i], l.b1[i], l.b2[i], l.front[i] != 0, &hit[i]);
-    if (loc)
-        *loc = l;
-}
-
-void dr_path8_locate_hits(const struct dr_scene *s, const int64_t *tri, dr_v3x8 o, dr_v3x8 d, const bool *want,
-                          struct dr_hit *hit)
-{
-    dr_path8_locate_group(s, tri, o, d, want, hit, NULL);
+            hit_of_lane(m, &L, i, dr_v3x8_get(&o, i), dr_v3x8_get(&l->p, i), dr_v3x8_get(&l->ng, i),
+                        dr_v3x8_get(&l->ns, i), l->eps[i], l->b1[i], l->b2[i], l->front[i] != 0, &hit[i]);
 }
 
 /* dr_emission of a material without an emissive texture: factor x strength,
@@ -893,9 +885,8 @@ void dr_path8_ahead_stage(const struct dr_scene *s, const struct dr_path8_in *in
                 continue;
             int64_t tri = lt.emitter_tri[a->entry[i]];
             dr_mesh_prefetch_positions(m, tri);
-            if (m->uvs && emissive_textured(s, tri))
-                for (int k = 0; k < 3; k++)
-                    __builtin_prefetch(m->uvs + 2 * (size_t)m->indices[3 * (size_t)tri + k]);
+            if (emissive_textured(s, tri))
+                dr_mesh_prefetch_uvs(m, tri);
         }
         break;
     case 5:   /* the emissive texels at the light points */

@@ -113,11 +113,12 @@ bool dr_path8_hit(const struct dr_scene *scene, const struct dr_path_opts *opts,
 bool dr_path8_reads_textures(const struct dr_scene *scene, int64_t tri);
 /* dr_hit_compute of the lanes i with want[i], eight-wide (the hit point
  * and normals as the hit stage's own locate computes them; the same values
- * as the scalar function's): into hit[i]. Every lane's tri must be a
- * triangle. For a tracer that locates textured hits before shading, to
- * prefetch their texels. */
+ * as the scalar function's): into hit[i], and every lane's hit point into
+ * loc, which shading then takes instead of solving again (dr_path8_in's
+ * located). Every lane's tri must be a triangle. For a tracer that locates
+ * textured hits before shading, to prefetch their texels. */
 void dr_path8_locate_hits(const struct dr_scene *scene, const int64_t *tri, dr_v3x8 o, dr_v3x8 d,
-                          const bool *want, struct dr_hit *hit);
+                          const bool *want, struct dr_hit *hit, struct dr_path8_located *loc);
 /* dr_path_step_hit of n <= DR_SIMD_W lanes that dr_path8_hit accepts:
  * fills next[i], *shadow[i] when next[i] is DR_STEP_SHADOW, the vertex term's
  * emission in *v[i], the sampler's position, and g for dr_path8_continue.
@@ -142,9 +143,6 @@ void dr_path8_shade(const struct dr_scene *scene, const struct dr_path_opts *opt
 bool dr_path8_picks_ahead(const struct dr_scene *scene);
 void dr_path8_ahead_stage(const struct dr_scene *scene, const struct dr_path8_in *in, int stage,
                           struct dr_path8_ahead *a);
-/* dr_path8_locate_hits that also keeps the whole group's hit points in loc. */
-void dr_path8_locate_group(const struct dr_scene *scene, const int64_t *tri, dr_v3x8 o, dr_v3x8 d,
-                           const bool *want, struct dr_hit *hit, struct dr_path8_located *loc);
 /* The hit stage of a group from its inputs, into g (the same as
  * dr_path8_shade, for a caller that keeps its paths' state in arrays). */
 void dr_path8_shade_lanes(const struct dr_scene *scene, const struct dr_path_opts *opts,

@@ -343,8 +343,8 @@ static void locate_textured(struct dr_wave_soa *w, const struct dr_scene *s, int
         w->loc_valid[i0 / DR_SIMD_W] = any;
         if (!any)
             continue;
-        dr_path8_locate_group(s, w->tri + i0, load3(w->ox + i0, w->oy + i0, w->oz + i0),
-                              load3(w->dx + i0, w->dy + i0, w->dz + i0), want, w->hit + i0, &w->loc[i0 / DR_SIMD_W]);
+        dr_path8_locate_hits(s, w->tri + i0, load3(w->ox + i0, w->oy + i0, w->oz + i0),
+                             load3(w->dx + i0, w->dy + i0, w->dz + i0), want, w->hit + i0, &w->loc[i0 / DR_SIMD_W]);
         for (int i = 0; i < DR_SIMD_W; i++)
             if (want[i])
                 dr_material_prefetch(s, &w->hit[i0 + i]);
