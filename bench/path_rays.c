@@ -18,7 +18,7 @@
  *                         (wavefront order);
  *   rtc16_wavefront       16-wide packets in wavefront order;
  *   rtc1M_wavefront       streams of 256 rays in wavefront order.
- * The raw scene is built like drender's (robust, high quality) without the
+ * The raw scene is built like drender's (default traversal, high quality) without the
  * filter; on scenes whose materials are all single-sided the filter is the
  * difference between the first two lines.
  *

@@ -12,7 +12,7 @@
 
 struct dr_accel;
 
-/* Builds a robust-mode BVH over mesh (which must outlive the accel); every
+/* Builds a BVH over mesh (which must outlive the accel); every
  * triangle is opaque from both sides. */
 struct dr_accel *dr_accel_create(const struct dr_mesh *mesh);
 /* The same over scene->mesh, honouring alphaMode and doubleSided
