@@ -19,6 +19,10 @@
 
 #include <math.h>
 #include <stdint.h>
+#include <string.h>
+#if defined(__AVX512F__)
+#include <immintrin.h>   /* dr_compress8 */
+#endif
 
 #include "vec.h"
 
@@ -108,6 +112,28 @@ DR_SIMD_INLINE int dr_m8_any(dr_m8 m)
     for (int i = 0; i < DR_SIMD_W; i++)
         a |= m[i];
     return a != 0;
+}
+
+/* Closing up: the 64-bit words src[i] of the lanes i where keep is set, in
+ * lane order, to dst[0 .. count); dst[count .. 8) get unspecified words (a
+ * caller's arrays must have room for them, and must not read them before
+ * writing them again). src is read whole before dst is written, so dst may
+ * overlap it. With AVX-512: one compress in registers and one store (the
+ * store form of the compress is slow on some processors), where closing up
+ * lane by lane took a slot's twenty moves per path and step. */
+DR_SIMD_INLINE void dr_compress8(void *dst, const void *src, dr_m8 keep)
+{
+#if defined(__AVX512F__)
+    __m512i v = _mm512_loadu_si512(src);
+    __mmask8 k = _mm512_test_epi64_mask((__m512i)keep, (__m512i)keep);
+    _mm512_storeu_si512(dst, _mm512_maskz_compress_epi64(k, v));
+#else
+    uint64_t v[DR_SIMD_W];
+    memcpy(v, src, sizeof v);
+    for (int i = 0, j = 0; i < DR_SIMD_W; i++)
+        if (keep[i])
+            memcpy((char *)dst + sizeof(uint64_t) * (size_t)j++, &v[i], sizeof(uint64_t));
+#endif
 }
 
 /* Three coordinates of eight vectors; the operations mirror vec.h's. */

@@ -148,6 +148,8 @@ static void start_path(struct dr_wave_soa *w, int k, int64_t item, dr_wave_start
     }
 }
 
+/* Slot from's path to slot to. close_up and advance move the same arrays by
+ * whole vectors: an array added to the slots goes into all three. */
 static void move_path(struct dr_wave_soa *w, int to, int from)
 {
     w->ox[to] = w->ox[from], w->oy[to] = w->oy[from], w->oz[to] = w->oz[from];
@@ -167,6 +169,34 @@ static void move_path(struct dr_wave_soa *w, int to, int from)
         w->Tx[to] = w->Tx[from], w->Ty[to] = w->Ty[from], w->Tz[to] = w->Tz[from];
         w->last_diff[to] = w->last_diff[from];
     }
+}
+
+/* The paths of slots [i0, i0 + 8) where keep is set, closed up to the slots
+ * from `to` (<= i0) by whole vectors: every array move_path moves but the
+ * samplers and last_diff, which the caller moves slot by slot. */
+static void close_up(struct dr_wave_soa *w, int to, int i0, dr_m8 keep)
+{
+    double *const a[] = {w->ox, w->oy, w->oz, w->dx, w->dy, w->dz, w->px, w->py, w->pz, w->prev_pdf,
+                         w->bx, w->by, w->bz, w->Lx, w->Ly, w->Lz, w->depth};
+    for (size_t j = 0; j < sizeof a / sizeof *a; j++)
+        dr_compress8(a[j] + to, a[j] + i0, keep);
+    dr_compress8(w->key + to, w->key + i0, keep);
+    dr_compress8(w->item + to, w->item + i0, keep);
+    dr_compress8(w->tri + to, w->tri + i0, keep);
+    if (w->out) {
+        double *const r[] = {w->rx, w->ry, w->rz, w->Tx, w->Ty, w->Tz};
+        for (size_t j = 0; j < sizeof r / sizeof *r; j++)
+            dr_compress8(r[j] + to, r[j] + i0, keep);
+    }
+}
+
+/* Lanes [0, n) of a group. */
+static inline dr_m8 first_lanes(int n)
+{
+    dr_m8 m;
+    for (int i = 0; i < DR_SIMD_W; i++)
+        m[i] = i < n ? -1 : 0;
+    return m;
 }
 
 /* A walk's end (dr_wave_soa_walk): its sums to the caller (L_sub: the
@@ -314,20 +344,30 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
 {
     int kept = 0;
     w->n_scalar = 0;
-    for (int k = 0; k < n_live; k++) {
-        if (w->tri[k] < 0) {
-            escaped(w, s, opts, k, out);
-            continue;
+    for (int i0 = 0; i0 < n_live; i0 += DR_SIMD_W) {   /* (group by group: close_up) */
+        dr_m8 keep = {0};
+        int j = kept;
+        for (int i = 0; i < DR_SIMD_W && i0 + i < n_live; i++) {
+            const int k = i0 + i;
+            if (w->tri[k] < 0) {
+                escaped(w, s, opts, k, out);
+                continue;
+            }
+            if (prefetch)
+                dr_mesh_prefetch_vertices(&s->mesh, w->tri[k]);
+            if (w->out && w->out->vertex && !dr_path8_hit(s, opts, w->tri[k])) {   /* (a tape keeps such vertices whole) */
+                take_scalar(w, k);
+                continue;
+            }
+            keep[i] = -1;
+            if (w->structured)
+                w->smp[j] = w->smp[k];
+            if (w->out)
+                w->last_diff[j] = w->last_diff[k];
+            j++;
         }
-        if (prefetch)
-            dr_mesh_prefetch_vertices(&s->mesh, w->tri[k]);
-        if (w->out && w->out->vertex && !dr_path8_hit(s, opts, w->tri[k])) {   /* (a tape keeps such vertices whole) */
-            take_scalar(w, k);
-            continue;
-        }
-        if (kept != k)
-            move_path(w, kept, k);
-        kept++;
+        close_up(w, kept, i0, keep);   /* (after the group's slots were read above) */
+        kept = j;
     }
     return kept;
 }
@@ -552,35 +592,43 @@ static int advance(struct dr_wave_soa *w, const struct dr_scene *s, const struct
             T = dr_v3x8_add(load3(w->Tx + i0, w->Ty + i0, w->Tz + i0), dr_v3x8_mul(ratio, be));
         if (w->out && w->out->step)
             steps(w, G, &c, beta, e);
+        const dr_m8 go_on = c.more & first_lanes(G->n);
+        int j = kept;
         for (int i = 0; i < G->n; i++) {
             int k = i0 + i;
             if (w->out && G->diff[i])   /* (dr_path_vertex_has_derivative: diff_bsdf) */
                 w->last_diff[k] = (int)G->depth[i];
-            if (!c.more[i]) {
+            if (!go_on[i]) {
                 if (w->out)
                     walk_done(w, w->item[k], dr_v3x8_get(&L, i), dr_v3x8_get(&T, i), w->last_diff[k]);
                 else
                     out[w->item[k]] = dr_v3x8_get(&L, i);
                 continue;
             }
-            w->ox[kept] = c.o.x[i], w->oy[kept] = c.o.y[i], w->oz[kept] = c.o.z[i];
-            w->dx[kept] = c.d.x[i], w->dy[kept] = c.d.y[i], w->dz[kept] = c.d.z[i];
-            w->px[kept] = G->p.x[i], w->py[kept] = G->p.y[i], w->pz[kept] = G->p.z[i];
-            w->prev_pdf[kept] = c.prev_pdf[i];
-            w->bx[kept] = c.beta.x[i], w->by[kept] = c.beta.y[i], w->bz[kept] = c.beta.z[i];
-            w->Lx[kept] = L.x[i], w->Ly[kept] = L.y[i], w->Lz[kept] = L.z[i];
-            w->depth[kept] = w->depth[k];
-            w->key[kept] = w->key[k];
-            w->item[kept] = w->item[k];
             if (w->structured)
-                w->smp[kept] = w->smp[k];
-            if (w->out) {
-                w->rx[kept] = c.ratio.x[i], w->ry[kept] = c.ratio.y[i], w->rz[kept] = c.ratio.z[i];
-                w->Tx[kept] = T.x[i], w->Ty[kept] = T.y[i], w->Tz[kept] = T.z[i];
-                w->last_diff[kept] = w->last_diff[k];
-            }
-            kept++;
+                w->smp[j] = w->smp[k];
+            if (w->out)
+                w->last_diff[j] = w->last_diff[k];
+            j++;
         }
+        /* the paths that go on, closed up by whole vectors (after the
+         * group's slots were read above) */
+        const struct { double *a; const void *v; } moved[] = {
+            {w->ox, &c.o.x}, {w->oy, &c.o.y}, {w->oz, &c.o.z}, {w->dx, &c.d.x}, {w->dy, &c.d.y}, {w->dz, &c.d.z},
+            {w->px, &G->p.x}, {w->py, &G->p.y}, {w->pz, &G->p.z}, {w->prev_pdf, &c.prev_pdf},
+            {w->bx, &c.beta.x}, {w->by, &c.beta.y}, {w->bz, &c.beta.z}, {w->Lx, &L.x}, {w->Ly, &L.y}, {w->Lz, &L.z}};
+        for (size_t a = 0; a < sizeof moved / sizeof *moved; a++)
+            dr_compress8(moved[a].a + kept, moved[a].v, go_on);
+        dr_compress8(w->depth + kept, w->depth + i0, go_on);
+        dr_compress8(w->key + kept, w->key + i0, go_on);
+        dr_compress8(w->item + kept, w->item + i0, go_on);
+        if (w->out) {
+            const struct { double *a; const void *v; } walked[] = {
+                {w->rx, &c.ratio.x}, {w->ry, &c.ratio.y}, {w->rz, &c.ratio.z}, {w->Tx, &T.x}, {w->Ty, &T.y}, {w->Tz, &T.z}};
+            for (size_t a = 0; a < sizeof walked / sizeof *walked; a++)
+                dr_compress8(walked[a].a + kept, walked[a].v, go_on);
+        }
+        kept = j;
     }
     for (int j = 0; j < w->n_scalar; j++)
         kept = finish_scalar(w, s, opts, &w->scalar[j], kept);
