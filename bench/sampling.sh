@@ -46,7 +46,7 @@ row() {   # label param set-args...
     for est in prb tape; do
         for smp in detached attached mis; do
             local J rc=0
-            J=$("$DR" grad "$CORNELL" --target "$TMP/target.exr" --param "$param" "$@" --estimator $est \
+            J=$("$DR" grad "$CORNELL" --grad-dir "$TMP" --target "$TMP/target.exr" --param "$param" "$@" --estimator $est \
                 --sampling $smp --spp $SPP --batches $BATCHES --max-depth $DEPTH --threads 2 --seed 3 --json \
                 2>"$TMP/err") || rc=$?
             if [[ $rc -eq 2 ]]; then
