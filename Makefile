@@ -171,7 +171,7 @@ install: all
 		$(DESTDIR)$(PREFIX)/share/drender/scenes/
 
 clean:
-	rm -rf build build-san build-fuzz
+	rm -rf build build-san build-fuzz build-narrow
 
 -include $(shell find $(BUILD) $(FUZZ_BUILD) -name '*.d' 2>/dev/null)
 
