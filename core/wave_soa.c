@@ -41,7 +41,7 @@ struct dr_wave_soa {
     /* one step's shadow rays, and whose they are */
     double sox[SLOTS], soy[SLOTS], soz[SLOTS], sdx[SLOTS], sdy[SLOTS], sdz[SLOTS];
     double stmax[SLOTS];
-    int sowner[SLOTS];
+    int64_t sowner[SLOTS];
     bool socc[SLOTS];
     double inf[SLOTS];                          /* the traces' tmax */
     struct dr_hit hit[SLOTS];                   /* textured lanes' hits, located to prefetch their texels */
@@ -481,19 +481,19 @@ static void shade(struct dr_wave_soa *w, const struct dr_scene *s, const struct 
         group_inputs(w, g, n_live, located, &in);
         struct dr_path8 *G = &w->group[g];
         dr_path8_shade_lanes(s, opts, &in, G);
-        for (int i = 0; i < in.n; i++) {
-            int k = g * DR_SIMD_W + i;
-            w->occluded[k] = false;
-            if (!G->shadow[i])
-                continue;
-            counts->shadow++;   /* (counted as dr_path_step counts it: no ray when tmax is not > 0) */
-            if (G->tmax[i] > 0.0) {
-                w->sox[n_shadow] = G->so.x[i], w->soy[n_shadow] = G->so.y[i], w->soz[n_shadow] = G->so.z[i];
-                w->sdx[n_shadow] = G->sd.x[i], w->sdy[n_shadow] = G->sd.y[i], w->sdz[n_shadow] = G->sd.z[i];
-                w->stmax[n_shadow] = G->tmax[i];
-                w->sowner[n_shadow++] = k;
-            }
-        }
+        const int i0 = g * DR_SIMD_W;
+        memset(w->occluded + i0, 0, sizeof(bool) * (size_t)in.n);
+        /* the group's shadow rays appended as whole vectors (counted as
+         * dr_path_step counts them: no ray when tmax is not > 0) */
+        const dr_m8 cast = G->shadow & first_lanes(in.n), ray = cast & dr_f8_gt(G->tmax, dr_f8s(0.0));
+        const int64_t owner[DR_SIMD_W] = {i0, i0 + 1, i0 + 2, i0 + 3, i0 + 4, i0 + 5, i0 + 6, i0 + 7};
+        const struct { void *a; const void *v; } rays[] = {
+            {w->sox, &G->so.x}, {w->soy, &G->so.y}, {w->soz, &G->so.z}, {w->sdx, &G->sd.x}, {w->sdy, &G->sd.y},
+            {w->sdz, &G->sd.z}, {w->stmax, &G->tmax}, {w->sowner, owner}};
+        for (size_t a = 0; a < sizeof rays / sizeof *rays; a++)
+            dr_compress8((uint64_t *)rays[a].a + n_shadow, rays[a].v, ray);
+        for (int i = 0; i < DR_SIMD_W; i++)
+            counts->shadow += cast[i] != 0, n_shadow += ray[i] != 0;
     }
     counts->simd_vertices += (uint64_t)n_live;
     n_shadow = shade_scalar(w, s, opts, n_shadow, located, counts);
