@@ -16,8 +16,9 @@ cd "$(dirname "$0")/.."
 if grep -qw avx2 /proc/cpuinfo; then arch=x86-64-v3; else arch=x86-64-v2; fi
 out=build-narrow
 tests=(test_render test_estimators)
-# (make does not track flags: this directory is only ever built with these)
-make -s -j2 BUILD=$out OPT="-O2 -march=$arch" "${tests[@]/#/$out/tests/}" >/dev/null
+# (make does not track flags: this directory is only ever built with these;
+# and not the calling make's variables, such as make sanitize's SAN=1)
+env -u MAKEFLAGS -u MFLAGS -u MAKELEVEL make -s -j2 BUILD=$out OPT="-O2 -march=$arch" "${tests[@]/#/$out/tests/}" >/dev/null
 for t in "${tests[@]}"; do
     # built for that width: not one AVX-512 register in the binary
     if objdump -d --no-show-raw-insn "$out/tests/$t" | grep -q '%zmm'; then
