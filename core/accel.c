@@ -402,20 +402,26 @@ bool dr_accel_occluded(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tm
  * the lane-by-lane loop below compiled to scalar conversions and stores
  * (fill_packet16 was 1500 instructions, 2.5 % of a peer-box render). */
 typedef float dr_f8f __attribute__((vector_size(8 * sizeof(float))));
-static inline void floats8(float *dst, const double *src)
+static inline void store_floats8(float *dst, dr_f8 v)
+{
+    dr_f8f f = __builtin_convertvector(v, dr_f8f);
+    memcpy(dst, &f, sizeof f);
+}
+static inline dr_f8 load_doubles8(const double *src)
 {
     dr_f8 v;
     memcpy(&v, src, sizeof v);
-    dr_f8f f = __builtin_convertvector(v, dr_f8f);
-    memcpy(dst, &f, sizeof f);
+    return v;
+}
+static inline void floats8(float *dst, const double *src)
+{
+    store_floats8(dst, load_doubles8(src));
 }
 /* ... the same for tfar: a tmax of FLT_MAX or more is Embree's infinity (fill_ray) */
 static inline void tfar8(float *dst, const double *tmax)
 {
-    dr_f8 t;
-    memcpy(&t, tmax, sizeof t);
-    t = dr_f8_sel(dr_f8_ge(t, dr_f8s(FLT_MAX)), dr_f8s(INFINITY), t);
-    floats8(dst, (const double *)&t);
+    dr_f8 t = load_doubles8(tmax);
+    store_floats8(dst, dr_f8_sel(dr_f8_ge(t, dr_f8s(FLT_MAX)), dr_f8s(INFINITY), t));
 }
 
 /* Packet r from rays [first, first + m): lane j from ray first + j, as

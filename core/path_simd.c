@@ -549,12 +549,11 @@ void dr_path8_locate_hits(const struct dr_scene *s, const int64_t *tri, dr_v3x8 
         triangle_vertices(m, tri[i], &L.v0[i], &L.v1[i], &L.v2[i]);
         L.has_normals[i] = m->flags[tri[i]] & DR_TRI_HAS_NORMALS;
     }
-    struct dr_path8_located *l = loc;
-    l->front = locate(m, &L, o, d, &l->p, &l->ng, &l->ns, &l->eps, &l->b1, &l->b2);
+    loc->front = locate(m, &L, o, d, &loc->p, &loc->ng, &loc->ns, &loc->eps, &loc->b1, &loc->b2);
     for (int i = 0; i < DR_SIMD_W; i++)
         if (want[i])
-            hit_of_lane(m, &L, i, dr_v3x8_get(&o, i), dr_v3x8_get(&l->p, i), dr_v3x8_get(&l->ng, i),
-                        dr_v3x8_get(&l->ns, i), l->eps[i], l->b1[i], l->b2[i], l->front[i] != 0, &hit[i]);
+            hit_of_lane(m, &L, i, dr_v3x8_get(&o, i), dr_v3x8_get(&loc->p, i), dr_v3x8_get(&loc->ng, i),
+                        dr_v3x8_get(&loc->ns, i), loc->eps[i], loc->b1[i], loc->b2[i], loc->front[i] != 0, &hit[i]);
 }
 
 /* dr_emission of a material without an emissive texture: factor x strength,

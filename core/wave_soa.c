@@ -148,46 +148,42 @@ static void start_path(struct dr_wave_soa *w, int k, int64_t item, dr_wave_start
     }
 }
 
-/* Slot from's path to slot to. close_up and advance move the same arrays by
- * whole vectors: an array added to the slots goes into all three. */
+/* The slots' arrays of 64-bit elements that move with a path (a walk's
+ * too): the one list move_path and close_up move. advance writes the same
+ * arrays from its vectors: an array added here goes there too. Returns how
+ * many. */
+#define WORD_ARRAYS 26
+static int word_arrays(struct dr_wave_soa *w, void *a[WORD_ARRAYS])
+{
+    void *const all[] = {w->ox, w->oy, w->oz, w->dx, w->dy, w->dz, w->px, w->py, w->pz, w->prev_pdf,
+                         w->bx, w->by, w->bz, w->Lx, w->Ly, w->Lz, w->depth, w->key, w->item, w->tri,
+                         w->rx, w->ry, w->rz, w->Tx, w->Ty, w->Tz};   /* (the last six: a walk's) */
+    _Static_assert(sizeof all / sizeof *all == WORD_ARRAYS, "word_arrays' list");
+    int n = w->out ? WORD_ARRAYS : WORD_ARRAYS - 6;
+    memcpy(a, all, sizeof(void *) * (size_t)n);
+    return n;
+}
+
+/* Slot from's path to slot to. */
 static void move_path(struct dr_wave_soa *w, int to, int from)
 {
-    w->ox[to] = w->ox[from], w->oy[to] = w->oy[from], w->oz[to] = w->oz[from];
-    w->dx[to] = w->dx[from], w->dy[to] = w->dy[from], w->dz[to] = w->dz[from];
-    w->px[to] = w->px[from], w->py[to] = w->py[from], w->pz[to] = w->pz[from];
-    w->prev_pdf[to] = w->prev_pdf[from];
-    w->bx[to] = w->bx[from], w->by[to] = w->by[from], w->bz[to] = w->bz[from];
-    w->Lx[to] = w->Lx[from], w->Ly[to] = w->Ly[from], w->Lz[to] = w->Lz[from];
-    w->depth[to] = w->depth[from];
-    w->key[to] = w->key[from];
-    w->item[to] = w->item[from];
-    w->tri[to] = w->tri[from];
+    void *a[WORD_ARRAYS];
+    for (int j = 0, n = word_arrays(w, a); j < n; j++)
+        memcpy((char *)a[j] + 8 * (size_t)to, (char *)a[j] + 8 * (size_t)from, 8);
     if (w->structured)
         w->smp[to] = w->smp[from];
-    if (w->out) {
-        w->rx[to] = w->rx[from], w->ry[to] = w->ry[from], w->rz[to] = w->rz[from];
-        w->Tx[to] = w->Tx[from], w->Ty[to] = w->Ty[from], w->Tz[to] = w->Tz[from];
+    if (w->out)
         w->last_diff[to] = w->last_diff[from];
-    }
 }
 
 /* The paths of slots [i0, i0 + 8) where keep is set, closed up to the slots
- * from `to` (<= i0) by whole vectors: every array move_path moves but the
- * samplers and last_diff, which the caller moves slot by slot. */
+ * from `to` (<= i0) by whole vectors; the samplers and last_diff, which are
+ * not 64-bit words, the caller moves slot by slot. */
 static void close_up(struct dr_wave_soa *w, int to, int i0, dr_m8 keep)
 {
-    double *const a[] = {w->ox, w->oy, w->oz, w->dx, w->dy, w->dz, w->px, w->py, w->pz, w->prev_pdf,
-                         w->bx, w->by, w->bz, w->Lx, w->Ly, w->Lz, w->depth};
-    for (size_t j = 0; j < sizeof a / sizeof *a; j++)
-        dr_compress8(a[j] + to, a[j] + i0, keep);
-    dr_compress8(w->key + to, w->key + i0, keep);
-    dr_compress8(w->item + to, w->item + i0, keep);
-    dr_compress8(w->tri + to, w->tri + i0, keep);
-    if (w->out) {
-        double *const r[] = {w->rx, w->ry, w->rz, w->Tx, w->Ty, w->Tz};
-        for (size_t j = 0; j < sizeof r / sizeof *r; j++)
-            dr_compress8(r[j] + to, r[j] + i0, keep);
-    }
+    void *a[WORD_ARRAYS];
+    for (int j = 0, n = word_arrays(w, a); j < n; j++)
+        dr_compress8((char *)a[j] + 8 * (size_t)to, (char *)a[j] + 8 * (size_t)i0, keep);
 }
 
 /* Lanes [0, n) of a group. */
