@@ -4,6 +4,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "backface.h"
 #include "camera.h"
 #include "grad_common.h"
 #include "cli.h"
@@ -100,6 +101,8 @@ static void print_json(const struct render_args *a, const char *scene_path, cons
     fprintf(f, ", \"camera\": ");
     json_string(f, camera_name);
     fprintf(f, ", \"triangles\": %u", scene->mesh.n_triangles);
+    /* single-sided triangles whose backs no ray can reach: no culling test (backface.h) */
+    fprintf(f, ", \"backs_unreachable\": %lld", (long long)dr_backface_count(scene->backface));
     fprintf(f, ", \"time\": {\"startup\": ");
     json_number(f, t_startup);
     fprintf(f, ", \"load\": ");

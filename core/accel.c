@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "backface.h"
 #include "coverage.h"
 #include "error.h"
 #include "simd.h"
@@ -38,16 +39,23 @@ struct dr_accel_geom {
  * only a blocker that would not count asks again, one ray at a time as
  * above. (Rejecting such blockers inside the traversal instead, as the
  * filtered scene does, calls back for every candidate: slower on big
- * scenes, measured.) Exact up to which of two triangles wins a tie in t. */
+ * scenes, measured.) Exact up to which of two triangles wins a tie in t.
+ *
+ * Which triangles need a test is decided per triangle: a single-sided
+ * triangle whose back no ray can reach (backface.h: the walls of a room,
+ * the faces of a closed box) needs none, and goes with the unfiltered
+ * triangles, in both scenes. */
 struct dr_accel {
     RTCDevice device;
     RTCScene scene;
     RTCScene plain;                 /* with a filter in scene: every triangle, no filter (see below) */
     const struct dr_scene *cover;   /* NULL: nothing is filtered */
-    uint8_t *mat_bits;              /* per material: enum dr_cover_bits */
-    struct dr_accel_geom geom[2];   /* by geomID */
-    struct dr_accel_geom plain_geom;
+    uint8_t *tri_bits;              /* per triangle: enum dr_cover_bits, less culling where no ray
+                                       can meet the back (backface.h) */
+    struct dr_accel_geom geom[2];   /* by geomID, in both scenes: 0 unfiltered, 1 filtered */
     uint32_t *indices[2];           /* owned index buffers when the mesh is split */
+    uint32_t n_part[2];             /* ... their triangles */
+    bool split;                     /* geomID 0 and 1 hold the two kinds (else one geometry, 0) */
     bool packet8;                   /* packets traced as 8-wide halves (packet_intersect) */
 };
 
@@ -98,8 +106,7 @@ static void cover_filter(const struct RTCFilterFunctionNArguments *args)
         unsigned prim = hit_u32[5 * N + i];
         int64_t tri = g->tri ? (int64_t)g->tri[prim] : (int64_t)prim;
         dr_vec3 d = dr_v3(ray[4 * N + i], ray[5 * N + i], ray[6 * N + i]);
-        unsigned bits = a->mat_bits[a->cover->mesh.material[tri]];
-        if (!dr_coverage_blocks(a->cover, bits, tri, hit[3 * N + i], hit[4 * N + i], d, key))
+        if (!dr_coverage_blocks(a->cover, a->tri_bits[tri], tri, hit[3 * N + i], hit[4 * N + i], d, key))
             args->valid[i] = 0;
     }
 }
@@ -114,7 +121,8 @@ static bool filter_accepts(const struct dr_accel *a, int64_t tri, float u, float
  * asks again (dr_accel_occluded_many). */
 static void first_blocker_filter(const struct RTCFilterFunctionNArguments *args)
 {
-    const struct dr_accel *a = ((const struct dr_accel_geom *)args->geometryUserPtr)->accel;
+    const struct dr_accel_geom *g = args->geometryUserPtr;
+    const struct dr_accel *a = g->accel;
     const struct query_ctx *q = (const struct query_ctx *)args->context;
     const unsigned N = args->N;
     const float *ray = (const float *)args->ray, *hit = (const float *)args->hit;
@@ -125,13 +133,16 @@ static void first_blocker_filter(const struct RTCFilterFunctionNArguments *args)
         unsigned id = ray_u32[10 * N + i] % DR_ACCEL_PACKET;   /* the ray's lane */
         uint64_t key = q->keys ? q->keys[id] : q->key;
         dr_vec3 d = dr_v3(ray[4 * N + i], ray[5 * N + i], ray[6 * N + i]);
-        q->passed[id] = !filter_accepts(a, hit_u32[5 * N + i], hit[3 * N + i], hit[4 * N + i], d, key);
+        unsigned prim = hit_u32[5 * N + i];
+        int64_t tri = g->tri ? (int64_t)g->tri[prim] : (int64_t)prim;
+        q->passed[id] = !filter_accepts(a, tri, hit[3 * N + i], hit[4 * N + i], d, key);
     }
 }
 
-/* Attaches geometry id over indices (n triangles); filtered: with cover_filter. */
-static void add_geometry(struct dr_accel *a, const struct dr_mesh *mesh, unsigned id, const uint32_t *indices,
-                         uint32_t n, bool filtered)
+/* Attaches geometry id to sc over indices (n triangles), with the
+ * intersection and occlusion filters given (NULL: none). */
+static void add_geometry(struct dr_accel *a, RTCScene sc, const struct dr_mesh *mesh, unsigned id,
+                         const uint32_t *indices, uint32_t n, RTCFilterFunctionN isect, RTCFilterFunctionN occ)
 {
     RTCGeometry g = rtcNewGeometry(a->device, RTC_GEOMETRY_TYPE_TRIANGLE);
     /* Shared buffers: the mesh arrays are used in place (positions carry
@@ -140,18 +151,19 @@ static void add_geometry(struct dr_accel *a, const struct dr_mesh *mesh, unsigne
                                3 * sizeof(float), mesh->n_vertices);
     rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, indices, 0, 3 * sizeof(uint32_t), n);
     a->geom[id].accel = a;
-    if (filtered) {
-        rtcSetGeometryUserData(g, &a->geom[id]);
-        rtcSetGeometryIntersectFilterFunction(g, cover_filter);
-        rtcSetGeometryOccludedFilterFunction(g, cover_filter);
-    }
+    rtcSetGeometryUserData(g, &a->geom[id]);
+    if (isect)
+        rtcSetGeometryIntersectFilterFunction(g, isect);
+    if (occ)
+        rtcSetGeometryOccludedFilterFunction(g, occ);
     rtcCommitGeometry(g);
-    rtcAttachGeometryByID(a->scene, g, id);
+    rtcAttachGeometryByID(sc, g, id);
     rtcReleaseGeometry(g);
 }
 
-/* Splits the triangles into an unfiltered geometry 0 and a filtered geometry 1. */
-static int add_split(struct dr_accel *a, const struct dr_mesh *mesh, uint32_t n_filtered)
+/* The triangles as an unfiltered part 0 and a filtered part 1: index
+ * buffers and maps to the scene's triangles (a->split). */
+static int split_mesh(struct dr_accel *a, const struct dr_mesh *mesh, uint32_t n_filtered)
 {
     uint32_t n[2] = {mesh->n_triangles - n_filtered, n_filtered};
     for (int k = 0; k < 2; k++) {
@@ -164,30 +176,57 @@ static int add_split(struct dr_accel *a, const struct dr_mesh *mesh, uint32_t n_
     }
     uint32_t fill[2] = {0, 0};
     for (uint32_t t = 0; t < mesh->n_triangles; t++) {
-        int k = a->mat_bits[mesh->material[t]] ? 1 : 0;
+        int k = a->tri_bits[t] ? 1 : 0;
         for (int c = 0; c < 3; c++)
             a->indices[k][3 * fill[k] + c] = mesh->indices[3 * (size_t)t + c];
         a->geom[k].tri[fill[k]++] = t;
     }
-    add_geometry(a, mesh, 0, a->indices[0], n[0], false);
-    add_geometry(a, mesh, 1, a->indices[1], n[1], true);
+    a->n_part[0] = n[0];
+    a->n_part[1] = n[1];
+    a->split = true;
     return 0;
 }
 
-/* Per-material coverage bits; returns how many triangles need the filter. */
+/* Scene sc's geometries; the filtered part gets the filters given. */
+static void add_geometries(struct dr_accel *a, RTCScene sc, const struct dr_mesh *mesh, RTCFilterFunctionN isect,
+                           RTCFilterFunctionN occ)
+{
+    if (a->split) {
+        add_geometry(a, sc, mesh, 0, a->indices[0], a->n_part[0], NULL, NULL);
+        add_geometry(a, sc, mesh, 1, a->indices[1], a->n_part[1], isect, occ);
+    } else {
+        bool filtered = a->cover != NULL;
+        add_geometry(a, sc, mesh, 0, mesh->indices, mesh->n_triangles, filtered ? isect : NULL,
+                     filtered ? occ : NULL);
+    }
+}
+
+/* Per-triangle coverage bits; returns how many triangles need a filter. */
 static int64_t classify(struct dr_accel *a, const struct dr_scene *s)
 {
-    a->mat_bits = calloc((size_t)s->n_materials + 1, 1);
-    if (!a->mat_bits) {
+    a->tri_bits = malloc((size_t)s->mesh.n_triangles + 1);
+    if (!a->tri_bits) {
         dr_set_error("out of memory");
         return -1;
     }
-    for (int m = 0; m < s->n_materials; m++)
-        a->mat_bits[m] = (uint8_t)dr_material_coverage(s, m);
+    const uint8_t *unreachable = dr_backface_marks(s->backface);
     int64_t n = 0;
-    for (uint32_t t = 0; t < s->mesh.n_triangles; t++)
-        n += a->mat_bits[s->mesh.material[t]] != 0;
+    for (uint32_t t = 0; t < s->mesh.n_triangles; t++) {
+        unsigned bits = dr_material_coverage(s, s->mesh.material[t]);
+        if (unreachable && unreachable[t])
+            bits &= ~(unsigned)DR_COVER_CULL;
+        a->tri_bits[t] = (uint8_t)bits;
+        n += bits != 0;
+    }
     return n;
+}
+
+static RTCScene new_scene(struct dr_accel *a)
+{
+    RTCScene sc = rtcNewScene(a->device);
+    rtcSetSceneFlags(sc, DR_ACCEL_SCENE_FLAGS);
+    rtcSetSceneBuildQuality(sc, RTC_BUILD_QUALITY_HIGH);
+    return sc;
 }
 
 static struct dr_accel *build(const struct dr_mesh *mesh, const struct dr_scene *cover, bool with_plain)
@@ -209,9 +248,6 @@ static struct dr_accel *build(const struct dr_mesh *mesh, const struct dr_scene 
     rtcSetDeviceErrorFunction(a->device, embree_error, NULL);
     a->packet8 = !rtcGetDeviceProperty(a->device, RTC_DEVICE_PROPERTY_NATIVE_RAY16_SUPPORTED) &&
                  rtcGetDeviceProperty(a->device, RTC_DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED);
-    a->scene = rtcNewScene(a->device);
-    rtcSetSceneFlags(a->scene, DR_ACCEL_SCENE_FLAGS);
-    rtcSetSceneBuildQuality(a->scene, RTC_BUILD_QUALITY_HIGH);
     int64_t n_filtered = 0;
     if (cover && (n_filtered = classify(a, cover)) < 0) {
         dr_accel_destroy(a);
@@ -219,30 +255,17 @@ static struct dr_accel *build(const struct dr_mesh *mesh, const struct dr_scene 
     }
     if (n_filtered > 0)
         a->cover = cover;
-    if (mesh->n_triangles > 0) {
-        if (n_filtered == 0 || n_filtered == (int64_t)mesh->n_triangles) {
-            add_geometry(a, mesh, 0, mesh->indices, mesh->n_triangles, n_filtered > 0);
-        } else if (add_split(a, mesh, (uint32_t)n_filtered) != 0) {
-            dr_accel_destroy(a);
-            return NULL;
-        }
+    if (n_filtered > 0 && n_filtered < (int64_t)mesh->n_triangles && split_mesh(a, mesh, (uint32_t)n_filtered) != 0) {
+        dr_accel_destroy(a);
+        return NULL;
     }
+    a->scene = new_scene(a);
+    if (mesh->n_triangles > 0)
+        add_geometries(a, a->scene, mesh, cover_filter, cover_filter);
     rtcCommitScene(a->scene);
     if (with_plain && a->cover && mesh->n_triangles > 0) {
-        a->plain = rtcNewScene(a->device);
-        rtcSetSceneFlags(a->plain, DR_ACCEL_SCENE_FLAGS);
-        rtcSetSceneBuildQuality(a->plain, RTC_BUILD_QUALITY_HIGH);
-        RTCGeometry g = rtcNewGeometry(a->device, RTC_GEOMETRY_TYPE_TRIANGLE);
-        rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, mesh->positions, 0,
-                                   3 * sizeof(float), mesh->n_vertices);
-        rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, mesh->indices, 0,
-                                   3 * sizeof(uint32_t), mesh->n_triangles);
-        a->plain_geom.accel = a;
-        rtcSetGeometryUserData(g, &a->plain_geom);
-        rtcSetGeometryOccludedFilterFunction(g, first_blocker_filter);
-        rtcCommitGeometry(g);
-        rtcAttachGeometryByID(a->plain, g, 0);
-        rtcReleaseGeometry(g);
+        a->plain = new_scene(a);
+        add_geometries(a, a->plain, mesh, NULL, first_blocker_filter);
         rtcCommitScene(a->plain);
     }
     if (rtcGetDeviceError(a->device) != RTC_ERROR_NONE) {
@@ -281,7 +304,7 @@ void dr_accel_destroy(struct dr_accel *a)
         free(a->indices[k]);
         free(a->geom[k].tri);
     }
-    free(a->mat_bits);
+    free(a->tri_bits);
     free(a);
 }
 
@@ -301,6 +324,13 @@ static void fill_ray(struct RTCRay *r, dr_vec3 o, dr_vec3 d, double tmin, double
     r->flags = 0;
 }
 
+/* The scene's triangle of Embree's hit (geomID, primID), in either scene. */
+static inline int64_t scene_tri(const struct dr_accel *a, unsigned geom, unsigned prim)
+{
+    const uint32_t *map = a->geom[geom & 1].tri;
+    return map ? (int64_t)map[prim] : (int64_t)prim;
+}
+
 /* The filtered scene's answers (the filter sees every candidate). */
 static int64_t filtered_intersect(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tmin, double tmax,
                                   uint64_t key)
@@ -317,8 +347,7 @@ static int64_t filtered_intersect(const struct dr_accel *a, dr_vec3 o, dr_vec3 d
     rtcIntersect1(a->scene, &q.rtc, &rh);
     if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID)
         return -1;
-    const uint32_t *map = a->geom[rh.hit.geomID & 1].tri;
-    return map ? (int64_t)map[rh.hit.primID] : (int64_t)rh.hit.primID;
+    return scene_tri(a, rh.hit.geomID, rh.hit.primID);
 }
 
 static bool filtered_occluded(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tmin, double tmax, uint64_t key)
@@ -338,7 +367,7 @@ static bool filtered_occluded(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, do
  * filter sees: the ray's float direction, Embree's float barycentrics. */
 static bool filter_accepts(const struct dr_accel *a, int64_t tri, float u, float v, dr_vec3 d, uint64_t key)
 {
-    unsigned bits = a->mat_bits[a->cover->mesh.material[tri]];
+    unsigned bits = a->tri_bits[tri];
     dr_vec3 df = dr_v3((float)d.x, (float)d.y, (float)d.z);
     return !bits || dr_coverage_blocks(a->cover, bits, tri, u, v, df, key);
 }
@@ -357,7 +386,7 @@ static int64_t plain_intersect(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, d
     rtcIntersect1(a->plain, &ctx, &rh);
     *u = rh.hit.u;
     *v = rh.hit.v;
-    return rh.hit.geomID == RTC_INVALID_GEOMETRY_ID ? -1 : (int64_t)rh.hit.primID;
+    return rh.hit.geomID == RTC_INVALID_GEOMETRY_ID ? -1 : scene_tri(a, rh.hit.geomID, rh.hit.primID);
 }
 
 int64_t dr_accel_intersect_key(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tmin, double tmax,
@@ -549,9 +578,7 @@ static int packet_intersect(RTCScene sc, const struct dr_accel *a, const struct 
         memcpy(hv, rh.hit.v, sizeof hv);
     }
     for (int j = 0; j < m; j++) {
-        unsigned g = geom[j];
-        const uint32_t *map = g == RTC_INVALID_GEOMETRY_ID || sc == a->plain ? NULL : a->geom[g & 1].tri;
-        tri[j] = g == RTC_INVALID_GEOMETRY_ID ? -1 : map ? (int64_t)map[prim[j]] : (int64_t)prim[j];
+        tri[j] = geom[j] == RTC_INVALID_GEOMETRY_ID ? -1 : scene_tri(a, geom[j], prim[j]);
         if (u) {
             u[j] = hu[j];
             v[j] = hv[j];

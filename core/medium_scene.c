@@ -11,6 +11,7 @@
 #include "error.h"
 #include "geometry.h"
 #include "path.h"
+#include "weld.h"
 
 /* --------------------------------------------------------- closed meshes */
 
@@ -19,40 +20,12 @@ struct edge {
     int dir;         /* +1: a -> b in the triangle's winding, -1: b -> a */
 };
 
-static const float *weld_pos;
-
-static int cmp_vertex(const void *x, const void *y)
-{
-    const float *p = weld_pos + 3 * (size_t)*(const uint32_t *)x, *q = weld_pos + 3 * (size_t)*(const uint32_t *)y;
-    return memcmp(p, q, 3 * sizeof(float));
-}
-
 static int cmp_edge(const void *x, const void *y)
 {
     const struct edge *e = x, *f = y;
     if (e->a != f->a)
         return e->a < f->a ? -1 : 1;
     return e->b < f->b ? -1 : (e->b > f->b ? 1 : 0);
-}
-
-/* Vertex ids with equal positions merged (primitives split vertices for
- * normals and uvs; a closed surface is closed in positions). */
-static uint32_t *weld(const struct dr_mesh *m)
-{
-    uint32_t *order = malloc(sizeof(uint32_t) * m->n_vertices), *id = malloc(sizeof(uint32_t) * m->n_vertices);
-    if (!order || !id) {
-        free(order);
-        free(id);
-        return NULL;
-    }
-    for (uint32_t i = 0; i < m->n_vertices; i++)
-        order[i] = i;
-    weld_pos = m->positions;
-    qsort(order, m->n_vertices, sizeof *order, cmp_vertex);
-    for (uint32_t i = 0; i < m->n_vertices; i++)
-        id[order[i]] = i > 0 && cmp_vertex(&order[i - 1], &order[i]) == 0 ? id[order[i - 1]] : order[i];
-    free(order);
-    return id;
 }
 
 /* Every edge of the material's triangles is shared by exactly two of them,
@@ -114,7 +87,7 @@ static void material_bounds(const struct dr_mesh *m, int material, dr_vec3 *lo, 
 
 int dr_media_prepare(struct dr_scene *s)
 {
-    uint32_t *id = weld(&s->mesh);
+    uint32_t *id = dr_mesh_weld(&s->mesh);
     if (!id && s->mesh.n_vertices) {
         dr_set_error("out of memory");
         return DR_ERR_NOMEM;

@@ -177,6 +177,9 @@ int dr_render(const struct dr_scene *scene, const struct dr_camera *camera, cons
 {
     if (dr_film_check(&opts->film, opts->width, opts->height) != 0)
         return DR_ERR_ARG;
+    int vrc = dr_scene_check_viewpoint(scene, camera);
+    if (vrc != 0)
+        return vrc;
     struct render_job *j = calloc(1, sizeof *j);
     if (!j) {
         dr_set_error("out of memory");

@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "accel.h"
+#include "backface.h"
 #include "coverage.h"
 #include "error.h"
 #include "geometry.h"
@@ -157,6 +158,9 @@ int dr_scene_prepare(struct dr_scene *s)
     rc = dr_scene_refresh(s);
     if (rc != 0)
         return rc;
+    s->backface = dr_backface_analyse(s, NULL, NULL);
+    if (!s->backface)
+        return DR_ERR_NOMEM;
     s->accel = dr_accel_create_scene(s);
     if (!s->accel) {
         char msg[1024];
@@ -167,11 +171,42 @@ int dr_scene_prepare(struct dr_scene *s)
     return 0;
 }
 
+int dr_scene_add_viewpoint(struct dr_scene *s, const struct dr_camera *camera)
+{
+    if (dr_backface_admits(s->backface, s, camera))
+        return 0;
+    struct dr_backface *b = dr_backface_analyse(s, s->backface, camera);
+    if (!b)
+        return DR_ERR_NOMEM;
+    dr_accel_destroy(s->accel);
+    dr_backface_destroy(s->backface);
+    s->backface = b;
+    s->accel = dr_accel_create_scene(s);
+    if (!s->accel) {
+        char msg[1024];
+        snprintf(msg, sizeof msg, "%s: cannot rebuild the ray acceleration structure: %s", s->path, dr_last_error());
+        dr_set_error("%s", msg);
+        return DR_ERR_INTERNAL;
+    }
+    return 0;
+}
+
+int dr_scene_check_viewpoint(const struct dr_scene *s, const struct dr_camera *camera)
+{
+    if (dr_backface_admits(s->backface, s, camera))
+        return 0;
+    dr_set_error("%s: camera '%s' at (%g, %g, %g) was not analysed for back faces: rays from it could meet "
+                 "backs that the scene's cameras cannot (dr_scene_add_viewpoint)",
+                 s->path, camera->name, camera->origin.x, camera->origin.y, camera->origin.z);
+    return DR_ERR_ARG;
+}
+
 void dr_scene_destroy(struct dr_scene *s)
 {
     if (!s)
         return;
     dr_accel_destroy(s->accel);
+    dr_backface_destroy(s->backface);
     dr_light_sampler_destroy(s->light_sampler);
     free(s->mesh.positions);
     free(s->mesh.normals);

@@ -126,6 +126,7 @@ struct dr_environment {
 };
 
 struct dr_accel;
+struct dr_backface;
 struct dr_light_sampler;
 struct dr_medium;   /* medium.h */
 
@@ -167,6 +168,7 @@ struct dr_scene {
     int global_medium;            /* the medium outside every medium mesh, -1: vacuum */
 
     /* built by dr_scene_prepare() */
+    struct dr_backface *backface; /* the single-sided backs no ray can reach (backface.h) */
     struct dr_accel *accel;
     struct dr_light_sampler *light_sampler;
     unsigned effects;             /* enum dr_effect bits */
@@ -191,6 +193,14 @@ int dr_scene_prepare(struct dr_scene *scene);
  * not have changed. 0 or DR_ERR_NOMEM. */
 int dr_scene_refresh(struct dr_scene *scene);
 void dr_scene_destroy(struct dr_scene *scene);
+/* Rays will also come from camera, which is not one of the scene's (tests,
+ * library users): unless the back-face analysis (backface.h) already admits
+ * it, the analysis is redone with it and the ray structure rebuilt. 0, or
+ * DR_ERR_NOMEM / DR_ERR_INTERNAL (the scene is then unusable). */
+int dr_scene_add_viewpoint(struct dr_scene *scene, const struct dr_camera *camera);
+/* Before rays leave camera: 0 when the analysis admits it, else
+ * DR_ERR_ARG with a message (the caller forgot dr_scene_add_viewpoint). */
+int dr_scene_check_viewpoint(const struct dr_scene *scene, const struct dr_camera *camera);
 
 /* True when something in the scene emits: an emissive triangle with power,
  * a punctual light, or an environment (even one of strength 0: the file

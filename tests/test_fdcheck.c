@@ -27,6 +27,8 @@ static void run_case(const struct fd_case *c, struct dr_scene *s, struct dr_came
                      int n)
 {
     s->n_file_materials = s->n_materials;
+    /* (the cameras here are not the scene's: backface.h) */
+    CHECK(dr_scene_add_viewpoint(s, &cam) == 0, "%s: add_viewpoint: %s", c->name, dr_last_error());
     struct dr_param_set *ps = dr_param_set_create(s, ptrs, n);
     CHECK(ps != NULL, "%s: %s", c->name, dr_last_error());
     if (!ps)

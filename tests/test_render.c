@@ -26,6 +26,8 @@ static struct stats render_stats(struct dr_scene *s, struct dr_camera cam, int r
     struct dr_render_opts o = {.width = res, .height = res, .spp = spp, .max_depth = depth,
                               .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 7, .threads = 2};
     struct dr_render_stats st;
+    /* (the cameras here are not the scene's: backface.h) */
+    CHECK(dr_scene_add_viewpoint(s, &cam) == 0, "add_viewpoint: %s", dr_last_error());
     int rc = dr_render(s, &cam, &o, rgb, &st);
     CHECK(rc == 0, "dr_render failed: %s", dr_last_error());
     CHECK(st.invalid_samples == 0, "%llu non-finite samples", (unsigned long long)st.invalid_samples);

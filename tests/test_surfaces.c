@@ -17,6 +17,7 @@
 #include <unistd.h>
 
 #include "accel.h"
+#include "backface.h"
 #include "coverage.h"
 #include "geometry.h"
 #include "normal_map.h"
@@ -417,6 +418,12 @@ static void test_single_sided(void)
         sb_quad(&b, dr_v3(-1, -1, 0), dr_v3(2, 0, 0), dr_v3(0, 2, 0), sb_material(&b, m));   /* faces +z */
         struct dr_scene *s = sb_finish(&b);
         CHECK(((s->effects & DR_FX_SINGLE_SIDED) != 0) == !ds, "single_sided effect iff doubleSided false");
+        /* rays will come from behind the quad too: without a viewpoint
+         * there, the back is proved unreachable and not tested (backface.h) */
+        CHECK(dr_backface_count(s->backface) == (ds ? 0 : 2), "seen from the front only, the back is unreachable");
+        struct dr_camera behind = sb_camera(dr_v3(0, 0, -2), dr_v3(0, 0, 0), 40);
+        CHECK(dr_scene_add_viewpoint(s, &behind) == 0 && dr_backface_count(s->backface) == 0,
+              "with a viewpoint behind it, the back is reachable");
         int64_t front = dr_accel_intersect(s->accel, dr_v3(0, 0, 2), dr_v3(0, 0, -1), 0, INFINITY);
         int64_t back = dr_accel_intersect(s->accel, dr_v3(0, 0, -2), dr_v3(0, 0, 1), 0, INFINITY);
         bool occl_back = dr_accel_occluded(s->accel, dr_v3(0, 0, -2), dr_v3(0, 0, 1), 0, 4);
