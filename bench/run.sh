@@ -218,6 +218,13 @@ SPEEDUP=$(calc "$(median "${pair[@]}")")
 SCALING_OTHER=$(calc "$o / $w" %.2f)
 printf '   1 thread %.3g s, 2 threads %.3g s (medians); speedup %s (ideal 2; the pairs: %s); others %s\n' "$T1" "$T2" \
     "$SPEEDUP" "$(join "${pair[@]}")" "$SCALING_OTHER"
+# The same statistic as the floor's below (each thread count's best run):
+# the least disturbed runs, where the median of pairs keeps every pair that
+# another process slowed (the VM's neighbours take a core for seconds).
+B1=$(printf '%s\n' "${t1s[@]}" | sort -g | head -n 1) B2=$(printf '%s\n' "${t2s[@]}" | sort -g | head -n 1)
+SPEEDUP_BEST=$(calc "$B1 / $B2")
+printf '   best runs (the floor'"'"'s statistic): 1 thread %.3g s, 2 threads %.3g s: speedup %s (goal >= 1.9: %s)\n' \
+    "$B1" "$B2" "$SPEEDUP_BEST" "$(yesno "$SPEEDUP_BEST >= 1.9")"
 # What the machine itself gives: the SoA floor (bench/soa_floor.c, no
 # shared state between its threads but the scene) on the same scene, size
 # and depth (every surface Lambertian to it: a stand-in workload, not the
@@ -383,7 +390,7 @@ OTHER_CORES=$(calc "$OTHER_TOTAL / $WALL_TOTAL" %.2f)
         echo "    ${TP_JSON[i]}$( ((i + 1 < ${#TP_JSON[@]})) && echo ,)"
     done
     echo "  ],"
-    echo "  \"thread_scaling\": {\"scene\": \"$CORNELL\", \"t1_seconds\": $T1, \"t2_seconds\": $T2, \"speedup\": $SPEEDUP, \"soa_floor_speedup\": $FLOOR_SPEEDUP, \"other_cores_busy\": $SCALING_OTHER},"
+    echo "  \"thread_scaling\": {\"scene\": \"$CORNELL\", \"t1_seconds\": $T1, \"t2_seconds\": $T2, \"speedup\": $SPEEDUP, \"speedup_best_runs\": $SPEEDUP_BEST, \"soa_floor_speedup\": $FLOOR_SPEEDUP, \"other_cores_busy\": $SCALING_OTHER},"
     echo "  \"startup\": $STARTUP_JSON,"
     echo "  \"peer\": $PEER_JSON"
     echo "}"
