@@ -144,6 +144,26 @@ int dr_scene_set_light_units(struct dr_scene *s, enum dr_light_units units)
     return dr_scene_refresh(s);
 }
 
+/* The back-face analysis (for the scene's cameras, those added before and
+ * camera, if not NULL) and the ray structure it shapes, replacing any before. */
+static int build_accel(struct dr_scene *s, const struct dr_camera *camera)
+{
+    struct dr_backface *b = dr_backface_analyse(s, s->backface, camera);
+    if (!b)
+        return DR_ERR_NOMEM;
+    dr_accel_destroy(s->accel);
+    dr_backface_destroy(s->backface);
+    s->backface = b;
+    s->accel = dr_accel_create_scene(s);
+    if (!s->accel) {
+        char msg[1024];
+        snprintf(msg, sizeof msg, "%s: cannot build the ray acceleration structure: %s", s->path, dr_last_error());
+        dr_set_error("%s", msg);
+        return DR_ERR_INTERNAL;
+    }
+    return 0;
+}
+
 int dr_scene_prepare(struct dr_scene *s)
 {
     if (dr_mesh_derive(&s->mesh) != 0) {
@@ -158,37 +178,14 @@ int dr_scene_prepare(struct dr_scene *s)
     rc = dr_scene_refresh(s);
     if (rc != 0)
         return rc;
-    s->backface = dr_backface_analyse(s, NULL, NULL);
-    if (!s->backface)
-        return DR_ERR_NOMEM;
-    s->accel = dr_accel_create_scene(s);
-    if (!s->accel) {
-        char msg[1024];
-        snprintf(msg, sizeof msg, "%s: cannot build the ray acceleration structure: %s", s->path, dr_last_error());
-        dr_set_error("%s", msg);
-        return DR_ERR_INTERNAL;
-    }
-    return 0;
+    return build_accel(s, NULL);
 }
 
 int dr_scene_add_viewpoint(struct dr_scene *s, const struct dr_camera *camera)
 {
     if (dr_backface_admits(s->backface, s, camera))
         return 0;
-    struct dr_backface *b = dr_backface_analyse(s, s->backface, camera);
-    if (!b)
-        return DR_ERR_NOMEM;
-    dr_accel_destroy(s->accel);
-    dr_backface_destroy(s->backface);
-    s->backface = b;
-    s->accel = dr_accel_create_scene(s);
-    if (!s->accel) {
-        char msg[1024];
-        snprintf(msg, sizeof msg, "%s: cannot rebuild the ray acceleration structure: %s", s->path, dr_last_error());
-        dr_set_error("%s", msg);
-        return DR_ERR_INTERNAL;
-    }
-    return 0;
+    return build_accel(s, camera);
 }
 
 int dr_scene_check_viewpoint(const struct dr_scene *s, const struct dr_camera *camera)
