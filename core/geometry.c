@@ -42,6 +42,23 @@ static void attributes(const struct dr_mesh *m, int64_t tri, double b1, double b
     hit->material = m->material[tri];
 }
 
+/* Are the three vertex normals the face's own (a flat-shaded face: a box,
+ * a wall)? Within 1e-6 radians, about ten times the rounding of a unit
+ * normal stored in floats: interpolating them gives ng to that precision,
+ * so the triangle is shaded with ng and the hits skip the interpolation
+ * (1.6 % of a peer-box render, whose 36 triangles are all flat). */
+static bool flat_normals(const struct dr_mesh *m, const uint32_t *idx, dr_vec3 ng)
+{
+    for (int k = 0; k < 3; k++) {
+        const float *n = m->normals + 3 * (size_t)idx[k];
+        dr_vec3 v = dr_v3(n[0], n[1], n[2]);
+        double l = dr_length(v);
+        if (!(l > 0.0) || dr_dot(v, ng) < (1.0 - 5e-13) * l)
+            return false;
+    }
+    return true;
+}
+
 int dr_mesh_derive(struct dr_mesh *m)
 {
     free(m->tri_normal_eps);
@@ -64,6 +81,8 @@ int dr_mesh_derive(struct dr_mesh *m)
         ne[1] = ng.y;
         ne[2] = ng.z;
         ne[3] = 1e-5 * mag + 1e-30;
+        if ((m->flags[t] & DR_TRI_HAS_NORMALS) && flat_normals(m, idx, ng))
+            m->flags[t] &= (uint8_t)~DR_TRI_HAS_NORMALS;
     }
     return 0;
 }

@@ -160,8 +160,10 @@ static inline void d_texref_uv(const struct dr_texref *r, const double d_uv[2], 
 
 double dr_triangle_area(const struct dr_mesh *m, int64_t tri);
 
-/* Fills m->tri_normal_eps from the vertices (called by dr_scene_prepare).
- * 0, or -1 when out of memory. */
+/* Fills m->tri_normal_eps from the vertices (called by dr_scene_prepare),
+ * and clears DR_TRI_HAS_NORMALS where a triangle's vertex normals are its
+ * face normal (flat shading: nothing to interpolate). 0, or -1 when out of
+ * memory. */
 int dr_mesh_derive(struct dr_mesh *m);
 
 /* Origin for a ray leaving hit->p towards d: pushed off the surface along ng

@@ -445,6 +445,53 @@ static void test_single_sided(void)
     }
 }
 
+/* ------------------------------------------------------- flat faces */
+
+/* A quad facing +z whose vertex normals are n (each vertex, both
+ * triangles): after dr_scene_prepare, does it still interpolate them? And
+ * the shading normal a hit gets. */
+static bool keeps_normals(dr_vec3 n, dr_vec3 *ns)
+{
+    struct sb b;
+    sb_init(&b);
+    struct dr_material m = sb_diffuse(dr_v3s(0.5));
+    m.double_sided = true;
+    sb_quad(&b, dr_v3(-1, -1, 0), dr_v3(2, 0, 0), dr_v3(0, 2, 0), sb_material(&b, m));
+    struct dr_mesh *mesh = &b.s->mesh;
+    for (uint32_t v = 0; v < mesh->n_vertices; v++) {
+        mesh->normals[3 * v] = (float)n.x;
+        mesh->normals[3 * v + 1] = (float)n.y;
+        mesh->normals[3 * v + 2] = (float)n.z;
+    }
+    for (uint32_t t = 0; t < mesh->n_triangles; t++)
+        mesh->flags[t] |= DR_TRI_HAS_NORMALS;
+    struct dr_scene *s = sb_finish(&b);
+    bool keeps = (s->mesh.flags[0] & DR_TRI_HAS_NORMALS) && (s->mesh.flags[1] & DR_TRI_HAS_NORMALS);
+    CHECK(((s->effects & DR_FX_SHADING_NORMALS) != 0) == keeps, "the shading_normals effect follows the flags");
+    struct dr_hit h;
+    dr_hit_compute(&s->mesh, 0, dr_v3(0.3, -0.2, 2), dr_v3(0, 0, -1), &h);
+    *ns = h.ns;
+    dr_scene_destroy(s);
+    return keeps;
+}
+
+static void test_flat_faces(void)
+{
+    dr_vec3 ns;
+    CHECK(!keeps_normals(dr_v3(0, 0, 1), &ns), "vertex normals equal to the face's: shaded flat");
+    CHECK(ns.x == 0 && ns.y == 0 && ns.z == 1, "... with the face normal (%g %g %g)", ns.x, ns.y, ns.z);
+    /* a normal off by 1e-7 (float rounding of a normalised vector) is still the face's */
+    CHECK(!keeps_normals(dr_normalize(dr_v3(1e-7, 0, 1)), &ns), "a normal within 1e-7 of the face's: flat");
+    /* tilted by 1e-3 rad: a smooth surface, interpolated */
+    dr_vec3 tilted = dr_normalize(dr_v3(1e-3, 0, 1));
+    CHECK(keeps_normals(tilted, &ns), "a normal 1e-3 off the face's is interpolated");
+    CHECK(fabs(ns.x - tilted.x) < 1e-7, "... and used (ns.x %g, expected %g)", ns.x, tilted.x);
+    /* facing away from the winding: authored that way, kept (normal maps
+     * read the authored side) */
+    CHECK(keeps_normals(dr_v3(0, 0, -1), &ns), "normals against the winding are kept");
+    CHECK(keeps_normals(dr_v3(0, 0, 0), &ns), "zero normals are left to the shading's fallback");
+}
+
 int main(void)
 {
     test_tangents_vs_supplied();
@@ -454,5 +501,6 @@ int main(void)
     test_mask();
     test_blend();
     test_single_sided();
+    test_flat_faces();
     return TEST_END();
 }
