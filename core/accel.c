@@ -48,7 +48,8 @@ struct dr_accel_geom {
 struct dr_accel {
     RTCDevice device;
     RTCScene scene;
-    RTCScene plain;                 /* with a filter in scene: every triangle, no filter (see below) */
+    RTCScene plain;                 /* with a filter in scene: every triangle again, split alike, the
+                                       filtered part with first_blocker_filter only (see below) */
     const struct dr_scene *cover;   /* NULL: nothing is filtered */
     uint8_t *tri_bits;              /* per triangle: enum dr_cover_bits, less culling where no ray
                                        can meet the back (backface.h) */

@@ -16,10 +16,13 @@ struct dr_accel;
  * triangle is opaque from both sides. */
 struct dr_accel *dr_accel_create(const struct dr_mesh *mesh);
 /* The same over scene->mesh, honouring alphaMode and doubleSided
- * (coverage.h) for every query. The scene must outlive the accel; its
- * materials' alpha modes and sidedness must not change afterwards. A scene
- * without MASK/BLEND/single-sided materials gets exactly dr_accel_create's
- * structure: no filter is installed. */
+ * (coverage.h) for every ray the scene's paths trace: single-sided
+ * triangles whose backs no such ray can reach (scene->backface, backface.h)
+ * are not culled, so a ray from anywhere else may meet their backs. The
+ * scene must outlive the accel; its materials' alpha modes and sidedness
+ * must not change afterwards. A scene without MASK/BLEND materials and
+ * without single-sided triangles left to cull gets exactly
+ * dr_accel_create's structure: no filter is installed. */
 struct dr_accel *dr_accel_create_scene(const struct dr_scene *scene);
 /* The same without the unfiltered copy (accel.c): every query runs the
  * filters. The reference the tests hold the fast path to. */
