@@ -15,6 +15,8 @@
 #   d. BLEND decisions are pure functions of the path: the same image for
 #      --threads 1 and 2; params does not list the normal map's image;
 #      attached sampling with a roughness parameter is refused naming the material
+#   e. the closed Box's backs are proved unreachable from outside, and not
+#      with a camera inside, which sees through its culled walls
 # Run by tests/run.sh (env: DRENDER, DR_TESTDIR); also runs alone.
 set -u
 
@@ -124,4 +126,27 @@ run fdcheck "$data/normal_mapped.gltf" --param /materials/bumpy/pbrMetallicRough
     --sampling attached --res 8x8 --spp 1 --batches 2
 [ "$rc" -ne 0 ] || fail "attached sampling on a normal-mapped scene should be refused"
 expect_mentions "attached sampling|normal map|bumpy|--sampling detached"
+
+# ---- e. backs no ray can reach (core/backface.c) ----
+# Box (a closed single-sided cube) seen by the default view from outside:
+# all 12 backs proved unreachable. The same cube with its only camera inside:
+# nothing proved, and the camera sees through the culled walls to the
+# default white sky (an image of 1; black if the backs were taken as walls).
+box=$samples/Box/glTF
+run render "$box/Box.gltf" -o out_box.exr --res 16x16 --spp 2 --json
+expect_in out '"backs_unreachable": 12' "the closed Box seen from outside: 12 backs unreachable"
+mkdir inside && for f in "$box"/*; do ln -s "$f" inside/; done
+python3 - "$box/Box.gltf" <<'PY' || fail "could not write the camera-inside variant of Box"
+import json, sys
+d = json.load(open(sys.argv[1]))
+d["cameras"] = [{"type": "perspective", "perspective": {"yfov": 1.0, "znear": 0.01}}]
+d["nodes"].append({"camera": 0, "translation": [0, 0, 0]})
+d["scenes"][d.get("scene", 0)]["nodes"].append(len(d["nodes"]) - 1)
+json.dump(d, open("inside/inside.gltf", "w"))
+PY
+run render inside/inside.gltf -o inside.exr --res 16x16 --spp 2 --json
+expect_in out '"backs_unreachable": 0' "a camera inside the closed Box: no back proved unreachable"
+read -r r g b < <(oiiotool inside.exr --printstats 2>/dev/null | awk '/Stats Avg/ { print $3, $4, $5; exit }')
+awk -v r="$r" -v g="$g" -v b="$b" 'BEGIN { exit !(r > 0.999 && g > 0.999 && b > 0.999) }' ||
+    fail "inside the single-sided Box the walls must be culled (sky of 1), got $r $g $b"
 echo "PASS"
