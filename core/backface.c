@@ -37,16 +37,20 @@ struct dr_backface {
 
 /* ---------------------------------------------------------- the room test */
 
-/* How far behind a plane a point may lie and still count as in front: the
- * scene's float positions carry relative rounding of 6e-8, and a surface
- * point lifted off its triangle (dr_offset_origin) moves by 1e-5 of its
- * magnitude, only ever to the side it leaves from. */
+/* How far behind a plane a point may lie and still count as in front:
+ * only the double rounding of the distance (the plane and the corners are
+ * the same stored floats, so a corner on the plane is at ~1e-16 of the
+ * coordinates). Not a geometric slack: with one, a scene far from the
+ * origin (coordinates of 1e5) would let a surface sit a visible distance
+ * behind a wall and still count as in front. Surface points lifted off
+ * their triangle (dr_offset_origin, 1e-5 of the coordinates) move only to
+ * the side their rays leave from. */
 static double room_tolerance(const struct dr_scene *s)
 {
     double m = 0.0;
     for (int k = 0; k < 3; k++)
         m = fmax(m, fmax(fabs(dr_v3_get(s->bbox_min, k)), fabs(dr_v3_get(s->bbox_max, k))));
-    return 1e-5 * m + 1e-30;
+    return 1e-9 * m + 1e-30;
 }
 
 /* Signed distance of p from triangle t's plane (positive: in front). */
@@ -292,15 +296,15 @@ static int analyse(struct dr_backface *b, const struct dr_scene *s)
     if (!gather_views(b, s) || s->n_media > 0 || m->n_triangles == 0 || !m->tri_normal_eps)
         return 0;
     uint8_t *tri_bits = malloc(m->n_triangles);
-    bool any_cull = false;
+    int64_t n_cull = 0;
     if (!tri_bits)
         return -1;
     for (uint32_t t = 0; t < m->n_triangles; t++) {
         tri_bits[t] = (uint8_t)dr_material_coverage(s, m->material[t]);
-        any_cull |= tri_bits[t] & DR_COVER_CULL;
+        n_cull += (tri_bits[t] & DR_COVER_CULL) != 0;
     }
     int rc = 0;
-    if (any_cull) {
+    if (n_cull > 0) {
         b->marks = calloc(m->n_triangles, 1);
         b->room = malloc(sizeof(uint32_t) * m->n_triangles);
         rc = b->marks && b->room ? 0 : -1;
@@ -312,7 +316,7 @@ static int analyse(struct dr_backface *b, const struct dr_scene *s)
             }
         }
         b->n_marked = b->n_room;
-        if (rc == 0)
+        if (rc == 0 && b->n_room < n_cull)   /* (culled triangles left for the closed test) */
             rc = mark_closed(b, s, tri_bits);
         if (rc == 0 && b->n_marked == 0) {
             free(b->marks);

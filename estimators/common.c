@@ -329,9 +329,14 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
         free(b);
         return DR_ERR_ARG;
     }
-    if (dr_film_check(&p->film, p->width, p->height) != 0 || (rc = dr_scene_check_viewpoint(p->scene, p->camera)) != 0) {
+    if (dr_film_check(&p->film, p->width, p->height) != 0) {
         free(b);
-        return rc != 0 ? rc : DR_ERR_ARG;
+        return DR_ERR_ARG;
+    }
+    rc = dr_scene_check_viewpoint(p->scene, p->camera);   /* (backface.h) */
+    if (rc != 0) {
+        free(b);
+        return rc;
     }
     b->view = dr_camera_view(p->camera, dr_film_frame_w(&p->film, p->width), dr_film_frame_h(&p->film, p->height));
     b->popts = (struct dr_path_opts){.max_depth = p->max_depth, .rr_depth = p->rr_depth,

@@ -81,6 +81,26 @@ static void test_room(void)
     dr_scene_destroy(s);
 }
 
+/* Far from the origin (coordinates of 1e5, a georeferenced scene): a box
+ * that pokes 0.05 below the floor keeps the floor unproved (its back can
+ * be met from the box's part below); the room test allows no slack beyond
+ * rounding. */
+static void test_far_from_origin(void)
+{
+    struct sb b;
+    sb_init(&b);
+    int white = sb_material(&b, sb_diffuse(dr_v3s(0.7)));
+    dr_vec3 o = dr_v3(1e5, 0, 1e5);
+    sb_quad(&b, dr_add(o, dr_v3(-2, 0, -2)), dr_v3(0, 0, 4), dr_v3(4, 0, 0), white);   /* floor, +y */
+    sb_box(&b, dr_add(o, dr_v3(-0.5, -0.05, -0.5)), dr_add(o, dr_v3(0.5, 1, 0.5)), white);
+    scene_camera(b.s, sb_camera(dr_add(o, dr_v3(0, 3, 6)), o, 40));
+    struct dr_scene *s = sb_finish(&b);
+    CHECK(count_marked(s, 0, 2) == 0, "far from the origin, a floor with a box poking below it: %d marked",
+          count_marked(s, 0, 2));
+    CHECK(count_marked(s, 2, 12) == 12, "... the closed box is sealed (%d of 12)", count_marked(s, 2, 12));
+    dr_scene_destroy(s);
+}
+
 /* A closed box seen from outside and from inside; a scene of one
  * double-sided plate far off keeps the room test from proving anything. */
 enum variant { CLOSED, OPEN, FLIPPED, INWARD };
@@ -240,6 +260,7 @@ static void test_same_answers(void)
 int main(void)
 {
     test_room();
+    test_far_from_origin();
     test_closed();
     test_same_answers();
     return TEST_END();
