@@ -2,7 +2,8 @@
  * measured on the rays a path tracer really casts rather than on random ones.
  *
  * Records the rays of diffuse paths through a scene (camera rays; at every
- * hit a shadow ray to a uniform point of a random emissive triangle and a
+ * hit a shadow ray to a light point drawn by drender's own light sampler
+ * (dr_light_sample: emitting triangles by power, points uniform) and a
  * cosine-sampled bounce; Russian roulette from depth 5 with drender's
  * survival probability min(max(throughput), 0.95), the throughput being the
  * product of the base colours; at most MAX_DEPTH segments): the same mix of extension and shadow rays that `drender render`
@@ -41,6 +42,7 @@
 #include "raw_scene.h"
 #include "error.h"
 #include "geometry.h"
+#include "lights.h"
 #include "sampler.h"
 #include "scene.h"
 
@@ -74,22 +76,6 @@ static void push(struct rays *rs, dr_vec3 o, dr_vec3 d, double tfar, bool shadow
 
 /* ---- recording ---------------------------------------------------------- */
 
-struct emitters {
-    int64_t *tri;
-    int64_t n;
-};
-
-static struct emitters find_emitters(const struct dr_scene *s)
-{
-    struct emitters e = {malloc(sizeof(int64_t) * (s->mesh.n_triangles + 1u)), 0};
-    for (uint32_t t = 0; t < s->mesh.n_triangles; t++) {
-        const struct dr_material *m = &s->materials[s->mesh.material[t]];
-        if (m->emissive_strength * (m->emissive_factor.x + m->emissive_factor.y + m->emissive_factor.z) > 0.0)
-            e.tri[e.n++] = t;
-    }
-    return e;
-}
-
 /* A cosine-distributed direction around n (the Lambertian walls' sampling;
  * the map differs from core/bsdf.c's concentric one, the distribution not). */
 static dr_vec3 cosine_dir(dr_vec3 n, double u1, double u2)
@@ -102,7 +88,7 @@ static dr_vec3 cosine_dir(dr_vec3 n, double u1, double u2)
 /* One path from pixel (x, y), sample s: its rays appended to rs. Hits,
  * light points and ray offsets are drender's (core/geometry.h). */
 static void record_path(const struct dr_scene *sc, const struct dr_accel *acc, const struct dr_camera_view *view,
-                        const struct emitters *em, int x, int y, int s, int max_depth, struct rays *rs)
+                        int x, int y, int s, int max_depth, struct rays *rs)
 {
     struct dr_sampler smp;
     dr_sampler_init(&smp, 7, (uint64_t)y * 65536u + (uint64_t)x, (uint64_t)s);
@@ -121,16 +107,20 @@ static void record_path(const struct dr_scene *sc, const struct dr_accel *acc, c
         beta *= fmax(c.x, fmax(c.y, c.z));
         if (!(beta > 0.0))
             return;   /* a black surface: no shadow ray, no bounce, as drender */
-        if (em->n > 0) {   /* next-event estimation: one shadow ray, to a uniform point of an emitter */
-            int64_t lt = em->tri[(int64_t)(dr_sampler_next(&smp) * em->n) % em->n];
-            double su = sqrt(dr_sampler_next(&smp)), u2 = dr_sampler_next(&smp);
-            struct dr_hit l;
-            dr_hit_at(&sc->mesh, lt, 1.0 - su, u2 * su, &l);
-            dr_vec3 to = dr_sub(l.p, h.p);
-            double dist = dr_length(to);
-            if (dist > 0.0 && dr_dot(to, n) > 0.0 && dr_dot(to, l.ng) < 0.0) {   /* emitters shine from their front */
-                dr_vec3 w = dr_scale(to, 1.0 / dist), po = dr_offset_origin(&h, n, w);
-                push(rs, po, w, dr_length(dr_sub(l.p, po)) * (1.0 - 1e-4), true, depth);
+        /* next-event estimation: one shadow ray, to a light point chosen
+         * as drender chooses it (dr_light_sample: emitters by power, their
+         * points uniform by area), ending where drender's ends */
+        double u_pick = dr_sampler_next(&smp), u1 = dr_sampler_next(&smp), u2 = dr_sampler_next(&smp);
+        struct dr_light_sample ls;
+        if (dr_light_sample(sc, sc->light_sampler, h.p, u_pick, u1, u2, &ls) && dr_dot(ls.wi, n) > 0.0) {
+            dr_vec3 po = dr_offset_origin(&h, n, ls.wi);
+            if (isinf(ls.dist))
+                push(rs, po, ls.wi, INFINITY, true, depth);
+            else {
+                dr_vec3 to = dr_sub(ls.target, po);
+                double dist = dr_length(to);
+                if (dist > 0.0)
+                    push(rs, po, dr_scale(to, 1.0 / dist), dist, true, depth);
             }
         }
         if (depth + 1 >= 5) {   /* roulette from depth 5 (segments so far) */
@@ -312,7 +302,6 @@ int main(int argc, char **argv)
     }
     const struct dr_camera cam = sc->n_cameras > 0 ? sc->cameras[0] : dr_camera_default(sc);
     const struct dr_camera_view view = dr_camera_view(&cam, W, H);
-    struct emitters em = find_emitters(sc);
     /* thread t records rows t, t + T, ...: its share, in path order */
     struct rays path[64] = {{0}}, wave[64] = {{0}};
     size_t counts[2] = {0, 0};
@@ -320,7 +309,7 @@ int main(int argc, char **argv)
         for (int y = t; y < H; y += T)
             for (int x = 0; x < W; x++)
                 for (int s = 0; s < S; s++)
-                    record_path(sc, acc, &view, &em, x, y, s, D, &path[t]);
+                    record_path(sc, acc, &view, x, y, s, D, &path[t]);
         wave[t].n = wave[t].cap = path[t].n;
         wave[t].r = malloc(sizeof(struct ray) * (path[t].n + 1));
         memcpy(wave[t].r, path[t].r, sizeof(struct ray) * path[t].n);
@@ -349,7 +338,6 @@ int main(int argc, char **argv)
         free(path[t].r);
         free(wave[t].r);
     }
-    free(em.tri);
     rtcReleaseScene(raw);
     rtcReleaseDevice(dev);
     dr_accel_destroy(acc);

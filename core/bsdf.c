@@ -185,6 +185,23 @@ static inline void sincos_quarter(double t, double *s, double *c)
     *c = 1.0 - t2 * horner(t2, DR_COS_SERIES, 9);
 }
 
+void dr_sincos_turn(double u, double *s, double *c)
+{
+    const double m = floor(4.0 * u + 0.5);       /* the nearest quarter turn */
+    const double r = (2.0 * M_PI) * (u - 0.25 * m);   /* |r| <= pi/4; the difference is exact */
+    const double q = m - 4.0 * floor(0.25 * m);  /* m mod 4 (NaN: none of 1, 2, 3) */
+    double sr, cr;
+    sincos_quarter(r, &sr, &cr);
+    if (q == 1.0)
+        *s = cr, *c = -sr;
+    else if (q == 2.0)
+        *s = -sr, *c = -cr;
+    else if (q == 3.0)
+        *s = -cr, *c = sr;
+    else
+        *s = sr, *c = cr;
+}
+
 /* Cosine-weighted hemisphere: Shirley-Chiu concentric disk, lifted (Malley).
  * The disk angle is pi/4 (c/a), or pi/2 - pi/4 (a/c), whose cosine and sine
  * are the sine and cosine of pi/4 (a/c): one small angle either way. */
@@ -226,8 +243,9 @@ static inline dr_vec3 sample_vndf(dr_vec3 wo, double a, double u1, double u2, st
     double lensq = vh.x * vh.x + vh.y * vh.y;
     dr_vec3 t1 = lensq > 0.0 ? dr_scale(dr_v3(-vh.y, vh.x, 0.0), 1.0 / sqrt(lensq)) : dr_v3(1.0, 0.0, 0.0);
     dr_vec3 t2 = dr_cross(vh, t1);
-    double r = sqrt(u1), phi = 2.0 * M_PI * u2;
-    double p1 = r * cos(phi), p2 = r * sin(phi);
+    double r = sqrt(u1), cos_phi, sin_phi;
+    dr_sincos_turn(u2, &sin_phi, &cos_phi);   /* phi = 2 pi u2 */
+    double p1 = r * cos_phi, p2 = r * sin_phi;
     double s = 0.5 * (1.0 + vh.z);
     double c = sqrt(dr_max(0.0, 1.0 - p1 * p1));
     double p2s = (1.0 - s) * c + s * p2;

@@ -69,6 +69,16 @@ dr_vec3 dr_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lob
  * the eight-lane sampler of path_simd.c so both give the same bits. */
 extern const double DR_SIN_SERIES[8], DR_COS_SERIES[9];
 
+/* sin and cos of the angle 2 pi u (u turns; the azimuth of the GGX and
+ * environment samplers), without libm: the nearest quarter turn m / 4 is
+ * taken off u exactly (for u in [0, 1], u - m/4 is exact by Sterbenz's
+ * lemma), the rest r = 2 pi (u - m/4), |r| <= pi/4, goes through the series
+ * above, and the quarter turns are sign changes and swaps. As accurate as
+ * libm's cos(2 pi u) (r carries the one rounding phi = 2 pi u did); the
+ * eight-lane samplers (path_simd.c) do the same operations, so scalar and
+ * vector paths choose the same directions to the bit. NaN gives NaN. */
+void dr_sincos_turn(double u, double *s, double *c);
+
 /* Adjoint of the differentiable BSDF inputs (same field names as struct dr_bsdf). */
 struct dr_d_bsdf {
     dr_vec3 base_color;

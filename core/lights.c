@@ -4,6 +4,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "bsdf.h"
 #include "cdf.h"
 #include "error.h"
 
@@ -453,8 +454,9 @@ static bool sample_env(const struct dr_scene *s, const struct dr_light_sampler *
     double pdf;
     if (!ls->env_marginal) {
         /* constant radiance: uniform sphere */
-        double z = 1.0 - 2.0 * u1, r = sqrt(dr_max(0.0, 1.0 - z * z)), phi = 2.0 * M_PI * u2;
-        dir = dr_v3(r * cos(phi), r * sin(phi), z);
+        double z = 1.0 - 2.0 * u1, r = sqrt(dr_max(0.0, 1.0 - z * z)), cos_phi, sin_phi;
+        dr_sincos_turn(u2, &sin_phi, &cos_phi);   /* phi = 2 pi u2 */
+        dir = dr_v3(r * cos_phi, r * sin_phi, z);
         pdf = 1.0 / (4.0 * M_PI);
     } else {
         int y = (int)dr_cdf_find_guided(ls->env_marginal, ls->env_h, ls->env_marginal_guide, ls->env_h, u1);

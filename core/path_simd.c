@@ -171,6 +171,20 @@ DR_SIMD_INLINE dr_f8 horner(dr_f8 x, const double *c, int n)
         p = p * x + c[i];
     return p;
 }
+/* dr_sincos_turn (bsdf.h): sin and cos of 2 pi u, the same operations */
+DR_SIMD_INLINE void sincos_turn(dr_f8 u, dr_f8 *s, dr_f8 *c)
+{
+    const dr_f8 m = dr_f8_floor(4.0 * u + 0.5);
+    const dr_f8 r = (2.0 * M_PI) * (u - 0.25 * m);
+    const dr_f8 q = m - 4.0 * dr_f8_floor(0.25 * m);
+    const dr_f8 r2 = r * r;
+    const dr_f8 sr = r + r * r2 * horner(r2, DR_SIN_SERIES, 8);
+    const dr_f8 cr = 1.0 - r2 * horner(r2, DR_COS_SERIES, 9);
+    const dr_m8 q1 = dr_f8_eq(q, dr_f8s(1.0)), q2 = dr_f8_eq(q, dr_f8s(2.0)), q3 = dr_f8_eq(q, dr_f8s(3.0));
+    *s = dr_f8_sel(q1, cr, dr_f8_sel(q2, -sr, dr_f8_sel(q3, -cr, sr)));
+    *c = dr_f8_sel(q1, -sr, dr_f8_sel(q2, -cr, dr_f8_sel(q3, sr, cr)));
+}
+
 /* bsdf.c's sample_cosine: the concentric disk, lifted. */
 DR_SIMD_INLINE dr_v3x8 sample_cosine(dr_f8 u1, dr_f8 u2)
 {
@@ -396,9 +410,9 @@ DR_SIMD_INLINE dr_v3x8 eval_pdf_above(const struct dr_path8 *g, dr_v3x8 wo, dr_v
     return dr_v3x8_sel(g->lambert, f_l, f_g);
 }
 
-/* sample_specular_dir: GGX visible normals (sample_vndf), reflected. The
- * angle's cosine and sine are libm's, lane by lane, as in the scalar map. */
-DR_SIMD_INLINE dr_v3x8 sample_specular_dir(const struct dr_path8 *g, dr_v3x8 wo, dr_f8 u1, dr_f8 u2, dr_m8 lanes)
+/* sample_specular_dir: GGX visible normals (sample_vndf), reflected; the
+ * azimuth's cosine and sine from sincos_turn, as in the scalar map. */
+DR_SIMD_INLINE dr_v3x8 sample_specular_dir(const struct dr_path8 *g, dr_v3x8 wo, dr_f8 u1, dr_f8 u2)
 {
     dr_f8 a = g->alpha;
     dr_v3x8 vh = normalize((dr_v3x8){a * wo.x, a * wo.y, wo.z});
@@ -408,12 +422,8 @@ DR_SIMD_INLINE dr_v3x8 sample_specular_dir(const struct dr_path8 *g, dr_v3x8 wo,
     dr_v3x8 t1 = dr_v3x8_sel(tilted, (dr_v3x8){-vh.y * k, vh.x * k, 0.0 * k},
                              (dr_v3x8){dr_f8s(1.0), dr_f8s(0.0), dr_f8s(0.0)});
     dr_v3x8 t2 = dr_v3x8_cross(vh, t1);
-    dr_f8 r = dr_f8_sqrt(u1), phi = 2.0 * M_PI * u2, cos_phi = dr_f8s(1.0), sin_phi = dr_f8s(0.0);
-    for (int i = 0; i < DR_SIMD_W; i++)
-        if (lanes[i]) {
-            cos_phi[i] = cos(phi[i]);
-            sin_phi[i] = sin(phi[i]);
-        }
+    dr_f8 r = dr_f8_sqrt(u1), cos_phi, sin_phi;
+    sincos_turn(u2, &sin_phi, &cos_phi);   /* phi = 2 pi u2 */
     dr_f8 p1 = r * cos_phi, p2 = r * sin_phi;
     dr_f8 s = 0.5 * (1.0 + vh.z);
     dr_f8 c = dr_f8_sqrt(dr_f8_max(dr_f8s(0.0), 1.0 - p1 * p1));
@@ -1063,7 +1073,7 @@ void dr_path8_continue_lanes(const struct dr_path_opts *opts, const struct dr_pa
     dr_v3x8 wi = sample_cosine(g->bsdf_u1, g->bsdf_u2);
     dr_m8 specular = ok & dr_f8_lt(g->lobe_u, g->spec_p);
     if (dr_m8_any(specular))
-        wi = dr_v3x8_sel(specular, sample_specular_dir(g, g->wo, g->bsdf_u1, g->bsdf_u2, specular), wi);
+        wi = dr_v3x8_sel(specular, sample_specular_dir(g, g->wo, g->bsdf_u1, g->bsdf_u2), wi);
     ok &= dr_f8_gt(wi.z, dr_f8s(COS_EPS));
     dr_f8 pdf;
     dr_v3x8 f = eval_pdf_above(g, g->wo, wi, g->spec_p, &pdf);

@@ -93,6 +93,18 @@ DR_SIMD_INLINE dr_f8 dr_f8_sqrt(dr_f8 a)
         r[i] = sqrt(a[i]);
     return r;
 }
+/* floor, lane by lane (exact: rounding towards minus infinity) */
+DR_SIMD_INLINE dr_f8 dr_f8_floor(dr_f8 a)
+{
+#if defined(__AVX512F__)
+    return (dr_f8)_mm512_roundscale_pd((__m512d)a, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
+#else
+    dr_f8 r;
+    for (int i = 0; i < DR_SIMD_W; i++)
+        r[i] = floor(a[i]);
+    return r;
+#endif
+}
 DR_SIMD_INLINE dr_f8 dr_f8_abs(dr_f8 a) { return (dr_f8)((dr_m8)a & ~(dr_m8)dr_f8s(-0.0)); }
 /* copysign(1.0, a) */
 DR_SIMD_INLINE dr_f8 dr_f8_sign1(dr_f8 a)

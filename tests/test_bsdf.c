@@ -745,6 +745,51 @@ static void test_cosine_sampler_map(void)
     CHECK(off == 0, "%d of 100000 interior cosine samples differ from the libm map by more than a few ulps", off);
 }
 
+/* dr_sincos_turn, the azimuth of the GGX and environment samplers, against
+ * sin and cos of 2 pi u in long double (x87: 64-bit significands, so the
+ * reference's own error is far below a double's ulp) and against libm of
+ * the double angle, which the samplers used before. */
+static void test_sincos_turn(void)
+{
+    struct rng r = {4242};
+    double worst = 0.0, worst_libm = 0.0, worst_unit = 0.0;
+    for (int i = 0; i < 1000000; i++) {
+        double u = i < 4096 ? i / 4096.0 : rng_next(&r);
+        if (i % 5 == 1)
+            u = nextafter(u, 2.0);   /* just past a grid point */
+        double s, c;
+        dr_sincos_turn(u, &s, &c);
+        long double a = 2.0L * 3.14159265358979323846264338327950288L * (long double)u;
+        worst = fmax(worst, fmax(fabs((double)((long double)s - sinl(a))), fabs((double)((long double)c - cosl(a)))));
+        double phi = 2.0 * M_PI * u;
+        worst_libm = fmax(worst_libm, fmax(fabs(s - sin(phi)), fabs(c - cos(phi))));
+        worst_unit = fmax(worst_unit, fabs(s * s + c * c - 1.0));
+    }
+    /* 2.3e-16 is about two ulps of a value near 1 */
+    CHECK(worst <= 2.3e-16, "dr_sincos_turn is %.3g from sin, cos of 2 pi u", worst);
+    /* libm's error is the rounding of phi = 2 pi u, up to 2 pi u ulps */
+    CHECK(worst_libm <= 1e-15, "dr_sincos_turn is %.3g from libm's sin, cos of the double angle", worst_libm);
+    CHECK(worst_unit <= 4.5e-16, "s^2 + c^2 - 1 up to %.3g", worst_unit);
+    /* the quarter turns exactly, their signs by quadrant */
+    const double qu[] = {0.0, 0.25, 0.5, 0.75, 1.0}, qs[] = {0.0, 1.0, 0.0, -1.0, 0.0}, qc[] = {1.0, 0.0, -1.0, 0.0, 1.0};
+    for (int k = 0; k < 5; k++) {
+        double s, c;
+        dr_sincos_turn(qu[k], &s, &c);
+        CHECK(s == qs[k] && c == qc[k], "u = %g: sin %.17g cos %.17g", qu[k], s, c);
+    }
+    const double eighth[] = {0.125, 0.375, 0.625, 0.875};   /* the quadrants' signs, the values equal */
+    for (int k = 0; k < 4; k++) {
+        double s, c;
+        dr_sincos_turn(eighth[k], &s, &c);
+        CHECK(fabs(fabs(s) - M_SQRT1_2) <= 2.3e-16 && fabs(fabs(c) - M_SQRT1_2) <= 2.3e-16 && (s > 0) == (k < 2) &&
+                  (c > 0) == (k == 0 || k == 3),
+              "u = %g: sin %.17g cos %.17g", eighth[k], s, c);
+    }
+    double s, c;
+    dr_sincos_turn(NAN, &s, &c);
+    CHECK(isnan(s) && isnan(c), "NaN turns give NaN: %g %g", s, c);
+}
+
 /* ------------------------------------------------------------ hard cases */
 
 static void check_pair(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, const char *what)
@@ -842,6 +887,7 @@ int main(void)
     clock_t t0 = clock();
     test_lambertian();
     test_cosine_sampler_map();
+    test_sincos_turn();
     test_reciprocity();
     test_hard_cases();
     test_jacobian();

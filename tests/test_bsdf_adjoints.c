@@ -665,15 +665,19 @@ static void old_d_bsdf_eval(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_
     d->roughness += d_spec * dspec_da * (2.0 * rough);
 }
 
-/* The GGX visible-normal map as it was inside dr_bsdf_sample (frozen). */
+/* The GGX visible-normal map as it was inside dr_bsdf_sample (frozen),
+ * except for its azimuth: cos and sin of 2 pi u2 come from dr_sincos_turn
+ * since the samplers stopped calling libm for them (test_bsdf's
+ * test_sincos_turn holds those to libm's within 1e-15). */
 static dr_vec3 old_vndf_wi(dr_vec3 wo, double a, double u1, double u2)
 {
     dr_vec3 vh = dr_normalize(dr_v3(a * wo.x, a * wo.y, wo.z));
     double lensq = vh.x * vh.x + vh.y * vh.y;
     dr_vec3 t1 = lensq > 0.0 ? dr_scale(dr_v3(-vh.y, vh.x, 0.0), 1.0 / sqrt(lensq)) : dr_v3(1.0, 0.0, 0.0);
     dr_vec3 t2 = dr_cross(vh, t1);
-    double r = sqrt(u1), phi = 2.0 * M_PI * u2;
-    double p1 = r * cos(phi), p2 = r * sin(phi);
+    double r = sqrt(u1), cos_phi, sin_phi;
+    dr_sincos_turn(u2, &sin_phi, &cos_phi);
+    double p1 = r * cos_phi, p2 = r * sin_phi;
     double s = 0.5 * (1.0 + vh.z);
     p2 = (1.0 - s) * sqrt(dr_max(0.0, 1.0 - p1 * p1)) + s * p2;
     dr_vec3 nh = dr_add(dr_add(dr_scale(t1, p1), dr_scale(t2, p2)),
