@@ -366,7 +366,8 @@ bool dr_light_tables(const struct dr_light_sampler *ls, struct dr_light_tables *
     if (ls->n_entries == 0)
         return false;
     *t = (struct dr_light_tables){ls->n_entries, ls->n_emitters, ls->cdf, ls->cdf_guide, ls->pick,
-                                       ls->emitter_tri, ls->emitter_area, ls->tri_pick, ls->tri_pick_density};
+                                       ls->emitter_tri, ls->emitter_area, ls->tri_pick, ls->tri_pick_density,
+                                       ls->env_entry >= 0 && !ls->env_marginal ? ls->env_entry : -1};
     return true;
 }
 

@@ -60,7 +60,8 @@ double dr_light_pdf_area(const struct dr_scene *scene, const struct dr_light_sam
 double dr_light_pdf_area_pick(const struct dr_light_sampler *ls, int64_t tri);
 /* The sampler's tables, for a packet tracer that samples many lanes' lights
  * at once (path_simd.c does what dr_light_sample and dr_light_pdf_area do for
- * emitting triangles with these; other entries go through dr_light_sample).
+ * emitting triangles and a constant environment with these; other entries go
+ * through dr_light_sample).
  * False when there is nothing to sample. */
 struct dr_light_tables {
     int64_t n_entries;
@@ -72,6 +73,9 @@ struct dr_light_tables {
     const double *emitter_area;     /* per entry */
     const double *tri_pick;         /* per triangle, as dr_light_pdf_area_pick */
     const double *tri_pick_density; /* per triangle: pick probability / area */
+    int64_t env_uniform_entry;      /* the environment's entry when it is constant (sampled
+                                       uniformly over the sphere, dr_light_sample's
+                                       sample_env), else -1 */
 };
 bool dr_light_tables(const struct dr_light_sampler *ls, struct dr_light_tables *t);
 /* Density for an escaping direction (environment). */

@@ -634,12 +634,13 @@ static void find_entries(const struct dr_light_tables *lt, dr_f8 u, int64_t e[DR
         e[i] = count[i];
 }
 
-/* Each lane's light-table entry; other[i]: it is a punctual light or the
- * environment, which light_sample leaves to dr_light_sample (the area
- * arithmetic runs on a stand-in). */
+/* Each lane's light-table entry; env: it is a constant environment
+ * (env_light_samples); other[i]: it is a punctual light or a mapped
+ * environment, which light_sample leaves to dr_light_sample (for both the
+ * area arithmetic runs on a stand-in). */
 static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *lt, struct lanes *L,
                         const struct dr_path8_ahead *ahead, dr_f8 u_pick, dr_f8 *pick, dr_f8 *area,
-                        uint32_t v[3][DR_SIMD_W], bool *other)
+                        uint32_t v[3][DR_SIMD_W], dr_m8 *env, bool *other)
 {
     const struct dr_mesh *m = &s->mesh;
     int64_t entry[DR_SIMD_W];
@@ -648,8 +649,9 @@ static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *
     else
         find_entries(lt, u_pick, entry);
     for (int i = 0; i < DR_SIMD_W; i++) {
-        other[i] = entry[i] >= lt->n_emitters;
-        if (other[i])
+        (*env)[i] = entry[i] == lt->env_uniform_entry ? -1 : 0;
+        other[i] = entry[i] >= lt->n_emitters && !(*env)[i];
+        if (entry[i] >= lt->n_emitters)
             entry[i] = lt->n_emitters > 0 ? 0 : -1;
     }
     /* Each lane's reads depend on the one before (entry, its triangle, the
@@ -691,7 +693,29 @@ static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *
     }
 }
 
-/* The lanes that picked a punctual light or the environment: dr_light_sample. */
+/* The lanes that picked a constant environment: lights.c's sample_env
+ * (uniform over the sphere; dr_env_radiance is the colour times the
+ * strength) eight-wide, the same operations. */
+static void env_light_samples(const struct dr_scene *s, const struct dr_light_tables *lt, dr_m8 env, dr_f8 u1,
+                              dr_f8 u2, dr_m8 *ok, struct light8 *out)
+{
+    dr_f8 z = 1.0 - 2.0 * u1, r = dr_f8_sqrt(dr_f8_max(dr_f8s(0.0), 1.0 - z * z)), cos_phi, sin_phi;
+    sincos_turn(u2, &sin_phi, &cos_phi);   /* phi = 2 pi u2 */
+    const dr_vec3 Le = dr_scale(s->env.color, s->env.strength);
+    const double pick = lt->pick[lt->env_uniform_entry];
+    const dr_v3x8 zero = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
+    out->wi = dr_v3x8_sel(env, (dr_v3x8){r * cos_phi, r * sin_phi, z}, out->wi);
+    out->radiance = dr_v3x8_sel(env, (dr_v3x8){dr_f8s(Le.x), dr_f8s(Le.y), dr_f8s(Le.z)}, out->radiance);
+    out->target = dr_v3x8_sel(env, zero, out->target);
+    out->pdf = dr_f8_sel(env, dr_f8s(1.0 / (4.0 * M_PI) * pick), out->pdf);
+    out->infinite |= env;
+    out->delta &= ~env;
+    /* dr_light_sample's checks: a zero pick (a zero-strength environment)
+     * or black radiance carries no light (the fields are then not read) */
+    *ok = pick > 0.0 && !dr_is_black(Le) ? *ok | env : *ok & ~env;
+}
+
+/* The lanes that picked a punctual light or a mapped environment: dr_light_sample. */
 static void other_light_samples(const struct dr_scene *s, const bool *other, dr_v3x8 p, dr_f8 u_pick, dr_f8 u1,
                                 dr_f8 u2, dr_m8 *ok, struct light8 *out)
 {
@@ -721,7 +745,8 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     dr_f8 pick, area;
     uint32_t v[3][DR_SIMD_W];
     bool other[DR_SIMD_W];
-    pick_lights(s, lt, L, ahead, u_pick, &pick, &area, v, other);
+    dr_m8 env;
+    pick_lights(s, lt, L, ahead, u_pick, &pick, &area, v, &env, other);
     dr_m8 ok = ~dr_f8_le(pick, dr_f8s(0.0));
     dr_f8 su = dr_f8_sqrt(u1);
     dr_f8 b1 = 1.0 - su, b2 = u2 * su, b0 = 1.0 - b1 - b2;
@@ -749,6 +774,8 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     out->pdf = pick * d2 / (dr_f8_abs(cos_l) * area);
     ok &= ~dr_v3x8_is_black(out->radiance);
     out->infinite = out->delta = (dr_m8){0};
+    if (dr_m8_any(env))
+        env_light_samples(s, lt, env, u1, u2, &ok, out);
     other_light_samples(s, other, p, u_pick, u1, u2, &ok, out);
     return ok;
 }
