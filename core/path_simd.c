@@ -599,6 +599,22 @@ static void emission_seen(const struct dr_scene *s, const struct dr_light_tables
     g->Le = Le;
 }
 
+bool dr_path8_env_constant(const struct dr_scene *s)
+{
+    return !s->env.map.data;
+}
+
+dr_v3x8 dr_path8_escaped_term(const struct dr_scene *s, const struct dr_path_opts *opts, dr_f8 depth, dr_f8 prev_pdf)
+{
+    if (!(opts->stages & DR_STAGE_ENV))
+        return (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
+    /* any direction: without a map neither depends on it */
+    const dr_vec3 up = dr_v3(0.0, 0.0, 1.0), Le = dr_env_radiance(s, up);
+    const double pdf = dr_light_pdf_env(s, s->light_sampler, up);
+    dr_f8 w = dr_f8_sel(dr_f8_eq(depth, dr_f8s(1.0)), dr_f8s(1.0), mis_power(prev_pdf, dr_f8s(pdf)));
+    return (dr_v3x8){Le.x * w, Le.y * w, Le.z * w};
+}
+
 /* A light sample for each lane of a group (dr_light_sample's out). */
 struct light8 {
     dr_v3x8 wi, target, radiance;
