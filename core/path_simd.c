@@ -109,7 +109,7 @@ struct lanes {
     int64_t tri[DR_SIMD_W], ltri[DR_SIMD_W];
     uint32_t v0[DR_SIMD_W], v1[DR_SIMD_W], v2[DR_SIMD_W];
     bool double_sided[DR_SIMD_W], ldouble_sided[DR_SIMD_W], has_normals[DR_SIMD_W];
-    bool textured[DR_SIMD_W], ltextured[DR_SIMD_W];   /* reads_textures of the hit's, the light's material */
+    bool textured[DR_SIMD_W], ltextured[DR_SIMD_W];   /* reads_textures of the hit's material; the light's has an emissive texture */
     bool normal_mapped[DR_SIMD_W];
     bool any_textured, any_ltextured;
     struct dr_hit hit[DR_SIMD_W];   /* the hits of textured lanes, as dr_hit_compute fills them */
@@ -317,15 +317,18 @@ DR_SIMD_INLINE dr_v3x8 normalize(dr_v3x8 a)   /* dr_normalize */
 /* dr_material_eval (the factors; textured lanes call it), and what bsdf.c
  * derives from the material alone (bsdf_alpha, dielectric_f0,
  * no_specular_lobe). */
-static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const struct lanes *L, dr_m8 end)
+static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const struct lanes *L, dr_m8 end,
+                          const dr_v3x8 *colour)
 {
     const void *const *mat = L->mat;
     g->base = gather3(mat, offsetof(struct dr_material, base_color));
+    if (colour)   /* times COLOR_0 (a textured lane's base is dr_material_eval's, below) */
+        g->base = dr_v3x8_mul(g->base, *colour);
     g->metallic = gather(mat, offsetof(struct dr_material, metallic));
     g->specular = gather(mat, offsetof(struct dr_material, specular));
     dr_f8 r = gather(mat, offsetof(struct dr_material, roughness));
     for (int i = 0; L->any_textured && i < g->n; i++)
-        if (L->textured[i] && !end[i]) {   /* textures, vertex colours: dr_material_eval itself */
+        if (L->textured[i] && !end[i]) {   /* textures (and the vertex colour): dr_material_eval itself */
             struct dr_bsdf b;
             dr_material_eval(s, &L->hit[i], &b);
             set_lane(&g->base, i, b.base_color);
@@ -458,18 +461,33 @@ bool dr_path8_hit(const struct dr_scene *s, const struct dr_path_opts *opts, int
     return tri >= 0 && !(opts->params && opts->params->mat_bsdf_active[s->mesh.material[tri]]);
 }
 
-/* Does shading a hit on material m read a texture (or the vertex colours):
- * then its normal map, BSDF inputs and emission are the scalar functions',
- * lane by lane. */
-static bool reads_textures(const struct dr_scene *s, const struct dr_material *m)
+/* Does shading a hit on material m read a texture: then its normal map,
+ * BSDF inputs and emission are the scalar functions', lane by lane. (The
+ * vertex colours alone are interpolated eight lanes at a time:
+ * vertex_colours.) */
+static bool reads_textures(const struct dr_material *m)
 {
     return m->base_color_tex.texture >= 0 || m->metallic_roughness_tex.texture >= 0 || m->emissive_tex.texture >= 0 ||
-           m->normal_tex.texture >= 0 || s->mesh.colors;
+           m->normal_tex.texture >= 0;
 }
 
 bool dr_path8_reads_textures(const struct dr_scene *s, int64_t tri)
 {
-    return reads_textures(s, &s->materials[s->mesh.material[tri]]);
+    return reads_textures(&s->materials[s->mesh.material[tri]]);
+}
+
+/* dr_hit_color for every lane at barycentrics (b1, b2): the same operations
+ * (COLOR_0 has three floats a vertex and no padding: read lane by lane). */
+static dr_v3x8 vertex_colours(const struct dr_mesh *m, const struct lanes *L, dr_f8 b1, dr_f8 b2)
+{
+    const uint32_t *v[3] = {L->v0, L->v1, L->v2};
+    dr_v3x8 c[3];
+    for (int k = 0; k < 3; k++)
+        for (int i = 0; i < DR_SIMD_W; i++) {
+            const float *p = m->colors + 3 * (size_t)v[k][i];
+            c[k].x[i] = p[0], c[k].y[i] = p[1], c[k].z[i] = p[2];
+        }
+    return interp(1.0 - b1 - b2, b1, b2, c[0], c[1], c[2]);
 }
 
 /* ------------------------------------------------------------ the stages */
@@ -814,7 +832,7 @@ static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, str
         triangle_vertices(m, tri, &L->v0[i], &L->v1[i], &L->v2[i]);
         const struct dr_material *mat = &s->materials[m->material[tri]];
         L->mat[i] = mat;
-        L->textured[i] = reads_textures(s, mat);
+        L->textured[i] = reads_textures(mat);
         L->normal_mapped[i] = mat->normal_tex.texture >= 0;
         L->double_sided[i] = mat->double_sided;
         L->has_normals[i] = m->flags[tri] & DR_TRI_HAS_NORMALS;
@@ -1030,7 +1048,10 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     frame_from_normal(g->fn, &g->fs, &g->ft);
     g->wo = to_local(g->fs, g->ft, g->fn, dr_v3x8_neg(d));
     g->wo_z = g->wo.z;
-    material_eval(s, g, &L, end);
+    dr_v3x8 colour;
+    if (m->colors)
+        colour = vertex_colours(m, &L, b1, b2);
+    material_eval(s, g, &L, end, m->colors ? &colour : NULL);
     g->spec_p = specular_prob(g, g->wo_z);   /* (wo.z <= COS_EPS: unused) */
     dr_f8 u[7];
     if (in->ahead)

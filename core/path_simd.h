@@ -107,9 +107,9 @@ bool dr_path8_applies(const struct dr_scene *scene, const struct dr_path_opts *o
  * stages mark them (dr_path8's diff), and a walk's sums follow. */
 bool dr_path8_hit(const struct dr_scene *scene, const struct dr_path_opts *opts, int64_t tri);
 
-/* Does shading a hit on triangle tri read textures (or vertex colours)? Such
- * lanes call the scalar material, emission and normal-map functions with
- * the hit. */
+/* Does shading a hit on triangle tri read textures? Such lanes call the
+ * scalar material, emission and normal-map functions with the hit (vertex
+ * colours alone do not need them). */
 bool dr_path8_reads_textures(const struct dr_scene *scene, int64_t tri);
 /* dr_hit_compute of the lanes i with want[i], eight-wide (the hit point
  * and normals as the hit stage's own locate computes them; the same values

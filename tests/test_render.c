@@ -487,8 +487,8 @@ static struct dr_scene *bumpy_box(void)
     return sb_finish(&b);
 }
 
-/* Vertex colours without textures: no prefetching, so the eight-lane
- * stages build the hits dr_material_eval reads themselves. */
+/* Vertex colours without textures: no prefetching, and the eight-lane
+ * stages interpolate the colours themselves (no scalar material lookups). */
 static struct dr_scene *coloured_box(void)
 {
     struct sb b;
