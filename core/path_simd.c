@@ -109,7 +109,8 @@ struct lanes {
     int64_t tri[DR_SIMD_W], ltri[DR_SIMD_W];
     uint32_t v0[DR_SIMD_W], v1[DR_SIMD_W], v2[DR_SIMD_W];
     bool double_sided[DR_SIMD_W], ldouble_sided[DR_SIMD_W], has_normals[DR_SIMD_W];
-    bool textured[DR_SIMD_W], ltextured[DR_SIMD_W];   /* reads_textures of the hit's material; the light's has an emissive texture */
+    bool textured[DR_SIMD_W];    /* reads_textures of the hit's material */
+    bool ltextured[DR_SIMD_W];   /* the light's has an emissive texture */
     bool normal_mapped[DR_SIMD_W];
     bool any_textured, any_ltextured;
     struct dr_hit hit[DR_SIMD_W];   /* the hits of textured lanes, as dr_hit_compute fills them */
@@ -728,14 +729,14 @@ static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *
 }
 
 /* The lanes that picked a constant environment: lights.c's sample_env
- * (uniform over the sphere; dr_env_radiance is the colour times the
- * strength) eight-wide, the same operations. */
+ * (uniform over the sphere, the radiance the same in every direction)
+ * eight-wide, the same operations. */
 static void env_light_samples(const struct dr_scene *s, const struct dr_light_tables *lt, dr_m8 env, dr_f8 u1,
                               dr_f8 u2, dr_m8 *ok, struct light8 *out)
 {
     dr_f8 z = 1.0 - 2.0 * u1, r = dr_f8_sqrt(dr_f8_max(dr_f8s(0.0), 1.0 - z * z)), cos_phi, sin_phi;
     sincos_turn(u2, &sin_phi, &cos_phi);   /* phi = 2 pi u2 */
-    const dr_vec3 Le = dr_scale(s->env.color, s->env.strength);
+    const dr_vec3 Le = dr_env_radiance(s, dr_v3(0.0, 0.0, 1.0));   /* (any direction: no map) */
     const double pick = lt->pick[lt->env_uniform_entry];
     const dr_v3x8 zero = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
     out->wi = dr_v3x8_sel(env, (dr_v3x8){r * cos_phi, r * sin_phi, z}, out->wi);
