@@ -281,17 +281,24 @@ dr_vec3 dr_env_uv_to_dir(double u, double v)
     return dr_v3(st * sin(phi), cos(theta), -st * cos(phi));
 }
 
+/* The map's lookup: repeat across the seam, clamp at the poles. */
+static const struct dr_texture env_tex = {0, DR_WRAP_REPEAT, DR_WRAP_CLAMP};
+
+/* dr_env_radiance with a map, at the direction's map coordinates (u, v). */
+static dr_vec3 env_radiance_uv(const struct dr_scene *s, double u, double v)
+{
+    double px[4];
+    dr_texture_eval(&env_tex, &s->env.map, u, v, true, px);   /* decoded copy if 8-bit sRGB */
+    return dr_mul(dr_scale(s->env.color, s->env.strength), dr_v3(px[0], px[1], px[2]));
+}
+
 dr_vec3 dr_env_radiance(const struct dr_scene *s, dr_vec3 dir)
 {
-    dr_vec3 L = dr_scale(s->env.color, s->env.strength);
-    if (s->env.map.data) {
-        double u, v, px[4];
-        dr_env_dir_to_uv(dir, &u, &v);
-        struct dr_texture tex = {0, DR_WRAP_REPEAT, DR_WRAP_CLAMP};
-        dr_texture_eval(&tex, &s->env.map, u, v, true, px);  /* decoded copy if 8-bit sRGB */
-        L = dr_mul(L, dr_v3(px[0], px[1], px[2]));
-    }
-    return L;
+    if (!s->env.map.data)
+        return dr_scale(s->env.color, s->env.strength);
+    double u, v;
+    dr_env_dir_to_uv(dir, &u, &v);
+    return env_radiance_uv(s, u, v);
 }
 
 void d_env_radiance(const struct dr_scene *s, const struct dr_param_set *ps, dr_vec3 dir, dr_vec3 d_L,
@@ -301,7 +308,7 @@ void d_env_radiance(const struct dr_scene *s, const struct dr_param_set *ps, dr_
         return;
     /* L = color * strength * map(dir) */
     dr_vec3 map = dr_v3s(1.0);
-    struct dr_texture tex = {0, DR_WRAP_REPEAT, DR_WRAP_CLAMP};   /* as dr_env_radiance */
+    const struct dr_texture tex = env_tex;   /* dr_env_radiance's lookup */
     double u = 0.0, v = 0.0;
     if (s->env.map.data) {
         double px[4];
@@ -322,12 +329,9 @@ void d_env_radiance(const struct dr_scene *s, const struct dr_param_set *ps, dr_
     }
 }
 
-static double env_pdf_dir(const struct dr_light_sampler *ls, dr_vec3 dir)
+/* env_pdf_dir with a map, at the direction's map coordinates (u, v). */
+static double env_pdf_uv(const struct dr_light_sampler *ls, double u, double v)
 {
-    if (!ls->env_marginal)
-        return 1.0 / (4.0 * M_PI);
-    double u, v;
-    dr_env_dir_to_uv(dir, &u, &v);
     int x = (int)dr_clamp(floor(u * ls->env_w), 0, ls->env_w - 1);
     int y = (int)dr_clamp(floor(v * ls->env_h), 0, ls->env_h - 1);
     const double *row = ls->env_conditional + (size_t)y * (ls->env_w + 1);
@@ -336,6 +340,29 @@ static double env_pdf_dir(const struct dr_light_sampler *ls, dr_vec3 dir)
     /* Use the row-centre sine, the same factor the weights were built with,
      * so the density stays finite at the poles and matches sampling. */
     return st > 0.0 ? p_uv / (2.0 * M_PI * M_PI * st) : 0.0;
+}
+
+static double env_pdf_dir(const struct dr_light_sampler *ls, dr_vec3 dir)
+{
+    if (!ls->env_marginal)
+        return 1.0 / (4.0 * M_PI);
+    double u, v;
+    dr_env_dir_to_uv(dir, &u, &v);
+    return env_pdf_uv(ls, u, v);
+}
+
+dr_vec3 dr_env_radiance_pdf(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 dir, double *pdf)
+{
+    if (!s->env.map.data || !ls->env_marginal) {
+        if (pdf)
+            *pdf = dr_light_pdf_env(s, ls, dir);
+        return dr_env_radiance(s, dir);
+    }
+    double u, v;
+    dr_env_dir_to_uv(dir, &u, &v);
+    if (pdf)   /* dr_light_pdf_env's */
+        *pdf = ls->env_entry < 0 || ls->n_entries == 0 ? 0.0 : ls->pick[ls->env_entry] * env_pdf_uv(ls, u, v);
+    return env_radiance_uv(s, u, v);
 }
 
 double dr_light_pdf_env(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 dir)
@@ -700,7 +727,7 @@ void d_env_radiance_dir(const struct dr_scene *s, dr_vec3 dir, dr_vec3 d_L, dr_v
     dr_env_dir_to_uv(dir, &u, &v);
     dr_vec3 g = dr_scale(dr_mul(d_L, s->env.color), s->env.strength);
     double d_out[4] = {g.x, g.y, g.z, 0.0};
-    struct dr_texture tex = {0, DR_WRAP_REPEAT, DR_WRAP_CLAMP};   /* as dr_env_radiance */
+    const struct dr_texture tex = env_tex;   /* dr_env_radiance's lookup */
     d_texture_eval_uv(&tex, &s->env.map, u, v, true, d_out, &d_u, &d_v);
     d_env_dir_to_uv(dir, d_u, d_v, d_dir);
 }

@@ -92,6 +92,11 @@ void d_emission(const struct dr_scene *scene, const struct dr_param_set *params,
                 dr_vec3 d_Le, struct dr_grad_sink *sink);
 /* Environment radiance arriving from direction -dir... i.e. seen along dir. */
 dr_vec3 dr_env_radiance(const struct dr_scene *scene, dr_vec3 dir);
+/* dr_env_radiance(dir), and dr_light_pdf_env(dir) into *pdf unless pdf is
+ * NULL, with the direction's map coordinates computed once (the same values
+ * as the two calls: a ray leaving the scene needs both). */
+dr_vec3 dr_env_radiance_pdf(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 dir,
+                            double *pdf);
 /* Adjoint: d_L into the requested environment colour, strength and texels. */
 void d_env_radiance(const struct dr_scene *scene, const struct dr_param_set *params, dr_vec3 dir, dr_vec3 d_L,
                     struct dr_grad_sink *sink);

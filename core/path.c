@@ -137,8 +137,10 @@ static void stage_escaped(const struct dr_scene *s, const struct dr_path_opts *o
 
 dr_vec3 dr_path_escaped_radiance(const struct dr_scene *s, int depth, double prev_pdf, dr_vec3 d, double *emit_w)
 {
-    *emit_w = depth == 1 ? 1.0 : dr_mis_power(prev_pdf, dr_light_pdf_env(s, s->light_sampler, d));
-    return dr_env_radiance(s, d);
+    double pdf;
+    dr_vec3 Le = dr_env_radiance_pdf(s, s->light_sampler, d, depth == 1 ? NULL : &pdf);
+    *emit_w = depth == 1 ? 1.0 : dr_mis_power(prev_pdf, pdf);
+    return Le;
 }
 
 static bool surface_emits(const struct dr_scene *s, const struct dr_path_opts *o, int64_t tri, int mat)

@@ -670,9 +670,9 @@ static void find_entries(const struct dr_light_tables *lt, dr_f8 u, int64_t e[DR
 }
 
 /* Each lane's light-table entry; env: it is a constant environment
- * (env_light_samples); other[i]: it is a punctual light or a mapped
- * environment, which light_sample leaves to dr_light_sample (for both the
- * area arithmetic runs on a stand-in). */
+ * (env_light_samples); other[i]: it is a punctual light or an environment
+ * map, which light_sample leaves to dr_light_sample (for both the area
+ * arithmetic runs on a stand-in). */
 static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *lt, struct lanes *L,
                         const struct dr_path8_ahead *ahead, dr_f8 u_pick, dr_f8 *pick, dr_f8 *area,
                         uint32_t v[3][DR_SIMD_W], dr_m8 *env, bool *other)
@@ -750,7 +750,7 @@ static void env_light_samples(const struct dr_scene *s, const struct dr_light_ta
     *ok = pick > 0.0 && !dr_is_black(Le) ? *ok | env : *ok & ~env;
 }
 
-/* The lanes that picked a punctual light or a mapped environment: dr_light_sample. */
+/* The lanes that picked a punctual light or an environment map: dr_light_sample. */
 static void other_light_samples(const struct dr_scene *s, const bool *other, dr_v3x8 p, dr_f8 u_pick, dr_f8 u1,
                                 dr_f8 u2, dr_m8 *ok, struct light8 *out)
 {

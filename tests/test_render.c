@@ -257,6 +257,21 @@ static void test_env_map_sampling(void)
         sum_u2 += v * v;
     }
     CHECK(mismatch == 0, "%d samples whose pdf differs from dr_light_pdf_env", mismatch);
+    /* what a ray leaving the scene reads, the map coordinates computed once:
+     * exactly dr_env_radiance and dr_light_pdf_env (a mutation that swaps
+     * the coordinates of the density fails here and nowhere else) */
+    int differ = 0;
+    for (int i = 0; i < 20000; i++) {
+        double z = 1 - 2 * dr_sampler_next(&smp), r = sqrt(fmax(0, 1 - z * z)), ph = 2 * M_PI * dr_sampler_next(&smp);
+        dr_vec3 dir = dr_v3(r * cos(ph), r * sin(ph), z);
+        double pdf = -1.0;
+        dr_vec3 L = dr_env_radiance_pdf(s, s->light_sampler, dir, &pdf), L0 = dr_env_radiance(s, dir);
+        dr_vec3 L1 = dr_env_radiance_pdf(s, s->light_sampler, dir, NULL);
+        differ += pdf != dr_light_pdf_env(s, s->light_sampler, dir) || L.x != L0.x || L.y != L0.y || L.z != L0.z ||
+                  L1.x != L0.x || L1.y != L0.y || L1.z != L0.z;
+    }
+    CHECK(differ == 0, "dr_env_radiance_pdf differs from dr_env_radiance, dr_light_pdf_env in %d of 20000 directions",
+          differ);
     double m_is = sum_is / n, m_u = sum_u / n;
     double se = sqrt((sum_is2 / n - m_is * m_is) / n + (sum_u2 / n - m_u * m_u) / n);
     CHECK(fabs(m_is - m_u) < 4 * se, "env integral: importance %.4f vs uniform %.4f (se %.3g)", m_is, m_u, se);
