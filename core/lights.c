@@ -276,9 +276,13 @@ void dr_env_dir_to_uv(dr_vec3 d, double *u, double *v)
 
 dr_vec3 dr_env_uv_to_dir(double u, double v)
 {
-    double phi = (u - 0.5) * 2.0 * M_PI, theta = v * M_PI;
-    double st = sin(theta);
-    return dr_v3(st * sin(phi), cos(theta), -st * cos(phi));
+    /* phi = 2 pi (u - 1/2), theta = pi v = 2 pi (v / 2): sines and cosines
+     * of turns (dr_sincos_turn, within 2.3e-16; libm took a tenth of a
+     * render under a map here) */
+    double sin_phi, cos_phi, sin_theta, cos_theta;
+    dr_sincos_turn(u - 0.5, &sin_phi, &cos_phi);
+    dr_sincos_turn(0.5 * v, &sin_theta, &cos_theta);
+    return dr_v3(sin_theta * sin_phi, cos_theta, -sin_theta * cos_phi);
 }
 
 /* The map's lookup: repeat across the seam, clamp at the poles. */

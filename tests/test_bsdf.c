@@ -755,6 +755,8 @@ static void test_sincos_turn(void)
     double worst = 0.0, worst_libm = 0.0, worst_unit = 0.0;
     for (int i = 0; i < 1000000; i++) {
         double u = i < 4096 ? i / 4096.0 : rng_next(&r);
+        if (i % 7 == 3)
+            u -= 0.5;   /* half a turn either way (the environment's azimuth) */
         if (i % 5 == 1)
             u = nextafter(u, 2.0);   /* just past a grid point */
         double s, c;
