@@ -329,12 +329,6 @@ static void take_scalar(struct dr_wave_soa *w, int k)
     p->ratio = p->st.ratio;
 }
 
-/* The paths whose ray left the scene end; in a walk, those whose vertex
- * takes the scalar stages leave the arrays for this step (take_scalar); the
- * others close up, in order (moving the last paths into the gaps instead
- * was slower: a pixel's samples, started together, stay neighbours and
- * their first bounces make the more coherent packets). Returns how many
- * remain. */
 /* end_escaped's group i0 for a radiance under a constant environment: the
  * escaped paths' terms eight at a time (dr_path8_escaped_term; escaped()'s
  * sums, the same operations), their radiance out, the others closed up to
@@ -369,6 +363,12 @@ static int end_escaped_group(struct dr_wave_soa *w, const struct dr_scene *s, co
     return j;
 }
 
+/* The paths whose ray left the scene end; in a walk, those whose vertex
+ * takes the scalar stages leave the arrays for this step (take_scalar); the
+ * others close up, in order (moving the last paths into the gaps instead
+ * was slower: a pixel's samples, started together, stay neighbours and
+ * their first bounces make the more coherent packets). Returns how many
+ * remain. */
 static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int n_live,
                        bool prefetch, dr_vec3 *out)
 {
