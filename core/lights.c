@@ -312,12 +312,11 @@ void d_env_radiance(const struct dr_scene *s, const struct dr_param_set *ps, dr_
         return;
     /* L = color * strength * map(dir) */
     dr_vec3 map = dr_v3s(1.0);
-    const struct dr_texture tex = env_tex;   /* dr_env_radiance's lookup */
     double u = 0.0, v = 0.0;
     if (s->env.map.data) {
         double px[4];
         dr_env_dir_to_uv(dir, &u, &v);
-        dr_texture_eval(&tex, &s->env.map, u, v, true, px);
+        dr_texture_eval(&env_tex, &s->env.map, u, v, true, px);
         map = dr_v3(px[0], px[1], px[2]);
     }
     if (ps->env_color >= 0) {
@@ -329,7 +328,7 @@ void d_env_radiance(const struct dr_scene *s, const struct dr_param_set *ps, dr_
     if (ps->env_map >= 0 && s->env.map.data) {
         dr_vec3 g = dr_scale(dr_mul(d_L, s->env.color), s->env.strength);
         double d_out[4] = {g.x, g.y, g.z, 0.0};
-        d_texture_eval(&tex, &s->env.map, u, v, d_out, ps->env_map, k);
+        d_texture_eval(&env_tex, &s->env.map, u, v, d_out, ps->env_map, k);
     }
 }
 
@@ -731,7 +730,6 @@ void d_env_radiance_dir(const struct dr_scene *s, dr_vec3 dir, dr_vec3 d_L, dr_v
     dr_env_dir_to_uv(dir, &u, &v);
     dr_vec3 g = dr_scale(dr_mul(d_L, s->env.color), s->env.strength);
     double d_out[4] = {g.x, g.y, g.z, 0.0};
-    const struct dr_texture tex = env_tex;   /* dr_env_radiance's lookup */
-    d_texture_eval_uv(&tex, &s->env.map, u, v, true, d_out, &d_u, &d_v);
+    d_texture_eval_uv(&env_tex, &s->env.map, u, v, true, d_out, &d_u, &d_v);
     d_env_dir_to_uv(dir, d_u, d_v, d_dir);
 }

@@ -329,38 +329,21 @@ static void take_scalar(struct dr_wave_soa *w, int k)
     p->ratio = p->st.ratio;
 }
 
-/* end_escaped's group i0 for a radiance under a constant environment: the
- * escaped paths' terms eight at a time (dr_path8_escaped_term; escaped()'s
- * sums, the same operations), their radiance out, the others closed up to
- * slot kept. Returns the new kept. */
-static int end_escaped_group(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
-                             int n_live, int i0, int kept, bool prefetch, dr_vec3 *out)
+/* The radiance (w->L's sums) of group i0's paths whose rays left a scene
+ * under a constant environment, eight at once: escaped()'s sums with the
+ * same operations (dr_path8_escaped_term). False when none left. */
+static bool escaped_group(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
+                          int n_live, int i0, dr_v3x8 *L)
 {
-    const int n = n_live - i0 < DR_SIMD_W ? n_live - i0 : DR_SIMD_W;
-    dr_m8 esc = {0};
-    for (int i = 0; i < n; i++)
-        esc[i] = w->tri[i0 + i] < 0 ? -1 : 0;
-    if (dr_m8_any(esc)) {
-        dr_v3x8 e = dr_path8_escaped_term(s, opts, load8(w->depth + i0), load8(w->prev_pdf + i0));
-        dr_v3x8 c = dr_v3x8_mul(load3(w->bx + i0, w->by + i0, w->bz + i0), e);
-        dr_v3x8 L = dr_v3x8_add(load3(w->Lx + i0, w->Ly + i0, w->Lz + i0), c);
-        for (int i = 0; i < n; i++)
-            if (esc[i])
-                out[w->item[i0 + i]] = dr_v3x8_get(&L, i);
-    }
-    const dr_m8 keep = ~esc & first_lanes(n);
-    int j = kept;
-    for (int i = 0; i < n; i++) {
-        if (!keep[i])
-            continue;
-        if (prefetch)
-            dr_mesh_prefetch_vertices(&s->mesh, w->tri[i0 + i]);
-        if (w->structured)
-            w->smp[j] = w->smp[i0 + i];
-        j++;
-    }
-    close_up(w, kept, i0, keep);
-    return j;
+    bool any = false;
+    for (int i = 0; i < DR_SIMD_W && i0 + i < n_live; i++)
+        any |= w->tri[i0 + i] < 0;
+    if (!any)
+        return false;
+    dr_v3x8 e = dr_path8_escaped_term(s, opts, load8(w->depth + i0), load8(w->prev_pdf + i0));
+    *L = dr_v3x8_add(load3(w->Lx + i0, w->Ly + i0, w->Lz + i0),
+                     dr_v3x8_mul(load3(w->bx + i0, w->by + i0, w->bz + i0), e));
+    return true;
 }
 
 /* The paths whose ray left the scene end; in a walk, those whose vertex
@@ -374,18 +357,19 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
 {
     int kept = 0;
     w->n_scalar = 0;
-    if (!w->out && dr_path8_env_constant(s)) {
-        for (int i0 = 0; i0 < n_live; i0 += DR_SIMD_W)
-            kept = end_escaped_group(w, s, opts, n_live, i0, kept, prefetch, out);
-        return kept;
-    }
+    const bool eight_at_once = !w->out && dr_path8_env_constant(s);   /* (a render's radiance) */
     for (int i0 = 0; i0 < n_live; i0 += DR_SIMD_W) {   /* (group by group: close_up) */
         dr_m8 keep = {0};
         int j = kept;
+        dr_v3x8 L_esc;
+        const bool grouped = eight_at_once && escaped_group(w, s, opts, n_live, i0, &L_esc);
         for (int i = 0; i < DR_SIMD_W && i0 + i < n_live; i++) {
             const int k = i0 + i;
             if (w->tri[k] < 0) {
-                escaped(w, s, opts, k, out);
+                if (grouped)
+                    out[w->item[k]] = dr_v3x8_get(&L_esc, i);
+                else
+                    escaped(w, s, opts, k, out);
                 continue;
             }
             if (prefetch)
