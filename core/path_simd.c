@@ -14,6 +14,7 @@
 #include "lights.h"
 #include "material.h"
 #include "normal_map.h"
+#include "texture8.h"
 
 #define COS_EPS DR_BSDF_COS_EPS
 
@@ -109,8 +110,15 @@ struct lanes {
     int64_t tri[DR_SIMD_W], ltri[DR_SIMD_W];
     uint32_t v0[DR_SIMD_W], v1[DR_SIMD_W], v2[DR_SIMD_W];
     bool double_sided[DR_SIMD_W], ldouble_sided[DR_SIMD_W], has_normals[DR_SIMD_W];
-    bool textured[DR_SIMD_W];    /* reads_textures of the hit's material */
-    bool ltextured[DR_SIMD_W];   /* the light's has an emissive texture */
+    /* Textures: the eight-lane lookups' texrefs (texture8.h; NULL: none), and
+     * where the scalar functions read them lane by lane, from a scalar hit */
+    const struct dr_texref *base_tex[DR_SIMD_W], *mr_tex[DR_SIMD_W], *emissive_tex[DR_SIMD_W];
+    const struct dr_texref *lemissive_tex[DR_SIMD_W];   /* the light's */
+    bool any_tex8, any_ltex8;
+    bool textured[DR_SIMD_W];         /* the scalar hit is needed (mat_textures' scalar_hit) */
+    bool scalar_material[DR_SIMD_W];  /* dr_material_eval reads the BSDF's textures */
+    bool scalar_emission[DR_SIMD_W];  /* dr_emission reads the emissive texture */
+    bool ltextured[DR_SIMD_W];        /* the light's emissive texture is dr_emission's */
     bool normal_mapped[DR_SIMD_W];
     bool any_textured, any_ltextured;
     struct dr_hit hit[DR_SIMD_W];   /* the hits of textured lanes, as dr_hit_compute fills them */
@@ -315,21 +323,28 @@ DR_SIMD_INLINE dr_v3x8 normalize(dr_v3x8 a)   /* dr_normalize */
     return dr_v3x8_sel(pos, dr_v3x8_scale(a, 1.0 / dr_f8_sel(pos, l, dr_f8s(1.0))), a);
 }
 
-/* dr_material_eval (the factors; textured lanes call it), and what bsdf.c
- * derives from the material alone (bsdf_alpha, dielectric_f0,
- * no_specular_lobe). */
+/* dr_material_eval (the factors times the textures at TEXCOORD_0 (tu, tv),
+ * times the vertex colour; lanes with a texture texture8.h does not read
+ * call it), and what bsdf.c derives from the material alone (bsdf_alpha,
+ * dielectric_f0, no_specular_lobe). */
 static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const struct lanes *L, dr_m8 end,
-                          const dr_v3x8 *colour)
+                          const dr_v3x8 *colour, dr_f8 tu, dr_f8 tv)
 {
     const void *const *mat = L->mat;
     g->base = gather3(mat, offsetof(struct dr_material, base_color));
-    if (colour)   /* times COLOR_0 (a textured lane's base is dr_material_eval's, below) */
-        g->base = dr_v3x8_mul(g->base, *colour);
     g->metallic = gather(mat, offsetof(struct dr_material, metallic));
     g->specular = gather(mat, offsetof(struct dr_material, specular));
     dr_f8 r = gather(mat, offsetof(struct dr_material, roughness));
+    if (L->any_tex8) {   /* factor x texture (1 where a lane has none), in dr_material_eval's order */
+        g->base = dr_v3x8_mul(g->base, dr_texref8_rgb(s, L->base_tex, ~end, tu, tv, true));
+        dr_v3x8 mr = dr_texref8_rgb(s, L->mr_tex, ~end, tu, tv, false);
+        r = r * mr.y;
+        g->metallic = g->metallic * mr.z;
+    }
+    if (colour)   /* times COLOR_0 (scalar_material lanes: dr_material_eval's, below) */
+        g->base = dr_v3x8_mul(g->base, *colour);
     for (int i = 0; L->any_textured && i < g->n; i++)
-        if (L->textured[i] && !end[i]) {   /* textures (and the vertex colour): dr_material_eval itself */
+        if (L->scalar_material[i] && !end[i]) {   /* textures (and the vertex colour): dr_material_eval itself */
             struct dr_bsdf b;
             dr_material_eval(s, &L->hit[i], &b);
             set_lane(&g->base, i, b.base_color);
@@ -462,14 +477,41 @@ bool dr_path8_hit(const struct dr_scene *s, const struct dr_path_opts *opts, int
     return tri >= 0 && !(opts->params && opts->params->mat_bsdf_active[s->mesh.material[tri]]);
 }
 
-/* Does shading a hit on material m read a texture: then its normal map,
- * BSDF inputs and emission are the scalar functions', lane by lane. (The
- * vertex colours alone are interpolated eight lanes at a time:
- * vertex_colours.) */
+/* Does shading a hit on material m read a texture (mat_textures says how). */
 static bool reads_textures(const struct dr_material *m)
 {
     return m->base_color_tex.texture >= 0 || m->metallic_roughness_tex.texture >= 0 || m->emissive_tex.texture >= 0 ||
            m->normal_tex.texture >= 0;
+}
+
+/* How the stages read material m's textures. The base colour, metallic-
+ * roughness and emissive textures that texture8.h accepts (the usual eight-
+ * bit PNG or JPEG through TEXCOORD_0) are looked up eight lanes at a time.
+ * The rest go through the scalar functions lane by lane, which read a
+ * scalar hit: dr_material_eval for both BSDF textures when either is not
+ * accepted, dr_emission for an emissive texture that is not, and
+ * dr_normal_map_apply for every normal map. */
+struct mat_textures {
+    const struct dr_texref *base, *mr, *emissive;   /* the eight-lane lookups (NULL: none) */
+    bool scalar_material, scalar_emission, scalar_hit;
+};
+
+static void mat_textures(const struct dr_scene *s, const struct dr_material *m, struct mat_textures *t)
+{
+    *t = (struct mat_textures){0};
+    if (!reads_textures(m))
+        return;
+    const struct dr_texref *b = &m->base_color_tex, *mr = &m->metallic_roughness_tex, *e = &m->emissive_tex;
+    t->scalar_material = (b->texture >= 0 && !dr_texref8_accepts(s, b)) || (mr->texture >= 0 && !dr_texref8_accepts(s, mr));
+    if (!t->scalar_material) {
+        t->base = b->texture >= 0 ? b : NULL;
+        t->mr = mr->texture >= 0 ? mr : NULL;
+    }
+    if (e->texture >= 0)
+        t->scalar_emission = !dr_texref8_accepts(s, e);
+    if (e->texture >= 0 && !t->scalar_emission)
+        t->emissive = e;
+    t->scalar_hit = t->scalar_material || t->scalar_emission || m->normal_tex.texture >= 0;
 }
 
 bool dr_path8_reads_textures(const struct dr_scene *s, int64_t tri)
@@ -489,6 +531,28 @@ static dr_v3x8 vertex_colours(const struct dr_mesh *m, const struct lanes *L, dr
             c[k].x[i] = p[0], c[k].y[i] = p[1], c[k].z[i] = p[2];
         }
     return interp(1.0 - b1 - b2, b1, b2, c[0], c[1], c[2]);
+}
+
+/* TEXCOORD_0 at barycentrics (b1, b2) of each lane's triangle tri[i]
+ * (vertices v0..v2): the sums of attributes() and dr_hit_at, 0 where the
+ * triangle has none. */
+static void texcoords0(const struct dr_mesh *m, const int64_t *tri, const uint32_t *v0, const uint32_t *v1,
+                       const uint32_t *v2, dr_f8 b1, dr_f8 b2, dr_f8 *u, dr_f8 *v)
+{
+    const uint32_t *vk[3] = {v0, v1, v2};
+    dr_f8 tu[3], tv[3];
+    dr_m8 has;
+    for (int i = 0; i < DR_SIMD_W; i++)
+        has[i] = m->uvs && (m->flags[tri[i]] & DR_TRI_HAS_UVS) ? -1 : 0;
+    for (int k = 0; k < 3; k++)
+        for (int i = 0; i < DR_SIMD_W; i++) {
+            const float *t = has[i] ? m->uvs + 2 * (size_t)vk[k][i] : NULL;
+            tu[k][i] = t ? t[0] : 0.0f;
+            tv[k][i] = t ? t[1] : 0.0f;
+        }
+    dr_f8 b0 = 1.0 - b1 - b2;
+    *u = dr_f8_sel(has, b0 * tu[0] + b1 * tu[1] + b2 * tu[2], dr_f8s(0.0));
+    *v = dr_f8_sel(has, b0 * tv[0] + b1 * tv[1] + b2 * tv[2], dr_f8s(0.0));
 }
 
 /* ------------------------------------------------------------ the stages */
@@ -573,16 +637,33 @@ void dr_path8_locate_hits(const struct dr_scene *s, const int64_t *tri, dr_v3x8 
 {
     const struct dr_mesh *m = &s->mesh;
     struct lanes L;
+    const struct dr_texref *tex[3][DR_SIMD_W];   /* base, metallic-roughness, emissive: the eight-lane lookups' */
+    bool any_tex8 = false;
     for (int i = 0; i < DR_SIMD_W; i++) {
         L.tri[i] = tri[i];
         triangle_vertices(m, tri[i], &L.v0[i], &L.v1[i], &L.v2[i]);
         L.has_normals[i] = m->flags[tri[i]] & DR_TRI_HAS_NORMALS;
+        struct mat_textures t = {0};
+        if (want[i])
+            mat_textures(s, &s->materials[m->material[tri[i]]], &t);
+        L.textured[i] = t.scalar_hit;
+        tex[0][i] = t.base, tex[1][i] = t.mr, tex[2][i] = t.emissive;
+        any_tex8 |= t.base || t.mr || t.emissive;
     }
     loc->front = locate(m, &L, o, d, &loc->p, &loc->ng, &loc->ns, &loc->eps, &loc->b1, &loc->b2);
     for (int i = 0; i < DR_SIMD_W; i++)
-        if (want[i])
+        if (L.textured[i]) {
             hit_of_lane(m, &L, i, dr_v3x8_get(&o, i), dr_v3x8_get(&loc->p, i), dr_v3x8_get(&loc->ng, i),
                         dr_v3x8_get(&loc->ns, i), loc->eps[i], loc->b1[i], loc->b2[i], loc->front[i] != 0, &hit[i]);
+            dr_material_prefetch(s, &hit[i]);
+        }
+    loc->has_uv = any_tex8;
+    if (!any_tex8)
+        return;
+    texcoords0(m, L.tri, L.v0, L.v1, L.v2, loc->b1, loc->b2, &loc->u, &loc->v);
+    const dr_m8 vector_only = ~mask_of(L.textured);   /* (the others' texels: dr_material_prefetch's) */
+    for (int k = 0; k < 3; k++)
+        dr_texref8_prefetch(s, tex[k], vector_only, loc->u, loc->v, k != 1);
 }
 
 /* dr_emission of a material without an emissive texture: factor x strength,
@@ -598,14 +679,18 @@ DR_SIMD_INLINE dr_v3x8 emission(const void *const *mat, dr_m8 seen)
  * against next-event estimation (dr_light_pdf_area, dr_mis_power), where
  * the lane's triangle emits (g->emits, g->Le, g->emit_w). */
 static void emission_seen(const struct dr_scene *s, const struct dr_light_tables *lt, const struct lanes *L,
-                          const struct dr_path8_in *in, dr_v3x8 ng, dr_m8 front, struct dr_path8 *g)
+                          const struct dr_path8_in *in, dr_v3x8 ng, dr_m8 front, dr_f8 tu, dr_f8 tv,
+                          struct dr_path8 *g)
 {
     g->emits = dr_f8_gt(gather_at(lt->tri_pick, L->tri, 1, 0), dr_f8s(0.0));
     if (!dr_m8_any(g->emits))
         return;
-    dr_v3x8 Le = emission(L->mat, front | mask_of(L->double_sided));
+    const dr_m8 seen = front | mask_of(L->double_sided);
+    dr_v3x8 Le = emission(L->mat, seen);
+    if (L->any_tex8)   /* dr_emission's factor x strength x texture, where seen */
+        Le = dr_v3x8_mul(Le, dr_texref8_rgb(s, L->emissive_tex, g->emits & seen, tu, tv, true));
     for (int i = 0; L->any_textured && i < in->n; i++)
-        if (g->emits[i] && L->textured[i])
+        if (g->emits[i] && L->scalar_emission[i])
             set_lane(&Le, i, dr_emission(s, &L->hit[i]));
     dr_f8 density = gather_at(lt->tri_pick_density, L->tri, 1, 0);
     dr_v3x8 dd = dr_v3x8_sub(g->p, in->prev_p);
@@ -714,6 +799,7 @@ static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *
             L->lmat[i] = &s->materials[m->material[0]];
             L->ldouble_sided[i] = true;
             L->ltextured[i] = false;
+            L->lemissive_tex[i] = NULL;
         } else {
             (*pick)[i] = lt->pick[e];
             (*area)[i] = lt->emitter_area[e];
@@ -721,7 +807,10 @@ static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *
             const struct dr_material *lm = &s->materials[m->material[L->ltri[i]]];
             L->lmat[i] = lm;
             L->ldouble_sided[i] = lm->double_sided;
-            L->ltextured[i] = lm->emissive_tex.texture >= 0;
+            const bool tex = lm->emissive_tex.texture >= 0, tex8 = tex && dr_texref8_accepts(s, &lm->emissive_tex);
+            L->lemissive_tex[i] = tex8 ? &lm->emissive_tex : NULL;
+            L->any_ltex8 |= tex8;
+            L->ltextured[i] = tex && !tex8;
             L->any_ltextured |= L->ltextured[i];
         }
         triangle_vertices(m, L->ltri[i], &v[0][i], &v[1][i], &v[2][i]);
@@ -797,7 +886,14 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     out->wi = dr_v3x8_scale(d, 1.0 / dist);
     dr_f8 cos_l = dr_v3x8_dot(lng, out->wi);
     ok &= ~dr_f8_eq(cos_l, dr_f8s(0.0)) & dr_f8_gt(area, dr_f8s(0.0));
-    out->radiance = emission(L->lmat, dr_f8_lt(cos_l, dr_f8s(0.0)) | mask_of(L->ldouble_sided));
+    const dr_m8 seen = dr_f8_lt(cos_l, dr_f8s(0.0)) | mask_of(L->ldouble_sided);
+    out->radiance = emission(L->lmat, seen);
+    if (L->any_ltex8) {   /* dr_emission's texture at the light point (no texel read for a sample that failed) */
+        dr_f8 tu, tv;
+        texcoords0(m, L->ltri, v[0], v[1], v[2], b1, b2, &tu, &tv);
+        const dr_m8 on = ok & seen & ~mask_of(other);
+        out->radiance = dr_v3x8_mul(out->radiance, dr_texref8_rgb(s, L->lemissive_tex, on, tu, tv, true));
+    }
     for (int i = 0; L->any_ltextured && i < DR_SIMD_W; i++)
         if (ok[i] && L->ltextured[i] && !other[i]) {   /* (no texel read for a sample that failed) */
             struct dr_hit h;   /* the light point as dr_light_sample makes it */
@@ -826,14 +922,23 @@ static inline uint32_t vertex_dim(double depth)
 static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, struct lanes *L)
 {
     const struct dr_mesh *m = &s->mesh;
-    L->any_textured = L->any_ltextured = false;
+    L->any_textured = L->any_ltextured = L->any_tex8 = L->any_ltex8 = false;
+    const struct dr_material *prev_mat = NULL;
+    struct mat_textures t;
     for (int i = 0; i < DR_SIMD_W; i++) {
         int64_t tri = in->tri[i];
         L->tri[i] = tri;
         triangle_vertices(m, tri, &L->v0[i], &L->v1[i], &L->v2[i]);
         const struct dr_material *mat = &s->materials[m->material[tri]];
         L->mat[i] = mat;
-        L->textured[i] = reads_textures(mat);
+        if (mat != prev_mat)   /* (neighbouring lanes mostly share a material) */
+            mat_textures(s, mat, &t);
+        prev_mat = mat;
+        L->base_tex[i] = t.base, L->mr_tex[i] = t.mr, L->emissive_tex[i] = t.emissive;
+        L->any_tex8 |= t.base || t.mr || t.emissive;
+        L->textured[i] = t.scalar_hit;
+        L->scalar_material[i] = t.scalar_material;
+        L->scalar_emission[i] = t.scalar_emission;
         L->normal_mapped[i] = mat->normal_tex.texture >= 0;
         L->double_sided[i] = mat->double_sided;
         L->has_normals[i] = m->flags[tri] & DR_TRI_HAS_NORMALS;
@@ -1017,6 +1122,11 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
         g->p = l->p, ng = l->ng, ns = l->ns, g->eps = l->eps, b1 = l->b1, b2 = l->b2, front = l->front;
     } else
         front = locate(m, &L, o, d, &g->p, &ng, &ns, &g->eps, &b1, &b2);
+    dr_f8 tu = dr_f8s(0.0), tv = dr_f8s(0.0);   /* TEXCOORD_0, for the eight-lane texture lookups */
+    if (L.any_tex8 && in->located && in->located->has_uv)
+        tu = in->located->u, tv = in->located->v;
+    else if (L.any_tex8)
+        texcoords0(m, L.tri, L.v0, L.v1, L.v2, b1, b2, &tu, &tv);
     for (int i = 0; i < n; i++) {
         if (!L.textured[i])
             continue;
@@ -1033,7 +1143,7 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     }
     g->emits = (dr_m8){0};
     if (opts->stages & DR_STAGE_EMISSION)
-        emission_seen(s, &lt, &L, in, ng, front, g);
+        emission_seen(s, &lt, &L, in, ng, front, tu, tv, g);
 
     /* stage_material: the frame towards the ray, the BSDF, the random numbers */
     dr_m8 end = dr_f8_ge(depth, dr_f8s(opts->max_depth)) | (~front & ~mask_of(L.double_sided));
@@ -1052,7 +1162,7 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     dr_v3x8 colour;
     if (m->colors)
         colour = vertex_colours(m, &L, b1, b2);
-    material_eval(s, g, &L, end, m->colors ? &colour : NULL);
+    material_eval(s, g, &L, end, m->colors ? &colour : NULL, tu, tv);
     g->spec_p = specular_prob(g, g->wo_z);   /* (wo.z <= COS_EPS: unused) */
     dr_f8 u[7];
     if (in->ahead)

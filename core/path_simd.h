@@ -48,7 +48,7 @@ struct dr_path8_in {
     dr_u8 key;                    /* the sampler's key (independent sampler) */
     const struct dr_sampler *sampler[DR_SIMD_W];   /* each lane's sampler where it is a structured one (sobol,
                                                       stratified: its draws are taken lane by lane); NULL: key's */
-    const struct dr_hit *hit[DR_SIMD_W];   /* a lane that reads textures: its hit if located (NULL: computed) */
+    const struct dr_hit *hit[DR_SIMD_W];   /* a lane that needs the scalar hit: its hit if located (NULL: computed) */
     const struct dr_path8_located *located;   /* the group's hit points, if located before (NULL: computed) */
     const struct dr_path8_ahead *ahead;       /* its random numbers and light picks, if taken ahead (NULL) */
 };
@@ -60,6 +60,8 @@ struct dr_path8_located {
     dr_v3x8 p, ng, ns;            /* hit point, geometric and shading normal (not yet towards the ray) */
     dr_f8 eps, b1, b2;
     dr_m8 front;
+    bool has_uv;                  /* u, v hold TEXCOORD_0 (the group has eight-lane texture lookups) */
+    dr_f8 u, v;
 };
 
 /* A group's vertex random numbers and light-table entries, found before
@@ -107,16 +109,19 @@ bool dr_path8_applies(const struct dr_scene *scene, const struct dr_path_opts *o
  * stages mark them (dr_path8's diff), and a walk's sums follow. */
 bool dr_path8_hit(const struct dr_scene *scene, const struct dr_path_opts *opts, int64_t tri);
 
-/* Does shading a hit on triangle tri read textures? Such lanes call the
- * scalar material, emission and normal-map functions with the hit (vertex
- * colours alone do not need them). */
+/* Does shading a hit on triangle tri read textures? Eight-bit base colour,
+ * metallic-roughness and emissive textures are looked up eight lanes at a
+ * time (texture8.h); the other lanes call the scalar material, emission and
+ * normal-map functions with a scalar hit. (Vertex colours alone are no
+ * texture.) */
 bool dr_path8_reads_textures(const struct dr_scene *scene, int64_t tri);
-/* dr_hit_compute of the lanes i with want[i], eight-wide (the hit point
- * and normals as the hit stage's own locate computes them; the same values
- * as the scalar function's): into hit[i], and every lane's hit point into
- * loc, which shading then takes instead of solving again (dr_path8_in's
- * located). Every lane's tri must be a triangle. For a tracer that locates
- * textured hits before shading, to prefetch their texels. */
+/* For a tracer that locates textured hits before shading, to prefetch their
+ * texels: every lane's hit point into loc, eight-wide as the hit stage's own
+ * locate computes it, which shading then takes instead of solving again
+ * (dr_path8_in's located); of the lanes i with want[i], the ones that need
+ * the scalar hit get dr_hit_compute's (the same values) in hit[i], and
+ * every lane with want[i] has the texels it will read prefetched. Every
+ * lane's tri must be a triangle. */
 void dr_path8_locate_hits(const struct dr_scene *scene, const int64_t *tri, dr_v3x8 o, dr_v3x8 d,
                           const bool *want, struct dr_hit *hit, struct dr_path8_located *loc);
 /* dr_path_step_hit of n <= DR_SIMD_W lanes that dr_path8_hit accepts:

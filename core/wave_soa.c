@@ -44,7 +44,7 @@ struct dr_wave_soa {
     int64_t sowner[SLOTS];
     bool socc[SLOTS];
     double inf[SLOTS];                          /* the traces' tmax */
-    struct dr_hit hit[SLOTS];                   /* textured lanes' hits, located to prefetch their texels */
+    struct dr_hit hit[SLOTS];                   /* scalar hits of textured lanes (dr_path8_locate_hits) */
     struct dr_path8 group[LANES / DR_SIMD_W];   /* the hit stage's results, for the continuation */
     /* before shading: the hit points of the groups located (locate_textured),
      * the random numbers and light picks taken ahead (pick_ahead) */
@@ -391,8 +391,9 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
     return kept;
 }
 
-/* Before shading (prefetching): the hits of the lanes that read textures,
- * and their texels asked for, so that the cache misses overlap. */
+/* Before shading (prefetching): the hit points of the groups with lanes
+ * that read textures (and the scalar hits of the lanes that need one), and
+ * their texels asked for, so that the cache misses overlap. */
 static void locate_textured(struct dr_wave_soa *w, const struct dr_scene *s, int n_live)
 {
     for (int i0 = 0; i0 < n_live; i0 += DR_SIMD_W) {   /* (the last group padded: pad_last_group) */
@@ -404,9 +405,6 @@ static void locate_textured(struct dr_wave_soa *w, const struct dr_scene *s, int
             continue;
         dr_path8_locate_hits(s, w->tri + i0, load3(w->ox + i0, w->oy + i0, w->oz + i0),
                              load3(w->dx + i0, w->dy + i0, w->dz + i0), want, w->hit + i0, &w->loc[i0 / DR_SIMD_W]);
-        for (int i = 0; i < DR_SIMD_W; i++)
-            if (want[i])
-                dr_material_prefetch(s, &w->hit[i0 + i]);
     }
 }
 

@@ -1,0 +1,172 @@
+/* Eight-lane texture lookups (texture8.h). Each helper names the scalar
+ * function in image.c or geometry.h it mirrors; keep them in step when
+ * either changes (test_texture8 fails otherwise). */
+#include "texture8.h"
+
+#include "image.h"
+
+bool dr_texref8_accepts(const struct dr_scene *s, const struct dr_texref *r)
+{
+    if (r->texture < 0 || r->texcoord != 0)
+        return false;
+    const struct dr_image *img = &s->images[s->textures[r->texture].image];
+    return img->bytes && img->lut && (img->channels == 3 || img->channels == 4) && img->width > 0 &&
+           img->height > 0;
+}
+
+/* reduce_coord: NaN and infinities to 0, then the wrap mode's period. */
+DR_SIMD_INLINE dr_f8 reduce_coord8(dr_f8 t, enum dr_wrap mode)
+{
+    t = dr_f8_sel(dr_f8_eq(t - t, dr_f8s(0.0)), t, dr_f8s(0.0));
+    switch (mode) {
+    case DR_WRAP_CLAMP:
+        return dr_f8_clamp(t, -1.0, 2.0);
+    case DR_WRAP_MIRROR:
+        return t - 2.0 * dr_f8_floor(0.5 * t);
+    case DR_WRAP_REPEAT:
+    default:
+        return t - dr_f8_floor(t);
+    }
+}
+
+/* wrap_index for the indices a reduced coordinate gives (integers in
+ * doubles): in [-1, n] for REPEAT, [-1, 2n] for MIRROR, where wrap_index's
+ * remainder is one period added or taken off. */
+DR_SIMD_INLINE dr_f8 wrap_index8(dr_f8 i, double n, enum dr_wrap mode)
+{
+    switch (mode) {
+    case DR_WRAP_CLAMP:
+        return dr_f8_clamp(i, 0.0, n - 1.0);
+    case DR_WRAP_MIRROR: {
+        const double p = 2.0 * n;
+        dr_f8 m = dr_f8_sel(dr_f8_lt(i, dr_f8s(0.0)), i + p, dr_f8_sel(dr_f8_ge(i, dr_f8s(p)), i - p, i));
+        dr_f8 a = m - n;
+        a = dr_f8_sel(dr_f8_lt(a, dr_f8s(0.0)), -1.0 - a, a);
+        return (n - 1.0) - a;
+    }
+    case DR_WRAP_REPEAT:
+    default:
+        return dr_f8_sel(dr_f8_lt(i, dr_f8s(0.0)), i + n, dr_f8_sel(dr_f8_ge(i, dr_f8s(n)), i - n, i));
+    }
+}
+
+/* dr_texture_taps: the four texel indices and weights. */
+static void taps8(const struct dr_texture *tex, const struct dr_image *img, dr_f8 u, dr_f8 v, int64_t idx[4][DR_SIMD_W],
+                  dr_f8 wt[4])
+{
+    const double w = img->width, h = img->height;
+    dr_f8 x = reduce_coord8(u, tex->wrap_s) * w - 0.5;
+    dr_f8 y = reduce_coord8(v, tex->wrap_t) * h - 0.5;
+    dr_f8 fx0 = dr_f8_floor(x), fy0 = dr_f8_floor(y);
+    dr_f8 fx = x - fx0, fy = y - fy0;
+    dr_f8 xa = wrap_index8(fx0, w, tex->wrap_s), xb = wrap_index8(fx0 + 1.0, w, tex->wrap_s);
+    dr_f8 ya = wrap_index8(fy0, h, tex->wrap_t), yb = wrap_index8(fy0 + 1.0, h, tex->wrap_t);
+    dr_f8 row_a = ya * w, row_b = yb * w;   /* (integers below 2^53: exact) */
+    const dr_f8 i[4] = {row_a + xa, row_a + xb, row_b + xa, row_b + xb};
+    for (int k = 0; k < 4; k++)
+        for (int l = 0; l < DR_SIMD_W; l++)
+            idx[k][l] = (int64_t)i[k][l];
+    wt[0] = (1.0 - fx) * (1.0 - fy);
+    wt[1] = fx * (1.0 - fy);
+    wt[2] = (1.0 - fx) * fy;
+    wt[3] = fx * fy;
+}
+
+/* dr_texref_uv of TEXCOORD_0 (u, v): through the transform if r has one. */
+DR_SIMD_INLINE void texref_uv8(const struct dr_texref *r, dr_f8 *u, dr_f8 *v)
+{
+    if (!r->transformed)
+        return;
+    const double *x = r->xf;
+    dr_f8 tu = x[0] * *u + x[1] * *v + x[2];
+    *v = x[3] * *u + x[4] * *v + x[5];
+    *u = tu;
+}
+
+/* The lanes of todo whose texref is r[first of todo], taken off todo. */
+static dr_m8 next_group(const struct dr_texref *const r[DR_SIMD_W], dr_m8 *todo, const struct dr_texref **group)
+{
+    int first = 0;
+    while (!(*todo)[first])
+        first++;
+    *group = r[first];
+    dr_m8 same;
+    for (int i = 0; i < DR_SIMD_W; i++)
+        same[i] = (*todo)[i] && r[i] == *group ? -1 : 0;
+    *todo &= ~same;
+    return same;
+}
+
+/* The lanes of on with a texref. */
+static dr_m8 with_texref(const struct dr_texref *const r[DR_SIMD_W], dr_m8 on)
+{
+    dr_m8 m;
+    for (int i = 0; i < DR_SIMD_W; i++)
+        m[i] = on[i] && r[i] ? -1 : 0;
+    return m;
+}
+
+/* The 256 values an eight-bit image's colour channels stand for (texel8's
+ * choice: decoded where asked, or where float storage would have decoded
+ * in place). */
+static const float *colour_lut(const struct dr_image *img, bool use_linear)
+{
+    return (use_linear || img->linear_in_data) && img->lut_linear ? img->lut_linear : img->lut;
+}
+
+dr_v3x8 dr_texref8_rgb(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 on, dr_f8 u,
+                       dr_f8 v, bool use_linear)
+{
+    dr_v3x8 out = {dr_f8s(1.0), dr_f8s(1.0), dr_f8s(1.0)};
+    dr_m8 todo = with_texref(r, on);
+    while (dr_m8_any(todo)) {
+        const struct dr_texref *ref;
+        const dr_m8 lanes = next_group(r, &todo, &ref);
+        const struct dr_texture *tex = &s->textures[ref->texture];
+        const struct dr_image *img = &s->images[tex->image];
+        dr_f8 tu = u, tv = v;
+        texref_uv8(ref, &tu, &tv);
+        int64_t idx[4][DR_SIMD_W];
+        dr_f8 wt[4];
+        taps8(tex, img, tu, tv, idx, wt);
+        const float *lut = colour_lut(img, use_linear);
+        const size_t c = (size_t)img->channels;
+        /* dr_texture_eval's sum, tap by tap in its order: acc += wt * texel */
+        dr_v3x8 acc = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
+        for (int k = 0; k < 4; k++) {
+            dr_v3x8 t = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};   /* texel8's floats, widened (exact) */
+            for (int i = 0; i < DR_SIMD_W; i++)
+                if (lanes[i]) {
+                    const uint8_t *b = img->bytes + (size_t)idx[k][i] * c;
+                    t.x[i] = lut[b[0]], t.y[i] = lut[b[1]], t.z[i] = lut[b[2]];
+                }
+            acc.x = acc.x + wt[k] * t.x;
+            acc.y = acc.y + wt[k] * t.y;
+            acc.z = acc.z + wt[k] * t.z;
+        }
+        out = dr_v3x8_sel(lanes, acc, out);
+    }
+    return out;
+}
+
+void dr_texref8_prefetch(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 on, dr_f8 u,
+                         dr_f8 v, bool use_linear)
+{
+    (void)use_linear;   /* (eight-bit storage: the same bytes either way) */
+    dr_m8 todo = with_texref(r, on);
+    while (dr_m8_any(todo)) {
+        const struct dr_texref *ref;
+        const dr_m8 lanes = next_group(r, &todo, &ref);
+        const struct dr_texture *tex = &s->textures[ref->texture];
+        const struct dr_image *img = &s->images[tex->image];
+        dr_f8 tu = u, tv = v;
+        texref_uv8(ref, &tu, &tv);
+        int64_t idx[4][DR_SIMD_W];
+        dr_f8 wt[4];
+        taps8(tex, img, tu, tv, idx, wt);
+        for (int k = 0; k < 4; k++)
+            for (int i = 0; i < DR_SIMD_W; i++)
+                if (lanes[i])
+                    __builtin_prefetch(img->bytes + (size_t)idx[k][i] * (size_t)img->channels);
+    }
+}

@@ -1,0 +1,34 @@
+/* Texture lookups for eight lanes at once (simd.h): dr_texture_eval's
+ * bilinear lookup, through dr_texref_uv's transform, of eight-bit RGB and
+ * RGBA images, the kind nearly every glTF file's PNG and JPEG textures are.
+ * The same operations as image.c's dr_texture_taps, texel8 and add_texel
+ * on the same inputs, so the results are the scalar lookup's to the bit
+ * (test_texture8 checks both against each other). Other images (float
+ * storage, which parameters and HDR files have; grey ones) and TEXCOORD_1
+ * stay with the scalar functions. */
+#ifndef DR_TEXTURE8_H
+#define DR_TEXTURE8_H
+
+#include <stdbool.h>
+
+#include "scene.h"
+#include "simd.h"
+
+/* Does the eight-lane lookup read texref r: a texture that is there, an
+ * eight-bit RGB or RGBA image with pixels, TEXCOORD_0. */
+bool dr_texref8_accepts(const struct dr_scene *s, const struct dr_texref *r);
+
+/* For each lane i of on whose r[i] is not NULL (a texref dr_texref8_accepts):
+ * the colour channels dr_texture_eval returns for r[i]'s texture at
+ * dr_texref_uv of TEXCOORD_0 (u[i], v[i]), use_linear as there. Other
+ * lanes get 1 in every channel, so a product with the result leaves them
+ * as they were, exactly. Lanes sharing a texref are looked up together. */
+dr_v3x8 dr_texref8_rgb(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 on, dr_f8 u,
+                       dr_f8 v, bool use_linear);
+
+/* Asks the cache for the texels dr_texref8_rgb(s, r, on, u, v, use_linear)
+ * will read, without waiting (dr_texture_prefetch's job). */
+void dr_texref8_prefetch(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 on, dr_f8 u,
+                         dr_f8 v, bool use_linear);
+
+#endif
