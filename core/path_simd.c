@@ -666,13 +666,28 @@ void dr_path8_locate_hits(const struct dr_scene *s, const int64_t *tri, dr_v3x8 
         dr_texref8_prefetch(s, tex[k], vector_only, loc->u, loc->v, k != 1);
 }
 
+/* Each lane's material's emissive factor x strength (dr_emission's e). */
+DR_SIMD_INLINE dr_v3x8 emissive(const void *const *mat)
+{
+    return dr_v3x8_scale(gather3(mat, offsetof(struct dr_material, emissive_factor)),
+                         gather(mat, offsetof(struct dr_material, emissive_strength)));
+}
+
 /* dr_emission of a material without an emissive texture: factor x strength,
  * on the front (or both sides). */
 DR_SIMD_INLINE dr_v3x8 emission(const void *const *mat, dr_m8 seen)
 {
-    dr_v3x8 e = dr_v3x8_scale(gather3(mat, offsetof(struct dr_material, emissive_factor)),
-                              gather(mat, offsetof(struct dr_material, emissive_strength)));
-    return dr_v3x8_sel(seen, e, (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)});
+    return dr_v3x8_sel(seen, emissive(mat), (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)});
+}
+
+/* a[k[i]] for the lanes of on, 0 for the others (which read nothing) */
+DR_SIMD_INLINE dr_f8 gather_where(const double *a, const int64_t *k, dr_m8 on)
+{
+    dr_f8 r = dr_f8s(0.0);
+    for (int i = 0; i < DR_SIMD_W; i++)
+        if (on[i])
+            r[i] = a[k[i]];
+    return r;
 }
 
 /* stage_emission: what the hit emits towards the ray and its MIS weight
@@ -682,17 +697,25 @@ static void emission_seen(const struct dr_scene *s, const struct dr_light_tables
                           const struct dr_path8_in *in, dr_v3x8 ng, dr_m8 front, dr_f8 tu, dr_f8 tv,
                           struct dr_path8 *g)
 {
-    g->emits = dr_f8_gt(gather_at(lt->tri_pick, L->tri, 1, 0), dr_f8s(0.0));
+    /* Only a material whose factor x strength is not black has emitting
+     * triangles (the light sampler's emitter_power_weight): the per-triangle
+     * table, a cache miss a lane on a large mesh, is read for those lanes. */
+    const dr_v3x8 e = emissive(L->mat);
+    const dr_m8 may_emit = ~dr_v3x8_is_black(e);
+    g->emits = (dr_m8){0};
+    if (!dr_m8_any(may_emit))
+        return;
+    g->emits = dr_f8_gt(gather_where(lt->tri_pick, L->tri, may_emit), dr_f8s(0.0));
     if (!dr_m8_any(g->emits))
         return;
     const dr_m8 seen = front | mask_of(L->double_sided);
-    dr_v3x8 Le = emission(L->mat, seen);
+    dr_v3x8 Le = dr_v3x8_sel(seen, e, (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)});
     if (L->any_tex8)   /* dr_emission's factor x strength x texture, where seen */
         Le = dr_v3x8_mul(Le, dr_texref8_rgb(s, L->emissive_tex, g->emits & seen, tu, tv, true));
     for (int i = 0; L->any_textured && i < in->n; i++)
         if (g->emits[i] && L->scalar_emission[i])
             set_lane(&Le, i, dr_emission(s, &L->hit[i]));
-    dr_f8 density = gather_at(lt->tri_pick_density, L->tri, 1, 0);
+    dr_f8 density = gather_where(lt->tri_pick_density, L->tri, g->emits);
     dr_v3x8 dd = dr_v3x8_sub(g->p, in->prev_p);
     dr_f8 d2 = dr_v3x8_dot(dd, dd);
     dr_f8 cos_l = dr_f8_abs(dr_v3x8_dot(ng, dd)) / dr_f8_sqrt(d2);
