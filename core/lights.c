@@ -30,6 +30,8 @@ struct dr_light_sampler {
     double *env_conditional;   /* env_h * (env_w + 1): cdf over columns per row */
     uint32_t *env_marginal_guide;      /* env_h + 1: their guide tables (cdf.h) */
     uint32_t *env_conditional_guide;   /* env_h * (env_w + 1) */
+    double *env_row_sin;       /* env_h: sin of each row's centre angle, the weights' factor (libm's sin
+                                  per sample and per escaped ray was 3 % of a render under a map) */
     double env_integral;       /* sum of texel weights / (w h), for the pdf */
     int texture_averages;      /* whole-image averages the build made (one per emissive image) */
 };
@@ -80,14 +82,15 @@ static int build_env_tables(const struct dr_scene *s, struct dr_light_sampler *l
     ls->env_h = h;
     ls->env_marginal = malloc(sizeof(double) * (size_t)(h + 1));
     ls->env_conditional = malloc(sizeof(double) * (size_t)h * (size_t)(w + 1));
-    if (!ls->env_marginal || !ls->env_conditional)
+    ls->env_row_sin = malloc(sizeof(double) * (size_t)h);
+    if (!ls->env_marginal || !ls->env_conditional || !ls->env_row_sin)
         return DR_ERR_NOMEM;
     double total = 0.0;
     ls->env_marginal[0] = 0.0;
     const float *texels = img->linear ? img->linear : img->data;
     for (int y = 0; y < h; y++) {
         /* texel weight: mean radiance times the solid angle of its row */
-        double sin_theta = sin(M_PI * (y + 0.5) / h);
+        double sin_theta = ls->env_row_sin[y] = sin(M_PI * (y + 0.5) / h);
         double *row = ls->env_conditional + (size_t)y * (w + 1);
         row[0] = 0.0;
         for (int x = 0; x < w; x++) {
@@ -262,6 +265,7 @@ void dr_light_sampler_destroy(struct dr_light_sampler *ls)
     free(ls->env_marginal);
     free(ls->env_conditional);
     free(ls->env_marginal_guide);
+    free(ls->env_row_sin);
     free(ls->env_conditional_guide);
     free(ls);
 }
@@ -339,7 +343,7 @@ static double env_pdf_uv(const struct dr_light_sampler *ls, double u, double v)
     int y = (int)dr_clamp(floor(v * ls->env_h), 0, ls->env_h - 1);
     const double *row = ls->env_conditional + (size_t)y * (ls->env_w + 1);
     double p_uv = (ls->env_marginal[y + 1] - ls->env_marginal[y]) * (row[x + 1] - row[x]) * ls->env_w * ls->env_h;
-    double st = sin(M_PI * (y + 0.5) / ls->env_h);
+    double st = ls->env_row_sin[y];
     /* Use the row-centre sine, the same factor the weights were built with,
      * so the density stays finite at the poles and matches sampling. */
     return st > 0.0 ? p_uv / (2.0 * M_PI * M_PI * st) : 0.0;
@@ -504,7 +508,7 @@ static bool sample_env(const struct dr_scene *s, const struct dr_light_sampler *
         double du = (u2 - row[x]) / px;
         double u = (x + dr_clamp(du, 0.0, 1.0)) / ls->env_w, v = (y + dr_clamp(dv, 0.0, 1.0)) / ls->env_h;
         dir = dr_env_uv_to_dir(u, v);
-        double st = sin(M_PI * (y + 0.5) / ls->env_h);
+        double st = ls->env_row_sin[y];
         pdf = st > 0.0 ? py * px * ls->env_w * ls->env_h / (2.0 * M_PI * M_PI * st) : 0.0;
     }
     if (!(pdf > 0.0))
