@@ -36,6 +36,13 @@ void dr_image_set_max_bytes(unsigned long long bytes);
  * false, with dr_last_error naming where it looked, when it cannot be loaded
  * (an installation problem, not a problem of the user's file). */
 bool dr_image_library_ok(void);
+/* Starts loading the image library on a thread of its own and returns at
+ * once (no-op after the first call, or if the thread cannot be made: the
+ * first use loads it then). The first use waits for that load instead of
+ * doing its own; an error is reported there, as without the preload. A
+ * program calls it once its own threads exist (dr_parallel_set_started_hook),
+ * so that the render overlaps the load's 0.2 s (image_plugin.h). */
+void dr_image_library_preload(void);
 
 /* True when OpenImageIO can write this file name's format. */
 bool dr_image_can_write(const char *path);

@@ -171,6 +171,27 @@ bool dr_image_library_ok(void)
     return get_plugin() != NULL;
 }
 
+static void *preload_main(void *arg)
+{
+    (void)arg;
+    pthread_once(&load_once, load);
+    return NULL;
+}
+
+void dr_image_library_preload(void)
+{
+    static atomic_flag asked = ATOMIC_FLAG_INIT;
+    if (atomic_flag_test_and_set(&asked))
+        return;
+    pthread_attr_t attr;
+    pthread_t t;
+    if (pthread_attr_init(&attr) != 0)
+        return;
+    pthread_attr_setdetachstate(&attr, PTHREAD_CREATE_DETACHED);
+    pthread_create(&t, &attr, preload_main, NULL);   /* (failing: the first use loads it) */
+    pthread_attr_destroy(&attr);
+}
+
 /* Formats every OpenImageIO build drender supports writes (tests/test_image.c
  * checks each against the library). Answering for these without the library
  * lets `render` of an untextured scene trace its first ray without it. */

@@ -12,6 +12,9 @@
  * loading? Tried and measured: glibc holds a lock during dlopen that
  * pthread_create also takes, so the render's (and Embree's) thread creation
  * waited for the whole load (0.34 s in a 4-line test) and nothing overlapped.
+ * So the load starts later, once a render's workers exist: the CLI sets
+ * dr_image_library_preload as the parallel runs' started hook (parallel.h),
+ * and the render overlaps the load instead of the write waiting for it.
  *
  * Programs that link image_io.o and vis.o directly (tests, fuzz targets) get
  * the table through the weak symbol below and never dlopen anything. */

@@ -51,6 +51,20 @@ int dr_cpu_count(void)
     return n >= 1 ? (int)n : 1;
 }
 
+static void (*_Atomic started_hook)(void);
+
+void dr_parallel_set_started_hook(void (*hook)(void))
+{
+    atomic_store(&started_hook, hook);
+}
+
+static void workers_started(void)
+{
+    void (*hook)(void) = atomic_load(&started_hook);
+    if (hook)
+        hook();
+}
+
 int dr_parallel_tiles(int width, int height, int threads, dr_tile_fn fn, dr_progress_fn progress, void *ctx)
 {
     struct job j;
@@ -87,6 +101,7 @@ int dr_parallel_tiles(int width, int height, int threads, dr_tile_fn fn, dr_prog
             break;
         started++;
     }
+    workers_started();
     worker_main(&ws[0]);
     for (int i = 1; i <= started; i++)
         pthread_join(ids[i], NULL);
@@ -160,6 +175,7 @@ static int range_run(int64_t n, int64_t chunk, int threads, bool fixed, dr_range
             break;
         started++;
     }
+    workers_started();
     range_main(&ws[0]);
     for (int i = 1; i <= started; i++)
         pthread_join(ids[i], NULL);
