@@ -168,6 +168,37 @@ static inline struct dr_image sb_image(int w, int h, int c, const float *px, flo
     return im;
 }
 
+/* sb_image's pixels in eight-bit storage, as dr_image_read_memory8 leaves
+ * an sRGB PNG's (values rounded to k / 255; the colour decoded through the
+ * table): the kind the packet renderer looks up eight lanes at a time. */
+static inline struct dr_image sb_image8(int w, int h, int c, const float *px)
+{
+    struct dr_image im;
+    memset(&im, 0, sizeof im);
+    im.width = w;
+    im.height = h;
+    im.channels = c;
+    im.file_is_srgb = true;
+    size_t n = (size_t)w * h * c;
+    im.bytes = malloc(n);
+    im.lut = malloc(512 * sizeof(float));   /* lut, then lut_linear */
+    if (!im.bytes || !im.lut) {
+        fprintf(stderr, "scene_builder: out of memory\n");
+        exit(2);
+    }
+    for (size_t i = 0; i < n; i++) {
+        float v = px[i] < 0.0f ? 0.0f : (px[i] > 1.0f ? 1.0f : px[i]);
+        im.bytes[i] = (uint8_t)(v * 255.0f + 0.5f);
+    }
+    for (int k = 0; k < 256; k++)
+        im.lut[k] = (float)(k / 255.0);
+    if (dr_image_make_linear(&im) != 0) {
+        fprintf(stderr, "scene_builder: cannot decode an eight-bit image\n");
+        exit(2);
+    }
+    return im;
+}
+
 /* Adds im to the scene's images and a texture on it (clamped both ways);
  * returns the texture's index. */
 static inline int sb_texture(struct sb *b, struct dr_image im)

@@ -541,10 +541,12 @@ static struct dr_scene *tiled_lamp_box(void)
 /* The tiled lamp with an emissive texture (each tile's light point reads
  * its texels) and textured walls: the packet tracer locates the textured
  * hits before shading and keeps the groups' hit points for the shading
- * (dr_path8_located), and takes the random numbers and light picks ahead,
- * stage by stage over the wave (dr_path8_ahead), as on a textured asset
- * with thousands of emitting triangles. */
-static struct dr_scene *textured_lamp_box(void)
+ * (dr_path8_located); the light table is long enough for find_entries'
+ * search of a long table. eight_bit: the textures in eight-bit storage,
+ * looked up eight lanes at a time (texture8.h: base colour at the hits,
+ * emission at hits and at light points); else float images, which the
+ * scalar functions read lane by lane. */
+static struct dr_scene *textured_lamp_box(bool eight_bit)
 {
     struct sb b;
     sb_init(&b);
@@ -553,19 +555,31 @@ static struct dr_scene *textured_lamp_box(void)
                                              0.2f, 0.4f, 0.8f, 0.9f, 0.9f, 0.9f, 0.4f, 0.7f, 0.5f};
     static const float glow_px[2 * 2 * 3] = {1.0f, 0.9f, 0.6f, 0.2f, 0.5f, 1.0f, 0.8f, 0.1f, 0.3f, 0.0f, 0.0f, 0.0f};
     struct dr_material wall = sb_diffuse(dr_v3s(0.8));
-    wall.base_color_tex.texture = sb_texture(&b, sb_image(3, 3, 3, wall_px, 0.0f, true));
+    wall.base_color_tex.texture =
+        sb_texture(&b, eight_bit ? sb_image8(3, 3, 3, wall_px) : sb_image(3, 3, 3, wall_px, 0.0f, true));
     sb_open_box(&b, 2.0, sb_material(&b, wall));
-    sb_box(&b, dr_v3(-0.5, 0.0, -0.5), dr_v3(0.0, 0.7, 0.0), sb_material(&b, glossy_blue()));
+    struct dr_material block = glossy_blue();
+    if (eight_bit) {   /* half metal, with roughness and metalness from an RGBA metallic-roughness texture */
+        static const float mr_px[2 * 2 * 4] = {0.0f, 0.9f, 0.1f, 1.0f, 0.0f, 0.3f, 0.8f, 0.5f,
+                                               0.0f, 0.6f, 1.0f, 1.0f, 0.0f, 0.1f, 0.4f, 0.2f};
+        block.metallic = 0.5;
+        block.metallic_roughness_tex.texture = sb_texture(&b, sb_image8(2, 2, 4, mr_px));
+    }
+    sb_box(&b, dr_v3(-0.5, 0.0, -0.5), dr_v3(0.0, 0.7, 0.0), sb_material(&b, block));
     struct dr_material glow = warm_lamp();
-    glow.emissive_tex.texture = sb_texture(&b, sb_image(2, 2, 3, glow_px, 0.0f, true));
+    glow.emissive_tex.texture =
+        sb_texture(&b, eight_bit ? sb_image8(2, 2, 3, glow_px) : sb_image(2, 2, 3, glow_px, 0.0f, true));
     int lamp = sb_material(&b, glow);
     for (int i = 0; i < 6; i++)
         for (int j = 0; j < 6; j++)   /* faces down */
             sb_quad(&b, dr_v3(-0.3 + 0.1 * i, 1.9, -0.3 + 0.1 * j), dr_v3(0.1, 0, 0), dr_v3(0, 0, 0.1), lamp);
     sb_light(&b, light(DR_LIGHT_POINT, dr_v3(0.5, 1.2, 0.5), dr_v3(0, -1, 0), 2.0));
     struct dr_scene *s = sb_finish(&b);
-    CHECK(dr_wave_prefetches(s) && dr_path8_picks_ahead(s),
-          "the textured lamp box is located before shading, its light picks taken ahead");
+    CHECK(dr_wave_prefetches(s), "the textured lamp box is located before shading");
+    bool storage = s->n_images == (eight_bit ? 3 : 2);
+    for (int i = 0; storage && i < s->n_images; i++)
+        storage = (s->images[i].bytes != NULL) == eight_bit;
+    CHECK(storage, "the lamp box's textures are in %s storage", eight_bit ? "eight-bit" : "float");
     return s;
 }
 
@@ -617,8 +631,10 @@ static void test_wavefront_matches_one_path(void)
                       "sky-lit box");
     exact_with_groups(bumpy_box(), DR_FX_NORMAL_MAPS, inside, "bumpy box");
     exact_with_groups(tiled_lamp_box(), DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS, inside, "tiled lamp box");
-    exact_with_groups(textured_lamp_box(), DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_TEXTURES, inside,
+    exact_with_groups(textured_lamp_box(false), DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_TEXTURES, inside,
                       "textured lamp box");
+    exact_with_groups(textured_lamp_box(true), DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_TEXTURES, inside,
+                      "textured lamp box, eight-bit textures");
     s = coloured_box();
     CHECK(!dr_wave_prefetches(s), "the coloured box is shaded without prefetching");
     exact_with_groups(s, DR_FX_VERTEX_COLORS, inside, "coloured box");
