@@ -50,6 +50,7 @@ struct dr_path8_in {
                                                       stratified: its draws are taken lane by lane); NULL: key's */
     const struct dr_hit *hit[DR_SIMD_W];   /* a lane that needs the scalar hit: its hit if located (NULL: computed) */
     const struct dr_path8_located *located;   /* the group's hit points, if located before (NULL: computed) */
+    const struct dr_path8_ahead *ahead;       /* its random numbers and light picks, if taken ahead (NULL) */
 };
 
 /* A group's hit points as the hit stage's locate finds them (the tracer
@@ -61,6 +62,14 @@ struct dr_path8_located {
     dr_m8 front;
     bool has_uv;                  /* u, v hold TEXCOORD_0 (the group has eight-lane texture lookups) */
     dr_f8 u, v;
+};
+
+/* A group's vertex random numbers and light-table entries, found before
+ * any group of the wave is shaded (dr_path8_ahead_stage). */
+struct dr_path8_ahead {
+    dr_f8 u[7];                   /* the vertex's random numbers, in dr_path_step_hit's order */
+    int64_t entry[DR_SIMD_W];     /* each lane's light-table entry (stage 2 on) */
+    int64_t bucket[DR_SIMD_W];    /* ... its guide bucket (stages 0 and 1; -1: none) */
 };
 
 /* What the two halves of a group's vertex share, lane by lane. */
@@ -124,6 +133,21 @@ void dr_path8_shade(const struct dr_scene *scene, const struct dr_path_opts *opt
                     struct dr_path_state *const *st, struct dr_sampler *const *sampler,
                     struct dr_path_vertex *const *v, const int64_t *tri, struct dr_shadow_ray *const *shadow,
                     enum dr_step_next *next, bool located, struct dr_path8 *g);
+/* Light picks ahead. In a scene with many emitting triangles (thousands:
+ * an emissive texture on a mesh) each lane's light sample follows a chain
+ * of dependent reads (guide table, CDF, entry, triangle, its vertices),
+ * each likely a cache miss. A tracer with a wave of
+ * groups runs stage k (0 .. DR_PATH8_AHEAD_STAGES - 1) of every group
+ * before stage k + 1 of any, so that the misses of a stage overlap and have
+ * arrived when the next stage reads them; shading then takes the result
+ * (dr_path8_in's ahead) and finds the same entries with the same random
+ * numbers as it would have itself, so no result changes. The function
+ * says whether the light table is long enough for this to pay (else
+ * nothing is taken ahead). */
+#define DR_PATH8_AHEAD_STAGES 5
+bool dr_path8_picks_ahead(const struct dr_scene *scene);
+void dr_path8_ahead_stage(const struct dr_scene *scene, const struct dr_path8_in *in, int stage,
+                          struct dr_path8_ahead *a);
 /* Rays leaving a scene whose environment is constant (no map: its radiance
  * and density do not depend on the direction): dr_path8_escaped_term gives
  * eight such rays' terms at once, the escaped vertex's radiance times its

@@ -46,9 +46,12 @@ struct dr_wave_soa {
     double inf[SLOTS];                          /* the traces' tmax */
     struct dr_hit hit[SLOTS];                   /* scalar hits of textured lanes (dr_path8_locate_hits) */
     struct dr_path8 group[LANES / DR_SIMD_W];   /* the hit stage's results, for the continuation */
-    /* before shading: the hit points of the groups located (locate_textured) */
+    /* before shading: the hit points of the groups located (locate_textured),
+     * the random numbers and light picks taken ahead (pick_ahead) */
     struct dr_path8_located loc[LANES / DR_SIMD_W];
     bool loc_valid[LANES / DR_SIMD_W];
+    struct dr_path8_ahead ahead[LANES / DR_SIMD_W];
+    bool ahead_valid;
     /* path replay's primal walks only (dr_wave_soa_walk; out is NULL in a radiance run) */
     const struct dr_wave_soa_walks *out;
     double rx[SLOTS], ry[SLOTS], rz[SLOTS];     /* true / tracing throughput (dr_path_state's ratio) */
@@ -423,6 +426,24 @@ static void group_inputs(const struct dr_wave_soa *w, int g, int n_live, bool lo
         in->sampler[i] = w->structured ? &w->smp[i0 + (i < in->n ? i : 0)] : NULL;
     }
     in->located = located && w->loc_valid[g] ? &w->loc[g] : NULL;
+    in->ahead = w->ahead_valid ? &w->ahead[g] : NULL;
+}
+
+/* Before shading, in a scene with many emitting triangles: every group's
+ * random numbers and light picks, stage by stage over the whole wave, so
+ * that the cache misses of a stage overlap (dr_path8_ahead_stage). */
+static void pick_ahead(struct dr_wave_soa *w, const struct dr_scene *s, int n_live)
+{
+    const int n_groups = (n_live + DR_SIMD_W - 1) / DR_SIMD_W;
+    for (int g = 0; g < n_groups; g++) {
+        struct dr_path8_in in;
+        group_inputs(w, g, n_live, false, &in);
+        dr_path8_ahead_stage(s, &in, 0, &w->ahead[g]);
+    }
+    for (int stage = 1; stage < DR_PATH8_AHEAD_STAGES; stage++)
+        for (int g = 0; g < n_groups; g++)
+            dr_path8_ahead_stage(s, NULL, stage, &w->ahead[g]);
+    w->ahead_valid = true;
 }
 
 /* The kernels work on whole groups: the slots after the last path, up to the
@@ -635,7 +656,7 @@ static int advance(struct dr_wave_soa *w, const struct dr_scene *s, const struct
 static void run(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
                 dr_wave_start_fn start, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts)
 {
-    const bool prefetch = dr_wave_prefetches(s);
+    const bool prefetch = dr_wave_prefetches(s), picks_ahead = dr_path8_picks_ahead(s);
     int n_live = 0;
     int64_t next = 0;
     w->structured = false;
@@ -651,6 +672,9 @@ static void run(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr
             pad_last_group(w, n_live);
         if (prefetch)
             locate_textured(w, s, n_live);
+        w->ahead_valid = false;
+        if (picks_ahead && n_live > 0)
+            pick_ahead(w, s, n_live);
         shade(w, s, opts, n_live, prefetch, counts);
         n_live = advance(w, s, opts, n_live, L);
     }

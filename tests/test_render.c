@@ -541,8 +541,9 @@ static struct dr_scene *tiled_lamp_box(void)
 /* The tiled lamp with an emissive texture (each tile's light point reads
  * its texels) and textured walls: the packet tracer locates the textured
  * hits before shading and keeps the groups' hit points for the shading
- * (dr_path8_located); the light table is long enough for find_entries'
- * search of a long table. eight_bit: the textures in eight-bit storage,
+ * (dr_path8_located), and takes the random numbers and light picks ahead,
+ * stage by stage over the wave (dr_path8_ahead), as on a textured asset
+ * with thousands of emitting triangles. eight_bit: the textures in eight-bit storage,
  * looked up eight lanes at a time (texture8.h: base colour at the hits,
  * emission at hits and at light points); else float images, which the
  * scalar functions read lane by lane. */
@@ -575,7 +576,8 @@ static struct dr_scene *textured_lamp_box(bool eight_bit)
             sb_quad(&b, dr_v3(-0.3 + 0.1 * i, 1.9, -0.3 + 0.1 * j), dr_v3(0.1, 0, 0), dr_v3(0, 0, 0.1), lamp);
     sb_light(&b, light(DR_LIGHT_POINT, dr_v3(0.5, 1.2, 0.5), dr_v3(0, -1, 0), 2.0));
     struct dr_scene *s = sb_finish(&b);
-    CHECK(dr_wave_prefetches(s), "the textured lamp box is located before shading");
+    CHECK(dr_wave_prefetches(s) && dr_path8_picks_ahead(s),
+          "the textured lamp box is located before shading, its light picks taken ahead");
     bool storage = s->n_images == (eight_bit ? 3 : 2);
     for (int i = 0; storage && i < s->n_images; i++)
         storage = (s->images[i].bytes != NULL) == eight_bit;
