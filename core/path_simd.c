@@ -639,13 +639,18 @@ void dr_path8_locate_hits(const struct dr_scene *s, const int64_t *tri, dr_v3x8 
     struct lanes L;
     const struct dr_texref *tex[3][DR_SIMD_W];   /* base, metallic-roughness, emissive: the eight-lane lookups' */
     bool any_tex8 = false;
+    const struct dr_material *prev_mat = NULL;
+    struct mat_textures t = {0};
     for (int i = 0; i < DR_SIMD_W; i++) {
         L.tri[i] = tri[i];
         triangle_vertices(m, tri[i], &L.v0[i], &L.v1[i], &L.v2[i]);
         L.has_normals[i] = m->flags[tri[i]] & DR_TRI_HAS_NORMALS;
-        struct mat_textures t = {0};
-        if (want[i])
-            mat_textures(s, &s->materials[m->material[tri[i]]], &t);
+        const struct dr_material *mat = want[i] ? &s->materials[m->material[tri[i]]] : NULL;
+        if (mat != prev_mat && mat)   /* (neighbouring lanes mostly share a material) */
+            mat_textures(s, mat, &t);
+        else if (!mat)
+            t = (struct mat_textures){0};
+        prev_mat = mat;
         L.textured[i] = t.scalar_hit;
         tex[0][i] = t.base, tex[1][i] = t.mr, tex[2][i] = t.emissive;
         any_tex8 |= t.base || t.mr || t.emissive;
