@@ -51,18 +51,18 @@ int dr_cpu_count(void)
     return n >= 1 ? (int)n : 1;
 }
 
-static void (*_Atomic started_hook)(void);
+static void (*_Atomic started_hook)(int workers);
 
-void dr_parallel_set_started_hook(void (*hook)(void))
+void dr_parallel_set_started_hook(void (*hook)(int workers))
 {
     atomic_store(&started_hook, hook);
 }
 
-static void workers_started(void)
+static void workers_started(int workers)
 {
-    void (*hook)(void) = atomic_load(&started_hook);
+    void (*hook)(int) = atomic_load(&started_hook);
     if (hook)
-        hook();
+        hook(workers);
 }
 
 int dr_parallel_tiles(int width, int height, int threads, dr_tile_fn fn, dr_progress_fn progress, void *ctx)
@@ -101,7 +101,7 @@ int dr_parallel_tiles(int width, int height, int threads, dr_tile_fn fn, dr_prog
             break;
         started++;
     }
-    workers_started();
+    workers_started(1 + started);
     worker_main(&ws[0]);
     for (int i = 1; i <= started; i++)
         pthread_join(ids[i], NULL);
@@ -175,7 +175,7 @@ static int range_run(int64_t n, int64_t chunk, int threads, bool fixed, dr_range
             break;
         started++;
     }
-    workers_started();
+    workers_started(1 + started);
     range_main(&ws[0]);
     for (int i = 1; i <= started; i++)
         pthread_join(ids[i], NULL);

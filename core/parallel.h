@@ -32,11 +32,12 @@ int dr_parallel_for(int64_t n, int64_t chunk, int threads, dr_range_fn fn, void 
 int dr_parallel_for_static(int64_t n, int64_t chunk, int threads, dr_range_fn fn, void *ctx);
 
 /* Sets a function every later run (dr_parallel_tiles, _for, _for_static)
- * calls on its calling thread once all its workers have been created (NULL:
- * none). For work to start in the background while the workers run without
- * holding up their creation: the CLI's preload of the image library, whose
- * dlopen holds a lock pthread_create also takes (image_plugin.h). */
-void dr_parallel_set_started_hook(void (*hook)(void));
+ * calls on its calling thread, with the run's number of workers, once all
+ * of them have been created (NULL: none). For work to start in the
+ * background while the workers run without holding up their creation: the
+ * CLI's preload of the image library, whose dlopen holds a lock
+ * pthread_create also takes (image_plugin.h). */
+void dr_parallel_set_started_hook(void (*hook)(int workers));
 /* Number of online CPUs (>= 1). */
 int dr_cpu_count(void);
 /* The workers a run uses for a request (<= 0: one per CPU), at most DR_MAX_THREADS. */

@@ -120,6 +120,7 @@ struct lanes {
     bool scalar_emission[DR_SIMD_W];  /* dr_emission reads the emissive texture */
     bool ltextured[DR_SIMD_W];        /* the light's emissive texture is dr_emission's */
     bool normal_mapped[DR_SIMD_W];
+    bool may_emit[DR_SIMD_W];         /* the material's factor x strength is not black */
     bool any_textured, any_ltextured;
     struct dr_hit hit[DR_SIMD_W];   /* the hits of textured lanes, as dr_hit_compute fills them */
     uint32_t dim[DR_SIMD_W];   /* the vertex's first sampler dimension */
@@ -671,18 +672,13 @@ void dr_path8_locate_hits(const struct dr_scene *s, const int64_t *tri, dr_v3x8 
         dr_texref8_prefetch(s, tex[k], vector_only, loc->u, loc->v, k != 1);
 }
 
-/* Each lane's material's emissive factor x strength (dr_emission's e). */
-DR_SIMD_INLINE dr_v3x8 emissive(const void *const *mat)
-{
-    return dr_v3x8_scale(gather3(mat, offsetof(struct dr_material, emissive_factor)),
-                         gather(mat, offsetof(struct dr_material, emissive_strength)));
-}
-
 /* dr_emission of a material without an emissive texture: factor x strength,
  * on the front (or both sides). */
 DR_SIMD_INLINE dr_v3x8 emission(const void *const *mat, dr_m8 seen)
 {
-    return dr_v3x8_sel(seen, emissive(mat), (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)});
+    dr_v3x8 e = dr_v3x8_scale(gather3(mat, offsetof(struct dr_material, emissive_factor)),
+                              gather(mat, offsetof(struct dr_material, emissive_strength)));
+    return dr_v3x8_sel(seen, e, (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)});
 }
 
 /* a[k[i]] for the lanes of on, 0 for the others (which read nothing) */
@@ -705,8 +701,7 @@ static void emission_seen(const struct dr_scene *s, const struct dr_light_tables
     /* Only a material whose factor x strength is not black has emitting
      * triangles (the light sampler's emitter_power_weight): the per-triangle
      * table, a cache miss a lane on a large mesh, is read for those lanes. */
-    const dr_v3x8 e = emissive(L->mat);
-    const dr_m8 may_emit = ~dr_v3x8_is_black(e);
+    const dr_m8 may_emit = mask_of(L->may_emit);
     g->emits = (dr_m8){0};
     if (!dr_m8_any(may_emit))
         return;
@@ -714,7 +709,7 @@ static void emission_seen(const struct dr_scene *s, const struct dr_light_tables
     if (!dr_m8_any(g->emits))
         return;
     const dr_m8 seen = front | mask_of(L->double_sided);
-    dr_v3x8 Le = dr_v3x8_sel(seen, e, (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)});
+    dr_v3x8 Le = emission(L->mat, seen);
     if (L->any_tex8)   /* dr_emission's factor x strength x texture, where seen */
         Le = dr_v3x8_mul(Le, dr_texref8_rgb(s, L->emissive_tex, g->emits & seen, tu, tv, true));
     for (int i = 0; L->any_textured && i < in->n; i++)
@@ -952,22 +947,30 @@ static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, str
     const struct dr_mesh *m = &s->mesh;
     L->any_textured = L->any_ltextured = L->any_tex8 = L->any_ltex8 = false;
     const struct dr_material *prev_mat = NULL;
-    struct mat_textures t;
+    struct mat_textures t = {0};
+    bool may_emit = false;
+    const bool textures = s->n_textures > 0;   /* (else only textured[] is read: all false) */
     for (int i = 0; i < DR_SIMD_W; i++) {
         int64_t tri = in->tri[i];
         L->tri[i] = tri;
         triangle_vertices(m, tri, &L->v0[i], &L->v1[i], &L->v2[i]);
         const struct dr_material *mat = &s->materials[m->material[tri]];
         L->mat[i] = mat;
-        if (mat != prev_mat)   /* (neighbouring lanes mostly share a material) */
-            mat_textures(s, mat, &t);
+        if (mat != prev_mat) {   /* (neighbouring lanes mostly share a material) */
+            if (textures)
+                mat_textures(s, mat, &t);
+            may_emit = !dr_is_black(dr_scale(mat->emissive_factor, mat->emissive_strength));
+        }
         prev_mat = mat;
-        L->base_tex[i] = t.base, L->mr_tex[i] = t.mr, L->emissive_tex[i] = t.emissive;
-        L->any_tex8 |= t.base || t.mr || t.emissive;
+        L->may_emit[i] = may_emit;
         L->textured[i] = t.scalar_hit;
-        L->scalar_material[i] = t.scalar_material;
-        L->scalar_emission[i] = t.scalar_emission;
-        L->normal_mapped[i] = mat->normal_tex.texture >= 0;
+        if (textures) {
+            L->base_tex[i] = t.base, L->mr_tex[i] = t.mr, L->emissive_tex[i] = t.emissive;
+            L->any_tex8 |= t.base || t.mr || t.emissive;
+            L->scalar_material[i] = t.scalar_material;
+            L->scalar_emission[i] = t.scalar_emission;
+            L->normal_mapped[i] = mat->normal_tex.texture >= 0;
+        }
         L->double_sided[i] = mat->double_sided;
         L->has_normals[i] = m->flags[tri] & DR_TRI_HAS_NORMALS;
         L->dim[i] = vertex_dim(in->depth[i]);

@@ -10,12 +10,13 @@
 #include "parallel.h"
 #include "test.h"
 
-static _Atomic int hook_calls, hook_off_caller, work_items;
+static _Atomic int hook_calls, hook_off_caller, hook_workers, work_items;
 static pthread_t caller;
 
-static void hook(void)
+static void hook(int workers)
 {
     atomic_fetch_add(&hook_calls, 1);
+    atomic_fetch_add(&hook_workers, workers);
     if (!pthread_equal(pthread_self(), caller))
         atomic_fetch_add(&hook_off_caller, 1);
 }
@@ -38,12 +39,15 @@ static void test_started_hook(void)
     dr_parallel_set_started_hook(hook);
     for (int threads = 1; threads <= 3; threads++) {
         atomic_store(&hook_calls, 0);
+        atomic_store(&hook_workers, 0);
         atomic_store(&work_items, 0);
         CHECK(dr_parallel_tiles(40, 30, threads, tile, NULL, NULL) == 0, "tiles on %d threads", threads);
         CHECK(dr_parallel_for(1000, 7, threads, range, NULL) == 0, "for on %d threads", threads);
         CHECK(dr_parallel_for_static(1000, 7, threads, range, NULL) == 0, "for_static on %d threads", threads);
         CHECK(atomic_load(&hook_calls) == 3, "%d threads: the hook ran %d times for 3 runs", threads,
               atomic_load(&hook_calls));
+        CHECK(atomic_load(&hook_workers) == 3 * threads, "%d threads: the hook was told %d workers in 3 runs", threads,
+              atomic_load(&hook_workers));
         CHECK(atomic_load(&work_items) == 40 * 30 + 2000, "%d threads: %d items done", threads,
               atomic_load(&work_items));
     }
@@ -57,9 +61,15 @@ static void test_started_hook(void)
 
 /* The preload as the CLI's render sets it up: its runs go on, and the
  * library is there for the write afterwards (a second preload is a no-op). */
+static void preload(int workers)
+{
+    (void)workers;
+    dr_image_library_preload();
+}
+
 static void test_preload(void)
 {
-    dr_parallel_set_started_hook(dr_image_library_preload);
+    dr_parallel_set_started_hook(preload);
     atomic_store(&work_items, 0);
     CHECK(dr_parallel_tiles(64, 64, 2, tile, NULL, NULL) == 0 && atomic_load(&work_items) == 64 * 64,
           "a run with the preload as its hook");
