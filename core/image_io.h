@@ -41,7 +41,8 @@ bool dr_image_library_ok(void);
  * first use loads it then). The first use waits for that load instead of
  * doing its own; an error is reported there, as without the preload. A
  * program calls it once its own threads exist (dr_parallel_set_started_hook),
- * so that the render overlaps the load's 0.2 s (image_plugin.h). */
+ * so that the render overlaps the load's 0.2 s (image_plugin.h), and only
+ * with a CPU to spare: the load takes one CPU for that time. */
 void dr_image_library_preload(void);
 
 /* True when OpenImageIO can write this file name's format. */
