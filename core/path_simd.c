@@ -669,7 +669,7 @@ void dr_path8_locate_hits(const struct dr_scene *s, const int64_t *tri, dr_v3x8 
     texcoords0(m, L.tri, L.v0, L.v1, L.v2, loc->b1, loc->b2, &loc->u, &loc->v);
     const dr_m8 vector_only = ~mask_of(L.textured);   /* (the others' texels: dr_material_prefetch's) */
     for (int k = 0; k < 3; k++)
-        dr_texref8_prefetch(s, tex[k], vector_only, loc->u, loc->v, k != 1);
+        dr_texref8_prefetch(s, tex[k], vector_only, loc->u, loc->v);
 }
 
 /* dr_emission of a material without an emissive texture: factor x strength,

@@ -83,20 +83,6 @@ DR_SIMD_INLINE void texref_uv8(const struct dr_texref *r, dr_f8 *u, dr_f8 *v)
     *u = tu;
 }
 
-/* The lanes of todo whose texref is r[first of todo], taken off todo. */
-static dr_m8 next_group(const struct dr_texref *const r[DR_SIMD_W], dr_m8 *todo, const struct dr_texref **group)
-{
-    int first = 0;
-    while (!(*todo)[first])
-        first++;
-    *group = r[first];
-    dr_m8 same;
-    for (int i = 0; i < DR_SIMD_W; i++)
-        same[i] = (*todo)[i] && r[i] == *group ? -1 : 0;
-    *todo &= ~same;
-    return same;
-}
-
 /* The lanes of on with a texref. */
 static dr_m8 with_texref(const struct dr_texref *const r[DR_SIMD_W], dr_m8 on)
 {
@@ -104,6 +90,32 @@ static dr_m8 with_texref(const struct dr_texref *const r[DR_SIMD_W], dr_m8 on)
     for (int i = 0; i < DR_SIMD_W; i++)
         m[i] = on[i] && r[i] ? -1 : 0;
     return m;
+}
+
+/* One group of a call's lanes: the lanes of todo whose texref is that of
+ * todo's first lane (taken off todo), their image, and the taps of the
+ * lookup at (u, v) through that texref's transform. */
+struct group8 {
+    dr_m8 lanes;
+    const struct dr_image *img;
+    int64_t idx[4][DR_SIMD_W];
+    dr_f8 wt[4];
+};
+
+static void next_group(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 *todo, dr_f8 u,
+                       dr_f8 v, struct group8 *g)
+{
+    int first = 0;
+    while (!(*todo)[first])
+        first++;
+    const struct dr_texref *ref = r[first];
+    for (int i = 0; i < DR_SIMD_W; i++)
+        g->lanes[i] = (*todo)[i] && r[i] == ref ? -1 : 0;
+    *todo &= ~g->lanes;
+    const struct dr_texture *tex = &s->textures[ref->texture];
+    g->img = &s->images[tex->image];
+    texref_uv8(ref, &u, &v);
+    taps8(tex, g->img, u, v, g->idx, g->wt);
 }
 
 /* The 256 values an eight-bit image's colour channels stand for (texel8's
@@ -120,53 +132,38 @@ dr_v3x8 dr_texref8_rgb(const struct dr_scene *s, const struct dr_texref *const r
     dr_v3x8 out = {dr_f8s(1.0), dr_f8s(1.0), dr_f8s(1.0)};
     dr_m8 todo = with_texref(r, on);
     while (dr_m8_any(todo)) {
-        const struct dr_texref *ref;
-        const dr_m8 lanes = next_group(r, &todo, &ref);
-        const struct dr_texture *tex = &s->textures[ref->texture];
-        const struct dr_image *img = &s->images[tex->image];
-        dr_f8 tu = u, tv = v;
-        texref_uv8(ref, &tu, &tv);
-        int64_t idx[4][DR_SIMD_W];
-        dr_f8 wt[4];
-        taps8(tex, img, tu, tv, idx, wt);
-        const float *lut = colour_lut(img, use_linear);
-        const size_t c = (size_t)img->channels;
+        struct group8 g;
+        next_group(s, r, &todo, u, v, &g);
+        const float *lut = colour_lut(g.img, use_linear);
+        const size_t c = (size_t)g.img->channels;
         /* dr_texture_eval's sum, tap by tap in its order: acc += wt * texel */
         dr_v3x8 acc = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
         for (int k = 0; k < 4; k++) {
             dr_v3x8 t = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};   /* texel8's floats, widened (exact) */
             for (int i = 0; i < DR_SIMD_W; i++)
-                if (lanes[i]) {
-                    const uint8_t *b = img->bytes + (size_t)idx[k][i] * c;
+                if (g.lanes[i]) {
+                    const uint8_t *b = g.img->bytes + (size_t)g.idx[k][i] * c;
                     t.x[i] = lut[b[0]], t.y[i] = lut[b[1]], t.z[i] = lut[b[2]];
                 }
-            acc.x = acc.x + wt[k] * t.x;
-            acc.y = acc.y + wt[k] * t.y;
-            acc.z = acc.z + wt[k] * t.z;
+            acc.x = acc.x + g.wt[k] * t.x;
+            acc.y = acc.y + g.wt[k] * t.y;
+            acc.z = acc.z + g.wt[k] * t.z;
         }
-        out = dr_v3x8_sel(lanes, acc, out);
+        out = dr_v3x8_sel(g.lanes, acc, out);
     }
     return out;
 }
 
 void dr_texref8_prefetch(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 on, dr_f8 u,
-                         dr_f8 v, bool use_linear)
+                         dr_f8 v)
 {
-    (void)use_linear;   /* (eight-bit storage: the same bytes either way) */
     dr_m8 todo = with_texref(r, on);
     while (dr_m8_any(todo)) {
-        const struct dr_texref *ref;
-        const dr_m8 lanes = next_group(r, &todo, &ref);
-        const struct dr_texture *tex = &s->textures[ref->texture];
-        const struct dr_image *img = &s->images[tex->image];
-        dr_f8 tu = u, tv = v;
-        texref_uv8(ref, &tu, &tv);
-        int64_t idx[4][DR_SIMD_W];
-        dr_f8 wt[4];
-        taps8(tex, img, tu, tv, idx, wt);
+        struct group8 g;
+        next_group(s, r, &todo, u, v, &g);
         for (int k = 0; k < 4; k++)
             for (int i = 0; i < DR_SIMD_W; i++)
-                if (lanes[i])
-                    __builtin_prefetch(img->bytes + (size_t)idx[k][i] * (size_t)img->channels);
+                if (g.lanes[i])
+                    __builtin_prefetch(g.img->bytes + (size_t)g.idx[k][i] * (size_t)g.img->channels);
     }
 }

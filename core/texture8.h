@@ -26,9 +26,10 @@ bool dr_texref8_accepts(const struct dr_scene *s, const struct dr_texref *r);
 dr_v3x8 dr_texref8_rgb(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 on, dr_f8 u,
                        dr_f8 v, bool use_linear);
 
-/* Asks the cache for the texels dr_texref8_rgb(s, r, on, u, v, use_linear)
- * will read, without waiting (dr_texture_prefetch's job). */
+/* Asks the cache for the texels dr_texref8_rgb(s, r, on, u, v, ...) will
+ * read, without waiting (dr_texture_prefetch's job; the same bytes whether
+ * decoded or not). */
 void dr_texref8_prefetch(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 on, dr_f8 u,
-                         dr_f8 v, bool use_linear);
+                         dr_f8 v);
 
 #endif

@@ -95,7 +95,7 @@ static long compare_lanes(struct dr_scene *s, const struct dr_texref *refs, int 
             v[i] = coord(r, size);
         }
         dr_v3x8 got = dr_texref8_rgb(s, lane_ref, on, u, v, use_linear);
-        dr_texref8_prefetch(s, lane_ref, on, u, v, use_linear);   /* (no result: must not fault) */
+        dr_texref8_prefetch(s, lane_ref, on, u, v);   /* (no result: must not fault) */
         for (int i = 0; i < DR_SIMD_W; i++) {
             dr_vec3 want = on[i] && lane_ref[i] ? scalar_rgb(s, lane_ref[i], u[i], v[i], use_linear) : dr_v3s(1.0);
             bool same = same_bits(got.x[i], want.x) && same_bits(got.y[i], want.y) && same_bits(got.z[i], want.z);
