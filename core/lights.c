@@ -6,6 +6,7 @@
 
 #include "bsdf.h"
 #include "cdf.h"
+#include "env8.h"
 #include "error.h"
 
 /* Discrete distribution over: [0, n_emitters) emissive triangles, then the
@@ -274,8 +275,13 @@ bool dr_light_sampler_empty(const struct dr_light_sampler *ls) { return ls->n_en
 
 void dr_env_dir_to_uv(dr_vec3 d, double *u, double *v)
 {
-    *u = 0.5 + atan2(d.x, -d.z) * (0.5 / M_PI);
-    *v = acos(dr_clamp(d.y, -1.0, 1.0)) * DR_INV_PI;
+    /* env8.c's eight-lane mapping, lane 0: the packet renderer's lanes and
+     * this function then agree to the bit (its atan2 and acos are within a
+     * few ulp of libm's, which lane by lane had taken a tenth of a render) */
+    dr_f8 u8, v8;
+    dr_env8_dir_to_uv((dr_v3x8){dr_f8s(d.x), dr_f8s(d.y), dr_f8s(d.z)}, &u8, &v8);
+    *u = u8[0];
+    *v = v8[0];
 }
 
 dr_vec3 dr_env_uv_to_dir(double u, double v)
@@ -289,14 +295,11 @@ dr_vec3 dr_env_uv_to_dir(double u, double v)
     return dr_v3(sin_theta * sin_phi, cos_theta, -sin_theta * cos_phi);
 }
 
-/* The map's lookup: repeat across the seam, clamp at the poles. */
-static const struct dr_texture env_tex = {0, DR_WRAP_REPEAT, DR_WRAP_CLAMP};
-
 /* dr_env_radiance with a map, at the direction's map coordinates (u, v). */
 static dr_vec3 env_radiance_uv(const struct dr_scene *s, double u, double v)
 {
     double px[4];
-    dr_texture_eval(&env_tex, &s->env.map, u, v, true, px);   /* decoded copy if 8-bit sRGB */
+    dr_texture_eval(&dr_env_texture, &s->env.map, u, v, true, px);   /* decoded copy if 8-bit sRGB */
     return dr_mul(dr_scale(s->env.color, s->env.strength), dr_v3(px[0], px[1], px[2]));
 }
 
@@ -320,7 +323,7 @@ void d_env_radiance(const struct dr_scene *s, const struct dr_param_set *ps, dr_
     if (s->env.map.data) {
         double px[4];
         dr_env_dir_to_uv(dir, &u, &v);
-        dr_texture_eval(&env_tex, &s->env.map, u, v, true, px);
+        dr_texture_eval(&dr_env_texture, &s->env.map, u, v, true, px);
         map = dr_v3(px[0], px[1], px[2]);
     }
     if (ps->env_color >= 0) {
@@ -332,15 +335,14 @@ void d_env_radiance(const struct dr_scene *s, const struct dr_param_set *ps, dr_
     if (ps->env_map >= 0 && s->env.map.data) {
         dr_vec3 g = dr_scale(dr_mul(d_L, s->env.color), s->env.strength);
         double d_out[4] = {g.x, g.y, g.z, 0.0};
-        d_texture_eval(&env_tex, &s->env.map, u, v, d_out, ps->env_map, k);
+        d_texture_eval(&dr_env_texture, &s->env.map, u, v, d_out, ps->env_map, k);
     }
 }
 
 /* env_pdf_dir with a map, at the direction's map coordinates (u, v). */
 static double env_pdf_uv(const struct dr_light_sampler *ls, double u, double v)
 {
-    int x = (int)dr_clamp(floor(u * ls->env_w), 0, ls->env_w - 1);
-    int y = (int)dr_clamp(floor(v * ls->env_h), 0, ls->env_h - 1);
+    int x = (int)dr_env_cell(u, ls->env_w), y = (int)dr_env_cell(v, ls->env_h);
     const double *row = ls->env_conditional + (size_t)y * (ls->env_w + 1);
     double p_uv = (ls->env_marginal[y + 1] - ls->env_marginal[y]) * (row[x + 1] - row[x]) * ls->env_w * ls->env_h;
     double st = ls->env_row_sin[y];
@@ -401,7 +403,17 @@ bool dr_light_tables(const struct dr_light_sampler *ls, struct dr_light_tables *
         return false;
     *t = (struct dr_light_tables){ls->n_entries, ls->n_emitters, ls->cdf, ls->cdf_guide, ls->pick,
                                        ls->emitter_tri, ls->emitter_area, ls->tri_pick, ls->tri_pick_density,
-                                       ls->env_entry >= 0 && !ls->env_marginal ? ls->env_entry : -1};
+                                       ls->env_entry >= 0 && !ls->env_marginal ? ls->env_entry : -1,
+                                       ls->env_entry >= 0 && ls->env_marginal ? ls->env_entry : -1};
+    return true;
+}
+
+bool dr_light_env_tables(const struct dr_light_sampler *ls, struct dr_env_tables *t)
+{
+    if (!ls->env_marginal || ls->env_entry < 0 || ls->n_entries == 0)
+        return false;
+    *t = (struct dr_env_tables){ls->env_w, ls->env_h, ls->env_marginal, ls->env_marginal_guide, ls->env_conditional,
+                                ls->env_conditional_guide, ls->env_row_sin, ls->pick[ls->env_entry]};
     return true;
 }
 
@@ -734,6 +746,6 @@ void d_env_radiance_dir(const struct dr_scene *s, dr_vec3 dir, dr_vec3 d_L, dr_v
     dr_env_dir_to_uv(dir, &u, &v);
     dr_vec3 g = dr_scale(dr_mul(d_L, s->env.color), s->env.strength);
     double d_out[4] = {g.x, g.y, g.z, 0.0};
-    d_texture_eval_uv(&env_tex, &s->env.map, u, v, true, d_out, &d_u, &d_v);
+    d_texture_eval_uv(&dr_env_texture, &s->env.map, u, v, true, d_out, &d_u, &d_v);
     d_env_dir_to_uv(dir, d_u, d_v, d_dir);
 }

@@ -60,8 +60,8 @@ double dr_light_pdf_area(const struct dr_scene *scene, const struct dr_light_sam
 double dr_light_pdf_area_pick(const struct dr_light_sampler *ls, int64_t tri);
 /* The sampler's tables, for a packet tracer that samples many lanes' lights
  * at once (path_simd.c does what dr_light_sample and dr_light_pdf_area do for
- * emitting triangles and a constant environment with these; other entries go
- * through dr_light_sample).
+ * emitting triangles and a constant environment with these, env8.c for an
+ * environment map; punctual lights go through dr_light_sample).
  * False when there is nothing to sample. */
 struct dr_light_tables {
     int64_t n_entries;
@@ -76,8 +76,23 @@ struct dr_light_tables {
     int64_t env_uniform_entry;      /* the environment's entry when it is constant (sampled
                                        uniformly over the sphere, dr_light_sample's
                                        sample_env), else -1 */
+    int64_t env_map_entry;          /* the environment's entry when it has a map (env8.h), else -1 */
 };
 bool dr_light_tables(const struct dr_light_sampler *ls, struct dr_light_tables *t);
+/* The environment map's sampling tables, for env8.c's eight-lane copies of
+ * its sampling and density: piecewise constant over the w x h texels, rows
+ * by the marginal cdf, columns by each row's conditional one. False when
+ * the sampler has no environment map (or no environment entry). */
+struct dr_env_tables {
+    int w, h;
+    const double *marginal;             /* h + 1, and its guide table (cdf.h) */
+    const uint32_t *marginal_guide;
+    const double *conditional;          /* h rows of w + 1, and their guide tables */
+    const uint32_t *conditional_guide;
+    const double *row_sin;              /* h: each row's centre sine, the density's factor */
+    double pick;                        /* the environment entry's probability */
+};
+bool dr_light_env_tables(const struct dr_light_sampler *ls, struct dr_env_tables *t);
 /* Density for an escaping direction (environment). */
 double dr_light_pdf_env(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 dir);
 

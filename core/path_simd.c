@@ -11,9 +11,11 @@
 
 #include "bsdf.h"
 #include "cdf.h"
+#include "env8.h"
 #include "lights.h"
 #include "material.h"
 #include "normal_map.h"
+#include "simd_trig.h"
 #include "texture8.h"
 
 #define COS_EPS DR_BSDF_COS_EPS
@@ -173,28 +175,6 @@ DR_SIMD_INLINE dr_v3x8 to_world(dr_v3x8 s, dr_v3x8 t, dr_v3x8 n, dr_v3x8 v)
     return dr_v3x8_add(dr_v3x8_add(dr_v3x8_scale(s, v.x), dr_v3x8_scale(t, v.y)), dr_v3x8_scale(n, v.z));
 }
 
-/* bsdf.c's horner and sincos_quarter */
-DR_SIMD_INLINE dr_f8 horner(dr_f8 x, const double *c, int n)
-{
-    dr_f8 p = dr_f8s(c[0]);
-    for (int i = 1; i < n; i++)
-        p = p * x + c[i];
-    return p;
-}
-/* dr_sincos_turn (bsdf.h): sin and cos of 2 pi u, the same operations */
-DR_SIMD_INLINE void sincos_turn(dr_f8 u, dr_f8 *s, dr_f8 *c)
-{
-    const dr_f8 m = dr_f8_floor(4.0 * u + 0.5);
-    const dr_f8 r = (2.0 * M_PI) * (u - 0.25 * m);
-    const dr_f8 q = m - 4.0 * dr_f8_floor(0.25 * m);
-    const dr_f8 r2 = r * r;
-    const dr_f8 sr = r + r * r2 * horner(r2, DR_SIN_SERIES, 8);
-    const dr_f8 cr = 1.0 - r2 * horner(r2, DR_COS_SERIES, 9);
-    const dr_m8 q1 = dr_f8_eq(q, dr_f8s(1.0)), q2 = dr_f8_eq(q, dr_f8s(2.0)), q3 = dr_f8_eq(q, dr_f8s(3.0));
-    *s = dr_f8_sel(q1, cr, dr_f8_sel(q2, -sr, dr_f8_sel(q3, -cr, sr)));
-    *c = dr_f8_sel(q1, -sr, dr_f8_sel(q2, -cr, dr_f8_sel(q3, sr, cr)));
-}
-
 /* bsdf.c's sample_cosine: the concentric disk, lifted. */
 DR_SIMD_INLINE dr_v3x8 sample_cosine(dr_f8 u1, dr_f8 u2)
 {
@@ -204,8 +184,8 @@ DR_SIMD_INLINE dr_v3x8 sample_cosine(dr_f8 u1, dr_f8 u2)
     dr_f8 r = dr_f8_sel(wide, a, c);
     dr_f8 t = (M_PI / 4.0) * (dr_f8_sel(wide, c, a) / dr_f8_sel(centre, dr_f8s(1.0), r));
     dr_f8 t2 = t * t;
-    dr_f8 sn = t + t * t2 * horner(t2, DR_SIN_SERIES, 8);
-    dr_f8 cs = 1.0 - t2 * horner(t2, DR_COS_SERIES, 9);
+    dr_f8 sn = t + t * t2 * dr_f8_horner(t2, DR_SIN_SERIES, 8);
+    dr_f8 cs = 1.0 - t2 * dr_f8_horner(t2, DR_COS_SERIES, 9);
     dr_f8 x = dr_f8_sel(wide, cs, sn) * r, y = dr_f8_sel(wide, sn, cs) * r;
     dr_f8 z = dr_f8_sqrt(dr_f8_max(dr_f8s(0.0), 1.0 - x * x - y * y));
     return dr_v3x8_sel(centre, (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(1.0)}, (dr_v3x8){x, y, z});
@@ -431,7 +411,7 @@ DR_SIMD_INLINE dr_v3x8 eval_pdf_above(const struct dr_path8 *g, dr_v3x8 wo, dr_v
 }
 
 /* sample_specular_dir: GGX visible normals (sample_vndf), reflected; the
- * azimuth's cosine and sine from sincos_turn, as in the scalar map. */
+ * azimuth's cosine and sine from dr_f8_sincos_turn, as in the scalar map. */
 DR_SIMD_INLINE dr_v3x8 sample_specular_dir(const struct dr_path8 *g, dr_v3x8 wo, dr_f8 u1, dr_f8 u2)
 {
     dr_f8 a = g->alpha;
@@ -443,7 +423,7 @@ DR_SIMD_INLINE dr_v3x8 sample_specular_dir(const struct dr_path8 *g, dr_v3x8 wo,
                              (dr_v3x8){dr_f8s(1.0), dr_f8s(0.0), dr_f8s(0.0)});
     dr_v3x8 t2 = dr_v3x8_cross(vh, t1);
     dr_f8 r = dr_f8_sqrt(u1), cos_phi, sin_phi;
-    sincos_turn(u2, &sin_phi, &cos_phi);   /* phi = 2 pi u2 */
+    dr_f8_sincos_turn(u2, &sin_phi, &cos_phi);   /* phi = 2 pi u2 */
     dr_f8 p1 = r * cos_phi, p2 = r * sin_phi;
     dr_f8 s = 0.5 * (1.0 + vh.z);
     dr_f8 c = dr_f8_sqrt(dr_f8_max(dr_f8s(0.0), 1.0 - p1 * p1));
@@ -726,20 +706,31 @@ static void emission_seen(const struct dr_scene *s, const struct dr_light_tables
     g->Le = Le;
 }
 
-bool dr_path8_env_constant(const struct dr_scene *s)
+bool dr_path8_env_eight(const struct dr_scene *s)
 {
-    return !s->env.map.data;
+    struct dr_env_tables t;
+    return !s->env.map.data || dr_light_env_tables(s->light_sampler, &t);
 }
 
-dr_v3x8 dr_path8_escaped_term(const struct dr_scene *s, const struct dr_path_opts *opts, dr_f8 depth, dr_f8 prev_pdf)
+dr_v3x8 dr_path8_escaped_term(const struct dr_scene *s, const struct dr_path_opts *opts, dr_m8 on, dr_v3x8 d,
+                              dr_f8 depth, dr_f8 prev_pdf)
 {
+    const dr_v3x8 zero = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
     if (!(opts->stages & DR_STAGE_ENV))
-        return (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
+        return zero;
+    const dr_m8 first = dr_f8_eq(depth, dr_f8s(1.0));   /* (the camera ray's: weight 1, no density) */
+    struct dr_env_tables t;
+    if (s->env.map.data && dr_light_env_tables(s->light_sampler, &t)) {
+        dr_f8 pdf = dr_f8s(0.0);
+        dr_v3x8 Le = dr_env8_radiance_pdf(s, &t, on, d, dr_m8_any(on & ~first) ? &pdf : NULL);
+        dr_f8 w = dr_f8_sel(first, dr_f8s(1.0), mis_power(prev_pdf, pdf));
+        return dr_v3x8_sel(on, (dr_v3x8){Le.x * w, Le.y * w, Le.z * w}, zero);
+    }
     /* any direction: without a map neither depends on it */
     const dr_vec3 up = dr_v3(0.0, 0.0, 1.0), Le = dr_env_radiance(s, up);
     const double pdf = dr_light_pdf_env(s, s->light_sampler, up);
-    dr_f8 w = dr_f8_sel(dr_f8_eq(depth, dr_f8s(1.0)), dr_f8s(1.0), mis_power(prev_pdf, dr_f8s(pdf)));
-    return (dr_v3x8){Le.x * w, Le.y * w, Le.z * w};
+    dr_f8 w = dr_f8_sel(first, dr_f8s(1.0), mis_power(prev_pdf, dr_f8s(pdf)));
+    return dr_v3x8_sel(on, (dr_v3x8){Le.x * w, Le.y * w, Le.z * w}, zero);
 }
 
 /* A light sample for each lane of a group (dr_light_sample's out). */
@@ -778,12 +769,12 @@ static void find_entries(const struct dr_light_tables *lt, dr_f8 u, int64_t e[DR
 }
 
 /* Each lane's light-table entry; env: it is a constant environment
- * (env_light_samples); other[i]: it is a punctual light or an environment
- * map, which light_sample leaves to dr_light_sample (for both the area
- * arithmetic runs on a stand-in). */
+ * (env_light_samples); env_map: an environment map (dr_env8_sample);
+ * other[i]: a punctual light, which light_sample leaves to dr_light_sample
+ * (for all three the area arithmetic runs on a stand-in). */
 static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *lt, struct lanes *L,
                         const struct dr_path8_ahead *ahead, dr_f8 u_pick, dr_f8 *pick, dr_f8 *area,
-                        uint32_t v[3][DR_SIMD_W], dr_m8 *env, bool *other)
+                        uint32_t v[3][DR_SIMD_W], dr_m8 *env, dr_m8 *env_map, bool *other)
 {
     const struct dr_mesh *m = &s->mesh;
     int64_t entry[DR_SIMD_W];
@@ -793,7 +784,8 @@ static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *
         find_entries(lt, u_pick, entry);
     for (int i = 0; i < DR_SIMD_W; i++) {
         (*env)[i] = entry[i] == lt->env_uniform_entry ? -1 : 0;
-        other[i] = entry[i] >= lt->n_emitters && !(*env)[i];
+        (*env_map)[i] = entry[i] == lt->env_map_entry ? -1 : 0;
+        other[i] = entry[i] >= lt->n_emitters && !(*env)[i] && !(*env_map)[i];
         if (entry[i] >= lt->n_emitters)
             entry[i] = lt->n_emitters > 0 ? 0 : -1;
     }
@@ -847,7 +839,7 @@ static void env_light_samples(const struct dr_scene *s, const struct dr_light_ta
                               dr_f8 u2, dr_m8 *ok, struct light8 *out)
 {
     dr_f8 z = 1.0 - 2.0 * u1, r = dr_f8_sqrt(dr_f8_max(dr_f8s(0.0), 1.0 - z * z)), cos_phi, sin_phi;
-    sincos_turn(u2, &sin_phi, &cos_phi);   /* phi = 2 pi u2 */
+    dr_f8_sincos_turn(u2, &sin_phi, &cos_phi);   /* phi = 2 pi u2 */
     const dr_vec3 Le = dr_env_radiance(s, dr_v3(0.0, 0.0, 1.0));   /* (any direction: no map) */
     const double pick = lt->pick[lt->env_uniform_entry];
     const dr_v3x8 zero = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
@@ -862,7 +854,30 @@ static void env_light_samples(const struct dr_scene *s, const struct dr_light_ta
     *ok = pick > 0.0 && !dr_is_black(Le) ? *ok | env : *ok & ~env;
 }
 
-/* The lanes that picked a punctual light or an environment map: dr_light_sample. */
+/* The lanes that picked an environment map: dr_light_sample's sample_env
+ * (dr_env8_sample). */
+static void env_map_samples(const struct dr_scene *s, dr_m8 env_map, dr_f8 u1, dr_f8 u2, dr_m8 *ok,
+                            struct light8 *out)
+{
+    struct dr_env_tables t;
+    if (!dr_light_env_tables(s->light_sampler, &t)) {   /* (the entry exists only with them) */
+        *ok &= ~env_map;
+        return;
+    }
+    dr_v3x8 wi, radiance;
+    dr_f8 pdf;
+    const dr_m8 carries = dr_env8_sample(s, &t, env_map, u1, u2, &wi, &radiance, &pdf);
+    const dr_v3x8 zero = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
+    out->wi = dr_v3x8_sel(env_map, wi, out->wi);
+    out->radiance = dr_v3x8_sel(env_map, radiance, out->radiance);
+    out->target = dr_v3x8_sel(env_map, zero, out->target);
+    out->pdf = dr_f8_sel(env_map, pdf, out->pdf);
+    out->infinite |= env_map;
+    out->delta &= ~env_map;
+    *ok = (*ok & ~env_map) | carries;
+}
+
+/* The lanes that picked a punctual light: dr_light_sample. */
 static void other_light_samples(const struct dr_scene *s, const bool *other, dr_v3x8 p, dr_f8 u_pick, dr_f8 u1,
                                 dr_f8 u2, dr_m8 *ok, struct light8 *out)
 {
@@ -892,8 +907,8 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     dr_f8 pick, area;
     uint32_t v[3][DR_SIMD_W];
     bool other[DR_SIMD_W];
-    dr_m8 env;
-    pick_lights(s, lt, L, ahead, u_pick, &pick, &area, v, &env, other);
+    dr_m8 env, env_map;
+    pick_lights(s, lt, L, ahead, u_pick, &pick, &area, v, &env, &env_map, other);
     dr_m8 ok = ~dr_f8_le(pick, dr_f8s(0.0));
     dr_f8 su = dr_f8_sqrt(u1);
     dr_f8 b1 = 1.0 - su, b2 = u2 * su, b0 = 1.0 - b1 - b2;
@@ -914,11 +929,11 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     if (L->any_ltex8) {   /* dr_emission's texture at the light point (no texel read for a sample that failed) */
         dr_f8 tu, tv;
         texcoords0(m, L->ltri, v[0], v[1], v[2], b1, b2, &tu, &tv);
-        const dr_m8 on = ok & seen & ~mask_of(other);
+        const dr_m8 on = ok & seen & ~mask_of(other) & ~env & ~env_map;
         out->radiance = dr_v3x8_mul(out->radiance, dr_texref8_rgb(s, L->lemissive_tex, on, tu, tv, true));
     }
     for (int i = 0; L->any_ltextured && i < DR_SIMD_W; i++)
-        if (ok[i] && L->ltextured[i] && !other[i]) {   /* (no texel read for a sample that failed) */
+        if (ok[i] && L->ltextured[i] && !other[i] && !env[i] && !env_map[i]) {   /* (no texel read for a sample that failed) */
             struct dr_hit h;   /* the light point as dr_light_sample makes it */
             dr_hit_at(m, L->ltri[i], b1[i], b2[i], &h);
             h.front = cos_l[i] < 0.0;
@@ -930,6 +945,8 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     out->infinite = out->delta = (dr_m8){0};
     if (dr_m8_any(env))
         env_light_samples(s, lt, env, u1, u2, &ok, out);
+    if (dr_m8_any(env_map))
+        env_map_samples(s, env_map, u1, u2, &ok, out);
     other_light_samples(s, other, p, u_pick, u1, u2, &ok, out);
     return ok;
 }

@@ -148,15 +148,17 @@ void dr_path8_shade(const struct dr_scene *scene, const struct dr_path_opts *opt
 bool dr_path8_picks_ahead(const struct dr_scene *scene);
 void dr_path8_ahead_stage(const struct dr_scene *scene, const struct dr_path8_in *in, int stage,
                           struct dr_path8_ahead *a);
-/* Rays leaving a scene whose environment is constant (no map: its radiance
- * and density do not depend on the direction): dr_path8_escaped_term gives
- * eight such rays' terms at once, the escaped vertex's radiance times its
- * MIS weight (dr_path_escaped_radiance), zero without the environment
- * stage, with the scalar code's operations. depth and prev_pdf: the path
- * state's after the ray was traced. */
-bool dr_path8_env_constant(const struct dr_scene *scene);
-dr_v3x8 dr_path8_escaped_term(const struct dr_scene *scene, const struct dr_path_opts *opts, dr_f8 depth,
-                              dr_f8 prev_pdf);
+/* Rays leaving the scene: dr_path8_escaped_term gives the terms of the
+ * lanes of on at once (0 in the others), the escaped vertex's radiance
+ * times its MIS weight (dr_path_escaped_radiance), zero without the
+ * environment stage, with the scalar code's operations: a constant
+ * environment's, or a map's through env8.h. d, depth and prev_pdf: the
+ * path state's after the ray was traced. dr_path8_env_eight says whether
+ * the scene's environment is one of those two (an environment map's light
+ * tables exist whenever the scene has one). */
+bool dr_path8_env_eight(const struct dr_scene *scene);
+dr_v3x8 dr_path8_escaped_term(const struct dr_scene *scene, const struct dr_path_opts *opts, dr_m8 on, dr_v3x8 d,
+                              dr_f8 depth, dr_f8 prev_pdf);
 /* The hit stage of a group from its inputs, into g (the same as
  * dr_path8_shade, for a caller that keeps its paths' state in arrays). */
 void dr_path8_shade_lanes(const struct dr_scene *scene, const struct dr_path_opts *opts,

@@ -126,6 +126,39 @@ static const float *colour_lut(const struct dr_image *img, bool use_linear)
     return (use_linear || img->linear_in_data) && img->lut_linear ? img->lut_linear : img->lut;
 }
 
+/* dr_texture_eval's sum of the colour channels over the four taps, for the
+ * lanes of `lanes`: tap by tap in its order, acc += wt * texel, with the
+ * texels texel8 (eight-bit storage) or image.c's texels (float storage)
+ * reads, widened to double (exact). A grey image's one colour channel
+ * counts for all three, as add_texel counts it. Other lanes: 0. */
+static dr_v3x8 blend(const struct dr_image *img, dr_m8 lanes, int64_t idx[4][DR_SIMD_W], dr_f8 wt[4],
+                     bool use_linear)
+{
+    const size_t c = (size_t)img->channels;
+    const size_t g = c >= 3 ? 1 : 0, b = c >= 3 ? 2 : 0;   /* (green's and blue's channel) */
+    const float *lut = img->bytes ? colour_lut(img, use_linear) : NULL;
+    const float *pix = use_linear && img->linear ? img->linear : img->data;
+    dr_v3x8 acc = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
+    for (int k = 0; k < 4; k++) {
+        dr_v3x8 t = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
+        for (int i = 0; i < DR_SIMD_W; i++) {
+            if (!lanes[i])
+                continue;
+            if (lut) {
+                const uint8_t *p = img->bytes + (size_t)idx[k][i] * c;
+                t.x[i] = lut[p[0]], t.y[i] = lut[p[g]], t.z[i] = lut[p[b]];
+            } else {
+                const float *p = pix + (size_t)idx[k][i] * c;
+                t.x[i] = p[0], t.y[i] = p[g], t.z[i] = p[b];
+            }
+        }
+        acc.x = acc.x + wt[k] * t.x;
+        acc.y = acc.y + wt[k] * t.y;
+        acc.z = acc.z + wt[k] * t.z;
+    }
+    return acc;
+}
+
 dr_v3x8 dr_texref8_rgb(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 on, dr_f8 u,
                        dr_f8 v, bool use_linear)
 {
@@ -134,24 +167,23 @@ dr_v3x8 dr_texref8_rgb(const struct dr_scene *s, const struct dr_texref *const r
     while (dr_m8_any(todo)) {
         struct group8 g;
         next_group(s, r, &todo, u, v, &g);
-        const float *lut = colour_lut(g.img, use_linear);
-        const size_t c = (size_t)g.img->channels;
-        /* dr_texture_eval's sum, tap by tap in its order: acc += wt * texel */
-        dr_v3x8 acc = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
-        for (int k = 0; k < 4; k++) {
-            dr_v3x8 t = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};   /* texel8's floats, widened (exact) */
-            for (int i = 0; i < DR_SIMD_W; i++)
-                if (g.lanes[i]) {
-                    const uint8_t *b = g.img->bytes + (size_t)g.idx[k][i] * c;
-                    t.x[i] = lut[b[0]], t.y[i] = lut[b[1]], t.z[i] = lut[b[2]];
-                }
-            acc.x = acc.x + g.wt[k] * t.x;
-            acc.y = acc.y + g.wt[k] * t.y;
-            acc.z = acc.z + g.wt[k] * t.z;
-        }
-        out = dr_v3x8_sel(g.lanes, acc, out);
+        out = dr_v3x8_sel(g.lanes, blend(g.img, g.lanes, g.idx, g.wt, use_linear), out);
     }
     return out;
+}
+
+bool dr_texture8_reads(const struct dr_image *img)
+{
+    return dr_image_has_pixels(img) && img->width > 0 && img->height > 0 && img->channels > 0;
+}
+
+dr_v3x8 dr_texture8_rgb(const struct dr_texture *tex, const struct dr_image *img, dr_m8 on, dr_f8 u, dr_f8 v,
+                        bool use_linear)
+{
+    int64_t idx[4][DR_SIMD_W];
+    dr_f8 wt[4];
+    taps8(tex, img, u, v, idx, wt);
+    return blend(img, on, idx, wt, use_linear);
 }
 
 void dr_texref8_prefetch(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 on, dr_f8 u,

@@ -1,11 +1,12 @@
 /* Texture lookups for eight lanes at once (simd.h): dr_texture_eval's
- * bilinear lookup, through dr_texref_uv's transform, of eight-bit RGB and
- * RGBA images, the kind nearly every glTF file's PNG and JPEG textures are.
- * The same operations as image.c's dr_texture_taps, texel8 and add_texel
- * on the same inputs, so the results are the scalar lookup's to the bit
- * (test_texture8 checks both against each other). Other images (float
- * storage, which parameters and HDR files have; grey ones) and TEXCOORD_1
- * stay with the scalar functions. */
+ * bilinear lookup. For materials (dr_texref8_*), through dr_texref_uv's
+ * transform, of eight-bit RGB and RGBA images, the kind nearly every glTF
+ * file's PNG and JPEG textures are; other images (float storage, which
+ * parameters and HDR files have; grey ones) and TEXCOORD_1 stay with the
+ * scalar functions there. dr_texture8_rgb reads any image (the environment
+ * map's, env8.h). The same operations as image.c's dr_texture_taps, texel8,
+ * texels and add_texel on the same inputs, so the results are the scalar
+ * lookup's to the bit (test_texture8 checks both against each other). */
 #ifndef DR_TEXTURE8_H
 #define DR_TEXTURE8_H
 
@@ -25,6 +26,17 @@ bool dr_texref8_accepts(const struct dr_scene *s, const struct dr_texref *r);
  * as they were, exactly. Lanes sharing a texref are looked up together. */
 dr_v3x8 dr_texref8_rgb(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 on, dr_f8 u,
                        dr_f8 v, bool use_linear);
+
+/* Whether dr_texture8_rgb can read image img (dr_texture_eval returns black
+ * for one it cannot): it has pixels, in either storage. */
+bool dr_texture8_reads(const struct dr_image *img);
+
+/* dr_texture_eval(tex, img, u[i], v[i], use_linear)'s colour channels (a
+ * grey image's one in all three) for the lanes of on, whatever the image's
+ * storage and channel count; the other lanes get 0. img must be one
+ * dr_texture8_reads. */
+dr_v3x8 dr_texture8_rgb(const struct dr_texture *tex, const struct dr_image *img, dr_m8 on, dr_f8 u, dr_f8 v,
+                        bool use_linear);
 
 /* Asks the cache for the texels dr_texref8_rgb(s, r, on, u, v, ...) will
  * read, without waiting (dr_texture_prefetch's job; the same bytes whether

@@ -329,18 +329,19 @@ static void take_scalar(struct dr_wave_soa *w, int k)
     p->ratio = p->st.ratio;
 }
 
-/* The radiance (w->L's sums) of group i0's paths whose rays left a scene
- * under a constant environment, eight at once: escaped()'s sums with the
- * same operations (dr_path8_escaped_term). False when none left. */
+/* The radiance (w->L's sums) of group i0's paths whose rays left the
+ * scene, eight at once: escaped()'s sums with the same operations
+ * (dr_path8_escaped_term). False when none left. */
 static bool escaped_group(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
                           int n_live, int i0, dr_v3x8 *L)
 {
-    bool any = false;
+    dr_m8 left = {0};
     for (int i = 0; i < DR_SIMD_W && i0 + i < n_live; i++)
-        any |= w->tri[i0 + i] < 0;
-    if (!any)
+        left[i] = w->tri[i0 + i] < 0 ? -1 : 0;
+    if (!dr_m8_any(left))
         return false;
-    dr_v3x8 e = dr_path8_escaped_term(s, opts, load8(w->depth + i0), load8(w->prev_pdf + i0));
+    dr_v3x8 e = dr_path8_escaped_term(s, opts, left, load3(w->dx + i0, w->dy + i0, w->dz + i0), load8(w->depth + i0),
+                                      load8(w->prev_pdf + i0));
     *L = dr_v3x8_add(load3(w->Lx + i0, w->Ly + i0, w->Lz + i0),
                      dr_v3x8_mul(load3(w->bx + i0, w->by + i0, w->bz + i0), e));
     return true;
@@ -357,7 +358,7 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
 {
     int kept = 0;
     w->n_scalar = 0;
-    const bool eight_at_once = !w->out && dr_path8_env_constant(s);   /* (a render's radiance) */
+    const bool eight_at_once = !w->out && dr_path8_env_eight(s);   /* (a render's radiance) */
     for (int i0 = 0; i0 < n_live; i0 += DR_SIMD_W) {   /* (group by group: close_up) */
         dr_m8 keep = {0};
         int j = kept;

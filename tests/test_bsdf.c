@@ -8,6 +8,8 @@
 #include <time.h>
 
 #include "bsdf.h"
+#include "lights.h"
+#include "simd_trig.h"
 #include "sampler.h"
 #include "test.h"
 
@@ -792,6 +794,70 @@ static void test_sincos_turn(void)
     CHECK(isnan(s) && isnan(c), "NaN turns give NaN: %g %g", s, c);
 }
 
+/* dr_f8_atan2 and dr_f8_acos (simd_trig.h), the environment map's
+ * coordinates in both walkers, against long double: 10^6 pairs of every
+ * octant and scale, plus the axes, the diagonals, zeros and NaN. The error
+ * bound is in ulps of the result (a few, against libm's one). */
+static double ulps_off(double got, long double want)
+{
+    double w = (double)want;
+    double ulp = nextafter(fabs(w), INFINITY) - fabs(w);
+    return w == 0.0 ? (got == 0.0 ? 0.0 : INFINITY) : (double)fabsl((long double)got - want) / ulp;
+}
+
+static void test_atan2_acos(void)
+{
+    struct rng r = {777};
+    double worst_atan2 = 0.0, worst_acos = 0.0;
+    enum { N = 1000000 };
+    for (int i = 0; i < N; i += DR_SIMD_W) {
+        dr_f8 y, x, c;
+        for (int l = 0; l < DR_SIMD_W; l++) {
+            double scale = ldexp(1.0, (int)(rng_next(&r) * 40.0) - 20);
+            y[l] = (2.0 * rng_next(&r) - 1.0) * scale;
+            x[l] = (2.0 * rng_next(&r) - 1.0) * (i % 3 ? 1.0 : scale);
+            if (i % 11 == 0)
+                x[l] = y[l] * (1.0 + ldexp(rng_next(&r) - 0.5, -(int)(rng_next(&r) * 50.0)));   /* near the diagonal */
+            c[l] = 2.0 * rng_next(&r) - 1.0;
+            if (i % 5 == 0)
+                c[l] = copysign(1.0 - ldexp(rng_next(&r), -(int)(rng_next(&r) * 52.0)), c[l]);   /* near the poles */
+        }
+        dr_f8 a = dr_f8_atan2(y, x), ac = dr_f8_acos(c);
+        for (int l = 0; l < DR_SIMD_W; l++) {
+            worst_atan2 = fmax(worst_atan2, ulps_off(a[l], atan2l(y[l], x[l])));
+            worst_acos = fmax(worst_acos, ulps_off(ac[l], acosl(c[l])));
+        }
+    }
+    printf("dr_f8_atan2: worst %.3g ulp, dr_f8_acos %.3g ulp\n", worst_atan2, worst_acos);
+    CHECK(worst_atan2 <= 3.0, "dr_f8_atan2 is %.3g ulp from atan2", worst_atan2);
+    CHECK(worst_acos <= 4.0, "dr_f8_acos is %.3g ulp from acos", worst_acos);
+    /* the axes and diagonals exactly where libm is exact or correctly rounded */
+    const dr_f8 ys = {0.0, 1.0, 0.0, -1.0, 1.0, 1.0, -1.0, -1.0}, xs = {1.0, 0.0, -1.0, 0.0, 1.0, -1.0, -1.0, 1.0};
+    dr_f8 a = dr_f8_atan2(ys, xs);
+    for (int l = 0; l < DR_SIMD_W; l++)
+        CHECK(a[l] == atan2(ys[l], xs[l]), "atan2(%g, %g) = %.17g, libm %.17g", ys[l], xs[l], a[l],
+              atan2(ys[l], xs[l]));
+    const dr_f8 cs = {1.0, -1.0, 0.0, 0.5, -0.5, 1.0, 1.0, 1.0};
+    dr_f8 ac = dr_f8_acos(cs);
+    CHECK(ac[0] == 0.0 && ac[1] == M_PI && ac[2] == M_PI / 2.0, "acos(1, -1, 0) = %.17g %.17g %.17g", ac[0], ac[1],
+          ac[2]);
+    /* zeros give 0 (no division by zero), NaN gives NaN */
+    a = dr_f8_atan2((dr_f8){0.0, -0.0, NAN, 1.0, NAN, 0, 0, 0}, (dr_f8){0.0, 0.0, 1.0, NAN, NAN, 0, 0, 0});
+    CHECK(a[0] == 0.0 && a[1] == 0.0 && isnan(a[2]) && isnan(a[3]) && isnan(a[4]),
+          "atan2 of zeros and NaN: %g %g %g %g %g", a[0], a[1], a[2], a[3], a[4]);
+    /* the map's coordinates: lane 0 of the eight-lane mapping, within 1e-15 of libm's */
+    double worst_uv = 0.0;
+    for (int i = 0; i < 100000; i++) {
+        double z = 2.0 * rng_next(&r) - 1.0, ph = 2.0 * M_PI * rng_next(&r), rr = sqrt(1.0 - z * z);
+        dr_vec3 d = dr_v3(rr * cos(ph), z, rr * sin(ph));
+        double u, v;
+        dr_env_dir_to_uv(d, &u, &v);
+        double ul = 0.5 + atan2(d.x, -d.z) * (0.5 / M_PI), vl = acos(d.y) / M_PI;
+        worst_uv = fmax(worst_uv, fmax(fabs(u - ul), fabs(v - vl)));
+    }
+    CHECK(worst_uv <= 1e-15, "dr_env_dir_to_uv is %.3g from libm's coordinates", worst_uv);
+}
+
 /* ------------------------------------------------------------ hard cases */
 
 static void check_pair(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, const char *what)
@@ -890,6 +956,7 @@ int main(void)
     test_lambertian();
     test_cosine_sampler_map();
     test_sincos_turn();
+    test_atan2_acos();
     test_reciprocity();
     test_hard_cases();
     test_jacobian();

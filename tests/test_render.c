@@ -485,6 +485,39 @@ static struct dr_scene *sky_box(void)
     return sb_finish(&b);
 }
 
+/* An open box under an environment map alone, seen from above so that many
+ * rays leave: a 32 x 16 map with a black top row and black texels (cells
+ * never sampled), a bright patch (a sun) and a coloured rest; RGB, or grey
+ * (one channel, with a decoded copy beside it). A half-metal glossy block.
+ * The packet renderer samples and looks it up eight lanes at a time
+ * (env8.h). (Maps are read in float storage only.) */
+static struct dr_scene *map_box(bool grey)
+{
+    struct sb b;
+    sb_init(&b);
+    sb_open_box(&b, 1.0, sb_material(&b, sb_diffuse(dr_v3(0.8, 0.7, 0.6))));
+    struct dr_material block = glossy_blue();
+    block.metallic = 0.5;
+    sb_box(&b, dr_v3(-0.5, 0.0, -0.5), dr_v3(0.0, 0.7, 0.0), sb_material(&b, block));
+    sb_environment(&b, dr_v3(0.9, 1.0, 1.1));
+    b.s->env.strength = 1.5;
+    enum { W = 32, H = 16 };
+    const int c = grey ? 1 : 3;
+    float px[W * H * 3];
+    for (int y = 0; y < H; y++)
+        for (int x = 0; x < W; x++)
+            for (int k = 0; k < c; k++) {
+                float v = (float)(0.05 + 0.4 * ((x * 7 + y * 13 + k * 5) % 11) / 10.0);
+                if (y == 0 || (x + y) % 9 == 0)
+                    v = 0.0f;                    /* black: never sampled */
+                else if (y >= 4 && y <= 5 && x >= 20 && x <= 22)
+                    v = 40.0f;   /* the sun */
+                px[(y * W + x) * c + k] = v;
+            }
+    b.s->env.map = sb_image(W, H, c, px, 0.0f, grey);
+    return sb_finish(&b);
+}
+
 /* Normal-mapped walls (tangents generated), a lamp and a glossy block. */
 static struct dr_scene *bumpy_box(void)
 {
@@ -631,6 +664,9 @@ static void test_wavefront_matches_one_path(void)
     exact_with_groups(lit_box(), DR_FX_PUNCTUAL_LIGHTS | DR_FX_ENV_MAP | DR_FX_AREA_LIGHTS, inside, "lit box");
     exact_with_groups(sky_box(), DR_FX_ENV_CONSTANT, sb_camera(dr_v3(0, 2.5, 2.0), dr_v3(0, 0.3, 0), 60.0),
                       "sky-lit box");
+    const struct dr_camera above = sb_camera(dr_v3(0.3, 2.5, 1.8), dr_v3(0, 0.3, 0), 70.0);
+    exact_with_groups(map_box(false), DR_FX_ENV_MAP, above, "map-lit box");
+    exact_with_groups(map_box(true), DR_FX_ENV_MAP, above, "map-lit box, grey map");
     exact_with_groups(bumpy_box(), DR_FX_NORMAL_MAPS, inside, "bumpy box");
     exact_with_groups(tiled_lamp_box(), DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS, inside, "tiled lamp box");
     exact_with_groups(textured_lamp_box(false), DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_TEXTURES, inside,

@@ -3,7 +3,9 @@
  * RGB and RGBA images of awkward sizes, every pair of wrap modes, texture
  * transforms, coordinates far outside [0, 1] and not finite at all, lanes
  * of different textures in one call and lanes left out; and which texrefs
- * the lookup accepts. Deterministic: fixed seeds. */
+ * the lookup accepts; and the one-texture lookup (the environment map's)
+ * over images of either storage and any channel count. Deterministic:
+ * fixed seeds. */
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -167,8 +169,77 @@ static void test_matches_scalar_lookup(void)
     free(s.textures);
 }
 
+/* A w x h image of c channels in float storage with random values (up to
+ * 50: an HDR map's range), with a decoded copy beside it or not. */
+static struct dr_image image_float(struct rng *r, int w, int h, int c, bool with_linear)
+{
+    struct dr_image im;
+    memset(&im, 0, sizeof im);
+    im.width = w, im.height = h, im.channels = c;
+    size_t n = (size_t)w * h * c;
+    im.data = malloc(n * sizeof(float));
+    im.linear = with_linear ? malloc(n * sizeof(float)) : NULL;
+    if (!im.data || (with_linear && !im.linear))
+        exit(2);
+    for (size_t i = 0; i < n; i++) {
+        im.data[i] = (float)(50.0 * rng_next(r) * rng_next(r));
+        if (with_linear)
+            im.linear[i] = (float)rng_next(r);   /* (unrelated: which array was read shows) */
+    }
+    return im;
+}
+
+/* dr_texture8_rgb (one texture for all lanes, any storage and channel
+ * count: the environment map's lookup) against dr_texture_eval bit for bit,
+ * every pair of wrap modes, both use_linear; lanes left out get 0. */
+static void test_any_image(void)
+{
+    struct rng r = {99};
+    long compared = 0, differ = 0, left = 0;
+    for (int kind = 0; kind < 12; kind++) {
+        const int c = 1 + kind % 4, w = 1 + (int)(rng_next(&r) * 40.0), h = 1 + (int)(rng_next(&r) * 20.0);
+        struct dr_image img = kind < 4 ? image8(&r, w, h, c, false) : image_float(&r, w, h, c, kind >= 8);
+        CHECK(dr_texture8_reads(&img), "a %dx%dx%d image is read", w, h, c);
+        for (int ws = 0; ws < 3; ws++)
+            for (int wt = 0; wt < 3; wt++) {
+                const struct dr_texture tex = {0, (enum dr_wrap)ws, (enum dr_wrap)wt};
+                for (int call = 0; call < 400; call++) {
+                    const bool use_linear = call % 2;
+                    dr_m8 on;
+                    dr_f8 u, v;
+                    for (int i = 0; i < DR_SIMD_W; i++) {
+                        on[i] = rng_next(&r) < 0.85 ? -1 : 0;
+                        u[i] = coord(&r, w);
+                        v[i] = coord(&r, h);
+                    }
+                    dr_v3x8 got = dr_texture8_rgb(&tex, &img, on, u, v, use_linear);
+                    for (int i = 0; i < DR_SIMD_W; i++) {
+                        double px[4] = {0.0, 0.0, 0.0, 0.0};
+                        if (on[i])
+                            dr_texture_eval(&tex, &img, u[i], v[i], use_linear, px);
+                        bool same = same_bits(got.x[i], px[0]) && same_bits(got.y[i], px[1]) &&
+                                    same_bits(got.z[i], px[2]);
+                        if (!same && differ++ < 5)
+                            CHECK(same, "%dx%dx%d %s image, wrap %d/%d, uv (%.17g, %.17g): (%.17g %.17g %.17g), "
+                                  "the scalar lookup (%.17g %.17g %.17g)", w, h, c, img.bytes ? "eight-bit" : "float",
+                                  ws, wt, u[i], v[i], got.x[i], got.y[i], got.z[i], px[0], px[1], px[2]);
+                        compared += on[i] != 0;
+                        left += !on[i];
+                    }
+                }
+            }
+        dr_image_release(&img);
+    }
+    CHECK(differ == 0, "%ld of %ld lanes differ from the scalar lookup", differ, compared);
+    CHECK(compared > 200000 && left > 0, "only %ld lanes compared", compared);
+    struct dr_image none;
+    memset(&none, 0, sizeof none);
+    CHECK(!dr_texture8_reads(&none), "an image without pixels is not read");
+}
+
 int main(void)
 {
     test_matches_scalar_lookup();
+    test_any_image();
     return TEST_END();
 }
