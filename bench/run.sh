@@ -8,11 +8,14 @@
 #   b. thread scaling     render time with 1 thread / with 2 threads
 #   c. peer comparison    render time on the peer's Cornell box vs Mitsuba 3 (goal < 1)
 #   d. peak memory        of that render vs the peer's 116 MiB, and the image library's share of it
+#   e. start-up           process start to first ray
+#   l. lighting           time per ray under an environment map / under a constant sky
 #
 # Environment knobs:
 #   BUILD         build directory (default: build)
 #   PEER          the peer scene (default: ../shared/bench/peer-cornell-box.gltf)
 #   BENCH_RUNS    timed runs of the main peer render, after one warm-up (default: 3)
+#   SAMPLE_BOX    part l's scene (default: ../shared/gltf-samples/Box/glTF/Box.gltf)
 #   BENCH_BUDGET  seconds; the optional max-depth sweep (4/16/32) skips any run
 #                 predicted to end past this point (default: 170)
 #
@@ -394,6 +397,35 @@ printf '   process start to first ray (%s): %.3f s, of which loading the scene %
 printf '   drender --version: %.3f s wall; drender render --help: %.3f s wall\n' "$VERSION_WALL" "$HELP_WALL"
 STARTUP_JSON="{\"first_ray_seconds\": $STARTUP, \"textured_first_ray_seconds\": $STARTUP_TEX, \"textured_load_seconds\": $LOAD_TEX, \"textured_peak_memory_bytes\": $PEAK_TEX, \"version_wall_seconds\": $VERSION_WALL, \"help_wall_seconds\": $HELP_WALL}"
 
+# ---- l. lighting: an environment map against a constant sky -----------------
+# Real assets are often lit by an HDR environment map alone. The same scene
+# and the same rays (the sample Box, most of whose rays leave it) under a
+# 1024x512 map with a small bright sun and under a constant sky: the time
+# per ray under the map over that under the sky, median of 3 pairs run back
+# to back (issue 11: no scene far off the others in time per ray).
+SAMPLE_BOX=${SAMPLE_BOX:-../shared/gltf-samples/Box/glTF/Box.gltf}
+ENV_JSON=null
+echo
+if [[ -f $SAMPLE_BOX ]]; then
+    echo "l. lighting: time per ray under an environment map / under a constant sky ($(basename "$SAMPLE_BOX"), 256x256, 64 spp, 2 threads)"
+    oiiotool --pattern constant:color=800,700,600 12x12 3 --pattern fill:top=0.3,0.4,0.9:bottom=0.25,0.2,0.15 1024x512 3 \
+        --paste +600+110 -d float -o "$TMP/env.exr" >/dev/null
+    pairs=() map_s=() sky_s=()
+    for i in 1 2 3; do
+        render "$SAMPLE_BOX" --env "$TMP/env.exr" --res 256x256 --spp 64 --threads 2
+        per_map=$(calc "$R_TIME / $(json_num "$R_JSON" total rays)" %.6g) && map_s+=("$R_TIME")
+        render "$SAMPLE_BOX" --env 1,1,1 --res 256x256 --spp 64 --threads 2
+        per_sky=$(calc "$R_TIME / $(json_num "$R_JSON" total rays)" %.6g) && sky_s+=("$R_TIME")
+        pairs+=("$(calc "$per_map / $per_sky" %.3f)")
+    done
+    ENV_RATIO=$(median "${pairs[@]}")
+    printf '   map %s s, sky %s s (medians); per ray map / sky: %s (pairs %s)\n' "$(median "${map_s[@]}")" \
+        "$(median "${sky_s[@]}")" "$ENV_RATIO" "$(join "${pairs[@]}")"
+    ENV_JSON="{\"scene\": \"$SAMPLE_BOX\", \"map_seconds\": $(median "${map_s[@]}"), \"sky_seconds\": $(median "${sky_s[@]}"), \"per_ray_map_over_sky\": $ENV_RATIO, \"pairs\": [$(join "${pairs[@]}")]}"
+else
+    echo "l. lighting: $SAMPLE_BOX not found: skipped"
+fi
+
 # ---- results.json and the noise note ---------------------------------------
 
 TOTAL=$(elapsed)
@@ -411,6 +443,7 @@ OTHER_CORES=$(calc "$OTHER_TOTAL / $WALL_TOTAL" %.2f)
     echo "  \"textured_against_boxes\": $TEX_VS_BOX_JSON,"
     echo "  \"thread_scaling\": {\"scene\": \"$CORNELL\", \"t1_seconds\": $T1, \"t2_seconds\": $T2, \"speedup\": $SPEEDUP, \"speedup_best_runs\": $SPEEDUP_BEST, \"soa_floor_speedup\": $FLOOR_SPEEDUP, \"other_cores_busy\": $SCALING_OTHER},"
     echo "  \"startup\": $STARTUP_JSON,"
+    echo "  \"environment_map\": $ENV_JSON,"
     echo "  \"peer\": $PEER_JSON"
     echo "}"
 } >"$OUT/results.json"

@@ -10,6 +10,7 @@
 
 const struct dr_texture dr_env_texture = {0, DR_WRAP_REPEAT, DR_WRAP_CLAMP};
 
+/* dr_env_dir_to_uv. */
 void dr_env8_dir_to_uv(dr_v3x8 d, dr_f8 *u, dr_f8 *v)
 {
     *u = 0.5 + dr_f8_atan2(d.x, -d.z) * (0.5 / M_PI);

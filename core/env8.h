@@ -7,9 +7,7 @@
  *
  * Each function names the scalar one in lights.c it mirrors and runs its
  * operations, so a lane gets the scalar function's bits (test_render
- * compares the packet renderer with the one-path walker under a map); the
- * direction-to-map mapping is shared outright (lights.c's dr_env_dir_to_uv
- * is lane 0 of dr_env8_dir_to_uv). */
+ * compares the packet renderer with the one-path walker under a map). */
 #ifndef DR_ENV8_H
 #define DR_ENV8_H
 

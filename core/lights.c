@@ -4,10 +4,12 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "bigalloc.h"
 #include "bsdf.h"
 #include "cdf.h"
 #include "env8.h"
 #include "error.h"
+#include "simd_trig.h"
 
 /* Discrete distribution over: [0, n_emitters) emissive triangles, then the
  * punctual lights, then (if present) the environment. */
@@ -82,7 +84,9 @@ static int build_env_tables(const struct dr_scene *s, struct dr_light_sampler *l
     ls->env_w = w;
     ls->env_h = h;
     ls->env_marginal = malloc(sizeof(double) * (size_t)(h + 1));
-    ls->env_conditional = malloc(sizeof(double) * (size_t)h * (size_t)(w + 1));
+    /* (the two per-texel tables in huge pages where they are big: a map's
+     * lookups land anywhere in them, and in 4 KiB pages most missed the TLB) */
+    ls->env_conditional = dr_alloc_big(sizeof(double) * (size_t)h * (size_t)(w + 1));
     ls->env_row_sin = malloc(sizeof(double) * (size_t)h);
     if (!ls->env_marginal || !ls->env_conditional || !ls->env_row_sin)
         return DR_ERR_NOMEM;
@@ -120,7 +124,7 @@ static int build_env_tables(const struct dr_scene *s, struct dr_light_sampler *l
     }
     ls->env_integral = total / ((double)w * h);
     ls->env_marginal_guide = malloc(sizeof(uint32_t) * (size_t)(h + 1));
-    ls->env_conditional_guide = malloc(sizeof(uint32_t) * (size_t)h * (size_t)(w + 1));
+    ls->env_conditional_guide = dr_alloc_big(sizeof(uint32_t) * (size_t)h * (size_t)(w + 1));
     if (!ls->env_marginal_guide || !ls->env_conditional_guide)
         return DR_ERR_NOMEM;
     dr_cdf_guide_build(ls->env_marginal, h, ls->env_marginal_guide, h);
@@ -275,13 +279,11 @@ bool dr_light_sampler_empty(const struct dr_light_sampler *ls) { return ls->n_en
 
 void dr_env_dir_to_uv(dr_vec3 d, double *u, double *v)
 {
-    /* env8.c's eight-lane mapping, lane 0: the packet renderer's lanes and
-     * this function then agree to the bit (its atan2 and acos are within a
-     * few ulp of libm's, which lane by lane had taken a tenth of a render) */
-    dr_f8 u8, v8;
-    dr_env8_dir_to_uv((dr_v3x8){dr_f8s(d.x), dr_f8s(d.y), dr_f8s(d.z)}, &u8, &v8);
-    *u = u8[0];
-    *v = v8[0];
+    /* simd_trig.h's atan2 and acos (within a few ulp of libm's), whose
+     * eight-lane twins env8.c's dr_env8_dir_to_uv runs with these
+     * operations: the packet renderer's lanes and this agree to the bit */
+    *u = 0.5 + dr_atan2(d.x, -d.z) * (0.5 / M_PI);
+    *v = dr_acos(dr_clamp(d.y, -1.0, 1.0)) * DR_INV_PI;
 }
 
 dr_vec3 dr_env_uv_to_dir(double u, double v)

@@ -795,7 +795,8 @@ static void test_sincos_turn(void)
 }
 
 /* dr_f8_atan2 and dr_f8_acos (simd_trig.h), the environment map's
- * coordinates in both walkers, against long double: 10^6 pairs of every
+ * coordinates in both walkers, against their scalar twins (bit for bit)
+ * and long double: 10^6 pairs of every
  * octant and scale, plus the axes, the diagonals, zeros and NaN. The error
  * bound is in ulps of the result (a few, against libm's one). */
 static double ulps_off(double got, long double want)
@@ -809,6 +810,7 @@ static void test_atan2_acos(void)
 {
     struct rng r = {777};
     double worst_atan2 = 0.0, worst_acos = 0.0;
+    long twins_differ = 0;
     enum { N = 1000000 };
     for (int i = 0; i < N; i += DR_SIMD_W) {
         dr_f8 y, x, c;
@@ -824,11 +826,16 @@ static void test_atan2_acos(void)
         }
         dr_f8 a = dr_f8_atan2(y, x), ac = dr_f8_acos(c);
         for (int l = 0; l < DR_SIMD_W; l++) {
+            /* the scalar twins: the same bits */
+            double as = dr_atan2(y[l], x[l]), acs = dr_acos(c[l]);
+            twins_differ += memcmp(&as, &a[l], sizeof as) != 0 || memcmp(&acs, &ac[l], sizeof acs) != 0;
             worst_atan2 = fmax(worst_atan2, ulps_off(a[l], atan2l(y[l], x[l])));
             worst_acos = fmax(worst_acos, ulps_off(ac[l], acosl(c[l])));
         }
     }
     printf("dr_f8_atan2: worst %.3g ulp, dr_f8_acos %.3g ulp\n", worst_atan2, worst_acos);
+    CHECK(twins_differ == 0, "dr_atan2/dr_acos differ from their eight-lane twins in %ld of %d values",
+          twins_differ, N);
     CHECK(worst_atan2 <= 3.0, "dr_f8_atan2 is %.3g ulp from atan2", worst_atan2);
     CHECK(worst_acos <= 4.0, "dr_f8_acos is %.3g ulp from acos", worst_acos);
     /* the axes and diagonals exactly where libm is exact or correctly rounded */
@@ -845,6 +852,9 @@ static void test_atan2_acos(void)
     a = dr_f8_atan2((dr_f8){0.0, -0.0, NAN, 1.0, NAN, 0, 0, 0}, (dr_f8){0.0, 0.0, 1.0, NAN, NAN, 0, 0, 0});
     CHECK(a[0] == 0.0 && a[1] == 0.0 && isnan(a[2]) && isnan(a[3]) && isnan(a[4]),
           "atan2 of zeros and NaN: %g %g %g %g %g", a[0], a[1], a[2], a[3], a[4]);
+    CHECK(dr_atan2(0.0, 0.0) == 0.0 && dr_atan2(-0.0, -0.0) == 0.0 && isnan(dr_atan2(NAN, 1.0)) &&
+              isnan(dr_acos(NAN)),
+          "the scalar twin on zeros and NaN");
     /* the map's coordinates: lane 0 of the eight-lane mapping, within 1e-15 of libm's */
     double worst_uv = 0.0;
     for (int i = 0; i < 100000; i++) {
