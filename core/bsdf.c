@@ -170,19 +170,11 @@ const double DR_COS_SERIES[9] = {1.0 / 6402373705728000.0, -1.0 / 20922789888000
                                     -1.0 / 479001600.0,       1.0 / 3628800.0,         -1.0 / 40320.0,
                                     1.0 / 720.0,              -1.0 / 24.0,             0.5};   /* 1/18!, ..., 1/2! */
 
-static inline double horner(double x, const double *c, int n)
-{
-    double p = c[0];
-    for (int i = 1; i < n; i++)
-        p = p * x + c[i];
-    return p;
-}
-
 static inline void sincos_quarter(double t, double *s, double *c)
 {
     double t2 = t * t;
-    *s = t + t * t2 * horner(t2, DR_SIN_SERIES, 8);
-    *c = 1.0 - t2 * horner(t2, DR_COS_SERIES, 9);
+    *s = t + t * t2 * dr_horner(t2, DR_SIN_SERIES, 8);
+    *c = 1.0 - t2 * dr_horner(t2, DR_COS_SERIES, 9);
 }
 
 void dr_sincos_turn(double u, double *s, double *c)

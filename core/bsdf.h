@@ -68,6 +68,15 @@ dr_vec3 dr_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lob
  * cos t = 1 - t^2 Q(t^2), coefficients from the highest power), shared with
  * the eight-lane sampler of path_simd.c so both give the same bits. */
 extern const double DR_SIN_SERIES[8], DR_COS_SERIES[9];
+/* c[0] x^(n-1) + ... + c[n-1], by Horner's rule (the series' evaluation;
+ * simd_trig.h's dr_f8_horner is its eight-lane twin). */
+static inline double dr_horner(double x, const double *c, int n)
+{
+    double p = c[0];
+    for (int i = 1; i < n; i++)
+        p = p * x + c[i];
+    return p;
+}
 
 /* sin and cos of the angle 2 pi u (u turns; the azimuth of the GGX and
  * environment samplers), without libm: the nearest quarter turn m / 4 is

@@ -78,7 +78,9 @@ dr_v3x8 dr_env8_radiance_pdf(const struct dr_scene *s, const struct dr_env_table
  * then its column x by that row's conditional cdf at u2, with the cdf
  * values either side of each (lanes without a row with weight, py <= 0,
  * search no column). Each row is a cache miss in a large map: the rows
- * are asked for together before any is searched. */
+ * are asked for together before any is searched (the guide entry exactly;
+ * the cdf at the bucket's own index, where an even row's answer lies, a
+ * guess elsewhere). */
 static void find_cells(const struct dr_env_tables *t, dr_m8 on, dr_f8 u1, dr_f8 u2, int64_t x[DR_SIMD_W],
                        int64_t y[DR_SIMD_W], dr_f8 *m0, dr_f8 *py, dr_f8 *r0, dr_f8 *px)
 {

@@ -16,7 +16,7 @@
 #include "bsdf.h"   /* DR_SIN_SERIES, DR_COS_SERIES */
 #include "simd.h"
 
-/* c[0] x^(n-1) + ... + c[n-1], by Horner's rule (bsdf.c's horner). */
+/* bsdf.h's dr_horner, eight lanes. */
 DR_SIMD_INLINE dr_f8 dr_f8_horner(dr_f8 x, const double *c, int n)
 {
     dr_f8 p = dr_f8s(c[0]);
@@ -78,15 +78,6 @@ DR_SIMD_INLINE dr_f8 dr_f8_atan2(dr_f8 y, dr_f8 x)
 DR_SIMD_INLINE dr_f8 dr_f8_acos(dr_f8 y)
 {
     return 2.0 * dr_f8_atan2(dr_f8_sqrt(1.0 - y), dr_f8_sqrt(1.0 + y));
-}
-
-/* dr_f8_horner for one value. */
-static inline double dr_horner(double x, const double *c, int n)
-{
-    double p = c[0];
-    for (int i = 1; i < n; i++)
-        p = p * x + c[i];
-    return p;
 }
 
 /* dr_f8_atan2 for one pair: the same operations. */

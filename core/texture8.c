@@ -172,11 +172,6 @@ dr_v3x8 dr_texref8_rgb(const struct dr_scene *s, const struct dr_texref *const r
     return out;
 }
 
-bool dr_texture8_reads(const struct dr_image *img)
-{
-    return dr_image_has_pixels(img) && img->width > 0 && img->height > 0 && img->channels > 0;
-}
-
 dr_v3x8 dr_texture8_rgb(const struct dr_texture *tex, const struct dr_image *img, dr_m8 on, dr_f8 u, dr_f8 v,
                         bool use_linear)
 {

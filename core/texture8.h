@@ -27,14 +27,10 @@ bool dr_texref8_accepts(const struct dr_scene *s, const struct dr_texref *r);
 dr_v3x8 dr_texref8_rgb(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 on, dr_f8 u,
                        dr_f8 v, bool use_linear);
 
-/* Whether dr_texture8_rgb can read image img (dr_texture_eval returns black
- * for one it cannot): it has pixels, in either storage. */
-bool dr_texture8_reads(const struct dr_image *img);
-
 /* dr_texture_eval(tex, img, u[i], v[i], use_linear)'s colour channels (a
  * grey image's one in all three) for the lanes of on, whatever the image's
- * storage and channel count; the other lanes get 0. img must be one
- * dr_texture8_reads. */
+ * storage and channel count; the other lanes get 0. img must have pixels
+ * (dr_image_has_pixels; an environment map always does). */
 dr_v3x8 dr_texture8_rgb(const struct dr_texture *tex, const struct dr_image *img, dr_m8 on, dr_f8 u, dr_f8 v,
                         bool use_linear);
 
