@@ -37,6 +37,8 @@ struct dr_light_sampler {
                                   per sample and per escaped ray was 3 % of a render under a map) */
     double env_integral;       /* sum of texel weights / (w h), for the pdf */
     int texture_averages;      /* whole-image averages the build made (one per emissive image) */
+    int n_materials;
+    bool *mat_emits;           /* n_materials: its triangles are entries (a power weight above 0) */
 };
 
 static double mean_texture_value(const struct dr_scene *s, const struct dr_texref *ref, int channel_count)
@@ -202,6 +204,13 @@ struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
     for (int i = 0; i < s->n_materials; i++)
         mat_w[i] = emitter_power_weight(s, &s->materials[i], image_mean, ls);
     free(image_mean);
+    ls->n_materials = s->n_materials;
+    if (!(ls->mat_emits = malloc((size_t)s->n_materials + 1))) {
+        free(mat_w);
+        goto nomem;
+    }
+    for (int i = 0; i < s->n_materials; i++)
+        ls->mat_emits[i] = mat_w[i] > 0.0;
     for (uint32_t t = 0; t < m->n_triangles; t++)
         if (mat_w[m->material[t]] > 0.0)
             ls->n_emitters++;
@@ -272,10 +281,16 @@ void dr_light_sampler_destroy(struct dr_light_sampler *ls)
     free(ls->env_marginal_guide);
     free(ls->env_row_sin);
     free(ls->env_conditional_guide);
+    free(ls->mat_emits);
     free(ls);
 }
 
 bool dr_light_sampler_empty(const struct dr_light_sampler *ls) { return ls->n_entries == 0; }
+
+bool dr_light_material_emits(const struct dr_light_sampler *ls, int material)
+{
+    return material >= 0 && material < ls->n_materials && ls->mat_emits[material];
+}
 
 void dr_env_dir_to_uv(dr_vec3 d, double *u, double *v)
 {

@@ -56,6 +56,10 @@ void d_light_radiance(const struct dr_scene *scene, const struct dr_param_set *p
  * `hit` on an emissive triangle as seen from `from`. */
 double dr_light_pdf_area(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 from,
                          const struct dr_hit *hit);
+/* Are material's triangles entries of ls (an emission of power above 0)?
+ * A material whose emission has a parameter but is dark is not: the one-
+ * path walker still counts its hits as emitting (path.c's surface_emits). */
+bool dr_light_material_emits(const struct dr_light_sampler *ls, int material);
 /* Probability that NEE picks triangle tri (0: it does not emit). */
 double dr_light_pdf_area_pick(const struct dr_light_sampler *ls, int64_t tri);
 /* The sampler's tables, for a packet tracer that samples many lanes' lights

@@ -436,19 +436,44 @@ DR_SIMD_INLINE dr_v3x8 sample_specular_dir(const struct dr_path8 *g, dr_v3x8 wo,
 
 /* ----------------------------------------------------------- eligibility */
 
-bool dr_path8_applies(const struct dr_scene *s, const struct dr_path_opts *opts)
+/* The run's effects and stages are all the eight-lane stages' (whatever
+ * its parameters). */
+static bool eight_lane_run(const struct dr_scene *s, const struct dr_path_opts *opts)
 {
     const unsigned allowed = DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_ENV_CONSTANT | DR_FX_ENV_MAP |
                              DR_FX_SHADING_NORMALS | DR_FX_SINGLE_SIDED | DR_FX_SPECULAR | DR_FX_TEXTURES |
                              DR_FX_VERTEX_COLORS | DR_FX_NORMAL_MAPS;
     struct dr_light_tables t;
+    return !(s->effects & ~allowed) && (opts->stages & DR_STAGE_NEE) &&
+           !(opts->stages & (DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC)) && dr_light_tables(s->light_sampler, &t);
+}
+
+bool dr_path8_applies(const struct dr_scene *s, const struct dr_path_opts *opts)
+{
     /* A light whose radiance has a parameter gives any vertex's emission or
-     * next-event estimate a derivative term (and the scalar walker's
-     * surface_emits counts dark emitters then). */
+     * next-event estimate a derivative term, which the vertices these stages
+     * hand over do not carry (dr_path8_walks_apply: the walks that only
+     * need to know where the terms are). */
     const struct dr_param_set *ps = opts->params;
-    return !(ps && (ps->radiance_active || ps->media_active)) && !(s->effects & ~allowed) &&
-           (opts->stages & DR_STAGE_NEE) && !(opts->stages & (DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC)) &&
-           dr_light_tables(s->light_sampler, &t);
+    return !(ps && (ps->radiance_active || ps->media_active)) && eight_lane_run(s, opts);
+}
+
+bool dr_path8_walks_apply(const struct dr_scene *s, const struct dr_path_opts *opts)
+{
+    const struct dr_param_set *ps = opts->params;
+    if (!ps || !ps->radiance_active)
+        return dr_path8_applies(s, opts);
+    if (ps->media_active || !eight_lane_run(s, opts))
+        return false;
+    /* A dark emitter whose emission has a parameter: the one-path walker
+     * counts its hits as emitting (path.c's surface_emits) where these
+     * stages see no emitter; its radiance would be the same 0 but for an
+     * emission whose factors cancel in the power weight, so such runs stay
+     * with the scalar stages. */
+    for (int m = 0; m < s->n_materials; m++)
+        if (ps->mat_emission_active[m] && !dr_light_material_emits(s->light_sampler, m))
+            return false;
+    return true;
 }
 
 /* A material with a BSDF parameter stays scalar: its vertex substitutes zero
@@ -738,6 +763,7 @@ struct light8 {
     dr_v3x8 wi, target, radiance;
     dr_f8 pdf;
     dr_m8 infinite, delta;   /* at no finite distance (environment, directional); no MIS (punctual) */
+    dr_m8 diff;              /* the light's radiance has a parameter (only with ps: light_sample's) */
 };
 
 /* Tables at most this long are searched all eight lanes at once. */
@@ -900,8 +926,8 @@ static void other_light_samples(const struct dr_scene *s, const bool *other, dr_
  * emitters and the other kinds of light lane by lane. Returns where a light
  * sample carries light. */
 static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables *lt, struct lanes *L,
-                          const struct dr_path8_ahead *ahead, dr_v3x8 p, dr_f8 u_pick, dr_f8 u1, dr_f8 u2,
-                          struct light8 *out)
+                          const struct dr_path8_ahead *ahead, const struct dr_param_set *ps, dr_v3x8 p, dr_f8 u_pick,
+                          dr_f8 u1, dr_f8 u2, struct light8 *out)
 {
     const struct dr_mesh *m = &s->mesh;
     dr_f8 pick, area;
@@ -909,6 +935,13 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     bool other[DR_SIMD_W];
     dr_m8 env, env_map;
     pick_lights(s, lt, L, ahead, u_pick, &pick, &area, v, &env, &env_map, other);
+    out->diff = (dr_m8){0};
+    for (int i = 0; ps && ps->radiance_active && i < DR_SIMD_W; i++) {   /* (dr_path_vertex_has_derivative's switch) */
+        bool d = env[i] || env_map[i] ? ps->env_active
+                 : other[i]           ? ps->lights_active
+                                      : ps->mat_emission_active[m->material[L->ltri[i]]];
+        out->diff[i] = d ? -1 : 0;
+    }
     dr_m8 ok = ~dr_f8_le(pick, dr_f8s(0.0));
     dr_f8 su = dr_f8_sqrt(u1);
     dr_f8 b1 = 1.0 - su, b2 = u2 * su, b0 = 1.0 - b1 - b2;
@@ -1184,6 +1217,10 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     g->emits = (dr_m8){0};
     if (opts->stages & DR_STAGE_EMISSION)
         emission_seen(s, &lt, &L, in, ng, front, tu, tv, g);
+    g->diff_emit = (dr_m8){0};
+    const struct dr_param_set *ps = opts->params;
+    for (int i = 0; ps && ps->radiance_active && (opts->stages & DR_STAGE_EMISSION) && i < n; i++)
+        g->diff_emit[i] = ps->mat_emission_active[m->material[L.tri[i]]] ? -1 : 0;   /* (surface_emits and the predicate) */
 
     /* stage_material: the frame towards the ray, the BSDF, the random numbers */
     dr_m8 end = dr_f8_ge(depth, dr_f8s(opts->max_depth)) | (~front & ~mask_of(L.double_sided));
@@ -1217,8 +1254,9 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
 
     /* dr_path_nee_begin */
     struct light8 ls;
-    dr_m8 ok = light_sample(s, &lt, &L, in->ahead, g->p, u_pick, u1, u2, &ls);
+    dr_m8 ok = light_sample(s, &lt, &L, in->ahead, opts->params, g->p, u_pick, u1, u2, &ls);
     g->shadow = nee_begin(g, ok, &ls, &g->so, &g->sd) & ~end;
+    g->diff_nee = ls.diff;
     g->go_on = ~end;
     g->depth = depth;
 }

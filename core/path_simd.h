@@ -84,6 +84,10 @@ struct dr_path8 {
     dr_m8 diff;                   /* a differentiated vertex (dr_path_vertex's diff_bsdf): its
                                      shadow ray is cast even where the BSDF towards the light is
                                      0, its zero channels are substituted (path.h) */
+    dr_m8 diff_emit, diff_nee;    /* in a run with a light parameter (dr_path8_walks_apply): the
+                                     emission seen here, and the light sample (where it counts:
+                                     dr_path8_out's nee), have a derivative term
+                                     (dr_path_vertex_has_derivative's radiance cases) */
     dr_v3x8 p, ng;                /* hit point; geometric normal on the ray's side */
     dr_v3x8 fs, ft, fn;           /* shading frame */
     dr_f8 eps, wo_z, depth;
@@ -102,6 +106,12 @@ struct dr_path8 {
 /* Can this run use the eight-lane stages at all (no light whose radiance has
  * a parameter, no alpha, media or dielectric boundaries; some light)? */
 bool dr_path8_applies(const struct dr_scene *scene, const struct dr_path_opts *opts);
+/* Can a path replay's primal walks use them (wave_soa.h's walks that give
+ * sums and where the derivative terms are, no vertices)? Also where a
+ * light's radiance has a parameter: the stages then mark the vertices whose
+ * emission or light sample has a term (dr_path8's diff_emit, diff_nee);
+ * not where such a light is dark (a power of 0: path_simd.c says why). */
+bool dr_path8_walks_apply(const struct dr_scene *scene, const struct dr_path_opts *opts);
 /* Can a vertex on triangle tri use them without its derivative term's
  * bookkeeping (a hit, on a material without a BSDF parameter)? Such a
  * vertex has no derivative term in a run dr_path8_applies to. The arrays'

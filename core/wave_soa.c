@@ -108,9 +108,9 @@ size_t dr_wave_soa_walk_bytes(void)
     return sizeof(struct dr_wave_soa) + sizeof(struct scalar_path) * LANES;
 }
 
-bool dr_wave_soa_walks_apply(const struct dr_scene *s, const struct dr_path_opts *opts)
+bool dr_wave_soa_walks_apply(const struct dr_scene *s, const struct dr_path_opts *opts, bool sums_only)
 {
-    return dr_path8_applies(s, opts);
+    return sums_only ? dr_path8_walks_apply(s, opts) : dr_path8_applies(s, opts);
 }
 
 bool dr_wave_soa_applies(const struct dr_scene *s, const struct dr_path_opts *opts)
@@ -289,11 +289,12 @@ static void scalar_state(const struct dr_wave_soa *w, int k, struct dr_path_stat
 
 /* A ray that left the scene: the escaped stage's maths (the environment's
  * radiance, if any, with its MIS weight: dr_path_escaped_radiance, which the
- * scalar stage calls too), and the path's end. The vertex has no derivative
- * term: the arrays serve no run in which a light's radiance has a parameter
- * (dr_path8_applies). Building a scalar state and vertex for it, as before,
- * took a tenth of a render where most rays leave (a real asset under the
- * default sky). */
+ * scalar stage calls too), and the path's end. In a walk where the
+ * environment has a parameter the vertex has a derivative term (it emits:
+ * dr_path_vertex_has_derivative); no run with a step hook has one
+ * (dr_wave_soa_walks_apply). Building a scalar state and vertex for it, as
+ * before, took a tenth of a render where most rays leave (a real asset
+ * under the default sky). */
 static void escaped(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int k,
                     dr_vec3 *out)
 {
@@ -312,7 +313,8 @@ static void escaped(const struct dr_wave_soa *w, const struct dr_scene *s, const
     dr_vec3 ratio = dr_v3(w->rx[k], w->ry[k], w->rz[k]), T = dr_add(dr_v3(w->Tx[k], w->Ty[k], w->Tz[k]), dr_mul(ratio, c));
     if (w->out->step)
         w->out->step(w->out->ctx, w->item[k], e, dr_v3s(0.0), dr_mul(ratio, dr_v3(w->bx[k], w->by[k], w->bz[k])));
-    walk_done(w, w->item[k], L, T, w->last_diff[k]);
+    const bool diff = (opts->stages & DR_STAGE_ENV) && opts->params && opts->params->env_active;
+    walk_done(w, w->item[k], L, T, diff ? (int)w->depth[k] : w->last_diff[k]);
 }
 
 /* Slot k's path out of the arrays, to the scalar stages this step. */
@@ -614,7 +616,7 @@ static int advance(struct dr_wave_soa *w, const struct dr_scene *s, const struct
         int j = kept;
         for (int i = 0; i < G->n; i++) {
             int k = i0 + i;
-            if (w->out && G->diff[i])   /* (dr_path_vertex_has_derivative: diff_bsdf) */
+            if (w->out && (G->diff[i] | G->diff_emit[i] | (G->diff_nee[i] & c.nee[i])))   /* (dr_path_vertex_has_derivative) */
                 w->last_diff[k] = (int)G->depth[i];
             if (!go_on[i]) {
                 if (w->out)

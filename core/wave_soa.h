@@ -63,8 +63,11 @@ struct dr_wave_soa_walks {
 /* Can a gradient's primal walks use the arrays (parameters allowed)? The
  * vertices on materials with a BSDF parameter take the scalar stages where
  * the walk has a vertex hook (as in wavefront.c), the eight-lane ones
- * otherwise, as all other vertices do. */
-bool dr_wave_soa_walks_apply(const struct dr_scene *scene, const struct dr_path_opts *opts);
+ * otherwise, as all other vertices do. sums_only: walks without step and
+ * vertex hooks (path replay's: sums, last_diff, the log), which also apply
+ * where a light's radiance has a parameter (dr_path8_walks_apply); a tape's
+ * steps would need those vertices whole. */
+bool dr_wave_soa_walks_apply(const struct dr_scene *scene, const struct dr_path_opts *opts, bool sums_only);
 /* Bytes dr_wave_soa_create and dr_wave_soa_walk allocate (for memory estimates). */
 size_t dr_wave_soa_walk_bytes(void);
 

@@ -360,7 +360,7 @@ static void primal_walks(struct prb_job *j, int thread, struct park_ctx *c, int6
     struct dr_est_base *b = &j->b;
     static const struct dr_wave_ops primal = {primal_start, lane_vertex, primal_end, primal_keep_log,
                                               NULL, true};
-    if (dr_wave_soa_walks_apply(b->p->scene, &b->popts) &&
+    if (dr_wave_soa_walks_apply(b->p->scene, &b->popts, true) &&
         (j->soas[thread] || (j->soas[thread] = dr_wave_soa_create())) &&
         dr_wave_soa_walk(j->soas[thread], b->p->scene, &b->popts, n, soa_start, c, &c->items->walk,
                          &b->thr[thread].rays))
@@ -533,7 +533,7 @@ static int prb_run(struct dr_est_base *b)
     uint64_t per_thread = sizeof(dr_vec3) * (uint64_t)b->p->spp;
     if (j->wave) {
         per_thread += dr_wave_bytes() + parked_bytes(park_group(b->p->spp) * b->p->spp);
-        if (dr_wave_soa_walks_apply(b->p->scene, &b->popts))
+        if (dr_wave_soa_walks_apply(b->p->scene, &b->popts, true))
             per_thread += dr_wave_soa_walk_bytes();
     }
     b->scratch_bytes = per_thread * (uint64_t)b->acc.threads;   /* (at most prb_thread_bytes each) */

@@ -391,7 +391,7 @@ static void soa_vertex(void *ctx, int64_t i, const struct dr_wave_arrival *a, co
 static bool record_soa(struct tape_job *j, int thread, struct wave_record *c, int64_t n)
 {
     const struct dr_scene *s = j->b.p->scene;
-    if (!j->steps || !dr_wave_soa_walks_apply(s, &j->b.popts))
+    if (!j->steps || !dr_wave_soa_walks_apply(s, &j->b.popts, false))
         return false;
     if (!j->soas[thread] && !(j->soas[thread] = dr_wave_soa_create()))
         return false;
@@ -667,7 +667,7 @@ static int tape_run(struct dr_est_base *b)
     if (j->batch > pixels)
         j->batch = pixels > 0 ? pixels : 1;   /* (the pixel list holds a batch) */
     if (j->wave) {   /* what the workers hold besides the tape: the packet tracer's arrays or lanes */
-        const bool soa = j->steps && dr_wave_soa_walks_apply(p->scene, &b->popts);
+        const bool soa = j->steps && dr_wave_soa_walks_apply(p->scene, &b->popts, false);
         b->scratch_bytes = (uint64_t)threads * (soa ? dr_wave_soa_walk_bytes() : dr_wave_bytes());
     }
     int rc = dr_parallel_for_static(pixels, j->batch, threads, record_and_sweep, j);

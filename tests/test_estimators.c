@@ -48,8 +48,15 @@ static double reverse_difference(const char *what, const struct dr_param_set *ps
 /* Every registered estimator on the same problem and random numbers; every
  * pair must agree to rounding, in both modes, and each must be bit-identical
  * when repeated (resumable optimisation relies on it). */
+/* Which estimators shade vertices eight lanes at a time (path_simd.h):
+ * prb's primal walks wherever no light is dark (also with light parameters,
+ * whose vertices the stages mark), the tape's compact steps and prb's
+ * replays only where no light has a parameter; none with derivative
+ * sampling. */
+enum grouping { GROUPED_NONE, GROUPED_PRB, GROUPED_BOTH };
+
 static void compare(const char *what, struct dr_scene *s, const struct dr_camera *cam, const char *const *ptrs, int n,
-                    int depth, enum dr_sampling sampling, bool eight_wide)
+                    int depth, enum dr_sampling sampling, enum grouping grouping)
 {
     struct dr_param_set *ps = dr_param_set_create(s, ptrs, n);
     CHECK(ps != NULL, "%s: param set: %s", what, dr_last_error());
@@ -88,7 +95,7 @@ static void compare(const char *what, struct dr_scene *s, const struct dr_camera
         /* prb's walks and the tape's compact steps (detached sampling) shade
          * the vertices without a derivative term eight lanes at a time where
          * no light has a parameter (path_simd.h) */
-        const bool grouped = eight_wide;
+        const bool grouped = grouping == GROUPED_BOTH || (grouping == GROUPED_PRB && strcmp(est->name, "prb") == 0);
         CHECK(grouped ? st.rays.simd_vertices > 0 : st.rays.simd_vertices == 0,
               "%s: %s shaded %llu vertices eight lanes at a time (expected %s)", what, est->name,
               (unsigned long long)st.rays.simd_vertices, grouped ? "some" : "none");
@@ -309,22 +316,25 @@ int main(void)
         "/materials/light/extensions/KHR_materials_emissive_strength/emissiveStrength",
         "/images/0",
     };
-    compare("cornell box", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DETACHED, false);
+    compare("cornell box", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DETACHED, GROUPED_PRB);
+    /* the light's parameters alone: the vertices that see it or sample it
+     * are the only ones with a term (prb's walks mark them in the arrays) */
+    compare("cornell box, the light only", s, &s->cameras[0], ptrs + 4, 2, 8, DR_SAMPLING_DETACHED, GROUPED_PRB);
     /* BSDF parameters only: prb's walks and the tape's steps shade the
      * vertices on other materials eight lanes at a time; the estimators must
      * still agree (a wrong continuation factor in the tape's steps, or a
      * wrong radiance in prb's, would show) */
     const char *bsdf_ptrs[] = {ptrs[0], ptrs[2], ptrs[3], ptrs[6]};
-    compare("cornell box, BSDF parameters only", s, &s->cameras[0], bsdf_ptrs, 4, 8, DR_SAMPLING_DETACHED, true);
+    compare("cornell box, BSDF parameters only", s, &s->cameras[0], bsdf_ptrs, 4, 8, DR_SAMPLING_DETACHED, GROUPED_BOTH);
     /* one parameter at a time: most vertices then have no term */
     for (int k = 0; k < 7; k++)
         derivative_predicate(s, &s->cameras[0], &ptrs[k], 1);
     /* derivative sampling: the same sub-streams, the same terms in another order */
-    compare("cornell box, derivative sampling", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DERIVATIVE, false);
+    compare("cornell box, derivative sampling", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DERIVATIVE, GROUPED_NONE);
     compare("cornell box, paths longer than the replay log", s, &s->cameras[0], ptrs, 7, DR_WAVE_REPLAY_DEPTH + 12,
-            DR_SAMPLING_DETACHED, false);
+            DR_SAMPLING_DETACHED, GROUPED_PRB);
     compare("cornell box, BSDF parameters only, paths longer than the replay log", s, &s->cameras[0], bsdf_ptrs, 4,
-            DR_WAVE_REPLAY_DEPTH + 12, DR_SAMPLING_DETACHED, true);
+            DR_WAVE_REPLAY_DEPTH + 12, DR_SAMPLING_DETACHED, GROUPED_BOTH);
     /* zero BSDF channels at differentiated vertices (path.h's substitutes):
      * the red wall reflects no green or blue, the white walls nothing (no
      * specular lobe either: its 4 % would make no channel 0). prb's
@@ -342,7 +352,7 @@ int main(void)
     }
     CHECK(zeroed == 2, "cornell box: the red and white materials (found %d)", zeroed);
     const char *zero_ptrs[] = {ptrs[0], ptrs[1], ptrs[2]};
-    compare("cornell box, zero BSDF channels", s, &s->cameras[0], zero_ptrs, 3, 8, DR_SAMPLING_DETACHED, true);
+    compare("cornell box, zero BSDF channels", s, &s->cameras[0], zero_ptrs, 3, 8, DR_SAMPLING_DETACHED, GROUPED_BOTH);
     dr_scene_destroy(s);
 
     /* a glossy scene: rough metal and a dielectric floor under a point light and an environment */
@@ -378,9 +388,15 @@ int main(void)
         "/extensions/DR_environment/color",
         "/extensions/DR_environment/strength",
     };
-    compare("glossy scene", s, &cam, gptrs, 8, 6, DR_SAMPLING_DETACHED, false);
-    compare("glossy scene, derivative sampling", s, &cam, gptrs, 8, 6, DR_SAMPLING_DERIVATIVE, false);
-    compare("glossy scene, the floor's BSDF only", s, &cam, gptrs, 2, 6, DR_SAMPLING_DETACHED, true);
+    compare("glossy scene", s, &cam, gptrs, 8, 6, DR_SAMPLING_DETACHED, GROUPED_PRB);
+    compare("glossy scene, derivative sampling", s, &cam, gptrs, 8, 6, DR_SAMPLING_DERIVATIVE, GROUPED_NONE);
+    compare("glossy scene, the floor's BSDF only", s, &cam, gptrs, 2, 6, DR_SAMPLING_DETACHED, GROUPED_BOTH);
+    /* one kind of light at a time: where the point light alone has a
+     * parameter, a vertex's term is its light sample's when that picked the
+     * point light, never an escaped ray's; with the environment's alone,
+     * the other way round */
+    compare("glossy scene, the point light only", s, &cam, gptrs + 4, 2, 6, DR_SAMPLING_DETACHED, GROUPED_PRB);
+    compare("glossy scene, the environment only", s, &cam, gptrs + 6, 2, 6, DR_SAMPLING_DETACHED, GROUPED_PRB);
     tape_reuse(s, &cam, gptrs, 8);
     cross_many_samples(s, &cam, gptrs, 8);
     for (int k = 0; k < 8; k++)
@@ -404,7 +420,7 @@ int main(void)
     cam = sb_camera(dr_v3(0.5, 1.0, 0.9), dr_v3(-0.3, 0.8, -1), 60);
     const char *box_ptrs[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor"};
     compare("closed box, paths longer than the replay log", s, &cam, box_ptrs, 1, DR_WAVE_REPLAY_DEPTH + 12,
-            DR_SAMPLING_DETACHED, true);
+            DR_SAMPLING_DETACHED, GROUPED_BOTH);
     dr_scene_destroy(s);
     return TEST_END();
 }
