@@ -424,11 +424,7 @@ bool dr_path_vertex_has_derivative(const struct dr_scene *s, const struct dr_par
         return true;
     if (!v->nee)
         return false;
-    switch (v->ls.type) {
-    case DR_LS_AREA: return ps->mat_emission_active[s->mesh.material[v->ls.index]];
-    case DR_LS_ENV: return ps->env_active;
-    default: return ps->lights_active;
-    }
+    return dr_path_light_differentiated(ps, v->ls.type, v->ls.type == DR_LS_AREA ? s->mesh.material[v->ls.index] : -1);
 }
 
 /* d_e of one image channel (forward mode) or of all (reverse mode). */

@@ -208,6 +208,15 @@ void d_path_vertex_term(const struct dr_scene *scene, const struct dr_param_set 
  * path's derivative work can end at its last vertex with a term. Reads
  * v->diff_bsdf and v->media, and the rest of v only where some light's
  * radiance has a parameter (params->radiance_active). */
+/* Does a light sample of this type (DR_LS_*) have a derivative term: is its
+ * light's radiance a parameter (material: the emitting triangle's, for an
+ * area light)? dr_path_vertex_has_derivative's next-event case, shared with
+ * the eight-lane stages' marks (path_simd.c). */
+static inline bool dr_path_light_differentiated(const struct dr_param_set *ps, int type, int material)
+{
+    return type == DR_LS_AREA ? ps->mat_emission_active[material] : type == DR_LS_ENV ? ps->env_active
+                                                                                       : ps->lights_active;
+}
 bool dr_path_vertex_has_derivative(const struct dr_scene *scene, const struct dr_param_set *params,
                                    const struct dr_path_vertex *v);
 /* Adjoint of the continuation's BSDF value f along v->wi, given d_f. */

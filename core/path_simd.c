@@ -937,10 +937,8 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     pick_lights(s, lt, L, ahead, u_pick, &pick, &area, v, &env, &env_map, other);
     out->diff = (dr_m8){0};
     for (int i = 0; ps && ps->radiance_active && i < DR_SIMD_W; i++) {   /* (dr_path_vertex_has_derivative's switch) */
-        bool d = env[i] || env_map[i] ? ps->env_active
-                 : other[i]           ? ps->lights_active
-                                      : ps->mat_emission_active[m->material[L->ltri[i]]];
-        out->diff[i] = d ? -1 : 0;
+        const int type = env[i] || env_map[i] ? DR_LS_ENV : other[i] ? DR_LS_PUNCTUAL : DR_LS_AREA;
+        out->diff[i] = dr_path_light_differentiated(ps, type, m->material[L->ltri[i]]) ? -1 : 0;
     }
     dr_m8 ok = ~dr_f8_le(pick, dr_f8s(0.0));
     dr_f8 su = dr_f8_sqrt(u1);
