@@ -15,7 +15,8 @@
 void cmd_params_usage(FILE *out)
 {
     fprintf(out,
-            "usage: drender params [SCENE] [--json] [--ignore-unsupported]\n"
+            "usage: drender params [SCENE] [--json] [--env FILE|COLOR[,STRENGTH]] [--no-default-light]\n"
+            "                      [--light-units U] [--ignore-unsupported]\n"
             "\n"
             "Lists every differentiable parameter of SCENE (.gltf or .glb; default: the\n"
             "bundled Cornell box): its name (a JSON pointer into the glTF document, as\n"
@@ -27,6 +28,11 @@ void cmd_params_usage(FILE *out)
             "      --json          print one JSON object on stdout instead of the table\n"
             GRAD_IGNORE_UNSUPPORTED_HELP
             "  -h, --help          show this help\n");
+    /* the lighting options change what is listed, as they change what the
+     * rendering commands differentiate: --env's parameters replace the
+     * file's environment, the default light's appear or not, --light-units
+     * sets the punctual intensities shown */
+    grad_lighting_usage(out);
 }
 
 
@@ -123,6 +129,9 @@ int cmd_params(int argc, char **argv)
     static const struct option opts[] = {
         {"json", no_argument, NULL, GOPT_JSON},
         {"ignore-unsupported", no_argument, NULL, GOPT_IGNORE_UNSUPPORTED},
+        {"env", required_argument, NULL, GOPT_ENV},
+        {"no-default-light", no_argument, NULL, GOPT_NO_DEFAULT_LIGHT},
+        {"light-units", required_argument, NULL, GOPT_LIGHT_UNITS},
         {"help", no_argument, NULL, 'h'},
         {NULL, 0, NULL, 0},
     };
@@ -132,12 +141,14 @@ int cmd_params(int argc, char **argv)
     const bool json = g.json;
     const char *scene_arg = g.scene_arg;
     const struct dr_load_opts load = g.load;
-    grad_common_free(&g);
-    if (prc >= 0)
+    if (prc >= 0) {
+        grad_common_free(&g);
         return prc;
+    }
     char *scene_path = scene_arg ? strdup(scene_arg) : cli_find_bundled_scene(DEFAULT_SCENE);
     if (!scene_path) {
         cli_error("params", "no SCENE given and the bundled %s was not found (set DRENDER_DATA)", DEFAULT_SCENE);
+        grad_common_free(&g);
         return DR_EXIT_INPUT;
     }
     int rc;
@@ -150,9 +161,9 @@ int cmd_params(int argc, char **argv)
         rc = DR_EXIT_INPUT;
         goto out;
     }
-    /* the default environment a rendering command would add is a parameter too */
-    struct grad_common lighting = {.cmd = "params"};
-    if ((rc = grad_apply_lighting(&lighting, scene_path, scene)) >= 0)
+    /* the lighting a rendering command would use with the same options
+     * (--env, or the default environment) has parameters too */
+    if ((rc = grad_apply_lighting(&g, scene_path, scene)) >= 0)
         goto out;
     if (dr_params_list(scene, &list, &n) != 0) {
         cli_error("params", "%s", dr_last_error());
@@ -205,5 +216,6 @@ out:
     free(list);
     dr_scene_destroy(scene);
     free(scene_path);
+    grad_common_free(&g);
     return rc;
 }

@@ -4,7 +4,9 @@
 #   a. render: a note on stderr, once; a lit (non-black) image; with
 #      --no-default-light a black one and no note; --env COLOR,STRENGTH and
 #      --env FILE,STRENGTH light it as asked; a lit scene gets no note
-#   b. params lists the default environment's parameters
+#   b. params lists the default environment's parameters, --env's (the map's
+#      texels, or the colour as given) in their place, none with
+#      --no-default-light
 #   c. optimize on the camera-less, light-less file fits the environment's
 #      colour to a target; the written glTF carries DR_environment only when
 #      the environment was fitted
@@ -57,6 +59,27 @@ grep -q "has no light" "$tmp/err" && fail "a scene with an area light got the de
 run params "$box"
 expect_rc 0 "params"
 expect_in out "/extensions/DR_environment/color" "params lists the default environment"
+run params "$box" --no-default-light
+expect_rc 0 "params --no-default-light"
+grep -q "DR_environment" "$tmp/out" && fail "params --no-default-light still lists an environment"
+grep -q "has no light" "$tmp/err" && fail "params --no-default-light printed the default-light note"
+run params "$box" --env "$DR_TESTDIR/data/gltf/sky.hdr,0.5" --json
+expect_rc 0 "params --env FILE,STRENGTH"
+python3 - "$tmp/out" "$DR_TESTDIR/data/gltf/sky.hdr" <<'PY' || fail "params --env sky.hdr,0.5 does not list the map's texels and strength 0.5"
+import json, subprocess, sys
+p = {q["name"]: q for q in json.load(open(sys.argv[1]))["parameters"]}
+uri, st = p.get("/extensions/DR_environment/uri"), p.get("/extensions/DR_environment/strength")
+info = subprocess.run(["oiiotool", "--info", sys.argv[2]], capture_output=True, text=True).stdout
+w, h = [int(x) for x in info.split(":")[1].split(",")[0].split("x")]
+sys.exit(0 if uri and uri["type"] == "image" and (uri["width"], uri["height"]) == (w, h)
+         and st and st["value"] == [0.5] else 1)
+PY
+run params "$box" --env 0.25,0.5,1
+expect_rc 0 "params --env R,G,B"
+grep -qE '^/extensions/DR_environment/color +color +3 +\(0\.25, 0\.5, 1\)' "$tmp/out" ||
+    fail "params --env 0.25,0.5,1 does not list that colour: $(grep DR_environment "$tmp/out")"
+run params "$box" --env -1
+expect_rc 2 "params --env with a negative value"
 
 # ---- c. optimize: no camera, no light ----
 run render "$box" $R -o target.exr --env 0.5
