@@ -600,6 +600,7 @@ static void add_rays(struct dr_ray_counts *sum, const struct dr_ray_counts *r)
     sum->extension += r->extension;
     sum->shadow += r->shadow;
     sum->simd_vertices += r->simd_vertices;
+    sum->simd_replayed += r->simd_replayed;
 }
 
 void grad_totals_add(struct grad_totals *t, const struct dr_grad_stats *st)
@@ -662,7 +663,8 @@ void grad_json_run(FILE *f, const struct grad_totals *t)
     fprintf(f, ", \"rays\": {\"camera\": %llu, \"extension\": %llu, \"shadow\": %llu, \"total\": %llu}",
             (unsigned long long)r->camera, (unsigned long long)r->extension, (unsigned long long)r->shadow,
             (unsigned long long)(r->camera + r->extension + r->shadow));
-    fprintf(f, ", \"vertices_shaded_8_wide\": %llu", (unsigned long long)r->simd_vertices);
+    fprintf(f, ", \"vertices_shaded_8_wide\": %llu, \"replayed_vertices_shaded_8_wide\": %llu",
+            (unsigned long long)r->simd_vertices, (unsigned long long)r->simd_replayed);
     char stages[256];
     dr_path_stages_describe(t->stages, stages, sizeof stages);
     fprintf(f, ", \"invalid_samples\": %llu, \"stages\": ", (unsigned long long)t->invalid);

@@ -158,7 +158,7 @@ static void drt_gain(const struct dr_scene *s, const struct dr_path_opts *opts, 
                 dr_vec3 x = dr_madd(o, d, t);
                 dr_vec3 w = dr_mul(dr_mul(T, dr_medium_transmittance(m, o, d, t, &rng)), m->albedo);
                 if (!dr_is_black(w)) {
-                    struct dr_ray_counts counts = {0, 0, 0, 0};
+                    struct dr_ray_counts counts = {0};
                     uint64_t key = dr_hash64(tr->rng_key ^ (0x9e3779b97f4a7c15ULL * (uint64_t)(crossing + 1)));
                     dr_vec3 Ls = dr_medium_inscattered(s, opts, x, d, medium, v->depth, key, &counts);
                     for (int c = 0; c < 3; c++) {

@@ -47,6 +47,7 @@
 struct dr_ray_counts {
     uint64_t camera, extension, shadow;
     uint64_t simd_vertices;   /* path vertices shaded eight lanes at a time (path_simd.h) */
+    uint64_t simd_replayed;   /* ... of them in replays (prb's second walks of its paths) */
 };
 
 /* Dimensions a path uses: 2 for the pixel position, then a fixed block per

@@ -451,9 +451,10 @@ static bool eight_lane_run(const struct dr_scene *s, const struct dr_path_opts *
 bool dr_path8_applies(const struct dr_scene *s, const struct dr_path_opts *opts)
 {
     /* A light whose radiance has a parameter gives any vertex's emission or
-     * next-event estimate a derivative term, which the vertices these stages
-     * hand over do not carry (dr_path8_walks_apply: the walks that only
-     * need to know where the terms are). */
+     * next-event estimate a derivative term, whose inputs the vertices these
+     * stages hand over carry only for the walkers that ask
+     * (dr_path8_walks_apply: prb's walks, which need to know where the terms
+     * are, and its replays, dr_wave_ops.light_terms). */
     const struct dr_param_set *ps = opts->params;
     return !(ps && (ps->radiance_active || ps->media_active)) && eight_lane_run(s, opts);
 }
@@ -764,6 +765,11 @@ struct light8 {
     dr_f8 pdf;
     dr_m8 infinite, delta;   /* at no finite distance (environment, directional); no MIS (punctual) */
     dr_m8 diff;              /* the light's radiance has a parameter (only with ps: light_sample's) */
+    /* which light (dr_light_sample's record; only with ps: light_sample's,
+     * and the punctual lanes' always) */
+    int32_t type[DR_SIMD_W];
+    int64_t index[DR_SIMD_W];
+    dr_f8 b1, b2, atten;
 };
 
 /* Tables at most this long are searched all eight lanes at once. */
@@ -918,6 +924,8 @@ static void other_light_samples(const struct dr_scene *s, const bool *other, dr_
         out->pdf[i] = ls.pdf;
         out->infinite[i] = isinf(ls.dist) ? -1 : 0;
         out->delta[i] = ls.delta ? -1 : 0;
+        out->index[i] = ls.index;
+        out->atten[i] = ls.atten;
     }
 }
 
@@ -939,10 +947,13 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     for (int i = 0; ps && ps->radiance_active && i < DR_SIMD_W; i++) {   /* (dr_path_vertex_has_derivative's switch) */
         const int type = env[i] || env_map[i] ? DR_LS_ENV : other[i] ? DR_LS_PUNCTUAL : DR_LS_AREA;
         out->diff[i] = dr_path_light_differentiated(ps, type, m->material[L->ltri[i]]) ? -1 : 0;
+        out->type[i] = type;
+        out->index[i] = type == DR_LS_AREA ? L->ltri[i] : -1;   /* (a punctual lane's: other_light_samples) */
     }
     dr_m8 ok = ~dr_f8_le(pick, dr_f8s(0.0));
     dr_f8 su = dr_f8_sqrt(u1);
     dr_f8 b1 = 1.0 - su, b2 = u2 * su, b0 = 1.0 - b1 - b2;
+    out->b1 = b1, out->b2 = b2, out->atten = dr_f8s(0.0);   /* (atten: a punctual lane's, other_light_samples) */
     dr_v3x8 lp = interp(b0, b1, b2, gather_vertex(m->positions, v[0]), gather_vertex(m->positions, v[1]),
                         gather_vertex(m->positions, v[2]));
     dr_v3x8 lng = {gather_at(m->tri_normal_eps, L->ltri, 4, 0), gather_at(m->tri_normal_eps, L->ltri, 4, 1),
@@ -1255,6 +1266,11 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     dr_m8 ok = light_sample(s, &lt, &L, in->ahead, opts->params, g->p, u_pick, u1, u2, &ls);
     g->shadow = nee_begin(g, ok, &ls, &g->so, &g->sd) & ~end;
     g->diff_nee = ls.diff;
+    if (ps && ps->radiance_active) {   /* (d_light_radiance's inputs: dr_path8_continue) */
+        memcpy(g->ls_type, ls.type, sizeof g->ls_type);
+        memcpy(g->ls_index, ls.index, sizeof g->ls_index);
+        g->ls_b1 = ls.b1, g->ls_b2 = ls.b2, g->ls_atten = ls.atten, g->ls_wi = ls.wi;
+    }
     g->go_on = ~end;
     g->depth = depth;
 }
@@ -1280,6 +1296,7 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
     in.prev_p = gather3(S, offsetof(struct dr_path_state, prev_p));
     in.prev_pdf = gather(S, offsetof(struct dr_path_state, prev_pdf));
     dr_path8_shade_lanes(s, opts, &in, g);
+    const bool light_terms = opts->params && opts->params->radiance_active;
     for (int i = 0; i < n; i++) {
         v[i]->kind = DR_VERTEX_SURFACE;
         if (g->emits[i]) {
@@ -1287,6 +1304,12 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
             v[i]->Le = dr_v3x8_get(&g->Le, i);
             v[i]->emit_w = g->emit_w[i];
         }
+        /* what dr_path_vertex_has_derivative and d_emission read: the
+         * scalar stages' hit (the ray is still the one that hit) */
+        if (light_terms && g->emits[i] && g->diff_emit[i])
+            dr_hit_compute(&s->mesh, tri[i], st[i]->o, st[i]->d, &v[i]->hit);
+        else if (light_terms)
+            v[i]->hit.material = s->mesh.material[tri[i]];
         if (g->go_on[i])
             smp[i]->dim = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)(st[i]->depth - 1) + 7;
         next[i] = !g->go_on[i] ? DR_STEP_END : g->shadow[i] ? DR_STEP_SHADOW : DR_STEP_CONTINUE;
@@ -1381,6 +1404,12 @@ void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g
             v[i]->nee_f = dr_v3x8_get(&g->nee_f, i);
             v[i]->ls.radiance = dr_v3x8_get(&g->ls_radiance, i);
             v[i]->nee_scale = out.nee_scale[i];
+            if (opts->params && opts->params->radiance_active) {   /* (d_light_radiance's inputs) */
+                struct dr_light_sample *ls = &v[i]->ls;
+                ls->type = g->ls_type[i], ls->index = g->ls_index[i];
+                ls->b1 = g->ls_b1[i], ls->b2 = g->ls_b2[i], ls->atten = g->ls_atten[i];
+                ls->wi = dr_v3x8_get(&g->ls_wi, i);
+            }
         }
         more[i] = out.more[i] != 0;
         if (!more[i])

@@ -14,8 +14,8 @@
  * the independent sampler's hashes are vector code). Every operation is the scalar code's, in its order, so each lane gets the
  * scalar walker's bits (test_render compares radiance in double); what the
  * kernels mirror is named beside each step. Escaped rays, alpha, media
- * and vertices with a derivative term stay with the scalar stages: the packet tracer (wavefront.c) sends each lane one way or
- * the other.
+ * and vertices with a BSDF derivative term stay with the scalar stages: the
+ * packet tracer (wavefront.c) sends each lane one way or the other.
  *
  * The kernels themselves (dr_path8_shade_lanes, dr_path8_continue_lanes)
  * take and give vectors; dr_path8_shade and dr_path8_continue gather them
@@ -24,9 +24,12 @@
  *
  * The vertex the caller receives holds what dr_path_vertex_term reads
  * (emission, next-event estimate), what dr_path_vertex_has_derivative reads
- * (false) and the continuation's factor (cont, f, cos_pdf_q): the eight-lane
+ * and the continuation's factor (cont, f, cos_pdf_q): the eight-lane
  * stages serve `render`, prb's walks and the tape's compact steps
- * (dr_wave_ops.partial_vertices). */
+ * (dr_wave_ops.partial_vertices). In a run with a light parameter
+ * (dr_path8_walks_apply) it also holds what d_path_vertex_term reads of a
+ * vertex without a BSDF parameter: the hit of a differentiated emitter and
+ * the light sample's record (dr_wave_ops.light_terms: prb's replays). */
 #ifndef DR_PATH_SIMD_H
 #define DR_PATH_SIMD_H
 
@@ -96,6 +99,14 @@ struct dr_path8 {
     dr_f8 tmax, nee_cos, ls_pdf, bsdf_pdf;   /* next-event estimate, for its end */
     dr_m8 delta;                  /* ... from a punctual light (no MIS) */
     dr_v3x8 nee_f, ls_radiance;
+    /* in a run with a light parameter only: which light each lane's sample
+     * took, as dr_light_sample's record names it (type, index, b1, b2,
+     * atten, wi), for d_light_radiance (dr_path8_continue copies it into
+     * the vertex's ls) */
+    int32_t ls_type[DR_SIMD_W];
+    int64_t ls_index[DR_SIMD_W];
+    dr_f8 ls_b1, ls_b2, ls_atten;
+    dr_v3x8 ls_wi;
     /* the BSDF (bsdf.h) where some lane has a specular lobe (glossy) */
     bool glossy;
     dr_m8 lambert;                /* lanes without one */
@@ -103,14 +114,17 @@ struct dr_path8 {
     dr_f8 metallic, alpha, specular, spec_p, lobe_u;
 };
 
-/* Can this run use the eight-lane stages at all (no light whose radiance has
- * a parameter, no alpha, media or dielectric boundaries; some light)? */
+/* Can this run use the eight-lane stages for every walker (no light whose
+ * radiance has a parameter, no alpha, media or dielectric boundaries; some
+ * light)? */
 bool dr_path8_applies(const struct dr_scene *scene, const struct dr_path_opts *opts);
-/* Can a path replay's primal walks use them (wave_soa.h's walks that give
- * sums and where the derivative terms are, no vertices)? Also where a
- * light's radiance has a parameter: the stages then mark the vertices whose
- * emission or light sample has a term (dr_path8's diff_emit, diff_nee);
- * not where such a light is dark (a power of 0: path_simd.c says why). */
+/* Can path replay's walks use them (wave_soa.h's primal walks that give
+ * sums and where the derivative terms are, no vertices; its replays, whose
+ * vertices then carry their light terms)? Also where a light's radiance has
+ * a parameter: the stages then mark the vertices whose emission or light
+ * sample has a term (dr_path8's diff_emit, diff_nee) and fill what their
+ * adjoints read; not where such a light is dark (a power of 0: path_simd.c
+ * says why). */
 bool dr_path8_walks_apply(const struct dr_scene *scene, const struct dr_path_opts *opts);
 /* Can a vertex on triangle tri use them without its derivative term's
  * bookkeeping (a hit, on a material without a BSDF parameter)? Such a
@@ -136,7 +150,9 @@ void dr_path8_locate_hits(const struct dr_scene *scene, const int64_t *tri, dr_v
                           const bool *want, struct dr_hit *hit, struct dr_path8_located *loc);
 /* dr_path_step_hit of n <= DR_SIMD_W lanes that dr_path8_hit accepts:
  * fills next[i], *shadow[i] when next[i] is DR_STEP_SHADOW, the vertex term's
- * emission in *v[i], the sampler's position, and g for dr_path8_continue.
+ * emission in *v[i], the sampler's position, and g for dr_path8_continue;
+ * in a run with a light parameter also v[i]->hit's material, and the whole
+ * hit (dr_hit_compute's) where the emission seen there has a term.
  * located: v[i]->hit already holds the hit of each lane that reads textures
  * (dr_path_step_locate, so that its texels could be prefetched). */
 void dr_path8_shade(const struct dr_scene *scene, const struct dr_path_opts *opts, int n,

@@ -219,6 +219,7 @@ int dr_render(const struct dr_scene *scene, const struct dr_camera *camera, cons
             stats->rays.extension += j->counters[i].rays.extension;
             stats->rays.shadow += j->counters[i].rays.shadow;
             stats->rays.simd_vertices += j->counters[i].rays.simd_vertices;
+            stats->rays.simd_replayed += j->counters[i].rays.simd_replayed;
             stats->invalid_samples += j->counters[i].invalid;
         }
     }

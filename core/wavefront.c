@@ -211,11 +211,12 @@ static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
 {
     w->rays.n = 0;
     w->n_groups = 0;
-    int pending[DR_SIMD_W], n_pending = 0, n_simd = 0;
+    int pending[DR_SIMD_W], n_pending = 0, n_simd = 0, n_replayed = 0;
     for (int i = 0; i < n_live; i++) {
         struct lane *l = &w->lane[w->live[i]];
         if (l->simd) {
             n_simd++;
+            n_replayed += l->replaying;
             pending[n_pending++] = w->live[i];
             if (n_pending == DR_SIMD_W) {
                 shade_group(w, pending, n_pending, s, opts);
@@ -234,6 +235,7 @@ static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
         for (int i = 0; i < n_pending; i++) {
             struct lane *l = &w->lane[pending[i]];
             l->simd = false;
+            n_replayed -= l->replaying;
             /* (locate_live located it if it reads textures: not twice) */
             l->next = w->prefetch && dr_path8_reads_textures(s, l->tri)
                           ? dr_path_step_shade(s, opts, &l->st, &l->smp, &l->v, l->tri, &l->shadow)
@@ -242,6 +244,7 @@ static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
         n_simd -= n_pending;
     }
     counts->simd_vertices += (uint64_t)n_simd;
+    counts->simd_replayed += (uint64_t)n_replayed;
     for (int i = 0; w->simd && i < n_live; i++)
         collect_shadow(w, w->live[i], counts);
     struct dr_accel_rays r = accel_rays(&w->rays);
@@ -324,7 +327,8 @@ void dr_wave_run(struct dr_wave *w, const struct dr_scene *s, const struct dr_pa
                  const struct dr_wave_ops *ops, void *ctx, struct dr_ray_counts *counts)
 {
     w->prefetch = dr_wave_prefetches(s);
-    w->simd = ops->partial_vertices && dr_path8_applies(s, opts);
+    w->simd = ops->partial_vertices &&
+              (dr_path8_applies(s, opts) || (ops->light_terms && dr_path8_walks_apply(s, opts)));
     int n_live = 0, n_free = DR_WAVE_LANES;
     for (int k = 0; k < DR_WAVE_LANES; k++)
         w->free_[k] = DR_WAVE_LANES - 1 - k;   /* lane 0 is handed out first */
@@ -404,7 +408,7 @@ void dr_wave_radiance(struct dr_wave *w, const struct dr_scene *s, const struct 
 void dr_wave_radiance_lanes(struct dr_wave *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
                             dr_wave_start_fn start, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts)
 {
-    static const struct dr_wave_ops ops = {radiance_start, radiance_vertex, radiance_end, NULL, NULL, true};
+    static const struct dr_wave_ops ops = {radiance_start, radiance_vertex, radiance_end, NULL, NULL, true, false};
     struct radiance_ctx c = {start, ctx, L};
     dr_wave_run(w, s, opts, n, &ops, &c, counts);
 }

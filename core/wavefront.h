@@ -86,6 +86,13 @@ struct dr_wave_ops {
      * eight-lane stages accept (path_simd.h; only such vertices) are shaded
      * by them, in first walks and replays alike. */
     bool partial_vertices;
+    /* With partial_vertices: vertex also takes the eight-lane stages'
+     * vertices whose emission or light sample has a derivative term, in a
+     * run with a light parameter (dr_path8_walks_apply), and reads of them
+     * what d_path_vertex_term reads without a BSDF parameter (the hit of a
+     * differentiated emitter, the light sample's record), which the stages
+     * then fill (path_simd.h). Without it such runs take the scalar stages. */
+    bool light_terms;
 };
 
 struct dr_wave;

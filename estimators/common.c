@@ -368,6 +368,7 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
             st->rays.extension += b->thr[t].rays.extension;
             st->rays.shadow += b->thr[t].rays.shadow;
             st->rays.simd_vertices += b->thr[t].rays.simd_vertices;
+            st->rays.simd_replayed += b->thr[t].rays.simd_replayed;
             st->invalid_samples += b->thr[t].invalid;
         }
     }

@@ -49,11 +49,13 @@ static double reverse_difference(const char *what, const struct dr_param_set *ps
  * pair must agree to rounding, in both modes, and each must be bit-identical
  * when repeated (resumable optimisation relies on it). */
 /* Which estimators shade vertices eight lanes at a time (path_simd.h):
- * prb's primal walks wherever no light is dark (also with light parameters,
- * whose vertices the stages mark), the tape's compact steps and prb's
- * replays only where no light has a parameter; none with derivative
+ * prb's primal walks and replays wherever no light is dark (also with light
+ * parameters: the stages mark those vertices and fill their light terms;
+ * a replay groups only vertices on materials without a BSDF parameter, so
+ * none where every material has one: GROUPED_PRB_WALKS), the tape's
+ * compact steps only where no light has a parameter; none with derivative
  * sampling. */
-enum grouping { GROUPED_NONE, GROUPED_PRB, GROUPED_BOTH };
+enum grouping { GROUPED_NONE, GROUPED_PRB_WALKS, GROUPED_PRB, GROUPED_BOTH };
 
 static void compare(const char *what, struct dr_scene *s, const struct dr_camera *cam, const char *const *ptrs, int n,
                     int depth, enum dr_sampling sampling, enum grouping grouping)
@@ -95,10 +97,18 @@ static void compare(const char *what, struct dr_scene *s, const struct dr_camera
         /* prb's walks and the tape's compact steps (detached sampling) shade
          * the vertices without a derivative term eight lanes at a time where
          * no light has a parameter (path_simd.h) */
-        const bool grouped = grouping == GROUPED_BOTH || (grouping == GROUPED_PRB && strcmp(est->name, "prb") == 0);
+        const bool is_prb = strcmp(est->name, "prb") == 0;
+        const bool grouped = grouping == GROUPED_BOTH || (grouping != GROUPED_NONE && is_prb);
         CHECK(grouped ? st.rays.simd_vertices > 0 : st.rays.simd_vertices == 0,
               "%s: %s shaded %llu vertices eight lanes at a time (expected %s)", what, est->name,
               (unsigned long long)st.rays.simd_vertices, grouped ? "some" : "none");
+        if (is_prb && grouping >= GROUPED_PRB)
+            CHECK(st.rays.simd_replayed > 0 && st.rays.simd_replayed < st.rays.simd_vertices,
+                  "%s: prb's replays shaded %llu of its %llu eight-wide vertices (expected some, not all)", what,
+                  (unsigned long long)st.rays.simd_replayed, (unsigned long long)st.rays.simd_vertices);
+        else
+            CHECK(st.rays.simd_replayed == 0, "%s: %s: %llu replayed vertices eight-wide (expected none)", what,
+                  est->name, (unsigned long long)st.rays.simd_replayed);
         dr_estimator_backward(est, &p, adj, again, NULL);
         CHECK(memcmp(g[e], again, sizeof(double) * (size_t)ps->total) == 0, "%s: %s not bit-identical when repeated",
               what, est->name);
@@ -115,9 +125,10 @@ static void compare(const char *what, struct dr_scene *s, const struct dr_camera
         CHECK(fnorm > 0, "%s: %s: forward derivative image is zero", what, est->name);
         CHECK(rel_err(dot, rdot) <= 1e-9, "%s: %s: forward . adjoint %.12g != reverse . dir %.12g", what, est->name,
               dot, rdot);
-        printf("%s: %s: %lld scalars, adjoint identity %.3g, memory %llu bytes (records %llu)\n", what, est->name,
-               (long long)ps->total, rel_err(dot, rdot), (unsigned long long)st.memory_bytes,
-               (unsigned long long)st.record_bytes);
+        printf("%s: %s: %lld scalars, adjoint identity %.3g, memory %llu bytes (records %llu), %llu vertices "
+               "eight-wide (%llu replayed)\n", what, est->name, (long long)ps->total, rel_err(dot, rdot),
+               (unsigned long long)st.memory_bytes, (unsigned long long)st.record_bytes,
+               (unsigned long long)st.rays.simd_vertices, (unsigned long long)st.rays.simd_replayed);
     }
     /* the cross primal (estimator.h): the adjoint from the paths themselves */
     double *cg[MAX_EST], *cimg[MAX_EST];
@@ -319,7 +330,8 @@ int main(void)
     compare("cornell box", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DETACHED, GROUPED_PRB);
     /* the light's parameters alone: the vertices that see it or sample it
      * are the only ones with a term (prb's walks mark them in the arrays) */
-    compare("cornell box, the light only", s, &s->cameras[0], ptrs + 4, 2, 8, DR_SAMPLING_DETACHED, GROUPED_PRB);
+    compare("cornell box, the light only", s, &s->cameras[0], ptrs + 4, 2, 8, DR_SAMPLING_DETACHED,
+            GROUPED_PRB);
     /* BSDF parameters only: prb's walks and the tape's steps shade the
      * vertices on other materials eight lanes at a time; the estimators must
      * still agree (a wrong continuation factor in the tape's steps, or a
@@ -388,15 +400,17 @@ int main(void)
         "/extensions/DR_environment/color",
         "/extensions/DR_environment/strength",
     };
-    compare("glossy scene", s, &cam, gptrs, 8, 6, DR_SAMPLING_DETACHED, GROUPED_PRB);
+    compare("glossy scene", s, &cam, gptrs, 8, 6, DR_SAMPLING_DETACHED, GROUPED_PRB_WALKS);
     compare("glossy scene, derivative sampling", s, &cam, gptrs, 8, 6, DR_SAMPLING_DERIVATIVE, GROUPED_NONE);
     compare("glossy scene, the floor's BSDF only", s, &cam, gptrs, 2, 6, DR_SAMPLING_DETACHED, GROUPED_BOTH);
     /* one kind of light at a time: where the point light alone has a
      * parameter, a vertex's term is its light sample's when that picked the
      * point light, never an escaped ray's; with the environment's alone,
      * the other way round */
-    compare("glossy scene, the point light only", s, &cam, gptrs + 4, 2, 6, DR_SAMPLING_DETACHED, GROUPED_PRB);
-    compare("glossy scene, the environment only", s, &cam, gptrs + 6, 2, 6, DR_SAMPLING_DETACHED, GROUPED_PRB);
+    compare("glossy scene, the point light only", s, &cam, gptrs + 4, 2, 6, DR_SAMPLING_DETACHED,
+            GROUPED_PRB);
+    compare("glossy scene, the environment only", s, &cam, gptrs + 6, 2, 6, DR_SAMPLING_DETACHED,
+            GROUPED_PRB);
     tape_reuse(s, &cam, gptrs, 8);
     cross_many_samples(s, &cam, gptrs, 8);
     for (int k = 0; k < 8; k++)
@@ -421,6 +435,25 @@ int main(void)
     const char *box_ptrs[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor"};
     compare("closed box, paths longer than the replay log", s, &cam, box_ptrs, 1, DR_WAVE_REPLAY_DEPTH + 12,
             DR_SAMPLING_DETACHED, GROUPED_BOTH);
+    dr_scene_destroy(s);
+
+    /* a panel with an emissive texture lighting an open box, the texels the
+     * parameter: hits on the panel read them at the hit's coordinates, light
+     * samples at the sampled point's (its barycentrics), and prb's replays
+     * hand both to the adjoints from the eight-lane stages (path_simd.h) */
+    sb_init(&b);
+    sb_open_box(&b, 2.0, sb_material(&b, sb_diffuse(dr_v3(0.7, 0.6, 0.5))));
+    float texels[4 * 4 * 3];
+    for (int i = 0; i < 4 * 4 * 3; i++)
+        texels[i] = 0.2f + 0.8f * (float)((i * 7) % 11) / 10.0f;
+    struct dr_material panel = sb_diffuse(dr_v3(0.3, 0.3, 0.3));
+    panel.emissive_factor = dr_v3(4.0, 3.5, 3.0);
+    panel.emissive_tex.texture = sb_texture(&b, sb_image(4, 4, 3, texels, 0.0f, true));
+    sb_quad(&b, dr_v3(-0.6, 1.8, -0.6), dr_v3(1.2, 0, 0), dr_v3(0, 0, 1.2), sb_material(&b, panel));
+    s = sb_finish(&b);
+    s->n_file_materials = s->n_materials;
+    const char *panel_ptrs[] = {"/images/0"};
+    compare("open box, an emissive texture's texels", s, &cam, panel_ptrs, 1, 6, DR_SAMPLING_DETACHED, GROUPED_PRB);
     dr_scene_destroy(s);
     return TEST_END();
 }

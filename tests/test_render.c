@@ -293,7 +293,7 @@ static uint64_t wavefront_matches_one_path(struct dr_scene *s, struct dr_camera 
     CHECK(dr_render(s, &cam, &o, rgb, &st) == 0, "dr_render: %s", dr_last_error());
     struct dr_camera_view view = dr_camera_view(&cam, w, h);
     struct dr_path_opts po = {.max_depth = depth, .rr_depth = DR_RR_DEPTH_DEFAULT, .stages = dr_path_plan(s, NULL)};
-    struct dr_ray_counts rays = {0, 0, 0, 0};
+    struct dr_ray_counts rays = {0};
     int differ = 0;
     double total = 0.0;
     for (int y = 0; y < h; y++)
@@ -403,7 +403,7 @@ static uint64_t radiance_matches_exactly(const struct dr_scene *s, struct dr_cam
     struct dr_path_opts po = {.max_depth = 16, .rr_depth = 2, .stages = dr_path_plan(s, NULL)};
     dr_vec3 *L = malloc(sizeof(dr_vec3) * N), *Llanes = malloc(sizeof(dr_vec3) * N);
     struct dr_wave *w = dr_wave_create();
-    struct dr_ray_counts packets = {0, 0, 0, 0}, lanes = {0, 0, 0, 0}, one = {0, 0, 0, 0};
+    struct dr_ray_counts packets = {0}, lanes = {0}, one = {0};
     dr_wave_radiance(w, s, &po, N, random_path_start, &r, L, &packets);
     dr_wave_radiance_lanes(w, s, &po, N, random_path_start, &r, Llanes, &lanes);
     int differ = 0, differ_lanes = 0, lit = 0;
