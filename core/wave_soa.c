@@ -331,11 +331,12 @@ static void take_scalar(struct dr_wave_soa *w, int k)
     p->ratio = p->st.ratio;
 }
 
-/* The radiance (w->L's sums) of group i0's paths whose rays left the
- * scene, eight at once: escaped()'s sums with the same operations
- * (dr_path8_escaped_term). False when none left. */
+/* The sums of group i0's paths whose rays left the scene, eight at once:
+ * escaped()'s with the same operations (dr_path8_escaped_term): the
+ * radiance (w->L's) in *L, and in a walk the true throughput's (w->T's) in
+ * *T. False when none left. */
 static bool escaped_group(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
-                          int n_live, int i0, dr_v3x8 *L)
+                          int n_live, int i0, dr_v3x8 *L, dr_v3x8 *T)
 {
     dr_m8 left = {0};
     for (int i = 0; i < DR_SIMD_W && i0 + i < n_live; i++)
@@ -344,8 +345,11 @@ static bool escaped_group(const struct dr_wave_soa *w, const struct dr_scene *s,
         return false;
     dr_v3x8 e = dr_path8_escaped_term(s, opts, left, load3(w->dx + i0, w->dy + i0, w->dz + i0), load8(w->depth + i0),
                                       load8(w->prev_pdf + i0));
-    *L = dr_v3x8_add(load3(w->Lx + i0, w->Ly + i0, w->Lz + i0),
-                     dr_v3x8_mul(load3(w->bx + i0, w->by + i0, w->bz + i0), e));
+    dr_v3x8 c = dr_v3x8_mul(load3(w->bx + i0, w->by + i0, w->bz + i0), e);
+    *L = dr_v3x8_add(load3(w->Lx + i0, w->Ly + i0, w->Lz + i0), c);
+    if (w->out)
+        *T = dr_v3x8_add(load3(w->Tx + i0, w->Ty + i0, w->Tz + i0),
+                         dr_v3x8_mul(load3(w->rx + i0, w->ry + i0, w->rz + i0), c));
     return true;
 }
 
@@ -360,19 +364,24 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
 {
     int kept = 0;
     w->n_scalar = 0;
-    const bool eight_at_once = !w->out && dr_path8_env_eight(s);   /* (a render's radiance) */
+    /* (a render's radiance, or a walk's sums without a step hook: prb's) */
+    const bool eight_at_once = (!w->out || !w->out->step) && dr_path8_env_eight(s);
+    const bool diff_env = (opts->stages & DR_STAGE_ENV) && opts->params && opts->params->env_active;
     for (int i0 = 0; i0 < n_live; i0 += DR_SIMD_W) {   /* (group by group: close_up) */
         dr_m8 keep = {0};
         int j = kept;
-        dr_v3x8 L_esc;
-        const bool grouped = eight_at_once && escaped_group(w, s, opts, n_live, i0, &L_esc);
+        dr_v3x8 L_esc, T_esc;
+        const bool grouped = eight_at_once && escaped_group(w, s, opts, n_live, i0, &L_esc, &T_esc);
         for (int i = 0; i < DR_SIMD_W && i0 + i < n_live; i++) {
             const int k = i0 + i;
             if (w->tri[k] < 0) {
-                if (grouped)
-                    out[w->item[k]] = dr_v3x8_get(&L_esc, i);
-                else
+                if (!grouped)
                     escaped(w, s, opts, k, out);
+                else if (!w->out)
+                    out[w->item[k]] = dr_v3x8_get(&L_esc, i);
+                else   /* (escaped()'s end of a walk) */
+                    walk_done(w, w->item[k], dr_v3x8_get(&L_esc, i), dr_v3x8_get(&T_esc, i),
+                              diff_env ? (int)w->depth[k] : w->last_diff[k]);
                 continue;
             }
             if (prefetch)

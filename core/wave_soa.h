@@ -16,8 +16,9 @@
  * It applies where every hit can take the eight-lane stages: a run that
  * dr_path8_applies to, without parameters (dr_wave_soa_walk: with them).
  * Every path of a run must have a sampler of one kind.
- * Rays that leave the scene take the scalar stage (the environment's
- * radiance) and end there. */
+ * Rays that leave the scene end there, with the environment's radiance
+ * eight at a time where dr_path8_env_eight (renders, and walks without a
+ * step hook: prb's), else one by one. */
 #ifndef DR_WAVE_SOA_H
 #define DR_WAVE_SOA_H
 

@@ -415,6 +415,15 @@ int main(void)
     cross_many_samples(s, &cam, gptrs, 8);
     for (int k = 0; k < 8; k++)
         derivative_predicate(s, &cam, &gptrs[k], 1);
+    /* a floor that reflects no green (Lambertian, a zero channel): paths
+     * bounced off it carry on with a substitute in green (path.h), whose
+     * true throughput (ratio 0) must stay out of the sky's share of the
+     * escaped rays (prb's walks sum those eight at a time, the tape one by one) */
+    s->materials[0].base_color = dr_v3(0.6, 0.0, 0.4);
+    s->materials[0].specular = 0.0;
+    const char *sky_ptrs[] = {gptrs[1], gptrs[6]};
+    compare("glossy scene, a floor without green under the sky", s, &cam, sky_ptrs, 2, 6, DR_SAMPLING_DETACHED,
+            GROUPED_PRB);
     dr_scene_destroy(s);
 
     /* a closed box lit from inside: no path escapes, and without roulette
