@@ -738,25 +738,34 @@ bool dr_path8_env_eight(const struct dr_scene *s)
     return !s->env.map.data || dr_light_env_tables(s->light_sampler, &t);
 }
 
+void dr_path8_escaped(const struct dr_scene *s, dr_m8 on, dr_v3x8 d, dr_f8 depth, dr_f8 prev_pdf, dr_v3x8 *Le,
+                      dr_f8 *emit_w)
+{
+    const dr_m8 first = dr_f8_eq(depth, dr_f8s(1.0));   /* (the camera ray's: weight 1, no density) */
+    struct dr_env_tables t;
+    if (s->env.map.data && dr_light_env_tables(s->light_sampler, &t)) {
+        dr_f8 pdf = dr_f8s(0.0);
+        *Le = dr_env8_radiance_pdf(s, &t, on, d, dr_m8_any(on & ~first) ? &pdf : NULL);
+        *emit_w = dr_f8_sel(first, dr_f8s(1.0), mis_power(prev_pdf, pdf));
+        return;
+    }
+    /* any direction: without a map neither depends on it */
+    const dr_vec3 up = dr_v3(0.0, 0.0, 1.0), L = dr_env_radiance(s, up);
+    const double pdf = dr_light_pdf_env(s, s->light_sampler, up);
+    *Le = (dr_v3x8){dr_f8s(L.x), dr_f8s(L.y), dr_f8s(L.z)};
+    *emit_w = dr_f8_sel(first, dr_f8s(1.0), mis_power(prev_pdf, dr_f8s(pdf)));
+}
+
 dr_v3x8 dr_path8_escaped_term(const struct dr_scene *s, const struct dr_path_opts *opts, dr_m8 on, dr_v3x8 d,
                               dr_f8 depth, dr_f8 prev_pdf)
 {
     const dr_v3x8 zero = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
     if (!(opts->stages & DR_STAGE_ENV))
         return zero;
-    const dr_m8 first = dr_f8_eq(depth, dr_f8s(1.0));   /* (the camera ray's: weight 1, no density) */
-    struct dr_env_tables t;
-    if (s->env.map.data && dr_light_env_tables(s->light_sampler, &t)) {
-        dr_f8 pdf = dr_f8s(0.0);
-        dr_v3x8 Le = dr_env8_radiance_pdf(s, &t, on, d, dr_m8_any(on & ~first) ? &pdf : NULL);
-        dr_f8 w = dr_f8_sel(first, dr_f8s(1.0), mis_power(prev_pdf, pdf));
-        return dr_v3x8_sel(on, (dr_v3x8){Le.x * w, Le.y * w, Le.z * w}, zero);
-    }
-    /* any direction: without a map neither depends on it */
-    const dr_vec3 up = dr_v3(0.0, 0.0, 1.0), Le = dr_env_radiance(s, up);
-    const double pdf = dr_light_pdf_env(s, s->light_sampler, up);
-    dr_f8 w = dr_f8_sel(first, dr_f8s(1.0), mis_power(prev_pdf, dr_f8s(pdf)));
-    return dr_v3x8_sel(on, (dr_v3x8){Le.x * w, Le.y * w, Le.z * w}, zero);
+    dr_v3x8 Le;
+    dr_f8 w;
+    dr_path8_escaped(s, on, d, depth, prev_pdf, &Le, &w);
+    return dr_v3x8_sel(on, (dr_v3x8){Le.x * w, Le.y * w, Le.z * w}, zero);   /* (dr_path_vertex_term's) */
 }
 
 /* A light sample for each lane of a group (dr_light_sample's out). */

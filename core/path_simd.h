@@ -183,6 +183,10 @@ void dr_path8_ahead_stage(const struct dr_scene *scene, const struct dr_path8_in
  * the scene's environment is one of those two (an environment map's light
  * tables exist whenever the scene has one). */
 bool dr_path8_env_eight(const struct dr_scene *scene);
+/* The same lanes' radiance and MIS weight apart (stage_escaped's Le and
+ * emit_w, for a vertex), where the environment stage runs. */
+void dr_path8_escaped(const struct dr_scene *scene, dr_m8 on, dr_v3x8 d, dr_f8 depth, dr_f8 prev_pdf, dr_v3x8 *Le,
+                      dr_f8 *emit_w);
 dr_v3x8 dr_path8_escaped_term(const struct dr_scene *scene, const struct dr_path_opts *opts, dr_m8 on, dr_v3x8 d,
                               dr_f8 depth, dr_f8 prev_pdf);
 /* The hit stage of a group from its inputs, into g (the same as

@@ -44,6 +44,8 @@ struct dr_wave {
     bool occluded[DR_WAVE_LANES];
     bool prefetch;                    /* locate all hits before shading any (dr_wave_prefetches) */
     bool simd;                        /* shade the lanes path_simd.h accepts eight at a time */
+    bool env8;                        /* ... and the rays that left the scene (an environment stage
+                                         dr_path8_escaped computes: escaped_group) */
     int n_groups;                     /* ... in these groups this step */
     int group_lane[DR_WAVE_LANES / DR_SIMD_W][DR_SIMD_W];
     struct dr_path8 group[DR_WAVE_LANES / DR_SIMD_W];
@@ -186,6 +188,34 @@ static void shade_group(struct dr_wave *w, const int *k, int n, const struct dr_
         w->lane[k[i]].next = next[i];
 }
 
+/* stage_escaped of the lanes k[0..n-1] (n <= DR_SIMD_W) whose rays left the
+ * scene, eight at a time (dr_path8_escaped: the same bits); the rest of
+ * their vertex is dr_path_step_begin's. */
+static void escaped_group(struct dr_wave *w, const int *k, int n, const struct dr_scene *s)
+{
+    dr_m8 on;
+    dr_v3x8 d;
+    dr_f8 depth, prev_pdf;
+    for (int i = 0; i < DR_SIMD_W; i++) {
+        const struct dr_path_state *st = &w->lane[k[i < n ? i : 0]].st;   /* (padding repeats lane 0) */
+        on[i] = i < n ? -1 : 0;
+        d.x[i] = st->d.x, d.y[i] = st->d.y, d.z[i] = st->d.z;
+        depth[i] = st->depth;
+        prev_pdf[i] = st->prev_pdf;
+    }
+    dr_v3x8 Le;
+    dr_f8 emit_w;
+    dr_path8_escaped(s, on, d, depth, prev_pdf, &Le, &emit_w);
+    for (int i = 0; i < n; i++) {
+        struct lane *l = &w->lane[k[i]];
+        l->v.kind = DR_VERTEX_ESCAPED;
+        l->v.emits = true;
+        l->v.Le = dr_v3x8_get(&Le, i);
+        l->v.emit_w = emit_w[i];
+        l->next = DR_STEP_END;
+    }
+}
+
 /* Lane k's shadow ray into the batch, once its shading asked for one (a
  * replaying lane's logged answer stands in for the ray). */
 static inline void collect_shadow(struct dr_wave *w, int k, struct dr_ray_counts *counts)
@@ -212,8 +242,17 @@ static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
     w->rays.n = 0;
     w->n_groups = 0;
     int pending[DR_SIMD_W], n_pending = 0, n_simd = 0, n_replayed = 0;
+    int left[DR_SIMD_W], n_left = 0;   /* lanes whose rays left the scene, for escaped_group */
     for (int i = 0; i < n_live; i++) {
         struct lane *l = &w->lane[w->live[i]];
+        if (l->tri < 0 && w->env8) {
+            left[n_left++] = w->live[i];
+            if (n_left == DR_SIMD_W) {
+                escaped_group(w, left, n_left, s);
+                n_left = 0;
+            }
+            continue;
+        }
         if (l->simd) {
             n_simd++;
             n_replayed += l->replaying;
@@ -243,6 +282,8 @@ static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
         }
         n_simd -= n_pending;
     }
+    if (n_left > 0)
+        escaped_group(w, left, n_left, s);
     counts->simd_vertices += (uint64_t)n_simd;
     counts->simd_replayed += (uint64_t)n_replayed;
     for (int i = 0; w->simd && i < n_live; i++)
@@ -329,6 +370,8 @@ void dr_wave_run(struct dr_wave *w, const struct dr_scene *s, const struct dr_pa
     w->prefetch = dr_wave_prefetches(s);
     w->simd = ops->partial_vertices &&
               (dr_path8_applies(s, opts) || (ops->light_terms && dr_path8_walks_apply(s, opts)));
+    /* (an escaped vertex is whole either way: stage_escaped sets only these) */
+    w->env8 = (opts->stages & DR_STAGE_ENV) && !(opts->stages & DR_STAGE_MEDIA) && dr_path8_env_eight(s);
     int n_live = 0, n_free = DR_WAVE_LANES;
     for (int k = 0; k < DR_WAVE_LANES; k++)
         w->free_[k] = DR_WAVE_LANES - 1 - k;   /* lane 0 is handed out first */
