@@ -26,12 +26,13 @@ DR_SIMD_INLINE dr_v3x8 uv_to_dir(dr_f8 u, dr_f8 v)
     return (dr_v3x8){sin_theta * sin_phi, cos_theta, -sin_theta * cos_phi};
 }
 
-/* env_radiance_uv: colour x strength x the map's texel blend at (u, v). */
-static dr_v3x8 radiance_uv(const struct dr_scene *s, dr_m8 on, dr_f8 u, dr_f8 v)
+/* env_radiance_uv: colour x strength x the map's texel blend at (u, v)
+ * (the blend also into *px). */
+static dr_v3x8 radiance_uv(const struct dr_scene *s, dr_m8 on, dr_f8 u, dr_f8 v, dr_v3x8 *px)
 {
     const dr_vec3 k = dr_scale(s->env.color, s->env.strength);
-    const dr_v3x8 px = dr_texture8_rgb(&dr_env_texture, &s->env.map, on, u, v, true);
-    return (dr_v3x8){k.x * px.x, k.y * px.y, k.z * px.z};
+    *px = dr_texture8_rgb(&dr_env_texture, &s->env.map, on, u, v, true);
+    return (dr_v3x8){k.x * px->x, k.y * px->y, k.z * px->z};
 }
 
 /* dr_env_cell, eight lanes, as integers for the table reads. */
@@ -64,14 +65,18 @@ static dr_f8 pdf_uv(const struct dr_env_tables *t, dr_m8 on, dr_f8 u, dr_f8 v)
 }
 
 dr_v3x8 dr_env8_radiance_pdf(const struct dr_scene *s, const struct dr_env_tables *t, dr_m8 on, dr_v3x8 dir,
-                             dr_f8 *pdf)
+                             dr_f8 *pdf, struct dr_env8_lookup *at)
 {
     dr_f8 u, v;
     dr_env8_dir_to_uv(dir, &u, &v);
     if (pdf)   /* dr_light_pdf_env's: the pick times the map's density */
         *pdf = t->pick * pdf_uv(t, on, u, v);
     const dr_v3x8 zero = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
-    return dr_v3x8_sel(on, radiance_uv(s, on, u, v), zero);
+    dr_v3x8 px;
+    const dr_v3x8 L = dr_v3x8_sel(on, radiance_uv(s, on, u, v, &px), zero);
+    if (at)
+        *at = (struct dr_env8_lookup){u, v, px};
+    return L;
 }
 
 /* sample_env's two searches: each lane's row y by the marginal cdf at u1,
@@ -109,7 +114,7 @@ static void find_cells(const struct dr_env_tables *t, dr_m8 on, dr_f8 u1, dr_f8 
 }
 
 dr_m8 dr_env8_sample(const struct dr_scene *s, const struct dr_env_tables *t, dr_m8 on, dr_f8 u1, dr_f8 u2,
-                     dr_v3x8 *wi, dr_v3x8 *radiance, dr_f8 *pdf)
+                     dr_v3x8 *wi, dr_v3x8 *radiance, dr_f8 *pdf, struct dr_env8_lookup *at)
 {
     if (!(t->pick > 0.0))   /* (dr_light_sample: an entry never picked samples nothing) */
         return (dr_m8){0};
@@ -133,6 +138,6 @@ dr_m8 dr_env8_sample(const struct dr_scene *s, const struct dr_env_tables *t, dr
     *pdf = p * t->pick;
     /* dr_env_radiance at the direction (its map coordinates computed from
      * it again, as the scalar sample does) */
-    *radiance = dr_env8_radiance_pdf(s, t, ok, *wi, NULL);
+    *radiance = dr_env8_radiance_pdf(s, t, ok, *wi, NULL, at);
     return ok & ~dr_v3x8_is_black(*radiance);
 }

@@ -33,18 +33,27 @@ static inline double dr_env_cell(double t, int n)
  * simd_trig.h's atan2 and acos. */
 void dr_env8_dir_to_uv(dr_v3x8 dir, dr_f8 *u, dr_f8 *v);
 
+/* The lookup a radiance makes (lights.h's dr_env_lookup, eight lanes): the
+ * map coordinates and the texel blend there. */
+struct dr_env8_lookup {
+    dr_f8 u, v;
+    dr_v3x8 map;
+};
+
 /* dr_env_radiance_pdf for the lanes of on, in a scene whose environment
  * has a map and its tables t: the radiance seen along dir, and (pdf not
- * NULL) dr_light_pdf_env's density of that direction. Other lanes: 0. */
+ * NULL) dr_light_pdf_env's density of that direction; its lookup into *at
+ * unless at is NULL. Other lanes: 0. */
 dr_v3x8 dr_env8_radiance_pdf(const struct dr_scene *s, const struct dr_env_tables *t, dr_m8 on, dr_v3x8 dir,
-                             dr_f8 *pdf);
+                             dr_f8 *pdf, struct dr_env8_lookup *at);
 
 /* dr_light_sample's environment-map sample (lights.c's sample_env) from the
  * numbers (u1, u2) for the lanes of on: the direction, its radiance and its
- * density times the environment's pick. Returns the lanes whose sample
+ * density times the environment's pick (and the radiance's lookup into *at
+ * unless NULL). Returns the lanes whose sample
  * carries light (dr_light_sample's answer); the others' outputs are not
  * to be read. */
 dr_m8 dr_env8_sample(const struct dr_scene *s, const struct dr_env_tables *t, dr_m8 on, dr_f8 u1, dr_f8 u2,
-                     dr_v3x8 *wi, dr_v3x8 *radiance, dr_f8 *pdf);
+                     dr_v3x8 *wi, dr_v3x8 *radiance, dr_f8 *pdf, struct dr_env8_lookup *at);
 
 #endif

@@ -334,15 +334,25 @@ void d_env_radiance(const struct dr_scene *s, const struct dr_param_set *ps, dr_
 {
     if (!ps->env_active)
         return;
-    /* L = color * strength * map(dir) */
-    dr_vec3 map = dr_v3s(1.0);
-    double u = 0.0, v = 0.0;
+    struct dr_env_lookup at = {.valid = false, .map = dr_v3s(1.0)};
     if (s->env.map.data) {
         double px[4];
-        dr_env_dir_to_uv(dir, &u, &v);
-        dr_texture_eval(&dr_env_texture, &s->env.map, u, v, true, px);
-        map = dr_v3(px[0], px[1], px[2]);
+        dr_env_dir_to_uv(dir, &at.u, &at.v);
+        dr_texture_eval(&dr_env_texture, &s->env.map, at.u, at.v, true, px);
+        at.map = dr_v3(px[0], px[1], px[2]);
+        at.valid = true;
     }
+    d_env_radiance_at(s, ps, &at, d_L, k);
+}
+
+void d_env_radiance_at(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_env_lookup *at,
+                       dr_vec3 d_L, struct dr_grad_sink *k)
+{
+    if (!ps->env_active)
+        return;
+    /* L = color * strength * map(dir) */
+    const dr_vec3 map = at->valid ? at->map : dr_v3s(1.0);
+    const double u = at->u, v = at->v;
     if (ps->env_color >= 0) {
         dr_vec3 g = dr_scale(dr_mul(d_L, map), s->env.strength);
         dr_sink_add3(k, ps->env_color, g);
@@ -554,6 +564,7 @@ static bool sample_env(const struct dr_scene *s, const struct dr_light_sampler *
 bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 p, double u_pick,
                      double u1, double u2, struct dr_light_sample *out)
 {
+    out->env_at.valid = false;
     if (ls->n_entries == 0)
         return false;
     int64_t i = dr_cdf_find_guided(ls->cdf, ls->n_entries, ls->cdf_guide, ls->n_entries, u_pick);
@@ -633,7 +644,12 @@ void d_light_radiance(const struct dr_scene *s, const struct dr_param_set *ps, c
         d_emission(s, ps, &h, d_L, k);
         return;
     }
-    case DR_LS_ENV: d_env_radiance(s, ps, ls->wi, d_L, k); return;
+    case DR_LS_ENV:
+        if (ls->env_at.valid)   /* (the sampler's own lookup at wi) */
+            d_env_radiance_at(s, ps, &ls->env_at, d_L, k);
+        else
+            d_env_radiance(s, ps, ls->wi, d_L, k);
+        return;
     default: {
         /* radiance = color * intensity * watts_per_unit * atten (intensity in the file's units) */
         const struct dr_punctual *l = &s->lights[ls->index];

@@ -17,6 +17,16 @@ struct dr_light_sampler;
 
 enum { DR_LS_AREA, DR_LS_PUNCTUAL, DR_LS_ENV };
 
+/* An environment map's lookup along a direction, kept by whoever made it so
+ * that the adjoint need not make it again (d_env_radiance_at): the map
+ * coordinates dr_env_dir_to_uv gives and dr_texture_eval's texel blend
+ * there, as doubles (valid: they are there; never with a constant sky). */
+struct dr_env_lookup {
+    bool valid;
+    double u, v;
+    dr_vec3 map;
+};
+
 struct dr_light_sample {
     dr_vec3 wi;        /* unit direction from the shading point towards the light */
     double dist;       /* distance to the light point (INFINITY: environment/directional) */
@@ -33,6 +43,8 @@ struct dr_light_sample {
     dr_vec3 target;    /* finite lights: the light point, pushed off the light's
                           surface towards the shading point (see dr_offset_origin);
                           shadow rays end here */
+    struct dr_env_lookup env_at;   /* environment map: the lookup at wi, where the eight-lane
+                                      stages kept it (dr_light_sample clears it) */
 };
 
 /* Builds the tables; scene->accel need not exist. NULL + dr_last_error. */
@@ -119,6 +131,10 @@ dr_vec3 dr_env_radiance_pdf(const struct dr_scene *scene, const struct dr_light_
 /* Adjoint: d_L into the requested environment colour, strength and texels. */
 void d_env_radiance(const struct dr_scene *scene, const struct dr_param_set *params, dr_vec3 dir, dr_vec3 d_L,
                     struct dr_grad_sink *sink);
+/* The same with the map's lookup along dir given (at->valid; the same
+ * result as d_env_radiance(dir) when at holds dir's lookup). */
+void d_env_radiance_at(const struct dr_scene *scene, const struct dr_param_set *params,
+                       const struct dr_env_lookup *at, dr_vec3 d_L, struct dr_grad_sink *sink);
 
 /* ---- adjoints with respect to points and directions (attached sampling) ---- */
 

@@ -246,6 +246,7 @@ bool dr_medium_path_step(const struct dr_scene *s, const struct dr_path_opts *op
     v->d = st->d;
     v->seg = dr_v3s(1.0);
     v->emits = v->shaded = v->nee = v->cont = v->diff_bsdf = false;
+    v->env_at.valid = false;
     v->media = true;
     if (st->depth == 1)
         start_path(s, st, sampler);
@@ -329,6 +330,7 @@ dr_vec3 dr_medium_inscattered(const struct dr_scene *s, const struct dr_path_opt
     v.d = d;
     v.seg = dr_v3s(1.0);
     v.emits = v.shaded = v.nee = v.cont = v.diff_bsdf = false;
+    v.env_at.valid = false;
     v.media = true;
     v.medium = medium;
     bool more = medium_vertex(s, &o, &st, &sampler, &v, x, counts);

@@ -332,6 +332,7 @@ void dr_path_step_begin(struct dr_path_state *st, struct dr_path_vertex *v)
     v->prev_pdf = st->prev_pdf;
     v->prev_p = st->prev_p;
     v->emits = v->shaded = v->nee = v->cont = v->diff_bsdf = v->media = false;
+    v->env_at.valid = false;
 }
 
 void dr_path_step_locate(const struct dr_scene *s, const struct dr_path_state *st, struct dr_path_vertex *v,
@@ -437,6 +438,8 @@ static void vertex_term_part(const struct dr_scene *s, const struct dr_param_set
             d_Le = dr_mul(d_Le, v->seg);   /* folded into Le by the medium walker */
         if (v->kind == DR_VERTEX_SURFACE)
             d_emission(s, ps, &v->hit, d_Le, sink);
+        else if (v->env_at.valid)   /* (the escaped stage's own lookup along d) */
+            d_env_radiance_at(s, ps, &v->env_at, d_Le, sink);
         else
             d_env_radiance(s, ps, v->d, d_Le, sink);
     }

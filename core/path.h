@@ -159,6 +159,8 @@ struct dr_path_vertex {
     bool emits;                /* Le is evaluated (and differentiable) here */
     dr_vec3 Le;
     double emit_w;             /* its MIS weight */
+    struct dr_env_lookup env_at;   /* escaped: the map's lookup along d, where the eight-lane
+                                      stage kept it (cleared by dr_path_step_begin) */
     /* shading */
     bool shaded;               /* the BSDF was evaluated (surface, depth < max) */
     bool diff_bsdf;            /* its material has a requested parameter */

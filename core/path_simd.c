@@ -738,22 +738,23 @@ bool dr_path8_env_eight(const struct dr_scene *s)
     return !s->env.map.data || dr_light_env_tables(s->light_sampler, &t);
 }
 
-void dr_path8_escaped(const struct dr_scene *s, dr_m8 on, dr_v3x8 d, dr_f8 depth, dr_f8 prev_pdf, dr_v3x8 *Le,
-                      dr_f8 *emit_w)
+bool dr_path8_escaped(const struct dr_scene *s, dr_m8 on, dr_v3x8 d, dr_f8 depth, dr_f8 prev_pdf, dr_v3x8 *Le,
+                      dr_f8 *emit_w, struct dr_env8_lookup *at)
 {
     const dr_m8 first = dr_f8_eq(depth, dr_f8s(1.0));   /* (the camera ray's: weight 1, no density) */
     struct dr_env_tables t;
     if (s->env.map.data && dr_light_env_tables(s->light_sampler, &t)) {
         dr_f8 pdf = dr_f8s(0.0);
-        *Le = dr_env8_radiance_pdf(s, &t, on, d, dr_m8_any(on & ~first) ? &pdf : NULL);
+        *Le = dr_env8_radiance_pdf(s, &t, on, d, dr_m8_any(on & ~first) ? &pdf : NULL, at);
         *emit_w = dr_f8_sel(first, dr_f8s(1.0), mis_power(prev_pdf, pdf));
-        return;
+        return at != NULL;
     }
     /* any direction: without a map neither depends on it */
     const dr_vec3 up = dr_v3(0.0, 0.0, 1.0), L = dr_env_radiance(s, up);
     const double pdf = dr_light_pdf_env(s, s->light_sampler, up);
     *Le = (dr_v3x8){dr_f8s(L.x), dr_f8s(L.y), dr_f8s(L.z)};
     *emit_w = dr_f8_sel(first, dr_f8s(1.0), mis_power(prev_pdf, dr_f8s(pdf)));
+    return false;
 }
 
 dr_v3x8 dr_path8_escaped_term(const struct dr_scene *s, const struct dr_path_opts *opts, dr_m8 on, dr_v3x8 d,
@@ -764,7 +765,7 @@ dr_v3x8 dr_path8_escaped_term(const struct dr_scene *s, const struct dr_path_opt
         return zero;
     dr_v3x8 Le;
     dr_f8 w;
-    dr_path8_escaped(s, on, d, depth, prev_pdf, &Le, &w);
+    dr_path8_escaped(s, on, d, depth, prev_pdf, &Le, &w, NULL);
     return dr_v3x8_sel(on, (dr_v3x8){Le.x * w, Le.y * w, Le.z * w}, zero);   /* (dr_path_vertex_term's) */
 }
 
@@ -779,6 +780,8 @@ struct light8 {
     int32_t type[DR_SIMD_W];
     int64_t index[DR_SIMD_W];
     dr_f8 b1, b2, atten;
+    dr_m8 env_map;                  /* lanes that sampled the environment map, whose radiance's */
+    struct dr_env8_lookup env_at;   /* lookup this is (env_map_samples) */
 };
 
 /* Tables at most this long are searched all eight lanes at once. */
@@ -907,7 +910,9 @@ static void env_map_samples(const struct dr_scene *s, dr_m8 env_map, dr_f8 u1, d
     }
     dr_v3x8 wi, radiance;
     dr_f8 pdf;
-    const dr_m8 carries = dr_env8_sample(s, &t, env_map, u1, u2, &wi, &radiance, &pdf);
+    out->env_at = (struct dr_env8_lookup){0};   /* (defined where no sample is made) */
+    const dr_m8 carries = dr_env8_sample(s, &t, env_map, u1, u2, &wi, &radiance, &pdf, &out->env_at);
+    out->env_map = env_map;
     const dr_v3x8 zero = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
     out->wi = dr_v3x8_sel(env_map, wi, out->wi);
     out->radiance = dr_v3x8_sel(env_map, radiance, out->radiance);
@@ -963,6 +968,7 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     dr_f8 su = dr_f8_sqrt(u1);
     dr_f8 b1 = 1.0 - su, b2 = u2 * su, b0 = 1.0 - b1 - b2;
     out->b1 = b1, out->b2 = b2, out->atten = dr_f8s(0.0);   /* (atten: a punctual lane's, other_light_samples) */
+    out->env_map = (dr_m8){0};
     dr_v3x8 lp = interp(b0, b1, b2, gather_vertex(m->positions, v[0]), gather_vertex(m->positions, v[1]),
                         gather_vertex(m->positions, v[2]));
     dr_v3x8 lng = {gather_at(m->tri_normal_eps, L->ltri, 4, 0), gather_at(m->tri_normal_eps, L->ltri, 4, 1),
@@ -1279,6 +1285,7 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
         memcpy(g->ls_type, ls.type, sizeof g->ls_type);
         memcpy(g->ls_index, ls.index, sizeof g->ls_index);
         g->ls_b1 = ls.b1, g->ls_b2 = ls.b2, g->ls_atten = ls.atten, g->ls_wi = ls.wi;
+        g->ls_env_valid = ls.env_map, g->ls_env_at = ls.env_at;
     }
     g->go_on = ~end;
     g->depth = depth;
@@ -1418,6 +1425,8 @@ void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g
                 ls->type = g->ls_type[i], ls->index = g->ls_index[i];
                 ls->b1 = g->ls_b1[i], ls->b2 = g->ls_b2[i], ls->atten = g->ls_atten[i];
                 ls->wi = dr_v3x8_get(&g->ls_wi, i);
+                ls->env_at = (struct dr_env_lookup){g->ls_env_valid[i] != 0, g->ls_env_at.u[i], g->ls_env_at.v[i],
+                                                    dr_v3x8_get(&g->ls_env_at.map, i)};
             }
         }
         more[i] = out.more[i] != 0;

@@ -36,6 +36,7 @@
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "env8.h"
 #include "path.h"
 #include "simd.h"
 
@@ -107,6 +108,8 @@ struct dr_path8 {
     int64_t ls_index[DR_SIMD_W];
     dr_f8 ls_b1, ls_b2, ls_atten;
     dr_v3x8 ls_wi;
+    dr_m8 ls_env_valid;                 /* ... and the map's lookup at wi (lanes that sampled it) */
+    struct dr_env8_lookup ls_env_at;
     /* the BSDF (bsdf.h) where some lane has a specular lobe (glossy) */
     bool glossy;
     dr_m8 lambert;                /* lanes without one */
@@ -184,9 +187,10 @@ void dr_path8_ahead_stage(const struct dr_scene *scene, const struct dr_path8_in
  * tables exist whenever the scene has one). */
 bool dr_path8_env_eight(const struct dr_scene *scene);
 /* The same lanes' radiance and MIS weight apart (stage_escaped's Le and
- * emit_w, for a vertex), where the environment stage runs. */
-void dr_path8_escaped(const struct dr_scene *scene, dr_m8 on, dr_v3x8 d, dr_f8 depth, dr_f8 prev_pdf, dr_v3x8 *Le,
-                      dr_f8 *emit_w);
+ * emit_w, for a vertex), where the environment stage runs; true when the
+ * map's lookup is in *at (an environment map; at not NULL). */
+bool dr_path8_escaped(const struct dr_scene *scene, dr_m8 on, dr_v3x8 d, dr_f8 depth, dr_f8 prev_pdf, dr_v3x8 *Le,
+                      dr_f8 *emit_w, struct dr_env8_lookup *at);
 dr_v3x8 dr_path8_escaped_term(const struct dr_scene *scene, const struct dr_path_opts *opts, dr_m8 on, dr_v3x8 d,
                               dr_f8 depth, dr_f8 prev_pdf);
 /* The hit stage of a group from its inputs, into g (the same as

@@ -205,13 +205,16 @@ static void escaped_group(struct dr_wave *w, const int *k, int n, const struct d
     }
     dr_v3x8 Le;
     dr_f8 emit_w;
-    dr_path8_escaped(s, on, d, depth, prev_pdf, &Le, &emit_w);
+    struct dr_env8_lookup at;
+    const bool looked_up = dr_path8_escaped(s, on, d, depth, prev_pdf, &Le, &emit_w, &at);
     for (int i = 0; i < n; i++) {
         struct lane *l = &w->lane[k[i]];
         l->v.kind = DR_VERTEX_ESCAPED;
         l->v.emits = true;
         l->v.Le = dr_v3x8_get(&Le, i);
         l->v.emit_w = emit_w[i];
+        if (looked_up)   /* (for the adjoint, d_env_radiance_at) */
+            l->v.env_at = (struct dr_env_lookup){true, at.u[i], at.v[i], dr_v3x8_get(&at.map, i)};
         l->next = DR_STEP_END;
     }
 }

@@ -272,6 +272,31 @@ static void test_env_map_sampling(void)
     }
     CHECK(differ == 0, "dr_env_radiance_pdf differs from dr_env_radiance, dr_light_pdf_env in %d of 20000 directions",
           differ);
+    /* the lookup the eight-lane radiance keeps for the adjoint
+     * (d_env_radiance_at): the coordinates and texel blend d_env_radiance
+     * computes again, to the bit */
+    struct dr_env_tables et;
+    CHECK(dr_light_env_tables(s->light_sampler, &et), "the map's light tables");
+    int lookups_differ = 0;
+    for (int i = 0; i < 20000; i += DR_SIMD_W) {
+        dr_v3x8 d8;
+        dr_m8 all = {-1, -1, -1, -1, -1, -1, -1, -1};
+        for (int l = 0; l < DR_SIMD_W; l++) {
+            double z = 1 - 2 * dr_sampler_next(&smp), r = sqrt(fmax(0, 1 - z * z)), ph = 2 * M_PI * dr_sampler_next(&smp);
+            d8.x[l] = r * cos(ph), d8.y[l] = r * sin(ph), d8.z[l] = z;
+        }
+        struct dr_env8_lookup at;
+        dr_env8_radiance_pdf(s, &et, all, d8, NULL, &at);
+        for (int l = 0; l < DR_SIMD_W; l++) {
+            double u, v, px[4];
+            dr_env_dir_to_uv(dr_v3x8_get(&d8, l), &u, &v);
+            dr_texture_eval(&dr_env_texture, &s->env.map, u, v, true, px);
+            lookups_differ += u != at.u[l] || v != at.v[l] || px[0] != at.map.x[l] || px[1] != at.map.y[l] ||
+                              px[2] != at.map.z[l];
+        }
+    }
+    CHECK(lookups_differ == 0, "the eight-lane map lookup differs from d_env_radiance's in %d of 20000 directions",
+          lookups_differ);
     double m_is = sum_is / n, m_u = sum_u / n;
     double se = sqrt((sum_is2 / n - m_is * m_is) / n + (sum_u2 / n - m_u * m_u) / n);
     CHECK(fabs(m_is - m_u) < 4 * se, "env integral: importance %.4f vs uniform %.4f (se %.3g)", m_is, m_u, se);
