@@ -118,6 +118,53 @@ static void print_json_param(FILE *f, const struct dr_scene *s, const struct dr_
     fputc('}', f);
 }
 
+/* The list, as the table or (json) one JSON object, on f. -1 when done, or
+ * an exit code. */
+static int print_params(FILE *f, bool json, const char *scene_path, const struct dr_scene *scene,
+                        const struct dr_param *list, int n)
+{
+    int64_t biggest = 1;
+    size_t name_w = 4;
+    for (int i = 0; i < n; i++) {
+        if (list[i].size > biggest)
+            biggest = list[i].size;
+        if (strlen(list[i].name) > name_w)
+            name_w = strlen(list[i].name);
+    }
+    double *values = malloc(sizeof(double) * (size_t)biggest);
+    if (!values) {
+        cli_error("params", "out of memory");
+        return DR_EXIT_FAILURE;
+    }
+    if (json) {
+        fprintf(f, "{\"command\": \"params\", \"scene\": ");
+        json_string(f, scene_path);
+        fprintf(f, ", \"parameters\": [");
+        for (int i = 0; i < n; i++) {
+            dr_param_get(scene, &list[i], values);
+            if (i)
+                fputs(", ", f);
+            print_json_param(f, scene, &list[i], values);
+        }
+        fprintf(f, "]}\n");
+    } else {
+        fprintf(f, "%s: %d differentiable parameter%s\n", scene_path, n, n == 1 ? "" : "s");
+        if (n > 0)
+            fprintf(f, "%-*s  %-6s  %7s  %s\n", (int)name_w, "NAME", "TYPE", "SIZE", "VALUE");
+        for (int i = 0; i < n; i++) {
+            const struct dr_param *p = &list[i];
+            dr_param_get(scene, p, values);
+            fprintf(f, "%-*s  %-6s  %7lld  ", (int)name_w, p->name, dr_param_type_name(p), (long long)p->size);
+            print_value(f, p, values);
+            if (is_material(p) && scene->materials[p->target].name[0])
+                fprintf(f, "  [material '%s']", scene->materials[p->target].name);
+            fputc('\n', f);
+        }
+    }
+    free(values);
+    return -1;
+}
+
 static int no_own_option(void *ctx, int c, const char *arg)
 {
     (void)ctx, (void)c, (void)arg;
@@ -154,7 +201,6 @@ int cmd_params(int argc, char **argv)
     int rc;
     struct dr_param *list = NULL;
     int n = 0;
-    double *values = NULL;
     struct dr_scene *scene = dr_scene_load_opts(scene_path, &load);
     if (!scene) {
         cli_error("params", "%s", dr_last_error());
@@ -170,49 +216,10 @@ int cmd_params(int argc, char **argv)
         rc = DR_EXIT_FAILURE;
         goto out;
     }
-    int64_t biggest = 1;
-    size_t name_w = 4;
-    for (int i = 0; i < n; i++) {
-        if (list[i].size > biggest)
-            biggest = list[i].size;
-        if (strlen(list[i].name) > name_w)
-            name_w = strlen(list[i].name);
-    }
-    values = malloc(sizeof(double) * (size_t)biggest);
-    if (!values) {
-        cli_error("params", "out of memory");
-        rc = DR_EXIT_FAILURE;
+    if ((rc = print_params(stdout, json, scene_path, scene, list, n)) >= 0)
         goto out;
-    }
-    FILE *f = stdout;
-    if (json) {
-        fprintf(f, "{\"command\": \"params\", \"scene\": ");
-        json_string(f, scene_path);
-        fprintf(f, ", \"parameters\": [");
-        for (int i = 0; i < n; i++) {
-            dr_param_get(scene, &list[i], values);
-            if (i)
-                fputs(", ", f);
-            print_json_param(f, scene, &list[i], values);
-        }
-        fprintf(f, "]}\n");
-    } else {
-        fprintf(f, "%s: %d differentiable parameter%s\n", scene_path, n, n == 1 ? "" : "s");
-        if (n > 0)
-            fprintf(f, "%-*s  %-6s  %7s  %s\n", (int)name_w, "NAME", "TYPE", "SIZE", "VALUE");
-        for (int i = 0; i < n; i++) {
-            const struct dr_param *p = &list[i];
-            dr_param_get(scene, p, values);
-            fprintf(f, "%-*s  %-6s  %7lld  ", (int)name_w, p->name, dr_param_type_name(p), (long long)p->size);
-            print_value(f, p, values);
-            if (is_material(p) && scene->materials[p->target].name[0])
-                fprintf(f, "  [material '%s']", scene->materials[p->target].name);
-            fputc('\n', f);
-        }
-    }
     rc = DR_EXIT_OK;
 out:
-    free(values);
     free(list);
     dr_scene_destroy(scene);
     free(scene_path);
