@@ -332,6 +332,7 @@ static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const st
             g->metallic[i] = b.metallic;
             r[i] = b.roughness;
         }
+    g->roughness = r;   /* (a differentiated vertex's dr_bsdf: dr_path8_shade) */
     g->lambert = dr_f8_eq(g->metallic, dr_f8s(0.0)) & dr_f8_eq(g->specular, dr_f8s(0.0));
     g->glossy = dr_m8_any(~g->lambert);
     if (!g->glossy)
@@ -623,8 +624,8 @@ DR_SIMD_INLINE dr_m8 locate(const struct dr_mesh *m, const struct lanes *L, dr_v
  * so a textured lane no longer solves its triangle a second time in scalar
  * code. t is the distance to p (dr_hit_compute's fallback; nothing reads a
  * hit's t). */
-static void hit_of_lane(const struct dr_mesh *m, const struct lanes *L, int i, dr_vec3 o, dr_vec3 p, dr_vec3 ng,
-                        dr_vec3 ns, double eps, double b1, double b2, bool front, struct dr_hit *hit)
+DR_SIMD_INLINE void hit_of_lane(const struct dr_mesh *m, const struct lanes *L, int i, dr_vec3 o, dr_vec3 p,
+                                dr_vec3 ng, dr_vec3 ns, double eps, double b1, double b2, bool front, struct dr_hit *hit)
 {
     const int64_t tri = L->tri[i];
     *hit = (struct dr_hit){.tri = tri, .p = p, .ng = ng, .ns = ns, .b1 = b1, .b2 = b2, .front = front,
@@ -775,8 +776,8 @@ struct light8 {
     dr_f8 pdf;
     dr_m8 infinite, delta;   /* at no finite distance (environment, directional); no MIS (punctual) */
     dr_m8 diff;              /* the light's radiance has a parameter (only with ps: light_sample's) */
-    /* which light (dr_light_sample's record; only with ps: light_sample's,
-     * and the punctual lanes' always) */
+    /* which light (dr_light_sample's record; only with light_sample's
+     * record, and the punctual lanes' always) */
     int32_t type[DR_SIMD_W];
     int64_t index[DR_SIMD_W];
     dr_f8 b1, b2, atten;
@@ -948,8 +949,8 @@ static void other_light_samples(const struct dr_scene *s, const bool *other, dr_
  * emitters and the other kinds of light lane by lane. Returns where a light
  * sample carries light. */
 static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables *lt, struct lanes *L,
-                          const struct dr_path8_ahead *ahead, const struct dr_param_set *ps, dr_v3x8 p, dr_f8 u_pick,
-                          dr_f8 u1, dr_f8 u2, struct light8 *out)
+                          const struct dr_path8_ahead *ahead, const struct dr_param_set *ps, bool record, dr_v3x8 p,
+                          dr_f8 u_pick, dr_f8 u1, dr_f8 u2, struct light8 *out)
 {
     const struct dr_mesh *m = &s->mesh;
     dr_f8 pick, area;
@@ -958,9 +959,9 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     dr_m8 env, env_map;
     pick_lights(s, lt, L, ahead, u_pick, &pick, &area, v, &env, &env_map, other);
     out->diff = (dr_m8){0};
-    for (int i = 0; ps && ps->radiance_active && i < DR_SIMD_W; i++) {   /* (dr_path_vertex_has_derivative's switch) */
+    for (int i = 0; record && i < DR_SIMD_W; i++) {   /* (dr_path_vertex_has_derivative's switch) */
         const int type = env[i] || env_map[i] ? DR_LS_ENV : other[i] ? DR_LS_PUNCTUAL : DR_LS_AREA;
-        out->diff[i] = dr_path_light_differentiated(ps, type, m->material[L->ltri[i]]) ? -1 : 0;
+        out->diff[i] = ps->radiance_active && dr_path_light_differentiated(ps, type, m->material[L->ltri[i]]) ? -1 : 0;
         out->type[i] = type;
         out->index[i] = type == DR_LS_AREA ? L->ltri[i] : -1;   /* (a punctual lane's: other_light_samples) */
     }
@@ -1063,6 +1064,7 @@ DR_SIMD_INLINE dr_m8 nee_begin(struct dr_path8 *g, dr_m8 ok, const struct light8
     g->bsdf_pdf = dr_f8_sel(above, pdf, dr_f8s(0.0));
     g->nee_f = dr_v3x8_sel(above, f, (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)});
     g->nee_cos = nee_wi.z;
+    g->nee_wi = nee_wi;
     g->ls_radiance = ls->radiance;
     g->ls_pdf = ls->pdf;
     g->delta = ls->delta;
@@ -1251,6 +1253,15 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     g->diff = (dr_m8){0};
     for (int i = 0; opts->params && i < DR_SIMD_W; i++)   /* (stage_material's diff_bsdf, where it runs) */
         g->diff[i] = !end[i] && opts->params->mat_bsdf_active[m->material[L.tri[i]]] ? -1 : 0;
+    for (int i = 0; in->diff_hit && i < n; i++) {   /* the scalar hit, the normal map applied (stage_emission's) */
+        if (!g->diff[i])
+            continue;
+        if (L.textured[i])
+            *in->diff_hit[i] = L.hit[i];
+        else   /* (ng, ns: the triangle's, not yet towards the ray) */
+            hit_of_lane(m, &L, i, dr_v3x8_get(&o, i), dr_v3x8_get(&g->p, i), dr_v3x8_get(&ng, i),
+                        dr_v3x8_get(&ns, i), g->eps[i], b1[i], b2[i], front[i] != 0, in->diff_hit[i]);
+    }
     g->ng = dr_v3x8_sel(front, ng, dr_v3x8_neg(ng));
     g->fn = dr_v3x8_sel(front, ns, dr_v3x8_neg(ns));
     for (int i = 0; L.any_textured && i < n; i++)   /* a mapped normal may face away from wo */
@@ -1278,10 +1289,12 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
 
     /* dr_path_nee_begin */
     struct light8 ls;
-    dr_m8 ok = light_sample(s, &lt, &L, in->ahead, opts->params, g->p, u_pick, u1, u2, &ls);
+    /* the record of which light: where d_light_radiance may read it (dr_path8_continue) */
+    const bool record = ps && (ps->radiance_active || dr_m8_any(g->diff));
+    dr_m8 ok = light_sample(s, &lt, &L, in->ahead, opts->params, record, g->p, u_pick, u1, u2, &ls);
     g->shadow = nee_begin(g, ok, &ls, &g->so, &g->sd) & ~end;
     g->diff_nee = ls.diff;
-    if (ps && ps->radiance_active) {   /* (d_light_radiance's inputs: dr_path8_continue) */
+    if (record) {
         memcpy(g->ls_type, ls.type, sizeof g->ls_type);
         memcpy(g->ls_index, ls.index, sizeof g->ls_index);
         g->ls_b1 = ls.b1, g->ls_b2 = ls.b2, g->ls_atten = ls.atten, g->ls_wi = ls.wi;
@@ -1291,12 +1304,32 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     g->depth = depth;
 }
 
+/* Lane i's vertex as the scalar stages leave it where the adjoints of a
+ * BSDF parameter read it (d_path_vertex_term, d_path_continuation,
+ * d_material_eval: path_simd.h lists the fields), from the vectors, which
+ * hold the scalar code's bits (the hit is already in v->hit: dr_path8_in's
+ * diff_hit). */
+static void differentiated_vertex(const struct dr_scene *s, const struct dr_path8 *g, int i,
+                                  struct dr_path_vertex *v)
+{
+    v->shaded = v->diff_bsdf = true;
+    v->ng = dr_v3x8_get(&g->ng, i);
+    v->frame = (dr_frame){dr_v3x8_get(&g->fs, i), dr_v3x8_get(&g->ft, i), dr_v3x8_get(&g->fn, i)};
+    v->wo = dr_v3x8_get(&g->wo, i);
+    /* dr_material_eval's record: the groups keep its fields but the specular colour, a constant */
+    v->bsdf = (struct dr_bsdf){dr_v3x8_get(&g->base, i), g->metallic[i], g->roughness[i], g->specular[i],
+                               s->materials[v->hit.material].specular_color};
+    v->nee_wi = dr_v3x8_get(&g->nee_wi, i);
+    v->nee_bsdf_pdf = g->bsdf_pdf[i];
+}
+
 void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, int n,
                     struct dr_path_state *const *st, struct dr_sampler *const *smp, struct dr_path_vertex *const *v,
                     const int64_t *tri, struct dr_shadow_ray *const *shadow, enum dr_step_next *next,
                     bool located, struct dr_path8 *g)
 {
     struct dr_path8_in in = {.n = n};
+    struct dr_hit *diff_hit[DR_SIMD_W];
     const void *S[DR_SIMD_W];
     for (int i = 0; i < DR_SIMD_W; i++) {
         int k = i < n ? i : 0;
@@ -1306,7 +1339,9 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
         in.key[i] = smp[k]->key;
         in.sampler[i] = smp[k];
         in.hit[i] = located && i < n ? &v[i]->hit : NULL;
+        diff_hit[i] = &v[k]->hit;
     }
+    in.diff_hit = opts->params ? diff_hit : NULL;
     in.o = gather3(S, offsetof(struct dr_path_state, o));
     in.d = gather3(S, offsetof(struct dr_path_state, d));
     in.prev_p = gather3(S, offsetof(struct dr_path_state, prev_p));
@@ -1322,7 +1357,9 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
         }
         /* what dr_path_vertex_has_derivative and d_emission read: the
          * scalar stages' hit (the ray is still the one that hit) */
-        if (light_terms && g->emits[i] && g->diff_emit[i])
+        if (g->diff[i])
+            differentiated_vertex(s, g, i, v[i]);
+        else if (light_terms && g->emits[i] && g->diff_emit[i])
             dr_hit_compute(&s->mesh, tri[i], st[i]->o, st[i]->d, &v[i]->hit);
         else if (light_terms)
             v[i]->hit.material = s->mesh.material[tri[i]];
@@ -1387,7 +1424,9 @@ void dr_path8_continue_lanes(const struct dr_path_opts *opts, const struct dr_pa
     const dr_f8 zero = dr_f8s(0.0);
     out->ratio = (dr_v3x8){dr_f8_sel(sub.x, zero, ratio.x), dr_f8_sel(sub.y, zero, ratio.y),
                            dr_f8_sel(sub.z, zero, ratio.z)};
+    out->wi = wi;
     out->f = f;
+    out->sub[0] = sub.x, out->sub[1] = sub.y, out->sub[2] = sub.z;
     out->cos_pdf_q = cos_pdf / q;
     out->o = offset_origin(g->p, g->ng, g->eps, wiw);
     out->d = wiw;
@@ -1413,14 +1452,18 @@ void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g
         occ[i] = occluded[i < n ? i : 0];
     }
     struct dr_path8_out out;
-    dr_path8_continue_lanes(opts, g, gather3(S, offsetof(struct dr_path_state, beta)), NULL, mask_of(occ), &out);
+    const bool diff = dr_m8_any(g->diff);   /* (then the paths' ratios: substitution) */
+    const dr_v3x8 ratio = diff ? gather3(S, offsetof(struct dr_path_state, ratio)) : (dr_v3x8){{0}, {0}, {0}};
+    dr_path8_continue_lanes(opts, g, gather3(S, offsetof(struct dr_path_state, beta)), diff ? &ratio : NULL,
+                            mask_of(occ), &out);
+    const bool light_terms = opts->params && opts->params->radiance_active;
     for (int i = 0; i < n; i++) {
         if (out.nee[i]) {
             v[i]->nee = true;
             v[i]->nee_f = dr_v3x8_get(&g->nee_f, i);
             v[i]->ls.radiance = dr_v3x8_get(&g->ls_radiance, i);
             v[i]->nee_scale = out.nee_scale[i];
-            if (opts->params && opts->params->radiance_active) {   /* (d_light_radiance's inputs) */
+            if (light_terms || g->diff[i]) {   /* (d_light_radiance's inputs) */
                 struct dr_light_sample *ls = &v[i]->ls;
                 ls->type = g->ls_type[i], ls->index = g->ls_index[i];
                 ls->b1 = g->ls_b1[i], ls->b2 = g->ls_b2[i], ls->atten = g->ls_atten[i];
@@ -1435,6 +1478,15 @@ void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g
         v[i]->cont = true;   /* the continuation's factor, for a tape's step (tape.c) */
         v[i]->f = dr_v3x8_get(&out.f, i);
         v[i]->cos_pdf_q = out.cos_pdf_q[i];
+        if (g->diff[i]) {   /* d_path_continuation's inputs, and the substitution (stage_continue's) */
+            v[i]->wi = dr_v3x8_get(&out.wi, i);
+            v[i]->pdf = out.prev_pdf[i];
+            v[i]->s = v[i]->f;
+            for (int c = 0; c < 3; c++)
+                if ((v[i]->sub[c] = out.sub[c][i] != 0))
+                    dr_v3_set(&v[i]->s, c, DR_PATH_SUBSTITUTE);
+            st[i]->ratio = dr_v3x8_get(&out.ratio, i);
+        }
         /* the path's next state: one test per lane, not one per field */
         st[i]->beta = dr_v3x8_get(&out.beta, i);
         st[i]->prev_pdf = out.prev_pdf[i];

@@ -13,9 +13,10 @@
  * vertex's random numbers from a Sobol or stratified sampler (sampler.h:
  * the independent sampler's hashes are vector code). Every operation is the scalar code's, in its order, so each lane gets the
  * scalar walker's bits (test_render compares radiance in double); what the
- * kernels mirror is named beside each step. Escaped rays, alpha, media
- * and vertices with a BSDF derivative term stay with the scalar stages: the
- * packet tracer (wavefront.c) sends each lane one way or the other.
+ * kernels mirror is named beside each step. Alpha and media stay with the
+ * scalar stages, and so do vertices with a BSDF derivative term but for
+ * prb's walks (dr_wave_ops.bsdf_terms): the packet tracer (wavefront.c)
+ * sends each lane one way or the other.
  *
  * The kernels themselves (dr_path8_shade_lanes, dr_path8_continue_lanes)
  * take and give vectors; dr_path8_shade and dr_path8_continue gather them
@@ -53,6 +54,7 @@ struct dr_path8_in {
     const struct dr_sampler *sampler[DR_SIMD_W];   /* each lane's sampler where it is a structured one (sobol,
                                                       stratified: its draws are taken lane by lane); NULL: key's */
     const struct dr_hit *hit[DR_SIMD_W];   /* a lane that needs the scalar hit: its hit if located (NULL: computed) */
+    struct dr_hit *const *diff_hit;   /* NULL, or where each differentiated lane's hit goes (dr_path8_shade) */
     const struct dr_path8_located *located;   /* the group's hit points, if located before (NULL: computed) */
     const struct dr_path8_ahead *ahead;       /* its random numbers and light picks, if taken ahead (NULL) */
 };
@@ -96,14 +98,16 @@ struct dr_path8 {
     dr_v3x8 fs, ft, fn;           /* shading frame */
     dr_f8 eps, wo_z, depth;
     dr_v3x8 base;                 /* base colour */
+    dr_f8 roughness;              /* the material's roughness (factor x texture; alpha is its square) */
     dr_f8 bsdf_u1, bsdf_u2, rr;   /* the vertex's random numbers still to use */
     dr_f8 tmax, nee_cos, ls_pdf, bsdf_pdf;   /* next-event estimate, for its end */
     dr_m8 delta;                  /* ... from a punctual light (no MIS) */
     dr_v3x8 nee_f, ls_radiance;
-    /* in a run with a light parameter only: which light each lane's sample
-     * took, as dr_light_sample's record names it (type, index, b1, b2,
-     * atten, wi), for d_light_radiance (dr_path8_continue copies it into
-     * the vertex's ls) */
+    dr_v3x8 nee_wi;               /* the light's direction, local (for a differentiated vertex) */
+    /* in a run with a light parameter or a differentiated vertex only:
+     * which light each lane's sample took, as dr_light_sample's record
+     * names it (type, index, b1, b2, atten, wi), for d_light_radiance
+     * (dr_path8_continue copies it into the vertex's ls) */
     int32_t ls_type[DR_SIMD_W];
     int64_t ls_index[DR_SIMD_W];
     dr_f8 ls_b1, ls_b2, ls_atten;
@@ -132,8 +136,10 @@ bool dr_path8_walks_apply(const struct dr_scene *scene, const struct dr_path_opt
 /* Can a vertex on triangle tri use them without its derivative term's
  * bookkeeping (a hit, on a material without a BSDF parameter)? Such a
  * vertex has no derivative term in a run dr_path8_applies to. The arrays'
- * primal walks for path replay (wave_soa.c) take the others too: the
- * stages mark them (dr_path8's diff), and a walk's sums follow. */
+ * primal walks for path replay (wave_soa.c) and prb's walks and replays
+ * in the lanes take the others too: the stages mark them (dr_path8's
+ * diff), a walk's sums follow, and dr_path8_shade and dr_path8_continue
+ * fill their vertices for the adjoints. */
 bool dr_path8_hit(const struct dr_scene *scene, const struct dr_path_opts *opts, int64_t tri);
 
 /* Does shading a hit on triangle tri read textures? Eight-bit base colour,
@@ -151,11 +157,19 @@ bool dr_path8_reads_textures(const struct dr_scene *scene, int64_t tri);
  * lane's tri must be a triangle. */
 void dr_path8_locate_hits(const struct dr_scene *scene, const int64_t *tri, dr_v3x8 o, dr_v3x8 d,
                           const bool *want, struct dr_hit *hit, struct dr_path8_located *loc);
-/* dr_path_step_hit of n <= DR_SIMD_W lanes that dr_path8_hit accepts:
- * fills next[i], *shadow[i] when next[i] is DR_STEP_SHADOW, the vertex term's
+/* dr_path_step_hit of n <= DR_SIMD_W lanes that hit a triangle: fills
+ * next[i], *shadow[i] when next[i] is DR_STEP_SHADOW, the vertex term's
  * emission in *v[i], the sampler's position, and g for dr_path8_continue;
  * in a run with a light parameter also v[i]->hit's material, and the whole
- * hit (dr_hit_compute's) where the emission seen there has a term.
+ * hit (dr_hit_compute's) where the emission seen there has a term. A lane
+ * on a material with a BSDF parameter (one dr_path8_hit refuses: g->diff)
+ * gets what the adjoints of its terms read, as the scalar stages set it:
+ * diff_bsdf, shaded, the hit (dr_hit_compute's with the normal map
+ * applied, but for t, here the distance to p: nothing reads it), ng, frame, wo,
+ * bsdf, and for its light sample nee_wi and nee_bsdf_pdf (dr_path8_continue
+ * adds the record and the continuation's wi, pdf, s and sub); not its
+ * random numbers u or lobe, which only attached and derivative sampling
+ * read, and those walk one path at a time.
  * located: v[i]->hit already holds the hit of each lane that reads textures
  * (dr_path_step_locate, so that its texels could be prefetched). */
 void dr_path8_shade(const struct dr_scene *scene, const struct dr_path_opts *opts, int n,
@@ -203,7 +217,9 @@ struct dr_path8_out {
     dr_m8 nee;                    /* the next-event estimate counts (dr_path_vertex's nee) */
     dr_f8 nee_scale;
     dr_m8 more;                   /* the path goes on; then: */
-    dr_v3x8 f;                    /* the continuation's BSDF value */
+    dr_v3x8 wi;                   /* the continuation's direction, local */
+    dr_v3x8 f;                    /* ... its BSDF value */
+    dr_m8 sub[3];                 /* ... channels substituted here (path.h; differentiated vertices) */
     dr_f8 cos_pdf_q;              /* ... and |cos| / pdf / q */
     dr_v3x8 beta;                 /* the next throughput (with substitutes) */
     dr_v3x8 ratio;                /* the next true / tracing throughput ratio (0 where substituted) */
@@ -220,7 +236,9 @@ dr_v3x8 dr_path8_term(const struct dr_path8 *g, const struct dr_path8_out *out);
 
 /* dr_path_nee_end (occluded[i]: the shadow ray's answer) and
  * dr_path_stage_continue of the same lanes: the next-event estimate in
- * *v[i], the next ray and throughput in *st[i]; more[i]: the path goes on. */
+ * *v[i], the next ray and throughput in *st[i]; more[i]: the path goes on.
+ * Where a lane is differentiated (g->diff) also st[i]->ratio, and in v[i]
+ * the light sample's record and the continuation's wi, pdf, s and sub. */
 void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g, struct dr_path_state *const *st,
                        struct dr_path_vertex *const *v, const bool *occluded, bool *more);
 

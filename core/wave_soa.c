@@ -440,6 +440,7 @@ static void group_inputs(const struct dr_wave_soa *w, int g, int n_live, bool lo
     }
     in->located = located && w->loc_valid[g] ? &w->loc[g] : NULL;
     in->ahead = w->ahead_valid ? &w->ahead[g] : NULL;
+    in->diff_hit = NULL;   /* (the walks' sums need no hit) */
 }
 
 /* Before shading, in a scene with many emitting triangles: every group's

@@ -44,6 +44,7 @@ struct dr_wave {
     bool occluded[DR_WAVE_LANES];
     bool prefetch;                    /* locate all hits before shading any (dr_wave_prefetches) */
     bool simd;                        /* shade the lanes path_simd.h accepts eight at a time */
+    bool simd_diff;                   /* ... hits on materials with a BSDF parameter too (bsdf_terms) */
     bool env8;                        /* ... and the rays that left the scene (an environment stage
                                          dr_path8_escaped computes: escaped_group) */
     int n_groups;                     /* ... in these groups this step */
@@ -163,7 +164,7 @@ static void classify_live(struct dr_wave *w, int n_live, const struct dr_scene *
 {
     for (int i = 0; i < n_live; i++) {
         struct lane *l = &w->lane[w->live[i]];
-        l->simd = w->simd && dr_path8_hit(s, opts, l->tri);
+        l->simd = w->simd && (w->simd_diff ? l->tri >= 0 : dr_path8_hit(s, opts, l->tri));
     }
 }
 
@@ -373,6 +374,7 @@ void dr_wave_run(struct dr_wave *w, const struct dr_scene *s, const struct dr_pa
     w->prefetch = dr_wave_prefetches(s);
     w->simd = ops->partial_vertices &&
               (dr_path8_applies(s, opts) || (ops->light_terms && dr_path8_walks_apply(s, opts)));
+    w->simd_diff = ops->bsdf_terms;
     /* (an escaped vertex is whole either way: stage_escaped sets only these) */
     w->env8 = (opts->stages & DR_STAGE_ENV) && !(opts->stages & DR_STAGE_MEDIA) && dr_path8_env_eight(s);
     int n_live = 0, n_free = DR_WAVE_LANES;
@@ -454,7 +456,7 @@ void dr_wave_radiance(struct dr_wave *w, const struct dr_scene *s, const struct 
 void dr_wave_radiance_lanes(struct dr_wave *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
                             dr_wave_start_fn start, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts)
 {
-    static const struct dr_wave_ops ops = {radiance_start, radiance_vertex, radiance_end, NULL, NULL, true, false};
+    static const struct dr_wave_ops ops = {radiance_start, radiance_vertex, radiance_end, NULL, NULL, true, false, false};
     struct radiance_ctx c = {start, ctx, L};
     dr_wave_run(w, s, opts, n, &ops, &c, counts);
 }

@@ -93,6 +93,13 @@ struct dr_wave_ops {
      * differentiated emitter, the light sample's record), which the stages
      * then fill (path_simd.h). Without it such runs take the scalar stages. */
     bool light_terms;
+    /* With partial_vertices: vertex also takes the eight-lane stages'
+     * vertices on materials with a BSDF parameter, whole as far as the
+     * adjoints of their terms read them (dr_path8_shade says what the stages
+     * fill; prb's walks and replays). Without it they take the scalar
+     * stages (the tape: its record stays the scalar walker's, the
+     * reference prb is tested against). */
+    bool bsdf_terms;
 };
 
 struct dr_wave;

@@ -359,7 +359,7 @@ static void primal_walks(struct prb_job *j, int thread, struct park_ctx *c, int6
 {
     struct dr_est_base *b = &j->b;
     static const struct dr_wave_ops primal = {primal_start, lane_vertex, primal_end, primal_keep_log,
-                                              NULL, true, true};
+                                              NULL, true, true, true};
     if (dr_wave_soa_walks_apply(b->p->scene, &b->popts, true) &&
         (j->soas[thread] || (j->soas[thread] = dr_wave_soa_create())) &&
         dr_wave_soa_walk(j->soas[thread], b->p->scene, &b->popts, n, soa_start, c, &c->items->walk,
@@ -419,10 +419,11 @@ static bool wave_pixels(struct prb_job *j, int thread, int64_t begin, int64_t en
     for (int64_t p = begin; p < end; p++)
         if (b->p->cross || dr_est_sample_adjoint(b, p, &adj[n_all]))
             px[n_all++] = p;
-    /* (light_terms: walk_vertex's adjoint reads the light sample's record
-     * and a differentiated emitter's hit, which the eight-lane stages fill) */
+    /* (light_terms, bsdf_terms: walk_vertex's adjoint reads the light
+     * sample's record, a differentiated emitter's hit and a differentiated
+     * BSDF's vertex, which the eight-lane stages fill) */
     static const struct dr_wave_ops replay = {replay_start, lane_vertex, replay_end, NULL,
-                                              replay_log, true, true};
+                                              replay_log, true, true, true};
     for (int64_t first = 0; first < n_all; first += group) {
         const int64_t n_px = n_all - first < group ? n_all - first : group;
         struct park_ctx c = {.run = {j, thread}, .sink = sink, .px = px + first, .items = it};

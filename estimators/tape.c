@@ -421,8 +421,8 @@ static bool record_wave(struct tape_job *j, struct tape *tp, int thread, int64_t
         return false;
     /* With compact steps a vertex without a derivative term is read for its
      * step only (new_step): eight lanes at a time where they can */
-    static const struct dr_wave_ops whole = {lane_start, lane_vertex, lane_walk_end, NULL, NULL, false, false};
-    static const struct dr_wave_ops steps = {lane_start, lane_vertex, lane_walk_end, NULL, NULL, true, false};
+    static const struct dr_wave_ops whole = {lane_start, lane_vertex, lane_walk_end, NULL, NULL, false, false, false};
+    static const struct dr_wave_ops steps = {lane_start, lane_vertex, lane_walk_end, NULL, NULL, true, false, false};
     dr_wave_run(j->waves[thread], j->b.p->scene, &j->b.popts, n * j->b.p->spp, j->steps ? &steps : &whole, &c,
                 &j->b.thr[thread].rays);
     return true;

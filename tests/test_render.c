@@ -10,6 +10,7 @@
 #include "lights.h"
 #include "render.h"
 #include "sampler.h"
+#include "params.h"
 #include "path_simd.h"
 #include "scene_builder.h"
 #include "wavefront.h"
@@ -643,6 +644,156 @@ static struct dr_scene *textured_lamp_box(bool eight_bit)
     return s;
 }
 
+/* ---- differentiated vertices from the eight-lane stages (prb's walks and
+ * replays, dr_wave_ops.bsdf_terms) against the one-path walker's */
+
+/* What the adjoints of a BSDF parameter read of a vertex (path_simd.h's
+ * dr_path8_shade lists it), kept by item and depth. */
+struct diff_vertex {
+    bool seen, diff, nee, cont;
+    struct dr_wave_arrival arrival;
+    struct dr_hit hit;
+    dr_vec3 ng, wo, nee_wi, nee_f, wi, f, s;
+    dr_frame frame;
+    struct dr_bsdf bsdf;
+    double nee_scale, nee_bsdf_pdf, pdf, cos_pdf_q;
+    bool sub[3];
+    struct dr_light_sample ls;
+};
+enum { DIFF_PATHS = 3000, DIFF_DEPTH = 8 };
+struct diff_run {
+    struct random_paths r;
+    struct diff_vertex *rec;   /* [item * DIFF_DEPTH + depth - 1] */
+};
+static void diff_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    *(int64_t *)user = i;
+    random_path_start(&((struct diff_run *)ctx)->r, i, smp, o, d);
+}
+static bool diff_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
+                        struct dr_sampler *smp, bool more)
+{
+    (void)smp, (void)more;
+    struct diff_vertex *k = &((struct diff_run *)ctx)->rec[*(int64_t *)user * DIFF_DEPTH + v->depth - 1];
+    *k = (struct diff_vertex){.seen = true, .diff = v->diff_bsdf, .arrival = *a};
+    if (!v->diff_bsdf)
+        return true;
+    k->nee = v->nee, k->cont = v->cont;
+    k->hit = v->hit, k->ng = v->ng, k->wo = v->wo, k->frame = v->frame, k->bsdf = v->bsdf;
+    if (v->nee)
+        k->nee_wi = v->nee_wi, k->nee_f = v->nee_f, k->nee_scale = v->nee_scale, k->nee_bsdf_pdf = v->nee_bsdf_pdf,
+        k->ls = v->ls;
+    if (v->cont)
+        k->wi = v->wi, k->f = v->f, k->s = v->s, k->pdf = v->pdf, k->cos_pdf_q = v->cos_pdf_q,
+        memcpy(k->sub, v->sub, sizeof k->sub);
+    return true;
+}
+static enum dr_wave_next diff_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    (void)ctx, (void)user, (void)smp, (void)o, (void)d;
+    return DR_WAVE_DONE;
+}
+
+#define SAME(a, b) (memcmp(&(a), &(b), sizeof(a)) == 0)
+
+/* Does kept vertex k hold the one-path walker's v to the bit, in every
+ * field the adjoints read (the light sample's record as d_light_radiance
+ * reads it for the light's kind; of the hit all but t, which nothing reads
+ * and the stages set to the distance to p, path_simd.c's hit_of_lane)? */
+static bool same_diff_vertex(const struct diff_vertex *k, const struct dr_path_vertex *v, dr_vec3 beta,
+                             dr_vec3 ratio)
+{
+    const struct dr_hit *h = &k->hit, *g = &v->hit;
+    bool same = k->diff && k->nee == v->nee && k->cont == v->cont && SAME(k->arrival.beta, beta) &&
+                SAME(k->arrival.ratio, ratio) && h->tri == g->tri && SAME(h->p, g->p) &&
+                SAME(h->ng, g->ng) && SAME(h->ns, g->ns) && SAME(h->uv, g->uv) && SAME(h->b1, g->b1) &&
+                SAME(h->b2, g->b2) && h->front == g->front && h->material == g->material && SAME(h->eps, g->eps) &&
+                SAME(k->ng, v->ng) && SAME(k->wo, v->wo) && SAME(k->frame, v->frame) &&
+                SAME(k->bsdf.base_color, v->bsdf.base_color) && SAME(k->bsdf.metallic, v->bsdf.metallic) &&
+                SAME(k->bsdf.roughness, v->bsdf.roughness) && SAME(k->bsdf.specular, v->bsdf.specular) &&
+                SAME(k->bsdf.specular_color, v->bsdf.specular_color);
+    if (same && v->nee) {
+        const struct dr_light_sample *a = &k->ls, *b = &v->ls;
+        same = SAME(k->nee_wi, v->nee_wi) && SAME(k->nee_f, v->nee_f) && SAME(k->nee_scale, v->nee_scale) &&
+               SAME(k->nee_bsdf_pdf, v->nee_bsdf_pdf) && a->type == b->type && SAME(a->wi, b->wi) &&
+               SAME(a->radiance, b->radiance);
+        if (b->type == DR_LS_AREA)
+            same = same && a->index == b->index && SAME(a->b1, b->b1) && SAME(a->b2, b->b2);
+        if (b->type == DR_LS_PUNCTUAL)
+            same = same && a->index == b->index && SAME(a->atten, b->atten);
+    }
+    if (same && v->cont)
+        same = SAME(k->wi, v->wi) && SAME(k->f, v->f) && SAME(k->s, v->s) && SAME(k->pdf, v->pdf) &&
+               SAME(k->cos_pdf_q, v->cos_pdf_q) && SAME(k->sub, v->sub);
+    return same;
+}
+
+/* With every other material's BSDF differentiated (the lamps' too, whose
+ * black base colour makes zero channels to substitute), the lanes with
+ * bsdf_terms shade those vertices eight at a time and hand them over as
+ * the one-path walker makes them: compared field by field, path by path.
+ * The same run without bsdf_terms must group fewer vertices (so the first
+ * did take differentiated ones). */
+static void differentiated_vertices_match(struct dr_scene *s, struct dr_camera cam, const char *name)
+{
+    char ptr_store[64][80];
+    const char *ptrs[64];
+    int n = 0;
+    if (s->n_file_materials == 0)
+        s->n_file_materials = s->n_materials;
+    static const char *const what[] = {"baseColorFactor", "roughnessFactor", "metallicFactor"};
+    for (int m = 0; m < s->n_file_materials && n + 3 <= 64; m += 2)
+        for (int k = 0; k < 3; k++) {
+            snprintf(ptr_store[n], sizeof ptr_store[n], "/materials/%d/pbrMetallicRoughness/%s", m, what[k]);
+            ptrs[n] = ptr_store[n];
+            n++;
+        }
+    struct dr_param_set *ps = dr_param_set_create(s, ptrs, n);
+    CHECK(ps != NULL, "%s: BSDF parameters: %s", name, dr_last_error());
+    if (!ps)
+        return;
+    struct dr_path_opts po = {.max_depth = DIFF_DEPTH, .rr_depth = 3, .stages = dr_path_plan(s, ps), .params = ps};
+    struct diff_run run = {{dr_camera_view(&cam, 64, 48), DR_SAMPLER_INDEPENDENT},
+                           calloc((size_t)DIFF_PATHS * DIFF_DEPTH, sizeof(struct diff_vertex))};
+    struct dr_wave *w = dr_wave_create();
+    struct dr_wave_ops ops = {diff_start, diff_vertex, diff_end, NULL, NULL, true, false, true};
+    struct dr_ray_counts with = {0}, without = {0};
+    dr_wave_run(w, s, &po, DIFF_PATHS, &ops, &run, &with);
+    int compared = 0, differ = 0, missing = 0;
+    for (int64_t i = 0; i < DIFF_PATHS; i++) {
+        struct dr_sampler smp;
+        struct dr_path_state st;
+        struct dr_path_vertex v = {0};
+        dr_vec3 o, d;
+        struct dr_ray_counts one = {0};
+        random_path_start(&run.r, i, &smp, &o, &d);
+        dr_path_start(&st, o, d);
+        for (bool more = true; more;) {
+            dr_vec3 beta = st.beta, ratio = st.ratio;
+            more = dr_path_step(s, &po, &st, &smp, &v, &one);
+            const struct diff_vertex *k = &run.rec[i * DIFF_DEPTH + v.depth - 1];
+            missing += !k->seen || k->diff != v.diff_bsdf;
+            if (k->seen && v.diff_bsdf) {
+                compared++;
+                differ += !same_diff_vertex(k, &v, beta, ratio);
+            }
+        }
+    }
+    ops.bsdf_terms = false;
+    dr_wave_run(w, s, &po, DIFF_PATHS, &ops, &run, &without);
+    CHECK(compared > 1000, "%s: only %d differentiated vertices", name, compared);
+    CHECK(missing == 0 && differ == 0, "%s: of %d differentiated vertices from the lanes, %d differ from the one-path "
+          "walker's, %d paths' vertices disagree on being differentiated", name, compared, differ, missing);
+    CHECK(with.simd_vertices > without.simd_vertices, "%s: bsdf_terms grouped %llu vertices, without it %llu", name,
+          (unsigned long long)with.simd_vertices, (unsigned long long)without.simd_vertices);
+    printf("%s: %d differentiated vertices equal to the one-path walker's; %llu vertices eight-wide (%llu without "
+           "bsdf_terms)\n", name, compared, (unsigned long long)with.simd_vertices,
+           (unsigned long long)without.simd_vertices);
+    dr_wave_destroy(w);
+    free(run.rec);
+    dr_param_set_destroy(ps);
+}
+
 /* radiance_matches_exactly on scene s (destroyed after), which must have
  * the effects named and qualify for the eight-lane stages, most of whose
  * hits they must take. */
@@ -658,6 +809,7 @@ static void exact_with_groups(struct dr_scene *s, unsigned effects, struct dr_ca
         CHECK(simd > 1000, "%s, %s sampler: only %llu vertices shaded eight lanes at a time", name,
               dr_sampler_kind_name(kinds[k]), (unsigned long long)simd);
     }
+    differentiated_vertices_match(s, cam, name);
     dr_scene_destroy(s);
 }
 
