@@ -1289,8 +1289,9 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
 
     /* dr_path_nee_begin */
     struct light8 ls;
-    /* the record of which light: where d_light_radiance may read it (dr_path8_continue) */
-    const bool record = ps && (ps->radiance_active || dr_m8_any(g->diff));
+    /* the record of which light: where d_light_radiance may read it (dr_path8_continue; a
+     * differentiated vertex's only where the caller takes the vertex whole: diff_hit) */
+    const bool record = ps && (ps->radiance_active || (in->diff_hit && dr_m8_any(g->diff)));
     dr_m8 ok = light_sample(s, &lt, &L, in->ahead, opts->params, record, g->p, u_pick, u1, u2, &ls);
     g->shadow = nee_begin(g, ok, &ls, &g->so, &g->sd) & ~end;
     g->diff_nee = ls.diff;
