@@ -41,6 +41,9 @@ struct prb_job {
     struct dr_wave_soa *soas[DR_MAX_THREADS];   /* the wavefront's primal walks where the arrays apply (wave_soa.h) */
     struct parked_samples items[DR_MAX_THREADS];   /* the wavefront: a group's parked samples, per thread */
     dr_vec3 *adj[DR_MAX_THREADS];            /* one path at a time: a pixel's samples' adjoints, per thread */
+    struct prb_attached_sums *sums[DR_MAX_THREADS];   /* attached sampling with the cross primal: the pixel's
+                                                         samples' primal sums, which the replay then need not
+                                                         walk again */
 };
 
 struct prb_radiance {
@@ -168,7 +171,8 @@ static void attached_pixel(struct prb_job *j, int thread, int64_t px, const dr_v
         if (b->mis)
             dr_est_mis_sinks(b, thread, px, &det, &att);
         dr_est_camera_ray(b, px, sidx, &smp, &o, &d);
-        if (!prb_attached_sample(&c, smp, o, d, adj[sidx], b->mis ? &att : sink, b->mis ? &det : NULL)) {
+        const struct prb_attached_sums *sums = j->sums[thread] ? &j->sums[thread][sidx] : NULL;
+        if (!prb_attached_sample(&c, smp, o, d, adj[sidx], sums, b->mis ? &att : sink, b->mis ? &det : NULL)) {
             b->thr[thread].invalid++;
             continue;
         }
@@ -437,6 +441,23 @@ static bool wave_pixels(struct prb_job *j, int thread, int64_t begin, int64_t en
 /* The adjoint of each of pixel px's samples into adj[0, spp) (false: none
  * matters to the loss). Cross mode (estimator.h): from primal walks of all
  * its samples (their replays walk them again). */
+/* The cross primal (estimator.h): pixel px's samples' radiance in adj
+ * (0 where not finite) becomes their adjoints. False: none matters to the
+ * loss. */
+static bool cross_adjoints(struct dr_est_base *b, int64_t px, dr_vec3 *adj)
+{
+    dr_vec3 sum = dr_v3s(0.0);
+    for (int sidx = 0; sidx < b->p->spp; sidx++)
+        sum = dr_add(sum, adj[sidx]);
+    dr_est_cross_pixel(b, px, sum);
+    bool any = false;
+    for (int sidx = 0; sidx < b->p->spp; sidx++) {
+        adj[sidx] = dr_est_cross_adjoint(b, px, sum, adj[sidx]);
+        any = any || !dr_is_black(adj[sidx]);
+    }
+    return any;
+}
+
 static bool pixel_adjoints(struct prb_job *j, int thread, int64_t px, dr_vec3 *adj)
 {
     struct dr_est_base *b = &j->b;
@@ -450,7 +471,6 @@ static bool pixel_adjoints(struct prb_job *j, int thread, int64_t px, dr_vec3 *a
     }
     struct dr_medium_record mrec;
     struct dr_path_vertex prev;
-    dr_vec3 sum = dr_v3s(0.0);
     for (int sidx = 0; sidx < spp; sidx++) {   /* adj holds the samples' radiance meanwhile */
         struct dr_sampler smp;
         dr_vec3 o, d;
@@ -458,15 +478,52 @@ static bool pixel_adjoints(struct prb_job *j, int thread, int64_t px, dr_vec3 *a
         dr_est_camera_ray(b, px, sidx, &smp, &o, &d);
         walk(b, smp, o, d, &w, &b->thr[thread].rays);
         adj[sidx] = dr_v3_finite(w.L.true_) && dr_v3_finite(w.L.sub) ? w.L.true_ : dr_v3s(0.0);
-        sum = dr_add(sum, adj[sidx]);
+        if (j->sums[thread])   /* (prb_attached.c's primal sums the same way) */
+            j->sums[thread][sidx] = (struct prb_attached_sums){w.L.true_, w.L.sub};
     }
-    dr_est_cross_pixel(b, px, sum);
-    bool any = false;
-    for (int sidx = 0; sidx < spp; sidx++) {
-        adj[sidx] = dr_est_cross_adjoint(b, px, sum, adj[sidx]);
-        any = any || !dr_is_black(adj[sidx]);
+    return cross_adjoints(b, px, adj);
+}
+
+/* Attached sampling with the cross primal, pixels [begin, end): the primal
+ * walks of a group's samples in the arrays (wave_soa.h: their sums are the
+ * one-path walk's, bit for bit), then each pixel's adjoints and its
+ * samples' attached derivatives one path at a time (prb_attached.c, given
+ * the sums). Returns the first pixel not done: where the arrays do not
+ * apply or there is no memory for them, prb_pixels walks the rest one path
+ * at a time. */
+static int64_t attached_arrays(struct prb_job *j, int thread, int64_t begin, int64_t end, struct dr_grad_sink *sink)
+{
+    struct dr_est_base *b = &j->b;
+    const int spp = b->p->spp;
+    const int64_t group = park_group(spp);
+    struct parked_samples *it = &j->items[thread];
+    if (!dr_wave_soa_walks_apply(b->p->scene, &b->popts, true) || !parked_make(it, group * spp) ||
+        !(j->soas[thread] || (j->soas[thread] = dr_wave_soa_create())))
+        return begin;
+    struct dr_wave_soa_walks sums = it->walk;
+    sums.log = NULL;   /* (the attached replay traces its rays: no log) */
+    dr_vec3 *adj = j->adj[thread];
+    for (int64_t first = begin; first < end; first += group) {
+        const int64_t n_px = end - first < group ? end - first : group;
+        int64_t px[PIXEL_CHUNK];
+        for (int64_t k = 0; k < n_px; k++)
+            px[k] = first + k;
+        struct park_ctx c = {.run = {j, thread}, .px = px, .items = it};
+        if (!dr_wave_soa_walk(j->soas[thread], b->p->scene, &b->popts, n_px * spp, soa_start, &c, &sums,
+                              &b->thr[thread].rays))
+            return first;
+        for (int64_t k = 0; k < n_px; k++) {
+            for (int sidx = 0; sidx < spp; sidx++) {
+                const int64_t i = k * spp + sidx;
+                const dr_vec3 L = sums.L[i], L_sub = sums.L_sub[i];
+                adj[sidx] = dr_v3_finite(L) && dr_v3_finite(L_sub) ? L : dr_v3s(0.0);
+                j->sums[thread][sidx] = (struct prb_attached_sums){L, L_sub};
+            }
+            if (cross_adjoints(b, px[k], adj))
+                attached_pixel(j, thread, px[k], adj, sink);
+        }
     }
-    return any;
+    return end;
 }
 
 static void prb_pixels(void *ctx, int thread, int64_t begin, int64_t end)
@@ -475,11 +532,12 @@ static void prb_pixels(void *ctx, int thread, int64_t begin, int64_t end)
     struct dr_est_base *b = &j->b;
     struct dr_ray_counts *rays = &b->thr[thread].rays;
     struct dr_grad_sink sink = dr_est_sink_begin(b, thread);
-    if (j->wave && end - begin <= PIXEL_CHUNK &&
-        wave_pixels(j, thread, begin, end, sink)) {
+    if (j->wave && end - begin <= PIXEL_CHUNK && wave_pixels(j, thread, begin, end, sink)) {
         dr_est_sink_end(b, thread);
         return;
     }
+    if (j->sums[thread] && end - begin <= PIXEL_CHUNK)
+        begin = attached_arrays(j, thread, begin, end, &sink);   /* (the rest, if any: below) */
     dr_vec3 *adj = j->adj[thread];   /* by sample (all the same but in cross mode) */
     for (int64_t px = begin; px < end; px++) {
         if (!pixel_adjoints(j, thread, px, adj))
@@ -526,14 +584,21 @@ static int prb_run(struct dr_est_base *b)
     }
     j->wave = run == DR_SAMPLING_DETACHED && b->p->sampling != DR_SAMPLING_DERIVATIVE &&
               !(b->popts.stages & DR_STAGE_MEDIA);
+    const bool keep_sums = j->zeros && b->p->cross;   /* (attached: the cross primal's walks, pixel_adjoints) */
     for (int t = 0; t < b->acc.threads; t++)
-        if (!(j->adj[t] = malloc(sizeof(dr_vec3) * (size_t)b->p->spp))) {
+        if (!(j->adj[t] = malloc(sizeof(dr_vec3) * (size_t)b->p->spp)) ||
+            (keep_sums && !(j->sums[t] = malloc(sizeof(struct prb_attached_sums) * (size_t)b->p->spp)))) {
             dr_set_error("out of memory (%d samples per pixel)", b->p->spp);
             return DR_ERR_NOMEM;
         }
-    /* what the workers hold besides the gradient: the samples' adjoints, and
-     * on the wavefront the lanes, the parked samples and the arrays (wave_pixels) */
+    /* what the workers hold besides the gradient: the samples' adjoints (and
+     * attached sampling's sums), and on the wavefront the lanes, the parked
+     * samples and the arrays (wave_pixels) */
     uint64_t per_thread = sizeof(dr_vec3) * (uint64_t)b->p->spp;
+    if (keep_sums)
+        per_thread += sizeof(struct prb_attached_sums) * (uint64_t)b->p->spp;
+    if (keep_sums && dr_wave_soa_walks_apply(b->p->scene, &b->popts, true))   /* (attached_arrays) */
+        per_thread += parked_bytes(park_group(b->p->spp) * b->p->spp) + dr_wave_soa_walk_bytes();
     if (j->wave) {
         per_thread += dr_wave_bytes() + parked_bytes(park_group(b->p->spp) * b->p->spp);
         if (dr_wave_soa_walks_apply(b->p->scene, &b->popts, true))
@@ -552,6 +617,7 @@ static void prb_release(struct dr_est_base *b)
         dr_wave_soa_destroy(j->soas[t]);
         parked_free(&j->items[t]);
         free(j->adj[t]);
+        free(j->sums[t]);
     }
 }
 

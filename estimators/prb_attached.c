@@ -337,47 +337,43 @@ static dr_vec3 continuation_adjoint(const struct dr_path_vertex *v, dr_vec3 d_f)
     return d_t;
 }
 
-struct walk_sums {
-    dr_vec3 L_true, L_sub;
-    int first_moving;   /* index of the first vertex whose sampling moves (-1: none) */
-};
-
-/* The primal: the path's radiance and its first moving vertex. */
-static void primal(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_vec3 o, dr_vec3 d, struct walk_sums *w)
+/* The primal: the path's radiance (prb.c's walk sums the same way). */
+static void primal(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_vec3 o, dr_vec3 d,
+                   struct prb_attached_sums *w)
 {
     const struct dr_est_base *b = c->b;
     struct dr_path_state st;
     struct dr_path_vertex v;
     dr_path_start(&st, o, d);
-    *w = (struct walk_sums){dr_v3s(0.0), dr_v3s(0.0), -1};
-    for (int k = 0;; k++) {
+    *w = (struct prb_attached_sums){dr_v3s(0.0), dr_v3s(0.0)};
+    for (;;) {
         dr_vec3 beta = st.beta, ratio = st.ratio;
         bool more = dr_path_step(b->p->scene, &b->popts, &st, &smp, &v, c->rays);
         dr_vec3 e = dr_mul(beta, dr_path_vertex_term(&v));
         w->L_sub = dr_add(w->L_sub, e);
         w->L_true = dr_add(w->L_true, dr_mul(ratio, e));
-        if (w->first_moving < 0 && dr_path_vertex_sampling_moves(b->p->scene, b->p->params, &v))
-            w->first_moving = k;
         if (!more)
             return;
     }
 }
 
-/* The replay: vertices before the first moving one as the detached replay;
- * from it on, each vertex's derivative once the next one is known. With
- * `det` (mis), every vertex's detached adjoints also go there: the detached
- * estimate of the same path, for no extra ray. */
+/* The replay: vertices before the first whose sampling moves with a
+ * parameter as the detached replay; from it on, each vertex's derivative
+ * once the next one is known (the replay finds that vertex as it reaches
+ * it: the same path as the primal's). With `det` (mis), every vertex's
+ * detached adjoints also go there: the detached estimate of the same path,
+ * for no extra ray. */
 static void replay(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_vec3 o, dr_vec3 d, dr_vec3 adj,
-                   struct walk_sums *w, struct dr_grad_sink *sink, struct dr_grad_sink *det)
+                   struct prb_attached_sums *w, struct dr_grad_sink *sink, struct dr_grad_sink *det)
 {
     const struct dr_est_base *b = c->b;
     const struct dr_scene *s = b->p->scene;
     const struct dr_param_set *ps = b->p->params;
     struct dr_path_state st;
     struct pending P;
-    bool have = false;
+    bool have = false, moving = false;   /* moving: this vertex or one before moves */
     dr_path_start(&st, o, d);
-    for (int k = 0;; k++) {
+    for (;;) {
         dr_vec3 beta = st.beta, ratio = st.ratio, bt = dr_mul(ratio, beta);
         struct dr_path_vertex v;
         bool more = dr_path_step(s, &b->popts, &st, &smp, &v, c->rays);
@@ -391,7 +387,9 @@ static void replay(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_v
             if (v.cont && v.diff_bsdf)
                 d_path_continuation(s, ps, &v, d_f, det);
         }
-        if (w->first_moving < 0 || k < w->first_moving) {
+        const bool first = !moving && dr_path_vertex_sampling_moves(s, ps, &v);
+        moving = moving || first;
+        if (!moving) {
             d_path_vertex_term(s, ps, &v, d_e, sink);
             if (v.cont && v.diff_bsdf)
                 d_path_continuation(s, ps, &v, dr_scale(d_t, v.cos_pdf_q), sink);
@@ -407,7 +405,7 @@ static void replay(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_v
             P.v = v;
             P.d_e = d_e;
             P.d_t = d_t;
-            P.first = k == w->first_moving;
+            P.first = first;
             have = true;
             if (!more) {
                 vertex_call(c, &P.v, P.has_Tk ? &P.Tk : NULL, NULL, d_e, d_t, NULL, NULL, sink);
@@ -425,10 +423,13 @@ static void replay(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_v
 }
 
 bool prb_attached_sample(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_vec3 o, dr_vec3 d, dr_vec3 adj,
-                         struct dr_grad_sink *sink, struct dr_grad_sink *det)
+                         const struct prb_attached_sums *sums, struct dr_grad_sink *sink, struct dr_grad_sink *det)
 {
-    struct walk_sums w;
-    primal(c, smp, o, d, &w);
+    struct prb_attached_sums w;
+    if (sums)
+        w = *sums;
+    else
+        primal(c, smp, o, d, &w);
     if (!dr_v3_finite(w.L_true) || !dr_v3_finite(w.L_sub))
         return false;
     if (!sink->dir) {
@@ -437,7 +438,7 @@ bool prb_attached_sample(const struct prb_attached_ctx *c, struct dr_sampler smp
     }
     /* forward mode: the state adjoint mixes the channels, one replay each */
     for (int ch = 0; ch < 3; ch++) {
-        struct walk_sums wc = w;
+        struct prb_attached_sums wc = w;
         sink->channel = ch;
         replay(c, smp, o, d, dr_v3_channel(adj, ch), &wc, sink, det);
     }

@@ -14,11 +14,19 @@ struct prb_attached_ctx {
     struct dr_ray_counts *rays;
 };
 
+/* A sample's primal: its radiance with the true throughput and with the
+ * substitutes (path.h), summed vertex by vertex in path order. */
+struct prb_attached_sums {
+    dr_vec3 L_true, L_sub;
+};
+
 /* The whole derivative of one sample (primal, forward-mode pass, replay),
  * given its sampler and camera ray; adj as in the detached replay; false
- * when the path's value is not finite (nothing was added). det (mis; NULL:
- * none) receives the same path's detached derivative, from the same replay. */
+ * when the path's value is not finite (nothing was added). sums: the
+ * primal's, where the caller walked it already (the cross primal, prb.c:
+ * the same sums bit for bit; NULL: walked here). det (mis; NULL: none)
+ * receives the same path's detached derivative, from the same replay. */
 bool prb_attached_sample(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_vec3 o, dr_vec3 d, dr_vec3 adj,
-                         struct dr_grad_sink *sink, struct dr_grad_sink *det);
+                         const struct prb_attached_sums *sums, struct dr_grad_sink *sink, struct dr_grad_sink *det);
 
 #endif
