@@ -34,7 +34,10 @@
  * vertex adjoint the tape uses (d_path_vertex_attached), with a sink that
  * discards parameter adjoints; so nothing is differentiated twice by hand.
  * Cost per vertex after j: about 9 vertex adjoints in the forward-mode pass
- * and 6 in the replay (the tape: 1), and three walks of the path. */
+ * and 6 in the replay (the tape: 1), and three walks of the path: the
+ * primal (which, with the cross primal, is the caller's: prb.c walks a
+ * group of samples in its arrays for their adjoints and hands the sums
+ * over), the forward-mode pass and the replay. */
 #include "prb_attached.h"
 
 #include <string.h>
