@@ -41,13 +41,20 @@ struct prb_job {
     struct dr_wave_soa *soas[DR_MAX_THREADS];   /* the wavefront's primal walks where the arrays apply (wave_soa.h) */
     struct parked_samples items[DR_MAX_THREADS];   /* the wavefront: a group's parked samples, per thread */
     dr_vec3 *adj[DR_MAX_THREADS];            /* one path at a time: a pixel's samples' adjoints, per thread */
-    struct prb_attached_sums *sums[DR_MAX_THREADS];   /* attached sampling with the cross primal: the pixel's
-                                                         samples' primal sums, which the replay then need not
-                                                         walk again */
+    struct primal_sums *sums[DR_MAX_THREADS];   /* one path at a time with the cross primal: the pixel's
+                                                   samples' primal walks, which the replays then need not
+                                                   walk again */
 };
 
 struct prb_radiance {
     dr_vec3 true_, sub;   /* L with the true throughput, and with substitutes */
+};
+
+/* What a replay one path at a time needs of its primal walk (struct walk's
+ * sums and vertex count), where the cross primal walked it already. */
+struct primal_sums {
+    struct prb_attached_sums L;
+    int vertices;   /* (the media derivatives'; 0 from the arrays, which take no media) */
 };
 
 /* Samples whose ray answers are parked at most (per thread: about 1.4 MB);
@@ -171,7 +178,7 @@ static void attached_pixel(struct prb_job *j, int thread, int64_t px, const dr_v
         if (b->mis)
             dr_est_mis_sinks(b, thread, px, &det, &att);
         dr_est_camera_ray(b, px, sidx, &smp, &o, &d);
-        const struct prb_attached_sums *sums = j->sums[thread] ? &j->sums[thread][sidx] : NULL;
+        const struct prb_attached_sums *sums = j->sums[thread] ? &j->sums[thread][sidx].L : NULL;
         if (!prb_attached_sample(&c, smp, o, d, adj[sidx], sums, b->mis ? &att : sink, b->mis ? &det : NULL)) {
             b->thr[thread].invalid++;
             continue;
@@ -478,20 +485,54 @@ static bool pixel_adjoints(struct prb_job *j, int thread, int64_t px, dr_vec3 *a
         dr_est_camera_ray(b, px, sidx, &smp, &o, &d);
         walk(b, smp, o, d, &w, &b->thr[thread].rays);
         adj[sidx] = dr_v3_finite(w.L.true_) && dr_v3_finite(w.L.sub) ? w.L.true_ : dr_v3s(0.0);
-        if (j->sums[thread])   /* (prb_attached.c's primal sums the same way) */
-            j->sums[thread][sidx] = (struct prb_attached_sums){w.L.true_, w.L.sub};
+        if (j->sums[thread])   /* (for the replays: pixel_replays) */
+            j->sums[thread][sidx] = (struct primal_sums){{w.L.true_, w.L.sub}, w.vertices};
     }
     return cross_adjoints(b, px, adj);
 }
 
-/* Attached sampling with the cross primal, pixels [begin, end): the primal
+/* Pixel px's samples' replays one path at a time, given their adjoints
+ * (attached sampling: prb_attached.c's; else walk's), and their primal
+ * walks' sums where the cross primal made them (j->sums; else each path's
+ * primal is walked first). */
+static void pixel_replays(struct prb_job *j, int thread, int64_t px, const dr_vec3 *adj, struct dr_grad_sink *sink)
+{
+    struct dr_est_base *b = &j->b;
+    if (j->zeros) {
+        attached_pixel(j, thread, px, adj, sink);
+        return;
+    }
+    const struct primal_sums *sums = j->sums[thread];
+    struct dr_medium_record mrec;
+    struct dr_path_vertex prev;
+    for (int sidx = 0; sidx < b->p->spp; sidx++) {
+        struct dr_sampler smp;
+        dr_vec3 o, d;
+        if (dr_is_black(adj[sidx]))
+            continue;   /* (cross mode: this sample does not matter to the loss) */
+        struct walk w = {.adj = adj[sidx], .mrec = &mrec, .prev = &prev};
+        dr_est_camera_ray(b, px, sidx, &smp, &o, &d);
+        if (sums)
+            w.L = (struct prb_radiance){sums[sidx].L.L_true, sums[sidx].L.L_sub}, w.vertices = sums[sidx].vertices;
+        else
+            walk(b, smp, o, d, &w, &b->thr[thread].rays);
+        if (!dr_v3_finite(w.L.true_) || !dr_v3_finite(w.L.sub)) {
+            b->thr[thread].invalid++;
+            continue;
+        }
+        w.sink = sink;
+        walk(b, smp, o, d, &w, &b->thr[thread].rays);
+        dr_est_sample_done(b, px, sink);
+    }
+}
+
+/* One path at a time with the cross primal, pixels [begin, end): the primal
  * walks of a group's samples in the arrays (wave_soa.h: their sums are the
  * one-path walk's, bit for bit), then each pixel's adjoints and its
- * samples' attached derivatives one path at a time (prb_attached.c, given
- * the sums). Returns the first pixel not done: where the arrays do not
- * apply or there is no memory for them, prb_pixels walks the rest one path
- * at a time. */
-static int64_t attached_arrays(struct prb_job *j, int thread, int64_t begin, int64_t end, struct dr_grad_sink *sink)
+ * samples' replays (pixel_replays, given the sums). Returns the first pixel
+ * not done: where the arrays do not apply (media) or there is no memory
+ * for them, prb_pixels walks the rest one path at a time. */
+static int64_t cross_arrays(struct prb_job *j, int thread, int64_t begin, int64_t end, struct dr_grad_sink *sink)
 {
     struct dr_est_base *b = &j->b;
     const int spp = b->p->spp;
@@ -501,7 +542,7 @@ static int64_t attached_arrays(struct prb_job *j, int thread, int64_t begin, int
         !(j->soas[thread] || (j->soas[thread] = dr_wave_soa_create())))
         return begin;
     struct dr_wave_soa_walks sums = it->walk;
-    sums.log = NULL;   /* (the attached replay traces its rays: no log) */
+    sums.log = NULL;   /* (the replays trace their rays: no log) */
     dr_vec3 *adj = j->adj[thread];
     for (int64_t first = begin; first < end; first += group) {
         const int64_t n_px = end - first < group ? end - first : group;
@@ -517,10 +558,10 @@ static int64_t attached_arrays(struct prb_job *j, int thread, int64_t begin, int
                 const int64_t i = k * spp + sidx;
                 const dr_vec3 L = sums.L[i], L_sub = sums.L_sub[i];
                 adj[sidx] = dr_v3_finite(L) && dr_v3_finite(L_sub) ? L : dr_v3s(0.0);
-                j->sums[thread][sidx] = (struct prb_attached_sums){L, L_sub};
+                j->sums[thread][sidx] = (struct primal_sums){{L, L_sub}, 0};
             }
             if (cross_adjoints(b, px[k], adj))
-                attached_pixel(j, thread, px[k], adj, sink);
+                pixel_replays(j, thread, px[k], adj, sink);
         }
     }
     return end;
@@ -530,41 +571,17 @@ static void prb_pixels(void *ctx, int thread, int64_t begin, int64_t end)
 {
     struct prb_job *j = ctx;
     struct dr_est_base *b = &j->b;
-    struct dr_ray_counts *rays = &b->thr[thread].rays;
     struct dr_grad_sink sink = dr_est_sink_begin(b, thread);
     if (j->wave && end - begin <= PIXEL_CHUNK && wave_pixels(j, thread, begin, end, sink)) {
         dr_est_sink_end(b, thread);
         return;
     }
     if (j->sums[thread] && end - begin <= PIXEL_CHUNK)
-        begin = attached_arrays(j, thread, begin, end, &sink);   /* (the rest, if any: below) */
+        begin = cross_arrays(j, thread, begin, end, &sink);   /* (the rest, if any: below) */
     dr_vec3 *adj = j->adj[thread];   /* by sample (all the same but in cross mode) */
-    for (int64_t px = begin; px < end; px++) {
-        if (!pixel_adjoints(j, thread, px, adj))
-            continue;   /* this pixel does not matter to the loss */
-        if (j->zeros) {
-            attached_pixel(j, thread, px, adj, &sink);
-            continue;
-        }
-        struct dr_medium_record mrec;
-        struct dr_path_vertex prev;
-        for (int sidx = 0; sidx < b->p->spp; sidx++) {
-            struct dr_sampler smp;
-            dr_vec3 o, d;
-            if (dr_is_black(adj[sidx]))
-                continue;   /* (cross mode: this sample does not matter to the loss) */
-            struct walk w = {.adj = adj[sidx], .mrec = &mrec, .prev = &prev};
-            dr_est_camera_ray(b, px, sidx, &smp, &o, &d);
-            walk(b, smp, o, d, &w, rays);
-            if (!dr_v3_finite(w.L.true_) || !dr_v3_finite(w.L.sub)) {
-                b->thr[thread].invalid++;
-                continue;
-            }
-            w.sink = &sink;
-            walk(b, smp, o, d, &w, rays);
-            dr_est_sample_done(b, px, &sink);
-        }
-    }
+    for (int64_t px = begin; px < end; px++)
+        if (pixel_adjoints(j, thread, px, adj))   /* (else this pixel does not matter to the loss) */
+            pixel_replays(j, thread, px, adj, &sink);
     dr_est_sink_end(b, thread);
 }
 
@@ -584,20 +601,20 @@ static int prb_run(struct dr_est_base *b)
     }
     j->wave = run == DR_SAMPLING_DETACHED && b->p->sampling != DR_SAMPLING_DERIVATIVE &&
               !(b->popts.stages & DR_STAGE_MEDIA);
-    const bool keep_sums = j->zeros && b->p->cross;   /* (attached: the cross primal's walks, pixel_adjoints) */
+    const bool keep_sums = b->p->cross && !j->wave;   /* (one path at a time: the cross primal's walks) */
     for (int t = 0; t < b->acc.threads; t++)
         if (!(j->adj[t] = malloc(sizeof(dr_vec3) * (size_t)b->p->spp)) ||
-            (keep_sums && !(j->sums[t] = malloc(sizeof(struct prb_attached_sums) * (size_t)b->p->spp)))) {
+            (keep_sums && !(j->sums[t] = malloc(sizeof(struct primal_sums) * (size_t)b->p->spp)))) {
             dr_set_error("out of memory (%d samples per pixel)", b->p->spp);
             return DR_ERR_NOMEM;
         }
     /* what the workers hold besides the gradient: the samples' adjoints (and
-     * attached sampling's sums), and on the wavefront the lanes, the parked
-     * samples and the arrays (wave_pixels) */
+     * the cross primal's sums), and on the wavefront the lanes, the parked
+     * samples and the arrays (wave_pixels, cross_arrays) */
     uint64_t per_thread = sizeof(dr_vec3) * (uint64_t)b->p->spp;
     if (keep_sums)
-        per_thread += sizeof(struct prb_attached_sums) * (uint64_t)b->p->spp;
-    if (keep_sums && dr_wave_soa_walks_apply(b->p->scene, &b->popts, true))   /* (attached_arrays) */
+        per_thread += sizeof(struct primal_sums) * (uint64_t)b->p->spp;
+    if (keep_sums && dr_wave_soa_walks_apply(b->p->scene, &b->popts, true))   /* (cross_arrays) */
         per_thread += parked_bytes(park_group(b->p->spp) * b->p->spp) + dr_wave_soa_walk_bytes();
     if (j->wave) {
         per_thread += dr_wave_bytes() + parked_bytes(park_group(b->p->spp) * b->p->spp);
