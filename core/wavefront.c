@@ -403,6 +403,27 @@ void dr_wave_run(struct dr_wave *w, const struct dr_scene *s, const struct dr_pa
     }
 }
 
+bool dr_wave_log_step(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_wave_log *log,
+                      struct dr_path_state *st, struct dr_sampler *smp, struct dr_path_vertex *v,
+                      struct dr_ray_counts *counts)
+{
+    if (!log || st->depth >= log->n || (opts->stages & DR_STAGE_MEDIA))
+        return dr_path_step(s, opts, st, smp, v, counts);
+    /* dr_path_step's composition (path.h), the queries answered from the log */
+    dr_path_step_begin(st, v);
+    struct dr_shadow_ray shadow;
+    switch (dr_path_step_hit(s, opts, st, smp, v, log->tri[st->depth - 1], &shadow)) {
+    case DR_STEP_END:
+        return false;
+    case DR_STEP_SHADOW:
+        dr_path_nee_end(s, v, &shadow, shadow.tmax > 0.0 && log->occ[st->depth - 1]);
+        break;
+    case DR_STEP_CONTINUE:
+        break;
+    }
+    return dr_path_stage_continue(opts, st, v);
+}
+
 /* ------------------------------------------------------------- radiance */
 
 struct radiance_ctx {

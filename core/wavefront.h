@@ -61,6 +61,15 @@ static inline void dr_wave_log_copy(struct dr_wave_log *to, const struct dr_wave
     }
 }
 
+/* dr_path_step, with the ray answers of the vertices log holds taken from
+ * it instead of traced (a replay, one path at a time, of the walk that
+ * logged them: the same sampler and decisions make the same queries, as in
+ * DR_WAVE_REPLAY; counts then counts no ray for them). log NULL, vertices
+ * past it, and scenes with media (whose walks log nothing): traced. */
+bool dr_wave_log_step(const struct dr_scene *scene, const struct dr_path_opts *opts, const struct dr_wave_log *log,
+                      struct dr_path_state *st, struct dr_sampler *sampler, struct dr_path_vertex *v,
+                      struct dr_ray_counts *counts);
+
 struct dr_wave_ops {
     /* Begins item i in a lane: its state in user (DR_WAVE_USER_BYTES,
      * zeroed), the first walk's sampler and ray. */

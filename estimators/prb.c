@@ -72,6 +72,8 @@ struct walk {
     int last_diff;                     /* the primal: depth of the last vertex with a derivative term (0: none);
                                           the wavefront's replay ends there (detached sampling) */
     struct dr_medium_record *mrec;     /* media: what the replay re-traces, one vertex at a time */
+    const struct dr_wave_log *log;     /* one path at a time: the primal walk's ray answers, for the
+                                          replay (NULL: traced again) */
     /* derivative sampling: the last vertex, if differentiated and continued */
     struct dr_path_vertex *prev;
     bool have_prev;
@@ -154,7 +156,7 @@ static void walk(const struct dr_est_base *b, struct dr_sampler smp, dr_vec3 o, 
     dr_path_start(&st, o, d);
     for (;;) {
         dr_vec3 beta = st.beta, ratio = st.ratio;
-        bool more = dr_path_step(b->p->scene, &b->popts, &st, &smp, &v, rays);
+        bool more = dr_wave_log_step(b->p->scene, &b->popts, w->log, &st, &smp, &v, rays);
         walk_vertex(b, w, &v, beta, ratio, &smp, rays);
         if (!more)
             break;
@@ -164,7 +166,8 @@ static void walk(const struct dr_est_base *b, struct dr_sampler smp, dr_vec3 o, 
 /* One pixel's samples with attached sampling (prb_attached.c); under mis
  * each sample's attached and detached derivatives, from one replay, go to
  * its group's two estimates (mis.h). */
-static void attached_pixel(struct prb_job *j, int thread, int64_t px, const dr_vec3 *adj, struct dr_grad_sink *sink)
+static void attached_pixel(struct prb_job *j, int thread, int64_t px, const dr_vec3 *adj,
+                           const struct dr_wave_log *logs, struct dr_grad_sink *sink)
 {
     struct dr_est_base *b = &j->b;
     struct prb_attached_ctx c = {.b = b, .zeros = j->zeros, .eps = b->p->regularize, .radius = j->radius,
@@ -178,6 +181,7 @@ static void attached_pixel(struct prb_job *j, int thread, int64_t px, const dr_v
         if (b->mis)
             dr_est_mis_sinks(b, thread, px, &det, &att);
         dr_est_camera_ray(b, px, sidx, &smp, &o, &d);
+        c.log = logs ? &logs[sidx] : NULL;
         const struct prb_attached_sums *sums = j->sums[thread] ? &j->sums[thread][sidx].L : NULL;
         if (!prb_attached_sample(&c, smp, o, d, adj[sidx], sums, b->mis ? &att : sink, b->mis ? &det : NULL)) {
             b->thr[thread].invalid++;
@@ -494,12 +498,14 @@ static bool pixel_adjoints(struct prb_job *j, int thread, int64_t px, dr_vec3 *a
 /* Pixel px's samples' replays one path at a time, given their adjoints
  * (attached sampling: prb_attached.c's; else walk's), and their primal
  * walks' sums where the cross primal made them (j->sums; else each path's
- * primal is walked first). */
-static void pixel_replays(struct prb_job *j, int thread, int64_t px, const dr_vec3 *adj, struct dr_grad_sink *sink)
+ * primal is walked first) and ray answers where the arrays logged them
+ * (logs, by sample; NULL: traced). */
+static void pixel_replays(struct prb_job *j, int thread, int64_t px, const dr_vec3 *adj,
+                          const struct dr_wave_log *logs, struct dr_grad_sink *sink)
 {
     struct dr_est_base *b = &j->b;
     if (j->zeros) {
-        attached_pixel(j, thread, px, adj, sink);
+        attached_pixel(j, thread, px, adj, logs, sink);
         return;
     }
     const struct primal_sums *sums = j->sums[thread];
@@ -510,7 +516,7 @@ static void pixel_replays(struct prb_job *j, int thread, int64_t px, const dr_ve
         dr_vec3 o, d;
         if (dr_is_black(adj[sidx]))
             continue;   /* (cross mode: this sample does not matter to the loss) */
-        struct walk w = {.adj = adj[sidx], .mrec = &mrec, .prev = &prev};
+        struct walk w = {.adj = adj[sidx], .mrec = &mrec, .prev = &prev, .log = logs ? &logs[sidx] : NULL};
         dr_est_camera_ray(b, px, sidx, &smp, &o, &d);
         if (sums)
             w.L = (struct prb_radiance){sums[sidx].L.L_true, sums[sidx].L.L_sub}, w.vertices = sums[sidx].vertices;
@@ -541,8 +547,7 @@ static int64_t cross_arrays(struct prb_job *j, int thread, int64_t begin, int64_
     if (!dr_wave_soa_walks_apply(b->p->scene, &b->popts, true) || !parked_make(it, group * spp) ||
         !(j->soas[thread] || (j->soas[thread] = dr_wave_soa_create())))
         return begin;
-    struct dr_wave_soa_walks sums = it->walk;
-    sums.log = NULL;   /* (the replays trace their rays: no log) */
+    const struct dr_wave_soa_walks sums = it->walk;   /* (with ray answers where they fit LOGGED_ITEMS) */
     dr_vec3 *adj = j->adj[thread];
     for (int64_t first = begin; first < end; first += group) {
         const int64_t n_px = end - first < group ? end - first : group;
@@ -561,7 +566,7 @@ static int64_t cross_arrays(struct prb_job *j, int thread, int64_t begin, int64_
                 j->sums[thread][sidx] = (struct primal_sums){{L, L_sub}, 0};
             }
             if (cross_adjoints(b, px[k], adj))
-                pixel_replays(j, thread, px[k], adj, sink);
+                pixel_replays(j, thread, px[k], adj, sums.log ? &sums.log[k * spp] : NULL, sink);
         }
     }
     return end;
@@ -581,7 +586,7 @@ static void prb_pixels(void *ctx, int thread, int64_t begin, int64_t end)
     dr_vec3 *adj = j->adj[thread];   /* by sample (all the same but in cross mode) */
     for (int64_t px = begin; px < end; px++)
         if (pixel_adjoints(j, thread, px, adj))   /* (else this pixel does not matter to the loss) */
-            pixel_replays(j, thread, px, adj, &sink);
+            pixel_replays(j, thread, px, adj, NULL, &sink);
     dr_est_sink_end(b, thread);
 }
 

@@ -161,7 +161,7 @@ static void tangent_walk(const struct prb_attached_ctx *c, struct dr_sampler smp
     struct dr_path_vertex v;
     for (;;) {
         dr_vec3 bt = dr_mul(st.ratio, st.beta);
-        bool more = dr_path_step(b->p->scene, &b->popts, &st, &smp, &v, c->rays);
+        bool more = dr_wave_log_step(b->p->scene, &b->popts, c->log, &st, &smp, &v, c->rays);
         double ge[NS];
         vertex_call(c, &v, &Tk, NULL, dr_mul(adj, bt), dr_v3s(0.0), NULL, ge, NULL);
         dr_vec3 e = dr_mul(adj, dr_path_vertex_term(&v));
@@ -351,7 +351,7 @@ static void primal(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_v
     *w = (struct prb_attached_sums){dr_v3s(0.0), dr_v3s(0.0)};
     for (;;) {
         dr_vec3 beta = st.beta, ratio = st.ratio;
-        bool more = dr_path_step(b->p->scene, &b->popts, &st, &smp, &v, c->rays);
+        bool more = dr_wave_log_step(b->p->scene, &b->popts, c->log, &st, &smp, &v, c->rays);
         dr_vec3 e = dr_mul(beta, dr_path_vertex_term(&v));
         w->L_sub = dr_add(w->L_sub, e);
         w->L_true = dr_add(w->L_true, dr_mul(ratio, e));
@@ -379,7 +379,7 @@ static void replay(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_v
     for (;;) {
         dr_vec3 beta = st.beta, ratio = st.ratio, bt = dr_mul(ratio, beta);
         struct dr_path_vertex v;
-        bool more = dr_path_step(s, &b->popts, &st, &smp, &v, c->rays);
+        bool more = dr_wave_log_step(s, &b->popts, c->log, &st, &smp, &v, c->rays);
         dr_vec3 e = dr_mul(beta, dr_path_vertex_term(&v));
         w->L_sub = dr_sub(w->L_sub, e);
         w->L_true = dr_sub(w->L_true, dr_mul(ratio, e));

@@ -3,6 +3,7 @@
 #define DR_PRB_ATTACHED_H
 
 #include "common.h"
+#include "wavefront.h"
 
 /* What one sample's attached replay needs besides the shared run. */
 struct prb_attached_ctx {
@@ -12,6 +13,8 @@ struct prb_attached_ctx {
                                    not inverted; forward mode restarts there */
     double radius;              /* the scene's radius: positions in commensurable units */
     struct dr_ray_counts *rays;
+    const struct dr_wave_log *log;   /* the sample's primal walk's ray answers (NULL: none; the walks
+                                        here take them: dr_wave_log_step) */
 };
 
 /* A sample's primal: its radiance with the true throughput and with the

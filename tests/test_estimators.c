@@ -485,6 +485,10 @@ int main(void)
     const char *box_ptrs[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor"};
     compare("closed box, paths longer than the replay log", s, &cam, box_ptrs, 1, DR_WAVE_REPLAY_DEPTH + 12,
             DR_SAMPLING_DETACHED, GROUPED_BOTH);
+    /* one path at a time: with the cross primal the replays take the arrays'
+     * logged ray answers (dr_wave_log_step) and trace past the log */
+    compare("closed box, derivative sampling, paths longer than the replay log", s, &cam, box_ptrs, 1,
+            DR_WAVE_REPLAY_DEPTH + 12, DR_SAMPLING_DERIVATIVE, GROUPED_NONE);
     dr_scene_destroy(s);
 
     /* a panel with an emissive texture lighting an open box, the texels the
