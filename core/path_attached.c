@@ -90,7 +90,9 @@ static void nee_adjoint(const struct dr_scene *s, const struct dr_param_set *ps,
     double d_pdf_l = -d_scale * v->nee_scale / ls->pdf, d_pdf_b = 0.0;
     if (!ls->delta)
         d_mis_power(ls->pdf, pdf_b, d_scale * c / ls->pdf, &d_pdf_l, &d_pdf_b);
-    dr_vec3 d_wi = dr_v3(0.0, 0.0, copysign(d_scale * w / ls->pdf, v->nee_wi.z));
+    /* d |wi.z| / d wi.z = sign(wi.z); the adjoint keeps its own sign (copysign of
+     * the product would drop it: a negative loss adjoint turned this term around) */
+    dr_vec3 d_wi = dr_v3(0.0, 0.0, d_scale * w / ls->pdf * copysign(1.0, v->nee_wi.z));
     d_bsdf_eval(&v->bsdf, v->wo, v->nee_wi, d_f, &a->bsdf, &a->wo, &d_wi);
     if (d_pdf_b != 0.0)
         d_bsdf_pdf_fixed_prob(&v->bsdf, v->wo, v->nee_wi, d_pdf_b, &a->bsdf, &a->wo, &d_wi);

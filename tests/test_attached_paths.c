@@ -73,7 +73,7 @@ static void check_paths(const char *what, struct dr_scene *s, const struct dr_ca
         return;
     const struct dr_estimator_ops *tape = dr_estimator_find("tape");
     float adj[3] = {1.0f, 1.0f, 1.0f};
-    int agree = 0, nonzero = 0, finite = 1, prb_agree = 0;
+    int agree = 0, nonzero = 0, finite = 1, prb_agree = 0, linear = 0;
     double worst_ok = 0.0;
     for (int i = 0; i < paths; i++) {
         struct dr_grad_problem p = {.scene = s, .camera = cam, .params = ps, .width = 1, .height = 1, .spp = 1,
@@ -84,6 +84,14 @@ static void check_paths(const char *what, struct dr_scene *s, const struct dr_ca
         rc |= dr_estimator_forward(tape, &p, &dir, dimg, NULL);
         CHECK(rc == 0, "%s: %s", what, dr_last_error());
         double fwd = dimg[0] + dimg[1] + dimg[2];
+        /* reverse mode is linear in the adjoint, whatever its signs: an
+         * adjoint of mixed signs (as an L2 loss gives, pixels above and below
+         * their targets) against the forward mode's channels */
+        float mixed[3] = {0.75f, -1.0f, 0.5f};   /* (exact in float) */
+        double gm = 0.0;
+        rc = dr_estimator_backward(tape, &p, mixed, &gm, NULL);
+        double fm = 0.75 * dimg[0] - 1.0 * dimg[1] + 0.5 * dimg[2];
+        linear += rc == 0 && fabs(gm - fm) <= 1e-9 * (fabs(gm) + fabs(fm) + 1e-9);
         /* prb, exact inverse (--regularize 0): the same number to rounding where M is invertible */
         double gp = 0.0, dimgp[3];
         p.regularize = 0.0;
@@ -111,6 +119,8 @@ static void check_paths(const char *what, struct dr_scene *s, const struct dr_ca
     printf("%-28s %d of %d paths agree with their finite difference (%d depend on the parameter); prb = tape on %d\n",
            what, agree, paths, nonzero, prb_agree);
     CHECK(finite, "%s: non-finite gradient", what);
+    CHECK(linear == paths, "%s: reverse mode with a mixed-sign adjoint differs from forward mode on %d of %d paths",
+          what, paths - linear, paths);
     CHECK(nonzero >= paths / 3, "%s: only %d of %d paths depend on the parameter", what, nonzero, paths);
     CHECK(agree >= min_agree * paths, "%s: only %d of %d paths agree", what, agree, paths);
     CHECK(prb_agree >= min_agree * paths, "%s: prb equals tape on only %d of %d paths", what, prb_agree, paths);
