@@ -1199,6 +1199,50 @@ void dr_path8_ahead_stage(const struct dr_scene *s, const struct dr_path8_in *in
     }
 }
 
+/* Each differentiated lane's scalar hit into in->diff_hit[i], as stage_locate
+ * and stage_emission leave it (the normal map applied: a textured lane's
+ * L->hit has it); ng, ns: the triangle's, not yet towards the ray. */
+static void differentiated_hits(const struct dr_mesh *m, const struct dr_path8_in *in, const struct lanes *L,
+                                const struct dr_path8 *g, dr_v3x8 ng, dr_v3x8 ns, dr_f8 b1, dr_f8 b2, dr_m8 front)
+{
+    for (int i = 0; i < in->n; i++) {
+        if (!g->diff[i])
+            continue;
+        if (L->textured[i])
+            *in->diff_hit[i] = L->hit[i];
+        else
+            hit_of_lane(m, L, i, dr_v3x8_get(&in->o, i), dr_v3x8_get(&g->p, i), dr_v3x8_get(&ng, i),
+                        dr_v3x8_get(&ns, i), g->eps[i], b1[i], b2[i], front[i] != 0, in->diff_hit[i]);
+    }
+}
+
+/* The vertex's seven random numbers (taken ahead, or drawn now), in
+ * dr_path_step_hit's order: the light's three out, the rest kept in g. */
+static void take_randoms(const struct dr_path8_in *in, const struct lanes *L, struct dr_path8 *g, dr_f8 *u_pick,
+                         dr_f8 *u1, dr_f8 *u2)
+{
+    dr_f8 u[7];
+    if (in->ahead)
+        memcpy(u, in->ahead->u, sizeof u);
+    else
+        vertex_randoms(in, L->dim, u);
+    *u_pick = u[0], *u1 = u[1], *u2 = u[2];
+    g->lobe_u = u[3];
+    g->bsdf_u1 = u[4];
+    g->bsdf_u2 = u[5];
+    g->rr = u[6];
+}
+
+/* Which light each lane's sample took, for d_light_radiance (dr_path8_continue
+ * copies it into the vertex's ls). */
+static void keep_light_record(const struct light8 *ls, struct dr_path8 *g)
+{
+    memcpy(g->ls_type, ls->type, sizeof g->ls_type);
+    memcpy(g->ls_index, ls->index, sizeof g->ls_index);
+    g->ls_b1 = ls->b1, g->ls_b2 = ls->b2, g->ls_atten = ls->atten, g->ls_wi = ls->wi;
+    g->ls_env_valid = ls->env_map, g->ls_env_at = ls->env_at;
+}
+
 void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path8_in *in,
                           struct dr_path8 *g)
 {
@@ -1253,15 +1297,8 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     g->diff = (dr_m8){0};
     for (int i = 0; opts->params && i < DR_SIMD_W; i++)   /* (stage_material's diff_bsdf, where it runs) */
         g->diff[i] = !end[i] && opts->params->mat_bsdf_active[m->material[L.tri[i]]] ? -1 : 0;
-    for (int i = 0; in->diff_hit && i < n; i++) {   /* the scalar hit, the normal map applied (stage_emission's) */
-        if (!g->diff[i])
-            continue;
-        if (L.textured[i])
-            *in->diff_hit[i] = L.hit[i];
-        else   /* (ng, ns: the triangle's, not yet towards the ray) */
-            hit_of_lane(m, &L, i, dr_v3x8_get(&o, i), dr_v3x8_get(&g->p, i), dr_v3x8_get(&ng, i),
-                        dr_v3x8_get(&ns, i), g->eps[i], b1[i], b2[i], front[i] != 0, in->diff_hit[i]);
-    }
+    if (in->diff_hit)
+        differentiated_hits(m, in, &L, g, ng, ns, b1, b2, front);
     g->ng = dr_v3x8_sel(front, ng, dr_v3x8_neg(ng));
     g->fn = dr_v3x8_sel(front, ns, dr_v3x8_neg(ns));
     for (int i = 0; L.any_textured && i < n; i++)   /* a mapped normal may face away from wo */
@@ -1276,16 +1313,8 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
         colour = vertex_colours(m, &L, b1, b2);
     material_eval(s, g, &L, end, m->colors ? &colour : NULL, tu, tv);
     g->spec_p = specular_prob(g, g->wo_z);   /* (wo.z <= COS_EPS: unused) */
-    dr_f8 u[7];
-    if (in->ahead)
-        memcpy(u, in->ahead->u, sizeof u);
-    else
-        vertex_randoms(in, L.dim, u);
-    dr_f8 u_pick = u[0], u1 = u[1], u2 = u[2];
-    g->lobe_u = u[3];
-    g->bsdf_u1 = u[4];
-    g->bsdf_u2 = u[5];
-    g->rr = u[6];
+    dr_f8 u_pick, u1, u2;
+    take_randoms(in, &L, g, &u_pick, &u1, &u2);
 
     /* dr_path_nee_begin */
     struct light8 ls;
@@ -1295,12 +1324,8 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     dr_m8 ok = light_sample(s, &lt, &L, in->ahead, opts->params, record, g->p, u_pick, u1, u2, &ls);
     g->shadow = nee_begin(g, ok, &ls, &g->so, &g->sd) & ~end;
     g->diff_nee = ls.diff;
-    if (record) {
-        memcpy(g->ls_type, ls.type, sizeof g->ls_type);
-        memcpy(g->ls_index, ls.index, sizeof g->ls_index);
-        g->ls_b1 = ls.b1, g->ls_b2 = ls.b2, g->ls_atten = ls.atten, g->ls_wi = ls.wi;
-        g->ls_env_valid = ls.env_map, g->ls_env_at = ls.env_at;
-    }
+    if (record)
+        keep_light_record(&ls, g);
     g->go_on = ~end;
     g->depth = depth;
 }
