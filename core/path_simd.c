@@ -1349,6 +1349,28 @@ static void differentiated_vertex(const struct dr_scene *s, const struct dr_path
     v->nee_bsdf_pdf = g->bsdf_pdf[i];
 }
 
+/* Lane i's vertex as the hit stage leaves it (dr_path8_shade): the
+ * emission seen there, and what dr_path_vertex_has_derivative and the
+ * adjoints read: a differentiated lane's (its hit already in v->hit), a
+ * differentiated emitter's scalar hit (o, d: the ray that hit), the
+ * material. */
+static void shaded_vertex(const struct dr_scene *s, bool light_terms, const struct dr_path8 *g, int i, int64_t tri,
+                          dr_vec3 o, dr_vec3 d, struct dr_path_vertex *v)
+{
+    v->kind = DR_VERTEX_SURFACE;
+    if (g->emits[i]) {
+        v->emits = true;
+        v->Le = dr_v3x8_get(&g->Le, i);
+        v->emit_w = g->emit_w[i];
+    }
+    if (g->diff[i])
+        differentiated_vertex(s, g, i, v);
+    else if (light_terms && g->emits[i] && g->diff_emit[i])
+        dr_hit_compute(&s->mesh, tri, o, d, &v->hit);
+    else if (light_terms)
+        v->hit.material = s->mesh.material[tri];
+}
+
 void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, int n,
                     struct dr_path_state *const *st, struct dr_sampler *const *smp, struct dr_path_vertex *const *v,
                     const int64_t *tri, struct dr_shadow_ray *const *shadow, enum dr_step_next *next,
@@ -1375,20 +1397,7 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
     dr_path8_shade_lanes(s, opts, &in, g);
     const bool light_terms = opts->params && opts->params->radiance_active;
     for (int i = 0; i < n; i++) {
-        v[i]->kind = DR_VERTEX_SURFACE;
-        if (g->emits[i]) {
-            v[i]->emits = true;
-            v[i]->Le = dr_v3x8_get(&g->Le, i);
-            v[i]->emit_w = g->emit_w[i];
-        }
-        /* what dr_path_vertex_has_derivative and d_emission read: the
-         * scalar stages' hit (the ray is still the one that hit) */
-        if (g->diff[i])
-            differentiated_vertex(s, g, i, v[i]);
-        else if (light_terms && g->emits[i] && g->diff_emit[i])
-            dr_hit_compute(&s->mesh, tri[i], st[i]->o, st[i]->d, &v[i]->hit);
-        else if (light_terms)
-            v[i]->hit.material = s->mesh.material[tri[i]];
+        shaded_vertex(s, light_terms, g, i, tri[i], st[i]->o, st[i]->d, v[i]);
         if (g->go_on[i])
             smp[i]->dim = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)(st[i]->depth - 1) + 7;
         next[i] = !g->go_on[i] ? DR_STEP_END : g->shadow[i] ? DR_STEP_SHADOW : DR_STEP_CONTINUE;
@@ -1467,6 +1476,51 @@ dr_v3x8 dr_path8_term(const struct dr_path8 *g, const struct dr_path8_out *out)
     return dr_v3x8_sel(out->nee, dr_v3x8_add(e, nee), e);
 }
 
+/* Lane i's vertex as the continuation leaves it (dr_path8_continue): the
+ * next-event estimate (with the light sample's record where
+ * d_light_radiance may read it) and, where the path goes on, the
+ * continuation's factor (a tape's step, tape.c) and a differentiated
+ * lane's d_path_continuation inputs. */
+static void continued_vertex(bool light_terms, const struct dr_path8 *g, const struct dr_path8_out *out, int i,
+                             struct dr_path_vertex *v)
+{
+    if (out->nee[i]) {
+        v->nee = true;
+        v->nee_f = dr_v3x8_get(&g->nee_f, i);
+        v->ls.radiance = dr_v3x8_get(&g->ls_radiance, i);
+        v->nee_scale = out->nee_scale[i];
+        if (light_terms || g->diff[i]) {   /* (d_light_radiance's inputs) */
+            struct dr_light_sample *ls = &v->ls;
+            ls->type = g->ls_type[i], ls->index = g->ls_index[i];
+            ls->b1 = g->ls_b1[i], ls->b2 = g->ls_b2[i], ls->atten = g->ls_atten[i];
+            ls->wi = dr_v3x8_get(&g->ls_wi, i);
+            ls->env_at = (struct dr_env_lookup){g->ls_env_valid[i] != 0, g->ls_env_at.u[i], g->ls_env_at.v[i],
+                                                dr_v3x8_get(&g->ls_env_at.map, i)};
+        }
+    }
+    if (!out->more[i])
+        return;
+    v->cont = true;
+    v->f = dr_v3x8_get(&out->f, i);
+    v->cos_pdf_q = out->cos_pdf_q[i];
+    if (g->diff[i]) {
+        v->wi = dr_v3x8_get(&out->wi, i);
+        v->pdf = out->prev_pdf[i];
+        v->s = v->f;
+        for (int c = 0; c < 3; c++)
+            if ((v->sub[c] = out->sub[c][i] != 0))
+                dr_v3_set(&v->s, c, DR_PATH_SUBSTITUTE);
+    }
+}
+
+void dr_path8_vertex(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path8 *g,
+                     const struct dr_path8_out *out, int i, int64_t tri, dr_vec3 o, dr_vec3 d, struct dr_path_vertex *v)
+{
+    const bool light_terms = opts->params && opts->params->radiance_active;
+    shaded_vertex(s, light_terms, g, i, tri, o, d, v);
+    continued_vertex(light_terms, g, out, i, v);
+}
+
 void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g, struct dr_path_state *const *st,
                        struct dr_path_vertex *const *v, const bool *occluded, bool *more)
 {
@@ -1484,35 +1538,12 @@ void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g
                             mask_of(occ), &out);
     const bool light_terms = opts->params && opts->params->radiance_active;
     for (int i = 0; i < n; i++) {
-        if (out.nee[i]) {
-            v[i]->nee = true;
-            v[i]->nee_f = dr_v3x8_get(&g->nee_f, i);
-            v[i]->ls.radiance = dr_v3x8_get(&g->ls_radiance, i);
-            v[i]->nee_scale = out.nee_scale[i];
-            if (light_terms || g->diff[i]) {   /* (d_light_radiance's inputs) */
-                struct dr_light_sample *ls = &v[i]->ls;
-                ls->type = g->ls_type[i], ls->index = g->ls_index[i];
-                ls->b1 = g->ls_b1[i], ls->b2 = g->ls_b2[i], ls->atten = g->ls_atten[i];
-                ls->wi = dr_v3x8_get(&g->ls_wi, i);
-                ls->env_at = (struct dr_env_lookup){g->ls_env_valid[i] != 0, g->ls_env_at.u[i], g->ls_env_at.v[i],
-                                                    dr_v3x8_get(&g->ls_env_at.map, i)};
-            }
-        }
+        continued_vertex(light_terms, g, &out, i, v[i]);
         more[i] = out.more[i] != 0;
         if (!more[i])
             continue;
-        v[i]->cont = true;   /* the continuation's factor, for a tape's step (tape.c) */
-        v[i]->f = dr_v3x8_get(&out.f, i);
-        v[i]->cos_pdf_q = out.cos_pdf_q[i];
-        if (g->diff[i]) {   /* d_path_continuation's inputs, and the substitution (stage_continue's) */
-            v[i]->wi = dr_v3x8_get(&out.wi, i);
-            v[i]->pdf = out.prev_pdf[i];
-            v[i]->s = v[i]->f;
-            for (int c = 0; c < 3; c++)
-                if ((v[i]->sub[c] = out.sub[c][i] != 0))
-                    dr_v3_set(&v[i]->s, c, DR_PATH_SUBSTITUTE);
+        if (g->diff[i])   /* (the substitution's: stage_continue's) */
             st[i]->ratio = dr_v3x8_get(&out.ratio, i);
-        }
         /* the path's next state: one test per lane, not one per field */
         st[i]->beta = dr_v3x8_get(&out.beta, i);
         st[i]->prev_pdf = out.prev_pdf[i];

@@ -234,6 +234,15 @@ void dr_path8_continue_lanes(const struct dr_path_opts *opts, const struct dr_pa
 /* Each lane's vertex term e_k (dr_path_vertex_term) after the continuation. */
 dr_v3x8 dr_path8_term(const struct dr_path8 *g, const struct dr_path8_out *out);
 
+/* Lane i's vertex as dr_path8_shade and dr_path8_continue leave it, for a
+ * caller that keeps its paths in arrays (wave_soa.c's replays): v begun as
+ * dr_path_step_begin begins it, where g->diff[i] its hit already in v->hit
+ * (dr_path8_in's diff_hit); o, d: the ray that hit tri (v's o and d,
+ * passed on so that they are not read back just after being written). */
+void dr_path8_vertex(const struct dr_scene *scene, const struct dr_path_opts *opts, const struct dr_path8 *g,
+                     const struct dr_path8_out *out, int i, int64_t tri, dr_vec3 o, dr_vec3 d,
+                     struct dr_path_vertex *v);
+
 /* dr_path_nee_end (occluded[i]: the shadow ray's answer) and
  * dr_path_stage_continue of the same lanes: the next-event estimate in
  * *v[i], the next ray and throughput in *st[i]; more[i]: the path goes on.

@@ -60,6 +60,14 @@ struct dr_wave_soa {
     int last_diff[SLOTS];
     struct scalar_path *scalar;                 /* this step's paths at vertices for the scalar stages */
     int n_scalar;
+    /* path replay's second walks only (dr_wave_soa_replay; NULL otherwise;
+     * out then points at replay_out, which asks for nothing) */
+    const struct dr_wave_soa_replay *replay;
+    struct dr_wave_soa_walks replay_out;
+    struct dr_hit *diff_hit;                    /* by slot: a differentiated vertex's hit (dr_path8_in's) */
+    struct dr_path_vertex *vertex;              /* where its vertex is made whole (replay_step) */
+    int traced[SLOTS];                          /* the slots whose rays a replay traces, and */
+    int64_t traced_tri[SLOTS];                  /* their answers */
 };
 
 /* A path whose vertex this step takes the scalar stages (in a walk with a
@@ -94,8 +102,11 @@ struct dr_wave_soa *dr_wave_soa_create(void)
 
 void dr_wave_soa_destroy(struct dr_wave_soa *w)
 {
-    if (w)
+    if (w) {
         free(w->scalar);
+        free(w->diff_hit);
+        free(w->vertex);
+    }
     free(w);
 }
 
@@ -106,12 +117,19 @@ size_t dr_wave_soa_bytes(void)
 
 size_t dr_wave_soa_walk_bytes(void)
 {
-    return sizeof(struct dr_wave_soa) + sizeof(struct scalar_path) * LANES;
+    return sizeof(struct dr_wave_soa) + sizeof(struct scalar_path) * LANES + sizeof(struct dr_hit) * SLOTS +
+           sizeof(struct dr_path_vertex);
 }
 
 bool dr_wave_soa_walks_apply(const struct dr_scene *s, const struct dr_path_opts *opts, bool sums_only)
 {
     return sums_only ? dr_path8_walks_apply(s, opts) : dr_path8_applies(s, opts);
+}
+
+bool dr_wave_soa_replays_apply(const struct dr_scene *s, const struct dr_path_opts *opts)
+{
+    const bool diff_env = (opts->stages & DR_STAGE_ENV) && opts->params && opts->params->env_active;
+    return !diff_env && dr_path8_walks_apply(s, opts);
 }
 
 bool dr_wave_soa_applies(const struct dr_scene *s, const struct dr_path_opts *opts)
@@ -146,6 +164,13 @@ static void start_path(struct dr_wave_soa *w, int k, int64_t item, dr_wave_start
         w->last_diff[k] = 0;
         if (w->out->log)
             w->out->log[item].n = 0;
+    }
+    if (w->replay) {   /* the first walk's sums, which the replay takes apart */
+        const struct dr_wave_soa_replay *r = w->replay;
+        const int32_t i = r->sample[item];
+        w->Lx[k] = r->L_sub[i].x, w->Ly[k] = r->L_sub[i].y, w->Lz[k] = r->L_sub[i].z;
+        w->Tx[k] = r->L[i].x, w->Ty[k] = r->L[i].y, w->Tz[k] = r->L[i].z;
+        w->last_diff[k] = r->last_diff[i];
     }
 }
 
@@ -235,7 +260,45 @@ static inline dr_v3x8 load3(const double *x, const double *y, const double *z)
     return (dr_v3x8){load8(x), load8(y), load8(z)};
 }
 
+/* The log slot k's replay answers from (NULL: none, or not a replay). */
+static inline const struct dr_wave_log *replay_log(const struct dr_wave_soa *w, int k)
+{
+    const struct dr_wave_soa_replay *r = w->replay;
+    return r && r->log ? &r->log[r->sample[w->item[k]]] : NULL;
+}
+
 /* ------------------------------------------------------------ the stages */
+
+/* A replay's trace: the answers its first walk logged where the log holds
+ * them (no ray traced or counted, as in dr_wave_run's replays), the other
+ * rays traced as one batch. */
+static void replay_trace(struct dr_wave_soa *w, const struct dr_scene *s, int n_live, int first_new,
+                         struct dr_ray_counts *counts)
+{
+    int n = 0;
+    for (int k = 0; k < n_live; k++) {
+        const struct dr_wave_log *log = replay_log(w, k);
+        const int depth = (int)w->depth[k];
+        if (log && depth <= log->n) {
+            w->tri[k] = log->tri[depth - 1];
+            continue;
+        }
+        if (k < first_new)
+            counts->extension++;
+        else
+            counts->camera++;
+        w->sox[n] = w->ox[k], w->soy[n] = w->oy[k], w->soz[n] = w->oz[k];
+        w->sdx[n] = w->dx[k], w->sdy[n] = w->dy[k], w->sdz[n] = w->dz[k];
+        w->traced[n++] = k;
+    }
+    if (n == 0)
+        return;
+    struct dr_accel_rays r = {.n = n, .ox = w->sox, .oy = w->soy, .oz = w->soz,
+                              .dx = w->sdx, .dy = w->sdy, .dz = w->sdz, .tmax = w->inf};
+    dr_accel_intersect_many(s->accel, &r, w->traced_tri);
+    for (int j = 0; j < n; j++)
+        w->tri[w->traced[j]] = w->traced_tri[j];
+}
 
 /* The trace of every live path: the extension rays of slots [0, first_new),
  * then the camera rays of the paths just started (consecutive samples of a
@@ -245,6 +308,13 @@ static void trace(struct dr_wave_soa *w, const struct dr_scene *s, int n_live, i
 {
     for (int k = 0; k < n_live; k++)
         w->depth[k] += 1.0;   /* dr_path_step_begin */
+    if (w->replay) {
+        replay_trace(w, s, n_live, first_new, counts);
+        for (int k = 0; prefetch && k < n_live; k++)
+            if (w->tri[k] >= 0)
+                dr_mesh_prefetch_triangle(&s->mesh, w->tri[k]);
+        return;
+    }
     counts->extension += (uint64_t)first_new;
     counts->camera += (uint64_t)(n_live - first_new);
     struct dr_accel_rays old = {.n = first_new, .ox = w->ox, .oy = w->oy, .oz = w->oz,
@@ -398,7 +468,11 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
                 w->last_diff[j] = w->last_diff[k];
             j++;
         }
-        close_up(w, kept, i0, keep);   /* (after the group's slots were read above) */
+        /* (after the group's slots were read above; where no path before
+         * and none of the group left, every path is in its place already) */
+        const int in_group = n_live - i0 < DR_SIMD_W ? n_live - i0 : DR_SIMD_W;
+        if (kept != i0 || j - kept != in_group)
+            close_up(w, kept, i0, keep);
         kept = j;
     }
     return kept;
@@ -422,8 +496,10 @@ static void locate_textured(struct dr_wave_soa *w, const struct dr_scene *s, int
 }
 
 /* Group g's inputs: slots 8g .. 8g+7 (the last group's padding slots repeat
- * its first path: pad_last_group). */
-static void group_inputs(const struct dr_wave_soa *w, int g, int n_live, bool located, struct dr_path8_in *in)
+ * its first path: pad_last_group). In a replay, diff_hit (not NULL) gets
+ * where each lane's differentiated hit goes, which in->diff_hit points to. */
+static void group_inputs(const struct dr_wave_soa *w, int g, int n_live, bool located, struct dr_path8_in *in,
+                         struct dr_hit *diff_hit[DR_SIMD_W])
 {
     int i0 = g * DR_SIMD_W;
     in->n = n_live - i0 < DR_SIMD_W ? n_live - i0 : DR_SIMD_W;
@@ -440,7 +516,13 @@ static void group_inputs(const struct dr_wave_soa *w, int g, int n_live, bool lo
     }
     in->located = located && w->loc_valid[g] ? &w->loc[g] : NULL;
     in->ahead = w->ahead_valid ? &w->ahead[g] : NULL;
-    in->diff_hit = NULL;   /* (the walks' sums need no hit) */
+    /* (the first walks' sums need no hit; a replay's differentiated
+     * vertices do: padding lanes repeat the group's first slot, as above) */
+    in->diff_hit = NULL;
+    for (int i = 0; w->replay && diff_hit && i < DR_SIMD_W; i++)
+        diff_hit[i] = &w->diff_hit[i0 + (i < in->n ? i : 0)];
+    if (w->replay && diff_hit)
+        in->diff_hit = diff_hit;
 }
 
 /* Before shading, in a scene with many emitting triangles: every group's
@@ -451,7 +533,7 @@ static void pick_ahead(struct dr_wave_soa *w, const struct dr_scene *s, int n_li
     const int n_groups = (n_live + DR_SIMD_W - 1) / DR_SIMD_W;
     for (int g = 0; g < n_groups; g++) {
         struct dr_path8_in in;
-        group_inputs(w, g, n_live, false, &in);
+        group_inputs(w, g, n_live, false, &in, NULL);
         dr_path8_ahead_stage(s, &in, 0, &w->ahead[g]);
     }
     for (int stage = 1; stage < DR_PATH8_AHEAD_STAGES; stage++)
@@ -493,6 +575,23 @@ static int shade_scalar(struct dr_wave_soa *w, const struct dr_scene *s, const s
     return n_shadow;
 }
 
+/* A replay group's lanes whose shadow ray its log answers (as
+ * collect_shadow in wavefront.c: occluded only where a ray would have been
+ * cast), their answers set. */
+static dr_m8 logged_shadows(struct dr_wave_soa *w, const struct dr_path8 *G, int i0)
+{
+    dr_m8 logged = {0};
+    for (int i = 0; i < G->n; i++) {
+        const int k = i0 + i, depth = (int)w->depth[k];
+        const struct dr_wave_log *log = replay_log(w, k);
+        if (!G->shadow[i] || !log || depth > log->n)
+            continue;
+        logged[i] = -1;
+        w->occluded[k] = G->tmax[i] > 0.0 && log->occ[depth - 1];
+    }
+    return logged;
+}
+
 /* The hit stage of every live path, then their shadow rays as one batch. */
 static void shade(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int n_live,
                   bool located, struct dr_ray_counts *counts)
@@ -509,14 +608,19 @@ static void shade(struct dr_wave_soa *w, const struct dr_scene *s, const struct 
     }
     for (int g = 0; g * DR_SIMD_W < n_live; g++) {
         struct dr_path8_in in;
-        group_inputs(w, g, n_live, located, &in);
+        struct dr_hit *diff_hit[DR_SIMD_W];
+        group_inputs(w, g, n_live, located, &in, diff_hit);
         struct dr_path8 *G = &w->group[g];
         dr_path8_shade_lanes(s, opts, &in, G);
         const int i0 = g * DR_SIMD_W;
         memset(w->occluded + i0, 0, sizeof(bool) * (size_t)in.n);
         /* the group's shadow rays appended as whole vectors (counted as
-         * dr_path_step counts them: no ray when tmax is not > 0) */
-        const dr_m8 cast = G->shadow & first_lanes(in.n), ray = cast & dr_f8_gt(G->tmax, dr_f8s(0.0));
+         * dr_path_step counts them: no ray when tmax is not > 0), but a
+         * replay's that its log answers */
+        dr_m8 cast = G->shadow & first_lanes(in.n);
+        if (w->replay)
+            cast &= ~logged_shadows(w, G, i0);
+        const dr_m8 ray = cast & dr_f8_gt(G->tmax, dr_f8s(0.0));
         const int64_t owner[DR_SIMD_W] = {i0, i0 + 1, i0 + 2, i0 + 3, i0 + 4, i0 + 5, i0 + 6, i0 + 7};
         const struct { void *a; const void *v; } rays[] = {
             {w->sox, &G->so.x}, {w->soy, &G->so.y}, {w->soz, &G->so.z}, {w->sdx, &G->sd.x}, {w->sdy, &G->sd.y},
@@ -527,6 +631,8 @@ static void shade(struct dr_wave_soa *w, const struct dr_scene *s, const struct 
             counts->shadow += cast[i] != 0, n_shadow += ray[i] != 0;
     }
     counts->simd_vertices += (uint64_t)n_live;
+    if (w->replay)
+        counts->simd_replayed += (uint64_t)n_live;
     n_shadow = shade_scalar(w, s, opts, n_shadow, located, counts);
     struct dr_accel_rays r = {.n = n_shadow, .ox = w->sox, .oy = w->soy, .oz = w->soz,
                               .dx = w->sdx, .dy = w->sdy, .dz = w->sdz, .tmax = w->stmax};
@@ -594,6 +700,43 @@ static void steps(const struct dr_wave_soa *w, const struct dr_path8 *G, const s
         w->out->step(w->out->ctx, w->item[i0 + i], dr_v3x8_get(&e, i), dr_v3x8_get(&t, i), dr_v3x8_get(&bt, i));
 }
 
+/* A replay's step of the group at slot i0 (prb.c's walk_vertex with an
+ * adjoint): each vertex's term beta e (be) subtracted from the sums, as the
+ * walk subtracts it, into *L (with the tracing throughput) and *T (the true
+ * one), and each vertex with a derivative term (the test advance makes for
+ * a first walk's last_diff) made whole for the caller. Returns the lanes
+ * whose replay goes on past this vertex (prb.c's replay_goes_on: it is
+ * before the last such vertex). */
+static dr_m8 replay_step(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
+                         const struct dr_path8 *G, const struct dr_path8_out *c, int i0, dr_v3x8 beta, dr_v3x8 ratio,
+                         dr_v3x8 be, dr_v3x8 *L, dr_v3x8 *T)
+{
+    const dr_v3x8 T_before = load3(w->Tx + i0, w->Ty + i0, w->Tz + i0);
+    *L = dr_v3x8_sub(load3(w->Lx + i0, w->Ly + i0, w->Lz + i0), be);
+    *T = dr_v3x8_sub(T_before, dr_v3x8_mul(ratio, be));
+    dr_m8 goes_on = {0};
+    for (int i = 0; i < G->n; i++) {
+        const int k = i0 + i;
+        goes_on[i] = G->depth[i] < w->last_diff[k] ? -1 : 0;
+        if (!(G->diff[i] | G->diff_emit[i] | (G->diff_nee[i] & c->nee[i])))
+            continue;
+        /* begun as dr_path_step_begin begins it (as a lane's vertex in
+         * wavefront.c, the same storage for every vertex) */
+        struct dr_path_vertex *v = w->vertex;
+        struct dr_path_state st = {.o = dr_v3(w->ox[k], w->oy[k], w->oz[k]), .d = dr_v3(w->dx[k], w->dy[k], w->dz[k]),
+                                   .prev_p = dr_v3(w->px[k], w->py[k], w->pz[k]), .prev_pdf = w->prev_pdf[k],
+                                   .depth = (int)w->depth[k] - 1};
+        dr_path_step_begin(&st, v);
+        if (G->diff[i])
+            v->hit = w->diff_hit[k];
+        dr_path8_vertex(s, opts, G, c, i, w->tri[k], st.o, st.d, v);
+        const struct dr_wave_arrival a = {dr_v3x8_get(&beta, i), dr_v3x8_get(&ratio, i)};
+        w->replay->vertex(w->replay->ctx, w->item[k], &a, v, dr_v3x8_get(&T_before, i), dr_v3x8_get(T, i),
+                          dr_v3x8_get(L, i));
+    }
+    return goes_on;
+}
+
 /* The next-event estimates and continuations: each path's vertex term added
  * to its radiance, the paths that end written out, the others closed up
  * (then the scalar paths' ends, which go on after them). Returns how many
@@ -617,17 +760,22 @@ static int advance(struct dr_wave_soa *w, const struct dr_scene *s, const struct
         dr_path8_continue_lanes(opts, G, beta, w->out ? &ratio : NULL, occluded, &c);
         dr_v3x8 e = dr_path8_term(G, &c);   /* L += beta e, as dr_path_radiance sums */
         dr_v3x8 be = dr_v3x8_mul(beta, e);
-        dr_v3x8 L = {load8(w->Lx + i0) + be.x, load8(w->Ly + i0) + be.y, load8(w->Lz + i0) + be.z};
-        dr_v3x8 T = L;   /* a walk: T += ratio beta e, as prb.c's walk_vertex sums */
-        if (w->out)
-            T = dr_v3x8_add(load3(w->Tx + i0, w->Ty + i0, w->Tz + i0), dr_v3x8_mul(ratio, be));
+        dr_m8 go_on = c.more & first_lanes(G->n);
+        dr_v3x8 L, T;
+        if (w->replay) {
+            go_on &= replay_step(w, s, opts, G, &c, i0, beta, ratio, be, &L, &T);
+        } else {
+            L = (dr_v3x8){load8(w->Lx + i0) + be.x, load8(w->Ly + i0) + be.y, load8(w->Lz + i0) + be.z};
+            T = L;   /* a walk: T += ratio beta e, as prb.c's walk_vertex sums */
+            if (w->out)
+                T = dr_v3x8_add(load3(w->Tx + i0, w->Ty + i0, w->Tz + i0), dr_v3x8_mul(ratio, be));
+        }
         if (w->out && w->out->step)
             steps(w, G, &c, beta, e);
-        const dr_m8 go_on = c.more & first_lanes(G->n);
         int j = kept;
         for (int i = 0; i < G->n; i++) {
             int k = i0 + i;
-            if (w->out && (G->diff[i] | G->diff_emit[i] | (G->diff_nee[i] & c.nee[i])))   /* (dr_path_vertex_has_derivative) */
+            if (w->out && !w->replay && (G->diff[i] | G->diff_emit[i] | (G->diff_nee[i] & c.nee[i])))   /* (dr_path_vertex_has_derivative) */
                 w->last_diff[k] = (int)G->depth[i];
             if (!go_on[i]) {
                 if (w->out)
@@ -700,6 +848,24 @@ void dr_wave_soa_radiance(struct dr_wave_soa *w, const struct dr_scene *s, const
 {
     w->out = NULL;
     run(w, s, opts, n, start, ctx, L, counts);
+}
+
+bool dr_wave_soa_replay(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
+                        int64_t n, dr_wave_start_fn start, void *ctx, const struct dr_wave_soa_replay *replay,
+                        struct dr_ray_counts *counts)
+{
+    /* (zeroed: a field no stage writes reads the same on every run) */
+    if (!w->diff_hit && !(w->diff_hit = calloc(SLOTS, sizeof(struct dr_hit))))
+        return false;
+    if (!w->vertex && !(w->vertex = calloc(1, sizeof(struct dr_path_vertex))))
+        return false;
+    w->replay_out = (struct dr_wave_soa_walks){0};   /* (a walk's arrays move; nothing is written out) */
+    w->out = &w->replay_out;
+    w->replay = replay;
+    run(w, s, opts, n, start, ctx, NULL, counts);
+    w->out = NULL;
+    w->replay = NULL;
+    return true;
 }
 
 bool dr_wave_soa_walk(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,

@@ -79,6 +79,39 @@ bool dr_wave_soa_walk(struct dr_wave_soa *w, const struct dr_scene *scene, const
                       dr_wave_start_fn start, void *ctx, const struct dr_wave_soa_walks *out,
                       struct dr_ray_counts *counts);
 
+/* Path replay's second walks (prb.c) in the arrays: the walk of each path
+ * again, with the same sampler, ray and decisions (its ray answers from the
+ * first walk's log where it holds them, as a DR_WAVE_REPLAY of dr_wave_run,
+ * whose replays give the same vertices), each vertex's term subtracted from
+ * the first walk's sums, to the depth of its last vertex with a derivative
+ * term. Item k replays the first walk of sample `sample[k]`. */
+struct dr_wave_soa_replay {
+    void *ctx;
+    const int32_t *sample;
+    const dr_vec3 *L, *L_sub;           /* by sample: the first walk's sums (dr_wave_soa_walks') */
+    const int *last_diff;
+    const struct dr_wave_log *log;      /* NULL: every ray traced again */
+    /* A vertex with a derivative term (dr_path_vertex_has_derivative),
+     * reached with a, whole as far as prb's adjoints read it (as
+     * dr_wave_run's lanes give it with partial_vertices, light_terms and
+     * bsdf_terms); L_true, L_sub: the sums with its term subtracted;
+     * remaining: L_true before. */
+    void (*vertex)(void *ctx, int64_t item, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
+                   dr_vec3 remaining, dr_vec3 L_true, dr_vec3 L_sub);
+};
+
+/* Can a gradient's replays use the arrays? Where the primal walks can
+ * (dr_wave_soa_walks_apply's sums_only), but not where the environment has
+ * a parameter: an escaped vertex's term then has a derivative, and the
+ * arrays end such paths eight at a time without making their vertex. */
+bool dr_wave_soa_replays_apply(const struct dr_scene *scene, const struct dr_path_opts *opts);
+
+/* The replays of items [0, n) (start: item k's sampler and camera ray).
+ * False: no memory for its working storage (nothing replayed). */
+bool dr_wave_soa_replay(struct dr_wave_soa *w, const struct dr_scene *scene, const struct dr_path_opts *opts,
+                        int64_t n, dr_wave_start_fn start, void *ctx, const struct dr_wave_soa_replay *replay,
+                        struct dr_ray_counts *counts);
+
 /* L[i] = the radiance of path i for i in [0, n), as dr_wave_radiance. */
 void dr_wave_soa_radiance(struct dr_wave_soa *w, const struct dr_scene *scene, const struct dr_path_opts *opts,
                           int64_t n, dr_wave_start_fn start, void *ctx, dr_vec3 *L,

@@ -80,37 +80,18 @@ struct walk {
     dr_vec3 prev_dt;
 };
 
-/* What vertex v (reached with throughput beta, ratio) does to the walk:
- * the body of the walk's loop, shared by the one-path walk and the wavefront. */
-static void walk_vertex(const struct dr_est_base *b, struct walk *w, const struct dr_path_vertex *v, dr_vec3 beta,
-                        dr_vec3 ratio, struct dr_sampler *smp, struct dr_ray_counts *rays)
+/* The derivatives of a replay's vertex v (reached with beta, ratio) to the
+ * walk's sink: w->L holds the sums with v's term subtracted, remaining
+ * the true one before (walk_vertex). */
+static void vertex_adjoints(const struct dr_est_base *b, struct walk *w, const struct dr_path_vertex *v, dr_vec3 beta,
+                            dr_vec3 ratio, dr_vec3 remaining, struct dr_sampler *smp, struct dr_ray_counts *rays)
 {
     const struct dr_scene *s = b->p->scene;
     const struct dr_param_set *ps = b->p->params;
     struct dr_grad_sink *sink = w->sink;
-    struct prb_radiance *L = &w->L;
+    const struct prb_radiance *L = &w->L;
     const dr_vec3 adj = w->adj;
-    const double sign = sink ? -1.0 : 1.0;
-    const bool dsamp = b->p->sampling == DR_SAMPLING_DERIVATIVE;   /* path_deriv.h (only vertices with a BSDF parameter) */
-    if (!sink)
-        ++w->vertices;
-    dr_vec3 c = dr_mul(beta, dr_path_vertex_term(v));   /* with substitutes */
-    dr_vec3 remaining = L->true_;   /* replay: from this vertex on */
-    L->sub = dr_madd(L->sub, c, sign);
-    L->true_ = dr_madd(L->true_, dr_mul(ratio, c), sign);
-    const bool has_derivative = dr_path_vertex_has_derivative(s, ps, v);
-    if (!sink) {
-        if (has_derivative)
-            w->last_diff = v->depth;
-        return;
-    }
-    /* A vertex without a term adds nothing below (test_estimators checks the
-     * predicate against the adjoints); skipping it also means a replay reads
-     * no more of such a vertex than the primal did, so both walks can shade
-     * it eight lanes at a time (path_simd.h). Derivative sampling still
-     * needs its emission for the previous vertex's sampled direction. */
-    if (!has_derivative && !dsamp)
-        return;
+    const bool dsamp = b->p->sampling == DR_SAMPLING_DERIVATIVE;
     if (v->media)
         d_medium_vertex(s, &b->popts, v, w->mrec, w->vertices, dr_mul(adj, dr_mul(ratio, beta)), dr_mul(adj, remaining),
                         dr_mul(adj, L->true_), dr_mul(adj, dr_mul(dr_mul(ratio, beta), dr_path_vertex_nee(v))), sink);
@@ -143,6 +124,39 @@ static void walk_vertex(const struct dr_est_base *b, struct walk *w, const struc
         *w->prev = *v;
         w->prev_dt = dr_scale(dr_mul(adj, dr_mul(ratio, beta)), v->cos_pdf_q);
     }
+}
+
+/* What vertex v (reached with throughput beta, ratio) does to the walk:
+ * the body of the walk's loop, shared by the one-path walk and the wavefront. */
+static void walk_vertex(const struct dr_est_base *b, struct walk *w, const struct dr_path_vertex *v, dr_vec3 beta,
+                        dr_vec3 ratio, struct dr_sampler *smp, struct dr_ray_counts *rays)
+{
+    const struct dr_scene *s = b->p->scene;
+    const struct dr_param_set *ps = b->p->params;
+    struct dr_grad_sink *sink = w->sink;
+    struct prb_radiance *L = &w->L;
+    const double sign = sink ? -1.0 : 1.0;
+    const bool dsamp = b->p->sampling == DR_SAMPLING_DERIVATIVE;   /* path_deriv.h (only vertices with a BSDF parameter) */
+    if (!sink)
+        ++w->vertices;
+    dr_vec3 c = dr_mul(beta, dr_path_vertex_term(v));   /* with substitutes */
+    dr_vec3 remaining = L->true_;   /* replay: from this vertex on */
+    L->sub = dr_madd(L->sub, c, sign);
+    L->true_ = dr_madd(L->true_, dr_mul(ratio, c), sign);
+    const bool has_derivative = dr_path_vertex_has_derivative(s, ps, v);
+    if (!sink) {
+        if (has_derivative)
+            w->last_diff = v->depth;
+        return;
+    }
+    /* A vertex without a term adds nothing below (test_estimators checks the
+     * predicate against the adjoints); skipping it also means a replay reads
+     * no more of such a vertex than the primal did, so both walks can shade
+     * it eight lanes at a time (path_simd.h). Derivative sampling still
+     * needs its emission for the previous vertex's sampled direction. */
+    if (!has_derivative && !dsamp)
+        return;
+    vertex_adjoints(b, w, v, beta, ratio, remaining, smp, rays);
 }
 
 /* The walk of (smp, o, d), one path at a time. */
@@ -325,6 +339,44 @@ static enum dr_wave_next replay_end(void *ctx, void *user, struct dr_sampler *sm
     return DR_WAVE_DONE;
 }
 
+/* The arrays' replays (dr_wave_soa_replay): item k is the replay of sample
+ * order[k]; the vertices with a derivative term come whole, with the sums
+ * walk_vertex would hold. */
+static void soa_replay_start(void *ctx, int64_t k, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    const struct park_ctx *c = ctx;
+    (void)sample_ray(ctx, c->items->order[k], smp, o, d);
+}
+
+static void soa_replay_vertex(void *ctx, int64_t k, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
+                              dr_vec3 remaining, dr_vec3 L_true, dr_vec3 L_sub)
+{
+    struct park_ctx *c = ctx;
+    struct walk w = {.L = {L_true, L_sub}, .adj = c->items->adj[c->items->order[k]], .sink = &c->sink};
+    vertex_adjoints(&c->run.j->b, &w, v, a->beta, a->ratio, remaining, NULL, &c->run.j->b.thr[c->run.thread].rays);
+}
+
+/* The replays of a group's n parked samples (items->order): in the arrays
+ * where they apply, else in the lanes. The arrays need the sink shared by
+ * all paths, so a reverse-mode one: forward mode's sums a sample's
+ * derivatives per lane first (replay_end). */
+static void replay_walks(struct prb_job *j, int thread, struct park_ctx *c, int32_t n)
+{
+    struct dr_est_base *b = &j->b;
+    /* (light_terms, bsdf_terms: walk_vertex's adjoint reads the light
+     * sample's record, a differentiated emitter's hit and a differentiated
+     * BSDF's vertex, which the eight-lane stages fill) */
+    static const struct dr_wave_ops replay = {replay_start, lane_vertex, replay_end, NULL,
+                                              replay_log, true, true, true};
+    const struct parked_samples *it = c->items;
+    const struct dr_wave_soa_replay r = {c, it->order, it->walk.L, it->walk.L_sub, it->walk.last_diff, it->walk.log,
+                                         soa_replay_vertex};
+    if (!b->dir && j->soas[thread] && dr_wave_soa_replays_apply(b->p->scene, &b->popts) &&
+        dr_wave_soa_replay(j->soas[thread], b->p->scene, &b->popts, n, soa_replay_start, c, &r, &b->thr[thread].rays))
+        return;
+    dr_wave_run(j->waves[thread], b->p->scene, &b->popts, n, &replay, c, &b->thr[thread].rays);
+}
+
 /* Pixels a group holds: its samples' logs fit LOGGED_ITEMS. */
 static int64_t park_group(int spp)
 {
@@ -434,17 +486,11 @@ static bool wave_pixels(struct prb_job *j, int thread, int64_t begin, int64_t en
     for (int64_t p = begin; p < end; p++)
         if (b->p->cross || dr_est_sample_adjoint(b, p, &adj[n_all]))
             px[n_all++] = p;
-    /* (light_terms, bsdf_terms: walk_vertex's adjoint reads the light
-     * sample's record, a differentiated emitter's hit and a differentiated
-     * BSDF's vertex, which the eight-lane stages fill) */
-    static const struct dr_wave_ops replay = {replay_start, lane_vertex, replay_end, NULL,
-                                              replay_log, true, true, true};
     for (int64_t first = 0; first < n_all; first += group) {
         const int64_t n_px = n_all - first < group ? n_all - first : group;
         struct park_ctx c = {.run = {j, thread}, .sink = sink, .px = px + first, .items = it};
         primal_walks(j, thread, &c, n_px * spp);
-        int32_t n = replays(j, thread, px + first, adj + first, n_px, it);
-        dr_wave_run(j->waves[thread], b->p->scene, &b->popts, n, &replay, &c, &b->thr[thread].rays);
+        replay_walks(j, thread, &c, replays(j, thread, px + first, adj + first, n_px, it));
     }
     return true;
 }
