@@ -181,7 +181,8 @@ static void walk(const struct dr_est_base *b, struct dr_sampler smp, dr_vec3 o, 
  * each sample's attached and detached derivatives, from one replay, go to
  * its group's two estimates (mis.h). */
 static void attached_pixel(struct prb_job *j, int thread, int64_t px, const dr_vec3 *adj,
-                           const struct dr_wave_log *logs, struct dr_grad_sink *sink)
+                           const struct primal_sums *primal, const struct dr_wave_log *logs,
+                           struct dr_grad_sink *sink)
 {
     struct dr_est_base *b = &j->b;
     struct prb_attached_ctx c = {.b = b, .zeros = j->zeros, .eps = b->p->regularize, .radius = j->radius,
@@ -196,7 +197,7 @@ static void attached_pixel(struct prb_job *j, int thread, int64_t px, const dr_v
             dr_est_mis_sinks(b, thread, px, &det, &att);
         dr_est_camera_ray(b, px, sidx, &smp, &o, &d);
         c.log = logs ? &logs[sidx] : NULL;
-        const struct prb_attached_sums *sums = j->sums[thread] ? &j->sums[thread][sidx].L : NULL;
+        const struct prb_attached_sums *sums = primal ? &primal[sidx].L : NULL;
         if (!prb_attached_sample(&c, smp, o, d, adj[sidx], sums, b->mis ? &att : sink, b->mis ? &det : NULL)) {
             b->thr[thread].invalid++;
             continue;
@@ -543,18 +544,19 @@ static bool pixel_adjoints(struct prb_job *j, int thread, int64_t px, dr_vec3 *a
 
 /* Pixel px's samples' replays one path at a time, given their adjoints
  * (attached sampling: prb_attached.c's; else walk's), and their primal
- * walks' sums where the cross primal made them (j->sums; else each path's
- * primal is walked first) and ray answers where the arrays logged them
- * (logs, by sample; NULL: traced). */
+ * walks' sums where they were walked already (sums, by sample: the cross
+ * primal's, or the arrays'; NULL: each path's primal is walked first) and
+ * ray answers where the arrays logged them (logs, by sample; NULL:
+ * traced). */
 static void pixel_replays(struct prb_job *j, int thread, int64_t px, const dr_vec3 *adj,
-                          const struct dr_wave_log *logs, struct dr_grad_sink *sink)
+                          const struct primal_sums *sums, const struct dr_wave_log *logs,
+                          struct dr_grad_sink *sink)
 {
     struct dr_est_base *b = &j->b;
     if (j->zeros) {
-        attached_pixel(j, thread, px, adj, logs, sink);
+        attached_pixel(j, thread, px, adj, sums, logs, sink);
         return;
     }
-    const struct primal_sums *sums = j->sums[thread];
     struct dr_medium_record mrec;
     struct dr_path_vertex prev;
     for (int sidx = 0; sidx < b->p->spp; sidx++) {
@@ -578,13 +580,15 @@ static void pixel_replays(struct prb_job *j, int thread, int64_t px, const dr_ve
     }
 }
 
-/* One path at a time with the cross primal, pixels [begin, end): the primal
- * walks of a group's samples in the arrays (wave_soa.h: their sums are the
- * one-path walk's, bit for bit), then each pixel's adjoints and its
- * samples' replays (pixel_replays, given the sums). Returns the first pixel
- * not done: where the arrays do not apply (media) or there is no memory
- * for them, prb_pixels walks the rest one path at a time. */
-static int64_t cross_arrays(struct prb_job *j, int thread, int64_t begin, int64_t end, struct dr_grad_sink *sink)
+/* One path at a time, pixels [begin, end) (at most PIXEL_CHUNK): the
+ * primal walks of a group's samples in the arrays (wave_soa.h: their sums
+ * are the one-path walk's, bit for bit, and their ray answers are logged),
+ * then each pixel's adjoints (with the cross primal from those sums, else
+ * the loss's; pixels that do not matter to the loss are not walked) and its
+ * samples' replays (pixel_replays, given the sums and the logs). Returns
+ * the first pixel not done: where the arrays do not apply (media) or there
+ * is no memory for them, prb_pixels walks the rest one path at a time. */
+static int64_t arrays_pixels(struct prb_job *j, int thread, int64_t begin, int64_t end, struct dr_grad_sink *sink)
 {
     struct dr_est_base *b = &j->b;
     const int spp = b->p->spp;
@@ -595,24 +599,30 @@ static int64_t cross_arrays(struct prb_job *j, int thread, int64_t begin, int64_
         return begin;
     const struct dr_wave_soa_walks sums = it->walk;   /* (with ray answers where they fit LOGGED_ITEMS) */
     dr_vec3 *adj = j->adj[thread];
-    for (int64_t first = begin; first < end; first += group) {
-        const int64_t n_px = end - first < group ? end - first : group;
-        int64_t px[PIXEL_CHUNK];
-        for (int64_t k = 0; k < n_px; k++)
-            px[k] = first + k;
-        struct park_ctx c = {.run = {j, thread}, .px = px, .items = it};
+    int64_t px[PIXEL_CHUNK], n_all = 0;
+    dr_vec3 px_adj[PIXEL_CHUNK];   /* (but with the cross primal) */
+    for (int64_t p = begin; p < end; p++)
+        if (b->p->cross || dr_est_sample_adjoint(b, p, &px_adj[n_all]))
+            px[n_all++] = p;
+    for (int64_t first = 0; first < n_all; first += group) {
+        const int64_t n_px = n_all - first < group ? n_all - first : group;
+        struct park_ctx c = {.run = {j, thread}, .px = px + first, .items = it};
         if (!dr_wave_soa_walk(j->soas[thread], b->p->scene, &b->popts, n_px * spp, soa_start, &c, &sums,
                               &b->thr[thread].rays))
-            return first;
+            return px[first];
         for (int64_t k = 0; k < n_px; k++) {
             for (int sidx = 0; sidx < spp; sidx++) {
                 const int64_t i = k * spp + sidx;
                 const dr_vec3 L = sums.L[i], L_sub = sums.L_sub[i];
-                adj[sidx] = dr_v3_finite(L) && dr_v3_finite(L_sub) ? L : dr_v3s(0.0);
+                if (b->p->cross)
+                    adj[sidx] = dr_v3_finite(L) && dr_v3_finite(L_sub) ? L : dr_v3s(0.0);
+                else
+                    adj[sidx] = px_adj[first + k];
                 j->sums[thread][sidx] = (struct primal_sums){{L, L_sub}, 0};
             }
-            if (cross_adjoints(b, px[k], adj))
-                pixel_replays(j, thread, px[k], adj, sums.log ? &sums.log[k * spp] : NULL, sink);
+            if (!b->p->cross || cross_adjoints(b, px[first + k], adj))
+                pixel_replays(j, thread, px[first + k], adj, j->sums[thread], sums.log ? &sums.log[k * spp] : NULL,
+                              sink);
         }
     }
     return end;
@@ -628,11 +638,11 @@ static void prb_pixels(void *ctx, int thread, int64_t begin, int64_t end)
         return;
     }
     if (j->sums[thread] && end - begin <= PIXEL_CHUNK)
-        begin = cross_arrays(j, thread, begin, end, &sink);   /* (the rest, if any: below) */
+        begin = arrays_pixels(j, thread, begin, end, &sink);   /* (the rest, if any: below) */
     dr_vec3 *adj = j->adj[thread];   /* by sample (all the same but in cross mode) */
-    for (int64_t px = begin; px < end; px++)
+    for (int64_t px = begin; px < end; px++)   /* (pixel_adjoints walks the cross primal into j->sums) */
         if (pixel_adjoints(j, thread, px, adj))   /* (else this pixel does not matter to the loss) */
-            pixel_replays(j, thread, px, adj, NULL, &sink);
+            pixel_replays(j, thread, px, adj, b->p->cross ? j->sums[thread] : NULL, NULL, &sink);
     dr_est_sink_end(b, thread);
 }
 
@@ -652,7 +662,10 @@ static int prb_run(struct dr_est_base *b)
     }
     j->wave = run == DR_SAMPLING_DETACHED && b->p->sampling != DR_SAMPLING_DERIVATIVE &&
               !(b->popts.stages & DR_STAGE_MEDIA);
-    const bool keep_sums = b->p->cross && !j->wave;   /* (one path at a time: the cross primal's walks) */
+    /* one path at a time: the primal walks' sums, the cross primal's or
+     * the arrays' (arrays_pixels), which the replays then need not walk */
+    const bool arrays = dr_wave_soa_walks_apply(b->p->scene, &b->popts, true);
+    const bool keep_sums = !j->wave && (b->p->cross || arrays);
     for (int t = 0; t < b->acc.threads; t++)
         if (!(j->adj[t] = malloc(sizeof(dr_vec3) * (size_t)b->p->spp)) ||
             (keep_sums && !(j->sums[t] = malloc(sizeof(struct primal_sums) * (size_t)b->p->spp)))) {
@@ -661,15 +674,15 @@ static int prb_run(struct dr_est_base *b)
         }
     /* what the workers hold besides the gradient: the samples' adjoints (and
      * the cross primal's sums), and on the wavefront the lanes, the parked
-     * samples and the arrays (wave_pixels, cross_arrays) */
+     * samples and the arrays (wave_pixels, arrays_pixels) */
     uint64_t per_thread = sizeof(dr_vec3) * (uint64_t)b->p->spp;
     if (keep_sums)
         per_thread += sizeof(struct primal_sums) * (uint64_t)b->p->spp;
-    if (keep_sums && dr_wave_soa_walks_apply(b->p->scene, &b->popts, true))   /* (cross_arrays) */
+    if (keep_sums && arrays)   /* (arrays_pixels) */
         per_thread += parked_bytes(park_group(b->p->spp) * b->p->spp) + dr_wave_soa_walk_bytes();
     if (j->wave) {
         per_thread += dr_wave_bytes() + parked_bytes(park_group(b->p->spp) * b->p->spp);
-        if (dr_wave_soa_walks_apply(b->p->scene, &b->popts, true))
+        if (arrays)
             per_thread += dr_wave_soa_walk_bytes();
     }
     b->scratch_bytes = per_thread * (uint64_t)b->acc.threads;   /* (at most prb_thread_bytes each) */

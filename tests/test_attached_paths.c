@@ -260,7 +260,7 @@ static void cornell_singular(void)
 
 /* The cross primal (estimator.h, the default): prb walks the primal of a
  * group of pixels' samples in its arrays (wave_soa.h) and hands their sums
- * to the attached replays (prb.c's cross_arrays) instead of walking each
+ * to the attached replays (prb.c's arrays_pixels) instead of walking each
  * path once more; the gradient and the primal image must still be the
  * tape's, which records whole paths, and the arrays must have run. */
 static void cross_primal(void)

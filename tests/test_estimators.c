@@ -54,7 +54,10 @@ static double reverse_difference(const char *what, const struct dr_param_set *ps
  * adjoints read, so replays group even where every material has a BSDF
  * parameter, as in the glossy scene), the tape's compact steps only where
  * no light has a parameter; none with derivative sampling. */
-enum grouping { GROUPED_NONE, GROUPED_PRB, GROUPED_BOTH };
+/* Who shades vertices eight lanes at a time: nobody; prb's primal walks
+ * only (its one-path modes: the walks in arrays, the replays one path at a
+ * time); prb's walks and replays; prb and the tape. */
+enum grouping { GROUPED_NONE, GROUPED_PRB_WALKS, GROUPED_PRB, GROUPED_BOTH };
 
 static void compare(const char *what, struct dr_scene *s, const struct dr_camera *cam, const char *const *ptrs, int n,
                     int depth, enum dr_sampling sampling, enum grouping grouping)
@@ -217,7 +220,7 @@ static void wave_against_one_path(const char *what, struct dr_scene *s, const st
                                     .sampling = k ? DR_SAMPLING_DERIVATIVE : DR_SAMPLING_DETACHED};
         struct dr_grad_stats st = {0};
         CHECK(dr_estimator_backward(prb, &p, adj, g[k], &st) == 0, "%s: prb: %s", what, dr_last_error());
-        CHECK(k ? st.rays.simd_vertices == 0 : st.rays.simd_replayed > 0,
+        CHECK(k ? st.rays.simd_replayed == 0 : st.rays.simd_replayed > 0,
               "%s: %s walk shaded %llu vertices eight-wide (%llu replayed)", what, k ? "one-path" : "wavefront",
               (unsigned long long)st.rays.simd_vertices, (unsigned long long)st.rays.simd_replayed);
     }
@@ -389,9 +392,9 @@ int main(void)
      * identity); with the cross primal its walks run in the arrays. (mis is
      * left out: its weights are estimated from the gradients themselves, so
      * its forward and reverse modes are not transposes.) */
-    compare("cornell box, attached sampling", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_ATTACHED, GROUPED_NONE);
+    compare("cornell box, attached sampling", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_ATTACHED, GROUPED_PRB_WALKS);
     /* derivative sampling: the same sub-streams, the same terms in another order */
-    compare("cornell box, derivative sampling", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DERIVATIVE, GROUPED_NONE);
+    compare("cornell box, derivative sampling", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DERIVATIVE, GROUPED_PRB_WALKS);
     compare("cornell box, paths longer than the replay log", s, &s->cameras[0], ptrs, 7, DR_WAVE_REPLAY_DEPTH + 12,
             DR_SAMPLING_DETACHED, GROUPED_PRB);
     compare("cornell box, BSDF parameters only, paths longer than the replay log", s, &s->cameras[0], bsdf_ptrs, 4,
@@ -450,7 +453,7 @@ int main(void)
         "/extensions/DR_environment/strength",
     };
     compare("glossy scene", s, &cam, gptrs, 8, 6, DR_SAMPLING_DETACHED, GROUPED_PRB);
-    compare("glossy scene, derivative sampling", s, &cam, gptrs, 8, 6, DR_SAMPLING_DERIVATIVE, GROUPED_NONE);
+    compare("glossy scene, derivative sampling", s, &cam, gptrs, 8, 6, DR_SAMPLING_DERIVATIVE, GROUPED_PRB_WALKS);
     compare("glossy scene, the floor's BSDF only", s, &cam, gptrs, 2, 6, DR_SAMPLING_DETACHED, GROUPED_BOTH);
     /* one kind of light at a time: where the point light alone has a
      * parameter, a vertex's term is its light sample's when that picked the
@@ -496,7 +499,7 @@ int main(void)
     /* one path at a time: with the cross primal the replays take the arrays'
      * logged ray answers (dr_wave_log_step) and trace past the log */
     compare("closed box, derivative sampling, paths longer than the replay log", s, &cam, box_ptrs, 1,
-            DR_WAVE_REPLAY_DEPTH + 12, DR_SAMPLING_DERIVATIVE, GROUPED_NONE);
+            DR_WAVE_REPLAY_DEPTH + 12, DR_SAMPLING_DERIVATIVE, GROUPED_PRB_WALKS);
     dr_scene_destroy(s);
 
     /* a panel with an emissive texture lighting an open box, the texels the
