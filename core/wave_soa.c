@@ -711,9 +711,10 @@ static dr_m8 replay_step(const struct dr_wave_soa *w, const struct dr_scene *s, 
                          const struct dr_path8 *G, const struct dr_path8_out *c, int i0, dr_v3x8 beta, dr_v3x8 ratio,
                          dr_v3x8 be, dr_v3x8 *L, dr_v3x8 *T)
 {
-    const dr_v3x8 T_before = load3(w->Tx + i0, w->Ty + i0, w->Tz + i0);
-    *L = dr_v3x8_sub(load3(w->Lx + i0, w->Ly + i0, w->Lz + i0), be);
-    *T = dr_v3x8_sub(T_before, dr_v3x8_mul(ratio, be));
+    struct dr_wave_soa_replay_lanes g = {.beta = beta, .ratio = ratio};
+    g.remaining = load3(w->Tx + i0, w->Ty + i0, w->Tz + i0);
+    g.L_sub = *L = dr_v3x8_sub(load3(w->Lx + i0, w->Ly + i0, w->Lz + i0), be);
+    g.L_true = *T = dr_v3x8_sub(g.remaining, dr_v3x8_mul(ratio, be));
     dr_m8 goes_on = {0};
     for (int i = 0; i < G->n; i++) {
         const int k = i0 + i;
@@ -730,9 +731,7 @@ static dr_m8 replay_step(const struct dr_wave_soa *w, const struct dr_scene *s, 
         if (G->diff[i])
             v->hit = w->diff_hit[k];
         dr_path8_vertex(s, opts, G, c, i, w->tri[k], st.o, st.d, v);
-        const struct dr_wave_arrival a = {dr_v3x8_get(&beta, i), dr_v3x8_get(&ratio, i)};
-        w->replay->vertex(w->replay->ctx, w->item[k], &a, v, dr_v3x8_get(&T_before, i), dr_v3x8_get(T, i),
-                          dr_v3x8_get(L, i));
+        w->replay->vertex(w->replay->ctx, w->item[k], v, &g, i);
     }
     return goes_on;
 }

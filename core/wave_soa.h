@@ -27,6 +27,7 @@
 
 #include "path.h"
 #include "scene.h"
+#include "simd.h"
 #include "wavefront.h"
 
 struct dr_wave_soa;
@@ -85,19 +86,28 @@ bool dr_wave_soa_walk(struct dr_wave_soa *w, const struct dr_scene *scene, const
  * whose replays give the same vertices), each vertex's term subtracted from
  * the first walk's sums, to the depth of its last vertex with a derivative
  * term. Item k replays the first walk of sample `sample[k]`. */
+/* A replay group's sums and throughputs at a vertex, lane by lane
+ * (dr_v3x8_get(&beta, i): lane i's): the throughput the vertex was reached
+ * with (beta, ratio), the sums with its term subtracted (L_true, L_sub)
+ * and the true one before (remaining). */
+struct dr_wave_soa_replay_lanes {
+    dr_v3x8 beta, ratio, remaining, L_true, L_sub;
+};
+
 struct dr_wave_soa_replay {
     void *ctx;
     const int32_t *sample;
     const dr_vec3 *L, *L_sub;           /* by sample: the first walk's sums (dr_wave_soa_walks') */
     const int *last_diff;
     const struct dr_wave_log *log;      /* NULL: every ray traced again */
-    /* A vertex with a derivative term (dr_path_vertex_has_derivative),
-     * reached with a, whole as far as prb's adjoints read it (as
+    /* A vertex with a derivative term (dr_path_vertex_has_derivative) in
+     * lane i of a group, whole as far as prb's adjoints read it (as
      * dr_wave_run's lanes give it with partial_vertices, light_terms and
-     * bsdf_terms); L_true, L_sub: the sums with its term subtracted;
-     * remaining: L_true before. */
-    void (*vertex)(void *ctx, int64_t item, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
-                   dr_vec3 remaining, dr_vec3 L_true, dr_vec3 L_sub);
+     * bsdf_terms), with its lane's sums in g. (The group's vectors, not
+     * one lane's values: values passed one by one were stored just before
+     * the call and read back at once, a store-forwarding stall each.) */
+    void (*vertex)(void *ctx, int64_t item, const struct dr_path_vertex *v, const struct dr_wave_soa_replay_lanes *g,
+                   int i);
 };
 
 /* Can a gradient's replays use the arrays? Where the primal walks can

@@ -349,12 +349,14 @@ static void soa_replay_start(void *ctx, int64_t k, struct dr_sampler *smp, dr_ve
     (void)sample_ray(ctx, c->items->order[k], smp, o, d);
 }
 
-static void soa_replay_vertex(void *ctx, int64_t k, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
-                              dr_vec3 remaining, dr_vec3 L_true, dr_vec3 L_sub)
+static void soa_replay_vertex(void *ctx, int64_t k, const struct dr_path_vertex *v,
+                              const struct dr_wave_soa_replay_lanes *g, int i)
 {
     struct park_ctx *c = ctx;
-    struct walk w = {.L = {L_true, L_sub}, .adj = c->items->adj[c->items->order[k]], .sink = &c->sink};
-    vertex_adjoints(&c->run.j->b, &w, v, a->beta, a->ratio, remaining, NULL, &c->run.j->b.thr[c->run.thread].rays);
+    struct walk w = {.L = {dr_v3x8_get(&g->L_true, i), dr_v3x8_get(&g->L_sub, i)},
+                     .adj = c->items->adj[c->items->order[k]], .sink = &c->sink};
+    vertex_adjoints(&c->run.j->b, &w, v, dr_v3x8_get(&g->beta, i), dr_v3x8_get(&g->ratio, i),
+                    dr_v3x8_get(&g->remaining, i), NULL, &c->run.j->b.thr[c->run.thread].rays);
 }
 
 /* The replays of a group's n parked samples (items->order): in the arrays
