@@ -54,6 +54,34 @@ struct state_basis {
     double radius;
 };
 
+/* What the vertex adjoint gives of one vertex of the path being replayed,
+ * kept so that no later walk of the same vertex calls it again: the
+ * forward-mode pass computes a vertex's Jacobian rows, the replay needs
+ * the same rows of the same vertex in the same bases (bit for bit: the
+ * same path, decisions and calls), and a forward-mode pass restarted at a
+ * singular vertex walks the rest once more. Indexed by depth (the first
+ * CACHED_VERTICES vertices: memory stays constant in path length; deeper
+ * vertices are computed every time). Valid for one replay (one adjoint). */
+#define CACHED_VERTICES 32
+struct vertex_jacobian {
+    bool walked;                /* a forward-mode pass filled it (vertex_forward) */
+    bool rows;                  /* w and DT hold (the path goes on from it) */
+    bool more;                  /* the path goes on from it */
+    double w[NS][NS];           /* jacobian_rows: M_k^T e_i */
+    double DT[3][NS];           /* the continuation's factor's derivative per channel */
+    double ge[NS];              /* the vertex's own terms in tangent coordinates */
+    dr_vec3 bt, term, t;        /* true throughput it was reached with, dr_path_vertex_term, f |cos| / pdf / q */
+    struct state_basis Tn;      /* the basis of the state it hands on */
+};
+struct jacobian_cache {
+    struct vertex_jacobian v[CACHED_VERTICES];
+};
+
+static struct vertex_jacobian *cached(const struct prb_attached_ctx *c, const struct dr_path_vertex *v)
+{
+    return c->cache && v->depth >= 1 && v->depth <= CACHED_VERTICES ? &c->cache->v[v->depth - 1] : NULL;
+}
+
 /* Basis of the state vertex v hands on along next_d: the plane of its
  * triangle and the plane normal to next_d. */
 static struct state_basis basis_after(const struct dr_path_vertex *v, dr_vec3 next_d, double radius)
@@ -116,38 +144,84 @@ struct tangents {
     double dB[3][ND];   /* motion of the true throughput, per channel */
 };
 
-/* Advances the tangents over vertex v (continuing along Tn): U <- M U,
- * dB <- t dB + bt (dt/ds) U. */
-static void tangents_advance(const struct prb_attached_ctx *c, const struct dr_path_vertex *v,
-                             const struct state_basis *Tk, const struct state_basis *Tn, dr_vec3 bt,
-                             struct tangents *g)
+/* Vertex v's part of the forward-mode pass into k, once per replay (k
+ * holds it already when walked): its own terms in tangent coordinates (Tk,
+ * reached with true throughput bt) and, where the path goes on along Tn,
+ * the Jacobian rows and the continuation factor's derivative; and the walk's
+ * values the sums read, so that a later pass over the same vertices needs
+ * neither the vertex adjoint nor the walk. */
+static void vertex_forward(const struct prb_attached_ctx *c, const struct dr_path_vertex *v,
+                           const struct state_basis *Tk, const struct state_basis *Tn, dr_vec3 bt, dr_vec3 adj,
+                           bool more, struct vertex_jacobian *k)
 {
-    double w[NS][NS], DT[3][NS], U[NS][ND];
-    jacobian_rows(c, v, Tk, Tn, NS, w);
-    for (int ch = 0; ch < 3; ch++) {
-        dr_vec3 unit = dr_v3_channel(dr_v3s(1.0), ch);
-        vertex_call(c, v, Tk, NULL, dr_v3s(0.0), unit, NULL, DT[ch], NULL);
+    if (k->walked)
+        return;
+    k->more = more;
+    k->bt = bt;
+    k->term = dr_path_vertex_term(v);
+    k->t = dr_scale(v->f, v->cos_pdf_q);
+    vertex_call(c, v, Tk, NULL, dr_mul(adj, bt), dr_v3s(0.0), NULL, k->ge, NULL);
+    if (more) {
+        k->Tn = *Tn;
+        jacobian_rows(c, v, Tk, Tn, NS, k->w);
+        for (int ch = 0; ch < 3; ch++) {
+            dr_vec3 unit = dr_v3_channel(dr_v3s(1.0), ch);
+            vertex_call(c, v, Tk, NULL, dr_v3s(0.0), unit, NULL, k->DT[ch], NULL);
+        }
     }
-    dr_vec3 t = dr_scale(v->f, v->cos_pdf_q);
+    k->rows = more;
+    k->walked = true;
+}
+
+/* The forward-mode sums over vertex k: its terms' derivative along each
+ * tangent into out; then, where the path goes on, the tangents carried
+ * over it: U <- M U, dB <- t dB + bt (dt/ds) U. */
+static void tangents_over(const struct vertex_jacobian *k, dr_vec3 adj, struct tangents *g, double out[ND])
+{
+    dr_vec3 e = dr_mul(adj, k->term);
+    for (int col = 0; col < ND; col++) {
+        double s = e.x * g->dB[0][col] + e.y * g->dB[1][col] + e.z * g->dB[2][col];
+        for (int r = 0; r < NS; r++)
+            s += k->ge[r] * g->U[r][col];
+        out[col] += s;
+    }
+    if (!k->more)
+        return;
+    double U[NS][ND];
     for (int col = 0; col < ND; col++) {
         for (int ch = 0; ch < 3; ch++) {
             double s = 0.0;
             for (int r = 0; r < NS; r++)
-                s += DT[ch][r] * g->U[r][col];
-            g->dB[ch][col] = dr_v3_get(t, ch) * g->dB[ch][col] + dr_v3_get(bt, ch) * s;
+                s += k->DT[ch][r] * g->U[r][col];
+            g->dB[ch][col] = dr_v3_get(k->t, ch) * g->dB[ch][col] + dr_v3_get(k->bt, ch) * s;
         }
         for (int i = 0; i < NS; i++) {
             double s = 0.0;
             for (int r = 0; r < NS; r++)
-                s += w[i][r] * g->U[r][col];
+                s += k->w[i][r] * g->U[r][col];
             U[i][col] = s;
         }
     }
     memcpy(g->U, U, sizeof U);
 }
 
+/* Are the vertices from depth `from` to the path's end all in the cache
+ * (a forward-mode pass walked them: the pass need not walk again)? */
+static bool rest_cached(const struct prb_attached_ctx *c, int from)
+{
+    for (int depth = from; c->cache && depth <= CACHED_VERTICES; depth++) {
+        const struct vertex_jacobian *k = &c->cache->v[depth - 1];
+        if (!k->walked)
+            return false;
+        if (!k->more)
+            return true;
+    }
+    return false;
+}
+
 /* dL_{>j} / d s_{j+1} in s_{j+1}'s p and d coordinates (T1), by forward mode
- * over the rest of the path, walked again from state st with sampler smp. */
+ * over the rest of the path, walked again from state st with sampler smp
+ * (or, where an earlier pass walked the whole rest, from the cache). */
 static void tangent_walk(const struct prb_attached_ctx *c, struct dr_sampler smp, struct dr_path_state st,
                          const struct state_basis *T1, dr_vec3 adj, double out[ND])
 {
@@ -157,25 +231,29 @@ static void tangent_walk(const struct prb_attached_ctx *c, struct dr_sampler smp
     for (int i = 0; i < ND; i++)
         g.U[i][i] = 1.0;
     memset(out, 0, sizeof(double) * ND);
+    const bool known = rest_cached(c, st.depth + 1);
     struct state_basis Tk = *T1;
-    struct dr_path_vertex v;
     for (;;) {
-        dr_vec3 bt = dr_mul(st.ratio, st.beta);
-        bool more = dr_wave_log_step(b->p->scene, &b->popts, c->log, &st, &smp, &v, c->rays);
-        double ge[NS];
-        vertex_call(c, &v, &Tk, NULL, dr_mul(adj, bt), dr_v3s(0.0), NULL, ge, NULL);
-        dr_vec3 e = dr_mul(adj, dr_path_vertex_term(&v));
-        for (int col = 0; col < ND; col++) {
-            double s = e.x * g.dB[0][col] + e.y * g.dB[1][col] + e.z * g.dB[2][col];
-            for (int r = 0; r < NS; r++)
-                s += ge[r] * g.U[r][col];
-            out[col] += s;
+        struct vertex_jacobian here, *k = &here;
+        if (c->cache && st.depth + 1 <= CACHED_VERTICES)
+            k = &c->cache->v[st.depth];   /* (the next vertex's depth is st.depth + 1) */
+        else
+            here.walked = false;
+        if (known) {
+            st.depth++;   /* (only the depth is read: the cache's index) */
+        } else {
+            dr_vec3 bt = dr_mul(st.ratio, st.beta);
+            struct dr_path_vertex v;
+            bool more = dr_wave_log_step(b->p->scene, &b->popts, c->log, &st, &smp, &v, c->rays);
+            struct state_basis Tn;
+            if (more)
+                Tn = basis_after(&v, st.d, c->radius);
+            vertex_forward(c, &v, &Tk, more ? &Tn : NULL, bt, adj, more, k);
         }
-        if (!more)
+        tangents_over(k, adj, &g, out);
+        if (!k->more)
             return;
-        struct state_basis Tn = basis_after(&v, st.d, c->radius);
-        tangents_advance(c, &v, &Tk, &Tn, bt, &g);
-        Tk = Tn;
+        Tk = k->Tn;
     }
 }
 
@@ -281,17 +359,28 @@ struct pending {
 static void finish(const struct prb_attached_ctx *c, const struct pending *P, const struct dr_path_vertex *next,
                    dr_vec3 next_d_e, dr_vec3 adj, double c_next[NS], struct dr_grad_sink *sink)
 {
-    struct dr_d_path_state dt, zero;
-    memset(&zero, 0, sizeof zero);
-    d_path_vertex_attached(c->b->p->scene, c->b->p->params, next, next_d_e, dr_v3s(0.0), &zero, &dt,
-                           &(struct dr_grad_sink){.dir = c->zeros});
-    c_next[4] = dt.prev_pdf;
+    /* (the forward-mode pass made the same call for its own terms: its
+     * pdf coordinate is this) */
+    const struct vertex_jacobian *kn = cached(c, next);
+    if (kn && kn->walked) {
+        c_next[4] = kn->ge[4];
+    } else {
+        struct dr_d_path_state dt, zero;
+        memset(&zero, 0, sizeof zero);
+        d_path_vertex_attached(c->b->p->scene, c->b->p->params, next, next_d_e, dr_v3s(0.0), &zero, &dt,
+                               &(struct dr_grad_sink){.dir = c->zeros});
+        c_next[4] = dt.prev_pdf;
+    }
     if (P->first) {
         memcpy(c_next, P->cn, sizeof P->cn);
     } else {
-        double pdf_only[NS] = {0.0, 0.0, 0.0, 0.0, c_next[4]}, a[NS], w[NS][NS], A[ND][ND], y[ND], x[ND];
+        double pdf_only[NS] = {0.0, 0.0, 0.0, 0.0, c_next[4]}, a[NS], w_here[NS][NS], A[ND][ND], y[ND], x[ND];
         vertex_call(c, &P->v, &P->Tk, &P->Tn, P->d_e, P->d_t, pdf_only, a, NULL);
-        jacobian_rows(c, &P->v, &P->Tk, &P->Tn, ND, w);
+        /* (the forward-mode pass that reached this vertex computed its rows) */
+        struct vertex_jacobian *k = cached(c, &P->v);
+        double(*w)[NS] = k && k->rows ? k->w : w_here;
+        if (!k || !k->rows)
+            jacobian_rows(c, &P->v, &P->Tk, &P->Tn, ND, w);
         for (int r = 0; r < ND; r++) {
             for (int i = 0; i < ND; i++)
                 A[r][i] = w[i][r];
@@ -425,6 +514,18 @@ static void replay(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_v
     }
 }
 
+/* replay() with an empty jacobian_cache. */
+static void replay_cached(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_vec3 o, dr_vec3 d, dr_vec3 adj,
+                          struct prb_attached_sums *w, struct dr_grad_sink *sink, struct dr_grad_sink *det)
+{
+    struct jacobian_cache cache;   /* (11 KB: flags cleared, the numbers written before they are read) */
+    for (int i = 0; i < CACHED_VERTICES; i++)
+        cache.v[i].walked = cache.v[i].rows = false;
+    struct prb_attached_ctx cc = *c;
+    cc.cache = &cache;
+    replay(&cc, smp, o, d, adj, w, sink, det);
+}
+
 bool prb_attached_sample(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_vec3 o, dr_vec3 d, dr_vec3 adj,
                          const struct prb_attached_sums *sums, struct dr_grad_sink *sink, struct dr_grad_sink *det)
 {
@@ -436,14 +537,14 @@ bool prb_attached_sample(const struct prb_attached_ctx *c, struct dr_sampler smp
     if (!dr_v3_finite(w.L_true) || !dr_v3_finite(w.L_sub))
         return false;
     if (!sink->dir) {
-        replay(c, smp, o, d, adj, &w, sink, det);
+        replay_cached(c, smp, o, d, adj, &w, sink, det);
         return true;
     }
     /* forward mode: the state adjoint mixes the channels, one replay each */
     for (int ch = 0; ch < 3; ch++) {
         struct prb_attached_sums wc = w;
         sink->channel = ch;
-        replay(c, smp, o, d, dr_v3_channel(adj, ch), &wc, sink, det);
+        replay_cached(c, smp, o, d, dr_v3_channel(adj, ch), &wc, sink, det);
     }
     return true;
 }

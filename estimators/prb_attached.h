@@ -5,6 +5,8 @@
 #include "common.h"
 #include "wavefront.h"
 
+struct jacobian_cache;
+
 /* What one sample's attached replay needs besides the shared run. */
 struct prb_attached_ctx {
     const struct dr_est_base *b;
@@ -15,6 +17,7 @@ struct prb_attached_ctx {
     struct dr_ray_counts *rays;
     const struct dr_wave_log *log;   /* the sample's primal walk's ray answers (NULL: none; the walks
                                         here take them: dr_wave_log_step) */
+    struct jacobian_cache *cache;    /* prb_attached.c's own (set there; NULL outside a replay) */
 };
 
 /* A sample's primal: its radiance with the true throughput and with the
