@@ -518,7 +518,7 @@ static void replay(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_v
 static void replay_cached(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_vec3 o, dr_vec3 d, dr_vec3 adj,
                           struct prb_attached_sums *w, struct dr_grad_sink *sink, struct dr_grad_sink *det)
 {
-    struct jacobian_cache cache;   /* (11 KB: flags cleared, the numbers written before they are read) */
+    struct jacobian_cache cache;   /* (17 KB: flags cleared, the numbers written before they are read) */
     for (int i = 0; i < CACHED_VERTICES; i++)
         cache.v[i].walked = cache.v[i].rows = false;
     struct prb_attached_ctx cc = *c;
