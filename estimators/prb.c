@@ -342,7 +342,9 @@ static enum dr_wave_next replay_end(void *ctx, void *user, struct dr_sampler *sm
 
 /* The arrays' replays (dr_wave_soa_replay): item k is the replay of sample
  * order[k]; the vertices with a derivative term come whole, with the sums
- * walk_vertex would hold. */
+ * walk_vertex would hold. All paths share the thread's sink: in forward
+ * mode each vertex's channel sums go to its pixel at once (the lanes sum a
+ * sample's first, replay_end; the same numbers added in another order). */
 static void soa_replay_start(void *ctx, int64_t k, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
 {
     const struct park_ctx *c = ctx;
@@ -353,16 +355,18 @@ static void soa_replay_vertex(void *ctx, int64_t k, const struct dr_path_vertex 
                               const struct dr_wave_soa_replay_lanes *g, int i)
 {
     struct park_ctx *c = ctx;
-    struct walk w = {.L = {dr_v3x8_get(&g->L_true, i), dr_v3x8_get(&g->L_sub, i)},
-                     .adj = c->items->adj[c->items->order[k]], .sink = &c->sink};
-    vertex_adjoints(&c->run.j->b, &w, v, dr_v3x8_get(&g->beta, i), dr_v3x8_get(&g->ratio, i),
-                    dr_v3x8_get(&g->remaining, i), NULL, &c->run.j->b.thr[c->run.thread].rays);
+    struct dr_est_base *b = &c->run.j->b;
+    const int32_t sample = c->items->order[k];
+    struct walk w = {.L = {dr_v3x8_get(&g->L_true, i), dr_v3x8_get(&g->L_sub, i)}, .adj = c->items->adj[sample],
+                     .sink = &c->sink};
+    vertex_adjoints(b, &w, v, dr_v3x8_get(&g->beta, i), dr_v3x8_get(&g->ratio, i), dr_v3x8_get(&g->remaining, i),
+                    NULL, &b->thr[c->run.thread].rays);
+    if (c->sink.dir)
+        dr_est_sample_done(b, c->px[sample / b->p->spp], &c->sink);
 }
 
 /* The replays of a group's n parked samples (items->order): in the arrays
- * where they apply, else in the lanes. The arrays need the sink shared by
- * all paths, so a reverse-mode one: forward mode's sums a sample's
- * derivatives per lane first (replay_end). */
+ * where they apply, else in the lanes. */
 static void replay_walks(struct prb_job *j, int thread, struct park_ctx *c, int32_t n)
 {
     struct dr_est_base *b = &j->b;
@@ -374,7 +378,7 @@ static void replay_walks(struct prb_job *j, int thread, struct park_ctx *c, int3
     const struct parked_samples *it = c->items;
     const struct dr_wave_soa_replay r = {c, it->order, it->walk.L, it->walk.L_sub, it->walk.last_diff, it->walk.log,
                                          soa_replay_vertex};
-    if (!b->dir && j->soas[thread] && dr_wave_soa_replays_apply(b->p->scene, &b->popts) &&
+    if (j->soas[thread] && dr_wave_soa_replays_apply(b->p->scene, &b->popts) &&
         dr_wave_soa_replay(j->soas[thread], b->p->scene, &b->popts, n, soa_replay_start, c, &r, &b->thr[thread].rays))
         return;
     dr_wave_run(j->waves[thread], b->p->scene, &b->popts, n, &replay, c, &b->thr[thread].rays);

@@ -77,9 +77,15 @@ struct jacobian_cache {
     struct vertex_jacobian v[CACHED_VERTICES];
 };
 
+/* The cache's entry for the vertex at depth (NULL: none, or too deep). */
+static struct vertex_jacobian *cached_at(const struct prb_attached_ctx *c, int depth)
+{
+    return c->cache && depth >= 1 && depth <= CACHED_VERTICES ? &c->cache->v[depth - 1] : NULL;
+}
+
 static struct vertex_jacobian *cached(const struct prb_attached_ctx *c, const struct dr_path_vertex *v)
 {
-    return c->cache && v->depth >= 1 && v->depth <= CACHED_VERTICES ? &c->cache->v[v->depth - 1] : NULL;
+    return cached_at(c, v->depth);
 }
 
 /* Basis of the state vertex v hands on along next_d: the plane of its
@@ -209,14 +215,13 @@ static void tangents_over(const struct vertex_jacobian *k, dr_vec3 adj, struct t
  * (a forward-mode pass walked them: the pass need not walk again)? */
 static bool rest_cached(const struct prb_attached_ctx *c, int from)
 {
-    for (int depth = from; c->cache && depth <= CACHED_VERTICES; depth++) {
-        const struct vertex_jacobian *k = &c->cache->v[depth - 1];
-        if (!k->walked)
+    for (int depth = from;; depth++) {
+        const struct vertex_jacobian *k = cached_at(c, depth);
+        if (!k || !k->walked)
             return false;
         if (!k->more)
             return true;
     }
-    return false;
 }
 
 /* dL_{>j} / d s_{j+1} in s_{j+1}'s p and d coordinates (T1), by forward mode
@@ -234,11 +239,11 @@ static void tangent_walk(const struct prb_attached_ctx *c, struct dr_sampler smp
     const bool known = rest_cached(c, st.depth + 1);
     struct state_basis Tk = *T1;
     for (;;) {
-        struct vertex_jacobian here, *k = &here;
-        if (c->cache && st.depth + 1 <= CACHED_VERTICES)
-            k = &c->cache->v[st.depth];   /* (the next vertex's depth is st.depth + 1) */
-        else
+        struct vertex_jacobian here, *k = cached_at(c, st.depth + 1);   /* (the next vertex's) */
+        if (!k) {   /* (past the cache: made here each time) */
             here.walked = false;
+            k = &here;
+        }
         if (known) {
             st.depth++;   /* (only the depth is read: the cache's index) */
         } else {

@@ -53,11 +53,9 @@ static double reverse_difference(const char *what, const struct dr_param_set *ps
  * and BSDF parameters: the stages mark those vertices and fill what their
  * adjoints read, so replays group even where every material has a BSDF
  * parameter, as in the glossy scene), the tape's compact steps only where
- * no light has a parameter; none with derivative sampling. */
-/* Who shades vertices eight lanes at a time: nobody; prb's primal walks
- * only (its one-path modes: the walks in arrays, the replays one path at a
- * time); prb's walks and replays; prb and the tape. */
-enum grouping { GROUPED_NONE, GROUPED_PRB_WALKS, GROUPED_PRB, GROUPED_BOTH };
+ * no light has a parameter; in prb's one-path modes (attached, derivative
+ * sampling) its primal walks only, not its replays. */
+enum grouping { GROUPED_PRB_WALKS, GROUPED_PRB, GROUPED_BOTH };
 
 static void compare(const char *what, struct dr_scene *s, const struct dr_camera *cam, const char *const *ptrs, int n,
                     int depth, enum dr_sampling sampling, enum grouping grouping)
@@ -100,7 +98,7 @@ static void compare(const char *what, struct dr_scene *s, const struct dr_camera
          * the vertices without a derivative term eight lanes at a time where
          * no light has a parameter (path_simd.h) */
         const bool is_prb = strcmp(est->name, "prb") == 0;
-        const bool grouped = grouping == GROUPED_BOTH || (grouping != GROUPED_NONE && is_prb);
+        const bool grouped = grouping == GROUPED_BOTH || is_prb;
         CHECK(grouped ? st.rays.simd_vertices > 0 : st.rays.simd_vertices == 0,
               "%s: %s shaded %llu vertices eight lanes at a time (expected %s)", what, est->name,
               (unsigned long long)st.rays.simd_vertices, grouped ? "some" : "none");
