@@ -700,6 +700,13 @@ static void steps(const struct dr_wave_soa *w, const struct dr_path8 *G, const s
         w->out->step(w->out->ctx, w->item[i0 + i], dr_v3x8_get(&e, i), dr_v3x8_get(&t, i), dr_v3x8_get(&bt, i));
 }
 
+/* The group's lanes whose vertex has a derivative term
+ * (dr_path_vertex_has_derivative, from the stages' marks). */
+static inline dr_m8 differentiated8(const struct dr_path8 *G, const struct dr_path8_out *c)
+{
+    return G->diff | G->diff_emit | (G->diff_nee & c->nee);
+}
+
 /* A replay's step of the group at slot i0 (prb.c's walk_vertex with an
  * adjoint): each vertex's term beta e (be) subtracted from the sums, as the
  * walk subtracts it, into *L (with the tracing throughput) and *T (the true
@@ -716,10 +723,11 @@ static dr_m8 replay_step(const struct dr_wave_soa *w, const struct dr_scene *s, 
     g.L_sub = *L = dr_v3x8_sub(load3(w->Lx + i0, w->Ly + i0, w->Lz + i0), be);
     g.L_true = *T = dr_v3x8_sub(g.remaining, dr_v3x8_mul(ratio, be));
     dr_m8 goes_on = {0};
+    const dr_m8 diff = differentiated8(G, c);
     for (int i = 0; i < G->n; i++) {
         const int k = i0 + i;
         goes_on[i] = G->depth[i] < w->last_diff[k] ? -1 : 0;
-        if (!(G->diff[i] | G->diff_emit[i] | (G->diff_nee[i] & c->nee[i])))
+        if (!diff[i])
             continue;
         /* begun as dr_path_step_begin begins it (as a lane's vertex in
          * wavefront.c, the same storage for every vertex) */
@@ -771,10 +779,11 @@ static int advance(struct dr_wave_soa *w, const struct dr_scene *s, const struct
         }
         if (w->out && w->out->step)
             steps(w, G, &c, beta, e);
+        const dr_m8 diff = differentiated8(G, &c);
         int j = kept;
         for (int i = 0; i < G->n; i++) {
             int k = i0 + i;
-            if (w->out && !w->replay && (G->diff[i] | G->diff_emit[i] | (G->diff_nee[i] & c.nee[i])))   /* (dr_path_vertex_has_derivative) */
+            if (w->out && !w->replay && diff[i])
                 w->last_diff[k] = (int)G->depth[i];
             if (!go_on[i]) {
                 if (w->out)
