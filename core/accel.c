@@ -11,9 +11,8 @@
 #include "error.h"
 #include "simd.h"
 
-/* What a filter callback needs about its geometry. */
+/* A geometry's map to the scene's triangles. */
 struct dr_accel_geom {
-    const struct dr_accel *accel;
     uint32_t *tri;               /* primID -> scene triangle; NULL: the same */
 };
 
@@ -28,18 +27,29 @@ struct dr_accel_geom {
  *
  * Filters cost: Embree calls back for every candidate, and glTF's default
  * (single-sided) puts nearly every real asset's triangles behind one. So a
- * filtered scene also gets `plain`, the same triangles without filters, and
- * a query asks it first. Its closest hit, if the filter would accept it, is
- * the filtered query's answer too (every candidate the filtered traversal
- * accepts is one of plain's, and nothing is nearer); no hit there is no hit
- * at all. Only a nearest hit the filter would reject (a back face, a hole)
- * asks the filtered scene. Shadow rays in packets ask plain for any hit,
- * and its filter notes whether the first blocker found counts
+ * query on a filtered scene asks `plain` first: the same triangles without
+ * filters. Its closest hit, if the filter would accept it, is the filtered
+ * query's answer too (every candidate the filtered traversal accepts is one
+ * of plain's, and nothing is nearer); no hit there is no hit at all. Only a
+ * nearest hit the filter would reject (a back face, a hole) asks the
+ * filtered query. Shadow rays in packets ask plain for any hit, and a
+ * filter notes whether the first blocker found counts
  * (first_blocker_filter): no blocker, or one that counts, is the answer;
  * only a blocker that would not count asks again, one ray at a time as
  * above. (Rejecting such blockers inside the traversal instead, as the
- * filtered scene does, calls back for every candidate: slower on big
+ * filtered query does, calls back for every candidate: slower on big
  * scenes, measured.) Exact up to which of two triangles wins a tie in t.
+ *
+ * Plain and filtered queries use one structure. A query that filters
+ * hands Embree its filter in the query's context (a context filter:
+ * RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION), which sees every candidate of
+ * every geometry and passes the unfiltered part's; the only geometry
+ * filter is first_blocker_filter's on the filtered part, for occlusion,
+ * which passes everything in any other query (a context filter there
+ * would be called for every blocked shadow ray, of either part). Until 2026-12 plain was a second Embree scene, built again from
+ * the same buffers: on real assets, whose triangles are mostly filtered,
+ * that doubled the build (127k triangles: two builds of 0.23 s on one
+ * core) and the structure's memory.
  *
  * Which triangles need a test is decided per triangle: a single-sided
  * triangle whose back no ray can reach (backface.h: the walls of a room,
@@ -48,22 +58,24 @@ struct dr_accel_geom {
 struct dr_accel {
     RTCDevice device;
     RTCScene scene;
-    RTCScene plain;                 /* with a filter in scene: every triangle again, split alike, the
-                                       filtered part with first_blocker_filter only (see below) */
+    bool plain;                     /* plain queries ask scene as it is, filtered ones with a context
+                                       filter (see above); false: the filtered part carries
+                                       cover_filter, or nothing is filtered */
     const struct dr_scene *cover;   /* NULL: nothing is filtered */
     uint8_t *tri_bits;              /* per triangle: enum dr_cover_bits, less culling where no ray
                                        can meet the back (backface.h) */
-    struct dr_accel_geom geom[2];   /* by geomID, in both scenes: 0 unfiltered, 1 filtered */
+    struct dr_accel_geom geom[2];   /* by geomID: 0 unfiltered, 1 filtered */
     uint32_t *indices[2];           /* owned index buffers when the mesh is split */
     uint32_t n_part[2];             /* ... their triangles */
     bool split;                     /* geomID 0 and 1 hold the two kinds (else one geometry, 0) */
     bool packet8;                   /* packets traced as 8-wide halves (packet_intersect) */
 };
 
-/* The query context a filter receives: Embree's, then the query's key, or
- * for a packet every ray's key by the ray's id (its lane). */
+/* The query context a filter receives: Embree's, then the structure, the
+ * query's key, or for a packet every ray's key by the ray's id (its lane). */
 struct query_ctx {
     struct RTCIntersectContext rtc;
+    const struct dr_accel *accel;
     uint64_t key;
     const uint64_t *keys;   /* NULL: key for every ray */
     bool *passed;           /* plain's occlusion queries: the blocker found for ray j would not count
@@ -88,14 +100,22 @@ static void embree_error(void *user, enum RTCError code, const char *msg)
     dr_set_error("Embree error %d: %s", (int)code, msg ? msg : "");
 }
 
+/* The scene's triangle of Embree's hit (geomID, primID). */
+static inline int64_t scene_tri(const struct dr_accel *a, unsigned geom, unsigned prim)
+{
+    const uint32_t *map = a->geom[geom & 1].tri;
+    return map ? (int64_t)map[prim] : (int64_t)prim;
+}
+
 /* Embree's RTCRayN / RTCHitN accessors are C++ only; the SOA layout they
  * index (rtcore_ray.h): ray dir_x, dir_y, dir_z at 4N, 5N, 6N floats; hit u, v
- * at 3N, 4N floats and primID at 5N. */
+ * at 3N, 4N floats, primID at 5N and geomID at 6N. The filters find the
+ * triangle by geomID: as a context filter they see every geometry's
+ * candidates, and the unfiltered part's pass (dr_coverage_blocks, bits 0). */
 static void cover_filter(const struct RTCFilterFunctionNArguments *args)
 {
-    const struct dr_accel_geom *g = args->geometryUserPtr;
-    const struct dr_accel *a = g->accel;
     const struct query_ctx *q = (const struct query_ctx *)args->context;
+    const struct dr_accel *a = q->accel;
     const unsigned N = args->N;
     const float *ray = (const float *)args->ray, *hit = (const float *)args->hit;
     const unsigned *hit_u32 = (const unsigned *)args->hit;
@@ -104,8 +124,7 @@ static void cover_filter(const struct RTCFilterFunctionNArguments *args)
         if (args->valid[i] != -1)
             continue;
         uint64_t key = q->keys ? q->keys[ray_u32[10 * N + i] % DR_ACCEL_PACKET] : q->key;   /* id at 10N */
-        unsigned prim = hit_u32[5 * N + i];
-        int64_t tri = g->tri ? (int64_t)g->tri[prim] : (int64_t)prim;
+        int64_t tri = scene_tri(a, hit_u32[6 * N + i], hit_u32[5 * N + i]);
         dr_vec3 d = dr_v3(ray[4 * N + i], ray[5 * N + i], ray[6 * N + i]);
         if (!dr_coverage_blocks(a->cover, a->tri_bits[tri], tri, hit[3 * N + i], hit[4 * N + i], d, key))
             args->valid[i] = 0;
@@ -115,16 +134,17 @@ static void cover_filter(const struct RTCFilterFunctionNArguments *args)
 static bool filter_accepts(const struct dr_accel *a, int64_t tri, float u, float v, dr_vec3 d, uint64_t key);
 
 /* plain's occlusion filter: takes the first candidate Embree finds, which
- * ends the query, and notes whether the filtered scene would have taken it
+ * ends the query, and notes whether the filtered query would have taken it
  * too (passed[j] false: the ray is blocked for certain). So a shadow ray
  * costs one any-hit traversal and one callback where it is blocked; only
  * a ray whose first-found blocker would not count (a back face, a hole)
- * asks again (dr_accel_occluded_many). */
+ * asks again (dr_accel_occluded_many). The filtered part's occlusion filter
+ * where a->plain: a filtered query's context (passed NULL) passes every
+ * candidate to its own filter. */
 static void first_blocker_filter(const struct RTCFilterFunctionNArguments *args)
 {
-    const struct dr_accel_geom *g = args->geometryUserPtr;
-    const struct dr_accel *a = g->accel;
     const struct query_ctx *q = (const struct query_ctx *)args->context;
+    const struct dr_accel *a = q->accel;
     const unsigned N = args->N;
     const float *ray = (const float *)args->ray, *hit = (const float *)args->hit;
     const unsigned *hit_u32 = (const unsigned *)args->hit, *ray_u32 = (const unsigned *)args->ray;
@@ -134,8 +154,7 @@ static void first_blocker_filter(const struct RTCFilterFunctionNArguments *args)
         unsigned id = ray_u32[10 * N + i] % DR_ACCEL_PACKET;   /* the ray's lane */
         uint64_t key = q->keys ? q->keys[id] : q->key;
         dr_vec3 d = dr_v3(ray[4 * N + i], ray[5 * N + i], ray[6 * N + i]);
-        unsigned prim = hit_u32[5 * N + i];
-        int64_t tri = g->tri ? (int64_t)g->tri[prim] : (int64_t)prim;
+        int64_t tri = scene_tri(a, hit_u32[6 * N + i], hit_u32[5 * N + i]);
         q->passed[id] = !filter_accepts(a, tri, hit[3 * N + i], hit[4 * N + i], d, key);
     }
 }
@@ -151,8 +170,6 @@ static void add_geometry(struct dr_accel *a, RTCScene sc, const struct dr_mesh *
     rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, mesh->positions, 0,
                                3 * sizeof(float), mesh->n_vertices);
     rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, indices, 0, 3 * sizeof(uint32_t), n);
-    a->geom[id].accel = a;
-    rtcSetGeometryUserData(g, &a->geom[id]);
     if (isect)
         rtcSetGeometryIntersectFilterFunction(g, isect);
     if (occ)
@@ -225,7 +242,7 @@ static int64_t classify(struct dr_accel *a, const struct dr_scene *s)
 static RTCScene new_scene(struct dr_accel *a)
 {
     RTCScene sc = rtcNewScene(a->device);
-    rtcSetSceneFlags(sc, DR_ACCEL_SCENE_FLAGS);
+    rtcSetSceneFlags(sc, DR_ACCEL_SCENE_FLAGS | (a->plain ? RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION : 0));
     rtcSetSceneBuildQuality(sc, RTC_BUILD_QUALITY_HIGH);
     return sc;
 }
@@ -260,15 +277,12 @@ static struct dr_accel *build(const struct dr_mesh *mesh, const struct dr_scene 
         dr_accel_destroy(a);
         return NULL;
     }
+    a->plain = with_plain && a->cover && mesh->n_triangles > 0;
     a->scene = new_scene(a);
     if (mesh->n_triangles > 0)
-        add_geometries(a, a->scene, mesh, cover_filter, cover_filter);
+        add_geometries(a, a->scene, mesh, a->plain ? NULL : cover_filter,
+                       a->plain ? first_blocker_filter : cover_filter);
     rtcCommitScene(a->scene);
-    if (with_plain && a->cover && mesh->n_triangles > 0) {
-        a->plain = new_scene(a);
-        add_geometries(a, a->plain, mesh, NULL, first_blocker_filter);
-        rtcCommitScene(a->plain);
-    }
     if (rtcGetDeviceError(a->device) != RTC_ERROR_NONE) {
         dr_accel_destroy(a);
         return NULL;
@@ -297,8 +311,6 @@ void dr_accel_destroy(struct dr_accel *a)
         return;
     if (a->scene)
         rtcReleaseScene(a->scene);
-    if (a->plain)
-        rtcReleaseScene(a->plain);
     if (a->device)
         rtcReleaseDevice(a->device);
     for (int k = 0; k < 2; k++) {
@@ -325,22 +337,26 @@ static void fill_ray(struct RTCRay *r, dr_vec3 o, dr_vec3 d, double tmin, double
     r->flags = 0;
 }
 
-/* The scene's triangle of Embree's hit (geomID, primID), in either scene. */
-static inline int64_t scene_tri(const struct dr_accel *a, unsigned geom, unsigned prim)
+/* The filtered query's context: the filter sees every candidate (where
+ * the geometries carry none, as the context's filter). */
+static void filtered_context(const struct dr_accel *a, struct query_ctx *q, uint64_t key)
 {
-    const uint32_t *map = a->geom[geom & 1].tri;
-    return map ? (int64_t)map[prim] : (int64_t)prim;
+    rtcInitIntersectContext(&q->rtc);
+    q->rtc.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+    if (a->plain)
+        q->rtc.filter = cover_filter;
+    q->accel = a;
+    q->key = key;
+    q->keys = NULL;
+    q->passed = NULL;
 }
 
-/* The filtered scene's answers (the filter sees every candidate). */
+/* The filtered query's answers. */
 static int64_t filtered_intersect(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tmin, double tmax,
                                   uint64_t key)
 {
     struct query_ctx q;
-    rtcInitIntersectContext(&q.rtc);
-    q.rtc.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
-    q.key = key;
-    q.keys = NULL;
+    filtered_context(a, &q, key);
     struct RTCRayHit rh;
     fill_ray(&rh.ray, o, d, tmin, tmax);
     rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
@@ -354,10 +370,7 @@ static int64_t filtered_intersect(const struct dr_accel *a, dr_vec3 o, dr_vec3 d
 static bool filtered_occluded(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, double tmin, double tmax, uint64_t key)
 {
     struct query_ctx q;
-    rtcInitIntersectContext(&q.rtc);
-    q.rtc.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
-    q.key = key;
-    q.keys = NULL;
+    filtered_context(a, &q, key);
     struct RTCRay r;
     fill_ray(&r, o, d, tmin, tmax);
     rtcOccluded1(a->scene, &q.rtc, &r);
@@ -384,7 +397,7 @@ static int64_t plain_intersect(const struct dr_accel *a, dr_vec3 o, dr_vec3 d, d
     fill_ray(&rh.ray, o, d, tmin, tmax);
     rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
     rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
-    rtcIntersect1(a->plain, &ctx, &rh);
+    rtcIntersect1(a->scene, &ctx, &rh);
     *u = rh.hit.u;
     *v = rh.hit.v;
     return rh.hit.geomID == RTC_INVALID_GEOMETRY_ID ? -1 : scene_tri(a, rh.hit.geomID, rh.hit.primID);
@@ -520,7 +533,8 @@ static dr_vec3 ray_d(const struct dr_accel_rays *rays, int i)
 }
 
 /* Packet k's lanes: rays [16k, min(16k + 16, n)); valid marks them. */
-static int packet_lanes(const struct dr_accel_rays *rays, int k, int valid[DR_ACCEL_PACKET], struct query_ctx *q)
+static int packet_lanes(const struct dr_accel *a, const struct dr_accel_rays *rays, int k, int valid[DR_ACCEL_PACKET],
+                        struct query_ctx *q)
 {
     int first = k * DR_ACCEL_PACKET, m = rays->n - first < DR_ACCEL_PACKET ? rays->n - first : DR_ACCEL_PACKET;
     for (int j = 0; j < DR_ACCEL_PACKET; j++)
@@ -528,13 +542,14 @@ static int packet_lanes(const struct dr_accel_rays *rays, int k, int valid[DR_AC
     rtcInitIntersectContext(&q->rtc);
     q->rtc.flags = first + m <= rays->coherent ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT
                                                : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+    q->accel = a;
     q->key = 0;
     q->keys = rays->key ? rays->key + first : NULL;
     q->passed = NULL;
     return m;
 }
 
-/* Packet k's closest hits in scene sc: tri[j] for ray 16k + j (-1: none)
+/* Packet k's closest hits (a plain query where a->plain): tri[j] for ray 16k + j (-1: none)
  * and, where asked, Embree's barycentrics. Returns its number of rays.
  * Traced as one 16-wide packet where the device's kernels are 16 wide, else
  * as two 8-wide ones (a->packet8): Embree splits a 16-wide packet into
@@ -543,12 +558,12 @@ static int packet_lanes(const struct dr_accel_rays *rays, int k, int valid[DR_AC
  * machine (bench part a, runs 12 and 13), and the peer's box renders in
  * 0.93 x the time at depth 1, 0.96 x at depth 8. The same hits either way
  * (test_render's images). */
-static int packet_intersect(RTCScene sc, const struct dr_accel *a, const struct dr_accel_rays *rays, int k,
+static int packet_intersect(const struct dr_accel *a, const struct dr_accel_rays *rays, int k,
                             int64_t *tri, float *u, float *v)
 {
     int valid[DR_ACCEL_PACKET] __attribute__((aligned(64)));   /* Embree: 64-byte aligned */
     struct query_ctx q;
-    int first = k * DR_ACCEL_PACKET, m = packet_lanes(rays, k, valid, &q);
+    int first = k * DR_ACCEL_PACKET, m = packet_lanes(a, rays, k, valid, &q);
     unsigned geom[DR_ACCEL_PACKET], prim[DR_ACCEL_PACKET];
     float hu[DR_ACCEL_PACKET], hv[DR_ACCEL_PACKET];
     if (a->packet8) {
@@ -559,7 +574,7 @@ static int packet_intersect(RTCScene sc, const struct dr_accel *a, const struct 
                 rh.hit.geomID[j] = RTC_INVALID_GEOMETRY_ID;
                 rh.hit.instID[0][j] = RTC_INVALID_GEOMETRY_ID;
             }
-            rtcIntersect8(valid + 8 * h, sc, &q.rtc, &rh);
+            rtcIntersect8(valid + 8 * h, a->scene, &q.rtc, &rh);
             memcpy(geom + 8 * h, rh.hit.geomID, sizeof rh.hit.geomID);
             memcpy(prim + 8 * h, rh.hit.primID, sizeof rh.hit.primID);
             memcpy(hu + 8 * h, rh.hit.u, sizeof rh.hit.u);
@@ -572,7 +587,7 @@ static int packet_intersect(RTCScene sc, const struct dr_accel *a, const struct 
             rh.hit.geomID[j] = RTC_INVALID_GEOMETRY_ID;
             rh.hit.instID[0][j] = RTC_INVALID_GEOMETRY_ID;
         }
-        rtcIntersect16(valid, sc, &q.rtc, &rh);
+        rtcIntersect16(valid, a->scene, &q.rtc, &rh);
         memcpy(geom, rh.hit.geomID, sizeof geom);
         memcpy(prim, rh.hit.primID, sizeof prim);
         memcpy(hu, rh.hit.u, sizeof hu);
@@ -598,34 +613,34 @@ void dr_accel_intersect_many(const struct dr_accel *a, const struct dr_accel_ray
     for (int k = 0; k * DR_ACCEL_PACKET < rays->n; k++) {
         int64_t *t = tri + k * DR_ACCEL_PACKET;
         if (!a->plain) {
-            packet_intersect(a->scene, a, rays, k, t, NULL, NULL);
+            packet_intersect(a, rays, k, t, NULL, NULL);
             continue;
         }
         float u[DR_ACCEL_PACKET], v[DR_ACCEL_PACKET];
-        int m = packet_intersect(a->plain, a, rays, k, t, u, v);
+        int m = packet_intersect(a, rays, k, t, u, v);
         for (int j = 0, i = k * DR_ACCEL_PACKET; j < m; j++, i++)
             if (t[j] >= 0 && !filter_accepts(a, t[j], u[j], v[j], ray_d(rays, i), ray_key(rays, i)))
                 t[j] = filtered_intersect(a, ray_o(rays, i), ray_d(rays, i), 0.0, rays->tmax[i], ray_key(rays, i));
     }
 }
 
-/* Rays [first, first + m)'s any-hit queries in scene sc, in the width
+/* Rays [first, first + m)'s any-hit queries (q's filter, if any), in the width
  * packet_intersect uses; tfar[j] < 0: ray first + j is blocked. */
-static void occluded_packet(RTCScene sc, const struct dr_accel *a, const struct dr_accel_rays *rays, int first, int m,
+static void occluded_packet(const struct dr_accel *a, const struct dr_accel_rays *rays, int first, int m,
                             int *valid, struct query_ctx *q, float *tfar)
 {
     if (a->packet8) {
         for (int h = 0; h * 8 < m; h++) {
             struct RTCRay8 r __attribute__((aligned(32)));
             fill_packet8(&r, rays, first + 8 * h, m - 8 * h, 8u * (unsigned)h);
-            rtcOccluded8(valid + 8 * h, sc, &q->rtc, &r);
+            rtcOccluded8(valid + 8 * h, a->scene, &q->rtc, &r);
             memcpy(tfar + 8 * h, r.tfar, sizeof r.tfar);
         }
         return;
     }
     struct RTCRay16 r __attribute__((aligned(64)));
     fill_packet16(&r, rays, first, m, 0);
-    rtcOccluded16(valid, sc, &q->rtc, &r);
+    rtcOccluded16(valid, a->scene, &q->rtc, &r);
     memcpy(tfar, r.tfar, sizeof r.tfar);
 }
 
@@ -636,11 +651,11 @@ void dr_accel_occluded_many(const struct dr_accel *a, const struct dr_accel_rays
         int valid[DR_ACCEL_PACKET] __attribute__((aligned(64)));   /* Embree: 64-byte aligned */
         struct query_ctx q;
         bool passed[DR_ACCEL_PACKET] = {false};
-        int m = packet_lanes(rays, k, valid, &q);
+        int m = packet_lanes(a, rays, k, valid, &q);
         if (a->plain)
             q.passed = passed;   /* plain: any blocker, and whether it counts (first_blocker_filter) */
         float tfar[DR_ACCEL_PACKET];
-        occluded_packet(a->plain ? a->plain : a->scene, a, rays, first, m, valid, &q, tfar);
+        occluded_packet(a, rays, first, m, valid, &q, tfar);
         if (!a->plain) {
             for (int j = 0; j < m; j++)
                 occluded[first + j] = tfar[j] < 0.0f;
