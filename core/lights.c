@@ -7,6 +7,7 @@
 #include "bigalloc.h"
 #include "bsdf.h"
 #include "cdf.h"
+#include "emission_grid.h"
 #include "env8.h"
 #include "error.h"
 #include "simd_trig.h"
@@ -36,45 +37,80 @@ struct dr_light_sampler {
     double *env_row_sin;       /* env_h: sin of each row's centre angle, the weights' factor (libm's sin
                                   per sample and per escaped ray was 3 % of a render under a map) */
     double env_integral;       /* sum of texel weights / (w h), for the pdf */
-    int texture_averages;      /* whole-image averages the build made (one per emissive image) */
+    int texture_averages;      /* whole-image passes the build made (one per emissive image) */
     int n_materials;
-    bool *mat_emits;           /* n_materials: its triangles are entries (a power weight above 0) */
+    bool *mat_emits;           /* n_materials: every one of its triangles is an entry */
 };
 
-static double mean_texture_value(const struct dr_scene *s, const struct dr_texref *ref, int channel_count)
-{
-    if (ref->texture < 0)
-        return 1.0;
-    const struct dr_image *img = &s->images[s->textures[ref->texture].image];
-    if (!dr_image_has_pixels(img))
-        return 1.0;
-    double sum = 0.0;
-    size_t n = (size_t)img->width * img->height;
-    int c = img->channels < channel_count ? img->channels : channel_count;
-    for (size_t i = 0; i < n; i++)   /* (the decoded values where the image has them) */
-        for (int k = 0; k < c; k++)
-            sum += dr_image_value(img, i * (size_t)img->channels + (size_t)k, true);
-    return sum / (double)(n * (size_t)c);
-}
-
-/* A material's emitted power per unit area (up to pi). image_mean caches the
- * mean of every image (NaN: not computed yet), so a texture shared by many
- * emitting materials, or a 2048^2 emissive map on 15k triangles, is averaged
- * once: averaging per triangle made loading a helmet-class model take minutes. */
-static double emitter_power_weight(const struct dr_scene *s, const struct dr_material *m, double *image_mean,
-                                   struct dr_light_sampler *ls)
+/* A material's emitted power per unit area (up to pi) before its emissive
+ * texture: factor x strength, both sides' where it is double-sided. */
+static double emitter_power_weight(const struct dr_material *m)
 {
     dr_vec3 e = dr_scale(m->emissive_factor, m->emissive_strength);
     double w = (e.x + e.y + e.z) / 3.0;
-    if (w > 0.0 && m->emissive_tex.texture >= 0) {
-        int img = s->textures[m->emissive_tex.texture].image;
-        if (isnan(image_mean[img])) {
-            image_mean[img] = mean_texture_value(s, &m->emissive_tex, 3);
-            ls->texture_averages++;
-        }
-        w *= image_mean[img];
-    }
     return m->double_sided ? 2.0 * w : w;
+}
+
+/* The emissive texture of material m where the light table weights its
+ * triangles by their footprints (emission_grid.h): it emits and its
+ * texture has pixels. NULL otherwise. */
+static const struct dr_texref *footprint_texture(const struct dr_scene *s, const struct dr_material *m)
+{
+    const struct dr_texref *r = &m->emissive_tex;
+    if (emitter_power_weight(m) <= 0.0 || r->texture < 0)
+        return NULL;
+    return dr_image_has_pixels(&s->images[s->textures[r->texture].image]) ? r : NULL;
+}
+
+/* The emitter weights of every triangle (power: pi x weight x area) into
+ * tri_w, -1 for a triangle that is not an entry; which materials have all
+ * their triangles entries into ls->mat_emits. A textured emitter's triangle
+ * is weighted by the mean of its texture's footprint, and left out where
+ * that holds only black texels (it emits nothing anywhere); one grid per
+ * image, built when its first triangle asks (ls->texture_averages: a
+ * per-triangle pass over a 2048^2 texture made loading a helmet-class model
+ * take minutes, issue 13). Returns 0 or DR_ERR_NOMEM. */
+static int emitter_weights(const struct dr_scene *s, struct dr_light_sampler *ls, double *tri_w)
+{
+    const struct dr_mesh *m = &s->mesh;
+    struct dr_emission_grid **grid = calloc((size_t)s->n_images + 1, sizeof *grid);
+    if (!grid || !(ls->mat_emits = malloc((size_t)s->n_materials + 1))) {
+        free(grid);
+        return DR_ERR_NOMEM;
+    }
+    for (int i = 0; i < s->n_materials; i++)
+        ls->mat_emits[i] = emitter_power_weight(&s->materials[i]) > 0.0;
+    int rc = 0;
+    for (uint32_t t = 0; t < m->n_triangles && rc == 0; t++) {
+        const struct dr_material *mat = &s->materials[m->material[t]];
+        const double w = emitter_power_weight(mat);
+        tri_w[t] = w > 0.0 ? M_PI * w * dr_triangle_area(m, t) : -1.0;
+        const struct dr_texref *r = footprint_texture(s, mat);
+        if (!r)
+            continue;
+        const struct dr_texture *tex = &s->textures[r->texture];
+        struct dr_emission_grid **g = &grid[tex->image];
+        if (!*g && !(*g = dr_emission_grid_create(&s->images[tex->image]))) {
+            rc = DR_ERR_NOMEM;
+            break;
+        }
+        double mean;
+        if (dr_emission_footprint(*g, m, r, tex, t, &mean)) {
+            /* (a footprint with a texel that is not zero stays an entry of
+             * weight above 0, however small its mean: a triangle of pick 0
+             * counts as not emitting) */
+            tri_w[t] *= fmax(mean, 1e-6 * dr_emission_grid_mean(*g));
+        } else {
+            tri_w[t] = -1.0;
+            ls->mat_emits[m->material[t]] = false;
+        }
+    }
+    for (int i = 0; i < s->n_images; i++) {
+        ls->texture_averages += grid[i] != NULL;
+        dr_emission_grid_destroy(grid[i]);
+    }
+    free(grid);
+    return rc;
 }
 
 int dr_light_sampler_texture_averages(const struct dr_light_sampler *ls) { return ls->texture_averages; }
@@ -189,31 +225,15 @@ struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
     if (!(ls->scene_radius > 0.0))
         ls->scene_radius = 1.0;
 
-    /* Power per material first: a textured emitter's weight averages its
-     * whole texture, which must happen once per material, not per triangle. */
     const struct dr_mesh *m = &s->mesh;
-    double *mat_w = calloc((size_t)s->n_materials + 1, sizeof(double));
-    double *image_mean = malloc(sizeof(double) * (size_t)(s->n_images + 1));
-    if (!mat_w || !image_mean) {
-        free(mat_w);
-        free(image_mean);
-        goto nomem;
-    }
-    for (int i = 0; i < s->n_images; i++)
-        image_mean[i] = NAN;
-    for (int i = 0; i < s->n_materials; i++)
-        mat_w[i] = emitter_power_weight(s, &s->materials[i], image_mean, ls);
-    free(image_mean);
+    double *tri_w = malloc(sizeof(double) * ((size_t)m->n_triangles + 1));
     ls->n_materials = s->n_materials;
-    if (!(ls->mat_emits = malloc((size_t)s->n_materials + 1))) {
-        free(mat_w);
+    if (!tri_w || emitter_weights(s, ls, tri_w) != 0) {
+        free(tri_w);
         goto nomem;
     }
-    for (int i = 0; i < s->n_materials; i++)
-        ls->mat_emits[i] = mat_w[i] > 0.0;
     for (uint32_t t = 0; t < m->n_triangles; t++)
-        if (mat_w[m->material[t]] > 0.0)
-            ls->n_emitters++;
+        ls->n_emitters += tri_w[t] >= 0.0;
     ls->n_punctual = s->n_lights;
     ls->n_entries = ls->n_emitters + ls->n_punctual + (s->env.present ? 1 : 0);
     ls->emitter_tri = malloc(sizeof(int64_t) * (size_t)(ls->n_emitters + 1));
@@ -225,7 +245,7 @@ struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
     ls->cdf_guide = malloc(sizeof(uint32_t) * (size_t)(ls->n_entries + 1));
     if (!ls->emitter_tri || !ls->tri_pick || !ls->tri_pick_density || !ls->emitter_area || !ls->cdf || !ls->pick ||
         !ls->cdf_guide) {
-        free(mat_w);
+        free(tri_w);
         goto nomem;
     }
 
@@ -233,15 +253,13 @@ struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
     double *w = ls->pick;
     int64_t k = 0;
     for (uint32_t t = 0; t < m->n_triangles; t++) {
-        double mw = mat_w[m->material[t]];
-        if (mw > 0.0) {
+        if (tri_w[t] >= 0.0) {
             ls->emitter_tri[k] = t;
             ls->emitter_area[k] = dr_triangle_area(m, t);
-            w[k] = M_PI * mw * ls->emitter_area[k];
-            k++;
+            w[k++] = tri_w[t];
         }
     }
-    free(mat_w);
+    free(tri_w);
     for (int i = 0; i < s->n_lights; i++)
         w[k++] = punctual_power(&s->lights[i], ls->scene_radius);
     if (s->env.present) {

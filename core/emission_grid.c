@@ -1,0 +1,165 @@
+/* Emissive textures' footprints on triangles (emission_grid.h). */
+#include "emission_grid.h"
+
+#include <math.h>
+#include <stdlib.h>
+
+#include "image.h"
+
+struct dr_emission_grid {
+    int w, h;          /* the image's texels */
+    int s;             /* texels per cell side */
+    int gw, gh;        /* cells */
+    double *sum;       /* (gh + 1) x (gw + 1) summed-area table of the texels' emission */
+    uint32_t *lit;     /* the same of their count of texels that are not zero */
+};
+
+/* Texel i's emission as dr_emission reads it: the mean of its colour
+ * channels' decoded values (their magnitudes: a test for zero must not let
+ * values cancel). */
+static double texel_emission(const struct dr_image *img, size_t i)
+{
+    const int c = dr_image_colour_channels(img->channels);
+    double e = 0.0;
+    for (int k = 0; k < c; k++)
+        e += fabs(dr_image_value(img, i * (size_t)img->channels + (size_t)k, true));
+    return e / c;
+}
+
+struct dr_emission_grid *dr_emission_grid_create(const struct dr_image *img)
+{
+    struct dr_emission_grid *g = calloc(1, sizeof *g);
+    if (!g)
+        return NULL;
+    g->w = img->width, g->h = img->height;
+    const int side = g->w > g->h ? g->w : g->h;
+    g->s = (side + DR_EMISSION_GRID_CELLS - 1) / DR_EMISSION_GRID_CELLS;
+    g->gw = (g->w + g->s - 1) / g->s, g->gh = (g->h + g->s - 1) / g->s;
+    const size_t stride = (size_t)g->gw + 1, n = stride * ((size_t)g->gh + 1);
+    g->sum = calloc(n, sizeof *g->sum);
+    g->lit = calloc(n, sizeof *g->lit);
+    if (!g->sum || !g->lit) {
+        dr_emission_grid_destroy(g);
+        return NULL;
+    }
+    /* the cells' own sums at [cy + 1][cx + 1], then the running sums */
+    for (int y = 0; y < g->h; y++)
+        for (int x = 0; x < g->w; x++) {
+            const double e = texel_emission(img, (size_t)y * (size_t)g->w + (size_t)x);
+            const size_t at = (size_t)(y / g->s + 1) * stride + (size_t)(x / g->s + 1);
+            g->sum[at] += e;
+            g->lit[at] += e != 0.0;
+        }
+    for (size_t cy = 1; cy <= (size_t)g->gh; cy++)
+        for (size_t cx = 1; cx <= (size_t)g->gw; cx++) {
+            const size_t at = cy * stride + cx;
+            g->sum[at] += g->sum[at - 1] + g->sum[at - stride] - g->sum[at - stride - 1];
+            g->lit[at] += g->lit[at - 1] + g->lit[at - stride] - g->lit[at - stride - 1];
+        }
+    return g;
+}
+
+void dr_emission_grid_destroy(struct dr_emission_grid *g)
+{
+    if (g) {
+        free(g->sum);
+        free(g->lit);
+    }
+    free(g);
+}
+
+double dr_emission_grid_mean(const struct dr_emission_grid *g)
+{
+    return g->sum[((size_t)g->gw + 1) * ((size_t)g->gh + 1) - 1] / ((double)g->w * g->h);
+}
+
+/* Texel intervals [lo[k], hi[k]] of one axis (n texels) that bilinear
+ * lookups at coordinates in [t0, t1] can read under wrap mode: the taps
+ * floor(t n - 1/2) and the next, as dr_texture_taps takes them, one texel
+ * more on each side for rounding (the lookup interpolates the vertices' uv
+ * and transforms it; the bounds transform the vertices). Returns how many
+ * intervals: 1, or 2 where REPEAT wraps. */
+static int axis_texels(double t0, double t1, int n, enum dr_wrap mode, int lo[2], int hi[2])
+{
+    lo[0] = 0, hi[0] = n - 1;   /* every texel: the answer wherever the range is not simple */
+    if (!isfinite(t0) || !isfinite(t1))
+        return 1;
+    if (mode == DR_WRAP_REPEAT) {   /* into [0, 2): the lookup reduces t - floor(t) */
+        if (t1 - t0 >= 1.0)
+            return 1;
+        const double k = floor(t0);
+        t0 -= k, t1 -= k;
+    } else if (mode == DR_WRAP_CLAMP) {   /* (reduce_coord's clamp; the indices clamp below) */
+        t0 = fmin(fmax(t0, -1.0), 2.0), t1 = fmin(fmax(t1, -1.0), 2.0);
+    } else if (t0 < 0.0 || t1 > 1.0) {   /* MIRROR beyond one period: every texel */
+        return 1;
+    }
+    const double a = floor(t0 * n - 0.5) - 1.0, b = floor(t1 * n - 0.5) + 2.0;
+    if (mode != DR_WRAP_REPEAT) {   /* clamped (MIRROR in [0, 1] reflects the margin's into it) */
+        lo[0] = (int)fmin(fmax(a, 0.0), n - 1.0);
+        hi[0] = (int)fmin(fmax(b, 0.0), n - 1.0);
+        return 1;
+    }
+    if (b - a + 1.0 >= n)
+        return 1;
+    const int first = (int)(a - n * floor(a / n)), last = first + (int)(b - a);   /* a mod n, to last */
+    lo[0] = first, hi[0] = last < n ? last : n - 1;
+    if (last < n)
+        return 1;
+    lo[1] = 0, hi[1] = last - n;
+    return 2;
+}
+
+/* Cells [cx0, cx1] x [cy0, cy1]'s sums from the tables. */
+static void cells(const struct dr_emission_grid *g, int cx0, int cx1, int cy0, int cy1, double *sum, uint64_t *lit)
+{
+    const size_t stride = (size_t)g->gw + 1;
+    const size_t a = (size_t)cy0 * stride + (size_t)cx0, b = (size_t)cy0 * stride + (size_t)cx1 + 1,
+                 c = ((size_t)cy1 + 1) * stride + (size_t)cx0, d = ((size_t)cy1 + 1) * stride + (size_t)cx1 + 1;
+    *sum += g->sum[d] - g->sum[b] - g->sum[c] + g->sum[a];
+    *lit += (uint64_t)g->lit[d] - g->lit[b] - g->lit[c] + g->lit[a];
+}
+
+/* The texture coordinates r looks up at vertex k of tri (dr_texref_uv at
+ * that vertex: its TEXCOORD set, 0 where the triangle has none, through
+ * the transform). */
+static void vertex_uv(const struct dr_mesh *m, const struct dr_texref *r, uint32_t tri, int k, double uv[2])
+{
+    const uint32_t v = m->indices[3 * (size_t)tri + (size_t)k];
+    const float *t = r->texcoord == 1 ? (m->uvs1 ? m->uvs1 + 2 * (size_t)v : NULL)
+                                      : (m->uvs && (m->flags[tri] & DR_TRI_HAS_UVS) ? m->uvs + 2 * (size_t)v : NULL);
+    const double s[2] = {t ? t[0] : 0.0, t ? t[1] : 0.0};
+    if (!r->transformed) {
+        uv[0] = s[0], uv[1] = s[1];
+        return;
+    }
+    const double *x = r->xf;
+    uv[0] = x[0] * s[0] + x[1] * s[1] + x[2];
+    uv[1] = x[3] * s[0] + x[4] * s[1] + x[5];
+}
+
+bool dr_emission_footprint(const struct dr_emission_grid *g, const struct dr_mesh *m, const struct dr_texref *r,
+                           const struct dr_texture *tex, uint32_t tri, double *mean)
+{
+    double u0 = INFINITY, u1 = -INFINITY, v0 = INFINITY, v1 = -INFINITY;
+    for (int k = 0; k < 3; k++) {
+        double uv[2];
+        vertex_uv(m, r, tri, k, uv);
+        u0 = fmin(u0, uv[0]), u1 = fmax(u1, uv[0]);
+        v0 = fmin(v0, uv[1]), v1 = fmax(v1, uv[1]);
+    }
+    int xl[2], xh[2], yl[2], yh[2];
+    const int nx = axis_texels(u0, u1, g->w, tex->wrap_s, xl, xh), ny = axis_texels(v0, v1, g->h, tex->wrap_t, yl, yh);
+    double sum = 0.0;
+    uint64_t lit = 0, texels = 0;
+    for (int i = 0; i < nx; i++)
+        for (int j = 0; j < ny; j++) {
+            const int cx0 = xl[i] / g->s, cx1 = xh[i] / g->s, cy0 = yl[j] / g->s, cy1 = yh[j] / g->s;
+            cells(g, cx0, cx1, cy0, cy1, &sum, &lit);
+            const int64_t tw = ((cx1 + 1) * g->s < g->w ? (cx1 + 1) * g->s : g->w) - cx0 * g->s;
+            const int64_t th = ((cy1 + 1) * g->s < g->h ? (cy1 + 1) * g->s : g->h) - cy0 * g->s;
+            texels += (uint64_t)(tw * th);
+        }
+    *mean = texels > 0 && sum > 0.0 ? sum / (double)texels : 0.0;
+    return lit > 0;
+}
