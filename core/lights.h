@@ -50,8 +50,9 @@ struct dr_light_sample {
 /* Builds the tables; scene->accel need not exist. NULL + dr_last_error. */
 struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *scene);
 void dr_light_sampler_destroy(struct dr_light_sampler *ls);
-/* How many whole-image averages (emissive textures' mean values) building ls
- * took: at most one per image, whatever the number of emitting triangles. */
+/* How many whole-image passes (emissive textures' grids, emission_grid.h)
+ * building ls took: at most one per image, whatever the number of emitting
+ * triangles. */
 int dr_light_sampler_texture_averages(const struct dr_light_sampler *ls);
 bool dr_light_sampler_empty(const struct dr_light_sampler *ls);
 
@@ -68,9 +69,11 @@ void d_light_radiance(const struct dr_scene *scene, const struct dr_param_set *p
  * `hit` on an emissive triangle as seen from `from`. */
 double dr_light_pdf_area(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 from,
                          const struct dr_hit *hit);
-/* Are material's triangles entries of ls (an emission of power above 0)?
- * A material whose emission has a parameter but is dark is not: the one-
- * path walker still counts its hits as emitting (path.c's surface_emits). */
+/* Are all of material's triangles entries of ls? Not where it emits
+ * nothing (factor x strength black), nor where some of its triangles can
+ * read only black texels of its emissive texture (emission_grid.h: left out
+ * of the table). The one-path walker still counts such triangles' hits as
+ * emitting where the emission has a parameter (path.c's surface_emits). */
 bool dr_light_material_emits(const struct dr_light_sampler *ls, int material);
 /* Probability that NEE picks triangle tri (0: it does not emit). */
 double dr_light_pdf_area_pick(const struct dr_light_sampler *ls, int64_t tri);
