@@ -10,6 +10,7 @@
 #   d. peak memory        of that render vs the peer's 116 MiB, and the image library's share of it
 #   e. start-up           process start to first ray
 #   l. lighting           time per ray under an environment map / under a constant sky
+#   n. emissive texture   noise and time under a mostly black emissive texture
 #
 # Environment knobs:
 #   BUILD         build directory (default: build)
@@ -426,6 +427,33 @@ else
     echo "l. lighting: $SAMPLE_BOX not found: skipped"
 fi
 
+# ---- n. a sparse emissive texture ------------------------------------------
+# Real assets paint their glowing parts into an emissive texture that is black
+# nearly everywhere. A floor lit only by such a panel (2048 triangles, three
+# small lit spots; bench/make_glow_scene.py): the pixel noise of a 64-spp
+# render (the RMS of two seeds' difference over sqrt 2, mean of the channels)
+# and its time, and their product noise^2 x seconds (lower is better: the
+# cost of a given accuracy). The light table weights a textured emitter's
+# triangles by the texels they hold (core/emission_grid.c); before that, most
+# light samples here landed on black texels.
+echo
+echo "n. sparse emissive texture: noise and time of a floor lit by a mostly black emissive panel (128x128, 64 spp, 2 threads)"
+oiiotool --pattern constant:color=0,0,0 512x512 3 --fill:color=1,0.9,0.6 24x24+40+60 \
+    --fill:color=0.6,0.9,1 24x24+400+300 --fill:color=1,1,1 16x16+250+450 -d uint8 -o "$TMP/glow.png" >/dev/null
+python3 bench/make_glow_scene.py "$TMP/glow.gltf" glow.png
+glow_s=()
+for seed in 1 2; do
+    measure "$DRENDER" render "$TMP/glow.gltf" -o "$TMP/glow$seed.exr" --res 128x128 --spp 64 --threads 2 --seed "$seed" --json
+    glow_s+=("$(calc "$(json_num "$M_OUT" render time)" %.4f)")
+done
+GLOW_NOISE=$(oiiotool "$TMP/glow1.exr" "$TMP/glow2.exr" --sub --printstats 2>/dev/null |
+    awk '/StdDev/ { print ($3 + $4 + $5) / 3 / sqrt(2) }')
+GLOW_MEAN=$(oiiotool "$TMP/glow1.exr" --printstats 2>/dev/null | awk '/Stats Avg/ { print ($3 + $4 + $5) / 3 }')
+GLOW_T=$(median "${glow_s[@]}")
+GLOW_VT=$(calc "$GLOW_NOISE * $GLOW_NOISE * $GLOW_T" %.4g)
+printf '   pixel noise %s (image mean %s), render %s s: noise^2 x seconds %s\n' "$GLOW_NOISE" "$GLOW_MEAN" "$GLOW_T" "$GLOW_VT"
+GLOW_JSON="{\"res\": \"128x128\", \"spp\": 64, \"pixel_noise\": $GLOW_NOISE, \"image_mean\": $GLOW_MEAN, \"render_seconds\": $GLOW_T, \"noise2_seconds\": $GLOW_VT}"
+
 # ---- results.json and the noise note ---------------------------------------
 
 TOTAL=$(elapsed)
@@ -444,6 +472,7 @@ OTHER_CORES=$(calc "$OTHER_TOTAL / $WALL_TOTAL" %.2f)
     echo "  \"thread_scaling\": {\"scene\": \"$CORNELL\", \"t1_seconds\": $T1, \"t2_seconds\": $T2, \"speedup\": $SPEEDUP, \"speedup_best_runs\": $SPEEDUP_BEST, \"soa_floor_speedup\": $FLOOR_SPEEDUP, \"other_cores_busy\": $SCALING_OTHER},"
     echo "  \"startup\": $STARTUP_JSON,"
     echo "  \"environment_map\": $ENV_JSON,"
+    echo "  \"sparse_emissive_texture\": $GLOW_JSON,"
     echo "  \"peer\": $PEER_JSON"
     echo "}"
 } >"$OUT/results.json"
