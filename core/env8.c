@@ -114,7 +114,7 @@ static void find_cells(const struct dr_env_tables *t, dr_m8 on, dr_f8 u1, dr_f8 
 }
 
 dr_m8 dr_env8_sample(const struct dr_scene *s, const struct dr_env_tables *t, dr_m8 on, dr_f8 u1, dr_f8 u2,
-                     dr_v3x8 *wi, dr_v3x8 *radiance, dr_f8 *pdf, struct dr_env8_lookup *at)
+                     dr_m8 keep_black, dr_v3x8 *wi, dr_v3x8 *radiance, dr_f8 *pdf, struct dr_env8_lookup *at)
 {
     if (!(t->pick > 0.0))   /* (dr_light_sample: an entry never picked samples nothing) */
         return (dr_m8){0};
@@ -139,5 +139,5 @@ dr_m8 dr_env8_sample(const struct dr_scene *s, const struct dr_env_tables *t, dr
     /* dr_env_radiance at the direction (its map coordinates computed from
      * it again, as the scalar sample does) */
     *radiance = dr_env8_radiance_pdf(s, t, ok, *wi, NULL, at);
-    return ok & ~dr_v3x8_is_black(*radiance);
+    return ok & (~dr_v3x8_is_black(*radiance) | keep_black);
 }

@@ -50,10 +50,11 @@ dr_v3x8 dr_env8_radiance_pdf(const struct dr_scene *s, const struct dr_env_table
 /* dr_light_sample's environment-map sample (lights.c's sample_env) from the
  * numbers (u1, u2) for the lanes of on: the direction, its radiance and its
  * density times the environment's pick (and the radiance's lookup into *at
- * unless NULL). Returns the lanes whose sample
- * carries light (dr_light_sample's answer); the others' outputs are not
- * to be read. */
+ * unless NULL). Returns the lanes whose sample carries light
+ * (dr_light_sample's answer), and those of keep_black whose sample carries
+ * none but is one (dr_path_light_kept); the others' outputs are not to be
+ * read. */
 dr_m8 dr_env8_sample(const struct dr_scene *s, const struct dr_env_tables *t, dr_m8 on, dr_f8 u1, dr_f8 u2,
-                     dr_v3x8 *wi, dr_v3x8 *radiance, dr_f8 *pdf, struct dr_env8_lookup *at);
+                     dr_m8 keep_black, dr_v3x8 *wi, dr_v3x8 *radiance, dr_f8 *pdf, struct dr_env8_lookup *at);
 
 #endif

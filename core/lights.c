@@ -576,6 +576,7 @@ static bool sample_env(const struct dr_scene *s, const struct dr_light_sampler *
     out->radiance = dr_env_radiance(s, dir);
     out->pdf = pdf * ls->pick[ls->env_entry];
     out->delta = false;
+    out->valid = true;
     return !dr_is_black(out->radiance);
 }
 
@@ -583,6 +584,7 @@ bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls
                      double u1, double u2, struct dr_light_sample *out)
 {
     out->env_at.valid = false;
+    out->valid = false;
     if (ls->n_entries == 0)
         return false;
     int64_t i = dr_cdf_find_guided(ls->cdf, ls->n_entries, ls->cdf_guide, ls->n_entries, u_pick);
@@ -613,6 +615,7 @@ bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls
         out->target = dr_offset_origin(&h, h.ng, dr_neg(out->wi));
         out->pdf = ls->pick[i] * d2 / (fabs(cos_l) * area);
         out->delta = false;
+        out->valid = true;
         return !dr_is_black(out->radiance);
     }
     if (i == ls->env_entry)
@@ -630,6 +633,7 @@ bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls
         out->dist = INFINITY;
         out->atten = 1.0;
         out->radiance = I;
+        out->valid = true;
         return true;
     }
     dr_vec3 d = dr_sub(l->position, p);
@@ -644,6 +648,7 @@ bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls
         atten *= spot_falloff(l, -dr_dot(out->wi, l->direction));
     out->atten = atten;
     out->radiance = dr_scale(I, atten);
+    out->valid = true;
     return atten > 0.0;
 }
 

@@ -45,6 +45,8 @@ struct dr_light_sample {
                           shadow rays end here */
     struct dr_env_lookup env_at;   /* environment map: the lookup at wi, where the eight-lane
                                       stages kept it (dr_light_sample clears it) */
+    bool valid;        /* the fields above are set, even where the sample carries no light
+                          (black radiance: its derivative need not be 0, dr_path_light_kept) */
 };
 
 /* Builds the tables; scene->accel need not exist. NULL + dr_last_error. */
@@ -57,7 +59,8 @@ int dr_light_sampler_texture_averages(const struct dr_light_sampler *ls);
 bool dr_light_sampler_empty(const struct dr_light_sampler *ls);
 
 /* Samples a light as seen from point p with three uniforms. False when there
- * is nothing to sample or the sample carries no light. */
+ * is nothing to sample or the sample carries no light (out->valid tells the
+ * two apart). */
 bool dr_light_sample(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 p,
                      double u_pick, double u1, double u2, struct dr_light_sample *out);
 /* Adjoint of the radiance a light sample carries (area, punctual or

@@ -215,12 +215,13 @@ static bool stage_material(const struct dr_scene *s, const struct dr_path_opts *
     return true;
 }
 
-bool dr_path_nee_begin(const struct dr_scene *s, struct dr_path_vertex *v, struct dr_shadow_ray *ray)
+bool dr_path_nee_begin(const struct dr_scene *s, const struct dr_param_set *ps, struct dr_path_vertex *v,
+                       struct dr_shadow_ray *ray)
 {
     const struct dr_hit *hit = &v->hit;
     const struct dr_vertex_randoms *u = &v->u;
-    if (!dr_light_sample(s, s->light_sampler, hit->p, u->light_pick, u->light_u1, u->light_u2, &v->ls) ||
-        dr_dot(v->ls.wi, v->ng) <= 0.0)
+    const bool carries = dr_light_sample(s, s->light_sampler, hit->p, u->light_pick, u->light_u1, u->light_u2, &v->ls);
+    if (!dr_path_light_kept(s, ps, carries, &v->ls) || dr_dot(v->ls.wi, v->ng) <= 0.0)
         return false;
     v->nee_wi = dr_frame_to_local(&v->frame, v->ls.wi);
     v->nee_f = dr_bsdf_eval_pdf(&v->bsdf, v->wo, v->nee_wi, &v->nee_bsdf_pdf);
@@ -263,10 +264,11 @@ static void nee_trace_one(const struct dr_scene *s, struct dr_path_vertex *v, co
     dr_path_nee_end(s, v, ray, occluded);
 }
 
-void dr_path_nee(const struct dr_scene *s, struct dr_path_vertex *v, struct dr_ray_counts *counts)
+void dr_path_nee(const struct dr_scene *s, const struct dr_param_set *ps, struct dr_path_vertex *v,
+                 struct dr_ray_counts *counts)
 {
     struct dr_shadow_ray ray;
-    if (dr_path_nee_begin(s, v, &ray))
+    if (dr_path_nee_begin(s, ps, v, &ray))
         nee_trace_one(s, v, &ray, counts);
 }
 
@@ -354,7 +356,7 @@ step_shade(const struct dr_scene *s, const struct dr_path_opts *opts, const stru
     stage_emission(s, opts, st, tri, v);
     if (!stage_material(s, opts, st, sampler, v))
         return DR_STEP_END;
-    if ((opts->stages & DR_STAGE_NEE) && dr_path_nee_begin(s, v, shadow))
+    if ((opts->stages & DR_STAGE_NEE) && dr_path_nee_begin(s, opts->params, v, shadow))
         return DR_STEP_SHADOW;
     return DR_STEP_CONTINUE;
 }

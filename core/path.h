@@ -220,6 +220,19 @@ static inline bool dr_path_light_differentiated(const struct dr_param_set *ps, i
     return type == DR_LS_AREA ? ps->mat_emission_active[material] : type == DR_LS_ENV ? ps->env_active
                                                                                        : ps->lights_active;
 }
+/* Is light sample ls (dr_light_sample's answer: carries) kept for next-event
+ * estimation? Where it carries light; and where it carries none but is a
+ * sample (a black texel of an emissive texture, a dark environment or
+ * emitter) of a light whose radiance has a parameter: its term is 0, its
+ * derivative need not be, and dropping it biased the gradient (an emissive
+ * texture's black texels, one of them raised: the next-event share of the
+ * light it would add was never counted). */
+static inline bool dr_path_light_kept(const struct dr_scene *s, const struct dr_param_set *ps, bool carries,
+                                      const struct dr_light_sample *ls)
+{
+    return carries || (ls->valid && ps && ps->radiance_active &&
+                       dr_path_light_differentiated(ps, ls->type, ls->type == DR_LS_AREA ? s->mesh.material[ls->index] : -1));
+}
 bool dr_path_vertex_has_derivative(const struct dr_scene *scene, const struct dr_param_set *params,
                                    const struct dr_path_vertex *v);
 /* Adjoint of the continuation's BSDF value f along v->wi, given d_f. */
@@ -299,7 +312,8 @@ bool dr_path_step(const struct dr_scene *scene, const struct dr_path_opts *opts,
 /* Next-event estimation at a shaded surface vertex: samples a light with the
  * vertex's random numbers, casts the shadow ray, and fills v->nee, v->ls,
  * v->nee_wi, v->nee_f, v->nee_scale. */
-void dr_path_nee(const struct dr_scene *scene, struct dr_path_vertex *v, struct dr_ray_counts *counts);
+void dr_path_nee(const struct dr_scene *scene, const struct dr_param_set *params, struct dr_path_vertex *v,
+                 struct dr_ray_counts *counts);
 
 /* ---- the step cut at its ray queries (for a packet tracer: render.c) ----
  *
@@ -341,7 +355,8 @@ enum dr_step_next dr_path_step_shade(const struct dr_scene *scene, const struct 
                                      struct dr_path_vertex *v, int64_t tri, struct dr_shadow_ray *shadow);
 /* Next-event estimation in two halves around the shadow ray's query. begin:
  * false when no ray is needed (and nothing contributes). */
-bool dr_path_nee_begin(const struct dr_scene *scene, struct dr_path_vertex *v, struct dr_shadow_ray *shadow);
+bool dr_path_nee_begin(const struct dr_scene *scene, const struct dr_param_set *params, struct dr_path_vertex *v,
+                       struct dr_shadow_ray *shadow);
 void dr_path_nee_end(const struct dr_scene *scene, struct dr_path_vertex *v, const struct dr_shadow_ray *shadow,
                      bool occluded);
 

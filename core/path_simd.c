@@ -895,8 +895,10 @@ static void env_light_samples(const struct dr_scene *s, const struct dr_light_ta
     out->infinite |= env;
     out->delta &= ~env;
     /* dr_light_sample's checks: a zero pick (a zero-strength environment)
-     * or black radiance carries no light (the fields are then not read) */
-    *ok = pick > 0.0 && !dr_is_black(Le) ? *ok | env : *ok & ~env;
+     * samples nothing; black radiance carries no light (the fields are then
+     * not read) unless its derivative is asked (dr_path_light_kept) */
+    const dr_m8 keep = dr_is_black(Le) ? out->diff : env;
+    *ok = pick > 0.0 ? (*ok & ~env) | (env & keep) : *ok & ~env;
 }
 
 /* The lanes that picked an environment map: dr_light_sample's sample_env
@@ -912,7 +914,7 @@ static void env_map_samples(const struct dr_scene *s, dr_m8 env_map, dr_f8 u1, d
     dr_v3x8 wi, radiance;
     dr_f8 pdf;
     out->env_at = (struct dr_env8_lookup){0};   /* (defined where no sample is made) */
-    const dr_m8 carries = dr_env8_sample(s, &t, env_map, u1, u2, &wi, &radiance, &pdf, &out->env_at);
+    const dr_m8 carries = dr_env8_sample(s, &t, env_map, u1, u2, out->diff, &wi, &radiance, &pdf, &out->env_at);
     out->env_map = env_map;
     const dr_v3x8 zero = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
     out->wi = dr_v3x8_sel(env_map, wi, out->wi);
@@ -932,7 +934,8 @@ static void other_light_samples(const struct dr_scene *s, const bool *other, dr_
         if (!other[i])
             continue;
         struct dr_light_sample ls = {.dist = 0.0};   /* (its fields stay masked when it fails) */
-        (*ok)[i] = dr_light_sample(s, s->light_sampler, dr_v3x8_get(&p, i), u_pick[i], u1[i], u2[i], &ls) ? -1 : 0;
+        const bool carries = dr_light_sample(s, s->light_sampler, dr_v3x8_get(&p, i), u_pick[i], u1[i], u2[i], &ls);
+        (*ok)[i] = carries || (ls.valid && out->diff[i]) ? -1 : 0;   /* (dr_path_light_kept) */
         set_lane(&out->wi, i, ls.wi);
         set_lane(&out->target, i, ls.target);
         set_lane(&out->radiance, i, ls.radiance);
@@ -999,7 +1002,7 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
         }
     out->target = offset_origin(lp, lng, leps, dr_v3x8_neg(out->wi));
     out->pdf = pick * d2 / (dr_f8_abs(cos_l) * area);
-    ok &= ~dr_v3x8_is_black(out->radiance);
+    ok &= ~dr_v3x8_is_black(out->radiance) | out->diff;   /* (dr_path_light_kept) */
     out->infinite = out->delta = (dr_m8){0};
     if (dr_m8_any(env))
         env_light_samples(s, lt, env, u1, u2, &ok, out);

@@ -470,6 +470,55 @@ static void tiny_emitter(void)
     dr_scene_destroy(s);
 }
 
+/* Lights whose radiance is black where they are sampled but has a
+ * parameter: the light sample's term is 0, its derivative is not. An
+ * emissive panel whose 8x8 texture is black but for one texel (raising the
+ * black texels lights the panel), and a floor under a sky of strength 0 (its
+ * strength raised lights it). Light samples of black radiance used to be
+ * dropped with their derivative: next-event estimation's share of it was
+ * missing (the panel's texels: 0.050 against 0.747, z -393; the sky's
+ * strength: 0.541 against 0.621, z -36). */
+static void dark_texels(void)
+{
+    struct sb b;
+    sb_init(&b);
+    sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, sb_diffuse(dr_v3s(0.7))));
+    struct dr_material glow = emitter(dr_v3s(1.0));
+    glow.emissive_strength = 20.0;
+    glow.emissive_tex.texture = 0;
+    sb_quad(&b, dr_v3(-0.5, 1.5, 0.5), dr_v3(0, 0, -1), dr_v3(1, 0, 0), sb_material(&b, glow));
+    struct dr_scene *s = b.s;
+    s->n_images = 1;
+    s->images = calloc(1, sizeof(struct dr_image));
+    float px[8 * 8 * 3] = {0};
+    for (int c = 0; c < 3; c++)
+        px[3 * (2 * 8 + 5) + c] = 1.0f;
+    s->images[0] = sb_image(8, 8, 3, px, 0.0f, true);
+    s->n_textures = 1;
+    s->textures = calloc(1, sizeof(struct dr_texture));
+    s->textures[0] = (struct dr_texture){0, DR_WRAP_REPEAT, DR_WRAP_REPEAT};
+    sb_finish(&b);
+    const char *p[] = {"/images/0"};
+    struct fd_case c = {"dark-texels", 16, 8, 3, 16, 1e-2, NULL, NULL};
+    run_case(&c, s, sb_camera(dr_v3(0, 1, 2), dr_v3(0, 0, 0), 50), p, 1);
+    dr_scene_destroy(s);
+}
+
+static void dark_sky(void)
+{
+    struct sb b;
+    sb_init(&b);
+    sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, sb_diffuse(dr_v3s(0.7))));
+    sb_quad(&b, dr_v3(-0.5, 0.5, 0.5), dr_v3(0, 0, -1), dr_v3(1, 0, 0), sb_material(&b, sb_diffuse(dr_v3s(0.3))));
+    sb_environment(&b, dr_v3(0.8, 0.9, 1.0));
+    b.s->env.strength = 0.0;
+    struct dr_scene *s = sb_finish(&b);
+    const char *p[] = {"/extensions/DR_environment/strength"};
+    struct fd_case c = {"dark-sky", 16, 8, 3, 16, 1e-2, NULL, NULL};
+    run_case(&c, s, sb_camera(dr_v3(0, 1, 2), dr_v3(0, 0, 0), 50), p, 1);
+    dr_scene_destroy(s);
+}
+
 /* The hidden-wall scene at 1e-3 and 1e3 times its size. */
 static void scales(void)
 {
@@ -501,6 +550,8 @@ int main(void)
     long_paths();
     glossy_closed_box();
     tiny_emitter();
+    dark_texels();
+    dark_sky();
     scales();
     return TEST_END();
 }
