@@ -46,10 +46,11 @@ struct dr_accel_geom {
  * every geometry and passes the unfiltered part's; the only geometry
  * filter is first_blocker_filter's on the filtered part, for occlusion,
  * which passes everything in any other query (a context filter there
- * would be called for every blocked shadow ray, of either part). Until 2026-12 plain was a second Embree scene, built again from
- * the same buffers: on real assets, whose triangles are mostly filtered,
- * that doubled the build (127k triangles: two builds of 0.23 s on one
- * core) and the structure's memory.
+ * would be called for every blocked shadow ray, of either part). Until
+ * 2026-12 plain was a second Embree scene, built again from the same
+ * buffers: on real assets, whose triangles are mostly filtered, that
+ * doubled the build (127k triangles: two builds of 0.23 s on one core) and
+ * the structure's memory.
  *
  * Which triangles need a test is decided per triangle: a single-sided
  * triangle whose back no ray can reach (backface.h: the walls of a room,
