@@ -230,9 +230,11 @@ static inline bool dr_path_light_differentiated(const struct dr_param_set *ps, i
 static inline bool dr_path_light_kept(const struct dr_scene *s, const struct dr_param_set *ps, bool carries,
                                       const struct dr_light_sample *ls)
 {
-    return carries || (ls->valid && ps && ps->radiance_active &&
-                       dr_path_light_differentiated(ps, ls->type, ls->type == DR_LS_AREA ? s->mesh.material[ls->index] : -1));
+    if (carries || !ls->valid || !ps || !ps->radiance_active)
+        return carries;
+    return dr_path_light_differentiated(ps, ls->type, ls->type == DR_LS_AREA ? s->mesh.material[ls->index] : -1);
 }
+
 bool dr_path_vertex_has_derivative(const struct dr_scene *scene, const struct dr_param_set *params,
                                    const struct dr_path_vertex *v);
 /* Adjoint of the continuation's BSDF value f along v->wi, given d_f. */
