@@ -290,6 +290,19 @@ static void occluder_edge(void)
 }
 
 /* A floor with a 4x4 base-colour texture (already linear) under an environment. */
+/* b's scene finished with one image, img, as its texture 0 (REPEAT). */
+static struct dr_scene *one_texture(struct sb *b, struct dr_image img)
+{
+    struct dr_scene *s = b->s;
+    s->n_images = 1;
+    s->images = calloc(1, sizeof(struct dr_image));
+    s->images[0] = img;
+    s->n_textures = 1;
+    s->textures = calloc(1, sizeof(struct dr_texture));
+    s->textures[0] = (struct dr_texture){0, DR_WRAP_REPEAT, DR_WRAP_REPEAT};
+    return sb_finish(b);
+}
+
 static void texture_texels(void)
 {
     struct sb b;
@@ -298,19 +311,10 @@ static void texture_texels(void)
     m.base_color_tex.texture = 0;
     sb_quad(&b, dr_v3(-1, 0, 1), dr_v3(2, 0, 0), dr_v3(0, 0, -2), sb_material(&b, m));
     sb_environment(&b, dr_v3(1.0, 0.9, 0.8));
-    struct dr_scene *s = b.s;
-    s->n_images = 1;
-    s->images = calloc(1, sizeof(struct dr_image));
-    s->images[0].width = s->images[0].height = 4;
-    s->images[0].channels = 3;
-    s->images[0].data = malloc(sizeof(float) * 48);
-    s->images[0].linear = malloc(sizeof(float) * 48);
+    float px[48];
     for (int i = 0; i < 48; i++)
-        s->images[0].data[i] = s->images[0].linear[i] = (float)(0.2 + 0.05 * (i % 11));
-    s->n_textures = 1;
-    s->textures = calloc(1, sizeof(struct dr_texture));
-    s->textures[0] = (struct dr_texture){0, DR_WRAP_REPEAT, DR_WRAP_REPEAT};
-    sb_finish(&b);
+        px[i] = (float)(0.2 + 0.05 * (i % 11));
+    struct dr_scene *s = one_texture(&b, sb_image(4, 4, 3, px, 0.0f, true));
     const char *p[] = {"/images/0"};
     struct fd_case c = {"texture", 8, 8, 3, 16, 1e-2, NULL, NULL};
     run_case(&c, s, sb_camera(dr_v3(0, 1.2, 0.8), dr_v3(0, 0, 0), 60), p, 1);
@@ -487,17 +491,10 @@ static void dark_texels(void)
     glow.emissive_strength = 20.0;
     glow.emissive_tex.texture = 0;
     sb_quad(&b, dr_v3(-0.5, 1.5, 0.5), dr_v3(0, 0, -1), dr_v3(1, 0, 0), sb_material(&b, glow));
-    struct dr_scene *s = b.s;
-    s->n_images = 1;
-    s->images = calloc(1, sizeof(struct dr_image));
     float px[8 * 8 * 3] = {0};
     for (int c = 0; c < 3; c++)
         px[3 * (2 * 8 + 5) + c] = 1.0f;
-    s->images[0] = sb_image(8, 8, 3, px, 0.0f, true);
-    s->n_textures = 1;
-    s->textures = calloc(1, sizeof(struct dr_texture));
-    s->textures[0] = (struct dr_texture){0, DR_WRAP_REPEAT, DR_WRAP_REPEAT};
-    sb_finish(&b);
+    struct dr_scene *s = one_texture(&b, sb_image(8, 8, 3, px, 0.0f, true));
     const char *p[] = {"/images/0"};
     struct fd_case c = {"dark-texels", 16, 8, 3, 16, 1e-2, NULL, NULL};
     run_case(&c, s, sb_camera(dr_v3(0, 1, 2), dr_v3(0, 0, 0), 50), p, 1);
