@@ -4,6 +4,7 @@
 #include <math.h>
 #include <stdlib.h>
 
+#include "geometry.h"
 #include "image.h"
 
 struct dr_emission_grid {
@@ -120,31 +121,16 @@ static void cells(const struct dr_emission_grid *g, int cx0, int cx1, int cy0, i
     *lit += (uint64_t)g->lit[d] - g->lit[b] - g->lit[c] + g->lit[a];
 }
 
-/* The texture coordinates r looks up at vertex k of tri (dr_texref_uv at
- * that vertex: its TEXCOORD set, 0 where the triangle has none, through
- * the transform). */
-static void vertex_uv(const struct dr_mesh *m, const struct dr_texref *r, uint32_t tri, int k, double uv[2])
-{
-    const uint32_t v = m->indices[3 * (size_t)tri + (size_t)k];
-    const float *t = r->texcoord == 1 ? (m->uvs1 ? m->uvs1 + 2 * (size_t)v : NULL)
-                                      : (m->uvs && (m->flags[tri] & DR_TRI_HAS_UVS) ? m->uvs + 2 * (size_t)v : NULL);
-    const double s[2] = {t ? t[0] : 0.0, t ? t[1] : 0.0};
-    if (!r->transformed) {
-        uv[0] = s[0], uv[1] = s[1];
-        return;
-    }
-    const double *x = r->xf;
-    uv[0] = x[0] * s[0] + x[1] * s[1] + x[2];
-    uv[1] = x[3] * s[0] + x[4] * s[1] + x[5];
-}
-
 bool dr_emission_footprint(const struct dr_emission_grid *g, const struct dr_mesh *m, const struct dr_texref *r,
                            const struct dr_texture *tex, uint32_t tri, double *mean)
 {
     double u0 = INFINITY, u1 = -INFINITY, v0 = INFINITY, v1 = -INFINITY;
+    const double corner[3][2] = {{0.0, 0.0}, {1.0, 0.0}, {0.0, 1.0}};   /* (b1, b2) of the vertices */
     for (int k = 0; k < 3; k++) {
+        struct dr_hit h;   /* the lookup's own uv at the vertex: its set, through its transform */
         double uv[2];
-        vertex_uv(m, r, tri, k, uv);
+        dr_hit_at(m, tri, corner[k][0], corner[k][1], &h);
+        dr_texref_uv(m, r, &h, uv);
         u0 = fmin(u0, uv[0]), u1 = fmax(u1, uv[0]);
         v0 = fmin(v0, uv[1]), v1 = fmax(v1, uv[1]);
     }

@@ -648,7 +648,7 @@ bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls
         atten *= spot_falloff(l, -dr_dot(out->wi, l->direction));
     out->atten = atten;
     out->radiance = dr_scale(I, atten);
-    out->valid = true;
+    out->valid = atten > 0.0;   /* (out of range or cone: no light, and none for any parameter) */
     return atten > 0.0;
 }
 
