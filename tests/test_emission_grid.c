@@ -14,6 +14,7 @@
 #include <math.h>
 #include <stdlib.h>
 
+#include "cdf.h"
 #include "geometry.h"
 #include "lights.h"
 #include "sampler.h"
@@ -73,6 +74,12 @@ static void scatter(struct sb *b, struct dr_sampler *smp, int mat, int n)
     }
 }
 
+/* Does material m emit (factor x strength not black)? */
+static bool emits(const struct dr_material *m)
+{
+    return !dr_is_black(dr_scale(m->emissive_factor, m->emissive_strength));
+}
+
 /* Every triangle left out of the light table emits exactly 0 at its
  * vertices, edge midpoints and 64 random points. Counts left out and kept. */
 static void left_out_emit_nothing(const struct dr_scene *s, struct dr_sampler *smp, int *out, int *kept)
@@ -81,8 +88,7 @@ static void left_out_emit_nothing(const struct dr_scene *s, struct dr_sampler *s
     int bad = 0;
     *out = *kept = 0;
     for (uint32_t t = 0; t < s->mesh.n_triangles; t++) {
-        const struct dr_material *mat = &s->materials[s->mesh.material[t]];
-        if (dr_is_black(dr_scale(mat->emissive_factor, mat->emissive_strength)))
+        if (!emits(&s->materials[s->mesh.material[t]]))
             continue;
         if (dr_light_pdf_area_pick(s->light_sampler, t) > 0.0) {
             ++*kept;
@@ -113,7 +119,7 @@ static void irradiance(const struct dr_scene *s, bool nee, int n, double *mean, 
     double total = 0.0, *cdf = malloc(sizeof(double) * (m->n_triangles + 1));
     cdf[0] = 0.0;
     for (uint32_t t = 0; t < m->n_triangles; t++)
-        cdf[t + 1] = total += s->materials[m->material[t]].emissive_strength > 0.0 ? dr_triangle_area(m, t) : 0.0;
+        cdf[t + 1] = total += emits(&s->materials[m->material[t]]) ? dr_triangle_area(m, t) : 0.0;
     struct dr_sampler smp;
     dr_sampler_init(&smp, 7, nee, 0);
     double sum = 0.0, sum2 = 0.0;
@@ -126,15 +132,7 @@ static void irradiance(const struct dr_scene *s, bool nee, int n, double *mean, 
             if (dr_light_sample(s, s->light_sampler, p, u0, u1, u2, &ls) && ls.wi.y > 0.0)
                 f = (ls.radiance.x + ls.radiance.y + ls.radiance.z) * ls.wi.y / ls.pdf;
         } else {
-            double u = dr_sampler_next(&smp) * total;
-            uint32_t lo = 0, hi = m->n_triangles;
-            while (hi - lo > 1) {
-                uint32_t mid = (lo + hi) / 2;
-                if (cdf[mid] <= u)
-                    lo = mid;
-                else
-                    hi = mid;
-            }
+            const int64_t lo = dr_cdf_find(cdf, m->n_triangles, dr_sampler_next(&smp) * total);
             double su = sqrt(dr_sampler_next(&smp)), b2 = dr_sampler_next(&smp) * su;
             struct dr_hit h;
             dr_hit_at(m, lo, 1.0 - su, b2, &h);
