@@ -9,7 +9,9 @@
  *   - a central difference (J(theta + eps dir) - J(theta - eps dir)) / 2 eps from
  *     two renders with the same seed (common random numbers); one-sided,
  *     second order, where theta - eps dir would leave the parameter's range.
- * Means and standard errors over the batches give z = (g - fd) / sqrt(se_g^2 + se_fd^2). */
+ * Means and standard errors over the batches give z = (g - fd) / sqrt(se_g^2 + se_fd^2);
+ * se_fd includes the bound on the differences' rounding error (the image's
+ * float values), which is all that is left where the estimates are exact. */
 #ifndef DR_FDCHECK_H
 #define DR_FDCHECK_H
 
@@ -41,7 +43,7 @@ struct dr_fd_entry {
     char label[DR_PARAM_NAME_MAX + 32];   /* parameter name + component */
     double reverse, reverse_se;           /* estimator, reverse mode */
     double forward, forward_se;           /* estimator, forward mode */
-    double fd, fd_se;                     /* finite differences */
+    double fd, fd_se;                     /* finite differences (se with their rounding bound) */
     double z_reverse, z_forward;
     bool agree;                           /* both |z| <= z_max */
 };
