@@ -112,7 +112,7 @@ static void record_path(const struct dr_scene *sc, const struct dr_accel *acc, c
          * points uniform by area), ending where drender's ends */
         double u_pick = dr_sampler_next(&smp), u1 = dr_sampler_next(&smp), u2 = dr_sampler_next(&smp);
         struct dr_light_sample ls;
-        if (dr_light_sample(sc, sc->light_sampler, h.p, u_pick, u1, u2, &ls) && dr_dot(ls.wi, n) > 0.0) {
+        if (dr_light_sample(sc, sc->light_sampler, h.p, n, u_pick, u1, u2, &ls) && dr_dot(ls.wi, n) > 0.0) {
             dr_vec3 po = dr_offset_origin(&h, n, ls.wi);
             if (isinf(ls.dist))
                 push(rs, po, ls.wi, INFINITY, true, depth);

@@ -266,6 +266,8 @@ static dr_vec3 __attribute__((noinline)) sample_specular_dir(const struct dr_bsd
     return dr_sub(dr_scale(h, 2.0 * dr_dot(wo, h)), wo);
 }
 
+dr_vec3 dr_bsdf_cosine_dir(double u1, double u2) { return sample_cosine(u1, u2); }
+
 /* dr_bsdf_sample_dir, with the diffuse lobe inline for dr_bsdf_sample. */
 static inline __attribute__((always_inline)) dr_vec3 sample_dir(const struct dr_bsdf *b, dr_vec3 wo,
                                                                 enum dr_bsdf_lobe lobe, double u1, double u2)

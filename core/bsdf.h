@@ -63,6 +63,10 @@ double dr_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo);
  * ignores b and wo; the specular map needs wo.z > 0. The result may lie below
  * the surface (dr_bsdf_sample then rejects it). */
 dr_vec3 dr_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lobe, double u1, double u2);
+/* The diffuse lobe's map alone: the cosine-weighted hemisphere about +z
+ * (density z / pi), as dr_bsdf_sample_dir gives it (lights.c samples a
+ * constant sky with it). */
+dr_vec3 dr_bsdf_cosine_dir(double u1, double u2);
 
 /* The cosine sampler's sine and cosine series (bsdf.c: sin t = t + t^3 P(t^2),
  * cos t = 1 - t^2 Q(t^2), coefficients from the highest power), shared with

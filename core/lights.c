@@ -396,20 +396,28 @@ static double env_pdf_uv(const struct dr_light_sampler *ls, double u, double v)
     return st > 0.0 ? p_uv / (2.0 * M_PI * M_PI * st) : 0.0;
 }
 
-static double env_pdf_dir(const struct dr_light_sampler *ls, dr_vec3 dir)
+/* A constant sky's density from a point whose normal makes cosine cos_from
+ * with the direction (sample_env). */
+static double sky_pdf(double cos_from)
+{
+    return cos_from >= 0.0 ? cos_from / M_PI : 1.0 / (4.0 * M_PI);
+}
+
+static double env_pdf_dir(const struct dr_light_sampler *ls, dr_vec3 dir, double cos_from)
 {
     if (!ls->env_marginal)
-        return 1.0 / (4.0 * M_PI);
+        return sky_pdf(cos_from);
     double u, v;
     dr_env_dir_to_uv(dir, &u, &v);
     return env_pdf_uv(ls, u, v);
 }
 
-dr_vec3 dr_env_radiance_pdf(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 dir, double *pdf)
+dr_vec3 dr_env_radiance_pdf(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 dir,
+                            double cos_from, double *pdf)
 {
     if (!s->env.map.data || !ls->env_marginal) {
         if (pdf)
-            *pdf = dr_light_pdf_env(s, ls, dir);
+            *pdf = dr_light_pdf_env(s, ls, dir, cos_from);
         return dr_env_radiance(s, dir);
     }
     double u, v;
@@ -419,12 +427,12 @@ dr_vec3 dr_env_radiance_pdf(const struct dr_scene *s, const struct dr_light_samp
     return env_radiance_uv(s, u, v);
 }
 
-double dr_light_pdf_env(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 dir)
+double dr_light_pdf_env(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 dir, double cos_from)
 {
     (void)s;
     if (ls->env_entry < 0 || ls->n_entries == 0)
         return 0.0;
-    return ls->pick[ls->env_entry] * env_pdf_dir(ls, dir);
+    return ls->pick[ls->env_entry] * env_pdf_dir(ls, dir, cos_from);
 }
 
 double dr_light_pdf_area_pick(const struct dr_light_sampler *ls, int64_t tri) { return ls->tri_pick[tri]; }
@@ -539,13 +547,20 @@ static double range_window(double range, double dist)
     return w * w;
 }
 
-static bool sample_env(const struct dr_scene *s, const struct dr_light_sampler *ls, double u1, double u2,
+static bool sample_env(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 n, double u1, double u2,
                        struct dr_light_sample *out)
 {
     dr_vec3 dir;
     double pdf;
-    if (!ls->env_marginal) {
-        /* constant radiance: uniform sphere */
+    if (!ls->env_marginal && !dr_is_black(n)) {
+        /* constant radiance seen from a surface: the cosine about its normal
+         * (path_simd.c's env_light_samples: the same operations) */
+        const dr_frame f = dr_frame_from_normal(n);
+        const dr_vec3 local = dr_bsdf_cosine_dir(u1, u2);
+        dir = dr_frame_to_world(&f, local);
+        pdf = sky_pdf(local.z);
+    } else if (!ls->env_marginal) {
+        /* constant radiance in a medium: uniform sphere */
         double z = 1.0 - 2.0 * u1, r = sqrt(dr_max(0.0, 1.0 - z * z)), cos_phi, sin_phi;
         dr_sincos_turn(u2, &sin_phi, &cos_phi);   /* phi = 2 pi u2 */
         dir = dr_v3(r * cos_phi, r * sin_phi, z);
@@ -580,7 +595,7 @@ static bool sample_env(const struct dr_scene *s, const struct dr_light_sampler *
     return !dr_is_black(out->radiance);
 }
 
-bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 p, double u_pick,
+bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 p, dr_vec3 n, double u_pick,
                      double u1, double u2, struct dr_light_sample *out)
 {
     out->env_at.valid = false;
@@ -619,7 +634,7 @@ bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls
         return !dr_is_black(out->radiance);
     }
     if (i == ls->env_entry)
-        return sample_env(s, ls, u1, u2, out);
+        return sample_env(s, ls, n, u1, u2, out);
 
     const struct dr_punctual *l = &s->lights[i - ls->n_emitters];
     dr_vec3 I = dr_scale(l->color, dr_punctual_radiant(l));

@@ -60,8 +60,13 @@ bool dr_light_sampler_empty(const struct dr_light_sampler *ls);
 
 /* Samples a light as seen from point p with three uniforms. False when there
  * is nothing to sample or the sample carries no light (out->valid tells the
- * two apart). */
-bool dr_light_sample(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 p,
+ * two apart). n: the unit geometric normal at p on the side whose light is
+ * gathered, or the zero vector at a point without a surface (in a medium).
+ * A constant sky is sampled by the cosine about n (density cos / pi): next-
+ * event estimation uses no direction below the surface (dr_path_nee_begin
+ * drops them), and on a surface open to the sky the estimate is then exact.
+ * Without n it is sampled uniformly over the sphere. */
+bool dr_light_sample(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 p, dr_vec3 n,
                      double u_pick, double u1, double u2, struct dr_light_sample *out);
 /* Adjoint of the radiance a light sample carries (area, punctual or
  * environment) into that light's requested parameters; none requested: no work. */
@@ -115,8 +120,16 @@ struct dr_env_tables {
     double pick;                        /* the environment entry's probability */
 };
 bool dr_light_env_tables(const struct dr_light_sampler *ls, struct dr_env_tables *t);
-/* Density for an escaping direction (environment). */
-double dr_light_pdf_env(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 dir);
+/* The cosine between a direction and the geometric normal of the surface
+ * point it leaves, on its side, or this where it leaves no surface (the
+ * camera, a point in a medium, a run that samples the sky uniformly:
+ * dr_path_opts' sky_uniform): what dr_light_pdf_env needs of that point. */
+#define DR_NO_NORMAL (-1.0)
+/* Density with which dr_light_sample would give direction dir (the
+ * environment) from a point whose normal makes cosine cos_from with dir
+ * (DR_NO_NORMAL: none). */
+double dr_light_pdf_env(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 dir,
+                        double cos_from);
 
 /* Radiance emitted by the surface at hit towards the side the ray came from
  * (zero on the back of single-sided materials). */
@@ -133,7 +146,7 @@ dr_vec3 dr_env_radiance(const struct dr_scene *scene, dr_vec3 dir);
  * NULL, with the direction's map coordinates computed once (the same values
  * as the two calls: a ray leaving the scene needs both). */
 dr_vec3 dr_env_radiance_pdf(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 dir,
-                            double *pdf);
+                            double cos_from, double *pdf);
 /* Adjoint: d_L into the requested environment colour, strength and texels. */
 void d_env_radiance(const struct dr_scene *scene, const struct dr_param_set *params, dr_vec3 dir, dr_vec3 d_L,
                     struct dr_grad_sink *sink);

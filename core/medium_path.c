@@ -58,13 +58,15 @@ static void draw_vertex_randoms(struct dr_sampler *sampler, int depth, struct dr
 /* Next-event estimation from a surface or medium vertex: the light sample,
  * the BSDF or phase value towards it, and the transmittance to it through
  * media; that and the segment's weight are folded into ls.radiance. */
-static void media_nee(const struct dr_scene *s, const struct dr_param_set *ps, struct dr_path_vertex *v,
+static void media_nee(const struct dr_scene *s, const struct dr_path_opts *opts, struct dr_path_vertex *v,
                       const struct dr_sampler *smp, bool rec, struct dr_ray_counts *counts)
 {
     const struct dr_vertex_randoms *u = &v->u;
     const bool in_medium = v->kind == DR_VERTEX_MEDIUM;
-    const bool carries = dr_light_sample(s, s->light_sampler, v->hit.p, u->light_pick, u->light_u1, u->light_u2, &v->ls);
-    if (!dr_path_light_kept(s, ps, carries, &v->ls))
+    const dr_vec3 n = in_medium ? dr_v3s(0.0) : dr_path_sky_normal(opts, v->ng);   /* (a medium point: no normal) */
+    const bool carries = dr_light_sample(s, s->light_sampler, v->hit.p, n, u->light_pick, u->light_u1, u->light_u2,
+                                         &v->ls);
+    if (!dr_path_light_kept(s, opts->params, carries, &v->ls))
         return;
     double pdf, cosine = 1.0;
     dr_vec3 so = v->hit.p;
@@ -121,7 +123,7 @@ static bool medium_vertex(const struct dr_scene *s, const struct dr_path_opts *o
     v->wo = dr_neg(st->d);
     draw_vertex_randoms(sampler, st->depth, &v->u);
     if (opts->stages & DR_STAGE_NEE)
-        media_nee(s, opts->params, v, sampler, recording(opts, v), counts);
+        media_nee(s, opts, v, sampler, recording(opts, v), counts);
 
     dr_vec3 wi;
     double pdf = dr_hg_sample(s->media[v->medium].g, st->d, v->u.bsdf_u1, v->u.bsdf_u2, &wi);
@@ -145,6 +147,7 @@ static bool medium_vertex(const struct dr_scene *s, const struct dr_path_opts *o
     v->cont = true;
     st->beta = dr_scale(st->beta, 1.0 / q);
     st->prev_pdf = pdf;
+    st->prev_cos = DR_NO_NORMAL;
     st->prev_p = p;
     st->o = p;
     st->d = wi;
@@ -162,7 +165,7 @@ static bool surface_vertex(const struct dr_scene *s, const struct dr_path_opts *
     if (!dr_path_stage_material(s, opts, st, sampler, v))
         return false;
     if (opts->stages & DR_STAGE_NEE)
-        media_nee(s, opts->params, v, sampler, recording(opts, v), counts);
+        media_nee(s, opts, v, sampler, recording(opts, v), counts);
     return dr_path_stage_continue(opts, st, v);
 }
 
@@ -210,6 +213,7 @@ static bool dielectric_vertex(const struct dr_scene *s, const struct dr_path_opt
     v->cont = true;
     st->beta = dr_scale(st->beta, w);
     st->prev_pdf = INFINITY;
+    st->prev_cos = DR_NO_NORMAL;   /* (weight 1 whatever the light's density) */
     st->prev_p = h->p;
     st->o = dr_offset_origin(h, h->ng, wi);
     st->d = wi;

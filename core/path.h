@@ -92,6 +92,10 @@ struct dr_path_opts {
     enum dr_medium_grad medium_grad;
     unsigned stages;                     /* enum dr_path_stage bits (dr_path_plan) */
     const struct dr_param_set *params;   /* NULL: primal only (no substitution) */
+    bool sky_uniform;                    /* sample a constant sky over the sphere, not by the cosine
+                                            about the normal (dr_light_sample): the attached and
+                                            derivative samplings' adjoints take its density as
+                                            constant along the direction */
 };
 
 /* The stages a scene and a parameter set (NULL: none) call for. */
@@ -149,6 +153,7 @@ struct dr_path_vertex {
     dr_vec3 d;                 /* direction of the ray that arrived here */
     dr_vec3 o;                 /* and its origin */
     double prev_pdf;           /* the walker's state on arrival (dr_path_state) */
+    double prev_cos;
     dr_vec3 prev_p;
     bool media;                /* from the medium walker (medium_path.c): seg and nee_tr hold */
     dr_vec3 seg;               /* spectral MIS weight change over the segment that arrived
@@ -294,6 +299,8 @@ void d_path_vertex_attached(const struct dr_scene *scene, const struct dr_param_
 struct dr_path_state {
     dr_vec3 o, d;            /* the next ray */
     double prev_pdf;         /* BSDF density of d (0: camera ray) */
+    double prev_cos;         /* d's cosine to the geometric normal of the point it left (lights.h:
+                                DR_NO_NORMAL: the camera, a point in a medium, sky_uniform) */
     dr_vec3 prev_p;
     int depth;               /* segments traced so far */
     dr_vec3 beta;            /* tracing throughput (with substitutes) */
@@ -314,7 +321,7 @@ bool dr_path_step(const struct dr_scene *scene, const struct dr_path_opts *opts,
 /* Next-event estimation at a shaded surface vertex: samples a light with the
  * vertex's random numbers, casts the shadow ray, and fills v->nee, v->ls,
  * v->nee_wi, v->nee_f, v->nee_scale. */
-void dr_path_nee(const struct dr_scene *scene, const struct dr_param_set *params, struct dr_path_vertex *v,
+void dr_path_nee(const struct dr_scene *scene, const struct dr_path_opts *opts, struct dr_path_vertex *v,
                  struct dr_ray_counts *counts);
 
 /* ---- the step cut at its ray queries (for a packet tracer: render.c) ----
@@ -357,7 +364,7 @@ enum dr_step_next dr_path_step_shade(const struct dr_scene *scene, const struct 
                                      struct dr_path_vertex *v, int64_t tri, struct dr_shadow_ray *shadow);
 /* Next-event estimation in two halves around the shadow ray's query. begin:
  * false when no ray is needed (and nothing contributes). */
-bool dr_path_nee_begin(const struct dr_scene *scene, const struct dr_param_set *params, struct dr_path_vertex *v,
+bool dr_path_nee_begin(const struct dr_scene *scene, const struct dr_path_opts *opts, struct dr_path_vertex *v,
                        struct dr_shadow_ray *shadow);
 void dr_path_nee_end(const struct dr_scene *scene, struct dr_path_vertex *v, const struct dr_shadow_ray *shadow,
                      bool occluded);
@@ -369,11 +376,23 @@ dr_vec3 dr_path_radiance(const struct dr_scene *scene, const struct dr_path_opts
 
 /* What a ray leaving the scene at vertex `depth` sees along d: the
  * environment's radiance, and in emit_w its MIS weight against next-event
- * estimation of the environment (prev_pdf: the BSDF's pdf of d). The
- * escaped stage's maths; the arrays' escaped paths call it directly
- * (wave_soa.c). */
-dr_vec3 dr_path_escaped_radiance(const struct dr_scene *scene, int depth, double prev_pdf, dr_vec3 d,
+ * estimation of the environment (prev_pdf: the BSDF's pdf of d; prev_cos:
+ * dr_path_state's). The escaped stage's maths; the arrays' escaped paths
+ * call it directly (wave_soa.c). */
+dr_vec3 dr_path_escaped_radiance(const struct dr_scene *scene, int depth, double prev_pdf, double prev_cos, dr_vec3 d,
                                  double *emit_w);
+/* The prev_cos a ray along d leaving a surface point with geometric normal
+ * ng (on d's side) hands on, and the normal next-event estimation samples
+ * a constant sky about there (the zero vector where it samples it
+ * uniformly). */
+static inline double dr_path_leaving_cos(const struct dr_path_opts *opts, dr_vec3 ng, dr_vec3 d)
+{
+    return opts->sky_uniform ? DR_NO_NORMAL : dr_dot(d, ng);
+}
+static inline dr_vec3 dr_path_sky_normal(const struct dr_path_opts *opts, dr_vec3 ng)
+{
+    return opts->sky_uniform ? dr_v3s(0.0) : ng;
+}
 
 /* The stages, for the medium walker (medium_path.c), which strings them
  * together with free-flight sampling and boundary crossings. */

@@ -10,7 +10,9 @@
  *   nee      light sample at p; f(wo, wi_l), |cos| mis / pdf  -> d_p, d_wo, d_frame
  *   continue wi = T(u, bsdf, wo); t = f |cos| / pdf / q; next ray (p, frame wi)
  * An escaped vertex has only Le(d) * mis(prev_pdf, pdf_env(d)); pdf_env is
- * piecewise constant in d. */
+ * piecewise constant in d: a constant sky's is sampled uniformly in the
+ * runs that take these adjoints (dr_path_opts' sky_uniform), not by the
+ * cosine about the previous vertex's normal, whose density moves with d. */
 #include "path.h"
 
 #include <string.h>
@@ -61,8 +63,9 @@ static void emission_adjoint(const struct dr_scene *s, const struct dr_param_set
     if (v->kind == DR_VERTEX_ESCAPED) {
         d_env_radiance(s, ps, v->d, d_Le, sink);
         d_env_radiance_dir(s, v->d, d_Le, &d_this->d);
-        if (v->depth > 1)   /* pdf_env is constant within a map cell */
-            d_mis_power(v->prev_pdf, dr_light_pdf_env(s, s->light_sampler, v->d), d_w, &d_this->prev_pdf, NULL);
+        if (v->depth > 1)   /* pdf_env is constant within a map cell (and sky_uniform) */
+            d_mis_power(v->prev_pdf, dr_light_pdf_env(s, s->light_sampler, v->d, v->prev_cos), d_w, &d_this->prev_pdf,
+                        NULL);
         return;
     }
     d_emission(s, ps, &v->hit, d_Le, sink);

@@ -739,8 +739,8 @@ bool dr_path8_env_eight(const struct dr_scene *s)
     return !s->env.map.data || dr_light_env_tables(s->light_sampler, &t);
 }
 
-bool dr_path8_escaped(const struct dr_scene *s, dr_m8 on, dr_v3x8 d, dr_f8 depth, dr_f8 prev_pdf, dr_v3x8 *Le,
-                      dr_f8 *emit_w, struct dr_env8_lookup *at)
+bool dr_path8_escaped(const struct dr_scene *s, dr_m8 on, dr_v3x8 d, dr_f8 depth, dr_f8 prev_pdf,
+                      dr_f8 prev_cos, dr_v3x8 *Le, dr_f8 *emit_w, struct dr_env8_lookup *at)
 {
     const dr_m8 first = dr_f8_eq(depth, dr_f8s(1.0));   /* (the camera ray's: weight 1, no density) */
     struct dr_env_tables t;
@@ -750,23 +750,28 @@ bool dr_path8_escaped(const struct dr_scene *s, dr_m8 on, dr_v3x8 d, dr_f8 depth
         *emit_w = dr_f8_sel(first, dr_f8s(1.0), mis_power(prev_pdf, pdf));
         return at != NULL;
     }
-    /* any direction: without a map neither depends on it */
+    /* without a map the radiance is the same in every direction, and the
+     * density dr_light_pdf_env's: pick cos / pi, or pick / 4 pi without a
+     * normal (the same operations) */
     const dr_vec3 up = dr_v3(0.0, 0.0, 1.0), L = dr_env_radiance(s, up);
-    const double pdf = dr_light_pdf_env(s, s->light_sampler, up);
+    struct dr_light_tables lt;
+    const double pick = dr_light_tables(s->light_sampler, &lt) && lt.env_uniform_entry >= 0
+                            ? lt.pick[lt.env_uniform_entry] : 0.0;
+    const dr_f8 pdf = pick * dr_f8_sel(dr_f8_ge(prev_cos, dr_f8s(0.0)), prev_cos / M_PI, dr_f8s(1.0 / (4.0 * M_PI)));
     *Le = (dr_v3x8){dr_f8s(L.x), dr_f8s(L.y), dr_f8s(L.z)};
-    *emit_w = dr_f8_sel(first, dr_f8s(1.0), mis_power(prev_pdf, dr_f8s(pdf)));
+    *emit_w = dr_f8_sel(first, dr_f8s(1.0), mis_power(prev_pdf, pdf));
     return false;
 }
 
 dr_v3x8 dr_path8_escaped_term(const struct dr_scene *s, const struct dr_path_opts *opts, dr_m8 on, dr_v3x8 d,
-                              dr_f8 depth, dr_f8 prev_pdf)
+                              dr_f8 depth, dr_f8 prev_pdf, dr_f8 prev_cos)
 {
     const dr_v3x8 zero = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
     if (!(opts->stages & DR_STAGE_ENV))
         return zero;
     dr_v3x8 Le;
     dr_f8 w;
-    dr_path8_escaped(s, on, d, depth, prev_pdf, &Le, &w, NULL);
+    dr_path8_escaped(s, on, d, depth, prev_pdf, prev_cos, &Le, &w, NULL);
     return dr_v3x8_sel(on, (dr_v3x8){Le.x * w, Le.y * w, Le.z * w}, zero);   /* (dr_path_vertex_term's) */
 }
 
@@ -878,27 +883,42 @@ static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *
 }
 
 /* The lanes that picked a constant environment: lights.c's sample_env
- * (uniform over the sphere, the radiance the same in every direction)
- * eight-wide, the same operations. */
-static void env_light_samples(const struct dr_scene *s, const struct dr_light_tables *lt, dr_m8 env, dr_f8 u1,
-                              dr_f8 u2, dr_m8 *ok, struct light8 *out)
+ * eight-wide, the same operations: the cosine about the geometric normal ng
+ * (or, with uniform, over the sphere); the radiance is the same in every
+ * direction. */
+static void env_light_samples(const struct dr_scene *s, const struct dr_light_tables *lt, dr_m8 env, dr_v3x8 ng,
+                              bool uniform, dr_f8 u1, dr_f8 u2, dr_m8 *ok, struct light8 *out)
 {
-    dr_f8 z = 1.0 - 2.0 * u1, r = dr_f8_sqrt(dr_f8_max(dr_f8s(0.0), 1.0 - z * z)), cos_phi, sin_phi;
-    dr_f8_sincos_turn(u2, &sin_phi, &cos_phi);   /* phi = 2 pi u2 */
+    dr_v3x8 wi;
+    dr_f8 pdf;
+    if (uniform) {
+        dr_f8 z = 1.0 - 2.0 * u1, r = dr_f8_sqrt(dr_f8_max(dr_f8s(0.0), 1.0 - z * z)), cos_phi, sin_phi;
+        dr_f8_sincos_turn(u2, &sin_phi, &cos_phi);   /* phi = 2 pi u2 */
+        wi = (dr_v3x8){r * cos_phi, r * sin_phi, z};
+        pdf = dr_f8s(1.0 / (4.0 * M_PI));
+    } else {
+        dr_v3x8 fs, ft;
+        frame_from_normal(ng, &fs, &ft);
+        const dr_v3x8 local = sample_cosine(u1, u2);
+        wi = to_world(fs, ft, ng, local);
+        pdf = local.z / M_PI;   /* (sky_pdf: the lifted disk's z is not negative) */
+    }
     const dr_vec3 Le = dr_env_radiance(s, dr_v3(0.0, 0.0, 1.0));   /* (any direction: no map) */
     const double pick = lt->pick[lt->env_uniform_entry];
     const dr_v3x8 zero = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
-    out->wi = dr_v3x8_sel(env, (dr_v3x8){r * cos_phi, r * sin_phi, z}, out->wi);
+    out->wi = dr_v3x8_sel(env, wi, out->wi);
     out->radiance = dr_v3x8_sel(env, (dr_v3x8){dr_f8s(Le.x), dr_f8s(Le.y), dr_f8s(Le.z)}, out->radiance);
     out->target = dr_v3x8_sel(env, zero, out->target);
-    out->pdf = dr_f8_sel(env, dr_f8s(1.0 / (4.0 * M_PI) * pick), out->pdf);
+    out->pdf = dr_f8_sel(env, pdf * pick, out->pdf);
     out->infinite |= env;
     out->delta &= ~env;
     /* dr_light_sample's checks: a zero pick (a zero-strength environment)
-     * samples nothing; black radiance carries no light (the fields are then
-     * not read) unless its derivative is asked (dr_path_light_kept) */
-    const dr_m8 keep = dr_is_black(Le) ? out->diff : env;
-    *ok = pick > 0.0 ? (*ok & ~env) | (env & keep) : *ok & ~env;
+     * or a zero density (a direction in the surface) samples nothing; black
+     * radiance carries no light (the fields are then not read) unless its
+     * derivative is asked (dr_path_light_kept) */
+    const dr_m8 made = env & dr_f8_gt(pdf, dr_f8s(0.0));
+    const dr_m8 keep = dr_is_black(Le) ? out->diff & made : made;
+    *ok = pick > 0.0 ? (*ok & ~env) | keep : *ok & ~env;
 }
 
 /* The lanes that picked an environment map: dr_light_sample's sample_env
@@ -927,14 +947,15 @@ static void env_map_samples(const struct dr_scene *s, dr_m8 env_map, dr_f8 u1, d
 }
 
 /* The lanes that picked a punctual light: dr_light_sample. */
-static void other_light_samples(const struct dr_scene *s, const bool *other, dr_v3x8 p, dr_f8 u_pick, dr_f8 u1,
-                                dr_f8 u2, dr_m8 *ok, struct light8 *out)
+static void other_light_samples(const struct dr_scene *s, const bool *other, dr_v3x8 p, dr_v3x8 ng, dr_f8 u_pick,
+                                dr_f8 u1, dr_f8 u2, dr_m8 *ok, struct light8 *out)
 {
     for (int i = 0; i < DR_SIMD_W; i++) {
         if (!other[i])
             continue;
         struct dr_light_sample ls = {.dist = 0.0};   /* (its fields stay masked when it fails) */
-        const bool carries = dr_light_sample(s, s->light_sampler, dr_v3x8_get(&p, i), u_pick[i], u1[i], u2[i], &ls);
+        const bool carries = dr_light_sample(s, s->light_sampler, dr_v3x8_get(&p, i), dr_v3x8_get(&ng, i), u_pick[i],
+                                             u1[i], u2[i], &ls);
         (*ok)[i] = carries || (ls.valid && out->diff[i]) ? -1 : 0;   /* (dr_path_light_kept) */
         set_lane(&out->wi, i, ls.wi);
         set_lane(&out->target, i, ls.target);
@@ -953,7 +974,7 @@ static void other_light_samples(const struct dr_scene *s, const bool *other, dr_
  * sample carries light. */
 static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables *lt, struct lanes *L,
                           const struct dr_path8_ahead *ahead, const struct dr_param_set *ps, bool record, dr_v3x8 p,
-                          dr_f8 u_pick, dr_f8 u1, dr_f8 u2, struct light8 *out)
+                          dr_v3x8 ng, bool sky_uniform, dr_f8 u_pick, dr_f8 u1, dr_f8 u2, struct light8 *out)
 {
     const struct dr_mesh *m = &s->mesh;
     dr_f8 pick, area;
@@ -1005,10 +1026,10 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     ok &= ~dr_v3x8_is_black(out->radiance) | out->diff;   /* (dr_path_light_kept) */
     out->infinite = out->delta = (dr_m8){0};
     if (dr_m8_any(env))
-        env_light_samples(s, lt, env, u1, u2, &ok, out);
+        env_light_samples(s, lt, env, ng, sky_uniform, u1, u2, &ok, out);
     if (dr_m8_any(env_map))
         env_map_samples(s, env_map, u1, u2, &ok, out);
-    other_light_samples(s, other, p, u_pick, u1, u2, &ok, out);
+    other_light_samples(s, other, p, ng, u_pick, u1, u2, &ok, out);
     return ok;
 }
 
@@ -1341,7 +1362,8 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     /* the record of which light: where d_light_radiance may read it (dr_path8_continue; a
      * differentiated vertex's only where the caller takes the vertex whole: diff_hit) */
     const bool record = ps && (ps->radiance_active || (in->diff_hit && dr_m8_any(g->diff)));
-    dr_m8 ok = light_sample(s, &lt, &L, in->ahead, opts->params, record, g->p, u_pick, u1, u2, &ls);
+    dr_m8 ok = light_sample(s, &lt, &L, in->ahead, opts->params, record, g->p, g->ng, opts->sky_uniform, u_pick,
+                            u1, u2, &ls);
     g->shadow = nee_begin(g, ok, &ls, &g->so, &g->sd) & ~end;
     g->diff_nee = ls.diff;
     if (record)
@@ -1490,6 +1512,7 @@ void dr_path8_continue_lanes(const struct dr_path_opts *opts, const struct dr_pa
     out->o = offset_origin(g->p, g->ng, g->eps, wiw);
     out->d = wiw;
     out->prev_pdf = pdf;
+    out->prev_cos = opts->sky_uniform ? dr_f8s(DR_NO_NORMAL) : dr_v3x8_dot(wiw, g->ng);   /* (dr_path_leaving_cos) */
 }
 
 dr_v3x8 dr_path8_term(const struct dr_path8 *g, const struct dr_path8_out *out)
@@ -1573,6 +1596,7 @@ void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g
         /* the path's next state: one test per lane, not one per field */
         st[i]->beta = dr_v3x8_get(&out.beta, i);
         st[i]->prev_pdf = out.prev_pdf[i];
+        st[i]->prev_cos = out.prev_cos[i];
         st[i]->prev_p = dr_v3x8_get(&g->p, i);
         st[i]->o = dr_v3x8_get(&out.o, i);
         st[i]->d = dr_v3x8_get(&out.d, i);

@@ -344,7 +344,7 @@ static double light_objective(void *c, const double *x)
 {
     struct light_ctx *k = c;
     struct dr_light_sample ls;
-    if (!dr_light_sample(k->s, k->s->light_sampler, v3(x), k->pick, k->u1, k->u2, &ls))
+    if (!dr_light_sample(k->s, k->s->light_sampler, v3(x), dr_v3s(0.0), k->pick, k->u1, k->u2, &ls))
         return NAN;
     return dr_dot(k->w_wi, ls.wi) + k->w_pdf * ls.pdf + dr_dot(k->w_rad, ls.radiance);
 }
@@ -356,7 +356,8 @@ static void test_light_sample(const struct dr_scene *s)
     for (int i = 0; i < 40; i++) {
         struct light_ctx k = {s, (i + 0.5) / 40.0, 0.3, 0.6, rnd3(), rnd3(), rnd()};
         struct dr_light_sample ls;
-        if (!dr_light_sample(s, s->light_sampler, p, k.pick, k.u1, k.u2, &ls))
+        /* (no normal: attached runs sample a constant sky uniformly, dr_path_opts' sky_uniform) */
+        if (!dr_light_sample(s, s->light_sampler, p, dr_v3s(0.0), k.pick, k.u1, k.u2, &ls))
             continue;
         int kind = ls.type == DR_LS_AREA ? 0 : (ls.type == DR_LS_PUNCTUAL ? 1 : 2);
         kinds[kind == 1 && ls.index == 1 ? 3 : kind]++;
