@@ -11,6 +11,7 @@
 #   e. start-up           process start to first ray
 #   l. lighting           time per ray under an environment map / under a constant sky
 #   n. emissive texture   noise and time under a mostly black emissive texture
+#   o. default sky        noise and time of a sample model under the default sky
 #
 # Environment knobs:
 #   BUILD         build directory (default: build)
@@ -427,6 +428,30 @@ else
     echo "l. lighting: $SAMPLE_BOX not found: skipped"
 fi
 
+# The pixel noise of two renders that differ only in their seed: the RMS of
+# their difference over sqrt 2, the mean of the channels; and an image's mean.
+pixel_noise() {
+    oiiotool "$1" "$2" --sub --printstats 2>/dev/null | awk '/StdDev/ { print ($3 + $4 + $5) / 3 / sqrt(2) }'
+}
+image_mean() {
+    oiiotool "$1" --printstats 2>/dev/null | awk '/Stats Avg/ { print ($3 + $4 + $5) / 3 }'
+}
+# Renders SCENE at seeds 1 and 2 (128x128, 64 spp, 2 threads) into
+# $TMP/NAME1.exr, NAME2.exr; sets NOISE_JSON and prints noise, mean, time and
+# noise^2 x seconds (lower is better: the cost of a given accuracy).
+noise_part() {
+    local name=$1 scene=$2 times=() seed
+    for seed in 1 2; do
+        measure "$DRENDER" render "$scene" -o "$TMP/$name$seed.exr" --res 128x128 --spp 64 --threads 2 --seed "$seed" --json
+        times+=("$(calc "$(json_num "$M_OUT" render time)" %.4f)")
+    done
+    local noise mean t vt
+    noise=$(pixel_noise "$TMP/${name}1.exr" "$TMP/${name}2.exr") mean=$(image_mean "$TMP/${name}1.exr")
+    t=$(median "${times[@]}") && vt=$(calc "$noise * $noise * $t" %.4g)
+    printf '   pixel noise %s (image mean %s), render %s s: noise^2 x seconds %s\n' "$noise" "$mean" "$t" "$vt"
+    NOISE_JSON="{\"res\": \"128x128\", \"spp\": 64, \"pixel_noise\": $noise, \"image_mean\": $mean, \"render_seconds\": $t, \"noise2_seconds\": $vt}"
+}
+
 # ---- n. a sparse emissive texture ------------------------------------------
 # Real assets paint their glowing parts into an emissive texture that is black
 # nearly everywhere. A floor lit only by such a panel (2048 triangles, three
@@ -441,18 +466,24 @@ echo "n. sparse emissive texture: noise and time of a floor lit by a mostly blac
 oiiotool --pattern constant:color=0,0,0 512x512 3 --fill:color=1,0.9,0.6 24x24+40+60 \
     --fill:color=0.6,0.9,1 24x24+400+300 --fill:color=1,1,1 16x16+250+450 -d uint8 -o "$TMP/glow.png" >/dev/null
 python3 bench/make_glow_scene.py "$TMP/glow.gltf" glow.png
-glow_s=()
-for seed in 1 2; do
-    measure "$DRENDER" render "$TMP/glow.gltf" -o "$TMP/glow$seed.exr" --res 128x128 --spp 64 --threads 2 --seed "$seed" --json
-    glow_s+=("$(calc "$(json_num "$M_OUT" render time)" %.4f)")
-done
-GLOW_NOISE=$(oiiotool "$TMP/glow1.exr" "$TMP/glow2.exr" --sub --printstats 2>/dev/null |
-    awk '/StdDev/ { print ($3 + $4 + $5) / 3 / sqrt(2) }')
-GLOW_MEAN=$(oiiotool "$TMP/glow1.exr" --printstats 2>/dev/null | awk '/Stats Avg/ { print ($3 + $4 + $5) / 3 }')
-GLOW_T=$(median "${glow_s[@]}")
-GLOW_VT=$(calc "$GLOW_NOISE * $GLOW_NOISE * $GLOW_T" %.4g)
-printf '   pixel noise %s (image mean %s), render %s s: noise^2 x seconds %s\n' "$GLOW_NOISE" "$GLOW_MEAN" "$GLOW_T" "$GLOW_VT"
-GLOW_JSON="{\"res\": \"128x128\", \"spp\": 64, \"pixel_noise\": $GLOW_NOISE, \"image_mean\": $GLOW_MEAN, \"render_seconds\": $GLOW_T, \"noise2_seconds\": $GLOW_VT}"
+noise_part glow "$TMP/glow.gltf"
+GLOW_JSON=$NOISE_JSON
+
+# ---- o. a sample model under the default sky -------------------------------
+# Most glTF files carry no light and render under drender's default sky. The
+# sample Box under it: noise, time and noise^2 x seconds as in part n. Next-
+# event estimation samples a constant sky by the cosine about the normal
+# (lights.c's sample_env; over the whole sphere before, half of the samples
+# below the surface).
+echo
+SKY_JSON=null
+if [[ -f $SAMPLE_BOX ]]; then
+    echo "o. default sky: noise and time of $(basename "$SAMPLE_BOX") under drender's default sky (128x128, 64 spp, 2 threads)"
+    noise_part sky "$SAMPLE_BOX"
+    SKY_JSON=$NOISE_JSON
+else
+    echo "o. default sky: $SAMPLE_BOX not found: skipped"
+fi
 
 # ---- results.json and the noise note ---------------------------------------
 
@@ -473,6 +504,7 @@ OTHER_CORES=$(calc "$OTHER_TOTAL / $WALL_TOTAL" %.2f)
     echo "  \"startup\": $STARTUP_JSON,"
     echo "  \"environment_map\": $ENV_JSON,"
     echo "  \"sparse_emissive_texture\": $GLOW_JSON,"
+    echo "  \"default_sky\": $SKY_JSON,"
     echo "  \"peer\": $PEER_JSON"
     echo "}"
 } >"$OUT/results.json"
