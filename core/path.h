@@ -93,9 +93,9 @@ struct dr_path_opts {
     unsigned stages;                     /* enum dr_path_stage bits (dr_path_plan) */
     const struct dr_param_set *params;   /* NULL: primal only (no substitution) */
     bool sky_uniform;                    /* sample a constant sky over the sphere, not by the cosine
-                                            about the normal (dr_light_sample): the attached and
-                                            derivative samplings' adjoints take its density as
-                                            constant along the direction */
+                                            about the normal (dr_light_sample): attached sampling's
+                                            adjoints take its density as constant along the
+                                            direction (path_attached.c) */
 };
 
 /* The stages a scene and a parameter set (NULL: none) call for. */
