@@ -552,7 +552,7 @@ static bool sample_env(const struct dr_scene *s, const struct dr_light_sampler *
 {
     dr_vec3 dir;
     double pdf;
-    if (!ls->env_marginal && !dr_is_black(n)) {
+    if (!ls->env_marginal && dr_dot(n, n) > 0.0) {   /* (a normal, not the zero vector) */
         /* constant radiance seen from a surface: the cosine about its normal
          * (path_simd.c's env_light_samples: the same operations) */
         const dr_frame f = dr_frame_from_normal(n);

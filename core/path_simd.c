@@ -946,7 +946,8 @@ static void env_map_samples(const struct dr_scene *s, dr_m8 env_map, dr_f8 u1, d
     *ok = (*ok & ~env_map) | carries;
 }
 
-/* The lanes that picked a punctual light: dr_light_sample. */
+/* The lanes that picked a punctual light: dr_light_sample (which reads the
+ * normal ng only for a constant sky, never picked here). */
 static void other_light_samples(const struct dr_scene *s, const bool *other, dr_v3x8 p, dr_v3x8 ng, dr_f8 u_pick,
                                 dr_f8 u1, dr_f8 u2, dr_m8 *ok, struct light8 *out)
 {

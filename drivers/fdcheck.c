@@ -213,8 +213,8 @@ static bool fd_buffers_alloc(struct fd_buffers *b, struct fd_run *r, int K, int6
     r->lo = malloc(sizeof(double) * (size_t)T);
     r->hi = malloc(sizeof(double) * (size_t)T);
     r->rgb = malloc(sizeof(float) * npix * 3);
-    return b->grads && b->dir && b->dimg && b->adj && b->rev && b->fwd && b->fd && b->fd_round && r->theta0 && r->theta && r->lo &&
-           r->hi && r->rgb;
+    return b->grads && b->dir && b->dimg && b->adj && b->rev && b->fwd && b->fd && b->fd_round && r->theta0 &&
+           r->theta && r->lo && r->hi && r->rgb;
 }
 
 int dr_fdcheck(struct dr_scene *scene, const struct dr_camera *camera, const struct dr_param_set *ps,
