@@ -435,6 +435,13 @@ double dr_light_pdf_env(const struct dr_scene *s, const struct dr_light_sampler 
     return ls->pick[ls->env_entry] * env_pdf_dir(ls, dir, cos_from);
 }
 
+double dr_light_pdf_env_dcos(const struct dr_light_sampler *ls, double cos_from)
+{
+    if (ls->env_entry < 0 || ls->n_entries == 0 || ls->env_marginal || !(cos_from >= 0.0))
+        return 0.0;
+    return ls->pick[ls->env_entry] / M_PI;   /* (sky_pdf's slope) */
+}
+
 double dr_light_pdf_area_pick(const struct dr_light_sampler *ls, int64_t tri) { return ls->tri_pick[tri]; }
 
 double dr_light_pdf_area(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 from,

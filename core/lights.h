@@ -130,6 +130,10 @@ bool dr_light_env_tables(const struct dr_light_sampler *ls, struct dr_env_tables
  * (DR_NO_NORMAL: none). */
 double dr_light_pdf_env(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 dir,
                         double cos_from);
+/* Its derivative with respect to cos_from: a constant sky's density is
+ * pick cos / pi where there is a normal; a map's does not depend on it, nor
+ * does the sphere's (DR_NO_NORMAL). */
+double dr_light_pdf_env_dcos(const struct dr_light_sampler *ls, double cos_from);
 
 /* Radiance emitted by the surface at hit towards the side the ray came from
  * (zero on the back of single-sided materials). */

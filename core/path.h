@@ -93,9 +93,8 @@ struct dr_path_opts {
     unsigned stages;                     /* enum dr_path_stage bits (dr_path_plan) */
     const struct dr_param_set *params;   /* NULL: primal only (no substitution) */
     bool sky_uniform;                    /* sample a constant sky over the sphere, not by the cosine
-                                            about the normal (dr_light_sample): attached sampling's
-                                            adjoints take its density as constant along the
-                                            direction (path_attached.c) */
+                                            about the normal (dr_light_sample): the reference strategy
+                                            test_render holds the cosine to; no run of drender sets it */
 };
 
 /* The stages a scene and a parameter set (NULL: none) call for. */
@@ -267,6 +266,8 @@ void d_path_continuation(const struct dr_scene *scene, const struct dr_param_set
 struct dr_d_path_state {
     dr_vec3 o, d;        /* of the arriving ray */
     double prev_pdf;     /* of the BSDF density that sampled d */
+    double prev_cos;     /* of d's cosine to the geometric normal of the point
+                            it left (a constant sky's density, lights.h) */
     dr_vec3 prev_p;      /* of the point that ray left */
 };
 

@@ -9,10 +9,12 @@
  *   material frame(ns), wo = frame^T (-d), bsdf(uv)  -> d_ns, d_d, d_uv
  *   nee      light sample at p; f(wo, wi_l), |cos| mis / pdf  -> d_p, d_wo, d_frame
  *   continue wi = T(u, bsdf, wo); t = f |cos| / pdf / q; next ray (p, frame wi)
- * An escaped vertex has only Le(d) * mis(prev_pdf, pdf_env(d)); pdf_env is
- * piecewise constant in d: a constant sky's is sampled uniformly in the
- * runs that take these adjoints (dr_path_opts' sky_uniform), not by the
- * cosine about the previous vertex's normal, whose density moves with d. */
+ * An escaped vertex has only Le(d) * mis(prev_pdf, pdf_env(d, prev_cos)): a
+ * map's pdf_env is piecewise constant in d; a constant sky's is
+ * cos / pi, with prev_cos = d . ng of the point d left (its adjoint goes
+ * back in the state, and the continuation that sampled d takes it along ng:
+ * ng is constant, no parameter moves geometry). Next-event samples of the
+ * sky are fixed (drawn about the constant ng, density a constant). */
 #include "path.h"
 
 #include <string.h>
@@ -63,9 +65,12 @@ static void emission_adjoint(const struct dr_scene *s, const struct dr_param_set
     if (v->kind == DR_VERTEX_ESCAPED) {
         d_env_radiance(s, ps, v->d, d_Le, sink);
         d_env_radiance_dir(s, v->d, d_Le, &d_this->d);
-        if (v->depth > 1)   /* pdf_env is constant within a map cell (and sky_uniform) */
-            d_mis_power(v->prev_pdf, dr_light_pdf_env(s, s->light_sampler, v->d, v->prev_cos), d_w, &d_this->prev_pdf,
-                        NULL);
+        if (v->depth > 1) {   /* a map's pdf_env is constant within a cell; a sky's is cos / pi */
+            const struct dr_light_sampler *ls = s->light_sampler;
+            double d_pdf_env = 0.0;
+            d_mis_power(v->prev_pdf, dr_light_pdf_env(s, ls, v->d, v->prev_cos), d_w, &d_this->prev_pdf, &d_pdf_env);
+            d_this->prev_cos = d_pdf_env * dr_light_pdf_env_dcos(ls, v->prev_cos);
+        }
         return;
     }
     d_emission(s, ps, &v->hit, d_Le, sink);
@@ -106,7 +111,8 @@ static void nee_adjoint(const struct dr_scene *s, const struct dr_param_set *ps,
 }
 
 /* Continuation: t = f(wo, wi) |wi.z| / pdf(wo, wi) / q (q constant), the next
- * ray leaves p (offset along the constant ng) along frame wi, wi = T(u, bsdf, wo). */
+ * ray leaves p (offset along the constant ng) along frame wi, wi = T(u, bsdf, wo),
+ * with cosine (frame wi) . ng to ng (dr_path_leaving_cos). */
 static void continuation_adjoint(const struct dr_path_vertex *v, dr_vec3 d_t, const struct dr_d_path_state *d_next,
                                  struct vertex_adjoint *a)
 {
@@ -119,7 +125,7 @@ static void continuation_adjoint(const struct dr_path_vertex *v, dr_vec3 d_t, co
     d_bsdf_eval(&v->bsdf, v->wo, v->wi, d_f, &a->bsdf, &a->wo, &d_wi);
     if (d_pdf != 0.0)
         d_bsdf_pdf_fixed_prob(&v->bsdf, v->wo, v->wi, d_pdf, &a->bsdf, &a->wo, &d_wi);
-    d_frame_to_world(&v->frame, v->wi, d_next->d, &d_wi, &a->frame);
+    d_frame_to_world(&v->frame, v->wi, dr_add(d_next->d, dr_scale(v->ng, d_next->prev_cos)), &d_wi, &a->frame);
     a->p = dr_add(a->p, dr_add(d_next->o, d_next->prev_p));
     d_bsdf_sample_dir(&v->bsdf, v->wo, v->lobe, v->u.bsdf_u1, v->u.bsdf_u2, d_wi, &a->bsdf, &a->wo);
 }

@@ -339,13 +339,10 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
         return rc;
     }
     b->view = dr_camera_view(p->camera, dr_film_frame_w(&p->film, p->width), dr_film_frame_h(&p->film, p->height));
-    /* (the attached adjoints take a constant sky's density as constant
-     * along the direction: path_attached.c) */
     const enum dr_sampling run = dr_est_sampling_run(p);
     b->popts = (struct dr_path_opts){.max_depth = p->max_depth, .rr_depth = p->rr_depth,
                                      .stages = dr_path_plan(p->scene, p->params), .params = p->params,
-                                     .medium_grad = p->medium_grad,
-                                     .sky_uniform = run == DR_SAMPLING_ATTACHED || run == DR_SAMPLING_MIS};
+                                     .medium_grad = p->medium_grad};
     b->adjoint = adjoint;
     b->dir = dir;
     b->mis = run == DR_SAMPLING_MIS;

@@ -2,7 +2,8 @@
  * their primals: the hit point recomputed from a ray (point, shading normal,
  * uv w.r.t. origin and direction), the shading frame, texture lookups w.r.t.
  * uv (every wrap mode), materials and emission w.r.t. uv, environment
- * radiance w.r.t. the direction, light samples w.r.t. the shading point
+ * radiance w.r.t. the direction, a constant sky's density w.r.t. the
+ * cosine, light samples w.r.t. the shading point
  * (area, point with a range, spot), the area-light pdf w.r.t. both end
  * points, and the BSDF pdf with the lobe probability held fixed.
  *
@@ -331,6 +332,40 @@ static void test_env(const struct dr_scene *s)
     check_fd("d_env_radiance_dir", env_objective, &k, x, 3, g, 1e-7, 1e-6);
 }
 
+/* A constant sky's density, pick cos / pi about the normal, against its
+ * derivative in the cosine (the escaped vertex's MIS weight moves with the
+ * direction through it); the map's and the sphere's do not move. */
+struct sky_pdf_ctx {
+    const struct dr_scene *s;
+    dr_vec3 dir;
+};
+
+static double sky_pdf_objective(void *c, const double *x)
+{
+    struct sky_pdf_ctx *k = c;
+    return dr_light_pdf_env(k->s, k->s->light_sampler, k->dir, x[0]);
+}
+
+static void test_sky_pdf(const struct dr_scene *with_map)
+{
+    struct sb b;
+    sb_init(&b);
+    struct dr_material e = sb_diffuse(dr_v3s(0.0));
+    e.emissive_factor = dr_v3(4, 4, 4);
+    sb_quad(&b, dr_v3(-0.5, 2.0, 0.5), dr_v3(0, 0, -1), dr_v3(1, 0, 0), sb_material(&b, e));
+    sb_environment(&b, dr_v3(0.9, 1.0, 1.2));
+    struct dr_scene *s = sb_finish(&b);
+    struct sky_pdf_ctx k = {s, dr_normalize(dr_v3(0.3, 0.45, -0.7))};
+    for (double cos = 0.05; cos < 1.0; cos += 0.3) {
+        double x[1] = {cos}, g[1] = {dr_light_pdf_env_dcos(s->light_sampler, cos)};
+        CHECK(g[0] > 0.0 && g[0] < 1.0 / M_PI, "the sky shares the light pick with the area light: slope %g", g[0]);
+        check_fd("dr_light_pdf_env_dcos (constant sky)", sky_pdf_objective, &k, x, 1, g, 1e-6, 1e-9);
+    }
+    CHECK(dr_light_pdf_env_dcos(s->light_sampler, DR_NO_NORMAL) == 0.0, "the sphere's density has no slope");
+    CHECK(dr_light_pdf_env_dcos(with_map->light_sampler, 0.5) == 0.0, "a map's density has no slope in the cosine");
+    dr_scene_destroy(s);
+}
+
 /* ---------------------------------------------------------------- lights */
 
 struct light_ctx {
@@ -356,7 +391,7 @@ static void test_light_sample(const struct dr_scene *s)
     for (int i = 0; i < 40; i++) {
         struct light_ctx k = {s, (i + 0.5) / 40.0, 0.3, 0.6, rnd3(), rnd3(), rnd()};
         struct dr_light_sample ls;
-        /* (no normal: attached runs sample a constant sky uniformly, dr_path_opts' sky_uniform) */
+        /* (no normal: a sky sample over the sphere; about a normal it is as independent of p) */
         if (!dr_light_sample(s, s->light_sampler, p, dr_v3s(0.0), k.pick, k.u1, k.u2, &ls))
             continue;
         int kind = ls.type == DR_LS_AREA ? 0 : (ls.type == DR_LS_PUNCTUAL ? 1 : 2);
@@ -451,6 +486,7 @@ int main(void)
     test_uv(s);
     test_env(s);
     test_light_sample(s);
+    test_sky_pdf(s);
     test_pdf_area(s);
     test_pdf_fixed();
     test_hit_attributes(s);   /* last: it adds vertex colours and uv transforms to s */

@@ -11,8 +11,9 @@
  * those materials in expectation). Scenes: a glossy floor under an area light
  * and a point light, seen directly and via a tilted, smooth-shaded,
  * textured glossy panel (so hit points, shading normals, uv, NEE geometry
- * and emission MIS all move); and a near-specular metal under an
- * environment map. Both modes (reverse, forward) are checked, and prb with
+ * and emission MIS all move); the same surfaces under a constant sky
+ * (whose density moves with the escaping direction); and a near-specular
+ * metal under an environment map. Both modes (reverse, forward) are checked, and prb with
  * the exact inverse Jacobian (--regularize 0) must give tape's number to
  * rounding on every path where the Jacobians are invertible. */
 #include <stdlib.h>
@@ -215,6 +216,40 @@ static void near_specular(void)
     dr_scene_destroy(s);
 }
 
+/* Under a constant sky, which next-event estimation samples by the cosine
+ * about the geometric normal: a BSDF-sampled ray that escapes has the MIS
+ * weight mis(pdf, pick cos / pi), and its cosine to the normal it left
+ * moves with the direction the roughness moves (path_attached.c). A rough
+ * metal floor, a tilted smooth-shaded metal panel and a Lambertian wall. */
+static void sky_room(void)
+{
+    struct sb b;
+    sb_init(&b);
+    int floor = sb_material(&b, glossy_material(dr_v3(0.7, 0.5, 0.3), 1.0, 0.35));
+    int panel = sb_material(&b, glossy_material(dr_v3(0.4, 0.6, 0.8), 1.0, 0.2));
+    int wall = sb_material(&b, sb_diffuse(dr_v3(0.8, 0.7, 0.6)));
+    sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), floor);
+    sb_quad(&b, dr_v3(-2, 0.2, -1.5), dr_v3(4, 0, 0), dr_v3(0, 2.5, -0.8), panel);   /* tris 2, 3 */
+    sb_quad(&b, dr_v3(-2.5, 0, -2), dr_v3(0, 0, 4), dr_v3(0, 3, 0), wall);
+    sb_environment(&b, dr_v3(0.9, 1.0, 1.2));
+    struct dr_scene *s = b.s;
+    for (uint32_t v = 4; v < 8; v++) {   /* smooth normals on the panel, tilted apart */
+        dr_vec3 n = dr_normalize(dr_v3(0.15 * ((v & 1) ? 1 : -1), 0.3, 1.0 + 0.1 * (v & 2)));
+        s->mesh.normals[3 * v] = (float)n.x;
+        s->mesh.normals[3 * v + 1] = (float)n.y;
+        s->mesh.normals[3 * v + 2] = (float)n.z;
+    }
+    s->mesh.flags[2] |= DR_TRI_HAS_NORMALS;
+    s->mesh.flags[3] |= DR_TRI_HAS_NORMALS;
+    sb_finish(&b);
+    struct dr_camera cam = sb_camera(dr_v3(0, 1.2, 2.5), dr_v3(0, 0.3, -0.5), 50);
+    check_paths("sky room, floor rough.", s, &cam, "/materials/0/pbrMetallicRoughness/roughnessFactor", 200, 4,
+                1e-6, 0.95);
+    check_paths("sky room, panel rough.", s, &cam, "/materials/1/pbrMetallicRoughness/roughnessFactor", 200, 4,
+                1e-6, 0.95);
+    dr_scene_destroy(s);
+}
+
 /* The Cornell box: diffuse walls on flat triangles make the vertex
  * Jacobians singular (a diffuse direction forgets the incoming one). With
  * the default --regularize prb recomputes the state adjoint by forward mode
@@ -313,6 +348,7 @@ int main(void)
 {
     glossy_room();
     near_specular();
+    sky_room();
     cornell_singular();
     cross_primal();
     return TEST_END();
