@@ -150,6 +150,14 @@ double dr_bsdf_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi)
     return pdf;
 }
 
+double dr_bsdf_sky_share(const struct dr_bsdf *b, dr_vec3 wo)
+{
+    if (!(wo.z > COS_EPS))
+        return 0.0;
+    double sharp = (0.45 - bsdf_alpha(b)) * (1.0 / 0.15);   /* (path_simd.c's sky_share: the same operations) */
+    return specular_prob(b, wo.z) * (sharp < 0.0 ? 0.0 : sharp > 1.0 ? 1.0 : sharp);
+}
+
 double dr_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo)
 {
     if (!(wo.z > COS_EPS))

@@ -396,28 +396,21 @@ static double env_pdf_uv(const struct dr_light_sampler *ls, double u, double v)
     return st > 0.0 ? p_uv / (2.0 * M_PI * M_PI * st) : 0.0;
 }
 
-/* A constant sky's density from a point whose normal makes cosine cos_from
- * with the direction (sample_env). */
-static double sky_pdf(double cos_from)
-{
-    return cos_from >= 0.0 ? cos_from / M_PI : 1.0 / (4.0 * M_PI);
-}
-
-static double env_pdf_dir(const struct dr_light_sampler *ls, dr_vec3 dir, double cos_from)
+static double env_pdf_dir(const struct dr_light_sampler *ls, dr_vec3 dir, double sky_pdf)
 {
     if (!ls->env_marginal)
-        return sky_pdf(cos_from);
+        return sky_pdf;   /* (a constant sky: the point's own density, dr_light_sample) */
     double u, v;
     dr_env_dir_to_uv(dir, &u, &v);
     return env_pdf_uv(ls, u, v);
 }
 
 dr_vec3 dr_env_radiance_pdf(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 dir,
-                            double cos_from, double *pdf)
+                            double sky_pdf, double *pdf)
 {
     if (!s->env.map.data || !ls->env_marginal) {
         if (pdf)
-            *pdf = dr_light_pdf_env(s, ls, dir, cos_from);
+            *pdf = dr_light_pdf_env(s, ls, dir, sky_pdf);
         return dr_env_radiance(s, dir);
     }
     double u, v;
@@ -427,19 +420,19 @@ dr_vec3 dr_env_radiance_pdf(const struct dr_scene *s, const struct dr_light_samp
     return env_radiance_uv(s, u, v);
 }
 
-double dr_light_pdf_env(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 dir, double cos_from)
+double dr_light_pdf_env(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 dir, double sky_pdf)
 {
     (void)s;
     if (ls->env_entry < 0 || ls->n_entries == 0)
         return 0.0;
-    return ls->pick[ls->env_entry] * env_pdf_dir(ls, dir, cos_from);
+    return ls->pick[ls->env_entry] * env_pdf_dir(ls, dir, sky_pdf);
 }
 
-double dr_light_pdf_env_dcos(const struct dr_light_sampler *ls, double cos_from)
+double dr_light_pdf_env_dsky(const struct dr_light_sampler *ls)
 {
-    if (ls->env_entry < 0 || ls->n_entries == 0 || ls->env_marginal || !(cos_from >= 0.0))
+    if (ls->env_entry < 0 || ls->n_entries == 0 || ls->env_marginal)
         return 0.0;
-    return ls->pick[ls->env_entry] / M_PI;   /* (sky_pdf's slope) */
+    return ls->pick[ls->env_entry];
 }
 
 double dr_light_pdf_area_pick(const struct dr_light_sampler *ls, int64_t tri) { return ls->tri_pick[tri]; }
@@ -554,24 +547,39 @@ static double range_window(double range, double dist)
     return w * w;
 }
 
-static bool sample_env(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 n, double u1, double u2,
-                       struct dr_light_sample *out)
+/* u_lobe: the choice of dr_sky_pdf's half and of the BSDF's lobe, where sky
+ * is given. */
+static bool sample_env(const struct dr_scene *s, const struct dr_light_sampler *ls, const struct dr_sky_bsdf *sky,
+                       double u_lobe, double u1, double u2, struct dr_light_sample *out)
 {
     dr_vec3 dir;
     double pdf;
-    if (!ls->env_marginal && dr_dot(n, n) > 0.0) {   /* (a normal, not the zero vector) */
-        /* constant radiance seen from a surface: the cosine about its normal
+    if (!ls->env_marginal && sky) {
+        /* constant radiance seen from a surface: dr_sky_pdf's mixture
          * (path_simd.c's env_light_samples: the same operations) */
-        const dr_frame f = dr_frame_from_normal(n);
-        const dr_vec3 local = dr_bsdf_cosine_dir(u1, u2);
-        dir = dr_frame_to_world(&f, local);
-        pdf = sky_pdf(local.z);
+        double cos_g, pdf_b;
+        if (u_lobe >= sky->share) {
+            const dr_frame fg = dr_frame_from_normal(sky->ng);
+            const dr_vec3 local = dr_bsdf_cosine_dir(u1, u2);
+            dir = dr_frame_to_world(&fg, local);
+            cos_g = local.z;
+            pdf_b = dr_bsdf_pdf(sky->bsdf, sky->wo, dr_frame_to_local(&sky->frame, dir));
+        } else {
+            struct dr_bsdf_sample bs;
+            if (!dr_bsdf_sample(sky->bsdf, sky->wo, u_lobe / sky->share, u1, u2, &bs))
+                return false;
+            dir = dr_frame_to_world(&sky->frame, bs.wi);
+            cos_g = dr_dot(dir, sky->ng);
+            pdf_b = bs.pdf;
+            out->lobe = bs.lobe;
+        }
+        pdf = dr_sky_pdf(sky->share, cos_g, pdf_b);
     } else if (!ls->env_marginal) {
         /* constant radiance in a medium: uniform sphere */
         double z = 1.0 - 2.0 * u1, r = sqrt(dr_max(0.0, 1.0 - z * z)), cos_phi, sin_phi;
         dr_sincos_turn(u2, &sin_phi, &cos_phi);   /* phi = 2 pi u2 */
         dir = dr_v3(r * cos_phi, r * sin_phi, z);
-        pdf = 1.0 / (4.0 * M_PI);
+        pdf = DR_SKY_SPHERE;
     } else {
         int y = (int)dr_cdf_find_guided(ls->env_marginal, ls->env_h, ls->env_marginal_guide, ls->env_h, u1);
         double py = ls->env_marginal[y + 1] - ls->env_marginal[y];
@@ -602,11 +610,12 @@ static bool sample_env(const struct dr_scene *s, const struct dr_light_sampler *
     return !dr_is_black(out->radiance);
 }
 
-bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 p, dr_vec3 n, double u_pick,
-                     double u1, double u2, struct dr_light_sample *out)
+bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 p,
+                     const struct dr_sky_bsdf *sky, double u_pick, double u1, double u2, struct dr_light_sample *out)
 {
     out->env_at.valid = false;
     out->valid = false;
+    out->lobe = -1;
     if (ls->n_entries == 0)
         return false;
     int64_t i = dr_cdf_find_guided(ls->cdf, ls->n_entries, ls->cdf_guide, ls->n_entries, u_pick);
@@ -640,8 +649,8 @@ bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls
         out->valid = true;
         return !dr_is_black(out->radiance);
     }
-    if (i == ls->env_entry)
-        return sample_env(s, ls, n, u1, u2, out);
+    if (i == ls->env_entry)   /* (u_pick within the sky's share, rescaled: the lobe's choice) */
+        return sample_env(s, ls, sky, dr_clamp((u_pick - ls->cdf[i]) / ls->pick[i], 0.0, 1.0), u1, u2, out);
 
     const struct dr_punctual *l = &s->lights[i - ls->n_emitters];
     dr_vec3 I = dr_scale(l->color, dr_punctual_radiant(l));

@@ -7,6 +7,7 @@
 
 #include <stdbool.h>
 
+#include "bsdf.h"
 #include "geometry.h"
 #include "grad_sink.h"
 #include "params.h"
@@ -40,6 +41,10 @@ struct dr_light_sample {
     int64_t index;     /* emissive triangle, or index into scene->lights */
     double b1, b2;     /* area: barycentrics of the light point */
     double atten;      /* punctual: radiance = color * intensity * atten */
+    int lobe;          /* a constant sky sampled by the BSDF half of dr_sky_pdf: its
+                          lobe (attached sampling moves that sample as the
+                          continuation's; the scalar walker's record, which those
+                          adjoints read); else -1 */
     dr_vec3 target;    /* finite lights: the light point, pushed off the light's
                           surface towards the shading point (see dr_offset_origin);
                           shadow rays end here */
@@ -58,16 +63,36 @@ void dr_light_sampler_destroy(struct dr_light_sampler *ls);
 int dr_light_sampler_texture_averages(const struct dr_light_sampler *ls);
 bool dr_light_sampler_empty(const struct dr_light_sampler *ls);
 
+/* A surface point's scattering (its BSDF, shading frame and wo, local) and
+ * geometric normal on wo's side, by which next-event estimation samples a
+ * constant sky there. */
+struct dr_sky_bsdf {
+    const struct dr_bsdf *bsdf;
+    dr_frame frame;
+    dr_vec3 wo, ng;
+    double share;   /* dr_bsdf_sky_share(bsdf, wo) */
+};
+
+/* The density with which a constant sky is sampled from a surface point
+ * along a direction with cosine cos_g to its geometric normal, where its
+ * BSDF's density is pdf_b: a share (dr_bsdf_sky_share) by the BSDF, the
+ * rest by the cosine (cos / pi). The cosine makes a diffuse surface open to
+ * the sky exact and suits broad lobes; a sharp glossy lobe needs the BSDF's
+ * own samples (measured: bench part o and the note of this change). */
+static inline double dr_sky_pdf(double share, double cos_g, double pdf_b)
+{
+    return (1.0 - share) * ((cos_g > 0.0 ? cos_g : 0.0) * (1.0 / M_PI)) + share * pdf_b;
+}
+
 /* Samples a light as seen from point p with three uniforms. False when there
  * is nothing to sample or the sample carries no light (out->valid tells the
- * two apart). n: the unit geometric normal at p on the side whose light is
- * gathered, or the zero vector at a point without a surface (in a medium).
- * A constant sky is sampled by the cosine about n (density cos / pi): next-
- * event estimation uses no direction below the surface (dr_path_nee_begin
- * drops them), and on a surface open to the sky the estimate is then exact.
- * Without n it is sampled uniformly over the sphere. */
-bool dr_light_sample(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 p, dr_vec3 n,
-                     double u_pick, double u1, double u2, struct dr_light_sample *out);
+ * two apart). A constant sky is sampled from a surface by sky's mixture
+ * (dr_sky_pdf; u_pick rescaled within the sky's share of the pick chooses
+ * the half and the BSDF's lobe); sky NULL (a point in a medium): over the
+ * sphere. */
+bool dr_light_sample(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 p,
+                     const struct dr_sky_bsdf *sky, double u_pick, double u1, double u2,
+                     struct dr_light_sample *out);
 /* Adjoint of the radiance a light sample carries (area, punctual or
  * environment) into that light's requested parameters; none requested: no work. */
 void d_light_radiance(const struct dr_scene *scene, const struct dr_param_set *params,
@@ -120,20 +145,19 @@ struct dr_env_tables {
     double pick;                        /* the environment entry's probability */
 };
 bool dr_light_env_tables(const struct dr_light_sampler *ls, struct dr_env_tables *t);
-/* The cosine between a direction and the geometric normal of the surface
- * point it leaves, on its side, or this where it leaves no surface (the
- * camera, a point in a medium, a run that samples the sky uniformly:
- * dr_path_opts' sky_uniform): what dr_light_pdf_env needs of that point. */
-#define DR_NO_NORMAL (-1.0)
+/* The density per solid angle with which a point's next-event estimation
+ * draws a constant sky along a direction, before the light pick: at a
+ * surface dr_sky_pdf, at a point in a medium (or where a path starts)
+ * this, the sphere's. */
+#define DR_SKY_SPHERE (1.0 / (4.0 * M_PI))
 /* Density with which dr_light_sample would give direction dir (the
- * environment) from a point whose normal makes cosine cos_from with dir
- * (DR_NO_NORMAL: none). */
+ * environment) from a point whose own density for a constant sky along dir
+ * is sky_pdf (DR_SKY_SPHERE: none). */
 double dr_light_pdf_env(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 dir,
-                        double cos_from);
-/* Its derivative with respect to cos_from: a constant sky's density is
- * pick cos / pi where there is a normal; a map's does not depend on it, nor
- * does the sphere's (DR_NO_NORMAL). */
-double dr_light_pdf_env_dcos(const struct dr_light_sampler *ls, double cos_from);
+                        double sky_pdf);
+/* Its derivative with respect to sky_pdf (the sky's pick; a map's density
+ * does not depend on it). */
+double dr_light_pdf_env_dsky(const struct dr_light_sampler *ls);
 
 /* Radiance emitted by the surface at hit towards the side the ray came from
  * (zero on the back of single-sided materials). */
@@ -150,7 +174,7 @@ dr_vec3 dr_env_radiance(const struct dr_scene *scene, dr_vec3 dir);
  * NULL, with the direction's map coordinates computed once (the same values
  * as the two calls: a ray leaving the scene needs both). */
 dr_vec3 dr_env_radiance_pdf(const struct dr_scene *scene, const struct dr_light_sampler *ls, dr_vec3 dir,
-                            double cos_from, double *pdf);
+                            double sky_pdf, double *pdf);
 /* Adjoint: d_L into the requested environment colour, strength and texels. */
 void d_env_radiance(const struct dr_scene *scene, const struct dr_param_set *params, dr_vec3 dir, dr_vec3 d_L,
                     struct dr_grad_sink *sink);

@@ -63,8 +63,9 @@ static void media_nee(const struct dr_scene *s, const struct dr_path_opts *opts,
 {
     const struct dr_vertex_randoms *u = &v->u;
     const bool in_medium = v->kind == DR_VERTEX_MEDIUM;
-    const dr_vec3 n = in_medium ? dr_v3s(0.0) : dr_path_sky_normal(opts, v->ng);   /* (a medium point: no normal) */
-    const bool carries = dr_light_sample(s, s->light_sampler, v->hit.p, n, u->light_pick, u->light_u1, u->light_u2,
+    struct dr_sky_bsdf sky;   /* (a medium point: a sky over the sphere) */
+    const struct dr_sky_bsdf *by = in_medium ? NULL : dr_path_sky_bsdf(opts, v, &sky);
+    const bool carries = dr_light_sample(s, s->light_sampler, v->hit.p, by, u->light_pick, u->light_u1, u->light_u2,
                                          &v->ls);
     if (!dr_path_light_kept(s, opts->params, carries, &v->ls))
         return;
@@ -147,7 +148,7 @@ static bool medium_vertex(const struct dr_scene *s, const struct dr_path_opts *o
     v->cont = true;
     st->beta = dr_scale(st->beta, 1.0 / q);
     st->prev_pdf = pdf;
-    st->prev_cos = DR_NO_NORMAL;
+    st->prev_sky = DR_SKY_SPHERE;
     st->prev_p = p;
     st->o = p;
     st->d = wi;
@@ -213,7 +214,7 @@ static bool dielectric_vertex(const struct dr_scene *s, const struct dr_path_opt
     v->cont = true;
     st->beta = dr_scale(st->beta, w);
     st->prev_pdf = INFINITY;
-    st->prev_cos = DR_NO_NORMAL;   /* (weight 1 whatever the light's density) */
+    st->prev_sky = DR_SKY_SPHERE;   /* (weight 1 whatever the light's density) */
     st->prev_p = h->p;
     st->o = dr_offset_origin(h, h->ng, wi);
     st->d = wi;

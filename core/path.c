@@ -97,7 +97,7 @@ void d_mis_power(double pdf_a, double pdf_b, double d_w, double *d_pa, double *d
 
 void dr_path_start(struct dr_path_state *st, dr_vec3 o, dr_vec3 d)
 {
-    *st = (struct dr_path_state){.o = o, .d = d, .prev_pdf = 0.0, .prev_cos = DR_NO_NORMAL, .prev_p = o, .depth = 0,
+    *st = (struct dr_path_state){.o = o, .d = d, .prev_pdf = 0.0, .prev_sky = DR_SKY_SPHERE, .prev_p = o, .depth = 0,
                                  .beta = dr_v3s(1.0), .ratio = dr_v3s(1.0)};
 }
 
@@ -132,14 +132,14 @@ static void stage_escaped(const struct dr_scene *s, const struct dr_path_opts *o
     if (!(opts->stages & DR_STAGE_ENV))
         return;
     v->emits = true;
-    v->Le = dr_path_escaped_radiance(s, st->depth, st->prev_pdf, st->prev_cos, st->d, &v->emit_w);
+    v->Le = dr_path_escaped_radiance(s, st->depth, st->prev_pdf, st->prev_sky, st->d, &v->emit_w);
 }
 
-dr_vec3 dr_path_escaped_radiance(const struct dr_scene *s, int depth, double prev_pdf, double prev_cos, dr_vec3 d,
+dr_vec3 dr_path_escaped_radiance(const struct dr_scene *s, int depth, double prev_pdf, double prev_sky, dr_vec3 d,
                                  double *emit_w)
 {
     double pdf;
-    dr_vec3 Le = dr_env_radiance_pdf(s, s->light_sampler, d, prev_cos, depth == 1 ? NULL : &pdf);
+    dr_vec3 Le = dr_env_radiance_pdf(s, s->light_sampler, d, prev_sky, depth == 1 ? NULL : &pdf);
     *emit_w = depth == 1 ? 1.0 : dr_mis_power(prev_pdf, pdf);
     return Le;
 }
@@ -221,7 +221,8 @@ bool dr_path_nee_begin(const struct dr_scene *s, const struct dr_path_opts *opts
 {
     const struct dr_hit *hit = &v->hit;
     const struct dr_vertex_randoms *u = &v->u;
-    const bool carries = dr_light_sample(s, s->light_sampler, hit->p, dr_path_sky_normal(opts, v->ng), u->light_pick,
+    struct dr_sky_bsdf sky;
+    const bool carries = dr_light_sample(s, s->light_sampler, hit->p, dr_path_sky_bsdf(opts, v, &sky), u->light_pick,
                                          u->light_u1, u->light_u2, &v->ls);
     if (!dr_path_light_kept(s, opts->params, carries, &v->ls) || dr_dot(v->ls.wi, v->ng) <= 0.0)
         return false;
@@ -322,7 +323,7 @@ static bool stage_continue(const struct dr_path_opts *opts, struct dr_path_state
         if (v->sub[c])
             dr_v3_set(&st->ratio, c, 0.0);
     st->prev_pdf = bs.pdf;
-    st->prev_cos = dr_path_leaving_cos(opts, v->ng, wi);
+    st->prev_sky = dr_path_leaving_sky(opts, v, dr_dot(wi, v->ng), bs.pdf);
     st->prev_p = v->hit.p;
     st->o = dr_offset_origin(&v->hit, v->ng, wi);
     st->d = wi;
@@ -335,7 +336,7 @@ void dr_path_step_begin(struct dr_path_state *st, struct dr_path_vertex *v)
     v->d = st->d;
     v->o = st->o;
     v->prev_pdf = st->prev_pdf;
-    v->prev_cos = st->prev_cos;
+    v->prev_sky = st->prev_sky;
     v->prev_p = st->prev_p;
     v->emits = v->shaded = v->nee = v->cont = v->diff_bsdf = v->media = false;
     v->env_at.valid = false;

@@ -92,9 +92,9 @@ struct dr_path_opts {
     enum dr_medium_grad medium_grad;
     unsigned stages;                     /* enum dr_path_stage bits (dr_path_plan) */
     const struct dr_param_set *params;   /* NULL: primal only (no substitution) */
-    bool sky_uniform;                    /* sample a constant sky over the sphere, not by the cosine
-                                            about the normal (dr_light_sample): the reference strategy
-                                            test_render holds the cosine to; no run of drender sets it */
+    bool sky_uniform;                    /* sample a constant sky over the sphere, not by the BSDF
+                                            (dr_light_sample): the reference strategy test_render
+                                            holds the BSDF's to; no run of drender sets it */
 };
 
 /* The stages a scene and a parameter set (NULL: none) call for. */
@@ -152,7 +152,7 @@ struct dr_path_vertex {
     dr_vec3 d;                 /* direction of the ray that arrived here */
     dr_vec3 o;                 /* and its origin */
     double prev_pdf;           /* the walker's state on arrival (dr_path_state) */
-    double prev_cos;
+    double prev_sky;
     dr_vec3 prev_p;
     bool media;                /* from the medium walker (medium_path.c): seg and nee_tr hold */
     dr_vec3 seg;               /* spectral MIS weight change over the segment that arrived
@@ -266,8 +266,9 @@ void d_path_continuation(const struct dr_scene *scene, const struct dr_param_set
 struct dr_d_path_state {
     dr_vec3 o, d;        /* of the arriving ray */
     double prev_pdf;     /* of the BSDF density that sampled d */
-    double prev_cos;     /* of d's cosine to the geometric normal of the point
-                            it left (a constant sky's density, lights.h) */
+    double prev_sky;     /* of the density with which the point d left samples a
+                            constant sky along d (lights.h: at a surface the
+                            BSDF's, which moves with d and the BSDF as prev_pdf) */
     dr_vec3 prev_p;      /* of the point that ray left */
 };
 
@@ -300,8 +301,9 @@ void d_path_vertex_attached(const struct dr_scene *scene, const struct dr_param_
 struct dr_path_state {
     dr_vec3 o, d;            /* the next ray */
     double prev_pdf;         /* BSDF density of d (0: camera ray) */
-    double prev_cos;         /* d's cosine to the geometric normal of the point it left (lights.h:
-                                DR_NO_NORMAL: the camera, a point in a medium, sky_uniform) */
+    double prev_sky;         /* the density with which the point d left samples a constant sky
+                                along d (lights.h: at a surface the BSDF's, prev_pdf; DR_SKY_SPHERE:
+                                the camera, a point in a medium, sky_uniform) */
     dr_vec3 prev_p;
     int depth;               /* segments traced so far */
     dr_vec3 beta;            /* tracing throughput (with substitutes) */
@@ -377,22 +379,29 @@ dr_vec3 dr_path_radiance(const struct dr_scene *scene, const struct dr_path_opts
 
 /* What a ray leaving the scene at vertex `depth` sees along d: the
  * environment's radiance, and in emit_w its MIS weight against next-event
- * estimation of the environment (prev_pdf: the BSDF's pdf of d; prev_cos:
+ * estimation of the environment (prev_pdf: the BSDF's pdf of d; prev_sky:
  * dr_path_state's). The escaped stage's maths; the arrays' escaped paths
  * call it directly (wave_soa.c). */
-dr_vec3 dr_path_escaped_radiance(const struct dr_scene *scene, int depth, double prev_pdf, double prev_cos, dr_vec3 d,
+dr_vec3 dr_path_escaped_radiance(const struct dr_scene *scene, int depth, double prev_pdf, double prev_sky, dr_vec3 d,
                                  double *emit_w);
-/* The prev_cos a ray along d leaving a surface point with geometric normal
- * ng (on d's side) hands on, and the normal next-event estimation samples
- * a constant sky about there (the zero vector where it samples it
- * uniformly). */
-static inline double dr_path_leaving_cos(const struct dr_path_opts *opts, dr_vec3 ng, dr_vec3 d)
+/* The prev_sky a ray sampled by a surface's BSDF with density pdf, at
+ * cosine cos_g to the geometric normal, hands on, and the scattering by
+ * which next-event estimation samples a constant sky at surface vertex v
+ * (into *sky; NULL where it samples it uniformly). */
+static inline double dr_path_leaving_sky(const struct dr_path_opts *opts, const struct dr_path_vertex *v,
+                                         double cos_g, double pdf)
 {
-    return opts->sky_uniform ? DR_NO_NORMAL : dr_dot(d, ng);
+    if (opts->sky_uniform || !(opts->stages & DR_STAGE_ENV))   /* (no sky: never read) */
+        return DR_SKY_SPHERE;
+    return dr_sky_pdf(dr_bsdf_sky_share(&v->bsdf, v->wo), cos_g, pdf);
 }
-static inline dr_vec3 dr_path_sky_normal(const struct dr_path_opts *opts, dr_vec3 ng)
+static inline const struct dr_sky_bsdf *dr_path_sky_bsdf(const struct dr_path_opts *opts,
+                                                         const struct dr_path_vertex *v, struct dr_sky_bsdf *sky)
 {
-    return opts->sky_uniform ? dr_v3s(0.0) : ng;
+    if (opts->sky_uniform)
+        return NULL;
+    *sky = (struct dr_sky_bsdf){&v->bsdf, v->frame, v->wo, v->ng, dr_bsdf_sky_share(&v->bsdf, v->wo)};
+    return sky;
 }
 
 /* The stages, for the medium walker (medium_path.c), which strings them

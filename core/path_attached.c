@@ -7,14 +7,17 @@
  *   hit      p, ns, uv = hit(o, d)                  d_hit_compute -> d_o, d_d
  *   emission Le(uv) * mis(prev_pdf, pdf_A(prev_p, p)) -> d_prev_pdf, d_prev_p, d_p, d_uv
  *   material frame(ns), wo = frame^T (-d), bsdf(uv)  -> d_ns, d_d, d_uv
- *   nee      light sample at p; f(wo, wi_l), |cos| mis / pdf  -> d_p, d_wo, d_frame
+ *   nee      light sample at p; f(wo, wi_l), |cos| mis / pdf  -> d_p, d_wo, d_frame (a sky: d_bsdf)
  *   continue wi = T(u, bsdf, wo); t = f |cos| / pdf / q; next ray (p, frame wi)
- * An escaped vertex has only Le(d) * mis(prev_pdf, pdf_env(d, prev_cos)): a
- * map's pdf_env is piecewise constant in d; a constant sky's is
- * cos / pi, with prev_cos = d . ng of the point d left (its adjoint goes
- * back in the state, and the continuation that sampled d takes it along ng:
- * ng is constant, no parameter moves geometry). Next-event samples of the
- * sky are fixed (drawn about the constant ng, density a constant). */
+ * An escaped vertex has only Le(d) * mis(prev_pdf, pdf_env(d, prev_sky)): a
+ * map's pdf_env is piecewise constant in d; a constant sky's is pick
+ * prev_sky, prev_sky = (1 - c) cos / pi + c pdf (lights.h's dr_sky_pdf: cos
+ * = d . ng of the point d left, pdf its BSDF's, the share c held at its
+ * primal value as the lobe probability is): the continuation takes its
+ * adjoint into its pdf and, along the constant ng, its direction. A
+ * next-event sample of a constant sky drawn by the BSDF moves as the
+ * continuation's does (its lobe fixed, its direction T(u, bsdf, wo)); one
+ * drawn by the cosine about ng stays. */
 #include "path.h"
 
 #include <string.h>
@@ -65,11 +68,11 @@ static void emission_adjoint(const struct dr_scene *s, const struct dr_param_set
     if (v->kind == DR_VERTEX_ESCAPED) {
         d_env_radiance(s, ps, v->d, d_Le, sink);
         d_env_radiance_dir(s, v->d, d_Le, &d_this->d);
-        if (v->depth > 1) {   /* a map's pdf_env is constant within a cell; a sky's is cos / pi */
+        if (v->depth > 1) {   /* a map's pdf_env is constant within a cell; a sky's is pick prev_sky */
             const struct dr_light_sampler *ls = s->light_sampler;
             double d_pdf_env = 0.0;
-            d_mis_power(v->prev_pdf, dr_light_pdf_env(s, ls, v->d, v->prev_cos), d_w, &d_this->prev_pdf, &d_pdf_env);
-            d_this->prev_cos = d_pdf_env * dr_light_pdf_env_dcos(ls, v->prev_cos);
+            d_mis_power(v->prev_pdf, dr_light_pdf_env(s, ls, v->d, v->prev_sky), d_w, &d_this->prev_pdf, &d_pdf_env);
+            d_this->prev_sky = d_pdf_env * dr_light_pdf_env_dsky(ls);
         }
         return;
     }
@@ -83,7 +86,9 @@ static void emission_adjoint(const struct dr_scene *s, const struct dr_param_set
 }
 
 /* Next-event estimation: e_nee = f(wo, wi_l) L_l |wi_l.z| w / pdf_l, with
- * wi_l = frame^T ls.wi(p), w = mis(pdf_l(p), pdf_bsdf(wo, wi_l)). */
+ * wi_l = frame^T ls.wi(p), w = mis(pdf_l(p), pdf_bsdf(wo, wi_l)); for a
+ * constant sky sampled by the BSDF wi_l = T(u_l, bsdf, wo) and pdf_l =
+ * pick pdf_bsdf(wo, wi_l) instead (the light's world direction plays no part). */
 static void nee_adjoint(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
                         dr_vec3 d_e, struct vertex_adjoint *a, struct dr_grad_sink *sink)
 {
@@ -102,8 +107,19 @@ static void nee_adjoint(const struct dr_scene *s, const struct dr_param_set *ps,
      * the product would drop it: a negative loss adjoint turned this term around) */
     dr_vec3 d_wi = dr_v3(0.0, 0.0, d_scale * w / ls->pdf * copysign(1.0, v->nee_wi.z));
     d_bsdf_eval(&v->bsdf, v->wo, v->nee_wi, d_f, &a->bsdf, &a->wo, &d_wi);
+    /* a constant sky's density pick ((1 - c) cos_g / pi + c pdf_b) (dr_sky_pdf) */
+    const double sky_pick = ls->type == DR_LS_ENV ? dr_light_pdf_env_dsky(s->light_sampler) : 0.0;
+    const double c_sky = sky_pick > 0.0 ? dr_bsdf_sky_share(&v->bsdf, v->wo) : 0.0;
+    d_pdf_b += sky_pick * c_sky * d_pdf_l;
     if (d_pdf_b != 0.0)
         d_bsdf_pdf_fixed_prob(&v->bsdf, v->wo, v->nee_wi, d_pdf_b, &a->bsdf, &a->wo, &d_wi);
+    if (ls->lobe >= 0) {   /* drawn by the BSDF: cos_g = (frame wi) . ng moves with it */
+        const double d_cos = dr_dot(ls->wi, v->ng) > 0.0 ? sky_pick * (1.0 - c_sky) * DR_INV_PI * d_pdf_l : 0.0;
+        d_frame_to_world(&v->frame, v->nee_wi, dr_scale(v->ng, d_cos), &d_wi, &a->frame);
+        d_light_radiance(s, ps, ls, d_rad, sink);
+        d_bsdf_sample_dir(&v->bsdf, v->wo, ls->lobe, v->u.light_u1, v->u.light_u2, d_wi, &a->bsdf, &a->wo);
+        return;
+    }
     dr_vec3 d_ls_wi = dr_v3s(0.0);
     d_frame_to_local(&v->frame, ls->wi, d_wi, &d_ls_wi, &a->frame);
     d_light_radiance(s, ps, ls, d_rad, sink);
@@ -112,7 +128,8 @@ static void nee_adjoint(const struct dr_scene *s, const struct dr_param_set *ps,
 
 /* Continuation: t = f(wo, wi) |wi.z| / pdf(wo, wi) / q (q constant), the next
  * ray leaves p (offset along the constant ng) along frame wi, wi = T(u, bsdf, wo),
- * with cosine (frame wi) . ng to ng (dr_path_leaving_cos). */
+ * and hands on pdf and prev_sky = (1 - c) cos / pi + c pdf, cos = (frame wi) . ng
+ * (dr_path_leaving_sky; attached runs never sample the sky uniformly). */
 static void continuation_adjoint(const struct dr_path_vertex *v, dr_vec3 d_t, const struct dr_d_path_state *d_next,
                                  struct vertex_adjoint *a)
 {
@@ -120,12 +137,14 @@ static void continuation_adjoint(const struct dr_path_vertex *v, dr_vec3 d_t, co
         return;
     dr_vec3 d_f = dr_scale(d_t, v->cos_pdf_q);
     double d_tt = dr_dot(d_f, v->f);   /* sum_c d_t,c t_c */
-    double d_pdf = -d_tt / v->pdf + d_next->prev_pdf;
+    const double c_sky = d_next->prev_sky != 0.0 ? dr_bsdf_sky_share(&v->bsdf, v->wo) : 0.0;
+    double d_pdf = -d_tt / v->pdf + d_next->prev_pdf + c_sky * d_next->prev_sky;
     dr_vec3 d_wi = dr_v3(0.0, 0.0, d_tt / v->wi.z);
     d_bsdf_eval(&v->bsdf, v->wo, v->wi, d_f, &a->bsdf, &a->wo, &d_wi);
     if (d_pdf != 0.0)
         d_bsdf_pdf_fixed_prob(&v->bsdf, v->wo, v->wi, d_pdf, &a->bsdf, &a->wo, &d_wi);
-    d_frame_to_world(&v->frame, v->wi, dr_add(d_next->d, dr_scale(v->ng, d_next->prev_cos)), &d_wi, &a->frame);
+    const dr_vec3 d_cos = dr_scale(v->ng, (1.0 - c_sky) * DR_INV_PI * d_next->prev_sky);
+    d_frame_to_world(&v->frame, v->wi, dr_add(d_next->d, d_cos), &d_wi, &a->frame);
     a->p = dr_add(a->p, dr_add(d_next->o, d_next->prev_p));
     d_bsdf_sample_dir(&v->bsdf, v->wo, v->lobe, v->u.bsdf_u1, v->u.bsdf_u2, d_wi, &a->bsdf, &a->wo);
 }

@@ -45,7 +45,7 @@ static double emitter_light_pdf(const struct dr_scene *s, const struct dr_path_o
     if (!(opts->stages & DR_STAGE_NEE) || !w->emits)
         return 0.0;
     if (w->kind == DR_VERTEX_ESCAPED)
-        return dr_light_pdf_env(s, s->light_sampler, w->d, w->prev_cos);
+        return dr_light_pdf_env(s, s->light_sampler, w->d, w->prev_sky);
     return dr_light_pdf_area(s, s->light_sampler, w->prev_p, &w->hit);
 }
 
@@ -164,7 +164,7 @@ static void rest_radiance(const struct dr_scene *s, const struct dr_path_opts *o
     struct dr_path_vertex w;
     dr_path_start(&st, dr_offset_origin(&v->hit, v->ng, wi), wi);
     st.prev_pdf = pf;
-    st.prev_cos = dr_path_leaving_cos(opts, v->ng, wi);
+    st.prev_sky = dr_path_leaving_sky(opts, v, dr_dot(wi, v->ng), pf);
     st.prev_p = v->hit.p;
     st.depth = v->depth;
     *E = *L_ind = dr_v3s(0.0);

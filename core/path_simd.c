@@ -435,6 +435,23 @@ DR_SIMD_INLINE dr_v3x8 sample_specular_dir(const struct dr_path8 *g, dr_v3x8 wo,
     return dr_v3x8_sub(dr_v3x8_scale(h, 2.0 * dr_v3x8_dot(wo, h)), wo);
 }
 
+/* dr_bsdf_sample on the lanes of on (the continuation's, and next-event
+ * estimation's of a constant sky): the lobe by u_lobe against spec_p, the
+ * local direction *wi, its BSDF value and density; returns the lanes where
+ * wo and wi are above the surface and the density is finite and positive. */
+DR_SIMD_INLINE dr_m8 bsdf_sample(const struct dr_path8 *g, dr_m8 on, dr_f8 u_lobe, dr_f8 u1, dr_f8 u2, dr_v3x8 *wi,
+                                 dr_v3x8 *f, dr_f8 *pdf)
+{
+    dr_m8 ok = on & dr_f8_gt(g->wo_z, dr_f8s(COS_EPS));
+    *wi = sample_cosine(u1, u2);
+    dr_m8 specular = ok & dr_f8_lt(u_lobe, g->spec_p);
+    if (dr_m8_any(specular))
+        *wi = dr_v3x8_sel(specular, sample_specular_dir(g, g->wo, u1, u2), *wi);
+    ok &= dr_f8_gt(wi->z, dr_f8s(COS_EPS));
+    *f = eval_pdf_above(g, g->wo, *wi, g->spec_p, pdf);
+    return ok & dr_f8_gt(*pdf, dr_f8s(0.0)) & dr_f8_lt(*pdf, dr_f8s(INFINITY));
+}
+
 /* ----------------------------------------------------------- eligibility */
 
 /* The run's effects and stages are all the eight-lane stages' (whatever
@@ -740,7 +757,7 @@ bool dr_path8_env_eight(const struct dr_scene *s)
 }
 
 bool dr_path8_escaped(const struct dr_scene *s, dr_m8 on, dr_v3x8 d, dr_f8 depth, dr_f8 prev_pdf,
-                      dr_f8 prev_cos, dr_v3x8 *Le, dr_f8 *emit_w, struct dr_env8_lookup *at)
+                      dr_f8 prev_sky, dr_v3x8 *Le, dr_f8 *emit_w, struct dr_env8_lookup *at)
 {
     const dr_m8 first = dr_f8_eq(depth, dr_f8s(1.0));   /* (the camera ray's: weight 1, no density) */
     struct dr_env_tables t;
@@ -751,27 +768,27 @@ bool dr_path8_escaped(const struct dr_scene *s, dr_m8 on, dr_v3x8 d, dr_f8 depth
         return at != NULL;
     }
     /* without a map the radiance is the same in every direction, and the
-     * density dr_light_pdf_env's: pick cos / pi, or pick / 4 pi without a
-     * normal (the same operations) */
+     * density dr_light_pdf_env's: pick times the point's own (its BSDF's, or
+     * the sphere's) */
     const dr_vec3 up = dr_v3(0.0, 0.0, 1.0), L = dr_env_radiance(s, up);
     struct dr_light_tables lt;
     const double pick = dr_light_tables(s->light_sampler, &lt) && lt.env_uniform_entry >= 0
                             ? lt.pick[lt.env_uniform_entry] : 0.0;
-    const dr_f8 pdf = pick * dr_f8_sel(dr_f8_ge(prev_cos, dr_f8s(0.0)), prev_cos / M_PI, dr_f8s(1.0 / (4.0 * M_PI)));
+    const dr_f8 pdf = pick * prev_sky;
     *Le = (dr_v3x8){dr_f8s(L.x), dr_f8s(L.y), dr_f8s(L.z)};
     *emit_w = dr_f8_sel(first, dr_f8s(1.0), mis_power(prev_pdf, pdf));
     return false;
 }
 
 dr_v3x8 dr_path8_escaped_term(const struct dr_scene *s, const struct dr_path_opts *opts, dr_m8 on, dr_v3x8 d,
-                              dr_f8 depth, dr_f8 prev_pdf, dr_f8 prev_cos)
+                              dr_f8 depth, dr_f8 prev_pdf, dr_f8 prev_sky)
 {
     const dr_v3x8 zero = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
     if (!(opts->stages & DR_STAGE_ENV))
         return zero;
     dr_v3x8 Le;
     dr_f8 w;
-    dr_path8_escaped(s, on, d, depth, prev_pdf, prev_cos, &Le, &w, NULL);
+    dr_path8_escaped(s, on, d, depth, prev_pdf, prev_sky, &Le, &w, NULL);
     return dr_v3x8_sel(on, (dr_v3x8){Le.x * w, Le.y * w, Le.z * w}, zero);   /* (dr_path_vertex_term's) */
 }
 
@@ -882,29 +899,56 @@ static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *
     }
 }
 
-/* The lanes that picked a constant environment: lights.c's sample_env
- * eight-wide, the same operations: the cosine about the geometric normal ng
- * (or, with uniform, over the sphere); the radiance is the same in every
- * direction. */
-static void env_light_samples(const struct dr_scene *s, const struct dr_light_tables *lt, dr_m8 env, dr_v3x8 ng,
-                              bool uniform, dr_f8 u1, dr_f8 u2, dr_m8 *ok, struct light8 *out)
+/* lights.h's dr_sky_pdf and bsdf.c's dr_bsdf_sky_share, the same operations. */
+DR_SIMD_INLINE dr_f8 sky_pdf(dr_f8 share, dr_f8 cos_g, dr_f8 pdf_b)
 {
+    return (1.0 - share) * (dr_f8_max(cos_g, dr_f8s(0.0)) * (1.0 / M_PI)) + share * pdf_b;
+}
+DR_SIMD_INLINE dr_f8 sky_share(const struct dr_path8 *g)
+{
+    const dr_f8 sharp = (0.45 - g->alpha) * (1.0 / 0.15);
+    const dr_f8 s = g->spec_p * dr_f8_min(dr_f8_max(sharp, dr_f8s(0.0)), dr_f8s(1.0));
+    return dr_f8_sel(dr_f8_gt(g->wo_z, dr_f8s(COS_EPS)), s, dr_f8s(0.0));
+}
+
+/* The lanes that picked a constant environment: lights.c's sample_env
+ * eight-wide, the same operations: dr_sky_pdf's mixture of the cosine about
+ * the geometric normal and the BSDF (bsdf_sample), chosen, with the lobe,
+ * by u_pick rescaled within the sky's share; or with uniform over the
+ * sphere. The radiance is the same in every direction. */
+static void env_light_samples(const struct dr_scene *s, const struct dr_light_tables *lt, dr_m8 env,
+                              const struct dr_path8 *g, bool uniform, dr_f8 u_pick, dr_f8 u1, dr_f8 u2, dr_m8 *ok,
+                              struct light8 *out)
+{
+    const double pick = lt->pick[lt->env_uniform_entry], lo = lt->cdf[lt->env_uniform_entry];
     dr_v3x8 wi;
     dr_f8 pdf;
+    dr_m8 made = env;
     if (uniform) {
         dr_f8 z = 1.0 - 2.0 * u1, r = dr_f8_sqrt(dr_f8_max(dr_f8s(0.0), 1.0 - z * z)), cos_phi, sin_phi;
         dr_f8_sincos_turn(u2, &sin_phi, &cos_phi);   /* phi = 2 pi u2 */
         wi = (dr_v3x8){r * cos_phi, r * sin_phi, z};
-        pdf = dr_f8s(1.0 / (4.0 * M_PI));
+        pdf = dr_f8s(DR_SKY_SPHERE);
     } else {
-        dr_v3x8 fs, ft;
-        frame_from_normal(ng, &fs, &ft);
-        const dr_v3x8 local = sample_cosine(u1, u2);
-        wi = to_world(fs, ft, ng, local);
-        pdf = local.z / M_PI;   /* (sky_pdf: the lifted disk's z is not negative) */
+        const dr_f8 u_sel = dr_f8_min(dr_f8_max((u_pick - lo) / pick, dr_f8s(0.0)), dr_f8s(1.0));   /* (dr_clamp) */
+        const dr_f8 share = sky_share(g);
+        const dr_m8 by_cos = dr_f8_ge(u_sel, share);
+        dr_v3x8 fs, ft, local, f;
+        frame_from_normal(g->ng, &fs, &ft);
+        const dr_v3x8 cos_local = sample_cosine(u1, u2), cos_wi = to_world(fs, ft, g->ng, cos_local);
+        dr_f8 pdf_b, cos_pdf_b;
+        made &= by_cos | bsdf_sample(g, env & ~by_cos, u_sel / share, u1, u2, &local, &f, &pdf_b);
+        wi = dr_v3x8_sel(by_cos, cos_wi, to_world(g->fs, g->ft, g->fn, local));
+        if (dr_m8_any(env & by_cos)) {   /* (dr_bsdf_pdf: 0 below the shading surface) */
+            const dr_v3x8 at = to_local(g->fs, g->ft, g->fn, cos_wi);
+            eval_pdf_above(g, g->wo, at, g->spec_p, &cos_pdf_b);
+            const dr_m8 above = dr_f8_gt(g->wo_z, dr_f8s(COS_EPS)) & dr_f8_gt(at.z, dr_f8s(COS_EPS));
+            pdf_b = dr_f8_sel(by_cos, dr_f8_sel(above, cos_pdf_b, dr_f8s(0.0)), pdf_b);
+        }
+        const dr_f8 cos_g = dr_f8_sel(by_cos, cos_local.z, dr_v3x8_dot(wi, g->ng));
+        pdf = dr_f8_sel(made, sky_pdf(share, cos_g, pdf_b), dr_f8s(0.0));
     }
     const dr_vec3 Le = dr_env_radiance(s, dr_v3(0.0, 0.0, 1.0));   /* (any direction: no map) */
-    const double pick = lt->pick[lt->env_uniform_entry];
     const dr_v3x8 zero = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
     out->wi = dr_v3x8_sel(env, wi, out->wi);
     out->radiance = dr_v3x8_sel(env, (dr_v3x8){dr_f8s(Le.x), dr_f8s(Le.y), dr_f8s(Le.z)}, out->radiance);
@@ -912,11 +956,11 @@ static void env_light_samples(const struct dr_scene *s, const struct dr_light_ta
     out->pdf = dr_f8_sel(env, pdf * pick, out->pdf);
     out->infinite |= env;
     out->delta &= ~env;
-    /* dr_light_sample's checks: a zero pick (a zero-strength environment)
-     * or a zero density (a direction in the surface) samples nothing; black
+    /* dr_light_sample's checks: a zero pick (a zero-strength environment),
+     * a failed BSDF sample or a zero density samples nothing; black
      * radiance carries no light (the fields are then not read) unless its
      * derivative is asked (dr_path_light_kept) */
-    const dr_m8 made = env & dr_f8_gt(pdf, dr_f8s(0.0));
+    made &= dr_f8_gt(pdf, dr_f8s(0.0));
     const dr_m8 keep = dr_is_black(Le) ? out->diff & made : made;
     *ok = pick > 0.0 ? (*ok & ~env) | keep : *ok & ~env;
 }
@@ -947,16 +991,16 @@ static void env_map_samples(const struct dr_scene *s, dr_m8 env_map, dr_f8 u1, d
 }
 
 /* The lanes that picked a punctual light: dr_light_sample (which reads the
- * normal ng only for a constant sky, never picked here). */
-static void other_light_samples(const struct dr_scene *s, const bool *other, dr_v3x8 p, dr_v3x8 ng, dr_f8 u_pick,
-                                dr_f8 u1, dr_f8 u2, dr_m8 *ok, struct light8 *out)
+ * BSDF only for a constant sky, never picked here). */
+static void other_light_samples(const struct dr_scene *s, const bool *other, dr_v3x8 p, dr_f8 u_pick, dr_f8 u1,
+                                dr_f8 u2, dr_m8 *ok, struct light8 *out)
 {
     for (int i = 0; i < DR_SIMD_W; i++) {
         if (!other[i])
             continue;
         struct dr_light_sample ls = {.dist = 0.0};   /* (its fields stay masked when it fails) */
-        const bool carries = dr_light_sample(s, s->light_sampler, dr_v3x8_get(&p, i), dr_v3x8_get(&ng, i), u_pick[i],
-                                             u1[i], u2[i], &ls);
+        const bool carries = dr_light_sample(s, s->light_sampler, dr_v3x8_get(&p, i), NULL, u_pick[i], u1[i], u2[i],
+                                             &ls);
         (*ok)[i] = carries || (ls.valid && out->diff[i]) ? -1 : 0;   /* (dr_path_light_kept) */
         set_lane(&out->wi, i, ls.wi);
         set_lane(&out->target, i, ls.target);
@@ -974,8 +1018,9 @@ static void other_light_samples(const struct dr_scene *s, const bool *other, dr_
  * emitters and the other kinds of light lane by lane. Returns where a light
  * sample carries light. */
 static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables *lt, struct lanes *L,
-                          const struct dr_path8_ahead *ahead, const struct dr_param_set *ps, bool record, dr_v3x8 p,
-                          dr_v3x8 ng, bool sky_uniform, dr_f8 u_pick, dr_f8 u1, dr_f8 u2, struct light8 *out)
+                          const struct dr_path8_ahead *ahead, const struct dr_param_set *ps, bool record,
+                          const struct dr_path8 *g, bool sky_uniform, dr_f8 u_pick, dr_f8 u1, dr_f8 u2,
+                          struct light8 *out)
 {
     const struct dr_mesh *m = &s->mesh;
     dr_f8 pick, area;
@@ -1000,7 +1045,7 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     dr_v3x8 lng = {gather_at(m->tri_normal_eps, L->ltri, 4, 0), gather_at(m->tri_normal_eps, L->ltri, 4, 1),
                    gather_at(m->tri_normal_eps, L->ltri, 4, 2)};
     dr_f8 leps = gather_at(m->tri_normal_eps, L->ltri, 4, 3);
-    dr_v3x8 d = dr_v3x8_sub(lp, p);
+    dr_v3x8 d = dr_v3x8_sub(lp, g->p);
     dr_f8 d2 = dr_v3x8_dot(d, d);
     ok &= dr_f8_gt(d2, dr_f8s(0.0));
     dr_f8 dist = dr_f8_sqrt(d2);
@@ -1027,10 +1072,10 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     ok &= ~dr_v3x8_is_black(out->radiance) | out->diff;   /* (dr_path_light_kept) */
     out->infinite = out->delta = (dr_m8){0};
     if (dr_m8_any(env))
-        env_light_samples(s, lt, env, ng, sky_uniform, u1, u2, &ok, out);
+        env_light_samples(s, lt, env, g, sky_uniform, u_pick, u1, u2, &ok, out);
     if (dr_m8_any(env_map))
         env_map_samples(s, env_map, u1, u2, &ok, out);
-    other_light_samples(s, other, p, ng, u_pick, u1, u2, &ok, out);
+    other_light_samples(s, other, g->p, u_pick, u1, u2, &ok, out);
     return ok;
 }
 
@@ -1363,7 +1408,7 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     /* the record of which light: where d_light_radiance may read it (dr_path8_continue; a
      * differentiated vertex's only where the caller takes the vertex whole: diff_hit) */
     const bool record = ps && (ps->radiance_active || (in->diff_hit && dr_m8_any(g->diff)));
-    dr_m8 ok = light_sample(s, &lt, &L, in->ahead, opts->params, record, g->p, g->ng, opts->sky_uniform, u_pick,
+    dr_m8 ok = light_sample(s, &lt, &L, in->ahead, opts->params, record, g, opts->sky_uniform, u_pick,
                             u1, u2, &ls);
     g->shadow = nee_begin(g, ok, &ls, &g->so, &g->sd) & ~end;
     g->diff_nee = ls.diff;
@@ -1479,15 +1524,9 @@ void dr_path8_continue_lanes(const struct dr_path_opts *opts, const struct dr_pa
     out->nee_scale = dr_f8_abs(g->nee_cos) * w / g->ls_pdf;
 
     /* stage_continue: dr_bsdf_sample, Russian roulette, the next ray */
-    dr_m8 ok = g->go_on & dr_f8_gt(g->wo_z, dr_f8s(COS_EPS));
-    dr_v3x8 wi = sample_cosine(g->bsdf_u1, g->bsdf_u2);
-    dr_m8 specular = ok & dr_f8_lt(g->lobe_u, g->spec_p);
-    if (dr_m8_any(specular))
-        wi = dr_v3x8_sel(specular, sample_specular_dir(g, g->wo, g->bsdf_u1, g->bsdf_u2), wi);
-    ok &= dr_f8_gt(wi.z, dr_f8s(COS_EPS));
+    dr_v3x8 wi, f;
     dr_f8 pdf;
-    dr_v3x8 f = eval_pdf_above(g, g->wo, wi, g->spec_p, &pdf);
-    ok &= dr_f8_gt(pdf, dr_f8s(0.0)) & dr_f8_lt(pdf, dr_f8s(INFINITY));
+    dr_m8 ok = bsdf_sample(g, g->go_on, g->lobe_u, g->bsdf_u1, g->bsdf_u2, &wi, &f, &pdf);
     dr_v3x8 wiw = to_world(g->fs, g->ft, g->fn, wi);
     ok &= ~dr_f8_le(dr_v3x8_dot(wiw, g->ng), dr_f8s(0.0));
     dr_f8 cos_pdf = dr_f8_abs(wi.z) / pdf;
@@ -1513,7 +1552,8 @@ void dr_path8_continue_lanes(const struct dr_path_opts *opts, const struct dr_pa
     out->o = offset_origin(g->p, g->ng, g->eps, wiw);
     out->d = wiw;
     out->prev_pdf = pdf;
-    out->prev_cos = opts->sky_uniform ? dr_f8s(DR_NO_NORMAL) : dr_v3x8_dot(wiw, g->ng);   /* (dr_path_leaving_cos) */
+    const bool sky = !opts->sky_uniform && (opts->stages & DR_STAGE_ENV);   /* (dr_path_leaving_sky) */
+    out->prev_sky = sky ? sky_pdf(sky_share(g), dr_v3x8_dot(wiw, g->ng), pdf) : dr_f8s(DR_SKY_SPHERE);
 }
 
 dr_v3x8 dr_path8_term(const struct dr_path8 *g, const struct dr_path8_out *out)
@@ -1597,7 +1637,7 @@ void dr_path8_continue(const struct dr_path_opts *opts, const struct dr_path8 *g
         /* the path's next state: one test per lane, not one per field */
         st[i]->beta = dr_v3x8_get(&out.beta, i);
         st[i]->prev_pdf = out.prev_pdf[i];
-        st[i]->prev_cos = out.prev_cos[i];
+        st[i]->prev_sky = out.prev_sky[i];
         st[i]->prev_p = dr_v3x8_get(&g->p, i);
         st[i]->o = dr_v3x8_get(&out.o, i);
         st[i]->d = dr_v3x8_get(&out.d, i);

@@ -196,7 +196,7 @@ void dr_path8_ahead_stage(const struct dr_scene *scene, const struct dr_path8_in
  * times its MIS weight (dr_path_escaped_radiance), zero without the
  * environment stage, with the scalar code's operations: a constant
  * environment's, or a map's through env8.h. d, depth, prev_pdf and
- * prev_cos: the path state's after the ray was traced. dr_path8_env_eight says whether
+ * prev_sky: the path state's after the ray was traced. dr_path8_env_eight says whether
  * the scene's environment is one of those two (an environment map's light
  * tables exist whenever the scene has one). */
 bool dr_path8_env_eight(const struct dr_scene *scene);
@@ -204,9 +204,9 @@ bool dr_path8_env_eight(const struct dr_scene *scene);
  * emit_w, for a vertex), where the environment stage runs; true when the
  * map's lookup is in *at (an environment map; at not NULL). */
 bool dr_path8_escaped(const struct dr_scene *scene, dr_m8 on, dr_v3x8 d, dr_f8 depth, dr_f8 prev_pdf,
-                      dr_f8 prev_cos, dr_v3x8 *Le, dr_f8 *emit_w, struct dr_env8_lookup *at);
+                      dr_f8 prev_sky, dr_v3x8 *Le, dr_f8 *emit_w, struct dr_env8_lookup *at);
 dr_v3x8 dr_path8_escaped_term(const struct dr_scene *scene, const struct dr_path_opts *opts, dr_m8 on, dr_v3x8 d,
-                              dr_f8 depth, dr_f8 prev_pdf, dr_f8 prev_cos);
+                              dr_f8 depth, dr_f8 prev_pdf, dr_f8 prev_sky);
 /* The hit stage of a group from its inputs, into g (the same as
  * dr_path8_shade, for a caller that keeps its paths' state in arrays). */
 void dr_path8_shade_lanes(const struct dr_scene *scene, const struct dr_path_opts *opts,
@@ -225,7 +225,7 @@ struct dr_path8_out {
     dr_v3x8 ratio;                /* the next true / tracing throughput ratio (0 where substituted) */
     dr_v3x8 o, d;                 /* the next ray */
     dr_f8 prev_pdf;               /* its density (the next prev_p is g->p) */
-    dr_f8 prev_cos;               /* its cosine to g->ng (dr_path_state's) */
+    dr_f8 prev_sky;               /* a constant sky's density along it from here (dr_path_state's) */
 };
 /* dr_path8_continue from the arriving throughput beta, ratio (NULL: 1, no
  * channel substituted yet; a walk with parameters passes its paths') and

@@ -30,7 +30,7 @@ struct dr_wave_soa {
     double dx[SLOTS], dy[SLOTS], dz[SLOTS];
     double px[SLOTS], py[SLOTS], pz[SLOTS];     /* the point it leaves (dr_path_state's prev_p) */
     double prev_pdf[SLOTS];                     /* its BSDF density (0: camera ray) */
-    double prev_cos[SLOTS];                     /* dr_path_state's prev_cos */
+    double prev_sky[SLOTS];                     /* dr_path_state's prev_sky */
     double bx[SLOTS], by[SLOTS], bz[SLOTS];     /* throughput */
     double Lx[SLOTS], Ly[SLOTS], Lz[SLOTS];     /* radiance so far */
     double depth[SLOTS];                        /* segments traced */
@@ -150,7 +150,7 @@ static void start_path(struct dr_wave_soa *w, int k, int64_t item, dr_wave_start
     w->dx[k] = d.x, w->dy[k] = d.y, w->dz[k] = d.z;
     w->px[k] = o.x, w->py[k] = o.y, w->pz[k] = o.z;
     w->prev_pdf[k] = 0.0;
-    w->prev_cos[k] = DR_NO_NORMAL;
+    w->prev_sky[k] = DR_SKY_SPHERE;
     w->bx[k] = w->by[k] = w->bz[k] = 1.0;
     w->Lx[k] = w->Ly[k] = w->Lz[k] = 0.0;
     w->depth[k] = 0.0;
@@ -183,7 +183,7 @@ static void start_path(struct dr_wave_soa *w, int k, int64_t item, dr_wave_start
 #define WORD_ARRAYS 27
 static int word_arrays(struct dr_wave_soa *w, void *a[WORD_ARRAYS])
 {
-    void *const all[] = {w->ox, w->oy, w->oz, w->dx, w->dy, w->dz, w->px, w->py, w->pz, w->prev_pdf, w->prev_cos,
+    void *const all[] = {w->ox, w->oy, w->oz, w->dx, w->dy, w->dz, w->px, w->py, w->pz, w->prev_pdf, w->prev_sky,
                          w->bx, w->by, w->bz, w->Lx, w->Ly, w->Lz, w->depth, w->key, w->item, w->tri,
                          w->rx, w->ry, w->rz, w->Tx, w->Ty, w->Tz};   /* (the last six: a walk's) */
     _Static_assert(sizeof all / sizeof *all == WORD_ARRAYS, "word_arrays' list");
@@ -344,7 +344,7 @@ static void scalar_state(const struct dr_wave_soa *w, int k, struct dr_path_stat
 {
     dr_path_start(st, dr_v3(w->ox[k], w->oy[k], w->oz[k]), dr_v3(w->dx[k], w->dy[k], w->dz[k]));
     st->prev_pdf = w->prev_pdf[k];
-    st->prev_cos = w->prev_cos[k];
+    st->prev_sky = w->prev_sky[k];
     st->prev_p = dr_v3(w->px[k], w->py[k], w->pz[k]);
     st->depth = (int)w->depth[k] - 1;
     st->beta = dr_v3(w->bx[k], w->by[k], w->bz[k]);
@@ -375,7 +375,7 @@ static void escaped(const struct dr_wave_soa *w, const struct dr_scene *s, const
     dr_vec3 e = dr_v3s(0.0);   /* nothing out there: a term of 0, summed as the walker sums it */
     if (opts->stages & DR_STAGE_ENV) {
         double emit_w;
-        dr_vec3 Le = dr_path_escaped_radiance(s, (int)w->depth[k], w->prev_pdf[k], w->prev_cos[k],
+        dr_vec3 Le = dr_path_escaped_radiance(s, (int)w->depth[k], w->prev_pdf[k], w->prev_sky[k],
                                               dr_v3(w->dx[k], w->dy[k], w->dz[k]), &emit_w);
         e = dr_scale(Le, emit_w);   /* dr_path_vertex_term of the escaped vertex */
     }
@@ -418,7 +418,7 @@ static bool escaped_group(const struct dr_wave_soa *w, const struct dr_scene *s,
     if (!dr_m8_any(left))
         return false;
     dr_v3x8 e = dr_path8_escaped_term(s, opts, left, load3(w->dx + i0, w->dy + i0, w->dz + i0), load8(w->depth + i0),
-                                      load8(w->prev_pdf + i0), load8(w->prev_cos + i0));
+                                      load8(w->prev_pdf + i0), load8(w->prev_sky + i0));
     dr_v3x8 c = dr_v3x8_mul(load3(w->bx + i0, w->by + i0, w->bz + i0), e);
     *L = dr_v3x8_add(load3(w->Lx + i0, w->Ly + i0, w->Lz + i0), c);
     if (w->out)
@@ -678,7 +678,7 @@ static int finish_scalar(struct dr_wave_soa *w, const struct dr_scene *s, const 
     w->dx[k] = st->d.x, w->dy[k] = st->d.y, w->dz[k] = st->d.z;
     w->px[k] = st->prev_p.x, w->py[k] = st->prev_p.y, w->pz[k] = st->prev_p.z;
     w->prev_pdf[k] = st->prev_pdf;
-    w->prev_cos[k] = st->prev_cos;
+    w->prev_sky[k] = st->prev_sky;
     w->bx[k] = st->beta.x, w->by[k] = st->beta.y, w->bz[k] = st->beta.z;
     w->rx[k] = st->ratio.x, w->ry[k] = st->ratio.y, w->rz[k] = st->ratio.z;
     w->Lx[k] = L.x, w->Ly[k] = L.y, w->Lz[k] = L.z;
@@ -738,7 +738,7 @@ static dr_m8 replay_step(const struct dr_wave_soa *w, const struct dr_scene *s, 
         struct dr_path_vertex *v = w->vertex;
         struct dr_path_state st = {.o = dr_v3(w->ox[k], w->oy[k], w->oz[k]), .d = dr_v3(w->dx[k], w->dy[k], w->dz[k]),
                                    .prev_p = dr_v3(w->px[k], w->py[k], w->pz[k]), .prev_pdf = w->prev_pdf[k],
-                                   .prev_cos = w->prev_cos[k],
+                                   .prev_sky = w->prev_sky[k],
                                    .depth = (int)w->depth[k] - 1};
         dr_path_step_begin(&st, v);
         if (G->diff[i])
@@ -807,7 +807,7 @@ static int advance(struct dr_wave_soa *w, const struct dr_scene *s, const struct
          * group's slots were read above) */
         const struct { double *a; const void *v; } moved[] = {
             {w->ox, &c.o.x}, {w->oy, &c.o.y}, {w->oz, &c.o.z}, {w->dx, &c.d.x}, {w->dy, &c.d.y}, {w->dz, &c.d.z},
-            {w->px, &G->p.x}, {w->py, &G->p.y}, {w->pz, &G->p.z}, {w->prev_pdf, &c.prev_pdf}, {w->prev_cos, &c.prev_cos},
+            {w->px, &G->p.x}, {w->py, &G->p.y}, {w->pz, &G->p.z}, {w->prev_pdf, &c.prev_pdf}, {w->prev_sky, &c.prev_sky},
             {w->bx, &c.beta.x}, {w->by, &c.beta.y}, {w->bz, &c.beta.z}, {w->Lx, &L.x}, {w->Ly, &L.y}, {w->Lz, &L.z}};
         for (size_t a = 0; a < sizeof moved / sizeof *moved; a++)
             dr_compress8(moved[a].a + kept, moved[a].v, go_on);

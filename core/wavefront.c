@@ -196,19 +196,19 @@ static void escaped_group(struct dr_wave *w, const int *k, int n, const struct d
 {
     dr_m8 on;
     dr_v3x8 d;
-    dr_f8 depth, prev_pdf, prev_cos;
+    dr_f8 depth, prev_pdf, prev_sky;
     for (int i = 0; i < DR_SIMD_W; i++) {
         const struct dr_path_state *st = &w->lane[k[i < n ? i : 0]].st;   /* (padding repeats lane 0) */
         on[i] = i < n ? -1 : 0;
         d.x[i] = st->d.x, d.y[i] = st->d.y, d.z[i] = st->d.z;
         depth[i] = st->depth;
         prev_pdf[i] = st->prev_pdf;
-        prev_cos[i] = st->prev_cos;
+        prev_sky[i] = st->prev_sky;
     }
     dr_v3x8 Le;
     dr_f8 emit_w;
     struct dr_env8_lookup at;
-    const bool looked_up = dr_path8_escaped(s, on, d, depth, prev_pdf, prev_cos, &Le, &emit_w, &at);
+    const bool looked_up = dr_path8_escaped(s, on, d, depth, prev_pdf, prev_sky, &Le, &emit_w, &at);
     for (int i = 0; i < n; i++) {
         struct lane *l = &w->lane[k[i]];
         l->v.kind = DR_VERTEX_ESCAPED;

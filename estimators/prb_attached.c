@@ -6,9 +6,8 @@
  * sampled it). The tape carries the adjoint of that state backward
  * (d_path_vertex_attached); PRB walks forward and must know it at each vertex
  * without a tape. In tangent coordinates (p: 2 in the plane of p_k's
- * triangle, d: 2 normal to d_{k+1}, pdf: 1; the cosine of d_{k+1} to p_k's
- * normal, which a constant sky's density reads, moves with d) the reverse
- * recurrence is
+ * triangle, d: 2 normal to d_{k+1}, pdf: 1; a constant sky's density moves
+ * with d and pdf) the reverse recurrence is
  *     c_k = a_k + M_k^T c_{k+1},
  * with M_k = d s_{k+1} / d s_k (the differentiated sampling map, hit point,
  * frame, ...) and a_k vertex k's own terms. So:
@@ -53,7 +52,8 @@
  * commensurable in the condition test. */
 struct state_basis {
     dr_vec3 p[2], d[2];
-    dr_vec3 ng;       /* the normal of the point the state's ray left, for its prev_cos */
+    dr_vec3 ng;       /* the geometric normal of p_k (a constant sky's density reads d . ng) */
+    double share;     /* dr_bsdf_sky_share at p_k */
     double radius;
 };
 
@@ -96,7 +96,7 @@ static struct vertex_jacobian *cached(const struct prb_attached_ctx *c, const st
 static struct state_basis basis_after(const struct dr_path_vertex *v, dr_vec3 next_d, double radius)
 {
     dr_frame fp = dr_frame_from_normal(v->ng), fd = dr_frame_from_normal(next_d);
-    return (struct state_basis){{fp.s, fp.t}, {fd.s, fd.t}, v->ng, radius};
+    return (struct state_basis){{fp.s, fp.t}, {fd.s, fd.t}, v->ng, dr_bsdf_sky_share(&v->bsdf, v->wo), radius};
 }
 
 static struct dr_d_path_state to_ambient(const struct state_basis *T, const double c[NS])
@@ -111,19 +111,20 @@ static struct dr_d_path_state to_ambient(const struct state_basis *T, const doub
     return r;
 }
 
-/* The origin and the previous point are the same point p_{k-1}; the
- * cosine d . ng moves with d alone (ng constant), so its adjoint is part
- * of d's (to_ambient gives it none: a coordinate of its own would be one
- * more tangent for the same motion). */
+/* The origin and the previous point are the same point p_{k-1}; a constant
+ * sky's density prev_sky = (1 - c) (d . ng) / pi + c pdf (path_attached.c)
+ * moves with the d and pdf coordinates, so its adjoint is theirs
+ * (to_ambient gives it none). */
 static void to_tangent(const struct state_basis *T, const struct dr_d_path_state *r, double c[NS])
 {
     dr_vec3 po = dr_add(r->o, r->prev_p);
-    dr_vec3 dd = T ? dr_add(r->d, dr_scale(T->ng, r->prev_cos)) : dr_v3s(0.0);
+    const double share = T ? T->share : 0.0;
+    dr_vec3 dd = T ? dr_add(r->d, dr_scale(T->ng, (1.0 - share) * DR_INV_PI * r->prev_sky)) : dr_v3s(0.0);
     c[0] = T ? T->radius * dr_dot(T->p[0], po) : 0.0;
     c[1] = T ? T->radius * dr_dot(T->p[1], po) : 0.0;
     c[2] = T ? dr_dot(T->d[0], dd) : 0.0;
     c[3] = T ? dr_dot(T->d[1], dd) : 0.0;
-    c[4] = r->prev_pdf;
+    c[4] = r->prev_pdf + share * r->prev_sky;
 }
 
 /* c_out = T_k^T V_k(d_e, d_t, T_{k+1} c_next): vertex v's adjoint in tangent
@@ -381,7 +382,9 @@ static void finish(const struct prb_attached_ctx *c, const struct pending *P, co
         memset(&zero, 0, sizeof zero);
         d_path_vertex_attached(c->b->p->scene, c->b->p->params, next, next_d_e, dr_v3s(0.0), &zero, &dt,
                                &(struct dr_grad_sink){.dir = c->zeros});
-        c_next[4] = dt.prev_pdf;
+        double ct[NS];
+        to_tangent(&P->Tn, &dt, ct);
+        c_next[4] = ct[4];
     }
     if (P->first) {
         memcpy(c_next, P->cn, sizeof P->cn);

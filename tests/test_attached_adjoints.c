@@ -3,7 +3,7 @@
  * uv w.r.t. origin and direction), the shading frame, texture lookups w.r.t.
  * uv (every wrap mode), materials and emission w.r.t. uv, environment
  * radiance w.r.t. the direction, a constant sky's density w.r.t. the
- * cosine, light samples w.r.t. the shading point
+ * point's own, light samples w.r.t. the shading point
  * (area, point with a range, spot), the area-light pdf w.r.t. both end
  * points, and the BSDF pdf with the lobe probability held fixed.
  *
@@ -17,6 +17,8 @@
 #include "geometry.h"
 #include "lights.h"
 #include "material.h"
+#include "params.h"
+#include "path.h"
 #include "sampler.h"
 #include "scene_builder.h"
 #include "test.h"
@@ -332,9 +334,9 @@ static void test_env(const struct dr_scene *s)
     check_fd("d_env_radiance_dir", env_objective, &k, x, 3, g, 1e-7, 1e-6);
 }
 
-/* A constant sky's density, pick cos / pi about the normal, against its
- * derivative in the cosine (the escaped vertex's MIS weight moves with the
- * direction through it); the map's and the sphere's do not move. */
+/* A constant sky's density from a surface, pick times the point's own
+ * (lights.h's dr_sky_pdf), against its slope in that density (the escaped
+ * vertex's MIS weight moves with it); a map's does not move. */
 struct sky_pdf_ctx {
     const struct dr_scene *s;
     dr_vec3 dir;
@@ -356,13 +358,93 @@ static void test_sky_pdf(const struct dr_scene *with_map)
     sb_environment(&b, dr_v3(0.9, 1.0, 1.2));
     struct dr_scene *s = sb_finish(&b);
     struct sky_pdf_ctx k = {s, dr_normalize(dr_v3(0.3, 0.45, -0.7))};
-    for (double cos = 0.05; cos < 1.0; cos += 0.3) {
-        double x[1] = {cos}, g[1] = {dr_light_pdf_env_dcos(s->light_sampler, cos)};
-        CHECK(g[0] > 0.0 && g[0] < 1.0 / M_PI, "the sky shares the light pick with the area light: slope %g", g[0]);
-        check_fd("dr_light_pdf_env_dcos (constant sky)", sky_pdf_objective, &k, x, 1, g, 1e-6, 1e-9);
+    for (double density = 0.05; density < 3.0; density *= 3.0) {
+        double x[1] = {density}, g[1] = {dr_light_pdf_env_dsky(s->light_sampler)};
+        CHECK(g[0] > 0.0 && g[0] < 1.0, "the sky shares the light pick with the area light: slope %g", g[0]);
+        check_fd("dr_light_pdf_env_dsky (constant sky)", sky_pdf_objective, &k, x, 1, g, 1e-6, 1e-9);
     }
-    CHECK(dr_light_pdf_env_dcos(s->light_sampler, DR_NO_NORMAL) == 0.0, "the sphere's density has no slope");
-    CHECK(dr_light_pdf_env_dcos(with_map->light_sampler, 0.5) == 0.0, "a map's density has no slope in the cosine");
+    CHECK(dr_light_pdf_env_dsky(with_map->light_sampler) == 0.0, "a map's density does not move with the point's");
+    dr_scene_destroy(s);
+}
+
+/* Next-event estimation of a constant sky at one vertex of a metal floor
+ * (lobe probability 1) whose roughness 0.6 puts dr_bsdf_sky_share strictly
+ * between 0 and 1: some light samples are drawn by the cosine about the
+ * normal (a fixed direction), the others by the BSDF (moving with the
+ * roughness, and with them their cosine to the normal). The vertex adjoint
+ * (d_path_vertex_attached, d_e only) against the finite difference of the
+ * estimate f L |cos| mis / pdf made again from the same numbers with the
+ * roughness moved and the share held, as attached sampling holds it. */
+struct sky_nee_ctx {
+    struct dr_scene *s;
+    const struct dr_path_vertex *v;
+    double share;
+};
+
+static double sky_nee_objective(void *c, const double *x)
+{
+    struct sky_nee_ctx *k = c;
+    const struct dr_path_vertex *v = k->v;
+    k->s->materials[0].roughness = x[0];
+    struct dr_bsdf b;
+    dr_material_eval(k->s, &v->hit, &b);
+    const struct dr_sky_bsdf sky = {&b, v->frame, v->wo, v->ng, k->share};
+    struct dr_light_sample ls;
+    if (!dr_light_sample(k->s, k->s->light_sampler, v->hit.p, &sky, v->u.light_pick, v->u.light_u1, v->u.light_u2,
+                         &ls))
+        return NAN;
+    dr_vec3 wi = dr_frame_to_local(&v->frame, ls.wi);
+    double pdf_b;
+    dr_vec3 f = dr_bsdf_eval_pdf(&b, v->wo, wi, &pdf_b);
+    dr_vec3 e = dr_scale(dr_mul(f, ls.radiance), fabs(wi.z) * dr_mis_power(ls.pdf, pdf_b) / ls.pdf);
+    return e.x + e.y + e.z;
+}
+
+static void test_sky_nee_vertex(void)
+{
+    struct sb b;
+    sb_init(&b);
+    struct dr_material metal = sb_diffuse(dr_v3(0.7, 0.5, 0.3));
+    metal.metallic = 1.0;
+    metal.roughness = 0.6;
+    metal.specular = 1.0;
+    sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, metal));
+    sb_environment(&b, dr_v3(0.9, 1.0, 1.2));
+    struct dr_scene *s = sb_finish(&b);
+    s->n_file_materials = s->n_materials;
+    const char *ptr = "/materials/0/pbrMetallicRoughness/roughnessFactor";
+    struct dr_param_set *ps = dr_param_set_create(s, &ptr, 1);
+    CHECK(ps != NULL, "sky nee: %s", dr_last_error());
+    if (!ps)
+        return;
+    const struct dr_path_opts po = {.max_depth = 2, .rr_depth = DR_RR_DEPTH_DEFAULT, .stages = dr_path_plan(s, ps),
+                                    .params = ps};
+    int by_bsdf = 0, by_cos = 0;
+    for (uint64_t i = 0; i < 400 && (by_bsdf < 6 || by_cos < 6); i++) {
+        struct dr_sampler smp;
+        dr_sampler_init(&smp, 3, i, 0);
+        struct dr_path_state st;
+        struct dr_path_vertex v;
+        struct dr_ray_counts rc = {0};
+        dr_path_start(&st, dr_v3(0.2 * rnd() - 0.1, 1.0, 1.0), dr_normalize(dr_v3(0.1 * rnd(), -1.0, -1.0)));
+        dr_path_step(s, &po, &st, &smp, &v, &rc);
+        if (!v.nee || v.ls.type != DR_LS_ENV || (v.ls.lobe >= 0 ? by_bsdf : by_cos) >= 6)
+            continue;
+        struct sky_nee_ctx k = {s, &v, dr_bsdf_sky_share(&v.bsdf, v.wo)};
+        CHECK(k.share > 0.1 && k.share < 0.9, "the share %g is strictly between 0 and 1", k.share);
+        double grad = 0.0;
+        struct dr_grad_sink sink = dr_sink_reverse(&grad);
+        struct dr_d_path_state d_next, d_this;
+        memset(&d_next, 0, sizeof d_next);
+        d_path_vertex_attached(s, ps, &v, dr_v3s(1.0), dr_v3s(0.0), &d_next, &d_this, &sink);
+        double x[1] = {0.6};
+        check_fd(v.ls.lobe >= 0 ? "sky by the BSDF: next-event adjoint" : "sky by the cosine: next-event adjoint",
+                 sky_nee_objective, &k, x, 1, &grad, 1e-6, 1e-5);
+        s->materials[0].roughness = 0.6;
+        *(v.ls.lobe >= 0 ? &by_bsdf : &by_cos) += 1;
+    }
+    CHECK(by_bsdf == 6 && by_cos == 6, "light samples checked: %d by the BSDF, %d by the cosine", by_bsdf, by_cos);
+    dr_param_set_destroy(ps);
     dr_scene_destroy(s);
 }
 
@@ -379,7 +461,7 @@ static double light_objective(void *c, const double *x)
 {
     struct light_ctx *k = c;
     struct dr_light_sample ls;
-    if (!dr_light_sample(k->s, k->s->light_sampler, v3(x), dr_v3s(0.0), k->pick, k->u1, k->u2, &ls))
+    if (!dr_light_sample(k->s, k->s->light_sampler, v3(x), NULL, k->pick, k->u1, k->u2, &ls))
         return NAN;
     return dr_dot(k->w_wi, ls.wi) + k->w_pdf * ls.pdf + dr_dot(k->w_rad, ls.radiance);
 }
@@ -391,8 +473,8 @@ static void test_light_sample(const struct dr_scene *s)
     for (int i = 0; i < 40; i++) {
         struct light_ctx k = {s, (i + 0.5) / 40.0, 0.3, 0.6, rnd3(), rnd3(), rnd()};
         struct dr_light_sample ls;
-        /* (no normal: a sky sample over the sphere; about a normal it is as independent of p) */
-        if (!dr_light_sample(s, s->light_sampler, p, dr_v3s(0.0), k.pick, k.u1, k.u2, &ls))
+        /* (no BSDF: a sky sample over the sphere; by a surface's it is as independent of p) */
+        if (!dr_light_sample(s, s->light_sampler, p, NULL, k.pick, k.u1, k.u2, &ls))
             continue;
         int kind = ls.type == DR_LS_AREA ? 0 : (ls.type == DR_LS_PUNCTUAL ? 1 : 2);
         kinds[kind == 1 && ls.index == 1 ? 3 : kind]++;
@@ -487,6 +569,7 @@ int main(void)
     test_env(s);
     test_light_sample(s);
     test_sky_pdf(s);
+    test_sky_nee_vertex();
     test_pdf_area(s);
     test_pdf_fixed();
     test_hit_attributes(s);   /* last: it adds vertex colours and uv transforms to s */

@@ -129,7 +129,7 @@ static void irradiance(const struct dr_scene *s, bool nee, int n, double *mean, 
         if (nee) {
             struct dr_light_sample ls;
             double u0 = dr_sampler_next(&smp), u1 = dr_sampler_next(&smp), u2 = dr_sampler_next(&smp);
-            if (dr_light_sample(s, s->light_sampler, p, dr_v3(0.0, 1.0, 0.0), u0, u1, u2, &ls) && ls.wi.y > 0.0)
+            if (dr_light_sample(s, s->light_sampler, p, NULL, u0, u1, u2, &ls) && ls.wi.y > 0.0)
                 f = (ls.radiance.x + ls.radiance.y + ls.radiance.z) * ls.wi.y / ls.pdf;
         } else {
             const int64_t lo = dr_cdf_find(cdf, m->n_triangles, dr_sampler_next(&smp) * total);

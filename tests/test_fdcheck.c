@@ -225,6 +225,28 @@ static void glossy_env_scaled(double S, const char *name)
     dr_scene_destroy(s);
 }
 
+/* A half-metal floor under a constant sky, rough enough (0.6: alpha 0.36)
+ * that next-event estimation draws the sky partly by the BSDF and partly by
+ * the cosine (lights.h's dr_sky_pdf, the share strictly between 0 and 1):
+ * the attached adjoints of both kinds of light sample and of the escaping
+ * ray's density (path_attached.c), in expectation. */
+static void glossy_sky(void)
+{
+    struct sb b;
+    sb_init(&b);
+    struct dr_material g = sb_diffuse(dr_v3(0.7, 0.5, 0.3));
+    g.metallic = 0.5;
+    g.roughness = 0.6;
+    g.specular = 1.0;
+    sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, g));
+    sb_environment(&b, dr_v3(0.9, 1.0, 1.2));
+    struct dr_scene *s = sb_finish(&b);
+    const char *p[] = {"/materials/0/pbrMetallicRoughness/roughnessFactor", "/materials/0/pbrMetallicRoughness/metallicFactor"};
+    struct fd_case c = {"glossy-sky", 32, 8, 3, 16, 2e-2, NULL, NULL};
+    run_case(&c, s, sb_camera(dr_v3(0, 1, 1.5), dr_v3(0, 0, -0.6), 40), p, 2);
+    dr_scene_destroy(s);
+}
+
 static void glossy_env(void)
 {
     glossy_env_scaled(1.0, "glossy-env");
@@ -538,6 +560,7 @@ int main(void)
     env_map();
     glossy();
     glossy_env();
+    glossy_sky();
     occluder_edge();
     texture_texels();
     zero_albedo();

@@ -108,16 +108,16 @@ static void test_diffuse_plane_constant_env(void)
     }
 }
 
-/* The sky sampled by the cosine about the normal against over the whole
- * sphere (dr_path_opts' sky_uniform), where neither is exact: a floor with
- * a GGX lobe, a tilted panel whose smooth shading normals lean away from its
- * geometric one, and a box that hides part of the sky from both. The same
- * 400 camera rays, 500 paths each: the two strategies are independent
- * estimates of the same radiance, so their means must agree; the cosine's
- * spread about each ray's mean must be smaller (0.86 of the sphere's here;
- * about the same as the sphere's under a half-metal floor, whose light the
- * BSDF's lobe samples better than either). */
-static void test_sky_cosine_matches_sphere(void)
+/* The sky sampled by dr_sky_pdf's mixture of the cosine about the normal
+ * and the BSDF against over the whole sphere (dr_path_opts' sky_uniform),
+ * where neither is exact: a dielectric floor with a GGX lobe (both halves
+ * of the mixture), a tilted panel whose smooth shading normals lean away
+ * from its geometric one, and a glossy metal box (the BSDF's half alone)
+ * that hides part of the sky from both. The same 400 camera rays, 500
+ * paths each: the two strategies are independent estimates of the same
+ * radiance, so their means must agree; the mixture's spread about each
+ * ray's mean must be smaller. */
+static void test_sky_mixture_matches_sphere(void)
 {
     struct sb b;
     sb_init(&b);
@@ -126,7 +126,11 @@ static void test_sky_cosine_matches_sphere(void)
     floor.specular = 0.5;   /* a dielectric GGX lobe over the diffuse one */
     sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, floor));
     sb_quad(&b, dr_v3(-1.5, 0.2, -1.0), dr_v3(3, 0, 0), dr_v3(0, 2, -0.6), sb_material(&b, sb_diffuse(dr_v3s(0.8))));
-    sb_box(&b, dr_v3(0.4, 0, 0.2), dr_v3(1.2, 0.9, 1.0), sb_material(&b, sb_diffuse(dr_v3(0.3, 0.5, 0.7))));
+    struct dr_material metal = sb_diffuse(dr_v3(0.3, 0.5, 0.7));
+    metal.metallic = 1.0;
+    metal.roughness = 0.3;
+    metal.specular = 1.0;
+    sb_box(&b, dr_v3(0.4, 0, 0.2), dr_v3(1.2, 0.9, 1.0), sb_material(&b, metal));
     sb_environment(&b, dr_v3(0.9, 1.0, 1.2));
     struct dr_scene *s = b.s;
     for (uint32_t v = 4; v < 8; v++) {   /* the panel's vertices: normals tilted apart */
@@ -165,15 +169,15 @@ static void test_sky_cosine_matches_sphere(void)
             sum += ray_sum;
             spread += fmax(0.0, ray_sum2 - ray_sum * ray_sum / PATHS);
         }
-        CHECK(invalid == 0, "sky %s: %d paths not finite", uniform ? "over the sphere" : "by the cosine", invalid);
+        CHECK(invalid == 0, "sky %s: %d paths not finite", uniform ? "over the sphere" : "by the mixture", invalid);
         mean[uniform] = sum / (RAYS * PATHS);
         se[uniform] = sqrt(spread / (RAYS * (PATHS - 1.0)) / (RAYS * PATHS));   /* (the rays fixed: their paths' spread) */
     }
     const double z = (mean[0] - mean[1]) / hypot(se[0], se[1]);
-    CHECK(fabs(z) <= 4.0, "sky by the cosine %.5f +- %.5f against over the sphere %.5f +- %.5f (z %.2f)", mean[0], se[0],
-          mean[1], se[1], z);
-    CHECK(se[0] < 0.9 * se[1], "sky by the cosine: standard error %.3g, not below over the sphere's %.3g", se[0], se[1]);
-    printf("    | sky by the cosine %.5f +- %.5f, over the sphere %.5f +- %.5f (z %.2f)\n", mean[0], se[0], mean[1],
+    CHECK(fabs(z) <= 4.0, "sky by the mixture %.5f +- %.5f against over the sphere %.5f +- %.5f (z %.2f)", mean[0],
+          se[0], mean[1], se[1], z);
+    CHECK(se[0] < 0.9 * se[1], "sky by the mixture: standard error %.3g, not below over the sphere's %.3g", se[0], se[1]);
+    printf("    | sky by the mixture %.5f +- %.5f, over the sphere %.5f +- %.5f (z %.2f)\n", mean[0], se[0], mean[1],
            se[1], z);
     dr_scene_destroy(s);
 }
@@ -322,9 +326,9 @@ static void test_env_map_sampling(void)
     for (int i = 0; i < n; i++) {
         struct dr_light_sample ls;
         double a = dr_sampler_next(&smp), u1 = dr_sampler_next(&smp), u2 = dr_sampler_next(&smp);
-        /* (a map's sampling does not look at the normal) */
-        if (dr_light_sample(s, s->light_sampler, dr_v3(0, 1, 0), dr_v3(0, 1, 0), a, u1, u2, &ls)) {
-            double p = dr_light_pdf_env(s, s->light_sampler, ls.wi, ls.wi.y);
+        /* (a map's sampling does not look at the point's BSDF) */
+        if (dr_light_sample(s, s->light_sampler, dr_v3(0, 1, 0), NULL, a, u1, u2, &ls)) {
+            double p = dr_light_pdf_env(s, s->light_sampler, ls.wi, DR_SKY_SPHERE);
             if (fabs(p - ls.pdf) > 1e-6 * ls.pdf)
                 mismatch++;
             double v = ls.radiance.x / ls.pdf;
@@ -346,9 +350,9 @@ static void test_env_map_sampling(void)
         double z = 1 - 2 * dr_sampler_next(&smp), r = sqrt(fmax(0, 1 - z * z)), ph = 2 * M_PI * dr_sampler_next(&smp);
         dr_vec3 dir = dr_v3(r * cos(ph), r * sin(ph), z);
         double pdf = -1.0;
-        dr_vec3 L = dr_env_radiance_pdf(s, s->light_sampler, dir, DR_NO_NORMAL, &pdf), L0 = dr_env_radiance(s, dir);
-        dr_vec3 L1 = dr_env_radiance_pdf(s, s->light_sampler, dir, DR_NO_NORMAL, NULL);
-        differ += pdf != dr_light_pdf_env(s, s->light_sampler, dir, DR_NO_NORMAL) || L.x != L0.x || L.y != L0.y || L.z != L0.z ||
+        dr_vec3 L = dr_env_radiance_pdf(s, s->light_sampler, dir, DR_SKY_SPHERE, &pdf), L0 = dr_env_radiance(s, dir);
+        dr_vec3 L1 = dr_env_radiance_pdf(s, s->light_sampler, dir, DR_SKY_SPHERE, NULL);
+        differ += pdf != dr_light_pdf_env(s, s->light_sampler, dir, DR_SKY_SPHERE) || L.x != L0.x || L.y != L0.y || L.z != L0.z ||
                   L1.x != L0.x || L1.y != L0.y || L1.z != L0.z;
     }
     CHECK(differ == 0, "dr_env_radiance_pdf differs from dr_env_radiance, dr_light_pdf_env in %d of 20000 directions",
@@ -581,12 +585,21 @@ static struct dr_scene *lit_box(void)
 }
 
 /* A constant environment alone (what a glTF file without lights gets). */
+/* Under a constant sky, next-event estimation draws it by dr_sky_pdf's
+ * mixture: the Lambertian box by the cosine alone, the glossy dielectric
+ * block by both halves, a sharp metal block by the BSDF alone, a broad
+ * metal one (roughness 0.6) by both. */
 static struct dr_scene *sky_box(void)
 {
     struct sb b;
     sb_init(&b);
     sb_open_box(&b, 1.0, sb_material(&b, sb_diffuse(dr_v3(0.8, 0.7, 0.6))));
     sb_box(&b, dr_v3(-0.5, 0.0, -0.5), dr_v3(0.0, 0.7, 0.0), sb_material(&b, glossy_blue()));
+    struct dr_material metal = glossy_blue();
+    metal.metallic = 1.0;
+    sb_box(&b, dr_v3(0.2, 0.0, -0.6), dr_v3(0.6, 0.4, -0.2), sb_material(&b, metal));
+    metal.roughness = 0.6;
+    sb_box(&b, dr_v3(0.1, 0.0, 0.2), dr_v3(0.5, 0.5, 0.6), sb_material(&b, metal));
     sb_environment(&b, dr_v3(0.9, 1.0, 1.1));
     return sb_finish(&b);
 }
@@ -940,7 +953,7 @@ int main(void)
     test_wavefront_matches_one_path();
     test_emitter_seen_directly();
     test_diffuse_plane_constant_env();
-    test_sky_cosine_matches_sphere();
+    test_sky_mixture_matches_sphere();
     test_furnace();
     test_punctual();
     test_area_light_mis();
