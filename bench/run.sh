@@ -471,16 +471,25 @@ GLOW_JSON=$NOISE_JSON
 
 # ---- o. a sample model under the default sky -------------------------------
 # Most glTF files carry no light and render under drender's default sky. The
-# sample Box under it: noise, time and noise^2 x seconds as in part n. Next-
-# event estimation samples a constant sky by the cosine about the normal
-# (lights.c's sample_env; over the whole sphere before, half of the samples
-# below the surface).
+# sample Box under it: noise, time and noise^2 x seconds as in part n; then
+# the same Box made a glossy metal (roughness 0.3). Next-event estimation
+# samples a constant sky by the cosine about the normal where the surface is
+# diffuse or its lobe broad, and by the BSDF where the lobe is sharp
+# (lights.h's dr_sky_pdf; over the whole sphere before 2026-12-02).
 echo
-SKY_JSON=null
+SKY_JSON=null SKY_METAL_JSON=null
 if [[ -f $SAMPLE_BOX ]]; then
     echo "o. default sky: noise and time of $(basename "$SAMPLE_BOX") under drender's default sky (128x128, 64 spp, 2 threads)"
     noise_part sky "$SAMPLE_BOX"
     SKY_JSON=$NOISE_JSON
+    echo "   the same Box as a glossy metal (metallic 1, roughness 0.3):"
+    cp "$(dirname "$SAMPLE_BOX")"/*.bin "$TMP/"
+    python3 -c 'import json, sys
+j = json.load(open(sys.argv[1]))
+j["materials"][0]["pbrMetallicRoughness"].update(metallicFactor=1.0, roughnessFactor=0.3)
+json.dump(j, open(sys.argv[2], "w"))' "$SAMPLE_BOX" "$TMP/metal_box.gltf"
+    noise_part metal "$TMP/metal_box.gltf"
+    SKY_METAL_JSON=$NOISE_JSON
 else
     echo "o. default sky: $SAMPLE_BOX not found: skipped"
 fi
@@ -504,7 +513,7 @@ OTHER_CORES=$(calc "$OTHER_TOTAL / $WALL_TOTAL" %.2f)
     echo "  \"startup\": $STARTUP_JSON,"
     echo "  \"environment_map\": $ENV_JSON,"
     echo "  \"sparse_emissive_texture\": $GLOW_JSON,"
-    echo "  \"default_sky\": $SKY_JSON,"
+    echo "  \"default_sky\": $SKY_JSON, \"default_sky_metal\": $SKY_METAL_JSON,"
     echo "  \"peer\": $PEER_JSON"
     echo "}"
 } >"$OUT/results.json"

@@ -547,33 +547,41 @@ static double range_window(double range, double dist)
     return w * w;
 }
 
-/* u_lobe: the choice of dr_sky_pdf's half and of the BSDF's lobe, where sky
- * is given. */
+/* A constant sky seen from a surface: dr_sky_pdf's mixture, its half and the
+ * BSDF's lobe chosen by u_sel (path_simd.c's env_light_samples: the same
+ * operations). False where the BSDF's sample fails. */
+static bool sample_sky_from_surface(const struct dr_sky_bsdf *sky, double u_sel, double u1, double u2, dr_vec3 *dir,
+                                    double *pdf, struct dr_light_sample *out)
+{
+    double cos_g, pdf_b;
+    if (u_sel >= sky->share) {
+        const dr_frame fg = dr_frame_from_normal(sky->ng);
+        const dr_vec3 local = dr_bsdf_cosine_dir(u1, u2);
+        *dir = dr_frame_to_world(&fg, local);
+        cos_g = local.z;
+        pdf_b = dr_bsdf_pdf(sky->bsdf, sky->wo, dr_frame_to_local(&sky->frame, *dir));
+    } else {
+        struct dr_bsdf_sample bs;
+        if (!dr_bsdf_sample(sky->bsdf, sky->wo, u_sel / sky->share, u1, u2, &bs))
+            return false;
+        *dir = dr_frame_to_world(&sky->frame, bs.wi);
+        cos_g = dr_dot(*dir, sky->ng);
+        pdf_b = bs.pdf;
+        out->lobe = bs.lobe;
+    }
+    *pdf = dr_sky_pdf(sky->share, cos_g, pdf_b);
+    return true;
+}
+
+/* u_sel: sample_sky_from_surface's, where sky is given. */
 static bool sample_env(const struct dr_scene *s, const struct dr_light_sampler *ls, const struct dr_sky_bsdf *sky,
-                       double u_lobe, double u1, double u2, struct dr_light_sample *out)
+                       double u_sel, double u1, double u2, struct dr_light_sample *out)
 {
     dr_vec3 dir;
     double pdf;
     if (!ls->env_marginal && sky) {
-        /* constant radiance seen from a surface: dr_sky_pdf's mixture
-         * (path_simd.c's env_light_samples: the same operations) */
-        double cos_g, pdf_b;
-        if (u_lobe >= sky->share) {
-            const dr_frame fg = dr_frame_from_normal(sky->ng);
-            const dr_vec3 local = dr_bsdf_cosine_dir(u1, u2);
-            dir = dr_frame_to_world(&fg, local);
-            cos_g = local.z;
-            pdf_b = dr_bsdf_pdf(sky->bsdf, sky->wo, dr_frame_to_local(&sky->frame, dir));
-        } else {
-            struct dr_bsdf_sample bs;
-            if (!dr_bsdf_sample(sky->bsdf, sky->wo, u_lobe / sky->share, u1, u2, &bs))
-                return false;
-            dir = dr_frame_to_world(&sky->frame, bs.wi);
-            cos_g = dr_dot(dir, sky->ng);
-            pdf_b = bs.pdf;
-            out->lobe = bs.lobe;
-        }
-        pdf = dr_sky_pdf(sky->share, cos_g, pdf_b);
+        if (!sample_sky_from_surface(sky, u_sel, u1, u2, &dir, &pdf, out))
+            return false;
     } else if (!ls->env_marginal) {
         /* constant radiance in a medium: uniform sphere */
         double z = 1.0 - 2.0 * u1, r = sqrt(dr_max(0.0, 1.0 - z * z)), cos_phi, sin_phi;

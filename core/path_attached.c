@@ -86,9 +86,10 @@ static void emission_adjoint(const struct dr_scene *s, const struct dr_param_set
 }
 
 /* Next-event estimation: e_nee = f(wo, wi_l) L_l |wi_l.z| w / pdf_l, with
- * wi_l = frame^T ls.wi(p), w = mis(pdf_l(p), pdf_bsdf(wo, wi_l)); for a
- * constant sky sampled by the BSDF wi_l = T(u_l, bsdf, wo) and pdf_l =
- * pick pdf_bsdf(wo, wi_l) instead (the light's world direction plays no part). */
+ * wi_l = frame^T ls.wi(p), w = mis(pdf_l(p), pdf_bsdf(wo, wi_l)). A
+ * constant sky's pdf_l = pick ((1 - c) cos_g / pi + c pdf_bsdf(wo, wi_l))
+ * (dr_sky_pdf, c held); drawn by the cosine, ls.wi and cos_g stay; drawn by
+ * the BSDF, wi_l = T(u_l, bsdf, wo) and cos_g = (frame wi_l) . ng move. */
 static void nee_adjoint(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
                         dr_vec3 d_e, struct vertex_adjoint *a, struct dr_grad_sink *sink)
 {
