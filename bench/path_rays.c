@@ -109,10 +109,14 @@ static void record_path(const struct dr_scene *sc, const struct dr_accel *acc, c
             return;   /* a black surface: no shadow ray, no bounce, as drender */
         /* next-event estimation: one shadow ray, to a light point chosen
          * as drender chooses it (dr_light_sample: emitters by power, their
-         * points uniform by area), ending where drender's ends */
+         * points uniform by area; a sky as from a Lambertian surface, by the
+         * cosine), ending where drender's ends */
         double u_pick = dr_sampler_next(&smp), u1 = dr_sampler_next(&smp), u2 = dr_sampler_next(&smp);
+        const struct dr_bsdf lambert = {.base_color = c, .roughness = 1.0};
+        const dr_frame frame = dr_frame_from_normal(n);
+        const struct dr_sky_bsdf sky = {&lambert, frame, dr_frame_to_local(&frame, dr_neg(d)), n, 0.0};
         struct dr_light_sample ls;
-        if (dr_light_sample(sc, sc->light_sampler, h.p, n, u_pick, u1, u2, &ls) && dr_dot(ls.wi, n) > 0.0) {
+        if (dr_light_sample(sc, sc->light_sampler, h.p, &sky, u_pick, u1, u2, &ls) && dr_dot(ls.wi, n) > 0.0) {
             dr_vec3 po = dr_offset_origin(&h, n, ls.wi);
             if (isinf(ls.dist))
                 push(rs, po, ls.wi, INFINITY, true, depth);
