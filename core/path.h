@@ -92,9 +92,10 @@ struct dr_path_opts {
     enum dr_medium_grad medium_grad;
     unsigned stages;                     /* enum dr_path_stage bits (dr_path_plan) */
     const struct dr_param_set *params;   /* NULL: primal only (no substitution) */
-    bool sky_uniform;                    /* sample a constant sky over the sphere, not by the BSDF
-                                            (dr_light_sample): the reference strategy test_render
-                                            holds the BSDF's to; no run of drender sets it */
+    bool sky_uniform;                    /* sample a constant sky over the sphere, not by lights.h's
+                                            mixture (dr_light_sample): mis sampling's choice
+                                            (estimators/common.c), and the reference test_render
+                                            holds the mixture to */
 };
 
 /* The stages a scene and a parameter set (NULL: none) call for. */
@@ -292,8 +293,9 @@ bool dr_path_vertex_sampling_moves(const struct dr_scene *scene, const struct dr
  * sends every parameter adjoint of the vertex to the sink (emission, lights,
  * BSDF values, pdfs, the sampling map, textures through the moving uv) and
  * sets *d_this to the adjoint of the state it received. Forward mode: d_e
- * and d_t carry one image channel, the caller sets sink->channel. */
-void d_path_vertex_attached(const struct dr_scene *scene, const struct dr_param_set *params,
+ * and d_t carry one image channel, the caller sets sink->channel. opts:
+ * the walk's (its params, and how it sampled a constant sky). */
+void d_path_vertex_attached(const struct dr_scene *scene, const struct dr_path_opts *opts,
                             const struct dr_path_vertex *v, dr_vec3 d_e, dr_vec3 d_t,
                             const struct dr_d_path_state *d_next, struct dr_d_path_state *d_this,
                             struct dr_grad_sink *sink);

@@ -57,10 +57,11 @@ struct vertex_adjoint {
 };
 
 /* Emission (surface) or environment radiance (escaped), times its MIS weight. */
-static void emission_adjoint(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
-                             dr_vec3 d_e, struct vertex_adjoint *a, struct dr_d_path_state *d_this,
-                             struct dr_grad_sink *sink)
+static void emission_adjoint(const struct dr_scene *s, const struct dr_path_opts *opts,
+                             const struct dr_path_vertex *v, dr_vec3 d_e, struct vertex_adjoint *a,
+                             struct dr_d_path_state *d_this, struct dr_grad_sink *sink)
 {
+    const struct dr_param_set *ps = opts->params;
     if (!v->emits || dr_is_black(d_e))
         return;
     dr_vec3 d_Le = dr_scale(d_e, v->emit_w);
@@ -72,7 +73,8 @@ static void emission_adjoint(const struct dr_scene *s, const struct dr_param_set
             const struct dr_light_sampler *ls = s->light_sampler;
             double d_pdf_env = 0.0;
             d_mis_power(v->prev_pdf, dr_light_pdf_env(s, ls, v->d, v->prev_sky), d_w, &d_this->prev_pdf, &d_pdf_env);
-            d_this->prev_sky = d_pdf_env * dr_light_pdf_env_dsky(ls);
+            if (!opts->sky_uniform)   /* (over the sphere prev_sky is a constant) */
+                d_this->prev_sky = d_pdf_env * dr_light_pdf_env_dsky(ls);
         }
         return;
     }
@@ -90,9 +92,10 @@ static void emission_adjoint(const struct dr_scene *s, const struct dr_param_set
  * constant sky's pdf_l = pick ((1 - c) cos_g / pi + c pdf_bsdf(wo, wi_l))
  * (dr_sky_pdf, c held); drawn by the cosine, ls.wi and cos_g stay; drawn by
  * the BSDF, wi_l = T(u_l, bsdf, wo) and cos_g = (frame wi_l) . ng move. */
-static void nee_adjoint(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
+static void nee_adjoint(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
                         dr_vec3 d_e, struct vertex_adjoint *a, struct dr_grad_sink *sink)
 {
+    const struct dr_param_set *ps = opts->params;
     if (!v->nee || dr_is_black(d_e))
         return;
     const struct dr_light_sample *ls = &v->ls;
@@ -109,7 +112,8 @@ static void nee_adjoint(const struct dr_scene *s, const struct dr_param_set *ps,
     dr_vec3 d_wi = dr_v3(0.0, 0.0, d_scale * w / ls->pdf * copysign(1.0, v->nee_wi.z));
     d_bsdf_eval(&v->bsdf, v->wo, v->nee_wi, d_f, &a->bsdf, &a->wo, &d_wi);
     /* a constant sky's density pick ((1 - c) cos_g / pi + c pdf_b) (dr_sky_pdf) */
-    const double sky_pick = ls->type == DR_LS_ENV ? dr_light_pdf_env_dsky(s->light_sampler) : 0.0;
+    const double sky_pick =
+        ls->type == DR_LS_ENV && !opts->sky_uniform ? dr_light_pdf_env_dsky(s->light_sampler) : 0.0;
     const double c_sky = sky_pick > 0.0 ? dr_bsdf_sky_share(&v->bsdf, v->wo) : 0.0;
     d_pdf_b += sky_pick * c_sky * d_pdf_l;
     if (d_pdf_b != 0.0)
@@ -130,7 +134,8 @@ static void nee_adjoint(const struct dr_scene *s, const struct dr_param_set *ps,
 /* Continuation: t = f(wo, wi) |wi.z| / pdf(wo, wi) / q (q constant), the next
  * ray leaves p (offset along the constant ng) along frame wi, wi = T(u, bsdf, wo),
  * and hands on pdf and prev_sky = (1 - c) cos / pi + c pdf, cos = (frame wi) . ng
- * (dr_path_leaving_sky; attached runs never sample the sky uniformly). */
+ * (dr_path_leaving_sky; a walk that samples the sky uniformly hands on a
+ * constant, and the escaped vertex gives it no adjoint). */
 static void continuation_adjoint(const struct dr_path_vertex *v, dr_vec3 d_t, const struct dr_d_path_state *d_next,
                                  struct vertex_adjoint *a)
 {
@@ -173,17 +178,18 @@ static void surface_adjoint(const struct dr_scene *s, const struct dr_param_set 
     d_hit_compute(&s->mesh, hit, v->o, v->d, &dh, &d_this->o, &d_this->d);
 }
 
-void d_path_vertex_attached(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
+void d_path_vertex_attached(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
                             dr_vec3 d_e, dr_vec3 d_t, const struct dr_d_path_state *d_next,
                             struct dr_d_path_state *d_this, struct dr_grad_sink *sink)
 {
+    const struct dr_param_set *ps = opts->params;
     struct vertex_adjoint a;
     memset(&a, 0, sizeof a);
     memset(d_this, 0, sizeof *d_this);
-    emission_adjoint(s, ps, v, d_e, &a, d_this, sink);
+    emission_adjoint(s, opts, v, d_e, &a, d_this, sink);
     if (v->kind != DR_VERTEX_SURFACE)
         return;
-    nee_adjoint(s, ps, v, d_e, &a, sink);
+    nee_adjoint(s, opts, v, d_e, &a, sink);
     continuation_adjoint(v, d_t, d_next, &a);
     surface_adjoint(s, ps, v, &a, d_this, sink);
 }

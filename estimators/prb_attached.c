@@ -135,7 +135,7 @@ static void vertex_call(const struct prb_attached_ctx *c, const struct dr_path_v
 {
     struct dr_grad_sink discard = dr_sink_forward(c->zeros);
     struct dr_d_path_state dn = to_ambient(Tn, c_next), dt;
-    d_path_vertex_attached(c->b->p->scene, c->b->p->params, v, d_e, d_t, &dn, &dt, sink ? sink : &discard);
+    d_path_vertex_attached(c->b->p->scene, &c->b->popts, v, d_e, d_t, &dn, &dt, sink ? sink : &discard);
     if (c_out)
         to_tangent(Tk, &dt, c_out);
 }
@@ -380,7 +380,7 @@ static void finish(const struct prb_attached_ctx *c, const struct pending *P, co
     } else {
         struct dr_d_path_state dt, zero;
         memset(&zero, 0, sizeof zero);
-        d_path_vertex_attached(c->b->p->scene, c->b->p->params, next, next_d_e, dr_v3s(0.0), &zero, &dt,
+        d_path_vertex_attached(c->b->p->scene, &c->b->popts, next, next_d_e, dr_v3s(0.0), &zero, &dt,
                                &(struct dr_grad_sink){.dir = c->zeros});
         double ct[NS];
         to_tangent(&P->Tn, &dt, ct);

@@ -520,7 +520,7 @@ static void sweep_attached(const struct tape_job *j, const struct tape_vertex *v
         dr_vec3 bt = verts[i].bt;
         dr_vec3 t = v->cont ? dr_scale(v->f, v->cos_pdf_q) : dr_v3s(0.0);
         if (k >= path->moving) {
-            d_path_vertex_attached(s, ps, v, dr_mul(adj, bt), dr_mul(abar, bt), &d_next, &d_this, sink);
+            d_path_vertex_attached(s, &j->b.popts, v, dr_mul(adj, bt), dr_mul(abar, bt), &d_next, &d_this, sink);
             d_next = d_this;
         } else {
             if (v->cont && v->diff_bsdf)

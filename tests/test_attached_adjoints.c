@@ -436,7 +436,7 @@ static void test_sky_nee_vertex(void)
         struct dr_grad_sink sink = dr_sink_reverse(&grad);
         struct dr_d_path_state d_next, d_this;
         memset(&d_next, 0, sizeof d_next);
-        d_path_vertex_attached(s, ps, &v, dr_v3s(1.0), dr_v3s(0.0), &d_next, &d_this, &sink);
+        d_path_vertex_attached(s, &po, &v, dr_v3s(1.0), dr_v3s(0.0), &d_next, &d_this, &sink);
         double x[1] = {0.6};
         check_fd(v.ls.lobe >= 0 ? "sky by the BSDF: next-event adjoint" : "sky by the cosine: next-event adjoint",
                  sky_nee_objective, &k, x, 1, &grad, 1e-6, 1e-5);
