@@ -137,6 +137,20 @@ static struct dr_material glossy_material(dr_vec3 base, double metallic, double 
     return m;
 }
 
+/* Smooth normals on the panel (the scene's second quad: vertices 4-7,
+ * triangles 2 and 3), tilted apart. */
+static void tilt_panel_normals(struct dr_scene *s)
+{
+    for (uint32_t v = 4; v < 8; v++) {
+        dr_vec3 n = dr_normalize(dr_v3(0.15 * ((v & 1) ? 1 : -1), 0.3, 1.0 + 0.1 * (v & 2)));
+        s->mesh.normals[3 * v] = (float)n.x;
+        s->mesh.normals[3 * v + 1] = (float)n.y;
+        s->mesh.normals[3 * v + 2] = (float)n.z;
+    }
+    s->mesh.flags[2] |= DR_TRI_HAS_NORMALS;
+    s->mesh.flags[3] |= DR_TRI_HAS_NORMALS;
+}
+
 /* A metal floor, a tilted metal panel (smooth normals, base-colour texture),
  * a Lambertian wall (its diffuse samples turn with the moving frame); an
  * area light and a point light. */
@@ -163,15 +177,7 @@ static void glossy_room(void)
     l.position = dr_v3(1.0, 1.5, 1.0);
     sb_light(&b, l);
     struct dr_scene *s = b.s;
-    /* smooth normals on the panel, tilted apart */
-    for (uint32_t v = 4; v < 8; v++) {
-        dr_vec3 n = dr_normalize(dr_v3(0.15 * ((v & 1) ? 1 : -1), 0.3, 1.0 + 0.1 * (v & 2)));
-        s->mesh.normals[3 * v] = (float)n.x;
-        s->mesh.normals[3 * v + 1] = (float)n.y;
-        s->mesh.normals[3 * v + 2] = (float)n.z;
-    }
-    s->mesh.flags[2] |= DR_TRI_HAS_NORMALS;
-    s->mesh.flags[3] |= DR_TRI_HAS_NORMALS;
+    tilt_panel_normals(s);
     s->n_images = 1;
     s->images = calloc(1, sizeof(struct dr_image));
     struct dr_image *im = &s->images[0];
@@ -237,16 +243,9 @@ static void sky_room(double floor_roughness)
     sb_quad(&b, dr_v3(-2, 0.2, -1.5), dr_v3(4, 0, 0), dr_v3(0, 2.5, -0.8), panel);   /* tris 2, 3 */
     sb_quad(&b, dr_v3(-2.5, 0, -2), dr_v3(0, 0, 4), dr_v3(0, 3, 0), wall);
     sb_environment(&b, dr_v3(0.9, 1.0, 1.2));
-    struct dr_scene *s = b.s;
-    for (uint32_t v = 4; v < 8; v++) {   /* smooth normals on the panel, tilted apart */
-        dr_vec3 n = dr_normalize(dr_v3(0.15 * ((v & 1) ? 1 : -1), 0.3, 1.0 + 0.1 * (v & 2)));
-        s->mesh.normals[3 * v] = (float)n.x;
-        s->mesh.normals[3 * v + 1] = (float)n.y;
-        s->mesh.normals[3 * v + 2] = (float)n.z;
-    }
-    s->mesh.flags[2] |= DR_TRI_HAS_NORMALS;
-    s->mesh.flags[3] |= DR_TRI_HAS_NORMALS;
+    tilt_panel_normals(b.s);
     sb_finish(&b);
+    struct dr_scene *s = b.s;
     struct dr_camera cam = sb_camera(dr_v3(0, 1.2, 2.5), dr_v3(0, 0.3, -0.5), 50);
     char what[64];
     snprintf(what, sizeof what, "sky room, floor %.2f rough.", floor_roughness);
