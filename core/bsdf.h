@@ -55,8 +55,6 @@ dr_vec3 dr_bsdf_eval_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double
  * then ends. */
 bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u1,
                     double u2, struct dr_bsdf_sample *out);
-/* Probability of choosing the specular lobe for this wo (0 for a pure
- * Lambertian, 1 for a lobe with no diffuse part). */
 /* The share of a constant sky's next-event samples drawn by this BSDF at wo
  * (lights.h's dr_sky_pdf; the rest by the cosine about the normal): its
  * specular lobe's probability where that lobe is sharp (alpha <= 0.3,
@@ -64,6 +62,8 @@ bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u
  * roughness 0.67: there the cosine's samples were the better ones on the
  * sample Box as metal); 0 for wo at or below the surface. */
 double dr_bsdf_sky_share(const struct dr_bsdf *b, dr_vec3 wo);
+/* Probability of choosing the specular lobe for this wo (0 for a pure
+ * Lambertian, 1 for a lobe with no diffuse part). */
 double dr_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo);
 /* The sampling map of one lobe: the direction dr_bsdf_sample returns for
  * (u1, u2) once it has chosen `lobe` (bit for bit the same). The diffuse map

@@ -268,8 +268,8 @@ struct dr_d_path_state {
     dr_vec3 o, d;        /* of the arriving ray */
     double prev_pdf;     /* of the BSDF density that sampled d */
     double prev_sky;     /* of the density with which the point d left samples a
-                            constant sky along d (lights.h: at a surface the
-                            BSDF's, which moves with d and the BSDF as prev_pdf) */
+                            constant sky along d (at a surface lights.h's
+                            dr_sky_pdf, which moves with d and with the BSDF's pdf) */
     dr_vec3 prev_p;      /* of the point that ray left */
 };
 
@@ -304,8 +304,9 @@ struct dr_path_state {
     dr_vec3 o, d;            /* the next ray */
     double prev_pdf;         /* BSDF density of d (0: camera ray) */
     double prev_sky;         /* the density with which the point d left samples a constant sky
-                                along d (lights.h: at a surface the BSDF's, prev_pdf; DR_SKY_SPHERE:
-                                the camera, a point in a medium, sky_uniform) */
+                                along d (at a surface lights.h's dr_sky_pdf of d's cosine to ng
+                                and prev_pdf; DR_SKY_SPHERE: the camera, a point in a medium,
+                                sky_uniform, a scene without an environment) */
     dr_vec3 prev_p;
     int depth;               /* segments traced so far */
     dr_vec3 beta;            /* tracing throughput (with substitutes) */

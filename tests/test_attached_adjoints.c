@@ -371,14 +371,17 @@ static void test_sky_pdf(const struct dr_scene *with_map)
  * (lobe probability 1) whose roughness 0.6 puts dr_bsdf_sky_share strictly
  * between 0 and 1: some light samples are drawn by the cosine about the
  * normal (a fixed direction), the others by the BSDF (moving with the
- * roughness, and with them their cosine to the normal). The vertex adjoint
- * (d_path_vertex_attached, d_e only) against the finite difference of the
- * estimate f L |cos| mis / pdf made again from the same numbers with the
- * roughness moved and the share held, as attached sampling holds it. */
+ * roughness, and with them their cosine to the normal); or, as mis
+ * sampling draws it (sky_uniform), over the sphere (fixed, of constant
+ * density). The vertex adjoint (d_path_vertex_attached, d_e only) against
+ * the finite difference of the estimate f L |cos| mis / pdf made again from
+ * the same numbers with the roughness moved and the share held, as
+ * attached sampling holds it. */
 struct sky_nee_ctx {
     struct dr_scene *s;
     const struct dr_path_vertex *v;
     double share;
+    bool uniform;
 };
 
 static double sky_nee_objective(void *c, const double *x)
@@ -390,14 +393,50 @@ static double sky_nee_objective(void *c, const double *x)
     dr_material_eval(k->s, &v->hit, &b);
     const struct dr_sky_bsdf sky = {&b, v->frame, v->wo, v->ng, k->share};
     struct dr_light_sample ls;
-    if (!dr_light_sample(k->s, k->s->light_sampler, v->hit.p, &sky, v->u.light_pick, v->u.light_u1, v->u.light_u2,
-                         &ls))
+    if (!dr_light_sample(k->s, k->s->light_sampler, v->hit.p, k->uniform ? NULL : &sky, v->u.light_pick,
+                         v->u.light_u1, v->u.light_u2, &ls))
         return NAN;
     dr_vec3 wi = dr_frame_to_local(&v->frame, ls.wi);
     double pdf_b;
     dr_vec3 f = dr_bsdf_eval_pdf(&b, v->wo, wi, &pdf_b);
     dr_vec3 e = dr_scale(dr_mul(f, ls.radiance), fabs(wi.z) * dr_mis_power(ls.pdf, pdf_b) / ls.pdf);
     return e.x + e.y + e.z;
+}
+
+/* Six light samples of each kind the walk draws (uniform: over the sphere;
+ * else by the BSDF and by the cosine), each checked. */
+static void sky_nee_vertices(struct dr_scene *s, const struct dr_param_set *ps, bool uniform)
+{
+    const struct dr_path_opts po = {.max_depth = 2, .rr_depth = DR_RR_DEPTH_DEFAULT, .stages = dr_path_plan(s, ps),
+                                    .params = ps, .sky_uniform = uniform};
+    int by_bsdf = 0, other = 0;   /* (other: by the cosine, or over the sphere) */
+    for (uint64_t i = 0; i < 400 && (by_bsdf < (uniform ? 0 : 6) || other < 6); i++) {
+        struct dr_sampler smp;
+        dr_sampler_init(&smp, 3, i, 0);
+        struct dr_path_state st;
+        struct dr_path_vertex v;
+        struct dr_ray_counts rc = {0};
+        dr_path_start(&st, dr_v3(0.2 * rnd() - 0.1, 1.0, 1.0), dr_normalize(dr_v3(0.1 * rnd(), -1.0, -1.0)));
+        dr_path_step(s, &po, &st, &smp, &v, &rc);
+        if (!v.nee || v.ls.type != DR_LS_ENV || (v.ls.lobe >= 0 ? by_bsdf : other) >= 6)
+            continue;
+        struct sky_nee_ctx k = {s, &v, dr_bsdf_sky_share(&v.bsdf, v.wo), uniform};
+        CHECK(k.share > 0.1 && k.share < 0.9, "the share %g is strictly between 0 and 1", k.share);
+        double grad = 0.0;
+        struct dr_grad_sink sink = dr_sink_reverse(&grad);
+        struct dr_d_path_state d_next, d_this;
+        memset(&d_next, 0, sizeof d_next);
+        d_path_vertex_attached(s, &po, &v, dr_v3s(1.0), dr_v3s(0.0), &d_next, &d_this, &sink);
+        double x[1] = {0.6};
+        check_fd(v.ls.lobe >= 0 ? "sky by the BSDF: next-event adjoint"
+                                : uniform ? "sky over the sphere: next-event adjoint"
+                                          : "sky by the cosine: next-event adjoint",
+                 sky_nee_objective, &k, x, 1, &grad, 1e-6, 1e-5);
+        s->materials[0].roughness = 0.6;
+        *(v.ls.lobe >= 0 ? &by_bsdf : &other) += 1;
+    }
+    CHECK(by_bsdf == (uniform ? 0 : 6) && other == 6, "%s light samples checked: %d by the BSDF, %d %s",
+          uniform ? "sphere's" : "mixture's", by_bsdf, other, uniform ? "over the sphere" : "by the cosine");
 }
 
 static void test_sky_nee_vertex(void)
@@ -417,33 +456,8 @@ static void test_sky_nee_vertex(void)
     CHECK(ps != NULL, "sky nee: %s", dr_last_error());
     if (!ps)
         return;
-    const struct dr_path_opts po = {.max_depth = 2, .rr_depth = DR_RR_DEPTH_DEFAULT, .stages = dr_path_plan(s, ps),
-                                    .params = ps};
-    int by_bsdf = 0, by_cos = 0;
-    for (uint64_t i = 0; i < 400 && (by_bsdf < 6 || by_cos < 6); i++) {
-        struct dr_sampler smp;
-        dr_sampler_init(&smp, 3, i, 0);
-        struct dr_path_state st;
-        struct dr_path_vertex v;
-        struct dr_ray_counts rc = {0};
-        dr_path_start(&st, dr_v3(0.2 * rnd() - 0.1, 1.0, 1.0), dr_normalize(dr_v3(0.1 * rnd(), -1.0, -1.0)));
-        dr_path_step(s, &po, &st, &smp, &v, &rc);
-        if (!v.nee || v.ls.type != DR_LS_ENV || (v.ls.lobe >= 0 ? by_bsdf : by_cos) >= 6)
-            continue;
-        struct sky_nee_ctx k = {s, &v, dr_bsdf_sky_share(&v.bsdf, v.wo)};
-        CHECK(k.share > 0.1 && k.share < 0.9, "the share %g is strictly between 0 and 1", k.share);
-        double grad = 0.0;
-        struct dr_grad_sink sink = dr_sink_reverse(&grad);
-        struct dr_d_path_state d_next, d_this;
-        memset(&d_next, 0, sizeof d_next);
-        d_path_vertex_attached(s, &po, &v, dr_v3s(1.0), dr_v3s(0.0), &d_next, &d_this, &sink);
-        double x[1] = {0.6};
-        check_fd(v.ls.lobe >= 0 ? "sky by the BSDF: next-event adjoint" : "sky by the cosine: next-event adjoint",
-                 sky_nee_objective, &k, x, 1, &grad, 1e-6, 1e-5);
-        s->materials[0].roughness = 0.6;
-        *(v.ls.lobe >= 0 ? &by_bsdf : &by_cos) += 1;
-    }
-    CHECK(by_bsdf == 6 && by_cos == 6, "light samples checked: %d by the BSDF, %d by the cosine", by_bsdf, by_cos);
+    sky_nee_vertices(s, ps, false);
+    sky_nee_vertices(s, ps, true);
     dr_param_set_destroy(ps);
     dr_scene_destroy(s);
 }

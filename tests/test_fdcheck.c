@@ -229,7 +229,8 @@ static void glossy_env_scaled(double S, const char *name)
  * that next-event estimation draws the sky partly by the BSDF and partly by
  * the cosine (lights.h's dr_sky_pdf, the share strictly between 0 and 1):
  * the attached adjoints of both kinds of light sample and of the escaping
- * ray's density (path_attached.c), in expectation. */
+ * ray's density (path_attached.c), in expectation; and mis, which samples
+ * the sky over the sphere, whose density then has no adjoint. */
 static void glossy_sky(void)
 {
     struct sb b;

@@ -584,9 +584,8 @@ static struct dr_scene *lit_box(void)
     return sb_finish(&b);
 }
 
-/* A constant environment alone (what a glTF file without lights gets). */
-/* Under a constant sky, next-event estimation draws it by dr_sky_pdf's
- * mixture: the Lambertian box by the cosine alone, the glossy dielectric
+/* A constant environment alone (what a glTF file without lights gets).
+ * Next-event estimation draws it by dr_sky_pdf's mixture: the Lambertian box by the cosine alone, the glossy dielectric
  * block by both halves, a sharp metal block by the BSDF alone, a broad
  * metal one (roughness 0.6) by both. */
 static struct dr_scene *sky_box(void)
