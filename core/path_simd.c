@@ -228,36 +228,53 @@ DR_SIMD_INLINE dr_f8 independent(dr_u8 key, dr_u8 dim)
 
 typedef uint32_t u32x8 __attribute__((vector_size(8 * sizeof(uint32_t))));
 
-/* dr_reverse_bits32 */
+/* dr_reverse_bits32: with GFNI, as there, an affine transform reversing
+ * each byte's bits and a shuffle reversing each number's bytes. */
 DR_SIMD_INLINE u32x8 reverse_bits(u32x8 x)
 {
+#if defined(__GFNI__) && defined(__AVX2__)
+    const __m256i byte_reversal = _mm256_set1_epi64x(0x8040201008040201LL);
+    const __m256i byte_swap = _mm256_setr_epi8(3, 2, 1, 0, 7, 6, 5, 4, 11, 10, 9, 8, 15, 14, 13, 12, 3, 2, 1, 0, 7, 6,
+                                               5, 4, 11, 10, 9, 8, 15, 14, 13, 12);
+    return (u32x8)_mm256_shuffle_epi8(_mm256_gf2p8affine_epi64_epi8((__m256i)x, byte_reversal, 0), byte_swap);
+#else
     x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
     x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
     x = ((x >> 4) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4);
     x = ((x >> 8) & 0x00ff00ffu) | ((x & 0x00ff00ffu) << 8);
     return (x >> 16) | (x << 16);
+#endif
 }
 
-/* dr_owen_scramble */
-DR_SIMD_INLINE u32x8 owen_scramble(u32x8 x, u32x8 seed)
+/* dr_laine_karras */
+DR_SIMD_INLINE u32x8 laine_karras(u32x8 x, u32x8 seed)
 {
-    x = reverse_bits(x);
     x += seed;
     x ^= x * 0x6c50b47cu;
     x ^= x * 0xb82f1e52u;
     x ^= x * 0xc7afe638u;
     x ^= x * 0x8d22f6e6u;
-    return reverse_bits(x);
+    return x;
 }
 
-/* dr_sobol_dim1: the generator matrix's columns v_b for the set bits (in
- * vector registers a table lookup per lane costs more than the 32 steps) */
+/* dr_sobol_dim1. With AVX-512 its table's sixteen entries for a group of
+ * four bits fit two registers, and one two-register permutation looks all
+ * eight lanes up; elsewhere the generator matrix's columns v_b for the set
+ * bits (a table lookup per lane costs more than the 32 steps). */
 DR_SIMD_INLINE u32x8 sobol_dim1(u32x8 i)
 {
     u32x8 x = {0};
+#if defined(__AVX512F__) && defined(__AVX512VL__)
+    for (int n = 0; n < 8; n++, i >>= 4) {
+        const uint32_t *t = dr_sobol_dim1_nibble[n];
+        x ^= (u32x8)_mm256_permutex2var_epi32(_mm256_loadu_si256((const __m256i *)t), (__m256i)(i & 15u),
+                                              _mm256_loadu_si256((const __m256i *)(t + 8)));
+    }
+#else
     uint32_t v = 0x80000000u;
     for (int b = 0; b < 32; b++, i >>= 1, v ^= v >> 1)
         x ^= (0u - (i & 1u)) & v;
+#endif
     return x;
 }
 
@@ -269,16 +286,20 @@ DR_SIMD_INLINE dr_f8 sobol_to_f8(u32x8 x, dr_u8 h)
 }
 
 /* dr_sampler_sobol2 of dimension dim for lanes with scrambling seed pkey
- * and sample index; u2 NULL: the first number only. */
-DR_SIMD_INLINE void sobol2(dr_u8 pkey, u32x8 index, dr_u8 dim, dr_f8 *u1, dr_f8 *u2)
+ * and sample index, given as rindex = reverse_bits(index) (the same for all
+ * of a vertex's draws); u2 NULL: the first number only. Its scrambles are
+ * dr_owen_scramble's reverse_bits(laine_karras(reverse_bits(x))) with the
+ * reversals that meet cancelled: the same bits. */
+DR_SIMD_INLINE void sobol2(dr_u8 pkey, u32x8 rindex, dr_u8 dim, dr_f8 *u1, dr_f8 *u2)
 {
     dr_u8 h = hash64(pkey + dim * 0xd1b54a32d192ed03ULL);
-    u32x8 i = owen_scramble(index, __builtin_convertvector(h, u32x8));
+    u32x8 i = reverse_bits(laine_karras(rindex, __builtin_convertvector(h, u32x8)));
     dr_u8 h1 = hash64(h ^ 0x1111111111111111ULL);
-    *u1 = sobol_to_f8(owen_scramble(reverse_bits(i), __builtin_convertvector(h1 >> 32, u32x8)), h1);
+    *u1 = sobol_to_f8(reverse_bits(laine_karras(i, __builtin_convertvector(h1 >> 32, u32x8))), h1);
     if (u2) {
         dr_u8 h2 = hash64(h ^ 0x2222222222222222ULL);
-        *u2 = sobol_to_f8(owen_scramble(sobol_dim1(i), __builtin_convertvector(h2 >> 32, u32x8)), h2);
+        u32x8 s2 = __builtin_convertvector(h2 >> 32, u32x8);
+        *u2 = sobol_to_f8(reverse_bits(laine_karras(reverse_bits(sobol_dim1(i)), s2)), h2);
     }
 }
 
@@ -1162,11 +1183,12 @@ static void vertex_randoms(const struct dr_path8_in *in, const uint32_t *dim, dr
         u32x8 index;
         for (int i = 0; i < DR_SIMD_W; i++)
             pkey[i] = in->sampler[i]->pkey, index[i] = in->sampler[i]->index;
-        sobol2(pkey, index, d + 1, &u[0], NULL);
-        sobol2(pkey, index, d + 2, &u[1], &u[2]);
-        sobol2(pkey, index, d + 4, &u[3], NULL);
-        sobol2(pkey, index, d + 5, &u[4], &u[5]);
-        sobol2(pkey, index, d + 7, &u[6], NULL);
+        const u32x8 rindex = reverse_bits(index);
+        sobol2(pkey, rindex, d + 1, &u[0], NULL);
+        sobol2(pkey, rindex, d + 2, &u[1], &u[2]);
+        sobol2(pkey, rindex, d + 4, &u[3], NULL);
+        sobol2(pkey, rindex, d + 5, &u[4], &u[5]);
+        sobol2(pkey, rindex, d + 7, &u[6], NULL);
         return;
     }
     for (int k = 0; k < 7; k++)

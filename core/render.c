@@ -31,16 +31,22 @@ struct render_job {
     } counters[DR_MAX_THREADS];
 };
 
-/* Sample s of frame pixel (fx, fy): its random numbers and camera ray. The
- * frame pixel (not the crop's) keys them, so a crop renders the same pixels. */
-static void start_sample(const struct render_job *j, int fx, int fy, uint64_t pixel, int s, struct dr_sampler *smp,
-                         dr_vec3 *o, dr_vec3 *d)
+/* Frame pixel `pixel`'s share of its samples' random numbers. The frame
+ * pixel (not the crop's) keys them, so a crop renders the same pixels. */
+static void start_pixel(const struct render_job *j, uint64_t pixel, struct dr_sampler_pixel *p)
 {
-    const struct dr_render_opts *ro = j->opts;
-    dr_sampler_init_kind(smp, ro->sampler, ro->seed, pixel, (uint64_t)s, ro->spp);
+    dr_sampler_pixel_init(p, j->opts->sampler, j->opts->seed, pixel, j->opts->spp);
+}
+
+/* Sample s of frame pixel (fx, fy) (p: start_pixel's): its random numbers
+ * and camera ray. */
+static void start_sample(const struct render_job *j, int fx, int fy, const struct dr_sampler_pixel *p, int s,
+                         struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    dr_sampler_pixel_sample(p, (uint64_t)s, smp);
     double u, v, px, py;
-    dr_sampler_next2(smp, &u, &v);
-    dr_film_sample(&ro->film.filter, fx, fy, u, v, &px, &py);
+    dr_sampler_pixel_first2(p, smp, &u, &v);
+    dr_film_sample(&j->opts->film.filter, fx, fy, u, v, &px, &py);
     dr_camera_ray(&j->view, px, py, o, d);
 }
 
@@ -72,11 +78,12 @@ static void render_tile_scalar(struct render_job *j, int thread, int x0, int y0,
         for (int x = x0; x < x1; x++) {
             int fx, fy;
             int64_t local = (int64_t)y * o->width + x;
-            uint64_t pixel = dr_film_pixel(&o->film, o->width, local, &fx, &fy);
+            struct dr_sampler_pixel p;
+            start_pixel(j, dr_film_pixel(&o->film, o->width, local, &fx, &fy), &p);
             for (int s = 0; s < o->spp; s++) {
                 struct dr_sampler smp;
                 dr_vec3 ro, rd;
-                start_sample(j, fx, fy, pixel, s, &smp, &ro, &rd);
+                start_sample(j, fx, fy, &p, s, &smp, &ro, &rd);
                 L[s] = dr_path_radiance(j->scene, &j->path, ro, rd, &smp, rays);
             }
             store_pixel(j, thread, local, L);
@@ -90,7 +97,7 @@ struct pixel_run {
     int first;               /* index of the run's first pixel in the tile */
     int64_t local[DR_TILE_SIZE * DR_TILE_SIZE];
     int fx[DR_TILE_SIZE * DR_TILE_SIZE], fy[DR_TILE_SIZE * DR_TILE_SIZE];
-    uint64_t pixel[DR_TILE_SIZE * DR_TILE_SIZE];
+    struct dr_sampler_pixel pixel[DR_TILE_SIZE * DR_TILE_SIZE];   /* start_pixel's */
 };
 
 static void start_run_sample(void *ctx, int64_t i, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
@@ -98,7 +105,7 @@ static void start_run_sample(void *ctx, int64_t i, struct dr_sampler *smp, dr_ve
     const struct pixel_run *r = ctx;
     const int spp = r->j->opts->spp;
     int p = r->first + (int)(i / spp);
-    start_sample(r->j, r->fx[p], r->fy[p], r->pixel[p], (int)(i % spp), smp, o, d);
+    start_sample(r->j, r->fx[p], r->fy[p], &r->pixel[p], (int)(i % spp), smp, o, d);
 }
 
 /* Many paths at a time (wavefront.h), chunk_pixels pixels' samples per run. */
@@ -110,7 +117,7 @@ static void render_tile_wave(struct render_job *j, int thread, int x0, int y0, i
     for (int y = y0; y < y1; y++)
         for (int x = x0; x < x1; x++, n++) {
             run.local[n] = (int64_t)y * o->width + x;
-            run.pixel[n] = dr_film_pixel(&o->film, o->width, run.local[n], &run.fx[n], &run.fy[n]);
+            start_pixel(j, dr_film_pixel(&o->film, o->width, run.local[n], &run.fx[n], &run.fy[n]), &run.pixel[n]);
         }
     dr_vec3 *L = j->counters[thread].L;
     for (run.first = 0; run.first < n; run.first += j->chunk_pixels) {

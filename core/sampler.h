@@ -9,6 +9,10 @@
 
 #include "stratified.h"
 
+#if defined(__GFNI__) && defined(__SSE2__)
+#include <immintrin.h>   /* dr_reverse_bits32 */
+#endif
+
 /* SplitMix64's finaliser: a strong 64-bit mix. */
 static inline uint64_t dr_hash64(uint64_t x)
 {
@@ -53,15 +57,62 @@ struct dr_sampler {
     uint32_t grid_m, grid_n;   /* stratified: the 2D draws' grid (stratified.h) */
 };
 
+/* What the samples of one pixel share: the hash of (seed, pixel) their keys
+ * start from, the scrambling seed and the strata (in `shared`, whose key,
+ * index and dim each sample sets), and the hash of the first draw's
+ * dimension (dr_sampler_pixel_first2). A pixel's spp samples made through
+ * it (dr_sampler_pixel_sample) are dr_sampler_init_kind's, with five of a
+ * Sobol sample's ten scalar hashes, and two of an independent sample's
+ * five, computed once per pixel. */
+struct dr_sampler_pixel {
+    struct dr_sampler shared;
+    uint64_t pixel_key;    /* dr_hash64(dr_hash64(seed + phi) ^ pixel) */
+    uint64_t first_hash;   /* sobol, stratified: dimension 1's, dr_sampler_dim_hash */
+};
+
+/* Dimension dim's hash of a pixel's scrambling seed pkey: the Sobol pair's
+ * scrambling seed, the stratified draw's permutation seed. */
+static inline uint64_t dr_sampler_dim_hash(uint64_t pkey, uint32_t dim)
+{
+    return dr_hash64(pkey + (uint64_t)dim * 0xd1b54a32d192ed03ULL);
+}
+
+/* The pixel's share of dr_sampler_init_kind (spp: the pixel's sample count,
+ * as there). */
+static inline void dr_sampler_pixel_init(struct dr_sampler_pixel *p, enum dr_sampler_kind kind, uint64_t seed,
+                                         uint64_t pixel, int spp)
+{
+    struct dr_sampler *s = &p->shared;
+    s->key = 0, s->dim = 0, s->kind = DR_SAMPLER_INDEPENDENT, s->pkey = 0, s->index = 0, s->count = 0;
+    s->grid_m = s->grid_n = 0;
+    p->pixel_key = dr_hash64(dr_hash64(seed + 0x9e3779b97f4a7c15ULL) ^ pixel);
+    if (kind == DR_SAMPLER_SOBOL) {
+        s->kind = DR_SAMPLER_SOBOL;
+        s->pkey = dr_hash64(dr_hash64(seed ^ 0x5b0b5b0b5b0b5b0bULL) ^ (pixel * 0xd6e8feb86659fd93ULL));
+    } else if (kind == DR_SAMPLER_STRATIFIED) {
+        s->kind = DR_SAMPLER_STRATIFIED;
+        s->pkey = dr_hash64(dr_hash64(seed ^ 0x57a7157a7157a715ULL) ^ (pixel * 0xd6e8feb86659fd93ULL));
+        s->count = spp > 0 ? (uint32_t)spp : 1u;
+        dr_strat_grid(s->count, &s->grid_m, &s->grid_n);
+    }
+    p->first_hash = dr_sampler_dim_hash(s->pkey, 1);
+}
+
+/* Sample `sample` of the pixel (sample < spp). */
+static inline void dr_sampler_pixel_sample(const struct dr_sampler_pixel *p, uint64_t sample, struct dr_sampler *s)
+{
+    *s = p->shared;
+    s->key = dr_hash64(p->pixel_key ^ (sample * 0x9e3779b97f4a7c15ULL));
+    if (s->kind != DR_SAMPLER_INDEPENDENT)
+        s->index = (uint32_t)sample;
+}
+
+/* A sampler of the independent kind: sample `sample` of `pixel`. */
 static inline void dr_sampler_init(struct dr_sampler *s, uint64_t seed, uint64_t pixel, uint64_t sample)
 {
-    s->key = dr_hash64(dr_hash64(dr_hash64(seed + 0x9e3779b97f4a7c15ULL) ^ pixel) ^ (sample * 0x9e3779b97f4a7c15ULL));
-    s->dim = 0;
-    s->kind = DR_SAMPLER_INDEPENDENT;
-    s->pkey = 0;
-    s->index = 0;
-    s->count = 0;
-    s->grid_m = s->grid_n = 0;
+    struct dr_sampler_pixel p;
+    dr_sampler_pixel_init(&p, DR_SAMPLER_INDEPENDENT, seed, pixel, 0);
+    dr_sampler_pixel_sample(&p, sample, s);
 }
 
 /* Sample `sample` of the `spp` samples of `pixel`. spp only matters to the
@@ -70,43 +121,48 @@ static inline void dr_sampler_init(struct dr_sampler *s, uint64_t seed, uint64_t
 static inline void dr_sampler_init_kind(struct dr_sampler *s, enum dr_sampler_kind kind, uint64_t seed,
                                         uint64_t pixel, uint64_t sample, int spp)
 {
-    dr_sampler_init(s, seed, pixel, sample);
-    if (kind == DR_SAMPLER_SOBOL) {
-        s->kind = DR_SAMPLER_SOBOL;
-        s->pkey = dr_hash64(dr_hash64(seed ^ 0x5b0b5b0b5b0b5b0bULL) ^ (pixel * 0xd6e8feb86659fd93ULL));
-        s->index = (uint32_t)sample;
-    } else if (kind == DR_SAMPLER_STRATIFIED) {
-        s->kind = DR_SAMPLER_STRATIFIED;
-        s->pkey = dr_hash64(dr_hash64(seed ^ 0x57a7157a7157a715ULL) ^ (pixel * 0xd6e8feb86659fd93ULL));
-        s->index = (uint32_t)sample;
-        s->count = spp > 0 ? (uint32_t)spp : 1u;
-        dr_strat_grid(s->count, &s->grid_m, &s->grid_n);
-    }
+    struct dr_sampler_pixel p;
+    dr_sampler_pixel_init(&p, kind, seed, pixel, spp);
+    dr_sampler_pixel_sample(&p, sample, s);
 }
 
 /* ---- Owen-scrambled Sobol (the two dimensions of a (0,2) sequence) ---- */
 
+/* Reverses a 32-bit number's bits. With GFNI one affine transform over
+ * GF(2) reverses each byte's bits (the matrix 0x8040201008040201) and a byte
+ * swap does the rest: four instructions for the twenty of the shifts. */
 static inline uint32_t dr_reverse_bits32(uint32_t x)
 {
+#if defined(__GFNI__) && defined(__SSE2__)
+    const __m128i byte_reversal = _mm_set1_epi64x(0x8040201008040201LL);
+    return __builtin_bswap32((uint32_t)_mm_cvtsi128_si32(_mm_gf2p8affine_epi64_epi8(_mm_cvtsi32_si128((int)x), byte_reversal, 0)));
+#else
     x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
     x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
     x = ((x >> 4) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4);
     x = ((x >> 8) & 0x00ff00ffu) | ((x & 0x00ff00ffu) << 8);
     return (x >> 16) | (x << 16);
+#endif
 }
 
-/* Nested uniform (Owen) scrambling of a 32-bit fixed-point number: a hash
- * that lets higher bits affect only lower ones, applied to the reversed bits
- * (Laine-Karras permutation with Burley's constants). */
-static inline uint32_t dr_owen_scramble(uint32_t x, uint32_t seed)
+/* The Laine-Karras permutation with Burley's constants: a hash in which a
+ * bit affects only the bits above it. */
+static inline uint32_t dr_laine_karras(uint32_t x, uint32_t seed)
 {
-    x = dr_reverse_bits32(x);
     x += seed;
     x ^= x * 0x6c50b47cu;
     x ^= x * 0xb82f1e52u;
     x ^= x * 0xc7afe638u;
     x ^= x * 0x8d22f6e6u;
-    return dr_reverse_bits32(x);
+    return x;
+}
+
+/* Nested uniform (Owen) scrambling of a 32-bit fixed-point number: the
+ * Laine-Karras permutation applied to the reversed bits, so that higher bits
+ * affect only lower ones. */
+static inline uint32_t dr_owen_scramble(uint32_t x, uint32_t seed)
+{
+    return dr_reverse_bits32(dr_laine_karras(dr_reverse_bits32(x), seed));
 }
 
 /* Sobol dimension 1's generator matrix (Pascal's triangle mod 2), as the
@@ -132,15 +188,24 @@ static inline double dr_sobol_to_double(uint32_t x, uint64_t h)
     return (double)(((uint64_t)x << 21) | (h >> 43)) * (1.0 / 9007199254740992.0);
 }
 
+/* The Sobol pair of the dimension whose hash is h (dr_sampler_dim_hash) for
+ * the sample with index `index`; u2 NULL: the first number only. */
+static inline void dr_sobol2_hashed(uint64_t h, uint32_t index, double *u1, double *u2)
+{
+    uint32_t i = dr_owen_scramble(index, (uint32_t)h);   /* Burley's shuffled index */
+    uint64_t h1 = dr_hash64(h ^ 0x1111111111111111ULL);
+    /* dimension 0, dr_owen_scramble(dr_reverse_bits32(i)): its two inner reversals cancel */
+    *u1 = dr_sobol_to_double(dr_reverse_bits32(dr_laine_karras(i, (uint32_t)(h1 >> 32))), h1);
+    if (u2) {
+        uint64_t h2 = dr_hash64(h ^ 0x2222222222222222ULL);
+        *u2 = dr_sobol_to_double(dr_owen_scramble(dr_sobol_dim1(i), (uint32_t)(h2 >> 32)), h2);
+    }
+}
+
 /* The Sobol pair of dimension `dim` (its seed) for this sampler's sample. */
 static inline void dr_sampler_sobol2(const struct dr_sampler *s, uint32_t dim, double *u1, double *u2)
 {
-    uint64_t h = dr_hash64(s->pkey + (uint64_t)dim * 0xd1b54a32d192ed03ULL);
-    uint32_t i = dr_owen_scramble(s->index, (uint32_t)h);   /* Burley's shuffled index */
-    uint64_t h1 = dr_hash64(h ^ 0x1111111111111111ULL), h2 = dr_hash64(h ^ 0x2222222222222222ULL);
-    *u1 = dr_sobol_to_double(dr_owen_scramble(dr_reverse_bits32(i), (uint32_t)(h1 >> 32)), h1);
-    if (u2)
-        *u2 = dr_sobol_to_double(dr_owen_scramble(dr_sobol_dim1(i), (uint32_t)(h2 >> 32)), h2);
+    dr_sobol2_hashed(dr_sampler_dim_hash(s->pkey, dim), s->index, u1, u2);
 }
 
 /* ---- stratified (stratified.h) ---- */
@@ -149,7 +214,7 @@ static inline void dr_sampler_sobol2(const struct dr_sampler *s, uint32_t dim, d
  * sample's own jitter hash for it. */
 static inline uint64_t dr_sampler_strat_seed(const struct dr_sampler *s, uint32_t dim)
 {
-    return dr_hash64(s->pkey + (uint64_t)dim * 0xd1b54a32d192ed03ULL);
+    return dr_sampler_dim_hash(s->pkey, dim);
 }
 
 static inline uint64_t dr_sampler_strat_jitter(const struct dr_sampler *s, uint32_t dim, uint64_t salt)
@@ -170,6 +235,10 @@ static inline double dr_sampler_independent(const struct dr_sampler *s, uint32_t
  * quarter of its shading). */
 double dr_sampler_next_structured(struct dr_sampler *s);
 void dr_sampler_next2_structured(struct dr_sampler *s, double *u1, double *u2);
+/* dr_sampler_next2 on sample s of pixel p as dr_sampler_pixel_sample made
+ * it (its first draw, dimensions 1 and 2: the camera's film offset), with
+ * the pixel's hash of the dimension. */
+void dr_sampler_pixel_first2(const struct dr_sampler_pixel *p, struct dr_sampler *s, double *u1, double *u2);
 
 /* Uniform double in [0, 1) with 53 random bits. */
 static inline double dr_sampler_next(struct dr_sampler *s)

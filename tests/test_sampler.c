@@ -59,6 +59,77 @@ static void test_sobol_dim1(void)
           "dr_sobol_dim1 of 0, 1, 3: %#x %#x %#x", dr_sobol_dim1(0), dr_sobol_dim1(1), dr_sobol_dim1(3));
 }
 
+/* The Sobol pair restated from its definition, bit by bit: the index
+ * Owen-scrambled (reversed, Laine-Karras, reversed), dimension 0 its bits
+ * reversed and dimension 1 dr_sobol_dim1's columns, each Owen-scrambled by
+ * its own seed. dr_sampler_sobol2 cancels reversals that meet and reverses
+ * with GFNI where it can; its numbers must be these. */
+static uint32_t reverse_by_bits(uint32_t x)
+{
+    uint32_t r = 0;
+    for (int b = 0; b < 32; b++)
+        r |= (x >> b & 1u) << (31 - b);
+    return r;
+}
+
+static uint32_t owen_by_definition(uint32_t x, uint32_t seed)
+{
+    x = reverse_by_bits(x) + seed;
+    x ^= x * 0x6c50b47cu;
+    x ^= x * 0xb82f1e52u;
+    x ^= x * 0xc7afe638u;
+    x ^= x * 0x8d22f6e6u;
+    return reverse_by_bits(x);
+}
+
+static void test_sobol_definition(void)
+{
+    int bad_rev = 0, bad = 0;
+    for (uint64_t k = 0; k < 20000; k++) {
+        uint32_t x = (uint32_t)dr_hash64(k ^ 0xabcdefULL);
+        bad_rev += dr_reverse_bits32(x) != reverse_by_bits(x) || dr_reverse_bits32(1u << (k % 32)) != 1u << (31 - k % 32);
+        struct dr_sampler s;
+        dr_sampler_init_kind(&s, DR_SAMPLER_SOBOL, k % 7, k / 7, k % 300, 300);
+        uint32_t dim = 1 + (uint32_t)(k % 37);
+        uint64_t h = dr_hash64(s.pkey + (uint64_t)dim * 0xd1b54a32d192ed03ULL);
+        uint64_t h1 = dr_hash64(h ^ 0x1111111111111111ULL), h2 = dr_hash64(h ^ 0x2222222222222222ULL);
+        uint32_t i = owen_by_definition(s.index, (uint32_t)h);
+        double want1 = dr_sobol_to_double(owen_by_definition(reverse_by_bits(i), (uint32_t)(h1 >> 32)), h1);
+        double want2 = dr_sobol_to_double(owen_by_definition(sobol_dim1_columns(i), (uint32_t)(h2 >> 32)), h2);
+        double u1, u2, v1;
+        dr_sampler_sobol2(&s, dim, &u1, &u2);
+        dr_sampler_sobol2(&s, dim, &v1, NULL);
+        bad += u1 != want1 || u2 != want2 || v1 != want1;
+    }
+    CHECK(bad_rev == 0, "dr_reverse_bits32 wrong on %d numbers", bad_rev);
+    CHECK(bad == 0, "dr_sampler_sobol2 differs from the definition on %d of 20000 draws", bad);
+}
+
+/* A pixel's samples made once per pixel (dr_sampler_pixel_sample and
+ * dr_sampler_pixel_first2, as render does) draw what dr_sampler_init_kind's
+ * and dr_sampler_next2 draw, first draw and later ones, every kind. */
+static void test_pixel_sampler(void)
+{
+    const enum dr_sampler_kind kinds[] = {DR_SAMPLER_INDEPENDENT, DR_SAMPLER_SOBOL, DR_SAMPLER_STRATIFIED};
+    int bad = 0, n = 0;
+    for (int k = 0; k < 3; k++)
+        for (uint64_t pixel = 0; pixel < 40; pixel++) {
+            const int spp = 1 + (int)(pixel % 13);
+            struct dr_sampler_pixel p;
+            dr_sampler_pixel_init(&p, kinds[k], 99, pixel * 7919, spp);
+            for (int smp = 0; smp < spp; smp++, n++) {
+                struct dr_sampler a, b;
+                dr_sampler_pixel_sample(&p, (uint64_t)smp, &a);
+                dr_sampler_init_kind(&b, kinds[k], 99, pixel * 7919, (uint64_t)smp, spp);
+                double a1, a2, b1, b2;
+                dr_sampler_pixel_first2(&p, &a, &a1, &a2);
+                dr_sampler_next2(&b, &b1, &b2);
+                bad += a1 != b1 || a2 != b2 || a.dim != b.dim || dr_sampler_next(&a) != dr_sampler_next(&b);
+            }
+        }
+    CHECK(bad == 0, "a pixel's samplers differ from dr_sampler_init_kind's on %d of %d samples", bad, n);
+}
+
 /* Over N = 2^k samples of a pixel, every 1D Sobol draw puts one sample in
  * each interval [i/N, (i+1)/N), and every 2D draw one in each elementary box
  * of area 1/N (2^a x 2^b cells, a + b = k). */
@@ -168,6 +239,8 @@ int main(void)
 {
     test_independent_unchanged();
     test_sobol_dim1();
+    test_sobol_definition();
+    test_pixel_sampler();
     test_sobol_stratified();
     test_sobol_pure();
     test_convergence();
