@@ -13,7 +13,8 @@
 #   git worktree add /tmp/old REV && make -C /tmp/old build/drender
 #   bench/ab.sh /tmp/old/build/drender build/drender
 # SCENE defaults to the peer's box, ROUNDS to 5, the options to the bench's
-# peer configuration (256x256, 64 spp, depth 8, 2 threads). Prints each run's
+# peer configuration (256x256, 64 spp, depth 8, 2 threads); renders draw
+# independent numbers unless the options give --sampler. Prints each run's
 # render seconds (`render --json`, time.render), the medians and the minima
 # with NEW / OLD for each, and whether the two binaries' last images are
 # identical (idiff).
@@ -30,7 +31,7 @@ cd "$(dirname "$0")/.."
 source bench/lib.sh
 
 if [[ $# -lt 2 || $1 == -h || $1 == --help ]]; then
-    sed -n '2,25p' "$0" | sed 's/^# \{0,1\}//'
+    sed -n '2,27p' "$0" | sed 's/^# \{0,1\}//'
     exit 2
 fi
 OLD=$1 NEW=$2
@@ -56,7 +57,11 @@ trap 'rm -rf "$TMP"' EXIT
 run() {
     local json out=(-o "$TMP/$2.exr")
     [[ $CMD == render ]] || out=()
-    if ! json=$("$1" "$CMD" "$SCENE" "${out[@]}" --json "${OPTS[@]}" 2>"$TMP/stderr"); then
+    # (render with independent numbers unless OPTS say otherwise: binaries from
+    # before 2026-12 default to them, later ones to sobol)
+    local smp=()
+    [[ $CMD == render ]] && smp=(--sampler independent)
+    if ! json=$("$1" "$CMD" "$SCENE" "${out[@]}" --json "${smp[@]}" "${OPTS[@]}" 2>"$TMP/stderr"); then
         echo "ab.sh: '$1 $CMD $SCENE ${OPTS[*]}' failed:" >&2
         cat "$TMP/stderr" >&2
         exit 1

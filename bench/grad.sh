@@ -45,10 +45,10 @@ first_stderr() { printf '%s\n' "$1" | sed -n 's/.*"stderr": \[\([-+0-9.eE]*\).*/
 
 echo "drender gradient benchmarks ($(date '+%Y-%m-%d %H:%M'), $(nproc) CPUs, load average $(cut -d' ' -f1 /proc/loadavg))"
 echo
-"$DR" render "$CORNELL" -o "$TMP/target.exr" --res $RES --spp 256 --max-depth $DEPTH --seed 99
+"$DR" render "$CORNELL" --sampler independent -o "$TMP/target.exr" --res $RES --spp 256 --max-depth $DEPTH --seed 99
 
 echo "e. cost on $CORNELL ($RES, $SPP spp, depth $DEPTH, 2 threads; params: red wall colour, sphere roughness)"
-P=$("$DR" render "$CORNELL" -o "$TMP/p.exr" --res $RES --spp $SPP --max-depth $DEPTH --threads 2 --json)
+P=$("$DR" render "$CORNELL" --sampler independent -o "$TMP/p.exr" --res $RES --spp $SPP --max-depth $DEPTH --threads 2 --json)
 T_PRIMAL=$(json_num "$P" render time)
 declare -A T SE MEM TAPE
 for est in prb tape; do
@@ -90,13 +90,13 @@ echo
 PEER_JSON=null
 if [[ -f $PEER ]]; then
     echo "h. peer comparison ($PEER, 256x256, 64 spp, 2 threads, red wall (0.2, 0.6, 0.3), L2)"
-    "$DR" render "$PEER" -o "$TMP/peer-target.exr" --res 256x256 --spp 64 --max-depth 8 --threads 2 --seed 5
+    "$DR" render "$PEER" --sampler independent -o "$TMP/peer-target.exr" --res 256x256 --spp 64 --max-depth 8 --threads 2 --seed 5
     # Single runs move 15-25% on this kind of machine: each gradient figure
     # below is the median of 3 runs, each run paired with a render of
     # drender's own primal at the same depth, whose median gives the same-run
     # ratio (gradient time / own primal time), the figure that drifts least.
     own_primal() {
-        json_num "$("$DR" render "$PEER" -o "$TMP/own.exr" --res 256x256 --spp 64 --max-depth "$1" --threads 2 \
+        json_num "$("$DR" render "$PEER" --sampler independent -o "$TMP/own.exr" --res 256x256 --spp 64 --max-depth "$1" --threads 2 \
             --json)" render time
     }
     GS=() PS=() OWN=()
@@ -170,7 +170,7 @@ TEX_JSON=null
 if [[ -f $NTT ]]; then
     echo
     echo "m. a texture parameter: $NTT /images/0 (2048x2048x3), 64x64, 16 spp, 2 threads"
-    "$DR" render "$NTT" -o "$TMP/ntt.exr" --res 64x64 --spp 64 --threads 2 2>/dev/null
+    "$DR" render "$NTT" --sampler independent -o "$TMP/ntt.exr" --res 64x64 --spp 64 --threads 2 2>/dev/null
     J=$("$DR" grad "$NTT" --target "$TMP/ntt.exr" --param /images/0 --spp 16 --threads 2 --grad-dir "$TMP" --json 2>/dev/null)
     G_PEAK=$(json_num "$J" peak_memory_bytes) G_T=$(json_num "$J" gradient time)
     O=$("$DR" optimize "$NTT" --target "$TMP/ntt.exr" --param /images/0 --spp 16 --threads 2 --iters 5 \

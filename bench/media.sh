@@ -28,7 +28,7 @@ first_stderr() { printf '%s\n' "$1" | sed -n 's/.*"stderr": \[\([-+0-9.eE]*\).*/
 
 echo "drender media benchmarks ($(date '+%Y-%m-%d %H:%M'), $(nproc) CPUs, load average $(cut -d' ' -f1 /proc/loadavg))"
 echo
-"$DR" render "$SMOKE" -o "$TMP/target.exr" --res $RES --spp 256 --max-depth $DEPTH --seed 99
+"$DR" render "$SMOKE" --sampler independent -o "$TMP/target.exr" --res $RES --spp 256 --max-depth $DEPTH --seed 99
 echo "i. volume gradient on $SMOKE ($RES, $SPP spp x 4 batches, depth $DEPTH, 2 threads; density_scale + 4096 voxels)"
 ROWS=""
 for est in prb tape; do
@@ -58,12 +58,12 @@ done
 SPREAD=$(calc "(${MEM[1000]} - ${MEM[4]}) / ${MEM[4]} * 100" %.2f)
 echo "   change from depth 4 to 1000: $SPREAD % (goal: within 5%: $(yesno "$SPREAD <= 5 && $SPREAD >= -5"))"
 echo
-J=$("$DR" render "$SMOKE" -o "$TMP/r.exr" --res 256x256 --spp 16 --threads 2 --json)
+J=$("$DR" render "$SMOKE" --sampler independent -o "$TMP/r.exr" --res 256x256 --spp 16 --threads 2 --json)
 RT=$(json_num "$J" render time)
 RPS=$(json_num "$J" per_second rays)
 echo "iii. render $SMOKE 256x256 16 spp: $(calc "$RT" %.3f) s, $(calc "$RPS / 1e6" %.2f) M rays/s"
 DENSE=tests/data/media/fog-dense.gltf
-J=$("$DR" render "$DENSE" -o "$TMP/d.exr" --res 32x32 --spp 4 --max-depth 1000 --threads 2 --json)
+J=$("$DR" render "$DENSE" --sampler independent -o "$TMP/d.exr" --res 32x32 --spp 4 --max-depth 1000 --threads 2 --json)
 TP=$(json_num "$J" render time)
 J=$("$DR" grad "$DENSE" --param /materials/0/extensions/DR_medium/extinction -o "$TMP/dd.exr" --res 32x32 --spp 4 \
     --max-depth 1000 --threads 2 --json)

@@ -12,6 +12,7 @@
 #   l. lighting           time per ray under an environment map / under a constant sky
 #   n. emissive texture   noise and time under a mostly black emissive texture
 #   o. default sky        noise and time of a sample model under the default sky
+#   p. default sampler    noise and time of the peer's box with independent and with sobol numbers
 #
 # Environment knobs:
 #   BUILD         build directory (default: build)
@@ -105,9 +106,13 @@ measure() {
 
 # render SCENE ARGS...: drender render --json, image to a scratch file; sets
 # R_JSON (the summary), R_TIME (its "render" seconds) and the M_* above.
+# Every render here draws independent numbers unless its options say
+# otherwise: like for like with the peer's figures, which the peer measured
+# with its independent sampler, and with this bench's history (render's
+# default became sobol in 2026-12; part p measures it).
 render() {
     local scene=$1; shift
-    measure "$DRENDER" render "$scene" -o "$TMP/render.png" --json "$@"
+    measure "$DRENDER" render "$scene" -o "$TMP/render.png" --json --sampler independent "$@"
     R_JSON=$M_OUT
     R_TIME=$(calc "$(json_num "$R_JSON" render time)" %.4f)
 }
@@ -441,8 +446,10 @@ image_mean() {
 # noise^2 x seconds (lower is better: the cost of a given accuracy).
 noise_part() {
     local name=$1 scene=$2 times=() seed
+    shift 2   # the rest: render options after the bench's own (--sampler sobol: part p)
     for seed in 1 2; do
-        measure "$DRENDER" render "$scene" -o "$TMP/$name$seed.exr" --res 128x128 --spp 64 --threads 2 --seed "$seed" --json
+        measure "$DRENDER" render "$scene" -o "$TMP/$name$seed.exr" --res 128x128 --spp 64 --threads 2 --seed "$seed" \
+            --json --sampler independent "$@"
         times+=("$(calc "$(json_num "$M_OUT" render time)" %.4f)")
     done
     local noise mean t vt
@@ -494,6 +501,25 @@ else
     echo "o. default sky: $SAMPLE_BOX not found: skipped"
 fi
 
+# ---- p. render's default sampler --------------------------------------------
+# render draws Owen-scrambled Sobol numbers by default (the rest of this bench
+# pins independent ones). The peer's box both ways: noise, time and
+# noise^2 x seconds as in part n, and their ratio (below 1: Sobol gives a
+# given accuracy for less time).
+echo
+echo "p. render's default sampler: the peer's box with independent and with sobol numbers (128x128, 64 spp, 2 threads)"
+SAMPLER_JSON=null
+if [[ -f $PEER ]]; then
+    echo "   independent:"
+    noise_part peer_ind "$PEER"
+    IND_JSON=$NOISE_JSON IND_VT=$(json_num "$NOISE_JSON" noise2_seconds)
+    echo "   sobol (the default):"
+    noise_part peer_sobol "$PEER" --sampler sobol
+    SOBOL_VT=$(json_num "$NOISE_JSON" noise2_seconds)
+    printf '   sobol / independent noise^2 x seconds: %s\n' "$(calc "$SOBOL_VT / $IND_VT")"
+    SAMPLER_JSON="{\"independent\": $IND_JSON, \"sobol\": $NOISE_JSON, \"sobol_over_independent\": $(calc "$SOBOL_VT / $IND_VT")}"
+fi
+
 # ---- results.json and the noise note ---------------------------------------
 
 TOTAL=$(elapsed)
@@ -514,6 +540,7 @@ OTHER_CORES=$(calc "$OTHER_TOTAL / $WALL_TOTAL" %.2f)
     echo "  \"environment_map\": $ENV_JSON,"
     echo "  \"sparse_emissive_texture\": $GLOW_JSON,"
     echo "  \"default_sky\": $SKY_JSON, \"default_sky_metal\": $SKY_METAL_JSON,"
+    echo "  \"default_sampler\": $SAMPLER_JSON,"
     echo "  \"peer\": $PEER_JSON"
     echo "}"
 } >"$OUT/results.json"

@@ -37,7 +37,7 @@ first_stderr() {
 }
 
 echo "i. detached vs attached vs mis sampling on $CORNELL ($RES, $SPP spp in $BATCHES batches, depth $DEPTH, 2 threads)"
-"$DR" render "$CORNELL" -o "$TMP/target.exr" --res $RES --spp 256 --max-depth $DEPTH --seed 99 --threads 2
+"$DR" render "$CORNELL" --sampler independent -o "$TMP/target.exr" --res $RES --spp 256 --max-depth $DEPTH --seed 99 --threads 2
 printf '   %-22s %-5s %-9s %-9s %12s %9s %12s\n' parameter est sampling ran stderr seconds "stderr^2*s"
 ROWS=""
 row() {   # label param set-args...

@@ -41,9 +41,10 @@ void cmd_render_usage(FILE *out)
             "      --seed S        random seed (default: 0); the same seed gives the same\n"
             "                      image for any --threads\n"
             "      --threads T     worker threads (default: one per CPU)\n"
-            "      --sampler S     random numbers: independent (default), stratified\n"
-            "                      (jittered strata over the pixel's spp) or sobol\n"
-            "                      (Owen-scrambled Sobol); both converge faster\n"
+            "      --sampler S     random numbers: sobol (default: Owen-scrambled Sobol),\n"
+            "                      stratified (jittered strata over the pixel's spp) or\n"
+            "                      independent (each number hashed on its own: up to 6x\n"
+            "                      the variance; the default of render before 2026-12)\n"
             "      --filter F      pixel filter: box (default: the pixel's square), tent\n"
             "                      (radius 1 pixel) or gaussian[:STDDEV] (default 0.5 pixel),\n"
             "                      by filter importance sampling\n"
@@ -149,6 +150,12 @@ int cmd_render(int argc, char **argv)
     double t_start = dr_clock_seconds();
     struct render_args a = {.output = "render.png"};
     grad_common_init(&a.g, "render", 64);
+    /* An image's default: Owen-scrambled Sobol numbers. On the sample scenes
+     * they had 1.5-6 x less variance than independent ones for 1.02-1.2 x
+     * the time (media: the same variance). The commands that differentiate
+     * keep independent numbers: their cross primal needs them (man page,
+     * "Reverse mode and independent random numbers"). */
+    a.g.sampler = DR_SAMPLER_SOBOL;
     char *scene_path = NULL;
     struct dr_scene *scene = NULL;
     float *rgb = NULL;

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # --sampler independent|stratified|sobol from the command line.
-#   a. render: the default is the independent sampler, bit for bit; sobol
-#      gives a different image of the same mean, with a smaller error against
-#      a high-sample reference at equal spp; --json names the sampler; a
+#   a. render: the default is the sobol sampler, bit for bit, and grad's the
+#      independent one (its --json says so); independent numbers give a
+#      different image of the same mean, with a larger error against a
+#      high-sample reference at equal spp; --json names the sampler; a
 #      sobol crop equals the same rectangle of the full sobol render
 #   b. fdcheck --sampler sobol agrees for prb and tape, detached and attached
 #   c. grad forward mode: prb and tape give the same derivative image with sobol
@@ -25,17 +26,24 @@ rms() { idiff -a "$1" "$2" 2>&1 | awk '/RMS error/ { print $NF }'; }
 R="--res 32x32 --seed 4"
 
 # ---- a. render ----
-run render -o default.exr $R --spp 8
+run render -o default.exr $R --spp 8 --json
 expect_rc 0 "render, default sampler"
+expect_in out '"sampler": "sobol"' "render --json names sobol as the default sampler"
+run render -o sobol8.exr $R --spp 8 --sampler sobol
+expect_rc 0 "render --sampler sobol"
+same_image default.exr sobol8.exr || fail "render's default sampler is not the sobol one"
 run render -o indep.exr $R --spp 8 --sampler independent
 expect_rc 0 "render --sampler independent"
-same_image default.exr indep.exr || fail "the default sampler is not the independent one"
+same_image default.exr indep.exr && fail "render --sampler independent gave the default (sobol) image"
+run grad --param /materials/1/pbrMetallicRoughness/baseColorFactor -o dgrad.exr $R --spp 4 --json
+expect_rc 0 "grad, default sampler"
+expect_in out '"sampler": "independent"' "grad's default sampler is the independent one"
 run render -o ref.exr --res 32x32 --seed 77 --spp 1024 --sampler sobol
 expect_rc 0 "reference render"
 run render -o sobol.exr $R --spp 16 --sampler sobol --json
 expect_rc 0 "render --sampler sobol"
 expect_in out '"sampler": "sobol"' "render --json names the sampler"
-run render -o indep16.exr $R --spp 16
+run render -o indep16.exr $R --spp 16 --sampler independent
 e_ind=$(rms ref.exr indep16.exr) e_sob=$(rms ref.exr sobol.exr)
 awk -v a="$e_sob" -v b="$e_ind" 'BEGIN { exit !(a > 0 && a < 0.6 * b) }' ||
     fail "sobol's RMS error at 16 spp ($e_sob) is not well below independent's ($e_ind)"
