@@ -51,22 +51,27 @@ double dr_sampler_next_structured(struct dr_sampler *s)
                        dr_sampler_strat_jitter(s, s->dim, 0x3c6ef372fe94f82bULL));
 }
 
-/* dr_sampler_next2_structured's draw of dimensions d and d + 1, where h is
- * dimension d's dr_sampler_dim_hash. */
-static void next2_hashed(struct dr_sampler *s, uint32_t d, uint64_t h, double *u1, double *u2)
+/* dr_sampler_next2_structured's draw of dimensions d and d + 1, where h
+ * holds dimension d's hashes (stratified: h->h alone). */
+static void next2_hashed(struct dr_sampler *s, uint32_t d, const struct dr_sobol_hashes *h, double *u1, double *u2)
 {
     s->dim = d + 1;
     if (s->kind == DR_SAMPLER_SOBOL) {
         dr_sobol2_hashed(h, s->index, u1, u2);
         return;
     }
-    dr_strat_2d(s->index, s->grid_m, s->grid_n, h, dr_sampler_strat_jitter(s, d, 0x1ULL),   /* DR_SAMPLER_STRATIFIED */
+    dr_strat_2d(s->index, s->grid_m, s->grid_n, h->h, dr_sampler_strat_jitter(s, d, 0x1ULL),   /* DR_SAMPLER_STRATIFIED */
                 dr_sampler_strat_jitter(s, d, 0x2ULL), u1, u2);
 }
 
 void dr_sampler_next2_structured(struct dr_sampler *s, double *u1, double *u2)
 {
-    next2_hashed(s, s->dim + 1, dr_sampler_dim_hash(s->pkey, s->dim + 1), u1, u2);
+    const uint32_t d = s->dim + 1;
+    const uint64_t h = dr_sampler_dim_hash(s->pkey, d);
+    struct dr_sobol_hashes hs = {h, 0, 0};
+    if (s->kind == DR_SAMPLER_SOBOL)
+        hs = dr_sobol_hashes_of(h);
+    next2_hashed(s, d, &hs, u1, u2);
 }
 
 void dr_sampler_pixel_first2(const struct dr_sampler_pixel *p, struct dr_sampler *s, double *u1, double *u2)
@@ -74,5 +79,5 @@ void dr_sampler_pixel_first2(const struct dr_sampler_pixel *p, struct dr_sampler
     if (s->kind == DR_SAMPLER_INDEPENDENT)
         dr_sampler_next2(s, u1, u2);
     else
-        next2_hashed(s, 1, p->first_hash, u1, u2);
+        next2_hashed(s, 1, &p->first, u1, u2);
 }

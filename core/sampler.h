@@ -57,19 +57,6 @@ struct dr_sampler {
     uint32_t grid_m, grid_n;   /* stratified: the 2D draws' grid (stratified.h) */
 };
 
-/* What the samples of one pixel share: the hash of (seed, pixel) their keys
- * start from, the scrambling seed and the strata (in `shared`, whose key,
- * index and dim each sample sets), and the hash of the first draw's
- * dimension (dr_sampler_pixel_first2). A pixel's spp samples made through
- * it (dr_sampler_pixel_sample) are dr_sampler_init_kind's, with five of a
- * Sobol sample's ten scalar hashes, and two of an independent sample's
- * five, computed once per pixel. */
-struct dr_sampler_pixel {
-    struct dr_sampler shared;
-    uint64_t pixel_key;    /* dr_hash64(dr_hash64(seed + phi) ^ pixel) */
-    uint64_t first_hash;   /* sobol, stratified: dimension 1's, dr_sampler_dim_hash */
-};
-
 /* Dimension dim's hash of a pixel's scrambling seed pkey: the Sobol pair's
  * scrambling seed, the stratified draw's permutation seed. */
 static inline uint64_t dr_sampler_dim_hash(uint64_t pkey, uint32_t dim)
@@ -77,10 +64,35 @@ static inline uint64_t dr_sampler_dim_hash(uint64_t pkey, uint32_t dim)
     return dr_hash64(pkey + (uint64_t)dim * 0xd1b54a32d192ed03ULL);
 }
 
+/* A Sobol dimension's hashes: h (dr_sampler_dim_hash) scrambles the index,
+ * h1 and h2 the pair's two numbers. */
+struct dr_sobol_hashes {
+    uint64_t h, h1, h2;
+};
+static inline struct dr_sobol_hashes dr_sobol_hashes_of(uint64_t h)
+{
+    struct dr_sobol_hashes d = {h, dr_hash64(h ^ 0x1111111111111111ULL), dr_hash64(h ^ 0x2222222222222222ULL)};
+    return d;
+}
+
+/* What the samples of one pixel share: the hash of (seed, pixel) their keys
+ * start from, the scrambling seed and the strata (in `shared`, whose key,
+ * index and dim each sample sets), and the hashes of the first draw's
+ * dimension (dr_sampler_pixel_first2). A pixel's spp samples made through
+ * it (dr_sampler_pixel_sample) are dr_sampler_init_kind's, with seven of a
+ * Sobol sample's eight hashes up to its first draw, and two of an
+ * independent sample's five, computed once per pixel. */
+struct dr_sampler_pixel {
+    struct dr_sampler shared;
+    uint64_t pixel_key;                 /* dr_hash64(dr_hash64(seed + phi) ^ pixel) */
+    struct dr_sobol_hashes first;       /* dimension 1's (sobol; stratified: first.h, its
+                                           dr_sampler_dim_hash, alone) */
+};
+
 /* The pixel's share of dr_sampler_init_kind (spp: the pixel's sample count,
- * as there). */
-static inline void dr_sampler_pixel_init(struct dr_sampler_pixel *p, enum dr_sampler_kind kind, uint64_t seed,
-                                         uint64_t pixel, int spp)
+ * as there) but the first draw's hashes. */
+static inline void dr_sampler_pixel_shared(struct dr_sampler_pixel *p, enum dr_sampler_kind kind, uint64_t seed,
+                                           uint64_t pixel, int spp)
 {
     struct dr_sampler *s = &p->shared;
     s->key = 0, s->dim = 0, s->kind = DR_SAMPLER_INDEPENDENT, s->pkey = 0, s->index = 0, s->count = 0;
@@ -95,7 +107,18 @@ static inline void dr_sampler_pixel_init(struct dr_sampler_pixel *p, enum dr_sam
         s->count = spp > 0 ? (uint32_t)spp : 1u;
         dr_strat_grid(s->count, &s->grid_m, &s->grid_n);
     }
-    p->first_hash = dr_sampler_dim_hash(s->pkey, 1);
+}
+
+/* All of the pixel's share, for its samples' dr_sampler_pixel_first2. */
+static inline void dr_sampler_pixel_init(struct dr_sampler_pixel *p, enum dr_sampler_kind kind, uint64_t seed,
+                                         uint64_t pixel, int spp)
+{
+    dr_sampler_pixel_shared(p, kind, seed, pixel, spp);
+    const uint64_t h = dr_sampler_dim_hash(p->shared.pkey, 1);
+    if (kind == DR_SAMPLER_SOBOL)
+        p->first = dr_sobol_hashes_of(h);
+    else
+        p->first.h = h, p->first.h1 = p->first.h2 = 0;
 }
 
 /* Sample `sample` of the pixel (sample < spp). */
@@ -111,7 +134,7 @@ static inline void dr_sampler_pixel_sample(const struct dr_sampler_pixel *p, uin
 static inline void dr_sampler_init(struct dr_sampler *s, uint64_t seed, uint64_t pixel, uint64_t sample)
 {
     struct dr_sampler_pixel p;
-    dr_sampler_pixel_init(&p, DR_SAMPLER_INDEPENDENT, seed, pixel, 0);
+    dr_sampler_pixel_shared(&p, DR_SAMPLER_INDEPENDENT, seed, pixel, 0);
     dr_sampler_pixel_sample(&p, sample, s);
 }
 
@@ -122,7 +145,7 @@ static inline void dr_sampler_init_kind(struct dr_sampler *s, enum dr_sampler_ki
                                         uint64_t pixel, uint64_t sample, int spp)
 {
     struct dr_sampler_pixel p;
-    dr_sampler_pixel_init(&p, kind, seed, pixel, spp);
+    dr_sampler_pixel_shared(&p, kind, seed, pixel, spp);
     dr_sampler_pixel_sample(&p, sample, s);
 }
 
@@ -188,24 +211,22 @@ static inline double dr_sobol_to_double(uint32_t x, uint64_t h)
     return (double)(((uint64_t)x << 21) | (h >> 43)) * (1.0 / 9007199254740992.0);
 }
 
-/* The Sobol pair of the dimension whose hash is h (dr_sampler_dim_hash) for
- * the sample with index `index`; u2 NULL: the first number only. */
-static inline void dr_sobol2_hashed(uint64_t h, uint32_t index, double *u1, double *u2)
+/* The Sobol pair of the dimension with hashes d for the sample with index
+ * `index`; u2 NULL: the first number only. */
+static inline void dr_sobol2_hashed(const struct dr_sobol_hashes *d, uint32_t index, double *u1, double *u2)
 {
-    uint32_t i = dr_owen_scramble(index, (uint32_t)h);   /* Burley's shuffled index */
-    uint64_t h1 = dr_hash64(h ^ 0x1111111111111111ULL);
+    uint32_t i = dr_owen_scramble(index, (uint32_t)d->h);   /* Burley's shuffled index */
     /* dimension 0, dr_owen_scramble(dr_reverse_bits32(i)): its two inner reversals cancel */
-    *u1 = dr_sobol_to_double(dr_reverse_bits32(dr_laine_karras(i, (uint32_t)(h1 >> 32))), h1);
-    if (u2) {
-        uint64_t h2 = dr_hash64(h ^ 0x2222222222222222ULL);
-        *u2 = dr_sobol_to_double(dr_owen_scramble(dr_sobol_dim1(i), (uint32_t)(h2 >> 32)), h2);
-    }
+    *u1 = dr_sobol_to_double(dr_reverse_bits32(dr_laine_karras(i, (uint32_t)(d->h1 >> 32))), d->h1);
+    if (u2)
+        *u2 = dr_sobol_to_double(dr_owen_scramble(dr_sobol_dim1(i), (uint32_t)(d->h2 >> 32)), d->h2);
 }
 
 /* The Sobol pair of dimension `dim` (its seed) for this sampler's sample. */
 static inline void dr_sampler_sobol2(const struct dr_sampler *s, uint32_t dim, double *u1, double *u2)
 {
-    dr_sobol2_hashed(dr_sampler_dim_hash(s->pkey, dim), s->index, u1, u2);
+    const struct dr_sobol_hashes d = dr_sobol_hashes_of(dr_sampler_dim_hash(s->pkey, dim));
+    dr_sobol2_hashed(&d, s->index, u1, u2);
 }
 
 /* ---- stratified (stratified.h) ---- */
