@@ -15,6 +15,7 @@
 #include "lights.h"
 #include "material.h"
 #include "normal_map.h"
+#include "sampler8.h"
 #include "simd_trig.h"
 #include "texture8.h"
 
@@ -189,118 +190,6 @@ DR_SIMD_INLINE dr_v3x8 sample_cosine(dr_f8 u1, dr_f8 u2)
     dr_f8 x = dr_f8_sel(wide, cs, sn) * r, y = dr_f8_sel(wide, sn, cs) * r;
     dr_f8 z = dr_f8_sqrt(dr_f8_max(dr_f8s(0.0), 1.0 - x * x - y * y));
     return dr_v3x8_sel(centre, (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(1.0)}, (dr_v3x8){x, y, z});
-}
-
-/* (double)k for k < 2^53, exactly, with integer operations only: x86 has
- * no vector conversion from 64-bit integers before AVX-512DQ (GCC converts
- * lane by lane). Each 32-bit half becomes a double by placing it in the
- * mantissa of 2^52 (2^84 for the high half) and subtracting that; both
- * halves and their sum are exact below 2^53. */
-DR_SIMD_INLINE dr_f8 u53_to_f8(dr_u8 k)
-{
-#ifdef __AVX512DQ__
-    return __builtin_convertvector((dr_m8)k, dr_f8);   /* one instruction there */
-#else
-    dr_f8 lo = (dr_f8)((k & 0xffffffffULL) | 0x4330000000000000ULL) - 0x1p52;
-    dr_f8 hi = (dr_f8)((k >> 32) | 0x4530000000000000ULL) - 0x1p84;
-    return hi + lo;
-#endif
-}
-
-/* dr_hash64 */
-DR_SIMD_INLINE dr_u8 hash64(dr_u8 x)
-{
-    x ^= x >> 30;
-    x *= 0xbf58476d1ce4e5b9ULL;
-    x ^= x >> 27;
-    x *= 0x94d049bb133111ebULL;
-    x ^= x >> 31;
-    return x;
-}
-
-/* dr_sampler_independent */
-DR_SIMD_INLINE dr_f8 independent(dr_u8 key, dr_u8 dim)
-{
-    return u53_to_f8(hash64(key + dim * 0xd1b54a32d192ed03ULL) >> 11) * (1.0 / 9007199254740992.0);
-}
-
-/* ---- dr_sampler_sobol2 (sampler.h) on eight lanes' 32-bit numbers */
-
-typedef uint32_t u32x8 __attribute__((vector_size(8 * sizeof(uint32_t))));
-
-/* dr_reverse_bits32: with GFNI, as there, an affine transform reversing
- * each byte's bits and a shuffle reversing each number's bytes. */
-DR_SIMD_INLINE u32x8 reverse_bits(u32x8 x)
-{
-#if defined(__GFNI__) && defined(__AVX2__)
-    const __m256i byte_reversal = _mm256_set1_epi64x(0x8040201008040201LL);
-    const __m256i byte_swap = _mm256_setr_epi8(3, 2, 1, 0, 7, 6, 5, 4, 11, 10, 9, 8, 15, 14, 13, 12, 3, 2, 1, 0, 7, 6,
-                                               5, 4, 11, 10, 9, 8, 15, 14, 13, 12);
-    return (u32x8)_mm256_shuffle_epi8(_mm256_gf2p8affine_epi64_epi8((__m256i)x, byte_reversal, 0), byte_swap);
-#else
-    x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
-    x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
-    x = ((x >> 4) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4);
-    x = ((x >> 8) & 0x00ff00ffu) | ((x & 0x00ff00ffu) << 8);
-    return (x >> 16) | (x << 16);
-#endif
-}
-
-/* dr_laine_karras */
-DR_SIMD_INLINE u32x8 laine_karras(u32x8 x, u32x8 seed)
-{
-    x += seed;
-    x ^= x * 0x6c50b47cu;
-    x ^= x * 0xb82f1e52u;
-    x ^= x * 0xc7afe638u;
-    x ^= x * 0x8d22f6e6u;
-    return x;
-}
-
-/* dr_sobol_dim1. With AVX-512 its table's sixteen entries for a group of
- * four bits fit two registers, and one two-register permutation looks all
- * eight lanes up; elsewhere the generator matrix's columns v_b for the set
- * bits (a table lookup per lane costs more than the 32 steps). */
-DR_SIMD_INLINE u32x8 sobol_dim1(u32x8 i)
-{
-    u32x8 x = {0};
-#if defined(__AVX512F__) && defined(__AVX512VL__)
-    for (int n = 0; n < 8; n++, i >>= 4) {
-        const uint32_t *t = dr_sobol_dim1_nibble[n];
-        x ^= (u32x8)_mm256_permutex2var_epi32(_mm256_loadu_si256((const __m256i *)t), (__m256i)(i & 15u),
-                                              _mm256_loadu_si256((const __m256i *)(t + 8)));
-    }
-#else
-    uint32_t v = 0x80000000u;
-    for (int b = 0; b < 32; b++, i >>= 1, v ^= v >> 1)
-        x ^= (0u - (i & 1u)) & v;
-#endif
-    return x;
-}
-
-/* dr_sobol_to_double */
-DR_SIMD_INLINE dr_f8 sobol_to_f8(u32x8 x, dr_u8 h)
-{
-    dr_u8 k = (__builtin_convertvector(x, dr_u8) << 21) | (h >> 43);
-    return u53_to_f8(k) * (1.0 / 9007199254740992.0);
-}
-
-/* dr_sampler_sobol2 of dimension dim for lanes with scrambling seed pkey
- * and sample index, given as rindex = reverse_bits(index) (the same for all
- * of a vertex's draws); u2 NULL: the first number only. Its scrambles are
- * dr_owen_scramble's reverse_bits(laine_karras(reverse_bits(x))) with the
- * reversals that meet cancelled: the same bits. */
-DR_SIMD_INLINE void sobol2(dr_u8 pkey, u32x8 rindex, dr_u8 dim, dr_f8 *u1, dr_f8 *u2)
-{
-    dr_u8 h = hash64(pkey + dim * 0xd1b54a32d192ed03ULL);
-    u32x8 i = reverse_bits(laine_karras(rindex, __builtin_convertvector(h, u32x8)));
-    dr_u8 h1 = hash64(h ^ 0x1111111111111111ULL);
-    *u1 = sobol_to_f8(reverse_bits(laine_karras(i, __builtin_convertvector(h1 >> 32, u32x8))), h1);
-    if (u2) {
-        dr_u8 h2 = hash64(h ^ 0x2222222222222222ULL);
-        u32x8 s2 = __builtin_convertvector(h2 >> 32, u32x8);
-        *u2 = sobol_to_f8(reverse_bits(laine_karras(reverse_bits(sobol_dim1(i)), s2)), h2);
-    }
 }
 
 /* -------------------------------------------------------------- the BSDF */
@@ -1180,19 +1069,19 @@ static void vertex_randoms(const struct dr_path8_in *in, const uint32_t *dim, dr
         sobol = sobol && in->sampler[i] && in->sampler[i]->kind == DR_SAMPLER_SOBOL;
     if (sobol) {   /* the draws of dr_sampler_next and next2 (sampler.c) in vector form */
         dr_u8 pkey;
-        u32x8 index;
+        dr_u32x8 index;
         for (int i = 0; i < DR_SIMD_W; i++)
             pkey[i] = in->sampler[i]->pkey, index[i] = in->sampler[i]->index;
-        const u32x8 rindex = reverse_bits(index);
-        sobol2(pkey, rindex, d + 1, &u[0], NULL);
-        sobol2(pkey, rindex, d + 2, &u[1], &u[2]);
-        sobol2(pkey, rindex, d + 4, &u[3], NULL);
-        sobol2(pkey, rindex, d + 5, &u[4], &u[5]);
-        sobol2(pkey, rindex, d + 7, &u[6], NULL);
+        const dr_u32x8 rindex = dr_reverse_bits8(index);
+        dr_sobol2_8(pkey, rindex, d + 1, &u[0], NULL);
+        dr_sobol2_8(pkey, rindex, d + 2, &u[1], &u[2]);
+        dr_sobol2_8(pkey, rindex, d + 4, &u[3], NULL);
+        dr_sobol2_8(pkey, rindex, d + 5, &u[4], &u[5]);
+        dr_sobol2_8(pkey, rindex, d + 7, &u[6], NULL);
         return;
     }
     for (int k = 0; k < 7; k++)
-        u[k] = independent(in->key, d + (uint64_t)(k + 1));
+        u[k] = dr_independent8(in->key, d + (uint64_t)(k + 1));
     for (int i = 0; i < DR_SIMD_W; i++) {
         const struct dr_sampler *p = in->sampler[i];
         if (!p || p->kind == DR_SAMPLER_INDEPENDENT)

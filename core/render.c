@@ -5,10 +5,12 @@
 #include <string.h>
 
 #include "camera.h"
+#include "camera8.h"
 #include "clock.h"
 #include "error.h"
 #include "parallel.h"
 #include "sampler.h"
+#include "sampler8.h"
 #include "wave_soa.h"
 #include "wavefront.h"
 
@@ -108,6 +110,34 @@ static void start_run_sample(void *ctx, int64_t i, struct dr_sampler *smp, dr_ve
     start_sample(r->j, r->fx[p], r->fy[p], &r->pixel[p], (int)(i % spp), smp, o, d);
 }
 
+/* start_run_sample for items first .. first + 7 (dr_wave_start8_fn): their
+ * samplers, camera draws, film positions and rays eight at a time, each
+ * lane with start_sample's bits (filters other than the box lane by lane). */
+static void start_run_samples8(void *ctx, int64_t first, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    const struct pixel_run *r = ctx;
+    const struct render_job *j = r->j;
+    const int spp = j->opts->spp;
+    const struct dr_sampler_pixel *pixel[8];
+    uint64_t sample[8];
+    dr_f8 x, y, u, v;
+    for (int l = 0; l < 8; l++) {
+        const int p = r->first + (int)((first + l) / spp);
+        pixel[l] = &r->pixel[p];
+        sample[l] = (uint64_t)((first + l) % spp);
+        x[l] = r->fx[p], y[l] = r->fy[p];
+    }
+    dr_sampler_pixel_first2_8(pixel, sample, smp, &u, &v);
+    dr_f8 px = x + u, py = y + v;   /* dr_film_sample's box */
+    if (j->opts->film.filter.kind != DR_FILTER_BOX)
+        for (int l = 0; l < 8; l++)
+            dr_film_sample(&j->opts->film.filter, (int)x[l], (int)y[l], u[l], v[l], &px[l], &py[l]);
+    dr_v3x8 o8, d8;
+    dr_camera_ray8(&j->view, px, py, &o8, &d8);
+    for (int l = 0; l < 8; l++)
+        o[l] = dr_v3x8_get(&o8, l), d[l] = dr_v3x8_get(&d8, l);
+}
+
 /* Many paths at a time (wavefront.h), chunk_pixels pixels' samples per run. */
 static void render_tile_wave(struct render_job *j, int thread, int x0, int y0, int x1, int y1)
 {
@@ -122,7 +152,8 @@ static void render_tile_wave(struct render_job *j, int thread, int x0, int y0, i
     dr_vec3 *L = j->counters[thread].L;
     for (run.first = 0; run.first < n; run.first += j->chunk_pixels) {
         int m = n - run.first < j->chunk_pixels ? n - run.first : j->chunk_pixels;
-        dr_wave_radiance(j->counters[thread].wave, j->scene, &j->path, (int64_t)m * o->spp, start_run_sample, &run,
+        dr_wave_radiance(j->counters[thread].wave, j->scene, &j->path, (int64_t)m * o->spp, start_run_sample,
+                         start_run_samples8, &run,
                          L, &j->counters[thread].rays);
         for (int p = 0; p < m; p++)
             store_pixel(j, thread, run.local[run.first + p], L + (int64_t)p * o->spp);

@@ -155,6 +155,8 @@ DR_SIMD_INLINE dr_v3x8 dr_v3x8_add(dr_v3x8 a, dr_v3x8 b) { return (dr_v3x8){a.x 
 DR_SIMD_INLINE dr_v3x8 dr_v3x8_sub(dr_v3x8 a, dr_v3x8 b) { return (dr_v3x8){a.x - b.x, a.y - b.y, a.z - b.z}; }
 DR_SIMD_INLINE dr_v3x8 dr_v3x8_mul(dr_v3x8 a, dr_v3x8 b) { return (dr_v3x8){a.x * b.x, a.y * b.y, a.z * b.z}; }
 DR_SIMD_INLINE dr_v3x8 dr_v3x8_scale(dr_v3x8 a, dr_f8 s) { return (dr_v3x8){a.x * s, a.y * s, a.z * s}; }
+/* a in every lane */
+DR_SIMD_INLINE dr_v3x8 dr_v3x8_splat(dr_vec3 a) { return (dr_v3x8){dr_f8s(a.x), dr_f8s(a.y), dr_f8s(a.z)}; }
 DR_SIMD_INLINE dr_v3x8 dr_v3x8_neg(dr_v3x8 a) { return (dr_v3x8){-a.x, -a.y, -a.z}; }
 DR_SIMD_INLINE dr_v3x8 dr_v3x8_madd(dr_v3x8 a, dr_v3x8 b, dr_f8 s)
 {

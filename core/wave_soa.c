@@ -140,12 +140,10 @@ bool dr_wave_soa_applies(const struct dr_scene *s, const struct dr_path_opts *op
 
 /* ----------------------------------------------------------- the slots */
 
-static void start_path(struct dr_wave_soa *w, int k, int64_t item, dr_wave_start_fn start, void *ctx)
+/* Slot k takes item `item`, whose sampler and camera ray the caller's start
+ * made (dr_path_start). */
+static void start_path(struct dr_wave_soa *w, int k, int64_t item, const struct dr_sampler *smp, dr_vec3 o, dr_vec3 d)
 {
-    struct dr_sampler smp;
-    dr_vec3 o, d;
-    start(ctx, item, &smp, &o, &d);
-    /* dr_path_start */
     w->ox[k] = o.x, w->oy[k] = o.y, w->oz[k] = o.z;
     w->dx[k] = d.x, w->dy[k] = d.y, w->dz[k] = d.z;
     w->px[k] = o.x, w->py[k] = o.y, w->pz[k] = o.z;
@@ -154,11 +152,11 @@ static void start_path(struct dr_wave_soa *w, int k, int64_t item, dr_wave_start
     w->bx[k] = w->by[k] = w->bz[k] = 1.0;
     w->Lx[k] = w->Ly[k] = w->Lz[k] = 0.0;
     w->depth[k] = 0.0;
-    w->key[k] = smp.key;
+    w->key[k] = smp->key;
     w->item[k] = item;
-    if (smp.kind != DR_SAMPLER_INDEPENDENT) {   /* (one kind for all: set before any path moves) */
+    if (smp->kind != DR_SAMPLER_INDEPENDENT) {   /* (one kind for all: set before any path moves) */
         w->structured = true;
-        w->smp[k] = smp;
+        w->smp[k] = *smp;
     }
     if (w->out) {
         w->rx[k] = w->ry[k] = w->rz[k] = 1.0;
@@ -828,8 +826,28 @@ static int advance(struct dr_wave_soa *w, const struct dr_scene *s, const struct
 }
 
 /* Paths [0, n) to their ends: radiance into L, or (w->out) a walk's sums. */
+/* Slots n_live.. take items next.. up to LANES slots or item n: eight at a
+ * time through start8 where it is given, the rest one at a time. Returns the
+ * slots live then. */
+static int start_paths(struct dr_wave_soa *w, int n_live, int64_t *next, int64_t n, dr_wave_start_fn start,
+                       dr_wave_start8_fn start8, void *ctx)
+{
+    struct dr_sampler smp[8];
+    dr_vec3 o[8], d[8];
+    while (start8 && n_live + 8 <= LANES && *next + 8 <= n) {
+        start8(ctx, *next, smp, o, d);
+        for (int j = 0; j < 8; j++)
+            start_path(w, n_live++, (*next)++, &smp[j], o[j], d[j]);
+    }
+    while (n_live < LANES && *next < n) {
+        start(ctx, *next, &smp[0], &o[0], &d[0]);
+        start_path(w, n_live++, (*next)++, &smp[0], o[0], d[0]);
+    }
+    return n_live;
+}
+
 static void run(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
-                dr_wave_start_fn start, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts)
+                dr_wave_start_fn start, dr_wave_start8_fn start8, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts)
 {
     const bool prefetch = dr_wave_prefetches(s), picks_ahead = dr_path8_picks_ahead(s);
     int n_live = 0;
@@ -837,8 +855,7 @@ static void run(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr
     w->structured = false;
     while (next < n || n_live > 0) {
         int first_new = n_live;
-        while (n_live < LANES && next < n)
-            start_path(w, n_live++, next++, start, ctx);
+        n_live = start_paths(w, n_live, &next, n, start, start8, ctx);
         trace(w, s, n_live, first_new, prefetch, counts);
         n_live = end_escaped(w, s, opts, n_live, prefetch, L);
         if (n_live == 0 && w->n_scalar == 0)
@@ -856,11 +873,11 @@ static void run(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr
 }
 
 void dr_wave_soa_radiance(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
-                          int64_t n, dr_wave_start_fn start, void *ctx, dr_vec3 *L,
+                          int64_t n, dr_wave_start_fn start, dr_wave_start8_fn start8, void *ctx, dr_vec3 *L,
                           struct dr_ray_counts *counts)
 {
     w->out = NULL;
-    run(w, s, opts, n, start, ctx, L, counts);
+    run(w, s, opts, n, start, start8, ctx, L, counts);
 }
 
 bool dr_wave_soa_replay(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
@@ -875,7 +892,7 @@ bool dr_wave_soa_replay(struct dr_wave_soa *w, const struct dr_scene *s, const s
     w->replay_out = (struct dr_wave_soa_walks){0};   /* (a walk's arrays move; nothing is written out) */
     w->out = &w->replay_out;
     w->replay = replay;
-    run(w, s, opts, n, start, ctx, NULL, counts);
+    run(w, s, opts, n, start, NULL, ctx, NULL, counts);
     w->out = NULL;
     w->replay = NULL;
     return true;
@@ -889,7 +906,7 @@ bool dr_wave_soa_walk(struct dr_wave_soa *w, const struct dr_scene *s, const str
     if (!w->scalar && !(w->scalar = calloc(LANES, sizeof(struct scalar_path))))
         return false;
     w->out = out;
-    run(w, s, opts, n, start, ctx, NULL, counts);
+    run(w, s, opts, n, start, NULL, ctx, NULL, counts);
     w->out = NULL;
     return true;
 }

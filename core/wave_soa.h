@@ -124,7 +124,7 @@ bool dr_wave_soa_replay(struct dr_wave_soa *w, const struct dr_scene *scene, con
 
 /* L[i] = the radiance of path i for i in [0, n), as dr_wave_radiance. */
 void dr_wave_soa_radiance(struct dr_wave_soa *w, const struct dr_scene *scene, const struct dr_path_opts *opts,
-                          int64_t n, dr_wave_start_fn start, void *ctx, dr_vec3 *L,
+                          int64_t n, dr_wave_start_fn start, dr_wave_start8_fn start8, void *ctx, dr_vec3 *L,
                           struct dr_ray_counts *counts);
 
 #endif

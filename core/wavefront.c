@@ -466,10 +466,11 @@ static enum dr_wave_next radiance_end(void *ctx, void *user, struct dr_sampler *
 }
 
 void dr_wave_radiance(struct dr_wave *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
-                      dr_wave_start_fn start, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts)
+                      dr_wave_start_fn start, dr_wave_start8_fn start8, void *ctx, dr_vec3 *L,
+                      struct dr_ray_counts *counts)
 {
     if (dr_wave_soa_applies(s, opts) && (w->soa || (w->soa = dr_wave_soa_create()))) {
-        dr_wave_soa_radiance(w->soa, s, opts, n, start, ctx, L, counts);
+        dr_wave_soa_radiance(w->soa, s, opts, n, start, start8, ctx, L, counts);
         return;
     }   /* (out of memory for the arrays: the lanes, which need none) */
     dr_wave_radiance_lanes(w, s, opts, n, start, ctx, L, counts);

@@ -136,13 +136,20 @@ bool dr_wave_prefetches(const struct dr_scene *scene);
 
 /* Starts path i: its sampler, and its camera ray o + t d. */
 typedef void (*dr_wave_start_fn)(void *ctx, int64_t i, struct dr_sampler *sampler, dr_vec3 *o, dr_vec3 *d);
+/* Starts paths first .. first + 7 at once, as eight calls of the caller's
+ * dr_wave_start_fn would (into samplers[0..7], o[0..7], d[0..7]): its
+ * vector form, where the starts vectorise (render's camera rays). */
+typedef void (*dr_wave_start8_fn)(void *ctx, int64_t first, struct dr_sampler *samplers, dr_vec3 *o, dr_vec3 *d);
 
 /* L[i] = the radiance of path i for i in [0, n), what dr_path_radiance gives
  * for the same start (up to exact ties between triangles, accel.h). Every
  * path's sampler must be of one kind. Where the eight-lane stages shade
- * every hit (wave_soa.h), the paths are kept in arrays instead of lanes. */
+ * every hit (wave_soa.h), the paths are kept in arrays instead of lanes,
+ * and started eight at a time by start8 where it is given (else, and for a
+ * run's last few, one at a time by start). */
 void dr_wave_radiance(struct dr_wave *wave, const struct dr_scene *scene, const struct dr_path_opts *opts, int64_t n,
-                      dr_wave_start_fn start, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts);
+                      dr_wave_start_fn start, dr_wave_start8_fn start8, void *ctx, dr_vec3 *L,
+                      struct dr_ray_counts *counts);
 /* The same always through the lanes (dr_wave_run), as the gradients' walks
  * use them: what dr_wave_radiance does where the arrays do not apply (and
  * test_render holds to the one-path walker's bits too). */

@@ -15,6 +15,9 @@
 #include "error.h"
 #include "estimator.h"
 #include "film.h"
+#include "camera.h"
+#include "path.h"
+#include "sampler.h"
 #include "render.h"
 #include "scene_builder.h"
 #include "test.h"
@@ -224,6 +227,83 @@ static void crop_bit_identical(void)
     dr_scene_destroy(s);
 }
 
+/* ---- render's starts against the one-path walker's ---- */
+
+/* Pixel `local` of a render as the one-path walker makes it: each sample's
+ * sampler, camera draw, film position and ray from the scalar functions
+ * (start_sample's), its radiance from dr_path_radiance, the mean in sample
+ * order (store_pixel's). */
+static void one_path_pixel(const struct dr_scene *s, const struct dr_camera *cam, const struct dr_render_opts *ro,
+                           int64_t local, float out[3])
+{
+    const struct dr_camera_view view =
+        dr_camera_view(cam, dr_film_frame_w(&ro->film, ro->width), dr_film_frame_h(&ro->film, ro->height));
+    const struct dr_path_opts po = {.max_depth = ro->max_depth, .rr_depth = ro->rr_depth,
+                                    .stages = dr_path_plan(s, NULL)};
+    int fx, fy;
+    const uint64_t pixel = dr_film_pixel(&ro->film, ro->width, local, &fx, &fy);
+    dr_vec3 sum = dr_v3s(0.0);
+    for (int k = 0; k < ro->spp; k++) {
+        struct dr_sampler smp;
+        dr_sampler_init_kind(&smp, ro->sampler, ro->seed, pixel, (uint64_t)k, ro->spp);
+        double u, v, px, py;
+        dr_sampler_next2(&smp, &u, &v);
+        dr_film_sample(&ro->film.filter, fx, fy, u, v, &px, &py);
+        dr_vec3 o, d;
+        dr_camera_ray(&view, px, py, &o, &d);
+        struct dr_ray_counts counts = {0};
+        dr_vec3 L = dr_path_radiance(s, &po, o, d, &smp, &counts);
+        if (dr_v3_finite(L))
+            sum = dr_add(sum, L);
+    }
+    out[0] = (float)(sum.x / ro->spp), out[1] = (float)(sum.y / ro->spp), out[2] = (float)(sum.z / ro->spp);
+}
+
+/* render starts its paths eight at a time in vector form (the packet
+ * renderer's samplers, camera draws, film positions and rays): every pixel
+ * must be the one-path walker's from the scalar start, for each sampler and
+ * filter, a perspective and an orthographic camera, a crop, and spp that
+ * make groups of eight straddle pixels. */
+static void render_equals_one_path(void)
+{
+    const int W = 13, H = 9;
+    struct sb b;
+    sb_init(&b);
+    sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, sb_diffuse(dr_v3(0.6, 0.5, 0.4))));
+    sb_quad(&b, dr_v3(-0.5, 1.5, 0.5), dr_v3(0, 0, -1), dr_v3(1, 0, 0), sb_material(&b, emitter(dr_v3(3, 2, 1))));
+    sb_quad(&b, dr_v3(-0.4, 0, -0.4), dr_v3(0.8, 0, 0), dr_v3(0, 0.7, 0), sb_material(&b, sb_diffuse(dr_v3s(0.7))));
+    struct dr_scene *s = sb_finish(&b);
+    struct dr_camera persp = sb_camera(dr_v3(0, 1, 2), dr_v3(0, 0, 0), 50), ortho = persp;
+    ortho.orthographic = true;
+    ortho.ymag = 1.5;
+    const struct dr_camera *cams[] = {&persp, &ortho};
+    CHECK(dr_scene_add_viewpoint(s, &persp) == 0 && dr_scene_add_viewpoint(s, &ortho) == 0, "viewpoints: %s",
+          dr_last_error());
+    const enum dr_sampler_kind kinds[] = {DR_SAMPLER_INDEPENDENT, DR_SAMPLER_SOBOL, DR_SAMPLER_STRATIFIED};
+    const struct dr_filter filters[] = {{DR_FILTER_BOX, 0}, {DR_FILTER_TENT, 0}, {DR_FILTER_GAUSSIAN, 0.7}};
+    const int spps[] = {5, 16};
+    float rgb[13 * 9 * 3], want[3];
+    int bad = 0, pixels = 0;
+    for (int c = 0; c < 2; c++)
+        for (int k = 0; k < 3; k++)
+            for (int f = 0; f < 3; f++)
+                for (int n = 0; n < 2; n++) {
+                    struct dr_render_opts ro = {.width = W, .height = H, .spp = spps[n], .max_depth = 4,
+                                                .rr_depth = 3, .seed = 11, .threads = 2, .sampler = kinds[k],
+                                                .film = {.filter = filters[f]}};
+                    if (n == 1)   /* a crop of a larger frame: frame pixels key the numbers */
+                        ro.film.frame_w = 29, ro.film.frame_h = 21, ro.film.x0 = 7, ro.film.y0 = 5;
+                    CHECK(dr_render(s, cams[c], &ro, rgb, NULL) == 0, "render: %s", dr_last_error());
+                    for (int64_t i = 0; i < (int64_t)W * H; i++, pixels++) {
+                        one_path_pixel(s, cams[c], &ro, i, want);
+                        bad += memcmp(want, rgb + 3 * i, sizeof want) != 0;
+                    }
+                }
+    CHECK(bad == 0, "%d of %d rendered pixels differ from the one-path walker's", bad, pixels);
+    CHECK(pixels == 36 * W * H, "pixels compared: %d", pixels);
+    dr_scene_destroy(s);
+}
+
 static void filter_names(void)
 {
     struct dr_filter f;
@@ -246,5 +326,6 @@ int main(void)
     step_edge();
     gaussian_vs_convolution();
     crop_bit_identical();
+    render_equals_one_path();
     return TEST_END();
 }

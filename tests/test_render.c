@@ -514,7 +514,7 @@ static uint64_t radiance_matches_exactly(const struct dr_scene *s, struct dr_cam
     dr_vec3 *L = malloc(sizeof(dr_vec3) * N), *Llanes = malloc(sizeof(dr_vec3) * N);
     struct dr_wave *w = dr_wave_create();
     struct dr_ray_counts packets = {0}, lanes = {0}, one = {0};
-    dr_wave_radiance(w, s, &po, N, random_path_start, &r, L, &packets);
+    dr_wave_radiance(w, s, &po, N, random_path_start, NULL, &r, L, &packets);
     dr_wave_radiance_lanes(w, s, &po, N, random_path_start, &r, Llanes, &lanes);
     int differ = 0, differ_lanes = 0, lit = 0;
     for (int i = 0; i < N; i++) {

@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "sampler.h"
+#include "sampler8.h"
 #include "test.h"
 
 /* The independent sampler's numbers are what they were before samplers had
@@ -130,6 +131,36 @@ static void test_pixel_sampler(void)
     CHECK(bad == 0, "a pixel's samplers differ from dr_sampler_init_kind's on %d of %d samples", bad, n);
 }
 
+/* The eight-lane start (dr_sampler_pixel_first2_8, render's) against the
+ * scalar one lane by lane: the same samplers, field by field, and the same
+ * first draws, for every kind, with lanes from different pixels. */
+static void test_pixel_sampler_eight(void)
+{
+    const enum dr_sampler_kind kinds[] = {DR_SAMPLER_INDEPENDENT, DR_SAMPLER_SOBOL, DR_SAMPLER_STRATIFIED};
+    int bad = 0;
+    for (int k = 0; k < 3; k++)
+        for (uint64_t first = 0; first < 64; first += 3) {
+            struct dr_sampler_pixel px[8];
+            const struct dr_sampler_pixel *p[8];
+            uint64_t sample[8];
+            for (int l = 0; l < 8; l++) {   /* 6 samples per pixel: the lanes straddle pixels */
+                dr_sampler_pixel_init(&px[l], kinds[k], 5, (first + l) / 6 * 31, 6);
+                p[l] = &px[l], sample[l] = (first + l) % 6;
+            }
+            struct dr_sampler s8[8];
+            dr_f8 u8, v8;
+            dr_sampler_pixel_first2_8(p, sample, s8, &u8, &v8);
+            for (int l = 0; l < 8; l++) {
+                struct dr_sampler s1;
+                double u, v;
+                dr_sampler_pixel_sample(p[l], sample[l], &s1);
+                dr_sampler_pixel_first2(p[l], &s1, &u, &v);
+                bad += memcmp(&s1, &s8[l], sizeof s1) != 0 || u != u8[l] || v != v8[l];
+            }
+        }
+    CHECK(bad == 0, "the eight-lane start differs from the scalar one in %d lanes", bad);
+}
+
 /* Over N = 2^k samples of a pixel, every 1D Sobol draw puts one sample in
  * each interval [i/N, (i+1)/N), and every 2D draw one in each elementary box
  * of area 1/N (2^a x 2^b cells, a + b = k). */
@@ -241,6 +272,7 @@ int main(void)
     test_sobol_dim1();
     test_sobol_definition();
     test_pixel_sampler();
+    test_pixel_sampler_eight();
     test_sobol_stratified();
     test_sobol_pure();
     test_convergence();

@@ -1,0 +1,168 @@
+/* The samplers' draws (sampler.h) for eight lanes at once, for the packet
+ * renderer: each function names the scalar one it mirrors and runs its
+ * operations, so a lane gets the scalar draw's bits (test_render compares
+ * the packet renderer with the one-path walker with every sampler). */
+#ifndef DR_SAMPLER8_H
+#define DR_SAMPLER8_H
+
+#include <stdint.h>
+#if defined(__AVX__)
+#include <immintrin.h>   /* reverse_bits' GFNI, sobol_dim1's permutation */
+#endif
+
+#include "sampler.h"
+#include "simd.h"
+
+/* (double)k for k < 2^53, exactly, with integer operations only: x86 has
+ * no vector conversion from 64-bit integers before AVX-512DQ (GCC converts
+ * lane by lane). Each 32-bit half becomes a double by placing it in the
+ * mantissa of 2^52 (2^84 for the high half) and subtracting that; both
+ * halves and their sum are exact below 2^53. */
+DR_SIMD_INLINE dr_f8 dr_u53_to_f8(dr_u8 k)
+{
+#ifdef __AVX512DQ__
+    return __builtin_convertvector((dr_m8)k, dr_f8);   /* one instruction there */
+#else
+    dr_f8 lo = (dr_f8)((k & 0xffffffffULL) | 0x4330000000000000ULL) - 0x1p52;
+    dr_f8 hi = (dr_f8)((k >> 32) | 0x4530000000000000ULL) - 0x1p84;
+    return hi + lo;
+#endif
+}
+
+/* dr_hash64 */
+DR_SIMD_INLINE dr_u8 dr_hash64x8(dr_u8 x)
+{
+    x ^= x >> 30;
+    x *= 0xbf58476d1ce4e5b9ULL;
+    x ^= x >> 27;
+    x *= 0x94d049bb133111ebULL;
+    x ^= x >> 31;
+    return x;
+}
+
+/* dr_sampler_independent */
+DR_SIMD_INLINE dr_f8 dr_independent8(dr_u8 key, dr_u8 dim)
+{
+    return dr_u53_to_f8(dr_hash64x8(key + dim * 0xd1b54a32d192ed03ULL) >> 11) * (1.0 / 9007199254740992.0);
+}
+
+/* ---- dr_sampler_sobol2 (sampler.h) on eight lanes' 32-bit numbers */
+
+typedef uint32_t dr_u32x8 __attribute__((vector_size(8 * sizeof(uint32_t))));
+
+/* dr_reverse_bits32: with GFNI, as there, an affine transform reversing
+ * each byte's bits and a shuffle reversing each number's bytes. */
+DR_SIMD_INLINE dr_u32x8 dr_reverse_bits8(dr_u32x8 x)
+{
+#if defined(__GFNI__) && defined(__AVX2__)
+    const __m256i byte_reversal = _mm256_set1_epi64x(0x8040201008040201LL);
+    const __m256i byte_swap = _mm256_setr_epi8(3, 2, 1, 0, 7, 6, 5, 4, 11, 10, 9, 8, 15, 14, 13, 12, 3, 2, 1, 0, 7, 6,
+                                               5, 4, 11, 10, 9, 8, 15, 14, 13, 12);
+    return (dr_u32x8)_mm256_shuffle_epi8(_mm256_gf2p8affine_epi64_epi8((__m256i)x, byte_reversal, 0), byte_swap);
+#else
+    x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
+    x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
+    x = ((x >> 4) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4);
+    x = ((x >> 8) & 0x00ff00ffu) | ((x & 0x00ff00ffu) << 8);
+    return (x >> 16) | (x << 16);
+#endif
+}
+
+/* dr_laine_karras */
+DR_SIMD_INLINE dr_u32x8 dr_laine_karras8(dr_u32x8 x, dr_u32x8 seed)
+{
+    x += seed;
+    x ^= x * 0x6c50b47cu;
+    x ^= x * 0xb82f1e52u;
+    x ^= x * 0xc7afe638u;
+    x ^= x * 0x8d22f6e6u;
+    return x;
+}
+
+/* dr_sobol_dim1. With AVX-512 its table's sixteen entries for a group of
+ * four bits fit two registers, and one two-register permutation looks all
+ * eight lanes up; elsewhere the generator matrix's columns v_b for the set
+ * bits (a table lookup per lane costs more than the 32 steps). */
+DR_SIMD_INLINE dr_u32x8 dr_sobol_dim1_8(dr_u32x8 i)
+{
+    dr_u32x8 x = {0};
+#if defined(__AVX512F__) && defined(__AVX512VL__)
+    for (int n = 0; n < 8; n++, i >>= 4) {
+        const uint32_t *t = dr_sobol_dim1_nibble[n];
+        x ^= (dr_u32x8)_mm256_permutex2var_epi32(_mm256_loadu_si256((const __m256i *)t), (__m256i)(i & 15u),
+                                              _mm256_loadu_si256((const __m256i *)(t + 8)));
+    }
+#else
+    uint32_t v = 0x80000000u;
+    for (int b = 0; b < 32; b++, i >>= 1, v ^= v >> 1)
+        x ^= (0u - (i & 1u)) & v;
+#endif
+    return x;
+}
+
+/* dr_sobol_to_double */
+DR_SIMD_INLINE dr_f8 dr_sobol_to_f8(dr_u32x8 x, dr_u8 h)
+{
+    dr_u8 k = (__builtin_convertvector(x, dr_u8) << 21) | (h >> 43);
+    return dr_u53_to_f8(k) * (1.0 / 9007199254740992.0);
+}
+
+/* dr_sobol2_hashed for lanes whose dimension has the hashes h, h1, h2
+ * (dr_sobol_hashes; h2 unread where u2 is NULL), their sample index given
+ * as rindex = dr_reverse_bits8(index) (the same for all of a sample's
+ * draws). dr_owen_scramble is reverse, Laine-Karras, reverse: the reversals
+ * that meet cancel, for the same bits. */
+DR_SIMD_INLINE void dr_sobol2_hashed8(dr_u8 h, dr_u8 h1, dr_u8 h2, dr_u32x8 rindex, dr_f8 *u1, dr_f8 *u2)
+{
+    dr_u32x8 i = dr_reverse_bits8(dr_laine_karras8(rindex, __builtin_convertvector(h, dr_u32x8)));
+    *u1 = dr_sobol_to_f8(dr_reverse_bits8(dr_laine_karras8(i, __builtin_convertvector(h1 >> 32, dr_u32x8))), h1);
+    if (u2) {
+        dr_u32x8 s2 = __builtin_convertvector(h2 >> 32, dr_u32x8);
+        *u2 = dr_sobol_to_f8(dr_reverse_bits8(dr_laine_karras8(dr_reverse_bits8(dr_sobol_dim1_8(i)), s2)), h2);
+    }
+}
+
+/* dr_sampler_sobol2 of dimension dim for lanes with scrambling seed pkey
+ * (rindex as above); u2 NULL: the first number only. */
+DR_SIMD_INLINE void dr_sobol2_8(dr_u8 pkey, dr_u32x8 rindex, dr_u8 dim, dr_f8 *u1, dr_f8 *u2)
+{
+    dr_u8 h = dr_hash64x8(pkey + dim * 0xd1b54a32d192ed03ULL);
+    dr_u8 h1 = dr_hash64x8(h ^ 0x1111111111111111ULL);
+    dr_u8 h2 = u2 ? dr_hash64x8(h ^ 0x2222222222222222ULL) : h;
+    dr_sobol2_hashed8(h, h1, h2, rindex, u1, u2);
+}
+
+/* dr_sampler_pixel_sample and dr_sampler_pixel_first2 for eight samples at
+ * once: sample[l] of pixel p[l] (all of one kind). Their samplers into
+ * s[0..7] and their first draws (the camera's) into *u1 and *u2; stratified
+ * draws lane by lane through the scalar function. */
+static inline void dr_sampler_pixel_first2_8(const struct dr_sampler_pixel *const p[8], const uint64_t sample[8],
+                                             struct dr_sampler s[8], dr_f8 *u1, dr_f8 *u2)
+{
+    dr_u8 pixel_key, smp, h, h1, h2;
+    for (int l = 0; l < 8; l++) {
+        pixel_key[l] = p[l]->pixel_key, smp[l] = sample[l];
+        h[l] = p[l]->first.h, h1[l] = p[l]->first.h1, h2[l] = p[l]->first.h2;
+    }
+    const dr_u8 key = dr_hash64x8(pixel_key ^ (smp * 0x9e3779b97f4a7c15ULL));
+    const uint32_t kind = p[0]->shared.kind;
+    for (int l = 0; l < 8; l++) {
+        s[l] = p[l]->shared;
+        s[l].key = key[l];
+        if (kind != DR_SAMPLER_INDEPENDENT)
+            s[l].index = (uint32_t)sample[l];
+    }
+    if (kind == DR_SAMPLER_STRATIFIED) {
+        for (int l = 0; l < 8; l++)
+            dr_sampler_pixel_first2(p[l], &s[l], &(*u1)[l], &(*u2)[l]);
+        return;
+    }
+    if (kind == DR_SAMPLER_SOBOL)
+        dr_sobol2_hashed8(h, h1, h2, dr_reverse_bits8(__builtin_convertvector(smp, dr_u32x8)), u1, u2);
+    else
+        *u1 = dr_independent8(key, (dr_u8){1, 1, 1, 1, 1, 1, 1, 1}), *u2 = dr_independent8(key, (dr_u8){2, 2, 2, 2, 2, 2, 2, 2});
+    for (int l = 0; l < 8; l++)
+        s[l].dim = 2;
+}
+
+#endif
