@@ -151,7 +151,7 @@ int cmd_render(int argc, char **argv)
     struct render_args a = {.output = "render.png"};
     grad_common_init(&a.g, "render", 64);
     /* An image's default: Owen-scrambled Sobol numbers. On the sample scenes
-     * they had 1.5-6 x less variance than independent ones for 1.02-1.2 x
+     * they had 1.5-6 x less variance than independent ones for 0.97-1.09 x
      * the time (media: the same variance). The commands that differentiate
      * keep independent numbers: their cross primal needs them (man page,
      * "Reverse mode and independent random numbers"). */
