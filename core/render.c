@@ -153,8 +153,7 @@ static void render_tile_wave(struct render_job *j, int thread, int x0, int y0, i
     for (run.first = 0; run.first < n; run.first += j->chunk_pixels) {
         int m = n - run.first < j->chunk_pixels ? n - run.first : j->chunk_pixels;
         dr_wave_radiance(j->counters[thread].wave, j->scene, &j->path, (int64_t)m * o->spp, start_run_sample,
-                         start_run_samples8, &run,
-                         L, &j->counters[thread].rays);
+                         start_run_samples8, &run, L, &j->counters[thread].rays);
         for (int p = 0; p < m; p++)
             store_pixel(j, thread, run.local[run.first + p], L + (int64_t)p * o->spp);
     }

@@ -825,7 +825,6 @@ static int advance(struct dr_wave_soa *w, const struct dr_scene *s, const struct
     return kept;
 }
 
-/* Paths [0, n) to their ends: radiance into L, or (w->out) a walk's sums. */
 /* Slots n_live.. take items next.. up to LANES slots or item n: eight at a
  * time through start8 where it is given, the rest one at a time. Returns the
  * slots live then. */
@@ -846,6 +845,7 @@ static int start_paths(struct dr_wave_soa *w, int n_live, int64_t *next, int64_t
     return n_live;
 }
 
+/* Paths [0, n) to their ends: radiance into L, or (w->out) a walk's sums. */
 static void run(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
                 dr_wave_start_fn start, dr_wave_start8_fn start8, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts)
 {
