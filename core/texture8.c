@@ -130,7 +130,12 @@ static const float *colour_lut(const struct dr_image *img, bool use_linear)
  * lanes of `lanes`: tap by tap in its order, acc += wt * texel, with the
  * texels texel8 (eight-bit storage) or image.c's texels (float storage)
  * reads, widened to double (exact). A grey image's one colour channel
- * counts for all three, as add_texel counts it. Other lanes: 0. */
+ * counts for all three, as add_texel counts it. Other lanes: 0.
+ * The texels go straight into vector registers (initialiser lists: one
+ * insert each; lanes off read texel 0 and are zeroed after): written lane
+ * by lane into a vector on the stack, each tap's load of it waited for
+ * eight stores to forward, and that wait was a tenth of a render under an
+ * environment map. */
 static dr_v3x8 blend(const struct dr_image *img, dr_m8 lanes, int64_t idx[4][DR_SIMD_W], dr_f8 wt[4],
                      bool use_linear)
 {
@@ -138,20 +143,26 @@ static dr_v3x8 blend(const struct dr_image *img, dr_m8 lanes, int64_t idx[4][DR_
     const size_t g = c >= 3 ? 1 : 0, b = c >= 3 ? 2 : 0;   /* (green's and blue's channel) */
     const float *lut = img->bytes ? colour_lut(img, use_linear) : NULL;
     const float *pix = use_linear && img->linear ? img->linear : img->data;
-    dr_v3x8 acc = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
+    const dr_v3x8 zero = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
+    dr_v3x8 acc = zero;
     for (int k = 0; k < 4; k++) {
-        dr_v3x8 t = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
-        for (int i = 0; i < DR_SIMD_W; i++) {
-            if (!lanes[i])
-                continue;
-            if (lut) {
-                const uint8_t *p = img->bytes + (size_t)idx[k][i] * c;
-                t.x[i] = lut[p[0]], t.y[i] = lut[p[g]], t.z[i] = lut[p[b]];
-            } else {
-                const float *p = pix + (size_t)idx[k][i] * c;
-                t.x[i] = p[0], t.y[i] = p[g], t.z[i] = p[b];
-            }
+        size_t o[DR_SIMD_W];   /* each lane's texel's first channel */
+        for (int i = 0; i < DR_SIMD_W; i++)
+            o[i] = lanes[i] ? (size_t)idx[k][i] * c : 0;
+        dr_v3x8 t;
+        if (lut) {
+            const uint8_t *p = img->bytes;
+#define CH(ch) (dr_f8){lut[p[o[0] + ch]], lut[p[o[1] + ch]], lut[p[o[2] + ch]], lut[p[o[3] + ch]], \
+                       lut[p[o[4] + ch]], lut[p[o[5] + ch]], lut[p[o[6] + ch]], lut[p[o[7] + ch]]}
+            t = (dr_v3x8){CH(0), CH(g), CH(b)};
+#undef CH
+        } else {
+#define CH(ch) (dr_f8){pix[o[0] + ch], pix[o[1] + ch], pix[o[2] + ch], pix[o[3] + ch], \
+                       pix[o[4] + ch], pix[o[5] + ch], pix[o[6] + ch], pix[o[7] + ch]}
+            t = (dr_v3x8){CH(0), CH(g), CH(b)};
+#undef CH
         }
+        t = dr_v3x8_sel(lanes, t, zero);
         acc.x = acc.x + wt[k] * t.x;
         acc.y = acc.y + wt[k] * t.y;
         acc.z = acc.z + wt[k] * t.z;
