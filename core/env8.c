@@ -44,22 +44,28 @@ DR_SIMD_INLINE void cells(dr_f8 t, int n, int64_t c[DR_SIMD_W])
         c[i] = (int64_t)f[i];
 }
 
+/* Eight lanes' values of an expression of the lane i, straight into a
+ * vector register (simd.h: an initialiser list, not lane stores). */
+#define LANES8(e) (dr_f8){e(0), e(1), e(2), e(3), e(4), e(5), e(6), e(7)}
+
 /* env_pdf_uv: the piecewise-constant density of cell (x, y) over the
- * sphere, with the row-centre sine the weights were built with. */
+ * sphere, with the row-centre sine the weights were built with (lanes off:
+ * 0; every lane reads a cell, cells() keeping them in the map). */
 static dr_f8 pdf_uv(const struct dr_env_tables *t, dr_m8 on, dr_f8 u, dr_f8 v)
 {
     int64_t x[DR_SIMD_W], y[DR_SIMD_W];
     cells(u, t->w, x);
     cells(v, t->h, y);
-    dr_f8 dm = dr_f8s(0.0), dc = dr_f8s(0.0), st = dr_f8s(0.0);
-    for (int i = 0; i < DR_SIMD_W; i++) {
-        if (!on[i])
-            continue;
-        const double *row = t->conditional + (size_t)y[i] * (size_t)(t->w + 1);
-        dm[i] = t->marginal[y[i] + 1] - t->marginal[y[i]];
-        dc[i] = row[x[i] + 1] - row[x[i]];
-        st[i] = t->row_sin[y[i]];
-    }
+    const double *row[DR_SIMD_W];
+    for (int i = 0; i < DR_SIMD_W; i++)
+        row[i] = t->conditional + (size_t)y[i] * (size_t)(t->w + 1);
+#define DM(i) (t->marginal[y[i] + 1] - t->marginal[y[i]])
+#define DC(i) (row[i][x[i] + 1] - row[i][x[i]])
+#define ST(i) t->row_sin[y[i]]
+    const dr_f8 dm = LANES8(DM), dc = LANES8(DC), st = dr_f8_sel(on, LANES8(ST), dr_f8s(0.0));
+#undef DM
+#undef DC
+#undef ST
     const dr_f8 p_uv = dm * dc * (double)t->w * (double)t->h;
     return dr_f8_sel(dr_f8_gt(st, dr_f8s(0.0)), p_uv / (2.0 * M_PI * M_PI * st), dr_f8s(0.0));
 }
@@ -124,12 +130,13 @@ dr_m8 dr_env8_sample(const struct dr_scene *s, const struct dr_env_tables *t, dr
     dr_m8 ok = on & dr_f8_gt(py, dr_f8s(0.0)) & dr_f8_gt(px, dr_f8s(0.0));
     const dr_f8 one = dr_f8s(1.0);
     const dr_f8 dv = (u1 - m0) / dr_f8_sel(ok, py, one), du = (u2 - r0) / dr_f8_sel(ok, px, one);
-    dr_f8 xf, yf, st = dr_f8s(0.0);
-    for (int i = 0; i < DR_SIMD_W; i++) {
-        xf[i] = (double)x[i], yf[i] = (double)y[i];
-        if (ok[i])
-            st[i] = t->row_sin[y[i]];
-    }
+#define XF(i) (double)x[i]
+#define YF(i) (double)y[i]
+#define ST(i) t->row_sin[y[i]]
+    const dr_f8 xf = LANES8(XF), yf = LANES8(YF), st = dr_f8_sel(ok, LANES8(ST), dr_f8s(0.0));
+#undef XF
+#undef YF
+#undef ST
     const dr_f8 u = (xf + dr_f8_clamp(du, 0.0, 1.0)) / (double)t->w, v = (yf + dr_f8_clamp(dv, 0.0, 1.0)) / (double)t->h;
     *wi = uv_to_dir(u, v);
     const dr_f8 p = dr_f8_sel(dr_f8_gt(st, dr_f8s(0.0)),
