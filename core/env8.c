@@ -44,10 +44,6 @@ DR_SIMD_INLINE void cells(dr_f8 t, int n, int64_t c[DR_SIMD_W])
         c[i] = (int64_t)f[i];
 }
 
-/* Eight lanes' values of an expression of the lane i, straight into a
- * vector register (simd.h: an initialiser list, not lane stores). */
-#define LANES8(e) (dr_f8){e(0), e(1), e(2), e(3), e(4), e(5), e(6), e(7)}
-
 /* env_pdf_uv: the piecewise-constant density of cell (x, y) over the
  * sphere, with the row-centre sine the weights were built with (lanes off:
  * 0; every lane reads a cell, cells() keeping them in the map). */
@@ -62,7 +58,7 @@ static dr_f8 pdf_uv(const struct dr_env_tables *t, dr_m8 on, dr_f8 u, dr_f8 v)
 #define DM(i) (t->marginal[y[i] + 1] - t->marginal[y[i]])
 #define DC(i) (row[i][x[i] + 1] - row[i][x[i]])
 #define ST(i) t->row_sin[y[i]]
-    const dr_f8 dm = LANES8(DM), dc = LANES8(DC), st = dr_f8_sel(on, LANES8(ST), dr_f8s(0.0));
+    const dr_f8 dm = DR_LANES8(dr_f8, DM), dc = DR_LANES8(dr_f8, DC), st = dr_f8_sel(on, DR_LANES8(dr_f8, ST), dr_f8s(0.0));
 #undef DM
 #undef DC
 #undef ST
@@ -133,7 +129,7 @@ dr_m8 dr_env8_sample(const struct dr_scene *s, const struct dr_env_tables *t, dr
 #define XF(i) (double)x[i]
 #define YF(i) (double)y[i]
 #define ST(i) t->row_sin[y[i]]
-    const dr_f8 xf = LANES8(XF), yf = LANES8(YF), st = dr_f8_sel(ok, LANES8(ST), dr_f8s(0.0));
+    const dr_f8 xf = DR_LANES8(dr_f8, XF), yf = DR_LANES8(dr_f8, YF), st = dr_f8_sel(ok, DR_LANES8(dr_f8, ST), dr_f8s(0.0));
 #undef XF
 #undef YF
 #undef ST

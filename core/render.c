@@ -120,13 +120,18 @@ static void start_run_samples8(void *ctx, int64_t first, struct dr_sampler *smp,
     const int spp = j->opts->spp;
     const struct dr_sampler_pixel *pixel[8];
     uint64_t sample[8];
-    dr_f8 x, y, u, v;
-    for (int l = 0; l < 8; l++) {
-        const int p = r->first + (int)((first + l) / spp);
-        pixel[l] = &r->pixel[p];
-        sample[l] = (uint64_t)((first + l) % spp);
-        x[l] = r->fx[p], y[l] = r->fy[p];
+    int at[8];   /* each lane's pixel in the run */
+    for (int l = 0, p = r->first + (int)(first / spp), k = (int)(first % spp); l < 8; l++) {
+        at[l] = p, pixel[l] = &r->pixel[p], sample[l] = (uint64_t)k;
+        if (++k == spp)   /* (one division for the eight lanes, not sixteen) */
+            k = 0, p++;
     }
+#define X(l) (double)r->fx[at[l]]
+#define Y(l) (double)r->fy[at[l]]
+    const dr_f8 x = DR_LANES8(dr_f8, X), y = DR_LANES8(dr_f8, Y);
+#undef X
+#undef Y
+    dr_f8 u, v;
     dr_sampler_pixel_first2_8(pixel, sample, smp, &u, &v);
     dr_f8 px = x + u, py = y + v;   /* dr_film_sample's box */
     if (j->opts->film.filter.kind != DR_FILTER_BOX)

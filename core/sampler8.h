@@ -7,7 +7,7 @@
 
 #include <stdint.h>
 #if defined(__AVX__)
-#include <immintrin.h>   /* reverse_bits' GFNI, sobol_dim1's permutation */
+#include <immintrin.h>   /* dr_reverse_bits8's GFNI, dr_sobol_dim1_8's permutation */
 #endif
 
 #include "sampler.h"
@@ -139,11 +139,18 @@ DR_SIMD_INLINE void dr_sobol2_8(dr_u8 pkey, dr_u32x8 rindex, dr_u8 dim, dr_f8 *u
 static inline void dr_sampler_pixel_first2_8(const struct dr_sampler_pixel *const p[8], const uint64_t sample[8],
                                              struct dr_sampler s[8], dr_f8 *u1, dr_f8 *u2)
 {
-    dr_u8 pixel_key, smp, h, h1, h2;
-    for (int l = 0; l < 8; l++) {
-        pixel_key[l] = p[l]->pixel_key, smp[l] = sample[l];
-        h[l] = p[l]->first.h, h1[l] = p[l]->first.h1, h2[l] = p[l]->first.h2;
-    }
+#define PKEY(l) p[l]->pixel_key
+#define SAMPLE(l) sample[l]
+#define H(l) p[l]->first.h
+#define H1(l) p[l]->first.h1
+#define H2(l) p[l]->first.h2
+    const dr_u8 pixel_key = DR_LANES8(dr_u8, PKEY), smp = DR_LANES8(dr_u8, SAMPLE), h = DR_LANES8(dr_u8, H),
+                h1 = DR_LANES8(dr_u8, H1), h2 = DR_LANES8(dr_u8, H2);
+#undef PKEY
+#undef SAMPLE
+#undef H
+#undef H1
+#undef H2
     const dr_u8 key = dr_hash64x8(pixel_key ^ (smp * 0x9e3779b97f4a7c15ULL));
     const uint32_t kind = p[0]->shared.kind;
     for (int l = 0; l < 8; l++) {
