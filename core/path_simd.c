@@ -615,14 +615,12 @@ DR_SIMD_INLINE dr_v3x8 emission(const void *const *mat, dr_m8 seen)
     return dr_v3x8_sel(seen, e, (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)});
 }
 
-/* a[k[i]] for the lanes of on, 0 for the others (which read nothing) */
+/* a[k[i]] for the lanes of on, 0 for the others (which read a[0]) */
 DR_SIMD_INLINE dr_f8 gather_where(const double *a, const int64_t *k, dr_m8 on)
 {
-    dr_f8 r = dr_f8s(0.0);
-    for (int i = 0; i < DR_SIMD_W; i++)
-        if (on[i])
-            r[i] = a[k[i]];
-    return r;
+#define AT(i) a[on[i] ? k[i] : 0]
+    return dr_f8_sel(on, DR_LANES8(dr_f8, AT), dr_f8s(0.0));
+#undef AT
 }
 
 /* stage_emission: what the hit emits towards the ray and its MIS weight
@@ -759,9 +757,12 @@ static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *
         memcpy(entry, ahead->entry, sizeof entry);
     else
         find_entries(lt, u_pick, entry);
+#define ENV(i) (entry[i] == lt->env_uniform_entry ? -1 : 0)
+#define ENV_MAP(i) (entry[i] == lt->env_map_entry ? -1 : 0)
+    *env = DR_LANES8(dr_m8, ENV), *env_map = DR_LANES8(dr_m8, ENV_MAP);
+#undef ENV
+#undef ENV_MAP
     for (int i = 0; i < DR_SIMD_W; i++) {
-        (*env)[i] = entry[i] == lt->env_uniform_entry ? -1 : 0;
-        (*env_map)[i] = entry[i] == lt->env_map_entry ? -1 : 0;
         other[i] = entry[i] >= lt->n_emitters && !(*env)[i] && !(*env_map)[i];
         if (entry[i] >= lt->n_emitters)
             entry[i] = lt->n_emitters > 0 ? 0 : -1;
@@ -784,17 +785,20 @@ static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *
             if (entry[i] >= 0)
                 dr_mesh_prefetch_positions(m, lt->emitter_tri[entry[i]]);
     }
+#define PICK(i) (entry[i] < 0 ? 0.0 : lt->pick[entry[i]])
+#define AREA(i) (entry[i] < 0 ? 1.0 : lt->emitter_area[entry[i]])
+    *pick = DR_LANES8(dr_f8, PICK), *area = DR_LANES8(dr_f8, AREA);
+#undef PICK
+#undef AREA
     for (int i = 0; i < DR_SIMD_W; i++) {
         int64_t e = entry[i];
         if (e < 0) {   /* no emitting triangle at all: triangle 0 stands in */
-            (*pick)[i] = 0.0, (*area)[i] = 1.0, L->ltri[i] = 0;
+            L->ltri[i] = 0;
             L->lmat[i] = &s->materials[m->material[0]];
             L->ldouble_sided[i] = true;
             L->ltextured[i] = false;
             L->lemissive_tex[i] = NULL;
         } else {
-            (*pick)[i] = lt->pick[e];
-            (*area)[i] = lt->emitter_area[e];
             L->ltri[i] = lt->emitter_tri[e];
             const struct dr_material *lm = &s->materials[m->material[L->ltri[i]]];
             L->lmat[i] = lm;
@@ -1068,11 +1072,12 @@ static void vertex_randoms(const struct dr_path8_in *in, const uint32_t *dim, dr
     for (int i = 0; i < DR_SIMD_W; i++)
         sobol = sobol && in->sampler[i] && in->sampler[i]->kind == DR_SAMPLER_SOBOL;
     if (sobol) {   /* the draws of dr_sampler_next and next2 (sampler.c) in vector form */
-        dr_u8 pkey;
-        dr_u32x8 index;
-        for (int i = 0; i < DR_SIMD_W; i++)
-            pkey[i] = in->sampler[i]->pkey, index[i] = in->sampler[i]->index;
-        const dr_u32x8 rindex = dr_reverse_bits8(index);
+#define PKEY(i) in->sampler[i]->pkey
+#define INDEX(i) in->sampler[i]->index
+        const dr_u8 pkey = DR_LANES8(dr_u8, PKEY);
+        const dr_u32x8 rindex = dr_reverse_bits8(DR_LANES8(dr_u32x8, INDEX));
+#undef PKEY
+#undef INDEX
         dr_sobol2_8(pkey, rindex, d + 1, &u[0], NULL);
         dr_sobol2_8(pkey, rindex, d + 2, &u[1], &u[2]);
         dr_sobol2_8(pkey, rindex, d + 4, &u[3], NULL);
