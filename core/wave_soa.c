@@ -410,9 +410,9 @@ static void take_scalar(struct dr_wave_soa *w, int k)
 static bool escaped_group(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
                           int n_live, int i0, dr_v3x8 *L, dr_v3x8 *T)
 {
-    dr_m8 left = {0};
-    for (int i = 0; i < DR_SIMD_W && i0 + i < n_live; i++)
-        left[i] = w->tri[i0 + i] < 0 ? -1 : 0;
+    dr_m8 tri;   /* (SLOTS is a multiple of eight: the group's slots exist) */
+    memcpy(&tri, w->tri + i0, sizeof tri);
+    const dr_m8 left = (tri < 0) & first_lanes(n_live - i0);
     if (!dr_m8_any(left))
         return false;
     dr_v3x8 e = dr_path8_escaped_term(s, opts, left, load3(w->dx + i0, w->dy + i0, w->dz + i0), load8(w->depth + i0),
@@ -440,7 +440,7 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
     const bool eight_at_once = (!w->out || !w->out->step) && dr_path8_env_eight(s);
     const bool diff_env = (opts->stages & DR_STAGE_ENV) && opts->params && opts->params->env_active;
     for (int i0 = 0; i0 < n_live; i0 += DR_SIMD_W) {   /* (group by group: close_up) */
-        dr_m8 keep = {0};
+        bool keeps[DR_SIMD_W] = {false};
         int j = kept;
         dr_v3x8 L_esc, T_esc;
         const bool grouped = eight_at_once && escaped_group(w, s, opts, n_live, i0, &L_esc, &T_esc);
@@ -462,7 +462,7 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
                 take_scalar(w, k);
                 continue;
             }
-            keep[i] = -1;
+            keeps[i] = true;
             if (w->structured)
                 w->smp[j] = w->smp[k];
             if (w->out)
@@ -472,8 +472,10 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
         /* (after the group's slots were read above; where no path before
          * and none of the group left, every path is in its place already) */
         const int in_group = n_live - i0 < DR_SIMD_W ? n_live - i0 : DR_SIMD_W;
+#define KEEP(i) (keeps[i] ? -1 : 0)
         if (kept != i0 || j - kept != in_group)
-            close_up(w, kept, i0, keep);
+            close_up(w, kept, i0, DR_LANES8(dr_m8, KEEP));
+#undef KEEP
         kept = j;
     }
     return kept;
