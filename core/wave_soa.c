@@ -762,9 +762,9 @@ static int advance(struct dr_wave_soa *w, const struct dr_scene *s, const struct
         const int i0 = g * DR_SIMD_W;
         const struct dr_path8 *G = &w->group[g];
         dr_v3x8 beta = load3(w->bx + i0, w->by + i0, w->bz + i0);
-        dr_m8 occluded;
-        for (int i = 0; i < DR_SIMD_W; i++)
-            occluded[i] = w->occluded[i0 + i] ? -1 : 0;
+#define OCCLUDED(i) (w->occluded[i0 + i] ? -1 : 0)
+        const dr_m8 occluded = DR_LANES8(dr_m8, OCCLUDED);
+#undef OCCLUDED
         struct dr_path8_out c;
         dr_v3x8 ratio;
         if (w->out)
