@@ -156,9 +156,9 @@ DR_SIMD_INLINE dr_v3x8 dr_v3x8_sub(dr_v3x8 a, dr_v3x8 b) { return (dr_v3x8){a.x 
 DR_SIMD_INLINE dr_v3x8 dr_v3x8_mul(dr_v3x8 a, dr_v3x8 b) { return (dr_v3x8){a.x * b.x, a.y * b.y, a.z * b.z}; }
 DR_SIMD_INLINE dr_v3x8 dr_v3x8_scale(dr_v3x8 a, dr_f8 s) { return (dr_v3x8){a.x * s, a.y * s, a.z * s}; }
 /* The eight lanes' values of an expression of the lane l, e(l), as a vector
- * of type T. An initialiser list compiles to one insert per lane; eight
- * stores into a vector on the stack make its load wait for them to forward
- * (a tenth of a render under an environment map, texture8.c's blend). */
+ * of type T: an initialiser list, which compiles to one insert per lane,
+ * where eight stores into a vector on the stack make its load wait for them
+ * to forward (see above). */
 #define DR_LANES8(T, e) (T){e(0), e(1), e(2), e(3), e(4), e(5), e(6), e(7)}
 /* a in every lane */
 DR_SIMD_INLINE dr_v3x8 dr_v3x8_splat(dr_vec3 a) { return (dr_v3x8){dr_f8s(a.x), dr_f8s(a.y), dr_f8s(a.z)}; }
