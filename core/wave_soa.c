@@ -410,9 +410,9 @@ static void take_scalar(struct dr_wave_soa *w, int k)
 static bool escaped_group(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
                           int n_live, int i0, dr_v3x8 *L, dr_v3x8 *T)
 {
-    dr_m8 tri;   /* (SLOTS is a multiple of eight: the group's slots exist) */
-    memcpy(&tri, w->tri + i0, sizeof tri);
-    const dr_m8 left = (tri < 0) & first_lanes(n_live - i0);
+#define LEFT(i) (i0 + i < n_live && w->tri[i0 + i] < 0 ? -1 : 0)
+    const dr_m8 left = DR_LANES8(dr_m8, LEFT);   /* (a vector compare: piecewise on AVX2) */
+#undef LEFT
     if (!dr_m8_any(left))
         return false;
     dr_v3x8 e = dr_path8_escaped_term(s, opts, left, load3(w->dx + i0, w->dy + i0, w->dz + i0), load8(w->depth + i0),
