@@ -13,14 +13,19 @@
 #include <immintrin.h>   /* dr_reverse_bits32 */
 #endif
 
-/* SplitMix64's finaliser: a strong 64-bit mix. */
+/* SplitMix64's finaliser, a strong 64-bit mix, on x: a uint64_t or a vector
+ * of them (sampler8.h's dr_hash64x8 runs the same text). */
+#define DR_HASH64_STEPS(x)            \
+    do {                              \
+        x ^= x >> 30;                 \
+        x *= 0xbf58476d1ce4e5b9ULL;   \
+        x ^= x >> 27;                 \
+        x *= 0x94d049bb133111ebULL;   \
+        x ^= x >> 31;                 \
+    } while (0)
 static inline uint64_t dr_hash64(uint64_t x)
 {
-    x ^= x >> 30;
-    x *= 0xbf58476d1ce4e5b9ULL;
-    x ^= x >> 27;
-    x *= 0x94d049bb133111ebULL;
-    x ^= x >> 31;
+    DR_HASH64_STEPS(x);
     return x;
 }
 
@@ -151,6 +156,26 @@ static inline void dr_sampler_init_kind(struct dr_sampler *s, enum dr_sampler_ki
 
 /* ---- Owen-scrambled Sobol (the two dimensions of a (0,2) sequence) ---- */
 
+/* The steps of the bit reversal and of the Laine-Karras permutation below,
+ * on x: a uint32_t, or a vector of them (sampler8.h's eight-lane forms run
+ * the same text). */
+#define DR_REVERSE_BITS_STEPS(x)                                        \
+    do {                                                                \
+        x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);        \
+        x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);        \
+        x = ((x >> 4) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4);        \
+        x = ((x >> 8) & 0x00ff00ffu) | ((x & 0x00ff00ffu) << 8);        \
+        x = (x >> 16) | (x << 16);                                      \
+    } while (0)
+#define DR_LAINE_KARRAS_STEPS(x, seed) \
+    do {                               \
+        x += seed;                     \
+        x ^= x * 0x6c50b47cu;          \
+        x ^= x * 0xb82f1e52u;          \
+        x ^= x * 0xc7afe638u;          \
+        x ^= x * 0x8d22f6e6u;          \
+    } while (0)
+
 /* Reverses a 32-bit number's bits. With GFNI one affine transform over
  * GF(2) reverses each byte's bits (the matrix 0x8040201008040201) and a byte
  * swap does the rest: four instructions for the twenty of the shifts. */
@@ -160,11 +185,8 @@ static inline uint32_t dr_reverse_bits32(uint32_t x)
     const __m128i byte_reversal = _mm_set1_epi64x(0x8040201008040201LL);
     return __builtin_bswap32((uint32_t)_mm_cvtsi128_si32(_mm_gf2p8affine_epi64_epi8(_mm_cvtsi32_si128((int)x), byte_reversal, 0)));
 #else
-    x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
-    x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
-    x = ((x >> 4) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4);
-    x = ((x >> 8) & 0x00ff00ffu) | ((x & 0x00ff00ffu) << 8);
-    return (x >> 16) | (x << 16);
+    DR_REVERSE_BITS_STEPS(x);
+    return x;
 #endif
 }
 
@@ -172,11 +194,7 @@ static inline uint32_t dr_reverse_bits32(uint32_t x)
  * bit affects only the bits above it. */
 static inline uint32_t dr_laine_karras(uint32_t x, uint32_t seed)
 {
-    x += seed;
-    x ^= x * 0x6c50b47cu;
-    x ^= x * 0xb82f1e52u;
-    x ^= x * 0xc7afe638u;
-    x ^= x * 0x8d22f6e6u;
+    DR_LAINE_KARRAS_STEPS(x, seed);
     return x;
 }
 

@@ -32,11 +32,7 @@ DR_SIMD_INLINE dr_f8 dr_u53_to_f8(dr_u8 k)
 /* dr_hash64 */
 DR_SIMD_INLINE dr_u8 dr_hash64x8(dr_u8 x)
 {
-    x ^= x >> 30;
-    x *= 0xbf58476d1ce4e5b9ULL;
-    x ^= x >> 27;
-    x *= 0x94d049bb133111ebULL;
-    x ^= x >> 31;
+    DR_HASH64_STEPS(x);
     return x;
 }
 
@@ -60,22 +56,15 @@ DR_SIMD_INLINE dr_u32x8 dr_reverse_bits8(dr_u32x8 x)
                                                5, 4, 11, 10, 9, 8, 15, 14, 13, 12);
     return (dr_u32x8)_mm256_shuffle_epi8(_mm256_gf2p8affine_epi64_epi8((__m256i)x, byte_reversal, 0), byte_swap);
 #else
-    x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
-    x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
-    x = ((x >> 4) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4);
-    x = ((x >> 8) & 0x00ff00ffu) | ((x & 0x00ff00ffu) << 8);
-    return (x >> 16) | (x << 16);
+    DR_REVERSE_BITS_STEPS(x);
+    return x;
 #endif
 }
 
 /* dr_laine_karras */
 DR_SIMD_INLINE dr_u32x8 dr_laine_karras8(dr_u32x8 x, dr_u32x8 seed)
 {
-    x += seed;
-    x ^= x * 0x6c50b47cu;
-    x ^= x * 0xb82f1e52u;
-    x ^= x * 0xc7afe638u;
-    x ^= x * 0x8d22f6e6u;
+    DR_LAINE_KARRAS_STEPS(x, seed);
     return x;
 }
 
