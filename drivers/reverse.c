@@ -188,10 +188,11 @@ static void plan(const struct dr_reverse_options *o, struct dr_reverse_result *r
     const struct dr_grad_problem *p = &o->problem;
     const int K = o->batches;
     r->spp_batch = (int)(((int64_t)p->spp + K - 1) / K);
-    /* the cross primal needs a pixel's samples independent of each other: not
-     * so with one sample, nor under the stratified and sobol samplers, whose
-     * samples of a pixel share their strata (estimator.h) */
-    const bool cross_ok = r->spp_batch >= 2 && p->sampler == DR_SAMPLER_INDEPENDENT;
+    /* the cross primal needs samples of a pixel independent of each other:
+     * not so with one sample, nor under the stratified sampler, whose samples
+     * of a pixel share their strata (sobol: two halves scrambled apart,
+     * estimator.h) */
+    const bool cross_ok = r->spp_batch >= 2 && p->sampler != DR_SAMPLER_STRATIFIED;
     r->primal_run = o->primal == DR_PRIMAL_CROSS && !cross_ok ? DR_PRIMAL_PER_BATCH : o->primal;
     /* mis: a batch in one piece (no halves, so no se_gradient/se_primal
      * split): weights from halves of 2 spp were poor (mis.h) */

@@ -33,7 +33,8 @@
  * the estimate unbiased, and the K batches stay i.i.d., so the standard error
  * is their spread as above; the parts are not estimated (a sample's primal
  * and derivative noise are no longer apart). It needs spp_b >= 2 and the
- * independent sampler (estimator.h); otherwise the run is DR_PRIMAL_PER_BATCH.
+ * independent or sobol sampler (sobol: the mean of the other half of the
+ * pixel's samples, estimator.h); otherwise the run is DR_PRIMAL_PER_BATCH.
  * The cost against DR_PRIMAL_PER_BATCH: one estimator run per batch and no
  * render, i.e. the estimator's own primal walks serve as the loss's primal.
  *
@@ -80,8 +81,8 @@ struct dr_reverse_result {
     bool parts;                      /* se_gradient / se_primal were estimated */
     uint64_t primal_seed;            /* hash(seed ^ "PRIMAL"); batch b uses hash(primal_seed + b) */
     double t_primal, t_gradient;     /* seconds in renders and in estimator runs */
-    enum dr_primal_mode primal_run;  /* what ran: DR_PRIMAL_CROSS with spp_batch < 2 or a stratified
-                                        or sobol sampler runs per batch */
+    enum dr_primal_mode primal_run;  /* what ran: DR_PRIMAL_CROSS with spp_batch < 2 or the
+                                        stratified sampler runs per batch */
 };
 
 /* Whether a run with these options estimates se_gradient and se_primal

@@ -11,13 +11,30 @@
 /* Scalar problems up to this size sum each chunk locally first. */
 #define CHUNK_LOCAL_MAX 4096
 
+/* Cross mode under the sobol sampler (dr_est_cross_adjoint): a pixel's
+ * samples of even and of odd index are two Sobol sequences, each scrambled
+ * on its own (this salt gives the odd half's seed), so that each half is
+ * independent of the other. */
+#define CROSS_HALF_SALT 0x8f1bbcdc5a827999ULL
+
+static bool sobol_halves(const struct dr_grad_problem *p)
+{
+    return p->cross && p->sampler == DR_SAMPLER_SOBOL;
+}
+
 void dr_est_camera_ray(const struct dr_est_base *b, int64_t pixel, int sample, struct dr_sampler *smp, dr_vec3 *o,
                        dr_vec3 *d)
 {
     /* film.h: the frame pixel keys the random numbers, the filter draws the offset */
     int x, y;
     uint64_t frame_pixel = dr_film_pixel(&b->p->film, b->p->width, pixel, &x, &y);
-    dr_sampler_init_kind(smp, b->p->sampler, b->p->seed, frame_pixel, (uint64_t)sample, b->p->spp);
+    if (sobol_halves(b->p)) {   /* sample's half: its own sequence, index sample / 2 */
+        const int h = sample & 1;
+        dr_sampler_init_kind(smp, DR_SAMPLER_SOBOL, h ? dr_hash64(b->p->seed ^ CROSS_HALF_SALT) : b->p->seed,
+                             frame_pixel, (uint64_t)(sample >> 1), (b->p->spp + 1 - h) / 2);
+    } else {
+        dr_sampler_init_kind(smp, b->p->sampler, b->p->seed, frame_pixel, (uint64_t)sample, b->p->spp);
+    }
     double u, v, fx, fy;
     dr_sampler_next2(smp, &u, &v);
     dr_film_sample(&b->p->film.filter, x, y, u, v, &fx, &fy);
@@ -151,24 +168,30 @@ bool dr_est_sample_adjoint(const struct dr_est_base *b, int64_t pixel, dr_vec3 *
     return !dr_is_black(*adj);
 }
 
-void dr_est_cross_pixel(const struct dr_est_base *b, int64_t pixel, dr_vec3 sum)
+void dr_est_cross_pixel(const struct dr_est_base *b, int64_t pixel, const struct dr_cross_sum *sum)
 {
     double *img = b->p->cross->image + 3 * pixel;
     for (int c = 0; c < 3; c++)
-        img[c] = dr_v3_get(sum, c) / b->p->spp;
+        img[c] = dr_v3_get(sum->all, c) / b->p->spp;
 }
 
-dr_vec3 dr_est_cross_adjoint(const struct dr_est_base *b, int64_t pixel, dr_vec3 sum, dr_vec3 L)
+dr_vec3 dr_est_cross_adjoint(const struct dr_est_base *b, int64_t pixel, const struct dr_cross_sum *sum, int sample,
+                             dr_vec3 L)
 {
     const struct dr_cross_loss *x = b->p->cross;
     const int spp = b->p->spp;
     const size_t values = (size_t)b->p->width * (size_t)b->p->height * 3;
     const float *target = x->target + 3 * pixel;
+    /* the mean of the samples independent of this one: the other half's
+     * (sobol: dr_est_camera_ray; that half has (spp + h) / 2 samples), or
+     * all the others (independent numbers: leave one out) */
+    const int h = sample & 1;
+    const bool halves = sobol_halves(b->p);
+    const dr_vec3 others = halves ? dr_scale(sum->half[1 - h], 1.0 / ((spp + h) / 2))
+                                  : dr_scale(dr_sub(sum->all, L), 1.0 / (spp - 1));
     dr_vec3 adj;
-    for (int c = 0; c < 3; c++) {
-        double others = (dr_v3_get(sum, c) - dr_v3_get(L, c)) / (spp - 1);
-        dr_v3_set(&adj, c, d_loss_value(x->loss, others, target[c], values, x->scale) / spp);
-    }
+    for (int c = 0; c < 3; c++)
+        dr_v3_set(&adj, c, d_loss_value(x->loss, dr_v3_get(others, c), target[c], values, x->scale) / spp);
     return adj;
 }
 
@@ -322,10 +345,10 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
     }
     b->t0 = dr_clock_seconds();
     b->p = p;
-    if (p->cross && (dir || p->spp < 2 || p->sampler != DR_SAMPLER_INDEPENDENT || !p->cross->target ||
+    if (p->cross && (dir || p->spp < 2 || p->sampler == DR_SAMPLER_STRATIFIED || !p->cross->target ||
                      !p->cross->image)) {
-        dr_set_error("the cross primal is for reverse mode with at least 2 independent samples per pixel "
-                     "(spp %d, sampler %d)", p->spp, (int)p->sampler);
+        dr_set_error("the cross primal is for reverse mode with at least 2 independent or sobol samples per "
+                     "pixel (spp %d, sampler %d)", p->spp, (int)p->sampler);
         free(b);
         return DR_ERR_ARG;
     }

@@ -71,13 +71,27 @@ void dr_est_sink_end(struct dr_est_base *b, int thread);
  * mode (false: the pixel does not matter to the loss, skip it), all ones in
  * forward mode (the sink keeps the channels apart). */
 bool dr_est_sample_adjoint(const struct dr_est_base *b, int64_t pixel, dr_vec3 *adj);
-/* Cross mode (dr_grad_problem.cross), given sum, the sum of a pixel's
- * sample radiances (a non-finite sample counted as 0, as the renderer
- * does): dr_est_cross_pixel stores the pixel's mean in the cross image;
- * dr_est_cross_adjoint is the adjoint of the pixel's sample of radiance L:
- * the loss's adjoint at the mean of the other samples, / spp. */
-void dr_est_cross_pixel(const struct dr_est_base *b, int64_t pixel, dr_vec3 sum);
-dr_vec3 dr_est_cross_adjoint(const struct dr_est_base *b, int64_t pixel, dr_vec3 sum, dr_vec3 L);
+/* Cross mode (dr_grad_problem.cross): a pixel's sample radiances summed
+ * (a non-finite sample counted as 0, as the renderer does), all of them
+ * and by half (samples of even and of odd index), by dr_cross_sum_add.
+ * dr_est_cross_pixel stores the pixel's mean in the cross image;
+ * dr_est_cross_adjoint is the adjoint of the pixel's sample `sample` of
+ * radiance L: the loss's adjoint at the mean of the samples independent of
+ * it, / spp. With independent numbers those are all the others (leave one
+ * out); under the sobol sampler a pixel's halves are two sequences
+ * scrambled apart (dr_est_camera_ray), and the sample's are those of the
+ * other half. */
+struct dr_cross_sum {
+    dr_vec3 all, half[2];
+};
+static inline void dr_cross_sum_add(struct dr_cross_sum *s, int sample, dr_vec3 L)
+{
+    s->all = dr_add(s->all, L);
+    s->half[sample & 1] = dr_add(s->half[sample & 1], L);
+}
+void dr_est_cross_pixel(const struct dr_est_base *b, int64_t pixel, const struct dr_cross_sum *sum);
+dr_vec3 dr_est_cross_adjoint(const struct dr_est_base *b, int64_t pixel, const struct dr_cross_sum *sum, int sample,
+                             dr_vec3 L);
 /* Forward mode: moves the sink's three channels into the pixel of the d
  * image (divided by spp; the pixel is the calling thread's alone). Reverse
  * mode: nothing. */

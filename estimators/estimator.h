@@ -48,10 +48,12 @@ struct dr_estimator_ops;
  * unbiased, as with a separate primal (for l2 it is the U-statistic of the
  * product of the two means, the least-variance unbiased use of the same
  * paths), and the primal costs nothing beyond the walks the gradient makes
- * anyway. Needs spp >= 2 and the independent sampler: the stratified and
- * sobol samplers make a pixel's samples depend on each other (they share
- * the strata), and the mean of the others would then be correlated with the
- * sample, a bias of order 1/spp. */
+ * anyway. Needs spp >= 2 and not the stratified sampler, which makes a
+ * pixel's samples depend on each other (they share the strata): the mean of
+ * the others would then be correlated with the sample, a bias of order
+ * 1/spp. Under the sobol sampler a pixel's samples of even and of odd index
+ * are two sequences scrambled apart, and a sample's weight is the adjoint at
+ * the mean of the other half (common.h, dr_est_cross_adjoint). */
 struct dr_cross_loss {
     enum dr_loss_kind loss;
     const float *target;   /* the rendered rectangle's width * height * 3 values */

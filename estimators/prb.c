@@ -454,19 +454,19 @@ static int32_t replays(struct prb_job *j, int thread, const int64_t *px, const d
     int32_t n = 0;
     for (int64_t k = 0; k < n_px; k++) {
         const int64_t i0 = k * spp;
-        dr_vec3 sum = dr_v3s(0.0);
+        struct dr_cross_sum sum = {0};
         for (int64_t i = i0; i < i0 + spp; i++) {
             if (dr_v3_finite(walk->L[i]) && dr_v3_finite(walk->L_sub[i]))
-                sum = dr_add(sum, walk->L[i]);
+                dr_cross_sum_add(&sum, (int)(i - i0), walk->L[i]);
             else
                 b->thr[thread].invalid++;
         }
         if (b->p->cross)
-            dr_est_cross_pixel(b, px[k], sum);
+            dr_est_cross_pixel(b, px[k], &sum);
         for (int64_t i = i0; i < i0 + spp; i++) {
             if (!dr_v3_finite(walk->L[i]) || !dr_v3_finite(walk->L_sub[i]))
                 continue;
-            it->adj[i] = b->p->cross ? dr_est_cross_adjoint(b, px[k], sum, walk->L[i]) : adj[k];
+            it->adj[i] = b->p->cross ? dr_est_cross_adjoint(b, px[k], &sum, (int)(i - i0), walk->L[i]) : adj[k];
             /* (else the sample does not matter to the loss, or its path has no derivative term) */
             if (!dr_is_black(it->adj[i]) && walk->last_diff[i] > 0)
                 it->order[n++] = (int32_t)i;
@@ -510,13 +510,13 @@ static bool wave_pixels(struct prb_job *j, int thread, int64_t begin, int64_t en
  * loss. */
 static bool cross_adjoints(struct dr_est_base *b, int64_t px, dr_vec3 *adj)
 {
-    dr_vec3 sum = dr_v3s(0.0);
+    struct dr_cross_sum sum = {0};
     for (int sidx = 0; sidx < b->p->spp; sidx++)
-        sum = dr_add(sum, adj[sidx]);
-    dr_est_cross_pixel(b, px, sum);
+        dr_cross_sum_add(&sum, sidx, adj[sidx]);
+    dr_est_cross_pixel(b, px, &sum);
     bool any = false;
     for (int sidx = 0; sidx < b->p->spp; sidx++) {
-        adj[sidx] = dr_est_cross_adjoint(b, px, sum, adj[sidx]);
+        adj[sidx] = dr_est_cross_adjoint(b, px, &sum, sidx, adj[sidx]);
         any = any || !dr_is_black(adj[sidx]);
     }
     return any;

@@ -228,19 +228,21 @@ static void end_path(struct tape_job *j, int thread, struct tape_path *path, dr_
 }
 
 /* Cross mode: each path's adjoint from its pixel's other samples
- * (estimator.h). The tape holds whole pixels, their paths one after the other. */
+ * (estimator.h). The tape holds whole pixels, their paths one after the other
+ * in sample order (record_path's loop and lane_start's items both go
+ * sample by sample), so a path's sample is its place in its pixel. */
 static void cross_adjoints(const struct tape_job *j, struct tape *tp)
 {
     for (int64_t first = 0, end; first < tp->n_paths; first = end) {
         const int64_t px = tp->paths[first].pixel;
-        dr_vec3 sum = dr_v3s(0.0);
+        struct dr_cross_sum sum = {0};
         for (end = first; end < tp->n_paths && tp->paths[end].pixel == px; end++)
             if (!tp->paths[end].dropped)
-                sum = dr_add(sum, tp->paths[end].L);
-        dr_est_cross_pixel(&j->b, px, sum);
+                dr_cross_sum_add(&sum, (int)(end - first), tp->paths[end].L);
+        dr_est_cross_pixel(&j->b, px, &sum);
         for (int64_t k = first; k < end; k++)
             if (!tp->paths[k].dropped)
-                tp->paths[k].adj = dr_est_cross_adjoint(&j->b, px, sum, tp->paths[k].L);
+                tp->paths[k].adj = dr_est_cross_adjoint(&j->b, px, &sum, (int)(k - first), tp->paths[k].L);
     }
 }
 

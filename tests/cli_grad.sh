@@ -226,6 +226,23 @@ a, b = (json.load(open(f)) for f in sys.argv[1:])
 ga, gb = a["parameters"][0]["gradient"], b["parameters"][0]["gradient"]
 sys.exit(not (all(abs(x - y) <= 1e-9 * max(abs(x), abs(y)) for x, y in zip(ga, gb)) and a["loss"] == b["loss"]))
 PY
+# sobol: the cross primal too, each sample weighted by the other half of its
+# pixel's samples (two sequences scrambled apart); prb and tape agree (tape
+# pairs a path with its half by its place in the pixel)
+for est in prb tape; do
+    run grad --target t.exr --param "$red" --spp 16 --batches 4 --estimator $est --sampler sobol --json
+    expect_rc 0 "grad reverse --sampler sobol --json (cross primal, $est)"
+    cp "$tmp/out" "$tmp/sobol-$est.json"
+    json_check "$tmp/out" 'd["primal"] == "cross" and d["time"]["primal"] == 0 and d["sampler"] == "sobol"
+and all(math.isfinite(x) and x != 0 for x in d["parameters"][0]["gradient"] + d["parameters"][0]["stderr"])'
+done
+python3 - "$tmp/sobol-prb.json" "$tmp/sobol-tape.json" "$tmp/cross-prb.json" <<'PY' || fail "grad --sampler sobol: prb and tape differ, or equal independent's"
+import json, sys
+a, b, ind = (json.load(open(f)) for f in sys.argv[1:])
+ga, gb = a["parameters"][0]["gradient"], b["parameters"][0]["gradient"]
+sys.exit(not (all(abs(x - y) <= 1e-9 * max(abs(x), abs(y)) for x, y in zip(ga, gb)) and a["loss"] == b["loss"]
+              and ga != ind["parameters"][0]["gradient"]))
+PY
 # stratified samples of a pixel depend on each other (shared strata): their
 # leave-one-out means would be correlated with the sample, so separate runs
 run grad --target t.exr --param "$red" --spp 16 --batches 4 --sampler stratified --json
