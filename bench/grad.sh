@@ -17,7 +17,8 @@
 #      batch vs one shared primal (the old estimator), same samples: time ratio
 #      (goal <= 1.1), primal share of the run, and both reported standard errors;
 #      then the cross primal (default) vs a primal per batch over 8 seeds each:
-#      time ratio and efficiency (variance x time)
+#      time ratio and efficiency (variance x time); and the cross primal
+#      with sobol numbers against independent ones, the same way
 #   m. a texture parameter (NormalTangentTest's 2048x2048x3 base colour, 12.6 M
 #      scalars): grad's peak memory and gradient time, and optimize's per
 #      iteration time and peak memory (5 iterations, a checkpoint at the end)
@@ -166,6 +167,7 @@ SEJ=$("$TMP/reverse_stderr" $CORNELL $RED $RES 32 4 2)
 echo "   $SEJ"
 echo "   time ratio $(json_num "$SEJ" time_ratio) (goal <= 1.1: $(yesno "$(json_num "$SEJ" time_ratio) <= 1.1"))"
 echo "   cross primal (the default: no render) vs a primal per batch, over $(json_num "$SEJ" runs) seeds each: time ratio $(json_num "$SEJ" cross_time_ratio), efficiency (variance x time, per-batch / cross) $(json_num "$SEJ" cross_efficiency)"
+echo "   the cross primal with --sampler sobol (halves scrambled apart) vs independent, $(json_num "$SEJ" runs) seeds each: efficiency (variance x time, independent / sobol) $(json_num "$SEJ" sobol_cross_efficiency)"
 TEX_JSON=null
 if [[ -f $NTT ]]; then
     echo

@@ -7,7 +7,9 @@
  * primal) against per-batch primals over RUNS seeds each: mean seconds, the
  * runs' spread of the first gradient entry, and the efficiency ratio
  * (variance x time of per-batch / of cross; > 1: cross is cheaper for the
- * same accuracy).
+ * same accuracy); then the cross primal with sobol numbers (each sample
+ * weighted at the other half of its pixel's samples) against it with
+ * independent ones, the same way.
  *
  * usage: reverse_stderr SCENE PARAM [WxH] [SPP] [K] [THREADS]
  * The target is the scene rendered at 4 x SPP with PARAM's values scaled by 0.8. */
@@ -45,14 +47,15 @@ static int time_mode(const struct dr_reverse_options *base, enum dr_primal_mode 
 
 /* RUNS runs of mode with seeds 100..: mean seconds and the spread (sample
  * standard deviation) of the first gradient entry. */
-static int spread(const struct dr_reverse_options *base, enum dr_primal_mode mode, const float *target, int64_t T,
-                  double *seconds, double *sd)
+static int spread(const struct dr_reverse_options *base, enum dr_primal_mode mode, enum dr_sampler_kind sampler,
+                  const float *target, int64_t T, double *seconds, double *sd)
 {
     double g[RUNS], mean = 0.0, var = 0.0;
     *seconds = 0.0;
     for (int r = 0; r < RUNS; r++) {
         struct dr_reverse_options o = *base;
         o.problem.seed = 100 + (uint64_t)r;
+        o.problem.sampler = sampler;
         struct timing t;
         int rc = time_mode(&o, mode, target, T, &t);
         if (rc != 0)
@@ -114,9 +117,10 @@ int main(int argc, char **argv)
         fprintf(stderr, "%s\n", dr_last_error());
         return 1;
     }
-    double t_sep, sd_sep, t_cross, sd_cross;
-    if (spread(&o, DR_PRIMAL_PER_BATCH, target, ps->total, &t_sep, &sd_sep) != 0 ||
-        spread(&o, DR_PRIMAL_CROSS, target, ps->total, &t_cross, &sd_cross) != 0) {
+    double t_sep, sd_sep, t_cross, sd_cross, t_sobol, sd_sobol;
+    if (spread(&o, DR_PRIMAL_PER_BATCH, DR_SAMPLER_INDEPENDENT, target, ps->total, &t_sep, &sd_sep) != 0 ||
+        spread(&o, DR_PRIMAL_CROSS, DR_SAMPLER_INDEPENDENT, target, ps->total, &t_cross, &sd_cross) != 0 ||
+        spread(&o, DR_PRIMAL_CROSS, DR_SAMPLER_SOBOL, target, ps->total, &t_sobol, &sd_sobol) != 0) {
         fprintf(stderr, "%s\n", dr_last_error());
         return 1;
     }
@@ -124,10 +128,12 @@ int main(int argc, char **argv)
            "\"per_batch_primal\": {\"seconds\": %.4f, \"primal_share\": %.3f, \"stderr0\": %.4g}, "
            "\"time_ratio\": %.3f, \"runs\": %d, \"per_batch_runs\": {\"seconds\": %.4f, \"sd0\": %.4g}, "
            "\"cross_runs\": {\"seconds\": %.4f, \"sd0\": %.4g}, \"cross_time_ratio\": %.3f, "
-           "\"cross_efficiency\": %.3f}\n",
+           "\"cross_efficiency\": %.3f, \"sobol_cross_runs\": {\"seconds\": %.4f, \"sd0\": %.4g}, "
+           "\"sobol_cross_efficiency\": %.3f}\n",
            old.seconds, old.primal / old.seconds, old.se, now.seconds, now.primal / now.seconds, now.se,
            now.seconds / old.seconds, RUNS, t_sep, sd_sep, t_cross, sd_cross, t_cross / t_sep,
-           sd_sep * sd_sep * t_sep / (sd_cross * sd_cross * t_cross));
+           sd_sep * sd_sep * t_sep / (sd_cross * sd_cross * t_cross), t_sobol, sd_sobol,
+           sd_cross * sd_cross * t_cross / (sd_sobol * sd_sobol * t_sobol));
     free(theta);
     free(target);
     dr_param_set_destroy(ps);
