@@ -187,11 +187,13 @@ dr_vec3 dr_est_cross_adjoint(const struct dr_est_base *b, int64_t pixel, const s
      * all the others (independent numbers: leave one out) */
     const int h = sample & 1;
     const bool halves = sobol_halves(b->p);
-    const dr_vec3 others = halves ? dr_scale(sum->half[1 - h], 1.0 / ((spp + h) / 2))
-                                  : dr_scale(dr_sub(sum->all, L), 1.0 / (spp - 1));
+    const dr_vec3 others_sum = halves ? sum->half[1 - h] : dr_sub(sum->all, L);
+    const int n_others = halves ? (spp + h) / 2 : spp - 1;
     dr_vec3 adj;
-    for (int c = 0; c < 3; c++)
-        dr_v3_set(&adj, c, d_loss_value(x->loss, dr_v3_get(others, c), target[c], values, x->scale) / spp);
+    for (int c = 0; c < 3; c++) {
+        double others = dr_v3_get(others_sum, c) / n_others;
+        dr_v3_set(&adj, c, d_loss_value(x->loss, others, target[c], values, x->scale) / spp);
+    }
     return adj;
 }
 
