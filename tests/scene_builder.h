@@ -168,6 +168,16 @@ static inline struct dr_image sb_image(int w, int h, int c, const float *px, flo
     return im;
 }
 
+/* A w x h x c image of varied texels, both copies the same: multiples of
+ * 2^-8 in [1/8, 3/4] (salt shifts the pattern), exact in float storage. */
+static inline struct dr_image sb_varied_image(int w, int h, int c, int salt)
+{
+    struct dr_image im = sb_image(w, h, c, NULL, 0.0f, true);
+    for (int i = 0; i < w * h * c; i++)
+        im.data[i] = im.linear[i] = (float)((32 + (i * 37 + salt * 11) % 160) / 256.0);
+    return im;
+}
+
 /* sb_image's pixels in eight-bit storage, as dr_image_read_memory8 leaves
  * an sRGB PNG's (values rounded to k / 255; the colour decoded through the
  * table): the kind the packet renderer looks up eight lanes at a time. */
@@ -217,6 +227,19 @@ static inline void sb_environment(struct sb *b, dr_vec3 color)
     b->s->env.present = true;
     b->s->env.color = color;
     b->s->env.strength = 1.0;
+}
+
+/* The environment (sb_environment, colour 1) as a 16 x 8 map that brightens
+ * left to right and downwards: 0.2 + 0.1 x + 0.05 y in every channel. */
+static inline void sb_environment_ramp(struct sb *b)
+{
+    sb_environment(b, dr_v3s(1.0));
+    struct dr_image *map = &b->s->env.map;
+    *map = sb_image(16, 8, 3, NULL, 0.0f, false);
+    for (int y = 0; y < 8; y++)
+        for (int x = 0; x < 16; x++)
+            for (int k = 0; k < 3; k++)
+                map->data[(y * 16 + x) * 3 + k] = (float)(0.2 + 0.1 * x + 0.05 * y);
 }
 
 static inline void sb_light(struct sb *b, struct dr_punctual l)

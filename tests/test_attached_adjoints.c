@@ -52,21 +52,6 @@ static double rnd(void) { return 2.0 * dr_sampler_next(&rng) - 1.0; }
 static dr_vec3 rnd3(void) { return dr_v3(rnd(), rnd(), rnd()); }
 static dr_vec3 v3(const double *x) { return dr_v3(x[0], x[1], x[2]); }
 
-/* texel values are multiples of 2^-8 */
-static struct dr_image make_image(int w, int h, int c, int salt)
-{
-    struct dr_image im;
-    memset(&im, 0, sizeof im);
-    im.width = w;
-    im.height = h;
-    im.channels = c;
-    im.data = malloc(sizeof(float) * (size_t)(w * h * c));
-    im.linear = malloc(sizeof(float) * (size_t)(w * h * c));
-    for (int i = 0; i < w * h * c; i++)
-        im.data[i] = im.linear[i] = (float)((32 + (i * 37 + salt * 11) % 160) / 256.0);
-    return im;
-}
-
 /* A textured, smooth-normal quad, an emitter above it, a spot and a point light. */
 static struct dr_scene *make_scene(void)
 {
@@ -102,7 +87,7 @@ static struct dr_scene *make_scene(void)
     l.position = dr_v3(-0.5, 1.5, 0.4);
     sb_light(&b, l);
     sb_environment(&b, dr_v3(0.8, 0.9, 1.1));
-    b.s->env.map = make_image(8, 4, 3, 7);
+    b.s->env.map = sb_varied_image(8, 4, 3, 7);
     struct dr_scene *s = b.s;
     /* smooth normals on the quad's vertices, tilted differently */
     struct dr_mesh *mesh = &s->mesh;
@@ -116,9 +101,9 @@ static struct dr_scene *make_scene(void)
     mesh->flags[1] |= DR_TRI_HAS_NORMALS;
     s->n_images = 3;
     s->images = calloc(3, sizeof(struct dr_image));
-    s->images[0] = make_image(4, 3, 3, 1);
-    s->images[1] = make_image(3, 3, 3, 2);
-    s->images[2] = make_image(2, 4, 4, 3);
+    s->images[0] = sb_varied_image(4, 3, 3, 1);
+    s->images[1] = sb_varied_image(3, 3, 3, 2);
+    s->images[2] = sb_varied_image(2, 4, 4, 3);
     s->n_textures = 3;
     s->textures = calloc(3, sizeof(struct dr_texture));
     s->textures[0] = (struct dr_texture){0, DR_WRAP_REPEAT, DR_WRAP_MIRROR};

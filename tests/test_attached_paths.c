@@ -205,16 +205,7 @@ static void near_specular(void)
     struct sb b;
     sb_init(&b);
     sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, glossy_material(dr_v3(0.9, 0.8, 0.6), 1.0, 0.05)));
-    sb_environment(&b, dr_v3s(1.0));
-    struct dr_image *map = &b.s->env.map;
-    map->width = 16;
-    map->height = 8;
-    map->channels = 3;
-    map->data = malloc(sizeof(float) * 16 * 8 * 3);
-    for (int y = 0; y < 8; y++)
-        for (int x = 0; x < 16; x++)
-            for (int k = 0; k < 3; k++)
-                map->data[(y * 16 + x) * 3 + k] = (float)(0.2 + 0.1 * x + 0.05 * y);
+    sb_environment_ramp(&b);
     struct dr_scene *s = sb_finish(&b);
     struct dr_camera cam = sb_camera(dr_v3(0, 1, 1), dr_v3(0, 0, -1), 40);
     check_paths("env metal, roughness 0.05", s, &cam, "/materials/0/pbrMetallicRoughness/roughnessFactor", 200, 3,

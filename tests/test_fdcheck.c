@@ -387,16 +387,7 @@ static void near_specular(void)
     m.roughness = 0.001;
     m.specular = 1.0;
     sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, m));
-    sb_environment(&b, dr_v3s(1.0));
-    struct dr_image *map = &b.s->env.map;
-    map->width = 16;
-    map->height = 8;
-    map->channels = 3;
-    map->data = malloc(sizeof(float) * 16 * 8 * 3);
-    for (int y = 0; y < 8; y++)
-        for (int x = 0; x < 16; x++)
-            for (int k = 0; k < 3; k++)
-                map->data[(y * 16 + x) * 3 + k] = (float)(0.2 + 0.1 * x + 0.05 * y);
+    sb_environment_ramp(&b);
     struct dr_scene *s = sb_finish(&b);
     const char *p[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor", "/materials/0/pbrMetallicRoughness/roughnessFactor"};
     struct fd_case c = {"rough-0.001", 16, 8, 3, 16, 2e-4, "/materials/0/pbrMetallicRoughness/roughnessFactor", NULL};
@@ -421,16 +412,7 @@ static void near_specular_attached_vs_detached(void)
     m.roughness = 0.001;
     m.specular = 1.0;
     sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, m));
-    sb_environment(&b, dr_v3s(1.0));
-    struct dr_image *map = &b.s->env.map;
-    map->width = 16;
-    map->height = 8;
-    map->channels = 3;
-    map->data = malloc(sizeof(float) * 16 * 8 * 3);
-    for (int y = 0; y < 8; y++)
-        for (int x = 0; x < 16; x++)
-            for (int k = 0; k < 3; k++)
-                map->data[(y * 16 + x) * 3 + k] = (float)(0.2 + 0.1 * x + 0.05 * y);
+    sb_environment_ramp(&b);
     struct dr_scene *s = sb_finish(&b);
     s->n_file_materials = s->n_materials;
     const char *p = "/materials/0/pbrMetallicRoughness/roughnessFactor";

@@ -372,13 +372,7 @@ static void roughness_texture(int n)
     m.specular = 1.0;
     m.metallic_roughness_tex.texture = 0;
     sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, m));
-    sb_environment(&b, dr_v3s(1.0));
-    struct dr_image *map = &b.s->env.map;
-    *map = sb_image(16, 8, 3, NULL, 0.0f, false);
-    for (int y = 0; y < 8; y++)
-        for (int x = 0; x < 16; x++)
-            for (int k = 0; k < 3; k++)
-                map->data[(y * 16 + x) * 3 + k] = (float)(0.2 + 0.1 * x + 0.05 * y);
+    sb_environment_ramp(&b);
     float *px = malloc(sizeof(float) * n * n * 3);
     for (int i = 0; i < n * n; i++) {
         px[3 * i] = 0.0f;

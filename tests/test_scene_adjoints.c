@@ -16,21 +16,6 @@
 #include "scene_builder.h"
 #include "test.h"
 
-/* texel values are multiples of 2^-8 and steps 2^-6, so float storage is exact */
-static struct dr_image make_image(int w, int h, int c, int salt)
-{
-    struct dr_image im;
-    memset(&im, 0, sizeof im);
-    im.width = w;
-    im.height = h;
-    im.channels = c;
-    im.data = malloc(sizeof(float) * (size_t)(w * h * c));
-    im.linear = malloc(sizeof(float) * (size_t)(w * h * c));
-    for (int i = 0; i < w * h * c; i++)
-        im.data[i] = im.linear[i] = (float)((32 + (i * 37 + salt * 11) % 160) / 256.0);
-    return im;
-}
-
 enum objective { OBJ_MATERIAL, OBJ_EMISSION, OBJ_ENV, OBJ_PUNCTUAL, OBJ_AREA };
 
 struct fixture {
@@ -140,7 +125,7 @@ static void test_chains(void)
     sb_quad(&b, dr_v3(-1, 0, 1), dr_v3(2, 0, 0), dr_v3(0, 0, -2), sb_material(&b, m));
     sb_environment(&b, dr_v3(0.8, 0.9, 1.1));
     b.s->env.strength = 1.5;
-    b.s->env.map = make_image(8, 4, 3, 7);
+    b.s->env.map = sb_varied_image(8, 4, 3, 7);
     struct dr_punctual l;
     memset(&l, 0, sizeof l);
     l.type = DR_LIGHT_SPOT;
@@ -154,9 +139,9 @@ static void test_chains(void)
     struct dr_scene *s = b.s;
     s->n_images = 3;
     s->images = calloc(3, sizeof(struct dr_image));
-    s->images[0] = make_image(4, 3, 3, 1);
-    s->images[1] = make_image(3, 3, 3, 2);
-    s->images[2] = make_image(2, 4, 4, 3);
+    s->images[0] = sb_varied_image(4, 3, 3, 1);
+    s->images[1] = sb_varied_image(3, 3, 3, 2);
+    s->images[2] = sb_varied_image(2, 4, 4, 3);
     s->n_textures = 3;
     s->textures = calloc(3, sizeof(struct dr_texture));
     s->textures[0] = (struct dr_texture){0, DR_WRAP_REPEAT, DR_WRAP_MIRROR};
