@@ -7,7 +7,9 @@
 #include <string.h>
 
 #include "camera.h"
+#include "common.h"
 #include "error.h"
+#include "loss.h"
 #include "estimator.h"
 #include "render.h"
 #include "sampler.h"
@@ -353,8 +355,52 @@ static void tape_reuse(struct dr_scene *s, const struct dr_camera *cam, const ch
     dr_param_set_destroy(ps);
 }
 
+/* The cross primal's adjoint of one sample (common.h), computed by hand for
+ * a pixel of spp samples: with independent numbers at the mean of all the
+ * other samples; under sobol at the mean of the other half (samples of the
+ * other parity), each half over its own count (odd spp: unequal halves). */
+static void cross_adjoint_by_hand(void)
+{
+    static struct dr_est_base b;
+    const float target[3] = {0.3f, 0.2f, 0.1f};
+    double image[3];
+    struct dr_cross_loss x = {.loss = DR_LOSS_L2, .target = target, .scale = 1.0, .image = image};
+    for (int sobol = 0; sobol <= 1; sobol++)
+        for (int spp = 2; spp <= 5; spp++) {
+            struct dr_grad_problem p = {.width = 1, .height = 1, .spp = spp, .cross = &x,
+                                        .sampler = sobol ? DR_SAMPLER_SOBOL : DR_SAMPLER_INDEPENDENT};
+            b.p = &p;
+            dr_vec3 L[5];
+            struct dr_cross_sum sum = {0};
+            for (int t = 0; t < spp; t++) {
+                L[t] = dr_v3(0.1 * t + 0.05, 0.2 + 0.01 * t * t, 0.3 - 0.02 * t);
+                dr_cross_sum_add(&sum, t, L[t]);
+            }
+            dr_est_cross_pixel(&b, 0, &sum);
+            for (int s = 0; s < spp; s++) {
+                dr_vec3 adj = dr_est_cross_adjoint(&b, 0, &sum, s, L[s]);
+                for (int c = 0; c < 3; c++) {
+                    double others = 0.0, all = 0.0;
+                    int n = 0;
+                    for (int t = 0; t < spp; t++) {
+                        all += dr_v3_get(L[t], c);
+                        if (sobol ? (t & 1) != (s & 1) : t != s)
+                            others += dr_v3_get(L[t], c), n++;
+                    }
+                    double want = d_loss_value(DR_LOSS_L2, others / n, target[c], 3, 1.0) / spp;
+                    CHECK(fabs(dr_v3_get(adj, c) - want) <= 1e-12 * fabs(want),
+                          "cross adjoint (%s, spp %d, sample %d, channel %d): %.17g, by hand %.17g",
+                          sobol ? "sobol" : "independent", spp, s, c, dr_v3_get(adj, c), want);
+                    CHECK(fabs(image[c] - all / spp) <= 1e-12 * all, "cross image (spp %d): %.17g vs %.17g", spp,
+                          image[c], all / spp);
+                }
+            }
+        }
+}
+
 int main(void)
 {
+    cross_adjoint_by_hand();
     const char *path = scene_path("cornell-box.gltf");
     struct dr_scene *s = dr_scene_load(path);
     CHECK(s != NULL, "load: %s", dr_last_error());
