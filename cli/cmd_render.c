@@ -154,8 +154,9 @@ int cmd_render(int argc, char **argv)
      * they had 1.5-6 x less variance than independent ones for 0.97-1.09 x
      * the time (media: the same variance). The commands that differentiate
      * keep independent numbers: their cross primal under sobol weighs by half
-     * a pixel's samples, which paid only from about 8 samples a batch (man
-     * page, "Reverse mode and independent random numbers"). */
+     * a pixel's samples, and glossy roughness lost with it below about 32
+     * samples a batch (man page, "Reverse mode and independent random
+     * numbers"). */
     a.g.sampler = DR_SAMPLER_SOBOL;
     char *scene_path = NULL;
     struct dr_scene *scene = NULL;
