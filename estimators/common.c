@@ -22,6 +22,12 @@ static bool sobol_halves(const struct dr_grad_problem *p)
     return p->cross && p->sampler == DR_SAMPLER_SOBOL;
 }
 
+/* How many of spp samples are in half g (g = index mod 2). */
+static int half_count(int spp, int g)
+{
+    return (spp + 1 - g) / 2;
+}
+
 void dr_est_camera_ray(const struct dr_est_base *b, int64_t pixel, int sample, struct dr_sampler *smp, dr_vec3 *o,
                        dr_vec3 *d)
 {
@@ -31,7 +37,7 @@ void dr_est_camera_ray(const struct dr_est_base *b, int64_t pixel, int sample, s
     if (sobol_halves(b->p)) {   /* sample's half: its own sequence, index sample / 2 */
         const int h = sample & 1;
         dr_sampler_init_kind(smp, DR_SAMPLER_SOBOL, h ? dr_hash64(b->p->seed ^ CROSS_HALF_SALT) : b->p->seed,
-                             frame_pixel, (uint64_t)(sample >> 1), (b->p->spp + 1 - h) / 2);
+                             frame_pixel, (uint64_t)(sample >> 1), half_count(b->p->spp, h));
     } else {
         dr_sampler_init_kind(smp, b->p->sampler, b->p->seed, frame_pixel, (uint64_t)sample, b->p->spp);
     }
@@ -183,12 +189,12 @@ dr_vec3 dr_est_cross_adjoint(const struct dr_est_base *b, int64_t pixel, const s
     const size_t values = (size_t)b->p->width * (size_t)b->p->height * 3;
     const float *target = x->target + 3 * pixel;
     /* the mean of the samples independent of this one: the other half's
-     * (sobol: dr_est_camera_ray; that half has (spp + h) / 2 samples), or
-     * all the others (independent numbers: leave one out) */
+     * (sobol: dr_est_camera_ray), or all the others (independent numbers:
+     * leave one out) */
     const int h = sample & 1;
     const bool halves = sobol_halves(b->p);
     const dr_vec3 others_sum = halves ? sum->half[1 - h] : dr_sub(sum->all, L);
-    const int n_others = halves ? (spp + h) / 2 : spp - 1;
+    const int n_others = halves ? half_count(spp, 1 - h) : spp - 1;
     dr_vec3 adj;
     for (int c = 0; c < 3; c++) {
         double others = dr_v3_get(others_sum, c) / n_others;

@@ -18,7 +18,11 @@
  *
  * The cross primal (each pixel's samples are their own primal, half for half;
  * reverse.h) must pass all three cases too, and be unbiased: its mean over
- * the runs must agree with the per-batch estimator's within their spreads. */
+ * the runs must agree with the per-batch estimator's within their spreads.
+ * So must it under the sobol sampler (a sample weighted at the mean of the
+ * other half of its pixel's samples, the halves scrambled apart), and there
+ * its runs must spread less than the independent cross primal's: the point
+ * of using it. */
 #include <stdlib.h>
 #include <string.h>
 
@@ -183,6 +187,8 @@ int main(void)
             double tol = 4.0 * sqrt((x.sd[ch] * x.sd[ch] + ind.sd[ch] * ind.sd[ch]) / RUNS);
             CHECK(fabs(x.mean[ch] - ind.mean[ch]) <= tol, "%s: sobol cross mean %.6g vs separate %.6g (tol %.3g)",
                   names[k], x.mean[ch], ind.mean[ch], tol);
+            CHECK(x.sd[ch] < 0.85 * xi.sd[ch], "%s: sobol cross spread %.3g not below independent cross's %.3g",
+                  names[k], x.sd[ch], xi.sd[ch]);
         }
     }
     dr_param_set_destroy(ps);
