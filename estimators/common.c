@@ -28,22 +28,39 @@ static int half_count(int spp, int g)
     return (spp + 1 - g) / 2;
 }
 
-void dr_est_camera_ray(const struct dr_est_base *b, int64_t pixel, int sample, struct dr_sampler *smp, dr_vec3 *o,
-                       dr_vec3 *d)
+/* Thread's pixel start for `pixel`, made anew when it holds another. Under
+ * the sobol cross primal a pixel's samples of even and of odd index are two
+ * sequences (dr_est_cross_adjoint), the odd one with a seed of its own. */
+static const struct dr_est_pixel_start *pixel_start(struct dr_est_base *b, int thread, int64_t pixel)
 {
+    struct dr_est_pixel_start *ps = &b->thr[thread].start;
+    if (ps->valid && ps->pixel == pixel)
+        return ps;
+    const struct dr_grad_problem *p = b->p;
     /* film.h: the frame pixel keys the random numbers, the filter draws the offset */
-    int x, y;
-    uint64_t frame_pixel = dr_film_pixel(&b->p->film, b->p->width, pixel, &x, &y);
-    if (sobol_halves(b->p)) {   /* sample's half: its own sequence, index sample / 2 */
-        const int h = sample & 1;
-        dr_sampler_init_kind(smp, DR_SAMPLER_SOBOL, h ? dr_hash64(b->p->seed ^ CROSS_HALF_SALT) : b->p->seed,
-                             frame_pixel, (uint64_t)(sample >> 1), half_count(b->p->spp, h));
+    const uint64_t frame_pixel = dr_film_pixel(&p->film, p->width, pixel, &ps->x, &ps->y);
+    if (sobol_halves(p)) {
+        dr_sampler_pixel_init(&ps->half[0], DR_SAMPLER_SOBOL, p->seed, frame_pixel, half_count(p->spp, 0));
+        dr_sampler_pixel_init(&ps->half[1], DR_SAMPLER_SOBOL, dr_hash64(p->seed ^ CROSS_HALF_SALT), frame_pixel,
+                              half_count(p->spp, 1));
     } else {
-        dr_sampler_init_kind(smp, b->p->sampler, b->p->seed, frame_pixel, (uint64_t)sample, b->p->spp);
+        dr_sampler_pixel_init(&ps->half[0], p->sampler, p->seed, frame_pixel, p->spp);
     }
+    ps->valid = true, ps->pixel = pixel;
+    return ps;
+}
+
+void dr_est_camera_ray(struct dr_est_base *b, int thread, int64_t pixel, int sample, struct dr_sampler *smp,
+                       dr_vec3 *o, dr_vec3 *d)
+{
+    const struct dr_est_pixel_start *ps = pixel_start(b, thread, pixel);
+    /* sobol cross primal: the sample's half, index sample / 2 in it */
+    const bool halves = sobol_halves(b->p);
+    const struct dr_sampler_pixel *sp = &ps->half[halves ? sample & 1 : 0];
+    dr_sampler_pixel_sample(sp, (uint64_t)(halves ? sample >> 1 : sample), smp);
     double u, v, fx, fy;
-    dr_sampler_next2(smp, &u, &v);
-    dr_film_sample(&b->p->film.filter, x, y, u, v, &fx, &fy);
+    dr_sampler_pixel_first2(sp, smp, &u, &v);
+    dr_film_sample(&b->p->film.filter, ps->x, ps->y, u, v, &fx, &fy);
     dr_camera_ray(&b->view, fx, fy, o, d);
 }
 

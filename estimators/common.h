@@ -34,10 +34,23 @@ struct dr_est_accum {
     uint64_t bytes;                       /* what the buffers above hold */
 };
 
-/* Per-thread counters, padded apart against false sharing. */
+/* What the samples of the pixel a thread started last share
+ * (dr_est_camera_ray): its place in the frame and its samplers' per-pixel
+ * hashes, one set per half under the sobol cross primal (else half[0]).
+ * A pixel's samples are started one after another, so most starts reuse
+ * it: a Sobol start hashes once instead of nine times. */
+struct dr_est_pixel_start {
+    bool valid;
+    int64_t pixel;
+    int x, y;
+    struct dr_sampler_pixel half[2];
+};
+
+/* Per-thread counters and state, padded apart against false sharing. */
 struct dr_est_counters {
     struct dr_ray_counts rays;
     uint64_t invalid;
+    struct dr_est_pixel_start start;
     char pad[64];
 };
 
@@ -58,9 +71,9 @@ struct dr_est_base {
 
 /* Sampler and camera ray of sample `sample` of pixel `pixel` (an index into
  * the rendered rectangle; film.h maps it to the frame and draws the filter's
- * offset). */
-void dr_est_camera_ray(const struct dr_est_base *b, int64_t pixel, int sample, struct dr_sampler *smp, dr_vec3 *o,
-                       dr_vec3 *d);
+ * offset), started by thread `thread` (its dr_est_pixel_start). */
+void dr_est_camera_ray(struct dr_est_base *b, int thread, int64_t pixel, int sample, struct dr_sampler *smp,
+                       dr_vec3 *o, dr_vec3 *d);
 
 /* The sink a thread writes a piece of work into (reverse mode: a chunk
  * buffer summed into the thread's gradient by dr_est_sink_end). */

@@ -195,7 +195,7 @@ static void attached_pixel(struct prb_job *j, int thread, int64_t px, const dr_v
             continue;   /* (cross mode: this sample does not matter to the loss) */
         if (b->mis)
             dr_est_mis_sinks(b, thread, px, &det, &att);
-        dr_est_camera_ray(b, px, sidx, &smp, &o, &d);
+        dr_est_camera_ray(b, thread, px, sidx, &smp, &o, &d);
         c.log = logs ? &logs[sidx] : NULL;
         const struct prb_attached_sums *sums = primal ? &primal[sidx].L : NULL;
         if (!prb_attached_sample(&c, smp, o, d, adj[sidx], sums, b->mis ? &att : sink, b->mis ? &det : NULL)) {
@@ -269,7 +269,7 @@ static int64_t sample_ray(void *ctx, int64_t i, struct dr_sampler *smp, dr_vec3 
     const struct park_ctx *c = ctx;
     const int spp = c->run.j->b.p->spp;
     const int64_t px = c->px[i / spp];
-    dr_est_camera_ray(&c->run.j->b, px, (int)(i % spp), smp, o, d);
+    dr_est_camera_ray(&c->run.j->b, c->run.thread, px, (int)(i % spp), smp, o, d);
     return px;
 }
 
@@ -539,7 +539,7 @@ static bool pixel_adjoints(struct prb_job *j, int thread, int64_t px, dr_vec3 *a
         struct dr_sampler smp;
         dr_vec3 o, d;
         struct walk w = {.mrec = &mrec, .prev = &prev};
-        dr_est_camera_ray(b, px, sidx, &smp, &o, &d);
+        dr_est_camera_ray(b, thread, px, sidx, &smp, &o, &d);
         walk(b, smp, o, d, &w, &b->thr[thread].rays);
         adj[sidx] = dr_v3_finite(w.L.true_) && dr_v3_finite(w.L.sub) ? w.L.true_ : dr_v3s(0.0);
         if (j->sums[thread])   /* (for the replays: pixel_replays) */
@@ -571,7 +571,7 @@ static void pixel_replays(struct prb_job *j, int thread, int64_t px, const dr_ve
         if (dr_is_black(adj[sidx]))
             continue;   /* (cross mode: this sample does not matter to the loss) */
         struct walk w = {.adj = adj[sidx], .mrec = &mrec, .prev = &prev, .log = logs ? &logs[sidx] : NULL};
-        dr_est_camera_ray(b, px, sidx, &smp, &o, &d);
+        dr_est_camera_ray(b, thread, px, sidx, &smp, &o, &d);
         if (sums)
             w.L = (struct prb_radiance){sums[sidx].L.L_true, sums[sidx].L.L_sub}, w.vertices = sums[sidx].vertices;
         else

@@ -252,7 +252,7 @@ static bool record_path(struct tape_job *j, struct tape *tp, int thread, int64_t
 {
     struct dr_sampler smp;
     dr_vec3 o, d;
-    dr_est_camera_ray(&j->b, px, sidx, &smp, &o, &d);
+    dr_est_camera_ray(&j->b, thread, px, sidx, &smp, &o, &d);
     struct tape_path *path = new_path(tp, px, adj, smp.key);
     if (!path)
         return false;
@@ -312,7 +312,7 @@ static void lane_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp,
     const int64_t px = c->px[i / spp];
     dr_vec3 adj;
     adjoint_before(c->j, px, &adj);
-    dr_est_camera_ray(&c->j->b, px, (int)(i % spp), smp, o, d);
+    dr_est_camera_ray(&c->j->b, c->thread, px, (int)(i % spp), smp, o, d);
     struct tape_path *path = c->tp->failed ? NULL : new_path(c->tp, px, adj, smp->key);
     if (!path)
         c->tp->failed = true;
