@@ -63,9 +63,10 @@ void cmd_compare_usage(FILE *out)
             "parameter, its error against a reference and the efficiency 1 / (relative\n"
             "variance x seconds), in all and per parameter.\n"
             "With --target, runs differentiate the loss (reverse mode; one primal image of\n"
-            "%d spp gives every run the same adjoint); without, they compute d image / d\n"
-            "parameter (forward mode) and errors are over image pixels. Each run is\n"
-            "--batches independent estimates with N spp each (seeds S+1 .. S+K).\n"
+            "%d spp gives every run the same adjoint, or with --primal cross each run is\n"
+            "its own primal, as in grad); without, they compute d image / d parameter\n"
+            "(forward mode) and errors are over image pixels. Each run is --batches\n"
+            "independent estimates with N spp each (seeds S+1 .. S+K).\n"
             "\n"
             "Writes DIR/results.csv, results.json, report.md, reference.txt, plots.gp and\n"
             "the gnuplot plots error_vs_time.png, memory_vs_depth.png, efficiency.png.\n"
@@ -88,7 +89,17 @@ void cmd_compare_usage(FILE *out)
             "                      FILE   reference.txt of an earlier run (same scene,\n"
             "                             parameters, mode and settings, else refused)\n"
             "      --target IMG    reverse mode: the image to match (sets the default size)\n"
-            "      --loss L        reverse mode: l1 or l2 (default: l2)\n"
+            "      --loss L        reverse mode: l1 or l2 (default: l2)\n",
+            PRIMAL_SPP, pairs);
+    fprintf(out,   /* (two strings: each within what C99 compilers must accept) */
+            "      --primal M      reverse mode: where the loss's adjoint comes from: shared\n"
+            "                      (default: the one primal image above; runs then differ in\n"
+            "                      their derivative noise alone) or cross (each sample\n"
+            "                      weighted at the mean of its pixel's other samples, sobol:\n"
+            "                      of the other half, as grad and optimize run by default:\n"
+            "                      primal noise included, so the samplers compare as grad\n"
+            "                      would gain; needs every --spp >= 2, the independent or\n"
+            "                      sobol sampler and a reference of spp:N or a file)\n"
             "      --batches K     independent estimates per run and for the reference\n"
             "                      (default: 4, at least 2)\n"
             "      --repeat K      run each combination K times (same random numbers) and\n"
@@ -109,7 +120,7 @@ void cmd_compare_usage(FILE *out)
             GRAD_IGNORE_UNSUPPORTED_HELP
             "      --json          print results.json on stdout too\n"
             "  -h, --help          show this help\n",
-            PRIMAL_SPP, pairs, DEFAULT_RES, DEFAULT_RES);
+            DEFAULT_RES, DEFAULT_RES);
     grad_lighting_usage(out);
 }
 
@@ -125,6 +136,7 @@ enum {
     OPT_REPEAT,
     OPT_EPS,
     OPT_SAMPLERS,
+    OPT_PRIMAL,
 };
 
 /* ---- options ---- */
@@ -286,7 +298,9 @@ static int own_option(void *ctx, int c, const char *arg)
     case OPT_SAMPLERS:
         a->n_samplers = 0;
         return split_list("--sampler", arg, CMP_MAX_SAMPLERS, one_sampler, a) >= 0 ? DR_EXIT_USAGE : 0;
-    case OPT_SPPS: return int_list("--spp", arg, 1, 1L << 24, a->spps, &a->n_spps) >= 0 ? DR_EXIT_USAGE : 0;
+    case OPT_SPPS:
+        a->spp_given = true;
+        return int_list("--spp", arg, 1, 1L << 24, a->spps, &a->n_spps) >= 0 ? DR_EXIT_USAGE : 0;
     case OPT_DEPTHS: return int_list("--max-depth", arg, 1, 100000, a->depths, &a->n_depths) >= 0 ? DR_EXIT_USAGE : 0;
     case OPT_REFERENCE: return parse_reference(a, arg);
     case OPT_TARGET: a->target = arg; return 0;
@@ -300,6 +314,13 @@ static int own_option(void *ctx, int c, const char *arg)
         a->loss_given = true;
         return 0;
     }
+    case OPT_PRIMAL:
+        if (strcmp(arg, "shared") != 0 && strcmp(arg, "cross") != 0) {
+            cli_error("compare", "--primal: unknown mode '%s' (known: shared, cross)", arg);
+            return DR_EXIT_USAGE;
+        }
+        a->cross = strcmp(arg, "cross") == 0;
+        return 0;
     case OPT_BATCHES:
         if (!cli_parse_int("compare", "--batches", arg, 2, 1 << 16, &v)) return DR_EXIT_USAGE;
         a->batches = (int)v;
@@ -344,6 +365,7 @@ static int parse_args(int argc, char **argv, struct cmp_args *a)
         {"target", required_argument, NULL, OPT_TARGET},
         {"loss", required_argument, NULL, OPT_LOSS},
         {"batches", required_argument, NULL, OPT_BATCHES},
+        {"primal", required_argument, NULL, OPT_PRIMAL},
         {"repeat", required_argument, NULL, OPT_REPEAT},
         {"eps", required_argument, NULL, OPT_EPS},
         {NULL, 0, NULL, 0},
@@ -438,6 +460,49 @@ static int build_combos(const struct cmp_args *a, struct cmp_run *r)
     return -1;
 }
 
+/* --primal cross runs what grad's cross primal runs (estimator.h, struct
+ * dr_cross_loss): reverse mode, at least 2 samples a pixel, samples of a
+ * pixel independent of each other (not the stratified sampler's shared
+ * strata). Finite differences take the adjoint at one primal image, a
+ * different quantity (the loss's gradient at that image, not at the
+ * noise-free one), so their reference does not apply. */
+static int check_cross_args(struct cmp_args *a)
+{
+    if (!a->cross)
+        return -1;
+    if (!a->target) {
+        cli_error("compare", "--primal is for reverse mode: give --target IMG");
+        return DR_EXIT_USAGE;
+    }
+    if (!a->spp_given && a->spps[0] < 2) {   /* the default list without its 1 */
+        memmove(a->spps, a->spps + 1, sizeof(int) * (size_t)(a->n_spps - 1));
+        a->n_spps--;
+    }
+    if (a->spps[0] < 2) {
+        cli_error("compare", "--primal cross: --spp %d: the cross primal needs at least 2 samples per pixel "
+                             "(a sample is weighted at the mean of its pixel's others)", a->spps[0]);
+        return DR_EXIT_USAGE;
+    }
+    for (int q = 0; q < a->n_samplers; q++)
+        if (a->samplers[q] == DR_SAMPLER_STRATIFIED) {
+            cli_error("compare", "--primal cross: --sampler stratified: a pixel's samples share its strata, so "
+                                 "the mean of the others is not independent of a sample (use independent or "
+                                 "sobol)");
+            return DR_EXIT_USAGE;
+        }
+    if (a->ref_kind == CMP_REF_SPP && a->ref_spp == 1) {
+        cli_error("compare", "--primal cross: --reference spp:1: the cross primal needs at least 2 samples per "
+                             "pixel");
+        return DR_EXIT_USAGE;
+    }
+    if (a->ref_kind == CMP_REF_FD) {
+        cli_error("compare", "--primal cross: --reference fd differentiates the loss at one primal image, not at "
+                             "the noise-free image the cross primal's runs estimate (use --reference spp:N)");
+        return DR_EXIT_USAGE;
+    }
+    return -1;
+}
+
 static int check_args(struct cmp_args *a)
 {
     if (a->g.n_params == 0) {
@@ -452,6 +517,9 @@ static int check_args(struct cmp_args *a)
         cli_error("compare", "--loss is for reverse mode: give --target IMG");
         return DR_EXIT_USAGE;
     }
+    int rc = check_cross_args(a);
+    if (rc >= 0)
+        return rc;
     if (a->ref_kind == CMP_REF_SPP && a->ref_spp == 0)
         a->ref_spp = 16 * a->spps[a->n_spps - 1];
     if (a->ref_kind == CMP_REF_FD && a->ref_spp == 0)
@@ -467,6 +535,8 @@ struct cmp_ctx {
     struct dr_scene *scene;
     const struct dr_camera *cam;
     float *adj;               /* reverse mode: d loss / d image of the shared primal */
+    const float *target;      /* --primal cross: the target (the runs take their adjoints from it) */
+    double *cross_img;        /* --primal cross: a run's primal image (w*h*3, unused but required) */
     double *dir, *v, *dimg;   /* direction (T), one estimate (V), an fd image (w*h*3) */
     double *mean, *m2;        /* V: Welford over batches */
     double *seg_mean, *seg_m2, *seg_err2;   /* per parameter */
@@ -510,8 +580,10 @@ static int estimate(struct cmp_ctx *x, const struct dr_estimator_ops *e, enum dr
     g.sampler = q;
     struct dr_grad_problem p = grad_problem(&g, x->scene, x->cam, r->ps, g.width, g.height, spp, seed);
     struct dr_grad_stats st = {0};
+    const struct dr_cross_loss cross = {.loss = r->a->loss, .target = x->target, .scale = 1.0, .image = x->cross_img};
     if (r->reverse) {
-        if (dr_estimator_backward(e, &p, x->adj, v, &st) != 0)
+        p.cross = r->a->cross ? &cross : NULL;
+        if (dr_estimator_backward(e, &p, p.cross ? NULL : x->adj, v, &st) != 0)
             return -1;
         stats_add(sum, &st);
         return 0;
@@ -767,6 +839,7 @@ static void run_free(struct cmp_run *r)
 static void ctx_free(struct cmp_ctx *x)
 {
     free(x->adj);
+    free(x->cross_img);
     free(x->dir);
     free(x->v);
     free(x->dimg);
@@ -814,6 +887,8 @@ static int run_alloc(struct cmp_run *r, struct cmp_ctx *x)
     x->dir = calloc((size_t)(ps->total > 0 ? ps->total : 1), sizeof(double));
     x->v = calloc(V, sizeof(double));
     x->dimg = calloc((size_t)npix3, sizeof(double));
+    if (r->a->cross && !(x->cross_img = calloc((size_t)npix3, sizeof(double))))
+        return -1;
     x->mean = calloc(V, sizeof(double));
     x->m2 = calloc(V, sizeof(double));
     x->seg_mean = calloc(P, sizeof(double));
@@ -854,7 +929,7 @@ static void fingerprint(struct cmp_run *r, const struct dr_scene *scene, bool *o
     fp->camera = a->g.camera;
     fp->max_depth = a->depths[a->n_depths - 1];
     fp->rr_depth = a->g.rr_depth;
-    fp->primal_spp = r->reverse ? PRIMAL_SPP : 0;
+    fp->primal_spp = r->reverse && !a->cross ? PRIMAL_SPP : 0;
     snprintf(fp->mode, sizeof fp->mode, "%s", r->reverse ? "reverse" : "forward");
     snprintf(fp->loss, sizeof fp->loss, "%s", r->reverse ? dr_loss_name(a->loss) : "none");
 }
@@ -1101,7 +1176,8 @@ int cmd_compare(int argc, char **argv)
     if ((rc = check_scene_args(&r, scene)) >= 0)
         goto out;
     /* everything the user can get wrong has been checked: the work starts */
-    if ((r.reverse && (rc = shared_adjoint(&x, target)) >= 0) || (rc = run_all(&x)) >= 0)
+    x.target = target;
+    if ((r.reverse && !a.cross && (rc = shared_adjoint(&x, target)) >= 0) || (rc = run_all(&x)) >= 0)
         goto out;
     r.t_total = dr_clock_seconds() - t_start;
     if ((rc = write_outputs(&r, a.out_dir)) >= 0)

@@ -6,7 +6,8 @@
  * Every run estimates one vector v of length V, the same quantity for every
  * estimator, so errors are comparable:
  *   reverse mode (--target): v = d loss / d theta (params->total entries),
- *     the loss's adjoint taken from one primal image shared by all runs;
+ *     the loss's adjoint taken from one primal image shared by all runs, or
+ *     (--primal cross) each run's paths its own primal, as grad runs them;
  *   forward mode: v = the derivative images d image / d parameter (along all
  *     of a parameter's components), one w x h x 3 block per --param.
  * A parameter's part of v is its segment [seg_off[k], seg_off[k] + seg_len[k]). */
@@ -69,7 +70,7 @@ struct cmp_reference {
  * one is read back: a reference applies only to the same question. */
 struct cmp_fingerprint {
     uint64_t scene_hash, values_hash, target_hash;
-    int width, height, camera, max_depth, rr_depth, primal_spp;
+    int width, height, camera, max_depth, rr_depth, primal_spp;   /* primal_spp 0: --primal cross */
     char mode[16], loss[16];
     char film[128];   /* "filter=F crop=X,Y,W,H|none sampler=S": the film and random numbers */
 };
@@ -78,7 +79,7 @@ struct cmp_args {
     struct grad_common g;
     const char *out_dir, *target, *reference;
     enum dr_loss_kind loss;
-    bool loss_given, est_given, sampling_given;
+    bool loss_given, est_given, sampling_given, spp_given;
     const struct dr_estimator_ops *ests[CMP_MAX_LIST];
     int n_ests;
     enum dr_sampling samplings[DR_SAMPLING_COUNT];
@@ -88,6 +89,7 @@ struct cmp_args {
     int n_samplers;
     int depths[CMP_MAX_LIST], n_depths;
     int batches, repeat;
+    bool cross;   /* --primal cross: every run its own primal (dr_cross_loss), no shared image */
     double eps;
     /* the parsed --reference */
     enum { CMP_REF_SPP, CMP_REF_FD, CMP_REF_FILE } ref_kind;

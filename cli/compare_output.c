@@ -252,7 +252,8 @@ void cmp_write_json(const struct cmp_run *r, FILE *f)
     const struct cmp_args *a = r->a;
     fputs("{\"command\": \"compare\", \"scene\": ", f);
     json_string(f, r->scene_path);
-    fprintf(f, ", \"mode\": \"%s\", \"loss\": \"%s\", \"target\": ", r->fp.mode, r->fp.loss);
+    fprintf(f, ", \"mode\": \"%s\", \"loss\": \"%s\", \"primal\": %s, \"target\": ", r->fp.mode, r->fp.loss,
+            !r->reverse ? "null" : a->cross ? "\"cross\"" : "\"shared\"");
     if (a->target)
         json_string(f, a->target);
     else
@@ -315,7 +316,12 @@ static void report_head(FILE *f, const struct cmp_run *r)
     const struct cmp_args *a = r->a;
     const struct cmp_reference *ref = &r->ref;
     fprintf(f, "# drender compare: %s\n\n", r->scene_path);
-    if (r->reverse)
+    if (r->reverse && a->cross)
+        fprintf(f, "Reverse mode: d loss / d parameters, loss %s against %s, every run its own primal (--primal "
+                   "cross, as grad: each sample weighted at the loss's adjoint at the mean of its pixel's other "
+                   "samples, under sobol of the other half), so the errors include the primal's noise. ",
+                r->fp.loss, a->target);
+    else if (r->reverse)
         fprintf(f, "Reverse mode: d loss / d parameters, loss %s against %s (adjoint from one %d spp primal "
                    "image shared by every run). ", r->fp.loss, a->target, r->fp.primal_spp);
     else
@@ -465,10 +471,16 @@ static void report_reading(FILE *f, const struct cmp_run *r)
     int best = best_combo(r);
     char label[128];
     cmp_combo_label(r, &r->combos[best], label, sizeof label);
+    /* (the cross primal's variance has a part in 1 / spp^2, the product of
+     * the adjoint's noise and the derivative's: its efficiency grows with
+     * spp until the 1 / spp part dominates) */
     fprintf(f, "- Most accuracy per second: **%s at %d spp** (efficiency %.4g = 1 / (relative variance x "
-               "seconds)); efficiency hardly depends on spp, so compare estimators by it and pick spp for the "
-               "error you need.\n",
-            label, r->combos[best].spp, cmp_efficiency(r, best));
+               "seconds)); %s\n",
+            label, r->combos[best].spp, cmp_efficiency(r, best),
+            r->a->cross ? "with the cross primal efficiency grows with spp (the adjoint's noise shrinks with the "
+                          "samples it averages), so compare estimators at the spp per batch you will run."
+                        : "efficiency hardly depends on spp, so compare estimators by it and pick spp for the "
+                          "error you need.");
     report_median_efficiency(f, r);
     for (int d = 0; d < r->a->n_depths; d++) {
         int lo = -1, hi = -1;

@@ -4,8 +4,9 @@
 # plots), errors that fall as spp grows (statistical, with a margin; never a
 # timing), the reference's own error reported, the same table from the same
 # seed, --repeat, a reference file reused, --sampler as a list (the sampler a
-# column of every output, per-parameter efficiency), and bad inputs refused
-# before any work (exit 2, nothing written).
+# column of every output, per-parameter efficiency), --primal cross (prb and
+# tape agree, estimates unbiased, its reference apart from the shared
+# primal's), and bad inputs refused before any work (exit 2, nothing written).
 # Run by tests/run.sh (env: DRENDER = the binary); also runs alone.
 set -u
 
@@ -38,7 +39,7 @@ expect_rc 0 "drender --help"
 grep -Eq '^ +compare +[^ ]' "$tmp/out" || fail "drender --help: compare not listed"
 run compare --help
 expect_rc 0 "compare --help"
-for o in --estimators --sampling --spp --max-depth --reference --repeat --batches --target --json; do
+for o in --estimators --sampling --spp --max-depth --reference --repeat --batches --target --primal --json; do
     expect_in out "$o" "compare --help lists $o"
 done
 # "available now: prb (detached), tape (detached)" -> estimator:mode pairs
@@ -137,6 +138,49 @@ py rev2 "d['reference']['file'].endswith('rev/reference.txt') and d['reference']
 cmp <(cut -d, -f4-8,14,15,17,18 rev/results.csv) <(cut -d, -f4-8,14,15,17,18 rev2/results.csv) ||
     fail "the reference read back from its file gave other errors"
 
+# ---- reverse mode with --primal cross: every run its own primal, as grad ----
+run compare $tiny --param "$red" --param "$green" --set "$red=0.4,0.3,0.3" --target target.exr \
+    --estimators prb,tape --sampling detached --sampler independent,sobol --spp 2,32 --primal cross -o cross
+expect_rc 0 "compare --primal cross"
+py rev "d['primal'] == 'shared'"
+py cross "d['primal'] == 'cross' and d['mode'] == 'reverse' and d['reference']['kind'] == 'spp:512'"
+grep -q "every run its own primal" cross/report.md || fail "report.md does not say the runs are their own primal"
+grep -qx "primal_spp 0" cross/reference.txt || fail "reference.txt: a cross comparison has no shared primal"
+# prb and tape run the same cross primal: the same gradients to rounding
+# (the adjoints come from the paths, so a wiring that passed no cross loss
+# to either would differ or fail)
+python3 - cross/results.json <<'PY' || fail "compare --primal cross: prb and tape disagree"
+import json, sys
+c = json.load(open(sys.argv[1]))["combinations"]
+key = lambda x: (x["sampler"], x["spp"])
+prb = {key(x): x for x in c if x["estimator"] == "prb"}
+tape = {key(x): x for x in c if x["estimator"] == "tape"}
+assert prb.keys() == tape.keys() and len(prb) == 4, (prb.keys(), tape.keys())
+for k in prb:
+    for p, t in zip(prb[k]["parameters"], tape[k]["parameters"]):
+        for a, b in zip(p["value"], t["value"]):
+            assert abs(a - b) <= 1e-9 * max(abs(a), abs(b), 1e-12), (k, a, b)
+PY
+# unbiased: at 32 spp each red estimate is the loss's gradient (the finite
+# differences of the shared run above, whose adjoint is at a 256 spp primal:
+# 5 % for that difference) within 4 standard errors
+python3 - cross/results.json rev/results.json <<'PY' || fail "compare --primal cross: estimates off the reference"
+import json, sys
+c = json.load(open(sys.argv[1]))["combinations"]
+ref = json.load(open(sys.argv[2]))["combinations"][0]["parameters"][0]["reference"]
+for x in c:
+    if x["spp"] != 32:
+        continue
+    p = x["parameters"][0]
+    for v, se, r in zip(p["value"], p["stderr"], ref):
+        assert abs(v - r) <= 4 * se + 0.05 * abs(r), (x["estimator"], x["sampler"], v, se, r)
+PY
+# the default spp list without its 1 (the cross primal needs 2)
+run compare $tiny --param "$red" --set "$red=0.4,0.3,0.3" --target target.exr --estimators prb --sampling detached \
+    --batches 2 --primal cross -o cross_spp
+expect_rc 0 "compare --primal cross (default --spp)"
+py cross_spp "sorted(set(c['spp'] for c in d['combinations'])) == [4, 16, 64]"
+
 # ---- refused before any work: exit 2, a message, nothing written ----
 # --spp 1000000 makes any work that did start show up as a timeout (exit 124).
 huge="--spp 1000000 --reference spp:1000000"
@@ -204,4 +248,16 @@ grep -q "^film filter=gaussian:0.5 crop=2,3,8,6 sampler=sobol$" film/reference.t
 refused 2 "made for the film|crop=2,3,8,6" compare $tiny --param "$red" --set "$red=0.4,0.3,0.3" --target target.exr \
     --spp 1000000 --reference film/reference.txt -o bad
 refused 2 "--crop|12x12" compare $tiny --param "$red" --crop 8,8,8,8 --spp 1000000 -o bad
+refused 2 "--primal: unknown mode 'halves'" compare $tiny --param "$red" --target target.exr --primal halves $huge -o bad
+refused 2 "--primal is for reverse mode" compare $tiny --param "$red" --primal cross $huge -o bad
+refused 2 "--spp 1|at least 2" compare $tiny --param "$red" --target target.exr --primal cross --spp 1,1000000 -o bad
+refused 2 "stratified" compare $tiny --param "$red" --target target.exr --primal cross --sampler sobol,stratified \
+    $huge -o bad
+refused 2 "--reference fd|spp:N" compare $tiny --param "$red" --target target.exr --primal cross --spp 1000000 \
+    --reference fd -o bad
+refused 2 "--reference spp:1" compare $tiny --param "$red" --target target.exr --primal cross --spp 1000000 \
+    --reference spp:1 -o bad
+# a reference taken at the shared primal is another quantity
+refused 2 "a primal of spp" compare $tiny --param "$red" --param "$green" --set "$red=0.4,0.3,0.3" --target target.exr \
+    --primal cross --spp 1000000 --reference rev/reference.txt -o bad
 echo "cli_compare: all checks passed"
