@@ -15,16 +15,57 @@ struct dr_emission_grid {
     uint32_t *lit;     /* the same of their count of texels that are not zero */
 };
 
-/* Texel i's emission as dr_emission reads it: the mean of its colour
+/* Reads texels' emission as dr_emission reads them: the mean of their colour
  * channels' decoded values (their magnitudes: a test for zero must not let
- * values cancel). */
-static double texel_emission(const struct dr_image *img, size_t i)
+ * values cancel). For eight-bit storage, each channel's table is chosen once
+ * (dr_image_value's choice: decoded where there are decoded values) rather
+ * than per value: a 2k texture's grid is built while the first ray waits. */
+struct texel_reader {
+    const struct dr_image *img;
+    int c;                   /* colour channels */
+    const float *table[4];   /* eight-bit storage: channel k's values by byte */
+};
+
+static struct texel_reader texel_reader(const struct dr_image *img)
 {
-    const int c = dr_image_colour_channels(img->channels);
+    struct texel_reader r = {.img = img, .c = dr_image_colour_channels(img->channels)};
+    for (int k = 0; img->bytes && k < r.c; k++)
+        r.table[k] = img->lut_linear ? img->lut_linear : img->lut;
+    return r;
+}
+
+static double texel_emission(const struct texel_reader *r, size_t i)
+{
+    const struct dr_image *img = r->img;
     double e = 0.0;
-    for (int k = 0; k < c; k++)
-        e += fabs(dr_image_value(img, i * (size_t)img->channels + (size_t)k, true));
-    return e / c;
+    if (img->bytes) {
+        const uint8_t *b = img->bytes + i * (size_t)img->channels;
+        for (int k = 0; k < r->c; k++)
+            e += fabs(r->table[k][b[k]]);
+    } else {
+        for (int k = 0; k < r->c; k++)
+            e += fabs(dr_image_value(img, i * (size_t)img->channels + (size_t)k, true));
+    }
+    return e / r->c;
+}
+
+/* Row y's texels added to their cells' own sums (row cy + 1 of the tables),
+ * cell by cell, each cell's sum kept in a register: the same additions in
+ * the same order as texel by texel. */
+static void add_row(struct dr_emission_grid *g, const struct texel_reader *r, int y)
+{
+    const size_t stride = (size_t)g->gw + 1, row = (size_t)(y / g->s + 1) * stride;
+    for (int cx = 0; cx < g->gw; cx++) {
+        const int x0 = cx * g->s, x1 = x0 + g->s < g->w ? x0 + g->s : g->w;
+        double sum = g->sum[row + (size_t)cx + 1];
+        uint32_t lit = g->lit[row + (size_t)cx + 1];
+        for (int x = x0; x < x1; x++) {
+            const double e = texel_emission(r, (size_t)y * (size_t)g->w + (size_t)x);
+            sum += e;
+            lit += e != 0.0;
+        }
+        g->sum[row + (size_t)cx + 1] = sum, g->lit[row + (size_t)cx + 1] = lit;
+    }
 }
 
 struct dr_emission_grid *dr_emission_grid_create(const struct dr_image *img)
@@ -44,13 +85,9 @@ struct dr_emission_grid *dr_emission_grid_create(const struct dr_image *img)
         return NULL;
     }
     /* the cells' own sums at [cy + 1][cx + 1], then the running sums */
+    const struct texel_reader r = texel_reader(img);
     for (int y = 0; y < g->h; y++)
-        for (int x = 0; x < g->w; x++) {
-            const double e = texel_emission(img, (size_t)y * (size_t)g->w + (size_t)x);
-            const size_t at = (size_t)(y / g->s + 1) * stride + (size_t)(x / g->s + 1);
-            g->sum[at] += e;
-            g->lit[at] += e != 0.0;
-        }
+        add_row(g, &r, y);
     for (size_t cy = 1; cy <= (size_t)g->gh; cy++)
         for (size_t cx = 1; cx <= (size_t)g->gw; cx++) {
             const size_t at = cy * stride + cx;
