@@ -46,6 +46,9 @@ first_stderr() { printf '%s\n' "$1" | sed -n 's/.*"stderr": \[\([-+0-9.eE]*\).*/
 
 echo "drender gradient benchmarks ($(date '+%Y-%m-%d %H:%M'), $(nproc) CPUs, load average $(cut -d' ' -f1 /proc/loadavg))"
 echo
+# Every render and gradient here draws independent numbers (--sampler
+# independent), as the peer does and this bench's history did: render's
+# default became sobol in 2026-12, grad's and optimize's later that month.
 "$DR" render "$CORNELL" --sampler independent -o "$TMP/target.exr" --res $RES --spp 256 --max-depth $DEPTH --seed 99
 
 echo "e. cost on $CORNELL ($RES, $SPP spp, depth $DEPTH, 2 threads; params: red wall colour, sphere roughness)"
@@ -53,7 +56,7 @@ P=$("$DR" render "$CORNELL" --sampler independent -o "$TMP/p.exr" --res $RES --s
 T_PRIMAL=$(json_num "$P" render time)
 declare -A T SE MEM TAPE
 for est in prb tape; do
-    J=$("$DR" grad "$CORNELL" --target "$TMP/target.exr" --param $RED --param $GOLD --set $RED=0.3,0.3,0.3 \
+    J=$("$DR" grad "$CORNELL" --sampler independent --target "$TMP/target.exr" --param $RED --param $GOLD --set $RED=0.3,0.3,0.3 \
         --estimator $est --spp $SPP --batches 4 --max-depth $DEPTH --threads 2 --json)
     T[$est]=$(json_num "$J" gradient time)
     SE[$est]=$(first_stderr "$J")
@@ -75,7 +78,7 @@ echo "g. memory vs max depth ($RES, 4 spp, 1 sample per pixel per tape batch)"
 MEM_JSON=""
 for d in 4 64 1000; do
     for est in prb tape; do
-        J=$("$DR" grad "$CORNELL" --target "$TMP/target.exr" --param $RED --estimator $est --spp 4 --batches 2 \
+        J=$("$DR" grad "$CORNELL" --sampler independent --target "$TMP/target.exr" --param $RED --estimator $est --spp 4 --batches 2 \
             --max-depth $d --threads 2 --json)
         MEM[$est$d]=$(json_num "$J" peak_memory_bytes)
         TAPE[$est$d]=$(json_num "$J" record_bytes)
@@ -102,7 +105,7 @@ if [[ -f $PEER ]]; then
     }
     GS=() PS=() OWN=()
     for r in 1 2 3; do
-        J=$("$DR" grad "$PEER" --target "$TMP/peer-target.exr" --param $RED --set $RED=0.2,0.6,0.3 --spp 64 \
+        J=$("$DR" grad "$PEER" --sampler independent --target "$TMP/peer-target.exr" --param $RED --set $RED=0.2,0.6,0.3 --spp 64 \
             --batches 2 --max-depth 8 --threads 2 --json)
         GS+=("$(json_num "$J" gradient time)") PS+=("$(json_num "$J" primal time)") OWN+=("$(own_primal 8)")
     done
@@ -118,7 +121,7 @@ if [[ -f $PEER ]]; then
     echo "   ... with the loss's primal (like for like; the cross primal: the gradient's own samples, time.primal $(calc "$T_PEER_PRIMAL" %.2f) s): $(calc "$T_PEER_BOTH" %.2f) s: ratio $R_BOTH (goal < 1: $(yesno "$R_BOTH < 1"))"
     R_OWN8=$(calc "$T_PEER_BOTH / $T_OWN8")
     echo "   ... medians of 3 runs; drender's own primal in the same runs $(calc "$T_OWN8" %.2f) s: gradient / own primal $R_OWN8 (the peer's: 3.68 / 1.16 = 3.17)"
-    J=$("$DR" grad "$PEER" --target "$TMP/peer-target.exr" --param $RED --set $RED=0.2,0.6,0.3 --spp 64 \
+    J=$("$DR" grad "$PEER" --sampler independent --target "$TMP/peer-target.exr" --param $RED --set $RED=0.2,0.6,0.3 --spp 64 \
         --batches 2 --max-depth 8 --threads 2 --primal separate --json)
     T_SEP=$(calc "$(json_num "$J" gradient time) + $(json_num "$J" primal time)")
     R_SEP=$(calc "$T_SEP / 3.68")
@@ -129,7 +132,7 @@ if [[ -f $PEER ]]; then
     for m in white green red; do WALLS+=(--param "/materials/$m/pbrMetallicRoughness/baseColorFactor"); done
     GS=()
     for r in 1 2 3; do
-        J=$("$DR" grad "$PEER" --target "$TMP/peer-target.exr" "${WALLS[@]}" --spp 64 --batches 2 --max-depth 8 \
+        J=$("$DR" grad "$PEER" --sampler independent --target "$TMP/peer-target.exr" "${WALLS[@]}" --spp 64 --batches 2 --max-depth 8 \
             --threads 2 --json)
         GS+=("$(json_num "$J" gradient time)")
     done
@@ -143,7 +146,7 @@ if [[ -f $PEER ]]; then
     for d in 4 8 16 32; do
         GS=() PS=() OWN=()
         for r in 1 2 3; do
-            J=$("$DR" grad "$PEER" --target "$TMP/peer-target.exr" --param $RED --set $RED=0.2,0.6,0.3 --spp 64 \
+            J=$("$DR" grad "$PEER" --sampler independent --target "$TMP/peer-target.exr" --param $RED --set $RED=0.2,0.6,0.3 --spp 64 \
                 --batches 2 --max-depth $d --threads 2 --estimator tape --json)
             GS+=("$(json_num "$J" gradient time)") PS+=("$(json_num "$J" primal time)") OWN+=("$(own_primal $d)")
         done
@@ -173,9 +176,9 @@ if [[ -f $NTT ]]; then
     echo
     echo "m. a texture parameter: $NTT /images/0 (2048x2048x3), 64x64, 16 spp, 2 threads"
     "$DR" render "$NTT" --sampler independent -o "$TMP/ntt.exr" --res 64x64 --spp 64 --threads 2 2>/dev/null
-    J=$("$DR" grad "$NTT" --target "$TMP/ntt.exr" --param /images/0 --spp 16 --threads 2 --grad-dir "$TMP" --json 2>/dev/null)
+    J=$("$DR" grad "$NTT" --sampler independent --target "$TMP/ntt.exr" --param /images/0 --spp 16 --threads 2 --grad-dir "$TMP" --json 2>/dev/null)
     G_PEAK=$(json_num "$J" peak_memory_bytes) G_T=$(json_num "$J" gradient time)
-    O=$("$DR" optimize "$NTT" --target "$TMP/ntt.exr" --param /images/0 --spp 16 --threads 2 --iters 5 \
+    O=$("$DR" optimize "$NTT" --sampler independent --target "$TMP/ntt.exr" --param /images/0 --spp 16 --threads 2 --iters 5 \
         --out-dir "$TMP/ntt-opt" --json 2>/dev/null | tail -n 1)
     O_T=$(json_num "$O" seconds) O_PEAK=$(json_num "$O" peak_memory_bytes)
     printf '   grad: peak %.0f MiB, gradient %.2f s; optimize: %.2f s per iteration (checkpoint included), peak %.0f MiB\n' \

@@ -33,7 +33,7 @@ echo "i. volume gradient on $SMOKE ($RES, $SPP spp x 4 batches, depth $DEPTH, 2 
 ROWS=""
 for est in prb tape; do
     for mg in drt baseline; do
-        J=$("$DR" grad "$SMOKE" --grad-dir "$TMP" --target "$TMP/target.exr" --param $SCALE --param $GRID --set $SCALE=0.5 \
+        J=$("$DR" grad "$SMOKE" --sampler independent --grad-dir "$TMP" --target "$TMP/target.exr" --param $SCALE --param $GRID --set $SCALE=0.5 \
             --estimator $est --medium-grad $mg --spp $SPP --batches 4 --max-depth $DEPTH --threads 2 --json)
         T=$(json_num "$J" gradient time)
         SE=$(first_stderr "$J")
@@ -49,7 +49,7 @@ echo "ii. prb memory vs max depth (smoke cube, $RES, 4 spp)"
 declare -A MEM
 MEM_JSON=""
 for d in 4 64 1000; do
-    J=$("$DR" grad "$SMOKE" --grad-dir "$TMP" --target "$TMP/target.exr" --param $SCALE --param $GRID --spp 4 --batches 2 \
+    J=$("$DR" grad "$SMOKE" --sampler independent --grad-dir "$TMP" --target "$TMP/target.exr" --param $SCALE --param $GRID --spp 4 --batches 2 \
         --max-depth $d --threads 2 --json)
     MEM[$d]=$(json_num "$J" peak_memory_bytes)
     printf '   depth %4d: prb peak %.3f MiB\n' $d "$(calc "${MEM[$d]} / 1048576" %.3f)"
@@ -65,7 +65,7 @@ echo "iii. render $SMOKE 256x256 16 spp: $(calc "$RT" %.3f) s, $(calc "$RPS / 1e
 DENSE=tests/data/media/fog-dense.gltf
 J=$("$DR" render "$DENSE" --sampler independent -o "$TMP/d.exr" --res 32x32 --spp 4 --max-depth 1000 --threads 2 --json)
 TP=$(json_num "$J" render time)
-J=$("$DR" grad "$DENSE" --param /materials/0/extensions/DR_medium/extinction -o "$TMP/dd.exr" --res 32x32 --spp 4 \
+J=$("$DR" grad "$DENSE" --sampler independent --param /materials/0/extensions/DR_medium/extinction -o "$TMP/dd.exr" --res 32x32 --spp 4 \
     --max-depth 1000 --threads 2 --json)
 TG=$(json_num "$J" gradient time)
 echo " iv. dense medium (extinction 1e4/1e3/1e2, albedo 0.999, depth 1000, 32x32, 4 spp): primal $(calc "$TP" %.3f) s," \

@@ -46,7 +46,7 @@ row() {   # label param set-args...
     for est in prb tape; do
         for smp in detached attached mis; do
             local J rc=0
-            J=$("$DR" grad "$CORNELL" --grad-dir "$TMP" --target "$TMP/target.exr" --param "$param" "$@" --estimator $est \
+            J=$("$DR" grad "$CORNELL" --sampler independent --grad-dir "$TMP" --target "$TMP/target.exr" --param "$param" "$@" --estimator $est \
                 --sampling $smp --spp $SPP --batches $BATCHES --max-depth $DEPTH --threads 2 --seed 3 --json \
                 2>"$TMP/err") || rc=$?
             if [[ $rc -eq 2 ]]; then
@@ -76,7 +76,7 @@ echo "j. prb --sampling attached: peak memory vs max depth (gold roughness, $RES
 MEM_JSON=""
 declare -A MEM
 for d in 4 64 1000; do
-    J=$("$DR" grad "$CORNELL" --target "$TMP/target.exr" --param $GOLD_R --estimator prb --sampling attached \
+    J=$("$DR" grad "$CORNELL" --sampler independent --target "$TMP/target.exr" --param $GOLD_R --estimator prb --sampling attached \
         --spp 4 --batches 2 --max-depth $d --threads 2 --json)
     MEM[$d]=$(json_num "$J" peak_memory_bytes)
     printf '   depth %4d: peak %.2f MiB, gradient %.3f s\n' $d "$(calc "${MEM[$d]} / 1048576" %.4f)" \

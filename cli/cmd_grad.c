@@ -102,9 +102,11 @@ void cmd_grad_usage(FILE *out)
             "      --camera N      which camera of the file (default: 0)\n"
             "      --seed S        random seed (default: 0)\n"
             "      --threads T     worker threads (default: one per CPU)\n"
-            "      --sampler S     random numbers: independent (default), stratified\n"
-            "                      (jittered strata over the pixel's spp) or sobol\n"
-            "                      (Owen-scrambled Sobol); both converge faster\n"
+            "      --sampler S     random numbers: sobol (Owen-scrambled Sobol; the default,\n"
+            "                      but independent where a batch renders its own primal:\n"
+            "                      --primal separate or 1 sample a batch), independent\n"
+            "                      (each number hashed on its own; the default before\n"
+            "                      2026-12) or stratified (jittered strata over the spp)\n"
             "      --filter F      pixel filter: box (default), tent or gaussian[:STDDEV]\n"
             "                      (as render)\n"
             "      --crop X,Y,W,H  only this rectangle of the --res frame is rendered and\n"
@@ -848,6 +850,7 @@ int cmd_grad(int argc, char **argv)
     /* Everything the user can get wrong in the options is checked before any work. */
     if ((rc = check_args(&a)) >= 0)
         goto out;
+    grad_default_sampler(&a.g, a.target != NULL, a.primal, a.batches);
     if (a.target) {
         if ((rc = grad_load_target("grad", a.target, &timg, &target)) >= 0)
             goto out;

@@ -64,17 +64,21 @@ void cmd_optimize_usage(FILE *out)
             "                         (--json: gradient_stderr; default 2, at least 2)\n"
             "      --primal M         where a batch's primal (the image the loss is taken at)\n"
             "                         comes from: cross (default: the gradient's own samples,\n"
-            "                         each weighted at the mean of its pixel's others; unbiased,\n"
-            "                         no extra render) or separate (a render of its own)\n"
-            "      --max-depth D      path segments (default 6)\n"
+            "                         each weighted at the mean of its pixel's others, sobol:\n"
+            "                         the other half's; unbiased, no extra render) or separate\n"
+            "                         (a render of its own)\n"
+            "      --max-depth D      path segments (default 6)\n");
+    fprintf(out,   /* (two strings: each within what C99 compilers must accept) */
             "      --rr-depth D       Russian roulette from this many segments on (default 5)\n"
             "      --res WxH          render size; every target must have it (default: each\n"
             "                         target's own size)\n"
             "      --seed S           random seed (default 0)\n"
             "      --threads T        worker threads (default: one per CPU)\n"
-            "      --sampler S        random numbers: independent (default), stratified\n"
-            "                         (jittered strata over the pixel's spp) or sobol\n"
-            "                         (Owen-scrambled Sobol); both converge faster\n"
+            "      --sampler S        random numbers: sobol (Owen-scrambled Sobol; the\n"
+            "                         default, but independent where a batch renders its own\n"
+            "                         primal: --primal separate or 1 sample a batch),\n"
+            "                         independent (each number hashed on its own; the default\n"
+            "                         before 2026-12) or stratified (jittered strata)\n"
             "      --filter F         pixel filter: box (default), tent or gaussian[:STDDEV]\n"
             "      --crop X,Y,W,H     fit only this rectangle of every target's frame; a target\n"
             "                         may be W x H (then --res gives the frame) or the full frame\n"
@@ -890,6 +894,8 @@ static void opt_summary_json(const struct opt_args *a, const struct opt_run *r)
     json_string(stdout, a->g.estimator->name);
     printf(", \"sampling\": ");
     json_string(stdout, dr_sampling_name(a->g.sampling));
+    printf(", \"sampler\": ");   /* (the default depends on --primal and --batches: grad_default_sampler) */
+    json_string(stdout, dr_sampler_kind_name(a->g.sampler));
     printf(", \"peak_memory_bytes\": %llu", (unsigned long long)cli_peak_rss_bytes());
     cli_json_memory_estimate(stdout);
     printf(", \"output\": ");
@@ -971,9 +977,11 @@ int cmd_optimize(int argc, char **argv)
     a.loss = DR_LOSS_L2;
     a.out_dir = "optimize-out";
     int rc = parse_args(argc, argv, &a);
-    if (rc < 0 && (rc = check_args(&a)) < 0 && (rc = opt_load(&a, &r)) < 0 && (rc = opt_open_outputs(&a, &r)) < 0 &&
-        (rc = opt_loop(&a, &r)) < 0)
-        rc = opt_finish(&a, &r);
+    if (rc < 0 && (rc = check_args(&a)) < 0) {
+        grad_default_sampler(&a.g, true, a.primal, a.batches);
+        if ((rc = opt_load(&a, &r)) < 0 && (rc = opt_open_outputs(&a, &r)) < 0 && (rc = opt_loop(&a, &r)) < 0)
+            rc = opt_finish(&a, &r);
+    }
     opt_free(&a, &r);
     return rc;
 }

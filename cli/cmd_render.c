@@ -152,11 +152,8 @@ int cmd_render(int argc, char **argv)
     grad_common_init(&a.g, "render", 64);
     /* An image's default: Owen-scrambled Sobol numbers. On the sample scenes
      * they had 1.5-6 x less variance than independent ones for 0.97-1.09 x
-     * the time (media: the same variance). The commands that differentiate
-     * keep independent numbers: their cross primal under sobol weighs by half
-     * a pixel's samples, and glossy roughness lost with it below about 32
-     * samples a batch (man page, "Reverse mode and independent random
-     * numbers"). */
+     * the time (media: the same variance). grad and optimize default to them
+     * too where their cross primal runs (grad_default_sampler). */
     a.g.sampler = DR_SAMPLER_SOBOL;
     char *scene_path = NULL;
     struct dr_scene *scene = NULL;

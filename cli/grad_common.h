@@ -79,6 +79,7 @@ struct grad_common {
      * (width x height above stay the frame's size) */
     struct dr_filter filter;
     enum dr_sampler_kind sampler;    /* --sampler */
+    bool sampler_given;
     bool crop_given;
     int crop_x, crop_y, crop_w, crop_h;
     double regularize;               /* prb attached: conditioning threshold (estimator.h) */
@@ -165,6 +166,10 @@ int grad_load_target(const char *cmd, const char *path, struct dr_image *img, fl
 int grad_parse_primal(const char *cmd, const char *arg, enum dr_primal_mode *mode);
 /* Its name, for --json and messages. */
 const char *grad_primal_name(enum dr_primal_mode mode);
+/* grad's and optimize's sampler where --sampler is not given: sobol, but
+ * independent numbers where a reverse-mode batch renders a primal of its own
+ * (--primal separate, or batches of one sample: spp over `batches`). */
+void grad_default_sampler(struct grad_common *g, bool reverse, enum dr_primal_mode primal, int batches);
 
 /* ---- the film: --filter and --crop ----
  * The film of a w x h frame under the options: the filter, and with --crop

@@ -28,7 +28,7 @@ echo "$cases" | while IFS='|' read -r name param set; do
         while [ "$seed" -le "$SEEDS" ]; do
             "$DR" grad --target "$tmp/target.exr" --param "$param" --set "$set" --res "$RES" --spp "$SPP" \
                 --batches "$BATCHES" --max-depth "$DEPTH" --threads "$THREADS" --sampling "$s" --seed "$seed" \
-                --json 2>/dev/null >"$tmp/$name.$s.$seed.json"
+                --sampler independent --json 2>/dev/null >"$tmp/$name.$s.$seed.json"   # (as its recorded figures)
             seed=$((seed + 1))
         done
     done

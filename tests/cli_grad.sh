@@ -210,10 +210,11 @@ expect_rc 0 "grad reverse --json (spp 1 per batch)"
 json_check "$tmp/out" '
 d["parameters"][0]["stderr_gradient"] == [None] * 3 and d["parameters"][0]["stderr_primal"] == [None] * 3
 and all(x > 0 for x in d["parameters"][0]["stderr"]) and d["primal"] == "separate" and d["time"]["primal"] > 0'
-# the cross primal (default): the gradient's own samples are the loss's
-# primal, no render, no parts; both estimators give the same numbers
+# the cross primal (default), with independent numbers (leave one out): the
+# gradient's own samples are the loss's primal, no render, no parts; both
+# estimators give the same numbers
 for est in prb tape; do
-    run grad --target t.exr --param "$red" --spp 16 --batches 4 --estimator $est --json
+    run grad --target t.exr --param "$red" --spp 16 --batches 4 --estimator $est --sampler independent --json
     expect_rc 0 "grad reverse --json (cross primal, $est)"
     cp "$tmp/out" "$tmp/cross-$est.json"
     json_check "$tmp/out" 'd["primal"] == "cross" and d["time"]["primal"] == 0 and 0 < d["loss"] < 0.5
@@ -226,9 +227,9 @@ a, b = (json.load(open(f)) for f in sys.argv[1:])
 ga, gb = a["parameters"][0]["gradient"], b["parameters"][0]["gradient"]
 sys.exit(not (all(abs(x - y) <= 1e-9 * max(abs(x), abs(y)) for x, y in zip(ga, gb)) and a["loss"] == b["loss"]))
 PY
-# sobol: the cross primal too, each sample weighted by the other half of its
-# pixel's samples (two sequences scrambled apart); prb and tape agree (tape
-# pairs a path with its half by its place in the pixel)
+# sobol (the default there): the cross primal too, each sample weighted by
+# the other half of its pixel's samples (two sequences scrambled apart); prb
+# and tape agree (tape pairs a path with its half by its place in the pixel)
 for est in prb tape; do
     run grad --target t.exr --param "$red" --spp 16 --batches 4 --estimator $est --sampler sobol --json
     expect_rc 0 "grad reverse --sampler sobol --json (cross primal, $est)"

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # --sampler independent|stratified|sobol from the command line.
-#   a. render: the default is the sobol sampler, bit for bit, and grad's the
-#      independent one (its --json says so); independent numbers give a
+#   a. render: the default is the sobol sampler, bit for bit, and grad's and
+#      optimize's too (the independent one where a batch renders its own
+#      primal; their --json says so); independent numbers give a
 #      different image of the same mean, with a larger error against a
 #      high-sample reference at equal spp; --json names the sampler; a
 #      sobol crop equals the same rectangle of the full sobol render
@@ -35,9 +36,35 @@ same_image default.exr sobol8.exr || fail "render's default sampler is not the s
 run render -o indep.exr $R --spp 8 --sampler independent
 expect_rc 0 "render --sampler independent"
 same_image default.exr indep.exr && fail "render --sampler independent gave the default (sobol) image"
-run grad --param /materials/1/pbrMetallicRoughness/baseColorFactor -o dgrad.exr $R --spp 4 --json
+# grad's and optimize's default: sobol (forward mode, and reverse mode where
+# the cross primal runs), independent where a batch renders its own primal
+red=/materials/1/pbrMetallicRoughness/baseColorFactor
+run grad --param $red -o dgrad.exr $R --spp 4 --json
 expect_rc 0 "grad, default sampler"
-expect_in out '"sampler": "independent"' "grad's default sampler is the independent one"
+expect_in out '"sampler": "sobol"' "grad's default sampler (forward mode) is the sobol one"
+run render -o gtarget.exr $R --spp 16 --sampler independent
+expect_rc 0 "render a target"
+default_sampler() {   # default_sampler WANT PRIMAL GRAD-OPTIONS...: grad --json names WANT and runs PRIMAL
+    local want=$1 primal=$2
+    shift 2
+    run grad --param $red --set $red=0.3,0.3,0.3 --target gtarget.exr $R "$@" --json
+    expect_rc 0 "grad $*"
+    expect_in out "\"sampler\": \"$want\"" "grad $*: the default sampler is $want"
+    expect_in out "\"primal\": \"$primal\"" "grad $*: the $primal primal runs"
+}
+default_sampler sobol cross --spp 16
+default_sampler independent separate --spp 4 --batches 4   # (one sample a batch)
+default_sampler independent separate --spp 16 --primal separate
+# the default is the sobol sampler itself: the same gradient to the last digit
+run grad --param $red --set $red=0.3,0.3,0.3 --target gtarget.exr $R --spp 16
+expect_rc 0 "grad, default sampler (text)"
+cp "$tmp/out" grad_default.txt
+run grad --param $red --set $red=0.3,0.3,0.3 --target gtarget.exr $R --spp 16 --sampler sobol
+expect_rc 0 "grad --sampler sobol (text)"
+cmp -s grad_default.txt "$tmp/out" || fail "grad's default gradient is not the sobol sampler's"
+run optimize --param $red --set $red=0.3,0.3,0.3 --target gtarget.exr $R --iters 1 --out-dir opt --json
+expect_rc 0 "optimize, default sampler"
+expect_in out '"sampler": "sobol"' "optimize's default sampler is the sobol one"
 run render -o ref.exr --res 32x32 --seed 77 --spp 1024 --sampler sobol
 expect_rc 0 "reference render"
 run render -o sobol.exr $R --spp 16 --sampler sobol --json
