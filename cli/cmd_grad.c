@@ -774,8 +774,10 @@ static void reverse_print_text(FILE *f, const struct grad_args *a, const struct 
                                const struct reverse_run *r)
 {
     fprintf(f, "loss (%s): %.9g\n", dr_loss_name(a->loss), r->res.loss);
-    fprintf(f, "d loss / d parameter (mean of %d batches of %d spp, +- standard error incl. primal noise; %s, %s):\n",
-            a->batches, r->res.spp_batch, a->g.estimator->name, dr_sampling_name(a->g.sampling));
+    fprintf(f, "d loss / d parameter (mean of %d batches of %d spp, +- standard error incl. primal noise; %s, %s, "
+               "%s numbers, %s primal):\n",
+            a->batches, r->res.spp_batch, a->g.estimator->name, dr_sampling_name(a->g.sampling),
+            dr_sampler_kind_name(a->g.sampler), grad_primal_name(r->res.primal_run));
     for (int k = 0; k < ps->n; k++) {
         const struct dr_param *p = &ps->params[k];
         if (is_image_param(p)) {

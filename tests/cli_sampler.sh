@@ -59,6 +59,8 @@ default_sampler independent separate --spp 16 --primal separate
 run grad --param $red --set $red=0.3,0.3,0.3 --target gtarget.exr $R --spp 16
 expect_rc 0 "grad, default sampler (text)"
 cp "$tmp/out" grad_default.txt
+grep -q "; prb, detached, sobol numbers, cross primal):" grad_default.txt ||
+    fail "grad's text output does not name the numbers and the primal it ran"
 run grad --param $red --set $red=0.3,0.3,0.3 --target gtarget.exr $R --spp 16 --sampler sobol
 expect_rc 0 "grad --sampler sobol (text)"
 cmp -s grad_default.txt "$tmp/out" || fail "grad's default gradient is not the sobol sampler's"
