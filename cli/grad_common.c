@@ -822,7 +822,7 @@ const char *grad_primal_name(enum dr_primal_mode mode)
  * Sobol sample at the other half of its pixel's samples, sobol had 0.9-2.8 x
  * less variance than independent numbers at 4 samples a batch (the
  * default's; median 1.5, glossy roughness the lowest) and 1.1-4.2 x from 8
- * (one case 0.97), for about 1.05 x the time; forward mode 1.2-1.75 x. A
+ * (one case 0.97), for 1.07-1.14 x the time; forward mode 1.2-1.75 x. A
  * batch's separate primal render under sobol was 1.2-1.3 x worse in
  * variance x time: there the independent numbers stay. */
 void grad_default_sampler(struct grad_common *g, bool reverse, enum dr_primal_mode primal, int batches)
