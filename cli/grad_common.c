@@ -829,7 +829,6 @@ void grad_default_sampler(struct grad_common *g, bool reverse, enum dr_primal_mo
 {
     if (g->sampler_given)
         return;
-    const int64_t spp_batch = ((int64_t)g->spp + batches - 1) / batches;   /* (as reverse.c) */
-    const bool cross = primal == DR_PRIMAL_CROSS && spp_batch >= 2;
+    const bool cross = dr_reverse_primal_run(primal, g->spp, batches, DR_SAMPLER_SOBOL) == DR_PRIMAL_CROSS;
     g->sampler = !reverse || cross ? DR_SAMPLER_SOBOL : DR_SAMPLER_INDEPENDENT;
 }

@@ -17,20 +17,19 @@ struct dr_emission_grid {
 
 /* Reads texels' emission as dr_emission reads them: the mean of their colour
  * channels' decoded values (their magnitudes: a test for zero must not let
- * values cancel). For eight-bit storage, each channel's table is chosen once
- * (dr_image_value's choice: decoded where there are decoded values) rather
+ * values cancel). For eight-bit storage the colour channels' table is chosen
+ * once (dr_image_value's choice: the decoded one where there is one) rather
  * than per value: a 2k texture's grid is built while the first ray waits. */
 struct texel_reader {
     const struct dr_image *img;
-    int c;                   /* colour channels */
-    const float *table[4];   /* eight-bit storage: channel k's values by byte */
+    int c;                /* colour channels */
+    const float *table;   /* eight-bit storage: a colour channel's value by byte */
 };
 
 static struct texel_reader texel_reader(const struct dr_image *img)
 {
     struct texel_reader r = {.img = img, .c = dr_image_colour_channels(img->channels)};
-    for (int k = 0; img->bytes && k < r.c; k++)
-        r.table[k] = img->lut_linear ? img->lut_linear : img->lut;
+    r.table = img->lut_linear ? img->lut_linear : img->lut;
     return r;
 }
 
@@ -41,7 +40,7 @@ static double texel_emission(const struct texel_reader *r, size_t i)
     if (img->bytes) {
         const uint8_t *b = img->bytes + i * (size_t)img->channels;
         for (int k = 0; k < r->c; k++)
-            e += fabs(r->table[k][b[k]]);
+            e += fabs(r->table[b[k]]);
     } else {
         for (int k = 0; k < r->c; k++)
             e += fabs(dr_image_value(img, i * (size_t)img->channels + (size_t)k, true));

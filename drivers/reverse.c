@@ -183,17 +183,27 @@ static void finish(struct rev_work *w, struct dr_reverse_result *r, int K, int p
 
 /* What will run: samples per batch, the primal mode, whether the standard
  * error's parts are estimated. */
-static void plan(const struct dr_reverse_options *o, struct dr_reverse_result *r)
+int dr_reverse_spp_batch(int spp, int batches)
 {
-    const struct dr_grad_problem *p = &o->problem;
-    const int K = o->batches;
-    r->spp_batch = (int)(((int64_t)p->spp + K - 1) / K);
+    return (int)(((int64_t)spp + batches - 1) / batches);
+}
+
+enum dr_primal_mode dr_reverse_primal_run(enum dr_primal_mode primal, int spp, int batches,
+                                          enum dr_sampler_kind sampler)
+{
     /* the cross primal needs samples of a pixel independent of each other:
      * not so with one sample, nor under the stratified sampler, whose samples
      * of a pixel share their strata (sobol: two halves scrambled apart,
      * estimator.h) */
-    const bool cross_ok = r->spp_batch >= 2 && p->sampler != DR_SAMPLER_STRATIFIED;
-    r->primal_run = o->primal == DR_PRIMAL_CROSS && !cross_ok ? DR_PRIMAL_PER_BATCH : o->primal;
+    const bool cross_ok = dr_reverse_spp_batch(spp, batches) >= 2 && sampler != DR_SAMPLER_STRATIFIED;
+    return primal == DR_PRIMAL_CROSS && !cross_ok ? DR_PRIMAL_PER_BATCH : primal;
+}
+
+static void plan(const struct dr_reverse_options *o, struct dr_reverse_result *r)
+{
+    const struct dr_grad_problem *p = &o->problem;
+    r->spp_batch = dr_reverse_spp_batch(p->spp, o->batches);
+    r->primal_run = dr_reverse_primal_run(o->primal, p->spp, o->batches, p->sampler);
     /* mis: a batch in one piece (no halves, so no se_gradient/se_primal
      * split): weights from halves of 2 spp were poor (mis.h) */
     const bool mis = dr_est_sampling_run(p) == DR_SAMPLING_MIS;

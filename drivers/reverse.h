@@ -85,6 +85,13 @@ struct dr_reverse_result {
                                         stratified sampler runs per batch */
 };
 
+/* Samples per pixel of each of `batches` batches of spp in all. */
+int dr_reverse_spp_batch(int spp, int batches);
+/* The primal mode a run asked for `primal` runs: DR_PRIMAL_CROSS falls back
+ * to DR_PRIMAL_PER_BATCH with one sample a batch or the stratified sampler. */
+enum dr_primal_mode dr_reverse_primal_run(enum dr_primal_mode primal, int spp, int batches,
+                                          enum dr_sampler_kind sampler);
+
 /* Whether a run with these options estimates se_gradient and se_primal
  * (dr_reverse_result.parts). */
 bool dr_reverse_parts(const struct dr_reverse_options *o);
