@@ -1,19 +1,19 @@
 /* The Embree scene the bench's raw ceilings trace (raw_embree.c,
- * path_rays.c): the scene's triangles in one geometry, built with drender's
- * flags (Embree's default traversal, high quality; core/accel.c) but without its coverage
- * filter. */
+ * path_rays.c): the scene's triangles in one geometry, built as drender
+ * builds its own (core/accel_build.h) but without its coverage filter. */
 #ifndef DR_BENCH_RAW_SCENE_H
 #define DR_BENCH_RAW_SCENE_H
 
 #include <embree3/rtcore.h>
 
+#include "accel_build.h"
 #include "scene.h"
 
 static inline RTCScene bench_raw_scene(RTCDevice dev, const struct dr_scene *scene)
 {
     RTCScene es = rtcNewScene(dev);
-    rtcSetSceneFlags(es, RTC_SCENE_FLAG_NONE);
-    rtcSetSceneBuildQuality(es, RTC_BUILD_QUALITY_HIGH);
+    rtcSetSceneFlags(es, DR_ACCEL_SCENE_FLAGS);
+    rtcSetSceneBuildQuality(es, DR_ACCEL_BUILD_QUALITY);
     RTCGeometry g = rtcNewGeometry(dev, RTC_GEOMETRY_TYPE_TRIANGLE);
     rtcSetSharedGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, scene->mesh.positions, 0,
                                3 * sizeof(float), scene->mesh.n_vertices);

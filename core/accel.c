@@ -6,6 +6,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "accel_build.h"
 #include "backface.h"
 #include "coverage.h"
 #include "error.h"
@@ -83,17 +84,6 @@ struct query_ctx {
                                (first_blocker_filter) */
 };
 
-/* Embree's default traversal, not RTC_SCENE_FLAG_ROBUST, which drender used
- * until 2026-11: robust mode was meant to stop rays slipping through the
- * shared edges of neighbouring triangles, but it does not stop them, and it
- * costs 15 % of a render. Measured on a closed box of 12 triangles with grey
- * walls, the camera inside and an environment of 1000 outside (a lit pixel
- * is a leak), 11 runs of 16 M paths (~1.3 G rays): 13 leaking pixels with
- * robust mode, 23 without, about one path in 13 M and in 8 M, far below any
- * render's noise. The peer's box renders in 0.85 x the time without it
- * (bench/ab.sh, 5 rounds). Mitsuba 3 traces without it too (its
- * embree_use_robust_intersections is off by default). */
-#define DR_ACCEL_SCENE_FLAGS RTC_SCENE_FLAG_NONE
 
 static void embree_error(void *user, enum RTCError code, const char *msg)
 {
@@ -244,7 +234,7 @@ static RTCScene new_scene(struct dr_accel *a)
 {
     RTCScene sc = rtcNewScene(a->device);
     rtcSetSceneFlags(sc, DR_ACCEL_SCENE_FLAGS | (a->plain ? RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION : 0));
-    rtcSetSceneBuildQuality(sc, RTC_BUILD_QUALITY_HIGH);
+    rtcSetSceneBuildQuality(sc, DR_ACCEL_BUILD_QUALITY);
     return sc;
 }
 
