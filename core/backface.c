@@ -85,14 +85,6 @@ static bool room_holds(const struct dr_scene *s, uint32_t t, const dr_vec3 *view
 
 /* ------------------------------------------------ closed components */
 
-static size_t table_size(size_t n)
-{
-    size_t cap = 16;
-    while (cap < 2 * n)
-        cap *= 2;
-    return cap;
-}
-
 static uint32_t find_root(uint32_t *parent, uint32_t t)
 {
     while (parent[t] != t) {
@@ -102,56 +94,104 @@ static uint32_t find_root(uint32_t *parent, uint32_t t)
     return t;
 }
 
-/* An undirected edge's entry: the first triangle that used it and in which
- * direction, and how many did. */
-struct edge {
-    uint64_t key;   /* lo << 32 | hi (welded ids, lo < hi); UINT64_MAX: empty */
-    uint32_t tri;
-    uint8_t forward, count;   /* forward: the first use went lo -> hi */
+/* One use of an undirected edge by a triangle, filed under the edge's
+ * lower welded end: the higher end, the triangle, the corner it starts at
+ * and whether it runs low -> high. */
+struct edge_use {
+    uint32_t hi, tri;
+    uint8_t k, forward;
 };
+
+/* Orders a vertex's uses by the other end, then in file order (triangle,
+ * corner): the order link_edges takes an edge's uses in. */
+static int use_order(const void *pa, const void *pb)
+{
+    const struct edge_use *a = pa, *b = pb;
+    if (a->hi != b->hi)
+        return a->hi < b->hi ? -1 : 1;
+    if (a->tri != b->tri)
+        return a->tri < b->tri ? -1 : 1;
+    return (a->k > b->k) - (a->k < b->k);
+}
+
+static void sort_uses(struct edge_use *u, size_t n)
+{
+    if (n > 24) {
+        qsort(u, n, sizeof *u, use_order);
+        return;
+    }
+    for (size_t i = 1; i < n; i++)   /* insertion sort: most buckets hold 2 to 6 */
+        for (size_t j = i; j > 0 && use_order(&u[j - 1], &u[j]) > 0; j--) {
+            struct edge_use t = u[j];
+            u[j] = u[j - 1];
+            u[j - 1] = t;
+        }
+}
+
+/* One edge's uses u[0 .. n), in file order: the second, run the other way,
+ * joins the two triangles; any other case opens them. */
+static void link_edge(const struct edge_use *u, size_t n, uint32_t *parent, uint8_t *open)
+{
+    for (size_t i = 1; i < n; i++) {
+        if (i == 1 && u[1].forward != u[0].forward)
+            parent[find_root(parent, u[1].tri)] = find_root(parent, u[0].tri);
+        else
+            open[u[i].tri] = open[u[0].tri] = 1;
+    }
+    if (n != 2)
+        open[u[0].tri] = 1;
+}
 
 /* Joins triangles across shared edges into components (parent) and sets
  * open[t] where t's component cannot be closed: an edge used once (a
  * boundary), more than twice, or twice in the same direction (inconsistent
- * winding), or a triangle with two corners welded together. */
+ * winding), or a triangle with two corners welded together.
+ *
+ * The uses are filed by their lower end (a counting sort) and each
+ * vertex's few sorted, not looked up in a hash table of every edge: on the
+ * big bench scene (381k edge uses) the table's random probes missed the
+ * cache at almost every use and took most of the analysis. */
 static int link_edges(const struct dr_mesh *m, const uint32_t *wid, uint32_t *parent, uint8_t *open)
 {
-    size_t cap = table_size(3 * (size_t)m->n_triangles);
-    struct edge *e = malloc(sizeof *e * cap);
-    if (!e)
+    const size_t nv = m->n_vertices;
+    uint32_t *first = calloc(nv + 2, sizeof *first);
+    struct edge_use *use = malloc(sizeof *use * (3 * (size_t)m->n_triangles + 1));
+    if (!first || !use) {
+        free(first);
+        free(use);
         return -1;
-    for (size_t i = 0; i < cap; i++)
-        e[i].key = UINT64_MAX;
-    for (uint32_t t = 0; t < m->n_triangles; t++) {
-        const uint32_t *idx = m->indices + 3 * (size_t)t;
+    }
+    for (uint32_t t = 0; t < m->n_triangles; t++)   /* count each vertex's uses, at first[lo + 2] */
         for (int k = 0; k < 3; k++) {
+            const uint32_t *idx = m->indices + 3 * (size_t)t;
             uint32_t a = wid[idx[k]], b = wid[idx[(k + 1) % 3]];
-            if (a == b) {
+            if (a != b)
+                first[(a < b ? a : b) + 2]++;
+        }
+    for (size_t v = 2; v < nv + 2; v++)
+        first[v] += first[v - 1];
+    for (uint32_t t = 0; t < m->n_triangles; t++)   /* file them: first[lo + 1] is lo's fill point */
+        for (int k = 0; k < 3; k++) {
+            const uint32_t *idx = m->indices + 3 * (size_t)t;
+            uint32_t a = wid[idx[k]], b = wid[idx[(k + 1) % 3]];
+            if (a == b)
                 open[t] = 1;
-                continue;
-            }
-            uint64_t key = a < b ? (uint64_t)a << 32 | b : (uint64_t)b << 32 | a;
-            size_t h = dr_hash64(key) & (cap - 1);
-            while (e[h].key != UINT64_MAX && e[h].key != key)
-                h = (h + 1) & (cap - 1);
-            struct edge *x = &e[h];
-            if (x->key == UINT64_MAX) {
-                *x = (struct edge){.key = key, .tri = t, .forward = a < b, .count = 1};
-                continue;
-            }
-            if (x->count == 1 && x->forward != (a < b)) {
-                uint32_t r0 = find_root(parent, t), r1 = find_root(parent, x->tri);
-                parent[r0] = r1;
-            } else {
-                open[t] = open[x->tri] = 1;
-            }
-            x->count = x->count < 255 ? x->count + 1 : 255;
+            else
+                use[first[(a < b ? a : b) + 1]++] = (struct edge_use){
+                    .hi = a < b ? b : a, .tri = t, .k = (uint8_t)k, .forward = a < b};
+        }
+    for (size_t v = 0; v < nv; v++) {   /* now first[v] .. first[v + 1] are v's */
+        struct edge_use *u = use + first[v];
+        size_t n = first[v + 1] - first[v];
+        sort_uses(u, n);
+        for (size_t i = 0, j; i < n; i = j) {
+            for (j = i + 1; j < n && u[j].hi == u[i].hi; j++)
+                ;
+            link_edge(u + i, j - i, parent, open);
         }
     }
-    for (size_t i = 0; i < cap; i++)
-        if (e[i].key != UINT64_MAX && e[i].count != 2)
-            open[e[i].tri] = 1;
-    free(e);
+    free(first);
+    free(use);
     return 0;
 }
 

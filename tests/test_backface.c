@@ -195,6 +195,59 @@ static void test_closed(void)
     dr_scene_destroy(s);
 }
 
+/* A closed bipyramid of 2 x FAN triangles around a ring, its apexes first,
+ * so the edges to the top apex are all filed under that vertex (a bucket
+ * of 2 x FAN uses, sorted by qsort rather than by insertion), each ring
+ * vertex written once per triangle (the weld joins them). FIN adds a
+ * triangle on the edge apex - ring 0 (used three times: not closed);
+ * TWISTED winds one fan triangle against its neighbours. */
+enum { FAN = 40 };
+enum fan_variant { FAN_CLOSED, FAN_FIN, FAN_TWISTED };
+static struct dr_scene *bipyramid_scene(enum fan_variant v)
+{
+    struct sb b;
+    sb_init(&b);
+    int m = sb_material(&b, sb_diffuse(dr_v3s(0.5)));
+    struct dr_material ds = sb_diffuse(dr_v3s(0.5));
+    ds.double_sided = true;
+    int plate = sb_material(&b, ds);
+    uint32_t top = sb_vertex(&b, dr_v3(0, 1, 0), 0, 0), bottom = sb_vertex(&b, dr_v3(0, -1, 0), 0, 0);
+    for (int i = 0; i < FAN; i++) {
+        double a0 = 2 * M_PI * i / FAN, a1 = 2 * M_PI * ((i + 1) % FAN) / FAN;   /* the ring closes exactly */
+        dr_vec3 p0 = dr_v3(cos(a0), 0, -sin(a0)), p1 = dr_v3(cos(a1), 0, -sin(a1));
+        uint32_t r0 = sb_vertex(&b, p0, 0, 0), r1 = sb_vertex(&b, p1, 0, 0);
+        if (v == FAN_TWISTED && i == 7)
+            sb_triangle(&b, top, r1, r0, m);
+        else
+            sb_triangle(&b, top, r0, r1, m);   /* counter-clockwise seen from outside */
+        uint32_t s0 = sb_vertex(&b, p0, 0, 0), s1 = sb_vertex(&b, p1, 0, 0);
+        sb_triangle(&b, bottom, s1, s0, m);
+    }
+    if (v == FAN_FIN)
+        sb_triangle(&b, top, sb_vertex(&b, dr_v3(1, 0, 0), 0, 0), sb_vertex(&b, dr_v3(2, 0.5, 0), 0, 0), m);
+    sb_quad(&b, dr_v3(-20, 5, -20), dr_v3(40, 0, 0), dr_v3(0, 0, 40), plate);   /* keeps the room test out */
+    sb_environment(&b, dr_v3s(1.0));
+    b.s->n_file_materials = b.s->n_materials;
+    scene_camera(b.s, sb_camera(dr_v3(0.3, 0.4, 6), dr_v3(0, 0, 0), 40));
+    return sb_finish(&b);
+}
+
+static void test_closed_fan(void)
+{
+    struct dr_scene *s = bipyramid_scene(FAN_CLOSED);
+    CHECK(count_marked(s, 0, 2 * FAN) == 2 * FAN, "closed bipyramid: %d of %d marked", count_marked(s, 0, 2 * FAN),
+          2 * FAN);
+    dr_scene_destroy(s);
+    s = bipyramid_scene(FAN_FIN);
+    CHECK(count_marked(s, 0, 2 * FAN + 1) == 0, "an edge used three times: %d marked",
+          count_marked(s, 0, 2 * FAN + 1));
+    dr_scene_destroy(s);
+    s = bipyramid_scene(FAN_TWISTED);
+    CHECK(count_marked(s, 0, 2 * FAN) == 0, "one fan triangle wound the other way: %d marked",
+          count_marked(s, 0, 2 * FAN));
+    dr_scene_destroy(s);
+}
+
 /* The same answers with the proofs as without: the image of the room scene
  * (every marked triangle's test dropped) against the same scene analysed
  * with an orthographic viewpoint added (nothing marked, every test kept);
@@ -262,6 +315,7 @@ int main(void)
     test_room();
     test_far_from_origin();
     test_closed();
+    test_closed_fan();
     test_same_answers();
     return TEST_END();
 }
