@@ -1,10 +1,11 @@
 #!/usr/bin/env python3
-"""Writes bench part m's scene: a grey floor lit only by a panel of 2048
-small triangles whose emissive texture (IMAGE, written by the caller with
+"""Writes bench part n's scene: a grey floor lit only by a panel of
+2 x N x N triangles (N = 32 unless given: 2048 small ones; N = 1: two
+large ones) whose emissive texture (IMAGE, written by the caller with
 oiiotool) is black but for three small spots, the way real assets paint
 their glowing parts. The camera sits between floor and panel.
 
-    make_glow_scene.py OUT.gltf IMAGE_URI
+    make_glow_scene.py OUT.gltf IMAGE_URI [N]
 
 Standard library only (the buffer goes inline as a data URI)."""
 import base64
@@ -30,10 +31,11 @@ def grid(pos, uv, idx, y, half, n, down):
 
 def main():
     out, image = sys.argv[1], sys.argv[2]
+    n = int(sys.argv[3]) if len(sys.argv) > 3 else 32
     pos, uv, idx = [], [], []
     grid(pos, uv, idx, 0.0, 2.0, 1, False)
     floor_indices = len(idx)
-    grid(pos, uv, idx, 2.0, 1.5, 32, True)
+    grid(pos, uv, idx, 2.0, 1.5, n, True)
     blobs = [struct.pack("<%df" % len(pos), *pos), struct.pack("<%df" % len(uv), *uv),
              struct.pack("<%dI" % len(idx), *idx)]
     data = b"".join(blobs)

@@ -160,8 +160,18 @@ static void cells(const struct dr_emission_grid *g, int cx0, int cx1, int cy0, i
 bool dr_emission_footprint(const struct dr_emission_grid *g, const struct dr_mesh *m, const struct dr_texref *r,
                            const struct dr_texture *tex, uint32_t tri, double *mean)
 {
-    double u0 = INFINITY, u1 = -INFINITY, v0 = INFINITY, v1 = -INFINITY;
     const double corner[3][2] = {{0.0, 0.0}, {1.0, 0.0}, {0.0, 1.0}};   /* (b1, b2) of the vertices */
+    struct dr_footprint f;
+    const bool any = dr_emission_footprint_part(g, m, r, tex, tri, corner, &f);
+    *mean = f.mean;
+    return any;
+}
+
+bool dr_emission_footprint_part(const struct dr_emission_grid *g, const struct dr_mesh *m, const struct dr_texref *r,
+                                const struct dr_texture *tex, uint32_t tri, const double corner[3][2],
+                                struct dr_footprint *out)
+{
+    double u0 = INFINITY, u1 = -INFINITY, v0 = INFINITY, v1 = -INFINITY;
     for (int k = 0; k < 3; k++) {
         struct dr_hit h;   /* the lookup's own uv at the vertex: its set, through its transform */
         double uv[2];
@@ -182,6 +192,8 @@ bool dr_emission_footprint(const struct dr_emission_grid *g, const struct dr_mes
             const int64_t th = ((cy1 + 1) * g->s < g->h ? (cy1 + 1) * g->s : g->h) - cy0 * g->s;
             texels += (uint64_t)(tw * th);
         }
-    *mean = texels > 0 && sum > 0.0 ? sum / (double)texels : 0.0;
+    out->mean = texels > 0 && sum > 0.0 ? sum / (double)texels : 0.0;
+    out->texels = (double)texels;
+    out->lit = (double)lit;
     return lit > 0;
 }

@@ -45,5 +45,15 @@ double dr_emission_grid_mean(const struct dr_emission_grid *g);
  * emission of the footprint's cells' texels in *mean. */
 bool dr_emission_footprint(const struct dr_emission_grid *g, const struct dr_mesh *m, const struct dr_texref *r,
                            const struct dr_texture *tex, uint32_t tri, double *mean);
+/* The same for the part of triangle tri with corners corner[k] = (b1, b2)
+ * (a part the light table samples on its own, lights.c): its footprint's
+ * mean, how many texels it covers (whole cells, as the mean counts them)
+ * and how many of those are not zero. */
+struct dr_footprint {
+    double mean, texels, lit;
+};
+bool dr_emission_footprint_part(const struct dr_emission_grid *g, const struct dr_mesh *m, const struct dr_texref *r,
+                                const struct dr_texture *tex, uint32_t tri, const double corner[3][2],
+                                struct dr_footprint *f);
 
 #endif

@@ -20,6 +20,15 @@ struct dr_light_sampler {
     double *tri_pick;          /* per triangle: probability of picking it (0: not an emitter) */
     double *tri_pick_density;  /* per triangle: pick probability / area (area density) */
     double *emitter_area;      /* per emitter entry */
+    uint32_t *emitter_sub;     /* per emitter entry: 0, the whole triangle; else one of its parts
+                                  (dr_light_part_point) */
+    /* Triangles with parts (a large emissive texture's footprint with black
+     * texels, emitter_weights): their tri_pick_density is -1 and the
+     * density at a point is its part's (area_density). NULL: none has. */
+    uint8_t *tri_level;        /* per triangle: 0, or the levels of its 4^level parts */
+    int64_t *tri_part_first;   /* per triangle with parts: its first in part_density */
+    double *part_density;      /* per part: pick probability / area (0: not an entry) */
+    int64_t n_parts;
     int n_punctual;
     int env_entry;             /* index of the environment in cdf, -1 if none */
     int64_t n_entries;
@@ -62,6 +71,108 @@ static const struct dr_texref *footprint_texture(const struct dr_scene *s, const
     return dr_image_has_pixels(&s->images[s->textures[r->texture].image]) ? r : NULL;
 }
 
+/* ---- a triangle's parts ----
+ * Midpoint subdivision in barycentric space: part d of a triangle is the
+ * one at corner d (0: b0's, 1: b1's, 2: b2's) or the middle one (3,
+ * upside down), each a quarter of it. Level L divides L times; a part's
+ * code holds its digits, the top level's highest. The maps are exact
+ * halvings and unit shifts, so a point mapped into a part is located in it
+ * again (dr_light_part_locate) but on a part's edge. */
+
+/* (b1, b2) of the point with (b1, b2) in part d, in its parent. */
+static inline void part_to_parent(unsigned d, double *b1, double *b2)
+{
+    const double x = 0.5 * *b1, y = 0.5 * *b2;
+    *b1 = d == 1 ? 0.5 + x : d == 3 ? 0.5 - x : x;
+    *b2 = d == 2 ? 0.5 + y : d == 3 ? 0.5 - y : y;
+}
+
+void dr_light_part_point(uint32_t sub, double *b1, double *b2)
+{
+    const unsigned level = sub & 7u;
+    uint32_t code = sub >> 3;
+    for (unsigned l = 0; l < level; l++, code >>= 2)   /* the deepest digit first */
+        part_to_parent(code & 3u, b1, b2);
+}
+
+uint32_t dr_light_part_locate(unsigned level, double b1, double b2)
+{
+    uint32_t code = 0;
+    for (unsigned l = 0; l < level; l++) {
+        unsigned d;
+        if (b1 >= 0.5)
+            d = 1, b1 = 2.0 * b1 - 1.0, b2 = 2.0 * b2;
+        else if (b2 >= 0.5)
+            d = 2, b1 = 2.0 * b1, b2 = 2.0 * b2 - 1.0;
+        else if (b1 + b2 <= 0.5)
+            d = 0, b1 = 2.0 * b1, b2 = 2.0 * b2;
+        else
+            d = 3, b1 = 1.0 - 2.0 * b1, b2 = 1.0 - 2.0 * b2;
+        code = 4u * code + d;
+    }
+    return code;
+}
+
+/* How many times to divide a textured emitter whose footprint is f: not
+ * at all where it holds no black texel (its parts would be picked by
+ * nearly the same weights), else until a part's footprint is about 64
+ * texels (8 x 8), at most DR_LIGHT_MAX_LEVEL times (1024 parts). */
+static unsigned part_level(const struct dr_footprint *f)
+{
+    unsigned level = 0;
+    if (f->lit >= f->texels)
+        return 0;
+    while (level < DR_LIGHT_MAX_LEVEL && f->texels > 64.0 * (double)(1u << (2 * level)))
+        level++;
+    return level;
+}
+
+/* The parts' weights of triangle t (a whole triangle's weight w, its
+ * footprint's texture r through grid g) into part_w[0 .. 4^level), -1 for
+ * a part whose footprint holds only black texels. Returns whether any part
+ * was left out. */
+static bool part_weights(const struct dr_scene *s, const struct dr_emission_grid *g, const struct dr_texref *r,
+                         uint32_t t, unsigned level, double w, double *part_w)
+{
+    const struct dr_texture *tex = &s->textures[r->texture];
+    const uint32_t n = 1u << (2 * level);
+    bool dropped = false;
+    for (uint32_t j = 0; j < n; j++) {
+        double corner[3][2] = {{0.0, 0.0}, {1.0, 0.0}, {0.0, 1.0}};
+        for (int k = 0; k < 3; k++)
+            dr_light_part_point(j << 3 | level, &corner[k][0], &corner[k][1]);
+        struct dr_footprint f;
+        if (dr_emission_footprint_part(g, &s->mesh, r, tex, t, (const double(*)[2])corner, &f)) {
+            part_w[j] = w / (double)n * fmax(f.mean, 1e-6 * dr_emission_grid_mean(g));
+        } else {
+            part_w[j] = -1.0;
+            dropped = true;
+        }
+    }
+    return dropped;
+}
+
+/* Room for the parts of one more triangle: ls->tri_level and
+ * tri_part_first on the first, part_w grown to hold n more. */
+static int reserve_parts(const struct dr_mesh *m, struct dr_light_sampler *ls, double **part_w, int64_t *cap,
+                         uint32_t n)
+{
+    if (!ls->tri_level) {
+        ls->tri_level = calloc((size_t)m->n_triangles + 1, 1);
+        ls->tri_part_first = calloc((size_t)m->n_triangles + 1, sizeof(int64_t));
+        if (!ls->tri_level || !ls->tri_part_first)
+            return DR_ERR_NOMEM;
+    }
+    if (ls->n_parts + n > *cap) {
+        int64_t c = 2 * (ls->n_parts + n);
+        double *p = realloc(*part_w, sizeof(double) * (size_t)c);
+        if (!p)
+            return DR_ERR_NOMEM;
+        *part_w = p, *cap = c;
+    }
+    return 0;
+}
+
 /* The emitter weights of every triangle (power: pi x weight x area) into
  * tri_w, -1 for a triangle that is not an entry; which materials have all
  * their triangles entries into ls->mat_emits. A textured emitter's triangle
@@ -70,8 +181,14 @@ static const struct dr_texref *footprint_texture(const struct dr_scene *s, const
  * image, built when its first triangle asks (ls->texture_averages: a
  * per-triangle pass over a 2048^2 texture made loading a helmet-class model
  * take minutes, issue 13). Returns 0 or DR_ERR_NOMEM. */
-static int emitter_weights(const struct dr_scene *s, struct dr_light_sampler *ls, double *tri_w)
+static inline unsigned tri_level(const struct dr_light_sampler *ls, uint32_t t)
 {
+    return ls->tri_level ? ls->tri_level[t] : 0u;
+}
+
+static int emitter_weights(const struct dr_scene *s, struct dr_light_sampler *ls, double *tri_w, double **part_w)
+{
+    int64_t part_cap = 0;
     const struct dr_mesh *m = &s->mesh;
     struct dr_emission_grid **grid = calloc((size_t)s->n_images + 1, sizeof *grid);
     if (!grid || !(ls->mat_emits = malloc((size_t)s->n_materials + 1))) {
@@ -94,12 +211,25 @@ static int emitter_weights(const struct dr_scene *s, struct dr_light_sampler *ls
             rc = DR_ERR_NOMEM;
             break;
         }
-        double mean;
-        if (dr_emission_footprint(*g, m, r, tex, t, &mean)) {
+        const double corner[3][2] = {{0.0, 0.0}, {1.0, 0.0}, {0.0, 1.0}};
+        struct dr_footprint f;
+        unsigned level = dr_emission_footprint_part(*g, m, r, tex, t, corner, &f) ? part_level(&f) : 0;
+        while (level > 0 && ls->n_parts + (1 << (2 * level)) > DR_LIGHT_MAX_PARTS)
+            level--;   /* (a texture tiled over many large triangles: the first get parts) */
+        if (level > 0) {   /* sampled part by part, each weighted by its own footprint */
+            const uint32_t n = 1u << (2 * level);
+            if ((rc = reserve_parts(m, ls, part_w, &part_cap, n)) != 0)
+                break;
+            ls->tri_level[t] = (uint8_t)level;
+            ls->tri_part_first[t] = ls->n_parts;
+            if (part_weights(s, *g, r, t, level, tri_w[t], *part_w + ls->n_parts))
+                ls->mat_emits[m->material[t]] = false;
+            ls->n_parts += n;
+        } else if (f.lit > 0.0) {
             /* (a footprint with a texel that is not zero stays an entry of
              * weight above 0, however small its mean: a triangle of pick 0
              * counts as not emitting) */
-            tri_w[t] *= fmax(mean, 1e-6 * dr_emission_grid_mean(*g));
+            tri_w[t] *= fmax(f.mean, 1e-6 * dr_emission_grid_mean(*g));
         } else {
             tri_w[t] = -1.0;
             ls->mat_emits[m->material[t]] = false;
@@ -208,8 +338,16 @@ static double normalise_picks(struct dr_light_sampler *ls)
         ls->cdf[i + 1] = total > 0.0 ? ls->cdf[i + 1] / total : 0.0;
     }
     for (int64_t i = 0; i < ls->n_emitters; i++) {
-        ls->tri_pick[ls->emitter_tri[i]] = ls->pick[i];
-        ls->tri_pick_density[ls->emitter_tri[i]] = ls->emitter_area[i] > 0.0 ? ls->pick[i] / ls->emitter_area[i] : 0.0;
+        const int64_t t = ls->emitter_tri[i];
+        const uint32_t sub = ls->emitter_sub[i];
+        const double density = ls->emitter_area[i] > 0.0 ? ls->pick[i] / ls->emitter_area[i] : 0.0;
+        ls->tri_pick[t] += ls->pick[i];   /* (a triangle's parts: the sum) */
+        if (sub == 0) {
+            ls->tri_pick_density[t] = density;
+        } else {   /* looked up by the point's part (area_density) */
+            ls->tri_pick_density[t] = -1.0;
+            ls->part_density[ls->tri_part_first[t] + (sub >> 3)] = density;
+        }
     }
     return total;
 }
@@ -226,26 +364,32 @@ struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
         ls->scene_radius = 1.0;
 
     const struct dr_mesh *m = &s->mesh;
-    double *tri_w = malloc(sizeof(double) * ((size_t)m->n_triangles + 1));
+    double *tri_w = malloc(sizeof(double) * ((size_t)m->n_triangles + 1)), *part_w = NULL;
     ls->n_materials = s->n_materials;
-    if (!tri_w || emitter_weights(s, ls, tri_w) != 0) {
+    if (!tri_w || emitter_weights(s, ls, tri_w, &part_w) != 0) {
         free(tri_w);
+        free(part_w);
         goto nomem;
     }
     for (uint32_t t = 0; t < m->n_triangles; t++)
-        ls->n_emitters += tri_w[t] >= 0.0;
+        ls->n_emitters += tri_level(ls, t) == 0 ? tri_w[t] >= 0.0 : 0;
+    for (int64_t j = 0; j < ls->n_parts; j++)
+        ls->n_emitters += part_w[j] >= 0.0;
     ls->n_punctual = s->n_lights;
     ls->n_entries = ls->n_emitters + ls->n_punctual + (s->env.present ? 1 : 0);
     ls->emitter_tri = malloc(sizeof(int64_t) * (size_t)(ls->n_emitters + 1));
+    ls->emitter_sub = malloc(sizeof(uint32_t) * (size_t)(ls->n_emitters + 1));
     ls->tri_pick = calloc((size_t)m->n_triangles + 1, sizeof(double));
     ls->tri_pick_density = calloc((size_t)m->n_triangles + 1, sizeof(double));
+    ls->part_density = calloc((size_t)ls->n_parts + 1, sizeof(double));
     ls->emitter_area = malloc(sizeof(double) * (size_t)(ls->n_emitters + 1));
     ls->cdf = malloc(sizeof(double) * (size_t)(ls->n_entries + 1));
     ls->pick = malloc(sizeof(double) * (size_t)(ls->n_entries + 1));
     ls->cdf_guide = malloc(sizeof(uint32_t) * (size_t)(ls->n_entries + 1));
-    if (!ls->emitter_tri || !ls->tri_pick || !ls->tri_pick_density || !ls->emitter_area || !ls->cdf || !ls->pick ||
-        !ls->cdf_guide) {
+    if (!ls->emitter_tri || !ls->emitter_sub || !ls->tri_pick || !ls->tri_pick_density || !ls->part_density ||
+        !ls->emitter_area || !ls->cdf || !ls->pick || !ls->cdf_guide) {
         free(tri_w);
+        free(part_w);
         goto nomem;
     }
 
@@ -253,13 +397,19 @@ struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
     double *w = ls->pick;
     int64_t k = 0;
     for (uint32_t t = 0; t < m->n_triangles; t++) {
-        if (tri_w[t] >= 0.0) {
-            ls->emitter_tri[k] = t;
-            ls->emitter_area[k] = dr_triangle_area(m, t);
-            w[k++] = tri_w[t];
-        }
+        const unsigned level = tri_level(ls, t);
+        const uint32_t n = 1u << (2 * level);
+        const double *tw = level == 0 ? tri_w + t : part_w + ls->tri_part_first[t];
+        for (uint32_t j = 0; j < n; j++)
+            if (tw[j] >= 0.0) {
+                ls->emitter_tri[k] = t;
+                ls->emitter_sub[k] = level == 0 ? 0u : j << 3 | level;
+                ls->emitter_area[k] = dr_triangle_area(m, t) / (double)n;
+                w[k++] = tw[j];
+            }
     }
     free(tri_w);
+    free(part_w);
     for (int i = 0; i < s->n_lights; i++)
         w[k++] = punctual_power(&s->lights[i], ls->scene_radius);
     if (s->env.present) {
@@ -288,6 +438,10 @@ void dr_light_sampler_destroy(struct dr_light_sampler *ls)
     if (!ls)
         return;
     free(ls->emitter_tri);
+    free(ls->emitter_sub);
+    free(ls->tri_level);
+    free(ls->tri_part_first);
+    free(ls->part_density);
     free(ls->tri_pick);
     free(ls->tri_pick_density);
     free(ls->emitter_area);
@@ -437,11 +591,19 @@ double dr_light_pdf_env_dsky(const struct dr_light_sampler *ls)
 
 double dr_light_pdf_area_pick(const struct dr_light_sampler *ls, int64_t tri) { return ls->tri_pick[tri]; }
 
+double dr_light_area_density(const struct dr_light_sampler *ls, int64_t tri, double b1, double b2)
+{
+    const double d = ls->tri_pick_density[tri];
+    if (d >= 0.0)
+        return d;
+    return ls->part_density[ls->tri_part_first[tri] + dr_light_part_locate(ls->tri_level[tri], b1, b2)];
+}
+
 double dr_light_pdf_area(const struct dr_scene *s, const struct dr_light_sampler *ls, dr_vec3 from,
                          const struct dr_hit *hit)
 {
     (void)s;
-    double density = ls->tri_pick_density[hit->tri];
+    double density = dr_light_area_density(ls, hit->tri, hit->b1, hit->b2);
     if (density <= 0.0)
         return 0.0;
     dr_vec3 d = dr_sub(hit->p, from);
@@ -454,10 +616,20 @@ bool dr_light_tables(const struct dr_light_sampler *ls, struct dr_light_tables *
 {
     if (ls->n_entries == 0)
         return false;
-    *t = (struct dr_light_tables){ls->n_entries, ls->n_emitters, ls->cdf, ls->cdf_guide, ls->pick,
-                                       ls->emitter_tri, ls->emitter_area, ls->tri_pick, ls->tri_pick_density,
-                                       ls->env_entry >= 0 && !ls->env_marginal ? ls->env_entry : -1,
-                                       ls->env_entry >= 0 && ls->env_marginal ? ls->env_entry : -1};
+    *t = (struct dr_light_tables){
+        .n_entries = ls->n_entries,
+        .n_emitters = ls->n_emitters,
+        .cdf = ls->cdf,
+        .cdf_guide = ls->cdf_guide,
+        .pick = ls->pick,
+        .emitter_tri = ls->emitter_tri,
+        .emitter_area = ls->emitter_area,
+        .emitter_sub = ls->emitter_sub,
+        .any_parts = ls->n_parts > 0,
+        .tri_pick = ls->tri_pick,
+        .tri_pick_density = ls->tri_pick_density,
+        .env_uniform_entry = ls->env_entry >= 0 && !ls->env_marginal ? ls->env_entry : -1,
+        .env_map_entry = ls->env_entry >= 0 && ls->env_marginal ? ls->env_entry : -1};
     return true;
 }
 
@@ -631,9 +803,11 @@ bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls
         return false;
     if (i < ls->n_emitters) {
         int64_t tri = ls->emitter_tri[i];
-        double su = sqrt(u1);
+        double su = sqrt(u1), b1 = 1.0 - su, b2 = u2 * su;
+        if (ls->emitter_sub[i] != 0)   /* uniform over a part: its point in the triangle */
+            dr_light_part_point(ls->emitter_sub[i], &b1, &b2);
         struct dr_hit h;
-        dr_hit_at(&s->mesh, tri, 1.0 - su, u2 * su, &h);
+        dr_hit_at(&s->mesh, tri, b1, b2, &h);
         dr_vec3 d = dr_sub(h.p, p);
         double d2 = dr_dot(d, d);
         if (!(d2 > 0.0))
@@ -649,8 +823,8 @@ bool dr_light_sample(const struct dr_scene *s, const struct dr_light_sampler *ls
         out->dist = dist;
         out->type = DR_LS_AREA;
         out->index = tri;
-        out->b1 = 1.0 - su;
-        out->b2 = u2 * su;
+        out->b1 = b1;
+        out->b2 = b2;
         out->target = dr_offset_origin(&h, h.ng, dr_neg(out->wi));
         out->pdf = ls->pick[i] * d2 / (fabs(cos_l) * area);
         out->delta = false;
@@ -787,7 +961,7 @@ void d_light_pdf_area_points(const struct dr_scene *s, const struct dr_light_sam
                              const struct dr_hit *hit, double d_pdf, dr_vec3 *d_from, dr_vec3 *d_hit_p)
 {
     (void)s;
-    double density = ls->tri_pick_density[hit->tri];
+    double density = dr_light_area_density(ls, hit->tri, hit->b1, hit->b2);   /* (constant within a part) */
     if (density <= 0.0 || d_pdf == 0.0)
         return;
     /* pdf = density |d|^3 / |ng . d|, d = hit.p - from */

@@ -123,14 +123,36 @@ struct dr_light_tables {
     const double *pick;             /* per entry: its probability */
     const int64_t *emitter_tri;     /* per entry: its triangle */
     const double *emitter_area;     /* per entry */
+    const uint32_t *emitter_sub;    /* per entry: 0, or the part of its triangle (dr_light_part_point) */
+    bool any_parts;                 /* some entry is a part */
     const double *tri_pick;         /* per triangle, as dr_light_pdf_area_pick */
-    const double *tri_pick_density; /* per triangle: pick probability / area */
+    const double *tri_pick_density; /* per triangle: pick probability / area; -1 where its
+                                       parts are entries (dr_light_area_density) */
     int64_t env_uniform_entry;      /* the environment's entry when it is constant (sampled
                                        uniformly over the sphere, dr_light_sample's
                                        sample_env), else -1 */
     int64_t env_map_entry;          /* the environment's entry when it has a map (env8.h), else -1 */
 };
 bool dr_light_tables(const struct dr_light_sampler *ls, struct dr_light_tables *t);
+
+/* Parts of emitting triangles. A large emitter whose emissive texture holds
+ * black texels over it is divided for the light table (midpoint
+ * subdivision, up to DR_LIGHT_MAX_LEVEL times), and each part is an entry
+ * weighted by its own footprint (emission_grid.h): next-event estimation
+ * then draws the light points among the texels that glow, and leaves out
+ * parts that can only read black ones. A part is sampled uniformly, so the
+ * density at a point is its part's pick over its area. */
+#define DR_LIGHT_MAX_LEVEL 6
+/* All triangles' parts together at most this many (each costs an entry,
+ * about 60 bytes with its build): a texture tiled over many large
+ * triangles divides the first ones only. */
+#define DR_LIGHT_MAX_PARTS (1 << 18)
+/* Maps (b1, b2) in part `sub` (an entry's emitter_sub, not 0) to its triangle's. */
+void dr_light_part_point(uint32_t sub, double *b1, double *b2);
+/* The part of the triangle's 4^level that holds (b1, b2), as a code (sub >> 3). */
+uint32_t dr_light_part_locate(unsigned level, double b1, double b2);
+/* Pick probability per area at the point (b1, b2) of triangle tri (0: not an entry there). */
+double dr_light_area_density(const struct dr_light_sampler *ls, int64_t tri, double b1, double b2);
 /* The environment map's sampling tables, for env8.c's eight-lane copies of
  * its sampling and density: piecewise constant over the w x h texels, rows
  * by the marginal cdf, columns by each row's conditional one. False when

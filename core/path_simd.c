@@ -627,8 +627,8 @@ DR_SIMD_INLINE dr_f8 gather_where(const double *a, const int64_t *k, dr_m8 on)
  * against next-event estimation (dr_light_pdf_area, dr_mis_power), where
  * the lane's triangle emits (g->emits, g->Le, g->emit_w). */
 static void emission_seen(const struct dr_scene *s, const struct dr_light_tables *lt, const struct lanes *L,
-                          const struct dr_path8_in *in, dr_v3x8 ng, dr_m8 front, dr_f8 tu, dr_f8 tv,
-                          struct dr_path8 *g)
+                          const struct dr_path8_in *in, dr_v3x8 ng, dr_m8 front, dr_f8 b1, dr_f8 b2, dr_f8 tu,
+                          dr_f8 tv, struct dr_path8 *g)
 {
     /* Only a material whose factor x strength is not black has emitting
      * triangles (the light sampler's emitter_power_weight): the per-triangle
@@ -648,6 +648,9 @@ static void emission_seen(const struct dr_scene *s, const struct dr_light_tables
         if (g->emits[i] && L->scalar_emission[i])
             set_lane(&Le, i, dr_emission(s, &L->hit[i]));
     dr_f8 density = gather_where(lt->tri_pick_density, L->tri, g->emits);
+    for (int i = 0; lt->any_parts && i < DR_SIMD_W; i++)   /* a triangle with parts: the hit's part's */
+        if (g->emits[i] && density[i] < 0.0)
+            density[i] = dr_light_area_density(s->light_sampler, L->tri[i], b1[i], b2[i]);
     dr_v3x8 dd = dr_v3x8_sub(g->p, in->prev_p);
     dr_f8 d2 = dr_v3x8_dot(dd, dd);
     dr_f8 cos_l = dr_f8_abs(dr_v3x8_dot(ng, dd)) / dr_f8_sqrt(d2);
@@ -749,7 +752,7 @@ static void find_entries(const struct dr_light_tables *lt, dr_f8 u, int64_t e[DR
  * (for all three the area arithmetic runs on a stand-in). */
 static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *lt, struct lanes *L,
                         const struct dr_path8_ahead *ahead, dr_f8 u_pick, dr_f8 *pick, dr_f8 *area,
-                        uint32_t v[3][DR_SIMD_W], dr_m8 *env, dr_m8 *env_map, bool *other)
+                        uint32_t v[3][DR_SIMD_W], uint32_t sub[DR_SIMD_W], dr_m8 *env, dr_m8 *env_map, bool *other)
 {
     const struct dr_mesh *m = &s->mesh;
     int64_t entry[DR_SIMD_W];
@@ -766,6 +769,8 @@ static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *
         other[i] = entry[i] >= lt->n_emitters && !(*env)[i] && !(*env_map)[i];
         if (entry[i] >= lt->n_emitters)
             entry[i] = lt->n_emitters > 0 ? 0 : -1;
+        else if (lt->any_parts)
+            sub[i] = lt->emitter_sub[entry[i]];   /* (a stand-in's stays 0: the whole triangle) */
     }
     /* Each lane's reads depend on the one before (entry, its triangle, the
      * triangle's vertices); on a scene with thousands of emitters each is a
@@ -777,6 +782,8 @@ static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *
                 __builtin_prefetch(lt->emitter_tri + entry[i]);
                 __builtin_prefetch(lt->pick + entry[i]);
                 __builtin_prefetch(lt->emitter_area + entry[i]);
+                if (lt->any_parts)
+                    __builtin_prefetch(lt->emitter_sub + entry[i]);
             }
         for (int i = 0; i < DR_SIMD_W; i++)
             if (entry[i] >= 0)
@@ -941,7 +948,8 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     uint32_t v[3][DR_SIMD_W];
     bool other[DR_SIMD_W];
     dr_m8 env, env_map;
-    pick_lights(s, lt, L, ahead, u_pick, &pick, &area, v, &env, &env_map, other);
+    uint32_t sub[DR_SIMD_W] = {0};
+    pick_lights(s, lt, L, ahead, u_pick, &pick, &area, v, sub, &env, &env_map, other);
     out->diff = (dr_m8){0};
     for (int i = 0; record && i < DR_SIMD_W; i++) {   /* (dr_path_vertex_has_derivative's switch) */
         const int type = env[i] || env_map[i] ? DR_LS_ENV : other[i] ? DR_LS_PUNCTUAL : DR_LS_AREA;
@@ -951,7 +959,14 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     }
     dr_m8 ok = ~dr_f8_le(pick, dr_f8s(0.0));
     dr_f8 su = dr_f8_sqrt(u1);
-    dr_f8 b1 = 1.0 - su, b2 = u2 * su, b0 = 1.0 - b1 - b2;
+    dr_f8 b1 = 1.0 - su, b2 = u2 * su;
+    for (int i = 0; lt->any_parts && i < DR_SIMD_W; i++)   /* a part of its triangle: its point there */
+        if (sub[i] != 0) {
+            double x = b1[i], y = b2[i];
+            dr_light_part_point(sub[i], &x, &y);
+            b1[i] = x, b2[i] = y;
+        }
+    dr_f8 b0 = 1.0 - b1 - b2;
     out->b1 = b1, out->b2 = b2, out->atten = dr_f8s(0.0);   /* (atten: a punctual lane's, other_light_samples) */
     out->env_map = (dr_m8){0};
     dr_v3x8 lp = interp(b0, b1, b2, gather_vertex(m->positions, v[0]), gather_vertex(m->positions, v[1]),
@@ -1162,6 +1177,8 @@ void dr_path8_ahead_stage(const struct dr_scene *s, const struct dr_path8_in *in
                 __builtin_prefetch(lt.emitter_tri + e);
                 __builtin_prefetch(lt.pick + e);
                 __builtin_prefetch(lt.emitter_area + e);
+                if (lt.any_parts)
+                    __builtin_prefetch(lt.emitter_sub + e);
             }
         }
         break;
@@ -1285,7 +1302,7 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     }
     g->emits = (dr_m8){0};
     if (opts->stages & DR_STAGE_EMISSION)
-        emission_seen(s, &lt, &L, in, ng, front, tu, tv, g);
+        emission_seen(s, &lt, &L, in, ng, front, b1, b2, tu, tv, g);
     g->diff_emit = (dr_m8){0};
     const struct dr_param_set *ps = opts->params;
     for (int i = 0; ps && ps->radiance_active && (opts->stages & DR_STAGE_EMISSION) && i < n; i++)

@@ -10,6 +10,7 @@
 #include "estimator.h"
 #include "fdcheck.h"
 #include "scene_builder.h"
+#include "lights.h"
 #include "test.h"
 
 struct fd_case {
@@ -506,6 +507,35 @@ static void dark_texels(void)
     dr_scene_destroy(s);
 }
 
+/* The same panel with a 32x32 texture, black but for a 3x3 spot: its
+ * triangles are sampled part by part (lights.h), the parts that can read
+ * only black texels left out of the light table, so next-event estimation
+ * reaches only the spot and the black texels' derivative comes from the
+ * hits of BSDF-sampled rays alone (their light density there is 0). */
+static void spotted_parts(void)
+{
+    struct sb b;
+    sb_init(&b);
+    sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, sb_diffuse(dr_v3s(0.7))));
+    struct dr_material glow = emitter(dr_v3s(1.0));
+    glow.emissive_strength = 20.0;
+    glow.emissive_tex.texture = 0;
+    sb_quad(&b, dr_v3(-0.5, 1.5, 0.5), dr_v3(0, 0, -1), dr_v3(1, 0, 0), sb_material(&b, glow));
+    static float px[32 * 32 * 3];
+    for (int y = 20; y < 23; y++)
+        for (int x = 9; x < 12; x++)
+            for (int c = 0; c < 3; c++)
+                px[3 * (32 * y + x) + c] = 1.0f;
+    struct dr_scene *s = one_texture(&b, sb_image(32, 32, 3, px, 0.0f, true));
+    struct dr_light_tables lt;
+    CHECK(dr_light_tables(s->light_sampler, &lt) && lt.any_parts && lt.n_emitters < 16,
+          "spotted panel: sampled part by part, black parts left out (%lld entries)", (long long)lt.n_emitters);
+    const char *p[] = {"/images/0", "/materials/1/extensions/KHR_materials_emissive_strength/emissiveStrength"};
+    struct fd_case c = {"spot-parts", 16, 8, 3, 16, 1e-2, NULL, NULL};
+    run_case(&c, s, sb_camera(dr_v3(0, 1, 2), dr_v3(0, 0, 0), 50), p, 2);
+    dr_scene_destroy(s);
+}
+
 static void dark_sky(void)
 {
     struct sb b;
@@ -554,6 +584,7 @@ int main(void)
     glossy_closed_box();
     tiny_emitter();
     dark_texels();
+    spotted_parts();
     dark_sky();
     scales();
     return TEST_END();

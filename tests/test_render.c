@@ -736,6 +736,39 @@ static struct dr_scene *textured_lamp_box(bool eight_bit)
     return s;
 }
 
+/* A lamp of two large triangles whose emissive texture is black but for
+ * two spots (the way assets paint their glowing parts): the light table
+ * samples its triangles part by part (lights.h, dr_light_part_point), the
+ * packet tracer maps its lanes' light points into their parts and looks up
+ * the density of the part a hit is in. eight_bit as textured_lamp_box. */
+static float spot_px[64 * 64 * 3];
+static struct dr_scene *spotted_lamp_box(bool eight_bit)
+{
+    for (int y = 0; y < 64; y++)
+        for (int x = 0; x < 64; x++) {
+            float *p = spot_px + 3 * (64 * y + x);
+            const bool a = x >= 8 && x < 12 && y >= 10 && y < 14, c = x >= 40 && x < 48 && y >= 30 && y < 34;
+            p[0] = a ? 1.0f : c ? 0.3f : 0.0f;
+            p[1] = a ? 0.8f : c ? 0.6f : 0.0f;
+            p[2] = a ? 0.5f : c ? 1.0f : 0.0f;
+        }
+    struct sb b;
+    sb_init(&b);
+    sb_open_box(&b, 2.0, sb_material(&b, sb_diffuse(dr_v3(0.7, 0.6, 0.5))));
+    sb_box(&b, dr_v3(-0.5, 0.0, -0.5), dr_v3(0.0, 0.7, 0.0), sb_material(&b, glossy_blue()));
+    struct dr_material glow = warm_lamp();
+    glow.emissive_factor = dr_v3(40.0, 30.0, 20.0);
+    glow.emissive_tex.texture =
+        sb_texture(&b, eight_bit ? sb_image8(64, 64, 3, spot_px) : sb_image(64, 64, 3, spot_px, 0.0f, true));
+    sb_quad(&b, dr_v3(-0.6, 1.9, -0.6), dr_v3(1.2, 0, 0), dr_v3(0, 0, 1.2), sb_material(&b, glow));   /* faces down */
+    struct dr_scene *s = sb_finish(&b);
+    struct dr_light_tables lt;
+    CHECK(dr_light_tables(s->light_sampler, &lt) && lt.any_parts && lt.n_emitters > 2 && lt.n_emitters < 200,
+          "the spotted lamp's triangles are sampled part by part, the black parts left out (%lld entries)",
+          (long long)lt.n_emitters);
+    return s;
+}
+
 /* ---- differentiated vertices from the eight-lane stages (prb's walks and
  * replays, dr_wave_ops.bsdf_terms) against the one-path walker's */
 
@@ -942,6 +975,9 @@ static void test_wavefront_matches_one_path(void)
                       "textured lamp box");
     exact_with_groups(textured_lamp_box(true), DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_TEXTURES, inside,
                       "textured lamp box, eight-bit textures");
+    exact_with_groups(spotted_lamp_box(false), DR_FX_AREA_LIGHTS | DR_FX_TEXTURES, inside, "spotted lamp box");
+    exact_with_groups(spotted_lamp_box(true), DR_FX_AREA_LIGHTS | DR_FX_TEXTURES, inside,
+                      "spotted lamp box, eight-bit texture");
     s = coloured_box();
     CHECK(!dr_wave_prefetches(s), "the coloured box is shaded without prefetching");
     exact_with_groups(s, DR_FX_VERTEX_COLORS, inside, "coloured box");
