@@ -160,7 +160,7 @@ static void cells(const struct dr_emission_grid *g, int cx0, int cx1, int cy0, i
 bool dr_emission_footprint(const struct dr_emission_grid *g, const struct dr_mesh *m, const struct dr_texref *r,
                            const struct dr_texture *tex, uint32_t tri, double *mean)
 {
-    const double corner[3][2] = {{0.0, 0.0}, {1.0, 0.0}, {0.0, 1.0}};   /* (b1, b2) of the vertices */
+    double corner[3][2] = {{0.0, 0.0}, {1.0, 0.0}, {0.0, 1.0}};   /* (b1, b2) of the vertices */
     struct dr_footprint f;
     const bool any = dr_emission_footprint_part(g, m, r, tex, tri, corner, &f);
     *mean = f.mean;
@@ -168,7 +168,7 @@ bool dr_emission_footprint(const struct dr_emission_grid *g, const struct dr_mes
 }
 
 bool dr_emission_footprint_part(const struct dr_emission_grid *g, const struct dr_mesh *m, const struct dr_texref *r,
-                                const struct dr_texture *tex, uint32_t tri, const double corner[3][2],
+                                const struct dr_texture *tex, uint32_t tri, double corner[3][2],
                                 struct dr_footprint *out)
 {
     double u0 = INFINITY, u1 = -INFINITY, v0 = INFINITY, v1 = -INFINITY;

@@ -53,7 +53,7 @@ struct dr_footprint {
     double mean, texels, lit;
 };
 bool dr_emission_footprint_part(const struct dr_emission_grid *g, const struct dr_mesh *m, const struct dr_texref *r,
-                                const struct dr_texture *tex, uint32_t tri, const double corner[3][2],
+                                const struct dr_texture *tex, uint32_t tri, double corner[3][2],
                                 struct dr_footprint *f);
 
 #endif
