@@ -1093,11 +1093,7 @@ static void vertex_randoms(const struct dr_path8_in *in, const uint32_t *dim, dr
         const dr_u32x8 rindex = dr_reverse_bits8(DR_LANES8(dr_u32x8, INDEX));
 #undef PKEY
 #undef INDEX
-        dr_sobol2_8(pkey, rindex, d + 1, &u[0], NULL);
-        dr_sobol2_8(pkey, rindex, d + 2, &u[1], &u[2]);
-        dr_sobol2_8(pkey, rindex, d + 4, &u[3], NULL);
-        dr_sobol2_8(pkey, rindex, d + 5, &u[4], &u[5]);
-        dr_sobol2_8(pkey, rindex, d + 7, &u[6], NULL);
+        dr_sobol_vertex8(pkey, rindex, d, u);
         return;
     }
     for (int k = 0; k < 7; k++)

@@ -121,6 +121,102 @@ DR_SIMD_INLINE void dr_sobol2_8(dr_u8 pkey, dr_u32x8 rindex, dr_u8 dim, dr_f8 *u
     dr_sobol2_hashed8(h, h1, h2, rindex, u1, u2);
 }
 
+/* ---- a path vertex's five Sobol draws, two dimensions to a register ----
+ * A vertex draws five dimensions (vertex_randoms, path_simd.c). Their
+ * 32-bit arithmetic on eight lanes (Laine-Karras chains, bit reversals,
+ * dimension 1's table) filled half a register, and as a chain of dependent
+ * multiplies each draw waited on its own: the draws took 10 % of a
+ * render. With two dimensions joined in sixteen lanes the same operations
+ * run about half as often, lane for lane the same bits. */
+
+typedef uint32_t dr_u32x16 __attribute__((vector_size(16 * sizeof(uint32_t))));
+
+DR_SIMD_INLINE dr_u32x16 dr_join16(dr_u32x8 a, dr_u32x8 b)
+{
+    return __builtin_shufflevector(a, b, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+}
+DR_SIMD_INLINE dr_u32x8 dr_low8(dr_u32x16 x)
+{
+    return __builtin_shufflevector(x, x, 0, 1, 2, 3, 4, 5, 6, 7);
+}
+DR_SIMD_INLINE dr_u32x8 dr_high8(dr_u32x16 x)
+{
+    return __builtin_shufflevector(x, x, 8, 9, 10, 11, 12, 13, 14, 15);
+}
+
+/* dr_reverse_bits8 on sixteen lanes */
+DR_SIMD_INLINE dr_u32x16 dr_reverse_bits16(dr_u32x16 x)
+{
+#if defined(__GFNI__) && defined(__AVX512BW__)
+    const __m512i byte_reversal = _mm512_set1_epi64(0x8040201008040201LL);
+    const __m512i byte_swap = _mm512_broadcast_i32x4(_mm_setr_epi8(3, 2, 1, 0, 7, 6, 5, 4, 11, 10, 9, 8, 15, 14, 13, 12));
+    return (dr_u32x16)_mm512_shuffle_epi8(_mm512_gf2p8affine_epi64_epi8((__m512i)x, byte_reversal, 0), byte_swap);
+#else
+    DR_REVERSE_BITS_STEPS(x);
+    return x;
+#endif
+}
+
+DR_SIMD_INLINE dr_u32x16 dr_laine_karras16(dr_u32x16 x, dr_u32x16 seed)
+{
+    DR_LAINE_KARRAS_STEPS(x, seed);
+    return x;
+}
+
+/* dr_sobol_dim1_8 on sixteen lanes: with AVX-512 a four-bit group's
+ * sixteen entries are one register, looked up by one permutation. */
+DR_SIMD_INLINE dr_u32x16 dr_sobol_dim1_16(dr_u32x16 i)
+{
+    dr_u32x16 x = {0};
+#if defined(__AVX512F__)
+    for (int n = 0; n < 8; n++, i >>= 4)
+        x ^= (dr_u32x16)_mm512_permutexvar_epi32((__m512i)(i & 15u), _mm512_loadu_si512(dr_sobol_dim1_nibble[n]));
+#else
+    uint32_t v = 0x80000000u;
+    for (int b = 0; b < 32; b++, i >>= 1, v ^= v >> 1)
+        x ^= (0u - (i & 1u)) & v;
+#endif
+    return x;
+}
+
+/* The draws of dr_sobol2_8 for dimensions d+1 (one number), d+2 (a pair),
+ * d+4 (one), d+5 (a pair) and d+7 (one) into u[0 .. 7), in that order:
+ * the same hashes, and dr_sobol2_hashed8's operations with the dimensions
+ * taken two at a time (d+1 with d+2, d+4 with d+5, the pairs' second
+ * numbers together). */
+DR_SIMD_INLINE void dr_sobol_vertex8(dr_u8 pkey, dr_u32x8 rindex, dr_u8 d, dr_f8 u[7])
+{
+    static const int offset[5] = {1, 2, 4, 5, 7};
+    dr_u8 h[5], h1[5];
+    for (int k = 0; k < 5; k++) {
+        h[k] = dr_hash64x8(pkey + (d + (uint64_t)offset[k]) * 0xd1b54a32d192ed03ULL);
+        h1[k] = dr_hash64x8(h[k] ^ 0x1111111111111111ULL);
+    }
+    const dr_u8 h2a = dr_hash64x8(h[1] ^ 0x2222222222222222ULL), h2b = dr_hash64x8(h[3] ^ 0x2222222222222222ULL);
+#define LOW32(v) __builtin_convertvector(v, dr_u32x8)
+#define HIGH32(v) __builtin_convertvector((v) >> 32, dr_u32x8)
+    /* the shuffled indices (dr_owen_scramble of the index, reversals met) */
+    const dr_u32x16 r2 = dr_join16(rindex, rindex);
+    const dr_u32x16 ia = dr_reverse_bits16(dr_laine_karras16(r2, dr_join16(LOW32(h[0]), LOW32(h[1]))));
+    const dr_u32x16 ib = dr_reverse_bits16(dr_laine_karras16(r2, dr_join16(LOW32(h[2]), LOW32(h[3]))));
+    const dr_u32x8 ic = dr_reverse_bits8(dr_laine_karras8(rindex, LOW32(h[4])));
+    /* the first numbers: dimension 0 Owen-scrambled */
+    const dr_u32x16 xa = dr_reverse_bits16(dr_laine_karras16(ia, dr_join16(HIGH32(h1[0]), HIGH32(h1[1]))));
+    const dr_u32x16 xb = dr_reverse_bits16(dr_laine_karras16(ib, dr_join16(HIGH32(h1[2]), HIGH32(h1[3]))));
+    u[0] = dr_sobol_to_f8(dr_low8(xa), h1[0]);
+    u[1] = dr_sobol_to_f8(dr_high8(xa), h1[1]);
+    u[3] = dr_sobol_to_f8(dr_low8(xb), h1[2]);
+    u[4] = dr_sobol_to_f8(dr_high8(xb), h1[3]);
+    u[6] = dr_sobol_to_f8(dr_reverse_bits8(dr_laine_karras8(ic, HIGH32(h1[4]))), h1[4]);
+    /* the pairs' second numbers: dimension 1 Owen-scrambled */
+    const dr_u32x16 y = dr_reverse_bits16(dr_laine_karras16(
+        dr_reverse_bits16(dr_sobol_dim1_16(dr_join16(dr_high8(ia), dr_high8(ib)))), dr_join16(HIGH32(h2a), HIGH32(h2b))));
+    u[2] = dr_sobol_to_f8(dr_low8(y), h2a);
+    u[5] = dr_sobol_to_f8(dr_high8(y), h2b);
+#undef LOW32
+#undef HIGH32
+}
+
 /* dr_sampler_pixel_sample and dr_sampler_pixel_first2 for eight samples at
  * once: sample[l] of pixel p[l] (all of one kind). Their samplers into
  * s[0..7] and their first draws (the camera's) into *u1 and *u2; stratified
