@@ -111,16 +111,6 @@ DR_SIMD_INLINE void dr_sobol2_hashed8(dr_u8 h, dr_u8 h1, dr_u8 h2, dr_u32x8 rind
     }
 }
 
-/* dr_sampler_sobol2 of dimension dim for lanes with scrambling seed pkey
- * (rindex as above); u2 NULL: the first number only. */
-DR_SIMD_INLINE void dr_sobol2_8(dr_u8 pkey, dr_u32x8 rindex, dr_u8 dim, dr_f8 *u1, dr_f8 *u2)
-{
-    dr_u8 h = dr_hash64x8(pkey + dim * 0xd1b54a32d192ed03ULL);
-    dr_u8 h1 = dr_hash64x8(h ^ 0x1111111111111111ULL);
-    dr_u8 h2 = u2 ? dr_hash64x8(h ^ 0x2222222222222222ULL) : h;
-    dr_sobol2_hashed8(h, h1, h2, rindex, u1, u2);
-}
-
 /* ---- a path vertex's five Sobol draws, two dimensions to a register ----
  * A vertex draws five dimensions (vertex_randoms, path_simd.c). Their
  * 32-bit arithmetic on eight lanes (Laine-Karras chains, bit reversals,
@@ -179,11 +169,13 @@ DR_SIMD_INLINE dr_u32x16 dr_sobol_dim1_16(dr_u32x16 i)
     return x;
 }
 
-/* The draws of dr_sobol2_8 for dimensions d+1 (one number), d+2 (a pair),
- * d+4 (one), d+5 (a pair) and d+7 (one) into u[0 .. 7), in that order:
- * the same hashes, and dr_sobol2_hashed8's operations with the dimensions
- * taken two at a time (d+1 with d+2, d+4 with d+5, the pairs' second
- * numbers together). */
+/* dr_sampler_sobol2's draws for lanes with scrambling seeds pkey, sample
+ * indices given as rindex = dr_reverse_bits8(index), of dimensions d+1
+ * (one number), d+2 (a pair), d+4 (one), d+5 (a pair) and d+7 (one) into
+ * u[0 .. 7), in that order (a vertex's dr_sampler_next and next2 from
+ * dimension d): the same hashes (dr_sobol_hashes_of), and
+ * dr_sobol2_hashed8's operations with the dimensions taken two at a time
+ * (d+1 with d+2, d+4 with d+5, the pairs' second numbers together). */
 DR_SIMD_INLINE void dr_sobol_vertex8(dr_u8 pkey, dr_u32x8 rindex, dr_u8 d, dr_f8 u[7])
 {
     static const int offset[5] = {1, 2, 4, 5, 7};

@@ -161,6 +161,40 @@ static void test_pixel_sampler_eight(void)
     CHECK(bad == 0, "the eight-lane start differs from the scalar one in %d lanes", bad);
 }
 
+/* A path vertex's seven numbers from the eight-lane Sobol draws
+ * (dr_sobol_vertex8, the packet tracer's) against dr_sampler_next and
+ * next2 lane by lane: every lane its own pixel, sample and dimension. */
+static void test_sobol_vertex_eight(void)
+{
+    int bad = 0;
+    for (uint64_t k = 0; k < 400; k++) {
+        struct dr_sampler s[8];
+        dr_u8 pkey, d;
+        dr_u32x8 index;
+        for (int l = 0; l < 8; l++) {
+            const uint64_t n = 8 * k + (uint64_t)l;
+            dr_sampler_init_kind(&s[l], DR_SAMPLER_SOBOL, n % 5, n / 5 * 17, dr_hash64(n) % 1000, 1000);
+            s[l].dim = 2 + 7 * (uint32_t)(dr_hash64(n ^ 77) % 40);
+            pkey[l] = s[l].pkey, index[l] = s[l].index, d[l] = s[l].dim;
+        }
+        dr_f8 u[7];
+        dr_sobol_vertex8(pkey, dr_reverse_bits8(index), d, u);
+        for (int l = 0; l < 8; l++) {
+            double r[7];
+            r[0] = dr_sampler_next(&s[l]);
+            dr_sampler_next2(&s[l], &r[1], &r[2]);
+            r[3] = dr_sampler_next(&s[l]);
+            dr_sampler_next2(&s[l], &r[4], &r[5]);
+            r[6] = dr_sampler_next(&s[l]);
+            for (int j = 0; j < 7; j++) {
+                const double v = u[j][l];
+                bad += memcmp(&r[j], &v, sizeof v) != 0;
+            }
+        }
+    }
+    CHECK(bad == 0, "dr_sobol_vertex8 differs from the scalar draws in %d of %d numbers", bad, 400 * 8 * 7);
+}
+
 /* Over N = 2^k samples of a pixel, every 1D Sobol draw puts one sample in
  * each interval [i/N, (i+1)/N), and every 2D draw one in each elementary box
  * of area 1/N (2^a x 2^b cells, a + b = k). */
@@ -273,6 +307,7 @@ int main(void)
     test_sobol_definition();
     test_pixel_sampler();
     test_pixel_sampler_eight();
+    test_sobol_vertex_eight();
     test_sobol_stratified();
     test_sobol_pure();
     test_convergence();
