@@ -68,10 +68,19 @@ DR_SIMD_INLINE dr_u32x8 dr_laine_karras8(dr_u32x8 x, dr_u32x8 seed)
     return x;
 }
 
+/* Dimension 1 of index vector i into x (zero on entry), from the generator
+ * matrix's columns v_b for the set bits: where no permutation looks the
+ * table up (a table lookup per lane costs more than the 32 steps). */
+#define DR_SOBOL_DIM1_COLUMNS(x, i)                                \
+    do {                                                           \
+        uint32_t v_ = 0x80000000u;                                 \
+        for (int b_ = 0; b_ < 32; b_++, (i) >>= 1, v_ ^= v_ >> 1)  \
+            (x) ^= (0u - ((i) & 1u)) & v_;                         \
+    } while (0)
+
 /* dr_sobol_dim1. With AVX-512 its table's sixteen entries for a group of
  * four bits fit two registers, and one two-register permutation looks all
- * eight lanes up; elsewhere the generator matrix's columns v_b for the set
- * bits (a table lookup per lane costs more than the 32 steps). */
+ * eight lanes up; elsewhere DR_SOBOL_DIM1_COLUMNS. */
 DR_SIMD_INLINE dr_u32x8 dr_sobol_dim1_8(dr_u32x8 i)
 {
     dr_u32x8 x = {0};
@@ -82,9 +91,7 @@ DR_SIMD_INLINE dr_u32x8 dr_sobol_dim1_8(dr_u32x8 i)
                                               _mm256_loadu_si256((const __m256i *)(t + 8)));
     }
 #else
-    uint32_t v = 0x80000000u;
-    for (int b = 0; b < 32; b++, i >>= 1, v ^= v >> 1)
-        x ^= (0u - (i & 1u)) & v;
+    DR_SOBOL_DIM1_COLUMNS(x, i);
 #endif
     return x;
 }
@@ -134,7 +141,8 @@ DR_SIMD_INLINE dr_u32x8 dr_high8(dr_u32x16 x)
     return __builtin_shufflevector(x, x, 8, 9, 10, 11, 12, 13, 14, 15);
 }
 
-/* dr_reverse_bits8 on sixteen lanes */
+/* dr_reverse_bits8 on sixteen lanes: one register's worth with AVX-512,
+ * else the eight-lane form on each half (GFNI's, where there is GFNI) */
 DR_SIMD_INLINE dr_u32x16 dr_reverse_bits16(dr_u32x16 x)
 {
 #if defined(__GFNI__) && defined(__AVX512BW__)
@@ -142,8 +150,7 @@ DR_SIMD_INLINE dr_u32x16 dr_reverse_bits16(dr_u32x16 x)
     const __m512i byte_swap = _mm512_broadcast_i32x4(_mm_setr_epi8(3, 2, 1, 0, 7, 6, 5, 4, 11, 10, 9, 8, 15, 14, 13, 12));
     return (dr_u32x16)_mm512_shuffle_epi8(_mm512_gf2p8affine_epi64_epi8((__m512i)x, byte_reversal, 0), byte_swap);
 #else
-    DR_REVERSE_BITS_STEPS(x);
-    return x;
+    return dr_join16(dr_reverse_bits8(dr_low8(x)), dr_reverse_bits8(dr_high8(x)));
 #endif
 }
 
@@ -162,9 +169,7 @@ DR_SIMD_INLINE dr_u32x16 dr_sobol_dim1_16(dr_u32x16 i)
     for (int n = 0; n < 8; n++, i >>= 4)
         x ^= (dr_u32x16)_mm512_permutexvar_epi32((__m512i)(i & 15u), _mm512_loadu_si512(dr_sobol_dim1_nibble[n]));
 #else
-    uint32_t v = 0x80000000u;
-    for (int b = 0; b < 32; b++, i >>= 1, v ^= v >> 1)
-        x ^= (0u - (i & 1u)) & v;
+    DR_SOBOL_DIM1_COLUMNS(x, i);
 #endif
     return x;
 }

@@ -101,17 +101,36 @@ static void test_far_from_origin(void)
     dr_scene_destroy(s);
 }
 
+/* The closed-mesh scenes' start: a single-sided grey material (*m) and a
+ * double-sided one for the plate (*plate). */
+static void closed_scene_start(struct sb *b, int *m, int *plate)
+{
+    sb_init(b);
+    *m = sb_material(b, sb_diffuse(dr_v3s(0.5)));
+    struct dr_material ds = sb_diffuse(dr_v3s(0.5));
+    ds.double_sided = true;
+    *plate = sb_material(b, ds);
+}
+
+/* ... and their end: the double-sided plate far off (it keeps the room
+ * test from proving anything), a white sky, the camera. */
+static struct dr_scene *closed_scene_finish(struct sb *b, int plate, struct dr_camera cam)
+{
+    sb_quad(b, dr_v3(-20, 5, -20), dr_v3(40, 0, 0), dr_v3(0, 0, 40), plate);
+    sb_environment(b, dr_v3s(1.0));
+    b->s->n_file_materials = b->s->n_materials;
+    scene_camera(b->s, cam);
+    return sb_finish(b);
+}
+
 /* A closed box seen from outside and from inside; a scene of one
  * double-sided plate far off keeps the room test from proving anything. */
 enum variant { CLOSED, OPEN, FLIPPED, INWARD };
 static struct dr_scene *box_scene(enum variant v, dr_vec3 view)
 {
     struct sb b;
-    sb_init(&b);
-    int m = sb_material(&b, sb_diffuse(dr_v3s(0.5)));
-    struct dr_material ds = sb_diffuse(dr_v3s(0.5));
-    ds.double_sided = true;
-    int plate = sb_material(&b, ds);
+    int m, plate;
+    closed_scene_start(&b, &m, &plate);
     dr_vec3 lo = dr_v3(-1, -1, -1), hi = dr_v3(1, 1, 1);
     if (v == INWARD) {   /* the box's faces wound the other way: a closed room */
         dr_vec3 dx = dr_v3(2, 0, 0), dy = dr_v3(0, 2, 0), dz = dr_v3(0, 0, 2);
@@ -132,13 +151,8 @@ static struct dr_scene *box_scene(enum variant v, dr_vec3 view)
         mesh->indices[1] = mesh->indices[2];
         mesh->indices[2] = tmp;
     }
-    uint32_t n_box = mesh->n_triangles;
-    sb_quad(&b, dr_v3(-20, 5, -20), dr_v3(40, 0, 0), dr_v3(0, 0, 40), plate);
-    sb_environment(&b, dr_v3s(1.0));
-    b.s->n_file_materials = b.s->n_materials;
-    CHECK(n_box == (v == OPEN ? 10u : 12u), "the box's triangles come first (%u)", n_box);
-    scene_camera(b.s, sb_camera(view, dr_v3(0, 0, 0.5), 40));
-    return sb_finish(&b);
+    CHECK(mesh->n_triangles == (v == OPEN ? 10u : 12u), "the box's triangles come first (%u)", mesh->n_triangles);
+    return closed_scene_finish(&b, plate, sb_camera(view, dr_v3(0, 0, 0.5), 40));
 }
 
 static void test_closed(void)
@@ -206,11 +220,8 @@ enum fan_variant { FAN_CLOSED, FAN_FIN, FAN_TWISTED };
 static struct dr_scene *bipyramid_scene(enum fan_variant v)
 {
     struct sb b;
-    sb_init(&b);
-    int m = sb_material(&b, sb_diffuse(dr_v3s(0.5)));
-    struct dr_material ds = sb_diffuse(dr_v3s(0.5));
-    ds.double_sided = true;
-    int plate = sb_material(&b, ds);
+    int m, plate;
+    closed_scene_start(&b, &m, &plate);
     uint32_t top = sb_vertex(&b, dr_v3(0, 1, 0), 0, 0), bottom = sb_vertex(&b, dr_v3(0, -1, 0), 0, 0);
     for (int i = 0; i < FAN; i++) {
         double a0 = 2 * M_PI * i / FAN, a1 = 2 * M_PI * ((i + 1) % FAN) / FAN;   /* the ring closes exactly */
@@ -225,11 +236,7 @@ static struct dr_scene *bipyramid_scene(enum fan_variant v)
     }
     if (v == FAN_FIN)
         sb_triangle(&b, top, sb_vertex(&b, dr_v3(1, 0, 0), 0, 0), sb_vertex(&b, dr_v3(2, 0.5, 0), 0, 0), m);
-    sb_quad(&b, dr_v3(-20, 5, -20), dr_v3(40, 0, 0), dr_v3(0, 0, 40), plate);   /* keeps the room test out */
-    sb_environment(&b, dr_v3s(1.0));
-    b.s->n_file_materials = b.s->n_materials;
-    scene_camera(b.s, sb_camera(dr_v3(0.3, 0.4, 6), dr_v3(0, 0, 0), 40));
-    return sb_finish(&b);
+    return closed_scene_finish(&b, plate, sb_camera(dr_v3(0.3, 0.4, 6), dr_v3(0, 0, 0), 40));
 }
 
 static void test_closed_fan(void)

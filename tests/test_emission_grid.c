@@ -21,6 +21,7 @@
 #include "cdf.h"
 #include "emission_grid.h"
 #include "geometry.h"
+#include "light_estimates.h"
 #include "lights.h"
 #include "sampler.h"
 #include "scene_builder.h"
@@ -79,12 +80,6 @@ static void scatter(struct sb *b, struct dr_sampler *smp, int mat, int n)
     }
 }
 
-/* Does material m emit (factor x strength not black)? */
-static bool emits(const struct dr_material *m)
-{
-    return !dr_is_black(dr_scale(m->emissive_factor, m->emissive_strength));
-}
-
 /* Every triangle left out of the light table emits exactly 0 at its
  * vertices, edge midpoints and 64 random points. Counts left out and kept. */
 static void left_out_emit_nothing(const struct dr_scene *s, struct dr_sampler *smp, int *out, int *kept)
@@ -93,7 +88,7 @@ static void left_out_emit_nothing(const struct dr_scene *s, struct dr_sampler *s
     int bad = 0;
     *out = *kept = 0;
     for (uint32_t t = 0; t < s->mesh.n_triangles; t++) {
-        if (!emits(&s->materials[s->mesh.material[t]]))
+        if (!material_emits(&s->materials[s->mesh.material[t]]))
             continue;
         if (dr_light_pdf_area_pick(s->light_sampler, t) > 0.0) {
             ++*kept;
@@ -112,50 +107,6 @@ static void left_out_emit_nothing(const struct dr_scene *s, struct dr_sampler *s
         }
     }
     CHECK(bad == 0, "%d points of triangles left out of the light table emit", bad);
-}
-
-/* Irradiance at p (normal +y) from the emitters, with its standard error:
- * by next-event estimation (nee) or by uniform points on all emitting area.
- * *lit: the fraction of samples that carry light. */
-static void irradiance(const struct dr_scene *s, bool nee, int n, double *mean, double *se, double *lit)
-{
-    const struct dr_mesh *m = &s->mesh;
-    dr_vec3 p = dr_v3(0.1, 0, -0.2);
-    double total = 0.0, *cdf = malloc(sizeof(double) * (m->n_triangles + 1));
-    cdf[0] = 0.0;
-    for (uint32_t t = 0; t < m->n_triangles; t++)
-        cdf[t + 1] = total += emits(&s->materials[m->material[t]]) ? dr_triangle_area(m, t) : 0.0;
-    struct dr_sampler smp;
-    dr_sampler_init(&smp, 7, nee, 0);
-    double sum = 0.0, sum2 = 0.0;
-    int carrying = 0;
-    for (int i = 0; i < n; i++) {
-        double f = 0.0;
-        if (nee) {
-            struct dr_light_sample ls;
-            double u0 = dr_sampler_next(&smp), u1 = dr_sampler_next(&smp), u2 = dr_sampler_next(&smp);
-            if (dr_light_sample(s, s->light_sampler, p, NULL, u0, u1, u2, &ls) && ls.wi.y > 0.0)
-                f = (ls.radiance.x + ls.radiance.y + ls.radiance.z) * ls.wi.y / ls.pdf;
-        } else {
-            const int64_t lo = dr_cdf_find(cdf, m->n_triangles, dr_sampler_next(&smp) * total);
-            double su = sqrt(dr_sampler_next(&smp)), b2 = dr_sampler_next(&smp) * su;
-            struct dr_hit h;
-            dr_hit_at(m, lo, 1.0 - su, b2, &h);
-            dr_vec3 d = dr_sub(h.p, p);
-            double d2 = dr_dot(d, d), cos_l = -dr_dot(h.ng, d) / sqrt(d2);
-            h.front = cos_l > 0.0;
-            dr_vec3 e = dr_emission(s, &h);
-            if (cos_l > 0.0 && d.y > 0.0)
-                f = (e.x + e.y + e.z) * (d.y / sqrt(d2)) * cos_l / d2 * total;
-        }
-        carrying += f > 0.0;
-        sum += f;
-        sum2 += f * f;
-    }
-    free(cdf);
-    *mean = sum / n;
-    *se = sqrt(fmax(sum2 / n - *mean * *mean, 0.0) / n);
-    *lit = (double)carrying / n;
 }
 
 /* Texels in [0, 1]: some zero, the rest varied (salt shifts the pattern). */
@@ -230,17 +181,9 @@ int main(void)
               "material %d has triangles left out: its triangles are not all entries", k);
     CHECK(!dr_light_material_emits(s->light_sampler, floor), "the floor does not emit");
 
-    const int n = 400000;
-    double e_nee, se_nee, lit_nee, e_area, se_area, lit_area;
-    irradiance(s, true, n, &e_nee, &se_nee, &lit_nee);
-    irradiance(s, false, n, &e_area, &se_area, &lit_area);
-    printf("irradiance: next-event %.5f +- %.5f (%.1f %% of samples carry light), uniform area %.5f +- %.5f "
-           "(%.1f %%)\n", e_nee, se_nee, 100 * lit_nee, e_area, se_area, 100 * lit_area);
-    CHECK(e_area > 0.0, "the emitters light the point");
-    CHECK(fabs(e_nee - e_area) < 4.0 * sqrt(se_nee * se_nee + se_area * se_area),
-          "next-event estimate %g vs %g: more than 4 standard errors apart", e_nee, e_area);
-    CHECK(lit_nee > 5.0 * lit_area, "light samples carry light %.2f %% of the time, uniform points %.2f %%",
-          100 * lit_nee, 100 * lit_area);
+    const struct irradiance_pair e = irradiance_agrees(s, dr_v3(0.1, 0, -0.2), 7, 400000);
+    CHECK(e.lit_nee > 5.0 * e.lit_area, "light samples carry light %.2f %% of the time, uniform points %.2f %%",
+          100 * e.lit_nee, 100 * e.lit_area);
     dr_scene_destroy(s);
     return TEST_END();
 }

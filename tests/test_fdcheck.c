@@ -488,7 +488,8 @@ static void tiny_emitter(void)
  * dropped with their derivative: next-event estimation's share of it was
  * missing (the panel's texels: 0.050 against 0.747, z -393; the sky's
  * strength: 0.541 against 0.621, z -36). */
-static void dark_texels(void)
+/* A grey floor under a panel (material 1) whose emission reads image im. */
+static struct dr_scene *glowing_panel(struct dr_image im)
 {
     struct sb b;
     sb_init(&b);
@@ -497,10 +498,15 @@ static void dark_texels(void)
     glow.emissive_strength = 20.0;
     glow.emissive_tex.texture = 0;
     sb_quad(&b, dr_v3(-0.5, 1.5, 0.5), dr_v3(0, 0, -1), dr_v3(1, 0, 0), sb_material(&b, glow));
+    return one_texture(&b, im);
+}
+
+static void dark_texels(void)
+{
     float px[8 * 8 * 3] = {0};
     for (int c = 0; c < 3; c++)
         px[3 * (2 * 8 + 5) + c] = 1.0f;
-    struct dr_scene *s = one_texture(&b, sb_image(8, 8, 3, px, 0.0f, true));
+    struct dr_scene *s = glowing_panel(sb_image(8, 8, 3, px, 0.0f, true));
     const char *p[] = {"/images/0"};
     struct fd_case c = {"dark-texels", 16, 8, 3, 16, 1e-2, NULL, NULL};
     run_case(&c, s, sb_camera(dr_v3(0, 1, 2), dr_v3(0, 0, 0), 50), p, 1);
@@ -514,19 +520,12 @@ static void dark_texels(void)
  * hits of BSDF-sampled rays alone (their light density there is 0). */
 static void spotted_parts(void)
 {
-    struct sb b;
-    sb_init(&b);
-    sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, sb_diffuse(dr_v3s(0.7))));
-    struct dr_material glow = emitter(dr_v3s(1.0));
-    glow.emissive_strength = 20.0;
-    glow.emissive_tex.texture = 0;
-    sb_quad(&b, dr_v3(-0.5, 1.5, 0.5), dr_v3(0, 0, -1), dr_v3(1, 0, 0), sb_material(&b, glow));
     static float px[32 * 32 * 3];
     for (int y = 20; y < 23; y++)
         for (int x = 9; x < 12; x++)
             for (int c = 0; c < 3; c++)
                 px[3 * (32 * y + x) + c] = 1.0f;
-    struct dr_scene *s = one_texture(&b, sb_image(32, 32, 3, px, 0.0f, true));
+    struct dr_scene *s = glowing_panel(sb_image(32, 32, 3, px, 0.0f, true));
     struct dr_light_tables lt;
     CHECK(dr_light_tables(s->light_sampler, &lt) && lt.any_parts && lt.n_emitters < 16,
           "spotted panel: sampled part by part, black parts left out (%lld entries)", (long long)lt.n_emitters);

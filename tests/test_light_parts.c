@@ -18,6 +18,7 @@
 
 #include "cdf.h"
 #include "geometry.h"
+#include "light_estimates.h"
 #include "lights.h"
 #include "sampler.h"
 #include "scene_builder.h"
@@ -65,6 +66,19 @@ static struct dr_image spotted_image(void)
     return im;
 }
 
+/* The scene's one image, spotted_image(), and n textures on it, texture k
+ * wrapping both ways by wraps[k]. */
+static void spotted_textures(struct dr_scene *s, const enum dr_wrap *wraps, int n)
+{
+    s->n_images = 1;
+    s->images = calloc(1, sizeof(struct dr_image));
+    s->images[0] = spotted_image();
+    s->n_textures = n;
+    s->textures = calloc((size_t)n, sizeof(struct dr_texture));
+    for (int k = 0; k < n; k++)
+        s->textures[k] = (struct dr_texture){0, wraps[k], wraps[k]};
+}
+
 static struct dr_material panel_material(int texture, bool transformed)
 {
     struct dr_material m = sb_diffuse(dr_v3s(0.2));
@@ -96,20 +110,9 @@ static struct dr_scene *panel_scene(void)
     struct dr_material lamp = sb_diffuse(dr_v3s(0.0));
     lamp.emissive_factor = dr_v3s(0.5);
     sb_quad(&b, dr_v3(2.0, 1.5, -0.1), dr_v3(0.2, 0, 0), dr_v3(0, 0, 0.2), sb_material(&b, lamp));
-    struct dr_scene *s = b.s;
-    s->n_images = 1;
-    s->images = calloc(1, sizeof(struct dr_image));
-    s->images[0] = spotted_image();
-    s->n_textures = 2;
-    s->textures = calloc(2, sizeof(struct dr_texture));
-    s->textures[0] = (struct dr_texture){0, DR_WRAP_CLAMP, DR_WRAP_CLAMP};
-    s->textures[1] = (struct dr_texture){0, DR_WRAP_REPEAT, DR_WRAP_REPEAT};
+    const enum dr_wrap wraps[2] = {DR_WRAP_CLAMP, DR_WRAP_REPEAT};
+    spotted_textures(b.s, wraps, 2);
     return sb_finish(&b);
-}
-
-static bool emits(const struct dr_material *m)
-{
-    return !dr_is_black(dr_scale(m->emissive_factor, m->emissive_strength));
 }
 
 /* The level of triangle t's parts in the light table (0: none). */
@@ -194,50 +197,6 @@ static void densities_agree(const struct dr_scene *s)
     }
 }
 
-/* Irradiance at p (normal +y) from the emitters with its standard error:
- * by next-event estimation or by uniform points on all emitting area; *lit:
- * the fraction of samples that carry light. */
-static void irradiance(const struct dr_scene *s, bool nee, int n, double *mean, double *se, double *lit)
-{
-    const struct dr_mesh *m = &s->mesh;
-    const dr_vec3 p = dr_v3(0.3, 0.0, -0.4);
-    double total = 0.0, *cdf = malloc(sizeof(double) * (m->n_triangles + 1));
-    cdf[0] = 0.0;
-    for (uint32_t t = 0; t < m->n_triangles; t++)
-        cdf[t + 1] = total += emits(&s->materials[m->material[t]]) ? dr_triangle_area(m, t) : 0.0;
-    struct dr_sampler smp;
-    dr_sampler_init(&smp, 13, nee, 0);
-    double sum = 0.0, sum2 = 0.0;
-    int carrying = 0;
-    for (int i = 0; i < n; i++) {
-        double f = 0.0;
-        if (nee) {
-            struct dr_light_sample ls;
-            double u0 = dr_sampler_next(&smp), u1 = dr_sampler_next(&smp), u2 = dr_sampler_next(&smp);
-            if (dr_light_sample(s, s->light_sampler, p, NULL, u0, u1, u2, &ls) && ls.wi.y > 0.0)
-                f = (ls.radiance.x + ls.radiance.y + ls.radiance.z) * ls.wi.y / ls.pdf;
-        } else {
-            const int64_t t = dr_cdf_find(cdf, m->n_triangles, dr_sampler_next(&smp) * total);
-            double su = sqrt(dr_sampler_next(&smp)), b2 = dr_sampler_next(&smp) * su;
-            struct dr_hit h;
-            dr_hit_at(m, t, 1.0 - su, b2, &h);
-            dr_vec3 d = dr_sub(h.p, p);
-            double d2 = dr_dot(d, d), cos_l = -dr_dot(h.ng, d) / sqrt(d2);
-            h.front = cos_l > 0.0;
-            dr_vec3 e = dr_emission(s, &h);
-            if (cos_l > 0.0 && d.y > 0.0)
-                f = (e.x + e.y + e.z) * (d.y / sqrt(d2)) * cos_l / d2 * total;
-        }
-        carrying += f > 0.0;
-        sum += f;
-        sum2 += f * f;
-    }
-    free(cdf);
-    *mean = sum / n;
-    *se = sqrt(fmax(sum2 / n - *mean * *mean, 0.0) / n);
-    *lit = (double)carrying / n;
-}
-
 /* 300 large triangles each reading the whole texture: parts for the first
  * DR_LIGHT_MAX_PARTS / 4^level of them, whole entries for the rest. */
 static void parts_budget(void)
@@ -251,12 +210,8 @@ static void parts_budget(void)
         sb_triangle(&b, a, c, d, mat);
     }
     struct dr_scene *s = b.s;
-    s->n_images = 1;
-    s->images = calloc(1, sizeof(struct dr_image));
-    s->images[0] = spotted_image();
-    s->n_textures = 1;
-    s->textures = calloc(1, sizeof(struct dr_texture));
-    s->textures[0] = (struct dr_texture){0, DR_WRAP_CLAMP, DR_WRAP_CLAMP};
+    const enum dr_wrap clamp = DR_WRAP_CLAMP;
+    spotted_textures(s, &clamp, 1);
     sb_finish(&b);
     struct dr_light_tables lt;
     CHECK(dr_light_tables(s->light_sampler, &lt) && lt.any_parts, "the tiled triangles have parts");
@@ -289,19 +244,11 @@ int main(void)
           "a material with parts left out does not have all its triangles' area in the table");
     densities_agree(s);
 
-    const int n = 400000;
-    double e_nee, se_nee, lit_nee, e_area, se_area, lit_area;
-    irradiance(s, true, n, &e_nee, &se_nee, &lit_nee);
-    irradiance(s, false, n, &e_area, &se_area, &lit_area);
-    printf("irradiance: next-event %.5f +- %.5f (%.1f %% of samples carry light), uniform area %.5f +- %.5f "
-           "(%.1f %%)\n", e_nee, se_nee, 100 * lit_nee, e_area, se_area, 100 * lit_area);
-    CHECK(e_area > 0.0, "the emitters light the point");
-    CHECK(fabs(e_nee - e_area) < 4.0 * sqrt(se_nee * se_nee + se_area * se_area),
-          "next-event estimation %.5f vs uniform area %.5f (se %.5f, %.5f): biased", e_nee, e_area, se_nee, se_area);
-    CHECK(lit_nee > 0.3 && lit_nee > 10.0 * lit_area, "light samples on glowing texels: %.3f, uniform points %.3f",
-          lit_nee, lit_area);
-    CHECK(se_nee < 0.25 * se_area, "next-event estimation's error %.5f against uniform points' %.5f", se_nee,
-          se_area);
+    const struct irradiance_pair e = irradiance_agrees(s, dr_v3(0.3, 0.0, -0.4), 13, 400000);
+    CHECK(e.lit_nee > 0.3 && e.lit_nee > 10.0 * e.lit_area, "light samples on glowing texels: %.3f, uniform points %.3f",
+          e.lit_nee, e.lit_area);
+    CHECK(e.se_nee < 0.25 * e.se_area, "next-event estimation's error %.5f against uniform points' %.5f", e.se_nee,
+          e.se_area);
     dr_scene_destroy(s);
     parts_budget();
     return TEST_END();
