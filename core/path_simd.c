@@ -649,7 +649,7 @@ static void emission_seen(const struct dr_scene *s, const struct dr_light_tables
             set_lane(&Le, i, dr_emission(s, &L->hit[i]));
     dr_f8 density = gather_where(lt->tri_pick_density, L->tri, g->emits);
     for (int i = 0; lt->any_parts && i < DR_SIMD_W; i++)   /* a triangle with parts: the hit's part's */
-        if (g->emits[i] && density[i] < 0.0)
+        if (g->emits[i] && density[i] < 0.0 && in->depth[i] > 1.0)   /* (a camera ray's weight is 1) */
             density[i] = dr_light_area_density(s->light_sampler, L->tri[i], b1[i], b2[i]);
     dr_v3x8 dd = dr_v3x8_sub(g->p, in->prev_p);
     dr_f8 d2 = dr_v3x8_dot(dd, dd);
