@@ -6,8 +6,9 @@
  * loads PLUGIN (libdrender-image.so) as drender does (dlopen, RTLD_NOW,
  * core/image_plugin.c) into a process that has no other image code, and
  * prints one JSON object: resident memory before and after the load, the
- * process's peak, and the largest parts after it by mapping (the heap,
- * libraries by file) from /proc/self/smaps. This program links drender's own
+ * process's peak, the largest parts after it by mapping (the heap,
+ * libraries by file) from /proc/self/smaps, and the dlopen's wall time
+ * (part e: what a textured scene's load, or an image write, waits for). This program links drender's own
  * functions the plugin calls back into (error reporting, sRGB curves, image
  * release) and exports them (-rdynamic, as the drender binary does), but not
  * image_io.o: OpenImageIO is loaded only by the dlopen. */
@@ -16,6 +17,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "clock.h"
 #include "error.h"
 #include "image.h"
 
@@ -98,13 +100,16 @@ int main(int argc, char **argv)
     if (dr_linear_to_srgb(dr_srgb_to_linear(0.5)) < 0.0)
         return 1;
     long before = status_kib("VmRSS");
+    double t0 = dr_clock_seconds();
     void *h = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
+    double load_seconds = dr_clock_seconds() - t0;
     if (!h) {
         fprintf(stderr, "image_lib_rss: %s\n", dlerror());
         return 1;
     }
     long after = status_kib("VmRSS"), peak = status_kib("VmHWM");
-    printf("{\"rss_before_kib\": %ld, \"rss_after_kib\": %ld, \"peak_kib\": %ld", before, after, peak);
+    printf("{\"rss_before_kib\": %ld, \"rss_after_kib\": %ld, \"peak_kib\": %ld, \"load_seconds\": %.4f", before, after,
+           peak, load_seconds);
     print_largest();
     printf("}\n");
     return 0;

@@ -401,8 +401,17 @@ done
 STARTUP_TEX=$(median "${st[@]}") LOAD_TEX=$(median "${ld[@]}") PEAK_TEX=$(median "${pk[@]}")
 printf '   process start to first ray (%s): %.3f s, of which loading the scene %.3f s; peak memory %.1f MiB\n' \
     "$(basename "$BIG_TEX")" "$STARTUP_TEX" "$LOAD_TEX" "$(calc "$PEAK_TEX / 1048576")"
+# of that, the image library's dlopen alone (bench/image_lib_rss.c): what
+# every textured scene's load and every untextured render's write wait for
+# (scripts/image-lib-order.sh orders its dependencies to shorten it)
+il=()
+for i in 1 2 3 4 5; do
+    il+=("$(json_num "$("$OUT/image_lib_rss" "$BUILD/libdrender-image.so")" load_seconds)")
+done
+IMAGE_LIB_LOAD=$(median "${il[@]}")
+printf '   loading the image library alone (its dlopen): %.3f s\n' "$IMAGE_LIB_LOAD"
 printf '   drender --version: %.3f s wall; drender render --help: %.3f s wall\n' "$VERSION_WALL" "$HELP_WALL"
-STARTUP_JSON="{\"first_ray_seconds\": $STARTUP, \"textured_first_ray_seconds\": $STARTUP_TEX, \"textured_load_seconds\": $LOAD_TEX, \"textured_peak_memory_bytes\": $PEAK_TEX, \"version_wall_seconds\": $VERSION_WALL, \"help_wall_seconds\": $HELP_WALL}"
+STARTUP_JSON="{\"first_ray_seconds\": $STARTUP, \"textured_first_ray_seconds\": $STARTUP_TEX, \"textured_load_seconds\": $LOAD_TEX, \"image_library_load_seconds\": $IMAGE_LIB_LOAD, \"textured_peak_memory_bytes\": $PEAK_TEX, \"version_wall_seconds\": $VERSION_WALL, \"help_wall_seconds\": $HELP_WALL}"
 
 # ---- l. lighting: an environment map against a constant sky -----------------
 # Real assets are often lit by an HDR environment map alone. The same scene
