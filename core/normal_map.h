@@ -38,7 +38,9 @@ int dr_mesh_generate_tangents(struct dr_mesh *m);
  * 1), T and B the interpolated tangent frame made orthonormal to the
  * interpolated normal N). Keeps the interpolated normal where the tangent is
  * missing or degenerate. The result may point below the geometric surface:
- * see dr_shading_normal_valid. */
+ * see dr_shading_normal_valid. path_simd.c's normal_map8 does the same for
+ * eight lanes with the same operations: keep the two in step (test_render
+ * compares them bit for bit). */
 void dr_normal_map_apply(const struct dr_scene *scene, struct dr_hit *hit);
 
 /* The shading normal n (unit, oriented to wo's side of the unit geometric

@@ -34,6 +34,16 @@ DR_SIMD_INLINE dr_v3x8 gather3(const void *const *b, size_t off)
 {
     return (dr_v3x8){gather(b, off), gather(b, off + sizeof(double)), gather(b, off + 2 * sizeof(double))};
 }
+/* Vertex vi[i]'s four floats (tangents: xyz and the handedness w) for each
+ * lane, widened to double (exact). */
+DR_SIMD_INLINE void gather_vertex4(const float *a, const uint32_t *vi, dr_f8 out[4])
+{
+#define G(i, c) (double)a[4 * (size_t)vi[i] + c]
+#define V(c) (dr_f8){G(0, c), G(1, c), G(2, c), G(3, c), G(4, c), G(5, c), G(6, c), G(7, c)}
+    out[0] = V(0), out[1] = V(1), out[2] = V(2), out[3] = V(3);
+#undef V
+#undef G
+}
 /* Element k * stride + c of array a for each lane's index k[i]. */
 DR_SIMD_INLINE dr_f8 gather_at(const double *a, const int64_t *k, int stride, int c)
 {
@@ -116,13 +126,14 @@ struct lanes {
     /* Textures: the eight-lane lookups' texrefs (texture8.h; NULL: none), and
      * where the scalar functions read them lane by lane, from a scalar hit */
     const struct dr_texref *base_tex[DR_SIMD_W], *mr_tex[DR_SIMD_W], *emissive_tex[DR_SIMD_W];
+    const struct dr_texref *normal_tex[DR_SIMD_W];      /* (normal_map8's) */
     const struct dr_texref *lemissive_tex[DR_SIMD_W];   /* the light's */
-    bool any_tex8, any_ltex8;
+    bool any_tex8, any_ltex8, any_normal8;
     bool textured[DR_SIMD_W];         /* the scalar hit is needed (mat_textures' scalar_hit) */
     bool scalar_material[DR_SIMD_W];  /* dr_material_eval reads the BSDF's textures */
     bool scalar_emission[DR_SIMD_W];  /* dr_emission reads the emissive texture */
     bool ltextured[DR_SIMD_W];        /* the light's emissive texture is dr_emission's */
-    bool normal_mapped[DR_SIMD_W];
+    bool normal_mapped[DR_SIMD_W];    /* the material has a normal map (eight-lane or scalar) */
     bool may_emit[DR_SIMD_W];         /* the material's factor x strength is not black */
     bool any_textured, any_ltextured;
     struct dr_hit hit[DR_SIMD_W];   /* the hits of textured lanes, as dr_hit_compute fills them */
@@ -424,10 +435,12 @@ static bool reads_textures(const struct dr_material *m)
  * bit PNG or JPEG through TEXCOORD_0) are looked up eight lanes at a time.
  * The rest go through the scalar functions lane by lane, which read a
  * scalar hit: dr_material_eval for both BSDF textures when either is not
- * accepted, dr_emission for an emissive texture that is not, and
- * dr_normal_map_apply for every normal map. */
+ * accepted, dr_emission for an emissive texture that is not. A normal map
+ * texture8.h accepts is applied eight lanes at a time (normal_map8) where
+ * the lane needs no scalar hit for the rest; otherwise dr_normal_map_apply
+ * applies it to the scalar hit. */
 struct mat_textures {
-    const struct dr_texref *base, *mr, *emissive;   /* the eight-lane lookups (NULL: none) */
+    const struct dr_texref *base, *mr, *emissive, *normal;   /* the eight-lane lookups (NULL: none) */
     bool scalar_material, scalar_emission, scalar_hit;
 };
 
@@ -446,7 +459,11 @@ static void mat_textures(const struct dr_scene *s, const struct dr_material *m, 
         t->scalar_emission = !dr_texref8_accepts(s, e);
     if (e->texture >= 0 && !t->scalar_emission)
         t->emissive = e;
-    t->scalar_hit = t->scalar_material || t->scalar_emission || m->normal_tex.texture >= 0;
+    t->scalar_hit = t->scalar_material || t->scalar_emission;
+    if (m->normal_tex.texture >= 0 && !t->scalar_hit && dr_texref8_accepts(s, &m->normal_tex))
+        t->normal = &m->normal_tex;
+    else if (m->normal_tex.texture >= 0)
+        t->scalar_hit = true;
 }
 
 bool dr_path8_reads_textures(const struct dr_scene *s, int64_t tri)
@@ -572,7 +589,7 @@ void dr_path8_locate_hits(const struct dr_scene *s, const int64_t *tri, dr_v3x8 
 {
     const struct dr_mesh *m = &s->mesh;
     struct lanes L;
-    const struct dr_texref *tex[3][DR_SIMD_W];   /* base, metallic-roughness, emissive: the eight-lane lookups' */
+    const struct dr_texref *tex[4][DR_SIMD_W];   /* base, metallic-roughness, emissive, normal: the eight-lane lookups' */
     bool any_tex8 = false;
     const struct dr_material *prev_mat = NULL;
     struct mat_textures t = {0};
@@ -587,8 +604,8 @@ void dr_path8_locate_hits(const struct dr_scene *s, const int64_t *tri, dr_v3x8 
             t = (struct mat_textures){0};
         prev_mat = mat;
         L.textured[i] = t.scalar_hit;
-        tex[0][i] = t.base, tex[1][i] = t.mr, tex[2][i] = t.emissive;
-        any_tex8 |= t.base || t.mr || t.emissive;
+        tex[0][i] = t.base, tex[1][i] = t.mr, tex[2][i] = t.emissive, tex[3][i] = t.normal;
+        any_tex8 |= t.base || t.mr || t.emissive || t.normal;
     }
     loc->front = locate(m, &L, o, d, &loc->p, &loc->ng, &loc->ns, &loc->eps, &loc->b1, &loc->b2);
     for (int i = 0; i < DR_SIMD_W; i++)
@@ -602,8 +619,66 @@ void dr_path8_locate_hits(const struct dr_scene *s, const int64_t *tri, dr_v3x8 
         return;
     texcoords0(m, L.tri, L.v0, L.v1, L.v2, loc->b1, loc->b2, &loc->u, &loc->v);
     const dr_m8 vector_only = ~mask_of(L.textured);   /* (the others' texels: dr_material_prefetch's) */
-    for (int k = 0; k < 3; k++)
+    for (int k = 0; k < 4; k++)
         dr_texref8_prefetch(s, tex[k], vector_only, loc->u, loc->v);
+    for (int i = 0; m->tangents && i < DR_SIMD_W; i++)   /* normal_map8's tangent frames */
+        if (tex[3][i] && !L.textured[i]) {
+            __builtin_prefetch(m->tangents + 4 * (size_t)L.v0[i]);
+            __builtin_prefetch(m->tangents + 4 * (size_t)L.v1[i]);
+            __builtin_prefetch(m->tangents + 4 * (size_t)L.v2[i]);
+        }
+}
+
+/* dr_normal_map_apply (normal_map.c) for the lanes with an eight-lane normal
+ * map (L->normal_tex): the tangent frame at the hit, the map's texel through
+ * TEXCOORD_0 (tu, tv), the perturbed normal, with the scalar function's
+ * operations in its order, so each lane gets its bits. ng: the triangle's
+ * normal, ns: the interpolated one (both not yet towards the ray). Returns
+ * ns with those lanes' mapped; lanes where the scalar function changes
+ * nothing (no tangents or UVs, a degenerate frame) keep theirs. */
+static dr_v3x8 normal_map8(const struct dr_scene *s, const struct lanes *L, dr_v3x8 ng, dr_v3x8 ns, dr_f8 b1,
+                           dr_f8 b2, dr_f8 tu, dr_f8 tv)
+{
+    const struct dr_mesh *m = &s->mesh;
+    if (!m->tangents)
+        return ns;
+    dr_m8 on;
+    for (int i = 0; i < DR_SIMD_W; i++)
+        on[i] = L->normal_tex[i] && (m->flags[L->tri[i]] & DR_TRI_HAS_UVS) ? -1 : 0;
+    dr_f8 t0[4], t1[4], t2[4];
+    gather_vertex4(m->tangents, L->v0, t0);
+    gather_vertex4(m->tangents, L->v1, t1);
+    gather_vertex4(m->tangents, L->v2, t2);
+    const dr_f8 zero = dr_f8s(0.0), one = dr_f8s(1.0);
+    on &= dr_f8_ne(t0[3], zero) & dr_f8_ne(t1[3], zero) & dr_f8_ne(t2[3], zero);   /* (no frame here) */
+    if (!dr_m8_any(on))
+        return ns;
+    const dr_f8 b0 = 1.0 - b1 - b2;
+    dr_v3x8 t = {b0 * t0[0] + b1 * t1[0] + b2 * t2[0], b0 * t0[1] + b1 * t1[1] + b2 * t2[1],
+                 b0 * t0[2] + b1 * t1[2] + b2 * t2[2]};
+    const dr_f8 w = dr_f8_sel(dr_f8_lt(b0 * t0[3] + b1 * t1[3] + b2 * t2[3], zero), -one, one);
+    t = dr_v3x8_sub(t, dr_v3x8_scale(ns, dr_v3x8_dot(ns, t)));   /* Gram-Schmidt against the normal */
+    const dr_f8 tl = dr_f8_sqrt(dr_v3x8_dot(t, t));
+    on &= dr_f8_gt(tl, dr_f8s(1e-6));   /* (degenerate UVs: no frame) */
+    if (!dr_m8_any(on))
+        return ns;
+    t = dr_v3x8_scale(t, 1.0 / tl);
+    const dr_v3x8 px = dr_texref8_rgb(s, L->normal_tex, on, tu, tv, false);
+    const dr_f8 k = gather(L->mat, offsetof(struct dr_material, normal_scale));
+    const dr_f8 x = (2.0 * px.x - 1.0) * k, y = (2.0 * px.y - 1.0) * k, z = 2.0 * px.z - 1.0;
+    /* authored_side: -1 where the interpolated vertex normal was flipped onto ng's side */
+    dr_f8 side = one;
+    const dr_m8 has_n = mask_of(L->has_normals) & on;
+    if (m->normals && dr_m8_any(has_n)) {
+        dr_v3x8 n = interp(b0, b1, b2, gather_vertex(m->normals, L->v0), gather_vertex(m->normals, L->v1),
+                           gather_vertex(m->normals, L->v2));
+        side = dr_f8_sel(has_n & dr_f8_lt(dr_v3x8_dot(n, ng), zero), -one, one);
+    }
+    const dr_v3x8 p = dr_v3x8_add(dr_v3x8_add(dr_v3x8_scale(t, side * x), dr_v3x8_scale(dr_v3x8_cross(ns, t), w * y)),
+                                  dr_v3x8_scale(ns, z));
+    const dr_f8 pl = dr_f8_sqrt(dr_v3x8_dot(p, p));
+    on &= dr_f8_gt(pl, zero) & dr_f8_eq(pl - pl, zero);   /* (positive and finite) */
+    return dr_v3x8_sel(on, dr_v3x8_scale(p, 1.0 / pl), ns);
 }
 
 /* dr_emission of a material without an emissive texture: factor x strength,
@@ -1019,7 +1094,7 @@ static inline uint32_t vertex_dim(double depth)
 static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, struct lanes *L)
 {
     const struct dr_mesh *m = &s->mesh;
-    L->any_textured = L->any_ltextured = L->any_tex8 = L->any_ltex8 = false;
+    L->any_textured = L->any_ltextured = L->any_tex8 = L->any_ltex8 = L->any_normal8 = false;
     const struct dr_material *prev_mat = NULL;
     struct mat_textures t = {0};
     bool may_emit = false;
@@ -1040,7 +1115,9 @@ static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, str
         L->textured[i] = t.scalar_hit;
         if (textures) {
             L->base_tex[i] = t.base, L->mr_tex[i] = t.mr, L->emissive_tex[i] = t.emissive;
-            L->any_tex8 |= t.base || t.mr || t.emissive;
+            L->normal_tex[i] = t.normal;
+            L->any_tex8 |= t.base || t.mr || t.emissive || t.normal;
+            L->any_normal8 |= t.normal != NULL;
             L->scalar_material[i] = t.scalar_material;
             L->scalar_emission[i] = t.scalar_emission;
             L->normal_mapped[i] = mat->normal_tex.texture >= 0;
@@ -1296,6 +1373,8 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
             set_lane(&ns, i, L.hit[i].ns);
         }
     }
+    if (L.any_normal8)   /* ... eight lanes at a time (lanes without a scalar hit) */
+        ns = normal_map8(s, &L, ng, ns, b1, b2, tu, tv);
     g->emits = (dr_m8){0};
     if (opts->stages & DR_STAGE_EMISSION)
         emission_seen(s, &lt, &L, in, ng, front, b1, b2, tu, tv, g);
@@ -1317,7 +1396,7 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     }
     g->ng = dr_v3x8_sel(front, ng, dr_v3x8_neg(ng));
     g->fn = dr_v3x8_sel(front, ns, dr_v3x8_neg(ns));
-    for (int i = 0; L.any_textured && i < n; i++)   /* a mapped normal may face away from wo */
+    for (int i = 0; (L.any_textured || L.any_normal8) && i < n; i++)   /* a mapped normal may face away from wo */
         if (L.normal_mapped[i])
             set_lane(&g->fn, i,
                      dr_shading_normal_valid(dr_v3x8_get(&g->ng, i), dr_neg(dr_v3x8_get(&d, i)), dr_v3x8_get(&g->fn, i)));

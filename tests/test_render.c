@@ -636,8 +636,16 @@ static struct dr_scene *map_box(bool grey)
     return sb_finish(&b);
 }
 
-/* Normal-mapped walls (tangents generated), a lamp and a glossy block. */
-static struct dr_scene *bumpy_box(void)
+/* Normal-mapped walls (tangents generated), a lamp and a glossy block.
+ * eight_bit: the map in eight-bit storage, which the packet tracer applies
+ * eight lanes at a time (path_simd.c's normal_map8), at scale 0.7 through a
+ * texture transform, on walls whose vertex normals lean in at some corners
+ * and out at others (the authored side), with some tangent frames'
+ * handedness flipped and some missing, and a tile on the back wall whose
+ * tangents lie along its normal but for 1e-9 (a degenerate frame: no
+ * mapping); else a float map, which dr_normal_map_apply applies lane by
+ * lane. */
+static struct dr_scene *bumpy_box(bool eight_bit)
 {
     struct sb b;
     sb_init(&b);
@@ -646,11 +654,40 @@ static struct dr_scene *bumpy_box(void)
         0.3f, 0.9f, 0.5f, 0.5f, 1,    0.8f, 0.2f, 0.7f, 0.1f, 0.5f, 0.8f, 0.5f, 0.9f, 0.8f, 0.6f, 0.4f,
         0.9f, 0.5f, 0.5f, 1,    0.4f, 0.8f, 0.8f, 0.9f, 0.9f, 0.6f, 0.5f, 0.5f, 1,    0.2f, 0.3f, 0.9f};
     struct dr_material bumpy = sb_diffuse(dr_v3(0.7, 0.6, 0.5));
-    bumpy.normal_tex.texture = sb_texture(&b, sb_image(4, 4, 3, bump_px, 0.0f, false));
-    sb_open_box(&b, 2.0, sb_material(&b, bumpy));
+    bumpy.normal_tex.texture = sb_texture(&b, eight_bit ? sb_image8(4, 4, 3, bump_px) : sb_image(4, 4, 3, bump_px, 0.0f, false));
+    if (eight_bit) {
+        bumpy.normal_scale = 0.7;
+        bumpy.normal_tex.transformed = true;
+        const double xf[6] = {1.5, 0.2, 0.1, -0.3, 1.2, 0.4};
+        memcpy(bumpy.normal_tex.xf, xf, sizeof xf);
+    }
+    const int bumpy_id = sb_material(&b, bumpy);
+    sb_open_box(&b, 2.0, bumpy_id);
+    struct dr_mesh *m = &b.s->mesh;
+    for (uint32_t v = 0; eight_bit && v < m->n_vertices; v++) {   /* leaning in (v even) or out */
+        dr_vec3 p = dr_v3(m->positions[3 * v], m->positions[3 * v + 1], m->positions[3 * v + 2]);
+        dr_vec3 n = dr_normalize(dr_scale(dr_sub(dr_v3(0.0, 1.0, 0.0), p), v % 2 ? -1.0 : 1.0));
+        m->normals[3 * v] = (float)n.x, m->normals[3 * v + 1] = (float)n.y, m->normals[3 * v + 2] = (float)n.z;
+    }
+    for (uint32_t t = 0; eight_bit && t < m->n_triangles; t++)
+        m->flags[t] |= DR_TRI_HAS_NORMALS;
     sb_box(&b, dr_v3(-0.5, 0.0, -0.5), dr_v3(0.0, 0.7, 0.0), sb_material(&b, glossy_blue()));
     sb_quad(&b, dr_v3(-0.3, 1.9, -0.3), dr_v3(0.6, 0, 0), dr_v3(0, 0, 0.6), sb_material(&b, warm_lamp()));
-    return sb_finish(&b);
+    const uint32_t tile = m->n_vertices;
+    if (eight_bit)   /* facing +z */
+        sb_quad(&b, dr_v3(0.2, 0.8, -0.9), dr_v3(0.5, 0, 0), dr_v3(0, 0.5, 0), bumpy_id);
+    struct dr_scene *s = sb_finish(&b);
+    CHECK(s->mesh.tangents != NULL, "the bumpy box has tangent frames");
+    for (uint32_t v = tile; eight_bit && s->mesh.tangents && v < tile + 4; v++)
+        memcpy(s->mesh.tangents + 4 * (size_t)v, (const float[]){1e-9f, 0, 1, 1}, 4 * sizeof(float));
+    for (uint32_t v = 0; eight_bit && s->mesh.tangents && v < s->mesh.n_vertices; v++) {
+        float *t = s->mesh.tangents + 4 * (size_t)v;
+        if (v % 5 == 1)
+            t[3] = -t[3];   /* the other handedness */
+        else if (v % 7 == 3)
+            t[3] = 0.0f;    /* no frame: the interpolated normal stays */
+    }
+    return s;
 }
 
 /* Vertex colours without textures: no prefetching, and the eight-lane
@@ -969,7 +1006,8 @@ static void test_wavefront_matches_one_path(void)
     const struct dr_camera above = sb_camera(dr_v3(0.3, 2.5, 1.8), dr_v3(0, 0.3, 0), 70.0);
     exact_with_groups(map_box(false), DR_FX_ENV_MAP, above, "map-lit box");
     exact_with_groups(map_box(true), DR_FX_ENV_MAP, above, "map-lit box, grey map");
-    exact_with_groups(bumpy_box(), DR_FX_NORMAL_MAPS, inside, "bumpy box");
+    exact_with_groups(bumpy_box(false), DR_FX_NORMAL_MAPS, inside, "bumpy box");
+    exact_with_groups(bumpy_box(true), DR_FX_NORMAL_MAPS | DR_FX_SHADING_NORMALS, inside, "bumpy box, eight-bit map");
     exact_with_groups(tiled_lamp_box(), DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS, inside, "tiled lamp box");
     exact_with_groups(textured_lamp_box(false), DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_TEXTURES, inside,
                       "textured lamp box");
