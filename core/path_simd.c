@@ -14,6 +14,7 @@
 #include "env8.h"
 #include "lights.h"
 #include "material.h"
+#include "coverage.h"
 #include "normal_map.h"
 #include "sampler8.h"
 #include "simd_trig.h"
@@ -379,9 +380,11 @@ DR_SIMD_INLINE dr_m8 bsdf_sample(const struct dr_path8 *g, dr_m8 on, dr_f8 u_lob
  * its parameters). */
 static bool eight_lane_run(const struct dr_scene *s, const struct dr_path_opts *opts)
 {
+    /* (alphaMode MASK: its cut-outs are Embree's filters' business, which
+     * every query applies; the stages only test a light point, light_sample) */
     const unsigned allowed = DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_ENV_CONSTANT | DR_FX_ENV_MAP |
                              DR_FX_SHADING_NORMALS | DR_FX_SINGLE_SIDED | DR_FX_SPECULAR | DR_FX_TEXTURES |
-                             DR_FX_VERTEX_COLORS | DR_FX_NORMAL_MAPS;
+                             DR_FX_VERTEX_COLORS | DR_FX_NORMAL_MAPS | DR_FX_ALPHA_MASK;
     struct dr_light_tables t;
     return !(s->effects & ~allowed) && (opts->stages & DR_STAGE_NEE) &&
            !(opts->stages & (DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC)) && dr_light_tables(s->light_sampler, &t);
@@ -789,6 +792,7 @@ struct light8 {
     int32_t type[DR_SIMD_W];
     int64_t index[DR_SIMD_W];
     dr_f8 b1, b2, atten;
+    dr_m8 hole;                     /* the light point is a hole of a cut-out (alphaMode MASK) emitter */
     dr_m8 env_map;                  /* lanes that sampled the environment map, whose radiance's */
     struct dr_env8_lookup env_at;   /* lookup this is (env_map_samples) */
 };
@@ -1074,6 +1078,14 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     out->target = offset_origin(lp, lng, leps, dr_v3x8_neg(out->wi));
     out->pdf = pick * d2 / (dr_f8_abs(cos_l) * area);
     ok &= ~dr_v3x8_is_black(out->radiance) | out->diff;   /* (dr_path_light_kept) */
+    /* dr_path_nee_end's test, here where the point is: a point in a hole of
+     * a cut-out emitter emits nothing (its shadow ray is still cast, as the
+     * one-path walker casts it). Only MASK: BLEND scenes keep the scalar
+     * stages, whose rays carry the coverage keys BLEND draws from. */
+    out->hole = (dr_m8){0};
+    for (int i = 0; (s->effects & DR_FX_ALPHA_MASK) && i < DR_SIMD_W; i++)
+        if (ok[i] && !env[i] && !env_map[i] && !other[i])
+            out->hole[i] = dr_coverage_point_present(s, L->ltri[i], b1[i], b2[i], 0) ? 0 : -1;
     out->infinite = out->delta = (dr_m8){0};
     if (dr_m8_any(env))
         env_light_samples(s, lt, env, g, sky_uniform, u_pick, u1, u2, &ok, out);
@@ -1327,7 +1339,7 @@ static void keep_light_record(const struct light8 *ls, struct dr_path8 *g)
  * peer's box that is 18 % of the vertices. */
 static void ended_group(struct dr_path8 *g, dr_f8 depth)
 {
-    g->shadow = g->go_on = g->diff_nee = (dr_m8){0};
+    g->shadow = g->go_on = g->diff_nee = g->hole = (dr_m8){0};
     g->tmax = dr_f8s(0.0);
     g->depth = depth;
 }
@@ -1419,6 +1431,7 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     dr_m8 ok = light_sample(s, &lt, &L, in->ahead, opts->params, record, g, opts->sky_uniform, u_pick,
                             u1, u2, &ls);
     g->shadow = nee_begin(g, ok, &ls, &g->so, &g->sd) & ~end;
+    g->hole = ls.hole;
     g->diff_nee = ls.diff;
     if (record)
         keep_light_record(&ls, g);
@@ -1527,7 +1540,7 @@ void dr_path8_continue_lanes(const struct dr_path_opts *opts, const struct dr_pa
         return;
     }
     /* dr_path_nee_end */
-    out->nee = g->shadow & dr_f8_gt(g->tmax, dr_f8s(0.0)) & ~occluded;
+    out->nee = g->shadow & dr_f8_gt(g->tmax, dr_f8s(0.0)) & ~occluded & ~g->hole;
     dr_f8 w = dr_f8_sel(g->delta, dr_f8s(1.0), mis_power(g->ls_pdf, g->bsdf_pdf));
     out->nee_scale = dr_f8_abs(g->nee_cos) * w / g->ls_pdf;
 

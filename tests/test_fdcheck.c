@@ -535,6 +535,41 @@ static void spotted_parts(void)
     dr_scene_destroy(s);
 }
 
+/* A floor under a lamp cut out by alphaMode MASK (its RGBA base colour
+ * texture's alpha: a checker of holes) and a cut-out panel beside it: light
+ * points in the holes emit nothing, rays pass through them (the queries'
+ * filters), so the floor's albedo and the lamp's strength are seen through
+ * a lamp that is half holes. The eight-lane stages run here too
+ * (path_simd.c). */
+static void cutouts(void)
+{
+    struct sb b;
+    sb_init(&b);
+    sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, sb_diffuse(dr_v3(0.6, 0.5, 0.4))));
+    float px[4 * 4 * 4];
+    for (int k = 0; k < 16; k++) {
+        px[4 * k] = px[4 * k + 1] = px[4 * k + 2] = 0.8f;
+        px[4 * k + 3] = ((k % 4) + (k / 4)) % 2 ? 0.0f : 1.0f;
+    }
+    struct dr_material lamp = emitter(dr_v3(3, 2, 1));
+    lamp.alpha_mode = DR_ALPHA_MASK;
+    lamp.alpha_cutoff = 0.5;
+    lamp.base_color_tex.texture = 0;
+    sb_quad(&b, dr_v3(-0.5, 1.5, 0.5), dr_v3(0, 0, -1), dr_v3(1, 0, 0), sb_material(&b, lamp));
+    struct dr_material panel = sb_diffuse(dr_v3(0.3, 0.6, 0.3));
+    panel.alpha_mode = DR_ALPHA_MASK;
+    panel.alpha_cutoff = 0.5;
+    panel.base_color_tex.texture = 0;
+    sb_quad(&b, dr_v3(0.6, 0.0, -0.6), dr_v3(0, 0, 1.2), dr_v3(0, 1.2, 0), sb_material(&b, panel));
+    struct dr_scene *s = one_texture(&b, sb_image8(4, 4, 4, px));
+    CHECK(s->effects & DR_FX_ALPHA_MASK, "cut-outs: the scene has alpha MASK");
+    const char *p[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor",
+                       "/materials/1/extensions/KHR_materials_emissive_strength/emissiveStrength"};
+    struct fd_case c = {"cut-outs", 16, 8, 3, 16, 1e-2, NULL, NULL};
+    run_case(&c, s, sb_camera(dr_v3(0, 1, 2), dr_v3(0, 0, 0), 50), p, 2);
+    dr_scene_destroy(s);
+}
+
 static void dark_sky(void)
 {
     struct sb b;
@@ -584,6 +619,7 @@ int main(void)
     tiny_emitter();
     dark_texels();
     spotted_parts();
+    cutouts();
     dark_sky();
     scales();
     return TEST_END();

@@ -690,6 +690,37 @@ static struct dr_scene *bumpy_box(bool eight_bit)
     return s;
 }
 
+/* Cut-outs (alphaMode MASK), which the queries' filters apply and the eight-
+ * lane stages see only at light points (path_simd.c's light_sample): a
+ * wall panel whose RGBA base colour texture's alpha is a checker with
+ * holes, and a lamp cut the same way (about half its light points are
+ * holes, which emit nothing), above a glossy block; the open top lets some
+ * rays out to a constant sky. */
+static struct dr_scene *cutout_box(void)
+{
+    struct sb b;
+    sb_init(&b);
+    sb_open_box(&b, 2.0, sb_material(&b, sb_diffuse(dr_v3(0.8, 0.7, 0.6))));
+    sb_box(&b, dr_v3(-0.5, 0.0, -0.5), dr_v3(0.0, 0.7, 0.0), sb_material(&b, glossy_blue()));
+    float px[4 * 4 * 4];
+    for (int k = 0; k < 16; k++) {   /* colours, and alpha 1 or 0.1 in a checker */
+        px[4 * k] = 0.9f, px[4 * k + 1] = (float)(0.3 + 0.04 * k), px[4 * k + 2] = 0.5f;
+        px[4 * k + 3] = ((k % 4) + (k / 4)) % 2 ? 0.1f : 1.0f;
+    }
+    struct dr_material panel = sb_diffuse(dr_v3(0.9, 0.9, 0.9));
+    panel.alpha_mode = DR_ALPHA_MASK;
+    panel.alpha_cutoff = 0.5;
+    panel.base_color_tex.texture = sb_texture(&b, sb_image8(4, 4, 4, px));
+    sb_quad(&b, dr_v3(-0.8, 0.2, 0.3), dr_v3(1.4, 0, 0), dr_v3(0, 1.2, 0.2), sb_material(&b, panel));
+    struct dr_material lamp = warm_lamp();
+    lamp.alpha_mode = DR_ALPHA_MASK;
+    lamp.alpha_cutoff = 0.5;
+    lamp.base_color_tex.texture = panel.base_color_tex.texture;
+    sb_quad(&b, dr_v3(-0.4, 1.9, -0.4), dr_v3(0.8, 0, 0), dr_v3(0, 0, 0.8), sb_material(&b, lamp));   /* faces down */
+    sb_environment(&b, dr_v3(0.3, 0.35, 0.4));
+    return sb_finish(&b);
+}
+
 /* Vertex colours without textures: no prefetching, and the eight-lane
  * stages interpolate the colours themselves (no scalar material lookups). */
 static struct dr_scene *coloured_box(void)
@@ -1008,6 +1039,7 @@ static void test_wavefront_matches_one_path(void)
     exact_with_groups(map_box(true), DR_FX_ENV_MAP, above, "map-lit box, grey map");
     exact_with_groups(bumpy_box(false), DR_FX_NORMAL_MAPS, inside, "bumpy box");
     exact_with_groups(bumpy_box(true), DR_FX_NORMAL_MAPS | DR_FX_SHADING_NORMALS, inside, "bumpy box, eight-bit map");
+    exact_with_groups(cutout_box(), DR_FX_ALPHA_MASK | DR_FX_AREA_LIGHTS | DR_FX_TEXTURES, inside, "cut-out box");
     exact_with_groups(tiled_lamp_box(), DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS, inside, "tiled lamp box");
     exact_with_groups(textured_lamp_box(false), DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_TEXTURES, inside,
                       "textured lamp box");
