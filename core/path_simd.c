@@ -380,11 +380,13 @@ DR_SIMD_INLINE dr_m8 bsdf_sample(const struct dr_path8 *g, dr_m8 on, dr_f8 u_lob
  * its parameters). */
 static bool eight_lane_run(const struct dr_scene *s, const struct dr_path_opts *opts)
 {
-    /* (alphaMode MASK: its cut-outs are Embree's filters' business, which
-     * every query applies; the stages only test a light point, light_sample) */
+    /* (alphaMode MASK and BLEND: the surfaces a ray passes are Embree's
+     * filters' business, which every query applies with the ray's coverage
+     * key; the stages make the shadow rays' keys and test a light point,
+     * light_sample) */
     const unsigned allowed = DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_ENV_CONSTANT | DR_FX_ENV_MAP |
                              DR_FX_SHADING_NORMALS | DR_FX_SINGLE_SIDED | DR_FX_SPECULAR | DR_FX_TEXTURES |
-                             DR_FX_VERTEX_COLORS | DR_FX_NORMAL_MAPS | DR_FX_ALPHA_MASK;
+                             DR_FX_VERTEX_COLORS | DR_FX_NORMAL_MAPS | DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND;
     struct dr_light_tables t;
     return !(s->effects & ~allowed) && (opts->stages & DR_STAGE_NEE) &&
            !(opts->stages & (DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC)) && dr_light_tables(s->light_sampler, &t);
@@ -1079,13 +1081,13 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     out->pdf = pick * d2 / (dr_f8_abs(cos_l) * area);
     ok &= ~dr_v3x8_is_black(out->radiance) | out->diff;   /* (dr_path_light_kept) */
     /* dr_path_nee_end's test, here where the point is: a point in a hole of
-     * a cut-out emitter emits nothing (its shadow ray is still cast, as the
-     * one-path walker casts it). Only MASK: BLEND scenes keep the scalar
-     * stages, whose rays carry the coverage keys BLEND draws from. */
+     * a cut-out emitter, or on a BLEND emitter that lets the shadow ray's key
+     * through, emits nothing (its shadow ray is still cast, as the one-path
+     * walker casts it) */
     out->hole = (dr_m8){0};
-    for (int i = 0; (s->effects & DR_FX_ALPHA_MASK) && i < DR_SIMD_W; i++)
+    for (int i = 0; (s->effects & (DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND)) && i < DR_SIMD_W; i++)
         if (ok[i] && !env[i] && !env_map[i] && !other[i])
-            out->hole[i] = dr_coverage_point_present(s, L->ltri[i], b1[i], b2[i], 0) ? 0 : -1;
+            out->hole[i] = dr_coverage_point_present(s, L->ltri[i], b1[i], b2[i], g->skey[i]) ? 0 : -1;
     out->infinite = out->delta = (dr_m8){0};
     if (dr_m8_any(env))
         env_light_samples(s, lt, env, g, sky_uniform, u_pick, u1, u2, &ok, out);
@@ -1340,6 +1342,7 @@ static void keep_light_record(const struct light8 *ls, struct dr_path8 *g)
 static void ended_group(struct dr_path8 *g, dr_f8 depth)
 {
     g->shadow = g->go_on = g->diff_nee = g->hole = (dr_m8){0};
+    memset(g->skey, 0, sizeof g->skey);
     g->tmax = dr_f8s(0.0);
     g->depth = depth;
 }
@@ -1422,6 +1425,9 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     g->spec_p = specular_prob(g, g->wo_z);   /* (wo.z <= COS_EPS: unused) */
     dr_f8 u_pick, u1, u2;
     take_randoms(in, &L, g, &u_pick, &u1, &u2);
+    for (int i = 0; i < DR_SIMD_W; i++)   /* dr_path_step_begin's cover_key */
+        g->skey[i] = (s->effects & (DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND))
+                         ? dr_coverage_key(in->key[i], (int)depth[i], DR_RAY_SHADOW) : 0;
 
     /* dr_path_nee_begin */
     struct light8 ls;
@@ -1512,7 +1518,7 @@ void dr_path8_shade(const struct dr_scene *s, const struct dr_path_opts *opts, i
         next[i] = !g->go_on[i] ? DR_STEP_END : g->shadow[i] ? DR_STEP_SHADOW : DR_STEP_CONTINUE;
         if (next[i] == DR_STEP_SHADOW)
             *shadow[i] = (struct dr_shadow_ray){.o = dr_v3x8_get(&g->so, i), .d = dr_v3x8_get(&g->sd, i),
-                                                .tmax = g->tmax[i], .key = 0};
+                                                .tmax = g->tmax[i], .key = g->skey[i]};
     }
 }
 

@@ -103,6 +103,7 @@ struct dr_path8 {
     dr_f8 tmax, nee_cos, ls_pdf, bsdf_pdf;   /* next-event estimate, for its end */
     dr_m8 delta;                  /* ... from a punctual light (no MIS) */
     dr_m8 hole;                   /* ... whose light point is a hole of a cut-out emitter (no estimate) */
+    uint64_t skey[DR_SIMD_W];     /* the shadow rays' coverage keys (coverage.h; 0 without alpha) */
     dr_v3x8 nee_f, ls_radiance;
     dr_v3x8 nee_wi;               /* the light's direction, local (for a differentiated vertex) */
     /* in a run with a light parameter or a differentiated vertex only:
@@ -123,7 +124,7 @@ struct dr_path8 {
 };
 
 /* Can this run use the eight-lane stages for every walker (no light whose
- * radiance has a parameter, no alpha blending, media or dielectric boundaries; some
+ * radiance has a parameter, no media or dielectric boundaries; some
  * light)? */
 bool dr_path8_applies(const struct dr_scene *scene, const struct dr_path_opts *opts);
 /* Can path replay's walks use them (wave_soa.h's primal walks that give

@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "accel.h"
+#include "coverage.h"
 #include "material.h"
 #include "path_simd.h"
 #include "wavefront.h"
@@ -43,9 +44,11 @@ struct dr_wave_soa {
     /* one step's shadow rays, and whose they are */
     double sox[SLOTS], soy[SLOTS], soz[SLOTS], sdx[SLOTS], sdy[SLOTS], sdz[SLOTS];
     double stmax[SLOTS];
-    int64_t sowner[SLOTS];
+    int64_t sowner[SLOTS];   /* (their coverage keys: skey, below) */
     bool socc[SLOTS];
     double inf[SLOTS];                          /* the traces' tmax */
+    uint64_t tkey[SLOTS];                       /* the traces' coverage keys (coverage.h: BLEND scenes) */
+    uint64_t skey[SLOTS];                       /* the shadow rays' (by their index, as sox) */
     struct dr_hit hit[SLOTS];                   /* scalar hits of textured lanes (dr_path8_locate_hits) */
     struct dr_path8 group[LANES / DR_SIMD_W];   /* the hit stage's results, for the continuation */
     /* before shading: the hit points of the groups located (locate_textured),
@@ -269,6 +272,23 @@ static inline const struct dr_wave_log *replay_log(const struct dr_wave_soa *w, 
 
 /* ------------------------------------------------------------ the stages */
 
+/* Does a ray's coverage key matter (coverage.h: which BLEND surfaces it
+ * passes; the queries take keys only then). */
+static inline bool keyed_traces(const struct dr_scene *s)
+{
+    return (s->effects & DR_FX_ALPHA_BLEND) != 0;
+}
+static inline bool keyed_shadows(const struct dr_scene *s)
+{
+    return (s->effects & (DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND)) != 0;
+}
+
+/* Slot k's trace key (dr_path_trace_key, at the depth trace() counted). */
+static inline uint64_t trace_key(const struct dr_wave_soa *w, int k)
+{
+    return dr_coverage_key(w->key[k], (int)w->depth[k], DR_RAY_TRACE);
+}
+
 /* A replay's trace: the answers its first walk logged where the log holds
  * them (no ray traced or counted, as in dr_wave_run's replays), the other
  * rays traced as one batch. */
@@ -289,12 +309,14 @@ static void replay_trace(struct dr_wave_soa *w, const struct dr_scene *s, int n_
             counts->camera++;
         w->sox[n] = w->ox[k], w->soy[n] = w->oy[k], w->soz[n] = w->oz[k];
         w->sdx[n] = w->dx[k], w->sdy[n] = w->dy[k], w->sdz[n] = w->dz[k];
+        w->skey[n] = keyed_traces(s) ? trace_key(w, k) : 0;
         w->traced[n++] = k;
     }
     if (n == 0)
         return;
     struct dr_accel_rays r = {.n = n, .ox = w->sox, .oy = w->soy, .oz = w->soz,
-                              .dx = w->sdx, .dy = w->sdy, .dz = w->sdz, .tmax = w->inf};
+                              .dx = w->sdx, .dy = w->sdy, .dz = w->sdz, .tmax = w->inf,
+                              .key = keyed_traces(s) ? w->skey : NULL};
     dr_accel_intersect_many(s->accel, &r, w->traced_tri);
     for (int j = 0; j < n; j++)
         w->tri[w->traced[j]] = w->traced_tri[j];
@@ -317,12 +339,16 @@ static void trace(struct dr_wave_soa *w, const struct dr_scene *s, int n_live, i
     }
     counts->extension += (uint64_t)first_new;
     counts->camera += (uint64_t)(n_live - first_new);
+    const bool keyed = keyed_traces(s);
+    for (int k = 0; keyed && k < n_live; k++)
+        w->tkey[k] = trace_key(w, k);
     struct dr_accel_rays old = {.n = first_new, .ox = w->ox, .oy = w->oy, .oz = w->oz,
-                                .dx = w->dx, .dy = w->dy, .dz = w->dz, .tmax = w->inf};
+                                .dx = w->dx, .dy = w->dy, .dz = w->dz, .tmax = w->inf,
+                                .key = keyed ? w->tkey : NULL};
     const int f = first_new;
     struct dr_accel_rays cam = {.n = n_live - f, .ox = w->ox + f, .oy = w->oy + f, .oz = w->oz + f,
                                 .dx = w->dx + f, .dy = w->dy + f, .dz = w->dz + f, .tmax = w->inf,
-                                .coherent = n_live - f};
+                                .key = keyed ? w->tkey + f : NULL, .coherent = n_live - f};
     if (old.n > 0)
         dr_accel_intersect_many(s->accel, &old, w->tri);
     if (cam.n > 0)
@@ -572,6 +598,7 @@ static int shade_scalar(struct dr_wave_soa *w, const struct dr_scene *s, const s
             w->sox[n_shadow] = p->shadow.o.x, w->soy[n_shadow] = p->shadow.o.y, w->soz[n_shadow] = p->shadow.o.z;
             w->sdx[n_shadow] = p->shadow.d.x, w->sdy[n_shadow] = p->shadow.d.y, w->sdz[n_shadow] = p->shadow.d.z;
             w->stmax[n_shadow] = p->shadow.tmax;
+            w->skey[n_shadow] = p->shadow.key;
             w->sowner[n_shadow++] = SLOTS + j;
         }
     }
@@ -630,6 +657,8 @@ static void shade(struct dr_wave_soa *w, const struct dr_scene *s, const struct 
             {w->sdz, &G->sd.z}, {w->stmax, &G->tmax}, {w->sowner, owner}};
         for (size_t a = 0; a < sizeof rays / sizeof *rays; a++)
             dr_compress8((uint64_t *)rays[a].a + n_shadow, rays[a].v, ray);
+        if (keyed_shadows(s))
+            dr_compress8(w->skey + n_shadow, G->skey, ray);
         for (int i = 0; i < DR_SIMD_W; i++)
             counts->shadow += cast[i] != 0, n_shadow += ray[i] != 0;
     }
@@ -638,7 +667,8 @@ static void shade(struct dr_wave_soa *w, const struct dr_scene *s, const struct 
         counts->simd_replayed += (uint64_t)n_live;
     n_shadow = shade_scalar(w, s, opts, n_shadow, located, counts);
     struct dr_accel_rays r = {.n = n_shadow, .ox = w->sox, .oy = w->soy, .oz = w->soz,
-                              .dx = w->sdx, .dy = w->sdy, .dz = w->sdz, .tmax = w->stmax};
+                              .dx = w->sdx, .dy = w->sdy, .dz = w->sdz, .tmax = w->stmax,
+                              .key = keyed_shadows(s) ? w->skey : NULL};
     if (n_shadow > 0)
         dr_accel_occluded_many(s->accel, &r, w->socc);
     for (int j = 0; j < n_shadow; j++) {

@@ -690,12 +690,15 @@ static struct dr_scene *bumpy_box(bool eight_bit)
     return s;
 }
 
-/* Cut-outs (alphaMode MASK), which the queries' filters apply and the eight-
- * lane stages see only at light points (path_simd.c's light_sample): a
- * wall panel whose RGBA base colour texture's alpha is a checker with
- * holes, and a lamp cut the same way (about half its light points are
- * holes, which emit nothing), above a glossy block; the open top lets some
- * rays out to a constant sky. */
+/* Cut-outs (alphaMode MASK) and stochastic transparency (BLEND), which the
+ * queries' filters apply (BLEND by each ray's coverage key, which the
+ * packet tracer makes for its traces and shadow rays) and the eight-lane
+ * stages see only at light points (path_simd.c's light_sample): a wall
+ * panel whose RGBA base colour texture's alpha is a checker with holes, a
+ * lamp cut the same way (about half its light points are holes, which emit
+ * nothing), a BLEND pane of alpha 0.6 across the room and a small BLEND
+ * lamp of alpha 0.5, above a glossy block; the open top lets some rays out
+ * to a constant sky. */
 static struct dr_scene *cutout_box(void)
 {
     struct sb b;
@@ -717,6 +720,14 @@ static struct dr_scene *cutout_box(void)
     lamp.alpha_cutoff = 0.5;
     lamp.base_color_tex.texture = panel.base_color_tex.texture;
     sb_quad(&b, dr_v3(-0.4, 1.9, -0.4), dr_v3(0.8, 0, 0), dr_v3(0, 0, 0.8), sb_material(&b, lamp));   /* faces down */
+    struct dr_material pane = sb_diffuse(dr_v3(0.2, 0.5, 0.9));
+    pane.alpha_mode = DR_ALPHA_BLEND;
+    pane.alpha = 0.6;
+    sb_quad(&b, dr_v3(-0.9, 0.1, 0.6), dr_v3(1.8, 0, 0), dr_v3(0, 1.0, -0.3), sb_material(&b, pane));
+    struct dr_material veil = warm_lamp();
+    veil.alpha_mode = DR_ALPHA_BLEND;
+    veil.alpha = 0.5;
+    sb_quad(&b, dr_v3(0.5, 1.7, 0.5), dr_v3(0.3, 0, 0), dr_v3(0, 0, -0.3), sb_material(&b, veil));   /* faces down */
     sb_environment(&b, dr_v3(0.3, 0.35, 0.4));
     return sb_finish(&b);
 }
@@ -1039,7 +1050,8 @@ static void test_wavefront_matches_one_path(void)
     exact_with_groups(map_box(true), DR_FX_ENV_MAP, above, "map-lit box, grey map");
     exact_with_groups(bumpy_box(false), DR_FX_NORMAL_MAPS, inside, "bumpy box");
     exact_with_groups(bumpy_box(true), DR_FX_NORMAL_MAPS | DR_FX_SHADING_NORMALS, inside, "bumpy box, eight-bit map");
-    exact_with_groups(cutout_box(), DR_FX_ALPHA_MASK | DR_FX_AREA_LIGHTS | DR_FX_TEXTURES, inside, "cut-out box");
+    exact_with_groups(cutout_box(), DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND | DR_FX_AREA_LIGHTS | DR_FX_TEXTURES, inside,
+                      "cut-out box");
     exact_with_groups(tiled_lamp_box(), DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS, inside, "tiled lamp box");
     exact_with_groups(textured_lamp_box(false), DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_TEXTURES, inside,
                       "textured lamp box");
