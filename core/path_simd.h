@@ -13,7 +13,9 @@
  * vertex's random numbers from a Sobol or stratified sampler (sampler.h:
  * the independent sampler's hashes are vector code). Every operation is the scalar code's, in its order, so each lane gets the
  * scalar walker's bits (test_render compares radiance in double); what the
- * kernels mirror is named beside each step. Alpha and media stay with the
+ * kernels mirror is named beside each step. Alpha (MASK, BLEND) is the
+ * queries' filters' business but for a light point's coverage (light_sample)
+ * and the shadow rays' coverage keys (skey). Media stay with the
  * scalar stages, and so do vertices with a BSDF derivative term but for
  * prb's walks (dr_wave_ops.bsdf_terms): the packet tracer (wavefront.c)
  * sends each lane one way or the other.
