@@ -536,6 +536,41 @@ if [[ -f $PEER ]]; then
     SAMPLER_JSON="{\"independent\": $IND_JSON, \"sobol\": $NOISE_JSON, \"sobol_over_independent\": $(calc "$SOBOL_VT / $IND_VT")}"
 fi
 
+# ---- q. alpha: cut-outs and stochastic transparency -------------------------
+# glTF's alphaMode on one material, the peer box's left wall: MASK (alpha 1:
+# the same rays, every candidate hit on the wall through Embree's coverage
+# filter) and BLEND (alpha 0.5: rays pass the wall by their coverage key).
+# The time per ray over the opaque box's, median of 3 triples run back to
+# back (issue 11: no scene far off the others; until 2026-12-03 any alpha
+# sent every vertex through the one-lane stages: MASK took 1.78 x the time).
+ALPHA_JSON=null
+if [[ -f $PEER ]]; then
+    echo
+    echo "q. alpha: time per ray, the peer box with its left wall MASK or BLEND / opaque (256x256, 64 spp, 2 threads)"
+    python3 - "$PEER" "$TMP" <<'PY'
+import json, sys
+for mode, a in (("MASK", 1.0), ("BLEND", 0.5)):
+    g = json.load(open(sys.argv[1]))
+    m = next(m for m in g["materials"] if m.get("name") == "red")
+    m["alphaMode"] = mode
+    pbr = m.setdefault("pbrMetallicRoughness", {})
+    pbr["baseColorFactor"] = pbr.get("baseColorFactor", [1, 1, 1, 1])[:3] + [a]
+    json.dump(g, open("%s/peer-%s.gltf" % (sys.argv[2], mode.lower()), "w"))
+PY
+    mask_r=() blend_r=()
+    for i in 1 2 3; do
+        render "$PEER" --res 256x256 --spp 64 --threads 2
+        per_opaque=$(calc "$R_TIME / $(json_num "$R_JSON" total rays)" %.6g)
+        render "$TMP/peer-mask.gltf" --res 256x256 --spp 64 --threads 2
+        mask_r+=("$(calc "$R_TIME / $(json_num "$R_JSON" total rays) / $per_opaque" %.3f)")
+        render "$TMP/peer-blend.gltf" --res 256x256 --spp 64 --threads 2
+        blend_r+=("$(calc "$R_TIME / $(json_num "$R_JSON" total rays) / $per_opaque" %.3f)")
+    done
+    printf '   per ray MASK / opaque: %s (%s); BLEND / opaque: %s (%s)\n' "$(median "${mask_r[@]}")" \
+        "$(join "${mask_r[@]}")" "$(median "${blend_r[@]}")" "$(join "${blend_r[@]}")"
+    ALPHA_JSON="{\"mask_per_ray_over_opaque\": $(median "${mask_r[@]}"), \"blend_per_ray_over_opaque\": $(median "${blend_r[@]}"), \"mask_triples\": [$(join "${mask_r[@]}")], \"blend_triples\": [$(join "${blend_r[@]}")]}"
+fi
+
 # ---- results.json and the noise note ---------------------------------------
 
 TOTAL=$(elapsed)
@@ -558,6 +593,7 @@ OTHER_CORES=$(calc "$OTHER_TOTAL / $WALL_TOTAL" %.2f)
     echo "  \"sparse_emissive_two_triangles\": $GLOW2_JSON,"
     echo "  \"default_sky\": $SKY_JSON, \"default_sky_metal\": $SKY_METAL_JSON,"
     echo "  \"default_sampler\": $SAMPLER_JSON,"
+    echo "  \"alpha\": $ALPHA_JSON,"
     echo "  \"peer\": $PEER_JSON"
     echo "}"
 } >"$OUT/results.json"
