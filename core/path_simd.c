@@ -624,8 +624,8 @@ void dr_path8_locate_hits(const struct dr_scene *s, const int64_t *tri, dr_v3x8 
         return;
     texcoords0(m, L.tri, L.v0, L.v1, L.v2, loc->b1, loc->b2, &loc->u, &loc->v);
     const dr_m8 vector_only = ~mask_of(L.textured);   /* (the others' texels: dr_material_prefetch's) */
-    for (int k = 0; k < 4; k++)
-        dr_texref8_prefetch(s, tex[k], vector_only, loc->u, loc->v);
+    for (int k = 0; k < 4; k++)   /* (the colours decoded: base and emissive) */
+        dr_texref8_prefetch(s, tex[k], vector_only, loc->u, loc->v, k == 0 || k == 2);
     for (int i = 0; m->tangents && i < DR_SIMD_W; i++)   /* normal_map8's tangent frames */
         if (tex[3][i] && !L.textured[i]) {
             __builtin_prefetch(m->tangents + 4 * (size_t)L.v0[i]);

@@ -10,8 +10,8 @@ bool dr_texref8_accepts(const struct dr_scene *s, const struct dr_texref *r)
     if (r->texture < 0 || r->texcoord != 0)
         return false;
     const struct dr_image *img = &s->images[s->textures[r->texture].image];
-    return img->bytes && img->lut && (img->channels == 3 || img->channels == 4) && img->width > 0 &&
-           img->height > 0;
+    const bool stored = img->bytes ? img->lut != NULL : img->data != NULL;   /* (blend reads either) */
+    return stored && (img->channels == 3 || img->channels == 4) && img->width > 0 && img->height > 0;
 }
 
 /* reduce_coord: NaN and infinities to 0, then the wrap mode's period. */
@@ -193,15 +193,18 @@ dr_v3x8 dr_texture8_rgb(const struct dr_texture *tex, const struct dr_image *img
 }
 
 void dr_texref8_prefetch(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 on, dr_f8 u,
-                         dr_f8 v)
+                         dr_f8 v, bool use_linear)
 {
     dr_m8 todo = with_texref(r, on);
     while (dr_m8_any(todo)) {
         struct group8 g;
         next_group(s, r, &todo, u, v, &g);
+        const size_t c = (size_t)g.img->channels;
+        const float *pix = use_linear && g.img->linear ? g.img->linear : g.img->data;   /* (blend's) */
         for (int k = 0; k < 4; k++)
             for (int i = 0; i < DR_SIMD_W; i++)
                 if (g.lanes[i])
-                    __builtin_prefetch(g.img->bytes + (size_t)g.idx[k][i] * (size_t)g.img->channels);
+                    __builtin_prefetch(g.img->bytes ? (const void *)(g.img->bytes + (size_t)g.idx[k][i] * c)
+                                                    : (const void *)(pix + (size_t)g.idx[k][i] * c));
     }
 }

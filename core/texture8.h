@@ -1,9 +1,9 @@
 /* Texture lookups for eight lanes at once (simd.h): dr_texture_eval's
  * bilinear lookup. For materials (dr_texref8_*), through dr_texref_uv's
- * transform, of eight-bit RGB and RGBA images, the kind nearly every glTF
- * file's PNG and JPEG textures are; other images (float storage, which
- * parameters and HDR files have; grey ones) and TEXCOORD_1 stay with the
- * scalar functions there. dr_texture8_rgb reads any image (the environment
+ * transform, of RGB and RGBA images in eight-bit storage (the kind nearly
+ * every glTF file's PNG and JPEG textures are) or float storage (texture
+ * parameters, HDR files); grey images and TEXCOORD_1 stay with the scalar
+ * functions there. dr_texture8_rgb reads any image (the environment
  * map's, env8.h). The same operations as image.c's dr_texture_taps, texel8,
  * texels and add_texel on the same inputs, so the results are the scalar
  * lookup's to the bit (test_texture8 checks both against each other). */
@@ -15,8 +15,8 @@
 #include "scene.h"
 #include "simd.h"
 
-/* Does the eight-lane lookup read texref r: a texture that is there, an
- * eight-bit RGB or RGBA image with pixels, TEXCOORD_0. */
+/* Does the eight-lane lookup read texref r: a texture that is there, an RGB
+ * or RGBA image with pixels (either storage), TEXCOORD_0. */
 bool dr_texref8_accepts(const struct dr_scene *s, const struct dr_texref *r);
 
 /* For each lane i of on whose r[i] is not NULL (a texref dr_texref8_accepts):
@@ -34,10 +34,9 @@ dr_v3x8 dr_texref8_rgb(const struct dr_scene *s, const struct dr_texref *const r
 dr_v3x8 dr_texture8_rgb(const struct dr_texture *tex, const struct dr_image *img, dr_m8 on, dr_f8 u, dr_f8 v,
                         bool use_linear);
 
-/* Asks the cache for the texels dr_texref8_rgb(s, r, on, u, v, ...) will
- * read, without waiting (dr_texture_prefetch's job; the same bytes whether
- * decoded or not). */
+/* Asks the cache for the texels dr_texref8_rgb(s, r, on, u, v, use_linear)
+ * will read, without waiting (dr_texture_prefetch's job). */
 void dr_texref8_prefetch(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 on, dr_f8 u,
-                         dr_f8 v);
+                         dr_f8 v, bool use_linear);
 
 #endif

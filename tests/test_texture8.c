@@ -1,6 +1,6 @@
 /* Tests of core/texture8.c: the eight-lane texture lookup against the
  * scalar one (dr_texref_uv + dr_texture_eval) bit for bit, over eight-bit
- * RGB and RGBA images of awkward sizes, every pair of wrap modes, texture
+ * and float RGB and RGBA images of awkward sizes, every pair of wrap modes, texture
  * transforms, coordinates far outside [0, 1] and not finite at all, lanes
  * of different textures in one call and lanes left out; and which texrefs
  * the lookup accepts; and the one-texture lookup (the environment map's)
@@ -97,7 +97,7 @@ static long compare_lanes(struct dr_scene *s, const struct dr_texref *refs, int 
             v[i] = coord(r, size);
         }
         dr_v3x8 got = dr_texref8_rgb(s, lane_ref, on, u, v, use_linear);
-        dr_texref8_prefetch(s, lane_ref, on, u, v);   /* (no result: must not fault) */
+        dr_texref8_prefetch(s, lane_ref, on, u, v, use_linear);   /* (no result: must not fault) */
         for (int i = 0; i < DR_SIMD_W; i++) {
             dr_vec3 want = on[i] && lane_ref[i] ? scalar_rgb(s, lane_ref[i], u[i], v[i], use_linear) : dr_v3s(1.0);
             bool same = same_bits(got.x[i], want.x) && same_bits(got.y[i], want.y) && same_bits(got.z[i], want.z);
@@ -113,6 +113,26 @@ static long compare_lanes(struct dr_scene *s, const struct dr_texref *refs, int 
     return compared;
 }
 
+/* A w x h image of c channels in float storage with random values (up to
+ * 50: an HDR map's range), with a decoded copy beside it or not. */
+static struct dr_image image_float(struct rng *r, int w, int h, int c, bool with_linear)
+{
+    struct dr_image im;
+    memset(&im, 0, sizeof im);
+    im.width = w, im.height = h, im.channels = c;
+    size_t n = (size_t)w * h * c;
+    im.data = malloc(n * sizeof(float));
+    im.linear = with_linear ? malloc(n * sizeof(float)) : NULL;
+    if (!im.data || (with_linear && !im.linear))
+        exit(2);
+    for (size_t i = 0; i < n; i++) {
+        im.data[i] = (float)(50.0 * rng_next(r) * rng_next(r));
+        if (with_linear)
+            im.linear[i] = (float)rng_next(r);   /* (unrelated: which array was read shows) */
+    }
+    return im;
+}
+
 static void test_matches_scalar_lookup(void)
 {
     struct rng r = {7};
@@ -123,8 +143,9 @@ static void test_matches_scalar_lookup(void)
     s.textures = calloc((size_t)n_img * 9, sizeof *s.textures);
     struct dr_texref refs[2 * 9 * 6];
     int n_refs = 0;
-    for (int k = 0; k < n_img; k++) {
-        s.images[k] = image8(&r, sizes[k][0], sizes[k][1], sizes[k][2], k % 2 == 1);
+    for (int k = 0; k < n_img; k++) {   /* the last two in float storage (texture parameters, HDR files) */
+        s.images[k] = k < 4 ? image8(&r, sizes[k][0], sizes[k][1], sizes[k][2], k % 2 == 1)
+                            : image_float(&r, sizes[k][0], sizes[k][1], sizes[k][2], k == 5);
         s.n_images++;
         for (int ws = 0; ws < 3; ws++)
             for (int wt = 0; wt < 3; wt++) {   /* every pair of wrap modes, each with and without a transform */
@@ -161,32 +182,14 @@ static void test_matches_scalar_lookup(void)
     CHECK(!dr_texref8_accepts(&s, &refs[0]), "a grey image with alpha is the scalar lookup's");
     s.images[0] = keep;
     CHECK(dr_image_expand(&s.images[0]) == 0 && !s.images[0].bytes, "expand image 0 to floats");
-    CHECK(!dr_texref8_accepts(&s, &refs[0]), "a float image (a parameter's) is the scalar lookup's");
+    CHECK(dr_texref8_accepts(&s, &refs[0]), "an eight-bit image expanded to floats (a parameter's) is accepted");
+    for (int lin = 0; lin < 2; lin++)
+        compare_lanes(&s, refs, 12, lin == 1, &r, 1000);
 
     for (int k = 0; k < n_img; k++)
         dr_image_release(&s.images[k]);
     free(s.images);
     free(s.textures);
-}
-
-/* A w x h image of c channels in float storage with random values (up to
- * 50: an HDR map's range), with a decoded copy beside it or not. */
-static struct dr_image image_float(struct rng *r, int w, int h, int c, bool with_linear)
-{
-    struct dr_image im;
-    memset(&im, 0, sizeof im);
-    im.width = w, im.height = h, im.channels = c;
-    size_t n = (size_t)w * h * c;
-    im.data = malloc(n * sizeof(float));
-    im.linear = with_linear ? malloc(n * sizeof(float)) : NULL;
-    if (!im.data || (with_linear && !im.linear))
-        exit(2);
-    for (size_t i = 0; i < n; i++) {
-        im.data[i] = (float)(50.0 * rng_next(r) * rng_next(r));
-        if (with_linear)
-            im.linear[i] = (float)rng_next(r);   /* (unrelated: which array was read shows) */
-    }
-    return im;
 }
 
 /* dr_texture8_rgb (one texture for all lanes, any storage and channel
