@@ -436,8 +436,9 @@ static bool reads_textures(const struct dr_material *m)
 }
 
 /* How the stages read material m's textures. The base colour, metallic-
- * roughness and emissive textures that texture8.h accepts (the usual eight-
- * bit PNG or JPEG through TEXCOORD_0) are looked up eight lanes at a time.
+ * roughness and emissive textures that texture8.h accepts (RGB or RGBA
+ * through TEXCOORD_0: PNG and JPEG files, float parameters) are looked up
+ * eight lanes at a time.
  * The rest go through the scalar functions lane by lane, which read a
  * scalar hit: dr_material_eval for both BSDF textures when either is not
  * accepted, dr_emission for an emissive texture that is not. A normal map
