@@ -436,7 +436,7 @@ static bool reads_textures(const struct dr_material *m)
 }
 
 /* How the stages read material m's textures. The base colour, metallic-
- * roughness and emissive textures that texture8.h accepts (RGB or RGBA
+ * roughness and emissive textures that texture8.h accepts (any image read
  * through TEXCOORD_0: PNG and JPEG files, float parameters) are looked up
  * eight lanes at a time.
  * The rest go through the scalar functions lane by lane, which read a

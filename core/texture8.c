@@ -11,7 +11,7 @@ bool dr_texref8_accepts(const struct dr_scene *s, const struct dr_texref *r)
         return false;
     const struct dr_image *img = &s->images[s->textures[r->texture].image];
     const bool stored = img->bytes ? img->lut != NULL : img->data != NULL;   /* (blend reads either) */
-    return stored && (img->channels == 3 || img->channels == 4) && img->width > 0 && img->height > 0;
+    return stored && img->channels >= 1 && img->channels <= 4 && img->width > 0 && img->height > 0;
 }
 
 /* reduce_coord: NaN and infinities to 0, then the wrap mode's period. */

@@ -1,9 +1,9 @@
 /* Texture lookups for eight lanes at once (simd.h): dr_texture_eval's
  * bilinear lookup. For materials (dr_texref8_*), through dr_texref_uv's
- * transform, of RGB and RGBA images in eight-bit storage (the kind nearly
- * every glTF file's PNG and JPEG textures are) or float storage (texture
- * parameters, HDR files); grey images and TEXCOORD_1 stay with the scalar
- * functions there. dr_texture8_rgb reads any image (the environment
+ * transform, of images in eight-bit storage (the kind nearly every glTF
+ * file's PNG and JPEG textures are) or float storage (texture parameters,
+ * HDR files), grey or colour, with or without alpha; TEXCOORD_1 stays with
+ * the scalar functions there. dr_texture8_rgb reads any image (the environment
  * map's, env8.h). The same operations as image.c's dr_texture_taps, texel8,
  * texels and add_texel on the same inputs, so the results are the scalar
  * lookup's to the bit (test_texture8 checks both against each other). */
@@ -15,8 +15,8 @@
 #include "scene.h"
 #include "simd.h"
 
-/* Does the eight-lane lookup read texref r: a texture that is there, an RGB
- * or RGBA image with pixels (either storage), TEXCOORD_0. */
+/* Does the eight-lane lookup read texref r: a texture that is there, an
+ * image of 1 to 4 channels with pixels (either storage), TEXCOORD_0. */
 bool dr_texref8_accepts(const struct dr_scene *s, const struct dr_texref *r);
 
 /* For each lane i of on whose r[i] is not NULL (a texref dr_texref8_accepts):

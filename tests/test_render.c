@@ -643,9 +643,9 @@ static struct dr_scene *map_box(bool grey)
  * and out at others (the authored side), with some tangent frames'
  * handedness flipped and some missing, and a tile on the back wall whose
  * tangents lie along its normal but for 1e-9 (a degenerate frame: no
- * mapping); else a float map on walls with a grey base colour texture,
- * which only the scalar lookups read: such lanes build a scalar hit, to
- * which dr_normal_map_apply applies the map lane by lane. */
+ * mapping); else a float map on walls with a base colour texture read
+ * through TEXCOORD_1, which only the scalar lookups read: such lanes build
+ * a scalar hit, to which dr_normal_map_apply applies the map lane by lane. */
 static struct dr_scene *bumpy_box(bool eight_bit)
 {
     struct sb b;
@@ -656,9 +656,11 @@ static struct dr_scene *bumpy_box(bool eight_bit)
         0.9f, 0.5f, 0.5f, 1,    0.4f, 0.8f, 0.8f, 0.9f, 0.9f, 0.6f, 0.5f, 0.5f, 1,    0.2f, 0.3f, 0.9f};
     struct dr_material bumpy = sb_diffuse(dr_v3(0.7, 0.6, 0.5));
     bumpy.normal_tex.texture = sb_texture(&b, eight_bit ? sb_image8(4, 4, 3, bump_px) : sb_image(4, 4, 3, bump_px, 0.0f, false));
-    if (!eight_bit)
+    if (!eight_bit) {
         bumpy.base_color_tex.texture =
             sb_texture(&b, sb_image(2, 2, 1, (const float[]){0.9f, 0.4f, 0.6f, 1.0f}, 0.0f, true));
+        bumpy.base_color_tex.texcoord = 1;
+    }
     if (eight_bit) {
         bumpy.normal_scale = 0.7;
         bumpy.normal_tex.transformed = true;
