@@ -12,7 +12,7 @@
 
 /* Paths in flight per thread: enough for long runs of full Embree packets
  * and eight-lane groups, few enough that the arrays stay in a core's L2
- * cache (651 KiB in all, of which the group states take 5 KB per eight
+ * cache (693 KiB in all, of which the group states take 5 KB per eight
  * paths; a render touches 4 KB of those: the light sample's record in
  * dr_path8 is written only where a light has a parameter). */
 #ifndef DR_SOA_LANES
