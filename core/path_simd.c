@@ -1426,9 +1426,11 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     g->spec_p = specular_prob(g, g->wo_z);   /* (wo.z <= COS_EPS: unused) */
     dr_f8 u_pick, u1, u2;
     take_randoms(in, &L, g, &u_pick, &u1, &u2);
-    for (int i = 0; i < DR_SIMD_W; i++)   /* dr_path_step_begin's cover_key */
-        g->skey[i] = (s->effects & (DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND))
-                         ? dr_coverage_key(in->key[i], (int)depth[i], DR_RAY_SHADOW) : 0;
+    if (s->effects & (DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND))
+        for (int i = 0; i < DR_SIMD_W; i++)   /* dr_path_step_begin's cover_key */
+            g->skey[i] = dr_coverage_key(in->key[i], (int)depth[i], DR_RAY_SHADOW);
+    else
+        memset(g->skey, 0, sizeof g->skey);
 
     /* dr_path_nee_begin */
     struct light8 ls;
