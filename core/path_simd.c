@@ -1348,6 +1348,61 @@ static void ended_group(struct dr_path8 *g, dr_f8 depth)
     g->depth = depth;
 }
 
+/* The hit as the stages read it: stage_locate's geometry (ng, ns: the
+ * triangle's, not yet towards the ray), TEXCOORD_0 for the eight-lane
+ * lookups, and the textured lanes' scalar hits. */
+struct hit8 {
+    dr_v3x8 ng, ns;
+    dr_f8 b1, b2, tu, tv;
+    dr_m8 front;
+};
+
+/* stage_locate, and stage_emission's normal map (the hit point and eps into
+ * g): from the group's located hits where the caller has them. */
+static void locate_stage(const struct dr_scene *s, const struct dr_path8_in *in, struct lanes *L, struct dr_path8 *g,
+                         struct hit8 *h)
+{
+    const struct dr_mesh *m = &s->mesh;
+    if (in->located) {   /* (the same operations on the same inputs: the same bits) */
+        const struct dr_path8_located *l = in->located;
+        g->p = l->p, h->ng = l->ng, h->ns = l->ns, g->eps = l->eps, h->b1 = l->b1, h->b2 = l->b2, h->front = l->front;
+    } else
+        h->front = locate(m, L, in->o, in->d, &g->p, &h->ng, &h->ns, &g->eps, &h->b1, &h->b2);
+    h->tu = h->tv = dr_f8s(0.0);
+    if (L->any_tex8 && in->located && in->located->has_uv)
+        h->tu = in->located->u, h->tv = in->located->v;
+    else if (L->any_tex8)
+        texcoords0(m, L->tri, L->v0, L->v1, L->v2, h->b1, h->b2, &h->tu, &h->tv);
+    for (int i = 0; i < in->n; i++) {
+        if (!L->textured[i])
+            continue;
+        L->any_textured = true;
+        if (in->hit[i])
+            L->hit[i] = *in->hit[i];
+        else   /* the scalar hit the lookups read */
+            hit_of_lane(m, L, i, dr_v3x8_get(&in->o, i), dr_v3x8_get(&g->p, i), dr_v3x8_get(&h->ng, i),
+                        dr_v3x8_get(&h->ns, i), g->eps[i], h->b1[i], h->b2[i], h->front[i] != 0, &L->hit[i]);
+        if (L->normal_mapped[i]) {   /* stage_emission's dr_normal_map_apply */
+            dr_normal_map_apply(s, &L->hit[i]);
+            set_lane(&h->ns, i, L->hit[i].ns);
+        }
+    }
+    if (L->any_normal8)   /* ... eight lanes at a time (lanes without a scalar hit) */
+        h->ns = normal_map8(s, L, h->ng, h->ns, h->b1, h->b2, h->tu, h->tv);
+}
+
+/* The shadow rays' coverage keys: dr_path_step_begin's cover_key where the
+ * scene has alpha (coverage.h), 0 elsewhere. */
+static void shadow_keys(const struct dr_scene *s, const struct dr_path8_in *in, struct dr_path8 *g)
+{
+    if (!(s->effects & (DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND))) {
+        memset(g->skey, 0, sizeof g->skey);
+        return;
+    }
+    for (int i = 0; i < DR_SIMD_W; i++)
+        g->skey[i] = dr_coverage_key(in->key[i], (int)in->depth[i], DR_RAY_SHADOW);
+}
+
 void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path8_in *in,
                           struct dr_path8 *g)
 {
@@ -1358,39 +1413,15 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     lanes_of(s, in, &L);
     const int n = in->n;
     g->n = n;
-    dr_v3x8 o = in->o, d = in->d;
-    dr_f8 depth = in->depth;
+    const dr_v3x8 d = in->d;
+    const dr_f8 depth = in->depth;
 
     /* stage_locate, stage_emission */
-    dr_v3x8 ng, ns;
-    dr_f8 b1, b2;
-    dr_m8 front;
-    if (in->located) {   /* (the same operations on the same inputs: the same bits) */
-        const struct dr_path8_located *l = in->located;
-        g->p = l->p, ng = l->ng, ns = l->ns, g->eps = l->eps, b1 = l->b1, b2 = l->b2, front = l->front;
-    } else
-        front = locate(m, &L, o, d, &g->p, &ng, &ns, &g->eps, &b1, &b2);
-    dr_f8 tu = dr_f8s(0.0), tv = dr_f8s(0.0);   /* TEXCOORD_0, for the eight-lane texture lookups */
-    if (L.any_tex8 && in->located && in->located->has_uv)
-        tu = in->located->u, tv = in->located->v;
-    else if (L.any_tex8)
-        texcoords0(m, L.tri, L.v0, L.v1, L.v2, b1, b2, &tu, &tv);
-    for (int i = 0; i < n; i++) {
-        if (!L.textured[i])
-            continue;
-        L.any_textured = true;
-        if (in->hit[i])
-            L.hit[i] = *in->hit[i];
-        else   /* the scalar hit the lookups read */
-            hit_of_lane(m, &L, i, dr_v3x8_get(&o, i), dr_v3x8_get(&g->p, i), dr_v3x8_get(&ng, i), dr_v3x8_get(&ns, i),
-                        g->eps[i], b1[i], b2[i], front[i] != 0, &L.hit[i]);
-        if (L.normal_mapped[i]) {   /* stage_emission's dr_normal_map_apply */
-            dr_normal_map_apply(s, &L.hit[i]);
-            set_lane(&ns, i, L.hit[i].ns);
-        }
-    }
-    if (L.any_normal8)   /* ... eight lanes at a time (lanes without a scalar hit) */
-        ns = normal_map8(s, &L, ng, ns, b1, b2, tu, tv);
+    struct hit8 h;
+    locate_stage(s, in, &L, g, &h);
+    const dr_v3x8 ng = h.ng, ns = h.ns;
+    const dr_f8 b1 = h.b1, b2 = h.b2, tu = h.tu, tv = h.tv;
+    const dr_m8 front = h.front;
     g->emits = (dr_m8){0};
     if (opts->stages & DR_STAGE_EMISSION)
         emission_seen(s, &lt, &L, in, ng, front, b1, b2, tu, tv, g);
@@ -1426,11 +1457,7 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     g->spec_p = specular_prob(g, g->wo_z);   /* (wo.z <= COS_EPS: unused) */
     dr_f8 u_pick, u1, u2;
     take_randoms(in, &L, g, &u_pick, &u1, &u2);
-    if (s->effects & (DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND))
-        for (int i = 0; i < DR_SIMD_W; i++)   /* dr_path_step_begin's cover_key */
-            g->skey[i] = dr_coverage_key(in->key[i], (int)depth[i], DR_RAY_SHADOW);
-    else
-        memset(g->skey, 0, sizeof g->skey);
+    shadow_keys(s, in, g);
 
     /* dr_path_nee_begin */
     struct light8 ls;
