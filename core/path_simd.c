@@ -226,12 +226,12 @@ DR_SIMD_INLINE dr_v3x8 normalize(dr_v3x8 a)   /* dr_normalize */
     return dr_v3x8_sel(pos, dr_v3x8_scale(a, 1.0 / dr_f8_sel(pos, l, dr_f8s(1.0))), a);
 }
 
-/* dr_material_eval (the factors times the textures at TEXCOORD_0 (tu, tv),
+/* dr_material_eval (the factors times the textures at the coordinates uv,
  * times the vertex colour; lanes with a texture texture8.h does not read
  * call it), and what bsdf.c derives from the material alone (bsdf_alpha,
  * dielectric_f0, no_specular_lobe). */
 static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const struct lanes *L, dr_m8 end,
-                          const dr_v3x8 *colour, dr_f8 tu, dr_f8 tv)
+                          const dr_v3x8 *colour, const struct dr_uv8 *uv)
 {
     const void *const *mat = L->mat;
     g->base = gather3(mat, offsetof(struct dr_material, base_color));
@@ -239,8 +239,8 @@ static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const st
     g->specular = gather(mat, offsetof(struct dr_material, specular));
     dr_f8 r = gather(mat, offsetof(struct dr_material, roughness));
     if (L->any_tex8) {   /* factor x texture (1 where a lane has none), in dr_material_eval's order */
-        g->base = dr_v3x8_mul(g->base, dr_texref8_rgb(s, L->base_tex, ~end, tu, tv, true));
-        dr_v3x8 mr = dr_texref8_rgb(s, L->mr_tex, ~end, tu, tv, false);
+        g->base = dr_v3x8_mul(g->base, dr_texref8_rgb(s, L->base_tex, ~end, uv, true));
+        dr_v3x8 mr = dr_texref8_rgb(s, L->mr_tex, ~end, uv, false);
         r = r * mr.y;
         g->metallic = g->metallic * mr.z;
     }
@@ -436,10 +436,10 @@ static bool reads_textures(const struct dr_material *m)
 }
 
 /* How the stages read material m's textures. The base colour, metallic-
- * roughness and emissive textures that texture8.h accepts (any image read
- * through TEXCOORD_0: PNG and JPEG files, float parameters) are looked up
- * eight lanes at a time.
- * The rest go through the scalar functions lane by lane, which read a
+ * roughness and emissive textures that texture8.h accepts (any image of up
+ * to four channels read through TEXCOORD_0 or _1: PNG and JPEG files, float
+ * parameters) are looked up eight lanes at a time.
+ * The rest (images of more channels, such as a five-channel EXR) go through the scalar functions lane by lane, which read a
  * scalar hit: dr_material_eval for both BSDF textures when either is not
  * accepted, dr_emission for an emissive texture that is not. A normal map
  * texture8.h accepts is applied eight lanes at a time (normal_map8) where
@@ -491,11 +491,12 @@ static dr_v3x8 vertex_colours(const struct dr_mesh *m, const struct lanes *L, dr
     return interp(1.0 - b1 - b2, b1, b2, c[0], c[1], c[2]);
 }
 
-/* TEXCOORD_0 at barycentrics (b1, b2) of each lane's triangle tri[i]
- * (vertices v0..v2): the sums of attributes() and dr_hit_at, 0 where the
- * triangle has none. */
-static void texcoords0(const struct dr_mesh *m, const int64_t *tri, const uint32_t *v0, const uint32_t *v1,
-                       const uint32_t *v2, dr_f8 b1, dr_f8 b2, dr_f8 *u, dr_f8 *v)
+/* TEXCOORD_0 and _1 at barycentrics (b1, b2) of each lane's triangle tri[i]
+ * (vertices v0..v2). Set 0: the sums of attributes() and dr_hit_at, 0 where
+ * the triangle has none; set 1: dr_hit_uv1's, read only where the mesh has
+ * the set (some texture reads it), 0 elsewhere, as there. */
+static void texcoords(const struct dr_mesh *m, const int64_t *tri, const uint32_t *v0, const uint32_t *v1,
+                      const uint32_t *v2, dr_f8 b1, dr_f8 b2, struct dr_uv8 *uv)
 {
     const uint32_t *vk[3] = {v0, v1, v2};
     dr_f8 tu[3], tv[3];
@@ -509,8 +510,19 @@ static void texcoords0(const struct dr_mesh *m, const int64_t *tri, const uint32
             tv[k][i] = t ? t[1] : 0.0f;
         }
     dr_f8 b0 = 1.0 - b1 - b2;
-    *u = dr_f8_sel(has, b0 * tu[0] + b1 * tu[1] + b2 * tu[2], dr_f8s(0.0));
-    *v = dr_f8_sel(has, b0 * tv[0] + b1 * tv[1] + b2 * tv[2], dr_f8s(0.0));
+    uv->u[0] = dr_f8_sel(has, b0 * tu[0] + b1 * tu[1] + b2 * tu[2], dr_f8s(0.0));
+    uv->v[0] = dr_f8_sel(has, b0 * tv[0] + b1 * tv[1] + b2 * tv[2], dr_f8s(0.0));
+    uv->u[1] = uv->v[1] = dr_f8s(0.0);
+    if (!m->uvs1)
+        return;
+    for (int k = 0; k < 3; k++)
+        for (int i = 0; i < DR_SIMD_W; i++) {
+            const float *t = m->uvs1 + 2 * (size_t)vk[k][i];
+            tu[k][i] = t[0];
+            tv[k][i] = t[1];
+        }
+    uv->u[1] = b0 * tu[0] + b1 * tu[1] + b2 * tu[2];
+    uv->v[1] = b0 * tv[0] + b1 * tv[1] + b2 * tv[2];
 }
 
 /* ------------------------------------------------------------ the stages */
@@ -623,10 +635,10 @@ void dr_path8_locate_hits(const struct dr_scene *s, const int64_t *tri, dr_v3x8 
     loc->has_uv = any_tex8;
     if (!any_tex8)
         return;
-    texcoords0(m, L.tri, L.v0, L.v1, L.v2, loc->b1, loc->b2, &loc->u, &loc->v);
+    texcoords(m, L.tri, L.v0, L.v1, L.v2, loc->b1, loc->b2, &loc->uv);
     const dr_m8 vector_only = ~mask_of(L.textured);   /* (the others' texels: dr_material_prefetch's) */
     for (int k = 0; k < 4; k++)   /* (the colours decoded: base and emissive) */
-        dr_texref8_prefetch(s, tex[k], vector_only, loc->u, loc->v, k == 0 || k == 2);
+        dr_texref8_prefetch(s, tex[k], vector_only, &loc->uv, k == 0 || k == 2);
     for (int i = 0; m->tangents && i < DR_SIMD_W; i++)   /* normal_map8's tangent frames */
         if (tex[3][i] && !L.textured[i]) {
             __builtin_prefetch(m->tangents + 4 * (size_t)L.v0[i]);
@@ -637,13 +649,13 @@ void dr_path8_locate_hits(const struct dr_scene *s, const int64_t *tri, dr_v3x8 
 
 /* dr_normal_map_apply (normal_map.c) for the lanes with an eight-lane normal
  * map (L->normal_tex): the tangent frame at the hit, the map's texel through
- * TEXCOORD_0 (tu, tv), the perturbed normal, with the scalar function's
+ * its coordinates in uv, the perturbed normal, with the scalar function's
  * operations in its order, so each lane gets its bits. ng: the triangle's
  * normal, ns: the interpolated one (both not yet towards the ray). Returns
  * ns with those lanes' mapped; lanes where the scalar function changes
  * nothing (no tangents or UVs, a degenerate frame) keep theirs. */
 static dr_v3x8 normal_map8(const struct dr_scene *s, const struct lanes *L, dr_v3x8 ng, dr_v3x8 ns, dr_f8 b1,
-                           dr_f8 b2, dr_f8 tu, dr_f8 tv)
+                           dr_f8 b2, const struct dr_uv8 *uv)
 {
     const struct dr_mesh *m = &s->mesh;
     if (!m->tangents)
@@ -669,7 +681,7 @@ static dr_v3x8 normal_map8(const struct dr_scene *s, const struct lanes *L, dr_v
     if (!dr_m8_any(on))
         return ns;
     t = dr_v3x8_scale(t, 1.0 / tl);
-    const dr_v3x8 px = dr_texref8_rgb(s, L->normal_tex, on, tu, tv, false);
+    const dr_v3x8 px = dr_texref8_rgb(s, L->normal_tex, on, uv, false);
     const dr_f8 k = gather(L->mat, offsetof(struct dr_material, normal_scale));
     const dr_f8 x = (2.0 * px.x - 1.0) * k, y = (2.0 * px.y - 1.0) * k, z = 2.0 * px.z - 1.0;
     /* authored_side: -1 where the interpolated vertex normal was flipped onto ng's side */
@@ -708,8 +720,8 @@ DR_SIMD_INLINE dr_f8 gather_where(const double *a, const int64_t *k, dr_m8 on)
  * against next-event estimation (dr_light_pdf_area, dr_mis_power), where
  * the lane's triangle emits (g->emits, g->Le, g->emit_w). */
 static void emission_seen(const struct dr_scene *s, const struct dr_light_tables *lt, const struct lanes *L,
-                          const struct dr_path8_in *in, dr_v3x8 ng, dr_m8 front, dr_f8 b1, dr_f8 b2, dr_f8 tu,
-                          dr_f8 tv, struct dr_path8 *g)
+                          const struct dr_path8_in *in, dr_v3x8 ng, dr_m8 front, dr_f8 b1, dr_f8 b2,
+                          const struct dr_uv8 *uv, struct dr_path8 *g)
 {
     /* Only a material whose factor x strength is not black has emitting
      * triangles (the light sampler's emitter_power_weight): the per-triangle
@@ -724,7 +736,7 @@ static void emission_seen(const struct dr_scene *s, const struct dr_light_tables
     const dr_m8 seen = front | mask_of(L->double_sided);
     dr_v3x8 Le = emission(L->mat, seen);
     if (L->any_tex8)   /* dr_emission's factor x strength x texture, where seen */
-        Le = dr_v3x8_mul(Le, dr_texref8_rgb(s, L->emissive_tex, g->emits & seen, tu, tv, true));
+        Le = dr_v3x8_mul(Le, dr_texref8_rgb(s, L->emissive_tex, g->emits & seen, uv, true));
     for (int i = 0; L->any_textured && i < in->n; i++)
         if (g->emits[i] && L->scalar_emission[i])
             set_lane(&Le, i, dr_emission(s, &L->hit[i]));
@@ -1066,10 +1078,10 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     const dr_m8 seen = dr_f8_lt(cos_l, dr_f8s(0.0)) | mask_of(L->ldouble_sided);
     out->radiance = emission(L->lmat, seen);
     if (L->any_ltex8) {   /* dr_emission's texture at the light point (no texel read for a sample that failed) */
-        dr_f8 tu, tv;
-        texcoords0(m, L->ltri, v[0], v[1], v[2], b1, b2, &tu, &tv);
+        struct dr_uv8 uv;
+        texcoords(m, L->ltri, v[0], v[1], v[2], b1, b2, &uv);
         const dr_m8 on = ok & seen & ~mask_of(other) & ~env & ~env_map;
-        out->radiance = dr_v3x8_mul(out->radiance, dr_texref8_rgb(s, L->lemissive_tex, on, tu, tv, true));
+        out->radiance = dr_v3x8_mul(out->radiance, dr_texref8_rgb(s, L->lemissive_tex, on, &uv, true));
     }
     for (int i = 0; L->any_ltextured && i < DR_SIMD_W; i++)
         if (ok[i] && L->ltextured[i] && !other[i] && !env[i] && !env_map[i]) {   /* (no texel read for a sample that failed) */
@@ -1349,11 +1361,12 @@ static void ended_group(struct dr_path8 *g, dr_f8 depth)
 }
 
 /* The hit as the stages read it: stage_locate's geometry (ng, ns: the
- * triangle's, not yet towards the ray), TEXCOORD_0 for the eight-lane
- * lookups, and the textured lanes' scalar hits. */
+ * triangle's, not yet towards the ray), the texture coordinates for the
+ * eight-lane lookups, and the textured lanes' scalar hits. */
 struct hit8 {
     dr_v3x8 ng, ns;
-    dr_f8 b1, b2, tu, tv;
+    dr_f8 b1, b2;
+    struct dr_uv8 uv;
     dr_m8 front;
 };
 
@@ -1368,11 +1381,10 @@ static void locate_stage(const struct dr_scene *s, const struct dr_path8_in *in,
         g->p = l->p, h->ng = l->ng, h->ns = l->ns, g->eps = l->eps, h->b1 = l->b1, h->b2 = l->b2, h->front = l->front;
     } else
         h->front = locate(m, L, in->o, in->d, &g->p, &h->ng, &h->ns, &g->eps, &h->b1, &h->b2);
-    h->tu = h->tv = dr_f8s(0.0);
     if (L->any_tex8 && in->located && in->located->has_uv)
-        h->tu = in->located->u, h->tv = in->located->v;
+        h->uv = in->located->uv;
     else if (L->any_tex8)
-        texcoords0(m, L->tri, L->v0, L->v1, L->v2, h->b1, h->b2, &h->tu, &h->tv);
+        texcoords(m, L->tri, L->v0, L->v1, L->v2, h->b1, h->b2, &h->uv);
     for (int i = 0; i < in->n; i++) {
         if (!L->textured[i])
             continue;
@@ -1388,7 +1400,7 @@ static void locate_stage(const struct dr_scene *s, const struct dr_path8_in *in,
         }
     }
     if (L->any_normal8)   /* ... eight lanes at a time (lanes without a scalar hit) */
-        h->ns = normal_map8(s, L, h->ng, h->ns, h->b1, h->b2, h->tu, h->tv);
+        h->ns = normal_map8(s, L, h->ng, h->ns, h->b1, h->b2, &h->uv);
 }
 
 /* The shadow rays' coverage keys: dr_path_step_begin's cover_key where the
@@ -1420,11 +1432,11 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     struct hit8 h;
     locate_stage(s, in, &L, g, &h);
     const dr_v3x8 ng = h.ng, ns = h.ns;
-    const dr_f8 b1 = h.b1, b2 = h.b2, tu = h.tu, tv = h.tv;
+    const dr_f8 b1 = h.b1, b2 = h.b2;
     const dr_m8 front = h.front;
     g->emits = (dr_m8){0};
     if (opts->stages & DR_STAGE_EMISSION)
-        emission_seen(s, &lt, &L, in, ng, front, b1, b2, tu, tv, g);
+        emission_seen(s, &lt, &L, in, ng, front, b1, b2, &h.uv, g);
     g->diff_emit = (dr_m8){0};
     const struct dr_param_set *ps = opts->params;
     for (int i = 0; ps && ps->radiance_active && (opts->stages & DR_STAGE_EMISSION) && i < n; i++)
@@ -1453,7 +1465,7 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     dr_v3x8 colour;
     if (m->colors)
         colour = vertex_colours(m, &L, b1, b2);
-    material_eval(s, g, &L, end, m->colors ? &colour : NULL, tu, tv);
+    material_eval(s, g, &L, end, m->colors ? &colour : NULL, &h.uv);
     g->spec_p = specular_prob(g, g->wo_z);   /* (wo.z <= COS_EPS: unused) */
     dr_f8 u_pick, u1, u2;
     take_randoms(in, &L, g, &u_pick, &u1, &u2);

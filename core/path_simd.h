@@ -42,6 +42,7 @@
 #include "env8.h"
 #include "path.h"
 #include "simd.h"
+#include "texture8.h"
 
 /* A group's inputs: each lane's path state as the hit stage reads it
  * (dr_path_state's fields in vector form; lanes past n repeat lane 0). */
@@ -68,8 +69,8 @@ struct dr_path8_located {
     dr_v3x8 p, ng, ns;            /* hit point, geometric and shading normal (not yet towards the ray) */
     dr_f8 eps, b1, b2;
     dr_m8 front;
-    bool has_uv;                  /* u, v hold TEXCOORD_0 (the group has eight-lane texture lookups) */
-    dr_f8 u, v;
+    bool has_uv;                  /* uv holds the texture coordinates (the group has eight-lane lookups) */
+    struct dr_uv8 uv;
 };
 
 /* A group's vertex random numbers and light-table entries, found before

@@ -7,7 +7,7 @@
 
 bool dr_texref8_accepts(const struct dr_scene *s, const struct dr_texref *r)
 {
-    if (r->texture < 0 || r->texcoord != 0)
+    if (r->texture < 0 || (r->texcoord != 0 && r->texcoord != 1))
         return false;
     const struct dr_image *img = &s->images[s->textures[r->texture].image];
     const bool stored = img->bytes ? img->lut != NULL : img->data != NULL;   /* (blend reads either) */
@@ -72,7 +72,7 @@ static void taps8(const struct dr_texture *tex, const struct dr_image *img, dr_f
     wt[3] = fx * fy;
 }
 
-/* dr_texref_uv of TEXCOORD_0 (u, v): through the transform if r has one. */
+/* dr_texref_uv's transform of the set's (u, v), if r has one. */
 DR_SIMD_INLINE void texref_uv8(const struct dr_texref *r, dr_f8 *u, dr_f8 *v)
 {
     if (!r->transformed)
@@ -94,7 +94,7 @@ static dr_m8 with_texref(const struct dr_texref *const r[DR_SIMD_W], dr_m8 on)
 
 /* One group of a call's lanes: the lanes of todo whose texref is that of
  * todo's first lane (taken off todo), their image, and the taps of the
- * lookup at (u, v) through that texref's transform. */
+ * lookup at that texref's set of uv through its transform. */
 struct group8 {
     dr_m8 lanes;
     const struct dr_image *img;
@@ -102,8 +102,8 @@ struct group8 {
     dr_f8 wt[4];
 };
 
-static void next_group(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 *todo, dr_f8 u,
-                       dr_f8 v, struct group8 *g)
+static void next_group(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 *todo,
+                       const struct dr_uv8 *uv, struct group8 *g)
 {
     int first = 0;
     while (!(*todo)[first])
@@ -114,6 +114,7 @@ static void next_group(const struct dr_scene *s, const struct dr_texref *const r
     *todo &= ~g->lanes;
     const struct dr_texture *tex = &s->textures[ref->texture];
     g->img = &s->images[tex->image];
+    dr_f8 u = uv->u[ref->texcoord], v = uv->v[ref->texcoord];
     texref_uv8(ref, &u, &v);
     taps8(tex, g->img, u, v, g->idx, g->wt);
 }
@@ -170,14 +171,14 @@ static dr_v3x8 blend(const struct dr_image *img, dr_m8 lanes, int64_t idx[4][DR_
     return acc;
 }
 
-dr_v3x8 dr_texref8_rgb(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 on, dr_f8 u,
-                       dr_f8 v, bool use_linear)
+dr_v3x8 dr_texref8_rgb(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 on,
+                       const struct dr_uv8 *uv, bool use_linear)
 {
     dr_v3x8 out = {dr_f8s(1.0), dr_f8s(1.0), dr_f8s(1.0)};
     dr_m8 todo = with_texref(r, on);
     while (dr_m8_any(todo)) {
         struct group8 g;
-        next_group(s, r, &todo, u, v, &g);
+        next_group(s, r, &todo, uv, &g);
         out = dr_v3x8_sel(g.lanes, blend(g.img, g.lanes, g.idx, g.wt, use_linear), out);
     }
     return out;
@@ -192,13 +193,13 @@ dr_v3x8 dr_texture8_rgb(const struct dr_texture *tex, const struct dr_image *img
     return blend(img, on, idx, wt, use_linear);
 }
 
-void dr_texref8_prefetch(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 on, dr_f8 u,
-                         dr_f8 v, bool use_linear)
+void dr_texref8_prefetch(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 on,
+                         const struct dr_uv8 *uv, bool use_linear)
 {
     dr_m8 todo = with_texref(r, on);
     while (dr_m8_any(todo)) {
         struct group8 g;
-        next_group(s, r, &todo, u, v, &g);
+        next_group(s, r, &todo, uv, &g);
         const size_t c = (size_t)g.img->channels;
         const float *pix = use_linear && g.img->linear ? g.img->linear : g.img->data;   /* (blend's) */
         for (int k = 0; k < 4; k++)

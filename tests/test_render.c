@@ -643,8 +643,8 @@ static struct dr_scene *map_box(bool grey)
  * and out at others (the authored side), with some tangent frames'
  * handedness flipped and some missing, and a tile on the back wall whose
  * tangents lie along its normal but for 1e-9 (a degenerate frame: no
- * mapping); else a float map on walls with a base colour texture read
- * through TEXCOORD_1, which only the scalar lookups read: such lanes build
+ * mapping); else a float map on walls with a base colour texture of five
+ * channels (an EXR's), which only the scalar lookups read: such lanes build
  * a scalar hit, to which dr_normal_map_apply applies the map lane by lane. */
 static struct dr_scene *bumpy_box(bool eight_bit)
 {
@@ -657,9 +657,9 @@ static struct dr_scene *bumpy_box(bool eight_bit)
     struct dr_material bumpy = sb_diffuse(dr_v3(0.7, 0.6, 0.5));
     bumpy.normal_tex.texture = sb_texture(&b, eight_bit ? sb_image8(4, 4, 3, bump_px) : sb_image(4, 4, 3, bump_px, 0.0f, false));
     if (!eight_bit) {
-        bumpy.base_color_tex.texture =
-            sb_texture(&b, sb_image(2, 2, 1, (const float[]){0.9f, 0.4f, 0.6f, 1.0f}, 0.0f, true));
-        bumpy.base_color_tex.texcoord = 1;
+        static const float five[2 * 2 * 5] = {0.9f, 0.4f, 0.6f, 1.0f, 0.5f, 0.3f, 0.8f, 0.7f, 1.0f, 0.2f,
+                                              0.6f, 0.6f, 0.2f, 1.0f, 0.9f, 1.0f, 0.7f, 0.4f, 1.0f, 0.1f};
+        bumpy.base_color_tex.texture = sb_texture(&b, sb_image(2, 2, 5, five, 0.0f, true));
     }
     if (eight_bit) {
         bumpy.normal_scale = 0.7;
@@ -779,10 +779,23 @@ static struct dr_scene *tiled_lamp_box(void)
  * hits before shading and keeps the groups' hit points for the shading
  * (dr_path8_located), and takes the random numbers and light picks ahead,
  * stage by stage over the wave (dr_path8_ahead), as on a textured asset
- * with thousands of emitting triangles. eight_bit: the textures in eight-bit storage,
- * looked up eight lanes at a time (texture8.h: base colour at the hits,
- * emission at hits and at light points); else float images, which the
- * scalar functions read lane by lane. */
+ * with thousands of emitting triangles. The textures are looked up eight
+ * lanes at a time (texture8.h: base colour at the hits, emission at hits
+ * and at light points). eight_bit: in eight-bit storage, the walls' base
+ * colour and the lamp's emission read through TEXCOORD_1 (a set of its own,
+ * made from the positions), the block's metallic-roughness through
+ * TEXCOORD_0; else float images through TEXCOORD_0. */
+static void uv1_from_positions(struct dr_mesh *m)
+{
+    m->uvs1 = malloc(sizeof(float) * 2 * m->n_vertices);
+    CHECK(m->uvs1 != NULL, "TEXCOORD_1 array");
+    for (uint32_t v = 0; m->uvs1 && v < m->n_vertices; v++) {
+        const float *p = m->positions + 3 * (size_t)v;
+        m->uvs1[2 * v] = 0.8f * p[0] - 0.3f * p[2] + 0.2f * p[1] + 0.15f;
+        m->uvs1[2 * v + 1] = 0.5f * p[1] + 0.6f * p[2] - 0.7f * p[0] - 0.25f;
+    }
+}
+
 static struct dr_scene *textured_lamp_box(bool eight_bit)
 {
     struct sb b;
@@ -794,6 +807,7 @@ static struct dr_scene *textured_lamp_box(bool eight_bit)
     struct dr_material wall = sb_diffuse(dr_v3s(0.8));
     wall.base_color_tex.texture =
         sb_texture(&b, eight_bit ? sb_image8(3, 3, 3, wall_px) : sb_image(3, 3, 3, wall_px, 0.0f, true));
+    wall.base_color_tex.texcoord = eight_bit;
     sb_open_box(&b, 2.0, sb_material(&b, wall));
     struct dr_material block = glossy_blue();
     if (eight_bit) {   /* half metal, with roughness and metalness from an RGBA metallic-roughness texture */
@@ -806,11 +820,14 @@ static struct dr_scene *textured_lamp_box(bool eight_bit)
     struct dr_material glow = warm_lamp();
     glow.emissive_tex.texture =
         sb_texture(&b, eight_bit ? sb_image8(2, 2, 3, glow_px) : sb_image(2, 2, 3, glow_px, 0.0f, true));
+    glow.emissive_tex.texcoord = eight_bit;
     int lamp = sb_material(&b, glow);
     for (int i = 0; i < 6; i++)
         for (int j = 0; j < 6; j++)   /* faces down */
             sb_quad(&b, dr_v3(-0.3 + 0.1 * i, 1.9, -0.3 + 0.1 * j), dr_v3(0.1, 0, 0), dr_v3(0, 0, 0.1), lamp);
     sb_light(&b, light(DR_LIGHT_POINT, dr_v3(0.5, 1.2, 0.5), dr_v3(0, -1, 0), 2.0));
+    if (eight_bit)
+        uv1_from_positions(&b.s->mesh);
     struct dr_scene *s = sb_finish(&b);
     CHECK(dr_wave_prefetches(s) && dr_path8_picks_ahead(s),
           "the textured lamp box is located before shading, its light picks taken ahead");
@@ -1062,7 +1079,7 @@ static void test_wavefront_matches_one_path(void)
     exact_with_groups(textured_lamp_box(false), DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_TEXTURES, inside,
                       "textured lamp box");
     exact_with_groups(textured_lamp_box(true), DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_TEXTURES, inside,
-                      "textured lamp box, eight-bit textures");
+                      "textured lamp box, eight-bit textures, TEXCOORD_1");
     exact_with_groups(spotted_lamp_box(false), DR_FX_AREA_LIGHTS | DR_FX_TEXTURES, inside, "spotted lamp box");
     exact_with_groups(spotted_lamp_box(true), DR_FX_AREA_LIGHTS | DR_FX_TEXTURES, inside,
                       "spotted lamp box, eight-bit texture");

@@ -1,8 +1,8 @@
 /* Tests of core/texture8.c: the eight-lane texture lookup against the
  * scalar one (dr_texref_uv + dr_texture_eval) bit for bit, over eight-bit
  * and float RGB and RGBA images of awkward sizes, every pair of wrap modes, texture
- * transforms, coordinates far outside [0, 1] and not finite at all, lanes
- * of different textures in one call and lanes left out; and which texrefs
+ * transforms, both TEXCOORD sets, coordinates far outside [0, 1] and not
+ * finite at all, lanes of different textures in one call and lanes left out; and which texrefs
  * the lookup accepts; and the one-texture lookup (the environment map's)
  * over images of either storage and any channel count. Deterministic:
  * fixed seeds. */
@@ -47,13 +47,32 @@ static struct dr_image image8(struct rng *r, int w, int h, int c, bool in_place)
     return im;
 }
 
-/* The scalar lookup a lane stands for: dr_texref_uv of a hit whose
- * TEXCOORD_0 is (u, v), then dr_texture_eval's colour channels. */
-static dr_vec3 scalar_rgb(const struct dr_scene *s, const struct dr_texref *r, double u, double v, bool use_linear)
+/* The scene's one triangle, whose TEXCOORD_1 is (0, 0), (1, 0), (0, 1):
+ * at barycentrics (b1, b2) dr_hit_uv1 interpolates to (b1, b2) (NaN where
+ * b0 = 1 - b1 - b2 is not finite). */
+static void one_triangle_with_uv1(struct dr_scene *s)
+{
+    static uint32_t indices[3] = {0, 1, 2};
+    static float uvs1[6] = {0, 0, 1, 0, 0, 1};
+    s->mesh.n_triangles = 1, s->mesh.n_vertices = 3;
+    s->mesh.indices = indices;
+    s->mesh.uvs1 = uvs1;
+}
+
+/* A hit on that triangle with TEXCOORD_0 (u, v) at barycentrics (b1, b2). */
+static struct dr_hit hit_at(double u, double v, double b1, double b2)
 {
     struct dr_hit hit;
     memset(&hit, 0, sizeof hit);
     hit.uv[0] = u, hit.uv[1] = v;
+    hit.b1 = b1, hit.b2 = b2;
+    return hit;
+}
+
+/* The scalar lookup a lane stands for: dr_texref_uv of the hit (its set),
+ * then dr_texture_eval's colour channels. */
+static dr_vec3 scalar_rgb(const struct dr_scene *s, const struct dr_texref *r, struct dr_hit hit, bool use_linear)
+{
     double uv[2], px[4];
     dr_texref_uv(&s->mesh, r, &hit, uv);
     const struct dr_texture *t = &s->textures[r->texture];
@@ -79,7 +98,8 @@ static double coord(struct rng *r, int size)
 
 /* Every lane of many calls, textures drawn per lane from refs (NULL among
  * them), some lanes left out: the same bits as the scalar lookup, 1 where a
- * lane has no lookup. Returns the lanes compared. */
+ * lane has no lookup. Each lane's TEXCOORD_1 is dr_hit_uv1's at random
+ * barycentrics, as the stages hand it over. Returns the lanes compared. */
 static long compare_lanes(struct dr_scene *s, const struct dr_texref *refs, int n_refs, bool use_linear,
                           struct rng *r, int calls)
 {
@@ -87,23 +107,27 @@ static long compare_lanes(struct dr_scene *s, const struct dr_texref *refs, int 
     for (int call = 0; call < calls; call++) {
         const struct dr_texref *lane_ref[DR_SIMD_W];
         dr_m8 on;
-        dr_f8 u, v;
+        struct dr_uv8 uv;
+        struct dr_hit hit[DR_SIMD_W];
         for (int i = 0; i < DR_SIMD_W; i++) {
             int k = (int)(rng_next(r) * (n_refs + 1));
             lane_ref[i] = k < n_refs ? &refs[k] : NULL;
             on[i] = rng_next(r) < 0.85 ? -1 : 0;
             int size = lane_ref[i] ? s->images[s->textures[lane_ref[i]->texture].image].width : 4;
-            u[i] = coord(r, size);
-            v[i] = coord(r, size);
+            double u = coord(r, size), v = coord(r, size), uv1[2];
+            hit[i] = hit_at(u, v, coord(r, size), coord(r, size));
+            dr_hit_uv1(&s->mesh, &hit[i], uv1);
+            uv.u[0][i] = u, uv.v[0][i] = v, uv.u[1][i] = uv1[0], uv.v[1][i] = uv1[1];
         }
-        dr_v3x8 got = dr_texref8_rgb(s, lane_ref, on, u, v, use_linear);
-        dr_texref8_prefetch(s, lane_ref, on, u, v, use_linear);   /* (no result: must not fault) */
+        dr_v3x8 got = dr_texref8_rgb(s, lane_ref, on, &uv, use_linear);
+        dr_texref8_prefetch(s, lane_ref, on, &uv, use_linear);   /* (no result: must not fault) */
         for (int i = 0; i < DR_SIMD_W; i++) {
-            dr_vec3 want = on[i] && lane_ref[i] ? scalar_rgb(s, lane_ref[i], u[i], v[i], use_linear) : dr_v3s(1.0);
+            dr_vec3 want = on[i] && lane_ref[i] ? scalar_rgb(s, lane_ref[i], hit[i], use_linear) : dr_v3s(1.0);
             bool same = same_bits(got.x[i], want.x) && same_bits(got.y[i], want.y) && same_bits(got.z[i], want.z);
             if (!same && differ++ < 5)
-                CHECK(same, "lane %d, uv (%.17g, %.17g): (%.17g %.17g %.17g), the scalar lookup (%.17g %.17g %.17g)",
-                      i, u[i], v[i], got.x[i], got.y[i], got.z[i], want.x, want.y, want.z);
+                CHECK(same, "lane %d, set %d, uv (%.17g, %.17g): (%.17g %.17g %.17g), the scalar lookup (%.17g %.17g %.17g)",
+                      i, lane_ref[i]->texcoord, uv.u[lane_ref[i]->texcoord][i], uv.v[lane_ref[i]->texcoord][i],
+                      got.x[i], got.y[i], got.z[i], want.x, want.y, want.z);
             compared += on[i] && lane_ref[i];
             left_alone += !(on[i] && lane_ref[i]);
         }
@@ -139,6 +163,7 @@ static void test_matches_scalar_lookup(void)
     static struct dr_scene s;
     const int sizes[][3] = {{5, 3, 3}, {1, 1, 3}, {7, 1, 4}, {1, 6, 3}, {64, 64, 4}, {33, 17, 3}};
     const int n_img = sizeof sizes / sizeof sizes[0];
+    one_triangle_with_uv1(&s);
     s.images = calloc((size_t)n_img, sizeof *s.images);
     s.textures = calloc((size_t)n_img * 9, sizeof *s.textures);
     struct dr_texref refs[2 * 9 * 6];
@@ -148,12 +173,14 @@ static void test_matches_scalar_lookup(void)
                             : image_float(&r, sizes[k][0], sizes[k][1], sizes[k][2], k == 5);
         s.n_images++;
         for (int ws = 0; ws < 3; ws++)
-            for (int wt = 0; wt < 3; wt++) {   /* every pair of wrap modes, each with and without a transform */
+            for (int wt = 0; wt < 3; wt++) {   /* every pair of wrap modes, each with and without a transform,
+                                                  through either TEXCOORD set */
                 s.textures[s.n_textures] = (struct dr_texture){k, (enum dr_wrap)ws, (enum dr_wrap)wt};
-                struct dr_texref plain = {.texture = s.n_textures, .texcoord = 0, .transformed = false,
+                struct dr_texref plain = {.texture = s.n_textures, .texcoord = (ws + wt + k) % 2, .transformed = false,
                                           .xf = {1, 0, 0, 0, 1, 0}};
                 struct dr_texref moved = plain;
                 moved.transformed = true;
+                moved.texcoord = 1 - plain.texcoord;
                 for (int j = 0; j < 6; j++)
                     moved.xf[j] = -2.0 + 4.0 * rng_next(&r);
                 refs[n_refs++] = plain;
@@ -170,12 +197,15 @@ static void test_matches_scalar_lookup(void)
     CHECK(n > 100000, "only %ld lanes compared", n);
 
     /* what is left to the scalar lookup */
-    struct dr_texref t1 = refs[0];
-    t1.texcoord = 1;
-    CHECK(!dr_texref8_accepts(&s, &t1), "TEXCOORD_1 is the scalar lookup's");
+    struct dr_texref t2 = refs[0];
+    t2.texcoord = 2;
+    CHECK(!dr_texref8_accepts(&s, &t2), "no TEXCOORD_2 (the loader drops such textures)");
     struct dr_texref none = {.texture = -1};
     CHECK(!dr_texref8_accepts(&s, &none), "no texture, no lookup");
     struct dr_image keep = s.images[0];
+    s.images[0].channels = 5;   /* (a five-channel EXR's) */
+    CHECK(!dr_texref8_accepts(&s, &refs[0]), "an image of five channels is the scalar lookup's");
+    s.images[0] = keep;
     for (int c = 1; c <= 2; c++) {   /* grey, and grey with alpha: image 0's bytes read as fewer channels */
         s.images[0].channels = c;
         CHECK(dr_texref8_accepts(&s, &refs[0]), "a grey image (%d channels) is accepted", c);
