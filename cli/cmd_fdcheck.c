@@ -146,6 +146,36 @@ static void print_json(const struct fdcheck_args *a, const char *scene_path, con
     fprintf(f, "}\n");
 }
 
+/* The entries as a table on stdout, and the verdict. */
+static void print_table(const struct fdcheck_args *a, const char *scene_path, const struct dr_fd_entry *en, int n)
+{
+    FILE *f = stdout;
+    int lw = 5;
+    for (int i = 0; i < n; i++)
+        if ((int)strlen(en[i].label) > lw)
+            lw = (int)strlen(en[i].label);
+    fprintf(f, "%s: %s estimator (%s) vs finite differences (eps %g), %d batches of %d spp at %dx%d, |z| <= %g\n",
+            scene_path, a->g.estimator->name, dr_sampling_name(a->g.sampling), a->eps, a->batches, a->g.spp,
+            a->g.width, a->g.height, a->z_max);
+    fprintf(f, "%-*s  %24s  %24s  %24s  %7s  %7s  %s\n", lw, "ENTRY", "REVERSE +- SE", "FORWARD +- SE", "FD +- SE",
+            "Z(REV)", "Z(FWD)", "VERDICT");
+    int bad = 0;
+    for (int i = 0; i < n; i++) {
+        const struct dr_fd_entry *e = &en[i];
+        char r[64], fw[64], fd[64];
+        snprintf(r, sizeof r, "%.5g +- %.2g", e->reverse, e->reverse_se);
+        snprintf(fw, sizeof fw, "%.5g +- %.2g", e->forward, e->forward_se);
+        snprintf(fd, sizeof fd, "%.5g +- %.2g", e->fd, e->fd_se);
+        fprintf(f, "%-*s  %24s  %24s  %24s  %7.2f  %7.2f  %s\n", lw, e->label, r, fw, fd, e->z_reverse, e->z_forward,
+                e->agree ? "agree" : "DISAGREE");
+        bad += !e->agree;
+    }
+    if (bad)
+        fprintf(f, "%d of %d entries disagree\n", bad, n);
+    else
+        fprintf(f, "all %d entries agree\n", n);
+}
+
 int cmd_fdcheck(int argc, char **argv)
 {
     double t_start = dr_clock_seconds();
@@ -194,31 +224,7 @@ int cmd_fdcheck(int argc, char **argv)
     if (a.g.json) {
         print_json(&a, scene_path, en, n, all_agree, t_loaded - t_start, t_end - t_loaded, t_end - t_start, ps);
     } else {
-        FILE *f = stdout;
-        int lw = 5;
-        for (int i = 0; i < n; i++)
-            if ((int)strlen(en[i].label) > lw)
-                lw = (int)strlen(en[i].label);
-        fprintf(f, "%s: %s estimator (%s) vs finite differences (eps %g), %d batches of %d spp at %dx%d, |z| <= %g\n",
-                scene_path, a.g.estimator->name, dr_sampling_name(a.g.sampling), a.eps, a.batches, a.g.spp, a.g.width, a.g.height, a.z_max);
-        fprintf(f, "%-*s  %24s  %24s  %24s  %7s  %7s  %s\n", lw, "ENTRY", "REVERSE +- SE", "FORWARD +- SE",
-                "FD +- SE", "Z(REV)", "Z(FWD)", "VERDICT");
-        for (int i = 0; i < n; i++) {
-            const struct dr_fd_entry *e = &en[i];
-            char r[64], fw[64], fd[64];
-            snprintf(r, sizeof r, "%.5g +- %.2g", e->reverse, e->reverse_se);
-            snprintf(fw, sizeof fw, "%.5g +- %.2g", e->forward, e->forward_se);
-            snprintf(fd, sizeof fd, "%.5g +- %.2g", e->fd, e->fd_se);
-            fprintf(f, "%-*s  %24s  %24s  %24s  %7.2f  %7.2f  %s\n", lw, e->label, r, fw, fd, e->z_reverse,
-                    e->z_forward, e->agree ? "agree" : "DISAGREE");
-        }
-        int bad = 0;
-        for (int i = 0; i < n; i++)
-            bad += !en[i].agree;
-        if (bad)
-            fprintf(f, "%d of %d entries disagree\n", bad, n);
-        else
-            fprintf(f, "all %d entries agree\n", n);
+        print_table(&a, scene_path, en, n);
     }
     rc = all_agree ? DR_EXIT_OK : DR_EXIT_DISAGREE;
 out:

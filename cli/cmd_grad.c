@@ -33,6 +33,7 @@
 #define TEXT(x) TEXT_(x)
 #define TAPE_PER_THREAD TEXT(DR_TAPE_PATHS_PER_WORKER)
 
+/* The help text: one string, long by nature (no logic). */
 void cmd_grad_usage(FILE *out)
 {
     fprintf(out,

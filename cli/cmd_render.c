@@ -145,6 +145,20 @@ static void preload_beside(int workers)
         dr_image_library_preload();
 }
 
+/* Can the image library write -o's format? -1 if so, else the exit code
+ * (with the message): no library, or a format it cannot write. */
+static int check_output_format(const char *output)
+{
+    if (dr_image_can_write(output))
+        return -1;
+    if (!dr_image_library_ok()) {
+        cli_error("render", "%s", dr_last_error());
+        return DR_EXIT_FAILURE;
+    }
+    cli_error("render", "-o %s: OpenImageIO cannot write this format (use e.g. .exr, .hdr, .png, .jpg)", output);
+    return DR_EXIT_USAGE;
+}
+
 int cmd_render(int argc, char **argv)
 {
     double t_start = dr_clock_seconds();
@@ -172,17 +186,8 @@ int cmd_render(int argc, char **argv)
     struct dr_camera cam;
     if ((rc = grad_load_scene(&a.g, &scene_path, &scene, &cam, 0, 0)) >= 0)
         goto out;
-    if (!dr_image_can_write(a.output) && !dr_image_library_ok()) {
-        cli_error("render", "%s", dr_last_error());
-        rc = DR_EXIT_FAILURE;
+    if ((rc = check_output_format(a.output)) >= 0)
         goto out;
-    }
-    if (!dr_image_can_write(a.output)) {
-        cli_error("render", "-o %s: OpenImageIO cannot write this format (use e.g. .exr, .hdr, .png, .jpg)",
-                  a.output);
-        rc = DR_EXIT_USAGE;
-        goto out;
-    }
     /* The write needs the image library: have it loaded while the render's
      * workers run, if a CPU is left for it (image_plugin.h) */
     dr_parallel_set_started_hook(preload_beside);

@@ -390,6 +390,100 @@ inline uint8_t quantize(double v)
     return (uint8_t)(v * 255.0 + 0.5);
 }
 
+// The file's channels: src_of[k] is the source channel of file channel k;
+// alpha_k the file's alpha channel (-1: none).
+struct file_layout {
+    int out_ch;
+    int src_of[4];
+    int alpha_k;
+};
+
+file_layout layout_for(const char *fmt, ImageOutput *out, int channels)
+{
+    file_layout l;
+    const bool has_alpha = channels == 2 || channels == 4;
+    if (std::strcmp(fmt, "hdr") == 0) {   // RGBE: exactly RGB
+        l.out_ch = 3;
+        for (int k = 0; k < 3; ++k)
+            l.src_of[k] = channels >= 3 ? k : 0;
+    } else if (has_alpha && !out->supports("alpha")) {   // JPEG, PNM, ...: drop alpha
+        l.out_ch = channels - 1;
+        for (int k = 0; k < l.out_ch; ++k)
+            l.src_of[k] = k;
+    } else {
+        l.out_ch = channels;
+        for (int k = 0; k < l.out_ch; ++k)
+            l.src_of[k] = k;
+    }
+    l.alpha_k = (has_alpha && l.out_ch == channels) ? l.out_ch - 1 : -1;
+    return l;
+}
+
+// The pixels as the file stores them: linear floats (as_float), or bytes,
+// sRGB-encoded but for alpha when srgb_encode. Data written as-is gets no
+// colour-space tag (no sRGB/gAMA chunk): glTF reads such textures
+// (metallic-roughness) as linear regardless.
+void file_pixels(const file_layout &l, size_t n, int channels, const float *pixels, bool as_float, bool srgb_encode,
+                 ImageSpec &spec, std::vector<float> &fbuf, std::vector<uint8_t> &bbuf)
+{
+    const int out_ch = l.out_ch;
+    if (as_float) {
+        fbuf.resize(n * (size_t)out_ch);
+        for (size_t i = 0; i < n; ++i)
+            for (int k = 0; k < out_ch; ++k)
+                fbuf[i * out_ch + k] = pixels[i * channels + l.src_of[k]];
+        return;
+    }
+    if (srgb_encode)
+        spec.attribute("oiio:ColorSpace", "sRGB");
+    bbuf.resize(n * (size_t)out_ch);
+    for (size_t i = 0; i < n; ++i)
+        for (int k = 0; k < out_ch; ++k) {
+            double v = pixels[i * channels + l.src_of[k]];
+            if (k != l.alpha_k && srgb_encode)
+                v = dr_linear_to_srgb(v > 0.0 ? v : 0.0);
+            bbuf[i * out_ch + k] = quantize(v);
+        }
+}
+
+// Writes data to a temporary beside path and renames it over path, so that a
+// failed write leaves nothing half-written under path's name.
+int write_then_rename(ImageOutput *out, const std::string &spath, const ImageSpec &spec, TypeDesc type,
+                      const void *data)
+{
+    const char *path = spath.c_str();
+    std::string tmp = dir_and_temp_name(spath, extension_of(spath));
+    temp_guard guard;
+    guard.path = tmp;
+    std::string why;
+    bool ok = out->open(tmp, spec);
+    if (!ok) {
+        why = oiio_error(out);
+    } else {
+        ok = out->write_image(type, data);
+        if (!ok)
+            why = oiio_error(out);
+        bool closed = out->close();
+        if (ok && !closed) {
+            ok = false;
+            why = oiio_error(out);
+        }
+    }
+    if (ok && std::rename(tmp.c_str(), path) != 0) {
+        ok = false;
+        why = std::strerror(errno);
+    }
+    if (!ok) {
+        // OpenImageIO's message names the temporary; the user knows only path.
+        for (size_t at; (at = why.find(tmp)) != std::string::npos;)
+            why.replace(at, tmp.size(), path);
+        dr_set_error("%s: cannot write image: %s", path, why.c_str());
+        return DR_ERR_IO;   // the guard removes the temporary
+    }
+    guard.keep = true;   // renamed: nothing left to remove
+    return DR_OK;
+}
+
 int write_image(const char *path, int width, int height, int channels, const float *pixels,
                 bool srgb_encode)
 {
@@ -406,92 +500,24 @@ int write_image(const char *path, int width, int height, int channels, const flo
         return DR_ERR_ARG;
     }
     const char *fmt = out->format_name();
-    bool as_float = is_float_format(fmt);
-    bool has_alpha = channels == 2 || channels == 4;
-
-    // Channel layout of the file: src_of[k] = source channel for file channel k.
-    int src_of[4];
-    int out_ch;
-    if (std::strcmp(fmt, "hdr") == 0) {   // RGBE: exactly RGB
-        out_ch = 3;
-        for (int k = 0; k < 3; ++k)
-            src_of[k] = channels >= 3 ? k : 0;
-    } else if (has_alpha && !out->supports("alpha")) {   // JPEG, PNM, ...: drop alpha
-        out_ch = channels - 1;
-        for (int k = 0; k < out_ch; ++k)
-            src_of[k] = k;
-    } else {
-        out_ch = channels;
-        for (int k = 0; k < out_ch; ++k)
-            src_of[k] = k;
-    }
-    int alpha_k = (has_alpha && out_ch == channels) ? out_ch - 1 : -1;
-
-    size_t n = (size_t)width * (size_t)height;
-    ImageSpec spec(width, height, out_ch, as_float ? TypeDesc::FLOAT : TypeDesc::UINT8);
-    if (alpha_k >= 0)
-        spec.alpha_channel = alpha_k;
-    if (out_ch == 2) {
+    const bool as_float = is_float_format(fmt);
+    const file_layout l = layout_for(fmt, out.get(), channels);
+    ImageSpec spec(width, height, l.out_ch, as_float ? TypeDesc::FLOAT : TypeDesc::UINT8);
+    if (l.alpha_k >= 0)
+        spec.alpha_channel = l.alpha_k;
+    if (l.out_ch == 2) {
         spec.channelnames = {"Y", "A"};
-    } else if (out_ch == 1) {
+    } else if (l.out_ch == 1) {
         spec.channelnames = {"Y"};
     }
     spec.attribute("oiio:UnassociatedAlpha", 1);
     std::vector<float> fbuf;
     std::vector<uint8_t> bbuf;
-    if (as_float) {
-        fbuf.resize(n * (size_t)out_ch);
-        for (size_t i = 0; i < n; ++i)
-            for (int k = 0; k < out_ch; ++k)
-                fbuf[i * out_ch + k] = pixels[i * channels + src_of[k]];
-    } else {
-        // Data written as-is gets no colour-space tag (no sRGB/gAMA chunk): glTF
-        // reads such textures (metallic-roughness) as linear regardless.
-        if (srgb_encode)
-            spec.attribute("oiio:ColorSpace", "sRGB");
-        bbuf.resize(n * (size_t)out_ch);
-        for (size_t i = 0; i < n; ++i)
-            for (int k = 0; k < out_ch; ++k) {
-                double v = pixels[i * channels + src_of[k]];
-                if (k != alpha_k && srgb_encode)
-                    v = dr_linear_to_srgb(v > 0.0 ? v : 0.0);
-                bbuf[i * out_ch + k] = quantize(v);
-            }
-    }
-
-    std::string ext = extension_of(spath);
-    std::string tmp = dir_and_temp_name(spath, ext);
-    temp_guard guard;
-    guard.path = tmp;
-    std::string why;
-    bool ok = out->open(tmp, spec);
-    if (!ok) {
-        why = oiio_error(out.get());
-    } else {
-        ok = as_float ? out->write_image(TypeDesc::FLOAT, fbuf.data())
-                      : out->write_image(TypeDesc::UINT8, bbuf.data());
-        if (!ok)
-            why = oiio_error(out.get());
-        bool closed = out->close();
-        if (ok && !closed) {
-            ok = false;
-            why = oiio_error(out.get());
-        }
-    }
+    file_pixels(l, (size_t)width * (size_t)height, channels, pixels, as_float, srgb_encode, spec, fbuf, bbuf);
+    int rc = as_float ? write_then_rename(out.get(), spath, spec, TypeDesc::FLOAT, fbuf.data())
+                      : write_then_rename(out.get(), spath, spec, TypeDesc::UINT8, bbuf.data());
     out.reset();
-    if (ok && std::rename(tmp.c_str(), path) != 0) {
-        ok = false;
-        why = std::strerror(errno);
-    }
-    if (!ok) {
-        // OpenImageIO's message names the temporary; the user knows only path.
-        for (size_t at; (at = why.find(tmp)) != std::string::npos;)
-            why.replace(at, tmp.size(), path);
-        dr_set_error("%s: cannot write image: %s", path, why.c_str());
-        return DR_ERR_IO;   // the guard removes the temporary
-    }
-    guard.keep = true;   // renamed: nothing left to remove
-    return DR_OK;
+    return rc;
 }
 
 

@@ -357,6 +357,45 @@ static double normalise_picks(struct dr_light_sampler *ls)
     return total;
 }
 
+/* The tables sized by the counts (n_emitters, n_entries, n_parts) and the
+ * mesh's triangles; false when out of memory. */
+static bool alloc_tables(struct dr_light_sampler *ls, const struct dr_mesh *m)
+{
+    ls->emitter_tri = malloc(sizeof(int64_t) * (size_t)(ls->n_emitters + 1));
+    ls->emitter_sub = malloc(sizeof(uint32_t) * (size_t)(ls->n_emitters + 1));
+    ls->tri_pick = calloc((size_t)m->n_triangles + 1, sizeof(double));
+    ls->tri_pick_density = calloc((size_t)m->n_triangles + 1, sizeof(double));
+    ls->part_density = calloc((size_t)ls->n_parts + 1, sizeof(double));
+    ls->emitter_area = malloc(sizeof(double) * (size_t)(ls->n_emitters + 1));
+    ls->cdf = malloc(sizeof(double) * (size_t)(ls->n_entries + 1));
+    ls->pick = malloc(sizeof(double) * (size_t)(ls->n_entries + 1));
+    ls->cdf_guide = malloc(sizeof(uint32_t) * (size_t)(ls->n_entries + 1));
+    return ls->emitter_tri && ls->emitter_sub && ls->tri_pick && ls->tri_pick_density && ls->part_density &&
+           ls->emitter_area && ls->cdf && ls->pick && ls->cdf_guide;
+}
+
+/* The emitting triangles and parts (weight tri_w / part_w >= 0) as entries
+ * 0.. of the table, in triangle order, their weights into w; returns how
+ * many. */
+static int64_t list_emitters(struct dr_light_sampler *ls, const struct dr_mesh *m, const double *tri_w,
+                             const double *part_w, double *w)
+{
+    int64_t k = 0;
+    for (uint32_t t = 0; t < m->n_triangles; t++) {
+        const unsigned level = tri_level(ls, t);
+        const uint32_t n = 1u << (2 * level);
+        const double *tw = level == 0 ? tri_w + t : part_w + ls->tri_part_first[t];
+        for (uint32_t j = 0; j < n; j++)
+            if (tw[j] >= 0.0) {
+                ls->emitter_tri[k] = t;
+                ls->emitter_sub[k] = level == 0 ? 0u : j << 3 | level;
+                ls->emitter_area[k] = dr_triangle_area(m, t) / (double)n;
+                w[k++] = tw[j];
+            }
+    }
+    return k;
+}
+
 struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
 {
     struct dr_light_sampler *ls = calloc(1, sizeof *ls);
@@ -382,17 +421,7 @@ struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
         ls->n_emitters += part_w[j] >= 0.0;
     ls->n_punctual = s->n_lights;
     ls->n_entries = ls->n_emitters + ls->n_punctual + (s->env.present ? 1 : 0);
-    ls->emitter_tri = malloc(sizeof(int64_t) * (size_t)(ls->n_emitters + 1));
-    ls->emitter_sub = malloc(sizeof(uint32_t) * (size_t)(ls->n_emitters + 1));
-    ls->tri_pick = calloc((size_t)m->n_triangles + 1, sizeof(double));
-    ls->tri_pick_density = calloc((size_t)m->n_triangles + 1, sizeof(double));
-    ls->part_density = calloc((size_t)ls->n_parts + 1, sizeof(double));
-    ls->emitter_area = malloc(sizeof(double) * (size_t)(ls->n_emitters + 1));
-    ls->cdf = malloc(sizeof(double) * (size_t)(ls->n_entries + 1));
-    ls->pick = malloc(sizeof(double) * (size_t)(ls->n_entries + 1));
-    ls->cdf_guide = malloc(sizeof(uint32_t) * (size_t)(ls->n_entries + 1));
-    if (!ls->emitter_tri || !ls->emitter_sub || !ls->tri_pick || !ls->tri_pick_density || !ls->part_density ||
-        !ls->emitter_area || !ls->cdf || !ls->pick || !ls->cdf_guide) {
+    if (!alloc_tables(ls, m)) {
         free(tri_w);
         free(part_w);
         goto nomem;
@@ -400,19 +429,7 @@ struct dr_light_sampler *dr_light_sampler_create(const struct dr_scene *s)
 
     /* Power estimates, comparable across light kinds: flux in watts-ish. */
     double *w = ls->pick;
-    int64_t k = 0;
-    for (uint32_t t = 0; t < m->n_triangles; t++) {
-        const unsigned level = tri_level(ls, t);
-        const uint32_t n = 1u << (2 * level);
-        const double *tw = level == 0 ? tri_w + t : part_w + ls->tri_part_first[t];
-        for (uint32_t j = 0; j < n; j++)
-            if (tw[j] >= 0.0) {
-                ls->emitter_tri[k] = t;
-                ls->emitter_sub[k] = level == 0 ? 0u : j << 3 | level;
-                ls->emitter_area[k] = dr_triangle_area(m, t) / (double)n;
-                w[k++] = tw[j];
-            }
-    }
+    int64_t k = list_emitters(ls, m, tri_w, part_w, w);
     free(tri_w);
     free(part_w);
     for (int i = 0; i < s->n_lights; i++)

@@ -620,14 +620,14 @@ static void index_param(struct dr_param_set *set, const struct dr_scene *s, cons
     }
 }
 
-struct dr_param_set *dr_param_set_create(const struct dr_scene *s, const char *const *pointers, int n)
+/* The set's per-material, light, image and medium indices, all "none"
+ * (offsets()), and room for n parameters; false when out of memory. */
+static bool alloc_indices(struct dr_param_set *set, const struct dr_scene *s, int n)
 {
-    struct dr_param_set *set = calloc(1, sizeof *set);
-    if (!set)
-        goto nomem;
     set->n_materials = s->n_materials;
     set->n_lights = s->n_lights;
     set->n_images = s->n_images;
+    set->n_media = s->n_media;
     set->params = calloc((size_t)(n > 0 ? n : 1), sizeof *set->params);
     set->mat_base_color = offsets(s->n_materials);
     set->mat_metallic = offsets(s->n_materials);
@@ -640,53 +640,58 @@ struct dr_param_set *dr_param_set_create(const struct dr_scene *s, const char *c
     set->mat_bsdf_active = calloc((size_t)s->n_materials + 1, sizeof(bool));
     set->mat_emission_active = calloc((size_t)s->n_materials + 1, sizeof(bool));
     set->env_color = set->env_strength = set->env_map = -1;
-    set->n_media = s->n_media;
     set->med_extinction = offsets(s->n_media);
     set->med_albedo = offsets(s->n_media);
     set->med_g = offsets(s->n_media);
     set->med_density_scale = offsets(s->n_media);
     set->med_density = offsets(s->n_media);
     set->med_active = calloc((size_t)s->n_media + 1, sizeof(bool));
-    if (!set->med_extinction || !set->med_albedo || !set->med_g || !set->med_density_scale || !set->med_density ||
-        !set->med_active)
-        goto nomem;
-    if (!set->params || !set->mat_base_color || !set->mat_metallic || !set->mat_roughness ||
-        !set->mat_emissive_factor || !set->mat_emissive_strength || !set->light_color || !set->light_intensity ||
-        !set->image || !set->mat_bsdf_active || !set->mat_emission_active)
-        goto nomem;
+    return set->med_extinction && set->med_albedo && set->med_g && set->med_density_scale && set->med_density &&
+           set->med_active && set->params && set->mat_base_color && set->mat_metallic && set->mat_roughness &&
+           set->mat_emissive_factor && set->mat_emissive_strength && set->light_color && set->light_intensity &&
+           set->image && set->mat_bsdf_active && set->mat_emission_active;
+}
 
-    int64_t total = 0;
-    for (int i = 0; i < n; i++) {
-        struct dr_param p;
-        if (dr_param_resolve(s, pointers[i], &p) != 0)
-            goto fail;
-        for (int j = 0; j < set->n; j++)
-            if (strcmp(set->params[j].name, p.name) == 0) {
-                dr_set_error("%s: requested twice (as %s)", pointers[i], p.name);
-                goto fail;
-            }
-        if (p.kind == DR_PARAM_IMAGE) {
-            bool colour, data;
-            image_usage(s, p.target, &colour, &data);
-            if (colour && data) {
-                dr_set_error("%s: this image is used both as a colour texture (sRGB) and as metallic-roughness "
-                             "data; drender cannot differentiate it as one parameter",
-                             pointers[i]);
-                goto fail;
-            }
-            /* its texels will change: floats again if it was kept in eight
-             * bits (a change of storage, not of the scene: the same values) */
-            if (dr_image_expand(&s->images[p.target]) != 0) {
-                dr_set_error("%s: out of memory for its texels as floats", pointers[i]);
-                goto fail;
-            }
+/* Resolves `pointer` and appends it at offset *total (advanced); 0, or an
+ * error with dr_set_error (an unknown or repeated parameter, an image used
+ * both as colour and as data, no memory for a texture's floats). */
+static int add_param(struct dr_param_set *set, const struct dr_scene *s, const char *pointer, int64_t *total)
+{
+    struct dr_param p;
+    if (dr_param_resolve(s, pointer, &p) != 0)
+        return DR_ERR_ARG;
+    for (int j = 0; j < set->n; j++)
+        if (strcmp(set->params[j].name, p.name) == 0) {
+            dr_set_error("%s: requested twice (as %s)", pointer, p.name);
+            return DR_ERR_ARG;
         }
-        p.offset = total;
-        total += p.size;
-        set->params[set->n++] = p;
-        index_param(set, s, &p);
+    if (p.kind == DR_PARAM_IMAGE) {
+        bool colour, data;
+        image_usage(s, p.target, &colour, &data);
+        if (colour && data) {
+            dr_set_error("%s: this image is used both as a colour texture (sRGB) and as metallic-roughness "
+                         "data; drender cannot differentiate it as one parameter",
+                         pointer);
+            return DR_ERR_ARG;
+        }
+        /* its texels will change: floats again if it was kept in eight
+         * bits (a change of storage, not of the scene: the same values) */
+        if (dr_image_expand(&s->images[p.target]) != 0) {
+            dr_set_error("%s: out of memory for its texels as floats", pointer);
+            return DR_ERR_NOMEM;
+        }
     }
-    set->total = total;
+    p.offset = *total;
+    *total += p.size;
+    set->params[set->n++] = p;
+    index_param(set, s, &p);
+    return 0;
+}
+
+/* Which materials' BSDFs and emission, which media, and whether any
+ * radiance, have a parameter. */
+static void mark_active(struct dr_param_set *set, const struct dr_scene *s)
+{
     for (int m = 0; m < s->n_materials; m++) {
         const struct dr_material *mat = &s->materials[m];
         set->mat_bsdf_active[m] = set->mat_base_color[m] >= 0 || set->mat_metallic[m] >= 0 ||
@@ -702,12 +707,25 @@ struct dr_param_set *dr_param_set_create(const struct dr_scene *s, const char *c
                              set->med_density_scale[i] >= 0 || set->med_density[i] >= 0;
         set->media_active |= set->med_active[i];
     }
+}
+
+struct dr_param_set *dr_param_set_create(const struct dr_scene *s, const char *const *pointers, int n)
+{
+    struct dr_param_set *set = calloc(1, sizeof *set);
+    if (!set || !alloc_indices(set, s, n)) {
+        dr_set_error("out of memory");
+        dr_param_set_destroy(set);
+        return NULL;
+    }
+    int64_t total = 0;
+    for (int i = 0; i < n; i++)
+        if (add_param(set, s, pointers[i], &total) != 0) {
+            dr_param_set_destroy(set);
+            return NULL;
+        }
+    set->total = total;
+    mark_active(set, s);
     return set;
-nomem:
-    dr_set_error("out of memory");
-fail:
-    dr_param_set_destroy(set);
-    return NULL;
 }
 
 void dr_param_set_get(const struct dr_scene *s, const struct dr_param_set *set, double *values)
