@@ -161,9 +161,65 @@ dr_vec3 dr_spectral_mis_weight(const struct dr_spectral_mis *mis)
     return dr_scale(dr_v3(mis->r[0], mis->r[1], mis->r[2]), 1.0 / mean);
 }
 
+/* Keeps the channels' probabilities (which only matter as ratios) away
+ * from overflow and underflow. */
+static void rescale(struct dr_spectral_mis *mis)
+{
+    const double big = dr_max(mis->r[0], dr_max(mis->r[1], mis->r[2]));
+    if (big > 1e100 || (big > 0.0 && big < 1e-100))
+        for (int j = 0; j < 3; j++)
+            mis->r[j] /= big;
+}
+
+/* Free flight in a homogeneous medium: the hero channel c's own flight,
+ * exponential at its extinction, no null collisions. Delta tracking against
+ * the largest channel's extinction took a step per tentative collision:
+ * (largest / hero's) steps per real one, which made a dense medium with
+ * chromatic extinction (10^4 / 10^3 / 10^2) walk a hundred steps for each,
+ * and a channel that does not attenuate at all (extinction 0) walk for ever
+ * along a ray leaving an unbounded medium. Each channel's probability of the
+ * same events, sigma_s,j exp(-sigma_t,j s) for a scattering at s and
+ * exp(-sigma_t,j len) for a pass, goes into mis->r; taken relative to the
+ * least extinction's exp(-sigma_min s), a common factor, so that no
+ * exponent is positive (only ratios of r matter). Two uniforms a call. */
+static enum dr_medium_event homogeneous_sample(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double tmax,
+                                               struct dr_sampler *rng, struct dr_spectral_mis *mis, double *t_out)
+{
+    double t0 = 0.0, t1 = tmax;
+    if (m->bounded && !clip_to_box(m->bmin, m->bmax, o, d, &t0, &t1))
+        return DR_MEDIUM_PASS;   /* (no collision outside the box: walk_start's clip) */
+    if (!(t0 < t1))
+        return DR_MEDIUM_PASS;
+    const dr_vec3 st = dr_scale(m->extinction, m->density_scale);
+    const double sig[3] = {st.x, st.y, st.z}, a[3] = {m->albedo.x, m->albedo.y, m->albedo.z};
+    const double least = dr_min(sig[0], dr_min(sig[1], sig[2]));
+    const int c = mis->hero;
+    const double u_flight = dr_sampler_next(rng), u_event = dr_sampler_next(rng);
+    const double s = sig[c] > 0.0 ? -log1p(-u_flight) / sig[c] : INFINITY;
+    const bool collides = t0 + s < t1;
+    const double len = collides ? s : t1 - t0;
+    if (collides && u_event < 1.0 - a[c]) {
+        *t_out = t0 + s;
+        return DR_MEDIUM_ABSORB;   /* (the path ends: its weights no longer matter) */
+    }
+    for (int j = 0; j < 3; j++) {
+        const double excess = sig[j] - least;   /* >= 0; 0 x infinity is no decay */
+        mis->r[j] *= excess > 0.0 ? exp(-excess * len) : 1.0;
+        if (collides)
+            mis->r[j] *= a[j] * sig[j] / (a[c] * sig[c]);   /* (a[c] sig[c] > 0: it scattered) */
+    }
+    rescale(mis);
+    if (!collides)
+        return DR_MEDIUM_PASS;
+    *t_out = t0 + s;
+    return DR_MEDIUM_SCATTER;
+}
+
 enum dr_medium_event dr_medium_sample(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double tmax,
                                       struct dr_sampler *rng, struct dr_spectral_mis *mis, double *t_out)
 {
+    if (!m->has_grid)
+        return homogeneous_sample(m, o, d, tmax, rng, mis, t_out);
     struct majorant_walk walk;
     double t0, t1, maj;
     walk_start(&walk, m, o, d, tmax);
@@ -231,6 +287,8 @@ void dr_medium_replay_ratio_tracking(const struct dr_medium *m, dr_vec3 o, dr_ve
 void dr_medium_replay_nulls(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double len, struct dr_sampler *rng,
                             dr_medium_visit_fn visit, void *ctx)
 {
+    if (!m->has_grid)
+        return;   /* a homogeneous medium's free flight has no null collisions (homogeneous_sample) */
     struct majorant_walk walk;
     double t0, t1, maj;
     walk_start(&walk, m, o, d, len);

@@ -8,12 +8,13 @@
  * the grid's voxels (centres at (i + 0.5) / n of the box, 0 outside it).
  *
  * Sampling:
- *  - free flight: delta tracking against a scalar majorant (the largest
- *    extinction of any channel in the majorant cell) with spectral MIS: a
- *    hero channel per path decides the events, every channel is weighted by
- *    the balance heuristic over the three channels' event probabilities,
- *    so red, green and blue extinction may differ by orders of magnitude
- *    (the weight of a channel is at most 3);
+ *  - free flight with spectral MIS: a hero channel per path decides the
+ *    events, every channel is weighted by the balance heuristic over the
+ *    three channels' event probabilities, so red, green and blue extinction
+ *    may differ by orders of magnitude (the weight of a channel is at most
+ *    3). In a homogeneous medium the hero channel's own exponential flight
+ *    (no null collisions); in a grid, delta tracking against a scalar
+ *    majorant (the largest extinction of any channel in the majorant cell);
  *  - transmittance for next-event estimation: exact exp(-sigma_t d) in a
  *    homogeneous medium, ratio tracking in a grid;
  *  - majorants: a coarse grid (DR_MAJORANT_CELL voxels a side) of the maxima
@@ -103,9 +104,11 @@ struct dr_spectral_mis {
 /* Per-channel weight of everything the path gathers now: r / mean(r). */
 dr_vec3 dr_spectral_mis_weight(const struct dr_spectral_mis *mis);
 
-/* Free-flight sampling along o + t d (d unit) for t in [0, tmax): delta
- * tracking with spectral MIS over the channels (medium.c), updating mis;
- * returns the event. rng supplies the uniforms (any number). */
+/* Free-flight sampling along o + t d (d unit) for t in [0, tmax) (infinite:
+ * a ray leaving an unbounded medium), with spectral MIS over the channels
+ * (medium.c: the hero's own flight when homogeneous, delta tracking in a
+ * grid), updating mis; returns the event. rng supplies the uniforms (any
+ * number). */
 enum dr_medium_event dr_medium_sample(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double tmax,
                                       struct dr_sampler *rng, struct dr_spectral_mis *mis, double *t);
 /* Unbiased transmittance estimate over [0, tmax) (exact when homogeneous). */
@@ -114,8 +117,9 @@ dr_vec3 dr_medium_transmittance(const struct dr_medium *m, dr_vec3 o, dr_vec3 d,
 
 /* Replays for the baseline derivative (medium_grad.c): the same tentative
  * collisions as dr_medium_sample over [0, len) of a stretch that ended there
- * (so all of them were null collisions) / as the transmittance estimate,
- * from the same random numbers; visit sees each point and its majorant. */
+ * (so all of them were null collisions; none in a homogeneous medium) / as
+ * the transmittance estimate, from the same random numbers; visit sees each
+ * point and its majorant. */
 typedef void (*dr_medium_visit_fn)(void *ctx, dr_vec3 x, double majorant);
 void dr_medium_replay_nulls(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double len, struct dr_sampler *rng,
                             dr_medium_visit_fn visit, void *ctx);

@@ -189,7 +189,9 @@ static void d_trace(const struct dr_scene *s, const struct dr_path_opts *opts, c
             continue;
         struct dsigma_ctx k = {s, ps, sink, pc->medium, w, false};
         const struct dr_medium *m = &s->media[pc->medium];
-        bool exact = shadow && !m->has_grid;   /* exact transmittance: exact derivative */
+        /* homogeneous: exact transmittance (shadow rays) or a free flight
+         * without null collisions (homogeneous_sample): the exact derivative */
+        bool exact = !m->has_grid;
         if (opts->medium_grad == DR_MEDIUM_GRAD_DRT || exact) {
             struct dr_sampler rng = {.key = dr_hash64(tr->rng_key ^ 0x5bd1e9955bd1e995ULL), .dim = (uint32_t)i << 16};
             drt_piece(&k, pc, tr->d, &rng);

@@ -140,6 +140,34 @@ static void test_slab_transmittance(void)
     dr_scene_destroy(s);
 }
 
+/* An unbounded (global) medium with a channel that does not attenuate
+ * (extinction 0.4 / 0 / 1.2, absorbing only), around a camera looking at
+ * the sky: green comes through whole, red and blue are absorbed on the
+ * way to infinity. The hero channel green never collides; free flight took
+ * a step per tentative collision against the largest extinction and never
+ * got to the end of the ray (the render hung). */
+static void test_clear_channel_to_infinity(void)
+{
+    struct sb b;
+    sb_init(&b);
+    sb_quad(&b, dr_v3(-0.1, -0.1, 30), dr_v3(0.2, 0, 0), dr_v3(0, 0.2, 0), sb_material(&b, sb_diffuse(dr_v3s(0.5))));
+    sb_medium(&b, -1, medium(dr_v3(0.4, 0.0, 1.2), dr_v3s(0.0), 0.0));
+    sb_environment(&b, dr_v3s(1.0));
+    struct dr_scene *s = sb_finish(&b);
+    check_mean("unbounded medium, green not attenuated", render_stats(s, sb_camera(dr_v3(0, 0, 0), dr_v3(0, 0, -1), 40),
+                                                                      16, 64, 8),
+               dr_v3(0.0, 1.0, 0.0), 1e-9);
+    /* the free flight itself: a pass to infinity, the attenuating channels'
+     * probabilities 0 against green's */
+    struct dr_sampler rng = {.key = 5, .dim = 0};
+    struct dr_spectral_mis mis = {1, {1.0, 1.0, 1.0}};
+    double t = -1.0;
+    enum dr_medium_event ev = dr_medium_sample(&s->media[0], dr_v3s(0.0), dr_v3(0, 0, -1), INFINITY, &rng, &mis, &t);
+    CHECK(ev == DR_MEDIUM_PASS && mis.r[0] == 0.0 && mis.r[1] > 0.0 && mis.r[2] == 0.0,
+          "hero green passes to infinity: event %d, r %g %g %g", (int)ev, mis.r[0], mis.r[1], mis.r[2]);
+    dr_scene_destroy(s);
+}
+
 /* --------------------------------------------------------------- furnace */
 
 static double noise(int x, int y, int z)
@@ -347,6 +375,7 @@ int main(void)
 {
     test_hg();
     test_slab_transmittance();
+    test_clear_channel_to_infinity();
     test_furnace();
     test_fresnel();
     test_dielectric_interface();
