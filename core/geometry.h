@@ -56,8 +56,12 @@ static inline void dr_mesh_prefetch_positions(const struct dr_mesh *m, int64_t t
 static inline void dr_mesh_prefetch_uvs(const struct dr_mesh *m, int64_t tri)
 {
     const uint32_t *idx = m->indices + 3 * (size_t)tri;
-    for (int k = 0; m->uvs && k < 3; k++)
-        __builtin_prefetch(m->uvs + 2 * (size_t)idx[k]);
+    for (int k = 0; k < 3; k++) {
+        if (m->uvs)
+            __builtin_prefetch(m->uvs + 2 * (size_t)idx[k]);
+        if (m->uvs1)
+            __builtin_prefetch(m->uvs1 + 2 * (size_t)idx[k]);
+    }
 }
 static inline void dr_mesh_prefetch_vertices(const struct dr_mesh *m, int64_t tri)
 {
@@ -68,6 +72,8 @@ static inline void dr_mesh_prefetch_vertices(const struct dr_mesh *m, int64_t tr
             __builtin_prefetch(m->normals + 3 * (size_t)idx[k]);
         if (m->uvs)
             __builtin_prefetch(m->uvs + 2 * (size_t)idx[k]);
+        if (m->uvs1)   /* (only where a texture reads TEXCOORD_1) */
+            __builtin_prefetch(m->uvs1 + 2 * (size_t)idx[k]);
     }
 }
 
