@@ -156,6 +156,19 @@ static double se(struct moments m)
     return sqrt(fmax(0.0, m.sq / BATCHES - mu * mu) / (BATCHES - 1));
 }
 
+/* Each estimator's z against the finite difference (printed). */
+static void z_scores(const char *what, struct moments fd, struct moments prb, struct moments tape, struct moments base,
+                     double *zp, double *zt, double *zb)
+{
+    const double f = mean(fd), fs = se(fd);
+    *zp = (mean(prb) - f) / sqrt(fs * fs + se(prb) * se(prb) + 1e-30);
+    *zt = (mean(tape) - f) / sqrt(fs * fs + se(tape) * se(tape) + 1e-30);
+    *zb = (mean(base) - f) / sqrt(fs * fs + se(base) * se(base) + 1e-30);
+    fprintf(stderr, "%-22s fd %+.5f (%.5f)  drt prb %+.5f (%.5f) z %+.2f  tape %+.5f z %+.2f  baseline %+.5f z %+.2f\n",
+            what, f, fs, mean(prb), se(prb), *zp, mean(tape), *zt, mean(base), *zb);
+}
+
+
 /* The cross primal (estimator.h): prb's replays one path at a time take
  * each path's sums and vertex count from the walk that made its pixel's
  * adjoints (prb.c's pixel_replays) instead of walking it again. Paths longer
@@ -253,13 +266,8 @@ static void check_scene(bool lamp)
         }
     }
     for (int i = 0; i < N; i++) {
-        double f = mean(fd[i]), fs = se(fd[i]);
-        double zp = (mean(drt_prb[i]) - f) / sqrt(fs * fs + se(drt_prb[i]) * se(drt_prb[i]) + 1e-30);
-        double zt = (mean(drt_tape[i]) - f) / sqrt(fs * fs + se(drt_tape[i]) * se(drt_tape[i]) + 1e-30);
-        double zb = (mean(base[i]) - f) / sqrt(fs * fs + se(base[i]) * se(base[i]) + 1e-30);
-        fprintf(stderr, "%-22s fd %+.5f (%.5f)  drt prb %+.5f (%.5f) z %+.2f  tape %+.5f z %+.2f  baseline %+.5f z %+.2f\n",
-                checks[i].what, f, fs, mean(drt_prb[i]), se(drt_prb[i]), zp, mean(drt_tape[i]), zt, mean(base[i]),
-                zb);
+        double zp, zt, zb;
+        z_scores(checks[i].what, fd[i], drt_prb[i], drt_tape[i], base[i], &zp, &zt, &zb);
         CHECK(fabs(zp) <= 3.5, "%s: DRT (prb) disagrees with finite differences: z = %.2f", checks[i].what, zp);
         CHECK(fabs(zt) <= 3.5, "%s: DRT (tape) disagrees with finite differences: z = %.2f", checks[i].what, zt);
     }
@@ -353,13 +361,9 @@ static void check_homogeneous(void)
         }
     }
     for (int i = 0; i < N; i++) {
-        double f = mean(fd[i]), fs = se(fd[i]);
-        double zp = (mean(drt_prb[i]) - f) / sqrt(fs * fs + se(drt_prb[i]) * se(drt_prb[i]) + 1e-30);
-        double zt = (mean(drt_tape[i]) - f) / sqrt(fs * fs + se(drt_tape[i]) * se(drt_tape[i]) + 1e-30);
-        double zb = (mean(base[i]) - f) / sqrt(fs * fs + se(base[i]) * se(base[i]) + 1e-30);
-        fprintf(stderr, "%-22s fd %+.5f (%.5f)  drt prb %+.5f (%.5f) z %+.2f  tape %+.5f z %+.2f  baseline %+.5f z %+.2f\n",
-                checks[i].what, f, fs, mean(drt_prb[i]), se(drt_prb[i]), zp, mean(drt_tape[i]), zt, mean(base[i]),
-                zb);
+        double zp, zt, zb;
+        z_scores(checks[i].what, fd[i], drt_prb[i], drt_tape[i], base[i], &zp, &zt, &zb);
+        const double f = mean(fd[i]), fs = se(fd[i]);
         CHECK(fabs(f) > 3.0 * fs, "%s: the finite difference is not significant (%.5f, se %.5f)", checks[i].what, f,
               fs);
         CHECK(fabs(zp) <= 3.5, "%s: DRT (prb) disagrees with finite differences: z = %.2f", checks[i].what, zp);
