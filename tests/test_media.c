@@ -217,6 +217,19 @@ static void test_furnace(void)
     s = furnace_scene(medium(dr_v3(1e4, 1e3, 1e2), dr_v3s(1.0), 0.0));
     check_mean("extinction 1e4 furnace", render_stats(s, cam, 8, 16, 100000), dr_v3s(1.0), 1e-3);
     dr_scene_destroy(s);
+    /* a channel that does not attenuate: the furnace still holds */
+    s = furnace_scene(medium(dr_v3(5.0, 0.0, 50.0), dr_v3s(1.0), 0.2));
+    check_mean("furnace with a clear green channel", render_stats(s, cam, 8, 64, 100000), dr_v3s(1.0), 1e-3);
+    dr_scene_destroy(s);
+    /* extinctions 10^8 apart: free flight took 10^8 tentative collisions per
+     * collision of the weakest channel (a render did not finish in a minute);
+     * now one step each: finite, and the red channel, whose paths stop at
+     * the depth limit inside, darker than blue */
+    s = furnace_scene(medium(dr_v3(1e8, 1e4, 1.0), dr_v3s(0.9), 0.0));
+    st = render_stats(s, cam, 8, 4, 200);
+    CHECK(st.mean.x >= 0.0 && st.mean.x < st.mean.z && st.mean.z <= 1.0, "extinction 1e8 / 1e4 / 1: mean %.4f %.4f %.4f",
+          st.mean.x, st.mean.y, st.mean.z);
+    dr_scene_destroy(s);
 }
 
 /* ------------------------------------------------------ dielectric boundaries */
