@@ -67,7 +67,10 @@ deps=$(oiio_deps)
 [[ -n $deps ]] || exit 0
 out=()
 for stem in "${RANKED[@]}"; do
-    path=$(printf '%s\n' "$deps" | awk -v s="$stem.so" '{ n = split($0, p, "/"); if (index(p[n], s) == 1) { print; exit } }')
+    # (awk reads to the end: an early exit could make printf die of SIGPIPE,
+    # which under pipefail and -e ended the script with nothing printed, and
+    # the plugin was linked without the ranking, now and then under load)
+    path=$(printf '%s\n' "$deps" | awk -v s="$stem.so" '!found { n = split($0, p, "/"); if (index(p[n], s) == 1) { print; found = 1 } }')
     [[ -n $path ]] && out+=("$path")
 done
 echo "${out[*]}"
