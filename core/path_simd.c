@@ -439,9 +439,10 @@ static bool reads_textures(const struct dr_material *m)
  * roughness and emissive textures that texture8.h accepts (any image of up
  * to four channels read through TEXCOORD_0 or _1: PNG and JPEG files, float
  * parameters) are looked up eight lanes at a time.
- * The rest (images of more channels, such as a five-channel EXR) go through the scalar functions lane by lane, which read a
- * scalar hit: dr_material_eval for both BSDF textures when either is not
- * accepted, dr_emission for an emissive texture that is not. A normal map
+ * The rest (images of more channels, such as a five-channel EXR) go through
+ * the scalar functions lane by lane, which read a scalar hit:
+ * dr_material_eval for both BSDF textures when either is not accepted,
+ * dr_emission for an emissive texture that is not. A normal map
  * texture8.h accepts is applied eight lanes at a time (normal_map8) where
  * the lane needs no scalar hit for the rest; otherwise dr_normal_map_apply
  * applies it to the scalar hit. */
@@ -1385,6 +1386,8 @@ static void locate_stage(const struct dr_scene *s, const struct dr_path8_in *in,
         h->uv = in->located->uv;
     else if (L->any_tex8)
         texcoords(m, L->tri, L->v0, L->v1, L->v2, h->b1, h->b2, &h->uv);
+    else
+        h->uv = (struct dr_uv8){0};   /* (no lookup reads them) */
     for (int i = 0; i < in->n; i++) {
         if (!L->textured[i])
             continue;

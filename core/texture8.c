@@ -92,8 +92,8 @@ static dr_m8 with_texref(const struct dr_texref *const r[DR_SIMD_W], dr_m8 on)
     return m;
 }
 
-/* One group of a call's lanes: the lanes of todo whose texref is that of
- * todo's first lane (taken off todo), their image, and the taps of the
+/* One group of a call's lanes: the lanes of pending whose texref is that of
+ * pending's first lane (taken off pending), their image, and the taps of the
  * lookup at that texref's set of uv through its transform. */
 struct group8 {
     dr_m8 lanes;
@@ -102,16 +102,16 @@ struct group8 {
     dr_f8 wt[4];
 };
 
-static void next_group(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 *todo,
+static void next_group(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 *pending,
                        const struct dr_uv8 *uv, struct group8 *g)
 {
     int first = 0;
-    while (!(*todo)[first])
+    while (!(*pending)[first])
         first++;
     const struct dr_texref *ref = r[first];
     for (int i = 0; i < DR_SIMD_W; i++)
-        g->lanes[i] = (*todo)[i] && r[i] == ref ? -1 : 0;
-    *todo &= ~g->lanes;
+        g->lanes[i] = (*pending)[i] && r[i] == ref ? -1 : 0;
+    *pending &= ~g->lanes;
     const struct dr_texture *tex = &s->textures[ref->texture];
     g->img = &s->images[tex->image];
     dr_f8 u = uv->u[ref->texcoord], v = uv->v[ref->texcoord];
@@ -175,10 +175,10 @@ dr_v3x8 dr_texref8_rgb(const struct dr_scene *s, const struct dr_texref *const r
                        const struct dr_uv8 *uv, bool use_linear)
 {
     dr_v3x8 out = {dr_f8s(1.0), dr_f8s(1.0), dr_f8s(1.0)};
-    dr_m8 todo = with_texref(r, on);
-    while (dr_m8_any(todo)) {
+    dr_m8 pending = with_texref(r, on);
+    while (dr_m8_any(pending)) {
         struct group8 g;
-        next_group(s, r, &todo, uv, &g);
+        next_group(s, r, &pending, uv, &g);
         out = dr_v3x8_sel(g.lanes, blend(g.img, g.lanes, g.idx, g.wt, use_linear), out);
     }
     return out;
@@ -196,10 +196,10 @@ dr_v3x8 dr_texture8_rgb(const struct dr_texture *tex, const struct dr_image *img
 void dr_texref8_prefetch(const struct dr_scene *s, const struct dr_texref *const r[DR_SIMD_W], dr_m8 on,
                          const struct dr_uv8 *uv, bool use_linear)
 {
-    dr_m8 todo = with_texref(r, on);
-    while (dr_m8_any(todo)) {
+    dr_m8 pending = with_texref(r, on);
+    while (dr_m8_any(pending)) {
         struct group8 g;
-        next_group(s, r, &todo, uv, &g);
+        next_group(s, r, &pending, uv, &g);
         const size_t c = (size_t)g.img->channels;
         const float *pix = use_linear && g.img->linear ? g.img->linear : g.img->data;   /* (blend's) */
         for (int k = 0; k < 4; k++)
