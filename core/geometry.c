@@ -2,7 +2,10 @@
 
 #include <stdlib.h>
 
-static void attributes(const struct dr_mesh *m, int64_t tri, double b1, double b2, struct dr_hit *hit)
+/* The hit's place on triangle tri at barycentrics (b1, b2): the position,
+ * the geometric normal and the ray offset, all that a medium's boundary
+ * crossing reads (dr_hit_locate). */
+static void place(const struct dr_mesh *m, int64_t tri, double b1, double b2, struct dr_hit *hit)
 {
     const uint32_t *idx = m->indices + 3 * (size_t)tri;
     const double *ne = m->tri_normal_eps + 4 * (size_t)tri;
@@ -17,7 +20,17 @@ static void attributes(const struct dr_mesh *m, int64_t tri, double b1, double b
     hit->ng = dr_v3(ne[0], ne[1], ne[2]);
     hit->eps = ne[3];
     hit->ns = hit->ng;
-    uint8_t flags = m->flags[tri];
+    hit->uv[0] = hit->uv[1] = 0.0;
+    hit->material = m->material[tri];
+}
+
+/* What shading reads besides: the interpolated shading normal and TEXCOORD_0
+ * (after place()). */
+static void shading_attributes(const struct dr_mesh *m, struct dr_hit *hit)
+{
+    const uint32_t *idx = m->indices + 3 * (size_t)hit->tri;
+    const double b1 = hit->b1, b2 = hit->b2, b0 = 1.0 - b1 - b2;
+    uint8_t flags = m->flags[hit->tri];
     if (flags & DR_TRI_HAS_NORMALS) {
         const float *n0 = m->normals + 3 * (size_t)idx[0], *n1 = m->normals + 3 * (size_t)idx[1],
                     *n2 = m->normals + 3 * (size_t)idx[2];
@@ -36,10 +49,7 @@ static void attributes(const struct dr_mesh *m, int64_t tri, double b1, double b
                     *t2 = m->uvs + 2 * (size_t)idx[2];
         hit->uv[0] = b0 * t0[0] + b1 * t1[0] + b2 * t2[0];
         hit->uv[1] = b0 * t0[1] + b1 * t1[1] + b2 * t2[1];
-    } else {
-        hit->uv[0] = hit->uv[1] = 0.0;
     }
-    hit->material = m->material[tri];
 }
 
 /* Are the three vertex normals the face's own (a flat-shaded face: a box,
@@ -87,7 +97,7 @@ int dr_mesh_derive(struct dr_mesh *m)
     return 0;
 }
 
-void dr_hit_compute(const struct dr_mesh *m, int64_t tri, dr_vec3 o, dr_vec3 d, struct dr_hit *hit)
+void dr_hit_locate(const struct dr_mesh *m, int64_t tri, dr_vec3 o, dr_vec3 d, struct dr_hit *hit)
 {
     const uint32_t *idx = m->indices + 3 * (size_t)tri;
     dr_vec3 p0 = dr_mesh_vertex(m, idx[0]);
@@ -112,9 +122,20 @@ void dr_hit_compute(const struct dr_mesh *m, int64_t tri, dr_vec3 o, dr_vec3 d, 
         b1 /= s;
         b2 /= s;
     }
-    attributes(m, tri, b1, b2, hit);
+    place(m, tri, b1, b2, hit);
     hit->t = t > 0.0 ? t : dr_length(dr_sub(hit->p, o));
     hit->front = dr_dot(d, hit->ng) < 0.0;
+}
+
+void dr_hit_shade(const struct dr_mesh *m, struct dr_hit *hit)
+{
+    shading_attributes(m, hit);
+}
+
+void dr_hit_compute(const struct dr_mesh *m, int64_t tri, dr_vec3 o, dr_vec3 d, struct dr_hit *hit)
+{
+    dr_hit_locate(m, tri, o, d, hit);
+    shading_attributes(m, hit);
 }
 
 /* d loss / d (b1, b2) of the shading normal: ns = sign * n / |n|,

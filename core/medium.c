@@ -182,20 +182,35 @@ static void rescale(struct dr_spectral_mis *mis)
  * exp(-sigma_t,j len) for a pass, goes into mis->r; taken relative to the
  * least extinction's exp(-sigma_min s), a common factor, so that no
  * exponent is positive (only ratios of r matter). Two uniforms a call. */
+/* The ray's stretch [t0, t1) of the medium up to tmax (false: none, and
+ * no number drawn), and then the hero channel c's flight s from t0 and the
+ * event's number u_event, drawn from rng: homogeneous_sample's and
+ * dr_medium_collision_ahead's, the same operations. */
+static bool homogeneous_flight(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double tmax, int c,
+                               struct dr_sampler *rng, double *t0, double *t1, double *s, double *u_event)
+{
+    *t0 = 0.0, *t1 = tmax;
+    if (m->bounded && !clip_to_box(m->bmin, m->bmax, o, d, t0, t1))
+        return false;   /* (no collision outside the box: walk_start's clip) */
+    if (!(*t0 < *t1))
+        return false;
+    const double u_flight = dr_sampler_next(rng);
+    *u_event = dr_sampler_next(rng);
+    const double sig = m->density_scale * dr_v3_get(m->extinction, c);   /* (dr_scale's product) */
+    *s = sig > 0.0 ? -log1p(-u_flight) / sig : INFINITY;
+    return true;
+}
+
 static enum dr_medium_event homogeneous_sample(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double tmax,
                                                struct dr_sampler *rng, struct dr_spectral_mis *mis, double *t_out)
 {
-    double t0 = 0.0, t1 = tmax;
-    if (m->bounded && !clip_to_box(m->bmin, m->bmax, o, d, &t0, &t1))
-        return DR_MEDIUM_PASS;   /* (no collision outside the box: walk_start's clip) */
-    if (!(t0 < t1))
+    const int c = mis->hero;
+    double t0, t1, s, u_event;
+    if (!homogeneous_flight(m, o, d, tmax, c, rng, &t0, &t1, &s, &u_event))
         return DR_MEDIUM_PASS;
     const dr_vec3 st = dr_scale(m->extinction, m->density_scale);
     const double sig[3] = {st.x, st.y, st.z}, a[3] = {m->albedo.x, m->albedo.y, m->albedo.z};
     const double least = dr_min(sig[0], dr_min(sig[1], sig[2]));
-    const int c = mis->hero;
-    const double u_flight = dr_sampler_next(rng), u_event = dr_sampler_next(rng);
-    const double s = sig[c] > 0.0 ? -log1p(-u_flight) / sig[c] : INFINITY;
     const bool collides = t0 + s < t1;
     const double len = collides ? s : t1 - t0;
     if (collides && u_event < 1.0 - a[c]) {
@@ -213,6 +228,14 @@ static enum dr_medium_event homogeneous_sample(const struct dr_medium *m, dr_vec
         return DR_MEDIUM_PASS;
     *t_out = t0 + s;
     return DR_MEDIUM_SCATTER;
+}
+
+double dr_medium_collision_ahead(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, struct dr_sampler rng, int hero)
+{
+    double t0, t1, s, u_event;
+    if (m->has_grid || !homogeneous_flight(m, o, d, INFINITY, hero, &rng, &t0, &t1, &s, &u_event))
+        return INFINITY;
+    return t0 + s < t1 ? t0 + s : INFINITY;
 }
 
 enum dr_medium_event dr_medium_sample(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double tmax,

@@ -111,6 +111,13 @@ dr_vec3 dr_spectral_mis_weight(const struct dr_spectral_mis *mis);
  * number). */
 enum dr_medium_event dr_medium_sample(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double tmax,
                                       struct dr_sampler *rng, struct dr_spectral_mis *mis, double *t);
+/* Where dr_medium_sample's next call with this rng (not advanced: a copy)
+ * and hero channel will put a collision if no surface comes first: in a
+ * homogeneous medium the hero's flight does not depend on tmax, only
+ * whether it ends before it. INFINITY where it may not collide at all (the
+ * flight leaves the medium's box, a non-attenuating hero) and in a grid.
+ * The walker traces only up to there (medium_path.c). */
+double dr_medium_collision_ahead(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, struct dr_sampler rng, int hero);
 /* Unbiased transmittance estimate over [0, tmax) (exact when homogeneous). */
 dr_vec3 dr_medium_transmittance(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double tmax,
                                 struct dr_sampler *rng);

@@ -147,7 +147,7 @@ static void drt_gain(const struct dr_scene *s, const struct dr_path_opts *opts, 
         struct dr_hit h;
         double seg = INFINITY;
         if (tri >= 0) {
-            dr_hit_compute(&s->mesh, tri, o, d, &h);
+            dr_hit_locate(&s->mesh, tri, o, d, &h);   /* (a boundary: no shading) */
             seg = dr_dot(dr_sub(h.p, o), d);
         }
         if (medium >= 0) {

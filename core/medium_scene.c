@@ -154,7 +154,7 @@ int dr_medium_at(const struct dr_scene *s, dr_vec3 o, dr_vec3 d)
         if (tri < 0)
             return s->global_medium;
         struct dr_hit h;
-        dr_hit_compute(&s->mesh, tri, o, d, &h);
+        dr_hit_locate(&s->mesh, tri, o, d, &h);   /* (a boundary: no shading) */
         int med = dr_boundary_medium(s, tri);
         if (med >= 0)
             return h.front ? s->global_medium : med;
@@ -186,7 +186,7 @@ dr_vec3 dr_media_transmittance(const struct dr_scene *s, dr_vec3 o, dr_vec3 d, d
         struct dr_hit h;
         double seg = tmax;
         if (tri >= 0) {
-            dr_hit_compute(&s->mesh, tri, o, d, &h);
+            dr_hit_locate(&s->mesh, tri, o, d, &h);   /* (a boundary: no shading) */
             seg = dr_dot(dr_sub(h.p, o), d);
         }
         if (medium >= 0) {

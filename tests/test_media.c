@@ -168,6 +168,56 @@ static void test_clear_channel_to_infinity(void)
     dr_scene_destroy(s);
 }
 
+/* dr_medium_collision_ahead against dr_medium_sample with the same numbers:
+ * where it names a distance, free flight collides exactly there whatever
+ * tmax lies beyond it (the walker traces its ray only that far,
+ * medium_path.c), and passes for any tmax before it; where it says
+ * INFINITY, free flight to infinity passes. Random rays from inside and
+ * outside a bounded chromatic medium (a channel of extinction 0 among
+ * them) and an unbounded one; a grid medium never names a distance. */
+static void test_collision_ahead(void)
+{
+    struct dr_medium box = medium(dr_v3(2.0, 0.0, 40.0), dr_v3s(0.7), 0.0);
+    box.bounded = true;
+    box.bmin = dr_v3(-1, -1, -1);
+    box.bmax = dr_v3(1, 1, 1);
+    struct dr_medium open = medium(dr_v3(0.3, 1.0, 3.0), dr_v3s(0.9), 0.0);
+    const struct dr_medium *ms[2] = {&box, &open};
+    int bad = 0, finite = 0, infinite = 0;
+    struct dr_sampler pick = {.key = 77, .dim = 0};
+    for (int i = 0; i < 20000; i++) {
+        const struct dr_medium *m = ms[i & 1];
+        dr_vec3 o = dr_v3(4.0 * dr_sampler_next(&pick) - 2.0, 4.0 * dr_sampler_next(&pick) - 2.0,
+                          4.0 * dr_sampler_next(&pick) - 2.0);
+        dr_vec3 d = dr_normalize(dr_v3(dr_sampler_next(&pick) - 0.5, dr_sampler_next(&pick) - 0.5,
+                                       dr_sampler_next(&pick) - 0.5));
+        const int hero = (int)(dr_sampler_next(&pick) * 3.0) % 3;
+        const struct dr_sampler rng = {.key = dr_hash64((uint64_t)i), .dim = 40, .kind = DR_SAMPLER_INDEPENDENT};
+        const double ahead = dr_medium_collision_ahead(m, o, d, rng, hero);
+        const double tmaxes[3] = {INFINITY, isinf(ahead) ? 1.0 : ahead * 1.5 + 1e-3,
+                                  isinf(ahead) ? 10.0 : ahead * 0.5};
+        for (int k = 0; k < 3; k++) {
+            struct dr_sampler r = rng;
+            struct dr_spectral_mis mis = {hero, {1.0, 1.0, 1.0}};
+            double t = -1.0;
+            enum dr_medium_event ev = dr_medium_sample(m, o, d, tmaxes[k], &r, &mis, &t);
+            const bool collides = ev != DR_MEDIUM_PASS;
+            const bool expect = !isinf(ahead) && ahead < tmaxes[k];
+            bad += collides != expect || (collides && t != ahead);
+            bad += k == 0 && isinf(ahead) && collides;
+        }
+        finite += !isinf(ahead);
+        infinite += isinf(ahead);
+    }
+    CHECK(bad == 0, "%d free flights disagree with the collision ahead", bad);
+    CHECK(finite > 5000 && infinite > 2000, "both cases drawn: %d with a collision ahead, %d without", finite, infinite);
+    struct dr_medium g = medium(dr_v3s(1.0), dr_v3s(0.5), 0.0);
+    set_grid(&g, 2, 2, 2, dr_v3s(-1.0), dr_v3s(1.0), constant_one);
+    CHECK(isinf(dr_medium_collision_ahead(&g, dr_v3s(0.0), dr_v3(0, 0, 1), (struct dr_sampler){.key = 1}, 0)),
+          "a grid medium names no distance (delta tracking needs the surface first)");
+    free(g.grid.density);
+}
+
 /* --------------------------------------------------------------- furnace */
 
 static double noise(int x, int y, int z)
@@ -389,6 +439,7 @@ int main(void)
     test_hg();
     test_slab_transmittance();
     test_clear_channel_to_infinity();
+    test_collision_ahead();
     test_furnace();
     test_fresnel();
     test_dielectric_interface();
