@@ -8,7 +8,9 @@
 #  ii. prb peak memory at max depth 4, 64, 1000 (goal: flat within 5%)
 # iii. render time of the smoke cube (rays per second)
 #  iv. a dense, almost white medium at depth 1000: gradient / primal time
-#      (DRT's gain paths are spread so that the cost stays linear in depth)
+#      (DRT takes a thick homogeneous medium's gain at the path's collisions,
+#      medium_grad.c; the gain paths elsewhere are spread so that the cost
+#      stays linear in depth)
 # Writes $BUILD/bench/media-results.json.
 set -euo pipefail
 BUILD=${BUILD:-build}

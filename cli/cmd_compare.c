@@ -117,6 +117,9 @@ void cmd_compare_usage(FILE *out)
             "      --sampler L     comma-separated random numbers: independent (default),\n"
             "                      stratified, sobol (as render); every combination runs\n"
             "                      with each, the reference with the first\n"
+            "      --medium-grad L comma-separated media derivative methods: drt (default),\n"
+            "                      baseline (as grad); with both, every combination runs\n"
+            "                      with each (the reference: drt, unbiased in every medium)\n"
             GRAD_IGNORE_UNSUPPORTED_HELP
             "      --json          print results.json on stdout too\n"
             "  -h, --help          show this help\n",
@@ -137,6 +140,7 @@ enum {
     OPT_EPS,
     OPT_SAMPLERS,
     OPT_PRIMAL,
+    OPT_MEDIUM_GRADS,
 };
 
 /* ---- options ---- */
@@ -219,6 +223,26 @@ static int one_sampler(struct cmp_args *a, const char *name)
     return -1;
 }
 
+static int one_medium_grad(struct cmp_args *a, const char *name)
+{
+    enum dr_medium_grad m;
+    if (strcmp(name, "drt") == 0)
+        m = DR_MEDIUM_GRAD_DRT;
+    else if (strcmp(name, "baseline") == 0)
+        m = DR_MEDIUM_GRAD_BASELINE;
+    else {
+        cli_error("compare", "--medium-grad: unknown method '%s' (known: drt, baseline)", name);
+        return DR_EXIT_USAGE;
+    }
+    for (int i = 0; i < a->n_medium_grads; i++)
+        if (a->medium_grads[i] == m) {
+            cli_error("compare", "--medium-grad: '%s' is listed twice", name);
+            return DR_EXIT_USAGE;
+        }
+    a->medium_grads[a->n_medium_grads++] = m;
+    return -1;
+}
+
 /* An ascending list of distinct integers in [lo, hi]. */
 static int int_list(const char *opt, const char *text, long lo, long hi, int *vals, int *n)
 {
@@ -298,6 +322,9 @@ static int own_option(void *ctx, int c, const char *arg)
     case OPT_SAMPLERS:
         a->n_samplers = 0;
         return split_list("--sampler", arg, CMP_MAX_SAMPLERS, one_sampler, a) >= 0 ? DR_EXIT_USAGE : 0;
+    case OPT_MEDIUM_GRADS:
+        a->n_medium_grads = 0;
+        return split_list("--medium-grad", arg, 2, one_medium_grad, a) >= 0 ? DR_EXIT_USAGE : 0;
     case OPT_SPPS:
         a->spp_given = true;
         return int_list("--spp", arg, 1, 1L << 24, a->spps, &a->n_spps) >= 0 ? DR_EXIT_USAGE : 0;
@@ -349,6 +376,7 @@ static int parse_args(int argc, char **argv, struct cmp_args *a)
         {"filter", required_argument, NULL, GOPT_FILTER},
         {"crop", required_argument, NULL, GOPT_CROP},
         {"sampler", required_argument, NULL, OPT_SAMPLERS},   /* a list here: compare's own */
+        {"medium-grad", required_argument, NULL, OPT_MEDIUM_GRADS},   /* (a list too) */
         {"env", required_argument, NULL, GOPT_ENV},
         {"no-default-light", no_argument, NULL, GOPT_NO_DEFAULT_LIGHT},
         {"light-units", required_argument, NULL, GOPT_LIGHT_UNITS},
@@ -390,6 +418,7 @@ static void args_defaults(struct cmp_args *a)
         a->spps[a->n_spps++] = spps[i];
     a->depths[a->n_depths++] = 8;
     a->samplers[a->n_samplers++] = DR_SAMPLER_INDEPENDENT;
+    a->medium_grads[a->n_medium_grads++] = DR_MEDIUM_GRAD_DRT;
     a->ref_kind = CMP_REF_SPP;
 }
 
@@ -422,7 +451,8 @@ static int check_out_dir(const char *dir)
  * does not apply; left out (and listed in the report) otherwise. */
 static int build_combos(const struct cmp_args *a, struct cmp_run *r)
 {
-    r->combos = calloc((size_t)(a->n_ests * a->n_samplings * a->n_samplers * a->n_depths * a->n_spps),
+    r->combos = calloc((size_t)(a->n_ests * a->n_samplings * a->n_medium_grads * a->n_samplers * a->n_depths *
+                                a->n_spps),
                        sizeof *r->combos);
     if (!r->combos) {
         cli_error("compare", "out of memory");
@@ -445,11 +475,12 @@ static int build_combos(const struct cmp_args *a, struct cmp_run *r)
                          dr_sampling_name(a->samplings[s]));
                 continue;
             }
-            for (int q = 0; q < a->n_samplers; q++)
-                for (int d = 0; d < a->n_depths; d++)
-                    for (int k = 0; k < a->n_spps; k++)
-                        r->combos[r->n_combos++] =
-                            (struct cmp_combo){est, a->samplings[s], a->depths[d], a->spps[k], a->samplers[q]};
+            for (int m = 0; m < a->n_medium_grads; m++)
+                for (int q = 0; q < a->n_samplers; q++)
+                    for (int d = 0; d < a->n_depths; d++)
+                        for (int k = 0; k < a->n_spps; k++)
+                            r->combos[r->n_combos++] = (struct cmp_combo){
+                                est, a->samplings[s], a->depths[d], a->spps[k], a->samplers[q], a->medium_grads[m]};
         }
     if (r->n_combos == 0) {
         char pairs[512];
@@ -569,16 +600,17 @@ static void stats_add(struct dr_grad_stats *sum, const struct dr_grad_stats *st)
         sum->record_bytes = st->record_bytes;
 }
 
-/* One estimate of v by estimator e with sampler q (stats summed into *sum). */
-static int estimate(struct cmp_ctx *x, const struct dr_estimator_ops *e, enum dr_sampling s,
-                    enum dr_sampler_kind q, int depth, int spp, uint64_t seed, double *v, struct dr_grad_stats *sum)
+/* One estimate of v as combination `how` runs it (stats summed into *sum). */
+static int estimate(struct cmp_ctx *x, const struct cmp_combo *how, uint64_t seed, double *v, struct dr_grad_stats *sum)
 {
     const struct cmp_run *r = x->r;
+    const struct dr_estimator_ops *e = how->est;
     struct grad_common g = r->a->g;
-    g.max_depth = depth;
-    g.sampling = s;
-    g.sampler = q;
-    struct dr_grad_problem p = grad_problem(&g, x->scene, x->cam, r->ps, g.width, g.height, spp, seed);
+    g.max_depth = how->max_depth;
+    g.sampling = how->sampling;
+    g.sampler = how->sampler;
+    g.medium_grad = how->medium_grad;
+    struct dr_grad_problem p = grad_problem(&g, x->scene, x->cam, r->ps, g.width, g.height, how->spp, seed);
     struct dr_grad_stats st = {0};
     const struct dr_cross_loss cross = {.loss = r->a->loss, .target = x->target, .scale = 1.0, .image = x->cross_img};
     if (r->reverse) {
@@ -720,8 +752,7 @@ static int run_combo(struct cmp_ctx *x, int c, int rep)
     struct dr_grad_stats sum = {0};
     welford_reset(x);
     for (int b = 0; b < B; b++) {
-        if (estimate(x, cb->est, cb->sampling, cb->sampler, cb->max_depth, cb->spp, r->a->g.seed + 1 + (uint64_t)b,
-                     x->v, &sum))
+        if (estimate(x, cb, r->a->g.seed + 1 + (uint64_t)b, x->v, &sum))
             return -1;
         welford_add(x, b, r->ref.mean);
         tick(x);
@@ -773,6 +804,11 @@ static int compute_reference(struct cmp_ctx *x)
     ref->spp = a->ref_spp;
     ref->batches = B;
     ref->max_depth = a->depths[a->n_depths - 1];
+    /* the first estimator and sampling listed; media derivatives by DRT,
+     * unbiased in every medium (the baseline is not in a density grid's
+     * empty or constant regions: its error there must show) */
+    const struct cmp_combo ref_run = {first->est, first->sampling, ref->max_depth, ref->spp, a->g.sampler,
+                                      DR_MEDIUM_GRAD_DRT};
     int rw, rh;   /* the rendered rectangle: the frame or --crop's */
     struct dr_film film = grad_film(&a->g, a->g.width, a->g.height, &rw, &rh);
     struct dr_fd_options o = {.width = rw, .height = rh, .film = film, .sampler = a->g.sampler, .spp = ref->spp,
@@ -793,8 +829,7 @@ static int compute_reference(struct cmp_ctx *x)
         uint64_t seed = dr_hash64(a->g.seed ^ REF_SEED_SALT) + (uint64_t)b;
         int rc = a->ref_kind == CMP_REF_FD
                      ? fd_estimate(x, &o, seed)
-                     : estimate(x, first->est, first->sampling, a->g.sampler, ref->max_depth, ref->spp, seed, x->v,
-                                &sum);
+                     : estimate(x, &ref_run, seed, x->v, &sum);
         if (rc != 0)
             return -1;
         welford_add(x, b, NULL);
@@ -961,10 +996,16 @@ static int shared_adjoint(struct cmp_ctx *x, const float *target)
 }
 
 /* Checks that need the scene but no work: fd cannot give texel gradients,
- * memory, a reference file. */
+ * two media methods need a medium's parameter, memory, a reference file. */
 static int check_scene_args(struct cmp_run *r, const struct dr_scene *scene)
 {
     const struct cmp_args *a = r->a;
+    if (a->n_medium_grads > 1 && !r->ps->media_active) {
+        cli_error("compare", "--medium-grad %s,%s: no --param is a participating medium's (DR_medium, "
+                             "KHR_materials_volume), so both methods would run the same paths",
+                  cmp_medium_grad_name(a->medium_grads[0]), cmp_medium_grad_name(a->medium_grads[1]));
+        return DR_EXIT_USAGE;
+    }
     if (a->ref_kind == CMP_REF_FD && r->reverse)
         for (int k = 0; k < r->ps->n; k++)
             if (is_image_param(&r->ps->params[k])) {

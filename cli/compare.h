@@ -32,6 +32,7 @@ struct cmp_combo {
     enum dr_sampling sampling;
     int max_depth, spp;
     enum dr_sampler_kind sampler;   /* the random numbers (--sampler, a list) */
+    enum dr_medium_grad medium_grad;   /* media derivatives (--medium-grad, a list) */
 };
 
 /* What one parameter's estimate was, summarised: up to 3 components for a
@@ -87,6 +88,8 @@ struct cmp_args {
     int spps[CMP_MAX_LIST], n_spps;
     enum dr_sampler_kind samplers[CMP_MAX_SAMPLERS];   /* --sampler's list; g.sampler is the first */
     int n_samplers;
+    enum dr_medium_grad medium_grads[2];   /* --medium-grad's list (drt, baseline) */
+    int n_medium_grads;
     int depths[CMP_MAX_LIST], n_depths;
     int batches, repeat;
     bool cross;   /* --primal cross: every run its own primal (dr_cross_loss), no shared image */
@@ -121,10 +124,17 @@ int cmp_write_report(const struct cmp_run *r, const char *path);
  * missing or fails: the PNGs are then not drawn). */
 int cmp_write_plots(const struct cmp_run *r, const char *dir);
 /* The combination's label, "prb detached d8"; with more than one --sampler
- * listed, the sampler too: "prb detached sobol d8". */
+ * listed, the sampler too: "prb detached sobol d8"; with both media
+ * derivative methods, the method: "prb detached (media baseline) d8". */
 void cmp_combo_label(const struct cmp_run *r, const struct cmp_combo *c, char *buf, size_t size);
-/* "prb detached" or, with several samplers, "prb detached sobol". */
+/* "prb detached" or, with several samplers, "prb detached sobol" (and the
+ * media method, as above). */
 void cmp_pair_label(const struct cmp_run *r, const struct cmp_combo *c, char *buf, size_t size);
+/* Do a and b differ only in max depth and spp (the same estimator,
+ * sampling, sampler and media method)? */
+bool cmp_same_pair(const struct cmp_combo *a, const struct cmp_combo *b);
+/* "drt" or "baseline" */
+const char *cmp_medium_grad_name(enum dr_medium_grad m);
 /* The efficiency 1 / (relative variance x seconds) of parameter k in combination c. */
 double cmp_param_efficiency(const struct cmp_run *r, int c, int k);
 /* Median / min / max of a combination's repeat timings. */

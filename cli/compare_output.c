@@ -12,13 +12,28 @@
 #include "cli.h"
 #include "compare.h"
 
+const char *cmp_medium_grad_name(enum dr_medium_grad m)
+{
+    return m == DR_MEDIUM_GRAD_BASELINE ? "baseline" : "drt";
+}
+
+bool cmp_same_pair(const struct cmp_combo *a, const struct cmp_combo *b)
+{
+    return a->est == b->est && a->sampling == b->sampling && a->sampler == b->sampler &&
+           a->medium_grad == b->medium_grad;
+}
+
 void cmp_pair_label(const struct cmp_run *r, const struct cmp_combo *c, char *buf, size_t size)
 {
-    /* a single sampler is the run's setting (in the film line), not a dimension */
+    /* a single sampler (media method) is the run's setting, not a dimension */
+    char media[32] = "";
+    if (r->a->n_medium_grads > 1)
+        snprintf(media, sizeof media, " (media %s)", cmp_medium_grad_name(c->medium_grad));
     if (r->a->n_samplers > 1)
-        snprintf(buf, size, "%s %s %s", c->est->name, dr_sampling_name(c->sampling), dr_sampler_kind_name(c->sampler));
+        snprintf(buf, size, "%s %s %s%s", c->est->name, dr_sampling_name(c->sampling), dr_sampler_kind_name(c->sampler),
+                 media);
     else
-        snprintf(buf, size, "%s %s", c->est->name, dr_sampling_name(c->sampling));
+        snprintf(buf, size, "%s %s%s", c->est->name, dr_sampling_name(c->sampling), media);
 }
 
 void cmp_combo_label(const struct cmp_run *r, const struct cmp_combo *c, char *buf, size_t size)
@@ -93,7 +108,7 @@ static void csv_number(FILE *f, double v)
 
 #define CSV_COLUMNS                                                                                           \
     "scene,mode,estimator,sampling,max_depth,spp,repeat,batches,seconds,rays,memory_bytes,record_bytes,"       \
-    "invalid_samples,rel_error,rel_variance,efficiency,reference,reference_rel_se,sampler"
+    "invalid_samples,rel_error,rel_variance,efficiency,reference,reference_rel_se,sampler,medium_grad"
 
 int cmp_write_csv(const struct cmp_run *r, const char *path)
 {
@@ -118,7 +133,8 @@ int cmp_write_csv(const struct cmp_run *r, const char *path)
             csv_number(f, efficiency_at(res, res->seconds[rep]));
             fprintf(f, ",%s", r->ref.kind);
             csv_number(f, r->ref.rel_se);
-            fprintf(f, ",%s\n", dr_sampler_kind_name(cb->sampler));   /* last: older columns keep their place */
+            /* last: older columns keep their place */
+            fprintf(f, ",%s,%s\n", dr_sampler_kind_name(cb->sampler), cmp_medium_grad_name(cb->medium_grad));
         }
     if (fclose(f) != 0) {
         cli_error("compare", "%s: %s", path, strerror(errno));
@@ -184,8 +200,9 @@ static void json_combination(FILE *f, const struct cmp_run *r, int c)
     const struct cmp_result *res = &r->results[c];
     double med, lo, hi;
     cmp_seconds_spread(r, c, &med, &lo, &hi);
-    fprintf(f, "{\"estimator\": \"%s\", \"sampling\": \"%s\", \"sampler\": \"%s\", \"max_depth\": %d, \"spp\": %d",
-            cb->est->name, dr_sampling_name(cb->sampling), dr_sampler_kind_name(cb->sampler), cb->max_depth, cb->spp);
+    fprintf(f, "{\"estimator\": \"%s\", \"sampling\": \"%s\", \"sampler\": \"%s\", \"medium_grad\": \"%s\", "
+               "\"max_depth\": %d, \"spp\": %d", cb->est->name, dr_sampling_name(cb->sampling),
+            dr_sampler_kind_name(cb->sampler), cmp_medium_grad_name(cb->medium_grad), cb->max_depth, cb->spp);
     json_key_number(f, "seconds_median", med);
     json_key_number(f, "seconds_min", lo);
     json_key_number(f, "seconds_max", hi);
@@ -236,9 +253,10 @@ static void json_rows(FILE *f, const struct cmp_run *r)
     for (int rep = 0, i = 0; rep < r->a->repeat; rep++)
         for (int c = 0; c < r->n_combos; c++, i++) {
             const struct cmp_combo *cb = &r->combos[c];
-            fprintf(f, "%s{\"estimator\": \"%s\", \"sampling\": \"%s\", \"sampler\": \"%s\", \"max_depth\": %d, "
-                       "\"spp\": %d, \"repeat\": %d", i ? ", " : "", cb->est->name, dr_sampling_name(cb->sampling),
-                    dr_sampler_kind_name(cb->sampler), cb->max_depth, cb->spp, rep);
+            fprintf(f, "%s{\"estimator\": \"%s\", \"sampling\": \"%s\", \"sampler\": \"%s\", \"medium_grad\": \"%s\", "
+                       "\"max_depth\": %d, \"spp\": %d, \"repeat\": %d", i ? ", " : "", cb->est->name,
+                    dr_sampling_name(cb->sampling), dr_sampler_kind_name(cb->sampler),
+                    cmp_medium_grad_name(cb->medium_grad), cb->max_depth, cb->spp, rep);
             json_key_number(f, "seconds", r->results[c].seconds[rep]);
             json_key_number(f, "rel_error", r->results[c].rel_error);
             json_key_number(f, "efficiency", efficiency_at(&r->results[c], r->results[c].seconds[rep]));
@@ -265,6 +283,9 @@ void cmp_write_json(const struct cmp_run *r, FILE *f)
     fputs(", \"samplers\": [", f);   /* "sampler" (the film's) is the first: the reference's */
     for (int q = 0; q < a->n_samplers; q++)
         fprintf(f, "%s\"%s\"", q ? ", " : "", dr_sampler_kind_name(a->samplers[q]));
+    fputs("], \"medium_grads\": [", f);
+    for (int q = 0; q < a->n_medium_grads; q++)
+        fprintf(f, "%s\"%s\"", q ? ", " : "", cmp_medium_grad_name(a->medium_grads[q]));
     fputs("], \"output_dir\": ", f);
     json_string(f, a->out_dir);
     fputs(", \"parameters\": [", f);
@@ -285,9 +306,10 @@ void cmp_write_json(const struct cmp_run *r, FILE *f)
     fputc(']', f);
     json_rows(f, r);
     int b = best_combo(r);
-    fprintf(f, ", \"best\": {\"estimator\": \"%s\", \"sampling\": \"%s\", \"sampler\": \"%s\", \"max_depth\": %d, "
-               "\"spp\": %d", r->combos[b].est->name, dr_sampling_name(r->combos[b].sampling),
-            dr_sampler_kind_name(r->combos[b].sampler), r->combos[b].max_depth, r->combos[b].spp);
+    fprintf(f, ", \"best\": {\"estimator\": \"%s\", \"sampling\": \"%s\", \"sampler\": \"%s\", \"medium_grad\": \"%s\", "
+               "\"max_depth\": %d, \"spp\": %d", r->combos[b].est->name, dr_sampling_name(r->combos[b].sampling),
+            dr_sampler_kind_name(r->combos[b].sampler), cmp_medium_grad_name(r->combos[b].medium_grad),
+            r->combos[b].max_depth, r->combos[b].spp);
     json_key_number(f, "efficiency", cmp_efficiency(r, b));
     fputc('}', f);
     json_key_number(f, "seconds_total", r->t_total);
@@ -354,6 +376,16 @@ static void report_head(FILE *f, const struct cmp_run *r)
     }
 }
 
+/* The tables' sampling cell: the mode, and the media method when the
+ * comparison lists both. */
+static const char *sampling_cell(const struct cmp_run *r, const struct cmp_combo *cb, char *buf, size_t size)
+{
+    if (r->a->n_medium_grads < 2)
+        return dr_sampling_name(cb->sampling);
+    snprintf(buf, size, "%s (media %s)", dr_sampling_name(cb->sampling), cmp_medium_grad_name(cb->medium_grad));
+    return buf;
+}
+
 static void report_table(FILE *f, const struct cmp_run *r)
 {
     fprintf(f, "| estimator | sampling | sampler | max depth | spp | time / estimate (s)%s | rays | memory | tape "
@@ -365,7 +397,7 @@ static void report_table(FILE *f, const struct cmp_run *r)
         const struct cmp_result *res = &r->results[c];
         double med, lo, hi;
         cmp_seconds_spread(r, c, &med, &lo, &hi);
-        char mem[32], rec[32], t[64];
+        char mem[32], rec[32], t[64], smp[64];
         bytes_text(res->memory_bytes, mem, sizeof mem);
         bytes_text(res->record_bytes, rec, sizeof rec);
         if (r->a->repeat > 1)
@@ -373,7 +405,7 @@ static void report_table(FILE *f, const struct cmp_run *r)
         else
             snprintf(t, sizeof t, "%.4g", med);
         fprintf(f, "| %s | %s | %s | %d | %d | %s | %.3g | %s | %s | %.3g | %.3g | %.4g |\n", cb->est->name,
-                dr_sampling_name(cb->sampling), dr_sampler_kind_name(cb->sampler), cb->max_depth, cb->spp, t,
+                sampling_cell(r, cb, smp, sizeof smp), dr_sampler_kind_name(cb->sampler), cb->max_depth, cb->spp, t,
                 res->rays, mem, rec, res->rel_error, res->rel_variance, efficiency_at(res, med));
     }
     fputc('\n', f);
@@ -391,9 +423,10 @@ static void report_params(FILE *f, const struct cmp_run *r)
         const struct cmp_combo *cb = &r->combos[c];
         if (cb->spp != r->a->spps[r->a->n_spps - 1] || cb->max_depth != r->a->depths[r->a->n_depths - 1])
             continue;
+        char smp[64];
         for (int k = 0; k < r->ps->n; k++) {
             const struct cmp_param_result *pr = &r->results[c].params[k];
-            fprintf(f, "| %s | %s | %s | `%s`%s | ", cb->est->name, dr_sampling_name(cb->sampling),
+            fprintf(f, "| %s | %s | %s | `%s`%s | ", cb->est->name, sampling_cell(r, cb, smp, sizeof smp),
                     dr_sampler_kind_name(cb->sampler), r->ps->params[k].name,
                     strcmp(summary_kind(r, k), "norm") == 0 ? " (norm)" : "");
             for (int i = 0; i < pr->n; i++)
@@ -539,7 +572,7 @@ static bool series_start(const struct cmp_run *r, int c)
 
 static bool same_series(const struct cmp_combo *a, const struct cmp_combo *b)
 {
-    return a->est == b->est && a->sampling == b->sampling && a->sampler == b->sampler && a->max_depth == b->max_depth;
+    return cmp_same_pair(a, b) && a->max_depth == b->max_depth;
 }
 
 /* Which estimator x sampling (x sampler) pair combination c belongs to,
@@ -549,8 +582,7 @@ static int pair_index(const struct cmp_run *r, int c)
     int n = 0;
     for (int i = 0; i < c; i++)
         if (series_start(r, i) && r->combos[i].max_depth == r->a->depths[0] &&
-            (r->combos[i].est != r->combos[c].est || r->combos[i].sampling != r->combos[c].sampling ||
-             r->combos[i].sampler != r->combos[c].sampler))
+            !cmp_same_pair(&r->combos[i], &r->combos[c]))
             n++;
     return n;
 }
@@ -633,8 +665,7 @@ static void plot_memory(FILE *g, const struct cmp_run *r)
             continue;
         for (int i = 0; i < r->n_combos; i++) {
             const struct cmp_combo *x = &r->combos[i];
-            if (x->est != r->combos[c].est || x->sampling != r->combos[c].sampling ||
-                x->sampler != r->combos[c].sampler || !series_start(r, i))
+            if (!cmp_same_pair(x, &r->combos[c]) || !series_start(r, i))
                 continue;
             uint64_t m = 0;
             for (int j = i; j < r->n_combos && same_series(&r->combos[j], x); j++)

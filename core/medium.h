@@ -57,6 +57,11 @@ struct dr_medium {
      * ray that slips through its boundary by rounding cannot scatter far off) */
     bool bounded;
     dr_vec3 bmin, bmax;
+    /* the mean length of a straight line across the medium: 4 V / S of its
+     * box (the global medium's: the scene's box); 0 where unknown. Its
+     * optical thickness at this length picks the gain estimator of DRT
+     * (medium_grad.c). Set by dr_media_prepare. */
+    double mean_chord;
     char grid_uri[512];
     int material;          /* the boundary material, -1: the global medium */
     /* the boundary: 0 index-matched (crossed without bending); else a smooth

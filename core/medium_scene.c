@@ -85,6 +85,28 @@ static void material_bounds(const struct dr_mesh *m, int material, dr_vec3 *lo, 
         }
 }
 
+/* 4 V / S of the box [lo, hi]: the mean chord of a convex body (Cauchy);
+ * 0 for a flat or empty box. */
+static double box_mean_chord(dr_vec3 lo, dr_vec3 hi)
+{
+    dr_vec3 e = dr_sub(hi, lo);
+    if (!(e.x > 0.0 && e.y > 0.0 && e.z > 0.0))
+        return 0.0;
+    return 4.0 * e.x * e.y * e.z / (2.0 * (e.x * e.y + e.y * e.z + e.z * e.x));
+}
+
+/* The box of every vertex of the scene (the global medium's extent). */
+static void scene_bounds(const struct dr_mesh *m, dr_vec3 *lo, dr_vec3 *hi)
+{
+    *lo = dr_v3s(INFINITY);
+    *hi = dr_v3s(-INFINITY);
+    for (uint32_t v = 0; v < m->n_vertices; v++) {
+        dr_vec3 p = dr_mesh_vertex(m, v);
+        *lo = dr_v3(fmin(lo->x, p.x), fmin(lo->y, p.y), fmin(lo->z, p.z));
+        *hi = dr_v3(fmax(hi->x, p.x), fmax(hi->y, p.y), fmax(hi->z, p.z));
+    }
+}
+
 int dr_media_prepare(struct dr_scene *s)
 {
     uint32_t *id = dr_mesh_weld(&s->mesh);
@@ -95,8 +117,12 @@ int dr_media_prepare(struct dr_scene *s)
     int rc = 0;
     for (int i = 0; i < s->n_media && rc == 0; i++) {
         struct dr_medium *med = &s->media[i];
-        if (med->material < 0)
+        if (med->material < 0) {
+            dr_vec3 lo, hi;
+            scene_bounds(&s->mesh, &lo, &hi);
+            med->mean_chord = box_mean_chord(lo, hi);
             continue;
+        }
         rc = check_closed(s, med->material, id);
         if (rc != 0)
             break;
@@ -106,6 +132,7 @@ int dr_media_prepare(struct dr_scene *s)
         med->bmin = dr_sub(med->bmin, slack);
         med->bmax = dr_add(med->bmax, slack);
         med->bounded = true;
+        med->mean_chord = box_mean_chord(med->bmin, med->bmax);
         struct dr_grid *g = &med->grid;
         if (med->has_grid && !(g->bmin.x < g->bmax.x)) {
             material_bounds(&s->mesh, med->material, &g->bmin, &g->bmax);

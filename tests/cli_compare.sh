@@ -4,7 +4,9 @@
 # plots), errors that fall as spp grows (statistical, with a margin; never a
 # timing), the reference's own error reported, the same table from the same
 # seed, --repeat, a reference file reused, --sampler as a list (the sampler a
-# column of every output, per-parameter efficiency), --primal cross (prb and
+# column of every output, per-parameter efficiency), --medium-grad as a list
+# (a homogeneous medium, thin and thick: DRT's gain paths against the
+# collisions), --primal cross (prb and
 # tape agree, estimates unbiased, its reference apart from the shared
 # primal's), and bad inputs refused before any work (exit 2, nothing written).
 # Run by tests/run.sh (env: DRENDER = the binary); also runs alone.
@@ -58,7 +60,7 @@ done
 for f in error_vs_time.png memory_vs_depth.png efficiency.png; do
     [ "$(head -c 4 "out1/$f" | tail -c 3)" = PNG ] || fail "out1/$f is not a PNG"
 done
-want='scene,mode,estimator,sampling,max_depth,spp,repeat,batches,seconds,rays,memory_bytes,record_bytes,invalid_samples,rel_error,rel_variance,efficiency,reference,reference_rel_se,sampler'
+want='scene,mode,estimator,sampling,max_depth,spp,repeat,batches,seconds,rays,memory_bytes,record_bytes,invalid_samples,rel_error,rel_variance,efficiency,reference,reference_rel_se,sampler,medium_grad'
 [ "$(head -1 out1/results.csv)" = "$want" ] || fail "results.csv header: $(head -1 out1/results.csv)"
 # every pair the registry supports, at each spp; one CSV row per run
 py out1 "len(d['combinations']) == 2 * $n_pairs and len(rows) == 2 * $n_pairs"
@@ -78,6 +80,7 @@ py out1 "all(c['memory_bytes'] > 0 and c['rays'] > 0 and c['efficiency'] > 0 for
 py out1 "all(len(c['parameters']) == 1 and c['parameters'][0]['summary'] == 'pixel_mean' for c in d['combinations'])"
 # one sampler (the default): every row says so; one parameter: its efficiency is the run's
 py out1 "d['samplers'] == ['independent'] and all(r['sampler'] == 'independent' for r in rows)"
+py out1 "d['medium_grads'] == ['drt'] and all(r['medium_grad'] == 'drt' for r in rows)"
 py out1 "all(abs(c['parameters'][0]['efficiency'] - c['efficiency']) <= 1e-9 * c['efficiency'] for c in d['combinations'])"
 
 # ---- --sampler as a list: the sampler is a dimension of every output ----
@@ -106,6 +109,30 @@ grep -q '^| estimator | sampling | sampler |' smp/report.md || fail "report.md: 
 grep -q 'prb detached sobol' smp/report.md || fail "report.md: the ranking does not name the sampler"
 grep -q '^film filter=box crop=none sampler=independent,stratified,sobol$' smp/reference.txt ||
     fail "reference.txt does not record the sampler list"
+
+# ---- --medium-grad as a list: the media derivative method is a dimension ----
+# A homogeneous KHR medium (a 2 m cube). Thin (as in the file, least
+# extinction 0.15: DRT's gain paths): the two methods give different numbers,
+# both finite. Thick (extinction 3: DRT takes the gain at the
+# path's collisions, as the baseline does): the same numbers to the bit.
+khr=$DR_TESTDIR/data/media/fog-khr.gltf
+ext=/materials/0/extensions/DR_medium/extinction
+for case in thin thick; do
+    set_thick=()
+    [ $case = thick ] && set_thick=(--set "$ext=3,3,3")
+    run compare "$khr" --param "$ext" "${set_thick[@]}" --estimators prb --sampling detached --medium-grad drt,baseline \
+        --spp 2,8 $tiny --batches 4 -o "mg_$case"
+    expect_rc 0 "compare --medium-grad drt,baseline ($case)"
+    py "mg_$case" "(d['medium_grads'] == ['drt', 'baseline'] and [c['medium_grad'] for c in d['combinations']] ==
+                   ['drt', 'drt', 'baseline', 'baseline'] == [r['medium_grad'] for r in rows] and
+                   d['reference']['kind'] == 'spp:128')"
+    py "mg_$case" "all(math.isfinite(c['rel_error']) and c['rel_error'] > 0 for c in d['combinations'])"
+    grep -q 'prb detached (media baseline)' "mg_$case/report.md" || fail "report.md ($case): no media method in the labels"
+    grep -q '| detached (media drt) |' "mg_$case/report.md" || fail "report.md ($case): no media method in the table"
+done
+py mg_thin "d['combinations'][1]['parameters'][0]['value'] != d['combinations'][3]['parameters'][0]['value']"
+py mg_thick "(d['combinations'][1]['parameters'][0]['value'] == d['combinations'][3]['parameters'][0]['value'] and
+             d['combinations'][1]['rel_error'] == d['combinations'][3]['rel_error'])"
 
 # ---- the same seed gives the same table (timings aside); --repeat; reference files ----
 # (out1's reference read back from its file: a forward-mode reference reused, and no second reference to compute)
@@ -200,6 +227,9 @@ refused 2 "-o DIR is required" compare $tiny --param "$red"
 refused 2 "--spp: 4 is listed twice" compare $tiny --param "$red" --spp 4,4 -o bad
 refused 2 "--sampler: unknown sampler 'halton'" compare $tiny --param "$red" --sampler sobol,halton $huge -o bad
 refused 2 "--sampler: 'sobol' is listed twice" compare $tiny --param "$red" --sampler sobol,sobol $huge -o bad
+refused 2 "--medium-grad: unknown method 'nulls'" compare $tiny --param "$red" --medium-grad drt,nulls $huge -o bad
+refused 2 "--medium-grad: 'drt' is listed twice" compare $tiny --param "$red" --medium-grad drt,drt $huge -o bad
+refused 2 "no --param is a participating medium's" compare $tiny --param "$red" --medium-grad drt,baseline $huge -o bad
 # a sampling mode an estimator lacks, found from the registry via --help
 lacking=$(python3 -c '
 import re, sys

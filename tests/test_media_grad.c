@@ -308,19 +308,24 @@ static void check_scene(bool lamp)
     dr_scene_destroy(s);
 }
 
-/* A homogeneous cube of strongly chromatic extinction (0.5 / 3 / 9 per
- * unit), whose free flight is the hero channel's own (medium.c's
- * homogeneous_sample: no null collisions, so the baseline takes each
- * segment's exact transmittance derivative, as DRT does): prb and tape
- * with DRT and prb with the baseline against finite differences. */
-static void check_homogeneous(void)
+/* A homogeneous cube of strongly chromatic extinction, whose free flight
+ * is the hero channel's own (medium.c's homogeneous_sample: no null
+ * collisions, so the baseline takes each segment's exact transmittance
+ * derivative, as DRT does): prb and tape with DRT and prb with the
+ * baseline against finite differences. Thin (least extinction 0.5 across a
+ * mean chord of 4/3: thickness 0.67), DRT's gain comes from gain paths and
+ * its gradients differ from the baseline's; thick (2: thickness 2.7), from
+ * the path's collisions (medium_grad.c, gain_at_collisions), as the
+ * baseline's: the same numbers, to the bit. */
+static void check_homogeneous(dr_vec3 extinction, bool thick)
 {
-    fprintf(stderr, "-- a homogeneous chromatic cube\n");
+    fprintf(stderr, "-- a homogeneous chromatic cube, extinction %g / %g / %g\n", extinction.x, extinction.y,
+            extinction.z);
     struct sb b;
     sb_init(&b);
     int mat = sb_material(&b, sb_diffuse(dr_v3s(0.5)));
     sb_box(&b, dr_v3(-1, -1, -1), dr_v3(1, 1, 1), mat);
-    sb_medium(&b, mat, medium(dr_v3(0.5, 3.0, 9.0), dr_v3(0.8, 0.7, 0.9), 0.3));
+    sb_medium(&b, mat, medium(extinction, dr_v3(0.8, 0.7, 0.9), 0.3));
     int floor = sb_material(&b, sb_diffuse(dr_v3(0.6, 0.5, 0.4)));
     sb_quad(&b, dr_v3(-4, -1.5, -4), dr_v3(0, 0, 8), dr_v3(8, 0, 0), floor);
     sb_environment(&b, dr_v3(0.6, 0.7, 0.9));
@@ -341,20 +346,23 @@ static void check_homogeneous(void)
     const double eps[] = {0.05, 0.1, 0.2, 0.02, 0.05};
     enum { N = sizeof checks / sizeof checks[0] };
     struct moments fd[N] = {{0}}, drt_prb[N] = {{0}}, drt_tape[N] = {{0}}, base[N] = {{0}};
-    double *g = malloc(sizeof(double) * (size_t)ps->total);
+    double *g = malloc(sizeof(double) * (size_t)ps->total), *g_drt = malloc(sizeof(double) * (size_t)ps->total);
     const struct dr_estimator_ops *prb = dr_estimator_find("prb"), *tape = dr_estimator_find("tape");
     int64_t slot;
+    int same_as_baseline = 0;   /* (batch, sigma_t entry) pairs where DRT's number is the baseline's */
     for (int bt = 0; bt < BATCHES; bt++) {
         uint64_t seed = 300 + (uint64_t)bt;
-        estimator_grad(prb, DR_MEDIUM_GRAD_DRT, s, &cam, ps, seed, g);
+        estimator_grad(prb, DR_MEDIUM_GRAD_DRT, s, &cam, ps, seed, g_drt);
         for (int i = 0; i < N; i++)
-            add(&drt_prb[i], g[checks[i].slot]);
+            add(&drt_prb[i], g_drt[checks[i].slot]);
         estimator_grad(tape, DR_MEDIUM_GRAD_DRT, s, &cam, ps, seed, g);
         for (int i = 0; i < N; i++)
             add(&drt_tape[i], g[checks[i].slot]);
         estimator_grad(prb, DR_MEDIUM_GRAD_BASELINE, s, &cam, ps, seed, g);
-        for (int i = 0; i < N; i++)
+        for (int i = 0; i < N; i++) {
             add(&base[i], g[checks[i].slot]);
+            same_as_baseline += i != 3 && g[checks[i].slot] == g_drt[checks[i].slot];   /* (3: albedo) */
+        }
         for (int i = 0; i < N; i++) {
             slot = checks[i].slot;
             add(&fd[i], finite_difference(s, &cam, ps, &slot, 1, eps[i], 7000 + (uint64_t)bt));
@@ -370,6 +378,13 @@ static void check_homogeneous(void)
         CHECK(fabs(zt) <= 3.5, "%s: DRT (tape) disagrees with finite differences: z = %.2f", checks[i].what, zt);
         CHECK(fabs(zb) <= 3.5, "%s: the baseline disagrees with finite differences: z = %.2f", checks[i].what, zb);
     }
+    if (thick)
+        CHECK(same_as_baseline == 4 * BATCHES, "thick: DRT took the gain at the collisions, as the baseline, in %d of %d",
+              same_as_baseline, 4 * BATCHES);
+    else
+        CHECK(same_as_baseline < BATCHES, "thin: DRT took gain paths, yet %d of %d numbers are the baseline's",
+              same_as_baseline, 4 * BATCHES);
+    free(g_drt);
     free(g);
     dr_param_set_destroy(ps);
     dr_scene_destroy(s);
@@ -377,7 +392,8 @@ static void check_homogeneous(void)
 
 int main(void)
 {
-    check_homogeneous();
+    check_homogeneous(dr_v3(0.5, 3.0, 9.0), false);
+    check_homogeneous(dr_v3(2.0, 3.0, 9.0), true);
     check_scene(false);
     check_scene(true);
     return TEST_END();
