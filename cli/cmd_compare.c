@@ -50,6 +50,7 @@ static void available_pairs(char *buf, size_t size)
     }
 }
 
+/* The help text: one string, long by nature (no logic). */
 void cmd_compare_usage(FILE *out)
 {
     char pairs[512];

@@ -229,24 +229,13 @@ struct comp_info {
     uint8_t wants;      /* it has a culled triangle the room test did not mark */
 };
 
-/* Marks the culled triangles of the closed components every viewpoint sees
- * from the front, and records those components in b. */
-static int mark_closed(struct dr_backface *b, const struct dr_scene *s, const uint8_t *tri_bits)
+/* Each connected component's (its root's) volume, size, and whether it is
+ * open (a border edge, or a cut-out or blended triangle) and has a triangle
+ * that wants culling. */
+static void component_infos(const struct dr_backface *b, const struct dr_mesh *m, const uint8_t *tri_bits,
+                            uint32_t *parent, const uint8_t *open, struct comp_info *ci)
 {
-    const struct dr_mesh *m = &s->mesh;
-    uint32_t n_tri = m->n_triangles;
-    uint32_t *wid = dr_mesh_weld(m), *parent = malloc(sizeof(uint32_t) * n_tri);
-    uint8_t *open = calloc(n_tri, 1);
-    struct comp_info *ci = calloc(n_tri, sizeof *ci);
-    int64_t *start = malloc(sizeof(int64_t) * n_tri);
-    int rc = -1;
-    if (!wid || !parent || !open || !ci || !start)
-        goto out;
-    for (uint32_t t = 0; t < n_tri; t++)
-        parent[t] = t;
-    if (link_edges(m, wid, parent, open) != 0)
-        goto out;
-    for (uint32_t t = 0; t < n_tri; t++) {
+    for (uint32_t t = 0; t < m->n_triangles; t++) {
         struct comp_info *c = &ci[find_root(parent, t)];
         const uint32_t *idx = m->indices + 3 * (size_t)t;
         dr_vec3 p0 = dr_mesh_vertex(m, idx[0]), p1 = dr_mesh_vertex(m, idx[1]), p2 = dr_mesh_vertex(m, idx[2]);
@@ -255,6 +244,15 @@ static int mark_closed(struct dr_backface *b, const struct dr_scene *s, const ui
         c->open |= open[t] | ((tri_bits[t] & (DR_COVER_MASK | DR_COVER_BLEND)) != 0);
         c->wants |= (tri_bits[t] & DR_COVER_CULL) && !b->marks[t];
     }
+}
+
+/* The candidate components (closed, wanting culling, enclosing a volume):
+ * their triangles gathered in b->closed_tris, component by component from
+ * start[root] (-1: not a candidate); ci[root].n becomes the count. */
+static int gather_candidates(struct dr_backface *b, const struct dr_scene *s, uint32_t *parent,
+                             struct comp_info *ci, int64_t *start)
+{
+    const uint32_t n_tri = s->mesh.n_triangles;
     /* a component enclosing no volume (a sheet of back-to-back triangles)
      * has no front side */
     dr_vec3 ext = dr_sub(s->bbox_max, s->bbox_min);
@@ -270,14 +268,23 @@ static int mark_closed(struct dr_backface *b, const struct dr_scene *s, const ui
     b->closed_tris = malloc(sizeof(uint32_t) * (size_t)(n_cand + 1));
     b->sealed = malloc(sizeof(struct sealed) * (size_t)(n_cand + 1));
     if (!b->closed_tris || !b->sealed)
-        goto out;
+        return -1;
     for (uint32_t t = 0; t < n_tri; t++) {
         uint32_t r = find_root(parent, t);
         if (start[r] >= 0)
             b->closed_tris[start[r] + ci[r].n++] = t;
     }
+    return 0;
+}
+
+/* The candidates whose front every view sees from outside are sealed:
+ * their triangles stay in b->closed_tris (moved up over the dropped ones)
+ * and the ones wanting culling are marked. */
+static void seal_candidates(struct dr_backface *b, const struct dr_mesh *m, const uint8_t *tri_bits,
+                            const struct comp_info *ci, const int64_t *start)
+{
     int64_t kept = 0;
-    for (uint32_t r = 0; r < n_tri; r++) {
+    for (uint32_t r = 0; r < m->n_triangles; r++) {
         if (start[r] < 0)
             continue;
         const uint32_t *tris = b->closed_tris + start[r];
@@ -298,6 +305,29 @@ static int mark_closed(struct dr_backface *b, const struct dr_scene *s, const ui
         b->sealed[b->n_sealed++] = sc;
         kept += sc.count;
     }
+}
+
+/* Marks the culled triangles of the closed components every viewpoint sees
+ * from the front, and records those components in b. */
+static int mark_closed(struct dr_backface *b, const struct dr_scene *s, const uint8_t *tri_bits)
+{
+    const struct dr_mesh *m = &s->mesh;
+    uint32_t n_tri = m->n_triangles;
+    uint32_t *wid = dr_mesh_weld(m), *parent = malloc(sizeof(uint32_t) * n_tri);
+    uint8_t *open = calloc(n_tri, 1);
+    struct comp_info *ci = calloc(n_tri, sizeof *ci);
+    int64_t *start = malloc(sizeof(int64_t) * n_tri);
+    int rc = -1;
+    if (!wid || !parent || !open || !ci || !start)
+        goto out;
+    for (uint32_t t = 0; t < n_tri; t++)
+        parent[t] = t;
+    if (link_edges(m, wid, parent, open) != 0)
+        goto out;
+    component_infos(b, m, tri_bits, parent, open, ci);
+    if (gather_candidates(b, s, parent, ci, start) != 0)
+        goto out;
+    seal_candidates(b, m, tri_bits, ci, start);
     rc = 0;
 out:
     free(wid);

@@ -250,6 +250,33 @@ static bool read_doubles(FILE *f, const char *key, double *v, int64_t n)
     return true;
 }
 
+/* A well-formed file can still hold a state no run reaches: a negative
+ * iteration (optimize indexes its history with it), Adam constants out of
+ * range, non-finite or out-of-range values, a negative second moment.
+ * 0, or DR_ERR_FORMAT after a message naming the file and the value. */
+static int check_state(const char *path, const struct dr_param_set *ps, const double *theta, const struct dr_adam *a,
+                       long long it, long long t)
+{
+    if (it < 0 || t < 0 || !(a->beta1 >= 0.0 && a->beta1 < 1.0) || !(a->beta2 >= 0.0 && a->beta2 < 1.0) ||
+        !(a->eps > 0.0 && isfinite(a->eps))) {
+        dr_set_error("%s: not a valid drender checkpoint: iteration %lld, adam %lld %g %g %g out of range", path, it,
+                     t, a->beta1, a->beta2, a->eps);
+        return DR_ERR_FORMAT;
+    }
+    for (int k = 0; k < ps->n; k++) {
+        const struct dr_param *p = &ps->params[k];
+        for (int64_t i = p->offset; i < p->offset + p->size; i++)
+            if (!(theta[i] >= a->lo[k] && theta[i] <= a->hi[k]) || !isfinite(a->m[i]) || !isfinite(a->v[i]) ||
+                a->v[i] < 0.0) {
+                dr_set_error("%s: not a valid drender checkpoint: %s value %lld is %g (range [%g, %g]), m %g, v %g",
+                             path, p->name, (long long)(i - p->offset), theta[i], a->lo[k], a->hi[k], a->m[i],
+                             a->v[i]);
+                return DR_ERR_FORMAT;
+            }
+    }
+    return 0;
+}
+
 int dr_checkpoint_read(const char *path, const struct dr_param_set *ps, double *theta, struct dr_adam *a,
                        int64_t *iteration)
 {
@@ -302,26 +329,9 @@ int dr_checkpoint_read(const char *path, const struct dr_param_set *ps, double *
         dr_set_error("%s: not a valid drender checkpoint (or truncated)", path);
         return DR_ERR_FORMAT;
     }
-    /* A well-formed file can still hold a state no run reaches: a negative
-     * iteration (optimize indexes its history with it), Adam constants out of
-     * range, non-finite or out-of-range values, a negative second moment. */
-    if (it < 0 || t < 0 || !(a->beta1 >= 0.0 && a->beta1 < 1.0) || !(a->beta2 >= 0.0 && a->beta2 < 1.0) ||
-        !(a->eps > 0.0 && isfinite(a->eps))) {
-        dr_set_error("%s: not a valid drender checkpoint: iteration %lld, adam %lld %g %g %g out of range", path, it,
-                     t, a->beta1, a->beta2, a->eps);
-        return DR_ERR_FORMAT;
-    }
-    for (int k = 0; k < ps->n; k++) {
-        const struct dr_param *p = &ps->params[k];
-        for (int64_t i = p->offset; i < p->offset + p->size; i++)
-            if (!(theta[i] >= a->lo[k] && theta[i] <= a->hi[k]) || !isfinite(a->m[i]) || !isfinite(a->v[i]) ||
-                a->v[i] < 0.0) {
-                dr_set_error("%s: not a valid drender checkpoint: %s value %lld is %g (range [%g, %g]), m %g, v %g",
-                             path, p->name, (long long)(i - p->offset), theta[i], a->lo[k], a->hi[k], a->m[i],
-                             a->v[i]);
-                return DR_ERR_FORMAT;
-            }
-    }
+    int rc = check_state(path, ps, theta, a, it, t);
+    if (rc != 0)
+        return rc;
     a->t = t;
     *iteration = it;
     return 0;

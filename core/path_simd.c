@@ -1033,6 +1033,34 @@ static void other_light_samples(const struct dr_scene *s, const bool *other, dr_
  * dr_emission, dr_offset_origin) eight-wide, texel reads of textured
  * emitters and the other kinds of light lane by lane. Returns where a light
  * sample carries light. */
+/* The emitting triangles' radiance at their light points (lanes `on`:
+ * the area samples that have not failed, so that no texel is read for a
+ * failed one): the material's emission towards the side seen (cos_l < 0:
+ * the front, or double-sided), times its emissive texture, looked up eight
+ * lanes at a time, or through a scalar hit (dr_emission, the light point as
+ * dr_light_sample makes it) for an image the eight-lane lookup does not
+ * take. */
+static dr_v3x8 area_radiance(const struct dr_scene *s, const struct lanes *L, uint32_t v[3][DR_SIMD_W], dr_f8 b1,
+                             dr_f8 b2, dr_m8 on, dr_f8 cos_l)
+{
+    const struct dr_mesh *m = &s->mesh;
+    const dr_m8 seen = dr_f8_lt(cos_l, dr_f8s(0.0)) | mask_of(L->ldouble_sided);
+    dr_v3x8 radiance = emission(L->lmat, seen);
+    if (L->any_ltex8) {
+        struct dr_uv8 uv;
+        texcoords(m, L->ltri, v[0], v[1], v[2], b1, b2, &uv);
+        radiance = dr_v3x8_mul(radiance, dr_texref8_rgb(s, L->lemissive_tex, on & seen, &uv, true));
+    }
+    for (int i = 0; L->any_ltextured && i < DR_SIMD_W; i++)
+        if (on[i] && L->ltextured[i]) {
+            struct dr_hit h;
+            dr_hit_at(m, L->ltri[i], b1[i], b2[i], &h);
+            h.front = cos_l[i] < 0.0;
+            set_lane(&radiance, i, dr_emission(s, &h));
+        }
+    return radiance;
+}
+
 static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables *lt, struct lanes *L,
                           const struct dr_path8_ahead *ahead, const struct dr_param_set *ps, bool record,
                           const struct dr_path8 *g, bool sky_uniform, dr_f8 u_pick, dr_f8 u1, dr_f8 u2,
@@ -1076,21 +1104,7 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     out->wi = dr_v3x8_scale(d, 1.0 / dist);
     dr_f8 cos_l = dr_v3x8_dot(lng, out->wi);
     ok &= ~dr_f8_eq(cos_l, dr_f8s(0.0)) & dr_f8_gt(area, dr_f8s(0.0));
-    const dr_m8 seen = dr_f8_lt(cos_l, dr_f8s(0.0)) | mask_of(L->ldouble_sided);
-    out->radiance = emission(L->lmat, seen);
-    if (L->any_ltex8) {   /* dr_emission's texture at the light point (no texel read for a sample that failed) */
-        struct dr_uv8 uv;
-        texcoords(m, L->ltri, v[0], v[1], v[2], b1, b2, &uv);
-        const dr_m8 on = ok & seen & ~mask_of(other) & ~env & ~env_map;
-        out->radiance = dr_v3x8_mul(out->radiance, dr_texref8_rgb(s, L->lemissive_tex, on, &uv, true));
-    }
-    for (int i = 0; L->any_ltextured && i < DR_SIMD_W; i++)
-        if (ok[i] && L->ltextured[i] && !other[i] && !env[i] && !env_map[i]) {   /* (no texel read for a sample that failed) */
-            struct dr_hit h;   /* the light point as dr_light_sample makes it */
-            dr_hit_at(m, L->ltri[i], b1[i], b2[i], &h);
-            h.front = cos_l[i] < 0.0;
-            set_lane(&out->radiance, i, dr_emission(s, &h));
-        }
+    out->radiance = area_radiance(s, L, v, b1, b2, ok & ~mask_of(other) & ~env & ~env_map, cos_l);
     out->target = offset_origin(lp, lng, leps, dr_v3x8_neg(out->wi));
     out->pdf = pick * d2 / (dr_f8_abs(cos_l) * area);
     ok &= ~dr_v3x8_is_black(out->radiance) | out->diff;   /* (dr_path_light_kept) */
