@@ -157,10 +157,10 @@ static bool medium_vertex(const struct dr_scene *s, const struct dr_path_opts *o
 
 /* An ordinary surface: the stages of path.c with media-aware shadow rays. */
 static bool surface_vertex(const struct dr_scene *s, const struct dr_path_opts *opts, struct dr_path_state *st,
-                           struct dr_sampler *sampler, struct dr_path_vertex *v, int64_t tri,
+                           struct dr_sampler *sampler, struct dr_path_vertex *v, const struct dr_hit *h,
                            struct dr_ray_counts *counts)
 {
-    dr_path_stage_surface_hit(s, opts, st, tri, v);
+    dr_path_stage_surface_hit(s, opts, st, h, v);
     if (v->emits)
         v->Le = dr_mul(v->Le, v->seg);
     if (!dr_path_stage_material(s, opts, st, sampler, v))
@@ -334,7 +334,7 @@ bool dr_medium_path_step(const struct dr_scene *s, const struct dr_path_opts *op
                 v->Le = dr_mul(v->Le, v->seg);
                 return false;
             }
-            return surface_vertex(s, opts, st, sampler, v, tri, counts);
+            return surface_vertex(s, opts, st, sampler, v, &h, counts);
         }
         st->medium = h.front ? med : s->global_medium;
         st->o = dr_offset_origin(&h, h.ng, st->d);

@@ -514,9 +514,12 @@ void dr_path_stage_escaped(const struct dr_scene *s, const struct dr_path_opts *
 }
 
 void dr_path_stage_surface_hit(const struct dr_scene *s, const struct dr_path_opts *opts,
-                               const struct dr_path_state *st, int64_t tri, struct dr_path_vertex *v)
+                               const struct dr_path_state *st, const struct dr_hit *located, struct dr_path_vertex *v)
 {
-    stage_surface_hit(s, opts, st, tri, v);
+    v->kind = DR_VERTEX_SURFACE;   /* stage_locate's hit, from the place the walker found */
+    v->hit = *located;
+    dr_hit_shade(&s->mesh, &v->hit);
+    stage_emission(s, opts, st, located->tri, v);
 }
 
 bool dr_path_stage_material(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_state *st,

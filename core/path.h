@@ -411,8 +411,10 @@ static inline const struct dr_sky_bsdf *dr_path_sky_bsdf(const struct dr_path_op
  * together with free-flight sampling and boundary crossings. */
 void dr_path_stage_escaped(const struct dr_scene *scene, const struct dr_path_opts *opts,
                            const struct dr_path_state *st, struct dr_path_vertex *v);
+/* (located: dr_hit_locate's hit of the current ray, st->o along st->d) */
 void dr_path_stage_surface_hit(const struct dr_scene *scene, const struct dr_path_opts *opts,
-                               const struct dr_path_state *st, int64_t tri, struct dr_path_vertex *v);
+                               const struct dr_path_state *st, const struct dr_hit *located,
+                               struct dr_path_vertex *v);
 bool dr_path_stage_material(const struct dr_scene *scene, const struct dr_path_opts *opts,
                             const struct dr_path_state *st, struct dr_sampler *sampler, struct dr_path_vertex *v);
 bool dr_path_stage_continue(const struct dr_path_opts *opts, struct dr_path_state *st, struct dr_path_vertex *v);
