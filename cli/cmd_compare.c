@@ -226,21 +226,17 @@ static int one_sampler(struct cmp_args *a, const char *name)
 
 static int one_medium_grad(struct cmp_args *a, const char *name)
 {
-    enum dr_medium_grad m;
-    if (strcmp(name, "drt") == 0)
-        m = DR_MEDIUM_GRAD_DRT;
-    else if (strcmp(name, "baseline") == 0)
-        m = DR_MEDIUM_GRAD_BASELINE;
-    else {
+    int m = dr_medium_grad_parse(name);
+    if (m < 0) {
         cli_error("compare", "--medium-grad: unknown method '%s' (known: drt, baseline)", name);
         return DR_EXIT_USAGE;
     }
     for (int i = 0; i < a->n_medium_grads; i++)
-        if (a->medium_grads[i] == m) {
+        if ((int)a->medium_grads[i] == m) {
             cli_error("compare", "--medium-grad: '%s' is listed twice", name);
             return DR_EXIT_USAGE;
         }
-    a->medium_grads[a->n_medium_grads++] = m;
+    a->medium_grads[a->n_medium_grads++] = (enum dr_medium_grad)m;
     return -1;
 }
 
@@ -1004,7 +1000,7 @@ static int check_scene_args(struct cmp_run *r, const struct dr_scene *scene)
     if (a->n_medium_grads > 1 && !r->ps->media_active) {
         cli_error("compare", "--medium-grad %s,%s: no --param is a participating medium's (DR_medium, "
                              "KHR_materials_volume), so both methods would run the same paths",
-                  cmp_medium_grad_name(a->medium_grads[0]), cmp_medium_grad_name(a->medium_grads[1]));
+                  dr_medium_grad_name(a->medium_grads[0]), dr_medium_grad_name(a->medium_grads[1]));
         return DR_EXIT_USAGE;
     }
     if (a->ref_kind == CMP_REF_FD && r->reverse)

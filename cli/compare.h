@@ -133,8 +133,7 @@ void cmp_pair_label(const struct cmp_run *r, const struct cmp_combo *c, char *bu
 /* Do a and b differ only in max depth and spp (the same estimator,
  * sampling, sampler and media method)? */
 bool cmp_same_pair(const struct cmp_combo *a, const struct cmp_combo *b);
-/* "drt" or "baseline" */
-const char *cmp_medium_grad_name(enum dr_medium_grad m);
+
 /* The efficiency 1 / (relative variance x seconds) of parameter k in combination c. */
 double cmp_param_efficiency(const struct cmp_run *r, int c, int k);
 /* Median / min / max of a combination's repeat timings. */

@@ -12,11 +12,6 @@
 #include "cli.h"
 #include "compare.h"
 
-const char *cmp_medium_grad_name(enum dr_medium_grad m)
-{
-    return m == DR_MEDIUM_GRAD_BASELINE ? "baseline" : "drt";
-}
-
 bool cmp_same_pair(const struct cmp_combo *a, const struct cmp_combo *b)
 {
     return a->est == b->est && a->sampling == b->sampling && a->sampler == b->sampler &&
@@ -28,7 +23,7 @@ void cmp_pair_label(const struct cmp_run *r, const struct cmp_combo *c, char *bu
     /* a single sampler (media method) is the run's setting, not a dimension */
     char media[32] = "";
     if (r->a->n_medium_grads > 1)
-        snprintf(media, sizeof media, " (media %s)", cmp_medium_grad_name(c->medium_grad));
+        snprintf(media, sizeof media, " (media %s)", dr_medium_grad_name(c->medium_grad));
     if (r->a->n_samplers > 1)
         snprintf(buf, size, "%s %s %s%s", c->est->name, dr_sampling_name(c->sampling), dr_sampler_kind_name(c->sampler),
                  media);
@@ -134,7 +129,7 @@ int cmp_write_csv(const struct cmp_run *r, const char *path)
             fprintf(f, ",%s", r->ref.kind);
             csv_number(f, r->ref.rel_se);
             /* last: older columns keep their place */
-            fprintf(f, ",%s,%s\n", dr_sampler_kind_name(cb->sampler), cmp_medium_grad_name(cb->medium_grad));
+            fprintf(f, ",%s,%s\n", dr_sampler_kind_name(cb->sampler), dr_medium_grad_name(cb->medium_grad));
         }
     if (fclose(f) != 0) {
         cli_error("compare", "%s: %s", path, strerror(errno));
@@ -202,7 +197,7 @@ static void json_combination(FILE *f, const struct cmp_run *r, int c)
     cmp_seconds_spread(r, c, &med, &lo, &hi);
     fprintf(f, "{\"estimator\": \"%s\", \"sampling\": \"%s\", \"sampler\": \"%s\", \"medium_grad\": \"%s\", "
                "\"max_depth\": %d, \"spp\": %d", cb->est->name, dr_sampling_name(cb->sampling),
-            dr_sampler_kind_name(cb->sampler), cmp_medium_grad_name(cb->medium_grad), cb->max_depth, cb->spp);
+            dr_sampler_kind_name(cb->sampler), dr_medium_grad_name(cb->medium_grad), cb->max_depth, cb->spp);
     json_key_number(f, "seconds_median", med);
     json_key_number(f, "seconds_min", lo);
     json_key_number(f, "seconds_max", hi);
@@ -256,7 +251,7 @@ static void json_rows(FILE *f, const struct cmp_run *r)
             fprintf(f, "%s{\"estimator\": \"%s\", \"sampling\": \"%s\", \"sampler\": \"%s\", \"medium_grad\": \"%s\", "
                        "\"max_depth\": %d, \"spp\": %d, \"repeat\": %d", i ? ", " : "", cb->est->name,
                     dr_sampling_name(cb->sampling), dr_sampler_kind_name(cb->sampler),
-                    cmp_medium_grad_name(cb->medium_grad), cb->max_depth, cb->spp, rep);
+                    dr_medium_grad_name(cb->medium_grad), cb->max_depth, cb->spp, rep);
             json_key_number(f, "seconds", r->results[c].seconds[rep]);
             json_key_number(f, "rel_error", r->results[c].rel_error);
             json_key_number(f, "efficiency", efficiency_at(&r->results[c], r->results[c].seconds[rep]));
@@ -285,7 +280,7 @@ void cmp_write_json(const struct cmp_run *r, FILE *f)
         fprintf(f, "%s\"%s\"", q ? ", " : "", dr_sampler_kind_name(a->samplers[q]));
     fputs("], \"medium_grads\": [", f);
     for (int q = 0; q < a->n_medium_grads; q++)
-        fprintf(f, "%s\"%s\"", q ? ", " : "", cmp_medium_grad_name(a->medium_grads[q]));
+        fprintf(f, "%s\"%s\"", q ? ", " : "", dr_medium_grad_name(a->medium_grads[q]));
     fputs("], \"output_dir\": ", f);
     json_string(f, a->out_dir);
     fputs(", \"parameters\": [", f);
@@ -308,7 +303,7 @@ void cmp_write_json(const struct cmp_run *r, FILE *f)
     int b = best_combo(r);
     fprintf(f, ", \"best\": {\"estimator\": \"%s\", \"sampling\": \"%s\", \"sampler\": \"%s\", \"medium_grad\": \"%s\", "
                "\"max_depth\": %d, \"spp\": %d", r->combos[b].est->name, dr_sampling_name(r->combos[b].sampling),
-            dr_sampler_kind_name(r->combos[b].sampler), cmp_medium_grad_name(r->combos[b].medium_grad),
+            dr_sampler_kind_name(r->combos[b].sampler), dr_medium_grad_name(r->combos[b].medium_grad),
             r->combos[b].max_depth, r->combos[b].spp);
     json_key_number(f, "efficiency", cmp_efficiency(r, b));
     fputc('}', f);
@@ -382,7 +377,7 @@ static const char *sampling_cell(const struct cmp_run *r, const struct cmp_combo
 {
     if (r->a->n_medium_grads < 2)
         return dr_sampling_name(cb->sampling);
-    snprintf(buf, size, "%s (media %s)", dr_sampling_name(cb->sampling), cmp_medium_grad_name(cb->medium_grad));
+    snprintf(buf, size, "%s (media %s)", dr_sampling_name(cb->sampling), dr_medium_grad_name(cb->medium_grad));
     return buf;
 }
 

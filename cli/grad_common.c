@@ -175,16 +175,15 @@ static int method_option(struct grad_common *g, int c, const char *arg)
         g->sampler_given = true;
         return 0;
     }
-    case GOPT_MEDIUM_GRAD:
-        if (strcmp(arg, "drt") == 0)
-            g->medium_grad = DR_MEDIUM_GRAD_DRT;
-        else if (strcmp(arg, "baseline") == 0)
-            g->medium_grad = DR_MEDIUM_GRAD_BASELINE;
-        else {
+    case GOPT_MEDIUM_GRAD: {
+        int m = dr_medium_grad_parse(arg);
+        if (m < 0) {
             cli_error(g->cmd, "--medium-grad: unknown method '%s' (known: drt, baseline)", arg);
             return DR_EXIT_USAGE;
         }
+        g->medium_grad = (enum dr_medium_grad)m;
         return 0;
+    }
     default: return -1;
     }
 }
@@ -647,7 +646,7 @@ void grad_json_head(FILE *f, const struct grad_common *g, const char *scene_path
     fprintf(f, ", \"sampling\": ");
     json_string(f, dr_sampling_name(g->sampling));
     fprintf(f, ", \"regularize\": %.17g", g->regularize);
-    fprintf(f, ", \"medium_grad\": \"%s\"", g->medium_grad == DR_MEDIUM_GRAD_BASELINE ? "baseline" : "drt");
+    fprintf(f, ", \"medium_grad\": \"%s\"", dr_medium_grad_name(g->medium_grad));
     fprintf(f, ", \"width\": %d, \"height\": %d, \"spp\": %d, \"max_depth\": %d, \"rr_depth\": %d, \"seed\": %llu",
             g->width, g->height, g->spp, g->max_depth, g->rr_depth, (unsigned long long)g->seed);
     fputs(", ", f);

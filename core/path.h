@@ -35,6 +35,7 @@
 
 #include <stdbool.h>
 #include <stdint.h>
+#include <string.h>
 
 #include "bsdf.h"
 #include "geometry.h"
@@ -49,6 +50,16 @@ struct dr_ray_counts {
     uint64_t simd_vertices;   /* path vertices shaded eight lanes at a time (path_simd.h) */
     uint64_t simd_replayed;   /* ... of them in replays (prb's second walks of its paths) */
 };
+
+/* *sum += *x, count by count (a run's threads summed). */
+static inline void dr_ray_counts_add(struct dr_ray_counts *sum, const struct dr_ray_counts *x)
+{
+    sum->camera += x->camera;
+    sum->extension += x->extension;
+    sum->shadow += x->shadow;
+    sum->simd_vertices += x->simd_vertices;
+    sum->simd_replayed += x->simd_replayed;
+}
 
 /* Dimensions a path uses: 2 for the pixel position, then a fixed block per
  * vertex so each decision owns its own random numbers whatever came before. */
@@ -86,6 +97,17 @@ enum dr_medium_grad {
     DR_MEDIUM_GRAD_BASELINE    /* differentiate the sampled null collisions as they are: biased
                                   where the majorant is 0 or tight */
 };
+
+/* "drt" / "baseline": the command line's names (--medium-grad); parse: -1
+ * for another name. */
+static inline const char *dr_medium_grad_name(enum dr_medium_grad m)
+{
+    return m == DR_MEDIUM_GRAD_BASELINE ? "baseline" : "drt";
+}
+static inline int dr_medium_grad_parse(const char *name)
+{
+    return strcmp(name, "drt") == 0 ? DR_MEDIUM_GRAD_DRT : strcmp(name, "baseline") == 0 ? DR_MEDIUM_GRAD_BASELINE : -1;
+}
 
 struct dr_path_opts {
     int max_depth, rr_depth;

@@ -257,11 +257,7 @@ int dr_render(const struct dr_scene *scene, const struct dr_camera *camera, cons
         stats->threads = threads;
         stats->stages = j->path.stages;
         for (int i = 0; i < threads; i++) {
-            stats->rays.camera += j->counters[i].rays.camera;
-            stats->rays.extension += j->counters[i].rays.extension;
-            stats->rays.shadow += j->counters[i].rays.shadow;
-            stats->rays.simd_vertices += j->counters[i].rays.simd_vertices;
-            stats->rays.simd_replayed += j->counters[i].rays.simd_replayed;
+            dr_ray_counts_add(&stats->rays, &j->counters[i].rays);
             stats->invalid_samples += j->counters[i].invalid;
         }
     }

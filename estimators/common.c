@@ -380,11 +380,7 @@ static void run_stats(const struct dr_est_base *b, struct dr_grad_stats *st)
                                  .record_bytes = b->record_bytes, .stages = b->popts.stages,
                                  .sampling_run = dr_est_sampling_run(b->p)};
     for (int t = 0; t < b->acc.threads; t++) {
-        st->rays.camera += b->thr[t].rays.camera;
-        st->rays.extension += b->thr[t].rays.extension;
-        st->rays.shadow += b->thr[t].rays.shadow;
-        st->rays.simd_vertices += b->thr[t].rays.simd_vertices;
-        st->rays.simd_replayed += b->thr[t].rays.simd_replayed;
+        dr_ray_counts_add(&st->rays, &b->thr[t].rays);
         st->invalid_samples += b->thr[t].invalid;
     }
 }
