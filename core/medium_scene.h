@@ -36,7 +36,8 @@ int dr_medium_at(const struct dr_scene *scene, dr_vec3 o, dr_vec3 d);
  * environment) starting in medium `medium`, through index-matched
  * boundaries; 0 when an ordinary surface or a dielectric boundary (a
  * specular interface, which no straight shadow ray crosses) is in the way. *rays counts the
- * ray queries. */
+ * ray queries. Unbiased, not always exact: a ray that starts deep in a
+ * homogeneous medium plays Russian roulette (medium_scene.c). */
 struct dr_medium_trace;
 /* rec (may be NULL): records the medium pieces crossed, for derivatives. */
 dr_vec3 dr_media_transmittance(const struct dr_scene *scene, dr_vec3 o, dr_vec3 d, double tmax, int medium,

@@ -218,6 +218,49 @@ static void test_collision_ahead(void)
     free(g.grid.density);
 }
 
+/* Shadow rays from deep inside a thick homogeneous slab (extinction 20 /
+ * 30 / 50, half-thickness 0.5: every channel below 1 % within 0.23) play
+ * Russian roulette (medium_scene.c): most give 0, the rest 10 times the
+ * transmittance, whose mean over many rays is the exact exp(-sigma 0.5).
+ * A ray whose boundary is within that distance is exact, every time. */
+static void test_shadow_roulette(void)
+{
+    const dr_vec3 sigma = dr_v3(20.0, 30.0, 50.0);
+    struct dr_scene *s = slab_scene(medium(sigma, dr_v3s(0.5), 0.0));
+    const int n = 40000;
+    double sum[3] = {0}, sq[3] = {0};
+    int zero = 0;
+    uint64_t rays = 0;
+    for (int i = 0; i < n; i++) {
+        struct dr_sampler rng = {.key = dr_hash64(0x5eed + (uint64_t)i), .dim = 0};
+        dr_vec3 T = dr_media_transmittance(s, dr_v3(0, 0, 0), dr_v3(0, 0, 1), INFINITY, 0, &rng, &rays, NULL);
+        zero += dr_is_black(T);
+        for (int c = 0; c < 3; c++) {
+            sum[c] += dr_v3_get(T, c);
+            sq[c] += dr_v3_get(T, c) * dr_v3_get(T, c);
+        }
+    }
+    CHECK(zero > 0.85 * n && zero < 0.95 * n, "roulette: %d of %d shadow rays ended (expected about 90 %%)", zero, n);
+    for (int c = 0; c < 3; c++) {
+        const double mean = sum[c] / n, se = sqrt((sq[c] / n - mean * mean) / (n - 1));
+        const double exact = exp(-dr_v3_get(sigma, c) * 0.5);
+        CHECK(fabs(mean - exact) <= 4.0 * se && se > 0.0, "roulette channel %d: mean %.6g, exact %.6g (se %.2g)", c,
+              mean, exact, se);
+    }
+    CHECK(rays < (uint64_t)n * 2, "killed rays cost one query each (%llu queries for %d rays)",
+          (unsigned long long)rays, n);
+    /* the boundary 0.1 away: no roulette, the exact transmittance every time */
+    int inexact = 0;
+    for (int i = 0; i < 1000; i++) {
+        struct dr_sampler rng = {.key = dr_hash64(0xface + (uint64_t)i), .dim = 0};
+        dr_vec3 T = dr_media_transmittance(s, dr_v3(0, 0, 0.4), dr_v3(0, 0, 1), INFINITY, 0, &rng, &rays, NULL);
+        for (int c = 0; c < 3; c++)
+            inexact += fabs(dr_v3_get(T, c) - exp(-dr_v3_get(sigma, c) * 0.1)) > 1e-3 * exp(-dr_v3_get(sigma, c) * 0.1);
+    }
+    CHECK(inexact == 0, "near the boundary: %d transmittances differ from the exact one", inexact);
+    dr_scene_destroy(s);
+}
+
 /* --------------------------------------------------------------- furnace */
 
 static double noise(int x, int y, int z)
@@ -440,6 +483,7 @@ int main(void)
     test_slab_transmittance();
     test_clear_channel_to_infinity();
     test_collision_ahead();
+    test_shadow_roulette();
     test_furnace();
     test_fresnel();
     test_dielectric_interface();
