@@ -171,17 +171,6 @@ static void rescale(struct dr_spectral_mis *mis)
             mis->r[j] /= big;
 }
 
-/* Free flight in a homogeneous medium: the hero channel c's own flight,
- * exponential at its extinction, no null collisions. Delta tracking against
- * the largest channel's extinction took a step per tentative collision:
- * (largest / hero's) steps per real one, which made a dense medium with
- * chromatic extinction (10^4 / 10^3 / 10^2) walk a hundred steps for each,
- * and a channel that does not attenuate at all (extinction 0) walk for ever
- * along a ray leaving an unbounded medium. Each channel's probability of the
- * same events, sigma_s,j exp(-sigma_t,j s) for a scattering at s and
- * exp(-sigma_t,j len) for a pass, goes into mis->r; taken relative to the
- * least extinction's exp(-sigma_min s), a common factor, so that no
- * exponent is positive (only ratios of r matter). Two uniforms a call. */
 /* The ray's stretch [t0, t1) of the medium up to tmax (false: none, and
  * no number drawn), and then the hero channel c's flight s from t0 and the
  * event's number u_event, drawn from rng: homogeneous_sample's and
@@ -201,6 +190,17 @@ static bool homogeneous_flight(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, 
     return true;
 }
 
+/* Free flight in a homogeneous medium: the hero channel c's own flight,
+ * exponential at its extinction, no null collisions. Delta tracking against
+ * the largest channel's extinction took a step per tentative collision:
+ * (largest / hero's) steps per real one, which made a dense medium with
+ * chromatic extinction (10^4 / 10^3 / 10^2) walk a hundred steps for each,
+ * and a channel that does not attenuate at all (extinction 0) walk for ever
+ * along a ray leaving an unbounded medium. Each channel's probability of the
+ * same events, sigma_s,j exp(-sigma_t,j s) for a scattering at s and
+ * exp(-sigma_t,j len) for a pass, goes into mis->r; taken relative to the
+ * least extinction's exp(-sigma_min s), a common factor, so that no
+ * exponent is positive (only ratios of r matter). Two uniforms a call. */
 static enum dr_medium_event homogeneous_sample(const struct dr_medium *m, dr_vec3 o, dr_vec3 d, double tmax,
                                                struct dr_sampler *rng, struct dr_spectral_mis *mis, double *t_out)
 {
