@@ -251,8 +251,8 @@ static void start_path(const struct dr_scene *s, struct dr_path_state *st, const
  * event, so the ray stops there: in a dense medium most rays end at a
  * collision long before any surface, and Embree finds no hit (no hit to
  * compute either) sooner than the surface's (the dense fog's render 5 %
- * faster; its shadow rays, twice as many queries, still go all the way:
- * transmittance needs the whole length). The margin covers
+ * faster; for its shadow rays see medium_scene.c's roulette). The margin
+ * covers
  * Embree's float distances against the double ones dr_medium_sample
  * compares (a relative error of about 1e-7 of the origin's and the
  * distance's magnitude; the margin is 100 times that): a hit that decides
