@@ -253,7 +253,9 @@ static dr_vec3 trace_transmittance(const struct dr_scene *s, dr_vec3 o, dr_vec3 
 
 /* The distance over which medium m surely attenuates every channel below
  * exp(-ROULETTE_DEPTH); INFINITY where no such bound holds (a grid, a
- * channel of extinction 0). */
+ * channel of extinction 0) or where it is longer than the medium's mean
+ * chord: there the query would nearly always find a surface, and cost a
+ * query for nothing (a thin global fog rendered 9 % slower so). */
 static double roulette_reach(const struct dr_medium *m)
 {
     if (m->has_grid || !(m->density_scale > 0.0))
@@ -261,7 +263,8 @@ static double roulette_reach(const struct dr_medium *m)
     double least = INFINITY;
     for (int c = 0; c < 3; c++)
         least = dr_min(least, m->density_scale * dr_v3_get(m->extinction, c));
-    return least > 0.0 ? ROULETTE_DEPTH / least : INFINITY;
+    const double reach = least > 0.0 ? ROULETTE_DEPTH / least : INFINITY;
+    return reach < m->mean_chord ? reach : INFINITY;
 }
 
 dr_vec3 dr_media_transmittance(const struct dr_scene *s, dr_vec3 o, dr_vec3 d, double tmax, int medium,
