@@ -254,8 +254,9 @@ static dr_vec3 trace_transmittance(const struct dr_scene *s, dr_vec3 o, dr_vec3 
 /* The distance over which medium m surely attenuates every channel below
  * exp(-ROULETTE_DEPTH); INFINITY where no such bound holds (a grid, a
  * channel of extinction 0) or where it is longer than the medium's mean
- * chord: there the query would nearly always find a surface, and cost a
- * query for nothing (a thin global fog rendered 9 % slower so). */
+ * chord: there the query would nearly always find a surface and cost a
+ * query for nothing (a thin global fog's shadow rays mostly found its
+ * floor so). */
 static double roulette_reach(const struct dr_medium *m)
 {
     if (m->has_grid || !(m->density_scale > 0.0))
