@@ -24,9 +24,9 @@ static void place(const struct dr_mesh *m, int64_t tri, double b1, double b2, st
     hit->material = m->material[tri];
 }
 
-/* What shading reads besides: the interpolated shading normal and TEXCOORD_0
- * (after place()). */
-static void shading_attributes(const struct dr_mesh *m, struct dr_hit *hit)
+/* What shading reads besides the place: the interpolated shading normal and
+ * TEXCOORD_0. */
+void dr_hit_shade(const struct dr_mesh *m, struct dr_hit *hit)
 {
     const uint32_t *idx = m->indices + 3 * (size_t)hit->tri;
     const double b1 = hit->b1, b2 = hit->b2, b0 = 1.0 - b1 - b2;
@@ -127,15 +127,10 @@ void dr_hit_locate(const struct dr_mesh *m, int64_t tri, dr_vec3 o, dr_vec3 d, s
     hit->front = dr_dot(d, hit->ng) < 0.0;
 }
 
-void dr_hit_shade(const struct dr_mesh *m, struct dr_hit *hit)
-{
-    shading_attributes(m, hit);
-}
-
 void dr_hit_compute(const struct dr_mesh *m, int64_t tri, dr_vec3 o, dr_vec3 d, struct dr_hit *hit)
 {
     dr_hit_locate(m, tri, o, d, hit);
-    shading_attributes(m, hit);
+    dr_hit_shade(m, hit);
 }
 
 /* d loss / d (b1, b2) of the shading normal: ns = sign * n / |n|,

@@ -171,6 +171,12 @@ static void rescale(struct dr_spectral_mis *mis)
             mis->r[j] /= big;
 }
 
+double dr_medium_least_extinction(const struct dr_medium *m)
+{
+    const dr_vec3 st = dr_scale(m->extinction, m->density_scale);
+    return dr_max(0.0, dr_min(st.x, dr_min(st.y, st.z)));
+}
+
 /* The ray's stretch [t0, t1) of the medium up to tmax (false: none, and
  * no number drawn), and then the hero channel c's flight s from t0 and the
  * event's number u_event, drawn from rng: homogeneous_sample's and

@@ -90,6 +90,11 @@ void dr_grid_release(struct dr_grid *grid);
  * (idx -1 where the weight is 0), for derivatives; may be NULL. */
 double dr_grid_density(const struct dr_grid *grid, dr_vec3 p, int64_t idx[8], double w[8]);
 
+/* A homogeneous medium's smallest extinction over the channels, density
+ * scale applied (0 if some channel's is 0): its transmittance decays at
+ * least this fast in every channel. */
+double dr_medium_least_extinction(const struct dr_medium *m);
+
 /* sigma_t at p. */
 dr_vec3 dr_medium_sigma_t(const struct dr_medium *m, dr_vec3 p);
 

@@ -36,10 +36,21 @@
  *    collisions (medium.c): there both methods take the exact segment
  *    derivative, and the baseline is unbiased. */
 #include <math.h>
+#include <string.h>
 
 #include "accel.h"
 #include "medium_scene.h"
 #include "medium_grad.h"
+
+const char *dr_medium_grad_name(enum dr_medium_grad m)
+{
+    return m == DR_MEDIUM_GRAD_BASELINE ? "baseline" : "drt";
+}
+
+int dr_medium_grad_parse(const char *name)
+{
+    return strcmp(name, "drt") == 0 ? DR_MEDIUM_GRAD_DRT : strcmp(name, "baseline") == 0 ? DR_MEDIUM_GRAD_BASELINE : -1;
+}
 
 /* Positions per medium piece for the DRT integral. */
 #define DRT_SAMPLES 4
@@ -133,15 +144,9 @@ static bool gain_at_collisions(const struct dr_path_opts *opts, const struct dr_
 {
     if (opts->medium_grad == DR_MEDIUM_GRAD_BASELINE)
         return true;
-    if (m->has_grid || !(m->density_scale > 0.0))
+    if (m->has_grid || !(m->albedo.x > 0.0 && m->albedo.y > 0.0 && m->albedo.z > 0.0))
         return false;
-    double least = INFINITY;
-    for (int c = 0; c < 3; c++) {
-        if (!(dr_v3_get(m->extinction, c) > 0.0 && dr_v3_get(m->albedo, c) > 0.0))
-            return false;
-        least = dr_min(least, dr_v3_get(m->extinction, c));
-    }
-    return m->density_scale * least * m->mean_chord >= COLLISION_GAIN_THICKNESS;
+    return dr_medium_least_extinction(m) * m->mean_chord >= COLLISION_GAIN_THICKNESS;
 }
 
 /* Does some medium whose sigma_t is differentiated take DRT's gain paths? */
@@ -267,6 +272,7 @@ static void d_scatter(const struct dr_scene *s, const struct dr_path_opts *opts,
     const int mi = v->medium;
     const struct dr_medium *m = &s->media[mi];
     dr_vec3 st = dr_medium_sigma_t(m, v->hit.p);
+    const bool sigma_t_here = sigma_t_requested(ps, mi) && gain_at_collisions(opts, m);
     for (int c = 0; c < 3; c++) {
         double w = dr_v3_get(d_R, c), a = dr_v3_get(m->albedo, c), t = dr_v3_get(st, c);
         if (w == 0.0)
@@ -274,7 +280,7 @@ static void d_scatter(const struct dr_scene *s, const struct dr_path_opts *opts,
         sink->channel = c;
         if (ps->med_albedo[mi] >= 0 && a > 0.0)
             dr_sink_add(sink, ps->med_albedo[mi] + c, w / a);
-        if (t > 0.0 && gain_at_collisions(opts, m))
+        if (t > 0.0 && sigma_t_here)
             add_dsigma_t(s, ps, sink, mi, v->hit.p, c, w / t);
     }
     if (ps->med_g[mi] < 0)
@@ -305,7 +311,7 @@ void d_medium_vertex(const struct dr_scene *s, const struct dr_path_opts *opts, 
         d_trace(s, opts, &rec->seg, false, d_R, sink);
     if (opts->medium_grad == DR_MEDIUM_GRAD_DRT && !dr_is_black(d_beta) && gain_paths_needed(s, opts)) {
         double p = path_vertices > GAIN_PATHS ? (double)GAIN_PATHS / path_vertices : 1.0;
-        double u = (double)(dr_hash64(rec->seg.rng_key ^ 0x2545f4914f6cdd1dULL) >> 11) * (1.0 / 9007199254740992.0);
+        double u = dr_hash_unit(dr_hash64(rec->seg.rng_key ^ 0x2545f4914f6cdd1dULL));
         if (u < p)
             drt_gain(s, opts, v, &rec->seg, dr_scale(d_beta, 1.0 / p), sink);
     }

@@ -96,7 +96,7 @@ static void media_nee(const struct dr_scene *s, const struct dr_path_opts *opts,
         return;
     struct dr_sampler rng = tracking_stream(smp, v->depth, STREAM_SHADOW);
     if ((s->effects & (DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND)) && v->ls.type == DR_LS_AREA &&
-        !dr_coverage_point_present(s, v->ls.index, v->ls.b1, v->ls.b2, dr_hash64(rng.key ^ 0x5851f42d4c957f2dULL)))
+        !dr_coverage_point_present(s, v->ls.index, v->ls.b1, v->ls.b2, dr_media_shadow_key(&rng)))
         return;   /* the light point is a hole in a cut-out emitter */
     dr_vec3 tr = dr_media_transmittance(s, so, sd, tmax, v->medium, &rng, &counts->shadow, rec ? &v->mrec->shadow : NULL);
     if (dr_is_black(tr))

@@ -196,17 +196,13 @@ void dr_medium_trace_add(struct dr_medium_trace *rec, int medium, uint32_t rng_d
         rec->p[rec->n++] = (struct dr_medium_piece){medium, rng_dim, o, len};
 }
 
+/* (rec, if any, started by the caller) */
 static dr_vec3 trace_transmittance(const struct dr_scene *s, dr_vec3 o, dr_vec3 d, double tmax, int medium,
                                    struct dr_sampler *rng, uint64_t *rays, struct dr_medium_trace *rec)
 {
-    if (rec) {
-        rec->rng_key = rng->key;
-        rec->n = 0;
-        rec->d = d;
-    }
     dr_vec3 T = dr_v3s(1.0);
     /* BLEND surfaces on a shadow ray: decided by the ray's own stream (coverage.h) */
-    const uint64_t key = (s->effects & DR_FX_ALPHA_BLEND) ? dr_hash64(rng->key ^ 0x5851f42d4c957f2dULL) : 0;
+    const uint64_t key = (s->effects & DR_FX_ALPHA_BLEND) ? dr_media_shadow_key(rng) : 0;
     for (int i = 0; i < MAX_CROSSINGS; i++) {
         ++*rays;
         int64_t tri = dr_accel_intersect_key(s->accel, o, d, 0.0, tmax, key);
@@ -259,11 +255,7 @@ static dr_vec3 trace_transmittance(const struct dr_scene *s, dr_vec3 o, dr_vec3 
  * floor so). */
 static double roulette_reach(const struct dr_medium *m)
 {
-    if (m->has_grid || !(m->density_scale > 0.0))
-        return INFINITY;
-    double least = INFINITY;
-    for (int c = 0; c < 3; c++)
-        least = dr_min(least, m->density_scale * dr_v3_get(m->extinction, c));
+    const double least = m->has_grid ? 0.0 : dr_medium_least_extinction(m);
     const double reach = least > 0.0 ? ROULETTE_DEPTH / least : INFINITY;
     return reach < m->mean_chord ? reach : INFINITY;
 }
@@ -271,21 +263,19 @@ static double roulette_reach(const struct dr_medium *m)
 dr_vec3 dr_media_transmittance(const struct dr_scene *s, dr_vec3 o, dr_vec3 d, double tmax, int medium,
                                struct dr_sampler *rng, uint64_t *rays, struct dr_medium_trace *rec)
 {
+    if (rec) {
+        rec->rng_key = rng->key;
+        rec->n = 0;
+        rec->d = d;
+    }
     const double reach = medium >= 0 ? roulette_reach(&s->media[medium]) : INFINITY;
     double keep = 1.0;
     if (reach < tmax) {
         ++*rays;
-        const uint64_t key = (s->effects & DR_FX_ALPHA_BLEND) ? dr_hash64(rng->key ^ 0x5851f42d4c957f2dULL) : 0;
+        const uint64_t key = (s->effects & DR_FX_ALPHA_BLEND) ? dr_media_shadow_key(rng) : 0;
         if (!dr_accel_occluded_key(s->accel, o, d, 0.0, reach, key)) {
-            const double u = (double)(dr_hash64(rng->key ^ 0x3c6ef372fe94f82bULL) >> 11) * (1.0 / 9007199254740992.0);
-            if (u >= ROULETTE_KEEP) {
-                if (rec) {
-                    rec->rng_key = rng->key;
-                    rec->n = 0;
-                    rec->d = d;
-                }
+            if (dr_hash_unit(dr_hash64(rng->key ^ 0x3c6ef372fe94f82bULL)) >= ROULETTE_KEEP)
                 return dr_v3s(0.0);
-            }
             keep = ROULETTE_KEEP;
         }
     }

@@ -39,6 +39,12 @@ int dr_medium_at(const struct dr_scene *scene, dr_vec3 o, dr_vec3 d);
  * ray queries. Unbiased, not always exact: a ray that starts deep in a
  * homogeneous medium plays Russian roulette (medium_scene.c). */
 struct dr_medium_trace;
+/* The key a shadow ray with tracking stream rng decides coverage by (BLEND
+ * surfaces crossed, a cut-out emitter's light point: coverage.h). */
+static inline uint64_t dr_media_shadow_key(const struct dr_sampler *rng)
+{
+    return dr_hash64(rng->key ^ 0x5851f42d4c957f2dULL);
+}
 /* rec (may be NULL): records the medium pieces crossed, for derivatives. */
 dr_vec3 dr_media_transmittance(const struct dr_scene *scene, dr_vec3 o, dr_vec3 d, double tmax, int medium,
                                struct dr_sampler *rng, uint64_t *rays, struct dr_medium_trace *rec);

@@ -35,7 +35,6 @@
 
 #include <stdbool.h>
 #include <stdint.h>
-#include <string.h>
 
 #include "bsdf.h"
 #include "geometry.h"
@@ -98,16 +97,10 @@ enum dr_medium_grad {
                                   where the majorant is 0 or tight */
 };
 
-/* "drt" / "baseline": the command line's names (--medium-grad); parse: -1
- * for another name. */
-static inline const char *dr_medium_grad_name(enum dr_medium_grad m)
-{
-    return m == DR_MEDIUM_GRAD_BASELINE ? "baseline" : "drt";
-}
-static inline int dr_medium_grad_parse(const char *name)
-{
-    return strcmp(name, "drt") == 0 ? DR_MEDIUM_GRAD_DRT : strcmp(name, "baseline") == 0 ? DR_MEDIUM_GRAD_BASELINE : -1;
-}
+/* "drt" / "baseline": the command line's names (--medium-grad; medium_grad.c);
+ * parse: -1 for another name. */
+const char *dr_medium_grad_name(enum dr_medium_grad m);
+int dr_medium_grad_parse(const char *name);
 
 struct dr_path_opts {
     int max_depth, rr_depth;

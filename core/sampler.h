@@ -261,11 +261,16 @@ static inline uint64_t dr_sampler_strat_jitter(const struct dr_sampler *s, uint3
     return dr_hash64((s->key ^ salt) + (uint64_t)dim * 0xd1b54a32d192ed03ULL);
 }
 
+/* A uniform number in [0, 1) from a hash's top 53 bits. */
+static inline double dr_hash_unit(uint64_t h)
+{
+    return (double)(h >> 11) * (1.0 / 9007199254740992.0);
+}
+
 /* The independent sampler's draw of dimension dim: 53 random bits. */
 static inline double dr_sampler_independent(const struct dr_sampler *s, uint32_t dim)
 {
-    uint64_t h = dr_hash64(s->key + (uint64_t)dim * 0xd1b54a32d192ed03ULL);
-    return (double)(h >> 11) * (1.0 / 9007199254740992.0);
+    return dr_hash_unit(dr_hash64(s->key + (uint64_t)dim * 0xd1b54a32d192ed03ULL));
 }
 
 /* The Sobol and stratified draws (sampler.c): out of line, so the
