@@ -17,6 +17,29 @@ void d_medium_vertex(const struct dr_scene *scene, const struct dr_path_opts *op
                      const struct dr_medium_record *rec, int path_vertices, dr_vec3 d_beta, dr_vec3 d_R,
                      dr_vec3 d_Rn, dr_vec3 d_nee, struct dr_grad_sink *sink);
 
+/* Where DRT takes the sigma_t share of scattering in a thin homogeneous
+ * medium (thickness below 1, medium_grad.c's gain_at_collisions): from the
+ * path's collisions where a pilot saw many of the segments through the
+ * medium end in one, else from gain paths. The estimators run the pilot
+ * (estimators/common.c) where dr_medium_gain_pilot_wanted says so, tally
+ * its vertices per medium and decide into dr_path_opts.collision_gain. */
+struct dr_medium_tally {
+    uint64_t segments, collisions;
+};
+/* Is some medium whose sigma_t is differentiated by DRT (opts) that thin? */
+bool dr_medium_gain_pilot_wanted(const struct dr_scene *scene, const struct dr_path_opts *opts);
+/* Adds the stretches of media vertex v's incoming flight crossed (its
+ * record, v->mrec: the walker fills it where media parameters are
+ * requested), and its collision, to their media's tallies (one per medium). */
+void dr_medium_tally_vertex(const struct dr_path_vertex *v, struct dr_medium_tally *t);
+/* collision_gain[i] (one per medium): the tally of medium i says collisions. */
+void dr_medium_gain_decide(const struct dr_scene *scene, const struct dr_medium_tally *t,
+                           unsigned char *collision_gain);
+/* The pilot's paths (spread over the rendered pixels, a fixed seed, one
+ * thread: every batch, seed and thread count decide alike) and its longest. */
+#define DR_MEDIUM_PILOT_PATHS 1024
+#define DR_MEDIUM_PILOT_VERTICES 64
+
 /* Radiance scattered at x (in medium `medium`, the ray arriving along d)
  * towards -d, per unit scattering coefficient: NEE and a phase-sampled path
  * from x as if the path's vertex `depth` were there (medium_path.c). */

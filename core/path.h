@@ -105,6 +105,9 @@ int dr_medium_grad_parse(const char *name);
 struct dr_path_opts {
     int max_depth, rr_depth;
     enum dr_medium_grad medium_grad;
+    const unsigned char *collision_gain; /* per medium, DRT: take a thin homogeneous medium's sigma_t
+                                            gain at the path's collisions (the pilot's choice,
+                                            medium_grad.h); NULL: gain paths in every thin one */
     unsigned stages;                     /* enum dr_path_stage bits (dr_path_plan) */
     const struct dr_param_set *params;   /* NULL: primal only (no substitution) */
     bool sky_uniform;                    /* sample a constant sky over the sphere, not by lights.h's

@@ -7,6 +7,7 @@
 
 #include "clock.h"
 #include "error.h"
+#include "medium_grad.h"
 
 /* Scalar problems up to this size sum each chunk locally first. */
 #define CHUNK_LOCAL_MAX 4096
@@ -385,6 +386,50 @@ static void run_stats(const struct dr_est_base *b, struct dr_grad_stats *st)
     }
 }
 
+/* Random numbers of the media pilot (a seed of its own, whatever the run's). */
+#define MEDIA_PILOT_SEED 0x6d656469615f706cULL
+
+/* DRT's pilot (medium_grad.h): primal paths spread evenly over the rendered
+ * pixels, each walked for at most DR_MEDIUM_PILOT_VERTICES vertices, their
+ * segments tallied by medium; then the choice into collision_gain (one per
+ * medium), which b->popts points to. Its rays count as the run's. */
+static int plan_media_gain(struct dr_est_base *b, unsigned char **collision_gain)
+{
+    const struct dr_grad_problem *p = b->p;
+    const struct dr_scene *s = p->scene;
+    struct dr_medium_tally *tally = calloc((size_t)s->n_media, sizeof *tally);
+    *collision_gain = calloc((size_t)s->n_media, 1);
+    if (!tally || !*collision_gain) {
+        free(tally);
+        dr_set_error("out of memory");
+        return DR_ERR_NOMEM;
+    }
+    struct dr_medium_record rec;   /* (the walker records the media a flight crosses) */
+    const int64_t pixels = (int64_t)p->width * p->height;
+    for (int k = 0; k < DR_MEDIUM_PILOT_PATHS; k++) {
+        int x, y;
+        const uint64_t frame_pixel = dr_film_pixel(&p->film, p->width, k * pixels / DR_MEDIUM_PILOT_PATHS, &x, &y);
+        struct dr_sampler smp;
+        dr_sampler_init(&smp, MEDIA_PILOT_SEED, frame_pixel, (uint64_t)k);
+        double u = dr_sampler_next(&smp), v = dr_sampler_next(&smp), fx, fy;
+        dr_film_sample(&p->film.filter, x, y, u, v, &fx, &fy);
+        dr_vec3 o, d;
+        dr_camera_ray(&b->view, fx, fy, &o, &d);
+        struct dr_path_state st;
+        struct dr_path_vertex vx = {.mrec = &rec};
+        dr_path_start(&st, o, d);
+        bool more = true;
+        for (int n = 0; more && n < DR_MEDIUM_PILOT_VERTICES; n++) {
+            more = dr_path_step(s, &b->popts, &st, &smp, &vx, &b->thr[0].rays);
+            dr_medium_tally_vertex(&vx, tally);
+        }
+    }
+    dr_medium_gain_decide(s, tally, *collision_gain);
+    free(tally);
+    b->popts.collision_gain = *collision_gain;
+    return 0;
+}
+
 static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const float *adjoint,
                const double *dir, double *grad, double *d_image, struct dr_grad_stats *st)
 {
@@ -414,7 +459,11 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
     b->adjoint = adjoint;
     b->dir = dir;
     b->mis = run == DR_SAMPLING_MIS;
-    rc = accum_init(&b->acc, p, dir != NULL, b->mis, grad, d_image);
+    unsigned char *collision_gain = NULL;
+    if (dr_medium_gain_pilot_wanted(p->scene, &b->popts))
+        rc = plan_media_gain(b, &collision_gain);
+    if (rc == 0)
+        rc = accum_init(&b->acc, p, dir != NULL, b->mis, grad, d_image);
     if (rc == 0 && b->mis)
         rc = mis_init(b);
     if (rc == 0) {
@@ -433,6 +482,7 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
         e->release(b);
     accum_free(&b->acc);
     dr_mis_free(&b->mis_acc);
+    free(collision_gain);
     free(b);
     return rc;
 }

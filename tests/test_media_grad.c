@@ -17,6 +17,7 @@
 #include "error.h"
 #include "estimator.h"
 #include "media_builder.h"
+#include "medium_grad.h"
 #include "render.h"
 #include "test.h"
 
@@ -308,16 +309,22 @@ static void check_scene(bool lamp)
     dr_scene_destroy(s);
 }
 
+/* Where DRT takes a homogeneous medium's sigma_t gain (medium_grad.c's
+ * gain_at_collisions), and so whether its numbers are the baseline's. */
+enum gain_source {
+    GAIN_PATHS,         /* thin, and few of the pilot's segments collide: gain paths, numbers differ */
+    PILOT_COLLISIONS,   /* thin, but most segments collide: the pilot picks the collisions */
+    THICK_COLLISIONS,   /* thickness >= 1: the collisions, no pilot */
+};
+
 /* A homogeneous cube of strongly chromatic extinction, whose free flight
  * is the hero channel's own (medium.c's homogeneous_sample: no null
  * collisions, so the baseline takes each segment's exact transmittance
  * derivative, as DRT does): prb and tape with DRT and prb with the
- * baseline against finite differences. Thin (least extinction 0.5 across a
- * mean chord of 4/3: thickness 0.67), DRT's gain comes from gain paths and
- * its gradients differ from the baseline's; thick (2: thickness 2.7), from
- * the path's collisions (medium_grad.c, gain_at_collisions), as the
- * baseline's: the same numbers, to the bit. */
-static void check_homogeneous(dr_vec3 extinction, bool thick)
+ * baseline against finite differences. Where DRT takes the gain at the
+ * path's collisions, as the baseline does, its numbers are the baseline's
+ * to the bit; where it takes gain paths, they differ. */
+static void check_homogeneous(dr_vec3 extinction, enum gain_source expect)
 {
     fprintf(stderr, "-- a homogeneous chromatic cube, extinction %g / %g / %g\n", extinction.x, extinction.y,
             extinction.z);
@@ -378,11 +385,14 @@ static void check_homogeneous(dr_vec3 extinction, bool thick)
         CHECK(fabs(zt) <= 3.5, "%s: DRT (tape) disagrees with finite differences: z = %.2f", checks[i].what, zt);
         CHECK(fabs(zb) <= 3.5, "%s: the baseline disagrees with finite differences: z = %.2f", checks[i].what, zb);
     }
-    if (thick)
-        CHECK(same_as_baseline == 4 * BATCHES, "thick: DRT took the gain at the collisions, as the baseline, in %d of %d",
+    struct dr_path_opts drt = {.medium_grad = DR_MEDIUM_GRAD_DRT, .params = ps};
+    CHECK(dr_medium_gain_pilot_wanted(s, &drt) == (expect != THICK_COLLISIONS), "the pilot is%s wanted",
+          expect != THICK_COLLISIONS ? " not" : "");
+    if (expect == GAIN_PATHS)
+        CHECK(same_as_baseline < BATCHES, "DRT should take gain paths, yet %d of %d numbers are the baseline's",
               same_as_baseline, 4 * BATCHES);
     else
-        CHECK(same_as_baseline < BATCHES, "thin: DRT took gain paths, yet %d of %d numbers are the baseline's",
+        CHECK(same_as_baseline == 4 * BATCHES, "DRT took the gain at the collisions, as the baseline, in %d of %d",
               same_as_baseline, 4 * BATCHES);
     free(g_drt);
     free(g);
@@ -390,10 +400,79 @@ static void check_homogeneous(dr_vec3 extinction, bool thick)
     dr_scene_destroy(s);
 }
 
+/* The pilot's tally and choice (medium_grad.h) on records made by hand: a
+ * crossing of several media counts a segment in each, a collision only in
+ * the vertex's medium; the choice takes collisions from 0.4 of the segments
+ * on, given 64 of them; and who asks for a pilot. */
+static void check_pilot_rule(void)
+{
+    fprintf(stderr, "-- the media pilot's tally and choice\n");
+    struct sb b;
+    sb_init(&b);
+    int thin = sb_material(&b, sb_diffuse(dr_v3s(0.5))), grid = sb_material(&b, sb_diffuse(dr_v3s(0.5)));
+    sb_box(&b, dr_v3(-1, -1, -1), dr_v3(0, 1, 1), thin);
+    sb_box(&b, dr_v3(0.5, -1, -1), dr_v3(1.5, 1, 1), grid);
+    sb_medium(&b, thin, medium(dr_v3(0.2, 0.3, 0.4), dr_v3(0.8, 0.7, 0.9), 0.0));
+    struct dr_medium gm = medium(dr_v3(0.2, 0.3, 0.4), dr_v3(0.8, 0.7, 0.9), 0.0);
+    set_grid(&gm, 12, 8, 8, dr_v3(0.5, -1, -1), dr_v3(1.5, 1, 1), grid_density);
+    sb_medium(&b, grid, gm);
+    sb_environment(&b, dr_v3s(1.0));
+    b.s->n_file_materials = b.s->n_materials;
+    struct dr_scene *s = sb_finish(&b);
+    struct dr_medium_tally t[2] = {{0}};
+    struct dr_medium_record rec = {.seg = {.n = 2, .p = {{.medium = 0}, {.medium = 1}}}};
+    struct dr_path_vertex v = {.kind = DR_VERTEX_MEDIUM, .medium = 1, .mrec = &rec};
+    dr_medium_tally_vertex(&v, t);
+    v.kind = DR_VERTEX_SURFACE, v.medium = -1;
+    dr_medium_tally_vertex(&v, t);
+    CHECK(t[0].segments == 2 && t[0].collisions == 0 && t[1].segments == 2 && t[1].collisions == 1,
+          "tally: %d %d / %d %d (expected 2 0 / 2 1)", (int)t[0].segments, (int)t[0].collisions, (int)t[1].segments,
+          (int)t[1].collisions);
+    v.mrec = NULL;   /* (nothing recorded: nothing counted) */
+    dr_medium_tally_vertex(&v, t);
+    CHECK(t[0].segments == 2, "a vertex without a record counted");
+    const struct {
+        uint64_t segments, collisions;
+        unsigned char expect;
+    } cases[] = {{100, 40, 1}, {100, 39, 0}, {64, 64, 1}, {63, 63, 0}, {0, 0, 0}, {1000, 999, 1}};
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        struct dr_medium_tally ti[2] = {{cases[i].segments, cases[i].collisions}, {0, 0}};
+        unsigned char choice[2] = {9, 9};
+        dr_medium_gain_decide(s, ti, choice);
+        CHECK(choice[0] == cases[i].expect && choice[1] == 0, "%d of %d segments collide: chose %d, expected %d",
+              (int)cases[i].collisions, (int)cases[i].segments, choice[0], cases[i].expect);
+    }
+    const char *thin_ext[] = {"/materials/0/extensions/DR_medium/extinction"},
+               *thin_albedo[] = {"/materials/0/extensions/DR_medium/albedo"},
+               *grid_ext[] = {"/materials/1/extensions/DR_medium/extinction"};
+    const struct {
+        const char *const *param;
+        enum dr_medium_grad mode;
+        bool wanted;
+    } asks[] = {{thin_ext, DR_MEDIUM_GRAD_DRT, true},
+                {thin_ext, DR_MEDIUM_GRAD_BASELINE, false},   /* (the collisions everywhere) */
+                {thin_albedo, DR_MEDIUM_GRAD_DRT, false},     /* (no sigma_t derivative) */
+                {grid_ext, DR_MEDIUM_GRAD_DRT, false}};       /* (grids: gain paths) */
+    for (size_t i = 0; i < sizeof asks / sizeof asks[0]; i++) {
+        struct dr_param_set *ps = dr_param_set_create(s, asks[i].param, 1);
+        CHECK(ps != NULL, "param set: %s", dr_last_error());
+        if (!ps)
+            continue;
+        struct dr_path_opts o = {.medium_grad = asks[i].mode, .params = ps};
+        CHECK(dr_medium_gain_pilot_wanted(s, &o) == asks[i].wanted, "%s, %s: the pilot is%s wanted", asks[i].param[0],
+              dr_medium_grad_name(asks[i].mode), asks[i].wanted ? "" : " not");
+        dr_param_set_destroy(ps);
+    }
+    dr_scene_destroy(s);
+}
+
 int main(void)
 {
-    check_homogeneous(dr_v3(0.5, 3.0, 9.0), false);
-    check_homogeneous(dr_v3(2.0, 3.0, 9.0), true);
+    check_pilot_rule();
+    /* least extinction x the cube's mean chord of 4/3: thickness 0.13, 0.67, 2.7 */
+    check_homogeneous(dr_v3(0.1, 0.2, 0.4), GAIN_PATHS);         /* about a fifth of the segments collide */
+    check_homogeneous(dr_v3(0.5, 3.0, 9.0), PILOT_COLLISIONS);   /* about four fifths */
+    check_homogeneous(dr_v3(2.0, 3.0, 9.0), THICK_COLLISIONS);
     check_scene(false);
     check_scene(true);
     return TEST_END();
