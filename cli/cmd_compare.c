@@ -595,6 +595,10 @@ static void stats_add(struct dr_grad_stats *sum, const struct dr_grad_stats *st)
         sum->memory_bytes = st->memory_bytes;
     if (st->record_bytes > sum->record_bytes)
         sum->record_bytes = st->record_bytes;
+    if (st->n_media_gain > 0) {   /* (every run of a combination chooses alike) */
+        sum->n_media_gain = st->n_media_gain;
+        memcpy(sum->media_gain, st->media_gain, sizeof sum->media_gain);
+    }
 }
 
 /* One estimate of v as combination `how` runs it (stats summed into *sum). */
@@ -736,6 +740,8 @@ static void finish_combo(struct cmp_ctx *x, int c, const struct dr_grad_stats *s
     res->memory_bytes = sum->memory_bytes;
     res->record_bytes = sum->record_bytes;
     res->invalid = sum->invalid_samples;
+    res->n_media_gain = sum->n_media_gain;
+    memcpy(res->media_gain, sum->media_gain, sizeof res->media_gain);
     for (int k = 0; k < r->ps->n; k++)
         summarise_param(x, k, B, &res->params[k]);
 }

@@ -54,6 +54,8 @@ struct cmp_result {
     double rel_error;         /* sqrt(mean over batches |v_b - ref|^2 / |ref|^2) */
     double rel_variance;      /* sum of per-entry variances of one estimate / |ref|^2 */
     struct cmp_param_result *params;
+    struct dr_medium_gain_choice media_gain[DR_STATS_MEDIA_GAIN];   /* DRT's sources (dr_grad_stats) */
+    int n_media_gain;
 };
 
 struct cmp_reference {

@@ -208,6 +208,7 @@ static void json_combination(FILE *f, const struct cmp_run *r, int c)
     json_key_number(f, "rel_error", res->rel_error);
     json_key_number(f, "rel_variance", res->rel_variance);
     json_key_number(f, "efficiency", efficiency_at(res, med));
+    grad_json_media_gain(f, res->media_gain, res->n_media_gain);
     json_params(f, r, c);
     fputc('}', f);
 }

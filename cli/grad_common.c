@@ -594,19 +594,10 @@ struct dr_render_opts grad_render_opts(const struct grad_common *g, int w, int h
                                    .progress = progress, .film = film, .sampler = g->sampler};
 }
 
-static void add_rays(struct dr_ray_counts *sum, const struct dr_ray_counts *r)
-{
-    sum->camera += r->camera;
-    sum->extension += r->extension;
-    sum->shadow += r->shadow;
-    sum->simd_vertices += r->simd_vertices;
-    sum->simd_replayed += r->simd_replayed;
-}
-
 void grad_totals_add(struct grad_totals *t, const struct dr_grad_stats *st)
 {
     t->seconds += st->seconds;
-    add_rays(&t->rays, &st->rays);
+    dr_ray_counts_add(&t->rays, &st->rays);
     t->invalid += st->invalid_samples;
     if (st->memory_bytes > t->memory_bytes)
         t->memory_bytes = st->memory_bytes;
@@ -618,11 +609,15 @@ void grad_totals_add(struct grad_totals *t, const struct dr_grad_stats *st)
     t->attached_run |= st->sampling_run == DR_SAMPLING_ATTACHED;
     t->mis_run |= st->sampling_run == DR_SAMPLING_MIS;
     t->derivative_run |= st->sampling_run == DR_SAMPLING_DERIVATIVE;
+    if (st->n_media_gain > 0) {
+        t->n_media_gain = st->n_media_gain;
+        memcpy(t->media_gain, st->media_gain, sizeof t->media_gain);
+    }
 }
 
 void grad_totals_add_render(struct grad_totals *t, const struct dr_render_stats *rs)
 {
-    add_rays(&t->rays, &rs->rays);
+    dr_ray_counts_add(&t->rays, &rs->rays);
     t->invalid += rs->invalid_samples;
     t->stages |= rs->stages;
     if (rs->threads > 0)
@@ -653,6 +648,27 @@ void grad_json_head(FILE *f, const struct grad_common *g, const char *scene_path
     grad_json_film(f, g);
 }
 
+void grad_json_media_gain(FILE *f, const struct dr_medium_gain_choice *c, int n)
+{
+    if (n == 0)
+        return;
+    fputs(", \"medium_gain\": [", f);
+    for (int i = 0; i < n; i++) {
+        char medium[64];
+        if (c[i].material >= 0)
+            snprintf(medium, sizeof medium, "/materials/%d/extensions/DR_medium", c[i].material);
+        else
+            snprintf(medium, sizeof medium, "/extensions/DR_medium");
+        fprintf(f, "%s{\"medium\": \"%s\", \"source\": \"%s\", \"reason\": \"%s\"", i ? ", " : "", medium,
+                c[i].collisions ? "collisions" : "gain_paths", dr_gain_reason_name(c[i].why));
+        if (c[i].why == DR_GAIN_PILOT)
+            fprintf(f, ", \"pilot_stretches\": %llu, \"pilot_collided\": %llu", (unsigned long long)c[i].stretches,
+                    (unsigned long long)c[i].collided);
+        fputc('}', f);
+    }
+    fputc(']', f);
+}
+
 void grad_json_run(FILE *f, const struct grad_totals *t)
 {
     const struct dr_ray_counts *r = &t->rays;
@@ -676,6 +692,7 @@ void grad_json_run(FILE *f, const struct grad_totals *t)
                    : t->attached_run   ? "attached"
                    : t->derivative_run ? "derivative"
                                        : "detached");
+    grad_json_media_gain(f, t->media_gain, t->n_media_gain);
 }
 
 void grad_json_mis_weight(FILE *f, const struct grad_common *g, double w_detached)

@@ -210,6 +210,8 @@ struct grad_totals {
     bool attached_run;   /* some run differentiated with attached sampling */
     bool mis_run;        /* some run combined detached and attached (mis) */
     bool derivative_run; /* ... with derivative sampling (some BSDF parameter requested) */
+    struct dr_medium_gain_choice media_gain[DR_STATS_MEDIA_GAIN];   /* (every run's: the same) */
+    int n_media_gain;
 };
 void grad_totals_add(struct grad_totals *t, const struct dr_grad_stats *st);
 void grad_totals_add_render(struct grad_totals *t, const struct dr_render_stats *rs);
@@ -221,8 +223,12 @@ void grad_totals_warn(const char *cmd, const struct grad_totals *t);
  * "seed": ...` (no braces), the start of every gradient command's summary. */
 void grad_json_head(FILE *f, const struct grad_common *g, const char *scene_path);
 /* JSON: `"threads", "estimator_memory_bytes", "record_bytes", "peak_memory_bytes",
- * "rays", "invalid_samples", "stages", "sampling_effective"` (no braces). */
+ * "rays", "invalid_samples", "stages", "sampling_effective"`, and
+ * "medium_gain" where DRT differentiated a medium's sigma_t (no braces). */
 void grad_json_run(FILE *f, const struct grad_totals *t);
+/* JSON: `, "medium_gain": [{"medium", "source", "reason"[, "pilot_stretches",
+ * "pilot_collided"]}, ...]`, the n choices c (medium_grad.h); nothing if n is 0. */
+void grad_json_media_gain(FILE *f, const struct dr_medium_gain_choice *c, int n);
 
 /* JSON, with --sampling mis only: `, "mis_weight": {"detached": w, "attached": 1 - w}`
  * (w: the weight of the detached estimate, estimators/mis.h). */

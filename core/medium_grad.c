@@ -24,7 +24,7 @@
  *    differential ratio tracking (Nimier-David et al. 2022), whose
  *    reservoir variant picks the position among ratio-tracking collisions.
  *    The gain of sigma_t from gain paths (drt_gain), except in a
- *    homogeneous medium that is thick or where many segments end in a
+ *    homogeneous medium that is thick or where many stretches end in a
  *    collision, where the path's own collisions estimate it with less noise
  *    (gain_at_collisions).
  *  - baseline: differentiate the sampled null collisions of a grid as they
@@ -126,12 +126,21 @@ static bool sigma_t_requested(const struct dr_param_set *ps, int medium)
  * which DRT takes a homogeneous medium's gain at the path's collisions
  * without asking the pilot. */
 #define COLLISION_GAIN_THICKNESS 1.0
-/* Below it, the share of the pilot's segments through the medium that end
- * in a collision from which the collisions are taken, and the segments the
- * pilot must have seen there to decide (fewer: gain paths, as before the
- * pilot). */
+/* Below it, the share of the pilot's stretches through the medium that end
+ * in a collision from which the collisions are taken, and the stretches the
+ * pilot must have seen there to decide (fewer: gain paths). */
 #define COLLISION_GAIN_SHARE 0.4
-#define PILOT_MIN_SEGMENTS 64
+#define PILOT_MIN_STRETCHES 64
+
+/* Why medium m's gain comes from where it does, under DRT. */
+static enum dr_gain_reason gain_reason(const struct dr_medium *m)
+{
+    if (m->has_grid)
+        return DR_GAIN_GRID;
+    if (!(m->albedo.x > 0.0 && m->albedo.y > 0.0 && m->albedo.z > 0.0))
+        return DR_GAIN_ABSORBING;
+    return dr_medium_least_extinction(m) * m->mean_chord >= COLLISION_GAIN_THICKNESS ? DR_GAIN_THICK : DR_GAIN_PILOT;
+}
 
 /* Where does the sigma_t share of the scattering derivative come from in
  * medium m: the path's own collisions (d_scatter: R_k d sigma_t / sigma_t),
@@ -146,35 +155,33 @@ static bool sigma_t_requested(const struct dr_param_set *ps, int medium)
  * 5e4 at 30 (albedo 0.5: 0.41, 3.1, 8.7, 18 at 0.3, 1, 3, 10); in a thin
  * medium collisions are rare and a gain path on every segment wins. So DRT
  * takes the collisions from thickness 1 on, and below it where the pilot
- * (dr_medium_gain_plan) saw at least COLLISION_GAIN_SHARE of the segments
- * through the medium collide: thickness alone misjudged a thin global fog
- * crossed many times a path (fog-global: thickness 0.43, 0.85 of its
- * segments collide, collisions 2.1 x better) and a chromatic medium whose
- * hero channels collide far more often than its least extinction says.
- * Measured shares and ratios (gain paths / collisions; 32x32, 16 spp x 8
- * batches, compare --medium-grad drt,baseline): fog-khr 0.24, 0.20; the
- * 0.3 cube 0.28, 0.73; glass-fog 0.24, 0.90; the 1 cube 0.57, 2.2;
- * fog-global 0.85, 2.1. The baseline takes the collisions everywhere (in a
+ * (estimators/common.c, dr_medium_gain_decide) saw at least COLLISION_GAIN_SHARE of the stretches
+ * through the medium end in a collision: thickness alone misjudged a thin
+ * global fog crossed many times a path, and a chromatic medium whose hero
+ * channels collide far more often than its least extinction says.
+ * Measured in reverse mode (grad --target, L2 against a render at 1.5 x the
+ * extinction (1.3 x for the cube), 64x64, 512 spp in 64 batches), stderr^2 x
+ * seconds of gain paths over collisions per channel, and the pilot's share:
+ * fog-khr 0.13-0.21 (0.26), the 0.3 cube 0.24-0.27 (0.28), glass-fog 1.2-1.4
+ * (0.24: its paths bounce inside the glass), a 0.5 / 3 / 9 cube 4-44 (0.79),
+ * fog-global's global fog (thickness 0.43) 3.4-33 (0.83). Forward-mode
+ * images can rank otherwise: fog-global's derivative image had 1.6 x less
+ * variance per second per pixel with gain paths (compare, 64x64, 16 x 16
+ * spp). The baseline takes the collisions everywhere (in a
  * grid that is its bias: empty regions and constant ones have no null
  * collisions to stand in for the gain). */
-static bool gain_candidate(const struct dr_medium *m)
-{
-    return !m->has_grid && m->albedo.x > 0.0 && m->albedo.y > 0.0 && m->albedo.z > 0.0;
-}
-
-static bool thick(const struct dr_medium *m)
-{
-    return dr_medium_least_extinction(m) * m->mean_chord >= COLLISION_GAIN_THICKNESS;
-}
-
 static bool gain_at_collisions(const struct dr_path_opts *opts, const struct dr_scene *s, int medium)
 {
     if (opts->medium_grad == DR_MEDIUM_GRAD_BASELINE)
         return true;
-    const struct dr_medium *m = &s->media[medium];
-    if (!gain_candidate(m))
+    switch (gain_reason(&s->media[medium])) {
+    case DR_GAIN_THICK:
+        return true;
+    case DR_GAIN_PILOT:
+        return opts->collision_gain && opts->collision_gain[medium];
+    default:
         return false;
-    return thick(m) || (opts->collision_gain && opts->collision_gain[medium]);
+    }
 }
 
 bool dr_medium_gain_pilot_wanted(const struct dr_scene *s, const struct dr_path_opts *opts)
@@ -182,9 +189,31 @@ bool dr_medium_gain_pilot_wanted(const struct dr_scene *s, const struct dr_path_
     if (opts->medium_grad != DR_MEDIUM_GRAD_DRT || !opts->params)
         return false;
     for (int i = 0; i < s->n_media; i++)
-        if (sigma_t_requested(opts->params, i) && gain_candidate(&s->media[i]) && !thick(&s->media[i]))
+        if (sigma_t_requested(opts->params, i) && gain_reason(&s->media[i]) == DR_GAIN_PILOT)
             return true;
     return false;
+}
+
+int dr_medium_gain_choices(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_medium_tally *t,
+                           struct dr_medium_gain_choice *out, int max)
+{
+    int n = 0;
+    for (int i = 0; opts->medium_grad == DR_MEDIUM_GRAD_DRT && opts->params && i < s->n_media && n < max; i++) {
+        if (!sigma_t_requested(opts->params, i))
+            continue;
+        const enum dr_gain_reason why = gain_reason(&s->media[i]);
+        out[n++] = (struct dr_medium_gain_choice){.medium = i, .material = s->media[i].material,
+                                                  .collisions = gain_at_collisions(opts, s, i), .why = why,
+                                                  .stretches = why == DR_GAIN_PILOT && t ? t[i].stretches : 0,
+                                                  .collided = why == DR_GAIN_PILOT && t ? t[i].collisions : 0};
+    }
+    return n;
+}
+
+const char *dr_gain_reason_name(enum dr_gain_reason r)
+{
+    static const char *const names[] = {"grid", "absorbing_channel", "thick", "pilot"};
+    return names[r];
 }
 
 void dr_medium_tally_vertex(const struct dr_path_vertex *v, struct dr_medium_tally *t)
@@ -193,7 +222,7 @@ void dr_medium_tally_vertex(const struct dr_path_vertex *v, struct dr_medium_tal
         return;
     const struct dr_medium_trace *tr = &v->mrec->seg;   /* (a crossing without a vertex included) */
     for (int i = 0; i < tr->n; i++)
-        t[tr->p[i].medium].segments++;
+        t[tr->p[i].medium].stretches++;
     if (v->kind == DR_VERTEX_MEDIUM && v->medium >= 0)
         t[v->medium].collisions++;
 }
@@ -201,8 +230,8 @@ void dr_medium_tally_vertex(const struct dr_path_vertex *v, struct dr_medium_tal
 void dr_medium_gain_decide(const struct dr_scene *s, const struct dr_medium_tally *t, unsigned char *collision_gain)
 {
     for (int i = 0; i < s->n_media; i++)
-        collision_gain[i] = t[i].segments >= PILOT_MIN_SEGMENTS &&
-                            (double)t[i].collisions >= COLLISION_GAIN_SHARE * (double)t[i].segments;
+        collision_gain[i] = t[i].stretches >= PILOT_MIN_STRETCHES &&
+                            (double)t[i].collisions >= COLLISION_GAIN_SHARE * (double)t[i].stretches;
 }
 
 /* Does some medium whose sigma_t is differentiated take DRT's gain paths? */

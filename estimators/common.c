@@ -379,7 +379,8 @@ static void run_stats(const struct dr_est_base *b, struct dr_grad_stats *st)
     *st = (struct dr_grad_stats){.seconds = dr_clock_seconds() - b->t0, .threads = b->acc.threads,
                                  .memory_bytes = b->acc.bytes + b->mis_acc.bytes + b->record_bytes + b->scratch_bytes,
                                  .record_bytes = b->record_bytes, .stages = b->popts.stages,
-                                 .sampling_run = dr_est_sampling_run(b->p)};
+                                 .sampling_run = dr_est_sampling_run(b->p), .n_media_gain = b->n_media_gain};
+    memcpy(st->media_gain, b->media_gain, sizeof st->media_gain);
     for (int t = 0; t < b->acc.threads; t++) {
         dr_ray_counts_add(&st->rays, &b->thr[t].rays);
         st->invalid_samples += b->thr[t].invalid;
@@ -391,19 +392,11 @@ static void run_stats(const struct dr_est_base *b, struct dr_grad_stats *st)
 
 /* DRT's pilot (medium_grad.h): primal paths spread evenly over the rendered
  * pixels, each walked for at most DR_MEDIUM_PILOT_VERTICES vertices, their
- * segments tallied by medium; then the choice into collision_gain (one per
- * medium), which b->popts points to. Its rays count as the run's. */
-static int plan_media_gain(struct dr_est_base *b, unsigned char **collision_gain)
+ * stretches through media tallied into t (one per medium). Its rays count
+ * as the run's. */
+static void media_pilot(struct dr_est_base *b, struct dr_medium_tally *t)
 {
     const struct dr_grad_problem *p = b->p;
-    const struct dr_scene *s = p->scene;
-    struct dr_medium_tally *tally = calloc((size_t)s->n_media, sizeof *tally);
-    *collision_gain = calloc((size_t)s->n_media, 1);
-    if (!tally || !*collision_gain) {
-        free(tally);
-        dr_set_error("out of memory");
-        return DR_ERR_NOMEM;
-    }
     struct dr_medium_record rec;   /* (the walker records the media a flight crosses) */
     const int64_t pixels = (int64_t)p->width * p->height;
     for (int k = 0; k < DR_MEDIUM_PILOT_PATHS; k++) {
@@ -420,13 +413,34 @@ static int plan_media_gain(struct dr_est_base *b, unsigned char **collision_gain
         dr_path_start(&st, o, d);
         bool more = true;
         for (int n = 0; more && n < DR_MEDIUM_PILOT_VERTICES; n++) {
-            more = dr_path_step(s, &b->popts, &st, &smp, &vx, &b->thr[0].rays);
-            dr_medium_tally_vertex(&vx, tally);
+            more = dr_path_step(p->scene, &b->popts, &st, &smp, &vx, &b->thr[0].rays);
+            dr_medium_tally_vertex(&vx, t);
         }
     }
-    dr_medium_gain_decide(s, tally, *collision_gain);
+}
+
+/* Where DRT takes each medium's sigma_t gain: the pilot where a thin medium
+ * asks for it, its choice into *collision_gain (one per medium; the
+ * caller frees it), which b->popts points to; and every differentiated
+ * medium's choice into b->media_gain for the statistics. */
+static int plan_media_gain(struct dr_est_base *b, unsigned char **collision_gain)
+{
+    const struct dr_scene *s = b->p->scene;
+    struct dr_medium_tally *tally = NULL;
+    if (dr_medium_gain_pilot_wanted(s, &b->popts)) {
+        tally = calloc((size_t)s->n_media, sizeof *tally);
+        *collision_gain = calloc((size_t)s->n_media, 1);
+        if (!tally || !*collision_gain) {
+            free(tally);
+            dr_set_error("out of memory");
+            return DR_ERR_NOMEM;
+        }
+        media_pilot(b, tally);
+        dr_medium_gain_decide(s, tally, *collision_gain);
+        b->popts.collision_gain = *collision_gain;
+    }
+    b->n_media_gain = dr_medium_gain_choices(s, &b->popts, tally, b->media_gain, DR_STATS_MEDIA_GAIN);
     free(tally);
-    b->popts.collision_gain = *collision_gain;
     return 0;
 }
 
@@ -460,8 +474,7 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
     b->dir = dir;
     b->mis = run == DR_SAMPLING_MIS;
     unsigned char *collision_gain = NULL;
-    if (dr_medium_gain_pilot_wanted(p->scene, &b->popts))
-        rc = plan_media_gain(b, &collision_gain);
+    rc = plan_media_gain(b, &collision_gain);
     if (rc == 0)
         rc = accum_init(&b->acc, p, dir != NULL, b->mis, grad, d_image);
     if (rc == 0 && b->mis)

@@ -67,6 +67,8 @@ struct dr_est_base {
     double t0;
     bool mis;               /* --sampling mis that runs as such: samples go to b->mis_acc, not acc */
     struct dr_mis_accum mis_acc;
+    struct dr_medium_gain_choice media_gain[DR_STATS_MEDIA_GAIN];   /* (dr_grad_stats') */
+    int n_media_gain;
 };
 
 /* Sampler and camera ray of sample `sample` of pixel `pixel` (an index into

@@ -20,6 +20,7 @@
 
 #include "film.h"
 #include "loss.h"
+#include "medium_grad.h"
 #include "sampler.h"
 #include "params.h"
 #include "path.h"
@@ -112,6 +113,10 @@ struct dr_grad_stats {
     int threads;
     enum dr_sampling sampling_run;   /* what ran: attached or mis with no parameter entering a
                                         sampling map is detached (identical, cheaper) */
+    /* DRT: where each medium whose sigma_t is differentiated took its
+     * scattering gain (medium_grad.h; the first DR_STATS_MEDIA_GAIN) */
+    struct dr_medium_gain_choice media_gain[DR_STATS_MEDIA_GAIN];
+    int n_media_gain;
 };
 
 struct dr_est_base;   /* common.h: the run every estimator shares */

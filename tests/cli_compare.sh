@@ -112,9 +112,11 @@ grep -q '^film filter=box crop=none sampler=independent,stratified,sobol$' smp/r
 
 # ---- --medium-grad as a list: the media derivative method is a dimension ----
 # A homogeneous KHR medium (a 2 m cube). Thin (as in the file, least
-# extinction 0.15: DRT's gain paths): the two methods give different numbers,
-# both finite. Thick (extinction 3: DRT takes the gain at the
-# path's collisions, as the baseline does): the same numbers to the bit.
+# extinction 0.15: DRT's pilot finds few of its stretches collide and takes
+# gain paths): the two methods give different numbers, both finite. Thick
+# (extinction 3: DRT takes the gain at the path's collisions, as the
+# baseline does): the same numbers to the bit. DRT's combinations say where
+# the gain came from and why (medium_gain), the baseline's have none.
 khr=$DR_TESTDIR/data/media/fog-khr.gltf
 ext=/materials/0/extensions/DR_medium/extinction
 for case in thin thick; do
@@ -131,6 +133,10 @@ for case in thin thick; do
     grep -q '| detached (media drt) |' "mg_$case/report.md" || fail "report.md ($case): no media method in the table"
 done
 py mg_thin "d['combinations'][1]['parameters'][0]['value'] != d['combinations'][3]['parameters'][0]['value']"
+py mg_thin "([(c['medium_gain'][0]['source'], c['medium_gain'][0]['reason']) for c in d['combinations'][:2]] ==
+             [('gain_paths', 'pilot')] * 2 and all('medium_gain' not in c for c in d['combinations'][2:]))"
+py mg_thick "[c.get('medium_gain') for c in d['combinations']] == [[{'medium': '$ext'[:-len('/extinction')],
+             'source': 'collisions', 'reason': 'thick'}]] * 2 + [None] * 2"
 py mg_thick "(d['combinations'][1]['parameters'][0]['value'] == d['combinations'][3]['parameters'][0]['value'] and
              d['combinations'][1]['rel_error'] == d['combinations'][3]['rel_error'])"
 

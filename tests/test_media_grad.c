@@ -312,8 +312,8 @@ static void check_scene(bool lamp)
 /* Where DRT takes a homogeneous medium's sigma_t gain (medium_grad.c's
  * gain_at_collisions), and so whether its numbers are the baseline's. */
 enum gain_source {
-    GAIN_PATHS,         /* thin, and few of the pilot's segments collide: gain paths, numbers differ */
-    PILOT_COLLISIONS,   /* thin, but most segments collide: the pilot picks the collisions */
+    GAIN_PATHS,         /* thin, and few of the pilot's stretches collide: gain paths, numbers differ */
+    PILOT_COLLISIONS,   /* thin, but most stretches collide: the pilot picks the collisions */
     THICK_COLLISIONS,   /* thickness >= 1: the collisions, no pilot */
 };
 
@@ -402,7 +402,7 @@ static void check_homogeneous(dr_vec3 extinction, enum gain_source expect)
 
 /* The pilot's tally and choice (medium_grad.h) on records made by hand: a
  * crossing of several media counts a segment in each, a collision only in
- * the vertex's medium; the choice takes collisions from 0.4 of the segments
+ * the vertex's medium; the choice takes collisions from 0.4 of the stretches
  * on, given 64 of them; and who asks for a pilot. */
 static void check_pilot_rule(void)
 {
@@ -425,22 +425,22 @@ static void check_pilot_rule(void)
     dr_medium_tally_vertex(&v, t);
     v.kind = DR_VERTEX_SURFACE, v.medium = -1;
     dr_medium_tally_vertex(&v, t);
-    CHECK(t[0].segments == 2 && t[0].collisions == 0 && t[1].segments == 2 && t[1].collisions == 1,
-          "tally: %d %d / %d %d (expected 2 0 / 2 1)", (int)t[0].segments, (int)t[0].collisions, (int)t[1].segments,
+    CHECK(t[0].stretches == 2 && t[0].collisions == 0 && t[1].stretches == 2 && t[1].collisions == 1,
+          "tally: %d %d / %d %d (expected 2 0 / 2 1)", (int)t[0].stretches, (int)t[0].collisions, (int)t[1].stretches,
           (int)t[1].collisions);
     v.mrec = NULL;   /* (nothing recorded: nothing counted) */
     dr_medium_tally_vertex(&v, t);
-    CHECK(t[0].segments == 2, "a vertex without a record counted");
+    CHECK(t[0].stretches == 2, "a vertex without a record counted");
     const struct {
-        uint64_t segments, collisions;
+        uint64_t stretches, collisions;
         unsigned char expect;
     } cases[] = {{100, 40, 1}, {100, 39, 0}, {64, 64, 1}, {63, 63, 0}, {0, 0, 0}, {1000, 999, 1}};
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
-        struct dr_medium_tally ti[2] = {{cases[i].segments, cases[i].collisions}, {0, 0}};
+        struct dr_medium_tally ti[2] = {{cases[i].stretches, cases[i].collisions}, {0, 0}};
         unsigned char choice[2] = {9, 9};
         dr_medium_gain_decide(s, ti, choice);
-        CHECK(choice[0] == cases[i].expect && choice[1] == 0, "%d of %d segments collide: chose %d, expected %d",
-              (int)cases[i].collisions, (int)cases[i].segments, choice[0], cases[i].expect);
+        CHECK(choice[0] == cases[i].expect && choice[1] == 0, "%d of %d stretches collide: chose %d, expected %d",
+              (int)cases[i].collisions, (int)cases[i].stretches, choice[0], cases[i].expect);
     }
     const char *thin_ext[] = {"/materials/0/extensions/DR_medium/extinction"},
                *thin_albedo[] = {"/materials/0/extensions/DR_medium/albedo"},
@@ -470,7 +470,7 @@ int main(void)
 {
     check_pilot_rule();
     /* least extinction x the cube's mean chord of 4/3: thickness 0.13, 0.67, 2.7 */
-    check_homogeneous(dr_v3(0.1, 0.2, 0.4), GAIN_PATHS);         /* about a fifth of the segments collide */
+    check_homogeneous(dr_v3(0.1, 0.2, 0.4), GAIN_PATHS);         /* about a fifth of the stretches collide */
     check_homogeneous(dr_v3(0.5, 3.0, 9.0), PILOT_COLLISIONS);   /* about four fifths */
     check_homogeneous(dr_v3(2.0, 3.0, 9.0), THICK_COLLISIONS);
     check_scene(false);
