@@ -661,6 +661,8 @@ void grad_json_media_gain(FILE *f, const struct dr_medium_gain_choice *c, int n)
             snprintf(medium, sizeof medium, "/extensions/DR_medium");
         fprintf(f, "%s{\"medium\": \"%s\", \"source\": \"%s\", \"reason\": \"%s\"", i ? ", " : "", medium,
                 c[i].collisions ? "collisions" : "gain_paths", dr_gain_reason_name(c[i].why));
+        if (c[i].grid && c[i].collisions)
+            fputs(", \"voxels_source\": \"gain_paths\"", f);
         if (c[i].why == DR_GAIN_PILOT)
             fprintf(f, ", \"pilot_stretches\": %llu, \"pilot_collided\": %llu", (unsigned long long)c[i].stretches,
                     (unsigned long long)c[i].collided);

@@ -226,8 +226,8 @@ void grad_json_head(FILE *f, const struct grad_common *g, const char *scene_path
  * "rays", "invalid_samples", "stages", "sampling_effective"`, and
  * "medium_gain" where DRT differentiated a medium's sigma_t (no braces). */
 void grad_json_run(FILE *f, const struct grad_totals *t);
-/* JSON: `, "medium_gain": [{"medium", "source", "reason"[, "pilot_stretches",
- * "pilot_collided"]}, ...]`, the n choices c (medium_grad.h); nothing if n is 0. */
+/* JSON: `, "medium_gain": [{"medium", "source", "reason"[, "voxels_source"]
+ * [, "pilot_stretches", "pilot_collided"]}, ...]`, the n choices c (medium_grad.h); nothing if n is 0. */
 void grad_json_media_gain(FILE *f, const struct dr_medium_gain_choice *c, int n);
 
 /* JSON, with --sampling mis only: `, "mis_weight": {"detached": w, "attached": 1 - w}`

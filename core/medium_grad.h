@@ -18,15 +18,15 @@ void d_medium_vertex(const struct dr_scene *scene, const struct dr_path_opts *op
                      dr_vec3 d_Rn, dr_vec3 d_nee, struct dr_grad_sink *sink);
 
 /* Where DRT takes the sigma_t share of scattering in a thin homogeneous
- * medium (thickness below 1, medium_grad.c's gain_at_collisions): from the
- * path's collisions where a pilot saw many of the stretches through the
- * medium end in one, else from gain paths. The estimators run the pilot
+ * medium (thickness below 1, medium_grad.c's gain_at_collisions):
+ * from the path's collisions where a pilot saw many of the stretches
+ * through the medium end in one, else from gain paths. The estimators run the pilot
  * (estimators/common.c) where dr_medium_gain_pilot_wanted says so, tally
  * its vertices per medium and decide into dr_path_opts.collision_gain. */
 struct dr_medium_tally {
     uint64_t stretches, collisions;
 };
-/* Is some medium whose sigma_t is differentiated by DRT (opts) that thin? */
+/* Is some medium whose sigma_t DRT differentiates (opts) of that kind? */
 bool dr_medium_gain_pilot_wanted(const struct dr_scene *scene, const struct dr_path_opts *opts);
 /* Adds the stretches of media vertex v's incoming flight crossed (its
  * record, v->mrec: the walker fills it where media parameters are
@@ -41,12 +41,15 @@ void dr_medium_gain_decide(const struct dr_scene *scene, const struct dr_medium_
 #define DR_MEDIUM_PILOT_VERTICES 64
 
 /* For the reports: where DRT took a differentiated medium's sigma_t gain,
- * and why: a grid or a medium with a channel that does not scatter takes
- * gain paths, a thick one the collisions, a thin one the pilot's choice. */
-enum dr_gain_reason { DR_GAIN_GRID, DR_GAIN_ABSORBING, DR_GAIN_THICK, DR_GAIN_PILOT };
+ * and why: a medium with a channel that does not scatter (extinction or
+ * albedo 0) takes gain paths, a thick homogeneous one and a grid the
+ * collisions (a grid's voxels gain paths), a thin homogeneous one the
+ * pilot's choice. */
+enum dr_gain_reason { DR_GAIN_NONSCATTERING, DR_GAIN_THICK, DR_GAIN_GRID, DR_GAIN_PILOT };
 struct dr_medium_gain_choice {
     int medium, material;          /* the medium, its boundary material (-1: the global medium) */
     bool collisions;               /* from the path's collisions, else from gain paths */
+    bool grid;                     /* a grid: its voxels' gain from gain paths */
     enum dr_gain_reason why;
     uint64_t stretches, collided;  /* the pilot's tally (why == DR_GAIN_PILOT; else 0) */
 };
@@ -56,7 +59,7 @@ struct dr_medium_gain_choice {
 int dr_medium_gain_choices(const struct dr_scene *scene, const struct dr_path_opts *opts,
                            const struct dr_medium_tally *t, struct dr_medium_gain_choice *out, int max);
 #define DR_STATS_MEDIA_GAIN 8
-/* "grid", "absorbing_channel", "thick", "pilot" (--json). */
+/* "nonscattering_channel", "thick", "grid", "pilot" (--json). */
 const char *dr_gain_reason_name(enum dr_gain_reason r);
 
 /* Radiance scattered at x (in medium `medium`, the ray arriving along d)

@@ -9,7 +9,8 @@
 #      stretches collide and takes the gain at the path's collisions:
 #      grad --json says so, fdcheck agrees, and the baseline reports no
 #      choice. A thin fog seen once (fog-khr) keeps gain paths, a thick one
-#      (fog-dense) takes the collisions without a pilot.
+#      (fog-dense) takes the collisions without a pilot, and so does a grid
+#      (smoke), whose voxels keep gain paths.
 # Run by tests/run.sh (env: DRENDER, DR_TESTDIR); also runs alone.
 set -u
 
@@ -26,7 +27,7 @@ absorbing=(--set /extensions/DR_medium/albedo=0.9,0.9,0)
 run grad "$data/fog-global.gltf" --param /extensions/DR_medium/extinction "${absorbing[@]}" --res 16x16 --spp 2 \
     -o "$tmp/d.exr" --json
 expect_rc 0 "grad on the global fog with a channel that does not scatter"
-json_check "$tmp/out" 'd["medium_gain"] == [{"medium": "/extensions/DR_medium", "source": "gain_paths", "reason": "absorbing_channel"}]'
+json_check "$tmp/out" 'd["medium_gain"] == [{"medium": "/extensions/DR_medium", "source": "gain_paths", "reason": "nonscattering_channel"}]'
 run fdcheck "$data/fog-global.gltf" "${params[@]}" "${absorbing[@]}" --spp 16 --res 16x16 --batches 16 --eps 0.03
 expect_rc 0 "fdcheck on a global fog's gain paths around a grid medium"
 expect_in out "all 5 entries agree" "every entry agrees (gain paths)"
@@ -50,4 +51,8 @@ run grad "$data/fog-dense.gltf" --param /materials/0/extensions/DR_medium/extinc
     -o "$tmp/d.exr" --json
 expect_rc 0 "grad on a dense fog"
 json_check "$tmp/out" 'd["medium_gain"] == [{"medium": "/materials/0/extensions/DR_medium", "source": "collisions", "reason": "thick"}]'
+run grad "$data/smoke.gltf" --param /materials/0/extensions/DR_medium/density_scale \
+    --param /materials/0/extensions/DR_medium/density --res 8x8 --spp 1 -o "$tmp/d.exr" --json
+expect_rc 0 "grad on a smoke grid"
+json_check "$tmp/out" 'd["medium_gain"] == [{"medium": "/materials/0/extensions/DR_medium", "source": "collisions", "reason": "grid", "voxels_source": "gain_paths"}]'
 echo "cli_media_fog: all passed"

@@ -107,6 +107,9 @@ static double dot_slots(const double *g, const int64_t *slots, int n)
     return sum;
 }
 
+/* Where the last DRT run of estimator_grad took the first medium's gain (medium_grad.h). */
+static struct dr_medium_gain_choice last_gain;
+
 /* Estimator gradients (all slots) for batch b. */
 static void estimator_grad(const struct dr_estimator_ops *e, enum dr_medium_grad mode, struct dr_scene *s,
                            const struct dr_camera *cam, const struct dr_param_set *ps, uint64_t seed, double *grad)
@@ -117,8 +120,13 @@ static void estimator_grad(const struct dr_estimator_ops *e, enum dr_medium_grad
     struct dr_grad_problem p = {.scene = s, .camera = cam, .params = ps, .width = RES, .height = RES, .spp = SPP,
                                 .max_depth = 6, .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = seed, .threads = 2,
                                 .sampling = DR_SAMPLING_DETACHED, .medium_grad = mode};
-    int rc = dr_estimator_backward(e, &p, adj, grad, NULL);
+    struct dr_grad_stats st = {0};
+    int rc = dr_estimator_backward(e, &p, adj, grad, &st);
     CHECK(rc == 0, "%s: %s", e->name, dr_last_error());
+    CHECK(mode == DR_MEDIUM_GRAD_DRT ? st.n_media_gain == 1 : st.n_media_gain == 0, "%s: %d gain choices reported",
+          dr_medium_grad_name(mode), st.n_media_gain);
+    if (mode == DR_MEDIUM_GRAD_DRT && st.n_media_gain == 1)
+        last_gain = st.media_gain[0];
 }
 
 /* Finite difference of J along one scalar (common random numbers). */
@@ -302,6 +310,11 @@ static void check_scene(bool lamp)
             free(dir);
             free(dimg);
         }
+    /* a grid: extinction's and density scale's gain at the collisions, the
+     * voxels' from gain paths (medium_grad.c's gain_from_collisions) */
+    CHECK(last_gain.collisions && last_gain.grid && last_gain.why == DR_GAIN_GRID && last_gain.stretches == 0,
+          "the grid's gain: %s (%s)", last_gain.collisions ? "collisions" : "gain paths",
+          dr_gain_reason_name(last_gain.why));
     cross_primal_long_paths(s, &cam, ps);
     free(g);
     free(slots);
@@ -386,6 +399,9 @@ static void check_homogeneous(dr_vec3 extinction, enum gain_source expect)
         CHECK(fabs(zb) <= 3.5, "%s: the baseline disagrees with finite differences: z = %.2f", checks[i].what, zb);
     }
     struct dr_path_opts drt = {.medium_grad = DR_MEDIUM_GRAD_DRT, .params = ps};
+    CHECK(last_gain.collisions == (expect != GAIN_PATHS) &&
+              last_gain.why == (expect == THICK_COLLISIONS ? DR_GAIN_THICK : DR_GAIN_PILOT),
+          "reported: %s (%s)", last_gain.collisions ? "collisions" : "gain paths", dr_gain_reason_name(last_gain.why));
     CHECK(dr_medium_gain_pilot_wanted(s, &drt) == (expect != THICK_COLLISIONS), "the pilot is%s wanted",
           expect != THICK_COLLISIONS ? " not" : "");
     if (expect == GAIN_PATHS)
@@ -403,7 +419,8 @@ static void check_homogeneous(dr_vec3 extinction, enum gain_source expect)
 /* The pilot's tally and choice (medium_grad.h) on records made by hand: a
  * crossing of several media counts a segment in each, a collision only in
  * the vertex's medium; the choice takes collisions from 0.4 of the stretches
- * on, given 64 of them; and who asks for a pilot. */
+ * on, given 64 of them; and who asks for a pilot (DRT, a sigma_t
+ * parameter, every channel scattering, homogeneous and not thick). */
 static void check_pilot_rule(void)
 {
     fprintf(stderr, "-- the media pilot's tally and choice\n");
@@ -448,19 +465,26 @@ static void check_pilot_rule(void)
     const struct {
         const char *const *param;
         enum dr_medium_grad mode;
+        dr_vec3 thin_extinction, grid_albedo;
         bool wanted;
-    } asks[] = {{thin_ext, DR_MEDIUM_GRAD_DRT, true},
-                {thin_ext, DR_MEDIUM_GRAD_BASELINE, false},   /* (the collisions everywhere) */
-                {thin_albedo, DR_MEDIUM_GRAD_DRT, false},     /* (no sigma_t derivative) */
-                {grid_ext, DR_MEDIUM_GRAD_DRT, false}};       /* (grids: gain paths) */
+    } asks[] = {
+        {thin_ext, DR_MEDIUM_GRAD_DRT, {0.2, 0.3, 0.4}, {0.8, 0.7, 0.9}, true},
+        {thin_ext, DR_MEDIUM_GRAD_BASELINE, {0.2, 0.3, 0.4}, {0.8, 0.7, 0.9}, false},   /* (collisions everywhere) */
+        {thin_albedo, DR_MEDIUM_GRAD_DRT, {0.2, 0.3, 0.4}, {0.8, 0.7, 0.9}, false},     /* (no sigma_t derivative) */
+        {thin_ext, DR_MEDIUM_GRAD_DRT, {0.2, 0.3, 0.0}, {0.8, 0.7, 0.9}, false},   /* (a clear channel: gain paths) */
+        {grid_ext, DR_MEDIUM_GRAD_DRT, {0.2, 0.3, 0.4}, {0.8, 0.7, 0.9}, false},   /* (a grid: the collisions) */
+        {grid_ext, DR_MEDIUM_GRAD_DRT, {0.2, 0.3, 0.4}, {0.8, 0.0, 0.9}, false},   /* (a channel without albedo) */
+    };
     for (size_t i = 0; i < sizeof asks / sizeof asks[0]; i++) {
+        s->media[0].extinction = asks[i].thin_extinction;
+        s->media[1].albedo = asks[i].grid_albedo;
         struct dr_param_set *ps = dr_param_set_create(s, asks[i].param, 1);
         CHECK(ps != NULL, "param set: %s", dr_last_error());
         if (!ps)
             continue;
         struct dr_path_opts o = {.medium_grad = asks[i].mode, .params = ps};
-        CHECK(dr_medium_gain_pilot_wanted(s, &o) == asks[i].wanted, "%s, %s: the pilot is%s wanted", asks[i].param[0],
-              dr_medium_grad_name(asks[i].mode), asks[i].wanted ? "" : " not");
+        CHECK(dr_medium_gain_pilot_wanted(s, &o) == asks[i].wanted, "case %zu: %s, %s: the pilot is%s wanted", i,
+              asks[i].param[0], dr_medium_grad_name(asks[i].mode), asks[i].wanted ? "" : " not");
         dr_param_set_destroy(ps);
     }
     dr_scene_destroy(s);
