@@ -5,11 +5,13 @@
 #      the true values, starting from density_scale 0.5), prb vs tape and DRT
 #      vs baseline: time, stderr of d loss / d density_scale, stderr^2 x seconds
 #      (lower is better: the cost of a given accuracy), peak memory, tape bytes
+#      (DRT takes a grid's density-scale gain at the path's collisions and
+#      its voxels' from gain paths, medium_grad.c)
 #  ii. prb peak memory at max depth 4, 64, 1000 (goal: flat within 5%)
 # iii. render time of the smoke cube (rays per second)
 #  iv. a dense, almost white medium at depth 1000: gradient / primal time
 #      (DRT takes a thick homogeneous medium's gain at the path's collisions,
-#      medium_grad.c; the gain paths elsewhere are spread so that the cost
+#      medium_grad.c; gain paths, where taken, are spread so that the cost
 #      stays linear in depth)
 # Writes $BUILD/bench/media-results.json.
 set -euo pipefail

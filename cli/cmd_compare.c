@@ -570,6 +570,7 @@ struct cmp_ctx {
     double *seg_mean, *seg_m2, *seg_err2;   /* per parameter */
     bool progress;
     int done, total;
+    struct dr_media_plan media_plan;   /* DRT's media pilot, shared by the runs it applies to */
 };
 
 static bool is_image_param(const struct dr_param *p)
@@ -612,6 +613,7 @@ static int estimate(struct cmp_ctx *x, const struct cmp_combo *how, uint64_t see
     g.sampler = how->sampler;
     g.medium_grad = how->medium_grad;
     struct dr_grad_problem p = grad_problem(&g, x->scene, x->cam, r->ps, g.width, g.height, how->spp, seed);
+    p.media_plan = &x->media_plan;
     struct dr_grad_stats st = {0};
     const struct dr_cross_loss cross = {.loss = r->a->loss, .target = x->target, .scale = 1.0, .image = x->cross_img};
     if (r->reverse) {
@@ -876,6 +878,7 @@ static void run_free(struct cmp_run *r)
 
 static void ctx_free(struct cmp_ctx *x)
 {
+    dr_media_plan_free(&x->media_plan);
     free(x->adj);
     free(x->cross_img);
     free(x->dir);

@@ -133,6 +133,7 @@ struct grad_args {
     enum dr_primal_mode primal;
     int batches;
     int64_t batch;
+    struct dr_media_plan media_plan;   /* forward mode: the parameters' runs share the media pilot */
 };
 
 /* The options only `grad` takes (grad_own_option_fn). */
@@ -468,6 +469,7 @@ static int forward_param(struct grad_args *a, const struct dr_scene *scene, cons
     struct dr_grad_problem prob = grad_problem(&a->g, scene, cam, ps, a->g.width, a->g.height, a->g.spp, a->g.seed);
     prob.batch = a->batch;
     prob.mis_weights = img->mis_one;   /* mis: the direction's weight (every entry the same) */
+    prob.media_plan = &a->media_plan;
     struct dr_grad_stats st = {0};
     if (dr_estimator_forward(a->g.estimator, &prob, img->dir, img->dimg, &st) != 0)
         return -1;
@@ -551,6 +553,7 @@ out:
     free(dir);
     free(dimg);
     free(fimg);
+    dr_media_plan_free(&a->media_plan);
     return rc;
 }
 

@@ -37,6 +37,7 @@
  *    collisions (medium.c): there both methods take the exact segment
  *    derivative, and the baseline is unbiased. */
 #include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "accel.h"
@@ -168,23 +169,23 @@ static enum dr_gain_reason gain_reason(const struct dr_medium *m)
  * collisions' was 0.73 at extinction 0.3, 2.2 at 1, 31 at 3, 1.7e3 at 10,
  * 5e4 at 30 (albedo 0.5: 0.41, 3.1, 8.7, 18 at 0.3, 1, 3, 10); in a thin
  * medium collisions are rare and a gain path on every segment wins. So DRT
- * takes the collisions from thickness 1 on (grids: gain_from_collisions),
- * and below it where the pilot
- * (estimators/common.c, dr_medium_gain_decide) saw at least COLLISION_GAIN_SHARE of the stretches
- * through the medium end in a collision: thickness alone misjudged a thin
- * global fog crossed many times a path, and a chromatic medium whose hero
- * channels collide far more often than its least extinction says.
- * Measured in reverse mode (grad --target, L2 against a render at 1.5 x the
- * extinction (1.3 x for the cube), 64x64, 512 spp in 64 batches), stderr^2 x
- * seconds of gain paths over collisions per channel, and the pilot's share:
- * fog-khr 0.13-0.21 (0.26), the 0.3 cube 0.24-0.27 (0.28), glass-fog 1.2-1.4
- * (0.24: its paths bounce inside the glass), a 0.5 / 3 / 9 cube 4-44 (0.79),
- * fog-global's global fog (thickness 0.43) 3.4-33 (0.83). Forward-mode
- * images can rank otherwise: fog-global's derivative image had 1.6 x less
- * variance per second per pixel with gain paths (compare, 64x64, 16 x 16
- * spp). The baseline takes the collisions everywhere (in a
- * grid that is its bias: empty regions and constant ones have no null
- * collisions to stand in for the gain). */
+ * takes the collisions from thickness 1 on, in grids (gain_from_collisions
+ * says for which parameters), and in a thinner homogeneous medium where
+ * the pilot (estimators/common.c, dr_medium_gain_decide) saw at least
+ * COLLISION_GAIN_SHARE of the stretches through it end in a collision:
+ * thickness alone misjudged a thin global fog crossed many times a path,
+ * and a chromatic medium whose hero channels collide far more often than
+ * its least extinction says. Measured in reverse mode (grad --target, L2
+ * against a render at 1.5 x the extinction (1.3 x for the cube), 64x64,
+ * 512 spp in 64 batches), stderr^2 x seconds of gain paths over collisions
+ * per channel, and the pilot's share: fog-khr 0.13-0.21 (0.26), the 0.3
+ * cube 0.24-0.27 (0.28), glass-fog 1.2-1.4 (0.24: its paths bounce inside
+ * the glass), a 0.5 / 3 / 9 cube 4-44 (0.79), fog-global's global fog
+ * (thickness 0.43) 3.4-33 (0.83). Forward-mode images can rank otherwise:
+ * fog-global's derivative image had 1.6 x less variance per second per
+ * pixel with gain paths (compare, 64x64, 16 x 16 spp). The baseline takes
+ * the collisions everywhere, a grid's voxels too (where the density is 0
+ * no collision can be: their gain there is missing, part of its bias). */
 static bool gain_at_collisions(const struct dr_path_opts *opts, const struct dr_scene *s, int medium)
 {
     if (opts->medium_grad == DR_MEDIUM_GRAD_BASELINE)
@@ -242,6 +243,28 @@ void dr_medium_tally_vertex(const struct dr_path_vertex *v, struct dr_medium_tal
         t[tr->p[i].medium].stretches++;
     if (v->kind == DR_VERTEX_MEDIUM && v->medium >= 0)
         t[v->medium].collisions++;
+}
+
+void dr_media_plan_free(struct dr_media_plan *plan)
+{
+    free(plan->collision_gain);
+    free(plan->tally);
+    *plan = (struct dr_media_plan){0};
+}
+
+uint64_t dr_media_values_hash(const struct dr_scene *s, uint64_t h)
+{
+    for (int i = 0; i < s->n_media; i++) {
+        const struct dr_medium *m = &s->media[i];
+        const double v[] = {m->extinction.x, m->extinction.y, m->extinction.z, m->albedo.x, m->albedo.y,
+                            m->albedo.z, m->g, m->density_scale, m->mean_chord, m->ior};
+        for (size_t k = 0; k < sizeof v / sizeof v[0]; k++) {
+            uint64_t bits;
+            memcpy(&bits, &v[k], sizeof bits);
+            h = dr_hash64(h ^ bits);
+        }
+    }
+    return h;
 }
 
 void dr_medium_gain_decide(const struct dr_scene *s, const struct dr_medium_tally *t, unsigned char *collision_gain)

@@ -35,6 +35,23 @@ void dr_medium_tally_vertex(const struct dr_path_vertex *v, struct dr_medium_tal
 /* collision_gain[i] (one per medium): the tally of medium i says collisions. */
 void dr_medium_gain_decide(const struct dr_scene *scene, const struct dr_medium_tally *t,
                            unsigned char *collision_gain);
+/* The pilot's choice kept for later runs of the same problem (a
+ * dr_grad_problem's media_plan, the caller's): the runs of a command's
+ * batches, of its parameters one by one, of compare's estimators, reuse it
+ * where what it depends on is the same (key: the scene, camera, image and
+ * film, depth, Russian roulette, stages and every medium's values), so the
+ * pilot is paid once, not per run. Zeroed: empty. */
+struct dr_media_plan {
+    bool valid;
+    uint64_t key;
+    int n_media;
+    unsigned char *collision_gain;   /* per medium, as dr_path_opts.collision_gain */
+    struct dr_medium_tally *tally;   /* per medium: the pilot's */
+};
+void dr_media_plan_free(struct dr_media_plan *plan);   /* (zeroes it) */
+/* h hashed on with every medium's values the pilot's choice depends on. */
+uint64_t dr_media_values_hash(const struct dr_scene *scene, uint64_t h);
+
 /* The pilot's paths (spread over the rendered pixels, a fixed seed, one
  * thread: every batch, seed and thread count decide alike) and its longest. */
 #define DR_MEDIUM_PILOT_PATHS 1024

@@ -15,6 +15,7 @@ struct fd_run {
     const struct dr_fd_options *o;
     double *theta0, *theta, *lo, *hi;
     float *rgb;
+    struct dr_media_plan media_plan;   /* the estimator runs' (all at theta0) */
 };
 
 static struct dr_grad_problem problem(const struct dr_scene *scene, const struct dr_camera *camera,
@@ -132,6 +133,7 @@ static int batch_estimates(struct fd_run *r, const double *dir, int side, uint64
     if (rc != 0)
         return rc;
     struct dr_grad_problem p = problem(r->scene, r->camera, r->ps, o, seed);
+    p.media_plan = &r->media_plan;
     if ((rc = dr_estimator_forward(o->estimator, &p, dir, dimg, NULL)) != 0)
         return rc;
     double m = 0.0;
@@ -191,6 +193,7 @@ static void fd_buffers_free(struct fd_buffers *b, struct fd_run *r)
     free(b->fwd);
     free(b->fd);
     free(b->fd_round);
+    dr_media_plan_free(&r->media_plan);
     free(r->theta0);
     free(r->theta);
     free(r->lo);
@@ -223,7 +226,7 @@ int dr_fdcheck(struct dr_scene *scene, const struct dr_camera *camera, const str
     const int K = o->batches;
     const int64_t T = ps->total;
     const size_t npix = (size_t)o->width * o->height;
-    struct fd_run r = {scene, camera, ps, o, NULL, NULL, NULL, NULL, NULL};
+    struct fd_run r = {scene, camera, ps, o, NULL, NULL, NULL, NULL, NULL, {0}};
     struct fd_buffers b = {0};
     int n_dirs = 0;
     for (int k = 0; k < ps->n; k++)
@@ -252,6 +255,7 @@ int dr_fdcheck(struct dr_scene *scene, const struct dr_camera *camera, const str
         b.adj[i] = (float)(1.0 / (double)(npix * 3));
     for (int k = 0; k < K && rc == 0; k++) {
         struct dr_grad_problem p = problem(scene, camera, ps, o, o->seed + (uint64_t)k);
+        p.media_plan = &r.media_plan;
         rc = dr_estimator_backward(o->estimator, &p, b.adj, b.grads + (size_t)k * T, NULL);
     }
     for (int k = 0, e = 0; k < ps->n && rc == 0; k++) {
@@ -306,7 +310,7 @@ int dr_fd_image(struct dr_scene *scene, const struct dr_camera *camera, const st
 {
     const int64_t T = ps->total;
     const size_t n = (size_t)o->width * o->height * 3;
-    struct fd_run r = {scene, camera, ps, o, NULL, NULL, NULL, NULL, NULL};
+    struct fd_run r = {scene, camera, ps, o, NULL, NULL, NULL, NULL, NULL, {0}};
     r.theta0 = malloc(sizeof(double) * (size_t)(T > 0 ? T : 1));
     r.theta = malloc(sizeof(double) * (size_t)(T > 0 ? T : 1));
     r.lo = malloc(sizeof(double) * (size_t)(T > 0 ? T : 1));

@@ -26,6 +26,7 @@ struct rev_work {
     double *half[2], *m2, *dsq;
     int done, steps;
     struct dr_mis_history mis;   /* mis without the caller's history: this run's batches' */
+    struct dr_media_plan media_plan;   /* the batches' media pilot (medium_grad.h), unless the caller's */
 };
 
 static void work_free(struct rev_work *w)
@@ -37,6 +38,7 @@ static void work_free(struct rev_work *w)
     free(w->half[0]);
     free(w->half[1]);
     dr_mis_history_free(&w->mis);
+    dr_media_plan_free(&w->media_plan);
 }
 
 /* Scratch for a run: the sums live in the caller's se and se_gradient
@@ -103,6 +105,8 @@ static int run_estimator(struct rev_work *w, uint64_t seed, int spp, const struc
     p.cross = cross;
     if (!p.mis_history && w->mis.stats)
         p.mis_history = &w->mis;
+    if (!p.media_plan)
+        p.media_plan = &w->media_plan;
     struct dr_grad_stats st = {0};
     int rc = dr_estimator_backward(w->o->estimator, &p, cross ? NULL : w->adj, g, &st);
     if (rc != 0)

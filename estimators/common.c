@@ -419,28 +419,64 @@ static void media_pilot(struct dr_est_base *b, struct dr_medium_tally *t)
     }
 }
 
-/* Where DRT takes each medium's sigma_t gain: the pilot where a thin medium
- * asks for it, its choice into *collision_gain (one per medium; the
- * caller frees it), which b->popts points to; and every differentiated
- * medium's choice into b->media_gain for the statistics. */
-static int plan_media_gain(struct dr_est_base *b, unsigned char **collision_gain)
+/* What the pilot's choice depends on (dr_media_plan): a hash. */
+static uint64_t media_plan_key(const struct dr_est_base *b)
+{
+    const struct dr_grad_problem *p = b->p;
+    const struct dr_scene *s = p->scene;
+    uint64_t h = dr_hash64((uint64_t)(uintptr_t)s ^ dr_hash64((uint64_t)(uintptr_t)p->camera));
+    const int64_t ints[] = {p->width, p->height, p->max_depth, p->rr_depth, b->popts.stages, b->popts.sky_uniform,
+                            p->film.frame_w, p->film.frame_h, p->film.x0, p->film.y0, p->film.filter.kind,
+                            s->n_media};
+    for (size_t i = 0; i < sizeof ints / sizeof ints[0]; i++)
+        h = dr_hash64(h ^ (uint64_t)ints[i]);
+    uint64_t bits;
+    memcpy(&bits, &p->film.filter.stddev, sizeof bits);
+    return dr_media_values_hash(s, dr_hash64(h ^ bits));
+}
+
+/* The pilot into plan (its arrays made for the scene's media). */
+static int media_plan_fill(struct dr_est_base *b, struct dr_media_plan *plan, uint64_t key)
 {
     const struct dr_scene *s = b->p->scene;
-    struct dr_medium_tally *tally = NULL;
-    if (dr_medium_gain_pilot_wanted(s, &b->popts)) {
-        tally = calloc((size_t)s->n_media, sizeof *tally);
-        *collision_gain = calloc((size_t)s->n_media, 1);
-        if (!tally || !*collision_gain) {
-            free(tally);
-            dr_set_error("out of memory");
-            return DR_ERR_NOMEM;
-        }
-        media_pilot(b, tally);
-        dr_medium_gain_decide(s, tally, *collision_gain);
-        b->popts.collision_gain = *collision_gain;
+    dr_media_plan_free(plan);
+    plan->tally = calloc((size_t)s->n_media, sizeof *plan->tally);
+    plan->collision_gain = calloc((size_t)s->n_media, 1);
+    if (!plan->tally || !plan->collision_gain) {
+        dr_media_plan_free(plan);
+        dr_set_error("out of memory");
+        return DR_ERR_NOMEM;
     }
-    b->n_media_gain = dr_medium_gain_choices(s, &b->popts, tally, b->media_gain, DR_STATS_MEDIA_GAIN);
-    free(tally);
+    media_pilot(b, plan->tally);
+    dr_medium_gain_decide(s, plan->tally, plan->collision_gain);
+    plan->n_media = s->n_media;
+    plan->key = key;
+    plan->valid = true;
+    return 0;
+}
+
+/* Where DRT takes each medium's sigma_t gain: the pilot where a thin medium
+ * asks for it (or the caller's plan from an earlier run, where it still
+ * applies; else *own, which the caller frees), its choice pointed to by
+ * b->popts; and every differentiated medium's choice into b->media_gain for
+ * the statistics. */
+static int plan_media_gain(struct dr_est_base *b, struct dr_media_plan *own)
+{
+    const struct dr_scene *s = b->p->scene;
+    const struct dr_media_plan *use = NULL;
+    if (dr_medium_gain_pilot_wanted(s, &b->popts)) {
+        struct dr_media_plan *plan = b->p->media_plan ? b->p->media_plan : own;
+        const uint64_t key = media_plan_key(b);
+        if (!(plan->valid && plan->key == key && plan->n_media == s->n_media)) {
+            int rc = media_plan_fill(b, plan, key);
+            if (rc != 0)
+                return rc;
+        }
+        use = plan;
+        b->popts.collision_gain = plan->collision_gain;
+    }
+    b->n_media_gain = dr_medium_gain_choices(s, &b->popts, use ? use->tally : NULL, b->media_gain,
+                                             DR_STATS_MEDIA_GAIN);
     return 0;
 }
 
@@ -473,8 +509,8 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
     b->adjoint = adjoint;
     b->dir = dir;
     b->mis = run == DR_SAMPLING_MIS;
-    unsigned char *collision_gain = NULL;
-    rc = plan_media_gain(b, &collision_gain);
+    struct dr_media_plan own_plan = {0};
+    rc = plan_media_gain(b, &own_plan);
     if (rc == 0)
         rc = accum_init(&b->acc, p, dir != NULL, b->mis, grad, d_image);
     if (rc == 0 && b->mis)
@@ -495,7 +531,7 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
         e->release(b);
     accum_free(&b->acc);
     dr_mis_free(&b->mis_acc);
-    free(collision_gain);
+    dr_media_plan_free(&own_plan);
     free(b);
     return rc;
 }

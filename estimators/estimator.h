@@ -86,6 +86,9 @@ struct dr_grad_problem {
                                              this problem for the weights (mis.h); NULL: this run's only */
     const struct dr_cross_loss *cross;    /* reverse mode: the adjoint from the paths themselves (NULL: from
                                              the adjoint image dr_estimator_backward is given) */
+    struct dr_media_plan *media_plan;     /* DRT (optional, in/out): the media pilot's choice, reused by
+                                             later runs where it still applies (medium_grad.h); NULL:
+                                             every run that needs one pilots */
 };
 
 /* The sampling an algorithm runs: attached (or mis) sampling where no

@@ -490,9 +490,69 @@ static void check_pilot_rule(void)
     dr_scene_destroy(s);
 }
 
+/* The caller's media plan (medium_grad.h): a second run of the same problem
+ * reuses the pilot's choice (the same gradient to the bit, the pilot's rays
+ * not traced again), a run without a plan pilots every time, and a run after
+ * a medium's values changed pilots again. */
+static void check_plan_reuse(void)
+{
+    fprintf(stderr, "-- the media plan kept between runs\n");
+    struct sb b;
+    sb_init(&b);
+    int mat = sb_material(&b, sb_diffuse(dr_v3s(0.5)));
+    sb_box(&b, dr_v3(-1, -1, -1), dr_v3(1, 1, 1), mat);
+    sb_medium(&b, mat, medium(dr_v3(0.5, 3.0, 9.0), dr_v3(0.8, 0.7, 0.9), 0.3));
+    sb_environment(&b, dr_v3(0.6, 0.7, 0.9));
+    b.s->n_file_materials = b.s->n_materials;
+    struct dr_scene *s = sb_finish(&b);
+    struct dr_camera cam = sb_camera(dr_v3(0.4, 0.8, 4.0), dr_v3(0, 0, 0), 40);
+    const char *ptrs[] = {"/materials/0/extensions/DR_medium/extinction"};
+    struct dr_param_set *ps = dr_param_set_create(s, ptrs, 1);
+    CHECK(ps != NULL, "param set: %s", dr_last_error());
+    if (!ps)
+        return;
+    static float adj[RES * RES * 3];
+    for (int i = 0; i < RES * RES * 3; i++)
+        adj[i] = 1.0f / (RES * RES * 3);
+    struct dr_media_plan plan = {0};
+    struct dr_grad_problem p = {.scene = s, .camera = &cam, .params = ps, .width = RES, .height = RES, .spp = 4,
+                                .max_depth = 6, .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 5, .threads = 2,
+                                .sampling = DR_SAMPLING_DETACHED, .media_plan = &plan};
+    const struct dr_estimator_ops *prb = dr_estimator_find("prb");
+    double g[4][3];
+    uint64_t rays[4];
+    for (int run = 0; run < 4; run++) {
+        if (run == 2)
+            p.media_plan = NULL;
+        if (run == 3) {
+            p.media_plan = &plan;
+            s->media[0].extinction.x = 0.6;   /* (a new key) */
+        }
+        const uint64_t key = plan.key;
+        struct dr_grad_stats st = {0};
+        CHECK(dr_estimator_backward(prb, &p, adj, g[run], &st) == 0, "run %d: %s", run, dr_last_error());
+        rays[run] = st.rays.camera + st.rays.extension + st.rays.shadow;
+        CHECK(st.n_media_gain == 1 && st.media_gain[0].why == DR_GAIN_PILOT && st.media_gain[0].stretches >= 64,
+              "run %d: the choice and the pilot's tally reported", run);
+        if (run == 3)
+            CHECK(plan.valid && plan.key != key, "run 3: the plan was made again for the new values");
+    }
+    CHECK(plan.valid && memcmp(g[0], g[1], sizeof g[0]) == 0 && memcmp(g[0], g[2], sizeof g[0]) == 0,
+          "the same gradient with the plan kept, and without a plan");
+    CHECK(rays[1] < rays[0] && rays[2] == rays[0] && rays[3] > rays[1],
+          "rays: %llu first, %llu reusing the plan, %llu without one, %llu after a change",
+          (unsigned long long)rays[0], (unsigned long long)rays[1], (unsigned long long)rays[2],
+          (unsigned long long)rays[3]);
+    dr_media_plan_free(&plan);
+    CHECK(!plan.valid && !plan.tally && !plan.collision_gain, "dr_media_plan_free empties the plan");
+    dr_param_set_destroy(ps);
+    dr_scene_destroy(s);
+}
+
 int main(void)
 {
     check_pilot_rule();
+    check_plan_reuse();
     /* least extinction x the cube's mean chord of 4/3: thickness 0.13, 0.67, 2.7 */
     check_homogeneous(dr_v3(0.1, 0.2, 0.4), GAIN_PATHS);         /* about a fifth of the stretches collide */
     check_homogeneous(dr_v3(0.5, 3.0, 9.0), PILOT_COLLISIONS);   /* about four fifths */
