@@ -372,6 +372,32 @@ static void report_head(FILE *f, const struct cmp_run *r)
     }
 }
 
+/* Where DRT took each differentiated medium's scattering gain (the first
+ * DRT combination's choices: every run of one depth chooses alike), if any. */
+static void report_media_gain(FILE *f, const struct cmp_run *r)
+{
+    for (int c = 0; c < r->n_combos; c++) {
+        const struct cmp_result *res = &r->results[c];
+        if (res->n_media_gain == 0)
+            continue;
+        fprintf(f, "**Media (drt, max depth %d):** the scattering a change of extinction adds is taken",
+                r->combos[c].max_depth);
+        for (int i = 0; i < res->n_media_gain; i++) {
+            const struct dr_medium_gain_choice *g = &res->media_gain[i];
+            char medium[64];
+            grad_medium_pointer(g, medium, sizeof medium);
+            fprintf(f, "%s in `%s` from %s (%s", i ? ";" : "", medium,
+                    g->collisions ? "the path's collisions" : "gain paths", dr_gain_reason_name(g->why));
+            if (g->why == DR_GAIN_PILOT)
+                fprintf(f, ": %llu of %llu stretches collided", (unsigned long long)g->collided,
+                        (unsigned long long)g->stretches);
+            fprintf(f, ")%s", g->grid && g->collisions ? ", its voxels' from gain paths" : "");
+        }
+        fprintf(f, " (see --medium-grad in drender(1)).\n\n");
+        return;
+    }
+}
+
 /* The tables' sampling cell: the mode, and the media method when the
  * comparison lists both. */
 static const char *sampling_cell(const struct cmp_run *r, const struct cmp_combo *cb, char *buf, size_t size)
@@ -547,6 +573,7 @@ int cmp_write_report(const struct cmp_run *r, const char *path)
         return -1;
     }
     report_head(f, r);
+    report_media_gain(f, r);
     report_table(f, r);
     report_params(f, r);
     report_reading(f, r);

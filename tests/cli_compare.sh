@@ -135,6 +135,8 @@ done
 py mg_thin "d['combinations'][1]['parameters'][0]['value'] != d['combinations'][3]['parameters'][0]['value']"
 py mg_thin "([(c['medium_gain'][0]['source'], c['medium_gain'][0]['reason']) for c in d['combinations'][:2]] ==
              [('gain_paths', 'pilot')] * 2 and all('medium_gain' not in c for c in d['combinations'][2:]))"
+grep -qF "from gain paths (pilot: " mg_thin/report.md || fail "report.md (thin): DRT's gain source not named"
+grep -qF "from the path's collisions (thick)" mg_thick/report.md || fail "report.md (thick): DRT's gain source not named"
 py mg_thick "[c.get('medium_gain') for c in d['combinations']] == [[{'medium': '$ext'[:-len('/extinction')],
              'source': 'collisions', 'reason': 'thick'}]] * 2 + [None] * 2"
 py mg_thick "(d['combinations'][1]['parameters'][0]['value'] == d['combinations'][3]['parameters'][0]['value'] and
