@@ -13,6 +13,12 @@
 #      (DRT takes a thick homogeneous medium's gain at the path's collisions,
 #      medium_grad.c; gain paths, where taken, are spread so that the cost
 #      stays linear in depth)
+#   v. the pilot's choice on two thin homogeneous fogs (medium_grad.c):
+#      fog-khr (a fog seen once: DRT takes gain paths) and fog-global's
+#      global fog (crossed on every bounce: the collisions); reverse-mode
+#      stderr^2 x seconds of d loss / d extinction (red) with DRT over the
+#      baseline's, which takes the collisions in homogeneous media (below 1:
+#      DRT's choice is the better one; 1: the same estimator)
 # Writes $BUILD/bench/media-results.json.
 set -euo pipefail
 BUILD=${BUILD:-build}
@@ -74,9 +80,27 @@ J=$("$DR" grad "$DENSE" --sampler independent --param /materials/0/extensions/DR
 TG=$(json_num "$J" gradient time)
 echo " iv. dense medium (extinction 1e4/1e3/1e2, albedo 0.999, depth 1000, 32x32, 4 spp): primal $(calc "$TP" %.3f) s," \
     "prb DRT gradient $(calc "$TG" %.3f) s: ratio $(calc "$TG / $TP")"
+echo "  v. the pilot on thin fogs (reverse mode, 64x64, 256 spp in 32 batches, d loss / d extinction r): stderr^2 x s, DRT / baseline"
+PILOT_JSON=""
+for scene in fog-khr:/materials/0/extensions/DR_medium/extinction fog-global:/extensions/DR_medium/extinction; do
+    name=${scene%%:*} param=${scene#*:}
+    f=tests/data/media/$name.gltf
+    "$DR" render "$f" --sampler independent -o "$TMP/t-$name.exr" --res 64x64 --spp 64 --seed 7 >/dev/null
+    declare -A COST=()
+    for mg in drt baseline; do
+        J=$("$DR" grad "$f" --sampler independent --target "$TMP/t-$name.exr" --param "$param" --set "$param=0.5,0.5,0.5" \
+            --medium-grad $mg --spp 256 --batches 32 --threads 2 --json)
+        SE=$(first_stderr "$J")
+        COST[$mg]=$(calc "$SE * $SE * $(json_num "$J" gradient time)")
+        [[ $mg == drt ]] && SRC=$(printf '%s\n' "$J" | sed -n 's/.*"medium_gain": \[{[^]]*"source": "\([a-z_]*\)".*/\1/p')
+    done
+    printf '     %-10s DRT takes %-10s  %s / %s = %s\n' "$name" "$SRC" "${COST[drt]}" "${COST[baseline]}" \
+        "$(calc "${COST[drt]} / ${COST[baseline]}")"
+    PILOT_JSON+="{\"scene\": \"$name\", \"drt_source\": \"$SRC\", \"drt_cost\": ${COST[drt]}, \"baseline_cost\": ${COST[baseline]}},"
+done
 cat >"$OUT/media-results.json" <<JSON
 {"volume_gradient": [${ROWS%,}], "prb_memory_vs_depth": [${MEM_JSON%,}], "prb_memory_change_percent": $SPREAD,
- "render_seconds": $RT, "dense_primal_seconds": $TP, "dense_gradient_seconds": $TG}
+ "render_seconds": $RT, "dense_primal_seconds": $TP, "dense_gradient_seconds": $TG, "pilot": [${PILOT_JSON%,}]}
 JSON
 echo
 echo "results in $OUT/media-results.json"

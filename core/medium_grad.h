@@ -40,7 +40,9 @@ void dr_medium_gain_decide(const struct dr_scene *scene, const struct dr_medium_
  * batches, of its parameters one by one, of compare's estimators, reuse it
  * where what it depends on is the same (key: the scene, camera, image and
  * film, depth, Russian roulette, stages and every medium's values), so the
- * pilot is paid once, not per run. Zeroed: empty. */
+ * pilot is paid once, not per run. Surfaces are not in the key: a caller
+ * that changes them between runs (optimize's steps) uses a fresh plan.
+ * Zeroed: empty. */
 struct dr_media_plan {
     bool valid;
     uint64_t key;
