@@ -109,7 +109,8 @@ static int parse_args(int argc, char **argv, struct fdcheck_args *a)
 }
 
 static void print_json(const struct fdcheck_args *a, const char *scene_path, const struct dr_fd_entry *en, int n,
-                       bool all_agree, double t_load, double t_check, double t_total, const struct dr_param_set *ps)
+                       bool all_agree, double t_load, double t_check, double t_total, const struct dr_param_set *ps,
+                       const struct dr_grad_stats *st)
 {
     FILE *f = stdout;
     fprintf(f, "{");
@@ -141,7 +142,9 @@ static void print_json(const struct fdcheck_args *a, const char *scene_path, con
         }
         fprintf(f, ", \"agree\": %s}", e->agree ? "true" : "false");
     }
-    fprintf(f, "], \"effects_differentiated\": ");
+    fputc(']', f);
+    grad_json_media_gain(f, st->media_gain, st->n_media_gain);
+    fprintf(f, ", \"effects_differentiated\": ");
     grad_json_effects(f, ps);
     fprintf(f, "}\n");
 }
@@ -212,6 +215,8 @@ int cmd_fdcheck(int argc, char **argv)
                               .max_depth = a.g.max_depth, .rr_depth = a.g.rr_depth, .seed = a.g.seed,
                               .regularize = a.g.regularize, .sampler = a.g.sampler,
                               .threads = a.g.threads, .eps = a.eps, .z_max = a.z_max};
+    struct dr_grad_stats st = {0};
+    o.stats = &st;
     if (dr_fdcheck(scene, &cam, ps, &o, &en, &n) != 0) {
         cli_error("fdcheck", "%s", dr_last_error());
         rc = DR_EXIT_FAILURE;
@@ -222,7 +227,7 @@ int cmd_fdcheck(int argc, char **argv)
     for (int i = 0; i < n; i++)
         all_agree &= en[i].agree;
     if (a.g.json) {
-        print_json(&a, scene_path, en, n, all_agree, t_loaded - t_start, t_end - t_loaded, t_end - t_start, ps);
+        print_json(&a, scene_path, en, n, all_agree, t_loaded - t_start, t_end - t_loaded, t_end - t_start, ps, &st);
     } else {
         print_table(&a, scene_path, en, n);
     }

@@ -256,7 +256,7 @@ int dr_fdcheck(struct dr_scene *scene, const struct dr_camera *camera, const str
     for (int k = 0; k < K && rc == 0; k++) {
         struct dr_grad_problem p = problem(scene, camera, ps, o, o->seed + (uint64_t)k);
         p.media_plan = &r.media_plan;
-        rc = dr_estimator_backward(o->estimator, &p, b.adj, b.grads + (size_t)k * T, NULL);
+        rc = dr_estimator_backward(o->estimator, &p, b.adj, b.grads + (size_t)k * T, o->stats);
     }
     for (int k = 0, e = 0; k < ps->n && rc == 0; k++) {
         const struct dr_param *pp = &ps->params[k];

@@ -37,6 +37,8 @@ struct dr_fd_options {
     struct dr_film film;   /* filter and crop; width x height above is the rendered rectangle */
     enum dr_sampler_kind sampler;   /* the random numbers, shared by estimator and differences */
     double regularize;  /* prb, attached: conditioning threshold (estimator.h) */
+    struct dr_grad_stats *stats;   /* optional out: the last reverse-mode estimator run's statistics
+                                      (their media_gain: where DRT took each medium's gain) */
 };
 
 struct dr_fd_entry {

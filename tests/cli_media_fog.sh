@@ -39,6 +39,8 @@ json_check "$tmp/out" 'len(d["medium_gain"]) == 1 and d["medium_gain"][0]["sourc
 run fdcheck "$data/fog-global.gltf" "${params[@]}" --spp 16 --res 16x16 --batches 16 --eps 0.03
 expect_rc 0 "fdcheck on a global fog's collisions around a grid medium"
 expect_in out "all 5 entries agree" "every entry agrees (collisions)"
+run fdcheck "$data/fog-global.gltf" --param /extensions/DR_medium/extinction --res 8x8 --spp 2 --batches 2 --json
+json_check "$tmp/out" 'd["medium_gain"][0]["source"] == "collisions" and d["medium_gain"][0]["reason"] == "pilot"'
 run grad "$data/fog-global.gltf" --param /extensions/DR_medium/extinction --res 16x16 --spp 2 -o "$tmp/d.exr" --json \
     --medium-grad baseline
 expect_rc 0 "grad on the global fog, baseline"
