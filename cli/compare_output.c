@@ -385,7 +385,7 @@ static void report_media_gain(FILE *f, const struct cmp_run *r)
         for (int i = 0; i < res->n_media_gain; i++) {
             const struct dr_medium_gain_choice *g = &res->media_gain[i];
             char medium[64];
-            grad_medium_pointer(g, medium, sizeof medium);
+            dr_medium_param_prefix(g->material, medium, sizeof medium);
             fprintf(f, "%s in `%s` from %s (%s", i ? ";" : "", medium,
                     g->collisions ? "the path's collisions" : "gain paths", dr_gain_reason_name(g->why));
             if (g->why == DR_GAIN_PILOT)

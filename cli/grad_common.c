@@ -648,14 +648,6 @@ void grad_json_head(FILE *f, const struct grad_common *g, const char *scene_path
     grad_json_film(f, g);
 }
 
-void grad_medium_pointer(const struct dr_medium_gain_choice *c, char *buf, size_t size)
-{
-    if (c->material >= 0)
-        snprintf(buf, size, "/materials/%d/extensions/DR_medium", c->material);
-    else
-        snprintf(buf, size, "/extensions/DR_medium");
-}
-
 void grad_json_media_gain(FILE *f, const struct dr_medium_gain_choice *c, int n)
 {
     if (n == 0)
@@ -663,7 +655,7 @@ void grad_json_media_gain(FILE *f, const struct dr_medium_gain_choice *c, int n)
     fputs(", \"medium_gain\": [", f);
     for (int i = 0; i < n; i++) {
         char medium[64];
-        grad_medium_pointer(&c[i], medium, sizeof medium);
+        dr_medium_param_prefix(c[i].material, medium, sizeof medium);
         fprintf(f, "%s{\"medium\": \"%s\", \"source\": \"%s\", \"reason\": \"%s\"", i ? ", " : "", medium,
                 c[i].collisions ? "collisions" : "gain_paths", dr_gain_reason_name(c[i].why));
         if (c[i].grid && c[i].collisions)

@@ -229,8 +229,6 @@ void grad_json_run(FILE *f, const struct grad_totals *t);
 /* JSON: `, "medium_gain": [{"medium", "source", "reason"[, "voxels_source"]
  * [, "pilot_stretches", "pilot_collided"]}, ...]`, the n choices c (medium_grad.h); nothing if n is 0. */
 void grad_json_media_gain(FILE *f, const struct dr_medium_gain_choice *c, int n);
-/* The medium's parameters' JSON pointer prefix ("/materials/0/extensions/DR_medium"). */
-void grad_medium_pointer(const struct dr_medium_gain_choice *c, char *buf, size_t size);
 
 /* JSON, with --sampling mis only: `, "mis_weight": {"detached": w, "attached": 1 - w}`
  * (w: the weight of the detached estimate, estimators/mis.h). */

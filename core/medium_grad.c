@@ -219,7 +219,7 @@ int dr_medium_gain_choices(const struct dr_scene *s, const struct dr_path_opts *
         if (!sigma_t_requested(opts->params, i))
             continue;
         const enum dr_gain_reason why = gain_reason(&s->media[i]);
-        out[n++] = (struct dr_medium_gain_choice){.medium = i, .material = s->media[i].material,
+        out[n++] = (struct dr_medium_gain_choice){.material = s->media[i].material,
                                                   .collisions = gain_at_collisions(opts, s, i),
                                                   .grid = s->media[i].has_grid, .why = why,
                                                   .stretches = why == DR_GAIN_PILOT && t ? t[i].stretches : 0,

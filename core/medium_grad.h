@@ -66,7 +66,7 @@ uint64_t dr_media_values_hash(const struct dr_scene *scene, uint64_t h);
  * pilot's choice. */
 enum dr_gain_reason { DR_GAIN_NONSCATTERING, DR_GAIN_THICK, DR_GAIN_GRID, DR_GAIN_PILOT };
 struct dr_medium_gain_choice {
-    int medium, material;          /* the medium, its boundary material (-1: the global medium) */
+    int material;                  /* the medium's boundary material (-1: the global medium) */
     bool collisions;               /* from the path's collisions, else from gain paths */
     bool grid;                     /* a grid: its voxels' gain from gain paths */
     enum dr_gain_reason why;

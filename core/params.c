@@ -23,6 +23,14 @@ static bool is_medium_kind(enum dr_param_kind k)
     return k >= DR_PARAM_MEDIUM_EXTINCTION && k <= DR_PARAM_MEDIUM_DENSITY;
 }
 
+void dr_medium_param_prefix(int material, char *buf, size_t size)
+{
+    if (material >= 0)
+        snprintf(buf, size, "/materials/%d/extensions/DR_medium", material);
+    else
+        snprintf(buf, size, "/extensions/DR_medium");
+}
+
 /* The parameters of every medium: appended to list, returns how many. */
 static int list_medium_params(const struct dr_scene *s, struct dr_param *list)
 {
@@ -30,10 +38,7 @@ static int list_medium_params(const struct dr_scene *s, struct dr_param *list)
     for (int i = 0; i < s->n_media; i++) {
         const struct dr_medium *m = &s->media[i];
         char base[64];
-        if (m->material >= 0)
-            snprintf(base, sizeof base, "/materials/%d/extensions/DR_medium", m->material);
-        else
-            snprintf(base, sizeof base, "/extensions/DR_medium");
+        dr_medium_param_prefix(m->material, base, sizeof base);
         for (int k = DR_PARAM_MEDIUM_EXTINCTION; k <= DR_PARAM_MEDIUM_DENSITY; k++) {
             if (k == DR_PARAM_MEDIUM_DENSITY && !m->has_grid)
                 continue;

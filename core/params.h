@@ -76,6 +76,9 @@ void dr_param_display_name(const struct dr_scene *scene, const struct dr_param *
 const char *dr_param_type_name(const struct dr_param *p);
 /* Physical range of each scalar (for optimisers and finite differences). */
 void dr_param_range(const struct dr_param *p, double *lo, double *hi);
+/* The JSON pointer prefix of a medium's parameters: "/materials/M/extensions/DR_medium"
+ * for the medium bounded by material M, "/extensions/DR_medium" for the global one (-1). */
+void dr_medium_param_prefix(int material, char *buf, size_t size);
 
 /* Every differentiable parameter the scene offers, in document order.
  * *out is malloc'd. 0 or DR_ERR_NOMEM. */
