@@ -108,6 +108,14 @@ static void media_nee(const struct dr_scene *s, const struct dr_path_opts *opts,
     v->nee = true;
 }
 
+dr_vec3 dr_medium_shadow_transmittance(const struct dr_scene *s, uint64_t key, int depth, dr_vec3 so, dr_vec3 sd,
+                                       double tmax, uint64_t *rays)
+{
+    const struct dr_sampler smp = {.key = key};
+    struct dr_sampler rng = tracking_stream(&smp, depth, STREAM_SHADOW);
+    return dr_media_transmittance(s, so, sd, tmax, s->global_medium, &rng, rays, NULL);
+}
+
 /* A scattering collision at p: NEE, then a phase-sampled continuation with
  * Russian roulette as at surfaces. The phase function is its own sampling
  * density, so the throughput changes only by the roulette. */
@@ -236,13 +244,29 @@ static void end_segment(struct dr_path_state *st, struct dr_path_vertex *v, cons
     st->beta = dr_mul(st->beta, v->seg);
 }
 
+/* The path's hero channel (spectral MIS, medium.h): drawn from its own
+ * stream, so whenever it is drawn it is the same. */
+static int hero_channel(const struct dr_sampler *sampler)
+{
+    struct dr_sampler rng = tracking_stream(sampler, 0, STREAM_HERO);
+    int hero = (int)(dr_sampler_next(&rng) * 3.0);
+    return hero > 2 ? 2 : hero;
+}
+
 static void start_path(const struct dr_scene *s, struct dr_path_state *st, const struct dr_sampler *sampler)
 {
     st->medium = dr_medium_at(s, st->o, st->d);
-    struct dr_sampler rng = tracking_stream(sampler, 0, STREAM_HERO);
-    int hero = (int)(dr_sampler_next(&rng) * 3.0);
-    st->hero = hero > 2 ? 2 : hero;
+    st->hero = hero_channel(sampler);
     st->mis_r[0] = st->mis_r[1] = st->mis_r[2] = 1.0;
+}
+
+void dr_medium_path_resume(const struct dr_scene *s, struct dr_path_state *st, const struct dr_sampler *sampler)
+{
+    if (st->depth == 0)
+        return;   /* (the camera ray: the first step starts the path itself) */
+    st->medium = s->global_medium;
+    st->hero = hero_channel(sampler);
+    st->mis_r[0] = st->mis_r[1] = st->mis_r[2] = 1.0;   /* (no medium crossed: every channel's events alike) */
 }
 
 /* How far the segment's ray must be traced. In a homogeneous medium the
@@ -359,9 +383,7 @@ dr_vec3 dr_medium_inscattered(const struct dr_scene *s, const struct dr_path_opt
     dr_path_start(&st, x, d);
     st.depth = depth;
     st.medium = medium;
-    struct dr_sampler rng = tracking_stream(&sampler, 0, STREAM_HERO);
-    int hero = (int)(dr_sampler_next(&rng) * 3.0);
-    st.hero = hero > 2 ? 2 : hero;
+    st.hero = hero_channel(&sampler);
     st.mis_r[0] = st.mis_r[1] = st.mis_r[2] = 1.0;
     v.depth = depth;
     v.d = d;

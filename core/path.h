@@ -439,6 +439,19 @@ bool dr_path_stage_continue(const struct dr_path_opts *opts, struct dr_path_stat
 /* dr_path_step for scenes with media (medium_path.c). */
 bool dr_medium_path_step(const struct dr_scene *scene, const struct dr_path_opts *opts, struct dr_path_state *st,
                          struct dr_sampler *sampler, struct dr_path_vertex *v, struct dr_ray_counts *counts);
+/* A path that has met no medium yet, handed to dr_medium_path_step after
+ * st->depth segments in vacuum (the packet tracer's, wave_soa.c): its
+ * medium (the global one: vacuum in the scenes it hands over from), hero
+ * channel and spectral weights as if the walker had taken it from the
+ * start. */
+void dr_medium_path_resume(const struct dr_scene *scene, struct dr_path_state *st, const struct dr_sampler *sampler);
+/* The transmittance media_nee (medium_path.c) finds for the shadow ray from
+ * so along sd (unit) up to tmax of the vertex at `depth` of the path whose
+ * sampler key is `key`, the vertex outside every medium (in the global one):
+ * the same stream and operations, for the packet tracer's shadow rays that
+ * cross a medium's box (wave_soa.c). *rays counts the queries. */
+dr_vec3 dr_medium_shadow_transmittance(const struct dr_scene *scene, uint64_t key, int depth, dr_vec3 so, dr_vec3 sd,
+                                       double tmax, uint64_t *rays);
 
 /* Substitute factor for zero BSDF channels at differentiated vertices. */
 #define DR_PATH_SUBSTITUTE DR_INV_PI

@@ -378,7 +378,9 @@ DR_SIMD_INLINE dr_m8 bsdf_sample(const struct dr_path8 *g, dr_m8 on, dr_f8 u_lob
 
 /* The run's effects and stages are all the eight-lane stages' (whatever
  * its parameters). */
-static bool eight_lane_run(const struct dr_scene *s, const struct dr_path_opts *opts)
+/* media: media are allowed (the caller hands each path that meets one to
+ * the one-path walker: dr_path8_applies_outside_media) */
+static bool eight_lane_run(const struct dr_scene *s, const struct dr_path_opts *opts, bool media)
 {
     /* (alphaMode MASK and BLEND: the surfaces a ray passes are Embree's
      * filters' business, which every query applies with the ray's coverage
@@ -387,9 +389,16 @@ static bool eight_lane_run(const struct dr_scene *s, const struct dr_path_opts *
     const unsigned allowed = DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_ENV_CONSTANT | DR_FX_ENV_MAP |
                              DR_FX_SHADING_NORMALS | DR_FX_SINGLE_SIDED | DR_FX_SPECULAR | DR_FX_TEXTURES |
                              DR_FX_VERTEX_COLORS | DR_FX_NORMAL_MAPS | DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND;
+    const unsigned media_fx = DR_FX_MEDIA | DR_FX_HETEROGENEOUS_MEDIA | DR_FX_DIELECTRIC_BOUNDARIES;
+    const unsigned media_stages = DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC;
     struct dr_light_tables t;
-    return !(s->effects & ~allowed) && (opts->stages & DR_STAGE_NEE) &&
-           !(opts->stages & (DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC)) && dr_light_tables(s->light_sampler, &t);
+    return !(s->effects & ~(allowed | (media ? media_fx : 0))) && (opts->stages & DR_STAGE_NEE) &&
+           !(opts->stages & (media ? 0 : media_stages)) && dr_light_tables(s->light_sampler, &t);
+}
+
+bool dr_path8_applies_outside_media(const struct dr_scene *s, const struct dr_path_opts *opts)
+{
+    return !opts->params && eight_lane_run(s, opts, true);
 }
 
 bool dr_path8_applies(const struct dr_scene *s, const struct dr_path_opts *opts)
@@ -400,7 +409,7 @@ bool dr_path8_applies(const struct dr_scene *s, const struct dr_path_opts *opts)
      * (dr_path8_walks_apply: prb's walks, which need to know where the terms
      * are, and its replays, dr_wave_ops.light_terms). */
     const struct dr_param_set *ps = opts->params;
-    return !(ps && (ps->radiance_active || ps->media_active)) && eight_lane_run(s, opts);
+    return !(ps && (ps->radiance_active || ps->media_active)) && eight_lane_run(s, opts, false);
 }
 
 bool dr_path8_walks_apply(const struct dr_scene *s, const struct dr_path_opts *opts)
@@ -408,7 +417,7 @@ bool dr_path8_walks_apply(const struct dr_scene *s, const struct dr_path_opts *o
     const struct dr_param_set *ps = opts->params;
     if (!ps || !ps->radiance_active)
         return dr_path8_applies(s, opts);
-    if (ps->media_active || !eight_lane_run(s, opts))
+    if (ps->media_active || !eight_lane_run(s, opts, false))
         return false;
     /* A dark emitter whose emission has a parameter: the one-path walker
      * counts its hits as emitting (path.c's surface_emits) where these

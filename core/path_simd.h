@@ -130,6 +130,10 @@ struct dr_path8 {
  * radiance has a parameter, no media or dielectric boundaries; some
  * light)? */
 bool dr_path8_applies(const struct dr_scene *scene, const struct dr_path_opts *opts);
+/* ... for a radiance run (no parameters) in a scene with media, whose
+ * paths the caller hands to the one-path walker where they could meet a
+ * medium (wave_soa.c): the rest as dr_path8_applies. */
+bool dr_path8_applies_outside_media(const struct dr_scene *scene, const struct dr_path_opts *opts);
 /* Can path replay's walks use them (wave_soa.h's primal walks that give
  * sums and where the derivative terms are, no vertices; its replays, whose
  * vertices then carry their light terms)? Also where a light's radiance has

@@ -70,7 +70,7 @@ static void store_pixel(struct render_job *j, int thread, int64_t local, const d
     out[2] = (float)(sum.z / spp);
 }
 
-/* One path at a time (scenes with media). */
+/* One path at a time (scenes with a global medium). */
 static void render_tile_scalar(struct render_job *j, int thread, int x0, int y0, int x1, int y1)
 {
     const struct dr_render_opts *o = j->opts;
@@ -235,7 +235,8 @@ int dr_render(const struct dr_scene *scene, const struct dr_camera *camera, cons
     j->path = (struct dr_path_opts){.max_depth = opts->max_depth, .rr_depth = opts->rr_depth,
                                     .stages = dr_path_plan(scene, NULL)};
     j->rgb = rgb;
-    j->wave = !(j->path.stages & DR_STAGE_MEDIA);
+    /* (media: the packet tracer where every medium is bounded, wave_soa.c) */
+    j->wave = !(j->path.stages & DR_STAGE_MEDIA) || dr_wave_soa_applies(scene, &j->path);
     j->chunk_pixels = chunk_pixels(opts->spp);
     int threads = dr_thread_count(opts->threads);
     int rc = 0;

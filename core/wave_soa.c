@@ -7,6 +7,7 @@
 #include "accel.h"
 #include "coverage.h"
 #include "material.h"
+#include "medium_scene.h"
 #include "path_simd.h"
 #include "wavefront.h"
 
@@ -72,6 +73,9 @@ struct dr_wave_soa {
     struct dr_path_vertex *vertex;              /* where its vertex is made whole (replay_step) */
     int traced[SLOTS];                          /* the slots whose rays a replay traces, and */
     int64_t traced_tri[SLOTS];                  /* their answers */
+    /* a radiance run in a scene with media (every one bounded): the paths
+     * that could meet a medium go to the one-path walker (finish_in_media) */
+    bool media;
 };
 
 /* A path whose vertex this step takes the scalar stages (in a walk with a
@@ -138,6 +142,8 @@ bool dr_wave_soa_replays_apply(const struct dr_scene *s, const struct dr_path_op
 
 bool dr_wave_soa_applies(const struct dr_scene *s, const struct dr_path_opts *opts)
 {
+    if (opts->stages & DR_STAGE_MEDIA)   /* (the paths that meet no medium: finish_in_media) */
+        return dr_media_all_bounded(s) && dr_path8_applies_outside_media(s, opts);
     return !opts->params && dr_path8_applies(s, opts);
 }
 
@@ -363,8 +369,7 @@ static void trace(struct dr_wave_soa *w, const struct dr_scene *s, int n_live, i
 /* Slot k's path as the scalar walker holds it, just begun on its vertex
  * (dr_path_step_begin: the trace counted its segment already) in *v, with
  * its sampler at the vertex's numbers. */
-static void scalar_state(const struct dr_wave_soa *w, int k, struct dr_path_state *st, struct dr_sampler *smp,
-                         struct dr_path_vertex *v)
+static void path_state(const struct dr_wave_soa *w, int k, struct dr_path_state *st, struct dr_sampler *smp)
 {
     dr_path_start(st, dr_v3(w->ox[k], w->oy[k], w->oz[k]), dr_v3(w->dx[k], w->dy[k], w->dz[k]));
     st->prev_pdf = w->prev_pdf[k];
@@ -381,8 +386,80 @@ static void scalar_state(const struct dr_wave_soa *w, int k, struct dr_path_stat
         smp->key = w->key[k];
     }
     smp->dim = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)st->depth;
+}
+
+/* Slot k's path as the scalar walker holds it, just begun on its vertex
+ * (dr_path_step_begin: the trace counted its segment already) in *v, with
+ * its sampler at the vertex's numbers. */
+static void scalar_state(const struct dr_wave_soa *w, int k, struct dr_path_state *st, struct dr_sampler *smp,
+                         struct dr_path_vertex *v)
+{
+    path_state(w, k, st, smp);
     v->mrec = NULL;   /* (no media here) */
     dr_path_step_begin(st, v);
+}
+
+/* ------------------------------------------ paths that could meet a medium */
+
+/* In a scene with media (every one bounded by a mesh) the eight-lane
+ * stages take the paths until they could enter one: a camera ray that
+ * starts in a medium's box, a ray that hits a medium's boundary. Such a path
+ * goes back to the start of its step and the one-path walker takes it from
+ * there to its end (it traces the step's ray again: a ray more, counted),
+ * with its own operations on the path's own numbers, so that the image is
+ * the one-path walker's (test_render). A shadow ray through a medium's box,
+ * where the stages' occlusion test would take the boundary for a wall,
+ * takes the walker's transmittance (shadows_through_media) and its path
+ * stays. So the paths that never enter a medium, most of them where a smoke
+ * or fog fills part of a scene, run as in a scene without media. Radiance
+ * runs only: derivatives of media take the one-path walker throughout. */
+static void finish_in_media(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
+                            int k, dr_vec3 *out, struct dr_ray_counts *counts)
+{
+    struct dr_path_state st;
+    struct dr_sampler smp;
+    struct dr_path_vertex v;
+    path_state(w, k, &st, &smp);
+    v.mrec = NULL;   /* (nothing recorded: no parameters) */
+    dr_medium_path_resume(s, &st, &smp);
+    dr_vec3 L = dr_v3(w->Lx[k], w->Ly[k], w->Lz[k]);   /* (summed on as dr_path_radiance sums) */
+    for (bool more = true; more;) {
+        const dr_vec3 beta = st.beta;
+        more = dr_path_step(s, opts, &st, &smp, &v, counts);
+        L = dr_add(L, dr_mul(beta, dr_path_vertex_term(&v)));
+    }
+    out[w->item[k]] = L;
+}
+
+/* Does slot k's traced ray start in a medium's box (a camera ray) or end on
+ * a medium's boundary? */
+static bool meets_medium(const struct dr_wave_soa *w, const struct dr_scene *s, int k)
+{
+    return (w->tri[k] >= 0 && dr_boundary_medium(s, w->tri[k]) >= 0) ||
+           (w->depth[k] == 1.0 && dr_media_box_holds(s, dr_v3(w->ox[k], w->oy[k], w->oz[k])));
+}
+
+/* The group's shadow rays that cross a medium's box, among those cast:
+ * their transmittance as the one-path walker's media_nee finds it, through
+ * the media and their boundaries (dr_medium_shadow_transmittance; a surface
+ * in the way: 0, occluded), folded into the light's radiance as media_nee
+ * folds it. Returns them: they leave the batch of occlusion queries. */
+static dr_m8 shadows_through_media(struct dr_wave_soa *w, const struct dr_scene *s, struct dr_path8 *G, int i0,
+                                   dr_m8 cast, struct dr_ray_counts *counts)
+{
+    dr_m8 through = {0};
+    for (int i = 0; i < G->n; i++) {
+        const int k = i0 + i;
+        const dr_vec3 so = dr_v3x8_get(&G->so, i), sd = dr_v3x8_get(&G->sd, i);
+        if (!cast[i] || !(G->tmax[i] > 0.0) || !dr_media_box_crossed(s, so, sd, G->tmax[i]))
+            continue;
+        through[i] = -1;
+        const dr_vec3 tr = dr_medium_shadow_transmittance(s, w->key[k], (int)w->depth[k], so, sd, G->tmax[i],
+                                                          &counts->shadow);
+        w->occluded[k] = dr_is_black(tr);
+        G->ls_radiance.x[i] *= tr.x, G->ls_radiance.y[i] *= tr.y, G->ls_radiance.z[i] *= tr.z;
+    }
+    return through;
 }
 
 /* A ray that left the scene: the escaped stage's maths (the environment's
@@ -458,7 +535,7 @@ static bool escaped_group(const struct dr_wave_soa *w, const struct dr_scene *s,
  * their first bounces make the more coherent packets). Returns how many
  * remain. */
 static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int n_live,
-                       bool prefetch, dr_vec3 *out)
+                       bool prefetch, dr_vec3 *out, struct dr_ray_counts *counts)
 {
     int kept = 0;
     w->n_scalar = 0;
@@ -472,6 +549,10 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
         const bool grouped = eight_at_once && escaped_group(w, s, opts, n_live, i0, &L_esc, &T_esc);
         for (int i = 0; i < DR_SIMD_W && i0 + i < n_live; i++) {
             const int k = i0 + i;
+            if (w->media && meets_medium(w, s, k)) {
+                finish_in_media(w, s, opts, k, out, counts);
+                continue;
+            }
             if (w->tri[k] < 0) {
                 if (!grouped)
                     escaped(w, s, opts, k, out);
@@ -650,6 +731,8 @@ static void shade(struct dr_wave_soa *w, const struct dr_scene *s, const struct 
         dr_m8 cast = G->shadow & first_lanes(in.n);
         if (w->replay)
             cast &= ~logged_shadows(w, G, i0);
+        if (w->media)
+            cast &= ~shadows_through_media(w, s, G, i0, cast, counts);
         const dr_m8 ray = cast & dr_f8_gt(G->tmax, dr_f8s(0.0));
         const int64_t owner[DR_SIMD_W] = {i0, i0 + 1, i0 + 2, i0 + 3, i0 + 4, i0 + 5, i0 + 6, i0 + 7};
         const struct { void *a; const void *v; } rays[] = {
@@ -885,11 +968,12 @@ static void run(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr
     int n_live = 0;
     int64_t next = 0;
     w->structured = false;
+    w->media = !w->out && (opts->stages & DR_STAGE_MEDIA);   /* (dr_wave_soa_applies: a radiance run) */
     while (next < n || n_live > 0) {
         int first_new = n_live;
         n_live = start_paths(w, n_live, &next, n, start, start8, ctx);
         trace(w, s, n_live, first_new, prefetch, counts);
-        n_live = end_escaped(w, s, opts, n_live, prefetch, L);
+        n_live = end_escaped(w, s, opts, n_live, prefetch, L, counts);
         if (n_live == 0 && w->n_scalar == 0)
             continue;
         if (n_live > 0)

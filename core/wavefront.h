@@ -4,7 +4,9 @@
  * ends takes the next item. Each path runs exactly the one-path walker's
  * stages (path.h: dr_path_step cut at its ray queries), so it makes the same
  * decisions with the same numbers; only the order in which paths are worked
- * on changes. Scenes with media use the one-path walker.
+ * on changes. Scenes with media use the one-path walker (a render's
+ * radiance, where every medium is bounded, the packet tracer until a path
+ * could meet one: wave_soa.c's finish_in_media).
  *
  * A lane works on one item (a pixel sample) at a time, as one or more walks
  * (render: one; path replay: the primal walk, then the replay). What a walk
