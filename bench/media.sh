@@ -19,6 +19,11 @@
 #      stderr^2 x seconds of d loss / d extinction (red) with DRT over the
 #      baseline's, which takes the collisions in homogeneous media (below 1:
 #      DRT's choice is the better one; 1: the same estimator)
+#  vi. a medium in part of a scene: the peer's Cornell box with a small
+#      cube of smoke (the smoke cube's grid) or of homogeneous fog
+#      (bench/make_box_medium.py), rendered as the box alone is: the time per
+#      ray over the box's (the median of three triples run back to back; the
+#      packet tracer keeps the paths that enter no medium, wave_soa.c)
 # Writes $BUILD/bench/media-results.json.
 set -euo pipefail
 BUILD=${BUILD:-build}
@@ -98,9 +103,38 @@ for scene in fog-khr:/materials/0/extensions/DR_medium/extinction fog-global:/ex
         "$(calc "${COST[drt]} / ${COST[baseline]}")"
     PILOT_JSON+="{\"scene\": \"$name\", \"drt_source\": \"$SRC\", \"drt_cost\": ${COST[drt]}, \"baseline_cost\": ${COST[baseline]}},"
 done
+PEER=${PEER:-../shared/bench/peer-cornell-box.gltf}
+PART_JSON=""
+if [[ -f $PEER ]]; then
+    echo " vi. a medium in part of the peer's box (256x256, 16 spp, depth 8, 2 threads): time per ray over the box's"
+    cp tests/data/media/smoke.raw "$TMP/"
+    python3 bench/make_box_medium.py "$PEER" "$TMP/box-grid.gltf" grid smoke.raw
+    python3 bench/make_box_medium.py "$PEER" "$TMP/box-fog.gltf" fog
+    declare -A PER_RAY=()
+    per_ray() {   # seconds per ray of one render of scene $1
+        local j
+        j=$("$DR" render "$1" --sampler independent -o "$TMP/part.exr" --res 256x256 --spp 16 --threads 2 --json)
+        calc "$(json_num "$j" render time) / $(json_num "$j" total rays)" %.6e
+    }
+    for _ in 1 2 3; do
+        for sc in box grid fog; do
+            f=$PEER
+            [[ $sc != box ]] && f=$TMP/box-$sc.gltf
+            PER_RAY[$sc]+="$(per_ray "$f") "
+        done
+    done
+    median3() { tr ' ' '\n' <<<"$1" | sed '/^$/d' | sort -g | sed -n 2p; }
+    B=$(median3 "${PER_RAY[box]}")
+    for sc in grid fog; do
+        M=$(median3 "${PER_RAY[$sc]}")
+        printf '     %-5s %s s per ray against the box'"'"'s %s: %s\n' $sc "$M" "$B" "$(calc "$M / $B")"
+        PART_JSON+="{\"medium\": \"$sc\", \"seconds_per_ray\": $M, \"box_seconds_per_ray\": $B, \"per_ray_over_box\": $(calc "$M / $B")},"
+    done
+fi
 cat >"$OUT/media-results.json" <<JSON
 {"volume_gradient": [${ROWS%,}], "prb_memory_vs_depth": [${MEM_JSON%,}], "prb_memory_change_percent": $SPREAD,
- "render_seconds": $RT, "dense_primal_seconds": $TP, "dense_gradient_seconds": $TG, "pilot": [${PILOT_JSON%,}]}
+ "render_seconds": $RT, "dense_primal_seconds": $TP, "dense_gradient_seconds": $TG, "pilot": [${PILOT_JSON%,}],
+ "medium_in_part_of_box": [${PART_JSON%,}]}
 JSON
 echo
 echo "results in $OUT/media-results.json"

@@ -192,36 +192,6 @@ bool dr_media_box_holds(const struct dr_scene *s, dr_vec3 p)
     return false;
 }
 
-/* The slab test: the segment's parameter interval inside each axis's slab,
- * intersected (an axis the ray runs parallel to: its origin inside or out). */
-static bool box_crossed(dr_vec3 lo, dr_vec3 hi, dr_vec3 o, dr_vec3 d, double tmax)
-{
-    const double oa[3] = {o.x, o.y, o.z}, da[3] = {d.x, d.y, d.z};
-    const double la[3] = {lo.x, lo.y, lo.z}, ha[3] = {hi.x, hi.y, hi.z};
-    double t0 = 0.0, t1 = tmax;
-    for (int a = 0; a < 3; a++) {
-        if (da[a] == 0.0) {
-            if (oa[a] < la[a] || oa[a] > ha[a])
-                return false;
-            continue;
-        }
-        double ta = (la[a] - oa[a]) / da[a], tb = (ha[a] - oa[a]) / da[a];
-        t0 = fmax(t0, fmin(ta, tb));
-        t1 = fmin(t1, fmax(ta, tb));
-    }
-    return t0 <= t1;
-}
-
-bool dr_media_box_crossed(const struct dr_scene *s, dr_vec3 o, dr_vec3 d, double tmax)
-{
-    for (int i = 0; i < s->n_media; i++) {
-        const struct dr_medium *m = &s->media[i];
-        if (!m->bounded || box_crossed(m->bmin, m->bmax, o, d, tmax))
-            return true;
-    }
-    return false;
-}
-
 /* Boundaries crossed before giving up (a ray grazing many thin shells). */
 #define MAX_CROSSINGS 256
 

@@ -30,12 +30,11 @@ static inline bool dr_boundary_dielectric(const struct dr_scene *s, int med)
 
 /* The packet tracer's tests (wave_soa.c), which keep the paths that meet
  * no medium on its eight-lane stages: every medium bounded by a mesh (no
- * global medium); point p or the segment from o along d (unit) up to tmax
- * (INFINITY: a ray) in or through some medium's box, where a path could
- * meet a medium. Conservative: the box holds the boundary. */
+ * global medium: each then has a box, dr_medium's bmin, bmax); point p in
+ * some medium's box, where a path could start in a medium. Conservative:
+ * the box holds the boundary. */
 bool dr_media_all_bounded(const struct dr_scene *scene);
 bool dr_media_box_holds(const struct dr_scene *scene, dr_vec3 p);
-bool dr_media_box_crossed(const struct dr_scene *scene, dr_vec3 o, dr_vec3 d, double tmax);
 
 /* The medium containing point o (-1: vacuum): the first medium boundary along
  * direction d says (its back seen: inside it). */
