@@ -302,6 +302,16 @@ static double segment_reach(const struct dr_scene *s, const struct dr_path_state
 bool dr_medium_path_step(const struct dr_scene *s, const struct dr_path_opts *opts, struct dr_path_state *st,
                          struct dr_sampler *sampler, struct dr_path_vertex *v, struct dr_ray_counts *counts)
 {
+    return dr_medium_path_step_traced(s, opts, st, sampler, v, counts, NULL);
+}
+
+/* (traced: see path.h. The answer of the full trace serves where the walker
+ * would have traced only up to segment_reach: the events are the same, as
+ * segment_reach says.) */
+bool dr_medium_path_step_traced(const struct dr_scene *s, const struct dr_path_opts *opts, struct dr_path_state *st,
+                                struct dr_sampler *sampler, struct dr_path_vertex *v, struct dr_ray_counts *counts,
+                                const int64_t *traced)
+{
     v->depth = ++st->depth;
     v->d = st->d;
     v->seg = dr_v3s(1.0);
@@ -320,13 +330,18 @@ bool dr_medium_path_step(const struct dr_scene *s, const struct dr_path_opts *op
     struct dr_spectral_mis mis = {st->hero, {st->mis_r[0], st->mis_r[1], st->mis_r[2]}};
     const dr_vec3 w_before = dr_spectral_mis_weight(&mis);
     for (int crossing = 0; crossing < MAX_CROSSINGS; crossing++) {
-        if (st->depth == 1 && crossing == 0)
-            counts->camera++;
-        else
-            counts->extension++;
         v->medium = st->medium;
-        uint64_t key = (s->effects & DR_FX_ALPHA_BLEND) ? dr_coverage_key(sampler->key, st->depth, DR_RAY_TRACE) : 0;
-        int64_t tri = dr_accel_intersect_key(s->accel, st->o, st->d, 0.0, segment_reach(s, st, &rng), key);
+        int64_t tri;
+        if (crossing == 0 && traced) {
+            tri = *traced;
+        } else {
+            if (st->depth == 1 && crossing == 0)
+                counts->camera++;
+            else
+                counts->extension++;
+            uint64_t key = (s->effects & DR_FX_ALPHA_BLEND) ? dr_coverage_key(sampler->key, st->depth, DR_RAY_TRACE) : 0;
+            tri = dr_accel_intersect_key(s->accel, st->o, st->d, 0.0, segment_reach(s, st, &rng), key);
+        }
         struct dr_hit h;
         double thit = INFINITY;   /* (no surface up to the reach: the flight collides before it) */
         if (tri >= 0) {

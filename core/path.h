@@ -439,6 +439,12 @@ bool dr_path_stage_continue(const struct dr_path_opts *opts, struct dr_path_stat
 /* dr_path_step for scenes with media (medium_path.c). */
 bool dr_medium_path_step(const struct dr_scene *scene, const struct dr_path_opts *opts, struct dr_path_state *st,
                          struct dr_sampler *sampler, struct dr_path_vertex *v, struct dr_ray_counts *counts);
+/* ... whose first ray query the caller has made (traced, not NULL: its
+ * answer, the closest hit from st->o along st->d, unbounded, with the
+ * step's coverage key; counted by the caller). */
+bool dr_medium_path_step_traced(const struct dr_scene *scene, const struct dr_path_opts *opts, struct dr_path_state *st,
+                                struct dr_sampler *sampler, struct dr_path_vertex *v, struct dr_ray_counts *counts,
+                                const int64_t *traced);
 /* A path that has met no medium yet, handed to dr_medium_path_step after
  * st->depth segments in vacuum (the packet tracer's, wave_soa.c): its
  * medium (the global one: vacuum in the scenes it hands over from), hero

@@ -405,7 +405,7 @@ static void scalar_state(const struct dr_wave_soa *w, int k, struct dr_path_stat
  * stages take the paths until they could enter one: a camera ray that
  * starts in a medium's box, a ray that hits a medium's boundary. Such a path
  * goes back to the start of its step and the one-path walker takes it from
- * there to its end (it traces the step's ray again: a ray more, counted),
+ * there to its end (the step's ray query answered by the stages' trace),
  * with its own operations on the path's own numbers, so that the image is
  * the one-path walker's (test_render; but with alphaMode BLEND surfaces,
  * whose shadow rays draw their coverage from another stream there,
@@ -426,9 +426,10 @@ static void finish_in_media(const struct dr_wave_soa *w, const struct dr_scene *
     v.mrec = NULL;   /* (nothing recorded: no parameters) */
     dr_medium_path_resume(s, &st, &smp);
     dr_vec3 L = dr_v3(w->Lx[k], w->Ly[k], w->Lz[k]);   /* (summed on as dr_path_radiance sums) */
-    for (bool more = true; more;) {
+    for (bool more = true, first = true; more; first = false) {
         const dr_vec3 beta = st.beta;
-        more = dr_path_step(s, opts, &st, &smp, &v, counts);
+        more = first ? dr_medium_path_step_traced(s, opts, &st, &smp, &v, counts, &w->tri[k])
+                     : dr_path_step(s, opts, &st, &smp, &v, counts);
         L = dr_add(L, dr_mul(beta, dr_path_vertex_term(&v)));
     }
     out[w->item[k]] = L;
