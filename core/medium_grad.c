@@ -458,6 +458,14 @@ static void d_scatter(const struct dr_scene *s, const struct dr_path_opts *opts,
  * paths of up to GAIN_PATHS vertices. */
 #define GAIN_PATHS 8
 
+bool dr_medium_vertex_has_derivative(const struct dr_param_set *ps, const struct dr_path_vertex *v)
+{
+    if (!v->media || !v->mrec || !ps || !ps->media_active)
+        return false;
+    const bool scattered = v->kind == DR_VERTEX_MEDIUM && v->shaded && ps->med_active[v->medium];
+    return scattered || v->mrec->seg.n > 0 || (v->nee && v->mrec->shadow.n > 0);
+}
+
 void d_medium_vertex(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
                      const struct dr_medium_record *rec, int path_vertices, dr_vec3 d_beta, dr_vec3 d_R,
                      dr_vec3 d_Rn, dr_vec3 d_nee, struct dr_grad_sink *sink)

@@ -17,6 +17,14 @@ void d_medium_vertex(const struct dr_scene *scene, const struct dr_path_opts *op
                      const struct dr_medium_record *rec, int path_vertices, dr_vec3 d_beta, dr_vec3 d_R,
                      dr_vec3 d_Rn, dr_vec3 d_nee, struct dr_grad_sink *sink);
 
+/* Does d_medium_vertex give v a term? Only where media parameters are
+ * requested and v's segment or shadow ray crossed a medium (the recorded
+ * pieces, which its gain paths follow too) or v scattered in a
+ * differentiated one: a vertex of the medium walker whose rays stayed out
+ * of every medium has none. Read right after the walker's step (v->mrec
+ * then holds v's pieces). */
+bool dr_medium_vertex_has_derivative(const struct dr_param_set *params, const struct dr_path_vertex *v);
+
 /* Where DRT takes the sigma_t share of scattering in a thin homogeneous
  * medium (thickness below 1, medium_grad.c's gain_at_collisions):
  * from the path's collisions where a pilot saw many of the stretches

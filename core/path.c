@@ -423,7 +423,13 @@ dr_vec3 dr_path_radiance(const struct dr_scene *s, const struct dr_path_opts *op
 bool dr_path_vertex_has_derivative(const struct dr_scene *s, const struct dr_param_set *ps,
                                    const struct dr_path_vertex *v)
 {
-    if (v->diff_bsdf || v->media)
+    return v->media || dr_path_vertex_has_surface_derivative(s, ps, v);
+}
+
+bool dr_path_vertex_has_surface_derivative(const struct dr_scene *s, const struct dr_param_set *ps,
+                                           const struct dr_path_vertex *v)
+{
+    if (v->diff_bsdf)
         return true;
     if (!ps->radiance_active)   /* (then nothing else of v is read: the eight-lane stages rely on it) */
         return false;

@@ -260,6 +260,11 @@ static inline bool dr_path_light_kept(const struct dr_scene *s, const struct dr_
 
 bool dr_path_vertex_has_derivative(const struct dr_scene *scene, const struct dr_param_set *params,
                                    const struct dr_path_vertex *v);
+/* ... but for the media: its BSDF, emission or light sample (a vertex of the
+ * medium walker, v->media, may have these and a media term besides:
+ * medium_grad.h's dr_medium_vertex_has_derivative). */
+bool dr_path_vertex_has_surface_derivative(const struct dr_scene *scene, const struct dr_param_set *params,
+                                           const struct dr_path_vertex *v);
 /* Adjoint of the continuation's BSDF value f along v->wi, given d_f. */
 void d_path_continuation(const struct dr_scene *scene, const struct dr_param_set *params,
                          const struct dr_path_vertex *v, dr_vec3 d_f, struct dr_grad_sink *sink);

@@ -143,7 +143,11 @@ static void walk_vertex(const struct dr_est_base *b, struct walk *w, const struc
     dr_vec3 remaining = L->true_;   /* replay: from this vertex on */
     L->sub = dr_madd(L->sub, c, sign);
     L->true_ = dr_madd(L->true_, dr_mul(ratio, c), sign);
-    const bool has_derivative = dr_path_vertex_has_derivative(s, ps, v);
+    /* (in a scene with media: where the media give the vertex a term. Most
+     * paths through a room with a smoke in it never meet the smoke, and
+     * their replays now end where a scene without it would end them) */
+    const bool has_derivative =
+        dr_path_vertex_has_surface_derivative(s, ps, v) || dr_medium_vertex_has_derivative(ps, v);
     if (!sink) {
         if (has_derivative)
             w->last_diff = v->depth;

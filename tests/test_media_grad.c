@@ -14,6 +14,7 @@
  * three agree. */
 #include <stdlib.h>
 
+#include "camera.h"
 #include "error.h"
 #include "estimator.h"
 #include "media_builder.h"
@@ -549,8 +550,69 @@ static void check_plan_reuse(void)
     dr_scene_destroy(s);
 }
 
+/* dr_medium_vertex_has_derivative's contract, against d_medium_vertex
+ * itself: a vertex of the medium walker it calls free of media terms (its
+ * rays stayed out of the cube: the floor seen beside it, the sky) gets
+ * nothing from it, with unit adjoints everywhere and DRT's gain paths on
+ * every vertex. prb ends its replays at the last vertex with a term by this
+ * predicate (estimators/prb.c's walk_vertex). */
+static void check_media_predicate(void)
+{
+    struct dr_scene *s = cube_scene(false);
+    struct dr_camera cam = sb_camera(dr_v3(0.4, 0.8, 4.0), dr_v3(0, -0.5, 0), 70);
+    const char *ptrs[] = {"/materials/0/extensions/DR_medium/density", "/materials/0/extensions/DR_medium/albedo",
+                          "/materials/0/extensions/DR_medium/g", "/materials/0/extensions/DR_medium/extinction",
+                          "/materials/0/extensions/DR_medium/density_scale"};
+    struct dr_param_set *ps = dr_param_set_create(s, ptrs, 5);
+    CHECK(ps != NULL, "predicate: %s", dr_last_error());
+    if (!ps)
+        return;
+    const struct dr_path_opts opts = {.max_depth = 8, .rr_depth = DR_RR_DEPTH_DEFAULT, .stages = dr_path_plan(s, ps),
+                                      .params = ps, .medium_grad = DR_MEDIUM_GRAD_DRT};
+    struct dr_camera_view view = dr_camera_view(&cam, 32, 32);
+    double *g = calloc((size_t)ps->total, sizeof(double));
+    struct dr_medium_record rec;
+    struct dr_ray_counts rays = {0};
+    int with = 0, without = 0, leaks = 0;
+    for (int i = 0; i < 3000; i++) {
+        struct dr_sampler smp;
+        dr_sampler_init(&smp, 5, (uint64_t)i, 0);
+        double u, v;
+        dr_sampler_next2(&smp, &u, &v);
+        dr_vec3 o, d;
+        dr_camera_ray(&view, (i % 32) + u, ((i / 32) % 32) + v, &o, &d);
+        struct dr_path_state st;
+        struct dr_path_vertex vx;
+        vx.mrec = &rec;
+        dr_path_start(&st, o, d);
+        for (bool more = true; more;) {
+            more = dr_path_step(s, &opts, &st, &smp, &vx, &rays);
+            if (dr_medium_vertex_has_derivative(ps, &vx)) {
+                with++;
+                continue;
+            }
+            without++;
+            struct dr_grad_sink sink = dr_sink_reverse(g);
+            d_medium_vertex(s, &opts, &vx, &rec, 1, dr_v3s(1.0), dr_v3s(1.0), dr_v3s(1.0), dr_v3s(1.0), &sink);
+            for (int64_t k = 0; k < ps->total; k++)
+                if (g[k] != 0.0) {
+                    leaks++;
+                    g[k] = 0.0;
+                }
+        }
+    }
+    CHECK(with > 100 && without > 100, "media predicate: vertices with %d, without %d (both kinds needed)", with,
+          without);
+    CHECK(leaks == 0, "media predicate: %d media terms at vertices it calls free of them", leaks);
+    fprintf(stderr, "media predicate: %d vertices with a media term, %d without, %d leaks\n", with, without, leaks);
+    free(g);
+    dr_param_set_destroy(ps);
+    dr_scene_destroy(s);
+}
+
 int main(void)
 {
+    check_media_predicate();
     check_pilot_rule();
     check_plan_reuse();
     /* least extinction x the cube's mean chord of 4/3: thickness 0.13, 0.67, 2.7 */
