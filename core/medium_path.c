@@ -299,6 +299,19 @@ static double segment_reach(const struct dr_scene *s, const struct dr_path_state
     return t + 1e-5 * (t + scale);
 }
 
+/* The ray query of the segment's crossing-th stretch (after as many
+ * boundaries), counted. */
+static int64_t segment_query(const struct dr_scene *s, const struct dr_path_state *st, const struct dr_sampler *sampler,
+                             const struct dr_sampler *rng, int crossing, struct dr_ray_counts *counts)
+{
+    if (st->depth == 1 && crossing == 0)
+        counts->camera++;
+    else
+        counts->extension++;
+    uint64_t key = (s->effects & DR_FX_ALPHA_BLEND) ? dr_coverage_key(sampler->key, st->depth, DR_RAY_TRACE) : 0;
+    return dr_accel_intersect_key(s->accel, st->o, st->d, 0.0, segment_reach(s, st, rng), key);
+}
+
 bool dr_medium_path_step(const struct dr_scene *s, const struct dr_path_opts *opts, struct dr_path_state *st,
                          struct dr_sampler *sampler, struct dr_path_vertex *v, struct dr_ray_counts *counts)
 {
@@ -307,7 +320,10 @@ bool dr_medium_path_step(const struct dr_scene *s, const struct dr_path_opts *op
 
 /* (traced: see path.h. The answer of the full trace serves where the walker
  * would have traced only up to segment_reach: the events are the same, as
- * segment_reach says.) */
+ * segment_reach says. One loop over the boundaries the segment crosses,
+ * whose cases (absorbed, scattered, a dielectric, escaped or a surface, an
+ * index-matched boundary crossed) read best in order: longer than a screen
+ * for that.) */
 bool dr_medium_path_step_traced(const struct dr_scene *s, const struct dr_path_opts *opts, struct dr_path_state *st,
                                 struct dr_sampler *sampler, struct dr_path_vertex *v, struct dr_ray_counts *counts,
                                 const int64_t *traced)
@@ -331,17 +347,7 @@ bool dr_medium_path_step_traced(const struct dr_scene *s, const struct dr_path_o
     const dr_vec3 w_before = dr_spectral_mis_weight(&mis);
     for (int crossing = 0; crossing < MAX_CROSSINGS; crossing++) {
         v->medium = st->medium;
-        int64_t tri;
-        if (crossing == 0 && traced) {
-            tri = *traced;
-        } else {
-            if (st->depth == 1 && crossing == 0)
-                counts->camera++;
-            else
-                counts->extension++;
-            uint64_t key = (s->effects & DR_FX_ALPHA_BLEND) ? dr_coverage_key(sampler->key, st->depth, DR_RAY_TRACE) : 0;
-            tri = dr_accel_intersect_key(s->accel, st->o, st->d, 0.0, segment_reach(s, st, &rng), key);
-        }
+        const int64_t tri = crossing == 0 && traced ? *traced : segment_query(s, st, sampler, &rng, crossing, counts);
         struct dr_hit h;
         double thit = INFINITY;   /* (no surface up to the reach: the flight collides before it) */
         if (tri >= 0) {
