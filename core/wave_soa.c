@@ -403,7 +403,7 @@ static void scalar_state(const struct dr_wave_soa *w, int k, struct dr_path_stat
 
 /* In a scene with media (every one bounded by a mesh) the eight-lane
  * stages take the paths until they could enter one: a camera ray that
- * starts in a medium's box, a ray that hits a medium's boundary. Such a path
+ * starts in a medium, a ray that hits a medium's boundary. Such a path
  * goes back to the start of its step and the one-path walker takes it from
  * there to its end (the step's ray query answered by the stages' trace),
  * with its own operations on the path's own numbers, so that the image is
@@ -435,12 +435,17 @@ static void finish_in_media(const struct dr_wave_soa *w, const struct dr_scene *
     out[w->item[k]] = L;
 }
 
-/* Does slot k's traced ray start in a medium's box (a camera ray) or end on
- * a medium's boundary? */
+/* Does slot k's traced ray end on a medium's boundary, or start in a medium
+ * (a camera ray: where its origin is in a medium's box, the medium there as
+ * the one-path walker finds it, dr_medium_at: a ray more, uncounted there
+ * too)? */
 static bool meets_medium(const struct dr_wave_soa *w, const struct dr_scene *s, int k)
 {
-    return (w->tri[k] >= 0 && dr_boundary_medium(s, w->tri[k]) >= 0) ||
-           (w->depth[k] == 1.0 && dr_media_box_holds(s, dr_v3(w->ox[k], w->oy[k], w->oz[k])));
+    if (w->tri[k] >= 0 && dr_boundary_medium(s, w->tri[k]) >= 0)
+        return true;
+    const dr_vec3 o = dr_v3(w->ox[k], w->oy[k], w->oz[k]);
+    return w->depth[k] == 1.0 && dr_media_box_holds(s, o) &&
+           dr_medium_at(s, o, dr_v3(w->dx[k], w->dy[k], w->dz[k])) >= 0;
 }
 
 /* The lanes whose segment from o along d up to tmax crosses some medium's

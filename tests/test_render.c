@@ -12,6 +12,7 @@
 #include "sampler.h"
 #include "params.h"
 #include "path_simd.h"
+#include "media_builder.h"
 #include "scene_builder.h"
 #include "wave_soa.h"
 #include "wavefront.h"
@@ -1123,9 +1124,44 @@ static void test_media_outside_paths(void)
     }
 }
 
+/* A fog octahedron (|x| + |y| + |z| <= 1) over a floor: a camera inside its
+ * box [-1, 1]^3 but outside the octahedron starts no path in the fog, and
+ * the packet renderer keeps its paths (wave_soa.c's meets_medium asks the
+ * one-path walker's dr_medium_at where a camera is inside a medium's box);
+ * the image is still the one-path walker's. */
+static void test_media_camera_in_box(void)
+{
+    struct sb b;
+    sb_init(&b);
+    const int fog = sb_material(&b, sb_diffuse(dr_v3s(0.5)));
+    const dr_vec3 axis[3] = {dr_v3(1, 0, 0), dr_v3(0, 1, 0), dr_v3(0, 0, 1)};
+    for (int f = 0; f < 8; f++) {   /* face (sx, sy, sz), wound to face outwards */
+        const double sx = f & 1 ? -1 : 1, sy = f & 2 ? -1 : 1, sz = f & 4 ? -1 : 1;
+        uint32_t a = sb_vertex(&b, dr_scale(axis[0], sx), 0, 0), c = sb_vertex(&b, dr_scale(axis[1], sy), 0, 0),
+                 d = sb_vertex(&b, dr_scale(axis[2], sz), 0, 0);
+        if (sx * sy * sz > 0)
+            sb_triangle(&b, a, c, d, fog);
+        else
+            sb_triangle(&b, a, d, c, fog);
+    }
+    sb_medium(&b, fog, medium(dr_v3(1.5, 2.0, 2.5), dr_v3(0.8, 0.8, 0.7), 0.2));
+    sb_quad(&b, dr_v3(-4, -1.2, -4), dr_v3(0, 0, 8), dr_v3(8, 0, 0), sb_material(&b, sb_diffuse(dr_v3(0.6, 0.5, 0.4))));
+    sb_environment(&b, dr_v3(0.6, 0.7, 0.9));
+    struct dr_scene *s = sb_finish(&b);
+    const dr_vec3 corner = dr_v3(0.7, 0.6, 0.8);   /* in the box, |x| + |y| + |z| = 2.1: outside */
+    CHECK(dr_medium_at(s, corner, dr_v3(0, 0, 1)) == -1 && dr_medium_at(s, dr_v3(0.1, 0.1, 0.1), dr_v3(0, 0, 1)) == 0,
+          "octahedron: the corner of its box is outside it, its centre inside");
+    const uint64_t simd = wavefront_matches_one_path(s, sb_camera(corner, dr_v3(-0.5, -1.2, -0.5), 70.0),
+                                                     "camera in the octahedron's box, outside it");
+    CHECK(simd > 0, "camera outside the fog but in its box: %llu vertices eight lanes at a time",
+          (unsigned long long)simd);
+    dr_scene_destroy(s);
+}
+
 int main(void)
 {
     test_wavefront_matches_one_path();
+    test_media_camera_in_box();
     test_media_outside_paths();
     test_emitter_seen_directly();
     test_diffuse_plane_constant_env();
