@@ -366,9 +366,8 @@ static void trace(struct dr_wave_soa *w, const struct dr_scene *s, int n_live, i
         log_trace(w, w->item[k], (int)w->depth[k], w->tri[k]);
 }
 
-/* Slot k's path as the scalar walker holds it, just begun on its vertex
- * (dr_path_step_begin: the trace counted its segment already) in *v, with
- * its sampler at the vertex's numbers. */
+/* Slot k's path and sampler as the scalar walker holds them before the
+ * step whose ray (the arrays' o, d) the trace has just traced. */
 static void path_state(const struct dr_wave_soa *w, int k, struct dr_path_state *st, struct dr_sampler *smp)
 {
     dr_path_start(st, dr_v3(w->ox[k], w->oy[k], w->oz[k]), dr_v3(w->dx[k], w->dy[k], w->dz[k]));
@@ -410,10 +409,9 @@ static void scalar_state(const struct dr_wave_soa *w, int k, struct dr_path_stat
  * the one-path walker's (test_render; but with alphaMode BLEND surfaces,
  * whose shadow rays draw their coverage from another stream there,
  * medium_scene.h's dr_media_shadow_key: the same odds, not the same
- * draws). A shadow ray through a medium's box,
- * where the stages' occlusion test would take the boundary for a wall,
- * takes the walker's transmittance (shadows_through_media) and its path
- * stays. So the paths that never enter a medium, most of them where a smoke
+ * draws). A shadow ray through a medium's box, where the stages' occlusion
+ * test would take the boundary for a wall, takes the walker's transmittance
+ * (shadows_through_media) and its path stays. So the paths that never enter a medium, most of them where a smoke
  * or fog fills part of a scene, run as in a scene without media. Radiance
  * runs only: derivatives of media take the one-path walker throughout. */
 static void finish_in_media(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
