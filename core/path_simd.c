@@ -377,9 +377,9 @@ DR_SIMD_INLINE dr_m8 bsdf_sample(const struct dr_path8 *g, dr_m8 on, dr_f8 u_lob
 /* ----------------------------------------------------------- eligibility */
 
 /* The run's effects and stages are all the eight-lane stages' (whatever
- * its parameters). */
-/* media: media are allowed (the caller hands each path that meets one to
- * the one-path walker: dr_path8_applies_outside_media) */
+ * its parameters); with `media`, media and dielectric boundaries too (the
+ * caller hands each path that could enter a medium to the one-path walker:
+ * dr_path8_applies_outside_media). */
 static bool eight_lane_run(const struct dr_scene *s, const struct dr_path_opts *opts, bool media)
 {
     /* (alphaMode MASK and BLEND: the surfaces a ray passes are Embree's

@@ -472,16 +472,17 @@ void dr_wave_radiance(struct dr_wave *w, const struct dr_scene *s, const struct 
     if (dr_wave_soa_applies(s, opts) && (w->soa || (w->soa = dr_wave_soa_create()))) {
         dr_wave_soa_radiance(w->soa, s, opts, n, start, start8, ctx, L, counts);
         return;
-    }   /* (out of memory for the arrays: the lanes, which need none; with
-           media, which the lanes do not know, one path at a time) */
-    for (int64_t i = 0; (opts->stages & DR_STAGE_MEDIA) && i < n; i++) {
+    }   /* (out of memory for the arrays: the lanes, which need none) */
+    if (!(opts->stages & DR_STAGE_MEDIA)) {
+        dr_wave_radiance_lanes(w, s, opts, n, start, ctx, L, counts);
+        return;
+    }
+    for (int64_t i = 0; i < n; i++) {   /* (media, which the lanes do not know: one path at a time) */
         struct dr_sampler smp;
         dr_vec3 o, d;
         start(ctx, i, &smp, &o, &d);
         L[i] = dr_path_radiance(s, opts, o, d, &smp, counts);
     }
-    if (!(opts->stages & DR_STAGE_MEDIA))
-        dr_wave_radiance_lanes(w, s, opts, n, start, ctx, L, counts);
 }
 
 void dr_wave_radiance_lanes(struct dr_wave *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
