@@ -560,6 +560,7 @@ struct opt_run {
     double *theta, *grad, *ref;        /* values, gradient, reference values */
     double *se;                        /* the gradient's standard error */
     double *gt, *se_t;                 /* several targets: one target's gradient and standard error */
+    struct dr_reverse_scratch scratch; /* the gradient runs' vectors, kept from iteration to iteration */
     struct history hist;
     double loss;
     char ckpt[4096];
@@ -721,6 +722,7 @@ static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
             .batches = a->batches, .primal = a->primal,
             .problem = grad_problem(&a->g, r->scene, cam, r->ps, t->w, t->h, a->g.spp,
                                     iteration_seed(a->g.seed, it, ti, 0x47524144))};
+        o.scratch = &r->scratch;
         struct dr_reverse_result res = {.grad = several ? r->gt : r->grad, .se = several ? r->se_t : r->se,
                                         .image = t->render};
         if (dr_reverse_gradient(&o, t->rgb, &res) != 0) {
@@ -949,6 +951,7 @@ static void opt_free(struct opt_args *a, struct opt_run *r)
     free(r->hist.seconds);
     free(r->hist.error);
     free(r->theta);
+    dr_reverse_scratch_free(&r->scratch);
     free(r->grad);
     free(r->gt);
     free(r->se);

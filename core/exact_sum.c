@@ -1,6 +1,7 @@
 #include "exact_sum.h"
 
 #include <stdlib.h>
+#include <string.h>
 
 #include "bigalloc.h"
 #include "error.h"
@@ -32,6 +33,13 @@ void dr_exact_sum_destroy(struct dr_exact_sum *e)
     free(e->w);
     free(e->bad);
     free(e);
+}
+
+void dr_exact_sum_clear(struct dr_exact_sum *e)
+{
+    const size_t n1 = (size_t)(e->n > 0 ? e->n : 1);
+    memset(e->w, 0, n1 * sizeof *e->w);
+    memset(e->bad, 0, n1);
 }
 
 uint64_t dr_exact_sum_bytes(int64_t n)

@@ -47,6 +47,9 @@ struct dr_exact_sum {
 /* n entries, all zero; NULL + dr_last_error on out of memory. */
 struct dr_exact_sum *dr_exact_sum_create(int64_t n);
 void dr_exact_sum_destroy(struct dr_exact_sum *e);
+/* Every entry back to zero (and no longer bad): as created, in the memory
+ * it has (estimator.h's dr_est_scratch). */
+void dr_exact_sum_clear(struct dr_exact_sum *e);
 /* Bytes held for n entries. */
 uint64_t dr_exact_sum_bytes(int64_t n);
 /* Entries [0, n) as doubles (correctly rounded) into out; an entry with a

@@ -27,6 +27,8 @@ struct rev_work {
     int done, steps;
     struct dr_mis_history mis;   /* mis without the caller's history: this run's batches' */
     struct dr_media_plan media_plan;   /* the batches' media pilot (medium_grad.h), unless the caller's */
+    struct dr_reverse_scratch own;     /* the batches' vectors, unless the caller keeps them (o->scratch) */
+    struct dr_reverse_scratch *scratch;   /* o->scratch or &own */
 };
 
 static void work_free(struct rev_work *w)
@@ -35,10 +37,31 @@ static void work_free(struct rev_work *w)
     free(w->adj);
     free(w->img_sum);
     free(w->cross_img);
-    free(w->half[0]);
-    free(w->half[1]);
+    dr_reverse_scratch_free(&w->own);
     dr_mis_history_free(&w->mis);
     dr_media_plan_free(&w->media_plan);
+}
+
+void dr_reverse_scratch_free(struct dr_reverse_scratch *s)
+{
+    if (!s)
+        return;
+    free(s->half[0]);
+    free(s->half[1]);
+    dr_est_scratch_free(&s->est);
+    memset(s, 0, sizeof *s);
+}
+
+/* The scratch's half h, T1 entries (not cleared: a batch overwrites it),
+ * allocated where it has none of that size. */
+static double *scratch_half(struct dr_reverse_scratch *s, int h, size_t T1)
+{
+    if (s->half[h] && s->half_len[h] == (int64_t)T1)
+        return s->half[h];
+    free(s->half[h]);
+    s->half[h] = dr_calloc_big(T1, sizeof(double));
+    s->half_len[h] = s->half[h] ? (int64_t)T1 : 0;
+    return s->half[h];
 }
 
 /* Scratch for a run: the sums live in the caller's se and se_gradient
@@ -54,8 +77,9 @@ static int work_alloc(struct rev_work *w, const struct dr_reverse_result *r)
     w->adj = malloc(sizeof(float) * w->n);
     w->img_sum = calloc(w->n, sizeof(double));
     w->cross_img = calloc(w->n, sizeof(double));
-    w->half[0] = dr_calloc_big(T1, sizeof(double));
-    w->half[1] = split ? dr_calloc_big(T1, sizeof(double)) : NULL;
+    w->scratch = w->o->scratch ? w->o->scratch : &w->own;
+    w->half[0] = scratch_half(w->scratch, 0, T1);
+    w->half[1] = split ? scratch_half(w->scratch, 1, T1) : NULL;
     w->m2 = r->se;
     memset(w->m2, 0, sizeof(double) * (size_t)w->T);
     /* the halves' squared differences feed se_gradient and se_primal only */
@@ -107,6 +131,8 @@ static int run_estimator(struct rev_work *w, uint64_t seed, int spp, const struc
         p.mis_history = &w->mis;
     if (!p.media_plan)
         p.media_plan = &w->media_plan;
+    if (!p.scratch)
+        p.scratch = &w->scratch->est;
     struct dr_grad_stats st = {0};
     int rc = dr_estimator_backward(w->o->estimator, &p, cross ? NULL : w->adj, g, &st);
     if (rc != 0)

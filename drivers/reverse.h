@@ -54,6 +54,19 @@ enum dr_primal_mode {
     DR_PRIMAL_SHARED,      /* one primal for all batches (understates the error; tests only) */
 };
 
+/* What a run's batches sum into, kept from run to run by a caller that
+ * runs many (optimize: one run an iteration) so that no run faults in
+ * fresh pages for them (estimator.h's dr_est_scratch says why): a batch's
+ * gradient halves and the estimator runs' own vectors. Zero-initialised,
+ * caller-owned; dr_reverse_scratch_free releases it (and zeroes it). The
+ * results are the same to the bit with or without it. */
+struct dr_reverse_scratch {
+    double *half[2];
+    int64_t half_len[2];
+    struct dr_est_scratch est;
+};
+void dr_reverse_scratch_free(struct dr_reverse_scratch *s);
+
 struct dr_reverse_options {
     const struct dr_estimator_ops *estimator;
     struct dr_grad_problem problem;   /* .spp: samples per pixel in all (split over the batches) */
@@ -66,6 +79,7 @@ struct dr_reverse_options {
     void (*on_render)(void *ctx, const struct dr_render_stats *st);
     void (*on_gradient)(void *ctx, const struct dr_grad_stats *st);
     void *ctx;
+    struct dr_reverse_scratch *scratch;   /* optional (above); NULL: the run's own, freed at its end */
 };
 
 struct dr_reverse_result {

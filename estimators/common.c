@@ -67,13 +67,15 @@ void dr_est_camera_ray(struct dr_est_base *b, int thread, int64_t pixel, int sam
 
 /* ------------------------------------------------------------ accumulators */
 
-/* What accum_init allocated (never the caller's vectors: grad[0], image). */
+/* What accum_init allocated (never the caller's vectors: grad[0], image,
+ * nor the scratch's). */
 static void accum_free(struct dr_est_accum *a)
 {
-    dr_exact_sum_destroy(a->exact);
+    if (!a->scratch)
+        dr_exact_sum_destroy(a->exact);
     a->exact = NULL;
     for (int t = 0; t < DR_MAX_THREADS; t++) {
-        if (t > 0)
+        if (t > 0 && !a->scratch)
             free(a->grad[t]);
         free(a->chunk[t]);
         a->grad[t] = a->chunk[t] = NULL;
@@ -85,6 +87,53 @@ static double *accum_alloc(struct dr_est_accum *a, size_t n)
 {
     a->bytes += n * sizeof(double);
     return dr_calloc_big(n, sizeof(double));   /* texture gradients: 100 MB a 2k texture */
+}
+
+/* Thread t's gradient vector of n entries, zeroed: the scratch's, cleared,
+ * where it holds one of that size (estimator.h: no fresh pages), else a
+ * new one, kept there when there is a scratch. */
+static double *accum_thread_vector(struct dr_est_accum *a, int t, size_t n)
+{
+    struct dr_est_scratch *s = a->scratch;
+    if (!s)
+        return accum_alloc(a, n);
+    if (s->grad[t] && s->len[t] == (int64_t)n) {
+        a->bytes += n * sizeof(double);
+        memset(s->grad[t], 0, n * sizeof(double));
+        return s->grad[t];
+    }
+    free(s->grad[t]);
+    s->grad[t] = accum_alloc(a, n);
+    s->len[t] = s->grad[t] ? (int64_t)n : 0;
+    return s->grad[t];
+}
+
+/* The shared exact sum of n entries, zeroed: the scratch's if it has one of
+ * that size, as accum_thread_vector. */
+static struct dr_exact_sum *accum_exact(struct dr_est_accum *a, int64_t n)
+{
+    struct dr_est_scratch *s = a->scratch;
+    a->bytes += dr_exact_sum_bytes(n);
+    if (!s)
+        return dr_exact_sum_create(n);
+    if (s->exact && s->exact_len == n) {
+        dr_exact_sum_clear(s->exact);
+        return s->exact;
+    }
+    dr_exact_sum_destroy(s->exact);
+    s->exact = dr_exact_sum_create(n);
+    s->exact_len = s->exact ? n : 0;
+    return s->exact;
+}
+
+void dr_est_scratch_free(struct dr_est_scratch *s)
+{
+    if (!s)
+        return;
+    for (int t = 0; t < DR_MAX_THREADS; t++)
+        free(s->grad[t]);
+    dr_exact_sum_destroy(s->exact);
+    memset(s, 0, sizeof *s);
 }
 
 bool dr_estimator_shared_sums(int threads, int64_t total)
@@ -109,6 +158,7 @@ static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, b
                       double *d_image)
 {
     memset(a, 0, sizeof *a);
+    a->scratch = forward || mis ? NULL : p->scratch;
     a->threads = dr_thread_count(p->threads);
     a->total = p->params->total;
     if (mis)
@@ -118,14 +168,12 @@ static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, b
         a->image = d_image;
         return 0;
     }
-    if (dr_estimator_shared_sums(a->threads, a->total)) {
-        a->bytes += dr_exact_sum_bytes(a->total);
-        return (a->exact = dr_exact_sum_create(a->total)) ? 0 : DR_ERR_NOMEM;
-    }
+    if (dr_estimator_shared_sums(a->threads, a->total))
+        return (a->exact = accum_exact(a, a->total)) ? 0 : DR_ERR_NOMEM;
     memset(out, 0, sizeof(double) * (size_t)a->total);
     a->grad[0] = out;
     for (int t = 0; t < a->threads; t++) {
-        if (t > 0 && !(a->grad[t] = accum_alloc(a, (size_t)a->total + 1)))
+        if (t > 0 && !(a->grad[t] = accum_thread_vector(a, t, (size_t)a->total + 1)))
             goto nomem;
         if (a->total <= CHUNK_LOCAL_MAX && !(a->chunk[t] = accum_alloc(a, (size_t)a->total + 1)))
             goto nomem;

@@ -32,6 +32,8 @@ struct dr_est_accum {
     double *image;                        /* forward mode: the caller's d image (w*h*3), every thread
                                              writes its own pixels */
     uint64_t bytes;                       /* what the buffers above hold */
+    struct dr_est_scratch *scratch;       /* where grad[1..] and exact come from, if anywhere
+                                             (the problem's: not freed by the run) */
 };
 
 /* What the samples of the pixel a thread started last share

@@ -22,6 +22,7 @@
 #include "loss.h"
 #include "medium_grad.h"
 #include "sampler.h"
+#include "parallel.h"
 #include "params.h"
 #include "path.h"
 #include "scene.h"
@@ -89,7 +90,31 @@ struct dr_grad_problem {
     struct dr_media_plan *media_plan;     /* DRT (optional, in/out): the media pilot's choice, reused by
                                              later runs where it still applies (medium_grad.h); NULL:
                                              every run that needs one pilots */
+    struct dr_est_scratch *scratch;       /* reverse mode (optional, in/out): the run's own gradient
+                                             vectors, kept for the next run (below); NULL: allocated
+                                             and freed by every run */
 };
+
+/* The big vectors a reverse-mode run sums into besides the caller's: the
+ * second and later threads' gradient vectors, or from four threads on the
+ * shared exact sum (dr_estimator_shared_sums). A texture parameter makes
+ * them big (100 MB for a 2k texture), and fresh memory is expensive on
+ * the virtual machines drender runs on: the kernel maps and zeroes every
+ * page at its first touch, about 60 ms per 100 MB, which was 15 % of a
+ * 2k-texture gradient's time (4 batches, 2 threads). A caller that runs
+ * the same problem many times (grad's batches, optimize's iterations)
+ * keeps them here: a later run of the same size clears memory it already
+ * holds instead. Caller-owned, zero-initialised; dr_est_scratch_free
+ * releases what the runs left (and zeroes it). The results are the same
+ * to the bit with or without it. */
+struct dr_exact_sum;   /* exact_sum.h */
+struct dr_est_scratch {
+    double *grad[DR_MAX_THREADS];   /* [0] unused: thread 0 sums into the caller's vector */
+    int64_t len[DR_MAX_THREADS];
+    struct dr_exact_sum *exact;
+    int64_t exact_len;
+};
+void dr_est_scratch_free(struct dr_est_scratch *s);
 
 /* The sampling an algorithm runs: attached (or mis) sampling where no
  * requested parameter enters a sampling map, and derivative sampling with no

@@ -12,6 +12,7 @@
 #include "loss.h"
 #include "estimator.h"
 #include "render.h"
+#include "reverse.h"
 #include "sampler.h"
 #include "scene_builder.h"
 #include "test.h"
@@ -401,6 +402,94 @@ static void cross_adjoint_by_hand(void)
         }
 }
 
+/* estimator.h's dr_est_scratch and reverse.h's dr_reverse_scratch: runs
+ * that reuse the caller's vectors (cleared, not fresh) give the same
+ * gradient to the bit as runs with their own, again and again; a problem of
+ * another size replaces them. threads 2: thread 1's vector is kept; 4 with a
+ * texture of at least DR_SHARED_SUMS_MIN entries: the shared exact sum. */
+static void scratch_reuse(const char *what, struct dr_scene *s, const struct dr_camera *cam, const char *const *ptrs,
+                          int n, int threads)
+{
+    struct dr_param_set *ps = dr_param_set_create(s, ptrs, n), *small = dr_param_set_create(s, ptrs + n - 1, 1);
+    CHECK(ps && small && small->total < ps->total, "%s: param sets: %s", what, dr_last_error());
+    if (!ps || !small)
+        return;
+    const bool exact = dr_estimator_shared_sums(threads, ps->total);
+    const struct dr_estimator_ops *prb = dr_estimator_find("prb");
+    float *adj = malloc(sizeof(float) * 3 * W * H);
+    struct dr_sampler r;
+    dr_sampler_init(&r, 3, 4, 5);
+    for (int i = 0; i < 3 * W * H; i++)
+        adj[i] = (float)(dr_sampler_next(&r) - 0.4);
+    double *own = calloc((size_t)ps->total, sizeof(double)), *kept = calloc((size_t)ps->total, sizeof(double));
+    struct dr_est_scratch sc = {0};
+    struct dr_grad_problem p = {.scene = s, .camera = cam, .params = ps, .width = W, .height = H, .spp = 2,
+                                .max_depth = 4, .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 5, .threads = threads};
+    CHECK(dr_estimator_backward(prb, &p, adj, own, NULL) == 0, "%s: %s", what, dr_last_error());
+    p.scratch = &sc;
+    const void *first = NULL;
+    for (int run = 0; run < 3; run++) {
+        CHECK(dr_estimator_backward(prb, &p, adj, kept, NULL) == 0, "%s: %s", what, dr_last_error());
+        CHECK(memcmp(own, kept, sizeof(double) * (size_t)ps->total) == 0,
+              "%s: run %d with the scratch differs from a run with its own vectors", what, run);
+        const void *held = exact ? (const void *)sc.exact : (const void *)sc.grad[1];
+        CHECK(held && (run == 0 || held == first), "%s: run %d did not keep (or reuse) the scratch's %s", what,
+              run, exact ? "exact sum" : "thread 1 vector");
+        first = run == 0 ? held : first;
+    }
+    CHECK(exact ? sc.exact_len == ps->total && !sc.grad[1] : sc.len[1] == ps->total + 1 && !sc.exact,
+          "%s: the scratch holds %s of the wrong size", what, exact ? "an exact sum" : "a vector");
+    /* another problem's size: replaced, and still the run's own result */
+    p.params = small;
+    p.scratch = NULL;
+    CHECK(dr_estimator_backward(prb, &p, adj, own, NULL) == 0, "%s: %s", what, dr_last_error());
+    p.scratch = &sc;
+    CHECK(dr_estimator_backward(prb, &p, adj, kept, NULL) == 0, "%s: %s", what, dr_last_error());
+    CHECK(memcmp(own, kept, sizeof(double) * (size_t)small->total) == 0, "%s: a smaller problem with the scratch",
+          what);
+    dr_est_scratch_free(&sc);
+    CHECK(!sc.grad[1] && !sc.exact && sc.len[1] == 0, "%s: dr_est_scratch_free left something", what);
+
+    /* the batches' driver: twice with one dr_reverse_scratch, as optimize's
+     * iterations, against a run with its own */
+    float *target = calloc((size_t)3 * W * H, sizeof(float));
+    double *g[2], *se[2];
+    struct dr_reverse_scratch rs = {0};
+    for (int k = 0; k < 2; k++) {
+        g[k] = calloc((size_t)ps->total, sizeof(double));
+        se[k] = calloc((size_t)ps->total, sizeof(double));
+    }
+    for (int run = 0; run < 3; run++) {
+        struct dr_reverse_options o = {.estimator = prb, .loss = DR_LOSS_L2, .loss_scale = 1.0, .batches = 2,
+                                       .primal = DR_PRIMAL_PER_BATCH, .problem = p};
+        o.problem.params = ps;
+        o.problem.scratch = NULL;
+        o.problem.spp = 4;
+        o.scratch = run ? &rs : NULL;
+        struct dr_reverse_result res = {.grad = g[run > 0], .se = se[run > 0]};
+        CHECK(dr_reverse_gradient(&o, target, &res) == 0, "%s: reverse run %d: %s", what, run, dr_last_error());
+        if (run > 0)
+            CHECK(memcmp(g[0], g[1], sizeof(double) * (size_t)ps->total) == 0 &&
+                      memcmp(se[0], se[1], sizeof(double) * (size_t)ps->total) == 0,
+                  "%s: dr_reverse_gradient with a kept scratch (run %d) differs from one with its own", what, run);
+    }
+    CHECK(rs.half[0] && rs.half_len[0] == ps->total, "%s: the reverse scratch kept no batch vector", what);
+    dr_reverse_scratch_free(&rs);
+    CHECK(!rs.half[0] && !rs.est.grad[1] && !rs.est.exact, "%s: dr_reverse_scratch_free left something", what);
+    for (int k = 0; k < 2; k++) {
+        free(g[k]);
+        free(se[k]);
+    }
+    free(target);
+    free(own);
+    free(kept);
+    free(adj);
+    dr_param_set_destroy(small);
+    dr_param_set_destroy(ps);
+    printf("%s: runs with a kept scratch (%d threads, %s) match runs with their own\n", what, threads,
+           exact ? "shared exact sum" : "per-thread vectors");
+}
+
 int main(void)
 {
     cross_adjoint_by_hand();
@@ -419,6 +508,7 @@ int main(void)
         "/images/0",
     };
     compare("cornell box", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DETACHED, GROUPED_PRB);
+    scratch_reuse("cornell box", s, &s->cameras[0], ptrs, 7, 2);
     /* the light's parameters alone: the vertices that see it or sample it
      * are the only ones with a term (prb's walks mark them in the arrays) */
     compare("cornell box, the light only", s, &s->cameras[0], ptrs + 4, 2, 8, DR_SAMPLING_DETACHED,
@@ -613,6 +703,20 @@ int main(void)
     const char *sky_map_ptrs[] = {"/extensions/DR_environment/color", "/extensions/DR_environment/uri"};
     compare("open box under a map", s, &above, sky_map_ptrs, 2, 6, DR_SAMPLING_DETACHED, GROUPED_PRB);
     wave_against_one_path("open box under a map", s, &above, sky_map_ptrs, 2);
+    dr_scene_destroy(s);
+
+    /* a 160 x 160 texture with four threads: the runs share one exact sum
+     * (dr_estimator_shared_sums), which the scratch keeps */
+    sb_init(&b);
+    struct dr_material textured = sb_diffuse(dr_v3s(1.0));
+    textured.base_color_tex.texture = sb_texture(&b, sb_varied_image(160, 160, 3, 1));
+    sb_quad(&b, dr_v3(-1, 0, 1), dr_v3(2, 0, 0), dr_v3(0, 0, -2), sb_material(&b, textured));
+    sb_environment(&b, dr_v3(1.0, 0.9, 0.8));
+    s = sb_finish(&b);
+    s->n_file_materials = s->n_materials;
+    const char *tex_ptrs[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor", "/images/0"};
+    const struct dr_camera top = sb_camera(dr_v3(0, 1.2, 0.8), dr_v3(0, 0, 0), 60);
+    scratch_reuse("a 160x160 texture", s, &top, tex_ptrs, 2, 4);
     dr_scene_destroy(s);
     return TEST_END();
 }
