@@ -484,6 +484,22 @@ int write_then_rename(ImageOutput *out, const std::string &spath, const ImageSpe
     return DR_OK;
 }
 
+// Is at least half of v exactly zero? A texture's gradient is (the texels
+// no path read), and for such an image OpenEXR's run-length encoding beats
+// OpenImageIO's default, zip: a 2k texture's gradient of 16 spp at 128 x 128
+// (half its values 0) took 1.12 s to write with zip, 24.0 MB, and 0.18 s
+// with RLE, 26.5 MB, while the gradient itself took about 1 s. Images of
+// dense noise compress little either way (a render: zip 11.5 MB in 0.40 s,
+// RLE 11.9 MB in 0.05 s), but smooth synthetic ones only with zip, so the
+// rest keep it.
+bool mostly_zero(const std::vector<float> &v)
+{
+    size_t zeros = 0;
+    for (float x : v)
+        zeros += x == 0.0f;
+    return 2 * zeros >= v.size();
+}
+
 int write_image(const char *path, int width, int height, int channels, const float *pixels,
                 bool srgb_encode)
 {
@@ -514,6 +530,8 @@ int write_image(const char *path, int width, int height, int channels, const flo
     std::vector<float> fbuf;
     std::vector<uint8_t> bbuf;
     file_pixels(l, (size_t)width * (size_t)height, channels, pixels, as_float, srgb_encode, spec, fbuf, bbuf);
+    if (as_float && std::strcmp(fmt, "openexr") == 0 && mostly_zero(fbuf))
+        spec.attribute("compression", "rle");
     int rc = as_float ? write_then_rename(out.get(), spath, spec, TypeDesc::FLOAT, fbuf.data())
                       : write_then_rename(out.get(), spath, spec, TypeDesc::UINT8, bbuf.data());
     out.reset();

@@ -391,6 +391,46 @@ static void test_exr(void)
     dr_image_release(&img);
 }
 
+/* The compression an OpenEXR file's header names (its "compression"
+ * attribute: 0 none, 1 RLE, 3 zip, ...), or -1. */
+static int exr_compression(const char *path)
+{
+    unsigned char head[4096];
+    FILE *f = fopen(path, "rb");
+    size_t n = f ? fread(head, 1, sizeof head, f) : 0;
+    if (f)
+        fclose(f);
+    static const char key[] = "compression\0compression\0\1\0\0\0";   /* name, type, size 1 */
+    const size_t k = sizeof key - 1;
+    for (size_t i = 0; i + k < n; i++)
+        if (memcmp(head + i, key, k) == 0)
+            return head[i + k];
+    return -1;
+}
+
+/* A float image mostly of exact zeros (a texture's gradient) is written
+ * run-length encoded, bit for bit; one of dense values keeps zip. */
+static void test_exr_compression(void)
+{
+    enum { SW = 64, SH = 48 };
+    static float px[SW * SH * 3];
+    char path[512];
+    for (int dense = 0; dense < 2; dense++) {
+        for (int i = 0; i < SW * SH * 3; i++)
+            px[i] = dense || i % 7 == 3 ? (float)(0.001 * (i % 997) - 0.3) : 0.0f;
+        px[3] = -0.0f;   /* (a zero too, and its sign must survive) */
+        path_in_tmp(path, sizeof path, dense ? "dense.exr" : "sparse.exr");
+        CHECK(dr_image_write(path, SW, SH, 3, px) == 0, "write %s: %s", path, dr_last_error());
+        const int c = exr_compression(path);
+        CHECK(c == (dense ? 3 : 1), "%s: compression %d, expected %s", path, c, dense ? "zip (3)" : "RLE (1)");
+        struct dr_image img;
+        int rc = dr_image_read(path, &img);
+        CHECK(rc == 0 && img.channels == 3 && memcmp(img.data, px, sizeof px) == 0, "%s: not bit-exact (rc %d)",
+              path, rc);
+        dr_image_release(&img);
+    }
+}
+
 static void test_png(void)
 {
     char path[512];
@@ -926,6 +966,7 @@ int main(void)
     test_channels();
     test_eight_bit();
     test_exr();
+    test_exr_compression();
     test_png();
     test_hdr();
     test_jpeg();
