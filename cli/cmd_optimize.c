@@ -808,7 +808,7 @@ static int opt_iterations(const struct opt_args *a, struct opt_run *r)
             return rc;
         dr_adam_step(r->adam, r->theta, r->grad);
         dr_param_set_put(r->scene, r->ps, r->theta);
-        if (dr_scene_refresh(r->scene) != 0) {
+        if (dr_param_set_refresh(r->scene, r->ps) != 0) {
             cli_error("optimize", "%s", dr_last_error());
             return DR_EXIT_FAILURE;
         }

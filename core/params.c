@@ -744,3 +744,8 @@ void dr_param_set_put(struct dr_scene *s, const struct dr_param_set *set, const 
     for (int i = 0; i < set->n; i++)
         dr_param_put(s, &set->params[i], values + set->params[i].offset);
 }
+
+int dr_param_set_refresh(struct dr_scene *scene, const struct dr_param_set *set)
+{
+    return set->radiance_active ? dr_scene_refresh(scene) : dr_scene_refresh_bsdfs(scene);
+}

@@ -57,7 +57,9 @@ static unsigned surface_effects(const struct dr_scene *s, int m)
     return fx;
 }
 
-int dr_scene_refresh(struct dr_scene *s)
+/* dr_scene_refresh's work; the light sampling tables rebuilt only when
+ * `lights` (dr_scene_refresh_bsdfs keeps them). */
+static int refresh(struct dr_scene *s, bool lights)
 {
     const struct dr_mesh *m = &s->mesh;
     s->effects = 0;
@@ -88,10 +90,12 @@ int dr_scene_refresh(struct dr_scene *s)
     }
     free(used);
 
-    dr_light_sampler_destroy(s->light_sampler);
-    s->light_sampler = dr_light_sampler_create(s);
-    if (!s->light_sampler)
-        return DR_ERR_NOMEM;
+    if (lights || !s->light_sampler) {
+        dr_light_sampler_destroy(s->light_sampler);
+        s->light_sampler = dr_light_sampler_create(s);
+        if (!s->light_sampler)
+            return DR_ERR_NOMEM;
+    }
     for (uint32_t t = 0; t < m->n_triangles; t++)
         if (dr_light_pdf_area_pick(s->light_sampler, t) > 0.0) {
             s->effects |= DR_FX_AREA_LIGHTS;
@@ -104,6 +108,16 @@ int dr_scene_refresh(struct dr_scene *s)
     if (s->n_media > 0)
         return dr_media_refresh(s);
     return 0;
+}
+
+int dr_scene_refresh(struct dr_scene *s)
+{
+    return refresh(s, true);
+}
+
+int dr_scene_refresh_bsdfs(struct dr_scene *s)
+{
+    return refresh(s, false);
 }
 
 bool dr_scene_has_light(const struct dr_scene *s)

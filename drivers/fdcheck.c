@@ -34,7 +34,7 @@ static int objective(struct fd_run *r, const double *dir, double t, uint64_t see
     for (int64_t i = 0; i < r->ps->total; i++)
         r->theta[i] = r->theta0[i] + t * dir[i];
     dr_param_set_put(r->scene, r->ps, r->theta);
-    int rc = dr_scene_refresh(r->scene);
+    int rc = dr_param_set_refresh(r->scene, r->ps);
     if (rc != 0)
         return rc;
     const struct dr_fd_options *o = r->o;
@@ -129,7 +129,7 @@ static int batch_estimates(struct fd_run *r, const double *dir, int side, uint64
     const struct dr_fd_options *o = r->o;
     const size_t n = (size_t)o->width * o->height * 3;
     dr_param_set_put(r->scene, r->ps, r->theta0);
-    int rc = dr_scene_refresh(r->scene);
+    int rc = dr_param_set_refresh(r->scene, r->ps);
     if (rc != 0)
         return rc;
     struct dr_grad_problem p = problem(r->scene, r->camera, r->ps, o, seed);
@@ -278,7 +278,7 @@ int dr_fdcheck(struct dr_scene *scene, const struct dr_camera *camera, const str
 done:
     if (restore) {
         dr_param_set_put(scene, ps, r.theta0);
-        int rc2 = dr_scene_refresh(scene);
+        int rc2 = dr_param_set_refresh(scene, ps);
         if (rc == 0)
             rc = rc2;
     }
@@ -341,7 +341,7 @@ int dr_fd_image(struct dr_scene *scene, const struct dr_camera *camera, const st
         if ((rc = render_at(&r, dir, ts[k], seed)) == 0)
             axpy_image(dimg, ws[k] / (2.0 * h), r.rgb, n);
     dr_param_set_put(scene, ps, r.theta0);
-    int rc2 = dr_scene_refresh(scene);
+    int rc2 = dr_param_set_refresh(scene, ps);
     if (rc == 0)
         rc = rc2;
 out:

@@ -9,6 +9,7 @@
 
 #include "geometry.h"
 #include "lights.h"
+#include "params.h"
 #include "scene_builder.h"
 #include "test.h"
 
@@ -77,6 +78,29 @@ int main(void)
     CHECK(dr_scene_refresh(s) == 0, "refresh");
     CHECK(dr_light_sampler_texture_averages(s->light_sampler) == 2, "after refresh: %d",
           dr_light_sampler_texture_averages(s->light_sampler));
+
+    /* dr_param_set_refresh after parameters changed: with BSDF parameters
+     * only, the tables are kept (an emission changed behind the set's back
+     * does not show); with an emission parameter they are built again */
+    s->n_file_materials = s->n_materials;
+    const char *bsdf_ptr = "/materials/3/pbrMetallicRoughness/baseColorFactor", *emit_ptr = "/materials/3/emissiveFactor";
+    struct dr_param_set *bsdf = dr_param_set_create(s, &bsdf_ptr, 1), *emit = dr_param_set_create(s, &emit_ptr, 1);
+    CHECK(bsdf && emit && !bsdf->radiance_active && emit->radiance_active, "param sets: %s", dr_last_error());
+    uint32_t t3 = 0;
+    while (t3 < s->mesh.n_triangles && s->mesh.material[t3] != mats[3])
+        t3++;
+    const double before = dr_light_pdf_area_pick(s->light_sampler, t3);
+    s->materials[mats[3]].emissive_factor = dr_v3s(3.0);
+    CHECK(bsdf && dr_param_set_refresh(s, bsdf) == 0, "refresh after a base colour: %s", dr_last_error());
+    CHECK(dr_light_pdf_area_pick(s->light_sampler, t3) == before, "BSDF parameters rebuilt the light tables");
+    CHECK(dr_light_sampler_texture_averages(s->light_sampler) == 2, "kept tables: %d averages",
+          dr_light_sampler_texture_averages(s->light_sampler));
+    CHECK(emit && dr_param_set_refresh(s, emit) == 0, "refresh after an emission: %s", dr_last_error());
+    CHECK(dr_light_pdf_area_pick(s->light_sampler, t3) > 1.5 * before,
+          "an emission parameter left the light tables as they were (pick %g, before %g)",
+          dr_light_pdf_area_pick(s->light_sampler, t3), before);
+    dr_param_set_destroy(bsdf);
+    dr_param_set_destroy(emit);
     dr_scene_destroy(s);
     return TEST_END();
 }
