@@ -75,6 +75,98 @@ static void edge_values(const struct dr_param_set *ps, const double *theta0, con
     dr_adam_destroy(b);
 }
 
+/* A texture parameter (more values than the text limit): version 2 stores
+ * it raw after "binary le64", beside a colour in text; it reads back bit for
+ * bit, the file is a fraction of the text's size, the same state written
+ * all in text (version 1) reads the same, and a file cut inside the raw
+ * values, or with the raw block's end changed, is refused. */
+static void texture_checkpoint(const char *path)
+{
+    struct sb b;
+    sb_init(&b);
+    struct dr_material m = sb_diffuse(dr_v3(0.5, 0.5, 0.5));
+    m.base_color_tex.texture = sb_texture(&b, sb_varied_image(32, 24, 3, 2));
+    sb_quad(&b, dr_v3(0, 0, 0), dr_v3(1, 0, 0), dr_v3(0, 1, 0), sb_material(&b, m));
+    struct dr_scene *s = sb_finish(&b);
+    s->n_file_materials = s->n_materials;
+    const char *ptrs[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor", "/images/0"};
+    struct dr_param_set *ps = dr_param_set_create(s, ptrs, 2);
+    CHECK(ps && ps->total == 3 + 32 * 24 * 3, "texture param set: %s", dr_last_error());
+    if (!ps) {
+        dr_scene_destroy(s);
+        return;
+    }
+    const int64_t n = ps->total;
+    double *theta = malloc(sizeof(double) * (size_t)n), *back = malloc(sizeof(double) * (size_t)n);
+    dr_param_set_get(s, ps, theta);
+    struct dr_adam *a = dr_adam_create(ps, theta, 0.0), *r = dr_adam_create(ps, theta, 0.0);
+    for (int64_t i = 0; i < n; i++) {
+        theta[i] = (double)(i % 97) / 97.0 + 1.0 / 3.0 * 1e-3;
+        a->m[i] = i % 5 == 0 ? -0.0 : -1.0 / (double)(i + 3);
+        a->v[i] = i % 7 == 0 ? 4.9406564584124654e-324 : 1.0 / (double)(i + 1);
+    }
+    a->t = 12;
+    int64_t it = 0;
+    CHECK(dr_checkpoint_write(path, "scene.gltf", ps, theta, a, 12) == 0, "texture write: %s", dr_last_error());
+    FILE *f = fopen(path, "rb");
+    char head[64] = {0};
+    size_t got = f ? fread(head, 1, sizeof head - 1, f) : 0;
+    long size2 = -1;
+    if (f) {
+        fseek(f, 0, SEEK_END);
+        size2 = ftell(f);
+        fclose(f);
+    }
+    CHECK(got > 0 && strncmp(head, "drender-checkpoint 2\n", 21) == 0, "version 2 header: %.21s", head);
+    CHECK(dr_checkpoint_read(path, ps, back, r, &it) == 0, "texture read: %s", dr_last_error());
+    CHECK(it == 12 && r->t == 12 && memcmp(back, theta, sizeof(double) * (size_t)n) == 0 &&
+              memcmp(r->m, a->m, sizeof(double) * (size_t)n) == 0 && memcmp(r->v, a->v, sizeof(double) * (size_t)n) == 0,
+          "texture checkpoint not restored bit for bit");
+    /* raw: 3 x 8 bytes a value and little else */
+    CHECK(size2 > 24 * (n - 3) && size2 < 24 * (n - 3) + 1024, "texture checkpoint of %ld bytes for %lld values",
+          size2, (long long)n);
+
+    /* the same state all in text, as version 1 wrote it */
+    f = fopen(path, "w");
+    fprintf(f, "drender-checkpoint 1\nscene scene.gltf\niteration 12\nadam 12 %.17g %.17g %.17g\n", a->beta1,
+            a->beta2, a->eps);
+    for (int k = 0; k < ps->n; k++) {
+        const struct dr_param *p = &ps->params[k];
+        fprintf(f, "param %s %lld\n", p->name, (long long)p->size);
+        const double *vec[3] = {theta, a->m, a->v};
+        const char *key[3] = {"value", "m", "v"};
+        for (int j = 0; j < 3; j++) {
+            fputs(key[j], f);
+            for (int64_t i = p->offset; i < p->offset + p->size; i++)
+                fprintf(f, " %a", vec[j][i]);
+            fputc('\n', f);
+        }
+    }
+    fputs("end\n", f);
+    fclose(f);
+    memset(back, 0, sizeof(double) * (size_t)n);
+    CHECK(dr_checkpoint_read(path, ps, back, r, &it) == 0 && memcmp(back, theta, sizeof(double) * (size_t)n) == 0 &&
+              memcmp(r->v, a->v, sizeof(double) * (size_t)n) == 0,
+          "a version 1 texture checkpoint: %s", dr_last_error());
+
+    /* cut inside the raw values; the newline after them changed */
+    CHECK(dr_checkpoint_write(path, "scene.gltf", ps, theta, a, 12) == 0, "rewrite: %s", dr_last_error());
+    CHECK(truncate(path, size2 - 4000) == 0, "truncate");
+    CHECK(dr_checkpoint_read(path, ps, back, r, &it) == DR_ERR_FORMAT, "a cut raw block was accepted");
+    CHECK(dr_checkpoint_write(path, "scene.gltf", ps, theta, a, 12) == 0, "rewrite: %s", dr_last_error());
+    f = fopen(path, "r+b");
+    fseek(f, size2 - 5, SEEK_SET);   /* "\nend\n" ends the file: the raw block's newline */
+    fputc('x', f);
+    fclose(f);
+    CHECK(dr_checkpoint_read(path, ps, back, r, &it) == DR_ERR_FORMAT, "a raw block without its newline was accepted");
+    free(theta);
+    free(back);
+    dr_adam_destroy(a);
+    dr_adam_destroy(r);
+    dr_param_set_destroy(ps);
+    dr_scene_destroy(s);
+}
+
 int main(void)
 {
     struct dr_scene *s = scene();
@@ -138,6 +230,7 @@ int main(void)
     fclose(f);
     CHECK(truncate(path, len / 2) == 0, "truncate");
     CHECK(dr_checkpoint_read(path, ps, tmp, b, &it0) == DR_ERR_FORMAT, "truncated checkpoint accepted");
+    texture_checkpoint(path);
     unlink(path);
     dr_param_set_destroy(other);
     dr_adam_destroy(a);
