@@ -20,8 +20,9 @@
 #      time ratio and efficiency (variance x time); and the cross primal
 #      with sobol numbers against independent ones, the same way
 #   m. a texture parameter (NormalTangentTest's 2048x2048x3 base colour, 12.6 M
-#      scalars): grad's peak memory and gradient time, and optimize's per
-#      iteration time and peak memory (5 iterations, a checkpoint at the end)
+#      scalars): grad's peak memory, gradient time and the gradient image's
+#      write, and optimize's per iteration time, peak memory and checkpoint
+#      size (5 iterations, a checkpoint at the end)
 # Writes $BUILD/bench/grad-results.json.
 set -euo pipefail
 BUILD=${BUILD:-build}
@@ -177,13 +178,14 @@ if [[ -f $NTT ]]; then
     echo "m. a texture parameter: $NTT /images/0 (2048x2048x3), 64x64, 16 spp, 2 threads"
     "$DR" render "$NTT" --sampler independent -o "$TMP/ntt.exr" --res 64x64 --spp 64 --threads 2 2>/dev/null
     J=$("$DR" grad "$NTT" --sampler independent --target "$TMP/ntt.exr" --param /images/0 --spp 16 --threads 2 --grad-dir "$TMP" --json 2>/dev/null)
-    G_PEAK=$(json_num "$J" peak_memory_bytes) G_T=$(json_num "$J" gradient time)
+    G_PEAK=$(json_num "$J" peak_memory_bytes) G_T=$(json_num "$J" gradient time) G_W=$(json_num "$J" write time)
     O=$("$DR" optimize "$NTT" --sampler independent --target "$TMP/ntt.exr" --param /images/0 --spp 16 --threads 2 --iters 5 \
         --out-dir "$TMP/ntt-opt" --json 2>/dev/null | tail -n 1)
     O_T=$(json_num "$O" seconds) O_PEAK=$(json_num "$O" peak_memory_bytes)
-    printf '   grad: peak %.0f MiB, gradient %.2f s; optimize: %.2f s per iteration (checkpoint included), peak %.0f MiB\n' \
-        "$(calc "$G_PEAK / 1048576")" "$G_T" "$(calc "$O_T / 5")" "$(calc "$O_PEAK / 1048576")"
-    TEX_JSON="{\"grad_peak_bytes\": $G_PEAK, \"grad_seconds\": $G_T, \"optimize_seconds_per_iteration\": $(calc "$O_T / 5" %.4f), \"optimize_peak_bytes\": $O_PEAK}"
+    CK_BYTES=$(stat -c %s "$TMP/ntt-opt/checkpoint.txt" 2>/dev/null || echo 0)
+    printf '   grad: peak %.0f MiB, gradient %.2f s, its image written in %.2f s; optimize: %.2f s per iteration (checkpoint included), peak %.0f MiB, checkpoint %.0f MiB\n' \
+        "$(calc "$G_PEAK / 1048576")" "$G_T" "$G_W" "$(calc "$O_T / 5")" "$(calc "$O_PEAK / 1048576")" "$(calc "$CK_BYTES / 1048576")"
+    TEX_JSON="{\"grad_peak_bytes\": $G_PEAK, \"grad_seconds\": $G_T, \"grad_write_seconds\": $G_W, \"optimize_seconds_per_iteration\": $(calc "$O_T / 5" %.4f), \"optimize_peak_bytes\": $O_PEAK, \"checkpoint_bytes\": $CK_BYTES}"
 fi
 cat >"$OUT/grad-results.json" <<JSON
 {"primal_seconds": $T_PRIMAL, "prb_seconds": ${T[prb]}, "tape_seconds": ${T[tape]},
