@@ -23,6 +23,7 @@
 #include "loss.h"
 #include "mem_limits.h"
 #include "optimizer.h"
+#include "parallel.h"
 #include "render.h"
 #include "reverse.h"
 #include "sampler.h"
@@ -642,6 +643,7 @@ static int opt_load(struct opt_args *a, struct opt_run *r)
         cli_error("optimize", "%s", dr_last_error());
         return DR_EXIT_FAILURE;
     }
+    r->adam->threads = a->g.threads;   /* (a texture's step on the workers the run asked for) */
     return -1;
 }
 
@@ -711,8 +713,10 @@ static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
 {
     const int64_t T = r->ps->total;
     const bool several = a->n_targets > 1;
-    memset(r->grad, 0, sizeof(double) * (size_t)T);
-    memset(r->se, 0, sizeof(double) * (size_t)T);
+    if (several) {   /* (one target's run overwrites both) */
+        dr_parallel_zero(r->grad, T, a->g.threads);
+        dr_parallel_zero(r->se, T, a->g.threads);
+    }
     r->loss = 0.0;
     for (int ti = 0; ti < a->n_targets; ti++) {
         const struct target *t = &a->targets[ti];

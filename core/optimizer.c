@@ -2,6 +2,7 @@
 
 #include <errno.h>
 #include <math.h>
+#include <stdatomic.h>
 #include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -10,6 +11,7 @@
 #include <unistd.h>
 
 #include "error.h"
+#include "parallel.h"
 
 double dr_param_default_lr(const struct dr_param *p, const double *values)
 {
@@ -51,6 +53,7 @@ struct dr_adam *dr_adam_create(const struct dr_param_set *ps, const double *thet
     if (!a)
         goto nomem;
     a->n = ps->total;
+    a->threads = 1;
     a->beta1 = 0.9;
     a->beta2 = 0.999;
     a->eps = 1e-8;
@@ -109,16 +112,34 @@ static int64_t adam_span(const struct dr_adam *a, int64_t n, double *restrict m,
     return bad;
 }
 
+/* One parameter's step on scalars [begin, end) of it (dr_parallel_elements). */
+struct adam_step {
+    const struct dr_adam *a;
+    int k;
+    double *theta, c1, c2;
+    const double *grad;
+    _Atomic int64_t bad;
+};
+
+static void adam_range(void *ctx, int thread, int64_t begin, int64_t end)
+{
+    (void)thread;
+    struct adam_step *x = ctx;
+    const struct dr_adam *a = x->a;
+    const int64_t o = a->offset[x->k] + begin;
+    x->bad += adam_span(a, end - begin, a->m + o, a->v + o, x->theta + o, x->grad + o, a->lr[x->k], a->lo[x->k],
+                        a->hi[x->k], x->c1, x->c2);
+}
+
 int64_t dr_adam_step(struct dr_adam *a, double *theta, const double *grad)
 {
-    int64_t bad = 0;
     a->t++;
-    double c1 = 1.0 - pow(a->beta1, (double)a->t), c2 = 1.0 - pow(a->beta2, (double)a->t);
-    for (int k = 0; k < a->n_params; k++) {
-        const int64_t o = a->offset[k];
-        bad += adam_span(a, a->size[k], a->m + o, a->v + o, theta + o, grad + o, a->lr[k], a->lo[k], a->hi[k], c1, c2);
-    }
-    return bad;
+    struct adam_step x = {.a = a, .theta = theta, .grad = grad, .c1 = 1.0 - pow(a->beta1, (double)a->t),
+                          .c2 = 1.0 - pow(a->beta2, (double)a->t)};
+    atomic_init(&x.bad, 0);
+    for (x.k = 0; x.k < a->n_params; x.k++)
+        dr_parallel_elements(a->size[x.k], a->threads, adam_range, &x);
+    return atomic_load(&x.bad);
 }
 
 /* ---- checkpoints ---- */

@@ -18,6 +18,8 @@ struct dr_adam {
     int n_params;
     int64_t *offset, *size;
     double *lr, *lo, *hi;
+    int threads;               /* workers for a big parameter's step (dr_parallel_elements;
+                                  dr_adam_create: 1; the same bits for any number) */
 };
 
 /* The parameter scalar i belongs to (-1: none). */

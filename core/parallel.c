@@ -4,6 +4,7 @@
 #include <stdbool.h>
 #include <stdatomic.h>
 #include <stdlib.h>
+#include <string.h>
 #include <unistd.h>
 
 #include "error.h"
@@ -192,6 +193,30 @@ int dr_parallel_for(int64_t n, int64_t chunk, int threads, dr_range_fn fn, void 
 int dr_parallel_for_static(int64_t n, int64_t chunk, int threads, dr_range_fn fn, void *ctx)
 {
     return range_run(n, chunk, threads, true, fn, ctx);
+}
+
+void dr_parallel_elements(int64_t n, int threads, dr_range_fn fn, void *ctx)
+{
+    threads = dr_thread_count(threads);
+    if (threads > 1 && n >= DR_PARALLEL_ELEMENTS_MIN) {
+        /* a few chunks a worker, whole cache lines (8 doubles) */
+        const int64_t chunk = ((n / (4 * threads)) + 7) / 8 * 8;
+        if (dr_parallel_for(n, chunk, threads, fn, ctx) == 0)
+            return;
+    }
+    fn(ctx, 0, 0, n);
+}
+
+static void zero_range(void *ctx, int thread, int64_t begin, int64_t end)
+{
+    (void)thread;
+    memset((double *)ctx + begin, 0, sizeof(double) * (size_t)(end - begin));
+}
+
+void dr_parallel_zero(double *x, int64_t n, int threads)
+{
+    if (n > 0)
+        dr_parallel_elements(n, threads, zero_range, x);
 }
 
 int dr_thread_count(int requested)

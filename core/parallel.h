@@ -31,6 +31,17 @@ int dr_parallel_for(int64_t n, int64_t chunk, int threads, dr_range_fn fn, void 
  * thread count (what gradient estimators and resumable optimisation need). */
 int dr_parallel_for_static(int64_t n, int64_t chunk, int threads, dr_range_fn fn, void *ctx);
 
+/* Element-wise work on a big vector (a texture parameter's 12.6 M entries:
+ * clearing, summing, Adam's step), whose every element's result does not
+ * depend on how [0, n) is split: fn over [0, n) on up to `threads` workers
+ * (<= 0: one per CPU), the same bits for any thread count. Below
+ * DR_PARALLEL_ELEMENTS_MIN elements, with one thread, or if no worker can be
+ * had, fn runs on the calling thread alone. */
+#define DR_PARALLEL_ELEMENTS_MIN 65536
+void dr_parallel_elements(int64_t n, int threads, dr_range_fn fn, void *ctx);
+/* dr_parallel_elements clearing n doubles at x. */
+void dr_parallel_zero(double *x, int64_t n, int threads);
+
 /* Sets a function every later run (dr_parallel_tiles, _for, _for_static)
  * calls on its calling thread, with the run's number of workers, once all
  * of them have been created (NULL: none). For work to start in the

@@ -7,6 +7,7 @@
 #include "bigalloc.h"
 #include "error.h"
 #include "mis.h"
+#include "parallel.h"
 #include "sampler.h"
 
 #define PRIMAL_SEED_SALT 0x5052494d414cULL   /* "PRIMAL" */
@@ -81,11 +82,11 @@ static int work_alloc(struct rev_work *w, const struct dr_reverse_result *r)
     w->half[0] = scratch_half(w->scratch, 0, T1);
     w->half[1] = split ? scratch_half(w->scratch, 1, T1) : NULL;
     w->m2 = r->se;
-    memset(w->m2, 0, sizeof(double) * (size_t)w->T);
+    dr_parallel_zero(w->m2, w->T, w->o->problem.threads);
     /* the halves' squared differences feed se_gradient and se_primal only */
     w->dsq = r->parts && r->se_gradient ? r->se_gradient : NULL;
     if (w->dsq)
-        memset(w->dsq, 0, sizeof(double) * (size_t)w->T);
+        dr_parallel_zero(w->dsq, w->T, w->o->problem.threads);
     if (w->img && w->adj && w->img_sum && w->cross_img && w->half[0] && (w->half[1] || !split))
         return 0;
     dr_set_error("out of memory (%lld gradient entries, %zu image values)", (long long)w->T, w->n);
@@ -160,6 +161,34 @@ static int cross_gradient(struct rev_work *w, uint64_t seed, struct dr_reverse_r
     return rc;
 }
 
+/* batch()'s update of entries [begin, end) (each entry on its own:
+ * dr_parallel_elements). */
+struct welford_step {
+    struct rev_work *w;
+    struct dr_reverse_result *r;
+    int b, n0, n1, spp;
+    bool split;
+};
+
+static void welford_range(void *ctx, int thread, int64_t begin, int64_t end)
+{
+    (void)thread;
+    const struct welford_step *x = ctx;
+    struct rev_work *w = x->w;
+    double *grad = x->r->grad;
+    const int b = x->b, n0 = x->n0, n1 = x->n1, spp = x->spp;
+    for (int64_t i = begin; i < end; i++) {
+        double g = x->split ? (n0 * w->half[0][i] + n1 * w->half[1][i]) / spp : w->half[0][i];
+        double d = g - grad[i];
+        grad[i] += d / (b + 1);
+        w->m2[i] += d * (g - grad[i]);
+        if (x->split && w->dsq) {
+            double h = w->half[0][i] - w->half[1][i];
+            w->dsq[i] += h * h * n0 * n1 / ((double)spp * spp);
+        }
+    }
+}
+
 /* Batch b's gradient g_b into r->grad's running mean (Welford), and, with
  * two halves, the gradient-sample variance of g_b into dsq. */
 static int batch(struct rev_work *w, int b, uint64_t grad_base, struct dr_reverse_result *r)
@@ -177,25 +206,27 @@ static int batch(struct rev_work *w, int b, uint64_t grad_base, struct dr_revers
         rc = gradient(w, dr_hash64(grad_base + 2 * (uint64_t)b + 1), n1, w->half[1], r);
     if (rc != 0)
         return rc;
-    for (int64_t i = 0; i < w->T; i++) {
-        double g = split ? (n0 * w->half[0][i] + n1 * w->half[1][i]) / spp : w->half[0][i];
-        double d = g - r->grad[i];
-        r->grad[i] += d / (b + 1);
-        w->m2[i] += d * (g - r->grad[i]);
-        if (split && w->dsq) {
-            double h = w->half[0][i] - w->half[1][i];
-            w->dsq[i] += h * h * n0 * n1 / ((double)spp * spp);
-        }
-    }
+    struct welford_step ws = {w, r, b, n0, n1, spp, split};
+    dr_parallel_elements(w->T, w->o->problem.threads, welford_range, &ws);
     step_done(w);
     return 0;
 }
 
-/* Standard errors from the sums, and the loss of the mean primal image. */
-static void finish(struct rev_work *w, struct dr_reverse_result *r, int K, int primals)
+/* finish()'s standard errors of entries [begin, end). */
+struct finish_step {
+    struct rev_work *w;
+    struct dr_reverse_result *r;
+    int K;
+};
+
+static void finish_range(void *ctx, int thread, int64_t begin, int64_t end)
 {
-    /* in place: se held m2, se_gradient (with parts) dsq */
-    for (int64_t i = 0; i < w->T; i++) {
+    (void)thread;
+    const struct finish_step *x = ctx;
+    const struct rev_work *w = x->w;
+    struct dr_reverse_result *r = x->r;
+    const int K = x->K;
+    for (int64_t i = begin; i < end; i++) {
         r->se[i] = sqrt(w->m2[i] / (K - 1) / K);
         if (!r->se_gradient)
             continue;
@@ -204,6 +235,14 @@ static void finish(struct rev_work *w, struct dr_reverse_result *r, int K, int p
         if (r->se_primal)
             r->se_primal[i] = r->parts ? sqrt(fmax(0.0, r->se[i] * r->se[i] - sg2)) : NAN;
     }
+}
+
+/* Standard errors from the sums, and the loss of the mean primal image. */
+static void finish(struct rev_work *w, struct dr_reverse_result *r, int K, int primals)
+{
+    /* in place: se held m2, se_gradient (with parts) dsq */
+    struct finish_step fs = {w, r, K};
+    dr_parallel_elements(w->T, w->o->problem.threads, finish_range, &fs);
     for (size_t i = 0; i < w->n; i++)
         w->img[i] = (float)(w->img_sum[i] / primals);
     r->loss = w->o->loss_scale * dr_loss_eval(w->o->loss, w->img, w->target, w->n);
@@ -264,7 +303,7 @@ int dr_reverse_gradient(const struct dr_reverse_options *o, const float *target,
     const bool mis = dr_est_sampling_run(p) == DR_SAMPLING_MIS;
     r->primal_seed = dr_hash64(p->seed ^ PRIMAL_SEED_SALT);
     r->t_primal = r->t_gradient = 0.0;
-    memset(r->grad, 0, sizeof(double) * (size_t)w.T);
+    dr_parallel_zero(r->grad, w.T, p->threads);
     const uint64_t grad_base = dr_hash64(p->seed ^ GRAD_SEED_SALT);
     int rc = work_alloc(&w, r);
     /* mis: the weights of each batch (and half) from the earlier ones too (mis.h) */

@@ -8,6 +8,7 @@
 #include "clock.h"
 #include "error.h"
 #include "medium_grad.h"
+#include "parallel.h"
 
 /* Scalar problems up to this size sum each chunk locally first. */
 #define CHUNK_LOCAL_MAX 4096
@@ -99,7 +100,7 @@ static double *accum_thread_vector(struct dr_est_accum *a, int t, size_t n)
         return accum_alloc(a, n);
     if (s->grad[t] && s->len[t] == (int64_t)n) {
         a->bytes += n * sizeof(double);
-        memset(s->grad[t], 0, n * sizeof(double));
+        dr_parallel_zero(s->grad[t], (int64_t)n, a->threads);
         return s->grad[t];
     }
     free(s->grad[t]);
@@ -170,7 +171,7 @@ static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, b
     }
     if (dr_estimator_shared_sums(a->threads, a->total))
         return (a->exact = accum_exact(a, a->total)) ? 0 : DR_ERR_NOMEM;
-    memset(out, 0, sizeof(double) * (size_t)a->total);
+    dr_parallel_zero(out, a->total, a->threads);
     a->grad[0] = out;
     for (int t = 0; t < a->threads; t++) {
         if (t > 0 && !(a->grad[t] = accum_thread_vector(a, t, (size_t)a->total + 1)))
@@ -185,21 +186,32 @@ nomem:
     return DR_ERR_NOMEM;
 }
 
+/* accum_sum's entries [begin, end): each entry's threads added in thread
+ * order, then +0.0, one entry at a time (the same operations, and bits, as
+ * one pass per thread). */
+static void sum_threads(void *ctx, int thread, int64_t begin, int64_t end)
+{
+    (void)thread;
+    const struct dr_est_accum *a = ctx;
+    double *g = a->grad[0];
+    for (int64_t i = begin; i < end; i++) {
+        double x = g[i];
+        for (int t = 1; t < a->threads; t++)
+            x += a->grad[t][i];
+        g[i] = x + 0.0;
+    }
+}
+
 /* The threads' sums into grad (thread 0 summed there already: the others
  * added in thread order) or d_image (written in place). Adding +0.0 at the
  * end gives every entry the bits the former 0 + g0 + g1 + ... gave (a -0
  * sum became +0). */
 static void accum_sum(const struct dr_est_accum *a, const struct dr_grad_problem *p, double *grad, double *d_image)
 {
-    if (grad && a->exact) {
+    if (grad && a->exact)
         dr_exact_sum_read(a->exact, grad);   /* NaN where a contribution was out of its range (exact_sum.h) */
-    } else if (grad) {
-        for (int t = 1; t < a->threads; t++)
-            for (int64_t i = 0; i < a->total; i++)
-                grad[i] += a->grad[t][i];
-        for (int64_t i = 0; i < a->total; i++)
-            grad[i] += 0.0;
-    }
+    else if (grad)
+        dr_parallel_elements(a->total, a->threads, sum_threads, (void *)a);
     for (size_t i = 0, n = (size_t)p->width * (size_t)p->height * 3; d_image && i < n; i++)
         d_image[i] += 0.0;
 }

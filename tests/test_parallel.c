@@ -5,6 +5,7 @@
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdbool.h>
+#include <stdlib.h>
 
 #include "image_io.h"
 #include "parallel.h"
@@ -79,9 +80,66 @@ static void test_preload(void)
     dr_parallel_set_started_hook(NULL);
 }
 
+/* dr_parallel_elements: every element exactly once; a big vector handed
+ * out in chunks to the workers (which worker takes which depends on
+ * timing), a small one, or any with one thread, in one call on the calling
+ * thread; dr_parallel_zero clears all of it and nothing else. */
+struct marks {
+    unsigned char *seen;
+    _Atomic int calls;
+    pthread_t caller;
+    _Atomic int off_caller;
+};
+
+static void mark(void *ctx, int thread, int64_t b, int64_t e)
+{
+    struct marks *m = ctx;
+    for (int64_t i = b; i < e; i++)
+        m->seen[i]++;
+    (void)thread;
+    atomic_fetch_add(&m->calls, 1);
+    if (!pthread_equal(pthread_self(), m->caller))
+        atomic_store(&m->off_caller, 1);
+}
+
+static void test_elements(void)
+{
+    const int64_t sizes[] = {0, 1, DR_PARALLEL_ELEMENTS_MIN - 1, DR_PARALLEL_ELEMENTS_MIN, 1000003};
+    for (int k = 0; k < 5; k++)
+        for (int threads = 1; threads <= 3; threads += 2) {
+            const int64_t n = sizes[k];
+            struct marks m = {.seen = calloc((size_t)n + 1, 1), .caller = pthread_self()};
+            atomic_init(&m.calls, 0);
+            atomic_init(&m.off_caller, 0);
+            dr_parallel_elements(n, threads, mark, &m);
+            int64_t wrong = 0;
+            for (int64_t i = 0; i < n; i++)
+                wrong += m.seen[i] != 1;
+            CHECK(wrong == 0 && m.seen[n] == 0, "n %lld, %d threads: %lld elements not seen exactly once",
+                  (long long)n, threads, (long long)wrong);
+            const bool big = threads > 1 && n >= DR_PARALLEL_ELEMENTS_MIN;
+            CHECK(big ? atomic_load(&m.calls) >= 4 * threads : atomic_load(&m.calls) == 1 && !atomic_load(&m.off_caller),
+                  "n %lld, %d threads: %d calls, off the caller %d", (long long)n, threads, atomic_load(&m.calls),
+                  atomic_load(&m.off_caller));
+            free(m.seen);
+        }
+    enum { N = 200003 };
+    double *x = malloc(sizeof(double) * (N + 2));
+    for (int i = 0; i < N + 2; i++)
+        x[i] = 1.5;
+    dr_parallel_zero(x + 1, N, 2);
+    int64_t nonzero = 0;
+    for (int i = 1; i <= N; i++)
+        nonzero += x[i] != 0.0;
+    CHECK(nonzero == 0 && x[0] == 1.5 && x[N + 1] == 1.5, "dr_parallel_zero: %lld left, edges %g %g",
+          (long long)nonzero, x[0], x[N + 1]);
+    free(x);
+}
+
 int main(void)
 {
     test_started_hook();
     test_preload();
+    test_elements();
     return TEST_END();
 }
