@@ -29,6 +29,33 @@ static struct dr_scene *scene(void)
     return s;
 }
 
+/* A version 1 checkpoint (all text) of theta, m and v at iteration `it`,
+ * every number printed with fmt (" %.17g": decimal, as before 2026-11-27;
+ * " %a": hexadecimal). */
+static void write_version1(const char *path, const struct dr_param_set *ps, const struct dr_adam *a, int it,
+                           const double *theta, const double *m, const double *v, const char *fmt)
+{
+    FILE *f = fopen(path, "w");
+    if (!f)
+        return;
+    fprintf(f, "drender-checkpoint 1\nscene scene.gltf\niteration %d\nadam %d %.17g %.17g %.17g\n", it, it, a->beta1,
+            a->beta2, a->eps);
+    for (int k = 0; k < ps->n; k++) {
+        const struct dr_param *p = &ps->params[k];
+        fprintf(f, "param %s %lld\n", p->name, (long long)p->size);
+        const double *vec[3] = {theta, m, v};
+        const char *key[3] = {"value", "m", "v"};
+        for (int j = 0; j < 3; j++) {
+            fputs(key[j], f);
+            for (int64_t i = p->offset; i < p->offset + p->size; i++)
+                fprintf(f, fmt, vec[j][i]);
+            fputc('\n', f);
+        }
+    }
+    fputs("end\n", f);
+    fclose(f);
+}
+
 /* The checkpoint's numbers (hexadecimal, optimizer.c's put_double) read back
  * bit for bit at the edges of the double range; a decimal checkpoint (the
  * format before) reads as it did. */
@@ -50,23 +77,7 @@ static void edge_values(const struct dr_param_set *ps, const double *theta0, con
     for (int i = 0; i < 5; i++)   /* say which, if any */
         CHECK(memcmp(&b->m[i], &m[i], sizeof(double)) == 0, "m[%d]: %a read back as %a", i, m[i], b->m[i]);
     /* the same state in decimal, as written before */
-    FILE *f = fopen(path, "w");
-    fprintf(f, "drender-checkpoint 1\nscene scene.gltf\niteration 7\nadam 7 %.17g %.17g %.17g\n", a->beta1, a->beta2,
-            a->eps);
-    for (int k = 0; k < ps->n; k++) {
-        const struct dr_param *p = &ps->params[k];
-        fprintf(f, "param %s %lld\n", p->name, (long long)p->size);
-        const double *vec[3] = {theta, m, v};
-        const char *key[3] = {"value", "m", "v"};
-        for (int j = 0; j < 3; j++) {
-            fputs(key[j], f);
-            for (int64_t i = p->offset; i < p->offset + p->size; i++)
-                fprintf(f, " %.17g", vec[j][i]);
-            fputc('\n', f);
-        }
-    }
-    fputs("end\n", f);
-    fclose(f);
+    write_version1(path, ps, a, 7, theta, m, v, " %.17g");
     memset(back, 0, sizeof back);
     CHECK(dr_checkpoint_read(path, ps, back, b, &it) == 0, "decimal read: %s", dr_last_error());
     CHECK(memcmp(back, theta, sizeof back) == 0 && memcmp(b->m, m, sizeof m) == 0 && memcmp(b->v, v, sizeof v) == 0,
@@ -127,23 +138,7 @@ static void texture_checkpoint(const char *path)
           size2, (long long)n);
 
     /* the same state all in text, as version 1 wrote it */
-    f = fopen(path, "w");
-    fprintf(f, "drender-checkpoint 1\nscene scene.gltf\niteration 12\nadam 12 %.17g %.17g %.17g\n", a->beta1,
-            a->beta2, a->eps);
-    for (int k = 0; k < ps->n; k++) {
-        const struct dr_param *p = &ps->params[k];
-        fprintf(f, "param %s %lld\n", p->name, (long long)p->size);
-        const double *vec[3] = {theta, a->m, a->v};
-        const char *key[3] = {"value", "m", "v"};
-        for (int j = 0; j < 3; j++) {
-            fputs(key[j], f);
-            for (int64_t i = p->offset; i < p->offset + p->size; i++)
-                fprintf(f, " %a", vec[j][i]);
-            fputc('\n', f);
-        }
-    }
-    fputs("end\n", f);
-    fclose(f);
+    write_version1(path, ps, a, 12, theta, a->m, a->v, " %a");
     memset(back, 0, sizeof(double) * (size_t)n);
     CHECK(dr_checkpoint_read(path, ps, back, r, &it) == 0 && memcmp(back, theta, sizeof(double) * (size_t)n) == 0 &&
               memcmp(r->v, a->v, sizeof(double) * (size_t)n) == 0,
