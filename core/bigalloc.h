@@ -8,6 +8,7 @@
 #ifndef DR_BIGALLOC_H
 #define DR_BIGALLOC_H
 
+#include <stdbool.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -37,6 +38,22 @@ static inline void *dr_calloc_big(size_t n, size_t size)
     if (p)
         memset(p, 0, n * size);
     return p;
+}
+
+/* A vector of n doubles kept in *buf from call to call (caller-owned
+ * scratch, estimator.h's dr_est_scratch): *buf itself where it holds n
+ * already (*kept true: its old values are still there), else a new zeroed
+ * one (*kept false) in place of the old, *len n (0 and NULL when out of
+ * memory). */
+static inline double *dr_big_vector_keep(double **buf, int64_t *len, int64_t n, bool *kept)
+{
+    *kept = *buf && *len == n;
+    if (*kept)
+        return *buf;
+    free(*buf);
+    *buf = (double *)dr_calloc_big((size_t)n, sizeof(double));
+    *len = *buf ? n : 0;
+    return *buf;
 }
 
 #endif

@@ -281,13 +281,11 @@ static bool read_word(FILE *f, char *w, size_t size)
     return n > 0;
 }
 
-/* key, then n numbers: hexadecimal (put_double) or decimal (checkpoints
- * written before it), each read whole by strtod. */
-static bool read_doubles(FILE *f, const char *key, double *v, int64_t n)
+/* n numbers: hexadecimal (put_double) or decimal (checkpoints written
+ * before it), each read whole by strtod. */
+static bool read_numbers(FILE *f, double *v, int64_t n)
 {
     char word[64];
-    if (!read_word(f, word, sizeof word) || strcmp(word, key) != 0)
-        return false;
     for (int64_t i = 0; i < n; i++) {
         char *end;
         if (!read_word(f, word, sizeof word))
@@ -299,22 +297,30 @@ static bool read_doubles(FILE *f, const char *key, double *v, int64_t n)
     return true;
 }
 
-/* One parameter's values, m and v: text (read_doubles), or in version 2
- * a "binary le64" line and the raw doubles (write_binary). */
+/* key, then n numbers. */
+static bool read_doubles(FILE *f, const char *key, double *v, int64_t n)
+{
+    char word[16];
+    return read_word(f, word, sizeof word) && strcmp(word, key) == 0 && read_numbers(f, v, n);
+}
+
+/* One parameter's values, m and v: text ("value" and n numbers, then m and
+ * v), or in version 2 a "binary le64" line and the raw doubles
+ * (write_binary). */
 static bool read_section(FILE *f, int version, double *value, double *m, double *v, int64_t n)
 {
-    const long at = ftell(f);
     char word[16];
-    if (version >= 2 && read_word(f, word, sizeof word) && strcmp(word, "binary") == 0) {
+    if (!read_word(f, word, sizeof word))
+        return false;
+    if (version >= 2 && strcmp(word, "binary") == 0) {
         if (!CHECKPOINT_LITTLE_ENDIAN || !read_word(f, word, sizeof word) || strcmp(word, "le64") != 0)
             return false;   /* (read_word took the newline after it) */
         return fread(value, sizeof(double), (size_t)n, f) == (size_t)n &&
                fread(m, sizeof(double), (size_t)n, f) == (size_t)n &&
                fread(v, sizeof(double), (size_t)n, f) == (size_t)n && getc_unlocked(f) == '\n';
     }
-    if (at < 0 || fseek(f, at, SEEK_SET) != 0)
-        return false;
-    return read_doubles(f, "value", value, n) && read_doubles(f, "m", m, n) && read_doubles(f, "v", v, n);
+    return strcmp(word, "value") == 0 && read_numbers(f, value, n) && read_doubles(f, "m", m, n) &&
+           read_doubles(f, "v", v, n);
 }
 
 /* A well-formed file can still hold a state no run reaches: a negative

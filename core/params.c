@@ -747,5 +747,5 @@ void dr_param_set_put(struct dr_scene *s, const struct dr_param_set *set, const 
 
 int dr_param_set_refresh(struct dr_scene *scene, const struct dr_param_set *set)
 {
-    return set->radiance_active ? dr_scene_refresh(scene) : dr_scene_refresh_bsdfs(scene);
+    return set->radiance_active ? dr_scene_refresh(scene) : dr_scene_refresh_keep_lights(scene);
 }

@@ -129,7 +129,7 @@ void dr_param_set_get(const struct dr_scene *scene, const struct dr_param_set *s
 void dr_param_set_put(struct dr_scene *scene, const struct dr_param_set *set, const double *values);
 /* After dr_param_set_put: dr_scene_refresh where a radiance has a parameter
  * (an emission, a light, the environment: their sampling tables change),
- * else dr_scene_refresh_bsdfs, which keeps the tables (the lights are as
+ * else dr_scene_refresh_keep_lights, which keeps the tables (the lights are as
  * they were). Optimising a 2k base-colour texture rebuilt its scene's
  * emissive-texture grid every iteration: 30 ms of each. */
 int dr_param_set_refresh(struct dr_scene *scene, const struct dr_param_set *set);

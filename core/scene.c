@@ -58,7 +58,7 @@ static unsigned surface_effects(const struct dr_scene *s, int m)
 }
 
 /* dr_scene_refresh's work; the light sampling tables rebuilt only when
- * `lights` (dr_scene_refresh_bsdfs keeps them). */
+ * `lights` (dr_scene_refresh_keep_lights keeps them). */
 static int refresh(struct dr_scene *s, bool lights)
 {
     const struct dr_mesh *m = &s->mesh;
@@ -115,7 +115,7 @@ int dr_scene_refresh(struct dr_scene *s)
     return refresh(s, true);
 }
 
-int dr_scene_refresh_bsdfs(struct dr_scene *s)
+int dr_scene_refresh_keep_lights(struct dr_scene *s)
 {
     return refresh(s, false);
 }

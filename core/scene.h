@@ -195,7 +195,7 @@ int dr_scene_refresh(struct dr_scene *scene);
 /* The same after changes no light sampling table reads (BSDF parameters,
  * their textures, media): the effect flags, the light sampling tables kept.
  * dr_param_set_refresh (params.h) picks this or dr_scene_refresh. */
-int dr_scene_refresh_bsdfs(struct dr_scene *scene);
+int dr_scene_refresh_keep_lights(struct dr_scene *scene);
 void dr_scene_destroy(struct dr_scene *scene);
 /* Rays will also come from camera, which is not one of the scene's (tests,
  * library users): unless the back-face analysis (backface.h) already admits

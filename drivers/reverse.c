@@ -53,16 +53,11 @@ void dr_reverse_scratch_free(struct dr_reverse_scratch *s)
     memset(s, 0, sizeof *s);
 }
 
-/* The scratch's half h, T1 entries (not cleared: a batch overwrites it),
- * allocated where it has none of that size. */
+/* The scratch's half h, T1 entries (not cleared: a batch overwrites it). */
 static double *scratch_half(struct dr_reverse_scratch *s, int h, size_t T1)
 {
-    if (s->half[h] && s->half_len[h] == (int64_t)T1)
-        return s->half[h];
-    free(s->half[h]);
-    s->half[h] = dr_calloc_big(T1, sizeof(double));
-    s->half_len[h] = s->half[h] ? (int64_t)T1 : 0;
-    return s->half[h];
+    bool kept;
+    return dr_big_vector_keep(&s->half[h], &s->half_len[h], (int64_t)T1, &kept);
 }
 
 /* Scratch for a run: the sums live in the caller's se and se_gradient

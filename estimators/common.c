@@ -98,15 +98,12 @@ static double *accum_thread_vector(struct dr_est_accum *a, int t, size_t n)
     struct dr_est_scratch *s = a->scratch;
     if (!s)
         return accum_alloc(a, n);
-    if (s->grad[t] && s->len[t] == (int64_t)n) {
-        a->bytes += n * sizeof(double);
-        dr_parallel_zero(s->grad[t], (int64_t)n, a->threads);
-        return s->grad[t];
-    }
-    free(s->grad[t]);
-    s->grad[t] = accum_alloc(a, n);
-    s->len[t] = s->grad[t] ? (int64_t)n : 0;
-    return s->grad[t];
+    a->bytes += n * sizeof(double);
+    bool kept;
+    double *v = dr_big_vector_keep(&s->grad[t], &s->len[t], (int64_t)n, &kept);
+    if (kept)
+        dr_parallel_zero(v, (int64_t)n, a->threads);
+    return v;
 }
 
 /* The shared exact sum of n entries, zeroed: the scratch's if it has one of
