@@ -1029,7 +1029,8 @@ void dr_wave_soa_radiance(struct dr_wave_soa *w, const struct dr_scene *s, const
 }
 
 bool dr_wave_soa_replay(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
-                        int64_t n, dr_wave_start_fn start, void *ctx, const struct dr_wave_soa_replay *replay,
+                        int64_t n, dr_wave_start_fn start, dr_wave_start8_fn start8, void *ctx,
+                        const struct dr_wave_soa_replay *replay,
                         struct dr_ray_counts *counts)
 {
     /* (zeroed: a field no stage writes reads the same on every run) */
@@ -1040,21 +1041,21 @@ bool dr_wave_soa_replay(struct dr_wave_soa *w, const struct dr_scene *s, const s
     w->replay_out = (struct dr_wave_soa_walks){0};   /* (a walk's arrays move; nothing is written out) */
     w->out = &w->replay_out;
     w->replay = replay;
-    run(w, s, opts, n, start, NULL, ctx, NULL, counts);
+    run(w, s, opts, n, start, start8, ctx, NULL, counts);
     w->out = NULL;
     w->replay = NULL;
     return true;
 }
 
 bool dr_wave_soa_walk(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
-                      dr_wave_start_fn start, void *ctx, const struct dr_wave_soa_walks *out,
+                      dr_wave_start_fn start, dr_wave_start8_fn start8, void *ctx, const struct dr_wave_soa_walks *out,
                       struct dr_ray_counts *counts)
 {
     /* zeroed, as the lanes (wavefront.c): a field no stage wrote reads the same on every run */
     if (!w->scalar && !(w->scalar = calloc(LANES, sizeof(struct scalar_path))))
         return false;
     w->out = out;
-    run(w, s, opts, n, start, NULL, ctx, NULL, counts);
+    run(w, s, opts, n, start, start8, ctx, NULL, counts);
     w->out = NULL;
     return true;
 }

@@ -73,11 +73,12 @@ bool dr_wave_soa_walks_apply(const struct dr_scene *scene, const struct dr_path_
 /* Bytes dr_wave_soa_create and dr_wave_soa_walk allocate (for memory estimates). */
 size_t dr_wave_soa_walk_bytes(void);
 
-/* The primal walks of paths [0, n) into out, with the decisions and sums of
+/* The primal walks of paths [0, n) (started by start, or eight at a time
+ * by start8 where not NULL) into out, with the decisions and sums of
  * dr_wave_run's walks of the same paths (prb.c's lane_vertex without a
  * sink). False: no memory for its working storage (nothing walked). */
 bool dr_wave_soa_walk(struct dr_wave_soa *w, const struct dr_scene *scene, const struct dr_path_opts *opts, int64_t n,
-                      dr_wave_start_fn start, void *ctx, const struct dr_wave_soa_walks *out,
+                      dr_wave_start_fn start, dr_wave_start8_fn start8, void *ctx, const struct dr_wave_soa_walks *out,
                       struct dr_ray_counts *counts);
 
 /* Path replay's second walks (prb.c) in the arrays: the walk of each path
@@ -116,10 +117,12 @@ struct dr_wave_soa_replay {
  * arrays end such paths eight at a time without making their vertex. */
 bool dr_wave_soa_replays_apply(const struct dr_scene *scene, const struct dr_path_opts *opts);
 
-/* The replays of items [0, n) (start: item k's sampler and camera ray).
+/* The replays of items [0, n) (start: item k's sampler and camera ray;
+ * start8, if not NULL, eight items' at once, as in dr_wave_radiance).
  * False: no memory for its working storage (nothing replayed). */
 bool dr_wave_soa_replay(struct dr_wave_soa *w, const struct dr_scene *scene, const struct dr_path_opts *opts,
-                        int64_t n, dr_wave_start_fn start, void *ctx, const struct dr_wave_soa_replay *replay,
+                        int64_t n, dr_wave_start_fn start, dr_wave_start8_fn start8, void *ctx,
+                        const struct dr_wave_soa_replay *replay,
                         struct dr_ray_counts *counts);
 
 /* L[i] = the radiance of path i for i in [0, n), as dr_wave_radiance. */

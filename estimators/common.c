@@ -4,6 +4,8 @@
 #include <string.h>
 
 #include "bigalloc.h"
+#include "camera8.h"
+#include "sampler8.h"
 
 #include "clock.h"
 #include "error.h"
@@ -64,6 +66,47 @@ void dr_est_camera_ray(struct dr_est_base *b, int thread, int64_t pixel, int sam
     dr_sampler_pixel_first2(sp, smp, &u, &v);
     dr_film_sample(&b->p->film.filter, ps->x, ps->y, u, v, &fx, &fy);
     dr_camera_ray(&b->view, fx, fy, o, d);
+}
+
+void dr_est_camera_rays8(struct dr_est_base *b, int thread, const int64_t pixel[8], const int sample[8],
+                         struct dr_sampler smp[8], dr_vec3 o[8], dr_vec3 d[8])
+{
+    /* each lane's pixel start: the thread's own where all eight share a
+     * pixel (the walks' usual case), else copies, as pixel_start keeps one */
+    struct dr_est_pixel_start own[8];
+    const struct dr_est_pixel_start *ps[8];
+    bool one_pixel = true;
+    for (int l = 1; l < 8; l++)
+        one_pixel &= pixel[l] == pixel[0];
+    const struct dr_est_pixel_start *shared = one_pixel ? pixel_start(b, thread, pixel[0]) : NULL;
+    for (int l = 0, n_own = 0; l < 8; l++) {
+        if (shared)
+            ps[l] = shared;
+        else if (l > 0 && pixel[l] == pixel[l - 1])
+            ps[l] = ps[l - 1];
+        else
+            own[n_own] = *pixel_start(b, thread, pixel[l]), ps[l] = &own[n_own++];
+    }
+    const bool halves = sobol_halves(b->p);
+    const struct dr_sampler_pixel *sp[8];
+    uint64_t index[8];
+    for (int l = 0; l < 8; l++) {
+        sp[l] = &ps[l]->half[halves ? sample[l] & 1 : 0];
+        index[l] = (uint64_t)(halves ? sample[l] >> 1 : sample[l]);
+    }
+    dr_f8 u, v, x, y;
+    dr_sampler_pixel_first2_8(sp, index, smp, &u, &v);
+    for (int l = 0; l < 8; l++)
+        x[l] = ps[l]->x, y[l] = ps[l]->y;
+    dr_f8 fx = x + u, fy = y + v;   /* dr_film_sample's box */
+    const struct dr_filter *f = &b->p->film.filter;
+    if (f->kind != DR_FILTER_BOX)
+        for (int l = 0; l < 8; l++)
+            dr_film_sample(f, ps[l]->x, ps[l]->y, u[l], v[l], &fx[l], &fy[l]);
+    dr_v3x8 o8, d8;
+    dr_camera_ray8(&b->view, fx, fy, &o8, &d8);
+    for (int l = 0; l < 8; l++)
+        o[l] = dr_v3x8_get(&o8, l), d[l] = dr_v3x8_get(&d8, l);
 }
 
 /* ------------------------------------------------------------ accumulators */

@@ -78,6 +78,12 @@ struct dr_est_base {
  * offset), started by thread `thread` (its dr_est_pixel_start). */
 void dr_est_camera_ray(struct dr_est_base *b, int thread, int64_t pixel, int sample, struct dr_sampler *smp,
                        dr_vec3 *o, dr_vec3 *d);
+/* The same for eight samples at once, lane l sample[l] of pixel[l] (any
+ * pixels), with dr_est_camera_ray's bits in each lane: the samplers'
+ * first draws and the rays eight at a time (sampler8.h, camera8.h), as
+ * render's start_run_samples8. */
+void dr_est_camera_rays8(struct dr_est_base *b, int thread, const int64_t pixel[8], const int sample[8],
+                         struct dr_sampler smp[8], dr_vec3 o[8], dr_vec3 d[8]);
 
 /* The sink a thread writes a piece of work into (reverse mode: a chunk
  * buffer summed into the thread's gradient by dr_est_sink_end). */

@@ -295,6 +295,18 @@ static void soa_start(void *ctx, int64_t i, struct dr_sampler *smp, dr_vec3 *o, 
     (void)sample_ray(ctx, i, smp, o, d);
 }
 
+/* soa_start for items first .. first + 7 at once (dr_wave_start8_fn). */
+static void soa_start8(void *ctx, int64_t first, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    const struct park_ctx *c = ctx;
+    const int spp = c->run.j->b.p->spp;
+    int64_t px[8];
+    int sample[8];
+    for (int l = 0; l < 8; l++)
+        px[l] = c->px[(first + l) / spp], sample[l] = (int)((first + l) % spp);
+    dr_est_camera_rays8(&c->run.j->b, c->run.thread, px, sample, smp, o, d);
+}
+
 static void primal_keep_log(void *ctx, void *user, const struct dr_wave_log *log)
 {
     struct park_ctx *c = ctx;
@@ -355,6 +367,20 @@ static void soa_replay_start(void *ctx, int64_t k, struct dr_sampler *smp, dr_ve
     (void)sample_ray(ctx, c->items->order[k], smp, o, d);
 }
 
+/* soa_replay_start for items first .. first + 7 at once. */
+static void soa_replay_start8(void *ctx, int64_t first, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    const struct park_ctx *c = ctx;
+    const int spp = c->run.j->b.p->spp;
+    int64_t px[8];
+    int sample[8];
+    for (int l = 0; l < 8; l++) {
+        const int32_t i = c->items->order[first + l];
+        px[l] = c->px[i / spp], sample[l] = i % spp;
+    }
+    dr_est_camera_rays8(&c->run.j->b, c->run.thread, px, sample, smp, o, d);
+}
+
 static void soa_replay_vertex(void *ctx, int64_t k, const struct dr_path_vertex *v,
                               const struct dr_wave_soa_replay_lanes *g, int i)
 {
@@ -383,7 +409,8 @@ static void replay_walks(struct prb_job *j, int thread, struct park_ctx *c, int3
     const struct dr_wave_soa_replay r = {c, it->order, it->walk.L, it->walk.L_sub, it->walk.last_diff, it->walk.log,
                                          soa_replay_vertex};
     if (j->soas[thread] && dr_wave_soa_replays_apply(b->p->scene, &b->popts) &&
-        dr_wave_soa_replay(j->soas[thread], b->p->scene, &b->popts, n, soa_replay_start, c, &r, &b->thr[thread].rays))
+        dr_wave_soa_replay(j->soas[thread], b->p->scene, &b->popts, n, soa_replay_start, soa_replay_start8, c, &r,
+                           &b->thr[thread].rays))
         return;
     dr_wave_run(j->waves[thread], b->p->scene, &b->popts, n, &replay, c, &b->thr[thread].rays);
 }
@@ -440,7 +467,7 @@ static void primal_walks(struct prb_job *j, int thread, struct park_ctx *c, int6
                                               NULL, true, true, true};
     if (dr_wave_soa_walks_apply(b->p->scene, &b->popts, true) &&
         (j->soas[thread] || (j->soas[thread] = dr_wave_soa_create())) &&
-        dr_wave_soa_walk(j->soas[thread], b->p->scene, &b->popts, n, soa_start, c, &c->items->walk,
+        dr_wave_soa_walk(j->soas[thread], b->p->scene, &b->popts, n, soa_start, soa_start8, c, &c->items->walk,
                          &b->thr[thread].rays))
         return;   /* (out of memory for the arrays: the lanes, which need none) */
     dr_wave_run(j->waves[thread], b->p->scene, &b->popts, n, &primal, c, &b->thr[thread].rays);
@@ -617,7 +644,7 @@ static int64_t arrays_pixels(struct prb_job *j, int thread, int64_t begin, int64
     for (int64_t first = 0; first < n_all; first += group) {
         const int64_t n_px = n_all - first < group ? n_all - first : group;
         struct park_ctx c = {.run = {j, thread}, .px = px + first, .items = it};
-        if (!dr_wave_soa_walk(j->soas[thread], b->p->scene, &b->popts, n_px * spp, soa_start, &c, &sums,
+        if (!dr_wave_soa_walk(j->soas[thread], b->p->scene, &b->popts, n_px * spp, soa_start, soa_start8, &c, &sums,
                               &b->thr[thread].rays))
             return px[first];
         for (int64_t k = 0; k < n_px; k++) {

@@ -399,7 +399,7 @@ static bool record_soa(struct tape_job *j, int thread, struct wave_record *c, in
         return false;
     const struct dr_wave_soa_walks out = {.ctx = c, .step = soa_step, .vertex = soa_vertex};
     c->first_path = c->tp->n_paths;
-    if (!dr_wave_soa_walk(j->soas[thread], s, &j->b.popts, n, soa_start, c, &out, &j->b.thr[thread].rays))
+    if (!dr_wave_soa_walk(j->soas[thread], s, &j->b.popts, n, soa_start, NULL, c, &out, &j->b.thr[thread].rays))
         return false;
     for (int64_t i = 0; i < n && !c->tp->failed; i++)
         end_path(j, thread, &c->tp->paths[c->first_path + i], c->tp->paths[c->first_path + i].L);

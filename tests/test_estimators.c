@@ -402,6 +402,52 @@ static void cross_adjoint_by_hand(void)
         }
 }
 
+/* dr_est_camera_rays8 against eight calls of dr_est_camera_ray: every
+ * lane's sampler, ray origin and direction to the bit, for each sampler
+ * kind, with and without the cross primal (sobol's halves), for each
+ * filter, on a cropped frame, with lanes of one pixel, of neighbouring
+ * pixels and of pixels in no order (the replays' lanes). */
+static void camera_rays8_match(const struct dr_camera *cam)
+{
+    static struct dr_est_base b;   /* (static: its thread states are large) */
+    static const enum dr_sampler_kind kinds[] = {DR_SAMPLER_INDEPENDENT, DR_SAMPLER_SOBOL, DR_SAMPLER_STRATIFIED};
+    static const struct dr_filter filters[] = {{DR_FILTER_BOX, 0.0}, {DR_FILTER_TENT, 0.0}, {DR_FILTER_GAUSSIAN, 0.7}};
+    static const int64_t lanes_px[3][8] = {{5, 5, 5, 5, 5, 5, 5, 5}, {3, 3, 3, 4, 4, 4, 4, 5}, {9, 2, 9, 0, 11, 2, 7, 7}};
+    static const int lanes_sample[3][8] = {{0, 1, 2, 3, 4, 5, 6, 7}, {5, 6, 7, 0, 1, 2, 3, 0}, {3, 0, 7, 6, 1, 2, 4, 5}};
+    const float target[3] = {0};
+    double image[3];
+    struct dr_cross_loss x = {.loss = DR_LOSS_L2, .target = target, .scale = 1.0, .image = image};
+    int lanes = 0, differ = 0;
+    for (size_t k = 0; k < sizeof kinds / sizeof *kinds; k++)
+        for (int cross = 0; cross <= 1; cross++)
+            for (size_t f = 0; f < sizeof filters / sizeof *filters; f++)
+                for (int set = 0; set < 3; set++) {
+                    struct dr_grad_problem p = {.width = 4, .height = 3, .spp = 8, .seed = 11, .sampler = kinds[k],
+                                                .cross = cross ? &x : NULL};
+                    p.film = (struct dr_film){filters[f], 9, 7, 2, 3};   /* (a 4 x 3 crop of a 9 x 7 frame) */
+                    memset(&b, 0, sizeof b);
+                    b.p = &p;
+                    b.view = dr_camera_view(cam, 9, 7);
+                    struct dr_sampler smp8[8], smp1;
+                    dr_vec3 o8[8], d8[8], o1, d1;
+                    dr_est_camera_rays8(&b, 1, lanes_px[set], lanes_sample[set], smp8, o8, d8);
+                    for (int l = 0; l < 8; l++, lanes++) {
+                        dr_est_camera_ray(&b, 0, lanes_px[set][l], lanes_sample[set][l], &smp1, &o1, &d1);
+                        const bool same = memcmp(&o1, &o8[l], sizeof o1) == 0 && memcmp(&d1, &d8[l], sizeof d1) == 0 &&
+                                          smp1.key == smp8[l].key && smp1.dim == smp8[l].dim &&
+                                          smp1.kind == smp8[l].kind && smp1.pkey == smp8[l].pkey &&
+                                          smp1.index == smp8[l].index && smp1.count == smp8[l].count &&
+                                          smp1.grid_m == smp8[l].grid_m && smp1.grid_n == smp8[l].grid_n;
+                        differ += !same;
+                        CHECK(same, "camera rays8 (sampler %d, cross %d, filter %zu, lanes %d, lane %d): "
+                              "d %.17g %.17g %.17g vs %.17g %.17g %.17g, key %llx vs %llx", (int)kinds[k], cross, f, set,
+                              l, d8[l].x, d8[l].y, d8[l].z, d1.x, d1.y, d1.z, (unsigned long long)smp8[l].key,
+                              (unsigned long long)smp1.key);
+                    }
+                }
+    CHECK(lanes == 3 * 2 * 3 * 3 * 8 && differ == 0, "camera rays8: %d lanes, %d differ", lanes, differ);
+}
+
 /* estimator.h's dr_est_scratch and reverse.h's dr_reverse_scratch: runs
  * that reuse the caller's vectors (cleared, not fresh) give the same
  * gradient to the bit as runs with their own, again and again; a problem of
@@ -507,6 +553,7 @@ int main(void)
         "/materials/light/extensions/KHR_materials_emissive_strength/emissiveStrength",
         "/images/0",
     };
+    camera_rays8_match(&s->cameras[0]);
     compare("cornell box", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DETACHED, GROUPED_PRB);
     scratch_reuse("cornell box", s, &s->cameras[0], ptrs, 7, 2);
     /* the light's parameters alone: the vertices that see it or sample it
