@@ -181,15 +181,39 @@ DR_SIMD_INLINE dr_u32x16 dr_sobol_dim1_16(dr_u32x16 i)
  * dimension d): the same hashes (dr_sobol_hashes_of), and
  * dr_sobol2_hashed8's operations with the dimensions taken two at a time
  * (d+1 with d+2, d+4 with d+5, the pairs' second numbers together). */
-DR_SIMD_INLINE void dr_sobol_vertex8(dr_u8 pkey, dr_u32x8 rindex, dr_u8 d, dr_f8 u[7])
+/* The twelve hashes of dr_sobol_vertex8's dimensions (dr_sobol_hashes_of
+ * of dr_sampler_dim_hash(pkey, d + offset)). They depend on the pixel and
+ * the dimension alone, and a group's lanes are mostly one pixel's samples
+ * at one depth (a pixel's samples start side by side and stay in order):
+ * then they are worked out once, in scalar registers, and broadcast, the
+ * same bits (the multiplies of twelve 64-bit vector hashes were a third of
+ * the draws). */
+DR_SIMD_INLINE void dr_sobol_vertex_hashes8(dr_u8 pkey, dr_u8 d, dr_u8 h[5], dr_u8 h1[5], dr_u8 *h2a, dr_u8 *h2b)
 {
     static const int offset[5] = {1, 2, 4, 5, 7};
-    dr_u8 h[5], h1[5];
+    const dr_u8 zero = {0};
+    if (!dr_m8_any((dr_m8)((pkey ^ pkey[0]) | (d ^ d[0])) != (dr_m8)zero)) {
+        for (int k = 0; k < 5; k++) {
+            const uint64_t hk = dr_hash64(pkey[0] + (d[0] + (uint64_t)offset[k]) * 0xd1b54a32d192ed03ULL);
+            h[k] = zero + hk;
+            h1[k] = zero + dr_hash64(hk ^ 0x1111111111111111ULL);
+        }
+        *h2a = zero + dr_hash64(h[1][0] ^ 0x2222222222222222ULL);
+        *h2b = zero + dr_hash64(h[3][0] ^ 0x2222222222222222ULL);
+        return;
+    }
     for (int k = 0; k < 5; k++) {
         h[k] = dr_hash64x8(pkey + (d + (uint64_t)offset[k]) * 0xd1b54a32d192ed03ULL);
         h1[k] = dr_hash64x8(h[k] ^ 0x1111111111111111ULL);
     }
-    const dr_u8 h2a = dr_hash64x8(h[1] ^ 0x2222222222222222ULL), h2b = dr_hash64x8(h[3] ^ 0x2222222222222222ULL);
+    *h2a = dr_hash64x8(h[1] ^ 0x2222222222222222ULL);
+    *h2b = dr_hash64x8(h[3] ^ 0x2222222222222222ULL);
+}
+
+DR_SIMD_INLINE void dr_sobol_vertex8(dr_u8 pkey, dr_u32x8 rindex, dr_u8 d, dr_f8 u[7])
+{
+    dr_u8 h[5], h1[5], h2a, h2b;
+    dr_sobol_vertex_hashes8(pkey, d, h, h1, &h2a, &h2b);
 #define LOW32(v) __builtin_convertvector(v, dr_u32x8)
 #define HIGH32(v) __builtin_convertvector((v) >> 32, dr_u32x8)
     /* the shuffled indices (dr_owen_scramble of the index, reversals met) */
