@@ -76,12 +76,9 @@ static int work_alloc(struct rev_work *w, const struct dr_reverse_result *r)
     w->scratch = w->o->scratch ? w->o->scratch : &w->own;
     w->half[0] = scratch_half(w->scratch, 0, T1);
     w->half[1] = split ? scratch_half(w->scratch, 1, T1) : NULL;
-    w->m2 = r->se;
-    dr_parallel_zero(w->m2, w->T, w->o->problem.threads);
+    w->m2 = r->se;   /* (batch 0 writes it whole: welford_range) */
     /* the halves' squared differences feed se_gradient and se_primal only */
     w->dsq = r->parts && r->se_gradient ? r->se_gradient : NULL;
-    if (w->dsq)
-        dr_parallel_zero(w->dsq, w->T, w->o->problem.threads);
     if (w->img && w->adj && w->img_sum && w->cross_img && w->half[0] && (w->half[1] || !split))
         return 0;
     dr_set_error("out of memory (%lld gradient entries, %zu image values)", (long long)w->T, w->n);
@@ -172,14 +169,18 @@ static void welford_range(void *ctx, int thread, int64_t begin, int64_t end)
     struct rev_work *w = x->w;
     double *grad = x->r->grad;
     const int b = x->b, n0 = x->n0, n1 = x->n1, spp = x->spp;
+    /* batch 0 starts every entry from +0 itself (the same operations on the
+     * zeros the sums would hold): nothing to clear before it, nor to read */
+    const bool first = b == 0;
     for (int64_t i = begin; i < end; i++) {
         double g = x->split ? (n0 * w->half[0][i] + n1 * w->half[1][i]) / spp : w->half[0][i];
-        double d = g - grad[i];
-        grad[i] += d / (b + 1);
-        w->m2[i] += d * (g - grad[i]);
+        const double mean = first ? 0.0 : grad[i], m2 = first ? 0.0 : w->m2[i];
+        double d = g - mean;
+        grad[i] = mean + d / (b + 1);
+        w->m2[i] = m2 + d * (g - grad[i]);
         if (x->split && w->dsq) {
             double h = w->half[0][i] - w->half[1][i];
-            w->dsq[i] += h * h * n0 * n1 / ((double)spp * spp);
+            w->dsq[i] = (first ? 0.0 : w->dsq[i]) + h * h * n0 * n1 / ((double)spp * spp);
         }
     }
 }
@@ -297,8 +298,7 @@ int dr_reverse_gradient(const struct dr_reverse_options *o, const float *target,
                          .T = p->params->total, .steps = r->primal_run == DR_PRIMAL_CROSS ? K : 2 * K};
     const bool mis = dr_est_sampling_run(p) == DR_SAMPLING_MIS;
     r->primal_seed = dr_hash64(p->seed ^ PRIMAL_SEED_SALT);
-    r->t_primal = r->t_gradient = 0.0;
-    dr_parallel_zero(r->grad, w.T, p->threads);
+    r->t_primal = r->t_gradient = 0.0;   /* (r->grad: batch 0 writes it whole) */
     const uint64_t grad_base = dr_hash64(p->seed ^ GRAD_SEED_SALT);
     int rc = work_alloc(&w, r);
     /* mis: the weights of each batch (and half) from the earlier ones too (mis.h) */

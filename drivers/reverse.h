@@ -110,7 +110,9 @@ enum dr_primal_mode dr_reverse_primal_run(enum dr_primal_mode primal, int spp, i
  * (dr_reverse_result.parts). */
 bool dr_reverse_parts(const struct dr_reverse_options *o);
 
-/* target: width * height * 3 linear floats. 0 or a negative DR_ERR_*. */
+/* target: width * height * 3 linear floats. 0 or a negative DR_ERR_*
+ * (then r's vectors hold nothing meaningful: the first batch writes them
+ * whole, so nothing clears them before). */
 int dr_reverse_gradient(const struct dr_reverse_options *o, const float *target, struct dr_reverse_result *r);
 
 #endif
