@@ -25,6 +25,7 @@ struct rev_work {
     /* a batch's gradient (its two halves); Welford's sum of squares and the
      * halves' (the caller's se and se_gradient, finished in place) */
     double *half[2], *m2, *dsq;
+    bool consume;              /* a batch's last estimator run hands its gradient to the fold (welford_take) */
     int done, steps;
     struct dr_mis_history mis;   /* mis without the caller's history: this run's batches' */
     struct dr_media_plan media_plan;   /* the batches' media pilot (medium_grad.h), unless the caller's */
@@ -61,10 +62,13 @@ static double *scratch_half(struct dr_reverse_scratch *s, int h, size_t T1)
 }
 
 /* Scratch for a run: the sums live in the caller's se and se_gradient
- * (finish() turns them into standard errors in place), the second half only
- * when batches are split. So a texture parameter costs its result vectors
- * and one or two batch vectors, not eight (and the estimator sums thread 0
- * straight into half[0]: common.c). */
+ * (the last batch turns them into standard errors in place). Where the
+ * estimator hands a run's gradient over in pieces (estimator.h's
+ * dr_grad_consumer: not with mis sampling nor the shared exact sum), a
+ * batch's last run is folded in as it is summed, so a batch vector is kept
+ * only for the first of two halves; else one for each half. So a texture
+ * parameter costs its result vectors and at most two batch vectors, not
+ * eight. */
 static int work_alloc(struct rev_work *w, const struct dr_reverse_result *r)
 {
     size_t T1 = (size_t)(w->T > 0 ? w->T : 1);
@@ -74,12 +78,19 @@ static int work_alloc(struct rev_work *w, const struct dr_reverse_result *r)
     w->img_sum = calloc(w->n, sizeof(double));
     w->cross_img = calloc(w->n, sizeof(double));
     w->scratch = w->o->scratch ? w->o->scratch : &w->own;
-    w->half[0] = scratch_half(w->scratch, 0, T1);
-    w->half[1] = split ? scratch_half(w->scratch, 1, T1) : NULL;
+    struct dr_grad_problem q = w->o->problem;   /* (as run_estimator will run it) */
+    const struct dr_grad_consumer probe = {0};
+    q.consumer = &probe;
+    if (!q.scratch)
+        q.scratch = &w->scratch->est;
+    w->consume = dr_estimator_consumes(&q);
+    w->half[0] = split || !w->consume ? scratch_half(w->scratch, 0, T1) : NULL;
+    w->half[1] = split && !w->consume ? scratch_half(w->scratch, 1, T1) : NULL;
     w->m2 = r->se;   /* (batch 0 writes it whole: welford_range) */
     /* the halves' squared differences feed se_gradient and se_primal only */
     w->dsq = r->parts && r->se_gradient ? r->se_gradient : NULL;
-    if (w->img && w->adj && w->img_sum && w->cross_img && w->half[0] && (w->half[1] || !split))
+    if (w->img && w->adj && w->img_sum && w->cross_img && (w->half[0] || !(split || !w->consume)) &&
+        (w->half[1] || !(split && !w->consume)))
         return 0;
     dr_set_error("out of memory (%lld gradient entries, %zu image values)", (long long)w->T, w->n);
     return DR_ERR_NOMEM;
@@ -111,15 +122,17 @@ static int primal(struct rev_work *w, uint64_t seed, int spp, struct dr_reverse_
     return 0;
 }
 
-/* The estimator: spp samples, this seed, into g; with the current adjoint
- * image, or with cross non-NULL from the paths themselves. */
+/* The estimator: spp samples, this seed, into g or (g NULL) to fold; with
+ * the current adjoint image, or with cross non-NULL from the paths
+ * themselves. */
 static int run_estimator(struct rev_work *w, uint64_t seed, int spp, const struct dr_cross_loss *cross, double *g,
-                         struct dr_reverse_result *r)
+                         const struct dr_grad_consumer *fold, struct dr_reverse_result *r)
 {
     struct dr_grad_problem p = w->o->problem;
     p.spp = spp;
     p.seed = seed;
     p.cross = cross;
+    p.consumer = g ? NULL : fold;
     if (!p.mis_history && w->mis.stats)
         p.mis_history = &w->mis;
     if (!p.media_plan)
@@ -136,109 +149,137 @@ static int run_estimator(struct rev_work *w, uint64_t seed, int spp, const struc
     return 0;
 }
 
-static int gradient(struct rev_work *w, uint64_t seed, int spp, double *g, struct dr_reverse_result *r)
+static int gradient(struct rev_work *w, uint64_t seed, int spp, double *g, const struct dr_grad_consumer *fold,
+                    struct dr_reverse_result *r)
 {
-    return run_estimator(w, seed, spp, NULL, g, r);
+    return run_estimator(w, seed, spp, NULL, g, fold, r);
 }
 
-/* Cross mode: batch b's gradient into half[0], from one estimator run
- * whose paths are their own primal; its image goes into the sum. */
-static int cross_gradient(struct rev_work *w, uint64_t seed, struct dr_reverse_result *r)
+/* Cross mode: batch b's gradient into g (or to fold), from one estimator
+ * run whose paths are their own primal; its image goes into the sum. */
+static int cross_gradient(struct rev_work *w, uint64_t seed, double *g, const struct dr_grad_consumer *fold,
+                          struct dr_reverse_result *r)
 {
     const struct dr_cross_loss cross = {.loss = w->o->loss, .target = w->target, .scale = w->o->loss_scale,
                                         .image = w->cross_img};
-    int rc = run_estimator(w, seed, r->spp_batch, &cross, w->half[0], r);
+    int rc = run_estimator(w, seed, r->spp_batch, &cross, g, fold, r);
     for (size_t i = 0; rc == 0 && i < w->n; i++)
         w->img_sum[i] += w->cross_img[i];
     return rc;
 }
 
-/* batch()'s update of entries [begin, end) (each entry on its own:
- * dr_parallel_elements). */
+/* A batch's fold into the running sums, entry by entry (each on its own,
+ * so from any thread: dr_parallel_elements, dr_grad_consumer). */
 struct welford_step {
     struct rev_work *w;
     struct dr_reverse_result *r;
-    int b, n0, n1, spp;
+    int b, K, n0, n1, spp;
     bool split;
 };
 
-static void welford_range(void *ctx, int thread, int64_t begin, int64_t end)
+/* Entries [begin, end)'s update with batch b's gradient there: g[i - begin]
+ * (split halves: h0[i] and h1[i - begin], h0 indexed as the vector): the
+ * running mean (Welford) in r->grad and its sum of squares in m2, with two
+ * halves their squared difference into dsq; on the last batch the
+ * standard errors from those sums, in their place (se held m2, se_gradient
+ * dsq). Batch 0 starts every entry from +0 itself (the same operations on
+ * the zeros the sums would hold), so nothing is cleared before it, nor
+ * read. FIRST and SPLIT are constants where fold_piece calls it, so that
+ * each of its four loops compiles branch-free to vector divisions (with
+ * the tests inside the loop it ran one entry at a time: twice as slow). */
+static inline __attribute__((always_inline)) void fold(const struct welford_step *x, int64_t begin, int64_t end,
+                                                       const double *g, const double *h0, bool first, bool split)
 {
-    (void)thread;
-    const struct welford_step *x = ctx;
     struct rev_work *w = x->w;
-    double *grad = x->r->grad;
+    double *grad = x->r->grad, *m2 = w->m2, *dsq = w->dsq;   /* (dsq: only with split halves, plan()) */
     const int b = x->b, n0 = x->n0, n1 = x->n1, spp = x->spp;
-    /* batch 0 starts every entry from +0 itself (the same operations on the
-     * zeros the sums would hold): nothing to clear before it, nor to read */
-    const bool first = b == 0;
     for (int64_t i = begin; i < end; i++) {
-        double g = x->split ? (n0 * w->half[0][i] + n1 * w->half[1][i]) / spp : w->half[0][i];
-        const double mean = first ? 0.0 : grad[i], m2 = first ? 0.0 : w->m2[i];
-        double d = g - mean;
+        const double hb = g[i - begin];
+        const double gi = split ? (n0 * h0[i] + n1 * hb) / spp : hb;
+        const double mean = first ? 0.0 : grad[i];
+        const double d = gi - mean;
         grad[i] = mean + d / (b + 1);
-        w->m2[i] = m2 + d * (g - grad[i]);
-        if (x->split && w->dsq) {
-            double h = w->half[0][i] - w->half[1][i];
-            w->dsq[i] = (first ? 0.0 : w->dsq[i]) + h * h * n0 * n1 / ((double)spp * spp);
-        }
+        m2[i] = (first ? 0.0 : m2[i]) + d * (gi - grad[i]);
+    }
+    for (int64_t i = begin; split && dsq && i < end; i++) {
+        const double h = h0[i] - g[i - begin];
+        dsq[i] = (first ? 0.0 : dsq[i]) + h * h * n0 * n1 / ((double)spp * spp);
     }
 }
 
-/* Batch b's gradient g_b into r->grad's running mean (Welford), and, with
- * two halves, the gradient-sample variance of g_b into dsq. */
-static int batch(struct rev_work *w, int b, uint64_t grad_base, struct dr_reverse_result *r)
+static void fold_piece(const struct welford_step *x, int64_t begin, int64_t end, const double *g, const double *h0)
 {
-    const int spp = r->spp_batch, n0 = (spp + 1) / 2, n1 = spp / 2;
-    const bool split = r->parts && n1 > 0;
-    int rc;
-    if (r->primal_run == DR_PRIMAL_CROSS)
-        rc = cross_gradient(w, dr_hash64(grad_base + 2 * (uint64_t)b), r);
-    else if (w->o->primal == DR_PRIMAL_SHARED)
-        rc = gradient(w, w->o->problem.seed + 1 + (uint64_t)b, spp, w->half[0], r);
+    if (x->b == 0)
+        x->split ? fold(x, begin, end, g, h0, true, true) : fold(x, begin, end, g, h0, true, false);
     else
-        rc = gradient(w, dr_hash64(grad_base + 2 * (uint64_t)b), split ? n0 : spp, w->half[0], r);
-    if (rc == 0 && split)
-        rc = gradient(w, dr_hash64(grad_base + 2 * (uint64_t)b + 1), n1, w->half[1], r);
-    if (rc != 0)
-        return rc;
-    struct welford_step ws = {w, r, b, n0, n1, spp, split};
-    dr_parallel_elements(w->T, w->o->problem.threads, welford_range, &ws);
-    step_done(w);
-    return 0;
-}
-
-/* finish()'s standard errors of entries [begin, end). */
-struct finish_step {
-    struct rev_work *w;
-    struct dr_reverse_result *r;
-    int K;
-};
-
-static void finish_range(void *ctx, int thread, int64_t begin, int64_t end)
-{
-    (void)thread;
-    const struct finish_step *x = ctx;
-    const struct rev_work *w = x->w;
+        x->split ? fold(x, begin, end, g, h0, false, true) : fold(x, begin, end, g, h0, false, false);
+    if (x->b < x->K - 1)
+        return;
     struct dr_reverse_result *r = x->r;
+    const double *dsq = x->w->dsq;
     const int K = x->K;
-    for (int64_t i = begin; i < end; i++) {
-        r->se[i] = sqrt(w->m2[i] / (K - 1) / K);
-        if (!r->se_gradient)
-            continue;
-        double sg2 = w->dsq ? w->dsq[i] / K / K : NAN;
-        r->se_gradient[i] = r->parts ? sqrt(sg2) : NAN;
+    for (int64_t i = begin; i < end; i++)
+        r->se[i] = sqrt(r->se[i] / (K - 1) / K);   /* (in place of m2) */
+    for (int64_t i = begin; r->se_gradient && i < end; i++) {
+        const double sg2 = dsq ? dsq[i] / K / K : NAN;
+        r->se_gradient[i] = r->parts ? sqrt(sg2) : NAN;   /* (in place of dsq) */
         if (r->se_primal)
             r->se_primal[i] = r->parts ? sqrt(fmax(0.0, r->se[i] * r->se[i] - sg2)) : NAN;
     }
 }
 
-/* Standard errors from the sums, and the loss of the mean primal image. */
-static void finish(struct rev_work *w, struct dr_reverse_result *r, int K, int primals)
+/* The fold of entries [begin, end) from the batch's vectors. */
+static void welford_range(void *ctx, int thread, int64_t begin, int64_t end)
 {
-    /* in place: se held m2, se_gradient (with parts) dsq */
-    struct finish_step fs = {w, r, K};
-    dr_parallel_elements(w->T, w->o->problem.threads, finish_range, &fs);
+    (void)thread;
+    const struct welford_step *x = ctx;
+    const double *h0 = x->w->half[0], *h1 = x->w->half[1];
+    fold_piece(x, begin, end, x->split ? h1 + begin : h0 + begin, x->split ? h0 : NULL);
+}
+
+/* The fold of a piece of the batch's last estimator run as it is summed
+ * (dr_grad_consumer): g is the batch's gradient there, or with split
+ * halves the second half's (the first's is in half[0]). */
+static void welford_take(void *ctx, int64_t begin, int64_t end, const double *g)
+{
+    const struct welford_step *x = ctx;
+    fold_piece(x, begin, end, g, x->split ? x->w->half[0] : NULL);
+}
+
+/* Batch b's gradient g_b folded into the sums (fold): its last
+ * estimator run's as it is summed where the estimator hands it over
+ * (w->consume), else from the batch's vectors afterwards. */
+static int batch(struct rev_work *w, int b, uint64_t grad_base, struct dr_reverse_result *r)
+{
+    const int spp = r->spp_batch, n0 = (spp + 1) / 2, n1 = spp / 2;
+    const bool split = r->parts && n1 > 0;
+    const struct welford_step ws = {w, r, b, w->o->batches, n0, n1, spp, split};
+    const struct dr_grad_consumer fold = {welford_take, (void *)&ws};
+    double *last = w->consume ? NULL : split ? w->half[1] : w->half[0];   /* (NULL: to fold) */
+    int rc;
+    if (r->primal_run == DR_PRIMAL_CROSS)
+        rc = cross_gradient(w, dr_hash64(grad_base + 2 * (uint64_t)b), last, &fold, r);
+    else if (w->o->primal == DR_PRIMAL_SHARED)
+        rc = gradient(w, w->o->problem.seed + 1 + (uint64_t)b, spp, last, &fold, r);
+    else if (!split)
+        rc = gradient(w, dr_hash64(grad_base + 2 * (uint64_t)b), spp, last, &fold, r);
+    else {
+        rc = gradient(w, dr_hash64(grad_base + 2 * (uint64_t)b), n0, w->half[0], NULL, r);
+        if (rc == 0)
+            rc = gradient(w, dr_hash64(grad_base + 2 * (uint64_t)b + 1), n1, last, &fold, r);
+    }
+    if (rc != 0)
+        return rc;
+    if (!w->consume)
+        dr_parallel_elements(w->T, w->o->problem.threads, welford_range, (void *)&ws);
+    step_done(w);
+    return 0;
+}
+
+/* The loss of the mean primal image (the standard errors: the last
+ * batch's fold). */
+static void finish(struct rev_work *w, struct dr_reverse_result *r, int primals)
+{
     for (size_t i = 0; i < w->n; i++)
         w->img[i] = (float)(w->img_sum[i] / primals);
     r->loss = w->o->loss_scale * dr_loss_eval(w->o->loss, w->img, w->target, w->n);
@@ -315,7 +356,7 @@ int dr_reverse_gradient(const struct dr_reverse_options *o, const float *target,
             rc = batch(&w, b, grad_base, r);
     }
     if (rc == 0)
-        finish(&w, r, K, o->primal == DR_PRIMAL_SHARED ? 1 : K);
+        finish(&w, r, o->primal == DR_PRIMAL_SHARED ? 1 : K);
     work_free(&w);
     return rc;
 }

@@ -144,8 +144,9 @@ static double *accum_thread_vector(struct dr_est_accum *a, int t, size_t n)
     a->bytes += n * sizeof(double);
     bool kept;
     double *v = dr_big_vector_keep(&s->grad[t], &s->len[t], (int64_t)n, &kept);
-    if (kept)
+    if (kept && s->dirty[t])   /* (not dirty: the last run's sum cleared it) */
         dr_parallel_zero(v, (int64_t)n, a->threads);
+    s->dirty[t] = v != NULL;   /* (this run writes it) */
     return v;
 }
 
@@ -182,6 +183,12 @@ bool dr_estimator_shared_sums(int threads, int64_t total)
     return threads >= 4 && total >= DR_SHARED_SUMS_MIN;
 }
 
+bool dr_estimator_consumes(const struct dr_grad_problem *p)
+{
+    return p->consumer && p->scratch && dr_est_sampling_run(p) != DR_SAMPLING_MIS &&
+           !dr_estimator_shared_sums(dr_thread_count(p->threads), p->params->total);
+}
+
 /* Where the threads' sums go; out and d_image are the caller's outputs
  * (zeroed here).
  *  - Reverse mode: thread 0 sums straight into `out`, the others into
@@ -211,10 +218,15 @@ static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, b
     }
     if (dr_estimator_shared_sums(a->threads, a->total))
         return (a->exact = accum_exact(a, a->total)) ? 0 : DR_ERR_NOMEM;
-    dr_parallel_zero(out, a->total, a->threads);
-    a->grad[0] = out;
+    /* thread 0 sums into the caller's vector, or with a consumer into the
+     * scratch's first, as the others into theirs */
+    a->consumer = p->consumer && a->scratch ? p->consumer : NULL;
+    if (!a->consumer) {
+        dr_parallel_zero(out, a->total, a->threads);
+        a->grad[0] = out;
+    }
     for (int t = 0; t < a->threads; t++) {
-        if (t > 0 && !(a->grad[t] = accum_thread_vector(a, t, (size_t)a->total + 1)))
+        if ((t > 0 || a->consumer) && !(a->grad[t] = accum_thread_vector(a, t, (size_t)a->total + 1)))
             goto nomem;
         if (a->total <= CHUNK_LOCAL_MAX && !(a->chunk[t] = accum_alloc(a, (size_t)a->total + 1)))
             goto nomem;
@@ -234,24 +246,55 @@ static void sum_threads(void *ctx, int thread, int64_t begin, int64_t end)
     (void)thread;
     const struct dr_est_accum *a = ctx;
     double *g = a->grad[0];
+    const bool clear = a->scratch != NULL;   /* (the scratch's vectors: cleared as read, for the next run) */
     for (int64_t i = begin; i < end; i++) {
         double x = g[i];
-        for (int t = 1; t < a->threads; t++)
+        for (int t = 1; t < a->threads; t++) {
             x += a->grad[t][i];
+            if (clear)
+                a->grad[t][i] = 0.0;
+        }
         g[i] = x + 0.0;
     }
 }
 
+/* The same sums for a consumer (accum_init: every thread's vector the
+ * scratch's), a piece at a time through a buffer in the cache, each
+ * vector cleared as it is read. */
+#define CONSUME_PIECE 1024
+static void consume_threads(void *ctx, int thread, int64_t begin, int64_t end)
+{
+    (void)thread;
+    const struct dr_est_accum *a = ctx;
+    double piece[CONSUME_PIECE];
+    for (int64_t i0 = begin; i0 < end; i0 += CONSUME_PIECE) {
+        const int64_t i1 = end - i0 < CONSUME_PIECE ? end : i0 + CONSUME_PIECE;
+        for (int64_t i = i0; i < i1; i++) {
+            double x = a->grad[0][i];
+            a->grad[0][i] = 0.0;
+            for (int t = 1; t < a->threads; t++) {
+                x += a->grad[t][i];
+                a->grad[t][i] = 0.0;
+            }
+            piece[i - i0] = x + 0.0;
+        }
+        a->consumer->take(a->consumer->ctx, i0, i1, piece);
+    }
+}
+
 /* The threads' sums into grad (thread 0 summed there already: the others
- * added in thread order) or d_image (written in place). Adding +0.0 at the
- * end gives every entry the bits the former 0 + g0 + g1 + ... gave (a -0
- * sum became +0). */
+ * added in thread order), to the consumer, or into d_image (written in
+ * place). Adding +0.0 at the end gives every entry the bits the former
+ * 0 + g0 + g1 + ... gave (a -0 sum became +0). */
 static void accum_sum(const struct dr_est_accum *a, const struct dr_grad_problem *p, double *grad, double *d_image)
 {
-    if (grad && a->exact)
+    if (a->consumer || (grad && !a->exact)) {
+        dr_parallel_elements(a->total, a->threads, a->consumer ? consume_threads : sum_threads, (void *)a);
+        for (int t = a->consumer ? 0 : 1; a->scratch && t < a->threads; t++)
+            a->scratch->dirty[t] = false;   /* (cleared as read) */
+    } else if (grad && a->exact) {
         dr_exact_sum_read(a->exact, grad);   /* NaN where a contribution was out of its range (exact_sum.h) */
-    else if (grad)
-        dr_parallel_elements(a->total, a->threads, sum_threads, (void *)a);
+    }
     for (size_t i = 0, n = (size_t)p->width * (size_t)p->height * 3; d_image && i < n; i++)
         d_image[i] += 0.0;
 }

@@ -34,6 +34,8 @@ struct dr_est_accum {
     uint64_t bytes;                       /* what the buffers above hold */
     struct dr_est_scratch *scratch;       /* where grad[1..] and exact come from, if anywhere
                                              (the problem's: not freed by the run) */
+    const struct dr_grad_consumer *consumer;   /* where the sums go instead of grad[0] (then the
+                                                  scratch's too): estimator.h */
 };
 
 /* What the samples of the pixel a thread started last share

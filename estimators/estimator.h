@@ -93,6 +93,23 @@ struct dr_grad_problem {
     struct dr_est_scratch *scratch;       /* reverse mode (optional, in/out): the run's own gradient
                                              vectors, kept for the next run (below); NULL: allocated
                                              and freed by every run */
+    const struct dr_grad_consumer *consumer;   /* reverse mode (optional): the gradient handed over in
+                                                  pieces instead of written whole (below) */
+};
+
+/* Where a reverse-mode run can hand its gradient instead of writing it to
+ * the caller's vector: take(ctx, begin, end, g) gets g[k] = entry begin + k
+ * (the bits the vector would hold), every entry exactly once, in pieces of
+ * a few thousand, from several threads at once (disjoint pieces). A caller
+ * that folds the gradient into running sums (reverse.h's batches: Welford)
+ * so reads the threads' sums while they are in the cache, and needs no
+ * vector of its own for them: for a 2k texture 100 MB and two passes over
+ * it less per run. Honoured where dr_estimator_consumes says so (the
+ * threads' vectors must be the scratch's); dr_estimator_backward's grad
+ * may then be NULL. */
+struct dr_grad_consumer {
+    void (*take)(void *ctx, int64_t begin, int64_t end, const double *g);
+    void *ctx;
 };
 
 /* The big vectors a reverse-mode run sums into besides the caller's: the
@@ -109,8 +126,10 @@ struct dr_grad_problem {
  * to the bit with or without it. */
 struct dr_exact_sum;   /* exact_sum.h */
 struct dr_est_scratch {
-    double *grad[DR_MAX_THREADS];   /* [0] unused: thread 0 sums into the caller's vector */
+    double *grad[DR_MAX_THREADS];   /* [0]: only with a consumer (else thread 0 sums into the caller's vector) */
     int64_t len[DR_MAX_THREADS];
+    bool dirty[DR_MAX_THREADS];     /* grad[t] may hold non-zero entries (false: the run that summed it
+                                       cleared it as it read it, so the next one need not) */
     struct dr_exact_sum *exact;
     int64_t exact_len;
 };
@@ -187,6 +206,11 @@ bool dr_estimator_supports(const struct dr_estimator_ops *e, enum dr_sampling s)
  * thread count from 4 on. */
 #define DR_SHARED_SUMS_MIN 65536
 bool dr_estimator_shared_sums(int threads, int64_t total);
+
+/* Does a reverse-mode run of p hand its gradient to p->consumer: one is
+ * set, with a scratch, and the run sums per-thread vectors (not mis
+ * sampling, not the shared exact sum). */
+bool dr_estimator_consumes(const struct dr_grad_problem *p);
 
 /* Forward mode: d_image (width * height * 3 doubles) = d I / d theta . dir,
  * dir having params->total entries. */
