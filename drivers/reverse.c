@@ -188,17 +188,19 @@ struct welford_step {
  * each of its four loops compiles branch-free to vector divisions (with
  * the tests inside the loop it ran one entry at a time: twice as slow). */
 static inline __attribute__((always_inline)) void fold(const struct welford_step *x, int64_t begin, int64_t end,
-                                                       const double *g, const double *h0, bool first, bool split)
+                                                       const double *g, const double *h0, bool first, bool split,
+                                                       bool pow2)
 {
     struct rev_work *w = x->w;
     double *grad = x->r->grad, *m2 = w->m2, *dsq = w->dsq;   /* (dsq: only with split halves, plan()) */
     const int b = x->b, n0 = x->n0, n1 = x->n1, spp = x->spp;
+    const double inv = 1.0 / (b + 1);   /* (pow2: exact, so d * inv is d / (b + 1) to the bit) */
     for (int64_t i = begin; i < end; i++) {
         const double hb = g[i - begin];
         const double gi = split ? (n0 * h0[i] + n1 * hb) / spp : hb;
         const double mean = first ? 0.0 : grad[i];
         const double d = gi - mean;
-        grad[i] = mean + d / (b + 1);
+        grad[i] = mean + (pow2 ? d * inv : d / (b + 1));
         m2[i] = (first ? 0.0 : m2[i]) + d * (gi - grad[i]);
     }
     for (int64_t i = begin; split && dsq && i < end; i++) {
@@ -207,19 +209,36 @@ static inline __attribute__((always_inline)) void fold(const struct welford_step
     }
 }
 
+static bool power_of_two(int n)
+{
+    return n > 0 && (n & (n - 1)) == 0;
+}
+
+/* (Dividing by a power of two is multiplying by its reciprocal, exactly:
+ * batches 0 and 1, and K = 2's standard errors, need no division, the
+ * slowest operation of these loops.) */
 static void fold_piece(const struct welford_step *x, int64_t begin, int64_t end, const double *g, const double *h0)
 {
+    const bool pow2 = power_of_two(x->b + 1);
     if (x->b == 0)
-        x->split ? fold(x, begin, end, g, h0, true, true) : fold(x, begin, end, g, h0, true, false);
+        x->split ? fold(x, begin, end, g, h0, true, true, true) : fold(x, begin, end, g, h0, true, false, true);
+    else if (pow2)
+        x->split ? fold(x, begin, end, g, h0, false, true, true) : fold(x, begin, end, g, h0, false, false, true);
     else
-        x->split ? fold(x, begin, end, g, h0, false, true) : fold(x, begin, end, g, h0, false, false);
+        x->split ? fold(x, begin, end, g, h0, false, true, false) : fold(x, begin, end, g, h0, false, false, false);
     if (x->b < x->K - 1)
         return;
     struct dr_reverse_result *r = x->r;
     const double *dsq = x->w->dsq;
     const int K = x->K;
-    for (int64_t i = begin; i < end; i++)
-        r->se[i] = sqrt(r->se[i] / (K - 1) / K);   /* (in place of m2) */
+    if (power_of_two(K - 1) && power_of_two(K)) {   /* (K = 2) */
+        const double inv = 1.0 / (K - 1), inv_k = 1.0 / K;
+        for (int64_t i = begin; i < end; i++)
+            r->se[i] = sqrt(r->se[i] * inv * inv_k);   /* (in place of m2) */
+    } else {
+        for (int64_t i = begin; i < end; i++)
+            r->se[i] = sqrt(r->se[i] / (K - 1) / K);
+    }
     for (int64_t i = begin; r->se_gradient && i < end; i++) {
         const double sg2 = dsq ? dsq[i] / K / K : NAN;
         r->se_gradient[i] = r->parts ? sqrt(sg2) : NAN;   /* (in place of dsq) */
