@@ -448,6 +448,82 @@ static void camera_rays8_match(const struct dr_camera *cam)
     CHECK(lanes == 3 * 2 * 3 * 3 * 8 && differ == 0, "camera rays8: %d lanes, %d differ", lanes, differ);
 }
 
+/* estimator.h's dr_grad_consumer: the gradient handed over in pieces is
+ * the vector a run writes, to the bit, every entry exactly once; the
+ * scratch's vectors are left cleared (not dirty), so a second run with
+ * them gives it again; dr_estimator_consumes says no where the run cannot
+ * (mis sampling; the shared exact sum from four threads on a big vector,
+ * `consumes` false). */
+struct taken {
+    double *g;
+    int *count;
+};
+static void take_piece(void *ctx, int64_t begin, int64_t end, const double *g)
+{
+    struct taken *t = ctx;
+    for (int64_t i = begin; i < end; i++) {
+        t->g[i] = g[i - begin];
+        __atomic_fetch_add(&t->count[i], 1, __ATOMIC_RELAXED);   /* (pieces come from several threads) */
+    }
+}
+
+static void consumer_matches(const char *what, struct dr_scene *s, const struct dr_camera *cam,
+                             const char *const *ptrs, int n, int threads, bool consumes)
+{
+    struct dr_param_set *ps = dr_param_set_create(s, ptrs, n);
+    CHECK(ps != NULL, "%s: param set: %s", what, dr_last_error());
+    if (!ps)
+        return;
+    const struct dr_estimator_ops *prb = dr_estimator_find("prb");
+    const size_t T = (size_t)ps->total;
+    float *adj = malloc(sizeof(float) * 3 * W * H);
+    struct dr_sampler r;
+    dr_sampler_init(&r, 7, 8, 9);
+    for (int i = 0; i < 3 * W * H; i++)
+        adj[i] = (float)(dr_sampler_next(&r) - 0.4);
+    double *own = calloc(T, sizeof(double));
+    struct taken got = {calloc(T, sizeof(double)), calloc(T, sizeof(int))};
+    const struct dr_grad_consumer consumer = {take_piece, &got};
+    struct dr_est_scratch sc = {0};
+    struct dr_grad_problem p = {.scene = s, .camera = cam, .params = ps, .width = W, .height = H, .spp = 2,
+                                .max_depth = 4, .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 9, .threads = threads};
+    CHECK(dr_estimator_backward(prb, &p, adj, own, NULL) == 0, "%s: %s", what, dr_last_error());
+    p.scratch = &sc;
+    p.consumer = &consumer;
+    CHECK(dr_estimator_consumes(&p) == consumes, "%s, %d threads: dr_estimator_consumes says %d", what, threads,
+          !consumes);
+    for (int run = 0; consumes && run < 2; run++) {
+        memset(got.count, 0, sizeof(int) * T);
+        CHECK(dr_estimator_backward(prb, &p, adj, NULL, NULL) == 0, "%s: %s", what, dr_last_error());
+        int64_t not_once = 0, zeros = 0;
+        for (size_t i = 0; i < T; i++)
+            not_once += got.count[i] != 1, zeros += own[i] == 0.0;
+        CHECK(not_once == 0, "%s, run %d: %lld entries not taken exactly once", what, run, (long long)not_once);
+        CHECK(memcmp(own, got.g, sizeof(double) * T) == 0 && zeros < (int64_t)T,
+              "%s, %d threads, run %d: the consumer's gradient differs from the vector's", what, threads, run);
+        for (int t = 0; t < threads; t++) {
+            int64_t left = 0;
+            for (size_t i = 0; sc.grad[t] && i <= T; i++)
+                left += sc.grad[t][i] != 0.0;
+            CHECK(sc.grad[t] && !sc.dirty[t] && left == 0, "%s, run %d: thread %d's vector %s", what, run, t,
+                  !sc.grad[t] ? "missing" : sc.dirty[t] ? "left dirty" : "not cleared");
+        }
+    }
+    struct dr_grad_problem mis = p;
+    mis.sampling = DR_SAMPLING_MIS;
+    mis.params = ps;
+    CHECK(!dr_estimator_consumes(&mis) || dr_est_sampling_run(&mis) != DR_SAMPLING_MIS,
+          "%s: a mis run would hand its gradient to a consumer", what);
+    dr_est_scratch_free(&sc);
+    free(own);
+    free(got.g);
+    free(got.count);
+    free(adj);
+    dr_param_set_destroy(ps);
+    if (consumes)
+        printf("%s: a consumer's pieces are the gradient vector, %d threads\n", what, threads);
+}
+
 /* estimator.h's dr_est_scratch and reverse.h's dr_reverse_scratch: runs
  * that reuse the caller's vectors (cleared, not fresh) give the same
  * gradient to the bit as runs with their own, again and again; a problem of
@@ -505,22 +581,32 @@ static void scratch_reuse(const char *what, struct dr_scene *s, const struct dr_
         g[k] = calloc((size_t)ps->total, sizeof(double));
         se[k] = calloc((size_t)ps->total, sizeof(double));
     }
-    for (int run = 0; run < 3; run++) {
-        struct dr_reverse_options o = {.estimator = prb, .loss = DR_LOSS_L2, .loss_scale = 1.0, .batches = 2,
-                                       .primal = DR_PRIMAL_PER_BATCH, .problem = p};
-        o.problem.params = ps;
-        o.problem.scratch = NULL;
-        o.problem.spp = 4;
-        o.scratch = run ? &rs : NULL;
-        struct dr_reverse_result res = {.grad = g[run > 0], .se = se[run > 0]};
-        CHECK(dr_reverse_gradient(&o, target, &res) == 0, "%s: reverse run %d: %s", what, run, dr_last_error());
-        if (run > 0)
-            CHECK(memcmp(g[0], g[1], sizeof(double) * (size_t)ps->total) == 0 &&
-                      memcmp(se[0], se[1], sizeof(double) * (size_t)ps->total) == 0,
-                  "%s: dr_reverse_gradient with a kept scratch (run %d) differs from one with its own", what, run);
+    /* per-batch primals (two halves a batch: the first kept in half[0], the
+     * second folded in as it is summed, or kept in half[1] with the shared
+     * exact sum) and the cross primal (each batch folded in as it is summed:
+     * no batch vector, but with the exact sum) */
+    for (int cross = 0; cross <= 1; cross++) {
+        for (int run = 0; run < 3; run++) {
+            struct dr_reverse_options o = {.estimator = prb, .loss = DR_LOSS_L2, .loss_scale = 1.0, .batches = 2,
+                                           .primal = cross ? DR_PRIMAL_CROSS : DR_PRIMAL_PER_BATCH, .problem = p};
+            o.problem.params = ps;
+            o.problem.scratch = NULL;
+            o.problem.spp = 4;
+            o.scratch = run ? &rs : NULL;
+            struct dr_reverse_result res = {.grad = g[run > 0], .se = se[run > 0]};
+            CHECK(dr_reverse_gradient(&o, target, &res) == 0, "%s: reverse run %d: %s", what, run, dr_last_error());
+            if (run > 0)
+                CHECK(memcmp(g[0], g[1], sizeof(double) * (size_t)ps->total) == 0 &&
+                          memcmp(se[0], se[1], sizeof(double) * (size_t)ps->total) == 0,
+                      "%s: dr_reverse_gradient (%s primal) with a kept scratch (run %d) differs from one with its own",
+                      what, cross ? "cross" : "per-batch", run);
+        }
+        CHECK((cross && !exact ? !rs.half[0] : rs.half[0] && rs.half_len[0] == ps->total) &&
+                  !rs.half[1] == (cross || !exact),
+              "%s (%s primal): the reverse scratch kept the wrong batch vectors (%p, %p)", what,
+              cross ? "cross" : "per-batch", (void *)rs.half[0], (void *)rs.half[1]);
+        dr_reverse_scratch_free(&rs);
     }
-    CHECK(rs.half[0] && rs.half_len[0] == ps->total, "%s: the reverse scratch kept no batch vector", what);
-    dr_reverse_scratch_free(&rs);
     CHECK(!rs.half[0] && !rs.est.grad[1] && !rs.est.exact, "%s: dr_reverse_scratch_free left something", what);
     for (int k = 0; k < 2; k++) {
         free(g[k]);
@@ -556,6 +642,8 @@ int main(void)
     camera_rays8_match(&s->cameras[0]);
     compare("cornell box", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DETACHED, GROUPED_PRB);
     scratch_reuse("cornell box", s, &s->cameras[0], ptrs, 7, 2);
+    consumer_matches("cornell box", s, &s->cameras[0], ptrs, 7, 2, true);
+    consumer_matches("cornell box", s, &s->cameras[0], ptrs, 7, 3, true);
     /* the light's parameters alone: the vertices that see it or sample it
      * are the only ones with a term (prb's walks mark them in the arrays) */
     compare("cornell box, the light only", s, &s->cameras[0], ptrs + 4, 2, 8, DR_SAMPLING_DETACHED,
@@ -764,6 +852,8 @@ int main(void)
     const char *tex_ptrs[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor", "/images/0"};
     const struct dr_camera top = sb_camera(dr_v3(0, 1.2, 0.8), dr_v3(0, 0, 0), 60);
     scratch_reuse("a 160x160 texture", s, &top, tex_ptrs, 2, 4);
+    consumer_matches("a 160x160 texture", s, &top, tex_ptrs, 2, 2, true);
+    consumer_matches("a 160x160 texture", s, &top, tex_ptrs, 2, 4, false);   /* (the shared exact sum) */
     dr_scene_destroy(s);
     return TEST_END();
 }
