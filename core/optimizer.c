@@ -12,6 +12,7 @@
 
 #include "error.h"
 #include "parallel.h"
+#include "zero_blocks.h"
 
 double dr_param_default_lr(const struct dr_param *p, const double *values)
 {
@@ -98,17 +99,38 @@ static int64_t adam_span(const struct dr_adam *a, int64_t n, double *restrict m,
 {
     int64_t bad = 0;
     const double b1 = a->beta1, b2 = a->beta2, eps = a->eps;
-    for (int64_t i = 0; i < n; i++) {
-        double g = grad[i];
-        bool finite = isfinite(g);
-        bad += !finite;
-        g = finite ? g : 0.0;
-        m[i] = b1 * m[i] + (1.0 - b1) * g;
-        v[i] = b2 * v[i] + (1.0 - b2) * g * g;
-        double step = lr * (m[i] / c1) / (sqrt(v[i] / c2) + eps);
-        double x = theta[i] - step;
-        theta[i] = x < lo ? lo : (x > hi ? hi : x);
+#define ADAM_ENTRY(i)                                                   \
+    do {                                                                \
+        double g = grad[i];                                             \
+        bool finite = isfinite(g);                                      \
+        bad += !finite;                                                 \
+        g = finite ? g : 0.0;                                           \
+        m[i] = b1 * m[i] + (1.0 - b1) * g;                              \
+        v[i] = b2 * v[i] + (1.0 - b2) * g * g;                          \
+        double step = lr * (m[i] / c1) / (sqrt(v[i] / c2) + eps);       \
+        double x = theta[i] - step;                                     \
+        theta[i] = x < lo ? lo : (x > hi ? hi : x);                     \
+    } while (0)
+    int64_t i0 = 0;
+    for (; i0 + DR_ZERO_BLOCK <= n; i0 += DR_ZERO_BLOCK) {
+        /* an entry no gradient has reached yet (m, v and its gradient +0)
+         * inside its bounds does not move: m and v stay +0, the step is
+         * lr * +0 / (+0 + eps) = +0 (lr, eps > 0), theta - +0 = theta; most
+         * of a texture's, in the first iterations at a preview size
+         * (zero_blocks.h) */
+        if (dr_block_zero(grad + i0) && dr_block_zero(m + i0) && dr_block_zero(v + i0) && lr > 0.0 && eps > 0.0) {
+            bool inside = true;
+            for (int64_t i = i0; i < i0 + DR_ZERO_BLOCK; i++)
+                inside &= theta[i] >= lo && theta[i] <= hi;
+            if (inside)
+                continue;
+        }
+        for (int64_t i = i0; i < i0 + DR_ZERO_BLOCK; i++)
+            ADAM_ENTRY(i);
     }
+    for (int64_t i = i0; i < n; i++)
+        ADAM_ENTRY(i);
+#undef ADAM_ENTRY
     return bad;
 }
 

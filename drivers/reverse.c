@@ -9,6 +9,7 @@
 #include "mis.h"
 #include "parallel.h"
 #include "sampler.h"
+#include "zero_blocks.h"
 
 #define PRIMAL_SEED_SALT 0x5052494d414cULL   /* "PRIMAL" */
 #define GRAD_SEED_SALT 0x47524144ULL         /* "GRAD" */
@@ -195,18 +196,33 @@ static inline __attribute__((always_inline)) void fold(const struct welford_step
     double *grad = x->r->grad, *m2 = w->m2, *dsq = w->dsq;   /* (dsq: only with split halves, plan()) */
     const int b = x->b, n0 = x->n0, n1 = x->n1, spp = x->spp;
     const double inv = 1.0 / (b + 1);   /* (pow2: exact, so d * inv is d / (b + 1) to the bit) */
-    for (int64_t i = begin; i < end; i++) {
-        const double hb = g[i - begin];
-        const double gi = split ? (n0 * h0[i] + n1 * hb) / spp : hb;
-        const double mean = first ? 0.0 : grad[i];
-        const double d = gi - mean;
-        grad[i] = mean + (pow2 ? d * inv : d / (b + 1));
-        m2[i] = (first ? 0.0 : m2[i]) + d * (gi - grad[i]);
+#define FOLD_ENTRY(i)                                                              \
+    do {                                                                           \
+        const double hb = g[(i) - begin];                                          \
+        const double gi = split ? (n0 * h0[i] + n1 * hb) / spp : hb;               \
+        const double mean = first ? 0.0 : grad[i];                                 \
+        const double d = gi - mean;                                                \
+        grad[i] = mean + (pow2 ? d * inv : d / (b + 1));                           \
+        m2[i] = (first ? 0.0 : m2[i]) + d * (gi - grad[i]);                        \
+        if (split && dsq) {                                                        \
+            const double h = h0[i] - hb;                                           \
+            dsq[i] = (first ? 0.0 : dsq[i]) + h * h * n0 * n1 / ((double)spp * spp); \
+        }                                                                          \
+    } while (0)
+    int64_t i0 = begin;
+    for (; i0 + DR_ZERO_BLOCK <= end; i0 += DR_ZERO_BLOCK) {
+        /* after batch 0, an entry at +0 with a +0 gradient stays so (mean
+         * + (+0 - +0) * inv = +0, m2 + +0 * +0 = +0, dsq likewise): such
+         * blocks, most of a preview's texture gradient, are left alone */
+        if (!first && dr_block_zero(g + (i0 - begin)) && dr_block_zero(grad + i0) && dr_block_zero(m2 + i0) &&
+            (!split || dr_block_zero(h0 + i0)) && (!(split && dsq) || dr_block_zero(dsq + i0)))
+            continue;
+        for (int64_t i = i0; i < i0 + DR_ZERO_BLOCK; i++)
+            FOLD_ENTRY(i);
     }
-    for (int64_t i = begin; split && dsq && i < end; i++) {
-        const double h = h0[i] - g[i - begin];
-        dsq[i] = (first ? 0.0 : dsq[i]) + h * h * n0 * n1 / ((double)spp * spp);
-    }
+    for (int64_t i = i0; i < end; i++)
+        FOLD_ENTRY(i);
+#undef FOLD_ENTRY
 }
 
 static bool power_of_two(int n)
@@ -231,13 +247,15 @@ static void fold_piece(const struct welford_step *x, int64_t begin, int64_t end,
     struct dr_reverse_result *r = x->r;
     const double *dsq = x->w->dsq;
     const int K = x->K;
-    if (power_of_two(K - 1) && power_of_two(K)) {   /* (K = 2) */
-        const double inv = 1.0 / (K - 1), inv_k = 1.0 / K;
-        for (int64_t i = begin; i < end; i++)
-            r->se[i] = sqrt(r->se[i] * inv * inv_k);   /* (in place of m2) */
-    } else {
-        for (int64_t i = begin; i < end; i++)
-            r->se[i] = sqrt(r->se[i] / (K - 1) / K);
+    /* (in place of m2; where a block of it is +0, sqrt(+0 / (K - 1) / K) = +0 is there already) */
+    const bool halves = power_of_two(K - 1) && power_of_two(K);   /* (K = 2) */
+    const double inv = 1.0 / (K - 1), inv_k = 1.0 / K;
+    for (int64_t i0 = begin; i0 < end; i0 += DR_ZERO_BLOCK) {
+        const int64_t i1 = end - i0 < DR_ZERO_BLOCK ? end : i0 + DR_ZERO_BLOCK;
+        if (i1 - i0 == DR_ZERO_BLOCK && dr_block_zero(r->se + i0))
+            continue;
+        for (int64_t i = i0; i < i1; i++)
+            r->se[i] = halves ? sqrt(r->se[i] * inv * inv_k) : sqrt(r->se[i] / (K - 1) / K);
     }
     for (int64_t i = begin; r->se_gradient && i < end; i++) {
         const double sg2 = dsq ? dsq[i] / K / K : NAN;

@@ -4,6 +4,7 @@
 #include <string.h>
 
 #include "bigalloc.h"
+#include "zero_blocks.h"
 #include "camera8.h"
 #include "sampler8.h"
 
@@ -241,43 +242,44 @@ nomem:
 /* accum_sum's entries [begin, end): each entry's threads added in thread
  * order, then +0.0, one entry at a time (the same operations, and bits, as
  * one pass per thread). */
+#define SUM_PIECE 1024
 static void sum_threads(void *ctx, int thread, int64_t begin, int64_t end)
 {
     (void)thread;
     const struct dr_est_accum *a = ctx;
     double *g = a->grad[0];
-    const bool clear = a->scratch != NULL;   /* (the scratch's vectors: cleared as read, for the next run) */
-    for (int64_t i = begin; i < end; i++) {
-        double x = g[i];
-        for (int t = 1; t < a->threads; t++) {
-            x += a->grad[t][i];
-            if (clear)
-                a->grad[t][i] = 0.0;
+    for (int64_t i0 = begin; i0 < end; i0 += SUM_PIECE) {   /* (pieces: cleared while in the cache) */
+        const int64_t i1 = end - i0 < SUM_PIECE ? end : i0 + SUM_PIECE;
+        for (int64_t i = i0; i < i1; i++) {
+            double x = g[i];
+            for (int t = 1; t < a->threads; t++)
+                x += a->grad[t][i];
+            g[i] = x + 0.0;
         }
-        g[i] = x + 0.0;
+        for (int t = 1; a->scratch && t < a->threads; t++)   /* (the scratch's vectors: for the next run) */
+            dr_clear_touched(a->grad[t] + i0, i1 - i0);
     }
 }
 
 /* The same sums for a consumer (accum_init: every thread's vector the
  * scratch's), a piece at a time through a buffer in the cache, each
- * vector cleared as it is read. */
-#define CONSUME_PIECE 1024
+ * vector cleared once read (its lines that held only zeros left clean:
+ * zero_blocks.h). */
 static void consume_threads(void *ctx, int thread, int64_t begin, int64_t end)
 {
     (void)thread;
     const struct dr_est_accum *a = ctx;
-    double piece[CONSUME_PIECE];
-    for (int64_t i0 = begin; i0 < end; i0 += CONSUME_PIECE) {
-        const int64_t i1 = end - i0 < CONSUME_PIECE ? end : i0 + CONSUME_PIECE;
+    double piece[SUM_PIECE];
+    for (int64_t i0 = begin; i0 < end; i0 += SUM_PIECE) {
+        const int64_t i1 = end - i0 < SUM_PIECE ? end : i0 + SUM_PIECE;
         for (int64_t i = i0; i < i1; i++) {
             double x = a->grad[0][i];
-            a->grad[0][i] = 0.0;
-            for (int t = 1; t < a->threads; t++) {
+            for (int t = 1; t < a->threads; t++)
                 x += a->grad[t][i];
-                a->grad[t][i] = 0.0;
-            }
             piece[i - i0] = x + 0.0;
         }
+        for (int t = 0; t < a->threads; t++)
+            dr_clear_touched(a->grad[t] + i0, i1 - i0);
         a->consumer->take(a->consumer->ctx, i0, i1, piece);
     }
 }

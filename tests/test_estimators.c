@@ -524,6 +524,74 @@ static void consumer_matches(const char *what, struct dr_scene *s, const struct 
         printf("%s: a consumer's pieces are the gradient vector, %d threads\n", what, threads);
 }
 
+/* The batches' fold (reverse.c) on a sparse texture gradient, whose
+ * untouched blocks it leaves alone: with two batches, an entry's mean is
+ * (g0 + g1) / 2 and its standard error |g0 - g1| / 2, so an entry with a
+ * mean and no standard error had the same non-zero value in both batches,
+ * which independent samples never give. A fold that skipped a block a
+ * batch did not touch but the other did would leave such entries (its
+ * mean one batch's value, its error 0). */
+static void fold_sparse(const char *what, struct dr_scene *s, const struct dr_camera *cam, const char *const *ptrs,
+                        int n)
+{
+    struct dr_param_set *ps = dr_param_set_create(s, ptrs, n);
+    CHECK(ps != NULL, "%s: param set: %s", what, dr_last_error());
+    if (!ps)
+        return;
+    const size_t T = (size_t)ps->total;
+    double *g = calloc(T, sizeof(double)), *se = calloc(T, sizeof(double));
+    float *target = calloc((size_t)3 * W * H, sizeof(float));
+    struct dr_reverse_scratch rs = {0};
+    for (int cross = 0; cross <= 1; cross++) {
+        struct dr_reverse_options o = {
+            .estimator = dr_estimator_find("prb"), .loss = DR_LOSS_L2, .loss_scale = 1.0, .batches = 2,
+            .primal = cross ? DR_PRIMAL_CROSS : DR_PRIMAL_PER_BATCH, .scratch = &rs,
+            .problem = {.scene = s, .camera = cam, .params = ps, .width = W, .height = H, .spp = 4, .max_depth = 3,
+                        .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 21, .threads = 2}};
+        struct dr_reverse_result res = {.grad = g, .se = se};
+        for (int run = 0; run < 2; run++)   /* (the second with the vectors the first left) */
+            CHECK(dr_reverse_gradient(&o, target, &res) == 0, "%s: %s", what, dr_last_error());
+        int64_t touched = 0, alike = 0;
+        for (size_t i = 0; i < T; i++) {
+            touched += g[i] != 0.0;
+            alike += g[i] != 0.0 && se[i] == 0.0;
+        }
+        CHECK(touched > 0 && touched < (int64_t)T / 2, "%s: %lld of %zu entries touched: not a sparse gradient", what,
+              (long long)touched, T);
+        CHECK(alike == 0, "%s (%s primal): %lld entries with a mean and no standard error", what,
+              cross ? "cross" : "per-batch", (long long)alike);
+        if (!cross)
+            continue;
+        /* the cross primal's batches one by one (reverse.c's seeds: hash(hash(seed ^ "GRAD") + 2b)), and
+         * Welford's formulas on them entry by entry: r's mean and error to the bit */
+        double *gb[2] = {calloc(T, sizeof(double)), calloc(T, sizeof(double))};
+        double *img = calloc((size_t)3 * W * H, sizeof(double));
+        const uint64_t base = dr_hash64(o.problem.seed ^ 0x47524144ULL);
+        for (int b = 0; b < 2; b++) {
+            const struct dr_cross_loss x = {.loss = DR_LOSS_L2, .target = target, .scale = 1.0, .image = img};
+            struct dr_grad_problem p = o.problem;
+            p.spp = 2, p.seed = dr_hash64(base + 2 * (uint64_t)b), p.cross = &x;
+            CHECK(dr_estimator_backward(o.estimator, &p, NULL, gb[b], NULL) == 0, "%s: %s", what, dr_last_error());
+        }
+        int64_t differ = 0;
+        for (size_t i = 0; i < T; i++) {
+            const double mean0 = 0.0 + (gb[0][i] - 0.0) / 1, m20 = 0.0 + (gb[0][i] - 0.0) * (gb[0][i] - mean0);
+            const double d = gb[1][i] - mean0, mean = mean0 + d / 2, m2 = m20 + d * (gb[1][i] - mean);
+            differ += memcmp(&mean, &g[i], sizeof mean) != 0 || sqrt(m2 / 1 / 2) != se[i];
+        }
+        CHECK(differ == 0, "%s: %lld entries of the fold differ from Welford's formulas on the batches", what,
+              (long long)differ);
+        free(gb[0]);
+        free(gb[1]);
+        free(img);
+    }
+    dr_reverse_scratch_free(&rs);
+    free(g);
+    free(se);
+    free(target);
+    dr_param_set_destroy(ps);
+}
+
 /* estimator.h's dr_est_scratch and reverse.h's dr_reverse_scratch: runs
  * that reuse the caller's vectors (cleared, not fresh) give the same
  * gradient to the bit as runs with their own, again and again; a problem of
@@ -854,6 +922,7 @@ int main(void)
     scratch_reuse("a 160x160 texture", s, &top, tex_ptrs, 2, 4);
     consumer_matches("a 160x160 texture", s, &top, tex_ptrs, 2, 2, true);
     consumer_matches("a 160x160 texture", s, &top, tex_ptrs, 2, 4, false);   /* (the shared exact sum) */
+    fold_sparse("a 160x160 texture", s, &top, tex_ptrs, 2);
     dr_scene_destroy(s);
     return TEST_END();
 }

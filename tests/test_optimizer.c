@@ -162,8 +162,90 @@ static void texture_checkpoint(const char *path)
     dr_scene_destroy(s);
 }
 
+/* Adam's formula, entry by entry, with nothing skipped: what dr_adam_step
+ * must give to the bit (its blocks of untouched entries left alone:
+ * zero_blocks.h). */
+static int64_t adam_reference(const struct dr_adam *a, int64_t t, double *theta, double *m, double *v,
+                              const double *grad)
+{
+    const double c1 = 1.0 - pow(a->beta1, (double)t), c2 = 1.0 - pow(a->beta2, (double)t);
+    int64_t bad = 0;
+    for (int k = 0; k < a->n_params; k++)
+        for (int64_t i = a->offset[k]; i < a->offset[k] + a->size[k]; i++) {
+            double g = grad[i];
+            bad += !isfinite(g);
+            g = isfinite(g) ? g : 0.0;
+            m[i] = a->beta1 * m[i] + (1.0 - a->beta1) * g;
+            v[i] = a->beta2 * v[i] + (1.0 - a->beta2) * g * g;
+            double x = theta[i] - a->lr[k] * (m[i] / c1) / (sqrt(v[i] / c2) + a->eps);
+            theta[i] = x < a->lo[k] ? a->lo[k] : (x > a->hi[k] ? a->hi[k] : x);
+        }
+    return bad;
+}
+
+/* A texture's step where most of the gradient is +0 (a preview's): the
+ * same bits as the formula, with blocks of +0 entries, -0 gradients, a
+ * NaN, entries whose moments are not yet zero, and untouched entries
+ * outside their range (which the step clamps: they must not be skipped). */
+static void sparse_adam_step(void)
+{
+    struct sb b;
+    sb_init(&b);
+    struct dr_material mat = sb_diffuse(dr_v3(0.5, 0.5, 0.5));
+    mat.base_color_tex.texture = sb_texture(&b, sb_varied_image(32, 24, 3, 2));
+    sb_quad(&b, dr_v3(0, 0, 0), dr_v3(1, 0, 0), dr_v3(0, 1, 0), sb_material(&b, mat));
+    struct dr_scene *s = sb_finish(&b);
+    s->n_file_materials = s->n_materials;
+    const char *ptrs[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor", "/images/0"};
+    struct dr_param_set *ps = dr_param_set_create(s, ptrs, 2);
+    CHECK(ps != NULL, "sparse adam: param set: %s", dr_last_error());
+    if (!ps) {
+        dr_scene_destroy(s);
+        return;
+    }
+    const size_t n = (size_t)ps->total;
+    double *theta = malloc(sizeof(double) * n), *ref = malloc(sizeof(double) * n), *grad = calloc(n, sizeof(double));
+    double *m = calloc(n, sizeof(double)), *v = calloc(n, sizeof(double));
+    dr_param_set_get(s, ps, theta);
+    struct dr_adam *a = dr_adam_create(ps, theta, 0.0);
+    a->threads = 2;
+    const int tex = dr_adam_param_of(a, 3);
+    for (size_t i = 0; i < n; i++)
+        theta[i] = (double)(i % 89) / 89.0;
+    for (size_t i = 200; i < 216; i++)   /* untouched, out of range: clamped by the step */
+        theta[i] = i % 2 ? a->hi[tex] + 0.25 : a->lo[tex] - 0.5;
+    a->m[400] = m[400] = -0.0;   /* not +0 as bits: its block is stepped */
+    memcpy(ref, theta, sizeof(double) * n);
+    int64_t moved = 0;
+    for (int64_t t = 1; t <= 3; t++) {
+        memset(grad, 0, sizeof(double) * n);
+        for (size_t i = 0; i < n; i += 37 + (size_t)t)   /* a sparse gradient */
+            grad[i] = (double)(i % 11) * 1e-3 - 4e-3;
+        grad[500] = -0.0, grad[900] = NAN;
+        const int64_t want_bad = adam_reference(a, t, ref, m, v, grad);
+        const int64_t bad = dr_adam_step(a, theta, grad);
+        CHECK(bad == want_bad, "sparse adam step %lld: %lld non-finite, the formula %lld", (long long)t,
+              (long long)bad, (long long)want_bad);
+        CHECK(memcmp(theta, ref, sizeof(double) * n) == 0 && memcmp(a->m, m, sizeof(double) * n) == 0 &&
+                  memcmp(a->v, v, sizeof(double) * n) == 0,
+              "sparse adam step %lld differs from the formula", (long long)t);
+    }
+    for (size_t i = 0; i < n; i++)
+        moved += theta[i] != (double)(i % 89) / 89.0;
+    CHECK(moved > 0 && moved < (int64_t)n / 2, "sparse adam: %lld of %zu entries moved", (long long)moved, n);
+    dr_adam_destroy(a);
+    free(theta);
+    free(ref);
+    free(grad);
+    free(m);
+    free(v);
+    dr_param_set_destroy(ps);
+    dr_scene_destroy(s);
+}
+
 int main(void)
 {
+    sparse_adam_step();
     struct dr_scene *s = scene();
     const char *ptrs[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor",
                           "/materials/0/pbrMetallicRoughness/roughnessFactor",
