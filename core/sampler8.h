@@ -191,8 +191,11 @@ DR_SIMD_INLINE dr_u32x16 dr_sobol_dim1_16(dr_u32x16 i)
 DR_SIMD_INLINE void dr_sobol_vertex_hashes8(dr_u8 pkey, dr_u8 d, dr_u8 h[5], dr_u8 h1[5], dr_u8 *h2a, dr_u8 *h2b)
 {
     static const int offset[5] = {1, 2, 4, 5, 7};
-    const dr_u8 zero = {0};
-    if (!dr_m8_any((dr_m8)((pkey ^ pkey[0]) | (d ^ d[0])) != (dr_m8)zero)) {
+    const dr_u8 zero = {0}, differ = (pkey ^ pkey[0]) | (d ^ d[0]);
+    uint64_t any = 0;   /* (an OR of the lanes, not a vector comparison: cli_simd_lowering.sh) */
+    for (int i = 0; i < DR_SIMD_W; i++)
+        any |= differ[i];
+    if (!any) {
         for (int k = 0; k < 5; k++) {
             const uint64_t hk = dr_hash64(pkey[0] + (d[0] + (uint64_t)offset[k]) * 0xd1b54a32d192ed03ULL);
             h[k] = zero + hk;
