@@ -19,7 +19,7 @@
 #define DR_ZERO_BLOCK 8
 
 /* Are v[0..8) all +0. */
-static inline bool dr_block_zero(const double *v)
+static inline __attribute__((always_inline)) bool dr_block_zero(const double *v)
 {
     uint64_t w[DR_ZERO_BLOCK];
     memcpy(w, v, sizeof w);
@@ -27,7 +27,7 @@ static inline bool dr_block_zero(const double *v)
 }
 
 /* v[0..n) to +0, writing only the blocks that are not all +0 already. */
-static inline void dr_clear_touched(double *v, int64_t n)
+static inline __attribute__((always_inline)) void dr_clear_touched(double *v, int64_t n)
 {
     int64_t k = 0;
     for (; k + DR_ZERO_BLOCK <= n; k += DR_ZERO_BLOCK)

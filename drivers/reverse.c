@@ -184,10 +184,11 @@ struct welford_step {
  * halves their squared difference into dsq; on the last batch the
  * standard errors from those sums, in their place (se held m2, se_gradient
  * dsq). Batch 0 starts every entry from +0 itself (the same operations on
- * the zeros the sums would hold), so nothing is cleared before it, nor
- * read. FIRST and SPLIT are constants where fold_piece calls it, so that
- * each of its four loops compiles branch-free to vector divisions (with
- * the tests inside the loop it ran one entry at a time: twice as slow). */
+ * the zeros the sums would hold), so nothing is cleared before it; what the
+ * vectors held is read only to leave blocks alone that stay +0 (below).
+ * FIRST, SPLIT and POW2 are constants where fold_run calls it, so that each
+ * variant's loop compiles branch-free to vector operations (with the tests
+ * inside the loop it ran one entry at a time: twice as slow). */
 static inline __attribute__((always_inline)) void fold(const struct welford_step *x, int64_t begin, int64_t end,
                                                        const double *g, const double *h0, bool first, bool split,
                                                        bool pow2)
@@ -211,10 +212,11 @@ static inline __attribute__((always_inline)) void fold(const struct welford_step
     } while (0)
     int64_t i0 = begin;
     for (; i0 + DR_ZERO_BLOCK <= end; i0 += DR_ZERO_BLOCK) {
-        /* after batch 0, an entry at +0 with a +0 gradient stays so (mean
-         * + (+0 - +0) * inv = +0, m2 + +0 * +0 = +0, dsq likewise): such
-         * blocks, most of a preview's texture gradient, are left alone */
-        if (!first && dr_block_zero(g + (i0 - begin)) && dr_block_zero(grad + i0) && dr_block_zero(m2 + i0) &&
+        /* an entry at +0 with a +0 gradient stays so (mean + (+0 - +0) *
+         * inv = +0, m2 + +0 * +0 = +0, dsq likewise; batch 0's +0 results
+         * are there already): such blocks, most of a preview's texture
+         * gradient, are read, not written */
+        if (dr_block_zero(g + (i0 - begin)) && dr_block_zero(grad + i0) && dr_block_zero(m2 + i0) &&
             (!split || dr_block_zero(h0 + i0)) && (!(split && dsq) || dr_block_zero(dsq + i0)))
             continue;
         for (int64_t i = i0; i < i0 + DR_ZERO_BLOCK; i++)
@@ -233,7 +235,7 @@ static bool power_of_two(int n)
 /* (Dividing by a power of two is multiplying by its reciprocal, exactly:
  * batches 0 and 1, and K = 2's standard errors, need no division, the
  * slowest operation of these loops.) */
-static void fold_piece(const struct welford_step *x, int64_t begin, int64_t end, const double *g, const double *h0)
+static void fold_run(const struct welford_step *x, int64_t begin, int64_t end, const double *g, const double *h0)
 {
     const bool pow2 = power_of_two(x->b + 1);
     if (x->b == 0)
@@ -242,8 +244,11 @@ static void fold_piece(const struct welford_step *x, int64_t begin, int64_t end,
         x->split ? fold(x, begin, end, g, h0, false, true, true) : fold(x, begin, end, g, h0, false, false, true);
     else
         x->split ? fold(x, begin, end, g, h0, false, true, false) : fold(x, begin, end, g, h0, false, false, false);
-    if (x->b < x->K - 1)
-        return;
+}
+
+/* The last batch's standard errors of [begin, end), in place of the sums. */
+static void standard_errors(const struct welford_step *x, int64_t begin, int64_t end)
+{
     struct dr_reverse_result *r = x->r;
     const double *dsq = x->w->dsq;
     const int K = x->K;
@@ -262,6 +267,20 @@ static void fold_piece(const struct welford_step *x, int64_t begin, int64_t end,
         r->se_gradient[i] = r->parts ? sqrt(sg2) : NAN;   /* (in place of dsq) */
         if (r->se_primal)
             r->se_primal[i] = r->parts ? sqrt(fmax(0.0, r->se[i] * r->se[i] - sg2)) : NAN;
+    }
+}
+
+/* The fold of [begin, end), g[i - begin] its gradient (split: the second
+ * half's, h0 the first's), a cache-sized piece at a time so that the last
+ * batch's standard errors read the sums it has just written. */
+#define FOLD_PIECE 1024
+static void fold_piece(const struct welford_step *x, int64_t begin, int64_t end, const double *g, const double *h0)
+{
+    for (int64_t i0 = begin; i0 < end; i0 += FOLD_PIECE) {
+        const int64_t i1 = end - i0 < FOLD_PIECE ? end : i0 + FOLD_PIECE;
+        fold_run(x, i0, i1, g + (i0 - begin), h0);
+        if (x->b == x->K - 1)
+            standard_errors(x, i0, i1);
     }
 }
 

@@ -243,21 +243,34 @@ nomem:
  * order, then +0.0, one entry at a time (the same operations, and bits, as
  * one pass per thread). */
 #define SUM_PIECE 1024
+/* out[k] = grad[0][i0 + k] + grad[1][i0 + k] + ... + 0.0 for k < n, in that
+ * order entry by entry, thread by thread over the piece so that each loop
+ * is one vector add (entry by entry over the threads, with the vectors'
+ * pointers reloaded each time, it ran one add at a time). out may be
+ * grad[0] + i0 itself. */
+static void sum_piece(const struct dr_est_accum *a, int64_t i0, int64_t n, double *out)
+{
+    if (out != a->grad[0] + i0)
+        memcpy(out, a->grad[0] + i0, sizeof(double) * (size_t)n);
+    for (int t = 1; t < a->threads; t++) {
+        const double *restrict g = a->grad[t] + i0;
+        double *restrict o = out;
+        for (int64_t k = 0; k < n; k++)
+            o[k] += g[k];
+    }
+    for (int64_t k = 0; k < n; k++)
+        out[k] += 0.0;
+}
+
 static void sum_threads(void *ctx, int thread, int64_t begin, int64_t end)
 {
     (void)thread;
     const struct dr_est_accum *a = ctx;
-    double *g = a->grad[0];
     for (int64_t i0 = begin; i0 < end; i0 += SUM_PIECE) {   /* (pieces: cleared while in the cache) */
-        const int64_t i1 = end - i0 < SUM_PIECE ? end : i0 + SUM_PIECE;
-        for (int64_t i = i0; i < i1; i++) {
-            double x = g[i];
-            for (int t = 1; t < a->threads; t++)
-                x += a->grad[t][i];
-            g[i] = x + 0.0;
-        }
+        const int64_t n = end - i0 < SUM_PIECE ? end - i0 : SUM_PIECE;
+        sum_piece(a, i0, n, a->grad[0] + i0);
         for (int t = 1; a->scratch && t < a->threads; t++)   /* (the scratch's vectors: for the next run) */
-            dr_clear_touched(a->grad[t] + i0, i1 - i0);
+            dr_clear_touched(a->grad[t] + i0, n);
     }
 }
 
@@ -271,16 +284,11 @@ static void consume_threads(void *ctx, int thread, int64_t begin, int64_t end)
     const struct dr_est_accum *a = ctx;
     double piece[SUM_PIECE];
     for (int64_t i0 = begin; i0 < end; i0 += SUM_PIECE) {
-        const int64_t i1 = end - i0 < SUM_PIECE ? end : i0 + SUM_PIECE;
-        for (int64_t i = i0; i < i1; i++) {
-            double x = a->grad[0][i];
-            for (int t = 1; t < a->threads; t++)
-                x += a->grad[t][i];
-            piece[i - i0] = x + 0.0;
-        }
+        const int64_t n = end - i0 < SUM_PIECE ? end - i0 : SUM_PIECE;
+        sum_piece(a, i0, n, piece);
         for (int t = 0; t < a->threads; t++)
-            dr_clear_touched(a->grad[t] + i0, i1 - i0);
-        a->consumer->take(a->consumer->ctx, i0, i1, piece);
+            dr_clear_touched(a->grad[t] + i0, n);
+        a->consumer->take(a->consumer->ctx, i0, i0 + n, piece);
     }
 }
 
