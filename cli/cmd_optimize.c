@@ -811,7 +811,7 @@ static int opt_iterations(const struct opt_args *a, struct opt_run *r)
         if (rc >= 0)
             return rc;
         dr_adam_step(r->adam, r->theta, r->grad);
-        dr_param_set_put(r->scene, r->ps, r->theta);
+        dr_param_set_put_threads(r->scene, r->ps, r->theta, a->g.threads);
         if (dr_param_set_refresh(r->scene, r->ps) != 0) {
             cli_error("optimize", "%s", dr_last_error());
             return DR_EXIT_FAILURE;

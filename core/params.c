@@ -7,6 +7,7 @@
 
 #include "error.h"
 #include "medium.h"
+#include "parallel.h"
 
 /* ---- participating media (the DR_medium parameters, params.h) ---- */
 
@@ -743,6 +744,41 @@ void dr_param_set_put(struct dr_scene *s, const struct dr_param_set *set, const 
 {
     for (int i = 0; i < set->n; i++)
         dr_param_put(s, &set->params[i], values + set->params[i].offset);
+}
+
+/* A texel array's floats from the values, [begin, end) (dr_parallel_elements). */
+struct texels_put {
+    float *t;
+    const double *v;
+};
+
+static void put_texels(void *ctx, int thread, int64_t begin, int64_t end)
+{
+    (void)thread;
+    const struct texels_put *x = ctx;
+    for (int64_t i = begin; i < end; i++) {
+        const float f = (float)x->v[i];
+        uint32_t now, was;
+        memcpy(&now, &f, sizeof now);
+        memcpy(&was, &x->t[i], sizeof was);
+        if (now != was)   /* (as bits: -0 over +0 is a change) */
+            x->t[i] = f;
+    }
+}
+
+void dr_param_set_put_threads(struct dr_scene *s, const struct dr_param_set *set, const double *values, int threads)
+{
+    for (int i = 0; i < set->n; i++) {
+        const struct dr_param *p = &set->params[i];
+        const bool texels = p->kind == DR_PARAM_IMAGE || p->kind == DR_PARAM_ENV_MAP;
+        float *t = texels ? param_texels(s, p) : NULL;
+        if (!texels)
+            dr_param_put(s, p, values + p->offset);
+        if (!t)   /* (as dr_param_put: a texel parameter without floats does not change) */
+            continue;
+        struct texels_put x = {t, values + p->offset};
+        dr_parallel_elements(p->size, threads, put_texels, &x);
+    }
 }
 
 int dr_param_set_refresh(struct dr_scene *scene, const struct dr_param_set *set)

@@ -233,6 +233,21 @@ static void sparse_adam_step(void)
     for (size_t i = 0; i < n; i++)
         moved += theta[i] != (double)(i % 89) / 89.0;
     CHECK(moved > 0 && moved < (int64_t)n / 2, "sparse adam: %lld of %zu entries moved", (long long)moved, n);
+    /* the step written back as optimize writes it (only the texels that
+     * changed, on workers): every texel the float of its value, -0 over a
+     * +0 included; dr_param_set_put gives the same */
+    dr_param_set_put(s, ps, ref);
+    theta[10] = -0.0;
+    ref[10] = 0.0;
+    dr_param_set_put(s, ps, ref);
+    dr_param_set_put_threads(s, ps, theta, 2);
+    dr_param_set_get(s, ps, ref);
+    int64_t wrong = 0;
+    for (size_t i = 0; i < n; i++) {   /* (the colour factor is kept in doubles, the texels in floats) */
+        const double want = (int64_t)i >= ps->params[1].offset ? (double)(float)theta[i] : theta[i];
+        wrong += memcmp(&want, &ref[i], sizeof want) != 0;
+    }
+    CHECK(wrong == 0, "dr_param_set_put_threads: %lld values not the floats of the step", (long long)wrong);
     dr_adam_destroy(a);
     free(theta);
     free(ref);
