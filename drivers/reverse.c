@@ -184,8 +184,8 @@ struct welford_step {
  * halves their squared difference into dsq; on the last batch the
  * standard errors from those sums, in their place (se held m2, se_gradient
  * dsq). Batch 0 starts every entry from +0 itself (the same operations on
- * the zeros the sums would hold), so nothing is cleared before it; what the
- * vectors held is read only to leave blocks alone that stay +0 (below).
+ * the zeros the sums would hold) and writes every entry, so nothing is
+ * cleared before it, nor read (a caller's vectors may hold anything).
  * FIRST, SPLIT and POW2 are constants where fold_run calls it, so that each
  * variant's loop compiles branch-free to vector operations (with the tests
  * inside the loop it ran one entry at a time: twice as slow). */
@@ -212,11 +212,11 @@ static inline __attribute__((always_inline)) void fold(const struct welford_step
     } while (0)
     int64_t i0 = begin;
     for (; i0 + DR_ZERO_BLOCK <= end; i0 += DR_ZERO_BLOCK) {
-        /* an entry at +0 with a +0 gradient stays so (mean + (+0 - +0) *
-         * inv = +0, m2 + +0 * +0 = +0, dsq likewise; batch 0's +0 results
-         * are there already): such blocks, most of a preview's texture
-         * gradient, are read, not written */
-        if (dr_block_zero(g + (i0 - begin)) && dr_block_zero(grad + i0) && dr_block_zero(m2 + i0) &&
+        /* after batch 0, an entry at +0 with a +0 gradient stays so (mean
+         * + (+0 - +0) * inv = +0, m2 + +0 * +0 = +0, dsq likewise): such
+         * blocks, most of a preview's texture gradient, are read, not
+         * written */
+        if (!first && dr_block_zero(g + (i0 - begin)) && dr_block_zero(grad + i0) && dr_block_zero(m2 + i0) &&
             (!split || dr_block_zero(h0 + i0)) && (!(split && dsq) || dr_block_zero(dsq + i0)))
             continue;
         for (int64_t i = i0; i < i0 + DR_ZERO_BLOCK; i++)
