@@ -91,7 +91,9 @@ static void edge_values(const struct dr_param_set *ps, const double *theta0, con
  * bit, the file is a fraction of the text's size, the same state written
  * all in text (version 1) reads the same, and a file cut inside the raw
  * values, or with the raw block's end changed, is refused. */
-static void texture_checkpoint(const char *path)
+/* A quad with a 32 x 24 colour texture; *ps: its base colour factor and
+ * its texels (3 + 32 * 24 * 3 values), NULL if that cannot be had. */
+static struct dr_scene *texture_scene(struct dr_param_set **ps)
 {
     struct sb b;
     sb_init(&b);
@@ -101,7 +103,14 @@ static void texture_checkpoint(const char *path)
     struct dr_scene *s = sb_finish(&b);
     s->n_file_materials = s->n_materials;
     const char *ptrs[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor", "/images/0"};
-    struct dr_param_set *ps = dr_param_set_create(s, ptrs, 2);
+    *ps = dr_param_set_create(s, ptrs, 2);
+    return s;
+}
+
+static void texture_checkpoint(const char *path)
+{
+    struct dr_param_set *ps;
+    struct dr_scene *s = texture_scene(&ps);
     CHECK(ps && ps->total == 3 + 32 * 24 * 3, "texture param set: %s", dr_last_error());
     if (!ps) {
         dr_scene_destroy(s);
@@ -189,15 +198,8 @@ static int64_t adam_reference(const struct dr_adam *a, int64_t t, double *theta,
  * outside their range (which the step clamps: they must not be skipped). */
 static void sparse_adam_step(void)
 {
-    struct sb b;
-    sb_init(&b);
-    struct dr_material mat = sb_diffuse(dr_v3(0.5, 0.5, 0.5));
-    mat.base_color_tex.texture = sb_texture(&b, sb_varied_image(32, 24, 3, 2));
-    sb_quad(&b, dr_v3(0, 0, 0), dr_v3(1, 0, 0), dr_v3(0, 1, 0), sb_material(&b, mat));
-    struct dr_scene *s = sb_finish(&b);
-    s->n_file_materials = s->n_materials;
-    const char *ptrs[] = {"/materials/0/pbrMetallicRoughness/baseColorFactor", "/images/0"};
-    struct dr_param_set *ps = dr_param_set_create(s, ptrs, 2);
+    struct dr_param_set *ps;
+    struct dr_scene *s = texture_scene(&ps);
     CHECK(ps != NULL, "sparse adam: param set: %s", dr_last_error());
     if (!ps) {
         dr_scene_destroy(s);
