@@ -85,13 +85,13 @@ static int work_alloc(struct rev_work *w, const struct dr_reverse_result *r)
     if (!q.scratch)
         q.scratch = &w->scratch->est;
     w->consume = dr_estimator_consumes(&q);
-    w->half[0] = split || !w->consume ? scratch_half(w->scratch, 0, T1) : NULL;
-    w->half[1] = split && !w->consume ? scratch_half(w->scratch, 1, T1) : NULL;
+    const bool need0 = split || !w->consume, need1 = split && !w->consume;   /* (batch(): what goes to a vector) */
+    w->half[0] = need0 ? scratch_half(w->scratch, 0, T1) : NULL;
+    w->half[1] = need1 ? scratch_half(w->scratch, 1, T1) : NULL;
     w->m2 = r->se;   /* (batch 0 writes it whole: welford_range) */
     /* the halves' squared differences feed se_gradient and se_primal only */
     w->dsq = r->parts && r->se_gradient ? r->se_gradient : NULL;
-    if (w->img && w->adj && w->img_sum && w->cross_img && (w->half[0] || !(split || !w->consume)) &&
-        (w->half[1] || !(split && !w->consume)))
+    if (w->img && w->adj && w->img_sum && w->cross_img && (w->half[0] || !need0) && (w->half[1] || !need1))
         return 0;
     dr_set_error("out of memory (%lld gradient entries, %zu image values)", (long long)w->T, w->n);
     return DR_ERR_NOMEM;
@@ -178,12 +178,11 @@ struct welford_step {
     bool split;
 };
 
-/* Entries [begin, end)'s update with batch b's gradient there: g[i - begin]
- * (split halves: h0[i] and h1[i - begin], h0 indexed as the vector): the
- * running mean (Welford) in r->grad and its sum of squares in m2, with two
- * halves their squared difference into dsq; on the last batch the
- * standard errors from those sums, in their place (se held m2, se_gradient
- * dsq). Batch 0 starts every entry from +0 itself (the same operations on
+/* Entries [begin, end)'s update with batch b's gradient there, g[i - begin]
+ * (split halves: g the second's, h0[i] the first's): the running mean
+ * (Welford) in r->grad and its sum of squares in m2, with two halves their
+ * squared difference into dsq (the last batch's standard_errors turn them
+ * into standard errors in place: se holds m2, se_gradient dsq). Batch 0 starts every entry from +0 itself (the same operations on
  * the zeros the sums would hold) and writes every entry, so nothing is
  * cleared before it, nor read (a caller's vectors may hold anything).
  * FIRST, SPLIT and POW2 are constants where fold_run calls it, so that each

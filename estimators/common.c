@@ -4,14 +4,13 @@
 #include <string.h>
 
 #include "bigalloc.h"
-#include "zero_blocks.h"
 #include "camera8.h"
-#include "sampler8.h"
-
 #include "clock.h"
 #include "error.h"
 #include "medium_grad.h"
 #include "parallel.h"
+#include "sampler8.h"
+#include "zero_blocks.h"
 
 /* Scalar problems up to this size sum each chunk locally first. */
 #define CHUNK_LOCAL_MAX 4096
@@ -195,6 +194,8 @@ bool dr_estimator_consumes(const struct dr_grad_problem *p)
  *  - Reverse mode: thread 0 sums straight into `out`, the others into
  *    their own vectors, added to it in thread order by accum_sum: a texture
  *    parameter costs (threads - 1) vectors of its size here, not threads.
+ *    With a consumer (estimator.h) thread 0 has its own too, and the sums
+ *    go to the consumer instead of `out`.
  *    From four threads on a large vector is one shared exact sum instead
  *    (exact_sum.h: 17 bytes an entry, not 8 a thread).
  *  - Forward mode: every thread writes d_image itself. A pixel's samples are
@@ -239,9 +240,6 @@ nomem:
     return DR_ERR_NOMEM;
 }
 
-/* accum_sum's entries [begin, end): each entry's threads added in thread
- * order, then +0.0, one entry at a time (the same operations, and bits, as
- * one pass per thread). */
 #define SUM_PIECE 1024
 /* out[k] = grad[0][i0 + k] + grad[1][i0 + k] + ... + 0.0 for k < n, in that
  * order entry by entry, thread by thread over the piece so that each loop
@@ -262,6 +260,9 @@ static void sum_piece(const struct dr_est_accum *a, int64_t i0, int64_t n, doubl
         out[k] += 0.0;
 }
 
+/* accum_sum's entries [begin, end): each entry's threads added in thread
+ * order, then +0.0 (the same operations, and bits, as one pass per
+ * thread), a piece at a time. */
 static void sum_threads(void *ctx, int thread, int64_t begin, int64_t end)
 {
     (void)thread;
