@@ -641,8 +641,8 @@ static int reverse_batches(const struct grad_args *a, const struct dr_scene *sce
     /* the parts' vectors only when the run estimates them (null in the output otherwise) */
     if (dr_reverse_parts(&o)) {
         const size_t T1 = (size_t)(r->T > 0 ? r->T : 1);
-        r->se_grad = dr_calloc_big(T1, sizeof(double));
-        r->se_primal = dr_calloc_big(T1, sizeof(double));
+        r->se_grad = dr_alloc_big(T1 * sizeof(double));   /* (written whole by the run: run_reverse) */
+        r->se_primal = dr_alloc_big(T1 * sizeof(double));
         if (!r->se_grad || !r->se_primal) {
             cli_error("grad", "out of memory (%lld gradient entries)", (long long)r->T);
             return DR_EXIT_FAILURE;
@@ -807,8 +807,11 @@ static int run_reverse(struct grad_args *a, const char *scene_path, const struct
 {
     struct reverse_run r = {.T = ps->total, .n_params = ps->n};
     const size_t T1 = (size_t)(r.T > 0 ? r.T : 1);
-    r.mean = dr_calloc_big(T1, sizeof(double));   /* bigalloc.h: texture parameters */
-    r.se = dr_calloc_big(T1, sizeof(double));
+    /* (bigalloc.h: texture parameters; not zeroed: dr_reverse_gradient's
+     * first batch writes every entry, and in parallel, where a zeroing
+     * pass here faulted a texture's pages in one thread) */
+    r.mean = dr_alloc_big(T1 * sizeof(double));
+    r.se = dr_alloc_big(T1 * sizeof(double));
     r.files = calloc((size_t)ps->n, sizeof(char *));
     bool mis_ok = true;
     if (a->g.sampling == DR_SAMPLING_MIS) {
