@@ -522,6 +522,27 @@ void dr_param_get(const struct dr_scene *cs, const struct dr_param *p, double *v
     }
 }
 
+/* A texel array's floats from the values, [begin, end) (dr_parallel_elements),
+ * written only where they changed (as bits: -0 over +0 is a change). */
+struct texels_put {
+    float *t;
+    const double *v;
+};
+
+static void put_texels(void *ctx, int thread, int64_t begin, int64_t end)
+{
+    (void)thread;
+    const struct texels_put *x = ctx;
+    for (int64_t i = begin; i < end; i++) {
+        const float f = (float)x->v[i];
+        uint32_t now, was;
+        memcpy(&now, &f, sizeof now);
+        memcpy(&was, &x->t[i], sizeof was);
+        if (now != was)
+            x->t[i] = f;
+    }
+}
+
 void dr_param_put(struct dr_scene *s, const struct dr_param *p, const double *v)
 {
     if (is_medium_kind(p->kind)) {
@@ -548,9 +569,9 @@ void dr_param_put(struct dr_scene *s, const struct dr_param *p, const double *v)
     case DR_PARAM_ENV_STRENGTH: s->env.strength = v[0]; return;
     case DR_PARAM_ENV_MAP:
     case DR_PARAM_IMAGE: {
-        float *t = param_texels(s, p);
-        for (int64_t i = 0; t && i < p->size; i++)   /* (no memory for its floats: nothing changes) */
-            t[i] = (float)v[i];
+        struct texels_put x = {param_texels(s, p), v};
+        if (x.t)   /* (no memory for its floats: nothing changes) */
+            put_texels(&x, 0, 0, p->size);
         return;
     }
     default: *mat_scalar(&s->materials[p->target], p->kind) = v[0]; return;
@@ -744,26 +765,6 @@ void dr_param_set_put(struct dr_scene *s, const struct dr_param_set *set, const 
 {
     for (int i = 0; i < set->n; i++)
         dr_param_put(s, &set->params[i], values + set->params[i].offset);
-}
-
-/* A texel array's floats from the values, [begin, end) (dr_parallel_elements). */
-struct texels_put {
-    float *t;
-    const double *v;
-};
-
-static void put_texels(void *ctx, int thread, int64_t begin, int64_t end)
-{
-    (void)thread;
-    const struct texels_put *x = ctx;
-    for (int64_t i = begin; i < end; i++) {
-        const float f = (float)x->v[i];
-        uint32_t now, was;
-        memcpy(&now, &f, sizeof now);
-        memcpy(&was, &x->t[i], sizeof was);
-        if (now != was)   /* (as bits: -0 over +0 is a change) */
-            x->t[i] = f;
-    }
 }
 
 void dr_param_set_put_threads(struct dr_scene *s, const struct dr_param_set *set, const double *values, int threads)

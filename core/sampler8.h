@@ -186,8 +186,8 @@ DR_SIMD_INLINE dr_u32x16 dr_sobol_dim1_16(dr_u32x16 i)
  * the dimension alone, and a group's lanes are mostly one pixel's samples
  * at one depth (a pixel's samples start side by side and stay in order):
  * then they are worked out once, in scalar registers, and broadcast, the
- * same bits (the multiplies of twelve 64-bit vector hashes were a third of
- * the draws). */
+ * same bits (76 % of groups at 64 spp, 39 % at 16: the draws 6.6 -> 5.7 %
+ * of the peer box's render). */
 DR_SIMD_INLINE void dr_sobol_vertex_hashes8(dr_u8 pkey, dr_u8 d, dr_u8 h[5], dr_u8 h1[5], dr_u8 *h2a, dr_u8 *h2b)
 {
     static const int offset[5] = {1, 2, 4, 5, 7};

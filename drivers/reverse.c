@@ -182,9 +182,10 @@ struct welford_step {
  * (split halves: g the second's, h0[i] the first's): the running mean
  * (Welford) in r->grad and its sum of squares in m2, with two halves their
  * squared difference into dsq (the last batch's standard_errors turn them
- * into standard errors in place: se holds m2, se_gradient dsq). Batch 0 starts every entry from +0 itself (the same operations on
- * the zeros the sums would hold) and writes every entry, so nothing is
- * cleared before it, nor read (a caller's vectors may hold anything).
+ * into standard errors in place: se holds m2, se_gradient dsq). Batch 0
+ * starts every entry from +0 itself (the same operations on the zeros the
+ * sums would hold) and writes every entry, so nothing is cleared before
+ * it, nor read (a caller's vectors may hold anything).
  * FIRST, SPLIT and POW2 are constants where fold_run calls it, so that each
  * variant's loop compiles branch-free to vector operations (with the tests
  * inside the loop it ran one entry at a time: twice as slow). */
@@ -232,8 +233,8 @@ static bool power_of_two(int n)
 }
 
 /* (Dividing by a power of two is multiplying by its reciprocal, exactly:
- * batches 0 and 1, and K = 2's standard errors, need no division, the
- * slowest operation of these loops.) */
+ * batch b where b + 1 is one (0, 1, 3, 7 ...), and K = 2's standard
+ * errors, need no division, the slowest operation of these loops.) */
 static void fold_run(const struct welford_step *x, int64_t begin, int64_t end, const double *g, const double *h0)
 {
     const bool pow2 = power_of_two(x->b + 1);
@@ -309,19 +310,19 @@ static int batch(struct rev_work *w, int b, uint64_t grad_base, struct dr_revers
     const int spp = r->spp_batch, n0 = (spp + 1) / 2, n1 = spp / 2;
     const bool split = r->parts && n1 > 0;
     const struct welford_step ws = {w, r, b, w->o->batches, n0, n1, spp, split};
-    const struct dr_grad_consumer fold = {welford_take, (void *)&ws};
+    const struct dr_grad_consumer to_fold = {welford_take, (void *)&ws};
     double *last = w->consume ? NULL : split ? w->half[1] : w->half[0];   /* (NULL: to fold) */
     int rc;
     if (r->primal_run == DR_PRIMAL_CROSS)
-        rc = cross_gradient(w, dr_hash64(grad_base + 2 * (uint64_t)b), last, &fold, r);
+        rc = cross_gradient(w, dr_hash64(grad_base + 2 * (uint64_t)b), last, &to_fold, r);
     else if (w->o->primal == DR_PRIMAL_SHARED)
-        rc = gradient(w, w->o->problem.seed + 1 + (uint64_t)b, spp, last, &fold, r);
+        rc = gradient(w, w->o->problem.seed + 1 + (uint64_t)b, spp, last, &to_fold, r);
     else if (!split)
-        rc = gradient(w, dr_hash64(grad_base + 2 * (uint64_t)b), spp, last, &fold, r);
+        rc = gradient(w, dr_hash64(grad_base + 2 * (uint64_t)b), spp, last, &to_fold, r);
     else {
         rc = gradient(w, dr_hash64(grad_base + 2 * (uint64_t)b), n0, w->half[0], NULL, r);
         if (rc == 0)
-            rc = gradient(w, dr_hash64(grad_base + 2 * (uint64_t)b + 1), n1, last, &fold, r);
+            rc = gradient(w, dr_hash64(grad_base + 2 * (uint64_t)b + 1), n1, last, &to_fold, r);
     }
     if (rc != 0)
         return rc;

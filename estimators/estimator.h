@@ -100,11 +100,12 @@ struct dr_grad_problem {
 /* Where a reverse-mode run can hand its gradient instead of writing it to
  * the caller's vector: take(ctx, begin, end, g) gets g[k] = entry begin + k
  * (the bits the vector would hold), every entry exactly once, in pieces of
- * a few thousand, from several threads at once (disjoint pieces). A caller
+ * at most 1024, from several threads at once (disjoint pieces). A caller
  * that folds the gradient into running sums (reverse.h's batches: Welford)
- * so reads the threads' sums while they are in the cache, and needs no
- * vector of its own for them: for a 2k texture 100 MB and two passes over
- * it less per run. Honoured where dr_estimator_consumes says so (the
+ * so reads the threads' sums while they are in the cache: no vector is
+ * written with them and read back (thread 0 then sums into a scratch
+ * vector, not the caller's: the same memory), two passes over a texture's
+ * gradient less per run. Honoured where dr_estimator_consumes says so (the
  * threads' vectors must be the scratch's); dr_estimator_backward's grad
  * may then be NULL. */
 struct dr_grad_consumer {
