@@ -39,9 +39,10 @@ int64_t dr_adam_step(struct dr_adam *a, double *theta, const double *grad);
  * strengths and environment radiance, which have no natural scale. */
 double dr_param_default_lr(const struct dr_param *p, const double *values);
 
-/* Checkpoint: parameters and optimizer state, as text with every double as
- * a C99 hexadecimal constant (exact round trip; decimal is read too),
- * written to PATH.tmp and renamed (atomic).
+/* Checkpoint (checkpoint.c): parameters and optimizer state, as text with
+ * every double as a C99 hexadecimal constant (exact round trip; decimal is
+ * read too), textures as packed binary runs, written to PATH.tmp and
+ * renamed (atomic).
  * Reading checks that the names and sizes match the parameter set. */
 int dr_checkpoint_write(const char *path, const char *scene_path, const struct dr_param_set *ps,
                         const double *theta, const struct dr_adam *adam, int64_t iteration);

@@ -96,7 +96,7 @@ $have_gnuplot && { [ -s a/loss.png ] || fail "a: expected a/loss.png (gnuplot is
 [ "$(csv_rows a/loss.csv)" -eq 120 ] || fail "a: loss.csv should have 120 rows, has $(csv_rows a/loss.csv)"
 last=$(tail -n 1 a/loss.csv | cut -d, -f4)
 check "a: loss.csv's last parameter_error should be the summary's" 'last - e < 1e-5 && e - last < 1e-5' last="$last" e="$e"
-head -n 1 a/checkpoint.txt | grep -qx 'drender-checkpoint 2' || fail "a: checkpoint header"
+head -n 1 a/checkpoint.txt | grep -qx 'drender-checkpoint 3' || fail "a: checkpoint header"
 grep -qx 'iteration 120' a/checkpoint.txt || fail "a: checkpoint should be at iteration 120"
 echo "a. albedo recovered: max |error| $e"
 # ... also with a primal render per batch (--primal separate; a used the
@@ -209,7 +209,7 @@ interrupt INT dI
 expect_rc 130 "d: SIGINT"
 expect_in err "interrupted after iteration" "d: SIGINT message"
 [ -s dI/checkpoint.txt ] || fail "d: no checkpoint after SIGINT"
-head -n 1 dI/checkpoint.txt | grep -qx 'drender-checkpoint 2' || fail "d: checkpoint header after SIGINT"
+head -n 1 dI/checkpoint.txt | grep -qx 'drender-checkpoint 3' || fail "d: checkpoint header after SIGINT"
 [ "$(tail -n 1 dI/checkpoint.txt)" = end ] || fail "d: checkpoint after SIGINT does not end with 'end'"
 k=$(sed -n 's/^iteration //p' dI/checkpoint.txt)
 [ "$k" = "$(csv_rows dI/loss.csv)" ] || fail "d: checkpoint iteration '$k' vs $(csv_rows dI/loss.csv) rows in loss.csv"

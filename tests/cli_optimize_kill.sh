@@ -41,7 +41,7 @@ full_ms=$(awk -v a="$t0" -v b="$EPOCHREALTIME" 'BEGIN{printf "%d", (b - a) * 100
 check_dir() {   # check_dir WHEN
     local d=$dir when="seed $seed, $dir, $1"
     if [ -e $d/checkpoint.txt ]; then
-        head -n 1 $d/checkpoint.txt | grep -qx 'drender-checkpoint 2' || fail "$when: checkpoint without its header"
+        head -n 1 $d/checkpoint.txt | grep -qx 'drender-checkpoint 3' || fail "$when: checkpoint without its header"
         [ "$(tail -n 1 $d/checkpoint.txt)" = end ] || fail "$when: checkpoint does not end with 'end' (truncated)"
         local it
         it=$(sed -n 's/^iteration \([0-9]*\)$/\1/p' $d/checkpoint.txt)

@@ -86,19 +86,55 @@ static void edge_values(const struct dr_param_set *ps, const double *theta0, con
     dr_adam_destroy(b);
 }
 
-/* A texture parameter (more values than the text limit): version 2 stores
- * it raw after "binary le64", beside a colour in text; it reads back bit for
- * bit, the file is a fraction of the text's size, the same state written
- * all in text (version 1) reads the same, and a file cut inside the raw
- * values, or with the raw block's end changed, is refused. */
-/* A quad with a 32 x 24 colour texture; *ps: its base colour factor and
- * its texels (3 + 32 * 24 * 3 values), NULL if that cannot be had. */
-static struct dr_scene *texture_scene(struct dr_param_set **ps)
+/* A version 2 checkpoint of theta and a's moments at iteration `it`: text
+ * for parameters of at most 64 values, "binary le64" and the raw doubles
+ * (values, m, v) for larger ones, as drender wrote it from 2026-12-03. */
+static void write_version2(const char *path, const struct dr_param_set *ps, const struct dr_adam *a, int it,
+                           const double *theta)
+{
+    FILE *f = fopen(path, "wb");
+    if (!f)
+        return;
+    fprintf(f, "drender-checkpoint 2\nscene scene.gltf\niteration %d\nadam %d %.17g %.17g %.17g\n", it, it, a->beta1,
+            a->beta2, a->eps);
+    for (int k = 0; k < ps->n; k++) {
+        const struct dr_param *p = &ps->params[k];
+        fprintf(f, "param %s %lld\n", p->name, (long long)p->size);
+        const double *vec[3] = {theta + p->offset, a->m + p->offset, a->v + p->offset};
+        const char *key[3] = {"value", "m", "v"};
+        if (p->size > 64)
+            fputs("binary le64\n", f);
+        for (int j = 0; j < 3; j++) {
+            if (p->size > 64) {
+                fwrite(vec[j], sizeof(double), (size_t)p->size, f);
+                continue;
+            }
+            fputs(key[j], f);
+            for (int64_t i = 0; i < p->size; i++)
+                fprintf(f, " %a", vec[j][i]);
+            fputc('\n', f);
+        }
+        if (p->size > 64)
+            fputc('\n', f);
+    }
+    fputs("end\n", f);
+    fclose(f);
+}
+
+/* A texture parameter (more values than the text limit): version 3 stores
+ * it packed after "binary packed", beside a colour in text; with values no
+ * float holds it is the raw doubles and little else; it reads back bit for
+ * bit, the same state written all in text (version 1) or raw (version 2)
+ * reads the same, and a file cut inside the binary values, or with the
+ * binary block's end changed, is refused. */
+/* A quad with a w x h colour texture; *ps: its base colour factor and its
+ * texels (3 + w * h * 3 values), NULL if that cannot be had. */
+static struct dr_scene *texture_scene(struct dr_param_set **ps, int w, int h)
 {
     struct sb b;
     sb_init(&b);
     struct dr_material m = sb_diffuse(dr_v3(0.5, 0.5, 0.5));
-    m.base_color_tex.texture = sb_texture(&b, sb_varied_image(32, 24, 3, 2));
+    m.base_color_tex.texture = sb_texture(&b, sb_varied_image(w, h, 3, 2));
     sb_quad(&b, dr_v3(0, 0, 0), dr_v3(1, 0, 0), dr_v3(0, 1, 0), sb_material(&b, m));
     struct dr_scene *s = sb_finish(&b);
     s->n_file_materials = s->n_materials;
@@ -110,7 +146,7 @@ static struct dr_scene *texture_scene(struct dr_param_set **ps)
 static void texture_checkpoint(const char *path)
 {
     struct dr_param_set *ps;
-    struct dr_scene *s = texture_scene(&ps);
+    struct dr_scene *s = texture_scene(&ps, 32, 24);
     CHECK(ps && ps->total == 3 + 32 * 24 * 3, "texture param set: %s", dr_last_error());
     if (!ps) {
         dr_scene_destroy(s);
@@ -137,12 +173,12 @@ static void texture_checkpoint(const char *path)
         size2 = ftell(f);
         fclose(f);
     }
-    CHECK(got > 0 && strncmp(head, "drender-checkpoint 2\n", 21) == 0, "version 2 header: %.21s", head);
+    CHECK(got > 0 && strncmp(head, "drender-checkpoint 3\n", 21) == 0, "version 3 header: %.21s", head);
     CHECK(dr_checkpoint_read(path, ps, back, r, &it) == 0, "texture read: %s", dr_last_error());
     CHECK(it == 12 && r->t == 12 && memcmp(back, theta, sizeof(double) * (size_t)n) == 0 &&
               memcmp(r->m, a->m, sizeof(double) * (size_t)n) == 0 && memcmp(r->v, a->v, sizeof(double) * (size_t)n) == 0,
           "texture checkpoint not restored bit for bit");
-    /* raw: 3 x 8 bytes a value and little else */
+    /* doubles no float holds: 3 x 8 bytes a value and little else */
     CHECK(size2 > 24 * (n - 3) && size2 < 24 * (n - 3) + 1024, "texture checkpoint of %ld bytes for %lld values",
           size2, (long long)n);
 
@@ -153,7 +189,16 @@ static void texture_checkpoint(const char *path)
               memcmp(r->v, a->v, sizeof(double) * (size_t)n) == 0,
           "a version 1 texture checkpoint: %s", dr_last_error());
 
-    /* cut inside the raw values; the newline after them changed */
+    /* the same state raw, as version 2 wrote it */
+    write_version2(path, ps, a, 12, theta);
+    memset(back, 0, sizeof(double) * (size_t)n);
+    memset(r->m, 0, sizeof(double) * (size_t)n);
+    CHECK(dr_checkpoint_read(path, ps, back, r, &it) == 0 && memcmp(back, theta, sizeof(double) * (size_t)n) == 0 &&
+              memcmp(r->m, a->m, sizeof(double) * (size_t)n) == 0 &&
+              memcmp(r->v, a->v, sizeof(double) * (size_t)n) == 0,
+          "a version 2 texture checkpoint: %s", dr_last_error());
+
+    /* cut inside the binary values; the newline after them changed */
     CHECK(dr_checkpoint_write(path, "scene.gltf", ps, theta, a, 12) == 0, "rewrite: %s", dr_last_error());
     CHECK(truncate(path, size2 - 4000) == 0, "truncate");
     CHECK(dr_checkpoint_read(path, ps, back, r, &it) == DR_ERR_FORMAT, "a cut raw block was accepted");
@@ -163,6 +208,93 @@ static void texture_checkpoint(const char *path)
     fputc('x', f);
     fclose(f);
     CHECK(dr_checkpoint_read(path, ps, back, r, &it) == DR_ERR_FORMAT, "a raw block without its newline was accepted");
+    free(theta);
+    free(back);
+    dr_adam_destroy(a);
+    dr_adam_destroy(r);
+    dr_param_set_destroy(ps);
+    dr_scene_destroy(s);
+}
+
+/* A preview's state, packed (version 3): values that are floats, moments
+ * +0 but for a few blocks. It reads back bit for bit, -0 and subnormals
+ * included (a -0 is not a zero run's +0; a double subnormal is no float),
+ * takes about a float a value, and a run that overruns the array or has no
+ * kind is refused. The texture's 7 x 5 x 3 = 105 values end in a short
+ * block. */
+static void packed_checkpoint(const char *path)
+{
+    struct dr_param_set *ps;
+    struct dr_scene *s = texture_scene(&ps, 7, 5);
+    CHECK(ps && ps->total == 3 + 105, "small texture param set: %s", dr_last_error());
+    if (!ps) {
+        dr_scene_destroy(s);
+        return;
+    }
+    const int64_t n = ps->total, n_tex = 105;
+    double *theta = malloc(sizeof(double) * (size_t)n), *back = malloc(sizeof(double) * (size_t)n);
+    dr_param_set_get(s, ps, theta);
+    struct dr_adam *a = dr_adam_create(ps, theta, 0.0), *r = dr_adam_create(ps, theta, 0.0);
+    for (int64_t i = 3; i < n; i++) {
+        theta[i] = (double)((float)(i % 97) / 97.0f);
+        a->m[i] = a->v[i] = 0.0;
+    }
+    theta[3 + 17] = 1.0 / 3.0;      /* no float: its block is doubles */
+    theta[3 + 18] = -0.0;
+    theta[3 + 104] = (double)1e-40f;   /* a float subnormal, in the short last block */
+    for (int64_t i = 3 + 40; i < 3 + 48; i++)   /* a block of -0 moments */
+        a->m[i] = -0.0;
+    a->m[3 + 60] = -1.0 / 7.0;
+    a->v[3 + 60] = 1.0 / 49.0;
+    a->m[3 + 100] = 4.9406564584124654e-324;   /* in the short last block */
+    a->v[3 + 100] = 4.9406564584124654e-324;
+    a->t = 3;
+    int64_t it = 0;
+    CHECK(dr_checkpoint_write(path, "scene.gltf", ps, theta, a, 3) == 0, "packed write: %s", dr_last_error());
+    CHECK(dr_checkpoint_read(path, ps, back, r, &it) == 0, "packed read: %s", dr_last_error());
+    CHECK(it == 3 && memcmp(back, theta, sizeof(double) * (size_t)n) == 0 &&
+              memcmp(r->m, a->m, sizeof(double) * (size_t)n) == 0 && memcmp(r->v, a->v, sizeof(double) * (size_t)n) == 0,
+          "packed checkpoint not restored bit for bit");
+    for (int64_t i = 3; i < n; i++)   /* say which, if any */
+        CHECK(memcmp(&back[i], &theta[i], 8) == 0 && memcmp(&r->m[i], &a->m[i], 8) == 0 &&
+                  memcmp(&r->v[i], &a->v[i], 8) == 0,
+              "entry %lld: value %a m %a v %a read back as %a %a %a", (long long)(i - 3), theta[i], a->m[i], a->v[i],
+              back[i], r->m[i], r->v[i]);
+
+    /* its size: the header, the colour's text, and the binary part: values
+     * as floats but one block of doubles, moments as runs */
+    FILE *f = fopen(path, "rb");
+    char buf[8192];
+    const size_t size = f ? fread(buf, 1, sizeof buf, f) : 0;
+    if (f)
+        fclose(f);
+    const char *bin = memmem(buf, size, "binary packed\n", 14);
+    CHECK(bin != NULL, "no packed section");
+    if (bin) {
+        const size_t body = size - (size_t)(bin + 14 - buf) - 5;   /* less "\nend\n" */
+        /* values: runs of 2 float blocks, the double block, 11 float blocks
+         * (81 entries); m: +0 x 40, the -0 block as floats, +0 x 8, a double
+         * block, +0 x 32, a double block, +0 x 1; v: the same without the -0
+         * block. 8 bytes a run's header. */
+        const size_t values = 3 * 8 + 4 * 16 + 8 * 8 + 4 * 81, m = 7 * 8 + 4 * 8 + 2 * 8 * 8, v = 5 * 8 + 2 * 8 * 8;
+        CHECK(body == values + m + v, "packed body of %zu bytes, expected %zu", body, values + m + v);
+
+        /* a run longer than what is left of its array; a run of kind 3 */
+        uint64_t head;
+        const long at = (long)(bin + 14 - buf);
+        memcpy(&head, bin + 14, 8);
+        const uint64_t longer = (head >> 62) << 62 | (uint64_t)(n_tex + 1), bad_kind = (UINT64_C(3) << 62) | (head & 0xff);
+        f = fopen(path, "r+b");
+        fseek(f, at, SEEK_SET);
+        fwrite(&longer, 8, 1, f);
+        fclose(f);
+        CHECK(dr_checkpoint_read(path, ps, back, r, &it) == DR_ERR_FORMAT, "a run past its array was accepted");
+        f = fopen(path, "r+b");
+        fseek(f, at, SEEK_SET);
+        fwrite(&bad_kind, 8, 1, f);
+        fclose(f);
+        CHECK(dr_checkpoint_read(path, ps, back, r, &it) == DR_ERR_FORMAT, "a run of kind 3 was accepted");
+    }
     free(theta);
     free(back);
     dr_adam_destroy(a);
@@ -199,7 +331,7 @@ static int64_t adam_reference(const struct dr_adam *a, int64_t t, double *theta,
 static void sparse_adam_step(void)
 {
     struct dr_param_set *ps;
-    struct dr_scene *s = texture_scene(&ps);
+    struct dr_scene *s = texture_scene(&ps, 32, 24);
     CHECK(ps != NULL, "sparse adam: param set: %s", dr_last_error());
     if (!ps) {
         dr_scene_destroy(s);
@@ -325,6 +457,7 @@ int main(void)
     CHECK(truncate(path, len / 2) == 0, "truncate");
     CHECK(dr_checkpoint_read(path, ps, tmp, b, &it0) == DR_ERR_FORMAT, "truncated checkpoint accepted");
     texture_checkpoint(path);
+    packed_checkpoint(path);
     unlink(path);
     dr_param_set_destroy(other);
     dr_adam_destroy(a);
