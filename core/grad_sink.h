@@ -15,10 +15,13 @@
 #include <stdint.h>
 
 #include "exact_sum.h"
+#include "zero_blocks.h"
 #include "vec.h"
 
 struct dr_grad_sink {
     double *grad;        /* reverse mode: gradient vector (+=) */
+    uint64_t *touched;   /* reverse mode, when not NULL: the blocks of grad it adds to are marked here
+                            (zero_blocks.h's masks: whoever sums grad then reads only those) */
     struct dr_exact_sum *exact;   /* reverse mode, when not NULL: the shared exact sums instead */
     const double *dir;   /* forward mode (when not NULL): direction */
     double forward[3];   /* forward mode: accumulated dot product per image channel */
@@ -28,6 +31,11 @@ struct dr_grad_sink {
 static inline struct dr_grad_sink dr_sink_reverse(double *grad)
 {
     return (struct dr_grad_sink){.grad = grad};
+}
+
+static inline struct dr_grad_sink dr_sink_reverse_marked(double *grad, uint64_t *touched)
+{
+    return (struct dr_grad_sink){.grad = grad, .touched = touched};
 }
 
 static inline struct dr_grad_sink dr_sink_exact(struct dr_exact_sum *e)
@@ -46,8 +54,11 @@ static inline void dr_sink_add(struct dr_grad_sink *k, int64_t slot, double v)
         k->forward[k->channel] += k->dir[slot] * v;
     else if (k->exact)
         dr_exact_add(k->exact, slot, v);
-    else
+    else {
         k->grad[slot] += v;
+        if (k->touched)
+            dr_mask_mark(k->touched, slot);
+    }
 }
 
 /* Adds v = (v0, v1, v2) to three consecutive slots (a colour parameter). */

@@ -36,8 +36,12 @@ int dr_parallel_for_static(int64_t n, int64_t chunk, int threads, dr_range_fn fn
  * depend on how [0, n) is split: fn over [0, n) on up to `threads` workers
  * (<= 0: one per CPU), the same bits for any thread count. Below
  * DR_PARALLEL_ELEMENTS_MIN elements, with one thread, or if no worker can be
- * had, fn runs on the calling thread alone. */
+ * had, fn runs on the calling thread alone. Every range but the last is a
+ * multiple of DR_PARALLEL_ALIGN elements long, so ranges begin at its
+ * multiples: a bit mask word over 512 elements (zero_blocks.h) belongs to
+ * one range, which may write it. */
 #define DR_PARALLEL_ELEMENTS_MIN 65536
+#define DR_PARALLEL_ALIGN 1024
 void dr_parallel_elements(int64_t n, int threads, dr_range_fn fn, void *ctx);
 /* dr_parallel_elements clearing n doubles at x. */
 void dr_parallel_zero(double *x, int64_t n, int threads);

@@ -37,4 +37,29 @@ static inline __attribute__((always_inline)) void dr_clear_touched(double *v, in
         v[k] = 0.0;
 }
 
+/* Block masks: one bit per block of DR_ZERO_BLOCK entries of a vector,
+ * bit (i / 8) % 64 of word i / 512 for entry i. A clear bit says the block
+ * is all +0; a set bit, that it may not be. A pass that follows such a mask
+ * reads and writes only the set blocks: with a preview's texture gradient,
+ * a few per cent of the vector, where dr_block_zero still reads all of it.
+ * Who keeps a mask true is each mask's owner's to say. */
+#define DR_MASK_SPAN (64 * DR_ZERO_BLOCK)   /* entries a word covers */
+
+static inline int64_t dr_mask_words(int64_t n)
+{
+    return (n + DR_MASK_SPAN - 1) / DR_MASK_SPAN;
+}
+
+/* Marks the block holding entry i. */
+static inline __attribute__((always_inline)) void dr_mask_mark(uint64_t *mask, int64_t i)
+{
+    mask[i / DR_MASK_SPAN] |= UINT64_C(1) << (i / DR_ZERO_BLOCK % 64);
+}
+
+/* Whether the block holding entry i is marked. */
+static inline __attribute__((always_inline)) bool dr_mask_test(const uint64_t *mask, int64_t i)
+{
+    return mask[i / DR_MASK_SPAN] >> (i / DR_ZERO_BLOCK % 64) & 1;
+}
+
 #endif

@@ -27,6 +27,7 @@ struct rev_work {
      * halves' (the caller's se and se_gradient, finished in place) */
     double *half[2], *m2, *dsq;
     bool consume;              /* a batch's last estimator run hands its gradient to the fold (welford_take) */
+    uint64_t *nonzero;         /* r->nonzero where the fold keeps it (work_alloc), else NULL */
     int done, steps;
     struct dr_mis_history mis;   /* mis without the caller's history: this run's batches' */
     struct dr_media_plan media_plan;   /* the batches' media pilot (medium_grad.h), unless the caller's */
@@ -89,6 +90,12 @@ static int work_alloc(struct rev_work *w, const struct dr_reverse_result *r)
     w->half[0] = need0 ? scratch_half(w->scratch, 0, T1) : NULL;
     w->half[1] = need1 ? scratch_half(w->scratch, 1, T1) : NULL;
     w->m2 = r->se;   /* (batch 0 writes it whole: welford_range) */
+    /* the result's mask, where the fold can keep it: not with the halves'
+     * vectors (dense) nor the parts (written whole); else all marked */
+    const bool keep_mask = r->nonzero && !split && !r->se_gradient && !r->se_primal;
+    w->nonzero = keep_mask ? r->nonzero : NULL;
+    if (r->nonzero && !keep_mask)
+        memset(r->nonzero, 0xff, sizeof(uint64_t) * (size_t)dr_mask_words(w->T));
     /* the halves' squared differences feed se_gradient and se_primal only */
     w->dsq = r->parts && r->se_gradient ? r->se_gradient : NULL;
     if (w->img && w->adj && w->img_sum && w->cross_img && (w->half[0] || !need0) && (w->half[1] || !need1))
@@ -178,53 +185,80 @@ struct welford_step {
     bool split;
 };
 
-/* Entries [begin, end)'s update with batch b's gradient there, g[i - begin]
- * (split halves: g the second's, h0[i] the first's): the running mean
- * (Welford) in r->grad and its sum of squares in m2, with two halves their
- * squared difference into dsq (the last batch's standard_errors turn them
- * into standard errors in place: se holds m2, se_gradient dsq). Batch 0
- * starts every entry from +0 itself (the same operations on the zeros the
- * sums would hold) and writes every entry, so nothing is cleared before
- * it, nor read (a caller's vectors may hold anything).
- * FIRST, SPLIT and POW2 are constants where fold_run calls it, so that each
- * variant's loop compiles branch-free to vector operations (with the tests
- * inside the loop it ran one entry at a time: twice as slow). */
-static inline __attribute__((always_inline)) void fold(const struct welford_step *x, int64_t begin, int64_t end,
-                                                       const double *g, const double *h0, bool first, bool split,
-                                                       bool pow2)
+/* Entries [i0, i0 + n)'s update (n <= DR_ZERO_BLOCK) with batch b's
+ * gradient there, g[i - i0] (split halves: g the second's, h0[i] the
+ * first's): the running mean (Welford) in r->grad and its sum of squares in
+ * m2, with two halves their squared difference into dsq (the last batch's
+ * standard_errors turn them into standard errors in place: se holds m2,
+ * se_gradient dsq). Batch 0 starts every entry from +0 itself (the same
+ * operations on the zeros the sums would hold) and writes every entry, so
+ * nothing is cleared before it, nor read (a caller's vectors may hold
+ * anything). */
+static inline __attribute__((always_inline)) void fold_block(const struct welford_step *x, int64_t i0, int64_t n,
+                                                             const double *g, const double *h0, bool first,
+                                                             bool split, bool pow2)
 {
     struct rev_work *w = x->w;
     double *grad = x->r->grad, *m2 = w->m2, *dsq = w->dsq;   /* (dsq: only with split halves, plan()) */
     const int b = x->b, n0 = x->n0, n1 = x->n1, spp = x->spp;
     const double inv = 1.0 / (b + 1);   /* (pow2: exact, so d * inv is d / (b + 1) to the bit) */
-#define FOLD_ENTRY(i)                                                              \
-    do {                                                                           \
-        const double hb = g[(i) - begin];                                          \
-        const double gi = split ? (n0 * h0[i] + n1 * hb) / spp : hb;               \
-        const double mean = first ? 0.0 : grad[i];                                 \
-        const double d = gi - mean;                                                \
-        grad[i] = mean + (pow2 ? d * inv : d / (b + 1));                           \
-        m2[i] = (first ? 0.0 : m2[i]) + d * (gi - grad[i]);                        \
-        if (split && dsq) {                                                        \
-            const double h = h0[i] - hb;                                           \
-            dsq[i] = (first ? 0.0 : dsq[i]) + h * h * n0 * n1 / ((double)spp * spp); \
-        }                                                                          \
-    } while (0)
-    int64_t i0 = begin;
-    for (; i0 + DR_ZERO_BLOCK <= end; i0 += DR_ZERO_BLOCK) {
-        /* after batch 0, an entry at +0 with a +0 gradient stays so (mean
-         * + (+0 - +0) * inv = +0, m2 + +0 * +0 = +0, dsq likewise): such
-         * blocks, most of a preview's texture gradient, are read, not
-         * written */
-        if (!first && dr_block_zero(g + (i0 - begin)) && dr_block_zero(grad + i0) && dr_block_zero(m2 + i0) &&
-            (!split || dr_block_zero(h0 + i0)) && (!(split && dsq) || dr_block_zero(dsq + i0)))
-            continue;
-        for (int64_t i = i0; i < i0 + DR_ZERO_BLOCK; i++)
-            FOLD_ENTRY(i);
+    for (int64_t i = i0; i < i0 + n; i++) {
+        const double hb = g[i - i0];
+        const double gi = split ? (n0 * h0[i] + n1 * hb) / spp : hb;
+        const double mean = first ? 0.0 : grad[i];
+        const double d = gi - mean;
+        grad[i] = mean + (pow2 ? d * inv : d / (b + 1));
+        m2[i] = (first ? 0.0 : m2[i]) + d * (gi - grad[i]);
+        if (split && dsq) {
+            const double h = h0[i] - hb;
+            dsq[i] = (first ? 0.0 : dsq[i]) + h * h * n0 * n1 / ((double)spp * spp);
+        }
     }
-    for (int64_t i = i0; i < end; i++)
-        FOLD_ENTRY(i);
-#undef FOLD_ENTRY
+}
+
+static const double zero_block[DR_ZERO_BLOCK];
+
+/* The fold of entries [begin, end) (begin a multiple of 512: a mask word
+ * is this range's), g[i - begin] the gradient there; with mask (the
+ * consumer's: estimator.h), only its marked blocks of g are read, the
+ * others are +0. Blocks whose result is what they hold are left alone:
+ *  - with the run's mask of the result (w->nonzero: r->nonzero's contract,
+ *    reverse.h), a block neither marked in it nor in mask, without reading
+ *    it; the mask is kept true as blocks are written (batch 0: marked where
+ *    g is, as batch 0 clears the others; later: where either is);
+ *  - else after batch 0, a block at +0 with a +0 gradient (mean + (+0 -
+ *    +0) * inv = +0, m2 + +0 * +0 = +0, dsq likewise), read to see so.
+ * FIRST, SPLIT and POW2 are constants where fold_run calls it, so that each
+ * variant's loop compiles branch-free to vector operations (with the tests
+ * inside the loop it ran one entry at a time: twice as slow). */
+static inline __attribute__((always_inline)) void fold(const struct welford_step *x, int64_t begin, int64_t end,
+                                                       const double *g, const uint64_t *mask, const double *h0,
+                                                       bool first, bool split, bool pow2)
+{
+    struct rev_work *w = x->w;
+    const double *grad = x->r->grad, *m2 = w->m2, *dsq = w->dsq;
+    uint64_t *nonzero = w->nonzero;
+    for (int64_t i0 = begin; i0 < end; i0 += DR_ZERO_BLOCK) {
+        const int64_t n = end - i0 < DR_ZERO_BLOCK ? end - i0 : DR_ZERO_BLOCK;
+        const bool in = !mask || dr_mask_test(mask, i0 - begin);
+        const double *gb = in ? g + (i0 - begin) : zero_block;
+        if (nonzero) {
+            const bool held = dr_mask_test(nonzero, i0);
+            if (!in && !held)
+                continue;
+            const uint64_t bit = UINT64_C(1) << (i0 / DR_ZERO_BLOCK % 64);
+            uint64_t *word = &nonzero[i0 / DR_MASK_SPAN];
+            *word = first && !in ? *word & ~bit : *word | bit;
+        } else if (!first && n == DR_ZERO_BLOCK && (!in || dr_block_zero(gb)) && dr_block_zero(grad + i0) &&
+                   dr_block_zero(m2 + i0) && (!split || dr_block_zero(h0 + i0)) &&
+                   (!(split && dsq) || dr_block_zero(dsq + i0))) {
+            continue;
+        }
+        if (n == DR_ZERO_BLOCK)
+            fold_block(x, i0, DR_ZERO_BLOCK, gb, h0, first, split, pow2);
+        else
+            fold_block(x, i0, n, gb, h0, first, split, pow2);
+    }
 }
 
 static bool power_of_two(int n)
@@ -235,15 +269,19 @@ static bool power_of_two(int n)
 /* (Dividing by a power of two is multiplying by its reciprocal, exactly:
  * batch b where b + 1 is one (0, 1, 3, 7 ...), and K = 2's standard
  * errors, need no division, the slowest operation of these loops.) */
-static void fold_run(const struct welford_step *x, int64_t begin, int64_t end, const double *g, const double *h0)
+static void fold_run(const struct welford_step *x, int64_t begin, int64_t end, const double *g, const uint64_t *mask,
+                     const double *h0)
 {
     const bool pow2 = power_of_two(x->b + 1);
     if (x->b == 0)
-        x->split ? fold(x, begin, end, g, h0, true, true, true) : fold(x, begin, end, g, h0, true, false, true);
+        x->split ? fold(x, begin, end, g, mask, h0, true, true, true)
+                 : fold(x, begin, end, g, mask, h0, true, false, true);
     else if (pow2)
-        x->split ? fold(x, begin, end, g, h0, false, true, true) : fold(x, begin, end, g, h0, false, false, true);
+        x->split ? fold(x, begin, end, g, mask, h0, false, true, true)
+                 : fold(x, begin, end, g, mask, h0, false, false, true);
     else
-        x->split ? fold(x, begin, end, g, h0, false, true, false) : fold(x, begin, end, g, h0, false, false, false);
+        x->split ? fold(x, begin, end, g, mask, h0, false, true, false)
+                 : fold(x, begin, end, g, mask, h0, false, false, false);
 }
 
 /* The last batch's standard errors of [begin, end), in place of the sums. */
@@ -255,9 +293,10 @@ static void standard_errors(const struct welford_step *x, int64_t begin, int64_t
     /* (in place of m2; where a block of it is +0, sqrt(+0 / (K - 1) / K) = +0 is there already) */
     const bool halves = power_of_two(K - 1) && power_of_two(K);   /* (K = 2) */
     const double inv = 1.0 / (K - 1), inv_k = 1.0 / K;
+    const uint64_t *nonzero = x->w->nonzero;
     for (int64_t i0 = begin; i0 < end; i0 += DR_ZERO_BLOCK) {
         const int64_t i1 = end - i0 < DR_ZERO_BLOCK ? end : i0 + DR_ZERO_BLOCK;
-        if (i1 - i0 == DR_ZERO_BLOCK && dr_block_zero(r->se + i0))
+        if (nonzero ? !dr_mask_test(nonzero, i0) : i1 - i0 == DR_ZERO_BLOCK && dr_block_zero(r->se + i0))
             continue;
         for (int64_t i = i0; i < i1; i++)
             r->se[i] = halves ? sqrt(r->se[i] * inv * inv_k) : sqrt(r->se[i] / (K - 1) / K);
@@ -271,14 +310,16 @@ static void standard_errors(const struct welford_step *x, int64_t begin, int64_t
 }
 
 /* The fold of [begin, end), g[i - begin] its gradient (split: the second
- * half's, h0 the first's), a cache-sized piece at a time so that the last
- * batch's standard errors read the sums it has just written. */
+ * half's, h0 the first's; mask: g's marked blocks, fold), a cache-sized
+ * piece at a time so that the last batch's standard errors read the sums
+ * it has just written. */
 #define FOLD_PIECE 1024
-static void fold_piece(const struct welford_step *x, int64_t begin, int64_t end, const double *g, const double *h0)
+static void fold_piece(const struct welford_step *x, int64_t begin, int64_t end, const double *g,
+                       const uint64_t *mask, const double *h0)
 {
     for (int64_t i0 = begin; i0 < end; i0 += FOLD_PIECE) {
         const int64_t i1 = end - i0 < FOLD_PIECE ? end : i0 + FOLD_PIECE;
-        fold_run(x, i0, i1, g + (i0 - begin), h0);
+        fold_run(x, i0, i1, g + (i0 - begin), mask ? mask + (i0 - begin) / DR_MASK_SPAN : NULL, h0);
         if (x->b == x->K - 1)
             standard_errors(x, i0, i1);
     }
@@ -290,16 +331,16 @@ static void welford_range(void *ctx, int thread, int64_t begin, int64_t end)
     (void)thread;
     const struct welford_step *x = ctx;
     const double *h0 = x->w->half[0], *h1 = x->w->half[1];
-    fold_piece(x, begin, end, x->split ? h1 + begin : h0 + begin, x->split ? h0 : NULL);
+    fold_piece(x, begin, end, x->split ? h1 + begin : h0 + begin, NULL, x->split ? h0 : NULL);
 }
 
 /* The fold of a piece of the batch's last estimator run as it is summed
  * (dr_grad_consumer): g is the batch's gradient there, or with split
  * halves the second half's (the first's is in half[0]). */
-static void welford_take(void *ctx, int64_t begin, int64_t end, const double *g)
+static void welford_take(void *ctx, int64_t begin, int64_t end, const double *g, const uint64_t *mask)
 {
     const struct welford_step *x = ctx;
-    fold_piece(x, begin, end, g, x->split ? x->w->half[0] : NULL);
+    fold_piece(x, begin, end, g, mask, x->split ? x->w->half[0] : NULL);
 }
 
 /* Batch b's gradient g_b folded into the sums (fold): its last

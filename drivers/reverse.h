@@ -90,6 +90,17 @@ struct dr_reverse_result {
     double *grad, *se, *se_gradient, *se_primal;
     /* optional (may be NULL): the mean of the primal images, width * height * 3 */
     float *image;
+    /* optional (may be NULL; in and out): a block mask of grad and se
+     * (zero_blocks.h, dr_mask_words(params->total) words). On entry it
+     * must be true of them: grad and se are +0 in every block it leaves
+     * clear (fresh vectors: a clear mask and zeros; or what the last run
+     * left). The run then reads and writes only the blocks marked on entry
+     * and those its gradient reaches (with a texture seen at a preview
+     * size, a few per cent), and on return the mask is true again, marking
+     * those the run left non-zero. Where the run cannot keep it (halves'
+     * vectors, se_gradient or se_primal asked for) every block is marked
+     * and every entry written. */
+    uint64_t *nonzero;
     double loss;                     /* loss of the mean primal image (scaled by loss_scale) */
     int spp_batch;                   /* samples per pixel of each batch */
     bool parts;                      /* se_gradient / se_primal were estimated */
@@ -111,8 +122,8 @@ enum dr_primal_mode dr_reverse_primal_run(enum dr_primal_mode primal, int spp, i
 bool dr_reverse_parts(const struct dr_reverse_options *o);
 
 /* target: width * height * 3 linear floats. 0 or a negative DR_ERR_*
- * (then r's vectors hold nothing meaningful: the first batch writes them
- * whole, so nothing clears them before). */
+ * (then r's vectors and mask hold nothing meaningful: the first batch
+ * writes them whole, so nothing clears them before). */
 int dr_reverse_gradient(const struct dr_reverse_options *o, const float *target, struct dr_reverse_result *r);
 
 #endif

@@ -144,10 +144,28 @@ static double *accum_thread_vector(struct dr_est_accum *a, int t, size_t n)
     a->bytes += n * sizeof(double);
     bool kept;
     double *v = dr_big_vector_keep(&s->grad[t], &s->len[t], (int64_t)n, &kept);
-    if (kept && s->dirty[t])   /* (not dirty: the last run's sum cleared it) */
+    if (kept && s->dirty[t]) {   /* (not dirty: the last run's sum cleared it, and its mask) */
         dr_parallel_zero(v, (int64_t)n, a->threads);
+        if (s->touched[t])
+            memset(s->touched[t], 0, sizeof(uint64_t) * (size_t)dr_mask_words((int64_t)n));
+    }
+    if (!kept) {   /* (a new vector: a new mask, made when asked for) */
+        free(s->touched[t]);
+        s->touched[t] = NULL;
+    }
     s->dirty[t] = v != NULL;   /* (this run writes it) */
     return v;
+}
+
+/* Thread t's block mask over its vector of n entries (the scratch's, all
+ * clear: accum_thread_vector). */
+static uint64_t *accum_thread_mask(struct dr_est_accum *a, int t, int64_t n)
+{
+    struct dr_est_scratch *s = a->scratch;
+    if (!s->touched[t])
+        s->touched[t] = calloc((size_t)dr_mask_words(n), sizeof(uint64_t));
+    a->bytes += sizeof(uint64_t) * (size_t)dr_mask_words(n);
+    return s->touched[t];
 }
 
 /* The shared exact sum of n entries, zeroed: the scratch's if it has one of
@@ -172,8 +190,10 @@ void dr_est_scratch_free(struct dr_est_scratch *s)
 {
     if (!s)
         return;
-    for (int t = 0; t < DR_MAX_THREADS; t++)
+    for (int t = 0; t < DR_MAX_THREADS; t++) {
         free(s->grad[t]);
+        free(s->touched[t]);
+    }
     dr_exact_sum_destroy(s->exact);
     memset(s, 0, sizeof *s);
 }
@@ -232,6 +252,10 @@ static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, b
             goto nomem;
         if (a->total <= CHUNK_LOCAL_MAX && !(a->chunk[t] = accum_alloc(a, (size_t)a->total + 1)))
             goto nomem;
+        /* a consumer's vectors too big for chunks: each with the mask of
+         * the blocks its paths reached, so that the sums read only those */
+        if (a->consumer && !a->chunk[t] && !(a->touched[t] = accum_thread_mask(a, t, a->total + 1)))
+            goto nomem;
     }
     return 0;
 nomem:
@@ -289,7 +313,41 @@ static void consume_threads(void *ctx, int thread, int64_t begin, int64_t end)
         sum_piece(a, i0, n, piece);
         for (int t = 0; t < a->threads; t++)
             dr_clear_touched(a->grad[t] + i0, n);
-        a->consumer->take(a->consumer->ctx, i0, i0 + n, piece);
+        a->consumer->take(a->consumer->ctx, i0, i0 + n, piece, NULL);
+    }
+}
+
+#define PIECE_WORDS (SUM_PIECE / DR_MASK_SPAN)
+/* consume_threads where the threads' vectors have block masks (accum_init):
+ * a piece's marked blocks only (the union of the threads' masks), each
+ * summed as sum_piece sums it; each thread's marked blocks cleared and its
+ * mask words with them; the consumer gets the union. Pieces begin at
+ * multiples of SUM_PIECE (dr_parallel_elements' ranges do), so a mask word
+ * is this piece's alone. */
+static void consume_marked(void *ctx, int thread, int64_t begin, int64_t end)
+{
+    (void)thread;
+    const struct dr_est_accum *a = ctx;
+    double piece[SUM_PIECE];
+    for (int64_t i0 = begin; i0 < end; i0 += SUM_PIECE) {
+        const int64_t n = end - i0 < SUM_PIECE ? end - i0 : SUM_PIECE, w0 = i0 / DR_MASK_SPAN;
+        const int words = (int)dr_mask_words(n);
+        uint64_t all[PIECE_WORDS] = {0};
+        for (int t = 0; t < a->threads; t++)
+            for (int w = 0; w < words; w++)
+                all[w] |= a->touched[t][w0 + w];
+        for (int w = 0; w < words; w++)
+            for (uint64_t bits = all[w]; bits; bits &= bits - 1) {
+                const int64_t k = (int64_t)w * DR_MASK_SPAN + __builtin_ctzll(bits) * DR_ZERO_BLOCK;
+                const int64_t m = n - k < DR_ZERO_BLOCK ? n - k : DR_ZERO_BLOCK;
+                sum_piece(a, i0 + k, m, piece + k);
+                for (int t = 0; t < a->threads; t++)
+                    if (a->touched[t][w0 + w] >> (k / DR_ZERO_BLOCK % 64) & 1)
+                        memset(a->grad[t] + i0 + k, 0, sizeof(double) * (size_t)m);
+            }
+        for (int t = 0; t < a->threads; t++)
+            memset(&a->touched[t][w0], 0, sizeof(uint64_t) * (size_t)words);
+        a->consumer->take(a->consumer->ctx, i0, i0 + n, piece, all);
     }
 }
 
@@ -300,7 +358,8 @@ static void consume_threads(void *ctx, int thread, int64_t begin, int64_t end)
 static void accum_sum(const struct dr_est_accum *a, const struct dr_grad_problem *p, double *grad, double *d_image)
 {
     if (a->consumer || (grad && !a->exact)) {
-        dr_parallel_elements(a->total, a->threads, a->consumer ? consume_threads : sum_threads, (void *)a);
+        dr_parallel_elements(a->total, a->threads,
+                             a->touched[0] ? consume_marked : a->consumer ? consume_threads : sum_threads, (void *)a);
         for (int t = a->consumer ? 0 : 1; a->scratch && t < a->threads; t++)
             a->scratch->dirty[t] = false;   /* (cleared as read) */
     } else if (grad && a->exact) {
@@ -320,7 +379,7 @@ struct dr_grad_sink dr_est_sink_begin(struct dr_est_base *b, int thread)
     if (a->exact)
         return dr_sink_exact(a->exact);
     if (!a->chunk[thread])
-        return dr_sink_reverse(a->grad[thread]);
+        return dr_sink_reverse_marked(a->grad[thread], a->touched[thread]);
     memset(a->chunk[thread], 0, sizeof(double) * (size_t)a->total);
     return dr_sink_reverse(a->chunk[thread]);
 }

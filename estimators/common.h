@@ -36,6 +36,8 @@ struct dr_est_accum {
                                              (the problem's: not freed by the run) */
     const struct dr_grad_consumer *consumer;   /* where the sums go instead of grad[0] (then the
                                                   scratch's too): estimator.h */
+    uint64_t *touched[DR_MAX_THREADS];    /* with a consumer and no chunks: grad[t]'s block mask, the
+                                             scratch's (zero_blocks.h), set by the sinks */
 };
 
 /* What the samples of the pixel a thread started last share

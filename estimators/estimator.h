@@ -98,18 +98,24 @@ struct dr_grad_problem {
 };
 
 /* Where a reverse-mode run can hand its gradient instead of writing it to
- * the caller's vector: take(ctx, begin, end, g) gets g[k] = entry begin + k
- * (the bits the vector would hold), every entry exactly once, in pieces of
- * at most 1024, from several threads at once (disjoint pieces). A caller
- * that folds the gradient into running sums (reverse.h's batches: Welford)
- * so reads the threads' sums while they are in the cache: no vector is
+ * the caller's vector: take(ctx, begin, end, g, mask) gets g[k] = entry
+ * begin + k (the bits the vector would hold), every entry exactly once, in
+ * pieces of at most 1024 that begin at multiples of 1024 (the last may be
+ * shorter), from several threads at once (disjoint pieces). A caller that
+ * folds the gradient into running sums (reverse.h's batches: Welford) so
+ * reads the threads' sums while they are in the cache: no vector is
  * written with them and read back (thread 0 then sums into a scratch
  * vector, not the caller's: the same memory), two passes over a texture's
- * gradient less per run. Honoured where dr_estimator_consumes says so (the
- * threads' vectors must be the scratch's); dr_estimator_backward's grad
- * may then be NULL. */
+ * gradient less per run. mask, when not NULL, is the piece's block mask
+ * (zero_blocks.h; its word 0 is entry begin's): only the marked blocks of
+ * g are written, the others are +0 and g there holds anything. It is given
+ * where the estimator tracked which blocks its paths reached (more than
+ * 4096 entries), so that a preview's texture gradient, a few per cent of
+ * the entries, costs what it touches. Honoured where
+ * dr_estimator_consumes says so (the threads' vectors must be the
+ * scratch's); dr_estimator_backward's grad may then be NULL. */
 struct dr_grad_consumer {
-    void (*take)(void *ctx, int64_t begin, int64_t end, const double *g);
+    void (*take)(void *ctx, int64_t begin, int64_t end, const double *g, const uint64_t *mask);
     void *ctx;
 };
 
@@ -131,6 +137,8 @@ struct dr_est_scratch {
     int64_t len[DR_MAX_THREADS];
     bool dirty[DR_MAX_THREADS];     /* grad[t] may hold non-zero entries (false: the run that summed it
                                        cleared it as it read it, so the next one need not) */
+    uint64_t *touched[DR_MAX_THREADS];   /* with a consumer: grad[t]'s block mask (zero_blocks.h), all
+                                            clear between runs but after a failed one (dirty) */
     struct dr_exact_sum *exact;
     int64_t exact_len;
 };

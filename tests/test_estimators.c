@@ -449,21 +449,29 @@ static void camera_rays8_match(const struct dr_camera *cam)
 }
 
 /* estimator.h's dr_grad_consumer: the gradient handed over in pieces is
- * the vector a run writes, to the bit, every entry exactly once; the
- * scratch's vectors are left cleared (not dirty), so a second run with
- * them gives it again; dr_estimator_consumes says no where the run cannot
- * (mis sampling; the shared exact sum from four threads on a big vector,
- * `consumes` false). */
+ * the vector a run writes, to the bit, every entry exactly once (where a
+ * piece comes with a block mask, its unmarked blocks +0: a block with a
+ * non-zero entry left unmarked fails the comparison); pieces begin at
+ * multiples of 1024; the scratch's vectors and masks are left cleared (not
+ * dirty), so a second run with them gives it again; dr_estimator_consumes
+ * says no where the run cannot (mis sampling; the shared exact sum from
+ * four threads on a big vector, `consumes` false). */
 struct taken {
     double *g;
     int *count;
+    int64_t marked, unmarked, misaligned;   /* blocks of masked pieces; pieces not at a multiple of 1024 */
 };
-static void take_piece(void *ctx, int64_t begin, int64_t end, const double *g)
+static void take_piece(void *ctx, int64_t begin, int64_t end, const double *g, const uint64_t *mask)
 {
     struct taken *t = ctx;
+    if (begin % 1024 != 0)
+        __atomic_fetch_add(&t->misaligned, 1, __ATOMIC_RELAXED);
     for (int64_t i = begin; i < end; i++) {
-        t->g[i] = g[i - begin];
+        const bool marked = !mask || (mask[(i - begin) / 512] >> ((i - begin) / 8 % 64) & 1);
+        t->g[i] = marked ? g[i - begin] : 0.0;
         __atomic_fetch_add(&t->count[i], 1, __ATOMIC_RELAXED);   /* (pieces come from several threads) */
+        if (mask && (i - begin) % 8 == 0)
+            __atomic_fetch_add(marked ? &t->marked : &t->unmarked, 1, __ATOMIC_RELAXED);
     }
 }
 
@@ -482,7 +490,7 @@ static void consumer_matches(const char *what, struct dr_scene *s, const struct 
     for (int i = 0; i < 3 * W * H; i++)
         adj[i] = (float)(dr_sampler_next(&r) - 0.4);
     double *own = calloc(T, sizeof(double));
-    struct taken got = {calloc(T, sizeof(double)), calloc(T, sizeof(int))};
+    struct taken got = {calloc(T, sizeof(double)), calloc(T, sizeof(int)), 0, 0, 0};
     const struct dr_grad_consumer consumer = {take_piece, &got};
     struct dr_est_scratch sc = {0};
     struct dr_grad_problem p = {.scene = s, .camera = cam, .params = ps, .width = W, .height = H, .spp = 2,
@@ -502,12 +510,22 @@ static void consumer_matches(const char *what, struct dr_scene *s, const struct 
         CHECK(memcmp(own, got.g, sizeof(double) * T) == 0 && zeros < (int64_t)T,
               "%s, %d threads, run %d: the consumer's gradient differs from the vector's", what, threads, run);
         for (int t = 0; t < threads; t++) {
-            int64_t left = 0;
+            int64_t left = 0, bits = 0;
             for (size_t i = 0; sc.grad[t] && i <= T; i++)
                 left += sc.grad[t][i] != 0.0;
-            CHECK(sc.grad[t] && !sc.dirty[t] && left == 0, "%s, run %d: thread %d's vector %s", what, run, t,
-                  !sc.grad[t] ? "missing" : sc.dirty[t] ? "left dirty" : "not cleared");
+            for (int64_t w = 0; sc.touched[t] && w < (int64_t)(T + 1 + 511) / 512; w++)
+                bits += sc.touched[t][w] != 0;
+            CHECK(sc.grad[t] && !sc.dirty[t] && left == 0 && bits == 0, "%s, run %d: thread %d's vector %s", what, run,
+                  t, !sc.grad[t] ? "missing" : sc.dirty[t] ? "left dirty" : bits ? "with its mask set" : "not cleared");
         }
+        /* masks where the vectors are too big for the estimator's chunks (4096 entries) */
+        CHECK(got.misaligned == 0 && (T > 4096) == (got.marked > 0),
+              "%s, run %d: %lld pieces not at multiples of 1024, %lld blocks marked, %lld not", what, run,
+              (long long)got.misaligned, (long long)got.marked, (long long)got.unmarked);
+        if (T > 4096)
+            printf("%s, %d threads, run %d: %lld blocks marked, %lld not\n", what, threads, run, (long long)got.marked,
+                   (long long)got.unmarked);
+        got.marked = got.unmarked = got.misaligned = 0;
     }
     struct dr_grad_problem mis = p;
     mis.sampling = DR_SAMPLING_MIS;
@@ -588,6 +606,70 @@ static void fold_sparse(const char *what, struct dr_scene *s, const struct dr_ca
     dr_reverse_scratch_free(&rs);
     free(g);
     free(se);
+    free(target);
+    dr_param_set_destroy(ps);
+}
+
+/* reverse.h's result mask (dr_reverse_result.nonzero), as optimize keeps
+ * it from iteration to iteration: runs with other seeds on the same
+ * vectors (the blocks the last run left non-zero are not this one's) give
+ * the bits of runs on fresh vectors without a mask, the mask is true after
+ * each (every block with a non-zero mean or error marked) and sparse; where
+ * the run cannot keep it (per-batch halves with the parts asked for) it
+ * comes back all marked, the result still exact. */
+static void result_mask(const char *what, struct dr_scene *s, const struct dr_camera *cam, const char *const *ptrs,
+                        int n)
+{
+    struct dr_param_set *ps = dr_param_set_create(s, ptrs, n);
+    CHECK(ps != NULL, "%s: param set: %s", what, dr_last_error());
+    if (!ps)
+        return;
+    const size_t T = (size_t)ps->total, words = (T + 511) / 512;
+    double *g = calloc(T, sizeof(double)), *se = calloc(T, sizeof(double));
+    double *g1 = malloc(sizeof(double) * T), *se1 = malloc(sizeof(double) * T);
+    double *sg = malloc(sizeof(double) * T), *sp = malloc(sizeof(double) * T);
+    uint64_t *mask = calloc(words, sizeof(uint64_t));
+    float *target = calloc((size_t)3 * W * H, sizeof(float));
+    struct dr_reverse_scratch rs = {0};
+    for (int run = 0; run < 4; run++) {
+        const bool parts = run == 3;   /* (per-batch primals, two halves, se_gradient asked for) */
+        struct dr_reverse_options o = {
+            .estimator = dr_estimator_find("prb"), .loss = DR_LOSS_L2, .loss_scale = 1.0, .batches = 2 + run % 2,
+            .primal = parts ? DR_PRIMAL_PER_BATCH : DR_PRIMAL_CROSS, .scratch = &rs,
+            .problem = {.scene = s, .camera = cam, .params = ps, .width = W, .height = H, .spp = run == 1 ? 6 : 4,
+                        .max_depth = 3, .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 31 + (uint64_t)run, .threads = 2}};
+        struct dr_reverse_result fresh = {.grad = g1, .se = se1, .se_gradient = parts ? sg : NULL,
+                                          .se_primal = parts ? sp : NULL};
+        CHECK(dr_reverse_gradient(&o, target, &fresh) == 0, "%s: %s", what, dr_last_error());
+        struct dr_reverse_result kept = {.grad = g, .se = se, .se_gradient = parts ? sg : NULL,
+                                         .se_primal = parts ? sp : NULL, .nonzero = mask};
+        CHECK(dr_reverse_gradient(&o, target, &kept) == 0, "%s: %s", what, dr_last_error());
+        CHECK(memcmp(g, g1, sizeof(double) * T) == 0 && memcmp(se, se1, sizeof(double) * T) == 0,
+              "%s, run %d: with the mask the result differs from a run without", what, run);
+        int64_t untrue = 0, marked = 0;
+        for (size_t i = 0; i < T; i += 8) {
+            const bool m = mask[i / 512] >> (i / 8 % 64) & 1;
+            marked += m;
+            for (size_t k = i; k < i + 8 && k < T; k++)
+                untrue += !m && (g[k] != 0.0 || se[k] != 0.0 || signbit(g[k]) || signbit(se[k]));
+        }
+        const int64_t blocks = (int64_t)(T + 7) / 8;
+        CHECK(untrue == 0, "%s, run %d: %lld entries non-zero in unmarked blocks", what, run, (long long)untrue);
+        CHECK(parts ? marked == blocks : marked > 0 && marked < blocks / 2,
+              "%s, run %d: %lld of %lld blocks marked", what, run, (long long)marked, (long long)blocks);
+        if (parts)   /* (the dense run left every block marked: start the next from a true mask again) */
+            continue;
+        printf("%s, run %d: the result's mask marks %lld of %lld blocks\n", what, run, (long long)marked,
+               (long long)blocks);
+    }
+    dr_reverse_scratch_free(&rs);
+    free(g);
+    free(se);
+    free(g1);
+    free(se1);
+    free(sg);
+    free(sp);
+    free(mask);
     free(target);
     dr_param_set_destroy(ps);
 }
@@ -923,6 +1005,7 @@ int main(void)
     consumer_matches("a 160x160 texture", s, &top, tex_ptrs, 2, 2, true);
     consumer_matches("a 160x160 texture", s, &top, tex_ptrs, 2, 4, false);   /* (the shared exact sum) */
     fold_sparse("a 160x160 texture", s, &top, tex_ptrs, 2);
+    result_mask("a 160x160 texture", s, &top, tex_ptrs, 2);
     dr_scene_destroy(s);
     return TEST_END();
 }
