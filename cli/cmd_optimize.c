@@ -28,6 +28,7 @@
 #include "reverse.h"
 #include "sampler.h"
 #include "stale_temps.h"
+#include "zero_blocks.h"
 
 #define MAX_TARGETS 64
 
@@ -561,6 +562,8 @@ struct opt_run {
     double *theta, *grad, *ref;        /* values, gradient, reference values */
     double *se;                        /* the gradient's standard error */
     double *gt, *se_t;                 /* several targets: one target's gradient and standard error */
+    uint64_t *nonzero;                 /* one target: the blocks of grad and se that may not be +0
+                                          (reverse.h), kept true from iteration to iteration */
     struct dr_reverse_scratch scratch; /* the gradient runs' vectors, kept from iteration to iteration */
     struct history hist;
     double loss;
@@ -633,7 +636,11 @@ static int opt_load(struct opt_args *a, struct opt_run *r)
     const bool several = a->n_targets > 1;
     r->gt = several ? dr_alloc_big(sizeof(double) * T) : NULL;
     r->se_t = several ? dr_alloc_big(sizeof(double) * T) : NULL;
-    if (!r->theta || !r->grad || !r->se || (several && (!r->gt || !r->se_t))) {
+    /* all marked: the first run writes grad and se whole, and its mask is true from then on */
+    r->nonzero = several ? NULL : malloc(sizeof(uint64_t) * (size_t)dr_mask_words((int64_t)T));
+    if (r->nonzero)
+        memset(r->nonzero, 0xff, sizeof(uint64_t) * (size_t)dr_mask_words((int64_t)T));
+    if (!r->theta || !r->grad || !r->se || (several && (!r->gt || !r->se_t)) || (!several && !r->nonzero)) {
         cli_error("optimize", "out of memory");
         return DR_EXIT_FAILURE;
     }
@@ -728,7 +735,7 @@ static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
                                     iteration_seed(a->g.seed, it, ti, 0x47524144))};
         o.scratch = &r->scratch;
         struct dr_reverse_result res = {.grad = several ? r->gt : r->grad, .se = several ? r->se_t : r->se,
-                                        .image = t->render};
+                                        .image = t->render, .nonzero = r->nonzero};
         if (dr_reverse_gradient(&o, t->rgb, &res) != 0) {
             cli_error("optimize", "%s", dr_last_error());
             return DR_EXIT_FAILURE;
@@ -810,8 +817,9 @@ static int opt_iterations(const struct opt_args *a, struct opt_run *r)
         int rc = opt_gradient(a, r, it);
         if (rc >= 0)
             return rc;
-        dr_adam_step(r->adam, r->theta, r->grad);
-        dr_param_set_put_threads(r->scene, r->ps, r->theta, a->g.threads);
+        /* (a texture's step and write-back visit the blocks its gradients have reached) */
+        dr_adam_step_masked(r->adam, r->theta, r->grad, r->nonzero);
+        dr_param_set_put_threads(r->scene, r->ps, r->theta, a->g.threads, dr_adam_changed(r->adam));
         if (dr_param_set_refresh(r->scene, r->ps) != 0) {
             cli_error("optimize", "%s", dr_last_error());
             return DR_EXIT_FAILURE;
@@ -959,6 +967,7 @@ static void opt_free(struct opt_args *a, struct opt_run *r)
     free(r->grad);
     free(r->gt);
     free(r->se);
+    free(r->nonzero);
     free(r->se_t);
     free(r->ref);
     dr_adam_destroy(r->adam);

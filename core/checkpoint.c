@@ -384,6 +384,7 @@ int dr_checkpoint_read(const char *path, const struct dr_param_set *ps, double *
     if (rc != 0)
         return rc;
     a->t = t;
+    a->tracked = false, a->changed = NULL;   /* (theta, m and v are new: dr_adam_step_masked's masks are not theirs) */
     *iteration = it;
     return 0;
 }

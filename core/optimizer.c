@@ -36,6 +36,7 @@ void dr_adam_destroy(struct dr_adam *a)
         return;
     free(a->m);
     free(a->v);
+    free(a->moved);
     free(a->offset);
     free(a->size);
     free(a->lr);
@@ -87,6 +88,24 @@ int dr_adam_param_of(const struct dr_adam *a, int64_t i)
     return -1;
 }
 
+/* Entry i's step; false if its gradient was not finite (taken as 0). */
+static inline __attribute__((always_inline)) bool adam_entry(const struct dr_adam *a, int64_t i,
+                                                             double *restrict m, double *restrict v,
+                                                             double *restrict theta, const double *restrict grad,
+                                                             double lr, double lo, double hi, double c1, double c2)
+{
+    const double b1 = a->beta1, b2 = a->beta2, eps = a->eps;
+    double g = grad[i];
+    const bool finite = isfinite(g);
+    g = finite ? g : 0.0;
+    m[i] = b1 * m[i] + (1.0 - b1) * g;
+    v[i] = b2 * v[i] + (1.0 - b2) * g * g;
+    const double step = lr * (m[i] / c1) / (sqrt(v[i] / c2) + eps);
+    const double x = theta[i] - step;
+    theta[i] = x < lo ? lo : (x > hi ? hi : x);
+    return finite;
+}
+
 /* One parameter's scalars. restrict: m, v, theta and grad never overlap, so
  * GCC may vectorise (the same operations in the same order: the same bits). */
 static int64_t adam_span(const struct dr_adam *a, int64_t n, double *restrict m, double *restrict v,
@@ -94,19 +113,6 @@ static int64_t adam_span(const struct dr_adam *a, int64_t n, double *restrict m,
                          double c1, double c2)
 {
     int64_t bad = 0;
-    const double b1 = a->beta1, b2 = a->beta2, eps = a->eps;
-#define ADAM_ENTRY(i)                                                   \
-    do {                                                                \
-        double g = grad[i];                                             \
-        bool finite = isfinite(g);                                      \
-        bad += !finite;                                                 \
-        g = finite ? g : 0.0;                                           \
-        m[i] = b1 * m[i] + (1.0 - b1) * g;                              \
-        v[i] = b2 * v[i] + (1.0 - b2) * g * g;                          \
-        double step = lr * (m[i] / c1) / (sqrt(v[i] / c2) + eps);       \
-        double x = theta[i] - step;                                     \
-        theta[i] = x < lo ? lo : (x > hi ? hi : x);                     \
-    } while (0)
     int64_t i0 = 0;
     for (; i0 + DR_ZERO_BLOCK <= n; i0 += DR_ZERO_BLOCK) {
         /* an entry no gradient has reached yet (m, v and its gradient +0)
@@ -114,7 +120,8 @@ static int64_t adam_span(const struct dr_adam *a, int64_t n, double *restrict m,
          * lr * +0 / (+0 + eps) = +0 (lr, eps > 0), theta - +0 = theta; most
          * of a texture's, in the first iterations at a preview size
          * (zero_blocks.h) */
-        if (dr_block_zero(grad + i0) && dr_block_zero(m + i0) && dr_block_zero(v + i0) && lr > 0.0 && eps > 0.0) {
+        if (dr_block_zero(grad + i0) && dr_block_zero(m + i0) && dr_block_zero(v + i0) && lr > 0.0 &&
+            a->eps > 0.0) {
             bool inside = true;
             for (int64_t i = i0; i < i0 + DR_ZERO_BLOCK; i++)
                 inside &= theta[i] >= lo && theta[i] <= hi;
@@ -122,11 +129,10 @@ static int64_t adam_span(const struct dr_adam *a, int64_t n, double *restrict m,
                 continue;
         }
         for (int64_t i = i0; i < i0 + DR_ZERO_BLOCK; i++)
-            ADAM_ENTRY(i);
+            bad += !adam_entry(a, i, m, v, theta, grad, lr, lo, hi, c1, c2);
     }
     for (int64_t i = i0; i < n; i++)
-        ADAM_ENTRY(i);
-#undef ADAM_ENTRY
+        bad += !adam_entry(a, i, m, v, theta, grad, lr, lo, hi, c1, c2);
     return bad;
 }
 
@@ -136,6 +142,7 @@ struct adam_step {
     int k;
     double *theta, c1, c2;
     const double *grad;
+    const uint64_t *grad_mask;   /* adam_marked: grad's mask (a->moved the moments') */
     _Atomic int64_t bad;
 };
 
@@ -149,13 +156,104 @@ static void adam_range(void *ctx, int thread, int64_t begin, int64_t end)
                         a->hi[x->k], x->c1, x->c2);
 }
 
-int64_t dr_adam_step(struct dr_adam *a, double *theta, const double *grad)
+/* n entries' steps, nothing skipped (restrict: vectorised, the same
+ * bits). */
+static int64_t adam_run(const struct dr_adam *a, int64_t n, double *restrict m, double *restrict v,
+                        double *restrict theta, const double *restrict grad, double lr, double lo, double hi,
+                        double c1, double c2)
+{
+    int64_t bad = 0;
+    for (int64_t i = 0; i < n; i++)
+        bad += !adam_entry(a, i, m, v, theta, grad, lr, lo, hi, c1, c2);
+    return bad;
+}
+
+/* adam_range over the runs of blocks grad's or the moments' mask marks:
+ * [begin, end) of parameter k, global entries o + begin ... (a block may
+ * straddle two ranges: each steps its own entries of it; the masks are
+ * only read). */
+static void adam_marked(void *ctx, int thread, int64_t begin, int64_t end)
+{
+    (void)thread;
+    struct adam_step *x = ctx;
+    const struct dr_adam *a = x->a;
+    const int k = x->k;
+    const int64_t o = a->offset[k], e = o + end;
+    int64_t bad = 0;
+    for (int64_t i = dr_mask_next(x->grad_mask, a->moved, o + begin, e); i < e;) {
+        const int64_t j = dr_mask_run_end(x->grad_mask, a->moved, i, e);
+        bad += adam_run(a, j - i, a->m + i, a->v + i, x->theta + i, x->grad + i, a->lr[k], a->lo[k], a->hi[k],
+                        x->c1, x->c2);
+        i = dr_mask_next(x->grad_mask, a->moved, j, e);
+    }
+    x->bad += bad;
+}
+
+/* a->moved from m and v, words [begin, end) (dr_parallel_elements over
+ * words: each its own). */
+static void moved_from_moments(void *ctx, int thread, int64_t begin, int64_t end)
+{
+    (void)thread;
+    struct dr_adam *a = ctx;
+    for (int64_t w = begin; w < end; w++) {
+        uint64_t bits = 0;
+        for (int b = 0; b < 64; b++) {
+            const int64_t i = w * DR_MASK_SPAN + b * DR_ZERO_BLOCK;
+            if (i >= a->n)
+                break;
+            bool zero = true;
+            for (int64_t j = i; j < i + DR_ZERO_BLOCK && j < a->n; j++)
+                zero &= a->m[j] == 0.0 && !signbit(a->m[j]) && a->v[j] == 0.0 && !signbit(a->v[j]);
+            bits |= (uint64_t)!zero << b;
+        }
+        a->moved[w] = bits;
+    }
+}
+
+static int64_t adam_steps(struct dr_adam *a, double *theta, const double *grad, const uint64_t *grad_mask)
 {
     a->t++;
-    struct adam_step x = {.a = a, .theta = theta, .grad = grad, .c1 = 1.0 - pow(a->beta1, (double)a->t),
-                          .c2 = 1.0 - pow(a->beta2, (double)a->t)};
+    struct adam_step x = {.a = a, .theta = theta, .grad = grad, .grad_mask = grad_mask,
+                          .c1 = 1.0 - pow(a->beta1, (double)a->t), .c2 = 1.0 - pow(a->beta2, (double)a->t)};
     atomic_init(&x.bad, 0);
     for (x.k = 0; x.k < a->n_params; x.k++)
-        dr_parallel_elements(a->size[x.k], a->threads, adam_range, &x);
+        dr_parallel_elements(a->size[x.k], a->threads, grad_mask ? adam_marked : adam_range, &x);
     return atomic_load(&x.bad);
+}
+
+int64_t dr_adam_step(struct dr_adam *a, double *theta, const double *grad)
+{
+    a->tracked = false, a->changed = NULL;
+    return adam_steps(a, theta, grad, NULL);
+}
+
+int64_t dr_adam_step_masked(struct dr_adam *a, double *theta, const double *grad, const uint64_t *grad_mask)
+{
+    /* (the skipped entries need lr > 0 and eps > 0: a step of +0, as adam_span's) */
+    bool lr_positive = a->eps > 0.0;
+    for (int k = 0; k < a->n_params; k++)
+        lr_positive &= a->lr[k] > 0.0;
+    if (!grad_mask || !lr_positive || !(a->tracked && a->moved))
+        goto dense;
+    const int64_t bad = adam_steps(a, theta, grad, grad_mask);
+    for (int64_t w = 0; w < dr_mask_words(a->n); w++)   /* (the moments reached now: after every range) */
+        a->moved[w] |= grad_mask[w];
+    a->changed = a->moved;
+    return bad;
+dense:;
+    const int64_t dense_bad = dr_adam_step(a, theta, grad);
+    if (!grad_mask || !lr_positive)
+        return dense_bad;
+    if (!a->moved)
+        a->moved = malloc(sizeof(uint64_t) * (size_t)dr_mask_words(a->n));
+    if (a->moved) {
+        dr_parallel_elements(dr_mask_words(a->n), a->threads, moved_from_moments, a);
+        a->tracked = true;   /* (every value is inside its range after a step over all of them) */
+    }
+    return dense_bad;
+}
+
+const uint64_t *dr_adam_changed(const struct dr_adam *a)
+{
+    return a->changed;
 }

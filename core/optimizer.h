@@ -3,6 +3,7 @@
 #ifndef DR_OPTIMIZER_H
 #define DR_OPTIMIZER_H
 
+#include <stdbool.h>
 #include <stdint.h>
 
 #include "params.h"
@@ -20,6 +21,15 @@ struct dr_adam {
     double *lr, *lo, *hi;
     int threads;               /* workers for a big parameter's step (dr_parallel_elements;
                                   dr_adam_create: 1; the same bits for any number) */
+    /* dr_adam_step_masked's bookkeeping: the blocks of m and v that may not
+     * be +0 (zero_blocks.h), true while `tracked`; tracked is set by a
+     * step over every entry (after which every value is inside its range)
+     * and must be cleared by whoever changes theta, m or v otherwise
+     * (dr_checkpoint_read does); changed: NULL or the blocks the last step
+     * may have moved (dr_adam_changed). */
+    uint64_t *moved;
+    bool tracked;
+    const uint64_t *changed;
 };
 
 /* The parameter scalar i belongs to (-1: none). */
@@ -32,6 +42,16 @@ void dr_adam_destroy(struct dr_adam *a);
 /* theta -= lr * mhat / (sqrt(vhat) + eps), then clamped into [lo, hi].
  * Non-finite gradient entries are treated as 0 (and counted in the return). */
 int64_t dr_adam_step(struct dr_adam *a, double *theta, const double *grad);
+/* The same step given grad's block mask (zero_blocks.h; grad is +0 in
+ * every block it leaves clear; NULL: none known), to the bit: where a
+ * value's gradient and moments are +0 and it is inside its range, the step
+ * leaves it, its m and v as they are, so only the blocks grad_mask or the
+ * moments' mask (a->moved) mark are visited, once a first step over every
+ * entry has built a->moved and clamped every value into its range. A
+ * preview's texture: the blocks its gradients have reached so far. */
+int64_t dr_adam_step_masked(struct dr_adam *a, double *theta, const double *grad, const uint64_t *grad_mask);
+/* The blocks of theta the last step may have changed (NULL: any). */
+const uint64_t *dr_adam_changed(const struct dr_adam *a);
 
 /* Default learning rate of a parameter given its current values:
  * 0.02 for colours, metallic, roughness and texels (they live in [0,1]);

@@ -199,8 +199,9 @@ void dr_parallel_elements(int64_t n, int threads, dr_range_fn fn, void *ctx)
 {
     threads = dr_thread_count(threads);
     if (threads > 1 && n >= DR_PARALLEL_ELEMENTS_MIN) {
-        /* a few chunks a worker, of whole DR_PARALLEL_ALIGN elements */
-        const int64_t chunk = (n / (4 * threads) + DR_PARALLEL_ALIGN - 1) / DR_PARALLEL_ALIGN * DR_PARALLEL_ALIGN;
+        /* at least four chunks a worker, of whole DR_PARALLEL_ALIGN elements */
+        int64_t chunk = n / (4 * threads) / DR_PARALLEL_ALIGN * DR_PARALLEL_ALIGN;
+        chunk = chunk > DR_PARALLEL_ALIGN ? chunk : DR_PARALLEL_ALIGN;
         if (dr_parallel_for(n, chunk, threads, fn, ctx) == 0)
             return;
     }

@@ -8,6 +8,7 @@
 #include "error.h"
 #include "medium.h"
 #include "parallel.h"
+#include "zero_blocks.h"
 
 /* ---- participating media (the DR_medium parameters, params.h) ---- */
 
@@ -527,6 +528,8 @@ void dr_param_get(const struct dr_scene *cs, const struct dr_param *p, double *v
 struct texels_put {
     float *t;
     const double *v;
+    const uint64_t *changed;   /* put_marked: the values' block mask, entry 0 at global entry `offset` */
+    int64_t offset;
 };
 
 static void put_texels(void *ctx, int thread, int64_t begin, int64_t end)
@@ -540,6 +543,19 @@ static void put_texels(void *ctx, int thread, int64_t begin, int64_t end)
         memcpy(&was, &x->t[i], sizeof was);
         if (now != was)
             x->t[i] = f;
+    }
+}
+
+/* put_texels over the runs of blocks x->changed marks (the other values
+ * did not change, so neither do their floats). */
+static void put_marked(void *ctx, int thread, int64_t begin, int64_t end)
+{
+    const struct texels_put *x = ctx;
+    const int64_t o = x->offset, e = o + end;
+    for (int64_t i = dr_mask_next(x->changed, NULL, o + begin, e); i < e;) {
+        const int64_t j = dr_mask_run_end(x->changed, NULL, i, e);
+        put_texels(ctx, thread, i - o, j - o);
+        i = dr_mask_next(x->changed, NULL, j, e);
     }
 }
 
@@ -569,7 +585,7 @@ void dr_param_put(struct dr_scene *s, const struct dr_param *p, const double *v)
     case DR_PARAM_ENV_STRENGTH: s->env.strength = v[0]; return;
     case DR_PARAM_ENV_MAP:
     case DR_PARAM_IMAGE: {
-        struct texels_put x = {param_texels(s, p), v};
+        struct texels_put x = {param_texels(s, p), v, NULL, 0};
         if (x.t)   /* (no memory for its floats: nothing changes) */
             put_texels(&x, 0, 0, p->size);
         return;
@@ -767,7 +783,8 @@ void dr_param_set_put(struct dr_scene *s, const struct dr_param_set *set, const 
         dr_param_put(s, &set->params[i], values + set->params[i].offset);
 }
 
-void dr_param_set_put_threads(struct dr_scene *s, const struct dr_param_set *set, const double *values, int threads)
+void dr_param_set_put_threads(struct dr_scene *s, const struct dr_param_set *set, const double *values, int threads,
+                              const uint64_t *changed)
 {
     for (int i = 0; i < set->n; i++) {
         const struct dr_param *p = &set->params[i];
@@ -777,8 +794,8 @@ void dr_param_set_put_threads(struct dr_scene *s, const struct dr_param_set *set
             dr_param_put(s, p, values + p->offset);
         if (!t)   /* (as dr_param_put: a texel parameter without floats does not change) */
             continue;
-        struct texels_put x = {t, values + p->offset};
-        dr_parallel_elements(p->size, threads, put_texels, &x);
+        struct texels_put x = {t, values + p->offset, changed, p->offset};
+        dr_parallel_elements(p->size, threads, changed ? put_marked : put_texels, &x);
     }
 }
 

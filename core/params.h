@@ -131,9 +131,11 @@ void dr_param_set_put(struct dr_scene *scene, const struct dr_param_set *set, co
  * up to `threads` workers (dr_parallel_elements; the same floats), writing
  * only the ones that changed (an optimisation step moves a preview's
  * texture in few places): optimize's step, 5 % of a 2k texture's
- * iteration on one thread. */
+ * iteration on one thread. changed, when not NULL, is a block mask of
+ * values (zero_blocks.h: dr_adam_changed) outside which no value changed
+ * since the last put: a texture's floats are then looked at only there. */
 void dr_param_set_put_threads(struct dr_scene *scene, const struct dr_param_set *set, const double *values,
-                              int threads);
+                              int threads, const uint64_t *changed);
 /* After dr_param_set_put: dr_scene_refresh where a radiance has a parameter
  * (an emission, a light, the environment: their sampling tables change),
  * else dr_scene_refresh_keep_lights, which keeps the tables (the lights are as

@@ -62,4 +62,47 @@ static inline __attribute__((always_inline)) bool dr_mask_test(const uint64_t *m
     return mask[i / DR_MASK_SPAN] >> (i / DR_ZERO_BLOCK % 64) & 1;
 }
 
+/* The first entry at or after i, below end, of a block marked in mask or
+ * in also (which may be NULL); end if there is none. Words of neither are
+ * skipped 512 entries at a time. */
+static inline int64_t dr_mask_next(const uint64_t *mask, const uint64_t *also, int64_t i, int64_t end)
+{
+    if (i >= end)
+        return end;
+    int64_t w = i / DR_MASK_SPAN;
+    uint64_t bits = (mask[w] | (also ? also[w] : 0)) & (~UINT64_C(0) << (i / DR_ZERO_BLOCK % 64));
+    while (!bits) {
+        if (++w * DR_MASK_SPAN >= end)
+            return end;
+        bits = mask[w] | (also ? also[w] : 0);
+    }
+    const int64_t first = w * DR_MASK_SPAN + __builtin_ctzll(bits) * DR_ZERO_BLOCK;
+    return first < i ? i : (first < end ? first : end);
+}
+
+/* The first entry at or after i, at most end, of a block marked in neither
+ * mask nor also (NULL: none): with dr_mask_next, the end of a run of
+ * marked blocks, which a pass can then take as one span (vectorised). */
+static inline int64_t dr_mask_run_end(const uint64_t *mask, const uint64_t *also, int64_t i, int64_t end)
+{
+    if (i >= end)
+        return end;
+    int64_t w = i / DR_MASK_SPAN;
+    uint64_t bits = ~(mask[w] | (also ? also[w] : 0)) & (~UINT64_C(0) << (i / DR_ZERO_BLOCK % 64));
+    while (!bits) {
+        if (++w * DR_MASK_SPAN >= end)
+            return end;
+        bits = ~(mask[w] | (also ? also[w] : 0));
+    }
+    const int64_t first = w * DR_MASK_SPAN + __builtin_ctzll(bits) * DR_ZERO_BLOCK;
+    return first < end ? first : end;
+}
+
+/* The end of the block holding entry i, at most end. */
+static inline int64_t dr_block_end(int64_t i, int64_t end)
+{
+    const int64_t e = (i / DR_ZERO_BLOCK + 1) * DR_ZERO_BLOCK;
+    return e < end ? e : end;
+}
+
 #endif

@@ -238,26 +238,32 @@ static inline __attribute__((always_inline)) void fold(const struct welford_step
     struct rev_work *w = x->w;
     const double *grad = x->r->grad, *m2 = w->m2, *dsq = w->dsq;
     uint64_t *nonzero = w->nonzero;
-    for (int64_t i0 = begin; i0 < end; i0 += DR_ZERO_BLOCK) {
-        const int64_t n = end - i0 < DR_ZERO_BLOCK ? end - i0 : DR_ZERO_BLOCK;
-        const bool in = !mask || dr_mask_test(mask, i0 - begin);
-        const double *gb = in ? g + (i0 - begin) : zero_block;
-        if (nonzero) {
-            const bool held = dr_mask_test(nonzero, i0);
-            if (!in && !held)
+    for (int64_t iw = begin; iw < end; iw += DR_MASK_SPAN) {
+        /* the blocks to look at: with the result's mask, those of either
+         * mask (a word of neither skipped whole), else all */
+        uint64_t *held = nonzero ? &nonzero[iw / DR_MASK_SPAN] : NULL;
+        const uint64_t in_word = mask ? mask[(iw - begin) / DR_MASK_SPAN] : ~UINT64_C(0);
+        for (uint64_t visit = held ? in_word | *held : ~UINT64_C(0); visit; visit &= visit - 1) {
+            const int bit = __builtin_ctzll(visit);
+            const int64_t i0 = iw + bit * DR_ZERO_BLOCK;
+            if (i0 >= end)
+                break;
+            const int64_t n = end - i0 < DR_ZERO_BLOCK ? end - i0 : DR_ZERO_BLOCK;
+            const bool in = in_word >> bit & 1;
+            const double *gb = in ? g + (i0 - begin) : zero_block;
+            if (held) {
+                /* batch 0 clears the blocks it does not reach; later ones keep them */
+                *held = first && !in ? *held & ~(UINT64_C(1) << bit) : *held | UINT64_C(1) << bit;
+            } else if (!first && n == DR_ZERO_BLOCK && (!in || dr_block_zero(gb)) && dr_block_zero(grad + i0) &&
+                       dr_block_zero(m2 + i0) && (!split || dr_block_zero(h0 + i0)) &&
+                       (!(split && dsq) || dr_block_zero(dsq + i0))) {
                 continue;
-            const uint64_t bit = UINT64_C(1) << (i0 / DR_ZERO_BLOCK % 64);
-            uint64_t *word = &nonzero[i0 / DR_MASK_SPAN];
-            *word = first && !in ? *word & ~bit : *word | bit;
-        } else if (!first && n == DR_ZERO_BLOCK && (!in || dr_block_zero(gb)) && dr_block_zero(grad + i0) &&
-                   dr_block_zero(m2 + i0) && (!split || dr_block_zero(h0 + i0)) &&
-                   (!(split && dsq) || dr_block_zero(dsq + i0))) {
-            continue;
+            }
+            if (n == DR_ZERO_BLOCK)
+                fold_block(x, i0, DR_ZERO_BLOCK, gb, h0, first, split, pow2);
+            else
+                fold_block(x, i0, n, gb, h0, first, split, pow2);
         }
-        if (n == DR_ZERO_BLOCK)
-            fold_block(x, i0, DR_ZERO_BLOCK, gb, h0, first, split, pow2);
-        else
-            fold_block(x, i0, n, gb, h0, first, split, pow2);
     }
 }
 
@@ -294,9 +300,10 @@ static void standard_errors(const struct welford_step *x, int64_t begin, int64_t
     const bool halves = power_of_two(K - 1) && power_of_two(K);   /* (K = 2) */
     const double inv = 1.0 / (K - 1), inv_k = 1.0 / K;
     const uint64_t *nonzero = x->w->nonzero;
-    for (int64_t i0 = begin; i0 < end; i0 += DR_ZERO_BLOCK) {
-        const int64_t i1 = end - i0 < DR_ZERO_BLOCK ? end : i0 + DR_ZERO_BLOCK;
-        if (nonzero ? !dr_mask_test(nonzero, i0) : i1 - i0 == DR_ZERO_BLOCK && dr_block_zero(r->se + i0))
+    for (int64_t i0 = nonzero ? dr_mask_next(nonzero, NULL, begin, end) : begin; i0 < end;
+         i0 = nonzero ? dr_mask_next(nonzero, NULL, dr_block_end(i0, end), end) : i0 + DR_ZERO_BLOCK) {
+        const int64_t i1 = dr_block_end(i0, end);
+        if (!nonzero && i1 - i0 == DR_ZERO_BLOCK && dr_block_zero(r->se + i0))
             continue;
         for (int64_t i = i0; i < i1; i++)
             r->se[i] = halves ? sqrt(r->se[i] * inv * inv_k) : sqrt(r->se[i] / (K - 1) / K);

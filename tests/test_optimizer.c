@@ -374,7 +374,7 @@ static void sparse_adam_step(void)
     theta[10] = -0.0;
     ref[10] = 0.0;
     dr_param_set_put(s, ps, ref);
-    dr_param_set_put_threads(s, ps, theta, 2);
+    dr_param_set_put_threads(s, ps, theta, 2, NULL);
     dr_param_set_get(s, ps, ref);
     int64_t wrong = 0;
     for (size_t i = 0; i < n; i++) {   /* (the colour factor is kept in doubles, the texels in floats) */
@@ -388,6 +388,96 @@ static void sparse_adam_step(void)
     free(grad);
     free(m);
     free(v);
+    dr_param_set_destroy(ps);
+    dr_scene_destroy(s);
+}
+
+/* dr_adam_step_masked against dr_adam_step, step by step to the bit: a
+ * sparse gradient with its block mask (its blocks move from step to step,
+ * so the moments' mask grows; one marked block is all +0), a NaN,
+ * untouched values out of range (the first step, over every entry, clamps
+ * them), a -0 moment; dr_adam_changed is NULL after a step over every entry
+ * and after a masked one marks every value it moved; the write-back through
+ * it leaves every texel the float of its value; after a checkpoint is read
+ * (moments the masks do not know: a block of them set here), a masked step
+ * still gives the bits of the formula. */
+static void masked_adam_steps(const char *path)
+{
+    struct dr_param_set *ps;
+    struct dr_scene *s = texture_scene(&ps, 32, 24);
+    CHECK(ps != NULL, "masked adam: param set: %s", dr_last_error());
+    if (!ps) {
+        dr_scene_destroy(s);
+        return;
+    }
+    const size_t n = (size_t)ps->total, words = (n + 511) / 512;
+    double *theta = malloc(sizeof(double) * n), *ref = malloc(sizeof(double) * n), *grad = calloc(n, sizeof(double));
+    double *before = malloc(sizeof(double) * n), *back = malloc(sizeof(double) * n);
+    uint64_t *mask = calloc(words, sizeof(uint64_t));
+    dr_param_set_get(s, ps, theta);
+    struct dr_adam *a = dr_adam_create(ps, theta, 0.0), *b = dr_adam_create(ps, theta, 0.0);
+    a->threads = b->threads = 2;
+    const int tex = dr_adam_param_of(a, 3);
+    for (size_t i = 0; i < n; i++)
+        theta[i] = (double)(i % 89) / 89.0;
+    for (size_t i = 200; i < 216; i++)
+        theta[i] = i % 2 ? a->hi[tex] + 0.25 : a->lo[tex] - 0.5;
+    a->m[400] = b->m[400] = -0.0;
+    memcpy(ref, theta, sizeof(double) * n);
+    dr_param_set_put(s, ps, theta);
+    for (int t = 1; t <= 7; t++) {
+        if (t == 6) {   /* through a checkpoint, with a block of moments no mask knows */
+            for (size_t i = 8 * 52; i < 8 * 53; i++)   /* (a block no gradient here reaches) */
+                a->m[i] = b->m[i] = 1e-3, a->v[i] = b->v[i] = 1e-6;
+            int64_t it = 0;
+            CHECK(dr_checkpoint_write(path, "scene.gltf", ps, theta, a, 5) == 0 &&
+                      dr_checkpoint_read(path, ps, theta, a, &it) == 0,
+                  "masked adam: checkpoint: %s", dr_last_error());
+        }
+        memset(grad, 0, sizeof(double) * n);
+        memset(mask, 0, sizeof(uint64_t) * words);
+        for (size_t i = (size_t)t * 13; i < n; i += 97 + 11 * (size_t)t) {   /* a sparse gradient, moving */
+            grad[i] = (double)(i % 11) * 1e-3 - 4e-3;
+            mask[i / 512] |= UINT64_C(1) << (i / 8 % 64);
+        }
+        grad[900] = NAN;
+        mask[900 / 512] |= UINT64_C(1) << (900 / 8 % 64);
+        mask[1200 / 512] |= UINT64_C(1) << (1200 / 8 % 64);   /* marked, all +0 */
+        for (size_t i = 1200; i < 1208; i++)
+            grad[i] = 0.0;
+        memcpy(before, theta, sizeof(double) * n);
+        const int64_t bad_a = dr_adam_step_masked(a, theta, grad, mask), bad_b = dr_adam_step(b, ref, grad);
+        CHECK(bad_a == bad_b && memcmp(theta, ref, sizeof(double) * n) == 0 &&
+                  memcmp(a->m, b->m, sizeof(double) * n) == 0 && memcmp(a->v, b->v, sizeof(double) * n) == 0,
+              "masked adam step %d differs from the step over every entry", t);
+        const uint64_t *changed = dr_adam_changed(a);
+        CHECK((t == 1 || t == 6) == (changed == NULL), "masked adam step %d: changed is %s", t,
+              changed ? "a mask" : "NULL");
+        int64_t outside = 0, moved = 0;
+        for (size_t i = 0; i < n; i++) {
+            const bool differs = memcmp(&before[i], &theta[i], sizeof(double)) != 0;
+            moved += differs;
+            outside += differs && changed && !(changed[i / 512] >> (i / 8 % 64) & 1);
+        }
+        CHECK(outside == 0 && moved > 0, "masked adam step %d: %lld of %lld moved values outside the changed mask", t,
+              (long long)outside, (long long)moved);
+        dr_param_set_put_threads(s, ps, theta, 2, changed);
+        dr_param_set_get(s, ps, back);
+        int64_t wrong = 0;
+        for (size_t i = 0; i < n; i++) {
+            const double want = (int64_t)i >= ps->params[1].offset ? (double)(float)theta[i] : theta[i];
+            wrong += memcmp(&want, &back[i], sizeof want) != 0;
+        }
+        CHECK(wrong == 0, "masked adam step %d: %lld values written back wrong", t, (long long)wrong);
+    }
+    dr_adam_destroy(a);
+    dr_adam_destroy(b);
+    free(theta);
+    free(ref);
+    free(grad);
+    free(before);
+    free(back);
+    free(mask);
     dr_param_set_destroy(ps);
     dr_scene_destroy(s);
 }
@@ -457,6 +547,7 @@ int main(void)
     CHECK(truncate(path, len / 2) == 0, "truncate");
     CHECK(dr_checkpoint_read(path, ps, tmp, b, &it0) == DR_ERR_FORMAT, "truncated checkpoint accepted");
     texture_checkpoint(path);
+    masked_adam_steps(path);
     packed_checkpoint(path);
     unlink(path);
     dr_param_set_destroy(other);

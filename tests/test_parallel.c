@@ -82,11 +82,12 @@ static void test_preload(void)
 
 /* dr_parallel_elements: every element exactly once; a big vector handed
  * out in chunks to the workers (which worker takes which depends on
- * timing), a small one, or any with one thread, in one call on the calling
+ * timing), each beginning at a multiple of DR_PARALLEL_ALIGN, a small one,
+ * or any with one thread, in one call on the calling
  * thread; dr_parallel_zero clears all of it and nothing else. */
 struct marks {
     unsigned char *seen;
-    _Atomic int calls;
+    _Atomic int calls, unaligned;
     pthread_t caller;
     _Atomic int off_caller;
 };
@@ -98,6 +99,8 @@ static void mark(void *ctx, int thread, int64_t b, int64_t e)
         m->seen[i]++;
     (void)thread;
     atomic_fetch_add(&m->calls, 1);
+    if (b % DR_PARALLEL_ALIGN != 0)
+        atomic_fetch_add(&m->unaligned, 1);
     if (!pthread_equal(pthread_self(), m->caller))
         atomic_store(&m->off_caller, 1);
 }
@@ -110,6 +113,7 @@ static void test_elements(void)
             const int64_t n = sizes[k];
             struct marks m = {.seen = calloc((size_t)n + 1, 1), .caller = pthread_self()};
             atomic_init(&m.calls, 0);
+            atomic_init(&m.unaligned, 0);
             atomic_init(&m.off_caller, 0);
             dr_parallel_elements(n, threads, mark, &m);
             int64_t wrong = 0;
@@ -121,6 +125,8 @@ static void test_elements(void)
             CHECK(big ? atomic_load(&m.calls) >= 4 * threads : atomic_load(&m.calls) == 1 && !atomic_load(&m.off_caller),
                   "n %lld, %d threads: %d calls, off the caller %d", (long long)n, threads, atomic_load(&m.calls),
                   atomic_load(&m.off_caller));
+            CHECK(atomic_load(&m.unaligned) == 0, "n %lld, %d threads: %d ranges not at a multiple of %d",
+                  (long long)n, threads, atomic_load(&m.unaligned), DR_PARALLEL_ALIGN);
             free(m.seen);
         }
     enum { N = 200003 };
