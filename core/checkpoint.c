@@ -384,7 +384,7 @@ int dr_checkpoint_read(const char *path, const struct dr_param_set *ps, double *
     if (rc != 0)
         return rc;
     a->t = t;
-    a->tracked = false, a->changed = NULL;   /* (theta, m and v are new: dr_adam_step_masked's masks are not theirs) */
+    a->moved_known = a->ranged = false, a->changed = NULL;   /* (new theta, m and v: optimizer.h) */
     *iteration = it;
     return 0;
 }

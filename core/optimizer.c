@@ -59,12 +59,14 @@ struct dr_adam *dr_adam_create(const struct dr_param_set *ps, const double *thet
     a->n_params = ps->n;
     a->m = calloc(n, sizeof(double));
     a->v = calloc(n, sizeof(double));
+    a->moved = calloc((size_t)dr_mask_words((int64_t)n), sizeof(uint64_t));   /* (m and v: +0) */
+    a->moved_known = true;
     a->offset = malloc(np * sizeof(int64_t));
     a->size = malloc(np * sizeof(int64_t));
     a->lr = malloc(np * sizeof(double));
     a->lo = malloc(np * sizeof(double));
     a->hi = malloc(np * sizeof(double));
-    if (!a->m || !a->v || !a->offset || !a->size || !a->lr || !a->lo || !a->hi)
+    if (!a->m || !a->v || !a->moved || !a->offset || !a->size || !a->lr || !a->lo || !a->hi)
         goto nomem;
     for (int k = 0; k < ps->n; k++) {
         const struct dr_param *p = &ps->params[k];
@@ -210,20 +212,48 @@ static void moved_from_moments(void *ctx, int thread, int64_t begin, int64_t end
     }
 }
 
+/* While the values' ranges are not known (dr_adam_step_masked): the
+ * blocks of [begin, end) of parameter k that neither mask marks, stepped
+ * where a value is outside its range (the step clamps it; m and v stay +0:
+ * b1 * +0 + (1 - b1) * +0), found by reading the values alone. */
+static void adam_range_unmarked(void *ctx, int thread, int64_t begin, int64_t end)
+{
+    (void)thread;
+    struct adam_step *x = ctx;
+    const struct dr_adam *a = x->a;
+    const int k = x->k;
+    const double lo = a->lo[k], hi = a->hi[k];
+    const int64_t o = a->offset[k], e = o + end;
+    for (int64_t i = o + begin; i < e;) {
+        const int64_t j = dr_mask_next(x->grad_mask, a->moved, i, e);   /* [i, j): unmarked */
+        for (int64_t b = i; b < j; b = dr_block_end(b, j)) {
+            bool inside = true;
+            for (int64_t l = b; l < dr_block_end(b, j); l++)
+                inside &= x->theta[l] >= lo && x->theta[l] <= hi;
+            for (int64_t l = b; !inside && l < dr_block_end(b, j); l++)
+                x->bad += !adam_entry(a, l, a->m, a->v, x->theta, x->grad, a->lr[k], lo, hi, x->c1, x->c2);
+        }
+        i = dr_mask_run_end(x->grad_mask, a->moved, j, e);
+    }
+}
+
 static int64_t adam_steps(struct dr_adam *a, double *theta, const double *grad, const uint64_t *grad_mask)
 {
     a->t++;
     struct adam_step x = {.a = a, .theta = theta, .grad = grad, .grad_mask = grad_mask,
                           .c1 = 1.0 - pow(a->beta1, (double)a->t), .c2 = 1.0 - pow(a->beta2, (double)a->t)};
     atomic_init(&x.bad, 0);
-    for (x.k = 0; x.k < a->n_params; x.k++)
+    for (x.k = 0; x.k < a->n_params; x.k++) {
         dr_parallel_elements(a->size[x.k], a->threads, grad_mask ? adam_marked : adam_range, &x);
+        if (grad_mask && !a->ranged)
+            dr_parallel_elements(a->size[x.k], a->threads, adam_range_unmarked, &x);
+    }
     return atomic_load(&x.bad);
 }
 
 int64_t dr_adam_step(struct dr_adam *a, double *theta, const double *grad)
 {
-    a->tracked = false, a->changed = NULL;
+    a->moved_known = a->ranged = false, a->changed = NULL;
     return adam_steps(a, theta, grad, NULL);
 }
 
@@ -233,24 +263,18 @@ int64_t dr_adam_step_masked(struct dr_adam *a, double *theta, const double *grad
     bool lr_positive = a->eps > 0.0;
     for (int k = 0; k < a->n_params; k++)
         lr_positive &= a->lr[k] > 0.0;
-    if (!grad_mask || !lr_positive || !(a->tracked && a->moved))
-        goto dense;
+    if (!grad_mask || !lr_positive)
+        return dr_adam_step(a, theta, grad);
+    if (!a->moved_known)   /* (after a checkpoint: m and v are resident, read them) */
+        dr_parallel_elements(dr_mask_words(a->n), a->threads, moved_from_moments, a);
+    a->moved_known = true;
+    const bool ranged = a->ranged;
     const int64_t bad = adam_steps(a, theta, grad, grad_mask);
     for (int64_t w = 0; w < dr_mask_words(a->n); w++)   /* (the moments reached now: after every range) */
         a->moved[w] |= grad_mask[w];
-    a->changed = a->moved;
+    a->ranged = true;   /* (every value outside the masks was inside its range, or clamped into it) */
+    a->changed = ranged ? a->moved : NULL;   /* (a clamped value may be anywhere) */
     return bad;
-dense:;
-    const int64_t dense_bad = dr_adam_step(a, theta, grad);
-    if (!grad_mask || !lr_positive)
-        return dense_bad;
-    if (!a->moved)
-        a->moved = malloc(sizeof(uint64_t) * (size_t)dr_mask_words(a->n));
-    if (a->moved) {
-        dr_parallel_elements(dr_mask_words(a->n), a->threads, moved_from_moments, a);
-        a->tracked = true;   /* (every value is inside its range after a step over all of them) */
-    }
-    return dense_bad;
 }
 
 const uint64_t *dr_adam_changed(const struct dr_adam *a)

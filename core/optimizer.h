@@ -21,14 +21,15 @@ struct dr_adam {
     double *lr, *lo, *hi;
     int threads;               /* workers for a big parameter's step (dr_parallel_elements;
                                   dr_adam_create: 1; the same bits for any number) */
-    /* dr_adam_step_masked's bookkeeping: the blocks of m and v that may not
-     * be +0 (zero_blocks.h), true while `tracked`; tracked is set by a
-     * step over every entry (after which every value is inside its range)
-     * and must be cleared by whoever changes theta, m or v otherwise
-     * (dr_checkpoint_read does); changed: NULL or the blocks the last step
-     * may have moved (dr_adam_changed). */
+    /* dr_adam_step_masked's bookkeeping: `moved`, the blocks of m and v
+     * that may not be +0 (zero_blocks.h), is true while moved_known (from
+     * dr_adam_create: m and v start at +0); `ranged`: every value is inside
+     * its range (after a masked step). Whoever changes theta, m or v
+     * otherwise clears both (dr_adam_step and dr_checkpoint_read do).
+     * changed: NULL or the blocks the last step may have moved
+     * (dr_adam_changed). */
     uint64_t *moved;
-    bool tracked;
+    bool moved_known, ranged;
     const uint64_t *changed;
 };
 
@@ -46,8 +47,11 @@ int64_t dr_adam_step(struct dr_adam *a, double *theta, const double *grad);
  * every block it leaves clear; NULL: none known), to the bit: where a
  * value's gradient and moments are +0 and it is inside its range, the step
  * leaves it, its m and v as they are, so only the blocks grad_mask or the
- * moments' mask (a->moved) mark are visited, once a first step over every
- * entry has built a->moved and clamped every value into its range. A
+ * moments' mask (a->moved) mark are stepped, and, while the values' ranges
+ * are not known (the first step, or after a checkpoint is read), the
+ * others whose values are outside their range (which the step clamps),
+ * found without reading m and v (a read maps the zero page, and the
+ * write after it costs a copy-on-write fault with a TLB shootdown). A
  * preview's texture: the blocks its gradients have reached so far. */
 int64_t dr_adam_step_masked(struct dr_adam *a, double *theta, const double *grad, const uint64_t *grad_mask);
 /* The blocks of theta the last step may have changed (NULL: any). */

@@ -395,13 +395,16 @@ static void sparse_adam_step(void)
 /* dr_adam_step_masked against dr_adam_step, step by step to the bit: a
  * sparse gradient with its block mask (its blocks move from step to step,
  * so the moments' mask grows; one marked block is all +0), a NaN,
- * untouched values out of range (the first step, over every entry, clamps
- * them), a -0 moment; dr_adam_changed is NULL after a step over every entry
- * and after a masked one marks every value it moved; the write-back through
+ * untouched values out of range (the first step finds them by their values
+ * alone and clamps them),
+ * with or without a -0 moment set before (its owner then says the
+ * moments' mask is not known); dr_adam_changed is NULL after the steps
+ * that clamp (the first, the first after a checkpoint) and after the
+ * others marks every value they moved; the write-back through
  * it leaves every texel the float of its value; after a checkpoint is read
  * (moments the masks do not know: a block of them set here), a masked step
  * still gives the bits of the formula. */
-static void masked_adam_steps(const char *path)
+static void masked_adam_steps(const char *path, bool minus_zero)
 {
     struct dr_param_set *ps;
     struct dr_scene *s = texture_scene(&ps, 32, 24);
@@ -422,7 +425,10 @@ static void masked_adam_steps(const char *path)
         theta[i] = (double)(i % 89) / 89.0;
     for (size_t i = 200; i < 216; i++)
         theta[i] = i % 2 ? a->hi[tex] + 0.25 : a->lo[tex] - 0.5;
-    a->m[400] = b->m[400] = -0.0;
+    if (minus_zero) {   /* (m set outside a step: its owner says so, optimizer.h) */
+        a->m[400] = b->m[400] = -0.0;
+        a->moved_known = false;
+    }
     memcpy(ref, theta, sizeof(double) * n);
     dr_param_set_put(s, ps, theta);
     for (int t = 1; t <= 7; t++) {
@@ -449,7 +455,7 @@ static void masked_adam_steps(const char *path)
         const int64_t bad_a = dr_adam_step_masked(a, theta, grad, mask), bad_b = dr_adam_step(b, ref, grad);
         CHECK(bad_a == bad_b && memcmp(theta, ref, sizeof(double) * n) == 0 &&
                   memcmp(a->m, b->m, sizeof(double) * n) == 0 && memcmp(a->v, b->v, sizeof(double) * n) == 0,
-              "masked adam step %d differs from the step over every entry", t);
+              "masked adam step %d (-0 moment %d) differs from the step over every entry", t, minus_zero);
         const uint64_t *changed = dr_adam_changed(a);
         CHECK((t == 1 || t == 6) == (changed == NULL), "masked adam step %d: changed is %s", t,
               changed ? "a mask" : "NULL");
@@ -547,7 +553,8 @@ int main(void)
     CHECK(truncate(path, len / 2) == 0, "truncate");
     CHECK(dr_checkpoint_read(path, ps, tmp, b, &it0) == DR_ERR_FORMAT, "truncated checkpoint accepted");
     texture_checkpoint(path);
-    masked_adam_steps(path);
+    masked_adam_steps(path, false);
+    masked_adam_steps(path, true);
     packed_checkpoint(path);
     unlink(path);
     dr_param_set_destroy(other);
