@@ -60,7 +60,7 @@ void dr_reverse_scratch_free(struct dr_reverse_scratch *s)
 static double *scratch_half(struct dr_reverse_scratch *s, int h, size_t T1)
 {
     bool kept;
-    return dr_big_vector_keep(&s->half[h], &s->half_len[h], (int64_t)T1, &kept);
+    return dr_big_vector_keep(&s->half[h], &s->half_len[h], (int64_t)T1, false, &kept);
 }
 
 /* Scratch for a run: the sums live in the caller's se and se_gradient

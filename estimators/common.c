@@ -135,15 +135,17 @@ static double *accum_alloc(struct dr_est_accum *a, size_t n)
 
 /* Thread t's gradient vector of n entries, zeroed: the scratch's, cleared,
  * where it holds one of that size (estimator.h: no fresh pages), else a
- * new one, kept there when there is a scratch. */
-static double *accum_thread_vector(struct dr_est_accum *a, int t, size_t n)
+ * new one, kept there when there is a scratch; sparse: one whose untouched
+ * pages stay out of memory (bigalloc.h), for a vector with a block mask
+ * (every pass then touches only the blocks the sinks wrote). */
+static double *accum_thread_vector(struct dr_est_accum *a, int t, size_t n, bool sparse)
 {
     struct dr_est_scratch *s = a->scratch;
     if (!s)
         return accum_alloc(a, n);
     a->bytes += n * sizeof(double);
     bool kept;
-    double *v = dr_big_vector_keep(&s->grad[t], &s->len[t], (int64_t)n, &kept);
+    double *v = dr_big_vector_keep(&s->grad[t], &s->len[t], (int64_t)n, sparse, &kept);
     if (kept && s->dirty[t]) {   /* (not dirty: the last run's sum cleared it, and its mask) */
         dr_parallel_zero(v, (int64_t)n, a->threads);
         if (s->touched[t])
@@ -247,14 +249,15 @@ static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, b
         dr_parallel_zero(out, a->total, a->threads);
         a->grad[0] = out;
     }
+    const bool masked = a->consumer && a->total > CHUNK_LOCAL_MAX;   /* (below: chunks, no masks) */
     for (int t = 0; t < a->threads; t++) {
-        if ((t > 0 || a->consumer) && !(a->grad[t] = accum_thread_vector(a, t, (size_t)a->total + 1)))
+        if ((t > 0 || a->consumer) && !(a->grad[t] = accum_thread_vector(a, t, (size_t)a->total + 1, masked)))
             goto nomem;
         if (a->total <= CHUNK_LOCAL_MAX && !(a->chunk[t] = accum_alloc(a, (size_t)a->total + 1)))
             goto nomem;
         /* a consumer's vectors too big for chunks: each with the mask of
          * the blocks its paths reached, so that the sums read only those */
-        if (a->consumer && !a->chunk[t] && !(a->touched[t] = accum_thread_mask(a, t, a->total + 1)))
+        if (masked && !(a->touched[t] = accum_thread_mask(a, t, a->total + 1)))
             goto nomem;
     }
     return 0;
