@@ -27,6 +27,7 @@
 #include "sampler.h"
 #include "scene.h"
 #include "vis.h"
+#include "zero_blocks.h"
 
 /* DR_TAPE_PATHS_PER_WORKER as text, for the help */
 #define TEXT_(x) #x
@@ -565,6 +566,7 @@ struct reverse_run {
     int64_t T;
     int n_params;
     double *mean, *se, *se_grad, *se_primal;
+    uint64_t *nonzero;   /* the blocks of mean and se that may not be +0 (reverse.h) */
     char **files;                  /* gradient images of image parameters */
     double t_write;
     struct dr_reverse_result res;
@@ -582,6 +584,7 @@ static void reverse_free(struct reverse_run *r, int n_params)
     free(r->files);
     free(r->mean);
     free(r->se);
+    free(r->nonzero);
     free(r->se_grad);
     free(r->se_primal);
     free(r->mis_last);
@@ -649,7 +652,7 @@ static int reverse_batches(const struct grad_args *a, const struct dr_scene *sce
         }
     }
     r->res = (struct dr_reverse_result){.grad = r->mean, .se = r->se, .se_gradient = r->se_grad,
-                                        .se_primal = r->se_primal};
+                                        .se_primal = r->se_primal, .nonzero = r->nonzero};
     if (dr_reverse_gradient(&o, target, &r->res) != 0) {
         if (progress)
             fputc('\n', stderr);
@@ -668,14 +671,19 @@ static int reverse_write_images(const struct grad_args *a, const struct dr_param
         if (!is_image_param(p))
             continue;
         r->files[k] = grad_image_name(a->grad_dir, p);
-        float *gimg = malloc(sizeof(float) * (size_t)p->size);
+        float *gimg = calloc((size_t)p->size, sizeof(float));   /* (+0 where the mask says: not written) */
         if (!r->files[k] || !gimg) {
             free(gimg);
             cli_error("grad", "out of memory");
             return DR_EXIT_FAILURE;
         }
-        for (int64_t i = 0; i < p->size; i++)
-            gimg[i] = (float)r->mean[p->offset + i];
+        const int64_t o = p->offset, e = o + p->size;
+        for (int64_t i = dr_mask_next(r->nonzero, NULL, o, e); i < e;) {
+            const int64_t j = dr_mask_run_end(r->nonzero, NULL, i, e);
+            for (; i < j; i++)
+                gimg[i - o] = (float)r->mean[i];
+            i = dr_mask_next(r->nonzero, NULL, j, e);
+        }
         int rc = dr_image_write(r->files[k], p->width, p->height, p->channels, gimg);
         free(gimg);
         if (rc != 0) {
@@ -807,11 +815,14 @@ static int run_reverse(struct grad_args *a, const char *scene_path, const struct
 {
     struct reverse_run r = {.T = ps->total, .n_params = ps->n};
     const size_t T1 = (size_t)(r.T > 0 ? r.T : 1);
-    /* (bigalloc.h: texture parameters; not zeroed: dr_reverse_gradient's
-     * first batch writes every entry, and in parallel, where a zeroing
-     * pass here faulted a texture's pages in one thread) */
-    r.mean = dr_alloc_big(T1 * sizeof(double));
-    r.se = dr_alloc_big(T1 * sizeof(double));
+    /* (zeros by calloc: fresh pages, resident only where written; the
+     * mask clear says so, and the run writes the blocks its gradient
+     * reaches, reverse.h: a preview's texture gradient is a few per cent
+     * of the texture. A zeroing pass here had faulted a texture's pages in
+     * on one thread; writing them whole, on the workers, still all of them) */
+    r.mean = calloc(T1, sizeof(double));
+    r.se = calloc(T1, sizeof(double));
+    r.nonzero = calloc((size_t)dr_mask_words((int64_t)T1), sizeof(uint64_t));
     r.files = calloc((size_t)ps->n, sizeof(char *));
     bool mis_ok = true;
     if (a->g.sampling == DR_SAMPLING_MIS) {
@@ -821,7 +832,7 @@ static int run_reverse(struct grad_args *a, const char *scene_path, const struct
     }
     int rc = DR_EXIT_FAILURE;
     bool progress = isatty(2) != 0;
-    if (!r.mean || !r.se || !r.files || !mis_ok)
+    if (!r.mean || !r.se || !r.nonzero || !r.files || !mis_ok)
         cli_error("grad", "out of memory (%lld gradient entries)", (long long)r.T);
     else if ((rc = reverse_batches(a, scene, cam, ps, target, progress, &r)) < 0 &&
              (rc = reverse_write_images(a, ps, &r)) < 0) {
