@@ -29,28 +29,39 @@ static struct dr_scene *scene(void)
     return s;
 }
 
-/* A version 1 checkpoint (all text) of theta, m and v at iteration `it`,
- * every number printed with fmt (" %.17g": decimal, as before 2026-11-27;
- * " %a": hexadecimal). */
-static void write_version1(const char *path, const struct dr_param_set *ps, const struct dr_adam *a, int it,
-                           const double *theta, const double *m, const double *v, const char *fmt)
+/* A checkpoint as drender wrote it before version 3, of theta, m and v at
+ * iteration `it`: version 1 all text, every number printed with fmt
+ * (" %.17g": decimal, as before 2026-11-27; " %a": hexadecimal); version 2
+ * (from 2026-12-03) the same but for parameters of more than 64 values: a
+ * line "binary le64" and the raw doubles (values, m, v). */
+static void write_old(const char *path, int version, const struct dr_param_set *ps, const struct dr_adam *a, int it,
+                      const double *theta, const double *m, const double *v, const char *fmt)
 {
-    FILE *f = fopen(path, "w");
+    FILE *f = fopen(path, "wb");
     if (!f)
         return;
-    fprintf(f, "drender-checkpoint 1\nscene scene.gltf\niteration %d\nadam %d %.17g %.17g %.17g\n", it, it, a->beta1,
-            a->beta2, a->eps);
+    fprintf(f, "drender-checkpoint %d\nscene scene.gltf\niteration %d\nadam %d %.17g %.17g %.17g\n", version, it, it,
+            a->beta1, a->beta2, a->eps);
     for (int k = 0; k < ps->n; k++) {
         const struct dr_param *p = &ps->params[k];
         fprintf(f, "param %s %lld\n", p->name, (long long)p->size);
-        const double *vec[3] = {theta, m, v};
+        const double *vec[3] = {theta + p->offset, m + p->offset, v + p->offset};
         const char *key[3] = {"value", "m", "v"};
+        const bool raw = version >= 2 && p->size > 64;
+        if (raw)
+            fputs("binary le64\n", f);
         for (int j = 0; j < 3; j++) {
+            if (raw) {
+                fwrite(vec[j], sizeof(double), (size_t)p->size, f);
+                continue;
+            }
             fputs(key[j], f);
-            for (int64_t i = p->offset; i < p->offset + p->size; i++)
+            for (int64_t i = 0; i < p->size; i++)
                 fprintf(f, fmt, vec[j][i]);
             fputc('\n', f);
         }
+        if (raw)
+            fputc('\n', f);
     }
     fputs("end\n", f);
     fclose(f);
@@ -77,48 +88,13 @@ static void edge_values(const struct dr_param_set *ps, const double *theta0, con
     for (int i = 0; i < 5; i++)   /* say which, if any */
         CHECK(memcmp(&b->m[i], &m[i], sizeof(double)) == 0, "m[%d]: %a read back as %a", i, m[i], b->m[i]);
     /* the same state in decimal, as written before */
-    write_version1(path, ps, a, 7, theta, m, v, " %.17g");
+    write_old(path, 1, ps, a, 7, theta, m, v, " %.17g");
     memset(back, 0, sizeof back);
     CHECK(dr_checkpoint_read(path, ps, back, b, &it) == 0, "decimal read: %s", dr_last_error());
     CHECK(memcmp(back, theta, sizeof back) == 0 && memcmp(b->m, m, sizeof m) == 0 && memcmp(b->v, v, sizeof v) == 0,
           "a decimal checkpoint not read bit for bit");
     dr_adam_destroy(a);
     dr_adam_destroy(b);
-}
-
-/* A version 2 checkpoint of theta and a's moments at iteration `it`: text
- * for parameters of at most 64 values, "binary le64" and the raw doubles
- * (values, m, v) for larger ones, as drender wrote it from 2026-12-03. */
-static void write_version2(const char *path, const struct dr_param_set *ps, const struct dr_adam *a, int it,
-                           const double *theta)
-{
-    FILE *f = fopen(path, "wb");
-    if (!f)
-        return;
-    fprintf(f, "drender-checkpoint 2\nscene scene.gltf\niteration %d\nadam %d %.17g %.17g %.17g\n", it, it, a->beta1,
-            a->beta2, a->eps);
-    for (int k = 0; k < ps->n; k++) {
-        const struct dr_param *p = &ps->params[k];
-        fprintf(f, "param %s %lld\n", p->name, (long long)p->size);
-        const double *vec[3] = {theta + p->offset, a->m + p->offset, a->v + p->offset};
-        const char *key[3] = {"value", "m", "v"};
-        if (p->size > 64)
-            fputs("binary le64\n", f);
-        for (int j = 0; j < 3; j++) {
-            if (p->size > 64) {
-                fwrite(vec[j], sizeof(double), (size_t)p->size, f);
-                continue;
-            }
-            fputs(key[j], f);
-            for (int64_t i = 0; i < p->size; i++)
-                fprintf(f, " %a", vec[j][i]);
-            fputc('\n', f);
-        }
-        if (p->size > 64)
-            fputc('\n', f);
-    }
-    fputs("end\n", f);
-    fclose(f);
 }
 
 /* A texture parameter (more values than the text limit): version 3 stores
@@ -183,14 +159,14 @@ static void texture_checkpoint(const char *path)
           size2, (long long)n);
 
     /* the same state all in text, as version 1 wrote it */
-    write_version1(path, ps, a, 12, theta, a->m, a->v, " %a");
+    write_old(path, 1, ps, a, 12, theta, a->m, a->v, " %a");
     memset(back, 0, sizeof(double) * (size_t)n);
     CHECK(dr_checkpoint_read(path, ps, back, r, &it) == 0 && memcmp(back, theta, sizeof(double) * (size_t)n) == 0 &&
               memcmp(r->v, a->v, sizeof(double) * (size_t)n) == 0,
           "a version 1 texture checkpoint: %s", dr_last_error());
 
     /* the same state raw, as version 2 wrote it */
-    write_version2(path, ps, a, 12, theta);
+    write_old(path, 2, ps, a, 12, theta, a->m, a->v, " %a");
     memset(back, 0, sizeof(double) * (size_t)n);
     memset(r->m, 0, sizeof(double) * (size_t)n);
     CHECK(dr_checkpoint_read(path, ps, back, r, &it) == 0 && memcmp(back, theta, sizeof(double) * (size_t)n) == 0 &&
