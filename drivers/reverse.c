@@ -191,9 +191,9 @@ struct welford_step {
  * m2, with two halves their squared difference into dsq (the last batch's
  * standard_errors turn them into standard errors in place: se holds m2,
  * se_gradient dsq). Batch 0 starts every entry from +0 itself (the same
- * operations on the zeros the sums would hold) and writes every entry, so
- * nothing is cleared before it, nor read (a caller's vectors may hold
- * anything). */
+ * operations on the zeros the sums would hold) and writes it, so nothing is
+ * cleared before it, nor read (without a result mask, fold has batch 0
+ * write every block: a caller's vectors may then hold anything). */
 static inline __attribute__((always_inline)) void fold_block(const struct welford_step *x, int64_t i0, int64_t n,
                                                              const double *g, const double *h0, bool first,
                                                              bool split, bool pow2)
