@@ -562,8 +562,9 @@ struct opt_run {
     double *theta, *grad, *ref;        /* values, gradient, reference values */
     double *se;                        /* the gradient's standard error */
     double *gt, *se_t;                 /* several targets: one target's gradient and standard error */
-    uint64_t *nonzero;                 /* one target: the blocks of grad and se that may not be +0
-                                          (reverse.h), kept true from iteration to iteration */
+    uint64_t *nonzero;                 /* the blocks of grad and se that may not be +0 (reverse.h), kept
+                                          true from iteration to iteration */
+    uint64_t *nonzero_t;               /* several targets: the same of gt and se_t */
     struct dr_reverse_scratch scratch; /* the gradient runs' vectors, kept from iteration to iteration */
     struct history hist;
     double loss;
@@ -636,11 +637,17 @@ static int opt_load(struct opt_args *a, struct opt_run *r)
     const bool several = a->n_targets > 1;
     r->gt = several ? dr_alloc_big(sizeof(double) * T) : NULL;
     r->se_t = several ? dr_alloc_big(sizeof(double) * T) : NULL;
-    /* all marked: the first run writes grad and se whole, and its mask is true from then on */
-    r->nonzero = several ? NULL : malloc(sizeof(uint64_t) * (size_t)dr_mask_words((int64_t)T));
+    /* all marked: the first run writes grad and se whole (several: gt and
+     * se_t, and grad and se are cleared whole), and the masks are true
+     * from then on */
+    const size_t words = (size_t)dr_mask_words((int64_t)T);
+    r->nonzero = malloc(sizeof(uint64_t) * words);
+    r->nonzero_t = several ? malloc(sizeof(uint64_t) * words) : NULL;
     if (r->nonzero)
-        memset(r->nonzero, 0xff, sizeof(uint64_t) * (size_t)dr_mask_words((int64_t)T));
-    if (!r->theta || !r->grad || !r->se || (several && (!r->gt || !r->se_t)) || (!several && !r->nonzero)) {
+        memset(r->nonzero, 0xff, sizeof(uint64_t) * words);
+    if (r->nonzero_t)
+        memset(r->nonzero_t, 0xff, sizeof(uint64_t) * words);
+    if (!r->theta || !r->grad || !r->se || !r->nonzero || (several && (!r->gt || !r->se_t || !r->nonzero_t))) {
         cli_error("optimize", "out of memory");
         return DR_EXIT_FAILURE;
     }
@@ -713,6 +720,47 @@ static int opt_open_outputs(const struct opt_args *a, struct opt_run *r)
     return -1;
 }
 
+/* Several targets: grad and se are sums over the targets' runs, of gt and
+ * of se_t squared, each +0 outside its mask (reverse.h). A sum that starts
+ * at +0 never becomes -0, so adding +0 changes none of them: only the
+ * marked blocks are visited, and grad's mask is the union of the targets'.
+ * clear_sums: +0 where the last iteration's sums were (its mask); add_target
+ * adds a target's run; root_sums takes the standard errors' roots. */
+static void clear_sums(struct opt_run *r, int64_t T)
+{
+    for (int64_t i = dr_mask_next(r->nonzero, NULL, 0, T); i < T;) {
+        const int64_t j = dr_mask_run_end(r->nonzero, NULL, i, T);
+        memset(r->grad + i, 0, sizeof(double) * (size_t)(j - i));
+        memset(r->se + i, 0, sizeof(double) * (size_t)(j - i));
+        i = dr_mask_next(r->nonzero, NULL, j, T);
+    }
+    memset(r->nonzero, 0, sizeof(uint64_t) * (size_t)dr_mask_words(T));
+}
+
+static void add_target(struct opt_run *r, int64_t T)
+{
+    for (int64_t i = dr_mask_next(r->nonzero_t, NULL, 0, T); i < T;) {
+        const int64_t j = dr_mask_run_end(r->nonzero_t, NULL, i, T);
+        for (; i < j; i++) {
+            r->grad[i] += r->gt[i];
+            r->se[i] += r->se_t[i] * r->se_t[i];
+        }
+        i = dr_mask_next(r->nonzero_t, NULL, j, T);
+    }
+    for (int64_t w = 0; w < dr_mask_words(T); w++)
+        r->nonzero[w] |= r->nonzero_t[w];
+}
+
+static void root_sums(struct opt_run *r, int64_t T)
+{
+    for (int64_t i = dr_mask_next(r->nonzero, NULL, 0, T); i < T;) {
+        const int64_t j = dr_mask_run_end(r->nonzero, NULL, i, T);
+        for (; i < j; i++)
+            r->se[i] = sqrt(r->se[i]);
+        i = dr_mask_next(r->nonzero, NULL, j, T);
+    }
+}
+
 /* Loss and gradient of iteration `it` over every target, from
  * drivers/reverse.h (batches with primals of their own, independent of
  * their gradient samples); the targets' standard errors add in quadrature. */
@@ -720,10 +768,8 @@ static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
 {
     const int64_t T = r->ps->total;
     const bool several = a->n_targets > 1;
-    if (several) {   /* (one target's run overwrites both) */
-        dr_parallel_zero(r->grad, T, a->g.threads);
-        dr_parallel_zero(r->se, T, a->g.threads);
-    }
+    if (several)   /* (one target's run overwrites both) */
+        clear_sums(r, T);
     r->loss = 0.0;
     for (int ti = 0; ti < a->n_targets; ti++) {
         const struct target *t = &a->targets[ti];
@@ -735,16 +781,14 @@ static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
                                     iteration_seed(a->g.seed, it, ti, 0x47524144))};
         o.scratch = &r->scratch;
         struct dr_reverse_result res = {.grad = several ? r->gt : r->grad, .se = several ? r->se_t : r->se,
-                                        .image = t->render, .nonzero = r->nonzero};
+                                        .image = t->render, .nonzero = several ? r->nonzero_t : r->nonzero};
         if (dr_reverse_gradient(&o, t->rgb, &res) != 0) {
             cli_error("optimize", "%s", dr_last_error());
             return DR_EXIT_FAILURE;
         }
         r->loss += res.loss;
-        for (int64_t i = 0; several && i < T; i++) {
-            r->grad[i] += r->gt[i];
-            r->se[i] += r->se_t[i] * r->se_t[i];
-        }
+        if (several)
+            add_target(r, T);
         if (ti == 0 && (it % a->render_every == 0)) {
             char name[64], path[4096];
             snprintf(name, sizeof name, "render-%04d.png", it);
@@ -752,8 +796,8 @@ static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
             dr_image_write(path, t->rw, t->rh, 3, t->render);
         }
     }
-    for (int64_t i = 0; several && i < T; i++)
-        r->se[i] = sqrt(r->se[i]);
+    if (several)
+        root_sums(r, T);
     return -1;
 }
 
@@ -968,6 +1012,7 @@ static void opt_free(struct opt_args *a, struct opt_run *r)
     free(r->gt);
     free(r->se);
     free(r->nonzero);
+    free(r->nonzero_t);
     free(r->se_t);
     free(r->ref);
     dr_adam_destroy(r->adam);
