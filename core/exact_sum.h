@@ -44,8 +44,12 @@ struct dr_exact_sum {
 #define DR_EXACT_SCALE 0x1p88       /* units per 1.0 */
 #define DR_EXACT_MAX_ADD 0x1p24     /* a contribution's magnitude must be below this */
 
-/* n entries, all zero; NULL + dr_last_error on out of memory. */
+/* n entries, all zero; NULL + dr_last_error on out of memory. _sparse:
+ * for sums added to in few places (a preview's texture gradient, read
+ * back with dr_exact_sum_take): fresh pages, resident only where written
+ * (bigalloc.h's dr_big_vector_keep says why). */
 struct dr_exact_sum *dr_exact_sum_create(int64_t n);
+struct dr_exact_sum *dr_exact_sum_create_sparse(int64_t n);
 void dr_exact_sum_destroy(struct dr_exact_sum *e);
 /* Every entry back to zero (and no longer bad): as created, in the memory
  * it has (estimator.h's dr_est_scratch). */
@@ -57,6 +61,10 @@ uint64_t dr_exact_sum_bytes(int64_t n);
  * the range's end, becomes NaN. Returns how many did.
  * Call after every thread's last dr_exact_add (the threads joined). */
 int64_t dr_exact_sum_read(const struct dr_exact_sum *e, double *out);
+/* Entries [begin, end) as dr_exact_sum_read gives them, into out[0 ..
+ * end - begin), each then zero again (and no longer bad): a sum read piece
+ * by piece where it was added to, and left as created. */
+int64_t dr_exact_sum_take(struct dr_exact_sum *e, int64_t begin, int64_t end, double *out);
 
 /* Entry i += v, from any thread. */
 static inline void dr_exact_add(struct dr_exact_sum *e, int64_t i, double v)

@@ -20,8 +20,9 @@
 
 struct dr_grad_sink {
     double *grad;        /* reverse mode: gradient vector (+=) */
-    uint64_t *touched;   /* reverse mode, when not NULL: the blocks of grad it adds to are marked here
-                            (zero_blocks.h's masks: whoever sums grad then reads only those) */
+    uint64_t *touched;   /* reverse mode, when not NULL: the blocks of grad (or exact) it adds to are
+                            marked here (zero_blocks.h's masks: whoever sums them then reads only
+                            those; the thread's own, also with the shared exact sums) */
     struct dr_exact_sum *exact;   /* reverse mode, when not NULL: the shared exact sums instead */
     const double *dir;   /* forward mode (when not NULL): direction */
     double forward[3];   /* forward mode: accumulated dot product per image channel */
@@ -38,9 +39,9 @@ static inline struct dr_grad_sink dr_sink_reverse_marked(double *grad, uint64_t 
     return (struct dr_grad_sink){.grad = grad, .touched = touched};
 }
 
-static inline struct dr_grad_sink dr_sink_exact(struct dr_exact_sum *e)
+static inline struct dr_grad_sink dr_sink_exact(struct dr_exact_sum *e, uint64_t *touched)
 {
-    return (struct dr_grad_sink){.exact = e};
+    return (struct dr_grad_sink){.exact = e, .touched = touched};
 }
 
 static inline struct dr_grad_sink dr_sink_forward(const double *dir)
@@ -52,10 +53,11 @@ static inline void dr_sink_add(struct dr_grad_sink *k, int64_t slot, double v)
 {
     if (k->dir)
         k->forward[k->channel] += k->dir[slot] * v;
-    else if (k->exact)
-        dr_exact_add(k->exact, slot, v);
     else {
-        k->grad[slot] += v;
+        if (k->exact)
+            dr_exact_add(k->exact, slot, v);
+        else
+            k->grad[slot] += v;
         if (k->touched)
             dr_mask_mark(k->touched, slot);
     }

@@ -171,20 +171,33 @@ static uint64_t *accum_thread_mask(struct dr_est_accum *a, int t, int64_t n)
 }
 
 /* The shared exact sum of n entries, zeroed: the scratch's if it has one of
- * that size, as accum_thread_vector. */
-static struct dr_exact_sum *accum_exact(struct dr_est_accum *a, int64_t n)
+ * that size, as accum_thread_vector (sparse: one whose untouched pages
+ * stay out of memory, for a sum read through block masks, which clear it
+ * as they read it). */
+static struct dr_exact_sum *accum_exact(struct dr_est_accum *a, int64_t n, bool sparse)
 {
     struct dr_est_scratch *s = a->scratch;
     a->bytes += dr_exact_sum_bytes(n);
     if (!s)
         return dr_exact_sum_create(n);
     if (s->exact && s->exact_len == n) {
-        dr_exact_sum_clear(s->exact);
+        if (s->exact_dirty) {
+            dr_exact_sum_clear(s->exact);
+            for (int t = 0; t < DR_MAX_THREADS; t++)   /* (a failed run's marks with it) */
+                if (s->touched[t])
+                    memset(s->touched[t], 0, sizeof(uint64_t) * (size_t)dr_mask_words(n + 1));
+        }
+        s->exact_dirty = true;   /* (this run writes it) */
         return s->exact;
     }
     dr_exact_sum_destroy(s->exact);
-    s->exact = dr_exact_sum_create(n);
+    for (int t = 0; t < DR_MAX_THREADS; t++) {   /* (masks of another size: made anew) */
+        free(s->touched[t]);
+        s->touched[t] = NULL;
+    }
+    s->exact = sparse ? dr_exact_sum_create_sparse(n) : dr_exact_sum_create(n);
     s->exact_len = s->exact ? n : 0;
+    s->exact_dirty = s->exact != NULL;
     return s->exact;
 }
 
@@ -207,8 +220,7 @@ bool dr_estimator_shared_sums(int threads, int64_t total)
 
 bool dr_estimator_consumes(const struct dr_grad_problem *p)
 {
-    return p->consumer && p->scratch && dr_est_sampling_run(p) != DR_SAMPLING_MIS &&
-           !dr_estimator_shared_sums(dr_thread_count(p->threads), p->params->total);
+    return p->consumer && p->scratch && dr_est_sampling_run(p) != DR_SAMPLING_MIS;
 }
 
 /* Where the threads' sums go; out and d_image are the caller's outputs
@@ -240,16 +252,23 @@ static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, b
         a->image = d_image;
         return 0;
     }
-    if (dr_estimator_shared_sums(a->threads, a->total))
-        return (a->exact = accum_exact(a, a->total)) ? 0 : DR_ERR_NOMEM;
     /* thread 0 sums into the caller's vector, or with a consumer into the
-     * scratch's first, as the others into theirs */
+     * scratch's first, as the others into theirs; a consumer's run too big
+     * for chunks marks what each thread adds to (accum_thread_mask) */
     a->consumer = p->consumer && a->scratch ? p->consumer : NULL;
+    const bool masked = a->consumer && a->total > CHUNK_LOCAL_MAX;   /* (below: chunks, no masks) */
+    if (dr_estimator_shared_sums(a->threads, a->total)) {
+        if (!(a->exact = accum_exact(a, a->total, masked)))
+            return DR_ERR_NOMEM;
+        for (int t = 0; masked && t < a->threads; t++)
+            if (!(a->touched[t] = accum_thread_mask(a, t, a->total + 1)))
+                goto nomem;
+        return 0;
+    }
     if (!a->consumer) {
         dr_parallel_zero(out, a->total, a->threads);
         a->grad[0] = out;
     }
-    const bool masked = a->consumer && a->total > CHUNK_LOCAL_MAX;   /* (below: chunks, no masks) */
     for (int t = 0; t < a->threads; t++) {
         if ((t > 0 || a->consumer) && !(a->grad[t] = accum_thread_vector(a, t, (size_t)a->total + 1, masked)))
             goto nomem;
@@ -354,13 +373,42 @@ static void consume_marked(void *ctx, int thread, int64_t begin, int64_t end)
     }
 }
 
+/* consume_marked for the shared exact sum: a piece's blocks marked by any
+ * thread read and cleared (dr_exact_sum_take: the bits dr_exact_sum_read
+ * gives; the unmarked blocks are zero, +0 read), the marks cleared. */
+static void consume_exact_marked(void *ctx, int thread, int64_t begin, int64_t end)
+{
+    (void)thread;
+    const struct dr_est_accum *a = ctx;
+    double piece[SUM_PIECE];
+    for (int64_t i0 = begin; i0 < end; i0 += SUM_PIECE) {
+        const int64_t n = end - i0 < SUM_PIECE ? end - i0 : SUM_PIECE, w0 = i0 / DR_MASK_SPAN;
+        const int words = (int)dr_mask_words(n);
+        uint64_t all[PIECE_WORDS] = {0};
+        for (int t = 0; t < a->threads; t++) {
+            for (int w = 0; w < words; w++)
+                all[w] |= a->touched[t][w0 + w];
+            memset(&a->touched[t][w0], 0, sizeof(uint64_t) * (size_t)words);
+        }
+        for (int64_t k = dr_mask_next(all, NULL, 0, n); k < n;) {
+            const int64_t j = dr_mask_run_end(all, NULL, k, n);
+            dr_exact_sum_take(a->exact, i0 + k, i0 + j, piece + k);
+            k = dr_mask_next(all, NULL, j, n);
+        }
+        a->consumer->take(a->consumer->ctx, i0, i0 + n, piece, all);
+    }
+}
+
 /* The threads' sums into grad (thread 0 summed there already: the others
  * added in thread order), to the consumer, or into d_image (written in
  * place). Adding +0.0 at the end gives every entry the bits the former
  * 0 + g0 + g1 + ... gave (a -0 sum became +0). */
 static void accum_sum(const struct dr_est_accum *a, const struct dr_grad_problem *p, double *grad, double *d_image)
 {
-    if (a->consumer || (grad && !a->exact)) {
+    if (a->consumer && a->exact) {
+        dr_parallel_elements(a->total, a->threads, consume_exact_marked, (void *)a);
+        a->scratch->exact_dirty = false;   /* (cleared as read) */
+    } else if (a->consumer || (grad && !a->exact)) {
         dr_parallel_elements(a->total, a->threads,
                              a->touched[0] ? consume_marked : a->consumer ? consume_threads : sum_threads, (void *)a);
         for (int t = a->consumer ? 0 : 1; a->scratch && t < a->threads; t++)
@@ -380,7 +428,7 @@ struct dr_grad_sink dr_est_sink_begin(struct dr_est_base *b, int thread)
         return dr_sink_forward(b->dir);
     struct dr_est_accum *a = &b->acc;
     if (a->exact)
-        return dr_sink_exact(a->exact);
+        return dr_sink_exact(a->exact, a->touched[thread]);
     if (!a->chunk[thread])
         return dr_sink_reverse_marked(a->grad[thread], a->touched[thread]);
     memset(a->chunk[thread], 0, sizeof(double) * (size_t)a->total);

@@ -112,8 +112,9 @@ struct dr_grad_problem {
  * where the estimator tracked which blocks its paths reached (more than
  * 4096 entries), so that a preview's texture gradient, a few per cent of
  * the entries, costs what it touches. Honoured where
- * dr_estimator_consumes says so (the threads' vectors must be the
- * scratch's); dr_estimator_backward's grad may then be NULL. */
+ * dr_estimator_consumes says so (the threads' vectors, or the shared exact
+ * sum, must be the scratch's); dr_estimator_backward's grad may then be
+ * NULL. */
 struct dr_grad_consumer {
     void (*take)(void *ctx, int64_t begin, int64_t end, const double *g, const uint64_t *mask);
     void *ctx;
@@ -137,10 +138,13 @@ struct dr_est_scratch {
     int64_t len[DR_MAX_THREADS];
     bool dirty[DR_MAX_THREADS];     /* grad[t] may hold non-zero entries (false: the run that summed it
                                        cleared it as it read it, so the next one need not) */
-    uint64_t *touched[DR_MAX_THREADS];   /* with a consumer: grad[t]'s block mask (zero_blocks.h), all
-                                            clear between runs but after a failed one (dirty) */
+    uint64_t *touched[DR_MAX_THREADS];   /* with a consumer: thread t's block mask (zero_blocks.h) of
+                                            grad[t] or of the exact sum, all clear between runs but
+                                            after a failed one (dirty, exact_dirty) */
     struct dr_exact_sum *exact;
     int64_t exact_len;
+    bool exact_dirty;               /* exact may hold non-zero entries (false: a consumer's run read and
+                                       cleared it as it went) */
 };
 void dr_est_scratch_free(struct dr_est_scratch *s);
 
@@ -217,8 +221,8 @@ bool dr_estimator_supports(const struct dr_estimator_ops *e, enum dr_sampling s)
 bool dr_estimator_shared_sums(int threads, int64_t total);
 
 /* Does a reverse-mode run of p hand its gradient to p->consumer: one is
- * set, with a scratch, and the run sums per-thread vectors (not mis
- * sampling, not the shared exact sum). */
+ * set, with a scratch, and the run sums per-thread vectors or the shared
+ * exact sum (not mis sampling). */
 bool dr_estimator_consumes(const struct dr_grad_problem *p);
 
 /* Forward mode: d_image (width * height * 3 doubles) = d I / d theta . dir,

@@ -9,6 +9,7 @@
 #include "camera.h"
 #include "common.h"
 #include "error.h"
+#include "exact_sum.h"
 #include "loss.h"
 #include "estimator.h"
 #include "render.h"
@@ -509,15 +510,23 @@ static void consumer_matches(const char *what, struct dr_scene *s, const struct 
         CHECK(not_once == 0, "%s, run %d: %lld entries not taken exactly once", what, run, (long long)not_once);
         CHECK(memcmp(own, got.g, sizeof(double) * T) == 0 && zeros < (int64_t)T,
               "%s, %d threads, run %d: the consumer's gradient differs from the vector's", what, threads, run);
+        const bool exact = dr_estimator_shared_sums(threads, (int64_t)T);
         for (int t = 0; t < threads; t++) {
             int64_t left = 0, bits = 0;
             for (size_t i = 0; sc.grad[t] && i <= T; i++)
                 left += sc.grad[t][i] != 0.0;
             for (int64_t w = 0; sc.touched[t] && w < (int64_t)(T + 1 + 511) / 512; w++)
                 bits += sc.touched[t][w] != 0;
-            CHECK(sc.grad[t] && !sc.dirty[t] && left == 0 && bits == 0, "%s, run %d: thread %d's vector %s", what, run,
-                  t, !sc.grad[t] ? "missing" : sc.dirty[t] ? "left dirty" : bits ? "with its mask set" : "not cleared");
+            const bool kept = exact ? sc.exact != NULL : sc.grad[t] != NULL, dirty = exact ? sc.exact_dirty : sc.dirty[t];
+            CHECK(kept && !dirty && left == 0 && bits == 0, "%s, run %d: thread %d's vector %s", what, run, t,
+                  !kept ? "missing" : dirty ? "left dirty" : bits ? "with its mask set" : "not cleared");
         }
+        /* the shared exact sum (four threads): left all zero, as created */
+        int64_t exact_left = 0;
+        for (size_t i = 0; exact && sc.exact && i < T; i++)
+            exact_left += sc.exact->w[i].lo != 0 || sc.exact->w[i].hi != 0 || sc.exact->bad[i] != 0;
+        CHECK(exact_left == 0, "%s, run %d: %lld entries of the exact sum not cleared", what, run,
+              (long long)exact_left);
         /* masks where the vectors are too big for the estimator's chunks (4096 entries) */
         CHECK(got.misaligned == 0 && (T > 4096) == (got.marked > 0),
               "%s, run %d: %lld pieces not at multiples of 1024, %lld blocks marked, %lld not", what, run,
@@ -618,7 +627,7 @@ static void fold_sparse(const char *what, struct dr_scene *s, const struct dr_ca
  * the run cannot keep it (per-batch halves with the parts asked for) it
  * comes back all marked, the result still exact. */
 static void result_mask(const char *what, struct dr_scene *s, const struct dr_camera *cam, const char *const *ptrs,
-                        int n)
+                        int n, int threads)
 {
     struct dr_param_set *ps = dr_param_set_create(s, ptrs, n);
     CHECK(ps != NULL, "%s: param set: %s", what, dr_last_error());
@@ -637,7 +646,8 @@ static void result_mask(const char *what, struct dr_scene *s, const struct dr_ca
             .estimator = dr_estimator_find("prb"), .loss = DR_LOSS_L2, .loss_scale = 1.0, .batches = 2 + run % 2,
             .primal = parts ? DR_PRIMAL_PER_BATCH : DR_PRIMAL_CROSS, .scratch = &rs,
             .problem = {.scene = s, .camera = cam, .params = ps, .width = W, .height = H, .spp = run == 1 ? 6 : 4,
-                        .max_depth = 3, .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 31 + (uint64_t)run, .threads = 2}};
+                        .max_depth = 3, .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 31 + (uint64_t)run,
+                        .threads = threads}};
         struct dr_reverse_result fresh = {.grad = g1, .se = se1, .se_gradient = parts ? sg : NULL,
                                           .se_primal = parts ? sp : NULL};
         CHECK(dr_reverse_gradient(&o, target, &fresh) == 0, "%s: %s", what, dr_last_error());
@@ -659,8 +669,8 @@ static void result_mask(const char *what, struct dr_scene *s, const struct dr_ca
               "%s, run %d: %lld of %lld blocks marked", what, run, (long long)marked, (long long)blocks);
         if (parts)   /* (the dense run left every block marked: start the next from a true mask again) */
             continue;
-        printf("%s, run %d: the result's mask marks %lld of %lld blocks\n", what, run, (long long)marked,
-               (long long)blocks);
+        printf("%s, %d threads, run %d: the result's mask marks %lld of %lld blocks\n", what, threads, run,
+               (long long)marked, (long long)blocks);
     }
     dr_reverse_scratch_free(&rs);
     free(g);
@@ -732,9 +742,9 @@ static void scratch_reuse(const char *what, struct dr_scene *s, const struct dr_
         se[k] = calloc((size_t)ps->total, sizeof(double));
     }
     /* per-batch primals (two halves a batch: the first kept in half[0], the
-     * second folded in as it is summed, or kept in half[1] with the shared
-     * exact sum) and the cross primal (each batch folded in as it is summed:
-     * no batch vector, but with the exact sum) */
+     * second folded in as it is summed, also from the shared exact sum) and
+     * the cross primal (each batch folded in as it is summed: no batch
+     * vector) */
     for (int cross = 0; cross <= 1; cross++) {
         for (int run = 0; run < 3; run++) {
             struct dr_reverse_options o = {.estimator = prb, .loss = DR_LOSS_L2, .loss_scale = 1.0, .batches = 2,
@@ -751,8 +761,7 @@ static void scratch_reuse(const char *what, struct dr_scene *s, const struct dr_
                       "%s: dr_reverse_gradient (%s primal) with a kept scratch (run %d) differs from one with its own",
                       what, cross ? "cross" : "per-batch", run);
         }
-        CHECK((cross && !exact ? !rs.half[0] : rs.half[0] && rs.half_len[0] == ps->total) &&
-                  !rs.half[1] == (cross || !exact),
+        CHECK((cross ? !rs.half[0] : rs.half[0] && rs.half_len[0] == ps->total) && !rs.half[1],
               "%s (%s primal): the reverse scratch kept the wrong batch vectors (%p, %p)", what,
               cross ? "cross" : "per-batch", (void *)rs.half[0], (void *)rs.half[1]);
         dr_reverse_scratch_free(&rs);
@@ -1003,9 +1012,10 @@ int main(void)
     const struct dr_camera top = sb_camera(dr_v3(0, 1.2, 0.8), dr_v3(0, 0, 0), 60);
     scratch_reuse("a 160x160 texture", s, &top, tex_ptrs, 2, 4);
     consumer_matches("a 160x160 texture", s, &top, tex_ptrs, 2, 2, true);
-    consumer_matches("a 160x160 texture", s, &top, tex_ptrs, 2, 4, false);   /* (the shared exact sum) */
+    consumer_matches("a 160x160 texture", s, &top, tex_ptrs, 2, 4, true);   /* (the shared exact sum) */
     fold_sparse("a 160x160 texture", s, &top, tex_ptrs, 2);
-    result_mask("a 160x160 texture", s, &top, tex_ptrs, 2);
+    result_mask("a 160x160 texture", s, &top, tex_ptrs, 2, 2);
+    result_mask("a 160x160 texture", s, &top, tex_ptrs, 2, 4);   /* (the shared exact sum) */
     dr_scene_destroy(s);
     return TEST_END();
 }
