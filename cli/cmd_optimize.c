@@ -629,21 +629,24 @@ static int opt_load(struct opt_args *a, struct opt_run *r)
     if ((rc = grad_apply_sets(&a->g, r->scene)) >= 0)
         return rc;
     const size_t T = (size_t)r->ps->total;
-    const size_t T1 = T > 0 ? T : 1;
-    r->theta = dr_alloc_big(sizeof(double) * T1);
-    /* the gradients' vectors zero by calloc, pages resident only where
-     * written, and masks clear (reverse.h): a run writes the blocks its
-     * gradient reaches, a few per cent of a texture at a preview size. One
-     * target's result goes straight into grad and se (no parts: optimize
+    r->theta = dr_alloc_big(sizeof(double) * T);
+    r->grad = dr_alloc_big(sizeof(double) * T);
+    r->se = dr_alloc_big(sizeof(double) * T);
+    /* one target's result goes straight into grad and se (no parts: optimize
      * does not report them); several add up through gt and se_t */
     const bool several = a->n_targets > 1;
-    r->grad = calloc(T1, sizeof(double));
-    r->se = calloc(T1, sizeof(double));
-    r->gt = several ? calloc(T1, sizeof(double)) : NULL;
-    r->se_t = several ? calloc(T1, sizeof(double)) : NULL;
-    const size_t words = (size_t)dr_mask_words((int64_t)T1);
-    r->nonzero = calloc(words, sizeof(uint64_t));
-    r->nonzero_t = several ? calloc(words, sizeof(uint64_t)) : NULL;
+    r->gt = several ? dr_alloc_big(sizeof(double) * T) : NULL;
+    r->se_t = several ? dr_alloc_big(sizeof(double) * T) : NULL;
+    /* all marked: the first run writes grad and se whole (several: gt and
+     * se_t, and grad and se are cleared whole), and the masks are true
+     * from then on */
+    const size_t words = (size_t)dr_mask_words((int64_t)T);
+    r->nonzero = malloc(sizeof(uint64_t) * words);
+    r->nonzero_t = several ? malloc(sizeof(uint64_t) * words) : NULL;
+    if (r->nonzero)
+        memset(r->nonzero, 0xff, sizeof(uint64_t) * words);
+    if (r->nonzero_t)
+        memset(r->nonzero_t, 0xff, sizeof(uint64_t) * words);
     if (!r->theta || !r->grad || !r->se || !r->nonzero || (several && (!r->gt || !r->se_t || !r->nonzero_t))) {
         cli_error("optimize", "out of memory");
         return DR_EXIT_FAILURE;
