@@ -780,6 +780,7 @@ static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
             .problem = grad_problem(&a->g, r->scene, cam, r->ps, t->w, t->h, a->g.spp,
                                     iteration_seed(a->g.seed, it, ti, 0x47524144))};
         o.scratch = &r->scratch;
+        r->scratch.est.many_runs = true;   /* (one run an iteration: estimator.h) */
         struct dr_reverse_result res = {.grad = several ? r->gt : r->grad, .se = several ? r->se_t : r->se,
                                         .image = t->render, .nonzero = several ? r->nonzero_t : r->nonzero};
         if (dr_reverse_gradient(&o, t->rgb, &res) != 0) {

@@ -257,8 +257,9 @@ static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, b
      * for chunks marks what each thread adds to (accum_thread_mask) */
     a->consumer = p->consumer && a->scratch ? p->consumer : NULL;
     const bool masked = a->consumer && a->total > CHUNK_LOCAL_MAX;   /* (below: chunks, no masks) */
+    const bool sparse = masked && !a->scratch->many_runs;   /* (masked: a scratch's) */
     if (dr_estimator_shared_sums(a->threads, a->total)) {
-        if (!(a->exact = accum_exact(a, a->total, masked)))
+        if (!(a->exact = accum_exact(a, a->total, sparse)))
             return DR_ERR_NOMEM;
         for (int t = 0; masked && t < a->threads; t++)
             if (!(a->touched[t] = accum_thread_mask(a, t, a->total + 1)))
@@ -270,7 +271,7 @@ static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, b
         a->grad[0] = out;
     }
     for (int t = 0; t < a->threads; t++) {
-        if ((t > 0 || a->consumer) && !(a->grad[t] = accum_thread_vector(a, t, (size_t)a->total + 1, masked)))
+        if ((t > 0 || a->consumer) && !(a->grad[t] = accum_thread_vector(a, t, (size_t)a->total + 1, sparse)))
             goto nomem;
         if (a->total <= CHUNK_LOCAL_MAX && !(a->chunk[t] = accum_alloc(a, (size_t)a->total + 1)))
             goto nomem;
