@@ -341,6 +341,17 @@ static void consume_threads(void *ctx, int thread, int64_t begin, int64_t end)
 }
 
 #define PIECE_WORDS (SUM_PIECE / DR_MASK_SPAN)
+/* all[w] = the threads' marks of mask words w0 + w, w < words: the blocks
+ * of a piece any thread added to. */
+static void piece_marks(const struct dr_est_accum *a, int64_t w0, int words, uint64_t all[PIECE_WORDS])
+{
+    for (int w = 0; w < words; w++) {
+        all[w] = 0;
+        for (int t = 0; t < a->threads; t++)
+            all[w] |= a->touched[t][w0 + w];
+    }
+}
+
 /* consume_threads where the threads' vectors have block masks (accum_init):
  * a piece's marked blocks only (the union of the threads' masks), each
  * summed as sum_piece sums it; each thread's marked blocks cleared and its
@@ -355,10 +366,8 @@ static void consume_marked(void *ctx, int thread, int64_t begin, int64_t end)
     for (int64_t i0 = begin; i0 < end; i0 += SUM_PIECE) {
         const int64_t n = end - i0 < SUM_PIECE ? end - i0 : SUM_PIECE, w0 = i0 / DR_MASK_SPAN;
         const int words = (int)dr_mask_words(n);
-        uint64_t all[PIECE_WORDS] = {0};
-        for (int t = 0; t < a->threads; t++)
-            for (int w = 0; w < words; w++)
-                all[w] |= a->touched[t][w0 + w];
+        uint64_t all[PIECE_WORDS];
+        piece_marks(a, w0, words, all);
         for (int w = 0; w < words; w++)
             for (uint64_t bits = all[w]; bits; bits &= bits - 1) {
                 const int64_t k = (int64_t)w * DR_MASK_SPAN + __builtin_ctzll(bits) * DR_ZERO_BLOCK;
@@ -385,12 +394,10 @@ static void consume_exact_marked(void *ctx, int thread, int64_t begin, int64_t e
     for (int64_t i0 = begin; i0 < end; i0 += SUM_PIECE) {
         const int64_t n = end - i0 < SUM_PIECE ? end - i0 : SUM_PIECE, w0 = i0 / DR_MASK_SPAN;
         const int words = (int)dr_mask_words(n);
-        uint64_t all[PIECE_WORDS] = {0};
-        for (int t = 0; t < a->threads; t++) {
-            for (int w = 0; w < words; w++)
-                all[w] |= a->touched[t][w0 + w];
+        uint64_t all[PIECE_WORDS];
+        piece_marks(a, w0, words, all);
+        for (int t = 0; t < a->threads; t++)
             memset(&a->touched[t][w0], 0, sizeof(uint64_t) * (size_t)words);
-        }
         for (int64_t k = dr_mask_next(all, NULL, 0, n); k < n;) {
             const int64_t j = dr_mask_run_end(all, NULL, k, n);
             dr_exact_sum_take(a->exact, i0 + k, i0 + j, piece + k);

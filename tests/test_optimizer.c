@@ -67,6 +67,17 @@ static void write_old(const char *path, int version, const struct dr_param_set *
     fclose(f);
 }
 
+/* n bytes at offset `at` of the file at path replaced by bytes. */
+static void patch_file(const char *path, long at, const void *bytes, size_t n)
+{
+    FILE *f = fopen(path, "r+b");
+    if (!f)
+        return;
+    fseek(f, at, SEEK_SET);
+    fwrite(bytes, 1, n, f);
+    fclose(f);
+}
+
 /* The checkpoint's numbers (hexadecimal, optimizer.c's put_double) read back
  * bit for bit at the edges of the double range; a decimal checkpoint (the
  * format before) reads as it did. */
@@ -179,10 +190,7 @@ static void texture_checkpoint(const char *path)
     CHECK(truncate(path, size2 - 4000) == 0, "truncate");
     CHECK(dr_checkpoint_read(path, ps, back, r, &it) == DR_ERR_FORMAT, "a cut raw block was accepted");
     CHECK(dr_checkpoint_write(path, "scene.gltf", ps, theta, a, 12) == 0, "rewrite: %s", dr_last_error());
-    f = fopen(path, "r+b");
-    fseek(f, size2 - 5, SEEK_SET);   /* "\nend\n" ends the file: the raw block's newline */
-    fputc('x', f);
-    fclose(f);
+    patch_file(path, size2 - 5, "x", 1);   /* "\nend\n" ends the file: the binary block's newline */
     CHECK(dr_checkpoint_read(path, ps, back, r, &it) == DR_ERR_FORMAT, "a raw block without its newline was accepted");
     free(theta);
     free(back);
@@ -260,15 +268,9 @@ static void packed_checkpoint(const char *path)
         const long at = (long)(bin + 14 - buf);
         memcpy(&head, bin + 14, 8);
         const uint64_t longer = (head >> 62) << 62 | (uint64_t)(n_tex + 1), bad_kind = (UINT64_C(3) << 62) | (head & 0xff);
-        f = fopen(path, "r+b");
-        fseek(f, at, SEEK_SET);
-        fwrite(&longer, 8, 1, f);
-        fclose(f);
+        patch_file(path, at, &longer, 8);
         CHECK(dr_checkpoint_read(path, ps, back, r, &it) == DR_ERR_FORMAT, "a run past its array was accepted");
-        f = fopen(path, "r+b");
-        fseek(f, at, SEEK_SET);
-        fwrite(&bad_kind, 8, 1, f);
-        fclose(f);
+        patch_file(path, at, &bad_kind, 8);
         CHECK(dr_checkpoint_read(path, ps, back, r, &it) == DR_ERR_FORMAT, "a run of kind 3 was accepted");
     }
     free(theta);
