@@ -12,6 +12,7 @@
 #include <unistd.h>
 
 #include "error.h"
+#include "zero_blocks.h"
 
 /* x exactly, as a C99 hexadecimal floating constant (what "%a" prints;
  * strtod and scanf's %lf read it back bit for bit): [-]0x1.<hex>p<exp>, or
@@ -144,13 +145,26 @@ static void write_run(FILE *f, int kind, const double *v, int64_t n)
     }
 }
 
-/* v[0..n) as runs of whole blocks of one kind. */
-static void pack_array(FILE *f, const double *v, int64_t n)
+/* Is every entry of global entries [i, i + n) in a block zeros leaves
+ * clear (zero_blocks.h; n <= 8, so two blocks at most)? */
+static bool unmarked(const uint64_t *zeros, int64_t i, int64_t n)
+{
+    return !dr_mask_test(zeros, i) && !dr_mask_test(zeros, i + n - 1);
+}
+
+/* v[0..n) as runs of whole blocks of one kind. zeros (NULL: none): a block
+ * mask over the global entries (v[0] is entry `first`) whose clear blocks
+ * are +0: not read, a run of PACK_ZERO as reading them would give. (Adam's
+ * moments, mostly zeros: a read of a page nothing wrote maps the shared
+ * zero page, and Adam's next write there would cost a copy-on-write fault
+ * and a TLB shootdown, optimizer.c's adam_entry.) */
+static void pack_array(FILE *f, const double *v, int64_t n, const uint64_t *zeros, int64_t first)
 {
     int64_t start = 0;
     int kind = -1;
     for (int64_t k = 0; k < n; k += PACK_BLOCK) {
-        const int b = pack_kind(v + k, n - k < PACK_BLOCK ? n - k : PACK_BLOCK);
+        const int64_t len = n - k < PACK_BLOCK ? n - k : PACK_BLOCK;
+        const int b = zeros && unmarked(zeros, first + k, len) ? PACK_ZERO : pack_kind(v + k, len);
         if (b != kind && kind >= 0) {
             write_run(f, kind, v + start, k - start);
             start = k;
@@ -161,12 +175,15 @@ static void pack_array(FILE *f, const double *v, int64_t n)
         write_run(f, kind, v + start, n - start);
 }
 
-static void write_binary(FILE *f, const double *value, const double *m, const double *v, int64_t n)
+/* Parameter p's section; moments: Adam's mask of the blocks whose m and v
+ * may not be +0, NULL where it is not known (optimizer.h). */
+static void write_binary(FILE *f, const struct dr_param *p, const double *theta, const struct dr_adam *a,
+                         const uint64_t *moments)
 {
     fputs("binary packed\n", f);
-    pack_array(f, value, n);
-    pack_array(f, m, n);
-    pack_array(f, v, n);
+    pack_array(f, theta + p->offset, p->size, NULL, 0);
+    pack_array(f, a->m + p->offset, p->size, moments, p->offset);
+    pack_array(f, a->v + p->offset, p->size, moments, p->offset);
     fputc('\n', f);
 }
 
@@ -186,7 +203,7 @@ int dr_checkpoint_write(const char *path, const char *scene_path, const struct d
         const struct dr_param *p = &ps->params[k];
         fprintf(f, "param %s %lld\n", p->name, (long long)p->size);
         if (binary_section(p)) {
-            write_binary(f, theta + p->offset, a->m + p->offset, a->v + p->offset, p->size);
+            write_binary(f, p, theta, a, dr_adam_moments(a));
             continue;
         }
         write_doubles(f, "value", theta + p->offset, p->size);

@@ -56,6 +56,9 @@ int64_t dr_adam_step(struct dr_adam *a, double *theta, const double *grad);
 int64_t dr_adam_step_masked(struct dr_adam *a, double *theta, const double *grad, const uint64_t *grad_mask);
 /* The blocks of theta the last step may have changed (NULL: any). */
 const uint64_t *dr_adam_changed(const struct dr_adam *a);
+/* The blocks of m and v that may not be +0 (a->moved where it is known;
+ * NULL: any). */
+const uint64_t *dr_adam_moments(const struct dr_adam *a);
 
 /* Default learning rate of a parameter given its current values:
  * 0.02 for colours, metallic, roughness and texels (they live in [0,1]);
