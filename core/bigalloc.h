@@ -27,16 +27,35 @@ static inline void *dr_alloc_big(size_t bytes)
     return p;
 }
 
-/* calloc's contract (n elements of size bytes, zeroed; NULL on overflow). */
+/* From this size on glibc's calloc always maps fresh pages (its mmap
+ * threshold, which grows as mapped blocks are freed, stops at 32 MiB on
+ * 64-bit machines) and knows they are zero: it writes nothing. */
+#define DR_LAZY_ZERO_BYTES ((size_t)32 << 20)
+
+/* calloc's contract (n elements of size bytes, zeroed; NULL on overflow).
+ * Arrays of DR_LAZY_ZERO_BYTES or more are calloc's fresh pages, with huge
+ * pages asked for on the 2 MiB-aligned part: the kernel zeroes a page where
+ * it is first written, so the pages a sparse vector never touches (a
+ * texture gradient's, at a preview size) are never zeroed nor resident.
+ * Smaller ones are dr_alloc_big's, zeroed now. */
 static inline void *dr_calloc_big(size_t n, size_t size)
 {
     if (size != 0 && n > SIZE_MAX / size)
         return NULL;
-    if (n * size < DR_BIG_PAGE)
+    const size_t bytes = n * size;
+    if (bytes < DR_BIG_PAGE)
         return calloc(n, size);
-    void *p = dr_alloc_big(n * size);
+    if (bytes >= DR_LAZY_ZERO_BYTES) {
+        void *p = calloc(n, size);
+        uintptr_t b = ((uintptr_t)p + DR_BIG_PAGE - 1) / DR_BIG_PAGE * DR_BIG_PAGE;
+        uintptr_t e = ((uintptr_t)p + bytes) / DR_BIG_PAGE * DR_BIG_PAGE;
+        if (p && e > b)
+            madvise((void *)b, e - b, MADV_HUGEPAGE);   /* advice only */
+        return p;
+    }
+    void *p = dr_alloc_big(bytes);
     if (p)
-        memset(p, 0, n * size);
+        memset(p, 0, bytes);
     return p;
 }
 
