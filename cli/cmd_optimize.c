@@ -565,6 +565,8 @@ struct opt_run {
     uint64_t *nonzero;                 /* the blocks of grad and se that may not be +0 (reverse.h), kept
                                           true from iteration to iteration */
     uint64_t *nonzero_t;               /* several targets: the same of gt and se_t */
+    uint64_t *se_blocks;               /* the blocks of the parameters whose standard errors are
+                                          shown (not images': reverse.h) */
     struct dr_reverse_scratch scratch; /* the gradient runs' vectors, kept from iteration to iteration */
     struct history hist;
     double loss;
@@ -647,7 +649,12 @@ static int opt_load(struct opt_args *a, struct opt_run *r)
         memset(r->nonzero, 0xff, sizeof(uint64_t) * words);
     if (r->nonzero_t)
         memset(r->nonzero_t, 0xff, sizeof(uint64_t) * words);
-    if (!r->theta || !r->grad || !r->se || !r->nonzero || (several && (!r->gt || !r->se_t || !r->nonzero_t))) {
+    r->se_blocks = calloc(words, sizeof(uint64_t));
+    for (int k = 0; r->se_blocks && k < r->ps->n; k++)
+        for (int64_t i = 0; !dr_param_is_array(&r->ps->params[k]) && i < r->ps->params[k].size; i++)
+            dr_mask_mark(r->se_blocks, r->ps->params[k].offset + i);
+    if (!r->theta || !r->grad || !r->se || !r->nonzero || !r->se_blocks ||
+        (several && (!r->gt || !r->se_t || !r->nonzero_t))) {
         cli_error("optimize", "out of memory");
         return DR_EXIT_FAILURE;
     }
@@ -723,7 +730,9 @@ static int opt_open_outputs(const struct opt_args *a, struct opt_run *r)
 /* Several targets: grad and se are sums over the targets' runs, of gt and
  * of se_t squared, each +0 outside its mask (reverse.h). A sum that starts
  * at +0 never becomes -0, so adding +0 changes none of them: only the
- * marked blocks are visited, and grad's mask is the union of the targets'.
+ * marked blocks of grad are visited, and grad's mask is the union of the
+ * targets'. The standard errors are those of the parameters shown (not
+ * images': r->se_blocks), a few numbers, summed entry by entry.
  * clear_sums: +0 where the last iteration's sums were (its mask); add_target
  * adds a target's run; root_sums takes the standard errors' roots. */
 static void clear_sums(struct opt_run *r, int64_t T)
@@ -731,34 +740,36 @@ static void clear_sums(struct opt_run *r, int64_t T)
     for (int64_t i = dr_mask_next(r->nonzero, NULL, 0, T); i < T;) {
         const int64_t j = dr_mask_run_end(r->nonzero, NULL, i, T);
         memset(r->grad + i, 0, sizeof(double) * (size_t)(j - i));
-        memset(r->se + i, 0, sizeof(double) * (size_t)(j - i));
         i = dr_mask_next(r->nonzero, NULL, j, T);
     }
     memset(r->nonzero, 0, sizeof(uint64_t) * (size_t)dr_mask_words(T));
+    for (int k = 0; k < r->ps->n; k++)
+        if (!dr_param_is_array(&r->ps->params[k]))
+            memset(r->se + r->ps->params[k].offset, 0, sizeof(double) * (size_t)r->ps->params[k].size);
 }
 
 static void add_target(struct opt_run *r, int64_t T)
 {
     for (int64_t i = dr_mask_next(r->nonzero_t, NULL, 0, T); i < T;) {
         const int64_t j = dr_mask_run_end(r->nonzero_t, NULL, i, T);
-        for (; i < j; i++) {
+        for (; i < j; i++)
             r->grad[i] += r->gt[i];
-            r->se[i] += r->se_t[i] * r->se_t[i];
-        }
         i = dr_mask_next(r->nonzero_t, NULL, j, T);
     }
     for (int64_t w = 0; w < dr_mask_words(T); w++)
         r->nonzero[w] |= r->nonzero_t[w];
+    for (int k = 0; k < r->ps->n; k++)
+        for (int64_t i = 0; !dr_param_is_array(&r->ps->params[k]) && i < r->ps->params[k].size; i++) {
+            const int64_t e = r->ps->params[k].offset + i;
+            r->se[e] += r->se_t[e] * r->se_t[e];
+        }
 }
 
-static void root_sums(struct opt_run *r, int64_t T)
+static void root_sums(struct opt_run *r)
 {
-    for (int64_t i = dr_mask_next(r->nonzero, NULL, 0, T); i < T;) {
-        const int64_t j = dr_mask_run_end(r->nonzero, NULL, i, T);
-        for (; i < j; i++)
-            r->se[i] = sqrt(r->se[i]);
-        i = dr_mask_next(r->nonzero, NULL, j, T);
-    }
+    for (int k = 0; k < r->ps->n; k++)
+        for (int64_t i = 0; !dr_param_is_array(&r->ps->params[k]) && i < r->ps->params[k].size; i++)
+            r->se[r->ps->params[k].offset + i] = sqrt(r->se[r->ps->params[k].offset + i]);
 }
 
 /* Loss and gradient of iteration `it` over every target, from
@@ -782,7 +793,8 @@ static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
         o.scratch = &r->scratch;
         r->scratch.est.many_runs = true;   /* (one run an iteration: estimator.h) */
         struct dr_reverse_result res = {.grad = several ? r->gt : r->grad, .se = several ? r->se_t : r->se,
-                                        .image = t->render, .nonzero = several ? r->nonzero_t : r->nonzero};
+                                        .image = t->render, .nonzero = several ? r->nonzero_t : r->nonzero,
+                                        .se_blocks = r->se_blocks};
         if (dr_reverse_gradient(&o, t->rgb, &res) != 0) {
             cli_error("optimize", "%s", dr_last_error());
             return DR_EXIT_FAILURE;
@@ -798,7 +810,7 @@ static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
         }
     }
     if (several)
-        root_sums(r, T);
+        root_sums(r);
     return -1;
 }
 
@@ -1015,6 +1027,7 @@ static void opt_free(struct opt_args *a, struct opt_run *r)
     free(r->nonzero);
     free(r->nonzero_t);
     free(r->se_t);
+    free(r->se_blocks);
     free(r->ref);
     dr_adam_destroy(r->adam);
     dr_param_set_destroy(r->ps);

@@ -28,6 +28,7 @@ struct rev_work {
     double *half[2], *m2, *dsq;
     bool consume;              /* a batch's last estimator run hands its gradient to the fold (welford_take) */
     uint64_t *nonzero;         /* r->nonzero where the fold keeps it (work_alloc), else NULL */
+    const uint64_t *se_blocks; /* r->se_blocks where it applies (work_alloc), else NULL: every block's */
     int done, steps;
     struct dr_mis_history mis;   /* mis without the caller's history: this run's batches' */
     struct dr_media_plan media_plan;   /* the batches' media pilot (medium_grad.h), unless the caller's */
@@ -98,6 +99,7 @@ static int work_alloc(struct rev_work *w, const struct dr_reverse_result *r)
         memset(r->nonzero, 0xff, sizeof(uint64_t) * (size_t)dr_mask_words(w->T));
     /* the halves' squared differences feed se_gradient and se_primal only */
     w->dsq = r->parts && r->se_gradient ? r->se_gradient : NULL;
+    w->se_blocks = r->se_gradient || r->se_primal ? NULL : r->se_blocks;
     if (w->img && w->adj && w->img_sum && w->cross_img && (w->half[0] || !need0) && (w->half[1] || !need1))
         return 0;
     dr_set_error("out of memory (%lld gradient entries, %zu image values)", (long long)w->T, w->n);
@@ -196,7 +198,7 @@ struct welford_step {
  * write every block: a caller's vectors may then hold anything). */
 static inline __attribute__((always_inline)) void fold_block(const struct welford_step *x, int64_t i0, int64_t n,
                                                              const double *g, const double *h0, bool first,
-                                                             bool split, bool pow2)
+                                                             bool split, bool pow2, bool se)
 {
     struct rev_work *w = x->w;
     double *grad = x->r->grad, *m2 = w->m2, *dsq = w->dsq;   /* (dsq: only with split halves, plan()) */
@@ -208,7 +210,8 @@ static inline __attribute__((always_inline)) void fold_block(const struct welfor
         const double mean = first ? 0.0 : grad[i];
         const double d = gi - mean;
         grad[i] = mean + (pow2 ? d * inv : d / (b + 1));
-        m2[i] = (first ? 0.0 : m2[i]) + d * (gi - grad[i]);
+        if (se)   /* (se: the block's standard error is wanted, w->se_blocks) */
+            m2[i] = (first ? 0.0 : m2[i]) + d * (gi - grad[i]);
         if (split && dsq) {
             const double h = h0[i] - hb;
             dsq[i] = (first ? 0.0 : dsq[i]) + h * h * n0 * n1 / ((double)spp * spp);
@@ -250,19 +253,22 @@ static inline __attribute__((always_inline)) void fold(const struct welford_step
                 break;
             const int64_t n = end - i0 < DR_ZERO_BLOCK ? end - i0 : DR_ZERO_BLOCK;
             const bool in = in_word >> bit & 1;
+            const bool se = !w->se_blocks || dr_mask_test(w->se_blocks, i0);
             const double *gb = in ? g + (i0 - begin) : zero_block;
             if (held) {
                 /* batch 0 clears the blocks it does not reach; later ones keep them */
                 *held = first && !in ? *held & ~(UINT64_C(1) << bit) : *held | UINT64_C(1) << bit;
             } else if (!first && n == DR_ZERO_BLOCK && (!in || dr_block_zero(gb)) && dr_block_zero(grad + i0) &&
-                       dr_block_zero(m2 + i0) && (!split || dr_block_zero(h0 + i0)) &&
+                       (!se || dr_block_zero(m2 + i0)) && (!split || dr_block_zero(h0 + i0)) &&
                        (!(split && dsq) || dr_block_zero(dsq + i0))) {
                 continue;
             }
-            if (n == DR_ZERO_BLOCK)
-                fold_block(x, i0, DR_ZERO_BLOCK, gb, h0, first, split, pow2);
+            if (n == DR_ZERO_BLOCK && se)   /* (each variant a constant: compiled apart, branch-free) */
+                fold_block(x, i0, DR_ZERO_BLOCK, gb, h0, first, split, pow2, true);
+            else if (n == DR_ZERO_BLOCK)
+                fold_block(x, i0, DR_ZERO_BLOCK, gb, h0, first, split, pow2, false);
             else
-                fold_block(x, i0, n, gb, h0, first, split, pow2);
+                fold_block(x, i0, n, gb, h0, first, split, pow2, se);
         }
     }
 }
@@ -299,10 +305,12 @@ static void standard_errors(const struct welford_step *x, int64_t begin, int64_t
     /* (in place of m2; where a block of it is +0, sqrt(+0 / (K - 1) / K) = +0 is there already) */
     const bool halves = power_of_two(K - 1) && power_of_two(K);   /* (K = 2) */
     const double inv = 1.0 / (K - 1), inv_k = 1.0 / K;
-    const uint64_t *nonzero = x->w->nonzero;
+    const uint64_t *nonzero = x->w->nonzero, *wanted = x->w->se_blocks;
     for (int64_t i0 = nonzero ? dr_mask_next(nonzero, NULL, begin, end) : begin; i0 < end;
          i0 = nonzero ? dr_mask_next(nonzero, NULL, dr_block_end(i0, end), end) : i0 + DR_ZERO_BLOCK) {
         const int64_t i1 = dr_block_end(i0, end);
+        if (wanted && !dr_mask_test(wanted, i0))
+            continue;
         if (!nonzero && i1 - i0 == DR_ZERO_BLOCK && dr_block_zero(r->se + i0))
             continue;
         for (int64_t i = i0; i < i1; i++)

@@ -101,6 +101,14 @@ struct dr_reverse_result {
      * vectors, se_gradient or se_primal asked for) every block is marked
      * and every entry written. */
     uint64_t *nonzero;
+    /* optional (may be NULL: every entry's): a block mask (zero_blocks.h)
+     * of the entries whose standard error is wanted. se is neither read nor
+     * written outside it (nonzero's contract then holds of se inside it
+     * only), and the fold keeps no sum of squares there: optimize shows
+     * the standard errors of its scalar parameters, never a texture's, whose
+     * vector would cost as much memory as its gradient. Ignored (every
+     * entry's) where se_gradient or se_primal is asked for. */
+    const uint64_t *se_blocks;
     double loss;                     /* loss of the mean primal image (scaled by loss_scale) */
     int spp_batch;                   /* samples per pixel of each batch */
     bool parts;                      /* se_gradient / se_primal were estimated */

@@ -640,6 +640,18 @@ static void result_mask(const char *what, struct dr_scene *s, const struct dr_ca
     uint64_t *mask = calloc(words, sizeof(uint64_t));
     float *target = calloc((size_t)3 * W * H, sizeof(float));
     struct dr_reverse_scratch rs = {0};
+    /* se wanted in every third block only (reverse.h's se_blocks, optimize's
+     * pattern): se is left alone elsewhere (a sentinel stays), the rest is
+     * the same to the bit, with the result's mask kept from run to run
+     * (g2, se2, mask2) and without one (g3, se3) */
+    uint64_t *wanted = calloc(words, sizeof(uint64_t)), *mask2 = calloc(words, sizeof(uint64_t));
+    double *g2 = calloc(T, sizeof(double)), *se2 = malloc(sizeof(double) * T);
+    double *g3 = malloc(sizeof(double) * T), *se3 = malloc(sizeof(double) * T);
+    const double sentinel = 12345.0;
+    for (size_t i = 0; i < T; i += 24)
+        wanted[i / 512] |= UINT64_C(1) << (i / 8 % 64);
+    for (size_t i = 0; i < T; i++)
+        se2[i] = wanted[i / 512] >> (i / 8 % 64) & 1 ? 0.0 : sentinel;
     for (int run = 0; run < 4; run++) {
         const bool parts = run == 3;   /* (per-batch primals, two halves, se_gradient asked for) */
         struct dr_reverse_options o = {
@@ -656,6 +668,25 @@ static void result_mask(const char *what, struct dr_scene *s, const struct dr_ca
         CHECK(dr_reverse_gradient(&o, target, &kept) == 0, "%s: %s", what, dr_last_error());
         CHECK(memcmp(g, g1, sizeof(double) * T) == 0 && memcmp(se, se1, sizeof(double) * T) == 0,
               "%s, run %d: with the mask the result differs from a run without", what, run);
+        for (size_t i = 0; i < T; i++)
+            se3[i] = sentinel;
+        struct dr_reverse_result sel = {.grad = g2, .se = se2, .nonzero = mask2, .se_blocks = wanted},
+                                 sel_dense = {.grad = g3, .se = se3, .se_blocks = wanted};
+        if (!parts) {   /* (se_blocks is ignored where the parts are asked for: reverse.h) */
+            CHECK(dr_reverse_gradient(&o, target, &sel) == 0 && dr_reverse_gradient(&o, target, &sel_dense) == 0,
+                  "%s: %s", what, dr_last_error());
+            int64_t wrong = 0, touched = 0;
+            for (size_t i = 0; i < T; i++) {
+                const bool want = wanted[i / 512] >> (i / 8 % 64) & 1;
+                wrong += memcmp(&g2[i], &g1[i], 8) != 0 || memcmp(&g3[i], &g1[i], 8) != 0 ||
+                         (want && (memcmp(&se2[i], &se1[i], 8) != 0 || memcmp(&se3[i], &se1[i], 8) != 0));
+                touched += !want && (se2[i] != sentinel || se3[i] != sentinel);
+            }
+            CHECK(wrong == 0 && touched == 0,
+                  "%s, run %d, se in every third block: %lld entries differ from the full run, %lld se written "
+                  "outside",
+                  what, run, (long long)wrong, (long long)touched);
+        }
         int64_t untrue = 0, marked = 0;
         for (size_t i = 0; i < T; i += 8) {
             const bool m = mask[i / 512] >> (i / 8 % 64) & 1;
@@ -673,6 +704,12 @@ static void result_mask(const char *what, struct dr_scene *s, const struct dr_ca
                (long long)marked, (long long)blocks);
     }
     dr_reverse_scratch_free(&rs);
+    free(wanted);
+    free(mask2);
+    free(g2);
+    free(se2);
+    free(g3);
+    free(se3);
     free(g);
     free(se);
     free(g1);
