@@ -571,6 +571,7 @@ struct opt_run {
     struct history hist;
     double loss;
     char ckpt[4096];
+    struct dr_checkpoint_pending pending;   /* the last checkpoint's fsync and rename, in the background */
     int it0;                           /* first iteration to run (resumed runs: > 0) */
 };
 
@@ -885,11 +886,17 @@ static int opt_iterations(const struct opt_args *a, struct opt_run *r)
         history_add(&r->hist, it, r->loss, sec, err);
         write_loss_csv(a->out_dir, &r->hist);
         opt_report(a, r, it, sec, (now - t_loop) / (it - r->it0 + 1), err);
-        bool last = it + 1 == a->iters;
-        if (((it + 1) % a->ckpt_every == 0 || last || stop_signal) &&
-            dr_checkpoint_write(r->ckpt, r->scene_path, r->ps, r->theta, r->adam, it + 1) != 0) {
-            cli_error("optimize", "%s", dr_last_error());
-            return DR_EXIT_FAILURE;
+        /* (the last, and an interrupted run's, is on disk before the run
+         * goes on; the others finish beside the next iterations) */
+        const bool last = it + 1 == a->iters, at_once = last || stop_signal;
+        if ((it + 1) % a->ckpt_every == 0 || at_once) {
+            int crc = dr_checkpoint_write_async(&r->pending, r->ckpt, r->scene_path, r->ps, r->theta, r->adam, it + 1);
+            if (crc == 0 && at_once)
+                crc = dr_checkpoint_wait(&r->pending);
+            if (crc != 0) {
+                cli_error("optimize", "%s", dr_last_error());
+                return DR_EXIT_FAILURE;
+            }
         }
         if (stop_signal) {
             if (isatty(2))
@@ -1011,6 +1018,8 @@ static int opt_finish(const struct opt_args *a, struct opt_run *r)
 
 static void opt_free(struct opt_args *a, struct opt_run *r)
 {
+    if (dr_checkpoint_wait(&r->pending) != 0)   /* (a run that failed otherwise: its last checkpoint's end) */
+        cli_error("optimize", "%s", dr_last_error());
     for (int i = 0; i < a->n_targets; i++) {
         dr_image_release(&a->targets[i].img);
         free(a->targets[i].rgb);

@@ -3,6 +3,7 @@
 #include "optimizer.h"
 
 #include <errno.h>
+#include <pthread.h>
 #include <math.h>
 #include <stdbool.h>
 #include <stdint.h>
@@ -187,16 +188,10 @@ static void write_binary(FILE *f, const struct dr_param *p, const double *theta,
     fputc('\n', f);
 }
 
-int dr_checkpoint_write(const char *path, const char *scene_path, const struct dr_param_set *ps,
-                        const double *theta, const struct dr_adam *a, int64_t iteration)
+/* The file's contents, written to f (not flushed). */
+static void write_body(FILE *f, const char *scene_path, const struct dr_param_set *ps, const double *theta,
+                       const struct dr_adam *a, int64_t iteration)
 {
-    char tmp[4096];
-    snprintf(tmp, sizeof tmp, "%s.tmp%ld", path, (long)getpid());
-    FILE *f = fopen(tmp, "w");
-    if (!f) {
-        dr_set_error("%s: cannot write checkpoint: %s", path, strerror(errno));
-        return DR_ERR_IO;
-    }
     fprintf(f, "drender-checkpoint %d\nscene %s\niteration %lld\nadam %lld %.17g %.17g %.17g\n", CHECKPOINT_VERSION,
             scene_path, (long long)iteration, (long long)a->t, a->beta1, a->beta2, a->eps);
     for (int k = 0; k < ps->n; k++) {
@@ -211,14 +206,104 @@ int dr_checkpoint_write(const char *path, const char *scene_path, const struct d
         write_doubles(f, "v", a->v + p->offset, p->size);
     }
     fputs("end\n", f);
-    bool ok = fflush(f) == 0 && fsync(fileno(f)) == 0;
-    ok = (fclose(f) == 0) && ok;
-    if (!ok || rename(tmp, path) != 0) {
+}
+
+/* The end of a write whose data f has flushed: on disk (fsync), closed,
+ * renamed over the checkpoint. 0, or DR_ERR_IO with the message in why
+ * (the temporary removed). */
+static int finish_file(FILE *f, const char *tmp, const char *path, char *why, size_t size)
+{
+    bool ok = fsync(fileno(f)) == 0;
+    int e = errno;
+    if (fclose(f) != 0 && ok)
+        ok = false, e = errno;
+    if (ok && rename(tmp, path) != 0)
+        ok = false, e = errno;
+    if (ok)
+        return 0;
+    snprintf(why, size, "%s: cannot write checkpoint: %s", path, strerror(e));
+    unlink(tmp);
+    return DR_ERR_IO;
+}
+
+/* The contents written and flushed to tmp (opened here); NULL with the
+ * error set, the temporary removed, if that fails (a full disk shows here,
+ * not in the finisher). */
+static FILE *write_flushed(const char *path, const char *tmp, const char *scene_path, const struct dr_param_set *ps,
+                           const double *theta, const struct dr_adam *a, int64_t iteration)
+{
+    FILE *f = fopen(tmp, "w");
+    if (!f) {
         dr_set_error("%s: cannot write checkpoint: %s", path, strerror(errno));
+        return NULL;
+    }
+    write_body(f, scene_path, ps, theta, a, iteration);
+    if (fflush(f) != 0 || ferror(f)) {
+        dr_set_error("%s: cannot write checkpoint: %s", path, strerror(errno ? errno : EIO));
+        fclose(f);
         unlink(tmp);
+        return NULL;
+    }
+    return f;
+}
+
+int dr_checkpoint_write(const char *path, const char *scene_path, const struct dr_param_set *ps,
+                        const double *theta, const struct dr_adam *a, int64_t iteration)
+{
+    char tmp[4096], why[4200];
+    snprintf(tmp, sizeof tmp, "%s.tmp%ld", path, (long)getpid());
+    FILE *f = write_flushed(path, tmp, scene_path, ps, theta, a, iteration);
+    if (!f)
+        return DR_ERR_IO;
+    int rc = finish_file(f, tmp, path, why, sizeof why);
+    if (rc != 0)
+        dr_set_error("%s", why);
+    return rc;
+}
+
+static void *finisher_main(void *arg)
+{
+    struct dr_checkpoint_pending *p = arg;
+    p->rc = finish_file(p->f, p->tmp, p->path, p->error, sizeof p->error);
+    return NULL;
+}
+
+int dr_checkpoint_write_async(struct dr_checkpoint_pending *p, const char *path, const char *scene_path,
+                              const struct dr_param_set *ps, const double *theta, const struct dr_adam *a,
+                              int64_t iteration)
+{
+    int rc = dr_checkpoint_wait(p);   /* (the last one renamed first: checkpoints replace in order) */
+    if (rc != 0)
+        return rc;
+    if (strlen(path) >= sizeof p->path - 32) {
+        dr_set_error("%s: cannot write checkpoint: path too long", path);
         return DR_ERR_IO;
     }
-    return 0;
+    snprintf(p->path, sizeof p->path, "%s", path);
+    snprintf(p->tmp, sizeof p->tmp, "%s.tmp%ld", path, (long)getpid());
+    p->f = write_flushed(p->path, p->tmp, scene_path, ps, theta, a, iteration);
+    if (!p->f)
+        return DR_ERR_IO;
+    p->rc = 0;
+    if (pthread_create(&p->thread, NULL, finisher_main, p) == 0) {
+        p->running = true;
+        return 0;
+    }
+    finisher_main(p);   /* (no thread: finished here) */
+    if (p->rc != 0)
+        dr_set_error("%s", p->error);
+    return p->rc;
+}
+
+int dr_checkpoint_wait(struct dr_checkpoint_pending *p)
+{
+    if (!p->running)
+        return 0;
+    pthread_join(p->thread, NULL);
+    p->running = false;
+    if (p->rc != 0)
+        dr_set_error("%s", p->error);
+    return p->rc;
 }
 
 /* The next whitespace-separated word of f into w (at most size - 1

@@ -9,6 +9,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "error.h"
@@ -528,6 +529,62 @@ static void unmarked_moments_unread(const char *path)
     dr_scene_destroy(s);
 }
 
+/* dr_checkpoint_write_async: the same file as dr_checkpoint_write once
+ * waited for; the previous checkpoint in place until then; a second write
+ * waits for the first; a rename that fails (a directory where the file
+ * goes) is reported by the wait, the temporary removed. */
+static void async_checkpoint(const char *path)
+{
+    struct dr_param_set *ps;
+    struct dr_scene *s = texture_scene(&ps, 32, 24);
+    CHECK(ps != NULL, "async: param set: %s", dr_last_error());
+    if (!ps) {
+        dr_scene_destroy(s);
+        return;
+    }
+    const size_t n = (size_t)ps->total;
+    double *theta = malloc(sizeof(double) * n);
+    dr_param_set_get(s, ps, theta);
+    struct dr_adam *a = dr_adam_create(ps, theta, 0.0);
+    char sync_path[4200], async_path[4200], dir[4200];
+    snprintf(sync_path, sizeof sync_path, "%s.sync", path);
+    snprintf(async_path, sizeof async_path, "%s.async", path);
+    snprintf(dir, sizeof dir, "%s.dir", path);
+    struct dr_checkpoint_pending pending = {0};
+    CHECK(dr_checkpoint_write(sync_path, "scene.gltf", ps, theta, a, 4) == 0 &&
+              dr_checkpoint_write_async(&pending, async_path, "scene.gltf", ps, theta, a, 2) == 0 &&
+              dr_checkpoint_write_async(&pending, async_path, "scene.gltf", ps, theta, a, 4) == 0,
+          "async: writes: %s", dr_last_error());
+    CHECK(dr_checkpoint_wait(&pending) == 0 && !pending.running, "async: wait: %s", dr_last_error());
+    FILE *fa = fopen(async_path, "rb"), *fs = fopen(sync_path, "rb");
+    bool same = fa && fs;
+    for (int ca = 0, cs = 0; same && (ca != EOF || cs != EOF);) {
+        ca = getc(fa), cs = getc(fs);
+        same = ca == cs;
+    }
+    if (fa)
+        fclose(fa);
+    if (fs)
+        fclose(fs);
+    CHECK(same, "async: the file differs from the one written at once");
+    CHECK(mkdir(dir, 0755) == 0, "async: mkdir %s", dir);
+    CHECK(dr_checkpoint_write_async(&pending, dir, "scene.gltf", ps, theta, a, 5) == 0, "async: write: %s",
+          dr_last_error());
+    CHECK(dr_checkpoint_wait(&pending) == DR_ERR_IO && strstr(dr_last_error(), "cannot write checkpoint"),
+          "async: a failed rename not reported: %s", dr_last_error());
+    char tmp[4300];
+    snprintf(tmp, sizeof tmp, "%s.tmp%ld", dir, (long)getpid());
+    CHECK(access(tmp, F_OK) != 0, "async: the temporary %s was left", tmp);
+    CHECK(dr_checkpoint_wait(&pending) == 0, "async: a second wait reports again");
+    rmdir(dir);
+    unlink(sync_path);
+    unlink(async_path);
+    dr_adam_destroy(a);
+    free(theta);
+    dr_param_set_destroy(ps);
+    dr_scene_destroy(s);
+}
+
 int main(void)
 {
     sparse_adam_step();
@@ -597,6 +654,7 @@ int main(void)
     masked_adam_steps(path, true);
     packed_checkpoint(path);
     unmarked_moments_unread(path);
+    async_checkpoint(path);
     unlink(path);
     dr_param_set_destroy(other);
     dr_adam_destroy(a);
