@@ -666,6 +666,7 @@ static int opt_load(struct opt_args *a, struct opt_run *r)
         return DR_EXIT_FAILURE;
     }
     r->adam->threads = a->g.threads;   /* (a texture's step on the workers the run asked for) */
+    r->scratch.est.many_runs = true;   /* (its gradient runs: one an iteration, estimator.h) */
     return -1;
 }
 
@@ -792,7 +793,6 @@ static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
             .problem = grad_problem(&a->g, r->scene, cam, r->ps, t->w, t->h, a->g.spp,
                                     iteration_seed(a->g.seed, it, ti, 0x47524144))};
         o.scratch = &r->scratch;
-        r->scratch.est.many_runs = true;   /* (one run an iteration: estimator.h) */
         struct dr_reverse_result res = {.grad = several ? r->gt : r->grad, .se = several ? r->se_t : r->se,
                                         .image = t->render, .nonzero = several ? r->nonzero_t : r->nonzero,
                                         .se_blocks = r->se_blocks};

@@ -238,7 +238,9 @@ static void moved_from_moments(void *ctx, int thread, int64_t begin, int64_t end
             if (i >= a->n)
                 break;
             bool zero = true;
-            for (int64_t j = i; j < i + DR_ZERO_BLOCK && j < a->n; j++)
+            if (i + DR_ZERO_BLOCK <= a->n)   /* (a whole block: its words as bits, -0 not a zero) */
+                zero = dr_block_zero(a->m + i) && dr_block_zero(a->v + i);
+            for (int64_t j = i; i + DR_ZERO_BLOCK > a->n && j < a->n; j++)
                 zero &= a->m[j] == 0.0 && !signbit(a->m[j]) && a->v[j] == 0.0 && !signbit(a->v[j]);
             bits |= (uint64_t)!zero << b;
         }
