@@ -183,6 +183,23 @@ and d["parameters"][1]["file"] == "gdir/grad-images-0.exr" and math.isfinite(d["
 and "gradient" not in d["parameters"][1]
 and "bsdf" in d["effects_differentiated"] and "textures" in d["effects_differentiated"]
 and d["vertices_shaded_8_wide"] > 0'
+    # the texture's norm is that of the gradient image written (its floats:
+    # the JSON's sum runs over the blocks the result's mask marks, cmd_grad.c);
+    # scaled to about 1 first, as --dumpdata prints nine decimals
+    if $have_oiio; then
+        python3 - "$tmp/out" gdir/grad-images-0.exr "$tmp" <<'PY' || fail "grad --json ($est): the texture's norm is not its image's"
+import json, math, subprocess, sys
+d = json.load(open(sys.argv[1]))
+want = d["parameters"][1]["norm"]
+scaled = sys.argv[3] + "/scaled.exr"
+subprocess.run(["oiiotool", sys.argv[2], "--mulc", repr(1.0 / want), "-o", scaled], check=True)
+dump = subprocess.run(["oiiotool", "--dumpdata", scaled], check=True, capture_output=True, text=True).stdout
+vals = [float(x) for line in dump.splitlines() if line.lstrip().startswith("Pixel") for x in line.split(":", 1)[1].split()]
+norm = math.sqrt(sum(v * v for v in vals)) * want
+print("texture norm", want, "from the image", norm, len(vals), "values")
+sys.exit(0 if len(vals) == 64 * 64 * 3 and abs(norm - want) <= 1e-5 * want else 1)
+PY
+    fi
 done
 # (prb's walks and the tape's steps shade the hits on the undifferentiated
 # materials eight lanes at a time; with the light'"'"'s emission a parameter,
