@@ -631,6 +631,10 @@ static int opt_load(struct opt_args *a, struct opt_run *r)
         return rc;
     if ((rc = grad_apply_sets(&a->g, r->scene)) >= 0)
         return rc;
+    if (dr_param_set_writable(r->scene, r->ps) != 0) {   /* (every step puts its values) */
+        cli_error("optimize", "%s", dr_last_error());
+        return DR_EXIT_FAILURE;
+    }
     const size_t T = (size_t)r->ps->total;
     r->theta = dr_alloc_big(sizeof(double) * T);
     r->grad = dr_alloc_big(sizeof(double) * T);

@@ -166,8 +166,8 @@ static void image_usage(const struct dr_scene *s, int image, bool *as_colour, bo
 }
 
 /* The texel array a parameter writes (NULL: out of memory). An image in
- * eight-bit storage (image.h) goes back to floats first (dr_param_set_create
- * does it for every image parameter, and says when there is no memory). */
+ * eight-bit storage (image.h) goes back to floats first (writers call
+ * dr_param_set_writable before, which says when there is no memory). */
 static float *param_texels(const struct dr_scene *s, const struct dr_param *p)
 {
     if (p->kind == DR_PARAM_ENV_MAP)
@@ -717,12 +717,6 @@ static int add_param(struct dr_param_set *set, const struct dr_scene *s, const c
                          pointer);
             return DR_ERR_ARG;
         }
-        /* its texels will change: floats again if it was kept in eight
-         * bits (a change of storage, not of the scene: the same values) */
-        if (dr_image_expand(&s->images[p.target]) != 0) {
-            dr_set_error("%s: out of memory for its texels as floats", pointer);
-            return DR_ERR_NOMEM;
-        }
     }
     p.offset = *total;
     *total += p.size;
@@ -775,6 +769,18 @@ void dr_param_set_get(const struct dr_scene *s, const struct dr_param_set *set, 
 {
     for (int i = 0; i < set->n; i++)
         dr_param_get(s, &set->params[i], values + set->params[i].offset);
+}
+
+int dr_param_set_writable(struct dr_scene *s, const struct dr_param_set *set)
+{
+    for (int i = 0; i < set->n; i++) {
+        const struct dr_param *p = &set->params[i];
+        if (p->kind == DR_PARAM_IMAGE && dr_image_expand(&s->images[p->target]) != 0) {
+            dr_set_error("%s: out of memory for its texels as floats", p->name);
+            return DR_ERR_NOMEM;
+        }
+    }
+    return 0;
 }
 
 void dr_param_set_put(struct dr_scene *s, const struct dr_param_set *set, const double *values)

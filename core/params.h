@@ -124,9 +124,17 @@ struct dr_param_set {
 struct dr_param_set *dr_param_set_create(const struct dr_scene *scene, const char *const *pointers, int n);
 void dr_param_set_destroy(struct dr_param_set *set);
 
-/* All values of the set, concatenated (total scalars) / written back. */
+/* All values of the set, concatenated (total scalars) / written back. A
+ * texture kept in eight bits (image.h) is read in place; writing it needs
+ * its floats: call dr_param_set_writable once before the first put. */
 void dr_param_set_get(const struct dr_scene *scene, const struct dr_param_set *set, double *values);
 void dr_param_set_put(struct dr_scene *scene, const struct dr_param_set *set, const double *values);
+/* Makes the set's textures writable: those kept in eight bits go back to
+ * floats (the same values; a change of storage, not of the scene). Only
+ * callers that put values pay for it: `grad` reads a texture's eight bits
+ * (a 2k colour texture: 12 MB, not 50 of floats plus the faults that make
+ * them). 0, or DR_ERR_NOMEM with the parameter named. */
+int dr_param_set_writable(struct dr_scene *scene, const struct dr_param_set *set);
 /* The same with a big parameter's values (a texture's texels) converted on
  * up to `threads` workers (dr_parallel_elements; the same floats), writing
  * only the ones that changed (an optimisation step moves a preview's

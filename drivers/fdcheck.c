@@ -240,6 +240,8 @@ int dr_fdcheck(struct dr_scene *scene, const struct dr_camera *camera, const str
         rc = DR_ERR_NOMEM;
         goto done;
     }
+    if ((rc = dr_param_set_writable(scene, ps)) != 0)   /* (its steps put values) */
+        goto done;
     dr_param_set_get(scene, ps, r.theta0);
     restore = true;
     for (int k = 0; k < ps->n; k++) {
@@ -322,6 +324,8 @@ int dr_fd_image(struct dr_scene *scene, const struct dr_camera *camera, const st
         rc = DR_ERR_NOMEM;
         goto out;
     }
+    if ((rc = dr_param_set_writable(scene, ps)) != 0)   /* (its steps put values) */
+        goto out;
     dr_param_set_get(scene, ps, r.theta0);
     for (int k = 0; k < ps->n; k++) {
         double lo, hi;
