@@ -6,6 +6,7 @@
 
 #include "geometry.h"
 #include "image.h"
+#include "parallel.h"
 
 struct dr_emission_grid {
     int w, h;          /* the image's texels */
@@ -67,6 +68,22 @@ static void add_row(struct dr_emission_grid *g, const struct texel_reader *r, in
     }
 }
 
+/* Rows of cells [begin, end): their texel rows added (add_row). */
+struct cell_rows {
+    struct dr_emission_grid *g;
+    struct texel_reader r;
+};
+
+static void add_cell_rows(void *ctx, int thread, int64_t begin, int64_t end)
+{
+    (void)thread;
+    const struct cell_rows *x = ctx;
+    const int s = x->g->s, h = x->g->h;
+    for (int64_t cy = begin; cy < end; cy++)
+        for (int y = (int)cy * s; y < (int)(cy + 1) * s && y < h; y++)
+            add_row(x->g, &x->r, y);
+}
+
 struct dr_emission_grid *dr_emission_grid_create(const struct dr_image *img)
 {
     struct dr_emission_grid *g = calloc(1, sizeof *g);
@@ -83,10 +100,14 @@ struct dr_emission_grid *dr_emission_grid_create(const struct dr_image *img)
         dr_emission_grid_destroy(g);
         return NULL;
     }
-    /* the cells' own sums at [cy + 1][cx + 1], then the running sums */
-    const struct texel_reader r = texel_reader(img);
-    for (int y = 0; y < g->h; y++)
-        add_row(g, &r, y);
+    /* the cells' own sums at [cy + 1][cx + 1], a row of cells per task
+     * (each writes its own row of the tables, adding its texel rows in
+     * order: the same sums on any number of workers; a 2k texture's 4 M
+     * texels were 20 ms of a textured scene's start on one), then the
+     * running sums */
+    struct cell_rows x = {g, texel_reader(img)};
+    if (dr_parallel_for(g->gh, 1, 0, add_cell_rows, &x) != 0)
+        add_cell_rows(&x, 0, 0, g->gh);
     for (size_t cy = 1; cy <= (size_t)g->gh; cy++)
         for (size_t cx = 1; cx <= (size_t)g->gw; cx++) {
             const size_t at = cy * stride + cx;
