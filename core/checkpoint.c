@@ -3,8 +3,9 @@
 #include "optimizer.h"
 
 #include <errno.h>
-#include <pthread.h>
 #include <math.h>
+#include <pthread.h>
+#include <signal.h>
 #include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -343,7 +344,15 @@ int dr_checkpoint_write_async(struct dr_checkpoint_pending *p, const char *path,
     if (!p->f)
         return DR_ERR_IO;
     p->rc = 0;
-    if (pthread_create(&p->thread, NULL, finisher_main, p) == 0) {
+    /* the finisher blocks every signal (it inherits the mask it is created
+     * with): SIGINT and SIGTERM go to the threads that stop the run, and
+     * its fsync and close are never interrupted */
+    sigset_t all, old;
+    sigfillset(&all);
+    pthread_sigmask(SIG_BLOCK, &all, &old);
+    const bool started = pthread_create(&p->thread, NULL, finisher_main, p) == 0;
+    pthread_sigmask(SIG_SETMASK, &old, NULL);
+    if (started) {
         p->running = true;
         return 0;
     }
