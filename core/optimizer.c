@@ -105,7 +105,7 @@ static inline __attribute__((always_inline)) bool adam_entry(const struct dr_ada
                                                              bool fresh)
 {
     const double b1 = a->beta1, b2 = a->beta2, eps = a->eps;
-    double g = grad[i];
+    double g = grad ? grad[i] : 0.0;   /* (NULL: a block the gradient's mask leaves +0, not read) */
     const bool finite = isfinite(g);
     g = finite ? g : 0.0;
     m[i] = b1 * (fresh ? 0.0 : m[i]) + (1.0 - b1) * g;
@@ -181,25 +181,37 @@ static inline __attribute__((always_inline)) int64_t adam_run(const struct dr_ad
     return bad;
 }
 
-/* adam_run of [i, j) (global entries), each stretch of blocks the moments'
- * mask marks as it is, each other stretch fresh: their m and v are +0
- * (the mask is true: dr_adam_step_masked). */
+/* What a block of a masked step reads: the moments' mask says whether
+ * its m and v may not be +0 (else they are written unread, adam_entry's
+ * fresh), the gradient's whether its gradient may not be +0 (else it is
+ * not read either: once a third of a texture has moved, most stepped
+ * blocks only decay, and a stream fewer is a quarter less to read). */
+static inline int block_reads(const struct adam_step *x, int64_t b)
+{
+    return dr_mask_test(x->a->moved, b) | dr_mask_test(x->grad_mask, b) << 1;
+}
+
+/* adam_run of [i, j) (global entries, blocks either mask marks), in
+ * stretches of blocks that read the same (block_reads). */
 static int64_t adam_run_masked(const struct adam_step *x, int64_t i, int64_t j)
 {
     const struct dr_adam *a = x->a;
     const int k = x->k;
+    const double lr = a->lr[k], lo = a->lo[k], hi = a->hi[k];
     int64_t bad = 0;
     for (int64_t b = i; b < j;) {
-        const bool held = dr_mask_test(a->moved, b);
+        const int reads = block_reads(x, b);
         int64_t c = dr_block_end(b, j);
-        while (c < j && dr_mask_test(a->moved, c) == held)
+        while (c < j && block_reads(x, c) == reads)
             c = dr_block_end(c, j);
-        if (held)
-            bad += adam_run(a, c - b, a->m + b, a->v + b, x->theta + b, x->grad + b, a->lr[k], a->lo[k], a->hi[k],
-                            x->c1, x->c2, false);
+        double *m = a->m + b, *v = a->v + b, *theta = x->theta + b;
+        const double *g = x->grad + b;
+        if (reads == 3)   /* (each case's flags constants: a loop of its own) */
+            bad += adam_run(a, c - b, m, v, theta, g, lr, lo, hi, x->c1, x->c2, false);
+        else if (reads == 1)
+            bad += adam_run(a, c - b, m, v, theta, NULL, lr, lo, hi, x->c1, x->c2, false);
         else
-            bad += adam_run(a, c - b, a->m + b, a->v + b, x->theta + b, x->grad + b, a->lr[k], a->lo[k], a->hi[k],
-                            x->c1, x->c2, true);
+            bad += adam_run(a, c - b, m, v, theta, g, lr, lo, hi, x->c1, x->c2, true);
         b = c;
     }
     return bad;

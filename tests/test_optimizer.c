@@ -504,6 +504,19 @@ static void unmarked_moments_unread(const char *path)
     CHECK(memcmp(theta, ref, sizeof(double) * n) == 0 && memcmp(a->m, b->m, sizeof(double) * n) == 0 &&
               memcmp(a->v, b->v, sizeof(double) * n) == 0,
           "a masked step read m and v of a block the moments' mask leaves clear");
+    /* a second step whose gradient's mask leaves that block clear: its
+     * moments decay, and the gradient there (planted: the mask says +0) is
+     * not read either */
+    memset(mask, 0, sizeof(uint64_t) * words);
+    for (size_t i = stepped; i < stepped + 8; i++)
+        grad[i] = 5.0;
+    double *zeros = calloc(n, sizeof(double));
+    CHECK(dr_adam_step_masked(a, theta, grad, mask) == 0 && dr_adam_step(b, ref, zeros) == 0,
+          "unread moments: a second step failed");
+    CHECK(memcmp(theta, ref, sizeof(double) * n) == 0 && memcmp(a->m, b->m, sizeof(double) * n) == 0 &&
+              memcmp(a->v, b->v, sizeof(double) * n) == 0,
+          "a masked step read the gradient of a block its mask leaves clear");
+    free(zeros);
     for (size_t i = planted; i < planted + 8; i++)
         a->m[i] = a->v[i] = 7.0;
     struct dr_adam *r = dr_adam_create(ps, theta, 0.0);
