@@ -890,12 +890,13 @@ static int opt_iterations(const struct opt_args *a, struct opt_run *r)
         history_add(&r->hist, it, r->loss, sec, err);
         write_loss_csv(a->out_dir, &r->hist);
         opt_report(a, r, it, sec, (now - t_loop) / (it - r->it0 + 1), err);
-        /* (the last, and an interrupted run's, is on disk before the run
-         * goes on; the others finish beside the next iterations) */
-        const bool last = it + 1 == a->iters, at_once = last || stop_signal;
-        if ((it + 1) % a->ckpt_every == 0 || at_once) {
+        /* (an interrupted run's is on disk before it stops; the others
+         * finish beside the next iterations, the last beside the final
+         * pictures, opt_finish) */
+        const bool last = it + 1 == a->iters;
+        if ((it + 1) % a->ckpt_every == 0 || last || stop_signal) {
             int crc = dr_checkpoint_write_async(&r->pending, r->ckpt, r->scene_path, r->ps, r->theta, r->adam, it + 1);
-            if (crc == 0 && at_once)
+            if (crc == 0 && stop_signal)
                 crc = dr_checkpoint_wait(&r->pending);
             if (crc != 0) {
                 cli_error("optimize", "%s", dr_last_error());
@@ -1011,6 +1012,10 @@ static int opt_finish(const struct opt_args *a, struct opt_run *r)
     if (rc != DR_EXIT_OK)
         return rc;
     if (a->output && dr_gltf_write(r->scene, r->ps, a->output) != 0) {
+        cli_error("optimize", "%s", dr_last_error());
+        return DR_EXIT_FAILURE;
+    }
+    if (dr_checkpoint_wait(&r->pending) != 0) {   /* (the last checkpoint, on disk before the summary) */
         cli_error("optimize", "%s", dr_last_error());
         return DR_EXIT_FAILURE;
     }
