@@ -185,7 +185,17 @@ if [[ -f $NTT ]]; then
     CK_BYTES=$(stat -c %s "$TMP/ntt-opt/checkpoint.txt" 2>/dev/null || echo 0)
     printf '   grad: peak %.0f MiB, gradient %.2f s, its image written in %.2f s; optimize: %.2f s per iteration (checkpoint included), peak %.0f MiB, checkpoint %.0f MiB\n' \
         "$(calc "$G_PEAK / 1048576")" "$G_T" "$G_W" "$(calc "$O_T / 5")" "$(calc "$O_PEAK / 1048576")" "$(calc "$CK_BYTES / 1048576")"
-    TEX_JSON="{\"grad_peak_bytes\": $G_PEAK, \"grad_seconds\": $G_T, \"grad_write_seconds\": $G_W, \"optimize_seconds_per_iteration\": $(calc "$O_T / 5" %.4f), \"optimize_peak_bytes\": $O_PEAK, \"checkpoint_bytes\": $CK_BYTES}"
+    # a fit of 20 iterations with the default checkpoints: its first
+    # iteration (fresh pages), the median of the others, and all of it
+    W0=$(date +%s.%N)
+    "$DR" optimize "$NTT" --sampler independent --target "$TMP/ntt.exr" --param /images/0 --spp 16 --threads 2 --iters 20 \
+        --out-dir "$TMP/ntt-opt20" --json 2>/dev/null >"$TMP/ntt-opt20.json"
+    O20_WALL=$(calc "$(date +%s.%N) - $W0" %.3f)
+    ITER_S=($(grep '^{"iteration"' "$TMP/ntt-opt20.json" | sed 's/.*, "seconds": \([^,]*\),.*/\1/'))
+    O20_FIRST=${ITER_S[0]:-0} O20_MED=$(median "${ITER_S[@]:1}")
+    printf '   optimize, 20 iterations (checkpoints every 10): the first %.3f s, the others %.4f s each (median), %.2f s in all\n' \
+        "$O20_FIRST" "$O20_MED" "$O20_WALL"
+    TEX_JSON="{\"grad_peak_bytes\": $G_PEAK, \"grad_seconds\": $G_T, \"grad_write_seconds\": $G_W, \"optimize_seconds_per_iteration\": $(calc "$O_T / 5" %.4f), \"optimize_peak_bytes\": $O_PEAK, \"checkpoint_bytes\": $CK_BYTES, \"optimize20_first_seconds\": $O20_FIRST, \"optimize20_median_seconds\": $O20_MED, \"optimize20_wall_seconds\": $O20_WALL}"
 fi
 cat >"$OUT/grad-results.json" <<JSON
 {"primal_seconds": $T_PRIMAL, "prb_seconds": ${T[prb]}, "tape_seconds": ${T[tape]},
