@@ -341,15 +341,29 @@ static void consume_threads(void *ctx, int thread, int64_t begin, int64_t end)
 }
 
 #define PIECE_WORDS (SUM_PIECE / DR_MASK_SPAN)
-/* all[w] = the threads' marks of mask words w0 + w, w < words: the blocks
- * of a piece any thread added to. */
-static void piece_marks(const struct dr_est_accum *a, int64_t w0, int words, uint64_t all[PIECE_WORDS])
+/* The piece of [i0, end) a masked sum takes next: its length in *n, and in
+ * all[w] the threads' marks of its mask words (the blocks of the piece any
+ * thread added to; the piece's first word is i0 / DR_MASK_SPAN). Returns
+ * how many words it has. */
+static int piece_marks(const struct dr_est_accum *a, int64_t i0, int64_t end, int64_t *n,
+                       uint64_t all[PIECE_WORDS])
 {
+    *n = end - i0 < SUM_PIECE ? end - i0 : SUM_PIECE;
+    const int64_t w0 = i0 / DR_MASK_SPAN;
+    const int words = (int)dr_mask_words(*n);
     for (int w = 0; w < words; w++) {
         all[w] = 0;
         for (int t = 0; t < a->threads; t++)
             all[w] |= a->touched[t][w0 + w];
     }
+    return words;
+}
+
+/* The threads' marks of those words cleared (their blocks were read). */
+static void clear_piece_marks(const struct dr_est_accum *a, int64_t i0, int words)
+{
+    for (int t = 0; t < a->threads; t++)
+        memset(&a->touched[t][i0 / DR_MASK_SPAN], 0, sizeof(uint64_t) * (size_t)words);
 }
 
 /* consume_threads where the threads' vectors have block masks (accum_init):
@@ -364,10 +378,10 @@ static void consume_marked(void *ctx, int thread, int64_t begin, int64_t end)
     const struct dr_est_accum *a = ctx;
     double piece[SUM_PIECE];
     for (int64_t i0 = begin; i0 < end; i0 += SUM_PIECE) {
-        const int64_t n = end - i0 < SUM_PIECE ? end - i0 : SUM_PIECE, w0 = i0 / DR_MASK_SPAN;
-        const int words = (int)dr_mask_words(n);
+        int64_t n;
         uint64_t all[PIECE_WORDS];
-        piece_marks(a, w0, words, all);
+        const int words = piece_marks(a, i0, end, &n, all);
+        const int64_t w0 = i0 / DR_MASK_SPAN;
         for (int w = 0; w < words; w++)
             for (uint64_t bits = all[w]; bits; bits &= bits - 1) {
                 const int64_t k = (int64_t)w * DR_MASK_SPAN + __builtin_ctzll(bits) * DR_ZERO_BLOCK;
@@ -377,8 +391,7 @@ static void consume_marked(void *ctx, int thread, int64_t begin, int64_t end)
                     if (a->touched[t][w0 + w] >> (k / DR_ZERO_BLOCK % 64) & 1)
                         memset(a->grad[t] + i0 + k, 0, sizeof(double) * (size_t)m);
             }
-        for (int t = 0; t < a->threads; t++)
-            memset(&a->touched[t][w0], 0, sizeof(uint64_t) * (size_t)words);
+        clear_piece_marks(a, i0, words);
         a->consumer->take(a->consumer->ctx, i0, i0 + n, piece, all);
     }
 }
@@ -392,12 +405,10 @@ static void consume_exact_marked(void *ctx, int thread, int64_t begin, int64_t e
     const struct dr_est_accum *a = ctx;
     double piece[SUM_PIECE];
     for (int64_t i0 = begin; i0 < end; i0 += SUM_PIECE) {
-        const int64_t n = end - i0 < SUM_PIECE ? end - i0 : SUM_PIECE, w0 = i0 / DR_MASK_SPAN;
-        const int words = (int)dr_mask_words(n);
+        int64_t n;
         uint64_t all[PIECE_WORDS];
-        piece_marks(a, w0, words, all);
-        for (int t = 0; t < a->threads; t++)
-            memset(&a->touched[t][w0], 0, sizeof(uint64_t) * (size_t)words);
+        const int words = piece_marks(a, i0, end, &n, all);
+        clear_piece_marks(a, i0, words);
         for (int64_t k = dr_mask_next(all, NULL, 0, n); k < n;) {
             const int64_t j = dr_mask_run_end(all, NULL, k, n);
             dr_exact_sum_take(a->exact, i0 + k, i0 + j, piece + k);
