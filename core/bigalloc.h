@@ -67,9 +67,10 @@ static inline void *dr_calloc_big(size_t n, size_t size)
  * preview's texture gradient): plain calloc, whose fresh pages the kernel
  * maps as they are first written, 4 KiB at a time, so that only those
  * become resident (a 2k texture's gradient at 64 x 64 on two threads:
- * `grad`'s peak 596 -> 496 MiB); else huge pages, zeroed now
- * (dr_calloc_big), cheaper for a vector written whole, and for one passed
- * over sparsely many times (4 KiB pages: a TLB miss a block). */
+ * `grad`'s peak 596 -> 496 MiB); else huge pages (dr_calloc_big: zeroed
+ * now, or from 32 MiB on by the kernel where first written, 2 MiB at a
+ * time), cheaper for a vector written whole, and for one passed over
+ * sparsely many times (4 KiB pages: a TLB miss a block). */
 static inline double *dr_big_vector_keep(double **buf, int64_t *len, int64_t n, bool sparse, bool *kept)
 {
     *kept = *buf && *len == n;

@@ -146,10 +146,10 @@ struct dr_est_scratch {
     bool exact_dirty;               /* exact may hold non-zero entries (false: a consumer's run read and
                                        cleared it as it went) */
     bool many_runs;                 /* set by a caller that runs the problem many times (optimize): the
-                                       masked runs' vectors in huge pages too, resident whole but passed
-                                       over sparsely run after run without a TLB miss a block (with 4 KiB
-                                       pages optimize's iterations were 10-20 % slower); else resident
-                                       only where written (bigalloc.h) */
+                                       masked runs' vectors in huge pages too, resident in 2 MiB pages
+                                       where written but passed over sparsely run after run without a
+                                       TLB miss a block (with 4 KiB pages optimize's iterations were
+                                       10-20 % slower); else in 4 KiB pages (bigalloc.h) */
 };
 void dr_est_scratch_free(struct dr_est_scratch *s);
 
