@@ -10,6 +10,7 @@
 
 #include "cli.h"
 #include "clock.h"
+#include "path.h"   /* dr_stage_seconds */
 
 #ifndef DR_DATADIR
 #define DR_DATADIR "/usr/local/share/drender"
@@ -201,6 +202,25 @@ void json_number(FILE *f, double v)
         fprintf(f, "%.17g", v);
     else
         fputs("null", f);
+}
+
+/* The array tracer's time by stage (path.h's dr_stage_seconds), CPU seconds
+ * summed over the threads; null where it did not run (media scenes' paths
+ * that may meet a medium, and the scalar walker, are not timed by stage). */
+void json_stage_seconds(FILE *f, const struct dr_stage_seconds *c)
+{
+    fprintf(f, ", \"stage_cpu_seconds\": ");
+    if (!(c->start + c->queries + c->ends + c->shade + c->advance > 0.0)) {
+        fprintf(f, "null");
+        return;
+    }
+    const struct { const char *name; double v; } stage[] = {{"camera", c->start}, {"ray_queries", c->queries},
+        {"escaped", c->ends}, {"shading", c->shade}, {"continuation", c->advance}};
+    for (size_t i = 0; i < sizeof stage / sizeof *stage; i++) {
+        fprintf(f, "%s\"%s\": ", i ? ", " : "{", stage[i].name);
+        json_number(f, stage[i].v);
+    }
+    fputc('}', f);
 }
 
 bool cli_parse_double(const char *cmd, const char *opt, const char *text, double min_exclusive, double *out)

@@ -122,6 +122,7 @@ static void print_json(const struct render_args *a, const char *scene_path, cons
     json_number(f, st->seconds > 0 ? total / st->seconds : 0.0);
     /* path vertices shaded eight lanes at a time (path_simd.h), of all hits */
     fprintf(f, "}, \"vertices_shaded_8_wide\": %llu", (unsigned long long)st->rays.simd_vertices);
+    json_stage_seconds(f, &st->rays.cpu);
     fprintf(f, ", \"invalid_samples\": %llu, \"peak_memory_bytes\": %llu, \"effects\": ",
             (unsigned long long)st->invalid_samples, (unsigned long long)cli_peak_rss_bytes());
     json_name_list(f, fx);

@@ -680,6 +680,7 @@ void grad_json_run(FILE *f, const struct grad_totals *t)
             (unsigned long long)(r->camera + r->extension + r->shadow));
     fprintf(f, ", \"vertices_shaded_8_wide\": %llu, \"replayed_vertices_shaded_8_wide\": %llu",
             (unsigned long long)r->simd_vertices, (unsigned long long)r->simd_replayed);
+    json_stage_seconds(f, &r->cpu);
     char stages[256];
     dr_path_stages_describe(t->stages, stages, sizeof stages);
     fprintf(f, ", \"invalid_samples\": %llu, \"stages\": ", (unsigned long long)t->invalid);

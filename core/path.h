@@ -44,10 +44,25 @@
 #include "sampler.h"
 #include "scene.h"
 
+/* Where the array tracer's time went (wave_soa.c), in CPU seconds summed
+ * over its threads, by the stages of its loop: a clock read between stages,
+ * a few per bounce of a wave of hundreds of paths. 0 where it did not run. */
+struct dr_stage_seconds {
+    double start;     /* new paths: samplers and camera rays */
+    double queries;   /* ray queries: the closest hits and the shadow rays (Embree, and
+                         accel.c's packets around it) */
+    double ends;      /* paths whose rays left the scene ended, the others closed up */
+    double shade;     /* the hit stage: hit points, materials, emission seen, light samples, the
+                         vertices' random numbers (but for the shadow rays' queries) */
+    double advance;   /* next-event estimates, continuations, roulette; ended paths written
+                         out, the others closed up */
+};
+
 struct dr_ray_counts {
     uint64_t camera, extension, shadow;
     uint64_t simd_vertices;   /* path vertices shaded eight lanes at a time (path_simd.h) */
     uint64_t simd_replayed;   /* ... of them in replays (prb's second walks of its paths) */
+    struct dr_stage_seconds cpu;
 };
 
 /* *sum += *x, count by count (a run's threads summed). */
@@ -58,6 +73,11 @@ static inline void dr_ray_counts_add(struct dr_ray_counts *sum, const struct dr_
     sum->shadow += x->shadow;
     sum->simd_vertices += x->simd_vertices;
     sum->simd_replayed += x->simd_replayed;
+    sum->cpu.start += x->cpu.start;
+    sum->cpu.queries += x->cpu.queries;
+    sum->cpu.ends += x->cpu.ends;
+    sum->cpu.shade += x->cpu.shade;
+    sum->cpu.advance += x->cpu.advance;
 }
 
 /* Dimensions a path uses: 2 for the pixel position, then a fixed block per

@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "accel.h"
+#include "clock.h"
 #include "coverage.h"
 #include "material.h"
 #include "medium_scene.h"
@@ -794,8 +795,11 @@ static void shade(struct dr_wave_soa *w, const struct dr_scene *s, const struct 
     struct dr_accel_rays r = {.n = n_shadow, .ox = w->sox, .oy = w->soy, .oz = w->soz,
                               .dx = w->sdx, .dy = w->sdy, .dz = w->sdz, .tmax = w->stmax,
                               .key = keyed_shadows(s) ? w->skey : NULL};
-    if (n_shadow > 0)
+    if (n_shadow > 0) {
+        const double t0 = dr_clock_seconds();
         dr_accel_occluded_many(s->accel, &r, w->socc);
+        counts->cpu.queries += dr_clock_seconds() - t0;   /* (taken off the shading below: run) */
+    }
     for (int j = 0; j < n_shadow; j++) {
         int k = w->sowner[j];
         if (k >= SLOTS) {
@@ -1011,11 +1015,17 @@ static void run(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr
     int64_t next = 0;
     w->structured = false;
     w->media = !w->out && (opts->stages & DR_STAGE_MEDIA);   /* (dr_wave_soa_applies: a radiance run) */
+    struct dr_stage_seconds *cpu = &counts->cpu;
+    double t = dr_clock_seconds(), t_next;   /* (the stages' times: path.h) */
+#define STAGE(field) (t_next = dr_clock_seconds(), cpu->field += t_next - t, t = t_next)
     while (next < n || n_live > 0) {
         int first_new = n_live;
         n_live = start_paths(w, n_live, &next, n, start, start8, ctx);
-        trace(w, s, n_live, first_new, prefetch, counts);
+        STAGE(start);
+        trace(w, s, n_live, first_new, prefetch, counts);   /* (its queries, and a pass over the slots) */
+        STAGE(queries);
         n_live = end_escaped(w, s, opts, n_live, prefetch, L, counts);
+        STAGE(ends);
         if (n_live == 0 && w->n_scalar == 0)
             continue;
         if (n_live > 0)
@@ -1025,9 +1035,14 @@ static void run(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr
         w->ahead_valid = false;
         if (picks_ahead && n_live > 0)
             pick_ahead(w, s, n_live);
+        const double shadows = cpu->queries;
         shade(w, s, opts, n_live, prefetch, counts);
+        t += cpu->queries - shadows;   /* (counted as queries there) */
+        STAGE(shade);
         n_live = advance(w, s, opts, n_live, L);
+        STAGE(advance);
     }
+#undef STAGE
 }
 
 void dr_wave_soa_radiance(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,

@@ -107,6 +107,13 @@ assert isinstance(doc["effects"], list) and all(isinstance(e, str) for e in doc[
 # the bundled box's untextured hits are shaded eight lanes at a time (path_simd.h)
 hits = doc["rays"]["camera"] + doc["rays"]["extension"]
 assert 0 < doc["vertices_shaded_8_wide"] <= hits, (doc["vertices_shaded_8_wide"], hits)
+# the array tracer's time by stage: every stage, none negative, ray queries
+# among them, and no more CPU time than the render's threads had
+st = doc["stage_cpu_seconds"]
+assert sorted(st) == ["camera", "continuation", "escaped", "ray_queries", "shading"], st
+assert all(isinstance(v, (int, float)) and v >= 0 for v in st.values()), st
+assert st["ray_queries"] > 0 and st["shading"] > 0, st
+assert sum(st.values()) <= doc["threads"] * doc["time"]["render"] + 1e-3, (st, doc["threads"], doc["time"])
 EOF
     # ... with the Sobol sampler too (its draws taken lane by lane inside the eight-lane stages)
     run render --res 16x16 --spp 3 --json --sampler sobol -o j2.exr
