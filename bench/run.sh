@@ -303,7 +303,7 @@ if [[ -f $PEER ]]; then
     # drender's own split of the last timed run (render --json's
     # stage_cpu_seconds: CPU seconds by stage of the array tracer's loop),
     # as shares of the CPU time the render had (threads x time.render)
-    thread_s=$(calc "2 * $R_TIME")
+    thread_s=$(calc "$(json_num "$R_JSON" threads) * $R_TIME")
     split_line=() split_json=() split_sum=0
     for st in ray_queries shading continuation escaped camera; do
         v=$(json_num "$R_JSON" "$st" stage_cpu_seconds)

@@ -205,8 +205,8 @@ void json_number(FILE *f, double v)
 }
 
 /* The array tracer's time by stage (path.h's dr_stage_seconds), CPU seconds
- * summed over the threads; null where it did not run (media scenes' paths
- * that may meet a medium, and the scalar walker, are not timed by stage). */
+ * summed over the threads; null where it did not run (a scene with a global
+ * medium: every path walks one at a time, untimed by stage). */
 void json_stage_seconds(FILE *f, const struct dr_stage_seconds *c)
 {
     fprintf(f, ", \"stage_cpu_seconds\": ");

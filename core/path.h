@@ -50,7 +50,8 @@
 struct dr_stage_seconds {
     double start;     /* new paths: samplers and camera rays */
     double queries;   /* ray queries: the closest hits and the shadow rays (Embree, and
-                         accel.c's packets around it) */
+                         accel.c's packets around it; in prb's replays, the logged answers
+                         read back) */
     double ends;      /* paths whose rays left the scene ended, the others closed up */
     double shade;     /* the hit stage: hit points, materials, emission seen, light samples, the
                          vertices' random numbers (but for the shadow rays' queries) */
