@@ -52,8 +52,9 @@ void cmd_render_usage(FILE *out)
             "                      pixel X,Y; W x H pixels): the same pixels, bit for bit,\n"
             "                      as the full render's; the image written is W x H\n"
             GRAD_IGNORE_UNSUPPORTED_HELP
-            "      --json          print a summary object on stdout (timings, rays,\n"
-            "                      peak memory, memory estimate, effects simulated)\n"
+            "      --json          print a summary object on stdout (timings, CPU time by\n"
+            "                      stage, rays, peak memory, memory estimate, effects\n"
+            "                      simulated)\n"
             "  -h, --help          show this help\n");
     grad_lighting_usage(out);
 }
