@@ -39,14 +39,14 @@ static void sampling_list(const struct dr_estimator_ops *e, char *buf, size_t si
 }
 
 /* "prb (detached), tape (detached)": what the registry offers right now. */
-static void available_pairs(char *buf, size_t size)
+static void available_pairs(char *buf, size_t size, const char *sep)
 {
     buf[0] = '\0';
     for (int i = 0; dr_estimators[i]; i++) {
         char modes[128];
         sampling_list(dr_estimators[i], modes, sizeof modes);
         size_t len = strlen(buf);
-        snprintf(buf + len, size - len, "%s%s (%s)", i ? ", " : "", dr_estimators[i]->name, modes);
+        snprintf(buf + len, size - len, "%s%s (%s)", i ? sep : "", dr_estimators[i]->name, modes);
     }
 }
 
@@ -54,7 +54,7 @@ static void available_pairs(char *buf, size_t size)
 void cmd_compare_usage(FILE *out)
 {
     char pairs[512];
-    available_pairs(pairs, sizeof pairs);
+    available_pairs(pairs, sizeof pairs, ",\n                      ");   /* (one estimator a line) */
     fprintf(out,
             "usage: drender compare [SCENE] --param P [--param P ...] -o DIR [options]\n"
             "\n"
@@ -109,7 +109,8 @@ void cmd_compare_usage(FILE *out)
             "      --res WxH       image size (default: the target's, else %dx%d)\n"
             "      --rr-depth D    Russian roulette from this many segments on (default: 5)\n"
             "      --camera N      which camera of the file (default: 0)\n"
-            "      --seed S        random seed (default: 0); the same seed gives the same table\n"
+            "      --seed S        random seed (default: 0); the same seed gives the same\n"
+            "                      table\n"
             "      --threads T     worker threads (default: one per CPU)\n"
             "      --filter F      pixel filter: box (default), tent or gaussian[:STDDEV]\n"
             "      --crop X,Y,W,H  only this rectangle of the --res frame is rendered and\n"
@@ -173,7 +174,7 @@ static int one_estimator(struct cmp_args *a, const char *name)
     const struct dr_estimator_ops *e = dr_estimator_find(name);
     if (!e) {
         char pairs[512];
-        available_pairs(pairs, sizeof pairs);
+        available_pairs(pairs, sizeof pairs, ", ");
         cli_error("compare", "--estimators: unknown estimator '%s' (available: %s)", name, pairs);
         return DR_EXIT_USAGE;
     }
@@ -481,7 +482,7 @@ static int build_combos(const struct cmp_args *a, struct cmp_run *r)
         }
     if (r->n_combos == 0) {
         char pairs[512];
-        available_pairs(pairs, sizeof pairs);
+        available_pairs(pairs, sizeof pairs, ", ");
         cli_error("compare", "no estimator listed supports a sampling mode listed (available: %s)", pairs);
         return DR_EXIT_USAGE;
     }

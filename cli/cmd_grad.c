@@ -72,10 +72,11 @@ void cmd_grad_usage(FILE *out)
             "                      per pixel, each with its own primal (default: 4, at least\n"
             "                      2); the standard error is their spread, primal noise\n"
             "                      included\n"
-            "      --primal M      reverse mode: where a batch's primal (the image the loss is\n"
-            "                      taken at) comes from: cross (default: from the gradient's own\n"
-            "                      samples, each weighted at the mean of its pixel's other\n"
-            "                      samples: unbiased, no extra render) or separate\n"
+            "      --primal M      reverse mode: where a batch's primal (the image the loss\n"
+            "                      is taken at) comes from: cross (default: from the\n"
+            "                      gradient's own samples, each weighted at the mean of its\n"
+            "                      pixel's other samples: unbiased, no extra render) or\n"
+            "                      separate\n"
             "                      (a render of its own; --json then also splits the standard\n"
             "                      error into gradient-sample and primal parts). Cross needs\n"
             "                      2+ samples per batch and the independent or sobol sampler\n"
@@ -119,7 +120,8 @@ void cmd_grad_usage(FILE *out)
             "                      sweep reads back from the cache); bounds the tape's memory\n");
     /* a second literal: one would pass the 4095 characters ISO C guarantees */
     fprintf(out, GRAD_IGNORE_UNSUPPORTED_HELP
-            "      --json          print a summary object on stdout (memory estimate included)\n"
+            "      --json          print a summary object on stdout (memory estimate and CPU\n"
+            "                      time by stage included)\n"
             "  -h, --help          show this help\n");
     grad_lighting_usage(out);
 }

@@ -15,8 +15,9 @@
 void cmd_params_usage(FILE *out)
 {
     fprintf(out,
-            "usage: drender params [SCENE] [--json] [--env FILE|COLOR[,STRENGTH]] [--no-default-light]\n"
-            "                      [--light-units U] [--ignore-unsupported]\n"
+            "usage: drender params [SCENE] [--json] [--env FILE|COLOR[,STRENGTH]]\n"
+            "                      [--no-default-light] [--light-units U]\n"
+            "                      [--ignore-unsupported]\n"
             "\n"
             "Lists every differentiable parameter of SCENE (.gltf or .glb; default: the\n"
             "bundled Cornell box): its name (a JSON pointer into the glTF document, as\n"

@@ -329,15 +329,16 @@ void grad_lighting_usage(FILE *out)
     fprintf(out,
             "\nlighting:\n"
             "      --env FILE|COLOR[,STRENGTH]\n"
-            "                      set the environment: an equirectangular image (.exr, .hdr,\n"
-            "                      ...) or a colour R,G,B or GREY, times STRENGTH (default 1);\n"
-            "                      replaces the file's DR_environment\n"
+            "                      set the environment: an equirectangular image (.exr,\n"
+            "                      .hdr, ...) or a colour R,G,B or GREY, times STRENGTH\n"
+            "                      (default 1); replaces the file's DR_environment\n"
             "      --no-default-light\n"
             "                      render a scene without any light black (by default it gets\n"
             "                      a white environment of radiance 1, with a note on stderr)\n"
             "      --light-units U photometric (glTF's definition: candela, lux; divided by\n"
             "                      683 lm/W) or radiometric (W/sr, W/m^2) punctual light\n"
-            "                      intensities (default: the file's DR_units, else photometric)\n");
+            "                      intensities (default: the file's DR_units, else\n"
+            "                      photometric)\n");
 }
 
 int grad_apply_lighting(const struct grad_common *g, const char *scene_path, struct dr_scene *scene)

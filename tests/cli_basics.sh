@@ -34,6 +34,16 @@ for args in "--help" "help"; do
     expect_empty err "drender $args"
 done
 
+# every help text fits an 80-column terminal
+for args in "--help" "render --help" "params --help" "grad --help" "fdcheck --help" "optimize --help" \
+    "compare --help" "batch --help" "help --help"; do
+    run $args
+    expect_rc 0 "drender $args"
+    long=$(awk 'length($0) > 80 { print length($0) ": " $0 }' "$tmp/out")
+    [ -z "$long" ] || fail "drender $args: lines wider than 80 columns:
+$long"
+done
+
 # help render and render --help: usage naming every option
 for args in "help render" "render --help"; do
     run $args
