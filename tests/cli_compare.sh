@@ -44,8 +44,9 @@ expect_rc 0 "compare --help"
 for o in --estimators --sampling --spp --max-depth --reference --repeat --batches --target --primal --json; do
     expect_in out "$o" "compare --help lists $o"
 done
-# "available now: prb (detached), tape (detached)" -> estimator:mode pairs
-avail=$(sed -n 's/.*available now: //p' "$tmp/out")
+# "available now: prb (detached),\n   tape (detached)" (one estimator a line,
+# up to the next option) -> estimator:mode pairs
+avail=$(sed -n '/available now: /,/^ *--spp /p' "$tmp/out" | sed '$d; s/.*available now: //' | tr -s ' \n' ' ')
 [ -n "$avail" ] || fail "compare --help: no 'available now:' line"
 n_pairs=$(python3 -c '
 import re, sys
