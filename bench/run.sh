@@ -301,17 +301,17 @@ if [[ -f $PEER ]]; then
     # has taken less than this estimate (bench/README, run 7).
     rays8=$(json_num "$R_JSON" total rays)
     # drender's own split of the last timed run (render --json's
-    # stage_cpu_seconds: CPU seconds by stage of the array tracer's loop),
-    # as shares of the CPU time the render had (threads x time.render)
+    # stage_seconds: each thread's seconds by stage of the array tracer's
+    # loop, summed), as shares of the threads' time (threads x time.render)
     thread_s=$(calc "$(json_num "$R_JSON" threads) * $R_TIME")
     split_line=() split_json=() split_sum=0
     for st in ray_queries shading continuation escaped camera; do
-        v=$(json_num "$R_JSON" "$st" stage_cpu_seconds)
+        v=$(json_num "$R_JSON" "$st" stage_seconds)
         split_line+=("$st $(calc "100 * $v / $thread_s" %.1f) %")
         split_json+=("\"$st\": $v")
         split_sum=$(calc "$split_sum + $v")
     done
-    printf '   drender'"'"'s own time by stage (last run; CPU seconds over threads x render time): %s; the rest (tiles, film, waiting) %s %%\n' \
+    printf '   drender'"'"'s own time by stage (last run; the threads' seconds over threads x render time): %s; the rest (tiles, film, waiting) %s %%\n' \
         "$(join "${split_line[@]}")" "$(calc "100 - 100 * $split_sum / $thread_s" %.1f)"
     floor8=$(calc "$rays8 / ($PEER_BEST_PATH * 1e6)" %.3f)
     floor_ratio=$(calc "$floor8 / ${PEER_TIME[8]}")
@@ -334,7 +334,7 @@ if [[ -f $PEER ]]; then
         "$(calc "$soa_rays / 1e6")" "$soa_f" "$(calc "$soa_f / ${PEER_TIME[8]}")" "$soa_d" "$(calc "$soa_d / ${PEER_TIME[8]}")"
     printf '   float with the rays through drender'"'"'s query layer (core/accel.h) %s s = %s;\n' "$soa_a" "$(calc "$soa_a / ${PEER_TIME[8]}")"
     printf '   drender takes %s x the float floor\n' "$(calc "$med8 / $soa_f")"
-    depth_json=("\"8\": {\"render_seconds\": $med8, \"wall_seconds\": $wall8, \"runs\": [$(join "${runs[@]}")], \"peer_seconds\": ${PEER_TIME[8]}, \"ratio\": $ratio8, \"rays\": $rays8, \"embree_floor_seconds\": $floor8, \"embree_floor_ratio\": $floor_ratio, \"soa_floor_seconds\": $soa_f, \"soa_floor_ratio\": $(calc "$soa_f / ${PEER_TIME[8]}"), \"soa_floor_double_seconds\": $soa_d, \"soa_floor_accel_seconds\": $soa_a, \"soa_floor_rays\": $soa_rays, \"stage_cpu_seconds\": {$(join "${split_json[@]}")}, \"thread_seconds\": $thread_s}")
+    depth_json=("\"8\": {\"render_seconds\": $med8, \"wall_seconds\": $wall8, \"runs\": [$(join "${runs[@]}")], \"peer_seconds\": ${PEER_TIME[8]}, \"ratio\": $ratio8, \"rays\": $rays8, \"embree_floor_seconds\": $floor8, \"embree_floor_ratio\": $floor_ratio, \"soa_floor_seconds\": $soa_f, \"soa_floor_ratio\": $(calc "$soa_f / ${PEER_TIME[8]}"), \"soa_floor_double_seconds\": $soa_d, \"soa_floor_accel_seconds\": $soa_a, \"soa_floor_rays\": $soa_rays, \"stage_seconds\": {$(join "${split_json[@]}")}, \"thread_seconds\": $thread_s}")
 
     # The rest of the peer's table, one run each, within the time budget; a
     # run is predicted to take the depth-8 wall time scaled like the peer's.

@@ -68,8 +68,8 @@ void json_string(FILE *f, const char *s);
 /* "a,b,c" as a JSON array of strings (names: no characters that need escaping). */
 void json_name_list(FILE *f, const char *names);
 void json_number(FILE *f, double v);   /* NaN/Inf written as null */
-/* ", \"stage_cpu_seconds\": {...}": the array tracer's time by stage (path.h),
- * summed over threads; null where it did not run. */
+/* ", \"stage_seconds\": {...}": the array tracer's time by stage (path.h),
+ * each thread's seconds summed; null where it did not run. */
 struct dr_stage_seconds;
 void json_stage_seconds(FILE *f, const struct dr_stage_seconds *c);
 

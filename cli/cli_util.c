@@ -204,12 +204,12 @@ void json_number(FILE *f, double v)
         fputs("null", f);
 }
 
-/* The array tracer's time by stage (path.h's dr_stage_seconds), CPU seconds
- * summed over the threads; null where it did not run (a scene with a global
+/* The array tracer's time by stage (path.h's dr_stage_seconds), each
+ * thread's seconds in a stage summed over the threads; null where it did not run (a scene with a global
  * medium: every path walks one at a time, untimed by stage). */
 void json_stage_seconds(FILE *f, const struct dr_stage_seconds *c)
 {
-    fprintf(f, ", \"stage_cpu_seconds\": ");
+    fprintf(f, ", \"stage_seconds\": ");
     if (!(c->start + c->queries + c->ends + c->shade + c->advance > 0.0)) {
         fprintf(f, "null");
         return;

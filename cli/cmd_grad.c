@@ -120,7 +120,7 @@ void cmd_grad_usage(FILE *out)
             "                      sweep reads back from the cache); bounds the tape's memory\n");
     /* a second literal: one would pass the 4095 characters ISO C guarantees */
     fprintf(out, GRAD_IGNORE_UNSUPPORTED_HELP
-            "      --json          print a summary object on stdout (memory estimate and CPU\n"
+            "      --json          print a summary object on stdout (memory estimate and\n"
             "                      time by stage included)\n"
             "  -h, --help          show this help\n");
     grad_lighting_usage(out);

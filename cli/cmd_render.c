@@ -52,7 +52,7 @@ void cmd_render_usage(FILE *out)
             "                      pixel X,Y; W x H pixels): the same pixels, bit for bit,\n"
             "                      as the full render's; the image written is W x H\n"
             GRAD_IGNORE_UNSUPPORTED_HELP
-            "      --json          print a summary object on stdout (timings, CPU time by\n"
+            "      --json          print a summary object on stdout (timings, time by\n"
             "                      stage, rays, peak memory, memory estimate, effects\n"
             "                      simulated)\n"
             "  -h, --help          show this help\n");

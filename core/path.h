@@ -44,9 +44,12 @@
 #include "sampler.h"
 #include "scene.h"
 
-/* Where the array tracer's time went (wave_soa.c), in CPU seconds summed
- * over its threads, by the stages of its loop: a clock read between stages,
- * a few per bounce of a wave of hundreds of paths. 0 where it did not run. */
+/* Where the array tracer's time went (wave_soa.c), by the stages of its
+ * loop: the seconds each thread spent in a stage (CLOCK_MONOTONIC read
+ * between stages, a few reads per bounce of a wave of hundreds of paths),
+ * summed over the threads. Wall time per thread, so CPU time only where
+ * nothing else runs (a thread's CPU clock costs a system call a read:
+ * ~2 % of a render). 0 where it did not run. */
 struct dr_stage_seconds {
     double start;     /* new paths: samplers and camera rays */
     double queries;   /* ray queries: the closest hits and the shadow rays (Embree, and

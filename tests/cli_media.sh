@@ -44,12 +44,12 @@ expect_in out '"participating_media"' "render --json stages of a grid medium"
 run render "$data/fog-khr.gltf" --spp 4 --res 24x24 -o fog.png --json
 expect_rc 0 "render KHR_materials_volume fog"
 expect_in out '"media"' "render --json effects of a homogeneous medium"
-expect_in out '"stage_cpu_seconds": {"camera": ' "render --json stage times (media inside a mesh: the array tracer)"
+expect_in out '"stage_seconds": {"camera": ' "render --json stage times (media inside a mesh: the array tracer)"
 grep -q heterogeneous_media "$tmp/out" && fail "a homogeneous medium listed as heterogeneous_media"
 # a global medium: every path one at a time, so no stage times
 run render "$data/fog-global.gltf" --spp 2 --res 16x16 -o fog-global.png --json
 expect_rc 0 "render a global medium"
-expect_in out '"stage_cpu_seconds": null' "render --json stage times of a global medium"
+expect_in out '"stage_seconds": null' "render --json stage times of a global medium"
 run render --spp 1 --res 16x16 -o box.png --json
 expect_rc 0 "render the Cornell box"
 grep -q '"media"\|heterogeneous_media\|participating_media' "$tmp/out" && fail "the Cornell box must not list media effects or stages"

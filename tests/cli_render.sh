@@ -108,8 +108,8 @@ assert isinstance(doc["effects"], list) and all(isinstance(e, str) for e in doc[
 hits = doc["rays"]["camera"] + doc["rays"]["extension"]
 assert 0 < doc["vertices_shaded_8_wide"] <= hits, (doc["vertices_shaded_8_wide"], hits)
 # the array tracer's time by stage: every stage, none negative, ray queries
-# among them, and no more CPU time than the render's threads had
-st = doc["stage_cpu_seconds"]
+# among them, and no more time than the render's threads had
+st = doc["stage_seconds"]
 assert sorted(st) == ["camera", "continuation", "escaped", "ray_queries", "shading"], st
 assert all(isinstance(v, (int, float)) and v >= 0 for v in st.values()), st
 assert st["ray_queries"] > 0 and st["shading"] > 0, st
