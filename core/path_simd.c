@@ -137,10 +137,7 @@ DR_SIMD_INLINE dr_v3x8 gather_vertex(const float *a, const uint32_t *vi)
 #endif
 DR_SIMD_INLINE dr_m8 mask_of(const bool *b)
 {
-    dr_m8 m;
-    for (int i = 0; i < DR_SIMD_W; i++)
-        m[i] = b[i] ? -1 : 0;
-    return m;
+    return dr_m8_from_bools(b);
 }
 
 /* Each lane's hit and material, and the light sample's triangle and entry. */

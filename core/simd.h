@@ -18,6 +18,7 @@
 #define DR_SIMD_H
 
 #include <math.h>
+#include <stdbool.h>
 #include <stdint.h>
 #include <string.h>
 #if defined(__AVX512F__)
@@ -132,6 +133,40 @@ DR_SIMD_INLINE int dr_m8_any(dr_m8 m)
     for (int i = 0; i < DR_SIMD_W; i++)
         a |= m[i];
     return a != 0;
+}
+
+/* The mask of eight bools (b[i] true: every bit set). With AVX-512 one
+ * widening of the eight bytes and a negation: the loop below compiled to a
+ * chain of eight dependent masked broadcasts (~40 instructions), and the
+ * stages make a dozen such masks per group. Exact either way (a bool is 0
+ * or 1). */
+DR_SIMD_INLINE dr_m8 dr_m8_from_bools(const bool *b)
+{
+#if defined(__AVX512F__)
+    uint64_t w;
+    memcpy(&w, b, sizeof w);
+    return (dr_m8)_mm512_sub_epi64(_mm512_setzero_si512(), _mm512_cvtepu8_epi64(_mm_cvtsi64_si128((long long)w)));
+#else
+    dr_m8 m;
+    for (int i = 0; i < DR_SIMD_W; i++)
+        m[i] = b[i] ? -1 : 0;
+    return m;
+#endif
+}
+/* Lanes [0, n) of a group (0 <= n <= 8): a window on a table, not eight
+ * conditional inserts. */
+DR_SIMD_INLINE dr_m8 dr_m8_first(int n)
+{
+    static const int64_t window[2 * DR_SIMD_W] = {-1, -1, -1, -1, -1, -1, -1, -1, 0, 0, 0, 0, 0, 0, 0, 0};
+    dr_m8 m;
+    memcpy(&m, window + DR_SIMD_W - n, sizeof m);
+    return m;
+}
+/* The lanes where a (64-bit integers) is negative: its sign bit spread,
+ * shifts that AVX2 has too (a comparison written with < would not be). */
+DR_SIMD_INLINE dr_m8 dr_m8_negative(dr_m8 a)
+{
+    return (dr_m8)((dr_u8){0} - ((dr_u8)a >> 63));
 }
 
 /* Closing up: the 64-bit words src[i] of the lanes i where keep is set, in

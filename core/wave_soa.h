@@ -112,9 +112,10 @@ struct dr_wave_soa_replay {
 };
 
 /* Can a gradient's replays use the arrays? Where the primal walks can
- * (dr_wave_soa_walks_apply's sums_only), but not where the environment has
- * a parameter: an escaped vertex's term then has a derivative, and the
- * arrays end such paths eight at a time without making their vertex. */
+ * (dr_wave_soa_walks_apply's sums_only). Where the environment has a
+ * parameter, a path that leaves the scene ends on a vertex with a
+ * derivative term: the replay makes it, as the one-path walker's escaped
+ * stage does, for the caller's vertex hook. */
 bool dr_wave_soa_replays_apply(const struct dr_scene *scene, const struct dr_path_opts *opts);
 
 /* The replays of items [0, n) (start: item k's sampler and camera ray;
