@@ -56,7 +56,9 @@ trap 'rm -rf "$TMP"' EXIT
 # run BIN TAG: one render (or gradient); prints its seconds
 run() {
     local json out=(-o "$TMP/$2.exr")
-    [[ $CMD == render ]] || out=()
+    # (a gradient's texture images into the run's own directory, not the
+    # current one)
+    [[ $CMD == render ]] || { mkdir -p "$TMP/$2" && out=(--grad-dir "$TMP/$2"); }
     # (render with independent numbers unless OPTS say otherwise: binaries from
     # before 2026-12 default to them, later ones to sobol)
     local smp=()

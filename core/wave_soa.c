@@ -567,6 +567,32 @@ static bool escaped_group(const struct dr_wave_soa *w, const struct dr_scene *s,
     return true;
 }
 
+/* A replay group's sums at a vertex whose terms, times the throughput, are
+ * be (prb.c's walk_vertex subtracts them as the walk goes): the sums after
+ * it, and the true one before (remaining). */
+static struct dr_wave_soa_replay_lanes replay_lanes(const struct dr_wave_soa *w, int i0, dr_v3x8 beta, dr_v3x8 ratio,
+                                                    dr_v3x8 be)
+{
+    struct dr_wave_soa_replay_lanes g = {.beta = beta, .ratio = ratio};
+    g.remaining = load3(w->Tx + i0, w->Ty + i0, w->Tz + i0);
+    g.L_sub = dr_v3x8_sub(load3(w->Lx + i0, w->Ly + i0, w->Lz + i0), be);
+    g.L_true = dr_v3x8_sub(g.remaining, dr_v3x8_mul(ratio, be));
+    return g;
+}
+
+/* Slot k's vertex for a replay's hook, begun as dr_path_step_begin begins
+ * it from the path's state before the step whose ray the slot holds (as a
+ * lane's vertex in wavefront.c: the same storage for every vertex); st:
+ * that state, after the begin. */
+static struct dr_path_vertex *replay_vertex_begin(const struct dr_wave_soa *w, int k, struct dr_path_state *st)
+{
+    *st = (struct dr_path_state){.o = dr_v3(w->ox[k], w->oy[k], w->oz[k]), .d = dr_v3(w->dx[k], w->dy[k], w->dz[k]),
+                                 .prev_p = dr_v3(w->px[k], w->py[k], w->pz[k]), .prev_pdf = w->prev_pdf[k],
+                                 .prev_sky = w->prev_sky[k], .depth = (int)w->depth[k] - 1};
+    dr_path_step_begin(st, w->vertex);
+    return w->vertex;
+}
+
 /* A replay's paths that left the scene where the environment has a
  * parameter: their escaped vertex has a derivative term (the path's last,
  * its first walk's last_diff). Each is made as the one-path walker's
@@ -599,20 +625,13 @@ static void replay_escaped(const struct dr_wave_soa *w, const struct dr_scene *s
         e = dr_v3x8_sel(left, (dr_v3x8){Le.x * emit_w, Le.y * emit_w, Le.z * emit_w}, zero);
     }
     const dr_v3x8 beta = load3(w->bx + i0, w->by + i0, w->bz + i0), ratio = load3(w->rx + i0, w->ry + i0, w->rz + i0);
-    const dr_v3x8 be = dr_v3x8_mul(beta, e);
-    struct dr_wave_soa_replay_lanes g = {.beta = beta, .ratio = ratio};
-    g.remaining = load3(w->Tx + i0, w->Ty + i0, w->Tz + i0);
-    g.L_sub = dr_v3x8_sub(load3(w->Lx + i0, w->Ly + i0, w->Lz + i0), be);
-    g.L_true = dr_v3x8_sub(g.remaining, dr_v3x8_mul(ratio, be));
+    const struct dr_wave_soa_replay_lanes g = replay_lanes(w, i0, beta, ratio, dr_v3x8_mul(beta, e));
     for (int i = 0; i < DR_SIMD_W; i++) {
         if (!left[i])
             continue;
         const int k = i0 + i;
-        struct dr_path_vertex *v = w->vertex;
-        struct dr_path_state st = {.o = dr_v3(w->ox[k], w->oy[k], w->oz[k]), .d = dr_v3(w->dx[k], w->dy[k], w->dz[k]),
-                                   .prev_p = dr_v3(w->px[k], w->py[k], w->pz[k]), .prev_pdf = w->prev_pdf[k],
-                                   .prev_sky = w->prev_sky[k], .depth = (int)w->depth[k] - 1};
-        dr_path_step_begin(&st, v);
+        struct dr_path_state st;
+        struct dr_path_vertex *v = replay_vertex_begin(w, k, &st);
         v->kind = DR_VERTEX_ESCAPED;   /* (stage_escaped's) */
         if (env) {
             v->emits = true;
@@ -935,10 +954,8 @@ static dr_m8 replay_step(const struct dr_wave_soa *w, const struct dr_scene *s, 
                          const struct dr_path8 *G, const struct dr_path8_out *c, int i0, dr_v3x8 beta, dr_v3x8 ratio,
                          dr_v3x8 be, dr_v3x8 *L, dr_v3x8 *T)
 {
-    struct dr_wave_soa_replay_lanes g = {.beta = beta, .ratio = ratio};
-    g.remaining = load3(w->Tx + i0, w->Ty + i0, w->Tz + i0);
-    g.L_sub = *L = dr_v3x8_sub(load3(w->Lx + i0, w->Ly + i0, w->Lz + i0), be);
-    g.L_true = *T = dr_v3x8_sub(g.remaining, dr_v3x8_mul(ratio, be));
+    const struct dr_wave_soa_replay_lanes g = replay_lanes(w, i0, beta, ratio, be);
+    *L = g.L_sub, *T = g.L_true;
     dr_m8 goes_on = {0};
     const dr_m8 diff = differentiated8(G, c);
     for (int i = 0; i < G->n; i++) {
@@ -946,14 +963,8 @@ static dr_m8 replay_step(const struct dr_wave_soa *w, const struct dr_scene *s, 
         goes_on[i] = G->depth[i] < w->last_diff[k] ? -1 : 0;
         if (!diff[i])
             continue;
-        /* begun as dr_path_step_begin begins it (as a lane's vertex in
-         * wavefront.c, the same storage for every vertex) */
-        struct dr_path_vertex *v = w->vertex;
-        struct dr_path_state st = {.o = dr_v3(w->ox[k], w->oy[k], w->oz[k]), .d = dr_v3(w->dx[k], w->dy[k], w->dz[k]),
-                                   .prev_p = dr_v3(w->px[k], w->py[k], w->pz[k]), .prev_pdf = w->prev_pdf[k],
-                                   .prev_sky = w->prev_sky[k],
-                                   .depth = (int)w->depth[k] - 1};
-        dr_path_step_begin(&st, v);
+        struct dr_path_state st;
+        struct dr_path_vertex *v = replay_vertex_begin(w, k, &st);
         if (G->diff[i])
             v->hit = w->diff_hit[k];
         dr_path8_vertex(s, opts, G, c, i, w->tri[k], st.o, st.d, v);
