@@ -868,11 +868,13 @@ static void find_entries(const struct dr_light_tables *lt, dr_f8 u, int64_t e[DR
 
 /* Each lane's light-table entry; env: it is a constant environment
  * (env_light_samples); env_map: an environment map (dr_env8_sample);
- * other[i]: a punctual light, which light_sample leaves to dr_light_sample
- * (for all three the area arithmetic runs on a stand-in). */
+ * other[i]: a punctual light, s->lights[punctual[i]] (punctual_samples; 0
+ * in the other lanes) (for all three the area arithmetic runs on a
+ * stand-in). */
 static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *lt, struct lanes *L,
                         const struct dr_path8_ahead *ahead, dr_f8 u_pick, dr_f8 *pick, dr_f8 *area,
-                        uint32_t v[3][DR_SIMD_W], uint32_t sub[DR_SIMD_W], dr_m8 *env, dr_m8 *env_map, bool *other)
+                        uint32_t v[3][DR_SIMD_W], uint32_t sub[DR_SIMD_W], dr_m8 *env, dr_m8 *env_map, bool *other,
+                        int64_t punctual[DR_SIMD_W])
 {
     const struct dr_mesh *m = &s->mesh;
     int64_t entry[DR_SIMD_W];
@@ -887,6 +889,7 @@ static void pick_lights(const struct dr_scene *s, const struct dr_light_tables *
 #undef ENV_MAP
     for (int i = 0; i < DR_SIMD_W; i++) {
         other[i] = entry[i] >= lt->n_emitters && !(*env)[i] && !(*env_map)[i];
+        punctual[i] = other[i] ? entry[i] - lt->n_emitters : 0;   /* (dr_light_sample's light index) */
         if (entry[i] >= lt->n_emitters)
             entry[i] = lt->n_emitters > 0 ? 0 : -1;
         else if (lt->any_parts)
@@ -1031,27 +1034,71 @@ static void env_map_samples(const struct dr_scene *s, dr_m8 env_map, dr_f8 u1, d
     *ok = (*ok & ~env_map) | carries;
 }
 
-/* The lanes that picked a punctual light: dr_light_sample (which reads the
- * BSDF only for a constant sky, never picked here). */
-static void other_light_samples(const struct dr_scene *s, const bool *other, dr_v3x8 p, dr_f8 u_pick, dr_f8 u1,
-                                dr_f8 u2, dr_m8 *ok, struct light8 *out)
+/* The lanes `on` that picked a punctual light, s->lights[light[i]]
+ * (table entry n_emitters + light[i]): dr_light_sample's punctual branch
+ * eight lanes at a time, its operations in its order (range_window,
+ * spot_falloff: lights.c), so each lane gets its bits. Lane by lane, through
+ * dr_light_sample (which searched the table again), a box lit by a point
+ * light took 1.5 x the shading time of the same box under an area light. */
+static void punctual_samples(const struct dr_scene *s, const struct dr_light_tables *lt, dr_m8 on,
+                             const int64_t *light, dr_v3x8 p, dr_m8 *ok, struct light8 *out)
 {
-    for (int i = 0; i < DR_SIMD_W; i++) {
-        if (!other[i])
-            continue;
-        struct dr_light_sample ls = {.dist = 0.0};   /* (its fields stay masked when it fails) */
-        const bool carries = dr_light_sample(s, s->light_sampler, dr_v3x8_get(&p, i), NULL, u_pick[i], u1[i], u2[i],
-                                             &ls);
-        (*ok)[i] = carries || (ls.valid && out->diff[i]) ? -1 : 0;   /* (dr_path_light_kept) */
-        set_lane(&out->wi, i, ls.wi);
-        set_lane(&out->target, i, ls.target);
-        set_lane(&out->radiance, i, ls.radiance);
-        out->pdf[i] = ls.pdf;
-        out->infinite[i] = isinf(ls.dist) ? -1 : 0;
-        out->delta[i] = ls.delta ? -1 : 0;
-        out->index[i] = ls.index;
-        out->atten[i] = ls.atten;
+    const void *l[DR_SIMD_W];
+    for (int i = 0; i < DR_SIMD_W; i++)
+        l[i] = &s->lights[light[i]];   /* (lanes not on: light 0, unread) */
+#define RADIANT(i) dr_punctual_radiant(l[i])
+#define PICK(i) lt->pick[lt->n_emitters + light[i]]
+#define TYPE_IS(i, t) (((const struct dr_punctual *)l[i])->type == (t) ? -1 : 0)
+#define DIRECTIONAL(i) TYPE_IS(i, DR_LIGHT_DIRECTIONAL)
+#define SPOT(i) TYPE_IS(i, DR_LIGHT_SPOT)
+    const dr_f8 radiant = DR_LANES8(dr_f8, RADIANT), pick = DR_LANES8(dr_f8, PICK);
+    const dr_m8 directional = on & DR_LANES8(dr_m8, DIRECTIONAL), spot = DR_LANES8(dr_m8, SPOT);
+#undef RADIANT
+#undef PICK
+#undef TYPE_IS
+#undef DIRECTIONAL
+#undef SPOT
+    const dr_v3x8 colour = gather3(l, offsetof(struct dr_punctual, color));
+    const dr_v3x8 position = gather3(l, offsetof(struct dr_punctual, position));
+    const dr_v3x8 direction = gather3(l, offsetof(struct dr_punctual, direction));
+    const dr_f8 range = gather(l, offsetof(struct dr_punctual, range));
+    const dr_v3x8 I = dr_v3x8_scale(colour, radiant);
+    /* point and spot lights */
+    const dr_v3x8 d = dr_v3x8_sub(position, p);
+    const dr_f8 d2 = dr_v3x8_dot(d, d), dist = dr_f8_sqrt(d2);
+    dr_v3x8 wi = dr_v3x8_scale(d, 1.0 / dist);
+    const dr_m8 ranged = ~dr_f8_le(range, dr_f8s(0.0));   /* range_window: 1 without a range */
+    const dr_f8 r = dist / dr_f8_sel(ranged, range, dr_f8s(1.0));
+    const dr_f8 win = dr_f8_clamp(1.0 - r * r * r * r, 0.0, 1.0);
+    dr_f8 atten = dr_f8_sel(ranged, win * win, dr_f8s(1.0)) / d2;
+    if (dr_m8_any(spot & on)) {   /* spot_falloff at the angle -wi . direction */
+        const dr_f8 ci = gather(l, offsetof(struct dr_punctual, cos_inner));
+        const dr_f8 co = gather(l, offsetof(struct dr_punctual, cos_outer));
+        const dr_f8 scale = 1.0 / dr_f8_max(ci - co, dr_f8s(1e-3));   /* (fmax(1e-3, ci - co)) */
+        const dr_f8 t = dr_f8_clamp((-dr_v3x8_dot(wi, direction) - co) * scale, 0.0, 1.0);
+        atten = dr_f8_sel(spot, atten * (t * t), atten);
     }
+    dr_v3x8 radiance = dr_v3x8_scale(I, atten);
+    dr_m8 carries = dr_f8_gt(d2, dr_f8s(0.0)) & dr_f8_gt(atten, dr_f8s(0.0));
+    /* directional lights: along -direction, unattenuated */
+    wi = dr_v3x8_sel(directional, dr_v3x8_neg(direction), wi);
+    atten = dr_f8_sel(directional, dr_f8s(1.0), atten);
+    radiance = dr_v3x8_sel(directional, I, radiance);
+    carries = (carries | directional) & dr_f8_gt(pick, dr_f8s(0.0));   /* (a zero pick samples nothing) */
+    out->wi = dr_v3x8_sel(on, wi, out->wi);
+    out->target = dr_v3x8_sel(on, position, out->target);
+    out->radiance = dr_v3x8_sel(on, radiance, out->radiance);
+    out->pdf = dr_f8_sel(on, pick, out->pdf);
+    out->infinite = (out->infinite & ~on) | directional;
+    out->delta |= on;
+    out->atten = dr_f8_sel(on, atten, out->atten);
+    for (int i = 0; i < DR_SIMD_W; i++)
+        if (on[i])
+            out->index[i] = light[i];
+    /* dr_light_sample's answer; a punctual sample is valid exactly where
+     * it carries light (out of range or cone: no light, and none for any
+     * parameter), so dr_path_light_kept keeps no other */
+    *ok = (*ok & ~on) | (on & carries);
 }
 
 /* dr_light_sample from the points p: its area-light branch (dr_hit_at,
@@ -1095,15 +1142,16 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
     dr_f8 pick, area;
     uint32_t v[3][DR_SIMD_W];
     bool other[DR_SIMD_W];
+    int64_t punctual[DR_SIMD_W];
     dr_m8 env, env_map;
     uint32_t sub[DR_SIMD_W] = {0};
-    pick_lights(s, lt, L, ahead, u_pick, &pick, &area, v, sub, &env, &env_map, other);
+    pick_lights(s, lt, L, ahead, u_pick, &pick, &area, v, sub, &env, &env_map, other, punctual);
     out->diff = (dr_m8){0};
     for (int i = 0; record && i < DR_SIMD_W; i++) {   /* (dr_path_vertex_has_derivative's switch) */
         const int type = env[i] || env_map[i] ? DR_LS_ENV : other[i] ? DR_LS_PUNCTUAL : DR_LS_AREA;
         out->diff[i] = ps->radiance_active && dr_path_light_differentiated(ps, type, m->material[L->ltri[i]]) ? -1 : 0;
         out->type[i] = type;
-        out->index[i] = type == DR_LS_AREA ? L->ltri[i] : -1;   /* (a punctual lane's: other_light_samples) */
+        out->index[i] = type == DR_LS_AREA ? L->ltri[i] : -1;   /* (a punctual lane's: punctual_samples) */
     }
     dr_m8 ok = ~dr_f8_le(pick, dr_f8s(0.0));
     dr_f8 su = dr_f8_sqrt(u1);
@@ -1115,7 +1163,7 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
             b1[i] = x, b2[i] = y;
         }
     dr_f8 b0 = 1.0 - b1 - b2;
-    out->b1 = b1, out->b2 = b2, out->atten = dr_f8s(0.0);   /* (atten: a punctual lane's, other_light_samples) */
+    out->b1 = b1, out->b2 = b2, out->atten = dr_f8s(0.0);   /* (atten: a punctual lane's, punctual_samples) */
     out->env_map = (dr_m8){0};
     dr_v3x8 lp = interp(b0, b1, b2, gather_vertex(m->positions, v[0]), gather_vertex(m->positions, v[1]),
                         gather_vertex(m->positions, v[2]));
@@ -1146,7 +1194,9 @@ static dr_m8 light_sample(const struct dr_scene *s, const struct dr_light_tables
         env_light_samples(s, lt, env, g, sky_uniform, u_pick, u1, u2, &ok, out);
     if (dr_m8_any(env_map))
         env_map_samples(s, env_map, u1, u2, &ok, out);
-    other_light_samples(s, other, g->p, u_pick, u1, u2, &ok, out);
+    const dr_m8 on_punctual = mask_of(other);
+    if (dr_m8_any(on_punctual))
+        punctual_samples(s, lt, on_punctual, punctual, g->p, &ok, out);
     return ok;
 }
 

@@ -566,7 +566,9 @@ static struct dr_material warm_lamp(void)
 }
 
 /* Every kind of light at once: an area lamp, point, spot and directional
- * lights, and an environment map seen through the open top. */
+ * lights, and an environment map seen through the open top. The point
+ * light has a range that leaves part of the box out (range_window's 0),
+ * the spot's cone another part (spot_falloff's). */
 static struct dr_scene *lit_box(void)
 {
     struct sb b;
@@ -574,7 +576,9 @@ static struct dr_scene *lit_box(void)
     sb_open_box(&b, 2.0, sb_material(&b, sb_diffuse(dr_v3(0.8, 0.7, 0.6))));
     sb_box(&b, dr_v3(-0.5, 0.0, -0.5), dr_v3(0.0, 0.7, 0.0), sb_material(&b, glossy_blue()));
     sb_quad(&b, dr_v3(0.4, 1.5, 0.4), dr_v3(0.3, 0, 0), dr_v3(0, 0, -0.3), sb_material(&b, warm_lamp()));
-    sb_light(&b, light(DR_LIGHT_POINT, dr_v3(0.5, 1.2, 0.5), dr_v3(0, -1, 0), 2.0));
+    struct dr_punctual point = light(DR_LIGHT_POINT, dr_v3(0.5, 1.2, 0.5), dr_v3(0, -1, 0), 2.0);
+    point.range = 1.6;
+    sb_light(&b, point);
     sb_light(&b, light(DR_LIGHT_SPOT, dr_v3(-0.5, 1.6, 0.3), dr_normalize(dr_v3(0.2, -1, -0.1)), 4.0));
     sb_light(&b, light(DR_LIGHT_DIRECTIONAL, dr_v3(0, 0, 0), dr_normalize(dr_v3(0.3, -1, 0.2)), 1.5));
     sb_environment(&b, dr_v3s(1.0));
