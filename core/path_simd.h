@@ -4,14 +4,15 @@
  * dr_path8_shade is dr_path_step_hit and dr_path8_continue is dr_path_nee_end
  * + dr_path_stage_continue for a group of eight lanes: the hit point, the
  * emission seen there and its MIS weight, the shading frame, the glTF BSDF
- * (Lambertian or with its GGX lobe), the light sample, the shadow ray, the
- * BSDF's continuation and Russian roulette, in vector registers. Per lane
- * inside a group: the light table search, texture, vertex-colour and
- * normal-map lookups (the scalar material, emission and normal-map functions
- * with the lane's hit), light samples that pick a punctual light or the
- * environment (dr_light_sample), libm's cosine and sine of the GGX map, and the
- * vertex's random numbers from a Sobol or stratified sampler (sampler.h:
- * the independent sampler's hashes are vector code). Every operation is the scalar code's, in its order, so each lane gets the
+ * (Lambertian or with its GGX lobe), the light sample (area, punctual,
+ * constant sky, environment map: env8.h), the shadow ray, the BSDF's
+ * continuation and Russian roulette, in vector registers; eight-bit
+ * textures through texture8.h. Per lane inside a group: the search of a
+ * long light table, the lookups of textures texture8.h does not take (the
+ * scalar material, emission and normal-map functions with the lane's hit),
+ * the gathers of each lane's triangle, material and light, and the
+ * stratified sampler's numbers (sampler.h: the independent and Sobol
+ * samplers' are vector code). Every operation is the scalar code's, in its order, so each lane gets the
  * scalar walker's bits (test_render compares radiance in double); what the
  * kernels mirror is named beside each step. Alpha (MASK, BLEND) is the
  * queries' filters' business but for a light point's coverage (light_sample)
