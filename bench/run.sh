@@ -13,6 +13,9 @@
 #   n. emissive texture   noise and time under a mostly black emissive texture
 #   o. default sky        noise and time of a sample model under the default sky
 #   p. default sampler    noise and time of the peer's box with independent and with sobol numbers
+#   q. alpha              time per ray of the peer's box with a MASK or BLEND wall / opaque
+#   r. punctual lights    time per path vertex of the peer's box lit by a point, spot or
+#                         directional light / by its area light
 #
 # Environment knobs:
 #   BUILD         build directory (default: build)
@@ -593,6 +596,37 @@ PY
     ALPHA_JSON="{\"mask_per_ray_over_opaque\": $(median "${mask_r[@]}"), \"blend_per_ray_over_opaque\": $(median "${blend_r[@]}"), \"mask_triples\": [$(join "${mask_r[@]}")], \"blend_triples\": [$(join "${blend_r[@]}")]}"
 fi
 
+# ---- r. punctual lights ------------------------------------------------------
+# Blender exports and many glTF assets are lit by KHR_lights_punctual lights.
+# The peer box with its area light's emission taken off and a point or spot
+# light below the lamp, or a directional light in through the open front
+# (bench/make_box_punctual.py): the time per path vertex (camera and
+# extension rays; the shadow rays differ with the light) over the area-lit
+# box's, median of 3 pairs run back to back (issue 11: no scene far off;
+# until 2026-12-05 each lane's punctual sample went through the scalar
+# dr_light_sample: point 1.14, spot 1.10, directional 1.00; since, 1.03 /
+# 0.98 / 0.93).
+PUNCTUAL_JSON=null
+if [[ -f $PEER ]]; then
+    echo
+    echo "r. punctual lights: time per path vertex, the peer box lit by a punctual light / by its area light (256x256, 64 spp, 2 threads)"
+    per_vertex() { calc "$R_TIME / ($(json_num "$R_JSON" camera rays) + $(json_num "$R_JSON" extension rays))" %.6g; }
+    parts=()
+    for kind in point spot directional; do
+        python3 bench/make_box_punctual.py "$PEER" "$TMP/box-$kind.gltf" "$kind"
+        r=()
+        for i in 1 2 3; do
+            render "$PEER" --res 256x256 --spp 64 --threads 2
+            area=$(per_vertex)
+            render "$TMP/box-$kind.gltf" --res 256x256 --spp 64 --threads 2
+            r+=("$(calc "$(per_vertex) / $area" %.3f)")
+        done
+        printf '   %-11s / area light: %s (pairs %s)\n' "$kind" "$(median "${r[@]}")" "$(join "${r[@]}")"
+        parts+=("\"$kind\": {\"per_vertex_over_area\": $(median "${r[@]}"), \"pairs\": [$(join "${r[@]}")]}")
+    done
+    PUNCTUAL_JSON="{$(join "${parts[@]}")}"
+fi
+
 # ---- results.json and the noise note ---------------------------------------
 
 TOTAL=$(elapsed)
@@ -616,6 +650,7 @@ OTHER_CORES=$(calc "$OTHER_TOTAL / $WALL_TOTAL" %.2f)
     echo "  \"default_sky\": $SKY_JSON, \"default_sky_metal\": $SKY_METAL_JSON,"
     echo "  \"default_sampler\": $SAMPLER_JSON,"
     echo "  \"alpha\": $ALPHA_JSON,"
+    echo "  \"punctual_lights\": $PUNCTUAL_JSON,"
     echo "  \"peer\": $PEER_JSON"
     echo "}"
 } >"$OUT/results.json"
