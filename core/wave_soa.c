@@ -545,6 +545,14 @@ static void take_scalar(struct dr_wave_soa *w, int k)
     p->ratio = p->st.ratio;
 }
 
+/* Group i0's paths whose ray left the scene (slots past n_live masked). */
+static inline dr_m8 escaped_lanes(const struct dr_wave_soa *w, int n_live, int i0)
+{
+    dr_m8 tri;
+    memcpy(&tri, w->tri + i0, sizeof tri);
+    return first_lanes(n_live - i0 < DR_SIMD_W ? n_live - i0 : DR_SIMD_W) & dr_m8_negative(tri);
+}
+
 /* The sums of group i0's paths whose rays left the scene, eight at once:
  * escaped()'s with the same operations (dr_path8_escaped_term): the
  * radiance (w->L's) in *L, and in a walk the true throughput's (w->T's) in
@@ -552,9 +560,7 @@ static void take_scalar(struct dr_wave_soa *w, int k)
 static bool escaped_group(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
                           int n_live, int i0, dr_v3x8 *L, dr_v3x8 *T)
 {
-    dr_m8 tri;
-    memcpy(&tri, w->tri + i0, sizeof tri);   /* (slots past n_live: first_lanes masks them) */
-    const dr_m8 left = first_lanes(n_live - i0 < DR_SIMD_W ? n_live - i0 : DR_SIMD_W) & dr_m8_negative(tri);
+    const dr_m8 left = escaped_lanes(w, n_live, i0);
     if (!dr_m8_any(left))
         return false;
     dr_v3x8 e = dr_path8_escaped_term(s, opts, left, load3(w->dx + i0, w->dy + i0, w->dz + i0), load8(w->depth + i0),
@@ -608,9 +614,7 @@ static struct dr_path_vertex *replay_vertex_begin(const struct dr_wave_soa *w, i
 static void replay_escaped(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
                            int n_live, int i0)
 {
-    dr_m8 tri;
-    memcpy(&tri, w->tri + i0, sizeof tri);
-    const dr_m8 left = first_lanes(n_live - i0 < DR_SIMD_W ? n_live - i0 : DR_SIMD_W) & dr_m8_negative(tri);
+    const dr_m8 left = escaped_lanes(w, n_live, i0);
     if (!dr_m8_any(left))
         return;
     const dr_v3x8 zero = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
@@ -662,7 +666,9 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
         bool keeps[DR_SIMD_W] = {false};
         int j = kept;
         dr_v3x8 L_esc, T_esc;
-        const bool grouped = eight_at_once && escaped_group(w, s, opts, n_live, i0, &L_esc, &T_esc);
+        /* (a replay's escaped paths end without sums: nothing reads them,
+         * but where their vertex has a derivative term) */
+        const bool grouped = !w->replay && eight_at_once && escaped_group(w, s, opts, n_live, i0, &L_esc, &T_esc);
         if (w->replay && diff_env)
             replay_escaped(w, s, opts, n_live, i0);
         for (int i = 0; i < DR_SIMD_W && i0 + i < n_live; i++) {
@@ -672,6 +678,8 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
                 continue;
             }
             if (w->tri[k] < 0) {
+                if (w->replay)
+                    continue;
                 if (!grouped)
                     escaped(w, s, opts, k, out);
                 else if (!w->out)

@@ -17,6 +17,7 @@
 #include "sampler.h"
 #include "scene_builder.h"
 #include "test.h"
+#include "wave_soa.h"
 #include "wavefront.h"
 
 static const int W = 24, H = 20;
@@ -361,6 +362,21 @@ static void tape_reuse(struct dr_scene *s, const struct dr_camera *cam, const ch
  * a pixel of spp samples: with independent numbers at the mean of all the
  * other samples; under sobol at the mean of the other half (samples of the
  * other parity), each half over its own count (odd spp: unequal halves). */
+/* prb replays a gradient whose environment has a parameter in its arrays
+ * (wave_soa.h: the escaped vertices made there), as any other eight-lane
+ * run; the comparisons with the tape then check those replays. */
+static void environment_replays_in_arrays(const char *what, struct dr_scene *s, const char *const *ptrs, int n)
+{
+    struct dr_param_set *ps = dr_param_set_create(s, ptrs, n);
+    CHECK(ps != NULL, "%s: param set: %s", what, dr_last_error());
+    if (!ps)
+        return;
+    const struct dr_path_opts po = {.max_depth = 6, .rr_depth = DR_RR_DEPTH_DEFAULT, .stages = dr_path_plan(s, ps),
+                                    .params = ps};
+    CHECK(ps->env_active && dr_wave_soa_replays_apply(s, &po), "%s: prb's replays run in the arrays", what);
+    dr_param_set_destroy(ps);
+}
+
 static void cross_adjoint_by_hand(void)
 {
     static struct dr_est_base b;
@@ -965,6 +981,7 @@ int main(void)
             GROUPED_PRB);
     compare("glossy scene, the environment only", s, &cam, gptrs + 6, 2, 6, DR_SAMPLING_DETACHED,
             GROUPED_PRB);
+    environment_replays_in_arrays("glossy scene, the environment only", s, gptrs + 6, 2);
     tape_reuse(s, &cam, gptrs, 8);
     cross_many_samples(s, &cam, gptrs, 8);
     for (int k = 0; k < 8; k++)
@@ -1067,6 +1084,7 @@ int main(void)
     const struct dr_camera above = sb_camera(dr_v3(0.3, 2.2, 1.6), dr_v3(0, 0.2, 0), 50);
     const char *sky_map_ptrs[] = {"/extensions/DR_environment/color", "/extensions/DR_environment/uri"};
     compare("open box under a map", s, &above, sky_map_ptrs, 2, 6, DR_SAMPLING_DETACHED, GROUPED_PRB);
+    environment_replays_in_arrays("open box under a map", s, sky_map_ptrs, 2);
     wave_against_one_path("open box under a map", s, &above, sky_map_ptrs, 2);
     dr_scene_destroy(s);
 
