@@ -292,6 +292,12 @@ bool dr_path_vertex_has_surface_derivative(const struct dr_scene *scene, const s
 /* Adjoint of the continuation's BSDF value f along v->wi, given d_f. */
 void d_path_continuation(const struct dr_scene *scene, const struct dr_param_set *params,
                          const struct dr_path_vertex *v, dr_vec3 d_f, struct dr_grad_sink *sink);
+/* Both at once: d_path_vertex_term's d_e and d_path_continuation's d_f
+ * (black: that part adds nothing; d_f only where v->cont and v->diff_bsdf),
+ * with one material adjoint for the two BSDF values (the same sums, added
+ * to the sink once). */
+void d_path_vertex(const struct dr_scene *scene, const struct dr_param_set *params, const struct dr_path_vertex *v,
+                   dr_vec3 d_e, dr_vec3 d_f, struct dr_grad_sink *sink);
 
 /* ---- attached sampling (reparametrize-then-differentiate) ----
  *

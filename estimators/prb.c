@@ -95,14 +95,9 @@ static void vertex_adjoints(const struct dr_est_base *b, struct walk *w, const s
     if (v->media)
         d_medium_vertex(s, &b->popts, v, w->mrec, w->vertices, dr_mul(adj, dr_mul(ratio, beta)), dr_mul(adj, remaining),
                         dr_mul(adj, L->true_), dr_mul(adj, dr_mul(dr_mul(ratio, beta), dr_path_vertex_nee(v))), sink);
-    d_path_vertex_term(s, ps, v, dr_mul(adj, dr_mul(ratio, beta)), sink);
-    if (dsamp) {   /* the three-strategy weights of the BSDF derivative terms (path_deriv.h) */
-        if (w->have_prev)
-            d_path_deriv_emission(s, &b->popts, w->prev, w->prev_dt, v, sink);
-        d_path_deriv_nee(s, &b->popts, v, dr_mul(adj, dr_mul(ratio, beta)), sink);
-    }
-    if (v->cont && v->diff_bsdf) {
-        dr_vec3 d_f;
+    const dr_vec3 d_e = dr_mul(adj, dr_mul(ratio, beta));
+    dr_vec3 d_f = dr_v3s(0.0);   /* the continuation's f (none: black) */
+    if (v->cont && v->diff_bsdf)
         for (int ch = 0; ch < 3; ch++) {
             double f = dr_v3_get(v->f, ch), r;
             if (v->sub[ch])
@@ -111,18 +106,23 @@ static void vertex_adjoints(const struct dr_est_base *b, struct walk *w, const s
                 r = f != 0.0 ? dr_v3_get(L->true_, ch) / f : 0.0;
             dr_v3_set(&d_f, ch, r * dr_v3_get(adj, ch));
         }
-        if (dsamp)
+    if (dsamp) {   /* the three-strategy weights of the BSDF derivative terms (path_deriv.h) */
+        d_path_vertex_term(s, ps, v, d_e, sink);
+        if (w->have_prev)
+            d_path_deriv_emission(s, &b->popts, w->prev, w->prev_dt, v, sink);
+        d_path_deriv_nee(s, &b->popts, v, d_e, sink);
+        if (v->cont && v->diff_bsdf)
             d_path_deriv_continuation(s, ps, v, d_f, sink);
-        else
-            d_path_continuation(s, ps, v, d_f, sink);
+    } else {
+        d_path_vertex(s, ps, v, d_e, d_f, sink);   /* (both BSDF values' material adjoint at once) */
     }
     /* the new directions: also where the forward sample failed or
      * Russian roulette ended the path (that strategy then gave 0) */
     if (dsamp && v->shaded && v->diff_bsdf)
-        d_path_deriv_sample(s, &b->popts, v, smp, dr_mul(adj, dr_mul(ratio, beta)), sink, rays);
+        d_path_deriv_sample(s, &b->popts, v, smp, d_e, sink, rays);
     if ((w->have_prev = dsamp && v->cont && v->diff_bsdf)) {
         *w->prev = *v;
-        w->prev_dt = dr_scale(dr_mul(adj, dr_mul(ratio, beta)), v->cos_pdf_q);
+        w->prev_dt = dr_scale(d_e, v->cos_pdf_q);
     }
 }
 

@@ -489,17 +489,13 @@ static void replay(const struct prb_attached_ctx *c, struct dr_sampler smp, dr_v
         w->L_true = dr_sub(w->L_true, dr_mul(ratio, e));
         dr_vec3 d_e = dr_mul(adj, bt), d_f = continuation_df(&v, ratio, w->L_true, w->L_sub, adj);
         dr_vec3 d_t = continuation_adjoint(&v, d_f);
-        if (det) {
-            d_path_vertex_term(s, ps, &v, d_e, det);
-            if (v.cont && v.diff_bsdf)
-                d_path_continuation(s, ps, &v, d_f, det);
-        }
+        const bool cont_diff = v.cont && v.diff_bsdf;   /* (else the continuation's f adds nothing) */
+        if (det)
+            d_path_vertex(s, ps, &v, d_e, cont_diff ? d_f : dr_v3s(0.0), det);
         const bool first = !moving && dr_path_vertex_sampling_moves(s, ps, &v);
         moving = moving || first;
         if (!moving) {
-            d_path_vertex_term(s, ps, &v, d_e, sink);
-            if (v.cont && v.diff_bsdf)
-                d_path_continuation(s, ps, &v, dr_scale(d_t, v.cos_pdf_q), sink);
+            d_path_vertex(s, ps, &v, d_e, cont_diff ? dr_scale(d_t, v.cos_pdf_q) : dr_v3s(0.0), sink);
         } else {
             double c_next[NS];
             if (have)

@@ -483,19 +483,19 @@ static void sweep(const struct tape_job *j, const struct tape *tp, const struct 
                             dr_mul(adj, dr_mul(bt, dr_path_vertex_nee(v))), sink);
             after = from;
         }
-        dr_vec3 t = dr_v3s(0.0);
+        dr_vec3 t = dr_v3s(0.0), d_f = dr_v3s(0.0);   /* (d_f: the continuation's f; none: black) */
         if (v->cont) {
             /* in media the throughput also took the segment's weight (path.h) */
             dr_vec3 bts = v->media ? dr_mul(bt, v->seg) : bt;
             if (v->diff_bsdf && j->derivative)
                 d_path_deriv_continuation(s, ps, v, dr_scale(dr_mul(abar, bts), v->cos_pdf_q), sink);
             else if (v->diff_bsdf)
-                d_path_continuation(s, ps, v, dr_scale(dr_mul(abar, bts), v->cos_pdf_q), sink);
+                d_f = dr_scale(dr_mul(abar, bts), v->cos_pdf_q);
             t = dr_scale(v->f, v->cos_pdf_q);
             if (v->media)
                 t = dr_mul(t, v->seg);
         }
-        d_path_vertex_term(s, ps, v, dr_mul(adj, bt), sink);
+        d_path_vertex(s, ps, v, dr_mul(adj, bt), d_f, sink);   /* (both BSDF values' material adjoint at once) */
         if (j->derivative)
             sweep_derivative(j, &verts[i], next, path, sink, rays);
         abar = dr_add(dr_mul(adj, dr_path_vertex_term(v)), dr_mul(abar, t));
@@ -525,9 +525,8 @@ static void sweep_attached(const struct tape_job *j, const struct tape_vertex *v
             d_path_vertex_attached(s, &j->b.popts, v, dr_mul(adj, bt), dr_mul(abar, bt), &d_next, &d_this, sink);
             d_next = d_this;
         } else {
-            if (v->cont && v->diff_bsdf)
-                d_path_continuation(s, ps, v, dr_scale(dr_mul(abar, bt), v->cos_pdf_q), sink);
-            d_path_vertex_term(s, ps, v, dr_mul(adj, bt), sink);
+            const dr_vec3 d_f = v->cont && v->diff_bsdf ? dr_scale(dr_mul(abar, bt), v->cos_pdf_q) : dr_v3s(0.0);
+            d_path_vertex(s, ps, v, dr_mul(adj, bt), d_f, sink);
         }
         abar = dr_add(dr_mul(adj, dr_path_vertex_term(v)), dr_mul(abar, t));
     }

@@ -321,6 +321,77 @@ static void derivative_predicate(struct dr_scene *s, const struct dr_camera *cam
     dr_param_set_destroy(ps);
 }
 
+/* d_path_vertex, which prb and the tape call at every differentiated vertex,
+ * sums its two BSDF values' adjoints before the material's (one texture
+ * lookup, one texel scatter): it must give what d_path_vertex_term and
+ * d_path_continuation give apart, to rounding, in reverse and forward mode,
+ * on vertices that have both parts (a dropped part, or one part's adjoint
+ * given to the other, fails). */
+static void joint_vertex_adjoint(struct dr_scene *s, const struct dr_camera *cam, const char *const *ptrs, int n)
+{
+    struct dr_param_set *ps = dr_param_set_create(s, ptrs, n);
+    CHECK(ps != NULL, "joint adjoint: %s", dr_last_error());
+    if (!ps)
+        return;
+    const struct dr_path_opts opts = {.max_depth = 8, .rr_depth = DR_RR_DEPTH_DEFAULT,
+                                      .stages = dr_path_plan(s, ps), .params = ps};
+    struct dr_camera_view view = dr_camera_view(cam, W, H);
+    double *joint = calloc((size_t)ps->total, sizeof(double)), *apart = calloc((size_t)ps->total, sizeof(double)),
+           *dir = calloc((size_t)ps->total, sizeof(double));
+    for (int64_t k = 0; k < ps->total; k++)
+        dir[k] = 0.5 + 0.01 * (double)(k % 37);
+    struct dr_ray_counts rays = {0};
+    int both = 0;
+    double worst = 0.0, worst_fwd = 0.0;
+    for (int i = 0; i < 3000; i++) {
+        struct dr_sampler smp;
+        dr_sampler_init(&smp, 23, (uint64_t)i, 0);
+        double u, v;
+        dr_sampler_next2(&smp, &u, &v);
+        dr_vec3 o, d;
+        dr_camera_ray(&view, (i % W) + u, ((i / W) % H) + v, &o, &d);
+        struct dr_path_state st;
+        struct dr_path_vertex vx;
+        dr_path_start(&st, o, d);
+        for (bool more = true; more;) {
+            more = dr_path_step(s, &opts, &st, &smp, &vx, &rays);
+            if (!(vx.nee && vx.cont && vx.diff_bsdf))
+                continue;
+            both++;
+            const dr_vec3 d_e = dr_v3(0.3, -0.7, 1.1), d_f = dr_v3(-0.9, 0.4, 0.6);
+            struct dr_grad_sink a = dr_sink_reverse(joint), b = dr_sink_reverse(apart);
+            d_path_vertex(s, ps, &vx, d_e, d_f, &a);
+            d_path_vertex_term(s, ps, &vx, d_e, &b);
+            d_path_continuation(s, ps, &vx, d_f, &b);
+            double scale = 0.0, diff = 0.0;
+            for (int64_t k = 0; k < ps->total; k++) {
+                scale = fmax(scale, fabs(apart[k]));
+                diff = fmax(diff, fabs(joint[k] - apart[k]));
+                joint[k] = apart[k] = 0.0;
+            }
+            worst = fmax(worst, scale > 0.0 ? diff / scale : diff);
+            /* (relative to the parts' sizes: their sum may cancel) */
+            struct dr_grad_sink fa = dr_sink_forward(dir), ft = dr_sink_forward(dir), fc = dr_sink_forward(dir);
+            d_path_vertex(s, ps, &vx, d_e, d_f, &fa);
+            d_path_vertex_term(s, ps, &vx, d_e, &ft);
+            d_path_continuation(s, ps, &vx, d_f, &fc);
+            for (int c = 0; c < 3; c++) {
+                const double size = fabs(ft.forward[c]) + fabs(fc.forward[c]);
+                const double diff = fabs(fa.forward[c] - (ft.forward[c] + fc.forward[c]));
+                worst_fwd = fmax(worst_fwd, size > 0.0 ? diff / size : diff);
+            }
+        }
+    }
+    CHECK(both > 100, "joint adjoint: only %d vertices with both parts", both);
+    CHECK(worst <= 1e-12, "joint adjoint: reverse mode differs from the parts by %.3g relative", worst);
+    CHECK(worst_fwd <= 1e-12, "joint adjoint: forward mode differs from the parts by %.3g relative", worst_fwd);
+    printf("joint vertex adjoint: %d vertices, reverse %.3g, forward %.3g\n", both, worst, worst_fwd);
+    free(joint);
+    free(apart);
+    free(dir);
+    dr_param_set_destroy(ps);
+}
+
 /* tape keeps each worker's tape mappings from one run to the next (tape.c):
  * a run after runs of other depths, batch sizes and thread counts gives bit
  * for bit what it gave before them. */
@@ -903,6 +974,7 @@ int main(void)
     /* one parameter at a time: most vertices then have no term */
     for (int k = 0; k < 7; k++)
         derivative_predicate(s, &s->cameras[0], &ptrs[k], 1);
+    joint_vertex_adjoint(s, &s->cameras[0], ptrs, 7);
     /* attached sampling (the gold roughness moves its sampling map): prb
      * with the default regularisation recomputes ill-conditioned Jacobians
      * exactly, so it matches the tape on a whole image, with an adjoint of
