@@ -11,6 +11,7 @@
 #include "cli.h"
 #include "error.h"
 #include "image_io.h"
+#include "parallel.h"
 
 #define DEFAULT_SCENE "cornell-box.gltf"
 
@@ -226,6 +227,9 @@ int grad_common_option(struct grad_common *g, int c, const char *arg)
         if (!cli_parse_int(g->cmd, "--threads", arg, 0, 256, &v))
             return DR_EXIT_USAGE;
         g->threads = (int)v;
+        /* (the loader, the structures' builds and the image library keep to it too) */
+        dr_set_default_threads(g->threads);
+        dr_image_set_threads(g->threads);
         return 0;
     case GOPT_JSON: g->json = true; return 0;
     case GOPT_PARAM:

@@ -142,7 +142,7 @@ uint64_t cli_mem_scene(const struct dr_scene *s)
 
 static int thread_count(int threads)
 {
-    int t = threads > 0 ? threads : dr_cpu_count();
+    int t = threads > 0 ? threads : dr_default_threads();
     return t < 1 ? 1 : (t > 64 ? 64 : t);
 }
 

@@ -10,6 +10,7 @@
 #include "backface.h"
 #include "coverage.h"
 #include "error.h"
+#include "parallel.h"
 #include "simd.h"
 
 /* A geometry's map to the scene's triangles. */
@@ -246,9 +247,18 @@ static struct dr_accel *build(const struct dr_mesh *mesh, const struct dr_scene 
         return NULL;
     }
     /* DRENDER_EMBREE_CONFIG: Embree's device configuration (e.g. "isa=avx2":
-     * how a machine without AVX-512 traces; the tests use it) */
-    const char *config = getenv("DRENDER_EMBREE_CONFIG");
-    a->device = rtcNewDevice(config && *config ? config : NULL);
+     * how a machine without AVX-512 traces; the tests use it). Its builds
+     * keep to the run's threads (dr_default_threads: --threads), where
+     * they took every CPU whatever the command line said. */
+    const char *env = getenv("DRENDER_EMBREE_CONFIG");
+    char config[1024];
+    if (snprintf(config, sizeof config, "threads=%d%s%s", dr_default_threads(), env && *env ? "," : "",
+                 env ? env : "") >= (int)sizeof config) {
+        dr_set_error("DRENDER_EMBREE_CONFIG is too long (%zu characters)", strlen(env));
+        free(a);
+        return NULL;
+    }
+    a->device = rtcNewDevice(config);
     if (!a->device) {
         dr_set_error("cannot create the Embree device");
         free(a);

@@ -32,7 +32,7 @@
 #include "image_io.h"
 #include "medium.h"
 extern "C" {
-#include "parallel.h"   /* dr_parallel_for, dr_cpu_count */
+#include "parallel.h"   /* dr_parallel_for, dr_default_threads */
 }
 #include "scene.h"
 
@@ -447,7 +447,7 @@ bool Loader::fs_write(std::string *err, const std::string &, const std::vector<u
 template <class Fn> void parallel_each(size_t n, Fn fn)
 {
     if (n == 0) return;
-    const int threads = int(std::min(n, size_t(dr_cpu_count())));
+    const int threads = int(std::min(n, size_t(dr_default_threads())));
     dr_range_fn range = [](void *ctx, int, int64_t begin, int64_t end) {
         for (int64_t i = begin; i < end; i++) (*static_cast<Fn *>(ctx))(size_t(i));
     };

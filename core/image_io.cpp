@@ -787,6 +787,15 @@ static void plugin_set_max_bytes(unsigned long long bytes)
     g_max_image_set.store(true);
 }
 
+/* OpenEXR's pool, which compresses an EXR's blocks on as many threads as
+ * the machine has: 0 is its default, one per CPU; one thread is none
+ * besides the caller (exr_threads -1). (OpenImageIO's own pool is not
+ * used by drender's reads and writes; sizing it would start it.) */
+static void plugin_set_threads(int n)
+{
+    OIIO::attribute("exr_threads", n == 1 ? -1 : (n > 0 ? n : 0));
+}
+
 static bool plugin_can_write(const char *path)
 {
     if (!path || !*path)
@@ -852,7 +861,7 @@ extern "C" const struct dr_image_plugin *dr_image_plugin_table(void)
     static const struct dr_image_plugin table = {
         DR_IMAGE_PLUGIN_VERSION, plugin_read,          plugin_read_memory,    plugin_set_max_bytes,
         plugin_can_write,        plugin_write_encoded, drp_colormap_diverging, plugin_read_volume,
-        plugin_read_memory8,
+        plugin_read_memory8,     plugin_set_threads,
     };
     return &table;
 }

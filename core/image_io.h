@@ -31,6 +31,9 @@ int dr_image_read_memory8(const void *bytes, size_t size, const char *name_hint,
  * DR_ERR_NOMEM and a message naming the image and its size. 0 = no limit.
  * Default: the machine's physical memory. */
 void dr_image_set_max_bytes(unsigned long long bytes);
+/* The threads the image library may use (OpenEXR's compression):
+ * --threads; n <= 0: its default, one per CPU. Does not load the library. */
+void dr_image_set_threads(int n);
 
 /* Loads the image library (core/image_plugin.h) if it is not loaded yet;
  * false, with dr_last_error naming where it looked, when it cannot be loaded

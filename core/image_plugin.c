@@ -28,9 +28,12 @@ extern const struct dr_image_plugin *dr_image_plugin_table(void) __attribute__((
 static pthread_once_t load_once = PTHREAD_ONCE_INIT;
 static const struct dr_image_plugin *_Atomic plugin;   /* set once by load() */
 static char load_error[1024];
-/* dr_image_set_max_bytes before the plugin is loaded: kept and handed over. */
+/* dr_image_set_max_bytes and dr_image_set_threads before the plugin is
+ * loaded: kept and handed over. */
 static _Atomic unsigned long long max_bytes;
 static atomic_bool max_bytes_set;
+static _Atomic int threads;
+static atomic_bool threads_set;
 
 /* Directory of the running executable, with a trailing '/'; "" if unknown. */
 static void exe_dir(char *dir, size_t size)
@@ -99,14 +102,17 @@ static const struct dr_image_plugin *find_plugin(void)
     return found;
 }
 
-/* Publishes the plugin, then hands over a limit set before it was there
- * (dr_image_set_max_bytes does the other half of this hand-shake). */
+/* Publishes the plugin, then hands over the settings made before it was
+ * there (dr_image_set_max_bytes and _threads do the other half of this
+ * hand-shake). */
 static void load(void)
 {
     const struct dr_image_plugin *p = find_plugin();
     atomic_store(&plugin, p);
     if (p && atomic_load(&max_bytes_set))
         p->set_max_bytes(atomic_load(&max_bytes));
+    if (p && atomic_load(&threads_set))
+        p->set_threads(atomic_load(&threads));
 }
 
 /* The plugin, loading it if needed; NULL with dr_last_error set if it
@@ -164,6 +170,15 @@ void dr_image_set_max_bytes(unsigned long long bytes)
     const struct dr_image_plugin *p = atomic_load(&plugin);
     if (p)
         p->set_max_bytes(bytes);
+}
+
+void dr_image_set_threads(int n)
+{
+    atomic_store(&threads, n > 0 ? n : 0);
+    atomic_store(&threads_set, true);
+    const struct dr_image_plugin *p = atomic_load(&plugin);   /* (as dr_image_set_max_bytes) */
+    if (p)
+        p->set_threads(n > 0 ? n : 0);
 }
 
 bool dr_image_library_ok(void)

@@ -36,7 +36,7 @@
 extern "C" {
 #endif
 
-#define DR_IMAGE_PLUGIN_VERSION 3
+#define DR_IMAGE_PLUGIN_VERSION 4
 #define DR_IMAGE_PLUGIN_FILE "libdrender-image.so"
 
 /* The plugin's functions; same contracts as image_io.h and vis.h. */
@@ -51,6 +51,7 @@ struct dr_image_plugin {
     int (*colormap_diverging)(const float *t, int width, int height, float *rgb);
     int (*read_volume)(const char *path, const char *grid, struct dr_volume *vol);
     int (*read_memory8)(const void *bytes, size_t size, const char *name_hint, struct dr_image *img);
+    void (*set_threads)(int threads);
 };
 
 /* Exported by the plugin (image_io.cpp): its table. */

@@ -52,6 +52,19 @@ int dr_cpu_count(void)
     return n >= 1 ? (int)n : 1;
 }
 
+static _Atomic int default_threads;   /* 0: one per CPU */
+
+void dr_set_default_threads(int n)
+{
+    atomic_store(&default_threads, n > 0 ? n : 0);
+}
+
+int dr_default_threads(void)
+{
+    const int n = atomic_load(&default_threads);
+    return n > 0 ? n : dr_cpu_count();
+}
+
 static void (*_Atomic started_hook)(int workers);
 
 void dr_parallel_set_started_hook(void (*hook)(int workers))
@@ -80,7 +93,7 @@ int dr_parallel_tiles(int width, int height, int threads, dr_tile_fn fn, dr_prog
     j.ctx = ctx;
     pthread_mutex_init(&j.lock, NULL);
     if (threads <= 0)
-        threads = dr_cpu_count();
+        threads = dr_default_threads();
     if (threads > j.total)
         threads = j.total > 0 ? j.total : 1;
 
@@ -156,7 +169,7 @@ static int range_run(int64_t n, int64_t chunk, int threads, bool fixed, dr_range
     j.fn = fn;
     j.ctx = ctx;
     if (threads <= 0)
-        threads = dr_cpu_count();
+        threads = dr_default_threads();
     j.threads = threads;
     struct range_worker *ws = calloc((size_t)threads, sizeof *ws);
     pthread_t *ids = calloc((size_t)threads, sizeof *ids);
@@ -222,6 +235,6 @@ void dr_parallel_zero(double *x, int64_t n, int threads)
 
 int dr_thread_count(int requested)
 {
-    int t = requested > 0 ? requested : dr_cpu_count();
+    int t = requested > 0 ? requested : dr_default_threads();
     return t > DR_MAX_THREADS ? DR_MAX_THREADS : t;
 }

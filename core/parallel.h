@@ -55,7 +55,13 @@ void dr_parallel_zero(double *x, int64_t n, int threads);
 void dr_parallel_set_started_hook(void (*hook)(int workers));
 /* Number of online CPUs (>= 1). */
 int dr_cpu_count(void);
-/* The workers a run uses for a request (<= 0: one per CPU), at most DR_MAX_THREADS. */
+/* The workers of work that names no number (threads <= 0 above, the scene
+ * loader's decodes, the light tables' builds): one per CPU, or the number
+ * set here (the command line's --threads; n <= 0: one per CPU again), so
+ * that a run asked to keep to n threads does so from its start. */
+void dr_set_default_threads(int n);
+int dr_default_threads(void);
+/* The workers a run uses for a request (<= 0: dr_default_threads), at most DR_MAX_THREADS. */
 int dr_thread_count(int requested);
 
 #endif

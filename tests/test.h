@@ -6,6 +6,7 @@
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <unistd.h>
 
 static int test_failures = 0;
 static int test_checks = 0;
@@ -46,5 +47,22 @@ static inline const char *path_in(const char *env, const char *def, const char *
 
 /* A bundled scene: $DR_SCENES/NAME, default scenes/NAME. */
 static inline const char *scene_path(const char *name) { return path_in("DR_SCENES", "scenes", name); }
+
+/* A shared glTF sample, REL under ../shared/gltf-samples beside the checkout
+ * (the tests' directory is $DR_TESTDIR, default tests; the checkout may be
+ * one level deeper, as a worktree); NULL if it is not there. One buffer:
+ * copy the result to hold two. */
+static inline const char *shared_sample(const char *rel)
+{
+    static char buf[4096];
+    const char *dir = getenv("DR_TESTDIR");
+    const char *roots[] = {"/../../shared/gltf-samples/", "/../../../shared/gltf-samples/"};
+    for (int i = 0; i < 2; i++) {
+        snprintf(buf, sizeof buf, "%s%s%s", dir && *dir ? dir : "tests", roots[i], rel);
+        if (access(buf, R_OK) == 0)
+            return buf;
+    }
+    return NULL;
+}
 
 #endif

@@ -476,20 +476,18 @@ static float *triangles(const struct dr_scene *s)
 
 /* The path of a shared sample (../shared/gltf-samples beside the checkout)
  * into buf; false (and a failed check) if it is not there. */
-static bool shared_sample(const char *rel, char *buf, size_t size)
+static bool shared_sample_in(const char *rel, char *buf, size_t size)
 {
-    const char *td = getenv("DR_TESTDIR");
-    snprintf(buf, size, "%s/../../shared/gltf-samples/%s", td && *td ? td : "tests", rel);
-    if (access(buf, R_OK) != 0)
-        snprintf(buf, size, "%s/../../../shared/gltf-samples/%s", td && *td ? td : "tests", rel);
-    CHECK(access(buf, R_OK) == 0, "the shared sample %s was not found beside the checkout (%s)", rel, buf);
-    return access(buf, R_OK) == 0;
+    const char *p = shared_sample(rel);
+    CHECK(p != NULL, "the shared sample %s was not found beside the checkout", rel);
+    snprintf(buf, size, "%s", p ? p : "");
+    return p != NULL;
 }
 
 static void test_draco(void)
 {
     char plain[512], draco[512];
-    if (!shared_sample("Box/glTF/Box.gltf", plain, sizeof plain)) return;
+    if (!shared_sample_in("Box/glTF/Box.gltf", plain, sizeof plain)) return;
     snprintf(draco, sizeof draco, "%.*s/glTF-Draco/Box.gltf", (int)(strstr(plain, "/glTF/Box.gltf") - plain), plain);
     struct dr_scene *a = calloc(1, sizeof *a), *d = calloc(1, sizeof *d);
     int ra = dr_gltf_load(plain, a), rd = dr_gltf_load(draco, d);
@@ -545,7 +543,7 @@ static void render_sample(struct dr_scene *s, float *rgb)
 static void test_eight_bit(void)
 {
     char path[512];
-    if (!shared_sample("NormalTangentTest/glTF/NormalTangentTest.gltf", path, sizeof path)) return;
+    if (!shared_sample_in("NormalTangentTest/glTF/NormalTangentTest.gltf", path, sizeof path)) return;
     struct dr_scene *s = dr_scene_load(path);
     CHECK(s != NULL, "%s: %s", path, dr_last_error());
     if (!s) return;

@@ -1,14 +1,19 @@
 /* Tests of core/parallel.c's started hook (the render's background load of
  * the image library hangs on it): called once per run, on the calling
- * thread, by every kind of run, and not once it is unset; and of the
- * preload it carries in the CLI. */
+ * thread, by every kind of run, and not once it is unset; of the preload
+ * it carries in the CLI; and of the default number of workers (--threads),
+ * which the scene loader and Embree's builds keep to as well. */
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdbool.h>
 #include <stdlib.h>
+#include <string.h>
 
+#include "accel.h"
+#include "error.h"
 #include "image_io.h"
 #include "parallel.h"
+#include "scene.h"
 #include "test.h"
 
 static _Atomic int hook_calls, hook_off_caller, hook_workers, work_items;
@@ -142,8 +147,101 @@ static void test_elements(void)
     free(x);
 }
 
+/* The process's threads now (/proc/self/status), 0 if unknown. */
+static int process_threads(void)
+{
+    FILE *f = fopen("/proc/self/status", "r");
+    char line[256];
+    int n = 0;
+    while (f && fgets(line, sizeof line, f))
+        if (strncmp(line, "Threads:", 8) == 0)
+            n = atoi(line + 8);
+    if (f)
+        fclose(f);
+    return n;
+}
+
+static _Atomic int most_workers;
+
+static void note_workers(int workers)
+{
+    int m = atomic_load(&most_workers);
+    while (workers > m && !atomic_compare_exchange_weak(&most_workers, &m, workers)) {
+    }
+}
+
+/* A flat grid of 2 * n * n triangles, big enough for Embree to build it
+ * on several threads where it may. */
+static void grid_mesh(struct dr_mesh *m, uint32_t n)
+{
+    memset(m, 0, sizeof *m);
+    m->n_vertices = (n + 1) * (n + 1);
+    m->n_triangles = 2 * n * n;
+    m->positions = calloc((size_t)m->n_vertices * 3 + 1, sizeof(float));
+    m->indices = calloc((size_t)m->n_triangles * 3, sizeof(uint32_t));
+    for (uint32_t y = 0; y <= n; y++)
+        for (uint32_t x = 0; x <= n; x++) {
+            float *p = m->positions + 3 * (y * (n + 1) + x);
+            p[0] = (float)x, p[1] = (float)y, p[2] = (float)((x * 7 + y * 3) % 5) * 0.1f;
+        }
+    for (uint32_t y = 0, t = 0; y < n; y++)
+        for (uint32_t x = 0; x < n; x++, t += 2) {
+            const uint32_t a = y * (n + 1) + x, b = a + 1, c = a + n + 1, d = c + 1;
+            const uint32_t tri[6] = {a, b, d, a, d, c};
+            memcpy(m->indices + 3 * t, tri, sizeof tri);
+        }
+}
+
+/* dr_set_default_threads (the CLI's --threads): runs that name no number
+ * take it, Embree builds on no more threads, and the scene loader decodes
+ * its images on no more workers. Runs first: the threads Embree's task
+ * scheduler starts stay for the process's life. */
+static void test_default_threads(void)
+{
+    dr_set_default_threads(1);
+    CHECK(dr_default_threads() == 1 && dr_thread_count(0) == 1 && dr_thread_count(3) == 3,
+          "default 1: %d, a run of 0 gets %d, of 3 gets %d", dr_default_threads(), dr_thread_count(0),
+          dr_thread_count(3));
+    /* Embree's build: no new thread (it had started one per CPU, less its caller) */
+    struct dr_mesh m;
+    grid_mesh(&m, 400);
+    const int before = process_threads();
+    struct dr_accel *a = dr_accel_create(&m);
+    const int during = process_threads();
+    CHECK(a != NULL, "a 320k-triangle structure: %s", dr_last_error());
+    CHECK(before > 0 && during == before, "default 1: Embree's build left %d threads (%d before)", during, before);
+    if (a)
+        CHECK(dr_accel_intersect(a, dr_v3(10.5, 10.25, 5.0), dr_v3(0.0, 0.0, -1.0), 0.0, 100.0) >= 0,
+              "the structure built on one thread answers");
+    dr_accel_destroy(a);
+    free(m.positions);
+    free(m.indices);
+    /* the loader's image decodes (three 2048 x 2048 PNGs) */
+    const char *sample = shared_sample("NormalTangentTest/glTF/NormalTangentTest.gltf");
+    CHECK(sample != NULL, "the shared sample NormalTangentTest was not found beside the checkout");
+    dr_parallel_set_started_hook(note_workers);
+    for (int limit = 1; sample && limit <= 3; limit += 2) {
+        dr_set_default_threads(limit);
+        atomic_store(&most_workers, 0);
+        CHECK(dr_parallel_for(1000, 7, 0, range, NULL) == 0 && atomic_load(&most_workers) == limit,
+              "default %d: a run of 0 threads took %d workers", limit, atomic_load(&most_workers));
+        atomic_store(&most_workers, 0);
+        struct dr_scene *s = dr_scene_load(sample);
+        CHECK(s != NULL && s->n_images == 3, "%s: %s", sample, s ? "not three images" : dr_last_error());
+        CHECK(atomic_load(&most_workers) == limit, "default %d: the loader's runs took up to %d workers", limit,
+              atomic_load(&most_workers));
+        dr_scene_destroy(s);
+    }
+    dr_parallel_set_started_hook(NULL);
+    /* back to one per CPU */
+    dr_set_default_threads(0);
+    CHECK(dr_default_threads() == dr_cpu_count() && dr_thread_count(0) == dr_cpu_count(),
+          "default reset: %d (%d CPUs)", dr_default_threads(), dr_cpu_count());
+}
+
 int main(void)
 {
+    test_default_threads();
     test_started_hook();
     test_preload();
     test_elements();

@@ -28,19 +28,6 @@
 
 /* ------------------------------------------------------------ tangents */
 
-static const char *shared_sample(const char *rel)
-{
-    static char buf[4096];
-    const char *dir = getenv("DR_TESTDIR");
-    const char *roots[] = {"/../../shared/gltf-samples/", "/../../../shared/gltf-samples/"};
-    for (int i = 0; i < 2; i++) {
-        snprintf(buf, sizeof buf, "%s%s%s", dir && *dir ? dir : "tests", roots[i], rel);
-        if (access(buf, R_OK) == 0)
-            return buf;
-    }
-    return NULL;
-}
-
 /* VertexColorTest ships TANGENT (Blender's MikkTSpace). A copy whose second
  * material gets a normalTexture makes the loader keep them; then each
  * vertex's tangent is regenerated and compared. */
