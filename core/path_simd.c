@@ -434,22 +434,30 @@ bool dr_path8_applies(const struct dr_scene *s, const struct dr_path_opts *opts)
     return !(ps && (ps->radiance_active || ps->media_active)) && eight_lane_run(s, opts, false);
 }
 
+/* A dark emitter whose emission has a parameter: the one-path walker
+ * counts its hits as emitting (path.c's surface_emits) where these stages
+ * see no emitter; its radiance would be the same 0 but for an emission
+ * whose factors cancel in the power weight, so such runs stay with the
+ * scalar stages. */
+static bool dark_emitter_param(const struct dr_scene *s, const struct dr_param_set *ps)
+{
+    for (int m = 0; ps && ps->radiance_active && m < s->n_materials; m++)
+        if (ps->mat_emission_active[m] && !dr_light_material_emits(s->light_sampler, m))
+            return true;
+    return false;
+}
+
 bool dr_path8_walks_apply(const struct dr_scene *s, const struct dr_path_opts *opts)
 {
     const struct dr_param_set *ps = opts->params;
     if (!ps || !ps->radiance_active)
         return dr_path8_applies(s, opts);
-    if (ps->media_active || !eight_lane_run(s, opts, false))
-        return false;
-    /* A dark emitter whose emission has a parameter: the one-path walker
-     * counts its hits as emitting (path.c's surface_emits) where these
-     * stages see no emitter; its radiance would be the same 0 but for an
-     * emission whose factors cancel in the power weight, so such runs stay
-     * with the scalar stages. */
-    for (int m = 0; m < s->n_materials; m++)
-        if (ps->mat_emission_active[m] && !dr_light_material_emits(s->light_sampler, m))
-            return false;
-    return true;
+    return !ps->media_active && eight_lane_run(s, opts, false) && !dark_emitter_param(s, ps);
+}
+
+bool dr_path8_walks_apply_outside_media(const struct dr_scene *s, const struct dr_path_opts *opts)
+{
+    return eight_lane_run(s, opts, true) && !dark_emitter_param(s, opts->params);
 }
 
 /* A material with a BSDF parameter stays scalar: its vertex substitutes zero

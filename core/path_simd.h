@@ -143,6 +143,11 @@ bool dr_path8_applies_outside_media(const struct dr_scene *scene, const struct d
  * adjoints read; not where such a light is dark (a power of 0: path_simd.c
  * says why). */
 bool dr_path8_walks_apply(const struct dr_scene *scene, const struct dr_path_opts *opts);
+/* ... in a scene with media, for path replay's walks of the paths that
+ * meet none, which the caller hands to the one-path walker where they could
+ * (wave_soa.c): media parameters allowed (such a path has no media term),
+ * the rest as dr_path8_walks_apply. */
+bool dr_path8_walks_apply_outside_media(const struct dr_scene *scene, const struct dr_path_opts *opts);
 /* Can a vertex on triangle tri use them without its derivative term's
  * bookkeeping (a hit, on a material without a BSDF parameter)? Such a
  * vertex has no derivative term in a run dr_path8_applies to. The arrays'

@@ -139,6 +139,11 @@ bool dr_wave_soa_walks_apply(const struct dr_scene *s, const struct dr_path_opts
     return sums_only ? dr_path8_walks_apply(s, opts) : dr_path8_applies(s, opts);
 }
 
+bool dr_wave_soa_media_walks_apply(const struct dr_scene *s, const struct dr_path_opts *opts)
+{
+    return (opts->stages & DR_STAGE_MEDIA) && dr_media_all_bounded(s) && dr_path8_walks_apply_outside_media(s, opts);
+}
+
 bool dr_wave_soa_replays_apply(const struct dr_scene *s, const struct dr_path_opts *opts)
 {
     return dr_path8_walks_apply(s, opts);
@@ -177,6 +182,8 @@ static void start_path(struct dr_wave_soa *w, int k, int64_t item, const struct 
         w->last_diff[k] = 0;
         if (w->out->log)
             w->out->log[item].n = 0;
+        if (w->out->in_media)
+            w->out->in_media[item] = false;
     }
     if (w->replay) {   /* the first walk's sums, which the replay takes apart */
         const struct dr_wave_soa_replay *r = w->replay;
@@ -418,9 +425,14 @@ static void scalar_state(const struct dr_wave_soa *w, int k, struct dr_path_stat
  * medium_scene.h's dr_media_shadow_key: the same odds, not the same
  * draws). A shadow ray through a medium's box, where the stages' occlusion
  * test would take the boundary for a wall, takes the walker's transmittance
- * (shadows_through_media) and its path stays. So the paths that never enter a medium, most of them where a smoke
- * or fog fills part of a scene, run as in a scene without media. Radiance
- * runs only: derivatives of media take the one-path walker throughout. */
+ * (shadows_through_media) and its path stays. So the paths that never
+ * enter a medium, most of them where a smoke or fog fills part of a scene,
+ * run as in a scene without media. Path replay's primal walks
+ * (dr_wave_soa_media_walks_apply) hand such paths, and those whose shadow
+ * rays cross a medium's box, back to their caller instead (in_media), who
+ * walks them one path at a time from their start: a path that meets no
+ * medium has no media term, so its sums are the one-path walk's even where
+ * the media have parameters. */
 static void finish_in_media(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
                             int k, dr_vec3 *out, struct dr_ray_counts *counts)
 {
@@ -492,6 +504,11 @@ static dr_m8 shadows_through_media(struct dr_wave_soa *w, const struct dr_scene 
         const int k = i0 + i;
         if (!through[i])
             continue;
+        if (w->out) {   /* a walk's: its vertex has a media term; the caller walks it again */
+            w->out->in_media[w->item[k]] = true;
+            w->occluded[k] = true;
+            continue;
+        }
         const dr_vec3 so = dr_v3x8_get(&G->so, i), sd = dr_v3x8_get(&G->sd, i);
         const dr_vec3 tr = dr_medium_shadow_transmittance(s, w->key[k], (int)w->depth[k], so, sd, G->tmax[i],
                                                           &counts->shadow);
@@ -674,7 +691,10 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
         for (int i = 0; i < DR_SIMD_W && i0 + i < n_live; i++) {
             const int k = i0 + i;
             if (w->media && meets_medium(w, s, k)) {
-                finish_in_media(w, s, opts, k, out, counts);
+                if (w->out)   /* (a walk's: the caller walks it again, one path at a time) */
+                    w->out->in_media[w->item[k]] = true;
+                else
+                    finish_in_media(w, s, opts, k, out, counts);
                 continue;
             }
             if (w->tri[k] < 0) {
@@ -1085,7 +1105,9 @@ static void run(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr
     int n_live = 0;
     int64_t next = 0;
     w->structured = false;
-    w->media = !w->out && (opts->stages & DR_STAGE_MEDIA);   /* (dr_wave_soa_applies: a radiance run) */
+    /* (dr_wave_soa_applies: a radiance run; dr_wave_soa_media_walks_apply:
+     * path replay's walks, which hand back the paths that meet a medium) */
+    w->media = (opts->stages & DR_STAGE_MEDIA) && (!w->out || w->out->in_media);
     struct dr_stage_seconds *cpu = &counts->cpu;
     double t = dr_clock_seconds(), t_next;   /* (the stages' times: path.h) */
 #define STAGE(field) (t_next = dr_clock_seconds(), cpu->field += t_next - t, t = t_next)

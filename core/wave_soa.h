@@ -60,6 +60,12 @@ struct dr_wave_soa_walks {
      * (set: the scalar stages take such vertices; NULL: the eight-lane
      * stages, which prb's walks use) */
     void (*vertex)(void *ctx, int64_t item, const struct dr_wave_arrival *a, const struct dr_path_vertex *v);
+    /* in a scene with media (dr_wave_soa_media_walks_apply; NULL
+     * elsewhere), by item: the path met a medium (its ray hit a medium's
+     * boundary, or it started in one, or a shadow ray of it crossed a
+     * medium's box). Its sums, last_diff and log are not given: the caller
+     * walks it one path at a time, from its start. Every item's is set. */
+    bool *in_media;
 };
 
 /* Can a gradient's primal walks use the arrays (parameters allowed)? The
@@ -70,6 +76,12 @@ struct dr_wave_soa_walks {
  * where a light's radiance has a parameter (dr_path8_walks_apply); a tape's
  * steps would need those vertices whole. */
 bool dr_wave_soa_walks_apply(const struct dr_scene *scene, const struct dr_path_opts *opts, bool sums_only);
+/* Can path replay's primal walks (sums_only) use the arrays in a scene with
+ * media, for the paths that meet none (dr_wave_soa_walks.in_media, which
+ * such walks must be given)? Where every medium is bounded by a mesh and
+ * the eight-lane stages take every hit. The media's parameters are then as
+ * if absent: no vertex of such a path has a media term. */
+bool dr_wave_soa_media_walks_apply(const struct dr_scene *scene, const struct dr_path_opts *opts);
 /* Bytes dr_wave_soa_create and dr_wave_soa_walk allocate (for memory estimates). */
 size_t dr_wave_soa_walk_bytes(void);
 

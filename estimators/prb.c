@@ -30,6 +30,8 @@ struct parked_samples {
                                         answers (log: the replay traces nothing again) */
     dr_vec3 *adj;                    /* the adjoint, once the pixel's samples are all walked */
     int32_t *order;                  /* the samples to replay */
+    bool *in_media;                  /* in a scene with media: the samples whose paths met one
+                                        (dr_wave_soa_walks.in_media; arrays_pixels) */
 };
 
 struct prb_job {
@@ -37,6 +39,8 @@ struct prb_job {
     double *zeros;          /* attached sampling: a sink direction that discards (params->total zeros) */
     double radius;          /* attached sampling: the scene's radius */
     bool wave;              /* detached, no media, no derivative sampling: samples as a wavefront */
+    bool media_arrays;      /* detached with media, no derivative sampling: the primal walks in the
+                               arrays where the paths meet no medium (arrays_pixels) */
     struct dr_wave *waves[DR_MAX_THREADS];   /* ... per thread, made on first use */
     struct dr_wave_soa *soas[DR_MAX_THREADS];   /* the wavefront's primal walks where the arrays apply (wave_soa.h) */
     struct parked_samples items[DR_MAX_THREADS];   /* the wavefront: a group's parked samples, per thread */
@@ -54,7 +58,8 @@ struct prb_radiance {
  * sums and vertex count), where the cross primal walked it already. */
 struct primal_sums {
     struct prb_attached_sums L;
-    int vertices;   /* (the media derivatives'; 0 from the arrays, which take no media) */
+    int vertices;   /* (the media derivatives'; 0 from the arrays, whose paths meet no medium: the
+                       count only sets how often a media term is estimated, and theirs are 0) */
 };
 
 /* Samples whose ray answers are parked at most (per thread: about 1.4 MB);
@@ -425,7 +430,7 @@ static int64_t park_group(int spp)
 static uint64_t parked_bytes(int64_t cap)
 {
     uint64_t log = cap <= LOGGED_ITEMS ? sizeof(struct dr_wave_log) : 0;
-    return (uint64_t)cap * (3 * sizeof(dr_vec3) + sizeof(int) + sizeof(int32_t) + log);
+    return (uint64_t)cap * (3 * sizeof(dr_vec3) + sizeof(int) + sizeof(int32_t) + sizeof(bool) + log);
 }
 
 /* A thread's parked samples, made on first use (cap of them; ray answers
@@ -438,6 +443,7 @@ static void parked_free(struct parked_samples *it)
     free(it->walk.log);
     free(it->adj);
     free(it->order);
+    free(it->in_media);
     *it = (struct parked_samples){0};
 }
 
@@ -450,9 +456,10 @@ static bool parked_make(struct parked_samples *it, int64_t cap)
     it->walk.last_diff = malloc(sizeof(int) * (size_t)cap);
     it->walk.log = cap <= LOGGED_ITEMS ? malloc(sizeof(struct dr_wave_log) * (size_t)cap) : NULL;
     it->adj = malloc(sizeof(dr_vec3) * (size_t)cap);
+    it->in_media = malloc(sizeof(bool) * (size_t)cap);
     it->order = malloc(sizeof(int32_t) * (size_t)cap);
     if (it->walk.L && it->walk.L_sub && it->walk.last_diff && (it->walk.log || cap > LOGGED_ITEMS) && it->adj &&
-        it->order)
+        it->in_media && it->order)
         return true;
     parked_free(it);   /* all or none: `order` marks a whole set */
     return false;
@@ -553,6 +560,20 @@ static bool cross_adjoints(struct dr_est_base *b, int64_t px, dr_vec3 *adj)
     return any;
 }
 
+/* The primal walk of pixel px's sample sidx, one path at a time: its sums
+ * and vertex count. */
+static struct primal_sums one_path_primal(struct dr_est_base *b, int thread, int64_t px, int sidx)
+{
+    struct dr_medium_record mrec;
+    struct dr_path_vertex prev;
+    struct dr_sampler smp;
+    dr_vec3 o, d;
+    struct walk w = {.mrec = &mrec, .prev = &prev};
+    dr_est_camera_ray(b, thread, px, sidx, &smp, &o, &d);
+    walk(b, smp, o, d, &w, &b->thr[thread].rays);
+    return (struct primal_sums){{w.L.true_, w.L.sub}, w.vertices};
+}
+
 static bool pixel_adjoints(struct prb_job *j, int thread, int64_t px, dr_vec3 *adj)
 {
     struct dr_est_base *b = &j->b;
@@ -564,17 +585,11 @@ static bool pixel_adjoints(struct prb_job *j, int thread, int64_t px, dr_vec3 *a
             adj[sidx] = adj[0];
         return true;
     }
-    struct dr_medium_record mrec;
-    struct dr_path_vertex prev;
     for (int sidx = 0; sidx < spp; sidx++) {   /* adj holds the samples' radiance meanwhile */
-        struct dr_sampler smp;
-        dr_vec3 o, d;
-        struct walk w = {.mrec = &mrec, .prev = &prev};
-        dr_est_camera_ray(b, thread, px, sidx, &smp, &o, &d);
-        walk(b, smp, o, d, &w, &b->thr[thread].rays);
-        adj[sidx] = dr_v3_finite(w.L.true_) && dr_v3_finite(w.L.sub) ? w.L.true_ : dr_v3s(0.0);
+        const struct primal_sums p = one_path_primal(b, thread, px, sidx);
+        adj[sidx] = dr_v3_finite(p.L.L_true) && dr_v3_finite(p.L.L_sub) ? p.L.L_true : dr_v3s(0.0);
         if (j->sums[thread])   /* (for the replays: pixel_replays) */
-            j->sums[thread][sidx] = (struct primal_sums){{w.L.true_, w.L.sub}, w.vertices};
+            j->sums[thread][sidx] = p;
     }
     return cross_adjoints(b, px, adj);
 }
@@ -622,19 +637,28 @@ static void pixel_replays(struct prb_job *j, int thread, int64_t px, const dr_ve
  * are the one-path walk's, bit for bit, and their ray answers are logged),
  * then each pixel's adjoints (with the cross primal from those sums, else
  * the loss's; pixels that do not matter to the loss are not walked) and its
- * samples' replays (pixel_replays, given the sums and the logs). Returns
- * the first pixel not done: where the arrays do not apply (media) or there
- * is no memory for them, prb_pixels walks the rest one path at a time. */
+ * samples' replays (pixel_replays, given the sums and the logs). In a scene
+ * with media (j->media_arrays) the arrays hand back the paths that meet a
+ * medium, whose primal walks are then made one path at a time here; a
+ * path that met none and has no derivative term is not replayed (with media
+ * parameters alone, that is most of them). Returns the first pixel not
+ * done: where the arrays do not apply or there is no memory for them,
+ * prb_pixels walks the rest one path at a time. */
 static int64_t arrays_pixels(struct prb_job *j, int thread, int64_t begin, int64_t end, struct dr_grad_sink *sink)
 {
     struct dr_est_base *b = &j->b;
     const int spp = b->p->spp;
     const int64_t group = park_group(spp);
     struct parked_samples *it = &j->items[thread];
-    if (!dr_wave_soa_walks_apply(b->p->scene, &b->popts, true) || !parked_make(it, group * spp) ||
+    const bool media = j->media_arrays;
+    if (!(media || dr_wave_soa_walks_apply(b->p->scene, &b->popts, true)) || !parked_make(it, group * spp) ||
         !(j->soas[thread] || (j->soas[thread] = dr_wave_soa_create())))
         return begin;
-    const struct dr_wave_soa_walks sums = it->walk;   /* (with ray answers where they fit LOGGED_ITEMS) */
+    struct dr_wave_soa_walks sums = it->walk;   /* (with ray answers where they fit LOGGED_ITEMS) */
+    if (media) {
+        sums.in_media = it->in_media;
+        sums.log = NULL;   /* (the one-path walker traces again in a scene with media: dr_wave_log_step) */
+    }
     dr_vec3 *adj = j->adj[thread];
     int64_t px[PIXEL_CHUNK], n_all = 0;
     dr_vec3 px_adj[PIXEL_CHUNK];   /* (but with the cross primal) */
@@ -650,16 +674,22 @@ static int64_t arrays_pixels(struct prb_job *j, int thread, int64_t begin, int64
         for (int64_t k = 0; k < n_px; k++) {
             for (int sidx = 0; sidx < spp; sidx++) {
                 const int64_t i = k * spp + sidx;
-                const dr_vec3 L = sums.L[i], L_sub = sums.L_sub[i];
+                struct primal_sums *p = &j->sums[thread][sidx];
+                if (media && it->in_media[i])
+                    *p = one_path_primal(b, thread, px[first + k], sidx);
+                else
+                    *p = (struct primal_sums){{sums.L[i], sums.L_sub[i]}, 0};
                 if (b->p->cross)
-                    adj[sidx] = dr_v3_finite(L) && dr_v3_finite(L_sub) ? L : dr_v3s(0.0);
+                    adj[sidx] = dr_v3_finite(p->L.L_true) && dr_v3_finite(p->L.L_sub) ? p->L.L_true : dr_v3s(0.0);
                 else
                     adj[sidx] = px_adj[first + k];
-                j->sums[thread][sidx] = (struct primal_sums){{L, L_sub}, 0};
             }
-            if (!b->p->cross || cross_adjoints(b, px[first + k], adj))
-                pixel_replays(j, thread, px[first + k], adj, j->sums[thread], sums.log ? &sums.log[k * spp] : NULL,
-                              sink);
+            if (b->p->cross && !cross_adjoints(b, px[first + k], adj))
+                continue;
+            for (int sidx = 0; media && sidx < spp; sidx++)   /* (no term: its replay would add nothing) */
+                if (!it->in_media[k * spp + sidx] && sums.last_diff[k * spp + sidx] == 0)
+                    adj[sidx] = dr_v3s(0.0);
+            pixel_replays(j, thread, px[first + k], adj, j->sums[thread], sums.log ? &sums.log[k * spp] : NULL, sink);
         }
     }
     return end;
@@ -697,11 +727,12 @@ static int prb_run(struct dr_est_base *b)
         if (!(j->radius > 0.0) || !isfinite(j->radius))
             j->radius = 1.0;
     }
-    j->wave = run == DR_SAMPLING_DETACHED && b->p->sampling != DR_SAMPLING_DERIVATIVE &&
-              !(b->popts.stages & DR_STAGE_MEDIA);
+    const bool detached = run == DR_SAMPLING_DETACHED && b->p->sampling != DR_SAMPLING_DERIVATIVE;
+    j->wave = detached && !(b->popts.stages & DR_STAGE_MEDIA);
+    j->media_arrays = detached && dr_wave_soa_media_walks_apply(b->p->scene, &b->popts);
     /* one path at a time: the primal walks' sums, the cross primal's or
      * the arrays' (arrays_pixels), which the replays then need not walk */
-    const bool arrays = dr_wave_soa_walks_apply(b->p->scene, &b->popts, true);
+    const bool arrays = j->media_arrays || dr_wave_soa_walks_apply(b->p->scene, &b->popts, true);
     const bool keep_sums = !j->wave && (b->p->cross || arrays);
     for (int t = 0; t < b->acc.threads; t++)
         if (!(j->adj[t] = malloc(sizeof(dr_vec3) * (size_t)b->p->spp)) ||

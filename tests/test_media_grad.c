@@ -207,8 +207,16 @@ static void cross_primal_long_paths(struct dr_scene *s, const struct dr_camera *
                                     .max_depth = 14, .rr_depth = 14, .seed = 9, .threads = 2,
                                     .sampling = DR_SAMPLING_DETACHED, .medium_grad = DR_MEDIUM_GRAD_DRT,
                                     .cross = &cross};
-        CHECK(dr_estimator_backward(dr_estimator_find(e ? "prb" : "tape"), &p, NULL, g[e], NULL) == 0,
+        struct dr_grad_stats st = {0};
+        CHECK(dr_estimator_backward(dr_estimator_find(e ? "prb" : "tape"), &p, NULL, g[e], &st) == 0,
               "cross primal: %s", dr_last_error());
+        /* prb walks the paths that meet no medium in the arrays (prb.c's
+         * arrays_pixels: the medium is bounded by a mesh), the others one
+         * path at a time; the tape walks every path one at a time */
+        if (e)
+            CHECK(st.rays.simd_vertices > 0, "cross primal: prb shaded no vertex eight lanes at a time");
+        fprintf(stderr, "cross primal: %s shaded %llu vertices eight lanes at a time\n", e ? "prb" : "tape",
+                (unsigned long long)st.rays.simd_vertices);
     }
     double worst = 0.0, scale = 0.0;
     for (int64_t i = 0; i < ps->total; i++) {
@@ -223,6 +231,70 @@ static void cross_primal_long_paths(struct dr_scene *s, const struct dr_camera *
     dr_scene_refresh(s);
     free(v0);
     free(v);
+}
+
+/* prb's primal walks in the arrays beside a medium (prb.c's arrays_pixels):
+ * seen from afar, the cube of smoke is a small part of the picture, so most
+ * paths meet no medium and are walked eight lanes at a time, the others
+ * handed back and walked one path at a time, and only the paths with a
+ * derivative term replayed. prb must still give the tape's gradient (one
+ * path at a time throughout) to rounding, for the media's parameters and a
+ * surface's and a light's, with the cross primal and with a given adjoint. */
+static void arrays_beside_media(void)
+{
+    enum { W = 24 };
+    struct dr_scene *s = cube_scene(true);
+    struct dr_camera cam = sb_camera(dr_v3(4.5, 1.0, 7.0), dr_v3(2.5, -1.5, 2.5), 50);
+    const char *ptrs[] = {"/materials/0/extensions/DR_medium/density", "/materials/0/extensions/DR_medium/albedo",
+                          "/materials/0/extensions/DR_medium/density_scale",
+                          "/materials/1/pbrMetallicRoughness/baseColorFactor", "/materials/2/emissiveFactor"};
+    for (int only_media = 0; only_media < 2; only_media++) {
+        struct dr_param_set *ps = dr_param_set_create(s, ptrs, only_media ? 3 : 5);
+        CHECK(ps != NULL, "beside media: %s", dr_last_error());
+        if (!ps)
+            continue;
+        float target[W * W * 3], adj[W * W * 3];
+        for (int i = 0; i < W * W * 3; i++) {
+            target[i] = (float)(0.02 * (i % 7));
+            adj[i] = (float)(0.01 * ((i * 5) % 11) - 0.05);
+        }
+        for (int cross_mode = 0; cross_mode < 2; cross_mode++) {
+            double *g[2], img[2][W * W * 3];
+            struct dr_grad_stats st[2] = {{0}};
+            for (int e = 0; e < 2; e++) {
+                g[e] = calloc((size_t)ps->total, sizeof(double));
+                struct dr_cross_loss cross = {.loss = DR_LOSS_L2, .target = target, .scale = 1.0, .image = img[e]};
+                struct dr_grad_problem p = {.scene = s, .camera = &cam, .params = ps, .width = W, .height = W,
+                                            .spp = 4, .max_depth = 6, .rr_depth = DR_RR_DEPTH_DEFAULT, .seed = 4,
+                                            .threads = 2, .sampling = DR_SAMPLING_DETACHED,
+                                            .medium_grad = DR_MEDIUM_GRAD_DRT, .cross = cross_mode ? &cross : NULL};
+                CHECK(dr_estimator_backward(dr_estimator_find(e ? "prb" : "tape"), &p, cross_mode ? NULL : adj, g[e],
+                                            &st[e]) == 0,
+                      "beside media: %s", dr_last_error());
+            }
+            double worst = 0.0, scale = 0.0, media_scale = 0.0;
+            for (int64_t i = 0; i < ps->total; i++) {
+                worst = fmax(worst, fabs(g[0][i] - g[1][i]));
+                scale = fmax(scale, fabs(g[0][i]));
+                if (i < ps->params[2].offset + 1)   /* (the media's scalars come first) */
+                    media_scale = fmax(media_scale, fabs(g[0][i]));
+            }
+            fprintf(stderr, "beside media (%s, %s): prb vs tape %.3g relative; prb shaded %llu vertices eight "
+                            "lanes at a time, of %llu camera rays\n",
+                    only_media ? "media parameters" : "media, surface and light parameters",
+                    cross_mode ? "cross primal" : "given adjoint", worst / scale,
+                    (unsigned long long)st[1].rays.simd_vertices, (unsigned long long)st[1].rays.camera);
+            CHECK(media_scale > 0.0 && worst <= 1e-9 * scale, "beside media: prb and tape differ by %.3g relative",
+                  worst / scale);
+            CHECK(st[1].rays.simd_vertices > (uint64_t)W * W,   /* (821 here; 0 one path at a time) */
+                  "beside media: prb shaded only %llu vertices eight lanes at a time",
+                  (unsigned long long)st[1].rays.simd_vertices);
+            free(g[0]);
+            free(g[1]);
+        }
+        dr_param_set_destroy(ps);
+    }
+    dr_scene_destroy(s);
 }
 
 static void check_scene(bool lamp)
@@ -612,6 +684,7 @@ static void check_media_predicate(void)
 
 int main(void)
 {
+    arrays_beside_media();
     check_media_predicate();
     check_pilot_rule();
     check_plan_reuse();
