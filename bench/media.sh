@@ -23,7 +23,9 @@
 #      cube of smoke (the smoke cube's grid) or of homogeneous fog
 #      (bench/make_box_medium.py), rendered as the box alone is: the time per
 #      ray over the box's (the median of three triples run back to back; the
-#      packet tracer keeps the paths that enter no medium, wave_soa.c)
+#      packet tracer keeps the paths that enter no medium, wave_soa.c); and
+#      the grid's density and the fog's extinction gradients over the same
+#      scene's primal render
 # Writes $BUILD/bench/media-results.json.
 set -euo pipefail
 BUILD=${BUILD:-build}
@@ -129,6 +131,27 @@ if [[ -f $PEER ]]; then
         M=$(median3 "${PER_RAY[$sc]}")
         printf '     %-5s %s s per ray against the box'"'"'s %s: %s\n' $sc "$M" "$B" "$(calc "$M / $B")"
         PART_JSON+="{\"medium\": \"$sc\", \"seconds_per_ray\": $M, \"box_seconds_per_ray\": $B, \"per_ray_over_box\": $(calc "$M / $B")},"
+    done
+    # ... and the media's gradients (prb, the cross primal) over the same
+    # scene's primal render (128x128, 32 spp; medians of three pairs): the
+    # paths that meet no medium walk in the arrays and, without a term, are
+    # not replayed (prb.c's arrays_pixels)
+    echo "     gradients (128x128, 32 spp, 2 threads; medians of 3): time over the scene's own primal render"
+    for sc in grid fog; do
+        param=/materials/4/extensions/DR_medium/extinction
+        [[ $sc == grid ]] && param=/materials/4/extensions/DR_medium/density
+        "$DR" render "$TMP/box-$sc.gltf" --sampler independent -o "$TMP/target-$sc.exr" --res 128x128 --spp 64 --threads 2
+        GT=() PT=()
+        for _ in 1 2 3; do
+            J=$("$DR" grad "$TMP/box-$sc.gltf" --sampler independent --target "$TMP/target-$sc.exr" --param $param \
+                --grad-dir "$TMP" --res 128x128 --spp 32 --threads 2 --json)
+            GT+=("$(json_num "$J" gradient time)")
+            J=$("$DR" render "$TMP/box-$sc.gltf" --sampler independent -o "$TMP/p.exr" --res 128x128 --spp 32 --threads 2 --json)
+            PT+=("$(json_num "$J" render time)")
+        done
+        G=$(median "${GT[@]}") P=$(median "${PT[@]}")
+        printf '     %-5s %s: gradient %.3f s, primal %.3f s: %s\n' $sc "${param##*/}" "$G" "$P" "$(calc "$G / $P")"
+        PART_JSON+="{\"medium\": \"$sc\", \"gradient_param\": \"$param\", \"gradient_seconds\": $G, \"primal_seconds\": $P, \"gradient_over_primal\": $(calc "$G / $P")},"
     done
 fi
 cat >"$OUT/media-results.json" <<JSON
