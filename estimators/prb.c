@@ -41,6 +41,9 @@ struct prb_job {
     bool wave;              /* detached, no media, no derivative sampling: samples as a wavefront */
     bool media_arrays;      /* detached with media, no derivative sampling: the primal walks in the
                                arrays where the paths meet no medium (arrays_pixels) */
+    struct dr_path_opts outside_media;   /* ... and the replays of those paths: the run's options
+                                            without the media's stages (a path that meets no medium
+                                            is the same there, and its ray answers are logged) */
     struct dr_wave *waves[DR_MAX_THREADS];   /* ... per thread, made on first use */
     struct dr_wave_soa *soas[DR_MAX_THREADS];   /* the wavefront's primal walks where the arrays apply (wave_soa.h) */
     struct parked_samples items[DR_MAX_THREADS];   /* the wavefront: a group's parked samples, per thread */
@@ -79,6 +82,8 @@ struct walk {
     struct dr_medium_record *mrec;     /* media: what the replay re-traces, one vertex at a time */
     const struct dr_wave_log *log;     /* one path at a time: the primal walk's ray answers, for the
                                           replay (NULL: traced again) */
+    const struct dr_path_opts *opts;   /* the walker's (NULL: the run's; prb_job.outside_media for a
+                                          path that meets no medium) */
     /* derivative sampling: the last vertex, if differentiated and continued */
     struct dr_path_vertex *prev;
     bool have_prev;
@@ -179,7 +184,7 @@ static void walk(const struct dr_est_base *b, struct dr_sampler smp, dr_vec3 o, 
     dr_path_start(&st, o, d);
     for (;;) {
         dr_vec3 beta = st.beta, ratio = st.ratio;
-        bool more = dr_wave_log_step(b->p->scene, &b->popts, w->log, &st, &smp, &v, rays);
+        bool more = dr_wave_log_step(b->p->scene, w->opts ? w->opts : &b->popts, w->log, &st, &smp, &v, rays);
         walk_vertex(b, w, &v, beta, ratio, &smp, rays);
         if (!more)
             break;
@@ -599,9 +604,11 @@ static bool pixel_adjoints(struct prb_job *j, int thread, int64_t px, dr_vec3 *a
  * walks' sums where they were walked already (sums, by sample: the cross
  * primal's, or the arrays'; NULL: each path's primal is walked first) and
  * ray answers where the arrays logged them (logs, by sample; NULL:
- * traced). */
+ * traced). In a scene with media, in_media (by sample; NULL: all) says
+ * which paths met a medium: the others replay without the media's stages,
+ * from their logs (prb_job.outside_media). */
 static void pixel_replays(struct prb_job *j, int thread, int64_t px, const dr_vec3 *adj,
-                          const struct primal_sums *sums, const struct dr_wave_log *logs,
+                          const struct primal_sums *sums, const struct dr_wave_log *logs, const bool *in_media,
                           struct dr_grad_sink *sink)
 {
     struct dr_est_base *b = &j->b;
@@ -617,6 +624,8 @@ static void pixel_replays(struct prb_job *j, int thread, int64_t px, const dr_ve
         if (dr_is_black(adj[sidx]))
             continue;   /* (cross mode: this sample does not matter to the loss) */
         struct walk w = {.adj = adj[sidx], .mrec = &mrec, .prev = &prev, .log = logs ? &logs[sidx] : NULL};
+        if (in_media && !in_media[sidx])
+            w.opts = &j->outside_media;
         dr_est_camera_ray(b, thread, px, sidx, &smp, &o, &d);
         if (sums)
             w.L = (struct prb_radiance){sums[sidx].L.L_true, sums[sidx].L.L_sub}, w.vertices = sums[sidx].vertices;
@@ -641,7 +650,8 @@ static void pixel_replays(struct prb_job *j, int thread, int64_t px, const dr_ve
  * with media (j->media_arrays) the arrays hand back the paths that meet a
  * medium, whose primal walks are then made one path at a time here; a
  * path that met none and has no derivative term is not replayed (with media
- * parameters alone, that is most of them). Returns the first pixel not
+ * parameters alone, that is most of them), one with a term replays without
+ * the media's stages, from its log. Returns the first pixel not
  * done: where the arrays do not apply or there is no memory for them,
  * prb_pixels walks the rest one path at a time. */
 static int64_t arrays_pixels(struct prb_job *j, int thread, int64_t begin, int64_t end, struct dr_grad_sink *sink)
@@ -655,10 +665,8 @@ static int64_t arrays_pixels(struct prb_job *j, int thread, int64_t begin, int64
         !(j->soas[thread] || (j->soas[thread] = dr_wave_soa_create())))
         return begin;
     struct dr_wave_soa_walks sums = it->walk;   /* (with ray answers where they fit LOGGED_ITEMS) */
-    if (media) {
+    if (media)   /* (the logs of the paths that met a medium go unread: dr_wave_log_step traces there) */
         sums.in_media = it->in_media;
-        sums.log = NULL;   /* (the one-path walker traces again in a scene with media: dr_wave_log_step) */
-    }
     dr_vec3 *adj = j->adj[thread];
     int64_t px[PIXEL_CHUNK], n_all = 0;
     dr_vec3 px_adj[PIXEL_CHUNK];   /* (but with the cross primal) */
@@ -689,7 +697,8 @@ static int64_t arrays_pixels(struct prb_job *j, int thread, int64_t begin, int64
             for (int sidx = 0; media && sidx < spp; sidx++)   /* (no term: its replay would add nothing) */
                 if (!it->in_media[k * spp + sidx] && sums.last_diff[k * spp + sidx] == 0)
                     adj[sidx] = dr_v3s(0.0);
-            pixel_replays(j, thread, px[first + k], adj, j->sums[thread], sums.log ? &sums.log[k * spp] : NULL, sink);
+            pixel_replays(j, thread, px[first + k], adj, j->sums[thread], sums.log ? &sums.log[k * spp] : NULL,
+                          media ? &it->in_media[k * spp] : NULL, sink);
         }
     }
     return end;
@@ -709,7 +718,7 @@ static void prb_pixels(void *ctx, int thread, int64_t begin, int64_t end)
     dr_vec3 *adj = j->adj[thread];   /* by sample (all the same but in cross mode) */
     for (int64_t px = begin; px < end; px++)   /* (pixel_adjoints walks the cross primal into j->sums) */
         if (pixel_adjoints(j, thread, px, adj))   /* (else this pixel does not matter to the loss) */
-            pixel_replays(j, thread, px, adj, b->p->cross ? j->sums[thread] : NULL, NULL, &sink);
+            pixel_replays(j, thread, px, adj, b->p->cross ? j->sums[thread] : NULL, NULL, NULL, &sink);
     dr_est_sink_end(b, thread);
 }
 
@@ -730,6 +739,8 @@ static int prb_run(struct dr_est_base *b)
     const bool detached = run == DR_SAMPLING_DETACHED && b->p->sampling != DR_SAMPLING_DERIVATIVE;
     j->wave = detached && !(b->popts.stages & DR_STAGE_MEDIA);
     j->media_arrays = detached && dr_wave_soa_media_walks_apply(b->p->scene, &b->popts);
+    j->outside_media = b->popts;
+    j->outside_media.stages &= ~(unsigned)(DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC);
     /* one path at a time: the primal walks' sums, the cross primal's or
      * the arrays' (arrays_pixels), which the replays then need not walk */
     const bool arrays = j->media_arrays || dr_wave_soa_walks_apply(b->p->scene, &b->popts, true);
