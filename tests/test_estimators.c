@@ -268,6 +268,19 @@ static void cross_many_samples(struct dr_scene *s, const struct dr_camera *cam, 
     dr_param_set_destroy(ps);
 }
 
+/* Path i of a run seeded `seed` started through pixel i of the W x H view
+ * (wrapping), with its sampler. */
+static void camera_path(const struct dr_camera_view *view, uint64_t seed, int i, struct dr_sampler *smp,
+                        struct dr_path_state *st)
+{
+    dr_sampler_init(smp, seed, (uint64_t)i, 0);
+    double u, v;
+    dr_sampler_next2(smp, &u, &v);
+    dr_vec3 o, d;
+    dr_camera_ray(view, (i % W) + u, ((i / W) % H) + v, &o, &d);
+    dr_path_start(st, o, d);
+}
+
 /* dr_path_vertex_has_derivative's contract, checked against the adjoints
  * themselves: a vertex it calls derivative-free gets nothing from
  * d_path_vertex_term (nor d_path_continuation, which only differentiated
@@ -288,14 +301,9 @@ static void derivative_predicate(struct dr_scene *s, const struct dr_camera *cam
     int with = 0, without = 0, leaks = 0;
     for (int i = 0; i < 4000; i++) {
         struct dr_sampler smp;
-        dr_sampler_init(&smp, 21, (uint64_t)i, 0);
-        double u, v;
-        dr_sampler_next2(&smp, &u, &v);
-        dr_vec3 o, d;
-        dr_camera_ray(&view, (i % W) + u, ((i / W) % H) + v, &o, &d);
         struct dr_path_state st;
         struct dr_path_vertex vx;
-        dr_path_start(&st, o, d);
+        camera_path(&view, 21, i, &smp, &st);
         for (bool more = true; more;) {
             more = dr_path_step(s, &opts, &st, &smp, &vx, &rays);
             if (dr_path_vertex_has_derivative(s, ps, &vx)) {
@@ -345,14 +353,9 @@ static void joint_vertex_adjoint(struct dr_scene *s, const struct dr_camera *cam
     double worst = 0.0, worst_fwd = 0.0;
     for (int i = 0; i < 3000; i++) {
         struct dr_sampler smp;
-        dr_sampler_init(&smp, 23, (uint64_t)i, 0);
-        double u, v;
-        dr_sampler_next2(&smp, &u, &v);
-        dr_vec3 o, d;
-        dr_camera_ray(&view, (i % W) + u, ((i / W) % H) + v, &o, &d);
         struct dr_path_state st;
         struct dr_path_vertex vx;
-        dr_path_start(&st, o, d);
+        camera_path(&view, 23, i, &smp, &st);
         for (bool more = true; more;) {
             more = dr_path_step(s, &opts, &st, &smp, &vx, &rays);
             if (!(vx.nee && vx.cont && vx.diff_bsdf))
