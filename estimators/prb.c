@@ -599,6 +599,33 @@ static bool pixel_adjoints(struct prb_job *j, int thread, int64_t px, dr_vec3 *a
     return cross_adjoints(b, px, adj);
 }
 
+/* The replay of pixel px's sample sidx, one path at a time, given its
+ * adjoint, its primal walk's sums (NULL: walked first here) and ray answers
+ * (log; NULL: traced), and the walker's options (NULL: the run's). */
+static void replay_one(struct prb_job *j, int thread, int64_t px, int sidx, dr_vec3 adj,
+                       const struct primal_sums *sums, const struct dr_wave_log *log, const struct dr_path_opts *opts,
+                       struct dr_grad_sink *sink)
+{
+    struct dr_est_base *b = &j->b;
+    struct dr_medium_record mrec;
+    struct dr_path_vertex prev;
+    struct dr_sampler smp;
+    dr_vec3 o, d;
+    struct walk w = {.adj = adj, .mrec = &mrec, .prev = &prev, .log = log, .opts = opts};
+    dr_est_camera_ray(b, thread, px, sidx, &smp, &o, &d);
+    if (sums)
+        w.L = (struct prb_radiance){sums->L.L_true, sums->L.L_sub}, w.vertices = sums->vertices;
+    else
+        walk(b, smp, o, d, &w, &b->thr[thread].rays);
+    if (!dr_v3_finite(w.L.true_) || !dr_v3_finite(w.L.sub)) {
+        b->thr[thread].invalid++;
+        return;
+    }
+    w.sink = sink;
+    walk(b, smp, o, d, &w, &b->thr[thread].rays);
+    dr_est_sample_done(b, px, sink);
+}
+
 /* Pixel px's samples' replays one path at a time, given their adjoints
  * (attached sampling: prb_attached.c's; else walk's), and their primal
  * walks' sums where they were walked already (sums, by sample: the cross
@@ -616,28 +643,32 @@ static void pixel_replays(struct prb_job *j, int thread, int64_t px, const dr_ve
         attached_pixel(j, thread, px, adj, sums, logs, sink);
         return;
     }
-    struct dr_medium_record mrec;
-    struct dr_path_vertex prev;
-    for (int sidx = 0; sidx < b->p->spp; sidx++) {
-        struct dr_sampler smp;
-        dr_vec3 o, d;
-        if (dr_is_black(adj[sidx]))
-            continue;   /* (cross mode: this sample does not matter to the loss) */
-        struct walk w = {.adj = adj[sidx], .mrec = &mrec, .prev = &prev, .log = logs ? &logs[sidx] : NULL};
-        if (in_media && !in_media[sidx])
-            w.opts = &j->outside_media;
-        dr_est_camera_ray(b, thread, px, sidx, &smp, &o, &d);
-        if (sums)
-            w.L = (struct prb_radiance){sums[sidx].L.L_true, sums[sidx].L.L_sub}, w.vertices = sums[sidx].vertices;
-        else
-            walk(b, smp, o, d, &w, &b->thr[thread].rays);
-        if (!dr_v3_finite(w.L.true_) || !dr_v3_finite(w.L.sub)) {
-            b->thr[thread].invalid++;
-            continue;
-        }
-        w.sink = sink;
-        walk(b, smp, o, d, &w, &b->thr[thread].rays);
-        dr_est_sample_done(b, px, sink);
+    for (int sidx = 0; sidx < b->p->spp; sidx++)
+        if (!dr_is_black(adj[sidx]))   /* (else, in cross mode, this sample does not matter to the loss) */
+            replay_one(j, thread, px, sidx, adj[sidx], sums ? &sums[sidx] : NULL, logs ? &logs[sidx] : NULL,
+                       in_media && !in_media[sidx] ? &j->outside_media : NULL, sink);
+}
+
+/* In a scene with media, the replays of a group's n samples whose paths met
+ * no medium and have a derivative term (items->order): in the arrays, as
+ * the wavefront's, without the media's stages (prb_job.outside_media: such
+ * a path is the same there); one path at a time where there is no memory
+ * for them. */
+static void media_replays(struct prb_job *j, int thread, struct park_ctx *c, int32_t n, struct dr_grad_sink *sink)
+{
+    struct dr_est_base *b = &j->b;
+    const struct parked_samples *it = c->items;
+    const struct dr_wave_soa_replay r = {c, it->order, it->walk.L, it->walk.L_sub, it->walk.last_diff, it->walk.log,
+                                         soa_replay_vertex};
+    if (dr_wave_soa_replay(j->soas[thread], b->p->scene, &j->outside_media, n, soa_replay_start, soa_replay_start8, c,
+                           &r, &b->thr[thread].rays))
+        return;
+    const int spp = b->p->spp;
+    for (int32_t k = 0; k < n; k++) {
+        const int32_t i = it->order[k];
+        const struct primal_sums sums = {{it->walk.L[i], it->walk.L_sub[i]}, 0};
+        replay_one(j, thread, c->px[i / spp], i % spp, it->adj[i], &sums, it->walk.log ? &it->walk.log[i] : NULL,
+                   &j->outside_media, sink);
     }
 }
 
@@ -675,10 +706,11 @@ static int64_t arrays_pixels(struct prb_job *j, int thread, int64_t begin, int64
             px[n_all++] = p;
     for (int64_t first = 0; first < n_all; first += group) {
         const int64_t n_px = n_all - first < group ? n_all - first : group;
-        struct park_ctx c = {.run = {j, thread}, .px = px + first, .items = it};
+        struct park_ctx c = {.run = {j, thread}, .sink = *sink, .px = px + first, .items = it};
         if (!dr_wave_soa_walk(j->soas[thread], b->p->scene, &b->popts, n_px * spp, soa_start, soa_start8, &c, &sums,
                               &b->thr[thread].rays))
             return px[first];
+        int32_t n_arrays = 0;   /* (media: the replays for the arrays, it->order) */
         for (int64_t k = 0; k < n_px; k++) {
             for (int sidx = 0; sidx < spp; sidx++) {
                 const int64_t i = k * spp + sidx;
@@ -694,12 +726,21 @@ static int64_t arrays_pixels(struct prb_job *j, int thread, int64_t begin, int64
             }
             if (b->p->cross && !cross_adjoints(b, px[first + k], adj))
                 continue;
-            for (int sidx = 0; media && sidx < spp; sidx++)   /* (no term: its replay would add nothing) */
-                if (!it->in_media[k * spp + sidx] && sums.last_diff[k * spp + sidx] == 0)
-                    adj[sidx] = dr_v3s(0.0);
+            for (int sidx = 0; media && sidx < spp; sidx++) {
+                const int64_t i = k * spp + sidx;
+                const struct primal_sums *p = &j->sums[thread][sidx];
+                if (it->in_media[i] || dr_is_black(adj[sidx]) || !dr_v3_finite(p->L.L_true) ||
+                    !dr_v3_finite(p->L.L_sub))
+                    continue;
+                if (sums.last_diff[i] > 0)   /* (a term: replayed in the arrays below) */
+                    it->adj[i] = adj[sidx], it->order[n_arrays++] = (int32_t)i;
+                adj[sidx] = dr_v3s(0.0);   /* (else no term: its replay would add nothing) */
+            }
             pixel_replays(j, thread, px[first + k], adj, j->sums[thread], sums.log ? &sums.log[k * spp] : NULL,
                           media ? &it->in_media[k * spp] : NULL, sink);
         }
+        if (n_arrays > 0)
+            media_replays(j, thread, &c, n_arrays, sink);
     }
     return end;
 }

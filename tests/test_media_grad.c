@@ -248,6 +248,7 @@ static void arrays_beside_media(void)
     const char *ptrs[] = {"/materials/0/extensions/DR_medium/density", "/materials/0/extensions/DR_medium/albedo",
                           "/materials/0/extensions/DR_medium/density_scale",
                           "/materials/1/pbrMetallicRoughness/baseColorFactor", "/materials/2/emissiveFactor"};
+    uint64_t shaded8[2] = {0, 0};   /* (by only_media: the last run's vertices eight lanes at a time) */
     for (int only_media = 0; only_media < 2; only_media++) {
         struct dr_param_set *ps = dr_param_set_create(s, ptrs, only_media ? 3 : 5);
         CHECK(ps != NULL, "beside media: %s", dr_last_error());
@@ -289,11 +290,17 @@ static void arrays_beside_media(void)
             CHECK(st[1].rays.simd_vertices > (uint64_t)W * W,   /* (821 here; 0 one path at a time) */
                   "beside media: prb shaded only %llu vertices eight lanes at a time",
                   (unsigned long long)st[1].rays.simd_vertices);
+            shaded8[only_media] = st[1].rays.simd_vertices;
             free(g[0]);
             free(g[1]);
         }
         dr_param_set_destroy(ps);
     }
+    /* with a surface's and a light's parameters, the paths that met no
+     * medium and have a term replay in the arrays too (prb.c's media_replays) */
+    CHECK(shaded8[0] > shaded8[1], "beside media: %llu vertices eight lanes at a time with surface parameters, %llu "
+                                   "without (their replays took the one-path walker)",
+          (unsigned long long)shaded8[0], (unsigned long long)shaded8[1]);
     dr_scene_destroy(s);
 }
 
