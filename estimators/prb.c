@@ -681,8 +681,8 @@ static void media_replays(struct prb_job *j, int thread, struct park_ctx *c, int
  * with media (j->media_arrays) the arrays hand back the paths that meet a
  * medium, whose primal walks are then made one path at a time here; a
  * path that met none and has no derivative term is not replayed (with media
- * parameters alone, that is most of them), one with a term replays without
- * the media's stages, from its log. Returns the first pixel not
+ * parameters alone, that is most of them), those with a term replay in the
+ * arrays after the group (media_replays). Returns the first pixel not
  * done: where the arrays do not apply or there is no memory for them,
  * prb_pixels walks the rest one path at a time. */
 static int64_t arrays_pixels(struct prb_job *j, int thread, int64_t begin, int64_t end, struct dr_grad_sink *sink)
