@@ -254,7 +254,7 @@ static struct dr_accel *build(const struct dr_mesh *mesh, const struct dr_scene 
     char config[1024];
     if (snprintf(config, sizeof config, "threads=%d%s%s", dr_default_threads(), env && *env ? "," : "",
                  env ? env : "") >= (int)sizeof config) {
-        dr_set_error("DRENDER_EMBREE_CONFIG is too long (%zu characters)", strlen(env));
+        dr_set_error("DRENDER_EMBREE_CONFIG is too long (%zu characters)", env ? strlen(env) : (size_t)0);
         free(a);
         return NULL;
     }

@@ -170,6 +170,9 @@ static int range_run(int64_t n, int64_t chunk, int threads, bool fixed, dr_range
     j.ctx = ctx;
     if (threads <= 0)
         threads = dr_default_threads();
+    const int64_t chunks = (n + j.chunk - 1) / j.chunk;   /* (no more workers than chunks) */
+    if (threads > chunks)
+        threads = chunks > 0 ? (int)chunks : 1;
     j.threads = threads;
     struct range_worker *ws = calloc((size_t)threads, sizeof *ws);
     pthread_t *ids = calloc((size_t)threads, sizeof *ids);

@@ -22,7 +22,8 @@ typedef void (*dr_progress_fn)(void *ctx, int done, int total);
 int dr_parallel_tiles(int width, int height, int threads, dr_tile_fn fn, dr_progress_fn progress, void *ctx);
 
 /* Runs fn over [0, n) in chunks of `chunk` items handed out dynamically to
- * `threads` workers (<= 0: one per CPU); fn gets [begin, end). */
+ * `threads` workers (<= 0: dr_default_threads; no more than there are
+ * chunks); fn gets [begin, end). */
 typedef void (*dr_range_fn)(void *ctx, int thread, int64_t begin, int64_t end);
 int dr_parallel_for(int64_t n, int64_t chunk, int threads, dr_range_fn fn, void *ctx);
 /* The same with a fixed assignment: chunk c goes to worker c mod threads, each
@@ -34,7 +35,7 @@ int dr_parallel_for_static(int64_t n, int64_t chunk, int threads, dr_range_fn fn
 /* Element-wise work on a big vector (a texture parameter's 12.6 M entries:
  * clearing, summing, Adam's step), whose every element's result does not
  * depend on how [0, n) is split: fn over [0, n) on up to `threads` workers
- * (<= 0: one per CPU), the same bits for any thread count. Below
+ * (<= 0: dr_default_threads), the same bits for any thread count. Below
  * DR_PARALLEL_ELEMENTS_MIN elements, with one thread, or if no worker can be
  * had, fn runs on the calling thread alone. Every range but the last is a
  * multiple of DR_PARALLEL_ALIGN elements long, so ranges begin at its

@@ -232,6 +232,12 @@ static void test_default_threads(void)
               atomic_load(&most_workers));
         dr_scene_destroy(s);
     }
+    /* no more workers than chunks: three items of one, eight workers asked */
+    atomic_store(&most_workers, 0);
+    atomic_store(&work_items, 0);
+    CHECK(dr_parallel_for(3, 1, 8, range, NULL) == 0 && atomic_load(&most_workers) == 3 &&
+              atomic_load(&work_items) == 3,
+          "3 chunks on 8 threads: %d workers, %d items", atomic_load(&most_workers), atomic_load(&work_items));
     dr_parallel_set_started_hook(NULL);
     /* back to one per CPU */
     dr_set_default_threads(0);
