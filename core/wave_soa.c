@@ -504,7 +504,8 @@ static dr_m8 shadows_through_media(struct dr_wave_soa *w, const struct dr_scene 
         const int k = i0 + i;
         if (!through[i])
             continue;
-        if (w->out) {   /* a walk's: its vertex has a media term; the caller walks it again */
+        if (w->out) {   /* a walk's: its vertex has a media term; the caller walks it again
+                           (the path ends at its next step: end_escaped) */
             w->out->in_media[w->item[k]] = true;
             w->occluded[k] = true;
             continue;
@@ -690,6 +691,8 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
             replay_escaped(w, s, opts, n_live, i0);
         for (int i = 0; i < DR_SIMD_W && i0 + i < n_live; i++) {
             const int k = i0 + i;
+            if (w->media && w->out && w->out->in_media[w->item[k]])
+                continue;   /* (a walk's path marked by a shadow ray through a medium: the caller's) */
             if (w->media && meets_medium(w, s, k)) {
                 if (w->out)   /* (a walk's: the caller walks it again, one path at a time) */
                     w->out->in_media[w->item[k]] = true;
