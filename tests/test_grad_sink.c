@@ -80,7 +80,9 @@ static void one_fault_per_page(void)
     for (int p = 0; p < PAGES; p++)   /* (an entry inside each span, as a texel's channels land) */
         dr_sink_add(&k, (int64_t)p * PER + 37, 1.0 + p);
     const long faults = minor_faults() - before;
-    CHECK(faults < PAGES * 3 / 2, "%ld page faults for the first writes into %d fresh pages", faults, PAGES);
+    /* (at least half a fault a page: the count is measured, the pages were fresh) */
+    CHECK(faults >= PAGES / 2 && faults < PAGES * 3 / 2, "%ld page faults for the first writes into %d fresh pages",
+          faults, PAGES);
     CHECK(v[37] == 1.0 && v[(int64_t)(PAGES - 1) * PER + 37] == PAGES, "the values written");
     printf("first writes into %d fresh pages: %ld faults\n", PAGES, faults);
     munmap(v, bytes);
