@@ -71,7 +71,9 @@ run() {
     if [[ $CMD == render ]]; then
         calc "$(json_num "$json" render time)" %.4f
     else   # the gradients and their standard errors, for the comparison at the end
-        printf '%s\n' "$json" | sed -n 's/.*"parameters": *//p' >"$TMP/$2.grad"
+        # (an image parameter's gradient file is named by its run's
+        # directory: the name left out, the images compared at the end)
+        printf '%s\n' "$json" | sed -n 's/.*"parameters": *//p' | sed "s|$TMP/$2/||g" >"$TMP/$2.grad"
         calc "$(json_num "$json" primal time) + $(json_num "$json" gradient time)" %.4f
     fi
 }
@@ -90,8 +92,13 @@ echo "median: old $MA s, new $MB s; new / old $(calc "$MB / $MA" %.3f)"
 LA=$(printf '%s\n' "${A[@]}" | sort -g | head -n 1) LB=$(printf '%s\n' "${B[@]}" | sort -g | head -n 1)
 echo "minimum: old $LA s, new $LB s; new / old $(calc "$LB / $LA" %.3f)"
 if [[ $CMD == grad ]]; then
-    if cmp -s "$TMP/old.grad" "$TMP/new.grad"; then
-        echo "gradients: identical"
+    same_images=true
+    for f in "$TMP"/old/*.exr; do
+        [[ -e $f ]] || continue
+        command -v idiff >/dev/null && idiff -fail 0 -warn 0 "$f" "$TMP/new/${f##*/}" >/dev/null 2>&1 || same_images=false
+    done
+    if cmp -s "$TMP/old.grad" "$TMP/new.grad" && $same_images; then
+        echo "gradients: identical (and the gradient images, idiff -fail 0)"
     else
         echo "gradients: differ"
         echo "  old: $(cat "$TMP/old.grad")"
