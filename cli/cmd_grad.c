@@ -673,7 +673,10 @@ static int reverse_write_images(const struct grad_args *a, const struct dr_param
         if (!is_image_param(p))
             continue;
         r->files[k] = grad_image_name(a->grad_dir, p);
-        float *gimg = calloc((size_t)p->size, sizeof(float));   /* (+0 where the mask says: not written) */
+        /* (+0 where the mask says: not written. The writer reads it whole:
+         * huge pages, dr_calloc_big, fault in a 2k texture's 50 MB a few
+         * dozen times instead of 12 thousand) */
+        float *gimg = dr_calloc_big((size_t)p->size, sizeof(float));
         if (!r->files[k] || !gimg) {
             free(gimg);
             cli_error("grad", "out of memory");
