@@ -124,7 +124,7 @@ static void accum_free(struct dr_est_accum *a)
         free(a->chunk[t]);
         a->grad[t] = a->chunk[t] = NULL;
     }
-    a->image = NULL;
+    memset(a->image, 0, sizeof a->image);
 }
 
 static double *accum_alloc(struct dr_est_accum *a, size_t n)
@@ -238,8 +238,8 @@ bool dr_estimator_consumes(const struct dr_grad_problem *p)
  *    value is its pixel's samples summed in order: the bits per-thread
  *    images summed gave, for any thread count, in one image.
  *  - mis: nothing (its samples go to the mis accumulator). */
-static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, bool forward, bool mis, double *out,
-                      double *d_image)
+static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, int forward, bool mis, double *out,
+                      double *const *d_image)
 {
     memset(a, 0, sizeof *a);
     a->scratch = forward || mis ? NULL : p->scratch;
@@ -247,11 +247,12 @@ static int accum_init(struct dr_est_accum *a, const struct dr_grad_problem *p, b
     a->total = p->params->total;
     if (mis)
         return 0;
-    if (forward) {
-        memset(d_image, 0, sizeof(double) * (size_t)p->width * (size_t)p->height * 3);
-        a->image = d_image;
-        return 0;
+    for (int g = 0; g < forward; g++) {   /* (forward: the number of images) */
+        memset(d_image[g], 0, sizeof(double) * (size_t)p->width * (size_t)p->height * 3);
+        a->image[g] = d_image[g];
     }
+    if (forward)
+        return 0;
     /* thread 0 sums into the caller's vector, or with a consumer into the
      * scratch's first, as the others into theirs; a consumer's run too big
      * for chunks marks what each thread adds to (accum_thread_mask) */
@@ -422,7 +423,7 @@ static void consume_exact_marked(void *ctx, int thread, int64_t begin, int64_t e
  * added in thread order), to the consumer, or into d_image (written in
  * place). Adding +0.0 at the end gives every entry the bits the former
  * 0 + g0 + g1 + ... gave (a -0 sum became +0). */
-static void accum_sum(const struct dr_est_accum *a, const struct dr_grad_problem *p, double *grad, double *d_image)
+static void accum_sum(const struct dr_est_accum *a, const struct dr_grad_problem *p, double *grad)
 {
     if (a->consumer && a->exact) {
         dr_parallel_elements(a->total, a->threads, consume_exact_marked, (void *)a);
@@ -435,8 +436,9 @@ static void accum_sum(const struct dr_est_accum *a, const struct dr_grad_problem
     } else if (grad && a->exact) {
         dr_exact_sum_read(a->exact, grad);   /* NaN where a contribution was out of its range (exact_sum.h) */
     }
-    for (size_t i = 0, n = (size_t)p->width * (size_t)p->height * 3; d_image && i < n; i++)
-        d_image[i] += 0.0;
+    for (int g = 0; g < DR_FORWARD_MAX && a->image[g]; g++)
+        for (size_t i = 0, n = (size_t)p->width * (size_t)p->height * 3; i < n; i++)
+            a->image[g][i] += 0.0;
 }
 
 /* ------------------------------------------------------------ per sample */
@@ -444,7 +446,7 @@ static void accum_sum(const struct dr_est_accum *a, const struct dr_grad_problem
 struct dr_grad_sink dr_est_sink_begin(struct dr_est_base *b, int thread)
 {
     if (b->dir)
-        return dr_sink_forward(b->dir);
+        return dr_sink_forward_groups(b->dir, b->n_groups, b->group_end);
     struct dr_est_accum *a = &b->acc;
     if (a->exact)
         return dr_sink_exact(a->exact, a->touched[thread]);
@@ -509,10 +511,12 @@ void dr_est_sample_done(struct dr_est_base *b, int64_t pixel, struct dr_grad_sin
     if (!b->dir)
         return;
     const double inv_spp = 1.0 / b->p->spp;
-    double *out = b->acc.image + 3 * pixel;   /* this thread's pixel (accum_init) */
-    for (int c = 0; c < 3; c++) {
-        out[c] += sink->forward[c] * inv_spp;
-        sink->forward[c] = 0.0;
+    for (int g = 0; g < b->n_groups; g++) {
+        double *out = b->acc.image[g] + 3 * pixel;   /* this thread's pixel (accum_init) */
+        for (int c = 0; c < 3; c++) {
+            out[c] += sink->forward[3 * g + c] * inv_spp;
+            sink->forward[3 * g + c] = 0.0;
+        }
     }
 }
 
@@ -763,12 +767,20 @@ static int plan_media_gain(struct dr_est_base *b, struct dr_media_plan *own)
     return 0;
 }
 
+/* A run: reverse mode (adjoint, grad) or forward (dir, n_groups images
+ * d_image[g], slot groups ending at group_end: grad_sink.h). */
 static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const float *adjoint,
-               const double *dir, double *grad, double *d_image, struct dr_grad_stats *st)
+               const double *dir, int n_groups, const int64_t *group_end, double *grad, double *const *d_image,
+               struct dr_grad_stats *st)
 {
     int rc = dr_estimator_check(e, p);
     if (rc == 0)
         rc = check_problem(p, dir);
+    if (rc == 0 && dir && (n_groups < 1 || n_groups > DR_FORWARD_MAX ||
+                           (n_groups > 1 && (!group_end || dr_est_sampling_run(p) == DR_SAMPLING_MIS)))) {
+        dr_set_error("forward mode: %d images in one pass (1 to %d; mis sampling: 1)", n_groups, DR_FORWARD_MAX);
+        rc = DR_ERR_ARG;
+    }
     if (rc != 0)
         return rc;
     struct dr_est_base *b = calloc(1, e->job_size);
@@ -791,19 +803,21 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
                                      .medium_grad = p->medium_grad, .sky_uniform = run == DR_SAMPLING_MIS};
     b->adjoint = adjoint;
     b->dir = dir;
+    b->n_groups = dir ? n_groups : 0;
+    b->group_end = group_end;
     b->mis = run == DR_SAMPLING_MIS;
     struct dr_media_plan own_plan = {0};
     rc = plan_media_gain(b, &own_plan);
     if (rc == 0)
-        rc = accum_init(&b->acc, p, dir != NULL, b->mis, grad, d_image);
+        rc = accum_init(&b->acc, p, b->n_groups, b->mis, grad, d_image);
     if (rc == 0 && b->mis)
         rc = mis_init(b);
     if (rc == 0) {
         rc = e->run(b);
         if (b->mis)
-            mis_finish(b, grad, d_image);
+            mis_finish(b, grad, d_image ? d_image[0] : NULL);
         else
-            accum_sum(&b->acc, p, grad, d_image);
+            accum_sum(&b->acc, p, grad);
     }
     if (p->mis_weights && p->sampling == DR_SAMPLING_MIS && !b->mis)   /* ran detached */
         for (int k = 0; k < p->params->n; k++)
@@ -822,11 +836,18 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
 int dr_estimator_forward(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const double *dir,
                          double *d_image, struct dr_grad_stats *st)
 {
-    return run(e, p, NULL, dir, NULL, d_image, st);
+    return run(e, p, NULL, dir, 1, NULL, NULL, &d_image, st);
+}
+
+int dr_estimator_forward_groups(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const double *dir,
+                                int n_groups, const int64_t *group_end, double *const *d_images,
+                                struct dr_grad_stats *st)
+{
+    return run(e, p, NULL, dir, n_groups, group_end, NULL, d_images, st);
 }
 
 int dr_estimator_backward(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const float *adjoint,
                           double *grad, struct dr_grad_stats *st)
 {
-    return run(e, p, adjoint, NULL, grad, NULL, st);
+    return run(e, p, adjoint, NULL, 0, NULL, grad, NULL, st);
 }

@@ -29,8 +29,8 @@ struct dr_est_accum {
                                              output (none with mis or exact) */
     struct dr_exact_sum *exact;           /* instead of grad[]: one shared exact sum (many threads) */
     double *chunk[DR_MAX_THREADS];        /* NULL when total is large */
-    double *image;                        /* forward mode: the caller's d image (w*h*3), every thread
-                                             writes its own pixels */
+    double *image[DR_FORWARD_MAX];        /* forward mode: the caller's d images (w*h*3), one a group
+                                             (b->n_groups), every thread writes its own pixels */
     uint64_t bytes;                       /* what the buffers above hold */
     struct dr_est_scratch *scratch;       /* where grad[1..] and exact come from, if anywhere
                                              (the problem's: not freed by the run) */
@@ -66,6 +66,8 @@ struct dr_est_base {
     struct dr_path_opts popts;
     const float *adjoint;   /* reverse mode */
     const double *dir;      /* forward mode (NULL in reverse mode) */
+    int n_groups;           /* forward mode: images (grad_sink.h's groups; 1 without) */
+    const int64_t *group_end;
     struct dr_est_accum acc;
     struct dr_est_counters thr[DR_MAX_THREADS];
     uint64_t record_bytes;  /* the algorithm's peak recorded-path memory, if any */

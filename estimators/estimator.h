@@ -238,6 +238,15 @@ int dr_estimator_forward(const struct dr_estimator_ops *e, const struct dr_grad_
  * and channels of adjoint * d I / d theta, adjoint being d loss / d I
  * (width * height * 3 floats; NULL with p->cross, which says how to take it
  * from the paths). */
+/* Forward mode for n_groups (1 .. DR_FORWARD_MAX, grad_sink.h) groups of
+ * slots at once, group g ending at slot group_end[g] (ascending; the last
+ * group takes the slots past its end): d_images[g] = d I / d theta . dir
+ * over group g's slots, each the image dr_estimator_forward gives with dir
+ * zero outside group g, from one pass over the paths. Not with mis
+ * sampling (its weight is the direction's: one group). */
+int dr_estimator_forward_groups(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const double *dir,
+                                int n_groups, const int64_t *group_end, double *const *d_images,
+                                struct dr_grad_stats *st);
 int dr_estimator_backward(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const float *adjoint,
                           double *grad, struct dr_grad_stats *st);
 

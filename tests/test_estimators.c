@@ -64,6 +64,50 @@ static double reverse_difference(const char *what, const struct dr_param_set *ps
  * sampling) its primal walks only, not its replays. */
 enum grouping { GROUPED_PRB_WALKS, GROUPED_PRB, GROUPED_BOTH };
 
+/* dr_estimator_forward_groups: the parameters in up to three groups, one
+ * pass; each group's image is, to the bit, the one pass's image along dir
+ * with every other group's entries 0 (grad -o's several parameters). Under
+ * mis sampling only one group is allowed. */
+static void forward_groups_match(const char *what, const struct dr_estimator_ops *est, const struct dr_grad_problem *p,
+                                 const double *dir)
+{
+    const struct dr_param_set *ps = p->params;
+    const int n_groups = ps->n < 3 ? ps->n : 3;
+    int64_t group_end[3];
+    for (int g = 0; g < n_groups; g++) {   /* (parameters 0 .. n-1 split as evenly as they go) */
+        const struct dr_param *last = &ps->params[(g + 1) * ps->n / n_groups - 1];
+        group_end[g] = last->offset + last->size;
+    }
+    double *img[3], *one = malloc(sizeof(double) * 3 * W * H), *masked = malloc(sizeof(double) * (size_t)ps->total);
+    for (int g = 0; g < n_groups; g++)
+        img[g] = malloc(sizeof(double) * 3 * W * H);
+    CHECK(dr_estimator_forward_groups(est, p, dir, n_groups, group_end, img, NULL) == 0, "%s: %s forward groups: %s",
+          what, est->name, dr_last_error());
+    int64_t differ = 0, nonzero = 0;
+    for (int g = 0; g < n_groups; g++) {
+        const int64_t begin = g ? group_end[g - 1] : 0;
+        for (int64_t i = 0; i < ps->total; i++)
+            masked[i] = i >= begin && i < group_end[g] ? dir[i] : 0.0;
+        CHECK(dr_estimator_forward(est, p, masked, one, NULL) == 0, "%s: %s forward: %s", what, est->name,
+              dr_last_error());
+        for (int i = 0; i < 3 * W * H; i++) {
+            differ += memcmp(&one[i], &img[g][i], sizeof(double)) != 0;
+            nonzero += img[g][i] != 0.0;
+        }
+    }
+    CHECK(differ == 0 && nonzero > 0, "%s: %s: %lld values of %d groups' images differ from one pass per group "
+          "(%lld non-zero)", what, est->name, (long long)differ, n_groups, (long long)nonzero);
+    struct dr_grad_problem mis = *p;
+    mis.sampling = DR_SAMPLING_MIS;
+    if (n_groups > 1 && dr_est_sampling_run(&mis) == DR_SAMPLING_MIS)
+        CHECK(dr_estimator_forward_groups(est, &mis, dir, n_groups, group_end, img, NULL) != 0,
+              "%s: %s: forward groups under mis sampling accepted", what, est->name);
+    for (int g = 0; g < n_groups; g++)
+        free(img[g]);
+    free(one);
+    free(masked);
+}
+
 static void compare(const char *what, struct dr_scene *s, const struct dr_camera *cam, const char *const *ptrs, int n,
                     int depth, enum dr_sampling sampling, enum grouping grouping)
 {
@@ -132,6 +176,7 @@ static void compare(const char *what, struct dr_scene *s, const struct dr_camera
         CHECK(fnorm > 0, "%s: %s: forward derivative image is zero", what, est->name);
         CHECK(rel_err(dot, rdot) <= 1e-9, "%s: %s: forward . adjoint %.12g != reverse . dir %.12g", what, est->name,
               dot, rdot);
+        forward_groups_match(what, est, &p, dir);
         printf("%s: %s: %lld scalars, adjoint identity %.3g, memory %llu bytes (records %llu), %llu vertices "
                "eight-wide (%llu replayed)\n", what, est->name, (long long)ps->total, rel_err(dot, rdot),
                (unsigned long long)st.memory_bytes, (unsigned long long)st.record_bytes,
