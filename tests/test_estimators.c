@@ -1020,9 +1020,16 @@ static void fold_fresh_pages(void)
         pages += 2 * (mask[i] != 0);
     CHECK(memcmp(g, warm_g, bytes) == 0 && memcmp(se, warm_se, bytes) == 0,
           "fold_fresh_pages: the same run on fresh vectors gave another result");
+#if defined(__SANITIZE_ADDRESS__)
+    /* (AddressSanitizer's quarantine hands every run fresh memory for its
+     * own buffers, and its shadow pages fault too: the count is not the
+     * result's; the bound is checked without it) */
+    CHECK(pages >= 2000, "fold_fresh_pages: %ld fresh pages written", pages);
+#else
     CHECK(pages >= 2000 && faults >= pages / 2 && faults < pages + pages / 4 + 200,
           "fold_fresh_pages: %ld page faults for %ld fresh pages written (at most %ld)", faults, pages,
           pages + pages / 4 + 200);
+#endif
     printf("fold_fresh_pages: %ld page faults for %ld fresh result pages\n", faults, pages);
     dr_reverse_scratch_free(&rs);
     munmap(g, bytes);
