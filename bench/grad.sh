@@ -197,12 +197,41 @@ if [[ -f $NTT ]]; then
         "$O20_FIRST" "$O20_MED" "$O20_WALL"
     TEX_JSON="{\"grad_peak_bytes\": $G_PEAK, \"grad_seconds\": $G_T, \"grad_write_seconds\": $G_W, \"optimize_seconds_per_iteration\": $(calc "$O_T / 5" %.4f), \"optimize_peak_bytes\": $O_PEAK, \"checkpoint_bytes\": $CK_BYTES, \"optimize20_first_seconds\": $O20_FIRST, \"optimize20_median_seconds\": $O20_MED, \"optimize20_wall_seconds\": $O20_WALL}"
 fi
+# s. forward mode with several parameters (grad -o): the three wall colours
+# of the peer's box in one run, which differentiates up to four parameters in
+# one pass over the paths, against the three one at a time (their sum), and
+# the scene's primal at the same size (medians of 3)
+FWD_JSON=null
+if [[ -f $PEER ]]; then
+    echo
+    echo "s. forward mode, three wall colours of the peer's box (256x256, 16 spp, 2 threads; medians of 3)"
+    WALLS=(/materials/0/pbrMetallicRoughness/baseColorFactor /materials/1/pbrMetallicRoughness/baseColorFactor
+        /materials/2/pbrMetallicRoughness/baseColorFactor)
+    FOPT=(--res 256x256 --spp 16 --threads 2 --json)
+    F3=() F1=() FP=()
+    for _ in 1 2 3; do
+        J=$("$DR" grad "$PEER" --param "${WALLS[0]}" --param "${WALLS[1]}" --param "${WALLS[2]}" -o "$TMP/fw.exr" "${FOPT[@]}" 2>/dev/null)
+        F3+=("$(json_num "$J" gradient time)")
+        S=0
+        for w in "${WALLS[@]}"; do
+            J=$("$DR" grad "$PEER" --param "$w" -o "$TMP/fw1.exr" "${FOPT[@]}" 2>/dev/null)
+            S=$(calc "$S + $(json_num "$J" gradient time)")
+        done
+        F1+=("$S")
+        J=$("$DR" render "$PEER" -o "$TMP/fp.exr" "${FOPT[@]}" 2>/dev/null)
+        FP+=("$(json_num "$J" render time)")
+    done
+    M3=$(median "${F3[@]}") M1=$(median "${F1[@]}") MP=$(median "${FP[@]}")
+    printf '   one run of three: %.3f s; three runs of one: %.3f s (ratio %s); primal %.3f s: the run of three / primal %s\n' \
+        "$M3" "$M1" "$(calc "$M3 / $M1")" "$MP" "$(calc "$M3 / $MP")"
+    FWD_JSON="{\"three_in_one_seconds\": $M3, \"one_at_a_time_seconds\": $M1, \"primal_seconds\": $MP}"
+fi
 cat >"$OUT/grad-results.json" <<JSON
 {"primal_seconds": $T_PRIMAL, "prb_seconds": ${T[prb]}, "tape_seconds": ${T[tape]},
  "prb_over_primal": $R_PRB, "tape_over_prb": $R_TAPE,
  "stderr_sqrt_seconds": {"prb": $(calc "${SE[prb]} * sqrt(${T[prb]})" %.6g), "tape": $(calc "${SE[tape]} * sqrt(${T[tape]})" %.6g)},
  "memory_vs_depth": [${MEM_JSON%,}], "prb_memory_change_percent": $SPREAD,
- "peer": $PEER_JSON, "reverse_stderr": $SEJ, "texture_parameter": $TEX_JSON}
+ "peer": $PEER_JSON, "reverse_stderr": $SEJ, "texture_parameter": $TEX_JSON, "forward_several": $FWD_JSON}
 JSON
 echo
 echo "results in $OUT/grad-results.json"
