@@ -624,21 +624,16 @@ static int estimate(struct cmp_ctx *x, const struct cmp_combo *how, uint64_t see
         stats_add(sum, &st);
         return 0;
     }
-    /* forward mode: each parameter's image along all its components, up
-     * to DR_FORWARD_MAX of them a pass (mis: one, its weight the pass's) */
-    const int per_pass = how->sampling == DR_SAMPLING_MIS ? 1 : DR_FORWARD_MAX;
+    /* forward mode: each parameter's image along all its components, as
+     * many a pass as one keeps apart (dr_forward_per_pass) */
+    const int per_pass = dr_forward_per_pass(how->sampling);
     for (int k0 = 0; k0 < r->ps->n; k0 += per_pass) {
         const int count = r->ps->n - k0 < per_pass ? r->ps->n - k0 : per_pass;
         int64_t group_end[DR_FORWARD_MAX];
         double *images[DR_FORWARD_MAX];
-        memset(x->dir, 0, sizeof(double) * (size_t)r->ps->total);
-        for (int k = 0; k < count; k++) {
-            const struct dr_param *pp = &r->ps->params[k0 + k];
-            for (int64_t i = 0; i < pp->size; i++)
-                x->dir[pp->offset + i] = 1.0;
-            group_end[k] = pp->offset + pp->size;
+        dr_forward_param_groups(r->ps, k0, count, x->dir, group_end);
+        for (int k = 0; k < count; k++)
             images[k] = v + r->seg_off[k0 + k];
-        }
         memset(&st, 0, sizeof st);
         if (dr_estimator_forward_groups(e, &p, x->dir, count, group_end, images, &st) != 0)
             return -1;

@@ -489,13 +489,7 @@ static int forward_pass(struct grad_args *a, const struct dr_scene *scene, const
                         const struct forward_outputs *fo, struct grad_totals *tot, double *t_write)
 {
     int64_t group_end[DR_FORWARD_MAX];
-    memset(img->dir, 0, sizeof(double) * (size_t)ps->total);
-    for (int k = 0; k < count; k++) {
-        const struct dr_param *p = &ps->params[first + k];
-        for (int64_t q = 0; q < p->size; q++)
-            img->dir[p->offset + q] = 1.0;
-        group_end[k] = p->offset + p->size;
-    }
+    dr_forward_param_groups(ps, first, count, img->dir, group_end);
     struct dr_grad_problem prob = grad_problem(&a->g, scene, cam, ps, a->g.width, a->g.height, a->g.spp, a->g.seed);
     prob.batch = a->batch;
     prob.mis_weights = img->mis_one;   /* mis: the direction's weight (every entry the same) */
@@ -519,9 +513,8 @@ static int run_forward(struct grad_args *a, const char *scene_path, const struct
     int w, h;   /* the rendered rectangle: the frame or --crop's */
     grad_film(&a->g, a->g.width, a->g.height, &w, &h);
     const size_t npix = (size_t)w * h;
-    /* parameters a pass: as many as a sink keeps apart, one under mis
-     * sampling (its weight is the pass's direction's) */
-    const int per_pass = a->g.sampling == DR_SAMPLING_MIS ? 1 : n < DR_FORWARD_MAX ? n : DR_FORWARD_MAX;
+    /* parameters a pass (dr_forward_per_pass), at most n */
+    const int max_pass = dr_forward_per_pass(a->g.sampling), per_pass = n < max_pass ? n : max_pass;
     double *dir = calloc((size_t)(ps->total > 0 ? ps->total : 1), sizeof(double));
     struct forward_images img = {.w = w, .h = h, .dir = dir};
     bool images_ok = true;

@@ -302,7 +302,7 @@ int dr_fdcheck(struct dr_scene *scene, const struct dr_camera *camera, const str
     /* the entries of a parameter, up to DR_FORWARD_MAX at a time (an
      * array's one at a time; mis: one): their forward estimates in one pass
      * a batch, then each one's differences and verdict */
-    const int per_pass = o->sampling == DR_SAMPLING_MIS ? 1 : DR_FORWARD_MAX;
+    const int per_pass = dr_forward_per_pass(o->sampling);
     for (int k = 0, e = 0; k < ps->n && rc == 0; k++) {
         const struct dr_param *pp = &ps->params[k];
         const bool array = dr_param_is_array(pp);

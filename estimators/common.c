@@ -839,6 +839,22 @@ int dr_estimator_forward(const struct dr_estimator_ops *e, const struct dr_grad_
     return run(e, p, NULL, dir, 1, NULL, NULL, &d_image, st);
 }
 
+int dr_forward_per_pass(enum dr_sampling sampling)
+{
+    return sampling == DR_SAMPLING_MIS ? 1 : DR_FORWARD_MAX;
+}
+
+void dr_forward_param_groups(const struct dr_param_set *ps, int first, int count, double *dir, int64_t *group_end)
+{
+    memset(dir, 0, sizeof(double) * (size_t)ps->total);
+    for (int k = 0; k < count; k++) {
+        const struct dr_param *p = &ps->params[first + k];
+        for (int64_t i = 0; i < p->size; i++)
+            dir[p->offset + i] = 1.0;
+        group_end[k] = p->offset + p->size;
+    }
+}
+
 int dr_estimator_forward_groups(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const double *dir,
                                 int n_groups, const int64_t *group_end, double *const *d_images,
                                 struct dr_grad_stats *st)

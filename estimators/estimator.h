@@ -247,6 +247,14 @@ int dr_estimator_forward(const struct dr_estimator_ops *e, const struct dr_grad_
 int dr_estimator_forward_groups(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const double *dir,
                                 int n_groups, const int64_t *group_end, double *const *d_images,
                                 struct dr_grad_stats *st);
+/* How many parameters one forward pass keeps apart under `sampling`:
+ * DR_FORWARD_MAX, or 1 under mis (its weight is the pass's direction's). */
+int dr_forward_per_pass(enum dr_sampling sampling);
+/* The direction and groups of a pass over parameters first .. first +
+ * count - 1 of ps (count <= DR_FORWARD_MAX), each along all its components:
+ * dir 1 on their slots and 0 elsewhere (ps->total entries), group_end[k]
+ * the end of parameter first + k's slots. */
+void dr_forward_param_groups(const struct dr_param_set *ps, int first, int count, double *dir, int64_t *group_end);
 int dr_estimator_backward(const struct dr_estimator_ops *e, const struct dr_grad_problem *p, const float *adjoint,
                           double *grad, struct dr_grad_stats *st);
 

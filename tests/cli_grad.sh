@@ -115,6 +115,21 @@ for f in m.0.exr m.1.exr m.0.png m.1.png; do [ -s "$f" ] || fail "grad forward: 
 [ ! -e m.exr ] || fail "grad forward with two parameters: m.exr should not exist (indexed names)"
 json_check "$tmp/out" 'd["mode"] == "forward" and [p["file"] for p in d["parameters"]] == ["m.0.exr", "m.1.exr"]
 and d["parameters"][0]["max"] > 0 and "textures" in d["effects_differentiated"] and "bsdf" in d["effects_differentiated"]'
+# several parameters share a pass (up to four: estimator.h's
+# dr_estimator_forward_groups): each image is, to the bit, its parameter's
+# run alone, in the first pass and in the second
+five=(--param "$red" --param /images/0 --param /materials/white/pbrMetallicRoughness/baseColorFactor
+    --param /materials/rough-gold/pbrMetallicRoughness/roughnessFactor --param /materials/light/emissiveFactor)
+run grad "${five[@]}" -o p.exr $fast
+expect_rc 0 "grad forward, five parameters"
+run grad --param /materials/light/emissiveFactor -o l.exr $fast
+expect_rc 0 "grad forward, the light alone"
+if $have_oiio; then
+    for pair in "m.0.exr d.exr" "p.0.exr d.exr" "p.4.exr l.exr"; do
+        set -- $pair
+        idiff -fail 0 -warn 0 "$1" "$2" >/dev/null 2>&1 || fail "grad forward: $1 (a shared pass) differs from $2 (alone)"
+    done
+fi
 if $have_oiio; then
     info=$(oiiotool --info d.exr d.png 2>&1) || fail "oiiotool --info: $info"
     echo "$info" | grep -F "d.exr " | grep -Eq ' 16 x +16, 3 channel, float openexr' || fail "d.exr: not float EXR: $info"
