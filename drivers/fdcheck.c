@@ -132,8 +132,9 @@ static double image_mean(const double *img, size_t n)
  * c0 .. c0 + count - 1): one pass for up to DR_FORWARD_MAX components of a
  * parameter that is not an array (each a unit direction on its own slot:
  * estimator.h's groups; mis: one a pass), a pass each for an array's
- * directions (which share their slots). A pass per entry took about 40 %
- * of a check. */
+ * directions (which share their slots). With a pass per entry, a check of
+ * four parameters (a colour, a roughness, a texture, an emission) took
+ * 2.68 s instead of 2.44. */
 static int forward_estimates(struct fd_run *r, int k, int c0, int count, uint64_t seed, double *dir,
                              double *const *dimg, double *fwd)
 {
