@@ -134,9 +134,9 @@ size_t dr_wave_soa_walk_bytes(void)
            sizeof(struct dr_path_vertex);
 }
 
-bool dr_wave_soa_walks_apply(const struct dr_scene *s, const struct dr_path_opts *opts, bool sums_only)
+bool dr_wave_soa_walks_apply(const struct dr_scene *s, const struct dr_path_opts *opts)
 {
-    return sums_only ? dr_path8_walks_apply(s, opts) : dr_path8_applies(s, opts);
+    return dr_path8_walks_apply(s, opts);
 }
 
 bool dr_wave_soa_media_walks_apply(const struct dr_scene *s, const struct dr_path_opts *opts)
@@ -519,14 +519,27 @@ static dr_m8 shadows_through_media(struct dr_wave_soa *w, const struct dr_scene 
     return through;
 }
 
+/* Slot k's vertex for a replay's hook (or a tape's: a walk's vertex hook), begun as dr_path_step_begin begins
+ * it from the path's state before the step whose ray the slot holds (as a
+ * lane's vertex in wavefront.c: the same storage for every vertex); st:
+ * that state, after the begin. */
+static struct dr_path_vertex *replay_vertex_begin(const struct dr_wave_soa *w, int k, struct dr_path_state *st)
+{
+    *st = (struct dr_path_state){.o = dr_v3(w->ox[k], w->oy[k], w->oz[k]), .d = dr_v3(w->dx[k], w->dy[k], w->dz[k]),
+                                 .prev_p = dr_v3(w->px[k], w->py[k], w->pz[k]), .prev_pdf = w->prev_pdf[k],
+                                 .prev_sky = w->prev_sky[k], .depth = (int)w->depth[k] - 1};
+    dr_path_step_begin(st, w->vertex);
+    return w->vertex;
+}
+
 /* A ray that left the scene: the escaped stage's maths (the environment's
  * radiance, if any, with its MIS weight: dr_path_escaped_radiance, which the
  * scalar stage calls too), and the path's end. In a walk where the
  * environment has a parameter the vertex has a derivative term (it emits:
- * dr_path_vertex_has_derivative); no run with a step hook has one
- * (dr_wave_soa_walks_apply). Building a scalar state and vertex for it, as
- * before, took a tenth of a render where most rays leave (a real asset
- * under the default sky). */
+ * dr_path_vertex_has_derivative): a walk with a vertex hook (a tape's) gets
+ * it whole, from the scalar stage. Building a scalar state and vertex for
+ * every escaped path, as before, took a tenth of a render where most rays
+ * leave (a real asset under the default sky). */
 static void escaped(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int k,
                     dr_vec3 *out)
 {
@@ -543,9 +556,16 @@ static void escaped(const struct dr_wave_soa *w, const struct dr_scene *s, const
         return;
     }
     dr_vec3 ratio = dr_v3(w->rx[k], w->ry[k], w->rz[k]), T = dr_add(dr_v3(w->Tx[k], w->Ty[k], w->Tz[k]), dr_mul(ratio, c));
-    if (w->out->step)
-        w->out->step(w->out->ctx, w->item[k], e, dr_v3s(0.0), dr_mul(ratio, dr_v3(w->bx[k], w->by[k], w->bz[k])));
     const bool diff = (opts->stages & DR_STAGE_ENV) && opts->params && opts->params->env_active;
+    const dr_vec3 beta = dr_v3(w->bx[k], w->by[k], w->bz[k]);
+    if (diff && w->out->vertex) {   /* (a tape's: the vertex whole, as the scalar stage makes it) */
+        struct dr_path_state st;
+        struct dr_path_vertex *v = replay_vertex_begin(w, k, &st);
+        dr_path_stage_escaped(s, opts, &st, v);
+        w->out->vertex(w->out->ctx, w->item[k], &(struct dr_wave_arrival){beta, ratio}, v);
+    } else if (w->out->step) {
+        w->out->step(w->out->ctx, w->item[k], e, dr_v3s(0.0), dr_mul(ratio, beta));
+    }
     walk_done(w, w->item[k], L, T, diff ? (int)w->depth[k] : w->last_diff[k]);
 }
 
@@ -602,19 +622,6 @@ static struct dr_wave_soa_replay_lanes replay_lanes(const struct dr_wave_soa *w,
     g.L_sub = dr_v3x8_sub(load3(w->Lx + i0, w->Ly + i0, w->Lz + i0), be);
     g.L_true = dr_v3x8_sub(g.remaining, dr_v3x8_mul(ratio, be));
     return g;
-}
-
-/* Slot k's vertex for a replay's hook, begun as dr_path_step_begin begins
- * it from the path's state before the step whose ray the slot holds (as a
- * lane's vertex in wavefront.c: the same storage for every vertex); st:
- * that state, after the begin. */
-static struct dr_path_vertex *replay_vertex_begin(const struct dr_wave_soa *w, int k, struct dr_path_state *st)
-{
-    *st = (struct dr_path_state){.o = dr_v3(w->ox[k], w->oy[k], w->oz[k]), .d = dr_v3(w->dx[k], w->dy[k], w->dz[k]),
-                                 .prev_p = dr_v3(w->px[k], w->py[k], w->pz[k]), .prev_pdf = w->prev_pdf[k],
-                                 .prev_sky = w->prev_sky[k], .depth = (int)w->depth[k] - 1};
-    dr_path_step_begin(st, w->vertex);
-    return w->vertex;
 }
 
 /* A replay's paths that left the scene where the environment has a
@@ -955,16 +962,33 @@ static int finish_scalar(struct dr_wave_soa *w, const struct dr_scene *s, const 
     return kept + 1;
 }
 
-/* A group's vertices to the walk's step hook (dr_wave_soa_walks). */
-static void steps(const struct dr_wave_soa *w, const struct dr_path8 *G, const struct dr_path8_out *c, dr_v3x8 beta,
-                  dr_v3x8 e)
+/* A group's vertices to the walk's hooks (dr_wave_soa_walks), with its
+ * throughputs before them (beta, ratio): the lanes in diff (a light's term,
+ * where a light has a parameter: the tape keeps such a vertex whole) to the
+ * vertex hook, made as replay_step makes a replay's (the fields
+ * d_path_vertex reads of a vertex without a BSDF parameter); the others to
+ * the step hook. (No lane here has a BSDF parameter: a walk with a vertex
+ * hook hands those to the scalar stages, end_escaped.) */
+static void steps(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
+                  const struct dr_path8 *G, const struct dr_path8_out *c, dr_v3x8 beta, dr_v3x8 ratio, dr_v3x8 e,
+                  dr_m8 diff)
 {
     const int i0 = (int)(G - w->group) * DR_SIMD_W;
     const dr_v3x8 zero = {dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)};
     dr_v3x8 t = dr_v3x8_sel(c->more, dr_v3x8_scale(c->f, c->cos_pdf_q), zero);   /* (tape.c's new_step) */
-    dr_v3x8 bt = dr_v3x8_mul(load3(w->rx + i0, w->ry + i0, w->rz + i0), beta);
-    for (int i = 0; i < G->n; i++)
-        w->out->step(w->out->ctx, w->item[i0 + i], dr_v3x8_get(&e, i), dr_v3x8_get(&t, i), dr_v3x8_get(&bt, i));
+    dr_v3x8 bt = dr_v3x8_mul(ratio, beta);
+    for (int i = 0; i < G->n; i++) {
+        const int k = i0 + i;
+        if (!diff[i]) {
+            w->out->step(w->out->ctx, w->item[k], dr_v3x8_get(&e, i), dr_v3x8_get(&t, i), dr_v3x8_get(&bt, i));
+            continue;
+        }
+        struct dr_path_state st;
+        struct dr_path_vertex *v = replay_vertex_begin(w, k, &st);
+        dr_path8_vertex(s, opts, G, c, i, w->tri[k], st.o, st.d, v);
+        const struct dr_wave_arrival a = {dr_v3x8_get(&beta, i), dr_v3x8_get(&ratio, i)};
+        w->out->vertex(w->out->ctx, w->item[k], &a, v);
+    }
 }
 
 /* The group's lanes whose vertex has a derivative term
@@ -1035,9 +1059,9 @@ static int advance(struct dr_wave_soa *w, const struct dr_scene *s, const struct
             if (w->out)
                 T = dr_v3x8_add(load3(w->Tx + i0, w->Ty + i0, w->Tz + i0), dr_v3x8_mul(ratio, be));
         }
-        if (w->out && w->out->step)
-            steps(w, G, &c, beta, e);
         const dr_m8 diff = differentiated8(G, &c);
+        if (w->out && w->out->step)
+            steps(w, s, opts, G, &c, beta, ratio, e, diff);
         int j = kept;
         for (int i = 0; i < G->n; i++) {
             int k = i0 + i;
@@ -1174,6 +1198,9 @@ bool dr_wave_soa_walk(struct dr_wave_soa *w, const struct dr_scene *s, const str
 {
     /* zeroed, as the lanes (wavefront.c): a field no stage wrote reads the same on every run */
     if (!w->scalar && !(w->scalar = calloc(LANES, sizeof(struct scalar_path))))
+        return false;
+    /* (a tape's walk hands the vertices of a light's terms whole: steps) */
+    if (out->vertex && !w->vertex && !(w->vertex = calloc(1, sizeof(struct dr_path_vertex))))
         return false;
     w->out = out;
     run(w, s, opts, n, start, start8, ctx, NULL, counts);

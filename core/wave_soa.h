@@ -56,9 +56,13 @@ struct dr_wave_soa_walks {
      * its continuation's factor t (f |cos| / pdf / q; 0 where the path ends)
      * and the true throughput bt (ratio beta) it was reached with */
     void (*step)(void *ctx, int64_t item, dr_vec3 e, dr_vec3 t, dr_vec3 bt);
-    /* a vertex on a material with a BSDF parameter, whole, reached with a
-     * (set: the scalar stages take such vertices; NULL: the eight-lane
-     * stages, which prb's walks use) */
+    /* a vertex with a derivative term, whole, reached with a: on a material
+     * with a BSDF parameter (set: the scalar stages take such vertices;
+     * NULL: the eight-lane stages, which prb's walks use), or the eight-lane
+     * stages' vertex of a light's term where a light has a parameter
+     * (made whole as far as d_path_vertex reads it, as a replay's: the
+     * emitter's hit, the light sample's record; an escaped vertex from the
+     * scalar stage) */
     void (*vertex)(void *ctx, int64_t item, const struct dr_wave_arrival *a, const struct dr_path_vertex *v);
     /* in a scene with media (dr_wave_soa_media_walks_apply; NULL
      * elsewhere), by item: the path met a medium (its ray hit a medium's
@@ -68,14 +72,12 @@ struct dr_wave_soa_walks {
     bool *in_media;
 };
 
-/* Can a gradient's primal walks use the arrays (parameters allowed)? The
- * vertices on materials with a BSDF parameter take the scalar stages where
- * the walk has a vertex hook (as in wavefront.c), the eight-lane ones
- * otherwise, as all other vertices do. sums_only: walks without step and
- * vertex hooks (path replay's: sums, last_diff, the log), which also apply
- * where a light's radiance has a parameter (dr_path8_walks_apply); a tape's
- * steps would need those vertices whole. */
-bool dr_wave_soa_walks_apply(const struct dr_scene *scene, const struct dr_path_opts *opts, bool sums_only);
+/* Can a gradient's primal walks use the arrays (parameters allowed, a
+ * light's radiance's too: dr_path8_walks_apply)? The vertices on materials
+ * with a BSDF parameter take the scalar stages where the walk has a vertex
+ * hook (as in wavefront.c), the eight-lane ones otherwise, as all other
+ * vertices do. */
+bool dr_wave_soa_walks_apply(const struct dr_scene *scene, const struct dr_path_opts *opts);
 /* Can path replay's primal walks (sums_only) use the arrays in a scene with
  * media, for the paths that meet none (dr_wave_soa_walks.in_media, which
  * such walks must be given)? Where every medium is bounded by a mesh and

@@ -477,7 +477,7 @@ static void primal_walks(struct prb_job *j, int thread, struct park_ctx *c, int6
     struct dr_est_base *b = &j->b;
     static const struct dr_wave_ops primal = {primal_start, lane_vertex, primal_end, primal_keep_log,
                                               NULL, true, true, true};
-    if (dr_wave_soa_walks_apply(b->p->scene, &b->popts, true) &&
+    if (dr_wave_soa_walks_apply(b->p->scene, &b->popts) &&
         (j->soas[thread] || (j->soas[thread] = dr_wave_soa_create())) &&
         dr_wave_soa_walk(j->soas[thread], b->p->scene, &b->popts, n, soa_start, soa_start8, c, &c->items->walk,
                          &b->thr[thread].rays))
@@ -692,7 +692,7 @@ static int64_t arrays_pixels(struct prb_job *j, int thread, int64_t begin, int64
     const int64_t group = park_group(spp);
     struct parked_samples *it = &j->items[thread];
     const bool media = j->media_arrays;
-    if (!(media || dr_wave_soa_walks_apply(b->p->scene, &b->popts, true)) || !parked_make(it, group * spp) ||
+    if (!(media || dr_wave_soa_walks_apply(b->p->scene, &b->popts)) || !parked_make(it, group * spp) ||
         !(j->soas[thread] || (j->soas[thread] = dr_wave_soa_create())))
         return begin;
     struct dr_wave_soa_walks sums = it->walk;   /* (with ray answers where they fit LOGGED_ITEMS) */
@@ -784,7 +784,7 @@ static int prb_run(struct dr_est_base *b)
     j->outside_media.stages &= ~(unsigned)(DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC);
     /* one path at a time: the primal walks' sums, the cross primal's or
      * the arrays' (arrays_pixels), which the replays then need not walk */
-    const bool arrays = j->media_arrays || dr_wave_soa_walks_apply(b->p->scene, &b->popts, true);
+    const bool arrays = j->media_arrays || dr_wave_soa_walks_apply(b->p->scene, &b->popts);
     const bool keep_sums = !j->wave && (b->p->cross || arrays);
     for (int t = 0; t < b->acc.threads; t++)
         if (!(j->adj[t] = malloc(sizeof(dr_vec3) * (size_t)b->p->spp)) ||

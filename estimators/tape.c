@@ -393,7 +393,7 @@ static void soa_vertex(void *ctx, int64_t i, const struct dr_wave_arrival *a, co
 static bool record_soa(struct tape_job *j, int thread, struct wave_record *c, int64_t n)
 {
     const struct dr_scene *s = j->b.p->scene;
-    if (!j->steps || !dr_wave_soa_walks_apply(s, &j->b.popts, false))
+    if (!j->steps || !dr_wave_soa_walks_apply(s, &j->b.popts))
         return false;
     if (!j->soas[thread] && !(j->soas[thread] = dr_wave_soa_create()))
         return false;
@@ -422,9 +422,10 @@ static bool record_wave(struct tape_job *j, struct tape *tp, int thread, int64_t
     if (!j->waves[thread] && !(j->waves[thread] = dr_wave_create()))
         return false;
     /* With compact steps a vertex without a derivative term is read for its
-     * step only (new_step): eight lanes at a time where they can */
+     * step only (new_step): eight lanes at a time where they can, and the
+     * vertices of a light's terms too (light_terms), as in the arrays */
     static const struct dr_wave_ops whole = {lane_start, lane_vertex, lane_walk_end, NULL, NULL, false, false, false};
-    static const struct dr_wave_ops steps = {lane_start, lane_vertex, lane_walk_end, NULL, NULL, true, false, false};
+    static const struct dr_wave_ops steps = {lane_start, lane_vertex, lane_walk_end, NULL, NULL, true, true, false};
     dr_wave_run(j->waves[thread], j->b.p->scene, &j->b.popts, n * j->b.p->spp, j->steps ? &steps : &whole, &c,
                 &j->b.thr[thread].rays);
     return true;
@@ -668,7 +669,7 @@ static int tape_run(struct dr_est_base *b)
     if (j->batch > pixels)
         j->batch = pixels > 0 ? pixels : 1;   /* (the pixel list holds a batch) */
     if (j->wave) {   /* what the workers hold besides the tape: the packet tracer's arrays or lanes */
-        const bool soa = j->steps && dr_wave_soa_walks_apply(p->scene, &b->popts, false);
+        const bool soa = j->steps && dr_wave_soa_walks_apply(p->scene, &b->popts);
         b->scratch_bytes = (uint64_t)threads * (soa ? dr_wave_soa_walk_bytes() : dr_wave_bytes());
     }
     int rc = dr_parallel_for_static(pixels, j->batch, threads, record_and_sweep, j);

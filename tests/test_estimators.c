@@ -146,8 +146,10 @@ static void compare(const char *what, struct dr_scene *s, const struct dr_camera
         CHECK(st.memory_bytes > 0, "%s: %s reports no memory", what, est->name);
         CHECK(st.memory_bytes >= st.record_bytes, "%s: %s: record bytes exceed its memory", what, est->name);
         /* prb's walks and the tape's compact steps (detached sampling) shade
-         * the vertices without a derivative term eight lanes at a time where
-         * no light has a parameter (path_simd.h) */
+         * the vertices eight lanes at a time, but those on materials with a
+         * BSDF parameter in the tape's (path_simd.h; a light's terms too
+         * since 2026-12-06: the tape's record in arrays hands those vertices
+         * whole, wave_soa.c's steps) */
         const bool is_prb = strcmp(est->name, "prb") == 0;
         const bool grouped = grouping == GROUPED_BOTH || is_prb;
         CHECK(grouped ? st.rays.simd_vertices > 0 : st.rays.simd_vertices == 0,
@@ -1092,14 +1094,14 @@ int main(void)
         "/images/0",
     };
     camera_rays8_match(&s->cameras[0]);
-    compare("cornell box", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DETACHED, GROUPED_PRB);
+    compare("cornell box", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DETACHED, GROUPED_BOTH);
     scratch_reuse("cornell box", s, &s->cameras[0], ptrs, 7, 2);
     consumer_matches("cornell box", s, &s->cameras[0], ptrs, 7, 2, true);
     consumer_matches("cornell box", s, &s->cameras[0], ptrs, 7, 3, true);
     /* the light's parameters alone: the vertices that see it or sample it
      * are the only ones with a term (prb's walks mark them in the arrays) */
     compare("cornell box, the light only", s, &s->cameras[0], ptrs + 4, 2, 8, DR_SAMPLING_DETACHED,
-            GROUPED_PRB);
+            GROUPED_BOTH);
     /* BSDF parameters only: prb's walks and the tape's steps shade the
      * vertices on other materials eight lanes at a time; the estimators must
      * still agree (a wrong continuation factor in the tape's steps, or a
@@ -1121,7 +1123,7 @@ int main(void)
     /* derivative sampling: the same sub-streams, the same terms in another order */
     compare("cornell box, derivative sampling", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DERIVATIVE, GROUPED_PRB_WALKS);
     compare("cornell box, paths longer than the replay log", s, &s->cameras[0], ptrs, 7, DR_WAVE_REPLAY_DEPTH + 12,
-            DR_SAMPLING_DETACHED, GROUPED_PRB);
+            DR_SAMPLING_DETACHED, GROUPED_BOTH);
     compare("cornell box, BSDF parameters only, paths longer than the replay log", s, &s->cameras[0], bsdf_ptrs, 4,
             DR_WAVE_REPLAY_DEPTH + 12, DR_SAMPLING_DETACHED, GROUPED_BOTH);
     /* zero BSDF channels at differentiated vertices (path.h's substitutes):
@@ -1185,9 +1187,9 @@ int main(void)
      * point light, never an escaped ray's; with the environment's alone,
      * the other way round */
     compare("glossy scene, the point light only", s, &cam, gptrs + 4, 2, 6, DR_SAMPLING_DETACHED,
-            GROUPED_PRB);
+            GROUPED_BOTH);
     compare("glossy scene, the environment only", s, &cam, gptrs + 6, 2, 6, DR_SAMPLING_DETACHED,
-            GROUPED_PRB);
+            GROUPED_BOTH);
     environment_replays_in_arrays("glossy scene, the environment only", s, gptrs + 6, 2);
     tape_reuse(s, &cam, gptrs, 8);
     cross_many_samples(s, &cam, gptrs, 8);
@@ -1201,7 +1203,7 @@ int main(void)
     s->materials[0].specular = 0.0;
     const char *sky_ptrs[] = {gptrs[1], gptrs[6]};
     compare("glossy scene, a floor without green under the sky", s, &cam, sky_ptrs, 2, 6, DR_SAMPLING_DETACHED,
-            GROUPED_PRB);
+            GROUPED_BOTH);
     dr_scene_destroy(s);
 
     /* a closed box lit from inside: no path escapes, and without roulette
@@ -1270,7 +1272,7 @@ int main(void)
     s = sb_finish(&b);
     s->n_file_materials = s->n_materials;
     const char *panel_ptrs[] = {"/images/0"};
-    compare("open box, an emissive texture's texels", s, &cam, panel_ptrs, 1, 6, DR_SAMPLING_DETACHED, GROUPED_PRB);
+    compare("open box, an emissive texture's texels", s, &cam, panel_ptrs, 1, 6, DR_SAMPLING_DETACHED, GROUPED_BOTH);
     dr_scene_destroy(s);
 
     /* an open box under an environment map alone, its colour and texels the
@@ -1290,7 +1292,7 @@ int main(void)
     s->n_file_materials = s->n_materials;
     const struct dr_camera above = sb_camera(dr_v3(0.3, 2.2, 1.6), dr_v3(0, 0.2, 0), 50);
     const char *sky_map_ptrs[] = {"/extensions/DR_environment/color", "/extensions/DR_environment/uri"};
-    compare("open box under a map", s, &above, sky_map_ptrs, 2, 6, DR_SAMPLING_DETACHED, GROUPED_PRB);
+    compare("open box under a map", s, &above, sky_map_ptrs, 2, 6, DR_SAMPLING_DETACHED, GROUPED_BOTH);
     environment_replays_in_arrays("open box under a map", s, sky_map_ptrs, 2);
     wave_against_one_path("open box under a map", s, &above, sky_map_ptrs, 2);
     dr_scene_destroy(s);
