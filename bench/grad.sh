@@ -23,6 +23,8 @@
 #      scalars): grad's peak memory, gradient time and the gradient image's
 #      write, and optimize's per iteration time, peak memory and checkpoint
 #      size (5 iterations, a checkpoint at the end)
+#   s. forward mode, three parameters in one run against three runs of one
+#   t. a light's emission: prb's and the tape's time over the primal's
 # Writes $BUILD/bench/grad-results.json.
 set -euo pipefail
 BUILD=${BUILD:-build}
@@ -226,12 +228,42 @@ if [[ -f $PEER ]]; then
         "$M3" "$M1" "$(calc "$M3 / $M1")" "$MP" "$(calc "$M3 / $MP")"
     FWD_JSON="{\"three_in_one_seconds\": $M3, \"one_at_a_time_seconds\": $M1, \"primal_seconds\": $MP}"
 fi
+# t. a light's emission as the parameter (the peer box's light, its
+# emissiveFactor set to (0.8, 0.8, 0.4), L2 against the render at the true
+# value, 256x256, 64 spp, depth 8, 2 threads): prb's and the tape's gradient
+# time over the primal's (medians of 3), and the tape's record. Most
+# vertices then have a derivative term (their light sample's).
+LIGHT_JSON=null
+if [[ -f $PEER ]]; then
+    echo
+    echo "t. a light's emission, the peer's box (256x256, 64 spp, depth 8, 2 threads; medians of 3)"
+    LIGHT=/materials/3/emissiveFactor
+    LOPT=(--sampler independent --target "$TMP/peer-target.exr" --param $LIGHT --set $LIGHT=0.8,0.8,0.4 --spp 64
+        --res 256x256 --max-depth 8 --threads 2 --json)
+    [[ -f $TMP/peer-target.exr ]] ||
+        "$DR" render "$PEER" --sampler independent -o "$TMP/peer-target.exr" --res 256x256 --spp 64 --max-depth 8 >/dev/null
+    LP=() LPRB=() LTAPE=()
+    for _ in 1 2 3; do
+        J=$("$DR" render "$PEER" --sampler independent -o "$TMP/lp.exr" --res 256x256 --spp 64 --max-depth 8 --threads 2 --json)
+        LP+=("$(json_num "$J" render time)")
+        J=$("$DR" grad "$PEER" --estimator prb "${LOPT[@]}" 2>/dev/null)
+        LPRB+=("$(json_num "$J" gradient time)")
+        J=$("$DR" grad "$PEER" --estimator tape "${LOPT[@]}" 2>/dev/null)
+        LTAPE+=("$(json_num "$J" gradient time)")
+        LREC=$(json_num "$J" record_bytes)
+    done
+    MLP=$(median "${LP[@]}") MLPRB=$(median "${LPRB[@]}") MLTAPE=$(median "${LTAPE[@]}")
+    printf '   primal %.3f s; prb %.3f s (%s x the primal); tape %.3f s (%s x the primal), its record %s bytes\n' \
+        "$MLP" "$MLPRB" "$(calc "$MLPRB / $MLP")" "$MLTAPE" "$(calc "$MLTAPE / $MLP")" "$LREC"
+    LIGHT_JSON="{\"primal_seconds\": $MLP, \"prb_seconds\": $MLPRB, \"tape_seconds\": $MLTAPE, \"tape_record_bytes\": $LREC}"
+fi
 cat >"$OUT/grad-results.json" <<JSON
 {"primal_seconds": $T_PRIMAL, "prb_seconds": ${T[prb]}, "tape_seconds": ${T[tape]},
  "prb_over_primal": $R_PRB, "tape_over_prb": $R_TAPE,
  "stderr_sqrt_seconds": {"prb": $(calc "${SE[prb]} * sqrt(${T[prb]})" %.6g), "tape": $(calc "${SE[tape]} * sqrt(${T[tape]})" %.6g)},
  "memory_vs_depth": [${MEM_JSON%,}], "prb_memory_change_percent": $SPREAD,
- "peer": $PEER_JSON, "reverse_stderr": $SEJ, "texture_parameter": $TEX_JSON, "forward_several": $FWD_JSON}
+ "peer": $PEER_JSON, "reverse_stderr": $SEJ, "texture_parameter": $TEX_JSON, "forward_several": $FWD_JSON,
+ "light_emission": $LIGHT_JSON}
 JSON
 echo
 echo "results in $OUT/grad-results.json"

@@ -448,6 +448,10 @@ bool dr_path_vertex_has_surface_derivative(const struct dr_scene *s, const struc
  * before the material's (d_material_eval is linear in them), which then
  * reads the hit's textures once instead of twice: a texture gradient's
  * texel adjoints took 8 % of its time twice over. */
+static void emission_part(const struct dr_scene *s, const struct dr_param_set *ps, enum dr_vertex_kind kind,
+                          const struct dr_hit *hit, const struct dr_env_lookup *env_at, dr_vec3 d, dr_vec3 d_Le,
+                          struct dr_grad_sink *sink);
+
 static void vertex_part(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
                         dr_vec3 d_e, dr_vec3 d_f, struct dr_grad_sink *sink)
 {
@@ -458,12 +462,7 @@ static void vertex_part(const struct dr_scene *s, const struct dr_param_set *ps,
             dr_vec3 d_Le = dr_scale(d_e, v->emit_w);
             if (v->media)
                 d_Le = dr_mul(d_Le, v->seg);   /* folded into Le by the medium walker */
-            if (v->kind == DR_VERTEX_SURFACE)
-                d_emission(s, ps, &v->hit, d_Le, sink);
-            else if (v->env_at.valid)   /* (the escaped stage's own lookup along d) */
-                d_env_radiance_at(s, ps, &v->env_at, d_Le, sink);
-            else
-                d_env_radiance(s, ps, v->d, d_Le, sink);
+            emission_part(s, ps, v->kind, &v->hit, &v->env_at, v->d, d_Le, sink);
         }
         if (v->nee) {
             if (v->diff_bsdf) {
@@ -500,6 +499,70 @@ void d_path_vertex(const struct dr_scene *s, const struct dr_param_set *ps, cons
             continue;
         sink->channel = c;
         vertex_part(s, ps, v, dr_v3_channel(d_e, c), dr_v3_channel(d_f, c), sink);
+    }
+}
+
+/* The adjoint of the emission Le a vertex sees (d_Le), where it sees it: an
+ * emitter's hit, or the environment along d (the escaped stage's own lookup
+ * there, where it kept one). */
+static void emission_part(const struct dr_scene *s, const struct dr_param_set *ps, enum dr_vertex_kind kind,
+                          const struct dr_hit *hit, const struct dr_env_lookup *env_at, dr_vec3 d, dr_vec3 d_Le,
+                          struct dr_grad_sink *sink)
+{
+    if (kind == DR_VERTEX_SURFACE)
+        d_emission(s, ps, hit, d_Le, sink);
+    else if (env_at->valid)
+        d_env_radiance_at(s, ps, env_at, d_Le, sink);
+    else
+        d_env_radiance(s, ps, d, d_Le, sink);
+}
+
+void dr_path_light_terms_take(const struct dr_path_vertex *v, struct dr_path_light_terms *t)
+{
+    t->kind = v->kind;
+    t->emits = v->emits;
+    t->nee = v->nee;
+    if (v->emits) {
+        t->emit_w = v->emit_w;
+        if (v->kind == DR_VERTEX_SURFACE) {
+            t->hit = v->hit;
+        } else {
+            t->d = v->d;
+            t->env_at = v->env_at;
+        }
+    }
+    if (v->nee) {
+        t->nee_f = v->nee_f;
+        t->nee_scale = v->nee_scale;
+        t->ls = v->ls;
+    }
+}
+
+/* vertex_part's d_e part for such a vertex (its d_f is black: no BSDF parameter). */
+static void light_terms_part(const struct dr_scene *s, const struct dr_param_set *ps,
+                             const struct dr_path_light_terms *t, dr_vec3 d_e, struct dr_grad_sink *sink)
+{
+    if (t->emits)
+        emission_part(s, ps, t->kind, &t->hit, &t->env_at, t->d, dr_scale(d_e, t->emit_w), sink);
+    if (t->nee)
+        d_light_radiance(s, ps, &t->ls, dr_scale(dr_mul(d_e, t->nee_f), t->nee_scale), sink);
+}
+
+/* (d_path_vertex's channel split) */
+void d_path_light_terms(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_light_terms *t,
+                        dr_vec3 d_e, struct dr_grad_sink *sink)
+{
+    if (dr_is_black(d_e))
+        return;
+    if (!sink->dir) {
+        light_terms_part(s, ps, t, d_e, sink);
+        return;
+    }
+    for (int c = 0; c < 3; c++) {
+        if (dr_v3_get(d_e, c) == 0.0)
+            continue;
+        sink->channel = c;
+        light_terms_part(s, ps, t, dr_v3_channel(d_e, c), sink);
     }
 }
 

@@ -299,6 +299,36 @@ void d_path_continuation(const struct dr_scene *scene, const struct dr_param_set
 void d_path_vertex(const struct dr_scene *scene, const struct dr_param_set *params, const struct dr_path_vertex *v,
                    dr_vec3 d_e, dr_vec3 d_f, struct dr_grad_sink *sink);
 
+/* What the adjoint of a vertex's term reads where the term's derivative is
+ * all in its light terms (no BSDF parameter, not the medium walker's
+ * vertex): the emission it sees (the emitter's hit, or the environment's
+ * lookup along d) and its next-event estimate's light sample. 448 bytes
+ * against the vertex's 1032: where a light has a parameter most vertices
+ * have such a term, and a tape records this instead of the vertex
+ * (estimators/tape.c). */
+struct dr_path_light_terms {
+    enum dr_vertex_kind kind;
+    bool emits, nee;
+    double emit_w;
+    dr_vec3 d;                     /* escaped: the ray's direction */
+    struct dr_env_lookup env_at;   /* ... and the map's lookup along it, where kept */
+    struct dr_hit hit;             /* surface, emitting: the emitter's hit */
+    dr_vec3 nee_f;
+    double nee_scale;
+    struct dr_light_sample ls;
+};
+/* Does v's derivative term lie in its light terms alone? */
+static inline bool dr_path_light_terms_hold(const struct dr_path_vertex *v)
+{
+    return !v->diff_bsdf && !v->media;
+}
+/* Where they do: *t takes them (the fields above that their adjoint reads). */
+void dr_path_light_terms_take(const struct dr_path_vertex *v, struct dr_path_light_terms *t);
+/* d_path_vertex_term of the vertex t was taken from: the same sums, in the
+ * same order, so the same bits. */
+void d_path_light_terms(const struct dr_scene *scene, const struct dr_param_set *params,
+                        const struct dr_path_light_terms *t, dr_vec3 d_e, struct dr_grad_sink *sink);
+
 /* ---- attached sampling (reparametrize-then-differentiate) ----
  *
  * The sampled directions, the hit points, the pdfs and the MIS weights move

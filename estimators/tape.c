@@ -13,8 +13,9 @@
  * A worker records and sweeps its own batch with no barrier between them
  * (the loss's adjoint is known before the record), and the default batch is
  * small enough that the tape is swept while it is still in the cache: the
- * sweep reads back every byte the record wrote (912 bytes per vertex with
- * a derivative term, 56 per step without one: struct tape_step).
+ * sweep reads back every byte the record wrote (1064 bytes per vertex with
+ * a derivative term, 528 where that term is a light's alone: struct
+ * tape_light; 56 per step without one: struct tape_step).
  * Without media the record runs on the packet tracer (wavefront.h), whose
  * paths advance together, so a path's vertices are not adjacent in the
  * tape: each vertex links to the one before it on its path. */
@@ -45,8 +46,22 @@ struct tape_step {
     dr_vec3 t;         /* the continuation factor f |cos| / pdf / q (0: the path ends) */
     int64_t prev;
 };
-/* Links (tape_vertex.prev, tape_path.last) with this bit name a tape_step. */
+/* A vertex whose derivative term is all in its light terms (no BSDF
+ * parameter: dr_path_light_terms_take), under plain detached sampling:
+ * where a light has a parameter most vertices are such. A step's part and
+ * what the light terms' adjoint reads, 528 bytes instead of the whole
+ * vertex's 1064: the peer's box's emission gradient spent a sixth of its
+ * time copying whole vertices and reading them back. */
+struct tape_light {
+    dr_vec3 e, t;      /* as a step's */
+    dr_vec3 bt;        /* true throughput arriving at the vertex */
+    int64_t prev;
+    struct dr_path_light_terms terms;
+};
+/* Links (tape_vertex.prev, tape_path.last) with this bit name a tape_step,
+ * with this one a tape_light. */
 #define TAPE_STEP ((int64_t)1 << 62)
+#define TAPE_LIGHT ((int64_t)1 << 61)
 
 size_t dr_tape_vertex_bytes(void)
 {
@@ -70,6 +85,8 @@ struct tape {
     int64_t n_verts, cap_verts;
     struct tape_step *steps;
     int64_t n_steps, cap_steps;
+    struct tape_light *lights;
+    int64_t n_lights, cap_lights;
     struct dr_medium_record *mrecs;   /* one per vertex, only when media parameters are requested */
     int64_t cap_mrecs;
     struct tape_path *paths;
@@ -133,7 +150,7 @@ static bool grow(void **p, int64_t *cap, int64_t need, size_t elem)
 static uint64_t tape_bytes(const struct tape *t, bool media)
 {
     return (uint64_t)t->n_verts * (sizeof(struct tape_vertex) + (media ? sizeof(struct dr_medium_record) : 0)) +
-           (uint64_t)t->n_steps * sizeof(struct tape_step) +
+           (uint64_t)t->n_steps * sizeof(struct tape_step) + (uint64_t)t->n_lights * sizeof(struct tape_light) +
            (uint64_t)t->n_paths * sizeof(struct tape_path);
 }
 
@@ -203,6 +220,26 @@ static bool new_step(struct tape *tp, struct tape_path *path, dr_vec3 e, dr_vec3
     path->last = TAPE_STEP | tp->n_steps++;
     path->count++;
     *L = dr_add(*L, dr_mul(bt, st->e));
+    return true;
+}
+
+/* Records vertex v (reached with true throughput bt), whose derivative term
+ * is all in its light terms, as a tape_light and adds its part to L; false
+ * when out of memory. */
+static bool new_light(struct tape *tp, struct tape_path *path, const struct dr_path_vertex *v, dr_vec3 *L, dr_vec3 bt)
+{
+    if (!grow((void **)&tp->lights, &tp->cap_lights, tp->n_lights + 1, sizeof *tp->lights))
+        return false;
+    struct tape_light *l = &tp->lights[tp->n_lights];
+    dr_path_light_terms_take(v, &l->terms);
+    l->e = dr_path_vertex_term(v);
+    l->t = v->cont ? dr_scale(v->f, v->cos_pdf_q) : dr_v3s(0.0);
+    l->bt = bt;
+    l->prev = path->last;
+    path->last = TAPE_LIGHT | tp->n_lights++;
+    path->count++;
+    *L = dr_add(*L, dr_mul(bt, l->e));
+    path->derivative = true;
     return true;
 }
 
@@ -327,6 +364,11 @@ static void record_vertex(struct wave_record *c, struct tape_path *path, const s
     if (c->j->steps && !dr_path_vertex_has_derivative(c->j->b.p->scene, c->j->b.p->params, v)) {
         dr_vec3 t = v->cont ? dr_scale(v->f, v->cos_pdf_q) : dr_v3s(0.0);
         if (!new_step(c->tp, path, dr_path_vertex_term(v), t, L, dr_mul(a->ratio, a->beta)))
+            c->tp->failed = true;
+        return;
+    }
+    if (c->j->steps && dr_path_light_terms_hold(v)) {
+        if (!new_light(c->tp, path, v, L, dr_mul(a->ratio, a->beta)))
             c->tp->failed = true;
         return;
     }
@@ -468,10 +510,18 @@ static void sweep(const struct tape_job *j, const struct tape *tp, const struct 
     dr_vec3 after = dr_v3s(0.0);  /* media: radiance gathered after the vertex */
     const struct tape_vertex *next = NULL;
     for (int64_t i = path->last; i >= 0; i = verts[i].prev) {
-        while (i >= 0 && (i & TAPE_STEP)) {   /* steps: no derivative term, only what they pass on */
-            const struct tape_step *st = &tp->steps[i & ~TAPE_STEP];
-            abar = dr_add(dr_mul(adj, st->e), dr_mul(abar, st->t));
-            i = st->prev;
+        while (i >= 0 && (i & (TAPE_STEP | TAPE_LIGHT))) {
+            if (i & TAPE_STEP) {   /* steps: no derivative term, only what they pass on */
+                const struct tape_step *st = &tp->steps[i & ~TAPE_STEP];
+                abar = dr_add(dr_mul(adj, st->e), dr_mul(abar, st->t));
+                i = st->prev;
+                continue;
+            }
+            /* a light's terms: the whole vertex's adjoint calls (d_f black) */
+            const struct tape_light *l = &tp->lights[i & ~TAPE_LIGHT];
+            d_path_light_terms(s, ps, &l->terms, dr_mul(adj, l->bt), sink);
+            abar = dr_add(dr_mul(adj, l->e), dr_mul(abar, l->t));
+            i = l->prev;
         }
         if (i < 0)
             break;
@@ -590,6 +640,7 @@ static void tape_unmap(struct tape *tp)
 {
     map_free(tp->verts, tp->cap_verts, sizeof *tp->verts);
     map_free(tp->steps, tp->cap_steps, sizeof *tp->steps);
+    map_free(tp->lights, tp->cap_lights, sizeof *tp->lights);
     map_free(tp->mrecs, tp->cap_mrecs, sizeof *tp->mrecs);
     map_free(tp->paths, tp->cap_paths, sizeof *tp->paths);
     *tp = (struct tape){0};
@@ -613,7 +664,7 @@ static void tape_take(struct tape *tp, int t)
     *tp = tape_pool.kept[t];
     tape_pool.kept[t] = (struct tape){0};
     pthread_mutex_unlock(&tape_pool.lock);
-    tp->n_verts = tp->n_steps = tp->n_paths = 0;
+    tp->n_verts = tp->n_steps = tp->n_lights = tp->n_paths = 0;
     tp->peak = 0;
     tp->failed = false;
 }
@@ -639,7 +690,7 @@ static void record_and_sweep(void *ctx, int thread, int64_t begin, int64_t end)
     struct tape *tp = &j->tapes[thread];
     if (tp->failed)
         return;
-    tp->n_verts = tp->n_steps = tp->n_paths = 0;
+    tp->n_verts = tp->n_steps = tp->n_lights = tp->n_paths = 0;
     if (!(j->wave && record_wave(j, tp, thread, begin, end)))
         record_one_by_one(j, tp, thread, begin, end);
     uint64_t bytes = tape_bytes(tp, j->b.popts.params->media_active);
