@@ -519,10 +519,10 @@ static dr_m8 shadows_through_media(struct dr_wave_soa *w, const struct dr_scene 
     return through;
 }
 
-/* Slot k's vertex for a replay's hook (or a tape's: a walk's vertex hook), begun as dr_path_step_begin begins
- * it from the path's state before the step whose ray the slot holds (as a
- * lane's vertex in wavefront.c: the same storage for every vertex); st:
- * that state, after the begin. */
+/* Slot k's vertex for a replay's hook (or a tape's: a walk's vertex hook),
+ * begun as dr_path_step_begin begins it from the path's state before the
+ * step whose ray the slot holds (as a lane's vertex in wavefront.c: the same
+ * storage for every vertex); st: that state, after the begin. */
 static struct dr_path_vertex *replay_vertex_begin(const struct dr_wave_soa *w, int k, struct dr_path_state *st)
 {
     *st = (struct dr_path_state){.o = dr_v3(w->ox[k], w->oy[k], w->oz[k]), .d = dr_v3(w->dx[k], w->dy[k], w->dz[k]),
@@ -722,7 +722,10 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
             if (prefetch)
                 dr_mesh_prefetch_vertices(&s->mesh, w->tri[k]);
             if (w->out && w->out->vertex && !dr_path8_hit(s, opts, w->tri[k])) {   /* (a tape keeps such vertices whole) */
-                take_scalar(w, k);
+                if (w->media)   /* (the scalar stages' shadow rays would not see the media: the caller's) */
+                    w->out->in_media[w->item[k]] = true;
+                else
+                    take_scalar(w, k);
                 continue;
             }
             keeps[i] = true;

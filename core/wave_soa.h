@@ -78,11 +78,16 @@ struct dr_wave_soa_walks {
  * hook (as in wavefront.c), the eight-lane ones otherwise, as all other
  * vertices do. */
 bool dr_wave_soa_walks_apply(const struct dr_scene *scene, const struct dr_path_opts *opts);
-/* Can path replay's primal walks (sums_only) use the arrays in a scene with
- * media, for the paths that meet none (dr_wave_soa_walks.in_media, which
- * such walks must be given)? Where every medium is bounded by a mesh and
- * the eight-lane stages take every hit. The media's parameters are then as
- * if absent: no vertex of such a path has a media term. */
+/* Can a gradient's primal walks (path replay's, a tape's) use the arrays
+ * in a scene with media, for the paths that meet none
+ * (dr_wave_soa_walks.in_media, which such walks must be given)? Where
+ * every medium is bounded by a mesh and the eight-lane stages take every
+ * hit. The media's parameters are then as if absent: no vertex of such a
+ * path has a media term. A walk with a vertex hook (a tape's) also hands
+ * back the paths whose vertex would take the scalar stages (a material
+ * with a BSDF parameter: their shadow rays would not see the media). The
+ * hooks may have been called for a path's first vertices before it was
+ * handed back: the caller drops them. */
 bool dr_wave_soa_media_walks_apply(const struct dr_scene *scene, const struct dr_path_opts *opts);
 /* Bytes dr_wave_soa_create and dr_wave_soa_walk allocate (for memory estimates). */
 size_t dr_wave_soa_walk_bytes(void);

@@ -103,7 +103,9 @@ struct tape_job {
     struct dr_wave_soa *soas[DR_MAX_THREADS];   /* ... or its arrays, where they apply (wave_soa.h) */
     int64_t *pixels[DR_MAX_THREADS];         /* ... and the batch's pixels that matter to the loss */
     int64_t batch;           /* pixels (all their samples) a worker records before it sweeps */
-    bool wave;               /* no media: the record runs on the packet tracer */
+    bool wave;               /* no media, or media_arrays: the record runs on the packet tracer */
+    bool media_arrays;       /* media: the paths that meet none are recorded in the arrays (record_soa) */
+    bool *in_media[DR_MAX_THREADS];          /* ... the walk's marks, per worker (a batch's paths) */
     bool attached;           /* attached sampling (or mis), and some parameter enters a sampling map */
     bool derivative;         /* derivative sampling (path_deriv.h) */
     bool steps;              /* vertices without a derivative term are recorded as steps (tape_step) */
@@ -283,16 +285,16 @@ static void cross_adjoints(const struct tape_job *j, struct tape *tp)
     }
 }
 
-/* Records the path of sample sidx of pixel px, one vertex after the other
- * (the one-path walker: scenes with media); false when out of memory. */
-static bool record_path(struct tape_job *j, struct tape *tp, int thread, int64_t px, int sidx, dr_vec3 adj)
+/* Records path (sample sidx of its pixel, no vertex recorded yet) one
+ * vertex after the other (the one-path walker: scenes with media); false
+ * when out of memory. */
+static bool record_walk(struct tape_job *j, struct tape *tp, int thread, struct tape_path *path, int sidx)
 {
     struct dr_sampler smp;
     dr_vec3 o, d;
-    dr_est_camera_ray(&j->b, thread, px, sidx, &smp, &o, &d);
-    struct tape_path *path = new_path(tp, px, adj, smp.key);
-    if (!path)
-        return false;
+    dr_est_camera_ray(&j->b, thread, path->pixel, sidx, &smp, &o, &d);
+    path->key = smp.key;
+    path->derivative = true;   /* (not asked vertex by vertex: swept) */
     const bool media = j->b.popts.params->media_active;
     struct dr_path_state st;
     dr_path_start(&st, o, d);
@@ -310,6 +312,13 @@ static bool record_path(struct tape_job *j, struct tape *tp, int thread, int64_t
     }
     end_path(j, thread, path, L);
     return true;
+}
+
+/* Records the path of sample sidx of pixel px (record_walk); false when out of memory. */
+static bool record_path(struct tape_job *j, struct tape *tp, int thread, int64_t px, int sidx, dr_vec3 adj)
+{
+    struct tape_path *path = new_path(tp, px, adj, 0);
+    return path && record_walk(j, tp, thread, path, sidx);
 }
 
 /* Pixels [begin, end), every sample, one path after the other. */
@@ -333,6 +342,7 @@ struct wave_record {
     int thread;
     const int64_t *px;    /* the batch's pixels that matter; item i is sample i % spp of px[i / spp] */
     int64_t first_path;   /* the record in arrays: item i's path */
+    const bool *in_media; /* ... in a scene with media, by item: the walk handed the path back (NULL: none) */
 };
 
 struct record_lane {
@@ -417,7 +427,7 @@ static void soa_start(void *ctx, int64_t i, struct dr_sampler *smp, dr_vec3 *o, 
 static void soa_step(void *ctx, int64_t i, dr_vec3 e, dr_vec3 t, dr_vec3 bt)
 {
     struct wave_record *c = ctx;
-    if (c->tp->failed)
+    if (c->tp->failed || (c->in_media && c->in_media[i]))
         return;
     struct tape_path *path = &c->tp->paths[c->first_path + i];
     if (!new_step(c->tp, path, e, t, &path->L, bt))
@@ -427,24 +437,55 @@ static void soa_step(void *ctx, int64_t i, dr_vec3 e, dr_vec3 t, dr_vec3 bt)
 static void soa_vertex(void *ctx, int64_t i, const struct dr_wave_arrival *a, const struct dr_path_vertex *v)
 {
     struct wave_record *c = ctx;
-    if (!c->tp->failed)
+    if (!c->tp->failed && !(c->in_media && c->in_media[i]))
         record_vertex(c, &c->tp->paths[c->first_path + i], a, v, &c->tp->paths[c->first_path + i].L);
 }
 
-/* The record of n paths in arrays; false when they cannot be had (nothing recorded). */
+/* The path's record dropped (its vertices stay in the arrays, unlinked):
+ * the walk handed it back. */
+static void forget_path(struct tape_path *path)
+{
+    path->last = -1;
+    path->count = 0;
+    path->moving = -1;
+    path->derivative = false;
+    path->L = dr_v3s(0.0);
+}
+
+/* The record of n paths in arrays; false when they cannot be had (nothing
+ * recorded). In a scene with media (j->media_arrays) the walk hands back
+ * the paths that could meet a medium (wave_soa.h's in_media: from the step
+ * whose ray hits a medium's boundary, or whose shadow ray crosses a
+ * medium's box); each is then recorded again from its start by the one-path
+ * walker, in its place among its pixel's samples (cross mode reads them in
+ * that order). */
 static bool record_soa(struct tape_job *j, int thread, struct wave_record *c, int64_t n)
 {
     const struct dr_scene *s = j->b.p->scene;
-    if (!j->steps || !dr_wave_soa_walks_apply(s, &j->b.popts))
+    if (!j->steps || !(j->media_arrays || dr_wave_soa_walks_apply(s, &j->b.popts)))
         return false;
     if (!j->soas[thread] && !(j->soas[thread] = dr_wave_soa_create()))
         return false;
-    const struct dr_wave_soa_walks out = {.ctx = c, .step = soa_step, .vertex = soa_vertex};
+    const size_t items = (size_t)j->batch * (size_t)j->b.p->spp;
+    if (j->media_arrays && !j->in_media[thread] && !(j->in_media[thread] = malloc(items)))
+        return false;
+    bool *in_media = j->media_arrays ? j->in_media[thread] : NULL;
+    const struct dr_wave_soa_walks out = {.ctx = c, .step = soa_step, .vertex = soa_vertex, .in_media = in_media};
     c->first_path = c->tp->n_paths;
+    c->in_media = in_media;
     if (!dr_wave_soa_walk(j->soas[thread], s, &j->b.popts, n, soa_start, NULL, c, &out, &j->b.thr[thread].rays))
         return false;
-    for (int64_t i = 0; i < n && !c->tp->failed; i++)
-        end_path(j, thread, &c->tp->paths[c->first_path + i], c->tp->paths[c->first_path + i].L);
+    const int spp = j->b.p->spp;
+    for (int64_t i = 0; i < n && !c->tp->failed; i++) {
+        struct tape_path *path = &c->tp->paths[c->first_path + i];
+        if (!(in_media && in_media[i])) {
+            end_path(j, thread, path, path->L);
+            continue;
+        }
+        forget_path(path);
+        if (!record_walk(j, c->tp, thread, path, (int)(i % spp)))
+            c->tp->failed = true;
+    }
     return true;
 }
 
@@ -461,6 +502,8 @@ static bool record_wave(struct tape_job *j, struct tape *tp, int thread, int64_t
     struct wave_record c = {.j = j, .tp = tp, .thread = thread, .px = j->pixels[thread]};
     if (record_soa(j, thread, &c, n * j->b.p->spp))
         return true;
+    if (j->media_arrays)
+        return false;   /* (the lanes take no media) */
     if (!j->waves[thread] && !(j->waves[thread] = dr_wave_create()))
         return false;
     /* With compact steps a vertex without a derivative term is read for its
@@ -709,10 +752,13 @@ static int tape_run(struct dr_est_base *b)
     const enum dr_sampling run = dr_est_sampling_run(p);
     j->attached = run == DR_SAMPLING_ATTACHED || run == DR_SAMPLING_MIS;
     j->derivative = run == DR_SAMPLING_DERIVATIVE;
-    j->wave = !(b->popts.stages & DR_STAGE_MEDIA);
     /* steps: plain detached sampling on the packet tracer (attached, mis and
      * derivative sampling read whole vertices where detached has no term) */
-    j->steps = j->wave && run == DR_SAMPLING_DETACHED && !b->mis;
+    const bool plain = run == DR_SAMPLING_DETACHED && !b->mis;
+    const bool media = (b->popts.stages & DR_STAGE_MEDIA) != 0;
+    j->media_arrays = media && plain && dr_wave_soa_media_walks_apply(p->scene, &b->popts);
+    j->wave = !media || j->media_arrays;
+    j->steps = j->wave && plain;
     for (int t = 0; t < threads; t++)
         tape_take(&j->tapes[t], t);
     const int64_t pixels = (int64_t)p->width * p->height;
@@ -720,7 +766,7 @@ static int tape_run(struct dr_est_base *b)
     if (j->batch > pixels)
         j->batch = pixels > 0 ? pixels : 1;   /* (the pixel list holds a batch) */
     if (j->wave) {   /* what the workers hold besides the tape: the packet tracer's arrays or lanes */
-        const bool soa = j->steps && dr_wave_soa_walks_apply(p->scene, &b->popts);
+        const bool soa = j->steps && (j->media_arrays || dr_wave_soa_walks_apply(p->scene, &b->popts));
         b->scratch_bytes = (uint64_t)threads * (soa ? dr_wave_soa_walk_bytes() : dr_wave_bytes());
     }
     int rc = dr_parallel_for_static(pixels, j->batch, threads, record_and_sweep, j);
@@ -743,11 +789,13 @@ static void tape_release(struct dr_est_base *b)
     for (int t = 0; t < DR_MAX_THREADS; t++) {
         if (j->tapes[t].failed)
             tape_unmap(&j->tapes[t]);   /* (an out-of-memory tape is not worth keeping) */
-        else if (j->tapes[t].cap_verts || j->tapes[t].cap_steps || j->tapes[t].cap_paths || j->tapes[t].cap_mrecs)
+        else if (j->tapes[t].cap_verts || j->tapes[t].cap_steps || j->tapes[t].cap_lights || j->tapes[t].cap_paths ||
+                 j->tapes[t].cap_mrecs)
             tape_leave(&j->tapes[t], t);
         dr_wave_destroy(j->waves[t]);
         dr_wave_soa_destroy(j->soas[t]);
         free(j->pixels[t]);
+        free(j->in_media[t]);
     }
 }
 
