@@ -673,8 +673,10 @@ static void replay_escaped(const struct dr_wave_soa *w, const struct dr_scene *s
     }
 }
 
-/* The paths whose ray left the scene end; in a walk, those whose vertex
- * takes the scalar stages leave the arrays for this step (take_scalar); the
+/* The paths whose ray left the scene end; in a walk with a vertex hook but
+ * not bsdf_vertices, those whose vertex takes the scalar stages leave the
+ * arrays for this step (take_scalar; in a scene with media, for the
+ * caller: in_media); the
  * others close up, in order (moving the last paths into the gaps instead
  * was slower: a pixel's samples, started together, stay neighbours and
  * their first bounces make the more coherent packets). Returns how many
@@ -721,7 +723,7 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
             }
             if (prefetch)
                 dr_mesh_prefetch_vertices(&s->mesh, w->tri[k]);
-            if (w->out && w->out->vertex && !dr_path8_hit(s, opts, w->tri[k])) {   /* (a tape keeps such vertices whole) */
+            if (w->out && w->out->vertex && !w->out->bsdf_vertices && !dr_path8_hit(s, opts, w->tri[k])) {
                 if (w->media)   /* (the scalar stages' shadow rays would not see the media: the caller's) */
                     w->out->in_media[w->item[k]] = true;
                 else
@@ -786,9 +788,10 @@ static void group_inputs(const struct dr_wave_soa *w, int g, int n_live, bool lo
     /* (the first walks' sums need no hit; a replay's differentiated
      * vertices do: padding lanes repeat the group's first slot, as above) */
     in->diff_hit = NULL;
-    for (int i = 0; w->replay && diff_hit && i < DR_SIMD_W; i++)
+    const bool wanted = diff_hit && (w->replay || (w->out && w->out->bsdf_vertices));
+    for (int i = 0; wanted && i < DR_SIMD_W; i++)
         diff_hit[i] = &w->diff_hit[i0 + (i < in->n ? i : 0)];
-    if (w->replay && diff_hit)
+    if (wanted)
         in->diff_hit = diff_hit;
 }
 
@@ -966,12 +969,11 @@ static int finish_scalar(struct dr_wave_soa *w, const struct dr_scene *s, const 
 }
 
 /* A group's vertices to the walk's hooks (dr_wave_soa_walks), with its
- * throughputs before them (beta, ratio): the lanes in diff (a light's term,
- * where a light has a parameter: the tape keeps such a vertex whole) to the
- * vertex hook, made as replay_step makes a replay's (the fields
- * d_path_vertex reads of a vertex without a BSDF parameter); the others to
- * the step hook. (No lane here has a BSDF parameter: a walk with a vertex
- * hook hands those to the scalar stages, end_escaped.) */
+ * throughputs before them (beta, ratio): the lanes in diff (a derivative
+ * term: a light's, where a light has a parameter; a BSDF parameter's, in a
+ * walk with bsdf_vertices, else such lanes took the scalar stages:
+ * end_escaped) to the vertex hook, made as replay_step makes a replay's;
+ * the others to the step hook. */
 static void steps(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
                   const struct dr_path8 *G, const struct dr_path8_out *c, dr_v3x8 beta, dr_v3x8 ratio, dr_v3x8 e,
                   dr_m8 diff)
@@ -988,6 +990,8 @@ static void steps(const struct dr_wave_soa *w, const struct dr_scene *s, const s
         }
         struct dr_path_state st;
         struct dr_path_vertex *v = replay_vertex_begin(w, k, &st);
+        if (G->diff[i])   /* (a walk with bsdf_vertices: the hit shading kept) */
+            v->hit = w->diff_hit[k];
         dr_path8_vertex(s, opts, G, c, i, w->tri[k], st.o, st.d, v);
         const struct dr_wave_arrival a = {dr_v3x8_get(&beta, i), dr_v3x8_get(&ratio, i)};
         w->out->vertex(w->out->ctx, w->item[k], &a, v);
@@ -1202,8 +1206,10 @@ bool dr_wave_soa_walk(struct dr_wave_soa *w, const struct dr_scene *s, const str
     /* zeroed, as the lanes (wavefront.c): a field no stage wrote reads the same on every run */
     if (!w->scalar && !(w->scalar = calloc(LANES, sizeof(struct scalar_path))))
         return false;
-    /* (a tape's walk hands the vertices of a light's terms whole: steps) */
+    /* (a tape's walk hands the vertices with a derivative term whole: steps) */
     if (out->vertex && !w->vertex && !(w->vertex = calloc(1, sizeof(struct dr_path_vertex))))
+        return false;
+    if (out->bsdf_vertices && !w->diff_hit && !(w->diff_hit = calloc(SLOTS, sizeof(struct dr_hit))))
         return false;
     w->out = out;
     run(w, s, opts, n, start, start8, ctx, NULL, counts);

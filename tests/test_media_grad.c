@@ -296,13 +296,10 @@ static void arrays_beside_media(void)
                   (unsigned long long)st[1].rays.simd_vertices);
             /* the tape records the paths that meet no medium in the arrays
              * too (tape.c's record_soa), and the others again from their
-             * start one path at a time; with a BSDF parameter on the
-             * ground, whose hits the tape's walk hands back (wave_soa.h),
-             * nearly every path is such here */
-            if (n_params[c] < 5)
-                CHECK(st[0].rays.simd_vertices > (uint64_t)W * W,
-                      "beside media: the tape shaded only %llu vertices eight lanes at a time",
-                      (unsigned long long)st[0].rays.simd_vertices);
+             * start one path at a time */
+            CHECK(st[0].rays.simd_vertices > (uint64_t)W * W,
+                  "beside media: the tape shaded only %llu vertices eight lanes at a time",
+                  (unsigned long long)st[0].rays.simd_vertices);
             shaded8[c] = st[1].rays.simd_vertices;
             free(g[0]);
             free(g[1]);
