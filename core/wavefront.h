@@ -108,8 +108,8 @@ struct dr_wave_ops {
      * vertices on materials with a BSDF parameter, whole as far as the
      * adjoints of their terms read them (dr_path8_shade says what the stages
      * fill; prb's walks and replays). Without it they take the scalar
-     * stages (the tape: its record stays the scalar walker's, the
-     * reference prb is tested against). */
+     * stages (the tape's lanes, its record where the arrays, wave_soa.h,
+     * cannot be had). */
     bool bsdf_terms;
 };
 

@@ -16,9 +16,12 @@
  * sweep reads back every byte the record wrote (1064 bytes per vertex with
  * a derivative term, 528 where that term is a light's alone: struct
  * tape_light; 56 per step without one: struct tape_step).
- * Without media the record runs on the packet tracer (wavefront.h), whose
- * paths advance together, so a path's vertices are not adjacent in the
- * tape: each vertex links to the one before it on its path. */
+ * Under plain detached sampling the record runs on the packet tracer's
+ * arrays (wave_soa.h; in a scene with media, for the paths that meet none:
+ * record_soa), under the other samplings without media on its lanes
+ * (wavefront.h), else one path at a time. On the packet tracer paths
+ * advance together, so a path's vertices are not adjacent in the tape:
+ * each vertex links to the one before it on its path. */
 #include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
