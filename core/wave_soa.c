@@ -984,7 +984,7 @@ static void steps(const struct dr_wave_soa *w, const struct dr_scene *s, const s
     dr_v3x8 bt = dr_v3x8_mul(ratio, beta);
     for (int i = 0; i < G->n; i++) {
         const int k = i0 + i;
-        if (!diff[i]) {
+        if (!diff[i] || !w->out->vertex) {
             w->out->step(w->out->ctx, w->item[k], dr_v3x8_get(&e, i), dr_v3x8_get(&t, i), dr_v3x8_get(&bt, i));
             continue;
         }

@@ -50,11 +50,11 @@ struct tape_step {
     int64_t prev;
 };
 /* A vertex whose derivative term is all in its light terms (no BSDF
- * parameter: dr_path_light_terms_take), under plain detached sampling:
- * where a light has a parameter most vertices are such. A step's part and
- * what the light terms' adjoint reads, 528 bytes instead of the whole
- * vertex's 1064: the peer's box's emission gradient spent a sixth of its
- * time copying whole vertices and reading them back. */
+ * parameter, not a medium vertex: dr_path_light_terms_hold), under plain
+ * detached sampling: where a light has a parameter most vertices are such.
+ * A step's part and what the light terms' adjoint reads, 528 bytes instead
+ * of the whole vertex's 1064: the peer's box's emission gradient spent a
+ * sixth of its time copying whole vertices and reading them back. */
 struct tape_light {
     dr_vec3 e, t;      /* as a step's */
     dr_vec3 bt;        /* true throughput arriving at the vertex */
