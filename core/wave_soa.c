@@ -968,12 +968,29 @@ static int finish_scalar(struct dr_wave_soa *w, const struct dr_scene *s, const 
     return kept + 1;
 }
 
+/* Lane i of group G, whose vertex has a derivative term, made whole for a
+ * hook (a replay's, or a tape's walk): begun from the slot's state, its
+ * differentiated hit as the shading kept it (G->diff: w->diff_hit), then
+ * the stages' fields (dr_path8_vertex). */
+static struct dr_path_vertex *group_vertex(const struct dr_wave_soa *w, const struct dr_scene *s,
+                                           const struct dr_path_opts *opts, const struct dr_path8 *G,
+                                           const struct dr_path8_out *c, int i)
+{
+    const int k = (int)(G - w->group) * DR_SIMD_W + i;
+    struct dr_path_state st;
+    struct dr_path_vertex *v = replay_vertex_begin(w, k, &st);
+    if (G->diff[i])
+        v->hit = w->diff_hit[k];
+    dr_path8_vertex(s, opts, G, c, i, w->tri[k], st.o, st.d, v);
+    return v;
+}
+
 /* A group's vertices to the walk's hooks (dr_wave_soa_walks), with its
  * throughputs before them (beta, ratio): the lanes in diff (a derivative
  * term: a light's, where a light has a parameter; a BSDF parameter's, in a
  * walk with bsdf_vertices, else such lanes took the scalar stages:
- * end_escaped) to the vertex hook, made as replay_step makes a replay's;
- * the others to the step hook. */
+ * end_escaped) to the vertex hook (group_vertex); the others to the step
+ * hook. */
 static void steps(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
                   const struct dr_path8 *G, const struct dr_path8_out *c, dr_v3x8 beta, dr_v3x8 ratio, dr_v3x8 e,
                   dr_m8 diff)
@@ -988,13 +1005,8 @@ static void steps(const struct dr_wave_soa *w, const struct dr_scene *s, const s
             w->out->step(w->out->ctx, w->item[k], dr_v3x8_get(&e, i), dr_v3x8_get(&t, i), dr_v3x8_get(&bt, i));
             continue;
         }
-        struct dr_path_state st;
-        struct dr_path_vertex *v = replay_vertex_begin(w, k, &st);
-        if (G->diff[i])   /* (a walk with bsdf_vertices: the hit shading kept) */
-            v->hit = w->diff_hit[k];
-        dr_path8_vertex(s, opts, G, c, i, w->tri[k], st.o, st.d, v);
         const struct dr_wave_arrival a = {dr_v3x8_get(&beta, i), dr_v3x8_get(&ratio, i)};
-        w->out->vertex(w->out->ctx, w->item[k], &a, v);
+        w->out->vertex(w->out->ctx, w->item[k], &a, group_vertex(w, s, opts, G, c, i));
     }
 }
 
@@ -1025,12 +1037,7 @@ static dr_m8 replay_step(const struct dr_wave_soa *w, const struct dr_scene *s, 
         goes_on[i] = G->depth[i] < w->last_diff[k] ? -1 : 0;
         if (!diff[i])
             continue;
-        struct dr_path_state st;
-        struct dr_path_vertex *v = replay_vertex_begin(w, k, &st);
-        if (G->diff[i])
-            v->hit = w->diff_hit[k];
-        dr_path8_vertex(s, opts, G, c, i, w->tri[k], st.o, st.d, v);
-        w->replay->vertex(w->replay->ctx, w->item[k], v, &g, i);
+        w->replay->vertex(w->replay->ctx, w->item[k], group_vertex(w, s, opts, G, c, i), &g, i);
     }
     return goes_on;
 }
