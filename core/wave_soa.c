@@ -64,8 +64,6 @@ struct dr_wave_soa {
     double rx[SLOTS], ry[SLOTS], rz[SLOTS];     /* true / tracing throughput (dr_path_state's ratio) */
     double Tx[SLOTS], Ty[SLOTS], Tz[SLOTS];     /* radiance with the true throughput (L: the tracing one's) */
     int last_diff[SLOTS];
-    struct scalar_path *scalar;                 /* this step's paths at vertices for the scalar stages */
-    int n_scalar;
     /* path replay's second walks only (dr_wave_soa_replay; NULL otherwise;
      * out then points at replay_out, which asks for nothing) */
     const struct dr_wave_soa_replay *replay;
@@ -78,24 +76,6 @@ struct dr_wave_soa {
      * that could meet a medium go to the one-path walker (finish_in_media) */
     bool media;
     void *words[27];   /* word_arrays' list, made once (dr_wave_soa_create) */
-};
-
-/* A path whose vertex this step takes the scalar stages (in a walk with a
- * vertex hook, a tape's, a material with a BSDF parameter: the hook keeps
- * such vertices whole), out of the arrays from its trace to its
- * continuation. Without the hook (prb's walks) the eight-lane stages take
- * them too (dr_path8's diff). */
-struct scalar_path {
-    int64_t item, tri;            /* the run's index; the trace's answer */
-    int last_diff;
-    struct dr_path_state st;
-    struct dr_sampler smp;
-    dr_vec3 L, T;                 /* as the arrays' */
-    dr_vec3 beta, ratio;          /* the throughput the vertex was reached with */
-    enum dr_step_next next;
-    bool occluded;
-    struct dr_shadow_ray shadow;
-    struct dr_path_vertex v;
 };
 
 static void list_word_arrays(struct dr_wave_soa *w);
@@ -116,7 +96,6 @@ struct dr_wave_soa *dr_wave_soa_create(void)
 void dr_wave_soa_destroy(struct dr_wave_soa *w)
 {
     if (w) {
-        free(w->scalar);
         free(w->diff_hit);
         free(w->vertex);
     }
@@ -130,8 +109,7 @@ size_t dr_wave_soa_bytes(void)
 
 size_t dr_wave_soa_walk_bytes(void)
 {
-    return sizeof(struct dr_wave_soa) + sizeof(struct scalar_path) * LANES + sizeof(struct dr_hit) * SLOTS +
-           sizeof(struct dr_path_vertex);
+    return sizeof(struct dr_wave_soa) + sizeof(struct dr_hit) * SLOTS + sizeof(struct dr_path_vertex);
 }
 
 bool dr_wave_soa_walks_apply(const struct dr_scene *s, const struct dr_path_opts *opts)
@@ -401,17 +379,6 @@ static void path_state(const struct dr_wave_soa *w, int k, struct dr_path_state 
     smp->dim = DR_DIMS_CAMERA + DR_DIMS_PER_VERTEX * (uint32_t)st->depth;
 }
 
-/* Slot k's path as the scalar walker holds it, just begun on its vertex
- * (dr_path_step_begin: the trace counted its segment already) in *v, with
- * its sampler at the vertex's numbers. */
-static void scalar_state(const struct dr_wave_soa *w, int k, struct dr_path_state *st, struct dr_sampler *smp,
-                         struct dr_path_vertex *v)
-{
-    path_state(w, k, st, smp);
-    v->mrec = NULL;   /* (no media here) */
-    dr_path_step_begin(st, v);
-}
-
 /* ------------------------------------------ paths that could meet a medium */
 
 /* In a scene with media (every one bounded by a mesh) the eight-lane
@@ -569,20 +536,6 @@ static void escaped(const struct dr_wave_soa *w, const struct dr_scene *s, const
     walk_done(w, w->item[k], L, T, diff ? (int)w->depth[k] : w->last_diff[k]);
 }
 
-/* Slot k's path out of the arrays, to the scalar stages this step. */
-static void take_scalar(struct dr_wave_soa *w, int k)
-{
-    struct scalar_path *p = &w->scalar[w->n_scalar++];
-    p->item = w->item[k];
-    p->tri = w->tri[k];
-    p->last_diff = w->last_diff[k];
-    scalar_state(w, k, &p->st, &p->smp, &p->v);
-    p->L = dr_v3(w->Lx[k], w->Ly[k], w->Lz[k]);
-    p->T = dr_v3(w->Tx[k], w->Ty[k], w->Tz[k]);
-    p->beta = p->st.beta;
-    p->ratio = p->st.ratio;
-}
-
 /* Group i0's paths whose ray left the scene (slots past n_live masked). */
 static inline dr_m8 escaped_lanes(const struct dr_wave_soa *w, int n_live, int i0)
 {
@@ -673,10 +626,7 @@ static void replay_escaped(const struct dr_wave_soa *w, const struct dr_scene *s
     }
 }
 
-/* The paths whose ray left the scene end; in a walk with a vertex hook but
- * not bsdf_vertices, those whose vertex takes the scalar stages leave the
- * arrays for this step (take_scalar; in a scene with media, for the
- * caller: in_media); the
+/* The paths whose ray left the scene end; the
  * others close up, in order (moving the last paths into the gaps instead
  * was slower: a pixel's samples, started together, stay neighbours and
  * their first bounces make the more coherent packets). Returns how many
@@ -685,7 +635,6 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
                        bool prefetch, dr_vec3 *out, struct dr_ray_counts *counts)
 {
     int kept = 0;
-    w->n_scalar = 0;
     /* (a render's radiance, or a walk's sums without a step hook: prb's) */
     const bool eight_at_once = (!w->out || !w->out->step) && dr_path8_env_eight(s);
     const bool diff_env = (opts->stages & DR_STAGE_ENV) && opts->params && opts->params->env_active;
@@ -723,13 +672,6 @@ static int end_escaped(struct dr_wave_soa *w, const struct dr_scene *s, const st
             }
             if (prefetch)
                 dr_mesh_prefetch_vertices(&s->mesh, w->tri[k]);
-            if (w->out && w->out->vertex && !w->out->bsdf_vertices && !dr_path8_hit(s, opts, w->tri[k])) {
-                if (w->media)   /* (the scalar stages' shadow rays would not see the media: the caller's) */
-                    w->out->in_media[w->item[k]] = true;
-                else
-                    take_scalar(w, k);
-                continue;
-            }
             keeps[i] = true;
             if (w->structured)
                 w->smp[j] = w->smp[k];
@@ -788,7 +730,7 @@ static void group_inputs(const struct dr_wave_soa *w, int g, int n_live, bool lo
     /* (the first walks' sums need no hit; a replay's differentiated
      * vertices do: padding lanes repeat the group's first slot, as above) */
     in->diff_hit = NULL;
-    const bool wanted = diff_hit && (w->replay || (w->out && w->out->bsdf_vertices));
+    const bool wanted = diff_hit && (w->replay || (w->out && w->out->vertex));
     for (int i = 0; wanted && i < DR_SIMD_W; i++)
         diff_hit[i] = &w->diff_hit[i0 + (i < in->n ? i : 0)];
     if (wanted)
@@ -821,31 +763,6 @@ static void pad_last_group(struct dr_wave_soa *w, int n_live)
         move_path(w, k, i0);
 }
 
-/* The scalar paths' hit stages (dr_path_step_hit), their shadow rays added
- * to the step's batch from index n_shadow on (owner SLOTS + the path's
- * index). Returns the batch's size. */
-static int shade_scalar(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
-                        int n_shadow, bool located, struct dr_ray_counts *counts)
-{
-    for (int j = 0; j < w->n_scalar; j++) {
-        struct scalar_path *p = &w->scalar[j];
-        p->next = located ? dr_path_step_shade(s, opts, &p->st, &p->smp, &p->v, p->tri, &p->shadow)
-                          : dr_path_step_hit(s, opts, &p->st, &p->smp, &p->v, p->tri, &p->shadow);
-        p->occluded = false;
-        if (p->next != DR_STEP_SHADOW)
-            continue;
-        counts->shadow++;
-        if (p->shadow.tmax > 0.0) {
-            w->sox[n_shadow] = p->shadow.o.x, w->soy[n_shadow] = p->shadow.o.y, w->soz[n_shadow] = p->shadow.o.z;
-            w->sdx[n_shadow] = p->shadow.d.x, w->sdy[n_shadow] = p->shadow.d.y, w->sdz[n_shadow] = p->shadow.d.z;
-            w->stmax[n_shadow] = p->shadow.tmax;
-            w->skey[n_shadow] = p->shadow.key;
-            w->sowner[n_shadow++] = SLOTS + j;
-        }
-    }
-    return n_shadow;
-}
-
 /* A replay group's lanes whose shadow ray its log answers (as
  * collect_shadow in wavefront.c: occluded only where a ray would have been
  * cast), their answers set. */
@@ -868,15 +785,6 @@ static void shade(struct dr_wave_soa *w, const struct dr_scene *s, const struct 
                   bool located, struct dr_ray_counts *counts)
 {
     int n_shadow = 0;
-    /* (located: the scalar paths' hits too, and their texels asked for
-     * before the groups are shaded, as locate_textured does for the groups'
-     * own: where a differentiated material covers a textured asset these
-     * are most vertices, and their texel reads missed one after another) */
-    for (int j = 0; located && j < w->n_scalar; j++) {
-        struct scalar_path *p = &w->scalar[j];
-        dr_path_step_locate(s, &p->st, &p->v, p->tri);
-        dr_material_prefetch(s, &p->v.hit);
-    }
     for (int g = 0; g * DR_SIMD_W < n_live; g++) {
         struct dr_path8_in in;
         struct dr_hit *diff_hit[DR_SIMD_W];
@@ -908,7 +816,6 @@ static void shade(struct dr_wave_soa *w, const struct dr_scene *s, const struct 
     counts->simd_vertices += (uint64_t)n_live;
     if (w->replay)
         counts->simd_replayed += (uint64_t)n_live;
-    n_shadow = shade_scalar(w, s, opts, n_shadow, located, counts);
     struct dr_accel_rays r = {.n = n_shadow, .ox = w->sox, .oy = w->soy, .oz = w->soz,
                               .dx = w->sdx, .dy = w->sdy, .dz = w->sdz, .tmax = w->stmax,
                               .key = keyed_shadows(s) ? w->skey : NULL};
@@ -918,54 +825,10 @@ static void shade(struct dr_wave_soa *w, const struct dr_scene *s, const struct 
         counts->cpu.queries += dr_clock_seconds() - t0;   /* (taken off the shading below: run) */
     }
     for (int j = 0; j < n_shadow; j++) {
-        int k = w->sowner[j];
-        if (k >= SLOTS) {
-            struct scalar_path *p = &w->scalar[k - SLOTS];
-            p->occluded = w->socc[j];
-            log_shadow(w, p->item, p->st.depth, p->occluded);
-        } else {
-            w->occluded[k] = w->socc[j];
-            log_shadow(w, w->item[k], (int)w->depth[k], w->occluded[k]);
-        }
+        const int64_t k = w->sowner[j];
+        w->occluded[k] = w->socc[j];
+        log_shadow(w, w->item[k], (int)w->depth[k], w->occluded[k]);
     }
-}
-
-/* A scalar path's next-event estimate and continuation (dr_path_nee_end,
- * dr_path_stage_continue), its term summed as in advance; back into the
- * arrays at slot `kept` if it goes on. Returns the next free slot. */
-static int finish_scalar(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
-                         struct scalar_path *p, int kept)
-{
-    if (p->next == DR_STEP_SHADOW)
-        dr_path_nee_end(s, &p->v, &p->shadow, p->occluded);
-    bool more = p->next != DR_STEP_END && dr_path_stage_continue(opts, &p->st, &p->v);
-    dr_vec3 c = dr_mul(p->beta, dr_path_vertex_term(&p->v));
-    dr_vec3 L = dr_add(p->L, c), T = dr_add(p->T, dr_mul(p->ratio, c));
-    int last_diff = opts->params && dr_path_vertex_has_derivative(s, opts->params, &p->v) ? p->v.depth : p->last_diff;
-    if (w->out->vertex)
-        w->out->vertex(w->out->ctx, p->item, &(struct dr_wave_arrival){p->beta, p->ratio}, &p->v);
-    if (!more) {
-        walk_done(w, p->item, L, T, last_diff);
-        return kept;
-    }
-    const struct dr_path_state *st = &p->st;
-    const int k = kept;
-    w->ox[k] = st->o.x, w->oy[k] = st->o.y, w->oz[k] = st->o.z;
-    w->dx[k] = st->d.x, w->dy[k] = st->d.y, w->dz[k] = st->d.z;
-    w->px[k] = st->prev_p.x, w->py[k] = st->prev_p.y, w->pz[k] = st->prev_p.z;
-    w->prev_pdf[k] = st->prev_pdf;
-    w->prev_sky[k] = st->prev_sky;
-    w->bx[k] = st->beta.x, w->by[k] = st->beta.y, w->bz[k] = st->beta.z;
-    w->rx[k] = st->ratio.x, w->ry[k] = st->ratio.y, w->rz[k] = st->ratio.z;
-    w->Lx[k] = L.x, w->Ly[k] = L.y, w->Lz[k] = L.z;
-    w->Tx[k] = T.x, w->Ty[k] = T.y, w->Tz[k] = T.z;
-    w->depth[k] = (double)st->depth;
-    w->key[k] = p->smp.key;
-    w->item[k] = p->item;
-    if (w->structured)
-        w->smp[k] = p->smp;
-    w->last_diff[k] = last_diff;
-    return kept + 1;
 }
 
 /* Lane i of group G, whose vertex has a derivative term, made whole for a
@@ -987,10 +850,9 @@ static struct dr_path_vertex *group_vertex(const struct dr_wave_soa *w, const st
 
 /* A group's vertices to the walk's hooks (dr_wave_soa_walks), with its
  * throughputs before them (beta, ratio): the lanes in diff (a derivative
- * term: a light's, where a light has a parameter; a BSDF parameter's, in a
- * walk with bsdf_vertices, else such lanes took the scalar stages:
- * end_escaped) to the vertex hook (group_vertex); the others to the step
- * hook. */
+ * term: a light's, where a light has a parameter; a BSDF parameter's) to
+ * the vertex hook (group_vertex), where the walk has one; the others, and
+ * every lane of a walk without one, to the step hook. */
 static void steps(const struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts,
                   const struct dr_path8 *G, const struct dr_path8_out *c, dr_v3x8 beta, dr_v3x8 ratio, dr_v3x8 e,
                   dr_m8 diff)
@@ -1043,8 +905,8 @@ static dr_m8 replay_step(const struct dr_wave_soa *w, const struct dr_scene *s, 
 }
 
 /* The next-event estimates and continuations: each path's vertex term added
- * to its radiance, the paths that end written out, the others closed up
- * (then the scalar paths' ends, which go on after them). Returns how many
+ * to its radiance, the paths that end written out, the others closed up.
+ * Returns how many
  * go on. (A path only ever moves to a lower slot, one that has been read
  * already.) */
 static int advance(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr_path_opts *opts, int n_live,
@@ -1113,8 +975,6 @@ static int advance(struct dr_wave_soa *w, const struct dr_scene *s, const struct
         }
         kept = j;
     }
-    for (int j = 0; j < w->n_scalar; j++)
-        kept = finish_scalar(w, s, opts, &w->scalar[j], kept);
     return kept;
 }
 
@@ -1160,14 +1020,13 @@ static void run(struct dr_wave_soa *w, const struct dr_scene *s, const struct dr
         STAGE(queries);
         n_live = end_escaped(w, s, opts, n_live, prefetch, L, counts);
         STAGE(ends);
-        if (n_live == 0 && w->n_scalar == 0)
+        if (n_live == 0)
             continue;
-        if (n_live > 0)
-            pad_last_group(w, n_live);
+        pad_last_group(w, n_live);
         if (prefetch)
             locate_textured(w, s, n_live);
         w->ahead_valid = false;
-        if (picks_ahead && n_live > 0)
+        if (picks_ahead)
             pick_ahead(w, s, n_live);
         const double shadows = cpu->queries;
         shade(w, s, opts, n_live, prefetch, counts);
@@ -1210,13 +1069,12 @@ bool dr_wave_soa_walk(struct dr_wave_soa *w, const struct dr_scene *s, const str
                       dr_wave_start_fn start, dr_wave_start8_fn start8, void *ctx, const struct dr_wave_soa_walks *out,
                       struct dr_ray_counts *counts)
 {
-    /* zeroed, as the lanes (wavefront.c): a field no stage wrote reads the same on every run */
-    if (!w->scalar && !(w->scalar = calloc(LANES, sizeof(struct scalar_path))))
-        return false;
-    /* (a tape's walk hands the vertices with a derivative term whole: steps) */
+    /* (a tape's walk hands the vertices with a derivative term whole, made
+     * as a replay's: group_vertex; zeroed, as the lanes in wavefront.c: a
+     * field no stage wrote reads the same on every run) */
     if (out->vertex && !w->vertex && !(w->vertex = calloc(1, sizeof(struct dr_path_vertex))))
         return false;
-    if (out->bsdf_vertices && !w->diff_hit && !(w->diff_hit = calloc(SLOTS, sizeof(struct dr_hit))))
+    if (out->vertex && !w->diff_hit && !(w->diff_hit = calloc(SLOTS, sizeof(struct dr_hit))))
         return false;
     w->out = out;
     run(w, s, opts, n, start, start8, ctx, NULL, counts);

@@ -56,19 +56,14 @@ struct dr_wave_soa_walks {
      * its continuation's factor t (f |cos| / pdf / q; 0 where the path ends)
      * and the true throughput bt (ratio beta) it was reached with */
     void (*step)(void *ctx, int64_t item, dr_vec3 e, dr_vec3 t, dr_vec3 bt);
-    /* a vertex with a derivative term, whole, reached with a: on a material
-     * with a BSDF parameter (set: the scalar stages take such vertices;
-     * NULL: the eight-lane stages, which prb's walks use), or the eight-lane
-     * stages' vertex of a light's term where a light has a parameter
-     * (made whole as far as d_path_vertex reads it, as a replay's: the
-     * emitter's hit, the light sample's record; an escaped vertex from the
-     * scalar stage) */
+    /* a vertex with a derivative term (on a material with a BSDF
+     * parameter, or a light's term where a light has a parameter), whole,
+     * reached with a: made from the eight-lane stages as a replay's, as far
+     * as d_path_vertex and the continuation read it (the differentiated hit
+     * the shading kept, the emitter's hit, the light sample's record); an
+     * escaped vertex under an environment parameter from the scalar escaped
+     * stage. NULL (prb's walks): every vertex to step, if given. */
     void (*vertex)(void *ctx, int64_t item, const struct dr_wave_arrival *a, const struct dr_path_vertex *v);
-    /* with vertex: the vertices on materials with a BSDF parameter too
-     * from the eight-lane stages (whole as far as d_path_vertex and the
-     * continuation read them, as a replay's: dr_path8_shade's differentiated
-     * lanes), not the scalar stages */
-    bool bsdf_vertices;
     /* in a scene with media (dr_wave_soa_media_walks_apply; NULL
      * elsewhere), by item: the path met a medium (its ray hit a medium's
      * boundary, or it started in one, or a shadow ray of it crossed a
@@ -78,20 +73,15 @@ struct dr_wave_soa_walks {
 };
 
 /* Can a gradient's primal walks use the arrays (parameters allowed, a
- * light's radiance's too: dr_path8_walks_apply)? The vertices on materials
- * with a BSDF parameter take the scalar stages where the walk has a vertex
- * hook without bsdf_vertices (as in wavefront.c), the eight-lane ones
- * otherwise, as all other vertices do. */
+ * light's radiance's too: dr_path8_walks_apply)? Every hit then takes the
+ * eight-lane stages, the vertices with a derivative term included. */
 bool dr_wave_soa_walks_apply(const struct dr_scene *scene, const struct dr_path_opts *opts);
 /* Can a gradient's primal walks (path replay's, a tape's) use the arrays
  * in a scene with media, for the paths that meet none
  * (dr_wave_soa_walks.in_media, which such walks must be given)? Where
  * every medium is bounded by a mesh and the eight-lane stages take every
  * hit. The media's parameters are then as if absent: no vertex of such a
- * path has a media term. A walk with a vertex hook but not bsdf_vertices
- * also hands back the paths whose vertex would take the scalar stages (a
- * material with a BSDF parameter: their shadow rays would not see the
- * media). The
+ * path has a media term. The
  * hooks may have been called for a path's first vertices before it was
  * handed back: the caller drops them. */
 bool dr_wave_soa_media_walks_apply(const struct dr_scene *scene, const struct dr_path_opts *opts);

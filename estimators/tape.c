@@ -473,8 +473,7 @@ static bool record_soa(struct tape_job *j, int thread, struct wave_record *c, in
     if (j->media_arrays && !j->in_media[thread] && !(j->in_media[thread] = malloc(items)))
         return false;
     bool *in_media = j->media_arrays ? j->in_media[thread] : NULL;
-    const struct dr_wave_soa_walks out = {.ctx = c, .step = soa_step, .vertex = soa_vertex, .bsdf_vertices = true,
-                                          .in_media = in_media};
+    const struct dr_wave_soa_walks out = {.ctx = c, .step = soa_step, .vertex = soa_vertex, .in_media = in_media};
     c->first_path = c->tp->n_paths;
     c->in_media = in_media;
     if (!dr_wave_soa_walk(j->soas[thread], s, &j->b.popts, n, soa_start, NULL, c, &out, &j->b.thr[thread].rays))
