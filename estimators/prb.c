@@ -63,6 +63,8 @@ struct primal_sums {
     struct prb_attached_sums L;
     int vertices;   /* (the media derivatives'; 0 from the arrays, whose paths meet no medium: the
                        count only sets how often a media term is estimated, and theirs are 0) */
+    bool no_term;   /* the arrays' walk met no vertex with a derivative term (last_diff 0): no
+                       parameter reaches the path, attached or not, so its replay adds nothing */
 };
 
 /* Samples whose ray answers are parked at most (per thread: about 1.4 MB);
@@ -212,7 +214,13 @@ static void attached_pixel(struct prb_job *j, int thread, int64_t px, const dr_v
         dr_est_camera_ray(b, thread, px, sidx, &smp, &o, &d);
         c.log = logs ? &logs[sidx] : NULL;
         const struct prb_attached_sums *sums = primal ? &primal[sidx].L : NULL;
-        if (!prb_attached_sample(&c, smp, o, d, adj[sidx], sums, b->mis ? &att : sink, b->mis ? &det : NULL)) {
+        /* (a path without a derivative term: no vertex's sampling moves
+         * either, dr_path_vertex_sampling_moves implies diff_bsdf; its
+         * replay, two walks and a vertex adjoint per vertex, would add
+         * exact zeros. Still a sample: MIS counts it) */
+        const bool no_term = primal && primal[sidx].no_term;
+        if (!no_term &&
+            !prb_attached_sample(&c, smp, o, d, adj[sidx], sums, b->mis ? &att : sink, b->mis ? &det : NULL)) {
             b->thr[thread].invalid++;
             continue;
         }
@@ -576,7 +584,7 @@ static struct primal_sums one_path_primal(struct dr_est_base *b, int thread, int
     struct walk w = {.mrec = &mrec, .prev = &prev};
     dr_est_camera_ray(b, thread, px, sidx, &smp, &o, &d);
     walk(b, smp, o, d, &w, &b->thr[thread].rays);
-    return (struct primal_sums){{w.L.true_, w.L.sub}, w.vertices};
+    return (struct primal_sums){{w.L.true_, w.L.sub}, w.vertices, false};
 }
 
 static bool pixel_adjoints(struct prb_job *j, int thread, int64_t px, dr_vec3 *adj)
@@ -666,7 +674,7 @@ static void media_replays(struct prb_job *j, int thread, struct park_ctx *c, int
     const int spp = b->p->spp;
     for (int32_t k = 0; k < n; k++) {
         const int32_t i = it->order[k];
-        const struct primal_sums sums = {{it->walk.L[i], it->walk.L_sub[i]}, 0};
+        const struct primal_sums sums = {{it->walk.L[i], it->walk.L_sub[i]}, 0, false};
         replay_one(j, thread, c->px[i / spp], i % spp, it->adj[i], &sums, it->walk.log ? &it->walk.log[i] : NULL,
                    &j->outside_media, sink);
     }
@@ -718,7 +726,7 @@ static int64_t arrays_pixels(struct prb_job *j, int thread, int64_t begin, int64
                 if (media && it->in_media[i])
                     *p = one_path_primal(b, thread, px[first + k], sidx);
                 else
-                    *p = (struct primal_sums){{sums.L[i], sums.L_sub[i]}, 0};
+                    *p = (struct primal_sums){{sums.L[i], sums.L_sub[i]}, 0, sums.last_diff[i] == 0};
                 if (b->p->cross)
                     adj[sidx] = dr_v3_finite(p->L.L_true) && dr_v3_finite(p->L.L_sub) ? p->L.L_true : dr_v3s(0.0);
                 else
