@@ -63,8 +63,9 @@ struct primal_sums {
     struct prb_attached_sums L;
     int vertices;   /* (the media derivatives'; 0 from the arrays, whose paths meet no medium: the
                        count only sets how often a media term is estimated, and theirs are 0) */
-    bool no_term;   /* the arrays' walk met no vertex with a derivative term (last_diff 0): no
-                       parameter reaches the path, attached or not, so its replay adds nothing */
+    bool no_term;   /* the arrays' walk met no vertex with a derivative term (last_diff 0) and its
+                       sums are finite: no parameter reaches the path (attached, derivative
+                       sampling or not), so its replay would add exact zeros */
 };
 
 /* Samples whose ray answers are parked at most (per thread: about 1.4 MB);
@@ -652,7 +653,9 @@ static void pixel_replays(struct prb_job *j, int thread, int64_t px, const dr_ve
         return;
     }
     for (int sidx = 0; sidx < b->p->spp; sidx++)
-        if (!dr_is_black(adj[sidx]))   /* (else, in cross mode, this sample does not matter to the loss) */
+        /* (a black adjoint: in cross mode, this sample does not matter to
+         * the loss; no_term: nothing to replay, as in attached_pixel) */
+        if (!dr_is_black(adj[sidx]) && !(sums && sums[sidx].no_term))
             replay_one(j, thread, px, sidx, adj[sidx], sums ? &sums[sidx] : NULL, logs ? &logs[sidx] : NULL,
                        in_media && !in_media[sidx] ? &j->outside_media : NULL, sink);
 }
@@ -726,7 +729,9 @@ static int64_t arrays_pixels(struct prb_job *j, int thread, int64_t begin, int64
                 if (media && it->in_media[i])
                     *p = one_path_primal(b, thread, px[first + k], sidx);
                 else
-                    *p = (struct primal_sums){{sums.L[i], sums.L_sub[i]}, 0, sums.last_diff[i] == 0};
+                    *p = (struct primal_sums){{sums.L[i], sums.L_sub[i]}, 0,
+                                              sums.last_diff[i] == 0 && dr_v3_finite(sums.L[i]) &&
+                                                  dr_v3_finite(sums.L_sub[i])};
                 if (b->p->cross)
                     adj[sidx] = dr_v3_finite(p->L.L_true) && dr_v3_finite(p->L.L_sub) ? p->L.L_true : dr_v3s(0.0);
                 else
