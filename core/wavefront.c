@@ -15,6 +15,7 @@ struct lane {
     bool occluded;                    /* the shadow ray's */
     bool simd;                        /* this vertex is shaded eight lanes at a time (path_simd.h) */
     bool simd_more;                   /* ... and its path goes on (dr_path8_continue) */
+    bool whole;                       /* the walk's later vertices are whole (whole_after_moving) */
     enum dr_step_next next;           /* what the hit stage asked for */
     int64_t tri;                      /* the trace's answer */
     struct dr_path_state st;
@@ -164,7 +165,7 @@ static void classify_live(struct dr_wave *w, int n_live, const struct dr_scene *
 {
     for (int i = 0; i < n_live; i++) {
         struct lane *l = &w->lane[w->live[i]];
-        l->simd = w->simd && (w->simd_diff ? l->tri >= 0 : dr_path8_hit(s, opts, l->tri));
+        l->simd = w->simd && !l->whole && (w->simd_diff ? l->tri >= 0 : dr_path8_hit(s, opts, l->tri));
     }
 }
 
@@ -307,6 +308,7 @@ static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
 static void begin_walk(struct lane *l, dr_vec3 o, dr_vec3 d, enum dr_wave_next how)
 {
     dr_path_start(&l->st, o, d);
+    l->whole = false;
     l->replaying = how == DR_WAVE_REPLAY;
     if (!l->replaying)
         l->log.n = 0;
@@ -345,6 +347,10 @@ static int finish_live(struct dr_wave *w, int n_live, int *n_free, const struct 
         }
         if (!ops->vertex(ctx, l->user, &l->arrival, &l->v, &l->smp, more))
             more = false;
+        /* (a partial vertex is never on a material with a BSDF parameter
+         * here, and its v->shaded may be an earlier vertex's: not asked) */
+        if (ops->whole_after_moving && !l->simd && !l->whole)
+            l->whole = dr_path_vertex_sampling_moves(s, opts->params, &l->v);
         if (!more && ops->keep_log && !l->replaying)
             ops->keep_log(ctx, l->user, &l->log);
         dr_vec3 o, d;
@@ -488,7 +494,8 @@ void dr_wave_radiance(struct dr_wave *w, const struct dr_scene *s, const struct 
 void dr_wave_radiance_lanes(struct dr_wave *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
                             dr_wave_start_fn start, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts)
 {
-    static const struct dr_wave_ops ops = {radiance_start, radiance_vertex, radiance_end, NULL, NULL, true, false, false};
+    static const struct dr_wave_ops ops = {.start = radiance_start, .vertex = radiance_vertex, .walk_end = radiance_end,
+                                           .partial_vertices = true};
     struct radiance_ctx c = {start, ctx, L};
     dr_wave_run(w, s, opts, n, &ops, &c, counts);
 }

@@ -111,6 +111,13 @@ struct dr_wave_ops {
      * stages (the tape's lanes, its record where the arrays, wave_soa.h,
      * cannot be had). */
     bool bsdf_terms;
+    /* With partial_vertices, without bsdf_terms: once a lane's vertex moves
+     * with a parameter under attached sampling (dr_path_vertex_sampling_moves:
+     * on a material with a BSDF parameter, so a vertex of the scalar
+     * stages), the rest of its walk takes the scalar stages: whole vertices,
+     * which the tape's attached sweep reads from there on
+     * (d_path_vertex_attached), while the vertices before stay partial. */
+    bool whole_after_moving;
 };
 
 struct dr_wave;

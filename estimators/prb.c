@@ -422,8 +422,9 @@ static void replay_walks(struct prb_job *j, int thread, struct park_ctx *c, int3
     /* (light_terms, bsdf_terms: walk_vertex's adjoint reads the light
      * sample's record, a differentiated emitter's hit and a differentiated
      * BSDF's vertex, which the eight-lane stages fill) */
-    static const struct dr_wave_ops replay = {replay_start, lane_vertex, replay_end, NULL,
-                                              replay_log, true, true, true};
+    static const struct dr_wave_ops replay = {.start = replay_start, .vertex = lane_vertex, .walk_end = replay_end,
+                                              .replay_log = replay_log, .partial_vertices = true,
+                                              .light_terms = true, .bsdf_terms = true};
     const struct parked_samples *it = c->items;
     const struct dr_wave_soa_replay r = {c, it->order, it->walk.L, it->walk.L_sub, it->walk.last_diff, it->walk.log,
                                          soa_replay_vertex};
@@ -484,8 +485,9 @@ static bool parked_make(struct parked_samples *it, int64_t cap)
 static void primal_walks(struct prb_job *j, int thread, struct park_ctx *c, int64_t n)
 {
     struct dr_est_base *b = &j->b;
-    static const struct dr_wave_ops primal = {primal_start, lane_vertex, primal_end, primal_keep_log,
-                                              NULL, true, true, true};
+    static const struct dr_wave_ops primal = {.start = primal_start, .vertex = lane_vertex, .walk_end = primal_end,
+                                              .keep_log = primal_keep_log, .partial_vertices = true,
+                                              .light_terms = true, .bsdf_terms = true};
     if (dr_wave_soa_walks_apply(b->p->scene, &b->popts) &&
         (j->soas[thread] || (j->soas[thread] = dr_wave_soa_create())) &&
         dr_wave_soa_walk(j->soas[thread], b->p->scene, &b->popts, n, soa_start, soa_start8, c, &c->items->walk,

@@ -112,6 +112,8 @@ struct tape_job {
     bool attached;           /* attached sampling (or mis), and some parameter enters a sampling map */
     bool derivative;         /* derivative sampling (path_deriv.h) */
     bool steps;              /* vertices without a derivative term are recorded as steps (tape_step) */
+    bool steps_before_moving;   /* attached (or mis) on the lanes: ... before a path's first moving
+                                   vertex (whole from it on: the attached sweep reads them) */
 };
 
 /* The tape's arrays live in mappings of their own. Grown with realloc, a
@@ -370,17 +372,20 @@ static void lane_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp,
 }
 
 /* Vertex v of the path (reached with a): a step (tape_step) where it has no
- * derivative term and steps are kept, else whole; its part added to L. */
+ * derivative term and steps are kept (under attached sampling: before its
+ * first moving vertex), a tape_light where its term is all light, else
+ * whole; its part added to L. */
 static void record_vertex(struct wave_record *c, struct tape_path *path, const struct dr_wave_arrival *a,
                           const struct dr_path_vertex *v, dr_vec3 *L)
 {
-    if (c->j->steps && !dr_path_vertex_has_derivative(c->j->b.p->scene, c->j->b.p->params, v)) {
+    const bool compact = c->j->steps || (c->j->steps_before_moving && path->moving < 0);
+    if (compact && !dr_path_vertex_has_derivative(c->j->b.p->scene, c->j->b.p->params, v)) {
         dr_vec3 t = v->cont ? dr_scale(v->f, v->cos_pdf_q) : dr_v3s(0.0);
         if (!new_step(c->tp, path, dr_path_vertex_term(v), t, L, dr_mul(a->ratio, a->beta)))
             c->tp->failed = true;
         return;
     }
-    if (c->j->steps && dr_path_light_terms_hold(v)) {
+    if (compact && dr_path_light_terms_hold(v)) {
         if (!new_light(c->tp, path, v, L, dr_mul(a->ratio, a->beta)))
             c->tp->failed = true;
         return;
@@ -512,10 +517,15 @@ static bool record_wave(struct tape_job *j, struct tape *tp, int thread, int64_t
     /* With compact steps a vertex without a derivative term is read for its
      * step only (new_step): eight lanes at a time where they can, and the
      * vertices of a light's terms too (light_terms), as in the arrays */
-    static const struct dr_wave_ops whole = {lane_start, lane_vertex, lane_walk_end, NULL, NULL, false, false, false};
-    static const struct dr_wave_ops steps = {lane_start, lane_vertex, lane_walk_end, NULL, NULL, true, true, false};
-    dr_wave_run(j->waves[thread], j->b.p->scene, &j->b.popts, n * j->b.p->spp, j->steps ? &steps : &whole, &c,
-                &j->b.thr[thread].rays);
+    static const struct dr_wave_ops whole = {.start = lane_start, .vertex = lane_vertex, .walk_end = lane_walk_end};
+    static const struct dr_wave_ops steps = {.start = lane_start, .vertex = lane_vertex, .walk_end = lane_walk_end,
+                                             .partial_vertices = true, .light_terms = true};
+    /* (attached: so until a path's first moving vertex, then whole) */
+    static const struct dr_wave_ops attached = {.start = lane_start, .vertex = lane_vertex, .walk_end = lane_walk_end,
+                                                .partial_vertices = true, .light_terms = true,
+                                                .whole_after_moving = true};
+    const struct dr_wave_ops *ops = j->steps ? &steps : j->steps_before_moving ? &attached : &whole;
+    dr_wave_run(j->waves[thread], j->b.p->scene, &j->b.popts, n * j->b.p->spp, ops, &c, &j->b.thr[thread].rays);
     return true;
 }
 
@@ -542,6 +552,29 @@ static void sweep_derivative(const struct tape_job *j, const struct tape_vertex 
     }
 }
 
+/* The sweep over the compact records from link i back (steps and
+ * tape_lights: nothing but their terms' adjoints and what they pass on to
+ * abar, the adjoint of the true throughput after them), to the first whole
+ * vertex's index (-1: the path's start). */
+static int64_t sweep_compact(const struct tape_job *j, const struct tape *tp, int64_t i, dr_vec3 adj, dr_vec3 *abar,
+                             struct dr_grad_sink *sink)
+{
+    while (i >= 0 && (i & (TAPE_STEP | TAPE_LIGHT))) {
+        if (i & TAPE_STEP) {   /* steps: no derivative term, only what they pass on */
+            const struct tape_step *st = &tp->steps[i & ~TAPE_STEP];
+            *abar = dr_add(dr_mul(adj, st->e), dr_mul(*abar, st->t));
+            i = st->prev;
+            continue;
+        }
+        /* a light's terms: the whole vertex's adjoint calls (d_f black) */
+        const struct tape_light *l = &tp->lights[i & ~TAPE_LIGHT];
+        d_path_light_terms(j->b.p->scene, j->b.p->params, &l->terms, dr_mul(adj, l->bt), sink);
+        *abar = dr_add(dr_mul(adj, l->e), dr_mul(*abar, l->t));
+        i = l->prev;
+    }
+    return i;
+}
+
 /* Backward sweep over one path (its adjoint path->adj). rays: where
  * derivative sampling counts its extra rays. */
 static void sweep(const struct tape_job *j, const struct tape *tp, const struct dr_medium_record *mrecs,
@@ -556,19 +589,7 @@ static void sweep(const struct tape_job *j, const struct tape *tp, const struct 
     dr_vec3 after = dr_v3s(0.0);  /* media: radiance gathered after the vertex */
     const struct tape_vertex *next = NULL;
     for (int64_t i = path->last; i >= 0; i = verts[i].prev) {
-        while (i >= 0 && (i & (TAPE_STEP | TAPE_LIGHT))) {
-            if (i & TAPE_STEP) {   /* steps: no derivative term, only what they pass on */
-                const struct tape_step *st = &tp->steps[i & ~TAPE_STEP];
-                abar = dr_add(dr_mul(adj, st->e), dr_mul(abar, st->t));
-                i = st->prev;
-                continue;
-            }
-            /* a light's terms: the whole vertex's adjoint calls (d_f black) */
-            const struct tape_light *l = &tp->lights[i & ~TAPE_LIGHT];
-            d_path_light_terms(s, ps, &l->terms, dr_mul(adj, l->bt), sink);
-            abar = dr_add(dr_mul(adj, l->e), dr_mul(abar, l->t));
-            i = l->prev;
-        }
+        i = sweep_compact(j, tp, i, adj, &abar, sink);
         if (i < 0)
             break;
         const struct dr_path_vertex *v = &verts[i].v;
@@ -604,17 +625,21 @@ static void sweep(const struct tape_job *j, const struct tape *tp, const struct 
  * a ray that moves with the parameters: their reverse mode also carries the
  * adjoint of the walker's state (d_path_vertex_attached), from the last
  * vertex back to the first moving one, whose own arriving ray is fixed.
- * Before it, the detached adjoints are the whole story. */
-static void sweep_attached(const struct tape_job *j, const struct tape_vertex *verts, const struct tape_path *path,
+ * Before it, the detached adjoints are the whole story, and only there may
+ * the record hold compact records (steps_before_moving). */
+static void sweep_attached(const struct tape_job *j, const struct tape *tp, const struct tape_path *path,
                            dr_vec3 adj, struct dr_grad_sink *sink)
 {
     const struct dr_scene *s = j->b.p->scene;
     const struct dr_param_set *ps = j->b.p->params;
+    const struct tape_vertex *verts = tp->verts;
     dr_vec3 abar = dr_v3s(0.0);
     struct dr_d_path_state d_next, d_this;
     memset(&d_next, 0, sizeof d_next);
-    int k = path->count - 1;   /* the vertex's place on its path */
+    int k = path->count - 1;   /* the vertex's place on its path (before the first moving one: at most) */
     for (int64_t i = path->last; i >= 0; i = verts[i].prev, k--) {
+        if (k < path->moving && (i = sweep_compact(j, tp, i, adj, &abar, sink)) < 0)
+            break;
         const struct dr_path_vertex *v = &verts[i].v;
         dr_vec3 bt = verts[i].bt;
         dr_vec3 t = v->cont ? dr_scale(v->f, v->cos_pdf_q) : dr_v3s(0.0);
@@ -634,18 +659,17 @@ static void sweep_attached(const struct tape_job *j, const struct tape_vertex *v
 static void sweep_path(const struct tape_job *j, const struct tape *tp, const struct dr_medium_record *mrecs,
                        const struct tape_path *path, struct dr_grad_sink *sink, struct dr_ray_counts *rays)
 {
-    const struct tape_vertex *verts = tp->verts;
     if (path->moving >= path->count) {
         sweep(j, tp, mrecs, path, sink, rays);
         return;
     }
     if (!sink->dir) {
-        sweep_attached(j, verts, path, path->adj, sink);
+        sweep_attached(j, tp, path, path->adj, sink);
         return;
     }
     for (int c = 0; c < 3; c++) {
         sink->channel = c;
-        sweep_attached(j, verts, path, dr_v3_channel(path->adj, c), sink);
+        sweep_attached(j, tp, path, dr_v3_channel(path->adj, c), sink);
     }
 }
 
@@ -762,6 +786,7 @@ static int tape_run(struct dr_est_base *b)
     j->media_arrays = media && plain && dr_wave_soa_media_walks_apply(p->scene, &b->popts);
     j->wave = !media || j->media_arrays;
     j->steps = j->wave && plain;
+    j->steps_before_moving = j->wave && j->attached;
     for (int t = 0; t < threads; t++)
         tape_take(&j->tapes[t], t);
     const int64_t pixels = (int64_t)p->width * p->height;

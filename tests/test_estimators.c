@@ -61,8 +61,10 @@ static double reverse_difference(const char *what, const struct dr_param_set *ps
  * adjoints read, so replays group even where every material has a BSDF
  * parameter, as in the glossy scene), the tape's compact steps only where
  * no light has a parameter; in prb's one-path modes (attached, derivative
- * sampling) its primal walks only, not its replays. */
-enum grouping { GROUPED_PRB_WALKS, GROUPED_PRB, GROUPED_BOTH };
+ * sampling) its primal walks only, not its replays. Under attached
+ * sampling the tape's record too, up to each path's first moving vertex
+ * (GROUPED_WALKS: whole vertices from there on, steps_before_moving). */
+enum grouping { GROUPED_PRB_WALKS, GROUPED_WALKS, GROUPED_PRB, GROUPED_BOTH };
 
 /* dr_estimator_forward_groups: the parameters in up to three groups, one
  * pass; each group's image is, to the bit, the one pass's image along dir
@@ -150,7 +152,7 @@ static void compare(const char *what, struct dr_scene *s, const struct dr_camera
          * since 2026-12-06 those with a light's or a BSDF parameter's term
          * too, handed to its record whole: wave_soa.c's steps) */
         const bool is_prb = strcmp(est->name, "prb") == 0;
-        const bool grouped = grouping == GROUPED_BOTH || is_prb;
+        const bool grouped = grouping == GROUPED_BOTH || grouping == GROUPED_WALKS || is_prb;
         CHECK(grouped ? st.rays.simd_vertices > 0 : st.rays.simd_vertices == 0,
               "%s: %s shaded %llu vertices eight lanes at a time (expected %s)", what, est->name,
               (unsigned long long)st.rays.simd_vertices, grouped ? "some" : "none");
@@ -1118,7 +1120,7 @@ int main(void)
      * identity); with the cross primal its walks run in the arrays. (mis is
      * left out: its weights are estimated from the gradients themselves, so
      * its forward and reverse modes are not transposes.) */
-    compare("cornell box, attached sampling", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_ATTACHED, GROUPED_PRB_WALKS);
+    compare("cornell box, attached sampling", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_ATTACHED, GROUPED_WALKS);
     /* derivative sampling: the same sub-streams, the same terms in another order */
     compare("cornell box, derivative sampling", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DERIVATIVE, GROUPED_PRB_WALKS);
     compare("cornell box, paths longer than the replay log", s, &s->cameras[0], ptrs, 7, DR_WAVE_REPLAY_DEPTH + 12,

@@ -989,7 +989,8 @@ static void differentiated_vertices_match(struct dr_scene *s, struct dr_camera c
     struct diff_run run = {{dr_camera_view(&cam, 64, 48), DR_SAMPLER_INDEPENDENT},
                            calloc((size_t)DIFF_PATHS * DIFF_DEPTH, sizeof(struct diff_vertex))};
     struct dr_wave *w = dr_wave_create();
-    struct dr_wave_ops ops = {diff_start, diff_vertex, diff_end, NULL, NULL, true, false, true};
+    struct dr_wave_ops ops = {.start = diff_start, .vertex = diff_vertex, .walk_end = diff_end,
+                              .partial_vertices = true, .bsdf_terms = true};
     struct dr_ray_counts with = {0}, without = {0};
     dr_wave_run(w, s, &po, DIFF_PATHS, &ops, &run, &with);
     int compared = 0, differ = 0, missing = 0;
