@@ -16,6 +16,7 @@ struct lane {
     bool simd;                        /* this vertex is shaded eight lanes at a time (path_simd.h) */
     bool simd_more;                   /* ... and its path goes on (dr_path8_continue) */
     bool whole;                       /* the walk's later vertices are whole (whole_after_moving) */
+    bool whole_next;                  /* ... its next vertex (whole_after_bsdf) */
     enum dr_step_next next;           /* what the hit stage asked for */
     int64_t tri;                      /* the trace's answer */
     struct dr_path_state st;
@@ -165,7 +166,8 @@ static void classify_live(struct dr_wave *w, int n_live, const struct dr_scene *
 {
     for (int i = 0; i < n_live; i++) {
         struct lane *l = &w->lane[w->live[i]];
-        l->simd = w->simd && !l->whole && (w->simd_diff ? l->tri >= 0 : dr_path8_hit(s, opts, l->tri));
+        l->simd = w->simd && !l->whole && !l->whole_next &&
+                  (w->simd_diff ? l->tri >= 0 : dr_path8_hit(s, opts, l->tri));
     }
 }
 
@@ -308,7 +310,7 @@ static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
 static void begin_walk(struct lane *l, dr_vec3 o, dr_vec3 d, enum dr_wave_next how)
 {
     dr_path_start(&l->st, o, d);
-    l->whole = false;
+    l->whole = l->whole_next = false;
     l->replaying = how == DR_WAVE_REPLAY;
     if (!l->replaying)
         l->log.n = 0;
@@ -351,6 +353,8 @@ static int finish_live(struct dr_wave *w, int n_live, int *n_free, const struct 
          * here, and its v->shaded may be an earlier vertex's: not asked) */
         if (ops->whole_after_moving && !l->simd && !l->whole)
             l->whole = dr_path_vertex_sampling_moves(s, opts->params, &l->v);
+        if (ops->whole_after_bsdf)
+            l->whole_next = !l->simd && l->v.diff_bsdf;
         if (!more && ops->keep_log && !l->replaying)
             ops->keep_log(ctx, l->user, &l->log);
         dr_vec3 o, d;

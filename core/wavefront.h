@@ -118,6 +118,11 @@ struct dr_wave_ops {
      * which the tape's attached sweep reads from there on
      * (d_path_vertex_attached), while the vertices before stay partial. */
     bool whole_after_moving;
+    /* With partial_vertices, without bsdf_terms: the vertex after one on a
+     * material with a BSDF parameter (a vertex of the scalar stages) takes
+     * the scalar stages too: derivative sampling's sweep reads it whole
+     * (the emission the continuation found, d_path_deriv_emission). */
+    bool whole_after_bsdf;
 };
 
 struct dr_wave;

@@ -114,6 +114,8 @@ struct tape_job {
     bool steps;              /* vertices without a derivative term are recorded as steps (tape_step) */
     bool steps_before_moving;   /* attached (or mis) on the lanes: ... before a path's first moving
                                    vertex (whole from it on: the attached sweep reads them) */
+    bool steps_off_bsdf;        /* derivative sampling on the lanes: ... but after a vertex with a
+                                   BSDF parameter (whole: sweep_derivative reads it as next) */
 };
 
 /* The tape's arrays live in mappings of their own. Grown with realloc, a
@@ -371,14 +373,22 @@ static void lane_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp,
     l->path = path ? c->tp->n_paths - 1 : -1;
 }
 
+/* Is the path's last record a whole vertex with a BSDF parameter? */
+static bool after_bsdf(const struct tape *tp, const struct tape_path *path)
+{
+    return path->last >= 0 && !(path->last & (TAPE_STEP | TAPE_LIGHT)) && tp->verts[path->last].v.diff_bsdf;
+}
+
 /* Vertex v of the path (reached with a): a step (tape_step) where it has no
  * derivative term and steps are kept (under attached sampling: before its
- * first moving vertex), a tape_light where its term is all light, else
+ * first moving vertex; under derivative sampling: not right after a vertex
+ * with a BSDF parameter), a tape_light where its term is all light, else
  * whole; its part added to L. */
 static void record_vertex(struct wave_record *c, struct tape_path *path, const struct dr_wave_arrival *a,
                           const struct dr_path_vertex *v, dr_vec3 *L)
 {
-    const bool compact = c->j->steps || (c->j->steps_before_moving && path->moving < 0);
+    const bool compact = c->j->steps || (c->j->steps_before_moving && path->moving < 0) ||
+                         (c->j->steps_off_bsdf && !after_bsdf(c->tp, path));
     if (compact && !dr_path_vertex_has_derivative(c->j->b.p->scene, c->j->b.p->params, v)) {
         dr_vec3 t = v->cont ? dr_scale(v->f, v->cos_pdf_q) : dr_v3s(0.0);
         if (!new_step(c->tp, path, dr_path_vertex_term(v), t, L, dr_mul(a->ratio, a->beta)))
@@ -524,7 +534,14 @@ static bool record_wave(struct tape_job *j, struct tape *tp, int thread, int64_t
     static const struct dr_wave_ops attached = {.start = lane_start, .vertex = lane_vertex, .walk_end = lane_walk_end,
                                                 .partial_vertices = true, .light_terms = true,
                                                 .whole_after_moving = true};
-    const struct dr_wave_ops *ops = j->steps ? &steps : j->steps_before_moving ? &attached : &whole;
+    /* (derivative sampling: so but for the vertex after one with a BSDF parameter) */
+    static const struct dr_wave_ops derivative = {.start = lane_start, .vertex = lane_vertex,
+                                                  .walk_end = lane_walk_end, .partial_vertices = true,
+                                                  .light_terms = true, .whole_after_bsdf = true};
+    const struct dr_wave_ops *ops = j->steps                 ? &steps
+                                    : j->steps_before_moving ? &attached
+                                    : j->steps_off_bsdf      ? &derivative
+                                                             : &whole;
     dr_wave_run(j->waves[thread], j->b.p->scene, &j->b.popts, n * j->b.p->spp, ops, &c, &j->b.thr[thread].rays);
     return true;
 }
@@ -587,6 +604,9 @@ static void sweep(const struct tape_job *j, const struct tape *tp, const struct 
     const struct dr_param_set *ps = j->b.p->params;
     dr_vec3 abar = dr_v3s(0.0);   /* adjoint of the true throughput after the vertex */
     dr_vec3 after = dr_v3s(0.0);  /* media: radiance gathered after the vertex */
+    /* the whole vertex after this one, as far as sweep_derivative reads it:
+     * compact records may lie between, but never right after a vertex
+     * with a BSDF parameter (steps_off_bsdf), the only one it reads next of */
     const struct tape_vertex *next = NULL;
     for (int64_t i = path->last; i >= 0; i = verts[i].prev) {
         i = sweep_compact(j, tp, i, adj, &abar, sink);
@@ -787,6 +807,7 @@ static int tape_run(struct dr_est_base *b)
     j->wave = !media || j->media_arrays;
     j->steps = j->wave && plain;
     j->steps_before_moving = j->wave && j->attached;
+    j->steps_off_bsdf = j->wave && j->derivative;
     for (int t = 0; t < threads; t++)
         tape_take(&j->tapes[t], t);
     const int64_t pixels = (int64_t)p->width * p->height;

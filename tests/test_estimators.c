@@ -63,7 +63,10 @@ static double reverse_difference(const char *what, const struct dr_param_set *ps
  * no light has a parameter; in prb's one-path modes (attached, derivative
  * sampling) its primal walks only, not its replays. Under attached
  * sampling the tape's record too, up to each path's first moving vertex
- * (GROUPED_WALKS: whole vertices from there on, steps_before_moving). */
+ * (GROUPED_WALKS: whole vertices from there on, steps_before_moving), and
+ * under derivative sampling but for the vertices on materials with a BSDF
+ * parameter and the ones right after them (steps_off_bsdf; where every
+ * material has one, as in the glossy scene, none). */
 enum grouping { GROUPED_PRB_WALKS, GROUPED_WALKS, GROUPED_PRB, GROUPED_BOTH };
 
 /* dr_estimator_forward_groups: the parameters in up to three groups, one
@@ -1122,7 +1125,7 @@ int main(void)
      * its forward and reverse modes are not transposes.) */
     compare("cornell box, attached sampling", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_ATTACHED, GROUPED_WALKS);
     /* derivative sampling: the same sub-streams, the same terms in another order */
-    compare("cornell box, derivative sampling", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DERIVATIVE, GROUPED_PRB_WALKS);
+    compare("cornell box, derivative sampling", s, &s->cameras[0], ptrs, 7, 8, DR_SAMPLING_DERIVATIVE, GROUPED_WALKS);
     compare("cornell box, paths longer than the replay log", s, &s->cameras[0], ptrs, 7, DR_WAVE_REPLAY_DEPTH + 12,
             DR_SAMPLING_DETACHED, GROUPED_BOTH);
     compare("cornell box, BSDF parameters only, paths longer than the replay log", s, &s->cameras[0], bsdf_ptrs, 4,
