@@ -15,8 +15,7 @@ struct lane {
     bool occluded;                    /* the shadow ray's */
     bool simd;                        /* this vertex is shaded eight lanes at a time (path_simd.h) */
     bool simd_more;                   /* ... and its path goes on (dr_path8_continue) */
-    bool whole;                       /* the walk's later vertices are whole (whole_after_moving) */
-    bool whole_next;                  /* ... its next vertex (whole_after_bsdf) */
+    bool whole_next;                  /* its walk's next vertex is whole (dr_wave_ops.next_whole) */
     enum dr_step_next next;           /* what the hit stage asked for */
     int64_t tri;                      /* the trace's answer */
     struct dr_path_state st;
@@ -166,7 +165,7 @@ static void classify_live(struct dr_wave *w, int n_live, const struct dr_scene *
 {
     for (int i = 0; i < n_live; i++) {
         struct lane *l = &w->lane[w->live[i]];
-        l->simd = w->simd && !l->whole && !l->whole_next &&
+        l->simd = w->simd && !l->whole_next &&
                   (w->simd_diff ? l->tri >= 0 : dr_path8_hit(s, opts, l->tri));
     }
 }
@@ -310,7 +309,7 @@ static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
 static void begin_walk(struct lane *l, dr_vec3 o, dr_vec3 d, enum dr_wave_next how)
 {
     dr_path_start(&l->st, o, d);
-    l->whole = l->whole_next = false;
+    l->whole_next = false;
     l->replaying = how == DR_WAVE_REPLAY;
     if (!l->replaying)
         l->log.n = 0;
@@ -349,12 +348,7 @@ static int finish_live(struct dr_wave *w, int n_live, int *n_free, const struct 
         }
         if (!ops->vertex(ctx, l->user, &l->arrival, &l->v, &l->smp, more))
             more = false;
-        /* (a partial vertex is never on a material with a BSDF parameter
-         * here, and its v->shaded may be an earlier vertex's: not asked) */
-        if (ops->whole_after_moving && !l->simd && !l->whole)
-            l->whole = dr_path_vertex_sampling_moves(s, opts->params, &l->v);
-        if (ops->whole_after_bsdf)
-            l->whole_next = !l->simd && l->v.diff_bsdf;
+        l->whole_next = more && ops->next_whole && ops->next_whole(ctx, l->user);
         if (!more && ops->keep_log && !l->replaying)
             ops->keep_log(ctx, l->user, &l->log);
         dr_vec3 o, d;

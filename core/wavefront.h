@@ -111,18 +111,15 @@ struct dr_wave_ops {
      * stages (the tape's lanes, its record where the arrays, wave_soa.h,
      * cannot be had). */
     bool bsdf_terms;
-    /* With partial_vertices, without bsdf_terms: once a lane's vertex moves
-     * with a parameter under attached sampling (dr_path_vertex_sampling_moves:
-     * on a material with a BSDF parameter, so a vertex of the scalar
-     * stages), the rest of its walk takes the scalar stages: whole vertices,
-     * which the tape's attached sweep reads from there on
-     * (d_path_vertex_attached), while the vertices before stay partial. */
-    bool whole_after_moving;
-    /* With partial_vertices, without bsdf_terms: the vertex after one on a
-     * material with a BSDF parameter (a vertex of the scalar stages) takes
-     * the scalar stages too: derivative sampling's sweep reads it whole
-     * (the emission the continuation found, d_path_deriv_emission). */
-    bool whole_after_bsdf;
+    /* Optional (NULL: never), with partial_vertices and without bsdf_terms:
+     * called after each vertex the walk goes on from; true sends the walk's
+     * next vertex to the scalar stages, whole. The caller decides which of
+     * its vertices it reads whole, so the rule lives in one place, its own:
+     * the tape's record asks for every vertex after a path's first moving
+     * one under attached sampling (d_path_vertex_attached reads them), and
+     * for the vertex after one with a BSDF parameter under derivative
+     * sampling (d_path_deriv_emission reads its emission). */
+    bool (*next_whole)(void *ctx, void *user);
 };
 
 struct dr_wave;

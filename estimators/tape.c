@@ -77,7 +77,8 @@ struct tape_path {
     int count;
     bool dropped;      /* not finite: left out of the sweep */
     int moving;        /* attached sampling: first vertex whose sampling moves with a parameter (count: none) */
-    bool derivative;   /* some vertex has a derivative term (else the sweep would add nothing) */
+    bool derivative;   /* some vertex may have a derivative term (else the sweep would add nothing): set
+                          by each whole vertex and light record (compact steps have none) */
     dr_vec3 adj;       /* d loss / d L of this sample (forward mode: ones; cross mode: set after the record) */
     uint64_t key;      /* its sampler's key: derivative sampling's sub-streams hang off it */
     dr_vec3 L;         /* its radiance (cross mode: the others' adjoints are taken without it) */
@@ -379,16 +380,33 @@ static bool after_bsdf(const struct tape *tp, const struct tape_path *path)
     return path->last >= 0 && !(path->last & (TAPE_STEP | TAPE_LIGHT)) && tp->verts[path->last].v.diff_bsdf;
 }
 
+/* Must the path's next vertex be recorded whole? The one rule of which
+ * vertices the sweeps read whole, asked by record_vertex and, through
+ * lane_next_whole, by the lanes (which then take that vertex from the scalar
+ * stages). Plain detached sampling reads none whole but those with a term.
+ * Attached sampling (steps_before_moving) reads every vertex from a path's
+ * first moving one on (sweep_attached: d_path_vertex_attached); derivative
+ * sampling (steps_off_bsdf) the vertex right after one with a BSDF parameter
+ * (sweep_derivative reads it as next). Without the lanes every vertex is
+ * whole. */
+static bool next_whole(const struct tape_job *j, const struct tape *tp, const struct tape_path *path)
+{
+    if (j->steps)
+        return false;
+    if (j->steps_before_moving)
+        return path->moving >= 0;
+    if (j->steps_off_bsdf)
+        return after_bsdf(tp, path);
+    return true;
+}
+
 /* Vertex v of the path (reached with a): a step (tape_step) where it has no
- * derivative term and steps are kept (under attached sampling: before its
- * first moving vertex; under derivative sampling: not right after a vertex
- * with a BSDF parameter), a tape_light where its term is all light, else
- * whole; its part added to L. */
+ * derivative term and need not be whole (next_whole), a tape_light where its
+ * term is all light, else whole; its part added to L. */
 static void record_vertex(struct wave_record *c, struct tape_path *path, const struct dr_wave_arrival *a,
                           const struct dr_path_vertex *v, dr_vec3 *L)
 {
-    const bool compact = c->j->steps || (c->j->steps_before_moving && path->moving < 0) ||
-                         (c->j->steps_off_bsdf && !after_bsdf(c->tp, path));
+    const bool compact = !next_whole(c->j, c->tp, path);
     if (compact && !dr_path_vertex_has_derivative(c->j->b.p->scene, c->j->b.p->params, v)) {
         dr_vec3 t = v->cont ? dr_scale(v->f, v->cos_pdf_q) : dr_v3s(0.0);
         if (!new_step(c->tp, path, dr_path_vertex_term(v), t, L, dr_mul(a->ratio, a->beta)))
@@ -421,6 +439,13 @@ static bool lane_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, 
     if (l->path >= 0 && !c->tp->failed)
         record_vertex(c, &c->tp->paths[l->path], a, v, &l->L);
     return true;
+}
+
+static bool lane_next_whole(void *ctx, void *user)
+{
+    const struct wave_record *c = ctx;
+    const struct record_lane *l = user;
+    return l->path >= 0 && !c->tp->failed && next_whole(c->j, c->tp, &c->tp->paths[l->path]);
 }
 
 static enum dr_wave_next lane_walk_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
@@ -530,18 +555,14 @@ static bool record_wave(struct tape_job *j, struct tape *tp, int thread, int64_t
     static const struct dr_wave_ops whole = {.start = lane_start, .vertex = lane_vertex, .walk_end = lane_walk_end};
     static const struct dr_wave_ops steps = {.start = lane_start, .vertex = lane_vertex, .walk_end = lane_walk_end,
                                              .partial_vertices = true, .light_terms = true};
-    /* (attached: so until a path's first moving vertex, then whole) */
-    static const struct dr_wave_ops attached = {.start = lane_start, .vertex = lane_vertex, .walk_end = lane_walk_end,
-                                                .partial_vertices = true, .light_terms = true,
-                                                .whole_after_moving = true};
-    /* (derivative sampling: so but for the vertex after one with a BSDF parameter) */
-    static const struct dr_wave_ops derivative = {.start = lane_start, .vertex = lane_vertex,
+    /* (attached and derivative sampling: so but for the vertices next_whole
+     * asks for whole) */
+    static const struct dr_wave_ops some_whole = {.start = lane_start, .vertex = lane_vertex,
                                                   .walk_end = lane_walk_end, .partial_vertices = true,
-                                                  .light_terms = true, .whole_after_bsdf = true};
-    const struct dr_wave_ops *ops = j->steps                 ? &steps
-                                    : j->steps_before_moving ? &attached
-                                    : j->steps_off_bsdf      ? &derivative
-                                                             : &whole;
+                                                  .light_terms = true, .next_whole = lane_next_whole};
+    const struct dr_wave_ops *ops = j->steps                                      ? &steps
+                                    : j->steps_before_moving || j->steps_off_bsdf ? &some_whole
+                                                                                  : &whole;
     dr_wave_run(j->waves[thread], j->b.p->scene, &j->b.popts, n * j->b.p->spp, ops, &c, &j->b.thr[thread].rays);
     return true;
 }
@@ -694,15 +715,19 @@ static void sweep_path(const struct tape_job *j, const struct tape *tp, const st
 }
 
 /* mis: one recorded path swept twice, detached and attached, into its
- * group's two estimates (mis.h): the record (every ray) is shared. */
+ * group's two estimates (mis.h): the record (every ray) is shared. A path
+ * without a derivative term is not swept, but still counts as a sample of
+ * its pixel (mis weighs by the per-pixel variances). */
 static void sweep_path_mis(struct tape_job *j, int thread, const struct tape *tp, const struct dr_medium_record *mrecs,
                            const struct tape_path *path)
 {
     struct dr_grad_sink det, att;
     dr_est_mis_sinks(&j->b, thread, path->pixel, &det, &att);
     struct dr_ray_counts *rays = &j->b.thr[thread].rays;   /* unused: mis is not derivative sampling */
-    sweep(j, tp, mrecs, path, &det, rays);
-    sweep_path(j, tp, mrecs, path, &att, rays);
+    if (path->derivative) {
+        sweep(j, tp, mrecs, path, &det, rays);
+        sweep_path(j, tp, mrecs, path, &att, rays);
+    }
     dr_est_mis_sample_done(&j->b, thread, path->pixel, &det, &att);
 }
 
@@ -714,12 +739,14 @@ static void sweep_tape(struct tape_job *j, int thread, const struct tape *tp)
     const struct dr_medium_record *mrecs = j->b.popts.params->media_active ? tp->mrecs : NULL;
     for (int64_t pi = 0; pi < tp->n_paths; pi++) {
         const struct tape_path *path = &tp->paths[pi];
-        if (path->dropped || (j->b.p->cross && dr_is_black(path->adj)) || (j->steps && !path->derivative))
-            continue;   /* (cross mode: a pixel that does not matter to the loss; steps only: nothing to add) */
+        if (path->dropped || (j->b.p->cross && dr_is_black(path->adj)))
+            continue;   /* (cross mode: a pixel that does not matter to the loss) */
         if (j->b.mis) {
             sweep_path_mis(j, thread, tp, mrecs, path);
             continue;
         }
+        if (!path->derivative)
+            continue;   /* (no term to add; forward mode adds a sample's zeros) */
         sweep_path(j, tp, mrecs, path, &sink, &j->b.thr[thread].rays);
         dr_est_sample_done(&j->b, path->pixel, &sink);
     }
