@@ -41,6 +41,8 @@
  * over), the forward-mode pass and the replay. */
 #include "prb_attached.h"
 
+#include "mat4.h"
+
 #include <string.h>
 
 #define NS 5   /* tangent coordinates of a state: p (2), d (2), pdf (1) */
@@ -272,94 +274,6 @@ static void tangent_walk(const struct prb_attached_ctx *c, struct dr_sampler smp
 
 /* --------------------------------------------------------------- replay */
 
-/* sigma_min / sigma_max of a 4x4 matrix: square roots of the extreme
- * eigenvalues of A^T A (cyclic Jacobi rotations, converged to rounding:
- * until the off-diagonal part is below 1e-16 of the diagonal's norm. An
- * absolute test, off <= 1e-300, as before 2026-12-06, is never met once
- * the rotations only stir rounding noise, so nearly every call ran all 30
- * sweeps: 13 % of a prb attached run. The eigenvalues move by at most
- * about 1e-16 of the largest then, far below any --regularize threshold,
- * whose ratio compares their square roots.) */
-static double condition_ratio(double A[ND][ND])
-{
-    double S[ND][ND];
-    for (int i = 0; i < ND; i++)
-        for (int k = 0; k < ND; k++) {
-            double s = 0.0;
-            for (int r = 0; r < ND; r++)
-                s += A[r][i] * A[r][k];
-            S[i][k] = s;
-        }
-    for (int sweep = 0; sweep < 30; sweep++) {
-        double off = 0.0, diag = 0.0;
-        for (int p = 0; p < ND; p++) {
-            diag += S[p][p] * S[p][p];
-            for (int q = p + 1; q < ND; q++)
-                off += S[p][q] * S[p][q];
-        }
-        if (off <= 1e-32 * diag || off <= 1e-300)
-            break;
-        for (int p = 0; p < ND; p++)
-            for (int q = p + 1; q < ND; q++) {
-                if (S[p][q] == 0.0)
-                    continue;
-                double th = 0.5 * (S[q][q] - S[p][p]) / S[p][q];
-                double t = (th >= 0.0 ? 1.0 : -1.0) / (fabs(th) + sqrt(th * th + 1.0));
-                double cs = 1.0 / sqrt(t * t + 1.0), sn = t * cs;
-                for (int k = 0; k < ND; k++) {   /* S <- S J */
-                    double a = S[k][p], b = S[k][q];
-                    S[k][p] = cs * a - sn * b;
-                    S[k][q] = sn * a + cs * b;
-                }
-                for (int k = 0; k < ND; k++) {   /* S <- J^T S */
-                    double a = S[p][k], b = S[q][k];
-                    S[p][k] = cs * a - sn * b;
-                    S[q][k] = sn * a + cs * b;
-                }
-            }
-    }
-    double lo = INFINITY, hi = 0.0;
-    for (int i = 0; i < ND; i++) {
-        lo = dr_min(lo, fabs(S[i][i]));
-        hi = dr_max(hi, fabs(S[i][i]));
-    }
-    return hi > 0.0 ? sqrt(lo / hi) : 0.0;
-}
-
-/* Solves A x = y (4x4) by Gaussian elimination with partial pivoting; the
- * caller has made sure A is well conditioned. */
-static void solve4(double A[ND][ND], const double y[ND], double x[ND])
-{
-    double M[ND][ND + 1];
-    for (int i = 0; i < ND; i++) {
-        for (int k = 0; k < ND; k++)
-            M[i][k] = A[i][k];
-        M[i][ND] = y[i];
-    }
-    for (int col = 0; col < ND; col++) {
-        int piv = col;
-        for (int r = col + 1; r < ND; r++)
-            if (fabs(M[r][col]) > fabs(M[piv][col]))
-                piv = r;
-        for (int k = 0; k <= ND; k++) {
-            double t = M[col][k];
-            M[col][k] = M[piv][k];
-            M[piv][k] = t;
-        }
-        for (int r = col + 1; r < ND; r++) {
-            double f = M[col][col] != 0.0 ? M[r][col] / M[col][col] : 0.0;
-            for (int k = col; k <= ND; k++)
-                M[r][k] -= f * M[col][k];
-        }
-    }
-    for (int i = ND - 1; i >= 0; i--) {
-        double s = M[i][ND];
-        for (int k = i + 1; k < ND; k++)
-            s -= M[i][k] * x[k];
-        x[i] = M[i][i] != 0.0 ? s / M[i][i] : 0.0;
-    }
-}
-
 /* A moving vertex whose derivative waits for the next one (the lookahead). */
 struct pending {
     struct dr_path_vertex v;
@@ -409,8 +323,8 @@ static void finish(const struct prb_attached_ctx *c, const struct pending *P, co
                 A[r][i] = w[i][r];
             y[r] = P->ck[r] - a[r];
         }
-        if (condition_ratio(A) >= c->eps) {
-            solve4(A, y, x);
+        if (dr_mat4_condition(A) >= c->eps) {
+            dr_mat4_solve(A, y, x);
         } else {
             /* (near-)singular: the direction forgot where it came from;
              * forward mode over the rest of the path instead, exactly */
