@@ -149,38 +149,46 @@ static struct dr_sampler deriv_stream(const struct dr_sampler *smp, int depth, u
     return r;
 }
 
-/* The radiance along world direction wi from v, split into the emission E at
- * the first vertex (unweighted; *pl its light density) and the rest L_ind:
- * the walker from the state the forward continuation would have handed on
- * had it sampled wi (same depth, prev_pdf = the forward density pf, so the
- * MIS weights beyond are the primal's), with unit throughput. */
-static void rest_radiance(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
-                          dr_vec3 wi, double pf, struct dr_sampler rng, struct dr_ray_counts *counts, dr_vec3 *E,
-                          double *pl, dr_vec3 *L_ind)
+/* (path_deriv.h) The state the forward continuation would have handed on
+ * had it sampled the ray's direction: same depth, prev_pdf = the forward
+ * density pf (so the MIS weights beyond are the primal's), unit throughput. */
+void dr_path_deriv_start(const struct dr_deriv_ray *r, struct dr_path_state *st)
+{
+    dr_path_start(st, r->o, r->d);
+    st->prev_pdf = r->pf;
+    st->prev_sky = r->prev_sky;
+    st->prev_p = r->prev_p;
+    st->depth = r->depth;
+}
+
+/* (path_deriv.h) */
+void dr_path_deriv_first(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *w,
+                         struct dr_deriv_light *out)
+{
+    out->E = w->emits ? w->Le : dr_v3s(0.0);
+    out->pl = w->emits ? emitter_light_pdf(s, opts, w) : 0.0;
+    out->L_ind = dr_path_vertex_nee(w);
+}
+
+/* (path_deriv.h) One path at a time: the walker with the primal's options
+ * but no parameters (nothing to differentiate along it: no zero-channel
+ * substitution). */
+void dr_path_deriv_radiance(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_deriv_ray *r,
+                            struct dr_deriv_light *out, struct dr_ray_counts *counts)
 {
     struct dr_path_opts o = *opts;
-    o.params = NULL;   /* nothing to differentiate along it: no zero-channel substitution */
+    o.params = NULL;
     struct dr_path_state st;
     struct dr_path_vertex w;
-    dr_path_start(&st, dr_offset_origin(&v->hit, v->ng, wi), wi);
-    st.prev_pdf = pf;
-    st.prev_sky = dr_path_leaving_sky(opts, v, dr_dot(wi, v->ng), pf);
-    st.prev_p = v->hit.p;
-    st.depth = v->depth;
-    *E = *L_ind = dr_v3s(0.0);
-    *pl = 0.0;
+    struct dr_sampler rng = r->rng;
+    dr_path_deriv_start(r, &st);
     for (bool first = true;; first = false) {
         dr_vec3 beta = st.beta;
         bool more = dr_path_step(s, &o, &st, &rng, &w, counts);
-        if (first) {
-            if (w.emits) {
-                *E = w.Le;
-                *pl = emitter_light_pdf(s, opts, &w);
-            }
-            *L_ind = dr_path_vertex_nee(&w);
-        } else {
-            *L_ind = dr_add(*L_ind, dr_mul(beta, dr_path_vertex_term(&w)));
-        }
+        if (first)
+            dr_path_deriv_first(s, opts, &w, out);
+        else
+            out->L_ind = dr_add(out->L_ind, dr_mul(beta, dr_path_vertex_term(&w)));
         if (!more)
             return;
     }
@@ -194,43 +202,71 @@ static bool usable(const struct dr_path_vertex *v, dr_vec3 wi, dr_vec3 *wiw)
     return wi.z > 0.0 && dr_dot(*wiw, v->ng) > 0.0;
 }
 
-/* B's direction from p_bm, MIS-weighted (path_deriv.h). */
-static void sample_bm(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
-                      unsigned mask, struct dr_sampler *dirs, const struct dr_sampler *smp, dr_vec3 d_beta,
-                      struct dr_grad_sink *sink, struct dr_ray_counts *counts)
+/* Ray r leaving v along local wi (world wiw) from stream `which`. */
+static struct dr_deriv_ray deriv_ray(const struct dr_path_opts *opts, const struct dr_path_vertex *v,
+                                     const struct dr_sampler *smp, uint64_t which, int kind, dr_vec3 wi, dr_vec3 wiw,
+                                     double pd)
 {
-    double ul = dr_sampler_next(dirs), u1, u2, pd, pl;
-    dr_sampler_next2(dirs, &u1, &u2);
-    dr_vec3 wi, wiw, E, L_ind;
-    if (!dr_bsdf_deriv_sample(&v->bsdf, v->wo, mask & BM_PARAMS, ul, u1, u2, &wi, &pd) || !usable(v, wi, &wiw))
-        return;
     double pf = dr_bsdf_pdf(&v->bsdf, v->wo, wi);
-    rest_radiance(s, opts, v, wiw, pf, deriv_stream(smp, v->depth, STREAM_BM_PATH), counts, &E, &pl, &L_ind);
-    dr_vec3 L = dr_add(dr_scale(E, 1.0 / (pl + pf + pd)), dr_scale(L_ind, 1.0 / (pf + pd)));
-    if (dr_v3_finite(L) && !dr_is_black(L))
-        d_rest_along(s, opts->params, v, mask, wi, dr_scale(dr_mul(d_beta, L), fabs(wi.z)), sink);
+    return (struct dr_deriv_ray){.wi = wi, .o = dr_offset_origin(&v->hit, v->ng, wiw), .d = wiw, .prev_p = v->hit.p,
+                                 .pf = pf, .pd = pd, .prev_sky = dr_path_leaving_sky(opts, v, dr_dot(wiw, v->ng), pf),
+                                 .rng = deriv_stream(smp, v->depth, which), .depth = v->depth, .kind = kind};
 }
 
-/* A's antithetic pair: the same (u1, u2), mirrored for the negative lobe so
- * both start at the sign change, and the same random numbers for both paths. */
-static void sample_pair(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
-                        struct dr_sampler *dirs, const struct dr_sampler *smp, dr_vec3 d_beta,
-                        struct dr_grad_sink *sink, struct dr_ray_counts *counts)
+/* (path_deriv.h) B's direction from p_bm, then A's antithetic pair: the
+ * same (u1, u2), mirrored for the negative lobe so both start at the sign
+ * change, and the same random numbers for both paths. The random numbers
+ * are drawn whether or not a direction is usable. */
+int dr_path_deriv_rays(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
+                       const struct dr_sampler *smp, struct dr_deriv_ray r[DR_DERIV_RAYS])
 {
-    double u1, u2;
-    dr_sampler_next2(dirs, &u1, &u2);
-    for (int side = 0; side < 2; side++) {
-        enum dr_bsdf_dlobe lobe = side == 0 ? DR_BSDF_DLOBE_ROUGH_POS : DR_BSDF_DLOBE_ROUGH_NEG;
-        dr_vec3 wi = dr_bsdf_deriv_sample_dir(&v->bsdf, v->wo, lobe, side == 0 ? u1 : 1.0 - u1, u2), wiw, E, L_ind;
-        double p = dr_bsdf_deriv_lobe_pdf(&v->bsdf, v->wo, wi, lobe), pl;
-        if (!(p > 0.0) || !usable(v, wi, &wiw))
-            continue;
-        double pf = dr_bsdf_pdf(&v->bsdf, v->wo, wi);
-        rest_radiance(s, opts, v, wiw, pf, deriv_stream(smp, v->depth, STREAM_PAIR_PATH), counts, &E, &pl, &L_ind);
-        /* E: MIS against next-event estimation (only one lobe is non-zero at wi) */
-        dr_vec3 L = dr_scale(dr_add(dr_scale(E, p / (pl + p)), L_ind), fabs(wi.z) / p);
-        if (dr_v3_finite(L) && !dr_is_black(L))
-            d_ndf_along(s, opts->params, v, wi, dr_mul(d_beta, L), sink);
+    unsigned mask = vertex_dparams(s, opts->params, v);
+    if (!mask || !(v->wo.z > 0.0))
+        return 0;
+    struct dr_sampler dirs = deriv_stream(smp, v->depth, STREAM_DIRS);
+    int n = 0;
+    if (mask & BM_PARAMS) {
+        double ul = dr_sampler_next(&dirs), u1, u2, pd;
+        dr_sampler_next2(&dirs, &u1, &u2);
+        dr_vec3 wi, wiw;
+        if (dr_bsdf_deriv_sample(&v->bsdf, v->wo, mask & BM_PARAMS, ul, u1, u2, &wi, &pd) && usable(v, wi, &wiw))
+            r[n++] = deriv_ray(opts, v, smp, STREAM_BM_PATH, DR_DERIV_BM, wi, wiw, pd);
+    }
+    if (mask & DR_BSDF_D_ROUGHNESS) {
+        double u1, u2;
+        dr_sampler_next2(&dirs, &u1, &u2);
+        for (int side = 0; side < 2; side++) {
+            enum dr_bsdf_dlobe lobe = side == 0 ? DR_BSDF_DLOBE_ROUGH_POS : DR_BSDF_DLOBE_ROUGH_NEG;
+            dr_vec3 wi = dr_bsdf_deriv_sample_dir(&v->bsdf, v->wo, lobe, side == 0 ? u1 : 1.0 - u1, u2), wiw;
+            double p = dr_bsdf_deriv_lobe_pdf(&v->bsdf, v->wo, wi, lobe);
+            if (p > 0.0 && usable(v, wi, &wiw))
+                r[n++] = deriv_ray(opts, v, smp, STREAM_PAIR_PATH, side == 0 ? DR_DERIV_POS : DR_DERIV_NEG, wi, wiw,
+                                   p);
+        }
+    }
+    return n;
+}
+
+/* (path_deriv.h) B's term: MIS-weighted against light and forward
+ * sampling; A's: E weighted against next-event estimation (only one lobe
+ * is non-zero at wi). */
+void d_path_deriv_rays(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
+                       const struct dr_deriv_ray *r, const struct dr_deriv_light *light, int n, dr_vec3 d_beta,
+                       struct dr_grad_sink *sink)
+{
+    unsigned mask = vertex_dparams(s, opts->params, v);
+    for (int i = 0; i < n; i++) {
+        const dr_vec3 E = light[i].E, L_ind = light[i].L_ind;
+        const double pl = light[i].pl, pf = r[i].pf, p = r[i].pd, cos = fabs(r[i].wi.z);
+        if (r[i].kind == DR_DERIV_BM) {
+            dr_vec3 L = dr_add(dr_scale(E, 1.0 / (pl + pf + p)), dr_scale(L_ind, 1.0 / (pf + p)));
+            if (dr_v3_finite(L) && !dr_is_black(L))
+                d_rest_along(s, opts->params, v, mask, r[i].wi, dr_scale(dr_mul(d_beta, L), cos), sink);
+        } else {
+            dr_vec3 L = dr_scale(dr_add(dr_scale(E, p / (pl + p)), L_ind), cos / p);
+            if (dr_v3_finite(L) && !dr_is_black(L))
+                d_ndf_along(s, opts->params, v, r[i].wi, dr_mul(d_beta, L), sink);
+        }
     }
 }
 
@@ -238,12 +274,12 @@ void d_path_deriv_sample(const struct dr_scene *s, const struct dr_path_opts *op
                          const struct dr_sampler *smp, dr_vec3 d_beta, struct dr_grad_sink *sink,
                          struct dr_ray_counts *counts)
 {
-    unsigned mask = vertex_dparams(s, opts->params, v);
-    if (!mask || dr_is_black(d_beta) || !(v->wo.z > 0.0))
+    if (dr_is_black(d_beta))
         return;
-    struct dr_sampler dirs = deriv_stream(smp, v->depth, STREAM_DIRS);
-    if (mask & BM_PARAMS)
-        sample_bm(s, opts, v, mask, &dirs, smp, d_beta, sink, counts);
-    if (mask & DR_BSDF_D_ROUGHNESS)
-        sample_pair(s, opts, v, &dirs, smp, d_beta, sink, counts);
+    struct dr_deriv_ray r[DR_DERIV_RAYS];
+    struct dr_deriv_light light[DR_DERIV_RAYS];
+    int n = dr_path_deriv_rays(s, opts, v, smp, r);
+    for (int i = 0; i < n; i++)
+        dr_path_deriv_radiance(s, opts, &r[i], &light[i], counts);
+    d_path_deriv_rays(s, opts, v, r, light, n, d_beta, sink);
 }

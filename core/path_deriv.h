@@ -93,4 +93,50 @@ void d_path_deriv_sample(const struct dr_scene *scene, const struct dr_path_opts
                          const struct dr_sampler *smp, dr_vec3 d_beta, struct dr_grad_sink *sink,
                          struct dr_ray_counts *counts);
 
+/* The same in three parts, for a caller that walks the radiance paths of
+ * many vertices at once (the tape, on the packet tracer's lanes): the new
+ * directions (dr_path_deriv_rays), each one's radiance walk, and their
+ * derivative terms (d_path_deriv_rays). d_path_deriv_sample is their
+ * composition with one walk at a time (dr_path_deriv_radiance). */
+#define DR_DERIV_RAYS 3   /* at most: B's direction and A's pair */
+enum dr_deriv_kind { DR_DERIV_BM, DR_DERIV_POS, DR_DERIV_NEG };
+struct dr_deriv_ray {
+    dr_vec3 wi;                /* local direction at the vertex */
+    dr_vec3 o, d, prev_p;      /* the radiance walk's first ray and the vertex's point */
+    double pf;                 /* the forward BSDF density of wi */
+    double pd;                 /* its strategy's density: p_bm (B), p+ or p- (A) */
+    double prev_sky;           /* the walk's start state (dr_path_deriv_start) */
+    struct dr_sampler rng;     /* the walk's random numbers */
+    int depth;
+    enum dr_deriv_kind kind;
+};
+/* What a radiance walk finds: the emission E first seen (unweighted) and
+ * the light sampler's density pl of it, and the rest L_ind. */
+struct dr_deriv_light {
+    dr_vec3 E, L_ind;
+    double pl;
+};
+
+/* The new directions at v (0 .. DR_DERIV_RAYS of them, into r), drawn from
+ * the sub-streams of smp's key as d_path_deriv_sample draws them. */
+int dr_path_deriv_rays(const struct dr_scene *scene, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
+                       const struct dr_sampler *smp, struct dr_deriv_ray r[DR_DERIV_RAYS]);
+/* The state a ray's radiance walk begins in (with r->rng as its sampler, and
+ * opts without parameters). */
+void dr_path_deriv_start(const struct dr_deriv_ray *r, struct dr_path_state *st);
+/* What the walk's first vertex w gives (whole: its emission unweighted, its
+ * hit for the light density, and its next-event term); each later vertex
+ * adds its dr_path_vertex_term times the throughput it was reached with to
+ * out->L_ind. */
+void dr_path_deriv_first(const struct dr_scene *scene, const struct dr_path_opts *opts, const struct dr_path_vertex *w,
+                         struct dr_deriv_light *out);
+/* One ray's radiance walk, one vertex at a time (counts its rays). */
+void dr_path_deriv_radiance(const struct dr_scene *scene, const struct dr_path_opts *opts, const struct dr_deriv_ray *r,
+                            struct dr_deriv_light *out, struct dr_ray_counts *counts);
+/* The derivative terms of v's n new directions r, given what their walks
+ * found, for d_beta as in d_path_deriv_sample (which skips a black d_beta). */
+void d_path_deriv_rays(const struct dr_scene *scene, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
+                       const struct dr_deriv_ray *r, const struct dr_deriv_light *light, int n, dr_vec3 d_beta,
+                       struct dr_grad_sink *sink);
+
 #endif
