@@ -6,6 +6,7 @@
 
 #include "accel.h"
 #include "material.h"
+#include "path_deriv.h"
 #include "path_simd.h"
 #include "wave_soa.h"
 
@@ -305,11 +306,16 @@ static void shade_live(struct dr_wave *w, int n_live, const struct dr_scene *s, 
     }
 }
 
-/* Starts the lane's next walk (or its item's first) from o, d. */
-static void begin_walk(struct lane *l, dr_vec3 o, dr_vec3 d, enum dr_wave_next how)
+/* Starts the lane's next walk (or its item's first) from o, d: the state
+ * as the caller wants it (start_state), and whether its first vertex is
+ * whole (next_whole). */
+static void begin_walk(struct lane *l, dr_vec3 o, dr_vec3 d, enum dr_wave_next how, const struct dr_wave_ops *ops,
+                       void *ctx)
 {
     dr_path_start(&l->st, o, d);
-    l->whole_next = false;
+    if (ops->start_state)
+        ops->start_state(ctx, l->user, &l->st);
+    l->whole_next = ops->next_whole && ops->next_whole(ctx, l->user);
     l->replaying = how == DR_WAVE_REPLAY;
     if (!l->replaying)
         l->log.n = 0;
@@ -358,7 +364,7 @@ static int finish_live(struct dr_wave *w, int n_live, int *n_free, const struct 
             continue;
         }
         if (!more)
-            begin_walk(l, o, d, how);
+            begin_walk(l, o, d, how, ops, ctx);
         w->live[kept++] = k;
     }
     return kept;
@@ -396,7 +402,7 @@ void dr_wave_run(struct dr_wave *w, const struct dr_scene *s, const struct dr_pa
             const struct dr_wave_log *log = ops->replay_log ? ops->replay_log(ctx, l->user) : NULL;
             if (log)
                 dr_wave_log_copy(&l->log, log);
-            begin_walk(l, o, d, log ? DR_WAVE_REPLAY : DR_WAVE_WALK);
+            begin_walk(l, o, d, log ? DR_WAVE_REPLAY : DR_WAVE_WALK, ops, ctx);
             w->live[n_live++] = k;
         }
         trace_live(w, n_live, s, counts);
@@ -496,4 +502,77 @@ void dr_wave_radiance_lanes(struct dr_wave *w, const struct dr_scene *s, const s
                                            .partial_vertices = true};
     struct radiance_ctx c = {start, ctx, L};
     dr_wave_run(w, s, opts, n, &ops, &c, counts);
+}
+
+/* ---------------------------------------- derivative sampling's radiance */
+
+struct deriv_ctx {
+    const struct dr_scene *s;
+    const struct dr_path_opts *opts;
+    const struct dr_deriv_ray *r;
+    struct dr_deriv_light *out;
+};
+struct deriv_lane {
+    int64_t ray;
+    bool first;                /* its first vertex is next (whole: dr_path_deriv_first) */
+    struct dr_deriv_light found;
+};
+_Static_assert(sizeof(struct deriv_lane) <= DR_WAVE_USER_BYTES, "lane state fits");
+
+static void deriv_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    const struct deriv_ctx *c = ctx;
+    struct deriv_lane *l = user;
+    l->ray = i;
+    l->first = true;
+    *smp = c->r[i].rng;
+    *o = c->r[i].o;
+    *d = c->r[i].d;
+}
+
+static void deriv_start_state(void *ctx, void *user, struct dr_path_state *st)
+{
+    const struct deriv_ctx *c = ctx;
+    dr_path_deriv_start(&c->r[((const struct deriv_lane *)user)->ray], st);
+}
+
+static bool deriv_next_whole(void *ctx, void *user)
+{
+    (void)ctx;
+    return ((const struct deriv_lane *)user)->first;
+}
+
+static bool deriv_vertex(void *ctx, void *user, const struct dr_wave_arrival *a, const struct dr_path_vertex *v,
+                         struct dr_sampler *smp, bool more)
+{
+    (void)smp, (void)more;
+    const struct deriv_ctx *c = ctx;
+    struct deriv_lane *l = user;
+    if (l->first)
+        dr_path_deriv_first(c->s, c->opts, v, &l->found);
+    else
+        l->found.L_ind = dr_add(l->found.L_ind, dr_mul(a->beta, dr_path_vertex_term(v)));
+    l->first = false;
+    return true;
+}
+
+static enum dr_wave_next deriv_end(void *ctx, void *user, struct dr_sampler *smp, dr_vec3 *o, dr_vec3 *d)
+{
+    (void)smp, (void)o, (void)d;
+    const struct deriv_ctx *c = ctx;
+    const struct deriv_lane *l = user;
+    c->out[l->ray] = l->found;
+    return DR_WAVE_DONE;
+}
+
+void dr_wave_deriv_radiance(struct dr_wave *w, const struct dr_scene *s, const struct dr_path_opts *opts, int64_t n,
+                            const struct dr_deriv_ray *r, struct dr_deriv_light *out, struct dr_ray_counts *counts)
+{
+    static const struct dr_wave_ops ops = {.start = deriv_start, .vertex = deriv_vertex, .walk_end = deriv_end,
+                                           .partial_vertices = true, .next_whole = deriv_next_whole,
+                                           .start_state = deriv_start_state};
+    struct dr_path_opts o = *opts;
+    o.params = NULL;   /* (as dr_path_deriv_radiance) */
+    struct deriv_ctx c = {s, &o, r, out};
+    dr_wave_run(w, s, &o, n, &ops, &c, counts);
 }

@@ -112,14 +112,20 @@ struct dr_wave_ops {
      * cannot be had). */
     bool bsdf_terms;
     /* Optional (NULL: never), with partial_vertices and without bsdf_terms:
-     * called after each vertex the walk goes on from; true sends the walk's
-     * next vertex to the scalar stages, whole. The caller decides which of
+     * called at each walk's start and after each vertex the walk goes on
+     * from; true sends the walk's next vertex to the scalar stages, whole. The caller decides which of
      * its vertices it reads whole, so the rule lives in one place, its own:
      * the tape's record asks for every vertex after a path's first moving
      * one under attached sampling (d_path_vertex_attached reads them), and
      * for the vertex after one with a BSDF parameter under derivative
      * sampling (d_path_deriv_emission reads its emission). */
     bool (*next_whole)(void *ctx, void *user);
+    /* Optional (NULL: none): adjusts the state each walk begins in
+     * (dr_path_start from the ray start or walk_end gave; user already set),
+     * for a walk that continues another from its middle: derivative
+     * sampling's radiance walks (path_deriv.h) start at a vertex's depth,
+     * with its point and the forward density of their direction. */
+    void (*start_state)(void *ctx, void *user, struct dr_path_state *st);
 };
 
 struct dr_wave;
@@ -166,5 +172,15 @@ void dr_wave_radiance(struct dr_wave *wave, const struct dr_scene *scene, const 
  * test_render holds to the one-path walker's bits too). */
 void dr_wave_radiance_lanes(struct dr_wave *wave, const struct dr_scene *scene, const struct dr_path_opts *opts,
                             int64_t n, dr_wave_start_fn start, void *ctx, dr_vec3 *L, struct dr_ray_counts *counts);
+
+/* Derivative sampling's radiance walks of rays r[0..n) (path_deriv.h) into
+ * out[0..n), on the lanes: what dr_path_deriv_radiance gives for each (to
+ * rounding: the lanes shade most vertices eight at a time). Not for scenes
+ * with media. */
+struct dr_deriv_ray;
+struct dr_deriv_light;
+void dr_wave_deriv_radiance(struct dr_wave *wave, const struct dr_scene *scene, const struct dr_path_opts *opts,
+                            int64_t n, const struct dr_deriv_ray *r, struct dr_deriv_light *out,
+                            struct dr_ray_counts *counts);
 
 #endif

@@ -13,7 +13,7 @@
  * A worker records and sweeps its own batch with no barrier between them
  * (the loss's adjoint is known before the record), and the default batch is
  * small enough that the tape is swept while it is still in the cache: the
- * sweep reads back every byte the record wrote (1064 bytes per vertex with
+ * sweep reads back every byte the record wrote (1072 bytes per vertex with
  * a derivative term, 528 where that term is a light's alone: struct
  * tape_light; 56 per step without one: struct tape_step).
  * Under plain detached sampling the record runs on the packet tracer's
@@ -38,6 +38,8 @@ struct tape_vertex {
     struct dr_path_vertex v;
     dr_vec3 bt;        /* true throughput arriving at the vertex */
     int64_t prev;      /* the path's vertex before this one (-1: the first; a link, see TAPE_STEP) */
+    int32_t rays;      /* derivative sampling: its new directions' first index in the tape's rays */
+    int32_t n_rays;    /* ... and how many (-1: not walked ahead: the sweep walks them) */
 };
 
 /* A vertex without a derivative term of its own (dr_path_vertex_has_derivative)
@@ -53,7 +55,7 @@ struct tape_step {
  * parameter, not a medium vertex: dr_path_light_terms_hold), under plain
  * detached sampling: where a light has a parameter most vertices are such.
  * A step's part and what the light terms' adjoint reads, 528 bytes instead
- * of the whole vertex's 1064: the peer's box's emission gradient spent a
+ * of the whole vertex's 1072: the peer's box's emission gradient spent a
  * sixth of its time copying whole vertices and reading them back. */
 struct tape_light {
     dr_vec3 e, t;      /* as a step's */
@@ -95,6 +97,9 @@ struct tape {
     int64_t cap_mrecs;
     struct tape_path *paths;
     int64_t n_paths, cap_paths;
+    struct dr_deriv_ray *rays;        /* derivative sampling: the sweep's new directions (walk_ahead) */
+    struct dr_deriv_light *found;     /* ... what their radiance walks found */
+    int64_t n_rays, cap_rays, cap_found;
     uint64_t peak;     /* this run's largest record, in bytes (the mappings may be larger:
                           they grow by doubling and are kept from earlier runs) */
     bool failed;       /* out of memory while recording */
@@ -161,7 +166,8 @@ static uint64_t tape_bytes(const struct tape *t, bool media)
 {
     return (uint64_t)t->n_verts * (sizeof(struct tape_vertex) + (media ? sizeof(struct dr_medium_record) : 0)) +
            (uint64_t)t->n_steps * sizeof(struct tape_step) + (uint64_t)t->n_lights * sizeof(struct tape_light) +
-           (uint64_t)t->n_paths * sizeof(struct tape_path);
+           (uint64_t)t->n_paths * sizeof(struct tape_path) +
+           (uint64_t)t->n_rays * (sizeof(struct dr_deriv_ray) + sizeof(struct dr_deriv_light));
 }
 
 /* Pixels in a worker's batch: its share of the paths, in whole pixels (at least one). */
@@ -211,6 +217,7 @@ static struct tape_vertex *new_vertex(struct tape *tp, struct tape_path *path, b
         return NULL;
     struct tape_vertex *tv = &tp->verts[tp->n_verts];
     tv->prev = path->last;
+    tv->n_rays = -1;
     path->last = tp->n_verts++;
     path->count++;
     return tv;
@@ -574,8 +581,9 @@ static bool record_wave(struct tape_job *j, struct tape *tp, int thread, int64_t
  * emission the continuation sees at the next vertex (NULL: none), and the new
  * directions with their radiance paths (from the path's sub-streams, as prb
  * draws them). */
-static void sweep_derivative(const struct tape_job *j, const struct tape_vertex *tv, const struct tape_vertex *next,
-                             const struct tape_path *path, struct dr_grad_sink *sink, struct dr_ray_counts *rays)
+static void sweep_derivative(const struct tape_job *j, const struct tape *tp, const struct tape_vertex *tv,
+                             const struct tape_vertex *next, const struct tape_path *path, struct dr_grad_sink *sink,
+                             struct dr_ray_counts *rays)
 {
     const struct dr_path_vertex *v = &tv->v;
     if (!v->diff_bsdf)
@@ -584,7 +592,10 @@ static void sweep_derivative(const struct tape_job *j, const struct tape_vertex 
     d_path_deriv_nee(j->b.p->scene, &j->b.popts, v, d_beta, sink);
     if (v->cont && next)
         d_path_deriv_emission(j->b.p->scene, &j->b.popts, v, dr_scale(d_beta, v->cos_pdf_q), &next->v, sink);
-    if (v->shaded) {
+    if (tv->n_rays >= 0) {   /* (walked ahead: walk_ahead) */
+        d_path_deriv_rays(j->b.p->scene, &j->b.popts, v, &tp->rays[tv->rays], &tp->found[tv->rays], tv->n_rays,
+                          d_beta, sink);
+    } else if (v->shaded) {
         struct dr_sampler smp = {.key = path->key};
         d_path_deriv_sample(j->b.p->scene, &j->b.popts, v, &smp, d_beta, sink, rays);
     }
@@ -656,7 +667,7 @@ static void sweep(const struct tape_job *j, const struct tape *tp, const struct 
         }
         d_path_vertex(s, ps, v, dr_mul(adj, bt), d_f, sink);   /* (both BSDF values' material adjoint at once) */
         if (j->derivative)
-            sweep_derivative(j, &verts[i], next, path, sink, rays);
+            sweep_derivative(j, tp, &verts[i], next, path, sink, rays);
         abar = dr_add(dr_mul(adj, dr_path_vertex_term(v)), dr_mul(abar, t));
         next = &verts[i];
     }
@@ -731,6 +742,58 @@ static void sweep_path_mis(struct tape_job *j, int thread, const struct tape *tp
     dr_est_mis_sample_done(&j->b, thread, path->pixel, &det, &att);
 }
 
+/* Will the sweep take path's derivative terms (not a dropped path, nor
+ * one whose pixel does not matter to the loss)? */
+static bool swept(const struct tape_job *j, const struct tape_path *path)
+{
+    return !path->dropped && !(j->b.p->cross && dr_is_black(path->adj));
+}
+
+/* Derivative sampling: the new directions of every vertex the sweep will
+ * take them at (sweep_derivative), and their radiance walked ahead of the
+ * sweep, all at once on the lanes, rather than one walk at a time inside
+ * it (the radiance does not depend on the adjoints). The same directions,
+ * streams and walks as d_path_deriv_sample's, so the gradients are the same
+ * to rounding (the lanes shade eight vertices at a time). False when the
+ * lanes or the memory cannot be had: then the sweep walks them itself. */
+static bool walk_ahead(struct tape_job *j, int thread, struct tape *tp)
+{
+    const struct dr_scene *s = j->b.p->scene;
+    tp->n_rays = 0;
+    if (!j->waves[thread] && !(j->waves[thread] = dr_wave_create()))
+        return false;
+    for (int64_t pi = 0; pi < tp->n_paths; pi++) {
+        const struct tape_path *path = &tp->paths[pi];
+        if (!swept(j, path) || !path->derivative)
+            continue;
+        const struct dr_sampler smp = {.key = path->key};
+        for (int64_t i = path->last; i >= 0;) {
+            if (i & TAPE_STEP) {
+                i = tp->steps[i & ~TAPE_STEP].prev;
+                continue;
+            }
+            if (i & TAPE_LIGHT) {
+                i = tp->lights[i & ~TAPE_LIGHT].prev;
+                continue;
+            }
+            struct tape_vertex *tv = &tp->verts[i];
+            i = tv->prev;
+            if (!tv->v.diff_bsdf || !tv->v.shaded || dr_is_black(dr_mul(path->adj, tv->bt)))
+                continue;
+            if (!grow((void **)&tp->rays, &tp->cap_rays, tp->n_rays + DR_DERIV_RAYS, sizeof *tp->rays))
+                return false;
+            tv->rays = (int32_t)tp->n_rays;   /* (3 per whole vertex of ~1 KB: far below 2^31) */
+            tv->n_rays = dr_path_deriv_rays(s, &j->b.popts, &tv->v, &smp, &tp->rays[tp->n_rays]);
+            tp->n_rays += tv->n_rays;
+        }
+    }
+    if (!grow((void **)&tp->found, &tp->cap_found, tp->n_rays, sizeof *tp->found))
+        return false;
+    dr_wave_deriv_radiance(j->waves[thread], s, &j->b.popts, tp->n_rays, tp->rays, tp->found,
+                           &j->b.thr[thread].rays);
+    return true;
+}
+
 /* The sweep of the worker's tape, path by path. */
 static void sweep_tape(struct tape_job *j, int thread, const struct tape *tp)
 {
@@ -739,8 +802,8 @@ static void sweep_tape(struct tape_job *j, int thread, const struct tape *tp)
     const struct dr_medium_record *mrecs = j->b.popts.params->media_active ? tp->mrecs : NULL;
     for (int64_t pi = 0; pi < tp->n_paths; pi++) {
         const struct tape_path *path = &tp->paths[pi];
-        if (path->dropped || (j->b.p->cross && dr_is_black(path->adj)))
-            continue;   /* (cross mode: a pixel that does not matter to the loss) */
+        if (!swept(j, path))
+            continue;
         if (j->b.mis) {
             sweep_path_mis(j, thread, tp, mrecs, path);
             continue;
@@ -760,6 +823,8 @@ static void tape_unmap(struct tape *tp)
     map_free(tp->lights, tp->cap_lights, sizeof *tp->lights);
     map_free(tp->mrecs, tp->cap_mrecs, sizeof *tp->mrecs);
     map_free(tp->paths, tp->cap_paths, sizeof *tp->paths);
+    map_free(tp->rays, tp->cap_rays, sizeof *tp->rays);
+    map_free(tp->found, tp->cap_found, sizeof *tp->found);
     *tp = (struct tape){0};
 }
 
@@ -814,6 +879,10 @@ static void record_and_sweep(void *ctx, int thread, int64_t begin, int64_t end)
     tp->peak = bytes > tp->peak ? bytes : tp->peak;
     if (!tp->failed && j->b.p->cross)
         cross_adjoints(j, tp);
+    if (!tp->failed && j->derivative && j->wave && !(j->b.popts.stages & DR_STAGE_MEDIA) &&
+        !walk_ahead(j, thread, tp))
+        for (int64_t i = 0; i < tp->n_verts; i++)
+            tp->verts[i].n_rays = -1;   /* (out of memory: the sweep walks them) */
     if (!tp->failed)
         sweep_tape(j, thread, tp);
 }
