@@ -2,6 +2,7 @@
 #include "mat4.h"
 
 #include <math.h>
+#include <stdbool.h>
 
 /* Cyclic Jacobi rotations on S = A^T A until the off-diagonal part is below
  * 1e-16 of the diagonal's norm: converged to rounding, the eigenvalues then
@@ -56,6 +57,69 @@ double dr_mat4_condition(double A[4][4])
         hi = fmax(hi, fabs(S[i][i]));
     }
     return hi > 0.0 ? sqrt(lo / hi) : 0.0;
+}
+
+/* det A by elimination with partial pivoting */
+static double det4(double A[4][4])
+{
+    double M[4][4], det = 1.0;
+    for (int i = 0; i < 4; i++)
+        for (int k = 0; k < 4; k++)
+            M[i][k] = A[i][k];
+    for (int col = 0; col < 4; col++) {
+        int piv = col;
+        for (int r = col + 1; r < 4; r++)
+            if (fabs(M[r][col]) > fabs(M[piv][col]))
+                piv = r;
+        if (M[piv][col] == 0.0)
+            return 0.0;
+        if (piv != col) {
+            det = -det;
+            for (int k = 0; k < 4; k++) {
+                double t = M[col][k];
+                M[col][k] = M[piv][k];
+                M[piv][k] = t;
+            }
+        }
+        det *= M[col][col];
+        for (int r = col + 1; r < 4; r++) {
+            double f = M[r][col] / M[col][col];
+            for (int k = col; k < 4; k++)
+                M[r][k] -= f * M[col][k];
+        }
+    }
+    return det;
+}
+
+/* With S = A^T A, eigenvalues l_1 >= .. >= l_4 >= 0 and trace T:
+ *  - l_4 <= min_i S_ii and l_1 >= max_i S_ii, so the ratio is at most
+ *    sqrt(min S_ii / max S_ii): a vertex whose direction forgets where it
+ *    came from has (near-)zero rows, and is decided here;
+ *  - l_1 <= T and l_4 = det S / (l_1 l_2 l_3) >= det S / T^3, so the ratio
+ *    is at least sqrt(det S) / T^2 = |det A| / T^2: a well-conditioned
+ *    vertex is decided here.
+ * Only what falls between takes the rotations. The margins (1e-6 of eps)
+ * are far above the rotations' rounding (about 5e-11 of the ratio at 1e-3,
+ * mat4.h) and the bounds', so every decision is the one
+ * dr_mat4_condition(A) >= eps makes (test_mat4 checks that). */
+bool dr_mat4_condition_at_least(double A[4][4], double eps)
+{
+    if (!(eps > 0.0))
+        return true;   /* (the ratio is never below 0) */
+    double lo = INFINITY, hi = 0.0, T = 0.0;
+    for (int i = 0; i < 4; i++) {
+        double d = A[0][i] * A[0][i] + A[1][i] * A[1][i] + A[2][i] * A[2][i] + A[3][i] * A[3][i];
+        lo = fmin(lo, d);
+        hi = fmax(hi, d);
+        T += d;
+    }
+    if (isfinite(T) && T > 0.0) {
+        if (lo < eps * eps * (1.0 - 1e-6) * hi)
+            return false;
+        if (fabs(det4(A)) >= eps * (1.0 + 1e-6) * T * T)
+            return true;
+    }
+    return dr_mat4_condition(A) >= eps;
 }
 
 void dr_mat4_solve(double A[4][4], const double y[4], double x[4])

@@ -323,7 +323,7 @@ static void finish(const struct prb_attached_ctx *c, const struct pending *P, co
                 A[r][i] = w[i][r];
             y[r] = P->ck[r] - a[r];
         }
-        if (dr_mat4_condition(A) >= c->eps) {
+        if (dr_mat4_condition_at_least(A, c->eps)) {
             dr_mat4_solve(A, y, x);
         } else {
             /* (near-)singular: the direction forgot where it came from;

@@ -9,6 +9,7 @@
  * threshold (prb then takes forward mode), and the solver must invert what
  * the measure calls well conditioned. */
 #include <math.h>
+#include <stdbool.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -103,6 +104,38 @@ static void check_singular(void)
     CHECK(dr_mat4_condition(N) == 0.0, "Inf entry: %g", dr_mat4_condition(N));
 }
 
+/* dr_mat4_condition_at_least gives the answer dr_mat4_condition(A) >= eps
+ * gives, for ratios on either side of each threshold and close to it, for
+ * matrices with zero rows or columns (a diffuse bounce's Jacobian) and
+ * for singular, zero and non-finite ones. */
+static void check_decisions(void)
+{
+    const double eps[] = {1e-2, 1e-3, 1e-4, 1e-5};
+    const double near[] = {1e-3, 0.3, 0.9, 0.999, 0.99999, 1.00001, 1.001, 1.1, 3.0, 1e3};
+    int differ = 0, checked = 0;
+    for (size_t e = 0; e < sizeof eps / sizeof eps[0]; e++)
+        for (size_t k = 0; k < sizeof near / sizeof near[0]; k++)
+            for (int rep = 0; rep < 40; rep++) {
+                double r = fmin(1.0, eps[e] * near[k]), s[4] = {1.0, 0.2 + 0.8 * drand48(), r, 0.0}, A[4][4];
+                s[3] = r + (1.0 - r) * drand48() * (rep % 2);   /* (every other: two small ones) */
+                with_singular_values(s, rep % 3 == 0 ? 1e-5 : rep % 3 == 1 ? 1e3 : 1.0, A);
+                if (rep % 5 == 0)   /* rows of zeros: the map forgets what it came from */
+                    for (int c = 0; c < 4; c++)
+                        A[2][c] = A[3][c] = 0.0;
+                for (size_t f = 0; f < sizeof eps / sizeof eps[0]; f++) {
+                    bool want = dr_mat4_condition(A) >= eps[f], got = dr_mat4_condition_at_least(A, eps[f]);
+                    differ += want != got;
+                    checked++;
+                }
+            }
+    CHECK(differ == 0, "%d of %d threshold decisions differ from the eigenvalues'", differ, checked);
+    double Z[4][4] = {{0}}, N[4][4] = {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, NAN, 0}, {0, 0, 0, 1}};
+    CHECK(!dr_mat4_condition_at_least(Z, 1e-3) && dr_mat4_condition_at_least(Z, 0.0),
+          "zero matrix: below every positive threshold, not below 0");
+    CHECK(!dr_mat4_condition_at_least(N, 1e-3), "a NaN entry passes the threshold");
+    fprintf(stderr, "threshold decisions: %d checked against the eigenvalues\n", checked);
+}
+
 /* A x = y recovered for a known x, where the ratio is at least 1e-4 */
 static void check_solve(void)
 {
@@ -142,6 +175,7 @@ int main(void)
     srand48(20261206);
     check_known_ratios();
     check_singular();
+    check_decisions();
     check_solve();
     return TEST_END();
 }
