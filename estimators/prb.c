@@ -205,25 +205,26 @@ static void attached_pixel(struct prb_job *j, int thread, int64_t px, const dr_v
     struct prb_attached_ctx c = {.b = b, .zeros = j->zeros, .eps = b->p->regularize, .radius = j->radius,
                                  .rays = &b->thr[thread].rays};
     for (int sidx = 0; sidx < b->p->spp; sidx++) {
-        struct dr_sampler smp;
-        dr_vec3 o, d;
         struct dr_grad_sink det, att;
         if (dr_is_black(adj[sidx]))
             continue;   /* (cross mode: this sample does not matter to the loss) */
         if (b->mis)
             dr_est_mis_sinks(b, thread, px, &det, &att);
-        dr_est_camera_ray(b, thread, px, sidx, &smp, &o, &d);
-        c.log = logs ? &logs[sidx] : NULL;
-        const struct prb_attached_sums *sums = primal ? &primal[sidx].L : NULL;
         /* (a path without a derivative term: no vertex's sampling moves
          * either, dr_path_vertex_sampling_moves implies diff_bsdf; its
          * replay, two walks and a vertex adjoint per vertex, would add
-         * exact zeros. Still a sample: MIS counts it) */
-        const bool no_term = primal && primal[sidx].no_term;
-        if (!no_term &&
-            !prb_attached_sample(&c, smp, o, d, adj[sidx], sums, b->mis ? &att : sink, b->mis ? &det : NULL)) {
-            b->thr[thread].invalid++;
-            continue;
+         * exact zeros, so neither it nor its camera ray is made. Still a
+         * sample: MIS counts it) */
+        if (!(primal && primal[sidx].no_term)) {
+            struct dr_sampler smp;
+            dr_vec3 o, d;
+            dr_est_camera_ray(b, thread, px, sidx, &smp, &o, &d);
+            c.log = logs ? &logs[sidx] : NULL;
+            const struct prb_attached_sums *sums = primal ? &primal[sidx].L : NULL;
+            if (!prb_attached_sample(&c, smp, o, d, adj[sidx], sums, b->mis ? &att : sink, b->mis ? &det : NULL)) {
+                b->thr[thread].invalid++;
+                continue;
+            }
         }
         if (b->mis)
             dr_est_mis_sample_done(b, thread, px, &det, &att);
