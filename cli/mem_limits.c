@@ -248,7 +248,8 @@ static double tape_bytes(const struct grad_common *g, double paths_per_batch)
 {
     if (!g->estimator || strcmp(g->estimator->name, "tape") != 0)
         return 0.0;
-    return paths_per_batch * ((double)g->max_depth * (double)dr_tape_vertex_bytes() + 64.0);
+    const bool derivative = g->sampling == DR_SAMPLING_DERIVATIVE;
+    return paths_per_batch * ((double)g->max_depth * (double)dr_tape_vertex_bytes(derivative) + 64.0);
 }
 
 /* --sampling mis (estimators/mis.h): per thread, 2 x DR_MIS_GROUPS copies of

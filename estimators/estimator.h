@@ -204,9 +204,10 @@ extern const struct dr_estimator_ops *const dr_estimators[];   /* NULL-terminate
 const struct dr_estimator_ops *dr_estimator_find(const char *name);
 
 /* Bytes the tape estimator records per path vertex (its record plus the path's
- * share is bounded by this); the CLI's memory estimate uses it so that the
- * estimate follows the record when the record changes. */
-size_t dr_tape_vertex_bytes(void);
+ * share is bounded by this; under derivative sampling with the new
+ * directions it walks ahead of the sweep); the CLI's memory estimate uses it
+ * so that the estimate follows the record when the record changes. */
+size_t dr_tape_vertex_bytes(bool derivative);
 /* The tape's default batch: paths each worker records before it sweeps them.
  * About 2 MB of tape per worker on a Cornell box, so the sweep reads it
  * back from the cache (see tape.c). */

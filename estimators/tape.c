@@ -68,9 +68,10 @@ struct tape_light {
 #define TAPE_STEP ((int64_t)1 << 62)
 #define TAPE_LIGHT ((int64_t)1 << 61)
 
-size_t dr_tape_vertex_bytes(void)
+size_t dr_tape_vertex_bytes(bool derivative)
 {
-    return sizeof(struct tape_vertex);
+    return sizeof(struct tape_vertex) +
+           (derivative ? DR_DERIV_RAYS * (sizeof(struct dr_deriv_ray) + sizeof(struct dr_deriv_light)) : 0);
 }
 
 struct tape_path {
