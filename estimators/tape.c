@@ -873,17 +873,18 @@ static void record_and_sweep(void *ctx, int thread, int64_t begin, int64_t end)
     struct tape *tp = &j->tapes[thread];
     if (tp->failed)
         return;
-    tp->n_verts = tp->n_steps = tp->n_lights = tp->n_paths = 0;
+    tp->n_verts = tp->n_steps = tp->n_lights = tp->n_paths = tp->n_rays = 0;
     if (!(j->wave && record_wave(j, tp, thread, begin, end)))
         record_one_by_one(j, tp, thread, begin, end);
-    uint64_t bytes = tape_bytes(tp, j->b.popts.params->media_active);
-    tp->peak = bytes > tp->peak ? bytes : tp->peak;
     if (!tp->failed && j->b.p->cross)
         cross_adjoints(j, tp);
     if (!tp->failed && j->derivative && j->wave && !(j->b.popts.stages & DR_STAGE_MEDIA) &&
         !walk_ahead(j, thread, tp))
         for (int64_t i = 0; i < tp->n_verts; i++)
             tp->verts[i].n_rays = -1;   /* (out of memory: the sweep walks them) */
+    /* (after walk_ahead: its rays are held with the record until the sweep) */
+    uint64_t bytes = tape_bytes(tp, j->b.popts.params->media_active);
+    tp->peak = bytes > tp->peak ? bytes : tp->peak;
     if (!tp->failed)
         sweep_tape(j, thread, tp);
 }
