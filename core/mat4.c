@@ -3,6 +3,7 @@
 
 #include <math.h>
 #include <stdbool.h>
+#include <stddef.h>
 
 /* Cyclic Jacobi rotations on S = A^T A until the off-diagonal part is below
  * 1e-16 of the diagonal's norm: converged to rounding, the eigenvalues then
@@ -59,35 +60,51 @@ double dr_mat4_condition(double A[4][4])
     return hi > 0.0 ? sqrt(lo / hi) : 0.0;
 }
 
-/* det A by elimination with partial pivoting */
-static double det4(double A[4][4])
+/* Forward elimination with partial pivoting on [A | y] (M), in place: M's
+ * left 4x4 becomes upper triangular. A zero pivot leaves its column as it
+ * is. Returns the sign of the row permutation. One elimination for both
+ * the determinant and the solver. */
+static double eliminate(double M[4][5])
 {
-    double M[4][4], det = 1.0;
-    for (int i = 0; i < 4; i++)
-        for (int k = 0; k < 4; k++)
-            M[i][k] = A[i][k];
+    double sign = 1.0;
     for (int col = 0; col < 4; col++) {
         int piv = col;
         for (int r = col + 1; r < 4; r++)
             if (fabs(M[r][col]) > fabs(M[piv][col]))
                 piv = r;
-        if (M[piv][col] == 0.0)
-            return 0.0;
-        if (piv != col) {
-            det = -det;
-            for (int k = 0; k < 4; k++) {
-                double t = M[col][k];
-                M[col][k] = M[piv][k];
-                M[piv][k] = t;
-            }
+        if (piv != col)
+            sign = -sign;
+        for (int k = 0; k <= 4; k++) {
+            double t = M[col][k];
+            M[col][k] = M[piv][k];
+            M[piv][k] = t;
         }
-        det *= M[col][col];
         for (int r = col + 1; r < 4; r++) {
-            double f = M[r][col] / M[col][col];
-            for (int k = col; k < 4; k++)
+            double f = M[col][col] != 0.0 ? M[r][col] / M[col][col] : 0.0;
+            for (int k = col; k <= 4; k++)
                 M[r][k] -= f * M[col][k];
         }
     }
+    return sign;
+}
+
+/* [A | y] as eliminate takes it */
+static void augmented(double A[4][4], const double y[4], double M[4][5])
+{
+    for (int i = 0; i < 4; i++) {
+        for (int k = 0; k < 4; k++)
+            M[i][k] = A[i][k];
+        M[i][4] = y ? y[i] : 0.0;
+    }
+}
+
+static double det4(double A[4][4])
+{
+    double M[4][5];
+    augmented(A, NULL, M);
+    double det = eliminate(M);
+    for (int i = 0; i < 4; i++)
+        det *= M[i][i];
     return det;
 }
 
@@ -125,27 +142,8 @@ bool dr_mat4_condition_at_least(double A[4][4], double eps)
 void dr_mat4_solve(double A[4][4], const double y[4], double x[4])
 {
     double M[4][5];
-    for (int i = 0; i < 4; i++) {
-        for (int k = 0; k < 4; k++)
-            M[i][k] = A[i][k];
-        M[i][4] = y[i];
-    }
-    for (int col = 0; col < 4; col++) {
-        int piv = col;
-        for (int r = col + 1; r < 4; r++)
-            if (fabs(M[r][col]) > fabs(M[piv][col]))
-                piv = r;
-        for (int k = 0; k <= 4; k++) {
-            double t = M[col][k];
-            M[col][k] = M[piv][k];
-            M[piv][k] = t;
-        }
-        for (int r = col + 1; r < 4; r++) {
-            double f = M[col][col] != 0.0 ? M[r][col] / M[col][col] : 0.0;
-            for (int k = col; k <= 4; k++)
-                M[r][k] -= f * M[col][k];
-        }
-    }
+    augmented(A, y, M);
+    eliminate(M);
     for (int i = 3; i >= 0; i--) {
         double s = M[i][4];
         for (int k = i + 1; k < 4; k++)
