@@ -121,9 +121,17 @@ $(BUILD)/bench/soa_floor $(BUILD)/bench/soa_floor_%: LDFLAGS += $(FLOOR_VEC)
 $(BUILD)/bench/image_lib_rss: $(BUILD)/bench/image_lib_rss.o $(LIB)
 	$(CC) $(LDFLAGS) -rdynamic $< $(LIB) $(HOST_LIBS) -o $@
 
+# The allocation-failure injector of tests/cli_alloc_failures.sh, preloaded
+# into drender: built without the sanitizers (under them it hands on to
+# AddressSanitizer's allocator, tests/failalloc.c says how).
+FAILALLOC := $(BUILD)/tests/libfailalloc.so
+$(FAILALLOC): tests/failalloc.c
+	@mkdir -p $(dir $@)
+	$(CC) -std=c11 -O2 $(WARN) -shared -fPIC $< -o $@ -ldl
+
 # (the bench's programs are built too, not run: an interface they use that
 # changed fails here, not at the next `make bench`)
-test: deps $(BUILD)/drender $(TEST_BIN) $(BENCH_BIN)
+test: deps $(BUILD)/drender $(TEST_BIN) $(BENCH_BIN) $(FAILALLOC)
 	BUILD=$(BUILD) tests/run.sh
 
 # The whole suite again under AddressSanitizer and UndefinedBehaviorSanitizer.

@@ -32,6 +32,10 @@ const struct dr_command *dr_command_find(const char *name);
 
 /* "drender CMD: message" on stderr. */
 void cli_error(const char *cmd, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+/* The exit code for core/'s last error where the call's failures are
+ * otherwise `code` (bad input or usage): an allocation that failed is the
+ * work failing (DR_EXIT_FAILURE), whatever the call was. */
+int cli_error_exit(int code);
 
 /* Parse option values; on failure print a message naming the option and
  * return false. */

@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include "cli.h"
+#include "error.h"
 #include "clock.h"
 #include "path.h"   /* dr_stage_seconds */
 
@@ -25,6 +26,8 @@ void cli_error(const char *cmd, const char *fmt, ...)
     va_end(ap);
     fputc('\n', stderr);
 }
+
+int cli_error_exit(int code) { return dr_last_error_is_nomem() ? DR_EXIT_FAILURE : code; }
 
 bool cli_parse_int(const char *cmd, const char *opt, const char *text, long min, long max, long *out)
 {

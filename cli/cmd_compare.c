@@ -1043,7 +1043,7 @@ static int check_scene_args(struct cmp_run *r, const struct dr_scene *scene)
     fingerprint(r, scene, &ok);
     if (!ok) {
         cli_error("compare", "%s", dr_last_error());
-        return DR_EXIT_INPUT;
+        return cli_error_exit(DR_EXIT_INPUT);
     }
     if (a->ref_kind == CMP_REF_FILE)
         return cmp_reference_read(r, a->reference);

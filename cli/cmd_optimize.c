@@ -307,15 +307,23 @@ struct history {
     double *loss, *seconds, *error;   /* error: max |parameter - reference|, NaN without --reference */
 };
 
-static void history_add(struct history *h, int it, double loss, double sec, double err)
+/* Iteration it's loss, time and error into h; false when out of memory
+ * (h is then as it was). */
+static bool history_add(struct history *h, int it, double loss, double sec, double err)
 {
     if (it >= h->cap) {
         int cap = h->cap ? h->cap * 2 : 256;
         while (cap <= it)
             cap *= 2;
-        h->loss = realloc(h->loss, sizeof(double) * (size_t)cap);
-        h->seconds = realloc(h->seconds, sizeof(double) * (size_t)cap);
-        h->error = realloc(h->error, sizeof(double) * (size_t)cap);
+        /* (an array that grew before another failed is only larger: cap,
+         * which says what all three hold, grows once all have) */
+        double **arrays[3] = {&h->loss, &h->seconds, &h->error};
+        for (int k = 0; k < 3; k++) {
+            double *grown = realloc(*arrays[k], sizeof(double) * (size_t)cap);
+            if (!grown)
+                return false;
+            *arrays[k] = grown;
+        }
         h->cap = cap;
     }
     h->loss[it] = loss;
@@ -323,6 +331,7 @@ static void history_add(struct history *h, int it, double loss, double sec, doub
     h->error[it] = err;
     if (it + 1 > h->n)
         h->n = it + 1;
+    return true;
 }
 
 static void path_in(char *buf, size_t size, const char *dir, const char *name)
@@ -352,22 +361,25 @@ static void write_loss_csv(const char *dir, const struct history *h)
         unlink(tmp);
 }
 
-/* Reads back DIR/loss.csv (on --resume) up to `upto` iterations. */
-static void read_loss_csv(const char *dir, struct history *h, int upto)
+/* Reads back DIR/loss.csv (on --resume) up to `upto` iterations; false
+ * when out of memory. */
+static bool read_loss_csv(const char *dir, struct history *h, int upto)
 {
     char path[4096], line[256];
     path_in(path, sizeof path, dir, "loss.csv");
     FILE *f = fopen(path, "r");
     if (!f)
-        return;
-    while (fgets(line, sizeof line, f)) {
+        return true;
+    bool ok = true;
+    while (ok && fgets(line, sizeof line, f)) {
         int it;
         double l, s, e = NAN;
         int n = sscanf(line, "%d,%lf,%lf,%lf", &it, &l, &s, &e);
         if (n >= 3 && it >= 0 && it < upto)
-            history_add(h, it, l, s, n == 4 ? e : NAN);
+            ok = history_add(h, it, l, s, n == 4 ? e : NAN);
     }
     fclose(f);
+    return ok;
 }
 
 /* DIR/loss.png with gnuplot (a warning if gnuplot is missing). */
@@ -429,8 +441,10 @@ static int save_view(const struct opt_args *a, const struct dr_scene *scene, con
     char path[4096];
     path_in(path, sizeof path, a->out_dir, name);
     float *rgb = malloc(sizeof(float) * 3 * (size_t)t->rw * t->rh);
-    if (!rgb)
+    if (!rgb) {
+        cli_error("optimize", "%s: out of memory for a %dx%d image", path, t->rw, t->rh);
         return DR_EXIT_FAILURE;
+    }
     struct dr_render_opts ro = grad_render_opts(&a->g, t->w, t->h, 4 * a->g.spp, a->g.seed ^ 0xbefa, false);
     struct dr_camera cam = view_camera(scene, t->camera);
     int rc = dr_render(scene, &cam, &ro, rgb, NULL);
@@ -585,14 +599,15 @@ static int load_reference(const struct opt_args *a, struct opt_run *r)
     r->ref_scene = dr_scene_load_opts(a->reference, &a->g.load);
     if (!r->ref_scene) {
         cli_error("optimize", "--reference %s", dr_last_error());
-        return DR_EXIT_INPUT;
+        return cli_error_exit(DR_EXIT_INPUT);
     }
     struct dr_param_set *rps = dr_param_set_create(r->ref_scene, a->g.params, a->g.n_params);
     if (!rps || rps->total != r->ps->total) {
         cli_error("optimize", "--reference %s: does not have the same parameters (%s)", a->reference,
                   rps ? "different sizes" : dr_last_error());
+        const int code = rps ? DR_EXIT_USAGE : cli_error_exit(DR_EXIT_USAGE);
         dr_param_set_destroy(rps);
-        return DR_EXIT_USAGE;
+        return code;
     }
     r->ref = malloc(sizeof(double) * (size_t)r->ps->total);
     if (r->ref)
@@ -686,7 +701,7 @@ static int read_checkpoint(const struct opt_args *a, struct opt_run *r)
     int crc = dr_checkpoint_read(r->ckpt, r->ps, r->theta, r->adam, &it);
     if (crc != 0) {
         cli_error("optimize", "--resume: %s", dr_last_error());
-        return crc == DR_ERR_ARG ? DR_EXIT_USAGE : DR_EXIT_INPUT;
+        return crc == DR_ERR_ARG ? DR_EXIT_USAGE : cli_error_exit(DR_EXIT_INPUT);
     }
     if (it > a->iters) {
         cli_error("optimize", "--resume: %s is at iteration %lld, beyond --iters %d", r->ckpt, (long long)it,
@@ -718,14 +733,19 @@ static int opt_open_outputs(const struct opt_args *a, struct opt_run *r)
         return DR_EXIT_FAILURE;
     }
     if (!a->resume) {
-        if ((rc = save_view(a, r->scene, "before.png")) != DR_EXIT_OK)
+        if ((rc = save_view(a, r->scene, "before.png")) != DR_EXIT_OK) {
+            unmake_dirs(a->out_dir, made_from);
             return rc;
+        }
         char tp[4096];
         path_in(tp, sizeof tp, a->out_dir, "target.png");
         dr_image_write(tp, a->targets[0].rw, a->targets[0].rh, 3, a->targets[0].rgb);
         return -1;
     }
-    read_loss_csv(a->out_dir, &r->hist, r->it0);
+    if (!read_loss_csv(a->out_dir, &r->hist, r->it0)) {
+        cli_error("optimize", "out of memory for the loss history");
+        return DR_EXIT_FAILURE;
+    }
     /* a run resumed at its last iteration reports the loss it ended with */
     r->loss = r->it0 > 0 && r->hist.n >= r->it0 ? r->hist.loss[r->it0 - 1] : NAN;
     dr_param_set_put(r->scene, r->ps, r->theta);
@@ -891,7 +911,10 @@ static int opt_iterations(const struct opt_args *a, struct opt_run *r)
             return DR_EXIT_FAILURE;
         }
         double now = dr_clock_seconds(), sec = now - t_it, err = reference_max_error(r);
-        history_add(&r->hist, it, r->loss, sec, err);
+        if (!history_add(&r->hist, it, r->loss, sec, err)) {
+            cli_error("optimize", "out of memory for the loss history");
+            return DR_EXIT_FAILURE;
+        }
         write_loss_csv(a->out_dir, &r->hist);
         opt_report(a, r, it, sec, (now - t_loop) / (it - r->it0 + 1), err);
         /* (an interrupted run's is on disk before it stops; the others

@@ -205,7 +205,7 @@ int cmd_params(int argc, char **argv)
     struct dr_scene *scene = dr_scene_load_opts(scene_path, &load);
     if (!scene) {
         cli_error("params", "%s", dr_last_error());
-        rc = DR_EXIT_INPUT;
+        rc = cli_error_exit(DR_EXIT_INPUT);
         goto out;
     }
     /* the lighting a rendering command would use with the same options

@@ -354,7 +354,7 @@ int grad_apply_lighting(const struct grad_common *g, const char *scene_path, str
     if (g->env_given) {
         if (dr_scene_set_environment(scene, g->env_color, g->env_strength, g->env_file, false) != 0) {
             cli_error(g->cmd, "--env %s", dr_last_error());
-            return g->env_file ? DR_EXIT_INPUT : DR_EXIT_FAILURE;
+            return g->env_file ? cli_error_exit(DR_EXIT_INPUT) : DR_EXIT_FAILURE;
         }
         return -1;
     }
@@ -396,7 +396,7 @@ int grad_load_scene(struct grad_common *g, char **scene_path, struct dr_scene **
     *scene = dr_scene_load_opts(*scene_path, &g->load);
     if (!*scene) {
         cli_error(g->cmd, "%s", dr_last_error());
-        return DR_EXIT_INPUT;
+        return cli_error_exit(DR_EXIT_INPUT);
     }
     int lrc = grad_apply_lighting(g, *scene_path, *scene);
     if (lrc >= 0)
@@ -425,6 +425,10 @@ int grad_param_set(const struct grad_common *g, const struct dr_scene *scene, st
 {
     *set = dr_param_set_create(scene, g->params, g->n_params);
     if (!*set) {
+        if (dr_last_error_is_nomem()) {
+            cli_error(g->cmd, "%s", dr_last_error());
+            return DR_EXIT_FAILURE;
+        }
         cli_error(g->cmd, "--param %s", dr_last_error());
         return DR_EXIT_USAGE;
     }
@@ -489,7 +493,7 @@ int grad_load_target(const char *cmd, const char *path, struct dr_image *img, fl
 {
     if (dr_image_read(path, img) != 0) {
         cli_error(cmd, "--target %s", dr_last_error());
-        return DR_EXIT_INPUT;
+        return cli_error_exit(DR_EXIT_INPUT);
     }
     size_t n = (size_t)img->width * img->height;
     *rgb = malloc(sizeof(float) * n * 3);
@@ -524,7 +528,7 @@ static int apply_set(const char *cmd, struct dr_scene *scene, const char *spec)
     struct dr_param p;
     if (dr_param_resolve(scene, ptr, &p) != 0) {
         cli_error(cmd, "--set %s", dr_last_error());
-        return DR_EXIT_USAGE;
+        return cli_error_exit(DR_EXIT_USAGE);
     }
     if (dr_param_is_array(&p)) {
         cli_error(cmd, "--set %s: images cannot be set from the command line (nor density grids)", ptr);
@@ -734,7 +738,7 @@ static int film_option(struct grad_common *g, int c, const char *arg)
     if (c == GOPT_FILTER) {
         if (dr_filter_parse(arg, &g->filter) != 0) {
             cli_error(g->cmd, "--filter: %s", dr_last_error());
-            return DR_EXIT_USAGE;
+            return cli_error_exit(DR_EXIT_USAGE);
         }
         return 0;
     }

@@ -2,6 +2,7 @@
 
 #include <stdarg.h>
 #include <stdio.h>
+#include <string.h>
 
 static _Thread_local char error_buf[1024];
 
@@ -14,6 +15,8 @@ void dr_set_error(const char *fmt, ...)
 }
 
 const char *dr_last_error(void) { return error_buf[0] ? error_buf : "unknown error"; }
+
+bool dr_last_error_is_nomem(void) { return strstr(error_buf, "out of memory") != NULL; }
 
 static void default_warn(const char *msg) { fprintf(stderr, "drender: warning: %s\n", msg); }
 static dr_warn_fn warn_handler = default_warn;

@@ -4,6 +4,8 @@
 #ifndef DR_ERROR_H
 #define DR_ERROR_H
 
+#include <stdbool.h>
+
 #ifdef __cplusplus
 extern "C" {
 #endif
@@ -22,6 +24,12 @@ __attribute__((format(printf, 1, 2)))
 #endif
 void dr_set_error(const char *fmt, ...);
 const char *dr_last_error(void);
+/* True if the last error is an allocation that failed: its message says "out
+ * of memory" (every such message in core/ does, and no other does; a request
+ * refused for the memory it would need says "would need ... more than"). The
+ * CLI exits 1 for it, as for any work that failed, where the same call's other
+ * errors are bad input (3) or usage (2). */
+bool dr_last_error_is_nomem(void);
 
 /* Warnings (things the scene has that drender ignores) go through one hook so
  * the CLI can route them; the default prints "drender: warning: ..." to stderr. */
