@@ -960,6 +960,9 @@ static void fingerprint(struct cmp_run *r, const struct dr_scene *scene, bool *o
         dr_param_set_get(scene, r->ps, vals);
         fp->values_hash = cmp_hash_bytes(0, vals, sizeof(double) * (size_t)r->ps->total);
         free(vals);
+    } else {   /* (a fingerprint without the values could match another scene's reference) */
+        dr_set_error("out of memory");
+        *ok = false;
     }
     fp->width = a->g.width;
     fp->height = a->g.height;

@@ -2,7 +2,8 @@
 # Allocation failures: every allocation drender's own code makes, made to
 # fail in turn (tests/failalloc.c, preloaded), in render, grad (each
 # estimator's paths: the wavefront, the arrays, the tape's walk-ahead,
-# attached sampling, media), fdcheck and optimize. Each run must end in one
+# attached sampling, media, textures), fdcheck, compare and optimize. Each
+# run must end in one
 # of two ways:
 #   - the work failed: exit 1, "out of memory" on stderr, nothing on stdout
 #     and no output file (nothing half-written);
@@ -43,10 +44,15 @@ tex=$DR_TESTDIR/data/optimize/texture-flat.gltf
 same_result() {
     local kind=$1 ref=$2 got=$3 f
     for f in $(ls -A "$ref"); do
+        [ "$kind" = files ] && break
         [ -e "$got/$f" ] || { echo "no $f"; return 1; }
         cmp -s "$ref/$f" "$got/$f" || oiiotool "$ref/$f" "$got/$f" --diff --fail 0 --failpercent 0 >/dev/null 2>&1 ||
             { echo "$f differs"; return 1; }
     done
+    if [ "$kind" = files ]; then   # (compare: its results hold times, so only that the same files are there)
+        [ "$(cd "$ref" && find . | sort)" = "$(cd "$got" && find . | sort)" ] || { echo "other files"; return 1; }
+        return 0
+    fi
     if [ "$kind" = json ]; then
         python3 - "$ref.stdout" "$got.stdout" <<'PY'
 import json, sys
@@ -73,7 +79,8 @@ PY
 # counting its allocations and their call sites, then with one allocation
 # failing per run: the first at each call site no earlier case has tried (a
 # site's later allocations take the same way out; the cases share loading).
-# KIND: json (grad --json: compare the numbers) or text (stdout as it is).
+# KIND: json (grad --json: compare the numbers), text (stdout as it is) or
+# files (the same files written; compare's hold times).
 # FALLBACK: yes if some failure must be absorbed by a fallback.
 # KEEPS: - (a failed run leaves no file) or the output a failed run must not
 # leave (optimize keeps its working directory, with its checkpoint: it is
@@ -81,7 +88,7 @@ PY
 tried=$tmp/tried-sites
 : >"$tried"
 sweep() {
-    local name=$1 kind=$2 fallback=$3 keeps=$4 n injected k rc absorbed=0 failed=0 why ks
+    local name=$1 kind=$2 fallback=$3 keeps=$4 n injected k rc absorbed=0 failed=0 why ks where=
     shift 4
     cli_cmd_label="$name"
     mkdir -p "$tmp/ref"
@@ -91,6 +98,7 @@ sweep() {
     cp "$tmp/ref.stdout" "$tmp/out"
     [ "$rc" -eq 0 ] || fail "$name: the reference run failed"
     read -r n injected <"$tmp/report" || fail "$name: no allocation count"
+    cp "$tmp/report" "$tmp/ref-report"
     # (the injector must see drender's allocations: a count of none would pass anything)
     [ "$n" -ge 20 ] || fail "$name: only $n allocations counted"
     # the first allocation at each site not tried before (the report's lines
@@ -123,13 +131,16 @@ sweep() {
         elif [ "$rc" -eq 0 ]; then
             why=$(same_result "$kind" "$tmp/ref" "$tmp/run") ||
                 fail "$name: allocation $k failed and the run went on, with another result: $why"
-            [ "$injected" = 1 ] && absorbed=$((absorbed + 1))
+            if [ "$injected" = 1 ]; then   # (named in the summary: which fallbacks were taken)
+                absorbed=$((absorbed + 1))
+                where+=" $(addr2line -f -e "$DRENDER" "0x$(sed -n "$((k + 1))p" "$tmp/ref-report")" | head -n 1)@$k"
+            fi
         else
             fail "$name: allocation $k: exit $rc"
         fi
     done
     [ "$fallback" = no ] || [ "$absorbed" -gt 0 ] || fail "$name: no fallback took a failed allocation"
-    echo "$name: $n allocations, $(echo "$ks" | wc -w) tried: $failed failed the work cleanly, $absorbed were absorbed by a fallback"
+    echo "$name: $n allocations, $(echo "$ks" | wc -w) tried: $failed failed the work cleanly, $absorbed were absorbed by a fallback${where:+ (in$where)}"
     rm -rf "$tmp/ref"
 }
 
@@ -150,6 +161,8 @@ sweep "grad forward" text no - grad "$box" --param /materials/2/pbrMetallicRough
     -o d.exr
 sweep "fdcheck" text no - fdcheck "$box" --param /materials/2/pbrMetallicRoughness/baseColorFactor --res 8x8 --spp 4 \
     --batches 4
+sweep "compare" files no - compare "$box" --param /materials/2/pbrMetallicRoughness/baseColorFactor --spp 2 --res 8x8 \
+    --estimators prb,tape -o cmp
 sweep "optimize" text no fit.gltf optimize "$box" --param /materials/2/pbrMetallicRoughness/baseColorFactor \
     --target "$tmp/target.exr" --res 16x16 --spp 4 --iters 2 -o fit.gltf
 }

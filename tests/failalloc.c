@@ -115,7 +115,15 @@ __attribute__((constructor)) static void failalloc_init(void)
     dl_iterate_phdr(find_main_program, NULL);
     const char *k = getenv("FAILALLOC_NTH");
     nth = k ? strtol(k, NULL, 10) : 0;
-    report = getenv("FAILALLOC_REPORT");
+    static char report_path[4096];
+    const char *r = getenv("FAILALLOC_REPORT");
+    if (r && strlen(r) < sizeof report_path)
+        report = strcpy(report_path, r);
+    /* (the programs drender starts, gnuplot for one, inherit the preload
+     * but not the settings: their allocations never fail, and their exit
+     * does not overwrite the report) */
+    unsetenv("FAILALLOC_NTH");
+    unsetenv("FAILALLOC_REPORT");
 }
 
 __attribute__((destructor)) static void failalloc_report(void)
