@@ -125,9 +125,10 @@ $(BUILD)/bench/image_lib_rss: $(BUILD)/bench/image_lib_rss.o $(LIB)
 # into drender: built without the sanitizers (under them it hands on to
 # AddressSanitizer's allocator, tests/failalloc.c says how).
 FAILALLOC := $(BUILD)/tests/libfailalloc.so
-$(FAILALLOC): tests/failalloc.c
+$(FAILALLOC): tests/failalloc.c tests/failalloc_new.cpp
 	@mkdir -p $(dir $@)
-	$(CC) -std=c11 -O2 $(WARN) -shared -fPIC $< -o $@ -ldl
+	$(CC) -std=c11 -O2 $(WARN) -fPIC -c tests/failalloc.c -o $(BUILD)/tests/failalloc.o
+	$(CXX) -std=c++17 -O2 $(WARN) -shared -fPIC $(BUILD)/tests/failalloc.o tests/failalloc_new.cpp -o $@ -ldl
 
 # (the bench's programs are built too, not run: an interface they use that
 # changed fails here, not at the next `make bench`)

@@ -5,6 +5,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "json_release.h"
+
 #include <draco/compression/decode.h>
 #include <draco/mesh/mesh.h>
 
@@ -63,7 +65,8 @@ bool dr_draco_decode(const unsigned char *data, size_t size, dr_draco_mesh *out,
 bool dr_draco_strip_indices(std::string &json_text)
 {
     if (json_text.find("KHR_draco_mesh_compression") == std::string::npos) return false;
-    nlohmann::json j = nlohmann::json::parse(json_text, nullptr, /*allow_exceptions=*/false);
+    DrJsonDocument doc(nlohmann::json::parse(json_text, nullptr, /*allow_exceptions=*/false));
+    nlohmann::json &j = doc.j;
     if (j.is_discarded() || !j.is_object()) return false;   /* tinygltf reports the syntax error */
     auto meshes = j.find("meshes");
     if (meshes == j.end() || !meshes->is_array()) return false;

@@ -21,6 +21,7 @@
 #include <map>
 #include <memory>
 #include <set>
+#include <new>
 #include <string>
 #include <utility>
 #include <vector>
@@ -538,6 +539,15 @@ void Loader::decode_images()
 {
     const size_t n = encoded_images_.size();
     std::vector<dr_image> out(n, dr_image{});
+    /* the decoded images not yet handed to images_, released if an
+     * allocation below throws (each is zeroed once handed on) */
+    struct Pending {
+        std::vector<dr_image> &images;
+        ~Pending()
+        {
+            for (dr_image &im : images) dr_image_release(&im);
+        }
+    } pending{out};
     std::vector<int> rc(n, 0);
     ThreadMessages why(n);
     parallel_each(n, [&](size_t k) {
@@ -555,10 +565,11 @@ void Loader::decode_images()
         if (images_.size() <= size_t(idx)) images_.resize(size_t(idx) + 1, dr_image{});
         dr_image_release(&images_[size_t(idx)]);
         images_[size_t(idx)] = out[k];   /* ours now: released by the destructor if loading fails */
+        out[k] = dr_image{};
         tinygltf::Image &im = model_.images[size_t(idx)];
-        im.width = out[k].width;
-        im.height = out[k].height;
-        im.component = out[k].channels;
+        im.width = images_[size_t(idx)].width;
+        im.height = images_[size_t(idx)].height;
+        im.component = images_[size_t(idx)].channels;
         im.bits = 32;
         im.pixel_type = TINYGLTF_COMPONENT_TYPE_FLOAT;
     }
@@ -647,6 +658,10 @@ void Loader::load_model()
             fail(DR_ERR_IO, "/buffers/%zu/uri: cannot read '%s': %s", b, file.c_str(),
                  strerror(fs_fail_errno_));
         }
+        /* (tinygltf catches what its JSON parser throws and hands on its
+         * what(): "std::bad_alloc" is an allocation that failed, not a
+         * malformed file) */
+        if (err.find("std::bad_alloc") != std::string::npos) throw std::bad_alloc();
         fail(DR_ERR_FORMAT, "%s", trim_message(err.empty() ? "tinygltf failed to load the file" : err).c_str());
     }
     size_t start = 0;

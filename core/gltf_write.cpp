@@ -52,6 +52,7 @@
 #include "image_io.h"
 #include "medium.h"
 #include "draco_decode.h"
+#include "json_release.h"
 
 namespace {
 
@@ -377,7 +378,8 @@ void Writer::remember_draco_indices(const std::string &json_text)
 {
     draco_indices_.clear();
     if (json_text.find("KHR_draco_mesh_compression") == std::string::npos) return;
-    nlohmann::json j = nlohmann::json::parse(json_text, nullptr, /*allow_exceptions=*/false);
+    DrJsonDocument doc(nlohmann::json::parse(json_text, nullptr, /*allow_exceptions=*/false));
+    nlohmann::json &j = doc.j;
     if (j.is_discarded() || !j.is_object() || !j.contains("meshes") || !j["meshes"].is_array()) return;
     for (size_t m = 0; m < j["meshes"].size(); m++) {
         const nlohmann::json &mesh = j["meshes"][m];
@@ -986,7 +988,8 @@ void Writer::fix_json()
     } else {
         json_text.assign(bytes.begin(), bytes.end());
     }
-    nlohmann::json j = nlohmann::json::parse(json_text, nullptr, /*allow_exceptions=*/false);
+    DrJsonDocument doc(nlohmann::json::parse(json_text, nullptr, /*allow_exceptions=*/false));
+    nlohmann::json &j = doc.j;
     if (j.is_discarded() || !j.is_object())
         fail(DR_ERR_IO, "cannot write: the written file is incomplete (disk full?)");
     repair(j);

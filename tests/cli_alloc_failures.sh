@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Allocation failures: every allocation drender's own code makes, made to
-# fail in turn (tests/failalloc.c, preloaded), in render, grad (each
+# fail in turn (tests/failalloc.c, preloaded), in render (the bundled box,
+# two real assets: Draco, a normal map), grad (each
 # estimator's paths: the wavefront, the arrays, the tape's walk-ahead,
 # attached sampling, media, textures), fdcheck, compare and optimize. Each
 # run must end in one
@@ -79,6 +80,8 @@ PY
 # counting its allocations and their call sites, then with one allocation
 # failing per run: the first at each call site no earlier case has tried (a
 # site's later allocations take the same way out; the cases share loading).
+# (With two threads the workers' allocations may come in another order from
+# run to run: the k-th is then another of that phase's sites.)
 # KIND: json (grad --json: compare the numbers), text (stdout as it is) or
 # files (the same files written; compare's hold times).
 # FALLBACK: yes if some failure must be absorbed by a fallback.
@@ -150,6 +153,10 @@ ROUGH="--set /materials/2/pbrMetallicRoughness/metallicFactor=1 --set /materials
 # shellcheck disable=SC2086  # (R, ROUGH: word lists)
 {
 sweep "render" text no - render "$box" --res 16x16 --spp 2 -o out.exr
+find_samples   # (real assets: Draco, a normal map with supplied tangents)
+sweep "render draco" text no - render "$samples/Box/glTF-Draco/Box.gltf" --res 16x16 --spp 2 -o out.exr
+sweep "render normal map" text no - render "$samples/NormalTangentTest/glTF/NormalTangentTest.gltf" --res 16x16 \
+    --spp 2 -o out.exr
 sweep "grad prb" json yes - grad "$box" --param /materials/2/pbrMetallicRoughness/baseColorFactor $R
 sweep "grad prb attached" json no - grad "$box" $ROUGH --sampling attached $R
 sweep "grad tape derivative" json yes - grad "$box" $ROUGH --sampling derivative --estimator tape $R

@@ -2,7 +2,8 @@
  * (tests/cli_alloc_failures.sh), loaded with LD_PRELOAD.
  *
  * It counts the allocations (malloc, calloc, realloc, aligned_alloc,
- * posix_memalign) that drender's own code makes: those whose caller lies in
+ * posix_memalign, and C++'s operator new, failalloc_new.cpp, which throws
+ * std::bad_alloc when it fails) that drender's own code makes: those whose caller lies in
  * the main program's executable segments. Allocations of the libraries
  * (OpenImageIO, Embree, tinygltf, the C++ runtime) are not counted and never
  * fail: the test is about drender's fallbacks and error paths, not theirs.
@@ -157,6 +158,17 @@ static int should_fail(const void *caller)
         return 1;
     }
     return 0;
+}
+
+/* for the C++ allocation functions (tests/failalloc_new.cpp): the same
+ * count, and the real allocator */
+int failalloc_should_fail(const void *caller) { return should_fail(caller); }
+
+void *failalloc_real_malloc(size_t n)
+{
+    if (!real_malloc)
+        resolve();
+    return real_malloc ? real_malloc(n) : bootstrap_alloc(n);
 }
 
 void *malloc(size_t n)
