@@ -1,11 +1,10 @@
 #!/usr/bin/env bash
 # Allocation failures: every allocation drender's own code makes, made to
 # fail in turn (tests/failalloc.c, preloaded), in render (the bundled box,
-# two real assets: Draco, a normal map), grad (each
-# estimator's paths: the wavefront, the arrays, the tape's walk-ahead,
-# attached sampling, media, textures), fdcheck, compare and optimize. Each
-# run must end in one
-# of two ways:
+# two real assets: Draco, a normal map), grad (each estimator's paths: the
+# wavefront, the arrays, the tape's walk-ahead, attached sampling, media,
+# textures), fdcheck, compare and optimize. Each run must end in one of two
+# ways:
 #   - the work failed: exit 1, "out of memory" on stderr, nothing on stdout
 #     and no output file (nothing half-written);
 #   - a fallback took over (the lanes, the arrays and the walk-ahead each
