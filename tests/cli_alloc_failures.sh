@@ -2,9 +2,9 @@
 # Allocation failures: every allocation drender's own code makes, made to
 # fail in turn (tests/failalloc.c, preloaded), in render (the bundled box,
 # two real assets: Draco, a normal map), grad (each estimator's paths: the
-# wavefront, the arrays, the tape's walk-ahead, attached sampling, media,
-# textures), fdcheck, compare and optimize. Each run must end in one of two
-# ways:
+# wavefront, the arrays, the walks ahead under derivative sampling,
+# attached sampling, media, textures), fdcheck, compare and optimize. Each
+# run must end in one of two ways:
 #   - the work failed: exit 1, "out of memory" on stderr, nothing on stdout
 #     and no output file (nothing half-written);
 #   - a fallback took over (the lanes, the arrays and the walk-ahead each
@@ -159,6 +159,7 @@ sweep "render normal map" text no - render "$samples/NormalTangentTest/glTF/Norm
 sweep "grad prb" json yes - grad "$box" --param /materials/2/pbrMetallicRoughness/baseColorFactor $R
 sweep "grad prb attached" json no - grad "$box" $ROUGH --sampling attached $R
 sweep "grad tape derivative" json yes - grad "$box" $ROUGH --sampling derivative --estimator tape $R
+sweep "grad prb derivative" json yes - grad "$box" $ROUGH --sampling derivative $R
 sweep "grad prb mis" json no - grad "$box" $ROUGH --sampling mis --regularize 0.01 $R
 sweep "grad texture" json no - grad "$tex" --param /images/0 --param /materials/0/pbrMetallicRoughness/baseColorFactor \
     --res 16x16 --spp 8 --threads 2 --target "$tmp/target.exr" --json --grad-dir .
