@@ -55,6 +55,8 @@ struct prb_job {
     struct deferred *deferred[DR_MAX_THREADS];   /* derivative sampling: the new directions the replays
                                                     drew, walked many at a time (deferred_add) */
     bool deferring[DR_MAX_THREADS];              /* ... within this thread's prb_pixels call */
+    bool defer;   /* derivative sampling with a BSDF parameter (dr_est_sampling_run): the only
+                     runs that draw new directions, so the only ones that make the buffers */
 };
 
 /* Derivative sampling's new directions, deferred: a replay draws them
@@ -675,11 +677,11 @@ static uint64_t deferred_bytes(void)
 
 /* The thread's deferred directions for a prb_pixels call that adds to sink:
  * made on first use, with the lanes they are walked on. False (then each
- * replay walks its own, d_path_deriv_sample): not derivative sampling, or
- * out of memory. */
+ * replay walks its own, d_path_deriv_sample): no new directions to draw
+ * (prb_job.defer), or out of memory. */
 static bool deferred_begin(struct prb_job *j, int thread, const struct dr_grad_sink *sink)
 {
-    if (j->b.p->sampling != DR_SAMPLING_DERIVATIVE)
+    if (!j->defer)
         return false;
     if (!j->waves[thread] && !(j->waves[thread] = dr_wave_create()))
         return false;
@@ -957,7 +959,8 @@ static int prb_run(struct dr_est_base *b)
         if (arrays)
             per_thread += dr_wave_soa_walk_bytes();
     }
-    if (b->p->sampling == DR_SAMPLING_DERIVATIVE)   /* (deferred_begin: the directions, and the lanes) */
+    j->defer = run == DR_SAMPLING_DERIVATIVE;
+    if (j->defer)   /* (deferred_begin: the directions, and the lanes) */
         per_thread += deferred_bytes() + (j->wave ? 0 : dr_wave_bytes());
     b->scratch_bytes = per_thread * (uint64_t)b->acc.threads;   /* (at most prb_thread_bytes each) */
     return dr_parallel_for_static((int64_t)b->p->width * b->p->height, PIXEL_CHUNK, b->acc.threads, prb_pixels, j);
