@@ -32,6 +32,13 @@ const struct dr_command *dr_command_find(const char *name);
 
 /* "drender CMD: message" on stderr. */
 void cli_error(const char *cmd, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+
+/* Flushes and closes standard output at the end of a command (cmd: its name,
+ * or NULL): when that, or an earlier write to it, failed (a full disk, a
+ * closed file), says so and returns DR_EXIT_FAILURE in place of rc's success. */
+int cli_close_stdout(const char *cmd, int rc);
+/* The same without closing (batch: after each job), clearing the error. */
+int cli_flush_stdout(const char *cmd, int rc);
 /* The exit code for core/'s last error where the call's failures are
  * otherwise `code` (bad input or usage): an allocation that failed is the
  * work failing (DR_EXIT_FAILURE), whatever the call was. */

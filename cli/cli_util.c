@@ -2,6 +2,7 @@
 #include <limits.h>
 #include <math.h>
 #include <stdarg.h>
+#include <stdbool.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/resource.h>
@@ -254,3 +255,27 @@ void json_name_list(FILE *f, const char *names)
     }
     fputc(']', f);
 }
+
+/* Standard output goes through stdio's buffer, so a full disk shows only when
+ * it is flushed: most often at exit, where nobody looks. A command whose
+ * output was lost must not exit 0 (coreutils' close_stdout does the same).
+ * An earlier failed write leaves only the stream's error flag; its cause is
+ * then unknown unless the final flush fails again. */
+static int stdout_failed(int rc, bool close_it, const char *cmd)
+{
+    errno = 0;
+    int e = fflush(stdout) != 0 ? errno : 0;
+    bool failed = e != 0 || ferror(stdout);
+    if (close_it && fclose(stdout) != 0 && !failed)
+        failed = true, e = errno;
+    if (!failed)
+        return rc;
+    cli_error(cmd, "cannot write standard output: %s", e ? strerror(e) : "a write failed");
+    if (!close_it)
+        clearerr(stdout);   /* (reported: the next job starts clean) */
+    return rc == DR_EXIT_OK ? DR_EXIT_FAILURE : rc;
+}
+
+int cli_flush_stdout(const char *cmd, int rc) { return stdout_failed(rc, false, cmd); }
+
+int cli_close_stdout(const char *cmd, int rc) { return stdout_failed(rc, true, cmd); }

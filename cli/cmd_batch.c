@@ -192,8 +192,7 @@ static int run_job(const struct job *j)
     optind = 0;   /* glibc: a full re-initialisation of getopt for the job's own parse */
     cli_mark_job_start();
     fflush(stdout);
-    int rc = c->run(j->argc, (char **)j->argv);
-    fflush(stdout);
+    int rc = cli_flush_stdout(c->name, c->run(j->argc, (char **)j->argv));
     fflush(stderr);
     return rc;
 }

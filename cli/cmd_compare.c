@@ -1117,8 +1117,7 @@ static int write_outputs(const struct cmp_run *r, const char *dir)
         out_path(dst, sizeof dst, dir, "", out_files[i].name);
         rename(tmp[i], dst);
     }
-    cmp_write_plots(r, dir);
-    return -1;
+    return cmp_write_plots(r, dir) != 0 ? DR_EXIT_FAILURE : -1;
 }
 
 static void print_summary(const struct cmp_run *r)

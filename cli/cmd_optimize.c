@@ -16,6 +16,7 @@
 #include "bigalloc.h"
 #include "camera.h"
 #include "cli.h"
+#include "cut_short.h"
 #include "error.h"
 #include "gltf_write.h"
 #include "grad_common.h"
@@ -339,15 +340,18 @@ static void path_in(char *buf, size_t size, const char *dir, const char *name)
     snprintf(buf, size, "%s/%s", dir, name);
 }
 
-/* Rewrites DIR/loss.csv atomically. */
-static void write_loss_csv(const char *dir, const struct history *h)
+/* Rewrites DIR/loss.csv atomically: false, said, when it cannot be written
+ * (--resume reads it back: a run must not go on without it). */
+static bool write_loss_csv(const char *dir, const struct history *h)
 {
     char path[4096], tmp[4200];
     path_in(path, sizeof path, dir, "loss.csv");
     snprintf(tmp, sizeof tmp, "%s.tmp", path);
     FILE *f = fopen(tmp, "w");
-    if (!f)
-        return;
+    if (!f) {
+        cli_error("optimize", "%s: cannot write: %s", path, strerror(errno));
+        return false;
+    }
     fprintf(f, "iteration,loss,seconds,parameter_error\n");
     for (int i = 0; i < h->n; i++) {
         fprintf(f, "%d,%.10g,%.4f,", i, h->loss[i], h->seconds[i]);
@@ -355,10 +359,17 @@ static void write_loss_csv(const char *dir, const struct history *h)
             fprintf(f, "%.6g", h->error[i]);
         fputc('\n', f);
     }
-    if (fclose(f) == 0)
-        rename(tmp, path);
-    else
+    errno = 0;
+    int e = fflush(f) != 0 || ferror(f) ? (errno ? errno : EIO) : 0;
+    if (fclose(f) != 0 && !e)
+        e = errno;
+    if (!e && rename(tmp, path) != 0)
+        e = errno;
+    if (e) {
         unlink(tmp);
+        cli_error("optimize", "%s: cannot write: %s", path, strerror(e));
+    }
+    return !e;
 }
 
 /* Reads back DIR/loss.csv (on --resume) up to `upto` iterations; false
@@ -382,8 +393,9 @@ static bool read_loss_csv(const char *dir, struct history *h, int upto)
     return ok;
 }
 
-/* DIR/loss.png with gnuplot (a warning if gnuplot is missing). */
-static void plot_loss(const char *dir, bool with_error)
+/* DIR/loss.png with gnuplot (a warning if gnuplot is missing): false, said,
+ * when the plot could not be written whole. */
+static bool plot_loss(const char *dir, bool with_error)
 {
     char csv[4096], png[4096], tmp[4200], cmd[9000];
     path_in(csv, sizeof csv, dir, "loss.csv");
@@ -393,7 +405,7 @@ static void plot_loss(const char *dir, bool with_error)
     FILE *g = popen(cmd, "w");
     if (!g) {
         cli_error("optimize", "warning: cannot run gnuplot: %s not drawn", png);
-        return;
+        return true;
     }
     fprintf(g,
             "set terminal png size 800,500\n"
@@ -410,12 +422,19 @@ static void plot_loss(const char *dir, bool with_error)
     else
         fprintf(g, "plot '%s' using 1:2 skip 1 with lines lw 2 title 'loss'\n", csv);
     int rc = pclose(g);
-    if (rc == 0 && access(tmp, R_OK) == 0)
-        rename(tmp, png);
-    else {
+    if (rc != 0 || access(tmp, R_OK) != 0) {
         unlink(tmp);
         cli_error("optimize", "warning: gnuplot failed: %s not drawn (install gnuplot-nox)", png);
+        return true;
     }
+    /* gnuplot does not tell when it could not write the plot whole (a full disk) */
+    char why[256];
+    bool whole = dr_png_complete(tmp);
+    if (!whole)
+        cli_error("optimize", "%s: cannot write the plot: %s", png, dr_why_cut_short(tmp, why, sizeof why));
+    if (!whole || rename(tmp, png) != 0)
+        unlink(tmp);
+    return whole;
 }
 
 static void eta_text(double secs, char *buf, size_t size)
@@ -739,7 +758,11 @@ static int opt_open_outputs(const struct opt_args *a, struct opt_run *r)
         }
         char tp[4096];
         path_in(tp, sizeof tp, a->out_dir, "target.png");
-        dr_image_write(tp, a->targets[0].rw, a->targets[0].rh, 3, a->targets[0].rgb);
+        if (dr_image_write(tp, a->targets[0].rw, a->targets[0].rh, 3, a->targets[0].rgb) != 0) {
+            cli_error("optimize", "%s", dr_last_error());
+            unmake_dirs(a->out_dir, made_from);
+            return cli_error_exit(DR_EXIT_FAILURE);
+        }
         return -1;
     }
     if (!read_loss_csv(a->out_dir, &r->hist, r->it0)) {
@@ -835,7 +858,10 @@ static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
             char name[64], path[4096];
             snprintf(name, sizeof name, "render-%04d.png", it);
             path_in(path, sizeof path, a->out_dir, name);
-            dr_image_write(path, t->rw, t->rh, 3, t->render);
+            if (dr_image_write(path, t->rw, t->rh, 3, t->render) != 0) {
+                cli_error("optimize", "%s", dr_last_error());
+                return cli_error_exit(DR_EXIT_FAILURE);
+            }
         }
     }
     if (several)
@@ -915,7 +941,8 @@ static int opt_iterations(const struct opt_args *a, struct opt_run *r)
             cli_error("optimize", "out of memory for the loss history");
             return DR_EXIT_FAILURE;
         }
-        write_loss_csv(a->out_dir, &r->hist);
+        if (!write_loss_csv(a->out_dir, &r->hist))
+            return DR_EXIT_FAILURE;
         opt_report(a, r, it, sec, (now - t_loop) / (it - r->it0 + 1), err);
         /* (an interrupted run's is on disk before it stops; the others
          * finish beside the next iterations, the last beside the final
@@ -1034,7 +1061,8 @@ static void opt_summary_json(const struct opt_args *a, const struct opt_run *r)
 /* After the last iteration: the loss plot, the after picture, the glTF, the summary. */
 static int opt_finish(const struct opt_args *a, struct opt_run *r)
 {
-    plot_loss(a->out_dir, r->ref != NULL);
+    if (!plot_loss(a->out_dir, r->ref != NULL))
+        return DR_EXIT_FAILURE;
     int rc = save_view(a, r->scene, "after.png");
     if (rc != DR_EXIT_OK)
         return rc;

@@ -123,7 +123,9 @@ int cmp_write_csv(const struct cmp_run *r, const char *path);
 void cmp_write_json(const struct cmp_run *r, FILE *f);
 int cmp_write_report(const struct cmp_run *r, const char *path);
 /* Writes DIR/plots.gp and runs gnuplot on it (a warning when gnuplot is
- * missing or fails: the PNGs are then not drawn). */
+ * missing or fails: the PNGs are then not drawn). DR_EXIT_FAILURE, said,
+ * when plots.gp or a plot could not be written whole (nothing half-written
+ * is left under a plot's name); else 0. */
 int cmp_write_plots(const struct cmp_run *r, const char *dir);
 /* The combination's label, "prb detached d8"; with more than one --sampler
  * listed, the sampler too: "prb detached sobol d8"; with both media

@@ -11,6 +11,7 @@
 
 #include "cli.h"
 #include "compare.h"
+#include "cut_short.h"
 
 bool cmp_same_pair(const struct cmp_combo *a, const struct cmp_combo *b)
 {
@@ -625,7 +626,7 @@ static void plot_error_vs_time(FILE *g, const struct cmp_run *r)
         }
         fprintf(g, "EOD\n");
     }
-    fprintf(g, "set output 'error_vs_time.png'\nset title 'Error vs time (reference %s, its own relative error "
+    fprintf(g, "set output out.'error_vs_time.png'\nset title 'Error vs time (reference %s, its own relative error "
                "%.2g)'\nset xlabel 'seconds per estimate'\nset ylabel 'relative RMS error'\nset logscale xy\n"
                "set key outside right top\nset grid\nplot ", r->ref.kind, r->ref.rel_se);
     /* colour = estimator x sampling, point and dash = depth, each keyed once
@@ -669,7 +670,7 @@ static void plot_error_vs_time(FILE *g, const struct cmp_run *r)
 static void plot_memory(FILE *g, const struct cmp_run *r)
 {
     int s = 0;
-    fprintf(g, "set output 'memory_vs_depth.png'\nset title 'Estimator memory vs max depth'\n"
+    fprintf(g, "set output out.'memory_vs_depth.png'\nset title 'Estimator memory vs max depth'\n"
                "set xlabel 'max depth (path segments)'\nset ylabel 'memory (MiB)'\nset logscale y\n"
                "set key outside right top\nset grid\nset xtics (");
     for (int d = 0; d < r->a->n_depths; d++)
@@ -724,7 +725,7 @@ static void plot_efficiency(FILE *g, const struct cmp_run *r)
             }
         fputc('\n', g);
     }
-    fprintf(g, "EOD\nset output 'efficiency.png'\nset title \"Efficiency = 1 / (relative variance x seconds), "
+    fprintf(g, "EOD\nset output out.'efficiency.png'\nset title \"Efficiency = 1 / (relative variance x seconds), "
                "higher is better\\nmax depth %d, reference %s\"\nset xlabel 'samples per pixel'\nset ylabel 'efficiency (1/s)'\n"
                "set style data histograms\nset style histogram cluster gap 1\nset style fill solid 0.8 border -1\n"
                "set boxwidth 0.9\nset key outside right top\nset grid ytics\nset logscale y\n"
@@ -737,10 +738,13 @@ static int write_plot_script(const struct cmp_run *r, const char *path)
 {
     FILE *g = fopen(path, "w");
     if (!g) {
-        cli_error("compare", "warning: %s: %s (plots not drawn)", path, strerror(errno));
-        return -1;
+        cli_error("compare", "%s: cannot write: %s", path, strerror(errno));
+        return DR_EXIT_FAILURE;
     }
+    /* out: a prefix of the plots' file names; compare draws them under
+     * temporary names (out = '.tmp.') and renames the whole ones */
     fprintf(g, "# drender compare: gnuplot script with its data inline (run: gnuplot plots.gp)\n"
+               "if (!exists('out')) out = ''\n"
                "set terminal pngcairo size 900,560 noenhanced\n");
     /* a zero reference leaves errors and efficiencies undefined: those plots are left out */
     bool defined = r->ref.norm2 > 0.0;
@@ -749,21 +753,20 @@ static int write_plot_script(const struct cmp_run *r, const char *path)
     plot_memory(g, r);
     if (defined)
         plot_efficiency(g, r);
-    return fclose(g) == 0 ? 0 : -1;
+    errno = 0;
+    int e = fflush(g) != 0 || ferror(g) ? (errno ? errno : EIO) : 0;
+    if (fclose(g) != 0 && !e)
+        e = errno;
+    if (e)
+        cli_error("compare", "%s: cannot write: %s", path, strerror(e));
+    return e ? DR_EXIT_FAILURE : 0;
 }
 
-int cmp_write_plots(const struct cmp_run *r, const char *dir)
+/* Runs gnuplot on DIR/plots.gp with the plots' names prefixed by tmp_prefix:
+ * false (a warning given) if gnuplot is missing or failed. */
+static bool run_gnuplot(const char *dir, const char *tmp_prefix)
 {
-    char path[4400], cmd[9000], quoted[8800];
-    static const char *const pngs[] = {"error_vs_time.png", "memory_vs_depth.png", "efficiency.png"};
-    for (int i = 0; i < 3; i++) {   /* no stale plot of an earlier run survives a plot left out */
-        snprintf(path, sizeof path, "%s/%s", dir, pngs[i]);
-        unlink(path);
-    }
-    snprintf(path, sizeof path, "%s/plots.gp", dir);
-    if (write_plot_script(r, path) != 0)
-        return -1;
-    /* gnuplot runs in DIR, so the script's file names are relative to it */
+    char quoted[8800];
     size_t k = 0;
     for (const char *s = dir; *s && k + 2 < sizeof quoted; s++) {
         if (*s == '\'')
@@ -771,16 +774,51 @@ int cmp_write_plots(const struct cmp_run *r, const char *dir)
         quoted[k++] = *s;
     }
     quoted[k] = '\0';
-    snprintf(cmd, sizeof cmd, "gnuplot 2>/dev/null");
-    FILE *g = popen(cmd, "w");
+    FILE *g = popen("gnuplot 2>/dev/null", "w");
     if (!g) {
         cli_error("compare", "warning: cannot run gnuplot: plots not drawn (install gnuplot-nox)");
-        return -1;
+        return false;
     }
-    fprintf(g, "cd '%s'\nload 'plots.gp'\n", quoted);
+    /* gnuplot runs in DIR, so the script's file names are relative to it */
+    fprintf(g, "cd '%s'\nout = '%s'\nload 'plots.gp'\n", quoted, tmp_prefix);
     if (pclose(g) != 0) {
-        cli_error("compare", "warning: gnuplot failed on %s: plots not drawn (install gnuplot-nox)", path);
-        return -1;
+        cli_error("compare", "warning: gnuplot failed on %s/plots.gp: plots not drawn (install gnuplot-nox)", dir);
+        return false;
     }
-    return 0;
+    return true;
+}
+
+int cmp_write_plots(const struct cmp_run *r, const char *dir)
+{
+    char path[4400], tmp[4400], why[256];
+    static const char *const pngs[] = {"error_vs_time.png", "memory_vs_depth.png", "efficiency.png"};
+    for (int i = 0; i < 3; i++) {   /* no stale plot of an earlier run survives a plot left out */
+        snprintf(path, sizeof path, "%s/%s", dir, pngs[i]);
+        unlink(path);
+    }
+    snprintf(path, sizeof path, "%s/plots.gp", dir);
+    snprintf(tmp, sizeof tmp, "%s/.tmp.plots.gp", dir);
+    int rc = write_plot_script(r, tmp);
+    if (rc == 0 && rename(tmp, path) != 0)
+        rc = -1;
+    if (rc != 0) {
+        unlink(tmp);
+        return rc;
+    }
+    const bool drawn = run_gnuplot(dir, ".tmp.");
+    /* gnuplot does not tell when a plot could not be written whole (a full
+     * disk): a plot that does not end as a PNG ends fails the run */
+    for (int i = 0; i < 3; i++) {
+        snprintf(tmp, sizeof tmp, "%s/.tmp.%s", dir, pngs[i]);
+        snprintf(path, sizeof path, "%s/%s", dir, pngs[i]);
+        if (access(tmp, F_OK) != 0)
+            continue;   /* (left out: a zero reference) */
+        if (drawn && !dr_png_complete(tmp)) {
+            cli_error("compare", "%s: cannot write the plot: %s", path, dr_why_cut_short(tmp, why, sizeof why));
+            rc = DR_EXIT_FAILURE;
+        }
+        if (!drawn || rc != 0 || rename(tmp, path) != 0)
+            unlink(tmp);
+    }
+    return rc;
 }

@@ -85,7 +85,7 @@ static int cmd_help(int argc, char **argv)
     return DR_EXIT_OK;
 }
 
-int main(int argc, char **argv)
+static int run_command(int argc, char **argv)
 {
     cli_mark_start();
     if (argc < 2) {
@@ -112,4 +112,10 @@ int main(int argc, char **argv)
     }
     cli_limits_init();
     return c->run(argc - 1, argv + 1);
+}
+
+int main(int argc, char **argv)
+{
+    const char *cmd = argc >= 2 && dr_command_find(argv[1]) ? argv[1] : NULL;
+    return cli_close_stdout(cmd, run_command(argc, argv));
 }

@@ -47,6 +47,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "cut_short.h"
 #include "error.h"
 #include "gltf_write.h"
 #include "image_io.h"
@@ -911,6 +912,13 @@ void Writer::write_model()
 
 /* ---- repairing what tinygltf wrote ---- */
 
+/* Why a file tinygltf wrote is cut short: its writes (std::ofstream) report nothing. */
+std::string why_cut_short(const std::string &path)
+{
+    char buf[256];
+    return dr_why_cut_short(path.c_str(), buf, sizeof buf);
+}
+
 std::vector<unsigned char> read_all(const std::string &path, int *err)
 {
     std::vector<unsigned char> out;
@@ -984,14 +992,14 @@ void Writer::fix_json()
                 if (ok) bin_chunk.assign(bytes.begin() + long(at), bytes.begin() + long(at + 8 + get_u32(&bytes[at])));
             }
         }
-        if (!ok) fail(DR_ERR_IO, "cannot write: the written file is incomplete (disk full?)");
+        if (!ok) fail(DR_ERR_IO, "cannot write: %s", why_cut_short(path).c_str());
     } else {
         json_text.assign(bytes.begin(), bytes.end());
     }
     DrJsonDocument doc(nlohmann::json::parse(json_text, nullptr, /*allow_exceptions=*/false));
     nlohmann::json &j = doc.j;
     if (j.is_discarded() || !j.is_object())
-        fail(DR_ERR_IO, "cannot write: the written file is incomplete (disk full?)");
+        fail(DR_ERR_IO, "cannot write: %s", why_cut_short(path).c_str());
     repair(j);
     for (const DracoIndices &d : draco_indices_)
         if (j.contains("meshes") && d.mesh < j["meshes"].size() && d.primitive < j["meshes"][d.mesh]["primitives"].size())
@@ -1024,9 +1032,11 @@ void Writer::check_outputs()
     for (size_t i = 0; i < model_.buffers.size(); i++) {
         if (glb_ && i == 0) continue;
         long long want = (long long)model_.buffers[i].data.size();
-        long long got = file_size(tmpdir_ + model_.buffers[i].uri);
+        const std::string bin = tmpdir_ + model_.buffers[i].uri;
+        long long got = file_size(bin);
         if (got != want)
-            fail(DR_ERR_IO, "cannot write /buffers/%zu: %lld of %lld bytes written (disk full?)", i, got, want);
+            fail(DR_ERR_IO, "cannot write /buffers/%zu: %lld of %lld bytes written: %s", i, got, want,
+                 why_cut_short(bin).c_str());
     }
     for (const PendingFile &pf : files_) {
         int fd = open(pf.tmp.c_str(), O_RDONLY);

@@ -34,6 +34,7 @@
 #include <string>
 #include <vector>
 
+#include <fcntl.h>
 #include <strings.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -446,28 +447,84 @@ void file_pixels(const file_layout &l, size_t n, int channels, const float *pixe
         }
 }
 
+// Writes bytes to a new file at path, checking every write and the close:
+// 0, or the errno of what failed.
+int write_file_checked(const std::string &path, const std::vector<unsigned char> &bytes)
+{
+    int fd = open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+    if (fd < 0)
+        return errno;
+    const unsigned char *p = bytes.data();
+    size_t left = bytes.size();
+    while (left > 0) {
+        ssize_t k = ::write(fd, p, left);
+        if (k < 0 && errno == EINTR)
+            continue;
+        if (k <= 0) {
+            int e = k < 0 ? errno : EIO;
+            close(fd);
+            return e;
+        }
+        p += k;
+        left -= (size_t)k;
+    }
+    return close(fd) != 0 ? errno : 0;
+}
+
+// For the formats that take no proxy (sgi, ico, fits, rla, heif): the file
+// is read back whole, so that a write the plugin did not check cannot pass.
+bool reads_back(const std::string &tmp, std::string &why)
+{
+    auto in = ImageInput::open(tmp);
+    std::vector<float> px;
+    bool ok = (bool)in;
+    if (ok) {
+        const ImageSpec &sp = in->spec();
+        px.resize((size_t)sp.width * sp.height * sp.nchannels);
+        ok = in->read_image(0, 0, 0, sp.nchannels, TypeDesc::FLOAT, px.data());
+    }
+    if (!ok)
+        why = in ? oiio_error(in.get()) : clean(OIIO::geterror());
+    return ok;
+}
+
 // Writes data to a temporary beside path and renames it over path, so that a
-// failed write leaves nothing half-written under path's name.
-int write_then_rename(ImageOutput *out, const std::string &spath, const ImageSpec &spec, TypeDesc type,
-                      const void *data)
+// failed write leaves nothing half-written under path's name. Closes out.
+//
+// The formats that take a proxy (png, exr, jpeg, tiff, hdr and most others)
+// are encoded into memory and then written by write_file_checked: OpenImageIO's
+// writers do not all check their writes. Its PNG writer ignored a short
+// fwrite (a full disk left a cut-short PNG under the output's name, and exit
+// 0), and libjpeg ends the process on one ("Output file write error", exit 1,
+// the temporary left behind). The encoded copy costs the file's size in
+// memory for the moment of the write.
+int write_then_rename(std::unique_ptr<ImageOutput> &out, const std::string &spath, const ImageSpec &spec,
+                      TypeDesc type, const void *data)
 {
     const char *path = spath.c_str();
     std::string tmp = dir_and_temp_name(spath, extension_of(spath));
     temp_guard guard;
     guard.path = tmp;
     std::string why;
-    bool ok = out->open(tmp, spec);
-    if (!ok) {
-        why = oiio_error(out);
-    } else {
-        ok = out->write_image(type, data);
-        if (!ok)
-            why = oiio_error(out);
-        bool closed = out->close();
-        if (ok && !closed) {
-            ok = false;
-            why = oiio_error(out);
-        }
+    std::vector<unsigned char> bytes;
+    Filesystem::IOVecOutput memory(bytes);
+    const bool proxied = out->supports("ioproxy");
+    bool ok = true;
+    if (proxied && !out->set_ioproxy(&memory))
+        ok = false, why = oiio_error(out.get());
+    else if (!out->open(tmp, spec))
+        ok = false, why = oiio_error(out.get());
+    if (ok && !out->write_image(type, data))
+        ok = false, why = oiio_error(out.get());
+    if (!out->close() && ok)
+        ok = false, why = oiio_error(out.get());
+    out.reset();   // (before the proxy it may hold goes)
+    if (ok && proxied) {
+        int e = write_file_checked(tmp, bytes);
+        if (e)
+            ok = false, why = std::strerror(e);
+    } else if (ok && !reads_back(tmp, why)) {
+        ok = false;
     }
     if (ok && std::rename(tmp.c_str(), path) != 0) {
         ok = false;
@@ -550,10 +607,8 @@ int write_image(const char *path, int width, int height, int channels, const flo
     const float *fdata = as_given ? pixels : fbuf.data();
     if (as_float && std::strcmp(fmt, "openexr") == 0 && mostly_zero(fdata, n * (size_t)l.out_ch))
         spec.attribute("compression", "rle");
-    int rc = as_float ? write_then_rename(out.get(), spath, spec, TypeDesc::FLOAT, fdata)
-                      : write_then_rename(out.get(), spath, spec, TypeDesc::UINT8, bbuf.data());
-    out.reset();
-    return rc;
+    return as_float ? write_then_rename(out, spath, spec, TypeDesc::FLOAT, fdata)
+                    : write_then_rename(out, spath, spec, TypeDesc::UINT8, bbuf.data());
 }
 
 
