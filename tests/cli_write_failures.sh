@@ -111,6 +111,10 @@ wsweep "grad texture" exact grad "$DR_TESTDIR/data/optimize/texture-flat.gltf" -
 wsweep "optimize" progress optimize "$box" --param "$B" --target "$tmp/target.exr" --res 16x16 --spp 4 --iters 2 -o fit.gltf
 wsweep "optimize glb" progress optimize "$box" --param "$B" --target "$tmp/target.exr" --res 16x16 --spp 4 --iters 1 \
     -o fit.glb
+wsweep "optimize texture" progress optimize "$DR_TESTDIR/data/optimize/texture-flat.gltf" --param /images/0 \
+    --target "$tmp/target.exr" --res 16x16 --spp 4 --iters 1 -o fit.gltf
+wsweep "optimize density grid" progress optimize "$DR_TESTDIR/data/media/smoke.gltf" \
+    --param /materials/0/extensions/DR_medium/density --target "$tmp/target.exr" --res 16x16 --spp 4 --iters 1 -o fit.gltf
 wsweep "compare" progress compare "$box" --param "$B" --spp 2 --res 8x8 --estimators prb,tape -o cmp
 
 # standard output on a full disk
