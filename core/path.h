@@ -377,7 +377,9 @@ bool dr_path_vertex_sampling_moves(const struct dr_scene *scene, const struct dr
  * BSDF values, pdfs, the sampling map, textures through the moving uv) and
  * sets *d_this to the adjoint of the state it received. Forward mode: d_e
  * and d_t carry one image channel, the caller sets sink->channel. opts:
- * the walk's (its params, and how it sampled a constant sky). */
+ * the walk's (its params, and how it sampled a constant sky). sink NULL:
+ * only *d_this is wanted (prb's Jacobian rows), the parameters' adjoints
+ * are not computed. */
 void d_path_vertex_attached(const struct dr_scene *scene, const struct dr_path_opts *opts,
                             const struct dr_path_vertex *v, dr_vec3 d_e, dr_vec3 d_t,
                             const struct dr_d_path_state *d_next, struct dr_d_path_state *d_this,

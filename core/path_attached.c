@@ -67,7 +67,8 @@ static void emission_adjoint(const struct dr_scene *s, const struct dr_path_opts
     dr_vec3 d_Le = dr_scale(d_e, v->emit_w);
     double d_w = dr_dot(d_e, v->Le);
     if (v->kind == DR_VERTEX_ESCAPED) {
-        d_env_radiance(s, ps, v->d, d_Le, sink);
+        if (sink)
+            d_env_radiance(s, ps, v->d, d_Le, sink);
         d_env_radiance_dir(s, v->d, d_Le, &d_this->d);
         if (v->depth > 1) {   /* a map's pdf_env is constant within a cell; a sky's is pick prev_sky */
             const struct dr_light_sampler *ls = s->light_sampler;
@@ -78,7 +79,8 @@ static void emission_adjoint(const struct dr_scene *s, const struct dr_path_opts
         }
         return;
     }
-    d_emission(s, ps, &v->hit, d_Le, sink);
+    if (sink)
+        d_emission(s, ps, &v->hit, d_Le, sink);
     d_emission_uv(s, &v->hit, d_Le, &a->attr);
     if (v->depth > 1) {
         double pdf_a = dr_light_pdf_area(s, s->light_sampler, v->prev_p, &v->hit), d_pdf_a = 0.0;
@@ -121,13 +123,15 @@ static void nee_adjoint(const struct dr_scene *s, const struct dr_path_opts *opt
     if (ls->lobe >= 0) {   /* drawn by the BSDF: cos_g = (frame wi) . ng moves with it */
         const double d_cos = dr_dot(ls->wi, v->ng) > 0.0 ? sky_pick * (1.0 - c_sky) * DR_INV_PI * d_pdf_l : 0.0;
         d_frame_to_world(&v->frame, v->nee_wi, dr_scale(v->ng, d_cos), &d_wi, &a->frame);
-        d_light_radiance(s, ps, ls, d_rad, sink);
+        if (sink)
+            d_light_radiance(s, ps, ls, d_rad, sink);
         d_bsdf_sample_dir(&v->bsdf, v->wo, ls->lobe, v->u.light_u1, v->u.light_u2, d_wi, &a->bsdf, &a->wo);
         return;
     }
     dr_vec3 d_ls_wi = dr_v3s(0.0);
     d_frame_to_local(&v->frame, ls->wi, d_wi, &d_ls_wi, &a->frame);
-    d_light_radiance(s, ps, ls, d_rad, sink);
+    if (sink)
+        d_light_radiance(s, ps, ls, d_rad, sink);
     d_light_sample_point(s, v->hit.p, ls, d_ls_wi, d_pdf_l, d_rad, &a->p);
 }
 
@@ -146,13 +150,19 @@ static void continuation_adjoint(const struct dr_path_vertex *v, dr_vec3 d_t, co
     const double c_sky = d_next->prev_sky != 0.0 ? dr_bsdf_sky_share(&v->bsdf, v->wo) : 0.0;
     double d_pdf = -d_tt / v->pdf + d_next->prev_pdf + c_sky * d_next->prev_sky;
     dr_vec3 d_wi = dr_v3(0.0, 0.0, d_tt / v->wi.z);
-    d_bsdf_eval(&v->bsdf, v->wo, v->wi, d_f, &a->bsdf, &a->wo, &d_wi);
+    /* (each adjoint is linear in its seed: a zero seed adds nothing, and prb's
+     * Jacobian rows seed one coordinate at a time, most of them zero here) */
+    if (!dr_is_black(d_f))
+        d_bsdf_eval(&v->bsdf, v->wo, v->wi, d_f, &a->bsdf, &a->wo, &d_wi);
     if (d_pdf != 0.0)
         d_bsdf_pdf_fixed_prob(&v->bsdf, v->wo, v->wi, d_pdf, &a->bsdf, &a->wo, &d_wi);
     const dr_vec3 d_cos = dr_scale(v->ng, (1.0 - c_sky) * DR_INV_PI * d_next->prev_sky);
-    d_frame_to_world(&v->frame, v->wi, dr_add(d_next->d, d_cos), &d_wi, &a->frame);
+    const dr_vec3 d_dir = dr_add(d_next->d, d_cos);
+    if (!dr_is_black(d_dir))
+        d_frame_to_world(&v->frame, v->wi, d_dir, &d_wi, &a->frame);
     a->p = dr_add(a->p, dr_add(d_next->o, d_next->prev_p));
-    d_bsdf_sample_dir(&v->bsdf, v->wo, v->lobe, v->u.bsdf_u1, v->u.bsdf_u2, d_wi, &a->bsdf, &a->wo);
+    if (!dr_is_black(d_wi))
+        d_bsdf_sample_dir(&v->bsdf, v->wo, v->lobe, v->u.bsdf_u1, v->u.bsdf_u2, d_wi, &a->bsdf, &a->wo);
 }
 
 /* Material inputs (the BSDF at uv, the frame of the oriented shading normal,
@@ -162,7 +172,7 @@ static void surface_adjoint(const struct dr_scene *s, const struct dr_param_set 
 {
     const struct dr_hit *hit = &v->hit;
     if (v->shaded) {
-        if (v->diff_bsdf)
+        if (v->diff_bsdf && sink)
             d_material_eval(s, ps, hit, &a->bsdf, sink);
         d_material_eval_uv(s, hit, &a->bsdf, &a->attr);
         dr_vec3 d_wo_world = dr_v3s(0.0);

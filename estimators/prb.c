@@ -37,7 +37,7 @@ struct parked_samples {
 
 struct prb_job {
     struct dr_est_base b;   /* first: the shared part */
-    double *zeros;          /* attached sampling: a sink direction that discards (params->total zeros) */
+    bool attached;          /* attached or mis sampling: the replays are prb_attached.c's */
     double radius;          /* attached sampling: the scene's radius */
     bool wave;              /* detached, no media, no derivative sampling: samples as a wavefront */
     bool media_arrays;      /* detached with media, no derivative sampling: the primal walks in the
@@ -247,7 +247,7 @@ static void attached_pixel(struct prb_job *j, int thread, int64_t px, const dr_v
                            struct dr_grad_sink *sink)
 {
     struct dr_est_base *b = &j->b;
-    struct prb_attached_ctx c = {.b = b, .zeros = j->zeros, .eps = b->p->regularize, .radius = j->radius,
+    struct prb_attached_ctx c = {.b = b, .eps = b->p->regularize, .radius = j->radius,
                                  .rays = &b->thr[thread].rays};
     for (int sidx = 0; sidx < b->p->spp; sidx++) {
         struct dr_grad_sink det, att;
@@ -786,7 +786,7 @@ static void pixel_replays(struct prb_job *j, int thread, int64_t px, const dr_ve
                           struct dr_grad_sink *sink)
 {
     struct dr_est_base *b = &j->b;
-    if (j->zeros) {
+    if (j->attached) {
         attached_pixel(j, thread, px, adj, sums, logs, sink);
         return;
     }
@@ -922,10 +922,7 @@ static int prb_run(struct dr_est_base *b)
     struct prb_job *j = (struct prb_job *)b;
     const enum dr_sampling run = dr_est_sampling_run(b->p);
     if (run == DR_SAMPLING_ATTACHED || run == DR_SAMPLING_MIS) {   /* mis: both from one replay */
-        if (!(j->zeros = calloc((size_t)b->p->params->total + 1, sizeof(double)))) {
-            dr_set_error("out of memory");
-            return DR_ERR_NOMEM;
-        }
+        j->attached = true;
         const struct dr_scene *s = b->p->scene;
         j->radius = 0.5 * dr_length(dr_sub(s->bbox_max, s->bbox_min));
         if (!(j->radius > 0.0) || !isfinite(j->radius))
@@ -969,7 +966,6 @@ static int prb_run(struct dr_est_base *b)
 static void prb_release(struct dr_est_base *b)
 {
     struct prb_job *j = (struct prb_job *)b;
-    free(j->zeros);
     for (int t = 0; t < DR_MAX_THREADS; t++) {
         dr_wave_destroy(j->waves[t]);
         dr_wave_soa_destroy(j->soas[t]);

@@ -135,9 +135,8 @@ static void vertex_call(const struct prb_attached_ctx *c, const struct dr_path_v
                         const struct state_basis *Tn, dr_vec3 d_e, dr_vec3 d_t, const double c_next[NS],
                         double c_out[NS], struct dr_grad_sink *sink)
 {
-    struct dr_grad_sink discard = dr_sink_forward(c->zeros);
     struct dr_d_path_state dn = to_ambient(Tn, c_next), dt;
-    d_path_vertex_attached(c->b->p->scene, &c->b->popts, v, d_e, d_t, &dn, &dt, sink ? sink : &discard);
+    d_path_vertex_attached(c->b->p->scene, &c->b->popts, v, d_e, d_t, &dn, &dt, sink);
     if (c_out)
         to_tangent(Tk, &dt, c_out);
 }
@@ -302,8 +301,7 @@ static void finish(const struct prb_attached_ctx *c, const struct pending *P, co
     } else {
         struct dr_d_path_state dt, zero;
         memset(&zero, 0, sizeof zero);
-        d_path_vertex_attached(c->b->p->scene, &c->b->popts, next, next_d_e, dr_v3s(0.0), &zero, &dt,
-                               &(struct dr_grad_sink){.dir = c->zeros});
+        d_path_vertex_attached(c->b->p->scene, &c->b->popts, next, next_d_e, dr_v3s(0.0), &zero, &dt, NULL);
         double ct[NS];
         to_tangent(&P->Tn, &dt, ct);
         c_next[4] = ct[4];

@@ -10,7 +10,6 @@ struct jacobian_cache;
 /* What one sample's attached replay needs besides the shared run. */
 struct prb_attached_ctx {
     const struct dr_est_base *b;
-    const double *zeros;        /* params->total zeros: a sink direction that discards */
     double eps;                 /* --regularize: below this sigma_min/sigma_max a Jacobian is
                                    not inverted; forward mode restarts there */
     double radius;              /* the scene's radius: positions in commensurable units */
