@@ -39,6 +39,10 @@ void cli_error(const char *cmd, const char *fmt, ...) __attribute__((format(prin
 int cli_close_stdout(const char *cmd, int rc);
 /* The same without closing (batch: after each job), clearing the error. */
 int cli_flush_stdout(const char *cmd, int rc);
+/* Closes a file written with stdio: 0, or -1 with errno set when any write
+ * to it failed (an earlier one leaves only the error flag: EIO then), its
+ * flush or its close. */
+int cli_fclose_checked(FILE *f);
 /* The exit code for core/'s last error where the call's failures are
  * otherwise `code` (bad input or usage): an allocation that failed is the
  * work failing (DR_EXIT_FAILURE), whatever the call was. */

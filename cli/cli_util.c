@@ -279,3 +279,13 @@ static int stdout_failed(int rc, bool close_it, const char *cmd)
 int cli_flush_stdout(const char *cmd, int rc) { return stdout_failed(rc, false, cmd); }
 
 int cli_close_stdout(const char *cmd, int rc) { return stdout_failed(rc, true, cmd); }
+
+int cli_fclose_checked(FILE *f)
+{
+    errno = 0;
+    int e = fflush(f) != 0 || ferror(f) ? (errno ? errno : EIO) : 0;
+    if (fclose(f) != 0 && !e)
+        e = errno ? errno : EIO;
+    errno = e;
+    return e ? -1 : 0;
+}

@@ -1058,18 +1058,13 @@ static int check_scene_args(struct cmp_run *r, const struct dr_scene *scene)
 static int write_json_file(const struct cmp_run *r, const char *path)
 {
     FILE *f = fopen(path, "w");
-    if (!f) {
-        cli_error("compare", "%s: %s", path, strerror(errno));
+    if (!f)
         return -1;
-    }
     cmp_write_json(r, f);
-    if (fclose(f) != 0) {
-        cli_error("compare", "%s: %s", path, strerror(errno));
-        return -1;
-    }
-    return 0;
+    return cli_fclose_checked(f);
 }
 
+/* Each writer returns 0, or -1 with errno set (the message is write_outputs'). */
 static const struct {
     const char *name;
     int (*write)(const struct cmp_run *r, const char *path);
@@ -1103,8 +1098,11 @@ static int write_outputs(const struct cmp_run *r, const char *dir)
     int written = 0;
     for (; written < N_OUT_FILES; written++) {
         out_path(tmp[written], sizeof tmp[written], dir, ".tmp.", out_files[written].name);
-        if (out_files[written].write(r, tmp[written]) != 0)
+        if (out_files[written].write(r, tmp[written]) != 0) {
+            out_path(dst, sizeof dst, dir, "", out_files[written].name);
+            cli_error("compare", "%s: cannot write: %s", dst, strerror(errno));
             break;
+        }
     }
     if (written < N_OUT_FILES) {
         for (int i = 0; i <= written && i < N_OUT_FILES; i++)

@@ -359,10 +359,7 @@ static bool write_loss_csv(const char *dir, const struct history *h)
             fprintf(f, "%.6g", h->error[i]);
         fputc('\n', f);
     }
-    errno = 0;
-    int e = fflush(f) != 0 || ferror(f) ? (errno ? errno : EIO) : 0;
-    if (fclose(f) != 0 && !e)
-        e = errno;
+    int e = cli_fclose_checked(f) != 0 ? errno : 0;
     if (!e && rename(tmp, path) != 0)
         e = errno;
     if (e) {

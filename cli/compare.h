@@ -117,8 +117,9 @@ struct cmp_run {
     double t_total;
 };
 
-/* compare_output.c. Each writes DIR/NAME through a temporary file renamed at
- * the end; 0 or -1 after a message. */
+/* compare_output.c. Each writes the file at path (cmd_compare.c's temporary,
+ * renamed at the end): 0, or -1 with errno set and no message (the caller
+ * names the file the user asked for). */
 int cmp_write_csv(const struct cmp_run *r, const char *path);
 void cmp_write_json(const struct cmp_run *r, FILE *f);
 int cmp_write_report(const struct cmp_run *r, const char *path);
@@ -147,7 +148,7 @@ double cmp_efficiency(const struct cmp_run *r, int c);
 /* compare_reference.c */
 uint64_t cmp_hash_file(const char *path, bool *ok);
 uint64_t cmp_hash_bytes(uint64_t h, const void *data, size_t n);
-int cmp_reference_write(const struct cmp_run *r, const char *path);
+int cmp_reference_write(const struct cmp_run *r, const char *path);   /* (as cmp_write_csv) */
 /* Reads FILE and checks that it answers this run's question (scene,
  * parameters, mode and settings); fills r->ref. Returns -1 to go on or an
  * exit code after a message naming the file and what differs. */

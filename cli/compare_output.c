@@ -109,10 +109,8 @@ static void csv_number(FILE *f, double v)
 int cmp_write_csv(const struct cmp_run *r, const char *path)
 {
     FILE *f = fopen(path, "w");
-    if (!f) {
-        cli_error("compare", "%s: %s", path, strerror(errno));
+    if (!f)
         return -1;
-    }
     fprintf(f, CSV_COLUMNS "\n");
     for (int rep = 0; rep < r->a->repeat; rep++)
         for (int c = 0; c < r->n_combos; c++) {
@@ -132,11 +130,7 @@ int cmp_write_csv(const struct cmp_run *r, const char *path)
             /* last: older columns keep their place */
             fprintf(f, ",%s,%s\n", dr_sampler_kind_name(cb->sampler), dr_medium_grad_name(cb->medium_grad));
         }
-    if (fclose(f) != 0) {
-        cli_error("compare", "%s: %s", path, strerror(errno));
-        return -1;
-    }
-    return 0;
+    return cli_fclose_checked(f);
 }
 
 /* ---- results.json ---- */
@@ -569,20 +563,14 @@ static void report_reading(FILE *f, const struct cmp_run *r)
 int cmp_write_report(const struct cmp_run *r, const char *path)
 {
     FILE *f = fopen(path, "w");
-    if (!f) {
-        cli_error("compare", "%s: %s", path, strerror(errno));
+    if (!f)
         return -1;
-    }
     report_head(f, r);
     report_media_gain(f, r);
     report_table(f, r);
     report_params(f, r);
     report_reading(f, r);
-    if (fclose(f) != 0) {
-        cli_error("compare", "%s: %s", path, strerror(errno));
-        return -1;
-    }
-    return 0;
+    return cli_fclose_checked(f);
 }
 
 /* ---- plots ---- */
@@ -753,13 +741,10 @@ static int write_plot_script(const struct cmp_run *r, const char *path)
     plot_memory(g, r);
     if (defined)
         plot_efficiency(g, r);
-    errno = 0;
-    int e = fflush(g) != 0 || ferror(g) ? (errno ? errno : EIO) : 0;
-    if (fclose(g) != 0 && !e)
-        e = errno;
-    if (e)
-        cli_error("compare", "%s: cannot write: %s", path, strerror(e));
-    return e ? DR_EXIT_FAILURE : 0;
+    if (cli_fclose_checked(g) == 0)
+        return 0;
+    cli_error("compare", "%s: cannot write: %s", path, strerror(errno));
+    return DR_EXIT_FAILURE;
 }
 
 /* Runs gnuplot on DIR/plots.gp with the plots' names prefixed by tmp_prefix:

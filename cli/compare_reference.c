@@ -60,10 +60,8 @@ static void write_header(FILE *f, const struct cmp_run *r)
 int cmp_reference_write(const struct cmp_run *r, const char *path)
 {
     FILE *f = fopen(path, "w");
-    if (!f) {
-        cli_error("compare", "%s: %s", path, strerror(errno));
+    if (!f)
         return -1;
-    }
     const struct cmp_reference *ref = &r->ref;
     write_header(f, r);
     fprintf(f, "kind %s\nestimator %s %s\nspp %d\nbatches %d\neps %.17g\nseconds %.6g\nvalues %lld\n", ref->kind,
@@ -71,11 +69,7 @@ int cmp_reference_write(const struct cmp_run *r, const char *path)
             ref->batches, ref->eps, ref->seconds, (long long)r->V);
     for (int64_t i = 0; i < r->V; i++)
         fprintf(f, "%.17g %.17g\n", ref->mean[i], ref->se[i]);
-    if (fclose(f) != 0) {
-        cli_error("compare", "%s: %s", path, strerror(errno));
-        return -1;
-    }
-    return 0;
+    return cli_fclose_checked(f);
 }
 
 /* ---- reading ---- */

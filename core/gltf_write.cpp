@@ -321,6 +321,17 @@ void Writer::plan_names()
 }
 
 std::vector<unsigned char> read_all(const std::string &path, int *err);
+
+/* The last error's message with the temporary path tmp named as the file
+ * the user will see (final). */
+std::string error_naming(const std::string &tmp, const std::string &final_path)
+{
+    std::string msg = dr_last_error();
+    for (size_t at; (at = msg.find(tmp)) != std::string::npos;)
+        msg.replace(at, tmp.size(), final_path);
+    return msg;
+}
+
 std::string glb_json(const std::vector<unsigned char> &glb);
 
 void Writer::load_source()
@@ -536,10 +547,8 @@ void Writer::write_image_param(const dr_param *p)
     std::vector<float> px(v.begin(), v.end());
     std::string tmp = tmpdir_ + name;
     bool srgb = image_as_colour(n) && dr_image_has_linear(&scene_->images[n]);
-    if (dr_image_write_encoded(tmp.c_str(), p->width, p->height, p->channels, px.data(), srgb) != 0) {
-        std::string msg = dr_last_error();
-        fail(DR_ERR_IO, "/images/%d: cannot write %s: %s", n, name.c_str(), msg.c_str());
-    }
+    if (dr_image_write_encoded(tmp.c_str(), p->width, p->height, p->channels, px.data(), srgb) != 0)
+        fail(DR_ERR_IO, "/images/%d: %s", n, error_naming(tmp, join(out_dir_, name)).c_str());
     files_.push_back({tmp, join(out_dir_, name)});
     tinygltf::Image &im = model_.images[size_t(n)];
     im.uri = percent_encode(name);
@@ -555,10 +564,8 @@ void Writer::write_env_map(const dr_param *p, tinygltf::Value::Object &env)
     std::vector<double> v = values(p);
     std::vector<float> px(v.begin(), v.end());
     std::string tmp = tmpdir_ + name;
-    if (dr_image_write_encoded(tmp.c_str(), p->width, p->height, p->channels, px.data(), false) != 0) {
-        std::string msg = dr_last_error();
-        fail(DR_ERR_IO, "/extensions/DR_environment/uri: cannot write %s: %s", name.c_str(), msg.c_str());
-    }
+    if (dr_image_write_encoded(tmp.c_str(), p->width, p->height, p->channels, px.data(), false) != 0)
+        fail(DR_ERR_IO, "/extensions/DR_environment/uri: %s", error_naming(tmp, join(out_dir_, name)).c_str());
     files_.push_back({tmp, join(out_dir_, name)});
     /* drender reads DR_environment/uri as a plain relative path (no percent-decoding) */
     env["uri"] = tinygltf::Value(name);
@@ -631,8 +638,11 @@ void Writer::apply_medium(const dr_param *p)
         std::string tmp = tmpdir_ + name;
         FILE *f = fopen(tmp.c_str(), "wb");
         bool ok = f && fwrite(g.density, sizeof(float), size_t(p->size), f) == size_t(p->size);
-        if (f && fclose(f) != 0) ok = false;
-        if (!ok) fail(DR_ERR_IO, "%s/density/uri: cannot write %s", where.c_str(), tmp.c_str());
+        int e = errno;
+        if (f && fclose(f) != 0 && ok) ok = false, e = errno;
+        if (!ok)
+            fail(DR_ERR_IO, "%s/density/uri: cannot write %s: %s", where.c_str(), join(out_dir_, name).c_str(),
+                 strerror(e));
         files_.push_back({tmp, join(out_dir_, name)});
         tinygltf::Value::Array res;
         for (int n : {g.nx, g.ny, g.nz}) res.push_back(tinygltf::Value(n));

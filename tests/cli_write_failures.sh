@@ -5,7 +5,8 @@
 # fails with ENOSPC: the same error path, through stdio, OpenEXR's streams
 # and drender's own writes alike), once at 0 bytes and once just below the
 # size of each file the command writes. Each run must end in one of two ways:
-#   - the work failed: exit 1, an error naming the cause ("File too large"),
+#   - the work failed: exit 1, an error naming the cause ("File too large")
+#     and the file as the user named it (not a temporary),
 #     and nothing half-written: every file left at its final name is whole
 #     (the reference run's, byte for byte; optimize's progress images decode
 #     and its checkpoint is a whole one), and no temporary file is left over;
@@ -84,6 +85,8 @@ wsweep() {
             fail "$name, limit $b KiB: a sanitizer report"
         elif [ "$rc" -eq 1 ]; then
             grep -q "File too large" "$tmp/err" || fail "$name, limit $b KiB: exit 1 without naming the cause"
+            # (the file the user asked for, not drender's temporary)
+            ! grep -q "\.tmp" "$tmp/err" || fail "$name, limit $b KiB: the message names a temporary file"
             failed=$((failed + 1))
         elif [ "$rc" -eq 0 ]; then
             # (every file written, each whole: checked below)
