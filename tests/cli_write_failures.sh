@@ -52,7 +52,12 @@ whole() {
     while IFS= read -r f; do
         [ -e "$ref/$f" ] || { echo "a file the reference run did not write: $f"; return 1; }
         cmp -s "$ref/$f" "$dir/$f" && continue
-        [ "$kind" = exact ] && { echo "$f differs from the reference (half-written?)"; return 1; }
+        if [ "$kind" = exact ]; then   # (an EXR holds its DateTime: the pixels then)
+            case $f in *.exr | *.tif | *.png) oiiotool -q "$ref/$f" "$dir/$f" --diff --fail 0 --failpercent 0 \
+                >/dev/null 2>&1 && continue ;; esac
+            echo "$f differs from the reference (half-written?)"
+            return 1
+        fi
         case $f in
         *.png | *.exr) oiiotool -q "$dir/$f" -o "$tmp/decoded.exr" >/dev/null 2>&1 || { echo "$f does not decode"; return 1; } ;;
         *checkpoint.txt) tail -n 1 "$dir/$f" | grep -q . && [ "$(tail -c 1 "$dir/$f" | od -An -c | tr -d ' ')" = '\n' ] ||
