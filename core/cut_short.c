@@ -4,7 +4,6 @@
 #include <stdio.h>
 #include <string.h>
 #include <sys/resource.h>
-#include <sys/stat.h>
 #include <sys/statvfs.h>
 
 bool dr_png_complete(const char *path)
@@ -21,11 +20,12 @@ bool dr_png_complete(const char *path)
 
 const char *dr_why_cut_short(const char *path, char *buf, size_t size)
 {
-    struct stat st;
+    /* (a file stops at the limit, or short of it when its writer seeks past
+     * it: a process under a limit is taken to have met it) */
     struct rlimit rl;
-    if (stat(path, &st) == 0 && getrlimit(RLIMIT_FSIZE, &rl) == 0 && rl.rlim_cur != RLIM_INFINITY &&
-        (rlim_t)st.st_size >= rl.rlim_cur) {
-        snprintf(buf, size, "%s (the file-size limit, ulimit -f)", strerror(EFBIG));
+    if (getrlimit(RLIMIT_FSIZE, &rl) == 0 && rl.rlim_cur != RLIM_INFINITY) {
+        snprintf(buf, size, "%s (the file-size limit, ulimit -f: %llu bytes)", strerror(EFBIG),
+                 (unsigned long long)rl.rlim_cur);
         return buf;
     }
     char dir[4096];

@@ -15,7 +15,7 @@ extern "C" {
 bool dr_png_complete(const char *path);
 
 /* Why the file at path stopped short, as a message in buf (returned): the
- * process's file-size limit (it stopped at the limit: "File too large"), a
+ * process's file-size limit when it has one ("File too large"), a
  * filesystem with next to no room left ("No space left on device"), or else
  * unknown ("disk full?"). */
 const char *dr_why_cut_short(const char *path, char *buf, size_t size);

@@ -16,6 +16,7 @@
 #include "image_io.h"
 #include "image_plugin.h"
 
+#include "cut_short.h"
 #include "error.h"
 #include "image.h"
 
@@ -524,6 +525,8 @@ int write_then_rename(std::unique_ptr<ImageOutput> &out, const std::string &spat
         if (e)
             ok = false, why = std::strerror(e);
     } else if (ok && !reads_back(tmp, why)) {
+        char cause[256];   // (the plugin's own writes report nothing: the likely cause)
+        why = std::string(dr_why_cut_short(tmp.c_str(), cause, sizeof cause)) + " (reading it back: " + why + ")";
         ok = false;
     }
     if (ok && std::rename(tmp.c_str(), path) != 0) {

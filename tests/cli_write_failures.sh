@@ -115,6 +115,8 @@ wsweep "render exr" exact render "$box" --res 64x64 --spp 2 -o out.exr
 wsweep "render hdr" exact render "$box" --res 64x64 --spp 2 -o out.hdr
 wsweep "render tif" exact render "$box" --res 64x64 --spp 2 -o out.tif
 wsweep "render jpg" exact render "$box" --res 64x64 --spp 2 -o out.jpg
+# (a format OpenImageIO cannot write to memory: written to the file, then read back whole)
+wsweep "render sgi" exact render "$box" --res 64x64 --spp 2 -o out.sgi
 wsweep "grad forward" exact grad "$box" --param "$B" --res 32x32 --spp 2 -o d.exr
 wsweep "grad texture" exact grad "$DR_TESTDIR/data/optimize/texture-flat.gltf" --param /images/0 --res 16x16 --spp 4 \
     --target "$tmp/target.exr" --grad-dir .
