@@ -784,8 +784,10 @@ int cmp_write_plots(const struct cmp_run *r, const char *dir)
     snprintf(path, sizeof path, "%s/plots.gp", dir);
     snprintf(tmp, sizeof tmp, "%s/.tmp.plots.gp", dir);
     int rc = write_plot_script(r, tmp);
-    if (rc == 0 && rename(tmp, path) != 0)
-        rc = -1;
+    if (rc == 0 && rename(tmp, path) != 0) {
+        cli_error("compare", "%s: cannot write: %s", path, strerror(errno));
+        rc = DR_EXIT_FAILURE;
+    }
     if (rc != 0) {
         unlink(tmp);
         return rc;

@@ -412,6 +412,20 @@ static void sky_nee_vertices(struct dr_scene *s, const struct dr_param_set *ps, 
         struct dr_d_path_state d_next, d_this;
         memset(&d_next, 0, sizeof d_next);
         d_path_vertex_attached(s, &po, &v, dr_v3s(1.0), dr_v3s(0.0), &d_next, &d_this, &sink);
+        /* Without a sink (prb's Jacobian rows) the state's adjoint is the same,
+         * bit for bit, for every seed: only the parameters' are left out. */
+        {
+            double g2 = 0.0;
+            struct dr_grad_sink sink2 = dr_sink_reverse(&g2);
+            struct dr_d_path_state dn = {.o = dr_v3(rnd(), rnd(), rnd()), .d = dr_v3(rnd(), rnd(), rnd()),
+                                         .prev_pdf = rnd(), .prev_sky = rnd(), .prev_p = dr_v3(rnd(), 0.0, rnd())},
+                                   with, without;
+            const dr_vec3 d_e = dr_v3(rnd(), rnd(), rnd()), d_t = dr_v3(rnd(), rnd(), rnd());
+            d_path_vertex_attached(s, &po, &v, d_e, d_t, &dn, &with, &sink2);
+            d_path_vertex_attached(s, &po, &v, d_e, d_t, &dn, &without, NULL);
+            CHECK(memcmp(&with, &without, sizeof with) == 0 && g2 != 0.0,
+                  "the state adjoint without a sink is the one with (parameter adjoint %g)", g2);
+        }
         double x[1] = {0.6};
         check_fd(v.ls.lobe >= 0 ? "sky by the BSDF: next-event adjoint"
                                 : uniform ? "sky over the sphere: next-event adjoint"
