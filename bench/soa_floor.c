@@ -281,7 +281,7 @@ static int shade(struct ctx *c, struct wave *w, int depth)
         const real er = td.er[pr], eg = td.eg[pr], eb = td.eb[pr];
         const real pdf_e = t * t / (max_f(cos_in, 1e-20f) * L->total_area);
         const real we = max_f(first, power_heuristic(prev_pdf_[i], pdf_e));
-        const real emit = hit & (cos_in > 0.0f) ? we : 0.0f;
+        const real emit = (hit & (cos_in > 0.0f)) ? we : 0.0f;
         lr_[i] += emit * tr_[i] * er, lg_[i] += emit * tg_[i] * eg, lb_[i] += emit * tb_[i] * eb;
         const real ar = tr_[i] * td.ar[pr], ag = tg_[i] * td.ag[pr], ab = tb_[i] * td.ab[pr];
         const int goes_on = hit & !last & (max_f(ar, max_f(ag, ab)) > 0.0f);   /* black: no shadow ray, no bounce */

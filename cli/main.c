@@ -4,6 +4,8 @@
 
 #include "cli.h"
 #include "mem_limits.h"
+#include "error.h"
+#include "source_date.h"
 
 int cmd_render(int argc, char **argv);
 void cmd_render_usage(FILE *out);
@@ -111,6 +113,11 @@ static int run_command(int argc, char **argv)
         return DR_EXIT_USAGE;
     }
     cli_limits_init();
+    long long epoch;
+    if (dr_source_date_epoch(&epoch) < 0) {   /* (before any work: a bad stamp would make every output unreproducible) */
+        cli_error(name, "%s", dr_last_error());
+        return DR_EXIT_USAGE;
+    }
     return c->run(argc - 1, argv + 1);
 }
 

@@ -19,6 +19,7 @@
 #include "cut_short.h"
 #include "error.h"
 #include "image.h"
+#include "source_date.h"
 
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
@@ -601,6 +602,9 @@ int write_image(const char *path, int width, int height, int channels, const flo
         spec.channelnames = {"Y"};
     }
     spec.attribute("oiio:UnassociatedAlpha", 1);
+    char stamp[32];   /* (EXR and TIFF writers stamp the time: without this, now) */
+    if (dr_source_date_string(stamp, sizeof stamp))
+        spec.attribute("DateTime", stamp);
     std::vector<float> fbuf;
     std::vector<uint8_t> bbuf;
     const size_t n = (size_t)width * (size_t)height;

@@ -18,9 +18,6 @@ static inline bool stage_material(const struct dr_scene *s, const struct dr_path
 static inline void stage_escaped(const struct dr_scene *s, const struct dr_path_opts *opts,
                                  const struct dr_path_state *st, struct dr_path_vertex *v)
     __attribute__((always_inline));
-static inline void stage_surface_hit(const struct dr_scene *s, const struct dr_path_opts *opts,
-                                     const struct dr_path_state *st, int64_t tri, struct dr_path_vertex *v)
-    __attribute__((always_inline));
 static inline bool stage_continue(const struct dr_path_opts *opts, struct dr_path_state *st,
                                   struct dr_path_vertex *v) __attribute__((always_inline));
 
@@ -174,13 +171,6 @@ static inline void stage_emission(const struct dr_scene *s, const struct dr_path
     v->emits = true;
     v->Le = dr_emission(s, hit);
     v->emit_w = st->depth == 1 ? 1.0 : dr_mis_power(st->prev_pdf, dr_light_pdf_area(s, s->light_sampler, st->prev_p, hit));
-}
-
-static void stage_surface_hit(const struct dr_scene *s, const struct dr_path_opts *opts,
-                              const struct dr_path_state *st, int64_t tri, struct dr_path_vertex *v)
-{
-    stage_locate(s, st, tri, v);
-    stage_emission(s, opts, st, tri, v);
 }
 
 /* Stage material: the shading frame oriented towards the arriving ray, the

@@ -135,8 +135,12 @@ static void start_run_samples8(void *ctx, int64_t first, struct dr_sampler *smp,
     dr_sampler_pixel_first2_8(pixel, sample, smp, &u, &v);
     dr_f8 px = x + u, py = y + v;   /* dr_film_sample's box */
     if (j->opts->film.filter.kind != DR_FILTER_BOX)
-        for (int l = 0; l < 8; l++)
-            dr_film_sample(&j->opts->film.filter, (int)x[l], (int)y[l], u[l], v[l], &px[l], &py[l]);
+        for (int l = 0; l < 8; l++) {   /* (clang takes no address of a vector's element) */
+            double fx, fy;
+            dr_film_sample(&j->opts->film.filter, (int)x[l], (int)y[l], u[l], v[l], &fx, &fy);
+            px[l] = fx;
+            py[l] = fy;
+        }
     dr_v3x8 o8, d8;
     dr_camera_ray8(&j->view, px, py, &o8, &d8);
     for (int l = 0; l < 8; l++)

@@ -269,8 +269,12 @@ static inline void dr_sampler_pixel_first2_8(const struct dr_sampler_pixel *cons
             s[l].index = (uint32_t)sample[l];
     }
     if (kind == DR_SAMPLER_STRATIFIED) {
-        for (int l = 0; l < 8; l++)
-            dr_sampler_pixel_first2(p[l], &s[l], &(*u1)[l], &(*u2)[l]);
+        for (int l = 0; l < 8; l++) {   /* (clang takes no address of a vector's element) */
+            double a, b;
+            dr_sampler_pixel_first2(p[l], &s[l], &a, &b);
+            (*u1)[l] = a;
+            (*u2)[l] = b;
+        }
         return;
     }
     if (kind == DR_SAMPLER_SOBOL)

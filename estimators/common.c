@@ -101,8 +101,12 @@ void dr_est_camera_rays8(struct dr_est_base *b, int thread, const int64_t pixel[
     dr_f8 fx = x + u, fy = y + v;   /* dr_film_sample's box */
     const struct dr_filter *f = &b->p->film.filter;
     if (f->kind != DR_FILTER_BOX)
-        for (int l = 0; l < 8; l++)
-            dr_film_sample(f, ps[l]->x, ps[l]->y, u[l], v[l], &fx[l], &fy[l]);
+        for (int l = 0; l < 8; l++) {   /* (clang takes no address of a vector's element) */
+            double sx, sy;
+            dr_film_sample(f, ps[l]->x, ps[l]->y, u[l], v[l], &sx, &sy);
+            fx[l] = sx;
+            fy[l] = sy;
+        }
     dr_v3x8 o8, d8;
     dr_camera_ray8(&b->view, fx, fy, &o8, &d8);
     for (int l = 0; l < 8; l++)

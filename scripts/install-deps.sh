@@ -2,7 +2,8 @@
 # Installs the Debian packages drender needs to build, test and benchmark.
 # Only what is missing is installed; uses sudo when not root. Idempotent.
 # With --fuzz, only the fuzzing toolchain of `make fuzz` (clang, libFuzzer and
-# the sanitizer runtimes) is checked; `make test` never needs it.
+# the sanitizer runtimes) is checked; `make test` needs clang only for its
+# syntax check (tests/cli_clang_syntax.sh), not libFuzzer.
 set -euo pipefail
 
 pkgs=(build-essential pkg-config
@@ -11,7 +12,8 @@ pkgs=(build-essential pkg-config
       libdraco-dev   # KHR_draco_mesh_compression (core/draco_decode.cpp)
       gnuplot-nox python3
       valgrind    # scripts/no-media-overhead.sh counts instructions with callgrind
-      python3-openvdb)   # tests/data/media/make_vdb.py writes the test .vdb files
+      python3-openvdb   # tests/data/media/make_vdb.py writes the test .vdb files
+      clang)   # tests/cli_clang_syntax.sh: every source compiles with clang (as make fuzz builds)
 # Node.js runs the Khronos glTF validator (tests/cli_gltf_validate.sh). Any node
 # on PATH will do (e.g. NodeSource's nodejs, which bundles npm and conflicts with
 # Debian's npm), so Debian's packages are added only when there is none.

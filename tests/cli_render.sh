@@ -81,6 +81,29 @@ else
     echo "note: oiiotool not found; checked the files by their magic bytes only"
 fi
 # a successful render leaves no temporary files behind
+# ---- SOURCE_DATE_EPOCH: EXR and TIFF files carry it as their DateTime
+# (UTC), so two renders seconds apart are the same bytes; a malformed value
+# stops every command before any work (exit 2, naming the variable) ----
+for ext in exr tif; do
+    SOURCE_DATE_EPOCH=1700000000 render_ok "stamp1.$ext" --res 8x8 --spp 1
+    sleep 1.1   # (a second boundary: without the variable the stamps would differ)
+    SOURCE_DATE_EPOCH=1700000000 render_ok "stamp2.$ext" --res 8x8 --spp 1
+    cmp -s "stamp1.$ext" "stamp2.$ext" || fail "SOURCE_DATE_EPOCH: two $ext renders differ in bytes"
+    if $have_oiio; then
+        iinfo -v "stamp1.$ext" | grep -q 'DateTime: "2023:11:14 22:13:20"' ||
+            fail "SOURCE_DATE_EPOCH=1700000000: $ext DateTime is not 2023:11:14 22:13:20 (UTC): $(iinfo -v "stamp1.$ext" | grep DateTime)"
+    fi
+    rm -f "stamp1.$ext" "stamp2.$ext"
+done
+for bad in 12x -5 " 7" 0x10 99999999999999999999 253402300800; do
+    SOURCE_DATE_EPOCH=$bad run render --res 8x8 --spp 1 -o stamp.exr
+    expect_rc 2 "SOURCE_DATE_EPOCH='$bad'"
+    expect_in err "SOURCE_DATE_EPOCH='$bad' is not a number of seconds" "SOURCE_DATE_EPOCH='$bad'"
+    [ ! -e stamp.exr ] || fail "SOURCE_DATE_EPOCH='$bad': stamp.exr was written"
+done
+SOURCE_DATE_EPOCH= render_ok stamp.exr --res 8x8 --spp 1   # (empty: unset)
+rm -f stamp.exr
+
 extra=$(ls -A | grep -v '^img\.\(png\|exr\|hdr\|jpg\)$')
 [ -z "$extra" ] || fail "stray files after rendering: $extra"
 

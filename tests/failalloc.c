@@ -19,7 +19,9 @@
  * The real allocator is the next one in the search order (dlsym RTLD_NEXT):
  * glibc's, or AddressSanitizer's where drender is built with it (then this
  * library is preloaded before libasan, with verify_asan_link_order=0). */
+#ifndef _GNU_SOURCE
 #define _GNU_SOURCE
+#endif
 #include <dlfcn.h>
 #include <errno.h>
 #include <link.h>

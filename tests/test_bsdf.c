@@ -828,7 +828,8 @@ static void test_atan2_acos(void)
         for (int l = 0; l < DR_SIMD_W; l++) {
             /* the scalar twins: the same bits */
             double as = dr_atan2(y[l], x[l]), acs = dr_acos(c[l]);
-            twins_differ += memcmp(&as, &a[l], sizeof as) != 0 || memcmp(&acs, &ac[l], sizeof acs) != 0;
+            const double al = a[l], acl = ac[l];   /* (clang takes no address of a vector's element) */
+            twins_differ += memcmp(&as, &al, sizeof as) != 0 || memcmp(&acs, &acl, sizeof acs) != 0;
             worst_atan2 = fmax(worst_atan2, ulps_off(a[l], atan2l(y[l], x[l])));
             worst_acos = fmax(worst_acos, ulps_off(ac[l], acosl(c[l])));
         }
