@@ -878,8 +878,8 @@ static double reference_max_error(const struct opt_run *r)
 }
 
 /* One progress line per iteration (a live bar on a terminal), and one JSON
- * object on stdout with --json. */
-static void opt_report(const struct opt_args *a, const struct opt_run *r, int it, double sec, double per, double err)
+ * object on stdout with --json: 0, or the errno of its failed write. */
+static int opt_report(const struct opt_args *a, const struct opt_run *r, int it, double sec, double per, double err)
 {
     const bool tty = isatty(2);
     char eta[32];
@@ -898,7 +898,7 @@ static void opt_report(const struct opt_args *a, const struct opt_run *r, int it
     fprintf(stderr, "%s%siter %*d/%d  loss %.6e  %.2f s/iter  eta %s%s%s", tty ? "\r" : "", bar,
             (int)snprintf(NULL, 0, "%d", a->iters), it + 1, a->iters, r->loss, sec, eta, refmsg, tty ? "  " : "\n");
     if (!a->g.json)
-        return;
+        return 0;
     printf("{\"iteration\": %d, \"loss\": ", it + 1);
     json_number(stdout, r->loss);
     printf(", \"seconds\": ");
@@ -913,7 +913,10 @@ static void opt_report(const struct opt_args *a, const struct opt_run *r, int it
     printf("}, \"gradient_stderr\": {");
     print_values(stdout, r->ps, r->se, true);
     printf("}}\n");
-    fflush(stdout);
+    errno = 0;
+    if (fflush(stdout) == 0 && !ferror(stdout))
+        return 0;
+    return errno ? errno : EIO;
 }
 
 /* The iterations: gradient, Adam step, history, report, checkpoint every K
@@ -940,19 +943,29 @@ static int opt_iterations(const struct opt_args *a, struct opt_run *r)
         }
         if (!write_loss_csv(a->out_dir, &r->hist))
             return DR_EXIT_FAILURE;
-        opt_report(a, r, it, sec, (now - t_loop) / (it - r->it0 + 1), err);
+        /* (--json progress nobody receives, a full disk say: the run stops
+         * here as when interrupted, its checkpoint written) */
+        const int lost = opt_report(a, r, it, sec, (now - t_loop) / (it - r->it0 + 1), err);
         /* (an interrupted run's is on disk before it stops; the others
          * finish beside the next iterations, the last beside the final
          * pictures, opt_finish) */
-        const bool last = it + 1 == a->iters;
-        if ((it + 1) % a->ckpt_every == 0 || last || stop_signal) {
+        const bool last = it + 1 == a->iters, stop = stop_signal || lost != 0;
+        if ((it + 1) % a->ckpt_every == 0 || last || stop) {
             int crc = dr_checkpoint_write_async(&r->pending, r->ckpt, r->scene_path, r->ps, r->theta, r->adam, it + 1);
-            if (crc == 0 && stop_signal)
+            if (crc == 0 && stop)
                 crc = dr_checkpoint_wait(&r->pending);
             if (crc != 0) {
                 cli_error("optimize", "%s", dr_last_error());
                 return DR_EXIT_FAILURE;
             }
+        }
+        if (lost && !last) {
+            if (isatty(2))
+                fputc('\n', stderr);
+            cli_error("optimize", "cannot write standard output: %s; stopped after iteration %d, checkpoint written to %s; continue with --resume",
+                      strerror(lost), it + 1, r->ckpt);
+            clearerr(stdout);   /* (reported: main's close need not say it again) */
+            return DR_EXIT_FAILURE;
         }
         if (stop_signal) {
             if (isatty(2))

@@ -145,6 +145,13 @@ full render "$box" --res 8x8 --spp 1 -o "$tmp/r.png" --json
 full grad "$box" --param "$B" --res 8x8 --spp 1 --target "$tmp/target.exr" --res 16x16
 full fdcheck "$box" --param "$B" --res 8x8 --spp 2 --batches 4
 full optimize "$box" --param "$B" --target "$tmp/target.exr" --res 16x16 --spp 2 --iters 1 --json --out-dir "$tmp/o"
+# (a long run stops at its first lost line, checkpoint written, not at the end)
+full optimize "$box" --param "$B" --target "$tmp/target.exr" --res 16x16 --spp 2 --iters 40 --json --out-dir "$tmp/o40"
+expect_mentions "stopped after iteration 1, checkpoint written" "optimize --json --iters 40 with stdout on a full device"
+rows=$(($(wc -l <"$tmp/o40/loss.csv") - 1))
+[ "$rows" -eq 1 ] || fail "optimize --json --iters 40 > /dev/full: ran $rows iterations (expected to stop after 1)"
+grep -qx "iteration 1" "$tmp/o40/checkpoint.txt" 2>/dev/null ||
+    fail "optimize --json --iters 40 > /dev/full: no checkpoint of iteration 1"
 full compare "$box" --param "$B" --spp 1 --res 8x8 --estimators prb -o "$tmp/c" --json
 full --help
 full help render
