@@ -931,6 +931,7 @@ int cmd_grad(int argc, char **argv)
         goto out;
     if ((rc = grad_apply_sets(&a.g, scene)) >= 0 || (rc = grad_param_set(&a.g, scene, &ps)) >= 0)
         goto out;
+    grad_sampling_note(&a.g, scene, ps);
     const struct dr_reverse_options planned = reverse_options(&a, scene, &cam, ps);
     if ((rc = cli_limits_grad(&a.g, scene, ps, a.target != NULL, a.batches, a.batches_given, a.batch,
                               a.target && dr_reverse_parts(&planned))) >= 0)

@@ -666,6 +666,7 @@ static int opt_load(struct opt_args *a, struct opt_run *r)
         return rc;
     if ((rc = grad_apply_sets(&a->g, r->scene)) >= 0)
         return rc;
+    grad_sampling_note(&a->g, r->scene, r->ps);
     if (dr_param_set_writable(r->scene, r->ps) != 0) {   /* (every step puts its values) */
         cli_error("optimize", "%s", dr_last_error());
         return DR_EXIT_FAILURE;

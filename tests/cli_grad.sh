@@ -308,6 +308,20 @@ expect_rc 0 "grad --sampling attached (colour)"
 json_check "$tmp/out" 'd["sampling"] == "attached" and d["sampling_effective"] == "detached"'
 run grad --target t.exr --param "$red" --estimator tape --spp 4 --batches 2 --json
 json_check "$tmp/out" 'd["sampling_effective"] == "detached"'
+# a narrow lobe's roughness under the default (detached) sampling: a note
+# naming the parameter and the modes that do better there; none when the
+# mode was chosen, the lobe is rough, or only a colour is differentiated
+run grad --target t.exr --param "$rough" --set "$rough=0.05" --spp 1
+expect_rc 0 "grad of roughness 0.05"
+expect_in err "note: /materials/rough-gold/pbrMetallicRoughness/roughnessFactor is 0.05" "grad of roughness 0.05"
+expect_in err "--sampling derivative (unbiased)" "grad of roughness 0.05"
+expect_in err "--sampling mis" "grad of roughness 0.05"
+run grad --target t.exr --param "$rough" --param "$red" --set "$rough=0.05" --spp 1 --sampling detached
+expect_empty err "grad of roughness 0.05 with --sampling detached given"
+run grad --target t.exr --param "$rough" --spp 1
+expect_empty err "grad of roughness 0.35 (the file's)"
+run grad --target t.exr --param "$red" --set "$rough=0.05" --spp 1
+expect_empty err "grad of a colour beside a roughness of 0.05"
 run grad --target t.exr --param "$red" --loss l1 --json
 expect_rc 0 "grad --loss l1"
 json_check "$tmp/out" 'd["loss_kind"] == "l1" and d["width"] == 16 and d["height"] == 16'

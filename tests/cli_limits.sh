@@ -86,6 +86,13 @@ refused 3 "basic.gltf|/images/0|999999x999999|more than the" render "$tmp/hugete
 tail -c +2 "$cli_root/fuzz/corpus/image/regress-bmp-bogus-bpp" >"$tmp/bogus.bmp"
 DRENDER_MEM_LIMIT=1G refused 3 "--target|bogus.bmp|3604481x5|more than the" grad "$scene" --target "$tmp/bogus.bmp" \
     --param $P
+# found by make fuzz: a 1 KB GIF claiming a 29702x15720 screen made OpenImageIO's
+# GIF reader allocate and clear its 1.9 GB canvas as it opened the file (7 s),
+# before drender saw the header; the screen size is now checked first
+tail -c +2 "$cli_root/fuzz/corpus/image/regress-gif-huge-canvas" >"$tmp/canvas.gif"
+# (before, the reader's own error: "Wrong record type detected")
+DRENDER_MEM_LIMIT=1G refused 3 "--target|canvas.gif|29702x15720|more than the" grad "$scene" \
+    --target "$tmp/canvas.gif" --param $P
 # a texture that fits the machine but not DRENDER_MEM_LIMIT (an 8-bit texture
 # takes a byte per value: 11.4 MiB here, and 1.5 MiB of decoder scratch)
 huge_png "$tmp/hugetex/checker.png" 2000

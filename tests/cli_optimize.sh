@@ -112,6 +112,11 @@ expect_rc 2 "optimize --primal nope"
 expect_in err "unknown mode 'nope' (available: cross, separate)" "optimize --primal nope"
 [ -e a-bad ] && fail "optimize --primal nope: created its output directory"
 
+# a narrow lobe's roughness from the default (detached) sampling: the note of cli_grad.sh
+run optimize "$data/glossy.gltf" --target glossy.exr --param "$rough" --set "$rough=0.02" --iters 1 --spp 1 \
+    $depth --out-dir note
+expect_rc 0 "optimize a roughness of 0.02"
+expect_in err "note: $rough is 0.02: under detached sampling" "optimize a roughness of 0.02"
 # a, two views: camera 0 straight on, camera 1 from the side
 run optimize "$data/diffuse.gltf" --target 0=diffuse0.exr --target 1=diffuse1.exr --param "$albedo" \
     --set "$albedo=0.9,0.1,0.5" --iters 100 --spp 8 $depth --reference "$data/diffuse.gltf" --out-dir a2 --json
