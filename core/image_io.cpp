@@ -509,7 +509,27 @@ int write_file_checked(const std::string &path, const std::vector<unsigned char>
         p += k;
         left -= (size_t)k;
     }
+    // (on disk before the rename that follows, as checkpoints and glTF
+    // outputs are: a machine that stops after it must not leave an empty
+    // file under the output's name; some filesystems report a full disk
+    // only here)
+    if (fsync(fd) != 0) {
+        int e = errno;
+        close(fd);
+        return e;
+    }
     return close(fd) != 0 ? errno : 0;
+}
+
+// fsync of a file another writer (OpenImageIO's plugin) wrote: 0 or errno.
+int fsync_path(const std::string &path)
+{
+    int fd = open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0)
+        return errno;
+    int e = fsync(fd) != 0 ? errno : 0;
+    close(fd);
+    return e;
 }
 
 // For the formats that take no proxy (sgi, ico, fits, rla, heif): the file
@@ -568,6 +588,10 @@ int write_then_rename(std::unique_ptr<ImageOutput> &out, const std::string &spat
         char cause[256];   // (the plugin's own writes report nothing: the likely cause)
         why = std::string(dr_why_cut_short(tmp.c_str(), cause, sizeof cause)) + " (reading it back: " + why + ")";
         ok = false;
+    } else if (ok) {
+        int e = fsync_path(tmp);
+        if (e)
+            ok = false, why = std::strerror(e);
     }
     if (ok && std::rename(tmp.c_str(), path) != 0) {
         ok = false;

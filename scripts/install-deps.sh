@@ -13,6 +13,7 @@ pkgs=(build-essential pkg-config
       gnuplot-nox python3
       valgrind    # scripts/no-media-overhead.sh counts instructions with callgrind
       python3-openvdb   # tests/data/media/make_vdb.py writes the test .vdb files
+      strace   # tests/cli_write_failures.sh: outputs are fsync'ed before their rename
       clang)   # tests/cli_clang_syntax.sh: every source compiles with clang (as make fuzz builds)
 # Node.js runs the Khronos glTF validator (tests/cli_gltf_validate.sh). Any node
 # on PATH will do (e.g. NodeSource's nodejs, which bundles npm and conflicts with

@@ -129,6 +129,29 @@ wsweep "optimize density grid" progress optimize "$DR_TESTDIR/data/media/smoke.g
     --param /materials/0/extensions/DR_medium/density --target "$tmp/target.exr" --res 16x16 --spp 4 --iters 1 -o fit.gltf
 wsweep "compare" progress compare "$box" --param "$B" --spp 2 --res 8x8 --estimators prb,tape -o cmp
 
+# on disk before it has the output's name: the temporary is fsync'ed before
+# the rename (a machine that stops right after could otherwise leave an
+# empty file under the name), for a format encoded in memory (png) and one
+# OpenImageIO's plugin writes itself (sgi)
+command -v strace >/dev/null || fail "strace not installed (scripts/install-deps.sh installs it)"
+for ext in png sgi; do
+    strace -f -o "$tmp/strace" -e trace=openat,fsync,rename "$DRENDER" render "$box" --res 8x8 --spp 1 \
+        -o "$work/durable.$ext" 2>/dev/null || fail "render to durable.$ext under strace"
+    python3 - "$tmp/strace" "$ext" <<'PY' || fail "render to durable.$ext: no fsync of its temporary before the rename"
+import re, sys
+fds, synced = {}, set()
+for line in open(sys.argv[1]):
+    m = re.search(r'openat\(.*"([^"]*\.tmp[^"]*)".* = (\d+)$', line)
+    if m: fds[m.group(2)] = m.group(1)
+    m = re.search(r'fsync\((\d+)\)\s+= 0', line)
+    if m and m.group(1) in fds: synced.add(fds[m.group(1)])
+    m = re.search(r'rename\("([^"]*)", "([^"]*durable\.' + sys.argv[2] + r')"\) = 0', line)
+    if m: sys.exit(0 if m.group(1) in synced else 1)
+sys.exit(1)
+PY
+    rm -f "$work/durable.$ext"
+done
+
 # standard output on a full disk
 cli_cmd_label="stdout"
 full() {   # full ARGS...: drender ARGS > /dev/full must fail and say so
