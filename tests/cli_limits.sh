@@ -90,9 +90,13 @@ DRENDER_MEM_LIMIT=1G refused 3 "--target|bogus.bmp|3604481x5|more than the" grad
 # GIF reader allocate and clear its 1.9 GB canvas as it opened the file (7 s),
 # before drender saw the header; the screen size is now checked first
 tail -c +2 "$cli_root/fuzz/corpus/image/regress-gif-huge-canvas" >"$tmp/canvas.gif"
-# (before, the reader's own error: "Wrong record type detected")
-DRENDER_MEM_LIMIT=1G refused 3 "--target|canvas.gif|29702x15720|more than the" grad "$scene" \
-    --target "$tmp/canvas.gif" --param $P
+# (before, the reader's own error: "Wrong record type detected"); and one
+# whose signature is "GIF88a", which giflib opens as well
+tail -c +2 "$cli_root/fuzz/corpus/image/regress-gif88a-huge-canvas" >"$tmp/canvas88.gif"
+for g in canvas canvas88; do
+    DRENDER_MEM_LIMIT=1G refused 3 "--target|$g.gif|29702x15720|more than the" grad "$scene" \
+        --target "$tmp/$g.gif" --param $P
+done
 # a texture that fits the machine but not DRENDER_MEM_LIMIT (an 8-bit texture
 # takes a byte per value: 11.4 MiB here, and 1.5 MiB of decoder scratch)
 huge_png "$tmp/hugetex/checker.png" 2000
