@@ -10,7 +10,8 @@
  * libraries by file) from /proc/self/smaps, and the dlopen's wall time
  * (part e: what a textured scene's load, or an image write, waits for). This program links drender's own
  * functions the plugin calls back into (error reporting, sRGB curves, image
- * release) and exports them (-rdynamic, as the drender binary does), but not
+ * release, the SOURCE_DATE_EPOCH stamp, the cause of a cut-short file;
+ * `nm -D --undefined-only libdrender-image.so | grep dr_` lists them) and exports them (-rdynamic, as the drender binary does), but not
  * image_io.o: OpenImageIO is loaded only by the dlopen. */
 #include <dlfcn.h>
 #include <stdio.h>
@@ -19,7 +20,9 @@
 
 #include "clock.h"
 #include "error.h"
+#include "cut_short.h"
 #include "image.h"
+#include "source_date.h"
 
 /* VmRSS or VmHWM of this process, KiB (-1: unreadable). */
 static long status_kib(const char *field)
@@ -99,6 +102,9 @@ int main(int argc, char **argv)
     dr_set_error("%s", "");
     if (dr_linear_to_srgb(dr_srgb_to_linear(0.5)) < 0.0)
         return 1;
+    char stamp[32], cause[64];
+    (void)dr_source_date_string(stamp, sizeof stamp);
+    (void)dr_why_cut_short("", cause, sizeof cause);
     long before = status_kib("VmRSS");
     double t0 = dr_clock_seconds();
     void *h = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);

@@ -31,6 +31,17 @@ while read -r n; do have+=("$n"); done < <(readelf -d "$plugin" | sed -n 's/.*(N
     fail "the image library's first dependencies are not the script's ranking: want '${want[*]:0:5} ...', have '${have[*]:0:5} ...'"
 case "${have[0]}" in libopenvdb.so*) ;; *) fail "libopenvdb (57 000 of the 170 000 bindings) is not the first dependency: ${have[0]}" ;; esac
 
+# drender's functions the library calls back into are all exported by the
+# binary (-rdynamic exports only what the binary linked: a function of an
+# archive member nothing else used would make the dlopen fail at the first
+# image, "undefined symbol"; bench/image_lib_rss met that)
+command -v nm >/dev/null || fail "nm (binutils) is needed"
+missing=$(comm -23 <(nm -D --undefined-only "$plugin" | awk '$2 ~ /^dr_/ {print $2}' | sort -u) \
+    <(nm -D --defined-only "$DRENDER" | awk '$3 ~ /^dr_/ {print $3}' | sort -u))
+[ -z "$missing" ] || fail "the image library needs functions drender does not export: $missing"
+[ "$(nm -D --undefined-only "$plugin" | grep -c ' dr_')" -ge 5 ] ||
+    fail "nm found fewer than 5 dr_ functions the image library calls back into"
+
 # it loads and works: a scene with a PNG texture (read through the library)
 # rendered to PNG and EXR (written through it)
 scene=$DR_SCENES/cornell-box.gltf
