@@ -34,7 +34,7 @@ bool dr_source_date_string(char *buf, size_t size)
 {
     long long secs;
     if (dr_source_date_epoch(&secs) != 1)
-        return 0;
+        return false;
     time_t t = (time_t)secs;
     struct tm tm;
     return gmtime_r(&t, &tm) && strftime(buf, size, "%Y:%m:%d %H:%M:%S", &tm) > 0;
