@@ -58,6 +58,19 @@ unsigned long long max_image_bytes()
     return g_max_image_bytes.load();
 }
 
+// Would an image of w x h with nch channels, needing `need` bytes decoded,
+// exceed the memory drender may use? Then the message says so (true).
+bool over_limit(const std::string &label, int w, int h, int nch, double need)
+{
+    const unsigned long long limit = max_image_bytes();
+    if (limit == 0 || need <= (double)limit)
+        return false;
+    dr_set_error("%s: cannot read image: %dx%d with %d channels needs %.1f MiB decoded, more than the "
+                 "%.1f MiB of memory drender may use",
+                 label.c_str(), w, h, nch, need / 1048576.0, (double)limit / 1048576.0);
+    return true;
+}
+
 // One line, no trailing newline: OIIO messages sometimes end with '\n'.
 std::string clean(std::string s)
 {
@@ -196,14 +209,8 @@ int read_opened(ImageInput *in, const std::string &label, dr_image *img, bool ei
     const bool as_bytes = eight_bit && spec.format == TypeDesc::UINT8;
     double need = (as_bytes ? 1.0 : 2.0 * sizeof(float)) * (double)w * (double)h * nch +
                   256.0 * (double)w * (double)spec.pixel_bytes(true);
-    unsigned long long limit = max_image_bytes();
-    if (limit > 0 && need > (double)limit) {
-        dr_set_error("%s: cannot read image: %dx%d with %d channels needs %.1f MiB decoded, more than the "
-                     "%.1f MiB of memory drender may use",
-                     label.c_str(), spec.width, spec.height, nch, need / 1048576.0,
-                     (double)limit / 1048576.0);
+    if (over_limit(label, spec.width, spec.height, nch, need))
         return DR_ERR_NOMEM;
-    }
     if (as_bytes)
         return read_opened_bytes(in, label, nch, img);
     float *data = (float *)dr_alloc_big(w * h * (size_t)nch * sizeof(float));
@@ -245,15 +252,7 @@ int refuse_huge_gif(const unsigned char *b, size_t n, const std::string &label)
     if (n < 10 || std::memcmp(b, "GIF", 3) != 0)   // (giflib reads any "GIF" + 3 bytes: "GIF88a" too)
         return DR_OK;
     const int w = b[6] | b[7] << 8, h = b[8] | b[9] << 8;
-    const double need = 4.0 * (double)w * (double)h;
-    const unsigned long long limit = max_image_bytes();
-    if (limit > 0 && need > (double)limit) {
-        dr_set_error("%s: cannot read image: %dx%d with 4 channels needs %.1f MiB decoded, more than the "
-                     "%.1f MiB of memory drender may use",
-                     label.c_str(), w, h, need / 1048576.0, (double)limit / 1048576.0);
-        return DR_ERR_NOMEM;
-    }
-    return DR_OK;
+    return over_limit(label, w, h, 4, 4.0 * (double)w * (double)h) ? DR_ERR_NOMEM : DR_OK;
 }
 
 int refuse_huge_gif_file(const char *path, const std::string &label)
