@@ -403,6 +403,7 @@ static void args_defaults(struct cmp_args *a)
 {
     memset(a, 0, sizeof *a);
     grad_common_init(&a->g, "compare", 0);
+    a->g.sampling_auto = false;   /* (compare names its modes: --sampling L) */
     a->loss = DR_LOSS_L2;
     a->batches = 4;
     a->repeat = 1;

@@ -84,11 +84,14 @@ void cmd_grad_usage(FILE *out)
             "                      runs (--json: primal)\n"
             "      --grad-dir DIR  reverse mode: where texture gradients go (default: .)\n"
             "      --estimator E   gradient estimator: prb (path replay, default) or tape\n"
-            "      --sampling S    detached (default), attached (differentiates through the\n"
-            "                      sampling: for roughness), mis (both from the same paths,\n"
-            "                      weighted per parameter) or derivative (adds directions\n"
-            "                      sampled for the BSDF derivative, combined by MIS); see\n"
-            "                      SAMPLING in the manual\n"
+            "      --sampling S    auto (default), detached, attached, mis or derivative:\n"
+            "                      attached differentiates through the sampling (for\n"
+            "                      roughness), mis takes both from the same paths, weighted\n"
+            "                      per parameter, derivative adds directions sampled for the\n"
+            "                      BSDF derivative, combined by MIS; auto is derivative where\n"
+            "                      a differentiated roughnessFactor is below 0.2 (0.12 beside\n"
+            "                      a base colour or metallic), else detached. See SAMPLING in\n"
+            "                      the manual\n"
             "      --regularize E  prb, attached: a vertex Jacobian whose smallest/largest\n"
             "                      singular value is below E is not inverted; forward mode\n"
             "                      restarts there instead (default: 1e-3; 0: always invert)\n"
@@ -931,7 +934,7 @@ int cmd_grad(int argc, char **argv)
         goto out;
     if ((rc = grad_apply_sets(&a.g, scene)) >= 0 || (rc = grad_param_set(&a.g, scene, &ps)) >= 0)
         goto out;
-    grad_sampling_note(&a.g, scene, ps);
+    grad_resolve_sampling(&a.g, scene, ps);
     const struct dr_reverse_options planned = reverse_options(&a, scene, &cam, ps);
     if ((rc = cli_limits_grad(&a.g, scene, ps, a.target != NULL, a.batches, a.batches_given, a.batch,
                               a.target && dr_reverse_parts(&planned))) >= 0)

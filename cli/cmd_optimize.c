@@ -56,8 +56,11 @@ void cmd_optimize_usage(FILE *out)
             "                         5%% of the value for emission, lights and environment)\n"
             "      --loss l1|l2       image loss (default l2)\n"
             "      --estimator E      gradient estimator: prb (default) or tape\n"
-            "      --sampling S       detached (default), attached, mis or derivative (see\n"
-            "                         SAMPLING in the manual)\n"
+            "      --sampling S       auto (default), detached, attached, mis or derivative\n"
+            "                         (see SAMPLING in the manual); auto is derivative while\n"
+            "                         a differentiated roughnessFactor is below 0.2 (0.12\n"
+            "                         beside a base colour or metallic), decided at every\n"
+            "                         iteration, else detached\n"
             "      --regularize E     prb, attached: a vertex Jacobian whose smallest/largest\n"
             "                         singular value is below E is not inverted; forward mode\n"
             "                         restarts there instead (default 1e-3; 0: always invert)\n"
@@ -607,6 +610,9 @@ struct opt_run {
     char ckpt[4096];
     struct dr_checkpoint_pending pending;   /* the last checkpoint's fsync and rename, in the background */
     int it0;                           /* first iteration to run (resumed runs: > 0) */
+    int sampling;                      /* what the last gradient ran (--sampling auto decides at every
+                                          iteration from the values then: opt_sampling); -1 before */
+    int auto_notes;                    /* notes auto's changes of mind have printed */
 };
 
 /* --reference: the true values of the same parameters, for error reports. */
@@ -658,15 +664,19 @@ static int opt_load(struct opt_args *a, struct opt_run *r)
                           a->targets[i].camera, r->scene_path);
             return DR_EXIT_USAGE;
         }
-    if ((rc = grad_param_set(&a->g, r->scene, &r->ps)) >= 0 ||
-        (rc = cli_limits_optimize(&a->g, r->scene, r->ps, target_pixels(a, false), target_pixels(a, true),
+    if ((rc = grad_param_set(&a->g, r->scene, &r->ps)) >= 0)
+        return rc;
+    /* (auto may move to derivative sampling as the fit lowers a roughness:
+     * the memory check counts that mode's tape) */
+    a->g.sampling_may_switch = a->g.sampling_auto && grad_auto_sampling(&a->g, r->scene, r->ps).derivative_possible;
+    if ((rc = cli_limits_optimize(&a->g, r->scene, r->ps, target_pixels(a, false), target_pixels(a, true),
                                    a->n_targets)) >= 0)
         return rc;
     if (a->reference && (rc = load_reference(a, r)) >= 0)
         return rc;
     if ((rc = grad_apply_sets(&a->g, r->scene)) >= 0)
         return rc;
-    grad_sampling_note(&a->g, r->scene, r->ps);
+    r->sampling = -1;   /* (decided at each iteration: opt_sampling) */
     if (dr_param_set_writable(r->scene, r->ps) != 0) {   /* (every step puts its values) */
         cli_error("optimize", "%s", dr_last_error());
         return DR_EXIT_FAILURE;
@@ -826,8 +836,33 @@ static void root_sums(struct opt_run *r)
 /* Loss and gradient of iteration `it` over every target, from
  * drivers/reverse.h (batches with primals of their own, independent of
  * their gradient samples); the targets' standard errors add in quadrature. */
+/* The sampling mode of iteration it: --sampling's, or auto's choice from the
+ * values the fit has reached (a pure function of them, so a resumed run
+ * decides as the uninterrupted one did). A change is said on stderr, the
+ * first few times (a roughness that hovers at the threshold would say it at
+ * every step). */
+static enum dr_sampling opt_sampling(const struct opt_args *a, struct opt_run *r, int it)
+{
+    if (!a->g.sampling_auto)
+        return a->g.sampling;
+    const struct grad_auto_choice c = grad_auto_sampling(&a->g, r->scene, r->ps);
+    const bool first = r->sampling < 0;
+    if (first || (int)c.sampling != r->sampling) {
+        if (r->auto_notes < 4) {
+            if (!first && isatty(2))
+                fputc('\n', stderr);   /* (after the progress line) */
+            grad_auto_note(&a->g, r->scene, &c, first ? 0 : it + 1);
+        } else if (r->auto_notes == 4)
+            cli_error("optimize", "note: --sampling auto: further changes of sampling mode are not reported "
+                                  "(--json gives every iteration's)");
+        r->auto_notes++;
+    }
+    return c.sampling;
+}
+
 static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
 {
+    r->sampling = (int)opt_sampling(a, r, it);
     const int64_t T = r->ps->total;
     const bool several = a->n_targets > 1;
     if (several)   /* (one target's run overwrites both) */
@@ -841,6 +876,7 @@ static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
             .batches = a->batches, .primal = a->primal,
             .problem = grad_problem(&a->g, r->scene, cam, r->ps, t->w, t->h, a->g.spp,
                                     iteration_seed(a->g.seed, it, ti, 0x47524144))};
+        o.problem.sampling = (enum dr_sampling)r->sampling;
         o.scratch = &r->scratch;
         struct dr_reverse_result res = {.grad = several ? r->gt : r->grad, .se = several ? r->se_t : r->se,
                                         .image = t->render, .nonzero = several ? r->nonzero_t : r->nonzero,
@@ -902,6 +938,8 @@ static int opt_report(const struct opt_args *a, const struct opt_run *r, int it,
         return 0;
     printf("{\"iteration\": %d, \"loss\": ", it + 1);
     json_number(stdout, r->loss);
+    printf(", \"sampling\": ");
+    json_string(stdout, dr_sampling_name((enum dr_sampling)r->sampling));
     printf(", \"seconds\": ");
     json_number(stdout, sec);
     printf(", \"eta_seconds\": ");
@@ -1040,8 +1078,10 @@ static void opt_summary_json(const struct opt_args *a, const struct opt_run *r)
     json_number(stdout, dr_clock_seconds() - r->t_start);
     printf(", \"estimator\": ");
     json_string(stdout, a->g.estimator->name);
-    printf(", \"sampling\": ");
-    json_string(stdout, dr_sampling_name(a->g.sampling));
+    printf(", \"sampling\": ");   /* (the last iteration's; auto decides at every one) */
+    json_string(stdout, dr_sampling_name(r->sampling >= 0 ? (enum dr_sampling)r->sampling : a->g.sampling));
+    printf(", \"sampling_requested\": ");
+    json_string(stdout, a->g.sampling_auto ? "auto" : dr_sampling_name(a->g.sampling));
     printf(", \"sampler\": ");   /* (the default depends on --primal and --batches: grad_default_sampler) */
     json_string(stdout, dr_sampler_kind_name(a->g.sampler));
     printf(", \"peak_memory_bytes\": %llu", (unsigned long long)cli_peak_rss_bytes());

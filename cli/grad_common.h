@@ -70,8 +70,10 @@ struct grad_common {
     const char **sets;               /* the --set P=V,... values, in order */
     int n_sets;
     const struct dr_estimator_ops *estimator;
-    enum dr_sampling sampling;
-    bool sampling_given;             /* --sampling on the command line (else the default, detached) */
+    enum dr_sampling sampling;       /* what runs (auto: resolved by grad_resolve_sampling) */
+    bool sampling_given;             /* --sampling on the command line (else the default, auto) */
+    bool sampling_auto;              /* --sampling auto, the default of grad, fdcheck and optimize */
+    bool sampling_may_switch;        /* optimize: auto may pick derivative sampling at a later iteration */
     enum dr_medium_grad medium_grad;   /* --medium-grad: drt (default) or baseline */
     int spp, max_depth, rr_depth, width, height, camera, threads;
     bool res_given, camera_given, json;
@@ -157,20 +159,54 @@ int grad_apply_sets(const struct grad_common *g, struct dr_scene *scene);
 /* Resolves the --param list (exit 2 with dr_last_error's nearest names). */
 int grad_param_set(const struct grad_common *g, const struct dr_scene *scene, struct dr_param_set **set);
 
-/* Below this roughness (roughnessFactor) the roughness derivative under
- * detached sampling has a very large variance. On the bundled box's gold
- * sphere (tape, 32x32, 16 spp x 64 batches) mis sampling was 1e10 x as
- * efficient at 0.001, 3-7 x at 0.1, 1.2 x at 0.2 and 0.88 x at 0.3;
- * derivative sampling 1e7 x at 0.001 and 4-5 x at 0.1 (README: Which
- * sampling mode). */
-#define GRAD_NARROW_ROUGHNESS 0.15
+/* --sampling auto (the default of grad, fdcheck and optimize): derivative
+ * sampling where a differentiated roughnessFactor is below the threshold
+ * and the estimator and scene can take it, detached sampling elsewhere.
+ * Derivative sampling because it stays unbiased at visibility edges, as
+ * detached does (attached and mis do not), and below the thresholds it is
+ * the better of the two. The thresholds are where it stops paying,
+ * measured with `compare` (prb, reverse mode, 32x32, 16 spp x 64 batches,
+ * depth 6, finite-difference reference; README: Which sampling mode), the
+ * roughness derivative's efficiency against detached at roughness
+ * 0.1 / 0.15 / 0.2 / 0.25 / 0.3:
+ *  - a roughness alone (no base colour or metallic differentiated): the
+ *    bundled box's gold sphere 4.6 / 2.8 / 1.65 / 1.2 / 0.9, the peer's box
+ *    with its red wall a metal 3.4 / 1.7 / 0.7 / 0.9 / 0.8: below 0.2;
+ *  - with a base colour or metallic factor (or base-colour texture)
+ *    differentiated, derivative sampling draws directions for those too,
+ *    which halves their efficiency (0.4-0.55 x at every roughness); the
+ *    roughness gains 3.4 / 2.0 / 1.2 (box) and 2.5 / 1.2 / 0.5 (peer): below
+ *    0.12, where the roughness, whose relative variance is hundreds of
+ *    times the colour's, gains about twice what the colour loses.
+ * Every run without a small roughness is what it was. Roughness textures are
+ * left out (their texels vary). */
+#define GRAD_AUTO_ROUGHNESS 0.2
+#define GRAD_AUTO_ROUGHNESS_WITH_COLOUR 0.12
 
-/* A note on stderr when --sampling was left at its default (detached) and a
- * differentiated roughnessFactor is below GRAD_NARROW_ROUGHNESS: what
- * derivative and mis sampling measured there, those of them the estimator
- * and scene can take (neither: no note). (Roughness textures are left out:
- * their texels vary.) */
-void grad_sampling_note(const struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *set);
+struct grad_auto_choice {
+    enum dr_sampling sampling;      /* what auto runs */
+    const struct dr_param *lowest;  /* the differentiated roughness factor below the threshold with the
+                                       lowest value (NULL: none) */
+    double roughness;               /* ... its value */
+    double threshold;               /* GRAD_AUTO_ROUGHNESS, or ..._WITH_COLOUR when a base colour or
+                                       metallic is differentiated */
+    int narrow;                     /* how many are below the threshold */
+    bool derivative_possible;       /* a roughness factor is differentiated and derivative sampling can run */
+    char why[512];                  /* a roughness factor is differentiated but derivative sampling cannot run:
+                                       the reason */
+};
+struct grad_auto_choice grad_auto_sampling(const struct grad_common *g, const struct dr_scene *scene,
+                                           const struct dr_param_set *set);
+
+/* Under --sampling auto, sets g->sampling to auto's choice for the scene's
+ * current values and says on stderr when that is not detached sampling, or
+ * when a small roughness is left to detached sampling because derivative
+ * sampling cannot run there (the reason). Given modes are left alone. */
+void grad_resolve_sampling(struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *set);
+/* The note for a choice (also optimize's, when auto changes its mind between
+ * iterations: iteration > 0 names it). */
+void grad_auto_note(const struct grad_common *g, const struct dr_scene *scene, const struct grad_auto_choice *c,
+                    int iteration);
 
 /* Reads a target image (--target): the first 3 channels (grey replicated) as
  * linear float rgb (8-bit sRGB files decoded); NaN/Inf pixels refused.

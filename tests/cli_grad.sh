@@ -308,20 +308,42 @@ expect_rc 0 "grad --sampling attached (colour)"
 json_check "$tmp/out" 'd["sampling"] == "attached" and d["sampling_effective"] == "detached"'
 run grad --target t.exr --param "$red" --estimator tape --spp 4 --batches 2 --json
 json_check "$tmp/out" 'd["sampling_effective"] == "detached"'
-# a narrow lobe's roughness under the default (detached) sampling: a note
-# naming the parameter and the modes that do better there; none when the
-# mode was chosen, the lobe is rough, or only a colour is differentiated
-run grad --target t.exr --param "$rough" --set "$rough=0.05" --spp 1
+# --sampling auto (the default): derivative sampling where a differentiated
+# roughness is below 0.2, said in a note naming the parameter; detached, and
+# no note, when a mode is given, the lobe is rough, or only a colour is
+# differentiated; on a scene derivative sampling cannot take (media), detached
+# with a note that says why
+run grad --target t.exr --param "$rough" --set "$rough=0.05" --spp 2 --json
 expect_rc 0 "grad of roughness 0.05"
-expect_in err "note: /materials/rough-gold/pbrMetallicRoughness/roughnessFactor is 0.05" "grad of roughness 0.05"
-expect_in err "--sampling derivative (unbiased)" "grad of roughness 0.05"
-expect_in err "--sampling mis" "grad of roughness 0.05"
-run grad --target t.exr --param "$rough" --param "$red" --set "$rough=0.05" --spp 1 --sampling detached
+expect_in err "note: --sampling auto chose derivative sampling: /materials/rough-gold/pbrMetallicRoughness/roughnessFactor is 0.05, below 0.2," "grad of roughness 0.05"
+json_check "$tmp/out" 'd["sampling"] == "derivative" and d["sampling_requested"] == "auto" and d["sampling_effective"] == "derivative"'
+run grad --target t.exr --param "$rough" --param "$red" --set "$rough=0.05" --spp 2 --sampling auto --json
+expect_rc 0 "grad of roughness 0.05 with --sampling auto given"
+expect_in err "is 0.05, below 0.12 (with a base colour or metallic differentiated)" "grad of roughness 0.05 with a colour"
+json_check "$tmp/out" 'd["sampling"] == "derivative" and d["sampling_requested"] == "auto"'
+# between the two thresholds: derivative for a roughness alone, detached beside a colour
+run grad --target t.exr --param "$rough" --set "$rough=0.15" --spp 2 --json
+expect_in err "is 0.15, below 0.2," "grad of roughness 0.15"
+json_check "$tmp/out" 'd["sampling"] == "derivative"'
+run grad --target t.exr --param "$rough" --param "$red" --set "$rough=0.15" --spp 2 --json
+expect_empty err "grad of roughness 0.15 beside a colour"
+json_check "$tmp/out" 'd["sampling"] == "detached" and d["sampling_requested"] == "auto"'
+run grad --target t.exr --param "$rough" --param "$red" --set "$rough=0.05" --spp 2 --sampling detached --json
 expect_empty err "grad of roughness 0.05 with --sampling detached given"
-run grad --target t.exr --param "$rough" --spp 1
+json_check "$tmp/out" 'd["sampling"] == "detached" and d["sampling_requested"] == "detached"'
+run grad --target t.exr --param "$rough" --spp 2 --json
 expect_empty err "grad of roughness 0.35 (the file's)"
-run grad --target t.exr --param "$red" --set "$rough=0.05" --spp 1
+json_check "$tmp/out" 'd["sampling"] == "detached" and d["sampling_requested"] == "auto"'
+run grad --target t.exr --param "$red" --set "$rough=0.05" --spp 2 --json
 expect_empty err "grad of a colour beside a roughness of 0.05"
+json_check "$tmp/out" 'd["sampling"] == "detached"'
+fog_rough=/materials/floor/pbrMetallicRoughness/roughnessFactor
+run grad "$DR_TESTDIR/data/media/fog-khr.gltf" --param "$fog_rough" --set "$fog_rough=0.1" --res 8x8 --spp 2 \
+    -o "$tmp/fog-d.exr" --json
+expect_rc 0 "grad of roughness 0.1 in a scene with media"
+expect_in err "cannot use derivative sampling here (derivative sampling does not handle participating media" \
+    "grad of roughness 0.1 in a scene with media"
+json_check "$tmp/out" 'd["sampling"] == "detached" and d["sampling_requested"] == "auto"'
 run grad --target t.exr --param "$red" --loss l1 --json
 expect_rc 0 "grad --loss l1"
 json_check "$tmp/out" 'd["loss_kind"] == "l1" and d["width"] == 16 and d["height"] == 16'

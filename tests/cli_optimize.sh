@@ -112,11 +112,42 @@ expect_rc 2 "optimize --primal nope"
 expect_in err "unknown mode 'nope' (available: cross, separate)" "optimize --primal nope"
 [ -e a-bad ] && fail "optimize --primal nope: created its output directory"
 
-# a narrow lobe's roughness from the default (detached) sampling: the note of cli_grad.sh
+# --sampling auto decides at every iteration from the values the fit has
+# reached: from roughness 0.12 (true 0.3) derivative sampling, and back to
+# detached once the roughness passes 0.2, each change said on stderr and
+# every iteration's mode in its --json line; a run resumed before the change
+# decides as the uninterrupted one (the same values to the last digit)
+auto=("$data/glossy.gltf" --target glossy.exr --param "$rough" --set "$rough=0.12" --spp 2 $depth --threads 2
+      --checkpoint-every 1 --json)
+run optimize "${auto[@]}" --iters 12 --out-dir auto
+expect_rc 0 "optimize a roughness from 0.12"
+expect_in err "note: --sampling auto chose derivative sampling: $rough is 0.12, below 0.2" "optimize a roughness of 0.12"
+expect_in err "--sampling auto goes back to detached sampling" "optimize a roughness from 0.12 to above 0.2"
+modes=$(grep -o '^{"iteration": [0-9]*, "loss": [^,]*, "sampling": "[a-z]*"' "$tmp/out" | sed 's/.*"sampling": "//; s/"//' | uniq | tr '\n' ' ')
+[ "$modes" = "derivative detached " ] || fail "auto: every iteration's sampling: expected derivative then detached, got '$modes'"
+summary "auto" auto.json
+# what ran is what was reported: iteration 1's gradient is --sampling derivative's, to the digit
+grad1() { grep -m1 '^{"iteration": 1,' "$tmp/out" | grep -o '"gradient": {[^}]*}'; }
+g_auto=$(grad1)
+run optimize "${auto[@]}" --iters 1 --out-dir autoD --sampling derivative
+g_der=$(grad1)
+run optimize "${auto[@]}" --iters 1 --out-dir autoE --sampling detached
+g_det=$(grad1)
+[ -n "$g_auto" ] && [ "$g_auto" = "$g_der" ] || fail "auto: iteration 1's gradient is not derivative sampling's: '$g_auto' vs '$g_der'"
+[ "$g_auto" != "$g_det" ] || fail "auto: iteration 1's gradient equals detached sampling's"
+grep -q '"sampling": "detached", "sampling_requested": "auto"' "$tmp/auto.json" || fail "auto: summary's sampling"
+run optimize "${auto[@]}" --iters 2 --out-dir autoB
+expect_rc 0 "optimize a roughness from 0.12, 2 iterations"
+run optimize "${auto[@]}" --iters 12 --out-dir autoB --resume
+expect_rc 0 "optimize a roughness from 0.12, resumed to 12"
+summary "auto (resumed)" autoB.json
+A=$(param_values auto.json "$rough_idx") B=$(param_values autoB.json "$rough_idx")
+[ -n "$A" ] && [ "$A" = "$B" ] || fail "auto: resumed result differs from the uninterrupted one: '$A' vs '$B'"
 run optimize "$data/glossy.gltf" --target glossy.exr --param "$rough" --set "$rough=0.02" --iters 1 --spp 1 \
-    $depth --out-dir note
-expect_rc 0 "optimize a roughness of 0.02"
-expect_in err "note: $rough is 0.02: under detached sampling" "optimize a roughness of 0.02"
+    $depth --sampling detached --out-dir note --json
+expect_rc 0 "optimize a roughness of 0.02, --sampling detached"
+grep -q "note:" "$tmp/err" && fail "optimize a roughness of 0.02 with --sampling detached given: a note"
+grep -q '"sampling": "detached", "sampling_requested": "detached"' "$tmp/out" || fail "--sampling detached: summary"
 # a, two views: camera 0 straight on, camera 1 from the side
 run optimize "$data/diffuse.gltf" --target 0=diffuse0.exr --target 1=diffuse1.exr --param "$albedo" \
     --set "$albedo=0.9,0.1,0.5" --iters 100 --spp 8 $depth --reference "$data/diffuse.gltf" --out-dir a2 --json
