@@ -451,6 +451,45 @@ int grad_param_set(const struct grad_common *g, const struct dr_scene *scene, st
     return -1;
 }
 
+static int cmp_float(const void *a, const void *b)
+{
+    const float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
+/* The median roughness of material m's metallic-roughness texture (its G
+ * channel, stored linear, times the factor) over at most 65536 texels taken
+ * at an even stride; -1 without texels. */
+static double texture_median_roughness(const struct dr_scene *scene, int m)
+{
+    const struct dr_material *mat = &scene->materials[m];
+    const struct dr_image *img = &scene->images[scene->textures[mat->metallic_roughness_tex.texture].image];
+    const size_t n = (size_t)img->width * (size_t)img->height;
+    if (n == 0 || img->channels < 2)
+        return -1.0;
+    const size_t stride = n > 65536 ? n / 65536 : 1, k = (n + stride - 1) / stride;
+    float *g = malloc(k * sizeof *g);
+    if (!g)
+        return -1.0;   /* (no choice made on it: detached, as before auto) */
+    for (size_t i = 0; i < k; i++)
+        g[i] = dr_image_value(img, i * stride * (size_t)img->channels + 1, false);
+    qsort(g, k, sizeof *g, cmp_float);
+    const double med = g[k / 2] * mat->roughness;
+    free(g);
+    return med;
+}
+
+/* A differentiated roughness below c->threshold: the factor's value, or a
+ * differentiated metallic-roughness texture's median. */
+static void auto_candidate(struct grad_auto_choice *c, const struct dr_param *q, double r, bool texture)
+{
+    if (!(r >= 0.0 && r < c->threshold))
+        return;
+    if (!c->lowest || r < c->roughness)
+        c->lowest = q, c->roughness = r, c->texture = texture;
+    c->narrow++;
+}
+
 struct grad_auto_choice grad_auto_sampling(const struct grad_common *g, const struct dr_scene *scene,
                                            const struct dr_param_set *set)
 {
@@ -461,15 +500,18 @@ struct grad_auto_choice grad_auto_sampling(const struct grad_common *g, const st
     bool any = false;
     for (int i = 0; i < set->n; i++) {
         const struct dr_param *q = &set->params[i];
-        if (q->kind != DR_PARAM_ROUGHNESS || q->target < 0 || q->target >= scene->n_materials)
-            continue;
-        any = true;
-        const double r = scene->materials[q->target].roughness;
-        if (!(r < c.threshold))
-            continue;
-        if (!c.lowest || r < c.roughness)
-            c.lowest = q, c.roughness = r;
-        c.narrow++;
+        if (q->kind == DR_PARAM_ROUGHNESS && q->target >= 0 && q->target < scene->n_materials) {
+            any = true;
+            auto_candidate(&c, q, scene->materials[q->target].roughness, false);
+        } else if (q->kind == DR_PARAM_IMAGE) {   /* the metallic-roughness textures it is */
+            for (int m = 0; m < scene->n_materials; m++) {
+                const int t = scene->materials[m].metallic_roughness_tex.texture;
+                if (t < 0 || scene->textures[t].image != q->target)
+                    continue;
+                any = true;
+                auto_candidate(&c, q, texture_median_roughness(scene, m), true);
+            }
+        }
     }
     if (any && g->estimator) {
         struct dr_grad_problem p = {.scene = scene, .params = set, .sampling = DR_SAMPLING_DERIVATIVE};
@@ -493,6 +535,11 @@ void grad_auto_note(const struct grad_common *g, const struct dr_scene *scene, c
         return;
     }
     dr_param_display_name(scene, c->lowest, name, sizeof name);
+    if (c->texture) {   /* "the roughness in /images/1 has median 0.08" */
+        char image[DR_PARAM_NAME_MAX + 64];
+        snprintf(image, sizeof image, "%s", name);
+        snprintf(name, sizeof name, "the roughness in %s", image);
+    }
     if (c->narrow > 1)
         snprintf(more, sizeof more, " (and %d more)", c->narrow - 1);
     if (iteration > 0)
@@ -502,18 +549,18 @@ void grad_auto_note(const struct grad_common *g, const struct dr_scene *scene, c
              c->threshold == GRAD_AUTO_ROUGHNESS_WITH_COLOUR ? " (with a base colour or metallic differentiated)" : "");
     if (c->sampling == DR_SAMPLING_DERIVATIVE) {
         cli_error(g->cmd,
-                  "note: %s--sampling auto chose derivative sampling: %s is %g%s, %s, where detached sampling's "
+                  "note: %s--sampling auto chose derivative sampling: %s %s %g%s, %s, where detached sampling's "
                   "roughness derivative is noisy (on the bundled box derivative sampling was 4.6x as efficient at "
                   "roughness 0.1, ~1e7x at 0.001; attached or mis can do better on near-specular lobes but are "
                   "biased where moving samples cross an edge). Manual: SAMPLING",
-                  when, name, c->roughness, more, below);
+                  when, name, c->texture ? "has median" : "is", c->roughness, more, below);
         return;
     }
     /* a small roughness left to detached sampling: say why (the estimator's check's message) */
     cli_error(g->cmd,
-              "note: %s%s is %g%s, %s, where detached sampling's roughness derivative is noisy, but --sampling "
+              "note: %s%s %s %g%s, %s, where detached sampling's roughness derivative is noisy, but --sampling "
               "auto cannot use derivative sampling here (%s). Manual: SAMPLING",
-              when, name, c->roughness, more, below, c->why);
+              when, name, c->texture ? "has median" : "is", c->roughness, more, below, c->why);
 }
 
 void grad_resolve_sampling(struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *set)

@@ -178,8 +178,9 @@ int grad_param_set(const struct grad_common *g, const struct dr_scene *scene, st
  *    roughness gains 3.4 / 2.0 / 1.2 (box) and 2.5 / 1.2 / 0.5 (peer): below
  *    0.12, where the roughness, whose relative variance is hundreds of
  *    times the colour's, gains about twice what the colour loses.
- * Every run without a small roughness is what it was. Roughness textures are
- * left out (their texels vary). */
+ * A differentiated metallic-roughness texture counts with its texels' median
+ * roughness (G x the factor; it moves metallic too, so the second
+ * threshold). Every run without a small roughness is what it was. */
 #define GRAD_AUTO_ROUGHNESS 0.2
 #define GRAD_AUTO_ROUGHNESS_WITH_COLOUR 0.12
 
@@ -187,7 +188,8 @@ struct grad_auto_choice {
     enum dr_sampling sampling;      /* what auto runs */
     const struct dr_param *lowest;  /* the differentiated roughness factor below the threshold with the
                                        lowest value (NULL: none) */
-    double roughness;               /* ... its value */
+    double roughness;               /* ... its value (a texture: its median) */
+    bool texture;                   /* ... it is a metallic-roughness texture (an image parameter) */
     double threshold;               /* GRAD_AUTO_ROUGHNESS, or ..._WITH_COLOUR when a base colour or
                                        metallic is differentiated */
     int narrow;                     /* how many are below the threshold */

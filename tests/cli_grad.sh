@@ -337,6 +337,19 @@ json_check "$tmp/out" 'd["sampling"] == "detached" and d["sampling_requested"] =
 run grad --target t.exr --param "$red" --set "$rough=0.05" --spp 2 --json
 expect_empty err "grad of a colour beside a roughness of 0.05"
 json_check "$tmp/out" 'd["sampling"] == "detached"'
+# a differentiated metallic-roughness texture counts with its texels' median
+# roughness (basic.gltf's mr.png: G median 150/255, times the factor)
+mr_rough=/materials/0/pbrMetallicRoughness/roughnessFactor
+run grad "$DR_TESTDIR/data/gltf/basic.gltf" --param /images/1 --set "$mr_rough=0.1" --res 8x8 --spp 2 \
+    -o "$tmp/mr-d.exr" --json
+expect_rc 0 "grad of a metallic-roughness texture of median roughness 0.059"
+expect_in err "--sampling auto chose derivative sampling: the roughness in /images/1 has median 0.0588235, below 0.12" \
+    "grad of a metallic-roughness texture of median roughness 0.059"
+json_check "$tmp/out" 'd["sampling"] == "derivative"'
+run grad "$DR_TESTDIR/data/gltf/basic.gltf" --param /images/1 --set "$mr_rough=0.5" --res 8x8 --spp 2 \
+    -o "$tmp/mr-d.exr" --json
+expect_rc 0 "grad of a metallic-roughness texture of median roughness 0.29"
+json_check "$tmp/out" 'd["sampling"] == "detached"'
 fog_rough=/materials/floor/pbrMetallicRoughness/roughnessFactor
 run grad "$DR_TESTDIR/data/media/fog-khr.gltf" --param "$fog_rough" --set "$fog_rough=0.1" --res 8x8 --spp 2 \
     -o "$tmp/fog-d.exr" --json
