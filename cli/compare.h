@@ -114,6 +114,8 @@ struct cmp_run {
     struct cmp_reference ref;
     struct cmp_fingerprint fp;
     char skipped[1024];           /* pairs left out because they do not apply */
+    char auto_sampling[16];       /* what grad and optimize's default, --sampling auto, would run here */
+    char auto_why[DR_PARAM_NAME_MAX + 96];   /* ... and why ("" for detached) */
     double t_total;
 };
 

@@ -287,6 +287,8 @@ void cmp_write_json(const struct cmp_run *r, FILE *f)
     }
     fputs("], \"skipped\": ", f);
     json_name_list(f, r->skipped);
+    fputs(", \"auto_sampling\": ", f);   /* (what grad's default would run) */
+    json_string(f, r->auto_sampling);
     json_reference(f, r);
     fputs(", \"combinations\": [", f);
     for (int c = 0; c < r->n_combos; c++) {
@@ -532,6 +534,8 @@ static void report_reading(FILE *f, const struct cmp_run *r)
                         : "efficiency hardly depends on spp, so compare estimators by it and pick spp for the "
                           "error you need.");
     report_median_efficiency(f, r);
+    fprintf(f, "- `grad` and `optimize` without `--sampling` (auto, prb) would run **%s** sampling here%s%s%s.\n",
+            r->auto_sampling, r->auto_why[0] ? " (" : "", r->auto_why, r->auto_why[0] ? ")" : "");
     for (int d = 0; d < r->a->n_depths; d++) {
         int lo = -1, hi = -1;
         for (int c = 0; c < r->n_combos; c++) {

@@ -83,6 +83,15 @@ py out1 "all(len(c['parameters']) == 1 and c['parameters'][0]['summary'] == 'pix
 py out1 "d['samplers'] == ['independent'] and all(r['sampler'] == 'independent' for r in rows)"
 py out1 "d['medium_grads'] == ['drt'] and all(r['medium_grad'] == 'drt' for r in rows)"
 py out1 "all(abs(c['parameters'][0]['efficiency'] - c['efficiency']) <= 1e-9 * c['efficiency'] for c in d['combinations'])"
+# what grad's default (--sampling auto) would run: detached for a colour; derivative, and why, for a small roughness
+py out1 "d['auto_sampling'] == 'detached'"
+grep -q 'would run \*\*detached\*\* sampling here\.' out1/report.md || fail "report.md: auto's choice for a colour"
+gold_rough=/materials/rough-gold/pbrMetallicRoughness/roughnessFactor
+run compare $tiny --param "$gold_rough" --set "$gold_rough=0.1" --spp 2 --batches 2 --estimators prb --sampling detached -o auto1
+expect_rc 0 "compare of a roughness of 0.1"
+py auto1 "d['auto_sampling'] == 'derivative'"
+grep -q "would run \*\*derivative\*\* sampling here (/materials/rough-gold/pbrMetallicRoughness/roughnessFactor is 0.1, below 0.2)" \
+    auto1/report.md || fail "report.md: auto's choice for a roughness of 0.1"
 
 # ---- --sampler as a list: the sampler is a dimension of every output ----
 run compare $tiny --param "$red" --param "$green" --spp 4,16 --sampler independent,stratified,sobol --estimators prb \
