@@ -98,12 +98,24 @@ struct grad_common {
 };
 
 /* The help line of --ignore-unsupported, shared by every command that loads a scene. */
+/* --sampling in grad's and fdcheck's --help (the thresholds are
+ * GRAD_AUTO_ROUGHNESS and GRAD_AUTO_ROUGHNESS_WITH_COLOUR, below). */
+#define GRAD_SAMPLING_HELP                                                               \
+    "      --sampling S    auto (default), detached, attached, mis or derivative:\n"     \
+    "                      attached differentiates through the sampling (for\n"         \
+    "                      roughness), mis takes both from the same paths, weighted\n"  \
+    "                      per parameter, derivative adds directions sampled for the\n" \
+    "                      BSDF derivative, combined by MIS; auto is derivative where\n" \
+    "                      a differentiated roughnessFactor is below 0.2 (0.12 beside\n" \
+    "                      a base colour or metallic), else detached. See SAMPLING in\n" \
+    "                      the manual\n"
+
 #define GRAD_IGNORE_UNSUPPORTED_HELP                                                   \
     "      --ignore-unsupported  skip, with one warning, what drender cannot read but\n" \
     "                      would not change its image (KTX2 normal/occlusion maps)\n" \
     "                      instead of failing\n"
 
-/* Defaults: prb, detached, the given spp, depth 8, Russian roulette from
+/* Defaults: prb, --sampling auto, the given spp, depth 8, Russian roulette from
  * DR_RR_DEPTH_DEFAULT, no --res. */
 void grad_common_init(struct grad_common *g, const char *cmd, int spp);
 void grad_common_free(struct grad_common *g);
