@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # drender sampling benchmark (run by `make bench` after bench/grad.sh):
-#   i. detached vs attached vs mis sampling: standard error^2 x gradient seconds of
+#   i. detached vs attached vs mis vs derivative sampling, and auto (the
+#      default: what it ran is the "ran" column): standard error^2 x gradient seconds of
 #      d loss / d theta (lower is better: the cost of a given accuracy) for
 #      both estimators on the bundled Cornell box, L2 against a 256-spp render:
 #      red wall colour (albedo), the gold sphere's roughness at 0.001, 0.1 and
@@ -36,21 +37,21 @@ first_stderr() {
     printf '%s' "$v"
 }
 
-echo "i. detached vs attached vs mis sampling on $CORNELL ($RES, $SPP spp in $BATCHES batches, depth $DEPTH, 2 threads)"
+echo "i. detached vs attached vs mis vs derivative sampling, and auto (the default), on $CORNELL ($RES, $SPP spp in $BATCHES batches, depth $DEPTH, 2 threads)"
 "$DR" render "$CORNELL" --sampler independent -o "$TMP/target.exr" --res $RES --spp 256 --max-depth $DEPTH --seed 99 --threads 2
-printf '   %-22s %-5s %-9s %-9s %12s %9s %12s\n' parameter est sampling ran stderr seconds "stderr^2*s"
+printf '   %-22s %-5s %-10s %-10s %12s %9s %12s\n' parameter est sampling ran stderr seconds "stderr^2*s"
 ROWS=""
 row() {   # label param set-args...
     local label=$1 param=$2
     shift 2
     for est in prb tape; do
-        for smp in detached attached mis; do
+        for smp in detached attached mis derivative auto; do
             local J rc=0
             J=$("$DR" grad "$CORNELL" --sampler independent --grad-dir "$TMP" --target "$TMP/target.exr" --param "$param" "$@" --estimator $est \
                 --sampling $smp --spp $SPP --batches $BATCHES --max-depth $DEPTH --threads 2 --seed 3 --json \
                 2>"$TMP/err") || rc=$?
             if [[ $rc -eq 2 ]]; then
-                printf '   %-22s %-5s %-9s %s\n' "$label" $est $smp "not implemented"
+                printf '   %-22s %-5s %-10s %s\n' "$label" $est $smp "not implemented"
                 ROWS+="{\"parameter\": \"$label\", \"estimator\": \"$est\", \"sampling\": \"$smp\", \"implemented\": false},"
                 continue
             fi
@@ -60,7 +61,7 @@ row() {   # label param set-args...
             t=$(json_num "$J" gradient time)
             ran=$(printf '%s\n' "$J" | sed -n 's/.*"sampling_effective": *"\([a-z]*\)".*/\1/p')
             cost=$(calc "$se * $se * $t" %.3g)
-            printf '   %-22s %-5s %-9s %-9s %12.4g %9.3f %12s\n' "$label" $est $smp "$ran" "$se" "$t" "$cost"
+            printf '   %-22s %-5s %-10s %-10s %12.4g %9.3f %12s\n' "$label" $est $smp "$ran" "$se" "$t" "$cost"
             ROWS+="{\"parameter\": \"$label\", \"estimator\": \"$est\", \"sampling\": \"$smp\", \"implemented\": true, \"ran\": \"$ran\", \"stderr\": $se, \"seconds\": $t, \"stderr2_seconds\": $cost},"
         done
     done
