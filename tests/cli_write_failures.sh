@@ -141,8 +141,21 @@ for ext in png sgi; do
         -o "$work/durable.$ext" 2>"$tmp/err" || fail "render to durable.$ext under strace: $(head -c 300 "$tmp/err")"
     python3 - "$tmp/strace" "$ext" <<'PY' || fail "render to durable.$ext: no fsync of its temporary before the rename"
 import re, sys
-fds, synced = {}, set()
-for line in open(sys.argv[1]):
+fds, synced, pending = {}, set(), {}
+def lines(path):
+    # strace -f splits a call another thread interrupts: "PID fsync(3 <unfinished ...>"
+    # and later "PID <... fsync resumed>) = 0"; join them (the pid says whose)
+    for line in open(path):
+        line = line.rstrip("\n")
+        pid = line.split(" ", 1)[0]
+        if line.endswith("<unfinished ...>"):
+            pending[pid] = line[: -len("<unfinished ...>")].rstrip()
+            continue
+        m = re.match(r'(\S+)\s+<\.\.\. \w+ resumed>(.*)$', line)
+        if m and m.group(1) in pending:
+            line = pending.pop(m.group(1)) + m.group(2)
+        yield line
+for line in lines(sys.argv[1]):
     m = re.search(r'openat\(.*"([^"]*\.tmp[^"]*)".* = (\d+)$', line)
     if m: fds[m.group(2)] = m.group(1)
     m = re.search(r'fsync\((\d+)\)\s+= 0', line)
