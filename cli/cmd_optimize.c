@@ -833,9 +833,6 @@ static void root_sums(struct opt_run *r)
             r->se[r->ps->params[k].offset + i] = sqrt(r->se[r->ps->params[k].offset + i]);
 }
 
-/* Loss and gradient of iteration `it` over every target, from
- * drivers/reverse.h (batches with primals of their own, independent of
- * their gradient samples); the targets' standard errors add in quadrature. */
 /* The sampling mode of iteration it: --sampling's, or auto's choice from the
  * values the fit has reached (a pure function of them, so a resumed run
  * decides as the uninterrupted one did). A change is said on stderr, the
@@ -860,6 +857,9 @@ static enum dr_sampling opt_sampling(const struct opt_args *a, struct opt_run *r
     return c.sampling;
 }
 
+/* Loss and gradient of iteration `it` over every target, from
+ * drivers/reverse.h (batches with primals of their own, independent of
+ * their gradient samples); the targets' standard errors add in quadrature. */
 static int opt_gradient(const struct opt_args *a, struct opt_run *r, int it)
 {
     r->sampling = (int)opt_sampling(a, r, it);
