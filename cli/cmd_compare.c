@@ -1191,19 +1191,11 @@ fail:
 /* What --sampling auto (grad's and optimize's default, with its default
  * estimator) would run on this problem, for the report: compare measures
  * the modes, auto is the choice a user gets without naming one. */
-static void auto_choice(struct cmp_run *r, const struct grad_common *g, const struct dr_scene *scene)
+static void auto_choice(struct cmp_run *r, const struct dr_scene *scene)
 {
-    struct grad_common dg = *g;
-    dg.estimator = dr_estimator_find("prb");
-    const struct grad_auto_choice c = grad_auto_sampling(&dg, scene, r->ps);
+    const struct grad_auto_choice c = grad_auto_sampling(dr_estimator_find("prb"), scene, r->ps);
     snprintf(r->auto_sampling, sizeof r->auto_sampling, "%s", dr_sampling_name(c.sampling));
-    r->auto_why[0] = '\0';
-    if (c.lowest) {
-        char name[DR_PARAM_NAME_MAX + 64];
-        dr_param_display_name(scene, c.lowest, name, sizeof name);
-        snprintf(r->auto_why, sizeof r->auto_why, "%s%s %s %g, below %g", c.texture ? "the roughness in " : "", name,
-                 c.texture ? "has median" : "is", c.roughness, c.threshold);
-    }
+    grad_auto_describe(scene, &c, r->auto_why, sizeof r->auto_why);
 }
 
 int cmd_compare(int argc, char **argv)
@@ -1237,7 +1229,7 @@ int cmd_compare(int argc, char **argv)
         goto out;
     r.scene_path = scene_path;
     r.ps = ps;
-    auto_choice(&r, &a.g, scene);
+    auto_choice(&r, scene);
     r.reverse = a.target != NULL;
     x.scene = scene;
     x.cam = &cam;

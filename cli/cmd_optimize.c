@@ -58,7 +58,8 @@ void cmd_optimize_usage(FILE *out)
             "      --estimator E      gradient estimator: prb (default) or tape\n"
             "      --sampling S       auto (default), detached, attached, mis or derivative\n"
             "                         (see SAMPLING in the manual); auto is derivative while\n"
-            "                         a differentiated roughnessFactor is below 0.2 (0.12\n"
+            "                         a differentiated roughnessFactor is below " GRAD_STR(GRAD_AUTO_ROUGHNESS) " ("
+            GRAD_STR(GRAD_AUTO_ROUGHNESS_WITH_COLOUR) "\n"
             "                         beside a base colour or metallic), decided at every\n"
             "                         iteration, else detached\n"
             "      --regularize E     prb, attached: a vertex Jacobian whose smallest/largest\n"
@@ -612,7 +613,7 @@ struct opt_run {
     int it0;                           /* first iteration to run (resumed runs: > 0) */
     int sampling;                      /* what the last gradient ran (--sampling auto decides at every
                                           iteration from the values then: opt_sampling); -1 before */
-    int auto_notes;                    /* notes auto's changes of mind have printed */
+    int auto_changes;                  /* changes of auto's mind so far (the first 4 are said) */
 };
 
 /* --reference: the true values of the same parameters, for error reports. */
@@ -668,7 +669,8 @@ static int opt_load(struct opt_args *a, struct opt_run *r)
         return rc;
     /* (auto may move to derivative sampling as the fit lowers a roughness:
      * the memory check counts that mode's tape) */
-    a->g.sampling_may_switch = a->g.sampling_auto && grad_auto_sampling(&a->g, r->scene, r->ps).derivative_possible;
+    a->g.sampling_may_switch =
+        a->g.sampling_auto && grad_auto_sampling(a->g.estimator, r->scene, r->ps).derivative_possible;
     if ((rc = cli_limits_optimize(&a->g, r->scene, r->ps, target_pixels(a, false), target_pixels(a, true),
                                    a->n_targets)) >= 0)
         return rc;
@@ -842,17 +844,18 @@ static enum dr_sampling opt_sampling(const struct opt_args *a, struct opt_run *r
 {
     if (!a->g.sampling_auto)
         return a->g.sampling;
-    const struct grad_auto_choice c = grad_auto_sampling(&a->g, r->scene, r->ps);
-    const bool first = r->sampling < 0;
-    if (first || (int)c.sampling != r->sampling) {
-        if (r->auto_notes < 4) {
-            if (!first && isatty(2))
+    const struct grad_auto_choice c = grad_auto_sampling(a->g.estimator, r->scene, r->ps);
+    if (r->sampling < 0) {   /* the first iteration this run: the note grad would print */
+        grad_auto_note(&a->g, r->scene, &c, 0);
+    } else if ((int)c.sampling != r->sampling) {
+        if (r->auto_changes < 4) {
+            if (isatty(2))
                 fputc('\n', stderr);   /* (after the progress line) */
-            grad_auto_note(&a->g, r->scene, &c, first ? 0 : it + 1);
-        } else if (r->auto_notes == 4)
+            grad_auto_note(&a->g, r->scene, &c, it + 1);
+        } else if (r->auto_changes == 4)
             cli_error("optimize", "note: --sampling auto: further changes of sampling mode are not reported "
                                   "(--json gives every iteration's)");
-        r->auto_notes++;
+        r->auto_changes++;
     }
     return c.sampling;
 }

@@ -145,7 +145,6 @@ static int method_option(struct grad_common *g, int c, const char *arg)
         }
         return 0;
     case GOPT_SAMPLING: {
-        g->sampling_given = true;
         if (strcmp(arg, "auto") == 0) {
             g->sampling_auto = true;
             g->sampling = DR_SAMPLING_DETACHED;
@@ -490,7 +489,7 @@ static void auto_candidate(struct grad_auto_choice *c, const struct dr_param *q,
     c->narrow++;
 }
 
-struct grad_auto_choice grad_auto_sampling(const struct grad_common *g, const struct dr_scene *scene,
+struct grad_auto_choice grad_auto_sampling(const struct dr_estimator_ops *e, const struct dr_scene *scene,
                                            const struct dr_param_set *set)
 {
     struct grad_auto_choice c = {.sampling = DR_SAMPLING_DETACHED, .threshold = GRAD_AUTO_ROUGHNESS};
@@ -513,9 +512,9 @@ struct grad_auto_choice grad_auto_sampling(const struct grad_common *g, const st
             }
         }
     }
-    if (any && g->estimator) {
+    if (any && e) {
         struct dr_grad_problem p = {.scene = scene, .params = set, .sampling = DR_SAMPLING_DERIVATIVE};
-        c.derivative_possible = dr_estimator_check(g->estimator, &p) == 0;   /* (media) */
+        c.derivative_possible = dr_estimator_check(e, &p) == 0;   /* (media) */
         if (!c.derivative_possible)
             snprintf(c.why, sizeof c.why, "%s", dr_last_error());
     }
@@ -524,50 +523,52 @@ struct grad_auto_choice grad_auto_sampling(const struct grad_common *g, const st
     return c;
 }
 
+void grad_auto_describe(const struct dr_scene *scene, const struct grad_auto_choice *c, char *buf, size_t size)
+{
+    buf[0] = '\0';
+    if (!c->lowest)
+        return;
+    char name[DR_PARAM_NAME_MAX + 64], more[48] = "";
+    dr_param_display_name(scene, c->lowest, name, sizeof name);
+    if (c->narrow > 1)
+        snprintf(more, sizeof more, " (and %d more)", c->narrow - 1);
+    snprintf(buf, size, "%s%s %s %g%s, below %g%s", c->texture ? "the roughness in " : "", name,
+             c->texture ? "has median" : "is", c->roughness, more, c->threshold,
+             c->threshold == GRAD_AUTO_ROUGHNESS_WITH_COLOUR ? " (with a base colour or metallic differentiated)" : "");
+}
+
 void grad_auto_note(const struct grad_common *g, const struct dr_scene *scene, const struct grad_auto_choice *c,
                     int iteration)
 {
-    char name[DR_PARAM_NAME_MAX + 64], more[48] = "", when[48] = "";
-    if (!c->lowest) {
-        if (iteration > 0)
-            cli_error(g->cmd, "note: iteration %d: --sampling auto goes back to detached sampling (no differentiated "
-                              "roughnessFactor below %g)", iteration, c->threshold);
-        return;
-    }
-    dr_param_display_name(scene, c->lowest, name, sizeof name);
-    if (c->texture) {   /* "the roughness in /images/1 has median 0.08" */
-        char image[DR_PARAM_NAME_MAX + 64];
-        snprintf(image, sizeof image, "%s", name);
-        snprintf(name, sizeof name, "the roughness in %s", image);
-    }
-    if (c->narrow > 1)
-        snprintf(more, sizeof more, " (and %d more)", c->narrow - 1);
+    char when[48] = "", what[DR_PARAM_NAME_MAX + 256];
     if (iteration > 0)
         snprintf(when, sizeof when, "iteration %d: ", iteration);
-    char below[96];
-    snprintf(below, sizeof below, "below %g%s", c->threshold,
-             c->threshold == GRAD_AUTO_ROUGHNESS_WITH_COLOUR ? " (with a base colour or metallic differentiated)" : "");
-    if (c->sampling == DR_SAMPLING_DERIVATIVE) {
-        cli_error(g->cmd,
-                  "note: %s--sampling auto chose derivative sampling: %s %s %g%s, %s, where detached sampling's "
-                  "roughness derivative is noisy (on the bundled box derivative sampling was 4.6x as efficient at "
-                  "roughness 0.1, ~1e7x at 0.001; attached or mis can do better on near-specular lobes but are "
-                  "biased where moving samples cross an edge). Manual: SAMPLING",
-                  when, name, c->texture ? "has median" : "is", c->roughness, more, below);
+    if (!c->lowest) {
+        if (iteration > 0)
+            cli_error(g->cmd, "note: %s--sampling auto goes back to detached sampling (no differentiated roughness "
+                              "below %g)", when, c->threshold);
         return;
     }
-    /* a small roughness left to detached sampling: say why (the estimator's check's message) */
-    cli_error(g->cmd,
-              "note: %s%s %s %g%s, %s, where detached sampling's roughness derivative is noisy, but --sampling "
-              "auto cannot use derivative sampling here (%s). Manual: SAMPLING",
-              when, name, c->texture ? "has median" : "is", c->roughness, more, below, c->why);
+    grad_auto_describe(scene, c, what, sizeof what);
+    if (c->sampling == DR_SAMPLING_DERIVATIVE)
+        cli_error(g->cmd,
+                  "note: %s--sampling auto chose derivative sampling: %s, where detached sampling's roughness "
+                  "derivative is noisy (on the bundled box derivative sampling was 4.6x as efficient at roughness "
+                  "0.1, ~1e7x at 0.001; attached or mis can do better on near-specular lobes but are biased where "
+                  "moving samples cross an edge). Manual: SAMPLING",
+                  when, what);
+    else   /* a small roughness left to detached sampling: say why (the estimator's check's message) */
+        cli_error(g->cmd,
+                  "note: %s%s, where detached sampling's roughness derivative is noisy, but --sampling auto cannot "
+                  "use derivative sampling here (%s). Manual: SAMPLING",
+                  when, what, c->why);
 }
 
 void grad_resolve_sampling(struct grad_common *g, const struct dr_scene *scene, const struct dr_param_set *set)
 {
     if (!g->sampling_auto)
         return;
-    const struct grad_auto_choice c = grad_auto_sampling(g, scene, set);
+    const struct grad_auto_choice c = grad_auto_sampling(g->estimator, scene, set);
     g->sampling = c.sampling;
     grad_auto_note(g, scene, &c, 0);
 }

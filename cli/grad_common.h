@@ -71,7 +71,6 @@ struct grad_common {
     int n_sets;
     const struct dr_estimator_ops *estimator;
     enum dr_sampling sampling;       /* what runs (auto: resolved by grad_resolve_sampling) */
-    bool sampling_given;             /* --sampling on the command line (else the default, auto) */
     bool sampling_auto;              /* --sampling auto, the default of grad, fdcheck and optimize */
     bool sampling_may_switch;        /* optimize: auto may pick derivative sampling at a later iteration */
     enum dr_medium_grad medium_grad;   /* --medium-grad: drt (default) or baseline */
@@ -98,18 +97,6 @@ struct grad_common {
 };
 
 /* The help line of --ignore-unsupported, shared by every command that loads a scene. */
-/* --sampling in grad's and fdcheck's --help (the thresholds are
- * GRAD_AUTO_ROUGHNESS and GRAD_AUTO_ROUGHNESS_WITH_COLOUR, below). */
-#define GRAD_SAMPLING_HELP                                                               \
-    "      --sampling S    auto (default), detached, attached, mis or derivative:\n"     \
-    "                      attached differentiates through the sampling (for\n"         \
-    "                      roughness), mis takes both from the same paths, weighted\n"  \
-    "                      per parameter, derivative adds directions sampled for the\n" \
-    "                      BSDF derivative, combined by MIS; auto is derivative where\n" \
-    "                      a differentiated roughnessFactor is below 0.2 (0.12 beside\n" \
-    "                      a base colour or metallic), else detached. See SAMPLING in\n" \
-    "                      the manual\n"
-
 #define GRAD_IGNORE_UNSUPPORTED_HELP                                                   \
     "      --ignore-unsupported  skip, with one warning, what drender cannot read but\n" \
     "                      would not change its image (KTX2 normal/occlusion maps)\n" \
@@ -195,22 +182,42 @@ int grad_param_set(const struct grad_common *g, const struct dr_scene *scene, st
  * threshold). Every run without a small roughness is what it was. */
 #define GRAD_AUTO_ROUGHNESS 0.2
 #define GRAD_AUTO_ROUGHNESS_WITH_COLOUR 0.12
+#define GRAD_STR_(x) #x
+#define GRAD_STR(x) GRAD_STR_(x)
+
+/* --sampling in grad's and fdcheck's --help, with the thresholds above. */
+#define GRAD_SAMPLING_HELP                                                                           \
+    "      --sampling S    auto (default), detached, attached, mis or derivative:\n"                 \
+    "                      attached differentiates through the sampling (for\n"                     \
+    "                      roughness), mis takes both from the same paths, weighted\n"              \
+    "                      per parameter, derivative adds directions sampled for the\n"             \
+    "                      BSDF derivative, combined by MIS; auto is derivative where\n"            \
+    "                      a differentiated roughnessFactor is below " GRAD_STR(GRAD_AUTO_ROUGHNESS) \
+    " (" GRAD_STR(GRAD_AUTO_ROUGHNESS_WITH_COLOUR) " beside\n"                                      \
+    "                      a base colour or metallic), else detached. See SAMPLING in\n"            \
+    "                      the manual\n"
 
 struct grad_auto_choice {
     enum dr_sampling sampling;      /* what auto runs */
-    const struct dr_param *lowest;  /* the differentiated roughness factor below the threshold with the
-                                       lowest value (NULL: none) */
+    const struct dr_param *lowest;  /* the differentiated roughness (factor, or metallic-roughness
+                                       texture) below the threshold with the lowest value (NULL: none) */
     double roughness;               /* ... its value (a texture: its median) */
     bool texture;                   /* ... it is a metallic-roughness texture (an image parameter) */
     double threshold;               /* GRAD_AUTO_ROUGHNESS, or ..._WITH_COLOUR when a base colour or
                                        metallic is differentiated */
     int narrow;                     /* how many are below the threshold */
-    bool derivative_possible;       /* a roughness factor is differentiated and derivative sampling can run */
-    char why[512];                  /* a roughness factor is differentiated but derivative sampling cannot run:
+    bool derivative_possible;       /* a roughness is differentiated and derivative sampling can run */
+    char why[512];                  /* a roughness is differentiated but derivative sampling cannot run:
                                        the reason */
 };
-struct grad_auto_choice grad_auto_sampling(const struct grad_common *g, const struct dr_scene *scene,
+/* Auto's choice for estimator e on the scene's current values. */
+struct grad_auto_choice grad_auto_sampling(const struct dr_estimator_ops *e, const struct dr_scene *scene,
                                            const struct dr_param_set *set);
+/* "/materials/gold/.../roughnessFactor is 0.05 (and 1 more), below 0.2" (a
+ * texture: "the roughness in /images/1 has median 0.06, below 0.12 (with a
+ * base colour or metallic differentiated)"); "" without a small roughness.
+ * The notes' and compare's report's words. */
+void grad_auto_describe(const struct dr_scene *scene, const struct grad_auto_choice *c, char *buf, size_t size);
 
 /* Under --sampling auto, sets g->sampling to auto's choice for the scene's
  * current values and says on stderr when that is not detached sampling, or
