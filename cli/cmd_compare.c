@@ -6,6 +6,7 @@
 #include <errno.h>
 #include <limits.h>
 #include <math.h>
+#include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -50,11 +51,58 @@ static void available_pairs(char *buf, size_t size, const char *sep)
     }
 }
 
+/* Appends to buf (size bytes, *len used) what fmt says, cut at the end of buf. */
+static void append(char *buf, size_t size, size_t *len, const char *fmt, ...)
+{
+    if (*len + 1 >= size)
+        return;
+    va_list ap;
+    va_start(ap, fmt);
+    int n = vsnprintf(buf + *len, size - *len, fmt, ap);
+    va_end(ap);
+    if (n > 0)
+        *len = *len + (size_t)n < size ? *len + (size_t)n : size - 1;
+}
+
+/* The same for the help text: "available now: prb (detached, ...)," one
+ * estimator a line, wrapped at 80 columns under the modes. */
+static void available_pairs_help(char *buf, size_t size)
+{
+    enum { INDENT = 22, WIDTH = 80 };
+    static const char lead[] = "available now: ";
+    size_t len = 0;
+    buf[0] = '\0';
+    for (int i = 0; dr_estimators[i]; i++) {
+        const char *name = dr_estimators[i]->name;
+        char modes[256];
+        sampling_list(dr_estimators[i], modes, sizeof modes);
+        const int start = INDENT + (i == 0 ? (int)strlen(lead) : 0);
+        const int hang = start + (int)strlen(name) + 2;   /* under the first mode */
+        append(buf, size, &len, "%*s%s%s (", INDENT, "", i == 0 ? lead : "", name);
+        int col = hang;
+        /* the modes word by word ("detached," ...), the last closing the list */
+        for (char *w = strtok(modes, " "); w; w = strtok(NULL, " ")) {
+            const bool last_word = !strchr(w, ',');
+            const int need = (int)strlen(w) + (last_word ? 1 + (dr_estimators[i + 1] ? 1 : 0) : 0);
+            if (col > hang && col + 1 + need > WIDTH) {
+                append(buf, size, &len, "\n%*s", hang, "");
+                col = hang;
+            } else if (col > hang) {
+                append(buf, size, &len, " ");
+                col++;
+            }
+            append(buf, size, &len, "%s", w);
+            col += (int)strlen(w);
+        }
+        append(buf, size, &len, ")%s\n", dr_estimators[i + 1] ? "," : "");
+    }
+}
+
 /* The help text: one string, long by nature (no logic). */
 void cmd_compare_usage(FILE *out)
 {
-    char pairs[512];
-    available_pairs(pairs, sizeof pairs, ",\n                      ");   /* (one estimator a line) */
+    char pairs[1024];
+    available_pairs_help(pairs, sizeof pairs);
     fprintf(out,
             "usage: drender compare [SCENE] --param P [--param P ...] -o DIR [options]\n"
             "\n"
@@ -79,7 +127,7 @@ void cmd_compare_usage(FILE *out)
             "      --estimators L  comma-separated estimators (default: every one)\n"
             "      --sampling L    comma-separated sampling modes (default: every one an\n"
             "                      estimator supports; naming both lists asks for every pair)\n"
-            "                      available now: %s\n"
+            "%s"
             "      --spp L         samples per pixel of one estimate (default: 1,4,16,64)\n"
             "      --max-depth L   path segments (default: 8); errors are against a\n"
             "                      reference at the largest, so shorter paths show their bias\n"

@@ -513,13 +513,13 @@ struct grad_auto_choice grad_auto_sampling(const struct dr_estimator_ops *e, con
         }
     }
     if (any && e) {
-        struct dr_grad_problem p = {.scene = scene, .params = set, .sampling = DR_SAMPLING_DERIVATIVE};
+        struct dr_grad_problem p = {.scene = scene, .params = set, .sampling = DR_SAMPLING_DERIVATIVE_ROUGHNESS};
         c.derivative_possible = dr_estimator_check(e, &p) == 0;   /* (media) */
         if (!c.derivative_possible)
             snprintf(c.why, sizeof c.why, "%s", dr_last_error());
     }
     if (c.lowest && c.derivative_possible)
-        c.sampling = DR_SAMPLING_DERIVATIVE;
+        c.sampling = DR_SAMPLING_DERIVATIVE_ROUGHNESS;
     return c;
 }
 
@@ -550,9 +550,10 @@ void grad_auto_note(const struct grad_common *g, const struct dr_scene *scene, c
         return;
     }
     grad_auto_describe(scene, c, what, sizeof what);
-    if (c->sampling == DR_SAMPLING_DERIVATIVE)
+    if (c->sampling == DR_SAMPLING_DERIVATIVE_ROUGHNESS)
         cli_error(g->cmd,
-                  "note: %s--sampling auto chose derivative sampling: %s, where detached sampling's roughness "
+                  "note: %s--sampling auto chose derivative-roughness sampling (directions sampled for the roughness "
+                  "derivative; base colours and metallic as detached): %s, where detached sampling's roughness "
                   "derivative is noisy (on the bundled box derivative sampling was 4.6x as efficient at roughness "
                   "0.1, ~1e7x at 0.001; attached or mis can do better on near-specular lobes but are biased where "
                   "moving samples cross an edge). Manual: SAMPLING",
@@ -745,9 +746,7 @@ void grad_totals_add(struct grad_totals *t, const struct dr_grad_stats *st)
     t->stages |= st->stages;
     if (st->threads > 0)
         t->threads = st->threads;
-    t->attached_run |= st->sampling_run == DR_SAMPLING_ATTACHED;
-    t->mis_run |= st->sampling_run == DR_SAMPLING_MIS;
-    t->derivative_run |= st->sampling_run == DR_SAMPLING_DERIVATIVE;
+    t->sampling_runs |= 1u << st->sampling_run;
     if (st->n_media_gain > 0) {
         t->n_media_gain = st->n_media_gain;
         memcpy(t->media_gain, st->media_gain, sizeof t->media_gain);
@@ -827,12 +826,17 @@ void grad_json_run(FILE *f, const struct grad_totals *t)
     fprintf(f, ", \"invalid_samples\": %llu, \"stages\": ", (unsigned long long)t->invalid);
     json_name_list(f, stages);
     /* attached or mis sampling with no parameter in a sampling map runs detached; so
-     * does derivative sampling with no BSDF parameter */
+     * does derivative sampling with no BSDF parameter (derivative-roughness:
+     * no roughness). Runs that differ (optimize under auto) name the first
+     * of these that ran. */
+    static const enum dr_sampling order[] = {DR_SAMPLING_MIS, DR_SAMPLING_ATTACHED, DR_SAMPLING_DERIVATIVE,
+                                             DR_SAMPLING_DERIVATIVE_ROUGHNESS};
+    enum dr_sampling eff = DR_SAMPLING_DETACHED;
+    for (int k = (int)(sizeof order / sizeof order[0]) - 1; k >= 0; k--)
+        if (t->sampling_runs & (1u << order[k]))
+            eff = order[k];
     fprintf(f, ", \"sampling_effective\": ");
-    json_string(f, t->mis_run          ? "mis"
-                   : t->attached_run   ? "attached"
-                   : t->derivative_run ? "derivative"
-                                       : "detached");
+    json_string(f, dr_sampling_name(eff));
     grad_json_media_gain(f, t->media_gain, t->n_media_gain);
 }
 

@@ -187,15 +187,16 @@ int grad_param_set(const struct grad_common *g, const struct dr_scene *scene, st
 
 /* --sampling in grad's and fdcheck's --help, with the thresholds above. */
 #define GRAD_SAMPLING_HELP                                                                           \
-    "      --sampling S    auto (default), detached, attached, mis or derivative:\n"                 \
-    "                      attached differentiates through the sampling (for\n"                     \
-    "                      roughness), mis takes both from the same paths, weighted\n"              \
-    "                      per parameter, derivative adds directions sampled for the\n"             \
-    "                      BSDF derivative, combined by MIS; auto is derivative where\n"            \
-    "                      a differentiated roughnessFactor is below " GRAD_STR(GRAD_AUTO_ROUGHNESS) \
-    " (" GRAD_STR(GRAD_AUTO_ROUGHNESS_WITH_COLOUR) " beside\n"                                      \
-    "                      a base colour or metallic), else detached. See SAMPLING in\n"            \
-    "                      the manual\n"
+    "      --sampling S    auto (default), detached, attached, mis, derivative or\n"                \
+    "                      derivative-roughness: attached differentiates through the\n"            \
+    "                      sampling (for roughness), mis takes both from the same\n"               \
+    "                      paths, weighted per parameter, derivative adds directions\n"            \
+    "                      sampled for the BSDF derivative, combined by MIS, and\n"                \
+    "                      derivative-roughness only those for the roughness; auto is\n"           \
+    "                      derivative-roughness where a differentiated\n"                          \
+    "                      roughnessFactor is below " GRAD_STR(GRAD_AUTO_ROUGHNESS) " ("             \
+    GRAD_STR(GRAD_AUTO_ROUGHNESS_WITH_COLOUR) " beside a base colour or\n"                           \
+    "                      metallic), else detached. See SAMPLING in the manual\n"
 
 struct grad_auto_choice {
     enum dr_sampling sampling;      /* what auto runs */
@@ -280,9 +281,9 @@ struct grad_totals {
     uint64_t invalid, memory_bytes, record_bytes;
     unsigned stages;
     int threads;
-    bool attached_run;   /* some run differentiated with attached sampling */
-    bool mis_run;        /* some run combined detached and attached (mis) */
-    bool derivative_run; /* ... with derivative sampling (some BSDF parameter requested) */
+    unsigned sampling_runs; /* 1 << the sampling mode each run ran (dr_est_sampling_run: attached,
+                               mis and derivative sampling without a parameter they act on run
+                               detached) */
     struct dr_medium_gain_choice media_gain[DR_STATS_MEDIA_GAIN];   /* (every run's: the same) */
     int n_media_gain;
 };

@@ -248,7 +248,7 @@ static double tape_bytes(const struct grad_common *g, double paths_per_batch)
 {
     if (!g->estimator || strcmp(g->estimator->name, "tape") != 0)
         return 0.0;
-    const bool derivative = g->sampling == DR_SAMPLING_DERIVATIVE || g->sampling_may_switch;
+    const bool derivative = dr_sampling_is_derivative(g->sampling) || g->sampling_may_switch;
     return paths_per_batch * ((double)g->max_depth * (double)dr_tape_vertex_bytes(derivative) + 64.0);
 }
 

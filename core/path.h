@@ -134,6 +134,9 @@ struct dr_path_opts {
                                             medium_grad.h); NULL: gain paths in every thin one */
     unsigned stages;                     /* enum dr_path_stage bits (dr_path_plan) */
     const struct dr_param_set *params;   /* NULL: primal only (no substitution) */
+    unsigned deriv_params;               /* derivative sampling: the BSDF inputs it samples directions
+                                            for (enum dr_bsdf_dparam bits; path_deriv.h): all of them,
+                                            or the roughness alone; 0 otherwise */
     bool sky_uniform;                    /* sample a constant sky over the sphere, not by lights.h's
                                             mixture (dr_light_sample): mis sampling's choice
                                             (estimators/common.c), and the reference test_render

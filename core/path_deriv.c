@@ -25,9 +25,13 @@ unsigned dr_path_material_dparams(const struct dr_scene *s, const struct dr_para
     return mask;
 }
 
-static unsigned vertex_dparams(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v)
+/* The inputs v's BSDF has requested parameters for that the mode samples
+ * directions for (opts->deriv_params): under derivative-roughness a base
+ * colour or metallic is left out, so B's terms keep detached sampling's
+ * strategies (vf = 1, W_l = the primal's weight, no third direction). */
+static unsigned vertex_dparams(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v)
 {
-    return dr_path_material_dparams(s, ps, v->hit.material);
+    return dr_path_material_dparams(s, opts->params, v->hit.material) & opts->deriv_params;
 }
 
 /* p_bm at local wi: the base colour / metallic mixture (0: neither requested). */
@@ -92,12 +96,12 @@ static void d_rest_along(const struct dr_scene *s, const struct dr_param_set *ps
 
 /* ------------------------------------------- the forward path's strategies */
 
-void d_path_deriv_continuation(const struct dr_scene *s, const struct dr_param_set *ps,
+void d_path_deriv_continuation(const struct dr_scene *s, const struct dr_path_opts *opts,
                                const struct dr_path_vertex *v, dr_vec3 d_f, struct dr_grad_sink *sink)
 {
-    unsigned mask = vertex_dparams(s, ps, v);
+    unsigned mask = vertex_dparams(s, opts, v);
     double vf = v->pdf / (v->pdf + bm_pdf(v, mask, v->wi));
-    d_rest_along(s, ps, v, mask, v->wi, dr_scale(d_f, vf), sink);
+    d_rest_along(s, opts->params, v, mask, v->wi, dr_scale(d_f, vf), sink);
 }
 
 void d_path_deriv_nee(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
@@ -105,7 +109,7 @@ void d_path_deriv_nee(const struct dr_scene *s, const struct dr_path_opts *opts,
 {
     if (!v->nee || !v->diff_bsdf)
         return;
-    unsigned mask = vertex_dparams(s, opts->params, v);
+    unsigned mask = vertex_dparams(s, opts, v);
     double pl = v->ls.pdf, pf = dr_bsdf_pdf(&v->bsdf, v->wo, v->nee_wi);
     double wp = v->ls.delta ? 1.0 : dr_mis_power(pl, pf);   /* the primal's weight (path.c) */
     /* a delta light: only next-event estimation reaches it, weight 1 */
@@ -126,7 +130,7 @@ void d_path_deriv_emission(const struct dr_scene *s, const struct dr_path_opts *
                            const struct dr_path_vertex *prev, dr_vec3 d_t, const struct dr_path_vertex *next,
                            struct dr_grad_sink *sink)
 {
-    unsigned mask = vertex_dparams(s, opts->params, prev);
+    unsigned mask = vertex_dparams(s, opts, prev);
     if (!(mask & BM_PARAMS) || !next->emits || dr_is_black(next->Le))
         return;
     double pf = prev->pdf, pd = bm_pdf(prev, mask, prev->wi), pl = emitter_light_pdf(s, opts, next);
@@ -220,7 +224,7 @@ static struct dr_deriv_ray deriv_ray(const struct dr_path_opts *opts, const stru
 int dr_path_deriv_rays(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
                        const struct dr_sampler *smp, struct dr_deriv_ray r[DR_DERIV_RAYS])
 {
-    unsigned mask = vertex_dparams(s, opts->params, v);
+    unsigned mask = vertex_dparams(s, opts, v);
     if (!mask || !(v->wo.z > 0.0))
         return 0;
     struct dr_sampler dirs = deriv_stream(smp, v->depth, STREAM_DIRS);
@@ -254,7 +258,7 @@ void d_path_deriv_rays(const struct dr_scene *s, const struct dr_path_opts *opts
                        const struct dr_deriv_ray *r, const struct dr_deriv_light *light, int n, dr_vec3 d_beta,
                        struct dr_grad_sink *sink)
 {
-    unsigned mask = vertex_dparams(s, opts->params, v);
+    unsigned mask = vertex_dparams(s, opts, v);
     for (int i = 0; i < n; i++) {
         const dr_vec3 E = light[i].E, L_ind = light[i].L_ind;
         const double pl = light[i].pl, pf = r[i].pf, p = r[i].pd, cos = fabs(r[i].wi.z);

@@ -8,6 +8,7 @@
 #include "clock.h"
 #include "error.h"
 #include "medium_grad.h"
+#include "path_deriv.h"   /* dr_path_material_dparams */
 #include "parallel.h"
 #include "sampler8.h"
 #include "zero_blocks.h"
@@ -532,11 +533,14 @@ enum dr_sampling dr_est_sampling_run(const struct dr_grad_problem *p)
     if ((p->sampling == DR_SAMPLING_ATTACHED || p->sampling == DR_SAMPLING_MIS) &&
         !dr_path_params_enter_sampling(p->scene, p->params))
         return DR_SAMPLING_DETACHED;
-    /* derivative sampling adds work only at vertices with a BSDF parameter */
-    if (p->sampling == DR_SAMPLING_DERIVATIVE) {
+    /* derivative sampling adds work only at vertices with a BSDF parameter
+     * (derivative-roughness: with a roughness parameter) */
+    if (dr_sampling_is_derivative(p->sampling)) {
+        const bool roughness_only = p->sampling == DR_SAMPLING_DERIVATIVE_ROUGHNESS;
         bool any = false;
         for (int m = 0; p->params && m < p->params->n_materials; m++)
-            any |= p->params->mat_bsdf_active[m];
+            any |= roughness_only ? (dr_path_material_dparams(p->scene, p->params, m) & DR_BSDF_D_ROUGHNESS) != 0
+                                  : p->params->mat_bsdf_active[m];
         if (!any)
             return DR_SAMPLING_DETACHED;
     }
@@ -564,7 +568,7 @@ int dr_estimator_check(const struct dr_estimator_ops *e, const struct dr_grad_pr
     }
     /* Nor the normal map's dependence on the moving hit point (normal_map.h);
      * derivative sampling keeps the hit points fixed, like detached. */
-    if (run != DR_SAMPLING_DERIVATIVE && (p->scene->effects & DR_FX_NORMAL_MAPS)) {
+    if (!dr_sampling_is_derivative(run) && (p->scene->effects & DR_FX_NORMAL_MAPS)) {
         const char *name = "";
         for (int m = 0; m < p->scene->n_materials && !name[0]; m++)
             if (p->scene->materials[m].normal_tex.texture >= 0)
@@ -804,6 +808,7 @@ static int run(const struct dr_estimator_ops *e, const struct dr_grad_problem *p
     const enum dr_sampling run = dr_est_sampling_run(p);
     b->popts = (struct dr_path_opts){.max_depth = p->max_depth, .rr_depth = p->rr_depth,
                                      .stages = dr_path_plan(p->scene, p->params), .params = p->params,
+                                     .deriv_params = dr_sampling_deriv_params(run),
                                      .medium_grad = p->medium_grad, .sky_uniform = run == DR_SAMPLING_MIS};
     b->adjoint = adjoint;
     b->dir = dir;

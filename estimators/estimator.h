@@ -33,11 +33,23 @@ enum dr_sampling {
     DR_SAMPLING_MIS,        /* both from the same paths, combined per parameter with weights
                                estimated by cross-fitting (mis.h) */
     DR_SAMPLING_DERIVATIVE, /* detached + a direction sampled for d f / d theta, by MIS (path_deriv.h) */
+    DR_SAMPLING_DERIVATIVE_ROUGHNESS, /* derivative sampling for the roughness alone: base colour and
+                                         metallic keep detached sampling's strategies (path_deriv.h) */
     DR_SAMPLING_COUNT
 };
-/* "detached", "attached", "mis", "derivative"; and back (-1: unknown name). */
+/* "detached", "attached", "mis", "derivative", "derivative-roughness"; and
+ * back (-1: unknown name). */
 const char *dr_sampling_name(enum dr_sampling s);
 int dr_sampling_parse(const char *name);
+
+/* One of the two derivative sampling modes (the same estimator, path_deriv.h). */
+static inline bool dr_sampling_is_derivative(enum dr_sampling s)
+{
+    return s == DR_SAMPLING_DERIVATIVE || s == DR_SAMPLING_DERIVATIVE_ROUGHNESS;
+}
+/* The BSDF inputs (enum dr_bsdf_dparam bits) a derivative sampling mode
+ * samples directions for (dr_path_opts.deriv_params); 0 for the others. */
+unsigned dr_sampling_deriv_params(enum dr_sampling s);
 
 struct dr_mis_history;
 struct dr_estimator_ops;

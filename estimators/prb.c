@@ -145,7 +145,7 @@ static void vertex_adjoints(const struct dr_est_base *b, struct walk *w, const s
     struct dr_grad_sink *sink = w->sink;
     const struct prb_radiance *L = &w->L;
     const dr_vec3 adj = w->adj;
-    const bool dsamp = b->p->sampling == DR_SAMPLING_DERIVATIVE;
+    const bool dsamp = b->popts.deriv_params != 0;   /* derivative sampling runs */
     if (v->media)
         d_medium_vertex(s, &b->popts, v, w->mrec, w->vertices, dr_mul(adj, dr_mul(ratio, beta)), dr_mul(adj, remaining),
                         dr_mul(adj, L->true_), dr_mul(adj, dr_mul(dr_mul(ratio, beta), dr_path_vertex_nee(v))), sink);
@@ -166,7 +166,7 @@ static void vertex_adjoints(const struct dr_est_base *b, struct walk *w, const s
             d_path_deriv_emission(s, &b->popts, w->prev, w->prev_dt, v, sink);
         d_path_deriv_nee(s, &b->popts, v, d_e, sink);
         if (v->cont && v->diff_bsdf)
-            d_path_deriv_continuation(s, ps, v, d_f, sink);
+            d_path_deriv_continuation(s, &b->popts, v, d_f, sink);
     } else {
         d_path_vertex(s, ps, v, d_e, d_f, sink);   /* (both BSDF values' material adjoint at once) */
     }
@@ -194,7 +194,7 @@ static void walk_vertex(const struct dr_est_base *b, struct walk *w, const struc
     struct dr_grad_sink *sink = w->sink;
     struct prb_radiance *L = &w->L;
     const double sign = sink ? -1.0 : 1.0;
-    const bool dsamp = b->p->sampling == DR_SAMPLING_DERIVATIVE;   /* path_deriv.h (only vertices with a BSDF parameter) */
+    const bool dsamp = b->popts.deriv_params != 0;   /* path_deriv.h (only vertices with a BSDF parameter) */
     if (!sink)
         ++w->vertices;
     dr_vec3 c = dr_mul(beta, dr_path_vertex_term(v));   /* with substitutes */
@@ -928,7 +928,10 @@ static int prb_run(struct dr_est_base *b)
         if (!(j->radius > 0.0) || !isfinite(j->radius))
             j->radius = 1.0;
     }
-    const bool detached = run == DR_SAMPLING_DETACHED && b->p->sampling != DR_SAMPLING_DERIVATIVE;
+    /* derivative sampling that runs detached (no parameter it samples for)
+     * walks one path at a time: test_estimators' wave_against_one_path
+     * holds the wavefront to that walk this way */
+    const bool detached = run == DR_SAMPLING_DETACHED && !dr_sampling_is_derivative(b->p->sampling);
     j->wave = detached && !(b->popts.stages & DR_STAGE_MEDIA);
     j->media_arrays = detached && dr_wave_soa_media_walks_apply(b->p->scene, &b->popts);
     j->outside_media = b->popts;
@@ -956,7 +959,7 @@ static int prb_run(struct dr_est_base *b)
         if (arrays)
             per_thread += dr_wave_soa_walk_bytes();
     }
-    j->defer = run == DR_SAMPLING_DERIVATIVE;
+    j->defer = dr_sampling_is_derivative(run);
     if (j->defer)   /* (deferred_begin: the directions, and the lanes) */
         per_thread += deferred_bytes() + (j->wave ? 0 : dr_wave_bytes());
     b->scratch_bytes = per_thread * (uint64_t)b->acc.threads;   /* (at most prb_thread_bytes each) */
@@ -988,7 +991,7 @@ const struct dr_estimator_ops dr_estimator_prb = {
     .name = "prb",
     .summary = "path replay backpropagation: primal pass + replay, constant memory per path, time linear in depth",
     .sampling = (1u << DR_SAMPLING_DETACHED) | (1u << DR_SAMPLING_ATTACHED) | (1u << DR_SAMPLING_MIS) |
-                (1u << DR_SAMPLING_DERIVATIVE),
+                (1u << DR_SAMPLING_DERIVATIVE) | (1u << DR_SAMPLING_DERIVATIVE_ROUGHNESS),
     .job_size = sizeof(struct prb_job),
     .run = prb_run,
     .release = prb_release,

@@ -3,6 +3,8 @@
 
 #include "estimator.h"
 
+#include "bsdf.h"   /* enum dr_bsdf_dparam */
+
 extern const struct dr_estimator_ops dr_estimator_prb;
 extern const struct dr_estimator_ops dr_estimator_tape;
 
@@ -20,7 +22,8 @@ const struct dr_estimator_ops *dr_estimator_find(const char *name)
     return NULL;
 }
 
-static const char *const sampling_names[DR_SAMPLING_COUNT] = {"detached", "attached", "mis", "derivative"};
+static const char *const sampling_names[DR_SAMPLING_COUNT] = {"detached", "attached", "mis", "derivative",
+                                                              "derivative-roughness"};
 
 const char *dr_sampling_name(enum dr_sampling s)
 {
@@ -33,6 +36,13 @@ int dr_sampling_parse(const char *name)
         if (strcmp(sampling_names[i], name) == 0)
             return i;
     return -1;
+}
+
+unsigned dr_sampling_deriv_params(enum dr_sampling s)
+{
+    if (s == DR_SAMPLING_DERIVATIVE)
+        return DR_BSDF_D_BASE | DR_BSDF_D_METALLIC | DR_BSDF_D_ROUGHNESS;
+    return s == DR_SAMPLING_DERIVATIVE_ROUGHNESS ? DR_BSDF_D_ROUGHNESS : 0u;
 }
 
 bool dr_estimator_supports(const struct dr_estimator_ops *e, enum dr_sampling s)

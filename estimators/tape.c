@@ -659,7 +659,7 @@ static void sweep(const struct tape_job *j, const struct tape *tp, const struct 
             /* in media the throughput also took the segment's weight (path.h) */
             dr_vec3 bts = v->media ? dr_mul(bt, v->seg) : bt;
             if (v->diff_bsdf && j->derivative)
-                d_path_deriv_continuation(s, ps, v, dr_scale(dr_mul(abar, bts), v->cos_pdf_q), sink);
+                d_path_deriv_continuation(s, &j->b.popts, v, dr_scale(dr_mul(abar, bts), v->cos_pdf_q), sink);
             else if (v->diff_bsdf)
                 d_f = dr_scale(dr_mul(abar, bts), v->cos_pdf_q);
             t = dr_scale(v->f, v->cos_pdf_q);
@@ -896,7 +896,7 @@ static int tape_run(struct dr_est_base *b)
     const int threads = b->acc.threads;
     const enum dr_sampling run = dr_est_sampling_run(p);
     j->attached = run == DR_SAMPLING_ATTACHED || run == DR_SAMPLING_MIS;
-    j->derivative = run == DR_SAMPLING_DERIVATIVE;
+    j->derivative = dr_sampling_is_derivative(run);
     /* steps: plain detached sampling on the packet tracer (attached, mis and
      * derivative sampling read whole vertices where detached has no term) */
     const bool plain = run == DR_SAMPLING_DETACHED && !b->mis;
@@ -959,7 +959,7 @@ const struct dr_estimator_ops dr_estimator_tape = {
     .summary = "conventional reverse mode: records every vertex of a batch of paths, then sweeps backward; memory "
                "grows with depth x paths per batch",
     .sampling = (1u << DR_SAMPLING_DETACHED) | (1u << DR_SAMPLING_ATTACHED) | (1u << DR_SAMPLING_MIS) |
-                (1u << DR_SAMPLING_DERIVATIVE),
+                (1u << DR_SAMPLING_DERIVATIVE) | (1u << DR_SAMPLING_DERIVATIVE_ROUGHNESS),
     .job_size = sizeof(struct tape_job),
     .run = tape_run,
     .release = tape_release,

@@ -308,23 +308,23 @@ expect_rc 0 "grad --sampling attached (colour)"
 json_check "$tmp/out" 'd["sampling"] == "attached" and d["sampling_effective"] == "detached"'
 run grad --target t.exr --param "$red" --estimator tape --spp 4 --batches 2 --json
 json_check "$tmp/out" 'd["sampling_effective"] == "detached"'
-# --sampling auto (the default): derivative sampling where a differentiated
-# roughness is below 0.2, said in a note naming the parameter; detached, and
+# --sampling auto (the default): derivative-roughness sampling where a
+# differentiated roughness is below 0.2, said in a note naming the parameter; detached, and
 # no note, when a mode is given, the lobe is rough, or only a colour is
 # differentiated; on a scene derivative sampling cannot take (media), detached
 # with a note that says why
 run grad --target t.exr --param "$rough" --set "$rough=0.05" --spp 2 --json
 expect_rc 0 "grad of roughness 0.05"
-expect_in err "note: --sampling auto chose derivative sampling: /materials/rough-gold/pbrMetallicRoughness/roughnessFactor is 0.05, below 0.2," "grad of roughness 0.05"
-json_check "$tmp/out" 'd["sampling"] == "derivative" and d["sampling_requested"] == "auto" and d["sampling_effective"] == "derivative"'
+expect_in err "note: --sampling auto chose derivative-roughness sampling (directions sampled for the roughness derivative; base colours and metallic as detached): /materials/rough-gold/pbrMetallicRoughness/roughnessFactor is 0.05, below 0.2," "grad of roughness 0.05"
+json_check "$tmp/out" 'd["sampling"] == "derivative-roughness" and d["sampling_requested"] == "auto" and d["sampling_effective"] == "derivative-roughness"'
 run grad --target t.exr --param "$rough" --param "$red" --set "$rough=0.05" --spp 2 --sampling auto --json
 expect_rc 0 "grad of roughness 0.05 with --sampling auto given"
 expect_in err "is 0.05, below 0.12 (with a base colour or metallic differentiated)" "grad of roughness 0.05 with a colour"
-json_check "$tmp/out" 'd["sampling"] == "derivative" and d["sampling_requested"] == "auto"'
-# between the two thresholds: derivative for a roughness alone, detached beside a colour
+json_check "$tmp/out" 'd["sampling"] == "derivative-roughness" and d["sampling_requested"] == "auto"'
+# between the two thresholds: derivative-roughness for a roughness alone, detached beside a colour
 run grad --target t.exr --param "$rough" --set "$rough=0.15" --spp 2 --json
 expect_in err "is 0.15, below 0.2," "grad of roughness 0.15"
-json_check "$tmp/out" 'd["sampling"] == "derivative"'
+json_check "$tmp/out" 'd["sampling"] == "derivative-roughness"'
 run grad --target t.exr --param "$rough" --param "$red" --set "$rough=0.15" --spp 2 --json
 expect_empty err "grad of roughness 0.15 beside a colour"
 json_check "$tmp/out" 'd["sampling"] == "detached" and d["sampling_requested"] == "auto"'
@@ -343,9 +343,9 @@ mr_rough=/materials/0/pbrMetallicRoughness/roughnessFactor
 run grad "$DR_TESTDIR/data/gltf/basic.gltf" --param /images/1 --set "$mr_rough=0.1" --res 8x8 --spp 2 \
     -o "$tmp/mr-d.exr" --json
 expect_rc 0 "grad of a metallic-roughness texture of median roughness 0.059"
-expect_in err "--sampling auto chose derivative sampling: the roughness in /images/1 has median 0.0588235, below 0.12" \
+expect_in err "--sampling auto chose derivative-roughness sampling (directions sampled for the roughness derivative; base colours and metallic as detached): the roughness in /images/1 has median 0.0588235, below 0.12" \
     "grad of a metallic-roughness texture of median roughness 0.059"
-json_check "$tmp/out" 'd["sampling"] == "derivative"'
+json_check "$tmp/out" 'd["sampling"] == "derivative-roughness"'
 run grad "$DR_TESTDIR/data/gltf/basic.gltf" --param /images/1 --set "$mr_rough=0.5" --res 8x8 --spp 2 \
     -o "$tmp/mr-d.exr" --json
 expect_rc 0 "grad of a metallic-roughness texture of median roughness 0.29"
@@ -354,7 +354,7 @@ fog_rough=/materials/floor/pbrMetallicRoughness/roughnessFactor
 run grad "$DR_TESTDIR/data/media/fog-khr.gltf" --param "$fog_rough" --set "$fog_rough=0.1" --res 8x8 --spp 2 \
     -o "$tmp/fog-d.exr" --json
 expect_rc 0 "grad of roughness 0.1 in a scene with media"
-expect_in err "cannot use derivative sampling here (derivative sampling does not handle participating media" \
+expect_in err "cannot use derivative sampling here (derivative-roughness sampling does not handle participating media" \
     "grad of roughness 0.1 in a scene with media"
 json_check "$tmp/out" 'd["sampling"] == "detached" and d["sampling_requested"] == "auto"'
 run grad --target t.exr --param "$red" --loss l1 --json

@@ -113,7 +113,7 @@ expect_in err "unknown mode 'nope' (available: cross, separate)" "optimize --pri
 [ -e a-bad ] && fail "optimize --primal nope: created its output directory"
 
 # --sampling auto decides at every iteration from the values the fit has
-# reached: from roughness 0.12 (true 0.3) derivative sampling, and back to
+# reached: from roughness 0.12 (true 0.3) derivative-roughness sampling, and back to
 # detached once the roughness passes 0.2, each change said on stderr and
 # every iteration's mode in its --json line; a run resumed before the change
 # decides as the uninterrupted one (the same values to the last digit)
@@ -121,19 +121,20 @@ auto=("$data/glossy.gltf" --target glossy.exr --param "$rough" --set "$rough=0.1
       --checkpoint-every 1 --json)
 run optimize "${auto[@]}" --iters 12 --out-dir auto
 expect_rc 0 "optimize a roughness from 0.12"
-expect_in err "note: --sampling auto chose derivative sampling: $rough is 0.12, below 0.2" "optimize a roughness of 0.12"
+expect_in err "note: --sampling auto chose derivative-roughness sampling (directions sampled for the roughness derivative; base colours and metallic as detached): $rough is 0.12, below 0.2" "optimize a roughness of 0.12"
 expect_in err "--sampling auto goes back to detached sampling" "optimize a roughness from 0.12 to above 0.2"
-modes=$(grep -o '^{"iteration": [0-9]*, "loss": [^,]*, "sampling": "[a-z]*"' "$tmp/out" | sed 's/.*"sampling": "//; s/"//' | uniq | tr '\n' ' ')
-[ "$modes" = "derivative detached " ] || fail "auto: every iteration's sampling: expected derivative then detached, got '$modes'"
+modes=$(grep -o '^{"iteration": [0-9]*, "loss": [^,]*, "sampling": "[a-z-]*"' "$tmp/out" | sed 's/.*"sampling": "//; s/"//' | uniq | tr '\n' ' ')
+[ "$modes" = "derivative-roughness detached " ] ||
+    fail "auto: every iteration's sampling: expected derivative-roughness then detached, got '$modes'"
 summary "auto" auto.json
-# what ran is what was reported: iteration 1's gradient is --sampling derivative's, to the digit
+# what ran is what was reported: iteration 1's gradient is --sampling derivative-roughness's, to the digit
 grad1() { grep -m1 '^{"iteration": 1,' "$tmp/out" | grep -o '"gradient": {[^}]*}'; }
 g_auto=$(grad1)
-run optimize "${auto[@]}" --iters 1 --out-dir autoD --sampling derivative
+run optimize "${auto[@]}" --iters 1 --out-dir autoD --sampling derivative-roughness
 g_der=$(grad1)
 run optimize "${auto[@]}" --iters 1 --out-dir autoE --sampling detached
 g_det=$(grad1)
-[ -n "$g_auto" ] && [ "$g_auto" = "$g_der" ] || fail "auto: iteration 1's gradient is not derivative sampling's: '$g_auto' vs '$g_der'"
+[ -n "$g_auto" ] && [ "$g_auto" = "$g_der" ] || fail "auto: iteration 1's gradient is not derivative-roughness sampling's: '$g_auto' vs '$g_der'"
 [ "$g_auto" != "$g_det" ] || fail "auto: iteration 1's gradient equals detached sampling's"
 grep -q '"sampling": "detached", "sampling_requested": "auto"' "$tmp/auto.json" || fail "auto: summary's sampling"
 run optimize "${auto[@]}" --iters 2 --out-dir autoB

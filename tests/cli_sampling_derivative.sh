@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# --sampling derivative (issue 12) on the command line: the help of grad,
+# --sampling derivative (issue 12) and derivative-roughness on the command line: the help of grad,
 # fdcheck and optimize names it; grad runs it in reverse and forward mode
 # and --json reports what ran; fdcheck agrees with finite differences;
 # optimize takes it; tape gives prb's gradient; a scene with participating
@@ -26,6 +26,8 @@ for cmd in grad fdcheck optimize; do
     run help "$cmd"
     expect_rc 0 "help $cmd"
     grep -A3 -e "--sampling" "$tmp/out" | grep -q "derivative" || fail "help $cmd: --sampling does not name derivative"
+    grep -A3 -e "--sampling" "$tmp/out" | grep -q "derivative-roughness" ||
+        fail "help $cmd: --sampling does not name derivative-roughness"
 done
 
 # ---- grad, reverse mode: what ran ----
@@ -69,6 +71,44 @@ cp "$tmp/out" prb.json
 run grad --target t.exr --param "$rough" --param "$red" --estimator tape --sampling derivative --batches 2 $fast --json
 expect_rc 0 "grad --estimator tape --sampling derivative"
 json_check "$tmp/out" 'all(abs(a - b) <= 1e-9 * (abs(a) + 1e-12) for p, q in zip(d["parameters"], json.load(open("prb.json"))["parameters"]) for a, b in zip(p["gradient"], q["gradient"]))'
+
+# ---- derivative-roughness: derivative sampling's directions for the roughness alone ----
+same_as() {   # same_as FILE INDEX TOL: parameter INDEX's gradient equals FILE's to TOL relative
+    json_check "$tmp/out" "all(abs(a - b) <= $3 * (abs(b) + 1e-300) for a, b in zip(d['parameters'][$2]['gradient'],
+        json.load(open('$1'))['parameters'][$2]['gradient']))"
+}
+run grad --target t.exr --param "$rough" --sampling derivative --batches 2 $fast --json
+cp "$tmp/out" rough-der.json
+run grad --target t.exr --param "$rough" --sampling derivative-roughness --batches 2 $fast --json
+expect_rc 0 "grad --sampling derivative-roughness (roughness alone)"
+json_check "$tmp/out" 'd["sampling"] == "derivative-roughness" and d["sampling_effective"] == "derivative-roughness"'
+# a roughness alone: the same directions and weights as derivative sampling, to the digit
+same_as rough-der.json 0 0
+# beside a base colour: the colour keeps detached sampling's estimate (to
+# rounding), and no third direction is sampled for it (fewer rays than derivative)
+run grad --target t.exr --param "$rough" --param "$red" --sampling detached --batches 2 $fast --json
+cp "$tmp/out" both-det.json
+run grad --target t.exr --param "$rough" --param "$red" --sampling derivative --batches 2 $fast --json
+cp "$tmp/out" both-der.json
+run grad --target t.exr --param "$rough" --param "$red" --sampling derivative-roughness --batches 2 $fast --json
+expect_rc 0 "grad --sampling derivative-roughness (roughness and a colour)"
+cp "$tmp/out" both-dr.json
+same_as both-det.json 1 1e-9
+json_check "$tmp/out" 'd["parameters"][0]["gradient"][0] != json.load(open("both-det.json"))["parameters"][0]["gradient"][0]'
+json_check "$tmp/out" 'd["rays"]["extension"] < json.load(open("both-der.json"))["rays"]["extension"]'
+run grad --target t.exr --param "$rough" --param "$red" --estimator tape --sampling derivative-roughness --batches 2 \
+    $fast --json
+expect_rc 0 "grad --estimator tape --sampling derivative-roughness"
+same_as both-dr.json 0 1e-9
+same_as both-dr.json 1 1e-9
+# no roughness requested: nothing to sample for, runs (and reports) detached
+run grad --target t.exr --param "$red" --param "$metal" --sampling derivative-roughness --batches 2 $fast --json
+json_check "$tmp/out" 'd["sampling"] == "derivative-roughness" and d["sampling_effective"] == "detached"'
+run fdcheck --param "$rough" --param "$metal" --set "$rough=0.5" --sampling derivative-roughness --res 12x12 --spp 8 \
+    --batches 4 --threads 2 --json
+expect_rc 0 "fdcheck --sampling derivative-roughness"
+json_check "$tmp/out" 'd["agree"] is True and d["sampling"] == "derivative-roughness" and len(d["entries"]) == 2'
+
 run grad "$DR_TESTDIR/data/media/fog-khr.gltf" --param /materials/floor/pbrMetallicRoughness/baseColorFactor \
     --sampling derivative -o d.exr $fast
 expect_rc 2 "derivative sampling on a scene with media (bad usage, refused before any work, as attached sampling is)"

@@ -1,7 +1,8 @@
 /* --sampling derivative (core/path_deriv.c) on the bundled Cornell box:
  * agreement with finite differences within 3 standard errors for the red
  * wall's albedo, the gold sphere's roughness at 0.1 and 0.5 and its metallic
- * factor, in reverse and forward mode; forward and reverse see the same
+ * factor, and (--sampling derivative-roughness) its roughness and metallic
+ * together, in reverse and forward mode; forward and reverse see the same
  * numbers (equal to rounding); and the gradient's standard error against
  * detached sampling's with the same seeds where the forward sampler is known
  * to be poor: a near-specular roughness (0.1), whose derivative lobe is
@@ -44,10 +45,10 @@ enum region { FRAME, SPHERE };
  * gradient standard error over the components (for the variance comparison).
  * resolve: the finite difference must be resolved (|fd| > 3 se), so that
  * agreement means something. */
-static double fd_case(struct dr_scene *s, const char *name, const char *ptr, enum dr_sampling smp, double eps,
-                      enum region region, bool resolve, double *mean_se)
+static double fd_case_n(struct dr_scene *s, const char *name, const char *const *ptrs, int n, enum dr_sampling smp,
+                        double eps, enum region region, bool resolve, double *mean_se)
 {
-    struct dr_param_set *ps = dr_param_set_create(s, &ptr, 1);
+    struct dr_param_set *ps = dr_param_set_create(s, ptrs, n);
     CHECK(ps != NULL, "%s: %s", name, dr_last_error());
     if (!ps)
         return INFINITY;
@@ -87,6 +88,13 @@ static double fd_case(struct dr_scene *s, const char *name, const char *ptr, enu
     if (mean_se)
         *mean_se = se;
     return worst;
+}
+
+/* One parameter. */
+static double fd_case(struct dr_scene *s, const char *name, const char *ptr, enum dr_sampling smp, double eps,
+                      enum region region, bool resolve, double *mean_se)
+{
+    return fd_case_n(s, name, &ptr, 1, smp, eps, region, resolve, mean_se);
 }
 
 /* test_fdcheck.c's occluder edge: a rough metal floor reflecting a dark
@@ -141,6 +149,11 @@ int main(void)
           "detached's %g", se_d, se_det);
     CHECK(set_value(s, rough, 0.5) == 0, "--set roughness 0.5: %s", dr_last_error());
     worst = fmax(worst, fd_case(s, "gold-rough-0.5", rough, DR_SAMPLING_DERIVATIVE, 1e-2, SPHERE, true, NULL));
+    /* derivative-roughness: the roughness's directions beside a metallic left
+     * to detached sampling's strategies (path_deriv.c's vertex_dparams) */
+    const char *rough_metal[] = {rough, metal};
+    worst = fmax(worst, fd_case_n(s, "gold-rough+metal", rough_metal, 2, DR_SAMPLING_DERIVATIVE_ROUGHNESS, 1e-2, SPHERE,
+                                  true, NULL));
     printf("worst |z| of derivative sampling: %.2f\n", worst);
     dr_scene_destroy(s);
     return TEST_END();

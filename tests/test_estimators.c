@@ -1184,6 +1184,8 @@ int main(void)
     };
     compare("glossy scene", s, &cam, gptrs, 8, 6, DR_SAMPLING_DETACHED, GROUPED_BOTH);
     compare("glossy scene, derivative sampling", s, &cam, gptrs, 8, 6, DR_SAMPLING_DERIVATIVE, GROUPED_WALKS);
+    compare("glossy scene, derivative-roughness sampling", s, &cam, gptrs, 8, 6, DR_SAMPLING_DERIVATIVE_ROUGHNESS,
+            GROUPED_WALKS);
     compare("glossy scene, the floor's BSDF only", s, &cam, gptrs, 2, 6, DR_SAMPLING_DETACHED, GROUPED_BOTH);
     /* one kind of light at a time: where the point light alone has a
      * parameter, a vertex's term is its light sample's when that picked the
