@@ -478,8 +478,9 @@ static double texture_median_roughness(const struct dr_scene *scene, int m)
     return med;
 }
 
-/* A differentiated roughness below c->threshold: the factor's value, or a
- * differentiated metallic-roughness texture's median. */
+/* A differentiated roughness below c->threshold: the factor's value (times
+ * its material's metallic-roughness texture's median, material_roughness),
+ * or a differentiated metallic-roughness texture's median. */
 static void auto_candidate(struct grad_auto_choice *c, const struct dr_param *q, double r, bool texture)
 {
     if (!(r >= 0.0 && r < c->threshold))
@@ -487,6 +488,15 @@ static void auto_candidate(struct grad_auto_choice *c, const struct dr_param *q,
     if (!c->lowest || r < c->roughness)
         c->lowest = q, c->roughness = r, c->texture = texture;
     c->narrow++;
+}
+
+/* The roughness of material m as auto weighs a differentiated factor: the
+ * factor, times the median of the material's metallic-roughness texture's G
+ * where it has one (the roughness the surface has is their product). */
+static double material_roughness(const struct dr_scene *scene, int m)
+{
+    const struct dr_material *mat = &scene->materials[m];
+    return mat->metallic_roughness_tex.texture >= 0 ? texture_median_roughness(scene, m) : mat->roughness;
 }
 
 struct grad_auto_choice grad_auto_sampling(const struct dr_estimator_ops *e, const struct dr_scene *scene,
@@ -501,7 +511,7 @@ struct grad_auto_choice grad_auto_sampling(const struct dr_estimator_ops *e, con
         const struct dr_param *q = &set->params[i];
         if (q->kind == DR_PARAM_ROUGHNESS && q->target >= 0 && q->target < scene->n_materials) {
             any = true;
-            auto_candidate(&c, q, scene->materials[q->target].roughness, false);
+            auto_candidate(&c, q, material_roughness(scene, q->target), false);
         } else if (q->kind == DR_PARAM_IMAGE) {   /* the metallic-roughness textures it is */
             for (int m = 0; m < scene->n_materials; m++) {
                 const int t = scene->materials[m].metallic_roughness_tex.texture;
@@ -532,8 +542,15 @@ void grad_auto_describe(const struct dr_scene *scene, const struct grad_auto_cho
     dr_param_display_name(scene, c->lowest, name, sizeof name);
     if (c->narrow > 1)
         snprintf(more, sizeof more, " (and %d more)", c->narrow - 1);
-    snprintf(buf, size, "%s%s %s %g%s, below %g%s", c->texture ? "the roughness in " : "", name,
-             c->texture ? "has median" : "is", c->roughness, more, c->threshold,
+    /* a factor on a textured material: its value, then the product auto weighed */
+    char is[96];
+    const int m = c->lowest->target;
+    if (!c->texture && scene->materials[m].metallic_roughness_tex.texture >= 0)
+        snprintf(is, sizeof is, "is %g (%g with its metallic-roughness texture: the texels' median G times it)",
+                 scene->materials[m].roughness, c->roughness);
+    else
+        snprintf(is, sizeof is, "%s %g", c->texture ? "has median" : "is", c->roughness);
+    snprintf(buf, size, "%s%s %s%s, below %g%s", c->texture ? "the roughness in " : "", name, is, more, c->threshold,
              c->threshold == GRAD_AUTO_ROUGHNESS_WITH_COLOUR ? " (with a base colour or metallic differentiated)" : "");
 }
 

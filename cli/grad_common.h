@@ -179,7 +179,9 @@ int grad_param_set(const struct grad_common *g, const struct dr_scene *scene, st
  *    times the colour's, gains about twice what the colour loses.
  * A differentiated metallic-roughness texture counts with its texels' median
  * roughness (G x the factor; it moves metallic too, so the second
- * threshold). Every run without a small roughness is what it was. */
+ * threshold), and so does a factor whose material has such a texture (the
+ * factor times that median: the roughness the surface has). Every run
+ * without a small roughness is what it was. */
 #define GRAD_AUTO_ROUGHNESS 0.2
 #define GRAD_AUTO_ROUGHNESS_WITH_COLOUR 0.12
 #define GRAD_STR_(x) #x

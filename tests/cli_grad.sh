@@ -350,6 +350,13 @@ run grad "$DR_TESTDIR/data/gltf/basic.gltf" --param /images/1 --set "$mr_rough=0
     -o "$tmp/mr-d.exr" --json
 expect_rc 0 "grad of a metallic-roughness texture of median roughness 0.29"
 json_check "$tmp/out" 'd["sampling"] == "detached"'
+# a differentiated factor on that material: the roughness it makes with the texture (0.3 x 0.588)
+run grad "$DR_TESTDIR/data/gltf/basic.gltf" --param "$mr_rough" --set "$mr_rough=0.3" --res 8x8 --spp 2 \
+    -o "$tmp/mr-d.exr" --json
+expect_rc 0 "grad of a roughness factor of 0.3 on a metallic-roughness texture of median 0.588"
+expect_in err "roughnessFactor is 0.3 (0.176471 with its metallic-roughness texture: the texels' median G times it), below 0.2" \
+    "grad of a roughness factor of 0.3 on a metallic-roughness texture"
+json_check "$tmp/out" 'd["sampling"] == "derivative-roughness"'
 fog_rough=/materials/floor/pbrMetallicRoughness/roughnessFactor
 run grad "$DR_TESTDIR/data/media/fog-khr.gltf" --param "$fog_rough" --set "$fog_rough=0.1" --res 8x8 --spp 2 \
     -o "$tmp/fog-d.exr" --json
