@@ -330,6 +330,12 @@ bool dr_medium_path_step_traced(const struct dr_scene *s, const struct dr_path_o
 {
     v->depth = ++st->depth;
     v->d = st->d;
+    v->o = st->o;
+    /* the state on arrival, as dr_path_step_begin keeps it: derivative
+     * sampling's emission weights read prev_p and prev_sky (path_deriv.c) */
+    v->prev_pdf = st->prev_pdf;
+    v->prev_sky = st->prev_sky;
+    v->prev_p = st->prev_p;
     v->seg = dr_v3s(1.0);
     v->emits = v->shaded = v->nee = v->cont = v->diff_bsdf = false;
     v->env_at.valid = false;

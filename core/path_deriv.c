@@ -156,13 +156,18 @@ static struct dr_sampler deriv_stream(const struct dr_sampler *smp, int depth, u
 /* (path_deriv.h) The state the forward continuation would have handed on
  * had it sampled the ray's direction: same depth, prev_pdf = the forward
  * density pf (so the MIS weights beyond are the primal's), unit throughput. */
-void dr_path_deriv_start(const struct dr_deriv_ray *r, struct dr_path_state *st)
+void dr_path_deriv_start(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_deriv_ray *r,
+                         struct dr_path_state *st)
 {
     dr_path_start(st, r->o, r->d);
     st->prev_pdf = r->pf;
     st->prev_sky = r->prev_sky;
     st->prev_p = r->prev_p;
     st->depth = r->depth;
+    if (opts->stages & DR_STAGE_MEDIA) {
+        dr_medium_path_resume(s, st, &r->rng);   /* (hero channel, spectral weights) */
+        st->medium = r->medium;
+    }
 }
 
 /* (path_deriv.h) */
@@ -185,7 +190,7 @@ void dr_path_deriv_radiance(const struct dr_scene *s, const struct dr_path_opts 
     struct dr_path_state st;
     struct dr_path_vertex w;
     struct dr_sampler rng = r->rng;
-    dr_path_deriv_start(r, &st);
+    dr_path_deriv_start(s, opts, r, &st);
     for (bool first = true;; first = false) {
         dr_vec3 beta = st.beta;
         bool more = dr_path_step(s, &o, &st, &rng, &w, counts);
@@ -214,7 +219,8 @@ static struct dr_deriv_ray deriv_ray(const struct dr_path_opts *opts, const stru
     double pf = dr_bsdf_pdf(&v->bsdf, v->wo, wi);
     return (struct dr_deriv_ray){.wi = wi, .o = dr_offset_origin(&v->hit, v->ng, wiw), .d = wiw, .prev_p = v->hit.p,
                                  .pf = pf, .pd = pd, .prev_sky = dr_path_leaving_sky(opts, v, dr_dot(wiw, v->ng), pf),
-                                 .rng = deriv_stream(smp, v->depth, which), .depth = v->depth, .kind = kind};
+                                 .rng = deriv_stream(smp, v->depth, which), .depth = v->depth, .kind = kind,
+                                 .medium = v->medium};
 }
 
 /* (path_deriv.h) B's direction from p_bm, then A's antithetic pair: the

@@ -54,6 +54,13 @@
  * d_path_deriv_sample adds the new directions and their radiance paths, the
  * extra cost (one path for B, two for A, per differentiated vertex).
  *
+ * In scenes with media the radiance walks are the medium walker's
+ * (dr_path_step dispatches), each starting in the medium on the vertex's
+ * side with a hero channel of its own; the derivative vertices are surface
+ * vertices (a phase function has no parameter here), whose next-event
+ * estimate and emission weights the medium walker forms as the surface
+ * walker does (transmittance folded into the light's radiance).
+ *
  * Nothing in the primal changes: the image, the path's continuation and
  * every other derivative term are detached sampling's. The new directions
  * and their paths draw from sub-streams of the path's key per vertex depth
@@ -111,6 +118,8 @@ struct dr_deriv_ray {
     double pf;                 /* the forward BSDF density of wi */
     double pd;                 /* its strategy's density: p_bm (B), p+ or p- (A) */
     double prev_sky;           /* the walk's start state (dr_path_deriv_start) */
+    int medium;                /* ... the medium it starts in (scenes with media: the vertex's side,
+                                  the one its ray arrived through) */
     struct dr_sampler rng;     /* the walk's random numbers */
     int depth;
     enum dr_deriv_kind kind;
@@ -127,8 +136,11 @@ struct dr_deriv_light {
 int dr_path_deriv_rays(const struct dr_scene *scene, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
                        const struct dr_sampler *smp, struct dr_deriv_ray r[DR_DERIV_RAYS]);
 /* The state a ray's radiance walk begins in (with r->rng as its sampler, and
- * opts without parameters). */
-void dr_path_deriv_start(const struct dr_deriv_ray *r, struct dr_path_state *st);
+ * opts without parameters). With media (opts->stages): in r->medium, with
+ * its own hero channel and spectral weights (a fresh estimate of the
+ * radiance along the ray, as the medium walker starts a path). */
+void dr_path_deriv_start(const struct dr_scene *scene, const struct dr_path_opts *opts, const struct dr_deriv_ray *r,
+                         struct dr_path_state *st);
 /* What the walk's first vertex w gives (whole: its emission unweighted, its
  * hit for the light density, and its next-event term); each later vertex
  * adds its dr_path_vertex_term times the throughput it was reached with to

@@ -533,7 +533,7 @@ static void deriv_start(void *ctx, int64_t i, void *user, struct dr_sampler *smp
 static void deriv_start_state(void *ctx, void *user, struct dr_path_state *st)
 {
     const struct deriv_ctx *c = ctx;
-    dr_path_deriv_start(&c->r[((const struct deriv_lane *)user)->ray], st);
+    dr_path_deriv_start(c->s, c->opts, &c->r[((const struct deriv_lane *)user)->ray], st);
 }
 
 static bool deriv_next_whole(void *ctx, void *user)
@@ -571,6 +571,11 @@ void dr_wave_deriv_radiance(struct dr_wave *w, const struct dr_scene *s, const s
     static const struct dr_wave_ops ops = {.start = deriv_start, .vertex = deriv_vertex, .walk_end = deriv_end,
                                            .partial_vertices = true, .next_whole = deriv_next_whole,
                                            .start_state = deriv_start_state};
+    if (opts->stages & DR_STAGE_MEDIA) {   /* (media, which the lanes do not know: one path at a time) */
+        for (int64_t i = 0; i < n; i++)
+            dr_path_deriv_radiance(s, opts, &r[i], &out[i], counts);
+        return;
+    }
     struct dr_path_opts o = *opts;
     o.params = NULL;   /* (as dr_path_deriv_radiance) */
     struct deriv_ctx c = {s, &o, r, out};

@@ -558,9 +558,9 @@ int dr_estimator_check(const struct dr_estimator_ops *e, const struct dr_grad_pr
         return 0;
     /* The attached adjoints (path_attached.c; mis uses them too) know
      * surfaces only: a path through a medium would silently lose its moving
-     * terms; derivative sampling's extra radiance paths use the surface
-     * walker's state. */
-    if (p->scene->effects & DR_FX_MEDIA) {
+     * terms. (Derivative sampling's radiance walks are the medium walker's
+     * there, path_deriv.h.) */
+    if ((run == DR_SAMPLING_ATTACHED || run == DR_SAMPLING_MIS) && (p->scene->effects & DR_FX_MEDIA)) {
         dr_set_error("%s sampling does not handle participating media yet (the scene has %d medi%s); use "
                      "--sampling detached",
                      dr_sampling_name(p->sampling), p->scene->n_media, p->scene->n_media == 1 ? "um" : "a");

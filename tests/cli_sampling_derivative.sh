@@ -2,12 +2,13 @@
 # --sampling derivative (issue 12) and derivative-roughness on the command line: the help of grad,
 # fdcheck and optimize names it; grad runs it in reverse and forward mode
 # and --json reports what ran; fdcheck agrees with finite differences;
-# optimize takes it; tape gives prb's gradient; a scene with participating
-# media is refused naming the option; unknown names list it.
+# optimize takes it; tape gives prb's gradient, also in a scene with
+# participating media (which attached sampling still refuses); unknown
+# names list it.
 # Run by tests/run.sh (env: DRENDER, DR_TESTDIR); also runs alone.
 #
-# Expected exit codes: 0 success; 2 usage error (unknown name, and a scene with media: refused before any work, as
-# attached sampling is).
+# Expected exit codes: 0 success; 2 usage error (unknown name; attached sampling on a scene with media: refused
+# before any work).
 set -u
 
 # shellcheck source=SCRIPTDIR/lib/cli.sh
@@ -109,10 +110,28 @@ run fdcheck --param "$rough" --param "$metal" --set "$rough=0.5" --sampling deri
 expect_rc 0 "fdcheck --sampling derivative-roughness"
 json_check "$tmp/out" 'd["agree"] is True and d["sampling"] == "derivative-roughness" and len(d["entries"]) == 2'
 
-run grad "$DR_TESTDIR/data/media/fog-khr.gltf" --param /materials/floor/pbrMetallicRoughness/baseColorFactor \
-    --sampling derivative -o d.exr $fast
-expect_rc 2 "derivative sampling on a scene with media (bad usage, refused before any work, as attached sampling is)"
-expect_mentions "derivative sampling|participating media|--sampling detached"
+# ---- media: the radiance walks are the medium walker's; prb and tape agree there too ----
+fog="$DR_TESTDIR/data/media/fog-khr.gltf"
+floor=/materials/floor/pbrMetallicRoughness
+for smp in derivative derivative-roughness; do
+    run render "$fog" -o fog-t.exr --res 12x12 --spp 16
+    run grad "$fog" --target fog-t.exr --param "$floor/roughnessFactor" --param "$floor/baseColorFactor" \
+        --set "$floor/roughnessFactor=0.2" --set "$floor/metallicFactor=1" --sampling $smp --res 12x12 --spp 4 \
+        --batches 2 --threads 2 --json
+    expect_rc 0 "grad --sampling $smp on a scene with media"
+    json_check "$tmp/out" "d['sampling_effective'] == '$smp' and all(math.isfinite(g) for p in d['parameters'] for g in p['gradient'])"
+    cp "$tmp/out" fog-prb.json
+    run grad "$fog" --target fog-t.exr --param "$floor/roughnessFactor" --param "$floor/baseColorFactor" \
+        --set "$floor/roughnessFactor=0.2" --set "$floor/metallicFactor=1" --sampling $smp --res 12x12 --spp 4 \
+        --batches 2 --threads 2 --json --estimator tape
+    expect_rc 0 "grad --estimator tape --sampling $smp on a scene with media"
+    same_as fog-prb.json 0 1e-9
+    same_as fog-prb.json 1 1e-9
+done
+# attached sampling still cannot take media
+run grad "$fog" --param "$floor/roughnessFactor" --sampling attached -o d.exr $fast
+expect_rc 2 "attached sampling on a scene with media (bad usage, refused before any work)"
+expect_mentions "attached sampling|participating media|--sampling detached"
 run grad --target t.exr --param "$red" --sampling derivativ $fast
 check_failed 2 "--sampling|derivativ|derivative"
 
