@@ -45,7 +45,10 @@ LDLIBS   += $(IMG_LIBS) $(HOST_LIBS)
 # printed the same notes)
 LDFLAGS  += $(OPT) $(MOVE_MAX) -Wno-psabi
 
-CORE_C   := $(wildcard core/*.c estimators/*.c drivers/*.c)
+# The image plugin's sources: the OpenImageIO shims, and the C its readers
+# call before OpenImageIO sees a file (core/bmp_check.h)
+IMG_C    := core/bmp_check.c
+CORE_C   := $(filter-out $(IMG_C),$(wildcard core/*.c estimators/*.c drivers/*.c))
 IMG_CXX  := core/image_io.cpp core/vis.cpp
 CORE_CXX := $(filter-out $(IMG_CXX),$(wildcard core/*.cpp))
 CLI_C    := $(wildcard cli/*.c)
@@ -57,7 +60,7 @@ CLI_OBJ  := $(CLI_C:%.c=$(BUILD)/%.o)
 TEST_BIN := $(TEST_C:tests/%.c=$(BUILD)/tests/%)
 BENCH_BIN:= $(BENCH_C:bench/%.c=$(BUILD)/bench/%)
 LIB      := $(BUILD)/libdrender.a
-IMG_OBJ  := $(IMG_CXX:%.cpp=$(BUILD)/%.o)
+IMG_OBJ  := $(IMG_CXX:%.cpp=$(BUILD)/%.o) $(IMG_C:%.c=$(BUILD)/%.o)
 PLUGIN   := $(BUILD)/libdrender-image.so
 
 .PHONY: all deps fuzz-deps demo test bench sanitize fuzz fuzz-build install clean
@@ -90,6 +93,7 @@ $(BUILD)/drender: $(CLI_OBJ) $(LIB) | $(PLUGIN)
 	$(CC) $(LDFLAGS) -rdynamic $(CLI_OBJ) $(LIB) $(HOST_LIBS) -o $@
 endif
 $(IMG_OBJ): CXXFLAGS += -fPIC
+$(IMG_OBJ): CFLAGS += -fPIC
 # The libraries most of the load's symbol bindings go to, named first so that
 # the plugin's dlopen finds their symbols early in its search list: 167 ->
 # 111 ms (scripts/image-lib-order.sh says why and measures the ranking).
@@ -156,6 +160,7 @@ FUZZ_SAN     := -fsanitize=address,undefined -fno-sanitize-recover=undefined
 FUZZ_CFLAGS  := -O1 -g -fno-omit-frame-pointer $(FUZZ_SAN) -fsanitize=fuzzer-no-link $(WARN)
 FUZZ_CLI_C   := cli/cli_util.c cli/grad_common.c cli/mem_limits.c
 FUZZ_OBJ     := $(CORE_C:%.c=$(FUZZ_BUILD)/%.o) $(CORE_CXX:%.cpp=$(FUZZ_BUILD)/%.o) $(IMG_CXX:%.cpp=$(FUZZ_BUILD)/%.o) \
+                $(IMG_C:%.c=$(FUZZ_BUILD)/%.o) \
                 $(FUZZ_CLI_C:%.c=$(FUZZ_BUILD)/%.o) $(FUZZ_BUILD)/fuzz/tinygltf_impl.o
 FUZZ_BIN     := $(FUZZ_TARGETS:%=$(FUZZ_BUILD)/fuzz_%)
 FUZZ_LIBS     = $(filter-out -ltinygltf,$(LDLIBS)) -lstb

@@ -16,6 +16,7 @@
 #include "image_io.h"
 #include "image_plugin.h"
 
+#include "bmp_check.h"
 #include "cut_short.h"
 #include "error.h"
 #include "image.h"
@@ -266,9 +267,48 @@ int refuse_huge_gif_file(const char *path, const std::string &label)
     return refuse_huge_gif(head, n, label);
 }
 
+// A BMP that OpenImageIO 2.4's reader must not see (bmp_check.h): the
+// bytes (the whole file: its pixels are checked against a short colour
+// table) give the reason. DR_OK for anything else.
+int refuse_unsafe_bmp(const unsigned char *b, size_t n, bool whole, const std::string &label)
+{
+    char why[256];
+    if (dr_bmp_check(b, n, whole, why, sizeof why) == 0)
+        return DR_OK;
+    dr_set_error("%s: cannot read image: %s", label.c_str(), why);
+    return DR_ERR_FORMAT;
+}
+
+// The same for a file: read whole when it is a BMP of at most 256 MiB (a
+// larger one: its headers alone).
+int refuse_unsafe_bmp_file(const char *path, const std::string &label)
+{
+    FILE *f = std::fopen(path, "rb");
+    if (!f)
+        return DR_OK;   // (the reader says why)
+    unsigned char head[64];
+    size_t n = std::fread(head, 1, sizeof head, f);
+    int rc = DR_OK;
+    struct stat st;
+    if (!dr_bmp_magic(head, n)) {
+        // not a BMP
+    } else if (fstat(fileno(f), &st) == 0 && st.st_size > (off_t)sizeof head && st.st_size <= ((off_t)256 << 20)) {
+        std::vector<unsigned char> all((size_t)st.st_size);
+        std::rewind(f);
+        n = std::fread(all.data(), 1, all.size(), f);
+        rc = refuse_unsafe_bmp(all.data(), n, true, label);
+    } else {
+        rc = refuse_unsafe_bmp(head, n, n < sizeof head, label);
+    }
+    std::fclose(f);
+    return rc;
+}
+
 int read_file(const char *path, const std::string &label, dr_image *img, bool eight_bit)
 {
     int grc = refuse_huge_gif_file(path, label);
+    if (grc == DR_OK)
+        grc = refuse_unsafe_bmp_file(path, label);
     if (grc != DR_OK)
         return grc;
     ImageSpec config = read_config();
@@ -357,6 +397,8 @@ int read_memory(const void *bytes, size_t size, const char *name_hint, dr_image 
         return DR_ERR_FORMAT;
     }
     int grc = refuse_huge_gif((const unsigned char *)bytes, size, label);
+    if (grc == DR_OK)
+        grc = refuse_unsafe_bmp((const unsigned char *)bytes, size, true, label);
     if (grc != DR_OK)
         return grc;
     std::string name = memory_name((const unsigned char *)bytes, size, label);

@@ -748,6 +748,98 @@ static void test_read_eight_bit(void)
     }
 }
 
+/* A BMP of w x h pixels at bpp bits: BITMAPINFOHEADER, `palette` colour
+ * table entries (a grey ramp), compression comp, and h rows of `row` bytes
+ * (the padded size) from pixels. Returns its size in buf (cap bytes; 0 if it
+ * does not fit). */
+enum { BMP_CAP = 2048 };
+static size_t make_bmp(unsigned char buf[BMP_CAP], int w, int h, int bpp, int comp, int palette, int row,
+                       const unsigned char *pixels)
+{
+    const size_t table = (size_t)palette * 4, data = (size_t)row * (size_t)h, size = 54 + table + data;
+    CHECK(size <= BMP_CAP, "make_bmp: %zu bytes do not fit", size);
+    if (size > BMP_CAP)
+        return 0;
+    memset(buf, 0, size);
+    buf[0] = 'B', buf[1] = 'M';
+    const uint32_t fields[][2] = {{2, (uint32_t)size}, {10, (uint32_t)(54 + table)}, {14, 40},
+                                  {18, (uint32_t)w},   {22, (uint32_t)h},            {30, (uint32_t)comp},
+                                  {34, (uint32_t)data}, {46, (uint32_t)palette}};
+    for (size_t i = 0; i < sizeof fields / sizeof fields[0]; i++)
+        for (int k = 0; k < 4; k++)
+            buf[fields[i][0] + k] = (unsigned char)(fields[i][1] >> (8 * k));
+    buf[26] = 1;   /* planes */
+    buf[28] = (unsigned char)bpp;
+    for (int i = 0; i < palette; i++)
+        buf[54 + 4 * i] = buf[55 + 4 * i] = buf[56 + 4 * i] = (unsigned char)(255 * i / (palette > 1 ? palette - 1 : 1));
+    memcpy(buf + 54 + table, pixels, data);
+    return size;
+}
+
+/* OpenImageIO 2.4's BMP reader crashes on RLE files with the wrong depth and
+ * reads past a short colour table (core/bmp_check.h): such files are refused
+ * with a reason, from memory and from a file alike; the BMPs it reads safely
+ * (a short table whose entries the pixels stay inside) still load. */
+static void test_bmp_guard(void)
+{
+    unsigned char buf[BMP_CAP], px[64];
+    struct dr_image img;
+    char path[512];
+    /* 4x2, 8 bits, a 2-entry table, pixels 0 and 1: read, as grey */
+    for (int i = 0; i < 8; i++)
+        px[i] = (unsigned char)(i & 1);
+    size_t n = make_bmp(buf, 4, 2, 8, 0, 2, 4, px);
+    int rc = dr_image_read_memory(buf, n, "x.bmp", &img);
+    CHECK(rc == 0 && img.width == 4 && img.height == 2, "short table, pixels inside: rc %d: %s", rc, dr_last_error());
+    if (rc == 0) {
+        CHECK(img.data[0] == 0.0f && img.data[img.channels] == 1.0f, "short table: values %g %g", img.data[0],
+              img.data[img.channels]);
+        dr_image_release(&img);
+    }
+    /* one pixel uses entry 5 of the 2: refused, from memory and from a file */
+    px[6] = 5;
+    n = make_bmp(buf, 4, 2, 8, 0, 2, 4, px);
+    rc = dr_image_read_memory(buf, n, "x.bmp", &img);
+    CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), "colour 5 of a 2-entry colour table"), "entry 5 of 2: rc %d: %s",
+          rc, dr_last_error());
+    path_in_tmp(path, sizeof path, "short-table.png");   /* (the content decides, not the name) */
+    FILE *f = fopen(path, "wb");
+    CHECK(f && fwrite(buf, 1, n, f) == n, "write %s", path);
+    if (f)
+        fclose(f);
+    rc = dr_image_read(path, &img);
+    CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), path) && strstr(dr_last_error(), "2-entry colour table"),
+          "entry 5 of 2 (file): rc %d: %s", rc, dr_last_error());
+    /* 4-bit pixels past a 3-entry table */
+    memset(px, 0x12, sizeof px);
+    px[1] = 0x13;
+    n = make_bmp(buf, 4, 2, 4, 0, 3, 4, px);
+    rc = dr_image_read_memory(buf, n, "x.bmp", &img);
+    CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), "colour 3 of a 3-entry"), "4-bit: rc %d: %s", rc,
+          dr_last_error());
+    /* RLE8 and RLE4, whatever the depth: refused before the reader sees them
+     * (24-bit RLE8 is make fuzz's crasher, fuzz/corpus/image/regress-bmp-rle8-24bit) */
+    memset(px, 0, sizeof px);
+    for (int k = 0; k < 3; k++) {
+        const int bpp[] = {24, 8, 4}, comp[] = {1, 1, 2};
+        n = make_bmp(buf, 4, 2, bpp[k], comp[k], bpp[k] <= 8 ? 1 << bpp[k] : 0, 12, px);
+        rc = dr_image_read_memory(buf, n, "x.bmp", &img);
+        CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), comp[k] == 1 ? "RLE8-compressed BMP" : "RLE4-compressed"),
+              "RLE %d-bit: rc %d: %s", bpp[k], rc, dr_last_error());
+    }
+    /* a depth the reader has no case for */
+    n = make_bmp(buf, 4, 2, 2, 0, 4, 4, px);
+    rc = dr_image_read_memory(buf, n, "x.bmp", &img);
+    CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), "2 bits a pixel"), "2-bit: rc %d: %s", rc, dr_last_error());
+    /* a plain 24-bit one reads */
+    memset(px, 200, sizeof px);
+    n = make_bmp(buf, 4, 2, 24, 0, 0, 12, px);
+    rc = dr_image_read_memory(buf, n, "x.bmp", &img);
+    CHECK(rc == 0 && img.width == 4 && img.channels == 3, "24-bit: rc %d: %s", rc, dr_last_error());
+    if (rc == 0)
+        dr_image_release(&img);
+}
+
 static void test_errors(void)
 {
     char path[512], other[512];
@@ -973,6 +1065,7 @@ int main(void)
     test_read_memory();
     test_read_eight_bit();
     test_errors();
+    test_bmp_guard();
 
     nftw(tmpdir, rm_entry, 16, FTW_DEPTH | FTW_PHYS);
     return TEST_END();
