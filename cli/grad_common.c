@@ -524,7 +524,7 @@ struct grad_auto_choice grad_auto_sampling(const struct dr_estimator_ops *e, con
     }
     if (any && e) {
         struct dr_grad_problem p = {.scene = scene, .params = set, .sampling = DR_SAMPLING_DERIVATIVE_ROUGHNESS};
-        c.derivative_possible = dr_estimator_check(e, &p) == 0;   /* (media) */
+        c.derivative_possible = dr_estimator_check(e, &p) == 0;   /* (an estimator without it) */
         if (!c.derivative_possible)
             snprintf(c.why, sizeof c.why, "%s", dr_last_error());
     }
