@@ -3,7 +3,7 @@
  * texture lookup (core/image.c).
  *
  * The first input byte picks the name hint (and so the decoder when the
- * magic bytes do not): byte % 14 indexes hints[] below; the rest is the
+ * magic bytes do not): byte % N_HINTS indexes hints[] below; the rest is the
  * encoded file. Note: OpenImageIO and the codec libraries are the system's
  * uninstrumented shared libraries, so libFuzzer sees coverage only in our
  * wrapper and ASan checks only what crosses into instrumented code. */
@@ -14,8 +14,13 @@
 int LLVMFuzzerInitialize(int *argc, char ***argv);
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
-static const char *const hints[14] = {"fuzz",    "x.png", "x.jpg", "x.exr", "x.hdr", "x.tif", "x.bmp",
-                                      "x.tga",   "x.pfm", "x.ppm", "x.gif", "x.psd", "x.dds", "image/png"};
+/* (the formats after "image/png" were added later: the older inputs' first
+ * bytes are all below 14, so they still pick what they picked) */
+#define N_HINTS 26
+static const char *const hints[N_HINTS] = {
+    "fuzz",   "x.png", "x.jpg",  "x.exr", "x.hdr",  "x.tif", "x.bmp", "x.tga", "x.pfm",
+    "x.ppm",  "x.gif", "x.psd",  "x.dds", "image/png", "x.dpx", "x.fits", "x.iff", "x.sgi",
+    "x.rla",  "x.ico", "x.webp", "x.jp2", "x.pnm", "x.heic", "x.cin", "x.pic"};
 
 int LLVMFuzzerInitialize(int *argc, char ***argv)
 {
@@ -30,7 +35,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     if (size < 1)
         return 0;
     struct dr_image img = {0};
-    if (dr_image_read_memory(data + 1, size - 1, hints[data[0] % 14], &img) == 0) {
+    if (dr_image_read_memory(data + 1, size - 1, hints[data[0] % N_HINTS], &img) == 0) {
         if (img.width <= 0 || img.height <= 0 || img.channels < 1 || img.channels > 4 || !img.data)
             abort();   /* the reader's contract */
         if (dr_image_make_linear(&img) == 0) {

@@ -67,7 +67,8 @@ for f in sorted(glob.glob(os.path.join(samples, "*/glTF*/*.gl*"))):
 
 # ---- image ----
 HINTS = ["fuzz", "x.png", "x.jpg", "x.exr", "x.hdr", "x.tif", "x.bmp", "x.tga", "x.pfm", "x.ppm", "x.gif",
-         "x.psd", "x.dds", "image/png"]
+         "x.psd", "x.dds", "image/png", "x.dpx", "x.fits", "x.iff", "x.sgi", "x.rla", "x.ico", "x.webp", "x.jp2",
+         "x.pnm", "x.heic", "x.cin", "x.pic"]
 for f in ["tests/data/gltf/checker.png", "tests/data/gltf/mr.png", "tests/data/gltf/sky.hdr",
           "tests/data/cli/truncated.png", "tests/data/optimize/texture-true.png"]:
     data = open(os.path.join(root, f), "rb").read()
@@ -77,7 +78,10 @@ if shutil.which("oiiotool"):
     tmp = os.path.join(out, ".tmp")
     os.makedirs(tmp, exist_ok=True)
     for ext, args in [("exr", ["-d", "half"]), ("tif", ["-d", "float"]), ("bmp", []), ("tga", []), ("pfm", []),
-                      ("ppm", []), ("jpg", []), ("gif", []), ("hdr", []), ("png", ["-d", "uint16"])]:
+                      ("ppm", []), ("jpg", []), ("gif", []), ("hdr", []), ("png", ["-d", "uint16"]),
+                      # the other readers a texture or target can reach by its magic bytes
+                      ("dpx", []), ("fits", []), ("iff", []), ("sgi", []), ("rla", []), ("ico", []), ("webp", []),
+                      ("jp2", []), ("pnm", []), ("heic", [])]:
         p = os.path.join(tmp, "s." + ext)
         r = subprocess.run(["oiiotool", "--pattern", "checker:width=2:height=2", "6x5", "3"] + args + ["-o", p],
                            stderr=subprocess.DEVNULL)
