@@ -79,12 +79,22 @@ int dr_bmp_check(const unsigned char *b, size_t n, bool whole, char *why, size_t
         snprintf(why, why_size, "BMP with %u bits a pixel (1, 4, 8, 16, 24 or 32 are read)", (unsigned)bpp);
         return -1;
     }
-    if (bpp > 8 || palette == 0 || palette >= (1u << bpp) || w <= 0 || h == 0)
-        return 0;   /* (no table, a full one, or one the reader refuses itself; a size it refuses) */
+    if (w <= 0 || h == 0)
+        return 0;   /* (a size the reader refuses itself) */
+    /* from memory the reader's seeks are not checked: every row must lie in
+     * the bytes (files: it seeks and reads, and says where they end) */
+    const int64_t rows = h < 0 ? -h : h, padded = ((w * bpp + 7) / 8 + 3) & ~(int64_t)3;
+    if (whole && (offset < 14 + (dib == 12 ? 12u : 40u) || offset > n || rows > ((int64_t)n - offset) / padded)) {
+        snprintf(why, why_size, "BMP pixel data (from byte %u, %lld rows of %lld bytes) is not all inside its %zu bytes",
+                 (unsigned)offset, (long long)rows, (long long)padded, n);
+        return -1;
+    }
+    if (bpp > 8 || palette == 0 || palette >= (1u << bpp))
+        return 0;   /* (no table, a full one, or one the reader refuses itself) */
     if (!whole) {
         snprintf(why, why_size, "BMP with a %u-entry colour table for %u-bit pixels, too large to check",
                  (unsigned)palette, (unsigned)bpp);
         return -1;
     }
-    return check_indices(b, n, offset, w, h < 0 ? -h : h, bpp, palette, why, why_size);
+    return check_indices(b, n, offset, w, rows, bpp, palette, why, why_size);
 }

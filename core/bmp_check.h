@@ -7,7 +7,10 @@
  *    (a 261-byte file: segmentation fault);
  *  - a palette image (1, 4 or 8 bits a pixel) whose pixels use entries past
  *    the end of a short colour table (its lookups are unchecked);
- *  - a bit depth other than 1, 4, 8, 16, 24 or 32.
+ *  - a bit depth other than 1, 4, 8, 16, 24 or 32;
+ *  - pixel data that is not all inside the bytes (its memory reader seeks
+ *    to the header's data offset unchecked: an offset of -44 read before
+ *    the buffer).
  * Checked from the file's bytes before the reader sees them; anything that
  * is not a BMP ("BM"), or that this check does not reach, is left to the
  * reader. */

@@ -831,6 +831,18 @@ static void test_bmp_guard(void)
     n = make_bmp(buf, 4, 2, 2, 0, 4, 4, px);
     rc = dr_image_read_memory(buf, n, "x.bmp", &img);
     CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), "2 bits a pixel"), "2-bit: rc %d: %s", rc, dr_last_error());
+    /* pixel data outside the bytes: an offset before them (make fuzz's
+     * regress-bmp-negative-offset read before the buffer), and rows cut short */
+    memset(px, 200, sizeof px);
+    n = make_bmp(buf, 4, 2, 24, 0, 0, 12, px);
+    buf[10] = 0xd4, buf[11] = buf[12] = buf[13] = 0xff;
+    rc = dr_image_read_memory(buf, n, "x.bmp", &img);
+    CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), "is not all inside"), "offset -44: rc %d: %s", rc,
+          dr_last_error());
+    n = make_bmp(buf, 4, 2, 24, 0, 0, 12, px);
+    rc = dr_image_read_memory(buf, n - 1, "x.bmp", &img);
+    CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), "2 rows of 12 bytes"), "a byte short: rc %d: %s", rc,
+          dr_last_error());
     /* a plain 24-bit one reads */
     memset(px, 200, sizeof px);
     n = make_bmp(buf, 4, 2, 24, 0, 0, 12, px);
