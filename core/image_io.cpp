@@ -25,6 +25,7 @@
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <cmath>
@@ -325,6 +326,32 @@ int read_file(const char *path, const std::string &label, dr_image *img, bool ei
     return rc;
 }
 
+// Bytes in memory for a reader, read within their bounds. OpenImageIO 2.4's
+// IOMemReader::pread compares offset + size with the buffer's size in
+// size_t, so a negative offset (a reader seeking to a value from the file's
+// header, unchecked) wraps around and reads before the buffer (make fuzz: a
+// BMP with a data offset of -44, an ASan heap-buffer-overflow). Here a read
+// outside the buffer gets no bytes, which the readers report as a short read.
+class BoundedMemReader final : public Filesystem::IOMemReader {
+public:
+    using Filesystem::IOMemReader::IOMemReader;
+    size_t pread(void *buf, size_t size, int64_t offset) override
+    {
+        const int64_t n = (int64_t)m_buf.size();
+        if (offset < 0 || offset >= n || size == 0)
+            return 0;
+        size = std::min(size, (size_t)(n - offset));
+        std::memcpy(buf, m_buf.data() + offset, size);
+        return size;
+    }
+    size_t read(void *buf, size_t size) override
+    {
+        const size_t got = pread(buf, size, m_pos);
+        m_pos += (int64_t)got;
+        return got;
+    }
+};
+
 // Picks a file name whose extension selects the decoder for `bytes`.
 std::string memory_name(const unsigned char *b, size_t n, const std::string &hint)
 {
@@ -420,7 +447,7 @@ int read_memory(const void *bytes, size_t size, const char *name_hint, dr_image 
         return read_memory_via_file(bytes, size, ext, label, img, eight_bit);
     }
 
-    Filesystem::IOMemReader proxy(bytes, size);
+    BoundedMemReader proxy(bytes, size);
     ImageSpec config = read_config();
     ImageSpec spec;
     int rc;
