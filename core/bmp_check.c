@@ -85,8 +85,10 @@ int dr_bmp_check(const unsigned char *b, size_t n, bool whole, char *why, size_t
      * the bytes (files: it seeks and reads, and says where they end) */
     const int64_t rows = h < 0 ? -h : h, padded = ((w * bpp + 7) / 8 + 3) & ~(int64_t)3;
     if (whole && (offset < 14 + (dib == 12 ? 12u : 40u) || offset > n || rows > ((int64_t)n - offset) / padded)) {
-        snprintf(why, why_size, "BMP pixel data (from byte %u, %lld rows of %lld bytes) is not all inside its %zu bytes",
-                 (unsigned)offset, (long long)rows, (long long)padded, n);
+        snprintf(why, why_size,
+                 "BMP of %lldx%lld pixels whose pixel data (from byte %u, %lld rows of %lld bytes) is not all inside "
+                 "its %zu bytes",
+                 (long long)w, (long long)rows, (unsigned)offset, (long long)rows, (long long)padded, n);
         return -1;
     }
     if (bpp > 8 || palette == 0 || palette >= (1u << bpp))
