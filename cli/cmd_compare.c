@@ -126,7 +126,9 @@ void cmd_compare_usage(FILE *out)
             "      --set P=V[,V...]  use these values for parameter P instead of the file's\n"
             "      --estimators L  comma-separated estimators (default: every one)\n"
             "      --sampling L    comma-separated sampling modes (default: every one an\n"
-            "                      estimator supports; naming both lists asks for every pair)\n"
+            "                      estimator supports, but those that would run as detached\n"
+            "                      on these parameters; naming both lists asks for every\n"
+            "                      pair)\n"
             "%s"
             "      --spp L         samples per pixel of one estimate (default: 1,4,16,64)\n"
             "      --max-depth L   path segments (default: 8); errors are against a\n"
@@ -536,6 +538,36 @@ static int build_combos(const struct cmp_args *a, struct cmp_run *r)
         return DR_EXIT_USAGE;
     }
     return -1;
+}
+
+/* Without --sampling, the modes that would run as detached sampling on this
+ * problem (attached or mis with no parameter in a sampling map, derivative
+ * sampling with none it samples for: dr_est_sampling_run) are left out:
+ * they would give detached's numbers for their time. The report lists
+ * them; --sampling runs them anyway. */
+static void drop_detached_twins(const struct cmp_args *a, struct cmp_run *r, const struct dr_scene *scene)
+{
+    if (a->sampling_given)
+        return;
+    int n = 0;
+    for (int c = 0; c < r->n_combos; c++) {
+        const struct cmp_combo *cb = &r->combos[c];
+        const struct dr_grad_problem p = {.scene = scene, .params = r->ps, .sampling = cb->sampling};
+        if (cb->sampling == DR_SAMPLING_DETACHED || dr_est_sampling_run(&p) != DR_SAMPLING_DETACHED) {
+            r->combos[n++] = *cb;
+            continue;
+        }
+        const char *name = dr_sampling_name(cb->sampling);
+        const size_t k = strlen(name);
+        bool listed = false;   /* (once per mode, whatever the estimator, depth or spp) */
+        for (const char *at = r->as_detached; (at = strstr(at, name)) != NULL; at += k)
+            listed |= (at == r->as_detached || at[-1] == ',') && (at[k] == ',' || !at[k]);
+        if (!listed) {
+            size_t len = strlen(r->as_detached);
+            snprintf(r->as_detached + len, sizeof r->as_detached - len, "%s%s", len ? "," : "", name);
+        }
+    }
+    r->n_combos = n;
 }
 
 /* --primal cross runs what grad's cross primal runs (estimator.h, struct
@@ -1176,6 +1208,8 @@ static void print_summary(const struct cmp_run *r)
     const char *dir = r->a->out_dir;
     printf("%d runs of %d combinations; reference %s (relative standard error %.3g)\n",
            r->n_combos * r->a->repeat, r->n_combos, r->ref.kind, r->ref.rel_se);
+    if (r->as_detached[0])
+        printf("left out: %s (they would run as detached sampling on these parameters)\n", r->as_detached);
     int best = 0;
     for (int c = 1; c < r->n_combos; c++)
         if (cmp_efficiency(r, c) > cmp_efficiency(r, best))
@@ -1277,6 +1311,7 @@ int cmd_compare(int argc, char **argv)
         goto out;
     r.scene_path = scene_path;
     r.ps = ps;
+    drop_detached_twins(&a, &r, scene);
     auto_choice(&r, scene);
     r.reverse = a.target != NULL;
     x.scene = scene;

@@ -114,6 +114,8 @@ struct cmp_run {
     struct cmp_reference ref;
     struct cmp_fingerprint fp;
     char skipped[1024];           /* pairs left out because they do not apply */
+    char as_detached[128];        /* modes left out of the default list because they would run as
+                                     detached sampling here ("attached,mis"; drop_detached_twins) */
     char auto_sampling[32];       /* what grad and optimize's default, --sampling auto, would run here */
     char auto_why[DR_PARAM_NAME_MAX + 160];  /* ... and why (grad_auto_describe; "" without a small roughness) */
     double t_total;

@@ -287,6 +287,8 @@ void cmp_write_json(const struct cmp_run *r, FILE *f)
     }
     fputs("], \"skipped\": ", f);
     json_name_list(f, r->skipped);
+    fputs(", \"as_detached\": ", f);   /* (default modes left out: they would run detached) */
+    json_name_list(f, r->as_detached);
     fputs(", \"auto_sampling\": ", f);   /* (what grad's default would run) */
     json_string(f, r->auto_sampling);
     json_reference(f, r);
@@ -366,6 +368,16 @@ static void report_head(FILE *f, const struct cmp_run *r)
             else
                 fputc(*c, f);
         fprintf(f, ".\n\n");
+    }
+    if (r->as_detached[0]) {   /* "attached,mis" */
+        fprintf(f, "Left out of the default modes, as they would run as detached sampling on these parameters (no "
+                   "parameter enters a sampling map, or none is one derivative sampling samples for): ");
+        for (const char *c = r->as_detached; *c; c++)
+            if (*c == ',')
+                fputs(", ", f);
+            else
+                fputc(*c, f);
+        fprintf(f, ". `--sampling` runs them anyway.\n\n");
     }
 }
 

@@ -63,8 +63,22 @@ for f in error_vs_time.png memory_vs_depth.png efficiency.png; do
 done
 want='scene,mode,estimator,sampling,max_depth,spp,repeat,batches,seconds,rays,memory_bytes,record_bytes,invalid_samples,rel_error,rel_variance,efficiency,reference,reference_rel_se,sampler,medium_grad'
 [ "$(head -1 out1/results.csv)" = "$want" ] || fail "results.csv header: $(head -1 out1/results.csv)"
-# every pair the registry supports, at each spp; one CSV row per run
-py out1 "len(d['combinations']) == 2 * $n_pairs and len(rows) == 2 * $n_pairs"
+# every pair the registry supports, at each spp, but the modes that would
+# run as detached on a colour (left out, and said so); one CSV row per run
+twins="['attached', 'mis', 'derivative-roughness']"
+n_twins=$(python3 -c '
+import re, sys
+print(sum(m in ("attached", "mis", "derivative-roughness") for l in re.findall(r"\(([^)]*)\)", sys.argv[1]) for m in l.split(", ")))' "$avail")
+py out1 "d['as_detached'] == $twins"
+py out1 "len(d['combinations']) == 2 * ($n_pairs - $n_twins) and len(rows) == 2 * ($n_pairs - $n_twins)"
+expect_in out "left out: attached,mis,derivative-roughness (they would run as detached sampling" "compare (forward)"
+grep -q 'Left out of the default modes.*attached, mis, derivative-roughness' out1/report.md ||
+    fail "report.md: the modes left out as detached"
+# named, they run (as detached: the same random numbers, the same numbers)
+run compare $tiny --param "$red" --spp 1 --batches 2 --estimators prb --sampling detached,attached -o named
+expect_rc 0 "compare --sampling detached,attached (a colour)"
+py named "d['as_detached'] == [] and [c['sampling'] for c in d['combinations']] == ['detached', 'attached']"
+py named "d['combinations'][0]['parameters'][0]['value'] == d['combinations'][1]['parameters'][0]['value']"
 py out1 "all(k in d for k in ('command', 'scene', 'mode', 'reference', 'combinations', 'rows', 'best', 'skipped'))"
 py out1 "d['mode'] == 'forward' and d['reference']['kind'] == 'spp:256' and d['reference']['estimator']"
 # the reference's own error is reported, finite and smaller than any run's
@@ -99,7 +113,8 @@ run compare $tiny --param "$red" --param "$green" --spp 4,16 --sampler independe
 expect_rc 0 "compare --sampler independent,stratified,sobol"
 py smp "d['samplers'] == ['independent', 'stratified', 'sobol'] and d['sampler'] == 'independent'"
 # every sampling mode of prb x 3 samplers x 2 spp, in results.json and results.csv alike
-npb=$(python3 -c 'import re,sys; print(len(re.search(r"prb \(([^)]*)\)", sys.argv[1]).group(1).split(", ")))' "$avail")
+# (less attached, mis and derivative-roughness, which run as detached on colours)
+npb=$(python3 -c 'import re,sys; print(len(re.search(r"prb \(([^)]*)\)", sys.argv[1]).group(1).split(", ")) - 3)' "$avail")
 py smp "len(d['combinations']) == 6 * $npb and len(rows) == 6 * $npb"
 py smp "sorted(set(r['sampler'] for r in rows)) == ['independent', 'sobol', 'stratified']"
 py smp "[r['sampler'] for r in rows] == [c['sampler'] for c in d['combinations']] == [r['sampler'] for r in d['rows']]"
@@ -157,7 +172,7 @@ py mg_thick "(d['combinations'][1]['parameters'][0]['value'] == d['combinations'
 run compare $tiny --param "$red" --spp 1,16 --reference out1/reference.txt --repeat 2 --json -o out2
 expect_rc 0 "compare --repeat 2"
 python3 -c 'import json,sys; json.load(open(sys.argv[1]))' "$tmp/out" || fail "--json: stdout is not one JSON object"
-py out2 "len(rows) == 4 * $n_pairs and sorted(set(r['repeat'] for r in rows)) == ['0', '1']"
+py out2 "len(rows) == 4 * ($n_pairs - $n_twins) and sorted(set(r['repeat'] for r in rows)) == ['0', '1']"
 py out2 "all(c['seconds_min'] <= c['seconds_median'] <= c['seconds_max'] for c in d['combinations'])"
 python3 - out1/results.csv out2/results.csv <<'EOF' || fail "the same seed gave a different table (out1 vs out2)"
 import csv, sys
