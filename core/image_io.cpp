@@ -28,6 +28,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
+#include <climits>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -38,6 +39,7 @@
 #include <string>
 #include <vector>
 
+#include <dirent.h>
 #include <fcntl.h>
 #include <strings.h>
 #include <sys/stat.h>
@@ -375,6 +377,36 @@ std::string memory_name(const unsigned char *b, size_t n, const std::string &hin
 }
 
 // Fallback for readers without ioproxy support: a private temporary file.
+// OpenImageIO 2.4's ICO reader leaves its file open when open() fails (a
+// 2-byte .ico: one descriptor a read; make fuzz ran out of them after 230k
+// inputs). A temporary's name is ours alone, so a descriptor still open on
+// it once the reader is gone was left by the reader: it is closed here.
+void close_left_open(const char *path)
+{
+    char real[PATH_MAX];
+    DIR *d = realpath(path, real) ? opendir("/proc/self/fd") : nullptr;
+    if (!d)
+        return;
+    std::vector<int> left;
+    for (struct dirent *e; (e = readdir(d)) != nullptr;) {
+        char *end;
+        const long fd = std::strtol(e->d_name, &end, 10);
+        if (*end || end == e->d_name || fd == dirfd(d))
+            continue;
+        char link[64], target[PATH_MAX];
+        std::snprintf(link, sizeof link, "/proc/self/fd/%ld", fd);
+        const ssize_t n = readlink(link, target, sizeof target - 1);
+        if (n <= 0)
+            continue;
+        target[n] = '\0';
+        if (std::strcmp(target, real) == 0)
+            left.push_back((int)fd);
+    }
+    closedir(d);
+    for (int fd : left)
+        close(fd);
+}
+
 int read_memory_via_file(const void *bytes, size_t size, const std::string &ext,
                          const std::string &label, dr_image *img, bool eight_bit)
 {
@@ -410,6 +442,7 @@ int read_memory_via_file(const void *bytes, size_t size, const std::string &ext,
     }
     close(fd);
     int rc = read_file(name.data(), label, img, eight_bit);
+    close_left_open(name.data());
     unlink(name.data());
     if (rc == DR_ERR_IO)   // the temporary exists: the content is at fault
         rc = DR_ERR_FORMAT;

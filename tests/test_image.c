@@ -852,6 +852,34 @@ static void test_bmp_guard(void)
         dr_image_release(&img);
 }
 
+/* Open descriptors of this process (its /proc/self/fd entries). */
+static int open_descriptors(void)
+{
+    DIR *d = opendir("/proc/self/fd");
+    int n = 0;
+    for (struct dirent *e; d && (e = readdir(d)) != NULL;)
+        n += e->d_name[0] != '.';
+    if (d)
+        closedir(d);
+    return n;
+}
+
+/* An image the reader takes from a temporary file (ICO: no in-memory
+ * reading in OpenImageIO 2.4), whose reader fails and leaves the file open:
+ * every read must give its descriptor back (make fuzz ran out of them). */
+static void test_no_descriptor_left(void)
+{
+    const unsigned char two[] = {'B', '&'};
+    const int before = open_descriptors();
+    for (int i = 0; i < 8; i++) {
+        struct dr_image img;
+        int rc = dr_image_read_memory(two, sizeof two, "x.ico", &img);
+        CHECK(rc == DR_ERR_FORMAT, "2-byte ico: rc %d", rc);
+    }
+    CHECK(before > 0 && open_descriptors() == before, "2-byte ico: %d descriptors open before 8 reads, %d after",
+          before, open_descriptors());
+}
+
 static void test_errors(void)
 {
     char path[512], other[512];
@@ -1078,6 +1106,7 @@ int main(void)
     test_read_eight_bit();
     test_errors();
     test_bmp_guard();
+    test_no_descriptor_left();
 
     nftw(tmpdir, rm_entry, 16, FTW_DEPTH | FTW_PHYS);
     return TEST_END();
