@@ -311,6 +311,19 @@ void cmp_write_json(const struct cmp_run *r, FILE *f)
     fputs("}\n", f);
 }
 
+/* A paragraph: lead, the comma-separated list csv with ", " between its
+ * items, then tail. */
+static void report_list(FILE *f, const char *lead, const char *csv, const char *tail)
+{
+    fputs(lead, f);
+    for (const char *c = csv; *c; c++)
+        if (*c == ',')
+            fputs(", ", f);
+        else
+            fputc(*c, f);
+    fprintf(f, "%s\n\n", tail);
+}
+
 /* ---- report.md ---- */
 
 static bool series_start(const struct cmp_run *r, int c);
@@ -360,25 +373,13 @@ static void report_head(FILE *f, const struct cmp_run *r)
                "**%.3g**: errors near it are not resolved.\n\n",
             ref->batches, ref->spp, r->fp.max_depth, ref->seconds, ref->file[0] ? ", read from " : "", ref->file,
             ref->rel_se);
-    if (r->skipped[0]) {   /* "prb attached,tape attached" */
-        fprintf(f, "Left out (the estimator does not support the sampling mode): ");
-        for (const char *c = r->skipped; *c; c++)
-            if (*c == ',')
-                fputs(", ", f);
-            else
-                fputc(*c, f);
-        fprintf(f, ".\n\n");
-    }
-    if (r->as_detached[0]) {   /* "attached,mis" */
-        fprintf(f, "Left out of the default modes, as they would run as detached sampling on these parameters (no "
-                   "parameter enters a sampling map, or none is one derivative sampling samples for): ");
-        for (const char *c = r->as_detached; *c; c++)
-            if (*c == ',')
-                fputs(", ", f);
-            else
-                fputc(*c, f);
-        fprintf(f, ". `--sampling` runs them anyway.\n\n");
-    }
+    if (r->skipped[0])   /* "prb attached,tape attached" */
+        report_list(f, "Left out (the estimator does not support the sampling mode): ", r->skipped, ".");
+    if (r->as_detached[0])   /* "attached,mis" */
+        report_list(f,
+                    "Left out of the default modes, as they would run as detached sampling on these parameters (no "
+                    "parameter enters a sampling map, or none is one derivative sampling samples for): ",
+                    r->as_detached, ". `--sampling` runs them anyway.");
 }
 
 /* Where DRT took each differentiated medium's scattering gain (the first
