@@ -928,10 +928,12 @@ static int prb_run(struct dr_est_base *b)
         if (!(j->radius > 0.0) || !isfinite(j->radius))
             j->radius = 1.0;
     }
-    /* derivative sampling that runs detached (no parameter it samples for)
-     * walks one path at a time: test_estimators' wave_against_one_path
-     * holds the wavefront to that walk this way */
-    const bool detached = run == DR_SAMPLING_DETACHED && !dr_sampling_is_derivative(b->p->sampling);
+    /* --sampling derivative that runs detached (no BSDF parameter) walks one
+     * path at a time: test_estimators' wave_against_one_path holds the
+     * wavefront to that walk this way (derivative-roughness without a
+     * roughness takes the wavefront, as detached does: 0.081 s against
+     * 0.068 s on the one-path walk, bench part i) */
+    const bool detached = run == DR_SAMPLING_DETACHED && b->p->sampling != DR_SAMPLING_DERIVATIVE;
     j->wave = detached && !(b->popts.stages & DR_STAGE_MEDIA);
     j->media_arrays = detached && dr_wave_soa_media_walks_apply(b->p->scene, &b->popts);
     j->outside_media = b->popts;

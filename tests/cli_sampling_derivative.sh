@@ -102,9 +102,14 @@ run grad --target t.exr --param "$rough" --param "$red" --estimator tape --sampl
 expect_rc 0 "grad --estimator tape --sampling derivative-roughness"
 same_as both-dr.json 0 1e-9
 same_as both-dr.json 1 1e-9
-# no roughness requested: nothing to sample for, runs (and reports) detached
+# no roughness requested: nothing to sample for, runs (and reports) detached,
+# on detached's walk: its numbers to the last digit
+run grad --target t.exr --param "$red" --param "$metal" --sampling detached --batches 2 $fast --json
+cp "$tmp/out" cm-det.json
 run grad --target t.exr --param "$red" --param "$metal" --sampling derivative-roughness --batches 2 $fast --json
 json_check "$tmp/out" 'd["sampling"] == "derivative-roughness" and d["sampling_effective"] == "detached"'
+same_as cm-det.json 0 0
+same_as cm-det.json 1 0
 run fdcheck --param "$rough" --param "$metal" --set "$rough=0.5" --sampling derivative-roughness --res 12x12 --spp 8 \
     --batches 4 --threads 2 --json
 expect_rc 0 "fdcheck --sampling derivative-roughness"
