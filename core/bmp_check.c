@@ -53,11 +53,15 @@ int dr_bmp_check(const unsigned char *b, size_t n, bool whole, char *why, size_t
     const uint32_t dib = u32(b + 14), offset = u32(b + 10);
     int64_t w, h;
     uint32_t bpp, compression = 0, palette = 0;
-    if (dib == 12 && n >= 26) {   /* OS/2 1.x: 16-bit sizes, no compression, a full table */
+    if ((dib == 12 && n < 26) || (dib >= 40 && n < 54)) {
+        snprintf(why, why_size, "truncated BMP header (%zu bytes, %u of them the bitmap header's)", n, (unsigned)dib);
+        return -1;
+    }
+    if (dib == 12) {   /* OS/2 1.x: 16-bit sizes, no compression, a full table */
         w = (int16_t)u16(b + 18);
         h = (int16_t)u16(b + 20);
         bpp = u16(b + 24);
-    } else if (dib >= 40 && n >= 54) {
+    } else if (dib >= 40) {
         w = (int32_t)u32(b + 18);
         h = (int32_t)u32(b + 22);
         bpp = u16(b + 28);
@@ -81,8 +85,9 @@ int dr_bmp_check(const unsigned char *b, size_t n, bool whole, char *why, size_t
     }
     if (w <= 0 || h == 0)
         return 0;   /* (a size the reader refuses itself) */
-    /* from memory the reader's seeks are not checked: every row must lie in
-     * the bytes (files: it seeks and reads, and says where they end) */
+    /* the reader seeks to the data offset unchecked, which from memory reads
+     * outside the buffer: every row must lie in the bytes (checked wherever
+     * they are all at hand, a file's too) */
     const int64_t rows = h < 0 ? -h : h, padded = ((w * bpp + 7) / 8 + 3) & ~(int64_t)3;
     if (whole && (offset < 14 + (dib == 12 ? 12u : 40u) || offset > n || rows > ((int64_t)n - offset) / padded)) {
         snprintf(why, why_size,
