@@ -73,26 +73,28 @@ static void available_pairs_help(char *buf, size_t size)
     size_t len = 0;
     buf[0] = '\0';
     for (int i = 0; dr_estimators[i]; i++) {
-        const char *name = dr_estimators[i]->name;
-        char modes[256];
-        sampling_list(dr_estimators[i], modes, sizeof modes);
-        const int start = INDENT + (i == 0 ? (int)strlen(lead) : 0);
-        const int hang = start + (int)strlen(name) + 2;   /* under the first mode */
-        append(buf, size, &len, "%*s%s%s (", INDENT, "", i == 0 ? lead : "", name);
-        int col = hang;
-        /* the modes word by word ("detached," ...), the last closing the list */
-        for (char *w = strtok(modes, " "); w; w = strtok(NULL, " ")) {
-            const bool last_word = !strchr(w, ',');
-            const int need = (int)strlen(w) + (last_word ? 1 + (dr_estimators[i + 1] ? 1 : 0) : 0);
-            if (col > hang && col + 1 + need > WIDTH) {
+        const struct dr_estimator_ops *e = dr_estimators[i];
+        const int hang = INDENT + (i == 0 ? (int)strlen(lead) : 0) + (int)strlen(e->name) + 2;   /* under the modes */
+        append(buf, size, &len, "%*s%s%s (", INDENT, "", i == 0 ? lead : "", e->name);
+        int col = hang, last = -1;
+        for (int s = 0; s < DR_SAMPLING_COUNT; s++)
+            if (dr_estimator_supports(e, (enum dr_sampling)s))
+                last = s;
+        for (int s = 0; s <= last; s++) {
+            if (!dr_estimator_supports(e, (enum dr_sampling)s))
+                continue;
+            const char *mode = dr_sampling_name((enum dr_sampling)s);
+            /* "mode," or, last, "mode)" and the comma before the next estimator */
+            const int w = (int)strlen(mode) + 1 + (s == last && dr_estimators[i + 1]);
+            if (col > hang && col + 1 + w > WIDTH) {
                 append(buf, size, &len, "\n%*s", hang, "");
                 col = hang;
             } else if (col > hang) {
                 append(buf, size, &len, " ");
                 col++;
             }
-            append(buf, size, &len, "%s", w);
-            col += (int)strlen(w);
+            append(buf, size, &len, "%s%s", mode, s == last ? "" : ",");
+            col += w;
         }
         append(buf, size, &len, ")%s\n", dr_estimators[i + 1] ? "," : "");
     }
@@ -549,25 +551,22 @@ static void drop_detached_twins(const struct cmp_args *a, struct cmp_run *r, con
 {
     if (a->sampling_given)
         return;
+    bool left_out[DR_SAMPLING_COUNT] = {false};
     int n = 0;
     for (int c = 0; c < r->n_combos; c++) {
-        const struct cmp_combo *cb = &r->combos[c];
-        const struct dr_grad_problem p = {.scene = scene, .params = r->ps, .sampling = cb->sampling};
-        if (cb->sampling == DR_SAMPLING_DETACHED || dr_est_sampling_run(&p) != DR_SAMPLING_DETACHED) {
-            r->combos[n++] = *cb;
-            continue;
-        }
-        const char *name = dr_sampling_name(cb->sampling);
-        const size_t k = strlen(name);
-        bool listed = false;   /* (once per mode, whatever the estimator, depth or spp) */
-        for (const char *at = r->as_detached; (at = strstr(at, name)) != NULL; at += k)
-            listed |= (at == r->as_detached || at[-1] == ',') && (at[k] == ',' || !at[k]);
-        if (!listed) {
-            size_t len = strlen(r->as_detached);
-            snprintf(r->as_detached + len, sizeof r->as_detached - len, "%s%s", len ? "," : "", name);
-        }
+        const struct dr_grad_problem p = {.scene = scene, .params = r->ps, .sampling = r->combos[c].sampling};
+        if (p.sampling != DR_SAMPLING_DETACHED && dr_est_sampling_run(&p) == DR_SAMPLING_DETACHED)
+            left_out[p.sampling] = true;
+        else
+            r->combos[n++] = r->combos[c];
     }
     r->n_combos = n;
+    for (int s = 0; s < DR_SAMPLING_COUNT; s++)
+        if (left_out[s]) {
+            size_t len = strlen(r->as_detached);
+            snprintf(r->as_detached + len, sizeof r->as_detached - len, "%s%s", len ? "," : "",
+                     dr_sampling_name((enum dr_sampling)s));
+        }
 }
 
 /* --primal cross runs what grad's cross primal runs (estimator.h, struct

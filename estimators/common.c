@@ -534,13 +534,12 @@ enum dr_sampling dr_est_sampling_run(const struct dr_grad_problem *p)
         !dr_path_params_enter_sampling(p->scene, p->params))
         return DR_SAMPLING_DETACHED;
     /* derivative sampling adds work only at vertices with a BSDF parameter
-     * (derivative-roughness: with a roughness parameter) */
+     * it samples for (derivative-roughness: a roughness) */
     if (dr_sampling_is_derivative(p->sampling)) {
-        const bool roughness_only = p->sampling == DR_SAMPLING_DERIVATIVE_ROUGHNESS;
+        const unsigned want = dr_sampling_deriv_params(p->sampling);
         bool any = false;
         for (int m = 0; p->params && m < p->params->n_materials; m++)
-            any |= roughness_only ? (dr_path_material_dparams(p->scene, p->params, m) & DR_BSDF_D_ROUGHNESS) != 0
-                                  : p->params->mat_bsdf_active[m];
+            any |= (dr_path_material_dparams(p->scene, p->params, m) & want) != 0;
         if (!any)
             return DR_SAMPLING_DETACHED;
     }
