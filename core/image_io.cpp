@@ -270,12 +270,27 @@ int refuse_huge_gif_file(const char *path, const std::string &label)
     return refuse_huge_gif(head, n, label);
 }
 
+// Maya IFF ("FOR4" or "FOR8" first): OpenImageIO 2.4's IFF reader
+// corrupts the heap on malformed RLE tiles (make fuzz: a 160-byte file
+// with one byte of its RLE data changed freed a block it did not own,
+// found at exit; IffInput::readimg). No glTF asset uses the format, so it
+// is refused whole, from the first bytes, before any reader sees it.
+bool maya_iff(const unsigned char *b, size_t n)
+{
+    return n >= 4 && b[0] == 'F' && b[1] == 'O' && b[2] == 'R' && (b[3] == '4' || b[3] == '8');
+}
+
 // A BMP that OpenImageIO 2.4's reader must not see (bmp_check.h): the
 // bytes (the whole file: its pixels are checked against a short colour
-// table) give the reason. DR_OK for anything else.
+// table) give the reason; and a Maya IFF. DR_OK for anything else.
 int refuse_unsafe_bmp(const unsigned char *b, size_t n, bool whole, const std::string &label)
 {
     char why[256];
+    if (maya_iff(b, n)) {
+        dr_set_error("%s: cannot read image: Maya IFF (OpenImageIO 2.4's IFF reader writes out of bounds on "
+                     "malformed files, so drender reads none); convert it to PNG or EXR", label.c_str());
+        return DR_ERR_FORMAT;
+    }
     if (dr_bmp_check(b, n, whole, why, sizeof why) == 0)
         return DR_OK;
     dr_set_error("%s: cannot read image: %s", label.c_str(), why);
@@ -294,7 +309,7 @@ int refuse_unsafe_bmp_file(const char *path, const std::string &label)
     int rc = DR_OK;
     struct stat st;
     if (!dr_bmp_magic(head, n)) {
-        // not a BMP
+        rc = refuse_unsafe_bmp(head, n, false, label);   // (not a BMP: a Maya IFF is still refused)
     } else if (fstat(fileno(f), &st) == 0 && st.st_size > (off_t)sizeof head && st.st_size <= ((off_t)256 << 20)) {
         std::vector<unsigned char> all((size_t)st.st_size);
         std::rewind(f);

@@ -852,6 +852,40 @@ static void test_bmp_guard(void)
         dr_image_release(&img);
 }
 
+/* Maya IFF: OpenImageIO 2.4's IFF reader corrupted the heap on a fuzzed
+ * file (fuzz/corpus/image/regress-iff-rle-heap): every IFF is refused, from
+ * memory and from a file named otherwise, before the reader sees it. */
+static void test_iff_refused(void)
+{
+    const char *seed = "fuzz/corpus/image/regress-iff-rle-heap";
+    char src[600];
+    snprintf(src, sizeof src, "%s/../%s", getenv("DR_TESTDIR") ? getenv("DR_TESTDIR") : "tests", seed);
+    FILE *f = fopen(src, "rb");
+    CHECK(f != NULL, "open %s", src);
+    if (!f)
+        return;
+    unsigned char buf[4096];
+    const size_t n = fread(buf, 1, sizeof buf, f);
+    fclose(f);
+    struct dr_image img;
+    /* (the corpus input's first byte is fuzz_image's name selector) */
+    int rc = dr_image_read_memory(buf + 1, n - 1, "x.iff", &img);
+    CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), "Maya IFF"), "IFF from memory: rc %d: %s", rc,
+          dr_last_error());
+    rc = dr_image_read_memory(buf + 1, n - 1, "x.png", &img);
+    CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), "Maya IFF"), "IFF named .png: rc %d: %s", rc,
+          dr_last_error());
+    char path[512];
+    path_in_tmp(path, sizeof path, "iff.png");
+    f = fopen(path, "wb");
+    CHECK(f && fwrite(buf + 1, 1, n - 1, f) == n - 1, "write %s", path);
+    if (f)
+        fclose(f);
+    rc = dr_image_read(path, &img);
+    CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), path) && strstr(dr_last_error(), "Maya IFF"),
+          "IFF file: rc %d: %s", rc, dr_last_error());
+}
+
 /* Open descriptors of this process (its /proc/self/fd entries). */
 static int open_descriptors(void)
 {
@@ -1106,6 +1140,7 @@ int main(void)
     test_read_eight_bit();
     test_errors();
     test_bmp_guard();
+    test_iff_refused();
     test_no_descriptor_left();
 
     nftw(tmpdir, rm_entry, 16, FTW_DEPTH | FTW_PHYS);
