@@ -35,7 +35,7 @@ CXXFLAGS += -std=c++17 $(OPT) $(WARN) -pthread $(shell pkg-config --cflags $(PKG
 # (core/image_plugin.h says why). Tests, bench and fuzz programs link the
 # image objects directly.
 # -ldraco: KHR_draco_mesh_compression (core/draco_decode.cpp), in every link of core/
-HOST_LIBS := -ltinygltf -ldraco -lembree3 -lstdc++ -lm -pthread -ldl
+HOST_LIBS := -ltinygltf -ldraco -lembree3 -lzstd -lz -lstdc++ -lm -pthread -ldl
 # Deferred (=, not :=): on a fresh machine the packages are installed by the
 # `deps` step, after make has read this file, so pkg-config must be asked when a
 # link runs, not when the Makefile is parsed.
@@ -152,7 +152,7 @@ sanitize:
 # stay the uninstrumented system libraries. `make fuzz` runs each target for
 # FUZZ_SECONDS from fuzz/corpus/TARGET (new inputs go to build-fuzz/corpus/).
 FUZZ_SECONDS ?= 60
-FUZZ_TARGETS ?= gltf checkpoint cli image
+FUZZ_TARGETS ?= gltf checkpoint cli image ktx2
 FUZZ_BUILD   := build-fuzz
 FUZZ_CC      ?= clang
 FUZZ_CXX     ?= clang++

@@ -241,7 +241,7 @@ static void component_infos(const struct dr_backface *b, const struct dr_mesh *m
         dr_vec3 p0 = dr_mesh_vertex(m, idx[0]), p1 = dr_mesh_vertex(m, idx[1]), p2 = dr_mesh_vertex(m, idx[2]);
         c->volume += dr_dot(p0, dr_cross(p1, p2));
         c->n++;
-        c->open |= open[t] | ((tri_bits[t] & (DR_COVER_MASK | DR_COVER_BLEND)) != 0);
+        c->open |= open[t] | ((tri_bits[t] & (DR_COVER_MASK | DR_COVER_BLEND | DR_COVER_THIN)) != 0);
         c->wants |= (tri_bits[t] & DR_COVER_CULL) && !b->marks[t];
     }
 }

@@ -2,6 +2,18 @@
 #include "coverage.h"
 
 #include "image.h"
+#include "medium.h"   /* dr_fresnel_dielectric */
+
+/* Salt of the thin-glass decision's uniform: apart from a BLEND decision on
+ * the same triangle in the same query. */
+#define THIN_SALT 0x7468696e676c6173ULL   /* "thinglas" */
+
+double dr_thin_reflectance(double cos_i, double ior)
+{
+    double cos_t;
+    const double F = dr_fresnel_dielectric(cos_i, ior, &cos_t);
+    return 2.0 * F / (1.0 + F);
+}
 
 unsigned dr_material_coverage(const struct dr_scene *s, int m)
 {
@@ -17,6 +29,8 @@ unsigned dr_material_coverage(const struct dr_scene *s, int m)
         bits |= DR_COVER_MASK;
     else if (mat->alpha_mode == DR_ALPHA_BLEND)
         bits |= DR_COVER_BLEND;
+    if (mat->thin_ior > 0.0)
+        bits |= DR_COVER_THIN;
     return bits;
 }
 
@@ -67,7 +81,14 @@ bool dr_coverage_blocks(const struct dr_scene *s, unsigned bits, int64_t tri, do
         if (d.x * ng[0] + d.y * ng[1] + d.z * ng[2] >= 0.0)
             return false;
     }
-    if (bits & (DR_COVER_MASK | DR_COVER_BLEND))
-        return dr_coverage_point_present(s, tri, b1, b2, key);
+    if ((bits & (DR_COVER_MASK | DR_COVER_BLEND)) && !dr_coverage_point_present(s, tri, b1, b2, key))
+        return false;
+    if (bits & DR_COVER_THIN) {
+        const double *ng = s->mesh.tri_normal_eps + 4 * (size_t)tri;
+        const double dn = d.x * ng[0] + d.y * ng[1] + d.z * ng[2], len = sqrt(dr_dot(d, d));
+        const double R = dr_thin_reflectance(len > 0.0 ? fmin(fabs(dn) / len, 1.0) : 1.0,
+                                             s->materials[s->mesh.material[tri]].thin_ior);
+        return dr_blend_uniform(key ^ THIN_SALT, tri) < R;
+    }
     return true;
 }

@@ -4,6 +4,12 @@
  *  - alphaMode BLEND: stochastic transparency: a ray stops at the surface with
  *    probability alpha and passes otherwise (an unbiased estimate of
  *    alpha x surface + (1 - alpha) x what lies behind);
+ *  - thin-walled glass (dr_material.thin_ior): a ray stops at the sheet with
+ *    probability R, the sheet's reflectance for the ray's angle
+ *    (dr_thin_reflectance), and passes straight through otherwise: an
+ *    unbiased estimate of R x reflection + (1 - R) x what lies behind, for
+ *    shadow rays too, so next-event estimation sees lights through glass.
+ *    What stops is shaded by the material as a white metal (scene.h);
  *  - doubleSided false: back faces are culled, a ray arriving at the back of
  *    the triangle passes. Media boundaries (a material bounding a medium,
  *    medium_scene.h) are never culled: closed meshes crossed from both sides.
@@ -32,8 +38,21 @@
 enum dr_cover_bits {
     DR_COVER_CULL = 1,    /* single-sided: the back passes */
     DR_COVER_MASK = 2,
-    DR_COVER_BLEND = 4
+    DR_COVER_BLEND = 4,
+    DR_COVER_THIN = 8
 };
+
+/* Reflectance of a thin non-absorbing sheet of index ior for a ray at
+ * |cos| = cos_i to its normal: both faces' Fresnel reflections summed over
+ * the bounces between them, R = 2F / (1 + F) (F the single interface's
+ * unpolarised Fresnel reflectance; no interference). */
+double dr_thin_reflectance(double cos_i, double ior);
+
+/* Effects whose surfaces a ray passes by a draw keyed on the query (BLEND,
+ * thin glass): traces need their keys then; shadow rays also where a light
+ * point may lie in a MASK hole (dr_coverage_point_present). */
+#define DR_FX_KEYED_TRACES (DR_FX_ALPHA_BLEND | DR_FX_THIN_TRANSMISSION)
+#define DR_FX_KEYED_SHADOWS (DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND | DR_FX_THIN_TRANSMISSION)
 
 /* The enum dr_cover_bits of material m (0: an ordinary opaque surface). */
 unsigned dr_material_coverage(const struct dr_scene *scene, int m);

@@ -31,6 +31,7 @@
 #include "draco_decode.h"
 #include "error.h"
 #include "image_io.h"
+#include "ktx2.h"
 #include "medium.h"
 extern "C" {
 #include "parallel.h"   /* dr_parallel_for, dr_default_threads */
@@ -235,7 +236,8 @@ struct AccessorView {
 const char *const kSupportedExtensions[] = {
     "KHR_materials_emissive_strength", "KHR_materials_specular", "KHR_lights_punctual",
     "DR_environment", "DR_units", "KHR_texture_transform", "KHR_draco_mesh_compression",
-    /* KTX2 images are refused, or skipped under --ignore-unsupported (check_ktx2): handled, not ignored */
+    /* KTX2 images: read when they hold 8-bit texels (core/ktx2.h); the others are refused, or skipped
+     * under --ignore-unsupported (check_ktx2): handled, not ignored */
     "KHR_texture_basisu",
     /* participating media (load_material_medium) */
     "KHR_materials_volume", "KHR_materials_transmission", "KHR_materials_ior", "KHR_materials_volume_scatter",
@@ -307,7 +309,8 @@ private:
     void load_light_units();
     void finish();
     /* participating media (the "media" section at the end of this file) */
-    void load_material_medium(const tinygltf::Material &g, const std::string &mp, size_t index);
+    void load_material_medium(const tinygltf::Material &g, const std::string &mp, size_t index, dr_material &m);
+    void load_thin_glass(const tinygltf::Material &g, const std::string &mp, dr_material &m);
     void read_medium_ext(const tinygltf::Value &v, const std::string &ep, dr_medium &med);
     void read_medium_grid(const tinygltf::Value &v, const std::string &ep, dr_medium &med);
     double boundary_ior(const tinygltf::Material &g, const std::string &mp, bool has_dr);
@@ -341,7 +344,8 @@ private:
         std::vector<unsigned char> bytes;
     };
     std::vector<EncodedImage> encoded_images_;
-    std::vector<char> ktx2_images_;         /* by image index: a KTX2 image, left undecoded */
+    std::vector<std::string> ktx2_images_;  /* by image index: why a KTX2 image is left undecoded ("": it is
+                                               not one, or drender decodes it) */
     std::vector<int> texture_ktx2_;         /* by texture: its KTX2 image, -1 */
     std::vector<char> linear_images_;       /* used as colour: needs sRGB decode */
     std::vector<char> data_images_;         /* used as data (metallic-roughness, normals): keeps its values */
@@ -507,11 +511,13 @@ bool Loader::image_cb(tinygltf::Image *image, const int image_idx, std::string *
                 return false;
             }
         }
-        if (is_ktx2(*image, bytes, size)) {
-            /* OpenImageIO cannot decode KTX2 (Basis Universal): kept undecoded;
-             * check_ktx2 decides whether the scene can do without it */
-            if (L->ktx2_images_.size() <= size_t(image_idx)) L->ktx2_images_.resize(size_t(image_idx) + 1, 0);
-            L->ktx2_images_[size_t(image_idx)] = 1;
+        char why[320];
+        if (is_ktx2(*image, bytes, size) && dr_ktx2_probe(bytes, size_t(size), why, sizeof why) != 0) {
+            /* a KTX2 drender cannot decode (Basis Universal, block formats;
+             * core/ktx2.h): kept undecoded, with the reason; check_ktx2
+             * decides whether the scene can do without it */
+            if (L->ktx2_images_.size() <= size_t(image_idx)) L->ktx2_images_.resize(size_t(image_idx) + 1);
+            L->ktx2_images_[size_t(image_idx)] = why;
             image->image.clear();
             return true;
         }
@@ -552,7 +558,12 @@ void Loader::decode_images()
     ThreadMessages why(n);
     parallel_each(n, [&](size_t k) {
         const EncodedImage &e = encoded_images_[k];
-        if ((rc[k] = dr_image_read_memory8(e.bytes.data(), e.bytes.size(), e.hint.c_str(), &out[k])) != 0)
+        /* KTX2 (plain 8-bit texels) is drender's own reader: no image library */
+        if (dr_ktx2_is(e.bytes.data(), e.bytes.size()))
+            rc[k] = dr_ktx2_read8(e.bytes.data(), e.bytes.size(), e.hint.c_str(), &out[k]);
+        else
+            rc[k] = dr_image_read_memory8(e.bytes.data(), e.bytes.size(), e.hint.c_str(), &out[k]);
+        if (rc[k] != 0)
             why.keep(k);
     });
     size_t failed = n;
@@ -699,9 +710,9 @@ void Loader::take_images()
 {
     size_t n = model_.images.size();
     images_.resize(std::max(images_.size(), n), dr_image{});
-    ktx2_images_.resize(n, 0);
+    ktx2_images_.resize(n);
     for (size_t i = 0; i < n; i++)
-        if (!dr_image_has_pixels(&images_[i]) && !ktx2_images_[i]) {
+        if (!dr_image_has_pixels(&images_[i]) && ktx2_images_[i].empty()) {
             const tinygltf::Image &im = model_.images[i];
             if (!im.uri.empty())
                 fail(DR_ERR_IO, "/images/%zu/uri: cannot read '%s'", i, im.uri.c_str());
@@ -731,7 +742,7 @@ void Loader::load_textures()
         auto bu = t.extensions.find("KHR_texture_basisu");
         if (bu != t.extensions.end()) {
             /* A "source" beside the extension is the fallback for viewers that
-             * cannot decode KTX2, such as drender: used when present. */
+             * cannot decode Basis Universal: used when present. */
             std::string ep = strf("/textures/%zu/extensions/KHR_texture_basisu/source", i);
             if (!bu->second.IsObject() || !bu->second.Get("source").IsInt())
                 fail(DR_ERR_FORMAT, "%s: expected an image index", ep.c_str());
@@ -744,7 +755,7 @@ void Loader::load_textures()
             fail(DR_ERR_FORMAT, "/textures/%zu: texture has no source image", i);
         if (size_t(source) >= model_.images.size())
             fail(DR_ERR_FORMAT, "%s: image %d does not exist", sp.c_str(), source);
-        texture_ktx2_.push_back(ktx2_images_[size_t(source)] ? source : -1);
+        texture_ktx2_.push_back(!ktx2_images_[size_t(source)].empty() ? source : -1);
         tex.image = source;
         tex.wrap_s = tex.wrap_t = DR_WRAP_REPEAT;
         if (t.sampler >= 0) {
@@ -834,10 +845,10 @@ dr_texref Loader::texref(const tinygltf::TextureInfo &ti, const std::string &pat
     }
     int k = texture_ktx2_[size_t(ti.index)];
     if (k >= 0)
-        fail(DR_ERR_FORMAT, "%s/index: texture %d uses the KTX2 image /images/%d ('%s'): KTX2 / "
-             "KHR_texture_basisu images cannot be decoded by drender, and this one changes the rendered image, "
-             "so --ignore-unsupported does not skip it (convert it to PNG or JPEG)", path.c_str(), ti.index, k,
-             model_.images[size_t(k)].uri.c_str());
+        fail(DR_ERR_FORMAT, "%s/index: texture %d uses the KTX2 image /images/%d ('%s'), which drender cannot "
+             "decode: %s. It changes the rendered image, so --ignore-unsupported does not skip it (convert it to "
+             "PNG or JPEG, or to KTX2 with uncompressed 8-bit texels)", path.c_str(),
+             ti.index, k, model_.images[size_t(k)].uri.c_str(), ktx2_images_[size_t(k)].c_str());
     want_uv1_ |= r.texcoord == 1;
     r.texture = ti.index;
     return r;
@@ -848,15 +859,18 @@ dr_texref Loader::texref(const tinygltf::TextureInfo &ti, const std::string &pat
  * --ignore-unsupported, then skipped with one warning. */
 void Loader::check_ktx2()
 {
-    std::string list;
+    std::string list, first_why;
     for (size_t i = 0; i < ktx2_images_.size(); i++)
-        if (ktx2_images_[i]) list += (list.empty() ? "" : ", ") + strf("/images/%zu", i);
+        if (!ktx2_images_[i].empty()) {
+            list += (list.empty() ? "" : ", ") + strf("/images/%zu", i);
+            if (first_why.empty()) first_why = ktx2_images_[i];
+        }
     if (list.empty()) return;
     if (!opts_.ignore_unsupported)
-        fail(DR_ERR_FORMAT, "%s: KTX2 / KHR_texture_basisu images cannot be decoded by drender; they are used only "
-             "as normal or occlusion maps (or not at all): --ignore-unsupported skips them (a normal map is then "
-             "left out: the interpolated normals shade)", list.c_str());
-    warn_once("ktx2", "%s: KTX2 / KHR_texture_basisu images skipped (--ignore-unsupported): used only as normal "
+        fail(DR_ERR_FORMAT, "%s: KTX2 images drender cannot decode (the first: %s); they are used only as normal or "
+             "occlusion maps (or not at all): --ignore-unsupported skips them (a normal map is then left out: the "
+             "interpolated normals shade)", list.c_str(), first_why.c_str());
+    warn_once("ktx2", "%s: KTX2 images drender cannot decode skipped (--ignore-unsupported): used only as normal "
               "or occlusion maps (or not at all); their materials shade without the normal map", list.c_str());
 }
 
@@ -955,7 +969,7 @@ void Loader::load_materials()
                     warn_once(std::string("spec:") + key, "%s/%s: specular textures are not supported; ignored",
                               ep.c_str(), key);
         }
-        load_material_medium(g, mp, i);
+        load_material_medium(g, mp, i, m);
         for (const auto &kv : g.extensions)
             if (!is_supported_extension(kv.first))
                 warn_once("ext:" + kv.first, "%s/extensions/%s: extension is not supported; ignored",
@@ -1770,21 +1784,60 @@ double Loader::boundary_ior(const tinygltf::Material &g, const std::string &mp, 
          "index-matched, otherwise a smooth dielectric), or describe the medium with DR_medium", mp.c_str());
 }
 
-void Loader::load_material_medium(const tinygltf::Material &g, const std::string &mp, size_t index)
+/* KHR_materials_transmission without a volume: thin-walled glass
+ * (dr_material.thin_ior) where transmissionFactor is 1; a partial one is
+ * rendered opaque, as before, with a warning. */
+void Loader::load_thin_glass(const tinygltf::Material &g, const std::string &mp, dr_material &m)
+{
+    auto tr = g.extensions.find("KHR_materials_transmission");
+    const std::string ep = mp + "/extensions/KHR_materials_transmission";
+    if (!tr->second.IsObject()) fail(DR_ERR_FORMAT, "%s: expected an object", ep.c_str());
+    const double factor = ext_number(tr->second, "transmissionFactor", 0.0, ep);
+    if (factor != 1.0) {
+        if (factor != 0.0)
+            warn_once("transmission", "%s/transmissionFactor: partial transmission (%g) is not supported; rendered "
+                      "opaque (1 renders thin-walled glass)", ep.c_str(), factor);
+        return;
+    }
+    if (tr->second.Has("transmissionTexture"))
+        warn_once("transmissionTexture", "%s/transmissionTexture: not supported; ignored (transmissionFactor 1 "
+                  "everywhere)", ep.c_str());
+    double ior = 1.5;
+    auto io = g.extensions.find("KHR_materials_ior");
+    if (io != g.extensions.end() && io->second.Has("ior")) {
+        const tinygltf::Value &x = io->second.Get("ior");
+        ior = x.IsNumber() ? x.GetNumberAsDouble() : -1.0;
+        if (!(ior >= 1.0 && ior <= 10.0))
+            fail(DR_ERR_FORMAT, "%s/extensions/KHR_materials_ior/ior: glass's index of refraction must be a number "
+                 "in [1, 10] (got %s)", mp.c_str(), x.IsNumber() ? strf("%g", ior).c_str() : "no number");
+    }
+    const unsigned dropped = dr_material_make_thin(&m, ior);
+    if (dropped & 1)
+        warn_once("thin:tint", "%s: thin-walled glass is rendered clear: its base colour's tint is ignored",
+                  mp.c_str());
+    if (dropped & 2)
+        warn_once("thin:mr", "%s/pbrMetallicRoughness/metallicRoughnessTexture: ignored on thin-walled glass "
+                  "(roughnessFactor alone sets its roughness)", mp.c_str());
+    if (dropped & 4)
+        warn_once("thin:emission", "%s: thin-walled glass does not emit: its emission is ignored", mp.c_str());
+}
+
+void Loader::load_material_medium(const tinygltf::Material &g, const std::string &mp, size_t index, dr_material &m)
 {
     material_medium_.resize(index + 1, -1);
     bool has_vol = g.extensions.count("KHR_materials_volume") > 0;
     auto dr = g.extensions.find("DR_medium");
     if (!has_vol && dr == g.extensions.end()) {
-        if (g.extensions.count("KHR_materials_transmission"))
-            warn_once("transmission", "%s/extensions/KHR_materials_transmission: transmission without a medium "
-                      "(KHR_materials_volume or DR_medium) is not supported; rendered opaque", mp.c_str());
+        if (g.extensions.count("KHR_materials_transmission")) load_thin_glass(g, mp, m);
         return;
     }
     dr_medium med = empty_medium(g.name.empty() ? strf("material_%zu", index).c_str() : g.name.c_str(), int(index));
     if (has_vol) khr_volume(g, med);
     double ior = boundary_ior(g, mp, dr != g.extensions.end());
     med.ior = ior == 1.0 ? 0.0 : ior;   /* medium.h: 0 is index-matched */
+    /* glTF's own volume (no DR_medium) on a mesh that turns out open: thin
+     * glass instead of a refusal (dr_media_prepare) */
+    med.thin_when_open = dr == g.extensions.end();
     media_.push_back(med);   /* owned (and released) by the loader from here */
     if (dr != g.extensions.end()) read_medium_ext(dr->second, mp + "/extensions/DR_medium", media_.back());
     material_medium_[index] = int(media_.size() - 1);

@@ -31,6 +31,9 @@ int dr_image_read_memory8(const void *bytes, size_t size, const char *name_hint,
  * DR_ERR_NOMEM and a message naming the image and its size. 0 = no limit.
  * Default: the machine's physical memory. */
 void dr_image_set_max_bytes(unsigned long long bytes);
+/* That limit (until it is set: the physical memory; 0 if unknown). Readers
+ * of drender's own (core/ktx2.h) honour it too. */
+unsigned long long dr_image_max_bytes(void);
 /* The threads the image library may use (OpenEXR's compression):
  * --threads; n <= 0: its default, one per CPU. Does not load the library. */
 void dr_image_set_threads(int n);

@@ -172,6 +172,14 @@ void dr_image_set_max_bytes(unsigned long long bytes)
         p->set_max_bytes(bytes);
 }
 
+unsigned long long dr_image_max_bytes(void)
+{
+    if (atomic_load(&max_bytes_set))
+        return atomic_load(&max_bytes);
+    const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGESIZE);
+    return pages > 0 && page > 0 ? (unsigned long long)pages * (unsigned long long)page : 0;
+}
+
 void dr_image_set_threads(int n)
 {
     atomic_store(&threads, n > 0 ? n : 0);

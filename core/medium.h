@@ -68,6 +68,10 @@ struct dr_medium {
      * dielectric interface, the index of refraction inside relative to
      * outside (KHR_materials_ior; the global medium's is 1) */
     double ior;
+    /* glTF's KHR_materials_volume alone (no DR_medium): where its mesh is not
+     * closed, dr_media_prepare makes the material thin-walled glass (scene.h)
+     * and drops the medium, with a warning, instead of refusing the scene */
+    bool thin_when_open;
 };
 
 /* Reads a density grid of nx x ny x nz voxels from file: raw little-endian

@@ -308,7 +308,7 @@ static int64_t segment_query(const struct dr_scene *s, const struct dr_path_stat
         counts->camera++;
     else
         counts->extension++;
-    uint64_t key = (s->effects & DR_FX_ALPHA_BLEND) ? dr_coverage_key(sampler->key, st->depth, DR_RAY_TRACE) : 0;
+    uint64_t key = (s->effects & DR_FX_KEYED_TRACES) ? dr_coverage_key(sampler->key, st->depth, DR_RAY_TRACE) : 0;
     return dr_accel_intersect_key(s->accel, st->o, st->d, 0.0, segment_reach(s, st, rng), key);
 }
 

@@ -107,6 +107,28 @@ static void scene_bounds(const struct dr_mesh *m, dr_vec3 *lo, dr_vec3 *hi)
     }
 }
 
+/* Medium i, a KHR_materials_volume whose mesh is open (why), becomes thin
+ * glass on its material and leaves the scene's media. */
+static void volume_to_thin_glass(struct dr_scene *s, int i, const char *why)
+{
+    const int m = s->media[i].material;
+    const unsigned dropped = dr_material_make_thin(&s->materials[m], s->media[i].ior > 0.0 ? s->media[i].ior : 1.0);
+    dr_warn("%s: /materials/%d (%s): KHR_materials_volume needs a closed mesh (%s): rendered as thin-walled glass "
+            "instead%s", s->path, m, s->materials[m].name, why,
+            dropped ? " (clear and not emitting: its base colour's tint, metallic-roughness texture and emission "
+                      "are ignored)" : "");
+    dr_grid_release(&s->media[i].grid);
+    memmove(&s->media[i], &s->media[i + 1], sizeof *s->media * (size_t)(s->n_media - i - 1));
+    s->n_media--;
+    for (int k = 0; k < s->n_materials; k++)
+        if (s->material_medium[k] == i)
+            s->material_medium[k] = -1;
+        else if (s->material_medium[k] > i)
+            s->material_medium[k]--;
+    if (s->global_medium > i)
+        s->global_medium--;
+}
+
 int dr_media_prepare(struct dr_scene *s)
 {
     uint32_t *id = dr_mesh_weld(&s->mesh);
@@ -124,6 +146,15 @@ int dr_media_prepare(struct dr_scene *s)
             continue;
         }
         rc = check_closed(s, med->material, id);
+        if (rc == DR_ERR_FORMAT && med->thin_when_open) {
+            /* (the reason: check_closed's message after its last ": ") */
+            const char *e = dr_last_error(), *why = strrchr(e, ':');
+            char reason[256];
+            snprintf(reason, sizeof reason, "%s", why ? why + 2 : e);
+            volume_to_thin_glass(s, i--, reason);
+            rc = 0;
+            continue;
+        }
         if (rc != 0)
             break;
         material_bounds(&s->mesh, med->material, &med->bmin, &med->bmax);
@@ -139,6 +170,8 @@ int dr_media_prepare(struct dr_scene *s)
         }
     }
     free(id);
+    if (rc == 0 && s->n_media == 0)   /* (every medium became thin glass: a scene without media) */
+        dr_media_release(s);
     return rc;
 }
 

@@ -226,6 +226,8 @@ int dr_params_list(const struct dr_scene *s, struct dr_param **out, int *count)
     int n = 0;
     for (int m = 0; m < s->n_file_materials; m++)
         for (int k = DR_PARAM_BASE_COLOR; k <= DR_PARAM_EMISSIVE_STRENGTH; k++) {
+            if (s->materials[m].thin_ior > 0.0 && k != DR_PARAM_ROUGHNESS)
+                continue;   /* thin glass is clear and does not emit (scene.h): only its roughness enters */
             int64_t size = (k == DR_PARAM_BASE_COLOR || k == DR_PARAM_EMISSIVE_FACTOR) ? 3 : 1;
             list[n++] = make(k, m, size, "/materials/%d%s", m, mat_fields[k]);
         }
@@ -424,6 +426,15 @@ int dr_param_resolve(const struct dr_scene *s, const char *ptr, struct dr_param 
                 for (int i = 0; i < count; i++)
                     if (list[i].kind == (enum dr_param_kind)k && list[i].target == m)
                         want = i;
+        bool thin_field = false;   /* a field thin glass does not use (every one but its roughness) */
+        for (int k = DR_PARAM_BASE_COLOR; k <= DR_PARAM_EMISSIVE_STRENGTH; k++)
+            thin_field |= k != DR_PARAM_ROUGHNESS && strcmp(field, mat_fields[k]) == 0;
+        if (want < 0 && s->materials[m].thin_ior > 0.0 && thin_field) {
+            free(list);
+            return fail_with_suggestions(s, ptr, "the material is thin-walled glass (KHR_materials_transmission), "
+                                                 "rendered clear and not emitting: only its roughnessFactor enters "
+                                                 "the image");
+        }
         /* a medium's parameters, by the material's index or name */
         char canonical[5 * DR_PARAM_NAME_MAX];
         snprintf(canonical, sizeof canonical, "/materials/%d%s", m, field);

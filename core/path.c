@@ -100,7 +100,7 @@ void dr_path_start(struct dr_path_state *st, dr_vec3 o, dr_vec3 d)
 
 uint64_t dr_path_trace_key(const struct dr_scene *s, const struct dr_path_state *st, const struct dr_sampler *sampler)
 {
-    return (s->effects & DR_FX_ALPHA_BLEND) ? dr_coverage_key(sampler->key, st->depth, DR_RAY_TRACE) : 0;
+    return (s->effects & DR_FX_KEYED_TRACES) ? dr_coverage_key(sampler->key, st->depth, DR_RAY_TRACE) : 0;
 }
 
 void dr_path_count_trace(const struct dr_path_state *st, struct dr_ray_counts *counts)
@@ -201,8 +201,7 @@ static bool stage_material(const struct dr_scene *s, const struct dr_path_opts *
     u->lobe = dr_sampler_next(sampler);
     dr_sampler_next2(sampler, &u->bsdf_u1, &u->bsdf_u2);     /* a 2D direction sample */
     u->rr = dr_sampler_next(sampler);
-    u->cover_key = (s->effects & (DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND))
-                       ? dr_coverage_key(sampler->key, st->depth, DR_RAY_SHADOW) : 0;
+    u->cover_key = (s->effects & DR_FX_KEYED_SHADOWS) ? dr_coverage_key(sampler->key, st->depth, DR_RAY_SHADOW) : 0;
     return true;
 }
 

@@ -410,7 +410,8 @@ static bool eight_lane_run(const struct dr_scene *s, const struct dr_path_opts *
      * light_sample) */
     const unsigned allowed = DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_ENV_CONSTANT | DR_FX_ENV_MAP |
                              DR_FX_SHADING_NORMALS | DR_FX_SINGLE_SIDED | DR_FX_SPECULAR | DR_FX_TEXTURES |
-                             DR_FX_VERTEX_COLORS | DR_FX_NORMAL_MAPS | DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND;
+                             DR_FX_VERTEX_COLORS | DR_FX_NORMAL_MAPS | DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND |
+                             DR_FX_THIN_TRANSMISSION;
     const unsigned media_fx = DR_FX_MEDIA | DR_FX_HETEROGENEOUS_MEDIA | DR_FX_DIELECTRIC_BOUNDARIES;
     const unsigned media_stages = DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC;
     struct dr_light_tables t;
@@ -1507,7 +1508,7 @@ static void locate_stage(const struct dr_scene *s, const struct dr_path8_in *in,
  * scene has alpha (coverage.h), 0 elsewhere. */
 static void shadow_keys(const struct dr_scene *s, const struct dr_path8_in *in, struct dr_path8 *g)
 {
-    if (!(s->effects & (DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND))) {
+    if (!(s->effects & DR_FX_KEYED_SHADOWS)) {
         memset(g->skey, 0, sizeof g->skey);
         return;
     }

@@ -54,7 +54,31 @@ static unsigned surface_effects(const struct dr_scene *s, int m)
         fx |= DR_FX_ALPHA_BLEND;
     if (cover & DR_COVER_CULL)
         fx |= DR_FX_SINGLE_SIDED;
+    if (cover & DR_COVER_THIN)
+        fx |= DR_FX_THIN_TRANSMISSION;
     return fx;
+}
+
+unsigned dr_material_make_thin(struct dr_material *m, double ior)
+{
+    unsigned dropped = 0;
+    if (m->base_color_tex.texture >= 0 || m->base_color.x != 1.0 || m->base_color.y != 1.0 ||
+        m->base_color.z != 1.0)
+        dropped |= 1;
+    if (m->metallic_roughness_tex.texture >= 0)
+        dropped |= 2;
+    /* (a sheet's emission would be seen only where a ray stops at it, but
+     * next-event estimation would count all of it: not rendered) */
+    if (m->emissive_tex.texture >= 0 || !dr_is_black(m->emissive_factor))
+        dropped |= 4;
+    m->emissive_factor = dr_v3s(0.0);
+    m->emissive_tex.texture = -1;
+    m->thin_ior = ior >= 1.0 ? ior : 1.0;
+    m->base_color = dr_v3s(1.0);
+    m->metallic = 1.0;
+    m->base_color_tex.texture = -1;
+    m->metallic_roughness_tex.texture = -1;
+    return dropped;
 }
 
 /* dr_scene_refresh's work; the light sampling tables rebuilt only when
@@ -252,7 +276,7 @@ void dr_effects_describe(unsigned fx, char *buf, int size)
         {DR_FX_HETEROGENEOUS_MEDIA, "heterogeneous_media"}, {DR_FX_NORMAL_MAPS, "normal_maps"},
         {DR_FX_ALPHA_MASK, "alpha_mask"},       {DR_FX_ALPHA_BLEND, "alpha_blend"},
         {DR_FX_SINGLE_SIDED, "single_sided"},   {DR_FX_VERTEX_COLORS, "vertex_colors"},
-        {DR_FX_DIELECTRIC_BOUNDARIES, "dielectric_boundaries"},
+        {DR_FX_DIELECTRIC_BOUNDARIES, "dielectric_boundaries"}, {DR_FX_THIN_TRANSMISSION, "thin_transmission"},
     };
     int n = 0;
     buf[0] = '\0';

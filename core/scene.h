@@ -47,7 +47,23 @@ struct dr_material {
     enum dr_alpha_mode alpha_mode;
     double alpha;                  /* baseColorFactor[3] (1 if absent) */
     double alpha_cutoff;           /* alphaCutoff (0.5 if absent), MASK only */
+    /* Thin-walled glass (KHR_materials_transmission without a volume, or
+     * with one on an open mesh): a smooth sheet of this index of refraction
+     * that a ray passes straight through with probability 1 - R, R the
+     * sheet's reflectance (coverage.h), and that reflects it like a white
+     * metal of the material's roughness otherwise; 0: not one. Set by
+     * dr_material_make_thin. */
+    double thin_ior;
 };
+
+/* Makes m thin-walled glass of index ior (>= 1): base colour white and no
+ * base colour texture (the sheet is clear: glTF's tint by the base colour
+ * is not rendered), metallic 1 and no metallic-roughness texture (what
+ * stops at the sheet is its Fresnel reflection, already weighed by the
+ * stop's probability), no emission. Returns a bit mask of what was
+ * dropped: 1 a base colour other than white or its texture, 2 a
+ * metallic-roughness texture, 4 emission (the loader warns). */
+unsigned dr_material_make_thin(struct dr_material *m, double ior);
 
 enum dr_tri_flags {
     DR_TRI_HAS_NORMALS = 1, /* interpolate vertex normals (else flat) */
@@ -146,7 +162,8 @@ enum dr_effect {
     DR_FX_ALPHA_BLEND = 1 << 11,       /* alphaMode BLEND: stochastic transparency */
     DR_FX_SINGLE_SIDED = 1 << 12,      /* doubleSided false: back faces culled */
     DR_FX_VERTEX_COLORS = 1 << 13,     /* COLOR_0 multiplies base colours (mesh.colors) */
-    DR_FX_DIELECTRIC_BOUNDARIES = 1 << 14 /* a medium bounded by a smooth dielectric (medium.h: ior) */
+    DR_FX_DIELECTRIC_BOUNDARIES = 1 << 14, /* a medium bounded by a smooth dielectric (medium.h: ior) */
+    DR_FX_THIN_TRANSMISSION = 1 << 15  /* thin-walled glass (dr_material.thin_ior, coverage.h) */
 };
 
 struct dr_scene {

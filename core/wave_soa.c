@@ -270,15 +270,15 @@ static inline const struct dr_wave_log *replay_log(const struct dr_wave_soa *w, 
 
 /* ------------------------------------------------------------ the stages */
 
-/* Does a ray's coverage key matter (coverage.h: which BLEND surfaces it
- * passes; the queries take keys only then). */
+/* Does a ray's coverage key matter (coverage.h: which BLEND surfaces and
+ * thin glass it passes; the queries take keys only then). */
 static inline bool keyed_traces(const struct dr_scene *s)
 {
-    return (s->effects & DR_FX_ALPHA_BLEND) != 0;
+    return (s->effects & DR_FX_KEYED_TRACES) != 0;
 }
 static inline bool keyed_shadows(const struct dr_scene *s)
 {
-    return (s->effects & (DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND)) != 0;
+    return (s->effects & DR_FX_KEYED_SHADOWS) != 0;
 }
 
 /* Slot k's trace key (dr_path_trace_key, at the depth trace() counted). */

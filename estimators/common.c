@@ -565,6 +565,18 @@ int dr_estimator_check(const struct dr_estimator_ops *e, const struct dr_grad_pr
                      dr_sampling_name(p->sampling), p->scene->n_media, p->scene->n_media == 1 ? "um" : "a");
         return DR_ERR_ARG;
     }
+    /* Nor thin glass, whose stop probability depends on the ray's direction
+     * (coverage.h): a moving direction moves it, and a stochastic decision
+     * has no derivative for the walker to follow. */
+    if (!dr_sampling_is_derivative(run) && (p->scene->effects & DR_FX_THIN_TRANSMISSION)) {
+        const char *name = "";
+        for (int m = 0; m < p->scene->n_materials && !name[0]; m++)
+            if (p->scene->materials[m].thin_ior > 0.0)
+                name = p->scene->materials[m].name;
+        dr_set_error("%s sampling does not differentiate through thin-walled glass (material '%s'); use --sampling "
+                     "detached", dr_sampling_name(p->sampling), name);
+        return DR_ERR_ARG;
+    }
     /* Nor the normal map's dependence on the moving hit point (normal_map.h);
      * derivative sampling keeps the hit points fixed, like detached. */
     if (!dr_sampling_is_derivative(run) && (p->scene->effects & DR_FX_NORMAL_MAPS)) {

@@ -9,11 +9,15 @@ not run this). Usage: fuzz/make_corpus.py [GLTF_SAMPLES_DIR]
                provides. Larger images are pointed at checker.png.
   image/       one selector byte (see fuzz/fuzz_image.c) + a small image file
                of each format: the tests' PNG/HDR files and oiiotool-made ones.
+  ktx2/        small KTX2 files (core/ktx2.c) of each 8-bit layout, with no,
+               zlib and Zstandard supercompression (a hand-made frame of one
+               raw block: Python has no zstd), an orientation key, and
+               Basis Universal and block-compressed headers that are refused.
   cli/         one selector byte (see fuzz/fuzz_cli.c) + option text.
   checkpoint/  is written by build-fuzz/fuzz_checkpoint (DR_FUZZ_WRITE_SEED)
                plus hand-made variants.
 """
-import base64, glob, json, os, shutil, subprocess, sys
+import base64, glob, json, os, shutil, struct, subprocess, sys, zlib
 
 root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 out = os.path.join(root, "fuzz", "corpus")
@@ -91,6 +95,35 @@ if shutil.which("oiiotool"):
         write("image", "small-%s.%s" % (args[1] if args else "8", ext), bytes([sel]) + open(p, "rb").read())
         write("image", "sniff-%s.%s" % (args[1] if args else "8", ext), bytes([0]) + open(p, "rb").read())
     shutil.rmtree(tmp)
+
+# ---- ktx2 ----
+def zstd_raw(data):
+    """A Zstandard frame holding data in one raw block (single segment, 1-byte content size: <= 255 bytes)."""
+    assert len(data) <= 255
+    return (bytes([0x28, 0xB5, 0x2F, 0xFD, 0x20, len(data)]) + (1 | (len(data) << 3)).to_bytes(3, "little") +
+            bytes(data))
+
+
+def ktx2(vk, w, h, ch, scheme, orientation=None, faces=1):
+    texels = bytes((x * 37 + y * 101 + c * 53) & 255 for y in range(h) for x in range(w) for c in range(ch))
+    level = {0: texels, 2: zstd_raw(texels), 3: zlib.compress(texels)}.get(scheme, texels[:16])
+    kvd = b""
+    if orientation:
+        kv = b"KTXorientation\0" + orientation.encode() + b"\0"
+        kvd = struct.pack("<I", len(kv)) + kv
+        kvd += bytes(-len(kvd) % 4)
+    head = bytes([0xAB, 0x4B, 0x54, 0x58, 0x20, 0x32, 0x30, 0xBB, 0x0D, 0x0A, 0x1A, 0x0A])
+    head += struct.pack("<9I", vk, 1, w, h, 0, 0, faces, 1, scheme)
+    head += struct.pack("<4I2Q", 0, 0, 104 if kvd else 0, len(kvd), 0, 0)
+    head += struct.pack("<3Q", 104 + len(kvd), len(level), len(texels))
+    return head + kvd + level
+
+
+for name, args in [("rgb8-zstd", (23, 8, 8, 3, 2)), ("rgb8-zlib", (23, 5, 3, 3, 3)), ("srgb8-raw", (29, 4, 4, 3, 0)),
+                   ("bgra8-zstd", (44, 6, 4, 4, 2)), ("r8-raw", (9, 7, 3, 1, 0)), ("rg8-zlib", (22, 3, 9, 2, 3)),
+                   ("rgba8-ru", (43, 4, 6, 4, 2, "ru")), ("bgr8-lu", (30, 5, 5, 3, 0, "lu")),
+                   ("etc1s-basislz", (0, 4, 4, 3, 1)), ("bc7", (145, 4, 4, 3, 0)), ("cubemap", (37, 2, 2, 4, 0, None, 6))]:
+    write("ktx2", name + ".ktx2", ktx2(*args))
 
 # ---- cli ----
 CLI = [

@@ -10,8 +10,8 @@ set -u
 cd "$(dirname "$0")/.."
 build=${FUZZ_BUILD:-build-fuzz}
 secs=${FUZZ_SECONDS:-60}
-[ $# -gt 0 ] || set -- gltf checkpoint cli image
-declare -A max_len=([gltf]=65536 [checkpoint]=4096 [cli]=512 [image]=16384)
+[ $# -gt 0 ] || set -- gltf checkpoint cli image ktx2
+declare -A max_len=([gltf]=65536 [checkpoint]=4096 [cli]=512 [image]=16384 [ktx2]=16384)
 failed=0
 summary=()
 for t in "$@"; do

@@ -16,10 +16,14 @@
 #      square with parallel edges, the perspective one as a trapezoid;
 #      --camera 2 names the count
 #   f. Draco: Box/glTF-Draco renders the same image as Box/glTF
-#   g. KTX2: AnisotropyBarnLamp-KTX2 is refused naming KHR_texture_basisu and
-#      the image (with and without --ignore-unsupported: its metallic-roughness
-#      map is KTX2); a copy whose KTX2 images are only normal/occlusion maps
-#      is refused without the option and renders with it (one warning)
+#   g. KTX2 and thin-walled glass: AnisotropyBarnLamp-KTX2 (8-bit KTX2
+#      textures with Zstandard; glass whose glTF volume is an open mesh)
+#      renders, its glass thin-walled with a warning, the filament lighting
+#      the image through it (dark with the glass opaque); fdcheck through the
+#      glass agrees; the glass's base colour is no parameter and attached
+#      sampling is refused. A copy whose normal map is Basis Universal is
+#      refused without --ignore-unsupported and renders with it (one warning);
+#      a Basis base colour is refused
 #   h. every command that loads a scene takes --ignore-unsupported
 # Run by tests/run.sh (env: DRENDER, DR_TESTDIR); also runs alone.
 set -u
@@ -200,35 +204,73 @@ print("Box vs Box Draco: max |difference| %g over %d pixels (%d show the box)" %
 sys.exit(0 if len(a) == len(b) == 48 * 48 and lit > 100 and m <= 1e-4 else 1)
 PY
 
-# ---- g. KTX2 ----
+# ---- g. KTX2 and thin-walled glass ----
 lamp=$samples/AnisotropyBarnLamp-KTX2/glTF
-for opt in "" --ignore-unsupported; do
-    run render "$lamp/AnisotropyBarnLamp.gltf" $R -o lamp.exr $opt
-    check_failed 3 "AnisotropyBarnLamp.gltf|KHR_texture_basisu|/images/1|/materials/0/pbrMetallicRoughness/metallicRoughnessTexture"
-    [ ! -e lamp.exr ] || fail "an image was written for the refused KTX2 model"
-done
-# only normal / occlusion / unsupported-extension maps left in KTX2 (and the
-# glass's dielectric volume, which drender refuses, taken out)
-lamp2=$(copy_model "$lamp" AnisotropyBarnLamp.gltf lamp2.gltf \
-    'del d["materials"][0]["pbrMetallicRoughness"]["metallicRoughnessTexture"]; del d["materials"][2]["extensions"]["KHR_materials_volume"]')
-run render "$lamp2" $R -o lamp2.exr --env 1
-check_failed 3 "lamp2.gltf|KHR_texture_basisu|/images/0|--ignore-unsupported"
-run render "$lamp2" $R -o lamp2.exr --env 1 --ignore-unsupported
-expect_rc 0 "render of the KTX2 normal-map model with --ignore-unsupported"
-[ "$(grep -c "KTX2" "$tmp/err")" -eq 1 ] || fail "expected exactly one KTX2 warning"
-expect_in err "/images/0, /images/1, /images/3" "the warning names the skipped images"
-set -- $(oiiotool --stats lamp2.exr | awk '/Stats Avg/ { print $3, $4, $5; exit }')
+run render "$lamp/AnisotropyBarnLamp.gltf" $R -o lamp.exr --json
+expect_rc 0 "render of the KTX2 lamp (8-bit texels, Zstandard)"
+expect_in err "/materials/2 (Lamp Glass): KHR_materials_volume needs a closed mesh" "the open glass volume's warning"
+expect_in err "rendered as thin-walled glass" "the glass becomes thin-walled"
+grep -q "KTX2 image" "$tmp/err" && fail "a KTX2 warning for images drender decodes"
+python3 - "$tmp/out" <<'PY' || fail "lamp --json effects"
+import json, sys
+fx = json.load(open(sys.argv[1]))["effects"]
+sys.exit(0 if all(e in fx for e in ("textures", "normal_maps", "thin_transmission")) and "media" not in fx else fx)
+PY
+# the filament lights the image through the glass: with the glass opaque
+# (transmission and volume taken out) the lamp is dark
+lamp_opaque=$(copy_model "$lamp" AnisotropyBarnLamp.gltf opaque.gltf \
+    'e = d["materials"][2]["extensions"]; del e["KHR_materials_transmission"]; del e["KHR_materials_volume"]')
+run render "$lamp_opaque" $R -o lamp_opaque.exr
+expect_rc 0 "render of the lamp with opaque glass"
+glass=$(oiiotool --stats lamp.exr | awk '/Stats Avg/ { print $3; exit }')
+opaque=$(oiiotool --stats lamp_opaque.exr | awk '/Stats Avg/ { print $3; exit }')
+echo "lamp: mean red $glass through thin glass, $opaque behind opaque glass"
+awk -v g="$glass" -v o="$opaque" 'BEGIN { exit !(g > 0.003 && g > 3 * o) }' || fail "the filament does not light the image through the glass ($glass vs $opaque)"
+# fdcheck through the glass: the filament's strength, seen through it
+run fdcheck "$lamp/AnisotropyBarnLamp.gltf" --param /materials/1/extensions/KHR_materials_emissive_strength/emissiveStrength \
+    --res 24x24 --spp 8 --batches 4
+expect_rc 0 "fdcheck of the filament's strength through thin glass"
+run grad "$lamp/AnisotropyBarnLamp.gltf" --param /materials/2/pbrMetallicRoughness/baseColorFactor --res 8x8 -o g.exr
+check_failed 2 "/materials/2/pbrMetallicRoughness/baseColorFactor|thin-walled glass"
+run grad "$lamp/AnisotropyBarnLamp.gltf" --param /materials/0/pbrMetallicRoughness/roughnessFactor \
+    --sampling attached --res 8x8 -o g.exr
+check_failed 2 "attached sampling does not differentiate through thin-walled glass|Lamp Glass"
+# a Basis Universal image (ETC1S: vkFormat 0, BasisLZ) as the normal map: refused without
+# --ignore-unsupported, skipped with it (one warning); as the base colour: refused
+python3 - "$tmp/basis.ktx2" <<'PY'
+import struct, sys
+h = bytes([0xAB, 0x4B, 0x54, 0x58, 0x20, 0x32, 0x30, 0xBB, 0x0D, 0x0A, 0x1A, 0x0A])
+h += struct.pack("<9I", 0, 1, 4, 4, 0, 0, 1, 1, 1) + struct.pack("<4I2Q", 0, 0, 0, 0, 0, 0)
+h += struct.pack("<3Q", 104, 16, 16) + bytes(16)
+open(sys.argv[1], "wb").write(h)
+PY
+lamp_b=$(copy_model "$lamp" AnisotropyBarnLamp.gltf basis.gltf \
+    'd["images"][0]["uri"] = "basis.ktx2"; del d["materials"][2]["extensions"]["KHR_materials_volume"]')
+cp "$tmp/basis.ktx2" "$(dirname "$lamp_b")/"
+run render "$lamp_b" $R -o lamp_b.exr --env 1
+check_failed 3 "basis.gltf|/images/0|Basis Universal ETC1S|--ignore-unsupported"
+run render "$lamp_b" $R -o lamp_b.exr --env 1 --ignore-unsupported
+expect_rc 0 "render of the Basis normal-map model with --ignore-unsupported"
+[ "$(grep -c "KTX2 image" "$tmp/err")" -eq 1 ] || fail "expected exactly one KTX2 warning"
+expect_in err "/images/0: KTX2 images drender cannot decode skipped" "the warning names the skipped image"
+set -- $(oiiotool --stats lamp_b.exr | awk '/Stats Avg/ { print $3, $4, $5; exit }')
 awk -v r="$1" 'BEGIN { exit !(r > 0.01) }' || fail "the lamp rendered black ($*)"
+lamp_bc=$(copy_model "$lamp" AnisotropyBarnLamp.gltf basis_colour.gltf 'd["images"][2]["uri"] = "basis.ktx2"')
+cp "$tmp/basis.ktx2" "$(dirname "$lamp_bc")/"
+run render "$lamp_bc" $R -o lamp_bc.exr --ignore-unsupported
+check_failed 3 "basis_colour.gltf|/materials/0/pbrMetallicRoughness/baseColorTexture|Basis Universal ETC1S"
 
 # ---- h. every command that loads a scene takes the option ----
 for c in render params grad fdcheck optimize compare; do
     "$DRENDER" help $c 2>&1 | grep -q -- "--ignore-unsupported" || fail "drender help $c does not list --ignore-unsupported"
 done
-run params "$lamp2" --ignore-unsupported
+run params "$lamp_b" --ignore-unsupported
 expect_rc 0 "params --ignore-unsupported"
 grep -q "^/images/0 " "$tmp/out" && fail "params lists the skipped KTX2 image /images/0"
 expect_in out "/images/2" "params lists the JPEG base colour"
-run fdcheck "$lamp2" --ignore-unsupported --env 1 --param /extensions/DR_environment/strength --res 8x8 --spp 2 --batches 4
+expect_in out "/images/1" "params lists the KTX2 metallic-roughness texture"
+grep -q "^/materials/2/pbrMetallicRoughness/baseColorFactor" "$tmp/out" && fail "params lists thin glass's base colour"
+run fdcheck "$lamp_b" --ignore-unsupported --env 1 --param /extensions/DR_environment/strength --res 8x8 --spp 2 --batches 4
 expect_rc 0 "fdcheck --ignore-unsupported"
 
 echo "cli_gltf_features: all passed"

@@ -30,7 +30,7 @@ Cameras/glTF/Cameras.gltf                                |0|yes|environment
 NormalTangentTest/glTF/NormalTangentTest.gltf            |0|yes|normal_maps,textures
 CornellBox-bevy/glTF-Binary/CornellBox.glb               |0|no|area_lights
 DepthOfFieldExample-bevy/glTF-Binary/DepthOfFieldExample.glb|0|no|punctual_lights,area_lights,textures
-AnisotropyBarnLamp-KTX2/glTF/AnisotropyBarnLamp.gltf     |3|-|
+AnisotropyBarnLamp-KTX2/glTF/AnisotropyBarnLamp.gltf     |0|no|area_lights,textures,normal_maps,thin_transmission
 "
 count=0
 while IFS='|' read -r model want note effects; do

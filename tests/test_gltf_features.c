@@ -405,9 +405,29 @@ static int count_ktx2_warnings(void)
     return n == 1 && strstr(warnings, "/images/0") != NULL;
 }
 
+/* The header of a KTX2 file: 12-byte identifier, then vkFormat, typeSize,
+ * width, height, depth, layers, faces, levels, supercompression (from byte
+ * 12), then the index; level 0's offset, length and uncompressed length at
+ * byte 80. */
+static void ktx2_header(unsigned char *b, unsigned vk, unsigned w, unsigned h, unsigned scheme, unsigned level_len)
+{
+    static const unsigned char magic[12] = {0xAB, 'K', 'T', 'X', ' ', '2', '0', 0xBB, '\r', '\n', 0x1A, '\n'};
+    memcpy(b, magic, 12);
+    const unsigned f[] = {vk, 1, w, h, 0, 0, 1, 1, scheme};
+    for (int i = 0; i < 9; i++)
+        for (int k = 0; k < 4; k++)
+            b[12 + 4 * i + k] = (unsigned char)(f[i] >> (8 * k));
+    const unsigned level[3] = {104, level_len, level_len};   /* (64-bit fields, high words 0) */
+    for (int i = 0; i < 3; i++)
+        for (int k = 0; k < 4; k++)
+            b[80 + 8 * i + k] = (unsigned char)(level[i] >> (8 * k));
+}
+
 static void test_ktx2(void)
 {
-    static const unsigned char ktx2[32] = {0xAB, 'K', 'T', 'X', ' ', '2', '0', 0xBB, '\r', '\n', 0x1A, '\n'};
+    /* Basis Universal ETC1S (vkFormat 0, BasisLZ): not decodable */
+    unsigned char ktx2[120] = {0};
+    ktx2_header(ktx2, 0, 4, 4, 1, 16);
     write_file("tex.ktx2", ktx2, sizeof ktx2);
     unsigned char b[36];
     size_t o = 0;
@@ -423,7 +443,7 @@ static void test_ktx2(void)
     const char *normal = "\"normalTexture\":{\"index\":0},\"occlusionTexture\":{\"index\":0}";
     int rc;
     struct dr_scene *s = load_json("ktx_normal.gltf", NULL, &rc, fmt, normal, data_uri(b, 36));
-    check_error(rc, "KTX2 normal map", "ktx_normal.gltf", "KHR_texture_basisu", "--ignore-unsupported");
+    check_error(rc, "KTX2 normal map", "ktx_normal.gltf", "Basis Universal ETC1S", "--ignore-unsupported");
     CHECK(strstr(dr_last_error(), "/images/0") != NULL, "names the image: %s", dr_last_error());
     dr_scene_destroy(s);
     struct dr_load_opts skip = {.ignore_unsupported = true};
@@ -436,7 +456,29 @@ static void test_ktx2(void)
     s = load_json("ktx_color.gltf", &skip, &rc, fmt, "\"pbrMetallicRoughness\":{\"baseColorTexture\":{\"index\":0}}",
                   data_uri(b, 36));
     check_error(rc, "KTX2 base colour", "ktx_color.gltf", "/materials/0/pbrMetallicRoughness/baseColorTexture",
-                "KHR_texture_basisu");
+                "Basis Universal ETC1S");
+    dr_scene_destroy(s);
+    /* plain 8-bit texels (R8G8B8_SRGB, no supercompression): read (core/ktx2.c; test_ktx2 covers the
+     * formats), as the base colour, sRGB-decoded */
+    unsigned char rgb[104 + 12];
+    memset(rgb, 0, sizeof rgb);
+    ktx2_header(rgb, 29, 2, 2, 0, 12);
+    const unsigned char texels[12] = {255, 0, 0, 0, 255, 0, 0, 0, 255, 128, 128, 128};
+    memcpy(rgb + 104, texels, 12);
+    write_file("tex.ktx2", rgb, sizeof rgb);
+    s = load_json("ktx_color.gltf", NULL, &rc, fmt, "\"pbrMetallicRoughness\":{\"baseColorTexture\":{\"index\":0}}",
+                  data_uri(b, 36));
+    CHECK(rc == 0 && s, "an 8-bit KTX2 base colour loads: %s", dr_last_error());
+    if (s) {
+        const struct dr_image *im = &s->images[0];
+        CHECK(im->width == 2 && im->height == 2 && im->channels == 3 && im->file_is_srgb, "2x2 sRGB RGB");
+        double px[4];
+        const struct dr_texture tex = {.image = 0, .wrap_s = DR_WRAP_CLAMP, .wrap_t = DR_WRAP_CLAMP};
+        dr_texture_eval(&tex, im, 0.75, 0.75, dr_image_has_linear(im), px);   /* the grey texel's centre */
+        CHECK_NEAR(px[0], dr_srgb_to_linear(128.0 / 255.0), 1e-6, "bottom-right texel, decoded");
+        dr_texture_eval(&tex, im, 0.25, 0.25, dr_image_has_linear(im), px);
+        CHECK(px[0] > 0.99 && px[1] < 1e-6 && px[2] < 1e-6, "top-left texel red: %g %g %g", px[0], px[1], px[2]);
+    }
     dr_scene_destroy(s);
 }
 

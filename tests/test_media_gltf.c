@@ -2,7 +2,9 @@
  * volume_scatter), the DR_medium extension with density grids (raw, EXR and
  * OpenVDB: tests/data/media/smoke.vdb holds smoke.raw's voxels),
  * and bad input that must be refused before any work, with a message naming
- * the file and the JSON path. Scenes are written to a temporary directory. */
+ * the file and the JSON path; thin-walled glass (transmission without a
+ * volume, or glTF's volume on an open mesh). Scenes are written to a
+ * temporary directory. */
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
@@ -10,6 +12,7 @@
 #include "error.h"
 #include "image_io.h"
 #include "medium_scene.h"
+#include "params.h"
 #include "path.h"
 #include "test.h"
 
@@ -278,6 +281,62 @@ static void test_vdb(void)
     }
 }
 
+static char warned[4096];
+static void keep_warning(const char *msg)
+{
+    size_t n = strlen(warned);
+    snprintf(warned + n, sizeof warned - n, "%s\n", msg);
+}
+
+/* KHR_materials_transmission without a volume is thin-walled glass; with a
+ * partial factor it stays opaque (a warning); glTF's volume on an open mesh
+ * becomes thin glass with a warning (DR_medium's is still refused: test_bad_input);
+ * a thin material's base colour and metallic are no parameters. */
+static void test_thin_glass(void)
+{
+    dr_set_warn_handler(keep_warning);
+    warned[0] = '\0';
+    struct dr_scene *s = dr_scene_load(write_scene("thin", KHR_TRANSMISSIVE ",\"KHR_materials_ior\":{\"ior\":1.33}",
+                                                   "", 0));
+    CHECK(s != NULL, "load: %s", dr_last_error());
+    if (s) {
+        CHECK(s->n_media == 0 && s->materials[0].thin_ior == 1.33, "thin glass of ior 1.33 (ior %g, %d media)",
+              s->materials[0].thin_ior, s->n_media);
+        CHECK((s->effects & DR_FX_THIN_TRANSMISSION) && !(s->effects & DR_FX_MEDIA), "effects");
+        CHECK(warned[0] == '\0', "no warning: %s", warned);
+        struct dr_param q;
+        CHECK(dr_param_resolve(s, "/materials/0/pbrMetallicRoughness/baseColorFactor", &q) != 0 &&
+                  strstr(dr_last_error(), "thin-walled glass"),
+              "the base colour of glass is no parameter: %s", dr_last_error());
+        CHECK(dr_param_resolve(s, "/materials/fog/pbrMetallicRoughness/metallicFactor", &q) != 0 &&
+                  strstr(dr_last_error(), "thin-walled glass"),
+              "nor its metallic: %s", dr_last_error());
+        CHECK(dr_param_resolve(s, "/materials/0/pbrMetallicRoughness/roughnessFactor", &q) == 0,
+              "its roughness is: %s", dr_last_error());
+        dr_scene_destroy(s);
+    }
+    warned[0] = '\0';
+    s = dr_scene_load(write_scene("partial", "\"KHR_materials_transmission\":{\"transmissionFactor\":0.5}", "", 0));
+    CHECK(s && s->materials[0].thin_ior == 0.0 && !(s->effects & DR_FX_THIN_TRANSMISSION), "partial: opaque");
+    CHECK(strstr(warned, "/materials/0/extensions/KHR_materials_transmission/transmissionFactor") &&
+              strstr(warned, "rendered opaque"), "partial: warned: %s", warned);
+    dr_scene_destroy(s);
+    warned[0] = '\0';
+    s = dr_scene_load(write_scene("openvol", "\"KHR_materials_volume\":{\"thicknessFactor\":0.01}," KHR_TRANSMISSIVE,
+                                  "", 2));
+    CHECK(s != NULL, "glTF's volume on an open mesh loads: %s", dr_last_error());
+    if (s) {
+        CHECK(s->n_media == 0 && !s->media && !s->material_medium && s->materials[0].thin_ior == 1.5,
+              "thin glass of the volume's default ior 1.5, no medium left (%d)", s->n_media);
+        CHECK((s->effects & DR_FX_THIN_TRANSMISSION) && !(s->effects & (DR_FX_MEDIA | DR_FX_DIELECTRIC_BOUNDARIES)),
+              "effects: thin glass, no media");
+        CHECK(strstr(warned, "/materials/0 (fog)") && strstr(warned, "open") && strstr(warned, "thin-walled glass"),
+              "warned: %s", warned);
+        dr_scene_destroy(s);
+    }
+    dr_set_warn_handler(NULL);
+}
+
 int main(void)
 {
     snprintf(dir, sizeof dir, "/tmp/drender-media-XXXXXX");
@@ -289,6 +348,7 @@ int main(void)
     test_dr_medium_grid();
     test_vdb();
     test_bad_input();
+    test_thin_glass();
     char cmd[300];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
     if (system(cmd) != 0)

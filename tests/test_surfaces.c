@@ -11,7 +11,10 @@
  *  - BLEND: the fraction of rays that stop is alpha (one layer) and the
  *    product of two layers' (independence), and a key repeats its decision;
  *  - doubleSided false: a ray from behind passes (closest hit and shadow),
- *    from the front it stops; a medium boundary is never culled. */
+ *    from the front it stops; a medium boundary is never culled;
+ *  - thin-walled glass: the sheet's reflectance against Fresnel's formula,
+ *    the fraction of rays (and shadow rays) it stops at two angles, and a
+ *    floor lit through it receiving (1 - R) of the light. */
 #include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
@@ -20,6 +23,7 @@
 #include "backface.h"
 #include "coverage.h"
 #include "geometry.h"
+#include "medium.h"
 #include "normal_map.h"
 #include "path.h"
 #include "scene.h"
@@ -393,6 +397,84 @@ static void test_blend(void)
     dr_scene_destroy(s);
 }
 
+/* ------------------------------------------------------------ thin glass */
+
+/* The floor and light of mask_scene with a thin glass pane (ior 1.5,
+ * roughness 0) at y = 1 instead of the MASK quad. */
+static struct dr_scene *glass_scene(void)
+{
+    struct sb b;
+    sb_init(&b);
+    sb_quad(&b, dr_v3(-3, 0, 3), dr_v3(6, 0, 0), dr_v3(0, 0, -6), sb_material(&b, sb_diffuse(dr_v3s(0.8))));
+    struct dr_material m = sb_diffuse(dr_v3(0.2, 0.5, 0.9));
+    m.roughness = 0.0;
+    m.double_sided = true;
+    CHECK(dr_material_make_thin(&m, 1.5) == 1, "a tinted pane reports its tint dropped");
+    sb_quad(&b, dr_v3(-2, 1, -2), dr_v3(4, 0, 0), dr_v3(0, 0, 4), sb_material(&b, m));
+    struct dr_punctual l;
+    memset(&l, 0, sizeof l);
+    l.type = DR_LIGHT_POINT;
+    l.color = dr_v3s(1.0);
+    l.intensity = 10.0;
+    l.position = dr_v3(0, 3, 0);
+    sb_light(&b, l);
+    return sb_finish(&b);
+}
+
+static void test_thin_glass(void)
+{
+    /* R = 2F / (1 + F): F = 0.04 at normal incidence for ior 1.5; 1 at grazing; 0 for ior 1 */
+    CHECK_NEAR(dr_thin_reflectance(1.0, 1.5), 0.08 / 1.04, 1e-12, "normal incidence");
+    CHECK_NEAR(dr_thin_reflectance(0.0, 1.5), 1.0, 1e-12, "grazing");
+    CHECK_NEAR(dr_thin_reflectance(0.7, 1.0), 0.0, 1e-12, "index-matched");
+    double ct;
+    const double F60 = dr_fresnel_dielectric(0.5, 1.5, &ct);
+    CHECK_NEAR(dr_thin_reflectance(0.5, 1.5), 2.0 * F60 / (1.0 + F60), 1e-12, "60 degrees");
+    struct dr_scene *s = glass_scene();
+    CHECK((s->effects & DR_FX_THIN_TRANSMISSION) != 0, "thin_transmission effect");
+    CHECK(s->materials[1].metallic == 1.0 && s->materials[1].base_color.x == 1.0, "the pane shades as a white metal");
+    /* the fraction of rays stopped, straight down and at 60 degrees */
+    const int n = 40000;
+    const dr_vec3 dirs[2] = {dr_v3(0, -1, 0), dr_normalize(dr_v3(sqrt(3.0), -1, 0))};
+    for (int k = 0; k < 2; k++) {
+        const dr_vec3 o = dr_sub(dr_v3(0.1, 1, 0.2), dirs[k]);   /* one unit before the pane */
+        int stop = 0, occl = 0, repeat_ok = 1;
+        for (int i = 0; i < n; i++) {
+            uint64_t key = dr_coverage_key(dr_hash64((uint64_t)i), 1, DR_RAY_TRACE);
+            int64_t t = dr_accel_intersect_key(s->accel, o, dirs[k], 0, INFINITY, key);
+            stop += t >= 0 && s->mesh.material[t] == 1;
+            repeat_ok &= dr_accel_intersect_key(s->accel, o, dirs[k], 0, INFINITY, key) == t;
+            occl += dr_accel_occluded_key(s->accel, o, dirs[k], 0, 1.5,
+                                          dr_coverage_key(dr_hash64((uint64_t)i), 1, DR_RAY_SHADOW));
+        }
+        const double R = dr_thin_reflectance(k == 0 ? 1.0 : 0.5, 1.5), sd = sqrt(R * (1 - R) / n);
+        printf("thin glass at cos %.1f: %.4f of rays stop, %.4f of shadow rays blocked (R %.4f, sd %.4f)\n",
+               k == 0 ? 1.0 : 0.5, (double)stop / n, (double)occl / n, R, sd);
+        CHECK(fabs((double)stop / n - R) < 4 * sd, "stop rate %.4f, expected %.4f", (double)stop / n, R);
+        CHECK(fabs((double)occl / n - R) < 4 * sd, "shadow blocking rate %.4f, expected %.4f", (double)occl / n, R);
+        CHECK(repeat_ok, "the same key gives the same decision");
+    }
+    /* a floor point lit through the pane: the mean over paths is (1 - R) of the
+     * unobstructed irradiance's radiance (R at the shadow ray's angle) */
+    const double x = 1.5, r2 = x * x + 9.0, cos_l = 3.0 / sqrt(r2);
+    const double clear = 0.8 / M_PI * 10.0 * cos_l / r2, want = clear * (1.0 - dr_thin_reflectance(cos_l, 1.5));
+    struct dr_path_opts o = {.max_depth = 2, .rr_depth = 100, .stages = dr_path_plan(s, NULL)};   /* direct light */
+    double sum = 0.0, sum2 = 0.0;
+    for (int i = 0; i < n; i++) {
+        struct dr_sampler smp;
+        dr_sampler_init(&smp, (uint64_t)i + 7, 0, 0);
+        struct dr_ray_counts c = {0};
+        dr_vec3 org = dr_v3(x, 0.5, -3), d = dr_normalize(dr_sub(dr_v3(x, 0, 0), org));
+        const double L = dr_path_radiance(s, &o, org, d, &smp, &c).x;
+        sum += L;
+        sum2 += L * L;
+    }
+    const double mean = sum / n, se = sqrt((sum2 / n - mean * mean) / n);
+    printf("floor through thin glass: %.6f +- %.6f (expected %.6f; without the pane %.6f)\n", mean, se, want, clear);
+    CHECK(fabs(mean - want) < 4 * se + 1e-9, "the floor through glass: %.6f, expected %.6f", mean, want);
+    dr_scene_destroy(s);
+}
+
 /* ------------------------------------------------------------ culling */
 
 static void test_single_sided(void)
@@ -488,6 +570,7 @@ int main(void)
     test_mask();
     test_blend();
     test_single_sided();
+    test_thin_glass();
     test_flat_faces();
     return TEST_END();
 }
