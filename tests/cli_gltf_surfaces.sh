@@ -17,6 +17,9 @@
 #      attached sampling with a roughness parameter is refused naming the material
 #   e. the closed Box's backs are proved unreachable from outside, and not
 #      with a camera inside, which sees through its culled walls
+#   f. thin-walled glass (the bundled box's sphere made transmissive): fdcheck,
+#      prb and tape, detached and derivative, of the glass's roughness and the
+#      wall seen through it; the same image for --threads 1 and 2
 # Run by tests/run.sh (env: DRENDER, DR_TESTDIR); also runs alone.
 set -u
 
@@ -149,4 +152,26 @@ expect_in out '"backs_unreachable": 0' "a camera inside the closed Box: no back 
 read -r r g b < <(oiiotool inside.exr --printstats 2>/dev/null | awk '/Stats Avg/ { print $3, $4, $5; exit }')
 awk -v r="$r" -v g="$g" -v b="$b" 'BEGIN { exit !(r > 0.999 && g > 0.999 && b > 0.999) }' ||
     fail "inside the single-sided Box the walls must be culled (sky of 1), got $r $g $b"
+
+# ---- f. thin-walled glass ----
+python3 - "$DR_TESTDIR/../scenes/cornell-box.gltf" "$tmp/glass.gltf" <<'PY'
+import json, sys
+g = json.load(open(sys.argv[1]))
+g["materials"][4].setdefault("extensions", {})["KHR_materials_transmission"] = {"transmissionFactor": 1}
+json.dump(g, open(sys.argv[2], "w"))
+PY
+ln -sf "$DR_TESTDIR/../scenes/cornell-box.bin" "$DR_TESTDIR/../scenes/cornell-box-checker.png" "$tmp/"
+for est in prb tape; do
+    for smp in detached derivative; do
+        run fdcheck "$tmp/glass.gltf" --param /materials/4/pbrMetallicRoughness/roughnessFactor \
+            --param /materials/0/pbrMetallicRoughness/baseColorFactor --res 24x24 --spp 16 --batches 8 \
+            --estimator $est --sampling $smp
+        expect_rc 0 "fdcheck through thin glass ($est, $smp)"
+    done
+done
+run render "$tmp/glass.gltf" --res 32x32 --spp 4 --threads 1 -o glass1.exr
+run render "$tmp/glass.gltf" --res 32x32 --spp 4 --threads 2 -o glass2.exr --json
+expect_in out '"thin_transmission"' "--json names the thin glass"
+[ "$(oiiotool --diff glass1.exr glass2.exr 2>&1 | grep -c PASS)" -ge 1 ] ||
+    fail "thin glass: the image depends on the thread count"
 echo "PASS"
