@@ -311,6 +311,7 @@ private:
     /* participating media (the "media" section at the end of this file) */
     void load_material_medium(const tinygltf::Material &g, const std::string &mp, size_t index, dr_material &m);
     void load_thin_glass(const tinygltf::Material &g, const std::string &mp, dr_material &m);
+    double material_ior(const tinygltf::Material &g, const std::string &mp, const char *what);
     void read_medium_ext(const tinygltf::Value &v, const std::string &ep, dr_medium &med);
     void read_medium_grid(const tinygltf::Value &v, const std::string &ep, dr_medium &med);
     double boundary_ior(const tinygltf::Material &g, const std::string &mp, bool has_dr);
@@ -1761,19 +1762,26 @@ static void khr_volume(const tinygltf::Material &g, dr_medium &med)
  * needs a transmissive boundary (transmissionFactor 1); a DR_medium material
  * whose KHR_materials_volume boundary is not transmissive stays index-matched
  * (DR_medium describes the medium, as before dielectrics existed). */
+/* KHR_materials_ior's ior (glTF's default 1.5 without it), checked to lie
+ * in [1, 10]; `what` names the surface in the message. */
+double Loader::material_ior(const tinygltf::Material &g, const std::string &mp, const char *what)
+{
+    auto io = g.extensions.find("KHR_materials_ior");
+    if (io == g.extensions.end() || !io->second.Has("ior")) return 1.5;
+    const tinygltf::Value &x = io->second.Get("ior");
+    const double ior = x.IsNumber() ? x.GetNumberAsDouble() : -1.0;
+    if (!(ior >= 1.0 && ior <= 10.0))
+        fail(DR_ERR_FORMAT, "%s/extensions/KHR_materials_ior/ior: %s index of refraction must be a number in [1, 10] "
+             "(got %s)", mp.c_str(), what, x.IsNumber() ? strf("%g", ior).c_str() : "no number");
+    return ior;
+}
+
 double Loader::boundary_ior(const tinygltf::Material &g, const std::string &mp, bool has_dr)
 {
     const bool has_vol = g.extensions.count("KHR_materials_volume") > 0;
-    auto io = g.extensions.find("KHR_materials_ior");
-    if (!has_vol && io == g.extensions.end()) return 1.0;
-    double ior = 1.5, transmission = 0.0;
-    if (io != g.extensions.end() && io->second.Has("ior")) {
-        const tinygltf::Value &x = io->second.Get("ior");
-        ior = x.IsNumber() ? x.GetNumberAsDouble() : -1.0;
-        if (!(ior >= 1.0 && ior <= 10.0))
-            fail(DR_ERR_FORMAT, "%s/extensions/KHR_materials_ior/ior: a medium boundary's index of refraction must "
-                 "be a number in [1, 10] (got %s)", mp.c_str(), x.IsNumber() ? strf("%g", ior).c_str() : "no number");
-    }
+    if (!has_vol && !g.extensions.count("KHR_materials_ior")) return 1.0;
+    const double ior = material_ior(g, mp, "a medium boundary's");
+    double transmission = 0.0;
     auto tr = g.extensions.find("KHR_materials_transmission");
     if (tr != g.extensions.end() && tr->second.Get("transmissionFactor").IsNumber())
         transmission = tr->second.Get("transmissionFactor").GetNumberAsDouble();
@@ -1802,16 +1810,7 @@ void Loader::load_thin_glass(const tinygltf::Material &g, const std::string &mp,
     if (tr->second.Has("transmissionTexture"))
         warn_once("transmissionTexture", "%s/transmissionTexture: not supported; ignored (transmissionFactor 1 "
                   "everywhere)", ep.c_str());
-    double ior = 1.5;
-    auto io = g.extensions.find("KHR_materials_ior");
-    if (io != g.extensions.end() && io->second.Has("ior")) {
-        const tinygltf::Value &x = io->second.Get("ior");
-        ior = x.IsNumber() ? x.GetNumberAsDouble() : -1.0;
-        if (!(ior >= 1.0 && ior <= 10.0))
-            fail(DR_ERR_FORMAT, "%s/extensions/KHR_materials_ior/ior: glass's index of refraction must be a number "
-                 "in [1, 10] (got %s)", mp.c_str(), x.IsNumber() ? strf("%g", ior).c_str() : "no number");
-    }
-    const unsigned dropped = dr_material_make_thin(&m, ior);
+    const unsigned dropped = dr_material_make_thin(&m, material_ior(g, mp, "glass's"));
     if (dropped & 1)
         warn_once("thin:tint", "%s: thin-walled glass is rendered clear: its base colour's tint is ignored",
                   mp.c_str());

@@ -284,6 +284,18 @@ static void test_valid_normal(void)
 
 /* ------------------------------------------------------------------ MASK */
 
+/* A white point light of intensity 10 at (0, 3, 0). */
+static void add_overhead_light(struct sb *b)
+{
+    struct dr_punctual l;
+    memset(&l, 0, sizeof l);
+    l.type = DR_LIGHT_POINT;
+    l.color = dr_v3s(1.0);
+    l.intensity = 10.0;
+    l.position = dr_v3(0, 3, 0);
+    sb_light(b, l);
+}
+
 /* Floor y = 0 (facing up) and, at y = 1, a MASK quad (facing down, double
  * sided) whose alpha is 0 on its left texel and 1 on its right (clamped,
  * bilinear between the texel centres u = 0.25 and 0.75); a point light at
@@ -301,13 +313,7 @@ static struct dr_scene *mask_scene(enum dr_alpha_mode mode, double alpha_factor)
     m.double_sided = true;
     /* x from -1 (u = 0) to 1 (u = 1), facing -y */
     sb_quad(&b, dr_v3(-1, 1, -1), dr_v3(2, 0, 0), dr_v3(0, 0, 2), sb_material(&b, m));
-    struct dr_punctual l;
-    memset(&l, 0, sizeof l);
-    l.type = DR_LIGHT_POINT;
-    l.color = dr_v3s(1.0);
-    l.intensity = 10.0;
-    l.position = dr_v3(0, 3, 0);
-    sb_light(&b, l);
+    add_overhead_light(&b);
     struct dr_scene *s = sb_finish(&b);
     for (int i = 0; i < s->n_images; i++)
         dr_image_make_linear(&s->images[i]);
@@ -411,13 +417,7 @@ static struct dr_scene *glass_scene(void)
     m.double_sided = true;
     CHECK(dr_material_make_thin(&m, 1.5) == 1, "a tinted pane reports its tint dropped");
     sb_quad(&b, dr_v3(-2, 1, -2), dr_v3(4, 0, 0), dr_v3(0, 0, 4), sb_material(&b, m));
-    struct dr_punctual l;
-    memset(&l, 0, sizeof l);
-    l.type = DR_LIGHT_POINT;
-    l.color = dr_v3s(1.0);
-    l.intensity = 10.0;
-    l.position = dr_v3(0, 3, 0);
-    sb_light(&b, l);
+    add_overhead_light(&b);
     return sb_finish(&b);
 }
 
