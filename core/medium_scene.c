@@ -255,8 +255,8 @@ static dr_vec3 trace_transmittance(const struct dr_scene *s, dr_vec3 o, dr_vec3 
                                    struct dr_sampler *rng, uint64_t *rays, struct dr_medium_trace *rec)
 {
     dr_vec3 T = dr_v3s(1.0);
-    /* BLEND surfaces on a shadow ray: decided by the ray's own stream (coverage.h) */
-    const uint64_t key = (s->effects & DR_FX_ALPHA_BLEND) ? dr_media_shadow_key(rng) : 0;
+    /* BLEND surfaces and thin glass on a shadow ray: decided by the ray's own stream (coverage.h) */
+    const uint64_t key = (s->effects & DR_FX_KEYED_TRACES) ? dr_media_shadow_key(rng) : 0;
     for (int i = 0; i < MAX_CROSSINGS; i++) {
         ++*rays;
         int64_t tri = dr_accel_intersect_key(s->accel, o, d, 0.0, tmax, key);
@@ -326,7 +326,7 @@ dr_vec3 dr_media_transmittance(const struct dr_scene *s, dr_vec3 o, dr_vec3 d, d
     double keep = 1.0;
     if (reach < tmax) {
         ++*rays;
-        const uint64_t key = (s->effects & DR_FX_ALPHA_BLEND) ? dr_media_shadow_key(rng) : 0;
+        const uint64_t key = (s->effects & DR_FX_KEYED_TRACES) ? dr_media_shadow_key(rng) : 0;
         if (!dr_accel_occluded_key(s->accel, o, d, 0.0, reach, key)) {
             if (dr_hash_unit(dr_hash64(rng->key ^ 0x3c6ef372fe94f82bULL)) >= ROULETTE_KEEP)
                 return dr_v3s(0.0);

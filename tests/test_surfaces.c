@@ -28,6 +28,7 @@
 #include "path.h"
 #include "scene.h"
 #include "scene_builder.h"
+#include "media_builder.h"
 #include "test.h"
 
 /* ------------------------------------------------------------ tangents */
@@ -406,8 +407,10 @@ static void test_blend(void)
 /* ------------------------------------------------------------ thin glass */
 
 /* The floor and light of mask_scene with a thin glass pane (ior 1.5,
- * roughness 0) at y = 1 instead of the MASK quad. */
-static struct dr_scene *glass_scene(void)
+ * roughness 0) at y = 1 instead of the MASK quad; with_medium: inside a
+ * global medium too thin to matter (1e-9 / m), so that the medium walker
+ * and its shadow transmittance see the pane. */
+static struct dr_scene *glass_scene(bool with_medium)
 {
     struct sb b;
     sb_init(&b);
@@ -418,6 +421,8 @@ static struct dr_scene *glass_scene(void)
     CHECK(dr_material_make_thin(&m, 1.5) == 1, "a tinted pane reports its tint dropped");
     sb_quad(&b, dr_v3(-2, 1, -2), dr_v3(4, 0, 0), dr_v3(0, 0, 4), sb_material(&b, m));
     add_overhead_light(&b);
+    if (with_medium)
+        sb_medium(&b, -1, medium(dr_v3s(1e-9), dr_v3s(0.0), 0.0));
     return sb_finish(&b);
 }
 
@@ -430,7 +435,7 @@ static void test_thin_glass(void)
     double ct;
     const double F60 = dr_fresnel_dielectric(0.5, 1.5, &ct);
     CHECK_NEAR(dr_thin_reflectance(0.5, 1.5), 2.0 * F60 / (1.0 + F60), 1e-12, "60 degrees");
-    struct dr_scene *s = glass_scene();
+    struct dr_scene *s = glass_scene(false);
     CHECK((s->effects & DR_FX_THIN_TRANSMISSION) != 0, "thin_transmission effect");
     CHECK(s->materials[1].metallic == 1.0 && s->materials[1].base_color.x == 1.0, "the pane shades as a white metal");
     /* the fraction of rays stopped, straight down and at 60 degrees */
@@ -454,25 +459,34 @@ static void test_thin_glass(void)
         CHECK(fabs((double)occl / n - R) < 4 * sd, "shadow blocking rate %.4f, expected %.4f", (double)occl / n, R);
         CHECK(repeat_ok, "the same key gives the same decision");
     }
+    dr_scene_destroy(s);
     /* a floor point lit through the pane: the mean over paths is (1 - R) of the
-     * unobstructed irradiance's radiance (R at the shadow ray's angle) */
+     * unobstructed irradiance's radiance (R at the shadow ray's angle); the
+     * same inside a (negligible) medium, where shadow rays estimate
+     * transmittance through the medium walker's own queries */
     const double x = 1.5, r2 = x * x + 9.0, cos_l = 3.0 / sqrt(r2);
     const double clear = 0.8 / M_PI * 10.0 * cos_l / r2, want = clear * (1.0 - dr_thin_reflectance(cos_l, 1.5));
-    struct dr_path_opts o = {.max_depth = 2, .rr_depth = 100, .stages = dr_path_plan(s, NULL)};   /* direct light */
-    double sum = 0.0, sum2 = 0.0;
-    for (int i = 0; i < n; i++) {
-        struct dr_sampler smp;
-        dr_sampler_init(&smp, (uint64_t)i + 7, 0, 0);
-        struct dr_ray_counts c = {0};
-        dr_vec3 org = dr_v3(x, 0.5, -3), d = dr_normalize(dr_sub(dr_v3(x, 0, 0), org));
-        const double L = dr_path_radiance(s, &o, org, d, &smp, &c).x;
-        sum += L;
-        sum2 += L * L;
+    for (int with_medium = 0; with_medium < 2; with_medium++) {
+        s = glass_scene(with_medium);
+        struct dr_path_opts o = {.max_depth = 2, .rr_depth = 100, .stages = dr_path_plan(s, NULL)};   /* direct */
+        double sum = 0.0, sum2 = 0.0;
+        for (int i = 0; i < n; i++) {
+            struct dr_sampler smp;
+            dr_sampler_init(&smp, (uint64_t)i + 7, 0, 0);
+            struct dr_ray_counts c = {0};
+            dr_vec3 org = dr_v3(x, 0.5, -3), d = dr_normalize(dr_sub(dr_v3(x, 0, 0), org));
+            const double L = dr_path_radiance(s, &o, org, d, &smp, &c).x;
+            sum += L;
+            sum2 += L * L;
+        }
+        const double mean = sum / n, se = sqrt((sum2 / n - mean * mean) / n);
+        printf("floor through thin glass%s: %.6f +- %.6f (expected %.6f; without the pane %.6f)\n",
+               with_medium ? " in a medium" : "", mean, se, want, clear);
+        CHECK(!with_medium || (o.stages & DR_STAGE_MEDIA), "the medium walker runs");
+        CHECK(fabs(mean - want) < 4 * se + 1e-9, "the floor through glass%s: %.6f, expected %.6f",
+              with_medium ? " in a medium" : "", mean, want);
+        dr_scene_destroy(s);
     }
-    const double mean = sum / n, se = sqrt((sum2 / n - mean * mean) / n);
-    printf("floor through thin glass: %.6f +- %.6f (expected %.6f; without the pane %.6f)\n", mean, se, want, clear);
-    CHECK(fabs(mean - want) < 4 * se + 1e-9, "the floor through glass: %.6f, expected %.6f", mean, want);
-    dr_scene_destroy(s);
 }
 
 /* ------------------------------------------------------------ culling */
