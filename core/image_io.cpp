@@ -280,12 +280,40 @@ bool maya_iff(const unsigned char *b, size_t n)
     return n >= 4 && b[0] == 'F' && b[1] == 'O' && b[2] == 'R' && (b[3] == '4' || b[3] == '8');
 }
 
-// A BMP that OpenImageIO 2.4's reader must not see (bmp_check.h): the
+// A DPX ("SDPX" big-endian, "XPDS" little-endian) whose header's
+// user-data length (bytes 32-35) is more than the file holds after its
+// 2048-byte generic header. OpenImageIO 2.4's DPX reader allocates and
+// fills that many bytes, then aborts on an assertion when the length does
+// not fit an int (make fuzz: a 2.5 KB file claiming 0xff000000 bytes made
+// drender hold 4.3 GB for 8 s and die of SIGABRT). file_size: the whole
+// file's bytes (n may be only its first bytes).
+bool dpx_user_data_too_long(const unsigned char *b, size_t n, uint64_t file_size, uint32_t *len)
+{
+    if (n < 36 || !((b[0] == 'S' && b[1] == 'D' && b[2] == 'P' && b[3] == 'X') ||
+                    (b[0] == 'X' && b[1] == 'P' && b[2] == 'D' && b[3] == 'S')))
+        return false;
+    const bool big = b[0] == 'S';
+    *len = big ? (uint32_t)b[32] << 24 | (uint32_t)b[33] << 16 | (uint32_t)b[34] << 8 | b[35]
+               : (uint32_t)b[35] << 24 | (uint32_t)b[34] << 16 | (uint32_t)b[33] << 8 | b[32];
+    return *len != 0xffffffffu && (uint64_t)*len + 2048 > file_size;   // (all ones: "undefined", none)
+}
+
+// What OpenImageIO 2.4's readers must not see: a BMP (bmp_check.h): the
 // bytes (the whole file: its pixels are checked against a short colour
-// table) give the reason; and a Maya IFF. DR_OK for anything else.
-int refuse_unsafe_bmp(const unsigned char *b, size_t n, bool whole, const std::string &label)
+// table) give the reason; and a Maya IFF, or a DPX whose user data is
+// longer than the file. file_size: the whole file's length. DR_OK for
+// anything else.
+int refuse_unsafe_image(const unsigned char *b, size_t n, bool whole, const std::string &label,
+                      uint64_t file_size)
 {
     char why[256];
+    uint32_t user = 0;
+    if (dpx_user_data_too_long(b, n, file_size, &user)) {
+        dr_set_error("%s: cannot read image: DPX whose header gives %u bytes of user data, more than its %llu "
+                     "bytes hold (OpenImageIO 2.4's DPX reader would allocate them and abort)",
+                     label.c_str(), (unsigned)user, (unsigned long long)file_size);
+        return DR_ERR_FORMAT;
+    }
     if (maya_iff(b, n)) {
         dr_set_error("%s: cannot read image: Maya IFF (OpenImageIO 2.4's IFF reader writes out of bounds on "
                      "malformed files, so drender reads none); convert it to PNG or EXR", label.c_str());
@@ -299,7 +327,7 @@ int refuse_unsafe_bmp(const unsigned char *b, size_t n, bool whole, const std::s
 
 // The same for a file: read whole when it is a BMP of at most 256 MiB (a
 // larger one: its headers alone).
-int refuse_unsafe_bmp_file(const char *path, const std::string &label)
+int refuse_unsafe_image_file(const char *path, const std::string &label)
 {
     FILE *f = std::fopen(path, "rb");
     if (!f)
@@ -308,15 +336,16 @@ int refuse_unsafe_bmp_file(const char *path, const std::string &label)
     size_t n = std::fread(head, 1, sizeof head, f);
     int rc = DR_OK;
     struct stat st;
+    const uint64_t size = fstat(fileno(f), &st) == 0 ? (uint64_t)st.st_size : n;
     if (!dr_bmp_magic(head, n)) {
-        rc = refuse_unsafe_bmp(head, n, false, label);   // (not a BMP: a Maya IFF is still refused)
-    } else if (fstat(fileno(f), &st) == 0 && st.st_size > (off_t)sizeof head && st.st_size <= ((off_t)256 << 20)) {
-        std::vector<unsigned char> all((size_t)st.st_size);
+        rc = refuse_unsafe_image(head, n, false, label, size);   // (not a BMP: IFF and DPX are still checked)
+    } else if (size > sizeof head && size <= ((uint64_t)256 << 20)) {
+        std::vector<unsigned char> all((size_t)size);
         std::rewind(f);
         n = std::fread(all.data(), 1, all.size(), f);
-        rc = refuse_unsafe_bmp(all.data(), n, true, label);
+        rc = refuse_unsafe_image(all.data(), n, true, label, n);
     } else {
-        rc = refuse_unsafe_bmp(head, n, n < sizeof head, label);
+        rc = refuse_unsafe_image(head, n, n < sizeof head, label, size);
     }
     std::fclose(f);
     return rc;
@@ -326,7 +355,7 @@ int read_file(const char *path, const std::string &label, dr_image *img, bool ei
 {
     int grc = refuse_huge_gif_file(path, label);
     if (grc == DR_OK)
-        grc = refuse_unsafe_bmp_file(path, label);
+        grc = refuse_unsafe_image_file(path, label);
     if (grc != DR_OK)
         return grc;
     ImageSpec config = read_config();
@@ -473,7 +502,7 @@ int read_memory(const void *bytes, size_t size, const char *name_hint, dr_image 
     }
     int grc = refuse_huge_gif((const unsigned char *)bytes, size, label);
     if (grc == DR_OK)
-        grc = refuse_unsafe_bmp((const unsigned char *)bytes, size, true, label);
+        grc = refuse_unsafe_image((const unsigned char *)bytes, size, true, label, size);
     if (grc != DR_OK)
         return grc;
     std::string name = memory_name((const unsigned char *)bytes, size, label);

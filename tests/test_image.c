@@ -886,6 +886,51 @@ static void test_iff_refused(void)
           "IFF file: rc %d: %s", rc, dr_last_error());
 }
 
+/* DPX: a header whose user-data length is more than the file holds made
+ * OpenImageIO 2.4 allocate and fill it (4 GB for a 2.5 KB file) and then
+ * abort (fuzz/corpus/image/regress-dpx-user-data-4gb): refused, from
+ * memory and from a file; the corpus's plain DPX still reads. */
+static void test_dpx_user_data(void)
+{
+    char src[600];
+    snprintf(src, sizeof src, "%s/../fuzz/corpus/image/small-8.dpx", getenv("DR_TESTDIR") ? getenv("DR_TESTDIR") : "tests");
+    FILE *f = fopen(src, "rb");
+    CHECK(f != NULL, "open %s", src);
+    if (!f)
+        return;
+    static unsigned char buf[16384];
+    const size_t n = fread(buf, 1, sizeof buf, f) - 1;   /* (its first byte: fuzz_image's name selector) */
+    CHECK(n + 1 < sizeof buf, "%s is larger than the test's buffer", src);
+    fclose(f);
+    unsigned char *dpx = buf + 1;
+    struct dr_image img;
+    char path[512];
+    path_in_tmp(path, sizeof path, "plain.dpx");   /* (OpenImageIO 2.4 reads DPX from files only) */
+    f = fopen(path, "wb");
+    CHECK(f && fwrite(dpx, 1, n, f) == n, "write %s", path);
+    if (f)
+        fclose(f);
+    int rc = dr_image_read(path, &img);
+    CHECK(rc == 0 && img.width == 6 && img.height == 5, "the plain DPX reads: rc %d: %s", rc, dr_last_error());
+    if (rc == 0)
+        dr_image_release(&img);
+    /* user data 0xff000000 bytes long, in the file's byte order */
+    const bool big = dpx[0] == 'S';
+    for (int k = 0; k < 4; k++)
+        dpx[32 + k] = (unsigned char)(0xff000000u >> (big ? 24 - 8 * k : 8 * k));
+    rc = dr_image_read_memory(dpx, n, "x.dpx", &img);
+    CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), "4278190080 bytes of user data"), "memory: rc %d: %s", rc,
+          dr_last_error());
+    path_in_tmp(path, sizeof path, "user.png");
+    f = fopen(path, "wb");
+    CHECK(f && fwrite(dpx, 1, n, f) == n, "write %s", path);
+    if (f)
+        fclose(f);
+    rc = dr_image_read(path, &img);
+    CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), path) && strstr(dr_last_error(), "user data"),
+          "file: rc %d: %s", rc, dr_last_error());
+}
+
 /* Open descriptors of this process (its /proc/self/fd entries). */
 static int open_descriptors(void)
 {
@@ -1141,6 +1186,7 @@ int main(void)
     test_errors();
     test_bmp_guard();
     test_iff_refused();
+    test_dpx_user_data();
     test_no_descriptor_left();
 
     nftw(tmpdir, rm_entry, 16, FTW_DEPTH | FTW_PHYS);
