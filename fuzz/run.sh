@@ -29,10 +29,14 @@ for t in "$@"; do
     # then replayed once with it on (-runs=0) before the target counts as clean.
     leak_opts=detect_leaks=1:fast_unwind_on_malloc=0
     case $t in gltf | image) fuzz_leaks=detect_leaks=0 ;; *) fuzz_leaks=$leak_opts ;; esac
+    # quarantine_size_mb: freed blocks stay poisoned longer (1 GiB, not 256 MiB),
+    # so that a write by the uninstrumented image libraries into a freed or
+    # neighbouring block is caught near the input that made it: that is how
+    # OpenImageIO 2.4's IFF heap corruption showed itself (FUZZ_QUARANTINE_MB).
     fuzz_run() {   # fuzz_run ASAN_LEAK_OPTIONS LIBFUZZER_ARGS...
         local leaks=$1
         shift
-        ASAN_OPTIONS=$leaks:allocator_may_return_null=1 \
+        ASAN_OPTIONS=$leaks:allocator_may_return_null=1:quarantine_size_mb=${FUZZ_QUARANTINE_MB:-1024} \
         LSAN_OPTIONS=suppressions=$PWD/tests/lsan.supp \
         UBSAN_OPTIONS=print_stacktrace=1 \
             "$bin" "$@" -timeout=10 -rss_limit_mb=2560 -max_len="${max_len[$t]:-65536}" \
