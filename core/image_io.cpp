@@ -280,22 +280,47 @@ bool maya_iff(const unsigned char *b, size_t n)
     return n >= 4 && b[0] == 'F' && b[1] == 'O' && b[2] == 'R' && (b[3] == '4' || b[3] == '8');
 }
 
-// A DPX ("SDPX" big-endian, "XPDS" little-endian) whose header's
-// user-data length (bytes 32-35) is more than the file holds after its
-// 2048-byte generic header. OpenImageIO 2.4's DPX reader allocates and
-// fills that many bytes, then aborts on an assertion when the length does
-// not fit an int (make fuzz: a 2.5 KB file claiming 0xff000000 bytes made
-// drender hold 4.3 GB for 8 s and die of SIGABRT). file_size: the whole
-// file's bytes (n may be only its first bytes).
-bool dpx_user_data_too_long(const unsigned char *b, size_t n, uint64_t file_size, uint32_t *len)
+// DPX ("SDPX" big-endian, "XPDS" little-endian) headers that OpenImageIO
+// 2.4's DPX reader mishandles, from make fuzz:
+//  - a user-data length (bytes 32-35) longer than the file holds after its
+//    2048-byte generic header: the reader allocates and fills that many
+//    bytes, then aborts on an assertion when the length does not fit an int
+//    (a 2.5 KB file claiming 0xff000000 bytes made drender hold 4.3 GB for
+//    8 s and die of SIGABRT);
+//  - pixels (bytes 772-779: per line, lines) that cannot fit in the file at
+//    even one bit each: the reader seeks and reads line by line past the
+//    end (a 3 KB file claiming 1 x 50348100 pixels read for minutes).
+// file_size: the whole file's bytes (n may be only its first bytes). Fills
+// why and returns true for such a file.
+uint32_t dpx_u32(const unsigned char *p, bool big)
+{
+    return big ? (uint32_t)p[0] << 24 | (uint32_t)p[1] << 16 | (uint32_t)p[2] << 8 | p[3]
+               : (uint32_t)p[3] << 24 | (uint32_t)p[2] << 16 | (uint32_t)p[1] << 8 | p[0];
+}
+
+bool dpx_header_unsafe(const unsigned char *b, size_t n, uint64_t file_size, char *why, size_t why_size)
 {
     if (n < 36 || !((b[0] == 'S' && b[1] == 'D' && b[2] == 'P' && b[3] == 'X') ||
                     (b[0] == 'X' && b[1] == 'P' && b[2] == 'D' && b[3] == 'S')))
         return false;
     const bool big = b[0] == 'S';
-    *len = big ? (uint32_t)b[32] << 24 | (uint32_t)b[33] << 16 | (uint32_t)b[34] << 8 | b[35]
-               : (uint32_t)b[35] << 24 | (uint32_t)b[34] << 16 | (uint32_t)b[33] << 8 | b[32];
-    return *len != 0xffffffffu && (uint64_t)*len + 2048 > file_size;   // (all ones: "undefined", none)
+    const uint32_t user = dpx_u32(b + 32, big);
+    if (user != 0xffffffffu && (uint64_t)user + 2048 > file_size) {   // (all ones: "undefined", none)
+        snprintf(why, why_size, "DPX whose header gives %u bytes of user data, more than its %llu bytes hold "
+                 "(OpenImageIO 2.4's DPX reader would allocate them and abort)", (unsigned)user,
+                 (unsigned long long)file_size);
+        return true;
+    }
+    if (n < 780)
+        return false;   // (too short for the image header: the reader refuses it)
+    const uint64_t w = dpx_u32(b + 772, big), h = dpx_u32(b + 776, big);
+    if (w * h / 8 > file_size) {
+        snprintf(why, why_size, "DPX of %llux%llu pixels whose image data cannot fit in its %llu bytes "
+                 "(OpenImageIO 2.4's DPX reader would read past the end line by line)", (unsigned long long)w,
+                 (unsigned long long)h, (unsigned long long)file_size);
+        return true;
+    }
+    return false;
 }
 
 // What OpenImageIO 2.4's readers must not see: a BMP (bmp_check.h): the
@@ -307,11 +332,8 @@ int refuse_unsafe_image(const unsigned char *b, size_t n, bool whole, const std:
                       uint64_t file_size)
 {
     char why[256];
-    uint32_t user = 0;
-    if (dpx_user_data_too_long(b, n, file_size, &user)) {
-        dr_set_error("%s: cannot read image: DPX whose header gives %u bytes of user data, more than its %llu "
-                     "bytes hold (OpenImageIO 2.4's DPX reader would allocate them and abort)",
-                     label.c_str(), (unsigned)user, (unsigned long long)file_size);
+    if (dpx_header_unsafe(b, n, file_size, why, sizeof why)) {
+        dr_set_error("%s: cannot read image: %s", label.c_str(), why);
         return DR_ERR_FORMAT;
     }
     if (maya_iff(b, n)) {
@@ -326,13 +348,14 @@ int refuse_unsafe_image(const unsigned char *b, size_t n, bool whole, const std:
 }
 
 // The same for a file: read whole when it is a BMP of at most 256 MiB (a
-// larger one: its headers alone).
+// larger one: its headers alone); the others by their first 1024 bytes
+// (a DPX's image header ends at byte 780).
 int refuse_unsafe_image_file(const char *path, const std::string &label)
 {
     FILE *f = std::fopen(path, "rb");
     if (!f)
         return DR_OK;   // (the reader says why)
-    unsigned char head[64];
+    unsigned char head[1024];
     size_t n = std::fread(head, 1, sizeof head, f);
     int rc = DR_OK;
     struct stat st;
