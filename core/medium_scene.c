@@ -29,8 +29,9 @@ static int cmp_edge(const void *x, const void *y)
 }
 
 /* Every edge of the material's triangles is shared by exactly two of them,
- * wound oppositely (so inside and outside are well defined). */
-static int check_closed(const struct dr_scene *s, int material, const uint32_t *id)
+ * wound oppositely (so inside and outside are well defined). DR_ERR_FORMAT
+ * with the message set and *problem the reason alone when not. */
+static int check_closed(const struct dr_scene *s, int material, const uint32_t *id, const char **problem_out)
 {
     const struct dr_mesh *m = &s->mesh;
     size_t n = 0;
@@ -67,6 +68,7 @@ static int check_closed(const struct dr_scene *s, int material, const uint32_t *
     if (problem) {
         dr_set_error("%s: /materials/%d (%s): a medium boundary must be a closed mesh: %s", s->path, material,
                      s->materials[material].name, problem);
+        *problem_out = problem;
         return DR_ERR_FORMAT;
     }
     return 0;
@@ -145,13 +147,10 @@ int dr_media_prepare(struct dr_scene *s)
             med->mean_chord = box_mean_chord(lo, hi);
             continue;
         }
-        rc = check_closed(s, med->material, id);
+        const char *problem = NULL;
+        rc = check_closed(s, med->material, id, &problem);
         if (rc == DR_ERR_FORMAT && med->thin_when_open) {
-            /* (the reason: check_closed's message after its last ": ") */
-            const char *e = dr_last_error(), *why = strrchr(e, ':');
-            char reason[256];
-            snprintf(reason, sizeof reason, "%s", why ? why + 2 : e);
-            volume_to_thin_glass(s, i--, reason);
+            volume_to_thin_glass(s, i--, problem);
             rc = 0;
             continue;
         }

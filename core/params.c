@@ -215,6 +215,14 @@ static struct dr_param make(enum dr_param_kind kind, int target, int64_t size, c
     return p;
 }
 
+/* Material m is thin-walled glass, which is clear and does not emit
+ * (scene.h): every material field but its roughness leaves the image as it
+ * is, and is no parameter (not listed; refused by name with the reason). */
+static bool thin_glass_unused(const struct dr_scene *s, int m, enum dr_param_kind kind)
+{
+    return s->materials[m].thin_ior > 0.0 && kind != DR_PARAM_ROUGHNESS;
+}
+
 int dr_params_list(const struct dr_scene *s, struct dr_param **out, int *count)
 {
     int cap = 5 * s->n_file_materials + 2 * (max_light_index(s) + 1) + 3 + s->n_images + 5 * s->n_media + 1;
@@ -226,8 +234,8 @@ int dr_params_list(const struct dr_scene *s, struct dr_param **out, int *count)
     int n = 0;
     for (int m = 0; m < s->n_file_materials; m++)
         for (int k = DR_PARAM_BASE_COLOR; k <= DR_PARAM_EMISSIVE_STRENGTH; k++) {
-            if (s->materials[m].thin_ior > 0.0 && k != DR_PARAM_ROUGHNESS)
-                continue;   /* thin glass is clear and does not emit (scene.h): only its roughness enters */
+            if (thin_glass_unused(s, m, (enum dr_param_kind)k))
+                continue;
             int64_t size = (k == DR_PARAM_BASE_COLOR || k == DR_PARAM_EMISSIVE_FACTOR) ? 3 : 1;
             list[n++] = make(k, m, size, "/materials/%d%s", m, mat_fields[k]);
         }
@@ -426,10 +434,10 @@ int dr_param_resolve(const struct dr_scene *s, const char *ptr, struct dr_param 
                 for (int i = 0; i < count; i++)
                     if (list[i].kind == (enum dr_param_kind)k && list[i].target == m)
                         want = i;
-        bool thin_field = false;   /* a field thin glass does not use (every one but its roughness) */
+        bool thin_field = false;   /* a field of m that thin glass does not use */
         for (int k = DR_PARAM_BASE_COLOR; k <= DR_PARAM_EMISSIVE_STRENGTH; k++)
-            thin_field |= k != DR_PARAM_ROUGHNESS && strcmp(field, mat_fields[k]) == 0;
-        if (want < 0 && s->materials[m].thin_ior > 0.0 && thin_field) {
+            thin_field |= thin_glass_unused(s, m, (enum dr_param_kind)k) && strcmp(field, mat_fields[k]) == 0;
+        if (want < 0 && thin_field) {
             free(list);
             return fail_with_suggestions(s, ptr, "the material is thin-walled glass (KHR_materials_transmission), "
                                                  "rendered clear and not emitting: only its roughnessFactor enters "

@@ -776,6 +776,15 @@ static size_t make_bmp(unsigned char buf[BMP_CAP], int w, int h, int bpp, int co
     return size;
 }
 
+/* Writes n bytes to path (a failure is a failed check). */
+static void write_bytes(const char *path, const void *bytes, size_t n)
+{
+    FILE *f = fopen(path, "wb");
+    CHECK(f && fwrite(bytes, 1, n, f) == n, "write %s", path);
+    if (f)
+        fclose(f);
+}
+
 /* OpenImageIO 2.4's BMP reader crashes on RLE files with the wrong depth and
  * reads past a short colour table (core/bmp_check.h): such files are refused
  * with a reason, from memory and from a file alike; the BMPs it reads safely
@@ -803,10 +812,7 @@ static void test_bmp_guard(void)
     CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), "colour 5 of a 2-entry colour table"), "entry 5 of 2: rc %d: %s",
           rc, dr_last_error());
     path_in_tmp(path, sizeof path, "short-table.png");   /* (the content decides, not the name) */
-    FILE *f = fopen(path, "wb");
-    CHECK(f && fwrite(buf, 1, n, f) == n, "write %s", path);
-    if (f)
-        fclose(f);
+    write_bytes(path, buf, n);
     rc = dr_image_read(path, &img);
     CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), path) && strstr(dr_last_error(), "2-entry colour table"),
           "entry 5 of 2 (file): rc %d: %s", rc, dr_last_error());
@@ -852,23 +858,34 @@ static void test_bmp_guard(void)
         dr_image_release(&img);
 }
 
+/* fuzz/corpus/image/NAME into buf (cap bytes); returns the length of the
+ * image after its first byte (fuzz_image's name selector), 0 if it could
+ * not be read whole (a failed check). */
+static size_t read_image_corpus_input(const char *name, unsigned char *buf, size_t cap)
+{
+    char src[600];
+    snprintf(src, sizeof src, "%s/../fuzz/corpus/image/%s", getenv("DR_TESTDIR") ? getenv("DR_TESTDIR") : "tests",
+             name);
+    FILE *f = fopen(src, "rb");
+    CHECK(f != NULL, "open %s", src);
+    if (!f)
+        return 0;
+    const size_t n = fread(buf, 1, cap, f);
+    fclose(f);
+    CHECK(n > 1 && n < cap, "%s: %zu bytes (the buffer holds %zu)", src, n, cap);
+    return n > 1 && n < cap ? n - 1 : 0;
+}
+
 /* Maya IFF: OpenImageIO 2.4's IFF reader corrupted the heap on a fuzzed
  * file (fuzz/corpus/image/regress-iff-rle-heap): every IFF is refused, from
  * memory and from a file named otherwise, before the reader sees it. */
 static void test_iff_refused(void)
 {
-    const char *seed = "fuzz/corpus/image/regress-iff-rle-heap";
-    char src[600];
-    snprintf(src, sizeof src, "%s/../%s", getenv("DR_TESTDIR") ? getenv("DR_TESTDIR") : "tests", seed);
-    FILE *f = fopen(src, "rb");
-    CHECK(f != NULL, "open %s", src);
-    if (!f)
+    static unsigned char buf[16384];
+    const size_t n = read_image_corpus_input("regress-iff-rle-heap", buf, sizeof buf) + 1;
+    if (n == 1)
         return;
-    unsigned char buf[4096];
-    const size_t n = fread(buf, 1, sizeof buf, f);
-    fclose(f);
     struct dr_image img;
-    /* (the corpus input's first byte is fuzz_image's name selector) */
     int rc = dr_image_read_memory(buf + 1, n - 1, "x.iff", &img);
     CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), "Maya IFF"), "IFF from memory: rc %d: %s", rc,
           dr_last_error());
@@ -877,10 +894,7 @@ static void test_iff_refused(void)
           dr_last_error());
     char path[512];
     path_in_tmp(path, sizeof path, "iff.png");
-    f = fopen(path, "wb");
-    CHECK(f && fwrite(buf + 1, 1, n - 1, f) == n - 1, "write %s", path);
-    if (f)
-        fclose(f);
+    write_bytes(path, buf + 1, n - 1);
     rc = dr_image_read(path, &img);
     CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), path) && strstr(dr_last_error(), "Maya IFF"),
           "IFF file: rc %d: %s", rc, dr_last_error());
@@ -892,28 +906,23 @@ static void test_iff_refused(void)
  * memory and from a file; the corpus's plain DPX still reads. */
 static void test_dpx_user_data(void)
 {
-    char src[600];
-    snprintf(src, sizeof src, "%s/../fuzz/corpus/image/small-8.dpx", getenv("DR_TESTDIR") ? getenv("DR_TESTDIR") : "tests");
-    FILE *f = fopen(src, "rb");
-    CHECK(f != NULL, "open %s", src);
-    if (!f)
-        return;
     static unsigned char buf[16384];
-    const size_t n = fread(buf, 1, sizeof buf, f) - 1;   /* (its first byte: fuzz_image's name selector) */
-    CHECK(n + 1 < sizeof buf, "%s is larger than the test's buffer", src);
-    fclose(f);
+    const size_t n = read_image_corpus_input("small-8.dpx", buf, sizeof buf);
+    if (n == 0)
+        return;
     unsigned char *dpx = buf + 1;
     struct dr_image img;
     char path[512];
-    path_in_tmp(path, sizeof path, "plain.dpx");   /* (OpenImageIO 2.4 reads DPX from files only) */
-    f = fopen(path, "wb");
-    CHECK(f && fwrite(dpx, 1, n, f) == n, "write %s", path);
-    if (f)
-        fclose(f);
-    int rc = dr_image_read(path, &img);
-    CHECK(rc == 0 && img.width == 6 && img.height == 5, "the plain DPX reads: rc %d: %s", rc, dr_last_error());
-    if (rc == 0)
-        dr_image_release(&img);
+    path_in_tmp(path, sizeof path, "plain.dpx");
+    write_bytes(path, dpx, n);
+    for (int from_file = 0; from_file < 2; from_file++) {
+        int rc = from_file ? dr_image_read(path, &img) : dr_image_read_memory(dpx, n, "x.dpx", &img);
+        CHECK(rc == 0 && img.width == 6 && img.height == 5, "the plain DPX reads (%s): rc %d: %s",
+              from_file ? "file" : "memory", rc, dr_last_error());
+        if (rc == 0)
+            dr_image_release(&img);
+    }
+    int rc;
     /* user data 0xff000000 bytes long, in the file's byte order */
     const bool big = dpx[0] == 'S';
     for (int k = 0; k < 4; k++)
@@ -922,10 +931,7 @@ static void test_dpx_user_data(void)
     CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), "4278190080 bytes of user data"), "memory: rc %d: %s", rc,
           dr_last_error());
     path_in_tmp(path, sizeof path, "user.png");
-    f = fopen(path, "wb");
-    CHECK(f && fwrite(dpx, 1, n, f) == n, "write %s", path);
-    if (f)
-        fclose(f);
+    write_bytes(path, dpx, n);
     rc = dr_image_read(path, &img);
     CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), path) && strstr(dr_last_error(), "user data"),
           "file: rc %d: %s", rc, dr_last_error());
@@ -942,10 +948,7 @@ static void test_dpx_user_data(void)
     rc = dr_image_read_memory(dpx, n, "x.dpx", &img);
     CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), "1x50348100 pixels whose image data cannot fit"),
           "50M lines (memory): rc %d: %s", rc, dr_last_error());
-    f = fopen(path, "wb");
-    CHECK(f && fwrite(dpx, 1, n, f) == n, "write %s", path);
-    if (f)
-        fclose(f);
+    write_bytes(path, dpx, n);
     rc = dr_image_read(path, &img);
     CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), "cannot fit"), "50M lines (file): rc %d: %s", rc,
           dr_last_error());
