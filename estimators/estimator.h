@@ -107,6 +107,9 @@ struct dr_grad_problem {
                                              and freed by every run */
     const struct dr_grad_consumer *consumer;   /* reverse mode (optional): the gradient handed over in
                                                   pieces instead of written whole (below) */
+    bool one_path_walks;       /* prb, detached (tests): walk one path at a time where the wavefront or
+                                  the arrays would run, so test_estimators can hold the two equal (no
+                                  user-facing mode walks this way: it is the slower of the two) */
 };
 
 /* Where a reverse-mode run can hand its gradient instead of writing it to

@@ -928,12 +928,10 @@ static int prb_run(struct dr_est_base *b)
         if (!(j->radius > 0.0) || !isfinite(j->radius))
             j->radius = 1.0;
     }
-    /* --sampling derivative that runs detached (no BSDF parameter) walks one
-     * path at a time: test_estimators' wave_against_one_path holds the
-     * wavefront to that walk this way (derivative-roughness without a
-     * roughness takes the wavefront, as detached does: 0.081 s against
-     * 0.068 s on the one-path walk, bench part i) */
-    const bool detached = run == DR_SAMPLING_DETACHED && b->p->sampling != DR_SAMPLING_DERIVATIVE;
+    /* every run that is detached in the end takes the wavefront or the
+     * arrays, --sampling derivative without a BSDF parameter included; the
+     * one-path walk is a test's (one_path_walks: wave_against_one_path) */
+    const bool detached = run == DR_SAMPLING_DETACHED && !b->p->one_path_walks;
     j->wave = detached && !(b->popts.stages & DR_STAGE_MEDIA);
     j->media_arrays = detached && dr_wave_soa_media_walks_apply(b->p->scene, &b->popts);
     j->outside_media = b->popts;
