@@ -251,6 +251,7 @@ private:
     std::string copy_one(const std::string &rel, const std::string &what, const std::string &flat_name);
     void set_buffer_uris();
     void declare_extensions();
+    void retarget_fitted_textures();
     void write_model();
     void fix_json();
     void check_outputs();
@@ -866,6 +867,34 @@ void Writer::set_buffer_uris()
     }
 }
 
+/* A fitted image is written as PNG (write_image_param). A texture that
+ * reached it through KHR_texture_basisu would then name a PNG where the
+ * extension requires KTX2, and one that kept a KTX2 beside a fitted `source`
+ * fallback would show viewers that decode KTX2 the unfitted texels. Such a
+ * texture takes the fitted image as its `source` and drops the extension;
+ * once no texture uses it, it leaves extensionsUsed and extensionsRequired
+ * (declare_extensions only adds). The KTX2 image stays in the file, unused. */
+void Writer::retarget_fitted_textures()
+{
+    static const char ext[] = "KHR_texture_basisu";
+    bool still_used = false;
+    for (tinygltf::Texture &t : model_.textures) {
+        auto it = t.extensions.find(ext);
+        if (it == t.extensions.end()) continue;
+        const tinygltf::Value &src = it->second.Get("source");
+        const int used = t.source >= 0 ? t.source : src.IsInt() ? src.GetNumberAsInt() : -1;
+        if (used >= 0 && replaced_images_.count(used)) {
+            t.source = used;
+            t.extensions.erase(it);
+        } else {
+            still_used = true;
+        }
+    }
+    if (still_used) return;
+    for (std::vector<std::string> *list : {&model_.extensionsUsed, &model_.extensionsRequired})
+        list->erase(std::remove(list->begin(), list->end(), std::string(ext)), list->end());
+}
+
 /* extensionsUsed must name every extension the file uses (the validator's
  * UNDECLARED_EXTENSION error); the loader is lenient, the output is not. */
 void Writer::declare_extensions()
@@ -1120,6 +1149,7 @@ void Writer::run()
     load_source();
     make_temp_dir();
     apply_params();
+    retarget_fitted_textures();
     record_light_units();
     if (glb_) embed_images();
     copy_resources();

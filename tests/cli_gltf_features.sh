@@ -23,7 +23,10 @@
 #      glass agrees; the glass's base colour is no parameter and attached
 #      sampling is refused. A copy whose normal map is Basis Universal is
 #      refused without --ignore-unsupported and renders with it (one warning);
-#      a Basis base colour is refused
+#      a Basis base colour is refused. A fitted KTX2 texture reached through
+#      KHR_texture_basisu is written as PNG and becomes the texture's source,
+#      the extension dropped there (and from extensionsUsed/Required once no
+#      texture uses it); the output renders
 #   h. every command that loads a scene takes --ignore-unsupported
 # Run by tests/run.sh (env: DRENDER, DR_TESTDIR); also runs alone.
 set -u
@@ -259,6 +262,31 @@ lamp_bc=$(copy_model "$lamp" AnisotropyBarnLamp.gltf basis_colour.gltf 'd["image
 cp "$tmp/basis.ktx2" "$(dirname "$lamp_bc")/"
 run render "$lamp_bc" $R -o lamp_bc.exr --ignore-unsupported
 check_failed 3 "basis_colour.gltf|/materials/0/pbrMetallicRoughness/baseColorTexture|Basis Universal ETC1S"
+
+# optimize fits a KTX2 texture that files reach through KHR_texture_basisu:
+# the PNG it writes is the texture's source, not the extension's (which must
+# name KTX2); a texture whose KTX2 was not fitted keeps the extension
+basisu_edit='
+for i in TEXTURES:
+    t = d["textures"][i]; t["extensions"] = {"KHR_texture_basisu": {"source": t.pop("source")}}
+d["extensionsUsed"].append("KHR_texture_basisu"); d["extensionsRequired"] = ["KHR_texture_basisu"]'
+run render "$lamp/AnisotropyBarnLamp.gltf" --res 16x16 --spp 2 -o lamp_t.exr
+expect_rc 0 "render of the lamp's target"
+for which in both one; do   # both: textures 0 and 1 through the extension; one: texture 1 alone
+    textures="(0, 1)" && [ $which = one ] && textures="(1,)"
+    lamp_u=$(copy_model "$lamp" AnisotropyBarnLamp.gltf "basisu-$which.gltf" "${basisu_edit/TEXTURES/$textures}")
+    mkdir -p "$tmp/fit-$which"
+    run optimize "$lamp_u" --target lamp_t.exr --param /images/1 --iters 1 --spp 1 -o "$tmp/fit-$which/fit.gltf"
+    expect_rc 0 "optimize of a KTX2 texture through KHR_texture_basisu ($which)"
+    json_check "$tmp/fit-$which/fit.gltf" '
+d["images"][1]["uri"] == "fit.image1.png" and d["textures"][1]["source"] == 1
+and "extensions" not in d["textures"][1] and (
+  ("KHR_texture_basisu" in d["textures"][0]["extensions"] and "KHR_texture_basisu" in d["extensionsUsed"]
+   and d["extensionsRequired"] == ["KHR_texture_basisu"]) if "'$which'" == "both" else
+  ("KHR_texture_basisu" not in d["extensionsUsed"] and not d.get("extensionsRequired")))'
+    run render "$tmp/fit-$which/fit.gltf" --res 16x16 --spp 1 -o fit.exr
+    expect_rc 0 "render of the fitted lamp ($which)"
+done
 
 # ---- h. every command that loads a scene takes the option ----
 for c in render params grad fdcheck optimize compare; do
