@@ -46,8 +46,8 @@ LDLIBS   += $(IMG_LIBS) $(HOST_LIBS)
 LDFLAGS  += $(OPT) $(MOVE_MAX) -Wno-psabi
 
 # The image plugin's sources: the OpenImageIO shims, and the C its readers
-# call before OpenImageIO sees a file (core/bmp_check.h)
-IMG_C    := core/bmp_check.c
+# call before OpenImageIO sees a file (core/unsafe_images.h, core/bmp_check.h)
+IMG_C    := core/bmp_check.c core/unsafe_images.c
 CORE_C   := $(filter-out $(IMG_C),$(wildcard core/*.c estimators/*.c drivers/*.c))
 IMG_CXX  := core/image_io.cpp core/vis.cpp
 CORE_CXX := $(filter-out $(IMG_CXX),$(wildcard core/*.cpp))

@@ -21,6 +21,7 @@
 #include "error.h"
 #include "image.h"
 #include "source_date.h"
+#include "unsafe_images.h"
 
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
@@ -188,6 +189,10 @@ int read_opened_bytes(ImageInput *in, const std::string &label, int nch, dr_imag
 // file's pixels in eight-bit storage (read_opened_bytes), others as float.
 int read_opened(ImageInput *in, const std::string &label, dr_image *img, bool eight_bit)
 {
+    if (const char *why = dr_unsafe_reader(in->format_name())) {   // (a format without magic bytes)
+        dr_set_error("%s: cannot read image: %s", label.c_str(), why);
+        return DR_ERR_FORMAT;
+    }
     const ImageSpec &spec = in->spec();
     if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0) {
         dr_set_error("%s: cannot read image: empty image (%dx%d, %d channels)",
@@ -270,78 +275,14 @@ int refuse_huge_gif_file(const char *path, const std::string &label)
     return refuse_huge_gif(head, n, label);
 }
 
-// Maya IFF ("FOR4" or "FOR8" first): OpenImageIO 2.4's IFF reader
-// corrupts the heap on malformed RLE tiles (make fuzz: a 160-byte file
-// with one byte of its RLE data changed freed a block it did not own,
-// found at exit; IffInput::readimg). No glTF asset uses the format, so it
-// is refused whole, from the first bytes, before any reader sees it.
-bool maya_iff(const unsigned char *b, size_t n)
-{
-    return n >= 4 && b[0] == 'F' && b[1] == 'O' && b[2] == 'R' && (b[3] == '4' || b[3] == '8');
-}
-
-// DPX ("SDPX" big-endian, "XPDS" little-endian) headers that OpenImageIO
-// 2.4's DPX reader mishandles, from make fuzz:
-//  - a user-data length (bytes 32-35) longer than the file holds after its
-//    2048-byte generic header: the reader allocates and fills that many
-//    bytes, then aborts on an assertion when the length does not fit an int
-//    (a 2.5 KB file claiming 0xff000000 bytes made drender hold 4.3 GB for
-//    8 s and die of SIGABRT);
-//  - pixels (bytes 772-779: per line, lines) that cannot fit in the file at
-//    even one bit each: the reader seeks and reads line by line past the
-//    end (a 3 KB file claiming 1 x 50348100 pixels read for minutes).
-// file_size: the whole file's bytes (n may be only its first bytes). Fills
-// why and returns true for such a file.
-uint32_t dpx_u32(const unsigned char *p, bool big)
-{
-    return big ? (uint32_t)p[0] << 24 | (uint32_t)p[1] << 16 | (uint32_t)p[2] << 8 | p[3]
-               : (uint32_t)p[3] << 24 | (uint32_t)p[2] << 16 | (uint32_t)p[1] << 8 | p[0];
-}
-
-bool dpx_header_unsafe(const unsigned char *b, size_t n, uint64_t file_size, char *why, size_t why_size)
-{
-    if (n < 36 || !((b[0] == 'S' && b[1] == 'D' && b[2] == 'P' && b[3] == 'X') ||
-                    (b[0] == 'X' && b[1] == 'P' && b[2] == 'D' && b[3] == 'S')))
-        return false;
-    const bool big = b[0] == 'S';
-    const uint32_t user = dpx_u32(b + 32, big);
-    if (user != 0xffffffffu && (uint64_t)user + 2048 > file_size) {   // (all ones: "undefined", none)
-        snprintf(why, why_size, "DPX whose header gives %u bytes of user data, more than its %llu bytes hold "
-                 "(OpenImageIO 2.4's DPX reader would allocate them and abort)", (unsigned)user,
-                 (unsigned long long)file_size);
-        return true;
-    }
-    if (n < 780)
-        return false;   // (too short for the image header: the reader refuses it)
-    const uint64_t w = dpx_u32(b + 772, big), h = dpx_u32(b + 776, big);
-    if (w * h / 8 > file_size) {
-        snprintf(why, why_size, "DPX of %llux%llu pixels whose image data cannot fit in its %llu bytes "
-                 "(OpenImageIO 2.4's DPX reader would read past the end line by line)", (unsigned long long)w,
-                 (unsigned long long)h, (unsigned long long)file_size);
-        return true;
-    }
-    return false;
-}
-
-// What OpenImageIO 2.4's readers must not see: a BMP (bmp_check.h): the
-// bytes (the whole file: its pixels are checked against a short colour
-// table) give the reason; and a Maya IFF, or a DPX whose user data is
-// longer than the file. file_size: the whole file's length. DR_OK for
-// anything else.
+// What OpenImageIO 2.4's readers must not see (unsafe_images.h), from the
+// bytes (a BMP's whole file: its pixels are checked against a short colour
+// table). file_size: the whole file's length. DR_OK for anything else.
 int refuse_unsafe_image(const unsigned char *b, size_t n, bool whole, const std::string &label,
-                      uint64_t file_size)
+                        uint64_t file_size)
 {
     char why[256];
-    if (dpx_header_unsafe(b, n, file_size, why, sizeof why)) {
-        dr_set_error("%s: cannot read image: %s", label.c_str(), why);
-        return DR_ERR_FORMAT;
-    }
-    if (maya_iff(b, n)) {
-        dr_set_error("%s: cannot read image: Maya IFF (OpenImageIO 2.4's IFF reader writes out of bounds on "
-                     "malformed files, so drender reads none); convert it to PNG or EXR", label.c_str());
-        return DR_ERR_FORMAT;
-    }
-    if (dr_bmp_check(b, n, whole, why, sizeof why) == 0)
+    if (dr_unsafe_image_check(b, n, whole, file_size, why, sizeof why) == 0)
         return DR_OK;
     dr_set_error("%s: cannot read image: %s", label.c_str(), why);
     return DR_ERR_FORMAT;

@@ -954,6 +954,40 @@ static void test_dpx_user_data(void)
           dr_last_error());
 }
 
+/* SGI and Wavefront RLA (unsafe_images.h): make fuzz found OpenImageIO
+ * 2.4's SGI reader taking 5.7 GB and half a minute to open a 155-byte file
+ * (regress-sgi-5gb-open) and its RLA reader looping for minutes on a
+ * 791-byte one (regress-rla-loops). Both formats are refused whole: SGI by
+ * its magic bytes before any reader sees it, RLA (no magic bytes) once a
+ * reader has opened it as RLA, before any pixel is read. Each case must end
+ * within a second or so, which a hang would not. */
+static void test_sgi_rla_refused(void)
+{
+    static unsigned char buf[16384];
+    const struct { const char *input, *hint, *says; } cases[] = {
+        {"regress-sgi-5gb-open", "x.sgi", "SGI image"},
+        {"small-8.sgi", "x.sgi", "SGI image"},
+        {"regress-rla-loops", "x.rla", "Wavefront RLA"},
+        {"small-8.rla", "x.rla", "Wavefront RLA"},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        const size_t n = read_image_corpus_input(cases[i].input, buf, sizeof buf);
+        if (n == 0)
+            continue;
+        struct dr_image img;
+        int rc = dr_image_read_memory(buf + 1, n, cases[i].hint, &img);
+        CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), cases[i].says), "%s from memory: rc %d: %s",
+              cases[i].input, rc, dr_last_error());
+        /* from a file named .png: OpenImageIO tries every reader in turn */
+        char path[512];
+        path_in_tmp(path, sizeof path, "unsafe.png");
+        write_bytes(path, buf + 1, n);
+        rc = dr_image_read(path, &img);
+        CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), path) && strstr(dr_last_error(), cases[i].says),
+              "%s as a file named .png: rc %d: %s", cases[i].input, rc, dr_last_error());
+    }
+}
+
 /* Open descriptors of this process (its /proc/self/fd entries). */
 static int open_descriptors(void)
 {
@@ -1209,6 +1243,7 @@ int main(void)
     test_errors();
     test_bmp_guard();
     test_iff_refused();
+    test_sgi_rla_refused();
     test_dpx_user_data();
     test_no_descriptor_left();
 

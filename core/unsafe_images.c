@@ -1,0 +1,77 @@
+/* Files OpenImageIO 2.4's readers must not see: see unsafe_images.h. */
+#include "unsafe_images.h"
+
+#include <stdio.h>
+#include <string.h>
+
+#include "bmp_check.h"
+
+static bool maya_iff(const unsigned char *b, size_t n)
+{
+    return n >= 4 && memcmp(b, "FOR", 3) == 0 && (b[3] == '4' || b[3] == '8');
+}
+
+static bool sgi(const unsigned char *b, size_t n)
+{
+    return n >= 2 && b[0] == 0x01 && b[1] == 0xDA;   /* (big-endian 474, the only byte order SGI has) */
+}
+
+static uint32_t dpx_u32(const unsigned char *p, bool big)
+{
+    return big ? (uint32_t)p[0] << 24 | (uint32_t)p[1] << 16 | (uint32_t)p[2] << 8 | p[3]
+               : (uint32_t)p[3] << 24 | (uint32_t)p[2] << 16 | (uint32_t)p[1] << 8 | p[0];
+}
+
+/* A DPX ("SDPX" big-endian, "XPDS" little-endian) whose header claims more
+ * than the file holds: user data (bytes 32-35; all ones is the format's
+ * "undefined", none) past its end after the 2048-byte generic header, or
+ * pixels (bytes 772-779: per line, lines) that cannot fit at one bit each. */
+static bool dpx_impossible(const unsigned char *b, size_t n, uint64_t file_size, char *why, size_t why_size)
+{
+    if (n < 36 || !(memcmp(b, "SDPX", 4) == 0 || memcmp(b, "XPDS", 4) == 0))
+        return false;
+    const bool big = b[0] == 'S';
+    const uint32_t user = dpx_u32(b + 32, big);
+    if (user != 0xffffffffu && (uint64_t)user + 2048 > file_size) {
+        snprintf(why, why_size, "DPX whose header gives %u bytes of user data, more than its %llu bytes hold "
+                 "(OpenImageIO 2.4's DPX reader would allocate them and abort)", (unsigned)user,
+                 (unsigned long long)file_size);
+        return true;
+    }
+    if (n < 780)
+        return false;   /* (too short for the image header: the reader refuses it) */
+    const uint64_t w = dpx_u32(b + 772, big), h = dpx_u32(b + 776, big);
+    if (w * h / 8 > file_size) {
+        snprintf(why, why_size, "DPX of %llux%llu pixels whose image data cannot fit in its %llu bytes "
+                 "(OpenImageIO 2.4's DPX reader would read past the end line by line)", (unsigned long long)w,
+                 (unsigned long long)h, (unsigned long long)file_size);
+        return true;
+    }
+    return false;
+}
+
+int dr_unsafe_image_check(const unsigned char *b, size_t n, bool whole, uint64_t file_size, char *why,
+                          size_t why_size)
+{
+    if (dpx_impossible(b, n, file_size, why, why_size))
+        return -1;
+    if (maya_iff(b, n)) {
+        snprintf(why, why_size, "Maya IFF (OpenImageIO 2.4's IFF reader writes out of bounds on malformed files, "
+                 "so drender reads none); convert it to PNG or EXR");
+        return -1;
+    }
+    if (sgi(b, n)) {
+        snprintf(why, why_size, "SGI image (OpenImageIO 2.4's SGI reader takes gigabytes and half a minute to open "
+                 "a malformed file of a few bytes, so drender reads none); convert it to PNG or EXR");
+        return -1;
+    }
+    return dr_bmp_check(b, n, whole, why, why_size);
+}
+
+const char *dr_unsafe_reader(const char *format_name)
+{
+    if (format_name && strcmp(format_name, "rla") == 0)
+        return "Wavefront RLA image (OpenImageIO 2.4's RLA reader can loop for minutes on a malformed file, so "
+               "drender reads none); convert it to PNG or EXR";
+    return NULL;
+}

@@ -1,0 +1,44 @@
+/* What OpenImageIO 2.4's readers (Debian 12 ships 2.4.7) must not be given:
+ * files on which make fuzz found a reader crashing, corrupting memory,
+ * allocating gigabytes or reading for minutes. Each case is refused before
+ * the reader sees the file, in memory and on disk, whatever the file's name:
+ *  - a BMP that its reader mishandles (bmp_check.h);
+ *  - a Maya IFF ("FOR4"/"FOR8"): the reader corrupts the heap on malformed
+ *    RLE tiles (a 160-byte file freed a block it did not own); whole;
+ *  - an SGI image (magic 0x01DA): opening a 155-byte file that claims
+ *    53374x3414 RLE pixels took the reader 28-40 s and 5.7 GB; whole;
+ *  - a DPX whose header gives more user data than the file holds (the
+ *    reader allocates it, 4.3 GB for a 2.5 KB file, then aborts), or more
+ *    pixels than it could hold at a bit each (the reader read a 3 KB file
+ *    claiming 1x50348100 pixels past its end for minutes).
+ * And a format that has no magic bytes, told only by the reader that opened
+ * the file (dr_unsafe_reader):
+ *  - Wavefront RLA: the reader looped for minutes reading a 791-byte file.
+ * None of these is a format glTF uses; IFF, SGI and RLA are refused whole,
+ * DPX (film scans are plausible targets) only where its header is impossible. */
+#ifndef DR_UNSAFE_IMAGES_H
+#define DR_UNSAFE_IMAGES_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* 0 when the file whose first n bytes are b (whole: b is all of it) may be
+ * handed to a reader; else -1 and why (a sentence fragment naming what the
+ * file is and why it is refused). file_size: the whole file's length. */
+int dr_unsafe_image_check(const unsigned char *b, size_t n, bool whole, uint64_t file_size, char *why,
+                          size_t why_size);
+
+/* Why a file that OpenImageIO opened with the reader `format_name` must not
+ * be read any further, or NULL when it may. */
+const char *dr_unsafe_reader(const char *format_name);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif
