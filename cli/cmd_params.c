@@ -39,7 +39,7 @@ void cmd_params_usage(FILE *out)
 
 static bool is_material(const struct dr_param *p)
 {
-    return p->kind <= DR_PARAM_EMISSIVE_STRENGTH;
+    return p->kind <= DR_PARAM_LAST_MATERIAL;
 }
 
 static bool is_image(const struct dr_param *p)

@@ -12,6 +12,10 @@
  *    which keeps every intermediate finite (z^2 never underflows). */
 #include "bsdf.h"
 
+#include <stddef.h>
+
+#include "bsdf_coat.h"   /* a coated BSDF (b->coated) is handed there */
+
 #define COS_EPS DR_BSDF_COS_EPS
 
 static inline double pow5(double s)
@@ -131,6 +135,8 @@ dr_vec3 dr_bsdf_eval_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double
         *pdf = 0.0;
         return dr_v3s(0.0);
     }
+    if (b->coated)
+        return dr_coat_eval_pdf(b, wo, wi, pdf);
     return eval_pdf_above(b, wo, wi, specular_prob(b, wo.z), pdf);
 }
 
@@ -139,6 +145,8 @@ dr_vec3 dr_bsdf_eval(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi)
     double pdf;
     if (!(wo.z > COS_EPS) || !(wi.z > COS_EPS))
         return dr_v3s(0.0);
+    if (b->coated)
+        return dr_coat_eval_pdf(b, wo, wi, NULL);
     /* p = 0: the pdf is not needed, the compiler drops its arithmetic. */
     return eval_pdf_above(b, wo, wi, 0.0, &pdf);
 }
@@ -152,6 +160,8 @@ double dr_bsdf_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi)
 
 double dr_bsdf_sky_share(const struct dr_bsdf *b, dr_vec3 wo)
 {
+    if (b->coated)
+        return dr_coat_sky_share(b, wo);
     if (!(wo.z > COS_EPS))
         return 0.0;
     double sharp = (0.45 - bsdf_alpha(b)) * (1.0 / 0.15);   /* (path_simd.c's sky_share: the same operations) */
@@ -160,6 +170,8 @@ double dr_bsdf_sky_share(const struct dr_bsdf *b, dr_vec3 wo)
 
 double dr_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo)
 {
+    if (b->coated)
+        return dr_coat_specular_prob(b, wo);
     if (!(wo.z > COS_EPS))
         return no_specular_lobe(b) ? 0.0 : specular_prob(b, 0.0);
     return specular_prob(b, wo.z);
@@ -285,12 +297,16 @@ static inline __attribute__((always_inline)) dr_vec3 sample_dir(const struct dr_
 
 dr_vec3 dr_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lobe, double u1, double u2)
 {
+    if (b->coated)
+        return dr_coat_sample_dir(b, wo, lobe, u1, u2);
     return sample_dir(b, wo, lobe, u1, u2);
 }
 
 bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u1, double u2,
                     struct dr_bsdf_sample *out)
 {
+    if (b->coated)
+        return dr_coat_sample(b, wo, u_lobe, u1, u2, out);
     out->wi = dr_v3(0.0, 0.0, 1.0);
     out->f = dr_v3s(0.0);
     out->pdf = 0.0;
@@ -539,6 +555,10 @@ void d_bsdf_eval(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out,
 {
     if (!(wo.z > COS_EPS) || !(wi.z > COS_EPS))
         return;
+    if (b->coated) {
+        d_coat_eval(b, wo, wi, d_out, d, d_wo, d_wi);
+        return;
+    }
     if (d)
         d_eval_params(b, wo, wi, d_out, d);
     /* The Lambertian fast path, f = base / pi, does not depend on the directions. */
@@ -593,6 +613,10 @@ static double d_specular_prob(const struct dr_bsdf *b, double cos_o, double d_p,
 
 void d_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo, double d_p, struct dr_d_bsdf *d, dr_vec3 *d_wo)
 {
+    if (b->coated) {
+        d_coat_specular_prob(b, wo, d_p, d, d_wo);
+        return;
+    }
     /* Below the surface dr_bsdf_specular_prob is p at cos_o = 0, a constant in wo. */
     bool above = wo.z > COS_EPS;
     double d_cos = d_specular_prob(b, above ? wo.z : 0.0, d_p, d);
@@ -646,13 +670,19 @@ static void d_pdf_impl(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double d
 void d_bsdf_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double d_pdf, struct dr_d_bsdf *d,
                 dr_vec3 *d_wo, dr_vec3 *d_wi)
 {
-    d_pdf_impl(b, wo, wi, d_pdf, true, d, d_wo, d_wi);
+    if (b->coated)
+        d_coat_pdf(b, wo, wi, d_pdf, true, d, d_wo, d_wi);
+    else
+        d_pdf_impl(b, wo, wi, d_pdf, true, d, d_wo, d_wi);
 }
 
 void d_bsdf_pdf_fixed_prob(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double d_pdf, struct dr_d_bsdf *d,
                            dr_vec3 *d_wo, dr_vec3 *d_wi)
 {
-    d_pdf_impl(b, wo, wi, d_pdf, false, d, d_wo, d_wi);
+    if (b->coated)
+        d_coat_pdf(b, wo, wi, d_pdf, false, d, d_wo, d_wi);
+    else
+        d_pdf_impl(b, wo, wi, d_pdf, false, d, d_wo, d_wi);
 }
 
 /* --------------------------------------------------- sampling map adjoints */
@@ -710,6 +740,10 @@ static void d_sample_vndf(dr_vec3 wo, double a, const struct vndf_tape *t, dr_ve
 void d_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lobe, double u1, double u2,
                        dr_vec3 d_wi, struct dr_d_bsdf *d, dr_vec3 *d_wo)
 {
+    if (b->coated) {
+        d_coat_sample_dir(b, wo, lobe, u1, u2, d_wi, d, d_wo);
+        return;
+    }
     if (lobe != DR_BSDF_LOBE_SPECULAR || !(wo.z > COS_EPS))
         return;
     const double rough = b->roughness;

@@ -10,6 +10,11 @@
  * Fresnel at wo.n and wi.n (not glTF's 1 - F(wo.h), which creates energy at
  * grazing angles): reciprocal, and a white dielectric's albedo stays <= 1.
  *
+ * A clear coat (KHR_materials_clearcoat, coated) layers a second GGX lobe
+ * over all of this (bsdf_coat.c, which the functions below call for it):
+ *   f = T(wo) T(wi) f_base + coat Fc(wo.h) D_c G2_c / (4 |wo.n| |wi.n|),
+ *   T(w) = 1 - coat Fc(w.n),  Fc = 0.04 + 0.96 (1 - cos)^5  (index 1.5).
+ *
  * All directions are unit vectors in the local shading frame (normal = +z),
  * both pointing away from the surface: wo towards the viewer, wi towards the
  * light. Below the surface (z <= 0) on either side, f = 0 and pdf = 0. */
@@ -30,10 +35,15 @@ struct dr_bsdf {
     double metallic, roughness;
     double specular;
     dr_vec3 specular_color;
+    /* KHR_materials_clearcoat (bsdf_coat.c): coated says the layer is there,
+     * so that a factor a fit moves to 0 keeps its derivative (false: the
+     * factors are unused and nothing of the coat is computed) */
+    double coat, coat_roughness;   /* clearcoatFactor, clearcoatRoughnessFactor */
+    bool coated;
 };
 
-/* The two lobes dr_bsdf_sample chooses between. */
-enum dr_bsdf_lobe { DR_BSDF_LOBE_DIFFUSE, DR_BSDF_LOBE_SPECULAR };
+/* The lobes dr_bsdf_sample chooses between (the coat's only when coated). */
+enum dr_bsdf_lobe { DR_BSDF_LOBE_DIFFUSE, DR_BSDF_LOBE_SPECULAR, DR_BSDF_LOBE_COAT };
 
 struct dr_bsdf_sample {
     dr_vec3 wi;     /* sampled direction, local frame */
@@ -50,7 +60,10 @@ double dr_bsdf_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi);
 dr_vec3 dr_bsdf_eval_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double *pdf);
 /* Chooses a lobe with u_lobe (probability dr_bsdf_specular_prob), then samples
  * it: cosine-weighted hemisphere for the diffuse lobe, GGX visible normals
- * (Heitz 2018) for the specular lobe, from (u1, u2). Returns false when no
+ * (Heitz 2018) for the specular lobe, from (u1, u2). A coated BSDF first
+ * picks its coat's lobe (GGX visible normals of the coat's roughness) with
+ * probability coat Fc(wo.n), else the base's lobes with u_lobe rescaled.
+ * Returns false when no
  * valid direction results (wo below the surface, sample below it); the path
  * then ends. */
 bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u1,
@@ -62,8 +75,8 @@ bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u
  * roughness 0.67: there the cosine's samples were the better ones on the
  * sample Box as metal); 0 for wo at or below the surface. */
 double dr_bsdf_sky_share(const struct dr_bsdf *b, dr_vec3 wo);
-/* Probability of choosing the specular lobe for this wo (0 for a pure
- * Lambertian, 1 for a lobe with no diffuse part). */
+/* Probability of choosing a microfacet lobe (specular or coat) for this wo
+ * (0 for a pure Lambertian, 1 for a BSDF with no diffuse part). */
 double dr_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo);
 /* The sampling map of one lobe: the direction dr_bsdf_sample returns for
  * (u1, u2) once it has chosen `lobe` (bit for bit the same). The diffuse map
@@ -103,6 +116,7 @@ void dr_sincos_turn(double u, double *s, double *c);
 struct dr_d_bsdf {
     dr_vec3 base_color;
     double metallic, roughness;
+    double coat, coat_roughness;
 };
 
 /* Reverse-mode adjoints (redner style): each takes the primal's inputs and
@@ -141,7 +155,9 @@ void d_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lo
 /* ---- derivative sampling (--sampling derivative; the maths beside the code in bsdf.c) ----
  *
  * Densities made for d f / d theta rather than for f: a mixture of lobes
- * whose weights follow the requested parameters. */
+ * whose weights follow the requested parameters. They know the base BSDF
+ * only: the estimators do not run derivative sampling at a coated material
+ * with requested parameters (estimators/common.c refuses it). */
 
 /* The BSDF inputs a derivative is taken with respect to (bits). */
 enum dr_bsdf_dparam { DR_BSDF_D_BASE = 1u, DR_BSDF_D_METALLIC = 2u, DR_BSDF_D_ROUGHNESS = 4u };

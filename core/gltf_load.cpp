@@ -234,7 +234,7 @@ struct AccessorView {
 };
 
 const char *const kSupportedExtensions[] = {
-    "KHR_materials_emissive_strength", "KHR_materials_specular", "KHR_lights_punctual",
+    "KHR_materials_emissive_strength", "KHR_materials_specular", "KHR_materials_clearcoat", "KHR_lights_punctual",
     "DR_environment", "DR_units", "KHR_texture_transform", "KHR_draco_mesh_compression",
     /* KTX2 images: read when they hold 8-bit texels (core/ktx2.h); the others are refused, or skipped
      * under --ignore-unsupported (check_ktx2): handled, not ignored */
@@ -311,6 +311,7 @@ private:
     /* participating media (the "media" section at the end of this file) */
     void load_material_medium(const tinygltf::Material &g, const std::string &mp, size_t index, dr_material &m);
     void load_thin_glass(const tinygltf::Material &g, const std::string &mp, dr_material &m);
+    void load_clearcoat(const tinygltf::Material &g, const std::string &mp, dr_material &m);
     double material_ior(const tinygltf::Material &g, const std::string &mp, const char *what);
     void read_medium_ext(const tinygltf::Value &v, const std::string &ep, dr_medium &med);
     void read_medium_grid(const tinygltf::Value &v, const std::string &ep, dr_medium &med);
@@ -970,6 +971,7 @@ void Loader::load_materials()
                     warn_once(std::string("spec:") + key, "%s/%s: specular textures are not supported; ignored",
                               ep.c_str(), key);
         }
+        load_clearcoat(g, mp, m);        /* (before load_material_medium: thin glass drops the coat) */
         load_material_medium(g, mp, i, m);
         for (const auto &kv : g.extensions)
             if (!is_supported_extension(kv.first))
@@ -1819,6 +1821,50 @@ void Loader::load_thin_glass(const tinygltf::Material &g, const std::string &mp,
                   "(roughnessFactor alone sets its roughness)", mp.c_str());
     if (dropped & 4)
         warn_once("thin:emission", "%s: thin-walled glass does not emit: its emission is ignored", mp.c_str());
+    if (dropped & 8)
+        warn_once("thin:coat", "%s/extensions/KHR_materials_clearcoat: ignored on thin-walled glass (its "
+                  "reflection is the sheet's own)", mp.c_str());
+}
+
+/* KHR_materials_clearcoat (bsdf_coat.c): its two factors, in [0, 1]. The
+ * coat's textures are not read (warned: the factors apply everywhere), and
+ * the coat is shaded with the base's normal, normal map included, where
+ * glTF gives it the geometric normal unless clearcoatNormalTexture says
+ * otherwise (warned where a normal map makes the two differ). */
+void Loader::load_clearcoat(const tinygltf::Material &g, const std::string &mp, dr_material &m)
+{
+    auto it = g.extensions.find("KHR_materials_clearcoat");
+    if (it == g.extensions.end()) return;
+    const std::string ep = mp + "/extensions/KHR_materials_clearcoat";
+    if (!it->second.IsObject()) fail(DR_ERR_FORMAT, "%s: expected an object", ep.c_str());
+    const std::pair<const char *, double *> factors[] = {{"clearcoatFactor", &m.coat},
+                                                         {"clearcoatRoughnessFactor", &m.coat_roughness}};
+    for (const auto &f : factors) {
+        *f.second = ext_number(it->second, f.first, 0.0, ep);
+        if (!(*f.second >= 0.0 && *f.second <= 1.0))
+            fail(DR_ERR_FORMAT, "%s/%s: must be in [0, 1] (got %g)", ep.c_str(), f.first, *f.second);
+    }
+    m.coated = m.coat > 0.0;
+    if (!m.coated) return;
+    for (const char *key : {"clearcoatTexture", "clearcoatRoughnessTexture"})
+        if (it->second.Has(key))
+            warn_once(std::string("coat:") + key, "%s/%s: clearcoat textures are not supported; ignored (the "
+                      "factors apply everywhere)", ep.c_str(), key);
+    /* The coat's normal is the base's: exact where clearcoatNormalTexture is
+     * the normalTexture itself (as Blender writes it) or where neither is given */
+    const tinygltf::Value &cn = it->second.Get("clearcoatNormalTexture");
+    const tinygltf::NormalTextureInfo &nt = g.normalTexture;
+    auto number = [](const tinygltf::Value &o, const char *key, double def) {
+        return o.Has(key) && o.Get(key).IsNumber() ? o.Get(key).GetNumberAsDouble() : def;
+    };
+    const bool same = cn.IsObject() && nt.index >= 0 && number(cn, "index", -1) == nt.index &&
+                      number(cn, "texCoord", 0) == nt.texCoord && number(cn, "scale", 1) == nt.scale;
+    if (it->second.Has("clearcoatNormalTexture") && !same)
+        warn_once("coat:normal", "%s/clearcoatNormalTexture: not supported unless it is the normalTexture; the "
+                  "clear coat is shaded with the base's normal", ep.c_str());
+    else if (!it->second.Has("clearcoatNormalTexture") && nt.index >= 0)
+        warn_once("coat:normal", "%s: the clear coat is shaded with the normal map's normal (glTF gives it the "
+                  "geometric normal)", ep.c_str());
 }
 
 void Loader::load_material_medium(const tinygltf::Material &g, const std::string &mp, size_t index, dr_material &m)

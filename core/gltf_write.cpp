@@ -477,6 +477,16 @@ void Writer::apply_material(int mi, const std::vector<const dr_param *> &ps)
         case DR_PARAM_ROUGHNESS: pbr.roughnessFactor = clamped(values(p)[0], 0, 1, p, &warned); break;
         case DR_PARAM_EMISSIVE_FACTOR: factor_p = p; break;
         case DR_PARAM_EMISSIVE_STRENGTH: strength_p = p; break;
+        case DR_PARAM_CLEARCOAT:
+        case DR_PARAM_CLEARCOAT_ROUGHNESS: {
+            /* (a parameter of coated materials only, whose extension object exists) */
+            tinygltf::Value &ext = m.extensions["KHR_materials_clearcoat"];
+            tinygltf::Value::Object o = ext.IsObject() ? ext.Get<tinygltf::Value::Object>() : tinygltf::Value::Object();
+            o[p->kind == DR_PARAM_CLEARCOAT ? "clearcoatFactor" : "clearcoatRoughnessFactor"] =
+                tinygltf::Value(clamped(values(p)[0], 0, 1, p, &warned));
+            ext = tinygltf::Value(std::move(o));
+            break;
+        }
         default: break;
         }
     }
@@ -695,7 +705,9 @@ void Writer::apply_params()
         case DR_PARAM_METALLIC:
         case DR_PARAM_ROUGHNESS:
         case DR_PARAM_EMISSIVE_FACTOR:
-        case DR_PARAM_EMISSIVE_STRENGTH: mats[p->target].push_back(p); break;
+        case DR_PARAM_EMISSIVE_STRENGTH:
+        case DR_PARAM_CLEARCOAT:
+        case DR_PARAM_CLEARCOAT_ROUGHNESS: mats[p->target].push_back(p); break;
         case DR_PARAM_LIGHT_COLOR:
         case DR_PARAM_LIGHT_INTENSITY: lights[p->target].push_back(p); break;
         case DR_PARAM_ENV_COLOR:

@@ -30,6 +30,9 @@ void dr_material_eval(const struct dr_scene *s, const struct dr_hit *hit, struct
     b->roughness = m->roughness;
     b->specular = m->specular;
     b->specular_color = m->specular_color;
+    b->coated = m->coated;
+    b->coat = m->coat;
+    b->coat_roughness = m->coat_roughness;
     double px[4], uv[2];
     const struct dr_texture *t = texref_texture(s, &m->base_color_tex);
     if (t) {
@@ -100,6 +103,11 @@ void d_material_eval(const struct dr_scene *s, const struct dr_param_set *ps, co
         dr_sink_add(k, ps->mat_roughness[mi], d_b->roughness * tex_g);
     if (ps->mat_metallic[mi] >= 0)
         dr_sink_add(k, ps->mat_metallic[mi], d_b->metallic * tex_b);
+    /* the coat's factors (no textures) */
+    if (ps->mat_coat[mi] >= 0)
+        dr_sink_add(k, ps->mat_coat[mi], d_b->coat);
+    if (ps->mat_coat_roughness[mi] >= 0)
+        dr_sink_add(k, ps->mat_coat_roughness[mi], d_b->coat_roughness);
     if (mt && ps->image[mt->image] >= 0) {
         double d_out[4] = {0.0, d_b->roughness * m->roughness, d_b->metallic * m->metallic, 0.0};
         d_texture_eval(mt, &s->images[mt->image], muv[0], muv[1], d_out, ps->image[mt->image], k);

@@ -103,6 +103,8 @@ static const char *const mat_fields[] = {
     [DR_PARAM_ROUGHNESS] = "/pbrMetallicRoughness/roughnessFactor",
     [DR_PARAM_EMISSIVE_FACTOR] = "/emissiveFactor",
     [DR_PARAM_EMISSIVE_STRENGTH] = "/extensions/KHR_materials_emissive_strength/emissiveStrength",
+    [DR_PARAM_CLEARCOAT] = "/extensions/KHR_materials_clearcoat/clearcoatFactor",
+    [DR_PARAM_CLEARCOAT_ROUGHNESS] = "/extensions/KHR_materials_clearcoat/clearcoatRoughnessFactor",
 };
 
 const char *dr_param_type_name(const struct dr_param *p)
@@ -125,8 +127,10 @@ void dr_param_range(const struct dr_param *p, double *lo, double *hi)
 {
     switch (p->kind) {
     case DR_PARAM_BASE_COLOR:
-    case DR_PARAM_METALLIC: *lo = 0.0; *hi = 1.0; break;
-    case DR_PARAM_ROUGHNESS: *lo = 0.001; *hi = 1.0; break;   /* the BSDF's floor */
+    case DR_PARAM_METALLIC:
+    case DR_PARAM_CLEARCOAT: *lo = 0.0; *hi = 1.0; break;
+    case DR_PARAM_ROUGHNESS:
+    case DR_PARAM_CLEARCOAT_ROUGHNESS: *lo = 0.001; *hi = 1.0; break;   /* the BSDF's floor */
     case DR_PARAM_IMAGE: *lo = 0.0; *hi = 1.0; break;        /* colour or data texels */
     case DR_PARAM_MEDIUM_ALBEDO: *lo = 0.0; *hi = 1.0; break;
     case DR_PARAM_MEDIUM_G: *lo = -0.99; *hi = 0.99; break;
@@ -136,7 +140,7 @@ void dr_param_range(const struct dr_param *p, double *lo, double *hi)
 
 void dr_param_display_name(const struct dr_scene *s, const struct dr_param *p, char *buf, size_t size)
 {
-    if (p->kind <= DR_PARAM_EMISSIVE_STRENGTH && s->materials[p->target].name[0] &&
+    if (p->kind <= DR_PARAM_LAST_MATERIAL && s->materials[p->target].name[0] &&
         !strchr(s->materials[p->target].name, '/')) {
         int same = 0;
         for (int i = 0; i < s->n_file_materials; i++)
@@ -223,9 +227,15 @@ static bool thin_glass_unused(const struct dr_scene *s, int m, enum dr_param_kin
     return s->materials[m].thin_ior > 0.0 && kind != DR_PARAM_ROUGHNESS;
 }
 
+/* The coat's factors are parameters of coated materials only (scene.h). */
+static bool uncoated_unused(const struct dr_scene *s, int m, enum dr_param_kind kind)
+{
+    return (kind == DR_PARAM_CLEARCOAT || kind == DR_PARAM_CLEARCOAT_ROUGHNESS) && !s->materials[m].coated;
+}
+
 int dr_params_list(const struct dr_scene *s, struct dr_param **out, int *count)
 {
-    int cap = 5 * s->n_file_materials + 2 * (max_light_index(s) + 1) + 3 + s->n_images + 5 * s->n_media + 1;
+    int cap = 7 * s->n_file_materials + 2 * (max_light_index(s) + 1) + 3 + s->n_images + 5 * s->n_media + 1;
     struct dr_param *list = calloc((size_t)cap, sizeof *list);
     if (!list) {
         dr_set_error("out of memory");
@@ -233,8 +243,8 @@ int dr_params_list(const struct dr_scene *s, struct dr_param **out, int *count)
     }
     int n = 0;
     for (int m = 0; m < s->n_file_materials; m++)
-        for (int k = DR_PARAM_BASE_COLOR; k <= DR_PARAM_EMISSIVE_STRENGTH; k++) {
-            if (thin_glass_unused(s, m, (enum dr_param_kind)k))
+        for (int k = DR_PARAM_BASE_COLOR; k <= DR_PARAM_LAST_MATERIAL; k++) {
+            if (thin_glass_unused(s, m, (enum dr_param_kind)k) || uncoated_unused(s, m, (enum dr_param_kind)k))
                 continue;
             int64_t size = (k == DR_PARAM_BASE_COLOR || k == DR_PARAM_EMISSIVE_FACTOR) ? 3 : 1;
             list[n++] = make(k, m, size, "/materials/%d%s", m, mat_fields[k]);
@@ -370,7 +380,7 @@ static int fail_with_suggestions(const struct dr_scene *s, const char *ptr, cons
         for (int i = 0; i < n; i++) {
             /* compare against the index form and the material-name form */
             int d = edit_distance(ptr, list[i].name);
-            if (list[i].kind <= DR_PARAM_EMISSIVE_STRENGTH) {
+            if (list[i].kind <= DR_PARAM_LAST_MATERIAL) {
                 char named[2 * DR_PARAM_NAME_MAX];
                 snprintf(named, sizeof named, "/materials/%s%s", s->materials[list[i].target].name,
                          mat_fields[list[i].kind]);
@@ -429,13 +439,13 @@ int dr_param_resolve(const struct dr_scene *s, const char *ptr, struct dr_param 
             strcat(field, "/");
             strcat(field, tok[i]);
         }
-        for (int k = DR_PARAM_BASE_COLOR; k <= DR_PARAM_EMISSIVE_STRENGTH; k++)
+        for (int k = DR_PARAM_BASE_COLOR; k <= DR_PARAM_LAST_MATERIAL; k++)
             if (strcmp(field, mat_fields[k]) == 0)
                 for (int i = 0; i < count; i++)
                     if (list[i].kind == (enum dr_param_kind)k && list[i].target == m)
                         want = i;
         bool thin_field = false;   /* a field of m that thin glass does not use */
-        for (int k = DR_PARAM_BASE_COLOR; k <= DR_PARAM_EMISSIVE_STRENGTH; k++)
+        for (int k = DR_PARAM_BASE_COLOR; k <= DR_PARAM_LAST_MATERIAL; k++)
             thin_field |= thin_glass_unused(s, m, (enum dr_param_kind)k) && strcmp(field, mat_fields[k]) == 0;
         if (want < 0 && thin_field) {
             free(list);
@@ -478,6 +488,8 @@ static double *mat_scalar(struct dr_material *m, enum dr_param_kind k)
     case DR_PARAM_METALLIC: return &m->metallic;
     case DR_PARAM_ROUGHNESS: return &m->roughness;
     case DR_PARAM_EMISSIVE_STRENGTH: return &m->emissive_strength;
+    case DR_PARAM_CLEARCOAT: return &m->coat;
+    case DR_PARAM_CLEARCOAT_ROUGHNESS: return &m->coat_roughness;
     default: return NULL;
     }
 }
@@ -625,6 +637,8 @@ void dr_param_set_destroy(struct dr_param_set *set)
     free(set->mat_roughness);
     free(set->mat_emissive_factor);
     free(set->mat_emissive_strength);
+    free(set->mat_coat);
+    free(set->mat_coat_roughness);
     free(set->light_color);
     free(set->light_intensity);
     free(set->image);
@@ -662,6 +676,8 @@ static void index_param(struct dr_param_set *set, const struct dr_scene *s, cons
     case DR_PARAM_ROUGHNESS: set->mat_roughness[p->target] = p->offset; break;
     case DR_PARAM_EMISSIVE_FACTOR: set->mat_emissive_factor[p->target] = p->offset; break;
     case DR_PARAM_EMISSIVE_STRENGTH: set->mat_emissive_strength[p->target] = p->offset; break;
+    case DR_PARAM_CLEARCOAT: set->mat_coat[p->target] = p->offset; break;
+    case DR_PARAM_CLEARCOAT_ROUGHNESS: set->mat_coat_roughness[p->target] = p->offset; break;
     case DR_PARAM_LIGHT_COLOR:
     case DR_PARAM_LIGHT_INTENSITY:
         for (int l = 0; l < s->n_lights; l++)
@@ -696,6 +712,8 @@ static bool alloc_indices(struct dr_param_set *set, const struct dr_scene *s, in
     set->mat_roughness = offsets(s->n_materials);
     set->mat_emissive_factor = offsets(s->n_materials);
     set->mat_emissive_strength = offsets(s->n_materials);
+    set->mat_coat = offsets(s->n_materials);
+    set->mat_coat_roughness = offsets(s->n_materials);
     set->light_color = offsets(s->n_lights);
     set->light_intensity = offsets(s->n_lights);
     set->image = offsets(s->n_images);
@@ -710,7 +728,8 @@ static bool alloc_indices(struct dr_param_set *set, const struct dr_scene *s, in
     set->med_active = calloc((size_t)s->n_media + 1, sizeof(bool));
     return set->med_extinction && set->med_albedo && set->med_g && set->med_density_scale && set->med_density &&
            set->med_active && set->params && set->mat_base_color && set->mat_metallic && set->mat_roughness &&
-           set->mat_emissive_factor && set->mat_emissive_strength && set->light_color && set->light_intensity &&
+           set->mat_emissive_factor && set->mat_emissive_strength && set->mat_coat && set->mat_coat_roughness &&
+           set->light_color && set->light_intensity &&
            set->image && set->mat_bsdf_active && set->mat_emission_active;
 }
 
@@ -751,7 +770,8 @@ static void mark_active(struct dr_param_set *set, const struct dr_scene *s)
     for (int m = 0; m < s->n_materials; m++) {
         const struct dr_material *mat = &s->materials[m];
         set->mat_bsdf_active[m] = set->mat_base_color[m] >= 0 || set->mat_metallic[m] >= 0 ||
-                                  set->mat_roughness[m] >= 0 || texref_active(set, s, &mat->base_color_tex) ||
+                                  set->mat_roughness[m] >= 0 || set->mat_coat[m] >= 0 ||
+                                  set->mat_coat_roughness[m] >= 0 || texref_active(set, s, &mat->base_color_tex) ||
                                   texref_active(set, s, &mat->metallic_roughness_tex);
         set->mat_emission_active[m] = set->mat_emissive_factor[m] >= 0 || set->mat_emissive_strength[m] >= 0 ||
                                       texref_active(set, s, &mat->emissive_tex);

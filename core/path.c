@@ -444,7 +444,7 @@ static void emission_part(const struct dr_scene *s, const struct dr_param_set *p
 static void vertex_part(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
                         dr_vec3 d_e, dr_vec3 d_f, struct dr_grad_sink *sink)
 {
-    struct dr_d_bsdf db = {dr_v3s(0.0), 0.0, 0.0};
+    struct dr_d_bsdf db = {0};
     bool bsdf = false;
     if (!dr_is_black(d_e)) {
         if (v->emits) {

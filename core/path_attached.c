@@ -28,7 +28,7 @@ bool dr_path_material_sampling_moves(const struct dr_scene *s, const struct dr_p
 {
     if (!ps || m < 0 || m >= ps->n_materials)
         return false;
-    if (ps->mat_roughness[m] >= 0)
+    if (ps->mat_roughness[m] >= 0 || ps->mat_coat_roughness[m] >= 0)   /* (the coat's lobe map) */
         return true;
     int t = s->materials[m].metallic_roughness_tex.texture;
     return t >= 0 && ps->image[s->textures[t].image] >= 0;

@@ -77,7 +77,7 @@ static void d_ndf_along(const struct dr_scene *s, const struct dr_param_set *ps,
         if (dr_is_black(part))
             continue;
         sink->channel = c;
-        struct dr_d_bsdf db = {dr_v3s(0.0), 0.0, 0.0};
+        struct dr_d_bsdf db = {0};
         d_bsdf_eval_rough_ndf(&v->bsdf, v->wo, wi, part, &db);
         d_material_eval(s, ps, &v->hit, &db, sink);
         if (!sink->dir)

@@ -1601,8 +1601,10 @@ static void differentiated_vertex(const struct dr_scene *s, const struct dr_path
     v->frame = (dr_frame){dr_v3x8_get(&g->fs, i), dr_v3x8_get(&g->ft, i), dr_v3x8_get(&g->fn, i)};
     v->wo = dr_v3x8_get(&g->wo, i);
     /* dr_material_eval's record: the groups keep its fields but the specular colour, a constant */
-    v->bsdf = (struct dr_bsdf){dr_v3x8_get(&g->base, i), g->metallic[i], g->roughness[i], g->specular[i],
-                               s->materials[v->hit.material].specular_color};
+    v->bsdf = (struct dr_bsdf){.base_color = dr_v3x8_get(&g->base, i), .metallic = g->metallic[i],
+                               .roughness = g->roughness[i], .specular = g->specular[i],
+                               .specular_color = s->materials[v->hit.material].specular_color};   /* (no coat:
+                                                                    coated scenes do not run eight-wide) */
     v->nee_wi = dr_v3x8_get(&g->nee_wi, i);
     v->nee_bsdf_pdf = g->bsdf_pdf[i];
 }

@@ -78,6 +78,10 @@ unsigned dr_material_make_thin(struct dr_material *m, double ior)
     m->metallic = 1.0;
     m->base_color_tex.texture = -1;
     m->metallic_roughness_tex.texture = -1;
+    if (m->coated)
+        dropped |= 8;
+    m->coated = false;   /* (the sheet's reflection is already Fresnel's) */
+    m->coat = m->coat_roughness = 0.0;
     return dropped;
 }
 
@@ -110,6 +114,8 @@ static int refresh(struct dr_scene *s, bool lights)
             s->effects |= DR_FX_TEXTURES;
         if (material_has_specular(mat))
             s->effects |= DR_FX_SPECULAR;
+        if (mat->coated)
+            s->effects |= DR_FX_CLEARCOAT;
         s->effects |= surface_effects(s, i);
     }
     free(used);
@@ -277,6 +283,7 @@ void dr_effects_describe(unsigned fx, char *buf, int size)
         {DR_FX_ALPHA_MASK, "alpha_mask"},       {DR_FX_ALPHA_BLEND, "alpha_blend"},
         {DR_FX_SINGLE_SIDED, "single_sided"},   {DR_FX_VERTEX_COLORS, "vertex_colors"},
         {DR_FX_DIELECTRIC_BOUNDARIES, "dielectric_boundaries"}, {DR_FX_THIN_TRANSMISSION, "thin_transmission"},
+        {DR_FX_CLEARCOAT, "clearcoat"},
     };
     int n = 0;
     buf[0] = '\0';

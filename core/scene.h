@@ -54,6 +54,12 @@ struct dr_material {
      * metal of the material's roughness otherwise; 0: not one. Set by
      * dr_material_make_thin. */
     double thin_ior;
+    /* KHR_materials_clearcoat (bsdf_coat.c): coated when the file gives the
+     * extension with clearcoatFactor > 0 (decided at load, so that a fit
+     * that moves the factor to 0 keeps its derivative); the factors then
+     * apply everywhere (clearcoat textures are not read) */
+    bool coated;
+    double coat, coat_roughness;
 };
 
 /* Makes m thin-walled glass of index ior (>= 1): base colour white and no
@@ -62,7 +68,8 @@ struct dr_material {
  * stops at the sheet is its Fresnel reflection, already weighed by the
  * stop's probability), no emission. Returns a bit mask of what was
  * dropped: 1 a base colour other than white or its texture, 2 a
- * metallic-roughness texture, 4 emission (the loader warns). */
+ * metallic-roughness texture, 4 emission, 8 a clear coat (the loader
+ * warns). */
 unsigned dr_material_make_thin(struct dr_material *m, double ior);
 
 enum dr_tri_flags {
@@ -163,7 +170,8 @@ enum dr_effect {
     DR_FX_SINGLE_SIDED = 1 << 12,      /* doubleSided false: back faces culled */
     DR_FX_VERTEX_COLORS = 1 << 13,     /* COLOR_0 multiplies base colours (mesh.colors) */
     DR_FX_DIELECTRIC_BOUNDARIES = 1 << 14, /* a medium bounded by a smooth dielectric (medium.h: ior) */
-    DR_FX_THIN_TRANSMISSION = 1 << 15  /* thin-walled glass (dr_material.thin_ior, coverage.h) */
+    DR_FX_THIN_TRANSMISSION = 1 << 15, /* thin-walled glass (dr_material.thin_ior, coverage.h) */
+    DR_FX_CLEARCOAT = 1 << 16          /* some material has a clear coat (dr_material.coated, bsdf_coat.c) */
 };
 
 struct dr_scene {

@@ -205,7 +205,7 @@ static double uv_objective(void *c, const double *x)
         return k->w[0] * px[0] + k->w[1] * px[1] + k->w[2] * px[2] + k->w[3] * px[3];
     }
     if (k->texture == -1) {
-        struct dr_bsdf b;
+        struct dr_bsdf b = {0};
         dr_material_eval(k->s, &h, &b);
         return dr_dot(k->wb.base_color, b.base_color) + k->wb.metallic * b.metallic + k->wb.roughness * b.roughness;
     }
@@ -220,13 +220,13 @@ static void test_uv(const struct dr_scene *s)
     const double pts[][2] = {{0.37, 0.29}, {1.61, -0.43}, {-0.62, 0.71}};
     for (int t = 0; t < 3; t++)
         for (int p = 0; p < 3; p++) {
-            struct uv_ctx k = {s, t, {0}, {rnd(), rnd(), rnd(), rnd()}, {dr_v3s(0), 0, 0}};
+            struct uv_ctx k = {s, t, {0}, {rnd(), rnd(), rnd(), rnd()}, {dr_v3s(0), 0, 0, 0, 0}};
             double x[2] = {pts[p][0], pts[p][1]}, g[2] = {0, 0};
             const struct dr_texture *tx = &s->textures[t];
             d_texture_eval_uv(tx, &s->images[tx->image], x[0], x[1], true, k.w, &g[0], &g[1]);
             check_fd(names[t], uv_objective, &k, x, 2, g, 1e-7, 1e-6);
         }
-    struct uv_ctx k = {s, -1, {0}, {rnd(), rnd(), rnd(), 0}, {rnd3(), rnd(), rnd()}};
+    struct uv_ctx k = {s, -1, {0}, {rnd(), rnd(), rnd(), 0}, {rnd3(), rnd(), rnd(), 0, 0}};
     dr_hit_at(&s->mesh, 0, 0.3, 0.25, &k.hit);
     double x[2] = {k.hit.uv[0], k.hit.uv[1]};
     struct dr_d_hit dh = {0};
@@ -252,7 +252,7 @@ static double attr_objective(void *c, const double *x)
     struct attr_ctx *k = c;
     struct dr_hit h;
     dr_hit_compute(&k->s->mesh, 0, v3(x), v3(x + 3), &h);
-    struct dr_bsdf b;
+    struct dr_bsdf b = {0};
     dr_material_eval(k->s, &h, &b);
     return dr_dot(k->wb.base_color, b.base_color) + k->wb.metallic * b.metallic + k->wb.roughness * b.roughness +
            dr_dot(k->we, dr_emission(k->s, &h));
@@ -275,7 +275,7 @@ static void test_hit_attributes(struct dr_scene *s)
     mat->emissive_tex.transformed = true;
     memcpy(mat->emissive_tex.xf, xf, sizeof xf);
     mat->metallic_roughness_tex.texcoord = 1;
-    struct attr_ctx k = {s, {rnd3(), rnd(), rnd()}, rnd3()};
+    struct attr_ctx k = {s, {rnd3(), rnd(), rnd(), 0, 0}, rnd3()};
     dr_vec3 o = dr_v3(0.2, 1.5, 0.3);
     struct dr_hit target;
     dr_hit_at(m, 0, 0.3, 0.4, &target);
@@ -374,7 +374,7 @@ static double sky_nee_objective(void *c, const double *x)
     struct sky_nee_ctx *k = c;
     const struct dr_path_vertex *v = k->v;
     k->s->materials[0].roughness = x[0];
-    struct dr_bsdf b;
+    struct dr_bsdf b = {0};
     dr_material_eval(k->s, &v->hit, &b);
     const struct dr_sky_bsdf sky = {&b, v->frame, v->wo, v->ng, k->share};
     struct dr_light_sample ls;
@@ -557,12 +557,12 @@ static void test_pdf_fixed(void)
     for (int r = 0; r < 3; r++) {
         struct pdf_ctx k;
         memset(&k, 0, sizeof k);
-        k.b = (struct dr_bsdf){dr_v3(0.5, 0.4, 0.3), 0.4, roughs[r], 1.0, dr_v3s(1.0)};
+        k.b = (struct dr_bsdf){.base_color = dr_v3(0.5, 0.4, 0.3), .metallic = 0.4, .roughness = roughs[r], .specular = 1.0, .specular_color = dr_v3s(1.0)};
         dr_vec3 wo = dr_normalize(dr_v3(0.3, -0.2, 0.8));
         dr_vec3 wi = dr_normalize(dr_v3(-0.25, 0.15 + 0.05 * r, 0.9));
         k.P0 = dr_bsdf_specular_prob(&k.b, wo);
         double x[7] = {roughs[r], wo.x, wo.y, wo.z, wi.x, wi.y, wi.z};
-        struct dr_d_bsdf db = {dr_v3s(0), 0, 0};
+        struct dr_d_bsdf db = {0};
         dr_vec3 dwo = dr_v3s(0), dwi = dr_v3s(0);
         d_bsdf_pdf_fixed_prob(&k.b, wo, wi, 1.0, &db, &dwo, &dwi);
         double g[7] = {db.roughness, dwo.x, dwo.y, dwo.z, dwi.x, dwi.y, dwi.z};

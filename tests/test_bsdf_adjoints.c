@@ -38,7 +38,7 @@ static double rng_sym(struct rng *r) { return 2.0 * rng_next(r) - 1.0; }
 
 static struct dr_bsdf make_bsdf(double rough, double metal, double spec, dr_vec3 base, dr_vec3 spec_col)
 {
-    struct dr_bsdf b;
+    struct dr_bsdf b = {0};
     b.base_color = base;
     b.metallic = metal;
     b.roughness = rough;
@@ -56,15 +56,16 @@ static dr_vec3 reflect(dr_vec3 w, dr_vec3 n) { return dr_sub(dr_scale(n, 2.0 * d
 static bool finite3(dr_vec3 v) { return isfinite(v.x) && isfinite(v.y) && isfinite(v.z); }
 static bool finite_d(const struct dr_d_bsdf *d)
 {
-    return finite3(d->base_color) && isfinite(d->metallic) && isfinite(d->roughness);
+    return finite3(d->base_color) && isfinite(d->metallic) && isfinite(d->roughness) && isfinite(d->coat) &&
+           isfinite(d->coat_roughness);
 }
 static double test_alpha(double rough) { return fmax(rough * rough, DR_BSDF_MIN_ALPHA); }
 
 /* ------------------------------------------------ inputs and configurations */
 
 /* Every differentiable input, by index. */
-enum { X_BR, X_BG, X_BB, X_M, X_R, X_OX, X_OY, X_OZ, X_IX, X_IY, X_IZ, NX };
-static const char *const x_name[NX] = {"base.r", "base.g", "base.b", "metallic", "roughness",
+enum { X_BR, X_BG, X_BB, X_M, X_R, X_C, X_CR, X_OX, X_OY, X_OZ, X_IX, X_IY, X_IZ, NX };
+static const char *const x_name[NX] = {"base.r", "base.g", "base.b", "metallic", "roughness", "coat", "coat_roughness",
                                        "wo.x",   "wo.y",   "wo.z",   "wi.x",     "wi.y",     "wi.z"};
 
 /* One point at which a function and its adjoint are compared. */
@@ -85,6 +86,8 @@ static double *x_ptr(struct cfg *c, int k)
     case X_BB: return &c->b.base_color.z;
     case X_M:  return &c->b.metallic;
     case X_R:  return &c->b.roughness;
+    case X_C:  return &c->b.coat;
+    case X_CR: return &c->b.coat_roughness;
     case X_OX: return &c->wo.x;
     case X_OY: return &c->wo.y;
     case X_OZ: return &c->wo.z;
@@ -99,7 +102,7 @@ static double x_get(const struct cfg *c, int k) { return *x_ptr((struct cfg *)c,
 static void g_from(double g[NX], const struct dr_d_bsdf *d, dr_vec3 dwo, dr_vec3 dwi)
 {
     g[X_BR] = d->base_color.x; g[X_BG] = d->base_color.y; g[X_BB] = d->base_color.z;
-    g[X_M] = d->metallic; g[X_R] = d->roughness;
+    g[X_M] = d->metallic; g[X_R] = d->roughness; g[X_C] = d->coat; g[X_CR] = d->coat_roughness;
     g[X_OX] = dwo.x; g[X_OY] = dwo.y; g[X_OZ] = dwo.z;
     g[X_IX] = dwi.x; g[X_IY] = dwi.y; g[X_IZ] = dwi.z;
 }
@@ -120,10 +123,14 @@ static double ref_weight_sum(const struct dr_bsdf *b, double cos_o)
 
 /* Regimes: which side of each kink of the primal a configuration is on. A
  * difference is taken only between points of the same regime. */
+static int regime_coat(const struct cfg *c)
+{
+    return c->b.coated | (c->b.coat_roughness * c->b.coat_roughness > DR_BSDF_MIN_ALPHA) << 1;
+}
 static int regime_common(const struct cfg *c)
 {
     return (c->wo.z > COS_EPS_T) | (c->wi.z > COS_EPS_T) << 1 |
-           (c->b.roughness * c->b.roughness > DR_BSDF_MIN_ALPHA) << 2;
+           (c->b.roughness * c->b.roughness > DR_BSDF_MIN_ALPHA) << 2 | regime_coat(c) << 4;
 }
 static int regime_eval(const struct cfg *c) { return regime_common(c); }
 static int regime_pdf(const struct cfg *c)
@@ -132,7 +139,8 @@ static int regime_pdf(const struct cfg *c)
 }
 static int regime_prob(const struct cfg *c)
 {
-    return (c->wo.z > COS_EPS_T) | (ref_weight_sum(&c->b, c->wo.z > COS_EPS_T ? c->wo.z : 0.0) > 0.0) << 1;
+    return (c->wo.z > COS_EPS_T) | (ref_weight_sum(&c->b, c->wo.z > COS_EPS_T ? c->wo.z : 0.0) > 0.0) << 1 |
+           regime_coat(c) << 2;
 }
 /* Sampling map: wo above the surface, the roughness floor, the frame branch
  * at wo along the normal (where the map is discontinuous), and whether the
@@ -141,7 +149,7 @@ static int regime_prob(const struct cfg *c)
 static int regime_sample(const struct cfg *c)
 {
     int r = (c->wo.z > COS_EPS_T) | (c->b.roughness * c->b.roughness > DR_BSDF_MIN_ALPHA) << 1 |
-            (c->wo.x != 0.0 || c->wo.y != 0.0) << 2;
+            (c->wo.x != 0.0 || c->wo.y != 0.0) << 2 | regime_coat(c) << 4;
     if (c->wo.z > COS_EPS_T) {
         dr_vec3 wi = dr_bsdf_sample_dir(&c->b, c->wo, c->lobe, c->u1, c->u2);
         r |= (wi.z > COS_EPS_T) << 3;
@@ -155,7 +163,8 @@ static int regime_sample(const struct cfg *c)
 static double feature_eval(const struct cfg *c)
 {
     double hz = c->wo.z + c->wi.z;
-    return fmin(1.0, fmin(test_alpha(c->b.roughness) * hz, fmin(c->wo.z, c->wi.z)));
+    double a = c->b.coated ? fmin(test_alpha(c->b.roughness), test_alpha(c->b.coat_roughness)) : test_alpha(c->b.roughness);
+    return fmin(1.0, fmin(a * hz, fmin(c->wo.z, c->wi.z)));
 }
 static double feature_prob(const struct cfg *c) { return fmin(1.0, fmax(c->wo.z, 1e-6)); }
 static double feature_sample(const struct cfg *c)
@@ -174,7 +183,7 @@ static double mag_eval(const struct cfg *c)
 }
 static void adj_eval(const struct cfg *c, double g[NX])
 {
-    struct dr_d_bsdf d = {dr_v3s(0.0), 0.0, 0.0};
+    struct dr_d_bsdf d = {0};
     dr_vec3 dwo = dr_v3s(0.0), dwi = dr_v3s(0.0);
     d_bsdf_eval(&c->b, c->wo, c->wi, c->d3, &d, &dwo, &dwi);
     g_from(g, &d, dwo, dwi);
@@ -190,7 +199,7 @@ static double mag_pdf(const struct cfg *c)
 }
 static void adj_pdf(const struct cfg *c, double g[NX])
 {
-    struct dr_d_bsdf d = {dr_v3s(0.0), 0.0, 0.0};
+    struct dr_d_bsdf d = {0};
     dr_vec3 dwo = dr_v3s(0.0), dwi = dr_v3s(0.0);
     d_bsdf_pdf(&c->b, c->wo, c->wi, c->d1, &d, &dwo, &dwi);
     g_from(g, &d, dwo, dwi);
@@ -200,7 +209,7 @@ static double loss_prob(const struct cfg *c) { return c->d1 * dr_bsdf_specular_p
 static double mag_prob(const struct cfg *c) { return fabs(c->d1); }
 static void adj_prob(const struct cfg *c, double g[NX])
 {
-    struct dr_d_bsdf d = {dr_v3s(0.0), 0.0, 0.0};
+    struct dr_d_bsdf d = {0};
     dr_vec3 dwo = dr_v3s(0.0);
     d_bsdf_specular_prob(&c->b, c->wo, c->d1, &d, &dwo);
     g_from(g, &d, dwo, dr_v3s(0.0));
@@ -213,7 +222,7 @@ static double loss_sample(const struct cfg *c)
 static double mag_sample(const struct cfg *c) { return fabs(c->d3.x) + fabs(c->d3.y) + fabs(c->d3.z); }
 static void adj_sample(const struct cfg *c, double g[NX])
 {
-    struct dr_d_bsdf d = {dr_v3s(0.0), 0.0, 0.0};
+    struct dr_d_bsdf d = {0};
     dr_vec3 dwo = dr_v3s(0.0);
     d_bsdf_sample_dir(&c->b, c->wo, c->lobe, c->u1, c->u2, c->d3, &d, &dwo);
     g_from(g, &d, dwo, dr_v3s(0.0));
@@ -261,6 +270,10 @@ static double step_for(const struct fn *f, const struct cfg *c, int k)
     }
     if (k == X_R)
         return 1e-6 * fmax(c->b.roughness, 1e-4);
+    if (k == X_CR)
+        return 1e-6 * fmax(c->b.coat_roughness, 1e-4);
+    if (k == X_C)
+        return 1e-6;
     double ell = f->feature(c);
     return fmax(1e-5 * ell, fmin(1e-10, 1e-3 * ell));
 }
@@ -280,7 +293,7 @@ static double loss_at(const struct fn *f, const struct cfg *c, int k, double x, 
 static double fd_input(const struct fn *f, const struct cfg *c, int k, double h, int *kind)
 {
     double x = x_get(c, k);
-    double lo = k <= X_R ? 0.0 : -INFINITY, hi = k <= X_R ? 1.0 : INFINITY;
+    double lo = k <= X_CR ? 0.0 : -INFINITY, hi = k <= X_CR ? 1.0 : INFINITY;
     int r0 = f->regime(c), rm, rp, r2;
     double f0 = f->loss(c);
     double fp = x + h <= hi ? loss_at(f, c, k, x + h, &rp) : NAN;
@@ -318,9 +331,10 @@ static void print_cfg(const char *fname, const char *what, const struct cfg *c)
 {
     fprintf(stderr,
             "    %s %s: r %.17g m %g s %g base (%g %g %g) wo (%.17g %.17g %.17g) wi (%.17g %.17g %.17g) "
-            "lobe %d u (%.17g %.17g)\n",
+            "lobe %d u (%.17g %.17g) coat %d %.17g r %.17g\n",
             fname, what, c->b.roughness, c->b.metallic, c->b.specular, c->b.base_color.x, c->b.base_color.y,
-            c->b.base_color.z, c->wo.x, c->wo.y, c->wo.z, c->wi.x, c->wi.y, c->wi.z, (int)c->lobe, c->u1, c->u2);
+            c->b.base_color.z, c->wo.x, c->wo.y, c->wo.z, c->wi.x, c->wi.y, c->wi.z, (int)c->lobe, c->u1, c->u2,
+            (int)c->b.coated, c->b.coat, c->b.coat_roughness);
 }
 
 /* Compares every input's adjoint with its difference at one configuration.
@@ -414,6 +428,19 @@ static dr_vec3 random_wi(struct rng *r, dr_vec3 wo, double alpha, int n)
     return wi;
 }
 
+/* A clear coat (bsdf_coat.c): factor inside (0, 1), 1, or 0 with the layer
+ * still there (a fit moved it to 0); roughness from smooth to rough; the
+ * sampled lobe the coat's a third of the time. */
+static void random_coat(struct rng *r, struct cfg *c, int n)
+{
+    static const double coat_roughs[] = {0.03, 0.2, 0.6, 1.0};
+    c->b.coated = true;
+    c->b.coat = n % 5 == 1 ? 1.0 : n % 5 == 2 ? 0.0 : 0.05 + 0.9 * rng_next(r);
+    c->b.coat_roughness = n % 7 == 3 ? 0.01 + 0.98 * rng_next(r) : coat_roughs[n % 4];
+    if (n % 3 == 0)
+        c->lobe = DR_BSDF_LOBE_COAT;
+}
+
 static struct cfg random_cfg(struct rng *r, double rough, double metal, double spec, int n)
 {
     struct cfg c;
@@ -427,6 +454,8 @@ static struct cfg random_cfg(struct rng *r, double rough, double metal, double s
     c.lobe = (n / 3) % 2 ? DR_BSDF_LOBE_SPECULAR : DR_BSDF_LOBE_DIFFUSE;
     c.u1 = 0.98 * rng_next(r);   /* the rim u1 -> 1 (unbounded slope) is a hard case, g. */
     c.u2 = rng_next(r);
+    if (n % 4 == 3)
+        random_coat(r, &c, n / 4);
     return c;
 }
 
@@ -528,7 +557,7 @@ static void check_identity(struct fn *f, const struct cfg *c, struct rng *r)
     f->adjoint(c, g);
     double ell = f->feature(c);
     for (int k = 0; k < NX; k++)
-        v[k] = rng_sym(r) * (k < X_R ? 1.0 : (k == X_R ? c->b.roughness : ell));
+        v[k] = rng_sym(r) * (k == X_R ? c->b.roughness : k == X_CR ? c->b.coat_roughness : k <= X_CR ? 1.0 : ell);
     const double t = 1e-5;
     struct cfg cp = *c, cm = *c;
     for (int k = 0; k < NX; k++) {
@@ -584,6 +613,10 @@ static void test_identity(void)
         c.lobe = n % 4 ? DR_BSDF_LOBE_SPECULAR : DR_BSDF_LOBE_DIFFUSE;
         c.u1 = 0.98 * rng_next(&r);
         c.u2 = rng_next(&r);
+        if (n % 3 == 1) {   /* coated, factor inside (0, 1) */
+            random_coat(&r, &c, 5 * (n / 3) + 3);
+            c.b.coat = 0.05 + 0.9 * rng_next(&r);
+        }
         check_identity(&fn_eval, &c, &r);
         check_identity(&fn_pdf, &c, &r);
         check_identity(&fn_prob, &c, &r);
@@ -702,7 +735,10 @@ static void test_bit_identity(void)
                 for (int n = 0; n < 200; n++) {
                     double rough = ir < NROUGH ? roughs[ir] : (n % 2 ? 0.0 : 0.0003);
                     struct cfg c = random_cfg(&r, rough, metals[im], specs[is], n);
-                    struct dr_d_bsdf d_old = {dr_v3(0.1, 0.2, 0.3), 0.4, 0.5}, d_new = d_old, d_new2 = d_old;
+                    c.b.coated = false;   /* (the frozen version knows no coat) */
+                    if (c.lobe == DR_BSDF_LOBE_COAT)
+                        c.lobe = DR_BSDF_LOBE_SPECULAR;
+                    struct dr_d_bsdf d_old = {dr_v3(0.1, 0.2, 0.3), 0.4, 0.5, 0.6, 0.7}, d_new = d_old, d_new2 = d_old;
                     dr_vec3 dwo = dr_v3s(0.0), dwi = dr_v3s(0.0);
                     old_d_bsdf_eval(&c.b, c.wo, c.wi, c.d3, &d_old);
                     d_bsdf_eval(&c.b, c.wo, c.wi, c.d3, &d_new, NULL, NULL);
@@ -735,7 +771,7 @@ static int hard_n;
 
 static void all_adjoints_finite(const struct cfg *c, const char *what)
 {
-    struct dr_d_bsdf d = {dr_v3s(0.0), 0.0, 0.0};
+    struct dr_d_bsdf d = {0};
     dr_vec3 dwo = dr_v3s(0.0), dwi = dr_v3s(0.0);
     d_bsdf_eval(&c->b, c->wo, c->wi, c->d3, &d, &dwo, &dwi);
     bool ok1 = finite_d(&d) && finite3(dwo) && finite3(dwi);
@@ -808,6 +844,29 @@ static void test_hard_cases(void)
                     c.u2 = us[j];
                     all_adjoints_finite(&c, "sampling edges");
                 }
+    /* a clear coat of every weight and roughness over a rough metal, at
+     * every pair of cosines, each lobe */
+    static const double coats[] = {0.0, 0.5, 1.0};
+    for (size_t ic2 = 0; ic2 < sizeof coats / sizeof *coats; ic2++)
+        for (size_t ir = 0; ir < sizeof hr / sizeof *hr; ir++)
+            for (int ic = 0; ic < nc; ic++)
+                for (int jc = 0; jc < nc; jc++)
+                    for (int lobe = 0; lobe < 3; lobe++) {
+                        struct cfg c;
+                        memset(&c, 0, sizeof c);
+                        c.b = make_bsdf(0.4, 0.5, 1.0, dr_v3(1.0, 0.5, 0.0), dr_v3s(1.0));
+                        c.b.coated = true;
+                        c.b.coat = coats[ic2];
+                        c.b.coat_roughness = hr[ir];
+                        c.wo = dir_from(cosines[ic], 0.3);
+                        c.wi = jc % 2 ? reflect(c.wo, dr_v3(0.0, 0.0, 1.0)) : dir_from(cosines[jc], 1.9);
+                        c.d3 = dr_v3(1.0, -0.5, 0.25);
+                        c.d1 = 0.7;
+                        c.lobe = (enum dr_bsdf_lobe)lobe;
+                        c.u1 = us[(ic + jc) % nu];
+                        c.u2 = us[(ic + 2 * jc) % nu];
+                        all_adjoints_finite(&c, "coat grid");
+                    }
     fprintf(stderr, "hard cases: %d configurations, every adjoint finite\n", hard_n);
 }
 
@@ -824,8 +883,8 @@ static void test_accumulate_and_null(void)
             double g1[NX], g2[NX];
             fs[i]->adjoint(&c, g1);
             /* twice into preset outputs */
-            struct dr_d_bsdf d = {dr_v3(1.0, 2.0, 3.0), 4.0, 5.0};
-            dr_vec3 dwo = dr_v3(6.0, 7.0, 8.0), dwi = dr_v3(9.0, 10.0, 11.0);
+            struct dr_d_bsdf d = {dr_v3(1.0, 2.0, 3.0), 4.0, 5.0, 6.0, 7.0};
+            dr_vec3 dwo = dr_v3(8.0, 9.0, 10.0), dwi = dr_v3(11.0, 12.0, 13.0);
             for (int t = 0; t < 2; t++) {
                 if (i == 0)
                     d_bsdf_eval(&c.b, c.wo, c.wi, c.d3, &d, &dwo, &dwi);
@@ -844,14 +903,14 @@ static void test_accumulate_and_null(void)
         }
         /* every NULL combination runs, and the parts requested match the full call */
         for (int mask = 0; mask < 8; mask++) {
-            struct dr_d_bsdf d = {dr_v3s(0.0), 0.0, 0.0}, *pd = mask & 1 ? &d : NULL;
+            struct dr_d_bsdf d = {0}, *pd = mask & 1 ? &d : NULL;
             dr_vec3 dwo = dr_v3s(0.0), dwi = dr_v3s(0.0), *pwo = mask & 2 ? &dwo : NULL, *pwi = mask & 4 ? &dwi : NULL;
             double g[NX], gf[NX];
             d_bsdf_eval(&c.b, c.wo, c.wi, c.d3, pd, pwo, pwi);
             g_from(g, &d, dwo, dwi);
             fn_eval.adjoint(&c, gf);
             for (int k = 0; k < NX; k++) {
-                bool requested = k <= X_R ? pd != NULL : (k <= X_OZ ? pwo != NULL : pwi != NULL);
+                bool requested = k <= X_CR ? pd != NULL : (k <= X_OZ ? pwo != NULL : pwi != NULL);
                 CHECK(g[k] == (requested ? gf[k] : 0.0), "d_bsdf_eval NULL mask %d input %s", mask, x_name[k]);
             }
             d_bsdf_pdf(&c.b, c.wo, c.wi, c.d1, pd, pwo, pwi);
@@ -863,13 +922,20 @@ static void test_accumulate_and_null(void)
     struct dr_bsdf b = make_bsdf(0.5, 0.5, 0.5, dr_v3s(0.5), dr_v3s(1.0));
     const dr_vec3 below[][2] = {{{0.0, 0.6, -0.8}, {0.0, 0.0, 1.0}}, {{0.0, 0.0, 1.0}, {0.6, 0.0, -0.8}},
                                 {{1.0, 0.0, 0.0}, {0.0, 0.0, 1.0}}};
-    struct dr_d_bsdf d = {dr_v3(1.0, 2.0, 3.0), 4.0, 5.0};
-    dr_vec3 dwo = dr_v3(6.0, 7.0, 8.0), dwi = dr_v3(9.0, 10.0, 11.0);
-    for (int i = 0; i < 3; i++) {
-        d_bsdf_eval(&b, below[i][0], below[i][1], dr_v3s(1.0), &d, &dwo, &dwi);
-        d_bsdf_pdf(&b, below[i][0], below[i][1], 1.0, &d, &dwo, &dwi);
+    struct dr_d_bsdf d = {dr_v3(1.0, 2.0, 3.0), 4.0, 5.0, 6.0, 7.0};
+    dr_vec3 dwo = dr_v3(8.0, 9.0, 10.0), dwi = dr_v3(11.0, 12.0, 13.0);
+    for (int coated = 0; coated < 2; coated++) {
+        b.coated = coated;
+        b.coat = 0.7;
+        b.coat_roughness = 0.1;
+        for (int i = 0; i < 3; i++) {
+            d_bsdf_eval(&b, below[i][0], below[i][1], dr_v3s(1.0), &d, &dwo, &dwi);
+            d_bsdf_pdf(&b, below[i][0], below[i][1], 1.0, &d, &dwo, &dwi);
+            d_bsdf_pdf_fixed_prob(&b, below[i][0], below[i][1], 1.0, &d, &dwo, &dwi);
+        }
+        d_bsdf_sample_dir(&b, below[0][0], DR_BSDF_LOBE_SPECULAR, 0.3, 0.3, dr_v3s(1.0), &d, &dwo);
+        d_bsdf_sample_dir(&b, below[0][0], DR_BSDF_LOBE_COAT, 0.3, 0.3, dr_v3s(1.0), &d, &dwo);
     }
-    d_bsdf_sample_dir(&b, below[0][0], DR_BSDF_LOBE_SPECULAR, 0.3, 0.3, dr_v3s(1.0), &d, &dwo);
     double g[NX];
     g_from(g, &d, dwo, dwi);
     for (int k = 0; k < NX; k++)

@@ -273,7 +273,7 @@ static void test_rough_ndf_vs_fd(void)
             double bc = dr_v3_get(base, c);
             double fd = f0 + (b.specular - f0) * s5, fm = bc + (1.0 - bc) * s5;
             double want = ((1.0 - m) * fd + m * fm) * g2 * dD / (4.0 * wo.z * wi.z);
-            struct dr_d_bsdf d = {dr_v3s(0.0), 0.0, 0.0};
+            struct dr_d_bsdf d = {0};
             dr_vec3 d_out = dr_v3s(0.0);
             dr_v3_set(&d_out, c, 1.0);
             d_bsdf_eval_rough_ndf(&b, wo, wi, d_out, &d);
@@ -288,7 +288,7 @@ static void test_rough_ndf_vs_fd(void)
     struct dr_bsdf lam = make_bsdf(0.5, 0.0, dr_v3s(0.5));
     lam.specular = 0.0;
     struct dr_bsdf flo = make_bsdf(1e-4, 1.0, dr_v3s(0.5));
-    struct dr_d_bsdf d = {dr_v3s(0.0), 0.0, 0.0};
+    struct dr_d_bsdf d = {0};
     dr_vec3 w = dr_normalize(dr_v3(0.1, 0.2, 1.0));
     d_bsdf_eval_rough_ndf(&lam, w, w, dr_v3s(1.0), &d);
     d_bsdf_eval_rough_ndf(&flo, w, w, dr_v3s(1.0), &d);

@@ -25,7 +25,7 @@ static double rng_next(struct rng *r)
 
 static struct dr_bsdf make_bsdf(double rough, double metal, double spec, dr_vec3 base, dr_vec3 spec_col)
 {
-    struct dr_bsdf b;
+    struct dr_bsdf b = {0};
     b.base_color = base;
     b.metallic = metal;
     b.roughness = rough;
@@ -248,7 +248,7 @@ static void test_bsdf_floor(void)
                 dr_vec3 d_out = dr_v3(rng_next(&r), rng_next(&r) - 0.5, rng_next(&r));
                 check_bsdf_point(&b, wo, wi, d_out);
                 if (roughs[ir] * roughs[ir] <= DR_BSDF_MIN_ALPHA) {
-                    struct dr_d_bsdf d = {dr_v3s(0.0), 0.0, 0.0};
+                    struct dr_d_bsdf d = {0};
                     d_bsdf_eval(&b, wo, wi, d_out, &d, NULL, NULL);
                     CHECK(d.roughness == 0.0, "below the floor: d roughness %g at r %g", d.roughness,
                           roughs[ir]);
@@ -265,7 +265,7 @@ static void test_bsdf_accumulates(void)
                                      dr_v3(rng_next(&r), rng_next(&r), rng_next(&r)), dr_v3s(1.0));
         dr_vec3 wo = random_hemi(&r), wi = random_hemi(&r);
         dr_vec3 d_out = dr_v3(rng_next(&r), rng_next(&r), rng_next(&r));
-        struct dr_d_bsdf d1 = {dr_v3s(0.0), 0.0, 0.0}, d2 = {dr_v3(1.0, 2.0, 3.0), 4.0, 5.0};
+        struct dr_d_bsdf d1 = {0}, d2 = {dr_v3(1.0, 2.0, 3.0), 4.0, 5.0, 6.0, 7.0};
         d_bsdf_eval(&b, wo, wi, d_out, &d1, NULL, NULL);
         d_bsdf_eval(&b, wo, wi, d_out, &d2, NULL, NULL);
         d_bsdf_eval(&b, wo, wi, d_out, &d2, NULL, NULL);
@@ -277,7 +277,7 @@ static void test_bsdf_accumulates(void)
     }
     /* Below the surface: f = 0 by construction, *d is untouched. */
     struct dr_bsdf b = make_bsdf(0.5, 0.5, 0.5, dr_v3s(0.5), dr_v3s(1.0));
-    struct dr_d_bsdf d = {dr_v3(1.0, 2.0, 3.0), 4.0, 5.0};
+    struct dr_d_bsdf d = {dr_v3(1.0, 2.0, 3.0), 4.0, 5.0, 6.0, 7.0};
     d_bsdf_eval(&b, dr_v3(0.0, 0.6, -0.8), dr_v3(0.0, 0.0, 1.0), dr_v3s(1.0), &d, NULL, NULL);
     d_bsdf_eval(&b, dr_v3(0.0, 0.0, 1.0), dr_v3(0.6, 0.0, -0.8), dr_v3s(1.0), &d, NULL, NULL);
     d_bsdf_eval(&b, dr_v3(1.0, 0.0, 0.0), dr_v3(0.0, 0.0, 1.0), dr_v3s(1.0), &d, NULL, NULL);
@@ -387,7 +387,7 @@ static void test_bsdf_hard_cases(void)
                                     wi = dir_from(cosines[jc], 0.3 + M_PI); /* same plane, opposite */
                                 else
                                     wi = dir_from(cosines[jc], 1.9);
-                                struct dr_d_bsdf d = {dr_v3s(0.0), 0.0, 0.0};
+                                struct dr_d_bsdf d = {0};
                                 d_bsdf_eval(&b, wo, wi, dr_v3(1.0, -0.5, 0.25), &d, NULL, NULL);
                                 dr_vec3 f = dr_bsdf_eval(&b, wo, wi);
                                 n++;

@@ -35,9 +35,10 @@ static double objective(const struct fixture *f, enum objective o)
     const struct dr_scene *s = f->s;
     switch (o) {
     case OBJ_MATERIAL: {
-        struct dr_bsdf b;
+        struct dr_bsdf b = {0};
         dr_material_eval(s, &f->hit, &b);
-        return dr_dot(f->d_b.base_color, b.base_color) + f->d_b.metallic * b.metallic + f->d_b.roughness * b.roughness;
+        return dr_dot(f->d_b.base_color, b.base_color) + f->d_b.metallic * b.metallic + f->d_b.roughness * b.roughness +
+               f->d_b.coat * b.coat + f->d_b.coat_roughness * b.coat_roughness;
     }
     case OBJ_EMISSION: return dr_dot(f->d_L, dr_emission(s, &f->hit));
     case OBJ_ENV: return dr_dot(f->d_L, dr_env_radiance(s, f->dir));
@@ -118,6 +119,9 @@ static void test_chains(void)
     m.roughness = 0.45;
     m.emissive_factor = dr_v3(0.5, 0.75, 0.25);
     m.emissive_strength = 3.0;
+    m.coated = true;   /* KHR_materials_clearcoat */
+    m.coat = 0.6;
+    m.coat_roughness = 0.3;
     m.base_color_tex.texture = 0;
     m.metallic_roughness_tex.texture = 1;
     m.emissive_tex.texture = 2;
@@ -157,6 +161,8 @@ static void test_chains(void)
         "/materials/0/pbrMetallicRoughness/roughnessFactor",
         "/materials/0/emissiveFactor",
         "/materials/0/extensions/KHR_materials_emissive_strength/emissiveStrength",
+        "/materials/0/extensions/KHR_materials_clearcoat/clearcoatFactor",
+        "/materials/0/extensions/KHR_materials_clearcoat/clearcoatRoughnessFactor",
         "/images/0",
         "/images/1",
         "/images/2",
@@ -175,7 +181,7 @@ static void test_chains(void)
         return;
     dr_hit_at(&s->mesh, 1, 0.3, 0.25, &f.hit);   /* a point with uv away from texel centres */
     f.dir = dr_normalize(dr_v3(0.3, 0.5, -0.7));
-    f.d_b = (struct dr_d_bsdf){dr_v3(0.7, -0.4, 0.9), -0.6, 0.8};
+    f.d_b = (struct dr_d_bsdf){dr_v3(0.7, -0.4, 0.9), -0.6, 0.8, 0.35, -0.45};
     f.d_L = dr_v3(0.5, -1.2, 0.9);
     f.lsp.type = DR_LS_PUNCTUAL;
     f.lsp.index = 0;
