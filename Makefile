@@ -34,8 +34,9 @@ CXXFLAGS += -std=c++17 $(OPT) $(WARN) -pthread $(shell pkg-config --cflags $(PKG
 # The drender binary does not link OpenImageIO: it loads $(PLUGIN) on first use
 # (core/image_plugin.h says why). Tests, bench and fuzz programs link the
 # image objects directly.
-# -ldraco: KHR_draco_mesh_compression (core/draco_decode.cpp), in every link of core/
-HOST_LIBS := -ltinygltf -ldraco -lembree3 -lzstd -lz -lstdc++ -lm -pthread -ldl
+# -ldraco: KHR_draco_mesh_compression (core/draco_decode.cpp), -lmeshoptimizer:
+# EXT_meshopt_compression (core/meshopt_decode.cpp), in every link of core/
+HOST_LIBS := -ltinygltf -ldraco -lmeshoptimizer -lembree3 -lzstd -lz -lstdc++ -lm -pthread -ldl
 # Deferred (=, not :=): on a fresh machine the packages are installed by the
 # `deps` step, after make has read this file, so pkg-config must be asked when a
 # link runs, not when the Makefile is parsed.

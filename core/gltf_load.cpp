@@ -29,6 +29,7 @@
 #include <strings.h>
 
 #include "draco_decode.h"
+#include "meshopt_decode.h"
 #include "error.h"
 #include "image_io.h"
 #include "ktx2.h"
@@ -239,9 +240,16 @@ const char *const kSupportedExtensions[] = {
     /* KTX2 images: read when they hold 8-bit texels (core/ktx2.h); the others are refused, or skipped
      * under --ignore-unsupported (check_ktx2): handled, not ignored */
     "KHR_texture_basisu",
+    /* WebP images (read by OpenImageIO), and integer vertex attributes (AccessorView::get reads them) */
+    "EXT_texture_webp", "KHR_mesh_quantization",
+    /* meshoptimizer-compressed buffer views (meshopt_decode.h) */
+    "EXT_meshopt_compression",
     /* participating media (load_material_medium) */
     "KHR_materials_volume", "KHR_materials_transmission", "KHR_materials_ior", "KHR_materials_volume_scatter",
     "DR_medium"};
+
+/* A texture's image named by an extension (load_textures). */
+const char *const kTextureSourceExtensions[] = {"KHR_texture_basisu", "EXT_texture_webp"};
 
 bool is_supported_extension(const std::string &name)
 {
@@ -615,20 +623,25 @@ bool has_suffix(const char *s, const char *suffix)
     return n >= m && strcasecmp(s + n - m, suffix) == 0;
 }
 
-/* Parses the file with tinygltf, through dr_draco_strip_indices when it has Draco primitives. */
+/* Parses the file with tinygltf, through dr_draco_strip_indices when it has
+ * Draco primitives and dr_meshopt_mark_fallbacks when it has meshopt-compressed
+ * buffer views (whose bytes load_model then decodes). */
 bool Loader::parse_file(tinygltf::TinyGLTF &gltf, bool binary, std::string *err, std::string *warn)
 {
     std::vector<unsigned char> bytes;
     std::string ignored;
     if (!fs_read(&bytes, &ignored, path_, this)) return false;
     if (binary) {
-        std::vector<unsigned char> glb = dr_glb_strip_draco_indices(bytes);
-        const std::vector<unsigned char> &use = glb.empty() ? bytes : glb;
+        std::vector<unsigned char> use = bytes, glb = dr_glb_strip_draco_indices(use);
+        if (!glb.empty()) use.swap(glb);
+        glb = dr_glb_meshopt_mark_fallbacks(use);
+        if (!glb.empty()) use.swap(glb);
         if (use.size() > UINT32_MAX) fail(DR_ERR_FORMAT, "the file is larger than 4 GiB");
         return gltf.LoadBinaryFromMemory(&model_, err, warn, use.data(), unsigned(use.size()), directory_of(path_));
     }
     std::string text(bytes.begin(), bytes.end());
-    if (!dr_draco_strip_indices(text))
+    const bool draco = dr_draco_strip_indices(text), meshopt = dr_meshopt_mark_fallbacks(text);
+    if (!draco && !meshopt)
         return gltf.LoadASCIIFromFile(&model_, err, warn, path_);
     if (text.size() > UINT32_MAX) fail(DR_ERR_FORMAT, "the file is larger than 4 GiB");
     return gltf.LoadASCIIFromString(&model_, err, warn, text.data(), unsigned(text.size()), directory_of(path_));
@@ -684,6 +697,8 @@ void Loader::load_model()
         if (end > start) warnings_.push_back(std::string(path_) + ": " + warn.substr(start, end - start));
         start = end + 1;
     }
+    const std::string meshopt = dr_meshopt_decode(model_);   /* (the accessors then read plain bytes) */
+    if (!meshopt.empty()) fail(DR_ERR_FORMAT, "%s", meshopt.c_str());
     decode_images();
 }
 
@@ -741,15 +756,18 @@ void Loader::load_textures()
         dr_texture tex = {};
         int source = t.source;
         std::string sp = strf("/textures/%zu/source", i);
-        auto bu = t.extensions.find("KHR_texture_basisu");
-        if (bu != t.extensions.end()) {
-            /* A "source" beside the extension is the fallback for viewers that
-             * cannot decode Basis Universal: used when present. */
-            std::string ep = strf("/textures/%zu/extensions/KHR_texture_basisu/source", i);
-            if (!bu->second.IsObject() || !bu->second.Get("source").IsInt())
+        /* Images in a format core glTF does not name: KTX2 and WebP. A
+         * "source" beside the extension is the fallback for viewers that
+         * cannot decode it: used when present (drender decodes the WebP too,
+         * and either gives the texture). */
+        for (const char *name : kTextureSourceExtensions) {
+            auto ex = t.extensions.find(name);
+            if (ex == t.extensions.end()) continue;
+            std::string ep = strf("/textures/%zu/extensions/%s/source", i, name);
+            if (!ex->second.IsObject() || !ex->second.Get("source").IsInt())
                 fail(DR_ERR_FORMAT, "%s: expected an image index", ep.c_str());
-            if (t.source < 0) {
-                source = bu->second.Get("source").GetNumberAsInt();
+            if (source < 0) {
+                source = ex->second.Get("source").GetNumberAsInt();
                 sp = ep;
             }
         }

@@ -53,6 +53,7 @@
 #include "image_io.h"
 #include "medium.h"
 #include "draco_decode.h"
+#include "meshopt_decode.h"
 #include "json_release.h"
 
 namespace {
@@ -355,15 +356,42 @@ void Writer::load_source()
     std::vector<unsigned char> bytes = read_all(path, &e);
     std::string text = binary ? glb_json(bytes) : std::string(bytes.begin(), bytes.end());
     remember_draco_indices(text);
-    if (!draco_indices_.empty()) {   /* tinygltf needs them stripped (draco_decode.h); fix_json puts them back */
-        std::vector<unsigned char> glb = binary ? dr_glb_strip_draco_indices(bytes) : std::vector<unsigned char>();
-        if (!binary) dr_draco_strip_indices(text);
-        ok = binary ? !glb.empty() && gltf.LoadBinaryFromMemory(&model_, &err, &warn, glb.data(), unsigned(glb.size()),
-                                                                src_dir_)
-                    : gltf.LoadASCIIFromString(&model_, &err, &warn, text.data(), unsigned(text.size()), src_dir_);
+    /* tinygltf needs Draco's indices stripped (draco_decode.h; fix_json puts
+     * them back) and meshopt's fallback buffers marked (meshopt_decode.h) */
+    std::vector<unsigned char> glb = bytes;
+    bool rewritten = false;
+    ok = true;
+    if (!draco_indices_.empty()) {
+        rewritten = true;
+        if (binary) {
+            glb = dr_glb_strip_draco_indices(bytes);
+            ok = !glb.empty();
+        } else {
+            dr_draco_strip_indices(text);
+        }
+    }
+    if (binary) {
+        std::vector<unsigned char> m = dr_glb_meshopt_mark_fallbacks(glb);
+        if (!m.empty()) glb.swap(m), rewritten = true;
     } else {
+        rewritten |= dr_meshopt_mark_fallbacks(text);
+    }
+    if (ok && rewritten)
+        ok = binary ? gltf.LoadBinaryFromMemory(&model_, &err, &warn, glb.data(), unsigned(glb.size()), src_dir_)
+                    : gltf.LoadASCIIFromString(&model_, &err, &warn, text.data(), unsigned(text.size()), src_dir_);
+    else if (ok)
         ok = binary ? gltf.LoadBinaryFromFile(&model_, &err, &warn, path)
                     : gltf.LoadASCIIFromFile(&model_, &err, &warn, path);
+    /* meshopt-compressed views are written back decoded, without the extension */
+    const bool meshopt = ok && std::find(model_.extensionsUsed.begin(), model_.extensionsUsed.end(),
+                                         "EXT_meshopt_compression") != model_.extensionsUsed.end();
+    if (meshopt) {
+        const std::string why = dr_meshopt_decode(model_);
+        if (!why.empty()) {
+            dr_set_error("%s: cannot re-read the source scene: %s", path, why.c_str());
+            throw Failure{DR_ERR_FORMAT};
+        }
+        dr_meshopt_drop_compressed_buffers(model_);
     }
     if (!ok) {
         while (!err.empty() && (err.back() == '\n' || err.back() == ' ')) err.pop_back();
@@ -880,31 +908,34 @@ void Writer::set_buffer_uris()
 }
 
 /* A fitted image is written as PNG (write_image_param). A texture that
- * reached it through KHR_texture_basisu would then name a PNG where the
- * extension requires KTX2, and one that kept a KTX2 beside a fitted `source`
- * fallback would show viewers that decode KTX2 the unfitted texels. Such a
- * texture takes the fitted image as its `source` and drops the extension;
- * once no texture uses it, it leaves extensionsUsed and extensionsRequired
- * (declare_extensions only adds). The KTX2 image stays in the file, unused. */
+ * reached it through KHR_texture_basisu or EXT_texture_webp would then name
+ * a PNG where the extension requires KTX2 or WebP, and one that kept such an
+ * image beside a fitted `source` fallback would show viewers that decode it
+ * the unfitted texels. Such a texture takes the fitted image as its `source`
+ * and drops the extension; an extension no texture uses any more leaves
+ * extensionsUsed and extensionsRequired (declare_extensions only adds). The
+ * KTX2 or WebP image stays in the file, unused. */
 void Writer::retarget_fitted_textures()
 {
-    static const char ext[] = "KHR_texture_basisu";
-    bool still_used = false;
-    for (tinygltf::Texture &t : model_.textures) {
-        auto it = t.extensions.find(ext);
-        if (it == t.extensions.end()) continue;
-        const tinygltf::Value &src = it->second.Get("source");
-        const int used = t.source >= 0 ? t.source : src.IsInt() ? src.GetNumberAsInt() : -1;
-        if (used >= 0 && replaced_images_.count(used)) {
-            t.source = used;
-            t.extensions.erase(it);
-        } else {
-            still_used = true;
+    for (const char *ext : {"KHR_texture_basisu", "EXT_texture_webp"}) {
+        bool present = false, still_used = false;
+        for (tinygltf::Texture &t : model_.textures) {
+            auto it = t.extensions.find(ext);
+            if (it == t.extensions.end()) continue;
+            present = true;
+            const tinygltf::Value &src = it->second.Get("source");
+            const int used = t.source >= 0 ? t.source : src.IsInt() ? src.GetNumberAsInt() : -1;
+            if (used >= 0 && replaced_images_.count(used)) {
+                t.source = used;
+                t.extensions.erase(it);
+            } else {
+                still_used = true;
+            }
         }
+        if (!present || still_used) continue;
+        for (std::vector<std::string> *list : {&model_.extensionsUsed, &model_.extensionsRequired})
+            list->erase(std::remove(list->begin(), list->end(), std::string(ext)), list->end());
     }
-    if (still_used) return;
-    for (std::vector<std::string> *list : {&model_.extensionsUsed, &model_.extensionsRequired})
-        list->erase(std::remove(list->begin(), list->end(), std::string(ext)), list->end());
 }
 
 /* extensionsUsed must name every extension the file uses (the validator's

@@ -10,6 +10,7 @@ pkgs=(build-essential pkg-config
       libembree-dev libopenimageio-dev openimageio-tools
       libtinygltf-dev nlohmann-json3-dev libstb-dev
       libdraco-dev   # KHR_draco_mesh_compression (core/draco_decode.cpp)
+      libmeshoptimizer-dev   # EXT_meshopt_compression (core/meshopt_decode.cpp)
       libzstd-dev zlib1g-dev   # KTX2 textures' supercompression (core/ktx2.c)
       gnuplot-nox python3
       valgrind    # scripts/no-media-overhead.sh counts instructions with callgrind

@@ -28,6 +28,12 @@
 #      the extension dropped there (and from extensionsUsed/Required once no
 #      texture uses it); the output renders
 #   h. every command that loads a scene takes --ignore-unsupported
+#   i. gltfpack's outputs (tests/data/gltf/meshopt): quantized and
+#      meshopt-compressed files render without a warning; optimize writes one
+#      back decoded (no EXT_meshopt_compression), which the validator accepts.
+#      EXT_texture_webp: BoxTextured with its texture as WebP renders the same
+#      bytes as with that WebP decoded to PNG; a fitted WebP texture is written
+#      as PNG, its texture's source, the extension dropped
 # Run by tests/run.sh (env: DRENDER, DR_TESTDIR); also runs alone.
 set -u
 
@@ -300,5 +306,53 @@ expect_in out "/images/1" "params lists the KTX2 metallic-roughness texture"
 grep -q "^/materials/2/pbrMetallicRoughness/baseColorFactor" "$tmp/out" && fail "params lists thin glass's base colour"
 run fdcheck "$lamp_b" --ignore-unsupported --env 1 --param /extensions/DR_environment/strength --res 8x8 --spp 2 --batches 4
 expect_rc 0 "fdcheck --ignore-unsupported"
+
+# ---- i. gltfpack's outputs, WebP ----
+mo=$DR_TESTDIR/data/gltf/meshopt
+for f in box_q.gltf box_c.gltf box_cc.glb box_vpf.gltf; do
+    run render "$mo/$f" --res 24x24 --spp 4 -o "mo_${f%.*}.exr"
+    expect_rc 0 "render of gltfpack's $f"
+    grep -q "EXT_meshopt_compression\|KHR_mesh_quantization" "$tmp/err" && fail "$f: a warning about its extensions"
+done
+mkdir -p "$tmp/mofit"
+run optimize "$mo/box_cc.glb" --target mo_box_q.exr --param /materials/0/pbrMetallicRoughness/baseColorFactor --iters 2 \
+    --spp 2 -o "$tmp/mofit/box.gltf" --out-dir "$tmp/mofit/progress"
+expect_rc 0 "optimize of a meshopt-compressed .glb"
+json_check "$tmp/mofit/box.gltf" '"EXT_meshopt_compression" not in d.get("extensionsUsed", []) and
+not any("extensions" in v for v in d["bufferViews"]) and "KHR_mesh_quantization" in d["extensionsRequired"]'
+ensure_gltf_validator
+validate_gltf "$tmp/mofit/box.gltf" || fail "the decoded output does not validate"
+run render "$tmp/mofit/box.gltf" --res 24x24 --spp 4 -o mofit.exr
+expect_rc 0 "render of the decoded output"
+# WebP
+bt=$samples/BoxTextured/glTF
+mkdir -p "$tmp/webp" && cp "$bt"/* "$tmp/webp/"
+oiiotool "$bt/CesiumLogoFlat.png" -o "$tmp/webp/logo.webp" && oiiotool "$tmp/webp/logo.webp" -o "$tmp/webp/logo_dec.png" ||
+    fail "oiiotool could not write the WebP"
+python3 - "$tmp/webp" <<'PY' || fail "could not write the WebP variants"
+import json, os, sys
+d = json.load(open(os.path.join(sys.argv[1], "BoxTextured.gltf")))
+d["images"].append({"uri": "logo.webp"})
+d["textures"][0] = {"sampler": d["textures"][0].get("sampler", 0), "extensions": {"EXT_texture_webp": {"source": 1}}}
+d["extensionsUsed"] = d.get("extensionsUsed", []) + ["EXT_texture_webp"]
+d["extensionsRequired"] = ["EXT_texture_webp"]
+json.dump(d, open(os.path.join(sys.argv[1], "webp.gltf"), "w"))
+d = json.load(open(os.path.join(sys.argv[1], "BoxTextured.gltf")))
+d["images"][0]["uri"] = "logo_dec.png"
+json.dump(d, open(os.path.join(sys.argv[1], "dec.gltf"), "w"))
+PY
+run render "$tmp/webp/webp.gltf" --res 32x32 --spp 4 -o webp.exr
+expect_rc 0 "render with a WebP texture"
+grep -q "EXT_texture_webp" "$tmp/err" && fail "a warning about EXT_texture_webp"
+run render "$tmp/webp/dec.gltf" --res 32x32 --spp 4 -o webp_dec.exr
+cmp -s webp.exr webp_dec.exr || fail "the WebP texture renders otherwise than its decoded PNG"
+mkdir -p "$tmp/webpfit"
+run optimize "$tmp/webp/webp.gltf" --target webp.exr --param /images/1 --iters 1 --spp 1 -o "$tmp/webpfit/fit.gltf" \
+    --out-dir "$tmp/webpfit/progress"
+expect_rc 0 "optimize of a WebP texture"
+json_check "$tmp/webpfit/fit.gltf" 'd["textures"][0]["source"] == 1 and "extensions" not in d["textures"][0] and
+d["images"][1]["uri"] == "fit.image1.png" and "EXT_texture_webp" not in d.get("extensionsUsed", []) and
+not d.get("extensionsRequired")'
+validate_gltf "$tmp/webpfit/fit.gltf" || fail "the fitted WebP scene does not validate"
 
 echo "cli_gltf_features: all passed"

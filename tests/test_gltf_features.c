@@ -567,6 +567,108 @@ static void test_draco(void)
     dr_scene_destroy(s);
 }
 
+/* ---- EXT_meshopt_compression and KHR_mesh_quantization: gltfpack's outputs ---- */
+
+static struct dr_scene *load_meshopt_file(const char *name, int *rc)
+{
+    char path[512];
+    snprintf(path, sizeof path, "%s/data/gltf/meshopt/%s", getenv("DR_TESTDIR") ? getenv("DR_TESTDIR") : "tests",
+             name);
+    struct dr_scene *s = calloc(1, sizeof *s);
+    *rc = dr_gltf_load(path, s);
+    CHECK(*rc == 0, "%s: %s", name, dr_last_error());
+    return s;
+}
+
+/* Every vertex normal within `cos` of its triangle's geometric normal (the
+ * Box's faces are flat: a normal decoded wrong points elsewhere). */
+static bool normals_follow_faces(const struct dr_scene *s, double cos_min)
+{
+    const struct dr_mesh *m = &s->mesh;
+    for (uint32_t t = 0; t < m->n_triangles; t++) {
+        dr_vec3 p[3];
+        for (int k = 0; k < 3; k++) {
+            const float *q = m->positions + 3 * m->indices[3 * t + (uint32_t)k];
+            p[k] = dr_v3(q[0], q[1], q[2]);
+        }
+        dr_vec3 ng = dr_normalize(dr_cross(dr_sub(p[1], p[0]), dr_sub(p[2], p[0])));
+        for (int k = 0; k < 3; k++) {
+            const float *n = m->normals + 3 * m->indices[3 * t + (uint32_t)k];
+            dr_vec3 v = dr_normalize(dr_v3(n[0], n[1], n[2]));
+            if (!(dr_dot(v, ng) >= cos_min)) return false;
+        }
+    }
+    return true;
+}
+
+static void test_meshopt(void)
+{
+    int rc;
+    warnings[0] = '\0';
+    struct dr_scene *f = load_meshopt_file("box_float.gltf", &rc);
+    struct dr_scene *q = load_meshopt_file("box_q.gltf", &rc);
+    const char *compressed[] = {"box_c.gltf", "box_cc.glb", "box_vpf.gltf"};
+    float *tq = triangles(q), *tf = triangles(f);
+    CHECK(q->mesh.n_triangles == 12 && f->mesh.n_triangles == 12, "12 triangles (%u, %u)", q->mesh.n_triangles,
+          f->mesh.n_triangles);
+    /* quantized positions dequantized by the node's transform: the float Box's */
+    CHECK(memcmp(tq, tf, sizeof(float) * 9 * 12) == 0, "the quantized Box's triangles are the float Box's");
+    CHECK(normals_follow_faces(q, 0.9999), "the quantized Box's normals are its faces'");
+    for (int i = 0; i < 3; i++) {
+        struct dr_scene *c = load_meshopt_file(compressed[i], &rc);
+        if (rc == 0 && c->mesh.n_triangles == 12) {
+            float *tc = triangles(c);
+            CHECK(memcmp(tc, tq, sizeof(float) * 9 * 12) == 0, "%s: the triangles are the uncompressed Box's",
+                  compressed[i]);
+            free(tc);
+            /* (box_cc's normals went through the octahedral filter: 8 bits) */
+            CHECK(normals_follow_faces(c, 0.999), "%s: the decoded normals are the faces'", compressed[i]);
+        } else {
+            CHECK(0, "%s: %u triangles", compressed[i], c->mesh.n_triangles);
+        }
+        dr_scene_destroy(c);
+    }
+    CHECK(!strstr(warnings, "EXT_meshopt_compression") && !strstr(warnings, "KHR_mesh_quantization"),
+          "no warning about the extensions:\n%s", warnings);
+    free(tq);
+    free(tf);
+    dr_scene_destroy(q);
+    dr_scene_destroy(f);
+
+    /* malformed compressed views: errors naming the bufferView */
+    const unsigned char junk[16] = "\xa0junkjunkjunkjun";
+    const char *fmt =
+        "{\"asset\":{\"version\":\"2.0\"},\"extensionsRequired\":[\"EXT_meshopt_compression\"],"
+        "\"extensionsUsed\":[\"EXT_meshopt_compression\"],\"nodes\":[{\"mesh\":0}],"
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0}}]}],"
+        "\"buffers\":[{\"byteLength\":16,\"uri\":\"%s\"},{\"byteLength\":36,"
+        "\"extensions\":{\"EXT_meshopt_compression\":{\"fallback\":true}}}],"
+        "\"bufferViews\":[{\"buffer\":1,\"byteLength\":36,\"byteStride\":12,\"extensions\":{\"EXT_meshopt_compression\":"
+        "{\"buffer\":0,\"byteLength\":%d,\"byteStride\":%d,\"count\":%d,\"mode\":\"%s\"%s}}}],"
+        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\"}]}";
+    struct dr_scene *s = load_json("meshopt_bad.gltf", NULL, &rc, fmt, data_uri(junk, 16), 16, 12, 3, "ATTRIBUTES", "");
+    check_error(rc, "corrupt meshopt bytes", "meshopt_bad.gltf", "/bufferViews/0/extensions/EXT_meshopt_compression",
+                "do not decode");
+    dr_scene_destroy(s);
+    s = load_json("meshopt_mode.gltf", NULL, &rc, fmt, data_uri(junk, 16), 16, 12, 3, "POINTS", "");
+    check_error(rc, "unknown mode", "meshopt_mode.gltf", "/bufferViews/0/extensions/EXT_meshopt_compression/mode",
+                "ATTRIBUTES");
+    dr_scene_destroy(s);
+    s = load_json("meshopt_past.gltf", NULL, &rc, fmt, data_uri(junk, 16), 17, 12, 3, "ATTRIBUTES", "");
+    check_error(rc, "past the buffer", "meshopt_past.gltf", "/bufferViews/0/extensions/EXT_meshopt_compression/byteLength",
+                "past the end");
+    dr_scene_destroy(s);
+    s = load_json("meshopt_huge.gltf", NULL, &rc, fmt, data_uri(junk, 16), 16, 12, 100000000, "ATTRIBUTES", "");
+    check_error(rc, "a count no 16 bytes encode", "meshopt_huge.gltf",
+                "/bufferViews/0/extensions/EXT_meshopt_compression/count", "more than the codec");
+    dr_scene_destroy(s);
+    s = load_json("meshopt_filter.gltf", NULL, &rc, fmt, data_uri(junk, 16), 16, 12, 3, "ATTRIBUTES",
+                  ",\"filter\":\"OCTAHEDRAL\"");
+    check_error(rc, "a filter's stride", "meshopt_filter.gltf",
+                "/bufferViews/0/extensions/EXT_meshopt_compression/filter", "byteStride of 12");
+    dr_scene_destroy(s);
+}
+
 /* ---- eight-bit textures: the shared NormalTangentTest's three 2k PNGs ---- */
 
 /* Its render under a sky (it has no light), 48x48, 8 spp, into rgb. */
@@ -632,6 +734,7 @@ int main(void)
     test_ortho();
     test_ktx2();
     test_draco();
+    test_meshopt();
     test_eight_bit();
     char cmd[400];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
