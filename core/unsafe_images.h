@@ -5,6 +5,11 @@
  *  - a BMP that its reader mishandles (bmp_check.h);
  *  - a Maya IFF ("FOR4"/"FOR8"): the reader corrupts the heap on malformed
  *    RLE tiles (a 160-byte file freed a block it did not own); whole;
+ *  - an ICO icon ("00 00 01 00"): the reader wrote past its pixel buffer
+ *    for a 178-byte icon whose bitmap header says 6x5 where its directory
+ *    entry says 6x4 (a heap corruption that ASan saw only when its
+ *    quarantine recycled the block, 45000 inputs later); whole, and also
+ *    when a reader opened a file as ICO (dr_unsafe_reader);
  *  - an SGI image (magic 0x01DA): opening a 155-byte file that claims
  *    53374x3414 RLE pixels took the reader 28-40 s and 5.7 GB; whole;
  *  - a DPX whose header gives more user data than the file holds (the
@@ -14,7 +19,7 @@
  * And a format that has no magic bytes, told only by the reader that opened
  * the file (dr_unsafe_reader):
  *  - Wavefront RLA: the reader looped for minutes reading a 791-byte file.
- * None of these is a format glTF uses; IFF, SGI and RLA are refused whole,
+ * None of these is a format glTF uses; IFF, ICO, SGI and RLA are refused whole,
  * DPX (film scans are plausible targets) only where its header is impossible. */
 #ifndef DR_UNSAFE_IMAGES_H
 #define DR_UNSAFE_IMAGES_H

@@ -954,12 +954,13 @@ static void test_dpx_user_data(void)
           dr_last_error());
 }
 
-/* SGI and Wavefront RLA (unsafe_images.h): make fuzz found OpenImageIO
+/* SGI, Wavefront RLA and ICO (unsafe_images.h): make fuzz found OpenImageIO
  * 2.4's SGI reader taking 5.7 GB and half a minute to open a 155-byte file
- * (regress-sgi-5gb-open) and its RLA reader looping for minutes on a
- * 791-byte one (regress-rla-loops). Both formats are refused whole: SGI by
- * its magic bytes before any reader sees it, RLA (no magic bytes) once a
- * reader has opened it as RLA, before any pixel is read. Each case must end
+ * (regress-sgi-5gb-open), its RLA reader looping for minutes on a 791-byte
+ * one (regress-rla-loops), and its ICO reader writing past its pixels
+ * (regress-ico-heap-overflow). The three formats are refused whole: SGI and
+ * ICO by their magic bytes before any reader sees them, RLA (no magic bytes)
+ * once a reader has opened it as RLA, before any pixel is read. Each case must end
  * within a second or so, which a hang would not. */
 static void test_sgi_rla_refused(void)
 {
@@ -969,6 +970,8 @@ static void test_sgi_rla_refused(void)
         {"small-8.sgi", "x.sgi", "SGI image"},
         {"regress-rla-loops", "x.rla", "Wavefront RLA"},
         {"small-8.rla", "x.rla", "Wavefront RLA"},
+        {"regress-ico-heap-overflow", "x.ico", "ICO icon"},
+        {"small-8.ico", "x.ico", "ICO icon"},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         const size_t n = read_image_corpus_input(cases[i].input, buf, sizeof buf);
