@@ -56,11 +56,13 @@ def embed(path):
 
 
 # ---- gltf ----
-for f in sorted(glob.glob(os.path.join(root, "tests/data/*/*.gltf"))):
+for f in sorted(glob.glob(os.path.join(root, "tests/data/*/*.gltf")) +
+                glob.glob(os.path.join(root, "tests/data/gltf/meshopt/*.gltf"))):   # (gltfpack's outputs)
     name = os.path.basename(f)
     keep = name in ("basic.gltf", "env_map.gltf")
     write("gltf", name, open(f, "rb").read() if keep else embed(f))
-for f in sorted(glob.glob(os.path.join(root, "tests/data/*/*.glb"))):
+for f in sorted(glob.glob(os.path.join(root, "tests/data/*/*.glb")) +
+                glob.glob(os.path.join(root, "tests/data/gltf/meshopt/*.glb"))):
     write("gltf", os.path.basename(f), open(f, "rb").read())
 for f in sorted(glob.glob(os.path.join(samples, "*/glTF*/*.gl*"))):
     if os.path.getsize(f) > 65536:
