@@ -212,6 +212,9 @@ struct grad_auto_choice {
     bool derivative_possible;       /* a roughness is differentiated and derivative sampling can run */
     char why[512];                  /* a roughness is differentiated but derivative sampling cannot run:
                                        the reason */
+    const struct dr_param *coat;    /* a differentiated clear coat roughness below GRAD_AUTO_ROUGHNESS,
+                                       the lowest (NULL: none): no mode auto runs samples for it */
+    double coat_roughness;          /* ... its value */
 };
 /* Auto's choice for estimator e on the scene's current values. */
 struct grad_auto_choice grad_auto_sampling(const struct dr_estimator_ops *e, const struct dr_scene *scene,

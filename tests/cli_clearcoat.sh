@@ -13,7 +13,8 @@
 #      under the coat, on a scene where the coat's derivatives are resolved
 #      (more than 4 standard errors from 0)
 #   d. derivative sampling is refused naming the material; the default (auto)
-#      runs detached and says why
+#      runs detached and says why, for a base roughness and for a smooth
+#      coat's roughness
 #   e. optimize moves clearcoatFactor towards a target's, writes it into the
 #      extension; the output passes the glTF validator and renders
 # Run by tests/run.sh (env: DRENDER, DR_TESTDIR); also runs alone.
@@ -117,6 +118,11 @@ run grad "$tmp/rough.gltf" --param /materials/1/pbrMetallicRoughness/roughnessFa
 expect_rc 0 "grad with auto sampling on a coated material"
 expect_in out '"sampling_effective": "detached"' "auto runs detached on the coated material"
 expect_in err "clear coat" "auto says why it stays detached"
+run grad "$tmp/coated.gltf" --param /materials/red/extensions/KHR_materials_clearcoat/clearcoatRoughnessFactor \
+    --res 8x8 -o g.exr
+expect_rc 0 "grad of a smooth coat's roughness"
+expect_in err "clearcoatRoughnessFactor is 0.1, below 0.2" "the note on a smooth coat's roughness"
+expect_in err "derivative sampling does not sample a clear coat" "the note says why auto stays detached"
 
 # ---- e. optimize ----
 coat target.gltf "${cc/M/1} = {'clearcoatFactor': 0.9, 'clearcoatRoughnessFactor': 0.05}"
