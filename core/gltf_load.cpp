@@ -293,6 +293,7 @@ private:
     void add_tangents(const tinygltf::Primitive &p, const std::string &pp, size_t nv, const Mat4 &world,
                       bool mirrored, int32_t material);
     dr_texref texref(const tinygltf::TextureInfo &ti, const std::string &path);
+    tinygltf::TextureInfo texture_info(const tinygltf::Value &v, const std::string &path);
     void texture_transform(const tinygltf::Value &v, const std::string &ep, dr_texref &r);
     void check_ktx2();
     void traverse_scene();
@@ -849,6 +850,23 @@ void Loader::texture_transform(const tinygltf::Value &v, const std::string &ep, 
     r.transformed = true;
 }
 
+/* A textureInfo object inside an extension (tinygltf parses those of core
+ * glTF only): its index, texCoord and extensions (KHR_texture_transform). */
+tinygltf::TextureInfo Loader::texture_info(const tinygltf::Value &v, const std::string &path)
+{
+    tinygltf::TextureInfo ti;
+    if (!v.IsObject() || !v.Has("index") || !v.Get("index").IsInt())
+        fail(DR_ERR_FORMAT, "%s/index: expected a texture index", path.c_str());
+    ti.index = v.Get("index").GetNumberAsInt();
+    if (v.Has("texCoord")) {
+        if (!v.Get("texCoord").IsInt()) fail(DR_ERR_FORMAT, "%s/texCoord: expected an integer", path.c_str());
+        ti.texCoord = v.Get("texCoord").GetNumberAsInt();
+    }
+    if (v.Has("extensions") && v.Get("extensions").IsObject())
+        for (const auto &kv : v.Get("extensions").Get<tinygltf::Value::Object>()) ti.extensions[kv.first] = kv.second;
+    return ti;
+}
+
 dr_texref Loader::texref(const tinygltf::TextureInfo &ti, const std::string &path)
 {
     dr_texref r = {-1, ti.texCoord, false, {1.0, 0.0, 0.0, 0.0, 1.0, 0.0}};
@@ -906,7 +924,7 @@ dr_material default_material(const char *name)
     m.specular_color = dr_v3s(1.0);
     m.double_sided = false;
     m.base_color_tex = m.metallic_roughness_tex = m.emissive_tex = dr_texref{-1, 0, false, {1, 0, 0, 0, 1, 0}};
-    m.normal_tex = dr_texref{-1, 0, false, {1, 0, 0, 0, 1, 0}};
+    m.normal_tex = m.coat_tex = m.coat_roughness_tex = dr_texref{-1, 0, false, {1, 0, 0, 0, 1, 0}};
     m.normal_scale = 1.0;
     m.alpha_mode = DR_ALPHA_OPAQUE;
     m.alpha = 1.0;
@@ -1844,11 +1862,11 @@ void Loader::load_thin_glass(const tinygltf::Material &g, const std::string &mp,
                   "reflection is the sheet's own)", mp.c_str());
 }
 
-/* KHR_materials_clearcoat (bsdf_coat.c): its two factors, in [0, 1]. The
- * coat's textures are not read (warned: the factors apply everywhere), and
- * the coat is shaded with the base's normal, normal map included, where
- * glTF gives it the geometric normal unless clearcoatNormalTexture says
- * otherwise (warned where a normal map makes the two differ). */
+/* KHR_materials_clearcoat (bsdf_coat.c): its two factors, in [0, 1], and
+ * their textures (clearcoatTexture's R, clearcoatRoughnessTexture's G). The
+ * coat is shaded with the base's normal, normal map included, where glTF
+ * gives it the geometric normal unless clearcoatNormalTexture says otherwise
+ * (warned where a normal map makes the two differ). */
 void Loader::load_clearcoat(const tinygltf::Material &g, const std::string &mp, dr_material &m)
 {
     auto it = g.extensions.find("KHR_materials_clearcoat");
@@ -1864,10 +1882,14 @@ void Loader::load_clearcoat(const tinygltf::Material &g, const std::string &mp, 
     }
     m.coated = m.coat > 0.0;
     if (!m.coated) return;
-    for (const char *key : {"clearcoatTexture", "clearcoatRoughnessTexture"})
-        if (it->second.Has(key))
-            warn_once(std::string("coat:") + key, "%s/%s: clearcoat textures are not supported; ignored (the "
-                      "factors apply everywhere)", ep.c_str(), key);
+    /* the factor's texture (R) and the roughness's (G): linear data */
+    const std::pair<const char *, dr_texref *> textures[] = {{"clearcoatTexture", &m.coat_tex},
+                                                             {"clearcoatRoughnessTexture", &m.coat_roughness_tex}};
+    for (const auto &t : textures) {
+        if (!it->second.Has(t.first)) continue;
+        *t.second = texref(texture_info(it->second.Get(t.first), ep + "/" + t.first), ep + "/" + t.first);
+        if (t.second->texture >= 0) data_images_[size_t(scene_->textures[t.second->texture].image)] = 1;
+    }
     /* The coat's normal is the base's: exact where clearcoatNormalTexture is
      * the normalTexture itself (as Blender writes it) or where neither is given */
     const tinygltf::Value &cn = it->second.Get("clearcoatNormalTexture");

@@ -47,6 +47,14 @@ void dr_material_eval(const struct dr_scene *s, const struct dr_hit *hit, struct
         b->roughness *= px[1];
         b->metallic *= px[2];
     }
+    /* the coat: clearcoatTexture's R, clearcoatRoughnessTexture's G */
+    for (int which = 0; which < 2; which++) {
+        const struct dr_texref *r = dr_material_coat_tex(m, which);
+        if (r) {
+            texref_eval(s, texref_texture(s, r), r, hit, false, uv, px);
+            *(which ? &b->coat_roughness : &b->coat) *= px[which];
+        }
+    }
 }
 
 static void texref_prefetch(const struct dr_scene *s, const struct dr_texref *r, const struct dr_hit *hit,
@@ -68,6 +76,9 @@ void dr_material_prefetch(const struct dr_scene *s, const struct dr_hit *hit)
     texref_prefetch(s, &m->metallic_roughness_tex, hit, false);
     dr_emission_prefetch(s, hit);
     texref_prefetch(s, &m->normal_tex, hit, false);
+    for (int which = 0; which < 2; which++)
+        if (dr_material_coat_tex(m, which))
+            texref_prefetch(s, dr_material_coat_tex(m, which), hit, false);
 }
 
 void d_material_eval(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_hit *hit,
@@ -103,11 +114,25 @@ void d_material_eval(const struct dr_scene *s, const struct dr_param_set *ps, co
         dr_sink_add(k, ps->mat_roughness[mi], d_b->roughness * tex_g);
     if (ps->mat_metallic[mi] >= 0)
         dr_sink_add(k, ps->mat_metallic[mi], d_b->metallic * tex_b);
-    /* the coat's factors (no textures) */
-    if (ps->mat_coat[mi] >= 0)
-        dr_sink_add(k, ps->mat_coat[mi], d_b->coat);
-    if (ps->mat_coat_roughness[mi] >= 0)
-        dr_sink_add(k, ps->mat_coat_roughness[mi], d_b->coat_roughness);
+    /* the coat: factor x R of its texture, roughness factor x G of its own */
+    for (int which = 0; which < 2; which++) {
+        const int64_t factor = which ? ps->mat_coat_roughness[mi] : ps->mat_coat[mi];
+        const double d = which ? d_b->coat_roughness : d_b->coat;
+        const struct dr_texref *r = dr_material_coat_tex(m, which);
+        double texel = 1.0, cuv[2] = {0.0, 0.0};
+        if (r) {
+            texref_eval(s, texref_texture(s, r), r, hit, false, cuv, px);
+            texel = px[which];
+        }
+        if (factor >= 0)
+            dr_sink_add(k, factor, d * texel);
+        const struct dr_texture *ct = r ? texref_texture(s, r) : NULL;
+        if (ct && ps->image[ct->image] >= 0) {
+            double d_out[4] = {0.0, 0.0, 0.0, 0.0};
+            d_out[which] = d * (which ? m->coat_roughness : m->coat);
+            d_texture_eval(ct, &s->images[ct->image], cuv[0], cuv[1], d_out, ps->image[ct->image], k);
+        }
+    }
     if (mt && ps->image[mt->image] >= 0) {
         double d_out[4] = {0.0, d_b->roughness * m->roughness, d_b->metallic * m->metallic, 0.0};
         d_texture_eval(mt, &s->images[mt->image], muv[0], muv[1], d_out, ps->image[mt->image], k);
@@ -142,5 +167,16 @@ void d_material_eval_uv(const struct dr_scene *s, const struct dr_hit *hit, cons
         double d_uv[2] = {0.0, 0.0};
         d_texture_eval_uv(mt, &s->images[mt->image], uv[0], uv[1], false, d_out, &d_uv[0], &d_uv[1]);
         d_texref_uv(&m->metallic_roughness_tex, d_uv, d_hit);
+    }
+    for (int which = 0; which < 2; which++) {   /* the coat's textures (R, G) */
+        const struct dr_texref *r = dr_material_coat_tex(m, which);
+        if (!r)
+            continue;
+        const struct dr_texture *ct = texref_texture(s, r);
+        dr_texref_uv(&s->mesh, r, hit, uv);
+        double d_out[4] = {0.0, 0.0, 0.0, 0.0}, d_uv[2] = {0.0, 0.0};
+        d_out[which] = (which ? d_b->coat_roughness * m->coat_roughness : d_b->coat * m->coat);
+        d_texture_eval_uv(ct, &s->images[ct->image], uv[0], uv[1], false, d_out, &d_uv[0], &d_uv[1]);
+        d_texref_uv(r, d_uv, d_hit);
     }
 }

@@ -164,6 +164,9 @@ static void image_usage(const struct dr_scene *s, int image, bool *as_colour, bo
         for (int k = 0; k < 2; k++)
             if (colour[k]->texture >= 0 && s->textures[colour[k]->texture].image == image)
                 *as_colour = true;
+        for (int which = 0; which < 2; which++)   /* (a clear coat's textures: data) */
+            if (dr_material_coat_tex(m, which) && s->textures[dr_material_coat_tex(m, which)->texture].image == image)
+                *as_data = true;
         if (m->metallic_roughness_tex.texture >= 0 && s->textures[m->metallic_roughness_tex.texture].image == image)
             *as_data = true;
     }
@@ -772,7 +775,9 @@ static void mark_active(struct dr_param_set *set, const struct dr_scene *s)
         set->mat_bsdf_active[m] = set->mat_base_color[m] >= 0 || set->mat_metallic[m] >= 0 ||
                                   set->mat_roughness[m] >= 0 || set->mat_coat[m] >= 0 ||
                                   set->mat_coat_roughness[m] >= 0 || texref_active(set, s, &mat->base_color_tex) ||
-                                  texref_active(set, s, &mat->metallic_roughness_tex);
+                                  texref_active(set, s, &mat->metallic_roughness_tex) ||
+                                  (dr_material_coat_tex(mat, 0) && texref_active(set, s, dr_material_coat_tex(mat, 0))) ||
+                                  (dr_material_coat_tex(mat, 1) && texref_active(set, s, dr_material_coat_tex(mat, 1)));
         set->mat_emission_active[m] = set->mat_emissive_factor[m] >= 0 || set->mat_emissive_strength[m] >= 0 ||
                                       texref_active(set, s, &mat->emissive_tex);
         set->radiance_active |= set->mat_emission_active[m];

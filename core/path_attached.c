@@ -30,6 +30,9 @@ bool dr_path_material_sampling_moves(const struct dr_scene *s, const struct dr_p
         return false;
     if (ps->mat_roughness[m] >= 0 || ps->mat_coat_roughness[m] >= 0)   /* (the coat's lobe map) */
         return true;
+    const struct dr_texref *cr = dr_material_coat_tex(&s->materials[m], 1);
+    if (cr && ps->image[s->textures[cr->texture].image] >= 0)
+        return true;
     int t = s->materials[m].metallic_roughness_tex.texture;
     return t >= 0 && ps->image[s->textures[t].image] >= 0;
 }

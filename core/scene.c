@@ -110,7 +110,7 @@ static int refresh(struct dr_scene *s, bool lights)
         if (!used[i])
             continue;
         if (mat->base_color_tex.texture >= 0 || mat->metallic_roughness_tex.texture >= 0 ||
-            mat->emissive_tex.texture >= 0)
+            mat->emissive_tex.texture >= 0 || dr_material_coat_tex(mat, 0) || dr_material_coat_tex(mat, 1))
             s->effects |= DR_FX_TEXTURES;
         if (material_has_specular(mat))
             s->effects |= DR_FX_SPECULAR;

@@ -56,11 +56,22 @@ struct dr_material {
     double thin_ior;
     /* KHR_materials_clearcoat (bsdf_coat.c): coated when the file gives the
      * extension with clearcoatFactor > 0 (decided at load, so that a fit
-     * that moves the factor to 0 keeps its derivative); the factors then
-     * apply everywhere (clearcoat textures are not read) */
+     * that moves the factor to 0 keeps its derivative). The coat is
+     * clearcoatFactor x clearcoatTexture's R, its roughness
+     * clearcoatRoughnessFactor x clearcoatRoughnessTexture's G (linear data);
+     * the textures are read only where coated (dr_material_coat_tex). */
     bool coated;
     double coat, coat_roughness;
+    struct dr_texref coat_tex, coat_roughness_tex;
 };
+
+/* m's clear coat texture (which 0) or coat roughness texture (1), or NULL:
+ * none, or m is not coated (a material zeroed without them reads none). */
+static inline const struct dr_texref *dr_material_coat_tex(const struct dr_material *m, int which)
+{
+    const struct dr_texref *t = which ? &m->coat_roughness_tex : &m->coat_tex;
+    return m->coated && t->texture >= 0 ? t : NULL;
+}
 
 /* Makes m thin-walled glass of index ior (>= 1): base colour white and no
  * base colour texture (the sheet is clear: glTF's tint by the base colour

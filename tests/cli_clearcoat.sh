@@ -3,11 +3,12 @@
 # Cornell box with coats added:
 #   a. loading: --json effects name "clearcoat"; a clearcoatFactor of 0 renders
 #      the same bytes as no extension (nothing of the coat is computed); a factor
-#      outside [0, 1] is refused naming its JSON path; clearcoat textures are
-#      warned as ignored; the lamp sample, whose clearcoatNormalTexture is its
-#      normalTexture, loads without a clearcoat warning
+#      outside [0, 1] is refused naming its JSON path; the lamp sample, whose
+#      clearcoatNormalTexture is its normalTexture, loads without a clearcoat
+#      warning
 #   b. the coat shows: a black floor under a smooth coat reflects the light
-#      (black without it)
+#      (black without it); a white clearcoatTexture gives the same pixels as
+#      none, a black one the bare floor's light; params lists its image
 #   c. params lists the coat's factors of coated materials only; fdcheck, prb
 #      and tape, detached and attached, of both factors and a base colour
 #      under the coat, on a scene where the coat's derivatives are resolved
@@ -51,10 +52,6 @@ coat bad.gltf "${cc/M/1} = {'clearcoatFactor': 1.5}"
 run render "$tmp/bad.gltf" $R -o bad.exr
 check_failed 3 "bad.gltf|/materials/1/extensions/KHR_materials_clearcoat/clearcoatFactor|[0, 1]"
 [ -e bad.exr ] && fail "a refused scene left an image"
-coat tex.gltf "${cc/M/1} = {'clearcoatFactor': 0.5, 'clearcoatTexture': {'index': 0}}"
-run render "$tmp/tex.gltf" $R -o tex.exr
-expect_rc 0 "render with a clearcoatTexture"
-expect_in err "clearcoatTexture: clearcoat textures are not supported; ignored" "the texture's warning"
 find_samples
 if [ -d "$samples/AnisotropyBarnLamp-KTX2" ]; then
     run params "$samples/AnisotropyBarnLamp-KTX2/glTF/AnisotropyBarnLamp.gltf"
@@ -82,6 +79,26 @@ floor_coat=$(oiiotool --stats black_coat.exr | awk '/Stats Avg/ { print $3; exit
 echo "black floor: mean red $floor bare, $floor_coat under a smooth coat"
 awk -v a="$floor" -v b="$floor_coat" 'BEGIN { exit !(b > 5 * a && b > 0.003) }' ||
     fail "the coat does not reflect on a black floor ($floor bare, $floor_coat coated)"
+# clearcoatTexture's R scales the coat: all white is the factor alone (the
+# same bytes), all black no coat at all (the bare floor's light)
+oiiotool --pattern constant:color=1,1,1 2x2 3 -d uint8 -o "$tmp/white.png" &&
+    oiiotool --pattern constant:color=0,0,0 2x2 3 -d uint8 -o "$tmp/black.png" || fail "oiiotool could not write the masks"
+for mask in white black; do
+    coat "mask_$mask.gltf" "d['materials'][5]['pbrMetallicRoughness'] = {'baseColorFactor': [0, 0, 0, 1], 'roughnessFactor': 1}; \
+d['images'].append({'uri': '$mask.png'}); d['textures'].append({'source': len(d['images']) - 1}); \
+d['materials'][5]['extensions'] = {'KHR_materials_specular': {'specularFactor': 0}, \
+'KHR_materials_clearcoat': {'clearcoatFactor': 1, 'clearcoatRoughnessFactor': 0.05, \
+'clearcoatTexture': {'index': len(d['textures']) - 1}}}"
+    run render "$tmp/mask_$mask.gltf" --res 32x32 --spp 64 --crop 7,28,5,4 -o "mask_$mask.exr"
+    expect_rc 0 "render with a $mask clearcoatTexture"
+    grep -q "clearcoat" "$tmp/err" && fail "a warning about the clearcoatTexture: $(cat "$tmp/err")"
+done
+# (pixels, not bytes: the headers differ)
+oiiotool --diff --fail 0 --warn 0 mask_white.exr black_coat.exr >/dev/null || fail "a white clearcoatTexture changed the coat"
+masked=$(oiiotool --stats mask_black.exr | awk '/Stats Avg/ { print $3; exit }')
+[ "$masked" = "$floor" ] || fail "a black clearcoatTexture leaves a coat ($masked, bare $floor)"
+run params "$tmp/mask_black.gltf"
+expect_in out "/images/1 " "params lists the clearcoatTexture's image"
 
 # ---- c. params and fdcheck ----
 run params "$tmp/coated.gltf"

@@ -207,7 +207,8 @@ static double uv_objective(void *c, const double *x)
     if (k->texture == -1) {
         struct dr_bsdf b = {0};
         dr_material_eval(k->s, &h, &b);
-        return dr_dot(k->wb.base_color, b.base_color) + k->wb.metallic * b.metallic + k->wb.roughness * b.roughness;
+        return dr_dot(k->wb.base_color, b.base_color) + k->wb.metallic * b.metallic + k->wb.roughness * b.roughness +
+               k->wb.coat * b.coat + k->wb.coat_roughness * b.coat_roughness;
     }
     return dr_dot(v3(k->w), dr_emission(k->s, &h));
 }
@@ -226,12 +227,29 @@ static void test_uv(const struct dr_scene *s)
             d_texture_eval_uv(tx, &s->images[tx->image], x[0], x[1], true, k.w, &g[0], &g[1]);
             check_fd(names[t], uv_objective, &k, x, 2, g, 1e-7, 1e-6);
         }
-    struct uv_ctx k = {s, -1, {0}, {rnd(), rnd(), rnd(), 0}, {rnd3(), rnd(), rnd(), 0, 0}};
+    struct uv_ctx k = {s, -1, {0}, {rnd(), rnd(), rnd(), 0}, {rnd3(), rnd(), rnd(), rnd(), rnd()}};
     dr_hit_at(&s->mesh, 0, 0.3, 0.25, &k.hit);
     double x[2] = {k.hit.uv[0], k.hit.uv[1]};
     struct dr_d_hit dh = {0};
     d_material_eval_uv(s, &k.hit, &k.wb, &dh);
     check_fd("d_material_eval_uv", uv_objective, &k, x, 2, dh.uv, 1e-7, 1e-6);
+    /* a clear coat whose factor and roughness come from texture 1's R and G
+     * (clearcoatTexture, clearcoatRoughnessTexture; a transform on the
+     * roughness's) */
+    struct dr_material *m = &((struct dr_scene *)s)->materials[0];
+    const struct dr_material saved = *m;
+    m->coated = true;
+    m->coat = 0.6;
+    m->coat_roughness = 0.4;
+    m->coat_tex = m->metallic_roughness_tex;
+    m->coat_roughness_tex = m->metallic_roughness_tex;
+    m->coat_roughness_tex.transformed = true;
+    const double xf[6] = {0.8, 0.3, 0.05, -0.2, 1.1, 0.15};
+    memcpy(m->coat_roughness_tex.xf, xf, sizeof xf);
+    memset(&dh, 0, sizeof dh);
+    d_material_eval_uv(s, &k.hit, &k.wb, &dh);
+    check_fd("d_material_eval_uv, coat textures", uv_objective, &k, x, 2, dh.uv, 1e-7, 1e-6);
+    *m = saved;
     k.texture = -2;
     memset(&dh, 0, sizeof dh);
     d_emission_uv(s, &k.hit, v3(k.w), &dh);

@@ -119,9 +119,11 @@ static void test_chains(void)
     m.roughness = 0.45;
     m.emissive_factor = dr_v3(0.5, 0.75, 0.25);
     m.emissive_strength = 3.0;
-    m.coated = true;   /* KHR_materials_clearcoat */
+    m.coated = true;   /* KHR_materials_clearcoat, its factor and roughness from texture 1's R and G */
     m.coat = 0.6;
     m.coat_roughness = 0.3;
+    m.coat_tex.texture = 1;
+    m.coat_roughness_tex.texture = 1;
     m.base_color_tex.texture = 0;
     m.metallic_roughness_tex.texture = 1;
     m.emissive_tex.texture = 2;
