@@ -627,6 +627,36 @@ if [[ -f $PEER ]]; then
     PUNCTUAL_JSON="{$(join "${parts[@]}")}"
 fi
 
+# ---- u. clear coat -----------------------------------------------------------
+# KHR_materials_clearcoat on the peer box's red and white walls (factor 1,
+# roughness 0.1): the time per ray over the uncoated box's, median of 3 pairs
+# run back to back (issue 11: no scene far off the others; coated scenes run
+# one path at a time, not eight lanes wide: 2026-12-07, 1.9-2.0 x per ray on
+# the bundled box with one thread).
+COAT_JSON=null
+if [[ -f $PEER ]]; then
+    echo
+    echo "u. clear coat: time per ray, the peer box with its red and white walls coated / uncoated (256x256, 64 spp, 2 threads)"
+    python3 - "$PEER" "$TMP/peer-coat.gltf" <<'PY'
+import json, sys
+g = json.load(open(sys.argv[1]))
+for m in g["materials"]:
+    if m.get("name") in ("red", "white"):
+        m.setdefault("extensions", {})["KHR_materials_clearcoat"] = {"clearcoatFactor": 1.0, "clearcoatRoughnessFactor": 0.1}
+g.setdefault("extensionsUsed", []).append("KHR_materials_clearcoat")
+json.dump(g, open(sys.argv[2], "w"))
+PY
+    coat_r=()
+    for i in 1 2 3; do
+        render "$PEER" --res 256x256 --spp 64 --threads 2
+        per_plain=$(calc "$R_TIME / $(json_num "$R_JSON" total rays)" %.6g)
+        render "$TMP/peer-coat.gltf" --res 256x256 --spp 64 --threads 2
+        coat_r+=("$(calc "$R_TIME / $(json_num "$R_JSON" total rays) / $per_plain" %.3f)")
+    done
+    printf '   per ray coated / uncoated: %s (pairs %s)\n' "$(median "${coat_r[@]}")" "$(join "${coat_r[@]}")"
+    COAT_JSON="{\"coated_per_ray_over_uncoated\": $(median "${coat_r[@]}"), \"pairs\": [$(join "${coat_r[@]}")]}"
+fi
+
 # ---- results.json and the noise note ---------------------------------------
 
 TOTAL=$(elapsed)
@@ -651,6 +681,7 @@ OTHER_CORES=$(calc "$OTHER_TOTAL / $WALL_TOTAL" %.2f)
     echo "  \"default_sampler\": $SAMPLER_JSON,"
     echo "  \"alpha\": $ALPHA_JSON,"
     echo "  \"punctual_lights\": $PUNCTUAL_JSON,"
+    echo "  \"clearcoat\": $COAT_JSON,"
     echo "  \"peer\": $PEER_JSON"
     echo "}"
 } >"$OUT/results.json"
