@@ -590,6 +590,57 @@ static void test_pdf_fixed(void)
     }
 }
 
+/* The same under a clear coat (bsdf_coat.c): both lobe choices held, the
+ * coat's at P0c = c Fc(wo.z) and the base's at its P0, so the density is
+ * P0c p_coat + (1 - P0c) [(1 - P0) cos/pi + P0 p_spec], each lobe's density
+ * from the public functions on the coat lobe (the base BSDF with base 0,
+ * metallic 0, specular 1) and on the uncoated base. Inputs: the base's and
+ * the coat's roughness, wo, wi; the coat's factor has no derivative then. */
+struct coat_pdf_ctx {
+    struct dr_bsdf b;
+    double P0c, P0;
+};
+
+static double coat_pdf_fixed_objective(void *c, const double *x)
+{
+    struct coat_pdf_ctx *k = c;
+    struct dr_bsdf base = k->b;
+    base.coated = false;
+    base.roughness = x[0];
+    const struct dr_bsdf lobe = {.roughness = x[1], .specular = 1.0, .specular_color = dr_v3s(1.0)};
+    dr_vec3 wo = v3(x + 2), wi = v3(x + 5);
+    double P = dr_bsdf_specular_prob(&base, wo), pd = wi.z * DR_INV_PI;
+    double ps = (dr_bsdf_pdf(&base, wo, wi) - (1.0 - P) * pd) / P;
+    return k->P0c * dr_bsdf_pdf(&lobe, wo, wi) + (1.0 - k->P0c) * ((1.0 - k->P0) * pd + k->P0 * ps);
+}
+
+static void test_coat_pdf_fixed(void)
+{
+    const double roughs[] = {0.05, 0.3, 0.8};
+    for (int r = 0; r < 3; r++) {
+        struct coat_pdf_ctx k;
+        memset(&k, 0, sizeof k);
+        k.b = (struct dr_bsdf){.base_color = dr_v3(0.5, 0.4, 0.3), .metallic = 0.4, .roughness = roughs[r],
+                               .specular = 1.0, .specular_color = dr_v3s(1.0), .coated = true, .coat = 0.7,
+                               .coat_roughness = roughs[2 - r]};
+        dr_vec3 wo = dr_normalize(dr_v3(0.3, -0.2, 0.8 - 0.3 * r));
+        dr_vec3 wi = dr_normalize(dr_v3(-0.25, 0.15 + 0.05 * r, 0.9));
+        struct dr_bsdf base = k.b;
+        base.coated = false;
+        k.P0 = dr_bsdf_specular_prob(&base, wo);
+        k.P0c = 0.7 * (0.04 + 0.96 * pow(1.0 - wo.z, 5.0));
+        double x[8] = {roughs[r], roughs[2 - r], wo.x, wo.y, wo.z, wi.x, wi.y, wi.z};
+        struct dr_d_bsdf db = {0};
+        dr_vec3 dwo = dr_v3s(0), dwi = dr_v3s(0);
+        d_bsdf_pdf_fixed_prob(&k.b, wo, wi, 1.0, &db, &dwo, &dwi);
+        double g[8] = {db.roughness, db.coat_roughness, dwo.x, dwo.y, dwo.z, dwi.x, dwi.y, dwi.z};
+        check_fd("d_bsdf_pdf_fixed_prob, coated", coat_pdf_fixed_objective, &k, x, 8, g, 1e-7, 1e-5);
+        CHECK(db.coat == 0.0 && db.metallic == 0.0 && dr_is_black(db.base_color),
+              "coated, with the lobes fixed the pdf does not depend on the coat's factor, metallic or base colour");
+        CHECK(db.coat_roughness != 0.0, "coated: the coat's roughness moves its lobe's density");
+    }
+}
+
 int main(void)
 {
     dr_sampler_init(&rng, 11, 0, 0);
@@ -603,6 +654,7 @@ int main(void)
     test_sky_nee_vertex();
     test_pdf_area(s);
     test_pdf_fixed();
+    test_coat_pdf_fixed();
     test_hit_attributes(s);   /* last: it adds vertex colours and uv transforms to s */
     dr_scene_destroy(s);
     return TEST_END();
