@@ -151,7 +151,9 @@ struct lanes {
     const struct dr_texref *base_tex[DR_SIMD_W], *mr_tex[DR_SIMD_W], *emissive_tex[DR_SIMD_W];
     const struct dr_texref *normal_tex[DR_SIMD_W];      /* (normal_map8's) */
     const struct dr_texref *lemissive_tex[DR_SIMD_W];   /* the light's */
-    bool any_tex8, any_ltex8, any_normal8;
+    const struct dr_texref *coat_tex[2][DR_SIMD_W];     /* the coat's and its roughness's (coat_eval) */
+    bool any_tex8, any_ltex8, any_normal8, any_coat_tex8;
+    bool coated[DR_SIMD_W], any_coated;   /* the material has a clear coat */
     bool textured[DR_SIMD_W];         /* the scalar hit is needed (mat_textures' scalar_hit) */
     bool scalar_material[DR_SIMD_W];  /* dr_material_eval reads the BSDF's textures */
     bool scalar_emission[DR_SIMD_W];  /* dr_emission reads the emissive texture */
@@ -248,6 +250,44 @@ DR_SIMD_INLINE dr_v3x8 normalize(dr_v3x8 a)   /* dr_normalize */
     return dr_v3x8_sel(pos, dr_v3x8_scale(a, 1.0 / dr_f8_sel(pos, l, dr_f8s(1.0))), a);
 }
 
+/* dielectric_f0 of a layer with specular colour sc and weight specular */
+DR_SIMD_INLINE dr_v3x8 dielectric_f0(dr_v3x8 sc, dr_f8 specular)
+{
+    return (dr_v3x8){dr_f8_min(0.04 * sc.x, dr_f8s(1.0)) * specular, dr_f8_min(0.04 * sc.y, dr_f8s(1.0)) * specular,
+                     dr_f8_min(0.04 * sc.z, dr_f8s(1.0)) * specular};
+}
+/* bsdf_alpha of roughness r */
+DR_SIMD_INLINE dr_f8 bsdf_alpha(dr_f8 r)
+{
+    dr_f8 a = r * r;
+    return dr_f8_sel(dr_f8_gt(a, dr_f8s(DR_BSDF_MIN_ALPHA)), a, dr_f8s(DR_BSDF_MIN_ALPHA));
+}
+
+/* The clear coat's inputs (dr_material_eval's last step: the factors times
+ * the R and G of their textures) and bsdf_coat.c's coat_lobe; coat 0 on
+ * the lanes without one, so that its share of the samples is 0 there. */
+static void coat_eval(const struct dr_scene *s, struct dr_path8 *g, const struct lanes *L, dr_m8 end,
+                      const struct dr_uv8 *uv, const double *lane_coat, const double *lane_coat_r)
+{
+    const void *const *mat = L->mat;
+    dr_f8 c = gather(mat, offsetof(struct dr_material, coat));
+    dr_f8 r = gather(mat, offsetof(struct dr_material, coat_roughness));
+    if (L->any_coat_tex8) {
+        c = c * dr_texref8_rgb(s, L->coat_tex[0], ~end, uv, false).x;
+        r = r * dr_texref8_rgb(s, L->coat_tex[1], ~end, uv, false).y;
+    }
+    for (int i = 0; L->any_textured && i < g->n; i++)
+        if (L->scalar_material[i] && !end[i])   /* (material_eval's dr_material_eval) */
+            c[i] = lane_coat[i], r[i] = lane_coat_r[i];
+    g->coat_on = mask_of(L->coated);
+    const dr_f8 zero = dr_f8s(0.0);
+    g->coat = dr_f8_sel(g->coat_on, c, zero);
+    g->coat_roughness = dr_f8_sel(g->coat_on, r, zero);
+    g->coat_lobe = (struct dr_lobe8){.base = {zero, zero, zero}, .metallic = zero, .specular = dr_f8s(1.0),
+                                     .alpha = bsdf_alpha(g->coat_roughness)};
+    g->coat_lobe.f0 = dielectric_f0((dr_v3x8){dr_f8s(1.0), dr_f8s(1.0), dr_f8s(1.0)}, g->coat_lobe.specular);
+}
+
 /* dr_material_eval (the factors times the textures at the coordinates uv,
  * times the vertex colour; lanes with a texture texture8.h does not read
  * call it), and what bsdf.c derives from the material alone (bsdf_alpha,
@@ -256,63 +296,66 @@ static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const st
                           const dr_v3x8 *colour, const struct dr_uv8 *uv)
 {
     const void *const *mat = L->mat;
-    g->base = gather3(mat, offsetof(struct dr_material, base_color));
-    g->metallic = gather(mat, offsetof(struct dr_material, metallic));
-    g->specular = gather(mat, offsetof(struct dr_material, specular));
+    struct dr_lobe8 *b = &g->b;
+    b->base = gather3(mat, offsetof(struct dr_material, base_color));
+    b->metallic = gather(mat, offsetof(struct dr_material, metallic));
+    b->specular = gather(mat, offsetof(struct dr_material, specular));
     dr_f8 r = gather(mat, offsetof(struct dr_material, roughness));
     if (L->any_tex8) {   /* factor x texture (1 where a lane has none), in dr_material_eval's order */
-        g->base = dr_v3x8_mul(g->base, dr_texref8_rgb(s, L->base_tex, ~end, uv, true));
+        b->base = dr_v3x8_mul(b->base, dr_texref8_rgb(s, L->base_tex, ~end, uv, true));
         dr_v3x8 mr = dr_texref8_rgb(s, L->mr_tex, ~end, uv, false);
         r = r * mr.y;
-        g->metallic = g->metallic * mr.z;
+        b->metallic = b->metallic * mr.z;
     }
     if (colour)   /* times COLOR_0 (scalar_material lanes: dr_material_eval's, below) */
-        g->base = dr_v3x8_mul(g->base, *colour);
+        b->base = dr_v3x8_mul(b->base, *colour);
+    double lane_coat[DR_SIMD_W], lane_coat_r[DR_SIMD_W];
     for (int i = 0; L->any_textured && i < g->n; i++)
         if (L->scalar_material[i] && !end[i]) {   /* textures (and the vertex colour): dr_material_eval itself */
-            struct dr_bsdf b;
-            dr_material_eval(s, &L->hit[i], &b);
-            set_lane(&g->base, i, b.base_color);
-            g->metallic[i] = b.metallic;
-            r[i] = b.roughness;
+            struct dr_bsdf lb;
+            dr_material_eval(s, &L->hit[i], &lb);
+            set_lane(&b->base, i, lb.base_color);
+            b->metallic[i] = lb.metallic;
+            r[i] = lb.roughness;
+            lane_coat[i] = lb.coat, lane_coat_r[i] = lb.coat_roughness;
         }
     g->roughness = r;   /* (a differentiated vertex's dr_bsdf: dr_path8_shade) */
-    g->lambert = dr_f8_eq(g->metallic, dr_f8s(0.0)) & dr_f8_eq(g->specular, dr_f8s(0.0));
+    g->coated = L->any_coated;
+    if (g->coated)
+        coat_eval(s, g, L, end, uv, lane_coat, lane_coat_r);
+    g->lambert = dr_f8_eq(b->metallic, dr_f8s(0.0)) & dr_f8_eq(b->specular, dr_f8s(0.0));
     g->glossy = dr_m8_any(~g->lambert);
-    if (!g->glossy)
+    if (!g->glossy) {   /* (spec_p is 0: alpha is read, not used, by bsdf_sample and sky_share) */
+        b->alpha = dr_f8s(1.0);
         return;
-    dr_f8 a = r * r;
-    g->alpha = dr_f8_sel(dr_f8_gt(a, dr_f8s(DR_BSDF_MIN_ALPHA)), a, dr_f8s(DR_BSDF_MIN_ALPHA));
-    dr_v3x8 sc = gather3(mat, offsetof(struct dr_material, specular_color));
-    g->f0 = (dr_v3x8){dr_f8_min(0.04 * sc.x, dr_f8s(1.0)) * g->specular,
-                      dr_f8_min(0.04 * sc.y, dr_f8s(1.0)) * g->specular,
-                      dr_f8_min(0.04 * sc.z, dr_f8s(1.0)) * g->specular};
+    }
+    b->alpha = bsdf_alpha(r);
+    b->f0 = dielectric_f0(gather3(mat, offsetof(struct dr_material, specular_color)), b->specular);
 }
 
-/* specular_prob (0 without a specular lobe) */
-DR_SIMD_INLINE dr_f8 specular_prob(const struct dr_path8 *g, dr_f8 cos_o)
+/* specular_prob_glossy of layer b, 0 on the lanes without a specular lobe
+ * (lambert) */
+DR_SIMD_INLINE dr_f8 specular_prob(const struct dr_lobe8 *b, dr_m8 lambert, dr_f8 cos_o)
 {
-    if (!g->glossy)
-        return dr_f8s(0.0);
-    dr_f8 m = g->metallic;
+    dr_f8 m = b->metallic;
     dr_f8 s5 = pow5(1.0 - dr_f8_clamp(cos_o, 0.0, 1.0));
-    dr_f8 f0max = max3(g->f0);
-    dr_f8 fd = f0max + (g->specular - f0max) * s5;
-    dr_v3x8 b = g->base;
-    dr_v3x8 fm = {b.x + (1.0 - b.x) * s5, b.y + (1.0 - b.y) * s5, b.z + (1.0 - b.z) * s5};
+    dr_f8 f0max = max3(b->f0);
+    dr_f8 fd = f0max + (b->specular - f0max) * s5;
+    dr_v3x8 c = b->base;
+    dr_v3x8 fm = {c.x + (1.0 - c.x) * s5, c.y + (1.0 - c.y) * s5, c.z + (1.0 - c.z) * s5};
     dr_f8 w_spec = (1.0 - m) * fd + m * luminance(fm);
-    dr_f8 w_diff = (1.0 - m) * (1.0 - fd) * luminance(b);
+    dr_f8 w_diff = (1.0 - m) * (1.0 - fd) * luminance(c);
     dr_f8 p = w_spec / (w_spec + w_diff);
     p = dr_f8_sel(dr_f8_gt(w_spec, dr_f8s(0.0)), p, dr_f8s(0.0));
     p = dr_f8_sel(dr_f8_gt(w_diff, dr_f8s(0.0)), p, dr_f8s(1.0));
-    return dr_f8_sel(g->lambert, dr_f8s(0.0), p);
+    return dr_f8_sel(lambert, dr_f8s(0.0), p);
 }
 
-/* eval_pdf_glossy */
-DR_SIMD_INLINE dr_v3x8 eval_pdf_glossy(const struct dr_path8 *g, dr_v3x8 wo, dr_v3x8 wi, dr_f8 p, dr_f8 *pdf)
+/* eval_pdf_glossy of layer b */
+DR_SIMD_INLINE dr_v3x8 eval_pdf_glossy(const struct dr_lobe8 *b, dr_v3x8 wo, dr_v3x8 wi, dr_f8 p, dr_f8 *pdf)
 {
     dr_f8 cos_pdf = wi.z * DR_INV_PI;
-    dr_f8 a = g->alpha, a2 = a * a;
+    dr_f8 a = b->alpha, a2 = a * a;
     dr_v3x8 H = dr_v3x8_add(wo, wi);
     dr_f8 hxy2 = H.x * H.x + H.y * H.y;
     dr_f8 H2 = hxy2 + H.z * H.z;
@@ -327,9 +370,9 @@ DR_SIMD_INLINE dr_v3x8 eval_pdf_glossy(const struct dr_path8 *g, dr_v3x8 wo, dr_
 
     dr_f8 c = 0.5 * dr_f8_sqrt(H2);
     dr_f8 s5 = pow5(1.0 - dr_f8_clamp(c, 0.0, 1.0));
-    dr_f8 m = g->metallic;
-    dr_v3x8 f0 = g->f0, base = g->base;
-    dr_f8 f90 = g->specular;
+    dr_f8 m = b->metallic;
+    dr_v3x8 f0 = b->f0, base = b->base;
+    dr_f8 f90 = b->specular;
     dr_v3x8 fd = {f0.x + (f90 - f0.x) * s5, f0.y + (f90 - f0.y) * s5, f0.z + (f90 - f0.z) * s5};
     dr_v3x8 fm = {base.x + (1.0 - base.x) * s5, base.y + (1.0 - base.y) * s5, base.z + (1.0 - base.z) * s5};
     dr_f8 f0max = max3(f0);
@@ -340,26 +383,53 @@ DR_SIMD_INLINE dr_v3x8 eval_pdf_glossy(const struct dr_path8 *g, dr_v3x8 wo, dr_
                      base.z * kd + fd.z * ks + fm.z * km};
 }
 
-/* eval_pdf_above: wo.z, wi.z > COS_EPS, p = specular_prob(wo.z) */
-DR_SIMD_INLINE dr_v3x8 eval_pdf_above(const struct dr_path8 *g, dr_v3x8 wo, dr_v3x8 wi, dr_f8 p, dr_f8 *pdf)
+/* bsdf.c's eval_pdf_above of the base layer: wo.z, wi.z > COS_EPS, with
+ * its specular_prob spec_p */
+DR_SIMD_INLINE dr_v3x8 eval_pdf_base(const struct dr_path8 *g, dr_v3x8 wo, dr_v3x8 wi, dr_f8 *pdf)
 {
     dr_f8 pdf_l = wi.z * DR_INV_PI;
-    dr_v3x8 f_l = dr_v3x8_scale(g->base, dr_f8s(DR_INV_PI));
+    dr_v3x8 f_l = dr_v3x8_scale(g->b.base, dr_f8s(DR_INV_PI));
     if (!g->glossy) {
         *pdf = pdf_l;
         return f_l;
     }
     dr_f8 pdf_g;
-    dr_v3x8 f_g = eval_pdf_glossy(g, wo, wi, p, &pdf_g);
+    dr_v3x8 f_g = eval_pdf_glossy(&g->b, wo, wi, g->spec_p, &pdf_g);
     *pdf = dr_f8_sel(g->lambert, pdf_l, pdf_g);
     return dr_v3x8_sel(g->lambert, f_l, f_g);
 }
 
-/* sample_specular_dir: GGX visible normals (sample_vndf), reflected; the
- * azimuth's cosine and sine from dr_f8_sincos_turn, as in the scalar map. */
-DR_SIMD_INLINE dr_v3x8 sample_specular_dir(const struct dr_path8 *g, dr_v3x8 wo, dr_f8 u1, dr_f8 u2)
+/* bsdf_coat.c's Fresnel of the coat (Schlick, f0 0.04) at cosine x */
+DR_SIMD_INLINE dr_f8 coat_fresnel(dr_f8 x)
 {
-    dr_f8 a = g->alpha;
+    return 0.04 + 0.96 * pow5(1.0 - dr_f8_clamp(x, 0.0, 1.0));
+}
+
+/* dr_bsdf_eval_pdf for wo.z, wi.z > COS_EPS: the base's (eval_pdf_base),
+ * and on coated lanes dr_coat_eval_pdf's composition with the coat's lobe
+ * (whose specular_prob is 1: no diffuse part), in its order. */
+DR_SIMD_INLINE dr_v3x8 eval_pdf_above(const struct dr_path8 *g, dr_v3x8 wo, dr_v3x8 wi, dr_f8 *pdf)
+{
+    dr_f8 pb;
+    const dr_v3x8 fb = eval_pdf_base(g, wo, wi, &pb);
+    if (!g->coated) {
+        *pdf = pb;
+        return fb;
+    }
+    dr_f8 pl;
+    const dr_v3x8 fl = eval_pdf_glossy(&g->coat_lobe, wo, wi, dr_f8s(1.0), &pl);
+    const dr_f8 c = g->coat, tt = (1.0 - c * coat_fresnel(wo.z)) * (1.0 - c * coat_fresnel(wi.z));
+    const dr_f8 p = g->coat_p;
+    *pdf = dr_f8_sel(g->coat_on, p * pl + (1.0 - p) * pb, pb);
+    const dr_v3x8 f = {fb.x * tt + fl.x * c, fb.y * tt + fl.y * c, fb.z * tt + fl.z * c};
+    return dr_v3x8_sel(g->coat_on, f, fb);
+}
+
+/* sample_specular_dir: GGX visible normals (sample_vndf) of roughness a,
+ * reflected; the azimuth's cosine and sine from dr_f8_sincos_turn, as in
+ * the scalar map. */
+DR_SIMD_INLINE dr_v3x8 sample_specular_dir(dr_f8 a, dr_v3x8 wo, dr_f8 u1, dr_f8 u2)
+{
     dr_v3x8 vh = normalize((dr_v3x8){a * wo.x, a * wo.y, wo.z});
     dr_f8 lensq = vh.x * vh.x + vh.y * vh.y;
     dr_m8 tilted = dr_f8_gt(lensq, dr_f8s(0.0));
@@ -380,19 +450,27 @@ DR_SIMD_INLINE dr_v3x8 sample_specular_dir(const struct dr_path8 *g, dr_v3x8 wo,
 }
 
 /* dr_bsdf_sample on the lanes of on (the continuation's, and next-event
- * estimation's of a constant sky): the lobe by u_lobe against spec_p, the
- * local direction *wi, its BSDF value and density; returns the lanes where
- * wo and wi are above the surface and the density is finite and positive. */
+ * estimation's of a constant sky): the lobe by u_lobe (dr_coat_sample's
+ * choice: the coat's lobe below coat_p, else the base's lobes with u_lobe
+ * rescaled, which is u_lobe itself where coat_p is 0), the local direction
+ * *wi, its BSDF value and density; returns the lanes where wo and wi are
+ * above the surface and the density is finite and positive. */
 DR_SIMD_INLINE dr_m8 bsdf_sample(const struct dr_path8 *g, dr_m8 on, dr_f8 u_lobe, dr_f8 u1, dr_f8 u2, dr_v3x8 *wi,
                                  dr_v3x8 *f, dr_f8 *pdf)
 {
     dr_m8 ok = on & dr_f8_gt(g->wo_z, dr_f8s(COS_EPS));
     *wi = sample_cosine(u1, u2);
-    dr_m8 specular = ok & dr_f8_lt(u_lobe, g->spec_p);
-    if (dr_m8_any(specular))
-        *wi = dr_v3x8_sel(specular, sample_specular_dir(g, g->wo, u1, u2), *wi);
+    dr_m8 coat = (dr_m8){0};
+    if (g->coated) {
+        coat = ok & dr_f8_lt(u_lobe, g->coat_p);
+        u_lobe = (u_lobe - g->coat_p) / (1.0 - g->coat_p);
+    }
+    dr_m8 specular = ok & ~coat & dr_f8_lt(u_lobe, g->spec_p);
+    if (dr_m8_any(specular | coat))
+        *wi = dr_v3x8_sel(specular | coat,
+                          sample_specular_dir(dr_f8_sel(coat, g->coat_lobe.alpha, g->b.alpha), g->wo, u1, u2), *wi);
     ok &= dr_f8_gt(wi->z, dr_f8s(COS_EPS));
-    *f = eval_pdf_above(g, g->wo, *wi, g->spec_p, pdf);
+    *f = eval_pdf_above(g, g->wo, *wi, pdf);
     return ok & dr_f8_gt(*pdf, dr_f8s(0.0)) & dr_f8_lt(*pdf, dr_f8s(INFINITY));
 }
 
@@ -411,7 +489,7 @@ static bool eight_lane_run(const struct dr_scene *s, const struct dr_path_opts *
     const unsigned allowed = DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_ENV_CONSTANT | DR_FX_ENV_MAP |
                              DR_FX_SHADING_NORMALS | DR_FX_SINGLE_SIDED | DR_FX_SPECULAR | DR_FX_TEXTURES |
                              DR_FX_VERTEX_COLORS | DR_FX_NORMAL_MAPS | DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND |
-                             DR_FX_THIN_TRANSMISSION;
+                             DR_FX_THIN_TRANSMISSION | DR_FX_CLEARCOAT;
     const unsigned media_fx = DR_FX_MEDIA | DR_FX_HETEROGENEOUS_MEDIA | DR_FX_DIELECTRIC_BOUNDARIES;
     const unsigned media_stages = DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC;
     struct dr_light_tables t;
@@ -472,22 +550,23 @@ bool dr_path8_hit(const struct dr_scene *s, const struct dr_path_opts *opts, int
 static bool reads_textures(const struct dr_material *m)
 {
     return m->base_color_tex.texture >= 0 || m->metallic_roughness_tex.texture >= 0 || m->emissive_tex.texture >= 0 ||
-           m->normal_tex.texture >= 0;
+           m->normal_tex.texture >= 0 || dr_material_coat_tex(m, 0) || dr_material_coat_tex(m, 1);
 }
 
 /* How the stages read material m's textures. The base colour, metallic-
- * roughness and emissive textures that texture8.h accepts (any image of up
- * to four channels read through TEXCOORD_0 or _1: PNG and JPEG files, float
- * parameters) are looked up eight lanes at a time.
+ * roughness, clear coat and emissive textures that texture8.h accepts (any
+ * image of up to four channels read through TEXCOORD_0 or _1: PNG and JPEG
+ * files, float parameters) are looked up eight lanes at a time.
  * The rest (images of more channels, such as a five-channel EXR) go through
  * the scalar functions lane by lane, which read a scalar hit:
- * dr_material_eval for both BSDF textures when either is not accepted,
+ * dr_material_eval for all BSDF textures when one is not accepted,
  * dr_emission for an emissive texture that is not. A normal map
  * texture8.h accepts is applied eight lanes at a time (normal_map8) where
  * the lane needs no scalar hit for the rest; otherwise dr_normal_map_apply
  * applies it to the scalar hit. */
 struct mat_textures {
     const struct dr_texref *base, *mr, *emissive, *normal;   /* the eight-lane lookups (NULL: none) */
+    const struct dr_texref *coat[2];                         /* (dr_material_coat_tex's) */
     bool scalar_material, scalar_emission, scalar_hit;
 };
 
@@ -497,10 +576,14 @@ static void mat_textures(const struct dr_scene *s, const struct dr_material *m, 
     if (!reads_textures(m))
         return;
     const struct dr_texref *b = &m->base_color_tex, *mr = &m->metallic_roughness_tex, *e = &m->emissive_tex;
-    t->scalar_material = (b->texture >= 0 && !dr_texref8_accepts(s, b)) || (mr->texture >= 0 && !dr_texref8_accepts(s, mr));
+    const struct dr_texref *coat[2] = {dr_material_coat_tex(m, 0), dr_material_coat_tex(m, 1)};
+    t->scalar_material = (b->texture >= 0 && !dr_texref8_accepts(s, b)) ||
+                         (mr->texture >= 0 && !dr_texref8_accepts(s, mr)) ||
+                         (coat[0] && !dr_texref8_accepts(s, coat[0])) || (coat[1] && !dr_texref8_accepts(s, coat[1]));
     if (!t->scalar_material) {
         t->base = b->texture >= 0 ? b : NULL;
         t->mr = mr->texture >= 0 ? mr : NULL;
+        t->coat[0] = coat[0], t->coat[1] = coat[1];
     }
     if (e->texture >= 0)
         t->scalar_emission = !dr_texref8_accepts(s, e);
@@ -642,7 +725,8 @@ void dr_path8_locate_hits(const struct dr_scene *s, const int64_t *tri, dr_v3x8 
 {
     const struct dr_mesh *m = &s->mesh;
     struct lanes L;
-    const struct dr_texref *tex[4][DR_SIMD_W];   /* base, metallic-roughness, emissive, normal: the eight-lane lookups' */
+    const struct dr_texref *tex[6][DR_SIMD_W];   /* base, metallic-roughness, emissive, normal, coat, coat
+                                                    roughness: the eight-lane lookups' */
     bool any_tex8 = false;
     const struct dr_material *prev_mat = NULL;
     struct mat_textures t = {0};
@@ -658,7 +742,8 @@ void dr_path8_locate_hits(const struct dr_scene *s, const int64_t *tri, dr_v3x8 
         prev_mat = mat;
         L.textured[i] = t.scalar_hit;
         tex[0][i] = t.base, tex[1][i] = t.mr, tex[2][i] = t.emissive, tex[3][i] = t.normal;
-        any_tex8 |= t.base || t.mr || t.emissive || t.normal;
+        tex[4][i] = t.coat[0], tex[5][i] = t.coat[1];
+        any_tex8 |= t.base || t.mr || t.emissive || t.normal || t.coat[0] || t.coat[1];
     }
     loc->front = locate(m, &L, o, d, &loc->p, &loc->ng, &loc->ns, &loc->eps, &loc->b1, &loc->b2);
     for (int i = 0; i < DR_SIMD_W; i++)
@@ -672,7 +757,7 @@ void dr_path8_locate_hits(const struct dr_scene *s, const int64_t *tri, dr_v3x8 
         return;
     texcoords(m, L.tri, L.v0, L.v1, L.v2, loc->b1, loc->b2, &loc->uv);
     const dr_m8 vector_only = ~mask_of(L.textured);   /* (the others' texels: dr_material_prefetch's) */
-    for (int k = 0; k < 4; k++)   /* (the colours decoded: base and emissive) */
+    for (int k = 0; k < 6; k++)   /* (the colours decoded: base and emissive) */
         dr_texref8_prefetch(s, tex[k], vector_only, &loc->uv, k == 0 || k == 2);
     for (int i = 0; m->tangents && i < DR_SIMD_W; i++)   /* normal_map8's tangent frames */
         if (tex[3][i] && !L.textured[i]) {
@@ -957,10 +1042,16 @@ DR_SIMD_INLINE dr_f8 sky_pdf(dr_f8 share, dr_f8 cos_g, dr_f8 pdf_b)
 {
     return (1.0 - share) * (dr_f8_max(cos_g, dr_f8s(0.0)) * (1.0 / M_PI)) + share * pdf_b;
 }
+DR_SIMD_INLINE dr_f8 sharpness(dr_f8 alpha)
+{
+    const dr_f8 sharp = (0.45 - alpha) * (1.0 / 0.15);
+    return dr_f8_min(dr_f8_max(sharp, dr_f8s(0.0)), dr_f8s(1.0));
+}
 DR_SIMD_INLINE dr_f8 sky_share(const struct dr_path8 *g)
 {
-    const dr_f8 sharp = (0.45 - g->alpha) * (1.0 / 0.15);
-    const dr_f8 s = g->spec_p * dr_f8_min(dr_f8_max(sharp, dr_f8s(0.0)), dr_f8s(1.0));
+    dr_f8 s = g->spec_p * sharpness(g->b.alpha);
+    if (g->coated)   /* dr_coat_sky_share: the coat lobe's share (its specular_prob is 1) and the base's */
+        s = dr_f8_sel(g->coat_on, g->coat_p * sharpness(g->coat_lobe.alpha) + (1.0 - g->coat_p) * s, s);
     return dr_f8_sel(dr_f8_gt(g->wo_z, dr_f8s(COS_EPS)), s, dr_f8s(0.0));
 }
 
@@ -994,7 +1085,7 @@ static void env_light_samples(const struct dr_scene *s, const struct dr_light_ta
         wi = dr_v3x8_sel(by_cos, cos_wi, to_world(g->fs, g->ft, g->fn, local));
         if (dr_m8_any(env & by_cos)) {   /* (dr_bsdf_pdf: 0 below the shading surface) */
             const dr_v3x8 at = to_local(g->fs, g->ft, g->fn, cos_wi);
-            eval_pdf_above(g, g->wo, at, g->spec_p, &cos_pdf_b);
+            eval_pdf_above(g, g->wo, at, &cos_pdf_b);
             const dr_m8 above = dr_f8_gt(g->wo_z, dr_f8s(COS_EPS)) & dr_f8_gt(at.z, dr_f8s(COS_EPS));
             pdf_b = dr_f8_sel(by_cos, dr_f8_sel(above, cos_pdf_b, dr_f8s(0.0)), pdf_b);
         }
@@ -1221,6 +1312,7 @@ static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, str
 {
     const struct dr_mesh *m = &s->mesh;
     L->any_textured = L->any_ltextured = L->any_tex8 = L->any_ltex8 = L->any_normal8 = false;
+    L->any_coat_tex8 = L->any_coated = false;
     const struct dr_material *prev_mat = NULL;
     struct mat_textures t = {0};
     bool may_emit = false;
@@ -1242,12 +1334,16 @@ static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, str
         if (textures) {
             L->base_tex[i] = t.base, L->mr_tex[i] = t.mr, L->emissive_tex[i] = t.emissive;
             L->normal_tex[i] = t.normal;
-            L->any_tex8 |= t.base || t.mr || t.emissive || t.normal;
+            L->any_tex8 |= t.base || t.mr || t.emissive || t.normal || t.coat[0] || t.coat[1];
             L->any_normal8 |= t.normal != NULL;
+            L->coat_tex[0][i] = t.coat[0], L->coat_tex[1][i] = t.coat[1];
+            L->any_coat_tex8 |= t.coat[0] || t.coat[1];
             L->scalar_material[i] = t.scalar_material;
             L->scalar_emission[i] = t.scalar_emission;
             L->normal_mapped[i] = mat->normal_tex.texture >= 0;
         }
+        L->coated[i] = mat->coated;
+        L->any_coated |= mat->coated;
         L->double_sided[i] = mat->double_sided;
         L->has_normals[i] = m->flags[tri] & DR_TRI_HAS_NORMALS;
         L->dim[i] = vertex_dim(in->depth[i]);
@@ -1262,7 +1358,7 @@ DR_SIMD_INLINE dr_m8 nee_begin(struct dr_path8 *g, dr_m8 ok, const struct light8
     dr_v3x8 nee_wi = to_local(g->fs, g->ft, g->fn, ls->wi);
     dr_m8 above = dr_f8_gt(g->wo_z, dr_f8s(COS_EPS)) & dr_f8_gt(nee_wi.z, dr_f8s(COS_EPS));
     dr_f8 pdf;
-    dr_v3x8 f = eval_pdf_above(g, g->wo, nee_wi, g->spec_p, &pdf);
+    dr_v3x8 f = eval_pdf_above(g, g->wo, nee_wi, &pdf);
     g->bsdf_pdf = dr_f8_sel(above, pdf, dr_f8s(0.0));
     g->nee_f = dr_v3x8_sel(above, f, (dr_v3x8){dr_f8s(0.0), dr_f8s(0.0), dr_f8s(0.0)});
     g->nee_cos = nee_wi.z;
@@ -1567,7 +1663,10 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
     if (m->colors)
         colour = vertex_colours(m, &L, b1, b2);
     material_eval(s, g, &L, end, m->colors ? &colour : NULL, &h.uv);
-    g->spec_p = specular_prob(g, g->wo_z);   /* (wo.z <= COS_EPS: unused) */
+    /* (wo.z <= COS_EPS: unused) */
+    g->spec_p = g->glossy ? specular_prob(&g->b, g->lambert, g->wo_z) : dr_f8s(0.0);
+    if (g->coated)   /* (dr_coat_sample's P; 0 where the coat is) */
+        g->coat_p = g->coat * coat_fresnel(g->wo_z);
     dr_f8 u_pick, u1, u2;
     take_randoms(in, &L, g, &u_pick, &u1, &u2);
     shadow_keys(s, in, g);
@@ -1600,11 +1699,14 @@ static void differentiated_vertex(const struct dr_scene *s, const struct dr_path
     v->ng = dr_v3x8_get(&g->ng, i);
     v->frame = (dr_frame){dr_v3x8_get(&g->fs, i), dr_v3x8_get(&g->ft, i), dr_v3x8_get(&g->fn, i)};
     v->wo = dr_v3x8_get(&g->wo, i);
-    /* dr_material_eval's record: the groups keep its fields but the specular colour, a constant */
-    v->bsdf = (struct dr_bsdf){.base_color = dr_v3x8_get(&g->base, i), .metallic = g->metallic[i],
-                               .roughness = g->roughness[i], .specular = g->specular[i],
-                               .specular_color = s->materials[v->hit.material].specular_color};   /* (no coat:
-                                                                    coated scenes do not run eight-wide) */
+    /* dr_material_eval's record: the groups keep its fields but the specular colour, a constant, and
+     * an uncoated material's coat factors (read by nothing, copied as it copies them) */
+    const struct dr_material *m = &s->materials[v->hit.material];
+    v->bsdf = (struct dr_bsdf){.base_color = dr_v3x8_get(&g->b.base, i), .metallic = g->b.metallic[i],
+                               .roughness = g->roughness[i], .specular = g->b.specular[i],
+                               .specular_color = m->specular_color, .coated = m->coated,
+                               .coat = m->coated ? g->coat[i] : m->coat,
+                               .coat_roughness = m->coated ? g->coat_roughness[i] : m->coat_roughness};
     v->nee_wi = dr_v3x8_get(&g->nee_wi, i);
     v->nee_bsdf_pdf = g->bsdf_pdf[i];
 }

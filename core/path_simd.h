@@ -4,9 +4,10 @@
  * dr_path8_shade is dr_path_step_hit and dr_path8_continue is dr_path_nee_end
  * + dr_path_stage_continue for a group of eight lanes: the hit point, the
  * emission seen there and its MIS weight, the shading frame, the glTF BSDF
- * (Lambertian or with its GGX lobe), the light sample (area, punctual,
- * constant sky, environment map: env8.h), the shadow ray, the BSDF's
- * continuation and Russian roulette, in vector registers; eight-bit
+ * (Lambertian or with its GGX lobe; under a clear coat, composed as
+ * bsdf_coat.c composes it), the light sample (area, punctual, constant sky,
+ * environment map: env8.h), the shadow ray, the BSDF's continuation and
+ * Russian roulette, in vector registers; eight-bit
  * textures through texture8.h. Per lane inside a group: the search of a
  * long light table, the lookups of textures texture8.h does not take (the
  * scalar material, emission and normal-map functions with the lane's hit),
@@ -82,6 +83,16 @@ struct dr_path8_ahead {
     int64_t bucket[DR_SIMD_W];    /* ... its guide bucket (stages 0 and 1; -1: none) */
 };
 
+/* One GGX layer of the glTF BSDF, eight lanes of the dr_bsdf fields bsdf.c
+ * reads, with what it derives from them (bsdf_alpha, dielectric_f0): the
+ * base, or a clear coat's lobe (bsdf_coat.c's coat_lobe). alpha and f0 are
+ * set only where the layer has a specular lobe. */
+struct dr_lobe8 {
+    dr_v3x8 base;                 /* base colour */
+    dr_v3x8 f0;                   /* the dielectric f0 */
+    dr_f8 metallic, specular, alpha;
+};
+
 /* What the two halves of a group's vertex share, lane by lane. */
 struct dr_path8 {
     int n;                        /* lanes in the group (the rest repeat lane 0) */
@@ -101,7 +112,7 @@ struct dr_path8 {
     dr_v3x8 p, ng;                /* hit point; geometric normal on the ray's side */
     dr_v3x8 fs, ft, fn;           /* shading frame */
     dr_f8 eps, wo_z, depth;
-    dr_v3x8 base;                 /* base colour */
+    struct dr_lobe8 b;            /* the BSDF's base layer (base colour; the rest where glossy) */
     dr_f8 roughness;              /* the material's roughness (factor x texture; alpha is its square) */
     dr_f8 bsdf_u1, bsdf_u2, rr;   /* the vertex's random numbers still to use */
     dr_f8 tmax, nee_cos, ls_pdf, bsdf_pdf;   /* next-event estimate, for its end */
@@ -123,8 +134,14 @@ struct dr_path8 {
     /* the BSDF (bsdf.h) where some lane has a specular lobe (glossy) */
     bool glossy;
     dr_m8 lambert;                /* lanes without one */
-    dr_v3x8 wo, f0;               /* wo local; the dielectric f0 */
-    dr_f8 metallic, alpha, specular, spec_p, lobe_u;
+    dr_v3x8 wo;                   /* wo local */
+    dr_f8 spec_p, lobe_u;         /* the base's specular_prob at wo; the lobe's random number */
+    /* the clear coat (bsdf_coat.c) where some lane has one (coated) */
+    bool coated;
+    dr_m8 coat_on;                /* lanes with a coat (dr_bsdf.coated) */
+    dr_f8 coat, coat_roughness;   /* its factor and roughness (factor x texture); 0 and 0 on other lanes */
+    dr_f8 coat_p;                 /* c Fc(wo.z): the share of samples its lobe takes (0 on other lanes) */
+    struct dr_lobe8 coat_lobe;    /* its lobe: base colour 0, metallic 0, specular 1, f0 0.04 */
 };
 
 /* Can this run use the eight-lane stages for every walker (no light whose

@@ -844,6 +844,50 @@ static struct dr_scene *textured_lamp_box(bool eight_bit)
     return s;
 }
 
+/* Clear coats (bsdf_coat.c), which the packet tracer composes eight lanes at
+ * a time: over the glossy dielectric block (smooth coat), over a Lambertian
+ * panel (a full, rougher coat), over a metal block with the coat and its
+ * roughness from an eight-bit RGBA texture (R and G), a floor tile whose
+ * coat textures are five-channel float images (read lane by lane through
+ * dr_material_eval), and a coat of factor 0 (coated all the same); uncoated
+ * walls beside them. Lit by a lamp and a constant sky (whose next-event
+ * samples take the coated BSDF's sampling, dr_sky_pdf) through the open top. */
+static struct dr_scene *coated_box(void)
+{
+    struct sb b;
+    sb_init(&b);
+    sb_open_box(&b, 1.6, sb_material(&b, sb_diffuse(dr_v3(0.8, 0.7, 0.6))));
+    struct dr_material block = glossy_blue();
+    block.coated = true, block.coat = 0.8, block.coat_roughness = 0.1;
+    sb_box(&b, dr_v3(-0.6, 0.0, -0.6), dr_v3(-0.1, 0.7, -0.1), sb_material(&b, block));
+    struct dr_material panel = sb_diffuse(dr_v3(0.7, 0.2, 0.2));
+    panel.coated = true, panel.coat = 1.0, panel.coat_roughness = 0.35;
+    sb_quad(&b, dr_v3(0.2, 0.1, -0.8), dr_v3(0.6, 0, 0), dr_v3(0, 0.9, 0.2), sb_material(&b, panel));
+    static const float coat_px[2 * 2 * 4] = {1.0f, 0.2f, 0.0f, 1.0f, 0.5f, 0.9f, 0.3f, 1.0f,
+                                             0.0f, 0.5f, 0.7f, 1.0f, 0.8f, 0.05f, 0.1f, 1.0f};
+    struct dr_material metal = sb_diffuse(dr_v3(0.9, 0.6, 0.3));
+    metal.metallic = 1.0, metal.roughness = 0.5;
+    metal.coated = true, metal.coat = 0.9, metal.coat_roughness = 0.8;
+    metal.coat_tex.texture = metal.coat_roughness_tex.texture = sb_texture(&b, sb_image8(2, 2, 4, coat_px));
+    sb_box(&b, dr_v3(0.2, 0.0, 0.1), dr_v3(0.6, 0.4, 0.5), sb_material(&b, metal));
+    static const float five[2 * 2 * 5] = {0.9f, 0.4f, 0.6f, 1.0f, 0.5f, 0.3f, 0.8f, 0.7f, 1.0f, 0.2f,
+                                          0.6f, 0.1f, 0.2f, 1.0f, 0.9f, 1.0f, 0.6f, 0.5f, 1.0f, 0.4f};
+    struct dr_material tile = glossy_blue();
+    tile.coated = true, tile.coat = 0.7, tile.coat_roughness = 0.6;
+    tile.coat_tex.texture = sb_texture(&b, sb_image(2, 2, 5, five, 0.0f, false));
+    tile.coat_roughness_tex.texture = tile.coat_tex.texture;
+    sb_quad(&b, dr_v3(-0.9, 0.01, 0.9), dr_v3(0.8, 0, 0), dr_v3(0, 0, -0.7), sb_material(&b, tile));
+    struct dr_material bare = sb_diffuse(dr_v3(0.3, 0.8, 0.3));
+    bare.coated = true, bare.coat = 0.0, bare.coat_roughness = 0.2;   /* a coat of factor 0 */
+    sb_quad(&b, dr_v3(-0.95, 0.2, -0.4), dr_v3(0, 0, 0.6), dr_v3(0, 0.6, 0), sb_material(&b, bare));
+    sb_quad(&b, dr_v3(-0.3, 1.5, -0.3), dr_v3(0.6, 0, 0), dr_v3(0, 0, 0.6), sb_material(&b, warm_lamp()));
+    sb_environment(&b, dr_v3(0.9, 1.0, 1.1));
+    struct dr_scene *s = sb_finish(&b);
+    CHECK(dr_path8_reads_textures(s, s->mesh.n_triangles - 6) && !dr_path8_reads_textures(s, 0),
+          "the tile's coat textures are read, the walls read none");
+    return s;
+}
+
 /* A lamp of two large triangles whose emissive texture is black but for
  * two spots (the way assets paint their glowing parts): the light table
  * samples its triangles part by part (lights.h, dr_light_part_point), the
@@ -944,7 +988,8 @@ static bool same_diff_vertex(const struct diff_vertex *k, const struct dr_path_v
                 SAME(k->ng, v->ng) && SAME(k->wo, v->wo) && SAME(k->frame, v->frame) &&
                 SAME(k->bsdf.base_color, v->bsdf.base_color) && SAME(k->bsdf.metallic, v->bsdf.metallic) &&
                 SAME(k->bsdf.roughness, v->bsdf.roughness) && SAME(k->bsdf.specular, v->bsdf.specular) &&
-                SAME(k->bsdf.specular_color, v->bsdf.specular_color);
+                SAME(k->bsdf.specular_color, v->bsdf.specular_color) && k->bsdf.coated == v->bsdf.coated &&
+                SAME(k->bsdf.coat, v->bsdf.coat) && SAME(k->bsdf.coat_roughness, v->bsdf.coat_roughness);
     if (same && v->nee) {
         const struct dr_light_sample *a = &k->ls, *b = &v->ls;
         same = SAME(k->nee_wi, v->nee_wi) && SAME(k->nee_f, v->nee_f) && SAME(k->nee_scale, v->nee_scale) &&
@@ -1090,6 +1135,8 @@ static void test_wavefront_matches_one_path(void)
     exact_with_groups(spotted_lamp_box(false), DR_FX_AREA_LIGHTS | DR_FX_TEXTURES, inside, "spotted lamp box");
     exact_with_groups(spotted_lamp_box(true), DR_FX_AREA_LIGHTS | DR_FX_TEXTURES, inside,
                       "spotted lamp box, eight-bit texture");
+    exact_with_groups(coated_box(), DR_FX_CLEARCOAT | DR_FX_TEXTURES | DR_FX_ENV_CONSTANT | DR_FX_AREA_LIGHTS,
+                      sb_camera(dr_v3(0.2, 2.2, 2.0), dr_v3(0, 0.3, 0), 70.0), "coated box");
     s = coloured_box();
     CHECK(!dr_wave_prefetches(s), "the coloured box is shaded without prefetching");
     exact_with_groups(s, DR_FX_VERTEX_COLORS, inside, "coloured box");
