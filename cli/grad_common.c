@@ -510,11 +510,9 @@ struct grad_auto_choice grad_auto_sampling(const struct dr_estimator_ops *e, con
     for (int i = 0; i < set->n; i++) {
         const struct dr_param *q = &set->params[i];
         if (q->kind == DR_PARAM_CLEARCOAT_ROUGHNESS && q->target >= 0 && q->target < scene->n_materials) {
-            const double r = scene->materials[q->target].coat_roughness;
-            if (r < GRAD_AUTO_ROUGHNESS && (!c.coat || r < c.coat_roughness))
-                c.coat = q, c.coat_roughness = r;
-        }
-        if (q->kind == DR_PARAM_ROUGHNESS && q->target >= 0 && q->target < scene->n_materials) {
+            any = true;   /* (its factor: a clearcoatRoughnessTexture's texels are weighed by no median) */
+            auto_candidate(&c, q, scene->materials[q->target].coat_roughness, false);
+        } else if (q->kind == DR_PARAM_ROUGHNESS && q->target >= 0 && q->target < scene->n_materials) {
             any = true;
             auto_candidate(&c, q, material_roughness(scene, q->target), false);
         } else if (q->kind == DR_PARAM_IMAGE) {   /* the metallic-roughness textures it is */
@@ -550,7 +548,7 @@ void grad_auto_describe(const struct dr_scene *scene, const struct grad_auto_cho
     /* a factor on a textured material: its value, then the product auto weighed */
     char is[96];
     const int m = c->lowest->target;
-    if (!c->texture && scene->materials[m].metallic_roughness_tex.texture >= 0)
+    if (!c->texture && c->lowest->kind == DR_PARAM_ROUGHNESS && scene->materials[m].metallic_roughness_tex.texture >= 0)
         snprintf(is, sizeof is, "is %g (%g with its metallic-roughness texture: the texels' median G times it)",
                  scene->materials[m].roughness, c->roughness);
     else
@@ -565,16 +563,6 @@ void grad_auto_note(const struct grad_common *g, const struct dr_scene *scene, c
     char when[48] = "", what[DR_PARAM_NAME_MAX + 256];
     if (iteration > 0)
         snprintf(when, sizeof when, "iteration %d: ", iteration);
-    if (c->coat && iteration == 0) {   /* (once: the coat's roughness decides no mode) */
-        dr_param_display_name(scene, c->coat, what, sizeof what);
-        cli_error(g->cmd,
-                  "note: %s is %g, below %g, where detached sampling's roughness derivative is noisy; derivative "
-                  "sampling does not sample a clear coat, so --sampling auto leaves it detached. 'drender compare' "
-                  "measures the modes on your scene (on the bundled box's red wall under a coat of roughness 0.05, "
-                  "attached sampling had 2.7x less variance in 5x the time: detached was 1.9x as efficient). "
-                  "Manual: SAMPLING",
-                  what, c->coat_roughness, GRAD_AUTO_ROUGHNESS);
-    }
     if (!c->lowest) {
         if (iteration > 0)
             cli_error(g->cmd, "note: %s--sampling auto goes back to detached sampling (no differentiated roughness "

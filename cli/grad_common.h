@@ -202,8 +202,9 @@ int grad_param_set(const struct grad_common *g, const struct dr_scene *scene, st
 
 struct grad_auto_choice {
     enum dr_sampling sampling;      /* what auto runs */
-    const struct dr_param *lowest;  /* the differentiated roughness (factor, or metallic-roughness
-                                       texture) below the threshold with the lowest value (NULL: none) */
+    const struct dr_param *lowest;  /* the differentiated roughness (factor, metallic-roughness texture,
+                                       or a clear coat's roughness factor) below the threshold with the
+                                       lowest value (NULL: none) */
     double roughness;               /* ... its value (a texture: its median) */
     bool texture;                   /* ... it is a metallic-roughness texture (an image parameter) */
     double threshold;               /* GRAD_AUTO_ROUGHNESS, or ..._WITH_COLOUR when a base colour or
@@ -212,9 +213,6 @@ struct grad_auto_choice {
     bool derivative_possible;       /* a roughness is differentiated and derivative sampling can run */
     char why[512];                  /* a roughness is differentiated but derivative sampling cannot run:
                                        the reason */
-    const struct dr_param *coat;    /* a differentiated clear coat roughness below GRAD_AUTO_ROUGHNESS,
-                                       the lowest (NULL: none): no mode auto runs samples for it */
-    double coat_roughness;          /* ... its value */
 };
 /* Auto's choice for estimator e on the scene's current values. */
 struct grad_auto_choice grad_auto_sampling(const struct dr_estimator_ops *e, const struct dr_scene *scene,

@@ -768,7 +768,7 @@ void d_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lo
 
 /* --sampling derivative (path_deriv.c) samples the derivative integrand
  * d f / d theta (wo, wi) L_in(wi) cos with a density made for d f / d theta,
- * a mixture of four lobes (bsdf.h: enum dr_bsdf_dlobe):
+ * a mixture of lobes (bsdf.h: enum dr_bsdf_dlobe):
  *
  *   cosine    wi.z / pi: the derivative of f in base colour, for the diffuse
  *             lobe, is the diffuse lobe itself (1-m)(1-F_o)(1-F_i) / pi
@@ -794,7 +794,13 @@ void d_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lo
  *                       inverse u = (1-t)/(1+t), t = sqrt(1-xi);
  *             as densities of h: p+-(h) = 2 alpha |d D / d alpha| cos(theta_h)
  *             on its side (= 4 |u-1| / (1+u) D cos(theta_h)), and of wi by
- *             the reflection's Jacobian 1 / (4 wo.h).
+ *             the reflection's Jacobian 1 / (4 wo.h);
+ *   coat+/-   the same pair at the clear coat's alpha, for its roughness
+ *             (a coated BSDF's c f_coat is the coat lobe's GGX times c).
+ *
+ * Under a coat, the base's integrands are the base's times the coat's
+ * transmission to ti (bsdf_coat.c), a smooth factor <= 1: the base's lobes
+ * serve them unchanged.
  *
  * The metallic derivative is a signed mixture: spec (F_m - F_d) (positive
  * where the metal reflects more than the dielectric, i.e. almost always)
@@ -814,7 +820,7 @@ void dr_bsdf_deriv_weights(const struct dr_bsdf *b, unsigned params, double w[DR
     for (int l = 0; l < DR_BSDF_DLOBE_COUNT; l++)
         w[l] = 0.0;
     int kinds = ((params & DR_BSDF_D_BASE) != 0) + ((params & DR_BSDF_D_METALLIC) != 0) +
-                ((params & DR_BSDF_D_ROUGHNESS) != 0);
+                ((params & DR_BSDF_D_ROUGHNESS) != 0) + ((params & DR_BSDF_D_COAT_ROUGHNESS) != 0);
     if (kinds == 0)
         return;
     double k = 1.0 / kinds;   /* each requested parameter gets an equal share */
@@ -831,12 +837,29 @@ void dr_bsdf_deriv_weights(const struct dr_bsdf *b, unsigned params, double w[DR
         w[DR_BSDF_DLOBE_ROUGH_POS] += 0.5 * k;
         w[DR_BSDF_DLOBE_ROUGH_NEG] += 0.5 * k;
     }
+    if (params & DR_BSDF_D_COAT_ROUGHNESS) {
+        w[DR_BSDF_DLOBE_COAT_POS] += 0.5 * k;
+        w[DR_BSDF_DLOBE_COAT_NEG] += 0.5 * k;
+    }
+}
+
+/* A coat lobe as the same lobe of the coat's own BSDF (bsdf_coat.c's
+ * coat_lobe: alpha its roughness's). */
+static inline enum dr_bsdf_dlobe coat_as_rough(enum dr_bsdf_dlobe lobe)
+{
+    return lobe == DR_BSDF_DLOBE_COAT_POS ? DR_BSDF_DLOBE_ROUGH_POS : DR_BSDF_DLOBE_ROUGH_NEG;
 }
 
 double dr_bsdf_deriv_lobe_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, enum dr_bsdf_dlobe lobe)
 {
     if (!(wo.z > COS_EPS) || !(wi.z > COS_EPS))
         return 0.0;
+    if (lobe == DR_BSDF_DLOBE_COAT_POS || lobe == DR_BSDF_DLOBE_COAT_NEG) {
+        if (!b->coated)
+            return 0.0;
+        const struct dr_bsdf l = dr_coat_lobe(b);
+        return dr_bsdf_deriv_lobe_pdf(&l, wo, wi, coat_as_rough(lobe));
+    }
     if (lobe == DR_BSDF_DLOBE_COSINE)
         return wi.z * DR_INV_PI;
     double a = bsdf_alpha(b), a2 = a * a;
@@ -881,6 +904,13 @@ dr_vec3 dr_bsdf_deriv_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bs
         return sample_cosine(u1, u2);
     case DR_BSDF_DLOBE_VNDF:
         return dr_bsdf_sample_dir(b, wo, DR_BSDF_LOBE_SPECULAR, u1, u2);
+    case DR_BSDF_DLOBE_COAT_POS:
+    case DR_BSDF_DLOBE_COAT_NEG: {
+        if (!b->coated)
+            return dr_v3(0.0, 0.0, -1.0);   /* (no coat: density 0, rejected) */
+        const struct dr_bsdf l = dr_coat_lobe(b);
+        return dr_bsdf_deriv_sample_dir(&l, wo, coat_as_rough(lobe), u1, u2);
+    }
     default: {
         dr_vec3 h = sample_rough_h(bsdf_alpha(b), lobe == DR_BSDF_DLOBE_ROUGH_POS, u1, u2);
         double oh = dr_dot(wo, h);
@@ -924,10 +954,15 @@ bool dr_bsdf_deriv_sample(const struct dr_bsdf *b, dr_vec3 wo, unsigned params, 
  *   d lnD / d alpha = (2/alpha) (Hxy^2 - alpha^2 Hz^2) / q   (as d_eval_params).
  * Zero for a Lambertian (no specular lobe) and below the alpha floor, as
  * d_eval_params' roughness adjoint. */
-void d_bsdf_eval_rough_ndf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out, struct dr_d_bsdf *d)
+void d_bsdf_eval_rough_ndf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out, unsigned parts,
+                           struct dr_d_bsdf *d)
 {
+    if (b->coated) {
+        d_coat_eval_rough_ndf(b, wo, wi, d_out, parts, d);
+        return;
+    }
     const double rough = b->roughness, m = b->metallic;
-    if (!(wo.z > COS_EPS) || !(wi.z > COS_EPS) || no_specular_lobe(b) || !(rough * rough > DR_BSDF_MIN_ALPHA))
+    if (!(parts & DR_BSDF_D_ROUGHNESS) || !(wo.z > COS_EPS) || !(wi.z > COS_EPS) || no_specular_lobe(b) || !(rough * rough > DR_BSDF_MIN_ALPHA))
         return;
     double a = bsdf_alpha(b), a2 = a * a;
     const struct ggx_half g_h = ggx_half(a2, wo, wi);

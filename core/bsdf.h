@@ -155,22 +155,31 @@ void d_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lo
 /* ---- derivative sampling (--sampling derivative; the maths beside the code in bsdf.c) ----
  *
  * Densities made for d f / d theta rather than for f: a mixture of lobes
- * whose weights follow the requested parameters. They know the base BSDF
- * only: the estimators do not run derivative sampling at a coated material
- * with requested parameters (estimators/common.c refuses it). */
+ * whose weights follow the requested parameters. Under a clear coat the
+ * base's lobes are the base BSDF's (the coat's transmission is a smooth
+ * factor of their integrands) and the coat's roughness has a pair of its own
+ * at the coat's alpha; the coat's factor is left to the forward sampler. */
 
 /* The BSDF inputs a derivative is taken with respect to (bits). */
-enum dr_bsdf_dparam { DR_BSDF_D_BASE = 1u, DR_BSDF_D_METALLIC = 2u, DR_BSDF_D_ROUGHNESS = 4u };
+enum dr_bsdf_dparam {
+    DR_BSDF_D_BASE = 1u,
+    DR_BSDF_D_METALLIC = 2u,
+    DR_BSDF_D_ROUGHNESS = 4u,
+    DR_BSDF_D_COAT_ROUGHNESS = 8u   /* a coated BSDF's clearcoatRoughness */
+};
 
 /* The lobes of the derivative mixture: cosine (base colour of the diffuse
  * lobe, the negative part of metallic), the forward GGX visible-normal map
- * (base colour of a metal, the positive part of metallic), and the positive
- * and negative parts of d D / d alpha (roughness). */
+ * (base colour of a metal, the positive part of metallic), the positive
+ * and negative parts of d D / d alpha (roughness), and the same at the
+ * coat's alpha (a coated BSDF's coat roughness; density 0 uncoated). */
 enum dr_bsdf_dlobe {
     DR_BSDF_DLOBE_COSINE,
     DR_BSDF_DLOBE_VNDF,
     DR_BSDF_DLOBE_ROUGH_POS,
     DR_BSDF_DLOBE_ROUGH_NEG,
+    DR_BSDF_DLOBE_COAT_POS,
+    DR_BSDF_DLOBE_COAT_NEG,
     DR_BSDF_DLOBE_COUNT
 };
 
@@ -188,9 +197,12 @@ dr_vec3 dr_bsdf_deriv_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bs
  * alone (G2 and Fresnel held): d f / d rough |_D = f_spec d lnD/d rough.
  * Its integrand, d D / d alpha times smooth factors, is what the roughness
  * lobes are made for (the antithetic pair of path_deriv.c estimates it;
- * the rest of d f / d rough is left to the forward sampler). Adds to
- * d->roughness only. */
-void d_bsdf_eval_rough_ndf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out, struct dr_d_bsdf *d);
+ * the rest of d f / d rough is left to the forward sampler). parts:
+ * DR_BSDF_D_ROUGHNESS adds the base's to d->roughness (under a coat, times
+ * the coat's transmission both ways), DR_BSDF_D_COAT_ROUGHNESS the coat
+ * lobe's to d->coat_roughness (times the coat's factor; 0 uncoated). */
+void d_bsdf_eval_rough_ndf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out, unsigned parts,
+                           struct dr_d_bsdf *d);
 /* Chooses a lobe with u_lobe by the weights, maps (u1, u2), and returns the
  * mixture density in *pdf. False: no valid direction (the estimate is 0). */
 bool dr_bsdf_deriv_sample(const struct dr_bsdf *b, dr_vec3 wo, unsigned params, double u_lobe, double u1, double u2,

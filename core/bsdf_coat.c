@@ -204,6 +204,31 @@ void d_coat_specular_prob(const struct dr_bsdf *b, dr_vec3 wo, double d_p, struc
         d_wo->z += d_p * (1.0 - pb) * c * d_coat_fresnel(cos_o);
 }
 
+struct dr_bsdf dr_coat_lobe(const struct dr_bsdf *b) { return coat_lobe(b); }
+
+/* The NDF parts of f = to ti f_base + c f_coat: the base's (its roughness's
+ * D alone) times to ti, and the coat lobe's (the coat roughness's D alone)
+ * times c; to, ti and c are smooth factors the roughness lobes need not
+ * know. */
+void d_coat_eval_rough_ndf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out, unsigned parts,
+                           struct dr_d_bsdf *d)
+{
+    if (!(wo.z > COS_EPS) || !(wi.z > COS_EPS))
+        return;
+    const double c = b->coat;
+    if (parts & DR_BSDF_D_ROUGHNESS) {
+        const struct dr_bsdf base = under(b);
+        const double tt = (1.0 - c * coat_fresnel(wo.z)) * (1.0 - c * coat_fresnel(wi.z));
+        d_bsdf_eval_rough_ndf(&base, wo, wi, dr_scale(d_out, tt), DR_BSDF_D_ROUGHNESS, d);
+    }
+    if (parts & DR_BSDF_D_COAT_ROUGHNESS) {
+        const struct dr_bsdf lobe = coat_lobe(b);
+        struct dr_d_bsdf dl = {0};
+        d_bsdf_eval_rough_ndf(&lobe, wo, wi, dr_scale(d_out, c), DR_BSDF_D_ROUGHNESS, &dl);
+        d->coat_roughness += dl.roughness;
+    }
+}
+
 void d_coat_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lobe, double u1, double u2,
                        dr_vec3 d_wi, struct dr_d_bsdf *d, dr_vec3 *d_wo)
 {

@@ -23,4 +23,10 @@ void d_coat_specular_prob(const struct dr_bsdf *b, dr_vec3 wo, double d_p, struc
 void d_coat_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lobe, double u1, double u2,
                        dr_vec3 d_wi, struct dr_d_bsdf *d, dr_vec3 *d_wo);
 
+/* Derivative sampling (bsdf.h): the coat's lobe as an uncoated BSDF (its
+ * roughness lobes are the coat's), and the NDF parts of a coated BSDF. */
+struct dr_bsdf dr_coat_lobe(const struct dr_bsdf *b);
+void d_coat_eval_rough_ndf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out, unsigned parts,
+                           struct dr_d_bsdf *d);
+
 #endif

@@ -5,6 +5,7 @@
 #include "medium_grad.h"   /* dr_path_vertex_nee */
 
 #define BM_PARAMS (DR_BSDF_D_BASE | DR_BSDF_D_METALLIC)
+#define NDF_PARAMS (DR_BSDF_D_ROUGHNESS | DR_BSDF_D_COAT_ROUGHNESS)   /* A's: each with its antithetic pair */
 
 unsigned dr_path_material_dparams(const struct dr_scene *s, const struct dr_param_set *ps, int m)
 {
@@ -22,6 +23,11 @@ unsigned dr_path_material_dparams(const struct dr_scene *s, const struct dr_para
     /* one image holds both metallic (B) and roughness (G): its texels move both */
     if (mt >= 0 && ps->image[s->textures[mt].image] >= 0)
         mask |= DR_BSDF_D_METALLIC | DR_BSDF_D_ROUGHNESS;
+    /* a clear coat's roughness: its factor, or the texture whose G it reads
+     * (the coat's factor is left to the forward strategies: B) */
+    const struct dr_texref *ct = dr_material_coat_tex(mat, 1);
+    if (mat->coated && (ps->mat_coat_roughness[m] >= 0 || (ct && ps->image[s->textures[ct->texture].image] >= 0)))
+        mask |= DR_BSDF_D_COAT_ROUGHNESS;
     return mask;
 }
 
@@ -67,10 +73,10 @@ static void d_full_along(const struct dr_scene *s, const struct dr_param_set *ps
     d_path_continuation(s, ps, &at, d_f, sink);
 }
 
-/* A alone along wi; forward mode keeps the image channels apart as
- * path.c's by_channel does. */
+/* A's parts (NDF_PARAMS bits) alone along wi; forward mode keeps the image
+ * channels apart as path.c's by_channel does. */
 static void d_ndf_along(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
-                        dr_vec3 wi, dr_vec3 d_f, struct dr_grad_sink *sink)
+                        unsigned parts, dr_vec3 wi, dr_vec3 d_f, struct dr_grad_sink *sink)
 {
     for (int c = 0; c < 3; c++) {
         dr_vec3 part = sink->dir ? dr_v3_channel(d_f, c) : d_f;
@@ -78,20 +84,28 @@ static void d_ndf_along(const struct dr_scene *s, const struct dr_param_set *ps,
             continue;
         sink->channel = c;
         struct dr_d_bsdf db = {0};
-        d_bsdf_eval_rough_ndf(&v->bsdf, v->wo, wi, part, &db);
+        d_bsdf_eval_rough_ndf(&v->bsdf, v->wo, wi, part, parts, &db);
         d_material_eval(s, ps, &v->hit, &db, sink);
         if (!sink->dir)
             return;   /* reverse mode: all channels at once */
     }
 }
 
-/* B = (A + B) - A along wi (A is 0 unless roughness is requested). */
+/* B = (A + B) - A along wi (A is 0 unless a roughness is requested). */
 static void d_rest_along(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_path_vertex *v,
                          unsigned mask, dr_vec3 wi, dr_vec3 d_f, struct dr_grad_sink *sink)
 {
     d_full_along(s, ps, v, wi, d_f, sink);
-    if (mask & DR_BSDF_D_ROUGHNESS)
-        d_ndf_along(s, ps, v, wi, dr_neg(d_f), sink);
+    if (mask & NDF_PARAMS)
+        d_ndf_along(s, ps, v, mask & NDF_PARAMS, wi, dr_neg(d_f), sink);
+}
+
+/* The antithetic pair of A's part `part` (a NDF_PARAMS bit): its two lobes. */
+static void pair_lobes(unsigned part, enum dr_bsdf_dlobe lobe[2])
+{
+    const bool coat = part == DR_BSDF_D_COAT_ROUGHNESS;
+    lobe[0] = coat ? DR_BSDF_DLOBE_COAT_POS : DR_BSDF_DLOBE_ROUGH_POS;
+    lobe[1] = coat ? DR_BSDF_DLOBE_COAT_NEG : DR_BSDF_DLOBE_ROUGH_NEG;
 }
 
 /* ------------------------------------------- the forward path's strategies */
@@ -117,12 +131,16 @@ void d_path_deriv_nee(const struct dr_scene *s, const struct dr_path_opts *opts,
     dr_vec3 d_f = dr_scale(dr_mul(d_e, v->ls.radiance), fabs(v->nee_wi.z) / pl);
     if (wl != wp && isfinite(wl - wp))
         d_rest_along(s, opts->params, v, mask, v->nee_wi, dr_scale(d_f, wl - wp), sink);
-    if (mask & DR_BSDF_D_ROUGHNESS) {   /* A: weight W_l against the antithetic pair's lobes */
-        double pa = dr_bsdf_deriv_lobe_pdf(&v->bsdf, v->wo, v->nee_wi, DR_BSDF_DLOBE_ROUGH_POS) +
-                    dr_bsdf_deriv_lobe_pdf(&v->bsdf, v->wo, v->nee_wi, DR_BSDF_DLOBE_ROUGH_NEG);
+    for (unsigned part = DR_BSDF_D_ROUGHNESS; part <= DR_BSDF_D_COAT_ROUGHNESS; part <<= 1) {
+        if (!(mask & part))   /* A's part: weight W_l against its antithetic pair's lobes */
+            continue;
+        enum dr_bsdf_dlobe lobe[2];
+        pair_lobes(part, lobe);
+        double pa = dr_bsdf_deriv_lobe_pdf(&v->bsdf, v->wo, v->nee_wi, lobe[0]) +
+                    dr_bsdf_deriv_lobe_pdf(&v->bsdf, v->wo, v->nee_wi, lobe[1]);
         double wa = v->ls.delta ? 1.0 : pl / (pl + pa);
         if (wa != wp && isfinite(wa - wp))
-            d_ndf_along(s, opts->params, v, v->nee_wi, dr_scale(d_f, wa - wp), sink);
+            d_ndf_along(s, opts->params, v, part, v->nee_wi, dr_scale(d_f, wa - wp), sink);
     }
 }
 
@@ -144,7 +162,7 @@ void d_path_deriv_emission(const struct dr_scene *s, const struct dr_path_opts *
 
 /* Sub-streams of the new directions at depth `depth` (the media walker's
  * tracking streams use the same construction with other constants). */
-enum { STREAM_DIRS = 1, STREAM_BM_PATH = 2, STREAM_PAIR_PATH = 3 };
+enum { STREAM_DIRS = 1, STREAM_BM_PATH = 2, STREAM_PAIR_PATH = 3, STREAM_COAT_PAIR_PATH = 4 };
 static struct dr_sampler deriv_stream(const struct dr_sampler *smp, int depth, uint64_t which)
 {
     uint64_t k = smp->key ^ 0x8f1bbcdcca62c1d6ULL ^ ((uint64_t)depth * 0x9e3779b97f4a7c15ULL);
@@ -223,10 +241,20 @@ static struct dr_deriv_ray deriv_ray(const struct dr_path_opts *opts, const stru
                                  .medium = v->medium};
 }
 
-/* (path_deriv.h) B's direction from p_bm, then A's antithetic pair: the
- * same (u1, u2), mirrored for the negative lobe so both start at the sign
- * change, and the same random numbers for both paths. The random numbers
- * are drawn whether or not a direction is usable. */
+int dr_path_deriv_max_rays(const struct dr_scene *s, const struct dr_path_opts *opts)
+{
+    unsigned all = 0;
+    for (int m = 0; opts->params && m < s->n_materials; m++)
+        all |= dr_path_material_dparams(s, opts->params, m) & opts->deriv_params;
+    return ((all & BM_PARAMS) ? 1 : 0) + ((all & DR_BSDF_D_ROUGHNESS) ? 2 : 0) +
+           ((all & DR_BSDF_D_COAT_ROUGHNESS) ? 2 : 0);
+}
+
+/* (path_deriv.h) B's direction from p_bm, then A's antithetic pairs (the
+ * base's roughness, then the coat's): the same (u1, u2) within a pair,
+ * mirrored for the negative lobe so both start at the sign change, and the
+ * same random numbers for both paths. The random numbers are drawn whether
+ * or not a direction is usable. */
 int dr_path_deriv_rays(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
                        const struct dr_sampler *smp, struct dr_deriv_ray r[DR_DERIV_RAYS])
 {
@@ -242,24 +270,29 @@ int dr_path_deriv_rays(const struct dr_scene *s, const struct dr_path_opts *opts
         if (dr_bsdf_deriv_sample(&v->bsdf, v->wo, mask & BM_PARAMS, ul, u1, u2, &wi, &pd) && usable(v, wi, &wiw))
             r[n++] = deriv_ray(opts, v, smp, STREAM_BM_PATH, DR_DERIV_BM, wi, wiw, pd);
     }
-    if (mask & DR_BSDF_D_ROUGHNESS) {
+    for (unsigned part = DR_BSDF_D_ROUGHNESS; part <= DR_BSDF_D_COAT_ROUGHNESS; part <<= 1) {
+        if (!(mask & part))
+            continue;
+        const bool coat = part == DR_BSDF_D_COAT_ROUGHNESS;
+        enum dr_bsdf_dlobe lobe[2];
+        pair_lobes(part, lobe);
         double u1, u2;
         dr_sampler_next2(&dirs, &u1, &u2);
         for (int side = 0; side < 2; side++) {
-            enum dr_bsdf_dlobe lobe = side == 0 ? DR_BSDF_DLOBE_ROUGH_POS : DR_BSDF_DLOBE_ROUGH_NEG;
-            dr_vec3 wi = dr_bsdf_deriv_sample_dir(&v->bsdf, v->wo, lobe, side == 0 ? u1 : 1.0 - u1, u2), wiw;
-            double p = dr_bsdf_deriv_lobe_pdf(&v->bsdf, v->wo, wi, lobe);
+            dr_vec3 wi = dr_bsdf_deriv_sample_dir(&v->bsdf, v->wo, lobe[side], side == 0 ? u1 : 1.0 - u1, u2), wiw;
+            double p = dr_bsdf_deriv_lobe_pdf(&v->bsdf, v->wo, wi, lobe[side]);
+            const int kind = coat ? (side == 0 ? DR_DERIV_COAT_POS : DR_DERIV_COAT_NEG)
+                                  : (side == 0 ? DR_DERIV_POS : DR_DERIV_NEG);
             if (p > 0.0 && usable(v, wi, &wiw))
-                r[n++] = deriv_ray(opts, v, smp, STREAM_PAIR_PATH, side == 0 ? DR_DERIV_POS : DR_DERIV_NEG, wi, wiw,
-                                   p);
+                r[n++] = deriv_ray(opts, v, smp, coat ? STREAM_COAT_PAIR_PATH : STREAM_PAIR_PATH, kind, wi, wiw, p);
         }
     }
     return n;
 }
 
 /* (path_deriv.h) B's term: MIS-weighted against light and forward
- * sampling; A's: E weighted against next-event estimation (only one lobe
- * is non-zero at wi). */
+ * sampling; A's parts: E weighted against next-event estimation (only one
+ * lobe of a pair is non-zero at wi), each part by its own pair. */
 void d_path_deriv_rays(const struct dr_scene *s, const struct dr_path_opts *opts, const struct dr_path_vertex *v,
                        const struct dr_deriv_ray *r, const struct dr_deriv_light *light, int n, dr_vec3 d_beta,
                        struct dr_grad_sink *sink)
@@ -273,9 +306,11 @@ void d_path_deriv_rays(const struct dr_scene *s, const struct dr_path_opts *opts
             if (dr_v3_finite(L) && !dr_is_black(L))
                 d_rest_along(s, opts->params, v, mask, r[i].wi, dr_scale(dr_mul(d_beta, L), cos), sink);
         } else {
+            const bool coat = r[i].kind == DR_DERIV_COAT_POS || r[i].kind == DR_DERIV_COAT_NEG;
             dr_vec3 L = dr_scale(dr_add(dr_scale(E, p / (pl + p)), L_ind), cos / p);
             if (dr_v3_finite(L) && !dr_is_black(L))
-                d_ndf_along(s, opts->params, v, r[i].wi, dr_mul(d_beta, L), sink);
+                d_ndf_along(s, opts->params, v, coat ? DR_BSDF_D_COAT_ROUGHNESS : DR_BSDF_D_ROUGHNESS, r[i].wi,
+                            dr_mul(d_beta, L), sink);
         }
     }
 }

@@ -16,7 +16,9 @@
  *                                roughness derivative through G2),
  * and estimates each with strategies made for it (bsdf.h: dr_bsdf_deriv_*):
  *
- *  A (roughness requested): a signed integrand, d D/d alpha times smooth
+ *  A (roughness requested; a clear coat's roughness is a second part with
+ *    its own pair at the coat's alpha, the base's part under a coat is
+ *    the base's times the coat's transmission): a signed integrand, d D/d alpha times smooth
  *    factors, whose positive and negative parts are each ~1 / alpha while
  *    their difference is ~1. Positivized and antithetic (Zeltner et al.
  *    2021, Belhe et al. 2024): one direction from the positive lobe p+ and
@@ -52,7 +54,8 @@
  * emission the forward direction sees at the next vertex moves from V_f
  * times the primal's MIS weight to W_f (d_path_deriv_emission); and
  * d_path_deriv_sample adds the new directions and their radiance paths, the
- * extra cost (one path for B, two for A, per differentiated vertex).
+ * extra cost (one path for B, two for each part of A, per differentiated
+ * vertex). The coat's factor has no strategy of its own: it is in B.
  *
  * In scenes with media the radiance walks are the medium walker's
  * (dr_path_step dispatches), each starting in the medium on the vertex's
@@ -110,8 +113,8 @@ void d_path_deriv_sample(const struct dr_scene *scene, const struct dr_path_opts
  * directions (dr_path_deriv_rays), each one's radiance walk, and their
  * derivative terms (d_path_deriv_rays). d_path_deriv_sample is their
  * composition with one walk at a time (dr_path_deriv_radiance). */
-#define DR_DERIV_RAYS 3   /* at most: B's direction and A's pair */
-enum dr_deriv_kind { DR_DERIV_BM, DR_DERIV_POS, DR_DERIV_NEG };
+#define DR_DERIV_RAYS 5   /* at most: B's direction, A's pair, the coat roughness's pair */
+enum dr_deriv_kind { DR_DERIV_BM, DR_DERIV_POS, DR_DERIV_NEG, DR_DERIV_COAT_POS, DR_DERIV_COAT_NEG };
 struct dr_deriv_ray {
     dr_vec3 wi;                /* local direction at the vertex */
     dr_vec3 o, d, prev_p;      /* the radiance walk's first ray and the vertex's point */
@@ -130,6 +133,11 @@ struct dr_deriv_light {
     dr_vec3 E, L_ind;
     double pl;
 };
+
+/* The most new directions a vertex of the run draws (at most
+ * DR_DERIV_RAYS): 1 with a base colour or metallic it samples for, 2 more
+ * with a roughness, 2 more with a clear coat's roughness. */
+int dr_path_deriv_max_rays(const struct dr_scene *scene, const struct dr_path_opts *opts);
 
 /* The new directions at v (0 .. DR_DERIV_RAYS of them, into r), drawn from
  * the sub-streams of smp's key as d_path_deriv_sample draws them. */

@@ -577,19 +577,6 @@ int dr_estimator_check(const struct dr_estimator_ops *e, const struct dr_grad_pr
                      "detached", dr_sampling_name(p->sampling), name);
         return DR_ERR_ARG;
     }
-    /* Derivative sampling's densities (bsdf.h) know the base BSDF only: at a
-     * coated material with a parameter they sample for, the estimate would
-     * miss the coat's share of the derivative. */
-    if (dr_sampling_is_derivative(run)) {
-        const unsigned want = dr_sampling_deriv_params(run);
-        for (int m = 0; p->params && m < p->params->n_materials; m++)
-            if (p->scene->materials[m].coated && (dr_path_material_dparams(p->scene, p->params, m) & want)) {
-                dr_set_error("%s sampling does not sample a clear coat's derivatives (material '%s' has "
-                             "KHR_materials_clearcoat); use --sampling detached or attached",
-                             dr_sampling_name(p->sampling), p->scene->materials[m].name);
-                return DR_ERR_ARG;
-            }
-    }
     /* Nor the normal map's dependence on the moving hit point (normal_map.h);
      * derivative sampling keeps the hit points fixed, like detached. */
     if (!dr_sampling_is_derivative(run) && (p->scene->effects & DR_FX_NORMAL_MAPS)) {

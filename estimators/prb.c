@@ -57,6 +57,7 @@ struct prb_job {
     bool deferring[DR_MAX_THREADS];              /* ... within this thread's prb_pixels call */
     bool defer;   /* derivative sampling with a BSDF parameter (dr_est_sampling_run): the only
                      runs that draw new directions, so the only ones that make the buffers */
+    int defer_rays;   /* ... the most a vertex draws (dr_path_deriv_max_rays): the buffers' rays per vertex */
 };
 
 /* Derivative sampling's new directions, deferred: a replay draws them
@@ -67,7 +68,7 @@ struct prb_job {
  * sampling). Their terms (d_path_deriv_rays) then go to the thread's sink;
  * in forward mode each vertex's to its pixel, as dr_est_sample_done adds
  * the rest of its sample: the same sum in another order. */
-#define DEFERRED_VERTICES 1024   /* per thread (about 1.6 MB with their rays) */
+#define DEFERRED_VERTICES 1024   /* per thread (about 1.6 MB with three rays each) */
 struct deferred_vertex {
     struct dr_path_vertex v;
     dr_vec3 d_beta;   /* d_path_deriv_sample's */
@@ -668,11 +669,11 @@ static void deferred_free(struct deferred *d)
     free(d);
 }
 
-static uint64_t deferred_bytes(void)
+static uint64_t deferred_bytes(int rays)
 {
     return sizeof(struct deferred) +
            DEFERRED_VERTICES * (sizeof(struct deferred_vertex) +
-                                DR_DERIV_RAYS * (sizeof(struct dr_deriv_ray) + sizeof(struct dr_deriv_light)));
+                                (uint64_t)rays * (sizeof(struct dr_deriv_ray) + sizeof(struct dr_deriv_light)));
 }
 
 /* The thread's deferred directions for a prb_pixels call that adds to sink:
@@ -690,8 +691,8 @@ static bool deferred_begin(struct prb_job *j, int thread, const struct dr_grad_s
         if (!(d = calloc(1, sizeof *d)))
             return false;
         d->verts = malloc(sizeof *d->verts * DEFERRED_VERTICES);
-        d->rays = malloc(sizeof *d->rays * DEFERRED_VERTICES * DR_DERIV_RAYS);
-        d->found = malloc(sizeof *d->found * DEFERRED_VERTICES * DR_DERIV_RAYS);
+        d->rays = malloc(sizeof *d->rays * DEFERRED_VERTICES * (size_t)j->defer_rays);
+        d->found = malloc(sizeof *d->found * DEFERRED_VERTICES * (size_t)j->defer_rays);
         if (!d->verts || !d->rays || !d->found) {
             deferred_free(d);
             return false;
@@ -960,8 +961,9 @@ static int prb_run(struct dr_est_base *b)
             per_thread += dr_wave_soa_walk_bytes();
     }
     j->defer = dr_sampling_is_derivative(run);
+    j->defer_rays = j->defer ? dr_path_deriv_max_rays(b->p->scene, &b->popts) : 0;
     if (j->defer)   /* (deferred_begin: the directions, and the lanes) */
-        per_thread += deferred_bytes() + (j->wave ? 0 : dr_wave_bytes());
+        per_thread += deferred_bytes(j->defer_rays) + (j->wave ? 0 : dr_wave_bytes());
     b->scratch_bytes = per_thread * (uint64_t)b->acc.threads;   /* (at most prb_thread_bytes each) */
     return dr_parallel_for_static((int64_t)b->p->width * b->p->height, PIXEL_CHUNK, b->acc.threads, prb_pixels, j);
 }
@@ -984,7 +986,7 @@ static void prb_release(struct dr_est_base *b)
 static uint64_t prb_thread_bytes(int spp)
 {
     return sizeof(dr_vec3) * (uint64_t)spp + dr_wave_bytes() + parked_bytes(park_group(spp) * spp) +
-           dr_wave_soa_walk_bytes() + deferred_bytes();
+           dr_wave_soa_walk_bytes() + deferred_bytes(DR_DERIV_RAYS);
 }
 
 const struct dr_estimator_ops dr_estimator_prb = {

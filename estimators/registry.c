@@ -41,8 +41,8 @@ int dr_sampling_parse(const char *name)
 unsigned dr_sampling_deriv_params(enum dr_sampling s)
 {
     if (s == DR_SAMPLING_DERIVATIVE)
-        return DR_BSDF_D_BASE | DR_BSDF_D_METALLIC | DR_BSDF_D_ROUGHNESS;
-    return s == DR_SAMPLING_DERIVATIVE_ROUGHNESS ? DR_BSDF_D_ROUGHNESS : 0u;
+        return DR_BSDF_D_BASE | DR_BSDF_D_METALLIC | DR_BSDF_D_ROUGHNESS | DR_BSDF_D_COAT_ROUGHNESS;
+    return s == DR_SAMPLING_DERIVATIVE_ROUGHNESS ? DR_BSDF_D_ROUGHNESS | DR_BSDF_D_COAT_ROUGHNESS : 0u;
 }
 
 bool dr_estimator_supports(const struct dr_estimator_ops *e, enum dr_sampling s)

@@ -99,7 +99,10 @@ static double worst_p = 1.0;
 static void chi2_case(const char *what, const struct dr_bsdf *b, double cos_o, unsigned params, int lobe, long n,
                       uint64_t seed)
 {
-    double a = fmax(b->roughness * b->roughness, DR_BSDF_MIN_ALPHA);
+    /* (cells at the lobe's alpha: a coat lobe's is the coat's) */
+    const bool coat_lobe = !params && (lobe == DR_BSDF_DLOBE_COAT_POS || lobe == DR_BSDF_DLOBE_COAT_NEG);
+    const double r_cells = coat_lobe ? b->coat_roughness : b->roughness;
+    double a = fmax(r_cells * r_cells, DR_BSDF_MIN_ALPHA);
     dr_vec3 wo = dr_v3(sqrt(1.0 - cos_o * cos_o), 0.0, cos_o);
     static double obs[NV * NP], expd[NV * NP];
     for (int i = 0; i < NV * NP; i++)
@@ -152,40 +155,62 @@ static void chi2_case(const char *what, const struct dr_bsdf *b, double cos_o, u
           total, frac);
 }
 
+/* A BSDF under a clear coat of factor 0.7 and roughness coat_rough. */
+static struct dr_bsdf make_coated(double rough, double coat_rough)
+{
+    struct dr_bsdf b = make_bsdf(rough, 0.3, dr_v3(0.8, 0.4, 0.2));
+    b.coated = true, b.coat = 0.7, b.coat_roughness = coat_rough;
+    return b;
+}
+
 static void test_lobes(void)
 {
-    static const char *names[] = {"cosine", "vndf", "rough+", "rough-"};
+    static const char *names[DR_BSDF_DLOBE_COUNT] = {"cosine", "vndf", "rough+", "rough-", "coat+", "coat-"};
     const double roughs[] = {0.1, 0.5, 0.9}, coss[] = {0.95, 0.4};
     uint64_t seed = 1;
     printf("single lobes (map vs pdf):\n");
     for (int l = 0; l < DR_BSDF_DLOBE_COUNT; l++)
         for (int i = 0; i < 3; i++)
             for (int k = 0; k < 2; k++) {
-                struct dr_bsdf b = make_bsdf(roughs[i], 1.0, dr_v3(1.0, 0.8, 0.3));
+                /* (the coat's lobes on a coated BSDF whose base is rougher or smoother than its coat) */
+                const bool coat = l == DR_BSDF_DLOBE_COAT_POS || l == DR_BSDF_DLOBE_COAT_NEG;
+                struct dr_bsdf b = coat ? make_coated(1.0 - 0.8 * roughs[i], roughs[i])
+                                        : make_bsdf(roughs[i], 1.0, dr_v3(1.0, 0.8, 0.3));
                 char what[64];
                 snprintf(what, sizeof what, "%s rough=%.1f", names[l], roughs[i]);
                 chi2_case(what, &b, coss[k], 0, l, 200000, seed++);
             }
+    /* without a coat, the coat's lobes have no density and map below the surface */
+    struct dr_bsdf b = make_bsdf(0.3, 0.0, dr_v3s(0.5));
+    dr_vec3 wo = dr_normalize(dr_v3(0.3, 0.1, 1.0)), wi = dr_normalize(dr_v3(-0.2, 0.1, 1.0));
+    CHECK(dr_bsdf_deriv_lobe_pdf(&b, wo, wi, DR_BSDF_DLOBE_COAT_POS) == 0.0 &&
+              dr_bsdf_deriv_lobe_pdf(&b, wo, wi, DR_BSDF_DLOBE_COAT_NEG) == 0.0 &&
+              !(dr_bsdf_deriv_sample_dir(&b, wo, DR_BSDF_DLOBE_COAT_POS, 0.3, 0.6).z > 0.0),
+          "an uncoated BSDF's coat lobes: density 0, nothing sampled");
 }
 
 static void test_mixtures(void)
 {
     static const struct { const char *name; unsigned params; } masks[] = {
         {"base", DR_BSDF_D_BASE}, {"metallic", DR_BSDF_D_METALLIC}, {"roughness", DR_BSDF_D_ROUGHNESS},
-        {"all", DR_BSDF_D_BASE | DR_BSDF_D_METALLIC | DR_BSDF_D_ROUGHNESS}};
+        {"all", DR_BSDF_D_BASE | DR_BSDF_D_METALLIC | DR_BSDF_D_ROUGHNESS},
+        {"coat roughness", DR_BSDF_D_COAT_ROUGHNESS},
+        {"all, coated", DR_BSDF_D_BASE | DR_BSDF_D_METALLIC | DR_BSDF_D_ROUGHNESS | DR_BSDF_D_COAT_ROUGHNESS}};
     const double metals[] = {0.0, 0.5, 1.0};
     uint64_t seed = 1000;
     printf("mixtures (dr_bsdf_deriv_sample vs dr_bsdf_deriv_pdf):\n");
-    for (int m = 0; m < 4; m++)
+    for (int m = 0; m < 6; m++)
         for (int i = 0; i < 3; i++) {
             struct dr_bsdf b = make_bsdf(i == 0 ? 0.1 : 0.5, metals[i], dr_v3(0.9, 0.1, 0.1));
+            if (masks[m].params & DR_BSDF_D_COAT_ROUGHNESS)   /* under a coat smoother than the base */
+                b.coated = true, b.coat = 0.6, b.coat_roughness = 0.2;
             char what[64];
             snprintf(what, sizeof what, "%s metallic=%.1f rough=%.1f", masks[m].name, metals[i], b.roughness);
             chi2_case(what, &b, 0.7, masks[m].params, 0, 200000, seed++);
         }
     /* weights sum to 1 for any request, and to 0 for none */
     struct dr_bsdf b = make_bsdf(0.3, 0.25, dr_v3s(0.5));
-    for (unsigned mask = 0; mask < 8; mask++) {
+    for (unsigned mask = 0; mask < 16; mask++) {
         double w[DR_BSDF_DLOBE_COUNT], s = 0.0;
         dr_bsdf_deriv_weights(&b, mask, w);
         for (int l = 0; l < DR_BSDF_DLOBE_COUNT; l++) {
@@ -247,51 +272,89 @@ static double ref_lambda(double a, dr_vec3 w)
     return (-1.0 + sqrt(1.0 + a * a * tan2)) / 2.0;
 }
 
+/* The NDF part of a GGX lobe's value at (wo, wi) by central differences
+ * in roughness with only D moving (G2 at the fixed roughness), per unit
+ * Fresnel: G2 dD/drough / (4 wo.z wi.z). */
+static double ref_ndf_part(double rough, dr_vec3 wo, dr_vec3 wi)
+{
+    double a = rough * rough, h = 1e-5;
+    dr_vec3 hv = dr_normalize(dr_add(wo, wi));
+    double g2 = 1.0 / (1.0 + ref_lambda(a, wo) + ref_lambda(a, wi));
+    double dD = (ref_D((rough + h) * (rough + h), hv) - ref_D((rough - h) * (rough - h), hv)) / (2.0 * h);
+    return g2 * dD / (4.0 * wo.z * wi.z);
+}
+
+/* The clear coat's Fresnel (Schlick, f0 0.04) */
+static double ref_coat_fresnel(double x) { return 0.04 + 0.96 * pow(1.0 - x, 5.0); }
+
 /* d_bsdf_eval_rough_ndf against central differences in roughness of the
  * specular lobe with only D moving (G2 and Fresnel at the fixed roughness),
  * channel by channel: the part of d f / d rough that the antithetic pair
- * estimates. Also: zero for a Lambertian and below the alpha floor. */
+ * estimates. Every other BSDF under a clear coat: the base's part times
+ * the coat's transmission (1 - c Fc(wo.z)) (1 - c Fc(wi.z)), and the coat
+ * lobe's part c Fc(wo.h) G2 dD/drough_c / (4 wo.z wi.z), each asked alone.
+ * Also: zero for a Lambertian and below the alpha floor. */
 static void test_rough_ndf_vs_fd(void)
 {
     struct rng r = {91};
-    double worst = 0.0;
-    for (int k = 0; k < 500; k++) {
+    double worst = 0.0, worst_coat = 0.0;
+    for (int k = 0; k < 1000; k++) {
         double rough = 0.1 + 0.85 * rng_next(&r), m = rng_next(&r);
         dr_vec3 base = dr_v3(rng_next(&r), rng_next(&r), rng_next(&r));
         struct dr_bsdf b = make_bsdf(rough, m, base);
         b.specular = 0.5 + 0.5 * rng_next(&r);
+        const bool coated = k % 2;
+        if (coated)
+            b.coated = true, b.coat = rng_next(&r), b.coat_roughness = 0.05 + 0.9 * rng_next(&r);
         double co = 0.2 + 0.8 * rng_next(&r), ci = 0.2 + 0.8 * rng_next(&r), pi_ = 2.0 * M_PI * rng_next(&r);
         dr_vec3 wo = dr_v3(sqrt(1 - co * co), 0.0, co), wi = dr_v3(sqrt(1 - ci * ci) * cos(pi_), sqrt(1 - ci * ci) * sin(pi_), ci);
         /* the lobe with D at roughness t: f(t) = f_rest + f_spec(rough) * D(t) / D(rough) */
-        double a = rough * rough, h = 1e-5;
-        dr_vec3 hv = dr_normalize(dr_add(wo, wi));
-        double g2 = 1.0 / (1.0 + ref_lambda(a, wo) + ref_lambda(a, wi));
-        double dD = (ref_D((rough + h) * (rough + h), hv) - ref_D((rough - h) * (rough - h), hv)) / (2.0 * h);
-        double s5 = pow(1.0 - 0.5 * dr_length(dr_add(wo, wi)), 5.0);
-        double f0 = fmin(0.04, 1.0) * b.specular;
+        const double ndf = ref_ndf_part(rough, wo, wi);
+        const double s5 = pow(1.0 - 0.5 * dr_length(dr_add(wo, wi)), 5.0);
+        const double f0 = fmin(0.04, 1.0) * b.specular;
+        const double tt = coated ? (1.0 - b.coat * ref_coat_fresnel(co)) * (1.0 - b.coat * ref_coat_fresnel(ci)) : 1.0;
         for (int c = 0; c < 3; c++) {
             double bc = dr_v3_get(base, c);
             double fd = f0 + (b.specular - f0) * s5, fm = bc + (1.0 - bc) * s5;
-            double want = ((1.0 - m) * fd + m * fm) * g2 * dD / (4.0 * wo.z * wi.z);
+            double want = tt * ((1.0 - m) * fd + m * fm) * ndf;
             struct dr_d_bsdf d = {0};
             dr_vec3 d_out = dr_v3s(0.0);
             dr_v3_set(&d_out, c, 1.0);
-            d_bsdf_eval_rough_ndf(&b, wo, wi, d_out, &d);
+            d_bsdf_eval_rough_ndf(&b, wo, wi, d_out, DR_BSDF_D_ROUGHNESS, &d);
             double err = fabs(d.roughness - want) / (fabs(want) + 1e-3);
             if (err > worst)
                 worst = err;
-            CHECK(d.metallic == 0.0 && dr_is_black(d.base_color), "rough_ndf touched other adjoints");
+            CHECK(d.metallic == 0.0 && dr_is_black(d.base_color) && d.coat == 0.0 && d.coat_roughness == 0.0,
+                  "rough_ndf touched other adjoints");
+            if (!coated)
+                continue;
+            /* the coat's part: a white lobe of f0 0.04 and f90 1, times c */
+            const double want_c = b.coat * (0.04 + 0.96 * s5) * ref_ndf_part(b.coat_roughness, wo, wi);
+            struct dr_d_bsdf dc = {0};
+            d_bsdf_eval_rough_ndf(&b, wo, wi, d_out, DR_BSDF_D_COAT_ROUGHNESS, &dc);
+            err = fabs(dc.coat_roughness - want_c) / (fabs(want_c) + 1e-3);
+            if (err > worst_coat)
+                worst_coat = err;
+            CHECK(dc.roughness == 0.0 && dc.coat == 0.0 && dc.metallic == 0.0,
+                  "the coat's NDF part touched other adjoints");
         }
     }
-    printf("NDF part of d f / d roughness vs central differences: worst relative error %.3g\n", worst);
+    printf("NDF part of d f / d roughness vs central differences: worst relative error %.3g (the coat's %.3g)\n",
+           worst, worst_coat);
     CHECK(worst < 1e-5, "d_bsdf_eval_rough_ndf vs finite differences: relative error %g", worst);
+    CHECK(worst_coat < 1e-5, "d_bsdf_eval_rough_ndf (coat) vs finite differences: relative error %g", worst_coat);
+    struct dr_bsdf plain = make_bsdf(0.4, 0.5, dr_v3s(0.5));
+    struct dr_d_bsdf dp = {0};
+    const dr_vec3 wa = dr_normalize(dr_v3(0.3, 0.2, 1.0)), wb = dr_normalize(dr_v3(-0.1, 0.4, 1.0));
+    d_bsdf_eval_rough_ndf(&plain, wa, wb, dr_v3s(1.0), DR_BSDF_D_COAT_ROUGHNESS, &dp);
+    CHECK(dp.roughness == 0.0 && dp.coat_roughness == 0.0, "an uncoated BSDF's coat part is not 0");
     struct dr_bsdf lam = make_bsdf(0.5, 0.0, dr_v3s(0.5));
     lam.specular = 0.0;
     struct dr_bsdf flo = make_bsdf(1e-4, 1.0, dr_v3s(0.5));
     struct dr_d_bsdf d = {0};
     dr_vec3 w = dr_normalize(dr_v3(0.1, 0.2, 1.0));
-    d_bsdf_eval_rough_ndf(&lam, w, w, dr_v3s(1.0), &d);
-    d_bsdf_eval_rough_ndf(&flo, w, w, dr_v3s(1.0), &d);
+    d_bsdf_eval_rough_ndf(&lam, w, w, dr_v3s(1.0), DR_BSDF_D_ROUGHNESS, &d);
+    d_bsdf_eval_rough_ndf(&flo, w, w, dr_v3s(1.0), DR_BSDF_D_ROUGHNESS, &d);
     CHECK(d.roughness == 0.0, "NDF part not 0 for a Lambertian or below the alpha floor: %g", d.roughness);
 }
 

@@ -2,7 +2,8 @@
  * agreement with finite differences within 3 standard errors for the red
  * wall's albedo, the gold sphere's roughness at 0.1 and 0.5 and its metallic
  * factor, and (--sampling derivative-roughness) its roughness and metallic
- * together, in reverse and forward mode, and in two scenes with media; forward and reverse see the same
+ * together, in reverse and forward mode, under a clear coat (the gold's
+ * roughness and the coat's), and in two scenes with media; forward and reverse see the same
  * numbers (equal to rounding); and the gradient's standard error against
  * detached sampling's with the same seeds where the forward sampler is known
  * to be poor: a near-specular roughness (0.1), whose derivative lobe is
@@ -198,6 +199,26 @@ int main(void)
     const char *rough_metal[] = {rough, metal};
     worst = fmax(worst, fd_case_n(s, "gold-rough+metal", rough_metal, 2, DR_SAMPLING_DERIVATIVE_ROUGHNESS, 1e-2, SPHERE,
                                   true, NULL));
+    /* under a clear coat (bsdf_coat.c): the base's roughness (its pair, the
+     * integrand times the coat's transmission) and the coat's own roughness
+     * at 0.1 (a pair of its own at the coat's alpha), whose standard error
+     * must again beat detached sampling's */
+    static const char *coat_rough = "/materials/rough-gold/extensions/KHR_materials_clearcoat/clearcoatRoughnessFactor";
+    struct dr_material *gold = NULL;
+    for (int m = 0; m < s->n_materials; m++)
+        if (strcmp(s->materials[m].name, "rough-gold") == 0)
+            gold = &s->materials[m];
+    CHECK(gold != NULL, "the bundled box has its rough-gold material");
+    if (gold) {
+        gold->coated = true, gold->coat = 0.8, gold->coat_roughness = 0.1;
+        CHECK(dr_scene_refresh(s) == 0 && (s->effects & DR_FX_CLEARCOAT), "coat the gold sphere: %s", dr_last_error());
+        worst = fmax(worst, fd_case(s, "coated-gold-rough", rough, DR_SAMPLING_DERIVATIVE, 1e-2, SPHERE, true, NULL));
+        worst = fmax(worst, fd_case(s, "coat-rough-0.1", coat_rough, DR_SAMPLING_DERIVATIVE, 1e-2, SPHERE, false, &se_d));
+        fd_case(s, "coat-rough-0.1", coat_rough, DR_SAMPLING_DETACHED, 1e-2, SPHERE, false, &se_det);
+        printf("coat roughness 0.1: gradient standard error %.3g (derivative) vs %.3g (detached)\n", se_d, se_det);
+        CHECK(se_d < 0.75 * se_det, "coat roughness 0.1: derivative sampling's standard error %g is not clearly below "
+              "detached's %g", se_d, se_det);
+    }
     const char *floor_colour[] = {"/materials/1/pbrMetallicRoughness/baseColorFactor"};
     const char *floor_rough[] = {"/materials/1/pbrMetallicRoughness/roughnessFactor"};
     worst = fmax(worst, media_case("data/media/fog-khr.gltf", "fog-floor", floor_colour, 1, DR_SAMPLING_DERIVATIVE, 0.2));

@@ -1240,6 +1240,9 @@ int main(void)
      * vertices on the coated metal, which has none, run eight-wide) */
     const char *aptrs[] = {cptrs[0], cptrs[1], gptrs[0], gptrs[1], gptrs[4]};
     compare("coated glossy scene, attached sampling", s, &cam, aptrs, 5, 6, DR_SAMPLING_ATTACHED, GROUPED_WALKS);
+    /* derivative sampling: the floor's base colour and roughness under its
+     * coat, and the coat's roughness with its own antithetic pair */
+    compare("coated glossy scene, derivative sampling", s, &cam, aptrs, 5, 6, DR_SAMPLING_DERIVATIVE, GROUPED_WALKS);
     dr_scene_destroy(s);
 
     /* a closed box lit from inside: no path escapes, and without roulette
