@@ -311,6 +311,11 @@ int refuse_unsafe_image_file(const char *path, const std::string &label)
     } else {
         rc = refuse_unsafe_image(head, n, n < sizeof head, label, size);
     }
+    char why[256];
+    if (rc == DR_OK && n == sizeof head && dr_unsafe_image_file_check(f, size, why, sizeof why) != 0) {
+        dr_set_error("%s: cannot read image: %s", label.c_str(), why);   // (past the first bytes: seeking)
+        rc = DR_ERR_FORMAT;
+    }
     std::fclose(f);
     return rc;
 }

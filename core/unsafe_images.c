@@ -31,6 +31,88 @@ static uint32_t dpx_u32(const unsigned char *p, bool big)
                : (uint32_t)p[3] << 24 | (uint32_t)p[2] << 16 | (uint32_t)p[1] << 8 | p[0];
 }
 
+static uint32_t le32(const unsigned char *p)
+{
+    return (uint32_t)p[3] << 24 | (uint32_t)p[2] << 16 | (uint32_t)p[1] << 8 | p[0];
+}
+
+/* A DDS whose pixel format is uncompressed (no FOURCC, flag 0x4) and names
+ * a channel whose bit mask is 0: RGB (0x40) without all of R, G and B,
+ * luminance (0x20000) without R, alpha (0x1 or 0x2) without A. The reader
+ * finds a mask's shift by shifting it until its low bit is set: forever. */
+static bool dds_empty_mask(const unsigned char *b, size_t n, char *why, size_t why_size)
+{
+    if (n < 4 + 124 || memcmp(b, "DDS ", 4) != 0)
+        return false;
+    const unsigned char *pf = b + 4 + 72;   /* DDS_PIXELFORMAT: size, flags, fourCC, bits, R G B A masks */
+    const uint32_t flags = le32(pf + 4);
+    if (flags & 0x4)
+        return false;   /* (compressed: no masks) */
+    const uint32_t r = le32(pf + 16), g = le32(pf + 20), bl = le32(pf + 24), a = le32(pf + 28);
+    if (!(((flags & 0x40) && !(r && g && bl)) || ((flags & 0x20000) && !r) || ((flags & 0x3) && !a)))
+        return false;
+    snprintf(why, why_size, "DDS whose pixel format (flags %#x) names a channel with an empty bit mask "
+             "(OpenImageIO 2.4's DDS reader loops forever on it)", (unsigned)flags);
+    return true;
+}
+
+static uint32_t be32(const unsigned char *p)
+{
+    return (uint32_t)p[0] << 24 | (uint32_t)p[1] << 16 | (uint32_t)p[2] << 8 | p[3];
+}
+
+/* A Photoshop file ("8BPS", version 1, or 2 for PSB) whose color mode data,
+ * image resources or layer and mask sections (each a length, then its
+ * bytes, one after the other from byte 26) run past the file's end: the
+ * reader allocates a section by its length before reading it (3 GB and 3 s
+ * for a 101-byte file). at(ctx, off, out, len) reads the file's bytes
+ * (false past what it has: the sections from there are not checked). */
+static bool psd_impossible(bool (*at)(void *, uint64_t, unsigned char *, size_t), void *ctx, uint64_t file_size,
+                           char *why, size_t why_size)
+{
+    unsigned char h[26];
+    if (!at(ctx, 0, h, sizeof h) || memcmp(h, "8BPS", 4) != 0)
+        return false;
+    const bool psb = h[4] == 0 && h[5] == 2;
+    static const char *const names[3] = {"color mode data", "image resources", "layer and mask information"};
+    uint64_t off = 26;
+    for (int k = 0; k < 3; k++) {
+        const size_t width = k == 2 && psb ? 8 : 4;   /* (PSB's layer section has an 8-byte length) */
+        unsigned char l[8];
+        if (!at(ctx, off, l, width))
+            return false;
+        const uint64_t len = width == 8 ? (uint64_t)be32(l) << 32 | be32(l + 4) : be32(l);
+        if (len > file_size || off + width + len > file_size) {
+            snprintf(why, why_size, "Photoshop file whose %s claims %llu bytes, more than its %llu bytes hold "
+                     "(OpenImageIO 2.4's PSD reader would allocate them first)", names[k],
+                     (unsigned long long)len, (unsigned long long)file_size);
+            return true;
+        }
+        off += width + len;
+    }
+    return false;
+}
+
+struct bytes_at { const unsigned char *b; size_t n; };
+static bool from_bytes(void *ctx, uint64_t off, unsigned char *out, size_t len)
+{
+    const struct bytes_at *m = ctx;
+    if (off > m->n || len > m->n - off)
+        return false;
+    memcpy(out, m->b + off, len);
+    return true;
+}
+static bool from_file(void *ctx, uint64_t off, unsigned char *out, size_t len)
+{
+    FILE *f = ctx;
+    return off <= (uint64_t)INT64_MAX && fseeko(f, (off_t)off, SEEK_SET) == 0 && fread(out, 1, len, f) == len;
+}
+
+int dr_unsafe_image_file_check(FILE *f, uint64_t file_size, char *why, size_t why_size)
+{
+    return psd_impossible(from_file, f, file_size, why, why_size) ? -1 : 0;
+}
+
 /* A DPX ("SDPX" big-endian, "XPDS" little-endian) whose header claims more
  * than the file holds: user data (bytes 32-35; all ones is the format's
  * "undefined", none) past its end after the 2048-byte generic header, or
@@ -62,7 +144,10 @@ static bool dpx_impossible(const unsigned char *b, size_t n, uint64_t file_size,
 int dr_unsafe_image_check(const unsigned char *b, size_t n, bool whole, uint64_t file_size, char *why,
                           size_t why_size)
 {
-    if (dpx_impossible(b, n, file_size, why, why_size))
+    if (dpx_impossible(b, n, file_size, why, why_size) || dds_empty_mask(b, n, why, why_size))
+        return -1;
+    struct bytes_at m = {b, n};
+    if (psd_impossible(from_bytes, &m, file_size, why, why_size))
         return -1;
     if (maya_iff(b, n)) {
         snprintf(why, why_size, "Maya IFF (OpenImageIO 2.4's IFF reader writes out of bounds on malformed files, "

@@ -15,18 +15,25 @@
  *  - a DPX whose header gives more user data than the file holds (the
  *    reader allocates it, 4.3 GB for a 2.5 KB file, then aborts), or more
  *    pixels than it could hold at a bit each (the reader read a 3 KB file
- *    claiming 1x50348100 pixels past its end for minutes).
+ *    claiming 1x50348100 pixels past its end for minutes);
+ *  - a DDS whose uncompressed pixel format names a channel with an empty bit
+ *    mask (the reader looped forever on a 192-byte file);
+ *  - a Photoshop file (PSD, PSB) whose sections claim more bytes than the
+ *    file holds (the reader allocated 3 GB for a 101-byte file; a file on
+ *    disk is checked section by section, dr_unsafe_image_file_check).
  * And a format that has no magic bytes, told only by the reader that opened
  * the file (dr_unsafe_reader):
  *  - Wavefront RLA: the reader looped for minutes reading a 791-byte file.
  * None of these is a format glTF uses; IFF, ICO, SGI and RLA are refused whole,
- * DPX (film scans are plausible targets) only where its header is impossible. */
+ * DPX, DDS and PSD (film scans, game textures and paintings are plausible
+ * targets) only where the header is impossible. */
 #ifndef DR_UNSAFE_IMAGES_H
 #define DR_UNSAFE_IMAGES_H
 
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <stdio.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -37,6 +44,11 @@ extern "C" {
  * file is and why it is refused). file_size: the whole file's length. */
 int dr_unsafe_image_check(const unsigned char *b, size_t n, bool whole, uint64_t file_size, char *why,
                           size_t why_size);
+
+/* The checks that need more of a file on disk than its first bytes (a
+ * Photoshop file's sections, found by seeking from length to length): 0
+ * or -1 and why, as dr_unsafe_image_check. Moves f's position. */
+int dr_unsafe_image_file_check(FILE *f, uint64_t file_size, char *why, size_t why_size);
 
 /* Why a file that OpenImageIO opened with the reader `format_name` must not
  * be read any further, or NULL when it may. */

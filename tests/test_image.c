@@ -991,6 +991,88 @@ static void test_sgi_rla_refused(void)
     }
 }
 
+/* DDS and Photoshop files whose headers make OpenImageIO 2.4's readers
+ * loop forever (a DDS channel with an empty bit mask) or allocate gigabytes
+ * (a PSD section longer than the file): refused from memory and from a file
+ * named .png, while well-formed ones (the corpus seeds: raw and RLE PSD,
+ * RGBA, DXT1 and DXT5 DDS) read with their pixels; on disk, a PSD section
+ * past the first kilobyte is found by seeking. */
+static void test_dds_psd_headers(void)
+{
+    static unsigned char buf[16384];
+    const struct { const char *input, *hint, *says; } bad[] = {
+        {"regress-dds-empty-mask-loops", "x.dds", "DDS whose pixel format (flags 0xfa) names a channel with an empty"},
+        {"regress-psd-3gb-color-data", "x.psd", "Photoshop file whose color mode data claims 3115956665 bytes"},
+    };
+    char path[512];
+    struct dr_image img;
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        const size_t n = read_image_corpus_input(bad[i].input, buf, sizeof buf);
+        if (n == 0)
+            continue;
+        int rc = dr_image_read_memory(buf + 1, n, bad[i].hint, &img);
+        CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), bad[i].says), "%s from memory: rc %d: %s", bad[i].input,
+              rc, dr_last_error());
+        path_in_tmp(path, sizeof path, "unsafe.png");
+        write_bytes(path, buf + 1, n);
+        rc = dr_image_read(path, &img);
+        CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), path) && strstr(dr_last_error(), bad[i].says),
+              "%s as a file named .png: rc %d: %s", bad[i].input, rc, dr_last_error());
+    }
+    const struct { const char *input, *hint; int channels; } good[] = {
+        {"small-8.psd", "x.psd", 3}, {"small-rle.psd", "x.psd", 3}, {"small-8.dds", "x.dds", 4},
+        {"small-dxt1.dds", "x.dds", 4}, {"small-dxt5.dds", "x.dds", 4},
+    };
+    for (size_t i = 0; i < sizeof good / sizeof good[0]; i++) {
+        const size_t n = read_image_corpus_input(good[i].input, buf, sizeof buf);
+        if (n == 0)
+            continue;
+        int rc = dr_image_read_memory(buf + 1, n, good[i].hint, &img);
+        CHECK(rc == DR_OK && img.width == 6 && img.height == 5 && img.channels == good[i].channels,
+              "%s: rc %d, %dx%dx%d: %s", good[i].input, rc, img.width, img.height, img.channels, dr_last_error());
+        if (rc == DR_OK && strstr(good[i].input, ".psd")) {   /* (the seeds' texels: (40 x + 7 y + 90 c) mod 256) */
+            int wrong = 0;
+            for (int y = 0; y < 5; y++)
+                for (int x = 0; x < 6; x++)
+                    for (int c = 0; c < 3; c++)
+                        wrong += fabs(img.data[(y * 6 + x) * 3 + c] - ((x * 40 + y * 7 + c * 90) & 255) / 255.0) > 1e-6;
+            CHECK(wrong == 0, "%s: %d texels differ from the file's", good[i].input, wrong);
+        }
+        if (rc == DR_OK)
+            dr_image_release(&img);
+    }
+    /* a PSD with 2000 bytes of image resources, then a layer section of
+     * 0x7fffffff bytes (refused: past the first kilobyte, by seeking) or of
+     * 0 (read) */
+    for (int impossible = 0; impossible < 2; impossible++) {
+        unsigned char f[2200];
+        size_t k = 0;
+        const unsigned char head[26] = {'8', 'B', 'P', 'S', 0, 1, 0, 0, 0, 0, 0, 0, 0, 3, 0, 0, 0, 1, 0, 0, 0, 1, 0, 8, 0, 3};
+        memcpy(f, head, sizeof head), k = sizeof head;   /* 1 x 1, 3 channels, 8 bits, RGB */
+        const unsigned char lens[] = {0, 0, 0, 0, 0, 0, 0x07, 0xdc};   /* no colour data; 2012 bytes of resources */
+        memcpy(f + k, lens, sizeof lens), k += sizeof lens;
+        const unsigned char block[12] = {'8', 'B', 'I', 'M', 0x0f, 0xa0, 0, 0, 0, 0, 0x07, 0xd0};   /* 2000 bytes */
+        memcpy(f + k, block, sizeof block), k += sizeof block;
+        memset(f + k, 'x', 2000), k += 2000;
+        const unsigned char layers[4] = {impossible ? 0x7f : 0, impossible ? 0xff : 0, impossible ? 0xff : 0,
+                                         impossible ? 0xff : 0};
+        memcpy(f + k, layers, 4), k += 4;
+        const unsigned char pixels[] = {0, 0, 200, 100, 50};   /* raw, then R, G, B */
+        memcpy(f + k, pixels, sizeof pixels), k += sizeof pixels;
+        path_in_tmp(path, sizeof path, "resources.psd");
+        write_bytes(path, f, k);
+        int rc = dr_image_read(path, &img);
+        if (impossible)
+            CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), "layer and mask information claims 2147483647"),
+                  "PSD with an impossible layer section past the first kilobyte: rc %d: %s", rc, dr_last_error());
+        else
+            CHECK(rc == DR_OK && img.width == 1 && fabs(img.data[0] - 200 / 255.0) < 1e-6,
+                  "PSD with 2000 bytes of resources: rc %d: %s", rc, dr_last_error());
+        if (rc == DR_OK)
+            dr_image_release(&img);
+    }
+}
+
 /* Open descriptors of this process (its /proc/self/fd entries). */
 static int open_descriptors(void)
 {
@@ -1247,6 +1329,7 @@ int main(void)
     test_bmp_guard();
     test_iff_refused();
     test_sgi_rla_refused();
+    test_dds_psd_headers();
     test_dpx_user_data();
     test_no_descriptor_left();
 
