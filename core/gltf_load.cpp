@@ -127,6 +127,8 @@ struct NormalXform {
     bool mirrored;  /* det < 0: the winding flips */
 };
 
+Mat4 trs_matrix(const double t[3], double q[4], const double s[3]);   /* (the node graph's, below) */
+
 NormalXform normal_xform(const Mat4 &a)
 {
     auto e = [&](int r, int c) { return a(r, c); };
@@ -242,8 +244,8 @@ const char *const kSupportedExtensions[] = {
     "KHR_texture_basisu",
     /* WebP images (read by OpenImageIO), and integer vertex attributes (AccessorView::get reads them) */
     "EXT_texture_webp", "KHR_mesh_quantization",
-    /* meshoptimizer-compressed buffer views (meshopt_decode.h) */
-    "EXT_meshopt_compression",
+    /* meshoptimizer-compressed buffer views (meshopt_decode.h); instanced nodes (add_instances) */
+    "EXT_meshopt_compression", "EXT_mesh_gpu_instancing",
     /* participating media (load_material_medium) */
     "KHR_materials_volume", "KHR_materials_transmission", "KHR_materials_ior", "KHR_materials_volume_scatter",
     "DR_medium"};
@@ -299,6 +301,7 @@ private:
     void traverse_scene();
     void visit_node(int idx, const Mat4 &parent, const std::string &ref, std::vector<char> &on_path);
     Mat4 local_matrix(int idx);
+    void add_instances(int idx, const tinygltf::Value &ext, const Mat4 &world);
     void add_primitive(int mesh_idx, int prim_idx, const Mat4 &world, const NormalXform &nx);
     struct VertexAttrs {
         const AccessorView &pos, &nor, &uv, &uv1, &col;
@@ -1485,9 +1488,16 @@ Mat4 Loader::local_matrix(int idx)
     for (size_t i = 0; i < n.translation.size(); i++) t[i] = n.translation[i];
     for (size_t i = 0; i < n.scale.size(); i++) s[i] = n.scale[i];
     for (size_t i = 0; i < n.rotation.size(); i++) q[i] = n.rotation[i];
+    return trs_matrix(t, q, s);
+}
+
+/* T * R * S of a translation, a rotation quaternion (x, y, z, w; normalised
+ * here) and a scale: a node's, or an instance's. */
+Mat4 trs_matrix(const double t[3], double q[4], const double s[3])
+{
     double ql = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
     if (ql > 0.0)
-        for (double &c : q) c /= ql;
+        for (int c = 0; c < 4; c++) q[c] /= ql;
     double x = q[0], y = q[1], z = q[2], w = q[3];
     double r[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)},
                       {2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)},
@@ -1513,9 +1523,14 @@ void Loader::visit_node(int idx, const Mat4 &parent, const std::string &ref, std
     if (n.mesh >= 0) {
         if (size_t(n.mesh) >= model_.meshes.size())
             fail(DR_ERR_FORMAT, "/nodes/%d/mesh: mesh %d does not exist", idx, n.mesh);
-        NormalXform nx = normal_xform(world);
-        for (size_t p = 0; p < model_.meshes[size_t(n.mesh)].primitives.size(); p++)
-            add_primitive(n.mesh, int(p), world, nx);
+        auto inst = n.extensions.find("EXT_mesh_gpu_instancing");
+        if (inst != n.extensions.end()) {
+            add_instances(idx, inst->second, world);
+        } else {
+            NormalXform nx = normal_xform(world);
+            for (size_t p = 0; p < model_.meshes[size_t(n.mesh)].primitives.size(); p++)
+                add_primitive(n.mesh, int(p), world, nx);
+        }
     }
     if (n.camera >= 0) {
         if (size_t(n.camera) >= model_.cameras.size())
@@ -1537,6 +1552,53 @@ void Loader::visit_node(int idx, const Mat4 &parent, const std::string &ref, std
     for (size_t c = 0; c < n.children.size(); c++)
         visit_node(n.children[c], world, strf("/nodes/%d/children/%zu", idx, c), on_path);
     on_path[size_t(idx)] = 0;
+}
+
+/* EXT_mesh_gpu_instancing: node idx's mesh once per instance, at world x
+ * (T R S)_i, from the attributes TRANSLATION (VEC3), ROTATION (VEC4, a
+ * quaternion: float or normalized integers) and SCALE (VEC3), accessors of
+ * one count; an absent one is the identity. Other attributes (_ID, ...)
+ * carry no geometry and are ignored. The mesh is copied per instance (the
+ * tracer has no instancing). */
+void Loader::add_instances(int idx, const tinygltf::Value &ext, const Mat4 &world)
+{
+    const std::string ep = strf("/nodes/%d/extensions/EXT_mesh_gpu_instancing", idx);
+    if (!ext.IsObject() || !ext.Get("attributes").IsObject())
+        fail(DR_ERR_FORMAT, "%s/attributes: expected an object of accessors", ep.c_str());
+    const tinygltf::Value &attrs = ext.Get("attributes");
+    static const char *const names[3] = {"TRANSLATION", "ROTATION", "SCALE"};
+    static const int types[3] = {TINYGLTF_TYPE_VEC3, TINYGLTF_TYPE_VEC4, TINYGLTF_TYPE_VEC3};
+    AccessorView v[3];
+    bool has[3] = {false, false, false};
+    size_t count = 0;
+    const char *first = nullptr;
+    for (int k = 0; k < 3; k++) {
+        if (!attrs.Has(names[k])) continue;
+        const std::string ap = ep + "/attributes/" + names[k];
+        if (!attrs.Get(names[k]).IsInt()) fail(DR_ERR_FORMAT, "%s: expected an accessor index", ap.c_str());
+        const int ai = attrs.Get(names[k]).GetNumberAsInt();
+        v[k] = view_accessor(ai, ap, types[k], names[k]);
+        if (k == 1 && v[k].comp_type != TINYGLTF_COMPONENT_TYPE_FLOAT && !v[k].normalized)
+            fail(DR_ERR_FORMAT, "/accessors/%d: ROTATION must be float or normalized integers", ai);
+        if (first && v[k].count != count)
+            fail(DR_ERR_FORMAT, "%s: %s has %zu elements but %s has %zu", ap.c_str(), names[k], v[k].count, first,
+                 count);
+        count = v[k].count, first = first ? first : names[k], has[k] = true;
+    }
+    if (!first) fail(DR_ERR_FORMAT, "%s/attributes: none of TRANSLATION, ROTATION and SCALE", ep.c_str());
+    const int mesh = model_.nodes[size_t(idx)].mesh;
+    for (size_t i = 0; i < count; i++) {
+        double t[3] = {0, 0, 0}, q[4] = {0, 0, 0, 1}, sc[3] = {1, 1, 1};
+        for (int c = 0; c < 3; c++) {
+            if (has[0]) t[c] = v[0].get(i, c);
+            if (has[2]) sc[c] = v[2].get(i, c);
+        }
+        for (int c = 0; has[1] && c < 4; c++) q[c] = v[1].get(i, c);
+        const Mat4 m = mat_mul(world, trs_matrix(t, q, sc));
+        const NormalXform nx = normal_xform(m);
+        for (size_t p = 0; p < model_.meshes[size_t(mesh)].primitives.size(); p++)
+            add_primitive(mesh, int(p), m, nx);
+    }
 }
 
 void Loader::traverse_scene()

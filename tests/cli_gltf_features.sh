@@ -34,6 +34,10 @@
 #      EXT_texture_webp: BoxTextured with its texture as WebP renders the same
 #      pixels as with that WebP decoded to PNG; a fitted WebP texture is written
 #      as PNG, its texture's source, the extension dropped
+#   j. EXT_mesh_gpu_instancing: Box drawn four times by one node's instance
+#      attributes renders the same pixels as four child nodes at the same
+#      TRS (and not the single box's); optimize keeps the extension and the
+#      validator accepts its output
 # Run by tests/run.sh (env: DRENDER, DR_TESTDIR); also runs alone.
 set -u
 
@@ -355,5 +359,59 @@ json_check "$tmp/webpfit/fit.gltf" 'd["textures"][0]["source"] == 1 and "extensi
 d["images"][1]["uri"] == "fit.image1.png" and "EXT_texture_webp" not in d.get("extensionsUsed", []) and
 not d.get("extensionsRequired")'
 validate_gltf "$tmp/webpfit/fit.gltf" || fail "the fitted WebP scene does not validate"
+
+# ---- j. EXT_mesh_gpu_instancing ----
+box=$samples/Box/glTF
+mkdir -p "$tmp/inst" && cp "$box"/* "$tmp/inst/"
+python3 - "$tmp/inst" <<'PY' || fail "could not write the instancing variants"
+import base64, json, math, os, struct, sys
+src = os.path.join(sys.argv[1], "Box.gltf")
+T = [(-1.2, 0, 0), (1.2, 0, 0), (0, 1.1, -0.5), (0, -1.1, 0.3)]
+a = math.sqrt(0.5)
+R = [(0, 0, 0, 1), (0, a, 0, a), (0.3, 0.1, 0.2, 0.9), (a, 0, 0, a)]
+S = [(1, 1, 1), (0.5, 0.5, 0.5), (1, 0.4, 1), (0.7, 0.7, 1.3)]
+raw = b"".join(struct.pack("<3f", *t) for t in T) + b"".join(struct.pack("<4f", *r) for r in R) + \
+      b"".join(struct.pack("<3f", *x) for x in S)
+def f32(v): return struct.unpack("<f", struct.pack("<f", v))[0]   # the values as the file holds them
+d = json.load(open(src))
+mesh_node = next(i for i, n in enumerate(d["nodes"]) if "mesh" in n)
+d["buffers"].append({"byteLength": len(raw), "uri": "data:application/octet-stream;base64," + base64.b64encode(raw).decode()})
+bv = len(d["bufferViews"])
+d["bufferViews"].append({"buffer": len(d["buffers"]) - 1, "byteLength": len(raw)})
+acc = len(d["accessors"])
+d["accessors"] += [{"bufferView": bv, "componentType": 5126, "count": 4, "type": "VEC3"},
+                   {"bufferView": bv, "byteOffset": 48, "componentType": 5126, "count": 4, "type": "VEC4"},
+                   {"bufferView": bv, "byteOffset": 112, "componentType": 5126, "count": 4, "type": "VEC3"}]
+d["nodes"][mesh_node].setdefault("extensions", {})["EXT_mesh_gpu_instancing"] = {
+    "attributes": {"TRANSLATION": acc, "ROTATION": acc + 1, "SCALE": acc + 2}}
+d["extensionsUsed"] = d.get("extensionsUsed", []) + ["EXT_mesh_gpu_instancing"]
+json.dump(d, open(os.path.join(sys.argv[1], "instanced.gltf"), "w"))
+d = json.load(open(src))
+mesh = d["nodes"][mesh_node].pop("mesh")
+kids = []
+for t, r, x in zip(T, R, S):
+    kids.append(len(d["nodes"]))
+    d["nodes"].append({"mesh": mesh, "translation": [f32(v) for v in t], "rotation": [f32(v) for v in r],
+                       "scale": [f32(v) for v in x]})
+d["nodes"][mesh_node]["children"] = d["nodes"][mesh_node].get("children", []) + kids
+json.dump(d, open(os.path.join(sys.argv[1], "explicit.gltf"), "w"))
+PY
+IR="--res 40x40 --spp 4 --sampler independent"
+for f in instanced explicit Box; do
+    run render "$tmp/inst/$f.gltf" $IR -o "inst_$f.exr"
+    expect_rc 0 "render of $f.gltf"
+    grep -q "EXT_mesh_gpu_instancing" "$tmp/err" && fail "$f.gltf: a warning about EXT_mesh_gpu_instancing"
+done
+oiiotool --diff --fail 0 --warn 0 inst_instanced.exr inst_explicit.exr >/dev/null ||
+    fail "the instanced Box renders otherwise than four explicit nodes"
+oiiotool --diff --fail 0 --warn 0 inst_instanced.exr inst_Box.exr >/dev/null &&
+    fail "the instanced Box renders as the single Box: the instances are not drawn"
+mkdir -p "$tmp/instfit"
+run optimize "$tmp/inst/instanced.gltf" --target inst_explicit.exr --param /materials/0/pbrMetallicRoughness/baseColorFactor \
+    --iters 1 --spp 1 -o "$tmp/instfit/fit.gltf" --out-dir "$tmp/instfit/progress"
+expect_rc 0 "optimize of an instanced scene"
+json_check "$tmp/instfit/fit.gltf" 'any("EXT_mesh_gpu_instancing" in n.get("extensions", {}) for n in d["nodes"]) and
+"EXT_mesh_gpu_instancing" in d["extensionsUsed"]'
+validate_gltf "$tmp/instfit/fit.gltf" || fail "the instanced output does not validate"
 
 echo "cli_gltf_features: all passed"

@@ -672,6 +672,89 @@ static void test_meshopt(void)
 /* ---- eight-bit textures: the shared NormalTangentTest's three 2k PNGs ---- */
 
 /* Its render under a sky (it has no light), 48x48, 8 spp, into rgb. */
+/* ---- EXT_mesh_gpu_instancing ---- */
+
+/* One triangle drawn three times by a node (itself moved by 0.5 in y)
+ * with TRANSLATION (float), ROTATION (normalized shorts) and SCALE (float)
+ * instance attributes: the same triangles, to the bit, as a parent node
+ * with three children at the instances' decoded TRS; and malformed
+ * attributes refused naming their JSON path. */
+static void test_instancing(void)
+{
+    unsigned char b[132];
+    size_t o = 0;
+    put_f32(b, &o, 9, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0);        /* positions: 0, 36 bytes */
+    put_f32(b, &o, 9, -2.0, 0.0, 0.0, 0.0, 0.0, -1.0, 2.5, 0.25, 0.0);     /* translations: 36 */
+    const int16_t rot[12] = {0, 0, 0, 32767, 0, 23170, 0, 23170, 12000, -5000, 30000, 2000};   /* rotations: 72 */
+    memcpy(b + o, rot, sizeof rot), o += sizeof rot;
+    put_f32(b, &o, 9, 1.0, 1.0, 1.0, 2.0, 0.5, 1.0, 0.75, 0.75, 1.5);       /* scales: 96 */
+    CHECK(o == sizeof b, "the buffer is filled (%zu of %zu bytes)", o, sizeof b);
+    const char *head =
+        "{\"asset\":{\"version\":\"2.0\"},\"extensionsUsed\":[\"EXT_mesh_gpu_instancing\"],"
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0}}]}],"
+        "\"buffers\":[{\"byteLength\":132,\"uri\":\"%s\"}],"
+        "\"bufferViews\":[{\"buffer\":0,\"byteLength\":132}],"
+        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\",\"max\":[1,1,0],"
+        "\"min\":[0,0,0]},{\"bufferView\":0,\"byteOffset\":36,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\"},"
+        "{\"bufferView\":0,\"byteOffset\":72,\"componentType\":5122,\"normalized\":true,\"count\":3,\"type\":\"VEC4\"},"
+        "{\"bufferView\":0,\"byteOffset\":96,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\"},"
+        "{\"bufferView\":0,\"byteOffset\":72,\"componentType\":5122,\"count\":3,\"type\":\"VEC4\"},"
+        "{\"bufferView\":0,\"byteOffset\":36,\"componentType\":5126,\"count\":3,\"type\":\"VEC2\"},"
+        "{\"bufferView\":0,\"byteOffset\":96,\"componentType\":5126,\"count\":2,\"type\":\"VEC3\"}],";
+    char uri[512], json[8192];
+    snprintf(uri, sizeof uri, "%s", data_uri(b, sizeof b));
+    int rc;
+    snprintf(json, sizeof json, "%s\"nodes\":[{\"mesh\":0,\"translation\":[0,0.5,0],\"extensions\":"
+             "{\"EXT_mesh_gpu_instancing\":{\"attributes\":{\"TRANSLATION\":1,\"ROTATION\":2,\"SCALE\":3,\"_ID\":1}}}}]}",
+             head);
+    struct dr_scene *inst = load_json("instanced.gltf", NULL, &rc, json, uri);
+    CHECK(rc == 0 && inst->mesh.n_triangles == 3, "instanced: rc %d, %u triangles: %s", rc, inst->mesh.n_triangles,
+          dr_last_error());
+    CHECK(!strstr(warnings, "EXT_mesh_gpu_instancing"), "no warning about the extension:\n%s", warnings);
+    /* the explicit twin: the decoded attributes as child nodes' TRS */
+    float sc[9];
+    memcpy(sc, b + 96, sizeof sc);
+    char kids[3][400];
+    for (int i = 0; i < 3; i++) {
+        float t[3];
+        memcpy(t, b + 36 + 12 * i, sizeof t);
+        double q[4];
+        for (int c = 0; c < 4; c++)
+            q[c] = fmax(rot[4 * i + c] / 32767.0, -1.0);
+        snprintf(kids[i], sizeof kids[i], "{\"mesh\":0,\"translation\":[%.17g,%.17g,%.17g],\"rotation\":[%.17g,%.17g,"
+                 "%.17g,%.17g],\"scale\":[%.17g,%.17g,%.17g]}", t[0], t[1], t[2], q[0], q[1], q[2], q[3],
+                 sc[3 * i], sc[3 * i + 1], sc[3 * i + 2]);
+    }
+    snprintf(json, sizeof json, "%s\"nodes\":[{\"translation\":[0,0.5,0],\"children\":[1,2,3]},%s,%s,%s]}", head,
+             kids[0], kids[1], kids[2]);
+    struct dr_scene *twin = load_json("explicit.gltf", NULL, &rc, json, uri);
+    CHECK(rc == 0 && twin->mesh.n_triangles == 3, "explicit: rc %d: %s", rc, dr_last_error());
+    if (inst->mesh.n_triangles == 3 && twin->mesh.n_triangles == 3)
+        CHECK(inst->mesh.n_vertices == 9 && twin->mesh.n_vertices == 9 &&
+              memcmp(inst->mesh.positions, twin->mesh.positions, sizeof(float) * 27) == 0 &&
+              memcmp(inst->mesh.indices, twin->mesh.indices, sizeof(uint32_t) * 9) == 0 &&
+              memcmp(inst->mesh.positions + 9, inst->mesh.positions, sizeof(float) * 3) != 0,
+              "the instances' triangles are the explicit nodes', and they differ from one another");
+    dr_scene_destroy(inst);
+    dr_scene_destroy(twin);
+
+    const struct { const char *attrs, *what, *n1, *n2; } bad[] = {
+        {"\"TRANSLATION\":1,\"SCALE\":6", "a count that differs", "/nodes/0/extensions/EXT_mesh_gpu_instancing/"
+         "attributes/SCALE", "TRANSLATION has 3"},
+        {"\"ROTATION\":4", "integer rotations not normalized", "/accessors/4", "ROTATION must be float or normalized"},
+        {"\"TRANSLATION\":5", "a VEC2 translation", "/accessors/5", "TRANSLATION must be VEC3"},
+        {"\"_ID\":1", "no transform attribute", "EXT_mesh_gpu_instancing/attributes", "none of TRANSLATION"},
+        {"\"TRANSLATION\":9", "a missing accessor", "attributes/TRANSLATION", "accessor 9 does not exist"},
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        snprintf(json, sizeof json, "%s\"nodes\":[{\"mesh\":0,\"extensions\":{\"EXT_mesh_gpu_instancing\":"
+                 "{\"attributes\":{%s}}}}]}", head, bad[i].attrs);
+        struct dr_scene *s = load_json("bad-instances.gltf", NULL, &rc, json, uri);
+        check_error(rc, bad[i].what, "bad-instances.gltf", bad[i].n1, bad[i].n2);
+        dr_scene_destroy(s);
+    }
+}
+
 static void render_sample(struct dr_scene *s, float *rgb)
 {
     struct dr_camera cam = dr_camera_default(s);
@@ -735,6 +818,7 @@ int main(void)
     test_ktx2();
     test_draco();
     test_meshopt();
+    test_instancing();
     test_eight_bit();
     char cmd[400];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
