@@ -1587,6 +1587,17 @@ void Loader::add_instances(int idx, const tinygltf::Value &ext, const Mat4 &worl
     }
     if (!first) fail(DR_ERR_FORMAT, "%s/attributes: none of TRANSLATION, ROTATION and SCALE", ep.c_str());
     const int mesh = model_.nodes[size_t(idx)].mesh;
+    /* the copies' vertices, before any is made: past 2^32 the scene cannot
+     * index them (add_primitive would find it only after gigabytes) */
+    uint64_t per_copy = 0;
+    for (const tinygltf::Primitive &p : model_.meshes[size_t(mesh)].primitives) {
+        auto pos = p.attributes.find("POSITION");
+        if (pos != p.attributes.end() && pos->second >= 0 && size_t(pos->second) < model_.accessors.size())
+            per_copy += model_.accessors[size_t(pos->second)].count;
+    }
+    if (per_copy > 0 && (uint64_t)count > (UINT32_MAX - positions_.size() / 3) / per_copy)
+        fail(DR_ERR_FORMAT, "%s: %zu instances of mesh %d (%llu vertices each) make more than 2^32 vertices "
+             "(drender copies the mesh per instance)", ep.c_str(), count, mesh, (unsigned long long)per_copy);
     for (size_t i = 0; i < count; i++) {
         double t[3] = {0, 0, 0}, q[4] = {0, 0, 0, 1}, sc[3] = {1, 1, 1};
         for (int c = 0; c < 3; c++) {

@@ -700,7 +700,8 @@ static void test_instancing(void)
         "{\"bufferView\":0,\"byteOffset\":96,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\"},"
         "{\"bufferView\":0,\"byteOffset\":72,\"componentType\":5122,\"count\":3,\"type\":\"VEC4\"},"
         "{\"bufferView\":0,\"byteOffset\":36,\"componentType\":5126,\"count\":3,\"type\":\"VEC2\"},"
-        "{\"bufferView\":0,\"byteOffset\":96,\"componentType\":5126,\"count\":2,\"type\":\"VEC3\"}],";
+        "{\"bufferView\":0,\"byteOffset\":96,\"componentType\":5126,\"count\":2,\"type\":\"VEC3\"},"
+        "{\"componentType\":5126,\"count\":2147483648,\"type\":\"VEC3\"}],";   /* (7: zeros, no bufferView) */
     char uri[512], json[8192];
     snprintf(uri, sizeof uri, "%s", data_uri(b, sizeof b));
     int rc;
@@ -745,6 +746,8 @@ static void test_instancing(void)
         {"\"TRANSLATION\":5", "a VEC2 translation", "/accessors/5", "TRANSLATION must be VEC3"},
         {"\"_ID\":1", "no transform attribute", "EXT_mesh_gpu_instancing/attributes", "none of TRANSLATION"},
         {"\"TRANSLATION\":9", "a missing accessor", "attributes/TRANSLATION", "accessor 9 does not exist"},
+        {"\"TRANSLATION\":7", "2^31 instances", "/nodes/0/extensions/EXT_mesh_gpu_instancing",
+         "2147483648 instances of mesh 0 (3 vertices each) make more than 2^32 vertices"},
     };
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
         snprintf(json, sizeof json, "%s\"nodes\":[{\"mesh\":0,\"extensions\":{\"EXT_mesh_gpu_instancing\":"
