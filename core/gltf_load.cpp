@@ -238,6 +238,7 @@ struct AccessorView {
 
 const char *const kSupportedExtensions[] = {
     "KHR_materials_emissive_strength", "KHR_materials_specular", "KHR_materials_clearcoat", "KHR_lights_punctual",
+    "KHR_materials_unlit",   /* (load_unlit) */
     "DR_environment", "DR_units", "KHR_texture_transform", "KHR_draco_mesh_compression",
     /* KTX2 images: read when they hold 8-bit texels (core/ktx2.h); the others are refused, or skipped
      * under --ignore-unsupported (check_ktx2): handled, not ignored */
@@ -324,6 +325,7 @@ private:
     void load_material_medium(const tinygltf::Material &g, const std::string &mp, size_t index, dr_material &m);
     void load_thin_glass(const tinygltf::Material &g, const std::string &mp, dr_material &m);
     void load_clearcoat(const tinygltf::Material &g, const std::string &mp, dr_material &m);
+    bool load_unlit(const tinygltf::Material &g, const std::string &mp, dr_material &m);
     double material_ior(const tinygltf::Material &g, const std::string &mp, const char *what);
     void read_medium_ext(const tinygltf::Value &v, const std::string &ep, dr_medium &med);
     void read_medium_grid(const tinygltf::Value &v, const std::string &ep, dr_medium &med);
@@ -1010,8 +1012,10 @@ void Loader::load_materials()
                     warn_once(std::string("spec:") + key, "%s/%s: specular textures are not supported; ignored",
                               ep.c_str(), key);
         }
-        load_clearcoat(g, mp, m);        /* (before load_material_medium: thin glass drops the coat) */
-        load_material_medium(g, mp, i, m);
+        if (!load_unlit(g, mp, m)) {
+            load_clearcoat(g, mp, m);        /* (before load_material_medium: thin glass drops the coat) */
+            load_material_medium(g, mp, i, m);
+        }
         for (const auto &kv : g.extensions)
             if (!is_supported_extension(kv.first))
                 warn_once("ext:" + kv.first, "%s/extensions/%s: extension is not supported; ignored",
@@ -1361,6 +1365,9 @@ void Loader::add_primitive(int mesh_idx, int prim_idx, const Mat4 &world, const 
         material = p.material;
     }
     uint8_t flags = uint8_t((has_nor ? DR_TRI_HAS_NORMALS : 0) | (has_uv ? DR_TRI_HAS_UVS : 0));
+    if (has_col && size_t(material) < materials_.size() && materials_[size_t(material)].unlit)
+        warn_once("unlit:COLOR_0", "%s/attributes/COLOR_0: vertex colours do not tint an unlit material's "
+                  "colour (KHR_materials_unlit); ignored there", pp.c_str());
 
     append_vertices(VertexAttrs{pos, nor, uv, uv1, col, has_nor, has_col}, base, world, nx);
     add_tangents(p, pp, nv, world, nx.mirrored, material);
@@ -1940,6 +1947,35 @@ void Loader::load_thin_glass(const tinygltf::Material &g, const std::string &mp,
  * coat is shaded with the base's normal, normal map included, where glTF
  * gives it the geometric normal unless clearcoatNormalTexture says otherwise
  * (warned where a normal map makes the two differ). */
+/* KHR_materials_unlit (scene.h's dr_material.unlit): the base colour
+ * becomes the emission, the BSDF black. The extensions that shade or fill
+ * the surface (clear coat, specular, transmission, volume) are then
+ * ignored, as glTF says, with a warning. False: the material is not unlit. */
+bool Loader::load_unlit(const tinygltf::Material &g, const std::string &mp, dr_material &m)
+{
+    auto it = g.extensions.find("KHR_materials_unlit");
+    if (it == g.extensions.end()) return false;
+    if (!it->second.IsObject())
+        fail(DR_ERR_FORMAT, "%s/extensions/KHR_materials_unlit: expected an object", mp.c_str());
+    for (const char *other : {"KHR_materials_clearcoat", "KHR_materials_specular", "KHR_materials_transmission",
+                              "KHR_materials_volume", "KHR_materials_emissive_strength"})
+        if (g.extensions.count(other))
+            warn_once(std::string("unlit:") + other, "%s/extensions/%s: ignored on an unlit material "
+                      "(KHR_materials_unlit)", mp.c_str(), other);
+    m.unlit = true;
+    m.emissive_factor = m.base_color;
+    m.emissive_strength = 1.0;
+    m.emissive_tex = m.base_color_tex;
+    m.base_color = dr_v3s(0.0);
+    m.metallic = m.specular = 0.0;
+    m.roughness = 1.0;
+    m.metallic_roughness_tex.texture = -1;
+    m.normal_tex.texture = -1;
+    if (m.alpha_mode == DR_ALPHA_OPAQUE)   /* (kept where its alpha cuts the surface out: coverage.h) */
+        m.base_color_tex.texture = -1;
+    return true;
+}
+
 void Loader::load_clearcoat(const tinygltf::Material &g, const std::string &mp, dr_material &m)
 {
     auto it = g.extensions.find("KHR_materials_clearcoat");

@@ -230,10 +230,12 @@ static bool thin_glass_unused(const struct dr_scene *s, int m, enum dr_param_kin
     return s->materials[m].thin_ior > 0.0 && kind != DR_PARAM_ROUGHNESS;
 }
 
-/* The coat's factors are parameters of coated materials only (scene.h). */
+/* The coat's factors are parameters of coated materials only (scene.h);
+ * an unlit material's factors are none (its colour is the loader's copy). */
 static bool uncoated_unused(const struct dr_scene *s, int m, enum dr_param_kind kind)
 {
-    return (kind == DR_PARAM_CLEARCOAT || kind == DR_PARAM_CLEARCOAT_ROUGHNESS) && !s->materials[m].coated;
+    return s->materials[m].unlit ||
+           ((kind == DR_PARAM_CLEARCOAT || kind == DR_PARAM_CLEARCOAT_ROUGHNESS) && !s->materials[m].coated);
 }
 
 int dr_params_list(const struct dr_scene *s, struct dr_param **out, int *count)
@@ -450,6 +452,12 @@ int dr_param_resolve(const struct dr_scene *s, const char *ptr, struct dr_param 
         bool thin_field = false;   /* a field of m that thin glass does not use */
         for (int k = DR_PARAM_BASE_COLOR; k <= DR_PARAM_LAST_MATERIAL; k++)
             thin_field |= thin_glass_unused(s, m, (enum dr_param_kind)k) && strcmp(field, mat_fields[k]) == 0;
+        if (want < 0 && s->materials[m].unlit) {
+            free(list);
+            return fail_with_suggestions(s, ptr, "the material is unlit (KHR_materials_unlit): its base colour is "
+                                                 "shown as it is, and its factors are not parameters (the texels of "
+                                                 "its baseColorTexture are: /images/N)");
+        }
         if (want < 0 && thin_field) {
             free(list);
             return fail_with_suggestions(s, ptr, "the material is thin-walled glass (KHR_materials_transmission), "

@@ -63,6 +63,13 @@ struct dr_material {
     bool coated;
     double coat, coat_roughness;
     struct dr_texref coat_tex, coat_roughness_tex;
+    /* KHR_materials_unlit: the base colour (factor x texture) is what the
+     * surface shows, whatever lights it. Loaded as an emitter of that colour
+     * (emissive_factor, emissive_tex; strength 1) that reflects nothing (a
+     * black Lambertian BSDF): seen directly it is its colour, and it lights
+     * what faces it, as Blender's importer renders it. Its factors are no
+     * parameters; the texels of its base colour texture are. */
+    bool unlit;
 };
 
 /* m's clear coat texture (which 0) or coat roughness texture (1), or NULL:

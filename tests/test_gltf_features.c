@@ -767,6 +767,90 @@ static void render_sample(struct dr_scene *s, float *rgb)
     CHECK(dr_render(s, &cam, &o, rgb, &st) == 0, "render: %s", dr_last_error());
 }
 
+/* ---- KHR_materials_unlit ---- */
+
+/* An unlit wall (its base colour shown as it is) behind a white floor, no
+ * light in the file: the pixels that see the wall are its colour exactly,
+ * the floor is lit by it alone; no extension warning; the wall's factors are
+ * no parameters (refused saying why); COLOR_0 on it is warned about. */
+static void test_unlit(void)
+{
+    unsigned char b[96];
+    size_t o = 0;
+    put_f32(b, &o, 12, -1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 1.0, 0.0, -1.0, 1.0, 0.0);   /* wall, facing +z */
+    put_f32(b, &o, 12, -1.0, 0.0, 0.0, -1.0, 0.0, 2.0, 1.0, 0.0, 2.0, 1.0, 0.0, 0.0);   /* floor, facing +y */
+    const char *fmt =
+        "{\"asset\":{\"version\":\"2.0\"},\"extensionsUsed\":[\"KHR_materials_unlit\"],"
+        "\"materials\":[{\"pbrMetallicRoughness\":{\"baseColorFactor\":[0.2,0.5,0.8,1]},"
+        "\"extensions\":{\"KHR_materials_unlit\":{}}},{\"pbrMetallicRoughness\":{\"baseColorFactor\":[1,1,1,1],"
+        "\"metallicFactor\":0}}],"
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0%s},\"indices\":2,\"material\":0}]},"
+        "{\"primitives\":[{\"attributes\":{\"POSITION\":1},\"indices\":2,\"material\":1}]}],"
+        "\"nodes\":[{\"mesh\":0},{\"mesh\":1}],\"scenes\":[{\"nodes\":[0,1]}],"
+        "\"cameras\":[{\"type\":\"perspective\",\"perspective\":{\"yfov\":0.9,\"znear\":0.01}}],"
+        "\"buffers\":[{\"byteLength\":108,\"uri\":\"%s\"}],"
+        "\"bufferViews\":[{\"buffer\":0,\"byteLength\":108}],"
+        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":4,\"type\":\"VEC3\",\"max\":[1,1,0],"
+        "\"min\":[-1,0,0]},{\"bufferView\":0,\"byteOffset\":48,\"componentType\":5126,\"count\":4,\"type\":\"VEC3\","
+        "\"max\":[1,0,2],\"min\":[-1,0,0]},{\"bufferView\":0,\"byteOffset\":96,\"componentType\":5123,\"count\":6,"
+        "\"type\":\"SCALAR\"},{\"bufferView\":0,\"componentType\":5126,\"count\":4,\"type\":\"VEC3\"}]}";
+    unsigned char all[108];
+    memcpy(all, b, sizeof b);
+    const uint16_t idx[6] = {0, 1, 2, 0, 2, 3};
+    memcpy(all + 96, idx, sizeof idx);
+    char uri[512];
+    snprintf(uri, sizeof uri, "%s", data_uri(all, sizeof all));
+    int rc;
+    struct dr_scene *s = load_json("unlit.gltf", NULL, &rc, fmt, "", uri);
+    CHECK(rc == 0, "unlit: %s", dr_last_error());
+    if (rc != 0) {
+        dr_scene_destroy(s);
+        return;
+    }
+    CHECK(!strstr(warnings, "KHR_materials_unlit"), "no warning about the extension:\n%s", warnings);
+    dr_scene_destroy(s);
+    s = dr_scene_load(tmp_path("unlit.gltf"));   /* (whole: lights and the tracer's geometry, for dr_render) */
+    CHECK(s != NULL, "unlit: %s", dr_last_error());
+    if (!s)
+        return;
+    CHECK(s->materials[0].unlit && !s->materials[1].unlit, "the wall's material is unlit, the floor's not");
+    /* a camera on the floor's far side looking at the wall, the floor below */
+    struct dr_camera cam = dr_camera_default(s);
+    cam.origin = dr_v3(0.0, 0.6, 2.6);
+    cam.forward = dr_normalize(dr_sub(dr_v3(0.0, 0.35, 0.0), cam.origin));
+    cam.right = dr_normalize(dr_cross(cam.forward, dr_v3(0.0, 1.0, 0.0)));
+    cam.up = dr_cross(cam.right, cam.forward);
+    cam.yfov = 0.9, cam.orthographic = false;
+    struct dr_render_opts ro = {.width = 32, .height = 32, .spp = 8, .max_depth = 4, .rr_depth = DR_RR_DEPTH_DEFAULT,
+                                .seed = 5, .threads = 2};
+    static float rgb[3 * 32 * 32];
+    struct dr_render_stats st;
+    CHECK(dr_render(s, &cam, &ro, rgb, &st) == 0, "render: %s", dr_last_error());
+    int wall = 0, lit = 0, other = 0;
+    for (int i = 0; i < 32 * 32; i++) {
+        const float *p = rgb + 3 * i;
+        if (fabsf(p[0] - 0.2f) < 1e-6f && fabsf(p[1] - 0.5f) < 1e-6f && fabsf(p[2] - 0.8f) < 1e-6f)
+            wall++;   /* (whole pixels on the wall: its colour, nothing reflected) */
+        else if (p[0] > 0.0f && p[0] < p[2])
+            lit++;    /* the white floor in the wall's blue light */
+        else
+            other++;
+    }
+    printf("  unlit wall: %d pixels exactly its colour, %d floor pixels lit by it, %d others\n", wall, lit, other);
+    CHECK(wall > 100 && lit > 100, "the unlit wall shows its colour (%d pixels) and lights the floor (%d)", wall, lit);
+    struct dr_param p;
+    CHECK(dr_param_resolve(s, "/materials/0/pbrMetallicRoughness/baseColorFactor", &p) != 0 &&
+              strstr(dr_last_error(), "unlit (KHR_materials_unlit)"),
+          "an unlit base colour is refused saying why: %s", dr_last_error());
+    CHECK(dr_param_resolve(s, "/materials/1/pbrMetallicRoughness/baseColorFactor", &p) == 0,
+          "the floor's base colour is a parameter: %s", dr_last_error());
+    dr_scene_destroy(s);
+    s = load_json("unlit_colours.gltf", NULL, &rc, fmt, ",\"COLOR_0\":3", uri);
+    CHECK(rc == 0 && strstr(warnings, "vertex colours do not tint an unlit material"),
+          "COLOR_0 on an unlit material is warned about: rc %d, warnings:\n%s", rc, warnings);
+    dr_scene_destroy(s);
+}
+
 /* Textures from 8-bit files are kept in eight bits once decoded (image.h:
  * the same values from a table); a render of them is bit for bit the render
  * of the same scene with its textures back in float. */
@@ -822,6 +906,7 @@ int main(void)
     test_draco();
     test_meshopt();
     test_instancing();
+    test_unlit();
     test_eight_bit();
     char cmd[400];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
