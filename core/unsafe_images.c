@@ -56,6 +56,27 @@ static bool dds_empty_mask(const unsigned char *b, size_t n, char *why, size_t w
     return true;
 }
 
+/* A DDS that says it has more mipmap levels (flags' 0x20000 and caps'
+ * 0x400000, count at byte 28) than halving its largest side down to 1
+ * gives: the reader walks the levels one by one (a 140-byte file claiming
+ * 1886257152 levels kept it busy for minutes). */
+static bool dds_too_many_levels(const unsigned char *b, size_t n, char *why, size_t why_size)
+{
+    if (n < 4 + 124 || memcmp(b, "DDS ", 4) != 0)
+        return false;
+    const uint32_t flags = le32(b + 8), levels = le32(b + 28), caps = le32(b + 108);
+    if (!(flags & 0x20000) || !(caps & 0x400000))
+        return false;
+    uint32_t side = le32(b + 12) | le32(b + 16) | le32(b + 24), most = 1;   /* (height, width, depth) */
+    while (side >>= 1)
+        most++;   /* 1 + floor(log2 of the largest side) */
+    if (levels <= most)
+        return false;
+    snprintf(why, why_size, "DDS that claims %u mipmap levels, more than its size allows (%u) (OpenImageIO 2.4's "
+             "DDS reader walks them all)", (unsigned)levels, (unsigned)most);
+    return true;
+}
+
 static uint32_t be32(const unsigned char *p)
 {
     return (uint32_t)p[0] << 24 | (uint32_t)p[1] << 16 | (uint32_t)p[2] << 8 | p[3];
@@ -144,7 +165,8 @@ static bool dpx_impossible(const unsigned char *b, size_t n, uint64_t file_size,
 int dr_unsafe_image_check(const unsigned char *b, size_t n, bool whole, uint64_t file_size, char *why,
                           size_t why_size)
 {
-    if (dpx_impossible(b, n, file_size, why, why_size) || dds_empty_mask(b, n, why, why_size))
+    if (dpx_impossible(b, n, file_size, why, why_size) || dds_empty_mask(b, n, why, why_size) ||
+        dds_too_many_levels(b, n, why, why_size))
         return -1;
     struct bytes_at m = {b, n};
     if (psd_impossible(from_bytes, &m, file_size, why, why_size))

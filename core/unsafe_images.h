@@ -17,7 +17,8 @@
  *    pixels than it could hold at a bit each (the reader read a 3 KB file
  *    claiming 1x50348100 pixels past its end for minutes);
  *  - a DDS whose uncompressed pixel format names a channel with an empty bit
- *    mask (the reader looped forever on a 192-byte file);
+ *    mask (the reader looped forever on a 192-byte file), or that claims
+ *    more mipmap levels than its size allows (minutes for a 140-byte file);
  *  - a Photoshop file (PSD, PSB) whose sections claim more bytes than the
  *    file holds (the reader allocated 3 GB for a 101-byte file; a file on
  *    disk is checked section by section, dr_unsafe_image_file_check).

@@ -1003,6 +1003,8 @@ static void test_dds_psd_headers(void)
     const struct { const char *input, *hint, *says; } bad[] = {
         {"regress-dds-empty-mask-loops", "x.dds", "DDS whose pixel format (flags 0xfa) names a channel with an empty"},
         {"regress-psd-3gb-color-data", "x.psd", "Photoshop file whose color mode data claims 3115956665 bytes"},
+        {"regress-dds-mipmap-levels-loop", "x.dds", "DDS that claims 1886257152 mipmap levels, more than its size "
+         "allows (12)"},
     };
     char path[512];
     struct dr_image img;
@@ -1038,6 +1040,26 @@ static void test_dds_psd_headers(void)
                         wrong += fabs(img.data[(y * 6 + x) * 3 + c] - ((x * 40 + y * 7 + c * 90) & 255) / 255.0) > 1e-6;
             CHECK(wrong == 0, "%s: %d texels differ from the file's", good[i].input, wrong);
         }
+        if (rc == DR_OK)
+            dr_image_release(&img);
+    }
+    /* the RGBA seed as a mipmapped DDS: 3 levels (6x5, 3x2, 1x1) read; a
+     * 4th is refused */
+    const size_t dn = read_image_corpus_input("small-8.dds", buf, sizeof buf);
+    for (uint32_t levels = 3; dn > 0 && levels <= 4; levels++) {
+        unsigned char *d = buf + 1;
+        d[10] |= 0x02;                               /* flags |= 0x20000: mipmap count */
+        memcpy(d + 28, &levels, 4);                  /* (little-endian, as the test machines) */
+        d[110] |= 0x40, d[109] |= 0x10, d[108] |= 0x08;   /* caps |= 0x401008: mipmap, texture, complex */
+        memset(d + dn, 0, 3 * 2 * 4 + 4);            /* the smaller levels' texels */
+        int rc = dr_image_read_memory(d, dn + 28, "x.dds", &img);
+        if (levels == 3)
+            CHECK(rc == DR_OK && img.width == 6 && img.height == 5, "a DDS of 3 mipmap levels: rc %d: %s", rc,
+                  dr_last_error());
+        else
+            CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), "claims 4 mipmap levels, more than its size allows "
+                                                                 "(3)"),
+                  "a DDS of 4 mipmap levels at 6x5: rc %d: %s", rc, dr_last_error());
         if (rc == DR_OK)
             dr_image_release(&img);
     }
