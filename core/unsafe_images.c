@@ -16,6 +16,12 @@ static bool sgi(const unsigned char *b, size_t n)
     return n >= 2 && b[0] == 0x01 && b[1] == 0xDA;   /* (big-endian 474, the only byte order SGI has) */
 }
 
+/* Softimage PIC: magic 0x5380F634, big-endian. */
+static bool softimage(const unsigned char *b, size_t n)
+{
+    return n >= 4 && b[0] == 0x53 && b[1] == 0x80 && b[2] == 0xF6 && b[3] == 0x34;
+}
+
 /* "00 00 01 00" and at least one image: an ICO directory. (A TGA cannot
  * start so: image type 1 needs a colour map, byte 1. CUR, type 2, is left
  * alone: "00 00 02 00" starts most TGA files; dr_unsafe_reader catches an
@@ -182,6 +188,11 @@ int dr_unsafe_image_check(const unsigned char *b, size_t n, bool whole, uint64_t
                  "PNG");
         return -1;
     }
+    if (softimage(b, n)) {
+        snprintf(why, why_size, "Softimage PIC image (OpenImageIO 2.4's Softimage reader crashes on malformed files, "
+                 "so drender reads none); convert it to PNG or EXR");
+        return -1;
+    }
     if (sgi(b, n)) {
         snprintf(why, why_size, "SGI image (OpenImageIO 2.4's SGI reader takes gigabytes and half a minute to open "
                  "a malformed file of a few bytes, so drender reads none); convert it to PNG or EXR");
@@ -195,6 +206,9 @@ const char *dr_unsafe_reader(const char *format_name)
     if (format_name && strcmp(format_name, "rla") == 0)
         return "Wavefront RLA image (OpenImageIO 2.4's RLA reader can loop for minutes on a malformed file, so "
                "drender reads none); convert it to PNG or EXR";
+    if (format_name && strcmp(format_name, "softimage") == 0)   /* (softimage() above refuses them by magic) */
+        return "Softimage PIC image (OpenImageIO 2.4's Softimage reader crashes on malformed files, so drender "
+               "reads none); convert it to PNG or EXR";
     if (format_name && strcmp(format_name, "ico") == 0)   /* (ico() above refuses most before they open) */
         return "ICO icon (OpenImageIO 2.4's ICO reader writes past its pixel buffer when an icon's bitmap header "
                "disagrees with its directory entry, so drender reads none); convert it to PNG";

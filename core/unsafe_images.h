@@ -12,6 +12,10 @@
  *    when a reader opened a file as ICO (dr_unsafe_reader);
  *  - an SGI image (magic 0x01DA): opening a 155-byte file that claims
  *    53374x3414 RLE pixels took the reader 28-40 s and 5.7 GB; whole;
+ *  - a Softimage PIC (magic 0x5380F634): the reader dereferenced a null
+ *    FILE reading the scanlines of malformed files (12 crashing inputs
+ *    in 3.5 min, a segmentation fault in drender and in oiiotool); whole,
+ *    and also when the reader opened a file as Softimage;
  *  - a DPX whose header gives more user data than the file holds (the
  *    reader allocates it, 4.3 GB for a 2.5 KB file, then aborts), or more
  *    pixels than it could hold at a bit each (the reader read a 3 KB file
@@ -25,7 +29,7 @@
  * And a format that has no magic bytes, told only by the reader that opened
  * the file (dr_unsafe_reader):
  *  - Wavefront RLA: the reader looped for minutes reading a 791-byte file.
- * None of these is a format glTF uses; IFF, ICO, SGI and RLA are refused whole,
+ * None of these is a format glTF uses; IFF, ICO, SGI, PIC and RLA are refused whole,
  * DPX, DDS and PSD (film scans, game textures and paintings are plausible
  * targets) only where the header is impossible. */
 #ifndef DR_UNSAFE_IMAGES_H

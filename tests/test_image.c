@@ -958,8 +958,9 @@ static void test_dpx_user_data(void)
  * 2.4's SGI reader taking 5.7 GB and half a minute to open a 155-byte file
  * (regress-sgi-5gb-open), its RLA reader looping for minutes on a 791-byte
  * one (regress-rla-loops), and its ICO reader writing past its pixels
- * (regress-ico-heap-overflow). The three formats are refused whole: SGI and
- * ICO by their magic bytes before any reader sees them, RLA (no magic bytes)
+ * (regress-ico-heap-overflow), and its Softimage reader dereferencing a
+ * null FILE (regress-pic-null-file-crash). The four formats are refused
+ * whole: SGI, ICO and PIC by their magic bytes before any reader sees them, RLA (no magic bytes)
  * once a reader has opened it as RLA, before any pixel is read. Each case must end
  * within a second or so, which a hang would not. */
 static void test_sgi_rla_refused(void)
@@ -972,6 +973,8 @@ static void test_sgi_rla_refused(void)
         {"small-8.rla", "x.rla", "Wavefront RLA"},
         {"regress-ico-heap-overflow", "x.ico", "ICO icon"},
         {"small-8.ico", "x.ico", "ICO icon"},
+        {"regress-pic-null-file-crash", "x.pic", "Softimage PIC image"},
+        {"small-8.pic", "x.pic", "Softimage PIC image"},
     };
     for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
         const size_t n = read_image_corpus_input(cases[i].input, buf, sizeof buf);
