@@ -478,15 +478,16 @@ static double texture_median_roughness(const struct dr_scene *scene, int m)
     return med;
 }
 
-/* A differentiated roughness below c->threshold: the factor's value (times
+/* A differentiated roughness below threshold: the factor's value (times
  * its material's metallic-roughness texture's median, material_roughness),
  * or a differentiated metallic-roughness texture's median. */
-static void auto_candidate(struct grad_auto_choice *c, const struct dr_param *q, double r, bool texture)
+static void auto_candidate(struct grad_auto_choice *c, const struct dr_param *q, double r, bool texture,
+                           double threshold)
 {
-    if (!(r >= 0.0 && r < c->threshold))
+    if (!(r >= 0.0 && r < threshold))
         return;
     if (!c->lowest || r < c->roughness)
-        c->lowest = q, c->roughness = r, c->texture = texture;
+        c->lowest = q, c->roughness = r, c->texture = texture, c->lowest_threshold = threshold;
     c->narrow++;
 }
 
@@ -511,17 +512,18 @@ struct grad_auto_choice grad_auto_sampling(const struct dr_estimator_ops *e, con
         const struct dr_param *q = &set->params[i];
         if (q->kind == DR_PARAM_CLEARCOAT_ROUGHNESS && q->target >= 0 && q->target < scene->n_materials) {
             any = true;   /* (its factor: a clearcoatRoughnessTexture's texels are weighed by no median) */
-            auto_candidate(&c, q, scene->materials[q->target].coat_roughness, false);
+            auto_candidate(&c, q, scene->materials[q->target].coat_roughness, false,
+                           c.threshold == GRAD_AUTO_ROUGHNESS ? GRAD_AUTO_COAT_ROUGHNESS : c.threshold);
         } else if (q->kind == DR_PARAM_ROUGHNESS && q->target >= 0 && q->target < scene->n_materials) {
             any = true;
-            auto_candidate(&c, q, material_roughness(scene, q->target), false);
+            auto_candidate(&c, q, material_roughness(scene, q->target), false, c.threshold);
         } else if (q->kind == DR_PARAM_IMAGE) {   /* the metallic-roughness textures it is */
             for (int m = 0; m < scene->n_materials; m++) {
                 const int t = scene->materials[m].metallic_roughness_tex.texture;
                 if (t < 0 || scene->textures[t].image != q->target)
                     continue;
                 any = true;
-                auto_candidate(&c, q, texture_median_roughness(scene, m), true);
+                auto_candidate(&c, q, texture_median_roughness(scene, m), true, c.threshold);
             }
         }
     }
@@ -553,8 +555,10 @@ void grad_auto_describe(const struct dr_scene *scene, const struct grad_auto_cho
                  scene->materials[m].roughness, c->roughness);
     else
         snprintf(is, sizeof is, "%s %g", c->texture ? "has median" : "is", c->roughness);
-    snprintf(buf, size, "%s%s %s%s, below %g%s", c->texture ? "the roughness in " : "", name, is, more, c->threshold,
-             c->threshold == GRAD_AUTO_ROUGHNESS_WITH_COLOUR ? " (with a base colour or metallic differentiated)" : "");
+    snprintf(buf, size, "%s%s %s%s, below %g%s", c->texture ? "the roughness in " : "", name, is, more,
+             c->lowest_threshold,
+             c->lowest_threshold == GRAD_AUTO_ROUGHNESS_WITH_COLOUR ? " (with a base colour or metallic differentiated)"
+                                                                    : "");
 }
 
 void grad_auto_note(const struct grad_common *g, const struct dr_scene *scene, const struct grad_auto_choice *c,
