@@ -962,7 +962,8 @@ void d_bsdf_eval_rough_ndf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_v
         return;
     }
     const double rough = b->roughness, m = b->metallic;
-    if (!(parts & DR_BSDF_D_ROUGHNESS) || !(wo.z > COS_EPS) || !(wi.z > COS_EPS) || no_specular_lobe(b) || !(rough * rough > DR_BSDF_MIN_ALPHA))
+    if (!(parts & DR_BSDF_D_ROUGHNESS) || !(wo.z > COS_EPS) || !(wi.z > COS_EPS) || no_specular_lobe(b) ||
+        !(rough * rough > DR_BSDF_MIN_ALPHA))
         return;
     double a = bsdf_alpha(b), a2 = a * a;
     const struct ggx_half g_h = ggx_half(a2, wo, wi);
