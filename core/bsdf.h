@@ -40,6 +40,13 @@ struct dr_bsdf {
      * factors are unused and nothing of the coat is computed) */
     double coat, coat_roughness;   /* clearcoatFactor, clearcoatRoughnessFactor */
     bool coated;
+    /* KHR_materials_anisotropy: the strength s in [0, 1] (anisotropyStrength
+     * x the texture's B). The base's GGX lobe stretches along the local +x
+     * axis (the caller's frame puts the anisotropy direction there):
+     * alpha_x = alpha + (1 - alpha) s^2, alpha_y = alpha (alpha = roughness^2
+     * above its floor). 0: isotropic, bit for bit the model without it. The
+     * coat's lobe stays isotropic. */
+    double anisotropy;
 };
 
 /* The lobes dr_bsdf_sample chooses between (the coat's only when coated). */
@@ -117,6 +124,7 @@ struct dr_d_bsdf {
     dr_vec3 base_color;
     double metallic, roughness;
     double coat, coat_roughness;
+    double anisotropy;
 };
 
 /* Reverse-mode adjoints (redner style): each takes the primal's inputs and
