@@ -239,6 +239,7 @@ struct AccessorView {
 const char *const kSupportedExtensions[] = {
     "KHR_materials_emissive_strength", "KHR_materials_specular", "KHR_materials_clearcoat", "KHR_lights_punctual",
     "KHR_materials_unlit",   /* (load_unlit) */
+    "KHR_materials_anisotropy",   /* (load_anisotropy) */
     "DR_environment", "DR_units", "KHR_texture_transform", "KHR_draco_mesh_compression",
     /* KTX2 images: read when they hold 8-bit texels (core/ktx2.h); the others are refused, or skipped
      * under --ignore-unsupported (check_ktx2): handled, not ignored */
@@ -325,6 +326,7 @@ private:
     void load_material_medium(const tinygltf::Material &g, const std::string &mp, size_t index, dr_material &m);
     void load_thin_glass(const tinygltf::Material &g, const std::string &mp, dr_material &m);
     void load_clearcoat(const tinygltf::Material &g, const std::string &mp, dr_material &m);
+    void load_anisotropy(const tinygltf::Material &g, const std::string &mp, dr_material &m);
     bool load_unlit(const tinygltf::Material &g, const std::string &mp, dr_material &m);
     double material_ior(const tinygltf::Material &g, const std::string &mp, const char *what);
     void read_medium_ext(const tinygltf::Value &v, const std::string &ep, dr_medium &med);
@@ -930,6 +932,7 @@ dr_material default_material(const char *name)
     m.double_sided = false;
     m.base_color_tex = m.metallic_roughness_tex = m.emissive_tex = dr_texref{-1, 0, false, {1, 0, 0, 0, 1, 0}};
     m.normal_tex = m.coat_tex = m.coat_roughness_tex = dr_texref{-1, 0, false, {1, 0, 0, 0, 1, 0}};
+    m.anisotropy_tex = dr_texref{-1, 0, false, {1, 0, 0, 0, 1, 0}};
     m.normal_scale = 1.0;
     m.alpha_mode = DR_ALPHA_OPAQUE;
     m.alpha = 1.0;
@@ -1015,6 +1018,7 @@ void Loader::load_materials()
         if (!load_unlit(g, mp, m)) {
             load_clearcoat(g, mp, m);        /* (before load_material_medium: thin glass drops the coat) */
             load_material_medium(g, mp, i, m);
+            load_anisotropy(g, mp, m);
         }
         for (const auto &kv : g.extensions)
             if (!is_supported_extension(kv.first))
@@ -1380,18 +1384,23 @@ void Loader::add_primitive(int mesh_idx, int prim_idx, const Mat4 &world, const 
     }
 }
 
-/* TANGENT (xyz direction, w bitangent sign) of a primitive whose material has
- * a normal map. tangents_ stays empty until the first such primitive and is
+/* TANGENT (xyz direction, w bitangent sign) of a primitive whose material
+ * needs it (a normal map or anisotropy: dr_material_needs_tangents). tangents_ stays empty until the first such primitive and is
  * then kept aligned with positions_; zeros mean "generate"
  * (dr_mesh_prepare_tangents), also for a tangent that is degenerate. */
 void Loader::add_tangents(const tinygltf::Primitive &p, const std::string &pp, size_t nv, const Mat4 &world,
                           bool mirrored, int32_t material)
 {
     size_t total = positions_.size() / 3;   /* this primitive's vertices included */
-    bool mapped = size_t(material) < materials_.size() && materials_[size_t(material)].normal_tex.texture >= 0;
+    bool mapped = size_t(material) < materials_.size() && dr_material_needs_tangents(&materials_[size_t(material)]);
     if (!mapped && tangents_.empty()) return;
     tangents_.resize(4 * (total - nv), 0.0f);
     auto it = p.attributes.find("TANGENT");
+    if (mapped && materials_[size_t(material)].anisotropic && it == p.attributes.end() &&
+        !p.attributes.count("TEXCOORD_0"))
+        warn_once("anisotropy:frame", "%s: material %d is anisotropic (KHR_materials_anisotropy), but the primitive "
+                  "has neither TANGENT nor TEXCOORD_0 to give the direction: rendered isotropic", pp.c_str(),
+                  int(material));
     if (!mapped || it == p.attributes.end()) {
         tangents_.resize(4 * total, 0.0f);
         return;
@@ -1958,7 +1967,7 @@ bool Loader::load_unlit(const tinygltf::Material &g, const std::string &mp, dr_m
     if (!it->second.IsObject())
         fail(DR_ERR_FORMAT, "%s/extensions/KHR_materials_unlit: expected an object", mp.c_str());
     for (const char *other : {"KHR_materials_clearcoat", "KHR_materials_specular", "KHR_materials_transmission",
-                              "KHR_materials_volume", "KHR_materials_emissive_strength"})
+                              "KHR_materials_volume", "KHR_materials_emissive_strength", "KHR_materials_anisotropy"})
         if (g.extensions.count(other))
             warn_once(std::string("unlit:") + other, "%s/extensions/%s: ignored on an unlit material "
                       "(KHR_materials_unlit)", mp.c_str(), other);
@@ -2014,6 +2023,36 @@ void Loader::load_clearcoat(const tinygltf::Material &g, const std::string &mp, 
     else if (!it->second.Has("clearcoatNormalTexture") && nt.index >= 0)
         warn_once("coat:normal", "%s: the clear coat is shaded with the normal map's normal (glTF gives it the "
                   "geometric normal)", ep.c_str());
+}
+
+/* KHR_materials_anisotropy (scene.h, anisotropy.h): anisotropyStrength in
+ * [0, 1], anisotropyRotation (radians, finite) and anisotropyTexture (RG
+ * the direction, B the strength: linear data). Anisotropic only where the
+ * strength is above 0; ignored, with a warning, on thin-walled glass, whose
+ * reflection is the sheet's own. */
+void Loader::load_anisotropy(const tinygltf::Material &g, const std::string &mp, dr_material &m)
+{
+    auto it = g.extensions.find("KHR_materials_anisotropy");
+    if (it == g.extensions.end()) return;
+    const std::string ep = mp + "/extensions/KHR_materials_anisotropy";
+    if (!it->second.IsObject()) fail(DR_ERR_FORMAT, "%s: expected an object", ep.c_str());
+    m.anisotropy_strength = ext_number(it->second, "anisotropyStrength", 0.0, ep);
+    if (!(m.anisotropy_strength >= 0.0 && m.anisotropy_strength <= 1.0))
+        fail(DR_ERR_FORMAT, "%s/anisotropyStrength: must be in [0, 1] (got %g)", ep.c_str(), m.anisotropy_strength);
+    m.anisotropy_rotation = ext_number(it->second, "anisotropyRotation", 0.0, ep);
+    if (!std::isfinite(m.anisotropy_rotation))
+        fail(DR_ERR_FORMAT, "%s/anisotropyRotation: must be finite", ep.c_str());
+    if (m.thin_ior > 0.0) {
+        warn_once("thin:anisotropy", "%s: ignored on thin-walled glass (its reflection is the sheet's own)",
+                  ep.c_str());
+        m.anisotropy_strength = 0.0;
+        return;
+    }
+    m.anisotropic = m.anisotropy_strength > 0.0;
+    if (!m.anisotropic || !it->second.Has("anisotropyTexture")) return;
+    const std::string tp = ep + "/anisotropyTexture";
+    m.anisotropy_tex = texref(texture_info(it->second.Get("anisotropyTexture"), tp), tp);
+    if (m.anisotropy_tex.texture >= 0) data_images_[size_t(scene_->textures[m.anisotropy_tex.texture].image)] = 1;
 }
 
 void Loader::load_material_medium(const tinygltf::Material &g, const std::string &mp, size_t index, dr_material &m)

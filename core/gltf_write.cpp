@@ -515,6 +515,13 @@ void Writer::apply_material(int mi, const std::vector<const dr_param *> &ps)
             ext = tinygltf::Value(std::move(o));
             break;
         }
+        case DR_PARAM_ANISOTROPY_STRENGTH: {   /* (anisotropic materials only: the object exists) */
+            tinygltf::Value &ext = m.extensions["KHR_materials_anisotropy"];
+            tinygltf::Value::Object o = ext.IsObject() ? ext.Get<tinygltf::Value::Object>() : tinygltf::Value::Object();
+            o["anisotropyStrength"] = tinygltf::Value(clamped(values(p)[0], 0, 1, p, &warned));
+            ext = tinygltf::Value(std::move(o));
+            break;
+        }
         default: break;
         }
     }
@@ -735,7 +742,8 @@ void Writer::apply_params()
         case DR_PARAM_EMISSIVE_FACTOR:
         case DR_PARAM_EMISSIVE_STRENGTH:
         case DR_PARAM_CLEARCOAT:
-        case DR_PARAM_CLEARCOAT_ROUGHNESS: mats[p->target].push_back(p); break;
+        case DR_PARAM_CLEARCOAT_ROUGHNESS:
+        case DR_PARAM_ANISOTROPY_STRENGTH: mats[p->target].push_back(p); break;
         case DR_PARAM_LIGHT_COLOR:
         case DR_PARAM_LIGHT_INTENSITY: lights[p->target].push_back(p); break;
         case DR_PARAM_ENV_COLOR:

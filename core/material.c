@@ -55,6 +55,14 @@ void dr_material_eval(const struct dr_scene *s, const struct dr_hit *hit, struct
             *(which ? &b->coat_roughness : &b->coat) *= px[which];
         }
     }
+    /* the anisotropy's strength: anisotropyStrength x B of its texture (its
+     * direction, RG, is the shading frame's business: anisotropy.h) */
+    b->anisotropy = m->anisotropic ? m->anisotropy_strength : 0.0;
+    const struct dr_texref *r = dr_material_anisotropy_tex(m);
+    if (r) {
+        texref_eval(s, texref_texture(s, r), r, hit, false, uv, px);
+        b->anisotropy *= px[2];
+    }
 }
 
 static void texref_prefetch(const struct dr_scene *s, const struct dr_texref *r, const struct dr_hit *hit,
@@ -79,6 +87,8 @@ void dr_material_prefetch(const struct dr_scene *s, const struct dr_hit *hit)
     for (int which = 0; which < 2; which++)
         if (dr_material_coat_tex(m, which))
             texref_prefetch(s, dr_material_coat_tex(m, which), hit, false);
+    if (dr_material_anisotropy_tex(m))
+        texref_prefetch(s, dr_material_anisotropy_tex(m), hit, false);
 }
 
 void d_material_eval(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_hit *hit,
@@ -136,6 +146,17 @@ void d_material_eval(const struct dr_scene *s, const struct dr_param_set *ps, co
     if (mt && ps->image[mt->image] >= 0) {
         double d_out[4] = {0.0, d_b->roughness * m->roughness, d_b->metallic * m->metallic, 0.0};
         d_texture_eval(mt, &s->images[mt->image], muv[0], muv[1], d_out, ps->image[mt->image], k);
+    }
+    /* the anisotropy's strength = factor x B of its texture (whose texels
+     * are no parameter: they also turn the frame, anisotropy.h) */
+    if (ps->mat_anisotropy[mi] >= 0) {
+        const struct dr_texref *r = dr_material_anisotropy_tex(m);
+        double texel = 1.0, auv[2];
+        if (r) {
+            texref_eval(s, texref_texture(s, r), r, hit, false, auv, px);
+            texel = px[2];
+        }
+        dr_sink_add(k, ps->mat_anisotropy[mi], d_b->anisotropy * texel);
     }
 }
 

@@ -109,7 +109,7 @@ int dr_mesh_prepare_tangents(struct dr_scene *s)
     struct dr_mesh *m = &s->mesh;
     bool needed = false;
     for (uint32_t t = 0; t < m->n_triangles && !needed; t++)
-        needed = s->materials[m->material[t]].normal_tex.texture >= 0;
+        needed = dr_material_needs_tangents(&s->materials[m->material[t]]);
     if (!needed)
         return 0;
     if (!m->tangents) {
@@ -138,27 +138,53 @@ static double authored_side(const struct dr_mesh *m, const struct dr_hit *hit, c
     return dr_dot(n, hit->ng) < 0.0 ? -1.0 : 1.0;
 }
 
-void dr_normal_map_apply(const struct dr_scene *s, struct dr_hit *hit)
+/* The interpolated tangent at hit made orthonormal to hit->ns (*t) and the
+ * bitangent's sign (*w); false where there is none: no tangents or UVs, a
+ * corner without one, or a tangent along the normal (degenerate UVs). */
+static bool hit_tangent(const struct dr_mesh *m, const struct dr_hit *hit, const uint32_t *idx, dr_vec3 *t_out,
+                        double *w)
 {
-    const struct dr_material *mat = &s->materials[hit->material];
-    const struct dr_mesh *m = &s->mesh;
-    if (mat->normal_tex.texture < 0 || !m->tangents || !(m->flags[hit->tri] & DR_TRI_HAS_UVS))
-        return;
-    const uint32_t *idx = m->indices + 3 * (size_t)hit->tri;
+    if (!m->tangents || !(m->flags[hit->tri] & DR_TRI_HAS_UVS))
+        return false;
     const float *t0 = m->tangents + 4 * (size_t)idx[0], *t1 = m->tangents + 4 * (size_t)idx[1],
                 *t2 = m->tangents + 4 * (size_t)idx[2];
     if (t0[3] == 0.0f || t1[3] == 0.0f || t2[3] == 0.0f)
-        return;   /* no tangent frame here: the interpolated normal stays */
+        return false;
     double b1 = hit->b1, b2 = hit->b2, b0 = 1.0 - b1 - b2;
     dr_vec3 n = hit->ns;
     dr_vec3 t = dr_v3(b0 * t0[0] + b1 * t1[0] + b2 * t2[0], b0 * t0[1] + b1 * t1[1] + b2 * t2[1],
                       b0 * t0[2] + b1 * t1[2] + b2 * t2[2]);
-    double w = b0 * t0[3] + b1 * t1[3] + b2 * t2[3] < 0.0 ? -1.0 : 1.0;
+    *w = b0 * t0[3] + b1 * t1[3] + b2 * t2[3] < 0.0 ? -1.0 : 1.0;
     t = dr_sub(t, dr_scale(n, dr_dot(n, t)));   /* Gram-Schmidt against the normal */
     double tl = dr_length(t);
     if (!(tl > 1e-6))
-        return;   /* tangent along the normal (degenerate UVs): no frame */
-    t = dr_scale(t, 1.0 / tl);
+        return false;
+    *t_out = dr_scale(t, 1.0 / tl);
+    return true;
+}
+
+bool dr_hit_tangent_frame(const struct dr_scene *s, const struct dr_hit *hit, dr_vec3 *t, dr_vec3 *b)
+{
+    const uint32_t *idx = s->mesh.indices + 3 * (size_t)hit->tri;
+    double w;
+    if (!hit_tangent(&s->mesh, hit, idx, t, &w))
+        return false;
+    /* B_a = w cross(N_a, T) with N_a = side ns, the authored normal */
+    *b = dr_scale(dr_cross(hit->ns, *t), w * authored_side(&s->mesh, hit, idx));
+    return true;
+}
+
+void dr_normal_map_apply(const struct dr_scene *s, struct dr_hit *hit)
+{
+    const struct dr_material *mat = &s->materials[hit->material];
+    const struct dr_mesh *m = &s->mesh;
+    if (mat->normal_tex.texture < 0)
+        return;
+    const uint32_t *idx = m->indices + 3 * (size_t)hit->tri;
+    dr_vec3 t, n = hit->ns;
+    double w;
+    if (!hit_tangent(m, hit, idx, &t, &w))
+        return;   /* no tangent frame here: the interpolated normal stays */
     const struct dr_texture *tex = &s->textures[mat->normal_tex.texture];
     double px[4], uv[2];
     dr_texref_uv(m, &mat->normal_tex, hit, uv);   /* its TEXCOORD set and KHR_texture_transform */

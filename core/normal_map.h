@@ -24,8 +24,8 @@
 #include "scene.h"
 #include "vec.h"
 
-/* Gives scene->mesh tangents when a material the triangles use has a normal
- * map: allocates them (zero) if the loader did not, then generates every
+/* Gives scene->mesh tangents when a material the triangles use needs them
+ * (dr_material_needs_tangents: a normal map or anisotropy): allocates them (zero) if the loader did not, then generates every
  * vertex's whose w is 0. 0 or DR_ERR_NOMEM. */
 int dr_mesh_prepare_tangents(struct dr_scene *scene);
 
@@ -54,5 +54,12 @@ void dr_normal_map_apply(const struct dr_scene *scene, struct dr_hit *hit);
  * (next-event and continuation directions below ng contribute nothing).
  * Returns ng when no such normal exists; never NaN. */
 dr_vec3 dr_shading_normal_valid(dr_vec3 ng, dr_vec3 wo, dr_vec3 n);
+
+/* The authored tangent frame at hit, made orthonormal to hit->ns (as
+ * dr_normal_map_apply uses it): the unit tangent *t and the bitangent *b =
+ * w cross(N, T) of the authored normal N (hit->ns, or its opposite where
+ * the loader flipped it), so that (T, B) keeps the file's handedness on
+ * either side. False where there is no frame (see dr_normal_map_apply). */
+bool dr_hit_tangent_frame(const struct dr_scene *scene, const struct dr_hit *hit, dr_vec3 *t, dr_vec3 *b);
 
 #endif

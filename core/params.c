@@ -105,6 +105,7 @@ static const char *const mat_fields[] = {
     [DR_PARAM_EMISSIVE_STRENGTH] = "/extensions/KHR_materials_emissive_strength/emissiveStrength",
     [DR_PARAM_CLEARCOAT] = "/extensions/KHR_materials_clearcoat/clearcoatFactor",
     [DR_PARAM_CLEARCOAT_ROUGHNESS] = "/extensions/KHR_materials_clearcoat/clearcoatRoughnessFactor",
+    [DR_PARAM_ANISOTROPY_STRENGTH] = "/extensions/KHR_materials_anisotropy/anisotropyStrength",
 };
 
 const char *dr_param_type_name(const struct dr_param *p)
@@ -128,7 +129,8 @@ void dr_param_range(const struct dr_param *p, double *lo, double *hi)
     switch (p->kind) {
     case DR_PARAM_BASE_COLOR:
     case DR_PARAM_METALLIC:
-    case DR_PARAM_CLEARCOAT: *lo = 0.0; *hi = 1.0; break;
+    case DR_PARAM_CLEARCOAT:
+    case DR_PARAM_ANISOTROPY_STRENGTH: *lo = 0.0; *hi = 1.0; break;
     case DR_PARAM_ROUGHNESS:
     case DR_PARAM_CLEARCOAT_ROUGHNESS: *lo = 0.001; *hi = 1.0; break;   /* the BSDF's floor */
     case DR_PARAM_IMAGE: *lo = 0.0; *hi = 1.0; break;        /* colour or data texels */
@@ -230,17 +232,19 @@ static bool thin_glass_unused(const struct dr_scene *s, int m, enum dr_param_kin
     return s->materials[m].thin_ior > 0.0 && kind != DR_PARAM_ROUGHNESS;
 }
 
-/* The coat's factors are parameters of coated materials only (scene.h);
- * an unlit material's factors are none (its colour is the loader's copy). */
+/* The coat's factors are parameters of coated materials only, the
+ * anisotropy's strength of anisotropic ones (scene.h); an unlit material's
+ * factors are none (its colour is the loader's copy). */
 static bool uncoated_unused(const struct dr_scene *s, int m, enum dr_param_kind kind)
 {
     return s->materials[m].unlit ||
-           ((kind == DR_PARAM_CLEARCOAT || kind == DR_PARAM_CLEARCOAT_ROUGHNESS) && !s->materials[m].coated);
+           ((kind == DR_PARAM_CLEARCOAT || kind == DR_PARAM_CLEARCOAT_ROUGHNESS) && !s->materials[m].coated) ||
+           (kind == DR_PARAM_ANISOTROPY_STRENGTH && !s->materials[m].anisotropic);
 }
 
 int dr_params_list(const struct dr_scene *s, struct dr_param **out, int *count)
 {
-    int cap = 7 * s->n_file_materials + 2 * (max_light_index(s) + 1) + 3 + s->n_images + 5 * s->n_media + 1;
+    int cap = 8 * s->n_file_materials + 2 * (max_light_index(s) + 1) + 3 + s->n_images + 5 * s->n_media + 1;
     struct dr_param *list = calloc((size_t)cap, sizeof *list);
     if (!list) {
         dr_set_error("out of memory");
@@ -501,6 +505,7 @@ static double *mat_scalar(struct dr_material *m, enum dr_param_kind k)
     case DR_PARAM_EMISSIVE_STRENGTH: return &m->emissive_strength;
     case DR_PARAM_CLEARCOAT: return &m->coat;
     case DR_PARAM_CLEARCOAT_ROUGHNESS: return &m->coat_roughness;
+    case DR_PARAM_ANISOTROPY_STRENGTH: return &m->anisotropy_strength;
     default: return NULL;
     }
 }
@@ -650,6 +655,7 @@ void dr_param_set_destroy(struct dr_param_set *set)
     free(set->mat_emissive_strength);
     free(set->mat_coat);
     free(set->mat_coat_roughness);
+    free(set->mat_anisotropy);
     free(set->light_color);
     free(set->light_intensity);
     free(set->image);
@@ -689,6 +695,7 @@ static void index_param(struct dr_param_set *set, const struct dr_scene *s, cons
     case DR_PARAM_EMISSIVE_STRENGTH: set->mat_emissive_strength[p->target] = p->offset; break;
     case DR_PARAM_CLEARCOAT: set->mat_coat[p->target] = p->offset; break;
     case DR_PARAM_CLEARCOAT_ROUGHNESS: set->mat_coat_roughness[p->target] = p->offset; break;
+    case DR_PARAM_ANISOTROPY_STRENGTH: set->mat_anisotropy[p->target] = p->offset; break;
     case DR_PARAM_LIGHT_COLOR:
     case DR_PARAM_LIGHT_INTENSITY:
         for (int l = 0; l < s->n_lights; l++)
@@ -725,6 +732,7 @@ static bool alloc_indices(struct dr_param_set *set, const struct dr_scene *s, in
     set->mat_emissive_strength = offsets(s->n_materials);
     set->mat_coat = offsets(s->n_materials);
     set->mat_coat_roughness = offsets(s->n_materials);
+    set->mat_anisotropy = offsets(s->n_materials);
     set->light_color = offsets(s->n_lights);
     set->light_intensity = offsets(s->n_lights);
     set->image = offsets(s->n_images);
@@ -740,7 +748,7 @@ static bool alloc_indices(struct dr_param_set *set, const struct dr_scene *s, in
     return set->med_extinction && set->med_albedo && set->med_g && set->med_density_scale && set->med_density &&
            set->med_active && set->params && set->mat_base_color && set->mat_metallic && set->mat_roughness &&
            set->mat_emissive_factor && set->mat_emissive_strength && set->mat_coat && set->mat_coat_roughness &&
-           set->light_color && set->light_intensity &&
+           set->mat_anisotropy &&            set->light_color && set->light_intensity &&
            set->image && set->mat_bsdf_active && set->mat_emission_active;
 }
 
@@ -782,7 +790,8 @@ static void mark_active(struct dr_param_set *set, const struct dr_scene *s)
         const struct dr_material *mat = &s->materials[m];
         set->mat_bsdf_active[m] = set->mat_base_color[m] >= 0 || set->mat_metallic[m] >= 0 ||
                                   set->mat_roughness[m] >= 0 || set->mat_coat[m] >= 0 ||
-                                  set->mat_coat_roughness[m] >= 0 || texref_active(set, s, &mat->base_color_tex) ||
+                                  set->mat_coat_roughness[m] >= 0 || set->mat_anisotropy[m] >= 0 ||
+                                  texref_active(set, s, &mat->base_color_tex) ||
                                   texref_active(set, s, &mat->metallic_roughness_tex) ||
                                   (dr_material_coat_tex(mat, 0) && texref_active(set, s, dr_material_coat_tex(mat, 0))) ||
                                   (dr_material_coat_tex(mat, 1) && texref_active(set, s, dr_material_coat_tex(mat, 1)));

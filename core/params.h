@@ -39,6 +39,7 @@ enum dr_param_kind {
     DR_PARAM_EMISSIVE_STRENGTH,
     DR_PARAM_CLEARCOAT,             /* KHR_materials_clearcoat, coated materials only */
     DR_PARAM_CLEARCOAT_ROUGHNESS,
+    DR_PARAM_ANISOTROPY_STRENGTH,   /* KHR_materials_anisotropy, anisotropic materials only */
     DR_PARAM_LIGHT_COLOR,
     DR_PARAM_LIGHT_INTENSITY,
     DR_PARAM_ENV_COLOR,
@@ -53,7 +54,7 @@ enum dr_param_kind {
     DR_PARAM_KIND_COUNT
 };
 
-#define DR_PARAM_LAST_MATERIAL DR_PARAM_CLEARCOAT_ROUGHNESS
+#define DR_PARAM_LAST_MATERIAL DR_PARAM_ANISOTROPY_STRENGTH
 #define DR_PARAM_NAME_MAX 160
 
 struct dr_param {
@@ -109,10 +110,11 @@ struct dr_param_set {
     int64_t *mat_base_color, *mat_metallic, *mat_roughness;      /* per material */
     int64_t *mat_emissive_factor, *mat_emissive_strength;        /* per material */
     int64_t *mat_coat, *mat_coat_roughness;                      /* per material */
+    int64_t *mat_anisotropy;                                     /* per material: anisotropyStrength */
     int64_t *light_color, *light_intensity;                      /* per scene light instance */
     int64_t *image;                                              /* per image: texel (0,0) */
     int64_t env_color, env_strength, env_map;
-    bool *mat_bsdf_active;      /* base colour, metallic, roughness, the coat's or one of their textures */
+    bool *mat_bsdf_active;      /* base colour, metallic, roughness, the coat's, the anisotropy's or one of their textures */
     bool *mat_emission_active;  /* emissive factor, strength or texture */
     bool lights_active;         /* some punctual light parameter */
     bool env_active;

@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "accel.h"
+#include "anisotropy.h"
 #include "coverage.h"
 #include "material.h"
 #include "normal_map.h"
@@ -188,9 +189,14 @@ static bool stage_material(const struct dr_scene *s, const struct dr_path_opts *
     dr_vec3 n = hit->front ? hit->ns : dr_neg(hit->ns);
     if (s->materials[hit->material].normal_tex.texture >= 0)   /* a mapped normal may face away from wo */
         n = dr_shading_normal_valid(v->ng, dr_neg(st->d), n);
-    v->frame = dr_frame_from_normal(n);
-    v->wo = dr_frame_to_local(&v->frame, dr_neg(st->d));
     dr_material_eval(s, hit, &v->bsdf);
+    /* an anisotropic lobe stretches along the frame's first axis, and is
+     * isotropic where the surface gives no direction (anisotropy.h) */
+    if (!s->materials[hit->material].anisotropic)
+        v->frame = dr_frame_from_normal(n);
+    else if (!dr_anisotropy_frame(s, hit, n, &v->frame))
+        v->bsdf.anisotropy = 0.0;
+    v->wo = dr_frame_to_local(&v->frame, dr_neg(st->d));
     v->shaded = true;
     v->diff_bsdf = opts->params && opts->params->mat_bsdf_active[hit->material];
 

@@ -23,6 +23,11 @@ unsigned dr_path_material_dparams(const struct dr_scene *s, const struct dr_para
     /* one image holds both metallic (B) and roughness (G): its texels move both */
     if (mt >= 0 && ps->image[s->textures[mt].image] >= 0)
         mask |= DR_BSDF_D_METALLIC | DR_BSDF_D_ROUGHNESS;
+    /* an anisotropic base's roughness has no lobes of its own (the pair's
+     * densities are the isotropic d D / d alpha's): it stays with the
+     * forward strategies, B, as the anisotropy's strength does */
+    if (mat->anisotropic)
+        mask &= ~(unsigned)DR_BSDF_D_ROUGHNESS;
     /* a clear coat's roughness: its factor, or the texture whose G it reads
      * (the coat's factor is left to the forward strategies: B) */
     const struct dr_texref *ct = dr_material_coat_tex(mat, 1);

@@ -110,12 +110,15 @@ static int refresh(struct dr_scene *s, bool lights)
         if (!used[i])
             continue;
         if (mat->base_color_tex.texture >= 0 || mat->metallic_roughness_tex.texture >= 0 ||
-            mat->emissive_tex.texture >= 0 || dr_material_coat_tex(mat, 0) || dr_material_coat_tex(mat, 1))
+            mat->emissive_tex.texture >= 0 || dr_material_coat_tex(mat, 0) || dr_material_coat_tex(mat, 1) ||
+            dr_material_anisotropy_tex(mat))
             s->effects |= DR_FX_TEXTURES;
         if (material_has_specular(mat))
             s->effects |= DR_FX_SPECULAR;
         if (mat->coated)
             s->effects |= DR_FX_CLEARCOAT;
+        if (mat->anisotropic)
+            s->effects |= DR_FX_ANISOTROPY;
         s->effects |= surface_effects(s, i);
     }
     free(used);
@@ -283,7 +286,7 @@ void dr_effects_describe(unsigned fx, char *buf, int size)
         {DR_FX_ALPHA_MASK, "alpha_mask"},       {DR_FX_ALPHA_BLEND, "alpha_blend"},
         {DR_FX_SINGLE_SIDED, "single_sided"},   {DR_FX_VERTEX_COLORS, "vertex_colors"},
         {DR_FX_DIELECTRIC_BOUNDARIES, "dielectric_boundaries"}, {DR_FX_THIN_TRANSMISSION, "thin_transmission"},
-        {DR_FX_CLEARCOAT, "clearcoat"},
+        {DR_FX_CLEARCOAT, "clearcoat"},         {DR_FX_ANISOTROPY, "anisotropy"},
     };
     int n = 0;
     buf[0] = '\0';

@@ -16,9 +16,12 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "anisotropy.h"
 #include "camera.h"
 #include "error.h"
 #include "geometry.h"
+#include "material.h"
+#include "params.h"
 #include "render.h"
 #include "scene.h"
 #include "test.h"
@@ -482,6 +485,157 @@ static void test_ktx2(void)
     dr_scene_destroy(s);
 }
 
+/* ---- KHR_materials_anisotropy ---- */
+
+/* A quad facing +z whose u runs along +x and v down +y (so the generated
+ * tangent is +x and the bitangent +y), with the material's anisotropy
+ * extension `ext`, extra primitive attributes `attrs` and node fields
+ * `node`; the anisotropy texture is a 1x1 R8G8B8 KTX2 texel `texel`. Loaded
+ * whole (tangents prepared); NULL when it fails (rc, the error kept). */
+static struct dr_scene *aniso_scene(const char *ext, const char *attrs, const char *node, const unsigned char texel[3],
+                                    int *rc)
+{
+    unsigned char ktx[104 + 4] = {0};
+    ktx2_header(ktx, 23, 1, 1, 0, 3);   /* R8G8B8_UNORM: linear data */
+    memcpy(ktx + 104, texel, 3);
+    write_file("aniso.ktx2", ktx, sizeof ktx);
+    unsigned char b[156];
+    size_t o = 0;
+    put_f32(b, &o, 12, -1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 1.0, 0.0, -1.0, 1.0, 0.0);   /* 0: positions */
+    put_f32(b, &o, 8, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0);                          /* 48: uvs */
+    for (int v = 0; v < 4; v++)
+        put_f32(b, &o, 4, 0.0, 1.0, 0.0, 1.0);                                          /* 80: tangents, +y */
+    const uint16_t idx[6] = {0, 1, 2, 0, 2, 3};                                         /* 144: indices */
+    memcpy(b + o, idx, sizeof idx);
+    char uri[512];
+    snprintf(uri, sizeof uri, "%s", data_uri(b, sizeof b));
+    const char *fmt =
+        "{\"asset\":{\"version\":\"2.0\"},\"extensionsUsed\":[\"KHR_materials_anisotropy\"],"
+        "\"materials\":[{\"pbrMetallicRoughness\":{\"metallicFactor\":1,\"roughnessFactor\":0.3},"
+        "\"extensions\":{\"KHR_materials_anisotropy\":%s}},{}],"
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0%s},\"indices\":3,\"material\":0}]}],"
+        "\"nodes\":[{\"mesh\":0%s}],\"scenes\":[{\"nodes\":[0]}],"
+        "\"textures\":[{\"source\":0}],\"images\":[{\"uri\":\"aniso.ktx2\",\"mimeType\":\"image/ktx2\"}],"
+        "\"buffers\":[{\"byteLength\":156,\"uri\":\"%s\"}],"
+        "\"bufferViews\":[{\"buffer\":0,\"byteLength\":156}],"
+        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":4,\"type\":\"VEC3\",\"max\":[1,1,0],"
+        "\"min\":[-1,0,0]},{\"bufferView\":0,\"byteOffset\":48,\"componentType\":5126,\"count\":4,\"type\":\"VEC2\"},"
+        "{\"bufferView\":0,\"byteOffset\":80,\"componentType\":5126,\"count\":4,\"type\":\"VEC4\"},"
+        "{\"bufferView\":0,\"byteOffset\":144,\"componentType\":5123,\"count\":6,\"type\":\"SCALAR\"}]}";
+    struct dr_scene *s = load_json("aniso.gltf", NULL, rc, fmt, ext, attrs, node, uri);
+    dr_scene_destroy(s);
+    if (*rc != 0)
+        return NULL;
+    s = dr_scene_load(tmp_path("aniso.gltf"));
+    *rc = s ? 0 : -1;
+    return s;
+}
+
+/* The anisotropy's world direction at the quad's point (x, y), seen from +z
+ * (false: none); *strength: the BSDF's anisotropy there. */
+static bool aniso_at(const struct dr_scene *s, double x, double y, dr_vec3 *dir, double *strength)
+{
+    struct dr_hit hit;
+    const dr_vec3 o = dr_v3(x, y, 3.0);
+    for (int64_t tri = 0; tri < (int64_t)s->mesh.n_triangles; tri++) {
+        dr_hit_compute(&s->mesh, tri, o, dr_v3(0.0, 0.0, -1.0), &hit);
+        if (hit.b1 >= 0.0 && hit.b2 >= 0.0 && hit.b1 + hit.b2 <= 1.0)
+            break;
+    }
+    struct dr_bsdf b;
+    dr_material_eval(s, &hit, &b);
+    *strength = b.anisotropy;
+    return dr_anisotropy_direction(s, &hit, dir);
+}
+
+static void test_anisotropy(void)
+{
+    const unsigned char grey[3] = {128, 128, 128}, up[3] = {128, 255, 128};
+    const struct {
+        const char *what, *ext, *attrs, *node;
+        const unsigned char *texel;
+        dr_vec3 want;       /* the direction, up to its sign */
+        double strength;
+    } cases[] = {
+        {"the tangent", "{\"anisotropyStrength\":0.6}", ",\"TEXCOORD_0\":1", "", grey, {1, 0, 0}, 0.6},
+        {"turned a quarter", "{\"anisotropyStrength\":0.6,\"anisotropyRotation\":1.5707963267948966}",
+         ",\"TEXCOORD_0\":1", "", grey, {0, 1, 0}, 0.6},
+        {"the texel's (0, 1)", "{\"anisotropyStrength\":0.6,\"anisotropyTexture\":{\"index\":0}}",
+         ",\"TEXCOORD_0\":1", "", up, {0, 1, 0}, 0.6 * 128.0 / 255.0},
+        {"the texel's, turned", "{\"anisotropyStrength\":0.6,\"anisotropyRotation\":1.5707963267948966,"
+         "\"anisotropyTexture\":{\"index\":0}}", ",\"TEXCOORD_0\":1", "", up, {1, 0, 0}, 0.6 * 128.0 / 255.0},
+        /* an eighth of a turn tells the bitangent's sign: T + B, which a mirror turns into -x + y */
+        {"turned an eighth", "{\"anisotropyStrength\":1,\"anisotropyRotation\":0.78539816339744828}",
+         ",\"TEXCOORD_0\":1", "", grey, {M_SQRT1_2, M_SQRT1_2, 0}, 1.0},
+        {"mirrored, turned an eighth", "{\"anisotropyStrength\":1,\"anisotropyRotation\":0.78539816339744828}",
+         ",\"TEXCOORD_0\":1", ",\"scale\":[-1,1,1]", grey, {-M_SQRT1_2, M_SQRT1_2, 0}, 1.0},
+        {"TANGENT", "{\"anisotropyStrength\":0.5}", ",\"TEXCOORD_0\":1,\"TANGENT\":2", "", grey, {0, 1, 0}, 0.5},
+        {"TANGENT, turned", "{\"anisotropyStrength\":0.5,\"anisotropyRotation\":1.5707963267948966}",
+         ",\"TEXCOORD_0\":1,\"TANGENT\":2", "", grey, {1, 0, 0}, 0.5},
+        {"TANGENT without UVs", "{\"anisotropyStrength\":0.5}", ",\"TANGENT\":2", "", grey, {1, 0, 0}, 0.5},
+    };
+    for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+        int rc;
+        struct dr_scene *s = aniso_scene(cases[i].ext, cases[i].attrs, cases[i].node, cases[i].texel, &rc);
+        CHECK(s != NULL, "%s: %s", cases[i].what, dr_last_error());
+        if (!s)
+            continue;
+        CHECK(!strstr(warnings, "KHR_materials_anisotropy"), "%s: no warning about the extension:\n%s", cases[i].what,
+              warnings);
+        CHECK(s->materials[0].anisotropic && (s->effects & DR_FX_ANISOTROPY) && s->mesh.tangents,
+              "%s: anisotropic, the effect named, tangents prepared", cases[i].what);
+        dr_vec3 d;
+        double strength;
+        bool has = aniso_at(s, 0.3, 0.6, &d, &strength);
+        const bool uvs = strstr(cases[i].attrs, "TEXCOORD_0") != NULL;
+        if (!uvs) {   /* a supplied tangent is applied where the triangle has UVs only (normal_map.h) */
+            CHECK(!has, "%s: no direction without UVs", cases[i].what);
+        } else {
+            CHECK(has && fabs(fabs(dr_dot(d, cases[i].want)) - 1.0) < 1e-4, "%s: direction (%g, %g, %g), want +-(%g, %g, %g)",
+                  cases[i].what, d.x, d.y, d.z, cases[i].want.x, cases[i].want.y, cases[i].want.z);
+        }
+        CHECK(fabs(strength - cases[i].strength) < 1e-7,   /* (the texel in float) */
+              "%s: the BSDF's strength %g, want %g", cases[i].what, strength,
+              cases[i].strength);
+        dr_scene_destroy(s);
+    }
+    int rc;
+    /* neither TANGENT nor UVs: said once, and no direction */
+    struct dr_scene *s = aniso_scene("{\"anisotropyStrength\":0.5}", "", "", grey, &rc);
+    CHECK(s && strstr(warnings, "neither TANGENT nor TEXCOORD_0"), "a primitive without a frame is warned about:\n%s",
+          warnings);
+    dr_scene_destroy(s);
+    /* strength 0: not anisotropic, nothing of it computed */
+    s = aniso_scene("{\"anisotropyStrength\":0,\"anisotropyRotation\":1}", ",\"TEXCOORD_0\":1", "", grey, &rc);
+    CHECK(s && !s->materials[0].anisotropic && !(s->effects & DR_FX_ANISOTROPY) && !s->mesh.tangents,
+          "strength 0 is not anisotropic (no effect, no tangents)");
+    dr_scene_destroy(s);
+    /* its strength is a parameter of anisotropic materials only */
+    s = aniso_scene("{\"anisotropyStrength\":0.5}", ",\"TEXCOORD_0\":1", "", grey, &rc);
+    if (s) {
+        struct dr_param p;
+        CHECK(dr_param_resolve(s, "/materials/0/extensions/KHR_materials_anisotropy/anisotropyStrength", &p) == 0 &&
+                  p.kind == DR_PARAM_ANISOTROPY_STRENGTH,
+              "anisotropyStrength is a parameter: %s", dr_last_error());
+        CHECK(dr_param_resolve(s, "/materials/1/extensions/KHR_materials_anisotropy/anisotropyStrength", &p) != 0,
+              "an isotropic material's anisotropyStrength is not");
+    }
+    dr_scene_destroy(s);
+    const struct { const char *ext, *what, *n1, *n2; } bad[] = {
+        {"{\"anisotropyStrength\":1.5}", "strength above 1", "KHR_materials_anisotropy/anisotropyStrength", "[0, 1]"},
+        {"{\"anisotropyStrength\":-0.1}", "negative strength", "KHR_materials_anisotropy/anisotropyStrength", "[0, 1]"},
+        {"{\"anisotropyStrength\":0.5,\"anisotropyRotation\":\"up\"}", "a rotation not a number",
+         "/materials/0/extensions/KHR_materials_anisotropy/anisotropyRotation", "a number"},
+        {"{\"anisotropyStrength\":0.5,\"anisotropyTexture\":{\"index\":7}}", "a missing texture",
+         "KHR_materials_anisotropy/anisotropyTexture", "does not exist"},
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        s = aniso_scene(bad[i].ext, ",\"TEXCOORD_0\":1", "", grey, &rc);
+        check_error(rc, bad[i].what, "aniso.gltf", bad[i].n1, bad[i].n2);
+        dr_scene_destroy(s);
+    }
+}
+
 /* ---- Draco: the shared sample against the plain Box ---- */
 
 static int cmp_tri(const void *a, const void *b)
@@ -907,6 +1061,7 @@ int main(void)
     test_meshopt();
     test_instancing();
     test_unlit();
+    test_anisotropy();
     test_eight_bit();
     char cmd[400];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
