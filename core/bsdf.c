@@ -9,7 +9,11 @@
  *  - wo.h = wi.h = |wo + wi| / 2 for unit wo, wi: symmetric in (wo, wi), so
  *    f(wo, wi) == f(wi, wo) bit for bit, and no dot product is needed.
  *  - Cosines at or below COS_EPS count as below the surface (f = pdf = 0),
- *    which keeps every intermediate finite (z^2 never underflows). */
+ *    which keeps every intermediate finite (z^2 never underflows).
+ *  - Anisotropy (b->anisotropy != 0, KHR_materials_anisotropy) takes separate
+ *    paths (the *_aniso functions, "anisotropic GGX" below) so that the
+ *    isotropic arithmetic, which the eight-lane copy in path_simd.c and the
+ *    estimators' tests compare bit for bit, is untouched. */
 #include "bsdf.h"
 
 #include <stddef.h>
@@ -35,6 +39,61 @@ static inline double smith_lambda(double a2, dr_vec3 w)
 {
     double x = a2 * (w.x * w.x + w.y * w.y) / (w.z * w.z);
     return 0.5 * x / (1.0 + sqrt(1.0 + x));
+}
+
+/* ------------------------------------------------------- anisotropic GGX
+ *
+ * KHR_materials_anisotropy stretches the base's lobe along the local +x axis:
+ * alpha_x = alpha + (1 - alpha) s^2, alpha_y = alpha (s = b->anisotropy), so
+ * alpha_x >= alpha_y. Heitz 2014 ("Understanding the masking-shadowing
+ * function"), with H = wo + wi unnormalised, h = H / |H|:
+ *   D(h) = 1 / (pi ax ay (hx^2/ax^2 + hy^2/ay^2 + hz^2)^2)
+ *        = ax ay |H|^4 / (pi q^2),  q = Hx^2 (ay/ax) + Hy^2 (ax/ay) + ax ay Hz^2
+ * (multiply the bracket by ax ay |H|^2); at ax = ay = a, q = Hxy^2 + a^2 Hz^2
+ * and D = a^2 (|H|^2/q)^2 / pi, the isotropic form. Like it, exact for tiny
+ * alphas (no 1 - cos^2 cancellation). Smith Lambda keeps its form with
+ *   x = (ax^2 wx^2 + ay^2 wy^2) / wz^2. */
+
+/* alpha_x of the stretched lobe, a = bsdf_alpha(b) = alpha_y. */
+static inline double alpha_x_of(const struct dr_bsdf *b, double a)
+{
+    const double s = b->anisotropy;
+    return a + (1.0 - a) * (s * s);
+}
+
+/* The anisotropic half-vector terms (as struct ggx_half, below, for one alpha). */
+struct ggx_aniso {
+    dr_vec3 H;
+    double hx2, hy2, hz2, H2, q, D;
+};
+
+static inline struct ggx_aniso ggx_aniso(double ax, double ay, dr_vec3 wo, dr_vec3 wi)
+{
+    struct ggx_aniso g;
+    g.H = dr_add(wo, wi);
+    g.hx2 = g.H.x * g.H.x;
+    g.hy2 = g.H.y * g.H.y;
+    g.hz2 = g.H.z * g.H.z;
+    g.H2 = g.hx2 + g.hy2 + g.hz2;
+    g.q = g.hx2 * (ay / ax) + g.hy2 * (ax / ay) + ax * ay * g.hz2;   /* > 0: H.z > 0 */
+    double r = g.H2 / g.q;
+    g.D = ax * ay * r * r * DR_INV_PI;
+    return g;
+}
+
+/* Smith Lambda of the anisotropic lobe (w.z > COS_EPS); with dax, day not
+ * NULL also dLambda/dax = ax tx / (2 sqrt(1 + x)) (tx = wx^2 / wz^2; from
+ * dLambda/dx = 1 / (4 sqrt(1 + x))) and alike in ay. */
+static inline double smith_lambda_aniso(double ax, double ay, dr_vec3 w, double *dax, double *day)
+{
+    double iz2 = 1.0 / (w.z * w.z);
+    double tx = w.x * w.x * iz2, ty = w.y * w.y * iz2;
+    double x = ax * ax * tx + ay * ay * ty, sq = sqrt(1.0 + x);
+    if (dax) {
+        *dax = 0.5 * ax * tx / sq;
+        *day = 0.5 * ay * ty / sq;
+    }
+    return 0.5 * x / (1.0 + sq);
 }
 
 static inline bool no_specular_lobe(const struct dr_bsdf *b)
@@ -84,14 +143,22 @@ static dr_vec3 __attribute__((noinline)) eval_pdf_glossy(const struct dr_bsdf *b
                                                           double *pdf)
 {
     double cos_pdf = wi.z * DR_INV_PI;
-    double a = bsdf_alpha(b), a2 = a * a;
-    dr_vec3 H = dr_add(wo, wi);
-    double hxy2 = H.x * H.x + H.y * H.y;
-    double H2 = hxy2 + H.z * H.z;
-    double q = hxy2 + a2 * H.z * H.z;   /* > 0: H.z > 0 */
-    double r = H2 / q;
-    double D = a2 * r * r * DR_INV_PI;
-    double lo = smith_lambda(a2, wo), li = smith_lambda(a2, wi);
+    double a = bsdf_alpha(b), D, H2, lo, li;
+    if (b->anisotropy == 0.0) {
+        double a2 = a * a;
+        dr_vec3 H = dr_add(wo, wi);
+        double hxy2 = H.x * H.x + H.y * H.y;
+        H2 = hxy2 + H.z * H.z;
+        double q = hxy2 + a2 * H.z * H.z;   /* > 0: H.z > 0 */
+        double r = H2 / q;
+        D = a2 * r * r * DR_INV_PI;
+        lo = smith_lambda(a2, wo), li = smith_lambda(a2, wi);
+    } else {
+        double ax = alpha_x_of(b, a);
+        struct ggx_aniso g = ggx_aniso(ax, a, wo, wi);
+        D = g.D, H2 = g.H2;
+        lo = smith_lambda_aniso(ax, a, wo, NULL, NULL), li = smith_lambda_aniso(ax, a, wi, NULL, NULL);
+    }
     double dq = D / (4.0 * wo.z);
     double pdf_spec = dq / (1.0 + lo);               /* G1(wo) D / (4 wo.z) = D_wo(h) / (4 wo.h) */
     double spec = dq / ((1.0 + lo + li) * wi.z);     /* D G2 / (4 wo.z wi.z) */
@@ -164,7 +231,10 @@ double dr_bsdf_sky_share(const struct dr_bsdf *b, dr_vec3 wo)
         return dr_coat_sky_share(b, wo);
     if (!(wo.z > COS_EPS))
         return 0.0;
-    double sharp = (0.45 - bsdf_alpha(b)) * (1.0 / 0.15);   /* (path_simd.c's sky_share: the same operations) */
+    double a = bsdf_alpha(b);
+    if (b->anisotropy != 0.0)   /* a stretched lobe's sharpness: the geometric mean of its alphas */
+        a = sqrt(alpha_x_of(b, a) * a);
+    double sharp = (0.45 - a) * (1.0 / 0.15);   /* (path_simd.c's sky_share: the same operations) */
     return specular_prob(b, wo.z) * (sharp < 0.0 ? 0.0 : sharp > 1.0 ? 1.0 : sharp);
 }
 
@@ -245,12 +315,15 @@ struct vndf_tape {
     dr_vec3 nh, m, h;     /* hemisphere normal, unstretched, normalised */
 };
 
-/* GGX visible normals (Heitz 2018, JCGT 7(4)), wo.z > 0. Returns h; fills *t
- * (the primal's callers let the compiler drop those stores). The arithmetic
- * is exactly the pre-adjoint map's, so dr_bsdf_sample's samples did not change. */
-static inline dr_vec3 sample_vndf(dr_vec3 wo, double a, double u1, double u2, struct vndf_tape *t)
+/* GGX visible normals (Heitz 2018, JCGT 7(4)), wo.z > 0, of the lobe with
+ * alphas (ax, ay): wo is stretched to the lobe of alpha 1, a visible normal of
+ * that hemisphere is drawn and unstretched. Returns h; fills *t (the primal's
+ * callers let the compiler drop those stores). With ax == ay the arithmetic
+ * is exactly the pre-adjoint isotropic map's, so dr_bsdf_sample's samples did
+ * not change. */
+static inline dr_vec3 sample_vndf(dr_vec3 wo, double ax, double ay, double u1, double u2, struct vndf_tape *t)
 {
-    t->v = dr_v3(a * wo.x, a * wo.y, wo.z);
+    t->v = dr_v3(ax * wo.x, ay * wo.y, wo.z);
     dr_vec3 vh = dr_normalize(t->v);
     double lensq = vh.x * vh.x + vh.y * vh.y;
     dr_vec3 t1 = lensq > 0.0 ? dr_scale(dr_v3(-vh.y, vh.x, 0.0), 1.0 / sqrt(lensq)) : dr_v3(1.0, 0.0, 0.0);
@@ -263,7 +336,7 @@ static inline dr_vec3 sample_vndf(dr_vec3 wo, double a, double u1, double u2, st
     double p2s = (1.0 - s) * c + s * p2;
     double n3 = sqrt(dr_max(0.0, 1.0 - p1 * p1 - p2s * p2s));
     dr_vec3 nh = dr_add(dr_add(dr_scale(t1, p1), dr_scale(t2, p2s)), dr_scale(vh, n3));
-    t->m = dr_v3(a * nh.x, a * nh.y, dr_max(0.0, nh.z));
+    t->m = dr_v3(ax * nh.x, ay * nh.y, dr_max(0.0, nh.z));
     t->h = dr_normalize(t->m);
     t->vh = vh;
     t->lensq = lensq;
@@ -282,7 +355,8 @@ static inline dr_vec3 sample_vndf(dr_vec3 wo, double a, double u1, double u2, st
 static dr_vec3 __attribute__((noinline)) sample_specular_dir(const struct dr_bsdf *b, dr_vec3 wo, double u1, double u2)
 {
     struct vndf_tape t;
-    dr_vec3 h = sample_vndf(wo, bsdf_alpha(b), u1, u2, &t);
+    const double a = bsdf_alpha(b);
+    dr_vec3 h = sample_vndf(wo, b->anisotropy == 0.0 ? a : alpha_x_of(b, a), a, u1, u2, &t);
     return dr_sub(dr_scale(h, 2.0 * dr_dot(wo, h)), wo);
 }
 
@@ -752,7 +826,7 @@ void d_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lo
         return;
     double a = bsdf_alpha(b);
     struct vndf_tape t;
-    dr_vec3 h = sample_vndf(wo, a, u1, u2, &t);
+    dr_vec3 h = sample_vndf(wo, a, a, u1, u2, &t);
     double oh = dr_dot(wo, h), hd = dr_dot(h, d_wi);
     dr_vec3 d_h = dr_add(dr_scale(d_wi, 2.0 * oh), dr_scale(wo, 2.0 * hd));
     dr_vec3 g_wo = dr_sub(dr_scale(h, 2.0 * hd), d_wi);
@@ -863,6 +937,13 @@ double dr_bsdf_deriv_lobe_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, e
     if (lobe == DR_BSDF_DLOBE_COSINE)
         return wi.z * DR_INV_PI;
     double a = bsdf_alpha(b), a2 = a * a;
+    if (lobe == DR_BSDF_DLOBE_VNDF && b->anisotropy != 0.0) {   /* the stretched lobe's map (sample_vndf) */
+        const double ax = alpha_x_of(b, a);
+        const struct ggx_aniso g = ggx_aniso(ax, a, wo, wi);
+        return g.D / (4.0 * wo.z) / (1.0 + smith_lambda_aniso(ax, a, wo, NULL, NULL));
+    }
+    /* (The roughness lobes stay those of the isotropic lobe of alpha, as
+     * their maps: bsdf.h.) */
     const struct ggx_half g_h = ggx_half(a2, wo, wi);
     if (lobe == DR_BSDF_DLOBE_VNDF)
         return g_h.D / (4.0 * wo.z) / (1.0 + smith_lambda(a2, wo));   /* as eval_pdf_above's pdf_spec */
