@@ -464,25 +464,19 @@ static inline void fresnel_lobes(const struct dr_bsdf *b, double s5, dr_vec3 *fd
  * The pure-Lambertian fast path (metallic == 0, specular == 0) evaluates the
  * general formula exactly (F_d = F_o = F_i = 0, kd0 = 1/pi); its metallic
  * derivative is the general one, -base/pi + spec F_m, which needs spec. */
-static void d_eval_params(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out,
-                          struct dr_d_bsdf *d)
+
+/* The base colour and metallic parts of d_eval_params, given the microfacet
+ * term spec and |H|^2 (isotropic or not, the rest of f is the same): adds
+ * them to *d and returns d loss / d spec, 0 for the Lambertian (whose
+ * roughness derivative is exactly 0). */
+static inline double d_eval_colour_metal(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out,
+                                         double spec, double H2, struct dr_d_bsdf *d)
 {
     const bool lambert = no_specular_lobe(b);
     const double m = b->metallic;
     const dr_vec3 base = b->base_color;
 
-    /* Microfacet term spec = D G2 / (4 wo.z wi.z), shared by both lobes. */
-    double a = bsdf_alpha(b), a2 = a * a;
-    const struct ggx_half g_h = ggx_half(a2, wo, wi);
-    double tan2o = (wo.x * wo.x + wo.y * wo.y) / (wo.z * wo.z);
-    double tan2i = (wi.x * wi.x + wi.y * wi.y) / (wi.z * wi.z);
-    double xo = a2 * tan2o, xi = a2 * tan2i;
-    double so = sqrt(1.0 + xo), si = sqrt(1.0 + xi);
-    double lo = 0.5 * xo / (1.0 + so), li = 0.5 * xi / (1.0 + si);
-    double g = 1.0 + lo + li;
-    double spec = g_h.D / (4.0 * wo.z * g * wi.z);
-
-    double c = 0.5 * sqrt(g_h.H2);
+    double c = 0.5 * sqrt(H2);
     double s5 = pow5(1.0 - dr_clamp(c, 0.0, 1.0));
     dr_vec3 fm = dr_v3(base.x + (1.0 - base.x) * s5, base.y + (1.0 - base.y) * s5,
                        base.z + (1.0 - base.z) * s5);
@@ -493,7 +487,7 @@ static void d_eval_params(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_ve
         /* m = 0, F_d = 0, kd0 = 1/pi: the roughness derivative is exactly 0. */
         d->base_color = dr_madd(d->base_color, d_out, DR_INV_PI);
         d->metallic += spec * d_km - DR_INV_PI * d_kd;
-        return;
+        return 0.0;
     }
 
     dr_vec3 f0 = dielectric_f0(b);
@@ -506,9 +500,77 @@ static void d_eval_params(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_ve
 
     d->base_color = dr_madd(d->base_color, d_out, (1.0 - m) * kd0 + m * spec * (1.0 - s5));
     d->metallic += spec * (d_km - d_ks) - kd0 * d_kd;
+    return (1.0 - m) * d_ks + m * d_km;
+}
 
+/* d loss / d alpha_x and d alpha_y of the stretched lobe into roughness and
+ * anisotropy: alpha_x = alpha + (1 - alpha) s^2, alpha_y = alpha, alpha =
+ * rough^2 above the floor, so
+ *   d ax / d rough = (1 - s^2) 2 rough, d ay / d rough = 2 rough (0 at or below the floor),
+ *   d ax / d s = 2 s (1 - alpha), d ay / d s = 0 (the floored alpha's: alpha_x moves with s there too). */
+static inline void d_alphas(const struct dr_bsdf *b, double d_ax, double d_ay, struct dr_d_bsdf *d)
+{
+    const double rough = b->roughness, s = b->anisotropy;
+    if (rough * rough > DR_BSDF_MIN_ALPHA)
+        d->roughness += (d_ax * (1.0 - s * s) + d_ay) * (2.0 * rough);
+    d->anisotropy += d_ax * (2.0 * s * (1.0 - bsdf_alpha(b)));
+}
+
+/* d ln D / d ax and d ay of the stretched lobe: ln D = ln ax + ln ay + 4 ln|H|
+ * - 2 ln q, d q / d ax = -Hx^2 ay/ax^2 + Hy^2/ay + ay Hz^2, so over one
+ * denominator
+ *   d lnD/d ax = (3 Hx^2 ay/ax - Hy^2 ax/ay - ax ay Hz^2) / (ax q),
+ *   d lnD/d ay = (3 Hy^2 ax/ay - Hx^2 ay/ax - ax ay Hz^2) / (ay q)
+ * (each ratio in [-1, 3]; their sum at ax = ay = a is the isotropic
+ * (2/a) (Hxy^2 - a^2 Hz^2) / q). */
+static inline void ggx_aniso_dlnD(double ax, double ay, const struct ggx_aniso *g, double *dax, double *day)
+{
+    const double tx = g->hx2 * (ay / ax), ty = g->hy2 * (ax / ay), tz = ax * ay * g->hz2;
+    *dax = (3.0 * tx - ty - tz) / g->q / ax;
+    *day = (3.0 * ty - tx - tz) / g->q / ay;
+}
+
+/* d_eval_params of the stretched lobe: as the isotropic one below with
+ *   dspec/dax = spec (dlnD/dax - (dL_o/dax + dL_i/dax) / (1 + L_o + L_i)),
+ * alike in ay (ggx_aniso_dlnD, smith_lambda_aniso), then d_alphas. */
+static void d_eval_params_aniso(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out,
+                                struct dr_d_bsdf *d)
+{
+    const double ay = bsdf_alpha(b), ax = alpha_x_of(b, ay);
+    const struct ggx_aniso g_h = ggx_aniso(ax, ay, wo, wi);
+    double dlo_x, dlo_y, dli_x, dli_y;
+    double lo = smith_lambda_aniso(ax, ay, wo, &dlo_x, &dlo_y), li = smith_lambda_aniso(ax, ay, wi, &dli_x, &dli_y);
+    double g = 1.0 + lo + li;
+    double spec = g_h.D / (4.0 * wo.z * g * wi.z);
+    double d_spec = d_eval_colour_metal(b, wo, wi, d_out, spec, g_h.H2, d);
+    if (d_spec == 0.0)
+        return;
+    double dlnD_x, dlnD_y;
+    ggx_aniso_dlnD(ax, ay, &g_h, &dlnD_x, &dlnD_y);
+    double k = d_spec * spec;
+    d_alphas(b, k * (dlnD_x - (dlo_x + dli_x) / g), k * (dlnD_y - (dlo_y + dli_y) / g), d);
+}
+
+static void d_eval_params(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out,
+                          struct dr_d_bsdf *d)
+{
+    if (b->anisotropy != 0.0) {
+        d_eval_params_aniso(b, wo, wi, d_out, d);
+        return;
+    }
+    /* Microfacet term spec = D G2 / (4 wo.z wi.z), shared by both lobes. */
+    double a = bsdf_alpha(b), a2 = a * a;
+    const struct ggx_half g_h = ggx_half(a2, wo, wi);
+    double tan2o = (wo.x * wo.x + wo.y * wo.y) / (wo.z * wo.z);
+    double tan2i = (wi.x * wi.x + wi.y * wi.y) / (wi.z * wi.z);
+    double xo = a2 * tan2o, xi = a2 * tan2i;
+    double so = sqrt(1.0 + xo), si = sqrt(1.0 + xi);
+    double lo = 0.5 * xo / (1.0 + so), li = 0.5 * xi / (1.0 + si);
+    double g = 1.0 + lo + li;
+    double spec = g_h.D / (4.0 * wo.z * g * wi.z);
+
+    double d_spec = d_eval_colour_metal(b, wo, wi, d_out, spec, g_h.H2, d);
     double rough = b->roughness;
-    double d_spec = (1.0 - m) * d_ks + m * d_km;
     if (d_spec == 0.0 || !(rough * rough > DR_BSDF_MIN_ALPHA))
         return;
     double dlnD = ggx_dlnD_dalpha(a, a2, &g_h);
@@ -556,6 +618,73 @@ static inline dr_vec3 grad_lambda(double a2, dr_vec3 w)
     return dr_v3(kxy * w.x, kxy * w.y, -k * (2.0 * x / w.z));
 }
 
+/* Gradient of ln D of the stretched lobe with respect to H: ln D = 4 ln|H| -
+ * 2 ln q + const, q = Hx^2 ay/ax + Hy^2 ax/ay + ax ay Hz^2, so
+ *   d lnD/dH = 4 H / |H|^2 - 4 (Hx ay/ax, Hy ax/ay, Hz ax ay) / q,
+ * combined over |H|^2 q as grad_ln_D does (component c: 4 H_c (q - |H|^2 k_c)
+ * / (|H|^2 q), k the factors above), where the differences are, with
+ * sxy = ax/ay - ay/ax = (ax - ay)(ax + ay) / (ax ay) >= 0:
+ *   q - |H|^2 ay/ax = Hy^2 sxy - Hz^2 ay (1 - ax^2) / ax,
+ *   q - |H|^2 ax/ay = -Hx^2 sxy - Hz^2 ax (1 - ay^2) / ay,
+ *   q - |H|^2 ax ay = Hx^2 ay (1 - ax^2) / ax + Hy^2 ax (1 - ay^2) / ay:
+ * no cancellation between large terms, and at ax = ay = a exactly the
+ * isotropic expressions. Each bracket over q is bounded as there
+ * (Hy^2 sxy <= Hy^2 ax/ay <= q, ...). */
+static inline dr_vec3 grad_ln_D_aniso(double ax, double ay, const struct ggx_aniso *g)
+{
+    const double sxy = (ax - ay) * (ax + ay) / (ax * ay);
+    const double zx = ay * (1.0 - ax * ax) / ax, zy = ax * (1.0 - ay * ay) / ay;
+    const double k = 4.0 / g->H2;
+    return dr_v3(k * g->H.x * ((g->hy2 * sxy - g->hz2 * zx) / g->q),
+                 k * g->H.y * ((-g->hx2 * sxy - g->hz2 * zy) / g->q),
+                 k * g->H.z * ((g->hx2 * zx + g->hy2 * zy) / g->q));
+}
+
+/* Gradient of smith_lambda_aniso in w, as grad_lambda with
+ * x = (ax^2 wx^2 + ay^2 wy^2) / wz^2: dx/dwx = 2 ax^2 wx / wz^2, alike in y,
+ * dx/dwz = -2 x / wz. */
+static inline dr_vec3 grad_lambda_aniso(double ax, double ay, dr_vec3 w)
+{
+    double iz2 = 1.0 / (w.z * w.z);
+    double ax2 = ax * ax, ay2 = ay * ay;
+    double x = (ax2 * w.x * w.x + ay2 * w.y * w.y) * iz2;
+    double k = 0.25 / sqrt(1.0 + x);
+    return dr_v3(k * (2.0 * ax2 * iz2) * w.x, k * (2.0 * ay2 * iz2) * w.y, -k * (2.0 * x / w.z));
+}
+
+/* The GGX terms the direction adjoints share, for the base's lobe whether
+ * isotropic (the very operations the isotropic code always did) or
+ * stretched: D, |H|^2, Lambda both ways and the gradients of ln D in H and
+ * of Lambda in wo (and in wi when with_wi). g_h: the isotropic terms (not
+ * filled when stretched). */
+struct ggx_dirs {
+    dr_vec3 H, dlnD_dH, dlo, dli;
+    double H2, D, lo, li;
+    struct ggx_half g_h;
+};
+
+static inline void ggx_dir_terms(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, bool with_wi, struct ggx_dirs *t)
+{
+    const double a = bsdf_alpha(b);
+    if (b->anisotropy == 0.0) {
+        const double a2 = a * a;
+        t->g_h = ggx_half(a2, wo, wi);
+        t->H = t->g_h.H, t->H2 = t->g_h.H2, t->D = t->g_h.D;
+        t->lo = smith_lambda(a2, wo), t->li = smith_lambda(a2, wi);
+        t->dlnD_dH = grad_ln_D(a2, t->g_h.H, t->g_h.hxy2, t->g_h.hz2, t->g_h.H2, t->g_h.q);
+        t->dlo = grad_lambda(a2, wo);
+        t->dli = with_wi ? grad_lambda(a2, wi) : dr_v3s(0.0);
+        return;
+    }
+    const double ax = alpha_x_of(b, a);
+    const struct ggx_aniso g = ggx_aniso(ax, a, wo, wi);
+    t->H = g.H, t->H2 = g.H2, t->D = g.D;
+    t->lo = smith_lambda_aniso(ax, a, wo, NULL, NULL), t->li = smith_lambda_aniso(ax, a, wi, NULL, NULL);
+    t->dlnD_dH = grad_ln_D_aniso(ax, a, &g);
+    t->dlo = grad_lambda_aniso(ax, a, wo);
+    t->dli = with_wi ? grad_lambda_aniso(ax, a, wi) : dr_v3s(0.0);
+}
+
 /* d s5 / d c for s5 = (1 - clamp(c, 0, 1))^5: the clamp is flat outside (0, 1). */
 static inline double ds5_dc(double c)
 {
@@ -581,13 +710,12 @@ static void d_eval_dirs(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3
 {
     const double m = b->metallic;
     const dr_vec3 base = b->base_color;
-    double a = bsdf_alpha(b), a2 = a * a;
-    const struct ggx_half g_h = ggx_half(a2, wo, wi);
-    double lo = smith_lambda(a2, wo), li = smith_lambda(a2, wi);
-    double g = 1.0 + lo + li;
-    double spec = g_h.D / (4.0 * wo.z * g * wi.z);
+    struct ggx_dirs t;
+    ggx_dir_terms(b, wo, wi, true, &t);
+    double g = 1.0 + t.lo + t.li;
+    double spec = t.D / (4.0 * wo.z * g * wi.z);
 
-    double c = 0.5 * sqrt(g_h.H2);
+    double c = 0.5 * sqrt(t.H2);
     double s5 = pow5(1.0 - dr_clamp(c, 0.0, 1.0));
     dr_vec3 f0 = dielectric_f0(b);
     double f90 = b->specular;
@@ -598,12 +726,12 @@ static void d_eval_dirs(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3
     double d_s5 = spec * ((1.0 - m) * dr_dot(d_out, dr_sub(dr_v3s(f90), f0)) +
                           m * dr_dot(d_out, dr_sub(dr_v3s(1.0), base)));
     double d_c = d_s5 * ds5_dc(c);
-    dr_vec3 d_H = dr_scale(grad_ln_D(a2, g_h.H, g_h.hxy2, g_h.hz2, g_h.H2, g_h.q), gs);
+    dr_vec3 d_H = dr_scale(t.dlnD_dH, gs);
     if (d_c != 0.0)
-        d_H = dr_madd(d_H, g_h.H, d_c * 0.25 / c);
+        d_H = dr_madd(d_H, t.H, d_c * 0.25 / c);
 
-    dr_vec3 go = dr_madd(d_H, grad_lambda(a2, wo), -gs / g);
-    dr_vec3 gi = dr_madd(d_H, grad_lambda(a2, wi), -gs / g);
+    dr_vec3 go = dr_madd(d_H, t.dlo, -gs / g);
+    dr_vec3 gi = dr_madd(d_H, t.dli, -gs / g);
     go.z -= gs / wo.z;
     gi.z -= gs / wi.z;
 
@@ -718,20 +846,29 @@ static void d_pdf_impl(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double d
     double p = specular_prob(b, wo.z);
     double cos_pdf = wi.z * DR_INV_PI;
     double a = bsdf_alpha(b), a2 = a * a;
-    const struct ggx_half g_h = ggx_half(a2, wo, wi);
-    double lo = smith_lambda(a2, wo);
-    double ps = g_h.D / (4.0 * wo.z) / (1.0 + lo);
+    struct ggx_dirs t;
+    ggx_dir_terms(b, wo, wi, false, &t);
+    double lo = t.lo;
+    double ps = t.D / (4.0 * wo.z) / (1.0 + lo);
     double d_cos_o = prob_moves ? d_specular_prob(b, wo.z, d_pdf * (ps - cos_pdf), d) : 0.0;
     double gs = d_pdf * p * ps;   /* d loss / d ln P_s */
-    if (d && gs != 0.0 && rough * rough > DR_BSDF_MIN_ALPHA) {
-        double dlnD = ggx_dlnD_dalpha(a, a2, &g_h);
+    if (d && gs != 0.0 && b->anisotropy != 0.0) {
+        /* stretched: d ln P_s / d ax = dlnD/dax - dL_o/dax / (1 + L_o), alike in ay */
+        const double ax = alpha_x_of(b, a);
+        const struct ggx_aniso g = ggx_aniso(ax, a, wo, wi);
+        double dlo_x, dlo_y, dlnD_x, dlnD_y;
+        smith_lambda_aniso(ax, a, wo, &dlo_x, &dlo_y);
+        ggx_aniso_dlnD(ax, a, &g, &dlnD_x, &dlnD_y);
+        d_alphas(b, gs * (dlnD_x - dlo_x / (1.0 + lo)), gs * (dlnD_y - dlo_y / (1.0 + lo)), d);
+    } else if (d && gs != 0.0 && rough * rough > DR_BSDF_MIN_ALPHA) {
+        double dlnD = ggx_dlnD_dalpha(a, a2, &t.g_h);
         double tan2o = (wo.x * wo.x + wo.y * wo.y) / (wo.z * wo.z);
         double dlo = 0.5 * a * tan2o / sqrt(1.0 + a2 * tan2o);
         d->roughness += gs * (dlnD - dlo / (1.0 + lo)) * (2.0 * rough);
     }
-    dr_vec3 d_H = dr_scale(grad_ln_D(a2, g_h.H, g_h.hxy2, g_h.hz2, g_h.H2, g_h.q), gs);
+    dr_vec3 d_H = dr_scale(t.dlnD_dH, gs);
     if (d_wo) {
-        dr_vec3 go = dr_madd(d_H, grad_lambda(a2, wo), -gs / (1.0 + lo));
+        dr_vec3 go = dr_madd(d_H, t.dlo, -gs / (1.0 + lo));
         go.z += d_cos_o - gs / wo.z;
         *d_wo = dr_add(*d_wo, go);
     }
@@ -1044,7 +1181,7 @@ void d_bsdf_eval_rough_ndf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_v
     }
     const double rough = b->roughness, m = b->metallic;
     if (!(parts & DR_BSDF_D_ROUGHNESS) || !(wo.z > COS_EPS) || !(wi.z > COS_EPS) || no_specular_lobe(b) ||
-        !(rough * rough > DR_BSDF_MIN_ALPHA))
+        !(rough * rough > DR_BSDF_MIN_ALPHA) || b->anisotropy != 0.0)   /* (isotropic only: bsdf.h) */
         return;
     double a = bsdf_alpha(b), a2 = a * a;
     const struct ggx_half g_h = ggx_half(a2, wo, wi);

@@ -58,6 +58,7 @@ static inline void add_base(struct dr_d_bsdf *d, const struct dr_d_bsdf *db)
     d->base_color = dr_add(d->base_color, db->base_color);
     d->metallic += db->metallic;
     d->roughness += db->roughness;
+    d->anisotropy += db->anisotropy;   /* (the base's lobe is the stretched one) */
 }
 
 dr_vec3 dr_coat_eval_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double *pdf)
