@@ -13,7 +13,8 @@
 #      scene do; turned half a turn, the same lobe: within the noise
 #   c. params lists anisotropyStrength of anisotropic materials only; fdcheck,
 #      prb and tape, of the strength, the roughness and the base colour of the
-#      anisotropic floor, resolved (more than 4 standard errors from 0);
+#      anisotropic floor agree with finite differences, the strength and the
+#      colour resolved (more than 4 standard errors from 0);
 #      attached sampling is refused naming the material; derivative sampling
 #      runs (the anisotropic roughness stays with the forward strategies)
 #   d. optimize moves anisotropyStrength towards a target's and writes it
@@ -101,8 +102,10 @@ for est in prb tape; do
     for smp in detached derivative; do
         run fdcheck "$tmp/fd.gltf" $P --res 24x24 --spp 16 --batches 8 --estimator $est --sampling $smp
         expect_rc 0 "fdcheck of the anisotropic floor ($est, $smp)"
-        awk '$1 ~ /anisotropyStrength$/ { a = ($2 > 0 ? $2 : -$2) > 4 * $4 } $1 ~ /roughnessFactor$/ \
-            { r = ($2 > 0 ? $2 : -$2) > 4 * $4 } END { exit !(a && r) }' "$tmp/out" ||
+        # (the strength and the colour stand out of their noise; the roughness's
+        # effect on this projection is within it, and agreeing is all it shows)
+        awk '$1 ~ /anisotropyStrength$/ { a = ($2 > 0 ? $2 : -$2) > 4 * $4 } $1 ~ /baseColorFactor\[0\]$/ \
+            { c = $2 > 4 * $4 } END { exit !(a && c) }' "$tmp/out" ||
             fail "the anisotropy's derivatives are not resolved ($est, $smp): $(cat "$tmp/out")"
     done
 done
@@ -111,17 +114,17 @@ run grad "$tmp/fd.gltf" --param /materials/5/pbrMetallicRoughness/roughnessFacto
 check_failed 2 "attached sampling|anisotropic|checker-floor|--sampling detached"
 
 # ---- d. optimize ----
-floor target.gltf '{"anisotropyStrength": 0.9}' 0.2
-floor start.gltf '{"anisotropyStrength": 0.3}' 0.2
+floor target.gltf '{"anisotropyStrength": 0.9, "anisotropyRotation": 1.5707963267948966}' 0.2
+floor start.gltf '{"anisotropyStrength": 0.3, "anisotropyRotation": 1.5707963267948966}' 0.2
 run render "$tmp/target.gltf" --res 32x32 --spp 64 -o target.exr
 expect_rc 0 "the target's render"
 mkdir -p "$tmp/fit"
 run optimize "$tmp/start.gltf" --target target.exr \
     --param /materials/checker-floor/extensions/KHR_materials_anisotropy/anisotropyStrength \
-    --iters 30 --spp 8 --lr 0.03 -o "$tmp/fit/fit.gltf" --out-dir "$tmp/fit"
+    --iters 30 --spp 8 --lr 0.05 -o "$tmp/fit/fit.gltf" --out-dir "$tmp/fit"
 expect_rc 0 "optimize of anisotropyStrength"
 json_check "$tmp/fit/fit.gltf" '
-d["materials"][5]["extensions"]["KHR_materials_anisotropy"]["anisotropyStrength"] > 0.5 and
+d["materials"][5]["extensions"]["KHR_materials_anisotropy"]["anisotropyStrength"] > 0.6 and
 d["materials"][5]["pbrMetallicRoughness"]["roughnessFactor"] == 0.2'
 ensure_gltf_validator
 validate_gltf "$tmp/fit/fit.gltf" || fail "the fitted scene does not validate"
