@@ -943,7 +943,9 @@ static void d_sample_vndf(dr_vec3 wo, double a, const struct vndf_tape *t, dr_ve
     *d_wo = dr_add(*d_wo, dr_v3(a * d_v.x, a * d_v.y, d_v.z));
 }
 
-/* Reverse mode of dr_bsdf_sample_dir. The cosine map (u1, u2) -> wi involves
+/* Reverse mode of dr_bsdf_sample_dir (isotropic only: bsdf.h; an anisotropic
+ * lobe's map is not differentiated, the estimators refuse attached sampling
+ * there). The cosine map (u1, u2) -> wi involves
  * neither the parameters nor wo: it contributes nothing. The specular map is
  * wi = 2 (wo.h) h - wo with h = sample_vndf(wo, alpha): the reflection gives
  *   d_h = 2 (wo.h) d_wi + 2 (h.d_wi) wo,   d_wo (direct) = 2 (h.d_wi) h - d_wi,
@@ -1020,6 +1022,11 @@ void d_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lo
  * (D dG/dalpha) are left to the forward sampler, with which the estimator
  * combines these densities by the balance heuristic (path_deriv.c); that is
  * also why a lobe need not cover the whole integrand, only its bulk.
+ *
+ * Anisotropy (KHR_materials_anisotropy): the vndf lobe is the forward map,
+ * so it follows the stretched lobe; the roughness pairs stay those of the
+ * isotropic lobe of alpha (a consistent density and map, but not made for a
+ * stretched lobe's d D; the caller does not ask for them there).
  *
  * Every lobe density is of wi, zero below the surface; samples a lobe maps
  * below the surface (or, for the microfacet lobes, with wo.h <= 0) are
@@ -1166,7 +1173,8 @@ bool dr_bsdf_deriv_sample(const struct dr_bsdf *b, dr_vec3 wo, unsigned params, 
     return *pdf > 0.0 && isfinite(*pdf);
 }
 
-/* The NDF part of the roughness derivative (see bsdf.h): with
+/* The NDF part of the roughness derivative (see bsdf.h; none for a stretched
+ * base lobe, whose D moves with two alphas): with
  * f_spec,c = [(1-m) F_d,c + m F_m,c] D G2 / (4 wo.z wi.z) = K_c spec,
  *   d f_c / d rough |_D = K_c spec d lnD/d alpha * 2 rough,
  *   d lnD / d alpha = (2/alpha) (Hxy^2 - alpha^2 Hz^2) / q   (as d_eval_params).

@@ -2,6 +2,9 @@
  *   f = (1-metallic) * [ (1 - F_o)(1 - F_i) base/pi + F_d * D G / (4 |wo.n| |wi.n|) ]
  *     +    metallic  * [ F_m * D G / (4 |wo.n| |wi.n|) ]
  * D: GGX / Trowbridge-Reitz with alpha = roughness^2 (floored at DR_BSDF_MIN_ALPHA),
+ * stretched along the local +x axis by KHR_materials_anisotropy (anisotropy
+ * below: Heitz 2014's anisotropic GGX, D, Smith Lambda and the visible-normal
+ * sampler with alpha_x, alpha_y),
  * G: Smith height-correlated masking-shadowing, F: Schlick.
  * Dielectric Fresnel follows KHR_materials_specular:
  *   F_d = f0 + (specular - f0) (1 - |wo.h|)^5, f0 = min(0.04 * specular_color, 1) * specular,
@@ -80,7 +83,9 @@ bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u
  * specular lobe's probability where that lobe is sharp (alpha <= 0.3,
  * roughness 0.55), falling to none where it is broad (alpha >= 0.45,
  * roughness 0.67: there the cosine's samples were the better ones on the
- * sample Box as metal); 0 for wo at or below the surface. */
+ * sample Box as metal); 0 for wo at or below the surface. A stretched lobe
+ * counts with the geometric mean sqrt(alpha_x alpha_y) (a heuristic: any
+ * share is unbiased). */
 double dr_bsdf_sky_share(const struct dr_bsdf *b, dr_vec3 wo);
 /* Probability of choosing a microfacet lobe (specular or coat) for this wo
  * (0 for a pure Lambertian, 1 for a BSDF with no diffuse part). */
@@ -137,7 +142,12 @@ struct dr_d_bsdf {
  * it. The specular and specular_color inputs are not differentiated. */
 
 /* Reverse mode of dr_bsdf_eval: d_out = d loss / d f (per channel). The
- * parameter part (*d) does not depend on whether d_wo, d_wi are requested. */
+ * parameter part (*d) does not depend on whether d_wo, d_wi are requested.
+ * With anisotropy, roughness flows through both alphas (d alpha_x / d rough =
+ * (1 - s^2) 2 rough, d alpha_y / d rough = 2 rough, none below the floor) and
+ * d->anisotropy receives d alpha_x / d s = 2 s (1 - alpha) (0 at s = 0; it
+ * stays live below the roughness floor). Likewise d_bsdf_pdf and
+ * d_bsdf_pdf_fixed_prob. */
 void d_bsdf_eval(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out, struct dr_d_bsdf *d,
                  dr_vec3 *d_wo, dr_vec3 *d_wi);
 /* Reverse mode of dr_bsdf_pdf, including the lobe-selection probability's
@@ -156,7 +166,11 @@ void d_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo, double d_p, struc
 /* Reverse mode of dr_bsdf_sample_dir: d_wi = d loss / d wi. The lobe and
  * (u1, u2) are constants. The diffuse map depends on nothing differentiable
  * (zero); the specular map depends on roughness and wo. Zero for
- * wo.z <= 0 (dr_bsdf_sample rejects the sample before mapping). */
+ * wo.z <= 0 (dr_bsdf_sample rejects the sample before mapping).
+ * Isotropic only: it differentiates the map of alpha_x = alpha_y = alpha
+ * whatever b->anisotropy (and adds nothing to d->anisotropy), which is not
+ * the map of a stretched lobe; the estimators refuse attached sampling on an
+ * anisotropic material. (A coat's own lobe is always isotropic.) */
 void d_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lobe, double u1, double u2,
                        dr_vec3 d_wi, struct dr_d_bsdf *d, dr_vec3 *d_wo);
 
@@ -194,7 +208,13 @@ enum dr_bsdf_dlobe {
 /* Mixture weights of the lobes for the parameters `params` (dr_bsdf_dparam
  * bits; each requested kind gets an equal share): sum 1, or all 0 if none. */
 void dr_bsdf_deriv_weights(const struct dr_bsdf *b, unsigned params, double w[DR_BSDF_DLOBE_COUNT]);
-/* Solid-angle density of wi under one lobe (0 below the surface). */
+/* Solid-angle density of wi under one lobe (0 below the surface). The VNDF
+ * lobe is the forward specular map's, stretched with the lobe (anisotropic
+ * visible normals). The roughness lobes (ROUGH_POS/NEG, and their maps) are
+ * those of the isotropic lobe of alpha whatever b->anisotropy: still a
+ * consistent density and map, but made for d D / d alpha of an isotropic
+ * lobe; the caller does not request DR_BSDF_D_ROUGHNESS for an anisotropic
+ * material. */
 double dr_bsdf_deriv_lobe_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, enum dr_bsdf_dlobe lobe);
 /* ... and under the mixture for `params`. */
 double dr_bsdf_deriv_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, unsigned params);
@@ -208,7 +228,10 @@ dr_vec3 dr_bsdf_deriv_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bs
  * the rest of d f / d rough is left to the forward sampler). parts:
  * DR_BSDF_D_ROUGHNESS adds the base's to d->roughness (under a coat, times
  * the coat's transmission both ways), DR_BSDF_D_COAT_ROUGHNESS the coat
- * lobe's to d->coat_roughness (times the coat's factor; 0 uncoated). */
+ * lobe's to d->coat_roughness (times the coat's factor; 0 uncoated).
+ * Isotropic only for the base: with b->anisotropy != 0 the base's part adds
+ * nothing (the caller never requests DR_BSDF_D_ROUGHNESS there); the coat's
+ * part (an isotropic lobe) is unaffected. */
 void d_bsdf_eval_rough_ndf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out, unsigned parts,
                            struct dr_d_bsdf *d);
 /* Chooses a lobe with u_lobe by the weights, maps (u1, u2), and returns the
