@@ -916,16 +916,24 @@ void d_bsdf_pdf_fixed_prob(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, doub
  *  - n3 has slope -p2s / n3, unbounded at the disk's rim (u1 -> 1) where
  *    n3 -> 0; at n3 == 0 (u1 = 1, or rounding) the clamp's zero slope.
  *  - max(0, nh.z) clamps only when h ends up horizontal, and then the
- *    reflection lies below the surface and the sample is rejected. */
-static void d_sample_vndf(dr_vec3 wo, double a, const struct vndf_tape *t, dr_vec3 d_h, dr_vec3 *d_wo,
-                          double *d_a)
+ *    reflection lies below the surface and the sample is rejected.
+ * The stretched lobe's map has ax in x and ay in y where a stands above
+ * (v = (ax wo.x, ay wo.y, wo.z), m = (ax nh.x, ay nh.y, ...)); its alpha
+ * adjoints go to *d_a (ax) and *d_ay. d_ay NULL: the isotropic map of
+ * a = ax = ay, its adjoint summed into *d_a in the very order the
+ * isotropic code always did. */
+static void d_sample_vndf(dr_vec3 wo, double a, double ay, const struct vndf_tape *t, dr_vec3 d_h, dr_vec3 *d_wo,
+                          double *d_a, double *d_ay)
 {
     double lm = dr_length(t->m);
     if (!(lm > 0.0))
         return;
     dr_vec3 d_m = dr_scale(dr_sub(d_h, dr_scale(t->h, dr_dot(t->h, d_h))), 1.0 / lm);
-    *d_a += t->nh.x * d_m.x + t->nh.y * d_m.y;
-    dr_vec3 d_nh = dr_v3(a * d_m.x, a * d_m.y, t->nh.z > 0.0 ? d_m.z : 0.0);
+    if (d_ay)
+        *d_a += t->nh.x * d_m.x, *d_ay += t->nh.y * d_m.y;
+    else
+        *d_a += t->nh.x * d_m.x + t->nh.y * d_m.y;
+    dr_vec3 d_nh = dr_v3(a * d_m.x, ay * d_m.y, t->nh.z > 0.0 ? d_m.z : 0.0);
     dr_vec3 d_t1 = dr_scale(d_nh, t->p1), d_t2 = dr_scale(d_nh, t->p2s), d_vh = dr_scale(d_nh, t->n3);
     double d_p2s = dr_dot(t->t2, d_nh);
     if (t->n3 > 0.0)
@@ -939,17 +947,21 @@ static void d_sample_vndf(dr_vec3 wo, double a, const struct vndf_tape *t, dr_ve
         d_vh.y -= d_e.x;
     }
     dr_vec3 d_v = dr_scale(dr_sub(d_vh, dr_scale(t->vh, dr_dot(t->vh, d_vh))), 1.0 / dr_length(t->v));
-    *d_a += wo.x * d_v.x + wo.y * d_v.y;
-    *d_wo = dr_add(*d_wo, dr_v3(a * d_v.x, a * d_v.y, d_v.z));
+    if (d_ay)
+        *d_a += wo.x * d_v.x, *d_ay += wo.y * d_v.y;
+    else
+        *d_a += wo.x * d_v.x + wo.y * d_v.y;
+    *d_wo = dr_add(*d_wo, dr_v3(a * d_v.x, ay * d_v.y, d_v.z));
 }
 
-/* Reverse mode of dr_bsdf_sample_dir (isotropic only: bsdf.h; an anisotropic
- * lobe's map is not differentiated, the estimators refuse attached sampling
- * there). The cosine map (u1, u2) -> wi involves
+/* Reverse mode of dr_bsdf_sample_dir. The cosine map (u1, u2) -> wi involves
  * neither the parameters nor wo: it contributes nothing. The specular map is
  * wi = 2 (wo.h) h - wo with h = sample_vndf(wo, alpha): the reflection gives
  *   d_h = 2 (wo.h) d_wi + 2 (h.d_wi) wo,   d_wo (direct) = 2 (h.d_wi) h - d_wi,
- * then d_sample_vndf; d alpha / d roughness = 2 roughness above the floor. */
+ * then d_sample_vndf; d alpha / d roughness = 2 roughness above the floor.
+ * A stretched lobe's map (alpha_x, alpha_y) takes its two alpha adjoints to
+ * roughness and anisotropy by d_alphas (the anisotropy's also below the
+ * roughness floor). */
 void d_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lobe, double u1, double u2,
                        dr_vec3 d_wi, struct dr_d_bsdf *d, dr_vec3 *d_wo)
 {
@@ -960,20 +972,23 @@ void d_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lo
     if (lobe != DR_BSDF_LOBE_SPECULAR || !(wo.z > COS_EPS))
         return;
     const double rough = b->roughness;
+    const bool aniso = b->anisotropy != 0.0;
     const bool at_floor = !(rough * rough > DR_BSDF_MIN_ALPHA);
-    if (!d_wo && (!d || at_floor))
+    if (!d_wo && (!d || (at_floor && !aniso)))
         return;
-    double a = bsdf_alpha(b);
+    double a = bsdf_alpha(b), ax = aniso ? alpha_x_of(b, a) : a;
     struct vndf_tape t;
-    dr_vec3 h = sample_vndf(wo, a, a, u1, u2, &t);
+    dr_vec3 h = sample_vndf(wo, ax, a, u1, u2, &t);
     double oh = dr_dot(wo, h), hd = dr_dot(h, d_wi);
     dr_vec3 d_h = dr_add(dr_scale(d_wi, 2.0 * oh), dr_scale(wo, 2.0 * hd));
     dr_vec3 g_wo = dr_sub(dr_scale(h, 2.0 * hd), d_wi);
-    double d_a = 0.0;
-    d_sample_vndf(wo, a, &t, d_h, &g_wo, &d_a);
+    double d_a = 0.0, d_ay = 0.0;
+    d_sample_vndf(wo, ax, a, &t, d_h, &g_wo, &d_a, aniso ? &d_ay : NULL);
     if (d_wo)
         *d_wo = dr_add(*d_wo, g_wo);
-    if (d && !at_floor)
+    if (d && aniso)
+        d_alphas(b, d_a, d_ay, d);
+    else if (d && !at_floor)
         d->roughness += d_a * (2.0 * rough);
 }
 

@@ -167,10 +167,9 @@ void d_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo, double d_p, struc
  * (u1, u2) are constants. The diffuse map depends on nothing differentiable
  * (zero); the specular map depends on roughness and wo. Zero for
  * wo.z <= 0 (dr_bsdf_sample rejects the sample before mapping).
- * Isotropic only: it differentiates the map of alpha_x = alpha_y = alpha
- * whatever b->anisotropy (and adds nothing to d->anisotropy), which is not
- * the map of a stretched lobe; the estimators refuse attached sampling on an
- * anisotropic material. (A coat's own lobe is always isotropic.) */
+ * With anisotropy, the stretched lobe's map: roughness and anisotropy as in
+ * d_bsdf_eval (the estimators nevertheless refuse attached sampling on an
+ * anisotropic material). */
 void d_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lobe, double u1, double u2,
                        dr_vec3 d_wi, struct dr_d_bsdf *d, dr_vec3 *d_wo);
 

@@ -928,9 +928,9 @@ static void test_hard_cases(void)
  * every input, anisotropy included, over s = 0 (one-sided: d alpha_x / d s
  * = 2 s (1 - alpha) vanishes there, and the adjoint must be exactly 0),
  * 0.3, 0.8, 1 and random, roughness from rough to below the alpha floor
- * (where alpha_x still moves with s), a clear coat on every fourth. The
- * sampling map's adjoint is isotropic only (bsdf.h: the estimators refuse
- * attached sampling on an anisotropic material), so it is not checked here. */
+ * (where alpha_x still moves with s), a clear coat on every fourth; and
+ * d_bsdf_sample_dir of the stretched visible-normal map (both lobes, the
+ * coat's too). */
 static void test_fd_aniso(void)
 {
     static const double ar[] = {0.7, 0.3, 0.05, 0.01, 0.001, 0.0002};
@@ -949,6 +949,7 @@ static void test_fd_aniso(void)
                     check_fd(&fn_pdf, &c);
                     check_fd(&fn_pdf_fixed, &c);
                     check_fd(&fn_prob, &c);
+                    check_fd(&fn_sample, &c);
                     if (c.b.anisotropy == 0.0) {
                         double g[NX];
                         fn_eval.adjoint(&c, g);
@@ -956,6 +957,8 @@ static void test_fd_aniso(void)
                         fn_pdf.adjoint(&c, g);
                         z = z && g[X_A] == 0.0;
                         fn_pdf_fixed.adjoint(&c, g);
+                        z = z && g[X_A] == 0.0;
+                        fn_sample.adjoint(&c, g);
                         z = z && g[X_A] == 0.0;
                         zero_checks++;
                         CHECK(z, "s = 0: the anisotropy adjoint must be exactly 0");
@@ -975,6 +978,9 @@ static void test_fd_aniso(void)
     CHECK(fabs(g[X_A]) > 1e-3 * fabs(loss_eval(&c)), "anisotropy adjoint of f vanishes: %g", g[X_A]);
     fn_pdf.adjoint(&c, g);
     CHECK(fabs(g[X_A]) > 1e-3 * fabs(loss_pdf(&c)), "anisotropy adjoint of the pdf vanishes: %g", g[X_A]);
+    c.lobe = DR_BSDF_LOBE_SPECULAR, c.u1 = 0.4, c.u2 = 0.15;
+    fn_sample.adjoint(&c, g);
+    CHECK(fabs(g[X_A]) > 1e-3, "anisotropy adjoint of the sampling map vanishes: %g", g[X_A]);
 }
 
 /* Hard cases of the stretched lobe: grazing, normal, tiny roughness, s up
