@@ -9,6 +9,7 @@
 #include <immintrin.h>   /* gather_vertex's loads */
 #endif
 
+#include "anisotropy.h"
 #include "bsdf.h"
 #include "cdf.h"
 #include "env8.h"
@@ -159,6 +160,8 @@ struct lanes {
     bool scalar_emission[DR_SIMD_W];  /* dr_emission reads the emissive texture */
     bool ltextured[DR_SIMD_W];        /* the light's emissive texture is dr_emission's */
     bool normal_mapped[DR_SIMD_W];    /* the material has a normal map (eight-lane or scalar) */
+    bool anisotropic[DR_SIMD_W], any_anisotropic;   /* the material is (dr_material.anisotropic) */
+    bool no_direction[DR_SIMD_W];     /* ... and the surface gives no direction here (dr_anisotropy_frame) */
     bool may_emit[DR_SIMD_W];         /* the material's factor x strength is not black */
     bool any_textured, any_ltextured;
     struct dr_hit hit[DR_SIMD_W];   /* the hits of textured lanes, as dr_hit_compute fills them */
@@ -285,6 +288,7 @@ static void coat_eval(const struct dr_scene *s, struct dr_path8 *g, const struct
     g->coat_roughness = dr_f8_sel(g->coat_on, r, zero);
     g->coat_lobe = (struct dr_lobe8){.base = {zero, zero, zero}, .metallic = zero, .specular = dr_f8s(1.0),
                                      .alpha = bsdf_alpha(g->coat_roughness)};
+    g->coat_lobe.alpha_x = g->coat_lobe.alpha;   /* (isotropic) */
     g->coat_lobe.f0 = dielectric_f0((dr_v3x8){dr_f8s(1.0), dr_f8s(1.0), dr_f8s(1.0)}, g->coat_lobe.specular);
 }
 
@@ -310,6 +314,7 @@ static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const st
     if (colour)   /* times COLOR_0 (scalar_material lanes: dr_material_eval's, below) */
         b->base = dr_v3x8_mul(b->base, *colour);
     double lane_coat[DR_SIMD_W], lane_coat_r[DR_SIMD_W];
+    dr_f8 aniso = dr_f8s(0.0);
     for (int i = 0; L->any_textured && i < g->n; i++)
         if (L->scalar_material[i] && !end[i]) {   /* textures (and the vertex colour): dr_material_eval itself */
             struct dr_bsdf lb;
@@ -318,18 +323,27 @@ static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const st
             b->metallic[i] = lb.metallic;
             r[i] = lb.roughness;
             lane_coat[i] = lb.coat, lane_coat_r[i] = lb.coat_roughness;
+            aniso[i] = L->no_direction[i] ? 0.0 : lb.anisotropy;   /* (stage_material's fallback) */
         }
+    g->anisotropy = aniso;
     g->roughness = r;   /* (a differentiated vertex's dr_bsdf: dr_path8_shade) */
     g->coated = L->any_coated;
     if (g->coated)
         coat_eval(s, g, L, end, uv, lane_coat, lane_coat_r);
     g->lambert = dr_f8_eq(b->metallic, dr_f8s(0.0)) & dr_f8_eq(b->specular, dr_f8s(0.0));
     g->glossy = dr_m8_any(~g->lambert);
+    b->any_aniso = false;
+    b->aniso = (dr_m8){0};
     if (!g->glossy) {   /* (spec_p is 0: alpha is read, not used, by bsdf_sample and sky_share) */
-        b->alpha = dr_f8s(1.0);
+        b->alpha = b->alpha_x = dr_f8s(1.0);
         return;
     }
-    b->alpha = bsdf_alpha(r);
+    b->alpha = b->alpha_x = bsdf_alpha(r);
+    if (L->any_anisotropic) {   /* bsdf.c's alpha_x_of on the stretched lanes */
+        b->aniso = ~dr_f8_eq(aniso, dr_f8s(0.0));
+        b->any_aniso = dr_m8_any(b->aniso);
+        b->alpha_x = dr_f8_sel(b->aniso, b->alpha + (1.0 - b->alpha) * (aniso * aniso), b->alpha);
+    }
     b->f0 = dielectric_f0(gather3(mat, offsetof(struct dr_material, specular_color)), b->specular);
 }
 
@@ -351,6 +365,29 @@ DR_SIMD_INLINE dr_f8 specular_prob(const struct dr_lobe8 *b, dr_m8 lambert, dr_f
     return dr_f8_sel(lambert, dr_f8s(0.0), p);
 }
 
+/* bsdf.c's smith_lambda_aniso and ggx_aniso, the same operations: the
+ * stretched lobe's D, |H|^2 and Lambdas, put on the lanes of b->aniso. */
+DR_SIMD_INLINE dr_f8 smith_lambda_aniso(dr_f8 ax, dr_f8 ay, dr_v3x8 w)
+{
+    dr_f8 iz2 = 1.0 / (w.z * w.z);
+    dr_f8 tx = w.x * w.x * iz2, ty = w.y * w.y * iz2;
+    dr_f8 x = ax * ax * tx + ay * ay * ty, sq = dr_f8_sqrt(1.0 + x);
+    return 0.5 * x / (1.0 + sq);
+}
+DR_SIMD_INLINE void stretched_lanes(const struct dr_lobe8 *b, dr_v3x8 H, dr_v3x8 wo, dr_v3x8 wi, dr_f8 *D, dr_f8 *H2,
+                                    dr_f8 *lo, dr_f8 *li)
+{
+    const dr_f8 ax = b->alpha_x, ay = b->alpha;
+    dr_f8 hx2 = H.x * H.x, hy2 = H.y * H.y, hz2 = H.z * H.z;
+    dr_f8 h2 = hx2 + hy2 + hz2;
+    dr_f8 q = hx2 * (ay / ax) + hy2 * (ax / ay) + ax * ay * hz2;
+    dr_f8 r = h2 / q;
+    *D = dr_f8_sel(b->aniso, ax * ay * r * r * DR_INV_PI, *D);
+    *H2 = dr_f8_sel(b->aniso, h2, *H2);
+    *lo = dr_f8_sel(b->aniso, smith_lambda_aniso(ax, ay, wo), *lo);
+    *li = dr_f8_sel(b->aniso, smith_lambda_aniso(ax, ay, wi), *li);
+}
+
 /* eval_pdf_glossy of layer b */
 DR_SIMD_INLINE dr_v3x8 eval_pdf_glossy(const struct dr_lobe8 *b, dr_v3x8 wo, dr_v3x8 wi, dr_f8 p, dr_f8 *pdf)
 {
@@ -363,6 +400,8 @@ DR_SIMD_INLINE dr_v3x8 eval_pdf_glossy(const struct dr_lobe8 *b, dr_v3x8 wo, dr_
     dr_f8 r = H2 / q;
     dr_f8 D = a2 * r * r * DR_INV_PI;
     dr_f8 lo = smith_lambda(a2, wo), li = smith_lambda(a2, wi);
+    if (b->any_aniso)
+        stretched_lanes(b, H, wo, wi, &D, &H2, &lo, &li);
     dr_f8 dq = D / (4.0 * wo.z);
     dr_f8 pdf_spec = dq / (1.0 + lo);
     dr_f8 spec = dq / ((1.0 + lo + li) * wi.z);
@@ -425,12 +464,12 @@ DR_SIMD_INLINE dr_v3x8 eval_pdf_above(const struct dr_path8 *g, dr_v3x8 wo, dr_v
     return dr_v3x8_sel(g->coat_on, f, fb);
 }
 
-/* sample_specular_dir: GGX visible normals (sample_vndf) of roughness a,
+/* sample_specular_dir: GGX visible normals (sample_vndf) of alphas (ax, ay),
  * reflected; the azimuth's cosine and sine from dr_f8_sincos_turn, as in
  * the scalar map. */
-DR_SIMD_INLINE dr_v3x8 sample_specular_dir(dr_f8 a, dr_v3x8 wo, dr_f8 u1, dr_f8 u2)
+DR_SIMD_INLINE dr_v3x8 sample_specular_dir(dr_f8 ax, dr_f8 ay, dr_v3x8 wo, dr_f8 u1, dr_f8 u2)
 {
-    dr_v3x8 vh = normalize((dr_v3x8){a * wo.x, a * wo.y, wo.z});
+    dr_v3x8 vh = normalize((dr_v3x8){ax * wo.x, ay * wo.y, wo.z});
     dr_f8 lensq = vh.x * vh.x + vh.y * vh.y;
     dr_m8 tilted = dr_f8_gt(lensq, dr_f8s(0.0));
     dr_f8 k = 1.0 / dr_f8_sqrt(dr_f8_sel(tilted, lensq, dr_f8s(1.0)));
@@ -445,7 +484,7 @@ DR_SIMD_INLINE dr_v3x8 sample_specular_dir(dr_f8 a, dr_v3x8 wo, dr_f8 u1, dr_f8 
     dr_f8 p2s = (1.0 - s) * c + s * p2;
     dr_f8 n3 = dr_f8_sqrt(dr_f8_max(dr_f8s(0.0), 1.0 - p1 * p1 - p2s * p2s));
     dr_v3x8 nh = dr_v3x8_add(dr_v3x8_add(dr_v3x8_scale(t1, p1), dr_v3x8_scale(t2, p2s)), dr_v3x8_scale(vh, n3));
-    dr_v3x8 h = normalize((dr_v3x8){a * nh.x, a * nh.y, dr_f8_max(dr_f8s(0.0), nh.z)});
+    dr_v3x8 h = normalize((dr_v3x8){ax * nh.x, ay * nh.y, dr_f8_max(dr_f8s(0.0), nh.z)});
     return dr_v3x8_sub(dr_v3x8_scale(h, 2.0 * dr_v3x8_dot(wo, h)), wo);
 }
 
@@ -468,7 +507,9 @@ DR_SIMD_INLINE dr_m8 bsdf_sample(const struct dr_path8 *g, dr_m8 on, dr_f8 u_lob
     dr_m8 specular = ok & ~coat & dr_f8_lt(u_lobe, g->spec_p);
     if (dr_m8_any(specular | coat))
         *wi = dr_v3x8_sel(specular | coat,
-                          sample_specular_dir(dr_f8_sel(coat, g->coat_lobe.alpha, g->b.alpha), g->wo, u1, u2), *wi);
+                          sample_specular_dir(dr_f8_sel(coat, g->coat_lobe.alpha, g->b.alpha_x),
+                                              dr_f8_sel(coat, g->coat_lobe.alpha, g->b.alpha), g->wo, u1, u2),
+                          *wi);
     ok &= dr_f8_gt(wi->z, dr_f8s(COS_EPS));
     *f = eval_pdf_above(g, g->wo, *wi, pdf);
     return ok & dr_f8_gt(*pdf, dr_f8s(0.0)) & dr_f8_lt(*pdf, dr_f8s(INFINITY));
@@ -489,7 +530,7 @@ static bool eight_lane_run(const struct dr_scene *s, const struct dr_path_opts *
     const unsigned allowed = DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_ENV_CONSTANT | DR_FX_ENV_MAP |
                              DR_FX_SHADING_NORMALS | DR_FX_SINGLE_SIDED | DR_FX_SPECULAR | DR_FX_TEXTURES |
                              DR_FX_VERTEX_COLORS | DR_FX_NORMAL_MAPS | DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND |
-                             DR_FX_THIN_TRANSMISSION | DR_FX_CLEARCOAT;
+                             DR_FX_THIN_TRANSMISSION | DR_FX_CLEARCOAT | DR_FX_ANISOTROPY;
     const unsigned media_fx = DR_FX_MEDIA | DR_FX_HETEROGENEOUS_MEDIA | DR_FX_DIELECTRIC_BOUNDARIES;
     const unsigned media_stages = DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC;
     struct dr_light_tables t;
@@ -550,7 +591,7 @@ bool dr_path8_hit(const struct dr_scene *s, const struct dr_path_opts *opts, int
 static bool reads_textures(const struct dr_material *m)
 {
     return m->base_color_tex.texture >= 0 || m->metallic_roughness_tex.texture >= 0 || m->emissive_tex.texture >= 0 ||
-           m->normal_tex.texture >= 0 || dr_material_coat_tex(m, 0) || dr_material_coat_tex(m, 1);
+           m->normal_tex.texture >= 0 || dr_material_coat_tex(m, 0) || dr_material_coat_tex(m, 1) || m->anisotropic;
 }
 
 /* How the stages read material m's textures. The base colour, metallic-
@@ -560,7 +601,9 @@ static bool reads_textures(const struct dr_material *m)
  * The rest (images of more channels, such as a five-channel EXR) go through
  * the scalar functions lane by lane, which read a scalar hit:
  * dr_material_eval for all BSDF textures when one is not accepted,
- * dr_emission for an emissive texture that is not. A normal map
+ * dr_emission for an emissive texture that is not. An anisotropic material
+ * (its strength's texture, and its frame from the scalar hit's tangents:
+ * dr_anisotropy_frame) is read lane by lane with dr_material_eval. A normal map
  * texture8.h accepts is applied eight lanes at a time (normal_map8) where
  * the lane needs no scalar hit for the rest; otherwise dr_normal_map_apply
  * applies it to the scalar hit. */
@@ -579,7 +622,8 @@ static void mat_textures(const struct dr_scene *s, const struct dr_material *m, 
     const struct dr_texref *coat[2] = {dr_material_coat_tex(m, 0), dr_material_coat_tex(m, 1)};
     t->scalar_material = (b->texture >= 0 && !dr_texref8_accepts(s, b)) ||
                          (mr->texture >= 0 && !dr_texref8_accepts(s, mr)) ||
-                         (coat[0] && !dr_texref8_accepts(s, coat[0])) || (coat[1] && !dr_texref8_accepts(s, coat[1]));
+                         (coat[0] && !dr_texref8_accepts(s, coat[0])) || (coat[1] && !dr_texref8_accepts(s, coat[1])) ||
+                         m->anisotropic;
     if (!t->scalar_material) {
         t->base = b->texture >= 0 ? b : NULL;
         t->mr = mr->texture >= 0 ? mr : NULL;
@@ -1049,7 +1093,10 @@ DR_SIMD_INLINE dr_f8 sharpness(dr_f8 alpha)
 }
 DR_SIMD_INLINE dr_f8 sky_share(const struct dr_path8 *g)
 {
-    dr_f8 s = g->spec_p * sharpness(g->b.alpha);
+    dr_f8 a = g->b.alpha;
+    if (g->b.any_aniso)   /* a stretched lobe's sharpness: the geometric mean of its alphas */
+        a = dr_f8_sel(g->b.aniso, dr_f8_sqrt(g->b.alpha_x * g->b.alpha), a);
+    dr_f8 s = g->spec_p * sharpness(a);
     if (g->coated)   /* dr_coat_sky_share: the coat lobe's share (its specular_prob is 1) and the base's */
         s = dr_f8_sel(g->coat_on, g->coat_p * sharpness(g->coat_lobe.alpha) + (1.0 - g->coat_p) * s, s);
     return dr_f8_sel(dr_f8_gt(g->wo_z, dr_f8s(COS_EPS)), s, dr_f8s(0.0));
@@ -1312,11 +1359,12 @@ static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, str
 {
     const struct dr_mesh *m = &s->mesh;
     L->any_textured = L->any_ltextured = L->any_tex8 = L->any_ltex8 = L->any_normal8 = false;
-    L->any_coat_tex8 = L->any_coated = false;
+    L->any_coat_tex8 = L->any_coated = L->any_anisotropic = false;
     const struct dr_material *prev_mat = NULL;
     struct mat_textures t = {0};
     bool may_emit = false;
-    const bool textures = s->n_textures > 0;   /* (else only textured[] is read: all false) */
+    /* (else only textured[] is read: all false; anisotropy reads the scalar material) */
+    const bool textures = s->n_textures > 0 || (s->effects & DR_FX_ANISOTROPY);
     for (int i = 0; i < DR_SIMD_W; i++) {
         int64_t tri = in->tri[i];
         L->tri[i] = tri;
@@ -1344,6 +1392,9 @@ static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, str
         }
         L->coated[i] = mat->coated;
         L->any_coated |= mat->coated;
+        L->anisotropic[i] = mat->anisotropic;
+        L->no_direction[i] = false;
+        L->any_anisotropic |= mat->anisotropic;
         L->double_sided[i] = mat->double_sided;
         L->has_normals[i] = m->flags[tri] & DR_TRI_HAS_NORMALS;
         L->dim[i] = vertex_dim(in->depth[i]);
@@ -1657,6 +1708,13 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
             set_lane(&g->fn, i,
                      dr_shading_normal_valid(dr_v3x8_get(&g->ng, i), dr_neg(dr_v3x8_get(&d, i)), dr_v3x8_get(&g->fn, i)));
     frame_from_normal(g->fn, &g->fs, &g->ft);
+    for (int i = 0; L.any_anisotropic && i < n; i++)   /* ... whose first axis an anisotropy turns (anisotropy.h) */
+        if (L.anisotropic[i] && !end[i]) {
+            dr_frame f;
+            L.no_direction[i] = !dr_anisotropy_frame(s, &L.hit[i], dr_v3x8_get(&g->fn, i), &f);
+            set_lane(&g->fs, i, f.s);
+            set_lane(&g->ft, i, f.t);
+        }
     g->wo = to_local(g->fs, g->ft, g->fn, dr_v3x8_neg(d));
     g->wo_z = g->wo.z;
     dr_v3x8 colour;
@@ -1706,7 +1764,8 @@ static void differentiated_vertex(const struct dr_scene *s, const struct dr_path
                                .roughness = g->roughness[i], .specular = g->b.specular[i],
                                .specular_color = m->specular_color, .coated = m->coated,
                                .coat = m->coated ? g->coat[i] : m->coat,
-                               .coat_roughness = m->coated ? g->coat_roughness[i] : m->coat_roughness};
+                               .coat_roughness = m->coated ? g->coat_roughness[i] : m->coat_roughness,
+                               .anisotropy = g->anisotropy[i]};
     v->nee_wi = dr_v3x8_get(&g->nee_wi, i);
     v->nee_bsdf_pdf = g->bsdf_pdf[i];
 }

@@ -86,11 +86,16 @@ struct dr_path8_ahead {
 /* One GGX layer of the glTF BSDF, eight lanes of the dr_bsdf fields bsdf.c
  * reads, with what it derives from them (bsdf_alpha, dielectric_f0): the
  * base, or a clear coat's lobe (bsdf_coat.c's coat_lobe). alpha and f0 are
- * set only where the layer has a specular lobe. */
+ * set only where the layer has a specular lobe. An anisotropic lane
+ * (KHR_materials_anisotropy, aniso) stretches the lobe along the frame's
+ * first axis: alpha_x = alpha + (1 - alpha) s^2 there, alpha elsewhere
+ * (bsdf.c's alpha_x_of); any_aniso says whether some lane is. */
 struct dr_lobe8 {
     dr_v3x8 base;                 /* base colour */
     dr_v3x8 f0;                   /* the dielectric f0 */
-    dr_f8 metallic, specular, alpha;
+    dr_f8 metallic, specular, alpha, alpha_x;
+    dr_m8 aniso;
+    bool any_aniso;
 };
 
 /* What the two halves of a group's vertex share, lane by lane. */
@@ -136,6 +141,7 @@ struct dr_path8 {
     dr_m8 lambert;                /* lanes without one */
     dr_v3x8 wo;                   /* wo local */
     dr_f8 spec_p, lobe_u;         /* the base's specular_prob at wo; the lobe's random number */
+    dr_f8 anisotropy;             /* the base's anisotropy strength (dr_bsdf.anisotropy; 0 where isotropic) */
     /* the clear coat (bsdf_coat.c) where some lane has one (coated) */
     bool coated;
     dr_m8 coat_on;                /* lanes with a coat (dr_bsdf.coated) */

@@ -888,6 +888,51 @@ static struct dr_scene *coated_box(void)
     return s;
 }
 
+/* Anisotropic surfaces (KHR_materials_anisotropy) of every kind the
+ * stages meet: a rough metal floor turned by its rotation, a glossy
+ * dielectric block stretched along its tangents, a tile whose direction and
+ * strength come from an eight-bit texture (one texel of no direction: the
+ * isotropic fallback), a coat over an anisotropic metal, an anisotropic
+ * Lambertian (nothing to stretch), and a panel without UVs (no tangent
+ * frame: isotropic), under a lamp and a constant sky. */
+static struct dr_scene *anisotropic_box(void)
+{
+    struct sb b;
+    sb_init(&b);
+    sb_open_box(&b, 1.6, sb_material(&b, sb_diffuse(dr_v3(0.8, 0.7, 0.6))));
+    struct dr_material floor = sb_diffuse(dr_v3(0.9, 0.8, 0.7));
+    floor.metallic = 1.0, floor.roughness = 0.25;
+    floor.anisotropic = true, floor.anisotropy_strength = 0.8, floor.anisotropy_rotation = 0.6;
+    sb_quad(&b, dr_v3(-0.95, 0.005, 0.95), dr_v3(1.9, 0, 0), dr_v3(0, 0, -1.9), sb_material(&b, floor));
+    struct dr_material block = glossy_blue();
+    block.anisotropic = true, block.anisotropy_strength = 1.0;
+    sb_box(&b, dr_v3(-0.6, 0.0, -0.6), dr_v3(-0.1, 0.7, -0.1), sb_material(&b, block));
+    static const float dir_px[2 * 2 * 3] = {1.0f, 0.5f, 1.0f, 0.5f, 0.5f, 0.9f,   /* (0.5, 0.5): no direction */
+                                            0.2f, 0.9f, 0.6f, 0.8f, 0.1f, 0.3f};
+    struct dr_material tile = sb_diffuse(dr_v3(0.7, 0.8, 0.9));
+    tile.metallic = 1.0, tile.roughness = 0.15;
+    tile.anisotropic = true, tile.anisotropy_strength = 0.9, tile.anisotropy_rotation = -1.1;
+    tile.anisotropy_tex.texture = sb_texture(&b, sb_image8(2, 2, 3, dir_px));
+    sb_quad(&b, dr_v3(0.2, 0.1, -0.8), dr_v3(0.6, 0, 0), dr_v3(0, 0.9, 0.2), sb_material(&b, tile));
+    struct dr_material coated = sb_diffuse(dr_v3(0.9, 0.6, 0.3));
+    coated.metallic = 1.0, coated.roughness = 0.4;
+    coated.coated = true, coated.coat = 0.6, coated.coat_roughness = 0.1;
+    coated.anisotropic = true, coated.anisotropy_strength = 0.7, coated.anisotropy_rotation = 2.0;
+    sb_box(&b, dr_v3(0.2, 0.0, 0.1), dr_v3(0.6, 0.4, 0.5), sb_material(&b, coated));
+    struct dr_material plain = sb_diffuse(dr_v3(0.3, 0.8, 0.3));
+    plain.anisotropic = true, plain.anisotropy_strength = 0.5;   /* Lambertian: nothing to stretch */
+    sb_quad(&b, dr_v3(-0.95, 0.2, -0.4), dr_v3(0, 0, 0.6), dr_v3(0, 0.6, 0), sb_material(&b, plain));
+    struct dr_material bare = glossy_blue();
+    bare.anisotropic = true, bare.anisotropy_strength = 1.0;
+    sb_quad(&b, dr_v3(0.95, 0.2, 0.4), dr_v3(0, 0, -0.6), dr_v3(0, 0.6, 0), sb_material(&b, bare));
+    struct dr_mesh *m = &b.s->mesh;
+    m->flags[m->n_triangles - 1] &= (uint8_t)~DR_TRI_HAS_UVS;   /* (no UVs: no tangent frame) */
+    m->flags[m->n_triangles - 2] &= (uint8_t)~DR_TRI_HAS_UVS;
+    sb_quad(&b, dr_v3(-0.3, 1.5, -0.3), dr_v3(0.6, 0, 0), dr_v3(0, 0, 0.6), sb_material(&b, warm_lamp()));
+    sb_environment(&b, dr_v3(0.9, 1.0, 1.1));
+    return sb_finish(&b);
+}
+
 /* A lamp of two large triangles whose emissive texture is black but for
  * two spots (the way assets paint their glowing parts): the light table
  * samples its triangles part by part (lights.h, dr_light_part_point), the
@@ -1137,6 +1182,8 @@ static void test_wavefront_matches_one_path(void)
                       "spotted lamp box, eight-bit texture");
     exact_with_groups(coated_box(), DR_FX_CLEARCOAT | DR_FX_TEXTURES | DR_FX_ENV_CONSTANT | DR_FX_AREA_LIGHTS,
                       sb_camera(dr_v3(0.2, 2.2, 2.0), dr_v3(0, 0.3, 0), 70.0), "coated box");
+    exact_with_groups(anisotropic_box(), DR_FX_ANISOTROPY | DR_FX_CLEARCOAT | DR_FX_TEXTURES | DR_FX_ENV_CONSTANT,
+                      sb_camera(dr_v3(0.2, 2.2, 2.0), dr_v3(0, 0.3, 0), 70.0), "anisotropic box");
     s = coloured_box();
     CHECK(!dr_wave_prefetches(s), "the coloured box is shaded without prefetching");
     exact_with_groups(s, DR_FX_VERTEX_COLORS, inside, "coloured box");
