@@ -212,5 +212,11 @@ const char *dr_unsafe_reader(const char *format_name)
     if (format_name && strcmp(format_name, "ico") == 0)   /* (ico() above refuses most before they open) */
         return "ICO icon (OpenImageIO 2.4's ICO reader writes past its pixel buffer when an icon's bitmap header "
                "disagrees with its directory entry, so drender reads none); convert it to PNG";
+    if (format_name && strcmp(format_name, "null") == 0)   /* (OpenImageIO's test reader) */
+        return "no image: OpenImageIO's null reader makes a black 1024x1024 image of any file named .null, "
+               "whatever it holds (or of the size its name asks for)";
+    if (format_name && strcmp(format_name, "ffmpeg") == 0)
+        return "a video file (OpenImageIO's ffmpeg reader: drender reads textures and environments from image "
+               "files, and hands no video container to libavformat's parsers); save the frame as PNG or EXR";
     return NULL;
 }

@@ -28,7 +28,11 @@
  *    disk is checked section by section, dr_unsafe_image_file_check).
  * And a format that has no magic bytes, told only by the reader that opened
  * the file (dr_unsafe_reader):
- *  - Wavefront RLA: the reader looped for minutes reading a 791-byte file.
+ *  - Wavefront RLA: the reader looped for minutes reading a 791-byte file;
+ *  - OpenImageIO's null reader, which makes a black image of any file named
+ *    .null (a garbage texture would render black, silently);
+ *  - video (the ffmpeg reader): no glTF texture is a video, and libavformat's
+ *    many container parsers are not worth exposing to a scene's files.
  * None of these is a format glTF uses; IFF, ICO, SGI, PIC and RLA are refused whole,
  * DPX, DDS and PSD (film scans, game textures and paintings are plausible
  * targets) only where the header is impossible. */

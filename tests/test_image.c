@@ -994,6 +994,24 @@ static void test_sgi_rla_refused(void)
     }
 }
 
+/* A file named .null: OpenImageIO's null reader opens anything so named (a
+ * black 1024x1024 image, RGBA), from disk and from memory; refused. (The
+ * ffmpeg reader is refused by name the same way; no video is at hand.) */
+static void test_null_reader_refused(void)
+{
+    char path[512];
+    path_in_tmp(path, sizeof path, "garbage.null");
+    static const unsigned char hello[] = "hello, not an image\n";
+    write_bytes(path, hello, sizeof hello - 1);
+    struct dr_image img;
+    int rc = dr_image_read(path, &img);
+    CHECK(rc == DR_ERR_FORMAT && strstr(dr_last_error(), path) && strstr(dr_last_error(), "null reader"),
+          "a file named .null: rc %d: %s", rc, dr_last_error());
+    rc = dr_image_read_memory(hello, sizeof hello - 1, "x.null", &img);
+    CHECK(rc != 0 && !strstr(dr_last_error(), "1024x1024 image,"), "from memory as x.null: rc %d: %s", rc,
+          dr_last_error());
+}
+
 /* DDS and Photoshop files whose headers make OpenImageIO 2.4's readers
  * loop forever (a DDS channel with an empty bit mask) or allocate gigabytes
  * (a PSD section longer than the file): refused from memory and from a file
@@ -1354,6 +1372,7 @@ int main(void)
     test_bmp_guard();
     test_iff_refused();
     test_sgi_rla_refused();
+    test_null_reader_refused();
     test_dds_psd_headers();
     test_dpx_user_data();
     test_no_descriptor_left();
