@@ -161,7 +161,12 @@ struct lanes {
     bool ltextured[DR_SIMD_W];        /* the light's emissive texture is dr_emission's */
     bool normal_mapped[DR_SIMD_W];    /* the material has a normal map (eight-lane or scalar) */
     bool anisotropic[DR_SIMD_W], any_anisotropic;   /* the material is (dr_material.anisotropic) */
-    bool no_direction[DR_SIMD_W];     /* ... and the surface gives no direction here (dr_anisotropy_frame) */
+    bool aniso_scalar[DR_SIMD_W];     /* ... read lane by lane (scalar_material: dr_material_eval and
+                                         dr_anisotropy_frame on the scalar hit); the others eight wide
+                                         (anisotropy8), any_aniso8 */
+    bool any_aniso8;
+    const struct dr_texref *aniso_tex[DR_SIMD_W];   /* (anisotropy8's eight-lane lookup; NULL: none) */
+    bool no_direction[DR_SIMD_W];     /* the surface gives no direction here (dr_anisotropy_frame) */
     bool may_emit[DR_SIMD_W];         /* the material's factor x strength is not black */
     bool any_textured, any_ltextured;
     struct dr_hit hit[DR_SIMD_W];   /* the hits of textured lanes, as dr_hit_compute fills them */
@@ -297,7 +302,7 @@ static void coat_eval(const struct dr_scene *s, struct dr_path8 *g, const struct
  * call it), and what bsdf.c derives from the material alone (bsdf_alpha,
  * dielectric_f0, no_specular_lobe). */
 static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const struct lanes *L, dr_m8 end,
-                          const dr_v3x8 *colour, const struct dr_uv8 *uv)
+                          const dr_v3x8 *colour, const struct dr_uv8 *uv, dr_f8 aniso)
 {
     const void *const *mat = L->mat;
     struct dr_lobe8 *b = &g->b;
@@ -313,8 +318,7 @@ static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const st
     }
     if (colour)   /* times COLOR_0 (scalar_material lanes: dr_material_eval's, below) */
         b->base = dr_v3x8_mul(b->base, *colour);
-    double lane_coat[DR_SIMD_W], lane_coat_r[DR_SIMD_W];
-    dr_f8 aniso = dr_f8s(0.0);
+    double lane_coat[DR_SIMD_W], lane_coat_r[DR_SIMD_W];   /* (aniso: anisotropy8's, 0 elsewhere) */
     for (int i = 0; L->any_textured && i < g->n; i++)
         if (L->scalar_material[i] && !end[i]) {   /* textures (and the vertex colour): dr_material_eval itself */
             struct dr_bsdf lb;
@@ -591,7 +595,8 @@ bool dr_path8_hit(const struct dr_scene *s, const struct dr_path_opts *opts, int
 static bool reads_textures(const struct dr_material *m)
 {
     return m->base_color_tex.texture >= 0 || m->metallic_roughness_tex.texture >= 0 || m->emissive_tex.texture >= 0 ||
-           m->normal_tex.texture >= 0 || dr_material_coat_tex(m, 0) || dr_material_coat_tex(m, 1) || m->anisotropic;
+           m->normal_tex.texture >= 0 || dr_material_coat_tex(m, 0) || dr_material_coat_tex(m, 1) ||
+           dr_material_anisotropy_tex(m);
 }
 
 /* How the stages read material m's textures. The base colour, metallic-
@@ -601,14 +606,15 @@ static bool reads_textures(const struct dr_material *m)
  * The rest (images of more channels, such as a five-channel EXR) go through
  * the scalar functions lane by lane, which read a scalar hit:
  * dr_material_eval for all BSDF textures when one is not accepted,
- * dr_emission for an emissive texture that is not. An anisotropic material
- * (its strength's texture, and its frame from the scalar hit's tangents:
- * dr_anisotropy_frame) is read lane by lane with dr_material_eval. A normal map
+ * dr_emission for an emissive texture that is not. An anisotropy texture
+ * texture8.h accepts is read eight lanes at a time (anisotropy8); one it does
+ * not, with the material's other textures, by dr_material_eval and
+ * dr_anisotropy_frame on the scalar hit. A normal map
  * texture8.h accepts is applied eight lanes at a time (normal_map8) where
  * the lane needs no scalar hit for the rest; otherwise dr_normal_map_apply
  * applies it to the scalar hit. */
 struct mat_textures {
-    const struct dr_texref *base, *mr, *emissive, *normal;   /* the eight-lane lookups (NULL: none) */
+    const struct dr_texref *base, *mr, *emissive, *normal, *aniso;   /* the eight-lane lookups (NULL: none) */
     const struct dr_texref *coat[2];                         /* (dr_material_coat_tex's) */
     bool scalar_material, scalar_emission, scalar_hit;
 };
@@ -620,14 +626,16 @@ static void mat_textures(const struct dr_scene *s, const struct dr_material *m, 
         return;
     const struct dr_texref *b = &m->base_color_tex, *mr = &m->metallic_roughness_tex, *e = &m->emissive_tex;
     const struct dr_texref *coat[2] = {dr_material_coat_tex(m, 0), dr_material_coat_tex(m, 1)};
+    const struct dr_texref *aniso = dr_material_anisotropy_tex(m);
     t->scalar_material = (b->texture >= 0 && !dr_texref8_accepts(s, b)) ||
                          (mr->texture >= 0 && !dr_texref8_accepts(s, mr)) ||
                          (coat[0] && !dr_texref8_accepts(s, coat[0])) || (coat[1] && !dr_texref8_accepts(s, coat[1])) ||
-                         m->anisotropic;
+                         (aniso && !dr_texref8_accepts(s, aniso));
     if (!t->scalar_material) {
         t->base = b->texture >= 0 ? b : NULL;
         t->mr = mr->texture >= 0 ? mr : NULL;
         t->coat[0] = coat[0], t->coat[1] = coat[1];
+        t->aniso = aniso;
     }
     if (e->texture >= 0)
         t->scalar_emission = !dr_texref8_accepts(s, e);
@@ -861,6 +869,99 @@ static dr_v3x8 normal_map8(const struct dr_scene *s, const struct lanes *L, dr_v
     const dr_f8 pl = dr_f8_sqrt(dr_v3x8_dot(p, p));
     on &= dr_f8_gt(pl, zero) & dr_f8_eq(pl - pl, zero);   /* (positive and finite) */
     return dr_v3x8_sel(on, dr_v3x8_scale(p, 1.0 / pl), ns);
+}
+
+/* A group's hits as locate_stage leaves them. */
+struct hit8 {
+    dr_v3x8 ng, ns;
+    dr_f8 b1, b2;
+    struct dr_uv8 uv;
+    dr_m8 front;
+};
+
+/* stage_material's anisotropic frame and dr_material_eval's anisotropy on
+ * the eight-wide anisotropic lanes (lanes->any_aniso8), the same operations
+ * as normal_map.c's dr_hit_tangent_frame, anisotropy.c's
+ * dr_anisotropy_direction and dr_anisotropy_frame: the tangent frame at the
+ * hit made orthonormal to ns (the mapped normal), the direction (the
+ * texture's RG or (1, 0), turned by the rotation, cos and sin from libm as
+ * there) in it, projected onto the shading normal fn's plane, on the frame's
+ * first axis (fs, ft); the strength (factor x the texel's B) returned, 0
+ * where there is no direction (L->no_direction: the scalar fallback). */
+static dr_f8 anisotropy8(const struct dr_scene *s, struct lanes *L, const struct hit8 *h, dr_m8 end, dr_v3x8 fn,
+                         dr_v3x8 *fs, dr_v3x8 *ft)
+{
+    const struct dr_mesh *m = &s->mesh;
+    const dr_f8 zero = dr_f8s(0.0), one = dr_f8s(1.0);
+    dr_m8 lanes, on;
+    for (int i = 0; i < DR_SIMD_W; i++) {
+        lanes[i] = L->anisotropic[i] && !L->aniso_scalar[i] && !end[i] ? -1 : 0;
+        on[i] = lanes[i] && m->tangents && (m->flags[L->tri[i]] & DR_TRI_HAS_UVS) ? -1 : 0;
+    }
+    dr_v3x8 px = {one, one, one};   /* (no texture: the direction (1, 0), the factor alone) */
+    dr_f8 t0[4], t1[4], t2[4];
+    if (dr_m8_any(on)) {
+        gather_vertex4(m->tangents, L->v0, t0);
+        gather_vertex4(m->tangents, L->v1, t1);
+        gather_vertex4(m->tangents, L->v2, t2);
+        on &= dr_f8_ne(t0[3], zero) & dr_f8_ne(t1[3], zero) & dr_f8_ne(t2[3], zero);   /* (no frame here) */
+    }
+    dr_m8 textured = (dr_m8){0};
+    for (int i = 0; i < DR_SIMD_W; i++)
+        textured[i] = lanes[i] && L->aniso_tex[i] ? -1 : 0;
+    if (dr_m8_any(textured))
+        px = dr_v3x8_sel(textured, dr_texref8_rgb(s, L->aniso_tex, textured, &h->uv, false), px);
+    const dr_f8 strength = dr_f8_sel(textured, gather(L->mat, offsetof(struct dr_material, anisotropy_strength)) * px.z,
+                                     gather(L->mat, offsetof(struct dr_material, anisotropy_strength)));
+    if (!dr_m8_any(on))
+        goto none;
+    /* the tangent frame (dr_hit_tangent_frame, normal_map8's interpolation) */
+    const dr_f8 b1 = h->b1, b2 = h->b2, b0 = 1.0 - b1 - b2;
+    const dr_v3x8 ns = h->ns;
+    dr_v3x8 t = {b0 * t0[0] + b1 * t1[0] + b2 * t2[0], b0 * t0[1] + b1 * t1[1] + b2 * t2[1],
+                 b0 * t0[2] + b1 * t1[2] + b2 * t2[2]};
+    const dr_f8 w = dr_f8_sel(dr_f8_lt(b0 * t0[3] + b1 * t1[3] + b2 * t2[3], zero), -one, one);
+    t = dr_v3x8_sub(t, dr_v3x8_scale(ns, dr_v3x8_dot(ns, t)));
+    const dr_f8 tl = dr_f8_sqrt(dr_v3x8_dot(t, t));
+    on &= dr_f8_gt(tl, dr_f8s(1e-6));
+    t = dr_v3x8_scale(t, 1.0 / dr_f8_sel(on, tl, one));
+    dr_f8 side = one;   /* authored_side */
+    const dr_m8 has_n = mask_of(L->has_normals) & on;
+    if (m->normals && dr_m8_any(has_n)) {
+        dr_v3x8 n = interp(b0, b1, b2, gather_vertex(m->normals, L->v0), gather_vertex(m->normals, L->v1),
+                           gather_vertex(m->normals, L->v2));
+        side = dr_f8_sel(has_n & dr_f8_lt(dr_v3x8_dot(n, h->ng), zero), -one, one);
+    }
+    const dr_v3x8 b = dr_v3x8_scale(dr_v3x8_cross(ns, t), w * side);
+    /* the direction (dr_anisotropy_direction) */
+    dr_f8 x = dr_f8_sel(textured, 2.0 * px.x - 1.0, one), y = dr_f8_sel(textured, 2.0 * px.y - 1.0, zero);
+    double rot_last = 0.0, c_last = 1.0, s_last = 0.0;
+    for (int i = 0; i < DR_SIMD_W; i++) {
+        const double rot = on[i] ? ((const struct dr_material *)L->mat[i])->anisotropy_rotation : 0.0;
+        if (rot == 0.0)
+            continue;
+        if (rot != rot_last)   /* (neighbouring lanes mostly share a material) */
+            rot_last = rot, c_last = cos(rot), s_last = sin(rot);
+        const double xr = c_last * x[i] - s_last * y[i];
+        y[i] = s_last * x[i] + c_last * y[i];
+        x[i] = xr;
+    }
+    dr_v3x8 d = dr_v3x8_add(dr_v3x8_scale(t, x), dr_v3x8_scale(b, y));
+    dr_f8 l = dr_f8_sqrt(dr_v3x8_dot(d, d));
+    on &= dr_f8_gt(l, dr_f8s(1e-9)) & dr_f8_eq(l - l, zero);
+    d = dr_v3x8_scale(d, 1.0 / dr_f8_sel(on, l, one));
+    /* on the shading plane (dr_anisotropy_frame) */
+    d = dr_v3x8_sub(d, dr_v3x8_scale(fn, dr_v3x8_dot(fn, d)));
+    l = dr_f8_sqrt(dr_v3x8_dot(d, d));
+    on &= dr_f8_gt(l, dr_f8s(1e-6));
+    const dr_v3x8 fx = dr_v3x8_scale(d, 1.0 / dr_f8_sel(on, l, one));
+    *fs = dr_v3x8_sel(on, fx, *fs);
+    *ft = dr_v3x8_sel(on, dr_v3x8_cross(fn, fx), *ft);
+none:
+    for (int i = 0; i < DR_SIMD_W; i++)
+        if (lanes[i])
+            L->no_direction[i] = !on[i];
+    return dr_f8_sel(on, strength, zero);
 }
 
 /* dr_emission of a material without an emissive texture: factor x strength,
@@ -1359,12 +1460,11 @@ static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, str
 {
     const struct dr_mesh *m = &s->mesh;
     L->any_textured = L->any_ltextured = L->any_tex8 = L->any_ltex8 = L->any_normal8 = false;
-    L->any_coat_tex8 = L->any_coated = L->any_anisotropic = false;
+    L->any_coat_tex8 = L->any_coated = L->any_anisotropic = L->any_aniso8 = false;
     const struct dr_material *prev_mat = NULL;
     struct mat_textures t = {0};
     bool may_emit = false;
-    /* (else only textured[] is read: all false; anisotropy reads the scalar material) */
-    const bool textures = s->n_textures > 0 || (s->effects & DR_FX_ANISOTROPY);
+    const bool textures = s->n_textures > 0;   /* (else only textured[] is read: all false) */
     for (int i = 0; i < DR_SIMD_W; i++) {
         int64_t tri = in->tri[i];
         L->tri[i] = tri;
@@ -1382,7 +1482,7 @@ static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, str
         if (textures) {
             L->base_tex[i] = t.base, L->mr_tex[i] = t.mr, L->emissive_tex[i] = t.emissive;
             L->normal_tex[i] = t.normal;
-            L->any_tex8 |= t.base || t.mr || t.emissive || t.normal || t.coat[0] || t.coat[1];
+            L->any_tex8 |= t.base || t.mr || t.emissive || t.normal || t.coat[0] || t.coat[1] || t.aniso;
             L->any_normal8 |= t.normal != NULL;
             L->coat_tex[0][i] = t.coat[0], L->coat_tex[1][i] = t.coat[1];
             L->any_coat_tex8 |= t.coat[0] || t.coat[1];
@@ -1393,6 +1493,9 @@ static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, str
         L->coated[i] = mat->coated;
         L->any_coated |= mat->coated;
         L->anisotropic[i] = mat->anisotropic;
+        L->aniso_scalar[i] = mat->anisotropic && textures && t.scalar_material;
+        L->any_aniso8 |= mat->anisotropic && !L->aniso_scalar[i];
+        L->aniso_tex[i] = textures ? t.aniso : NULL;
         L->no_direction[i] = false;
         L->any_anisotropic |= mat->anisotropic;
         L->double_sided[i] = mat->double_sided;
@@ -1609,13 +1712,6 @@ static void ended_group(struct dr_path8 *g, dr_f8 depth)
 /* The hit as the stages read it: stage_locate's geometry (ng, ns: the
  * triangle's, not yet towards the ray), the texture coordinates for the
  * eight-lane lookups, and the textured lanes' scalar hits. */
-struct hit8 {
-    dr_v3x8 ng, ns;
-    dr_f8 b1, b2;
-    struct dr_uv8 uv;
-    dr_m8 front;
-};
-
 /* stage_locate, and stage_emission's normal map (the hit point and eps into
  * g): from the group's located hits where the caller has them. */
 static void locate_stage(const struct dr_scene *s, const struct dr_path8_in *in, struct lanes *L, struct dr_path8 *g,
@@ -1709,18 +1805,19 @@ void dr_path8_shade_lanes(const struct dr_scene *s, const struct dr_path_opts *o
                      dr_shading_normal_valid(dr_v3x8_get(&g->ng, i), dr_neg(dr_v3x8_get(&d, i)), dr_v3x8_get(&g->fn, i)));
     frame_from_normal(g->fn, &g->fs, &g->ft);
     for (int i = 0; L.any_anisotropic && i < n; i++)   /* ... whose first axis an anisotropy turns (anisotropy.h) */
-        if (L.anisotropic[i] && !end[i]) {
+        if (L.aniso_scalar[i] && !end[i]) {
             dr_frame f;
             L.no_direction[i] = !dr_anisotropy_frame(s, &L.hit[i], dr_v3x8_get(&g->fn, i), &f);
             set_lane(&g->fs, i, f.s);
             set_lane(&g->ft, i, f.t);
         }
+    const dr_f8 aniso = L.any_aniso8 ? anisotropy8(s, &L, &h, end, g->fn, &g->fs, &g->ft) : dr_f8s(0.0);
     g->wo = to_local(g->fs, g->ft, g->fn, dr_v3x8_neg(d));
     g->wo_z = g->wo.z;
     dr_v3x8 colour;
     if (m->colors)
         colour = vertex_colours(m, &L, b1, b2);
-    material_eval(s, g, &L, end, m->colors ? &colour : NULL, &h.uv);
+    material_eval(s, g, &L, end, m->colors ? &colour : NULL, &h.uv, aniso);
     /* (wo.z <= COS_EPS: unused) */
     g->spec_p = g->glossy ? specular_prob(&g->b, g->lambert, g->wo_z) : dr_f8s(0.0);
     if (g->coated)   /* (dr_coat_sample's P; 0 where the coat is) */

@@ -891,11 +891,13 @@ static struct dr_scene *coated_box(void)
 /* Anisotropic surfaces (KHR_materials_anisotropy) of every kind the
  * stages meet: a rough metal floor turned by its rotation, a glossy
  * dielectric block stretched along its tangents, a tile whose direction and
- * strength come from an eight-bit texture (one texel of no direction: the
- * isotropic fallback), a coat over an anisotropic metal, an anisotropic
- * Lambertian (nothing to stretch), and a panel without UVs (no tangent
- * frame: isotropic), under a lamp and a constant sky. */
-static struct dr_scene *anisotropic_box(void)
+ * strength come from a texture (one texel of no direction: the isotropic
+ * fallback), a coat over an anisotropic metal, an anisotropic Lambertian
+ * (nothing to stretch), and a panel without UVs (no tangent frame:
+ * isotropic), under a lamp and a constant sky. The tile's texture is
+ * eight-bit RGB (read eight lanes at a time: anisotropy8), or five-channel
+ * float (lane by lane, with dr_material_eval and dr_anisotropy_frame). */
+static struct dr_scene *anisotropic_box(bool scalar_tile)
 {
     struct sb b;
     sb_init(&b);
@@ -912,7 +914,10 @@ static struct dr_scene *anisotropic_box(void)
     struct dr_material tile = sb_diffuse(dr_v3(0.7, 0.8, 0.9));
     tile.metallic = 1.0, tile.roughness = 0.15;
     tile.anisotropic = true, tile.anisotropy_strength = 0.9, tile.anisotropy_rotation = -1.1;
-    tile.anisotropy_tex.texture = sb_texture(&b, sb_image8(2, 2, 3, dir_px));
+    static const float five[2 * 2 * 5] = {1.0f, 0.5f, 1.0f, 0.3f, 0.2f, 0.5f, 0.5f, 0.9f, 1.0f, 0.7f,
+                                          0.2f, 0.9f, 0.6f, 0.5f, 0.5f, 0.8f, 0.1f, 0.3f, 0.4f, 0.9f};
+    tile.anisotropy_tex.texture =
+        sb_texture(&b, scalar_tile ? sb_image(2, 2, 5, five, 0.0f, false) : sb_image8(2, 2, 3, dir_px));
     sb_quad(&b, dr_v3(0.2, 0.1, -0.8), dr_v3(0.6, 0, 0), dr_v3(0, 0.9, 0.2), sb_material(&b, tile));
     struct dr_material coated = sb_diffuse(dr_v3(0.9, 0.6, 0.3));
     coated.metallic = 1.0, coated.roughness = 0.4;
@@ -1182,8 +1187,10 @@ static void test_wavefront_matches_one_path(void)
                       "spotted lamp box, eight-bit texture");
     exact_with_groups(coated_box(), DR_FX_CLEARCOAT | DR_FX_TEXTURES | DR_FX_ENV_CONSTANT | DR_FX_AREA_LIGHTS,
                       sb_camera(dr_v3(0.2, 2.2, 2.0), dr_v3(0, 0.3, 0), 70.0), "coated box");
-    exact_with_groups(anisotropic_box(), DR_FX_ANISOTROPY | DR_FX_CLEARCOAT | DR_FX_TEXTURES | DR_FX_ENV_CONSTANT,
+    exact_with_groups(anisotropic_box(false), DR_FX_ANISOTROPY | DR_FX_CLEARCOAT | DR_FX_TEXTURES | DR_FX_ENV_CONSTANT,
                       sb_camera(dr_v3(0.2, 2.2, 2.0), dr_v3(0, 0.3, 0), 70.0), "anisotropic box");
+    exact_with_groups(anisotropic_box(true), DR_FX_ANISOTROPY | DR_FX_CLEARCOAT | DR_FX_TEXTURES | DR_FX_ENV_CONSTANT,
+                      sb_camera(dr_v3(0.2, 2.2, 2.0), dr_v3(0, 0.3, 0), 70.0), "anisotropic box, float direction texture");
     s = coloured_box();
     CHECK(!dr_wave_prefetches(s), "the coloured box is shaded without prefetching");
     exact_with_groups(s, DR_FX_VERTEX_COLORS, inside, "coloured box");
