@@ -932,7 +932,7 @@ dr_material default_material(const char *name)
     m.double_sided = false;
     m.base_color_tex = m.metallic_roughness_tex = m.emissive_tex = dr_texref{-1, 0, false, {1, 0, 0, 0, 1, 0}};
     m.normal_tex = m.coat_tex = m.coat_roughness_tex = dr_texref{-1, 0, false, {1, 0, 0, 0, 1, 0}};
-    m.anisotropy_tex = dr_texref{-1, 0, false, {1, 0, 0, 0, 1, 0}};
+    m.anisotropy_tex = m.specular_tex = m.specular_color_tex = dr_texref{-1, 0, false, {1, 0, 0, 0, 1, 0}};
     m.normal_scale = 1.0;
     m.alpha_mode = DR_ALPHA_OPAQUE;
     m.alpha = 1.0;
@@ -1010,10 +1010,16 @@ void Loader::load_materials()
             if (!it->second.IsObject()) fail(DR_ERR_FORMAT, "%s: expected an object", ep.c_str());
             m.specular = ext_number(it->second, "specularFactor", 1.0, ep);
             m.specular_color = ext_vec3(it->second, "specularColorFactor", dr_v3s(1.0), ep);
-            for (const char *key : {"specularTexture", "specularColorTexture"})
-                if (it->second.Has(key))
-                    warn_once(std::string("spec:") + key, "%s/%s: specular textures are not supported; ignored",
-                              ep.c_str(), key);
+            /* specularTexture's A (linear data), specularColorTexture's RGB (sRGB) */
+            const std::pair<const char *, dr_texref *> textures[] = {{"specularTexture", &m.specular_tex},
+                                                                     {"specularColorTexture", &m.specular_color_tex}};
+            for (const auto &t : textures) {
+                if (!it->second.Has(t.first)) continue;
+                *t.second = texref(texture_info(it->second.Get(t.first), ep + "/" + t.first), ep + "/" + t.first);
+                if (t.second->texture < 0) continue;
+                auto &kind = t.second == &m.specular_tex ? data_images_ : linear_images_;
+                kind[size_t(scene_->textures[t.second->texture].image)] = 1;
+            }
         }
         if (!load_unlit(g, mp, m)) {
             load_clearcoat(g, mp, m);        /* (before load_material_medium: thin glass drops the coat) */
@@ -1977,6 +1983,7 @@ bool Loader::load_unlit(const tinygltf::Material &g, const std::string &mp, dr_m
     m.emissive_tex = m.base_color_tex;
     m.base_color = dr_v3s(0.0);
     m.metallic = m.specular = 0.0;
+    m.specular_tex.texture = m.specular_color_tex.texture = -1;
     m.roughness = 1.0;
     m.metallic_roughness_tex.texture = -1;
     m.normal_tex.texture = -1;

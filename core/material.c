@@ -47,6 +47,17 @@ void dr_material_eval(const struct dr_scene *s, const struct dr_hit *hit, struct
         b->roughness *= px[1];
         b->metallic *= px[2];
     }
+    /* KHR_materials_specular's textures: A of one, the (sRGB-decoded) RGB of the other */
+    t = texref_texture(s, &m->specular_tex);
+    if (t) {
+        texref_eval(s, t, &m->specular_tex, hit, false, uv, px);
+        b->specular *= px[3];
+    }
+    t = texref_texture(s, &m->specular_color_tex);
+    if (t) {
+        texref_eval(s, t, &m->specular_color_tex, hit, true, uv, px);
+        b->specular_color = dr_mul(b->specular_color, dr_v3(px[0], px[1], px[2]));
+    }
     /* the coat: clearcoatTexture's R, clearcoatRoughnessTexture's G */
     for (int which = 0; which < 2; which++) {
         const struct dr_texref *r = dr_material_coat_tex(m, which);
@@ -82,6 +93,8 @@ void dr_material_prefetch(const struct dr_scene *s, const struct dr_hit *hit)
     const struct dr_material *m = &s->materials[hit->material];
     texref_prefetch(s, &m->base_color_tex, hit, true);
     texref_prefetch(s, &m->metallic_roughness_tex, hit, false);
+    texref_prefetch(s, &m->specular_tex, hit, false);
+    texref_prefetch(s, &m->specular_color_tex, hit, true);
     dr_emission_prefetch(s, hit);
     texref_prefetch(s, &m->normal_tex, hit, false);
     for (int which = 0; which < 2; which++)

@@ -309,6 +309,7 @@ static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const st
     b->base = gather3(mat, offsetof(struct dr_material, base_color));
     b->metallic = gather(mat, offsetof(struct dr_material, metallic));
     b->specular = gather(mat, offsetof(struct dr_material, specular));
+    dr_v3x8 spec_colour = gather3(mat, offsetof(struct dr_material, specular_color));
     dr_f8 r = gather(mat, offsetof(struct dr_material, roughness));
     if (L->any_tex8) {   /* factor x texture (1 where a lane has none), in dr_material_eval's order */
         b->base = dr_v3x8_mul(b->base, dr_texref8_rgb(s, L->base_tex, ~end, uv, true));
@@ -325,12 +326,15 @@ static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const st
             dr_material_eval(s, &L->hit[i], &lb);
             set_lane(&b->base, i, lb.base_color);
             b->metallic[i] = lb.metallic;
+            b->specular[i] = lb.specular;   /* (times KHR_materials_specular's textures) */
+            set_lane(&spec_colour, i, lb.specular_color);
             r[i] = lb.roughness;
             lane_coat[i] = lb.coat, lane_coat_r[i] = lb.coat_roughness;
             aniso[i] = L->no_direction[i] ? 0.0 : lb.anisotropy;   /* (stage_material's fallback) */
         }
     g->anisotropy = aniso;
     g->roughness = r;   /* (a differentiated vertex's dr_bsdf: dr_path8_shade) */
+    g->specular_color = spec_colour;
     g->coated = L->any_coated;
     if (g->coated)
         coat_eval(s, g, L, end, uv, lane_coat, lane_coat_r);
@@ -348,7 +352,7 @@ static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const st
         b->any_aniso = dr_m8_any(b->aniso);
         b->alpha_x = dr_f8_sel(b->aniso, b->alpha + (1.0 - b->alpha) * (aniso * aniso), b->alpha);
     }
-    b->f0 = dielectric_f0(gather3(mat, offsetof(struct dr_material, specular_color)), b->specular);
+    b->f0 = dielectric_f0(spec_colour, b->specular);
 }
 
 /* specular_prob_glossy of layer b, 0 on the lanes without a specular lobe
@@ -596,7 +600,7 @@ static bool reads_textures(const struct dr_material *m)
 {
     return m->base_color_tex.texture >= 0 || m->metallic_roughness_tex.texture >= 0 || m->emissive_tex.texture >= 0 ||
            m->normal_tex.texture >= 0 || dr_material_coat_tex(m, 0) || dr_material_coat_tex(m, 1) ||
-           dr_material_anisotropy_tex(m);
+           dr_material_anisotropy_tex(m) || m->specular_tex.texture >= 0 || m->specular_color_tex.texture >= 0;
 }
 
 /* How the stages read material m's textures. The base colour, metallic-
@@ -609,7 +613,9 @@ static bool reads_textures(const struct dr_material *m)
  * dr_emission for an emissive texture that is not. An anisotropy texture
  * texture8.h accepts is read eight lanes at a time (anisotropy8); one it does
  * not, with the material's other textures, by dr_material_eval and
- * dr_anisotropy_frame on the scalar hit. A normal map
+ * dr_anisotropy_frame on the scalar hit. KHR_materials_specular's textures
+ * (an alpha channel texture8.h does not read) make the material's lookups
+ * dr_material_eval's. A normal map
  * texture8.h accepts is applied eight lanes at a time (normal_map8) where
  * the lane needs no scalar hit for the rest; otherwise dr_normal_map_apply
  * applies it to the scalar hit. */
@@ -630,7 +636,8 @@ static void mat_textures(const struct dr_scene *s, const struct dr_material *m, 
     t->scalar_material = (b->texture >= 0 && !dr_texref8_accepts(s, b)) ||
                          (mr->texture >= 0 && !dr_texref8_accepts(s, mr)) ||
                          (coat[0] && !dr_texref8_accepts(s, coat[0])) || (coat[1] && !dr_texref8_accepts(s, coat[1])) ||
-                         (aniso && !dr_texref8_accepts(s, aniso));
+                         (aniso && !dr_texref8_accepts(s, aniso)) || m->specular_tex.texture >= 0 ||
+                         m->specular_color_tex.texture >= 0;
     if (!t->scalar_material) {
         t->base = b->texture >= 0 ? b : NULL;
         t->mr = mr->texture >= 0 ? mr : NULL;
@@ -1854,12 +1861,12 @@ static void differentiated_vertex(const struct dr_scene *s, const struct dr_path
     v->ng = dr_v3x8_get(&g->ng, i);
     v->frame = (dr_frame){dr_v3x8_get(&g->fs, i), dr_v3x8_get(&g->ft, i), dr_v3x8_get(&g->fn, i)};
     v->wo = dr_v3x8_get(&g->wo, i);
-    /* dr_material_eval's record: the groups keep its fields but the specular colour, a constant, and
-     * an uncoated material's coat factors (read by nothing, copied as it copies them) */
+    /* dr_material_eval's record: the groups keep its fields but an uncoated material's coat factors
+     * (read by nothing, copied as it copies them) */
     const struct dr_material *m = &s->materials[v->hit.material];
     v->bsdf = (struct dr_bsdf){.base_color = dr_v3x8_get(&g->b.base, i), .metallic = g->b.metallic[i],
                                .roughness = g->roughness[i], .specular = g->b.specular[i],
-                               .specular_color = m->specular_color, .coated = m->coated,
+                               .specular_color = dr_v3x8_get(&g->specular_color, i), .coated = m->coated,
                                .coat = m->coated ? g->coat[i] : m->coat,
                                .coat_roughness = m->coated ? g->coat_roughness[i] : m->coat_roughness,
                                .anisotropy = g->anisotropy[i]};

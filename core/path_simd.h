@@ -119,6 +119,7 @@ struct dr_path8 {
     dr_f8 eps, wo_z, depth;
     struct dr_lobe8 b;            /* the BSDF's base layer (base colour; the rest where glossy) */
     dr_f8 roughness;              /* the material's roughness (factor x texture; alpha is its square) */
+    dr_v3x8 specular_color;       /* ... its specular colour (factor x KHR_materials_specular's texture) */
     dr_f8 bsdf_u1, bsdf_u2, rr;   /* the vertex's random numbers still to use */
     dr_f8 tmax, nee_cos, ls_pdf, bsdf_pdf;   /* next-event estimate, for its end */
     dr_m8 delta;                  /* ... from a punctual light (no MIS) */

@@ -78,6 +78,8 @@ unsigned dr_material_make_thin(struct dr_material *m, double ior)
     m->metallic = 1.0;
     m->base_color_tex.texture = -1;
     m->metallic_roughness_tex.texture = -1;
+    /* (a metal has no dielectric lobe for KHR_materials_specular to weigh) */
+    m->specular_tex.texture = m->specular_color_tex.texture = -1;
     if (m->coated)
         dropped |= 8;
     m->coated = false;   /* (the sheet's reflection is already Fresnel's) */
@@ -111,7 +113,7 @@ static int refresh(struct dr_scene *s, bool lights)
             continue;
         if (mat->base_color_tex.texture >= 0 || mat->metallic_roughness_tex.texture >= 0 ||
             mat->emissive_tex.texture >= 0 || dr_material_coat_tex(mat, 0) || dr_material_coat_tex(mat, 1) ||
-            dr_material_anisotropy_tex(mat))
+            dr_material_anisotropy_tex(mat) || mat->specular_tex.texture >= 0 || mat->specular_color_tex.texture >= 0)
             s->effects |= DR_FX_TEXTURES;
         if (material_has_specular(mat))
             s->effects |= DR_FX_SPECULAR;

@@ -37,6 +37,10 @@ struct dr_material {
     double emissive_strength;      /* KHR_materials_emissive_strength (1 if absent) */
     double specular;               /* KHR_materials_specular specularFactor (1 if absent) */
     dr_vec3 specular_color;        /* specularColorFactor (1,1,1 if absent) */
+    /* ... its textures: specularTexture's A times the factor (linear data),
+     * specularColorTexture's RGB (sRGB-decoded) times the colour; no
+     * parameters, like the factors (bsdf.h) */
+    struct dr_texref specular_tex, specular_color_tex;
     bool double_sided;
     struct dr_texref base_color_tex, metallic_roughness_tex, emissive_tex;
     /* normalTexture (tangent space, normal_tex.texture -1: none) and its scale;

@@ -636,6 +636,68 @@ static void test_anisotropy(void)
     }
 }
 
+/* ---- KHR_materials_specular's textures ---- */
+
+/* A quad whose material's specular factor and colour are scaled by a 1x1
+ * RGBA KTX2 specularTexture (A, linear) and an sRGB specularColorTexture
+ * (RGB, decoded): the BSDF at a hit carries the products; no warning. */
+static void test_specular_textures(void)
+{
+    unsigned char spec[104 + 4] = {0}, col[104 + 3] = {0};
+    ktx2_header(spec, 37, 1, 1, 0, 4);   /* R8G8B8A8_UNORM */
+    memcpy(spec + 104, (const unsigned char[]){10, 20, 30, 128}, 4);
+    ktx2_header(col, 29, 1, 1, 0, 3);    /* R8G8B8_SRGB */
+    memcpy(col + 104, (const unsigned char[]){255, 128, 64}, 3);
+    write_file("spec.ktx2", spec, sizeof spec);
+    write_file("col.ktx2", col, sizeof col);
+    unsigned char b[92];
+    size_t o = 0;
+    put_f32(b, &o, 12, -1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 1.0, 0.0, -1.0, 1.0, 0.0);
+    put_f32(b, &o, 8, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0);
+    const uint16_t idx[6] = {0, 1, 2, 0, 2, 3};
+    memcpy(b + o, idx, sizeof idx);
+    char uri[512];
+    snprintf(uri, sizeof uri, "%s", data_uri(b, sizeof b));
+    const char *fmt =
+        "{\"asset\":{\"version\":\"2.0\"},\"extensionsUsed\":[\"KHR_materials_specular\"],"
+        "\"materials\":[{\"pbrMetallicRoughness\":{\"metallicFactor\":0,\"roughnessFactor\":0.4},"
+        "\"extensions\":{\"KHR_materials_specular\":{\"specularFactor\":0.8,\"specularColorFactor\":[1,0.5,0.25]%s}}}],"
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0,\"TEXCOORD_0\":1},\"indices\":2,\"material\":0}]}],"
+        "\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}],"
+        "\"textures\":[{\"source\":0},{\"source\":1}],"
+        "\"images\":[{\"uri\":\"spec.ktx2\",\"mimeType\":\"image/ktx2\"},{\"uri\":\"col.ktx2\",\"mimeType\":\"image/ktx2\"}],"
+        "\"buffers\":[{\"byteLength\":92,\"uri\":\"%s\"}],\"bufferViews\":[{\"buffer\":0,\"byteLength\":92}],"
+        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":4,\"type\":\"VEC3\",\"max\":[1,1,0],"
+        "\"min\":[-1,0,0]},{\"bufferView\":0,\"byteOffset\":48,\"componentType\":5126,\"count\":4,\"type\":\"VEC2\"},"
+        "{\"bufferView\":0,\"byteOffset\":80,\"componentType\":5123,\"count\":6,\"type\":\"SCALAR\"}]}";
+    int rc;
+    struct dr_scene *s = load_json("spec.gltf", NULL, &rc, fmt,
+                                   ",\"specularTexture\":{\"index\":0},\"specularColorTexture\":{\"index\":1}", uri);
+    CHECK(rc == 0, "specular textures: %s", dr_last_error());
+    CHECK(!strstr(warnings, "specular"), "no warning about the specular textures:\n%s", warnings);
+    dr_scene_destroy(s);
+    s = dr_scene_load(tmp_path("spec.gltf"));
+    CHECK(s != NULL, "specular textures, whole: %s", dr_last_error());
+    if (s) {
+        struct dr_hit hit;
+        dr_hit_compute(&s->mesh, 0, dr_v3(0.5, 0.2, 3.0), dr_v3(0.0, 0.0, -1.0), &hit);
+        struct dr_bsdf bs;
+        dr_material_eval(s, &hit, &bs);
+        CHECK(fabs(bs.specular - 0.8 * 128.0 / 255.0) < 1e-6, "specular = factor x A: %g", bs.specular);
+        const dr_vec3 want = dr_v3(1.0, 0.5 * dr_srgb_to_linear(128.0 / 255.0), 0.25 * dr_srgb_to_linear(64.0 / 255.0));
+        CHECK(fabs(bs.specular_color.x - want.x) < 1e-6 && fabs(bs.specular_color.y - want.y) < 1e-6 &&
+                  fabs(bs.specular_color.z - want.z) < 1e-6,
+              "specular colour = factor x decoded RGB: (%g, %g, %g), want (%g, %g, %g)", bs.specular_color.x,
+              bs.specular_color.y, bs.specular_color.z, want.x, want.y, want.z);
+        CHECK(s->effects & DR_FX_TEXTURES, "the specular textures count as textures");
+    }
+    dr_scene_destroy(s);
+    s = load_json("spec_bad.gltf", NULL, &rc, fmt, ",\"specularTexture\":{\"index\":5}", uri);
+    check_error(rc, "a missing specular texture", "spec_bad.gltf", "KHR_materials_specular/specularTexture",
+                "does not exist");
+    dr_scene_destroy(s);
+}
+
 /* ---- Draco: the shared sample against the plain Box ---- */
 
 static int cmp_tri(const void *a, const void *b)
@@ -1062,6 +1124,7 @@ int main(void)
     test_instancing();
     test_unlit();
     test_anisotropy();
+    test_specular_textures();
     test_eight_bit();
     char cmd[400];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);

@@ -894,7 +894,8 @@ static struct dr_scene *coated_box(void)
  * strength come from a texture (one texel of no direction: the isotropic
  * fallback), a coat over an anisotropic metal, an anisotropic Lambertian
  * (nothing to stretch), and a panel without UVs (no tangent frame:
- * isotropic), under a lamp and a constant sky. The tile's texture is
+ * isotropic), under a lamp and a constant sky. The block also has
+ * KHR_materials_specular's textures (read lane by lane). The tile's texture is
  * eight-bit RGB (read eight lanes at a time: anisotropy8), or five-channel
  * float (lane by lane, with dr_material_eval and dr_anisotropy_frame). */
 static struct dr_scene *anisotropic_box(bool scalar_tile)
@@ -908,6 +909,10 @@ static struct dr_scene *anisotropic_box(bool scalar_tile)
     sb_quad(&b, dr_v3(-0.95, 0.005, 0.95), dr_v3(1.9, 0, 0), dr_v3(0, 0, -1.9), sb_material(&b, floor));
     struct dr_material block = glossy_blue();
     block.anisotropic = true, block.anisotropy_strength = 1.0;
+    /* (and KHR_materials_specular's textures: A scales the specular, RGB its colour; lane by lane) */
+    static const float spec_px[2 * 2 * 4] = {0.2f, 0.4f, 0.6f, 1.0f, 1.0f, 0.5f, 0.3f, 0.25f,
+                                             0.7f, 0.9f, 0.1f, 0.0f, 0.4f, 0.4f, 0.8f, 0.6f};
+    block.specular_tex.texture = block.specular_color_tex.texture = sb_texture(&b, sb_image8(2, 2, 4, spec_px));
     sb_box(&b, dr_v3(-0.6, 0.0, -0.6), dr_v3(-0.1, 0.7, -0.1), sb_material(&b, block));
     static const float dir_px[2 * 2 * 3] = {1.0f, 0.5f, 1.0f, 0.5f, 0.5f, 0.9f,   /* (0.5, 0.5): no direction */
                                             0.2f, 0.9f, 0.6f, 0.8f, 0.1f, 0.3f};
