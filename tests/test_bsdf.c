@@ -327,7 +327,7 @@ static double dens_ref_dielectric_albedo(void *vc, double u, double phi)
 }
 
 /* Integral over the whole (u, phi) square, cell by cell (H cells). */
-static double integrate_h_space(dens_fn f, struct qctx *q, double *cells, double tol)
+static double integrate_h_space(dens_fn f, void *q, double *cells, double tol)
 {
     double total = 0.0;
     for (int i = 0; i < HU; i++)
@@ -1104,19 +1104,6 @@ static double dens_ref_vndf_aniso(void *vc, double u, double phi)
     return g1 * oh * ref_D_aniso(q->rax, q->ray, h) / q->wo.z * jac;
 }
 
-static double integrate_aniso(dens_fn f, struct actx *q, double *cells, double tol)
-{
-    double total = 0.0;
-    for (int i = 0; i < HU; i++)
-        for (int j = 0; j < HV; j++) {
-            double v = integrate2d(f, q, (double)i / HU, (double)(i + 1) / HU, 2.0 * M_PI * j / HV,
-                                   2.0 * M_PI * (j + 1) / HV, tol);
-            if (cells) cells[i * HV + j] = v;
-            total += v;
-        }
-    return total;
-}
-
 struct acombo {
     const char *name;
     double rough, metal, s;
@@ -1158,7 +1145,7 @@ static void aniso_chi2_case(const struct acombo *c, double cos_o, double phi_o, 
     struct actx q = {&b, wo, ax, ay, ax, ay, 0};
     double int_h;
     if (p == 1.0 || c->coat > 0.0) {
-        int_h = integrate_aniso(dens_h_aniso, &q, eh, 1e-6);
+        int_h = integrate_h_space(dens_h_aniso, &q, eh, 1e-6);
     } else {
         /* A diffuse lobe seen in the cells of a strongly stretched lobe lies in
          * thin strips (1 - u ~ alpha_y, phi ~ +-pi/2) that an adaptive
@@ -1173,7 +1160,7 @@ static void aniso_chi2_case(const struct acombo *c, double cos_o, double phi_o, 
         struct dr_bsdf metal = make_aniso(c->rough, 1.0, 1.0, dr_v3s(1.0), c->s);
         struct actx qm = q;
         qm.b = &metal;
-        int_h = p * integrate_aniso(dens_h_aniso, &qm, eh, 1e-6);
+        int_h = p * integrate_h_space(dens_h_aniso, &qm, eh, 1e-6);
         memset(ec, 0, sizeof ec);
         const int NX = 2000;
         const double dx = 2.0 / NX, y0 = -wo.y;
@@ -1203,16 +1190,16 @@ static void aniso_chi2_case(const struct acombo *c, double cos_o, double phi_o, 
         CHECK(worst < 1e-12, "aniso %s: pdf is not (1-p) cos/pi + p pdf_spec: rel %g", c->name, worst);
     }
     for (int i = 0; i < HU * HV; i++) eh[i] *= (double)nsamples;
-    double vndf_total = integrate_aniso(dens_ref_vndf_aniso, &q, NULL, 1e-6);
+    double vndf_total = integrate_h_space(dens_ref_vndf_aniso, &q, NULL, 1e-6);
     q.mode = 1;
-    double fail_ref = integrate_aniso(dens_ref_vndf_aniso, &q, NULL, 1e-6);
+    double fail_ref = integrate_h_space(dens_ref_vndf_aniso, &q, NULL, 1e-6);
     double expect = 1.0 - p * fail_ref;
     if (c->coat > 0.0) {   /* the coat's isotropic lobe, on its own cells */
         struct dr_bsdf base = b;
         base.coated = false;
         double ac = test_alpha(c->coat_rough), pc = c->coat * (0.04 + 0.96 * pow(1.0 - cos_o, 5.0));
         struct actx qc = {&b, wo, ac, ac, ac, ac, 1};
-        double fail_coat = integrate_aniso(dens_ref_vndf_aniso, &qc, NULL, 1e-6);
+        double fail_coat = integrate_h_space(dens_ref_vndf_aniso, &qc, NULL, 1e-6);
         expect = 1.0 - pc * fail_coat - (1.0 - pc) * dr_bsdf_specular_prob(&base, wo) * fail_ref;
     }
     struct rng r = {(uint64_t)seed * 7919u + 17u};
@@ -1415,7 +1402,7 @@ static void test_aniso_energy(void)
                 }
                 double mean = sum / n, se = sqrt(fmax(0.0, sum2 / n - mean * mean) / n);
                 struct actx q = {&b, wo, ax, ay, ax, ay, 0};
-                double ref = integrate_aniso(dens_ref_albedo_aniso, &q, NULL, 1e-7);
+                double ref = integrate_h_space(dens_ref_albedo_aniso, &q, NULL, 1e-7);
                 printf("  wo.z=%.1f: %.4f +- %.4f (quad %.4f)", coss[k], mean, se, ref);
                 CHECK(wmax <= 1.0 + 1e-9 && mean <= 1.0, "white aniso metal: weight up to %.17g, albedo %.6f", wmax, mean);
                 CHECK(fabs(mean - ref) < 4.0 * se + 1e-3, "white aniso metal rough %g s %g wo.z %g: %.5f +- %.5f vs %.5f",
