@@ -657,6 +657,55 @@ PY
     COAT_JSON="{\"coated_per_ray_over_uncoated\": $(median "${coat_r[@]}"), \"pairs\": [$(join "${coat_r[@]}")]}"
 fi
 
+# ---- v. anisotropy ------------------------------------------------------------
+# KHR_materials_anisotropy: the time per ray over the same scene without it,
+# median of 3 pairs run back to back: the bundled box with its floor a rough
+# metal (roughness 0.3) stretched (strength 0.5) or not, and the
+# AnisotropyBarnLamp sample (under a white sky) with and without its
+# extension. (Anisotropic scenes ran one path at a time until path_simd.c
+# took the stretched lobe: 2.1-2.2 x per ray on the floor, 2026-12-07.)
+ANISO_JSON=null
+LAMP=${LAMP:-../shared/gltf-samples/AnisotropyBarnLamp-KTX2/glTF/AnisotropyBarnLamp.gltf}
+if [[ -f $CORNELL && -f $LAMP ]]; then
+    echo
+    echo "v. anisotropy: time per ray, anisotropic / the same without it (2 threads)"
+    ln -sf "$(cd "$(dirname "$CORNELL")" && pwd)"/*.bin "$(cd "$(dirname "$CORNELL")" && pwd)"/*.png "$TMP/" 2>/dev/null
+    lamp_dir=$(cd "$(dirname "$LAMP")" && pwd)
+    for f in "$lamp_dir"/*; do [[ $f == *.gltf ]] || ln -sf "$f" "$TMP/"; done
+    python3 - "$CORNELL" "$LAMP" "$TMP" <<'PY'
+import json, sys
+box, lamp, tmp = sys.argv[1:4]
+for s in (0.0, 0.5):
+    g = json.load(open(box))
+    m = g["materials"][5]
+    m["pbrMetallicRoughness"] = {"baseColorFactor": [0.9, 0.85, 0.8, 1], "metallicFactor": 1, "roughnessFactor": 0.3}
+    if s:
+        m["extensions"] = {"KHR_materials_anisotropy": {"anisotropyStrength": s}}
+        g.setdefault("extensionsUsed", []).append("KHR_materials_anisotropy")
+    json.dump(g, open(f"{tmp}/floor-{s}.gltf", "w"))
+g = json.load(open(lamp))
+for m in g["materials"]:
+    m.get("extensions", {}).pop("KHR_materials_anisotropy", None)
+g["extensionsUsed"] = [e for e in g.get("extensionsUsed", []) if e != "KHR_materials_anisotropy"]
+json.dump(g, open(f"{tmp}/lamp-iso.gltf", "w"))
+PY
+    cp "$LAMP" "$TMP/lamp-aniso.gltf"
+    floor_r=() lamp_r=()
+    for i in 1 2 3; do
+        render "$TMP/floor-0.0.gltf" --res 256x256 --spp 32 --threads 2
+        per_iso=$(calc "$R_TIME / $(json_num "$R_JSON" total rays)" %.6g)
+        render "$TMP/floor-0.5.gltf" --res 256x256 --spp 32 --threads 2
+        floor_r+=("$(calc "$R_TIME / $(json_num "$R_JSON" total rays) / $per_iso" %.3f)")
+        render "$TMP/lamp-iso.gltf" --res 384x384 --spp 64 --threads 2 --env 1
+        per_iso=$(calc "$R_TIME / $(json_num "$R_JSON" total rays)" %.6g)
+        render "$TMP/lamp-aniso.gltf" --res 384x384 --spp 64 --threads 2 --env 1
+        lamp_r+=("$(calc "$R_TIME / $(json_num "$R_JSON" total rays) / $per_iso" %.3f)")
+    done
+    printf '   per ray, the box'"'"'s anisotropic floor / isotropic: %s (pairs %s)\n' "$(median "${floor_r[@]}")" "$(join "${floor_r[@]}")"
+    printf '   per ray, the lamp with / without its anisotropy: %s (pairs %s)\n' "$(median "${lamp_r[@]}")" "$(join "${lamp_r[@]}")"
+    ANISO_JSON="{\"floor_per_ray_over_isotropic\": $(median "${floor_r[@]}"), \"floor_pairs\": [$(join "${floor_r[@]}")], \"lamp_per_ray_over_isotropic\": $(median "${lamp_r[@]}"), \"lamp_pairs\": [$(join "${lamp_r[@]}")]}"
+fi
+
 # ---- results.json and the noise note ---------------------------------------
 
 TOTAL=$(elapsed)
@@ -682,6 +731,7 @@ OTHER_CORES=$(calc "$OTHER_TOTAL / $WALL_TOTAL" %.2f)
     echo "  \"alpha\": $ALPHA_JSON,"
     echo "  \"punctual_lights\": $PUNCTUAL_JSON,"
     echo "  \"clearcoat\": $COAT_JSON,"
+    echo "  \"anisotropy\": $ANISO_JSON,"
     echo "  \"peer\": $PEER_JSON"
     echo "}"
 } >"$OUT/results.json"
