@@ -13,6 +13,7 @@
 #include "error.h"
 #include "exact_sum.h"
 #include "loss.h"
+#include "normal_map.h"
 #include "estimator.h"
 #include "render.h"
 #include "reverse.h"
@@ -1243,6 +1244,26 @@ int main(void)
     /* derivative sampling: the floor's base colour and roughness under its
      * coat, and the coat's roughness with its own antithetic pair */
     compare("coated glossy scene, derivative sampling", s, &cam, aptrs, 5, 6, DR_SAMPLING_DERIVATIVE, GROUPED_WALKS);
+    /* ... and anisotropic under the coats (KHR_materials_anisotropy: the
+     * frames from the generated tangents, eight lanes wide): the strengths
+     * and the bases' parameters, detached and derivative (attached is
+     * refused on anisotropic scenes) */
+    for (int m = 0; m < 2; m++) {
+        s->materials[m].anisotropic = true;
+        s->materials[m].anisotropy_strength = m ? 0.5 : 0.8;
+        s->materials[m].anisotropy_rotation = m ? -0.7 : 0.3;
+    }
+    CHECK(dr_mesh_prepare_tangents(s) == 0 && s->mesh.tangents && dr_scene_refresh(s) == 0 &&
+              (s->effects & DR_FX_ANISOTROPY),
+          "anisotropic coated scene: %s", dr_last_error());
+    const char *nptrs[] = {"/materials/0/extensions/KHR_materials_anisotropy/anisotropyStrength",
+                           "/materials/1/extensions/KHR_materials_anisotropy/anisotropyStrength",
+                           gptrs[0], gptrs[1], gptrs[2], gptrs[4]};
+    compare("anisotropic coated scene", s, &cam, nptrs, 6, 6, DR_SAMPLING_DETACHED, GROUPED_BOTH);
+    /* (the floor's and the light's: the tape's vertices on the metal, which has none, run eight-wide) */
+    const char *ndptrs[] = {nptrs[0], gptrs[0], gptrs[1], gptrs[4]};
+    compare("anisotropic coated scene, derivative sampling", s, &cam, ndptrs, 4, 6, DR_SAMPLING_DERIVATIVE,
+            GROUPED_WALKS);
     dr_scene_destroy(s);
 
     /* a closed box lit from inside: no path escapes, and without roulette
