@@ -309,7 +309,12 @@ static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const st
     b->base = gather3(mat, offsetof(struct dr_material, base_color));
     b->metallic = gather(mat, offsetof(struct dr_material, metallic));
     b->specular = gather(mat, offsetof(struct dr_material, specular));
-    dr_v3x8 spec_colour = gather3(mat, offsetof(struct dr_material, specular_color));
+    /* the specular colour: gathered here where the scalar lanes or a
+     * differentiated vertex's record read it, else only for a glossy f0 */
+    const bool colour_now = L->any_textured || dr_m8_any(g->diff);
+    dr_v3x8 spec_colour = b->base;
+    if (colour_now)
+        spec_colour = gather3(mat, offsetof(struct dr_material, specular_color));
     dr_f8 r = gather(mat, offsetof(struct dr_material, roughness));
     if (L->any_tex8) {   /* factor x texture (1 where a lane has none), in dr_material_eval's order */
         b->base = dr_v3x8_mul(b->base, dr_texref8_rgb(s, L->base_tex, ~end, uv, true));
@@ -334,7 +339,7 @@ static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const st
         }
     g->anisotropy = aniso;
     g->roughness = r;   /* (a differentiated vertex's dr_bsdf: dr_path8_shade) */
-    g->specular_color = spec_colour;
+    g->specular_color = spec_colour;   /* (read for differentiated lanes only: gathered then) */
     g->coated = L->any_coated;
     if (g->coated)
         coat_eval(s, g, L, end, uv, lane_coat, lane_coat_r);
@@ -352,7 +357,8 @@ static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const st
         b->any_aniso = dr_m8_any(b->aniso);
         b->alpha_x = dr_f8_sel(b->aniso, b->alpha + (1.0 - b->alpha) * (aniso * aniso), b->alpha);
     }
-    b->f0 = dielectric_f0(spec_colour, b->specular);
+    b->f0 = dielectric_f0(colour_now ? spec_colour : gather3(mat, offsetof(struct dr_material, specular_color)),
+                          b->specular);
 }
 
 /* specular_prob_glossy of layer b, 0 on the lanes without a specular lobe
