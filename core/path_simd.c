@@ -924,8 +924,8 @@ static dr_f8 anisotropy8(const struct dr_scene *s, struct lanes *L, const struct
         textured[i] = lanes[i] && L->aniso_tex[i] ? -1 : 0;
     if (dr_m8_any(textured))
         px = dr_v3x8_sel(textured, dr_texref8_rgb(s, L->aniso_tex, textured, &h->uv, false), px);
-    const dr_f8 strength = dr_f8_sel(textured, gather(L->mat, offsetof(struct dr_material, anisotropy_strength)) * px.z,
-                                     gather(L->mat, offsetof(struct dr_material, anisotropy_strength)));
+    const dr_f8 factor = gather(L->mat, offsetof(struct dr_material, anisotropy_strength));
+    const dr_f8 strength = dr_f8_sel(textured, factor * px.z, factor);
     if (!dr_m8_any(on))
         goto none;
     /* the tangent frame (dr_hit_tangent_frame, normal_map8's interpolation) */

@@ -589,6 +589,20 @@ int dr_estimator_check(const struct dr_estimator_ops *e, const struct dr_grad_pr
                      dr_sampling_name(p->sampling), name);
         return DR_ERR_ARG;
     }
+    /* Nor KHR_materials_specular's textures, whose texels change the BSDF
+     * as the hit point moves (the specular inputs have no adjoint:
+     * d_material_eval_uv would drop that term, silently) */
+    if (!dr_sampling_is_derivative(run)) {
+        for (int m = 0; m < p->scene->n_materials; m++) {
+            const struct dr_material *mat = &p->scene->materials[m];
+            if (mat->specular_tex.texture < 0 && mat->specular_color_tex.texture < 0)
+                continue;
+            dr_set_error("%s sampling does not differentiate specular textures (material '%s' has "
+                         "KHR_materials_specular textures); use --sampling detached",
+                         dr_sampling_name(p->sampling), mat->name);
+            return DR_ERR_ARG;
+        }
+    }
     /* Nor the anisotropy's frame, which turns with the moving hit point
      * (anisotropy.h), nor its stretched visible-normal map (bsdf.h) */
     if (!dr_sampling_is_derivative(run) && (p->scene->effects & DR_FX_ANISOTROPY)) {

@@ -15,7 +15,8 @@
 #      prb and tape, of the strength, the roughness and the base colour of the
 #      anisotropic floor agree with finite differences, the strength and the
 #      colour resolved (more than 4 standard errors from 0);
-#      attached sampling is refused naming the material; derivative sampling
+#      attached sampling is refused naming the material (also for
+#      KHR_materials_specular textures, which have no uv adjoint); derivative sampling
 #      runs (the anisotropic roughness stays with the forward strategies)
 #   d. optimize moves anisotropyStrength towards a target's and writes it
 #      into the extension; the output passes the glTF validator and renders
@@ -112,6 +113,16 @@ done
 cat "$tmp/out"
 run grad "$tmp/fd.gltf" --param /materials/5/pbrMetallicRoughness/roughnessFactor --sampling attached --res 8x8 -o g.exr
 check_failed 2 "attached sampling|anisotropic|checker-floor|--sampling detached"
+# KHR_materials_specular's textures have no uv adjoint either: attached refused, detached runs
+python3 -c "
+import json, sys
+d = json.load(open(sys.argv[1]))
+d['materials'][1]['extensions'] = {'KHR_materials_specular': {'specularTexture': {'index': 0}}}
+json.dump(d, open(sys.argv[2], 'w'))" "$box" "$tmp/spec.gltf" || fail "could not write spec.gltf"
+run grad "$tmp/spec.gltf" --param /materials/red/pbrMetallicRoughness/roughnessFactor --sampling attached --res 8x8 -o g.exr
+check_failed 2 "attached sampling|specular textures|'red'|--sampling detached"
+run grad "$tmp/spec.gltf" --param /materials/red/pbrMetallicRoughness/roughnessFactor --sampling detached --res 8x8 -o g.exr
+expect_rc 0 "detached sampling with a specular texture"
 
 # ---- d. optimize ----
 floor target.gltf '{"anisotropyStrength": 0.9, "anisotropyRotation": 1.5707963267948966}' 0.2
