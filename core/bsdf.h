@@ -50,10 +50,19 @@ struct dr_bsdf {
      * above its floor). 0: isotropic, bit for bit the model without it. The
      * coat's lobe stays isotropic. */
     double anisotropy;
+    /* KHR_materials_sheen (bsdf_sheen.c): a layer of fibres over the base and
+     * under the coat; sheened says it is there (as coated: a colour a fit
+     * moves to 0 keeps its derivative; false: the fields are unused). The
+     * sheen's colour (linear RGB, sheenColorFactor x texture) and its
+     * perceptual roughness (sheenRoughnessFactor x texture's A). */
+    dr_vec3 sheen_color;
+    double sheen_roughness;
+    bool sheened;
 };
 
-/* The lobes dr_bsdf_sample chooses between (the coat's only when coated). */
-enum dr_bsdf_lobe { DR_BSDF_LOBE_DIFFUSE, DR_BSDF_LOBE_SPECULAR, DR_BSDF_LOBE_COAT };
+/* The lobes dr_bsdf_sample chooses between (the coat's only when coated, the
+ * sheen's only when sheened: its map is the diffuse lobe's cosine map). */
+enum dr_bsdf_lobe { DR_BSDF_LOBE_DIFFUSE, DR_BSDF_LOBE_SPECULAR, DR_BSDF_LOBE_COAT, DR_BSDF_LOBE_SHEEN };
 
 struct dr_bsdf_sample {
     dr_vec3 wi;     /* sampled direction, local frame */
@@ -130,6 +139,8 @@ struct dr_d_bsdf {
     double metallic, roughness;
     double coat, coat_roughness;
     double anisotropy;
+    dr_vec3 sheen_color;
+    double sheen_roughness;
 };
 
 /* Reverse-mode adjoints (redner style): each takes the primal's inputs and
