@@ -240,6 +240,7 @@ const char *const kSupportedExtensions[] = {
     "KHR_materials_emissive_strength", "KHR_materials_specular", "KHR_materials_clearcoat", "KHR_lights_punctual",
     "KHR_materials_unlit",   /* (load_unlit) */
     "KHR_materials_anisotropy",   /* (load_anisotropy) */
+    "KHR_materials_sheen",        /* (load_sheen) */
     "DR_environment", "DR_units", "KHR_texture_transform", "KHR_draco_mesh_compression",
     /* KTX2 images: read when they hold 8-bit texels (core/ktx2.h); the others are refused, or skipped
      * under --ignore-unsupported (check_ktx2): handled, not ignored */
@@ -326,6 +327,7 @@ private:
     void load_material_medium(const tinygltf::Material &g, const std::string &mp, size_t index, dr_material &m);
     void load_thin_glass(const tinygltf::Material &g, const std::string &mp, dr_material &m);
     void load_clearcoat(const tinygltf::Material &g, const std::string &mp, dr_material &m);
+    void load_sheen(const tinygltf::Material &g, const std::string &mp, dr_material &m);
     void load_anisotropy(const tinygltf::Material &g, const std::string &mp, dr_material &m);
     bool load_unlit(const tinygltf::Material &g, const std::string &mp, dr_material &m);
     double material_ior(const tinygltf::Material &g, const std::string &mp, const char *what);
@@ -1022,7 +1024,8 @@ void Loader::load_materials()
             }
         }
         if (!load_unlit(g, mp, m)) {
-            load_clearcoat(g, mp, m);        /* (before load_material_medium: thin glass drops the coat) */
+            load_clearcoat(g, mp, m);        /* (before load_material_medium: thin glass drops the coat */
+            load_sheen(g, mp, m);            /*  and the sheen) */
             load_material_medium(g, mp, i, m);
             load_anisotropy(g, mp, m);
         }
@@ -1955,6 +1958,9 @@ void Loader::load_thin_glass(const tinygltf::Material &g, const std::string &mp,
     if (dropped & 8)
         warn_once("thin:coat", "%s/extensions/KHR_materials_clearcoat: ignored on thin-walled glass (its "
                   "reflection is the sheet's own)", mp.c_str());
+    if (dropped & 16)
+        warn_once("thin:sheen", "%s/extensions/KHR_materials_sheen: ignored on thin-walled glass (its "
+                  "reflection is the sheet's own)", mp.c_str());
 }
 
 /* KHR_materials_clearcoat (bsdf_coat.c): its two factors, in [0, 1], and
@@ -1973,7 +1979,8 @@ bool Loader::load_unlit(const tinygltf::Material &g, const std::string &mp, dr_m
     if (!it->second.IsObject())
         fail(DR_ERR_FORMAT, "%s/extensions/KHR_materials_unlit: expected an object", mp.c_str());
     for (const char *other : {"KHR_materials_clearcoat", "KHR_materials_specular", "KHR_materials_transmission",
-                              "KHR_materials_volume", "KHR_materials_emissive_strength", "KHR_materials_anisotropy"})
+                              "KHR_materials_volume", "KHR_materials_emissive_strength", "KHR_materials_anisotropy",
+                              "KHR_materials_sheen"})
         if (g.extensions.count(other))
             warn_once(std::string("unlit:") + other, "%s/extensions/%s: ignored on an unlit material "
                       "(KHR_materials_unlit)", mp.c_str(), other);
@@ -2030,6 +2037,38 @@ void Loader::load_clearcoat(const tinygltf::Material &g, const std::string &mp, 
     else if (!it->second.Has("clearcoatNormalTexture") && nt.index >= 0)
         warn_once("coat:normal", "%s: the clear coat is shaded with the normal map's normal (glTF gives it the "
                   "geometric normal)", ep.c_str());
+}
+
+/* KHR_materials_sheen (scene.h, bsdf_sheen.c): sheenColorFactor (linear RGB)
+ * and sheenRoughnessFactor, in [0, 1], and their textures
+ * (sheenColorTexture's RGB, sRGB; sheenRoughnessTexture's A, linear data).
+ * Sheened only where the colour is not black (glTF's default, [0, 0, 0],
+ * is no sheen). */
+void Loader::load_sheen(const tinygltf::Material &g, const std::string &mp, dr_material &m)
+{
+    auto it = g.extensions.find("KHR_materials_sheen");
+    if (it == g.extensions.end()) return;
+    const std::string ep = mp + "/extensions/KHR_materials_sheen";
+    if (!it->second.IsObject()) fail(DR_ERR_FORMAT, "%s: expected an object", ep.c_str());
+    m.sheen_color = ext_vec3(it->second, "sheenColorFactor", dr_v3s(0.0), ep);
+    const double c[3] = {m.sheen_color.x, m.sheen_color.y, m.sheen_color.z};
+    for (int k = 0; k < 3; k++)
+        if (!(c[k] >= 0.0 && c[k] <= 1.0))
+            fail(DR_ERR_FORMAT, "%s/sheenColorFactor/%d: must be in [0, 1] (got %g)", ep.c_str(), k, c[k]);
+    m.sheen_roughness = ext_number(it->second, "sheenRoughnessFactor", 0.0, ep);
+    if (!(m.sheen_roughness >= 0.0 && m.sheen_roughness <= 1.0))
+        fail(DR_ERR_FORMAT, "%s/sheenRoughnessFactor: must be in [0, 1] (got %g)", ep.c_str(), m.sheen_roughness);
+    m.sheened = !dr_is_black(m.sheen_color);
+    if (!m.sheened) return;
+    const std::pair<const char *, dr_texref *> textures[] = {{"sheenColorTexture", &m.sheen_color_tex},
+                                                             {"sheenRoughnessTexture", &m.sheen_roughness_tex}};
+    for (const auto &t : textures) {
+        if (!it->second.Has(t.first)) continue;
+        *t.second = texref(texture_info(it->second.Get(t.first), ep + "/" + t.first), ep + "/" + t.first);
+        if (t.second->texture < 0) continue;
+        auto &kind = t.second == &m.sheen_roughness_tex ? data_images_ : linear_images_;
+        kind[size_t(scene_->textures[t.second->texture].image)] = 1;
+    }
 }
 
 /* KHR_materials_anisotropy (scene.h, anisotropy.h): anisotropyStrength in

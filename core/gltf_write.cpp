@@ -522,6 +522,21 @@ void Writer::apply_material(int mi, const std::vector<const dr_param *> &ps)
             ext = tinygltf::Value(std::move(o));
             break;
         }
+        case DR_PARAM_SHEEN_COLOR:
+        case DR_PARAM_SHEEN_ROUGHNESS: {   /* (sheened materials only: the object exists) */
+            tinygltf::Value &ext = m.extensions["KHR_materials_sheen"];
+            tinygltf::Value::Object o = ext.IsObject() ? ext.Get<tinygltf::Value::Object>() : tinygltf::Value::Object();
+            std::vector<double> v = values(p);
+            if (p->kind == DR_PARAM_SHEEN_ROUGHNESS) {
+                o["sheenRoughnessFactor"] = tinygltf::Value(clamped(v[0], 0, 1, p, &warned));
+            } else {
+                tinygltf::Value::Array a;
+                for (int c = 0; c < 3; c++) a.push_back(tinygltf::Value(clamped(v[size_t(c)], 0, 1, p, &warned)));
+                o["sheenColorFactor"] = tinygltf::Value(std::move(a));
+            }
+            ext = tinygltf::Value(std::move(o));
+            break;
+        }
         default: break;
         }
     }
@@ -743,7 +758,9 @@ void Writer::apply_params()
         case DR_PARAM_EMISSIVE_STRENGTH:
         case DR_PARAM_CLEARCOAT:
         case DR_PARAM_CLEARCOAT_ROUGHNESS:
-        case DR_PARAM_ANISOTROPY_STRENGTH: mats[p->target].push_back(p); break;
+        case DR_PARAM_ANISOTROPY_STRENGTH:
+        case DR_PARAM_SHEEN_COLOR:
+        case DR_PARAM_SHEEN_ROUGHNESS: mats[p->target].push_back(p); break;
         case DR_PARAM_LIGHT_COLOR:
         case DR_PARAM_LIGHT_INTENSITY: lights[p->target].push_back(p); break;
         case DR_PARAM_ENV_COLOR:

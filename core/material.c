@@ -74,6 +74,20 @@ void dr_material_eval(const struct dr_scene *s, const struct dr_hit *hit, struct
         texref_eval(s, texref_texture(s, r), r, hit, false, uv, px);
         b->anisotropy *= px[2];
     }
+    /* the sheen: sheenColorTexture's RGB (sRGB-decoded), sheenRoughnessTexture's A */
+    b->sheened = m->sheened;
+    b->sheen_color = m->sheen_color;
+    b->sheen_roughness = m->sheen_roughness;
+    for (int which = 0; which < 2; which++) {
+        r = dr_material_sheen_tex(m, which);
+        if (!r)
+            continue;
+        texref_eval(s, texref_texture(s, r), r, hit, which == 0, uv, px);
+        if (which == 0)
+            b->sheen_color = dr_mul(b->sheen_color, dr_v3(px[0], px[1], px[2]));
+        else
+            b->sheen_roughness *= px[3];
+    }
 }
 
 static void texref_prefetch(const struct dr_scene *s, const struct dr_texref *r, const struct dr_hit *hit,
@@ -102,6 +116,9 @@ void dr_material_prefetch(const struct dr_scene *s, const struct dr_hit *hit)
             texref_prefetch(s, dr_material_coat_tex(m, which), hit, false);
     if (dr_material_anisotropy_tex(m))
         texref_prefetch(s, dr_material_anisotropy_tex(m), hit, false);
+    for (int which = 0; which < 2; which++)
+        if (dr_material_sheen_tex(m, which))
+            texref_prefetch(s, dr_material_sheen_tex(m, which), hit, which == 0);
 }
 
 void d_material_eval(const struct dr_scene *s, const struct dr_param_set *ps, const struct dr_hit *hit,
@@ -171,6 +188,22 @@ void d_material_eval(const struct dr_scene *s, const struct dr_param_set *ps, co
         }
         dr_sink_add(k, ps->mat_anisotropy[mi], d_b->anisotropy * texel);
     }
+    /* the sheen: colour = factor x RGB of its texture, roughness = factor x
+     * A of its own (the texels are no parameter, as the specular ones) */
+    for (int which = 0; which < 2; which++) {
+        const int64_t factor = which ? ps->mat_sheen_roughness[mi] : ps->mat_sheen_color[mi];
+        if (factor < 0)
+            continue;
+        const struct dr_texref *r = dr_material_sheen_tex(m, which);
+        double suv[2];
+        px[0] = px[1] = px[2] = px[3] = 1.0;
+        if (r)
+            texref_eval(s, texref_texture(s, r), r, hit, which == 0, suv, px);
+        if (which)
+            dr_sink_add(k, factor, d_b->sheen_roughness * px[3]);
+        else
+            dr_sink_add3(k, factor, dr_mul(d_b->sheen_color, dr_v3(px[0], px[1], px[2])));
+    }
 }
 
 void d_material_eval_uv(const struct dr_scene *s, const struct dr_hit *hit, const struct dr_d_bsdf *d_b,
@@ -211,6 +244,22 @@ void d_material_eval_uv(const struct dr_scene *s, const struct dr_hit *hit, cons
         double d_out[4] = {0.0, 0.0, 0.0, 0.0}, d_uv[2] = {0.0, 0.0};
         d_out[which] = (which ? d_b->coat_roughness * m->coat_roughness : d_b->coat * m->coat);
         d_texture_eval_uv(ct, &s->images[ct->image], uv[0], uv[1], false, d_out, &d_uv[0], &d_uv[1]);
+        d_texref_uv(r, d_uv, d_hit);
+    }
+    for (int which = 0; which < 2; which++) {   /* the sheen's: colour RGB (sRGB), roughness A */
+        const struct dr_texref *r = dr_material_sheen_tex(m, which);
+        if (!r)
+            continue;
+        const struct dr_texture *st = texref_texture(s, r);
+        dr_texref_uv(&s->mesh, r, hit, uv);
+        double d_out[4] = {0.0, 0.0, 0.0, 0.0}, d_uv[2] = {0.0, 0.0};
+        if (which) {
+            d_out[3] = d_b->sheen_roughness * m->sheen_roughness;
+        } else {
+            const dr_vec3 g = dr_mul(d_b->sheen_color, m->sheen_color);
+            d_out[0] = g.x, d_out[1] = g.y, d_out[2] = g.z;
+        }
+        d_texture_eval_uv(st, &s->images[st->image], uv[0], uv[1], which == 0, d_out, &d_uv[0], &d_uv[1]);
         d_texref_uv(r, d_uv, d_hit);
     }
 }

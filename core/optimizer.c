@@ -19,6 +19,8 @@ double dr_param_default_lr(const struct dr_param *p, const double *values)
     case DR_PARAM_CLEARCOAT:
     case DR_PARAM_CLEARCOAT_ROUGHNESS:
     case DR_PARAM_ANISOTROPY_STRENGTH:
+    case DR_PARAM_SHEEN_COLOR:
+    case DR_PARAM_SHEEN_ROUGHNESS:
     case DR_PARAM_IMAGE:
     case DR_PARAM_MEDIUM_ALBEDO:
     case DR_PARAM_MEDIUM_G: return 0.02;

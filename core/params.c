@@ -106,6 +106,8 @@ static const char *const mat_fields[] = {
     [DR_PARAM_CLEARCOAT] = "/extensions/KHR_materials_clearcoat/clearcoatFactor",
     [DR_PARAM_CLEARCOAT_ROUGHNESS] = "/extensions/KHR_materials_clearcoat/clearcoatRoughnessFactor",
     [DR_PARAM_ANISOTROPY_STRENGTH] = "/extensions/KHR_materials_anisotropy/anisotropyStrength",
+    [DR_PARAM_SHEEN_COLOR] = "/extensions/KHR_materials_sheen/sheenColorFactor",
+    [DR_PARAM_SHEEN_ROUGHNESS] = "/extensions/KHR_materials_sheen/sheenRoughnessFactor",
 };
 
 const char *dr_param_type_name(const struct dr_param *p)
@@ -113,6 +115,7 @@ const char *dr_param_type_name(const struct dr_param *p)
     switch (p->kind) {
     case DR_PARAM_BASE_COLOR:
     case DR_PARAM_EMISSIVE_FACTOR:
+    case DR_PARAM_SHEEN_COLOR:
     case DR_PARAM_LIGHT_COLOR:
     case DR_PARAM_MEDIUM_EXTINCTION:
     case DR_PARAM_MEDIUM_ALBEDO:
@@ -130,7 +133,9 @@ void dr_param_range(const struct dr_param *p, double *lo, double *hi)
     case DR_PARAM_BASE_COLOR:
     case DR_PARAM_METALLIC:
     case DR_PARAM_CLEARCOAT:
-    case DR_PARAM_ANISOTROPY_STRENGTH: *lo = 0.0; *hi = 1.0; break;
+    case DR_PARAM_ANISOTROPY_STRENGTH:
+    case DR_PARAM_SHEEN_COLOR:
+    case DR_PARAM_SHEEN_ROUGHNESS: *lo = 0.0; *hi = 1.0; break;   /* (the sheen's roughness floor: bsdf.h) */
     case DR_PARAM_ROUGHNESS:
     case DR_PARAM_CLEARCOAT_ROUGHNESS: *lo = 0.001; *hi = 1.0; break;   /* the BSDF's floor */
     case DR_PARAM_IMAGE: *lo = 0.0; *hi = 1.0; break;        /* colour or data texels */
@@ -233,18 +238,20 @@ static bool thin_glass_unused(const struct dr_scene *s, int m, enum dr_param_kin
 }
 
 /* The coat's factors are parameters of coated materials only, the
- * anisotropy's strength of anisotropic ones (scene.h); an unlit material's
+ * anisotropy's strength of anisotropic ones, the sheen's factors of sheened
+ * ones (scene.h); an unlit material's
  * factors are none (its colour is the loader's copy). */
 static bool uncoated_unused(const struct dr_scene *s, int m, enum dr_param_kind kind)
 {
     return s->materials[m].unlit ||
            ((kind == DR_PARAM_CLEARCOAT || kind == DR_PARAM_CLEARCOAT_ROUGHNESS) && !s->materials[m].coated) ||
-           (kind == DR_PARAM_ANISOTROPY_STRENGTH && !s->materials[m].anisotropic);
+           (kind == DR_PARAM_ANISOTROPY_STRENGTH && !s->materials[m].anisotropic) ||
+           ((kind == DR_PARAM_SHEEN_COLOR || kind == DR_PARAM_SHEEN_ROUGHNESS) && !s->materials[m].sheened);
 }
 
 int dr_params_list(const struct dr_scene *s, struct dr_param **out, int *count)
 {
-    int cap = 8 * s->n_file_materials + 2 * (max_light_index(s) + 1) + 3 + s->n_images + 5 * s->n_media + 1;
+    int cap = (DR_PARAM_LAST_MATERIAL + 1) * s->n_file_materials + 2 * (max_light_index(s) + 1) + 3 + s->n_images + 5 * s->n_media + 1;
     struct dr_param *list = calloc((size_t)cap, sizeof *list);
     if (!list) {
         dr_set_error("out of memory");
@@ -255,7 +262,7 @@ int dr_params_list(const struct dr_scene *s, struct dr_param **out, int *count)
         for (int k = DR_PARAM_BASE_COLOR; k <= DR_PARAM_LAST_MATERIAL; k++) {
             if (thin_glass_unused(s, m, (enum dr_param_kind)k) || uncoated_unused(s, m, (enum dr_param_kind)k))
                 continue;
-            int64_t size = (k == DR_PARAM_BASE_COLOR || k == DR_PARAM_EMISSIVE_FACTOR) ? 3 : 1;
+            int64_t size = (k == DR_PARAM_BASE_COLOR || k == DR_PARAM_EMISSIVE_FACTOR || k == DR_PARAM_SHEEN_COLOR) ? 3 : 1;
             list[n++] = make(k, m, size, "/materials/%d%s", m, mat_fields[k]);
         }
     for (int l = 0; l <= max_light_index(s); l++) {
@@ -506,6 +513,7 @@ static double *mat_scalar(struct dr_material *m, enum dr_param_kind k)
     case DR_PARAM_CLEARCOAT: return &m->coat;
     case DR_PARAM_CLEARCOAT_ROUGHNESS: return &m->coat_roughness;
     case DR_PARAM_ANISOTROPY_STRENGTH: return &m->anisotropy_strength;
+    case DR_PARAM_SHEEN_ROUGHNESS: return &m->sheen_roughness;
     default: return NULL;
     }
 }
@@ -516,6 +524,7 @@ static dr_vec3 *param_vec3(struct dr_scene *s, const struct dr_param *p, int *li
     switch (p->kind) {
     case DR_PARAM_BASE_COLOR: return &s->materials[p->target].base_color;
     case DR_PARAM_EMISSIVE_FACTOR: return &s->materials[p->target].emissive_factor;
+    case DR_PARAM_SHEEN_COLOR: return &s->materials[p->target].sheen_color;
     case DR_PARAM_ENV_COLOR: return &s->env.color;
     case DR_PARAM_LIGHT_COLOR:
         for (int i = 0; i < s->n_lights; i++)
@@ -656,6 +665,8 @@ void dr_param_set_destroy(struct dr_param_set *set)
     free(set->mat_coat);
     free(set->mat_coat_roughness);
     free(set->mat_anisotropy);
+    free(set->mat_sheen_color);
+    free(set->mat_sheen_roughness);
     free(set->light_color);
     free(set->light_intensity);
     free(set->image);
@@ -696,6 +707,8 @@ static void index_param(struct dr_param_set *set, const struct dr_scene *s, cons
     case DR_PARAM_CLEARCOAT: set->mat_coat[p->target] = p->offset; break;
     case DR_PARAM_CLEARCOAT_ROUGHNESS: set->mat_coat_roughness[p->target] = p->offset; break;
     case DR_PARAM_ANISOTROPY_STRENGTH: set->mat_anisotropy[p->target] = p->offset; break;
+    case DR_PARAM_SHEEN_COLOR: set->mat_sheen_color[p->target] = p->offset; break;
+    case DR_PARAM_SHEEN_ROUGHNESS: set->mat_sheen_roughness[p->target] = p->offset; break;
     case DR_PARAM_LIGHT_COLOR:
     case DR_PARAM_LIGHT_INTENSITY:
         for (int l = 0; l < s->n_lights; l++)
@@ -733,6 +746,8 @@ static bool alloc_indices(struct dr_param_set *set, const struct dr_scene *s, in
     set->mat_coat = offsets(s->n_materials);
     set->mat_coat_roughness = offsets(s->n_materials);
     set->mat_anisotropy = offsets(s->n_materials);
+    set->mat_sheen_color = offsets(s->n_materials);
+    set->mat_sheen_roughness = offsets(s->n_materials);
     set->light_color = offsets(s->n_lights);
     set->light_intensity = offsets(s->n_lights);
     set->image = offsets(s->n_images);
@@ -748,7 +763,7 @@ static bool alloc_indices(struct dr_param_set *set, const struct dr_scene *s, in
     return set->med_extinction && set->med_albedo && set->med_g && set->med_density_scale && set->med_density &&
            set->med_active && set->params && set->mat_base_color && set->mat_metallic && set->mat_roughness &&
            set->mat_emissive_factor && set->mat_emissive_strength && set->mat_coat && set->mat_coat_roughness &&
-           set->mat_anisotropy &&            set->light_color && set->light_intensity &&
+           set->mat_anisotropy && set->mat_sheen_color && set->mat_sheen_roughness && set->light_color && set->light_intensity &&
            set->image && set->mat_bsdf_active && set->mat_emission_active;
 }
 
@@ -791,6 +806,7 @@ static void mark_active(struct dr_param_set *set, const struct dr_scene *s)
         set->mat_bsdf_active[m] = set->mat_base_color[m] >= 0 || set->mat_metallic[m] >= 0 ||
                                   set->mat_roughness[m] >= 0 || set->mat_coat[m] >= 0 ||
                                   set->mat_coat_roughness[m] >= 0 || set->mat_anisotropy[m] >= 0 ||
+                                  set->mat_sheen_color[m] >= 0 || set->mat_sheen_roughness[m] >= 0 ||
                                   texref_active(set, s, &mat->base_color_tex) ||
                                   texref_active(set, s, &mat->metallic_roughness_tex) ||
                                   (dr_material_coat_tex(mat, 0) && texref_active(set, s, dr_material_coat_tex(mat, 0))) ||

@@ -40,6 +40,8 @@ enum dr_param_kind {
     DR_PARAM_CLEARCOAT,             /* KHR_materials_clearcoat, coated materials only */
     DR_PARAM_CLEARCOAT_ROUGHNESS,
     DR_PARAM_ANISOTROPY_STRENGTH,   /* KHR_materials_anisotropy, anisotropic materials only */
+    DR_PARAM_SHEEN_COLOR,           /* KHR_materials_sheen, sheened materials only */
+    DR_PARAM_SHEEN_ROUGHNESS,
     DR_PARAM_LIGHT_COLOR,
     DR_PARAM_LIGHT_INTENSITY,
     DR_PARAM_ENV_COLOR,
@@ -54,7 +56,7 @@ enum dr_param_kind {
     DR_PARAM_KIND_COUNT
 };
 
-#define DR_PARAM_LAST_MATERIAL DR_PARAM_ANISOTROPY_STRENGTH
+#define DR_PARAM_LAST_MATERIAL DR_PARAM_SHEEN_ROUGHNESS
 #define DR_PARAM_NAME_MAX 160
 
 struct dr_param {
@@ -111,10 +113,11 @@ struct dr_param_set {
     int64_t *mat_emissive_factor, *mat_emissive_strength;        /* per material */
     int64_t *mat_coat, *mat_coat_roughness;                      /* per material */
     int64_t *mat_anisotropy;                                     /* per material: anisotropyStrength */
+    int64_t *mat_sheen_color, *mat_sheen_roughness;              /* per material: KHR_materials_sheen's */
     int64_t *light_color, *light_intensity;                      /* per scene light instance */
     int64_t *image;                                              /* per image: texel (0,0) */
     int64_t env_color, env_strength, env_map;
-    bool *mat_bsdf_active;      /* base colour, metallic, roughness, the coat's, the anisotropy's or one of their textures */
+    bool *mat_bsdf_active;      /* base colour, metallic, roughness, the coat's, the anisotropy's, the sheen's or one of their textures */
     bool *mat_emission_active;  /* emissive factor, strength or texture */
     bool lights_active;         /* some punctual light parameter */
     bool env_active;

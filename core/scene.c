@@ -84,6 +84,11 @@ unsigned dr_material_make_thin(struct dr_material *m, double ior)
         dropped |= 8;
     m->coated = false;   /* (the sheet's reflection is already Fresnel's) */
     m->coat = m->coat_roughness = 0.0;
+    if (m->sheened)
+        dropped |= 16;
+    m->sheened = false;   /* (nor has the sheet fibres) */
+    m->sheen_color = dr_v3s(0.0);
+    m->sheen_roughness = 0.0;
     return dropped;
 }
 
@@ -113,7 +118,8 @@ static int refresh(struct dr_scene *s, bool lights)
             continue;
         if (mat->base_color_tex.texture >= 0 || mat->metallic_roughness_tex.texture >= 0 ||
             mat->emissive_tex.texture >= 0 || dr_material_coat_tex(mat, 0) || dr_material_coat_tex(mat, 1) ||
-            dr_material_anisotropy_tex(mat) || mat->specular_tex.texture >= 0 || mat->specular_color_tex.texture >= 0)
+            dr_material_anisotropy_tex(mat) || mat->specular_tex.texture >= 0 || mat->specular_color_tex.texture >= 0 ||
+            dr_material_sheen_tex(mat, 0) || dr_material_sheen_tex(mat, 1))
             s->effects |= DR_FX_TEXTURES;
         if (material_has_specular(mat))
             s->effects |= DR_FX_SPECULAR;
@@ -121,6 +127,8 @@ static int refresh(struct dr_scene *s, bool lights)
             s->effects |= DR_FX_CLEARCOAT;
         if (mat->anisotropic)
             s->effects |= DR_FX_ANISOTROPY;
+        if (mat->sheened)
+            s->effects |= DR_FX_SHEEN;
         s->effects |= surface_effects(s, i);
     }
     free(used);
@@ -289,6 +297,7 @@ void dr_effects_describe(unsigned fx, char *buf, int size)
         {DR_FX_SINGLE_SIDED, "single_sided"},   {DR_FX_VERTEX_COLORS, "vertex_colors"},
         {DR_FX_DIELECTRIC_BOUNDARIES, "dielectric_boundaries"}, {DR_FX_THIN_TRANSMISSION, "thin_transmission"},
         {DR_FX_CLEARCOAT, "clearcoat"},         {DR_FX_ANISOTROPY, "anisotropy"},
+        {DR_FX_SHEEN, "sheen"},
     };
     int n = 0;
     buf[0] = '\0';

@@ -83,7 +83,24 @@ struct dr_material {
     bool anisotropic;
     double anisotropy_strength, anisotropy_rotation;
     struct dr_texref anisotropy_tex;
+    /* KHR_materials_sheen (bsdf_sheen.c): sheened when the file gives the
+     * extension with a sheenColorFactor other than black (decided at load, as
+     * coated). The sheen's colour is sheenColorFactor x sheenColorTexture's
+     * RGB (sRGB), its roughness sheenRoughnessFactor x
+     * sheenRoughnessTexture's A (linear data). Read only where sheened. */
+    bool sheened;
+    dr_vec3 sheen_color;
+    double sheen_roughness;
+    struct dr_texref sheen_color_tex, sheen_roughness_tex;
 };
+
+/* m's sheen colour texture (which 0) or sheen roughness texture (1), or
+ * NULL: none, or m has no sheen. */
+static inline const struct dr_texref *dr_material_sheen_tex(const struct dr_material *m, int which)
+{
+    const struct dr_texref *t = which ? &m->sheen_roughness_tex : &m->sheen_color_tex;
+    return m->sheened && t->texture >= 0 ? t : NULL;
+}
 
 /* m's anisotropy texture, or NULL: none, or m is not anisotropic. */
 static inline const struct dr_texref *dr_material_anisotropy_tex(const struct dr_material *m)
@@ -112,8 +129,8 @@ static inline const struct dr_texref *dr_material_coat_tex(const struct dr_mater
  * stops at the sheet is its Fresnel reflection, already weighed by the
  * stop's probability), no emission. Returns a bit mask of what was
  * dropped: 1 a base colour other than white or its texture, 2 a
- * metallic-roughness texture, 4 emission, 8 a clear coat (the loader
- * warns). */
+ * metallic-roughness texture, 4 emission, 8 a clear coat, 16 a sheen (the
+ * loader warns). */
 unsigned dr_material_make_thin(struct dr_material *m, double ior);
 
 enum dr_tri_flags {
@@ -217,7 +234,8 @@ enum dr_effect {
     DR_FX_DIELECTRIC_BOUNDARIES = 1 << 14, /* a medium bounded by a smooth dielectric (medium.h: ior) */
     DR_FX_THIN_TRANSMISSION = 1 << 15, /* thin-walled glass (dr_material.thin_ior, coverage.h) */
     DR_FX_CLEARCOAT = 1 << 16,         /* some material has a clear coat (dr_material.coated, bsdf_coat.c) */
-    DR_FX_ANISOTROPY = 1 << 17         /* some material is anisotropic (dr_material.anisotropic, anisotropy.h) */
+    DR_FX_ANISOTROPY = 1 << 17,        /* some material is anisotropic (dr_material.anisotropic, anisotropy.h) */
+    DR_FX_SHEEN = 1 << 18              /* some material has a sheen (dr_material.sheened, bsdf_sheen.c) */
 };
 
 struct dr_scene {

@@ -280,7 +280,7 @@ static void check_basic(const char *name)
     CHECK(s->env.map.data == NULL && s->env.uri[0] == '\0', "constant environment has no map");
 
     /* warnings: the unsupported extension once; orthographic cameras are supported now */
-    CHECK(count_substr(warnings, "KHR_materials_sheen") == 1, "sheen warned once:\n%s", warnings);
+    CHECK(count_substr(warnings, "KHR_materials_iridescence") == 1, "iridescence warned once:\n%s", warnings);
     CHECK(count_substr(warnings, "KHR_materials_clearcoat") == 0, "clearcoat is supported:\n%s", warnings);
     CHECK(count_substr(warnings, "orthographic") == 0, "no orthographic camera warning:\n%s", warnings);
     CHECK(strncmp(warnings, data_path(name), strlen(data_path(name))) == 0, "warnings name the file:\n%s",

@@ -698,6 +698,110 @@ static void test_specular_textures(void)
     dr_scene_destroy(s);
 }
 
+/* ---- KHR_materials_sheen: factors, textures, parameters, refusals ---- */
+
+static void test_sheen(void)
+{
+    unsigned char rough[104 + 4] = {0}, col[104 + 3] = {0};
+    ktx2_header(rough, 37, 1, 1, 0, 4);   /* R8G8B8A8_UNORM: A is the roughness */
+    memcpy(rough + 104, (const unsigned char[]){10, 20, 30, 128}, 4);
+    ktx2_header(col, 29, 1, 1, 0, 3);     /* R8G8B8_SRGB */
+    memcpy(col + 104, (const unsigned char[]){255, 128, 64}, 3);
+    write_file("sheen_r.ktx2", rough, sizeof rough);
+    write_file("sheen_c.ktx2", col, sizeof col);
+    unsigned char b[92];
+    size_t o = 0;
+    put_f32(b, &o, 12, -1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 1.0, 0.0, -1.0, 1.0, 0.0);
+    put_f32(b, &o, 8, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0);
+    const uint16_t idx[6] = {0, 1, 2, 0, 2, 3};
+    memcpy(b + o, idx, sizeof idx);
+    char uri[512];
+    snprintf(uri, sizeof uri, "%s", data_uri(b, sizeof b));
+    const char *fmt =
+        "{\"asset\":{\"version\":\"2.0\"},\"extensionsUsed\":[\"KHR_materials_sheen\"],"
+        "\"materials\":[{\"pbrMetallicRoughness\":{\"metallicFactor\":0,\"roughnessFactor\":0.4},"
+        "\"extensions\":{\"KHR_materials_sheen\":{%s}}}],"
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0,\"TEXCOORD_0\":1},\"indices\":2,\"material\":0}]}],"
+        "\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}],"
+        "\"textures\":[{\"source\":0},{\"source\":1}],"
+        "\"images\":[{\"uri\":\"sheen_c.ktx2\",\"mimeType\":\"image/ktx2\"},{\"uri\":\"sheen_r.ktx2\",\"mimeType\":\"image/ktx2\"}],"
+        "\"buffers\":[{\"byteLength\":92,\"uri\":\"%s\"}],\"bufferViews\":[{\"buffer\":0,\"byteLength\":92}],"
+        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":4,\"type\":\"VEC3\",\"max\":[1,1,0],"
+        "\"min\":[-1,0,0]},{\"bufferView\":0,\"byteOffset\":48,\"componentType\":5126,\"count\":4,\"type\":\"VEC2\"},"
+        "{\"bufferView\":0,\"byteOffset\":80,\"componentType\":5123,\"count\":6,\"type\":\"SCALAR\"}]}";
+    int rc;
+    struct dr_scene *s = load_json("sheen.gltf", NULL, &rc, fmt,
+                                   "\"sheenColorFactor\":[1,0.5,0.25],\"sheenRoughnessFactor\":0.6,"
+                                   "\"sheenColorTexture\":{\"index\":0},\"sheenRoughnessTexture\":{\"index\":1}",
+                                   uri);
+    CHECK(rc == 0, "sheen: %s", dr_last_error());
+    CHECK(!strstr(warnings, "sheen"), "no warning about the sheen:\n%s", warnings);
+    dr_scene_destroy(s);
+    s = dr_scene_load(tmp_path("sheen.gltf"));
+    CHECK(s != NULL, "sheen, whole: %s", dr_last_error());
+    if (s) {
+        CHECK(s->materials[0].sheened, "a coloured sheen is there");
+        CHECK((s->effects & DR_FX_SHEEN) && (s->effects & DR_FX_TEXTURES), "effects sheen and textures: %x",
+              s->effects);
+        struct dr_hit hit;
+        dr_hit_compute(&s->mesh, 0, dr_v3(0.5, 0.2, 3.0), dr_v3(0.0, 0.0, -1.0), &hit);
+        struct dr_bsdf bs;
+        dr_material_eval(s, &hit, &bs);
+        CHECK(bs.sheened, "the BSDF has the sheen");
+        CHECK(fabs(bs.sheen_roughness - 0.6 * 128.0 / 255.0) < 1e-6, "sheen roughness = factor x A: %g",
+              bs.sheen_roughness);
+        const dr_vec3 want = dr_v3(1.0, 0.5 * dr_srgb_to_linear(128.0 / 255.0), 0.25 * dr_srgb_to_linear(64.0 / 255.0));
+        CHECK(fabs(bs.sheen_color.x - want.x) < 1e-6 && fabs(bs.sheen_color.y - want.y) < 1e-6 &&
+                  fabs(bs.sheen_color.z - want.z) < 1e-6,
+              "sheen colour = factor x decoded RGB: (%g, %g, %g), want (%g, %g, %g)", bs.sheen_color.x,
+              bs.sheen_color.y, bs.sheen_color.z, want.x, want.y, want.z);
+        struct dr_param *list;
+        int n;
+        CHECK(dr_params_list(s, &list, &n) == 0, "params: %s", dr_last_error());
+        int colour = -1, rough_p = -1;
+        for (int i = 0; i < n; i++) {
+            if (strcmp(list[i].name, "/materials/0/extensions/KHR_materials_sheen/sheenColorFactor") == 0)
+                colour = i;
+            if (strcmp(list[i].name, "/materials/0/extensions/KHR_materials_sheen/sheenRoughnessFactor") == 0)
+                rough_p = i;
+        }
+        CHECK(colour >= 0 && list[colour].size == 3 && list[colour].kind == DR_PARAM_SHEEN_COLOR,
+              "sheenColorFactor is a colour parameter");
+        CHECK(rough_p >= 0 && list[rough_p].size == 1 && list[rough_p].kind == DR_PARAM_SHEEN_ROUGHNESS,
+              "sheenRoughnessFactor is a parameter");
+        free(list);
+    }
+    dr_scene_destroy(s);
+    /* glTF's default colour, black, is no sheen: nothing of it is read or listed */
+    s = load_json("sheen_black.gltf", NULL, &rc, fmt, "\"sheenRoughnessFactor\":0.6,\"sheenColorTexture\":{\"index\":0}",
+                  uri);
+    CHECK(rc == 0 && s && !s->materials[0].sheened && !(s->effects & (DR_FX_SHEEN | DR_FX_TEXTURES)),
+          "a black sheen is none (rc %d)", rc);
+    if (s) {
+        struct dr_param *list;
+        int n;
+        CHECK(dr_params_list(s, &list, &n) == 0, "params: %s", dr_last_error());
+        for (int i = 0; i < n; i++)
+            CHECK(!strstr(list[i].name, "sheen"), "no sheen parameter without a sheen: %s", list[i].name);
+        free(list);
+    }
+    dr_scene_destroy(s);
+    static const struct { const char *ext, *what, *where, *says; } bad[] = {
+        {"\"sheenColorFactor\":[1,1.5,0]", "a sheen colour above 1", "KHR_materials_sheen/sheenColorFactor/1",
+         "[0, 1]"},
+        {"\"sheenColorFactor\":[1,1,1],\"sheenRoughnessFactor\":-0.1", "a negative sheen roughness",
+         "KHR_materials_sheen/sheenRoughnessFactor", "[0, 1]"},
+        {"\"sheenColorFactor\":[1,1,1],\"sheenRoughnessTexture\":{\"index\":5}", "a missing sheen texture",
+         "KHR_materials_sheen/sheenRoughnessTexture", "does not exist"},
+        {"\"sheenColorFactor\":[1,1]", "a sheen colour of two numbers", "KHR_materials_sheen/sheenColorFactor", ""},
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        s = load_json("sheen_bad.gltf", NULL, &rc, fmt, bad[i].ext, uri);
+        check_error(rc, bad[i].what, "sheen_bad.gltf", bad[i].where, bad[i].says);
+        dr_scene_destroy(s);
+    }
+}
+
 /* ---- Draco: the shared sample against the plain Box ---- */
 
 static int cmp_tri(const void *a, const void *b)
@@ -1125,6 +1229,7 @@ int main(void)
     test_unlit();
     test_anisotropy();
     test_specular_textures();
+    test_sheen();
     test_eight_bit();
     char cmd[400];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);

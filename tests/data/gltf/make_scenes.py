@@ -135,7 +135,7 @@ def basic_scene(kind):
     doc = {
         "asset": {"version": "2.0", "generator": "drender make_scenes.py"},
         "extensionsUsed": ["KHR_materials_emissive_strength", "KHR_materials_specular",
-                           "KHR_lights_punctual", "KHR_materials_sheen"],
+                           "KHR_lights_punctual", "KHR_materials_iridescence"],
         "scene": 0,
         "scenes": [{"nodes": [0, 2, 3, 4, 5, 6, 7]}],
         "nodes": [
