@@ -935,6 +935,7 @@ dr_material default_material(const char *name)
     m.base_color_tex = m.metallic_roughness_tex = m.emissive_tex = dr_texref{-1, 0, false, {1, 0, 0, 0, 1, 0}};
     m.normal_tex = m.coat_tex = m.coat_roughness_tex = dr_texref{-1, 0, false, {1, 0, 0, 0, 1, 0}};
     m.anisotropy_tex = m.specular_tex = m.specular_color_tex = dr_texref{-1, 0, false, {1, 0, 0, 0, 1, 0}};
+    m.sheen_color_tex = m.sheen_roughness_tex = dr_texref{-1, 0, false, {1, 0, 0, 0, 1, 0}};
     m.normal_scale = 1.0;
     m.alpha_mode = DR_ALPHA_OPAQUE;
     m.alpha = 1.0;

@@ -167,6 +167,7 @@ struct lanes {
     bool any_aniso8;
     const struct dr_texref *aniso_tex[DR_SIMD_W];   /* (anisotropy8's eight-lane lookup; NULL: none) */
     bool no_direction[DR_SIMD_W];     /* the surface gives no direction here (dr_anisotropy_frame) */
+    bool sheened[DR_SIMD_W], any_sheened;   /* the material has a sheen (shaded lane by lane: dr_path8.sheen_bsdf) */
     bool may_emit[DR_SIMD_W];         /* the material's factor x strength is not black */
     bool any_textured, any_ltextured;
     struct dr_hit hit[DR_SIMD_W];   /* the hits of textured lanes, as dr_hit_compute fills them */
@@ -336,7 +337,13 @@ static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const st
             r[i] = lb.roughness;
             lane_coat[i] = lb.coat, lane_coat_r[i] = lb.coat_roughness;
             aniso[i] = L->no_direction[i] ? 0.0 : lb.anisotropy;   /* (stage_material's fallback) */
+            if (L->sheened[i]) {   /* (the record the scalar functions shade this lane with) */
+                lb.anisotropy = aniso[i];
+                g->sheen_bsdf[i] = lb;
+            }
         }
+    g->any_sheen = L->any_sheened;
+    g->sheen_on = L->any_sheened ? mask_of(L->sheened) & ~end : (dr_m8){0};
     g->anisotropy = aniso;
     g->roughness = r;   /* (a differentiated vertex's dr_bsdf: dr_path8_shade) */
     g->specular_color = spec_colour;   /* (read for differentiated lanes only: gathered then) */
@@ -458,14 +465,30 @@ DR_SIMD_INLINE dr_f8 coat_fresnel(dr_f8 x)
     return 0.04 + 0.96 * pow5(1.0 - dr_f8_clamp(x, 0.0, 1.0));
 }
 
+/* The sheened lanes' dr_bsdf_eval_pdf, from their records, into f and pdf
+ * (the scalar function: the one-path walker's bits). */
+static void __attribute__((noinline)) sheen_eval_pdf(const struct dr_path8 *g, dr_v3x8 wo, dr_v3x8 wi, dr_v3x8 *f,
+                                                     dr_f8 *pdf)
+{
+    for (int i = 0; i < DR_SIMD_W; i++)
+        if (g->sheen_on[i]) {
+            double p;
+            set_lane(f, i, dr_bsdf_eval_pdf(&g->sheen_bsdf[i], dr_v3x8_get(&wo, i), dr_v3x8_get(&wi, i), &p));
+            (*pdf)[i] = p;
+        }
+}
+
 /* dr_bsdf_eval_pdf for wo.z, wi.z > COS_EPS: the base's (eval_pdf_base),
  * and on coated lanes dr_coat_eval_pdf's composition with the coat's lobe
- * (whose specular_prob is 1: no diffuse part), in its order. */
+ * (whose specular_prob is 1: no diffuse part), in its order; sheened lanes
+ * by the scalar function (sheen_eval_pdf). */
 DR_SIMD_INLINE dr_v3x8 eval_pdf_above(const struct dr_path8 *g, dr_v3x8 wo, dr_v3x8 wi, dr_f8 *pdf)
 {
     dr_f8 pb;
-    const dr_v3x8 fb = eval_pdf_base(g, wo, wi, &pb);
+    dr_v3x8 fb = eval_pdf_base(g, wo, wi, &pb);
     if (!g->coated) {
+        if (g->any_sheen)
+            sheen_eval_pdf(g, wo, wi, &fb, &pb);
         *pdf = pb;
         return fb;
     }
@@ -475,7 +498,10 @@ DR_SIMD_INLINE dr_v3x8 eval_pdf_above(const struct dr_path8 *g, dr_v3x8 wo, dr_v
     const dr_f8 p = g->coat_p;
     *pdf = dr_f8_sel(g->coat_on, p * pl + (1.0 - p) * pb, pb);
     const dr_v3x8 f = {fb.x * tt + fl.x * c, fb.y * tt + fl.y * c, fb.z * tt + fl.z * c};
-    return dr_v3x8_sel(g->coat_on, f, fb);
+    dr_v3x8 out = dr_v3x8_sel(g->coat_on, f, fb);
+    if (g->any_sheen)
+        sheen_eval_pdf(g, wo, wi, &out, pdf);
+    return out;
 }
 
 /* sample_specular_dir: GGX visible normals (sample_vndf) of alphas (ax, ay),
@@ -508,9 +534,26 @@ DR_SIMD_INLINE dr_v3x8 sample_specular_dir(dr_f8 ax, dr_f8 ay, dr_v3x8 wo, dr_f8
  * rescaled, which is u_lobe itself where coat_p is 0), the local direction
  * *wi, its BSDF value and density; returns the lanes where wo and wi are
  * above the surface and the density is finite and positive. */
+/* dr_bsdf_sample on the sheened lanes of on, from their records (the
+ * scalar function), into wi, f, pdf and the lanes' bits of *ok. */
+static void __attribute__((noinline)) sheen_sample(const struct dr_path8 *g, dr_m8 on, dr_f8 u_lobe, dr_f8 u1, dr_f8 u2,
+                                                   dr_v3x8 *wi, dr_v3x8 *f, dr_f8 *pdf, dr_m8 *ok)
+{
+    for (int i = 0; i < DR_SIMD_W; i++)
+        if (on[i] && g->sheen_on[i]) {
+            struct dr_bsdf_sample bs;
+            const bool made = dr_bsdf_sample(&g->sheen_bsdf[i], dr_v3x8_get(&g->wo, i), u_lobe[i], u1[i], u2[i], &bs);
+            set_lane(wi, i, bs.wi);
+            set_lane(f, i, bs.f);
+            (*pdf)[i] = bs.pdf;
+            (*ok)[i] = made && bs.pdf > 0.0 && bs.pdf < INFINITY ? -1 : 0;
+        }
+}
+
 DR_SIMD_INLINE dr_m8 bsdf_sample(const struct dr_path8 *g, dr_m8 on, dr_f8 u_lobe, dr_f8 u1, dr_f8 u2, dr_v3x8 *wi,
                                  dr_v3x8 *f, dr_f8 *pdf)
 {
+    const dr_f8 u_lobe_in = u_lobe;   /* (the sheened lanes' scalar sampler rescales its own) */
     dr_m8 ok = on & dr_f8_gt(g->wo_z, dr_f8s(COS_EPS));
     *wi = sample_cosine(u1, u2);
     dr_m8 coat = (dr_m8){0};
@@ -526,7 +569,10 @@ DR_SIMD_INLINE dr_m8 bsdf_sample(const struct dr_path8 *g, dr_m8 on, dr_f8 u_lob
                           *wi);
     ok &= dr_f8_gt(wi->z, dr_f8s(COS_EPS));
     *f = eval_pdf_above(g, g->wo, *wi, pdf);
-    return ok & dr_f8_gt(*pdf, dr_f8s(0.0)) & dr_f8_lt(*pdf, dr_f8s(INFINITY));
+    ok &= dr_f8_gt(*pdf, dr_f8s(0.0)) & dr_f8_lt(*pdf, dr_f8s(INFINITY));
+    if (g->any_sheen && dr_m8_any(on & g->sheen_on))
+        sheen_sample(g, on, u_lobe_in, u1, u2, wi, f, pdf, &ok);
+    return ok;
 }
 
 /* ----------------------------------------------------------- eligibility */
@@ -544,7 +590,7 @@ static bool eight_lane_run(const struct dr_scene *s, const struct dr_path_opts *
     const unsigned allowed = DR_FX_AREA_LIGHTS | DR_FX_PUNCTUAL_LIGHTS | DR_FX_ENV_CONSTANT | DR_FX_ENV_MAP |
                              DR_FX_SHADING_NORMALS | DR_FX_SINGLE_SIDED | DR_FX_SPECULAR | DR_FX_TEXTURES |
                              DR_FX_VERTEX_COLORS | DR_FX_NORMAL_MAPS | DR_FX_ALPHA_MASK | DR_FX_ALPHA_BLEND |
-                             DR_FX_THIN_TRANSMISSION | DR_FX_CLEARCOAT | DR_FX_ANISOTROPY;
+                             DR_FX_THIN_TRANSMISSION | DR_FX_CLEARCOAT | DR_FX_ANISOTROPY | DR_FX_SHEEN;
     const unsigned media_fx = DR_FX_MEDIA | DR_FX_HETEROGENEOUS_MEDIA | DR_FX_DIELECTRIC_BOUNDARIES;
     const unsigned media_stages = DR_STAGE_MEDIA | DR_STAGE_DIELECTRIC;
     struct dr_light_tables t;
@@ -601,10 +647,11 @@ bool dr_path8_hit(const struct dr_scene *s, const struct dr_path_opts *opts, int
     return tri >= 0 && !(opts->params && opts->params->mat_bsdf_active[s->mesh.material[tri]]);
 }
 
-/* Does shading a hit on material m read a texture (mat_textures says how). */
+/* Does shading a hit on material m read a texture (mat_textures says how),
+ * or need the scalar hit for dr_material_eval (a sheen: dr_path8.sheen_bsdf). */
 static bool reads_textures(const struct dr_material *m)
 {
-    return m->base_color_tex.texture >= 0 || m->metallic_roughness_tex.texture >= 0 || m->emissive_tex.texture >= 0 ||
+    return m->sheened || m->base_color_tex.texture >= 0 || m->metallic_roughness_tex.texture >= 0 || m->emissive_tex.texture >= 0 ||
            m->normal_tex.texture >= 0 || dr_material_coat_tex(m, 0) || dr_material_coat_tex(m, 1) ||
            dr_material_anisotropy_tex(m) || m->specular_tex.texture >= 0 || m->specular_color_tex.texture >= 0;
 }
@@ -643,7 +690,7 @@ static void mat_textures(const struct dr_scene *s, const struct dr_material *m, 
                          (mr->texture >= 0 && !dr_texref8_accepts(s, mr)) ||
                          (coat[0] && !dr_texref8_accepts(s, coat[0])) || (coat[1] && !dr_texref8_accepts(s, coat[1])) ||
                          (aniso && !dr_texref8_accepts(s, aniso)) || m->specular_tex.texture >= 0 ||
-                         m->specular_color_tex.texture >= 0;
+                         m->specular_color_tex.texture >= 0 || m->sheened;
     if (!t->scalar_material) {
         t->base = b->texture >= 0 ? b : NULL;
         t->mr = mr->texture >= 0 ? mr : NULL;
@@ -1213,7 +1260,11 @@ DR_SIMD_INLINE dr_f8 sky_share(const struct dr_path8 *g)
     dr_f8 s = g->spec_p * sharpness(a);
     if (g->coated)   /* dr_coat_sky_share: the coat lobe's share (its specular_prob is 1) and the base's */
         s = dr_f8_sel(g->coat_on, g->coat_p * sharpness(g->coat_lobe.alpha) + (1.0 - g->coat_p) * s, s);
-    return dr_f8_sel(dr_f8_gt(g->wo_z, dr_f8s(COS_EPS)), s, dr_f8s(0.0));
+    s = dr_f8_sel(dr_f8_gt(g->wo_z, dr_f8s(COS_EPS)), s, dr_f8s(0.0));
+    for (int i = 0; g->any_sheen && i < DR_SIMD_W; i++)   /* (the sheened lanes': dr_bsdf_sky_share itself) */
+        if (g->sheen_on[i])
+            s[i] = dr_bsdf_sky_share(&g->sheen_bsdf[i], dr_v3x8_get(&g->wo, i));
+    return s;
 }
 
 /* The lanes that picked a constant environment: lights.c's sample_env
@@ -1473,7 +1524,7 @@ static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, str
 {
     const struct dr_mesh *m = &s->mesh;
     L->any_textured = L->any_ltextured = L->any_tex8 = L->any_ltex8 = L->any_normal8 = false;
-    L->any_coat_tex8 = L->any_coated = L->any_anisotropic = L->any_aniso8 = false;
+    L->any_coat_tex8 = L->any_coated = L->any_anisotropic = L->any_aniso8 = L->any_sheened = false;
     const struct dr_material *prev_mat = NULL;
     struct mat_textures t = {0};
     bool may_emit = false;
@@ -1491,7 +1542,7 @@ static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, str
         }
         prev_mat = mat;
         L->may_emit[i] = may_emit;
-        L->textured[i] = t.scalar_hit;
+        L->textured[i] = t.scalar_hit || mat->sheened;
         if (textures) {
             L->base_tex[i] = t.base, L->mr_tex[i] = t.mr, L->emissive_tex[i] = t.emissive;
             L->normal_tex[i] = t.normal;
@@ -1499,14 +1550,16 @@ static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, str
             L->any_normal8 |= t.normal != NULL;
             L->coat_tex[0][i] = t.coat[0], L->coat_tex[1][i] = t.coat[1];
             L->any_coat_tex8 |= t.coat[0] || t.coat[1];
-            L->scalar_material[i] = t.scalar_material;
             L->scalar_emission[i] = t.scalar_emission;
             L->normal_mapped[i] = mat->normal_tex.texture >= 0;
         }
         L->coated[i] = mat->coated;
         L->any_coated |= mat->coated;
         L->anisotropic[i] = mat->anisotropic;
-        L->aniso_scalar[i] = mat->anisotropic && textures && t.scalar_material;
+        L->scalar_material[i] = (textures && t.scalar_material) || mat->sheened;   /* (a sheen without textures too) */
+        L->sheened[i] = mat->sheened;
+        L->any_sheened |= mat->sheened;
+        L->aniso_scalar[i] = mat->anisotropic && L->scalar_material[i];
         L->any_aniso8 |= mat->anisotropic && !L->aniso_scalar[i];
         L->aniso_tex[i] = textures ? t.aniso : NULL;
         L->no_direction[i] = false;
@@ -1876,6 +1929,8 @@ static void differentiated_vertex(const struct dr_scene *s, const struct dr_path
                                .coat = m->coated ? g->coat[i] : m->coat,
                                .coat_roughness = m->coated ? g->coat_roughness[i] : m->coat_roughness,
                                .anisotropy = g->anisotropy[i]};
+    if (g->any_sheen && g->sheen_on[i])   /* (dr_material_eval's record itself) */
+        v->bsdf = g->sheen_bsdf[i];
     v->nee_wi = dr_v3x8_get(&g->nee_wi, i);
     v->nee_bsdf_pdf = g->bsdf_pdf[i];
 }

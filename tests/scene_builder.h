@@ -31,6 +31,7 @@ static inline struct dr_material sb_diffuse(dr_vec3 albedo)
     m.normal_tex.texture = -1;
     m.coat_tex.texture = m.coat_roughness_tex.texture = -1;
     m.anisotropy_tex.texture = m.specular_tex.texture = m.specular_color_tex.texture = -1;
+    m.sheen_color_tex.texture = m.sheen_roughness_tex.texture = -1;
     m.normal_scale = 1.0;
     m.alpha = 1.0;
     m.alpha_cutoff = 0.5;

@@ -943,6 +943,47 @@ static struct dr_scene *anisotropic_box(bool scalar_tile)
     return sb_finish(&b);
 }
 
+/* KHR_materials_sheen's lanes (shaded lane by lane by the scalar BSDF on
+ * dr_material_eval's record, path_simd.h's sheen_bsdf) among the others:
+ * a velvet floor over a Lambertian, a rough metal block with a coloured
+ * sheen under a coat, a tile whose sheen colour and roughness come from
+ * textures (eight-bit RGB, float RGBA: A the roughness), an anisotropic
+ * sheened panel, and a sheen of colour 0 (still sheened: a fit's start),
+ * under a lamp and a constant sky; the walls are not sheened. */
+static struct dr_scene *sheened_box(void)
+{
+    struct sb b;
+    sb_init(&b);
+    sb_open_box(&b, 1.6, sb_material(&b, sb_diffuse(dr_v3(0.8, 0.7, 0.6))));
+    struct dr_material floor = sb_diffuse(dr_v3(0.3, 0.1, 0.2));
+    floor.sheened = true, floor.sheen_color = dr_v3(0.9, 0.8, 0.9), floor.sheen_roughness = 0.5;
+    sb_quad(&b, dr_v3(-0.95, 0.005, 0.95), dr_v3(1.9, 0, 0), dr_v3(0, 0, -1.9), sb_material(&b, floor));
+    struct dr_material block = sb_diffuse(dr_v3(0.9, 0.6, 0.3));
+    block.metallic = 1.0, block.roughness = 0.35;
+    block.sheened = true, block.sheen_color = dr_v3(0.2, 0.5, 0.9), block.sheen_roughness = 0.3;
+    block.coated = true, block.coat = 0.5, block.coat_roughness = 0.1;
+    sb_box(&b, dr_v3(-0.6, 0.0, -0.6), dr_v3(-0.1, 0.7, -0.1), sb_material(&b, block));
+    static const float col_px[2 * 2 * 3] = {1.0f, 0.5f, 0.2f, 0.1f, 0.9f, 0.4f, 0.6f, 0.6f, 0.6f, 0.0f, 0.3f, 1.0f};
+    static const float rough_px[2 * 2 * 4] = {0.2f, 0.4f, 0.6f, 1.0f, 1.0f, 0.5f, 0.3f, 0.25f,
+                                              0.7f, 0.9f, 0.1f, 0.0f, 0.4f, 0.4f, 0.8f, 0.6f};
+    struct dr_material tile = glossy_blue();
+    tile.sheened = true, tile.sheen_color = dr_v3(1.0, 1.0, 0.8), tile.sheen_roughness = 0.9;
+    tile.sheen_color_tex.texture = sb_texture(&b, sb_image8(2, 2, 3, col_px));
+    tile.sheen_roughness_tex.texture = sb_texture(&b, sb_image(2, 2, 4, rough_px, 0.0f, false));
+    sb_quad(&b, dr_v3(0.2, 0.1, -0.8), dr_v3(0.6, 0, 0), dr_v3(0, 0.9, 0.2), sb_material(&b, tile));
+    struct dr_material stretched = sb_diffuse(dr_v3(0.7, 0.8, 0.9));
+    stretched.metallic = 1.0, stretched.roughness = 0.2;
+    stretched.anisotropic = true, stretched.anisotropy_strength = 0.8, stretched.anisotropy_rotation = 0.4;
+    stretched.sheened = true, stretched.sheen_color = dr_v3(0.5, 0.5, 0.5), stretched.sheen_roughness = 0.2;
+    sb_box(&b, dr_v3(0.2, 0.0, 0.1), dr_v3(0.6, 0.4, 0.5), sb_material(&b, stretched));
+    struct dr_material black = sb_diffuse(dr_v3(0.3, 0.8, 0.3));
+    black.sheened = true, black.sheen_color = dr_v3s(0.0), black.sheen_roughness = 0.4;
+    sb_quad(&b, dr_v3(-0.95, 0.2, -0.4), dr_v3(0, 0, 0.6), dr_v3(0, 0.6, 0), sb_material(&b, black));
+    sb_quad(&b, dr_v3(-0.3, 1.5, -0.3), dr_v3(0.6, 0, 0), dr_v3(0, 0, 0.6), sb_material(&b, warm_lamp()));
+    sb_environment(&b, dr_v3(0.9, 1.0, 1.1));
+    return sb_finish(&b);
+}
+
 /* A lamp of two large triangles whose emissive texture is black but for
  * two spots (the way assets paint their glowing parts): the light table
  * samples its triangles part by part (lights.h, dr_light_part_point), the
@@ -1196,6 +1237,8 @@ static void test_wavefront_matches_one_path(void)
                       sb_camera(dr_v3(0.2, 2.2, 2.0), dr_v3(0, 0.3, 0), 70.0), "anisotropic box");
     exact_with_groups(anisotropic_box(true), DR_FX_ANISOTROPY | DR_FX_CLEARCOAT | DR_FX_TEXTURES | DR_FX_ENV_CONSTANT,
                       sb_camera(dr_v3(0.2, 2.2, 2.0), dr_v3(0, 0.3, 0), 70.0), "anisotropic box, float direction texture");
+    exact_with_groups(sheened_box(), DR_FX_SHEEN | DR_FX_ANISOTROPY | DR_FX_CLEARCOAT | DR_FX_TEXTURES | DR_FX_ENV_CONSTANT,
+                      sb_camera(dr_v3(0.2, 2.2, 2.0), dr_v3(0, 0.3, 0), 70.0), "sheened box");
     s = coloured_box();
     CHECK(!dr_wave_prefetches(s), "the coloured box is shaded without prefetching");
     exact_with_groups(s, DR_FX_VERTEX_COLORS, inside, "coloured box");
