@@ -1264,6 +1264,30 @@ int main(void)
     const char *ndptrs[] = {nptrs[0], gptrs[0], gptrs[1], gptrs[4]};
     compare("anisotropic coated scene, derivative sampling", s, &cam, ndptrs, 4, 6, DR_SAMPLING_DERIVATIVE,
             GROUPED_WALKS);
+    /* ... and sheened under the coats instead (KHR_materials_sheen: the
+     * sheened lanes by bsdf.c lane by lane inside the eight-lane stages):
+     * the sheens' colours and roughnesses and the bases' parameters,
+     * detached, attached (the sheen's lobe is the cosine map's; its
+     * probability moves with wo) and derivative (the sheen's own
+     * parameters with the forward strategies) */
+    for (int m = 0; m < 2; m++) {
+        s->materials[m].anisotropic = false;
+        s->materials[m].sheened = true;
+        s->materials[m].sheen_color = m ? dr_v3(0.3, 0.6, 0.9) : dr_v3(0.8, 0.8, 0.7);
+        s->materials[m].sheen_roughness = m ? 0.3 : 0.6;
+    }
+    CHECK(dr_scene_refresh(s) == 0 && (s->effects & DR_FX_SHEEN) && !(s->effects & DR_FX_ANISOTROPY),
+          "sheened coated scene: %s", dr_last_error());
+    const char *sptrs[] = {"/materials/0/extensions/KHR_materials_sheen/sheenColorFactor",
+                           "/materials/0/extensions/KHR_materials_sheen/sheenRoughnessFactor",
+                           "/materials/1/extensions/KHR_materials_sheen/sheenColorFactor",
+                           "/materials/1/extensions/KHR_materials_sheen/sheenRoughnessFactor",
+                           gptrs[0], gptrs[1], gptrs[2], gptrs[4]};
+    compare("sheened coated scene", s, &cam, sptrs, 8, 6, DR_SAMPLING_DETACHED, GROUPED_BOTH);
+    const char *saptrs[] = {sptrs[0], sptrs[1], gptrs[0], gptrs[1], gptrs[4]};
+    compare("sheened coated scene, attached sampling", s, &cam, saptrs, 5, 6, DR_SAMPLING_ATTACHED, GROUPED_WALKS);
+    compare("sheened coated scene, derivative sampling", s, &cam, saptrs, 5, 6, DR_SAMPLING_DERIVATIVE,
+            GROUPED_WALKS);
     dr_scene_destroy(s);
 
     /* a closed box lit from inside: no path escapes, and without roulette
