@@ -706,6 +706,40 @@ PY
     ANISO_JSON="{\"floor_per_ray_over_isotropic\": $(median "${floor_r[@]}"), \"floor_pairs\": [$(join "${floor_r[@]}")], \"lamp_per_ray_over_isotropic\": $(median "${lamp_r[@]}"), \"lamp_pairs\": [$(join "${lamp_r[@]}")]}"
 fi
 
+# ---- w. sheen -------------------------------------------------------------------
+# KHR_materials_sheen: the time per ray over the same scene without it,
+# median of 3 pairs run back to back: the bundled box with its floor a dark
+# Lambertian cloth with a white sheen (roughness 0.5) or none. The sheened
+# lanes are shaded by bsdf.c lane by lane inside the eight-lane stages
+# (path_simd.h's sheen_bsdf), the rest eight wide.
+SHEEN_JSON=null
+if [[ -f $CORNELL ]]; then
+    echo
+    echo "w. sheen: time per ray, the bundled box's floor sheened / not (256x256, 32 spp, 2 threads)"
+    ln -sf "$(cd "$(dirname "$CORNELL")" && pwd)"/*.bin "$(cd "$(dirname "$CORNELL")" && pwd)"/*.png "$TMP/" 2>/dev/null
+    python3 - "$CORNELL" "$TMP" <<'PY'
+import json, sys
+box, tmp = sys.argv[1:3]
+for name, sheen in (("bare", None), ("sheen", {"sheenColorFactor": [1, 1, 1], "sheenRoughnessFactor": 0.5})):
+    g = json.load(open(box))
+    m = g["materials"][5]
+    m["pbrMetallicRoughness"] = {"baseColorFactor": [0.25, 0.05, 0.08, 1], "metallicFactor": 0, "roughnessFactor": 1}
+    if sheen:
+        m["extensions"] = {"KHR_materials_sheen": sheen}
+        g.setdefault("extensionsUsed", []).append("KHR_materials_sheen")
+    json.dump(g, open(f"{tmp}/cloth-{name}.gltf", "w"))
+PY
+    sheen_r=()
+    for i in 1 2 3; do
+        render "$TMP/cloth-bare.gltf" --res 256x256 --spp 32 --threads 2
+        per_bare=$(calc "$R_TIME / $(json_num "$R_JSON" total rays)" %.6g)
+        render "$TMP/cloth-sheen.gltf" --res 256x256 --spp 32 --threads 2
+        sheen_r+=("$(calc "$R_TIME / $(json_num "$R_JSON" total rays) / $per_bare" %.3f)")
+    done
+    printf '   per ray, the box'"'"'s sheened floor / bare: %s (pairs %s)\n' "$(median "${sheen_r[@]}")" "$(join "${sheen_r[@]}")"
+    SHEEN_JSON="{\"floor_per_ray_over_bare\": $(median "${sheen_r[@]}"), \"pairs\": [$(join "${sheen_r[@]}")]}"
+fi
+
 # ---- results.json and the noise note ---------------------------------------
 
 TOTAL=$(elapsed)
@@ -732,6 +766,7 @@ OTHER_CORES=$(calc "$OTHER_TOTAL / $WALL_TOTAL" %.2f)
     echo "  \"punctual_lights\": $PUNCTUAL_JSON,"
     echo "  \"clearcoat\": $COAT_JSON,"
     echo "  \"anisotropy\": $ANISO_JSON,"
+    echo "  \"sheen\": $SHEEN_JSON,"
     echo "  \"peer\": $PEER_JSON"
     echo "}"
 } >"$OUT/results.json"
