@@ -89,7 +89,7 @@ P="--param /materials/5/extensions/KHR_materials_sheen/sheenColorFactor \
 --param /materials/5/extensions/KHR_materials_sheen/sheenRoughnessFactor \
 --param /materials/5/pbrMetallicRoughness/baseColorFactor"
 for est in prb tape; do
-    for smp in detached attached derivative; do
+    for smp in detached attached mis derivative; do
         run fdcheck "$tmp/fd.gltf" $P --res 24x24 --spp 16 --batches 8 --estimator $est --sampling $smp
         expect_rc 0 "fdcheck of the sheened floor ($est, $smp)"
         awk '$1 ~ /sheenColorFactor\[0\]$/ { c = $2 > 4 * $4 } END { exit !c }' "$tmp/out" ||
