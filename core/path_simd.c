@@ -879,6 +879,45 @@ void dr_path8_locate_hits(const struct dr_scene *s, const int64_t *tri, dr_v3x8 
         }
 }
 
+/* dr_hit_tangent_frame (normal_map.c) on the lanes of *on, the same
+ * operations: the mesh's tangent interpolated at (b1, b2) and made
+ * orthonormal to ns (Gram-Schmidt), its handedness w (the interpolated w's
+ * sign) and the authored side (-1 where the interpolated vertex normal lies
+ * on the far side of ng). Clears the lanes without a frame (a vertex's w 0:
+ * none generated there; a degenerate tangent); false when none is left.
+ * Shared by normal_map8 and anisotropy8. */
+static bool tangent_frame8(const struct dr_mesh *m, const struct lanes *L, dr_m8 *on, dr_f8 b1, dr_f8 b2, dr_v3x8 ns,
+                           dr_v3x8 ng, dr_v3x8 *t_out, dr_f8 *w_out, dr_f8 *side_out)
+{
+    const dr_f8 zero = dr_f8s(0.0), one = dr_f8s(1.0);
+    dr_f8 t0[4], t1[4], t2[4];
+    gather_vertex4(m->tangents, L->v0, t0);
+    gather_vertex4(m->tangents, L->v1, t1);
+    gather_vertex4(m->tangents, L->v2, t2);
+    *on &= dr_f8_ne(t0[3], zero) & dr_f8_ne(t1[3], zero) & dr_f8_ne(t2[3], zero);   /* (no frame here) */
+    if (!dr_m8_any(*on))
+        return false;
+    const dr_f8 b0 = 1.0 - b1 - b2;
+    dr_v3x8 t = {b0 * t0[0] + b1 * t1[0] + b2 * t2[0], b0 * t0[1] + b1 * t1[1] + b2 * t2[1],
+                 b0 * t0[2] + b1 * t1[2] + b2 * t2[2]};
+    *w_out = dr_f8_sel(dr_f8_lt(b0 * t0[3] + b1 * t1[3] + b2 * t2[3], zero), -one, one);
+    t = dr_v3x8_sub(t, dr_v3x8_scale(ns, dr_v3x8_dot(ns, t)));   /* Gram-Schmidt against the normal */
+    const dr_f8 tl = dr_f8_sqrt(dr_v3x8_dot(t, t));
+    *on &= dr_f8_gt(tl, dr_f8s(1e-6));   /* (degenerate UVs: no frame) */
+    if (!dr_m8_any(*on))
+        return false;
+    *t_out = dr_v3x8_scale(t, 1.0 / dr_f8_sel(*on, tl, one));
+    dr_f8 side = one;   /* (authored_side) */
+    const dr_m8 has_n = mask_of(L->has_normals) & *on;
+    if (m->normals && dr_m8_any(has_n)) {
+        dr_v3x8 n = interp(b0, b1, b2, gather_vertex(m->normals, L->v0), gather_vertex(m->normals, L->v1),
+                           gather_vertex(m->normals, L->v2));
+        side = dr_f8_sel(has_n & dr_f8_lt(dr_v3x8_dot(n, ng), zero), -one, one);
+    }
+    *side_out = side;
+    return true;
+}
+
 /* dr_normal_map_apply (normal_map.c) for the lanes with an eight-lane normal
  * map (L->normal_tex): the tangent frame at the hit, the map's texel through
  * its coordinates in uv, the perturbed normal, with the scalar function's
@@ -895,35 +934,14 @@ static dr_v3x8 normal_map8(const struct dr_scene *s, const struct lanes *L, dr_v
     dr_m8 on;
     for (int i = 0; i < DR_SIMD_W; i++)
         on[i] = L->normal_tex[i] && (m->flags[L->tri[i]] & DR_TRI_HAS_UVS) ? -1 : 0;
-    dr_f8 t0[4], t1[4], t2[4];
-    gather_vertex4(m->tangents, L->v0, t0);
-    gather_vertex4(m->tangents, L->v1, t1);
-    gather_vertex4(m->tangents, L->v2, t2);
-    const dr_f8 zero = dr_f8s(0.0), one = dr_f8s(1.0);
-    on &= dr_f8_ne(t0[3], zero) & dr_f8_ne(t1[3], zero) & dr_f8_ne(t2[3], zero);   /* (no frame here) */
-    if (!dr_m8_any(on))
+    dr_v3x8 t;
+    dr_f8 w, side;
+    if (!tangent_frame8(m, L, &on, b1, b2, ns, ng, &t, &w, &side))
         return ns;
-    const dr_f8 b0 = 1.0 - b1 - b2;
-    dr_v3x8 t = {b0 * t0[0] + b1 * t1[0] + b2 * t2[0], b0 * t0[1] + b1 * t1[1] + b2 * t2[1],
-                 b0 * t0[2] + b1 * t1[2] + b2 * t2[2]};
-    const dr_f8 w = dr_f8_sel(dr_f8_lt(b0 * t0[3] + b1 * t1[3] + b2 * t2[3], zero), -one, one);
-    t = dr_v3x8_sub(t, dr_v3x8_scale(ns, dr_v3x8_dot(ns, t)));   /* Gram-Schmidt against the normal */
-    const dr_f8 tl = dr_f8_sqrt(dr_v3x8_dot(t, t));
-    on &= dr_f8_gt(tl, dr_f8s(1e-6));   /* (degenerate UVs: no frame) */
-    if (!dr_m8_any(on))
-        return ns;
-    t = dr_v3x8_scale(t, 1.0 / tl);
+    const dr_f8 zero = dr_f8s(0.0);
     const dr_v3x8 px = dr_texref8_rgb(s, L->normal_tex, on, uv, false);
     const dr_f8 k = gather(L->mat, offsetof(struct dr_material, normal_scale));
     const dr_f8 x = (2.0 * px.x - 1.0) * k, y = (2.0 * px.y - 1.0) * k, z = 2.0 * px.z - 1.0;
-    /* authored_side: -1 where the interpolated vertex normal was flipped onto ng's side */
-    dr_f8 side = one;
-    const dr_m8 has_n = mask_of(L->has_normals) & on;
-    if (m->normals && dr_m8_any(has_n)) {
-        dr_v3x8 n = interp(b0, b1, b2, gather_vertex(m->normals, L->v0), gather_vertex(m->normals, L->v1),
-                           gather_vertex(m->normals, L->v2));
-        side = dr_f8_sel(has_n & dr_f8_lt(dr_v3x8_dot(n, ng), zero), -one, one);
-    }
     const dr_v3x8 p = dr_v3x8_add(dr_v3x8_add(dr_v3x8_scale(t, side * x), dr_v3x8_scale(dr_v3x8_cross(ns, t), w * y)),
                                   dr_v3x8_scale(ns, z));
     const dr_f8 pl = dr_f8_sqrt(dr_v3x8_dot(p, p));
@@ -959,13 +977,6 @@ static dr_f8 anisotropy8(const struct dr_scene *s, struct lanes *L, const struct
         on[i] = lanes[i] && m->tangents && (m->flags[L->tri[i]] & DR_TRI_HAS_UVS) ? -1 : 0;
     }
     dr_v3x8 px = {one, one, one};   /* (no texture: the direction (1, 0), the factor alone) */
-    dr_f8 t0[4], t1[4], t2[4];
-    if (dr_m8_any(on)) {
-        gather_vertex4(m->tangents, L->v0, t0);
-        gather_vertex4(m->tangents, L->v1, t1);
-        gather_vertex4(m->tangents, L->v2, t2);
-        on &= dr_f8_ne(t0[3], zero) & dr_f8_ne(t1[3], zero) & dr_f8_ne(t2[3], zero);   /* (no frame here) */
-    }
     dr_m8 textured = (dr_m8){0};
     for (int i = 0; i < DR_SIMD_W; i++)
         textured[i] = lanes[i] && L->aniso_tex[i] ? -1 : 0;
@@ -973,25 +984,12 @@ static dr_f8 anisotropy8(const struct dr_scene *s, struct lanes *L, const struct
         px = dr_v3x8_sel(textured, dr_texref8_rgb(s, L->aniso_tex, textured, &h->uv, false), px);
     const dr_f8 factor = gather(L->mat, offsetof(struct dr_material, anisotropy_strength));
     const dr_f8 strength = dr_f8_sel(textured, factor * px.z, factor);
-    if (!dr_m8_any(on))
+    /* the tangent frame (dr_hit_tangent_frame) */
+    dr_v3x8 t;
+    dr_f8 w, side;
+    if (!dr_m8_any(on) || !tangent_frame8(m, L, &on, h->b1, h->b2, h->ns, h->ng, &t, &w, &side))
         goto none;
-    /* the tangent frame (dr_hit_tangent_frame, normal_map8's interpolation) */
-    const dr_f8 b1 = h->b1, b2 = h->b2, b0 = 1.0 - b1 - b2;
     const dr_v3x8 ns = h->ns;
-    dr_v3x8 t = {b0 * t0[0] + b1 * t1[0] + b2 * t2[0], b0 * t0[1] + b1 * t1[1] + b2 * t2[1],
-                 b0 * t0[2] + b1 * t1[2] + b2 * t2[2]};
-    const dr_f8 w = dr_f8_sel(dr_f8_lt(b0 * t0[3] + b1 * t1[3] + b2 * t2[3], zero), -one, one);
-    t = dr_v3x8_sub(t, dr_v3x8_scale(ns, dr_v3x8_dot(ns, t)));
-    const dr_f8 tl = dr_f8_sqrt(dr_v3x8_dot(t, t));
-    on &= dr_f8_gt(tl, dr_f8s(1e-6));
-    t = dr_v3x8_scale(t, 1.0 / dr_f8_sel(on, tl, one));
-    dr_f8 side = one;   /* authored_side */
-    const dr_m8 has_n = mask_of(L->has_normals) & on;
-    if (m->normals && dr_m8_any(has_n)) {
-        dr_v3x8 n = interp(b0, b1, b2, gather_vertex(m->normals, L->v0), gather_vertex(m->normals, L->v1),
-                           gather_vertex(m->normals, L->v2));
-        side = dr_f8_sel(has_n & dr_f8_lt(dr_v3x8_dot(n, h->ng), zero), -one, one);
-    }
     const dr_v3x8 b = dr_v3x8_scale(dr_v3x8_cross(ns, t), w * side);
     /* the direction (dr_anisotropy_direction) */
     dr_f8 x = dr_f8_sel(textured, 2.0 * px.x - 1.0, one), y = dr_f8_sel(textured, 2.0 * px.y - 1.0, zero);
