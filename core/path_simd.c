@@ -298,6 +298,22 @@ static void coat_eval(const struct dr_scene *s, struct dr_path8 *g, const struct
     g->coat_lobe.f0 = dielectric_f0((dr_v3x8){dr_f8s(1.0), dr_f8s(1.0), dr_f8s(1.0)}, g->coat_lobe.specular);
 }
 
+/* Lane i's dr_material_eval record from the vectors (material_eval's and
+ * coat_eval's, which hold its bits) where the scalar code did not make it:
+ * the groups keep its fields but an uncoated material's coat factors (read
+ * by nothing, copied as it copies them) and a sheen without textures (its
+ * factors, as it copies them). */
+static struct dr_bsdf lane_record(const struct dr_path8 *g, int i, const struct dr_material *m)
+{
+    return (struct dr_bsdf){.base_color = dr_v3x8_get(&g->b.base, i), .metallic = g->b.metallic[i],
+                            .roughness = g->roughness[i], .specular = g->b.specular[i],
+                            .specular_color = dr_v3x8_get(&g->specular_color, i), .coated = m->coated,
+                            .coat = m->coated ? g->coat[i] : m->coat,
+                            .coat_roughness = m->coated ? g->coat_roughness[i] : m->coat_roughness,
+                            .anisotropy = g->anisotropy[i], .sheened = m->sheened, .sheen_color = m->sheen_color,
+                            .sheen_roughness = m->sheen_roughness};
+}
+
 /* dr_material_eval (the factors times the textures at the coordinates uv,
  * times the vertex colour; lanes with a texture texture8.h does not read
  * call it), and what bsdf.c derives from the material alone (bsdf_alpha,
@@ -312,7 +328,7 @@ static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const st
     b->specular = gather(mat, offsetof(struct dr_material, specular));
     /* the specular colour: gathered here where the scalar lanes or a
      * differentiated vertex's record read it, else only for a glossy f0 */
-    const bool colour_now = L->any_textured || dr_m8_any(g->diff);
+    const bool colour_now = L->any_textured || dr_m8_any(g->diff) || L->any_sheened;
     dr_v3x8 spec_colour = b->base;
     if (colour_now)
         spec_colour = gather3(mat, offsetof(struct dr_material, specular_color));
@@ -337,7 +353,7 @@ static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const st
             r[i] = lb.roughness;
             lane_coat[i] = lb.coat, lane_coat_r[i] = lb.coat_roughness;
             aniso[i] = L->no_direction[i] ? 0.0 : lb.anisotropy;   /* (stage_material's fallback) */
-            if (L->sheened[i]) {   /* (the record the scalar functions shade this lane with) */
+            if (L->sheened[i]) {   /* (the record the scalar functions shade this lane with: a sheen's textures) */
                 lb.anisotropy = aniso[i];
                 g->sheen_bsdf[i] = lb;
             }
@@ -350,6 +366,9 @@ static void material_eval(const struct dr_scene *s, struct dr_path8 *g, const st
     g->coated = L->any_coated;
     if (g->coated)
         coat_eval(s, g, L, end, uv, lane_coat, lane_coat_r);
+    for (int i = 0; L->any_sheened && i < g->n; i++)   /* (the rest: dr_material_eval's record, above) */
+        if (L->sheened[i] && !L->scalar_material[i] && !end[i])
+            g->sheen_bsdf[i] = lane_record(g, i, L->mat[i]);
     g->lambert = dr_f8_eq(b->metallic, dr_f8s(0.0)) & dr_f8_eq(b->specular, dr_f8s(0.0));
     g->glossy = dr_m8_any(~g->lambert);
     b->any_aniso = false;
@@ -647,11 +666,10 @@ bool dr_path8_hit(const struct dr_scene *s, const struct dr_path_opts *opts, int
     return tri >= 0 && !(opts->params && opts->params->mat_bsdf_active[s->mesh.material[tri]]);
 }
 
-/* Does shading a hit on material m read a texture (mat_textures says how),
- * or need the scalar hit for dr_material_eval (a sheen: dr_path8.sheen_bsdf). */
+/* Does shading a hit on material m read a texture (mat_textures says how). */
 static bool reads_textures(const struct dr_material *m)
 {
-    return m->sheened || m->base_color_tex.texture >= 0 || m->metallic_roughness_tex.texture >= 0 || m->emissive_tex.texture >= 0 ||
+    return dr_material_sheen_tex(m, 0) || dr_material_sheen_tex(m, 1) || m->base_color_tex.texture >= 0 || m->metallic_roughness_tex.texture >= 0 || m->emissive_tex.texture >= 0 ||
            m->normal_tex.texture >= 0 || dr_material_coat_tex(m, 0) || dr_material_coat_tex(m, 1) ||
            dr_material_anisotropy_tex(m) || m->specular_tex.texture >= 0 || m->specular_color_tex.texture >= 0;
 }
@@ -690,7 +708,8 @@ static void mat_textures(const struct dr_scene *s, const struct dr_material *m, 
                          (mr->texture >= 0 && !dr_texref8_accepts(s, mr)) ||
                          (coat[0] && !dr_texref8_accepts(s, coat[0])) || (coat[1] && !dr_texref8_accepts(s, coat[1])) ||
                          (aniso && !dr_texref8_accepts(s, aniso)) || m->specular_tex.texture >= 0 ||
-                         m->specular_color_tex.texture >= 0 || m->sheened;
+                         m->specular_color_tex.texture >= 0 || dr_material_sheen_tex(m, 0) ||
+                         dr_material_sheen_tex(m, 1);
     if (!t->scalar_material) {
         t->base = b->texture >= 0 ? b : NULL;
         t->mr = mr->texture >= 0 ? mr : NULL;
@@ -1540,7 +1559,7 @@ static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, str
         }
         prev_mat = mat;
         L->may_emit[i] = may_emit;
-        L->textured[i] = t.scalar_hit || mat->sheened;
+        L->textured[i] = t.scalar_hit;
         if (textures) {
             L->base_tex[i] = t.base, L->mr_tex[i] = t.mr, L->emissive_tex[i] = t.emissive;
             L->normal_tex[i] = t.normal;
@@ -1554,7 +1573,7 @@ static void lanes_of(const struct dr_scene *s, const struct dr_path8_in *in, str
         L->coated[i] = mat->coated;
         L->any_coated |= mat->coated;
         L->anisotropic[i] = mat->anisotropic;
-        L->scalar_material[i] = (textures && t.scalar_material) || mat->sheened;   /* (a sheen without textures too) */
+        L->scalar_material[i] = textures && t.scalar_material;
         L->sheened[i] = mat->sheened;
         L->any_sheened |= mat->sheened;
         L->aniso_scalar[i] = mat->anisotropic && L->scalar_material[i];
@@ -1918,17 +1937,7 @@ static void differentiated_vertex(const struct dr_scene *s, const struct dr_path
     v->ng = dr_v3x8_get(&g->ng, i);
     v->frame = (dr_frame){dr_v3x8_get(&g->fs, i), dr_v3x8_get(&g->ft, i), dr_v3x8_get(&g->fn, i)};
     v->wo = dr_v3x8_get(&g->wo, i);
-    /* dr_material_eval's record: the groups keep its fields but an uncoated material's coat factors
-     * (read by nothing, copied as it copies them) */
-    const struct dr_material *m = &s->materials[v->hit.material];
-    v->bsdf = (struct dr_bsdf){.base_color = dr_v3x8_get(&g->b.base, i), .metallic = g->b.metallic[i],
-                               .roughness = g->roughness[i], .specular = g->b.specular[i],
-                               .specular_color = dr_v3x8_get(&g->specular_color, i), .coated = m->coated,
-                               .coat = m->coated ? g->coat[i] : m->coat,
-                               .coat_roughness = m->coated ? g->coat_roughness[i] : m->coat_roughness,
-                               .anisotropy = g->anisotropy[i]};
-    if (g->any_sheen && g->sheen_on[i])   /* (dr_material_eval's record itself) */
-        v->bsdf = g->sheen_bsdf[i];
+    v->bsdf = g->any_sheen && g->sheen_on[i] ? g->sheen_bsdf[i] : lane_record(g, i, &s->materials[v->hit.material]);
     v->nee_wi = dr_v3x8_get(&g->nee_wi, i);
     v->nee_bsdf_pdf = g->bsdf_pdf[i];
 }
