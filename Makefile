@@ -64,7 +64,7 @@ LIB      := $(BUILD)/libdrender.a
 IMG_OBJ  := $(IMG_CXX:%.cpp=$(BUILD)/%.o) $(IMG_C:%.c=$(BUILD)/%.o)
 PLUGIN   := $(BUILD)/libdrender-image.so
 
-.PHONY: all deps fuzz-deps demo test bench sanitize fuzz fuzz-build install clean
+.PHONY: all deps fuzz-deps demo test bench sanitize fuzz fuzz-build install clean sheen-table
 all: deps $(BUILD)/drender $(PLUGIN)
 
 # Installs missing system packages (fast no-op when all are present).
@@ -193,6 +193,13 @@ bench: deps $(BUILD)/drender $(BENCH_BIN)
 DEMO_OUT ?= out/demo
 demo: all
 	BUILD=$(BUILD) scripts/demo.sh $(DEMO_OUT)
+
+# Regenerates core/sheen_albedo.c, the sheen lobe's albedo table
+# (scripts/sheen_albedo_gen.c; a minute or two). Not part of the normal build.
+sheen-table: scripts/sheen_albedo_gen.c core/sheen_albedo.h
+	@mkdir -p $(BUILD)
+	$(CC) -O2 -std=c11 -D_GNU_SOURCE $(WARN) -o $(BUILD)/sheen_albedo_gen scripts/sheen_albedo_gen.c -lm
+	$(BUILD)/sheen_albedo_gen > core/sheen_albedo.c.tmp && mv core/sheen_albedo.c.tmp core/sheen_albedo.c
 
 install: all
 	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/share/man/man1 $(DESTDIR)$(PREFIX)/share/drender/scenes

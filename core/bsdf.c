@@ -19,6 +19,7 @@
 #include <stddef.h>
 
 #include "bsdf_coat.h"   /* a coated BSDF (b->coated) is handed there */
+#include "bsdf_sheen.h"  /* then a sheened one (b->sheened): coat over sheen over base */
 
 #define COS_EPS DR_BSDF_COS_EPS
 
@@ -204,6 +205,8 @@ dr_vec3 dr_bsdf_eval_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double
     }
     if (b->coated)
         return dr_coat_eval_pdf(b, wo, wi, pdf);
+    if (b->sheened)
+        return dr_sheen_eval_pdf(b, wo, wi, pdf);
     return eval_pdf_above(b, wo, wi, specular_prob(b, wo.z), pdf);
 }
 
@@ -214,6 +217,8 @@ dr_vec3 dr_bsdf_eval(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi)
         return dr_v3s(0.0);
     if (b->coated)
         return dr_coat_eval_pdf(b, wo, wi, NULL);
+    if (b->sheened)
+        return dr_sheen_eval_pdf(b, wo, wi, NULL);
     /* p = 0: the pdf is not needed, the compiler drops its arithmetic. */
     return eval_pdf_above(b, wo, wi, 0.0, &pdf);
 }
@@ -229,6 +234,8 @@ double dr_bsdf_sky_share(const struct dr_bsdf *b, dr_vec3 wo)
 {
     if (b->coated)
         return dr_coat_sky_share(b, wo);
+    if (b->sheened)
+        return dr_sheen_sky_share(b, wo);
     if (!(wo.z > COS_EPS))
         return 0.0;
     double a = bsdf_alpha(b);
@@ -242,6 +249,8 @@ double dr_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo)
 {
     if (b->coated)
         return dr_coat_specular_prob(b, wo);
+    if (b->sheened)
+        return dr_sheen_specular_prob(b, wo);
     if (!(wo.z > COS_EPS))
         return no_specular_lobe(b) ? 0.0 : specular_prob(b, 0.0);
     return specular_prob(b, wo.z);
@@ -373,6 +382,8 @@ dr_vec3 dr_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lob
 {
     if (b->coated)
         return dr_coat_sample_dir(b, wo, lobe, u1, u2);
+    if (b->sheened)
+        return dr_sheen_sample_dir(b, wo, lobe, u1, u2);
     return sample_dir(b, wo, lobe, u1, u2);
 }
 
@@ -381,6 +392,8 @@ bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u
 {
     if (b->coated)
         return dr_coat_sample(b, wo, u_lobe, u1, u2, out);
+    if (b->sheened)
+        return dr_sheen_sample(b, wo, u_lobe, u1, u2, out);
     out->wi = dr_v3(0.0, 0.0, 1.0);
     out->f = dr_v3s(0.0);
     out->pdf = 0.0;
@@ -761,6 +774,10 @@ void d_bsdf_eval(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out,
         d_coat_eval(b, wo, wi, d_out, d, d_wo, d_wi);
         return;
     }
+    if (b->sheened) {
+        d_sheen_eval(b, wo, wi, d_out, d, d_wo, d_wi);
+        return;
+    }
     if (d)
         d_eval_params(b, wo, wi, d_out, d);
     /* The Lambertian fast path, f = base / pi, does not depend on the directions. */
@@ -817,6 +834,10 @@ void d_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo, double d_p, struc
 {
     if (b->coated) {
         d_coat_specular_prob(b, wo, d_p, d, d_wo);
+        return;
+    }
+    if (b->sheened) {
+        d_sheen_specular_prob(b, wo, d_p, d, d_wo);
         return;
     }
     /* Below the surface dr_bsdf_specular_prob is p at cos_o = 0, a constant in wo. */
@@ -883,6 +904,8 @@ void d_bsdf_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double d_pdf, s
 {
     if (b->coated)
         d_coat_pdf(b, wo, wi, d_pdf, true, d, d_wo, d_wi);
+    else if (b->sheened)
+        d_sheen_pdf(b, wo, wi, d_pdf, true, d, d_wo, d_wi);
     else
         d_pdf_impl(b, wo, wi, d_pdf, true, d, d_wo, d_wi);
 }
@@ -892,6 +915,8 @@ void d_bsdf_pdf_fixed_prob(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, doub
 {
     if (b->coated)
         d_coat_pdf(b, wo, wi, d_pdf, false, d, d_wo, d_wi);
+    else if (b->sheened)
+        d_sheen_pdf(b, wo, wi, d_pdf, false, d, d_wo, d_wi);
     else
         d_pdf_impl(b, wo, wi, d_pdf, false, d, d_wo, d_wi);
 }
@@ -967,6 +992,10 @@ void d_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lo
 {
     if (b->coated) {
         d_coat_sample_dir(b, wo, lobe, u1, u2, d_wi, d, d_wo);
+        return;
+    }
+    if (b->sheened) {
+        d_sheen_sample_dir(b, wo, lobe, u1, u2, d_wi, d, d_wo);
         return;
     }
     if (lobe != DR_BSDF_LOBE_SPECULAR || !(wo.z > COS_EPS))
@@ -1200,6 +1229,10 @@ void d_bsdf_eval_rough_ndf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_v
 {
     if (b->coated) {
         d_coat_eval_rough_ndf(b, wo, wi, d_out, parts, d);
+        return;
+    }
+    if (b->sheened) {
+        d_sheen_eval_rough_ndf(b, wo, wi, d_out, parts, d);
         return;
     }
     const double rough = b->roughness, m = b->metallic;

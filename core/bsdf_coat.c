@@ -21,6 +21,7 @@
  * coat's albedo, so its samples' weights stay near G2/G1), else the base's
  * lobes with u_lobe rescaled; pdf = P p_coat + (1 - P) p_base. */
 #include "bsdf_coat.h"
+#include "bsdf_sheen.h"
 
 #include <stddef.h>
 
@@ -100,7 +101,10 @@ bool dr_coat_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u
     } else {   /* (p <= u_lobe < 1: 1 - p > 0) */
         const struct dr_bsdf base = under(b);
         const double u = (u_lobe - p) / (1.0 - p);
-        out->lobe = u < dr_bsdf_specular_prob(&base, wo) ? DR_BSDF_LOBE_SPECULAR : DR_BSDF_LOBE_DIFFUSE;
+        if (base.sheened)   /* (the sheen's lobe, then the base's: bsdf_sheen.c) */
+            out->lobe = dr_sheen_pick_lobe(&base, wo, u);
+        else
+            out->lobe = u < dr_bsdf_specular_prob(&base, wo) ? DR_BSDF_LOBE_SPECULAR : DR_BSDF_LOBE_DIFFUSE;
     }
     const dr_vec3 wi = dr_coat_sample_dir(b, wo, out->lobe, u1, u2);
     out->wi = wi;
