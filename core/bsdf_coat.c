@@ -60,6 +60,8 @@ static inline void add_base(struct dr_d_bsdf *d, const struct dr_d_bsdf *db)
     d->metallic += db->metallic;
     d->roughness += db->roughness;
     d->anisotropy += db->anisotropy;   /* (the base's lobe is the stretched one) */
+    d->sheen_color = dr_add(d->sheen_color, db->sheen_color);   /* (a sheen is the base's layer) */
+    d->sheen_roughness += db->sheen_roughness;
 }
 
 dr_vec3 dr_coat_eval_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double *pdf)

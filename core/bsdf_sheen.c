@@ -82,7 +82,9 @@ static double sheen_L(const struct sheen_lobe *l, double x, double *dx, double *
 }
 
 /* ln Lambda(x) with its slope in x and in alpha; x is clamped to [0, 1]
- * (flat outside: only unnormalised directions leave it). */
+ * (flat outside: only unnormalised directions leave it). At x = 1 (normal
+ * incidence) the fit's slope L'(1 - x) ~ (1 - x)^(c-1) is infinite: there
+ * the slope is the clamp's, 0 (and E's mu slope too: sheen_albedo.h). */
 static double sheen_ln_lambda(const struct sheen_lobe *l, double x, double *dx, double *da)
 {
     const bool inside = x < 1.0;
@@ -362,7 +364,7 @@ void d_sheen_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double d_pdf, 
         d_bsdf_pdf_fixed_prob(&base, wo, wi, d_pdf * (1.0 - p), d, d_wo, d_wi);
     if (d_wi)
         d_wi->z += d_pdf * p * DR_INV_PI;
-    if (!prob_moves || !(pm > 0.0 && pm < 1.0))
+    if (!prob_moves || !(pm < 1.0))   /* (m E >= 0 always: P clamps only at 1) */
         return;
     double d_co = 0.0;
     d_albedo(&ao, d_pdf * (wi.z * DR_INV_PI - dr_bsdf_pdf(&base, wo, wi)), d, &d_co);
@@ -379,7 +381,7 @@ void d_sheen_specular_prob(const struct dr_bsdf *b, dr_vec3 wo, double d_p, stru
     const struct sheen_albedo ao = albedo_at(b, &l, above ? wo.z : 0.0);
     const double p = sheen_prob(&ao), pm = ao.m * ao.E;
     d_bsdf_specular_prob(&base, wo, d_p * (1.0 - p), d, d_wo);
-    if (!(pm > 0.0 && pm < 1.0))
+    if (!(pm < 1.0))
         return;
     double d_co = 0.0;
     d_albedo(&ao, -d_p * dr_bsdf_specular_prob(&base, wo), d, &d_co);

@@ -37,7 +37,8 @@ static inline double dr_sheen_grid_r(int j)
 
 /* E(mu, r) with mu clamped to [0, 1] and r to [floor, 1]; *d_mu, *d_r (if not
  * NULL) receive the interpolant's partial derivatives (0 outside the ranges,
- * where the clamps hold it). */
+ * where the clamps hold it, and at mu = 1; at r = 1 the slope from inside).
+ * Never below 0 (the cubic's undershoot where E < 1e-8 is held at 0). */
 double dr_sheen_albedo(double mu, double r, double *d_mu, double *d_r);
 
 #endif

@@ -53,7 +53,9 @@ static int interval(double x, double lo, double span, int n)
 double dr_sheen_albedo(double mu, double r, double *d_mu, double *d_r)
 {
     const double rmin = DR_SHEEN_MIN_ROUGHNESS;
-    const bool mu_in = mu > 0.0 && mu < 1.0, r_in = r > rmin && r < 1.0;
+    /* (r = 1, a common value, has the slope from inside; mu = 1 is flat like
+     * mu > 1, as the lobe's Lambda is there: bsdf_sheen.c) */
+    const bool mu_in = mu >= 0.0 && mu < 1.0, r_in = r >= rmin && r <= 1.0;
     mu = mu_in ? mu : mu > 0.0 ? 1.0 : 0.0;   /* (NaN: 0) */
     r = r_in ? r : r > rmin ? 1.0 : rmin;
     const int i = interval(mu, 0.0, 1.0, DR_SHEEN_NMU), j = interval(r, rmin, 1.0 - rmin, DR_SHEEN_NR);
@@ -77,9 +79,12 @@ double dr_sheen_albedo(double mu, double r, double *d_mu, double *d_r)
         em += wr[b] * row_m;
         er += dwr[b] * row;
     }
+    /* Where E ~ 0 (small r, mu near 1: E < 1e-8) the cubic can undershoot
+     * below 0 by ~1e-9: held at 0 there (flat), so that m E stays >= 0. */
+    const bool pos = e > 0.0;
     if (d_mu)
-        *d_mu = mu_in ? em : 0.0;
+        *d_mu = mu_in && pos ? em : 0.0;
     if (d_r)
-        *d_r = r_in ? er : 0.0;
-    return e;
+        *d_r = r_in && pos ? er : 0.0;
+    return pos ? e : 0.0;
 }

@@ -20,6 +20,7 @@
 #include <string.h>
 
 #include "bsdf.h"
+#include "sheen_albedo.h"   /* test-side lobe probability of a sheen (its table) */
 #include "path.h"
 #include "sampler.h"
 #include "test.h"
@@ -57,16 +58,19 @@ static bool finite3(dr_vec3 v) { return isfinite(v.x) && isfinite(v.y) && isfini
 static bool finite_d(const struct dr_d_bsdf *d)
 {
     return finite3(d->base_color) && isfinite(d->metallic) && isfinite(d->roughness) && isfinite(d->coat) &&
-           isfinite(d->coat_roughness) && isfinite(d->anisotropy);
+           isfinite(d->coat_roughness) && isfinite(d->anisotropy) && finite3(d->sheen_color) &&
+           isfinite(d->sheen_roughness);
 }
 static double test_alpha(double rough) { return fmax(rough * rough, DR_BSDF_MIN_ALPHA); }
 
 /* ------------------------------------------------ inputs and configurations */
 
 /* Every differentiable input, by index. */
-enum { X_BR, X_BG, X_BB, X_M, X_R, X_C, X_CR, X_A, X_OX, X_OY, X_OZ, X_IX, X_IY, X_IZ, NX };
+/* (the sheen's last, so that the older inputs keep their indices) */
+enum { X_BR, X_BG, X_BB, X_M, X_R, X_C, X_CR, X_A, X_OX, X_OY, X_OZ, X_IX, X_IY, X_IZ, X_SR, X_SG, X_SB, X_SRO, NX };
 static const char *const x_name[NX] = {"base.r", "base.g", "base.b", "metallic", "roughness", "coat", "coat_roughness",
-                                       "anisotropy", "wo.x",   "wo.y",   "wo.z",   "wi.x",     "wi.y",     "wi.z"};
+                                       "anisotropy", "wo.x",   "wo.y",   "wo.z",   "wi.x",     "wi.y",     "wi.z",
+                                       "sheen.r",    "sheen.g", "sheen.b", "sheen_roughness"};
 
 /* One point at which a function and its adjoint are compared. */
 struct cfg {
@@ -76,7 +80,7 @@ struct cfg {
     double d1;      /* d loss / d pdf, d loss / d p */
     enum dr_bsdf_lobe lobe;
     double u1, u2;
-    double p_fix, pc_fix;   /* d_bsdf_pdf_fixed_prob: the lobe probabilities held (set_fixed_probs) */
+    double p_fix, pc_fix, ps_fix;   /* d_bsdf_pdf_fixed_prob: the lobe probabilities held (set_fixed_probs) */
 };
 
 static double *x_ptr(struct cfg *c, int k)
@@ -95,6 +99,10 @@ static double *x_ptr(struct cfg *c, int k)
     case X_OZ: return &c->wo.z;
     case X_IX: return &c->wi.x;
     case X_IY: return &c->wi.y;
+    case X_SR: return &c->b.sheen_color.x;
+    case X_SG: return &c->b.sheen_color.y;
+    case X_SB: return &c->b.sheen_color.z;
+    case X_SRO: return &c->b.sheen_roughness;
     default:   return &c->wi.z;
     }
 }
@@ -108,6 +116,8 @@ static void g_from(double g[NX], const struct dr_d_bsdf *d, dr_vec3 dwo, dr_vec3
     g[X_A] = d->anisotropy;
     g[X_OX] = dwo.x; g[X_OY] = dwo.y; g[X_OZ] = dwo.z;
     g[X_IX] = dwi.x; g[X_IY] = dwi.y; g[X_IZ] = dwi.z;
+    g[X_SR] = d->sheen_color.x; g[X_SG] = d->sheen_color.y; g[X_SB] = d->sheen_color.z;
+    g[X_SRO] = d->sheen_roughness;
 }
 
 /* Test-side lobe weights of dr_bsdf_specular_prob (textbook form of the model
@@ -130,10 +140,29 @@ static int regime_coat(const struct cfg *c)
 {
     return c->b.coated | (c->b.coat_roughness * c->b.coat_roughness > DR_BSDF_MIN_ALPHA) << 1;
 }
+/* A sheen (bsdf_sheen.c): the roughness floor, the clamps of T(wo), T(wi)
+ * (and of P = 1 - T(wo)) at m E = 1, the channel of m = max(colour), and the
+ * cosines' clamps at 1 (Lambda's argument, E's mu), and h along the normal. */
+static double ref_sheen_mE(const struct cfg *c, double cos)
+{
+    const dr_vec3 s = c->b.sheen_color;
+    return fmax(s.x, fmax(s.y, s.z)) * dr_sheen_albedo(cos, c->b.sheen_roughness, NULL, NULL);
+}
+static int regime_sheen(const struct cfg *c)
+{
+    if (!c->b.sheened)
+        return 0;
+    const dr_vec3 s = c->b.sheen_color;
+    const int arg = s.y > s.x ? (s.z > s.y ? 2 : 1) : (s.z > s.x ? 2 : 0);
+    return 1 | (c->b.sheen_roughness > DR_SHEEN_MIN_ROUGHNESS) << 1 | (ref_sheen_mE(c, c->wo.z) < 1.0) << 2 |
+           (ref_sheen_mE(c, c->wi.z) < 1.0) << 3 | arg << 4 | (c->wo.z < 1.0) << 6 | (c->wi.z < 1.0) << 7 |
+           /* h along the normal: D ~ |Hxy|^(1/alpha) is a cone at alpha = 1 */
+           (c->wo.x + c->wi.x != 0.0 || c->wo.y + c->wi.y != 0.0) << 8;
+}
 static int regime_common(const struct cfg *c)
 {
     return (c->wo.z > COS_EPS_T) | (c->wi.z > COS_EPS_T) << 1 |
-           (c->b.roughness * c->b.roughness > DR_BSDF_MIN_ALPHA) << 2 | regime_coat(c) << 4;
+           (c->b.roughness * c->b.roughness > DR_BSDF_MIN_ALPHA) << 2 | regime_coat(c) << 4 | regime_sheen(c) << 8;
 }
 static int regime_eval(const struct cfg *c) { return regime_common(c); }
 static int regime_pdf(const struct cfg *c)
@@ -143,7 +172,7 @@ static int regime_pdf(const struct cfg *c)
 static int regime_prob(const struct cfg *c)
 {
     return (c->wo.z > COS_EPS_T) | (ref_weight_sum(&c->b, c->wo.z > COS_EPS_T ? c->wo.z : 0.0) > 0.0) << 1 |
-           regime_coat(c) << 2;
+           regime_coat(c) << 2 | regime_sheen(c) << 8;
 }
 /* Sampling map: wo above the surface, the roughness floor, the frame branch
  * at wo along the normal (where the map is discontinuous), and whether the
@@ -152,7 +181,7 @@ static int regime_prob(const struct cfg *c)
 static int regime_sample(const struct cfg *c)
 {
     int r = (c->wo.z > COS_EPS_T) | (c->b.roughness * c->b.roughness > DR_BSDF_MIN_ALPHA) << 1 |
-            (c->wo.x != 0.0 || c->wo.y != 0.0) << 2 | regime_coat(c) << 4;
+            (c->wo.x != 0.0 || c->wo.y != 0.0) << 2 | regime_coat(c) << 4 | regime_sheen(c) << 8;
     if (c->wo.z > COS_EPS_T) {
         dr_vec3 wi = dr_bsdf_sample_dir(&c->b, c->wo, c->lobe, c->u1, c->u2);
         r |= (wi.z > COS_EPS_T) << 3;
@@ -170,7 +199,16 @@ static double feature_eval(const struct cfg *c)
     /* and the Schlick weight's (1 - |H|/2)^5, which can carry all of f (a
      * black metal): its scale 1 - |H|/2, above 1e-4 */
     double oc = 1.0 - 0.5 * dr_length(dr_add(c->wo, c->wi));
-    return fmin(fmin(1.0, fmax(oc, 1e-4)), fmin(a * hz, fmin(c->wo.z, c->wi.z)));
+    double f = 1.0;
+    if (c->b.sheened) {   /* the sheen lobe's width sqrt(alpha) |H| in the half vector, at its floor, */
+        a = fmin(a, fmax(c->b.sheen_roughness, DR_SHEEN_MIN_ROUGHNESS));
+        /* and its Lambda's (1 - cos)^c near normal incidence (cos = 1 itself is flat) */
+        if (c->wo.z < 1.0)
+            f = fmin(f, 1.0 - c->wo.z);
+        if (c->wi.z < 1.0)
+            f = fmin(f, 1.0 - c->wi.z);
+    }
+    return fmin(f, fmin(fmin(1.0, fmax(oc, 1e-4)), fmin(a * hz, fmin(c->wo.z, c->wi.z))));
 }
 static double feature_prob(const struct cfg *c) { return fmin(1.0, fmax(c->wo.z, 1e-6)); }
 static double feature_sample(const struct cfg *c)
@@ -246,6 +284,8 @@ static double pdf_fixed(const struct cfg *c)
     struct dr_bsdf m = make_bsdf(c->b.roughness, 1.0, 1.0, dr_v3s(1.0), dr_v3s(1.0));
     m.anisotropy = c->b.anisotropy;
     double base = (1.0 - c->p_fix) * c->wi.z * DR_INV_PI + c->p_fix * dr_bsdf_pdf(&m, c->wo, c->wi);
+    if (c->b.sheened)   /* the sheen's cosine lobe held at ps_fix */
+        base = c->ps_fix * c->wi.z * DR_INV_PI + (1.0 - c->ps_fix) * base;
     if (!c->b.coated)
         return base;
     struct dr_bsdf cl = make_bsdf(c->b.coat_roughness, 1.0, 1.0, dr_v3s(1.0), dr_v3s(1.0));
@@ -255,7 +295,9 @@ static void set_fixed_probs(struct cfg *c)
 {
     struct dr_bsdf u = c->b;
     u.coated = false;
+    u.sheened = false;
     c->p_fix = dr_bsdf_specular_prob(&u, c->wo);
+    c->ps_fix = c->b.sheened ? fmin(1.0, ref_sheen_mE(c, c->wo.z > COS_EPS_T ? c->wo.z : 0.0)) : 0.0;
     double x = fmin(fmax(c->wo.z, 0.0), 1.0);
     c->pc_fix = c->b.coated ? c->b.coat * (0.04 + 0.96 * pow(1.0 - x, 5.0)) : 0.0;
 }
@@ -305,6 +347,10 @@ static struct fn fn_sample = {"d_bsdf_sample_dir", loss_sample, mag_sample, adj_
  *    as eps / step), but never above 1e-3 of the feature length. */
 static double step_for(const struct fn *f, const struct cfg *c, int k)
 {
+    if (k == X_SR || k == X_SG || k == X_SB)
+        return 1e-6;
+    if (k == X_SRO)
+        return 1e-6 * fmax(c->b.sheen_roughness, 1e-2);
     if (k <= X_M) {
         if (f->regime != regime_pdf && f->regime != regime_prob)
             return 1e-6;
@@ -344,7 +390,8 @@ static double loss_at(const struct fn *f, const struct cfg *c, int k, double x, 
 static double fd_input(const struct fn *f, const struct cfg *c, int k, double h, int *kind)
 {
     double x = x_get(c, k);
-    double lo = k <= X_A ? 0.0 : -INFINITY, hi = k <= X_A ? 1.0 : INFINITY;
+    const bool param = k <= X_A || k >= X_SR;
+    double lo = param ? 0.0 : -INFINITY, hi = param ? 1.0 : INFINITY;
     int r0 = f->regime(c), rm, rp, r2;
     double f0 = f->loss(c);
     double fp = x + h <= hi ? loss_at(f, c, k, x + h, &rp) : NAN;
@@ -382,10 +429,11 @@ static void print_cfg(const char *fname, const char *what, const struct cfg *c)
 {
     fprintf(stderr,
             "    %s %s: r %.17g aniso %.17g m %g s %g base (%g %g %g) wo (%.17g %.17g %.17g) wi (%.17g %.17g %.17g) "
-            "lobe %d u (%.17g %.17g) coat %d %.17g r %.17g\n",
+            "lobe %d u (%.17g %.17g) coat %d %.17g r %.17g sheen %d (%.17g %.17g %.17g) r %.17g\n",
             fname, what, c->b.roughness, c->b.anisotropy, c->b.metallic, c->b.specular, c->b.base_color.x, c->b.base_color.y,
             c->b.base_color.z, c->wo.x, c->wo.y, c->wo.z, c->wi.x, c->wi.y, c->wi.z, (int)c->lobe, c->u1, c->u2,
-            (int)c->b.coated, c->b.coat, c->b.coat_roughness);
+            (int)c->b.coated, c->b.coat, c->b.coat_roughness, (int)c->b.sheened, c->b.sheen_color.x, c->b.sheen_color.y,
+            c->b.sheen_color.z, c->b.sheen_roughness);
 }
 
 /* Compares every input's adjoint with its difference at one configuration.
@@ -608,7 +656,8 @@ static void check_identity(struct fn *f, const struct cfg *c, struct rng *r)
     f->adjoint(c, g);
     double ell = f->feature(c);
     for (int k = 0; k < NX; k++)
-        v[k] = rng_sym(r) * (k == X_R ? c->b.roughness : k == X_CR ? c->b.coat_roughness : k <= X_A ? 1.0 : ell);
+        v[k] = rng_sym(r) * (k == X_R ? c->b.roughness : k == X_CR ? c->b.coat_roughness : k == X_SRO ? c->b.sheen_roughness
+                                                                                          : k <= X_A || k >= X_SR ? 1.0 : ell);
     const double t = 1e-5;
     struct cfg cp = *c, cm = *c;
     for (int k = 0; k < NX; k++) {
@@ -790,7 +839,7 @@ static void test_bit_identity(void)
                     c.b.coated = false;   /* (the frozen version knows no coat) */
                     if (c.lobe == DR_BSDF_LOBE_COAT)
                         c.lobe = DR_BSDF_LOBE_SPECULAR;
-                    struct dr_d_bsdf d_old = {dr_v3(0.1, 0.2, 0.3), 0.4, 0.5, 0.6, 0.7, 0.8}, d_new = d_old, d_new2 = d_old;
+                    struct dr_d_bsdf d_old = {dr_v3(0.1, 0.2, 0.3), 0.4, 0.5, 0.6, 0.7, 0.8, dr_v3(0.9, 1.0, 1.1), 1.2}, d_new = d_old, d_new2 = d_old;
                     dr_vec3 dwo = dr_v3s(0.0), dwi = dr_v3s(0.0);
                     old_d_bsdf_eval(&c.b, c.wo, c.wi, c.d3, &d_old);
                     d_bsdf_eval(&c.b, c.wo, c.wi, c.d3, &d_new, NULL, NULL);
@@ -1035,7 +1084,7 @@ static void test_accumulate_and_null(void)
             double g1[NX], g2[NX];
             fs[i]->adjoint(&c, g1);
             /* twice into preset outputs */
-            struct dr_d_bsdf d = {dr_v3(1.0, 2.0, 3.0), 4.0, 5.0, 6.0, 7.0, 8.0};
+            struct dr_d_bsdf d = {dr_v3(1.0, 2.0, 3.0), 4.0, 5.0, 6.0, 7.0, 8.0, dr_v3(15.0, 16.0, 17.0), 18.0};
             dr_vec3 dwo = dr_v3(9.0, 10.0, 11.0), dwi = dr_v3(12.0, 13.0, 14.0);
             for (int t = 0; t < 2; t++) {
                 if (i == 0)
@@ -1062,7 +1111,7 @@ static void test_accumulate_and_null(void)
             g_from(g, &d, dwo, dwi);
             fn_eval.adjoint(&c, gf);
             for (int k = 0; k < NX; k++) {
-                bool requested = k <= X_A ? pd != NULL : (k <= X_OZ ? pwo != NULL : pwi != NULL);
+                bool requested = k <= X_A || k >= X_SR ? pd != NULL : (k <= X_OZ ? pwo != NULL : pwi != NULL);
                 CHECK(g[k] == (requested ? gf[k] : 0.0), "d_bsdf_eval NULL mask %d input %s", mask, x_name[k]);
             }
             d_bsdf_pdf(&c.b, c.wo, c.wi, c.d1, pd, pwo, pwi);
@@ -1074,7 +1123,7 @@ static void test_accumulate_and_null(void)
     struct dr_bsdf b = make_bsdf(0.5, 0.5, 0.5, dr_v3s(0.5), dr_v3s(1.0));
     const dr_vec3 below[][2] = {{{0.0, 0.6, -0.8}, {0.0, 0.0, 1.0}}, {{0.0, 0.0, 1.0}, {0.6, 0.0, -0.8}},
                                 {{1.0, 0.0, 0.0}, {0.0, 0.0, 1.0}}};
-    struct dr_d_bsdf d = {dr_v3(1.0, 2.0, 3.0), 4.0, 5.0, 6.0, 7.0, 8.0};
+    struct dr_d_bsdf d = {dr_v3(1.0, 2.0, 3.0), 4.0, 5.0, 6.0, 7.0, 8.0, dr_v3(15.0, 16.0, 17.0), 18.0};
     dr_vec3 dwo = dr_v3(9.0, 10.0, 11.0), dwi = dr_v3(12.0, 13.0, 14.0);
     for (int coated = 0; coated < 2; coated++) {
         b.coated = coated;
@@ -1092,6 +1141,132 @@ static void test_accumulate_and_null(void)
     g_from(g, &d, dwo, dwi);
     for (int k = 0; k < NX; k++)
         CHECK(g[k] == (double)(k + 1), "below the surface the adjoint of %s changed to %g", x_name[k], g[k]);
+}
+
+
+/* i. the sheen (bsdf_sheen.c): every adjoint against differences in every
+ * input, the sheen's colour and roughness included, over sheen roughness
+ * below, at and above its floor (0.05, 0.07, 0.071) up to 1, colours 0,
+ * white (T clamps at grazing angles), grey (a tie for the max channel) and
+ * random, on the bases of random_cfg (a clear coat over every fourth, a
+ * stretched base lobe on some), the sheen's lobe sampled a third of the
+ * time. Then: zero roughness derivative below the floor, a colour 0 keeps
+ * its derivative in f, and every adjoint finite at cosines down to 1e-9. */
+static void random_sheen(struct rng *r, struct cfg *c, int n)
+{
+    static const double sr[] = {0.05, 0.07, 0.071, 0.1, 0.3, 0.5, 0.8, 1.0, -1.0};
+    const double x = sr[n % 9];
+    c->b.sheened = true;
+    c->b.sheen_roughness = x >= 0.0 ? x : 0.08 + 0.9 * rng_next(r);
+    switch ((n / 9) % 4) {
+    case 0: c->b.sheen_color = dr_v3s(0.0); break;
+    case 1: c->b.sheen_color = dr_v3s(1.0); break;
+    case 2: c->b.sheen_color = dr_v3(0.4, 0.4, 0.2); break;
+    default: c->b.sheen_color = dr_v3(rng_next(r), rng_next(r), rng_next(r)); break;
+    }
+    if (n % 3 == 0)
+        c->lobe = DR_BSDF_LOBE_SHEEN;
+    /* Lambda's slope (1 - cos)^(c-1) is singular at normal incidence: within
+     * 1e-6 of it a difference cannot follow (1 - cos has few digits there) */
+    if (c->wi.z > 1.0 - 1e-6)
+        c->wi = dir_from(1.0 - 1e-4 * (1.0 + rng_next(r)), 2.0 * M_PI * rng_next(r));
+    if (c->wo.z > 1.0 - 1e-6 && c->wo.z < 1.0)
+        c->wo = dir_from(1.0 - 1e-4 * (1.0 + rng_next(r)), 2.0 * M_PI * rng_next(r));
+}
+
+static void test_fd_sheen(void)
+{
+    static const double br[] = {1.0, 0.5, 0.2, 0.05, 0.001};
+    const long before = fn_eval.checks + fn_pdf.checks + fn_pdf_fixed.checks + fn_prob.checks + fn_sample.checks;
+    struct rng r = {777000111};
+    long colour0 = 0;
+    for (size_t ir = 0; ir < sizeof br / sizeof *br; ir++)
+        for (int im = 0; im < 3; im++)
+            for (int n = 0; n < 144; n++) {
+                struct cfg c = random_cfg(&r, br[ir], metals[im], n % 2 ? 1.0 : 0.0, n);
+                random_sheen(&r, &c, n / 2 + 7 * (int)ir);
+                if (n % 11 == 5)
+                    c.b.anisotropy = 0.6;
+                set_fixed_probs(&c);
+                check_fd(&fn_eval, &c);
+                check_fd(&fn_pdf, &c);
+                check_fd(&fn_pdf_fixed, &c);
+                check_fd(&fn_prob, &c);
+                check_fd(&fn_sample, &c);
+                double g[NX];
+                if (!(c.b.sheen_roughness > DR_SHEEN_MIN_ROUGHNESS)) {
+                    fn_eval.adjoint(&c, g);
+                    bool z = g[X_SRO] == 0.0;
+                    fn_pdf.adjoint(&c, g);
+                    z = z && g[X_SRO] == 0.0;
+                    fn_prob.adjoint(&c, g);
+                    CHECK(z && g[X_SRO] == 0.0, "below the sheen roughness floor: a roughness adjoint is not 0");
+                }
+                if (c.b.sheen_color.x == 0.0 && c.wo.z > 0.05 && c.wi.z > 0.05 && !c.b.coated) {
+                    /* f_sheen = C s: d f / d C.r = s > 0 whatever C (the base's T T is 1 at C = 0) */
+                    fn_eval.adjoint(&c, g);
+                    struct cfg w = c;
+                    w.b.sheen_color = dr_v3(1.0, 0.0, 0.0);
+                    w.b.base_color = dr_v3s(0.0);
+                    w.b.metallic = 0.0;
+                    w.b.specular = 0.0;
+                    const double s = dr_bsdf_eval(&w.b, w.wo, w.wi).x;
+                    CHECK(s > 0.0 ? fabs(g[X_SR]) > 0.0 : true, "colour 0: d f / d sheen.r vanishes (s %g)", s);
+                    colour0++;
+                }
+            }
+    fprintf(stderr, "sheen: %ld FD checks over the five adjoints, %ld colour-0 checks\n",
+            fn_eval.checks + fn_pdf.checks + fn_pdf_fixed.checks + fn_prob.checks + fn_sample.checks - before,
+            colour0);
+    CHECK(colour0 > 10, "too few colour-0 sheen configurations (%ld)", colour0);
+    /* identity along random directions of all inputs at once */
+    for (int n = 0; n < 600; n++) {
+        struct cfg c = random_cfg(&r, 0.05 + 0.9 * rng_next(&r), 0.05 + 0.9 * rng_next(&r), 1.0, 8 * (n % 5) + n % 7);
+        random_sheen(&r, &c, n);
+        c.b.sheen_roughness = 0.08 + 0.9 * rng_next(&r);
+        c.b.sheen_color = dr_v3(0.05 + 0.9 * rng_next(&r), 0.05 + 0.9 * rng_next(&r), 0.05 + 0.9 * rng_next(&r));
+        c.b.base_color = dr_v3(0.05 + 0.9 * rng_next(&r), 0.05 + 0.9 * rng_next(&r), 0.05 + 0.9 * rng_next(&r));
+        if (c.b.coated)
+            c.b.coat = 0.05 + 0.9 * rng_next(&r);
+        check_identity(&fn_eval, &c, &r);
+        check_identity(&fn_pdf, &c, &r);
+        check_identity(&fn_prob, &c, &r);
+        check_identity(&fn_sample, &c, &r);
+    }
+    /* grazing cosines, the floor, colour 0 and 1, coated or not: finite */
+    static const double zs[] = {1e-9, 1e-7, 1e-4, 0.3, 1.0};
+    static const double rs[] = {0.0, 0.07, 0.3, 1.0};
+    int hard = 0;
+    for (size_t a = 0; a < 5; a++)
+        for (size_t b = 0; b < 5; b++)
+            for (size_t k = 0; k < 4; k++)
+                for (int v = 0; v < 4; v++) {
+                    struct cfg c = random_cfg(&r, 0.3, v % 2 ? 1.0 : 0.0, 1.0, 0);
+                    c.b.coated = v >= 2, c.b.coat = 0.5, c.b.coat_roughness = 0.2;
+                    c.b.sheened = true;
+                    c.b.sheen_roughness = rs[k];
+                    c.b.sheen_color = v % 2 ? dr_v3s(1.0) : dr_v3s(0.0);
+                    c.wo = dir_from(zs[a], 0.3);
+                    c.wi = dir_from(zs[b], 2.0 + 0.5 * (double)v);
+                    const enum dr_bsdf_lobe lobes[] = {DR_BSDF_LOBE_DIFFUSE, DR_BSDF_LOBE_SPECULAR, DR_BSDF_LOBE_SHEEN};
+                    for (int l = 0; l < 3; l++) {
+                        c.lobe = lobes[l];
+                        set_fixed_probs(&c);
+                        const struct fn *fs[5] = {&fn_eval, &fn_pdf, &fn_pdf_fixed, &fn_prob, &fn_sample};
+                        for (int i = 0; i < 5; i++) {
+                            double g[NX];
+                            fs[i]->adjoint(&c, g);
+                            bool fin = true;
+                            for (int x = 0; x < NX; x++)
+                                fin = fin && isfinite(g[x]);
+                            CHECK(fin, "sheen hard case: %s not finite", fs[i]->name);
+                            if (!fin)
+                                print_cfg(fs[i]->name, "non-finite", &c);
+                        }
+                        hard++;
+                    }
+                }
+    fprintf(stderr, "sheen hard cases: %d configurations, every adjoint finite\n", hard);
 }
 
 /* ------------------------------------------------------------------- main */
@@ -1116,6 +1291,7 @@ int main(void)
     test_accumulate_and_null();
     test_fd_aniso();
     test_hard_aniso();
+    test_fd_sheen();
     summary(&fn_eval);
     summary(&fn_pdf);
     summary(&fn_pdf_fixed);
