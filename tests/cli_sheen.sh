@@ -69,10 +69,10 @@ mad() { oiiotool "$1" "$2" --sub --abs --cut 32x16+0+16 --printstats | awk '/Sta
 floor smooth.gltf '{"sheenColorFactor": [1, 1, 1], "sheenRoughnessFactor": 0.1}'
 floor rough.gltf '{"sheenColorFactor": [1, 1, 1], "sheenRoughnessFactor": 1}'
 for s in bare smooth rough; do
-    run render "$tmp/$s.gltf" --res 32x32 --spp 256 -o "$s.exr"
+    run render "$tmp/$s.gltf" --res 32x32 --spp 1024 -o "$s.exr"
     expect_rc 0 "render of $s"
 done
-run render "$tmp/bare.gltf" --res 32x32 --spp 256 --seed 7 -o bare7.exr
+run render "$tmp/bare.gltf" --res 32x32 --spp 1024 --seed 7 -o bare7.exr
 noise=$(mad bare.exr bare7.exr)
 vs_bare=$(mad rough.exr bare.exr)
 smooth_rough=$(mad smooth.exr rough.exr)
