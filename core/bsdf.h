@@ -18,6 +18,13 @@
  *   f = T(wo) T(wi) f_base + coat Fc(wo.h) D_c G2_c / (4 |wo.n| |wi.n|),
  *   T(w) = 1 - coat Fc(w.n),  Fc = 0.04 + 0.96 (1 - cos)^5  (index 1.5).
  *
+ * A sheen (KHR_materials_sheen, sheened) layers the Estevez-Kulla "Charlie"
+ * lobe between the coat and the base (bsdf_sheen.c; coat over sheen over
+ * base):
+ *   f_sheened = T_s(wo) T_s(wi) f_base + C D_s G_s / (4 |wo.n| |wi.n|),
+ *   T_s(w) = max(0, 1 - max(C) E(w.n, r)),  E the lobe's white albedo
+ *   (a table, sheen_albedo.h), r = max(sheen_roughness, DR_SHEEN_MIN_ROUGHNESS).
+ *
  * All directions are unit vectors in the local shading frame (normal = +z),
  * both pointing away from the surface: wo towards the viewer, wi towards the
  * light. Below the surface (z <= 0) on either side, f = 0 and pdf = 0. */
@@ -31,6 +38,10 @@
 /* Cosines at or below this count as below the surface (f = pdf = 0). */
 #define DR_BSDF_COS_EPS 1e-12
 #define DR_BSDF_MIN_ALPHA 1e-7   /* roughness ~0.0003: below the smallest roughness parameter (0.001) */
+/* The sheen roughness's floor: at 0.07 the lobe's exponent 1/r^2 is ~200
+ * already (and its albedo table starts there); below it sheen_roughness has
+ * no effect and zero derivative. */
+#define DR_SHEEN_MIN_ROUGHNESS 0.07
 
 /* The material evaluated at one shading point (textures already applied). */
 struct dr_bsdf {
@@ -81,13 +92,18 @@ dr_vec3 dr_bsdf_eval_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double
  * it: cosine-weighted hemisphere for the diffuse lobe, GGX visible normals
  * (Heitz 2018) for the specular lobe, from (u1, u2). A coated BSDF first
  * picks its coat's lobe (GGX visible normals of the coat's roughness) with
- * probability coat Fc(wo.n), else the base's lobes with u_lobe rescaled.
+ * probability coat Fc(wo.n), else the base's lobes with u_lobe rescaled. A
+ * sheened BSDF (or the base under a coat) first picks its sheen's lobe
+ * (DR_BSDF_LOBE_SHEEN, the cosine map) with probability
+ * P = clamp(max(C) E(wo.n, r), 0, 1), else the base's lobes likewise.
  * Returns false when no
  * valid direction results (wo below the surface, sample below it); the path
  * then ends. */
 bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u1,
                     double u2, struct dr_bsdf_sample *out);
 /* The share of a constant sky's next-event samples drawn by this BSDF at wo
+ * (a sheened BSDF: (1 - P) times its base's, the sheen's cosine samples
+ * being the sky's other half)
  * (lights.h's dr_sky_pdf; the rest by the cosine about the normal): its
  * specular lobe's probability where that lobe is sharp (alpha <= 0.3,
  * roughness 0.55), falling to none where it is broad (alpha >= 0.45,
@@ -97,7 +113,10 @@ bool dr_bsdf_sample(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe, double u
  * share is unbiased). */
 double dr_bsdf_sky_share(const struct dr_bsdf *b, dr_vec3 wo);
 /* Probability of choosing a microfacet lobe (specular or coat) for this wo
- * (0 for a pure Lambertian, 1 for a BSDF with no diffuse part). */
+ * (0 for a pure Lambertian, 1 for a BSDF with no diffuse part): the share of
+ * samples drawn by a GGX visible-normal map rather than the cosine map. A
+ * sheen's lobe is sampled with the cosine map, so it counts with the
+ * diffuse side: (1 - P) p_base, P = the sheen's lobe probability. */
 double dr_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo);
 /* The sampling map of one lobe: the direction dr_bsdf_sample returns for
  * (u1, u2) once it has chosen `lobe` (bit for bit the same). The diffuse map
@@ -150,7 +169,13 @@ struct dr_d_bsdf {
  * normalisation and frames). Where the primal is zero or rejected by
  * construction (below the surface) the adjoints are zero and nothing is
  * touched. The roughness floor (DR_BSDF_MIN_ALPHA) has zero derivative below
- * it. The specular and specular_color inputs are not differentiated. */
+ * it. The specular and specular_color inputs are not differentiated.
+ * A sheen: sheen_color (max(C) of T and P to the first maximal channel;
+ * C = 0 keeps d f / d C = D G / (4 cos cos)), sheen_roughness (zero at and
+ * below DR_SHEEN_MIN_ROUGHNESS; through D, G's fit and E) and the cosines
+ * (through E's and Lambda's arguments). Where T or P clamps (max(C) E >= 1)
+ * their derivative is 0; at a cosine of exactly 1 Lambda's fit has an
+ * infinite slope ((1 - x)^(c-1)), taken as the clamp's 0 there. */
 
 /* Reverse mode of dr_bsdf_eval: d_out = d loss / d f (per channel). The
  * parameter part (*d) does not depend on whether d_wo, d_wi are requested.
@@ -176,7 +201,8 @@ void d_bsdf_pdf_fixed_prob(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, doub
 void d_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo, double d_p, struct dr_d_bsdf *d, dr_vec3 *d_wo);
 /* Reverse mode of dr_bsdf_sample_dir: d_wi = d loss / d wi. The lobe and
  * (u1, u2) are constants. The diffuse map depends on nothing differentiable
- * (zero); the specular map depends on roughness and wo. Zero for
+ * (zero), nor does the sheen lobe's (the same map); the specular map
+ * depends on roughness and wo. Zero for
  * wo.z <= 0 (dr_bsdf_sample rejects the sample before mapping).
  * With anisotropy, the stretched lobe's map: roughness and anisotropy as in
  * d_bsdf_eval (the estimators nevertheless refuse attached sampling on an
@@ -190,7 +216,9 @@ void d_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lo
  * whose weights follow the requested parameters. Under a clear coat the
  * base's lobes are the base BSDF's (the coat's transmission is a smooth
  * factor of their integrands) and the coat's roughness has a pair of its own
- * at the coat's alpha; the coat's factor is left to the forward sampler. */
+ * at the coat's alpha; the coat's factor is left to the forward sampler.
+ * Under a sheen likewise: the base's lobes (T_s(wo) T_s(wi) is a smooth
+ * factor); the sheen's own parameters are left to the forward sampler. */
 
 /* The BSDF inputs a derivative is taken with respect to (bits). */
 enum dr_bsdf_dparam {
@@ -237,7 +265,8 @@ dr_vec3 dr_bsdf_deriv_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bs
  * lobes are made for (the antithetic pair of path_deriv.c estimates it;
  * the rest of d f / d rough is left to the forward sampler). parts:
  * DR_BSDF_D_ROUGHNESS adds the base's to d->roughness (under a coat, times
- * the coat's transmission both ways), DR_BSDF_D_COAT_ROUGHNESS the coat
+ * the coat's transmission both ways; under a sheen, times T_s(wo) T_s(wi)),
+ * DR_BSDF_D_COAT_ROUGHNESS the coat
  * lobe's to d->coat_roughness (times the coat's factor; 0 uncoated).
  * Isotropic only for the base: with b->anisotropy != 0 the base's part adds
  * nothing (the caller never requests DR_BSDF_D_ROUGHNESS there); the coat's

@@ -19,8 +19,9 @@
  *   the fit keeps it there on its own, Lambda > 0).
  * E(mu, r) is that lobe's directional albedo with C = 1, tabulated
  * (sheen_albedo.h). The fit's G lets E exceed 1 near grazing at small
- * roughness (max 2.94 at mu = 0.0018, r = 0.07; on the table's grid E <= 1
- * for mu > 0.046 at every r, and at every mu >= 1e-4 for r >= 0.26): there
+ * roughness (table max 2.93 at mu = 0.0023, r = 0.07; on the table's grid
+ * E <= 1 for mu > 0.05 at every r, and at every mu >= 1e-4 for r >= 0.26;
+ * below mu ~ 1e-6 the fit's E grows without bound, sheen_albedo.h): there
  * a bright sheen has m E >= 1 and T clamps at 0 (zero derivative), the base
  * is hidden, and the layer's albedo is the lobe's, above 1 for a bright
  * sheen at grazing angles (the model's, not the layering's).

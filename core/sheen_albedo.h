@@ -16,8 +16,9 @@
 #ifndef DR_SHEEN_ALBEDO_H
 #define DR_SHEEN_ALBEDO_H
 
-#define DR_SHEEN_MIN_ROUGHNESS 0.07   /* bsdf.h: the sheen roughness floor */
-#define DR_SHEEN_NMU 48
+#include "bsdf.h"   /* DR_SHEEN_MIN_ROUGHNESS */
+
+#define DR_SHEEN_NMU 64
 #define DR_SHEEN_NR 32
 #define DR_SHEEN_MU_LO 1e-4
 

@@ -9,6 +9,7 @@
 
 #include "bsdf.h"
 #include "sampler.h"
+#include "sheen_albedo.h"
 #include "test.h"
 
 struct rng { uint64_t s; };
@@ -431,6 +432,72 @@ static void test_aniso(void)
     }
 }
 
+
+/* The sheen (bsdf_sheen.c): on a sheened BSDF the derivative mixture's
+ * lobes are the base's (T(wo) T(wi) is a smooth factor), so every mixture
+ * is still a consistent density whose samples follow it, with a coat over
+ * the sheen too; and d_bsdf_eval_rough_ndf's part is T(wo) T(wi) times the
+ * unsheened BSDF's (under a coat: the coat's factor as well, the coat's own
+ * part unchanged), T = max(0, 1 - m E(cos, r)) from the table. */
+static void test_sheen(void)
+{
+    static const struct { const char *name; unsigned params; } masks[] = {
+        {"sheened base", DR_BSDF_D_BASE}, {"sheened metallic", DR_BSDF_D_METALLIC},
+        {"sheened roughness", DR_BSDF_D_ROUGHNESS},
+        {"sheened all, coated", DR_BSDF_D_BASE | DR_BSDF_D_METALLIC | DR_BSDF_D_ROUGHNESS | DR_BSDF_D_COAT_ROUGHNESS}};
+    uint64_t seed = 5000;
+    printf("sheened mixtures (dr_bsdf_deriv_sample vs dr_bsdf_deriv_pdf):\n");
+    for (int m = 0; m < 4; m++)
+        for (int i = 0; i < 2; i++) {
+            struct dr_bsdf b = make_bsdf(i == 0 ? 0.2 : 0.5, i == 0 ? 1.0 : 0.3, dr_v3(0.9, 0.1, 0.1));
+            b.sheened = true, b.sheen_color = dr_v3(1.0, 0.5, 0.5), b.sheen_roughness = i == 0 ? 0.3 : 0.07;
+            if (masks[m].params & DR_BSDF_D_COAT_ROUGHNESS)
+                b.coated = true, b.coat = 0.6, b.coat_roughness = 0.3;
+            char what[64];
+            snprintf(what, sizeof what, "%s m=%.1f r=%.1f", masks[m].name, b.metallic, b.roughness);
+            chi2_case(what, &b, i == 0 ? 0.7 : 0.2, masks[m].params, 0, 200000, seed++);
+        }
+    struct rng r = {1234};
+    double worst = 0.0;
+    int nonzero = 0;
+    for (int k = 0; k < 1000; k++) {
+        struct dr_bsdf b = make_bsdf(0.1 + 0.85 * rng_next(&r), rng_next(&r), dr_v3(rng_next(&r), rng_next(&r), rng_next(&r)));
+        b.sheened = true;
+        b.sheen_roughness = k % 4 == 0 ? 0.07 : rng_next(&r);
+        b.sheen_color = k % 5 == 0 ? dr_v3s(1.0) : dr_v3(rng_next(&r), rng_next(&r), rng_next(&r));
+        const bool coated = k % 3 == 0;
+        if (coated)
+            b.coated = true, b.coat = rng_next(&r), b.coat_roughness = 0.05 + 0.9 * rng_next(&r);
+        const double co = (k % 7 == 0 ? 0.01 : 0.2) + 0.8 * rng_next(&r), ci = 0.05 + 0.95 * rng_next(&r);
+        const double ph = 2.0 * M_PI * rng_next(&r);
+        const dr_vec3 wo = dr_v3(sqrt(1 - co * co), 0.0, co);
+        const dr_vec3 wi = dr_v3(sqrt(1 - ci * ci) * cos(ph), sqrt(1 - ci * ci) * sin(ph), ci);
+        const double sr = fmax(b.sheen_roughness, DR_SHEEN_MIN_ROUGHNESS), m = dr_max3(b.sheen_color);
+        const double tt = fmax(0.0, 1.0 - m * dr_sheen_albedo(co, sr, NULL, NULL)) *
+                          fmax(0.0, 1.0 - m * dr_sheen_albedo(ci, sr, NULL, NULL));
+        struct dr_bsdf plain = b;
+        plain.sheened = false;
+        const dr_vec3 d_out = dr_v3(rng_next(&r), rng_next(&r), rng_next(&r));
+        struct dr_d_bsdf ds = {0}, dp = {0}, dsc = {0}, dpc = {0};
+        d_bsdf_eval_rough_ndf(&b, wo, wi, d_out, DR_BSDF_D_ROUGHNESS, &ds);
+        d_bsdf_eval_rough_ndf(&plain, wo, wi, d_out, DR_BSDF_D_ROUGHNESS, &dp);
+        const double want = tt * dp.roughness, err = fabs(ds.roughness - want) / (fabs(want) + 1e-300);
+        if (want != 0.0)
+            worst = fmax(worst, err), nonzero++;
+        CHECK(want == 0.0 ? ds.roughness == 0.0 : err < 1e-12, "sheened NDF part %g vs T T x unsheened %g", ds.roughness,
+              want);
+        CHECK(ds.metallic == 0.0 && dr_is_black(ds.base_color) && dr_is_black(ds.sheen_color) && ds.sheen_roughness == 0.0,
+              "sheened NDF part touched other adjoints");
+        if (coated) {
+            d_bsdf_eval_rough_ndf(&b, wo, wi, d_out, DR_BSDF_D_COAT_ROUGHNESS, &dsc);
+            d_bsdf_eval_rough_ndf(&plain, wo, wi, d_out, DR_BSDF_D_COAT_ROUGHNESS, &dpc);
+            CHECK(dsc.coat_roughness == dpc.coat_roughness, "the coat's NDF part changed under a sheen");
+        }
+    }
+    printf("sheened NDF part vs T T x the unsheened one: %d nonzero, worst relative error %.2e\n", nonzero, worst);
+    CHECK(nonzero > 500, "too few nonzero sheened NDF parts (%d)", nonzero);
+}
+
 int main(void)
 {
     test_rough_ndf_vs_fd();
@@ -438,6 +505,7 @@ int main(void)
     test_lobes();
     test_mixtures();
     test_aniso();
+    test_sheen();
     printf("worst chi-square p-value: %.4g\n", worst_p);
     return TEST_END();
 }
