@@ -221,13 +221,13 @@ static void test_uv(const struct dr_scene *s)
     const double pts[][2] = {{0.37, 0.29}, {1.61, -0.43}, {-0.62, 0.71}};
     for (int t = 0; t < 3; t++)
         for (int p = 0; p < 3; p++) {
-            struct uv_ctx k = {s, t, {0}, {rnd(), rnd(), rnd(), rnd()}, {dr_v3s(0), 0, 0, 0, 0, 0}};
+            struct uv_ctx k = {s, t, {0}, {rnd(), rnd(), rnd(), rnd()}, {dr_v3s(0), 0, 0, 0, 0, 0, dr_v3s(0), 0}};
             double x[2] = {pts[p][0], pts[p][1]}, g[2] = {0, 0};
             const struct dr_texture *tx = &s->textures[t];
             d_texture_eval_uv(tx, &s->images[tx->image], x[0], x[1], true, k.w, &g[0], &g[1]);
             check_fd(names[t], uv_objective, &k, x, 2, g, 1e-7, 1e-6);
         }
-    struct uv_ctx k = {s, -1, {0}, {rnd(), rnd(), rnd(), 0}, {rnd3(), rnd(), rnd(), rnd(), rnd(), 0}};
+    struct uv_ctx k = {s, -1, {0}, {rnd(), rnd(), rnd(), 0}, {rnd3(), rnd(), rnd(), rnd(), rnd(), 0, dr_v3s(0), 0}};
     dr_hit_at(&s->mesh, 0, 0.3, 0.25, &k.hit);
     double x[2] = {k.hit.uv[0], k.hit.uv[1]};
     struct dr_d_hit dh = {0};
@@ -293,7 +293,7 @@ static void test_hit_attributes(struct dr_scene *s)
     mat->emissive_tex.transformed = true;
     memcpy(mat->emissive_tex.xf, xf, sizeof xf);
     mat->metallic_roughness_tex.texcoord = 1;
-    struct attr_ctx k = {s, {rnd3(), rnd(), rnd(), 0, 0, 0}, rnd3()};
+    struct attr_ctx k = {s, {rnd3(), rnd(), rnd(), 0, 0, 0, dr_v3s(0), 0}, rnd3()};
     dr_vec3 o = dr_v3(0.2, 1.5, 0.3);
     struct dr_hit target;
     dr_hit_at(m, 0, 0.3, 0.4, &target);

@@ -265,7 +265,7 @@ static void test_bsdf_accumulates(void)
                                      dr_v3(rng_next(&r), rng_next(&r), rng_next(&r)), dr_v3s(1.0));
         dr_vec3 wo = random_hemi(&r), wi = random_hemi(&r);
         dr_vec3 d_out = dr_v3(rng_next(&r), rng_next(&r), rng_next(&r));
-        struct dr_d_bsdf d1 = {0}, d2 = {dr_v3(1.0, 2.0, 3.0), 4.0, 5.0, 6.0, 7.0, 0.0};
+        struct dr_d_bsdf d1 = {0}, d2 = {dr_v3(1.0, 2.0, 3.0), 4.0, 5.0, 6.0, 7.0, 0.0, dr_v3s(0.0), 0.0};
         d_bsdf_eval(&b, wo, wi, d_out, &d1, NULL, NULL);
         d_bsdf_eval(&b, wo, wi, d_out, &d2, NULL, NULL);
         d_bsdf_eval(&b, wo, wi, d_out, &d2, NULL, NULL);
@@ -277,7 +277,7 @@ static void test_bsdf_accumulates(void)
     }
     /* Below the surface: f = 0 by construction, *d is untouched. */
     struct dr_bsdf b = make_bsdf(0.5, 0.5, 0.5, dr_v3s(0.5), dr_v3s(1.0));
-    struct dr_d_bsdf d = {dr_v3(1.0, 2.0, 3.0), 4.0, 5.0, 6.0, 7.0, 0.0};
+    struct dr_d_bsdf d = {dr_v3(1.0, 2.0, 3.0), 4.0, 5.0, 6.0, 7.0, 0.0, dr_v3s(0.0), 0.0};
     d_bsdf_eval(&b, dr_v3(0.0, 0.6, -0.8), dr_v3(0.0, 0.0, 1.0), dr_v3s(1.0), &d, NULL, NULL);
     d_bsdf_eval(&b, dr_v3(0.0, 0.0, 1.0), dr_v3(0.6, 0.0, -0.8), dr_v3s(1.0), &d, NULL, NULL);
     d_bsdf_eval(&b, dr_v3(1.0, 0.0, 0.0), dr_v3(0.0, 0.0, 1.0), dr_v3s(1.0), &d, NULL, NULL);

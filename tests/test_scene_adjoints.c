@@ -183,7 +183,7 @@ static void test_chains(void)
         return;
     dr_hit_at(&s->mesh, 1, 0.3, 0.25, &f.hit);   /* a point with uv away from texel centres */
     f.dir = dr_normalize(dr_v3(0.3, 0.5, -0.7));
-    f.d_b = (struct dr_d_bsdf){dr_v3(0.7, -0.4, 0.9), -0.6, 0.8, 0.35, -0.45, 0.0};
+    f.d_b = (struct dr_d_bsdf){dr_v3(0.7, -0.4, 0.9), -0.6, 0.8, 0.35, -0.45, 0.0, dr_v3s(0.0), 0.0};
     f.d_L = dr_v3(0.5, -1.2, 0.9);
     f.lsp.type = DR_LS_PUNCTUAL;
     f.lsp.index = 0;
