@@ -50,8 +50,17 @@ static const double P_R1[5] = {21.5473, 3.82987, 0.19823, -1.97760, -4.32054};
 struct sheen_lobe {
     double r, alpha, k;   /* k = 1 / (2 alpha): D ~ (sin^2)^k */
     double p[5], dp[5];   /* L's coefficients and d p / d alpha */
+    double half;          /* L(0.5) (Lambda's reflection point) */
     bool live;            /* r above the floor: roughness derivatives flow */
 };
+
+/* L(x) = a / (1 + b x^c) + d x + e alone (sheen_L's value, the same
+ * operations: the primal needs no slopes, and they cost a pow and a log). */
+static inline double sheen_L_value(const struct sheen_lobe *l, double x)
+{
+    const double xc = x > 0.0 ? pow(x, l->p[2]) : 0.0, den = 1.0 + l->p[1] * xc;
+    return l->p[0] / den + l->p[3] * x + l->p[4];
+}
 
 static struct sheen_lobe sheen_lobe(double roughness)
 {
@@ -65,6 +74,7 @@ static struct sheen_lobe sheen_lobe(double roughness)
         l.p[i] = (1.0 - t) * P_R1[i] + t * P_R0[i];
         l.dp[i] = dt * (P_R0[i] - P_R1[i]);
     }
+    l.half = sheen_L_value(&l, 0.5);
     return l;
 }
 
@@ -104,8 +114,15 @@ static double sheen_ln_lambda(const struct sheen_lobe *l, double x, double *dx, 
     return v;
 }
 
-/* The lobe's value s = D G / (4 wo.z wi.z) (f_sheen = C s) and what its
- * adjoint needs. */
+/* ln Lambda(x) alone (sheen_ln_lambda's value, the same operations). */
+static inline double sheen_ln_lambda_value(const struct sheen_lobe *l, double x)
+{
+    x = x < 1.0 ? (x > 0.0 ? x : 0.0) : 1.0;
+    return x < 0.5 ? sheen_L_value(l, x) : 2.0 * l->half - sheen_L_value(l, 1.0 - x);
+}
+
+/* The lobe's value s = D G / (4 wo.z wi.z) (f_sheen = C s) and, with
+ * slopes, what its adjoint needs (the d*_x, d*_a fields; else unset). */
 struct sheen_eval {
     double s, G, lo, li;          /* G; Lambda(wo.z), Lambda(wi.z) */
     double dlo_x, dlo_a, dli_x, dli_a;   /* d ln Lambda / d x, d alpha */
@@ -113,7 +130,7 @@ struct sheen_eval {
     double hxy2, H2, s2;          /* s2 = sin^2 theta_h */
 };
 
-static struct sheen_eval sheen_eval(const struct sheen_lobe *l, dr_vec3 wo, dr_vec3 wi)
+static struct sheen_eval sheen_eval(const struct sheen_lobe *l, dr_vec3 wo, dr_vec3 wi, bool slopes)
 {
     struct sheen_eval e;
     e.H = dr_add(wo, wi);
@@ -121,8 +138,13 @@ static struct sheen_eval sheen_eval(const struct sheen_lobe *l, dr_vec3 wo, dr_v
     e.H2 = e.hxy2 + e.H.z * e.H.z;
     e.s2 = e.hxy2 / e.H2;
     const double D = (2.0 + 2.0 * l->k) * pow(e.s2, l->k) * (0.5 * DR_INV_PI);
-    e.lo = exp(sheen_ln_lambda(l, wo.z, &e.dlo_x, &e.dlo_a));
-    e.li = exp(sheen_ln_lambda(l, wi.z, &e.dli_x, &e.dli_a));
+    if (slopes) {
+        e.lo = exp(sheen_ln_lambda(l, wo.z, &e.dlo_x, &e.dlo_a));
+        e.li = exp(sheen_ln_lambda(l, wi.z, &e.dli_x, &e.dli_a));
+    } else {
+        e.lo = exp(sheen_ln_lambda_value(l, wo.z));
+        e.li = exp(sheen_ln_lambda_value(l, wi.z));
+    }
     e.G = 1.0 / (1.0 + e.lo + e.li);
     e.s = D * e.G / (4.0 * wo.z * wi.z);
     return e;
@@ -244,7 +266,7 @@ dr_vec3 dr_sheen_eval_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, doubl
         const double p = sheen_prob(&ao);
         *pdf = p * (wi.z * DR_INV_PI) + (1.0 - p) * pb;
     }
-    const struct sheen_eval e = sheen_eval(&l, wo, wi);
+    const struct sheen_eval e = sheen_eval(&l, wo, wi, false);
     return dr_add(dr_scale(fb, transmit(&ao) * transmit(&ai)), dr_scale(b->sheen_color, e.s));
 }
 
@@ -334,7 +356,7 @@ void d_sheen_eval(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out
         d_albedo(&ao, -gt * ti, d, &d_co);
     if (ti > 0.0)
         d_albedo(&ai, -gt * to, d, &d_ci);
-    const struct sheen_eval e = sheen_eval(&l, wo, wi);
+    const struct sheen_eval e = sheen_eval(&l, wo, wi, true);
     const double d_alpha = d_sheen_lobe(&l, &e, wo, wi, dr_dot(d_out, b->sheen_color), d_wo, d_wi);
     if (d) {
         d->sheen_color = dr_add(d->sheen_color, dr_scale(d_out, e.s));
