@@ -8,9 +8,9 @@
  * texture's RG mapped to [-1, 1], turned by anisotropyRotation radians
  * counter-clockwise (from T towards B), as the extension's reference does.
  *
- * The direction is not differentiated: it moves with the hit point and the
- * texture only, and attached sampling, which would need that, is refused on
- * anisotropic materials (estimators/common.c), as on normal maps. */
+ * Attached sampling moves the hit point, and with it the frame: the
+ * tangent's interpolation, the shading normal and the direction texture's
+ * texel (d_anisotropy_frame). */
 #ifndef DR_ANISOTROPY_H
 #define DR_ANISOTROPY_H
 
@@ -31,5 +31,13 @@ bool dr_anisotropy_direction(const struct dr_scene *scene, const struct dr_hit *
  * caller shades the lobe isotropic there (a direction made up by the frame
  * would turn with the normal, not with the surface). */
 bool dr_anisotropy_frame(const struct dr_scene *scene, const struct dr_hit *hit, dr_vec3 n, dr_frame *f);
+/* Reverse mode of dr_anisotropy_frame: given d loss / d f->s and d f->t
+ * (d_f->n is the caller's: f->n is n itself), adds d loss / d n to *d_n and
+ * d loss / d hit to *d_hit: hit->ns (the tangent's Gram-Schmidt and the
+ * bitangent), the interpolated tangent and the direction texture's uv.
+ * False, touching nothing, where dr_anisotropy_frame returned false (the
+ * frame was dr_frame_from_normal's: d_frame_from_normal is its adjoint). */
+bool d_anisotropy_frame(const struct dr_scene *scene, const struct dr_hit *hit, dr_vec3 n, const dr_frame *d_f,
+                        dr_vec3 *d_n, struct dr_d_hit *d_hit);
 
 #endif

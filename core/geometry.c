@@ -189,6 +189,13 @@ void d_hit_compute(const struct dr_mesh *m, const struct dr_hit *hit, dr_vec3 o,
         d_b2 += dc.x * (c2[0] - c0[0]) + dc.y * (c2[1] - c0[1]) + dc.z * (c2[2] - c0[2]);
     }
     d_shading_normal(m, hit, idx, d_hit->ns, &d_b1, &d_b2);
+    if (m->tangents && !dr_is_black(d_hit->tangent)) {   /* t = b0 t0 + b1 t1 + b2 t2 (xyz) */
+        const float *t0 = m->tangents + 4 * (size_t)idx[0], *t1 = m->tangents + 4 * (size_t)idx[1],
+                    *t2 = m->tangents + 4 * (size_t)idx[2];
+        const dr_vec3 dt = d_hit->tangent;
+        d_b1 += dt.x * (t1[0] - t0[0]) + dt.y * (t1[1] - t0[1]) + dt.z * (t1[2] - t0[2]);
+        d_b2 += dt.x * (t2[0] - t0[0]) + dt.y * (t2[1] - t0[1]) + dt.z * (t2[2] - t0[2]);
+    }
     dr_vec3 c1 = dr_scale(dr_cross(e2, n), 1.0 / n2), c2 = dr_scale(dr_cross(n, e1), 1.0 / n2);
     dr_vec3 d_p = dr_add(d_hit->p, dr_add(dr_scale(c1, d_b1), dr_scale(c2, d_b2)));
     /* p = o + t d, t = n . (p0 - o) / (n . d):

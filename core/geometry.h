@@ -98,6 +98,8 @@ struct dr_d_hit {
     double uv[2];
     double uv1[2];     /* TEXCOORD_1 (mesh.uvs1) */
     dr_vec3 color;     /* COLOR_0 (mesh.colors) */
+    dr_vec3 tangent;   /* the interpolated mesh tangent, before Gram-Schmidt (normal_map.h's
+                          d_hit_tangent_frame; mesh.tangents) */
 };
 
 /* Reverse mode of dr_hit_compute with respect to the ray: given d_hit, adds

@@ -246,6 +246,15 @@ void d_material_eval_uv(const struct dr_scene *s, const struct dr_hit *hit, cons
         d_texture_eval_uv(ct, &s->images[ct->image], uv[0], uv[1], false, d_out, &d_uv[0], &d_uv[1]);
         d_texref_uv(r, d_uv, d_hit);
     }
+    const struct dr_texref *ar = dr_material_anisotropy_tex(m);
+    if (ar) {   /* the anisotropy's strength = factor x B(uv) (its RG turn the frame: anisotropy.h) */
+        const struct dr_texture *at = texref_texture(s, ar);
+        dr_texref_uv(&s->mesh, ar, hit, uv);
+        const double d_out[4] = {0.0, 0.0, d_b->anisotropy * m->anisotropy_strength, 0.0};
+        double d_uv[2] = {0.0, 0.0};
+        d_texture_eval_uv(at, &s->images[at->image], uv[0], uv[1], false, d_out, &d_uv[0], &d_uv[1]);
+        d_texref_uv(ar, d_uv, d_hit);
+    }
     for (int which = 0; which < 2; which++) {   /* the sheen's: colour RGB (sRGB), roughness A */
         const struct dr_texref *r = dr_material_sheen_tex(m, which);
         if (!r)

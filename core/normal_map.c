@@ -174,6 +174,34 @@ bool dr_hit_tangent_frame(const struct dr_scene *s, const struct dr_hit *hit, dr
     return true;
 }
 
+/* t = u / |u|, u = t_raw - ns (ns . t_raw); b = k (ns x t), k = w side:
+ *   d ns += k (t x d_b),  d t += k (d_b x ns),
+ *   d u = (d t - t (t . d t)) / |u|,
+ *   d t_raw = d u - ns (ns . d u),  d ns -= (ns . t_raw) d u + t_raw (ns . d u). */
+void d_hit_tangent_frame(const struct dr_scene *s, const struct dr_hit *hit, dr_vec3 d_t, dr_vec3 d_b,
+                         struct dr_d_hit *d_hit)
+{
+    const struct dr_mesh *m = &s->mesh;
+    const uint32_t *idx = m->indices + 3 * (size_t)hit->tri;
+    dr_vec3 t;
+    double w;
+    if (!hit_tangent(m, hit, idx, &t, &w))
+        return;
+    const float *t0 = m->tangents + 4 * (size_t)idx[0], *t1 = m->tangents + 4 * (size_t)idx[1],
+                *t2 = m->tangents + 4 * (size_t)idx[2];
+    const double b1 = hit->b1, b2 = hit->b2, b0 = 1.0 - b1 - b2;
+    const dr_vec3 raw = dr_v3(b0 * t0[0] + b1 * t1[0] + b2 * t2[0], b0 * t0[1] + b1 * t1[1] + b2 * t2[1],
+                              b0 * t0[2] + b1 * t1[2] + b2 * t2[2]);
+    const dr_vec3 n = hit->ns, u = dr_sub(raw, dr_scale(n, dr_dot(n, raw)));
+    const double k = w * authored_side(m, hit, idx), ul = dr_length(u);
+    dr_vec3 d_n = dr_scale(dr_cross(t, d_b), k);
+    d_t = dr_add(d_t, dr_scale(dr_cross(d_b, n), k));
+    const dr_vec3 d_u = dr_scale(dr_sub(d_t, dr_scale(t, dr_dot(t, d_t))), 1.0 / ul);
+    d_hit->tangent = dr_add(d_hit->tangent, dr_sub(d_u, dr_scale(n, dr_dot(n, d_u))));
+    d_n = dr_sub(d_n, dr_add(dr_scale(d_u, dr_dot(n, raw)), dr_scale(raw, dr_dot(n, d_u))));
+    d_hit->ns = dr_add(d_hit->ns, d_n);
+}
+
 void dr_normal_map_apply(const struct dr_scene *s, struct dr_hit *hit)
 {
     const struct dr_material *mat = &s->materials[hit->material];

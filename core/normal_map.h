@@ -61,5 +61,11 @@ dr_vec3 dr_shading_normal_valid(dr_vec3 ng, dr_vec3 wo, dr_vec3 n);
  * the loader flipped it), so that (T, B) keeps the file's handedness on
  * either side. False where there is no frame (see dr_normal_map_apply). */
 bool dr_hit_tangent_frame(const struct dr_scene *scene, const struct dr_hit *hit, dr_vec3 *t, dr_vec3 *b);
+/* Its reverse mode where it returned true: d loss / d t and d b add
+ * d loss / d hit->ns to d_hit->ns and d loss / d the interpolated tangent
+ * to d_hit->tangent (geometry.h; d_hit_compute takes both to the ray). The
+ * handedness and the authored side are signs: constant. */
+void d_hit_tangent_frame(const struct dr_scene *scene, const struct dr_hit *hit, dr_vec3 d_t, dr_vec3 d_b,
+                         struct dr_d_hit *d_hit);
 
 #endif

@@ -22,6 +22,7 @@
 
 #include <string.h>
 
+#include "anisotropy.h"
 #include "material.h"
 
 bool dr_path_material_sampling_moves(const struct dr_scene *s, const struct dr_param_set *ps, int m)
@@ -182,12 +183,17 @@ static void surface_adjoint(const struct dr_scene *s, const struct dr_param_set 
         d_frame_to_local(&v->frame, dr_neg(v->d), a->wo, &d_wo_world, &a->frame);
         d_this->d = dr_sub(d_this->d, d_wo_world);
         dr_vec3 n = hit->front ? hit->ns : dr_neg(hit->ns), d_n = dr_v3s(0.0);
-        d_frame_from_normal(n, &a->frame, &d_n);
+        /* an anisotropic frame turns with the tangent, the normal and the
+         * direction texture (anisotropy.h); the rest is the normal's */
+        if (!s->materials[hit->material].anisotropic || !d_anisotropy_frame(s, hit, n, &a->frame, &d_n, &a->attr))
+            d_frame_from_normal(n, &a->frame, &d_n);
+        else
+            d_n = dr_add(d_n, a->frame.n);
         a->ns = hit->front ? dr_add(a->ns, d_n) : dr_sub(a->ns, d_n);
     }
     struct dr_d_hit dh = a->attr;
     dh.p = a->p;
-    dh.ns = a->ns;
+    dh.ns = dr_add(a->ns, a->attr.ns);   /* (a->attr.ns: the tangent frame's, hit->ns unoriented) */
     d_hit_compute(&s->mesh, hit, v->o, v->d, &dh, &d_this->o, &d_this->d);
 }
 

@@ -603,18 +603,8 @@ int dr_estimator_check(const struct dr_estimator_ops *e, const struct dr_grad_pr
             return DR_ERR_ARG;
         }
     }
-    /* Nor the anisotropy's frame, which turns with the moving hit point
-     * (anisotropy.h), nor its stretched visible-normal map (bsdf.h) */
-    if (!dr_sampling_is_derivative(run) && (p->scene->effects & DR_FX_ANISOTROPY)) {
-        const char *name = "";
-        for (int m = 0; m < p->scene->n_materials && !name[0]; m++)
-            if (p->scene->materials[m].anisotropic)
-                name = p->scene->materials[m].name;
-        dr_set_error("%s sampling does not differentiate anisotropic materials (material '%s' has "
-                     "KHR_materials_anisotropy); use --sampling detached",
-                     dr_sampling_name(p->sampling), name);
-        return DR_ERR_ARG;
-    }
+    /* (an anisotropic frame turns with the moving hit point:
+     * d_anisotropy_frame differentiates it, anisotropy.h) */
     return 0;
 }
 

@@ -15,9 +15,10 @@
 #      prb and tape, of the strength, the roughness and the base colour of the
 #      anisotropic floor agree with finite differences, the strength and the
 #      colour resolved (more than 4 standard errors from 0);
-#      attached sampling is refused naming the material (also for
-#      KHR_materials_specular textures, which have no uv adjoint); derivative sampling
-#      runs (the anisotropic roughness stays with the forward strategies)
+#      attached and mis sampling agree too (the frame turns with the moving
+#      hit point: d_anisotropy_frame); KHR_materials_specular textures, which
+#      have no uv adjoint, are refused under attached sampling; derivative
+#      sampling runs (the anisotropic roughness stays with the forward strategies)
 #   d. optimize moves anisotropyStrength towards a target's and writes it
 #      into the extension; the output passes the glTF validator and renders
 # Run by tests/run.sh (env: DRENDER, DR_TESTDIR); also runs alone.
@@ -100,19 +101,20 @@ floor fd.gltf '{"anisotropyStrength": 0.5, "anisotropyRotation": 1.5707963267948
 P="--param /materials/5/extensions/KHR_materials_anisotropy/anisotropyStrength \
 --param /materials/5/pbrMetallicRoughness/roughnessFactor --param /materials/5/pbrMetallicRoughness/baseColorFactor"
 for est in prb tape; do
-    for smp in detached derivative; do
+    for smp in detached attached mis derivative; do
         run fdcheck "$tmp/fd.gltf" $P --res 24x24 --spp 16 --batches 8 --estimator $est --sampling $smp
         expect_rc 0 "fdcheck of the anisotropic floor ($est, $smp)"
         # (the strength and the colour stand out of their noise; the roughness's
         # effect on this projection is within it, and agreeing is all it shows)
-        awk '$1 ~ /anisotropyStrength$/ { a = ($2 > 0 ? $2 : -$2) > 4 * $4 } $1 ~ /baseColorFactor\[0\]$/ \
-            { c = $2 > 4 * $4 } END { exit !(a && c) }' "$tmp/out" ||
+        # (attached sampling's strength is 10 times as noisy here, rough lobes
+        # being its weak case: agreeing, and the colour resolved, is what it shows)
+        awk -v need_a="$([ $smp = attached ] || [ $smp = mis ] && echo 0 || echo 1)" \
+            '$1 ~ /anisotropyStrength$/ { a = ($2 > 0 ? $2 : -$2) > 4 * $4 } $1 ~ /baseColorFactor\[0\]$/ \
+            { c = $2 > 4 * $4 } END { exit !((a || !need_a) && c) }' "$tmp/out" ||
             fail "the anisotropy's derivatives are not resolved ($est, $smp): $(cat "$tmp/out")"
     done
 done
 cat "$tmp/out"
-run grad "$tmp/fd.gltf" --param /materials/5/pbrMetallicRoughness/roughnessFactor --sampling attached --res 8x8 -o g.exr
-check_failed 2 "attached sampling|anisotropic|checker-floor|--sampling detached"
 # KHR_materials_specular's textures have no uv adjoint either: attached refused, detached runs
 python3 -c "
 import json, sys

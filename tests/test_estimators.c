@@ -1264,6 +1264,9 @@ int main(void)
     const char *ndptrs[] = {nptrs[0], gptrs[0], gptrs[1], gptrs[4]};
     compare("anisotropic coated scene, derivative sampling", s, &cam, ndptrs, 4, 6, DR_SAMPLING_DERIVATIVE,
             GROUPED_WALKS);
+    /* attached: the stretched lobe's map moves with the strength and the
+     * roughness, and the frame with the moving hit point (d_anisotropy_frame) */
+    compare("anisotropic coated scene, attached sampling", s, &cam, ndptrs, 4, 6, DR_SAMPLING_ATTACHED, GROUPED_WALKS);
     /* ... and sheened under the coats instead (KHR_materials_sheen: the
      * sheened lanes by bsdf.c lane by lane inside the eight-lane stages):
      * the sheens' colours and roughnesses and the bases' parameters,

@@ -698,6 +698,107 @@ static void test_specular_textures(void)
     dr_scene_destroy(s);
 }
 
+/* ---- KHR_materials_anisotropy: the frame's adjoint (attached sampling) ---- */
+
+/* F(o, d) = ws . s + wt . t + wa strength at the hit of the ray (o, d) on a
+ * triangle whose normals, tangents and uvs vary over it and whose direction
+ * texture (bilinear) turns the direction: anisotropy.h's frame and
+ * material.h's strength. */
+static const dr_vec3 FRAME_WS = {0.3, -0.7, 0.45}, FRAME_WT = {-0.5, 0.2, 0.6};
+static const double FRAME_WA = 0.8;
+static double frame_objective(const struct dr_scene *s, dr_vec3 o, dr_vec3 d, struct dr_hit *hit, bool *ok)
+{
+    dr_hit_compute(&s->mesh, 0, o, d, hit);
+    const dr_vec3 n = hit->front ? hit->ns : dr_neg(hit->ns);
+    dr_frame f;
+    struct dr_bsdf b;
+    *ok = dr_anisotropy_frame(s, hit, n, &f);
+    dr_material_eval(s, hit, &b);
+    return dr_dot(FRAME_WS, f.s) + dr_dot(FRAME_WT, f.t) + FRAME_WA * b.anisotropy;
+}
+
+static void test_anisotropy_frame_adjoint(void)
+{
+    unsigned char tex[104 + 16] = {0};
+    ktx2_header(tex, 37, 2, 2, 0, 16);   /* R8G8B8A8_UNORM, 2 x 2 */
+    memcpy(tex + 104, (const unsigned char[]){250, 140, 200, 255, 90, 230, 60, 255, 180, 30, 255, 255, 20, 160, 120, 255},
+           16);
+    write_file("aniso_adj.ktx2", tex, sizeof tex);
+    unsigned char b[144];
+    size_t o = 0;
+    put_f32(b, &o, 9, -1.0, -0.5, 0.0, 1.2, -0.4, 0.2, 0.1, 1.3, -0.3);
+    put_f32(b, &o, 9, 0.15, 0.0, 1.0, -0.2, 0.1, 1.0, 0.0, -0.25, 1.0);
+    put_f32(b, &o, 6, 0.05, 0.1, 0.95, 0.2, 0.35, 0.9);
+    put_f32(b, &o, 12, 1.0, 0.1, 0.0, 1.0, 0.9, -0.3, 0.1, 1.0, 1.0, 0.35, -0.1, 1.0);
+    char uri[512];
+    snprintf(uri, sizeof uri, "%s", data_uri(b, sizeof b));
+    int rc;
+    struct dr_scene *s = load_json(
+        "aniso_adj.gltf", NULL, &rc,
+        "{\"asset\":{\"version\":\"2.0\"},\"extensionsUsed\":[\"KHR_materials_anisotropy\"],"
+        "\"materials\":[{\"pbrMetallicRoughness\":{\"metallicFactor\":1,\"roughnessFactor\":0.3},"
+        "\"extensions\":{\"KHR_materials_anisotropy\":{\"anisotropyStrength\":0.7,\"anisotropyRotation\":0.4,"
+        "\"anisotropyTexture\":{\"index\":0}}}}],"
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0,\"NORMAL\":1,\"TEXCOORD_0\":2,\"TANGENT\":3},"
+        "\"material\":0}]}],\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}],"
+        "\"textures\":[{\"source\":0}],\"images\":[{\"uri\":\"aniso_adj.ktx2\",\"mimeType\":\"image/ktx2\"}],"
+        "\"buffers\":[{\"byteLength\":144,\"uri\":\"%s\"}],\"bufferViews\":[{\"buffer\":0,\"byteLength\":144}],"
+        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\",\"max\":[1.2,1.3,0.2],"
+        "\"min\":[-1,-0.5,-0.3]},{\"bufferView\":0,\"byteOffset\":36,\"componentType\":5126,\"count\":3,\"type\":\"VEC3\"},"
+        "{\"bufferView\":0,\"byteOffset\":72,\"componentType\":5126,\"count\":3,\"type\":\"VEC2\"},"
+        "{\"bufferView\":0,\"byteOffset\":96,\"componentType\":5126,\"count\":3,\"type\":\"VEC4\"}]}",
+        uri);
+    CHECK(rc == 0, "the frame's scene: %s", dr_last_error());
+    dr_scene_destroy(s);
+    s = dr_scene_load(tmp_path("aniso_adj.gltf"));   /* (whole: the triangles' normals and tangents) */
+    CHECK(s != NULL, "the frame's scene, whole: %s", dr_last_error());
+    if (!s)
+        return;
+    const dr_vec3 origins[3] = {{0.1, 0.2, 3.0}, {-0.3, 0.1, 2.5}, {0.4, 0.5, -2.0}};
+    const dr_vec3 dirs[3] = {{-0.02, 0.03, -1.0}, {0.05, -0.04, -1.0}, {-0.1, 0.0, 1.0}};   /* (the last: the back) */
+    double worst = 0.0;
+    int tested = 0;
+    for (int k = 0; k < 3; k++) {
+        struct dr_hit hit;
+        bool ok;
+        frame_objective(s, origins[k], dirs[k], &hit, &ok);
+        CHECK(ok, "ray %d: an anisotropic frame", k);
+        if (!ok)
+            continue;
+        const dr_vec3 n = hit.front ? hit.ns : dr_neg(hit.ns);
+        const dr_frame d_f = {FRAME_WS, FRAME_WT, dr_v3s(0.0)};
+        dr_vec3 d_n = dr_v3s(0.0), d_o = dr_v3s(0.0), d_d = dr_v3s(0.0);
+        struct dr_d_hit attr;
+        memset(&attr, 0, sizeof attr);
+        CHECK(d_anisotropy_frame(s, &hit, n, &d_f, &d_n, &attr), "ray %d: the frame's adjoint applies", k);
+        struct dr_d_bsdf db;
+        memset(&db, 0, sizeof db);
+        db.anisotropy = FRAME_WA;
+        d_material_eval_uv(s, &hit, &db, &attr);
+        struct dr_d_hit dh = attr;
+        dh.ns = dr_add(hit.front ? d_n : dr_neg(d_n), attr.ns);
+        d_hit_compute(&s->mesh, &hit, origins[k], dirs[k], &dh, &d_o, &d_d);
+        const double got[6] = {d_o.x, d_o.y, d_o.z, d_d.x, d_d.y, d_d.z};
+        for (int c = 0; c < 6; c++) {
+            const double h = 1e-6;
+            dr_vec3 o1 = origins[k], o2 = origins[k], d1 = dirs[k], d2 = dirs[k];
+            double *p1 = c < 3 ? &o1.x : &d1.x, *p2 = c < 3 ? &o2.x : &d2.x;
+            p1[c % 3] += h, p2[c % 3] -= h;
+            struct dr_hit h1, h2;
+            bool ok1, ok2;
+            const double fd = (frame_objective(s, o1, d1, &h1, &ok1) - frame_objective(s, o2, d2, &h2, &ok2)) / (2 * h);
+            const double err = fabs(fd - got[c]) / (fabs(fd) + 1e-3);
+            worst = err > worst ? err : worst;
+            tested++;
+            CHECK(ok1 && ok2 && err < 1e-5, "ray %d, d/d %s[%d]: adjoint %.9g, central differences %.9g", k,
+                  c < 3 ? "o" : "d", c % 3, got[c], fd);
+        }
+    }
+    printf("  the anisotropic frame's adjoint against central differences: %d derivatives, worst relative error %.2g\n",
+           tested, worst);
+    dr_scene_destroy(s);
+}
+
 /* ---- KHR_materials_sheen: factors, textures, parameters, refusals ---- */
 
 static void test_sheen(void)
@@ -1230,6 +1331,7 @@ int main(void)
     test_anisotropy();
     test_specular_textures();
     test_sheen();
+    test_anisotropy_frame_adjoint();
     test_eight_bit();
     char cmd[400];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
