@@ -40,7 +40,8 @@
 #define DR_BSDF_MIN_ALPHA 1e-7   /* roughness ~0.0003: below the smallest roughness parameter (0.001) */
 /* The sheen roughness's floor: at 0.07 the lobe's exponent 1/r^2 is ~200
  * already (and its albedo table starts there); below it sheen_roughness has
- * no effect and zero derivative. */
+ * no effect and zero derivative; at it, the slope from above (the
+ * parameter's range starts there: params.c). */
 #define DR_SHEEN_MIN_ROUGHNESS 0.07
 
 /* The material evaluated at one shading point (textures already applied). */
@@ -171,8 +172,8 @@ struct dr_d_bsdf {
  * touched. The roughness floor (DR_BSDF_MIN_ALPHA) has zero derivative below
  * it. The specular and specular_color inputs are not differentiated.
  * A sheen: sheen_color (max(C) of T and P to the first maximal channel;
- * C = 0 keeps d f / d C = D G / (4 cos cos)), sheen_roughness (zero at and
- * below DR_SHEEN_MIN_ROUGHNESS; through D, G's fit and E) and the cosines
+ * C = 0 keeps d f / d C = D G / (4 cos cos)), sheen_roughness (zero below
+ * DR_SHEEN_MIN_ROUGHNESS, from above at it; through D, G's fit and E) and the cosines
  * (through E's and Lambda's arguments). Where T or P clamps (max(C) E >= 1)
  * their derivative is 0; at a cosine of exactly 1 Lambda's fit has an
  * infinite slope ((1 - x)^(c-1)), taken as the clamp's 0 there. */

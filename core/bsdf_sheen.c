@@ -51,7 +51,7 @@ struct sheen_lobe {
     double r, alpha, k;   /* k = 1 / (2 alpha): D ~ (sin^2)^k */
     double p[5], dp[5];   /* L's coefficients and d p / d alpha */
     double half;          /* L(0.5) (Lambda's reflection point) */
-    bool live;            /* r above the floor: roughness derivatives flow */
+    bool live;            /* r at or above the floor: roughness derivatives flow */
 };
 
 /* L(x) = a / (1 + b x^c) + d x + e alone (sheen_L's value, the same
@@ -65,7 +65,7 @@ static inline double sheen_L_value(const struct sheen_lobe *l, double x)
 static struct sheen_lobe sheen_lobe(double roughness)
 {
     struct sheen_lobe l;
-    l.live = roughness > DR_SHEEN_MIN_ROUGHNESS;
+    l.live = roughness >= DR_SHEEN_MIN_ROUGHNESS;   /* (at the floor: the slope from above, as a fit clamped there needs) */
     l.r = l.live ? roughness : DR_SHEEN_MIN_ROUGHNESS;
     l.alpha = l.r * l.r;
     l.k = 0.5 / l.alpha;

@@ -5,6 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "bsdf.h"
 #include "error.h"
 #include "medium.h"
 #include "parallel.h"
@@ -134,8 +135,10 @@ void dr_param_range(const struct dr_param *p, double *lo, double *hi)
     case DR_PARAM_METALLIC:
     case DR_PARAM_CLEARCOAT:
     case DR_PARAM_ANISOTROPY_STRENGTH:
-    case DR_PARAM_SHEEN_COLOR:
-    case DR_PARAM_SHEEN_ROUGHNESS: *lo = 0.0; *hi = 1.0; break;   /* (the sheen's roughness floor: bsdf.h) */
+    case DR_PARAM_SHEEN_COLOR: *lo = 0.0; *hi = 1.0; break;
+    /* the BSDF's floor (below it the derivative is 0: a fit that starts at
+     * glTF's default, 0, is moved up to where it has one) */
+    case DR_PARAM_SHEEN_ROUGHNESS: *lo = DR_SHEEN_MIN_ROUGHNESS; *hi = 1.0; break;
     case DR_PARAM_ROUGHNESS:
     case DR_PARAM_CLEARCOAT_ROUGHNESS: *lo = 0.001; *hi = 1.0; break;   /* the BSDF's floor */
     case DR_PARAM_IMAGE: *lo = 0.0; *hi = 1.0; break;        /* colour or data texels */

@@ -154,7 +154,7 @@ static int regime_sheen(const struct cfg *c)
         return 0;
     const dr_vec3 s = c->b.sheen_color;
     const int arg = s.y > s.x ? (s.z > s.y ? 2 : 1) : (s.z > s.x ? 2 : 0);
-    return 1 | (c->b.sheen_roughness > DR_SHEEN_MIN_ROUGHNESS) << 1 | (ref_sheen_mE(c, c->wo.z) < 1.0) << 2 |
+    return 1 | (c->b.sheen_roughness >= DR_SHEEN_MIN_ROUGHNESS) << 1 | (ref_sheen_mE(c, c->wo.z) < 1.0) << 2 |
            (ref_sheen_mE(c, c->wi.z) < 1.0) << 3 | arg << 4 | (c->wo.z < 1.0) << 6 | (c->wi.z < 1.0) << 7 |
            /* h along the normal: D ~ |Hxy|^(1/alpha) is a cone at alpha = 1 */
            (c->wo.x + c->wi.x != 0.0 || c->wo.y + c->wi.y != 0.0) << 8;
@@ -1194,7 +1194,7 @@ static void test_fd_sheen(void)
                 check_fd(&fn_prob, &c);
                 check_fd(&fn_sample, &c);
                 double g[NX];
-                if (!(c.b.sheen_roughness > DR_SHEEN_MIN_ROUGHNESS)) {
+                if (!(c.b.sheen_roughness >= DR_SHEEN_MIN_ROUGHNESS)) {
                     fn_eval.adjoint(&c, g);
                     bool z = g[X_SRO] == 0.0;
                     fn_pdf.adjoint(&c, g);
