@@ -130,7 +130,7 @@ static double hit_objective(void *c, const double *x)
 
 static void test_hit(const struct dr_scene *s)
 {
-    struct hit_ctx k = {s, 0, {rnd3(), rnd3(), {rnd(), rnd()}, {0, 0}, {0, 0, 0}}};
+    struct hit_ctx k = {s, 0, {rnd3(), rnd3(), {rnd(), rnd()}, {0, 0}, {0, 0, 0}, {0, 0, 0}}};
     dr_vec3 o = dr_v3(0.2, 1.5, 0.3);
     struct dr_hit target;
     dr_hit_at(&s->mesh, 0, 0.3, 0.4, &target);
