@@ -208,7 +208,8 @@ static double uv_objective(void *c, const double *x)
         struct dr_bsdf b = {0};
         dr_material_eval(k->s, &h, &b);
         return dr_dot(k->wb.base_color, b.base_color) + k->wb.metallic * b.metallic + k->wb.roughness * b.roughness +
-               k->wb.coat * b.coat + k->wb.coat_roughness * b.coat_roughness;
+               k->wb.coat * b.coat + k->wb.coat_roughness * b.coat_roughness + k->wb.anisotropy * b.anisotropy +
+               dr_dot(k->wb.sheen_color, b.sheen_color) + k->wb.sheen_roughness * b.sheen_roughness;
     }
     return dr_dot(v3(k->w), dr_emission(k->s, &h));
 }
@@ -249,6 +250,25 @@ static void test_uv(const struct dr_scene *s)
     memset(&dh, 0, sizeof dh);
     d_material_eval_uv(s, &k.hit, &k.wb, &dh);
     check_fd("d_material_eval_uv, coat textures", uv_objective, &k, x, 2, dh.uv, 1e-7, 1e-6);
+    *m = saved;
+    /* KHR_materials_anisotropy's strength (B) and KHR_materials_sheen's colour
+     * (RGB, sRGB-decoded) and roughness (A, a transform on it) from textures */
+    m->anisotropic = true;
+    m->anisotropy_strength = 0.7;
+    m->anisotropy_tex = m->metallic_roughness_tex;
+    m->sheened = true;
+    m->sheen_color = dr_v3(0.8, 0.5, 0.3);
+    m->sheen_roughness = 0.6;
+    m->sheen_color_tex = m->base_color_tex;
+    m->sheen_roughness_tex = m->emissive_tex;
+    m->sheen_roughness_tex.transformed = true;
+    memcpy(m->sheen_roughness_tex.xf, xf, sizeof xf);
+    k.wb.anisotropy = rnd();
+    k.wb.sheen_color = rnd3();
+    k.wb.sheen_roughness = rnd();
+    memset(&dh, 0, sizeof dh);
+    d_material_eval_uv(s, &k.hit, &k.wb, &dh);
+    check_fd("d_material_eval_uv, anisotropy and sheen textures", uv_objective, &k, x, 2, dh.uv, 1e-7, 1e-6);
     *m = saved;
     k.texture = -2;
     memset(&dh, 0, sizeof dh);

@@ -38,7 +38,8 @@ static double objective(const struct fixture *f, enum objective o)
         struct dr_bsdf b = {0};
         dr_material_eval(s, &f->hit, &b);
         return dr_dot(f->d_b.base_color, b.base_color) + f->d_b.metallic * b.metallic + f->d_b.roughness * b.roughness +
-               f->d_b.coat * b.coat + f->d_b.coat_roughness * b.coat_roughness;
+               f->d_b.coat * b.coat + f->d_b.coat_roughness * b.coat_roughness + f->d_b.anisotropy * b.anisotropy +
+               dr_dot(f->d_b.sheen_color, b.sheen_color) + f->d_b.sheen_roughness * b.sheen_roughness;
     }
     case OBJ_EMISSION: return dr_dot(f->d_L, dr_emission(s, &f->hit));
     case OBJ_ENV: return dr_dot(f->d_L, dr_env_radiance(s, f->dir));
@@ -127,6 +128,16 @@ static void test_chains(void)
     m.base_color_tex.texture = 0;
     m.metallic_roughness_tex.texture = 1;
     m.emissive_tex.texture = 2;
+    /* KHR_materials_anisotropy's strength (texture 3's B) and KHR_materials_sheen's
+     * colour and roughness (texture 3's RGB and A): factors times texels */
+    m.anisotropic = true;
+    m.anisotropy_strength = 0.55;
+    m.anisotropy_tex.texture = 3;
+    m.sheened = true;
+    m.sheen_color = dr_v3(0.7, 0.4, 0.9);
+    m.sheen_roughness = 0.6;
+    m.sheen_color_tex.texture = 3;
+    m.sheen_roughness_tex.texture = 3;
     m.double_sided = true;
     sb_quad(&b, dr_v3(-1, 0, 1), dr_v3(2, 0, 0), dr_v3(0, 0, -2), sb_material(&b, m));
     sb_environment(&b, dr_v3(0.8, 0.9, 1.1));
@@ -143,13 +154,15 @@ static void test_chains(void)
     l.cos_outer = cos(0.5);
     sb_light(&b, l);
     struct dr_scene *s = b.s;
-    s->n_images = 3;
-    s->images = calloc(3, sizeof(struct dr_image));
+    s->n_images = 4;
+    s->images = calloc(4, sizeof(struct dr_image));
     s->images[0] = sb_varied_image(4, 3, 3, 1);
     s->images[1] = sb_varied_image(3, 3, 3, 2);
     s->images[2] = sb_varied_image(2, 4, 4, 3);
-    s->n_textures = 3;
-    s->textures = calloc(3, sizeof(struct dr_texture));
+    s->images[3] = sb_varied_image(3, 2, 4, 4);
+    s->n_textures = 4;
+    s->textures = calloc(4, sizeof(struct dr_texture));
+    s->textures[3] = (struct dr_texture){3, DR_WRAP_REPEAT, DR_WRAP_REPEAT};
     s->textures[0] = (struct dr_texture){0, DR_WRAP_REPEAT, DR_WRAP_MIRROR};
     s->textures[1] = (struct dr_texture){1, DR_WRAP_CLAMP, DR_WRAP_REPEAT};
     s->textures[2] = (struct dr_texture){2, DR_WRAP_MIRROR, DR_WRAP_CLAMP};
@@ -165,6 +178,9 @@ static void test_chains(void)
         "/materials/0/extensions/KHR_materials_emissive_strength/emissiveStrength",
         "/materials/0/extensions/KHR_materials_clearcoat/clearcoatFactor",
         "/materials/0/extensions/KHR_materials_clearcoat/clearcoatRoughnessFactor",
+        "/materials/0/extensions/KHR_materials_anisotropy/anisotropyStrength",
+        "/materials/0/extensions/KHR_materials_sheen/sheenColorFactor",
+        "/materials/0/extensions/KHR_materials_sheen/sheenRoughnessFactor",
         "/images/0",
         "/images/1",
         "/images/2",
@@ -183,7 +199,7 @@ static void test_chains(void)
         return;
     dr_hit_at(&s->mesh, 1, 0.3, 0.25, &f.hit);   /* a point with uv away from texel centres */
     f.dir = dr_normalize(dr_v3(0.3, 0.5, -0.7));
-    f.d_b = (struct dr_d_bsdf){dr_v3(0.7, -0.4, 0.9), -0.6, 0.8, 0.35, -0.45, 0.0, dr_v3s(0.0), 0.0};
+    f.d_b = (struct dr_d_bsdf){dr_v3(0.7, -0.4, 0.9), -0.6, 0.8, 0.35, -0.45, 0.5, dr_v3(-0.3, 0.65, 0.2), -0.55};
     f.d_L = dr_v3(0.5, -1.2, 0.9);
     f.lsp.type = DR_LS_PUNCTUAL;
     f.lsp.index = 0;
