@@ -62,7 +62,7 @@ static inline double sheen_L_value(const struct sheen_lobe *l, double x)
     return l->p[0] / den + l->p[3] * x + l->p[4];
 }
 
-static struct sheen_lobe sheen_lobe(double roughness)
+static struct sheen_lobe make_sheen_lobe(double roughness)
 {
     struct sheen_lobe l;
     l.live = roughness >= DR_SHEEN_MIN_ROUGHNESS;   /* (at the floor: the slope from above, as a fit clamped there needs) */
@@ -76,6 +76,41 @@ static struct sheen_lobe sheen_lobe(double roughness)
     }
     l.half = sheen_L_value(&l, 0.5);
     return l;
+}
+
+/* ------------------------------------------------ the per-thread memo */
+
+/* A sheened vertex asks for the same things again and again: next-event
+ * estimation, the sky's share, the lobe pick and the sample's evaluation
+ * each need the lobe's constants (a pow), E(wo.z) (a table lookup) and the
+ * evaluations Lambda(wo.z) (a pow and an exp), for one roughness and one wo.
+ * They are memoised per thread, keyed by the exact inputs, so a hit returns
+ * the bits the computation would (the one-path walker's and the eight-lane
+ * stages' images are unchanged). Eight wo entries: the stages run a
+ * group's sheened lanes one after another within each stage. Four lobes:
+ * a scene's few sheened roughnesses (textured ones vary: they just miss).
+ * The wo entries hold values only: the derivatives take their slopes
+ * (and the values with them) from the functions themselves. */
+enum { MEMO_LOBES = 4, MEMO_WO = 8 };
+struct wo_memo { double r, woz, E, lambda; };   /* r = the lobe's (clamped) r */
+static _Thread_local struct {
+    double key[MEMO_LOBES];            /* the roughness asked for */
+    struct sheen_lobe lobe[MEMO_LOBES];
+    struct wo_memo wo[MEMO_WO];
+    unsigned lobes, next_lobe, wos, next_wo;   /* entries filled; the next to replace */
+} memo;
+
+static struct sheen_lobe sheen_lobe(double roughness)
+{
+    for (unsigned i = 0; i < memo.lobes; i++)
+        if (memo.key[i] == roughness)
+            return memo.lobe[i];
+    const unsigned i = memo.next_lobe;
+    memo.next_lobe = (i + 1) % MEMO_LOBES;
+    memo.lobes += memo.lobes < MEMO_LOBES;
+    memo.key[i] = roughness;
+    memo.lobe[i] = make_sheen_lobe(roughness);
+    return memo.lobe[i];
 }
 
 /* L(x) for x in [0, 1]; *dx = L'(x) and *da = d L / d alpha. The slope's
@@ -121,6 +156,20 @@ static inline double sheen_ln_lambda_value(const struct sheen_lobe *l, double x)
     return x < 0.5 ? sheen_L_value(l, x) : 2.0 * l->half - sheen_L_value(l, 1.0 - x);
 }
 
+/* E(woz, l->r) and Lambda(woz), values, through the memo. */
+static struct wo_memo wo_terms(const struct sheen_lobe *l, double woz)
+{
+    for (unsigned i = 0; i < memo.wos; i++)
+        if (memo.wo[i].woz == woz && memo.wo[i].r == l->r)
+            return memo.wo[i];
+    const unsigned i = memo.next_wo;
+    memo.next_wo = (i + 1) % MEMO_WO;
+    memo.wos += memo.wos < MEMO_WO;
+    memo.wo[i] = (struct wo_memo){l->r, woz, dr_sheen_albedo(woz, l->r, NULL, NULL),
+                                  exp(sheen_ln_lambda_value(l, woz))};
+    return memo.wo[i];
+}
+
 /* The lobe's value s = D G / (4 wo.z wi.z) (f_sheen = C s) and, with
  * slopes, what its adjoint needs (the d*_x, d*_a fields; else unset). */
 struct sheen_eval {
@@ -142,7 +191,7 @@ static struct sheen_eval sheen_eval(const struct sheen_lobe *l, dr_vec3 wo, dr_v
         e.lo = exp(sheen_ln_lambda(l, wo.z, &e.dlo_x, &e.dlo_a));
         e.li = exp(sheen_ln_lambda(l, wi.z, &e.dli_x, &e.dli_a));
     } else {
-        e.lo = exp(sheen_ln_lambda_value(l, wo.z));
+        e.lo = wo_terms(l, wo.z).lambda;
         e.li = exp(sheen_ln_lambda_value(l, wi.z));
     }
     e.G = 1.0 / (1.0 + e.lo + e.li);
@@ -229,6 +278,16 @@ static struct sheen_albedo albedo_at(const struct dr_bsdf *b, const struct sheen
     return s;
 }
 
+/* m E alone, for the primal (the same E: the lookup's value does not depend
+ * on whether slopes are asked for); a wo's through the memo. */
+static struct sheen_albedo albedo_value(const struct dr_bsdf *b, const struct sheen_lobe *l, double cos, bool is_wo)
+{
+    struct sheen_albedo s = {.dE_mu = 0.0, .dE_r = 0.0};
+    s.m = colour_max(b->sheen_color, &s.arg);
+    s.E = is_wo ? wo_terms(l, cos).E : dr_sheen_albedo(cos, l->r, NULL, NULL);
+    return s;
+}
+
 /* T = max(0, 1 - m E) (clamped: see the top). */
 static inline double transmit(const struct sheen_albedo *s)
 {
@@ -259,7 +318,7 @@ dr_vec3 dr_sheen_eval_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, doubl
 {
     const struct dr_bsdf base = under(b);
     const struct sheen_lobe l = sheen_lobe(b->sheen_roughness);
-    const struct sheen_albedo ao = albedo_at(b, &l, wo.z), ai = albedo_at(b, &l, wi.z);
+    const struct sheen_albedo ao = albedo_value(b, &l, wo.z, true), ai = albedo_value(b, &l, wi.z, false);
     double pb = 0.0;
     const dr_vec3 fb = pdf ? dr_bsdf_eval_pdf(&base, wo, wi, &pb) : dr_bsdf_eval(&base, wo, wi);
     if (pdf) {
@@ -273,7 +332,7 @@ dr_vec3 dr_sheen_eval_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, doubl
 enum dr_bsdf_lobe dr_sheen_pick_lobe(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe)
 {
     const struct sheen_lobe l = sheen_lobe(b->sheen_roughness);
-    const struct sheen_albedo ao = albedo_at(b, &l, wo.z);
+    const struct sheen_albedo ao = albedo_value(b, &l, wo.z, true);
     const double p = sheen_prob(&ao);
     if (u_lobe < p)
         return DR_BSDF_LOBE_SHEEN;
@@ -321,7 +380,7 @@ double dr_sheen_sky_share(const struct dr_bsdf *b, dr_vec3 wo)
         return 0.0;
     const struct dr_bsdf base = under(b);
     const struct sheen_lobe l = sheen_lobe(b->sheen_roughness);
-    const struct sheen_albedo ao = albedo_at(b, &l, wo.z);
+    const struct sheen_albedo ao = albedo_value(b, &l, wo.z, true);
     return (1.0 - sheen_prob(&ao)) * dr_bsdf_sky_share(&base, wo);
 }
 
@@ -331,7 +390,7 @@ double dr_sheen_specular_prob(const struct dr_bsdf *b, dr_vec3 wo)
 {
     const struct dr_bsdf base = under(b);
     const struct sheen_lobe l = sheen_lobe(b->sheen_roughness);
-    const struct sheen_albedo ao = albedo_at(b, &l, wo.z > COS_EPS ? wo.z : 0.0);
+    const struct sheen_albedo ao = albedo_value(b, &l, wo.z > COS_EPS ? wo.z : 0.0, true);
     return (1.0 - sheen_prob(&ao)) * dr_bsdf_specular_prob(&base, wo);
 }
 
@@ -432,6 +491,6 @@ void d_sheen_eval_rough_ndf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_
         return;
     const struct dr_bsdf base = under(b);
     const struct sheen_lobe l = sheen_lobe(b->sheen_roughness);
-    const struct sheen_albedo ao = albedo_at(b, &l, wo.z), ai = albedo_at(b, &l, wi.z);
+    const struct sheen_albedo ao = albedo_value(b, &l, wo.z, true), ai = albedo_value(b, &l, wi.z, false);
     d_bsdf_eval_rough_ndf(&base, wo, wi, dr_scale(d_out, transmit(&ao) * transmit(&ai)), parts, d);
 }

@@ -73,8 +73,13 @@ static int interval(double x, double lo, double span, int n)
 }
 
 /* Row jj's values and mu-slopes combined along mu by basis weights w: the
- * function along mu (a = the values) and its r-slope (s = the r-slopes). */
-static void along_mu(const double w[4], int jj, int i, double *a, double *s)
+ * function along mu (a = the values) and its r-slope (s = the r-slopes).
+ * Inlined: called out of line, GCC 12 built the weights in a ymm register
+ * and called it without the vzeroupper the ABI expects, and the lookup
+ * returned with the upper halves dirty; the next libm call (whose wrapper
+ * is SSE code) then paid the AVX-SSE transition, measured at 15 % of a
+ * sheened render. */
+static inline __attribute__((always_inline)) void along_mu(const double w[4], int jj, int i, double *a, double *s)
 {
     *a = w[0] * DR_SHEEN_ALBEDO[jj][i] + w[1] * DR_SHEEN_ALBEDO[jj][i + 1] + w[2] * slope_mu[jj][i] +
          w[3] * slope_mu[jj][i + 1];
@@ -94,17 +99,19 @@ double dr_sheen_albedo(double mu, double r, double *d_mu, double *d_r)
     const double x0 = dr_sheen_grid_mu(i), hx = dr_sheen_grid_mu(i + 1) - x0;
     const double y0 = dr_sheen_grid_r(j), hy = dr_sheen_grid_r(j + 1) - y0;
     const struct hermite hm = hermite((mu - x0) / hx, hx), hr = hermite((r - y0) / hy, hy);
-    double v0, s0, v1, s1, m0, ms0, m1, ms1;   /* rows j, j+1: values and r-slopes, and their mu-slopes */
+    double v0, s0, v1, s1;   /* rows j, j+1: values and r-slopes */
     along_mu(hm.b, j, i, &v0, &s0);
     along_mu(hm.b, j + 1, i, &v1, &s1);
-    along_mu(hm.db, j, i, &m0, &ms0);
-    along_mu(hm.db, j + 1, i, &m1, &ms1);
     const double e = hr.b[0] * v0 + hr.b[1] * v1 + hr.b[2] * s0 + hr.b[3] * s1;
     /* Where E ~ 0 (small r, mu near 1: E < 1e-8) the cubic can undershoot
      * below 0 by ~1e-9: held at 0 there (flat), so that m E stays >= 0. */
     const bool pos = e > 0.0;
-    if (d_mu)
+    if (d_mu) {   /* (the rows' mu-slopes: only here, half the lookup's work) */
+        double m0, ms0, m1, ms1;
+        along_mu(hm.db, j, i, &m0, &ms0);
+        along_mu(hm.db, j + 1, i, &m1, &ms1);
         *d_mu = mu_in && pos ? hr.b[0] * m0 + hr.b[1] * m1 + hr.b[2] * ms0 + hr.b[3] * ms1 : 0.0;
+    }
     if (d_r)
         *d_r = r_in && pos ? hr.db[0] * v0 + hr.db[1] * v1 + hr.db[2] * s0 + hr.db[3] * s1 : 0.0;
     return pos ? e : 0.0;

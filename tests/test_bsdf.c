@@ -1619,6 +1619,68 @@ static void test_sheen_values(void)
     printf("sheen values vs test-side formulas: worst relative difference %.2e\n", worst);
 }
 
+/* bsdf_sheen.c memoises per thread what depends on (roughness, wo.z) only
+ * (eight wo entries, four roughnesses, replaced round-robin). A hit must
+ * give the bits a miss gives: cycling through nine wo directions and five
+ * roughnesses misses every time (each entry is replaced before its turn
+ * comes round again), then each (BSDF, wo) is evaluated again at once,
+ * which hits, and also interleaved with a second wo, as the eight-lane
+ * stages interleave lanes. f, pdf, a sample (its lobe, direction, f and
+ * pdf), the sky's share and the GGX maps' share are compared. */
+static void test_sheen_memo(void)
+{
+    enum { NWO = 9, NR = 5, NWI = 4 };
+    const double rough[NR] = {0.07, 0.2, 0.5, 0.81, 1.0};
+    struct rng g = {4242};
+    dr_vec3 wo[NWO], wi[NWI];
+    for (int k = 0; k < NWO; k++)
+        wo[k] = k == 0 ? dir_from(1e-3, 0.3) : random_hemi(&g);
+    for (int k = 0; k < NWI; k++)
+        wi[k] = random_hemi(&g);
+    struct dr_bsdf b[NR];
+    for (int j = 0; j < NR; j++) {
+        b[j] = make_bsdf(0.4, 0.0, 1.0, dr_v3(0.3, 0.2, 0.1));
+        b[j].sheened = true, b[j].sheen_roughness = rough[j], b[j].sheen_color = dr_v3(0.9, 0.5, 0.7);
+        b[j].coated = j == 3, b[j].coat = 0.5, b[j].coat_roughness = 0.2;
+    }
+    /* first pass: (j, k) in an order that never repeats a key within 9 calls */
+    double f[NR][NWO][NWI][4], share[NR][NWO][2];
+    struct dr_bsdf_sample smp[NR][NWO];
+    for (int k = 0; k < NWO; k++)
+        for (int j = 0; j < NR; j++)
+            for (int i = 0; i < NWI; i++) {
+                double pdf;
+                const dr_vec3 v = dr_bsdf_eval_pdf(&b[(j + i) % NR], wo[(k + 2 * i) % NWO], wi[i], &pdf);
+                f[(j + i) % NR][(k + 2 * i) % NWO][i][0] = v.x, f[(j + i) % NR][(k + 2 * i) % NWO][i][1] = v.y;
+                f[(j + i) % NR][(k + 2 * i) % NWO][i][2] = v.z, f[(j + i) % NR][(k + 2 * i) % NWO][i][3] = pdf;
+            }
+    for (int k = 0; k < NWO; k++)
+        for (int j = 0; j < NR; j++) {
+            share[j][k][0] = dr_bsdf_sky_share(&b[j], wo[k]);
+            share[j][k][1] = dr_bsdf_specular_prob(&b[j], wo[k]);
+            dr_bsdf_sample(&b[j], wo[k], 0.37, 0.61, 0.29, &smp[j][k]);
+        }
+    /* second pass: each key asked for repeatedly, interleaved with another */
+    int bad = 0;
+    for (int j = 0; j < NR; j++)
+        for (int k = 0; k < NWO; k++)
+            for (int rep = 0; rep < 2; rep++) {
+                const int k2 = (k + 4) % NWO;
+                for (int i = 0; i < NWI; i++) {
+                    double pdf;
+                    const dr_vec3 v = dr_bsdf_eval_pdf(&b[j], wo[k], wi[i], &pdf);
+                    bad += v.x != f[j][k][i][0] || v.y != f[j][k][i][1] || v.z != f[j][k][i][2] || pdf != f[j][k][i][3];
+                    (void)dr_bsdf_eval(&b[j], wo[k2], wi[i]);
+                }
+                bad += dr_bsdf_sky_share(&b[j], wo[k]) != share[j][k][0];
+                bad += dr_bsdf_specular_prob(&b[j], wo[k]) != share[j][k][1];
+                struct dr_bsdf_sample o;
+                dr_bsdf_sample(&b[j], wo[k], 0.37, 0.61, 0.29, &o);
+                bad += o.lobe != smp[j][k].lobe || o.pdf != smp[j][k].pdf || o.f.x != smp[j][k].f.x || o.wi.z != smp[j][k].wi.z;
+            }
+    CHECK(bad == 0, "sheen memo: %d results differ between a memo hit and a miss", bad);
+}
+
 /* White furnace: a white sheen over a white Lambertian, importance sampled:
  * albedo = E(wo) + T(wo) 2 int T(mu) mu dmu (<= 1 where m E <= 1; above 1
  * where the model's E is, T = 0 there), checked against that. */
@@ -1682,6 +1744,7 @@ int main(void)
     test_aniso_chi2();
     clock_t t3 = clock();
     test_sheen_values();
+    test_sheen_memo();
     test_sheen_furnace();
     test_sheen_table();
     clock_t t4 = clock();
