@@ -241,6 +241,7 @@ const char *const kSupportedExtensions[] = {
     "KHR_materials_unlit",   /* (load_unlit) */
     "KHR_materials_anisotropy",   /* (load_anisotropy) */
     "KHR_materials_sheen",        /* (load_sheen) */
+    "KHR_materials_pbrSpecularGlossiness",   /* (load_spec_gloss) */
     "DR_environment", "DR_units", "KHR_texture_transform", "KHR_draco_mesh_compression",
     /* KTX2 images: read when they hold 8-bit texels (core/ktx2.h); the others are refused, or skipped
      * under --ignore-unsupported (check_ktx2): handled, not ignored */
@@ -328,6 +329,8 @@ private:
     void load_thin_glass(const tinygltf::Material &g, const std::string &mp, dr_material &m);
     void load_clearcoat(const tinygltf::Material &g, const std::string &mp, dr_material &m);
     void load_sheen(const tinygltf::Material &g, const std::string &mp, dr_material &m);
+    void load_spec_gloss(const tinygltf::Material &g, const std::string &mp, dr_material &m);
+    dr_texref roughness_from_gloss(const dr_texref &gloss, double glossiness);
     void load_anisotropy(const tinygltf::Material &g, const std::string &mp, dr_material &m);
     bool load_unlit(const tinygltf::Material &g, const std::string &mp, dr_material &m);
     double material_ior(const tinygltf::Material &g, const std::string &mp, const char *what);
@@ -358,6 +361,8 @@ private:
     std::string image_message_;
 
     std::vector<dr_image> images_;          /* decoded by decode_images, by glTF image index */
+    std::map<std::pair<int, double>, int> gloss_textures_;   /* (texture, glossiness) -> the derived
+                                                                 roughness texture (roughness_from_gloss) */
     struct EncodedImage {                   /* kept by image_cb for decode_images */
         int index;
         std::string hint;                   /* name for the format and messages */
@@ -1024,6 +1029,7 @@ void Loader::load_materials()
                 kind[size_t(scene_->textures[t.second->texture].image)] = 1;
             }
         }
+        load_spec_gloss(g, mp, m);   /* (in place of pbrMetallicRoughness and KHR_materials_specular) */
         if (!load_unlit(g, mp, m)) {
             load_clearcoat(g, mp, m);        /* (before load_material_medium: thin glass drops the coat */
             load_sheen(g, mp, m);            /*  and the sheen) */
@@ -2070,6 +2076,130 @@ void Loader::load_sheen(const tinygltf::Material &g, const std::string &mp, dr_m
         auto &kind = t.second == &m.sheen_roughness_tex ? data_images_ : linear_images_;
         kind[size_t(scene_->textures[t.second->texture].image)] = 1;
     }
+}
+
+/* KHR_materials_pbrSpecularGlossiness (archived by Khronos, still in many
+ * older assets), loaded onto the model drender renders, as Khronos's own
+ * converter (glTF-Transform's metalRough) maps it:
+ *   base colour = diffuseFactor x diffuseTexture (sRGB; its alpha the alpha),
+ *   metallic 0, roughness = 1 - glossinessFactor x specularGlossinessTexture's A,
+ *   KHR_materials_specular with specular 1 and specularColor =
+ *   specularFactor x the texture's RGB (sRGB) / 0.04, so that the dielectric
+ *   f0 = min(0.04 specularColor, 1) is the file's specular colour F0 and
+ *   Schlick's F rises to 1 at grazing angles, as the extension's BRDF does.
+ * The diffuse lobe is weighted by (1 - F(wo))(1 - F(wi)) (Material model)
+ * rather than the extension's 1 - max(F0): the same deliberate difference as
+ * for metal-rough materials. The factors are not parameters (scene.h); the
+ * texels of the diffuse texture are, as base-colour texels. The roughness
+ * texture is derived (roughness_from_gloss). */
+void Loader::load_spec_gloss(const tinygltf::Material &g, const std::string &mp, dr_material &m)
+{
+    auto it = g.extensions.find("KHR_materials_pbrSpecularGlossiness");
+    if (it == g.extensions.end()) return;
+    const std::string ep = mp + "/extensions/KHR_materials_pbrSpecularGlossiness";
+    const tinygltf::Value &v = it->second;
+    if (!v.IsObject()) fail(DR_ERR_FORMAT, "%s: expected an object", ep.c_str());
+    double diffuse[4] = {1.0, 1.0, 1.0, 1.0}, spec[3] = {1.0, 1.0, 1.0};
+    const std::pair<const char *, double *> arrays[] = {{"diffuseFactor", diffuse}, {"specularFactor", spec}};
+    for (const auto &a : arrays) {
+        if (!v.Has(a.first)) continue;
+        const tinygltf::Value &arr = v.Get(a.first);
+        const int n = a.second == diffuse ? 4 : 3;
+        if (!arr.IsArray() || int(arr.ArrayLen()) != n)
+            fail(DR_ERR_FORMAT, "%s/%s: expected an array of %d numbers", ep.c_str(), a.first, n);
+        for (int k = 0; k < n; k++) {
+            const tinygltf::Value &x = arr.Get(k);
+            a.second[k] = x.IsNumber() ? x.GetNumberAsDouble() : NAN;
+            if (!(a.second[k] >= 0.0 && a.second[k] <= 1.0))
+                fail(DR_ERR_FORMAT, "%s/%s/%d: must be a number in [0, 1]", ep.c_str(), a.first, k);
+        }
+    }
+    const double gloss = ext_number(v, "glossinessFactor", 1.0, ep);
+    if (!(gloss >= 0.0 && gloss <= 1.0))
+        fail(DR_ERR_FORMAT, "%s/glossinessFactor: must be in [0, 1] (got %g)", ep.c_str(), gloss);
+    dr_texref diffuse_tex = texref(tinygltf::TextureInfo(), ep), gloss_tex = diffuse_tex;
+    if (v.Has("diffuseTexture"))
+        diffuse_tex = texref(texture_info(v.Get("diffuseTexture"), ep + "/diffuseTexture"), ep + "/diffuseTexture");
+    if (v.Has("specularGlossinessTexture"))
+        gloss_tex = texref(texture_info(v.Get("specularGlossinessTexture"), ep + "/specularGlossinessTexture"),
+                           ep + "/specularGlossinessTexture");
+    /* (the material's pbrMetallicRoughness is the fallback the extension
+     * asks files to carry for viewers without it: replaced, silently) */
+    m.spec_gloss = true;
+    m.base_color = dr_v3(diffuse[0], diffuse[1], diffuse[2]);
+    m.alpha = diffuse[3];
+    m.base_color_tex = diffuse_tex;
+    if (diffuse_tex.texture >= 0) linear_images_[size_t(scene_->textures[diffuse_tex.texture].image)] = 1;
+    m.metallic = 0.0;
+    m.specular = 1.0;
+    m.specular_tex = texref(tinygltf::TextureInfo(), ep);
+    m.specular_color = dr_v3(spec[0] / 0.04, spec[1] / 0.04, spec[2] / 0.04);
+    m.specular_color_tex = gloss_tex;
+    m.roughness = 1.0 - gloss;
+    m.metallic_roughness_tex = texref(tinygltf::TextureInfo(), ep);
+    if (gloss_tex.texture < 0) return;
+    linear_images_[size_t(scene_->textures[gloss_tex.texture].image)] = 1;   /* (RGB: sRGB colour) */
+    const dr_image &img = scene_->images[scene_->textures[gloss_tex.texture].image];
+    if (img.channels == 2 || img.channels >= 4) {   /* (without alpha A reads 1: roughness 1 - gloss) */
+        m.roughness = 1.0;
+        m.metallic_roughness_tex = roughness_from_gloss(gloss_tex, gloss);
+    }
+}
+
+/* A texture of the image 1 - glossiness x A of gloss's texture (A as
+ * stored: alpha is linear) in every channel: a metallic-roughness texture
+ * whose G is the roughness (the metallic factor 0 ignores its B). Bilinear
+ * filtering commutes with the map, so its lookups are 1 - glossiness x the
+ * filtered A. Eight-bit images stay eight-bit: the same bytes (A's), a
+ * table of 1 - glossiness x A's values; float images get floats. Made once
+ * per (texture, glossiness); appended to the scene's images and textures
+ * past the file's, where no parameter and no writer looks. */
+dr_texref Loader::roughness_from_gloss(const dr_texref &gloss, double glossiness)
+{
+    dr_texref r = gloss;
+    auto found = gloss_textures_.find({gloss.texture, glossiness});
+    if (found != gloss_textures_.end()) {
+        r.texture = found->second;
+        return r;
+    }
+    const dr_texture src_tex = scene_->textures[gloss.texture];
+    const dr_image &src = scene_->images[src_tex.image];
+    const size_t px = size_t(src.width) * size_t(src.height), c = size_t(src.channels);
+    dr_image d = {};
+    d.width = src.width, d.height = src.height, d.channels = 3;
+    if (src.bytes) {
+        d.bytes = static_cast<uint8_t *>(malloc(px * 3));
+        d.lut = static_cast<float *>(calloc(512, sizeof(float)));
+        if (!d.bytes || !d.lut) {
+            free(d.bytes), free(d.lut);
+            throw std::bad_alloc();
+        }
+        for (int i = 0; i < 256; i++) d.lut[i] = float(1.0 - glossiness * double(src.lut[i]));
+        for (size_t i = 0; i < px; i++) d.bytes[3 * i] = d.bytes[3 * i + 1] = d.bytes[3 * i + 2] = src.bytes[c * i + c - 1];
+    } else {
+        d.data = static_cast<float *>(malloc(px * 3 * sizeof(float)));
+        if (!d.data) throw std::bad_alloc();
+        for (size_t i = 0; i < px; i++)
+            d.data[3 * i] = d.data[3 * i + 1] = d.data[3 * i + 2] = float(1.0 - glossiness * double(src.data[c * i + c - 1]));
+    }
+    dr_image *images = static_cast<dr_image *>(realloc(scene_->images, sizeof(dr_image) * size_t(scene_->n_images + 1)));
+    if (!images) {
+        dr_image_release(&d);
+        throw std::bad_alloc();
+    }
+    scene_->images = images;
+    scene_->images[scene_->n_images] = d;   /* the scene's now */
+    dr_texture t = src_tex;
+    t.image = scene_->n_images++;
+    scene_->n_derived_images++;
+    dr_texture *textures = static_cast<dr_texture *>(realloc(scene_->textures, sizeof(dr_texture) * size_t(scene_->n_textures + 1)));
+    if (!textures) throw std::bad_alloc();
+    scene_->textures = textures;
+    scene_->textures[scene_->n_textures] = t;
+    texture_ktx2_.push_back(-1);
+    r.texture = scene_->n_textures++;
+    gloss_textures_[{gloss.texture, glossiness}] = r.texture;
+    return r;
 }
 
 /* KHR_materials_anisotropy (scene.h, anisotropy.h): anisotropyStrength in

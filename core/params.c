@@ -240,13 +240,23 @@ static bool thin_glass_unused(const struct dr_scene *s, int m, enum dr_param_kin
     return s->materials[m].thin_ior > 0.0 && kind != DR_PARAM_ROUGHNESS;
 }
 
+/* A specular-glossiness material's base colour, metallic and roughness are
+ * the loader's mapping of the extension's factors (scene.h): no parameters;
+ * its other fields (emission, layers) are glTF's own and are. */
+static bool spec_gloss_mapped(const struct dr_scene *s, int m, enum dr_param_kind kind)
+{
+    return s->materials[m].spec_gloss &&
+           (kind == DR_PARAM_BASE_COLOR || kind == DR_PARAM_METALLIC || kind == DR_PARAM_ROUGHNESS);
+}
+
 /* The coat's factors are parameters of coated materials only, the
  * anisotropy's strength of anisotropic ones, the sheen's factors of sheened
  * ones (scene.h); an unlit material's
- * factors are none (its colour is the loader's copy). */
+ * factors are none (its colour is the loader's copy), nor a specular-
+ * glossiness material's mapped ones. */
 static bool uncoated_unused(const struct dr_scene *s, int m, enum dr_param_kind kind)
 {
-    return s->materials[m].unlit ||
+    return s->materials[m].unlit || spec_gloss_mapped(s, m, kind) ||
            ((kind == DR_PARAM_CLEARCOAT || kind == DR_PARAM_CLEARCOAT_ROUGHNESS) && !s->materials[m].coated) ||
            (kind == DR_PARAM_ANISOTROPY_STRENGTH && !s->materials[m].anisotropic) ||
            ((kind == DR_PARAM_SHEEN_COLOR || kind == DR_PARAM_SHEEN_ROUGHNESS) && !s->materials[m].sheened);
@@ -287,7 +297,7 @@ int dr_params_list(const struct dr_scene *s, struct dr_param **out, int *count)
             list[n++] = p;
         }
     }
-    for (int i = 0; i < s->n_images; i++) {
+    for (int i = 0; i < s->n_images - s->n_derived_images; i++) {
         const struct dr_image *im = &s->images[i];
         bool colour, data;
         image_usage(s, i, &colour, &data);
@@ -464,13 +474,23 @@ int dr_param_resolve(const struct dr_scene *s, const char *ptr, struct dr_param 
                     if (list[i].kind == (enum dr_param_kind)k && list[i].target == m)
                         want = i;
         bool thin_field = false;   /* a field of m that thin glass does not use */
-        for (int k = DR_PARAM_BASE_COLOR; k <= DR_PARAM_LAST_MATERIAL; k++)
+        bool mapped_field = false; /* a field of m the spec-gloss mapping fills */
+        for (int k = DR_PARAM_BASE_COLOR; k <= DR_PARAM_LAST_MATERIAL; k++) {
             thin_field |= thin_glass_unused(s, m, (enum dr_param_kind)k) && strcmp(field, mat_fields[k]) == 0;
+            mapped_field |= spec_gloss_mapped(s, m, (enum dr_param_kind)k) && strcmp(field, mat_fields[k]) == 0;
+        }
         if (want < 0 && s->materials[m].unlit) {
             free(list);
             return fail_with_suggestions(s, ptr, "the material is unlit (KHR_materials_unlit): its base colour is "
                                                  "shown as it is, and its factors are not parameters (the texels of "
                                                  "its baseColorTexture are: /images/N)");
+        }
+        if (want < 0 && mapped_field) {
+            free(list);
+            return fail_with_suggestions(s, ptr, "the material is KHR_materials_pbrSpecularGlossiness, loaded onto "
+                                                 "the metallic-roughness model: its base colour, metallic and "
+                                                 "roughness factors are not parameters (the texels of its "
+                                                 "diffuseTexture are: /images/N)");
         }
         if (want < 0 && thin_field) {
             free(list);
@@ -494,7 +514,7 @@ int dr_param_resolve(const struct dr_scene *s, const char *ptr, struct dr_param 
         free(list);
         int img = -1;
         char end = 0;
-        if (sscanf(ptr, "/images/%d%c", &img, &end) == 1 && img >= 0 && img < s->n_images)
+        if (sscanf(ptr, "/images/%d%c", &img, &end) == 1 && img >= 0 && img < s->n_images - s->n_derived_images)
             return fail_with_suggestions(s, ptr, "this image's texels cannot change the rendered image (it is "
                                                  "used by no base colour, metallic-roughness or emissive texture "
                                                  "drender renders, e.g. only as a normal or occlusion map)");

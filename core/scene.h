@@ -74,6 +74,12 @@ struct dr_material {
      * what faces it, as Blender's importer renders it. Its factors are no
      * parameters; the texels of its base colour texture are. */
     bool unlit;
+    /* KHR_materials_pbrSpecularGlossiness, loaded onto this model (the
+     * loader's load_spec_gloss says how): its base colour, metallic and
+     * roughness factors are no parameters (they are the loader's mapping of
+     * the extension's); the texels of its diffuse texture, the base colour
+     * texture here, are, and so are its emission's. */
+    bool spec_gloss;
     /* KHR_materials_anisotropy (anisotropy.h): anisotropic when the file
      * gives the extension with anisotropyStrength > 0 (decided at load, as
      * coated). The BSDF's strength is anisotropyStrength x the texture's B;
@@ -245,6 +251,8 @@ struct dr_scene {
     int n_file_materials;         /* those in the file's "materials" (the rest: the default) */
     struct dr_texture *textures; int n_textures;
     struct dr_image *images; int n_images;
+    int n_derived_images;         /* the last of images, made by the loader rather than read from the
+                                     file (a specular-glossiness texture's roughness): no parameters */
     struct dr_camera *cameras; int n_cameras;   /* camera nodes, in depth-first node order */
     int n_unplaced_cameras;       /* entries of the file's "cameras" that no node places (not renderable) */
     struct dr_punctual *lights; int n_lights;

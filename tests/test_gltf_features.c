@@ -20,6 +20,7 @@
 #include "camera.h"
 #include "error.h"
 #include "geometry.h"
+#include "image_io.h"
 #include "material.h"
 #include "params.h"
 #include "render.h"
@@ -1311,6 +1312,153 @@ static void test_eight_bit(void)
     dr_scene_destroy(s);
 }
 
+/* KHR_materials_pbrSpecularGlossiness, loaded onto the metallic-roughness
+ * model with KHR_materials_specular (gltf_load.cpp's load_spec_gloss): the
+ * BSDF at a hit, with eight-bit (KTX2) and float (EXR) textures; the
+ * derived roughness texture made once per (texture, glossiness); the
+ * factors are no parameters but the diffuse texture's texels are; malformed
+ * files refused by JSON path. */
+static void test_spec_gloss(void)
+{
+    unsigned char dif[104 + 3] = {0}, sg[104 + 4] = {0};
+    ktx2_header(dif, 29, 1, 1, 0, 3);   /* R8G8B8_SRGB */
+    memcpy(dif + 104, (const unsigned char[]){200, 100, 50}, 3);
+    ktx2_header(sg, 43, 1, 1, 0, 4);    /* R8G8B8A8_SRGB: RGB the specular colour, A the glossiness */
+    memcpy(sg + 104, (const unsigned char[]){255, 128, 64, 128}, 4);
+    write_file("sg_d.ktx2", dif, sizeof dif);
+    write_file("sg_s.ktx2", sg, sizeof sg);
+    const float sg_float[4] = {0.5f, 0.25f, 1.0f, 0.25f};
+    CHECK(dr_image_write(tmp_path("sg_s.exr"), 1, 1, 4, sg_float) == 0, "writing sg_s.exr: %s", dr_last_error());
+    unsigned char b[92];
+    size_t o = 0;
+    put_f32(b, &o, 12, -1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 1.0, 0.0, -1.0, 1.0, 0.0);
+    put_f32(b, &o, 8, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0);
+    const uint16_t idx[6] = {0, 1, 2, 0, 2, 3};
+    memcpy(b + o, idx, sizeof idx);
+    char uri[512];
+    snprintf(uri, sizeof uri, "%s", data_uri(b, sizeof b));
+    /* material 0: the extension (%s); 1 and 2 share its specular-glossiness
+     * texture, 1 at the same glossiness (0.6), 2 at another */
+    const char *fmt =
+        "{\"asset\":{\"version\":\"2.0\"},\"extensionsUsed\":[\"KHR_materials_pbrSpecularGlossiness\"],"
+        "\"materials\":[{\"extensions\":{\"KHR_materials_pbrSpecularGlossiness\":{%s}}},"
+        "{\"extensions\":{\"KHR_materials_pbrSpecularGlossiness\":{\"glossinessFactor\":0.6,"
+        "\"specularGlossinessTexture\":{\"index\":1}}}},"
+        "{\"extensions\":{\"KHR_materials_pbrSpecularGlossiness\":{\"glossinessFactor\":0.3,"
+        "\"specularGlossinessTexture\":{\"index\":1}}}}],"
+        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0,\"TEXCOORD_0\":1},\"indices\":2,\"material\":0}]}],"
+        "\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}],"
+        "\"textures\":[{\"source\":0},{\"source\":1},{\"source\":2}],"
+        "\"images\":[{\"uri\":\"sg_d.ktx2\",\"mimeType\":\"image/ktx2\"},{\"uri\":\"sg_s.ktx2\",\"mimeType\":\"image/ktx2\"},"
+        "{\"uri\":\"sg_s.exr\"}],"
+        "\"buffers\":[{\"byteLength\":92,\"uri\":\"%s\"}],\"bufferViews\":[{\"buffer\":0,\"byteLength\":92}],"
+        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":4,\"type\":\"VEC3\",\"max\":[1,1,0],"
+        "\"min\":[-1,0,0]},{\"bufferView\":0,\"byteOffset\":48,\"componentType\":5126,\"count\":4,\"type\":\"VEC2\"},"
+        "{\"bufferView\":0,\"byteOffset\":80,\"componentType\":5123,\"count\":6,\"type\":\"SCALAR\"}]}";
+    int rc;
+    struct dr_scene *s = load_json("sg.gltf", NULL, &rc, fmt,
+                                   "\"diffuseFactor\":[0.8,0.4,0.2,0.7],\"specularFactor\":[0.5,0.3,0.1],"
+                                   "\"glossinessFactor\":0.6,\"diffuseTexture\":{\"index\":0},"
+                                   "\"specularGlossinessTexture\":{\"index\":1}",
+                                   uri);
+    CHECK(rc == 0, "spec-gloss: %s", dr_last_error());
+    CHECK(!strstr(warnings, "SpecularGlossiness"), "no warning about the extension:\n%s", warnings);
+    dr_scene_destroy(s);
+    s = dr_scene_load(tmp_path("sg.gltf"));
+    CHECK(s != NULL, "spec-gloss, whole: %s", dr_last_error());
+    if (s) {
+        /* three file textures + two derived (glossiness 0.6 shared by materials 0 and 1, and 0.3) */
+        CHECK(s->n_textures == 5 && s->n_images == 5, "derived roughness textures: %d textures, %d images",
+              s->n_textures, s->n_images);
+        CHECK(s->materials[0].spec_gloss && s->materials[0].metallic == 0.0 && s->materials[0].alpha == 0.7,
+              "material 0: spec-gloss, metallic 0, alpha from diffuseFactor");
+        CHECK(s->materials[0].metallic_roughness_tex.texture == s->materials[1].metallic_roughness_tex.texture &&
+                  s->materials[2].metallic_roughness_tex.texture != s->materials[0].metallic_roughness_tex.texture &&
+                  s->materials[0].metallic_roughness_tex.texture >= 3,
+              "one derived texture per (texture, glossiness)");
+        struct dr_hit hit;
+        dr_hit_compute(&s->mesh, 0, dr_v3(0.5, 0.2, 3.0), dr_v3(0.0, 0.0, -1.0), &hit);
+        struct dr_bsdf bs;
+        dr_material_eval(s, &hit, &bs);
+        const double lin_d[3] = {dr_srgb_to_linear(200.0 / 255.0), dr_srgb_to_linear(100.0 / 255.0),
+                                 dr_srgb_to_linear(50.0 / 255.0)};
+        CHECK(fabs(bs.base_color.x - 0.8 * lin_d[0]) < 1e-6 && fabs(bs.base_color.y - 0.4 * lin_d[1]) < 1e-6 &&
+                  fabs(bs.base_color.z - 0.2 * lin_d[2]) < 1e-6,
+              "base colour = diffuseFactor x diffuse texel: (%g, %g, %g)", bs.base_color.x, bs.base_color.y,
+              bs.base_color.z);
+        CHECK(bs.metallic == 0.0 && bs.specular == 1.0, "metallic 0, specular 1: %g, %g", bs.metallic, bs.specular);
+        CHECK(fabs(bs.roughness - (1.0 - 0.6 * 128.0 / 255.0)) < 1e-6, "roughness = 1 - glossiness x A: %g",
+              bs.roughness);
+        /* f0 = min(0.04 specular_color, 1) is the file's F0 = specularFactor x the texel's decoded RGB */
+        const double f0[3] = {0.5 * 1.0, 0.3 * dr_srgb_to_linear(128.0 / 255.0), 0.1 * dr_srgb_to_linear(64.0 / 255.0)};
+        const double got[3] = {0.04 * bs.specular_color.x, 0.04 * bs.specular_color.y, 0.04 * bs.specular_color.z};
+        for (int k = 0; k < 3; k++)
+            CHECK(fabs(got[k] - f0[k]) < 1e-6, "f0[%d] = specularFactor x texel: %g, want %g", k, got[k], f0[k]);
+        /* material 2's roughness: its own derived texture, 1 - 0.3 A */
+        hit.material = 2;
+        dr_material_eval(s, &hit, &bs);
+        CHECK(fabs(bs.roughness - (1.0 - 0.3 * 128.0 / 255.0)) < 1e-6, "material 2's roughness: %g", bs.roughness);
+        struct dr_param *list;
+        int n;
+        CHECK(dr_params_list(s, &list, &n) == 0, "params: %s", dr_last_error());
+        bool image0 = false, emissive = false;
+        for (int i = 0; i < n; i++) {
+            CHECK(!strstr(list[i].name, "/pbrMetallicRoughness/"),
+                  "no mapped factor of a spec-gloss material is a parameter: %s", list[i].name);
+            emissive |= strcmp(list[i].name, "/materials/0/emissiveFactor") == 0;
+            image0 |= strcmp(list[i].name, "/images/0") == 0;
+            CHECK(strcmp(list[i].name, "/images/1") != 0 && strcmp(list[i].name, "/images/3") != 0,
+                  "the specular-glossiness image and the derived one are no parameters: %s", list[i].name);
+        }
+        CHECK(image0, "the diffuse texture's texels are a parameter (/images/0)");
+        CHECK(emissive, "a spec-gloss material's emissiveFactor is a parameter");
+        free(list);
+        struct dr_param p;
+        CHECK(dr_param_resolve(s, "/materials/0/pbrMetallicRoughness/baseColorFactor", &p) != 0 &&
+                  strstr(dr_last_error(), "pbrSpecularGlossiness"),
+              "a factor refused with the reason: %s", dr_last_error());
+    }
+    dr_scene_destroy(s);
+    /* a float image (EXR): the derived texture in floats, 1 - 0.6 x 0.25 */
+    s = load_json("sg_f.gltf", NULL, &rc, fmt, "\"glossinessFactor\":0.6,\"specularGlossinessTexture\":{\"index\":2}",
+                  uri);
+    dr_scene_destroy(s);
+    s = rc == 0 ? dr_scene_load(tmp_path("sg_f.gltf")) : NULL;
+    CHECK(s != NULL, "spec-gloss with a float texture: %s", dr_last_error());
+    if (s) {
+        struct dr_hit hit;
+        dr_hit_compute(&s->mesh, 0, dr_v3(0.5, 0.2, 3.0), dr_v3(0.0, 0.0, -1.0), &hit);
+        struct dr_bsdf bs;
+        dr_material_eval(s, &hit, &bs);
+        CHECK(s->images[s->textures[s->materials[0].metallic_roughness_tex.texture].image].data != NULL,
+              "a float image's derived texture is float");
+        CHECK(fabs(bs.roughness - (1.0 - 0.6 * 0.25)) < 1e-6, "float: roughness = 1 - glossiness x A: %g", bs.roughness);
+        CHECK(fabs(0.04 * bs.specular_color.y - 0.25) < 1e-6, "float: f0 = the texel's G (linear): %g",
+              0.04 * bs.specular_color.y);
+    }
+    dr_scene_destroy(s);
+    /* without a texture: roughness 1 - glossinessFactor, no texture read */
+    s = load_json("sg_plain.gltf", NULL, &rc, fmt, "\"glossinessFactor\":0.25", uri);
+    CHECK(rc == 0 && s->materials[0].roughness == 0.75 && s->materials[0].metallic_roughness_tex.texture < 0 &&
+              s->materials[0].base_color.x == 1.0 && 0.04 * s->materials[0].specular_color.x == 1.0,
+          "defaults: diffuse 1, specular 1, roughness 1 - glossiness (rc %d)", rc);
+    dr_scene_destroy(s);
+    static const struct { const char *ext, *what, *where, *says; } bad[] = {
+        {"\"diffuseFactor\":[1,1,1]", "a diffuse factor of three numbers", "pbrSpecularGlossiness/diffuseFactor",
+         "4 numbers"},
+        {"\"specularFactor\":[0.5,2,0]", "a specular factor above 1", "pbrSpecularGlossiness/specularFactor/1",
+         "[0, 1]"},
+        {"\"glossinessFactor\":1.5", "a glossiness above 1", "pbrSpecularGlossiness/glossinessFactor", "[0, 1]"},
+        {"\"specularGlossinessTexture\":{\"index\":9}", "a missing texture",
+         "pbrSpecularGlossiness/specularGlossinessTexture", "does not exist"},
+    };
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        s = load_json("sg_bad.gltf", NULL, &rc, fmt, bad[i].ext, uri);
+        check_error(rc, bad[i].what, "sg_bad.gltf", bad[i].where, bad[i].says);
+        dr_scene_destroy(s);
+    }
+}
+
 int main(void)
 {
     snprintf(dir, sizeof dir, "%s/drender-gltf-features.XXXXXX", getenv("TMPDIR") ? getenv("TMPDIR") : "/tmp");
@@ -1331,6 +1479,7 @@ int main(void)
     test_anisotropy();
     test_specular_textures();
     test_sheen();
+    test_spec_gloss();
     test_anisotropy_frame_adjoint();
     test_eight_bit();
     char cmd[400];
