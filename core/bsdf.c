@@ -1068,9 +1068,10 @@ void d_bsdf_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_lobe lo
  * also why a lobe need not cover the whole integrand, only its bulk.
  *
  * Anisotropy (KHR_materials_anisotropy): the vndf lobe is the forward map,
- * so it follows the stretched lobe; the roughness pairs stay those of the
- * isotropic lobe of alpha (a consistent density and map, but not made for a
- * stretched lobe's d D; the caller does not ask for them there).
+ * so it follows the stretched lobe; the roughness pair splits the stretched
+ * lobe where d D / d alpha changes sign, azimuth by azimuth (rough_split),
+ * and the NDF part is the roughness's share of the stretched D's
+ * derivative (d_eval_rough_ndf_aniso).
  *
  * Every lobe density is of wi, zero below the surface; samples a lobe maps
  * below the surface (or, for the microfacet lobes, with wo.h <= 0) are
@@ -1112,6 +1113,38 @@ static inline enum dr_bsdf_dlobe coat_as_rough(enum dr_bsdf_dlobe lobe)
     return lobe == DR_BSDF_DLOBE_COAT_POS ? DR_BSDF_DLOBE_ROUGH_POS : DR_BSDF_DLOBE_ROUGH_NEG;
 }
 
+/* The stretched lobe's pair (anisotropic roughness). In the stretched
+ * slopes t = (sx / alpha_x, sy / alpha_y), u = |t|^2 and their azimuth phi,
+ * the lobe is du / (1 + u)^2 dphi / (2 pi) whatever the alphas, and
+ *   d ln D / d alpha = cx (4 tx^2 / (1 + u) - 1) + cy (4 ty^2 / (1 + u) - 1)
+ *                    = (u k - c) / (1 + u),
+ * cx = (1 - s^2) / alpha_x, cy = 1 / alpha_y (d alpha_x / d alpha = 1 -
+ * s^2), c = cx + cy, k(phi) = c + 2 (cx - cy) cos(2 phi): positive beyond
+ * u* = c / k, and nowhere at an azimuth where k <= 0. The pair is its
+ * positive and negative parts azimuth by azimuth: phi uniform, then u with
+ * radial density |u k - c| / ((1 + u)^3 M) on its side, M the side's mass
+ *   M+ = k^2 / (2 (k + c)),  M- = c^2 / (2 (k + c)) (k > 0), (c - k) / 2 (k <= 0),
+ * so that A / p is M times smooth factors, as for the isotropic pair (which
+ * is this with cx = cy: u* = 1, M = c / 4). In w = 1 / (1 + u) the CDFs
+ * invert in closed form, started at u* as the isotropic pair's:
+ *   w+ = w* (1 - sqrt(xi)), w* = k / (k + c);
+ *   w- = (k + c sqrt(xi)) / (k + c) (k > 0),
+ *        (k + sqrt(k^2 + (c^2 - k^2) xi)) / (k + c) (k <= 0);
+ * in h, p+-(h) = D cos(theta_h) |u k - c| / ((1 + u) M). */
+struct rough_split { double c, k; };
+
+static inline struct rough_split rough_split(const struct dr_bsdf *b, double a, double ax, double cos2phi)
+{
+    const double s = b->anisotropy, cx = (1.0 - s * s) / ax, cy = 1.0 / a;
+    return (struct rough_split){cx + cy, cx + cy + 2.0 * (cx - cy) * cos2phi};
+}
+
+static inline double rough_split_mass(struct rough_split sp, bool positive)
+{
+    return positive ? sp.k * sp.k / (2.0 * (sp.k + sp.c))
+                    : sp.k > 0.0 ? sp.c * sp.c / (2.0 * (sp.k + sp.c)) : 0.5 * (sp.c - sp.k);
+}
+
 double dr_bsdf_deriv_lobe_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, enum dr_bsdf_dlobe lobe)
 {
     if (!(wo.z > COS_EPS) || !(wi.z > COS_EPS))
@@ -1130,8 +1163,18 @@ double dr_bsdf_deriv_lobe_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, e
         const struct ggx_aniso g = ggx_aniso(ax, a, wo, wi);
         return g.D / (4.0 * wo.z) / (1.0 + smith_lambda_aniso(ax, a, wo, NULL, NULL));
     }
-    /* (The roughness lobes stay those of the isotropic lobe of alpha, as
-     * their maps: bsdf.h.) */
+    if (b->anisotropy != 0.0) {   /* the stretched lobe's pair (sample_rough_h_aniso) */
+        const double ax = alpha_x_of(b, a);
+        const struct ggx_aniso g = ggx_aniso(ax, a, wo, wi);
+        /* the stretched slopes' squares over Hz^2 (t = H.xy / (Hz alpha)) */
+        const double tx2 = g.hx2 / (ax * ax), ty2 = g.hy2 / (a * a), u = (tx2 + ty2) / g.hz2;
+        const struct rough_split sp = rough_split(b, a, ax, u > 0.0 ? (tx2 - ty2) / (tx2 + ty2) : 1.0);
+        const bool positive = u * sp.k > sp.c;
+        if (positive != (lobe == DR_BSDF_DLOBE_ROUGH_POS))
+            return 0.0;
+        /* p(h) / (4 wo.h), p(h) = D cos(theta_h) |u k - c| / ((1 + u) M), wo.h = |H| / 2 */
+        return 0.5 * fabs(u * sp.k - sp.c) / ((1.0 + u) * rough_split_mass(sp, positive)) * g.D * g.H.z / g.H2;
+    }
     const struct ggx_half g_h = ggx_half(a2, wo, wi);
     if (lobe == DR_BSDF_DLOBE_VNDF)
         return g_h.D / (4.0 * wo.z) / (1.0 + smith_lambda(a2, wo));   /* as eval_pdf_above's pdf_spec */
@@ -1166,6 +1209,25 @@ static dr_vec3 sample_rough_h(double a, bool positive, double u1, double u2)
     return dr_normalize(dr_v3(xy * cos(phi), xy * sin(phi), z));
 }
 
+/* A half vector of the pair's lobe (rough_split); (0, 0, -1), rejected,
+ * where the lobe has no support. */
+static dr_vec3 sample_rough_h_aniso(const struct dr_bsdf *b, double a, bool positive, double u1, double u2)
+{
+    const double ax = alpha_x_of(b, a), phi = 2.0 * M_PI * u2, cp = cos(phi), sn = sin(phi);
+    const struct rough_split sp = rough_split(b, a, ax, cp * cp - sn * sn);
+    double w;
+    if (positive)
+        w = sp.k > 0.0 ? sp.k / (sp.k + sp.c) * (1.0 - sqrt(u1)) : 0.0;
+    else if (sp.k > 0.0)
+        w = (sp.k + sp.c * sqrt(u1)) / (sp.k + sp.c);
+    else
+        w = (sp.k + sqrt(sp.k * sp.k + (sp.c * sp.c - sp.k * sp.k) * u1)) / (sp.k + sp.c);
+    if (!(w > 0.0))
+        return dr_v3(0.0, 0.0, -1.0);
+    const double r = sqrt(dr_max(0.0, 1.0 / w - 1.0));
+    return dr_normalize(dr_v3(ax * r * cp, a * r * sn, 1.0));
+}
+
 dr_vec3 dr_bsdf_deriv_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bsdf_dlobe lobe, double u1, double u2)
 {
     switch (lobe) {
@@ -1181,7 +1243,10 @@ dr_vec3 dr_bsdf_deriv_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bs
         return dr_bsdf_deriv_sample_dir(&l, wo, coat_as_rough(lobe), u1, u2);
     }
     default: {
-        dr_vec3 h = sample_rough_h(bsdf_alpha(b), lobe == DR_BSDF_DLOBE_ROUGH_POS, u1, u2);
+        const double a = bsdf_alpha(b);
+        const bool positive = lobe == DR_BSDF_DLOBE_ROUGH_POS;
+        dr_vec3 h = b->anisotropy != 0.0 ? sample_rough_h_aniso(b, a, positive, u1, u2)
+                                         : sample_rough_h(a, positive, u1, u2);
         double oh = dr_dot(wo, h);
         if (!(oh > 0.0))
             return dr_v3(0.0, 0.0, -1.0);   /* the back of the microfacet: rejected */
@@ -1217,8 +1282,27 @@ bool dr_bsdf_deriv_sample(const struct dr_bsdf *b, dr_vec3 wo, unsigned params, 
     return *pdf > 0.0 && isfinite(*pdf);
 }
 
-/* The NDF part of the roughness derivative (see bsdf.h; none for a stretched
- * base lobe, whose D moves with two alphas): with
+/* The stretched lobe's NDF part: spec (d lnD/d ax (1 - s^2) + d lnD/d ay)
+ * 2 rough, the roughness's share of d_eval_params_aniso's D terms (the
+ * anisotropy's strength moves alpha_x too: its share is B's, as G's is). */
+static void d_eval_rough_ndf_aniso(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out,
+                                   struct dr_d_bsdf *d)
+{
+    const double ay = bsdf_alpha(b), ax = alpha_x_of(b, ay), s = b->anisotropy, m = b->metallic;
+    const struct ggx_aniso g_h = ggx_aniso(ax, ay, wo, wi);
+    const double spec = g_h.D / (4.0 * wo.z * (1.0 + smith_lambda_aniso(ax, ay, wo, NULL, NULL) +
+                                               smith_lambda_aniso(ax, ay, wi, NULL, NULL)) * wi.z);
+    const double s5 = pow5(1.0 - dr_clamp(0.5 * sqrt(g_h.H2), 0.0, 1.0));
+    dr_vec3 fd, fm;
+    fresnel_lobes(b, s5, &fd, &fm);
+    const double d_spec = (1.0 - m) * dr_dot(d_out, fd) + m * dr_dot(d_out, fm);
+    double dlnD_x, dlnD_y;
+    ggx_aniso_dlnD(ax, ay, &g_h, &dlnD_x, &dlnD_y);
+    d->roughness += d_spec * spec * (dlnD_x * (1.0 - s * s) + dlnD_y) * (2.0 * b->roughness);
+}
+
+/* The NDF part of the roughness derivative (see bsdf.h; for a stretched
+ * base lobe d_eval_rough_ndf_aniso): with
  * f_spec,c = [(1-m) F_d,c + m F_m,c] D G2 / (4 wo.z wi.z) = K_c spec,
  *   d f_c / d rough |_D = K_c spec d lnD/d alpha * 2 rough,
  *   d lnD / d alpha = (2/alpha) (Hxy^2 - alpha^2 Hz^2) / q   (as d_eval_params).
@@ -1237,8 +1321,12 @@ void d_bsdf_eval_rough_ndf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_v
     }
     const double rough = b->roughness, m = b->metallic;
     if (!(parts & DR_BSDF_D_ROUGHNESS) || !(wo.z > COS_EPS) || !(wi.z > COS_EPS) || no_specular_lobe(b) ||
-        !(rough * rough > DR_BSDF_MIN_ALPHA) || b->anisotropy != 0.0)   /* (isotropic only: bsdf.h) */
+        !(rough * rough > DR_BSDF_MIN_ALPHA))
         return;
+    if (b->anisotropy != 0.0) {
+        d_eval_rough_ndf_aniso(b, wo, wi, d_out, d);
+        return;
+    }
     double a = bsdf_alpha(b), a2 = a * a;
     const struct ggx_half g_h = ggx_half(a2, wo, wi);
     double spec = g_h.D / (4.0 * wo.z * (1.0 + smith_lambda(a2, wo) + smith_lambda(a2, wi)) * wi.z);

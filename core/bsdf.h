@@ -250,10 +250,10 @@ void dr_bsdf_deriv_weights(const struct dr_bsdf *b, unsigned params, double w[DR
 /* Solid-angle density of wi under one lobe (0 below the surface). The VNDF
  * lobe is the forward specular map's, stretched with the lobe (anisotropic
  * visible normals). The roughness lobes (ROUGH_POS/NEG, and their maps) are
- * those of the isotropic lobe of alpha whatever b->anisotropy: still a
- * consistent density and map, but made for d D / d alpha of an isotropic
- * lobe; the caller does not request DR_BSDF_D_ROUGHNESS for an anisotropic
- * material. */
+ * the positive and negative parts of d D / d alpha of an isotropic lobe;
+ * of a stretched one (b->anisotropy != 0), whose derivative's sign also
+ * turns with the azimuth, the lobe itself on the two sides of the same
+ * boundary (bsdf.c). */
 double dr_bsdf_deriv_lobe_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, enum dr_bsdf_dlobe lobe);
 /* ... and under the mixture for `params`. */
 double dr_bsdf_deriv_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, unsigned params);
@@ -269,9 +269,9 @@ dr_vec3 dr_bsdf_deriv_sample_dir(const struct dr_bsdf *b, dr_vec3 wo, enum dr_bs
  * the coat's transmission both ways; under a sheen, times T_s(wo) T_s(wi)),
  * DR_BSDF_D_COAT_ROUGHNESS the coat
  * lobe's to d->coat_roughness (times the coat's factor; 0 uncoated).
- * Isotropic only for the base: with b->anisotropy != 0 the base's part adds
- * nothing (the caller never requests DR_BSDF_D_ROUGHNESS there); the coat's
- * part (an isotropic lobe) is unaffected. */
+ * A stretched base lobe (b->anisotropy != 0): the roughness's share of its
+ * D's derivative through both alphas (the strength's share is the forward
+ * sampler's). */
 void d_bsdf_eval_rough_ndf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, dr_vec3 d_out, unsigned parts,
                            struct dr_d_bsdf *d);
 /* Chooses a lobe with u_lobe by the weights, maps (u1, u2), and returns the

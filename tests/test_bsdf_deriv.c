@@ -360,14 +360,106 @@ static void test_rough_ndf_vs_fd(void)
     CHECK(d.roughness == 0.0, "NDF part not 0 for a Lambertian or below the alpha floor: %g", d.roughness);
 }
 
+/* Chi-square of a lobe (or mixture) on bins of a stretched lobe's own
+ * coordinates: F = u / (1 + u) and phi of its stretched slopes t = H.xy /
+ * (Hz alpha), 8 x 16 bins, where both the stretched lobe and the pair's
+ * boundaries (curves u = u*(phi)) stay resolved at any aspect ratio
+ * (chi2_case's isotropic cells do not). A bin's expected count integrates
+ * the density dr_bsdf_deriv_lobe_pdf / dr_bsdf_deriv_pdf gives over it by
+ * the change of variables d omega_i = 4 (wo.h) d omega_h, d omega_h =
+ * 2 dF dphi / (2 pi 2 D(h) cos(theta_h)) with D the test's own stretched
+ * GGX (D cos d omega_h = du dphi / (2 pi (1 + u)^2), du = (1 + u)^2 dF). */
+static void chi2_stretched(const char *what, const struct dr_bsdf *b, double cos_o, unsigned params, int lobe, long n,
+                           uint64_t seed)
+{
+    enum { NF = 8, NPH = 16, SF = 48, SPH = 24 };
+    const double a = fmax(b->roughness * b->roughness, DR_BSDF_MIN_ALPHA), s = b->anisotropy;
+    const double ax = a + (1.0 - a) * s * s;
+    const dr_vec3 wo = dr_v3(sqrt(1.0 - cos_o * cos_o), 0.0, cos_o);
+    static double obs[NF * NPH], expd[NF * NPH];
+    double total = 0.0;
+    for (int i = 0; i < NF * NPH; i++) {
+        obs[i] = 0.0;
+        double e = 0.0;
+        for (int jf = 0; jf < SF; jf++)
+            for (int jp = 0; jp < SPH; jp++) {
+                const double F = ((i / NPH) + (jf + 0.5) / SF) / NF, ph = 2.0 * M_PI * ((i % NPH) + (jp + 0.5) / SPH) / NPH;
+                const double u = F / (1.0 - F), rr = sqrt(u);
+                const dr_vec3 h = dr_normalize(dr_v3(ax * rr * cos(ph), a * rr * sin(ph), 1.0));
+                const double oh = dr_dot(wo, h);
+                const dr_vec3 wi = dr_sub(dr_scale(h, 2.0 * oh), wo);
+                if (!(oh > 0.0) || !(wi.z > 1e-12))
+                    continue;
+                const double q = h.x * h.x / (ax * ax) + h.y * h.y / (a * a) + h.z * h.z;
+                const double D = 1.0 / (M_PI * ax * a * q * q);
+                const double pdf = params ? dr_bsdf_deriv_pdf(b, wo, wi, params)
+                                          : dr_bsdf_deriv_lobe_pdf(b, wo, wi, (enum dr_bsdf_dlobe)lobe);
+                e += pdf * 4.0 * oh / (2.0 * M_PI * D * h.z) * (1.0 / (NF * SF)) * (2.0 * M_PI / (NPH * SPH));
+            }
+        expd[i] = e;
+        total += e;
+    }
+    struct rng r = {seed};
+    long valid = 0;
+    for (long k = 0; k < n; k++) {
+        double ul = rng_next(&r), u1 = rng_next(&r), u2 = rng_next(&r), pdf = 0.0;
+        dr_vec3 wi;
+        bool ok;
+        if (params) {
+            ok = dr_bsdf_deriv_sample(b, wo, params, ul, u1, u2, &wi, &pdf);
+        } else {
+            wi = dr_bsdf_deriv_sample_dir(b, wo, (enum dr_bsdf_dlobe)lobe, u1, u2);
+            pdf = dr_bsdf_deriv_lobe_pdf(b, wo, wi, (enum dr_bsdf_dlobe)lobe);
+            ok = wi.z > 1e-12 && pdf > 0.0;
+        }
+        if (!ok)
+            continue;
+        valid++;
+        const dr_vec3 H = dr_add(wo, wi);
+        const double tx = H.x / (H.z * ax), ty = H.y / (H.z * a), u = tx * tx + ty * ty;
+        double ph = atan2(ty, tx);
+        if (ph < 0.0)
+            ph += 2.0 * M_PI;
+        int fi = (int)(u / (1.0 + u) * NF), pi_ = (int)(ph / (2.0 * M_PI) * NPH);
+        fi = fi < NF ? fi : NF - 1, pi_ = pi_ < NPH ? pi_ : NPH - 1;
+        obs[fi * NPH + pi_] += 1.0;
+    }
+    double chi2 = 0.0, po = 0.0, pe = 0.0;
+    int cells = 0;
+    for (int i = 0; i < NF * NPH; i++) {
+        const double ei = expd[i] * n;
+        if (ei < 5.0) {
+            po += obs[i], pe += ei;
+            continue;
+        }
+        chi2 += dr_sqr(obs[i] - ei) / ei;
+        cells++;
+    }
+    if (pe > 0.0 || po > 0.0) {
+        chi2 += pe > 1.0 ? dr_sqr(po - pe) / pe : dr_sqr(po - pe);
+        cells++;
+    }
+    const double p = chi2_pvalue(chi2, cells - 1), frac = (double)valid / n, se = sqrt(frac * (1.0 - frac) / n) + 1e-4;
+    printf("  %-34s wo.z=%.2f valid=%.4f integral=%.4f chi2=%7.1f dof=%3d p=%.4f\n", what, cos_o, frac, total, chi2,
+           cells - 1, p);
+    if (p < worst_p)
+        worst_p = p;
+    CHECK(p > 1e-4, "%s wo.z=%g: chi-square p-value %g", what, cos_o, p);
+    CHECK(fabs(total - frac) < 4.0 * se + 2e-3, "%s wo.z=%g: pdf integrates to %g, valid fraction %g", what, cos_o,
+          total, frac);
+}
+
 /* KHR_materials_anisotropy (bsdf.h): the VNDF lobe is the forward sampler's
  * specular map, stretched with the base's lobe (alpha_x = alpha + (1 -
  * alpha) s^2): its density is dr_bsdf_pdf's for a metal (p = 1), its samples
  * follow it (chi-square on cells at the geometric mean of the alphas), and a
  * base-colour and metallic mixture (cosine + VNDF) still matches its pdf.
- * The roughness lobes and the base's NDF part stay isotropic-only (the
- * caller never asks for roughness on a stretched lobe): the base's NDF part
- * is zero there, and a coat's is that of the same BSDF without anisotropy. */
+ * The roughness pair of a stretched lobe is the lobe itself on either side
+ * of the stretched u = 1: their densities sum to 2 D cos(theta_h) (h-space),
+ * each lives on its own side, and their samples follow them; the base's NDF
+ * part is the lobe times the roughness's share of d ln D (central
+ * differences of a test-side stretched D), and a coat's is that of the same
+ * BSDF without anisotropy. */
 static void test_aniso(void)
 {
     struct rng r = {4711};
@@ -410,26 +502,109 @@ static void test_aniso(void)
             snprintf(what, sizeof what, "base+metallic m=0.5 rough=%.2f s=%.1f", rough, s);
             chi2_case(what, &b, 0.7, DR_BSDF_D_BASE | DR_BSDF_D_METALLIC, 0, 200000, seed++);
         }
-    cells_alpha = 0.0;
-    /* the NDF part: none for the stretched base; a coat's unchanged */
-    for (int k = 0; k < 200; k++) {
-        struct dr_bsdf b = make_bsdf(0.2 + 0.7 * rng_next(&r), rng_next(&r), dr_v3(0.5, 0.6, 0.7));
+    /* the roughness pair's maps and densities, alone and in the roughness
+     * mixture, on bins of the stretched lobe's own coordinates (chi2_stretched) */
+    printf("anisotropic roughness pair (bins in the stretched (u / (1 + u), phi)):\n");
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 2; j++) {
+            const double rough = roughs[i], s = i == 0 ? 0.3 : ss[(i + j) % 3];
+            struct dr_bsdf b = make_bsdf(rough, 1.0, dr_v3(1.0, 0.8, 0.3));
+            b.anisotropy = s;
+            char what[64];
+            for (int l = DR_BSDF_DLOBE_ROUGH_POS; l <= DR_BSDF_DLOBE_ROUGH_NEG; l++) {
+                snprintf(what, sizeof what, "rough%c rough=%.2f s=%.1f", l == DR_BSDF_DLOBE_ROUGH_POS ? '+' : '-',
+                         rough, s);
+                chi2_stretched(what, &b, j ? 0.4 : 0.95, 0, l, 400000, seed++);
+            }
+            /* (at rough 0.05 the pair alone: the base colour's cosine lobe
+             * lies in the last bin's far end, beyond these bins' quadrature) */
+            b.metallic = 0.5;
+            snprintf(what, sizeof what, "rough mixture m=0.5 rough=%.2f s=%.1f", rough, s);
+            chi2_stretched(what, &b, 0.7, DR_BSDF_D_ROUGHNESS | (i ? DR_BSDF_D_BASE : 0u), 0, 400000, seed++);
+        }
+    /* h-space densities: each side's is |d D / d alpha| cos(theta_h) / M,
+     * d D / d alpha by central differences of a test-side D and M the side's
+     * mass (bsdf.c's rough_split: with cx = (1 - s^2) / ax, cy = 1 / ay,
+     * c = cx + cy, k = c + 2 (cx - cy) cos(2 phi), M+ = k^2 / (2 (k + c)),
+     * M- = c^2 / (2 (k + c)), or (c - k) / 2 where k <= 0); and p+'s side is
+     * d D / d alpha > 0's */
+    double worst_d = 0.0;
+    int sign_ok = 0, sign_n = 0;
+    for (int k = 0; k < 3000; k++) {
+        const double rough = 0.05 + 0.9 * rng_next(&r), a = rough * rough, s = 0.1 + 0.9 * rng_next(&r);
+        const double ax = a + (1.0 - a) * s * s;
+        struct dr_bsdf b = make_bsdf(rough, 1.0, dr_v3s(1.0));
+        b.anisotropy = s;
+        dr_vec3 wo = dr_normalize(dr_v3(rng_next(&r) - 0.5, rng_next(&r) - 0.5, 0.6 + rng_next(&r)));
+        dr_vec3 h = dr_normalize(dr_v3(ax * (2.0 * rng_next(&r) - 1.0) * 2.0, a * (2.0 * rng_next(&r) - 1.0) * 2.0, 1.0));
+        const double oh = dr_dot(wo, h);
+        const dr_vec3 wi = dr_sub(dr_scale(h, 2.0 * oh), wo);
+        if (!(oh > 0.0) || !(wi.z > 1e-3))
+            continue;
+        const double tx = h.x / (h.z * ax), ty = h.y / (h.z * a), u = tx * tx + ty * ty;
+        const double cx = (1.0 - s * s) / ax, cy = 1.0 / a, c = cx + cy;
+        const double kk = c + 2.0 * (cx - cy) * (tx * tx - ty * ty) / u;
+        const bool pos = u * kk > c;
+        const double M = pos ? kk * kk / (2.0 * (kk + c)) : kk > 0.0 ? c * c / (2.0 * (kk + c)) : 0.5 * (c - kk);
+        double Dm[2];
+        for (int sg = 0; sg < 2; sg++) {
+            const double al = a * (1.0 + (sg ? 1e-6 : -1e-6)), axl = al + (1.0 - al) * s * s;
+            const double ql = h.x * h.x / (axl * axl) + h.y * h.y / (al * al) + h.z * h.z;
+            Dm[sg] = 1.0 / (M_PI * axl * al * ql * ql);
+        }
+        const double q = h.x * h.x / (ax * ax) + h.y * h.y / (a * a) + h.z * h.z;
+        const double D = 1.0 / (M_PI * ax * a * q * q);
+        const double want = fabs(Dm[1] - Dm[0]) / (2e-6 * a) * h.z / M;
+        const double pp = dr_bsdf_deriv_lobe_pdf(&b, wo, wi, DR_BSDF_DLOBE_ROUGH_POS) * 4.0 * oh;
+        const double pn = dr_bsdf_deriv_lobe_pdf(&b, wo, wi, DR_BSDF_DLOBE_ROUGH_NEG) * 4.0 * oh;
+        if (fabs(u * kk - c) > 1e-3 * c) {
+            worst_d = fmax(worst_d, fabs((pos ? pp : pn) - want) / want);
+            CHECK(pos ? pn == 0.0 : pp == 0.0, "stretched roughness pair on the wrong side: u %g k %g (+ %g, - %g)",
+                  u, kk, pp, pn);
+            if (fabs(Dm[1] - Dm[0]) > 1e-7 * D) {
+                sign_n++;
+                sign_ok += (Dm[1] > Dm[0]) == pos;
+            }
+        }
+    }
+    printf("anisotropic roughness pair vs |d D / d alpha| cos / M: worst relative error %.3g; p+'s side is d D / d alpha > 0's at %d "
+           "of %d\n", worst_d, sign_ok, sign_n);
+    CHECK(worst_d < 1e-5, "anisotropic roughness pair's density: relative error %g", worst_d);
+    CHECK(sign_ok == sign_n && sign_n > 1000, "the pair's sides are d D / d alpha's signs: %d of %d", sign_ok, sign_n);
+    /* the NDF part: the lobe times the roughness's share of d ln D (central
+     * differences in the roughness of a test-side stretched D, s held); a
+     * coat's part unchanged */
+    double worst_n = 0.0;
+    for (int k = 0; k < 400; k++) {
+        struct dr_bsdf b = make_bsdf(0.2 + 0.7 * rng_next(&r), 1.0, dr_v3(0.5, 0.6, 0.7));
         b.anisotropy = 0.1 + 0.9 * rng_next(&r);
         dr_vec3 wo = dr_normalize(dr_v3(rng_next(&r) - 0.5, rng_next(&r) - 0.5, 1.0));
         dr_vec3 wi = dr_normalize(dr_v3(rng_next(&r) - 0.5, rng_next(&r) - 0.5, 1.0));
         struct dr_d_bsdf d = {0};
         d_bsdf_eval_rough_ndf(&b, wo, wi, dr_v3s(1.0), DR_BSDF_D_ROUGHNESS, &d);
-        CHECK(d.roughness == 0.0 && d.anisotropy == 0.0, "stretched base: NDF part %g (want none)", d.roughness);
+        const dr_vec3 h = dr_normalize(dr_add(wo, wi)), f = dr_bsdf_eval(&b, wo, wi);   /* (a metal: f is the lobe) */
+        double lnD[2];
+        for (int sgn = 0; sgn < 2; sgn++) {
+            const double rr = b.roughness + (sgn ? 1e-5 : -1e-5), a = rr * rr, ax = a + (1.0 - a) * b.anisotropy * b.anisotropy;
+            const double q = h.x * h.x / (ax * ax) + h.y * h.y / (a * a) + h.z * h.z;
+            lnD[sgn] = -log(M_PI * ax * a * q * q);
+        }
+        const double want = (f.x + f.y + f.z) * (lnD[1] - lnD[0]) / 2e-5;
+        const double rel = fabs(d.roughness - want) / fmax(fabs(want), 1e-3 * (f.x + f.y + f.z));
+        worst_n = fmax(worst_n, rel);
+        CHECK(rel < 1e-6 && d.anisotropy == 0.0, "stretched base: NDF part %.10g, want %.10g (anisotropy part %g)",
+              d.roughness, want, d.anisotropy);
         b.coated = true, b.coat = 0.6, b.coat_roughness = 0.1 + 0.8 * rng_next(&r);
         struct dr_bsdf iso = b;
         iso.anisotropy = 0.0;
         struct dr_d_bsdf dc = {0}, di = {0};
-        d_bsdf_eval_rough_ndf(&b, wo, wi, dr_v3s(1.0), DR_BSDF_D_ROUGHNESS | DR_BSDF_D_COAT_ROUGHNESS, &dc);
+        d_bsdf_eval_rough_ndf(&b, wo, wi, dr_v3s(1.0), DR_BSDF_D_COAT_ROUGHNESS, &dc);
         d_bsdf_eval_rough_ndf(&iso, wo, wi, dr_v3s(1.0), DR_BSDF_D_COAT_ROUGHNESS, &di);
         CHECK(dc.roughness == 0.0 && dc.coat_roughness == di.coat_roughness && dc.coat_roughness != 0.0,
               "coated stretched base: base part %g, coat part %g vs %g", dc.roughness, dc.coat_roughness,
               di.coat_roughness);
     }
+    printf("anisotropic NDF part vs central differences of ln D: worst relative error %.3g\n", worst_n);
 }
 
 

@@ -14,6 +14,7 @@
 #include "exact_sum.h"
 #include "loss.h"
 #include "normal_map.h"
+#include "path_deriv.h"
 #include "estimator.h"
 #include "render.h"
 #include "reverse.h"
@@ -1267,6 +1268,17 @@ int main(void)
     /* attached: the stretched lobe's map moves with the strength and the
      * roughness, and the frame with the moving hit point (d_anisotropy_frame) */
     compare("anisotropic coated scene, attached sampling", s, &cam, ndptrs, 4, 6, DR_SAMPLING_ATTACHED, GROUPED_WALKS);
+    /* mildly anisotropic (stretched within DR_DERIV_MAX_STRETCH): both
+     * roughnesses get the stretched lobe's antithetic pair under derivative
+     * sampling (the stronger stretches above leave them to the forward
+     * strategies) */
+    s->materials[0].anisotropy_strength = 0.15, s->materials[1].anisotropy_strength = 0.1;
+    CHECK(dr_path_deriv_stretch_ok(&s->materials[0]) && dr_path_deriv_stretch_ok(&s->materials[1]) &&
+              dr_scene_refresh(s) == 0,
+          "mildly anisotropic scene: %s", dr_last_error());
+    const char *mptrs[] = {gptrs[0], gptrs[2], gptrs[1], gptrs[4]};
+    compare("mildly anisotropic coated scene, derivative sampling", s, &cam, mptrs, 4, 6, DR_SAMPLING_DERIVATIVE,
+            GROUPED_WALKS);
     /* ... and sheened under the coats instead (KHR_materials_sheen: the
      * sheened lanes by bsdf.c lane by lane inside the eight-lane stages):
      * the sheens' colours and roughnesses and the bases' parameters,
