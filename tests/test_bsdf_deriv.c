@@ -95,44 +95,29 @@ static double expected_cells(const struct dr_bsdf *b, double a, dr_vec3 wo, unsi
 static double worst_p = 1.0;
 static double cells_alpha;   /* > 0: the cells' alpha (a stretched lobe's), else the lobe's roughness^2 */
 
-/* Samples n directions (mixture: dr_bsdf_deriv_sample; one lobe: its map)
- * and compares the cell counts with the integrated pdf; the pdf's total must
- * equal the fraction of valid samples (normalisation). */
-static void chi2_case(const char *what, const struct dr_bsdf *b, double cos_o, unsigned params, int lobe, long n,
-                      uint64_t seed)
+/* One direction of the mixture for params (dr_bsdf_deriv_sample) or, params
+ * 0, of one lobe's map with its density; false: none (rejected). */
+static bool draw(const struct dr_bsdf *b, dr_vec3 wo, unsigned params, int lobe, struct rng *r, dr_vec3 *wi,
+                 double *pdf)
 {
-    /* (cells at the lobe's alpha: a coat lobe's is the coat's) */
-    const bool coat_lobe = !params && (lobe == DR_BSDF_DLOBE_COAT_POS || lobe == DR_BSDF_DLOBE_COAT_NEG);
-    const double r_cells = coat_lobe ? b->coat_roughness : b->roughness;
-    double a = cells_alpha > 0.0 ? cells_alpha : fmax(r_cells * r_cells, DR_BSDF_MIN_ALPHA);
-    dr_vec3 wo = dr_v3(sqrt(1.0 - cos_o * cos_o), 0.0, cos_o);
-    static double obs[NV * NP], expd[NV * NP];
-    for (int i = 0; i < NV * NP; i++)
-        obs[i] = 0.0;
-    double total = expected_cells(b, a, wo, params, lobe, expd);
-    struct rng r = {seed};
-    long valid = 0;
-    for (long k = 0; k < n; k++) {
-        double ul = rng_next(&r), u1 = rng_next(&r), u2 = rng_next(&r), pdf = 0.0;
-        dr_vec3 wi;
-        bool ok;
-        if (params) {
-            ok = dr_bsdf_deriv_sample(b, wo, params, ul, u1, u2, &wi, &pdf);
-        } else {
-            wi = dr_bsdf_deriv_sample_dir(b, wo, (enum dr_bsdf_dlobe)lobe, u1, u2);
-            pdf = dr_bsdf_deriv_lobe_pdf(b, wo, wi, (enum dr_bsdf_dlobe)lobe);
-            ok = wi.z > 1e-12 && pdf > 0.0;
-        }
-        if (!ok)
-            continue;
-        CHECK(isfinite(pdf) && pdf > 0.0, "%s: sampled pdf %g", what, pdf);
-        valid++;
-        obs[cell_of(a, dr_normalize(dr_add(wo, wi)))] += 1.0;
-    }
-    /* pool cells expecting < 5 counts */
+    double ul = rng_next(r), u1 = rng_next(r), u2 = rng_next(r);
+    *pdf = 0.0;
+    if (params)
+        return dr_bsdf_deriv_sample(b, wo, params, ul, u1, u2, wi, pdf);
+    *wi = dr_bsdf_deriv_sample_dir(b, wo, (enum dr_bsdf_dlobe)lobe, u1, u2);
+    *pdf = dr_bsdf_deriv_lobe_pdf(b, wo, *wi, (enum dr_bsdf_dlobe)lobe);
+    return wi->z > 1e-12 && *pdf > 0.0;
+}
+
+/* The verdict on ncells observed / expected (a fraction of n) counts: the
+ * chi-square's p-value (cells expecting < 5 pooled), and the density's
+ * integral total against the valid fraction of the n draws. */
+static void chi2_verdict(const char *what, double cos_o, const double *obs, const double *expd, int ncells, long n,
+                         long valid, double total)
+{
     double chi2 = 0.0, po = 0.0, pe = 0.0;
     int cells = 0;
-    for (int i = 0; i < NV * NP; i++) {
+    for (int i = 0; i < ncells; i++) {
         double ei = expd[i] * n;
         if (ei < 5.0) {
             po += obs[i];
@@ -155,6 +140,35 @@ static void chi2_case(const char *what, const struct dr_bsdf *b, double cos_o, u
     CHECK(p > 1e-4, "%s wo.z=%g: chi-square p-value %g", what, cos_o, p);
     CHECK(fabs(total - frac) < 4.0 * se + 2e-3, "%s wo.z=%g: pdf integrates to %g, valid fraction %g", what, cos_o,
           total, frac);
+}
+
+/* Samples n directions (mixture: dr_bsdf_deriv_sample; one lobe: its map)
+ * and compares the cell counts with the integrated pdf; the pdf's total must
+ * equal the fraction of valid samples (normalisation). */
+static void chi2_case(const char *what, const struct dr_bsdf *b, double cos_o, unsigned params, int lobe, long n,
+                      uint64_t seed)
+{
+    /* (cells at the lobe's alpha: a coat lobe's is the coat's) */
+    const bool coat_lobe = !params && (lobe == DR_BSDF_DLOBE_COAT_POS || lobe == DR_BSDF_DLOBE_COAT_NEG);
+    const double r_cells = coat_lobe ? b->coat_roughness : b->roughness;
+    double a = cells_alpha > 0.0 ? cells_alpha : fmax(r_cells * r_cells, DR_BSDF_MIN_ALPHA);
+    dr_vec3 wo = dr_v3(sqrt(1.0 - cos_o * cos_o), 0.0, cos_o);
+    static double obs[NV * NP], expd[NV * NP];
+    for (int i = 0; i < NV * NP; i++)
+        obs[i] = 0.0;
+    double total = expected_cells(b, a, wo, params, lobe, expd);
+    struct rng r = {seed};
+    long valid = 0;
+    for (long k = 0; k < n; k++) {
+        dr_vec3 wi;
+        double pdf;
+        if (!draw(b, wo, params, lobe, &r, &wi, &pdf))
+            continue;
+        CHECK(isfinite(pdf) && pdf > 0.0, "%s: sampled pdf %g", what, pdf);
+        valid++;
+        obs[cell_of(a, dr_normalize(dr_add(wo, wi)))] += 1.0;
+    }
+    chi2_verdict(what, cos_o, obs, expd, NV * NP, n, valid, total);
 }
 
 /* A BSDF under a clear coat of factor 0.7 and roughness coat_rough. */
@@ -402,17 +416,9 @@ static void chi2_stretched(const char *what, const struct dr_bsdf *b, double cos
     struct rng r = {seed};
     long valid = 0;
     for (long k = 0; k < n; k++) {
-        double ul = rng_next(&r), u1 = rng_next(&r), u2 = rng_next(&r), pdf = 0.0;
         dr_vec3 wi;
-        bool ok;
-        if (params) {
-            ok = dr_bsdf_deriv_sample(b, wo, params, ul, u1, u2, &wi, &pdf);
-        } else {
-            wi = dr_bsdf_deriv_sample_dir(b, wo, (enum dr_bsdf_dlobe)lobe, u1, u2);
-            pdf = dr_bsdf_deriv_lobe_pdf(b, wo, wi, (enum dr_bsdf_dlobe)lobe);
-            ok = wi.z > 1e-12 && pdf > 0.0;
-        }
-        if (!ok)
+        double pdf;
+        if (!draw(b, wo, params, lobe, &r, &wi, &pdf))
             continue;
         valid++;
         const dr_vec3 H = dr_add(wo, wi);
@@ -424,29 +430,7 @@ static void chi2_stretched(const char *what, const struct dr_bsdf *b, double cos
         fi = fi < NF ? fi : NF - 1, pi_ = pi_ < NPH ? pi_ : NPH - 1;
         obs[fi * NPH + pi_] += 1.0;
     }
-    double chi2 = 0.0, po = 0.0, pe = 0.0;
-    int cells = 0;
-    for (int i = 0; i < NF * NPH; i++) {
-        const double ei = expd[i] * n;
-        if (ei < 5.0) {
-            po += obs[i], pe += ei;
-            continue;
-        }
-        chi2 += dr_sqr(obs[i] - ei) / ei;
-        cells++;
-    }
-    if (pe > 0.0 || po > 0.0) {
-        chi2 += pe > 1.0 ? dr_sqr(po - pe) / pe : dr_sqr(po - pe);
-        cells++;
-    }
-    const double p = chi2_pvalue(chi2, cells - 1), frac = (double)valid / n, se = sqrt(frac * (1.0 - frac) / n) + 1e-4;
-    printf("  %-34s wo.z=%.2f valid=%.4f integral=%.4f chi2=%7.1f dof=%3d p=%.4f\n", what, cos_o, frac, total, chi2,
-           cells - 1, p);
-    if (p < worst_p)
-        worst_p = p;
-    CHECK(p > 1e-4, "%s wo.z=%g: chi-square p-value %g", what, cos_o, p);
-    CHECK(fabs(total - frac) < 4.0 * se + 2e-3, "%s wo.z=%g: pdf integrates to %g, valid fraction %g", what, cos_o,
-          total, frac);
+    chi2_verdict(what, cos_o, obs, expd, NF * NPH, n, valid, total);
 }
 
 /* KHR_materials_anisotropy (bsdf.h): the VNDF lobe is the forward sampler's
