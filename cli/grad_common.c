@@ -515,13 +515,13 @@ struct grad_auto_choice grad_auto_sampling(const struct dr_estimator_ops *e, con
             auto_candidate(&c, q, scene->materials[q->target].coat_roughness, false,
                            c.threshold == GRAD_AUTO_ROUGHNESS ? GRAD_AUTO_COAT_ROUGHNESS : c.threshold);
         } else if (q->kind == DR_PARAM_ROUGHNESS && q->target >= 0 && q->target < scene->n_materials &&
-                   dr_path_deriv_stretch_ok(&scene->materials[q->target])) {   /* (path_deriv.h) */
+                   dr_path_deriv_aniso_pair_ok(&scene->materials[q->target])) {   /* (path_deriv.h) */
             any = true;
             auto_candidate(&c, q, material_roughness(scene, q->target), false, c.threshold);
         } else if (q->kind == DR_PARAM_IMAGE) {   /* the metallic-roughness textures it is */
             for (int m = 0; m < scene->n_materials; m++) {
                 const int t = scene->materials[m].metallic_roughness_tex.texture;
-                if (t < 0 || scene->textures[t].image != q->target || !dr_path_deriv_stretch_ok(&scene->materials[m]))
+                if (t < 0 || scene->textures[t].image != q->target || !dr_path_deriv_aniso_pair_ok(&scene->materials[m]))
                     continue;
                 any = true;
                 auto_candidate(&c, q, texture_median_roughness(scene, m), true, c.threshold);

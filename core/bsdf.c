@@ -1126,7 +1126,8 @@ static inline enum dr_bsdf_dlobe coat_as_rough(enum dr_bsdf_dlobe lobe)
  *   M+ = k^2 / (2 (k + c)),  M- = c^2 / (2 (k + c)) (k > 0), (c - k) / 2 (k <= 0),
  * so that A / p is M times smooth factors, as for the isotropic pair (which
  * is this with cx = cy: u* = 1, M = c / 4). In w = 1 / (1 + u) the CDFs
- * invert in closed form, started at u* as the isotropic pair's:
+ * invert in closed form, started at u* as the isotropic pair's (xi = u1
+ * for p+, 1 - u1 for p-, whose caller passes 1 - u1):
  *   w+ = w* (1 - sqrt(xi)), w* = k / (k + c);
  *   w- = (k + c sqrt(xi)) / (k + c) (k > 0),
  *        (k + sqrt(k^2 + (c^2 - k^2) xi)) / (k + c) (k <= 0);
@@ -1215,13 +1216,17 @@ static dr_vec3 sample_rough_h_aniso(const struct dr_bsdf *b, double a, bool posi
 {
     const double ax = alpha_x_of(b, a), phi = 2.0 * M_PI * u2, cp = cos(phi), sn = sin(phi);
     const struct rough_split sp = rough_split(b, a, ax, cp * cp - sn * sn);
+    /* (the pair's caller hands the negative lobe 1 - u1, path_deriv.c: it
+     * inverts with 1 - u1 too, so that both start at u* from the same u1,
+     * as sample_rough_h's pair does) */
+    const double xi = positive ? u1 : 1.0 - u1;
     double w;
     if (positive)
-        w = sp.k > 0.0 ? sp.k / (sp.k + sp.c) * (1.0 - sqrt(u1)) : 0.0;
+        w = sp.k > 0.0 ? sp.k / (sp.k + sp.c) * (1.0 - sqrt(xi)) : 0.0;
     else if (sp.k > 0.0)
-        w = (sp.k + sp.c * sqrt(u1)) / (sp.k + sp.c);
+        w = (sp.k + sp.c * sqrt(xi)) / (sp.k + sp.c);
     else
-        w = (sp.k + sqrt(sp.k * sp.k + (sp.c * sp.c - sp.k * sp.k) * u1)) / (sp.k + sp.c);
+        w = (sp.k + sqrt(sp.k * sp.k + (sp.c * sp.c - sp.k * sp.k) * xi)) / (sp.k + sp.c);
     if (!(w > 0.0))
         return dr_v3(0.0, 0.0, -1.0);
     const double r = sqrt(dr_max(0.0, 1.0 / w - 1.0));

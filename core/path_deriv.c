@@ -7,12 +7,9 @@
 #define BM_PARAMS (DR_BSDF_D_BASE | DR_BSDF_D_METALLIC)
 #define NDF_PARAMS (DR_BSDF_D_ROUGHNESS | DR_BSDF_D_COAT_ROUGHNESS)   /* A's: each with its antithetic pair */
 
-bool dr_path_deriv_stretch_ok(const struct dr_material *mat)
+bool dr_path_deriv_aniso_pair_ok(const struct dr_material *mat)
 {
-    if (!mat->anisotropic)
-        return true;
-    const double a = dr_max(mat->roughness * mat->roughness, DR_BSDF_MIN_ALPHA), s = mat->anisotropy_strength;
-    return a + (1.0 - a) * s * s <= DR_DERIV_MAX_STRETCH * a;
+    return !mat->anisotropic || mat->anisotropy_strength <= DR_DERIV_MAX_STRENGTH;
 }
 
 unsigned dr_path_material_dparams(const struct dr_scene *s, const struct dr_param_set *ps, int m)
@@ -32,9 +29,9 @@ unsigned dr_path_material_dparams(const struct dr_scene *s, const struct dr_para
     if (mt >= 0 && ps->image[s->textures[mt].image] >= 0)
         mask |= DR_BSDF_D_METALLIC | DR_BSDF_D_ROUGHNESS;
     /* an anisotropic base's roughness has the stretched lobe's pair (bsdf.c)
-     * where the stretch is mild (path_deriv.h); the anisotropy's strength
+     * where the strength is mild (path_deriv.h); the anisotropy's strength
      * stays with the forward strategies, B */
-    if (mat->anisotropic && !dr_path_deriv_stretch_ok(mat))
+    if (mat->anisotropic && !dr_path_deriv_aniso_pair_ok(mat))
         mask &= ~(unsigned)DR_BSDF_D_ROUGHNESS;
     /* a clear coat's roughness: its factor, or the texture whose G it reads
      * (the coat's factor is left to the forward strategies: B) */

@@ -79,18 +79,18 @@
 unsigned dr_path_material_dparams(const struct dr_scene *scene, const struct dr_param_set *params, int m);
 
 /* An anisotropic material's roughness gets the stretched lobe's pair (bsdf.c)
- * only where its lobe, at the material's factors, is stretched by at most
- * this ratio alpha_x / alpha_y; beyond, it stays with the forward
- * strategies. Measured with `drender compare` (prb, forward mode, the
- * bundled box's gold sphere, 64x64, 16 spp x 8), the pair's efficiency over
- * detached sampling: 1.95, 1.80 and 1.10 at ratios 2.5, 1.4 and 1.1
- * (strength 0.1, roughness 0.08, 0.15, 0.3); 0.97, 0.90 at 7.2 and 15
- * (strength 0.2 and 0.3, roughness 0.08); 0.64 to 0.83 at strength 0.6. A
- * stretched lobe's d D / d alpha is mostly the lobe widening along its
- * narrow axis, a signed redistribution between azimuths that the pair,
- * split azimuth by azimuth, does not cancel. */
-#define DR_DERIV_MAX_STRETCH 4.0
-bool dr_path_deriv_stretch_ok(const struct dr_material *material);
+ * only where its anisotropyStrength factor is at most this; above, it stays
+ * with the forward strategies. Measured with `drender compare` (prb, forward
+ * mode, the bundled box's gold sphere, 64x64, 16 spp x 8 or 16), the pair's
+ * efficiency over detached sampling: 2.03, 1.97 and 0.93 at strength 0.1
+ * and roughness 0.08, 0.15 and 0.3; 1.37 at strength 0.2 and 1.24-1.51 at
+ * 0.3 (roughness 0.08); 0.93 and 0.69-0.97 at strength 0.6 (roughness 0.08,
+ * 0.15). A strongly stretched lobe's d D / d alpha is mostly the lobe
+ * widening along its narrow axis, a redistribution between azimuths that a
+ * pair split azimuth by azimuth does not cancel. (The stretch alpha_x /
+ * alpha_y predicted worse: 1.24-1.51 at 15, 0.69-0.97 at 16.6.) */
+#define DR_DERIV_MAX_STRENGTH 0.4
+bool dr_path_deriv_aniso_pair_ok(const struct dr_material *material);
 
 /* In place of d_path_continuation at a differentiated vertex v (v->cont):
  * the derivative of B along v->wi times V_f, given d_f (detached sampling's

@@ -18,11 +18,12 @@
 #      attached and mis sampling agree too (the frame turns with the moving
 #      hit point: d_anisotropy_frame); KHR_materials_specular textures, which
 #      have no uv adjoint, are refused under attached sampling; derivative
-#      sampling runs (this floor's stretch, alpha_x / alpha_y 4.7, leaves its
-#      roughness to the forward strategies: path_deriv.h); on the gold sphere
-#      mildly anisotropic (strength 0.1, roughness 0.15: stretch 1.4) the
-#      roughness gets the stretched lobe's antithetic pair, and its derivative
-#      agrees with finite differences, resolved, in prb and tape
+#      sampling runs (this floor's strength, 0.5, leaves its roughness to the
+#      forward strategies: path_deriv.h); on the gold sphere mildly
+#      anisotropic (strength 0.1, roughness 0.15) the roughness gets the
+#      stretched lobe's antithetic pair: its derivative agrees with finite
+#      differences in prb and tape with a standard error well below detached
+#      sampling's
 #   d. optimize moves anisotropyStrength towards a target's and writes it
 #      into the extension; the output passes the glTF validator and renders
 # Run by tests/run.sh (env: DRENDER, DR_TESTDIR); also runs alone.
@@ -127,12 +128,20 @@ m['pbrMetallicRoughness']['roughnessFactor'] = 0.15
 m['extensions'] = {'KHR_materials_anisotropy': {'anisotropyStrength': 0.1, 'anisotropyRotation': 0.5}}
 d.setdefault('extensionsUsed', []).append('KHR_materials_anisotropy')
 json.dump(d, open(sys.argv[2], 'w'))" "$box" "$tmp/mild.gltf" || fail "could not write mild.gltf"
+# (the roughness's effect on fdcheck's projection is small here: agreeing,
+# and derivative sampling's standard error well below detached sampling's,
+# 0.6x at most (by hand, seeds 1-3: 0.24-0.45x), is what shows the pair at work)
+mild_se() { awk '$1 ~ /roughnessFactor$/ { print $4 }' "$tmp/out"; }
+run fdcheck "$tmp/mild.gltf" --param /materials/4/pbrMetallicRoughness/roughnessFactor --res 32x32 --spp 64 \
+    --batches 8 --estimator prb --sampling detached
+expect_rc 0 "fdcheck of the mildly anisotropic sphere's roughness (prb, detached)"
+se_detached=$(mild_se)
 for est in prb tape; do
     run fdcheck "$tmp/mild.gltf" --param /materials/4/pbrMetallicRoughness/roughnessFactor --res 32x32 --spp 64 \
         --batches 8 --estimator $est --sampling derivative
     expect_rc 0 "fdcheck of the mildly anisotropic sphere's roughness ($est, derivative)"
-    awk '$1 ~ /roughnessFactor$/ { r = ($2 > 0 ? $2 : -$2) > 4 * $4 } END { exit !r }' "$tmp/out" ||
-        fail "the mildly anisotropic roughness is not resolved ($est): $(cat "$tmp/out")"
+    awk -v d="$se_detached" -v s="$(mild_se)" 'BEGIN { exit !(s > 0 && s < 0.6 * d) }' ||
+        fail "derivative sampling's standard error $(mild_se) is not well below detached's $se_detached ($est)"
 done
 # KHR_materials_specular's textures have no uv adjoint either: attached refused, detached runs
 python3 -c "

@@ -1268,12 +1268,12 @@ int main(void)
     /* attached: the stretched lobe's map moves with the strength and the
      * roughness, and the frame with the moving hit point (d_anisotropy_frame) */
     compare("anisotropic coated scene, attached sampling", s, &cam, ndptrs, 4, 6, DR_SAMPLING_ATTACHED, GROUPED_WALKS);
-    /* mildly anisotropic (stretched within DR_DERIV_MAX_STRETCH): both
+    /* mildly anisotropic (strengths within DR_DERIV_MAX_STRENGTH): both
      * roughnesses get the stretched lobe's antithetic pair under derivative
-     * sampling (the stronger stretches above leave them to the forward
+     * sampling (the stronger anisotropy above leaves them to the forward
      * strategies) */
     s->materials[0].anisotropy_strength = 0.15, s->materials[1].anisotropy_strength = 0.1;
-    CHECK(dr_path_deriv_stretch_ok(&s->materials[0]) && dr_path_deriv_stretch_ok(&s->materials[1]) &&
+    CHECK(dr_path_deriv_aniso_pair_ok(&s->materials[0]) && dr_path_deriv_aniso_pair_ok(&s->materials[1]) &&
               dr_scene_refresh(s) == 0,
           "mildly anisotropic scene: %s", dr_last_error());
     const char *mptrs[] = {gptrs[0], gptrs[2], gptrs[1], gptrs[4]};
