@@ -250,10 +250,9 @@ void dr_bsdf_deriv_weights(const struct dr_bsdf *b, unsigned params, double w[DR
 /* Solid-angle density of wi under one lobe (0 below the surface). The VNDF
  * lobe is the forward specular map's, stretched with the lobe (anisotropic
  * visible normals). The roughness lobes (ROUGH_POS/NEG, and their maps) are
- * the positive and negative parts of d D / d alpha of an isotropic lobe;
- * of a stretched one (b->anisotropy != 0), whose derivative's sign also
- * turns with the azimuth, the lobe itself on the two sides of the same
- * boundary (bsdf.c). */
+ * the positive and negative parts of d D / d alpha, made densities; for a
+ * stretched lobe (b->anisotropy != 0), whose derivative's sign also turns
+ * with the azimuth, split azimuth by azimuth (bsdf.c's rough_split). */
 double dr_bsdf_deriv_lobe_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, enum dr_bsdf_dlobe lobe);
 /* ... and under the mixture for `params`. */
 double dr_bsdf_deriv_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, unsigned params);

@@ -637,6 +637,29 @@ static void test_anisotropy(void)
     }
 }
 
+/* A unit quad in z = 0 (x in [-1, 1], y in [0, 1]) with uvs, drawn with
+ * material 0: its buffer as a data URI (uri: 512 bytes), and the JSON that
+ * uses it, QUAD_MESH_JSON (meshes, nodes, scenes) and QUAD_BUFFER_JSON
+ * (buffers, views and accessors, closing the document; its %s is the URI). */
+static void textured_quad_uri(char uri[512])
+{
+    unsigned char b[92];
+    size_t o = 0;
+    put_f32(b, &o, 12, -1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 1.0, 0.0, -1.0, 1.0, 0.0);
+    put_f32(b, &o, 8, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0);
+    const uint16_t idx[6] = {0, 1, 2, 0, 2, 3};
+    memcpy(b + o, idx, sizeof idx);
+    snprintf(uri, 512, "%s", data_uri(b, sizeof b));
+}
+#define QUAD_MESH_JSON                                                                                            \
+    "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0,\"TEXCOORD_0\":1},\"indices\":2,\"material\":0}]}]," \
+    "\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}],"
+#define QUAD_BUFFER_JSON                                                                                          \
+    "\"buffers\":[{\"byteLength\":92,\"uri\":\"%s\"}],\"bufferViews\":[{\"buffer\":0,\"byteLength\":92}],"        \
+    "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":4,\"type\":\"VEC3\",\"max\":[1,1,0],"      \
+    "\"min\":[-1,0,0]},{\"bufferView\":0,\"byteOffset\":48,\"componentType\":5126,\"count\":4,\"type\":\"VEC2\"}," \
+    "{\"bufferView\":0,\"byteOffset\":80,\"componentType\":5123,\"count\":6,\"type\":\"SCALAR\"}]}"
+
 /* ---- KHR_materials_specular's textures ---- */
 
 /* A quad whose material's specular factor and colour are scaled by a 1x1
@@ -651,26 +674,16 @@ static void test_specular_textures(void)
     memcpy(col + 104, (const unsigned char[]){255, 128, 64}, 3);
     write_file("spec.ktx2", spec, sizeof spec);
     write_file("col.ktx2", col, sizeof col);
-    unsigned char b[92];
-    size_t o = 0;
-    put_f32(b, &o, 12, -1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 1.0, 0.0, -1.0, 1.0, 0.0);
-    put_f32(b, &o, 8, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0);
-    const uint16_t idx[6] = {0, 1, 2, 0, 2, 3};
-    memcpy(b + o, idx, sizeof idx);
     char uri[512];
-    snprintf(uri, sizeof uri, "%s", data_uri(b, sizeof b));
+    textured_quad_uri(uri);
     const char *fmt =
         "{\"asset\":{\"version\":\"2.0\"},\"extensionsUsed\":[\"KHR_materials_specular\"],"
         "\"materials\":[{\"pbrMetallicRoughness\":{\"metallicFactor\":0,\"roughnessFactor\":0.4},"
         "\"extensions\":{\"KHR_materials_specular\":{\"specularFactor\":0.8,\"specularColorFactor\":[1,0.5,0.25]%s}}}],"
-        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0,\"TEXCOORD_0\":1},\"indices\":2,\"material\":0}]}],"
-        "\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}],"
+        QUAD_MESH_JSON
         "\"textures\":[{\"source\":0},{\"source\":1}],"
         "\"images\":[{\"uri\":\"spec.ktx2\",\"mimeType\":\"image/ktx2\"},{\"uri\":\"col.ktx2\",\"mimeType\":\"image/ktx2\"}],"
-        "\"buffers\":[{\"byteLength\":92,\"uri\":\"%s\"}],\"bufferViews\":[{\"buffer\":0,\"byteLength\":92}],"
-        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":4,\"type\":\"VEC3\",\"max\":[1,1,0],"
-        "\"min\":[-1,0,0]},{\"bufferView\":0,\"byteOffset\":48,\"componentType\":5126,\"count\":4,\"type\":\"VEC2\"},"
-        "{\"bufferView\":0,\"byteOffset\":80,\"componentType\":5123,\"count\":6,\"type\":\"SCALAR\"}]}";
+        QUAD_BUFFER_JSON;
     int rc;
     struct dr_scene *s = load_json("spec.gltf", NULL, &rc, fmt,
                                    ",\"specularTexture\":{\"index\":0},\"specularColorTexture\":{\"index\":1}", uri);
@@ -811,26 +824,16 @@ static void test_sheen(void)
     memcpy(col + 104, (const unsigned char[]){255, 128, 64}, 3);
     write_file("sheen_r.ktx2", rough, sizeof rough);
     write_file("sheen_c.ktx2", col, sizeof col);
-    unsigned char b[92];
-    size_t o = 0;
-    put_f32(b, &o, 12, -1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 1.0, 0.0, -1.0, 1.0, 0.0);
-    put_f32(b, &o, 8, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0);
-    const uint16_t idx[6] = {0, 1, 2, 0, 2, 3};
-    memcpy(b + o, idx, sizeof idx);
     char uri[512];
-    snprintf(uri, sizeof uri, "%s", data_uri(b, sizeof b));
+    textured_quad_uri(uri);
     const char *fmt =
         "{\"asset\":{\"version\":\"2.0\"},\"extensionsUsed\":[\"KHR_materials_sheen\"],"
         "\"materials\":[{\"pbrMetallicRoughness\":{\"metallicFactor\":0,\"roughnessFactor\":0.4},"
         "\"extensions\":{\"KHR_materials_sheen\":{%s}}}],"
-        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0,\"TEXCOORD_0\":1},\"indices\":2,\"material\":0}]}],"
-        "\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}],"
+        QUAD_MESH_JSON
         "\"textures\":[{\"source\":0},{\"source\":1}],"
         "\"images\":[{\"uri\":\"sheen_c.ktx2\",\"mimeType\":\"image/ktx2\"},{\"uri\":\"sheen_r.ktx2\",\"mimeType\":\"image/ktx2\"}],"
-        "\"buffers\":[{\"byteLength\":92,\"uri\":\"%s\"}],\"bufferViews\":[{\"buffer\":0,\"byteLength\":92}],"
-        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":4,\"type\":\"VEC3\",\"max\":[1,1,0],"
-        "\"min\":[-1,0,0]},{\"bufferView\":0,\"byteOffset\":48,\"componentType\":5126,\"count\":4,\"type\":\"VEC2\"},"
-        "{\"bufferView\":0,\"byteOffset\":80,\"componentType\":5123,\"count\":6,\"type\":\"SCALAR\"}]}";
+        QUAD_BUFFER_JSON;
     int rc;
     struct dr_scene *s = load_json("sheen.gltf", NULL, &rc, fmt,
                                    "\"sheenColorFactor\":[1,0.5,0.25],\"sheenRoughnessFactor\":0.6,"
@@ -1329,14 +1332,8 @@ static void test_spec_gloss(void)
     write_file("sg_s.ktx2", sg, sizeof sg);
     const float sg_float[4] = {0.5f, 0.25f, 1.0f, 0.25f};
     CHECK(dr_image_write(tmp_path("sg_s.exr"), 1, 1, 4, sg_float) == 0, "writing sg_s.exr: %s", dr_last_error());
-    unsigned char b[92];
-    size_t o = 0;
-    put_f32(b, &o, 12, -1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 1.0, 0.0, -1.0, 1.0, 0.0);
-    put_f32(b, &o, 8, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0);
-    const uint16_t idx[6] = {0, 1, 2, 0, 2, 3};
-    memcpy(b + o, idx, sizeof idx);
     char uri[512];
-    snprintf(uri, sizeof uri, "%s", data_uri(b, sizeof b));
+    textured_quad_uri(uri);
     /* material 0: the extension (%s); 1 and 2 share its specular-glossiness
      * texture, 1 at the same glossiness (0.6), 2 at another */
     const char *fmt =
@@ -1346,15 +1343,11 @@ static void test_spec_gloss(void)
         "\"specularGlossinessTexture\":{\"index\":1}}}},"
         "{\"extensions\":{\"KHR_materials_pbrSpecularGlossiness\":{\"glossinessFactor\":0.3,"
         "\"specularGlossinessTexture\":{\"index\":1}}}}],"
-        "\"meshes\":[{\"primitives\":[{\"attributes\":{\"POSITION\":0,\"TEXCOORD_0\":1},\"indices\":2,\"material\":0}]}],"
-        "\"nodes\":[{\"mesh\":0}],\"scenes\":[{\"nodes\":[0]}],"
+        QUAD_MESH_JSON
         "\"textures\":[{\"source\":0},{\"source\":1},{\"source\":2}],"
         "\"images\":[{\"uri\":\"sg_d.ktx2\",\"mimeType\":\"image/ktx2\"},{\"uri\":\"sg_s.ktx2\",\"mimeType\":\"image/ktx2\"},"
         "{\"uri\":\"sg_s.exr\"}],"
-        "\"buffers\":[{\"byteLength\":92,\"uri\":\"%s\"}],\"bufferViews\":[{\"buffer\":0,\"byteLength\":92}],"
-        "\"accessors\":[{\"bufferView\":0,\"componentType\":5126,\"count\":4,\"type\":\"VEC3\",\"max\":[1,1,0],"
-        "\"min\":[-1,0,0]},{\"bufferView\":0,\"byteOffset\":48,\"componentType\":5126,\"count\":4,\"type\":\"VEC2\"},"
-        "{\"bufferView\":0,\"byteOffset\":80,\"componentType\":5123,\"count\":6,\"type\":\"SCALAR\"}]}";
+        QUAD_BUFFER_JSON;
     int rc;
     struct dr_scene *s = load_json("sg.gltf", NULL, &rc, fmt,
                                    "\"diffuseFactor\":[0.8,0.4,0.2,0.7],\"specularFactor\":[0.5,0.3,0.1],"
