@@ -709,9 +709,9 @@ fi
 # ---- w. sheen -------------------------------------------------------------------
 # KHR_materials_sheen: the time per ray over the same scene without it,
 # median of 3 pairs run back to back: the bundled box with its floor a dark
-# Lambertian cloth with a white sheen (roughness 0.5) or none. The sheened
-# lanes are shaded by bsdf.c lane by lane inside the eight-lane stages
-# (path_simd.h's sheen_bsdf), the rest eight wide.
+# Lambertian cloth with a white sheen (roughness 0.5) or none. The sheen's
+# layer is bsdf.c's, lane by lane inside the eight-lane stages, over the
+# base evaluated eight wide (path_simd.h's sheen_bsdf).
 SHEEN_JSON=null
 if [[ -f $CORNELL ]]; then
     echo

@@ -119,6 +119,30 @@ double dr_bsdf_sky_share(const struct dr_bsdf *b, dr_vec3 wo);
  * sheen's lobe is sampled with the cosine map, so it counts with the
  * diffuse side: (1 - P) p_base, P = the sheen's lobe probability. */
 double dr_bsdf_specular_prob(const struct dr_bsdf *b, dr_vec3 wo);
+/* The sheen's layer alone, for a caller that evaluates the base beneath it
+ * itself (path_simd.c's eight-lane stages, whose base is eight-wide): at
+ * wo, wi (wo.z, wi.z > DR_BSDF_COS_EPS) a sheened BSDF's f and density are
+ * dr_sheen_layer_f and dr_sheen_layer_pdf of its base's (the BSDF without
+ * the sheen, nor a coat: a coat composes over the result), the same
+ * operations as dr_bsdf_eval_pdf, which uses them: t = T(wo) T(wi), s = C
+ * times the sheen's lobe, p = P(wo), the sheen's lobe probability. */
+struct dr_sheen_layer {
+    double t, p;
+    dr_vec3 s;
+};
+struct dr_sheen_layer dr_sheen_layer_at(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi);
+static inline dr_vec3 dr_sheen_layer_f(const struct dr_sheen_layer *l, dr_vec3 f_base)
+{
+    return dr_add(dr_scale(f_base, l->t), l->s);
+}
+static inline double dr_sheen_layer_pdf(const struct dr_sheen_layer *l, dr_vec3 wi, double pdf_base)
+{
+    return l->p * (wi.z * DR_INV_PI) + (1.0 - l->p) * pdf_base;
+}
+/* P(wo) alone (wo.z > DR_BSDF_COS_EPS): dr_bsdf_sample's sheened BSDF takes
+ * the sheen's lobe where u_lobe < P, else its base's lobes with
+ * (u_lobe - P) / (1 - P); its sky share is (1 - P) times the base's. */
+double dr_sheen_lobe_prob(const struct dr_bsdf *b, dr_vec3 wo);
 /* The sampling map of one lobe: the direction dr_bsdf_sample returns for
  * (u1, u2) once it has chosen `lobe` (bit for bit the same). The diffuse map
  * ignores b and wo; the specular map needs wo.z > 0. The result may lie below

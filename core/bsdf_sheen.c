@@ -314,26 +314,36 @@ static void d_albedo(const struct sheen_albedo *s, double g, struct dr_d_bsdf *d
         *d_cos += g * s->m * s->dE_mu;
 }
 
+struct dr_sheen_layer dr_sheen_layer_at(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi)
+{
+    const struct sheen_lobe l = sheen_lobe(b->sheen_roughness);
+    const struct sheen_albedo ao = albedo_value(b, &l, wo.z, true), ai = albedo_value(b, &l, wi.z, false);
+    const struct sheen_eval e = sheen_eval(&l, wo, wi, false);
+    return (struct dr_sheen_layer){.t = transmit(&ao) * transmit(&ai), .p = sheen_prob(&ao),
+                                   .s = dr_scale(b->sheen_color, e.s)};
+}
+
+double dr_sheen_lobe_prob(const struct dr_bsdf *b, dr_vec3 wo)
+{
+    const struct sheen_lobe l = sheen_lobe(b->sheen_roughness);
+    const struct sheen_albedo ao = albedo_value(b, &l, wo.z, true);
+    return sheen_prob(&ao);
+}
+
 dr_vec3 dr_sheen_eval_pdf(const struct dr_bsdf *b, dr_vec3 wo, dr_vec3 wi, double *pdf)
 {
     const struct dr_bsdf base = under(b);
-    const struct sheen_lobe l = sheen_lobe(b->sheen_roughness);
-    const struct sheen_albedo ao = albedo_value(b, &l, wo.z, true), ai = albedo_value(b, &l, wi.z, false);
     double pb = 0.0;
     const dr_vec3 fb = pdf ? dr_bsdf_eval_pdf(&base, wo, wi, &pb) : dr_bsdf_eval(&base, wo, wi);
-    if (pdf) {
-        const double p = sheen_prob(&ao);
-        *pdf = p * (wi.z * DR_INV_PI) + (1.0 - p) * pb;
-    }
-    const struct sheen_eval e = sheen_eval(&l, wo, wi, false);
-    return dr_add(dr_scale(fb, transmit(&ao) * transmit(&ai)), dr_scale(b->sheen_color, e.s));
+    const struct dr_sheen_layer layer = dr_sheen_layer_at(b, wo, wi);
+    if (pdf)
+        *pdf = dr_sheen_layer_pdf(&layer, wi, pb);
+    return dr_sheen_layer_f(&layer, fb);
 }
 
 enum dr_bsdf_lobe dr_sheen_pick_lobe(const struct dr_bsdf *b, dr_vec3 wo, double u_lobe)
 {
-    const struct sheen_lobe l = sheen_lobe(b->sheen_roughness);
-    const struct sheen_albedo ao = albedo_value(b, &l, wo.z, true);
-    const double p = sheen_prob(&ao);
+    const double p = dr_sheen_lobe_prob(b, wo);
     if (u_lobe < p)
         return DR_BSDF_LOBE_SHEEN;
     const struct dr_bsdf base = under(b);   /* (p <= u_lobe < 1: 1 - p > 0) */
@@ -379,9 +389,7 @@ double dr_sheen_sky_share(const struct dr_bsdf *b, dr_vec3 wo)
     if (!(wo.z > COS_EPS))
         return 0.0;
     const struct dr_bsdf base = under(b);
-    const struct sheen_lobe l = sheen_lobe(b->sheen_roughness);
-    const struct sheen_albedo ao = albedo_value(b, &l, wo.z, true);
-    return (1.0 - sheen_prob(&ao)) * dr_bsdf_sky_share(&base, wo);
+    return (1.0 - dr_sheen_lobe_prob(b, wo)) * dr_bsdf_sky_share(&base, wo);
 }
 
 /* The probability of a microfacet (GGX) map: the base's, (1 - P) p_base; the

@@ -484,30 +484,40 @@ DR_SIMD_INLINE dr_f8 coat_fresnel(dr_f8 x)
     return 0.04 + 0.96 * pow5(1.0 - dr_f8_clamp(x, 0.0, 1.0));
 }
 
-/* The sheened lanes' dr_bsdf_eval_pdf, from their records, into f and pdf
- * (the scalar function: the one-path walker's bits). */
-static void __attribute__((noinline)) sheen_eval_pdf(const struct dr_path8 *g, dr_v3x8 wo, dr_v3x8 wi, dr_v3x8 *f,
-                                                     dr_f8 *pdf)
+/* The sheen over the base on the sheened lanes: fb and pdf, the base's
+ * (eight-wide: the bits of the scalar base's), become dr_bsdf_eval_pdf's
+ * of the sheened record without its coat, by bsdf.h's dr_sheen_layer_*
+ * (the sheen's own terms lane by lane, the composition the scalar one's);
+ * 0 where wo or wi is at or below the surface, as there. */
+static void __attribute__((noinline)) sheen_layer(const struct dr_path8 *g, dr_v3x8 wo, dr_v3x8 wi, dr_v3x8 *fb,
+                                                  dr_f8 *pdf)
 {
-    for (int i = 0; i < DR_SIMD_W; i++)
-        if (g->sheen_on[i]) {
-            double p;
-            set_lane(f, i, dr_bsdf_eval_pdf(&g->sheen_bsdf[i], dr_v3x8_get(&wo, i), dr_v3x8_get(&wi, i), &p));
-            (*pdf)[i] = p;
+    for (int i = 0; i < DR_SIMD_W; i++) {
+        if (!g->sheen_on[i])
+            continue;
+        const dr_vec3 o = dr_v3x8_get(&wo, i), in = dr_v3x8_get(&wi, i);
+        if (!(o.z > COS_EPS) || !(in.z > COS_EPS)) {
+            set_lane(fb, i, dr_v3s(0.0));
+            (*pdf)[i] = 0.0;
+            continue;
         }
+        const struct dr_sheen_layer l = dr_sheen_layer_at(&g->sheen_bsdf[i], o, in);
+        set_lane(fb, i, dr_sheen_layer_f(&l, dr_v3x8_get(fb, i)));
+        (*pdf)[i] = dr_sheen_layer_pdf(&l, in, (*pdf)[i]);
+    }
 }
 
 /* dr_bsdf_eval_pdf for wo.z, wi.z > COS_EPS: the base's (eval_pdf_base),
- * and on coated lanes dr_coat_eval_pdf's composition with the coat's lobe
- * (whose specular_prob is 1: no diffuse part), in its order; sheened lanes
- * by the scalar function (sheen_eval_pdf). */
+ * under the sheen on sheened lanes (sheen_layer), and on coated lanes
+ * dr_coat_eval_pdf's composition of that with the coat's lobe (whose
+ * specular_prob is 1: no diffuse part), in its order. */
 DR_SIMD_INLINE dr_v3x8 eval_pdf_above(const struct dr_path8 *g, dr_v3x8 wo, dr_v3x8 wi, dr_f8 *pdf)
 {
     dr_f8 pb;
     dr_v3x8 fb = eval_pdf_base(g, wo, wi, &pb);
+    if (g->any_sheen)
+        sheen_layer(g, wo, wi, &fb, &pb);
     if (!g->coated) {
-        if (g->any_sheen)
-            sheen_eval_pdf(g, wo, wi, &fb, &pb);
         *pdf = pb;
         return fb;
     }
@@ -517,10 +527,7 @@ DR_SIMD_INLINE dr_v3x8 eval_pdf_above(const struct dr_path8 *g, dr_v3x8 wo, dr_v
     const dr_f8 p = g->coat_p;
     *pdf = dr_f8_sel(g->coat_on, p * pl + (1.0 - p) * pb, pb);
     const dr_v3x8 f = {fb.x * tt + fl.x * c, fb.y * tt + fl.y * c, fb.z * tt + fl.z * c};
-    dr_v3x8 out = dr_v3x8_sel(g->coat_on, f, fb);
-    if (g->any_sheen)
-        sheen_eval_pdf(g, wo, wi, &out, pdf);
-    return out;
+    return dr_v3x8_sel(g->coat_on, f, fb);
 }
 
 /* sample_specular_dir: GGX visible normals (sample_vndf) of alphas (ax, ay),
@@ -553,34 +560,42 @@ DR_SIMD_INLINE dr_v3x8 sample_specular_dir(dr_f8 ax, dr_f8 ay, dr_v3x8 wo, dr_f8
  * rescaled, which is u_lobe itself where coat_p is 0), the local direction
  * *wi, its BSDF value and density; returns the lanes where wo and wi are
  * above the surface and the density is finite and positive. */
-/* dr_bsdf_sample on the sheened lanes of on, from their records (the
- * scalar function), into wi, f, pdf and the lanes' bits of *ok. */
-static void __attribute__((noinline)) sheen_sample(const struct dr_path8 *g, dr_m8 on, dr_f8 u_lobe, dr_f8 u1, dr_f8 u2,
-                                                   dr_v3x8 *wi, dr_v3x8 *f, dr_f8 *pdf, dr_m8 *ok)
+/* dr_sheen_pick_lobe on the sheened lanes of on (wo above the surface):
+ * the lanes whose u_lobe falls below P(wo) take the sheen's lobe (*sheen),
+ * the others' u_lobe is rescaled for the base's lobes, as there. */
+static void __attribute__((noinline)) sheen_pick(const struct dr_path8 *g, dr_m8 on, dr_f8 *u_lobe, dr_m8 *sheen)
 {
     for (int i = 0; i < DR_SIMD_W; i++)
         if (on[i] && g->sheen_on[i]) {
-            struct dr_bsdf_sample bs;
-            const bool made = dr_bsdf_sample(&g->sheen_bsdf[i], dr_v3x8_get(&g->wo, i), u_lobe[i], u1[i], u2[i], &bs);
-            set_lane(wi, i, bs.wi);
-            set_lane(f, i, bs.f);
-            (*pdf)[i] = bs.pdf;
-            (*ok)[i] = made && bs.pdf > 0.0 && bs.pdf < INFINITY ? -1 : 0;
+            const double p = dr_sheen_lobe_prob(&g->sheen_bsdf[i], dr_v3x8_get(&g->wo, i));
+            if ((*u_lobe)[i] < p)
+                (*sheen)[i] = -1;
+            else   /* (p <= u_lobe < 1: 1 - p > 0) */
+                (*u_lobe)[i] = ((*u_lobe)[i] - p) / (1.0 - p);
         }
 }
 
+/* dr_bsdf_sample on the lanes of on (the continuation's, and next-event
+ * estimation's of a constant sky): the lobe by u_lobe (dr_coat_sample's
+ * choice: the coat's lobe below coat_p, else, with u_lobe rescaled, the
+ * sheen's below its P on sheened lanes (sheen_pick: the cosine map), else
+ * the base's lobes with u_lobe rescaled again; a rescale by a share of 0
+ * is u_lobe itself), the local direction *wi, its BSDF value and density;
+ * returns the lanes where wo and wi are above the surface and the density
+ * is finite and positive. */
 DR_SIMD_INLINE dr_m8 bsdf_sample(const struct dr_path8 *g, dr_m8 on, dr_f8 u_lobe, dr_f8 u1, dr_f8 u2, dr_v3x8 *wi,
                                  dr_v3x8 *f, dr_f8 *pdf)
 {
-    const dr_f8 u_lobe_in = u_lobe;   /* (the sheened lanes' scalar sampler rescales its own) */
     dr_m8 ok = on & dr_f8_gt(g->wo_z, dr_f8s(COS_EPS));
     *wi = sample_cosine(u1, u2);
-    dr_m8 coat = (dr_m8){0};
+    dr_m8 coat = (dr_m8){0}, sheen = (dr_m8){0};
     if (g->coated) {
         coat = ok & dr_f8_lt(u_lobe, g->coat_p);
         u_lobe = (u_lobe - g->coat_p) / (1.0 - g->coat_p);
     }
-    dr_m8 specular = ok & ~coat & dr_f8_lt(u_lobe, g->spec_p);
+    if (g->any_sheen && dr_m8_any(ok & ~coat & g->sheen_on))
+        sheen_pick(g, ok & ~coat, &u_lobe, &sheen);
+    dr_m8 specular = ok & ~coat & ~sheen & dr_f8_lt(u_lobe, g->spec_p);
     if (dr_m8_any(specular | coat))
         *wi = dr_v3x8_sel(specular | coat,
                           sample_specular_dir(dr_f8_sel(coat, g->coat_lobe.alpha, g->b.alpha_x),
@@ -589,8 +604,6 @@ DR_SIMD_INLINE dr_m8 bsdf_sample(const struct dr_path8 *g, dr_m8 on, dr_f8 u_lob
     ok &= dr_f8_gt(wi->z, dr_f8s(COS_EPS));
     *f = eval_pdf_above(g, g->wo, *wi, pdf);
     ok &= dr_f8_gt(*pdf, dr_f8s(0.0)) & dr_f8_lt(*pdf, dr_f8s(INFINITY));
-    if (g->any_sheen && dr_m8_any(on & g->sheen_on))
-        sheen_sample(g, on, u_lobe_in, u1, u2, wi, f, pdf, &ok);
     return ok;
 }
 
@@ -1275,13 +1288,12 @@ DR_SIMD_INLINE dr_f8 sky_share(const struct dr_path8 *g)
     if (g->b.any_aniso)   /* a stretched lobe's sharpness: the geometric mean of its alphas */
         a = dr_f8_sel(g->b.aniso, dr_f8_sqrt(g->b.alpha_x * g->b.alpha), a);
     dr_f8 s = g->spec_p * sharpness(a);
+    for (int i = 0; g->any_sheen && i < DR_SIMD_W; i++)   /* (dr_sheen_sky_share: the base's times 1 - P) */
+        if (g->sheen_on[i] && g->wo_z[i] > COS_EPS)
+            s[i] = (1.0 - dr_sheen_lobe_prob(&g->sheen_bsdf[i], dr_v3x8_get(&g->wo, i))) * s[i];
     if (g->coated)   /* dr_coat_sky_share: the coat lobe's share (its specular_prob is 1) and the base's */
         s = dr_f8_sel(g->coat_on, g->coat_p * sharpness(g->coat_lobe.alpha) + (1.0 - g->coat_p) * s, s);
-    s = dr_f8_sel(dr_f8_gt(g->wo_z, dr_f8s(COS_EPS)), s, dr_f8s(0.0));
-    for (int i = 0; g->any_sheen && i < DR_SIMD_W; i++)   /* (the sheened lanes': dr_bsdf_sky_share itself) */
-        if (g->sheen_on[i])
-            s[i] = dr_bsdf_sky_share(&g->sheen_bsdf[i], dr_v3x8_get(&g->wo, i));
-    return s;
+    return dr_f8_sel(dr_f8_gt(g->wo_z, dr_f8s(COS_EPS)), s, dr_f8s(0.0));
 }
 
 /* The lanes that picked a constant environment: lights.c's sample_env

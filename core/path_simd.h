@@ -149,11 +149,12 @@ struct dr_path8 {
     dr_f8 coat, coat_roughness;   /* its factor and roughness (factor x texture); 0 and 0 on other lanes */
     dr_f8 coat_p;                 /* c Fc(wo.z): the share of samples its lobe takes (0 on other lanes) */
     struct dr_lobe8 coat_lobe;    /* its lobe: base colour 0, metallic 0, specular 1, f0 0.04 */
-    /* KHR_materials_sheen's lanes (any_sheen): their BSDF is bsdf.c's, lane
-     * by lane, on dr_material_eval's record (sheen_bsdf, the anisotropy as
-     * the frame left it): evaluated, sampled and shared with the sky by the
-     * scalar functions, so the bits are the one-path walker's; the vectors'
-     * layers hold the same inputs but their results are replaced there */
+    /* KHR_materials_sheen's lanes (any_sheen): the base beneath the sheen
+     * is the vectors' (eight-wide, the scalar base's bits), the sheen's own
+     * layer bsdf.c's dr_sheen_layer_* and dr_sheen_lobe_prob lane by lane on
+     * dr_material_eval's record (sheen_bsdf, the anisotropy as the frame
+     * left it; a differentiated vertex's record too), composed in the
+     * scalar functions' order: the bits are the one-path walker's */
     bool any_sheen;
     dr_m8 sheen_on;
     struct dr_bsdf sheen_bsdf[DR_SIMD_W];

@@ -1681,6 +1681,42 @@ static void test_sheen_memo(void)
     CHECK(bad == 0, "sheen memo: %d results differ between a memo hit and a miss", bad);
 }
 
+/* bsdf.h's sheen layer (path_simd.c composes it over its eight-wide base):
+ * over the base's f and density (the record without sheen and coat) it
+ * gives dr_bsdf_eval_pdf's bits, and P(wo) gives the sky share's and the
+ * specular probability's (1 - P) factor and dr_bsdf_sample's lobe choice. */
+static void test_sheen_layer(void)
+{
+    const double rough[] = {0.07, 0.3, 0.5, 1.0}, aniso[] = {0.0, 0.0, 0.6, 0.0};
+    struct rng g = {777};
+    int bad_f = 0, bad_p = 0, bad_lobe = 0, n = 0;
+    for (int j = 0; j < 4; j++) {
+        struct dr_bsdf b = make_bsdf(0.3 * j, 0.4 * (j & 1), 0.2 + 0.25 * j, dr_v3(0.6, 0.3, 0.2));
+        b.anisotropy = aniso[j];
+        b.sheened = true, b.sheen_roughness = rough[j], b.sheen_color = dr_v3(0.9, 0.5 * j, 0.7);
+        struct dr_bsdf base = b;
+        base.sheened = false;
+        for (int k = 0; k < 200; k++, n++) {
+            const dr_vec3 wo = k == 0 ? dir_from(2e-3, 0.3) : random_hemi(&g), wi = random_hemi(&g);
+            double pdf, pb;
+            const dr_vec3 f = dr_bsdf_eval_pdf(&b, wo, wi, &pdf), fb = dr_bsdf_eval_pdf(&base, wo, wi, &pb);
+            const struct dr_sheen_layer l = dr_sheen_layer_at(&b, wo, wi);
+            const dr_vec3 fl = dr_sheen_layer_f(&l, fb);
+            bad_f += fl.x != f.x || fl.y != f.y || fl.z != f.z || dr_sheen_layer_pdf(&l, wi, pb) != pdf;
+            const double p = dr_sheen_lobe_prob(&b, wo);
+            bad_p += p != l.p || dr_bsdf_sky_share(&b, wo) != (1.0 - p) * dr_bsdf_sky_share(&base, wo) ||
+                     dr_bsdf_specular_prob(&b, wo) != (1.0 - p) * dr_bsdf_specular_prob(&base, wo);
+            const double u = rng_next(&g);
+            struct dr_bsdf_sample smp;
+            dr_bsdf_sample(&b, wo, u, 0.3, 0.7, &smp);
+            bad_lobe += (u < p) != (smp.lobe == DR_BSDF_LOBE_SHEEN);
+        }
+    }
+    CHECK(bad_f == 0, "sheen layer over the base: %d of %d f or pdf differ from dr_bsdf_eval_pdf's", bad_f, n);
+    CHECK(bad_p == 0, "sheen lobe probability: %d of %d disagree with the sky share or specular probability", bad_p, n);
+    CHECK(bad_lobe == 0, "sheen lobe probability: %d of %d samples chose otherwise", bad_lobe, n);
+}
+
 /* White furnace: a white sheen over a white Lambertian, importance sampled:
  * albedo = E(wo) + T(wo) 2 int T(mu) mu dmu (<= 1 where m E <= 1; above 1
  * where the model's E is, T = 0 there), checked against that. */
@@ -1745,6 +1781,7 @@ int main(void)
     clock_t t3 = clock();
     test_sheen_values();
     test_sheen_memo();
+    test_sheen_layer();
     test_sheen_furnace();
     test_sheen_table();
     clock_t t4 = clock();
