@@ -23,6 +23,8 @@
 #include <set>
 #include <new>
 #include <string>
+#include <system_error>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -264,14 +266,18 @@ bool is_supported_extension(const std::string &name)
     return false;
 }
 
+/* An image as the file holds it, kept by image_cb for the decode. */
+struct EncodedImage {
+    int index;
+    std::string hint;                   /* name for the format and messages */
+    std::vector<unsigned char> bytes;
+};
+
 class Loader {
 public:
-    Loader(const char *path, const dr_load_opts &opts, dr_scene *scene) : path_(path), opts_(opts), scene_(scene) {}
-    ~Loader()
-    {
-        for (dr_image &img : images_) dr_image_release(&img);  /* those not handed over */
-        for (dr_medium &m : media_) dr_grid_release(&m.grid);
-    }
+    Loader(const char *path, const dr_load_opts &opts, dr_scene *scene, bool defer)
+        : path_(path), opts_(opts), scene_(scene), defer_(defer) {}
+    ~Loader();
     void run();
 
     /* tinygltf callbacks (user data = this) */
@@ -315,6 +321,8 @@ private:
     std::vector<uint32_t> primitive_sequence(const tinygltf::Primitive &p, const std::string &pp, size_t nv,
                                              const dr_draco_mesh *draco);
     void decode_images();
+    void start_decode();
+    bool reads_spec_gloss() const;
     bool decode_draco(const tinygltf::Primitive &p, const std::string &pp, dr_draco_mesh &out,
                       std::map<std::string, int> &ids);
     AccessorView attribute_view(const tinygltf::Primitive &p, const std::string &pp, const char *name, int want_type,
@@ -363,12 +371,12 @@ private:
     std::vector<dr_image> images_;          /* decoded by decode_images, by glTF image index */
     std::map<std::pair<int, double>, int> gloss_textures_;   /* (texture, glossiness) -> the derived
                                                                  roughness texture (roughness_from_gloss) */
-    struct EncodedImage {                   /* kept by image_cb for decode_images */
-        int index;
-        std::string hint;                   /* name for the format and messages */
-        std::vector<unsigned char> bytes;
-    };
     std::vector<EncodedImage> encoded_images_;
+    /* the decode running in the background (load_model, defer_), handed to
+     * the scene at the end of run(); by image index: decoding there */
+    std::unique_ptr<dr_pending_images> pending_;
+    std::vector<char> pending_index_;
+    bool defer_ = false;
     std::vector<std::string> ktx2_images_;  /* by image index: why a KTX2 image is left undecoded ("": it is
                                                not one, or drender decodes it) */
     std::vector<int> texture_ktx2_;         /* by texture: its KTX2 image, -1 */
@@ -561,11 +569,90 @@ bool Loader::image_cb(tinygltf::Image *image, const int image_idx, std::string *
 }
 
 /* The images image_cb kept, decoded all at once, one per CPU at a time (a
- * scene's 2k textures were decoded one after the other). A failure is
- * reported for the first failing image in file order, as before. Images
- * from 8-bit files come in eight-bit storage (image.h: the same values in a
- * quarter of the memory; NormalTangentTest's three 2k textures took 151 MB
- * as floats), decoded straight to bytes. */
+ * scene's 2k textures were decoded one after the other), into out; rc and
+ * why by position. Images from 8-bit files come in eight-bit storage
+ * (image.h: the same values in a quarter of the memory; NormalTangentTest's
+ * three 2k textures took 151 MB as floats), decoded straight to bytes. */
+void decode_encoded(const std::vector<EncodedImage> &enc, std::vector<dr_image> &out, std::vector<int> &rc,
+                    ThreadMessages &why)
+{
+    parallel_each(enc.size(), [&](size_t k) {
+        const EncodedImage &e = enc[k];
+        /* KTX2 (plain 8-bit texels) is drender's own reader: no image library */
+        if (dr_ktx2_is(e.bytes.data(), e.bytes.size()))
+            rc[k] = dr_ktx2_read8(e.bytes.data(), e.bytes.size(), e.hint.c_str(), &out[k]);
+        else
+            rc[k] = dr_image_read_memory8(e.bytes.data(), e.bytes.size(), e.hint.c_str(), &out[k]);
+        if (rc[k] != 0)
+            why.keep(k);
+    });
+}
+
+/* The first failure in file order (the image index), or rc.size(). */
+size_t first_failure(const std::vector<EncodedImage> &enc, const std::vector<int> &rc)
+{
+    size_t failed = rc.size();
+    for (size_t k = 0; k < rc.size(); k++)
+        if (rc[k] != 0 && (failed == rc.size() || enc[k].index < enc[failed].index)) failed = k;
+    return failed;
+}
+
+/* The colour textures' sRGB decode, also one image per CPU; in place where
+ * nothing reads the encoded values (an image only used as colour). 0, or
+ * the first failure's code with its message set, naming path. */
+int linearize_images(const char *path, dr_image *images, const std::vector<char> &linear, const std::vector<char> &data)
+{
+    const size_t n = linear.size();
+    std::vector<int> rc(n, 0);
+    ThreadMessages why(n);
+    parallel_each(n, [&](size_t i) {
+        if (!linear[i]) return;
+        rc[i] = data[i] ? dr_image_make_linear(&images[i]) : dr_image_make_linear_in_place(&images[i]);
+        if (rc[i] != 0) why.keep(i);
+    });
+    for (size_t i = 0; i < n; i++)
+        if (rc[i] != 0) {
+            dr_set_error("%s: /images/%zu: %s", path, i, why.at(i));
+            return rc[i];
+        }
+    return 0;
+}
+
+}  // namespace
+
+/* The decode of a scene's images running on a thread of its own while the
+ * loader and dr_scene_prepare do what needs no pixels (scene.h): the image
+ * library's load (0.1-0.3 s, one CPU, core/image_plugin.h) and the decodes
+ * then overlap the geometry, the ray structure and the rest. Joined and
+ * handed to the scene by dr_pending_images_finish; deleting it joins the
+ * thread and releases what it decoded. */
+struct dr_pending_images {
+    std::string path;                   /* the scene file, for messages */
+    std::vector<EncodedImage> encoded;
+    std::vector<dr_image> out;          /* by position in encoded */
+    std::vector<int> rc;
+    ThreadMessages why{0};
+    int job_rc = 0;                     /* the job's own failure (no threads, no memory) */
+    std::vector<char> linear, data;     /* the loader's linear_images_, data_images_ */
+    std::thread thread;
+    ~dr_pending_images()
+    {
+        if (thread.joinable()) thread.join();
+        for (dr_image &im : out) dr_image_release(&im);
+    }
+};
+
+namespace {
+
+Loader::~Loader()
+{
+    for (dr_image &img : images_) dr_image_release(&img);  /* those not handed over */
+    for (dr_medium &m : media_) dr_grid_release(&m.grid);
+}
+
+/* The images image_cb kept, decoded now (decode_encoded) and handed to
+ * images_. A failure is reported for the first failing image in file
+ * order. */
 void Loader::decode_images()
 {
     const size_t n = encoded_images_.size();
@@ -581,23 +668,11 @@ void Loader::decode_images()
     } pending{out};
     std::vector<int> rc(n, 0);
     ThreadMessages why(n);
-    parallel_each(n, [&](size_t k) {
-        const EncodedImage &e = encoded_images_[k];
-        /* KTX2 (plain 8-bit texels) is drender's own reader: no image library */
-        if (dr_ktx2_is(e.bytes.data(), e.bytes.size()))
-            rc[k] = dr_ktx2_read8(e.bytes.data(), e.bytes.size(), e.hint.c_str(), &out[k]);
-        else
-            rc[k] = dr_image_read_memory8(e.bytes.data(), e.bytes.size(), e.hint.c_str(), &out[k]);
-        if (rc[k] != 0)
-            why.keep(k);
-    });
-    size_t failed = n;
+    decode_encoded(encoded_images_, out, rc, why);
+    const size_t failed = first_failure(encoded_images_, rc);
     for (size_t k = 0; k < n; k++) {
         const int idx = encoded_images_[k].index;
-        if (rc[k] != 0) {
-            if (failed == n || idx < encoded_images_[failed].index) failed = k;
-            continue;
-        }
+        if (rc[k] != 0) continue;
         if (images_.size() <= size_t(idx)) images_.resize(size_t(idx) + 1, dr_image{});
         dr_image_release(&images_[size_t(idx)]);
         images_[size_t(idx)] = out[k];   /* ours now: released by the destructor if loading fails */
@@ -614,6 +689,47 @@ void Loader::decode_images()
         throw Failure{rc[failed]};
     }
     encoded_images_.clear();
+}
+
+/* A specular-glossiness material derives its roughness texture from its
+ * image's pixels while the materials load (roughness_from_gloss): such a
+ * file's images are decoded before. */
+bool Loader::reads_spec_gloss() const
+{
+    for (const tinygltf::Material &m : model_.materials)
+        if (m.extensions.count("KHR_materials_pbrSpecularGlossiness")) return true;
+    return false;
+}
+
+/* The decode, started on a thread of its own (dr_pending_images); decoded
+ * here and now if that thread cannot be made. */
+void Loader::start_decode()
+{
+    auto p = std::make_unique<dr_pending_images>();
+    const size_t n = encoded_images_.size();
+    p->path = path_;
+    p->out.assign(n, dr_image{});
+    p->rc.assign(n, 0);
+    p->why = ThreadMessages(n);
+    pending_index_.assign(model_.images.size(), 0);
+    for (const EncodedImage &e : encoded_images_) pending_index_[size_t(e.index)] = 1;
+    p->encoded.swap(encoded_images_);
+    dr_pending_images *job = p.get();
+    try {
+        p->thread = std::thread([job] {
+            try {
+                decode_encoded(job->encoded, job->out, job->rc, job->why);
+            } catch (...) {
+                job->job_rc = DR_ERR_NOMEM;
+            }
+        });
+    } catch (const std::system_error &) {
+        p->encoded.swap(encoded_images_);
+        pending_index_.clear();
+        decode_images();
+        return;
+    }
+    pending_ = std::move(p);
 }
 
 /* ---- parsing ---- */
@@ -714,7 +830,10 @@ void Loader::load_model()
     }
     const std::string meshopt = dr_meshopt_decode(model_);   /* (the accessors then read plain bytes) */
     if (!meshopt.empty()) fail(DR_ERR_FORMAT, "%s", meshopt.c_str());
-    decode_images();
+    if (defer_ && !encoded_images_.empty() && !reads_spec_gloss())
+        start_decode();
+    else
+        decode_images();
 }
 
 void Loader::check_features()
@@ -744,7 +863,8 @@ void Loader::take_images()
     images_.resize(std::max(images_.size(), n), dr_image{});
     ktx2_images_.resize(n);
     for (size_t i = 0; i < n; i++)
-        if (!dr_image_has_pixels(&images_[i]) && ktx2_images_[i].empty()) {
+        if (!dr_image_has_pixels(&images_[i]) && ktx2_images_[i].empty() &&
+            !(i < pending_index_.size() && pending_index_[i])) {
             const tinygltf::Image &im = model_.images[i];
             if (!im.uri.empty())
                 fail(DR_ERR_IO, "/images/%zu/uri: cannot read '%s'", i, im.uri.c_str());
@@ -1745,19 +1865,12 @@ void Loader::finish()
     scene_->bbox_min = bbox_min_;
     scene_->bbox_max = bbox_max_;
 
-    /* the colour textures' sRGB decode, also one image per CPU; in place
-     * where nothing reads the encoded values (an image only used as colour) */
-    const size_t n = linear_images_.size();
-    std::vector<int> rc(n, 0);
-    ThreadMessages why(n);
-    parallel_each(n, [&](size_t i) {
-        if (!linear_images_[i]) return;
-        dr_image *img = &scene_->images[i];
-        rc[i] = data_images_[i] ? dr_image_make_linear(img) : dr_image_make_linear_in_place(img);
-        if (rc[i] != 0) why.keep(i);
-    });
-    for (size_t i = 0; i < n; i++)
-        if (rc[i] != 0) fail(rc[i], "/images/%zu: %s", i, why.at(i));
+    /* the colour textures' sRGB decode (with the pixels, if they come later:
+     * dr_pending_images_finish) */
+    if (!pending_) {
+        const int rc = linearize_images(path_, scene_->images, linear_images_, data_images_);
+        if (rc != 0) throw Failure{rc};
+    }
 }
 
 void Loader::run()
@@ -1778,6 +1891,11 @@ void Loader::run()
     load_global_medium();
     finish();
     finish_media();
+    if (pending_) {   /* the images still decoding: the scene's to finish (dr_scene_prepare) */
+        pending_->linear = linear_images_;
+        pending_->data = data_images_;
+        scene_->pending_images = pending_.release();
+    }
     for (const std::string &w : warnings_) dr_warn("%s", w.c_str());
 }
 
@@ -2288,12 +2406,12 @@ extern "C" int dr_gltf_load(const char *path, struct dr_scene *scene)
     return dr_gltf_load_opts(path, nullptr, scene);
 }
 
-extern "C" int dr_gltf_load_opts(const char *path, const struct dr_load_opts *opts, struct dr_scene *scene)
+static int load(const char *path, const struct dr_load_opts *opts, struct dr_scene *scene, bool defer)
 {
     dr_load_opts o = {};
     if (opts) o = *opts;
     try {
-        Loader loader(path, o, scene);
+        Loader loader(path, o, scene, defer);
         loader.run();
         return 0;
     } catch (const Failure &f) {
@@ -2308,4 +2426,51 @@ extern "C" int dr_gltf_load_opts(const char *path, const struct dr_load_opts *op
         dr_set_error("%s: internal error", path);
         return DR_ERR_INTERNAL;
     }
+}
+
+extern "C" int dr_gltf_load_opts(const char *path, const struct dr_load_opts *opts, struct dr_scene *scene)
+{
+    return load(path, opts, scene, false);
+}
+
+extern "C" int dr_gltf_load_deferred(const char *path, const struct dr_load_opts *opts, struct dr_scene *scene)
+{
+    return load(path, opts, scene, true);
+}
+
+extern "C" int dr_pending_images_finish(struct dr_scene *scene)
+{
+    std::unique_ptr<dr_pending_images> p(scene->pending_images);
+    scene->pending_images = nullptr;
+    if (!p) return 0;
+    try {
+        p->thread.join();
+        if (p->job_rc != 0) {
+            dr_set_error("%s: out of memory", p->path.c_str());
+            return p->job_rc;
+        }
+        const size_t failed = first_failure(p->encoded, p->rc);
+        if (failed < p->rc.size()) {
+            dr_set_error("%s: /images/%d: %s", p->path.c_str(), p->encoded[failed].index, p->why.at(failed));
+            return p->rc[failed];
+        }
+        for (size_t k = 0; k < p->encoded.size(); k++) {
+            dr_image &slot = scene->images[p->encoded[k].index];
+            dr_image_release(&slot);
+            slot = p->out[k];   /* the scene's now */
+            p->out[k] = dr_image{};
+        }
+        return linearize_images(p->path.c_str(), scene->images, p->linear, p->data);
+    } catch (const std::bad_alloc &) {
+        dr_set_error("%s: out of memory", p->path.c_str());
+        return DR_ERR_NOMEM;
+    } catch (const std::exception &e) {
+        dr_set_error("%s: internal error: %s", p->path.c_str(), e.what());
+        return DR_ERR_INTERNAL;
+    }
+}
+
+extern "C" void dr_pending_images_discard(struct dr_pending_images *pending)
+{
+    delete pending;
 }

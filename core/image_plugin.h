@@ -15,6 +15,12 @@
  * So the load starts later, once a render's workers exist: the CLI sets
  * dr_image_library_preload as the parallel runs' started hook (parallel.h),
  * and the render overlaps the load instead of the write waiting for it.
+ * A scene with images starts the load as soon as its file is parsed, on
+ * the thread that then decodes them (gltf_load.cpp's dr_pending_images),
+ * and builds its ray structure meanwhile (scene.c): that build makes no
+ * thread of its own before Embree's task system has started, and starting
+ * it waits for the dlopen too (it loads a library), so dr_scene_load_opts
+ * starts it first (accel.h's dr_accel_warm_up).
  *
  * The load itself is mostly the dynamic loader's symbol search through those
  * libraries; the Makefile names the ones most bound to as the plugin's first

@@ -269,6 +269,11 @@ struct dr_scene {
     struct dr_accel *accel;
     struct dr_light_sampler *light_sampler;
     unsigned effects;             /* enum dr_effect bits */
+    /* Images still being decoded on a thread of their own when the loader
+     * returns (dr_gltf_load_deferred): their slots in images are empty
+     * until dr_scene_prepare, which needs none of them for the ray
+     * structure, joins them (NULL: none) */
+    struct dr_pending_images *pending_images;
 };
 
 /* How the loader treats what drender cannot render. */
@@ -330,6 +335,19 @@ void dr_effects_describe(unsigned effects, char *buf, int size);
 int dr_gltf_load(const char *path, struct dr_scene *scene);
 /* The same with options (NULL: the defaults). */
 int dr_gltf_load_opts(const char *path, const struct dr_load_opts *opts, struct dr_scene *scene);
+/* The same, but the images decode on a thread of their own, started once
+ * the file is parsed (scene->pending_images, or NULL when there are none,
+ * or a specular-glossiness material reads their pixels while loading):
+ * dr_scene_load_opts's, which hands them to dr_scene_prepare. A decode's
+ * error then comes from dr_pending_images_finish. */
+int dr_gltf_load_deferred(const char *path, const struct dr_load_opts *opts, struct dr_scene *scene);
+/* Waits for scene->pending_images, puts the decoded pixels in their slots
+ * and sRGB-decodes the colour images as the loader does; frees it. 0 (also
+ * when nothing is pending) or a negative DR_ERR_* with dr_last_error
+ * naming the file and the image, as dr_gltf_load reports it. */
+int dr_pending_images_finish(struct dr_scene *scene);
+/* Waits for pending's thread and frees it with what it decoded (NULL: no-op). */
+void dr_pending_images_discard(struct dr_pending_images *pending);
 
 #ifdef __cplusplus
 }

@@ -419,6 +419,66 @@ static void test_shared_image(void)
     dr_scene_destroy(s);
 }
 
+/* Two loads' images agree value for value, as stored and as colour. */
+static int image_differences(const struct dr_scene *a, const struct dr_scene *b)
+{
+    if (a->n_images != b->n_images)
+        return -1;
+    int bad = 0;
+    for (int k = 0; k < a->n_images; k++) {
+        const struct dr_image *x = &a->images[k], *y = &b->images[k];
+        if (x->width != y->width || x->height != y->height || x->channels != y->channels ||
+            dr_image_has_linear(x) != dr_image_has_linear(y) || x->linear_in_data != y->linear_in_data ||
+            !dr_image_has_pixels(x) || !dr_image_has_pixels(y)) {
+            bad++;
+            continue;
+        }
+        const size_t n = (size_t)x->width * (size_t)x->height * (size_t)x->channels;
+        for (size_t i = 0; i < n; i++)
+            bad += dr_image_value(x, i, false) != dr_image_value(y, i, false) ||
+                   dr_image_value(x, i, true) != dr_image_value(y, i, true);
+    }
+    return bad;
+}
+
+/* dr_scene_load decodes a scene's images on a thread of their own while the
+ * loader and dr_scene_prepare make the geometry and the ray structure
+ * (scene.h's pending_images): the same images and effects as the loader's
+ * own decode; the decode is pending after the load and joined by the
+ * preparation; a scene destroyed before that releases it. */
+static void test_deferred_images(void)
+{
+    const char *names[] = {"basic.gltf", "basic.glb", "shared_image.gltf"};
+    for (size_t f = 0; f < sizeof names / sizeof *names; f++) {
+        struct dr_scene *a = dr_scene_load(data_path(names[f]));
+        struct dr_scene *b = calloc(1, sizeof *b);
+        b->path = strdup(data_path(names[f]));
+        const int rb = dr_gltf_load(data_path(names[f]), b);
+        CHECK(a && rb == 0 && dr_scene_prepare(b) == 0, "%s: both loads: %s", names[f], dr_last_error());
+        if (a && rb == 0) {
+            CHECK(a->n_images > 0 && image_differences(a, b) == 0, "%s: %d of %d images' values differ between "
+                  "the deferred and the loader's own decode", names[f], image_differences(a, b), a->n_images);
+            CHECK(a->effects == b->effects && !a->pending_images, "%s: effects %#x against %#x", names[f],
+                  a->effects, b->effects);
+        }
+        dr_scene_destroy(a);
+        dr_scene_destroy(b);
+    }
+    struct dr_scene *s = calloc(1, sizeof *s);
+    s->path = strdup(data_path("basic.gltf"));
+    int rc = dr_gltf_load_deferred(data_path("basic.gltf"), NULL, s);
+    CHECK(rc == 0 && s->pending_images && s->n_images > 0 && !dr_image_has_pixels(&s->images[0]),
+          "basic.gltf: the deferred load returns with its image pending (rc %d)", rc);
+    CHECK(dr_scene_prepare(s) == 0 && !s->pending_images && dr_image_has_pixels(&s->images[0]),
+          "basic.gltf: the preparation joins it: %s", dr_last_error());
+    dr_scene_destroy(s);
+    s = calloc(1, sizeof *s);
+    s->path = strdup(data_path("basic.gltf"));
+    rc = dr_gltf_load_deferred(data_path("basic.gltf"), NULL, s);
+    CHECK(rc == 0 && s->pending_images, "basic.gltf: pending before the destroy (rc %d)", rc);
+    dr_scene_destroy(s);   /* (joins and releases: the sanitizers' leak check) */
+}
+
 int main(void)
 {
     dr_set_warn_handler(record_warning);
@@ -428,6 +488,7 @@ int main(void)
     test_layout();
     test_env_map();
     test_shared_image();
+    test_deferred_images();
     test_errors();
     return TEST_END();
 }
